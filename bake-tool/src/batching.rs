@@ -1,0 +1,317 @@
+//! Grouped batches and tiles (seed 004 §3.4).
+//!
+//! Trees are grouped per species into square grid cells by spatial hashing
+//! (only occupied cells exist); each group is a batch with bounds for culling
+//! and instances quantised relative to the batch origin (the cell corner).
+//! Batches whose trees span more height than 11 bits of 2 cm steps are split
+//! into height bands, so the 1 cm position error bound always holds.
+//! Cells are grouped into tiles of `tile_cells`² cells, one file each.
+
+use glam::DVec3;
+use rayon::prelude::*;
+use sylva::format::tile::{GpuBatch, PackedInstance, Tile, MAX_XY_STEP_M, MAX_Z_STEP_M, SCALE_BITS, YAW_BITS, Z_BITS};
+
+/// One tree in scene coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneTree {
+    /// Trunk base, metres relative to the scene origin.
+    pub pos: DVec3,
+    /// Species index.
+    pub species: u32,
+    /// Uniform scale of the species model.
+    pub scale: f32,
+    /// Yaw in radians.
+    pub yaw_rad: f32,
+    /// Tint/variation 0–31.
+    pub variation: u8,
+    /// Tree id (see `docs/FORMAT.md`).
+    pub id: u64,
+}
+
+/// A species model's extent at scale 1, for batch bounds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeciesShape {
+    /// Largest horizontal distance of the model from its trunk axis.
+    pub radius_xy: f32,
+    /// Lowest model z.
+    pub z_min: f32,
+    /// Highest model z.
+    pub z_max: f32,
+}
+
+/// Largest cell size (metres) whose 16-bit quantisation keeps the 1 cm bound.
+pub const MAX_CELL_SIZE_M: u32 = (MAX_XY_STEP_M * 65535.0) as u32;
+/// Height span of one batch: 2^11 − 1 steps of `MAX_Z_STEP_M` (the split keeps 2 cm
+/// of it for rounding the batch origin down to whole centimetres).
+pub const Z_BAND_M: f64 = ((1 << Z_BITS) - 1) as f64 * MAX_Z_STEP_M as f64;
+
+/// A tile and the ids of its instances (same order).
+pub struct BuiltTile {
+    /// The tile.
+    pub tile: Tile,
+    /// Tree ids, one per instance.
+    pub ids: Vec<u64>,
+    /// Bounds of all trees, relative to the origin (min, max).
+    pub bounds: ([f32; 3], [f32; 3]),
+}
+
+/// Picks a cell size so an occupied cell holds about `target` trees of all species:
+/// estimate the density from occupied 64 m cells, then round to a power of two in 16–512 m.
+pub fn default_cell_size(trees: &[SceneTree], target: f64) -> u32 {
+    if trees.is_empty() {
+        return 64;
+    }
+    let mut cells = std::collections::HashSet::new();
+    for t in trees {
+        cells.insert(((t.pos.x / 64.0).floor() as i64, (t.pos.y / 64.0).floor() as i64));
+    }
+    let per_cell = trees.len() as f64 / cells.len() as f64;
+    let size = 64.0 * (target / per_cell).sqrt();
+    let pow = size.log2().round().clamp(4.0, 9.0);
+    2f64.powf(pow) as u32
+}
+
+/// Builds the tiles of a scene. `cell_size_m` ≤ [`MAX_CELL_SIZE_M`].
+///
+/// # Panics
+/// If `cell_size_m` is 0 or above [`MAX_CELL_SIZE_M`], or a tree's species has no shape.
+pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u32, tile_cells: u32) -> Vec<BuiltTile> {
+    assert!(cell_size_m > 0 && cell_size_m <= MAX_CELL_SIZE_M, "cell size {cell_size_m} m");
+    assert!(tile_cells > 0);
+    let cell = f64::from(cell_size_m);
+    // Key: tile, cell, species. Sorting keys with the tree index makes the order deterministic.
+    let mut keyed: Vec<([i64; 5], usize)> = trees
+        .par_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let cx = (t.pos.x / cell).floor() as i64;
+            let cy = (t.pos.y / cell).floor() as i64;
+            let tc = i64::from(tile_cells);
+            ([cy.div_euclid(tc), cx.div_euclid(tc), cy, cx, i64::from(t.species)], i)
+        })
+        .collect();
+    keyed.par_sort_unstable_by(|a, b| {
+        a.0.cmp(&b.0).then_with(|| trees[a.1].pos.z.total_cmp(&trees[b.1].pos.z)).then(a.1.cmp(&b.1))
+    });
+    // Split into tiles.
+    let mut tile_ranges = Vec::new();
+    let mut start = 0;
+    for i in 1..=keyed.len() {
+        if i == keyed.len() || keyed[i].0[..2] != keyed[start].0[..2] {
+            tile_ranges.push(start..i);
+            start = i;
+        }
+    }
+    tile_ranges
+        .into_par_iter()
+        .map(|range| {
+            let group = &keyed[range];
+            let (ty, tx) = (group[0].0[0], group[0].0[1]);
+            let mut batches = Vec::new();
+            let mut instances = Vec::with_capacity(group.len());
+            let mut ids = Vec::with_capacity(group.len());
+            let mut b0 = 0;
+            for i in 1..=group.len() {
+                let split = i == group.len()
+                    || group[i].0 != group[b0].0
+                    || trees[group[i].1].pos.z - trees[group[b0].1].pos.z > Z_BAND_M - 0.02;
+                if split {
+                    let key = group[b0].0;
+                    let members: Vec<&SceneTree> = group[b0..i].iter().map(|(_, t)| &trees[*t]).collect();
+                    let corner = [key[3] as f64 * cell, key[2] as f64 * cell];
+                    let batch = make_batch(
+                        &members,
+                        &shapes[key[4] as usize],
+                        corner,
+                        cell,
+                        instances.len() as u32,
+                        &mut instances,
+                    );
+                    ids.extend(members.iter().map(|t| t.id));
+                    batches.push(batch);
+                    b0 = i;
+                }
+            }
+            let mut lo = [f32::MAX; 3];
+            let mut hi = [f32::MIN; 3];
+            for b in &batches {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(b.center_m[k] - b.half_extent_m[k]);
+                    hi[k] = hi[k].max(b.center_m[k] + b.half_extent_m[k]);
+                }
+            }
+            BuiltTile { tile: Tile { tile_x: tx as i32, tile_y: ty as i32, batches, instances }, ids, bounds: (lo, hi) }
+        })
+        .collect()
+}
+
+/// Quantises `members` (one cell, one species, one height band) into a batch.
+fn make_batch(
+    members: &[&SceneTree],
+    shape: &SpeciesShape,
+    corner: [f64; 2],
+    cell: f64,
+    offset: u32,
+    out: &mut Vec<PackedInstance>,
+) -> GpuBatch {
+    let z_min = members.iter().map(|t| t.pos.z).fold(f64::MAX, f64::min);
+    // Round the z origin down to whole centimetres so it is stored exactly enough.
+    let z0 = (z_min * 100.0).floor() / 100.0;
+    let (s_min, s_max) = members.iter().fold((f32::MAX, f32::MIN), |(lo, hi), t| (lo.min(t.scale), hi.max(t.scale)));
+    let scale_levels = ((1u32 << SCALE_BITS) - 1) as f32;
+    let scale_log2_step = if s_max > s_min { (s_max / s_min).log2() / scale_levels } else { 0.0 };
+    let mut batch = GpuBatch {
+        origin_m: [corner[0] as f32, corner[1] as f32, z0 as f32],
+        instance_offset: offset,
+        center_m: [0.0; 3],
+        radius_m: 0.0,
+        half_extent_m: [0.0; 3],
+        instance_count: members.len() as u32,
+        species: members[0].species,
+        xy_step_m: (cell / 65535.0) as f32,
+        z_step_m: MAX_Z_STEP_M,
+        scale_min: s_min,
+        scale_log2_step,
+        max_height_m: 0.0,
+        reserved: [0; 2],
+    };
+    let xy_step = cell / 65535.0;
+    let z_max_q = (1u32 << Z_BITS) - 1;
+    let mut lo = [f32::MAX; 3];
+    let mut hi = [f32::MIN; 3];
+    for t in members {
+        let qx = ((t.pos.x - corner[0]) / xy_step).round().clamp(0.0, 65535.0) as u16;
+        let qy = ((t.pos.y - corner[1]) / xy_step).round().clamp(0.0, 65535.0) as u16;
+        let qz = ((t.pos.z - z0) / f64::from(MAX_Z_STEP_M)).round().clamp(0.0, f64::from(z_max_q)) as u32;
+        let turns = (t.yaw_rad / std::f32::consts::TAU).rem_euclid(1.0);
+        let qyaw = ((turns * (1 << YAW_BITS) as f32).round() as u32) % (1 << YAW_BITS);
+        let qs = if scale_log2_step > 0.0 {
+            ((t.scale / s_min).log2() / scale_log2_step).round().clamp(0.0, scale_levels) as u32
+        } else {
+            0
+        };
+        let packed = PackedInstance::new(qx, qy, qz, qyaw, qs, u32::from(t.variation));
+        // Bounds from the decoded values: exactly what the GPU will draw.
+        let d = packed.decode(&batch);
+        let r = shape.radius_xy * d.scale;
+        lo[0] = lo[0].min(d.position_m[0] - r);
+        lo[1] = lo[1].min(d.position_m[1] - r);
+        lo[2] = lo[2].min(d.position_m[2] + shape.z_min * d.scale);
+        hi[0] = hi[0].max(d.position_m[0] + r);
+        hi[1] = hi[1].max(d.position_m[1] + r);
+        hi[2] = hi[2].max(d.position_m[2] + shape.z_max * d.scale);
+        batch.max_height_m = batch.max_height_m.max((shape.z_max - shape.z_min) * d.scale);
+        out.push(packed);
+    }
+    for k in 0..3 {
+        batch.center_m[k] = (lo[k] + hi[k]) * 0.5;
+        // A hair of slack so f32 rounding in the centre never cuts a tree.
+        batch.half_extent_m[k] = (hi[k] - lo[k]) * 0.5 * 1.0001 + 1e-3;
+    }
+    batch.radius_m = glam::Vec3::from(batch.half_extent_m).length();
+    batch
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn random_trees(n: usize, seed: u64) -> Vec<SceneTree> {
+        let mut s = seed;
+        (0..n)
+            .map(|i| SceneTree {
+                pos: DVec3::new(
+                    lcg(&mut s) * 3000.0 - 1500.0,
+                    lcg(&mut s) * 2000.0 - 700.0,
+                    lcg(&mut s) * 120.0 - 20.0,
+                ),
+                species: (lcg(&mut s) * 3.0) as u32,
+                scale: 0.2 + lcg(&mut s) as f32 * 1.5,
+                yaw_rad: lcg(&mut s) as f32 * 7.0,
+                variation: (lcg(&mut s) * 32.0) as u8,
+                id: i as u64,
+            })
+            .collect()
+    }
+
+    const SHAPES: [SpeciesShape; 3] = [
+        SpeciesShape { radius_xy: 5.0, z_min: 0.0, z_max: 20.0 },
+        SpeciesShape { radius_xy: 3.0, z_min: -0.5, z_max: 30.0 },
+        SpeciesShape { radius_xy: 8.0, z_min: 0.0, z_max: 12.0 },
+    ];
+
+    #[test]
+    fn every_tree_in_exactly_one_batch_within_bounds_and_error() {
+        let trees = random_trees(20_000, 7);
+        let tiles = build_tiles(&trees, &SHAPES, 128, 4);
+        let mut seen = vec![0u32; trees.len()];
+        for bt in &tiles {
+            // Round trip through the file format too.
+            let bytes = bt.tile.encode();
+            let tile = Tile::decode("t", &bytes, 3).unwrap();
+            assert_eq!(tile, bt.tile);
+            for b in &tile.batches {
+                let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+                for (inst, id) in tile.instances[run.clone()].iter().zip(&bt.ids[run]) {
+                    let t = &trees[*id as usize];
+                    seen[*id as usize] += 1;
+                    assert_eq!(t.species, b.species);
+                    let d = inst.decode(b);
+                    let err =
+                        DVec3::new(f64::from(d.position_m[0]), f64::from(d.position_m[1]), f64::from(d.position_m[2]))
+                            - t.pos;
+                    assert!(err.length() <= 0.01, "position error {err} m");
+                    assert!((d.scale / t.scale - 1.0).abs() < 0.01, "scale {} vs {}", d.scale, t.scale);
+                    let shape = SHAPES[t.species as usize];
+                    for k in 0..3 {
+                        let top = if k == 2 {
+                            d.position_m[2] + shape.z_max * d.scale
+                        } else {
+                            d.position_m[k] + shape.radius_xy * d.scale
+                        };
+                        assert!(top <= b.center_m[k] + b.half_extent_m[k], "tree outside its batch bounds");
+                        assert!(d.position_m[k] >= b.center_m[k] - b.half_extent_m[k] - 1e-3);
+                    }
+                    let yaw_err = (d.yaw_rad - t.yaw_rad.rem_euclid(std::f32::consts::TAU)).abs();
+                    assert!(yaw_err < 0.013 || (std::f32::consts::TAU - yaw_err) < 0.013, "yaw {yaw_err}");
+                    assert_eq!(d.variation, t.variation);
+                }
+                // The sphere contains the box.
+                assert!(b.radius_m >= glam::Vec3::from(b.half_extent_m).length() - 1e-3);
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1), "some tree is in no batch or in two");
+    }
+
+    #[test]
+    fn tall_height_ranges_split_into_bands() {
+        let mut trees = random_trees(500, 3);
+        for (i, t) in trees.iter_mut().enumerate() {
+            t.pos = DVec3::new(10.0 + i as f64 * 0.01, 10.0, i as f64 * 0.5); // 250 m of height in one cell
+            t.species = 0;
+        }
+        let tiles = build_tiles(&trees, &SHAPES, 64, 8);
+        assert_eq!(tiles.len(), 1);
+        assert!(tiles[0].tile.batches.len() >= 7, "{} batches", tiles[0].tile.batches.len());
+    }
+
+    #[test]
+    fn build_is_deterministic() {
+        let trees = random_trees(5000, 11);
+        let a: Vec<Vec<u8>> = build_tiles(&trees, &SHAPES, 64, 8).iter().map(|t| t.tile.encode()).collect();
+        let b: Vec<Vec<u8>> = build_tiles(&trees, &SHAPES, 64, 8).iter().map(|t| t.tile.encode()).collect();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn default_cell_size_follows_density() {
+        let dense = random_trees(50_000, 1); // ~17 trees per 64 m cell
+        let c = default_cell_size(&dense, 500.0);
+        assert!((256..=512).contains(&c), "{c}");
+    }
+}

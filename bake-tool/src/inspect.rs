@@ -1,0 +1,204 @@
+//! `sylva-bake inspect`: summarises a scene directory, manifest, pack, tile or id file.
+//! The JSON keys are documented in `docs/FORMAT.md`.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+use sylva::format::pack::PackMeta;
+use sylva::format::{decode_ids, decode_pack, Manifest, Tile};
+
+/// Inspects `path` and returns the summary as JSON.
+pub fn inspect(path: &Path) -> Result<Value> {
+    let (path, is_scene) = if path.is_dir() { (path.join("scene.json"), true) } else { (path.to_path_buf(), false) };
+    let name = path.display().to_string();
+    let bytes = std::fs::read(&path).with_context(|| format!("cannot read {name}"))?;
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match (is_scene, ext) {
+        (true, _) | (_, "json") => inspect_scene(&path, &bytes),
+        (_, "pack") => {
+            let pack = decode_pack(&name, &bytes)?;
+            Ok(pack_json(&pack.meta, bytes.len() as u64, &pack))
+        }
+        (_, "tile") => {
+            // Without the manifest, accept any species index.
+            let tile = Tile::decode(&name, &bytes, u32::MAX)?;
+            Ok(tile_json(&tile, bytes.len() as u64))
+        }
+        (_, "ids") => {
+            let ids = decode_ids(&name, &bytes)?;
+            Ok(json!({"kind": "ids", "count": ids.len(), "bytes": bytes.len()}))
+        }
+        _ => bail!("{name}: not a scene directory, scene.json, .pack, .tile or .ids file"),
+    }
+}
+
+fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
+    let name = path.display().to_string();
+    let m = Manifest::decode(&name, bytes)?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut instance_bytes = 0u64;
+    let mut tile_bytes = 0u64;
+    for t in &m.tiles {
+        let p = dir.join(&t.url);
+        let b = std::fs::read(&p).with_context(|| format!("cannot read tile {}", p.display()))?;
+        let tile = Tile::decode(&p.display().to_string(), &b, m.species.len() as u32)?;
+        if tile.instances.len() as u64 != t.trees {
+            bail!("{}: holds {} trees, the manifest says {}", p.display(), tile.instances.len(), t.trees);
+        }
+        instance_bytes += tile.instance_bytes() as u64;
+        tile_bytes += b.len() as u64;
+    }
+    let mut species = Vec::new();
+    for s in &m.species {
+        let p = dir.join(&s.pack);
+        let b = std::fs::read(&p).with_context(|| format!("cannot read pack {}", p.display()))?;
+        let pack = decode_pack(&p.display().to_string(), &b)?;
+        let mut j = pack_json(&pack.meta, b.len() as u64, &pack);
+        j["trees"] = json!(s.trees);
+        species.push(j);
+    }
+    let trees = m.counts.trees.max(1) as f64;
+    Ok(json!({
+        "kind": "scene",
+        "format": m.format,
+        "version": m.version,
+        "crs": {"epsg": m.crs.epsg, "proj4": m.crs.proj4},
+        "origin_m": m.origin_m,
+        "bounds": {"min": m.bounds.min, "max": m.bounds.max},
+        "cell_size_m": m.cell_size_m,
+        "tile_cells": m.tile_cells,
+        "trees_total": m.counts.trees,
+        "species_count": m.species.len(),
+        "batches": m.counts.batches,
+        "tiles": m.counts.tiles,
+        "bytes_per_tree": instance_bytes as f64 / trees,
+        "tile_bytes_per_tree": tile_bytes as f64 / trees,
+        "tile_bytes": tile_bytes,
+        "pack_bytes": m.species.iter().map(|s| s.bytes).sum::<u64>(),
+        "species": species,
+    }))
+}
+
+fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Value {
+    use sylva::format::pack::kind;
+    let mut levels = Vec::new();
+    for (i, l) in meta.mesh_levels.iter().enumerate() {
+        let b = pack.section(kind::MESH_VERTICES, i as u32).map_or(0, <[u8]>::len)
+            + pack.section(kind::MESH_INDICES, i as u32).map_or(0, <[u8]>::len);
+        levels.push(json!({
+            "kind": "mesh",
+            "level": i,
+            "count": l.index_count / 3,
+            "vertices": l.vertex_count,
+            "bytes": b,
+            "select_px": l.select_px,
+        }));
+    }
+    if let Some(bb) = &meta.billboards {
+        let b = pack.section(kind::BILLBOARD_COLOR, 0).map_or(0, <[u8]>::len)
+            + pack.section(kind::BILLBOARD_NORMAL, 0).map_or(0, <[u8]>::len);
+        levels.push(json!({
+            "kind": "billboards",
+            "count": bb.angles * bb.azimuths,
+            "angles": bb.angles,
+            "azimuths": bb.azimuths,
+            "resolution": bb.texture.size,
+            "mips": bb.texture.mips,
+            "bytes": b,
+            "select_px": bb.select_px,
+        }));
+    }
+    json!({
+        "kind": "pack",
+        "name": meta.name,
+        "bytes": bytes,
+        "height_m": meta.height_m,
+        "bounds": {"min": meta.bounds_min, "max": meta.bounds_max},
+        "materials": meta.materials.iter().map(|m| json!({"name": m.name, "kind": m.kind, "alpha_cutoff": m.alpha_cutoff, "textured": m.texture_layer.is_some()})).collect::<Vec<_>>(),
+        "material_texture": meta.material_texture.map(|t| json!({"size": t.size, "layers": t.layers, "mips": t.mips, "bytes": t.byte_len()})),
+        "levels": levels,
+    })
+}
+
+fn tile_json(tile: &Tile, bytes: u64) -> Value {
+    json!({
+        "kind": "tile",
+        "tile_x": tile.tile_x,
+        "tile_y": tile.tile_y,
+        "batches": tile.batches.len(),
+        "trees": tile.instances.len(),
+        "bytes": bytes,
+        "bytes_per_tree": tile.instance_bytes() as f64 / tile.instances.len().max(1) as f64,
+    })
+}
+
+/// A human-readable rendering of [`inspect`]'s JSON.
+pub fn to_text(v: &Value) -> String {
+    let mut out = String::new();
+    let f = |v: &Value| v.to_string();
+    match v["kind"].as_str() {
+        Some("scene") => {
+            out += &format!("Sylva scene, {} v{}\n", v["format"].as_str().unwrap_or("?"), v["version"]);
+            out += &format!("CRS EPSG:{}  origin {}\n", v["crs"]["epsg"], f(&v["origin_m"]));
+            out += &format!(
+                "bounds {} .. {} (m, relative to the origin)\n",
+                f(&v["bounds"]["min"]),
+                f(&v["bounds"]["max"])
+            );
+            out += &format!(
+                "{} trees, {} species, {} batches, {} tiles; cell {} m, {} cells per tile side\n",
+                v["trees_total"], v["species_count"], v["batches"], v["tiles"], v["cell_size_m"], v["tile_cells"]
+            );
+            out += &format!(
+                "instance bytes per tree {:.2} (tile files incl. batch records: {:.2}); tiles {:.2} MB, packs {:.2} MB\n",
+                v["bytes_per_tree"].as_f64().unwrap_or(0.0),
+                v["tile_bytes_per_tree"].as_f64().unwrap_or(0.0),
+                v["tile_bytes"].as_f64().unwrap_or(0.0) / 1e6,
+                v["pack_bytes"].as_f64().unwrap_or(0.0) / 1e6
+            );
+            for s in v["species"].as_array().into_iter().flatten() {
+                out += &pack_text(s);
+            }
+        }
+        Some("pack") => out += &pack_text(v),
+        _ => out += &serde_json::to_string_pretty(v).unwrap_or_default(),
+    }
+    out
+}
+
+fn pack_text(s: &Value) -> String {
+    let mut out = format!(
+        "species {}: {:.2} MB, height {:.1} m{}\n",
+        s["name"].as_str().unwrap_or("?"),
+        s["bytes"].as_f64().unwrap_or(0.0) / 1e6,
+        s["height_m"].as_f64().unwrap_or(0.0),
+        s.get("trees").map_or(String::new(), |t| format!(", {t} trees"))
+    );
+    for l in s["levels"].as_array().into_iter().flatten() {
+        match l["kind"].as_str() {
+            Some("mesh") => {
+                out += &format!(
+                    "  mesh level {}: {} triangles, {} vertices, {:.1} KB, from {} px\n",
+                    l["level"],
+                    l["count"],
+                    l["vertices"],
+                    l["bytes"].as_f64().unwrap_or(0.0) / 1e3,
+                    l["select_px"]
+                )
+            }
+            Some("billboards") => {
+                out += &format!(
+                    "  billboards: {} angles × {} azimuths at {}², {} mips, {:.1} KB\n",
+                    l["angles"],
+                    l["azimuths"],
+                    l["resolution"],
+                    l["mips"],
+                    l["bytes"].as_f64().unwrap_or(0.0) / 1e3
+                )
+            }
+            _ => {}
+        }
+    }
+    out
+}

@@ -1,0 +1,442 @@
+//! `sylva-bake`: turns glTF trees and tree placements into a Sylva scene
+//! (LoD packs + grouped-batch tiles + manifest). See `--help`.
+
+mod batching;
+mod demo;
+mod gltf_import;
+mod inspect;
+mod pack_build;
+mod placements;
+mod reproject;
+mod scene_write;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use glam::DVec3;
+
+use batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
+use gltf_import::Classifier;
+use pack_build::PackOptions;
+use placements::CoordKind;
+use reproject::{Crs, Reprojector};
+use scene_write::{SceneInput, SceneSummary};
+
+#[derive(Parser)]
+#[command(
+    name = "sylva-bake",
+    version,
+    about = "Bake glTF trees and tree placements into a Sylva scene (LoD packs + grouped-batch tiles)."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Bake real models and placements into a scene directory.
+    #[command(
+        after_help = "Example:\n  sylva-bake bake --model oak=oak.glb --model pine=pine.glb \\\n    --placements trees.csv --map 'quercus*=oak' --map 'pinus*=pine' --default-model oak --out scene/"
+    )]
+    Bake(BakeArgs),
+    /// Make a complete procedural demo scene (three species, UTM 33N, no input files).
+    Demo(DemoArgs),
+    /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
+    Inspect {
+        /// Scene directory or file.
+        path: PathBuf,
+        /// Print one JSON object instead of text (keys in docs/FORMAT.md).
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args, Clone)]
+struct PackArgs {
+    /// Billboard elevation angles over 0–90° (seed 004 alg. 3.1).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(2..=64))]
+    billboard_angles: u32,
+    /// Billboard azimuths around the tree.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    billboard_azimuths: u32,
+    /// Billboard resolution per layer (power of two).
+    #[arg(long, default_value_t = 128)]
+    billboard_size: u32,
+    /// Material texture size (power of two).
+    #[arg(long, default_value_t = 512)]
+    texture_size: u32,
+    /// Do not add the simplified mesh level.
+    #[arg(long)]
+    no_simplified_level: bool,
+    /// Write billboard layers as PNG strips into this directory.
+    #[arg(long, value_name = "DIR")]
+    debug_dump: Option<PathBuf>,
+    /// Batch grid cell size in metres (default: from the data's density; at most 655).
+    #[arg(long)]
+    cell_size: Option<u32>,
+    /// Grid cells per tile side.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=256))]
+    tile_cells: u32,
+}
+
+impl PackArgs {
+    fn options(&self) -> Result<PackOptions> {
+        for (name, v, max) in
+            [("--billboard-size", self.billboard_size, 2048), ("--texture-size", self.texture_size, 4096)]
+        {
+            if !v.is_power_of_two() || v < 4 || v > max {
+                bail!("{name} {v}: must be a power of two between 4 and {max}");
+            }
+        }
+        if u64::from(self.billboard_angles) * u64::from(self.billboard_azimuths) > 256 {
+            bail!("--billboard-angles × --billboard-azimuths must be at most 256 (WebGPU's array layer limit)");
+        }
+        Ok(PackOptions {
+            texture_size: self.texture_size,
+            billboard_angles: self.billboard_angles,
+            billboard_azimuths: self.billboard_azimuths,
+            billboard_size: self.billboard_size,
+            simplified_level: !self.no_simplified_level,
+        })
+    }
+
+    fn cell_size(&self, trees: &[SceneTree]) -> Result<u32> {
+        match self.cell_size {
+            Some(c) if c == 0 || c > MAX_CELL_SIZE_M => {
+                bail!("--cell-size {c}: must be 1–{MAX_CELL_SIZE_M} m (16-bit positions at ≤ 1 cm)")
+            }
+            Some(c) => Ok(c),
+            None => Ok(default_cell_size(trees, 500.0)),
+        }
+    }
+}
+
+#[derive(Args)]
+struct BakeArgs {
+    /// A species model: NAME=PATH.glb (repeat for each species).
+    #[arg(long = "model", value_name = "NAME=PATH", required = true)]
+    models: Vec<String>,
+    /// Tree placements: .csv (columns auto-detected) or .geojson points.
+    #[arg(long, value_name = "PATH")]
+    placements: PathBuf,
+    /// Map species labels to models: PATTERN=NAME (case-insensitive; * is a wildcard,
+    /// otherwise a substring). Labels equal to a model name map to it without a pattern.
+    #[arg(long = "map", value_name = "PATTERN=NAME")]
+    maps: Vec<String>,
+    /// Model for rows whose species maps to no model (otherwise they are skipped and reported).
+    #[arg(long, value_name = "NAME")]
+    default_model: Option<String>,
+    /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
+    #[arg(long)]
+    crs: Option<String>,
+    /// CRS of x/y placement columns (required for projected input).
+    #[arg(long)]
+    input_crs: Option<String>,
+    /// Height in metres for rows without one (default: the median of the given heights).
+    #[arg(long)]
+    default_height: Option<f32>,
+    /// Rows farther than this from the median position are outliers and skipped.
+    #[arg(long, default_value_t = 100.0)]
+    max_extent_km: f64,
+    /// Material/mesh/node name pattern forced to leaves (repeatable).
+    #[arg(long = "leaf-material", value_name = "PATTERN")]
+    leaf_materials: Vec<String>,
+    /// Material/mesh/node name pattern forced to branches (repeatable).
+    #[arg(long = "branch-material", value_name = "PATTERN")]
+    branch_materials: Vec<String>,
+    #[command(flatten)]
+    pack: PackArgs,
+    /// Output scene directory (replaced atomically).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+struct DemoArgs {
+    /// Output scene directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Number of trees.
+    #[arg(long, default_value_t = 100_000)]
+    trees: usize,
+    /// Random seed (same seed → same bytes).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    pack: PackArgs,
+}
+
+fn log(msg: &str) {
+    eprintln!("{msg}");
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Bake(args) => bake(&args),
+        Command::Demo(args) => demo(&args),
+        Command::Inspect { path, json } => inspect::inspect(&path).map(|v| {
+            if json {
+                println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+            } else {
+                print!("{}", inspect::to_text(&v));
+            }
+        }),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn report_summary(s: &SceneSummary, out: &std::path::Path, started: Instant) {
+    let m = &s.manifest;
+    log(&format!(
+        "wrote {}: {} trees, {} species, {} batches, {} tiles, {:.2} instance bytes per tree (packs {:.1} s, tiles {:.1} s, total {:.1} s)",
+        out.display(),
+        m.counts.trees,
+        m.species.len(),
+        m.counts.batches,
+        m.counts.tiles,
+        s.instance_bytes as f64 / m.counts.trees.max(1) as f64,
+        s.pack_seconds,
+        s.tile_seconds,
+        started.elapsed().as_secs_f64()
+    ));
+}
+
+fn demo(args: &DemoArgs) -> Result<()> {
+    let started = Instant::now();
+    if args.trees == 0 {
+        bail!("--trees must be at least 1");
+    }
+    log(&format!("demo: {} trees, seed {}", args.trees, args.seed));
+    let species = demo::demo_models(args.seed);
+    let trees = demo::demo_layout(args.trees, args.seed);
+    let input = SceneInput {
+        cell_size_m: args.pack.cell_size(&trees)?,
+        species,
+        trees,
+        crs: Crs::projected(demo::DEMO_EPSG)?,
+        origin_m: demo::DEMO_ORIGIN,
+        tile_cells: args.pack.tile_cells,
+        pack: args.pack.options()?,
+        debug_dump: args.pack.debug_dump.clone(),
+    };
+    let s = scene_write::write_scene(&input, &args.out, &log)?;
+    report_summary(&s, &args.out, started);
+    Ok(())
+}
+
+/// Matches a species label against a `--map` pattern.
+fn pattern_matches(pattern: &str, label: &str) -> bool {
+    let p = pattern.to_lowercase();
+    let l = label.to_lowercase();
+    if !p.contains('*') {
+        return l.contains(&p);
+    }
+    // Glob with '*' only.
+    let parts: Vec<&str> = p.split('*').collect();
+    let mut rest = l.as_str();
+    for (i, part) in parts.iter().enumerate() {
+        if part.is_empty() {
+            continue;
+        }
+        if i == 0 {
+            if !rest.starts_with(part) {
+                return false;
+            }
+            rest = &rest[part.len()..];
+        } else if let Some(at) = rest.find(part) {
+            rest = &rest[at + part.len()..];
+        } else {
+            return false;
+        }
+    }
+    parts.last().is_none_or(|last| last.is_empty() || l.ends_with(last))
+}
+
+fn split_pair<'a>(flag: &str, s: &'a str) -> Result<(&'a str, &'a str)> {
+    match s.split_once('=') {
+        Some((a, b)) if !a.trim().is_empty() && !b.trim().is_empty() => Ok((a.trim(), b.trim())),
+        _ => bail!("{flag} {s:?}: expected NAME=VALUE"),
+    }
+}
+
+fn bake(args: &BakeArgs) -> Result<()> {
+    let started = Instant::now();
+    let pack_opts = args.pack.options()?;
+    let classifier =
+        Classifier { leaf_patterns: args.leaf_materials.clone(), branch_patterns: args.branch_materials.clone() };
+    // Models.
+    let mut species = Vec::new();
+    for m in &args.models {
+        let (name, path) = split_pair("--model", m)?;
+        if species.iter().any(|(n, _): &(String, _)| n.eq_ignore_ascii_case(name)) {
+            bail!("--model {name} is given twice");
+        }
+        let model = gltf_import::import(std::path::Path::new(path), &classifier)?;
+        let (leaf, wood) = model.triangle_counts();
+        log(&format!(
+            "model {name}: {} materials, {leaf} leaf + {wood} branch triangles, height {:.2} (model units)",
+            model.materials.len(),
+            model.height()
+        ));
+        species.push((name.to_string(), model));
+    }
+    let model_index = |name: &str| species.iter().position(|(n, _)| n.eq_ignore_ascii_case(name));
+    let mut maps = Vec::new();
+    for m in &args.maps {
+        let (pattern, name) = split_pair("--map", m)?;
+        let idx = model_index(name).with_context(|| format!("--map {m}: no --model named {name:?}"))?;
+        maps.push((pattern.to_string(), idx));
+    }
+    let default_model = match &args.default_model {
+        Some(n) => Some(model_index(n).with_context(|| format!("--default-model {n}: no --model with that name"))?),
+        None if species.len() == 1 => Some(0),
+        None => None,
+    };
+    // Placements.
+    let mut set = placements::read_placements(&args.placements)?;
+    // CRS.
+    let (src, dst) = match set.kind {
+        CoordKind::LonLat => {
+            let dst = match &args.crs {
+                Some(c) => Crs::parse(c)?,
+                None => {
+                    let mut lons: Vec<f64> = set.rows.iter().map(|p| p.x).collect();
+                    let mut lats: Vec<f64> = set.rows.iter().map(|p| p.y).collect();
+                    if lons.is_empty() {
+                        bail!(
+                            "placements {}: no usable rows ({})",
+                            args.placements.display(),
+                            set.report.lines().join("; ")
+                        );
+                    }
+                    Crs::utm_for(median(&mut lons), median(&mut lats))?
+                }
+            };
+            (Crs::from_epsg(4326)?, dst)
+        }
+        CoordKind::Projected => {
+            let input = args
+                .input_crs
+                .as_deref()
+                .or(args.crs.as_deref())
+                .context("the placements have x/y columns: say which CRS they are in with --input-crs EPSG:xxxx")?;
+            let src = Crs::parse(input)?;
+            let dst = Crs::parse(args.crs.as_deref().unwrap_or(input))?;
+            (src, dst)
+        }
+    };
+    if dst.is_geographic() {
+        bail!("--crs EPSG:{} is geographic; a scene needs a projected CRS in metres (e.g. a UTM zone)", dst.epsg);
+    }
+    log(&format!("scene CRS EPSG:{}", dst.epsg));
+    let reproject = Reprojector::new(src, &dst)?;
+    let mut projected = Vec::with_capacity(set.rows.len());
+    for p in std::mem::take(&mut set.rows) {
+        match reproject.apply(p.x, p.y) {
+            Ok((x, y)) => projected.push((x, y, p)),
+            Err(_) => set.report.skip("cannot be projected to the scene CRS", p.row),
+        }
+    }
+    // Outliers: far from the median position.
+    let mut xs: Vec<f64> = projected.iter().map(|(x, _, _)| *x).collect();
+    let mut ys: Vec<f64> = projected.iter().map(|(_, y, _)| *y).collect();
+    if xs.is_empty() {
+        bail!("no usable placements ({})", set.report.lines().join("; "));
+    }
+    let (mx, my) = (median(&mut xs), median(&mut ys));
+    let limit = args.max_extent_km * 1000.0;
+    projected.retain(|(x, y, p)| {
+        let keep = (x - mx).hypot(y - my) <= limit;
+        if !keep {
+            set.report
+                .skip(&format!("farther than {} km from the median position (outlier)", args.max_extent_km), p.row);
+        }
+        keep
+    });
+    // Species.
+    let mut unmapped: std::collections::BTreeMap<String, u64> = Default::default();
+    let mut heights: Vec<f32> = projected.iter().filter_map(|(_, _, p)| p.height_m).collect();
+    let default_height = match args.default_height {
+        Some(h) if h.is_finite() && h > 0.0 => Some(h),
+        Some(h) => bail!("--default-height {h}: must be a positive number of metres"),
+        None if !heights.is_empty() => {
+            let n = heights.len();
+            heights.select_nth_unstable_by(n / 2, f32::total_cmp);
+            Some(heights[n / 2])
+        }
+        None => None,
+    };
+    let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
+    let mut trees = Vec::with_capacity(projected.len());
+    for (x, y, p) in &projected {
+        let label = p.species.as_deref().unwrap_or("");
+        let idx = model_index(label)
+            .or_else(|| maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))
+            .or(default_model);
+        let Some(idx) = idx else {
+            *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
+            continue;
+        };
+        let model_h = species[idx].1.height().max(1e-3);
+        let target = p.height_m.or(default_height).unwrap_or(model_h);
+        let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
+        trees.push(SceneTree {
+            pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
+            species: idx as u32,
+            scale: target / model_h,
+            yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
+            variation: ((h >> 20) % 32) as u8,
+            id: p.id.unwrap_or(p.row | 1 << 63),
+        });
+    }
+    for line in set.report.lines() {
+        log(&format!("placements: {line}"));
+    }
+    for (label, n) in &unmapped {
+        log(&format!(
+            "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
+        ));
+    }
+    let input = SceneInput {
+        cell_size_m: args.pack.cell_size(&trees)?,
+        species,
+        trees,
+        crs: dst,
+        origin_m: origin,
+        tile_cells: args.pack.tile_cells,
+        pack: pack_opts,
+        debug_dump: args.pack.debug_dump.clone(),
+    };
+    log(&format!("batching with {} m cells", input.cell_size_m));
+    let s = scene_write::write_scene(&input, &args.out, &log)?;
+    report_summary(&s, &args.out, started);
+    Ok(())
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    let n = v.len();
+    v.select_nth_unstable_by(n / 2, f64::total_cmp);
+    v[n / 2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pattern_matches;
+
+    #[test]
+    fn patterns() {
+        assert!(pattern_matches("quercus*", "Quercus robur"));
+        assert!(!pattern_matches("quercus*", "Acer quercus"));
+        assert!(pattern_matches("*robur", "Quercus robur"));
+        assert!(pattern_matches("oak", "Red Oak"));
+        assert!(pattern_matches("q*r", "quercus robur"));
+        assert!(!pattern_matches("pinus*", "Quercus"));
+    }
+}

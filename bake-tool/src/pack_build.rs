@@ -1,0 +1,411 @@
+//! Builds a species' LoD pack from an imported model: mesh levels (vertex-cache
+//! optimised with meshoptimizer, quantised), material textures with alpha-aware
+//! mips, and the view-angle billboard array rendered by Sylva's own mesh pass.
+
+use anyhow::{Context, Result};
+use glam::{Vec2, Vec3};
+use sylva::format::pack::{
+    encode_pack, kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta,
+    Section, TextureArrayMeta,
+};
+use sylva::render::capture::{capture_billboards, BillboardFrame};
+use sylva::render::mesh::MeshPipelines;
+use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
+use sylva::render::GpuContext;
+
+use crate::gltf_import::{ImportedModel, ImportedVertex};
+
+/// Knobs of the pack bake.
+#[derive(Debug, Clone)]
+pub struct PackOptions {
+    /// Side of the material texture array (power of two).
+    pub texture_size: u32,
+    /// Billboard elevation angles over 0–90°.
+    pub billboard_angles: u32,
+    /// Billboard azimuths.
+    pub billboard_azimuths: u32,
+    /// Billboard layer side (power of two).
+    pub billboard_size: u32,
+    /// Whether to add a simplified mesh level.
+    pub simplified_level: bool,
+}
+
+impl Default for PackOptions {
+    fn default() -> Self {
+        Self {
+            texture_size: 512,
+            billboard_angles: 8,
+            billboard_azimuths: 1,
+            billboard_size: 128,
+            simplified_level: true,
+        }
+    }
+}
+
+/// Projected tree heights (pixels) above which each representation is selected.
+/// Mesh LoD0 close up, the simplified mesh in the middle, billboards far away.
+pub const SELECT_PX_MESH0: f32 = 360.0;
+/// See [`SELECT_PX_MESH0`].
+pub const SELECT_PX_MESH1: f32 = 120.0;
+
+/// The bytes of a finished pack and its metadata.
+pub struct BuiltPack {
+    /// The encoded pack.
+    pub bytes: Vec<u8>,
+    /// Its metadata.
+    pub meta: PackMeta,
+    /// Billboard colour layers at full resolution (for `--debug-dump`).
+    pub billboard_color: Vec<Vec<u8>>,
+    /// Billboard normal layers at full resolution.
+    pub billboard_normal: Vec<Vec<u8>>,
+}
+
+/// Builds the whole pack of `name` from `model`. `gpu` renders the billboards.
+pub fn build_pack(
+    name: &str,
+    model: &ImportedModel,
+    opts: &PackOptions,
+    gpu: &GpuContext,
+    pipelines: &MeshPipelines,
+) -> Result<BuiltPack> {
+    let (lo, hi) = model.bounds();
+    let height = (hi.z - lo.z).max(1e-3);
+    let (materials, texture_meta, texture_bytes) = build_materials(model, opts.texture_size);
+    let mut levels = vec![build_mesh_level(model, SELECT_PX_MESH0)];
+    if opts.simplified_level {
+        let simple = simplify_model(model);
+        if simple.triangles.len() < model.triangles.len() {
+            levels.push(build_mesh_level(&simple, SELECT_PX_MESH1));
+        }
+    }
+    let mut sections = Vec::new();
+    for (i, (_, vtx, idx)) in levels.iter().enumerate() {
+        sections.push(Section {
+            kind: kind::MESH_VERTICES,
+            index: i as u32,
+            count: vtx.len() as u32,
+            stride: 20,
+            data: bytemuck::cast_slice(vtx).to_vec(),
+        });
+        sections.push(Section {
+            kind: kind::MESH_INDICES,
+            index: i as u32,
+            count: idx.len() as u32,
+            stride: 4,
+            data: bytemuck::cast_slice(idx).to_vec(),
+        });
+    }
+    if let Some(bytes) = texture_bytes {
+        sections.push(Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: bytes });
+    }
+    let mut meta = PackMeta {
+        name: name.to_string(),
+        height_m: height,
+        bounds_min: lo.to_array(),
+        bounds_max: hi.to_array(),
+        materials,
+        material_texture: texture_meta,
+        mesh_levels: levels.iter().map(|(m, _, _)| m.clone()).collect(),
+        billboards: None,
+    };
+    // Capture the billboards from the mesh-only pack, through the same decoder the viewer uses.
+    let mesh_only = encode_pack(&meta, &sections);
+    let decoded = sylva::format::decode_pack(name, &mesh_only).context("the mesh-only pack does not validate")?;
+    let frame = BillboardFrame::from_bounds(lo, hi);
+    let capture_size = opts.billboard_size * 2;
+    let captured = capture_billboards(
+        gpu,
+        pipelines,
+        &decoded,
+        &frame,
+        opts.billboard_angles,
+        opts.billboard_azimuths,
+        capture_size,
+    );
+    let layers = opts.billboard_angles * opts.billboard_azimuths;
+    let tex = TextureArrayMeta { size: opts.billboard_size, layers, mips: opts.billboard_size.trailing_zeros() + 1 };
+    // Supersampled 2× capture: mip 1 of the alpha-aware chain is the stored mip 0,
+    // so stored alpha is real coverage rather than a hard alpha test.
+    let color_chains: Vec<Vec<Vec<u8>>> = captured
+        .color
+        .iter()
+        .map(|c| alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb)[1..].to_vec())
+        .collect();
+    let normal_chains: Vec<Vec<Vec<u8>>> = captured
+        .normal
+        .iter()
+        .zip(&captured.color)
+        .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear)[1..].to_vec())
+        .collect();
+    sections.push(Section {
+        kind: kind::BILLBOARD_COLOR,
+        index: 0,
+        count: 0,
+        stride: 0,
+        data: mip_major(&color_chains, tex.mips),
+    });
+    sections.push(Section {
+        kind: kind::BILLBOARD_NORMAL,
+        index: 0,
+        count: 0,
+        stride: 0,
+        data: mip_major(&normal_chains, tex.mips),
+    });
+    meta.billboards = Some(BillboardMeta {
+        angles: opts.billboard_angles,
+        azimuths: opts.billboard_azimuths,
+        texture: tex,
+        center: frame.center.to_array(),
+        half_width: frame.half_width,
+        half_height: frame.half_height,
+        select_px: 0.0,
+    });
+    let bytes = encode_pack(&meta, &sections);
+    sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
+    Ok(BuiltPack {
+        bytes,
+        meta,
+        billboard_color: color_chains.iter().map(|c| c[0].clone()).collect(),
+        billboard_normal: normal_chains.iter().map(|c| c[0].clone()).collect(),
+    })
+}
+
+/// Lays out per-layer mip chains mip-major (all layers of mip 0, then mip 1, …),
+/// the order `queue.write_texture` takes for an array.
+fn mip_major(chains: &[Vec<Vec<u8>>], mips: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    for m in 0..mips as usize {
+        for chain in chains {
+            out.extend_from_slice(&chain[m]);
+        }
+    }
+    out
+}
+
+fn build_materials(model: &ImportedModel, size: u32) -> (Vec<MaterialMeta>, Option<TextureArrayMeta>, Option<Vec<u8>>) {
+    let size = size.max(1).next_power_of_two();
+    let mut chains = Vec::new();
+    let metas = model
+        .materials
+        .iter()
+        .map(|m| {
+            let layer = m.texture.as_ref().map(|img| {
+                let resized = image::imageops::resize(img, size, size, image::imageops::FilterType::Triangle);
+                let raw = resized.into_raw();
+                chains.push(alpha_aware_mips(&raw, &raw, size, ColorEncoding::Srgb));
+                (chains.len() - 1) as u32
+            });
+            MaterialMeta {
+                name: m.name.clone(),
+                kind: m.kind,
+                base_color: m.base_color,
+                alpha_cutoff: m.alpha_cutoff,
+                double_sided: m.double_sided,
+                texture_layer: layer,
+            }
+        })
+        .collect();
+    if chains.is_empty() {
+        return (metas, None, None);
+    }
+    let meta = TextureArrayMeta { size, layers: chains.len() as u32, mips: size.trailing_zeros() + 1 };
+    let bytes = mip_major(&chains, meta.mips);
+    (metas, Some(meta), Some(bytes))
+}
+
+/// Octahedral encoding of a unit vector into snorm8 x, y.
+fn oct_encode(n: Vec3) -> [i8; 2] {
+    let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(1e-12);
+    let (x, y) =
+        if n.z >= 0.0 { (n.x, n.y) } else { ((1.0 - n.y.abs()) * n.x.signum(), (1.0 - n.x.abs()) * n.y.signum()) };
+    [(x.clamp(-1.0, 1.0) * 127.0).round() as i8, (y.clamp(-1.0, 1.0) * 127.0).round() as i8]
+}
+
+/// One quantised, cache-optimised mesh level: metadata, vertices, indices.
+fn build_mesh_level(model: &ImportedModel, select_px: f32) -> (MeshLevelMeta, Vec<MeshVertex>, Vec<u32>) {
+    // Group triangles by material: one draw range per material.
+    let mut order: Vec<usize> = (0..model.triangles.len()).collect();
+    order.sort_by_key(|&t| model.vertices[model.triangles[t][0] as usize].material);
+    let mut indices: Vec<u32> = Vec::with_capacity(order.len() * 3);
+    let mut draws: Vec<DrawRange> = Vec::new();
+    for &t in &order {
+        let m = u32::from(model.vertices[model.triangles[t][0] as usize].material);
+        match draws.last_mut() {
+            Some(d) if d.material == m => d.index_count += 3,
+            _ => draws.push(DrawRange { material: m, first_index: indices.len() as u32, index_count: 3 }),
+        }
+        indices.extend_from_slice(&model.triangles[t]);
+    }
+    // Vertex cache order within each material's range, then fetch order for all.
+    for d in &draws {
+        let range = d.first_index as usize..(d.first_index + d.index_count) as usize;
+        let optimised = meshopt::optimize_vertex_cache(&indices[range.clone()], model.vertices.len());
+        indices[range].copy_from_slice(&optimised);
+    }
+    let vertices: Vec<ImportedVertexPod> = model.vertices.iter().map(ImportedVertexPod::from).collect();
+    let vertices = meshopt::optimize_vertex_fetch(&mut indices, &vertices);
+    let (mut pmin, mut pmax) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    let (mut umin, mut umax) = (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN));
+    for v in &vertices {
+        pmin = pmin.min(Vec3::from(v.position));
+        pmax = pmax.max(Vec3::from(v.position));
+        umin = umin.min(Vec2::from(v.uv));
+        umax = umax.max(Vec2::from(v.uv));
+    }
+    if vertices.is_empty() {
+        (pmin, pmax, umin, umax) = (Vec3::ZERO, Vec3::ONE, Vec2::ZERO, Vec2::ONE);
+    }
+    let pext = (pmax - pmin).max(Vec3::splat(1e-6));
+    let uext = (umax - umin).max(Vec2::splat(1e-6));
+    let q16 = |v: f32| (v.clamp(0.0, 1.0) * 65535.0).round() as u16;
+    let packed: Vec<MeshVertex> = vertices
+        .iter()
+        .map(|v| {
+            let p = (Vec3::from(v.position) - pmin) / pext;
+            let uv = (Vec2::from(v.uv) - umin) / uext;
+            let [ox, oy] = oct_encode(Vec3::from(v.normal));
+            MeshVertex {
+                position: [q16(p.x), q16(p.y), q16(p.z)],
+                material: v.material as u16,
+                normal_oct: [ox, oy, 0, 0],
+                uv: [q16(uv.x), q16(uv.y)],
+                color: v.color.map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8),
+            }
+        })
+        .collect();
+    let meta = MeshLevelMeta {
+        vertex_count: packed.len() as u32,
+        index_count: indices.len() as u32,
+        pos_min: pmin.to_array(),
+        pos_max: (pmin + pext).to_array(),
+        uv_min: umin.to_array(),
+        uv_max: (umin + uext).to_array(),
+        draws,
+        select_px,
+    };
+    (meta, packed, indices)
+}
+
+/// `ImportedVertex` as plain data for meshopt's vertex fetch reordering.
+#[derive(Debug, Clone, Copy, Default)]
+struct ImportedVertexPod {
+    position: [f32; 3],
+    normal: [f32; 3],
+    uv: [f32; 2],
+    color: [f32; 4],
+    material: u32,
+}
+
+impl From<&ImportedVertex> for ImportedVertexPod {
+    fn from(v: &ImportedVertex) -> Self {
+        Self {
+            position: v.position.to_array(),
+            normal: v.normal.to_array(),
+            uv: v.uv.to_array(),
+            color: v.color,
+            material: u32::from(v.material),
+        }
+    }
+}
+
+/// The simplified mesh level: branches simplified to about a quarter of their
+/// triangles by meshoptimizer (silhouette-preserving edge collapses), and one in
+/// three leaf cards kept, each enlarged by √3 about its centre so the canopy
+/// keeps its coverage (edge collapses would destroy alpha-tested cards).
+pub fn simplify_model(model: &ImportedModel) -> ImportedModel {
+    let is_leaf =
+        |t: &[u32; 3]| model.materials[usize::from(model.vertices[t[0] as usize].material)].kind == MaterialKind::Leaf;
+    let branch_idx: Vec<u32> = model.triangles.iter().filter(|t| !is_leaf(t)).flatten().copied().collect();
+    let positions: Vec<[f32; 3]> = model.vertices.iter().map(|v| v.position.to_array()).collect();
+    let mut out =
+        ImportedModel { materials: model.materials.clone(), vertices: model.vertices.clone(), triangles: Vec::new() };
+    if !branch_idx.is_empty() {
+        let adapter =
+            meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0).expect("12-byte positions");
+        let target = (branch_idx.len() / 4 / 3 * 3).max(3);
+        let simplified = meshopt::simplify(&branch_idx, &adapter, target, 0.02, meshopt::SimplifyOptions::None, None);
+        out.triangles.extend(simplified.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
+    }
+    // Leaf cards = connected components of leaf triangles (union-find over shared vertices).
+    let leaf_tris: Vec<[u32; 3]> = model.triangles.iter().filter(|t| is_leaf(t)).copied().collect();
+    let mut parent: Vec<u32> = (0..model.vertices.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for t in &leaf_tris {
+        let a = find(&mut parent, t[0]);
+        for &v in &t[1..] {
+            let b = find(&mut parent, v);
+            parent[b as usize] = a;
+        }
+    }
+    let mut card_of_root = std::collections::HashMap::new();
+    let mut cards: Vec<Vec<[u32; 3]>> = Vec::new();
+    for t in &leaf_tris {
+        let root = find(&mut parent, t[0]);
+        let id = *card_of_root.entry(root).or_insert_with(|| {
+            cards.push(Vec::new());
+            cards.len() - 1
+        });
+        cards[id].push(*t);
+    }
+    let grow = 3f32.sqrt();
+    for (i, card) in cards.iter().enumerate() {
+        if i % 3 != 0 {
+            continue;
+        }
+        let mut verts: Vec<u32> = card.iter().flatten().copied().collect();
+        verts.sort_unstable();
+        verts.dedup();
+        let centre = verts.iter().map(|&v| model.vertices[v as usize].position).sum::<Vec3>() / verts.len() as f32;
+        for &v in &verts {
+            let p = &mut out.vertices[v as usize].position;
+            *p = centre + (*p - centre) * grow;
+        }
+        out.triangles.extend_from_slice(card);
+    }
+    // Drop unused vertices.
+    let mut remap = vec![u32::MAX; out.vertices.len()];
+    let mut vertices = Vec::new();
+    for t in &mut out.triangles {
+        for i in t.iter_mut() {
+            if remap[*i as usize] == u32::MAX {
+                remap[*i as usize] = vertices.len() as u32;
+                vertices.push(out.vertices[*i as usize]);
+            }
+            *i = remap[*i as usize];
+        }
+    }
+    out.vertices = vertices;
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn oct_encoding_round_trips_within_a_degree() {
+        for n in [
+            Vec3::X,
+            -Vec3::Y,
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.5, -0.8).normalize(),
+            Vec3::new(-0.7, 0.7, 0.1).normalize(),
+        ] {
+            let [x, y] = oct_encode(n);
+            let e = Vec2::new(f32::from(x) / 127.0, f32::from(y) / 127.0);
+            let mut d = Vec3::new(e.x, e.y, 1.0 - e.x.abs() - e.y.abs());
+            let t = (-d.z).max(0.0);
+            d.x += if d.x >= 0.0 { -t } else { t };
+            d.y += if d.y >= 0.0 { -t } else { t };
+            let d = d.normalize();
+            assert!(d.dot(n) > 0.9995, "{n} -> {d}");
+        }
+    }
+}

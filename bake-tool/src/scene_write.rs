@@ -1,0 +1,237 @@
+//! Assembles and writes a scene directory: packs, tiles, id sidecars, manifest.
+//!
+//! Writes are atomic: everything goes to a temporary sibling directory that is
+//! renamed into place at the end, so a reader never sees a half-written scene
+//! and a failed bake leaves nothing behind. Output is deterministic.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use sylva::format::manifest::{
+    Bounds, Counts, Crs as CrsEntry, Manifest, SpeciesEntry, TileEntry, SCENE_FORMAT, SCENE_VERSION,
+};
+use sylva::format::tile::encode_ids;
+use sylva::render::mesh::MeshPipelines;
+use sylva::render::GpuContext;
+
+use crate::batching::{build_tiles, SceneTree, SpeciesShape};
+use crate::gltf_import::ImportedModel;
+use crate::pack_build::{build_pack, PackOptions};
+use crate::reproject::Crs;
+
+/// Everything a scene is made from.
+pub struct SceneInput {
+    /// Species names and models, indexed by `SceneTree::species`.
+    pub species: Vec<(String, ImportedModel)>,
+    /// Trees relative to `origin_m`.
+    pub trees: Vec<SceneTree>,
+    /// Scene CRS.
+    pub crs: Crs,
+    /// Scene origin in CRS coordinates.
+    pub origin_m: DVec3,
+    /// Batch cell size, metres.
+    pub cell_size_m: u32,
+    /// Cells per tile side.
+    pub tile_cells: u32,
+    /// Pack options.
+    pub pack: PackOptions,
+    /// Where to write billboard PNGs, if anywhere.
+    pub debug_dump: Option<PathBuf>,
+}
+
+/// What was written.
+#[derive(Debug, Clone)]
+pub struct SceneSummary {
+    /// The manifest.
+    pub manifest: Manifest,
+    /// Bytes of all instance records.
+    pub instance_bytes: u64,
+    /// Seconds spent on packs and on tiles.
+    pub pack_seconds: f64,
+    /// Seconds spent on tiles.
+    pub tile_seconds: f64,
+}
+
+/// File-name-safe version of a species name.
+pub fn safe_name(name: &str) -> String {
+    let s: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c.to_ascii_lowercase() } else { '_' })
+        .collect();
+    if s.is_empty() {
+        "species".into()
+    } else {
+        s
+    }
+}
+
+/// Horizontal radius and z range of a model, for batch bounds.
+pub fn shape_of(model: &ImportedModel) -> SpeciesShape {
+    let (lo, hi) = model.bounds();
+    let radius_xy = model.vertices.iter().map(|v| v.position.truncate().length()).fold(0.0f32, f32::max);
+    SpeciesShape { radius_xy, z_min: lo.z, z_max: hi.z }
+}
+
+/// Bakes and writes the scene to `out` atomically.
+pub fn write_scene(input: &SceneInput, out: &Path, log: &dyn Fn(&str)) -> Result<SceneSummary> {
+    if input.trees.is_empty() {
+        bail!("no trees to bake: every placement was skipped (see the report above)");
+    }
+    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+    let name = out.file_name().map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp)?;
+    }
+    let result = write_into(input, &tmp, log);
+    match result {
+        Ok(summary) => {
+            let old = parent.join(format!(".{name}.old-{}", std::process::id()));
+            if out.exists() {
+                if !out.join("scene.json").exists() && std::fs::read_dir(out)?.next().is_some() {
+                    let _ = std::fs::remove_dir_all(&tmp);
+                    bail!("{} exists and is not a Sylva scene: refusing to replace it", out.display());
+                }
+                std::fs::rename(out, &old).with_context(|| format!("cannot move the old {} aside", out.display()))?;
+            }
+            std::fs::rename(&tmp, out).with_context(|| format!("cannot move the new scene to {}", out.display()))?;
+            if old.exists() {
+                std::fs::remove_dir_all(&old)?;
+            }
+            Ok(summary)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Err(e)
+        }
+    }
+}
+
+fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<SceneSummary> {
+    std::fs::create_dir_all(dir.join("species"))?;
+    std::fs::create_dir_all(dir.join("tiles"))?;
+    let t0 = Instant::now();
+    let gpu = GpuContext::new_headless_blocking().context("the billboard bake renders with the GPU (or lavapipe)")?;
+    log(&format!("rendering billboards on {}", gpu.adapter_summary()));
+    let pipelines = MeshPipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    let mut tree_counts = vec![0u64; input.species.len()];
+    for t in &input.trees {
+        tree_counts[t.species as usize] += 1;
+    }
+    let mut species_entries = Vec::new();
+    let mut shapes = Vec::new();
+    for (i, (name, model)) in input.species.iter().enumerate() {
+        let built =
+            build_pack(name, model, &input.pack, &gpu, &pipelines).with_context(|| format!("species {name:?}"))?;
+        let file = format!("species/{}.pack", safe_name(name));
+        std::fs::write(dir.join(&file), &built.bytes)?;
+        if let Some(dump) = &input.debug_dump {
+            dump_billboards(dump, name, &built)?;
+        }
+        log(&format!(
+            "  pack {name}: {} triangles in level 0, {} mesh levels, {} billboard angles, {:.2} MB",
+            built.meta.mesh_levels[0].index_count / 3,
+            built.meta.mesh_levels.len(),
+            built.meta.billboards.as_ref().map_or(0, |b| b.angles),
+            built.bytes.len() as f64 / 1e6
+        ));
+        species_entries.push(SpeciesEntry {
+            name: name.clone(),
+            pack: file,
+            bytes: built.bytes.len() as u64,
+            height_m: built.meta.height_m,
+            bounds: Bounds { min: built.meta.bounds_min, max: built.meta.bounds_max },
+            trees: tree_counts[i],
+        });
+        shapes.push(shape_of(model));
+    }
+    let pack_seconds = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let tiles = build_tiles(&input.trees, &shapes, input.cell_size_m, input.tile_cells);
+    let entries: Vec<(TileEntry, u64)> = tiles
+        .par_iter()
+        .map(|bt| -> Result<(TileEntry, u64)> {
+            let stem = format!("tiles/{}_{}", bt.tile.tile_x, bt.tile.tile_y);
+            let bytes = bt.tile.encode();
+            std::fs::write(dir.join(format!("{stem}.tile")), &bytes)?;
+            std::fs::write(dir.join(format!("{stem}.ids")), encode_ids(&bt.ids))?;
+            Ok((
+                TileEntry {
+                    x: bt.tile.tile_x,
+                    y: bt.tile.tile_y,
+                    url: format!("{stem}.tile"),
+                    ids_url: format!("{stem}.ids"),
+                    bytes: bytes.len() as u64,
+                    trees: bt.tile.instances.len() as u64,
+                    batches: bt.tile.batches.len() as u32,
+                    bounds: Bounds { min: bt.bounds.0, max: bt.bounds.1 },
+                },
+                bt.tile.instance_bytes() as u64,
+            ))
+        })
+        .collect::<Result<_>>()?;
+    let tile_seconds = t1.elapsed().as_secs_f64();
+    let instance_bytes = entries.iter().map(|(_, b)| b).sum();
+    let tile_entries: Vec<TileEntry> = entries.into_iter().map(|(e, _)| e).collect();
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for t in &tile_entries {
+        lo = lo.min(Vec3::from(t.bounds.min));
+        hi = hi.max(Vec3::from(t.bounds.max));
+    }
+    let manifest = Manifest {
+        format: SCENE_FORMAT.into(),
+        version: SCENE_VERSION,
+        crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone() },
+        origin_m: input.origin_m.to_array(),
+        bounds: Bounds { min: lo.to_array(), max: hi.to_array() },
+        cell_size_m: input.cell_size_m as f32,
+        tile_cells: input.tile_cells,
+        counts: Counts {
+            trees: input.trees.len() as u64,
+            batches: tile_entries.iter().map(|t| u64::from(t.batches)).sum(),
+            tiles: tile_entries.len() as u64,
+        },
+        species: species_entries,
+        tiles: tile_entries,
+    };
+    let bytes = manifest.encode();
+    // Validate what we wrote with the same decoder the viewer uses.
+    Manifest::decode("scene.json", &bytes)?;
+    std::fs::write(dir.join("scene.json"), bytes)?;
+    Ok(SceneSummary { manifest, instance_bytes, pack_seconds, tile_seconds })
+}
+
+/// Writes each billboard layer (colour and normals) as PNG for a look.
+fn dump_billboards(dir: &Path, name: &str, built: &crate::pack_build::BuiltPack) -> Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let Some(bb) = &built.meta.billboards else { return Ok(()) };
+    let s = bb.texture.size;
+    let n = built.billboard_color.len() as u32;
+    // One strip per kind: layers side by side, over a grey checker so alpha shows.
+    for (kind, layers, checker) in [("color", &built.billboard_color, true), ("normal", &built.billboard_normal, false)]
+    {
+        let mut img = image::RgbaImage::new(s * n, s);
+        for (l, layer) in layers.iter().enumerate() {
+            for y in 0..s {
+                for x in 0..s {
+                    let i = ((y * s + x) * 4) as usize;
+                    let a = f32::from(layer[i + 3]) / 255.0;
+                    let bg = if checker && ((x / 8 + y / 8) % 2 == 0) { 200.0 } else { 150.0 };
+                    let px = if checker {
+                        [0, 1, 2].map(|c| (f32::from(layer[i + c]) * a + bg * (1.0 - a)) as u8)
+                    } else {
+                        [layer[i], layer[i + 1], layer[i + 2]]
+                    };
+                    img.put_pixel(l as u32 * s + x, y, image::Rgba([px[0], px[1], px[2], 255]));
+                }
+            }
+        }
+        let path = dir.join(format!("{}-billboards-{kind}.png", safe_name(name)));
+        img.save(&path).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,110 @@
+// Mesh pass: alpha-tested, quantised tree meshes (LoD pack mesh levels).
+// Also the billboard capture of the bake (mode 1 writes albedo + normal).
+// Rust side: src/render/mesh.rs.
+
+@group(0) @binding(0) var<uniform> view: View;
+
+// Must match `MeshUniform` in src/render/gpu_data.rs.
+struct MeshParams {
+    pos_min: vec4<f32>,
+    pos_extent: vec4<f32>,
+    uv_min: vec2<f32>,
+    uv_extent: vec2<f32>,
+};
+
+// Must match `GpuMaterial` in src/render/gpu_data.rs.
+struct Material {
+    base_color: vec4<f32>,
+    alpha_cutoff: f32,
+    // Texture array layer, or -1 when untextured.
+    layer: i32,
+    // 0 leaf, 1 branch.
+    kind: u32,
+    pad: u32,
+};
+
+@group(1) @binding(0) var<uniform> mesh: MeshParams;
+@group(1) @binding(1) var<storage, read> materials: array<Material>;
+@group(1) @binding(2) var material_tex: texture_2d_array<f32>;
+@group(1) @binding(3) var material_sampler: sampler;
+
+// Must match `MeshVertex` in src/format/pack.rs and the layout in src/render/mesh.rs.
+struct VertexIn {
+    @location(0) position_material: vec4<u32>,
+    @location(1) normal_oct: vec4<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) color: vec4<f32>,
+    // Per instance: position relative to the eye (xyz) and yaw (w).
+    @location(4) eye_pos_yaw: vec4<f32>,
+    // Per instance: scale, variation, unused, unused.
+    @location(5) scale_variation: vec4<f32>,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec4<f32>,
+    @location(3) @interpolate(flat) material: u32,
+};
+
+@vertex
+fn vs_main(in: VertexIn) -> VertexOut {
+    let local = mesh.pos_min.xyz + vec3<f32>(in.position_material.xyz) / 65535.0 * mesh.pos_extent.xyz;
+    let yaw = in.eye_pos_yaw.w;
+    let scale = in.scale_variation.x;
+    let eye_rel = rotate_z(local * scale, yaw) + in.eye_pos_yaw.xyz;
+    var out: VertexOut;
+    out.clip = view.clip_from_eye * vec4<f32>(eye_rel, 1.0);
+    out.uv = mesh.uv_min + in.uv * mesh.uv_extent;
+    out.normal = rotate_z(oct_decode(in.normal_oct.xy), yaw);
+    out.color = vec4<f32>(in.color.rgb * variation_tint(in.scale_variation.y), in.color.a);
+    out.material = in.position_material.w;
+    return out;
+}
+
+struct Surface {
+    albedo: vec4<f32>,
+    normal: vec3<f32>,
+    is_leaf: bool,
+};
+
+fn surface(in: VertexOut, front: bool) -> Surface {
+    let mat = materials[in.material];
+    // Sample unconditionally (uniform control flow), then select.
+    let texel = textureSample(material_tex, material_sampler, in.uv, max(mat.layer, 0));
+    var albedo = mat.base_color * in.color;
+    if mat.layer >= 0 {
+        albedo *= texel;
+    }
+    if albedo.a < mat.alpha_cutoff {
+        discard;
+    }
+    var s: Surface;
+    s.albedo = albedo;
+    s.normal = normalize(select(-in.normal, in.normal, front));
+    s.is_leaf = mat.kind == 0u;
+    return s;
+}
+
+@fragment
+fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let s = surface(in, front);
+    return vec4<f32>(shade(s.albedo.rgb, s.normal, s.is_leaf, view), 1.0);
+}
+
+struct CaptureOut {
+    // Albedo (sRGB target) with coverage alpha.
+    @location(0) albedo: vec4<f32>,
+    // Model-frame normal * 0.5 + 0.5; alpha 1 for leaves, 0.5 for wood.
+    @location(1) normal: vec4<f32>,
+};
+
+@fragment
+fn fs_capture(in: VertexOut, @builtin(front_facing) front: bool) -> CaptureOut {
+    let s = surface(in, front);
+    var out: CaptureOut;
+    out.albedo = vec4<f32>(s.albedo.rgb, 1.0);
+    out.normal = vec4<f32>(s.normal * 0.5 + 0.5, select(0.5, 1.0, s.is_leaf));
+    return out;
+}

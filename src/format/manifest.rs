@@ -1,0 +1,227 @@
+//! The scene manifest (`scene.json`): what a viewer reads first.
+//!
+//! Coordinates: the scene CRS is projected (metres); `origin_m` is an f64 point
+//! in it and every other position in a scene (bounds, batch origins) is in
+//! metres relative to it, x east, y north, z up.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{finite, finite_all, DecodeError, Problem};
+
+/// Value of the manifest's `format` field.
+pub const SCENE_FORMAT: &str = "sylva-scene";
+/// Manifest version written and read by this build.
+pub const SCENE_VERSION: u32 = 1;
+/// Most species a scene may list.
+pub const MAX_SPECIES: usize = 65_536;
+/// Most tiles a flat tile index may list.
+pub const MAX_TILES: usize = 1 << 22;
+
+/// The scene's coordinate reference system.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Crs {
+    /// EPSG code, e.g. 32633 for UTM zone 33N.
+    pub epsg: u32,
+    /// The proj4 definition used by the bake.
+    pub proj4: String,
+}
+
+/// An axis-aligned box in metres relative to the scene origin.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bounds {
+    /// Lower corner.
+    pub min: [f32; 3],
+    /// Upper corner.
+    pub max: [f32; 3],
+}
+
+/// One species and its LoD pack.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpeciesEntry {
+    /// Species (model) name.
+    pub name: String,
+    /// Pack URL relative to the manifest.
+    pub pack: String,
+    /// Pack size in bytes.
+    pub bytes: u64,
+    /// Model height at scale 1, metres.
+    pub height_m: f32,
+    /// Model bounds at scale 1.
+    pub bounds: Bounds,
+    /// Trees of this species in the scene.
+    pub trees: u64,
+}
+
+/// One tile of the flat tile index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TileEntry {
+    /// Tile column.
+    pub x: i32,
+    /// Tile row.
+    pub y: i32,
+    /// Tile URL relative to the manifest.
+    pub url: String,
+    /// Tree-id sidecar URL relative to the manifest.
+    pub ids_url: String,
+    /// File size in bytes.
+    pub bytes: u64,
+    /// Trees in the tile.
+    pub trees: u64,
+    /// Batches in the tile.
+    pub batches: u32,
+    /// Bounds of every tree in the tile.
+    pub bounds: Bounds,
+}
+
+/// Scene-wide counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Counts {
+    /// Trees.
+    pub trees: u64,
+    /// Batches.
+    pub batches: u64,
+    /// Tiles.
+    pub tiles: u64,
+}
+
+/// `scene.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Always [`SCENE_FORMAT`].
+    pub format: String,
+    /// Always [`SCENE_VERSION`] for this build.
+    pub version: u32,
+    /// Projected CRS of the scene.
+    pub crs: Crs,
+    /// Scene origin in CRS coordinates (metres), f64.
+    pub origin_m: [f64; 3],
+    /// Bounds of every tree, relative to the origin.
+    pub bounds: Bounds,
+    /// Grid cell size of the batches, metres.
+    pub cell_size_m: f32,
+    /// Cells per tile side.
+    pub tile_cells: u32,
+    /// Scene-wide counts.
+    pub counts: Counts,
+    /// Species, indexed by `GpuBatch::species`.
+    pub species: Vec<SpeciesEntry>,
+    /// The tile index (flat).
+    pub tiles: Vec<TileEntry>,
+}
+
+impl Manifest {
+    /// Parses and validates `scene.json`. `file` names it in errors.
+    ///
+    /// # Errors
+    /// A [`DecodeError`] for JSON that does not parse or match the schema, a wrong
+    /// format name or version, non-finite numbers, inverted bounds, counts that do
+    /// not add up, or URLs that leave the scene directory.
+    pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
+        let inner = || -> Result<Self, Problem> {
+            // Check the format and version first so an older/newer file gets the
+            // right message instead of a schema mismatch.
+            let value: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| Problem::Json(e.to_string()))?;
+            let format = value.get("format").and_then(|f| f.as_str());
+            if format != Some(SCENE_FORMAT) {
+                return Err(Problem::Invalid(format!(
+                    "\"format\" is {:?}, expected \"{SCENE_FORMAT}\": not a Sylva scene manifest",
+                    format.unwrap_or("missing")
+                )));
+            }
+            let version = value.get("version").and_then(serde_json::Value::as_u64);
+            if version != Some(SCENE_VERSION.into()) {
+                return Err(Problem::UnsupportedVersion {
+                    found: version.unwrap_or(0).min(u32::MAX.into()) as u32,
+                    supported: SCENE_VERSION,
+                });
+            }
+            let m: Self = serde_json::from_value(value).map_err(|e| Problem::Json(e.to_string()))?;
+            m.validate()?;
+            Ok(m)
+        };
+        inner().map_err(|p| DecodeError::new(file, p))
+    }
+
+    /// Serialises to pretty JSON.
+    #[must_use]
+    pub fn encode(&self) -> Vec<u8> {
+        let mut v = serde_json::to_vec_pretty(self).expect("Manifest serialises");
+        v.push(b'\n');
+        v
+    }
+
+    fn validate(&self) -> Result<(), Problem> {
+        for (i, o) in self.origin_m.iter().enumerate() {
+            finite(format!("origin_m[{i}]"), *o)?;
+        }
+        validate_bounds("bounds", &self.bounds)?;
+        finite("cell_size_m", self.cell_size_m.into())?;
+        if self.cell_size_m <= 0.0 || self.tile_cells == 0 {
+            return Err(Problem::Invalid("cell_size_m and tile_cells must be positive".into()));
+        }
+        if self.species.len() > MAX_SPECIES || self.tiles.len() > MAX_TILES {
+            return Err(Problem::Invalid(format!(
+                "{} species / {} tiles exceed the limits {MAX_SPECIES} / {MAX_TILES}",
+                self.species.len(),
+                self.tiles.len()
+            )));
+        }
+        for (i, s) in self.species.iter().enumerate() {
+            let what = format!("species[{i}]");
+            check_url(&format!("{what}.pack"), &s.pack)?;
+            finite(format!("{what}.height_m"), s.height_m.into())?;
+            validate_bounds(&format!("{what}.bounds"), &s.bounds)?;
+        }
+        let mut trees = 0u64;
+        let mut batches = 0u64;
+        for (i, t) in self.tiles.iter().enumerate() {
+            let what = format!("tiles[{i}]");
+            check_url(&format!("{what}.url"), &t.url)?;
+            check_url(&format!("{what}.ids_url"), &t.ids_url)?;
+            validate_bounds(&format!("{what}.bounds"), &t.bounds)?;
+            trees = trees.saturating_add(t.trees);
+            batches = batches.saturating_add(t.batches.into());
+        }
+        let species_trees = self.species.iter().fold(0u64, |a, s| a.saturating_add(s.trees));
+        if trees != self.counts.trees
+            || species_trees != self.counts.trees
+            || batches != self.counts.batches
+            || self.tiles.len() as u64 != self.counts.tiles
+        {
+            return Err(Problem::Invalid(format!(
+                "counts {:?} do not match the tiles ({trees} trees, {batches} batches, {} tiles) and species ({species_trees} trees)",
+                self.counts,
+                self.tiles.len()
+            )));
+        }
+        Ok(())
+    }
+}
+
+fn validate_bounds(what: &str, b: &Bounds) -> Result<(), Problem> {
+    finite_all(&format!("{what}.min"), &b.min)?;
+    finite_all(&format!("{what}.max"), &b.max)?;
+    if b.min.iter().zip(&b.max).any(|(lo, hi)| lo > hi) {
+        return Err(Problem::Invalid(format!("{what}: min {:?} exceeds max {:?}", b.min, b.max)));
+    }
+    Ok(())
+}
+
+/// A URL in a manifest must stay inside the scene: relative, no `..`, no scheme.
+fn check_url(what: &str, url: &str) -> Result<(), Problem> {
+    let bad = url.is_empty()
+        || url.starts_with('/')
+        || url.contains('\\')
+        || url.contains(':')
+        || url.split('/').any(|seg| seg == ".." || seg.is_empty());
+    if bad {
+        return Err(Problem::Invalid(format!("{what} {url:?} must be a relative path inside the scene directory")));
+    }
+    Ok(())
+}

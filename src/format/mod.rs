@@ -1,0 +1,17 @@
+//! Sylva's file formats: the scene manifest, LoD packs and tiles.
+//!
+//! Everything here is versioned, little endian and validated on decode.
+//! Decoders promise: for any input bytes they return `Ok` or a
+//! [`DecodeError`] naming the file and the problem; they never panic and never
+//! allocate more than a small multiple of the input size, whatever counts the
+//! input declares. The spec is `docs/FORMAT.md`; fuzz targets live in `fuzz/`.
+
+mod error;
+pub mod manifest;
+pub mod pack;
+pub mod tile;
+
+pub use error::{DecodeError, Problem};
+pub use manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry};
+pub use pack::{decode_pack, encode_pack, Pack, PackMeta, Section};
+pub use tile::{decode_ids, encode_ids, GpuBatch, Instance, PackedInstance, Tile};

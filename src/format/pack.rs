@@ -1,0 +1,510 @@
+//! LoD packs (`species/<name>.pack`): every level of detail of one species.
+//!
+//! A pack is a header, a section table and sections aligned to
+//! [`PACK_SECTION_ALIGN`] bytes, so each section can be handed to
+//! `queue.write_buffer` / `queue.write_texture` as it is. The `META` section is
+//! JSON ([`PackMeta`]) describing the levels; binary sections hold vertices,
+//! indices and texture arrays. Readers skip section kinds they do not know,
+//! which is how later levels (ellipsoids, lines) are added without breaking
+//! older readers. Layout tables: `docs/FORMAT.md`.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{at_most, finite, finite_all, DecodeError, Problem, Reader};
+
+/// First four bytes of a pack file.
+pub const PACK_MAGIC: [u8; 4] = *b"SYPK";
+/// Pack format version written and read by this build.
+pub const PACK_VERSION: u16 = 1;
+/// Bytes in the pack header.
+pub const PACK_HEADER_BYTES: usize = 32;
+/// Bytes per section-table entry.
+pub const PACK_SECTION_ENTRY_BYTES: usize = 32;
+/// Alignment of every section's offset (covers GPU buffer offset and copy alignments).
+pub const PACK_SECTION_ALIGN: u64 = 256;
+/// Most sections a pack may declare.
+pub const MAX_PACK_SECTIONS: u32 = 4096;
+/// Largest texture side a pack may declare (WebGPU's default `max_texture_dimension_2d`).
+pub const MAX_TEXTURE_SIZE: u32 = 8192;
+/// Most layers a texture array may declare (WebGPU's default `max_texture_array_layers`).
+pub const MAX_TEXTURE_LAYERS: u32 = 256;
+
+/// Section kinds (FourCC).
+pub mod kind {
+    /// JSON metadata ([`super::PackMeta`]).
+    pub const META: [u8; 4] = *b"META";
+    /// Mesh vertices ([`super::MeshVertex`]) of level `index`.
+    pub const MESH_VERTICES: [u8; 4] = *b"MVTX";
+    /// Mesh indices (u32) of level `index`.
+    pub const MESH_INDICES: [u8; 4] = *b"MIDX";
+    /// Material texture array, RGBA8, mip-major.
+    pub const MATERIAL_TEXTURES: [u8; 4] = *b"MTEX";
+    /// Billboard colour+alpha array, RGBA8 (sRGB), mip-major.
+    pub const BILLBOARD_COLOR: [u8; 4] = *b"BBCO";
+    /// Billboard normal (xyz) + depth (w) array, RGBA8, mip-major.
+    pub const BILLBOARD_NORMAL: [u8; 4] = *b"BBNO";
+}
+
+/// One mesh vertex, 20 bytes, quantised against its level's bounds.
+///
+/// Must match `MeshVertex` in `shaders/mesh.wgsl` (vertex attributes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct MeshVertex {
+    /// Position in 1/65535 steps of the level's `pos_min..pos_max`.
+    pub position: [u16; 3],
+    /// Index into the pack's materials.
+    pub material: u16,
+    /// Octahedral-encoded normal (snorm8 x, y); bytes 2–3 reserved (0).
+    pub normal_oct: [i8; 4],
+    /// Texture coordinate in 1/65535 steps of the level's `uv_min..uv_max`.
+    pub uv: [u16; 2],
+    /// Vertex colour, linear RGBA8.
+    pub color: [u8; 4],
+}
+const _: () = assert!(std::mem::size_of::<MeshVertex>() == 20);
+
+/// Whether a material is foliage or wood; decides LoD treatment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MaterialKind {
+    /// Leaves, needles, leaf cards.
+    Leaf,
+    /// Trunk and branches.
+    Branch,
+}
+
+/// A material of the species.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialMeta {
+    /// Name from the source model.
+    pub name: String,
+    /// Leaf or branch.
+    pub kind: MaterialKind,
+    /// Base colour factor (linear RGBA), multiplied with the texture.
+    pub base_color: [f32; 4],
+    /// Fragments with alpha below this are discarded (0 for opaque).
+    pub alpha_cutoff: f32,
+    /// Whether back faces are drawn.
+    pub double_sided: bool,
+    /// Layer of the material texture array, if textured.
+    pub texture_layer: Option<u32>,
+}
+
+/// An indexed draw range of one material within a mesh level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DrawRange {
+    /// Material index.
+    pub material: u32,
+    /// First index in the level's index section.
+    pub first_index: u32,
+    /// Number of indices.
+    pub index_count: u32,
+}
+
+/// One mesh level (0 = the full source mesh).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshLevelMeta {
+    /// Vertices in the `MVTX` section of this level.
+    pub vertex_count: u32,
+    /// Indices in the `MIDX` section of this level.
+    pub index_count: u32,
+    /// Dequantisation of positions: metres at scale 1, Z up, trunk base at the origin.
+    pub pos_min: [f32; 3],
+    /// Upper end of the position range.
+    pub pos_max: [f32; 3],
+    /// Dequantisation of texture coordinates.
+    pub uv_min: [f32; 2],
+    /// Upper end of the texture coordinate range.
+    pub uv_max: [f32; 2],
+    /// Draw ranges per material.
+    pub draws: Vec<DrawRange>,
+    /// This level is drawn while the tree's projected height is at least this many pixels.
+    pub select_px: f32,
+}
+
+/// A texture array stored in a section.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextureArrayMeta {
+    /// Width and height of mip 0.
+    pub size: u32,
+    /// Array layers.
+    pub layers: u32,
+    /// Mip levels stored (mip 0 included).
+    pub mips: u32,
+}
+
+impl TextureArrayMeta {
+    /// Bytes of the whole RGBA8 array with all its mips.
+    #[must_use]
+    pub fn byte_len(&self) -> u64 {
+        (0..self.mips)
+            .map(|m| {
+                let s = u64::from((self.size >> m).max(1));
+                s * s * 4 * u64::from(self.layers)
+            })
+            .sum()
+    }
+
+    /// Byte offset of mip `m` within the section (mips are stored one after another,
+    /// each holding all layers).
+    #[must_use]
+    pub fn mip_offset(&self, m: u32) -> u64 {
+        TextureArrayMeta { mips: m, ..*self }.byte_len()
+    }
+}
+
+/// The view-angle billboard array (seed 004 §3.3, alg. 3.1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BillboardMeta {
+    /// Elevation angles, evenly spaced over 0–90° (layer = azimuth * angles + elevation).
+    pub angles: u32,
+    /// Azimuths around the tree (1 = one image per elevation).
+    pub azimuths: u32,
+    /// The colour and normal arrays' layout.
+    pub texture: TextureArrayMeta,
+    /// Centre of the capture box (model space, metres at scale 1).
+    pub center: [f32; 3],
+    /// Half width of each billboard quad, metres at scale 1.
+    pub half_width: f32,
+    /// Half height of each billboard quad, metres at scale 1.
+    pub half_height: f32,
+    /// Billboards are drawn while the projected tree height is below the finest
+    /// mesh level's `select_px` and at least this (0: to the draw distance).
+    pub select_px: f32,
+}
+
+/// The `META` section of a pack.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PackMeta {
+    /// Species name.
+    pub name: String,
+    /// Tree height at scale 1, metres.
+    pub height_m: f32,
+    /// Model-space bounds at scale 1 (Z up, trunk base at the origin).
+    pub bounds_min: [f32; 3],
+    /// Upper model-space bounds.
+    pub bounds_max: [f32; 3],
+    /// Materials.
+    pub materials: Vec<MaterialMeta>,
+    /// Material texture array, if any material is textured.
+    pub material_texture: Option<TextureArrayMeta>,
+    /// Mesh levels, finest first.
+    pub mesh_levels: Vec<MeshLevelMeta>,
+    /// Billboard array, if baked.
+    pub billboards: Option<BillboardMeta>,
+}
+
+/// A section-table entry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SectionEntry {
+    /// FourCC kind.
+    pub kind: [u8; 4],
+    /// Level or slot index for kinds that repeat.
+    pub index: u32,
+    /// Byte offset in the file (multiple of [`PACK_SECTION_ALIGN`]).
+    pub offset: u64,
+    /// Byte length.
+    pub bytes: u64,
+    /// Element count (0 for blobs).
+    pub count: u32,
+    /// Bytes per element (0 for blobs).
+    pub stride: u32,
+}
+
+/// A section to write: its table fields and its bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Section {
+    /// FourCC kind.
+    pub kind: [u8; 4],
+    /// Level or slot index.
+    pub index: u32,
+    /// Element count (0 for blobs).
+    pub count: u32,
+    /// Bytes per element (0 for blobs).
+    pub stride: u32,
+    /// Contents.
+    pub data: Vec<u8>,
+}
+
+/// A decoded and validated pack. Binary sections are borrowed from the file bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pack<'a> {
+    /// The metadata.
+    pub meta: PackMeta,
+    /// All sections in file order, known kinds or not.
+    pub sections: Vec<(SectionEntry, &'a [u8])>,
+}
+
+impl Pack<'_> {
+    /// The bytes of the section `kind`/`index`, if present.
+    #[must_use]
+    pub fn section(&self, kind: [u8; 4], index: u32) -> Option<&[u8]> {
+        self.sections.iter().find(|(e, _)| e.kind == kind && e.index == index).map(|(_, b)| *b)
+    }
+
+    /// Vertices of mesh level `level`, copied into an aligned vector.
+    #[must_use]
+    pub fn mesh_vertices(&self, level: u32) -> Vec<MeshVertex> {
+        self.section(kind::MESH_VERTICES, level).map(bytemuck::pod_collect_to_vec).unwrap_or_default()
+    }
+
+    /// Indices of mesh level `level`, copied into an aligned vector.
+    #[must_use]
+    pub fn mesh_indices(&self, level: u32) -> Vec<u32> {
+        self.section(kind::MESH_INDICES, level).map(bytemuck::pod_collect_to_vec).unwrap_or_default()
+    }
+}
+
+/// Encodes a pack: `META` first, then `sections` in order, each aligned.
+#[must_use]
+pub fn encode_pack(meta: &PackMeta, sections: &[Section]) -> Vec<u8> {
+    let meta_json = serde_json::to_vec(meta).expect("PackMeta serialises");
+    let mut all = vec![Section { kind: kind::META, index: 0, count: 0, stride: 0, data: meta_json }];
+    all.extend_from_slice(sections);
+    let table_end = (PACK_HEADER_BYTES + all.len() * PACK_SECTION_ENTRY_BYTES) as u64;
+    let mut offsets = Vec::with_capacity(all.len());
+    let mut at = table_end;
+    for s in &all {
+        at = at.next_multiple_of(PACK_SECTION_ALIGN);
+        offsets.push(at);
+        at += s.data.len() as u64;
+    }
+    let file_bytes = at;
+    let mut out = Vec::with_capacity(file_bytes as usize);
+    out.extend_from_slice(&PACK_MAGIC);
+    out.extend_from_slice(&PACK_VERSION.to_le_bytes());
+    out.extend_from_slice(&(PACK_HEADER_BYTES as u16).to_le_bytes());
+    out.extend_from_slice(&(all.len() as u32).to_le_bytes());
+    out.extend_from_slice(&(PACK_SECTION_ALIGN as u32).to_le_bytes());
+    out.extend_from_slice(&file_bytes.to_le_bytes());
+    out.extend_from_slice(&0u64.to_le_bytes());
+    for (s, off) in all.iter().zip(&offsets) {
+        out.extend_from_slice(&s.kind);
+        out.extend_from_slice(&s.index.to_le_bytes());
+        out.extend_from_slice(&off.to_le_bytes());
+        out.extend_from_slice(&(s.data.len() as u64).to_le_bytes());
+        out.extend_from_slice(&s.count.to_le_bytes());
+        out.extend_from_slice(&s.stride.to_le_bytes());
+    }
+    for (s, off) in all.iter().zip(&offsets) {
+        out.resize(*off as usize, 0);
+        out.extend_from_slice(&s.data);
+    }
+    out
+}
+
+/// Decodes and validates a pack. `file` names the file in errors.
+///
+/// # Errors
+/// A [`DecodeError`] for a wrong magic or version, a section outside the file,
+/// misaligned or overlapping, metadata that is not valid JSON or does not match
+/// the sections (counts, sizes, indices, non-finite numbers, texture limits).
+pub fn decode_pack<'a>(file: &str, bytes: &'a [u8]) -> Result<Pack<'a>, DecodeError> {
+    decode_pack_inner(bytes).map_err(|p| DecodeError::new(file, p))
+}
+
+fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
+    let r = Reader::new(bytes);
+    r.magic("Sylva LoD pack", &PACK_MAGIC)?;
+    let version = r.u16("header.version", 4)?;
+    if version != PACK_VERSION {
+        return Err(Problem::UnsupportedVersion { found: version.into(), supported: PACK_VERSION.into() });
+    }
+    let header_bytes = r.u16("header.header_bytes", 6)?;
+    if usize::from(header_bytes) != PACK_HEADER_BYTES {
+        return Err(Problem::Invalid(format!("header.header_bytes is {header_bytes}, expected {PACK_HEADER_BYTES}")));
+    }
+    let count = at_most("header.section_count", r.u32("header.section_count", 8)?.into(), MAX_PACK_SECTIONS.into())?;
+    let align = u64::from(r.u32("header.section_align", 12)?);
+    if align != PACK_SECTION_ALIGN {
+        return Err(Problem::Invalid(format!("header.section_align is {align}, expected {PACK_SECTION_ALIGN}")));
+    }
+    let file_bytes = r.u64("header.file_bytes", 16)?;
+    if file_bytes != bytes.len() as u64 {
+        return Err(if file_bytes > bytes.len() as u64 {
+            Problem::Truncated {
+                what: "pack (header.file_bytes)".into(),
+                start: 0,
+                end: file_bytes,
+                len: bytes.len() as u64,
+            }
+        } else {
+            Problem::Invalid(format!("header.file_bytes is {file_bytes} but the file has {} bytes", bytes.len()))
+        });
+    }
+    let table_end = PACK_HEADER_BYTES as u64 + count * PACK_SECTION_ENTRY_BYTES as u64;
+    r.slice("section table", PACK_HEADER_BYTES as u64, table_end - PACK_HEADER_BYTES as u64)?;
+    // `count` is bounded and the table is inside the file: safe to allocate.
+    let mut sections = Vec::with_capacity(count as usize);
+    let mut prev_end = table_end;
+    for i in 0..count {
+        let at = PACK_HEADER_BYTES as u64 + i * PACK_SECTION_ENTRY_BYTES as u64;
+        let what = format!("section[{i}]");
+        let k = r.slice(&what, at, 4)?;
+        let entry = SectionEntry {
+            kind: [k[0], k[1], k[2], k[3]],
+            index: r.u32(&what, at + 4)?,
+            offset: r.u64(&what, at + 8)?,
+            bytes: r.u64(&what, at + 16)?,
+            count: r.u32(&what, at + 24)?,
+            stride: r.u32(&what, at + 28)?,
+        };
+        let name = format!("section[{i}] '{}'", String::from_utf8_lossy(&entry.kind));
+        if !entry.offset.is_multiple_of(PACK_SECTION_ALIGN) {
+            return Err(Problem::Invalid(format!(
+                "{name} offset {} is not a multiple of {PACK_SECTION_ALIGN}",
+                entry.offset
+            )));
+        }
+        if entry.offset < prev_end {
+            return Err(Problem::Invalid(format!(
+                "{name} at offset {} overlaps the previous section or the table (ends at {prev_end})",
+                entry.offset
+            )));
+        }
+        if entry.stride != 0 && u64::from(entry.count) * u64::from(entry.stride) != entry.bytes {
+            return Err(Problem::Invalid(format!(
+                "{name} declares {} elements of {} bytes but holds {} bytes",
+                entry.count, entry.stride, entry.bytes
+            )));
+        }
+        let data = r.slice(&name, entry.offset, entry.bytes)?;
+        prev_end = entry.offset + entry.bytes;
+        sections.push((entry, data));
+    }
+    let meta_bytes = match sections.first() {
+        Some((e, b)) if e.kind == kind::META => *b,
+        _ => return Err(Problem::Invalid("the first section is not META".into())),
+    };
+    let meta: PackMeta = serde_json::from_slice(meta_bytes).map_err(|e| Problem::Json(format!("META: {e}")))?;
+    let pack = Pack { meta, sections };
+    validate_meta(&pack)?;
+    Ok(pack)
+}
+
+fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
+    let m = &pack.meta;
+    finite("META.height_m", m.height_m.into())?;
+    finite_all("META.bounds_min", &m.bounds_min)?;
+    finite_all("META.bounds_max", &m.bounds_max)?;
+    if m.height_m <= 0.0 {
+        return Err(Problem::Invalid(format!("META.height_m is {}, must be positive", m.height_m)));
+    }
+    let layers = m.material_texture.map_or(0, |t| t.layers);
+    for (i, mat) in m.materials.iter().enumerate() {
+        finite_all(&format!("META.materials[{i}].base_color"), &mat.base_color)?;
+        finite(format!("META.materials[{i}].alpha_cutoff"), mat.alpha_cutoff.into())?;
+        if let Some(layer) = mat.texture_layer {
+            if layer >= layers {
+                return Err(Problem::OutOfRange {
+                    what: format!("META.materials[{i}].texture_layer"),
+                    value: layer.into(),
+                    allowed: format!("less than the {layers} material texture layers"),
+                });
+            }
+        }
+    }
+    if let Some(t) = &m.material_texture {
+        validate_texture("META.material_texture", t, pack.section(kind::MATERIAL_TEXTURES, 0))?;
+    }
+    for (l, level) in m.mesh_levels.iter().enumerate() {
+        let what = format!("META.mesh_levels[{l}]");
+        finite_all(&format!("{what}.pos_min"), &level.pos_min)?;
+        finite_all(&format!("{what}.pos_max"), &level.pos_max)?;
+        finite_all(&format!("{what}.uv_min"), &level.uv_min)?;
+        finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
+        finite(format!("{what}.select_px"), level.select_px.into())?;
+        let vtx = pack.section(kind::MESH_VERTICES, l as u32);
+        let idx = pack.section(kind::MESH_INDICES, l as u32);
+        let (Some(vtx), Some(idx)) = (vtx, idx) else {
+            return Err(Problem::Invalid(format!("{what} has no MVTX/MIDX section with index {l}")));
+        };
+        if vtx.len() as u64 != u64::from(level.vertex_count) * 20
+            || idx.len() as u64 != u64::from(level.index_count) * 4
+        {
+            return Err(Problem::Invalid(format!(
+                "{what} declares {} vertices and {} indices, the sections hold {} and {} bytes",
+                level.vertex_count,
+                level.index_count,
+                vtx.len(),
+                idx.len()
+            )));
+        }
+        for (d, draw) in level.draws.iter().enumerate() {
+            let end = u64::from(draw.first_index) + u64::from(draw.index_count);
+            if end > u64::from(level.index_count) || !draw.index_count.is_multiple_of(3) {
+                return Err(Problem::Invalid(format!(
+                    "{what}.draws[{d}] covers indices {}..{end} of {} (or is not whole triangles)",
+                    draw.first_index, level.index_count
+                )));
+            }
+            if draw.material as usize >= m.materials.len() {
+                return Err(Problem::OutOfRange {
+                    what: format!("{what}.draws[{d}].material"),
+                    value: draw.material.into(),
+                    allowed: format!("less than {} materials", m.materials.len()),
+                });
+            }
+        }
+        // Indices must address existing vertices: the GPU would read out of bounds otherwise.
+        let vertex_count = level.vertex_count;
+        for (i, c) in idx.chunks_exact(4).enumerate() {
+            let v = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+            if v >= vertex_count {
+                return Err(Problem::OutOfRange {
+                    what: format!("{what} index[{i}]"),
+                    value: v.into(),
+                    allowed: format!("less than {vertex_count} vertices"),
+                });
+            }
+        }
+        for (i, c) in vtx.chunks_exact(20).enumerate() {
+            let material = u16::from_le_bytes([c[6], c[7]]);
+            if usize::from(material) >= m.materials.len() {
+                return Err(Problem::OutOfRange {
+                    what: format!("{what} vertex[{i}].material"),
+                    value: material.into(),
+                    allowed: format!("less than {} materials", m.materials.len()),
+                });
+            }
+        }
+    }
+    if let Some(b) = &m.billboards {
+        finite_all("META.billboards.center", &b.center)?;
+        finite_all("META.billboards", &[b.half_width, b.half_height, b.select_px])?;
+        if b.angles < 2 || b.azimuths == 0 || u64::from(b.angles) * u64::from(b.azimuths) != u64::from(b.texture.layers)
+        {
+            return Err(Problem::Invalid(format!(
+                "META.billboards has {} angles × {} azimuths but {} layers (need ≥ 2 angles)",
+                b.angles, b.azimuths, b.texture.layers
+            )));
+        }
+        validate_texture("META.billboards.texture", &b.texture, pack.section(kind::BILLBOARD_COLOR, 0))?;
+        validate_texture("META.billboards.texture", &b.texture, pack.section(kind::BILLBOARD_NORMAL, 0))?;
+    }
+    Ok(())
+}
+
+fn validate_texture(what: &str, t: &TextureArrayMeta, data: Option<&[u8]>) -> Result<(), Problem> {
+    at_most(format!("{what}.size"), t.size.into(), MAX_TEXTURE_SIZE.into())?;
+    at_most(format!("{what}.layers"), t.layers.into(), MAX_TEXTURE_LAYERS.into())?;
+    let full_chain = 32 - t.size.max(1).leading_zeros();
+    at_most(format!("{what}.mips"), t.mips.into(), full_chain.into())?;
+    if t.size == 0 || t.layers == 0 || t.mips == 0 {
+        return Err(Problem::Invalid(format!("{what} has a zero size, layer count or mip count")));
+    }
+    let Some(data) = data else {
+        return Err(Problem::Invalid(format!("{what} has no texture section")));
+    };
+    if data.len() as u64 != t.byte_len() {
+        return Err(Problem::Invalid(format!("{what} needs {} bytes, the section holds {}", t.byte_len(), data.len())));
+    }
+    Ok(())
+}

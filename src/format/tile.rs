@@ -1,0 +1,328 @@
+//! Tile files (`tiles/<x>_<y>.tile`): grouped batches of tree instances.
+//!
+//! A tile holds the batches (grid cell × species, seed 004 §3.4) of a square
+//! group of grid cells. Each batch has bounds for culling and a run of
+//! 8-byte instance records quantised relative to the batch origin. The batch
+//! and instance arrays are laid out exactly as the GPU reads them, so the
+//! renderer uploads them without repacking. Layout tables: `docs/FORMAT.md`.
+
+use super::error::{at_most, finite_all, pod_vec, DecodeError, Problem, Reader};
+
+/// First four bytes of a tile file.
+pub const TILE_MAGIC: [u8; 4] = *b"SYTL";
+/// Tile format version written and read by this build.
+pub const TILE_VERSION: u16 = 1;
+/// Bytes in the tile header.
+pub const TILE_HEADER_BYTES: usize = 32;
+/// Most batches one tile may declare (decoders refuse more before allocating).
+pub const MAX_TILE_BATCHES: u32 = 1 << 20;
+/// Most instances one tile may declare.
+pub const MAX_TILE_INSTANCES: u32 = 1 << 26;
+
+/// Bits of the quantised height above the batch origin.
+pub const Z_BITS: u32 = 11;
+/// Bits of the quantised yaw.
+pub const YAW_BITS: u32 = 8;
+/// Bits of the quantised log2 scale.
+pub const SCALE_BITS: u32 = 8;
+/// Bits of the tint/variation index.
+pub const VARIATION_BITS: u32 = 5;
+/// Largest horizontal quantisation step: keeps position error ≤ 0.5 cm.
+pub const MAX_XY_STEP_M: f32 = 0.01;
+/// Largest vertical quantisation step: height error ≤ 0.8 cm, so with the
+/// horizontal error the 3D position error stays ≤ 1 cm.
+pub const MAX_Z_STEP_M: f32 = 0.016;
+
+/// One batch: the trees of one species in one grid cell (seed 004 §3.4).
+///
+/// Must match `Batch` in `shaders/common.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuBatch {
+    /// Quantisation origin, metres relative to the scene origin (cell corner at the lowest ground).
+    pub origin_m: [f32; 3],
+    /// First instance of this batch within the tile.
+    pub instance_offset: u32,
+    /// Bounding-sphere centre (trunk bases to tree tops), metres relative to the scene origin.
+    pub center_m: [f32; 3],
+    /// Bounding-sphere radius in metres.
+    pub radius_m: f32,
+    /// Half size of the axis-aligned bounding box around `center_m`.
+    pub half_extent_m: [f32; 3],
+    /// Number of instances.
+    pub instance_count: u32,
+    /// Index into the manifest's species list.
+    pub species: u32,
+    /// Metres per step of the quantised x and y.
+    pub xy_step_m: f32,
+    /// Metres per step of the quantised z.
+    pub z_step_m: f32,
+    /// Scale of quantised scale 0.
+    pub scale_min: f32,
+    /// log2 of the scale ratio between consecutive quantised scales.
+    pub scale_log2_step: f32,
+    /// Height of the tallest tree of the batch in metres.
+    pub max_height_m: f32,
+    /// Reserved, zero.
+    pub reserved: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<GpuBatch>() == 80);
+
+/// One tree: 8 bytes, relative to its batch origin.
+///
+/// Word 0: x (bits 0–15), y (16–31) in `xy_step_m` steps.
+/// Word 1: z (bits 0–10) in `z_step_m` steps, yaw (11–18) in 1/256 turns,
+/// scale (19–26) in `scale_log2_step` steps above `scale_min`, variation (27–31).
+/// Must match `unpack_instance` in `shaders/common.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PackedInstance {
+    /// x | y << 16.
+    pub xy: u32,
+    /// z | yaw << 11 | scale << 19 | variation << 27.
+    pub zysv: u32,
+}
+const _: () = assert!(std::mem::size_of::<PackedInstance>() == 8);
+
+/// A tree decoded from a [`PackedInstance`], in metres relative to the scene origin.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Instance {
+    /// Trunk base position.
+    pub position_m: [f32; 3],
+    /// Rotation about the up axis in radians, in `[0, 2π)`.
+    pub yaw_rad: f32,
+    /// Uniform scale applied to the species model.
+    pub scale: f32,
+    /// Tint/variation index, 0–31.
+    pub variation: u8,
+}
+
+impl PackedInstance {
+    /// Packs quantised fields; each is masked to its bit width.
+    #[must_use]
+    pub fn new(x: u16, y: u16, z: u32, yaw: u32, scale: u32, variation: u32) -> Self {
+        let mask = |v: u32, bits: u32| v & ((1 << bits) - 1);
+        Self {
+            xy: u32::from(x) | (u32::from(y) << 16),
+            zysv: mask(z, Z_BITS)
+                | (mask(yaw, YAW_BITS) << Z_BITS)
+                | (mask(scale, SCALE_BITS) << (Z_BITS + YAW_BITS))
+                | (mask(variation, VARIATION_BITS) << (Z_BITS + YAW_BITS + SCALE_BITS)),
+        }
+    }
+
+    /// Decodes the instance relative to the scene origin using its batch.
+    #[must_use]
+    pub fn decode(self, batch: &GpuBatch) -> Instance {
+        let x = (self.xy & 0xffff) as f32;
+        let y = (self.xy >> 16) as f32;
+        let z = (self.zysv & ((1 << Z_BITS) - 1)) as f32;
+        let yaw = (self.zysv >> Z_BITS) & ((1 << YAW_BITS) - 1);
+        let scale = (self.zysv >> (Z_BITS + YAW_BITS)) & ((1 << SCALE_BITS) - 1);
+        let variation = self.zysv >> (Z_BITS + YAW_BITS + SCALE_BITS);
+        Instance {
+            position_m: [
+                batch.origin_m[0] + x * batch.xy_step_m,
+                batch.origin_m[1] + y * batch.xy_step_m,
+                batch.origin_m[2] + z * batch.z_step_m,
+            ],
+            yaw_rad: yaw as f32 * (std::f32::consts::TAU / (1 << YAW_BITS) as f32),
+            scale: batch.scale_min * (scale as f32 * batch.scale_log2_step).exp2(),
+            variation: variation as u8,
+        }
+    }
+}
+
+/// A decoded tile: its grid position, batches and instances.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tile {
+    /// Tile column in the scene's tile grid.
+    pub tile_x: i32,
+    /// Tile row in the scene's tile grid.
+    pub tile_y: i32,
+    /// Batches, in instance order.
+    pub batches: Vec<GpuBatch>,
+    /// All instances of all batches.
+    pub instances: Vec<PackedInstance>,
+}
+
+impl Tile {
+    /// Encodes the tile into its file bytes.
+    #[must_use]
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(
+            TILE_HEADER_BYTES + self.batches.len() * std::mem::size_of::<GpuBatch>() + self.instances.len() * 8,
+        );
+        out.extend_from_slice(&TILE_MAGIC);
+        out.extend_from_slice(&TILE_VERSION.to_le_bytes());
+        out.extend_from_slice(&(TILE_HEADER_BYTES as u16).to_le_bytes());
+        out.extend_from_slice(&(self.batches.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(self.instances.len() as u32).to_le_bytes());
+        out.extend_from_slice(&self.tile_x.to_le_bytes());
+        out.extend_from_slice(&self.tile_y.to_le_bytes());
+        out.extend_from_slice(&(std::mem::size_of::<GpuBatch>() as u16).to_le_bytes());
+        out.extend_from_slice(&(std::mem::size_of::<PackedInstance>() as u16).to_le_bytes());
+        out.extend_from_slice(&0u32.to_le_bytes());
+        out.extend_from_slice(bytemuck::cast_slice(&self.batches));
+        out.extend_from_slice(bytemuck::cast_slice(&self.instances));
+        out
+    }
+
+    /// Decodes and validates tile bytes. `file` names the file in errors;
+    /// `species_count` is the manifest's species count (batches must index it).
+    ///
+    /// # Errors
+    /// A [`DecodeError`] for a wrong magic or version, a size that does not match
+    /// the declared counts, a count above the format's limits, a non-finite or
+    /// negative bound, a batch whose instance run is outside the tile or out of
+    /// order, or an unknown species.
+    pub fn decode(file: &str, bytes: &[u8], species_count: u32) -> Result<Self, DecodeError> {
+        decode_tile(bytes, species_count).map_err(|p| DecodeError::new(file, p))
+    }
+
+    /// Bytes of the instance records (what "bytes per tree" counts).
+    #[must_use]
+    pub fn instance_bytes(&self) -> usize {
+        self.instances.len() * std::mem::size_of::<PackedInstance>()
+    }
+}
+
+fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
+    let r = Reader::new(bytes);
+    r.magic("Sylva tile", &TILE_MAGIC)?;
+    let version = r.u16("header.version", 4)?;
+    if version != TILE_VERSION {
+        return Err(Problem::UnsupportedVersion { found: version.into(), supported: TILE_VERSION.into() });
+    }
+    let header_bytes = r.u16("header.header_bytes", 6)?;
+    if usize::from(header_bytes) != TILE_HEADER_BYTES {
+        return Err(Problem::Invalid(format!("header.header_bytes is {header_bytes}, expected {TILE_HEADER_BYTES}")));
+    }
+    let batch_count = at_most("header.batch_count", r.u32("header.batch_count", 8)?.into(), MAX_TILE_BATCHES.into())?;
+    let instance_count =
+        at_most("header.instance_count", r.u32("header.instance_count", 12)?.into(), MAX_TILE_INSTANCES.into())?;
+    let tile_x = r.i32("header.tile_x", 16)?;
+    let tile_y = r.i32("header.tile_y", 20)?;
+    let batch_stride = r.u16("header.batch_stride", 24)?;
+    let instance_stride = r.u16("header.instance_stride", 26)?;
+    if usize::from(batch_stride) != std::mem::size_of::<GpuBatch>()
+        || usize::from(instance_stride) != std::mem::size_of::<PackedInstance>()
+    {
+        return Err(Problem::Invalid(format!(
+            "record sizes batch={batch_stride} instance={instance_stride}, expected 80 and 8"
+        )));
+    }
+    let batch_start = TILE_HEADER_BYTES as u64;
+    let batch_len = batch_count * 80;
+    let instance_start = batch_start + batch_len;
+    let instance_len = instance_count * 8;
+    let end = instance_start + instance_len;
+    // Check the whole size before allocating anything from the counts.
+    if end != bytes.len() as u64 {
+        return Err(if end > bytes.len() as u64 {
+            Problem::Truncated {
+                what: format!("{batch_count} batches and {instance_count} instances"),
+                start: 0,
+                end,
+                len: bytes.len() as u64,
+            }
+        } else {
+            Problem::Invalid(format!(
+                "{} trailing bytes after {batch_count} batches and {instance_count} instances",
+                bytes.len() as u64 - end
+            ))
+        });
+    }
+    let batches: Vec<GpuBatch> = pod_vec(r.slice("batches", batch_start, batch_len)?);
+    let instances: Vec<PackedInstance> = pod_vec(r.slice("instances", instance_start, instance_len)?);
+    let mut next = 0u64;
+    for (i, b) in batches.iter().enumerate() {
+        validate_batch(i, b, species_count)?;
+        if u64::from(b.instance_offset) != next {
+            return Err(Problem::Invalid(format!(
+                "batch[{i}].instance_offset is {}, expected {next}: batches must cover the instances in order",
+                b.instance_offset
+            )));
+        }
+        next += u64::from(b.instance_count);
+    }
+    if next != instance_count {
+        return Err(Problem::Invalid(format!(
+            "batches hold {next} instances but the header declares {instance_count}"
+        )));
+    }
+    Ok(Tile { tile_x, tile_y, batches, instances })
+}
+
+fn validate_batch(i: usize, b: &GpuBatch, species_count: u32) -> Result<(), Problem> {
+    let what = format!("batch[{i}]");
+    finite_all(&format!("{what}.origin_m"), &b.origin_m)?;
+    finite_all(&format!("{what}.center_m"), &b.center_m)?;
+    finite_all(&format!("{what}.half_extent_m"), &b.half_extent_m)?;
+    finite_all(&what, &[b.radius_m, b.xy_step_m, b.z_step_m, b.scale_min, b.scale_log2_step, b.max_height_m])?;
+    if b.species >= species_count {
+        return Err(Problem::OutOfRange {
+            what: format!("{what}.species"),
+            value: b.species.into(),
+            allowed: format!("less than the scene's {species_count} species"),
+        });
+    }
+    let positive =
+        [("radius_m", b.radius_m), ("xy_step_m", b.xy_step_m), ("z_step_m", b.z_step_m), ("scale_min", b.scale_min)];
+    for (name, v) in positive {
+        if v < 0.0 || (name != "radius_m" && v == 0.0) {
+            return Err(Problem::Invalid(format!("{what}.{name} is {v}, must be positive")));
+        }
+    }
+    if b.half_extent_m.iter().any(|&h| h < 0.0) || b.scale_log2_step < 0.0 || b.max_height_m < 0.0 {
+        return Err(Problem::Invalid(format!("{what} has a negative extent, scale step or height")));
+    }
+    if b.xy_step_m > MAX_XY_STEP_M * 1.0001 || b.z_step_m > MAX_Z_STEP_M * 1.0001 {
+        return Err(Problem::Invalid(format!(
+            "{what} quantisation steps {} m / {} m exceed the 1 cm position error bound",
+            b.xy_step_m, b.z_step_m
+        )));
+    }
+    Ok(())
+}
+
+/// First four bytes of a tree-id sidecar file.
+pub const IDS_MAGIC: [u8; 4] = *b"SYID";
+/// Tree-id sidecar version.
+pub const IDS_VERSION: u32 = 1;
+
+/// Encodes the tree ids of a tile's instances (same order) into an `.ids` sidecar.
+#[must_use]
+pub fn encode_ids(ids: &[u64]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(16 + ids.len() * 8);
+    out.extend_from_slice(&IDS_MAGIC);
+    out.extend_from_slice(&IDS_VERSION.to_le_bytes());
+    out.extend_from_slice(&(ids.len() as u64).to_le_bytes());
+    out.extend_from_slice(bytemuck::cast_slice(ids));
+    out
+}
+
+/// Decodes an `.ids` sidecar.
+///
+/// # Errors
+/// A [`DecodeError`] for a wrong magic or version, or a size that does not match the count.
+pub fn decode_ids(file: &str, bytes: &[u8]) -> Result<Vec<u64>, DecodeError> {
+    let inner = || -> Result<Vec<u64>, Problem> {
+        let r = Reader::new(bytes);
+        r.magic("Sylva tree-id", &IDS_MAGIC)?;
+        let version = r.u32("header.version", 4)?;
+        if version != IDS_VERSION {
+            return Err(Problem::UnsupportedVersion { found: version, supported: IDS_VERSION });
+        }
+        let count = at_most("header.count", r.u64("header.count", 8)?, MAX_TILE_INSTANCES.into())?;
+        let body = bytes.len() as u64 - 16;
+        if body != count * 8 {
+            return Err(Problem::Invalid(format!(
+                "{count} ids need {} bytes after the header, the file has {body}",
+                count * 8
+            )));
+        }
+        Ok(pod_vec(r.slice("ids", 16, body)?))
+    };
+    inner().map_err(|p| DecodeError::new(file, p))
+}

@@ -1,0 +1,11 @@
+//! Sylva: a GPU-driven forest renderer for whole forests in the browser and headless.
+//!
+//! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
+//! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
+//! * [`metrics`] — image error (multi-scale RMSE, seed 002 §4).
+//!
+//! The bake tool (`bake-tool/`, crate `sylva-bake`) writes what this crate reads.
+
+pub mod format;
+pub mod metrics;
+pub mod render;

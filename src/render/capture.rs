@@ -1,0 +1,288 @@
+//! Headless renders of one species pack: the bake's view-angle billboard
+//! capture (seed 004 §3.3, alg. 3.1) and `sylva render --pack` previews.
+//! Native only: both block on the GPU.
+
+use glam::{Mat4, Vec3};
+use wgpu::util::DeviceExt;
+
+use super::context::{read_texture_rgba8, GpuContext};
+use super::gpu_data::{MeshInstance, RenderMode, ViewUniform};
+use super::mesh::{MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_NORMAL_FORMAT, DEPTH_FORMAT};
+use super::Lighting;
+use crate::format::Pack;
+
+/// The box a billboard covers: a vertical cylinder around the tree (model space,
+/// metres at scale 1). Chosen so every elevation angle fits one quad size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BillboardFrame {
+    /// Centre of the cylinder (x, y at the crown axis, z at mid height).
+    pub center: Vec3,
+    /// Cylinder radius = quad half width.
+    pub half_width: f32,
+    /// Quad half height: the largest projected half height over 0–90°.
+    pub half_height: f32,
+}
+
+impl BillboardFrame {
+    /// The frame of a model with bounds `min..max`.
+    #[must_use]
+    pub fn from_bounds(min: Vec3, max: Vec3) -> Self {
+        let center = (min + max) * 0.5;
+        let half = (max - min) * 0.5;
+        let radius = half.x.hypot(half.y).max(1e-3);
+        // Projected half height of the cylinder at elevation θ is
+        // h cos θ + r sin θ, whose maximum over θ is sqrt(h² + r²).
+        let half_height = half.z.hypot(radius).max(1e-3);
+        Self { center, half_width: radius, half_height }
+    }
+
+    /// Camera direction (from the tree towards the eye) for elevation `elevation_rad`
+    /// and azimuth `azimuth_rad`, and the camera's up vector.
+    #[must_use]
+    pub fn view_axes(elevation_rad: f32, azimuth_rad: f32) -> (Vec3, Vec3) {
+        let (se, ce) = elevation_rad.sin_cos();
+        let (sa, ca) = azimuth_rad.sin_cos();
+        let dir = Vec3::new(ce * ca, ce * sa, se);
+        // Tangent in the elevation direction: continuous up to the top view.
+        let up = Vec3::new(-se * ca, -se * sa, ce);
+        (dir, up)
+    }
+
+    /// Clip-from-model transform of the orthographic capture (reversed Z).
+    #[must_use]
+    pub fn clip_from_model(&self, elevation_rad: f32, azimuth_rad: f32) -> Mat4 {
+        let (dir, up) = Self::view_axes(elevation_rad, azimuth_rad);
+        let reach = self.half_width.hypot(self.half_height) * 1.01;
+        let eye = self.center + dir * (reach * 2.0);
+        let view = glam::camera::rh::view::look_at_mat4(eye, self.center, up);
+        // near and far swapped: reversed Z, like every other pass.
+        let proj = glam::camera::rh::proj::directx::orthographic(
+            -self.half_width,
+            self.half_width,
+            -self.half_height,
+            self.half_height,
+            reach * 3.0,
+            reach,
+        );
+        proj * view
+    }
+}
+
+/// Raw billboard layers as rendered (before mips): per layer `size²` RGBA8 texels.
+pub struct CapturedBillboards {
+    /// Albedo (sRGB) + coverage alpha, one `Vec` per layer.
+    pub color: Vec<Vec<u8>>,
+    /// Normal * 0.5 + 0.5 and leaf flag, one `Vec` per layer.
+    pub normal: Vec<Vec<u8>>,
+}
+
+fn target(ctx: &GpuContext, size: u32, format: wgpu::TextureFormat, label: &str) -> wgpu::Texture {
+    ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
+fn target_wh(ctx: &GpuContext, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
+    ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("target"),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
+fn single_instance(ctx: &GpuContext, eye_pos: Vec3) -> wgpu::Buffer {
+    let instance =
+        MeshInstance { eye_pos_yaw: [eye_pos.x, eye_pos.y, eye_pos.z, 0.0], scale_variation: [1.0, 15.5, 0.0, 0.0] };
+    ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("instance"),
+        contents: bytemuck::bytes_of(&instance),
+        usage: wgpu::BufferUsages::VERTEX,
+    })
+}
+
+/// Renders mesh level 0 of `pack` orthographically from `angles` elevations evenly
+/// spaced over 0–90° (alg. 3.1: angle k = 90°/(K−1)·k) times `azimuths` azimuths,
+/// into `size`² albedo + normal layers. Layer = azimuth · angles + elevation.
+#[must_use]
+pub fn capture_billboards(
+    ctx: &GpuContext,
+    pipelines: &MeshPipelines,
+    pack: &Pack<'_>,
+    frame: &BillboardFrame,
+    angles: u32,
+    azimuths: u32,
+    size: u32,
+) -> CapturedBillboards {
+    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, pipelines, pack);
+    let albedo = target(ctx, size, CAPTURE_ALBEDO_FORMAT, "capture albedo");
+    let normal = target(ctx, size, CAPTURE_NORMAL_FORMAT, "capture normal");
+    let depth = target(ctx, size, DEPTH_FORMAT, "capture depth");
+    let (albedo_view, normal_view, depth_view) = (
+        albedo.create_view(&Default::default()),
+        normal.create_view(&Default::default()),
+        depth.create_view(&Default::default()),
+    );
+    let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("capture view"),
+        size: std::mem::size_of::<ViewUniform>() as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let view_group = pipelines.view_bind_group(&ctx.device, &view_buffer);
+    // The capture works in model space: the "eye" of the instance transform is the model origin.
+    let instances = single_instance(ctx, Vec3::ZERO);
+    let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new() };
+    for a in 0..azimuths {
+        let azimuth = std::f32::consts::TAU * a as f32 / azimuths as f32;
+        for k in 0..angles {
+            let elevation = std::f32::consts::FRAC_PI_2 * k as f32 / (angles - 1).max(1) as f32;
+            let uniform = ViewUniform {
+                clip_from_eye: frame.clip_from_model(elevation, azimuth).to_cols_array_2d(),
+                params: [RenderMode::Capture as u32, 0, 0, 0],
+                ..Lighting::default().view_uniform(Mat4::IDENTITY, Vec3::ZERO)
+            };
+            ctx.queue.write_buffer(&view_buffer, 0, bytemuck::bytes_of(&uniform));
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let clear = wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                };
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("billboard capture"),
+                    color_attachments: &[
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &albedo_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &normal_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                    ],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(0.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_bind_group(0, &view_group, &[]);
+                mesh.draw(&mut pass, pipelines, RenderMode::Capture, 0, &instances, 1);
+            }
+            ctx.queue.submit([encoder.finish()]);
+            out.color.push(read_texture_rgba8(ctx, &albedo, 0, 0));
+            out.normal.push(read_texture_rgba8(ctx, &normal, 0, 0));
+        }
+    }
+    out
+}
+
+/// Where `sylva render --pack` looks from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PackView {
+    /// Horizontal, from the side.
+    Side,
+    /// 35° down.
+    Oblique,
+    /// Straight down.
+    Top,
+}
+
+/// Renders one tree of `pack` (mesh level `level`) lit, with a perspective camera
+/// framing the whole tree, into a `width`×`height` sRGB RGBA8 image.
+#[must_use]
+pub fn render_pack_preview(
+    ctx: &GpuContext,
+    pack: &Pack<'_>,
+    level: usize,
+    view: PackView,
+    width: u32,
+    height: u32,
+    background: [f64; 4],
+) -> Vec<u8> {
+    let format = wgpu::TextureFormat::Rgba8UnormSrgb;
+    let pipelines = MeshPipelines::new(&ctx.device, format);
+    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines, pack);
+    let color = target_wh(ctx, width, height, format);
+    let depth = target_wh(ctx, width, height, DEPTH_FORMAT);
+    let min = Vec3::from(pack.meta.bounds_min);
+    let max = Vec3::from(pack.meta.bounds_max);
+    let center = (min + max) * 0.5;
+    let radius = ((max - min) * 0.5).length().max(1e-3);
+    let elevation: f32 = match view {
+        PackView::Side => 0.0,
+        PackView::Oblique => 35f32.to_radians(),
+        PackView::Top => 89.9f32.to_radians(),
+    };
+    let fov_y = 40f32.to_radians();
+    let aspect = width as f32 / height as f32;
+    let fit = (fov_y * 0.5).tan().min((fov_y * 0.5).tan() * aspect);
+    let distance = radius / fit * 1.05;
+    let (dir, _) = BillboardFrame::view_axes(elevation, -std::f32::consts::FRAC_PI_2);
+    let eye = center + dir * distance;
+    // Camera-relative: rotation-only view matrix, the tree placed at (origin − eye).
+    let eye_from_world = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, -dir, Vec3::Z);
+    let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(fov_y, aspect, distance * 0.01);
+    let uniform = Lighting::default().view_uniform(proj * eye_from_world, eye);
+    let view_buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("preview view"),
+        contents: bytemuck::bytes_of(&uniform),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let view_group = pipelines.view_bind_group(&ctx.device, &view_buffer);
+    let instances = single_instance(ctx, -eye);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("pack preview"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &color.create_view(&Default::default()),
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color {
+                        r: background[0],
+                        g: background[1],
+                        b: background[2],
+                        a: background[3],
+                    }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth.create_view(&Default::default()),
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &view_group, &[]);
+        mesh.draw(&mut pass, &pipelines, RenderMode::Lit, level, &instances, 1);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    read_texture_rgba8(ctx, &color, 0, 0)
+}

@@ -1,0 +1,126 @@
+//! The wgpu instance, adapter, device and queue, for headless and browser use.
+
+/// Why a GPU context could not be created.
+#[derive(Debug, thiserror::Error)]
+pub enum ContextError {
+    /// No adapter at all (no GPU, no lavapipe, no WebGPU).
+    #[error("no GPU adapter found ({0}); natively install Mesa's Vulkan drivers (`apt-get install mesa-vulkan-drivers libvulkan1`), in a browser enable WebGPU")]
+    NoAdapter(String),
+    /// The adapter refused the device request.
+    #[error("the GPU adapter refused to create a device: {0}")]
+    Device(String),
+}
+
+/// A device and queue with the adapter they came from.
+pub struct GpuContext {
+    /// The wgpu instance.
+    pub instance: wgpu::Instance,
+    /// The adapter in use.
+    pub adapter: wgpu::Adapter,
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+}
+
+impl GpuContext {
+    /// Creates a context without a surface. Prefers a real GPU and falls back
+    /// to any adapter (lavapipe on CI). Requests WebGPU's default limits only,
+    /// so what runs here runs in a browser.
+    ///
+    /// # Errors
+    /// [`ContextError`] when there is no adapter or the device request fails.
+    pub async fn new_headless() -> Result<Self, ContextError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let mut last_err = String::new();
+        let mut adapter = None;
+        for power in [wgpu::PowerPreference::HighPerformance, wgpu::PowerPreference::None] {
+            match instance
+                .request_adapter(&wgpu::RequestAdapterOptions { power_preference: power, ..Default::default() })
+                .await
+            {
+                Ok(a) => {
+                    adapter = Some(a);
+                    break;
+                }
+                Err(e) => last_err = e.to_string(),
+            }
+        }
+        let adapter = adapter.ok_or(ContextError::NoAdapter(last_err))?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("sylva"),
+                required_features: wgpu::Features::empty(),
+                required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| ContextError::Device(e.to_string()))?;
+        Ok(Self { instance, adapter, device, queue })
+    }
+
+    /// Blocking [`Self::new_headless`] for native code.
+    ///
+    /// # Errors
+    /// See [`Self::new_headless`].
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn new_headless_blocking() -> Result<Self, ContextError> {
+        pollster::block_on(Self::new_headless())
+    }
+
+    /// A one-line description of the adapter (name, backend, type).
+    #[must_use]
+    pub fn adapter_summary(&self) -> String {
+        let info = self.adapter.get_info();
+        format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
+    }
+}
+
+/// Reads back a 2D RGBA8 texture (or one layer of an array) as tightly packed rows.
+/// Native only: it blocks on the GPU.
+#[cfg(not(target_arch = "wasm32"))]
+#[must_use]
+pub fn read_texture_rgba8(ctx: &GpuContext, texture: &wgpu::Texture, layer: u32, mip: u32) -> Vec<u8> {
+    let width = (texture.width() >> mip).max(1);
+    let height = (texture.height() >> mip).max(1);
+    // Buffer copies need rows aligned to 256 bytes.
+    let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: u64::from(padded_row) * u64::from(height),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: mip,
+            origin: wgpu::Origin3d { x: 0, y: 0, z: layer },
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded_row),
+                rows_per_image: Some(height),
+            },
+        },
+        wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+    );
+    ctx.queue.submit([encoder.finish()]);
+    let slice = buffer.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map readback buffer"));
+    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
+    let mapped = slice.get_mapped_range().expect("mapped range");
+    let mut out = Vec::with_capacity((width * height * 4) as usize);
+    for row in mapped.chunks(padded_row as usize).take(height as usize) {
+        out.extend_from_slice(&row[..(width * 4) as usize]);
+    }
+    drop(mapped);
+    buffer.unmap();
+    out
+}

@@ -1,0 +1,385 @@
+//! Mesh pass: draws the quantised mesh levels of LoD packs, alpha-tested and
+//! lit, or (in capture mode) writes albedo + normals for the bake's billboards.
+//!
+//! [`MeshPipelines`] is the long-lived part (layouts, pipelines, sampler);
+//! [`MeshGpu`] is one pack's uploaded mesh levels and material textures.
+
+use wgpu::util::DeviceExt;
+
+use super::gpu_data::{GpuMaterial, MeshInstance, MeshUniform, RenderMode, ViewUniform};
+use super::shaders;
+use crate::format::pack::{kind, MaterialKind, TextureArrayMeta};
+use crate::format::Pack;
+
+/// Depth format of every Sylva pass (reversed Z: clear to 0, keep greater).
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Albedo target of the capture mode (sRGB-encoded, alpha = coverage).
+pub const CAPTURE_ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// Normal target of the capture mode (n * 0.5 + 0.5, alpha = leaf flag).
+pub const CAPTURE_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// Layouts, pipelines and the sampler of the mesh pass.
+pub struct MeshPipelines {
+    /// Group 0: the view uniform.
+    pub view_layout: wgpu::BindGroupLayout,
+    /// Group 1: mesh level constants, materials, material textures.
+    pub mesh_layout: wgpu::BindGroupLayout,
+    lit: wgpu::RenderPipeline,
+    capture: wgpu::RenderPipeline,
+    sampler: wgpu::Sampler,
+}
+
+const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
+    0 => Uint16x4, 1 => Snorm8x4, 2 => Unorm16x2, 3 => Unorm8x4
+];
+const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![
+    4 => Float32x4, 5 => Float32x4
+];
+
+impl MeshPipelines {
+    /// Creates the pipelines; `color_format` is the lit pass's target.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("mesh.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::MESH.into()),
+        });
+        let view_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("view"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let mesh_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("mesh level"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<MeshUniform>() as u64),
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<GpuMaterial>() as u64),
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("mesh"),
+            bind_group_layouts: &[Some(&view_layout), Some(&mesh_layout)],
+            immediate_size: 0,
+        });
+        let buffers = [
+            Some(wgpu::VertexBufferLayout {
+                array_stride: 20,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &VERTEX_ATTRIBUTES,
+            }),
+            Some(wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<MeshInstance>() as u64,
+                step_mode: wgpu::VertexStepMode::Instance,
+                attributes: &INSTANCE_ATTRIBUTES,
+            }),
+        ];
+        let make = |label: &str, entry: &str, targets: &[Option<wgpu::ColorTargetState>]| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &buffers,
+                },
+                primitive: wgpu::PrimitiveState {
+                    // Leaves are double-sided; bark is closed, so culling would save
+                    // little and per-material pipelines would double the draws.
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let lit = make("mesh lit", "fs_lit", &[Some(color_format.into())]);
+        let capture = make(
+            "mesh capture",
+            "fs_capture",
+            &[Some(CAPTURE_ALBEDO_FORMAT.into()), Some(CAPTURE_NORMAL_FORMAT.into())],
+        );
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("material"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        Self { view_layout, mesh_layout, lit, capture, sampler }
+    }
+
+    /// The pipeline for `mode`.
+    #[must_use]
+    pub fn pipeline(&self, mode: RenderMode) -> &wgpu::RenderPipeline {
+        match mode {
+            RenderMode::Lit => &self.lit,
+            RenderMode::Capture => &self.capture,
+        }
+    }
+
+    /// A bind group for a view uniform buffer.
+    #[must_use]
+    pub fn view_bind_group(&self, device: &wgpu::Device, view_buffer: &wgpu::Buffer) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("view"),
+            layout: &self.view_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: view_buffer.as_entire_binding() }],
+        })
+    }
+}
+
+/// One uploaded mesh level.
+pub struct MeshLevelGpu {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    bind_group: wgpu::BindGroup,
+}
+
+/// A pack's mesh levels and material textures on the GPU.
+pub struct MeshGpu {
+    /// Levels, finest first.
+    pub levels: Vec<MeshLevelGpu>,
+}
+
+impl MeshGpu {
+    /// Uploads every mesh level of a decoded pack.
+    #[must_use]
+    pub fn upload(device: &wgpu::Device, queue: &wgpu::Queue, pipelines: &MeshPipelines, pack: &Pack<'_>) -> Self {
+        let meta = &pack.meta;
+        let texture = match (meta.material_texture, pack.section(kind::MATERIAL_TEXTURES, 0)) {
+            (Some(t), Some(data)) => {
+                upload_texture_array(device, queue, "material textures", &t, data, wgpu::TextureFormat::Rgba8UnormSrgb)
+            }
+            _ => upload_texture_array(
+                device,
+                queue,
+                "no material texture",
+                &TextureArrayMeta { size: 1, layers: 1, mips: 1 },
+                &[255; 4],
+                wgpu::TextureFormat::Rgba8UnormSrgb,
+            ),
+        };
+        let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let mut materials: Vec<GpuMaterial> = meta
+            .materials
+            .iter()
+            .map(|m| GpuMaterial {
+                base_color: m.base_color,
+                alpha_cutoff: m.alpha_cutoff,
+                layer: m.texture_layer.map_or(-1, |l| l as i32),
+                kind: match m.kind {
+                    MaterialKind::Leaf => 0,
+                    MaterialKind::Branch => 1,
+                },
+                pad: 0,
+            })
+            .collect();
+        if materials.is_empty() {
+            // A storage binding may not be empty.
+            materials.push(GpuMaterial::zeroed_default());
+        }
+        let material_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("materials"),
+            contents: bytemuck::cast_slice(&materials),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let levels = meta
+            .mesh_levels
+            .iter()
+            .enumerate()
+            .map(|(l, level)| {
+                let uniform = MeshUniform {
+                    pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], 0.0],
+                    pos_extent: [
+                        level.pos_max[0] - level.pos_min[0],
+                        level.pos_max[1] - level.pos_min[1],
+                        level.pos_max[2] - level.pos_min[2],
+                        0.0,
+                    ],
+                    uv_min: level.uv_min,
+                    uv_extent: [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]],
+                };
+                let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("mesh level"),
+                    contents: bytemuck::bytes_of(&uniform),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let vtx = pack.section(kind::MESH_VERTICES, l as u32).unwrap_or_default();
+                let idx = pack.section(kind::MESH_INDICES, l as u32).unwrap_or_default();
+                // Sections are 256-byte aligned in the file and validated: upload as they are.
+                let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("mesh vertices"),
+                    contents: pad4(vtx).as_ref(),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+                let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("mesh indices"),
+                    contents: idx,
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+                let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("mesh level"),
+                    layout: &pipelines.mesh_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: uniform_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: material_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&texture_view),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::Sampler(&pipelines.sampler),
+                        },
+                    ],
+                });
+                MeshLevelGpu { vertices, indices, index_count: level.index_count, bind_group }
+            })
+            .collect();
+        Self { levels }
+    }
+
+    /// Records the draw of `level` for `instance_count` instances from `instances`
+    /// (a vertex buffer of [`MeshInstance`]). The caller has set the view bind group.
+    pub fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        pipelines: &MeshPipelines,
+        mode: RenderMode,
+        level: usize,
+        instances: &wgpu::Buffer,
+        instance_count: u32,
+    ) {
+        let Some(level) = self.levels.get(level) else { return };
+        if level.index_count == 0 || instance_count == 0 {
+            return;
+        }
+        pass.set_pipeline(pipelines.pipeline(mode));
+        pass.set_bind_group(1, &level.bind_group, &[]);
+        pass.set_vertex_buffer(0, level.vertices.slice(..));
+        pass.set_vertex_buffer(1, instances.slice(..));
+        pass.set_index_buffer(level.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..level.index_count, 0, 0..instance_count);
+    }
+}
+
+impl GpuMaterial {
+    fn zeroed_default() -> Self {
+        bytemuck::Zeroable::zeroed()
+    }
+}
+
+/// Vertex data is 20 bytes per vertex; buffers must be a multiple of 4 bytes (always true) —
+/// kept as a check so a format change cannot silently break the upload.
+fn pad4(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    if bytes.len().is_multiple_of(4) {
+        std::borrow::Cow::Borrowed(bytes)
+    } else {
+        let mut v = bytes.to_vec();
+        v.resize(bytes.len().next_multiple_of(4), 0);
+        std::borrow::Cow::Owned(v)
+    }
+}
+
+/// Uploads a mip-major RGBA8 texture array (the pack layout) as it is.
+#[must_use]
+pub fn upload_texture_array(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    meta: &TextureArrayMeta,
+    data: &[u8],
+    format: wgpu::TextureFormat,
+) -> wgpu::Texture {
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width: meta.size, height: meta.size, depth_or_array_layers: meta.layers },
+        mip_level_count: meta.mips,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for mip in 0..meta.mips {
+        let size = (meta.size >> mip).max(1);
+        let start = meta.mip_offset(mip) as usize;
+        let len = (size * size * 4 * meta.layers) as usize;
+        let Some(bytes) = data.get(start..start + len) else { break };
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: mip,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytes,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(size * 4), rows_per_image: Some(size) },
+            wgpu::Extent3d { width: size, height: size, depth_or_array_layers: meta.layers },
+        );
+    }
+    texture
+}
