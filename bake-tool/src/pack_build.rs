@@ -48,6 +48,9 @@ pub const SELECT_PX_MESH0: f32 = 360.0;
 /// See [`SELECT_PX_MESH0`].
 pub const SELECT_PX_MESH1: f32 = 120.0;
 
+/// Alpha-test threshold of billboards (the viewer discards below it).
+pub const BILLBOARD_ALPHA_CUTOFF: f32 = 0.5;
+
 /// The bytes of a finished pack and its metadata.
 pub struct BuiltPack {
     /// The encoded pack.
@@ -129,13 +132,13 @@ pub fn build_pack(
     let color_chains: Vec<Vec<Vec<u8>>> = captured
         .color
         .iter()
-        .map(|c| alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb)[1..].to_vec())
+        .map(|c| alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..].to_vec())
         .collect();
     let normal_chains: Vec<Vec<Vec<u8>>> = captured
         .normal
         .iter()
         .zip(&captured.color)
-        .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear)[1..].to_vec())
+        .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear, None)[1..].to_vec())
         .collect();
     sections.push(Section {
         kind: kind::BILLBOARD_COLOR,
@@ -183,7 +186,9 @@ fn mip_major(chains: &[Vec<Vec<u8>>], mips: u32) -> Vec<u8> {
 }
 
 fn build_materials(model: &ImportedModel, size: u32) -> (Vec<MaterialMeta>, Option<TextureArrayMeta>, Option<Vec<u8>>) {
-    let size = size.max(1).next_power_of_two();
+    // No larger than the largest source image: upscaling only costs bytes.
+    let largest = model.materials.iter().filter_map(|m| m.texture.as_ref()).map(|t| t.width().max(t.height())).max();
+    let size = size.max(1).next_power_of_two().min(largest.unwrap_or(1).next_power_of_two());
     let mut chains = Vec::new();
     let metas = model
         .materials
@@ -192,7 +197,8 @@ fn build_materials(model: &ImportedModel, size: u32) -> (Vec<MaterialMeta>, Opti
             let layer = m.texture.as_ref().map(|img| {
                 let resized = image::imageops::resize(img, size, size, image::imageops::FilterType::Triangle);
                 let raw = resized.into_raw();
-                chains.push(alpha_aware_mips(&raw, &raw, size, ColorEncoding::Srgb));
+                let cutoff = (m.alpha_cutoff > 0.0).then_some(m.alpha_cutoff);
+                chains.push(alpha_aware_mips(&raw, &raw, size, ColorEncoding::Srgb, cutoff));
                 (chains.len() - 1) as u32
             });
             MaterialMeta {

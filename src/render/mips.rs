@@ -44,14 +44,22 @@ struct Level {
 /// to 1×1) with alpha-weighted colour averaging and alpha equalisation.
 /// `weights` gives the alpha used for weighting and equalisation (pass the colour
 /// layer's own bytes for colour; for a normal layer, its colour layer), so the
-/// normal and colour chains of a billboard stay consistent.
+/// normal and colour chains of a billboard stay consistent. `cutoff` is the alpha
+/// test threshold whose coverage the equalisation preserves; `None` keeps the
+/// averaged alpha as it is (for data whose alpha is not coverage).
 ///
 /// Returns one RGBA8 vector per mip level.
 ///
 /// # Panics
 /// If `size` is not a power of two or a layer's length is not `size² · 4`.
 #[must_use]
-pub fn alpha_aware_mips(layer: &[u8], weights: &[u8], size: u32, encoding: ColorEncoding) -> Vec<Vec<u8>> {
+pub fn alpha_aware_mips(
+    layer: &[u8],
+    weights: &[u8],
+    size: u32,
+    encoding: ColorEncoding,
+    cutoff: Option<f32>,
+) -> Vec<Vec<u8>> {
     assert!(size.is_power_of_two(), "mip chains need a power-of-two size, got {size}");
     let texels = (size * size) as usize;
     assert_eq!(layer.len(), texels * 4);
@@ -99,23 +107,86 @@ pub fn alpha_aware_mips(layer: &[u8], weights: &[u8], size: u32, encoding: Color
         levels.push(Level { size: s, rgba });
         alphas.push(alpha);
     }
-    // Alg. 3.2 lines 9–14: map each level's stored alpha range back to mip 0's.
-    let range = |l: &Level| l.rgba.iter().fold((f32::MAX, f32::MIN), |(lo, hi), t| (lo.min(t[3]), hi.max(t[3])));
-    let (lo0, hi0) = range(&levels[0]);
+    // Alg. 3.2 lines 9–14: map each level's alpha range back to mip 0's. Sylva's
+    // remap is piecewise linear through the level's coverage quantile, so beyond
+    // restoring the range (opaque texels at every level) the fraction of texels
+    // passing the alpha test stays that of mip 0: alpha-tested billboards neither
+    // thin out nor thicken with distance.
+    let alpha0: Vec<f32> = levels[0].rgba.iter().map(|t| t[3]).collect();
+    let (lo0, hi0) = min_max(&alpha0);
+    let coverage0 = cutoff.map(|c| alpha0.iter().filter(|&&a| a >= c).count() as f64 / alpha0.len() as f64);
     levels
         .iter()
         .enumerate()
         .map(|(k, l)| {
-            let (lo, hi) = range(l);
+            let alpha: Vec<f32> = l.rgba.iter().map(|t| t[3]).collect();
+            let remap = match (k, cutoff, coverage0) {
+                (1.., Some(cutoff), Some(c0)) => Some(CoverageRemap::new(&alpha, c0, cutoff, lo0, hi0)),
+                _ => None,
+            };
             l.rgba
                 .iter()
                 .flat_map(|t| {
-                    let a = if k == 0 || hi - lo <= 1e-6 { t[3] } else { lo0 + (t[3] - lo) / (hi - lo) * (hi0 - lo0) };
-                    [encode(t[0]), encode(t[1]), encode(t[2]), (a.clamp(0.0, 1.0) * 255.0 + 0.5) as u8]
+                    let a = remap.as_ref().map_or(t[3], |r| r.apply(t[3]));
+                    [encode(t[0]), encode(t[1]), encode(t[2]), (a.clamp(0.0, 1.0) * 255.0).round() as u8]
                 })
                 .collect()
         })
         .collect()
+}
+
+fn min_max(v: &[f32]) -> (f32, f32) {
+    v.iter().fold((f32::MAX, f32::MIN), |(lo, hi), &a| (lo.min(a), hi.max(a)))
+}
+
+/// Piecewise-linear alpha remap of one mip level: `[lo, t] → [lo0, cutoff)` and
+/// `[t, hi] → [cutoff, hi0]`, where `t` splits the level's texels so that the
+/// share at or above the cutoff equals mip 0's coverage.
+struct CoverageRemap {
+    lo: f32,
+    t: f32,
+    hi: f32,
+    lo0: f32,
+    hi0: f32,
+    cutoff: f32,
+}
+
+impl CoverageRemap {
+    fn new(alpha: &[f32], coverage0: f64, cutoff: f32, lo0: f32, hi0: f32) -> Self {
+        let (lo, hi) = min_max(alpha);
+        let mut sorted = alpha.to_vec();
+        sorted.sort_by(|a, b| b.total_cmp(a));
+        let n = sorted.len();
+        let passing = ((coverage0 * n as f64).round() as usize).min(n);
+        // Threshold between the last passing and the first failing texel.
+        let t = match passing {
+            0 => hi + 1.0,
+            p if p == n => lo - 1.0,
+            p => 0.5 * (sorted[p - 1] + sorted[p]),
+        };
+        Self { lo, t, hi, lo0, hi0, cutoff }
+    }
+
+    fn apply(&self, a: f32) -> f32 {
+        // Largest value that still fails the test after 8-bit rounding.
+        let below = self.cutoff - 0.6 / 255.0;
+        if a >= self.t {
+            let span = (self.hi - self.t.max(self.lo)).max(1e-9);
+            self.cutoff.max(self.lo0)
+                + (a - self.t.max(self.lo)) / span * (self.hi0 - self.cutoff.max(self.lo0)).max(0.0)
+        } else {
+            let span = (self.t.min(self.hi) - self.lo).max(1e-9);
+            self.lo0 + (a - self.lo) / span * (below - self.lo0).max(0.0)
+        }
+    }
+}
+
+/// Fraction of texels of an RGBA8 layer whose alpha passes `cutoff` (0–1).
+#[must_use]
+pub fn alpha_coverage(layer: &[u8], cutoff: f32) -> f64 {
+    let n = layer.len() / 4;
+    let passing = layer.chunks_exact(4).filter(|t| f32::from(t[3]) / 255.0 >= cutoff).count();
+    passing as f64 / n.max(1) as f64
 }
 
 /// Plain per-channel box-filtered mips, for comparison in tests and benchmarks.

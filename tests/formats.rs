@@ -1,0 +1,425 @@
+//! Format round trips, golden files and every decoder error path.
+//!
+//! Golden files in `tests/golden/` pin the bytes of format version 1: the
+//! encoders must reproduce them and the decoders must read them. After an
+//! intended format change, bump the version and re-bless with
+//! `SYLVA_BLESS=1 cargo test --test formats`.
+
+use std::path::PathBuf;
+
+use sylva::format::manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry};
+use sylva::format::pack::{
+    kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section,
+    TextureArrayMeta,
+};
+use sylva::format::tile::{decode_ids, encode_ids, GpuBatch, PackedInstance, Tile};
+use sylva::format::{decode_pack, encode_pack, Problem};
+
+fn golden(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden").join(name)
+}
+
+/// Compares `bytes` with the golden file, or writes it when blessing.
+fn check_golden(name: &str, bytes: &[u8]) {
+    let path = golden(name);
+    if std::env::var_os("SYLVA_BLESS").is_some() {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, bytes).unwrap();
+    }
+    let expected =
+        std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e} (bless with SYLVA_BLESS=1)", path.display()));
+    assert!(expected == bytes, "{name} differs from its golden file; a format change needs a version bump");
+}
+
+fn sample_batch(species: u32, offset: u32, count: u32) -> GpuBatch {
+    GpuBatch {
+        origin_m: [-128.0, 256.0, 12.5],
+        instance_offset: offset,
+        center_m: [-96.0, 288.0, 25.0],
+        radius_m: 60.0,
+        half_extent_m: [40.0, 40.0, 20.0],
+        instance_count: count,
+        species,
+        xy_step_m: 64.0 / 65535.0,
+        z_step_m: 0.016,
+        scale_min: 0.5,
+        scale_log2_step: 0.01,
+        max_height_m: 30.0,
+        reserved: [0; 2],
+    }
+}
+
+fn sample_tile() -> Tile {
+    Tile {
+        tile_x: -1,
+        tile_y: 2,
+        batches: vec![sample_batch(0, 0, 3), sample_batch(1, 3, 2)],
+        instances: vec![
+            PackedInstance::new(0, 0, 0, 0, 0, 0),
+            PackedInstance::new(65535, 65535, 2047, 255, 255, 31),
+            PackedInstance::new(1234, 40000, 100, 64, 128, 7),
+            PackedInstance::new(1, 2, 3, 4, 5, 6),
+            PackedInstance::new(30000, 20000, 1000, 200, 10, 20),
+        ],
+    }
+}
+
+fn sample_pack() -> (PackMeta, Vec<Section>) {
+    let vertices = [
+        MeshVertex { position: [0, 0, 0], material: 0, normal_oct: [0, 0, 0, 0], uv: [0, 0], color: [255; 4] },
+        MeshVertex {
+            position: [65535, 0, 0],
+            material: 0,
+            normal_oct: [127, 0, 0, 0],
+            uv: [65535, 0],
+            color: [255; 4],
+        },
+        MeshVertex {
+            position: [0, 65535, 65535],
+            material: 1,
+            normal_oct: [0, -127, 0, 0],
+            uv: [0, 65535],
+            color: [200, 180, 160, 255],
+        },
+    ];
+    let indices: [u32; 6] = [0, 1, 2, 2, 1, 0];
+    let tex = TextureArrayMeta { size: 4, layers: 1, mips: 3 };
+    let bb_tex = TextureArrayMeta { size: 2, layers: 2, mips: 2 };
+    let meta = PackMeta {
+        name: "sample".into(),
+        height_m: 10.0,
+        bounds_min: [-2.0, -2.0, 0.0],
+        bounds_max: [2.0, 2.0, 10.0],
+        materials: vec![
+            MaterialMeta {
+                name: "bark".into(),
+                kind: MaterialKind::Branch,
+                base_color: [1.0; 4],
+                alpha_cutoff: 0.0,
+                double_sided: false,
+                texture_layer: None,
+            },
+            MaterialMeta {
+                name: "leaves".into(),
+                kind: MaterialKind::Leaf,
+                base_color: [1.0; 4],
+                alpha_cutoff: 0.5,
+                double_sided: true,
+                texture_layer: Some(0),
+            },
+        ],
+        material_texture: Some(tex),
+        mesh_levels: vec![MeshLevelMeta {
+            vertex_count: 3,
+            index_count: 6,
+            pos_min: [-2.0, -2.0, 0.0],
+            pos_max: [2.0, 2.0, 10.0],
+            uv_min: [0.0, 0.0],
+            uv_max: [1.0, 1.0],
+            draws: vec![
+                DrawRange { material: 0, first_index: 0, index_count: 3 },
+                DrawRange { material: 1, first_index: 3, index_count: 3 },
+            ],
+            select_px: 360.0,
+        }],
+        billboards: Some(BillboardMeta {
+            angles: 2,
+            azimuths: 1,
+            texture: bb_tex,
+            center: [0.0, 0.0, 5.0],
+            half_width: 2.0,
+            half_height: 5.5,
+            select_px: 0.0,
+        }),
+    };
+    let fill = |n: u64, v: u8| vec![v; n as usize];
+    let sections = vec![
+        Section {
+            kind: kind::MESH_VERTICES,
+            index: 0,
+            count: 3,
+            stride: 20,
+            data: bytemuck::cast_slice(&vertices).to_vec(),
+        },
+        Section {
+            kind: kind::MESH_INDICES,
+            index: 0,
+            count: 6,
+            stride: 4,
+            data: bytemuck::cast_slice(&indices).to_vec(),
+        },
+        Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: fill(tex.byte_len(), 0x80) },
+        Section { kind: kind::BILLBOARD_COLOR, index: 0, count: 0, stride: 0, data: fill(bb_tex.byte_len(), 0x40) },
+        Section { kind: kind::BILLBOARD_NORMAL, index: 0, count: 0, stride: 0, data: fill(bb_tex.byte_len(), 0xC0) },
+    ];
+    (meta, sections)
+}
+
+fn sample_manifest() -> Manifest {
+    let b = Bounds { min: [-200.0, 200.0, 0.0], max: [0.0, 400.0, 40.0] };
+    Manifest {
+        format: "sylva-scene".into(),
+        version: 1,
+        crs: Crs { epsg: 32633, proj4: "+proj=utm +zone=33 +datum=WGS84 +units=m +no_defs".into() },
+        origin_m: [540_000.0, 5_360_000.0, 0.0],
+        bounds: b,
+        cell_size_m: 64.0,
+        tile_cells: 8,
+        counts: Counts { trees: 5, batches: 2, tiles: 1 },
+        species: vec![
+            SpeciesEntry {
+                name: "a".into(),
+                pack: "species/a.pack".into(),
+                bytes: 100,
+                height_m: 10.0,
+                bounds: b,
+                trees: 3,
+            },
+            SpeciesEntry {
+                name: "b".into(),
+                pack: "species/b.pack".into(),
+                bytes: 100,
+                height_m: 10.0,
+                bounds: b,
+                trees: 2,
+            },
+        ],
+        tiles: vec![TileEntry {
+            x: -1,
+            y: 2,
+            url: "tiles/-1_2.tile".into(),
+            ids_url: "tiles/-1_2.ids".into(),
+            bytes: 432,
+            trees: 5,
+            batches: 2,
+            bounds: b,
+        }],
+    }
+}
+
+#[test]
+fn tile_golden_and_round_trip() {
+    let tile = sample_tile();
+    let bytes = tile.encode();
+    assert_eq!(bytes.len(), 32 + 2 * 80 + 5 * 8);
+    check_golden("v1.tile", &bytes);
+    let decoded = Tile::decode("v1.tile", &std::fs::read(golden("v1.tile")).unwrap(), 2).unwrap();
+    assert_eq!(decoded, tile);
+    // Field packing: the second instance has every field at its maximum.
+    let d = decoded.instances[1].decode(&decoded.batches[0]);
+    assert!((d.position_m[0] - (-128.0 + 64.0)).abs() < 1e-3);
+    assert!((d.position_m[2] - (12.5 + 2047.0 * 0.016)).abs() < 1e-3);
+    assert_eq!(d.variation, 31);
+    assert!((d.scale - 0.5 * (255.0f32 * 0.01).exp2()).abs() < 1e-5);
+}
+
+#[test]
+fn pack_golden_and_round_trip() {
+    let (meta, sections) = sample_pack();
+    let bytes = encode_pack(&meta, &sections);
+    check_golden("v1.pack", &bytes);
+    let file = std::fs::read(golden("v1.pack")).unwrap();
+    let pack = decode_pack("v1.pack", &file).unwrap();
+    assert_eq!(pack.meta, meta);
+    assert_eq!(pack.mesh_indices(0), vec![0, 1, 2, 2, 1, 0]);
+    assert_eq!(pack.mesh_vertices(0)[1].position, [65535, 0, 0]);
+    for (entry, _) in &pack.sections {
+        assert_eq!(entry.offset % 256, 0, "sections are 256-byte aligned for direct upload");
+    }
+}
+
+#[test]
+fn manifest_golden_and_round_trip() {
+    let m = sample_manifest();
+    let bytes = m.encode();
+    check_golden("v1-scene.json", &bytes);
+    assert_eq!(Manifest::decode("scene.json", &std::fs::read(golden("v1-scene.json")).unwrap()).unwrap(), m);
+}
+
+#[test]
+fn ids_round_trip_and_errors() {
+    let ids = [1u64, 42, u64::MAX];
+    let bytes = encode_ids(&ids);
+    assert_eq!(decode_ids("x.ids", &bytes).unwrap(), ids);
+    assert!(decode_ids("x.ids", &bytes[..bytes.len() - 1]).is_err());
+    assert!(decode_ids("x.ids", b"SYID").is_err());
+    let mut hostile = encode_ids(&[]);
+    hostile[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
+    let e = decode_ids("x.ids", &hostile).unwrap_err();
+    assert!(matches!(e.problem, Problem::OutOfRange { .. }), "{e}");
+}
+
+/// Decodes a tile after `mutate`, expecting an error whose message contains `needle`.
+fn tile_error(mutate: impl FnOnce(&mut Vec<u8>), needle: &str) {
+    let mut bytes = sample_tile().encode();
+    mutate(&mut bytes);
+    let e = Tile::decode("tiles/-1_2.tile", &bytes, 2).expect_err(needle);
+    let msg = e.to_string();
+    assert!(msg.starts_with("tiles/-1_2.tile: "), "the error names the file: {msg}");
+    assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
+}
+
+fn put_f32(bytes: &mut [u8], at: usize, v: f32) {
+    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+fn put_u32(bytes: &mut [u8], at: usize, v: u32) {
+    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+#[test]
+fn tile_decoder_error_paths() {
+    tile_error(|b| b[0] = b'X', "not a Sylva tile");
+    tile_error(|b| b.truncate(2), "not a Sylva tile");
+    tile_error(|b| b[4] = 9, "version 9");
+    tile_error(|b| b[6] = 33, "header_bytes");
+    tile_error(|b| b.truncate(20), "truncated");
+    tile_error(|b| b.truncate(b.len() - 1), "truncated");
+    tile_error(|b| b.push(0), "trailing bytes");
+    tile_error(|b| put_u32(b, 8, u32::MAX), "batch_count");
+    tile_error(|b| put_u32(b, 12, u32::MAX), "instance_count");
+    tile_error(|b| b[24] = 81, "record sizes");
+    // Batch 0 starts at byte 32.
+    tile_error(|b| put_f32(b, 32, f32::NAN), "batch[0].origin_m[0] is not a finite number");
+    tile_error(|b| put_f32(b, 32 + 28, f32::INFINITY), "batch[0]");
+    tile_error(|b| put_u32(b, 32 + 48, 7), "batch[0].species = 7 is out of range");
+    tile_error(|b| put_f32(b, 32 + 52, 0.0), "xy_step_m");
+    tile_error(|b| put_f32(b, 32 + 52, 0.5), "1 cm position error");
+    tile_error(|b| put_f32(b, 32 + 28, -1.0), "radius_m");
+    tile_error(|b| put_u32(b, 32 + 80 + 12, 4), "instance_offset is 4, expected 3");
+    tile_error(|b| put_u32(b, 32 + 44, 2), "instance_offset");
+}
+
+#[test]
+fn hostile_counts_do_not_allocate() {
+    // A 32-byte header claiming the maximum counts: rejected from the size check
+    // before any allocation sized by the counts.
+    let mut bytes = sample_tile().encode();
+    bytes.truncate(32);
+    put_u32(&mut bytes, 8, 1 << 20);
+    put_u32(&mut bytes, 12, 1 << 26);
+    let e = Tile::decode("t", &bytes, 2).unwrap_err();
+    assert!(matches!(e.problem, Problem::Truncated { .. }), "{e}");
+}
+
+fn pack_error(mutate: impl FnOnce(&mut PackMeta, &mut Vec<Section>), needle: &str) {
+    let (mut meta, mut sections) = sample_pack();
+    mutate(&mut meta, &mut sections);
+    let bytes = encode_pack(&meta, &sections);
+    let msg = decode_pack("species/x.pack", &bytes).expect_err(needle).to_string();
+    assert!(msg.starts_with("species/x.pack: "), "{msg}");
+    assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
+}
+
+fn pack_bytes_error(mutate: impl FnOnce(&mut Vec<u8>), needle: &str) {
+    let (meta, sections) = sample_pack();
+    let mut bytes = encode_pack(&meta, &sections);
+    mutate(&mut bytes);
+    let msg = decode_pack("species/x.pack", &bytes).expect_err(needle).to_string();
+    assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
+}
+
+#[test]
+fn pack_decoder_error_paths() {
+    pack_bytes_error(|b| b[1] = 0, "not a Sylva LoD pack");
+    pack_bytes_error(|b| b[4] = 2, "version 2");
+    pack_bytes_error(|b| b[6] = 0, "header_bytes");
+    pack_bytes_error(|b| put_u32(b, 8, 1_000_000), "section_count");
+    pack_bytes_error(|b| put_u32(b, 12, 16), "section_align");
+    pack_bytes_error(|b| b.truncate(b.len() - 1), "truncated");
+    pack_bytes_error(|b| b.extend_from_slice(&[0; 8]), "file_bytes");
+    // Section 1 (MVTX) offset → misaligned; then overlapping; then beyond the file.
+    let entry = |i: usize| 32 + 32 * i;
+    pack_bytes_error(|b| b[entry(1) + 8] = 1, "not a multiple of 256");
+    pack_bytes_error(|b| b[entry(2) + 8..entry(2) + 16].copy_from_slice(&256u64.to_le_bytes()), "overlaps");
+    pack_bytes_error(
+        |b| {
+            let last = entry(5);
+            let huge = (1u64 << 40).to_le_bytes();
+            b[last + 16..last + 24].copy_from_slice(&huge);
+        },
+        "truncated",
+    );
+    pack_bytes_error(|b| put_u32(b, entry(1) + 24, 4), "declares 4 elements");
+    pack_bytes_error(|b| b[entry(0)..entry(0) + 4].copy_from_slice(b"MVTX"), "first section is not META");
+    // serde_json writes NaN as null, which the schema refuses; overflowing numbers
+    // become infinities, which validation refuses (see pack_meta_json_errors).
+    pack_error(|m, _| m.height_m = f32::NAN, "expected f32");
+    pack_error(|m, _| m.height_m = -1.0, "height_m is -1");
+    pack_error(|m, _| m.materials[1].texture_layer = Some(3), "texture_layer = 3");
+    pack_error(|m, _| m.mesh_levels[0].vertex_count = 4, "declares 4 vertices");
+    pack_error(|m, _| m.mesh_levels[0].draws[1].index_count = 6, "draws[1]");
+    pack_error(|m, _| m.mesh_levels[0].draws[0].material = 9, "draws[0].material = 9");
+    pack_error(|m, _| m.mesh_levels.push(m.mesh_levels[0].clone()), "no MVTX/MIDX section with index 1");
+    pack_error(|_, s| s[1].data[8..12].copy_from_slice(&3u32.to_le_bytes()), "index[2] = 3 is out of range");
+    pack_error(|_, s| s[0].data[6] = 5, "vertex[0].material = 5");
+    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta { size: 8, layers: 1, mips: 3 }), "needs 336 bytes");
+    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta { size: 4, layers: 1, mips: 9 }), "mips = 9");
+    pack_error(
+        |m, _| m.material_texture = Some(TextureArrayMeta { size: 1 << 20, layers: 1, mips: 1 }),
+        "size = 1048576",
+    );
+    pack_error(|_, s| drop(s.remove(2)), "has no texture section");
+    pack_error(|m, _| m.billboards.as_mut().unwrap().angles = 3, "3 angles");
+    // Unknown section kinds are skipped (forward compatibility).
+    let (meta, mut sections) = sample_pack();
+    sections.push(Section { kind: *b"ELPS", index: 0, count: 2, stride: 32, data: vec![0; 64] });
+    assert!(decode_pack("x", &encode_pack(&meta, &sections)).is_ok());
+}
+
+#[test]
+fn pack_meta_json_errors() {
+    let (meta, sections) = sample_pack();
+    let mut bytes = encode_pack(&meta, &sections);
+    // The META section starts at the first 256-byte boundary after the table.
+    let meta_at = u64::from_le_bytes(bytes[40..48].try_into().unwrap()) as usize;
+    let meta_len = u64::from_le_bytes(bytes[48..56].try_into().unwrap()) as usize;
+    let original = bytes.clone();
+    bytes[meta_at] = b'[';
+    let msg = decode_pack("p", &bytes).unwrap_err().to_string();
+    assert!(msg.contains("invalid JSON: META"), "{msg}");
+    // Same-length edits of the JSON text: numbers that overflow f32 become infinite.
+    for (from, to, needle) in [
+        ("\"height_m\":10.0", "\"height_m\":1e39", "META.height_m is not a finite number"),
+        ("\"bounds_max\":[2.0,2.0,10.0", "\"bounds_max\":[2.0,2.0,1e39", "META.bounds_max[2]"),
+        ("\"center\":[0.0,0.0,5.0]", "\"center\":[1e39,0.0,5 ]", "META.billboards.center[0]"),
+        ("\"base_color\":[1.0,1.0", "\"base_color\":[1e50,1 ", "base_color[0]"),
+    ] {
+        let mut b = original.clone();
+        let text = String::from_utf8(b[meta_at..meta_at + meta_len].to_vec()).unwrap();
+        assert!(text.contains(from), "{from} not in {text}");
+        let edited = text.replacen(from, to, 1);
+        assert_eq!(edited.len(), text.len());
+        b[meta_at..meta_at + meta_len].copy_from_slice(edited.as_bytes());
+        let msg = decode_pack("p", &b).unwrap_err().to_string();
+        assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
+    }
+}
+
+fn manifest_error(mutate: impl FnOnce(&mut serde_json::Value), needle: &str) {
+    let mut v: serde_json::Value = serde_json::from_slice(&sample_manifest().encode()).unwrap();
+    mutate(&mut v);
+    let msg = Manifest::decode("https://example.org/scene.json", &serde_json::to_vec(&v).unwrap())
+        .expect_err(needle)
+        .to_string();
+    assert!(msg.starts_with("https://example.org/scene.json: "), "{msg}");
+    assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
+}
+
+#[test]
+fn manifest_decoder_error_paths() {
+    assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
+    assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
+    manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
+    manifest_error(|v| v["version"] = 2.into(), "version 2");
+    manifest_error(|v| v["cell_size_m"] = (-1.0).into(), "must be positive");
+    manifest_error(|v| v["origin_m"][1] = serde_json::Value::Null, "invalid JSON");
+    manifest_error(|v| v["bounds"]["min"][0] = 1000.0.into(), "exceeds max");
+    manifest_error(|v| v["tiles"][0]["url"] = "../../etc/passwd".into(), "relative path inside the scene");
+    manifest_error(|v| v["tiles"][0]["url"] = "https://evil.example/x.tile".into(), "relative path inside the scene");
+    manifest_error(|v| v["species"][0]["pack"] = "/abs.pack".into(), "species[0].pack");
+    manifest_error(|v| v["counts"]["trees"] = 6.into(), "do not match");
+    manifest_error(|v| v["species"][1]["trees"] = 3.into(), "do not match");
+    manifest_error(|v| v["unexpected"] = 1.into(), "unknown field");
+    manifest_error(|v| v["species"][0]["height_m"] = 1e39.into(), "species[0].height_m");
+}

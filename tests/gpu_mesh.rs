@@ -1,0 +1,187 @@
+//! GPU tests of the mesh pass and the billboard capture (any adapter; lavapipe on CI).
+//! They look at pixels: a test that passed on a black image would be no test.
+
+use sylva::format::pack::{
+    kind, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section, TextureArrayMeta,
+};
+use sylva::format::{decode_pack, encode_pack};
+use sylva::render::capture::{capture_billboards, render_pack_preview, BillboardFrame, PackView};
+use sylva::render::mesh::MeshPipelines;
+use sylva::render::GpuContext;
+
+const TEX: u32 = 16;
+
+/// A "tree": a brown trunk quad (0–6 m) and a green leaf card (alpha-tested disc,
+/// 4–10 m), both vertical and facing (1, 1, 0)/√2, so the side views from −y
+/// (preview) and +x (capture azimuth 0) both see them and the top view sees them edge-on.
+fn toy_pack() -> Vec<u8> {
+    let q = |v: f32, lo: f32, hi: f32| (((v - lo) / (hi - lo)).clamp(0.0, 1.0) * 65535.0).round() as u16;
+    let (lo, hi) = ([-3.0f32, -3.0, 0.0], [3.0f32, 3.0, 10.0]);
+    // `t` runs along the card's horizontal direction (1, −1, 0)/√2.
+    let vtx = |t: f32, z: f32, u: f32, v: f32, material: u16| MeshVertex {
+        position: [q(t * 0.7071, lo[0], hi[0]), q(-t * 0.7071, lo[1], hi[1]), q(z, lo[2], hi[2])],
+        material,
+        normal_oct: [64, 64, 0, 0],
+        uv: [q(u, 0.0, 1.0), q(v, 0.0, 1.0)],
+        color: [255; 4],
+    };
+    let vertices = [
+        // Trunk: 0.6 m wide, 6 m tall.
+        vtx(-0.3, 0.0, 0.0, 1.0, 0),
+        vtx(0.3, 0.0, 1.0, 1.0, 0),
+        vtx(0.3, 6.0, 1.0, 0.0, 0),
+        vtx(-0.3, 6.0, 0.0, 0.0, 0),
+        // Leaf card: 6 m square from 4 to 10 m.
+        vtx(-3.0, 4.0, 0.0, 1.0, 1),
+        vtx(3.0, 4.0, 1.0, 1.0, 1),
+        vtx(3.0, 10.0, 1.0, 0.0, 1),
+        vtx(-3.0, 10.0, 0.0, 0.0, 1),
+    ];
+    let indices: [u32; 12] = [0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7];
+    // Leaf texture: green disc, transparent outside; mips by the alpha-aware builder.
+    let disc: Vec<u8> = (0..TEX * TEX)
+        .flat_map(|i| {
+            let (x, y) = ((i % TEX) as f32 + 0.5 - TEX as f32 / 2.0, (i / TEX) as f32 + 0.5 - TEX as f32 / 2.0);
+            if x * x + y * y < (TEX as f32 * 0.45).powi(2) {
+                [40, 160, 40, 255]
+            } else {
+                [0, 0, 0, 0]
+            }
+        })
+        .collect();
+    let chain =
+        sylva::render::mips::alpha_aware_mips(&disc, &disc, TEX, sylva::render::mips::ColorEncoding::Srgb, Some(0.5));
+    let tex = TextureArrayMeta { size: TEX, layers: 1, mips: chain.len() as u32 };
+    let meta = PackMeta {
+        name: "toy".into(),
+        height_m: 10.0,
+        bounds_min: lo,
+        bounds_max: hi,
+        materials: vec![
+            MaterialMeta {
+                name: "bark".into(),
+                kind: MaterialKind::Branch,
+                base_color: [0.25, 0.12, 0.05, 1.0],
+                alpha_cutoff: 0.0,
+                double_sided: true,
+                texture_layer: None,
+            },
+            MaterialMeta {
+                name: "leaves".into(),
+                kind: MaterialKind::Leaf,
+                base_color: [1.0; 4],
+                alpha_cutoff: 0.5,
+                double_sided: true,
+                texture_layer: Some(0),
+            },
+        ],
+        material_texture: Some(tex),
+        mesh_levels: vec![MeshLevelMeta {
+            vertex_count: vertices.len() as u32,
+            index_count: indices.len() as u32,
+            pos_min: lo,
+            pos_max: hi,
+            uv_min: [0.0, 0.0],
+            uv_max: [1.0, 1.0],
+            draws: vec![
+                DrawRange { material: 0, first_index: 0, index_count: 6 },
+                DrawRange { material: 1, first_index: 6, index_count: 6 },
+            ],
+            select_px: 0.0,
+        }],
+        billboards: None,
+    };
+    let sections = vec![
+        Section {
+            kind: kind::MESH_VERTICES,
+            index: 0,
+            count: 8,
+            stride: 20,
+            data: bytemuck::cast_slice(&vertices).to_vec(),
+        },
+        Section {
+            kind: kind::MESH_INDICES,
+            index: 0,
+            count: 12,
+            stride: 4,
+            data: bytemuck::cast_slice(&indices).to_vec(),
+        },
+        Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: chain.concat() },
+    ];
+    encode_pack(&meta, &sections)
+}
+
+fn gpu() -> GpuContext {
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::var("XDG_RUNTIME_DIR").unwrap_or_else(|_| "/tmp".into()));
+    GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)")
+}
+
+fn pixel(img: &[u8], w: u32, x: u32, y: u32) -> [u8; 4] {
+    let i = ((y * w + x) * 4) as usize;
+    [img[i], img[i + 1], img[i + 2], img[i + 3]]
+}
+
+fn write_actual(name: &str, img: &[u8], w: u32, h: u32) -> String {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let path = dir.join(format!("{name}-actual.png"));
+    image::save_buffer(&path, img, w, h, image::ColorType::Rgba8).unwrap();
+    path.display().to_string()
+}
+
+#[test]
+fn preview_draws_trunk_and_alpha_tested_leaves() {
+    let ctx = gpu();
+    let bytes = toy_pack();
+    let pack = decode_pack("toy", &bytes).unwrap();
+    let (w, h) = (128, 128);
+    let bg = [0.0, 0.0, 1.0, 1.0];
+    let img = render_pack_preview(&ctx, &pack, 0, PackView::Side, w, h, bg);
+    let saved = write_actual("preview", &img, w, h);
+    // Classify pixels: background blue, leaf green, trunk brown.
+    let (mut leaf, mut trunk, mut background) = (0, 0, 0);
+    for p in img.chunks_exact(4) {
+        match p {
+            [0, 0, 255, 255] => background += 1,
+            [r, g, b, _] if g > r && g > b => leaf += 1,
+            [r, g, b, _] if r > g && r > b => trunk += 1,
+            _ => {}
+        }
+    }
+    let total = (w * h) as usize;
+    assert!(background > total / 4, "too little background ({background}); see {saved}");
+    assert!(leaf > total / 20, "leaves missing ({leaf} px); see {saved}");
+    assert!(trunk > total / 200, "trunk missing ({trunk} px); see {saved}");
+    // The leaf disc is alpha-tested: its card's corners are background.
+    // The card spans most of the width near the top; a corner of it must be empty.
+    let centre = pixel(&img, w, w / 2, h / 3);
+    assert!(centre[1] > centre[2] && centre[1] > centre[0], "crown centre is not green: {centre:?}; see {saved}");
+}
+
+#[test]
+fn billboard_capture_sees_the_tree_from_every_angle() {
+    let ctx = gpu();
+    let bytes = toy_pack();
+    let pack = decode_pack("toy", &bytes).unwrap();
+    let pipelines = MeshPipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
+    let size = 64;
+    let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size);
+    assert_eq!(cap.color.len(), 4);
+    let coverage: Vec<f64> = cap.color.iter().map(|l| sylva::render::mips::alpha_coverage(l, 0.5)).collect();
+    for (k, c) in coverage.iter().enumerate().take(3) {
+        assert!(
+            *c > 0.02,
+            "angle {k} captured nothing ({c}); see {}",
+            write_actual(&format!("capture{k}"), &cap.color[k], size, size)
+        );
+    }
+    // Seen from the side (angle 0) the card faces the camera; from the top (angle 3) it is
+    // edge-on: (almost) nothing.
+    assert!(coverage[3] < coverage[0] * 0.2, "coverage by angle {coverage:?}");
+    // Normals are stored for covered texels: from the side the card normal (±x) faces the camera.
+    let i = (size / 3 * size + size / 2) as usize * 4;
+    let n = &cap.normal[0][i..i + 4];
+    assert!(cap.color[0][i + 3] > 0, "no texel at the crown centre");
+    assert!((i32::from(n[0]) - 128).abs() > 60, "normal x should be ±0.7, got {n:?}");
+    assert!(n[2].abs_diff(128) < 20, "normal z should be 0, got {n:?}");
+}
