@@ -19,7 +19,11 @@ fn toy_pack() -> Vec<u8> {
     let (lo, hi) = ([-3.0f32, -3.0, 0.0], [3.0f32, 3.0, 10.0]);
     // `t` runs along the card's horizontal direction (1, −1, 0)/√2.
     let vtx = |t: f32, z: f32, u: f32, v: f32, material: u16| MeshVertex {
-        position: [q(t * 0.7071, lo[0], hi[0]), q(-t * 0.7071, lo[1], hi[1]), q(z, lo[2], hi[2])],
+        position: [
+            q(t * std::f32::consts::FRAC_1_SQRT_2, lo[0], hi[0]),
+            q(-t * std::f32::consts::FRAC_1_SQRT_2, lo[1], hi[1]),
+            q(z, lo[2], hi[2]),
+        ],
         material,
         normal_oct: [64, 64, 0, 0],
         uv: [q(u, 0.0, 1.0), q(v, 0.0, 1.0)],
