@@ -396,3 +396,269 @@ fn recenter(model: &mut ImportedModel) {
         }
     }
 }
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use serde_json::json;
+
+    /// A tiny RGBA PNG: opaque green disc on transparent black.
+    pub(crate) fn leaf_png() -> Vec<u8> {
+        let img = image::RgbaImage::from_fn(8, 8, |x, y| {
+            let (dx, dy) = (x as f32 - 3.5, y as f32 - 3.5);
+            if dx * dx + dy * dy < 12.0 {
+                image::Rgba([30, 150, 40, 255])
+            } else {
+                image::Rgba([0, 0, 0, 0])
+            }
+        });
+        let mut out = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+        out.into_inner()
+    }
+
+    /// Packs JSON and a binary chunk into a GLB.
+    pub(crate) fn glb(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+        let mut j = serde_json::to_vec(json).unwrap();
+        while j.len() % 4 != 0 {
+            j.push(b' ');
+        }
+        let mut b = bin.to_vec();
+        while b.len() % 4 != 0 {
+            b.push(0);
+        }
+        let total = 12 + 8 + j.len() + 8 + b.len();
+        let mut out = Vec::new();
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&j);
+        out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&b);
+        out
+    }
+
+    /// Interleaved POSITION/NORMAL/TEXCOORD_0 (stride 32) for two quads (y-up: a
+    /// 1×2 trunk quad and a 2×2 leaf quad above it), u16 indices, u8 vertex colours.
+    fn interleaved_buffers() -> (Vec<u8>, usize, usize, usize) {
+        let mut bin = Vec::new();
+        let quads = [
+            [[-0.5f32, 0.0, 0.0], [0.5, 0.0, 0.0], [0.5, 2.0, 0.0], [-0.5, 2.0, 0.0]],
+            [[-1.0, 2.0, 0.0], [1.0, 2.0, 0.0], [1.0, 4.0, 0.0], [-1.0, 4.0, 0.0]],
+        ];
+        let uvs = [[0.0f32, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+        for q in &quads {
+            for (p, uv) in q.iter().zip(&uvs) {
+                for v in p.iter().chain(&[0.0, 0.0, 1.0]).chain(uv) {
+                    bin.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+        }
+        let vertex_bytes = bin.len();
+        let colors_at = bin.len();
+        for i in 0..8u8 {
+            bin.extend_from_slice(&[255, 128, i * 30, 255]);
+        }
+        let indices_at = bin.len();
+        for i in [0u16, 1, 2, 0, 2, 3] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        (bin, vertex_bytes, colors_at, indices_at)
+    }
+
+    fn accessors(vertex_view: usize, color_view: usize, index_view: usize, first_vertex: usize) -> serde_json::Value {
+        json!([
+            {"bufferView": vertex_view, "byteOffset": first_vertex * 32, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [-1.0, 0.0, 0.0], "max": [1.0, 4.0, 0.0]},
+            {"bufferView": vertex_view, "byteOffset": first_vertex * 32 + 12, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": vertex_view, "byteOffset": first_vertex * 32 + 24, "componentType": 5126, "count": 4, "type": "VEC2"},
+            {"bufferView": color_view, "byteOffset": first_vertex * 4, "componentType": 5121, "normalized": true, "count": 4, "type": "VEC4"},
+            {"bufferView": index_view, "componentType": 5123, "count": 6, "type": "SCALAR"}
+        ])
+    }
+
+    /// GLB: one mesh with two primitives (bark, leaves), node hierarchy with
+    /// transforms, interleaved buffer, u16 indices, vertex colours, embedded PNG.
+    pub(crate) fn multi_primitive_glb() -> Vec<u8> {
+        let (mut bin, vbytes, colors_at, indices_at) = interleaved_buffers();
+        let image_at = bin.len();
+        let png = leaf_png();
+        bin.extend_from_slice(&png);
+        let mut acc = accessors(0, 1, 2, 0).as_array().unwrap().clone();
+        let acc2 = accessors(0, 1, 2, 4);
+        acc.extend(acc2.as_array().unwrap().iter().cloned());
+        let gltf = json!({
+            "asset": {"version": "2.0", "generator": "sylva test"},
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [
+                {"name": "Tree", "children": [1], "translation": [10.0, 0.0, 0.0], "scale": [2.0, 2.0, 2.0]},
+                {"name": "TreeMesh", "mesh": 0, "rotation": [0.0, 0.7071068, 0.0, 0.7071068]}
+            ],
+            "meshes": [{"name": "tree", "primitives": [
+                {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, "COLOR_0": 3}, "indices": 4, "material": 0},
+                {"attributes": {"POSITION": 5, "NORMAL": 6, "TEXCOORD_0": 7, "COLOR_0": 8}, "indices": 9, "material": 1}
+            ]}],
+            "materials": [
+                {"name": "Material.001", "pbrMetallicRoughness": {"baseColorFactor": [0.4, 0.3, 0.2, 1.0]}},
+                {"name": "Material.002", "alphaMode": "MASK", "alphaCutoff": 0.4, "doubleSided": true,
+                 "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
+            ],
+            "textures": [{"source": 0}],
+            "images": [{"bufferView": 3, "mimeType": "image/png"}],
+            "buffers": [{"byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+                {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+                {"buffer": 0, "byteOffset": indices_at, "byteLength": 12},
+                {"buffer": 0, "byteOffset": image_at, "byteLength": png.len()}
+            ],
+            "accessors": acc
+        });
+        glb(&gltf, &bin)
+    }
+
+    #[test]
+    fn imports_interleaved_multi_primitive_glb_with_transforms() {
+        let m = import_slice(&multi_primitive_glb(), None, &Classifier::default()).unwrap();
+        assert_eq!(m.materials.len(), 2);
+        assert_eq!(m.materials[0].kind, MaterialKind::Branch, "OPAQUE → branch");
+        assert_eq!(m.materials[1].kind, MaterialKind::Leaf, "MASK → leaf");
+        assert_eq!(m.materials[1].alpha_cutoff, 0.4);
+        assert!(m.materials[1].double_sided);
+        assert_eq!(m.materials[1].texture.as_ref().map(|t| t.dimensions()), Some((8, 8)));
+        assert_eq!(m.materials[0].base_color, [0.4, 0.3, 0.2, 1.0]);
+        assert_eq!(m.vertices.len(), 8);
+        assert_eq!(m.triangles.len(), 4);
+        // Node scale 2 and Y-up → Z-up: 4 units of glTF height become 8 along z.
+        assert!((m.height() - 8.0).abs() < 1e-4, "height {}", m.height());
+        let (lo, _) = m.bounds();
+        assert!(lo.z.abs() < 1e-6, "trunk base moved to z = 0");
+        // Vertex colours came through (normalised u8).
+        assert!((m.vertices[0].color[1] - 128.0 / 255.0).abs() < 1e-3);
+        // The 90° rotation about y turned the quad's +z normal into +x (glTF) = +x (Sylva).
+        assert!((m.vertices[0].normal - Vec3::X).length() < 1e-4, "{}", m.vertices[0].normal);
+    }
+
+    #[test]
+    fn imports_gltf_with_external_bin_and_image_and_u32_indices() {
+        let dir = std::env::temp_dir().join(format!("sylva-gltf-ext-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (bin16, vbytes, colors_at, _) = interleaved_buffers();
+        let mut bin = bin16[..colors_at + 32].to_vec();
+        let indices_at = bin.len();
+        for i in [0u32, 1, 2, 0, 2, 3] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        std::fs::write(dir.join("tree.bin"), &bin).unwrap();
+        std::fs::write(dir.join("leaf image.png"), leaf_png()).unwrap();
+        let mut acc = accessors(0, 1, 2, 4);
+        acc[4]["componentType"] = json!(5125);
+        let gltf = json!({
+            "asset": {"version": "2.0"},
+            "nodes": [{"name": "leaves", "mesh": 0}],
+            "scenes": [{"nodes": [0]}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 4, "material": 0}]}],
+            "materials": [{"name": "Foliage", "alphaMode": "BLEND", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+            "textures": [{"source": 0}],
+            "images": [{"uri": "leaf%20image.png"}],
+            "buffers": [{"uri": "tree.bin", "byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+                {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+                {"buffer": 0, "byteOffset": indices_at, "byteLength": 24}
+            ],
+            "accessors": acc
+        });
+        let path = dir.join("tree.gltf");
+        std::fs::write(&path, serde_json::to_vec(&gltf).unwrap()).unwrap();
+        let m = import(&path, &Classifier::default()).unwrap();
+        assert_eq!(m.triangles.len(), 2);
+        assert_eq!(m.materials[0].kind, MaterialKind::Leaf);
+        assert_eq!(m.materials[0].alpha_cutoff, 0.5, "BLEND is drawn alpha-tested at 0.5");
+        assert!(m.materials[0].texture.is_some());
+        // No NORMAL attribute: normals are computed (the quad faces +z in glTF = −y in Sylva).
+        assert!((m.vertices[0].normal - Vec3::NEG_Y).length() < 1e-4, "{}", m.vertices[0].normal);
+        // A missing external image is an error naming the file.
+        std::fs::remove_file(dir.join("leaf image.png")).unwrap();
+        let e = format!("{:#}", import(&path, &Classifier::default()).unwrap_err());
+        assert!(e.contains("leaf image.png") && e.contains("tree.gltf"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn data_uri_images_and_name_overrides() {
+        use base64::Engine as _;
+        let (bin, vbytes, colors_at, indices_at) = interleaved_buffers();
+        let b64 = base64::engine::general_purpose::STANDARD.encode(leaf_png());
+        let all_accessors: Vec<serde_json::Value> =
+            [accessors(0, 1, 2, 0).as_array().unwrap().clone(), accessors(0, 1, 2, 4).as_array().unwrap().clone()]
+                .concat();
+        let gltf = json!({
+            "asset": {"version": "2.0"},
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [
+                {"attributes": {"POSITION": 0}, "indices": 4, "material": 0},
+                {"attributes": {"POSITION": 5, "TEXCOORD_0": 7}, "indices": 9, "material": 1}
+            ]}],
+            "materials": [
+                {"name": "trunk_opaque"},
+                {"name": "cards", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
+            ],
+            "textures": [{"source": 0}],
+            "images": [{"uri": format!("data:image/png;base64,{b64}")}],
+            "buffers": [{"byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+                {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+                {"buffer": 0, "byteOffset": indices_at, "byteLength": 12}
+            ],
+            "accessors": all_accessors
+        });
+        let bytes = glb(&gltf, &bin);
+        // Both materials are OPAQUE and "cards" is no leaf word: no leaves → a clear error.
+        let e = import_slice(&bytes, None, &Classifier::default()).unwrap_err().to_string();
+        assert!(e.contains("no leaves") && e.contains("--leaf-material"), "{e}");
+        // With an explicit pattern the cards are leaves and the data-URI image loads.
+        let c = Classifier { leaf_patterns: vec!["CARDS".into()], branch_patterns: vec![] };
+        let m = import_slice(&bytes, None, &c).unwrap();
+        assert_eq!(m.materials[1].kind, MaterialKind::Leaf);
+        assert_eq!(m.materials[0].kind, MaterialKind::Branch);
+        assert_eq!(m.materials[1].texture.as_ref().map(|t| t.dimensions()), Some((8, 8)));
+    }
+
+    #[test]
+    fn broken_inputs_give_errors_not_panics() {
+        let c = Classifier::default();
+        assert!(import_slice(b"definitely not gltf", None, &c).is_err());
+        let mut truncated = multi_primitive_glb();
+        truncated.truncate(truncated.len() / 2);
+        assert!(import_slice(&truncated, None, &c).is_err());
+        let empty = glb(&json!({"asset": {"version": "2.0"}, "nodes": [{"name": "x"}]}), &[]);
+        let e = import_slice(&empty, None, &c).unwrap_err().to_string();
+        assert!(e.contains("no triangle meshes"), "{e}");
+        let e = format!("{:#}", import(Path::new("/nonexistent/tree.glb"), &c).unwrap_err());
+        assert!(e.contains("/nonexistent/tree.glb"), "{e}");
+    }
+
+    #[test]
+    fn imports_the_shared_ez_tree_models() {
+        // Real exporter output (three.js GLTFExporter); skipped where shared/ is absent.
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models");
+        for (file, leaves) in [("eztree_oak_medium.glb", 10_640 / 2), ("eztree_pine_medium.glb", 9_840 / 2)] {
+            let path = dir.join(file);
+            if !path.exists() {
+                eprintln!("skipping {}: not present", path.display());
+                continue;
+            }
+            let m = import(&path, &Classifier::default()).unwrap();
+            let (leaf, wood) = m.triangle_counts();
+            assert_eq!(leaf, leaves * 2, "{file}");
+            assert!(wood > 3000, "{file}");
+            assert!(m.height() > 40.0, "{file}: {}", m.height());
+        }
+    }
+}

@@ -1,0 +1,184 @@
+//! End-to-end tests of the `sylva-bake` binary: demo, bake of real data,
+//! inspect, determinism, and clear failures on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_sylva-bake"));
+    c.env("XDG_RUNTIME_DIR", std::env::var("XDG_RUNTIME_DIR").unwrap_or_else(|_| "/tmp".into()));
+    c
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("run sylva-bake");
+    assert!(
+        out.status.success(),
+        "failed: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    out
+}
+
+fn fails(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("run sylva-bake");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "expected failure, got success: {stderr}");
+    assert!(!stderr.contains("panicked"), "panicked: {stderr}");
+    stderr
+}
+
+fn inspect_json(path: &Path) -> serde_json::Value {
+    let out = run(bin().args(["inspect", "--json"]).arg(path));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Every file under `dir`, relative path → bytes.
+fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((p.strip_prefix(dir).unwrap().display().to_string(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+const SMALL: [&str; 4] = ["--billboard-size", "32", "--texture-size", "64"];
+
+#[test]
+fn demo_scene_is_complete_valid_and_deterministic() {
+    let dir = tmp("demo");
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    for out in [&a, &b] {
+        run(bin().args(["demo", "--trees", "3000", "--seed", "7"]).args(SMALL).arg("--out").arg(out));
+    }
+    assert_eq!(snapshot(&a), snapshot(&b), "same seed must give the same bytes");
+    let v = inspect_json(&a);
+    assert_eq!(v["trees_total"], 3000);
+    assert_eq!(v["species_count"], 3);
+    assert_eq!(v["bytes_per_tree"], 8.0);
+    assert_eq!(v["crs"]["epsg"], 32633);
+    assert!(v["origin_m"][0].as_f64().unwrap() > 500_000.0, "far from the origin on purpose");
+    for s in v["species"].as_array().unwrap() {
+        let kinds: Vec<&str> = s["levels"].as_array().unwrap().iter().map(|l| l["kind"].as_str().unwrap()).collect();
+        assert_eq!(kinds, ["mesh", "mesh", "billboards"], "{}", s["name"]);
+        for l in s["levels"].as_array().unwrap() {
+            assert!(l["count"].as_u64().unwrap() > 0 && l["bytes"].as_u64().unwrap() > 0);
+        }
+    }
+    // The text form names the same things.
+    let text = String::from_utf8(run(bin().arg("inspect").arg(&a)).stdout).unwrap();
+    assert!(text.contains("3000 trees, 3 species") && text.contains("billboards: 8 angles"), "{text}");
+}
+
+#[test]
+fn bakes_the_shared_real_data() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    if !data.exists() {
+        eprintln!("skipping: {} not present", data.display());
+        return;
+    }
+    let dir = tmp("real");
+    let out = dir.join("ams");
+    let o = run(bin()
+        .arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", data.join("models/eztree_oak_medium.glb").display()))
+        .arg("--model")
+        .arg(format!("pine={}", data.join("models/eztree_pine_medium.glb").display()))
+        .arg("--placements")
+        .arg(data.join("placements/amsterdam_trees.csv"))
+        .args(["--map", "pinus*=pine", "--map", "thuja*=pine", "--map", "juniperus*=pine"])
+        .args(SMALL)
+        .arg("--out")
+        .arg(&out));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("scene CRS EPSG:32631"), "{log}");
+    // No --default-model: broadleaf species are reported and skipped, not fatal.
+    assert!(log.contains("skipped") && log.contains("quercus robur"), "{log}");
+    let v = inspect_json(&out);
+    assert_eq!(v["trees_total"], 55 + 38 + 38, "pine-mapped rows only");
+    // Heights 6–24 m on 51-unit models: scales well below 1.
+    assert!(v["species"][1]["height_m"].as_f64().unwrap() > 50.0);
+}
+
+#[test]
+fn bad_inputs_fail_clearly_and_leave_nothing_behind() {
+    let dir = tmp("bad");
+    let csv = dir.join("t.csv");
+    std::fs::write(&csv, "lat,lng,height\n48.4,15.4,20\n").unwrap();
+    let out = dir.join("out");
+    // Missing model file.
+    let e =
+        fails(bin().args(["bake", "--model", "x=/nope/missing.glb", "--placements"]).arg(&csv).arg("--out").arg(&out));
+    assert!(e.contains("/nope/missing.glb"), "{e}");
+    assert!(!out.exists(), "nothing written on failure");
+    // Missing placements file.
+    let glb = dir.join("m.glb");
+    std::fs::write(&glb, b"not a glb").unwrap();
+    let e = fails(
+        bin()
+            .args(["bake", "--model"])
+            .arg(format!("x={}", glb.display()))
+            .args(["--placements", "/nope/p.csv"])
+            .arg("--out")
+            .arg(&out),
+    );
+    assert!(e.contains("m.glb"), "the broken model is named first: {e}");
+    // Demo into an existing non-scene directory is refused.
+    std::fs::create_dir_all(dir.join("precious")).unwrap();
+    std::fs::write(dir.join("precious/thesis.txt"), b"do not delete").unwrap();
+    let e = fails(bin().args(["demo", "--trees", "10"]).args(SMALL).arg("--out").arg(dir.join("precious")));
+    assert!(e.contains("not a Sylva scene"), "{e}");
+    assert!(dir.join("precious/thesis.txt").exists());
+    // Bad flags.
+    let e = fails(bin().args(["demo", "--trees", "10", "--billboard-size", "100"]).arg("--out").arg(&out));
+    assert!(e.contains("power of two"), "{e}");
+    let e = fails(bin().args(["demo", "--trees", "10", "--cell-size", "5000"]).args(SMALL).arg("--out").arg(&out));
+    assert!(e.contains("--cell-size"), "{e}");
+    // No leftover temporary directories.
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn inspect_reports_corrupt_files_without_panicking() {
+    let dir = tmp("corrupt");
+    let scene = dir.join("s");
+    run(bin().args(["demo", "--trees", "200"]).args(SMALL).arg("--out").arg(&scene));
+    let tile = std::fs::read_dir(scene.join("tiles"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().unwrap() == "tile")
+        .unwrap();
+    let mut bytes = std::fs::read(&tile).unwrap();
+    bytes[40..44].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&tile, &bytes).unwrap();
+    let e = fails(bin().arg("inspect").arg(&scene));
+    assert!(
+        e.contains(&tile.file_name().unwrap().to_string_lossy().into_owned()) && e.contains("not a finite number"),
+        "{e}"
+    );
+    let e = fails(bin().arg("inspect").arg(dir.join("missing.pack")));
+    assert!(e.contains("missing.pack"), "{e}");
+}
