@@ -420,11 +420,11 @@ pub(crate) mod tests {
     /// Packs JSON and a binary chunk into a GLB.
     pub(crate) fn glb(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
         let mut j = serde_json::to_vec(json).unwrap();
-        while j.len() % 4 != 0 {
+        while !j.len().is_multiple_of(4) {
             j.push(b' ');
         }
         let mut b = bin.to_vec();
-        while b.len() % 4 != 0 {
+        while !b.len().is_multiple_of(4) {
             b.push(0);
         }
         let total = 12 + 8 + j.len() + 8 + b.len();
@@ -496,7 +496,7 @@ pub(crate) mod tests {
             "scenes": [{"nodes": [0]}],
             "nodes": [
                 {"name": "Tree", "children": [1], "translation": [10.0, 0.0, 0.0], "scale": [2.0, 2.0, 2.0]},
-                {"name": "TreeMesh", "mesh": 0, "rotation": [0.0, 0.7071068, 0.0, 0.7071068]}
+                {"name": "TreeMesh", "mesh": 0, "rotation": [0.0, std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2]}
             ],
             "meshes": [{"name": "tree", "primitives": [
                 {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, "COLOR_0": 3}, "indices": 4, "material": 0},
