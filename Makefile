@@ -1,0 +1,53 @@
+# Sylva — the two commands of the README, and the ones behind them.
+#   make demo   bake the procedural demo forest if missing, build, preview it
+#   make test   install what is missing, then fmt, clippy (native + wasm32), all tests
+SHELL := /bin/bash
+CARGO ?= cargo
+DEMO_DIR ?= demo-scene
+DEMO_TREES ?= 100000
+FUZZ_SECONDS ?= 600
+# wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
+export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
+
+.PHONY: setup test fmt clippy clippy-wasm test-rust demo release bench-bake fuzz
+
+setup:
+	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
+	@.ci/setup
+
+test: setup fmt clippy clippy-wasm test-rust
+
+fmt:
+	$(CARGO) fmt --all -- --check
+
+clippy:
+	$(CARGO) clippy --workspace --all-targets --locked -- -D warnings
+
+# The library is what the browser runs: it must build (and lint clean) for wasm32.
+clippy-wasm:
+	$(CARGO) clippy -p sylva --lib --target wasm32-unknown-unknown --locked -- -D warnings
+
+test-rust:
+	$(CARGO) test --workspace --locked
+
+release:
+	$(CARGO) build --release --locked -p sylva -p sylva-bake
+
+demo: setup release
+	@if [ ! -f $(DEMO_DIR)/scene.json ]; then \
+	  echo "baking the demo forest ($(DEMO_TREES) trees) into $(DEMO_DIR)/"; \
+	  target/release/sylva-bake demo --trees $(DEMO_TREES) --out $(DEMO_DIR); \
+	else echo "$(DEMO_DIR)/ exists: not rebaking (delete it to bake again)"; fi
+	@target/release/sylva-bake inspect $(DEMO_DIR)
+	@for p in $(DEMO_DIR)/species/*.pack; do \
+	  target/release/sylva render --pack $$p --out $(DEMO_DIR)/preview-$$(basename $$p .pack).png --view side; done
+
+# Bake-time benchmark: 1,000,000 placements (docs/BENCHMARKS.md).
+bench-bake: release
+	target/release/sylva-bake demo --trees 1000000 --out target/bench-1m --billboard-size 128
+
+# Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
+fuzz:
+	@command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz
+	cd fuzz && for t in decode_tile decode_pack decode_manifest decode_ids; do \
+	  $(CARGO) +nightly fuzz run $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 || exit 1; done
