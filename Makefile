@@ -42,9 +42,17 @@ demo: setup release
 	@for p in $(DEMO_DIR)/species/*.pack; do \
 	  target/release/sylva render --pack $$p --out $(DEMO_DIR)/preview-$$(basename $$p .pack).png --view side; done
 
-# Bake-time benchmark: 1,000,000 placements (docs/BENCHMARKS.md).
+# Bake benchmark: 1,000,000 lon/lat placements through the whole `bake` path
+# (CSV parse, reprojection, species mapping, glTF import, packs, batching, tiles).
+SHARED ?= ../shared/data
 bench-bake: release
-	target/release/sylva-bake demo --trees 1000000 --out target/bench-1m --billboard-size 128
+	@test -f target/bench/placements-1m.csv || target/release/sylva-bake demo --trees 1000000 \
+	  --out target/bench/demo-1m --write-placements target/bench/placements-1m.csv
+	/usr/bin/time -v target/release/sylva-bake bake \
+	  --model oak=$(SHARED)/models/eztree_oak_medium.glb --model pine=$(SHARED)/models/eztree_pine_medium.glb \
+	  --placements target/bench/placements-1m.csv --map spruce=pine --default-model oak \
+	  --out target/bench/bake-1m 2>&1 | grep -E "wrote|placements|Elapsed|Maximum resident"
+	target/release/sylva-bake inspect target/bench/bake-1m
 
 # Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
 fuzz:

@@ -165,6 +165,9 @@ struct DemoArgs {
     /// Random seed (same seed → same bytes).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Also write the layout as a lon/lat placements CSV (input for `bake` benchmarks).
+    #[arg(long, value_name = "PATH.csv")]
+    write_placements: Option<PathBuf>,
     #[command(flatten)]
     pack: PackArgs,
 }
@@ -216,6 +219,10 @@ fn demo(args: &DemoArgs) -> Result<()> {
     log(&format!("demo: {} trees, seed {}", args.trees, args.seed));
     let species = demo::demo_models(args.seed);
     let trees = demo::demo_layout(args.trees, args.seed);
+    if let Some(path) = &args.write_placements {
+        write_placements_csv(path, &trees, &species, demo::DEMO_ORIGIN, demo::DEMO_EPSG)?;
+        log(&format!("wrote {} placements to {}", trees.len(), path.display()));
+    }
     let input = SceneInput {
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
@@ -228,6 +235,36 @@ fn demo(args: &DemoArgs) -> Result<()> {
     };
     let s = scene_write::write_scene(&input, &args.out, &log)?;
     report_summary(&s, &args.out, started);
+    Ok(())
+}
+
+/// Writes trees as a lon/lat CSV (`id,species,lat,lng,z,height`), reprojected from the scene CRS.
+fn write_placements_csv(
+    path: &std::path::Path,
+    trees: &[SceneTree],
+    species: &[(String, gltf_import::ImportedModel)],
+    origin: DVec3,
+    epsg: u32,
+) -> Result<()> {
+    use std::io::Write as _;
+    let inverse = Reprojector::new(Crs::projected(epsg)?, &Crs::from_epsg(4326)?)?;
+    let heights: Vec<f32> = species.iter().map(|(_, m)| m.height()).collect();
+    let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    writeln!(w, "id,species,lat,lng,z,height")?;
+    for t in trees {
+        let (lon, lat) = inverse.apply(origin.x + t.pos.x, origin.y + t.pos.y)?;
+        let s = t.species as usize;
+        writeln!(
+            w,
+            "{},{},{lat:.8},{lon:.8},{:.2},{:.2}",
+            t.id,
+            species[s].0,
+            t.pos.z + origin.z,
+            t.scale * heights[s]
+        )?;
+    }
+    w.flush()?;
     Ok(())
 }
 
@@ -374,6 +411,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
         None => None,
     };
     let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
+    let model_heights: Vec<f32> = species.iter().map(|(_, m)| m.height().max(1e-3)).collect();
     let mut trees = Vec::with_capacity(projected.len());
     for (x, y, p) in &projected {
         let label = p.species.as_deref().unwrap_or("");
@@ -384,7 +422,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
             *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
             continue;
         };
-        let model_h = species[idx].1.height().max(1e-3);
+        let model_h = model_heights[idx];
         let target = p.height_m.or(default_height).unwrap_or(model_h);
         let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
         trees.push(SceneTree {
