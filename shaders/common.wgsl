@@ -1,21 +1,147 @@
-// Shared helpers for every Sylva pass. Prepended to each pass's WGSL by
-// `src/render/shaders.rs`, so the structs here exist once.
+// Shared structs and helpers of every Sylva pass. Prepended to each pass's WGSL
+// by `src/render/shaders.rs`, so the structs here exist once.
 
 // Must match `ViewUniform` in src/render/gpu_data.rs.
 struct View {
-    // Camera-relative clip transform: world positions are given relative to `eye_m`.
+    // Clip transform of eye-relative positions (rotation + projection only).
     clip_from_eye: mat4x4<f32>,
-    // Camera position, metres relative to the scene origin (for billboards and LoD).
-    eye_m: vec4<f32>,
-    // Unit vector towards the sun (xyz), w unused.
+    // Eye position relative to the scene origin, split into a high and a low f32
+    // part (relative-to-eye rendering: batch origin − eye_hi − eye_lo keeps
+    // centimetres at UTM-sized coordinates).
+    eye_hi: vec4<f32>,
+    eye_lo: vec4<f32>,
+    // Frustum planes in eye-relative space, inside where dot(n, p) + d >= 0.
+    // The far plane of the infinite projection is all zeros (always inside).
+    frustum: array<vec4<f32>, 6>,
+    // Unit vector towards the sun (xyz).
     sun_dir: vec4<f32>,
     // Sun colour (rgb) times intensity.
     sun_color: vec4<f32>,
     // Ambient colour (rgb).
     ambient: vec4<f32>,
-    // x: render mode (0 lit, 1 capture albedo+normal, 2 debug colour), yzw unused.
+    // x: pixels per metre at 1 m distance (viewport height / (2 tan(fov_y / 2)) × quality),
+    // y: draw distance (m), z: transition band (fraction of a threshold), w: unused.
+    lod: vec4<f32>,
+    // x: render mode (0 lit, 1 capture), y: batch slots to test, z: debug view
+    // (0 off, 1 colour by representation), w: species count.
     params: vec4<u32>,
 };
+
+// One batch of the resident pool. Must match `GpuBatch` in src/format/tile.rs
+// (`instance_offset` is rebased to the instance pool on upload).
+struct Batch {
+    origin_m: vec3<f32>,
+    instance_offset: u32,
+    center_m: vec3<f32>,
+    radius_m: f32,
+    half_extent_m: vec3<f32>,
+    instance_count: u32,
+    species: u32,
+    xy_step_m: f32,
+    z_step_m: f32,
+    scale_min: f32,
+    scale_log2_step: f32,
+    max_height_m: f32,
+    reserved0: u32,
+    reserved1: u32,
+};
+
+// Per-species selection data. Must match `GpuSpecies` in src/render/gpu_data.rs.
+struct Species {
+    // Bounding sphere of the model at scale 1 (xyz centre, w radius).
+    sphere: vec4<f32>,
+    // x: model height, y: mesh level 0 threshold (px), z: mesh level 1 threshold (px), w: unused.
+    select: vec4<f32>,
+    // Draw-item segment base per representation (mesh0, mesh1, billboard, unused).
+    slot_base: vec4<u32>,
+    // Segment capacity per representation (0: representation not ready).
+    slot_cap: vec4<u32>,
+    // Indices (meshes) or vertices (billboards) per instance, per representation.
+    index_count: vec4<u32>,
+};
+
+// Representations, in order of detail. A slot is species * REPR_COUNT + repr.
+const REPR_MESH0: u32 = 0u;
+const REPR_MESH1: u32 = 1u;
+const REPR_BILLBOARD: u32 = 2u;
+const REPR_COUNT: u32 = 3u;
+
+// Per-draw constants (dynamic uniform offset). Must match `DrawParams` in src/render/gpu_data.rs.
+struct DrawParams {
+    // x: first draw item of the slot, y: representation, z: species, w: billboard angles.
+    ids: vec4<u32>,
+    // Billboard quad: centre (xyz, model space at scale 1), w: half width.
+    bb_center: vec4<f32>,
+    // x: billboard half height, yzw unused.
+    bb_size: vec4<f32>,
+};
+
+// A decoded tree, eye-relative.
+struct Tree {
+    pos: vec3<f32>,
+    yaw: f32,
+    scale: f32,
+    variation: f32,
+};
+
+// Eye-relative position of a batch-local point: (origin − eye_hi) − eye_lo + offset.
+// Both origin and eye_hi are exact f32s, so the first difference is exact for
+// nearby batches; see docs/ARCHITECTURE.md (precision).
+fn eye_relative(origin_m: vec3<f32>, offset: vec3<f32>, view: View) -> vec3<f32> {
+    return ((origin_m - view.eye_hi.xyz) - view.eye_lo.xyz) + offset;
+}
+
+// Decodes a PackedInstance (src/format/tile.rs) of `batch`.
+fn unpack_instance(packed: vec2<u32>, batch: Batch, view: View) -> Tree {
+    let x = f32(packed.x & 0xffffu);
+    let y = f32(packed.x >> 16u);
+    let z = f32(packed.y & 0x7ffu);
+    let yaw_q = (packed.y >> 11u) & 0xffu;
+    let scale_q = (packed.y >> 19u) & 0xffu;
+    var t: Tree;
+    t.pos = eye_relative(batch.origin_m, vec3<f32>(x * batch.xy_step_m, y * batch.xy_step_m, z * batch.z_step_m), view);
+    t.yaw = f32(yaw_q) * (6.283185307 / 256.0);
+    t.scale = batch.scale_min * exp2(f32(scale_q) * batch.scale_log2_step);
+    t.variation = f32(packed.y >> 27u);
+    return t;
+}
+
+// Sphere against the frustum (eye-relative).
+fn sphere_visible(center: vec3<f32>, radius: f32, view: View) -> bool {
+    for (var i = 0u; i < 6u; i++) {
+        let p = view.frustum[i];
+        if dot(p.xyz, center) + p.w < -radius {
+            return false;
+        }
+    }
+    return true;
+}
+
+// Draw item: x = instance index in the pool, y = batch index (bits 0–22),
+// side (bit 23), fade (bits 24–31). The fade keeps the pixels whose dither is
+// ≥ fade (side 0) or < fade (side 1): the two sides of a transition together
+// cover every pixel exactly once.
+fn pack_item_y(batch: u32, side: u32, fade: f32) -> u32 {
+    let f = u32(clamp(fade, 0.0, 1.0) * 255.0 + 0.5);
+    return (batch & 0x7fffffu) | (side << 23u) | (f << 24u);
+}
+
+// 8×8 ordered dither threshold in (0, 1), stable in screen space.
+fn dither8(p: vec2<f32>) -> f32 {
+    let x = u32(p.x) & 7u;
+    let y = u32(p.y) & 7u;
+    let v = x ^ y;
+    let m = ((v & 1u) << 5u) | ((y & 1u) << 4u) | ((v & 2u) << 2u) | ((y & 2u) << 1u) | ((v & 4u) >> 1u) | ((y & 4u) >> 2u);
+    return (f32(m) + 0.5) / 64.0;
+}
+
+// Whether an item's pixel survives its cross-fade mask.
+fn fade_keeps(item_y: u32, frag: vec2<f32>) -> bool {
+    let fade = f32(item_y >> 24u) / 255.0;
+    let side = (item_y >> 23u) & 1u;
+    let d = dither8(frag);
+    return select(d >= fade, d < fade, side == 1u);
+}
 
 // Decodes an octahedral-encoded unit vector (snorm xy in [-1, 1]).
 fn oct_decode(e: vec2<f32>) -> vec3<f32> {
@@ -48,4 +174,13 @@ fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32
 fn variation_tint(variation: f32) -> vec3<f32> {
     let v = variation / 31.0 - 0.5;
     return vec3<f32>(1.0 + 0.12 * v, 1.0 + 0.08 * v, 1.0 - 0.05 * v);
+}
+
+// Debug colour of a representation (seed 004 Fig. 3.1 style).
+fn repr_color(repr: u32) -> vec3<f32> {
+    switch repr {
+        case 0u: { return vec3<f32>(0.9, 0.2, 0.2); }
+        case 1u: { return vec3<f32>(0.95, 0.8, 0.2); }
+        default: { return vec3<f32>(0.2, 0.5, 0.95); }
+    }
 }

@@ -1,5 +1,6 @@
-// Mesh pass: alpha-tested, quantised tree meshes (LoD pack mesh levels).
-// Also the billboard capture of the bake (mode 1 writes albedo + normal).
+// Mesh pass: alpha-tested, quantised tree meshes (LoD pack mesh levels), one
+// indirect draw per (species × mesh level) over the draw items the cull pass
+// wrote. Mode 1 (capture) writes albedo + normal for the bake's billboards.
 // Rust side: src/render/mesh.rs.
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -28,16 +29,18 @@ struct Material {
 @group(1) @binding(2) var material_tex: texture_2d_array<f32>;
 @group(1) @binding(3) var material_sampler: sampler;
 
+@group(2) @binding(0) var<storage, read> batches: array<Batch>;
+@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
+@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+
+@group(3) @binding(0) var<uniform> draw: DrawParams;
+
 // Must match `MeshVertex` in src/format/pack.rs and the layout in src/render/mesh.rs.
 struct VertexIn {
     @location(0) position_material: vec4<u32>,
     @location(1) normal_oct: vec4<f32>,
     @location(2) uv: vec2<f32>,
     @location(3) color: vec4<f32>,
-    // Per instance: position relative to the eye (xyz) and yaw (w).
-    @location(4) eye_pos_yaw: vec4<f32>,
-    // Per instance: scale, variation, unused, unused.
-    @location(5) scale_variation: vec4<f32>,
 };
 
 struct VertexOut {
@@ -46,20 +49,23 @@ struct VertexOut {
     @location(1) normal: vec3<f32>,
     @location(2) color: vec4<f32>,
     @location(3) @interpolate(flat) material: u32,
+    @location(4) @interpolate(flat) item_y: u32,
 };
 
 @vertex
-fn vs_main(in: VertexIn) -> VertexOut {
+fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
+    let item = items[draw.ids.x + instance];
+    let batch = batches[item.y & 0x7fffffu];
+    let tree = unpack_instance(instances[item.x], batch, view);
     let local = mesh.pos_min.xyz + vec3<f32>(in.position_material.xyz) / 65535.0 * mesh.pos_extent.xyz;
-    let yaw = in.eye_pos_yaw.w;
-    let scale = in.scale_variation.x;
-    let eye_rel = rotate_z(local * scale, yaw) + in.eye_pos_yaw.xyz;
+    let eye_rel = rotate_z(local * tree.scale, tree.yaw) + tree.pos;
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(eye_rel, 1.0);
     out.uv = mesh.uv_min + in.uv * mesh.uv_extent;
-    out.normal = rotate_z(oct_decode(in.normal_oct.xy), yaw);
-    out.color = vec4<f32>(in.color.rgb * variation_tint(in.scale_variation.y), in.color.a);
+    out.normal = rotate_z(oct_decode(in.normal_oct.xy), tree.yaw);
+    out.color = vec4<f32>(in.color.rgb * variation_tint(tree.variation), in.color.a);
     out.material = in.position_material.w;
+    out.item_y = item.y;
     return out;
 }
 
@@ -77,7 +83,7 @@ fn surface(in: VertexOut, front: bool) -> Surface {
     if mat.layer >= 0 {
         albedo *= texel;
     }
-    if albedo.a < mat.alpha_cutoff {
+    if albedo.a < mat.alpha_cutoff || !fade_keeps(in.item_y, in.clip.xy) {
         discard;
     }
     var s: Surface;
@@ -90,7 +96,11 @@ fn surface(in: VertexOut, front: bool) -> Surface {
 @fragment
 fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     let s = surface(in, front);
-    return vec4<f32>(shade(s.albedo.rgb, s.normal, s.is_leaf, view), 1.0);
+    var albedo = s.albedo.rgb;
+    if view.params.z == 1u {
+        albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
+    }
+    return vec4<f32>(shade(albedo, s.normal, s.is_leaf, view), 1.0);
 }
 
 struct CaptureOut {

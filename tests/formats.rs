@@ -279,6 +279,8 @@ fn tile_decoder_error_paths() {
     tile_error(|b| put_u32(b, 8, u32::MAX), "batch_count");
     tile_error(|b| put_u32(b, 12, u32::MAX), "instance_count");
     tile_error(|b| b[24] = 81, "record sizes");
+    // Found by the fuzzer: reserved flags must be zero, or the tile would not round-trip.
+    tile_error(|b| b[28] = 32, "header.flags");
     // Batch 0 starts at byte 32.
     tile_error(|b| put_f32(b, 32, f32::NAN), "batch[0].origin_m[0] is not a finite number");
     tile_error(|b| put_f32(b, 32 + 28, f32::INFINITY), "batch[0]");

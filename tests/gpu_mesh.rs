@@ -5,8 +5,7 @@ use sylva::format::pack::{
     kind, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section, TextureArrayMeta,
 };
 use sylva::format::{decode_pack, encode_pack};
-use sylva::render::capture::{capture_billboards, render_pack_preview, BillboardFrame, PackView};
-use sylva::render::mesh::MeshPipelines;
+use sylva::render::capture::{capture_billboards, render_pack_preview, BillboardFrame, CapturePipelines, PackView};
 use sylva::render::GpuContext;
 
 const TEX: u32 = 16;
@@ -166,7 +165,7 @@ fn billboard_capture_sees_the_tree_from_every_angle() {
     let ctx = gpu();
     let bytes = toy_pack();
     let pack = decode_pack("toy", &bytes).unwrap();
-    let pipelines = MeshPipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
     let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
     let size = 64;
     let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size);

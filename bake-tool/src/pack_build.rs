@@ -8,8 +8,8 @@ use sylva::format::pack::{
     encode_pack, kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta,
     Section, TextureArrayMeta,
 };
+use sylva::render::capture::CapturePipelines;
 use sylva::render::capture::{capture_billboards, BillboardFrame};
-use sylva::render::mesh::MeshPipelines;
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 use sylva::render::GpuContext;
 
@@ -69,7 +69,7 @@ pub fn build_pack(
     model: &ImportedModel,
     opts: &PackOptions,
     gpu: &GpuContext,
-    pipelines: &MeshPipelines,
+    pipelines: &CapturePipelines,
 ) -> Result<BuiltPack> {
     let (lo, hi) = model.bounds();
     let height = (hi.z - lo.z).max(1e-3);

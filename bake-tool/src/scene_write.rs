@@ -14,7 +14,7 @@ use sylva::format::manifest::{
     Bounds, Counts, Crs as CrsEntry, Manifest, SpeciesEntry, TileEntry, SCENE_FORMAT, SCENE_VERSION,
 };
 use sylva::format::tile::encode_ids;
-use sylva::render::mesh::MeshPipelines;
+use sylva::render::capture::CapturePipelines;
 use sylva::render::GpuContext;
 
 use crate::batching::{build_tiles, SceneTree, SpeciesShape};
@@ -117,7 +117,7 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
     let t0 = Instant::now();
     let gpu = GpuContext::new_headless_blocking().context("the billboard bake renders with the GPU (or lavapipe)")?;
     log(&format!("rendering billboards on {}", gpu.adapter_summary()));
-    let pipelines = MeshPipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
     let mut tree_counts = vec![0u64; input.species.len()];
     for t in &input.trees {
         tree_counts[t.species as usize] += 1;

@@ -212,6 +212,10 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
             "record sizes batch={batch_stride} instance={instance_stride}, expected 80 and 8"
         )));
     }
+    let flags = r.u32("header.flags", 28)?;
+    if flags != 0 {
+        return Err(Problem::Invalid(format!("header.flags is {flags:#x}; version 1 defines no flags (must be 0)")));
+    }
     let batch_start = TILE_HEADER_BYTES as u64;
     let batch_len = batch_count * 80;
     let instance_start = batch_start + batch_len;

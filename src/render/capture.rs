@@ -6,9 +6,11 @@ use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use super::context::{read_texture_rgba8, GpuContext};
-use super::gpu_data::{MeshInstance, RenderMode, ViewUniform};
+use super::gpu_data::{DrawParams, RenderMode, ViewUniform};
+use super::layouts::SharedLayouts;
 use super::mesh::{MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_NORMAL_FORMAT, DEPTH_FORMAT};
 use super::Lighting;
+use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Pack;
 
 /// The box a billboard covers: a vertical cylinder around the tree (model space,
@@ -102,14 +104,68 @@ fn target_wh(ctx: &GpuContext, width: u32, height: u32, format: wgpu::TextureFor
     })
 }
 
-fn single_instance(ctx: &GpuContext, eye_pos: Vec3) -> wgpu::Buffer {
-    let instance =
-        MeshInstance { eye_pos_yaw: [eye_pos.x, eye_pos.y, eye_pos.z, 0.0], scale_variation: [1.0, 15.5, 0.0, 0.0] };
-    ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("instance"),
-        contents: bytemuck::bytes_of(&instance),
-        usage: wgpu::BufferUsages::VERTEX,
-    })
+/// Groups 2 and 3 for drawing one tree: a batch at the scene origin, one
+/// instance at its origin with yaw 0 and scale 1, one draw item. The view
+/// uniform's eye places the camera.
+struct SingleTree {
+    instances: wgpu::BindGroup,
+    draw: wgpu::BindGroup,
+}
+
+impl SingleTree {
+    fn new(ctx: &GpuContext, shared: &SharedLayouts) -> Self {
+        let origin = Vec3::ZERO;
+        let batch = GpuBatch {
+            origin_m: origin.to_array(),
+            instance_offset: 0,
+            center_m: origin.to_array(),
+            radius_m: 1.0,
+            half_extent_m: [1.0; 3],
+            instance_count: 1,
+            species: 0,
+            xy_step_m: 0.01,
+            z_step_m: 0.01,
+            scale_min: 1.0,
+            scale_log2_step: 0.0,
+            max_height_m: 1.0,
+            reserved: [0; 2],
+        };
+        // Variation 15 of 0–31 is the neutral tint.
+        let instance = PackedInstance::new(0, 0, 0, 0, 0, 15);
+        let init = |label, contents: &[u8], usage| {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+        };
+        let s = wgpu::BufferUsages::STORAGE;
+        let batches = init("batch", bytemuck::bytes_of(&batch), s);
+        let instances = init("instance", bytemuck::bytes_of(&instance), s);
+        let items = init("item", bytemuck::cast_slice(&[0u32, 0u32]), s);
+        let params = init("draw params", bytemuck::bytes_of(&DrawParams::default()), wgpu::BufferUsages::UNIFORM);
+        Self {
+            instances: shared.instance_group(&ctx.device, &batches, &instances, &items),
+            draw: shared.draw_group(&ctx.device, &params),
+        }
+    }
+
+    fn bind(&self, pass: &mut wgpu::RenderPass<'_>) {
+        pass.set_bind_group(2, &self.instances, &[]);
+        pass.set_bind_group(3, &self.draw, &[0]);
+    }
+}
+
+/// The mesh pipelines with their shared layouts, for captures and previews.
+pub struct CapturePipelines {
+    shared: SharedLayouts,
+    mesh: MeshPipelines,
+}
+
+impl CapturePipelines {
+    /// Creates them; `color_format` is the lit preview's target format.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Self {
+        let shared = SharedLayouts::new(device);
+        let mesh = MeshPipelines::new(device, &shared, color_format);
+        Self { shared, mesh }
+    }
 }
 
 /// Renders mesh level 0 of `pack` orthographically from `angles` elevations evenly
@@ -118,14 +174,14 @@ fn single_instance(ctx: &GpuContext, eye_pos: Vec3) -> wgpu::Buffer {
 #[must_use]
 pub fn capture_billboards(
     ctx: &GpuContext,
-    pipelines: &MeshPipelines,
+    pipelines: &CapturePipelines,
     pack: &Pack<'_>,
     frame: &BillboardFrame,
     angles: u32,
     azimuths: u32,
     size: u32,
 ) -> CapturedBillboards {
-    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, pipelines, pack);
+    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
     let albedo = target(ctx, size, CAPTURE_ALBEDO_FORMAT, "capture albedo");
     let normal = target(ctx, size, CAPTURE_NORMAL_FORMAT, "capture normal");
     let depth = target(ctx, size, DEPTH_FORMAT, "capture depth");
@@ -140,9 +196,9 @@ pub fn capture_billboards(
         usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let view_group = pipelines.view_bind_group(&ctx.device, &view_buffer);
-    // The capture works in model space: the "eye" of the instance transform is the model origin.
-    let instances = single_instance(ctx, Vec3::ZERO);
+    let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
+    // The capture works in model space: the eye is the model origin.
+    let tree = SingleTree::new(ctx, &pipelines.shared);
     let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new() };
     for a in 0..azimuths {
         let azimuth = std::f32::consts::TAU * a as f32 / azimuths as f32;
@@ -189,7 +245,9 @@ pub fn capture_billboards(
                     multiview_mask: None,
                 });
                 pass.set_bind_group(0, &view_group, &[]);
-                mesh.draw(&mut pass, pipelines, RenderMode::Capture, 0, &instances, 1);
+                tree.bind(&mut pass);
+                let indices = mesh.bind_level(&mut pass, &pipelines.mesh, RenderMode::Capture, 0);
+                pass.draw_indexed(0..indices, 0, 0..1);
             }
             ctx.queue.submit([encoder.finish()]);
             out.color.push(read_texture_rgba8(ctx, &albedo, 0, 0));
@@ -223,8 +281,8 @@ pub fn render_pack_preview(
     background: [f64; 4],
 ) -> Vec<u8> {
     let format = wgpu::TextureFormat::Rgba8UnormSrgb;
-    let pipelines = MeshPipelines::new(&ctx.device, format);
-    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines, pack);
+    let pipelines = CapturePipelines::new(&ctx.device, format);
+    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
     let color = target_wh(ctx, width, height, format);
     let depth = target_wh(ctx, width, height, DEPTH_FORMAT);
     let min = Vec3::from(pack.meta.bounds_min);
@@ -251,8 +309,8 @@ pub fn render_pack_preview(
         contents: bytemuck::bytes_of(&uniform),
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let view_group = pipelines.view_bind_group(&ctx.device, &view_buffer);
-    let instances = single_instance(ctx, -eye);
+    let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
+    let tree = SingleTree::new(ctx, &pipelines.shared);
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -281,7 +339,9 @@ pub fn render_pack_preview(
             multiview_mask: None,
         });
         pass.set_bind_group(0, &view_group, &[]);
-        mesh.draw(&mut pass, &pipelines, RenderMode::Lit, level, &instances, 1);
+        tree.bind(&mut pass);
+        let indices = mesh.bind_level(&mut pass, &pipelines.mesh, RenderMode::Lit, level);
+        pass.draw_indexed(0..indices, 0, 0..1);
     }
     ctx.queue.submit([encoder.finish()]);
     read_texture_rgba8(ctx, &color, 0, 0)

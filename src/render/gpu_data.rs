@@ -8,18 +8,94 @@ use bytemuck::{Pod, Zeroable};
 pub struct ViewUniform {
     /// Clip transform of eye-relative positions (rotation + projection only).
     pub clip_from_eye: [[f32; 4]; 4],
-    /// Eye position relative to the scene origin (xyz), w unused.
-    pub eye_m: [f32; 4],
+    /// Eye position relative to the scene origin, high f32 part (xyz).
+    pub eye_hi: [f32; 4],
+    /// Low f32 part: `eye_hi + eye_lo` is the f64 eye to ~1e-7 relative.
+    pub eye_lo: [f32; 4],
+    /// Frustum planes in eye-relative space (inside: `n·p + d ≥ 0`); unused planes are zero.
+    pub frustum: [[f32; 4]; 6],
     /// Unit vector towards the sun.
     pub sun_dir: [f32; 4],
     /// Sun colour × intensity.
     pub sun_color: [f32; 4],
     /// Ambient colour.
     pub ambient: [f32; 4],
-    /// x: [`RenderMode`] as u32.
+    /// x: pixels per metre at 1 m (× quality), y: draw distance (m), z: transition band, w: unused.
+    pub lod: [f32; 4],
+    /// x: [`RenderMode`], y: batch slots to test, z: debug view, w: species count.
     pub params: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<ViewUniform>() == 144);
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 272);
+
+/// Per-species selection data. Must match `Species` in `shaders/common.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable)]
+pub struct GpuSpecies {
+    /// Bounding sphere of the model at scale 1: centre xyz, radius w.
+    pub sphere: [f32; 4],
+    /// x: model height (m at scale 1), y: mesh level 0 threshold (px), z: mesh level 1 threshold (px).
+    pub select: [f32; 4],
+    /// First draw item of each representation's segment.
+    pub slot_base: [u32; 4],
+    /// Capacity of each segment (0: representation not ready, never selected).
+    pub slot_cap: [u32; 4],
+    /// Indices (meshes) or vertices (billboards) per instance.
+    pub index_count: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuSpecies>() == 80);
+
+/// Per-draw constants, bound with a dynamic offset. Must match `DrawParams` in
+/// `shaders/common.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct DrawParams {
+    /// x: first draw item, y: representation, z: species, w: billboard angles | azimuths << 16.
+    pub ids: [u32; 4],
+    /// Billboard centre (model space, scale 1) and half width.
+    pub bb_center: [f32; 4],
+    /// x: billboard half height.
+    pub bb_size: [f32; 4],
+    /// Padding to the 256-byte dynamic-offset alignment.
+    pub pad: [u32; 52],
+}
+const _: () = assert!(std::mem::size_of::<DrawParams>() == 256);
+
+impl Default for DrawParams {
+    fn default() -> Self {
+        Zeroable::zeroed()
+    }
+}
+
+/// Representations a tree can be drawn with, finest first. A draw slot is
+/// `species * REPR_COUNT + repr`. Must match `REPR_*` in `shaders/common.wgsl`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[repr(u32)]
+pub enum Repr {
+    /// Mesh level 0 (full detail).
+    Mesh0 = 0,
+    /// Mesh level 1 (simplified).
+    Mesh1 = 1,
+    /// View-angle billboards.
+    Billboard = 2,
+}
+
+/// Number of representations (draw slots per species).
+pub const REPR_COUNT: u32 = 3;
+
+impl Repr {
+    /// All, finest first.
+    pub const ALL: [Repr; 3] = [Repr::Mesh0, Repr::Mesh1, Repr::Billboard];
+
+    /// Name used in stats (`instances` keys).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Repr::Mesh0 => "mesh0",
+            Repr::Mesh1 => "mesh1",
+            Repr::Billboard => "billboard",
+        }
+    }
+}
 
 /// Dequantisation of one mesh level. Must match `MeshParams` in `shaders/mesh.wgsl`.
 #[repr(C)]
@@ -52,18 +128,6 @@ pub struct GpuMaterial {
     pub pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 32);
-
-/// One instance of the simple (non-GPU-driven) mesh draw. Vertex attributes 4 and 5
-/// of `shaders/mesh.wgsl`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
-pub struct MeshInstance {
-    /// Trunk base relative to the eye (xyz) and yaw in radians (w).
-    pub eye_pos_yaw: [f32; 4],
-    /// Scale, variation (0–31), unused, unused.
-    pub scale_variation: [f32; 4],
-}
-const _: () = assert!(std::mem::size_of::<MeshInstance>() == 32);
 
 /// What the fragment stage writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -6,7 +6,8 @@
 
 use wgpu::util::DeviceExt;
 
-use super::gpu_data::{GpuMaterial, MeshInstance, MeshUniform, RenderMode, ViewUniform};
+use super::gpu_data::{GpuMaterial, MeshUniform, RenderMode};
+use super::layouts::SharedLayouts;
 use super::shaders;
 use crate::format::pack::{kind, MaterialKind, TextureArrayMeta};
 use crate::format::Pack;
@@ -20,8 +21,6 @@ pub const CAPTURE_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba
 
 /// Layouts, pipelines and the sampler of the mesh pass.
 pub struct MeshPipelines {
-    /// Group 0: the view uniform.
-    pub view_layout: wgpu::BindGroupLayout,
     /// Group 1: mesh level constants, materials, material textures.
     pub mesh_layout: wgpu::BindGroupLayout,
     lit: wgpu::RenderPipeline,
@@ -32,30 +31,14 @@ pub struct MeshPipelines {
 const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
     0 => Uint16x4, 1 => Snorm8x4, 2 => Unorm16x2, 3 => Unorm8x4
 ];
-const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![
-    4 => Float32x4, 5 => Float32x4
-];
 
 impl MeshPipelines {
     /// Creates the pipelines; `color_format` is the lit pass's target.
     #[must_use]
-    pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat) -> Self {
+    pub fn new(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("mesh.wgsl"),
             source: wgpu::ShaderSource::Wgsl(shaders::MESH.into()),
-        });
-        let view_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("view"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
-                },
-                count: None,
-            }],
         });
         let mesh_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("mesh level"),
@@ -100,21 +83,14 @@ impl MeshPipelines {
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("mesh"),
-            bind_group_layouts: &[Some(&view_layout), Some(&mesh_layout)],
+            bind_group_layouts: &[Some(&shared.view), Some(&mesh_layout), Some(&shared.instances), Some(&shared.draw)],
             immediate_size: 0,
         });
-        let buffers = [
-            Some(wgpu::VertexBufferLayout {
-                array_stride: 20,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &VERTEX_ATTRIBUTES,
-            }),
-            Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<MeshInstance>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &INSTANCE_ATTRIBUTES,
-            }),
-        ];
+        let buffers = [Some(wgpu::VertexBufferLayout {
+            array_stride: 20,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &VERTEX_ATTRIBUTES,
+        })];
         let make = |label: &str, entry: &str, targets: &[Option<wgpu::ColorTargetState>]| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
@@ -164,7 +140,7 @@ impl MeshPipelines {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { view_layout, mesh_layout, lit, capture, sampler }
+        Self { mesh_layout, lit, capture, sampler }
     }
 
     /// The pipeline for `mode`.
@@ -174,16 +150,6 @@ impl MeshPipelines {
             RenderMode::Lit => &self.lit,
             RenderMode::Capture => &self.capture,
         }
-    }
-
-    /// A bind group for a view uniform buffer.
-    #[must_use]
-    pub fn view_bind_group(&self, device: &wgpu::Device, view_buffer: &wgpu::Buffer) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("view"),
-            layout: &self.view_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: view_buffer.as_entire_binding() }],
-        })
     }
 }
 
@@ -302,27 +268,24 @@ impl MeshGpu {
         Self { levels }
     }
 
-    /// Records the draw of `level` for `instance_count` instances from `instances`
-    /// (a vertex buffer of [`MeshInstance`]). The caller has set the view bind group.
-    pub fn draw(
+    /// Binds `level` (pipeline, group 1, buffers) for drawing; the caller has set
+    /// groups 0, 2 and 3. Returns the level's index count, 0 when there is none.
+    pub fn bind_level(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         pipelines: &MeshPipelines,
         mode: RenderMode,
         level: usize,
-        instances: &wgpu::Buffer,
-        instance_count: u32,
-    ) {
-        let Some(level) = self.levels.get(level) else { return };
-        if level.index_count == 0 || instance_count == 0 {
-            return;
+    ) -> u32 {
+        let Some(level) = self.levels.get(level) else { return 0 };
+        if level.index_count == 0 {
+            return 0;
         }
         pass.set_pipeline(pipelines.pipeline(mode));
         pass.set_bind_group(1, &level.bind_group, &[]);
         pass.set_vertex_buffer(0, level.vertices.slice(..));
-        pass.set_vertex_buffer(1, instances.slice(..));
         pass.set_index_buffer(level.indices.slice(..), wgpu::IndexFormat::Uint32);
-        pass.draw_indexed(0..level.index_count, 0, 0..instance_count);
+        level.index_count
     }
 }
 

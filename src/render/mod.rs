@@ -1,10 +1,15 @@
 //! Rendering with wgpu: one module per pass, the long-lived pipelines apart
 //! from per-frame data, CPU twins of GPU structs in [`gpu_data`].
 
+pub mod billboard;
+pub mod camera;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod capture;
 pub mod context;
+pub mod cull;
+pub mod forest;
 pub mod gpu_data;
+pub mod layouts;
 pub mod mesh;
 pub mod mips;
 pub mod shaders;
@@ -37,15 +42,19 @@ impl Default for Lighting {
 }
 
 impl Lighting {
-    /// The view uniform for a lit render with this lighting.
+    /// The view uniform for a lit render of a single tree (previews and captures:
+    /// no culling, so no frustum or LoD data).
     #[must_use]
     pub fn view_uniform(&self, clip_from_eye: Mat4, eye_m: Vec3) -> ViewUniform {
         ViewUniform {
             clip_from_eye: clip_from_eye.to_cols_array_2d(),
-            eye_m: eye_m.extend(0.0).to_array(),
+            eye_hi: eye_m.extend(0.0).to_array(),
+            eye_lo: [0.0; 4],
+            frustum: [[0.0, 0.0, 0.0, 1.0]; 6],
             sun_dir: self.sun_dir.extend(0.0).to_array(),
             sun_color: self.sun_color.extend(0.0).to_array(),
             ambient: self.ambient.extend(0.0).to_array(),
+            lod: [0.0; 4],
             params: [RenderMode::Lit as u32, 0, 0, 0],
         }
     }

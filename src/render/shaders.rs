@@ -7,5 +7,12 @@ pub const COMMON: &str = include_str!("../../shaders/common.wgsl");
 /// The mesh pass (and the bake's billboard capture).
 pub const MESH: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/mesh.wgsl"));
 
+/// The billboard pass.
+pub const BILLBOARD: &str =
+    concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/billboard.wgsl"));
+
+/// The cull and LoD-selection compute passes.
+pub const CULL: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cull.wgsl"));
+
 /// Every composed shader with its name, for validation tests.
-pub const ALL: &[(&str, &str)] = &[("mesh", MESH)];
+pub const ALL: &[(&str, &str)] = &[("mesh", MESH), ("billboard", BILLBOARD), ("cull", CULL)];

@@ -1,0 +1,94 @@
+// View-angle billboards (seed 004 §3.3): one quad per tree, facing the eye
+// horizontally and snapped to the baked elevation of the array layer chosen by
+// eq. 3.1; alpha-tested colour, relit with the baked normals under the same sun
+// and ambient as the meshes. Rust side: src/render/billboard.rs.
+
+@group(0) @binding(0) var<uniform> view: View;
+
+@group(1) @binding(0) var bb_color: texture_2d_array<f32>;
+@group(1) @binding(1) var bb_normal: texture_2d_array<f32>;
+@group(1) @binding(2) var bb_sampler: sampler;
+
+@group(2) @binding(0) var<storage, read> batches: array<Batch>;
+@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
+@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+
+@group(3) @binding(0) var<uniform> draw: DrawParams;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) @interpolate(flat) layer: u32,
+    // Rotation (radians) from the captured model frame to the world, for normals.
+    @location(2) @interpolate(flat) normal_yaw: f32,
+    @location(3) @interpolate(flat) item_y: u32,
+    @location(4) @interpolate(flat) tint: vec3<f32>,
+};
+
+const PI: f32 = 3.14159265;
+
+// Array layer by eq. 3.1: i = a − ⌊(2a/π)·acos(V·U)⌋, V the unit vector from the
+// tree to the eye, U up; clamped to the a baked angles.
+fn billboard_layer(to_eye: vec3<f32>, angles: u32) -> u32 {
+    let a = f32(angles);
+    let cos_zenith = clamp(normalize(to_eye).z, -1.0, 1.0);
+    let i = a - floor(2.0 * a / PI * acos(cos_zenith));
+    return u32(clamp(i, 0.0, a - 1.0));
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
+    let item = items[draw.ids.x + instance];
+    let batch = batches[item.y & 0x7fffffu];
+    let tree = unpack_instance(instances[item.x], batch, view);
+    let angles = max(draw.ids.w & 0xffffu, 2u);
+    let azimuths = max(draw.ids.w >> 16u, 1u);
+    let base = tree.pos + vec3<f32>(0.0, 0.0, draw.bb_center.z * tree.scale);
+    let to_eye = -base;
+    let phi = atan2(to_eye.y, to_eye.x);
+    let k = billboard_layer(to_eye, angles);
+    // Azimuth layer: the captured direction closest to the eye, in the tree's frame.
+    let az_step = 2.0 * PI / f32(azimuths);
+    let rel = phi - tree.yaw;
+    let az = u32(round(rel / az_step + f32(azimuths) * 4.0)) % azimuths;
+    // The quad is snapped to the baked elevation (seed 004 §3.3), so a layer switch
+    // is masked by the matching perspective.
+    let elevation = f32(k) * (PI * 0.5) / f32(angles - 1u);
+    let dir = vec3<f32>(cos(elevation) * cos(phi), cos(elevation) * sin(phi), sin(elevation));
+    let up = vec3<f32>(-sin(elevation) * cos(phi), -sin(elevation) * sin(phi), cos(elevation));
+    let right = cross(-dir, up);
+    // Two triangles: corners (-1,-1) (1,-1) (1,1) / (-1,-1) (1,1) (-1,1).
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    );
+    let c = corners[vertex % 6u];
+    let half_w = draw.bb_center.w * tree.scale;
+    let half_h = draw.bb_size.x * tree.scale;
+    let pos = base + right * (c.x * half_w) + up * (c.y * half_h);
+    var out: VertexOut;
+    out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
+    out.uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
+    out.layer = az * angles + k;
+    out.normal_yaw = phi - f32(az) * az_step;
+    out.item_y = item.y;
+    out.tint = variation_tint(tree.variation);
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
+    let packed_normal = textureSample(bb_normal, bb_sampler, in.uv, in.layer);
+    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+        discard;
+    }
+    let n_model = normalize(packed_normal.xyz * 2.0 - 1.0);
+    let n = rotate_z(n_model, in.normal_yaw);
+    let is_leaf = packed_normal.a > 0.75;
+    var albedo = color.rgb * in.tint;
+    if view.params.z == 1u {
+        albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
+    }
+    return vec4<f32>(shade(albedo, n, is_leaf, view), 1.0);
+}

@@ -1,0 +1,177 @@
+// GPU culling and LoD selection over grouped batches (seed 004 §3.5, ch. 4).
+// Per frame: reset → cull_batches → prepare_dispatch → cull_instances → finalize.
+// The CPU oracle of the same logic is `cpu_select` in src/render/cull.rs.
+// Rust side: src/render/cull.rs.
+
+@group(0) @binding(0) var<uniform> view: View;
+
+@group(1) @binding(0) var<storage, read> batches: array<Batch>;
+@group(1) @binding(1) var<storage, read> instances: array<vec2<u32>>;
+@group(1) @binding(2) var<storage, read> species: array<Species>;
+@group(1) @binding(3) var<storage, read_write> visible: array<u32>;
+// [0] visible batches, [1..4] dispatch args (x, y, z), [4] instances tested,
+// [5] items dropped because a segment was full.
+@group(1) @binding(4) var<storage, read_write> control: array<atomic<u32>>;
+@group(1) @binding(5) var<storage, read_write> items: array<vec2<u32>>;
+// Indirect draw args, 5 words per slot: count, instances, first, base/first, first.
+@group(1) @binding(6) var<storage, read_write> args: array<atomic<u32>>;
+
+const WORKGROUP: u32 = 64u;
+// WebGPU's limit on workgroups per dimension.
+const MAX_GROUPS_X: u32 = 65535u;
+
+@compute @workgroup_size(64)
+fn reset(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let slot = gid.x;
+    if slot == 0u {
+        for (var i = 0u; i < 6u; i++) {
+            atomicStore(&control[i], 0u);
+        }
+    }
+    let species_count = view.params.w;
+    if slot >= species_count * REPR_COUNT {
+        return;
+    }
+    let s = species[slot / REPR_COUNT];
+    let repr = slot % REPR_COUNT;
+    atomicStore(&args[slot * 5u + 0u], s.index_count[repr]);
+    for (var i = 1u; i < 5u; i++) {
+        atomicStore(&args[slot * 5u + i], 0u);
+    }
+}
+
+// Box against the frustum: the box's most positive vertex per plane.
+fn box_visible(center: vec3<f32>, half: vec3<f32>) -> bool {
+    for (var i = 0u; i < 6u; i++) {
+        let p = view.frustum[i];
+        if dot(p.xyz, center) + p.w + dot(abs(p.xyz), half) < 0.0 {
+            return false;
+        }
+    }
+    return true;
+}
+
+// Distance from the eye (the origin) to an axis-aligned box.
+fn box_distance(center: vec3<f32>, half: vec3<f32>) -> f32 {
+    return length(max(abs(center) - half, vec3<f32>(0.0)));
+}
+
+@compute @workgroup_size(64)
+fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= view.params.y {
+        return;
+    }
+    let b = batches[i];
+    if b.instance_count == 0u || b.species >= view.params.w {
+        return;
+    }
+    let center = eye_relative(b.center_m, vec3<f32>(0.0), view);
+    // Sphere first (cheap), then the tighter box.
+    if !sphere_visible(center, b.radius_m, view) || !box_visible(center, b.half_extent_m) {
+        return;
+    }
+    if box_distance(center, b.half_extent_m) > view.lod.y {
+        return;
+    }
+    let s = species[b.species];
+    if s.slot_cap.x + s.slot_cap.y + s.slot_cap.z == 0u {
+        return; // nothing of this species can be drawn yet (pack not loaded)
+    }
+    let at = atomicAdd(&control[0], 1u);
+    visible[at] = i;
+}
+
+@compute @workgroup_size(1)
+fn prepare_dispatch() {
+    let n = atomicLoad(&control[0]);
+    atomicStore(&control[1], min(n, MAX_GROUPS_X));
+    atomicStore(&control[2], (n + MAX_GROUPS_X - 1u) / MAX_GROUPS_X);
+    atomicStore(&control[3], 1u);
+}
+
+fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fade: f32) {
+    let s = species[species_index];
+    let slot = species_index * REPR_COUNT + repr;
+    let at = atomicAdd(&args[slot * 5u + 1u], 1u);
+    if at < s.slot_cap[repr] {
+        items[s.slot_base[repr] + at] = vec2<u32>(instance, pack_item_y(batch, side, fade));
+    } else {
+        atomicAdd(&control[5], 1u);
+    }
+}
+
+// The representations of a tree of projected height `h_px`: the finest ready one
+// whose threshold it reaches, or two with complementary fades inside a band.
+fn select_and_emit(s_index: u32, h_px: f32, instance: u32, batch: u32) {
+    let s = species[s_index];
+    // Ready representations, finest first, with their lower thresholds in px.
+    var reprs: array<u32, 3>;
+    var lower: array<f32, 3>;
+    var n = 0u;
+    if s.slot_cap.x > 0u { reprs[n] = REPR_MESH0; lower[n] = s.select.y; n++; }
+    if s.slot_cap.y > 0u { reprs[n] = REPR_MESH1; lower[n] = s.select.z; n++; }
+    if s.slot_cap.z > 0u { reprs[n] = REPR_BILLBOARD; lower[n] = 0.0; n++; }
+    if n == 0u {
+        return;
+    }
+    // The coarsest ready representation reaches down to 0 px.
+    lower[n - 1u] = 0.0;
+    let band = view.lod.z;
+    for (var k = 0u; k < n; k++) {
+        let t = lower[k];
+        if k + 1u < n && h_px < t * (1.0 + band) && h_px >= t * (1.0 - band) {
+            // Inside the band around reprs[k]'s threshold: fade from k to k+1.
+            let fade = (t * (1.0 + band) - h_px) / (2.0 * band * t);
+            emit(s_index, reprs[k], instance, batch, 0u, fade);
+            emit(s_index, reprs[k + 1u], instance, batch, 1u, fade);
+            return;
+        }
+        if h_px >= t * (1.0 + select(0.0, band, k + 1u < n)) {
+            emit(s_index, reprs[k], instance, batch, 0u, 0.0);
+            return;
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let v = wid.x + wid.y * MAX_GROUPS_X;
+    if v >= atomicLoad(&control[0]) {
+        return;
+    }
+    let batch_index = visible[v];
+    let b = batches[batch_index];
+    let s = species[b.species];
+    if lid == 0u {
+        atomicAdd(&control[4], b.instance_count);
+    }
+    for (var i = lid; i < b.instance_count; i += WORKGROUP) {
+        let instance = b.instance_offset + i;
+        let tree = unpack_instance(instances[instance], b, view);
+        let center = tree.pos + rotate_z(s.sphere.xyz * tree.scale, tree.yaw);
+        let radius = s.sphere.w * tree.scale;
+        if !sphere_visible(center, radius, view) {
+            continue;
+        }
+        let dist = max(length(center), 1e-3);
+        if dist - radius > view.lod.y {
+            continue;
+        }
+        let h_px = s.select.x * tree.scale * view.lod.x / dist;
+        select_and_emit(b.species, h_px, instance, batch_index);
+    }
+}
+
+// Clamps instance counts to segment capacities, so a full segment draws what it
+// holds instead of reading past it.
+@compute @workgroup_size(64)
+fn finalize(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let slot = gid.x;
+    if slot >= view.params.w * REPR_COUNT {
+        return;
+    }
+    let cap = species[slot / REPR_COUNT].slot_cap[slot % REPR_COUNT];
+    let n = atomicLoad(&args[slot * 5u + 1u]);
+    atomicStore(&args[slot * 5u + 1u], min(n, cap));
+}

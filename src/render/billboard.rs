@@ -1,0 +1,163 @@
+//! Billboard pass: view-angle billboards (seed 004 §3.3, eq. 3.1), one quad per
+//! tree, drawn with one indirect draw per species. Shader: `shaders/billboard.wgsl`.
+
+use super::layouts::SharedLayouts;
+use super::mesh::{upload_texture_array, DEPTH_FORMAT};
+use super::shaders;
+use crate::format::pack::{kind, BillboardMeta};
+use crate::format::Pack;
+
+/// Vertices per billboard (two triangles, no index buffer).
+pub const BILLBOARD_VERTICES: u32 = 6;
+
+/// The billboard pipeline and its texture layout.
+pub struct BillboardPipeline {
+    /// Group 1: colour array, normal array, sampler.
+    pub texture_layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::RenderPipeline,
+    sampler: wgpu::Sampler,
+}
+
+impl BillboardPipeline {
+    /// Creates the pipeline for `color_format` targets.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("billboard.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::BILLBOARD.into()),
+        });
+        let tex = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let texture_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("billboard textures"),
+            entries: &[
+                tex(0),
+                tex(1),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("billboard"),
+            bind_group_layouts: &[
+                Some(&shared.view),
+                Some(&texture_layout),
+                Some(&shared.instances),
+                Some(&shared.draw),
+            ],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("billboard"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(color_format.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("billboard"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        Self { texture_layout, pipeline, sampler }
+    }
+
+    /// The pipeline.
+    #[must_use]
+    pub fn pipeline(&self) -> &wgpu::RenderPipeline {
+        &self.pipeline
+    }
+}
+
+/// One species' billboard arrays on the GPU.
+pub struct BillboardGpu {
+    /// Group 1 of the billboard pipeline.
+    pub bind_group: wgpu::BindGroup,
+    /// The metadata (angles, quad size).
+    pub meta: BillboardMeta,
+    /// Bytes uploaded.
+    pub bytes: u64,
+}
+
+impl BillboardGpu {
+    /// Uploads the billboard arrays of `pack`, if it has them.
+    #[must_use]
+    pub fn upload(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        pipeline: &BillboardPipeline,
+        pack: &Pack<'_>,
+    ) -> Option<Self> {
+        let meta = pack.meta.billboards.clone()?;
+        let color = pack.section(kind::BILLBOARD_COLOR, 0)?;
+        let normal = pack.section(kind::BILLBOARD_NORMAL, 0)?;
+        let color_tex = upload_texture_array(
+            device,
+            queue,
+            "billboard colour",
+            &meta.texture,
+            color,
+            wgpu::TextureFormat::Rgba8UnormSrgb,
+        );
+        let normal_tex = upload_texture_array(
+            device,
+            queue,
+            "billboard normal",
+            &meta.texture,
+            normal,
+            wgpu::TextureFormat::Rgba8Unorm,
+        );
+        let view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("billboard textures"),
+            layout: &pipeline.texture_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view(&color_tex)) },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&view(&normal_tex)) },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&pipeline.sampler) },
+            ],
+        });
+        Some(Self { bind_group, bytes: (color.len() + normal.len()) as u64, meta })
+    }
+}

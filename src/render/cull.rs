@@ -1,0 +1,234 @@
+//! Cull pass: GPU culling and LoD selection over grouped batches (seed 004
+//! §3.5): batches (sphere, box, draw distance) → visible list → instances (fine
+//! sphere test, projected-size LoD with cross-fade bands) → compacted draw items
+//! and indirect draw arguments per (species × representation).
+//!
+//! [`cpu_select`] is the same selection written plainly on the CPU: the oracle
+//! the GPU pass is tested against.
+
+use glam::{Vec3, Vec4};
+
+use super::gpu_data::{GpuSpecies, Repr, ViewUniform, REPR_COUNT};
+use super::layouts::{storage_entry, SharedLayouts};
+use super::shaders;
+use crate::format::tile::{GpuBatch, PackedInstance};
+
+/// The compute pipelines of the cull pass.
+pub struct CullPipelines {
+    /// Group 1: batches, instances, species, visible, control, items, args.
+    pub layout: wgpu::BindGroupLayout,
+    /// Group 2 of `prepare_dispatch`: the indirect dispatch arguments.
+    pub dispatch_layout: wgpu::BindGroupLayout,
+    pub(crate) reset: wgpu::ComputePipeline,
+    pub(crate) cull_batches: wgpu::ComputePipeline,
+    pub(crate) prepare_dispatch: wgpu::ComputePipeline,
+    pub(crate) cull_instances: wgpu::ComputePipeline,
+    pub(crate) finalize: wgpu::ComputePipeline,
+}
+
+impl CullPipelines {
+    /// Creates the pipelines.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, shared: &SharedLayouts) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("cull.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::CULL.into()),
+        });
+        let c = wgpu::ShaderStages::COMPUTE;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("cull"),
+            entries: &[
+                storage_entry(0, c, true),
+                storage_entry(1, c, true),
+                storage_entry(2, c, true),
+                storage_entry(3, c, false),
+                storage_entry(4, c, false),
+                storage_entry(5, c, false),
+                storage_entry(6, c, false),
+            ],
+        });
+        let dispatch_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("cull dispatch args"),
+            entries: &[storage_entry(0, c, false)],
+        });
+        // The dispatch arguments are bound only while they are written: the
+        // instance pass reads them as INDIRECT, which may not meet a writable binding.
+        let main_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("cull"),
+            bind_group_layouts: &[Some(&shared.view), Some(&layout)],
+            immediate_size: 0,
+        });
+        let prepare_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("cull prepare"),
+            bind_group_layouts: &[Some(&shared.view), Some(&layout), Some(&dispatch_layout)],
+            immediate_size: 0,
+        });
+        let make = |entry: &str, layout: &wgpu::PipelineLayout| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Self {
+            reset: make("reset", &main_layout),
+            cull_batches: make("cull_batches", &main_layout),
+            prepare_dispatch: make("prepare_dispatch", &prepare_layout),
+            cull_instances: make("cull_instances", &main_layout),
+            finalize: make("finalize", &main_layout),
+            layout,
+            dispatch_layout,
+        }
+    }
+}
+
+/// One draw item as the GPU writes it: (instance index in the pool, batch | side | fade).
+pub type DrawItem = (u32, u32);
+
+/// Decodes an item's `y` word into (batch, side, fade byte).
+#[must_use]
+pub fn unpack_item_y(y: u32) -> (u32, u32, u32) {
+    (y & 0x7f_ffff, (y >> 23) & 1, y >> 24)
+}
+
+fn pack_item_y(batch: u32, side: u32, fade: f32) -> u32 {
+    let f = (fade.clamp(0.0, 1.0) * 255.0 + 0.5) as u32;
+    (batch & 0x7f_ffff) | (side << 23) | (f << 24)
+}
+
+fn rotate_z(v: Vec3, yaw: f32) -> Vec3 {
+    let (s, c) = yaw.sin_cos();
+    Vec3::new(c * v.x - s * v.y, s * v.x + c * v.y, v.z)
+}
+
+fn eye_relative(origin: Vec3, offset: Vec3, view: &ViewUniform) -> Vec3 {
+    let hi = Vec4::from(view.eye_hi).truncate();
+    let lo = Vec4::from(view.eye_lo).truncate();
+    ((origin - hi) - lo) + offset
+}
+
+fn sphere_visible(c: Vec3, r: f32, view: &ViewUniform) -> bool {
+    view.frustum.iter().all(|p| Vec3::new(p[0], p[1], p[2]).dot(c) + p[3] >= -r)
+}
+
+fn box_visible(c: Vec3, h: Vec3, view: &ViewUniform) -> bool {
+    view.frustum.iter().all(|p| {
+        let n = Vec3::new(p[0], p[1], p[2]);
+        n.dot(c) + p[3] + n.abs().dot(h) >= 0.0
+    })
+}
+
+/// Per-slot selection result: `slots[species * REPR_COUNT + repr]` lists the draw items.
+/// Also the batches that passed the batch test.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Selection {
+    /// Draw items per slot (order unspecified on the GPU: compare as sets).
+    pub slots: Vec<Vec<DrawItem>>,
+    /// Indices of visible batches.
+    pub visible_batches: Vec<u32>,
+    /// Items dropped because their segment was full.
+    pub dropped: u32,
+}
+
+/// The selection of `shaders/cull.wgsl`, on the CPU. `batches` are pool batches
+/// (instance offsets into `instances`); `view` is the frame's uniform.
+#[must_use]
+pub fn cpu_select(
+    view: &ViewUniform,
+    batches: &[GpuBatch],
+    instances: &[PackedInstance],
+    species: &[GpuSpecies],
+) -> Selection {
+    let species_count = view.params[3] as usize;
+    let mut sel = Selection { slots: vec![Vec::new(); species_count * REPR_COUNT as usize], ..Default::default() };
+    for (i, b) in batches.iter().enumerate().take(view.params[1] as usize) {
+        if b.instance_count == 0 || b.species as usize >= species_count {
+            continue;
+        }
+        let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
+        let half = Vec3::from(b.half_extent_m);
+        if !sphere_visible(center, b.radius_m, view) || !box_visible(center, half, view) {
+            continue;
+        }
+        if (center.abs() - half).max(Vec3::ZERO).length() > view.lod[1] {
+            continue;
+        }
+        let s = &species[b.species as usize];
+        if s.slot_cap.iter().take(3).sum::<u32>() == 0 {
+            continue;
+        }
+        sel.visible_batches.push(i as u32);
+        for k in 0..b.instance_count {
+            let index = b.instance_offset + k;
+            let packed = instances[index as usize];
+            let d = decode_eye_relative(packed, b, view);
+            let c = d.0 + rotate_z(Vec3::new(s.sphere[0], s.sphere[1], s.sphere[2]) * d.2, d.1);
+            let r = s.sphere[3] * d.2;
+            if !sphere_visible(c, r, view) {
+                continue;
+            }
+            let dist = c.length().max(1e-3);
+            if dist - r > view.lod[1] {
+                continue;
+            }
+            let h_px = s.select[0] * d.2 * view.lod[0] / dist;
+            select(&mut sel, view, s, b.species, h_px, index, i as u32);
+        }
+    }
+    sel
+}
+
+/// (eye-relative position, yaw, scale) of an instance, exactly as `unpack_instance` in WGSL.
+fn decode_eye_relative(p: PackedInstance, b: &GpuBatch, view: &ViewUniform) -> (Vec3, f32, f32) {
+    let x = (p.xy & 0xffff) as f32;
+    let y = (p.xy >> 16) as f32;
+    let z = (p.zysv & 0x7ff) as f32;
+    let yaw = ((p.zysv >> 11) & 0xff) as f32 * (std::f32::consts::TAU / 256.0);
+    let scale = b.scale_min * (((p.zysv >> 19) & 0xff) as f32 * b.scale_log2_step).exp2();
+    let pos = eye_relative(Vec3::from(b.origin_m), Vec3::new(x * b.xy_step_m, y * b.xy_step_m, z * b.z_step_m), view);
+    (pos, yaw, scale)
+}
+
+fn select(sel: &mut Selection, view: &ViewUniform, s: &GpuSpecies, species: u32, h_px: f32, instance: u32, batch: u32) {
+    let mut ready: Vec<(Repr, f32)> = Vec::with_capacity(3);
+    if s.slot_cap[0] > 0 {
+        ready.push((Repr::Mesh0, s.select[1]));
+    }
+    if s.slot_cap[1] > 0 {
+        ready.push((Repr::Mesh1, s.select[2]));
+    }
+    if s.slot_cap[2] > 0 {
+        ready.push((Repr::Billboard, 0.0));
+    }
+    let n = ready.len();
+    if n == 0 {
+        return;
+    }
+    ready[n - 1].1 = 0.0;
+    let band = view.lod[2];
+    let emit = |repr: Repr, side: u32, fade: f32, sel: &mut Selection| {
+        let slot = (species * REPR_COUNT + repr as u32) as usize;
+        if (sel.slots[slot].len() as u32) < s.slot_cap[repr as usize] {
+            sel.slots[slot].push((instance, pack_item_y(batch, side, fade)));
+        } else {
+            sel.dropped += 1;
+        }
+    };
+    for k in 0..n {
+        let t = ready[k].1;
+        if k + 1 < n && h_px < t * (1.0 + band) && h_px >= t * (1.0 - band) {
+            let fade = (t * (1.0 + band) - h_px) / (2.0 * band * t);
+            emit(ready[k].0, 0, fade, sel);
+            emit(ready[k + 1].0, 1, fade, sel);
+            return;
+        }
+        let hi = if k + 1 < n { band } else { 0.0 };
+        if h_px >= t * (1.0 + hi) {
+            emit(ready[k].0, 0, 0.0, sel);
+            return;
+        }
+    }
+}

@@ -1,0 +1,634 @@
+//! The forest renderer: GPU pools of resident batches and instances, the
+//! per-species LoD resources, and the frame (cull pass, then one indirect draw
+//! per species × representation).
+//!
+//! CPU work per frame is O(species): write the view uniform, record five
+//! dispatches and at most `species × REPR_COUNT` draws. Tiles are uploaded once
+//! when they arrive; nothing per tree is touched by the CPU after that.
+
+use std::ops::Range;
+
+use glam::Vec3;
+
+use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
+use super::camera::ViewData;
+use super::cull::CullPipelines;
+use super::gpu_data::{DrawParams, GpuSpecies, Repr, ViewUniform, REPR_COUNT};
+use super::layouts::SharedLayouts;
+use super::mesh::{MeshGpu, MeshPipelines, DEPTH_FORMAT};
+use super::Lighting;
+use crate::format::tile::{GpuBatch, Tile};
+use crate::format::Pack;
+
+/// Segment capacity of the full mesh level per species: only trees hundreds of
+/// pixels tall use it, a few hundred at most on any screen.
+pub const MESH0_CAPACITY: u32 = 1 << 15;
+/// Segment capacity of the simplified mesh level per species.
+pub const MESH1_CAPACITY: u32 = 1 << 18;
+
+/// Pool sizes; the defaults keep every binding far below WebGPU's 128 MiB.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PoolConfig {
+    /// Resident instances (8 bytes each).
+    pub instances: u32,
+    /// Resident batches (80 bytes each).
+    pub batches: u32,
+    /// Draw items (8 bytes each) shared by all slots.
+    pub items: u32,
+    /// Species the renderer can hold.
+    pub species: u32,
+}
+
+impl Default for PoolConfig {
+    fn default() -> Self {
+        Self { instances: 4 << 20, batches: 1 << 16, items: 6 << 20, species: 256 }
+    }
+}
+
+impl PoolConfig {
+    /// GPU bytes the pools take.
+    #[must_use]
+    pub fn bytes(&self) -> u64 {
+        u64::from(self.instances) * 8
+            + u64::from(self.batches) * (80 + 4)
+            + u64::from(self.items) * 8
+            + u64::from(self.species) * (80 + u64::from(REPR_COUNT) * (20 + 256))
+    }
+}
+
+/// How to draw: quality, draw distance, transitions, debug colouring.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    /// Scales projected sizes before LoD selection (1, ½, ¼ like seed 002 Fig. 12).
+    pub quality: f32,
+    /// Trees farther than this are not drawn (metres).
+    pub draw_distance_m: f32,
+    /// Half width of a transition band, as a fraction of its threshold.
+    pub fade_band: f32,
+    /// Colour trees by representation.
+    pub debug_lod: bool,
+    /// Sun and ambient.
+    pub lighting: Lighting,
+    /// Clear colour (linear RGBA).
+    pub clear: [f64; 4],
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            quality: 1.0,
+            draw_distance_m: 6000.0,
+            fade_band: 0.12,
+            debug_lod: false,
+            lighting: Lighting::default(),
+            clear: [0.55, 0.68, 0.82, 1.0],
+        }
+    }
+}
+
+/// First-fit allocator of index ranges.
+#[derive(Debug, Clone)]
+pub struct RangeAllocator {
+    free: Vec<Range<u32>>,
+}
+
+impl RangeAllocator {
+    /// All of `0..capacity` free.
+    #[must_use]
+    pub fn new(capacity: u32) -> Self {
+        Self { free: std::iter::once(0..capacity).collect() }
+    }
+
+    /// Allocates `len` contiguous indices.
+    pub fn alloc(&mut self, len: u32) -> Option<Range<u32>> {
+        if len == 0 {
+            return Some(0..0);
+        }
+        let i = self.free.iter().position(|r| r.len() as u32 >= len)?;
+        let start = self.free[i].start;
+        self.free[i].start += len;
+        if self.free[i].is_empty() {
+            self.free.remove(i);
+        }
+        Some(start..start + len)
+    }
+
+    /// Returns a range; neighbours are merged.
+    pub fn release(&mut self, r: Range<u32>) {
+        if r.is_empty() {
+            return;
+        }
+        let i = self.free.partition_point(|f| f.start < r.start);
+        self.free.insert(i, r);
+        if i + 1 < self.free.len() && self.free[i].end == self.free[i + 1].start {
+            self.free[i].end = self.free[i + 1].end;
+            self.free.remove(i + 1);
+        }
+        if i > 0 && self.free[i - 1].end == self.free[i].start {
+            self.free[i - 1].end = self.free[i].end;
+            self.free.remove(i);
+        }
+    }
+
+    /// Free indices in total.
+    #[must_use]
+    pub fn free_len(&self) -> u32 {
+        self.free.iter().map(|r| r.len() as u32).sum()
+    }
+}
+
+/// Where a resident tile lives in the pools.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TileSlot {
+    /// Batch pool range.
+    pub batches: Range<u32>,
+    /// Instance pool range.
+    pub instances: Range<u32>,
+    /// Instances per species (index, count), to keep residency counts.
+    pub species_counts: Vec<(u32, u32)>,
+}
+
+/// Why a tile could not be made resident.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PoolError {
+    /// Not enough contiguous room: evict something and retry.
+    #[error("the GPU pools are full ({0})")]
+    Full(&'static str),
+    /// A batch names a species the renderer was not told about.
+    #[error("batch species {0} is outside the scene's species list")]
+    UnknownSpecies(u32),
+}
+
+struct SpeciesGpu {
+    mesh: MeshGpu,
+    billboard: Option<BillboardGpu>,
+    sphere: [f32; 4],
+    height_m: f32,
+    select_px: [f32; 2],
+    index_counts: [u32; 2],
+    levels: usize,
+    bytes: u64,
+}
+
+/// Buffers of the pools.
+struct Pools {
+    batches: wgpu::Buffer,
+    instances: wgpu::Buffer,
+    items: wgpu::Buffer,
+    visible: wgpu::Buffer,
+    control: wgpu::Buffer,
+    dispatch: wgpu::Buffer,
+    args: wgpu::Buffer,
+    species: wgpu::Buffer,
+    draw_params: wgpu::Buffer,
+}
+
+/// The GPU-driven forest renderer (see the module docs).
+pub struct ForestRenderer {
+    /// Shared bind group layouts.
+    pub shared: SharedLayouts,
+    mesh: MeshPipelines,
+    billboard: BillboardPipeline,
+    cull: CullPipelines,
+    config: PoolConfig,
+    pools: Pools,
+    view_buffer: wgpu::Buffer,
+    view_group: wgpu::BindGroup,
+    instance_group: wgpu::BindGroup,
+    cull_group: wgpu::BindGroup,
+    dispatch_group: wgpu::BindGroup,
+    draw_group: wgpu::BindGroup,
+    batch_alloc: RangeAllocator,
+    instance_alloc: RangeAllocator,
+    batch_high_water: u32,
+    species_count: u32,
+    resident: Vec<u64>,
+    packs: Vec<Option<SpeciesGpu>>,
+    table: Vec<GpuSpecies>,
+    table_dirty: bool,
+    last_view: ViewUniform,
+}
+
+fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage,
+        mapped_at_creation: false,
+    })
+}
+
+impl ForestRenderer {
+    /// Creates pipelines and pools for `color_format` targets.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat, config: PoolConfig) -> Self {
+        use wgpu::BufferUsages as U;
+        let shared = SharedLayouts::new(device);
+        let mesh = MeshPipelines::new(device, &shared, color_format);
+        let billboard = BillboardPipeline::new(device, &shared, color_format);
+        let cull = CullPipelines::new(device, &shared);
+        let slots = u64::from(config.species) * u64::from(REPR_COUNT);
+        let pools = Pools {
+            batches: buffer(device, "batch pool", u64::from(config.batches) * 80, U::STORAGE | U::COPY_DST),
+            instances: buffer(device, "instance pool", u64::from(config.instances) * 8, U::STORAGE | U::COPY_DST),
+            items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE),
+            visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
+            control: buffer(device, "cull control", 8 * 4, U::STORAGE | U::COPY_SRC),
+            dispatch: buffer(device, "cull dispatch", 4 * 4, U::STORAGE | U::INDIRECT),
+            args: buffer(device, "draw args", slots * 20, U::STORAGE | U::INDIRECT | U::COPY_SRC),
+            species: buffer(device, "species table", u64::from(config.species) * 80, U::STORAGE | U::COPY_DST),
+            draw_params: buffer(device, "draw params", slots * 256, U::UNIFORM | U::COPY_DST),
+        };
+        let view_buffer = buffer(device, "view", std::mem::size_of::<ViewUniform>() as u64, U::UNIFORM | U::COPY_DST);
+        let view_group = shared.view_group(device, &view_buffer);
+        let instance_group = shared.instance_group(device, &pools.batches, &pools.instances, &pools.items);
+        let draw_group = shared.draw_group(device, &pools.draw_params);
+        fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }
+        }
+        let cull_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cull"),
+            layout: &cull.layout,
+            entries: &[
+                entry(0, &pools.batches),
+                entry(1, &pools.instances),
+                entry(2, &pools.species),
+                entry(3, &pools.visible),
+                entry(4, &pools.control),
+                entry(5, &pools.items),
+                entry(6, &pools.args),
+            ],
+        });
+        let dispatch_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cull dispatch"),
+            layout: &cull.dispatch_layout,
+            entries: &[entry(0, &pools.dispatch)],
+        });
+        Self {
+            shared,
+            mesh,
+            billboard,
+            cull,
+            config,
+            pools,
+            view_buffer,
+            view_group,
+            instance_group,
+            cull_group,
+            dispatch_group,
+            draw_group,
+            batch_alloc: RangeAllocator::new(config.batches),
+            instance_alloc: RangeAllocator::new(config.instances),
+            batch_high_water: 0,
+            species_count: 0,
+            resident: Vec::new(),
+            packs: Vec::new(),
+            table: Vec::new(),
+            table_dirty: true,
+            last_view: bytemuck::Zeroable::zeroed(),
+        }
+    }
+
+    /// The pool configuration.
+    #[must_use]
+    pub fn config(&self) -> PoolConfig {
+        self.config
+    }
+
+    /// Sets the scene's species count (from the manifest). Drops loaded packs.
+    ///
+    /// # Panics
+    /// If `count` exceeds the configured species capacity.
+    pub fn set_species_count(&mut self, count: u32) {
+        assert!(count <= self.config.species, "{count} species exceed the renderer's {}", self.config.species);
+        self.species_count = count;
+        self.resident = vec![0; count as usize];
+        self.packs = (0..count).map(|_| None).collect();
+        self.table_dirty = true;
+    }
+
+    /// Whether species `i`'s pack is on the GPU.
+    #[must_use]
+    pub fn has_pack(&self, i: u32) -> bool {
+        self.packs.get(i as usize).is_some_and(Option::is_some)
+    }
+
+    /// Uploads a decoded pack as species `index`.
+    pub fn upload_pack(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, index: u32, pack: &Pack<'_>) {
+        let Some(slot) = self.packs.get_mut(index as usize) else { return };
+        let m = &pack.meta;
+        let mesh = MeshGpu::upload(device, queue, &self.mesh, pack);
+        let billboard = BillboardGpu::upload(device, queue, &self.billboard, pack);
+        let lo = Vec3::from(m.bounds_min);
+        let hi = Vec3::from(m.bounds_max);
+        let c = (lo + hi) * 0.5;
+        let level = |l: usize| m.mesh_levels.get(l);
+        let bytes = pack.sections.iter().map(|(e, _)| e.bytes).sum();
+        *slot = Some(SpeciesGpu {
+            sphere: [c.x, c.y, c.z, ((hi - lo) * 0.5).length()],
+            height_m: m.height_m,
+            select_px: [level(0).map_or(0.0, |l| l.select_px), level(1).map_or(0.0, |l| l.select_px)],
+            index_counts: [level(0).map_or(0, |l| l.index_count), level(1).map_or(0, |l| l.index_count)],
+            levels: mesh.levels.len(),
+            mesh,
+            billboard,
+            bytes,
+        });
+        self.table_dirty = true;
+    }
+
+    /// Makes a tile resident: copies its batches (offsets rebased to the pool) and
+    /// its instance records (as they are) into the pools.
+    ///
+    /// # Errors
+    /// [`PoolError::Full`] when there is no room (nothing is changed), or
+    /// [`PoolError::UnknownSpecies`].
+    pub fn upload_tile(&mut self, queue: &wgpu::Queue, tile: &Tile) -> Result<TileSlot, PoolError> {
+        if let Some(b) = tile.batches.iter().find(|b| b.species >= self.species_count) {
+            return Err(PoolError::UnknownSpecies(b.species));
+        }
+        let instances = self.instance_alloc.alloc(tile.instances.len() as u32).ok_or(PoolError::Full("instances"))?;
+        let Some(batches) = self.batch_alloc.alloc(tile.batches.len() as u32) else {
+            self.instance_alloc.release(instances);
+            return Err(PoolError::Full("batches"));
+        };
+        let rebased: Vec<GpuBatch> = tile
+            .batches
+            .iter()
+            .map(|b| GpuBatch { instance_offset: b.instance_offset + instances.start, ..*b })
+            .collect();
+        queue.write_buffer(&self.pools.batches, u64::from(batches.start) * 80, bytemuck::cast_slice(&rebased));
+        queue.write_buffer(
+            &self.pools.instances,
+            u64::from(instances.start) * 8,
+            bytemuck::cast_slice(&tile.instances),
+        );
+        let mut counts: Vec<(u32, u32)> = Vec::new();
+        for b in &tile.batches {
+            match counts.iter_mut().find(|(s, _)| *s == b.species) {
+                Some(c) => c.1 += b.instance_count,
+                None => counts.push((b.species, b.instance_count)),
+            }
+            self.resident[b.species as usize] += u64::from(b.instance_count);
+        }
+        self.batch_high_water = self.batch_high_water.max(batches.end);
+        self.table_dirty = true;
+        Ok(TileSlot { batches, instances, species_counts: counts })
+    }
+
+    /// Evicts a resident tile: its batches are zeroed (the cull pass skips empty
+    /// batches) and its ranges returned.
+    pub fn evict_tile(&mut self, queue: &wgpu::Queue, slot: TileSlot) {
+        let zeros = vec![0u8; slot.batches.len() * 80];
+        queue.write_buffer(&self.pools.batches, u64::from(slot.batches.start) * 80, &zeros);
+        for (s, n) in &slot.species_counts {
+            self.resident[*s as usize] -= u64::from(*n);
+        }
+        self.batch_alloc.release(slot.batches);
+        self.instance_alloc.release(slot.instances);
+        self.table_dirty = true;
+    }
+
+    /// Resident instances in total.
+    #[must_use]
+    pub fn resident_instances(&self) -> u64 {
+        self.resident.iter().sum()
+    }
+
+    /// Free instance slots.
+    #[must_use]
+    pub fn free_instances(&self) -> u32 {
+        self.instance_alloc.free_len()
+    }
+
+    /// GPU bytes: pools plus uploaded packs.
+    #[must_use]
+    pub fn gpu_bytes(&self) -> u64 {
+        self.config.bytes() + self.packs.iter().flatten().map(|p| p.bytes).sum::<u64>()
+    }
+
+    fn rebuild_table(&mut self, queue: &wgpu::Queue) {
+        let mut base = 0u32;
+        let mut table = Vec::with_capacity(self.species_count as usize);
+        let mut params = Vec::with_capacity((self.species_count * REPR_COUNT) as usize);
+        let budget = self.config.items;
+        for (i, pack) in self.packs.iter().enumerate() {
+            let resident = self.resident[i].min(u64::from(u32::MAX)) as u32;
+            let mut s = GpuSpecies::default();
+            if let Some(p) = pack {
+                s.sphere = p.sphere;
+                s.select = [p.height_m, p.select_px[0], p.select_px[1], 0.0];
+                let caps = [
+                    if p.levels > 0 { resident.min(MESH0_CAPACITY) } else { 0 },
+                    if p.levels > 1 { resident.min(MESH1_CAPACITY) } else { 0 },
+                    if p.billboard.is_some() { resident } else { 0 },
+                ];
+                for (r, want) in caps.into_iter().enumerate() {
+                    let cap = want.min(budget.saturating_sub(base));
+                    s.slot_base[r] = base;
+                    s.slot_cap[r] = cap;
+                    base += cap;
+                }
+                s.index_count = [p.index_counts[0], p.index_counts[1], BILLBOARD_VERTICES, 0];
+            }
+            for repr in Repr::ALL {
+                let mut d =
+                    DrawParams { ids: [s.slot_base[repr as usize], repr as u32, i as u32, 0], ..Default::default() };
+                if let Some(bb) = pack.as_ref().and_then(|p| p.billboard.as_ref()) {
+                    d.ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
+                    d.bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
+                    d.bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                }
+                params.push(d);
+            }
+            table.push(s);
+        }
+        if !table.is_empty() {
+            queue.write_buffer(&self.pools.species, 0, bytemuck::cast_slice(&table));
+            queue.write_buffer(&self.pools.draw_params, 0, bytemuck::cast_slice(&params));
+        }
+        self.table = table;
+        self.table_dirty = false;
+    }
+
+    /// Writes the frame's uniforms (and the species table if residency changed).
+    pub fn prepare(&mut self, queue: &wgpu::Queue, view: &ViewData, settings: &RenderSettings) -> ViewUniform {
+        if self.table_dirty {
+            self.rebuild_table(queue);
+        }
+        let l = &settings.lighting;
+        let uniform = ViewUniform {
+            clip_from_eye: view.clip_from_eye.to_cols_array_2d(),
+            eye_hi: view.eye_hi.extend(0.0).to_array(),
+            eye_lo: view.eye_lo.extend(0.0).to_array(),
+            frustum: view.frustum.map(|p| p.to_array()),
+            sun_dir: l.sun_dir.extend(0.0).to_array(),
+            sun_color: l.sun_color.extend(0.0).to_array(),
+            ambient: l.ambient.extend(0.0).to_array(),
+            lod: [view.px_per_m_at_1m * settings.quality, settings.draw_distance_m, settings.fade_band, 0.0],
+            params: [0, self.batch_high_water, u32::from(settings.debug_lod), self.species_count],
+        };
+        queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
+        self.last_view = uniform;
+        uniform
+    }
+
+    /// Records the cull pass (after [`Self::prepare`]).
+    pub fn encode_cull(&self, encoder: &mut wgpu::CommandEncoder) {
+        let slots = self.species_count * REPR_COUNT;
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("cull"), timestamp_writes: None });
+        pass.set_bind_group(0, &self.view_group, &[]);
+        pass.set_bind_group(1, &self.cull_group, &[]);
+        pass.set_pipeline(&self.cull.reset);
+        pass.dispatch_workgroups(slots.div_ceil(64).max(1), 1, 1);
+        if self.batch_high_water > 0 {
+            pass.set_pipeline(&self.cull.cull_batches);
+            pass.dispatch_workgroups(self.batch_high_water.div_ceil(64), 1, 1);
+        }
+        pass.set_pipeline(&self.cull.prepare_dispatch);
+        pass.set_bind_group(2, &self.dispatch_group, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(&self.cull.cull_instances);
+        pass.dispatch_workgroups_indirect(&self.pools.dispatch, 0);
+        pass.set_pipeline(&self.cull.finalize);
+        pass.dispatch_workgroups(slots.div_ceil(64).max(1), 1, 1);
+    }
+
+    /// Records the draw pass: at most one indirect draw per species × representation.
+    /// Returns the number of draw calls recorded.
+    pub fn encode_draw(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        clear: [f64; 4],
+    ) -> u32 {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("forest"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r: clear[0], g: clear[1], b: clear[2], a: clear[3] }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &self.view_group, &[]);
+        pass.set_bind_group(2, &self.instance_group, &[]);
+        let mut draws = 0;
+        for (i, p) in self.packs.iter().enumerate() {
+            let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
+            for repr in Repr::ALL {
+                if s.slot_cap[repr as usize] == 0 {
+                    continue;
+                }
+                let slot = i as u32 * REPR_COUNT + repr as u32;
+                pass.set_bind_group(3, &self.draw_group, &[slot * 256]);
+                let args_offset = u64::from(slot) * 20;
+                match repr {
+                    Repr::Mesh0 | Repr::Mesh1 => {
+                        let level = repr as usize;
+                        if p.mesh.bind_level(&mut pass, &self.mesh, super::gpu_data::RenderMode::Lit, level) > 0 {
+                            pass.draw_indexed_indirect(&self.pools.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                    Repr::Billboard => {
+                        if let Some(bb) = &p.billboard {
+                            pass.set_pipeline(self.billboard.pipeline());
+                            pass.set_bind_group(1, &bb.bind_group, &[]);
+                            pass.draw_indirect(&self.pools.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                }
+            }
+        }
+        draws
+    }
+
+    /// The last frame's view uniform (for the CPU oracle and tests).
+    #[must_use]
+    pub fn last_view(&self) -> &ViewUniform {
+        &self.last_view
+    }
+
+    /// The species table as last uploaded.
+    #[must_use]
+    pub fn species_table(&self) -> &[GpuSpecies] {
+        &self.table
+    }
+
+    /// Batch slots the cull pass tests (the high-water mark of the batch pool).
+    #[must_use]
+    pub fn batch_slots(&self) -> u32 {
+        self.batch_high_water
+    }
+
+    /// The buffers stats and tests read back: (control, args, items).
+    #[must_use]
+    pub fn readback_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer) {
+        (&self.pools.control, &self.pools.args, &self.pools.items)
+    }
+
+    /// Number of draw slots in use.
+    #[must_use]
+    pub fn slot_count(&self) -> u32 {
+        self.species_count * REPR_COUNT
+    }
+}
+
+/// Creates the depth texture every Sylva target needs.
+#[must_use]
+pub fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("depth"),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: DEPTH_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+        view_formats: &[],
+    })
+}
+
+/// Instances of all resident batches, as the pool holds them (for tests).
+#[must_use]
+pub fn pool_batches(tile_batches: &[GpuBatch], instance_start: u32) -> Vec<GpuBatch> {
+    tile_batches.iter().map(|b| GpuBatch { instance_offset: b.instance_offset + instance_start, ..*b }).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn range_allocator_first_fit_and_merge() {
+        let mut a = RangeAllocator::new(100);
+        let x = a.alloc(30).unwrap();
+        let y = a.alloc(30).unwrap();
+        let z = a.alloc(40).unwrap();
+        assert_eq!((x.clone(), y.clone(), z.clone()), (0..30, 30..60, 60..100));
+        assert!(a.alloc(1).is_none());
+        a.release(y);
+        assert_eq!(a.alloc(31), None);
+        a.release(x);
+        assert_eq!(a.free_len(), 60);
+        assert_eq!(a.alloc(60), Some(0..60), "neighbours merged");
+        a.release(0..60);
+        a.release(z);
+        assert_eq!(a.alloc(100), Some(0..100));
+    }
+}

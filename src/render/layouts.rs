@@ -1,0 +1,120 @@
+//! Bind group layouts shared by every draw pass: the view (group 0), the
+//! resident instance data (group 2) and the per-draw constants (group 3).
+//! Group 1 belongs to each pass (mesh level, billboard textures).
+
+use super::gpu_data::{DrawParams, ViewUniform};
+
+/// The shared layouts, created once per device.
+pub struct SharedLayouts {
+    /// Group 0: `View` uniform.
+    pub view: wgpu::BindGroupLayout,
+    /// Group 2: batches, instances, draw items (read-only storage, vertex stage).
+    pub instances: wgpu::BindGroupLayout,
+    /// Group 3: `DrawParams` uniform with a dynamic offset.
+    pub draw: wgpu::BindGroupLayout,
+}
+
+fn storage(binding: u32, visibility: wgpu::ShaderStages, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A read-only or read-write storage entry (used by the cull pass too).
+#[must_use]
+pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    storage(binding, visibility, read_only)
+}
+
+impl SharedLayouts {
+    /// Creates the layouts.
+    #[must_use]
+    pub fn new(device: &wgpu::Device) -> Self {
+        let view = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("view"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let v = wgpu::ShaderStages::VERTEX;
+        let instances = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("instances"),
+            entries: &[storage(0, v, true), storage(1, v, true), storage(2, v, true)],
+        });
+        let draw = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("draw params"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<DrawParams>() as u64),
+                },
+                count: None,
+            }],
+        });
+        Self { view, instances, draw }
+    }
+
+    /// Group 0 for a view uniform buffer.
+    #[must_use]
+    pub fn view_group(&self, device: &wgpu::Device, buffer: &wgpu::Buffer) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("view"),
+            layout: &self.view,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+        })
+    }
+
+    /// Group 2 over the batch, instance and draw-item buffers.
+    #[must_use]
+    pub fn instance_group(
+        &self,
+        device: &wgpu::Device,
+        batches: &wgpu::Buffer,
+        instances: &wgpu::Buffer,
+        items: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("instances"),
+            layout: &self.instances,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: batches.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: instances.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: items.as_entire_binding() },
+            ],
+        })
+    }
+
+    /// Group 3 over a buffer of 256-byte `DrawParams` records (bound at a dynamic offset).
+    #[must_use]
+    pub fn draw_group(&self, device: &wgpu::Device, buffer: &wgpu::Buffer) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("draw params"),
+            layout: &self.draw,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<DrawParams>() as u64),
+                }),
+            }],
+        })
+    }
+}
