@@ -9,12 +9,16 @@
 @group(1) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(1) @binding(2) var<storage, read> species: array<Species>;
 @group(1) @binding(3) var<storage, read_write> visible: array<u32>;
-// [0] visible batches, [1..4] dispatch args (x, y, z), [4] instances tested,
-// [5] items dropped because a segment was full.
+// [0] visible batches, [1..4] unused, [4] instances tested, [5] items dropped
+// because a segment was full.
 @group(1) @binding(4) var<storage, read_write> control: array<atomic<u32>>;
 @group(1) @binding(5) var<storage, read_write> items: array<vec2<u32>>;
 // Indirect draw args, 5 words per slot: count, instances, first, base/first, first.
 @group(1) @binding(6) var<storage, read_write> args: array<atomic<u32>>;
+
+// Indirect dispatch arguments of cull_instances; bound only to prepare_dispatch
+// (a buffer may not be INDIRECT and writable storage in one dispatch).
+@group(2) @binding(0) var<storage, read_write> dispatch_args: array<u32, 4>;
 
 const WORKGROUP: u32 = 64u;
 // WebGPU's limit on workgroups per dimension.
@@ -85,9 +89,9 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(1)
 fn prepare_dispatch() {
     let n = atomicLoad(&control[0]);
-    atomicStore(&control[1], min(n, MAX_GROUPS_X));
-    atomicStore(&control[2], (n + MAX_GROUPS_X - 1u) / MAX_GROUPS_X);
-    atomicStore(&control[3], 1u);
+    dispatch_args[0] = min(n, MAX_GROUPS_X);
+    dispatch_args[1] = (n + MAX_GROUPS_X - 1u) / MAX_GROUPS_X;
+    dispatch_args[2] = 1u;
 }
 
 fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fade: f32) {

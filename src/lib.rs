@@ -3,9 +3,11 @@
 //! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
 //! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
 //! * [`metrics`] — image error (multi-scale RMSE, seed 002 §4).
+//! * [`scene`] — fetching, streaming and residency of scenes.
 //!
 //! The bake tool (`bake-tool/`, crate `sylva-bake`) writes what this crate reads.
 
 pub mod format;
 pub mod metrics;
 pub mod render;
+pub mod scene;

@@ -6,9 +6,14 @@ mod cli {
 
     use anyhow::{bail, Context, Result};
     use clap::{Parser, Subcommand, ValueEnum};
+    use glam::DVec3;
     use sylva::format::decode_pack;
+    use sylva::render::camera::Camera;
     use sylva::render::capture::{render_pack_preview, PackView};
+    use sylva::render::forest::{PoolConfig, RenderSettings};
+    use sylva::render::offscreen::{NamedView, OffscreenScene};
     use sylva::render::GpuContext;
+    use sylva::scene::StreamEvent;
 
     #[derive(Parser)]
     #[command(
@@ -28,23 +33,58 @@ mod cli {
         Top,
     }
 
+    #[derive(Clone, Copy, ValueEnum)]
+    enum SceneView {
+        Far,
+        Medium,
+        Close,
+        Top,
+    }
+
     #[derive(Subcommand)]
     enum Command {
-        /// Render one species pack (one tree, lit) to a PNG.
+        /// Render a scene (or one species pack) headless to a PNG, with stats.
+        #[command(
+            after_help = "Examples:\n  sylva render --scene demo-scene --view medium --out medium.png --stats medium.json\n  sylva render --scene http://127.0.0.1:8080/scene.json --camera 540000,5359700,300,0,-20 --out a.png\n  sylva render --pack demo-scene/species/beech.pack --view side --out beech.png"
+        )]
         Render {
-            /// LoD pack to render (`species/<name>.pack` of a scene).
+            /// Scene directory, scene.json path or http(s) URL.
+            #[arg(long, conflicts_with = "pack", required_unless_present = "pack")]
+            scene: Option<String>,
+            /// A single LoD pack to render (one tree, lit).
             #[arg(long)]
-            pack: PathBuf,
+            pack: Option<PathBuf>,
             /// Output PNG.
             #[arg(long)]
             out: PathBuf,
             /// Image size, WxH.
-            #[arg(long, default_value = "512x512")]
+            #[arg(long, default_value = "960x540")]
             size: String,
-            /// Where to look from.
+            /// Named scene viewpoint (ignored with --camera).
+            #[arg(long, value_enum, default_value_t = SceneView::Medium)]
+            view: SceneView,
+            /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
+            #[arg(long, allow_hyphen_values = true)]
+            camera: Option<String>,
+            /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
+            #[arg(long, default_value_t = 1.0)]
+            quality: f32,
+            /// Draw distance in metres.
+            #[arg(long, default_value_t = 6000.0)]
+            draw_distance: f32,
+            /// Colour trees by representation (red mesh0, yellow mesh1, blue billboard).
+            #[arg(long)]
+            debug_lod: bool,
+            /// Write frame statistics as JSON here.
+            #[arg(long)]
+            stats: Option<PathBuf>,
+            /// Give up waiting for data after this many seconds.
+            #[arg(long, default_value_t = 120.0)]
+            timeout: f64,
+            /// Pack view (with --pack).
             #[arg(long, value_enum, default_value_t = View::Oblique)]
-            view: View,
-            /// Mesh level to draw (0 = full detail).
+            pack_view: View,
+            /// Mesh level (with --pack).
             #[arg(long, default_value_t = 0)]
             level: usize,
         },
@@ -59,17 +99,137 @@ mod cli {
         Ok((w, h))
     }
 
+    fn parse_camera(text: &str, origin: [f64; 3]) -> Result<Camera> {
+        let v: Vec<f64> = text.split(',').map(|p| p.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| {
+            anyhow::anyhow!("--camera {text:?}: expected EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG (numbers)")
+        })?;
+        if v.len() != 5 || v.iter().any(|x| !x.is_finite()) {
+            bail!("--camera {text:?}: expected five finite numbers: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG");
+        }
+        Ok(Camera {
+            eye_m: DVec3::new(v[0] - origin[0], v[1] - origin[1], v[2] - origin[2]),
+            heading_rad: v[3].to_radians(),
+            pitch_rad: v[4].clamp(-90.0, 90.0).to_radians(),
+            ..Camera::default()
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn render_scene(
+        scene: &str,
+        out: &PathBuf,
+        (w, h): (u32, u32),
+        view: SceneView,
+        camera: Option<&str>,
+        settings: RenderSettings,
+        stats_path: Option<&PathBuf>,
+        timeout: f64,
+    ) -> Result<()> {
+        let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
+        off.settings = settings;
+        // The manifest first: the named views are derived from its bounds.
+        let mut events = off.load_view(&Camera::default(), timeout);
+        let manifest = match off.stream.manifest() {
+            Some(m) => m.clone(),
+            None => {
+                let why = events.iter().find_map(|e| match e {
+                    StreamEvent::Fatal { message } => Some(message.clone()),
+                    _ => None,
+                });
+                bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
+            }
+        };
+        let cam = match camera {
+            Some(text) => parse_camera(text, manifest.origin_m)?,
+            None => match view {
+                SceneView::Far => NamedView::Far,
+                SceneView::Medium => NamedView::Medium,
+                SceneView::Close => NamedView::Close,
+                SceneView::Top => NamedView::Top,
+            }
+            .camera(&manifest),
+        };
+        let t = std::time::Instant::now();
+        events.extend(off.load_view(&cam, timeout));
+        let load_s = t.elapsed().as_secs_f64();
+        for e in &events {
+            if let StreamEvent::Failed { url, message, retrying } = e {
+                eprintln!("warning: {message}{}", if *retrying { " (retrying)" } else { "" });
+                let _ = url;
+            }
+        }
+        if !off.stream.is_settled() {
+            eprintln!("warning: not everything the view needs arrived within {timeout} s; rendering what is there");
+        }
+        // A first frame warms pipelines and caches; the second is measured.
+        off.render(&cam, false);
+        let stats = off.render(&cam, true);
+        let rgba = off.read_image();
+        image::save_buffer(out, &rgba, w, h, image::ColorType::Rgba8)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        let json = serde_json::to_string_pretty(&stats)?;
+        if let Some(p) = stats_path {
+            std::fs::write(p, format!("{json}\n")).with_context(|| format!("cannot write {}", p.display()))?;
+        }
+        eprintln!(
+            "wrote {} ({w}x{h}) on {}: {} draw calls, instances {:?}, {} tiles resident, {:.1} MB fetched (loaded in {load_s:.1} s)",
+            out.display(),
+            off.ctx.adapter_summary(),
+            stats.draw_calls,
+            stats.instances,
+            stats.tiles_resident,
+            stats.bytes_fetched as f64 / 1e6
+        );
+        Ok(())
+    }
+
     pub fn main() -> Result<()> {
         match Cli::parse().command {
-            Command::Render { pack, out, size, view, level } => {
+            Command::Render {
+                scene,
+                pack,
+                out,
+                size,
+                view,
+                camera,
+                quality,
+                draw_distance,
+                debug_lod,
+                stats,
+                timeout,
+                pack_view,
+                level,
+            } => {
                 let (w, h) = parse_size(&size)?;
+                if !(quality > 0.0 && quality <= 16.0) {
+                    bail!("--quality {quality}: must be in (0, 16]");
+                }
+                if let Some(scene) = scene {
+                    let settings = RenderSettings {
+                        quality,
+                        draw_distance_m: draw_distance,
+                        debug_lod,
+                        ..RenderSettings::default()
+                    };
+                    return render_scene(
+                        &scene,
+                        &out,
+                        (w, h),
+                        view,
+                        camera.as_deref(),
+                        settings,
+                        stats.as_ref(),
+                        timeout,
+                    );
+                }
+                let pack = pack.expect("clap requires --scene or --pack");
                 let bytes = std::fs::read(&pack).with_context(|| format!("cannot read {}", pack.display()))?;
                 let decoded = decode_pack(&pack.display().to_string(), &bytes)?;
                 if level >= decoded.meta.mesh_levels.len() {
                     bail!("--level {level}: the pack has {} mesh levels", decoded.meta.mesh_levels.len());
                 }
                 let gpu = GpuContext::new_headless_blocking()?;
-                let view = match view {
+                let view = match pack_view {
                     View::Side => PackView::Side,
                     View::Oblique => PackView::Oblique,
                     View::Top => PackView::Top,
@@ -83,7 +243,6 @@ mod cli {
         }
     }
 }
-
 #[cfg(not(target_arch = "wasm32"))]
 fn main() {
     if let Err(e) = cli::main() {

@@ -12,6 +12,8 @@ pub mod gpu_data;
 pub mod layouts;
 pub mod mesh;
 pub mod mips;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod offscreen;
 pub mod shaders;
 
 use glam::{Mat4, Vec3};

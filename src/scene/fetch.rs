@@ -1,0 +1,212 @@
+//! One fetch abstraction for everything a scene loads: manifest, tiles, packs.
+//!
+//! A [`Fetcher`] starts requests and hands back finished ones when polled; it
+//! never blocks the caller, so a frame never waits for the network. Natively,
+//! [`ThreadFetcher`] serves local paths and `http(s)://` URLs from worker
+//! threads; the browser build uses `fetch` (the browser viewer issue).
+
+use std::collections::HashMap;
+
+/// Identifies a request.
+pub type RequestId = u64;
+
+/// Why a fetch failed. `retryable` says whether trying again may help.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FetchError {
+    /// 404 or a missing file: retrying will not help.
+    #[error("{url}: not found")]
+    NotFound {
+        /// What was fetched.
+        url: String,
+    },
+    /// Another HTTP error status.
+    #[error("{url}: HTTP status {status}")]
+    Status {
+        /// What was fetched.
+        url: String,
+        /// The status code.
+        status: u16,
+    },
+    /// Connection, I/O or protocol trouble.
+    #[error("{url}: {message}")]
+    Transport {
+        /// What was fetched.
+        url: String,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+impl FetchError {
+    /// Whether a retry may succeed (server errors, timeouts, broken connections).
+    #[must_use]
+    pub fn retryable(&self) -> bool {
+        match self {
+            FetchError::NotFound { .. } => false,
+            FetchError::Status { status, .. } => *status >= 500 || *status == 408 || *status == 429,
+            FetchError::Transport { .. } => true,
+        }
+    }
+}
+
+/// Starts requests and returns finished ones, without blocking.
+pub trait Fetcher {
+    /// Starts fetching `url` (an absolute URL or a local path).
+    fn start(&mut self, url: &str) -> RequestId;
+    /// Finished requests since the last poll.
+    fn poll(&mut self) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
+    /// Requests started and not yet returned by `poll`.
+    fn in_flight(&self) -> usize;
+}
+
+/// Joins a relative path (from a manifest) onto the manifest's base (a URL or a
+/// directory path ending in `/`).
+#[must_use]
+pub fn join(base: &str, relative: &str) -> String {
+    if base.is_empty() {
+        relative.to_string()
+    } else if base.ends_with('/') {
+        format!("{base}{relative}")
+    } else {
+        format!("{base}/{relative}")
+    }
+}
+
+/// The base (directory) and manifest location of a scene given as a directory,
+/// a `scene.json` path, or a URL of either.
+#[must_use]
+pub fn scene_locations(scene: &str) -> (String, String) {
+    let trimmed = scene.trim_end_matches('/');
+    if trimmed.ends_with(".json") {
+        let base = trimmed.rsplit_once('/').map_or(String::new(), |(b, _)| format!("{b}/"));
+        (base, trimmed.to_string())
+    } else {
+        (format!("{trimmed}/"), format!("{trimmed}/scene.json"))
+    }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+mod native {
+    use super::{FetchError, Fetcher, HashMap, RequestId};
+    use std::sync::mpsc;
+
+    type Job = (RequestId, String);
+    type Done = (RequestId, Result<Vec<u8>, FetchError>);
+
+    /// Worker threads serving local files and HTTP(S).
+    pub struct ThreadFetcher {
+        jobs: Option<mpsc::Sender<Job>>,
+        done: mpsc::Receiver<Done>,
+        next: RequestId,
+        pending: HashMap<RequestId, String>,
+        workers: Vec<std::thread::JoinHandle<()>>,
+    }
+
+    impl ThreadFetcher {
+        /// `workers` threads (the number of requests actually in flight at once).
+        #[must_use]
+        pub fn new(workers: usize) -> Self {
+            let (job_tx, job_rx) = mpsc::channel::<Job>();
+            let (done_tx, done_rx) = mpsc::channel::<Done>();
+            let job_rx = std::sync::Arc::new(std::sync::Mutex::new(job_rx));
+            let agent: ureq::Agent =
+                ureq::Agent::config_builder().timeout_global(Some(std::time::Duration::from_secs(60))).build().into();
+            let workers = (0..workers.max(1))
+                .map(|_| {
+                    let rx = job_rx.clone();
+                    let tx = done_tx.clone();
+                    let agent = agent.clone();
+                    std::thread::spawn(move || loop {
+                        let job = rx.lock().map(|r| r.recv());
+                        let Ok(Ok((id, url))) = job else { return };
+                        if tx.send((id, fetch_blocking(&agent, &url))).is_err() {
+                            return;
+                        }
+                    })
+                })
+                .collect();
+            Self { jobs: Some(job_tx), done: done_rx, next: 0, pending: HashMap::new(), workers }
+        }
+    }
+
+    impl Drop for ThreadFetcher {
+        fn drop(&mut self) {
+            self.jobs = None; // workers see the closed channel and exit
+            for w in self.workers.drain(..) {
+                let _ = w.join();
+            }
+        }
+    }
+
+    /// Most bytes one response may have (a pack with 8k² textures stays below it).
+    const MAX_RESPONSE_BYTES: u64 = 1 << 30;
+
+    fn fetch_blocking(agent: &ureq::Agent, url: &str) -> Result<Vec<u8>, FetchError> {
+        if url.starts_with("http://") || url.starts_with("https://") {
+            match agent.get(url).call() {
+                Ok(mut resp) => resp
+                    .body_mut()
+                    .with_config()
+                    .limit(MAX_RESPONSE_BYTES)
+                    .read_to_vec()
+                    .map_err(|e| FetchError::Transport { url: url.into(), message: e.to_string() }),
+                Err(ureq::Error::StatusCode(404)) => Err(FetchError::NotFound { url: url.into() }),
+                Err(ureq::Error::StatusCode(status)) => Err(FetchError::Status { url: url.into(), status }),
+                Err(e) => Err(FetchError::Transport { url: url.into(), message: e.to_string() }),
+            }
+        } else {
+            let path = url.strip_prefix("file://").unwrap_or(url);
+            std::fs::read(path).map_err(|e| match e.kind() {
+                std::io::ErrorKind::NotFound => FetchError::NotFound { url: url.into() },
+                _ => FetchError::Transport { url: url.into(), message: e.to_string() },
+            })
+        }
+    }
+
+    impl Fetcher for ThreadFetcher {
+        fn start(&mut self, url: &str) -> RequestId {
+            let id = self.next;
+            self.next += 1;
+            self.pending.insert(id, url.to_string());
+            if let Some(jobs) = &self.jobs {
+                let _ = jobs.send((id, url.to_string()));
+            }
+            id
+        }
+
+        fn poll(&mut self) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)> {
+            let mut out = Vec::new();
+            while let Ok((id, r)) = self.done.try_recv() {
+                self.pending.remove(&id);
+                out.push((id, r));
+            }
+            out
+        }
+
+        fn in_flight(&self) -> usize {
+            self.pending.len()
+        }
+    }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+pub use native::ThreadFetcher;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locations_and_joins() {
+        assert_eq!(scene_locations("demo"), ("demo/".into(), "demo/scene.json".into()));
+        assert_eq!(scene_locations("demo/"), ("demo/".into(), "demo/scene.json".into()));
+        assert_eq!(
+            scene_locations("http://h:1/s/scene.json"),
+            ("http://h:1/s/".into(), "http://h:1/s/scene.json".into())
+        );
+        assert_eq!(join("http://h/s/", "tiles/0_0.tile"), "http://h/s/tiles/0_0.tile");
+        assert!(!FetchError::NotFound { url: "x".into() }.retryable());
+        assert!(FetchError::Status { url: "x".into(), status: 503 }.retryable());
+        assert!(!FetchError::Status { url: "x".into(), status: 403 }.retryable());
+    }
+}

@@ -1,0 +1,10 @@
+//! Scenes: fetching (one abstraction for local paths, HTTP and the browser's
+//! `fetch`), streaming and residency.
+
+pub mod fetch;
+pub mod streaming;
+
+#[cfg(not(target_arch = "wasm32"))]
+pub use fetch::ThreadFetcher;
+pub use fetch::{FetchError, Fetcher, RequestId};
+pub use streaming::{SceneStream, StreamConfig, StreamEvent, StreamStats};

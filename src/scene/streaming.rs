@@ -1,0 +1,441 @@
+//! Streaming: what the view needs is fetched, decoded, validated and made
+//! resident; what is far and unseen is evicted when the pools fill up.
+//!
+//! Each frame [`SceneStream::update`] (non-blocking) handles finished requests,
+//! then requests the tiles inside the frustum and draw distance, nearest first,
+//! with a bounded number in flight, and the packs of species that resident
+//! visible tiles use. Failures are retried with exponential backoff (server
+//! errors, broken connections, corrupt bytes) or given up (404), and reported
+//! as [`StreamEvent`]s; the rest of the scene keeps rendering.
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
+use crate::format::{decode_pack, DecodeError, Manifest, Tile};
+use crate::render::camera::ViewData;
+use crate::render::forest::{ForestRenderer, PoolError, TileSlot};
+
+/// Limits of the streamer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamConfig {
+    /// Requests in flight at once.
+    pub max_in_flight: usize,
+    /// Attempts per file before giving up (retryable failures only).
+    pub max_attempts: u32,
+    /// First retry delay in seconds (doubles per attempt).
+    pub retry_base_s: f64,
+}
+
+impl Default for StreamConfig {
+    fn default() -> Self {
+        Self { max_in_flight: 6, max_attempts: 4, retry_base_s: 0.25 }
+    }
+}
+
+/// Something a user should hear about.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StreamEvent {
+    /// The manifest is loaded.
+    ManifestLoaded {
+        /// Trees in the scene.
+        trees: u64,
+    },
+    /// A fetch or decode failed; `retrying` says whether it will be tried again.
+    Failed {
+        /// The URL.
+        url: String,
+        /// What went wrong.
+        message: String,
+        /// Whether another attempt is scheduled.
+        retrying: bool,
+    },
+    /// The manifest could not be loaded: nothing can be drawn.
+    Fatal {
+        /// What went wrong.
+        message: String,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Load {
+    Idle,
+    Requested { attempt: u32 },
+    Waiting { attempt: u32, retry_at_s: f64 },
+    Broken,
+}
+
+enum TileState {
+    NotResident(Load),
+    Resident { slot: TileSlot, species: Vec<u32> },
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Target {
+    Manifest,
+    Tile(usize),
+    Pack(usize),
+}
+
+/// Counters for stats.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StreamStats {
+    /// Bytes received.
+    pub bytes_fetched: u64,
+    /// Tiles in the GPU pools.
+    pub tiles_resident: u64,
+    /// Requests in flight.
+    pub loading: u64,
+    /// Tiles or packs given up on.
+    pub broken: u64,
+    /// Tiles the view wants.
+    pub tiles_wanted: u64,
+}
+
+/// A scene being streamed into a [`ForestRenderer`].
+pub struct SceneStream<F: Fetcher> {
+    base: String,
+    manifest_url: String,
+    manifest: Option<Manifest>,
+    manifest_load: Load,
+    tiles: Vec<TileState>,
+    packs: Vec<Load>,
+    pack_ready: Vec<bool>,
+    requests: HashMap<RequestId, Target>,
+    fetcher: F,
+    config: StreamConfig,
+    stats: StreamStats,
+    events: Vec<StreamEvent>,
+    wanted: Vec<usize>,
+}
+
+impl<F: Fetcher> SceneStream<F> {
+    /// Starts streaming the scene at `scene` (directory, `scene.json` path or URL).
+    pub fn new(scene: &str, fetcher: F, config: StreamConfig) -> Self {
+        let (base, manifest_url) = scene_locations(scene);
+        Self {
+            base,
+            manifest_url,
+            manifest: None,
+            manifest_load: Load::Idle,
+            tiles: Vec::new(),
+            packs: Vec::new(),
+            pack_ready: Vec::new(),
+            requests: HashMap::new(),
+            fetcher,
+            config,
+            stats: StreamStats::default(),
+            events: Vec::new(),
+            wanted: Vec::new(),
+        }
+    }
+
+    /// The manifest, once loaded.
+    #[must_use]
+    pub fn manifest(&self) -> Option<&Manifest> {
+        self.manifest.as_ref()
+    }
+
+    /// Counters.
+    #[must_use]
+    pub fn stats(&self) -> StreamStats {
+        self.stats
+    }
+
+    /// Events since the last call.
+    pub fn drain_events(&mut self) -> Vec<StreamEvent> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// Whether everything the current view wants is resident (or given up on) and
+    /// nothing is in flight or waiting for a retry.
+    #[must_use]
+    pub fn is_settled(&self) -> bool {
+        let manifest_done = self.manifest.is_some() || self.manifest_load == Load::Broken;
+        let tiles_done = self.wanted.iter().all(|&t| match &self.tiles[t] {
+            TileState::Resident { .. } => true,
+            TileState::NotResident(l) => *l == Load::Broken,
+        });
+        let needed = self.needed_species();
+        let packs_done = needed.iter().all(|&s| self.pack_ready[s] || self.packs[s] == Load::Broken);
+        manifest_done && tiles_done && packs_done && self.requests.is_empty()
+    }
+
+    fn needed_species(&self) -> Vec<usize> {
+        let mut needed: Vec<usize> = Vec::new();
+        for &t in &self.wanted {
+            if let TileState::Resident { species, .. } = &self.tiles[t] {
+                for &s in species {
+                    if !needed.contains(&(s as usize)) {
+                        needed.push(s as usize);
+                    }
+                }
+            }
+        }
+        needed
+    }
+
+    fn fail(&mut self, url: String, err: &str, attempt: u32, retryable: bool, now_s: f64) -> Load {
+        let retrying = retryable && attempt + 1 < self.config.max_attempts;
+        self.events.push(StreamEvent::Failed { url, message: err.to_string(), retrying });
+        if retrying {
+            Load::Waiting {
+                attempt: attempt + 1,
+                retry_at_s: now_s + self.config.retry_base_s * 2f64.powi(attempt as i32),
+            }
+        } else {
+            self.stats.broken += 1;
+            Load::Broken
+        }
+    }
+
+    /// One non-blocking step: handle finished requests, then request what the view
+    /// needs. `now_s` is a monotonic clock in seconds (for retry backoff).
+    pub fn update(
+        &mut self,
+        renderer: &mut ForestRenderer,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        view: &ViewData,
+        draw_distance_m: f32,
+        now_s: f64,
+    ) {
+        for (id, result) in self.fetcher.poll() {
+            let Some(target) = self.requests.remove(&id) else { continue };
+            if let Ok(bytes) = &result {
+                self.stats.bytes_fetched += bytes.len() as u64;
+            }
+            match target {
+                Target::Manifest => self.on_manifest(renderer, result, now_s),
+                Target::Tile(t) => self.on_tile(renderer, queue, t, result, view, now_s),
+                Target::Pack(s) => self.on_pack(renderer, device, queue, s, result, now_s),
+            }
+        }
+        if self.manifest.is_none() {
+            let due = match self.manifest_load {
+                Load::Idle => Some(0),
+                Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
+                _ => None,
+            };
+            if let Some(attempt) = due {
+                let id = self.fetcher.start(&self.manifest_url);
+                self.requests.insert(id, Target::Manifest);
+                self.manifest_load = Load::Requested { attempt };
+            }
+        } else {
+            self.request_tiles(view, draw_distance_m, now_s);
+            self.request_packs(now_s);
+        }
+        self.stats.loading = self.requests.len() as u64;
+        self.stats.tiles_resident =
+            self.tiles.iter().filter(|t| matches!(t, TileState::Resident { .. })).count() as u64;
+        self.stats.tiles_wanted = self.wanted.len() as u64;
+    }
+
+    fn on_manifest(&mut self, renderer: &mut ForestRenderer, result: Result<Vec<u8>, FetchError>, now_s: f64) {
+        let attempt = match self.manifest_load {
+            Load::Requested { attempt } => attempt,
+            _ => 0,
+        };
+        let parsed = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
+            Manifest::decode(&self.manifest_url, &bytes).map_err(|e: DecodeError| (e.to_string(), false))
+        });
+        match parsed {
+            Ok(m) if m.species.len() as u32 <= renderer.config().species => {
+                renderer.set_species_count(m.species.len() as u32);
+                self.tiles = m.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
+                self.packs = vec![Load::Idle; m.species.len()];
+                self.pack_ready = vec![false; m.species.len()];
+                self.events.push(StreamEvent::ManifestLoaded { trees: m.counts.trees });
+                self.manifest = Some(m);
+            }
+            Ok(m) => {
+                self.manifest_load = Load::Broken;
+                self.events.push(StreamEvent::Fatal {
+                    message: format!(
+                        "{}: {} species exceed this viewer's {}",
+                        self.manifest_url,
+                        m.species.len(),
+                        renderer.config().species
+                    ),
+                });
+            }
+            Err((message, retryable)) => {
+                let url = self.manifest_url.clone();
+                self.manifest_load = self.fail(url, &message, attempt, retryable, now_s);
+                if self.manifest_load == Load::Broken {
+                    self.events.push(StreamEvent::Fatal { message });
+                }
+            }
+        }
+    }
+
+    fn on_tile(
+        &mut self,
+        renderer: &mut ForestRenderer,
+        queue: &wgpu::Queue,
+        t: usize,
+        result: Result<Vec<u8>, FetchError>,
+        view: &ViewData,
+        now_s: f64,
+    ) {
+        let Some(m) = &self.manifest else { return };
+        let entry = &m.tiles[t];
+        let url = join(&self.base, &entry.url);
+        let attempt = match &self.tiles[t] {
+            TileState::NotResident(Load::Requested { attempt }) => *attempt,
+            _ => 0,
+        };
+        let species_count = m.species.len() as u32;
+        let decoded = result
+            .map_err(|e| (e.to_string(), e.retryable()))
+            // A corrupt tile may be a truncated transfer: worth one more try.
+            .and_then(|bytes| Tile::decode(&url, &bytes, species_count).map_err(|e| (e.to_string(), true)));
+        let tile = match decoded {
+            Ok(tile) => tile,
+            Err((message, retryable)) => {
+                let load = self.fail(url, &message, attempt, retryable, now_s);
+                self.tiles[t] = TileState::NotResident(load);
+                return;
+            }
+        };
+        let mut result = renderer.upload_tile(queue, &tile);
+        // Full pools: evict resident tiles the view does not want, farthest first.
+        while matches!(result, Err(PoolError::Full(_))) {
+            if !self.evict_one(renderer, queue, view) {
+                break;
+            }
+            result = renderer.upload_tile(queue, &tile);
+        }
+        match result {
+            Ok(slot) => {
+                let species = slot.species_counts.iter().map(|(s, _)| *s).collect();
+                self.tiles[t] = TileState::Resident { slot, species };
+            }
+            Err(e) => {
+                // No room even after evicting everything unwanted: try again later.
+                self.events.push(StreamEvent::Failed { url, message: e.to_string(), retrying: true });
+                self.tiles[t] = TileState::NotResident(Load::Waiting { attempt, retry_at_s: now_s + 1.0 });
+            }
+        }
+    }
+
+    fn on_pack(
+        &mut self,
+        renderer: &mut ForestRenderer,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        s: usize,
+        result: Result<Vec<u8>, FetchError>,
+        now_s: f64,
+    ) {
+        let Some(m) = &self.manifest else { return };
+        let url = join(&self.base, &m.species[s].pack);
+        let attempt = match self.packs[s] {
+            Load::Requested { attempt } => attempt,
+            _ => 0,
+        };
+        let outcome = match result {
+            Ok(bytes) => match decode_pack(&url, &bytes) {
+                Ok(pack) => {
+                    renderer.upload_pack(device, queue, s as u32, &pack);
+                    Ok(())
+                }
+                Err(e) => Err((e.to_string(), true)),
+            },
+            Err(e) => Err((e.to_string(), e.retryable())),
+        };
+        match outcome {
+            Ok(()) => {
+                self.packs[s] = Load::Idle;
+                self.pack_ready[s] = true;
+            }
+            Err((message, retryable)) => self.packs[s] = self.fail(url, &message, attempt, retryable, now_s),
+        }
+    }
+
+    fn evict_one(&mut self, renderer: &mut ForestRenderer, queue: &wgpu::Queue, view: &ViewData) -> bool {
+        let Some(m) = &self.manifest else { return false };
+        let eye = view.eye_hi + view.eye_lo;
+        let victim = self
+            .tiles
+            .iter()
+            .enumerate()
+            .filter(|(i, t)| matches!(t, TileState::Resident { .. }) && !self.wanted.contains(i))
+            .max_by(|(a, _), (b, _)| {
+                let d = |i: usize| tile_distance(&m.tiles[i].bounds, eye);
+                d(*a).total_cmp(&d(*b))
+            })
+            .map(|(i, _)| i);
+        let Some(v) = victim else { return false };
+        if let TileState::Resident { slot, .. } =
+            std::mem::replace(&mut self.tiles[v], TileState::NotResident(Load::Idle))
+        {
+            renderer.evict_tile(queue, slot);
+        }
+        true
+    }
+
+    fn request_tiles(&mut self, view: &ViewData, draw_distance_m: f32, now_s: f64) {
+        let Some(m) = &self.manifest else { return };
+        let eye = view.eye_hi + view.eye_lo;
+        let mut wanted: Vec<(f32, usize)> = m
+            .tiles
+            .iter()
+            .enumerate()
+            .filter_map(|(i, t)| {
+                let lo = Vec3::from(t.bounds.min) - eye;
+                let hi = Vec3::from(t.bounds.max) - eye;
+                let (c, h) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+                let visible = view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(h) >= 0.0);
+                let d = (c.abs() - h).max(Vec3::ZERO).length();
+                (visible && d <= draw_distance_m).then_some((d, i))
+            })
+            .collect();
+        wanted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        self.wanted = wanted.iter().map(|(_, i)| *i).collect();
+        for &(_, i) in &wanted {
+            if self.fetcher.in_flight() >= self.config.max_in_flight {
+                break;
+            }
+            let due = match &self.tiles[i] {
+                TileState::NotResident(Load::Idle) => Some(0),
+                TileState::NotResident(Load::Waiting { attempt, retry_at_s }) if now_s >= *retry_at_s => Some(*attempt),
+                _ => None,
+            };
+            if let Some(attempt) = due {
+                let id = self.fetcher.start(&join(&self.base, &m.tiles[i].url));
+                self.requests.insert(id, Target::Tile(i));
+                self.tiles[i] = TileState::NotResident(Load::Requested { attempt });
+            }
+        }
+    }
+
+    fn request_packs(&mut self, now_s: f64) {
+        let needed = self.needed_species();
+        let Some(m) = &self.manifest else { return };
+        for s in needed {
+            if self.pack_ready[s] || self.fetcher.in_flight() >= self.config.max_in_flight {
+                continue;
+            }
+            let due = match self.packs[s] {
+                Load::Idle => Some(0),
+                Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
+                _ => None,
+            };
+            if let Some(attempt) = due {
+                let id = self.fetcher.start(&join(&self.base, &m.species[s].pack));
+                self.requests.insert(id, Target::Pack(s));
+                self.packs[s] = Load::Requested { attempt };
+            }
+        }
+    }
+}
+
+fn tile_distance(b: &crate::format::Bounds, eye: Vec3) -> f32 {
+    let lo = Vec3::from(b.min) - eye;
+    let hi = Vec3::from(b.max) - eye;
+    let (c, h) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+    (c.abs() - h).max(Vec3::ZERO).length()
+}
