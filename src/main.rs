@@ -141,13 +141,15 @@ mod cli {
         };
         let cam = match camera {
             Some(text) => parse_camera(text, manifest.origin_m)?,
-            None => match view {
-                SceneView::Far => NamedView::Far,
-                SceneView::Medium => NamedView::Medium,
-                SceneView::Close => NamedView::Close,
-                SceneView::Top => NamedView::Top,
+            None => {
+                let named = match view {
+                    SceneView::Far => NamedView::Far,
+                    SceneView::Medium => NamedView::Medium,
+                    SceneView::Close => NamedView::Close,
+                    SceneView::Top => NamedView::Top,
+                };
+                off.named_camera(named, timeout).context("the scene manifest is not loaded")?
             }
-            .camera(&manifest),
         };
         let t = std::time::Instant::now();
         events.extend(off.load_view(&cam, timeout));

@@ -83,7 +83,7 @@ fn fbm(seed: u64, x: f64, y: f64, scale: f64) -> f64 {
 
 /// Ground height of the demo terrain (metres above the origin).
 pub fn ground(x: f64, y: f64) -> f64 {
-    60.0 * fbm(99, x, y, 900.0) + 8.0 * fbm(98, x, y, 150.0)
+    25.0 * fbm(99, x, y, 900.0) + 2.0 * fbm(98, x, y, 150.0)
 }
 
 #[derive(Clone, Copy)]

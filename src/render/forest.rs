@@ -190,6 +190,7 @@ pub struct ForestRenderer {
     mesh: MeshPipelines,
     billboard: BillboardPipeline,
     cull: CullPipelines,
+    sky: wgpu::RenderPipeline,
     config: PoolConfig,
     pools: Pools,
     view_buffer: wgpu::Buffer,
@@ -227,6 +228,7 @@ impl ForestRenderer {
         let mesh = MeshPipelines::new(device, &shared, color_format);
         let billboard = BillboardPipeline::new(device, &shared, color_format);
         let cull = CullPipelines::new(device, &shared);
+        let sky = sky_pipeline(device, &shared, color_format);
         let slots = u64::from(config.species) * u64::from(REPR_COUNT);
         let pools = Pools {
             batches: buffer(device, "batch pool", u64::from(config.batches) * 80, U::STORAGE | U::COPY_DST),
@@ -269,6 +271,7 @@ impl ForestRenderer {
             mesh,
             billboard,
             cull,
+            sky,
             config,
             pools,
             view_buffer,
@@ -525,6 +528,8 @@ impl ForestRenderer {
             multiview_mask: None,
         });
         pass.set_bind_group(0, &self.view_group, &[]);
+        pass.set_pipeline(&self.sky);
+        pass.draw(0..3, 0..1);
         pass.set_bind_group(2, &self.instance_group, &[]);
         let mut draws = 0;
         for (i, p) in self.packs.iter().enumerate() {
@@ -587,6 +592,46 @@ impl ForestRenderer {
     pub fn slot_count(&self) -> u32 {
         self.species_count * REPR_COUNT
     }
+}
+
+fn sky_pipeline(device: &wgpu::Device, shared: &SharedLayouts, format: wgpu::TextureFormat) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("sky.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(super::shaders::SKY.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("sky"),
+        bind_group_layouts: &[Some(&shared.view)],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("sky"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: Default::default(),
+        // Depth 0 is the far end under reversed Z: never occludes a tree.
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::Always),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(format.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 /// Creates the depth texture every Sylva target needs.

@@ -208,6 +208,21 @@ impl<F: Fetcher> OffscreenScene<F> {
         }
     }
 
+    /// The camera of a named view, placing the close view on the ground near the
+    /// scene centre (loads the data around it to find the ground).
+    pub fn named_camera(&mut self, view: NamedView, timeout_s: f64) -> Option<Camera> {
+        let mut cam = view.camera(self.stream.manifest()?);
+        if view == NamedView::Close {
+            // Look straight down at the spot first so its tile is resident.
+            let down = Camera { pitch_rad: -std::f64::consts::FRAC_PI_2, eye_m: cam.eye_m + DVec3::Z * 200.0, ..cam };
+            self.load_view(&down, timeout_s);
+            if let Some(z) = self.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
+                cam.eye_m.z = f64::from(z) + 1.7;
+            }
+        }
+        Some(cam)
+    }
+
     /// Renders one frame from `camera`; with `measure`, waits for the GPU after each
     /// pass to time it and reads the counters back.
     pub fn render(&mut self, camera: &Camera, measure: bool) -> FrameStats {

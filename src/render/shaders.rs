@@ -14,5 +14,8 @@ pub const BILLBOARD: &str =
 /// The cull and LoD-selection compute passes.
 pub const CULL: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cull.wgsl"));
 
+/// The sky/ground background.
+pub const SKY: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/sky.wgsl"));
+
 /// Every composed shader with its name, for validation tests.
-pub const ALL: &[(&str, &str)] = &[("mesh", MESH), ("billboard", BILLBOARD), ("cull", CULL)];
+pub const ALL: &[(&str, &str)] = &[("mesh", MESH), ("billboard", BILLBOARD), ("cull", CULL), ("sky", SKY)];

@@ -68,7 +68,13 @@ enum Load {
 
 enum TileState {
     NotResident(Load),
-    Resident { slot: TileSlot, species: Vec<u32> },
+    /// In the pools; `cells` keeps each batch's cell rectangle and lowest ground
+    /// (x0, y0, x1, y1, z) for ground-height queries.
+    Resident {
+        slot: TileSlot,
+        species: Vec<u32>,
+        cells: Vec<[f32; 5]>,
+    },
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -160,6 +166,22 @@ impl<F: Fetcher> SceneStream<F> {
         let needed = self.needed_species();
         let packs_done = needed.iter().all(|&s| self.pack_ready[s] || self.packs[s] == Load::Broken);
         manifest_done && tiles_done && packs_done && self.requests.is_empty()
+    }
+
+    /// The lowest tree base of the resident batches whose cell holds `(x, y)`
+    /// (metres relative to the scene origin): a ground estimate without a DEM.
+    #[must_use]
+    pub fn ground_height_at(&self, x: f32, y: f32) -> Option<f32> {
+        self.tiles
+            .iter()
+            .filter_map(|t| match t {
+                TileState::Resident { cells, .. } => Some(cells),
+                TileState::NotResident(_) => None,
+            })
+            .flatten()
+            .filter(|c| c[0] <= x && x <= c[2] && c[1] <= y && y <= c[3])
+            .map(|c| c[4])
+            .reduce(f32::min)
     }
 
     fn needed_species(&self) -> Vec<usize> {
@@ -311,7 +333,15 @@ impl<F: Fetcher> SceneStream<F> {
         match result {
             Ok(slot) => {
                 let species = slot.species_counts.iter().map(|(s, _)| *s).collect();
-                self.tiles[t] = TileState::Resident { slot, species };
+                let cells = tile
+                    .batches
+                    .iter()
+                    .map(|b| {
+                        let side = b.xy_step_m * 65535.0;
+                        [b.origin_m[0], b.origin_m[1], b.origin_m[0] + side, b.origin_m[1] + side, b.origin_m[2]]
+                    })
+                    .collect();
+                self.tiles[t] = TileState::Resident { slot, species, cells };
             }
             Err(e) => {
                 // No room even after evicting everything unwanted: try again later.
