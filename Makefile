@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust demo release bench-bake fuzz
+.PHONY: setup test fmt clippy clippy-wasm test-rust demo release bench-bake fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -59,3 +59,10 @@ fuzz:
 	@command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz
 	cd fuzz && for t in decode_tile decode_pack decode_manifest decode_ids; do \
 	  $(CARGO) +nightly fuzz run $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 || exit 1; done
+
+# Regenerates the small test scene (commit the result; then re-bless image tests
+# with SYLVA_BLESS=1 cargo test --test gpu_scene).
+fixtures: release
+	rm -rf tests/fixtures/forest-small
+	target/release/sylva-bake demo --trees 3000 --seed 3 --billboard-size 32 --texture-size 64 \
+	  --cell-size 32 --tile-cells 4 --out tests/fixtures/forest-small

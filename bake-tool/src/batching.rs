@@ -205,8 +205,10 @@ fn make_batch(
     }
     for k in 0..3 {
         batch.center_m[k] = (lo[k] + hi[k]) * 0.5;
-        // A hair of slack so f32 rounding in the centre never cuts a tree.
-        batch.half_extent_m[k] = (hi[k] - lo[k]) * 0.5 * 1.0001 + 1e-3;
+        // Slack for f32 rounding of the centre: a relative hair plus two ulps of the
+        // centre itself, which matter for batches far from the scene origin.
+        let ulp = batch.center_m[k].abs() * f32::EPSILON;
+        batch.half_extent_m[k] = (hi[k] - lo[k]) * 0.5 * 1.0001 + 1e-3 + 2.0 * ulp;
     }
     batch.radius_m = glam::Vec3::from(batch.half_extent_m).length();
     batch

@@ -317,6 +317,8 @@ pub fn demo_layout(count: usize, seed: u64) -> Vec<SceneTree> {
     // About 450 trees per hectare where the forest is dense; the area grows with the count.
     let area_m2 = count as f64 / 450.0 * 10_000.0 * 1.8;
     let half = area_m2.sqrt() * 0.5;
+    // Noise periods shrink with small scenes so every demo has clearings and all species.
+    let k = (half / 1000.0).clamp(0.12, 1.0);
     let mut rng = Rng::new(seed);
     let mut trees = Vec::with_capacity(count);
     let mut attempts = 0u64;
@@ -324,18 +326,18 @@ pub fn demo_layout(count: usize, seed: u64) -> Vec<SceneTree> {
         attempts += 1;
         let x = f64::from(rng.f32()) * 2.0 * half - half;
         let y = f64::from(rng.f32()) * 2.0 * half - half;
-        let density = fbm(seed + 1, x, y, 400.0);
-        let clump = fbm(seed + 2, x, y, 60.0);
+        let density = fbm(seed + 1, x, y, 400.0 * k);
+        let clump = fbm(seed + 2, x, y, 60.0 * k.sqrt());
         // Clearings where the density field is low; clumps where both are high.
         let p = ((density - 0.38) * 3.0).clamp(0.0, 1.0) * (0.55 + 0.45 * clump);
         if f64::from(rng.f32()) > p {
             continue;
         }
-        let zone = fbm(seed + 3, x, y, 700.0);
+        let zone = fbm(seed + 3, x, y, 700.0 * k);
         let z = ground(x, y);
         // Spruce higher up, birch in patches, beech elsewhere.
-        let birch_patch = fbm(seed + 4, x, y, 120.0);
-        let species = if zone + z / 300.0 > 0.62 {
+        let birch_patch = fbm(seed + 4, x, y, 120.0 * k.sqrt());
+        let species = if zone + z / 300.0 > 0.6 {
             0
         } else if birch_patch > 0.58 {
             2

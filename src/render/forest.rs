@@ -231,9 +231,20 @@ impl ForestRenderer {
         let sky = sky_pipeline(device, &shared, color_format);
         let slots = u64::from(config.species) * u64::from(REPR_COUNT);
         let pools = Pools {
-            batches: buffer(device, "batch pool", u64::from(config.batches) * 80, U::STORAGE | U::COPY_DST),
-            instances: buffer(device, "instance pool", u64::from(config.instances) * 8, U::STORAGE | U::COPY_DST),
-            items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE),
+            // COPY_SRC everywhere tests and stats read back from.
+            batches: buffer(
+                device,
+                "batch pool",
+                u64::from(config.batches) * 80,
+                U::STORAGE | U::COPY_DST | U::COPY_SRC,
+            ),
+            instances: buffer(
+                device,
+                "instance pool",
+                u64::from(config.instances) * 8,
+                U::STORAGE | U::COPY_DST | U::COPY_SRC,
+            ),
+            items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE | U::COPY_SRC),
             visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
             control: buffer(device, "cull control", 8 * 4, U::STORAGE | U::COPY_SRC),
             dispatch: buffer(device, "cull dispatch", 4 * 4, U::STORAGE | U::INDIRECT),
@@ -585,6 +596,12 @@ impl ForestRenderer {
     #[must_use]
     pub fn readback_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer) {
         (&self.pools.control, &self.pools.args, &self.pools.items)
+    }
+
+    /// The batch and instance pools (for tests that check the GPU against the CPU oracle).
+    #[must_use]
+    pub fn pool_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        (&self.pools.batches, &self.pools.instances)
     }
 
     /// Number of draw slots in use.

@@ -9,8 +9,10 @@ use serde::Serialize;
 
 use super::camera::Camera;
 use super::context::{read_texture_rgba8, GpuContext};
+use super::cull::DrawItem;
 use super::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
 use super::gpu_data::{Repr, REPR_COUNT};
+use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Manifest;
 use crate::scene::{Fetcher, SceneStream, StreamConfig, StreamEvent, ThreadFetcher};
 
@@ -90,10 +92,11 @@ impl NamedView {
             NamedView::Medium => {
                 Camera::look_at(DVec3::new(c.x, c.y - 260.0, ground + 110.0), DVec3::new(c.x, c.y + 120.0, ground))
             }
+            // At the southern edge of the forest, looking in, at eye height.
             NamedView::Close => Camera {
-                eye_m: DVec3::new(c.x, c.y - 30.0, ground + 2.0),
+                eye_m: DVec3::new(c.x, lo.y - 6.0, ground + 1.7),
                 heading_rad: 0.0,
-                pitch_rad: 4f64.to_radians(),
+                pitch_rad: 6f64.to_radians(),
                 ..Camera::default()
             },
             NamedView::Top => {
@@ -291,6 +294,34 @@ impl<F: Fetcher> OffscreenScene<F> {
         self.readback.unmap();
     }
 
+    /// Reads back what the last cull pass selected, with the pools it selected
+    /// from: (per-slot draw items, batches, instances, visible batch count).
+    /// For tests against [`super::cull::cpu_select`].
+    #[must_use]
+    pub fn read_selection(&self) -> (Vec<Vec<DrawItem>>, Vec<GpuBatch>, Vec<PackedInstance>, u32) {
+        let (control, args, items) = self.renderer.readback_buffers();
+        let (batches, instances) = self.renderer.pool_buffers();
+        let slots = self.renderer.slot_count() as usize;
+        let control: Vec<u32> = bytemuck::cast_slice(&read_buffer(&self.ctx, control, 32)).to_vec();
+        let args: Vec<u32> = bytemuck::cast_slice(&read_buffer(&self.ctx, args, slots as u64 * 20)).to_vec();
+        let item_words: Vec<u32> = bytemuck::cast_slice(&read_buffer(&self.ctx, items, items.size())).to_vec();
+        let table = self.renderer.species_table();
+        let per_slot = (0..slots)
+            .map(|slot| {
+                let species = &table[slot / REPR_COUNT as usize];
+                let base = species.slot_base[slot % REPR_COUNT as usize] as usize;
+                let n = args[slot * 5 + 1] as usize;
+                (0..n).map(|i| (item_words[2 * (base + i)], item_words[2 * (base + i) + 1])).collect()
+            })
+            .collect();
+        let batch_count = u64::from(self.renderer.batch_slots());
+        let pool_batches: Vec<GpuBatch> =
+            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, batches, batch_count * 80));
+        let pool_instances: Vec<PackedInstance> =
+            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, instances, instances.size()));
+        (per_slot, pool_batches, pool_instances, control[0])
+    }
+
     /// The last rendered image, RGBA8 sRGB, tightly packed rows.
     #[must_use]
     pub fn read_image(&self) -> Vec<u8> {
@@ -302,4 +333,25 @@ impl<F: Fetcher> OffscreenScene<F> {
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
     }
+}
+
+/// Copies `size` bytes of a GPU buffer (which needs COPY_SRC) to the CPU. Blocks.
+#[must_use]
+pub fn read_buffer(ctx: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> Vec<u8> {
+    let size = size.max(4).next_multiple_of(4);
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    let slice = staging.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map readback"));
+    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
+    let data = slice.get_mapped_range().expect("mapped").to_vec();
+    staging.unmap();
+    data
 }

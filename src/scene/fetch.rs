@@ -5,8 +5,6 @@
 //! [`ThreadFetcher`] serves local paths and `http(s)://` URLs from worker
 //! threads; the browser build uses `fetch` (the browser viewer issue).
 
-use std::collections::HashMap;
-
 /// Identifies a request.
 pub type RequestId = u64;
 
@@ -87,7 +85,8 @@ pub fn scene_locations(scene: &str) -> (String, String) {
 
 #[cfg(not(target_arch = "wasm32"))]
 mod native {
-    use super::{FetchError, Fetcher, HashMap, RequestId};
+    use super::{FetchError, Fetcher, RequestId};
+    use std::collections::HashMap;
     use std::sync::mpsc;
 
     type Job = (RequestId, String);

@@ -168,10 +168,11 @@ impl<F: Fetcher> SceneStream<F> {
         manifest_done && tiles_done && packs_done && self.requests.is_empty()
     }
 
-    /// The lowest tree base of the resident batches whose cell holds `(x, y)`
-    /// (metres relative to the scene origin): a ground estimate without a DEM.
+    /// The lowest tree base of the resident batch cell nearest to `(x, y)` within
+    /// 200 m (metres relative to the scene origin): a ground estimate without a DEM.
     #[must_use]
     pub fn ground_height_at(&self, x: f32, y: f32) -> Option<f32> {
+        let distance = |c: &[f32; 5]| ((c[0] - x).max(x - c[2]).max(0.0)).hypot((c[1] - y).max(y - c[3]).max(0.0));
         self.tiles
             .iter()
             .filter_map(|t| match t {
@@ -179,9 +180,10 @@ impl<F: Fetcher> SceneStream<F> {
                 TileState::NotResident(_) => None,
             })
             .flatten()
-            .filter(|c| c[0] <= x && x <= c[2] && c[1] <= y && y <= c[3])
-            .map(|c| c[4])
-            .reduce(f32::min)
+            .map(|c| (distance(c), c[4]))
+            .filter(|(d, _)| *d <= 200.0)
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)))
+            .map(|(_, z)| z)
     }
 
     fn needed_species(&self) -> Vec<usize> {

@@ -1,0 +1,345 @@
+//! GPU tests of the scene renderer on `tests/fixtures/forest-small` (3,000 demo
+//! trees, 3 species, 144 batches in 16 tiles; `make fixtures` regenerates it):
+//! the GPU selection against the CPU oracle, image references, precision far
+//! from the origin, and streaming over HTTP with failing tiles.
+//!
+//! Image references are `tests/golden/render-*.png`, made on lavapipe; on a
+//! mismatch the test writes `*-actual.png` and `*-difference.png` next to the
+//! test binary's temp dir. Re-bless with `SYLVA_BLESS=1`.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use sylva::format::tile::Tile;
+use sylva::format::Manifest;
+use sylva::metrics::multiscale_rmse;
+use sylva::render::camera::Camera;
+use sylva::render::cull::{cpu_select, unpack_item_y};
+use sylva::render::forest::PoolConfig;
+use sylva::render::offscreen::{NamedView, OffscreenScene};
+use sylva::scene::StreamEvent;
+
+const W: u32 = 320;
+const H: u32 = 180;
+
+fn fixture() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("scene-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn open(scene: &str) -> OffscreenScene {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
+    }
+    let pools = PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
+    OffscreenScene::open(scene, W, H, pools).expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)")
+}
+
+fn manifest(off: &mut OffscreenScene) -> Manifest {
+    off.load_view(&Camera::default(), 30.0);
+    off.stream.manifest().expect("manifest loads").clone()
+}
+
+fn render(off: &mut OffscreenScene, cam: &Camera) -> Vec<u8> {
+    let events = off.load_view(cam, 30.0);
+    assert!(!events.iter().any(|e| matches!(e, StreamEvent::Failed { .. } | StreamEvent::Fatal { .. })), "{events:?}");
+    off.render(cam, false);
+    off.read_image()
+}
+
+/// Share of pixels whose green channel dominates: trees (not sky or ground).
+fn foliage_share(img: &[u8]) -> f64 {
+    let n = img.chunks_exact(4).filter(|p| p[1] > p[0] + 8 && p[1] > p[2] + 8).count();
+    n as f64 / (img.len() / 4) as f64
+}
+
+fn lcg(seed: &mut u64) -> f64 {
+    *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    (*seed >> 11) as f64 / (1u64 << 53) as f64
+}
+
+#[test]
+fn gpu_selection_matches_the_cpu_oracle() {
+    let mut off = open(fixture().to_str().unwrap());
+    let m = manifest(&mut off);
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let mut cameras: Vec<(String, Camera)> = Vec::new();
+    for v in [NamedView::Far, NamedView::Medium, NamedView::Close, NamedView::Top] {
+        cameras.push((format!("{v:?}"), off.named_camera(v, 30.0).unwrap()));
+    }
+    // Along the horizon from inside the forest, and straight down from low height
+    // (the eye inside a batch's bounds).
+    let c = (lo + hi) * 0.5;
+    cameras.push((
+        "horizon".into(),
+        Camera { eye_m: DVec3::new(c.x, c.y, lo.z + 3.0), heading_rad: 1.3, ..Camera::default() },
+    ));
+    cameras.push((
+        "down inside a batch".into(),
+        Camera {
+            eye_m: DVec3::new(c.x + 7.0, c.y - 5.0, lo.z + 20.0),
+            pitch_rad: -std::f64::consts::FRAC_PI_2,
+            ..Camera::default()
+        },
+    ));
+    let mut seed = 42;
+    for i in 0..6 {
+        let eye = DVec3::new(
+            lo.x + lcg(&mut seed) * (hi.x - lo.x),
+            lo.y + lcg(&mut seed) * (hi.y - lo.y),
+            lo.z + lcg(&mut seed) * 150.0,
+        );
+        let cam = Camera {
+            eye_m: eye,
+            heading_rad: lcg(&mut seed) * std::f64::consts::TAU,
+            pitch_rad: -lcg(&mut seed) * 1.2,
+            ..Camera::default()
+        };
+        cameras.push((format!("random {i}"), cam));
+    }
+    // Quality ½ moves every band edge: more trees in transitions.
+    off.settings.quality = 0.5;
+    let mut total_items = 0;
+    let mut transitions = 0;
+    for (name, cam) in &cameras {
+        off.load_view(cam, 30.0);
+        off.render(cam, false);
+        let (gpu, batches, instances, visible) = off.read_selection();
+        let oracle = cpu_select(off.renderer.last_view(), &batches, &instances, off.renderer.species_table());
+        assert_eq!(visible as usize, oracle.visible_batches.len(), "{name}: visible batch counts differ");
+        let mut mismatches = Vec::new();
+        for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
+            let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+            let mut c: Vec<(u32, u32)> = c.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+            g.sort_unstable();
+            c.sort_unstable();
+            if g != c {
+                mismatches.push((slot, g.len(), c.len()));
+            }
+            total_items += c.len();
+            transitions += c.iter().filter(|(_, side)| *side == 1).count();
+        }
+        assert!(mismatches.is_empty(), "{name}: slots (slot, gpu, cpu) differ: {mismatches:?}");
+        assert_eq!(oracle.dropped, 0);
+    }
+    assert!(total_items > 10_000, "the cameras saw too little ({total_items} items)");
+    assert!(transitions > 20, "no cross-fade transitions exercised ({transitions})");
+}
+
+fn compare_with_reference(name: &str, img: &[u8], tolerance: f64) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("tests/golden/render-{name}.png"));
+    if std::env::var_os("SYLVA_BLESS").is_some() {
+        image::save_buffer(&path, img, W, H, image::ColorType::Rgba8).unwrap();
+    }
+    let reference =
+        image::open(&path).unwrap_or_else(|e| panic!("{}: {e} (bless with SYLVA_BLESS=1)", path.display())).to_rgba8();
+    let error = multiscale_rmse(img, reference.as_raw(), W, H);
+    if error > tolerance {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+        let actual = dir.join(format!("render-{name}-actual.png"));
+        image::save_buffer(&actual, img, W, H, image::ColorType::Rgba8).unwrap();
+        let diff: Vec<u8> = img
+            .chunks_exact(4)
+            .zip(reference.as_raw().chunks_exact(4))
+            .flat_map(|(a, b)| {
+                let d = |c: usize| (a[c].abs_diff(b[c]) as u32 * 4).min(255) as u8;
+                [d(0), d(1), d(2), 255]
+            })
+            .collect();
+        let diff_path = dir.join(format!("render-{name}-difference.png"));
+        image::save_buffer(&diff_path, &diff, W, H, image::ColorType::Rgba8).unwrap();
+        panic!(
+            "{name}: multi-scale RMSE {error:.4} > {tolerance}; see {} and {}",
+            actual.display(),
+            diff_path.display()
+        );
+    }
+}
+
+#[test]
+fn renders_match_references() {
+    let mut off = open(fixture().to_str().unwrap());
+    manifest(&mut off);
+    // Tolerance: lavapipe is deterministic on one machine; 0.01 (≈ 2.5/255 averaged
+    // over scales) absorbs LLVM/Mesa version differences in rasterisation and
+    // transcendental functions, while a missing species, a wrong LoD band or a
+    // shifted camera gives 0.05 and more.
+    for (name, view, min_foliage) in
+        [("close", NamedView::Close, 0.2), ("medium", NamedView::Medium, 0.3), ("top", NamedView::Top, 0.2)]
+    {
+        let cam = off.named_camera(view, 30.0).unwrap();
+        let img = render(&mut off, &cam);
+        let share = foliage_share(&img);
+        assert!(share > min_foliage, "{name}: only {share:.2} of the image is foliage");
+        compare_with_reference(name, &img, 0.01);
+    }
+}
+
+/// Writes a copy of `src` whose origin moved by −`shift` (so every relative
+/// coordinate grows by `shift`): the same world, far from its origin.
+#[allow(clippy::needless_range_loop)] // three parallel arrays indexed by axis
+fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
+    let bytes = std::fs::read(src.join("scene.json")).unwrap();
+    let mut m = Manifest::decode("scene.json", &bytes).unwrap();
+    for k in 0..3 {
+        m.origin_m[k] -= f64::from(shift[k]);
+        m.bounds.min[k] += shift[k];
+        m.bounds.max[k] += shift[k];
+    }
+    std::fs::create_dir_all(dst.join("tiles")).unwrap();
+    std::fs::create_dir_all(dst.join("species")).unwrap();
+    for t in &mut m.tiles {
+        for k in 0..3 {
+            t.bounds.min[k] += shift[k];
+            t.bounds.max[k] += shift[k];
+        }
+        let tb = std::fs::read(src.join(&t.url)).unwrap();
+        let mut tile = Tile::decode(&t.url, &tb, m.species.len() as u32).unwrap();
+        for b in &mut tile.batches {
+            for k in 0..3 {
+                // Cell corners are whole metres: exact in f32 at 5 000 km.
+                b.origin_m[k] += shift[k];
+                b.center_m[k] += shift[k];
+                // The centre rounds to the f32 grid there (0.5 m): widen the bounds.
+                b.half_extent_m[k] += 1.0;
+            }
+            b.radius_m += 2.0;
+        }
+        std::fs::write(dst.join(&t.url), tile.encode()).unwrap();
+        std::fs::copy(src.join(&t.ids_url), dst.join(&t.ids_url)).unwrap();
+    }
+    for s in &m.species {
+        std::fs::copy(src.join(&s.pack), dst.join(&s.pack)).unwrap();
+    }
+    std::fs::write(dst.join("scene.json"), m.encode()).unwrap();
+}
+
+#[test]
+fn origin_far_away_renders_like_origin_near() {
+    let shift = [5_000_000.0f32, 5_000_000.0, 0.0];
+    let far_dir = tmp("shifted");
+    shifted_copy(&fixture(), &far_dir, shift);
+    let mut near = open(fixture().to_str().unwrap());
+    manifest(&mut near);
+    let mut far = open(far_dir.to_str().unwrap());
+    manifest(&mut far);
+    for view in [NamedView::Medium, NamedView::Close] {
+        let cam = near.named_camera(view, 30.0).unwrap();
+        let cam_far = Camera { eye_m: cam.eye_m + DVec3::new(5e6, 5e6, 0.0), ..cam };
+        let a = render(&mut near, &cam);
+        let b = render(&mut far, &cam_far);
+        assert!(foliage_share(&a) > 0.2);
+        let e = multiscale_rmse(&a, &b, W, H);
+        assert!(e <= 1.0 / 255.0, "{view:?}: multi-scale RMSE {e:.5} between origin 0 and 5 000 km");
+    }
+}
+
+#[test]
+fn extreme_cameras_render_without_artefacts() {
+    let mut off = open(fixture().to_str().unwrap());
+    let m = manifest(&mut off);
+    // 0.2 m in front of a trunk: find a tree through the cull pass's own pools.
+    let top = off.named_camera(NamedView::Top, 30.0).unwrap();
+    render(&mut off, &top);
+    let (_, batches, instances, _) = off.read_selection();
+    let b = batches.iter().find(|b| b.instance_count > 0).unwrap();
+    let tree = instances[b.instance_offset as usize].decode(b);
+    let p = DVec3::new(f64::from(tree.position_m[0]), f64::from(tree.position_m[1]), f64::from(tree.position_m[2]));
+    // Trunk radius of the demo trees is 1.8 % of their height (≈ 0.4 m); look at it from 0.2 m outside.
+    let cam = Camera {
+        eye_m: p + DVec3::new(0.0, -(0.2 + 0.02 * 28.0), 1.5),
+        heading_rad: 0.0,
+        near_m: 0.05,
+        ..Camera::default()
+    };
+    let img = render(&mut off, &cam);
+    let brown = img.chunks_exact(4).filter(|p| p[0] > p[2] + 10 && p[0] >= p[1]).count() as f64 / f64::from(W * H);
+    assert!(brown > 0.3, "the trunk should fill the view, brown share {brown:.2}");
+    // 50 km away with the draw distance opened up: trees are a tenth of a pixel,
+    // so the image must be the plain background — no stray or NaN pixels.
+    off.settings.draw_distance_m = 100_000.0;
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let far = Camera::look_at(c + DVec3::new(0.0, -50_000.0, 2_000.0), c);
+    let img = render(&mut off, &far);
+    off.settings.draw_distance_m = 1.0;
+    let background = render(&mut off, &far);
+    let e = multiscale_rmse(&img, &background, W, H);
+    assert!(e < 0.002, "50 km: image differs from the background by {e}");
+    // 2 km away the forest is a small patch of foliage.
+    off.settings.draw_distance_m = 100_000.0;
+    let near = Camera::look_at(c + DVec3::new(0.0, -2_000.0, 300.0), c);
+    let share = foliage_share(&render(&mut off, &near));
+    assert!(share > 0.0005 && share < 0.05, "forest 2 km away covers {share}");
+}
+
+/// A one-thread HTTP server over the fixture: `/tiles/<bad404>` answers 404,
+/// `<bad500>` 500, `<truncated>` half of its bytes with the full Content-Length.
+fn serve(root: PathBuf, bad404: String, bad500: String, truncated: String) -> u16 {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        for stream in listener.incoming().take(500) {
+            let Ok(mut s) = stream else { continue };
+            let mut buf = [0u8; 4096];
+            let n = s.read(&mut buf).unwrap_or(0);
+            let req = String::from_utf8_lossy(&buf[..n]);
+            let path = req.split_whitespace().nth(1).unwrap_or("/").trim_start_matches('/').to_string();
+            let reply = |s: &mut std::net::TcpStream, status: &str, body: &[u8], len: usize| {
+                let head = format!("HTTP/1.1 {status}\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n");
+                let _ = s.write_all(head.as_bytes());
+                let _ = s.write_all(body);
+            };
+            if path == bad404 {
+                reply(&mut s, "404 Not Found", b"", 0);
+            } else if path == bad500 {
+                reply(&mut s, "500 Internal Server Error", b"", 0);
+            } else if let Ok(body) = std::fs::read(root.join(&path)) {
+                if path == truncated {
+                    reply(&mut s, "200 OK", &body[..body.len() / 2], body.len());
+                } else {
+                    reply(&mut s, "200 OK", &body, body.len());
+                }
+            } else {
+                reply(&mut s, "404 Not Found", b"", 0);
+            }
+        }
+    });
+    port
+}
+
+#[test]
+fn streaming_over_http_survives_failing_tiles() {
+    let m = Manifest::decode("scene.json", &std::fs::read(fixture().join("scene.json")).unwrap()).unwrap();
+    let urls: Vec<String> = m.tiles.iter().map(|t| t.url.clone()).collect();
+    let port = serve(fixture(), urls[0].clone(), urls[1].clone(), urls[2].clone());
+    let mut off = open(&format!("http://127.0.0.1:{port}/scene.json"));
+    off.load_view(&Camera::default(), 30.0);
+    let cam = off.named_camera(NamedView::Top, 30.0).unwrap();
+    let events = off.load_view(&cam, 30.0);
+    off.render(&cam, false);
+    let img = off.read_image();
+    let failed: Vec<(&String, bool)> = events
+        .iter()
+        .filter_map(|e| match e {
+            StreamEvent::Failed { url, retrying, .. } => Some((url, *retrying)),
+            _ => None,
+        })
+        .collect();
+    let for_url = |u: &str| failed.iter().filter(|(f, _)| f.ends_with(u)).count();
+    assert_eq!(for_url(&urls[0]), 1, "404 is not retried: {failed:?}");
+    assert!(for_url(&urls[1]) >= 2, "500 is retried: {failed:?}");
+    assert!(for_url(&urls[2]) >= 2, "a truncated tile is retried: {failed:?}");
+    assert!(failed.iter().any(|(u, r)| u.ends_with(&urls[1]) && !r), "500 is given up on eventually");
+    let stats = off.stream.stats();
+    assert_eq!(stats.tiles_resident as usize, urls.len() - 3, "the other tiles are resident");
+    assert!(off.stream.is_settled());
+    assert!(foliage_share(&img) > 0.1, "the rest of the scene renders");
+}
