@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust demo release bench-bake fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust demo release bench-bake bench-render fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -53,6 +53,13 @@ bench-bake: release
 	  --placements target/bench/placements-1m.csv --map spruce=pine --default-model oak \
 	  --out target/bench/bake-1m 2>&1 | grep -E "wrote|placements|Elapsed|Maximum resident"
 	target/release/sylva-bake inspect target/bench/bake-1m
+
+# Renderer benchmarks (docs/BENCHMARKS.md): bakes demo scenes of 10k, 100k and 1M
+# trees once, then measures them side by side.
+bench-render: release
+	@for n in 10k:10000 100k:100000 1m:1000000; do name=$${n%%:*}; count=$${n##*:}; \
+	  test -f target/bench/demo-$$name/scene.json || target/release/sylva-bake demo --trees $$count --out target/bench/demo-$$name; done
+	$(CARGO) bench --locked --bench frame -- target/bench/demo-10k target/bench/demo-100k target/bench/demo-1m
 
 # Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
 fuzz:

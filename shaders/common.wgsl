@@ -20,7 +20,9 @@ struct View {
     // Ambient colour (rgb).
     ambient: vec4<f32>,
     // x: pixels per metre at 1 m distance (viewport height / (2 tan(fov_y / 2)) × quality),
-    // y: draw distance (m), z: transition band (fraction of a threshold), w: unused.
+    // y: draw distance (m), z: transition band (fraction of a threshold),
+    // w: culling mode (0 batches then trees, 1 trees only, 2 none) — the
+    // baselines the benchmarks compare against.
     lod: vec4<f32>,
     // x: render mode (0 lit, 1 capture), y: batch slots to test, z: debug view
     // (0 off, 1 colour by representation), w: species count.

@@ -18,7 +18,8 @@
 
 // Indirect dispatch arguments of cull_instances; bound only to prepare_dispatch
 // (a buffer may not be INDIRECT and writable storage in one dispatch).
-@group(2) @binding(0) var<storage, read_write> dispatch_args: array<u32, 4>;
+// Words 4–7: indirect draw arguments of the batch-bounds debug view.
+@group(2) @binding(0) var<storage, read_write> dispatch_args: array<u32, 8>;
 
 const WORKGROUP: u32 = 64u;
 // WebGPU's limit on workgroups per dimension.
@@ -71,11 +72,12 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let center = eye_relative(b.center_m, vec3<f32>(0.0), view);
-    // Sphere first (cheap), then the tighter box.
-    if !sphere_visible(center, b.radius_m, view) || !box_visible(center, b.half_extent_m) {
+    // Sphere first (cheap), then the tighter box; skipped by the baseline modes.
+    let batch_culling = view.lod.w < 0.5;
+    if batch_culling && (!sphere_visible(center, b.radius_m, view) || !box_visible(center, b.half_extent_m)) {
         return;
     }
-    if box_distance(center, b.half_extent_m) > view.lod.y {
+    if batch_culling && box_distance(center, b.half_extent_m) > view.lod.y {
         return;
     }
     let s = species[b.species];
@@ -92,6 +94,11 @@ fn prepare_dispatch() {
     dispatch_args[0] = min(n, MAX_GROUPS_X);
     dispatch_args[1] = (n + MAX_GROUPS_X - 1u) / MAX_GROUPS_X;
     dispatch_args[2] = 1u;
+    // Debug view: 24 line vertices per visible batch.
+    dispatch_args[4] = 24u;
+    dispatch_args[5] = n;
+    dispatch_args[6] = 0u;
+    dispatch_args[7] = 0u;
 }
 
 fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fade: f32) {
@@ -155,11 +162,9 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         let tree = unpack_instance(instances[instance], b, view);
         let center = tree.pos + rotate_z(s.sphere.xyz * tree.scale, tree.yaw);
         let radius = s.sphere.w * tree.scale;
-        if !sphere_visible(center, radius, view) {
-            continue;
-        }
         let dist = max(length(center), 1e-3);
-        if dist - radius > view.lod.y {
+        // Mode 2 (no culling) draws every tree.
+        if view.lod.w < 1.5 && (!sphere_visible(center, radius, view) || dist - radius > view.lod.y) {
             continue;
         }
         let h_px = s.select.x * tree.scale * view.lod.x / dist;

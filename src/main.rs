@@ -75,6 +75,9 @@ mod cli {
             /// Colour trees by representation (red mesh0, yellow mesh1, blue billboard).
             #[arg(long)]
             debug_lod: bool,
+            /// Draw the boxes of the batches that pass the batch test.
+            #[arg(long)]
+            debug_bounds: bool,
             /// Write frame statistics as JSON here.
             #[arg(long)]
             stats: Option<PathBuf>,
@@ -197,6 +200,7 @@ mod cli {
                 quality,
                 draw_distance,
                 debug_lod,
+                debug_bounds,
                 stats,
                 timeout,
                 pack_view,
@@ -211,6 +215,7 @@ mod cli {
                         quality,
                         draw_distance_m: draw_distance,
                         debug_lod,
+                        debug_bounds,
                         ..RenderSettings::default()
                     };
                     return render_scene(

@@ -150,10 +150,11 @@ pub fn cpu_select(
         }
         let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
         let half = Vec3::from(b.half_extent_m);
-        if !sphere_visible(center, b.radius_m, view) || !box_visible(center, half, view) {
+        let batch_culling = view.lod[3] < 0.5;
+        if batch_culling && (!sphere_visible(center, b.radius_m, view) || !box_visible(center, half, view)) {
             continue;
         }
-        if (center.abs() - half).max(Vec3::ZERO).length() > view.lod[1] {
+        if batch_culling && (center.abs() - half).max(Vec3::ZERO).length() > view.lod[1] {
             continue;
         }
         let s = &species[b.species as usize];
@@ -167,11 +168,8 @@ pub fn cpu_select(
             let d = decode_eye_relative(packed, b, view);
             let c = d.0 + rotate_z(Vec3::new(s.sphere[0], s.sphere[1], s.sphere[2]) * d.2, d.1);
             let r = s.sphere[3] * d.2;
-            if !sphere_visible(c, r, view) {
-                continue;
-            }
             let dist = c.length().max(1e-3);
-            if dist - r > view.lod[1] {
+            if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
                 continue;
             }
             let h_px = s.select[0] * d.2 * view.lod[0] / dist;

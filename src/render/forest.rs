@@ -56,6 +56,18 @@ impl PoolConfig {
     }
 }
 
+/// Which culling the cull pass does: Sylva's, or a baseline to compare with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CullingMode {
+    /// Batches first (sphere, box, distance), then trees (seed 004).
+    #[default]
+    Batches,
+    /// Every resident tree tested on its own (the batch step skipped).
+    PerTree,
+    /// No culling: every resident tree is drawn (LoD still chosen).
+    None,
+}
+
 /// How to draw: quality, draw distance, transitions, debug colouring.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
@@ -67,10 +79,14 @@ pub struct RenderSettings {
     pub fade_band: f32,
     /// Colour trees by representation.
     pub debug_lod: bool,
+    /// Draw the boxes of the batches that pass the batch test.
+    pub debug_bounds: bool,
     /// Sun and ambient.
     pub lighting: Lighting,
     /// Clear colour (linear RGBA).
     pub clear: [f64; 4],
+    /// Culling (benchmark baselines).
+    pub culling: CullingMode,
 }
 
 impl Default for RenderSettings {
@@ -80,8 +96,10 @@ impl Default for RenderSettings {
             draw_distance_m: 6000.0,
             fade_band: 0.12,
             debug_lod: false,
+            debug_bounds: false,
             lighting: Lighting::default(),
             clear: [0.55, 0.68, 0.82, 1.0],
+            culling: CullingMode::Batches,
         }
     }
 }
@@ -191,6 +209,9 @@ pub struct ForestRenderer {
     billboard: BillboardPipeline,
     cull: CullPipelines,
     sky: wgpu::RenderPipeline,
+    bounds: wgpu::RenderPipeline,
+    bounds_group: wgpu::BindGroup,
+    debug_bounds: bool,
     config: PoolConfig,
     pools: Pools,
     view_buffer: wgpu::Buffer,
@@ -247,7 +268,7 @@ impl ForestRenderer {
             items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE | U::COPY_SRC),
             visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
             control: buffer(device, "cull control", 8 * 4, U::STORAGE | U::COPY_SRC),
-            dispatch: buffer(device, "cull dispatch", 4 * 4, U::STORAGE | U::INDIRECT),
+            dispatch: buffer(device, "cull dispatch", 8 * 4, U::STORAGE | U::INDIRECT),
             args: buffer(device, "draw args", slots * 20, U::STORAGE | U::INDIRECT | U::COPY_SRC),
             species: buffer(device, "species table", u64::from(config.species) * 80, U::STORAGE | U::COPY_DST),
             draw_params: buffer(device, "draw params", slots * 256, U::UNIFORM | U::COPY_DST),
@@ -272,6 +293,12 @@ impl ForestRenderer {
                 entry(6, &pools.args),
             ],
         });
+        let (bounds, bounds_layout) = bounds_pipeline(device, &shared, color_format);
+        let bounds_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("bounds"),
+            layout: &bounds_layout,
+            entries: &[entry(0, &pools.batches), entry(1, &pools.visible)],
+        });
         let dispatch_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("cull dispatch"),
             layout: &cull.dispatch_layout,
@@ -283,6 +310,9 @@ impl ForestRenderer {
             billboard,
             cull,
             sky,
+            bounds,
+            bounds_group,
+            debug_bounds: false,
             config,
             pools,
             view_buffer,
@@ -479,11 +509,21 @@ impl ForestRenderer {
             sun_dir: l.sun_dir.extend(0.0).to_array(),
             sun_color: l.sun_color.extend(0.0).to_array(),
             ambient: l.ambient.extend(0.0).to_array(),
-            lod: [view.px_per_m_at_1m * settings.quality, settings.draw_distance_m, settings.fade_band, 0.0],
+            lod: [
+                view.px_per_m_at_1m * settings.quality,
+                settings.draw_distance_m,
+                settings.fade_band,
+                match settings.culling {
+                    CullingMode::Batches => 0.0,
+                    CullingMode::PerTree => 1.0,
+                    CullingMode::None => 2.0,
+                },
+            ],
             params: [0, self.batch_high_water, u32::from(settings.debug_lod), self.species_count],
         };
         queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
         self.last_view = uniform;
+        self.debug_bounds = settings.debug_bounds;
         uniform
     }
 
@@ -571,6 +611,12 @@ impl ForestRenderer {
                 }
             }
         }
+        if self.debug_bounds {
+            pass.set_pipeline(&self.bounds);
+            pass.set_bind_group(1, &self.bounds_group, &[]);
+            pass.draw_indirect(&self.pools.dispatch, 16);
+            draws += 1;
+        }
         draws
     }
 
@@ -609,6 +655,55 @@ impl ForestRenderer {
     pub fn slot_count(&self) -> u32 {
         self.species_count * REPR_COUNT
     }
+}
+
+fn bounds_pipeline(
+    device: &wgpu::Device,
+    shared: &SharedLayouts,
+    format: wgpu::TextureFormat,
+) -> (wgpu::RenderPipeline, wgpu::BindGroupLayout) {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("bounds.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(super::shaders::BOUNDS.into()),
+    });
+    let v = wgpu::ShaderStages::VERTEX;
+    let group = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("bounds"),
+        entries: &[super::layouts::storage_entry(0, v, true), super::layouts::storage_entry(1, v, true)],
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("bounds"),
+        bind_group_layouts: &[Some(&shared.view), Some(&group)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("bounds"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::LineList, ..Default::default() },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::Always),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(format.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    (pipeline, group)
 }
 
 fn sky_pipeline(device: &wgpu::Device, shared: &SharedLayouts, format: wgpu::TextureFormat) -> wgpu::RenderPipeline {

@@ -20,7 +20,8 @@ pub struct ViewUniform {
     pub sun_color: [f32; 4],
     /// Ambient colour.
     pub ambient: [f32; 4],
-    /// x: pixels per metre at 1 m (× quality), y: draw distance (m), z: transition band, w: unused.
+    /// x: pixels per metre at 1 m (× quality), y: draw distance (m), z: transition band,
+    /// w: culling mode (0 batches, 1 per tree, 2 none).
     pub lod: [f32; 4],
     /// x: [`RenderMode`], y: batch slots to test, z: debug view, w: species count.
     pub params: [u32; 4],

@@ -17,5 +17,9 @@ pub const CULL: &str = concat!(include_str!("../../shaders/common.wgsl"), includ
 /// The sky/ground background.
 pub const SKY: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/sky.wgsl"));
 
+/// The batch-bounds debug view.
+pub const BOUNDS: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/bounds.wgsl"));
+
 /// Every composed shader with its name, for validation tests.
-pub const ALL: &[(&str, &str)] = &[("mesh", MESH), ("billboard", BILLBOARD), ("cull", CULL), ("sky", SKY)];
+pub const ALL: &[(&str, &str)] =
+    &[("mesh", MESH), ("billboard", BILLBOARD), ("cull", CULL), ("sky", SKY), ("bounds", BOUNDS)];
