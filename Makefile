@@ -39,8 +39,9 @@ demo: setup release
 	  target/release/sylva-bake demo --trees $(DEMO_TREES) --out $(DEMO_DIR); \
 	else echo "$(DEMO_DIR)/ exists: not rebaking (delete it to bake again)"; fi
 	@target/release/sylva-bake inspect $(DEMO_DIR)
-	@for p in $(DEMO_DIR)/species/*.pack; do \
-	  target/release/sylva render --pack $$p --out $(DEMO_DIR)/preview-$$(basename $$p .pack).png --view side; done
+	@for v in far medium close top; do \
+	  target/release/sylva render --scene $(DEMO_DIR) --view $$v --out $(DEMO_DIR)/view-$$v.png --stats $(DEMO_DIR)/view-$$v.json; done
+	@echo "demo views: $(DEMO_DIR)/view-{far,medium,close,top}.png (the browser viewer arrives with the viewer issue)"
 
 # Bake benchmark: 1,000,000 lon/lat placements through the whole `bake` path
 # (CSV parse, reprojection, species mapping, glTF import, packs, batching, tiles).

@@ -78,20 +78,8 @@ pub struct CapturedBillboards {
     pub normal: Vec<Vec<u8>>,
 }
 
-fn target(ctx: &GpuContext, size: u32, format: wgpu::TextureFormat, label: &str) -> wgpu::Texture {
-    ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    })
-}
-
-fn target_wh(ctx: &GpuContext, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
+/// A render target that can be read back.
+fn target(ctx: &GpuContext, width: u32, height: u32, format: wgpu::TextureFormat) -> wgpu::Texture {
     ctx.device.create_texture(&wgpu::TextureDescriptor {
         label: Some("target"),
         size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -182,9 +170,9 @@ pub fn capture_billboards(
     size: u32,
 ) -> CapturedBillboards {
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
-    let albedo = target(ctx, size, CAPTURE_ALBEDO_FORMAT, "capture albedo");
-    let normal = target(ctx, size, CAPTURE_NORMAL_FORMAT, "capture normal");
-    let depth = target(ctx, size, DEPTH_FORMAT, "capture depth");
+    let albedo = target(ctx, size, size, CAPTURE_ALBEDO_FORMAT);
+    let normal = target(ctx, size, size, CAPTURE_NORMAL_FORMAT);
+    let depth = target(ctx, size, size, DEPTH_FORMAT);
     let (albedo_view, normal_view, depth_view) = (
         albedo.create_view(&Default::default()),
         normal.create_view(&Default::default()),
@@ -283,8 +271,8 @@ pub fn render_pack_preview(
     let format = wgpu::TextureFormat::Rgba8UnormSrgb;
     let pipelines = CapturePipelines::new(&ctx.device, format);
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
-    let color = target_wh(ctx, width, height, format);
-    let depth = target_wh(ctx, width, height, DEPTH_FORMAT);
+    let color = target(ctx, width, height, format);
+    let depth = target(ctx, width, height, DEPTH_FORMAT);
     let min = Vec3::from(pack.meta.bounds_min);
     let max = Vec3::from(pack.meta.bounds_max);
     let center = (min + max) * 0.5;

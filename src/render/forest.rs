@@ -249,7 +249,14 @@ impl ForestRenderer {
         let mesh = MeshPipelines::new(device, &shared, color_format);
         let billboard = BillboardPipeline::new(device, &shared, color_format);
         let cull = CullPipelines::new(device, &shared);
-        let sky = sky_pipeline(device, &shared, color_format);
+        let sky = overlay_pipeline(
+            device,
+            "sky",
+            super::shaders::SKY,
+            &[Some(&shared.view)],
+            wgpu::PrimitiveTopology::TriangleList,
+            color_format,
+        );
         let slots = u64::from(config.species) * u64::from(REPR_COUNT);
         let pools = Pools {
             // COPY_SRC everywhere tests and stats read back from.
@@ -293,7 +300,19 @@ impl ForestRenderer {
                 entry(6, &pools.args),
             ],
         });
-        let (bounds, bounds_layout) = bounds_pipeline(device, &shared, color_format);
+        let vertex = wgpu::ShaderStages::VERTEX;
+        let bounds_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("bounds"),
+            entries: &[super::layouts::storage_entry(0, vertex, true), super::layouts::storage_entry(1, vertex, true)],
+        });
+        let bounds = overlay_pipeline(
+            device,
+            "bounds",
+            super::shaders::BOUNDS,
+            &[Some(&shared.view), Some(&bounds_layout)],
+            wgpu::PrimitiveTopology::LineList,
+            color_format,
+        );
         let bounds_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("bounds"),
             layout: &bounds_layout,
@@ -657,67 +676,27 @@ impl ForestRenderer {
     }
 }
 
-fn bounds_pipeline(
+/// A pipeline drawn over the scene without depth writes and without vertex
+/// buffers (`vs_main`/`fs_main`): the sky and the debug overlays.
+fn overlay_pipeline(
     device: &wgpu::Device,
-    shared: &SharedLayouts,
+    label: &str,
+    source: &'static str,
+    groups: &[Option<&wgpu::BindGroupLayout>],
+    topology: wgpu::PrimitiveTopology,
     format: wgpu::TextureFormat,
-) -> (wgpu::RenderPipeline, wgpu::BindGroupLayout) {
+) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("bounds.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(super::shaders::BOUNDS.into()),
-    });
-    let v = wgpu::ShaderStages::VERTEX;
-    let group = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("bounds"),
-        entries: &[super::layouts::storage_entry(0, v, true), super::layouts::storage_entry(1, v, true)],
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("bounds"),
-        bind_group_layouts: &[Some(&shared.view), Some(&group)],
-        immediate_size: 0,
-    });
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("bounds"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::LineList, ..Default::default() },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Always),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_main"),
-            compilation_options: Default::default(),
-            targets: &[Some(format.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
-    (pipeline, group)
-}
-
-fn sky_pipeline(device: &wgpu::Device, shared: &SharedLayouts, format: wgpu::TextureFormat) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("sky.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(super::shaders::SKY.into()),
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("sky"),
-        bind_group_layouts: &[Some(&shared.view)],
+        label: Some(label),
+        bind_group_layouts: groups,
         immediate_size: 0,
     });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("sky"),
+        label: Some(label),
         layout: Some(&layout),
         vertex: wgpu::VertexState {
             module: &module,
@@ -725,8 +704,8 @@ fn sky_pipeline(device: &wgpu::Device, shared: &SharedLayouts, format: wgpu::Tex
             compilation_options: Default::default(),
             buffers: &[],
         },
-        primitive: Default::default(),
-        // Depth 0 is the far end under reversed Z: never occludes a tree.
+        primitive: wgpu::PrimitiveState { topology, ..Default::default() },
+        // The sky is at depth 0, the far end under reversed Z; overlays ignore depth.
         depth_stencil: Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(false),
