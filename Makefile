@@ -9,13 +9,13 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust demo release bench-bake bench-render fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
 	@.ci/setup
 
-test: setup fmt clippy clippy-wasm test-rust
+test: setup fmt clippy clippy-wasm test-rust test-web
 
 fmt:
 	$(CARGO) fmt --all -- --check
@@ -33,15 +33,29 @@ test-rust:
 release:
 	$(CARGO) build --release --locked -p sylva -p sylva-bake
 
-demo: setup release
+# The browser viewer: wasm32 build, wasm-bindgen (--target web) into web/pkg,
+# wasm-opt -Oz when binaryen's is installed (web/node_modules/.bin).
+WASM := target/wasm32-unknown-unknown/release/sylva.wasm
+web:
+	$(CARGO) build --release --locked -p sylva --lib --target wasm32-unknown-unknown
+	wasm-bindgen --target web --no-typescript --out-dir web/pkg $(WASM)
+	@if [ -x web/node_modules/.bin/wasm-opt ]; then \
+	  web/node_modules/.bin/wasm-opt -Oz --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
+	    --enable-mutable-globals -o web/pkg/sylva_bg.wasm web/pkg/sylva_bg.wasm; fi
+	@echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$(gzip -9c web/pkg/sylva_bg.wasm | wc -c) gzipped"
+
+# Browser end-to-end tests in headless Chromium.
+test-web: release web
+	cd web && node --test tests/
+
+PORT ?= 8080
+demo: setup release web
 	@if [ ! -f $(DEMO_DIR)/scene.json ]; then \
 	  echo "baking the demo forest ($(DEMO_TREES) trees) into $(DEMO_DIR)/"; \
 	  target/release/sylva-bake demo --trees $(DEMO_TREES) --out $(DEMO_DIR); \
 	else echo "$(DEMO_DIR)/ exists: not rebaking (delete it to bake again)"; fi
 	@target/release/sylva-bake inspect $(DEMO_DIR)
-	@for v in far medium close top; do \
-	  target/release/sylva render --scene $(DEMO_DIR) --view $$v --out $(DEMO_DIR)/view-$$v.png --stats $(DEMO_DIR)/view-$$v.json; done
-	@echo "demo views: $(DEMO_DIR)/view-{far,medium,close,top}.png (the browser viewer arrives with the viewer issue)"
+	target/release/sylva serve $(DEMO_DIR) --port $(PORT)
 
 # Bake benchmark: 1,000,000 lon/lat placements through the whole `bake` path
 # (CSV parse, reprojection, species mapping, glTF import, packs, batching, tiles).

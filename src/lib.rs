@@ -11,3 +11,7 @@ pub mod format;
 pub mod metrics;
 pub mod render;
 pub mod scene;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod serve;
+#[cfg(target_arch = "wasm32")]
+pub mod web;

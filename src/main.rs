@@ -91,6 +91,20 @@ mod cli {
             #[arg(long, default_value_t = 0)]
             level: usize,
         },
+        /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/).
+        Serve {
+            /// Scene directory.
+            dir: PathBuf,
+            /// Port (0 picks a free one).
+            #[arg(long, default_value_t = 8080)]
+            port: u16,
+            /// Address to listen on.
+            #[arg(long, default_value = "127.0.0.1")]
+            bind: String,
+            /// The built viewer (default: web/ of this checkout; `make web` builds it).
+            #[arg(long)]
+            web: Option<PathBuf>,
+        },
     }
 
     fn parse_size(s: &str) -> Result<(u32, u32)> {
@@ -190,6 +204,26 @@ mod cli {
 
     pub fn main() -> Result<()> {
         match Cli::parse().command {
+            Command::Serve { dir, port, bind, web } => {
+                if !dir.join("scene.json").is_file() {
+                    bail!(
+                        "{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake)",
+                        dir.display()
+                    );
+                }
+                let web = web.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("web"));
+                if !web.join("pkg").join("sylva_bg.wasm").is_file() {
+                    bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
+                }
+                let config = sylva::serve::ServeConfig { web_dir: web, scene_dir: dir };
+                sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
+                    println!("serving the Sylva viewer on http://{addr}/");
+                    use std::io::Write as _;
+                    let _ = std::io::stdout().flush();
+                })
+                .with_context(|| format!("cannot listen on {bind}:{port}"))?;
+                Ok(())
+            }
             Command::Render {
                 scene,
                 pack,

@@ -1,0 +1,239 @@
+//! `sylva serve`: a small static HTTP server for the viewer and a scene (native).
+//!
+//! `/` is the built viewer (`web/`, with the wasm in `web/pkg/`); `/scene/…` is
+//! the scene directory, which the viewer opens by default. Correct MIME types
+//! (`application/wasm` for streaming compilation), gzip for text and JSON when the
+//! client accepts it, single byte ranges, cache headers, CORS for embedding, and
+//! no path outside the two directories.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Component, Path, PathBuf};
+
+/// What to serve.
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// The built viewer (index.html, sylva.js, pkg/).
+    pub web_dir: PathBuf,
+    /// The scene served under `/scene/`.
+    pub scene_dir: PathBuf,
+}
+
+/// MIME type by extension.
+#[must_use]
+pub fn mime_type(path: &Path) -> &'static str {
+    match path.extension().and_then(|e| e.to_str()).unwrap_or("") {
+        "html" => "text/html; charset=utf-8",
+        "js" | "mjs" => "text/javascript; charset=utf-8",
+        "css" => "text/css; charset=utf-8",
+        "json" => "application/json",
+        "wasm" => "application/wasm",
+        "png" => "image/png",
+        "svg" => "image/svg+xml",
+        "geojson" => "application/geo+json",
+        _ => "application/octet-stream",
+    }
+}
+
+/// Maps a request path to a file, refusing anything that leaves its root.
+#[must_use]
+pub fn resolve(config: &ServeConfig, url_path: &str) -> Option<PathBuf> {
+    let path = url_path.split(['?', '#']).next().unwrap_or("/");
+    let path = percent_decode(path)?;
+    let (root, rest) = match path.strip_prefix("/scene/") {
+        Some(rest) => (&config.scene_dir, rest.to_string()),
+        None => (&config.web_dir, path.trim_start_matches('/').to_string()),
+    };
+    let rest = if rest.is_empty() { "index.html".to_string() } else { rest };
+    let rel = Path::new(&rest);
+    // Only plain names: no `..`, no absolute paths, no prefixes.
+    if !rel.components().all(|c| matches!(c, Component::Normal(_))) {
+        return None;
+    }
+    let full = root.join(rel);
+    full.is_file().then_some(full)
+}
+
+fn percent_decode(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// A parsed `Range: bytes=a-b` (single range).
+fn parse_range(header: &str, len: u64) -> Option<(u64, u64)> {
+    let spec = header.trim().strip_prefix("bytes=")?;
+    if spec.contains(',') {
+        return None;
+    }
+    let (a, b) = spec.split_once('-')?;
+    let (start, end) = match (a.trim(), b.trim()) {
+        ("", suffix) => {
+            let n: u64 = suffix.parse().ok()?;
+            (len.saturating_sub(n), len.checked_sub(1)?)
+        }
+        (a, "") => (a.parse().ok()?, len.checked_sub(1)?),
+        (a, b) => (a.parse().ok()?, b.parse::<u64>().ok()?.min(len.checked_sub(1)?)),
+    };
+    (start <= end && end < len).then_some((start, end))
+}
+
+fn respond(
+    stream: &mut TcpStream,
+    status: &str,
+    headers: &[(&str, String)],
+    body: &[u8],
+    head_only: bool,
+) -> std::io::Result<()> {
+    let mut head = format!("HTTP/1.1 {status}\r\nContent-Length: {}\r\nConnection: close\r\n", body.len());
+    head += "Access-Control-Allow-Origin: *\r\nAccess-Control-Expose-Headers: Content-Length, Content-Range\r\n";
+    for (k, v) in headers {
+        head += &format!("{k}: {v}\r\n");
+    }
+    head += "\r\n";
+    stream.write_all(head.as_bytes())?;
+    if !head_only {
+        stream.write_all(body)?;
+    }
+    Ok(())
+}
+
+fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
+    stream.set_read_timeout(Some(std::time::Duration::from_secs(10)))?;
+    let mut reader = BufReader::new(stream.try_clone()?);
+    let mut request_line = String::new();
+    reader.read_line(&mut request_line)?;
+    let mut range = None;
+    let mut gzip_ok = false;
+    loop {
+        let mut line = String::new();
+        if reader.read_line(&mut line)? == 0 || line.trim().is_empty() {
+            break;
+        }
+        let lower = line.to_ascii_lowercase();
+        if let Some(v) = lower.strip_prefix("range:") {
+            range = Some(v.trim().to_string());
+        } else if let Some(v) = lower.strip_prefix("accept-encoding:") {
+            gzip_ok = v.contains("gzip");
+        }
+    }
+    let mut parts = request_line.split_whitespace();
+    let (method, path) = (parts.next().unwrap_or(""), parts.next().unwrap_or("/"));
+    let head_only = method == "HEAD";
+    if method == "OPTIONS" {
+        return respond(&mut stream, "204 No Content", &[("Access-Control-Allow-Headers", "Range".into())], b"", false);
+    }
+    if method != "GET" && !head_only {
+        return respond(&mut stream, "405 Method Not Allowed", &[("Allow", "GET, HEAD".into())], b"", false);
+    }
+    let Some(file) = resolve(config, path) else {
+        return respond(
+            &mut stream,
+            "404 Not Found",
+            &[("Content-Type", "text/plain".into())],
+            b"not found\n",
+            head_only,
+        );
+    };
+    let mut body = Vec::new();
+    std::fs::File::open(&file)?.read_to_end(&mut body)?;
+    let mime = mime_type(&file);
+    // The viewer and manifest change when rebuilt; tiles and packs of a scene are immutable.
+    let cache =
+        if path.starts_with("/scene/") && !path.ends_with(".json") { "public, max-age=3600" } else { "no-cache" };
+    let mut headers =
+        vec![("Content-Type", mime.to_string()), ("Cache-Control", cache.into()), ("Accept-Ranges", "bytes".into())];
+    if let Some(r) = range {
+        let len = body.len() as u64;
+        return match parse_range(&r, len) {
+            Some((a, b)) => {
+                headers.push(("Content-Range", format!("bytes {a}-{b}/{len}")));
+                respond(&mut stream, "206 Partial Content", &headers, &body[a as usize..=b as usize], head_only)
+            }
+            None => {
+                headers.push(("Content-Range", format!("bytes */{len}")));
+                respond(&mut stream, "416 Range Not Satisfiable", &headers, b"", head_only)
+            }
+        };
+    }
+    let compressible = mime.starts_with("text/") || mime == "application/json" || mime == "application/wasm";
+    if gzip_ok && compressible && body.len() > 1024 {
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        enc.write_all(&body)?;
+        body = enc.finish()?;
+        headers.push(("Content-Encoding", "gzip".into()));
+        headers.push(("Vary", "Accept-Encoding".into()));
+    }
+    respond(&mut stream, "200 OK", &headers, &body, head_only)
+}
+
+/// Serves until the process ends; each connection on its own thread.
+/// Calls `on_ready` with the bound address first.
+///
+/// # Errors
+/// When the address cannot be bound.
+pub fn serve(config: ServeConfig, addr: &str, on_ready: impl FnOnce(std::net::SocketAddr)) -> std::io::Result<()> {
+    let listener = TcpListener::bind(addr)?;
+    on_ready(listener.local_addr()?);
+    let config = std::sync::Arc::new(config);
+    for stream in listener.incoming() {
+        let Ok(stream) = stream else { continue };
+        let config = config.clone();
+        std::thread::spawn(move || {
+            let _ = handle(stream, &config);
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_stay_inside_their_roots() {
+        let dir = std::env::temp_dir().join(format!("sylva-serve-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("web")).unwrap();
+        std::fs::create_dir_all(dir.join("scene/tiles")).unwrap();
+        std::fs::write(dir.join("web/index.html"), "x").unwrap();
+        std::fs::write(dir.join("scene/tiles/0_0.tile"), "t").unwrap();
+        std::fs::write(dir.join("secret"), "s").unwrap();
+        let c = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene") };
+        assert_eq!(resolve(&c, "/"), Some(dir.join("web/index.html")));
+        assert_eq!(resolve(&c, "/scene/tiles/0_0.tile?x=1"), Some(dir.join("scene/tiles/0_0.tile")));
+        for bad in [
+            "/../secret",
+            "/scene/../secret",
+            "/scene/%2e%2e/secret",
+            "/%2e%2e/secret",
+            "//etc/passwd",
+            "/scene/tiles/missing",
+        ] {
+            assert_eq!(resolve(&c, bad), None, "{bad}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn ranges_and_mime_types() {
+        assert_eq!(parse_range("bytes=0-9", 100), Some((0, 9)));
+        assert_eq!(parse_range("bytes=90-", 100), Some((90, 99)));
+        assert_eq!(parse_range("bytes=-10", 100), Some((90, 99)));
+        assert_eq!(parse_range("bytes=50-500", 100), Some((50, 99)));
+        assert_eq!(parse_range("bytes=100-", 100), None);
+        assert_eq!(parse_range("bytes=0-1,5-6", 100), None);
+        assert_eq!(mime_type(Path::new("a/sylva_bg.wasm")), "application/wasm");
+        assert_eq!(mime_type(Path::new("scene.json")), "application/json");
+    }
+}

@@ -1,0 +1,455 @@
+//! The browser entry point (wasm32): a [`Viewer`] drawing a streamed scene into a
+//! canvas with WebGPU, driven by the JS shell in `web/` (`web/sylva.js` wraps it
+//! in the public JS API). Same renderer and streamer as natively; only the fetch
+//! (`fetch`) and the surface (a canvas) differ.
+
+use std::cell::{Cell, RefCell};
+use std::collections::BTreeMap;
+use std::rc::Rc;
+
+use glam::DVec3;
+use wasm_bindgen::prelude::*;
+use wasm_bindgen::JsCast;
+use wasm_bindgen_futures::JsFuture;
+
+use crate::render::camera::Camera;
+use crate::render::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
+use crate::render::gpu_data::{Repr, REPR_COUNT};
+use crate::scene::{FetchError, Fetcher, RequestId, SceneStream, StreamConfig, StreamEvent};
+
+type Done = Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
+
+/// Fetches with the browser's `fetch`; completions queue up until polled.
+#[derive(Default)]
+pub struct WebFetcher {
+    next: RequestId,
+    pending: Rc<Cell<usize>>,
+    done: Rc<RefCell<Done>>,
+}
+
+async fn fetch_bytes(url: &str) -> Result<Vec<u8>, FetchError> {
+    let transport = |e: JsValue| FetchError::Transport {
+        url: url.to_string(),
+        message: e.as_string().unwrap_or_else(|| format!("{e:?}")),
+    };
+    let window = web_sys::window().ok_or_else(|| transport(JsValue::from_str("no window")))?;
+    let resp: web_sys::Response =
+        JsFuture::from(window.fetch_with_str(url)).await.map_err(transport)?.dyn_into().map_err(transport)?;
+    match resp.status() {
+        404 => return Err(FetchError::NotFound { url: url.to_string() }),
+        s if !(200..300).contains(&s) => return Err(FetchError::Status { url: url.to_string(), status: s }),
+        _ => {}
+    }
+    let buffer = JsFuture::from(resp.array_buffer().map_err(transport)?).await.map_err(transport)?;
+    Ok(js_sys::Uint8Array::new(&buffer).to_vec())
+}
+
+impl Fetcher for WebFetcher {
+    fn start(&mut self, url: &str) -> RequestId {
+        let id = self.next;
+        self.next += 1;
+        self.pending.set(self.pending.get() + 1);
+        let (pending, done, url) = (self.pending.clone(), self.done.clone(), url.to_string());
+        wasm_bindgen_futures::spawn_local(async move {
+            let result = fetch_bytes(&url).await;
+            done.borrow_mut().push((id, result));
+            pending.set(pending.get() - 1);
+        });
+        id
+    }
+
+    fn poll(&mut self) -> Done {
+        std::mem::take(&mut *self.done.borrow_mut())
+    }
+
+    fn in_flight(&self) -> usize {
+        self.pending.get() + self.done.borrow().len()
+    }
+}
+
+/// An orbit camera: a target on the ground, a distance, a heading and a pitch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Orbit {
+    target: DVec3,
+    distance: f64,
+    heading: f64,
+    pitch: f64,
+}
+
+impl Orbit {
+    fn camera(&self) -> Camera {
+        let c = Camera { heading_rad: self.heading, pitch_rad: self.pitch, ..Camera::default() };
+        Camera {
+            eye_m: self.target - c.forward() * self.distance,
+            near_m: (self.distance * 0.002).clamp(0.05, 5.0) as f32,
+            ..c
+        }
+    }
+}
+
+/// Counters read back from the GPU a few frames late (mapping is asynchronous on the web).
+struct Readback {
+    buffer: wgpu::Buffer,
+    /// Bytes mapped by the pending request (the same range is read back).
+    mapped_len: u64,
+    state: Rc<Cell<u8>>, // 0 idle, 1 mapping, 2 mapped
+    words: Vec<u32>,
+}
+
+/// The browser viewer.
+#[wasm_bindgen]
+pub struct Viewer {
+    surface: wgpu::Surface<'static>,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    config: wgpu::SurfaceConfiguration,
+    view_format: wgpu::TextureFormat,
+    renderer: ForestRenderer,
+    stream: SceneStream<WebFetcher>,
+    depth: wgpu::Texture,
+    orbit: Orbit,
+    placed: bool,
+    settings: RenderSettings,
+    readback: Readback,
+    last_draw_calls: u32,
+    last_cpu_ms: f64,
+    events: Vec<StreamEvent>,
+    adapter: String,
+}
+
+fn js_err(e: impl std::fmt::Display) -> JsValue {
+    JsValue::from_str(&e.to_string())
+}
+
+#[wasm_bindgen]
+impl Viewer {
+    /// Creates a viewer on `canvas` streaming `scene` (URL of a scene directory or scene.json).
+    ///
+    /// # Errors
+    /// A message naming what is missing: WebGPU, an adapter, a device.
+    pub async fn create(canvas: web_sys::HtmlCanvasElement, scene: String) -> Result<Viewer, JsValue> {
+        console_error_panic_hook_install();
+        let gpu = js_sys::Reflect::get(&web_sys::window().ok_or("no window")?.navigator(), &"gpu".into())?;
+        if gpu.is_undefined() {
+            return Err(js_err("WebGPU is not available in this browser (navigator.gpu is missing). Use a recent Chrome, Edge or Firefox Nightly, or Chromium with --enable-unsafe-webgpu."));
+        }
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::BROWSER_WEBGPU,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let (width, height) = (canvas.width().max(1), canvas.height().max(1));
+        let surface = instance.create_surface(wgpu::SurfaceTarget::Canvas(canvas)).map_err(js_err)?;
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                compatible_surface: Some(&surface),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| {
+                js_err(format!(
+                    "This browser has WebGPU but no usable GPU adapter ({e}). Turn on hardware acceleration in the \
+                     browser settings or update the graphics driver; a current Chrome or Edge works, and on Linux \
+                     Chromium needs --enable-unsafe-webgpu --enable-features=Vulkan."
+                ))
+            })?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("sylva"),
+                required_features: wgpu::Features::empty(),
+                required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| js_err(format!("the WebGPU adapter refused a device: {e}")))?;
+        let caps = surface.get_capabilities(&adapter);
+        let format = caps.formats.first().copied().unwrap_or(wgpu::TextureFormat::Bgra8Unorm);
+        // Canvases prefer a non-sRGB format; draw through an sRGB view so colours match native.
+        let view_format = format.add_srgb_suffix();
+        let config = wgpu::SurfaceConfiguration {
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            format,
+            width,
+            height,
+            present_mode: wgpu::PresentMode::Fifo,
+            desired_maximum_frame_latency: 2,
+            alpha_mode: wgpu::CompositeAlphaMode::Opaque,
+            view_formats: vec![view_format],
+            color_space: wgpu::SurfaceColorSpace::Auto,
+        };
+        surface.configure(&device, &config);
+        let pools = PoolConfig { instances: 2 << 20, items: 3 << 20, ..PoolConfig::default() };
+        let renderer = ForestRenderer::new(&device, view_format, pools);
+        let depth = depth_texture(&device, width, height);
+        let slots = u64::from(pools.species * REPR_COUNT);
+        let readback = Readback {
+            buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("stats readback"),
+                size: 32 + slots * 20,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
+            mapped_len: 0,
+            state: Rc::new(Cell::new(0)),
+            words: Vec::new(),
+        };
+        let info = adapter.get_info();
+        Ok(Viewer {
+            surface,
+            device,
+            queue,
+            config,
+            view_format,
+            renderer,
+            stream: SceneStream::new(&scene, WebFetcher::default(), StreamConfig::default()),
+            depth,
+            orbit: Orbit { target: DVec3::ZERO, distance: 800.0, heading: 0.0, pitch: -0.5 },
+            placed: false,
+            settings: RenderSettings::default(),
+            readback,
+            last_draw_calls: 0,
+            last_cpu_ms: 0.0,
+            events: Vec::new(),
+            adapter: format!("{} ({:?})", info.name, info.backend),
+        })
+    }
+
+    /// Resizes the drawing buffer (device pixels).
+    pub fn resize(&mut self, width: u32, height: u32) {
+        let (width, height) = (width.clamp(1, 8192), height.clamp(1, 8192));
+        if (width, height) != (self.config.width, self.config.height) {
+            self.config.width = width;
+            self.config.height = height;
+            self.surface.configure(&self.device, &self.config);
+            self.depth = depth_texture(&self.device, width, height);
+        }
+    }
+
+    /// Streams and draws one frame. `now_ms` is `performance.now()`.
+    ///
+    /// # Errors
+    /// When the surface is lost for good (the page should recreate the viewer).
+    pub fn frame(&mut self, now_ms: f64) -> Result<(), JsValue> {
+        let t0 = now_ms;
+        let cam = self.camera();
+        let view = cam.view_data(self.config.width, self.config.height);
+        self.stream.update(
+            &mut self.renderer,
+            &self.device,
+            &self.queue,
+            &view,
+            self.settings.draw_distance_m,
+            now_ms / 1e3,
+        );
+        self.events.extend(self.stream.drain_events());
+        if !self.placed {
+            if let Some(m) = self.stream.manifest() {
+                // Start over the whole scene, looking north and down.
+                let lo = DVec3::from(m.bounds.min.map(f64::from));
+                let hi = DVec3::from(m.bounds.max.map(f64::from));
+                let ext = ((hi - lo) * 0.5).truncate().max_element().max(20.0);
+                self.orbit = Orbit { target: (lo + hi) * 0.5, distance: ext * 1.6, heading: 0.0, pitch: -0.6 };
+                self.placed = true;
+            }
+        }
+        let frame = match self.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
+            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(()),
+            wgpu::CurrentSurfaceTexture::Outdated => {
+                self.surface.configure(&self.device, &self.config);
+                return Ok(());
+            }
+            other => return Err(js_err(format!("the canvas surface failed: {other:?}"))),
+        };
+        let cam = self.camera();
+        let view = cam.view_data(self.config.width, self.config.height);
+        self.renderer.prepare(&self.queue, &view, &self.settings);
+        let color = frame
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor { format: Some(self.view_format), ..Default::default() });
+        let depth = self.depth.create_view(&Default::default());
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        self.renderer.encode_cull(&mut encoder);
+        self.last_draw_calls = self.renderer.encode_draw(&mut encoder, &color, &depth, self.settings.clear);
+        let copy = self.readback.state.get() == 0;
+        let slot_bytes = u64::from(self.renderer.slot_count()) * 20;
+        if copy {
+            let (control, args, _) = self.renderer.readback_buffers();
+            encoder.copy_buffer_to_buffer(control, 0, &self.readback.buffer, 0, 32);
+            if slot_bytes > 0 {
+                encoder.copy_buffer_to_buffer(args, 0, &self.readback.buffer, 32, slot_bytes);
+            }
+        }
+        self.queue.submit([encoder.finish()]);
+        self.queue.present(frame);
+        self.collect_readback();
+        if copy {
+            let state = self.readback.state.clone();
+            state.set(1);
+            self.readback.mapped_len = 32 + slot_bytes;
+            self.readback.buffer.slice(..32 + slot_bytes).map_async(wgpu::MapMode::Read, move |r| {
+                state.set(if r.is_ok() { 2 } else { 0 });
+            });
+        }
+        self.last_cpu_ms = js_sys::Date::now().max(t0) - t0;
+        Ok(())
+    }
+
+    fn collect_readback(&mut self) {
+        if self.readback.state.get() != 2 {
+            return;
+        }
+        {
+            let data = self.readback.buffer.slice(..self.readback.mapped_len).get_mapped_range();
+            if let Ok(data) = data {
+                self.readback.words = bytemuck::cast_slice(&data[..]).to_vec();
+            }
+        }
+        self.readback.buffer.unmap();
+        self.readback.state.set(0);
+    }
+
+    fn camera(&self) -> Camera {
+        let mut cam = self.orbit.camera();
+        // No tunnelling: keep the eye above the ground near it.
+        if let Some(z) = self.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
+            cam.eye_m.z = cam.eye_m.z.max(f64::from(z) + 1.5);
+        }
+        cam
+    }
+
+    /// Orbits around the target: `dx`, `dy` in radians of heading and pitch.
+    pub fn orbit(&mut self, d_heading: f64, d_pitch: f64) {
+        self.orbit.heading += d_heading;
+        self.orbit.pitch = (self.orbit.pitch + d_pitch).clamp(-1.55, 0.6);
+    }
+
+    /// Moves the target in the view's ground plane by screen fractions of the distance.
+    pub fn pan(&mut self, right: f64, forward: f64) {
+        let (s, c) = self.orbit.heading.sin_cos();
+        let d = self.orbit.distance;
+        self.orbit.target += DVec3::new(c * right * d + s * forward * d, -s * right * d + c * forward * d, 0.0);
+    }
+
+    /// Multiplies the distance to the target (< 1 zooms in).
+    pub fn zoom(&mut self, factor: f64) {
+        self.orbit.distance = (self.orbit.distance * factor.clamp(0.2, 5.0)).clamp(2.0, 200_000.0);
+    }
+
+    /// Sets the camera: eye position relative to the scene origin (metres) and
+    /// heading/pitch in degrees. The orbit target is placed ahead of the eye.
+    pub fn set_camera(&mut self, x: f64, y: f64, z: f64, heading_deg: f64, pitch_deg: f64) {
+        let cam = Camera {
+            heading_rad: heading_deg.to_radians(),
+            pitch_rad: pitch_deg.clamp(-89.0, 34.0).to_radians(),
+            ..Camera::default()
+        };
+        let distance =
+            if pitch_deg < -5.0 { (z - self.orbit.target.z).abs().max(10.0) / (-cam.pitch_rad).sin() } else { 100.0 };
+        let eye = DVec3::new(x, y, z);
+        self.orbit =
+            Orbit { target: eye + cam.forward() * distance, distance, heading: cam.heading_rad, pitch: cam.pitch_rad };
+        self.placed = true;
+    }
+
+    /// The camera as JSON: `{x, y, z, heading, pitch}` (metres relative to the
+    /// scene origin, degrees) plus `origin` (the scene origin) and `epsg`.
+    pub fn camera_json(&self) -> String {
+        let c = self.camera();
+        let origin = self.stream.manifest().map_or([0.0; 3], |m| m.origin_m);
+        let epsg = self.stream.manifest().map_or(0, |m| m.crs.epsg);
+        serde_json::json!({
+            "x": c.eye_m.x, "y": c.eye_m.y, "z": c.eye_m.z,
+            "heading": c.heading_rad.to_degrees(), "pitch": c.pitch_rad.to_degrees(),
+            "origin": origin, "epsg": epsg,
+        })
+        .to_string()
+    }
+
+    /// Colours trees by representation and/or draws batch boxes.
+    pub fn set_debug(&mut self, lod: bool, bounds: bool) {
+        self.settings.debug_lod = lod;
+        self.settings.debug_bounds = bounds;
+    }
+
+    /// LoD quality factor (1, 0.5, 0.25).
+    pub fn set_quality(&mut self, quality: f32) {
+        self.settings.quality = quality.clamp(0.05, 4.0);
+    }
+
+    /// Whether everything the current view needs is drawn.
+    pub fn settled(&self) -> bool {
+        self.stream.is_settled()
+    }
+
+    /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md).
+    pub fn stats_json(&self) -> String {
+        let s = self.stream.stats();
+        let w = &self.readback.words;
+        let mut instances = BTreeMap::new();
+        for repr in Repr::ALL {
+            instances.insert(repr.name(), 0u64);
+        }
+        for slot in 0..self.renderer.slot_count() as usize {
+            if let Some(n) = w.get(8 + slot * 5 + 1) {
+                *instances.entry(Repr::ALL[slot % REPR_COUNT as usize].name()).or_default() += u64::from(*n);
+            }
+        }
+        serde_json::json!({
+            "draw_calls": self.last_draw_calls,
+            "instances": instances,
+            "batches_tested": self.renderer.batch_slots(),
+            "batches_visible": w.first().copied().unwrap_or(0),
+            "instances_tested": w.get(4).copied().unwrap_or(0),
+            "items_dropped": w.get(5).copied().unwrap_or(0),
+            "tiles_resident": s.tiles_resident,
+            "tiles_loading": s.loading,
+            "bytes_fetched": s.bytes_fetched,
+            "trees_total": self.stream.manifest().map_or(0, |m| m.counts.trees),
+            "trees_resident": self.renderer.resident_instances(),
+            "gpu_bytes": self.renderer.gpu_bytes(),
+            "frame_cpu_ms": self.last_cpu_ms,
+            "gpu_ms": {},
+            "adapter": self.adapter,
+        })
+        .to_string()
+    }
+
+    /// Loading progress: `{manifest, tiles_wanted, tiles_resident, loading, bytes_fetched, settled}`.
+    pub fn progress_json(&self) -> String {
+        let s = self.stream.stats();
+        serde_json::json!({
+            "manifest": self.stream.manifest().is_some(),
+            "tiles_wanted": s.tiles_wanted,
+            "tiles_resident": s.tiles_resident,
+            "loading": s.loading,
+            "bytes_fetched": s.bytes_fetched,
+            "settled": self.stream.is_settled(),
+        })
+        .to_string()
+    }
+
+    /// Events since the last call, as a JSON array of `{kind, url?, message}`.
+    pub fn take_events_json(&mut self) -> String {
+        let events: Vec<serde_json::Value> = self
+            .events
+            .drain(..)
+            .map(|e| match e {
+                StreamEvent::ManifestLoaded { trees } => serde_json::json!({"kind": "manifest", "trees": trees}),
+                StreamEvent::Failed { url, message, retrying } => {
+                    serde_json::json!({"kind": "warning", "url": url, "message": message, "retrying": retrying})
+                }
+                StreamEvent::Fatal { message } => serde_json::json!({"kind": "error", "message": message}),
+            })
+            .collect();
+        serde_json::Value::Array(events).to_string()
+    }
+}
+
+fn console_error_panic_hook_install() {
+    std::panic::set_hook(Box::new(|info| {
+        web_sys::console::error_1(&JsValue::from_str(&format!("sylva panicked: {info}")));
+    }));
+}

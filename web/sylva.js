@@ -1,0 +1,253 @@
+// Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`.
+// Wraps the wasm Viewer (src/web.rs) with a render loop, camera controls
+// (mouse, touch, keyboard), events and the camera in the URL hash.
+//
+//   v.setCamera({x, y, z, heading, pitch})   metres relative to the scene origin, degrees
+//   v.flyTo({...}, seconds)                 smooth move
+//   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
+//   v.stats()                               same keys as `sylva render --stats`
+//   v.ready                                 resolves after the first frame with everything the view needs
+//   v.destroy()
+
+import init, { Viewer } from './pkg/sylva.js';
+
+let wasmReady = null;
+
+/** Loads the wasm module once per page. */
+function loadWasm() {
+  if (!wasmReady) {
+    wasmReady = init({ module_or_path: new URL('./pkg/sylva_bg.wasm', import.meta.url) });
+  }
+  return wasmReady;
+}
+
+/** Why WebGPU is missing, in words a user can act on. */
+export function webgpuHelp() {
+  return 'This browser has no WebGPU. Use a current Chrome or Edge (113+), Safari 18+ or Firefox 141+; ' +
+    'on Linux, Chromium needs --enable-unsafe-webgpu --enable-features=Vulkan.';
+}
+
+class SylvaViewer {
+  constructor(canvas, viewer, options) {
+    this.canvas = canvas;
+    this.viewer = viewer;
+    this.options = options;
+    this.handlers = {};
+    this.destroyed = false;
+    this.dirty = 8;            // frames to draw before idling (render on demand)
+    this.lastCamera = '';
+    this.lastStatsMs = 0;
+    this.frameTimes = [];
+    this.flight = null;
+    this.readySettled = false;
+    this.ready = new Promise((resolve, reject) => { this.resolveReady = resolve; this.rejectReady = reject; });
+    this.ready.catch(() => {}); // observed through 'error' events too
+    this.resize();
+    this.bindControls();
+    this.resizeObserver = new ResizeObserver(() => { this.resize(); this.dirty = 8; });
+    this.resizeObserver.observe(canvas);
+    this.loop = this.loop.bind(this);
+    this.raf = requestAnimationFrame(this.loop);
+  }
+
+  on(event, fn) { (this.handlers[event] ||= []).push(fn); return this; }
+  emit(event, data) { for (const fn of this.handlers[event] || []) { try { fn(data); } catch (e) { console.error(e); } } }
+
+  resize() {
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.max(1, Math.round(this.canvas.clientWidth * dpr));
+    const h = Math.max(1, Math.round(this.canvas.clientHeight * dpr));
+    if (this.canvas.width !== w || this.canvas.height !== h) {
+      this.canvas.width = w;
+      this.canvas.height = h;
+    }
+    this.viewer.resize(w, h);
+  }
+
+  /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg). */
+  camera() { return JSON.parse(this.viewer.camera_json()); }
+
+  setCamera(c) {
+    this.flight = null;
+    this.viewer.set_camera(c.x, c.y, c.z, c.heading ?? 0, c.pitch ?? -30);
+    this.dirty = 8;
+  }
+
+  flyTo(c, seconds = 1.5) {
+    const from = this.camera();
+    const to = { heading: from.heading, pitch: from.pitch, ...c };
+    const start = performance.now();
+    let dh = ((to.heading - from.heading + 540) % 360) - 180;
+    this.flight = (now) => {
+      const t = Math.min(1, (now - start) / (seconds * 1000));
+      const s = t * t * (3 - 2 * t);
+      const lerp = (a, b) => a + (b - a) * s;
+      this.viewer.set_camera(lerp(from.x, to.x), lerp(from.y, to.y), lerp(from.z, to.z), from.heading + dh * s, lerp(from.pitch, to.pitch));
+      if (t >= 1) this.flight = null;
+    };
+    this.dirty = 8;
+  }
+
+  stats() { return JSON.parse(this.viewer.stats_json()); }
+  setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
+  setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
+
+  loop(now) {
+    if (this.destroyed) return;
+    this.raf = requestAnimationFrame(this.loop);
+    if (this.flight) this.flight(now);
+    const progress = JSON.parse(this.viewer.progress_json());
+    // Render on demand: while loading, moving or just after a change; idle otherwise.
+    if (!progress.settled || this.flight || this.dirty > 0) {
+      const t0 = performance.now();
+      try {
+        this.viewer.frame(now);
+      } catch (e) {
+        this.emit('error', { message: String(e) });
+        this.rejectReady(new Error(String(e)));
+        this.destroy();
+        return;
+      }
+      this.frameTimes.push(performance.now() - t0);
+      if (this.frameTimes.length > 60) this.frameTimes.shift();
+      if (this.dirty > 0) this.dirty--;
+      if (!progress.settled) this.dirty = Math.max(this.dirty, 4);
+    }
+    for (const e of JSON.parse(this.viewer.take_events_json())) {
+      if (e.kind === 'error') { this.emit('error', e); this.rejectReady(new Error(e.message)); }
+      else if (e.kind === 'warning') this.emit('warning', e);
+      else if (e.kind === 'manifest') this.emit('manifest', e);
+    }
+    this.emit('progress', progress);
+    const cam = this.viewer.camera_json();
+    if (cam !== this.lastCamera) {
+      this.lastCamera = cam;
+      this.emit('camerachange', JSON.parse(cam));
+    }
+    // Ready after a frame drawn with everything settled (stats counters need a few frames).
+    if (!this.readySettled && progress.manifest && progress.settled && this.dirty === 0) {
+      this.readySettled = true;
+      this.resolveReady(this.stats());
+      this.emit('ready', this.stats());
+    }
+    if (now - this.lastStatsMs > 500) {
+      this.lastStatsMs = now;
+      const s = this.stats();
+      const avg = this.frameTimes.reduce((a, b) => a + b, 0) / Math.max(1, this.frameTimes.length);
+      s.frame_ms = avg;
+      this.emit('stats', s);
+    }
+  }
+
+  bindControls() {
+    const c = this.canvas;
+    c.tabIndex = c.tabIndex >= 0 ? c.tabIndex : 0;
+    c.style.touchAction = 'none';
+    let drag = null;
+    const pointers = new Map();
+    c.addEventListener('contextmenu', (e) => e.preventDefault());
+    c.addEventListener('pointerdown', (e) => {
+      c.setPointerCapture(e.pointerId);
+      pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
+      drag = { x: e.clientX, y: e.clientY, pan: e.button === 2 || e.shiftKey || e.ctrlKey };
+      this.flight = null;
+    });
+    c.addEventListener('pointermove', (e) => {
+      if (!pointers.has(e.pointerId)) return;
+      const prev = pointers.get(e.pointerId);
+      pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
+      if (pointers.size === 2) {
+        // Two fingers: pinch zooms, twist rotates.
+        const [a, b] = [...pointers.values()];
+        const other = [...pointers.entries()].find(([id]) => id !== e.pointerId)[1];
+        const before = Math.hypot(prev.x - other.x, prev.y - other.y);
+        const after = Math.hypot(a.x - b.x, a.y - b.y);
+        if (before > 0 && after > 0) this.viewer.zoom(before / after);
+        const angBefore = Math.atan2(prev.y - other.y, prev.x - other.x);
+        const angAfter = Math.atan2(e.clientY - other.y, e.clientX - other.x);
+        this.viewer.orbit(angAfter - angBefore, 0);
+      } else if (drag) {
+        const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+        drag.x = e.clientX; drag.y = e.clientY;
+        const h = Math.max(1, c.clientHeight);
+        if (drag.pan) this.viewer.pan(-dx / h, dy / h);
+        else this.viewer.orbit(dx * 0.005, -dy * 0.005);
+      }
+      this.dirty = 8;
+    });
+    const up = (e) => { pointers.delete(e.pointerId); if (pointers.size === 0) drag = null; };
+    c.addEventListener('pointerup', up);
+    c.addEventListener('pointercancel', up);
+    c.addEventListener('wheel', (e) => {
+      e.preventDefault();
+      this.viewer.zoom(Math.exp(e.deltaY * 0.0015));
+      this.dirty = 8;
+    }, { passive: false });
+    c.addEventListener('keydown', (e) => {
+      const step = 0.05;
+      const keys = {
+        ArrowUp: () => this.viewer.pan(0, step), w: () => this.viewer.pan(0, step),
+        ArrowDown: () => this.viewer.pan(0, -step), s: () => this.viewer.pan(0, -step),
+        ArrowLeft: () => this.viewer.pan(-step, 0), a: () => this.viewer.pan(-step, 0),
+        ArrowRight: () => this.viewer.pan(step, 0), d: () => this.viewer.pan(step, 0),
+        q: () => this.viewer.orbit(-0.05, 0), e: () => this.viewer.orbit(0.05, 0),
+        '+': () => this.viewer.zoom(0.8), '=': () => this.viewer.zoom(0.8), '-': () => this.viewer.zoom(1.25),
+      };
+      const fn = keys[e.key];
+      if (fn) { fn(); this.dirty = 8; e.preventDefault(); }
+    });
+  }
+
+  destroy() {
+    if (this.destroyed) return;
+    this.destroyed = true;
+    cancelAnimationFrame(this.raf);
+    this.resizeObserver.disconnect();
+    try { this.viewer.free(); } catch (_) { /* already freed */ }
+  }
+}
+
+/**
+ * Creates a viewer in `target` (a canvas, or an element that gets a canvas).
+ * Rejects with an Error whose message says what to do when WebGPU is missing.
+ */
+export async function create(target, options = {}) {
+  let canvas = target;
+  if (!(target instanceof HTMLCanvasElement)) {
+    canvas = document.createElement('canvas');
+    canvas.style.width = '100%';
+    canvas.style.height = '100%';
+    canvas.style.display = 'block';
+    target.appendChild(canvas);
+  }
+  if (!navigator.gpu) throw new Error(webgpuHelp());
+  await loadWasm();
+  const scene = options.scene || 'scene/scene.json';
+  const viewer = await Viewer.create(canvas, scene);
+  const v = new SylvaViewer(canvas, viewer, options);
+  if (options.camera) v.setCamera(options.camera);
+  return v;
+}
+
+/** `<sylva-viewer src="…/scene.json" camera="x,y,z,heading,pitch">` */
+class SylvaElement extends HTMLElement {
+  async connectedCallback() {
+    if (this.viewer || this.starting) return;
+    this.starting = true;
+    this.style.display ||= 'block';
+    const cam = this.getAttribute('camera');
+    const camera = cam ? (([x, y, z, heading, pitch]) => ({ x, y, z, heading, pitch }))(cam.split(',').map(Number)) : undefined;
+    try {
+      this.viewer = await create(this, { scene: this.getAttribute('src') || undefined, camera });
+      this.dispatchEvent(new CustomEvent('sylva-ready', { detail: this.viewer }));
+    } catch (e) {
+      this.textContent = String(e.message || e);
+      this.dispatchEvent(new CustomEvent('sylva-error', { detail: { message: String(e.message || e) } }));
+    }
+  }
+  disconnectedCallback() { this.viewer?.destroy(); this.viewer = null; this.starting = false; }
+}
+if (!customElements.get('sylva-viewer')) customElements.define('sylva-viewer', SylvaElement);
+
+export const Sylva = { create, webgpuHelp };
+export default Sylva;

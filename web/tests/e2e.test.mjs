@@ -1,0 +1,135 @@
+// End-to-end tests of the viewer in headless Chromium (Debian's, with
+// SwiftShader WebGPU; flags from ../shared/design/platform.md). They start
+// `sylva serve` on the small fixture scene and drive the page through
+// `window.sylva`. Run by `make test` (or `cd web && npm test` after `make web`).
+
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { spawn } from 'node:child_process';
+import { mkdtempSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+
+const root = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
+const sylvaBin = process.env.SYLVA_BIN || join(root, 'target', 'release', 'sylva');
+const scene = join(root, 'tests', 'fixtures', 'forest-small');
+const artifacts = process.env.SYLVA_E2E_OUT || mkdtempSync(join(tmpdir(), 'sylva-e2e-'));
+const WEBGPU_FLAGS = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
+  '--use-webgpu-adapter=swiftshader', '--use-angle=swiftshader', '--disable-quic', '--no-first-run',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync'];
+
+let server, base, browser;
+
+before(async () => {
+  server = spawn(sylvaBin, ['serve', scene, '--port', '0'], { stdio: ['ignore', 'pipe', 'inherit'] });
+  base = await new Promise((resolve, reject) => {
+    server.on('error', reject);
+    server.on('exit', (code) => reject(new Error(`sylva serve exited with ${code}`)));
+    server.stdout.on('data', (d) => {
+      const m = /http:\/\/[0-9.:]+\//.exec(String(d));
+      if (m) resolve(m[0]);
+    });
+  });
+  browser = await chromium.launch({
+    executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
+    // launch() gives every browser a fresh temporary profile.
+    args: WEBGPU_FLAGS,
+  });
+});
+
+after(async () => {
+  await browser?.close();
+  server?.kill();
+});
+
+/** Awaits `window.sylva.ready` in the page, failing after `ms`. */
+function ready(page, ms = 90000) {
+  return page.evaluate((ms) => Promise.race([
+    window.sylva.ready,
+    new Promise((_, reject) => setTimeout(() => reject(new Error(`not ready after ${ms} ms: ${document.getElementById('error').textContent}`)), ms)),
+  ]), ms);
+}
+
+async function openViewer(url, size = { width: 480, height: 320 }) {
+  const page = await browser.newPage({ viewport: size });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(String(e)));
+  page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
+  await page.goto(url);
+  return { page, errors };
+}
+
+/** Share of screenshot pixels that are foliage green (the screenshot is a PNG). */
+async function foliageShare(page, name) {
+  const png = await page.screenshot({ path: join(artifacts, `${name}.png`) });
+  // Decode in the page with a 2D canvas (the screenshot, not the WebGPU canvas).
+  return page.evaluate(async (b64) => {
+    const img = new Image();
+    img.src = `data:image/png;base64,${b64}`;
+    await img.decode();
+    const c = document.createElement('canvas');
+    c.width = img.width; c.height = img.height;
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    const d = g.getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) if (d[i + 1] > d[i] + 8 && d[i + 1] > d[i + 2] + 8) n++;
+    return n / (d.length / 4);
+  }, png.toString('base64'));
+}
+
+test('the viewer loads the scene, draws it and reports stats', async () => {
+  const { page, errors } = await openViewer(base);
+  await page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 60000 });
+  assert.equal(await page.evaluate(() => window.sylvaError), undefined);
+  const readyStats = await ready(page);
+  const stats = await page.evaluate(() => window.sylva.stats());
+  for (const key of ['draw_calls', 'instances', 'batches_tested', 'batches_visible', 'tiles_resident', 'bytes_fetched', 'trees_total', 'frame_cpu_ms', 'gpu_ms']) {
+    assert.ok(key in stats, `stats has ${key}`);
+  }
+  assert.equal(stats.trees_total, 3000);
+  assert.ok(stats.tiles_resident > 0, 'tiles resident');
+  assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 9, `draw calls ${stats.draw_calls}`);
+  const drawn = Object.values(readyStats.instances).reduce((a, b) => a + b, 0);
+  assert.ok(drawn > 100, `instances drawn ${drawn}`);
+  const share = await foliageShare(page, 'viewer');
+  assert.ok(share > 0.05, `foliage covers ${share} of the page`);
+  assert.deepEqual(errors, []);
+});
+
+test('the camera follows the URL hash and setCamera', async () => {
+  const { page } = await openViewer(`${base}#camera=0,-400,120,0,-20`);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await ready(page);
+  const cam = await page.evaluate(() => window.sylva.camera());
+  assert.ok(Math.abs(cam.y + 400) < 1 && Math.abs(cam.pitch + 20) < 0.5, JSON.stringify(cam));
+  await page.evaluate(() => window.sylva.setCamera({ x: 10, y: -300, z: 80, heading: 30, pitch: -25 }));
+  await page.waitForFunction(() => /camera=10\.0,-300\.0/.test(location.hash), null, { timeout: 10000 });
+});
+
+test('a missing scene shows an error a user can act on', async () => {
+  const { page } = await openViewer(`${base}?scene=nowhere/scene.json`);
+  await page.waitForFunction(() => getComputedStyle(document.getElementById('error')).display !== 'none', null, { timeout: 60000 });
+  const text = await page.textContent('#error');
+  assert.match(text, /nowhere\/scene\.json/);
+});
+
+test('without WebGPU the page says what to do', async () => {
+  const plain = await chromium.launch({
+    executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
+    args: ['--no-sandbox', '--disable-gpu', '--disable-features=WebGPU', '--disable-quic', '--no-first-run',
+      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+  });
+  try {
+    const page = await plain.newPage();
+    await page.goto(base);
+    await page.waitForFunction(() => window.sylvaError, null, { timeout: 30000 });
+    const text = await page.textContent('#error');
+    assert.match(text, /WebGPU/);
+    assert.match(text, /Chrome|Chromium/);
+  } finally {
+    await plain.close();
+  }
+});
