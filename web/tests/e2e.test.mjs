@@ -133,3 +133,32 @@ test('without WebGPU the page says what to do', async () => {
     await plain.close();
   }
 });
+
+test('the portal page embeds the viewer with an overview', async () => {
+  const { page, errors } = await openViewer(`${base}embed.html`, { width: 900, height: 560 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await ready(page);
+  const share = await foliageShare(page, 'embed');
+  assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
+  assert.match(await page.textContent('#facts'), /3,000 trees/);
+  assert.deepEqual(errors, []);
+});
+
+test('an iframe is driven by postMessage', async () => {
+  const { page } = await openViewer('about:blank');
+  await page.goto(`${base}embed.html`); // same origin as the viewer, to host the iframe
+  await page.evaluate((url) => {
+    document.body.innerHTML = `<iframe id="f" src="${url}" style="width:400px;height:300px"></iframe>`;
+    window.replies = [];
+    window.addEventListener('message', (e) => { if (e.data && e.data.sylva) window.replies.push(e.data); });
+  }, base);
+  await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'ready'), null, { timeout: 90000 });
+  await page.evaluate(() => {
+    const f = document.getElementById('f').contentWindow;
+    f.postMessage({ verb: 'setCamera', args: [{ x: 5, y: -350, z: 90, heading: 10, pitch: -20 }], id: 1 }, '*');
+    f.postMessage({ verb: 'camera', id: 2 }, '*');
+  });
+  await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'reply' && r.id === 2), null, { timeout: 20000 });
+  const cam = await page.evaluate(() => window.replies.find((r) => r.id === 2).data);
+  assert.ok(Math.abs(cam.y + 350) < 1 && Math.abs(cam.heading - 10) < 0.5, JSON.stringify(cam));
+});
