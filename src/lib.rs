@@ -1,5 +1,6 @@
 //! Sylva: a GPU-driven forest renderer for whole forests in the browser and headless.
 //!
+//! * [`geo`] — lon/lat ↔ scene-relative metres through the scene CRS.
 //! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
 //! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
 //! * [`metrics`] — image error (multi-scale RMSE, seed 002 §4).
@@ -8,6 +9,7 @@
 //! The bake tool (`bake-tool/`, crate `sylva-bake`) writes what this crate reads.
 
 pub mod format;
+pub mod geo;
 pub mod metrics;
 pub mod render;
 pub mod scene;

@@ -12,6 +12,7 @@ use wasm_bindgen::prelude::*;
 use wasm_bindgen::JsCast;
 use wasm_bindgen_futures::JsFuture;
 
+use crate::geo::GeoFrame;
 use crate::render::camera::Camera;
 use crate::render::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
 use crate::render::gpu_data::{Repr, REPR_COUNT};
@@ -115,6 +116,12 @@ pub struct Viewer {
     last_cpu_ms: f64,
     events: Vec<StreamEvent>,
     adapter: String,
+    geo: Option<GeoFrame>,
+    /// A geographic camera asked for before the manifest (and so the CRS) arrived.
+    pending_geo: Option<[f64; 5]>,
+    /// Walking mode: the eye stays at eye height above the ground and looks around itself.
+    fly: bool,
+    lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 fn js_err(e: impl std::fmt::Display) -> JsValue {
@@ -164,6 +171,12 @@ impl Viewer {
             })
             .await
             .map_err(|e| js_err(format!("the WebGPU adapter refused a device: {e}")))?;
+        let lost = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = lost.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            web_sys::console::warn_1(&JsValue::from_str(&format!("sylva: GPU device lost ({reason:?}): {message}")));
+            flag.store(true, std::sync::atomic::Ordering::SeqCst);
+        });
         let caps = surface.get_capabilities(&adapter);
         let format = caps.formats.first().copied().unwrap_or(wgpu::TextureFormat::Bgra8Unorm);
         // Canvases prefer a non-sRGB format; draw through an sRGB view so colours match native.
@@ -213,6 +226,10 @@ impl Viewer {
             last_cpu_ms: 0.0,
             events: Vec::new(),
             adapter: format!("{} ({:?})", info.name, info.backend),
+            geo: None,
+            pending_geo: None,
+            fly: false,
+            lost,
         })
     }
 
@@ -232,6 +249,9 @@ impl Viewer {
     /// # Errors
     /// When the surface is lost for good (the page should recreate the viewer).
     pub fn frame(&mut self, now_ms: f64) -> Result<(), JsValue> {
+        if self.is_lost() {
+            return Ok(());
+        }
         let t0 = now_ms;
         let cam = self.camera();
         let view = cam.view_data(self.config.width, self.config.height);
@@ -252,6 +272,17 @@ impl Viewer {
                 let ext = ((hi - lo) * 0.5).truncate().max_element().max(20.0);
                 self.orbit = Orbit { target: (lo + hi) * 0.5, distance: ext * 1.6, heading: 0.0, pitch: -0.6 };
                 self.placed = true;
+            }
+        }
+        if self.geo.is_none() {
+            if let Some(m) = self.stream.manifest() {
+                match GeoFrame::new(&m.crs.proj4, m.origin_m) {
+                    Ok(g) => self.geo = Some(g),
+                    Err(e) => web_sys::console::warn_1(&JsValue::from_str(&format!("sylva: {e}"))),
+                }
+                if let Some([lon, lat, h, heading, pitch]) = self.pending_geo.take() {
+                    self.set_camera_geo(lon, lat, h, heading, pitch);
+                }
             }
         }
         let frame = match self.surface.get_current_texture() {
@@ -313,11 +344,79 @@ impl Viewer {
 
     fn camera(&self) -> Camera {
         let mut cam = self.orbit.camera();
-        // No tunnelling: keep the eye above the ground near it.
+        // No tunnelling: keep the eye above the ground near it; walking keeps eye height.
         if let Some(z) = self.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
-            cam.eye_m.z = cam.eye_m.z.max(f64::from(z) + 1.5);
+            let ground = f64::from(z);
+            cam.eye_m.z = if self.fly { ground + 1.7 } else { cam.eye_m.z.max(ground + 1.5) };
         }
         cam
+    }
+
+    /// Walking mode on or off. In walking mode `look` turns the head and `walk` moves.
+    pub fn set_fly(&mut self, on: bool) {
+        if on && !self.fly {
+            // Stand where the camera is looking, facing the same way, nearly level.
+            let target = self.orbit.target;
+            self.orbit = Orbit { target, distance: 3.0, heading: self.orbit.heading, pitch: 0.05 };
+        }
+        self.fly = on;
+    }
+
+    /// Whether walking mode is on.
+    pub fn fly(&self) -> bool {
+        self.fly
+    }
+
+    /// Turns the view around the eye by `d_heading`, `d_pitch` radians.
+    pub fn look(&mut self, d_heading: f64, d_pitch: f64) {
+        let eye = self.orbit.camera().eye_m;
+        self.orbit.heading += d_heading;
+        self.orbit.pitch = (self.orbit.pitch + d_pitch).clamp(-1.5, 1.2);
+        let forward =
+            Camera { heading_rad: self.orbit.heading, pitch_rad: self.orbit.pitch, ..Camera::default() }.forward();
+        self.orbit.target = eye + forward * self.orbit.distance;
+    }
+
+    /// Moves the eye `forward_m` along the heading and `right_m` to the side.
+    pub fn walk(&mut self, forward_m: f64, right_m: f64) {
+        let (s, c) = self.orbit.heading.sin_cos();
+        self.orbit.target += DVec3::new(s * forward_m + c * right_m, c * forward_m - s * right_m, 0.0);
+    }
+
+    /// Sets a geographic camera: WGS 84 lon/lat (degrees), height (metres, in the
+    /// scene's vertical datum), heading and pitch (degrees). Applied once the scene's
+    /// CRS is known if the manifest has not arrived yet.
+    pub fn set_camera_geo(&mut self, lon: f64, lat: f64, height: f64, heading_deg: f64, pitch_deg: f64) {
+        let Some(geo) = &self.geo else {
+            self.pending_geo = Some([lon, lat, height, heading_deg, pitch_deg]);
+            self.placed = true;
+            return;
+        };
+        match geo.to_local(lon, lat, height) {
+            Ok(p) => self.set_camera(p.x, p.y, p.z, heading_deg, pitch_deg),
+            Err(e) => {
+                self.events.push(StreamEvent::Failed { url: String::new(), message: e.to_string(), retrying: false })
+            }
+        }
+    }
+
+    /// Scene-relative `[x, y, z]` of a geographic point as JSON, or `null` before the
+    /// scene's CRS is known.
+    pub fn geo_to_local_json(&self, lon: f64, lat: f64, height: f64) -> String {
+        match self.geo.as_ref().map(|g| g.to_local(lon, lat, height)) {
+            Some(Ok(p)) => serde_json::json!([p.x, p.y, p.z]).to_string(),
+            _ => "null".into(),
+        }
+    }
+
+    /// Whether the GPU device was lost (the page then creates a new viewer).
+    pub fn is_lost(&self) -> bool {
+        self.lost.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Destroys the device as a driver reset would (for tests of the recovery).
+    pub fn simulate_device_loss(&self) {
+        self.device.destroy();
     }
 
     /// Orbits around the target: `dx`, `dy` in radians of heading and pitch.
@@ -360,12 +459,17 @@ impl Viewer {
         let c = self.camera();
         let origin = self.stream.manifest().map_or([0.0; 3], |m| m.origin_m);
         let epsg = self.stream.manifest().map_or(0, |m| m.crs.epsg);
-        serde_json::json!({
+        let mut v = serde_json::json!({
             "x": c.eye_m.x, "y": c.eye_m.y, "z": c.eye_m.z,
             "heading": c.heading_rad.to_degrees(), "pitch": c.pitch_rad.to_degrees(),
-            "origin": origin, "epsg": epsg,
-        })
-        .to_string()
+            "origin": origin, "epsg": epsg, "fly": self.fly,
+        });
+        if let Some((lon, lat, height)) = self.geo.as_ref().and_then(|g| g.to_geo(c.eye_m).ok()) {
+            v["lon"] = lon.into();
+            v["lat"] = lat.into();
+            v["height"] = height.into();
+        }
+        v.to_string()
     }
 
     /// Colours trees by representation and/or draws batch boxes.

@@ -2,7 +2,9 @@
 // Wraps the wasm Viewer (src/web.rs) with a render loop, camera controls
 // (mouse, touch, keyboard), events and the camera in the URL hash.
 //
-//   v.setCamera({x, y, z, heading, pitch})   metres relative to the scene origin, degrees
+//   v.setCamera({lon, lat, height, heading, pitch})   WGS 84 degrees, metres, degrees
+//   v.setCamera({x, y, z, heading, pitch})   or metres relative to the scene origin
+//   v.setFly(true)                          walking mode (eye height above the ground)
 //   v.flyTo({...}, seconds)                 smooth move
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
@@ -69,12 +71,30 @@ class SylvaViewer {
 
   setCamera(c) {
     this.flight = null;
-    this.viewer.set_camera(c.x, c.y, c.z, c.heading ?? 0, c.pitch ?? -30);
+    if (c.lon !== undefined) {
+      this.viewer.set_camera_geo(c.lon, c.lat, c.height ?? 300, c.heading ?? 0, c.pitch ?? -30);
+    } else {
+      this.viewer.set_camera(c.x, c.y, c.z, c.heading ?? 0, c.pitch ?? -30);
+    }
     this.dirty = 8;
   }
 
+  /** Scene-relative {x, y, z} of a geographic point (null before the scene CRS is known). */
+  toLocal(lon, lat, height) {
+    const p = JSON.parse(this.viewer.geo_to_local_json(lon, lat, height));
+    return p && { x: p[0], y: p[1], z: p[2] };
+  }
+
+  setFly(on) { this.viewer.set_fly(!!on); this.dirty = 8; }
+  get fly() { return this.viewer.fly(); }
+
   flyTo(c, seconds = 1.5) {
     const from = this.camera();
+    if (c.lon !== undefined) {
+      const p = this.toLocal(c.lon, c.lat, c.height ?? from.z);
+      if (!p) { this.setCamera(c); return; }
+      c = { ...c, ...p };
+    }
     const to = { heading: from.heading, pitch: from.pitch, ...c };
     const start = performance.now();
     let dh = ((to.heading - from.heading + 540) % 360) - 180;
@@ -92,9 +112,30 @@ class SylvaViewer {
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
   setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
 
+  /** Device lost (driver reset, GPU process crash): a new viewer on the same canvas, same camera. */
+  async recover() {
+    if (this.recovering) return;
+    this.recovering = true;
+    const cam = this.camera();
+    this.emit('warning', { message: 'The GPU device was lost; recreating the viewer.' });
+    try { this.viewer.free(); } catch (_) { /* gone with the device */ }
+    try {
+      this.viewer = await Viewer.create(this.canvas, this.options.scene || 'scene/scene.json');
+      this.resize();
+      this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
+      this.dirty = 8;
+      this.emit('recovered', {});
+    } catch (e) {
+      this.emit('error', { message: `The GPU device was lost and could not be recreated: ${e}` });
+    }
+    this.recovering = false;
+  }
+
   loop(now) {
     if (this.destroyed) return;
     this.raf = requestAnimationFrame(this.loop);
+    if (this.recovering) return;
+    if (this.viewer.is_lost()) { this.recover(); return; }
     if (this.flight) this.flight(now);
     const progress = JSON.parse(this.viewer.progress_json());
     // Render on demand: while loading, moving or just after a change; idle otherwise.
@@ -170,7 +211,8 @@ class SylvaViewer {
         const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
         drag.x = e.clientX; drag.y = e.clientY;
         const h = Math.max(1, c.clientHeight);
-        if (drag.pan) this.viewer.pan(-dx / h, dy / h);
+        if (this.viewer.fly()) this.viewer.look(-dx * 0.004, -dy * 0.004);
+        else if (drag.pan) this.viewer.pan(-dx / h, dy / h);
         else this.viewer.orbit(dx * 0.005, -dy * 0.005);
       }
       this.dirty = 8;
@@ -180,12 +222,21 @@ class SylvaViewer {
     c.addEventListener('pointercancel', up);
     c.addEventListener('wheel', (e) => {
       e.preventDefault();
-      this.viewer.zoom(Math.exp(e.deltaY * 0.0015));
+      if (this.viewer.fly()) this.viewer.walk(-e.deltaY * 0.02, 0);
+      else this.viewer.zoom(Math.exp(e.deltaY * 0.0015));
       this.dirty = 8;
     }, { passive: false });
     c.addEventListener('keydown', (e) => {
       const step = 0.05;
-      const keys = {
+      const walk = e.shiftKey ? 6 : 1.5;
+      const flyKeys = {
+        ArrowUp: () => this.viewer.walk(walk, 0), w: () => this.viewer.walk(walk, 0),
+        ArrowDown: () => this.viewer.walk(-walk, 0), s: () => this.viewer.walk(-walk, 0),
+        ArrowLeft: () => this.viewer.look(0.05, 0), a: () => this.viewer.walk(0, -walk),
+        ArrowRight: () => this.viewer.look(-0.05, 0), d: () => this.viewer.walk(0, walk),
+        q: () => this.viewer.look(0.05, 0), e: () => this.viewer.look(-0.05, 0),
+      };
+      const keys = this.viewer.fly() ? flyKeys : {
         ArrowUp: () => this.viewer.pan(0, step), w: () => this.viewer.pan(0, step),
         ArrowDown: () => this.viewer.pan(0, -step), s: () => this.viewer.pan(0, -step),
         ArrowLeft: () => this.viewer.pan(-step, 0), a: () => this.viewer.pan(-step, 0),
@@ -193,6 +244,7 @@ class SylvaViewer {
         q: () => this.viewer.orbit(-0.05, 0), e: () => this.viewer.orbit(0.05, 0),
         '+': () => this.viewer.zoom(0.8), '=': () => this.viewer.zoom(0.8), '-': () => this.viewer.zoom(1.25),
       };
+      if (e.key === 'f') { this.setFly(!this.viewer.fly()); e.preventDefault(); return; }
       const fn = keys[e.key];
       if (fn) { fn(); this.dirty = 8; e.preventDefault(); }
     });
@@ -229,14 +281,15 @@ export async function create(target, options = {}) {
   return v;
 }
 
-/** `<sylva-viewer src="…/scene.json" camera="x,y,z,heading,pitch">` */
+/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch">` */
 class SylvaElement extends HTMLElement {
   async connectedCallback() {
     if (this.viewer || this.starting) return;
     this.starting = true;
     this.style.display ||= 'block';
+    // camera="lon,lat,height,heading,pitch" (WGS 84 degrees, metres, degrees)
     const cam = this.getAttribute('camera');
-    const camera = cam ? (([x, y, z, heading, pitch]) => ({ x, y, z, heading, pitch }))(cam.split(',').map(Number)) : undefined;
+    const camera = cam ? (([lon, lat, height, heading, pitch]) => ({ lon, lat, height, heading, pitch }))(cam.split(',').map(Number)) : undefined;
     try {
       this.viewer = await create(this, { scene: this.getAttribute('src') || undefined, camera });
       this.dispatchEvent(new CustomEvent('sylva-ready', { detail: this.viewer }));

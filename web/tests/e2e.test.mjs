@@ -99,14 +99,51 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   assert.deepEqual(errors, []);
 });
 
-test('the camera follows the URL hash and setCamera', async () => {
-  const { page } = await openViewer(`${base}#camera=0,-400,120,0,-20`);
+test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the hash', async () => {
+  // 15.4° E 48.4° N is E 529 606.8, N 5 360 837.4 in UTM 33N (PROJ), i.e. x −10 393.2, y 837.4 from the origin.
+  const { page } = await openViewer(`${base}#camera=15.4,48.4,300,0,-20`);
   await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
   await ready(page);
   const cam = await page.evaluate(() => window.sylva.camera());
-  assert.ok(Math.abs(cam.y + 400) < 1 && Math.abs(cam.pitch + 20) < 0.5, JSON.stringify(cam));
+  assert.ok(Math.abs(cam.x + 10393.2) < 1 && Math.abs(cam.y - 837.4) < 1 && Math.abs(cam.pitch + 20) < 0.5, JSON.stringify(cam));
+  assert.ok(Math.abs(cam.lon - 15.4) < 1e-6 && Math.abs(cam.lat - 48.4) < 1e-6, JSON.stringify(cam));
   await page.evaluate(() => window.sylva.setCamera({ x: 10, y: -300, z: 80, heading: 30, pitch: -25 }));
-  await page.waitForFunction(() => /camera=10\.0,-300\.0/.test(location.hash), null, { timeout: 10000 });
+  await page.waitForFunction(() => /camera=15\.\d+,48\.\d+,\d+\.\d,30\.0,-25\.0/.test(location.hash), null, { timeout: 10000 });
+  // The shared link reproduces the view.
+  const hash = await page.evaluate(() => location.hash);
+  const again = await openViewer(`${base}${hash}`);
+  await again.page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await ready(again.page);
+  const cam2 = await again.page.evaluate(() => window.sylva.camera());
+  assert.ok(Math.abs(cam2.x - 10) < 0.5 && Math.abs(cam2.y + 300) < 0.5, JSON.stringify(cam2));
+});
+
+test('walking mode keeps eye height above the ground', async () => {
+  const { page } = await openViewer(base);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await ready(page);
+  await page.evaluate(() => { window.sylva.setFly(true); });
+  await page.focus('#view');
+  for (let i = 0; i < 5; i++) await page.keyboard.press('w');
+  await page.waitForTimeout(300);
+  const cam = await page.evaluate(() => window.sylva.camera());
+  assert.equal(cam.fly, true);
+  assert.ok(cam.z > 20 && cam.z < 40, `eye height ${cam.z} (ground of the fixture is ~21–29 m)`);
+  await foliageShare(page, 'walking');
+});
+
+test('a lost GPU device is recreated and rendering continues', async () => {
+  const { page } = await openViewer(base);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await ready(page);
+  await page.evaluate(() => new Promise((resolve) => {
+    window.sylva.on('recovered', resolve);
+    window.sylva.viewer.simulate_device_loss();
+  }));
+  await page.waitForFunction(() => window.sylva.stats().tiles_resident > 0, null, { timeout: 60000 });
+  await page.waitForTimeout(1500);
+  const share = await foliageShare(page, 'recovered');
+  assert.ok(share > 0.05, `after recovery foliage covers ${share}`);
 });
 
 test('a missing scene shows an error a user can act on', async () => {
