@@ -237,3 +237,55 @@ mod tests {
         assert_eq!(mime_type(Path::new("scene.json")), "application/json");
     }
 }
+
+#[cfg(test)]
+mod live_tests {
+    use super::*;
+
+    #[test]
+    fn serves_mime_types_ranges_gzip_cors_and_refuses_escapes() {
+        let dir = std::env::temp_dir().join(format!("sylva-serve-live-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("web/pkg")).unwrap();
+        std::fs::create_dir_all(dir.join("scene/tiles")).unwrap();
+        std::fs::write(dir.join("web/index.html"), "<!doctype html>".repeat(200)).unwrap();
+        std::fs::write(dir.join("web/pkg/sylva_bg.wasm"), b"\0asm\x01\0\0\0").unwrap();
+        let tile: Vec<u8> = (0..=255u8).collect();
+        std::fs::write(dir.join("scene/tiles/0_0.tile"), &tile).unwrap();
+        let config = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene") };
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
+        let base = format!("http://{}", rx.recv().unwrap());
+        let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
+        let get = |path: &str, headers: &[(&str, &str)]| {
+            let mut req = agent.get(&format!("{base}{path}"));
+            for (k, v) in headers {
+                req = req.header(*k, *v);
+            }
+            req.call().unwrap()
+        };
+        let wasm = get("/pkg/sylva_bg.wasm", &[]);
+        assert_eq!(wasm.status(), 200);
+        assert_eq!(wasm.headers()["content-type"], "application/wasm");
+        assert_eq!(wasm.headers()["access-control-allow-origin"], "*");
+        let mut part = get("/scene/tiles/0_0.tile", &[("Range", "bytes=10-19")]);
+        assert_eq!(part.status(), 206);
+        assert_eq!(part.headers()["content-range"], "bytes 10-19/256");
+        assert_eq!(part.body_mut().read_to_vec().unwrap(), (10..20u8).collect::<Vec<_>>());
+        assert!(part.headers()["cache-control"].to_str().unwrap().contains("max-age"));
+        // Raw request: ureq would decode gzip and drop the header.
+        let mut raw = TcpStream::connect(base.trim_start_matches("http://")).unwrap();
+        raw.write_all(b"GET / HTTP/1.1\r\nHost: x\r\nAccept-Encoding: gzip, br\r\n\r\n").unwrap();
+        let mut reply = Vec::new();
+        raw.read_to_end(&mut reply).unwrap();
+        let split = reply.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+        let head = String::from_utf8_lossy(&reply[..split]).to_ascii_lowercase();
+        assert!(head.contains("content-encoding: gzip"), "{head}");
+        let mut html = String::new();
+        flate2::read::GzDecoder::new(&reply[split + 4..]).read_to_string(&mut html).unwrap();
+        assert_eq!(html, "<!doctype html>".repeat(200));
+        assert_eq!(get("/scene/../web/index.html", &[]).status(), 404);
+        assert_eq!(get("/scene/%2e%2e/web/index.html", &[]).status(), 404);
+        assert_eq!(get("/scene/tiles/0_0.tile", &[("Range", "bytes=300-")]).status(), 416);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
