@@ -91,6 +91,13 @@ mod cli {
             #[arg(long, default_value_t = 0)]
             level: usize,
         },
+        /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
+        Compare {
+            /// First image (PNG).
+            a: PathBuf,
+            /// Second image (PNG).
+            b: PathBuf,
+        },
         /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/).
         Serve {
             /// Scene directory.
@@ -204,6 +211,24 @@ mod cli {
 
     pub fn main() -> Result<()> {
         match Cli::parse().command {
+            Command::Compare { a, b } => {
+                let load = |p: &PathBuf| {
+                    image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8())
+                };
+                let (ia, ib) = (load(&a)?, load(&b)?);
+                if ia.dimensions() != ib.dimensions() {
+                    bail!(
+                        "{} is {:?} but {} is {:?}: sizes must match",
+                        a.display(),
+                        ia.dimensions(),
+                        b.display(),
+                        ib.dimensions()
+                    );
+                }
+                let (w, h) = ia.dimensions();
+                println!("{:.6}", sylva::metrics::multiscale_rmse(ia.as_raw(), ib.as_raw(), w, h));
+                Ok(())
+            }
             Command::Serve { dir, port, bind, web } => {
                 if !dir.join("scene.json").is_file() {
                     bail!(

@@ -95,6 +95,9 @@ struct Readback {
     mapped_len: u64,
     state: Rc<Cell<u8>>, // 0 idle, 1 mapping, 2 mapped
     words: Vec<u32>,
+    /// Frame whose counters the pending mapping holds, and of the words read.
+    pending_frame: u64,
+    words_frame: u64,
 }
 
 /// The browser viewer.
@@ -117,6 +120,9 @@ pub struct Viewer {
     events: Vec<StreamEvent>,
     adapter: String,
     geo: Option<GeoFrame>,
+    /// Frames drawn, and the first frame drawn with the stream settled since the last change.
+    frames: u64,
+    settled_frame: Option<u64>,
     /// A geographic camera asked for before the manifest (and so the CRS) arrived.
     pending_geo: Option<[f64; 5]>,
     /// Walking mode: the eye stays at eye height above the ground and looks around itself.
@@ -207,6 +213,8 @@ impl Viewer {
             mapped_len: 0,
             state: Rc::new(Cell::new(0)),
             words: Vec::new(),
+            pending_frame: 0,
+            words_frame: 0,
         };
         let info = adapter.get_info();
         Ok(Viewer {
@@ -227,6 +235,8 @@ impl Viewer {
             events: Vec::new(),
             adapter: format!("{} ({:?})", info.name, info.backend),
             geo: None,
+            frames: 0,
+            settled_frame: None,
             pending_geo: None,
             fly: false,
             lost,
@@ -315,11 +325,18 @@ impl Viewer {
         }
         self.queue.submit([encoder.finish()]);
         self.queue.present(frame);
+        self.frames += 1;
+        if self.stream.is_settled() && self.stream.manifest().is_some() {
+            self.settled_frame.get_or_insert(self.frames);
+        } else {
+            self.settled_frame = None;
+        }
         self.collect_readback();
         if copy {
             let state = self.readback.state.clone();
             state.set(1);
             self.readback.mapped_len = 32 + slot_bytes;
+            self.readback.pending_frame = self.frames;
             self.readback.buffer.slice(..32 + slot_bytes).map_async(wgpu::MapMode::Read, move |r| {
                 state.set(if r.is_ok() { 2 } else { 0 });
             });
@@ -336,6 +353,7 @@ impl Viewer {
             let data = self.readback.buffer.slice(..self.readback.mapped_len).get_mapped_range();
             if let Ok(data) = data {
                 self.readback.words = bytemuck::cast_slice(&data[..]).to_vec();
+                self.readback.words_frame = self.readback.pending_frame;
             }
         }
         self.readback.buffer.unmap();
@@ -486,6 +504,12 @@ impl Viewer {
     /// Whether everything the current view needs is drawn.
     pub fn settled(&self) -> bool {
         self.stream.is_settled()
+    }
+
+    /// Whether a frame with everything the view needs has been drawn and its
+    /// counters read back (so `stats_json` describes it).
+    pub fn is_ready(&self) -> bool {
+        self.settled_frame.is_some_and(|f| self.readback.words_frame >= f)
     }
 
     /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md).

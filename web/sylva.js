@@ -138,8 +138,9 @@ class SylvaViewer {
     if (this.viewer.is_lost()) { this.recover(); return; }
     if (this.flight) this.flight(now);
     const progress = JSON.parse(this.viewer.progress_json());
-    // Render on demand: while loading, moving or just after a change; idle otherwise.
-    if (!progress.settled || this.flight || this.dirty > 0) {
+    // Render on demand: while loading, moving or just after a change, and until the
+    // first complete frame's counters are back; idle otherwise.
+    if (!progress.settled || this.flight || this.dirty > 0 || (!this.readySettled && !this.viewer.is_ready())) {
       const t0 = performance.now();
       try {
         this.viewer.frame(now);
@@ -165,8 +166,8 @@ class SylvaViewer {
       this.lastCamera = cam;
       this.emit('camerachange', JSON.parse(cam));
     }
-    // Ready after a frame drawn with everything settled (stats counters need a few frames).
-    if (!this.readySettled && progress.manifest && progress.settled && this.dirty === 0) {
+    // Ready after a frame drawn with everything settled, once its counters are read back.
+    if (!this.readySettled && this.viewer.is_ready()) {
       this.readySettled = true;
       this.resolveReady(this.stats());
       this.emit('ready', this.stats());
