@@ -166,17 +166,7 @@ impl Viewer {
                      Chromium needs --enable-unsafe-webgpu --enable-features=Vulkan."
                 ))
             })?;
-        let (device, queue) = adapter
-            .request_device(&wgpu::DeviceDescriptor {
-                label: Some("sylva"),
-                required_features: wgpu::Features::empty(),
-                required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
-                experimental_features: wgpu::ExperimentalFeatures::disabled(),
-                memory_hints: wgpu::MemoryHints::Performance,
-                trace: wgpu::Trace::Off,
-            })
-            .await
-            .map_err(|e| js_err(format!("the WebGPU adapter refused a device: {e}")))?;
+        let (device, queue) = crate::render::context::request_device(&adapter).await.map_err(js_err)?;
         let lost = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = lost.clone();
         device.set_device_lost_callback(move |reason, message| {

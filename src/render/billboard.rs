@@ -2,7 +2,7 @@
 //! tree, drawn with one indirect draw per species. Shader: `shaders/billboard.wgsl`.
 
 use super::layouts::SharedLayouts;
-use super::mesh::{upload_texture_array, DEPTH_FORMAT};
+use super::mesh::upload_texture_array;
 use super::shaders;
 use crate::format::pack::{kind, BillboardMeta};
 use crate::format::Pack;
@@ -69,13 +69,7 @@ impl BillboardPipeline {
                 buffers: &[],
             },
             primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
+            depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
                 module: &module,

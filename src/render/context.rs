@@ -47,17 +47,7 @@ impl GpuContext {
             }
         }
         let adapter = adapter.ok_or(ContextError::NoAdapter(last_err))?;
-        let (device, queue) = adapter
-            .request_device(&wgpu::DeviceDescriptor {
-                label: Some("sylva"),
-                required_features: wgpu::Features::empty(),
-                required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
-                experimental_features: wgpu::ExperimentalFeatures::disabled(),
-                memory_hints: wgpu::MemoryHints::Performance,
-                trace: wgpu::Trace::Off,
-            })
-            .await
-            .map_err(|e| ContextError::Device(e.to_string()))?;
+        let (device, queue) = request_device(&adapter).await?;
         Ok(Self { instance, adapter, device, queue })
     }
 
@@ -76,6 +66,26 @@ impl GpuContext {
         let info = self.adapter.get_info();
         format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
     }
+}
+
+/// The device every Sylva context asks for: no optional features and WebGPU's
+/// default limits (raised only as far as the adapter's resolution), so what runs
+/// natively also runs in a browser.
+///
+/// # Errors
+/// [`ContextError::Device`] when the adapter refuses.
+pub async fn request_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wgpu::Queue), ContextError> {
+    adapter
+        .request_device(&wgpu::DeviceDescriptor {
+            label: Some("sylva"),
+            required_features: wgpu::Features::empty(),
+            required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        })
+        .await
+        .map_err(|e| ContextError::Device(e.to_string()))
 }
 
 /// Reads back a 2D RGBA8 texture (or one layer of an array) as tightly packed rows.

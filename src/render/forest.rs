@@ -706,13 +706,7 @@ fn overlay_pipeline(
         },
         primitive: wgpu::PrimitiveState { topology, ..Default::default() },
         // The sky is at depth 0, the far end under reversed Z; overlays ignore depth.
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Always),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
+        depth_stencil: super::mesh::depth_state(false, wgpu::CompareFunction::Always),
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
             module: &module,

@@ -19,6 +19,19 @@ pub const CAPTURE_ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba
 /// Normal target of the capture mode (n * 0.5 + 0.5, alpha = leaf flag).
 pub const CAPTURE_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
+/// The depth state of every Sylva pipeline: reversed Z, so nearer is greater.
+/// Overlays pass `write = false` and `CompareFunction::Always`.
+#[must_use]
+pub fn depth_state(write: bool, compare: wgpu::CompareFunction) -> Option<wgpu::DepthStencilState> {
+    Some(wgpu::DepthStencilState {
+        format: DEPTH_FORMAT,
+        depth_write_enabled: Some(write),
+        depth_compare: Some(compare),
+        stencil: Default::default(),
+        bias: Default::default(),
+    })
+}
+
 /// Layouts, pipelines and the sampler of the mesh pass.
 pub struct MeshPipelines {
     /// Group 1: mesh level constants, materials, material textures.
@@ -107,13 +120,7 @@ impl MeshPipelines {
                     cull_mode: None,
                     ..Default::default()
                 },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
+                depth_stencil: depth_state(true, wgpu::CompareFunction::Greater),
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
