@@ -631,6 +631,38 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn imports_embedded_webp_images() {
+        // The same GLB with its leaf image re-encoded as lossless WebP (mimeType image/webp).
+        let png = image::load_from_memory(&leaf_png()).unwrap().to_rgba8();
+        let mut webp = Vec::new();
+        image::codecs::webp::WebPEncoder::new_lossless(&mut webp)
+            .encode(png.as_raw(), 8, 8, image::ExtendedColorType::Rgba8)
+            .unwrap();
+        let (mut bin, vbytes, colors_at, indices_at) = interleaved_buffers();
+        let image_at = bin.len();
+        bin.extend_from_slice(&webp);
+        let gltf = json!({
+            "asset": {"version": "2.0"},
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 4, "material": 0}]}],
+            "materials": [{"name": "leaf", "alphaMode": "MASK", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+            "textures": [{"source": 0}],
+            "images": [{"bufferView": 3, "mimeType": "image/webp"}],
+            "buffers": [{"byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+                {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+                {"buffer": 0, "byteOffset": indices_at, "byteLength": 12},
+                {"buffer": 0, "byteOffset": image_at, "byteLength": webp.len()}
+            ],
+            "accessors": accessors(0, 1, 2, 0)
+        });
+        let m = import_slice(&glb(&gltf, &bin), None, &Classifier::default()).unwrap();
+        let tex = m.materials[0].texture.as_ref().expect("WebP decoded");
+        assert_eq!(tex.as_raw(), png.as_raw(), "lossless WebP gives the same texels");
+    }
+
+    #[test]
     fn broken_inputs_give_errors_not_panics() {
         let c = Classifier::default();
         assert!(import_slice(b"definitely not gltf", None, &c).is_err());
