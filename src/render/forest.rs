@@ -734,12 +734,6 @@ pub fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Te
     })
 }
 
-/// Instances of all resident batches, as the pool holds them (for tests).
-#[must_use]
-pub fn pool_batches(tile_batches: &[GpuBatch], instance_start: u32) -> Vec<GpuBatch> {
-    tile_batches.iter().map(|b| GpuBatch { instance_offset: b.instance_offset + instance_start, ..*b }).collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

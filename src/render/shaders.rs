@@ -1,9 +1,6 @@
 //! WGSL sources, composed at compile time: `shaders/common.wgsl` is prepended
 //! to each pass's file (WGSL has no includes).
 
-/// Helpers shared by every pass.
-pub const COMMON: &str = include_str!("../../shaders/common.wgsl");
-
 /// The mesh pass (and the bake's billboard capture).
 pub const MESH: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/mesh.wgsl"));
 
