@@ -1,7 +1,7 @@
 //! Billboard pass: view-angle billboards (seed 004 §3.3, eq. 3.1), one quad per
 //! tree, drawn with one indirect draw per species. Shader: `shaders/billboard.wgsl`.
 
-use super::layouts::SharedLayouts;
+use super::layouts::{sampler_entry, texture_array_entry, SharedLayouts};
 use super::mesh::upload_texture_array;
 use super::shaders;
 use crate::format::pack::{kind, BillboardMeta};
@@ -26,28 +26,9 @@ impl BillboardPipeline {
             label: Some("billboard.wgsl"),
             source: wgpu::ShaderSource::Wgsl(shaders::BILLBOARD.into()),
         });
-        let tex = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-                multisampled: false,
-            },
-            count: None,
-        };
         let texture_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("billboard textures"),
-            entries: &[
-                tex(0),
-                tex(1),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-            ],
+            entries: &[texture_array_entry(0), texture_array_entry(1), sampler_entry(2)],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("billboard"),

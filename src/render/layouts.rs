@@ -33,6 +33,32 @@ pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages, read_only: bo
     storage(binding, visibility, read_only)
 }
 
+/// A filterable 2D-array texture read by the fragment stage (material and billboard arrays).
+#[must_use]
+pub fn texture_array_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// A filtering sampler for the fragment stage.
+#[must_use]
+pub fn sampler_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        count: None,
+    }
+}
+
 impl SharedLayouts {
     /// Creates the layouts.
     #[must_use]

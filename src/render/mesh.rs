@@ -7,7 +7,7 @@
 use wgpu::util::DeviceExt;
 
 use super::gpu_data::{GpuMaterial, MeshUniform, RenderMode};
-use super::layouts::SharedLayouts;
+use super::layouts::{sampler_entry, texture_array_entry, SharedLayouts};
 use super::shaders;
 use crate::format::pack::{kind, MaterialKind, TextureArrayMeta};
 use crate::format::Pack;
@@ -76,22 +76,8 @@ impl MeshPipelines {
                     },
                     count: None,
                 },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
+                texture_array_entry(2),
+                sampler_entry(3),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
