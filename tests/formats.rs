@@ -131,6 +131,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
             half_height: 5.5,
             select_px: 0.0,
         }),
+        clusters: None,
     };
     let fill = |n: u64, v: u8| vec![v; n as usize];
     let sections = vec![

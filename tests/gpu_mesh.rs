@@ -93,6 +93,7 @@ fn toy_pack() -> Vec<u8> {
             select_px: 0.0,
         }],
         billboards: None,
+        clusters: None,
     };
     let sections = vec![
         Section {

@@ -2,6 +2,7 @@
 //! (LoD packs + grouped-batch tiles + manifest). See `--help`.
 
 mod batching;
+mod clusters;
 mod demo;
 mod gltf_import;
 mod inspect;

@@ -110,6 +110,7 @@ pub fn build_pack(
         material_texture: texture_meta,
         mesh_levels: levels.iter().map(|(m, _, _)| m.clone()).collect(),
         billboards: None,
+        clusters: None,
     };
     // Capture the billboards from the mesh-only pack, through the same decoder the viewer uses.
     let mesh_only = encode_pack(&meta, &sections);

@@ -43,6 +43,10 @@ pub mod kind {
     pub const BILLBOARD_COLOR: [u8; 4] = *b"BBCO";
     /// Billboard normal (xyz) + depth (w) array, RGBA8, mip-major.
     pub const BILLBOARD_NORMAL: [u8; 4] = *b"BBNO";
+    /// Ellipsoid records of one cluster level (`index` = level), 24 bytes each.
+    pub const ELLIPSOIDS: [u8; 4] = *b"ELPS";
+    /// Line records of one cluster level (`index` = level), 16 bytes each.
+    pub const LINES: [u8; 4] = *b"LINE";
 }
 
 /// One mesh vertex, 20 bytes, quantised against its level's bounds.
@@ -199,6 +203,9 @@ pub struct PackMeta {
     pub mesh_levels: Vec<MeshLevelMeta>,
     /// Billboard array, if baked.
     pub billboards: Option<BillboardMeta>,
+    /// Clustered-ellipsoid and line levels (seed 002), if baked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clusters: Option<super::cluster::ClusterMeta>,
 }
 
 /// A section-table entry.
@@ -488,6 +495,33 @@ fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
         }
         validate_texture("META.billboards.texture", &b.texture, pack.section(kind::BILLBOARD_COLOR, 0))?;
         validate_texture("META.billboards.texture", &b.texture, pack.section(kind::BILLBOARD_NORMAL, 0))?;
+    }
+    if let Some(c) = &m.clusters {
+        finite_all("META.clusters.line_color", &c.line_color)?;
+        let kinds = [
+            ("ellipsoid_levels", &c.ellipsoid_levels, kind::ELLIPSOIDS, 24),
+            ("line_levels", &c.line_levels, kind::LINES, 16),
+        ];
+        for (name, levels, k, stride) in kinds {
+            at_most(format!("META.clusters.{name} count"), levels.len() as u64, 32)?;
+            for (l, level) in levels.iter().enumerate() {
+                let what = format!("META.clusters.{name}[{l}]");
+                finite_all(&what, &[level.select_px, level.error, level.noise_threshold, level.normal_blend])?;
+                let Some(data) = pack.section(k, l as u32) else {
+                    return Err(Problem::Invalid(format!(
+                        "{what} has no {} section with index {l}",
+                        String::from_utf8_lossy(&k)
+                    )));
+                };
+                if data.len() as u64 != u64::from(level.count) * stride {
+                    return Err(Problem::Invalid(format!(
+                        "{what} declares {} records of {stride} bytes, the section holds {} bytes",
+                        level.count,
+                        data.len()
+                    )));
+                }
+            }
+        }
     }
     Ok(())
 }
