@@ -27,6 +27,10 @@ struct View {
     // x: render mode (0 lit, 1 capture), y: batch slots to test, z: debug view
     // (0 off, 1 colour by representation), w: species count.
     params: vec4<u32>,
+    // Inverse of clip_from_eye: per-pixel rays of the cluster pass.
+    eye_from_clip: mat4x4<f32>,
+    // x, y: viewport size (px).
+    viewport: vec4<f32>,
 };
 
 // One batch of the resident pool. Must match `GpuBatch` in src/format/tile.rs
@@ -49,24 +53,34 @@ struct Batch {
 };
 
 // Per-species selection data. Must match `GpuSpecies` in src/render/gpu_data.rs.
+// The per-representation fields are 8 entries as two vec4s: use the accessors.
 struct Species {
     // Bounding sphere of the model at scale 1 (xyz centre, w radius).
     sphere: vec4<f32>,
-    // x: model height, y: mesh level 0 threshold (px), z: mesh level 1 threshold (px), w: unused.
+    // x: model height; yzw unused.
     select: vec4<f32>,
-    // Draw-item segment base per representation (mesh0, mesh1, billboard, unused).
-    slot_base: vec4<u32>,
+    // Per representation: projected tree height (px) from which it is drawn.
+    lower_px: array<vec4<f32>, 2>,
+    // Draw-item segment base per representation.
+    slot_base: array<vec4<u32>, 2>,
     // Segment capacity per representation (0: representation not ready).
-    slot_cap: vec4<u32>,
-    // Indices (meshes) or vertices (billboards) per instance, per representation.
-    index_count: vec4<u32>,
+    slot_cap: array<vec4<u32>, 2>,
+    // Indices (meshes) or vertices (billboards, clusters) per instance.
+    index_count: array<vec4<u32>, 2>,
 };
 
+fn species_lower(s: Species, r: u32) -> f32 { return s.lower_px[r >> 2u][r & 3u]; }
+fn species_base(s: Species, r: u32) -> u32 { return s.slot_base[r >> 2u][r & 3u]; }
+fn species_cap(s: Species, r: u32) -> u32 { return s.slot_cap[r >> 2u][r & 3u]; }
+fn species_indices(s: Species, r: u32) -> u32 { return s.index_count[r >> 2u][r & 3u]; }
+
 // Representations, in order of detail. A slot is species * REPR_COUNT + repr.
+// 2–5 are the cluster tiers (ellipsoids + lines of one level each, seed 002).
 const REPR_MESH0: u32 = 0u;
 const REPR_MESH1: u32 = 1u;
-const REPR_BILLBOARD: u32 = 2u;
-const REPR_COUNT: u32 = 3u;
+const REPR_CLUSTER0: u32 = 2u;
+const REPR_BILLBOARD: u32 = 6u;
+const REPR_COUNT: u32 = 7u;
 
 // Per-draw constants (dynamic uniform offset). Must match `DrawParams` in src/render/gpu_data.rs.
 struct DrawParams {
@@ -76,6 +90,15 @@ struct DrawParams {
     bb_center: vec4<f32>,
     // x: billboard half height, yzw unused.
     bb_size: vec4<f32>,
+    // Cluster level: x first ellipsoid word, y ellipsoids, z first line word, w lines.
+    cluster: vec4<u32>,
+    // x: noise threshold, y: normal blend, z: log2 of the noise cube size.
+    cluster_noise: vec4<f32>,
+    // Quantisation box of cluster records (min, extent).
+    bounds_min: vec4<f32>,
+    bounds_extent: vec4<f32>,
+    // Linear RGB of the lines.
+    line_color: vec4<f32>,
 };
 
 // A decoded tree, eye-relative.
@@ -183,6 +206,10 @@ fn repr_color(repr: u32) -> vec3<f32> {
     switch repr {
         case 0u: { return vec3<f32>(0.9, 0.2, 0.2); }
         case 1u: { return vec3<f32>(0.95, 0.8, 0.2); }
+        case 2u: { return vec3<f32>(0.2, 0.85, 0.3); }
+        case 3u: { return vec3<f32>(0.1, 0.65, 0.45); }
+        case 4u: { return vec3<f32>(0.1, 0.5, 0.55); }
+        case 5u: { return vec3<f32>(0.3, 0.4, 0.6); }
         default: { return vec3<f32>(0.2, 0.5, 0.95); }
     }
 }

@@ -39,7 +39,7 @@ fn reset(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let s = species[slot / REPR_COUNT];
     let repr = slot % REPR_COUNT;
-    atomicStore(&args[slot * 5u + 0u], s.index_count[repr]);
+    atomicStore(&args[slot * 5u + 0u], species_indices(s, repr));
     for (var i = 1u; i < 5u; i++) {
         atomicStore(&args[slot * 5u + i], 0u);
     }
@@ -81,7 +81,7 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let s = species[b.species];
-    if s.slot_cap.x + s.slot_cap.y + s.slot_cap.z == 0u {
+    if dot(s.slot_cap[0], vec4<u32>(1u)) + dot(s.slot_cap[1], vec4<u32>(1u)) == 0u {
         return; // nothing of this species can be drawn yet (pack not loaded)
     }
     let at = atomicAdd(&control[0], 1u);
@@ -105,8 +105,8 @@ fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fad
     let s = species[species_index];
     let slot = species_index * REPR_COUNT + repr;
     let at = atomicAdd(&args[slot * 5u + 1u], 1u);
-    if at < s.slot_cap[repr] {
-        items[s.slot_base[repr] + at] = vec2<u32>(instance, pack_item_y(batch, side, fade));
+    if at < species_cap(s, repr) {
+        items[species_base(s, repr) + at] = vec2<u32>(instance, pack_item_y(batch, side, fade));
     } else {
         atomicAdd(&control[5], 1u);
     }
@@ -117,12 +117,16 @@ fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fad
 fn select_and_emit(s_index: u32, h_px: f32, instance: u32, batch: u32) {
     let s = species[s_index];
     // Ready representations, finest first, with their lower thresholds in px.
-    var reprs: array<u32, 3>;
-    var lower: array<f32, 3>;
+    var reprs: array<u32, 7>;
+    var lower: array<f32, 7>;
     var n = 0u;
-    if s.slot_cap.x > 0u { reprs[n] = REPR_MESH0; lower[n] = s.select.y; n++; }
-    if s.slot_cap.y > 0u { reprs[n] = REPR_MESH1; lower[n] = s.select.z; n++; }
-    if s.slot_cap.z > 0u { reprs[n] = REPR_BILLBOARD; lower[n] = 0.0; n++; }
+    for (var r = 0u; r < REPR_COUNT; r++) {
+        if species_cap(s, r) > 0u {
+            reprs[n] = r;
+            lower[n] = species_lower(s, r);
+            n++;
+        }
+    }
     if n == 0u {
         return;
     }
@@ -180,7 +184,7 @@ fn finalize(@builtin(global_invocation_id) gid: vec3<u32>) {
     if slot >= view.params.w * REPR_COUNT {
         return;
     }
-    let cap = species[slot / REPR_COUNT].slot_cap[slot % REPR_COUNT];
+    let cap = species_cap(species[slot / REPR_COUNT], slot % REPR_COUNT);
     let n = atomicLoad(&args[slot * 5u + 1u]);
     atomicStore(&args[slot * 5u + 1u], min(n, cap));
 }

@@ -9,7 +9,7 @@ mod cli {
     use glam::DVec3;
     use sylva::format::decode_pack;
     use sylva::render::camera::Camera;
-    use sylva::render::capture::{render_pack_preview, PackView};
+    use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
     use sylva::render::forest::{PoolConfig, RenderSettings};
     use sylva::render::offscreen::{NamedView, OffscreenScene};
     use sylva::render::GpuContext;
@@ -31,6 +31,13 @@ mod cli {
         Side,
         Oblique,
         Top,
+    }
+
+    #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+    enum PackReprArg {
+        Mesh,
+        Ellipsoids,
+        Billboard,
     }
 
     #[derive(Clone, Copy, ValueEnum)]
@@ -87,7 +94,11 @@ mod cli {
             /// Pack view (with --pack).
             #[arg(long, value_enum, default_value_t = View::Oblique)]
             pack_view: View,
-            /// Mesh level (with --pack).
+            /// What to draw with --pack: mesh (level --level), ellipsoids (cluster
+            /// level --level: ellipsoids + lines) or billboard.
+            #[arg(long, value_enum, default_value_t = PackReprArg::Mesh)]
+            repr: PackReprArg,
+            /// Mesh or cluster level (with --pack).
             #[arg(long, default_value_t = 0)]
             level: usize,
         },
@@ -264,6 +275,7 @@ mod cli {
                 timeout,
                 pack_view,
                 level,
+                repr,
             } => {
                 let (w, h) = parse_size(&size)?;
                 if !(quality > 0.0 && quality <= 16.0) {
@@ -291,16 +303,35 @@ mod cli {
                 let pack = pack.expect("clap requires --scene or --pack");
                 let bytes = std::fs::read(&pack).with_context(|| format!("cannot read {}", pack.display()))?;
                 let decoded = decode_pack(&pack.display().to_string(), &bytes)?;
-                if level >= decoded.meta.mesh_levels.len() {
-                    bail!("--level {level}: the pack has {} mesh levels", decoded.meta.mesh_levels.len());
-                }
+                let repr = match repr {
+                    PackReprArg::Mesh => {
+                        if level >= decoded.meta.mesh_levels.len() {
+                            bail!("--level {level}: the pack has {} mesh levels", decoded.meta.mesh_levels.len());
+                        }
+                        PackRepr::Mesh(level)
+                    }
+                    PackReprArg::Ellipsoids => {
+                        let n = decoded.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
+                        if level >= n {
+                            bail!("--level {level}: the pack has {n} cluster levels");
+                        }
+                        PackRepr::Cluster(level)
+                    }
+                    PackReprArg::Billboard => {
+                        if decoded.meta.billboards.is_none() {
+                            bail!("the pack has no billboards");
+                        }
+                        PackRepr::Billboard
+                    }
+                };
                 let gpu = GpuContext::new_headless_blocking()?;
                 let view = match pack_view {
                     View::Side => PackView::Side,
                     View::Oblique => PackView::Oblique,
                     View::Top => PackView::Top,
                 };
-                let rgba = render_pack_preview(&gpu, &decoded, level, view, w, h, [0.62, 0.74, 0.86, 1.0]);
+                let rgba = render_pack_repr(&gpu, &decoded, repr, view, w, h, [0.62, 0.74, 0.86, 1.0])
+                    .context("the pack lacks that representation")?;
                 image::save_buffer(&out, &rgba, w, h, image::ColorType::Rgba8)
                     .with_context(|| format!("cannot write {}", out.display()))?;
                 eprintln!("wrote {} ({w}x{h}, {} on {})", out.display(), decoded.meta.name, gpu.adapter_summary());

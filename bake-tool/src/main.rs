@@ -72,6 +72,12 @@ struct PackArgs {
     /// Do not add the simplified mesh level.
     #[arg(long)]
     no_simplified_level: bool,
+    /// Do not add clustered-ellipsoid and line levels (seed 002).
+    #[arg(long)]
+    no_clusters: bool,
+    /// EM starts per cluster level; the one with the lowest image error is kept.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=32))]
+    cluster_tries: u32,
     /// Write billboard layers as PNG strips into this directory.
     #[arg(long, value_name = "DIR")]
     debug_dump: Option<PathBuf>,
@@ -101,6 +107,8 @@ impl PackArgs {
             billboard_azimuths: self.billboard_azimuths,
             billboard_size: self.billboard_size,
             simplified_level: !self.no_simplified_level,
+            clusters: !self.no_clusters,
+            cluster_tries: self.cluster_tries as usize,
         })
     }
 

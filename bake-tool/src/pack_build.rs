@@ -28,6 +28,10 @@ pub struct PackOptions {
     pub billboard_size: u32,
     /// Whether to add a simplified mesh level.
     pub simplified_level: bool,
+    /// Whether to add clustered-ellipsoid and line levels (seed 002).
+    pub clusters: bool,
+    /// EM starts per cluster level.
+    pub cluster_tries: usize,
 }
 
 impl Default for PackOptions {
@@ -38,6 +42,8 @@ impl Default for PackOptions {
             billboard_azimuths: 1,
             billboard_size: 128,
             simplified_level: true,
+            clusters: true,
+            cluster_tries: 4,
         }
     }
 }
@@ -155,6 +161,14 @@ pub fn build_pack(
         stride: 0,
         data: mip_major(&normal_chains, tex.mips),
     });
+    if opts.clusters {
+        let hopts = crate::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
+        let mut log = |m: &str| eprintln!("{m}");
+        if let Some(c) = crate::clusters::bake::build_clusters(model, &decoded, gpu, &hopts, &mut log)? {
+            sections.extend(c.sections);
+            meta.clusters = Some(c.meta);
+        }
+    }
     meta.billboards = Some(BillboardMeta {
         angles: opts.billboard_angles,
         azimuths: opts.billboard_azimuths,

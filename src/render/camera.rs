@@ -39,6 +39,8 @@ pub struct ViewData {
     pub frustum: [Vec4; 6],
     /// Pixels per metre at 1 m distance: `height / (2 tan(fov/2))`.
     pub px_per_m_at_1m: f32,
+    /// Viewport size in pixels.
+    pub viewport: [u32; 2],
 }
 
 impl Camera {
@@ -86,6 +88,7 @@ impl Camera {
             eye_lo,
             frustum: frustum_planes(&clip_from_eye),
             px_per_m_at_1m: height as f32 / (2.0 * (self.fov_y_rad * 0.5).tan()),
+            viewport: [width, height],
         }
     }
 }

@@ -5,6 +5,8 @@
 use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
+use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
+use super::cluster::{ClusterGpu, ClusterPipeline};
 use super::context::{read_texture_rgba8, GpuContext};
 use super::gpu_data::{DrawParams, RenderMode, ViewUniform};
 use super::layouts::SharedLayouts;
@@ -98,6 +100,7 @@ fn target(ctx: &GpuContext, width: u32, height: u32, format: wgpu::TextureFormat
 struct SingleTree {
     instances: wgpu::BindGroup,
     draw: wgpu::BindGroup,
+    params: wgpu::Buffer,
 }
 
 impl SingleTree {
@@ -127,10 +130,15 @@ impl SingleTree {
         let batches = init("batch", bytemuck::bytes_of(&batch), s);
         let instances = init("instance", bytemuck::bytes_of(&instance), s);
         let items = init("item", bytemuck::cast_slice(&[0u32, 0u32]), s);
-        let params = init("draw params", bytemuck::bytes_of(&DrawParams::default()), wgpu::BufferUsages::UNIFORM);
+        let params = init(
+            "draw params",
+            bytemuck::bytes_of(&DrawParams::default()),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
         Self {
             instances: shared.instance_group(&ctx.device, &batches, &instances, &items),
             draw: shared.draw_group(&ctx.device, &params),
+            params,
         }
     }
 
@@ -195,7 +203,7 @@ pub fn capture_billboards(
             let uniform = ViewUniform {
                 clip_from_eye: frame.clip_from_model(elevation, azimuth).to_cols_array_2d(),
                 params: [RenderMode::Capture as u32, 0, 0, 0],
-                ..Lighting::default().view_uniform(Mat4::IDENTITY, Vec3::ZERO)
+                ..Lighting::default().view_uniform(frame.clip_from_model(elevation, azimuth), Vec3::ZERO, [size, size])
             };
             ctx.queue.write_buffer(&view_buffer, 0, bytemuck::bytes_of(&uniform));
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -256,25 +264,150 @@ pub enum PackView {
     Top,
 }
 
-/// Renders one tree of `pack` (mesh level `level`) lit, with a perspective camera
-/// framing the whole tree, into a `width`×`height` sRGB RGBA8 image.
+/// What [`TreeRenderer::render`] draws.
+pub enum TreeDraw<'a> {
+    /// A mesh level.
+    Mesh(&'a MeshGpu, usize),
+    /// A cluster level (ellipsoids + lines).
+    Cluster(&'a ClusterGpu, usize),
+    /// The billboards.
+    Billboard(&'a BillboardGpu),
+}
+
+/// Lit renders of one tree (scale 1, yaw 0, at the model origin) with any
+/// representation, through the viewer's own pipelines: previews, the image
+/// tests of the representations, and the bake's image-error calibration.
+pub struct TreeRenderer {
+    shared: SharedLayouts,
+    /// Mesh pipelines (for [`MeshGpu::upload`]).
+    pub mesh: MeshPipelines,
+    /// Cluster pipeline (for [`ClusterGpu::upload`] / [`ClusterGpu::new`]).
+    pub cluster: ClusterPipeline,
+    /// Billboard pipeline (for [`BillboardGpu::upload`]).
+    pub billboard: BillboardPipeline,
+    tree: SingleTree,
+    view_buffer: wgpu::Buffer,
+    view_group: wgpu::BindGroup,
+    format: wgpu::TextureFormat,
+}
+
+impl TreeRenderer {
+    /// Pipelines for sRGB RGBA8 targets.
+    #[must_use]
+    pub fn new(ctx: &GpuContext) -> Self {
+        let format = wgpu::TextureFormat::Rgba8UnormSrgb;
+        let shared = SharedLayouts::new(&ctx.device);
+        let mesh = MeshPipelines::new(&ctx.device, &shared, format);
+        let cluster = ClusterPipeline::new(&ctx.device, &shared, format);
+        let billboard = BillboardPipeline::new(&ctx.device, &shared, format);
+        let tree = SingleTree::new(ctx, &shared);
+        let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tree view"),
+            size: std::mem::size_of::<ViewUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let view_group = shared.view_group(&ctx.device, &view_buffer);
+        Self { shared, mesh, cluster, billboard, tree, view_buffer, view_group, format }
+    }
+
+    /// Renders `what` with the camera `clip_from_eye` at `eye` (model space) into
+    /// a `width`×`height` sRGB RGBA8 image over `background`. `debug_lod` colours
+    /// by representation.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render(
+        &self,
+        ctx: &GpuContext,
+        what: &TreeDraw<'_>,
+        clip_from_eye: Mat4,
+        eye: Vec3,
+        width: u32,
+        height: u32,
+        background: [f64; 4],
+    ) -> Vec<u8> {
+        let mut uniform = Lighting::default().view_uniform(clip_from_eye, eye, [width, height]);
+        // Pixels per metre at 1 m, for the lines' minimum width.
+        let row1 = Vec3::new(clip_from_eye.x_axis.y, clip_from_eye.y_axis.y, clip_from_eye.z_axis.y);
+        uniform.lod[0] = 0.5 * height as f32 * row1.length();
+        ctx.queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
+        let mut params = DrawParams::default();
+        match what {
+            TreeDraw::Mesh(_, level) => params.ids[1] = (*level).min(1) as u32,
+            TreeDraw::Cluster(c, level) => {
+                params.ids[1] = 2;
+                c.draw_params(*level, &mut params);
+            }
+            TreeDraw::Billboard(bb) => {
+                params.ids[1] = 6;
+                params.ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
+                params.bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
+                params.bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+            }
+        }
+        ctx.queue.write_buffer(&self.tree.params, 0, bytemuck::bytes_of(&params));
+        let color = target(ctx, width, height, self.format);
+        let depth = target(ctx, width, height, DEPTH_FORMAT);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("tree"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &color.create_view(&Default::default()),
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color {
+                            r: background[0],
+                            g: background[1],
+                            b: background[2],
+                            a: background[3],
+                        }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth.create_view(&Default::default()),
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &self.view_group, &[]);
+            self.tree.bind(&mut pass);
+            match what {
+                TreeDraw::Mesh(mesh, level) => {
+                    let indices = mesh.bind_level(&mut pass, &self.mesh, RenderMode::Lit, *level);
+                    pass.draw_indexed(0..indices, 0, 0..1);
+                }
+                TreeDraw::Cluster(c, level) => {
+                    pass.set_pipeline(self.cluster.pipeline());
+                    pass.set_bind_group(1, &c.bind_group, &[]);
+                    pass.draw(0..c.vertices(*level), 0..1);
+                }
+                TreeDraw::Billboard(bb) => {
+                    pass.set_pipeline(self.billboard.pipeline());
+                    pass.set_bind_group(1, &bb.bind_group, &[]);
+                    pass.draw(0..BILLBOARD_VERTICES, 0..1);
+                }
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
+        read_texture_rgba8(ctx, &color, 0, 0)
+    }
+
+    /// The shared layouts.
+    #[must_use]
+    pub fn layouts(&self) -> &SharedLayouts {
+        &self.shared
+    }
+}
+
+/// A perspective camera framing a whole tree with bounds `min..max` from
+/// `view`, for a `width`×`height` image: (clip_from_eye, eye).
 #[must_use]
-pub fn render_pack_preview(
-    ctx: &GpuContext,
-    pack: &Pack<'_>,
-    level: usize,
-    view: PackView,
-    width: u32,
-    height: u32,
-    background: [f64; 4],
-) -> Vec<u8> {
-    let format = wgpu::TextureFormat::Rgba8UnormSrgb;
-    let pipelines = CapturePipelines::new(&ctx.device, format);
-    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
-    let color = target(ctx, width, height, format);
-    let depth = target(ctx, width, height, DEPTH_FORMAT);
-    let min = Vec3::from(pack.meta.bounds_min);
-    let max = Vec3::from(pack.meta.bounds_max);
+pub fn preview_camera(min: Vec3, max: Vec3, view: PackView, width: u32, height: u32) -> (Mat4, Vec3) {
     let center = (min + max) * 0.5;
     let radius = ((max - min) * 0.5).length().max(1e-3);
     let elevation: f32 = match view {
@@ -291,46 +424,66 @@ pub fn render_pack_preview(
     // Camera-relative: rotation-only view matrix, the tree placed at (origin − eye).
     let eye_from_world = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, -dir, Vec3::Z);
     let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(fov_y, aspect, distance * 0.01);
-    let uniform = Lighting::default().view_uniform(proj * eye_from_world, eye);
-    let view_buffer = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("preview view"),
-        contents: bytemuck::bytes_of(&uniform),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
-    let tree = SingleTree::new(ctx, &pipelines.shared);
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("pack preview"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &color.create_view(&Default::default()),
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color {
-                        r: background[0],
-                        g: background[1],
-                        b: background[2],
-                        a: background[3],
-                    }),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth.create_view(&Default::default()),
-                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_bind_group(0, &view_group, &[]);
-        tree.bind(&mut pass);
-        let indices = mesh.bind_level(&mut pass, &pipelines.mesh, RenderMode::Lit, level);
-        pass.draw_indexed(0..indices, 0, 0..1);
+    (proj * eye_from_world, eye)
+}
+
+/// Which representation of a pack [`render_pack_preview`] draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PackRepr {
+    /// Mesh level n.
+    Mesh(usize),
+    /// Cluster level n (ellipsoids + lines).
+    Cluster(usize),
+    /// The billboards.
+    Billboard,
+}
+
+/// Renders one tree of `pack` lit, with a perspective camera framing the whole
+/// tree, into a `width`×`height` sRGB RGBA8 image. `None` if the pack lacks the
+/// representation.
+#[must_use]
+pub fn render_pack_repr(
+    ctx: &GpuContext,
+    pack: &Pack<'_>,
+    repr: PackRepr,
+    view: PackView,
+    width: u32,
+    height: u32,
+    background: [f64; 4],
+) -> Option<Vec<u8>> {
+    let r = TreeRenderer::new(ctx);
+    let (clip, eye) =
+        preview_camera(Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max), view, width, height);
+    match repr {
+        PackRepr::Mesh(level) => {
+            let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
+            (level < mesh.levels.len())
+                .then(|| r.render(ctx, &TreeDraw::Mesh(&mesh, level), clip, eye, width, height, background))
+        }
+        PackRepr::Cluster(level) => {
+            let c = ClusterGpu::upload(&ctx.device, &ctx.queue, &r.cluster, pack)?;
+            (level < c.levels.len())
+                .then(|| r.render(ctx, &TreeDraw::Cluster(&c, level), clip, eye, width, height, background))
+        }
+        PackRepr::Billboard => {
+            let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, pack)?;
+            Some(r.render(ctx, &TreeDraw::Billboard(&bb), clip, eye, width, height, background))
+        }
     }
-    ctx.queue.submit([encoder.finish()]);
-    read_texture_rgba8(ctx, &color, 0, 0)
+}
+
+/// Renders one tree of `pack` (mesh level `level`) lit, with a perspective camera
+/// framing the whole tree, into a `width`×`height` sRGB RGBA8 image.
+#[must_use]
+pub fn render_pack_preview(
+    ctx: &GpuContext,
+    pack: &Pack<'_>,
+    level: usize,
+    view: PackView,
+    width: u32,
+    height: u32,
+    background: [f64; 4],
+) -> Vec<u8> {
+    render_pack_repr(ctx, pack, PackRepr::Mesh(level), view, width, height, background)
+        .unwrap_or_else(|| vec![0; (width * height * 4) as usize])
 }

@@ -158,7 +158,7 @@ pub fn cpu_select(
             continue;
         }
         let s = &species[b.species as usize];
-        if s.slot_cap.iter().take(3).sum::<u32>() == 0 {
+        if s.slot_cap.iter().sum::<u32>() == 0 {
             continue;
         }
         sel.visible_batches.push(i as u32);
@@ -191,16 +191,9 @@ fn decode_eye_relative(p: PackedInstance, b: &GpuBatch, view: &ViewUniform) -> (
 }
 
 fn select(sel: &mut Selection, view: &ViewUniform, s: &GpuSpecies, species: u32, h_px: f32, instance: u32, batch: u32) {
-    let mut ready: Vec<(Repr, f32)> = Vec::with_capacity(3);
-    if s.slot_cap[0] > 0 {
-        ready.push((Repr::Mesh0, s.select[1]));
-    }
-    if s.slot_cap[1] > 0 {
-        ready.push((Repr::Mesh1, s.select[2]));
-    }
-    if s.slot_cap[2] > 0 {
-        ready.push((Repr::Billboard, 0.0));
-    }
+    let ready: Vec<(Repr, f32)> =
+        Repr::ALL.into_iter().filter(|r| s.slot_cap[*r as usize] > 0).map(|r| (r, s.lower_px[r as usize])).collect();
+    let mut ready = ready;
     let n = ready.len();
     if n == 0 {
         return;

@@ -12,6 +12,7 @@ use glam::Vec3;
 
 use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
 use super::camera::ViewData;
+use super::cluster::{cluster_tiers, ClusterGpu, ClusterPipeline};
 use super::cull::CullPipelines;
 use super::gpu_data::{DrawParams, GpuSpecies, Repr, ViewUniform, REPR_COUNT};
 use super::layouts::SharedLayouts;
@@ -25,6 +26,8 @@ use crate::format::Pack;
 pub const MESH0_CAPACITY: u32 = 1 << 15;
 /// Segment capacity of the simplified mesh level per species.
 pub const MESH1_CAPACITY: u32 = 1 << 18;
+/// Segment capacity of each cluster tier per species.
+pub const CLUSTER_CAPACITY: u32 = 1 << 18;
 
 /// Pool sizes; the defaults keep every binding far below WebGPU's 128 MiB.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,7 +55,7 @@ impl PoolConfig {
         u64::from(self.instances) * 8
             + u64::from(self.batches) * (80 + 4)
             + u64::from(self.items) * 8
-            + u64::from(self.species) * (80 + u64::from(REPR_COUNT) * (20 + 256))
+            + u64::from(self.species) * (160 + u64::from(REPR_COUNT) * (20 + 256))
     }
 }
 
@@ -87,6 +90,10 @@ pub struct RenderSettings {
     pub clear: [f64; 4],
     /// Culling (benchmark baselines).
     pub culling: CullingMode,
+    /// Trees drawn at least this tall (px) but below the simplified mesh's
+    /// threshold use the clustered ellipsoids and lines of their pack (seed 002);
+    /// smaller ones billboards. Infinity: no ellipsoids; 0: no billboards.
+    pub cluster_min_px: f32,
 }
 
 impl Default for RenderSettings {
@@ -100,9 +107,13 @@ impl Default for RenderSettings {
             lighting: Lighting::default(),
             clear: [0.55, 0.68, 0.82, 1.0],
             culling: CullingMode::Batches,
+            cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
         }
     }
 }
+
+/// Default of [`RenderSettings::cluster_min_px`].
+pub const DEFAULT_CLUSTER_MIN_PX: f32 = 40.0;
 
 /// First-fit allocator of index ranges.
 #[derive(Debug, Clone)]
@@ -180,6 +191,9 @@ pub enum PoolError {
 struct SpeciesGpu {
     mesh: MeshGpu,
     billboard: Option<BillboardGpu>,
+    cluster: Option<ClusterGpu>,
+    /// Cluster level of each cluster tier in use (set by `rebuild_table`).
+    tiers: Vec<usize>,
     sphere: [f32; 4],
     height_m: f32,
     select_px: [f32; 2],
@@ -207,6 +221,7 @@ pub struct ForestRenderer {
     pub shared: SharedLayouts,
     mesh: MeshPipelines,
     billboard: BillboardPipeline,
+    cluster: ClusterPipeline,
     cull: CullPipelines,
     sky: wgpu::RenderPipeline,
     bounds: wgpu::RenderPipeline,
@@ -228,6 +243,7 @@ pub struct ForestRenderer {
     packs: Vec<Option<SpeciesGpu>>,
     table: Vec<GpuSpecies>,
     table_dirty: bool,
+    cluster_min_px: f32,
     last_view: ViewUniform,
 }
 
@@ -248,6 +264,7 @@ impl ForestRenderer {
         let shared = SharedLayouts::new(device);
         let mesh = MeshPipelines::new(device, &shared, color_format);
         let billboard = BillboardPipeline::new(device, &shared, color_format);
+        let cluster = ClusterPipeline::new(device, &shared, color_format);
         let cull = CullPipelines::new(device, &shared);
         let sky = overlay_pipeline(
             device,
@@ -327,6 +344,7 @@ impl ForestRenderer {
             shared,
             mesh,
             billboard,
+            cluster,
             cull,
             sky,
             bounds,
@@ -348,6 +366,7 @@ impl ForestRenderer {
             packs: Vec::new(),
             table: Vec::new(),
             table_dirty: true,
+            cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
             last_view: bytemuck::Zeroable::zeroed(),
         }
     }
@@ -382,6 +401,7 @@ impl ForestRenderer {
         let m = &pack.meta;
         let mesh = MeshGpu::upload(device, queue, &self.mesh, pack);
         let billboard = BillboardGpu::upload(device, queue, &self.billboard, pack);
+        let cluster = ClusterGpu::upload(device, queue, &self.cluster, pack);
         let lo = Vec3::from(m.bounds_min);
         let hi = Vec3::from(m.bounds_max);
         let c = (lo + hi) * 0.5;
@@ -395,6 +415,8 @@ impl ForestRenderer {
             levels: mesh.levels.len(),
             mesh,
             billboard,
+            cluster,
+            tiers: Vec::new(),
             bytes,
         });
         self.table_dirty = true;
@@ -475,35 +497,67 @@ impl ForestRenderer {
         let mut table = Vec::with_capacity(self.species_count as usize);
         let mut params = Vec::with_capacity((self.species_count * REPR_COUNT) as usize);
         let budget = self.config.items;
-        for (i, pack) in self.packs.iter().enumerate() {
+        let cluster_min_px = self.cluster_min_px;
+        for (i, pack) in self.packs.iter_mut().enumerate() {
             let resident = self.resident[i].min(u64::from(u32::MAX)) as u32;
             let mut s = GpuSpecies::default();
+            let mut draw: Vec<DrawParams> = Repr::ALL
+                .iter()
+                .map(|r| DrawParams { ids: [0, *r as u32, i as u32, 0], ..Default::default() })
+                .collect();
             if let Some(p) = pack {
                 s.sphere = p.sphere;
-                s.select = [p.height_m, p.select_px[0], p.select_px[1], 0.0];
-                let caps = [
-                    if p.levels > 0 { resident.min(MESH0_CAPACITY) } else { 0 },
-                    if p.levels > 1 { resident.min(MESH1_CAPACITY) } else { 0 },
-                    if p.billboard.is_some() { resident } else { 0 },
-                ];
-                for (r, want) in caps.into_iter().enumerate() {
-                    let cap = want.min(budget.saturating_sub(base));
+                s.select = [p.height_m, 0.0, 0.0, 0.0];
+                let mut want = [0u32; REPR_COUNT as usize];
+                let mut lower = [0f32; REPR_COUNT as usize];
+                if p.levels > 0 {
+                    want[Repr::Mesh0 as usize] = resident.min(MESH0_CAPACITY);
+                    lower[Repr::Mesh0 as usize] = p.select_px[0];
+                    s.index_count[Repr::Mesh0 as usize] = p.index_counts[0];
+                }
+                if p.levels > 1 {
+                    want[Repr::Mesh1 as usize] = resident.min(MESH1_CAPACITY);
+                    lower[Repr::Mesh1 as usize] = p.select_px[1];
+                    s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
+                }
+                // Cluster tiers: the levels whose size band meets [cluster_min_px, the
+                // coarsest mesh level's threshold).
+                let mesh_floor = p.select_px[..p.levels.min(2)].last().copied().unwrap_or(f32::INFINITY);
+                p.tiers.clear();
+                if let Some(c) = &p.cluster {
+                    for (tier, (level, lo)) in
+                        cluster_tiers(&c.levels, cluster_min_px, mesh_floor).into_iter().enumerate()
+                    {
+                        let r = Repr::CLUSTERS[tier] as usize;
+                        want[r] = resident.min(CLUSTER_CAPACITY);
+                        lower[r] = lo;
+                        s.index_count[r] = c.vertices(level);
+                        c.draw_params(level, &mut draw[r]);
+                        p.tiers.push(level);
+                    }
+                }
+                if let Some(bb) = &p.billboard {
+                    let r = Repr::Billboard as usize;
+                    want[r] = resident;
+                    s.index_count[r] = BILLBOARD_VERTICES;
+                    draw[r].ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
+                    draw[r].bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
+                    draw[r].bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                }
+                // Billboards first: the far field must never starve for items.
+                let order = std::iter::once(Repr::Billboard as usize).chain(0..Repr::Billboard as usize);
+                for r in order {
+                    let cap = want[r].min(budget.saturating_sub(base));
                     s.slot_base[r] = base;
                     s.slot_cap[r] = cap;
+                    s.lower_px[r] = lower[r];
                     base += cap;
                 }
-                s.index_count = [p.index_counts[0], p.index_counts[1], BILLBOARD_VERTICES, 0];
             }
-            for repr in Repr::ALL {
-                let mut d =
-                    DrawParams { ids: [s.slot_base[repr as usize], repr as u32, i as u32, 0], ..Default::default() };
-                if let Some(bb) = pack.as_ref().and_then(|p| p.billboard.as_ref()) {
-                    d.ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
-                    d.bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
-                    d.bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
-                }
-                params.push(d);
+            for (r, d) in draw.iter_mut().enumerate() {
+                d.ids[0] = s.slot_base[r];
             }
+            params.extend(draw);
             table.push(s);
         }
         if !table.is_empty() {
@@ -516,6 +570,10 @@ impl ForestRenderer {
 
     /// Writes the frame's uniforms (and the species table if residency changed).
     pub fn prepare(&mut self, queue: &wgpu::Queue, view: &ViewData, settings: &RenderSettings) -> ViewUniform {
+        if settings.cluster_min_px != self.cluster_min_px {
+            self.cluster_min_px = settings.cluster_min_px;
+            self.table_dirty = true;
+        }
         if self.table_dirty {
             self.rebuild_table(queue);
         }
@@ -539,6 +597,8 @@ impl ForestRenderer {
                 },
             ],
             params: [0, self.batch_high_water, u32::from(settings.debug_lod), self.species_count],
+            eye_from_clip: view.clip_from_eye.inverse().to_cols_array_2d(),
+            viewport: [view.viewport[0] as f32, view.viewport[1] as f32, 0.0, 0.0],
         };
         queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
         self.last_view = uniform;
@@ -616,6 +676,14 @@ impl ForestRenderer {
                         let level = repr as usize;
                         if p.mesh.bind_level(&mut pass, &self.mesh, super::gpu_data::RenderMode::Lit, level) > 0 {
                             pass.draw_indexed_indirect(&self.pools.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                    Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
+                        if let Some(c) = &p.cluster {
+                            pass.set_pipeline(self.cluster.pipeline());
+                            pass.set_bind_group(1, &c.bind_group, &[]);
+                            pass.draw_indirect(&self.pools.args, args_offset);
                             draws += 1;
                         }
                     }

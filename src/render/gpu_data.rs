@@ -25,8 +25,12 @@ pub struct ViewUniform {
     pub lod: [f32; 4],
     /// x: [`RenderMode`], y: batch slots to test, z: debug view, w: species count.
     pub params: [u32; 4],
+    /// Inverse of `clip_from_eye` (the cluster pass's per-pixel rays).
+    pub eye_from_clip: [[f32; 4]; 4],
+    /// x, y: viewport size in pixels; z, w unused.
+    pub viewport: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<ViewUniform>() == 272);
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 352);
 
 /// Per-species selection data. Must match `Species` in `shaders/common.wgsl`.
 #[repr(C)]
@@ -34,16 +38,22 @@ const _: () = assert!(std::mem::size_of::<ViewUniform>() == 272);
 pub struct GpuSpecies {
     /// Bounding sphere of the model at scale 1: centre xyz, radius w.
     pub sphere: [f32; 4],
-    /// x: model height (m at scale 1), y: mesh level 0 threshold (px), z: mesh level 1 threshold (px).
+    /// x: model height (m at scale 1); yzw unused.
     pub select: [f32; 4],
+    /// Per representation: the projected tree height (px) from which it is drawn
+    /// (the coarsest ready one reaches down to 0).
+    pub lower_px: [f32; SLOTS_PER_SPECIES],
     /// First draw item of each representation's segment.
-    pub slot_base: [u32; 4],
+    pub slot_base: [u32; SLOTS_PER_SPECIES],
     /// Capacity of each segment (0: representation not ready, never selected).
-    pub slot_cap: [u32; 4],
-    /// Indices (meshes) or vertices (billboards) per instance.
-    pub index_count: [u32; 4],
+    pub slot_cap: [u32; SLOTS_PER_SPECIES],
+    /// Indices (meshes) or vertices (billboards, clusters) per instance.
+    pub index_count: [u32; SLOTS_PER_SPECIES],
 }
-const _: () = assert!(std::mem::size_of::<GpuSpecies>() == 80);
+const _: () = assert!(std::mem::size_of::<GpuSpecies>() == 160);
+
+/// Per-species array length of the representation fields (REPR_COUNT rounded up to vec4s).
+pub const SLOTS_PER_SPECIES: usize = 8;
 
 /// Per-draw constants, bound with a dynamic offset. Must match `DrawParams` in
 /// `shaders/common.wgsl`.
@@ -56,8 +66,18 @@ pub struct DrawParams {
     pub bb_center: [f32; 4],
     /// x: billboard half height.
     pub bb_size: [f32; 4],
+    /// Cluster levels: x first ellipsoid word, y ellipsoids, z first line word, w lines.
+    pub cluster: [u32; 4],
+    /// x: noise threshold, y: normal blend, z: log2 of the noise cube size; w unused.
+    pub cluster_noise: [f32; 4],
+    /// Quantisation box of cluster records: min xyz.
+    pub bounds_min: [f32; 4],
+    /// Quantisation box extent xyz.
+    pub bounds_extent: [f32; 4],
+    /// Linear RGB of the lines.
+    pub line_color: [f32; 4],
     /// Padding to the 256-byte dynamic-offset alignment.
-    pub pad: [u32; 52],
+    pub pad: [u32; 32],
 }
 const _: () = assert!(std::mem::size_of::<DrawParams>() == 256);
 
@@ -76,24 +96,53 @@ pub enum Repr {
     Mesh0 = 0,
     /// Mesh level 1 (simplified).
     Mesh1 = 1,
+    /// The finest cluster level in use (ellipsoids + lines, seed 002).
+    Cluster0 = 2,
+    /// The next cluster level.
+    Cluster1 = 3,
+    /// The next cluster level.
+    Cluster2 = 4,
+    /// The coarsest cluster level in use.
+    Cluster3 = 5,
     /// View-angle billboards.
-    Billboard = 2,
+    Billboard = 6,
 }
 
 /// Number of representations (draw slots per species).
-pub const REPR_COUNT: u32 = 3;
+pub const REPR_COUNT: u32 = 7;
+
+/// Cluster levels a species can use at once (the levels whose projected size
+/// band meets the cluster range).
+pub const CLUSTER_TIERS: usize = 4;
 
 impl Repr {
     /// All, finest first.
-    pub const ALL: [Repr; 3] = [Repr::Mesh0, Repr::Mesh1, Repr::Billboard];
+    pub const ALL: [Repr; 7] =
+        [Repr::Mesh0, Repr::Mesh1, Repr::Cluster0, Repr::Cluster1, Repr::Cluster2, Repr::Cluster3, Repr::Billboard];
 
-    /// Name used in stats (`instances` keys).
+    /// The cluster tiers.
+    pub const CLUSTERS: [Repr; CLUSTER_TIERS] = [Repr::Cluster0, Repr::Cluster1, Repr::Cluster2, Repr::Cluster3];
+
+    /// Name used in stats (`instances` keys): cluster tiers all count as `ellipsoid`.
     #[must_use]
     pub fn name(self) -> &'static str {
         match self {
             Repr::Mesh0 => "mesh0",
             Repr::Mesh1 => "mesh1",
+            Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => "ellipsoid",
             Repr::Billboard => "billboard",
+        }
+    }
+
+    /// The cluster tier (0–3) of a cluster representation.
+    #[must_use]
+    pub fn cluster_tier(self) -> Option<usize> {
+        match self {
+            Repr::Cluster0 => Some(0),
+            Repr::Cluster1 => Some(1),
+            Repr::Cluster2 => Some(2),
+            Repr::Cluster3 => Some(3),
+            _ => None,
         }
     }
 }

@@ -5,6 +5,7 @@ pub mod billboard;
 pub mod camera;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod capture;
+pub mod cluster;
 pub mod context;
 pub mod cull;
 pub mod forest;
@@ -47,7 +48,7 @@ impl Lighting {
     /// The view uniform for a lit render of a single tree (previews and captures:
     /// no culling, so no frustum or LoD data).
     #[must_use]
-    pub fn view_uniform(&self, clip_from_eye: Mat4, eye_m: Vec3) -> ViewUniform {
+    pub fn view_uniform(&self, clip_from_eye: Mat4, eye_m: Vec3, viewport: [u32; 2]) -> ViewUniform {
         ViewUniform {
             clip_from_eye: clip_from_eye.to_cols_array_2d(),
             eye_hi: eye_m.extend(0.0).to_array(),
@@ -58,6 +59,8 @@ impl Lighting {
             ambient: self.ambient.extend(0.0).to_array(),
             lod: [0.0; 4],
             params: [RenderMode::Lit as u32, 0, 0, 0],
+            eye_from_clip: clip_from_eye.inverse().to_cols_array_2d(),
+            viewport: [viewport[0] as f32, viewport[1] as f32, 0.0, 0.0],
         }
     }
 }

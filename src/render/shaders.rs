@@ -8,6 +8,10 @@ pub const MESH: &str = concat!(include_str!("../../shaders/common.wgsl"), includ
 pub const BILLBOARD: &str =
     concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/billboard.wgsl"));
 
+/// The cluster pass (ellipsoids and lines).
+pub const CLUSTER: &str =
+    concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cluster.wgsl"));
+
 /// The cull and LoD-selection compute passes.
 pub const CULL: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cull.wgsl"));
 
@@ -19,4 +23,4 @@ pub const BOUNDS: &str = concat!(include_str!("../../shaders/common.wgsl"), incl
 
 /// Every composed shader with its name, for validation tests.
 pub const ALL: &[(&str, &str)] =
-    &[("mesh", MESH), ("billboard", BILLBOARD), ("cull", CULL), ("sky", SKY), ("bounds", BOUNDS)];
+    &[("mesh", MESH), ("billboard", BILLBOARD), ("cluster", CLUSTER), ("cull", CULL), ("sky", SKY), ("bounds", BOUNDS)];

@@ -8,6 +8,7 @@
 //! - [`lines`]: a line skeleton from the branch mesh, simplified by agglomerative
 //!   straighten/combine merges chosen by image error (§3.2).
 
+pub mod bake;
 pub mod em;
 pub mod hierarchy;
 pub mod leaves;
