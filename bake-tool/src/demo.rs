@@ -238,7 +238,18 @@ impl Builder {
     }
 }
 
+/// A broadleaf demo tree with about `leaves` leaf cards (smaller cards for more
+/// leaves, so the crown keeps its size): the bake benchmarks' large trees.
+#[must_use]
+pub fn tree_with_leaves(leaves: usize, seed: u64) -> ImportedModel {
+    make_tree_scaled(&STYLES[1], seed, leaves as f32 / (14.0 * 24.0 + 6.0))
+}
+
 fn make_tree(style: &SpeciesStyle, seed: u64) -> ImportedModel {
+    make_tree_scaled(style, seed, 1.0)
+}
+
+fn make_tree_scaled(style: &SpeciesStyle, seed: u64, leaf_scale: f32) -> ImportedModel {
     let mut rng = Rng::new(seed);
     let mut b = Builder {
         model: ImportedModel {
@@ -289,7 +300,7 @@ fn make_tree(style: &SpeciesStyle, seed: u64) -> ImportedModel {
         let end = start + dir * reach;
         b.limb(start, end, trunk_r * 0.35 * (1.0 - rel * 0.6), trunk_r * 0.06, 5);
         // Leaf cards along and around the branch.
-        let cards = if style.conifer { 16 } else { 24 };
+        let cards = ((if style.conifer { 16.0 } else { 24.0 }) * leaf_scale).round() as usize;
         for _ in 0..cards {
             let along = rng.range(0.25, 1.0);
             let jitter = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-0.6, 0.6))
@@ -298,12 +309,12 @@ fn make_tree(style: &SpeciesStyle, seed: u64) -> ImportedModel {
             let normal =
                 Quat::from_euler(glam::EulerRot::XYZ, rng.range(-1.2, 1.2), rng.range(-1.2, 1.2), rng.range(0.0, 6.3))
                     * Vec3::Z;
-            let size = h * if style.conifer { 0.055 } else { 0.05 } * rng.range(0.8, 1.2);
+            let size = h * if style.conifer { 0.055 } else { 0.05 } * rng.range(0.8, 1.2) / leaf_scale.max(1.0).sqrt();
             b.card(c, normal, dir, Vec2::new(size, size));
         }
     }
     // A tuft at the top.
-    for _ in 0..6 {
+    for _ in 0..((6.0 * leaf_scale).round() as usize) {
         let c = top + Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.5, 0.0)) * h * 0.03;
         let normal = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-0.3, 1.0)).normalize_or(Vec3::Z);
         b.card(c, normal, Vec3::Z, Vec2::splat(h * 0.04));

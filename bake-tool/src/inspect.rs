@@ -80,6 +80,11 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
     }))
 }
 
+/// The `inspect --json` object of a decoded pack of `bytes` bytes.
+pub fn pack_summary(pack: &sylva::format::Pack<'_>, bytes: u64) -> Value {
+    pack_json(&pack.meta, bytes, pack)
+}
+
 fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Value {
     use sylva::format::pack::kind;
     let mut levels = Vec::new();
@@ -94,6 +99,29 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
             "bytes": b,
             "select_px": l.select_px,
         }));
+    }
+    if let Some(c) = &meta.clusters {
+        for (name, k, list) in
+            [("ellipsoids", kind::ELLIPSOIDS, &c.ellipsoid_levels), ("lines", kind::LINES, &c.line_levels)]
+        {
+            for (i, l) in list.iter().enumerate() {
+                let b = pack.section(k, i as u32).map_or(0, <[u8]>::len);
+                let mut v = json!({
+                    "kind": name,
+                    "level": i,
+                    "count": l.count,
+                    "bytes": b,
+                    "bytes_per_primitive": if l.count > 0 { b as f64 / f64::from(l.count) } else { 0.0 },
+                    "select_px": l.select_px,
+                    "error": l.error,
+                });
+                if name == "ellipsoids" {
+                    v["noise_threshold"] = json!(l.noise_threshold);
+                    v["normal_blend"] = json!(l.normal_blend);
+                }
+                levels.push(v);
+            }
+        }
     }
     if let Some(bb) = &meta.billboards {
         let b = pack.section(kind::BILLBOARD_COLOR, 0).map_or(0, <[u8]>::len)
@@ -185,6 +213,16 @@ fn pack_text(s: &Value) -> String {
                     l["vertices"],
                     l["bytes"].as_f64().unwrap_or(0.0) / 1e3,
                     l["select_px"]
+                )
+            }
+            Some(kind @ ("ellipsoids" | "lines")) => {
+                out += &format!(
+                    "  {kind} level {}: {} × {} B, from {:.0} px, error {:.4}\n",
+                    l["level"],
+                    l["count"],
+                    l["bytes_per_primitive"],
+                    l["select_px"].as_f64().unwrap_or(0.0),
+                    l["error"].as_f64().unwrap_or(0.0)
                 )
             }
             Some("billboards") => {

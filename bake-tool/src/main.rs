@@ -45,6 +45,22 @@ enum Command {
     Bake(BakeArgs),
     /// Make a complete procedural demo scene (three species, UTM 33N, no input files).
     Demo(DemoArgs),
+    /// Benchmark the cluster-level bake (seed 002) of one model: timing and,
+    /// per level, primitives, bytes, select_px and image error, as JSON.
+    #[command(
+        after_help = "Examples:\n  sylva-bake bench-clusters --model oak.glb\n  sylva-bake bench-clusters --leaves 27000"
+    )]
+    BenchClusters {
+        /// A glTF/GLB tree.
+        #[arg(long, conflicts_with = "leaves", required_unless_present = "leaves")]
+        model: Option<PathBuf>,
+        /// A procedural broadleaf with about this many leaves instead.
+        #[arg(long)]
+        leaves: Option<usize>,
+        /// EM starts per level.
+        #[arg(long, default_value_t = 4)]
+        tries: usize,
+    },
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
         /// Scene directory or file.
@@ -190,6 +206,7 @@ fn main() {
     let result = match cli.command {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
+        Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
         Command::Inspect { path, json } => inspect::inspect(&path).map(|v| {
             if json {
                 println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
@@ -244,6 +261,46 @@ fn demo(args: &DemoArgs) -> Result<()> {
     };
     let s = scene_write::write_scene(&input, &args.out, &log)?;
     report_summary(&s, &args.out, started);
+    Ok(())
+}
+
+fn bench_clusters(model: Option<&std::path::Path>, leaves: Option<usize>, tries: usize) -> Result<()> {
+    let model = match (model, leaves) {
+        (Some(p), _) => gltf_import::import(p, &Classifier::default())?,
+        (None, Some(n)) => demo::tree_with_leaves(n, 1),
+        (None, None) => bail!("give --model or --leaves"),
+    };
+    let (leaf_tris, branch_tris) = model.triangle_counts();
+    log(&format!("model: {leaf_tris} leaf + {branch_tris} branch triangles"));
+    let gpu = sylva::render::GpuContext::new_headless_blocking()?;
+    let pipelines = sylva::render::capture::CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    let opts = PackOptions { cluster_tries: tries, ..PackOptions::default() };
+    let no_clusters = PackOptions { clusters: false, ..opts.clone() };
+    let t0 = Instant::now();
+    pack_build::build_pack("bench", &model, &no_clusters, &gpu, &pipelines)?;
+    let without = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let built = pack_build::build_pack("bench", &model, &opts, &gpu, &pipelines)?;
+    let with = t1.elapsed().as_secs_f64();
+    let decoded = sylva::format::decode_pack("bench", &built.bytes)?;
+    let summary = inspect::pack_summary(&decoded, built.bytes.len() as u64);
+    let levels: Vec<_> = summary["levels"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|l| matches!(l["kind"].as_str(), Some("ellipsoids" | "lines")))
+        .cloned()
+        .collect();
+    let out = serde_json::json!({
+        "leaf_triangles": leaf_tris,
+        "branch_triangles": branch_tris,
+        "cluster_seconds": with - without,
+        "pack_seconds": with,
+        "threads": rayon::current_num_threads(),
+        "adapter": gpu.adapter_summary(),
+        "levels": levels,
+    });
+    println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }
 

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use anyhow::Result;
 use glam::Vec3;
-use sylva::format::cluster::{ClusterLevelMeta, ClusterMeta, Ellipsoid, Line, PackedEllipsoid, PackedLine};
+use sylva::format::cluster::{ClusterLevelMeta, ClusterMeta, Line, PackedEllipsoid, PackedLine};
 use sylva::format::pack::{kind, MaterialKind, Section};
 use sylva::format::Pack;
 use sylva::metrics::multiscale_rmse;
@@ -179,12 +179,6 @@ pub struct BuiltClusters {
     pub meta: ClusterMeta,
     /// `ELPS` and `LINE` sections.
     pub sections: Vec<Section>,
-    /// The ellipsoid levels (for tests and debugging).
-    pub ellipsoids: Vec<Vec<Ellipsoid>>,
-    /// The line levels.
-    pub lines: Vec<Vec<Line>>,
-    /// GPU renders made while judging.
-    pub renders: usize,
 }
 
 /// Builds the cluster levels of `model`, judged against the mesh of `mesh_pack`.
@@ -199,6 +193,7 @@ pub fn build_clusters(
     opts: &HierarchyOptions,
     log: &mut dyn FnMut(&str),
 ) -> Result<Option<BuiltClusters>> {
+    let started = std::time::Instant::now();
     let leaves = extract_leaves(model);
     if leaves.is_empty() {
         return Ok(None);
@@ -219,6 +214,14 @@ pub fn build_clusters(
             log(&format!("    cluster level {}/{n}: {} ellipsoids", k + 1, sizes[k]));
         }
     });
+    log(&format!(
+        "    clusters: {} leaves, {} skeleton lines → {} levels in {:.1} s ({} judging renders)",
+        leaves.len(),
+        sk.len(),
+        levels.len(),
+        started.elapsed().as_secs_f64(),
+        judge.renders
+    ));
     let mut sections = Vec::new();
     for (k, l) in levels.iter().enumerate() {
         let data: Vec<u8> = l
@@ -254,8 +257,5 @@ pub fn build_clusters(
             line_color,
         },
         sections,
-        ellipsoids: levels.into_iter().map(|l| l.ellipsoids).collect(),
-        lines,
-        renders: judge.renders,
     }))
 }

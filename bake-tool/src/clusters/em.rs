@@ -15,7 +15,8 @@ pub struct EmOptions {
     pub neighbours: usize,
     /// Iteration cap.
     pub max_iterations: u32,
-    /// Stop when the mean log-likelihood per point changes less than this.
+    /// Stop when the mean log-likelihood per point (nats) changes less than this
+    /// (absolute, like scikit-learn's default).
     pub tolerance: f64,
     /// Added to every covariance's diagonal (m²): keeps single-point and coplanar
     /// components invertible.
@@ -24,9 +25,15 @@ pub struct EmOptions {
 
 impl Default for EmOptions {
     fn default() -> Self {
-        Self { neighbours: 10, max_iterations: 80, tolerance: 1e-5, regularisation: 1e-6 }
+        Self { neighbours: 10, max_iterations: 100, tolerance: 1e-3, regularisation: 1e-6 }
     }
 }
+
+/// Iterations between refreshes of each point's nearest components.
+const NEIGHBOUR_REFRESH: u32 = 4;
+
+/// Upper bound of [`EmOptions::neighbours`].
+pub const MAX_NEIGHBOURS: usize = 32;
 
 /// A fitted mixture and the sparse fuzzy assignment of every point.
 #[derive(Debug, Clone)]
@@ -41,8 +48,6 @@ pub struct Mixture {
     pub responsibilities: Vec<Vec<(u32, f32)>>,
     /// Mean log-likelihood per point at the end.
     pub log_likelihood: f64,
-    /// Iterations run.
-    pub iterations: u32,
 }
 
 /// Uniform grid over component means for k-nearest queries.
@@ -169,40 +174,58 @@ pub fn fit(points: &[DVec3], init_means: &[DVec3], opts: &EmOptions) -> Mixture 
     let mut resp: Vec<Vec<(u32, f32)>> = vec![Vec::new(); n];
     let mut ll_prev = f64::NEG_INFINITY;
     let mut ll = f64::NEG_INFINITY;
-    let mut iterations = 0;
-    let neighbours = opts.neighbours.max(1);
+    let neighbours = opts.neighbours.clamp(1, MAX_NEIGHBOURS);
     const LOG_2PI: f64 = 1.837_877_066_409_345_5;
+    // Each point's candidate components, refreshed every few iterations (the
+    // means move little between refreshes; dead components are skipped).
+    let mut cands: Vec<([u32; MAX_NEIGHBOURS], u8)> = vec![([0; MAX_NEIGHBOURS], 0); n];
     for it in 0..opts.max_iterations.max(1) {
-        iterations = it + 1;
-        let grid = Grid::new(&means, &alive);
+        if it % NEIGHBOUR_REFRESH == 0 {
+            let grid = Grid::new(&means, &alive);
+            cands.par_iter_mut().zip(points.par_iter()).for_each_init(Vec::new, |near, (c, p)| {
+                grid.nearest(*p, neighbours, &means, near);
+                c.1 = near.len().min(MAX_NEIGHBOURS) as u8;
+                for (slot, &(_, j)) in c.0.iter_mut().zip(near.iter()) {
+                    *slot = j;
+                }
+            });
+        }
         let pre: Vec<(DMat3, f64)> = covs.iter().map(|c| inverse_logdet(*c)).collect();
+        let log_weights: Vec<f64> = weights.iter().map(|w| w.max(1e-300).ln()).collect();
         // E step (log domain, truncated to the nearest components).
         let lls: Vec<f64> = resp
             .par_iter_mut()
-            .zip(points.par_iter())
-            .map_init(Vec::new, |near, (r, p)| {
-                grid.nearest(*p, neighbours, &means, near);
-                let mut logs: Vec<(u32, f64)> = near
-                    .iter()
-                    .map(|&(_, j)| {
-                        let (inv, logdet) = pre[j as usize];
-                        let d = *p - means[j as usize];
-                        let m = d.dot(inv * d);
-                        (j, weights[j as usize].max(1e-300).ln() - 0.5 * (3.0 * LOG_2PI + logdet + m))
-                    })
-                    .collect();
+            .zip(points.par_iter().zip(cands.par_iter()))
+            .map(|(r, (p, c))| {
+                let mut logs = [(0u32, 0.0f64); MAX_NEIGHBOURS];
+                let mut count = 0;
+                for &j in &c.0[..usize::from(c.1)] {
+                    if !alive[j as usize] {
+                        continue;
+                    }
+                    let slot = &mut logs[count];
+                    count += 1;
+                    let (inv, logdet) = pre[j as usize];
+                    let d = *p - means[j as usize];
+                    let m = d.dot(inv * d);
+                    *slot = (j, log_weights[j as usize] - 0.5 * (3.0 * LOG_2PI + logdet + m));
+                }
+                let logs = &logs[..count];
                 let max = logs.iter().map(|l| l.1).fold(f64::NEG_INFINITY, f64::max);
                 let sum: f64 = logs.iter().map(|l| (l.1 - max).exp()).sum();
                 let lse = max + sum.ln();
                 r.clear();
-                for (j, l) in logs.drain(..) {
+                for &(j, l) in logs {
                     let w = (l - lse).exp();
                     if w > 1e-6 {
                         r.push((j, w as f32));
                     }
                 }
                 if r.is_empty() {
-                    r.push((near[0].1, 1.0));
+                    // Every candidate died: stay with the first live component.
+                    let j = alive.iter().position(|a| *a).unwrap_or(0) as u32;
+                    r.push((j, 1.0));
+                    return 0.0;
                 }
                 lse
             })
@@ -249,7 +272,7 @@ pub fn fit(points: &[DVec3], init_means: &[DVec3], opts: &EmOptions) -> Mixture 
             covs[j] = symmetrise(c) + reg;
             weights[j] = sw / n as f64;
         }
-        if (ll - ll_prev).abs() < opts.tolerance * ll.abs().max(1.0) {
+        if (ll - ll_prev).abs() < opts.tolerance {
             break;
         }
         ll_prev = ll;
@@ -262,7 +285,6 @@ pub fn fit(points: &[DVec3], init_means: &[DVec3], opts: &EmOptions) -> Mixture 
         weights: Vec::new(),
         responsibilities: Vec::new(),
         log_likelihood: ll,
-        iterations,
     };
     for j in 0..k {
         if alive[j] {

@@ -187,7 +187,8 @@ pub fn build_levels(
     for (k, &n) in sizes.iter().enumerate() {
         progress(k, sizes.len());
         let level_lines = lines.get(k).or(lines.last()).unwrap_or(&empty);
-        let mut best: Option<(f64, Vec<Ellipsoid>, f32, u32)> = None;
+        // (error, −log-likelihood as the tie-breaker, ellipsoids, threshold, size).
+        let mut best: Option<(f64, f64, Vec<Ellipsoid>, f32, u32)> = None;
         for _ in 0..opts.tries.max(1) {
             // Random starts: distinct random leaves (the paper draws random points
             // in the box; starting on the data never leaves a component empty).
@@ -214,15 +215,16 @@ pub fn build_levels(
                     normal_blend: opts.normal_blend,
                     size_px,
                 });
-                if best.as_ref().is_none_or(|b| err < b.0) {
-                    best = Some((err, e, 0.0, size_px));
+                let key = (err, -mixture.log_likelihood);
+                if best.as_ref().is_none_or(|b| key < (b.0, b.1)) {
+                    best = Some((err, key.1, e, 0.0, size_px));
                 }
             }
             if n == 1 {
                 break; // one start is enough for one cluster
             }
         }
-        let (mut err, mut ell, mut threshold, size_px) = best.expect("at least one start");
+        let (mut err, _, mut ell, mut threshold, size_px) = best.expect("at least one start");
         // Noise: threshold t with a larger size compensating the holes (§3.1, Fig. 6).
         let base = ell.clone();
         for &t in &opts.thresholds {
@@ -267,6 +269,7 @@ fn calibration_size(height_m: f32, width: f32, opts: &HierarchyOptions) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::clusters::Rng;
 
     #[test]
     fn level_sizes_quarter_down_to_one() {
@@ -298,6 +301,70 @@ mod tests {
         let resp = vec![vec![(0u32, 0.5f32)], vec![(0, 1.0)], vec![(0, 1.0)], vec![(0, 1.0)]];
         let e = weighted_pca(&leaves, &resp, 1)[0];
         assert!(e.center.dot((r * DVec3::X).as_vec3()) < -0.3);
+    }
+
+    /// A CPU stand-in for the GPU judge: prefers a known total ellipsoid volume.
+    struct VolumeJudge(f32);
+
+    impl Judge for VolumeJudge {
+        fn error(&mut self, c: &Candidate<'_>) -> f64 {
+            let v: f32 = c.ellipsoids.iter().map(|e| e.radii.x * e.radii.y * e.radii.z).sum();
+            f64::from((v * (1.0 - c.noise_threshold) - self.0).abs())
+        }
+    }
+
+    fn leaf(center: DVec3) -> Leaf {
+        let cov = DMat3::from_diagonal(DVec3::new(0.01, 0.01, 0.0));
+        Leaf { center, covariance: cov, area: 0.1, color: Vec3::new(0.1, 0.4, 0.1) }
+    }
+
+    fn check(levels: &[BuiltLevel], leaves: usize) {
+        assert_eq!(levels.len(), level_sizes(leaves).len());
+        assert_eq!(levels.last().map(|l| l.ellipsoids.len()), Some(1), "ends with one cluster");
+        for l in levels {
+            assert!(!l.ellipsoids.is_empty());
+            assert!(l.meta.select_px.is_finite() && l.meta.select_px > 0.0 && l.meta.error.is_finite());
+            for e in &l.ellipsoids {
+                assert!(e.center.is_finite() && e.radii.is_finite() && e.rotation.is_finite(), "{e:?}");
+                assert!(e.radii.min_element() > 0.0 && e.noise_level.is_finite());
+                assert!((e.rotation.length() - 1.0).abs() < 1e-3);
+            }
+        }
+    }
+
+    #[test]
+    fn degenerate_leaf_sets_give_valid_ellipsoids() {
+        let opts = HierarchyOptions { tries: 2, ..Default::default() };
+        let cases: Vec<(&str, Vec<Leaf>)> = vec![
+            ("single leaf", vec![leaf(DVec3::new(1.0, 2.0, 3.0))]),
+            ("duplicates", vec![leaf(DVec3::splat(2.0)); 64]),
+            ("collinear", (0..200).map(|i| leaf(DVec3::new(f64::from(i) * 0.1, 0.0, 5.0))).collect()),
+            ("coplanar", (0..400).map(|i| leaf(DVec3::new(f64::from(i % 20), f64::from(i / 20), 7.0))).collect()),
+        ];
+        for (name, leaves) in cases {
+            let levels = build_levels(&leaves, 10.0, &[], &mut VolumeJudge(1.0), &opts, &mut |_, _| {});
+            check(&levels, leaves.len());
+            println!("{name}: {:?}", levels.iter().map(|l| l.ellipsoids.len()).collect::<Vec<_>>());
+        }
+    }
+
+    #[test]
+    fn a_hundred_thousand_leaves() {
+        let mut rng = Rng::new(5);
+        // Clumps in a crown, like a big tree.
+        let clumps: Vec<DVec3> = (0..300)
+            .map(|_| DVec3::new(rng.f64() * 20.0 - 10.0, rng.f64() * 20.0 - 10.0, 8.0 + rng.f64() * 15.0))
+            .collect();
+        let leaves: Vec<Leaf> = (0..100_000)
+            .map(|i| {
+                let c = clumps[i % clumps.len()];
+                leaf(c + DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 1.5)
+            })
+            .collect();
+        let opts = HierarchyOptions { tries: 1, scales: vec![1.0], thresholds: vec![], ..Default::default() };
+        let levels = build_levels(&leaves, 25.0, &[], &mut VolumeJudge(50.0), &opts, &mut |_, _| {});
+        check(&levels, leaves.len());
+        assert!(levels[0].ellipsoids.len() > 20_000, "{}", levels[0].ellipsoids.len());
     }
 
     #[test]
