@@ -76,10 +76,29 @@ fn demo_scene_is_complete_valid_and_deterministic() {
     assert_eq!(v["crs"]["epsg"], 32633);
     assert!(v["origin_m"][0].as_f64().unwrap() > 500_000.0, "far from the origin on purpose");
     for s in v["species"].as_array().unwrap() {
-        let kinds: Vec<&str> = s["levels"].as_array().unwrap().iter().map(|l| l["kind"].as_str().unwrap()).collect();
-        assert_eq!(kinds, ["mesh", "mesh", "billboards"], "{}", s["name"]);
-        for l in s["levels"].as_array().unwrap() {
+        let levels = s["levels"].as_array().unwrap();
+        let kinds: Vec<&str> = levels.iter().map(|l| l["kind"].as_str().unwrap()).collect();
+        let k = kinds.iter().filter(|x| **x == "ellipsoids").count();
+        assert!(k >= 2, "{}: cluster levels {kinds:?}", s["name"]);
+        let mut want = vec!["mesh", "mesh"];
+        want.extend(std::iter::repeat_n("ellipsoids", k));
+        want.extend(std::iter::repeat_n("lines", k));
+        want.push("billboards");
+        assert_eq!(kinds, want, "{}", s["name"]);
+        for l in levels {
             assert!(l["count"].as_u64().unwrap() > 0 && l["bytes"].as_u64().unwrap() > 0);
+        }
+        let ell: Vec<&serde_json::Value> = levels.iter().filter(|l| l["kind"] == "ellipsoids").collect();
+        for w in ell.windows(2) {
+            assert!(w[0]["count"].as_u64() >= w[1]["count"].as_u64(), "finest first");
+            assert!(w[0]["select_px"].as_f64() >= w[1]["select_px"].as_f64(), "finer levels need larger trees");
+        }
+        assert_eq!(ell.last().unwrap()["count"], 1, "down to one cluster");
+        for l in levels.iter().filter(|l| l["kind"] == "ellipsoids" || l["kind"] == "lines") {
+            let limit = if l["kind"] == "ellipsoids" { 32.0 } else { 16.0 };
+            assert!(l["bytes_per_primitive"].as_f64().unwrap() <= limit, "{l}");
+            let e = l["error"].as_f64().unwrap();
+            assert!((0.0..1.0).contains(&e), "{l}");
         }
     }
     // The text form names the same things.
@@ -116,6 +135,28 @@ fn bakes_the_shared_real_data() {
     assert_eq!(v["trees_total"], 55 + 38 + 38, "pine-mapped rows only");
     // Heights 6–24 m on 51-unit models: scales well below 1.
     assert!(v["species"][1]["height_m"].as_f64().unwrap() > 50.0);
+    // Cluster levels of the real trees: at one size, each finer level is closer to
+    // the full mesh than the coarser ones (seed 002 Fig. 1 / §3.1).
+    let ctx = sylva::render::GpuContext::new_headless_blocking().expect("a GPU adapter");
+    for species in ["oak", "pine"] {
+        let path = out.join(format!("species/{species}.pack"));
+        let bytes = std::fs::read(&path).unwrap();
+        let pack = sylva::format::decode_pack(species, &bytes).unwrap();
+        let n = pack.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
+        assert!(n >= 5, "{species}: {n} cluster levels");
+        use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
+        let bg = [0.62, 0.74, 0.86, 1.0];
+        let size = 128;
+        let render = |r| render_pack_repr(&ctx, &pack, r, PackView::Side, size, size, bg).unwrap();
+        let mesh = render(PackRepr::Mesh(0));
+        let errors: Vec<f64> =
+            (0..n).map(|l| sylva::metrics::multiscale_rmse(&render(PackRepr::Cluster(l)), &mesh, size, size)).collect();
+        eprintln!("{species}: error per cluster level at {size} px: {errors:.4?}");
+        for w in errors.windows(2) {
+            assert!(w[0] <= w[1] + 0.01, "{species}: a finer level is worse: {errors:?}");
+        }
+        assert!(errors[0] + 0.01 < errors[n - 1], "{species}: the finest beats the coarsest: {errors:?}");
+    }
 }
 
 #[test]
