@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-clusters fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -75,6 +75,13 @@ bench-render: release
 	@for n in 10k:10000 100k:100000 1m:1000000; do name=$${n%%:*}; count=$${n##*:}; \
 	  test -f target/bench/demo-$$name/scene.json || target/release/sylva-bake demo --trees $$count --out target/bench/demo-$$name; done
 	$(CARGO) bench --locked --bench frame -- target/bench/demo-10k target/bench/demo-100k target/bench/demo-1m
+
+# Cluster-level bake (seed 002) of the sample trees and a 27,000-leaf tree: time,
+# peak memory, and per level primitives, bytes, select_px and image error.
+bench-clusters: release
+	@for m in oak pine; do echo "== $$m"; /usr/bin/time -f "%e s wall, %M KB peak" \
+	  target/release/sylva-bake bench-clusters --model ../shared/data/models/eztree_$${m}_medium.glb; done
+	@echo "== 27,000 leaves"; /usr/bin/time -f "%e s wall, %M KB peak" target/release/sylva-bake bench-clusters --leaves 27000
 
 # Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
 fuzz:

@@ -14,12 +14,12 @@ use std::time::Instant;
 use glam::DVec3;
 use sylva::format::Manifest;
 use sylva::render::camera::Camera;
-use sylva::render::forest::{CullingMode, PoolConfig};
+use sylva::render::forest::{CullingMode, PoolConfig, Representations};
 use sylva::render::offscreen::{FrameStats, NamedView, OffscreenScene};
 
 const W: u32 = 960;
 const H: u32 = 540;
-const FRAMES: usize = 15;
+const FRAMES: usize = 7;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -34,7 +34,7 @@ struct Measured {
 }
 
 fn measure(off: &mut OffscreenScene, cam: &Camera) -> Measured {
-    for _ in 0..3 {
+    for _ in 0..2 {
         off.render(cam, true);
     }
     let (mut cpu, mut cull, mut draw) = (Vec::new(), Vec::new(), Vec::new());
@@ -61,6 +61,56 @@ fn open_resident(scene: &str) -> (OffscreenScene, Manifest) {
     let top = off.named_camera(NamedView::Top, 120.0).unwrap();
     off.load_view(&top, 300.0);
     (off, m)
+}
+
+/// Each representation family drawn alone at the distances where Sylva uses
+/// meshes, ellipsoids and billboards (trees about 200, 70 and 25 px tall), with
+/// the image error of each against the meshes.
+fn representations(off: &mut OffscreenScene, m: &Manifest) {
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let height_m: f64 = 24.0; // the demo species are 19–28 m tall
+    let px_per_m = f64::from(Camera::default().view_data(W, H).px_per_m_at_1m);
+    println!("\n## Representations at the distances where each is used ({W}x{H}, {} trees)\n", m.counts.trees);
+    println!("| trees tall | method | cull ms | draw ms | total ms | vs meshes | instances drawn | error vs meshes |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let methods: [(&str, Representations, bool); 5] = [
+        ("meshes", Representations::MESHES, true),
+        ("ellipsoids", Representations::CLUSTERS, true),
+        ("ellipsoids, proxy depth", Representations::CLUSTERS, false),
+        ("billboards", Representations::BILLBOARDS, true),
+        ("sylva (mixed)", Representations::ALL, true),
+    ];
+    for target_px in [200.0, 70.0, 25.0] {
+        let d = height_m * px_per_m / target_px;
+        let (s, co) = 35f64.to_radians().sin_cos();
+        let cam = Camera::look_at(c + DVec3::new(0.0, -d * co, d * s), c);
+        off.load_view(&cam, 120.0);
+        let mut base_ms = 0.0;
+        let mut reference = Vec::new();
+        for (name, reprs, exact) in methods {
+            off.settings.representations = reprs;
+            off.settings.cluster_exact_depth = exact;
+            let r = measure(off, &cam);
+            let img = off.read_image();
+            let total = r.cull_ms + r.draw_ms;
+            if reference.is_empty() {
+                reference = img.clone();
+                base_ms = total;
+            }
+            let err = sylva::metrics::multiscale_rmse(&img, &reference, W, H);
+            println!(
+                "| {target_px:.0} px | {name} | {:.1} | {:.1} | {:.1} | {:.2}x | {} | {:.4} |",
+                r.cull_ms,
+                r.draw_ms,
+                total,
+                total / base_ms,
+                r.last.instances.values().sum::<u64>(),
+                err
+            );
+        }
+    }
+    off.settings.representations = Representations::ALL;
+    off.settings.cluster_exact_depth = true;
 }
 
 fn main() {
@@ -123,6 +173,8 @@ fn main() {
         }
         off.settings.culling = CullingMode::Batches;
     }
+
+    representations(&mut off, &m);
 
     // Everything resident, the camera far away with every tree beyond the draw distance,
     // against a renderer with no resident tree at all.

@@ -138,7 +138,16 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
         let margin = 1.0 / max(view.viewport.xy, vec2<f32>(1.0));
         ndc = clamp(mix(lo - margin, hi + margin, corner * 0.5 + 0.5), vec2<f32>(-1.0), vec2<f32>(1.0));
     }
-    let cc = view.clip_from_eye * vec4<f32>(center, 1.0);
+    // The proxy sits at the ellipsoid's front-most depth: with exact depth off
+    // (fs_proxy_depth) early depth tests stay on and only interpenetrating
+    // primitives can sort wrongly.
+    var v = pixel_ray(vec2<f32>(0.0))[1];
+    if is_perspective() {
+        v = normalize(center);
+    }
+    let support = length(vec3<f32>(dot(a0, v) * r.x, dot(a1, v) * r.y, dot(a2, v) * r.z));
+    let front = center - v * min(support, max(dot(center, v) - 1e-3, 0.0));
+    let cc = view.clip_from_eye * vec4<f32>(front, 1.0);
     let depth = clamp(cc.z / max(abs(cc.w), 1e-20), 0.0, 1.0);
     (*out).clip = vec4<f32>(ndc, depth, 1.0);
     (*out).p0 = vec4<f32>(center, 0.0);
@@ -267,8 +276,7 @@ fn capsule_hit(ro: vec3<f32>, rd: vec3<f32>, pa: vec3<f32>, pb: vec3<f32>, r: f3
     return best;
 }
 
-@fragment
-fn fs_main(in: VertexOut) -> FragmentOut {
+fn cluster_fragment(in: VertexOut) -> FragmentOut {
     let ndc = vec2<f32>(in.clip.x / view.viewport.x * 2.0 - 1.0, 1.0 - in.clip.y / view.viewport.y * 2.0);
     let ray = pixel_ray(ndc);
     let is_line = in.p0.w > 0.5;
@@ -336,4 +344,16 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     }
     out.color = vec4<f32>(shade(albedo, n, !is_line, view), 1.0);
     return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> FragmentOut {
+    return cluster_fragment(in);
+}
+
+// Benchmark variant: keeps the proxy's depth (early depth tests stay on, but
+// intersecting primitives sort by their centres) to measure what exact depth costs.
+@fragment
+fn fs_proxy_depth(in: VertexOut) -> @location(0) vec4<f32> {
+    return cluster_fragment(in).color;
 }

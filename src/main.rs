@@ -34,6 +34,13 @@ mod cli {
     }
 
     #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+    enum OnlyArg {
+        Meshes,
+        Ellipsoids,
+        Billboards,
+    }
+
+    #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
     enum PackReprArg {
         Mesh,
         Ellipsoids,
@@ -79,9 +86,23 @@ mod cli {
             /// Draw distance in metres.
             #[arg(long, default_value_t = 6000.0)]
             draw_distance: f32,
-            /// Colour trees by representation (red mesh0, yellow mesh1, blue billboard).
+            /// Colour trees by representation (red mesh0, yellow mesh1, greens ellipsoid
+            /// levels, blue billboard).
             #[arg(long)]
             debug_lod: bool,
+            /// Draw only one representation family (the benchmark baselines); the
+            /// default mixes meshes, ellipsoids and billboards by projected size.
+            #[arg(long, value_enum)]
+            only: Option<OnlyArg>,
+            /// Trees at least this tall on screen (px), and below the simplified mesh,
+            /// are drawn with ellipsoids and lines; smaller ones with billboards.
+            #[arg(long, default_value_t = sylva::render::forest::DEFAULT_CLUSTER_MIN_PX)]
+            ellipsoid_min_px: f32,
+            /// Ellipsoids keep their proxy's front-most depth instead of writing exact
+            /// per-pixel depth: early depth tests stay on (faster), but
+            /// interpenetrating ellipsoids may sort wrongly.
+            #[arg(long)]
+            proxy_depth: bool,
             /// Draw the boxes of the batches that pass the batch test.
             #[arg(long)]
             debug_bounds: bool,
@@ -270,6 +291,9 @@ mod cli {
                 quality,
                 draw_distance,
                 debug_lod,
+                only,
+                ellipsoid_min_px,
+                proxy_depth,
                 debug_bounds,
                 stats,
                 timeout,
@@ -281,12 +305,24 @@ mod cli {
                 if !(quality > 0.0 && quality <= 16.0) {
                     bail!("--quality {quality}: must be in (0, 16]");
                 }
+                if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
+                    bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
+                }
                 if let Some(scene) = scene {
+                    use sylva::render::forest::Representations;
                     let settings = RenderSettings {
                         quality,
                         draw_distance_m: draw_distance,
                         debug_lod,
                         debug_bounds,
+                        cluster_min_px: ellipsoid_min_px,
+                        cluster_exact_depth: !proxy_depth,
+                        representations: match only {
+                            None => Representations::ALL,
+                            Some(OnlyArg::Meshes) => Representations::MESHES,
+                            Some(OnlyArg::Ellipsoids) => Representations::CLUSTERS,
+                            Some(OnlyArg::Billboards) => Representations::BILLBOARDS,
+                        },
                         ..RenderSettings::default()
                     };
                     return render_scene(

@@ -86,8 +86,8 @@ pub fn multiscale_rmse_with<const C: usize>(width: u32, height: u32, diff: impl 
         }
         let d = diff((y * width + x) as usize);
         let e = &mut acc[0];
-        for c in 0..C {
-            e.0[c] += d[c];
+        for (sum, v) in e.0.iter_mut().zip(d) {
+            *sum += v;
         }
         e.1 += 1;
         close_blocks(&mut acc, &mut sse, &mut blocks, code + 1);
@@ -111,8 +111,8 @@ fn close_blocks<const C: usize>(acc: &mut [([f64; C], u32)], sse: &mut [f64], bl
             blocks[k] += 1;
             if k + 1 < levels {
                 let p = &mut acc[k + 1];
-                for c in 0..C {
-                    p.0[c] += mean[c];
+                for (sum, v) in p.0.iter_mut().zip(mean) {
+                    *sum += v;
                 }
                 p.1 += 1;
             }

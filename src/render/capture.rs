@@ -382,7 +382,7 @@ impl TreeRenderer {
                     pass.draw_indexed(0..indices, 0, 0..1);
                 }
                 TreeDraw::Cluster(c, level) => {
-                    pass.set_pipeline(self.cluster.pipeline());
+                    pass.set_pipeline(self.cluster.pipeline(true));
                     pass.set_bind_group(1, &c.bind_group, &[]);
                     pass.draw(0..c.vertices(*level), 0..1);
                 }

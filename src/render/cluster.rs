@@ -23,6 +23,7 @@ pub struct ClusterPipeline {
     /// Group 1: records, alpha noise cube, normal noise cube, sampler.
     pub layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
+    proxy_depth: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
     noise: OnceLock<(wgpu::TextureView, wgpu::TextureView)>,
 }
@@ -62,27 +63,31 @@ impl ClusterPipeline {
             bind_group_layouts: &[Some(&shared.view), Some(&layout), Some(&shared.instances), Some(&shared.draw)],
             immediate_size: 0,
         });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("cluster"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(color_format.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let make = |entry: &str| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets: &[Some(color_format.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pipeline = make("fs_main");
+        let proxy_depth = make("fs_proxy_depth");
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("cluster noise"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -90,13 +95,17 @@ impl ClusterPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { layout, pipeline, sampler, noise: OnceLock::new() }
+        Self { layout, pipeline, proxy_depth, sampler, noise: OnceLock::new() }
     }
 
-    /// The pipeline.
+    /// The pipeline: exact per-pixel depth, or (benchmarks) the proxy's depth.
     #[must_use]
-    pub fn pipeline(&self) -> &wgpu::RenderPipeline {
-        &self.pipeline
+    pub fn pipeline(&self, exact_depth: bool) -> &wgpu::RenderPipeline {
+        if exact_depth {
+            &self.pipeline
+        } else {
+            &self.proxy_depth
+        }
     }
 
     fn noise(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> &(wgpu::TextureView, wgpu::TextureView) {
@@ -293,7 +302,7 @@ impl ClusterGpu {
 #[must_use]
 pub fn cluster_tiers(levels: &[ClusterLevelGpu], min_px: f32, below_px: f32) -> Vec<(usize, f32)> {
     let mut out: Vec<(usize, f32)> = Vec::new();
-    if !(min_px < below_px) {
+    if min_px.partial_cmp(&below_px) != Some(std::cmp::Ordering::Less) {
         return out;
     }
     let mut upper = f32::INFINITY;

@@ -94,6 +94,40 @@ pub struct RenderSettings {
     /// threshold use the clustered ellipsoids and lines of their pack (seed 002);
     /// smaller ones billboards. Infinity: no ellipsoids; 0: no billboards.
     pub cluster_min_px: f32,
+    /// Which representation families may be drawn (benchmark baselines); the
+    /// coarsest allowed one reaches down to 0 px, the finest up to infinity.
+    pub representations: Representations,
+    /// Ellipsoids and lines write their exact per-pixel depth (false: the proxy's
+    /// depth, for measuring what exact depth costs).
+    pub cluster_exact_depth: bool,
+}
+
+/// Representation families a frame may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Representations {
+    /// Mesh levels.
+    pub meshes: bool,
+    /// Clustered ellipsoids and lines.
+    pub clusters: bool,
+    /// Billboards.
+    pub billboards: bool,
+}
+
+impl Representations {
+    /// Everything (Sylva's mixed pipeline).
+    pub const ALL: Self = Self { meshes: true, clusters: true, billboards: true };
+    /// Meshes only.
+    pub const MESHES: Self = Self { meshes: true, clusters: false, billboards: false };
+    /// Ellipsoids and lines only.
+    pub const CLUSTERS: Self = Self { meshes: false, clusters: true, billboards: false };
+    /// Billboards only.
+    pub const BILLBOARDS: Self = Self { meshes: false, clusters: false, billboards: true };
+}
+
+impl Default for Representations {
+    fn default() -> Self {
+        Self::ALL
+    }
 }
 
 impl Default for RenderSettings {
@@ -108,6 +142,8 @@ impl Default for RenderSettings {
             clear: [0.55, 0.68, 0.82, 1.0],
             culling: CullingMode::Batches,
             cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
+            representations: Representations::ALL,
+            cluster_exact_depth: true,
         }
     }
 }
@@ -244,6 +280,8 @@ pub struct ForestRenderer {
     table: Vec<GpuSpecies>,
     table_dirty: bool,
     cluster_min_px: f32,
+    representations: Representations,
+    cluster_exact_depth: bool,
     last_view: ViewUniform,
 }
 
@@ -367,6 +405,8 @@ impl ForestRenderer {
             table: Vec::new(),
             table_dirty: true,
             cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
+            representations: Representations::ALL,
+            cluster_exact_depth: true,
             last_view: bytemuck::Zeroable::zeroed(),
         }
     }
@@ -497,7 +537,9 @@ impl ForestRenderer {
         let mut table = Vec::with_capacity(self.species_count as usize);
         let mut params = Vec::with_capacity((self.species_count * REPR_COUNT) as usize);
         let budget = self.config.items;
-        let cluster_min_px = self.cluster_min_px;
+        let allow = self.representations;
+        // Without billboards the coarsest cluster level reaches down to 0 px.
+        let cluster_min_px = if allow.billboards { self.cluster_min_px } else { 0.0 };
         for (i, pack) in self.packs.iter_mut().enumerate() {
             let resident = self.resident[i].min(u64::from(u32::MAX)) as u32;
             let mut s = GpuSpecies::default();
@@ -510,21 +552,25 @@ impl ForestRenderer {
                 s.select = [p.height_m, 0.0, 0.0, 0.0];
                 let mut want = [0u32; REPR_COUNT as usize];
                 let mut lower = [0f32; REPR_COUNT as usize];
-                if p.levels > 0 {
+                if p.levels > 0 && allow.meshes {
                     want[Repr::Mesh0 as usize] = resident.min(MESH0_CAPACITY);
                     lower[Repr::Mesh0 as usize] = p.select_px[0];
                     s.index_count[Repr::Mesh0 as usize] = p.index_counts[0];
                 }
-                if p.levels > 1 {
+                if p.levels > 1 && allow.meshes {
                     want[Repr::Mesh1 as usize] = resident.min(MESH1_CAPACITY);
                     lower[Repr::Mesh1 as usize] = p.select_px[1];
                     s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
                 }
                 // Cluster tiers: the levels whose size band meets [cluster_min_px, the
                 // coarsest mesh level's threshold).
-                let mesh_floor = p.select_px[..p.levels.min(2)].last().copied().unwrap_or(f32::INFINITY);
+                let mesh_floor = if allow.meshes {
+                    p.select_px[..p.levels.min(2)].last().copied().unwrap_or(f32::INFINITY)
+                } else {
+                    f32::INFINITY
+                };
                 p.tiers.clear();
-                if let Some(c) = &p.cluster {
+                if let Some(c) = p.cluster.as_ref().filter(|_| allow.clusters) {
                     for (tier, (level, lo)) in
                         cluster_tiers(&c.levels, cluster_min_px, mesh_floor).into_iter().enumerate()
                     {
@@ -536,7 +582,7 @@ impl ForestRenderer {
                         p.tiers.push(level);
                     }
                 }
-                if let Some(bb) = &p.billboard {
+                if let Some(bb) = p.billboard.as_ref().filter(|_| allow.billboards) {
                     let r = Repr::Billboard as usize;
                     want[r] = resident;
                     s.index_count[r] = BILLBOARD_VERTICES;
@@ -570,10 +616,12 @@ impl ForestRenderer {
 
     /// Writes the frame's uniforms (and the species table if residency changed).
     pub fn prepare(&mut self, queue: &wgpu::Queue, view: &ViewData, settings: &RenderSettings) -> ViewUniform {
-        if settings.cluster_min_px != self.cluster_min_px {
+        if settings.cluster_min_px != self.cluster_min_px || settings.representations != self.representations {
             self.cluster_min_px = settings.cluster_min_px;
+            self.representations = settings.representations;
             self.table_dirty = true;
         }
+        self.cluster_exact_depth = settings.cluster_exact_depth;
         if self.table_dirty {
             self.rebuild_table(queue);
         }
@@ -681,7 +729,7 @@ impl ForestRenderer {
                     }
                     Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
                         if let Some(c) = &p.cluster {
-                            pass.set_pipeline(self.cluster.pipeline());
+                            pass.set_pipeline(self.cluster.pipeline(self.cluster_exact_depth));
                             pass.set_bind_group(1, &c.bind_group, &[]);
                             pass.draw_indirect(&self.pools.args, args_offset);
                             draws += 1;

@@ -111,7 +111,8 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   }
   assert.equal(stats.trees_total, 3000);
   assert.ok(stats.tiles_resident > 0, 'tiles resident');
-  assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 9, `draw calls ${stats.draw_calls}`);
+  // At most one draw per species × representation (3 × 7).
+  assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 21, `draw calls ${stats.draw_calls}`);
   const drawn = Object.values(readyStats.instances).reduce((a, b) => a + b, 0);
   assert.ok(drawn > 100, `instances drawn ${drawn}`);
   const share = await foliageShare(page, 'viewer');

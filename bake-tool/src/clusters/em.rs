@@ -342,15 +342,15 @@ pub fn symmetric_eigen(m: DMat3) -> (DVec3, DMat3) {
             let c = 1.0 / (t * t + 1.0).sqrt();
             let s = t * c;
             // a ← Jᵀ a J, v ← v J (a is column-major but symmetric).
-            for r in 0..3 {
-                let (arp, arq) = (a[r][p], a[r][q]);
-                a[r][p] = c * arp - s * arq;
-                a[r][q] = s * arp + c * arq;
+            for row in &mut a {
+                let (arp, arq) = (row[p], row[q]);
+                row[p] = c * arp - s * arq;
+                row[q] = s * arp + c * arq;
             }
+            let (row_p, row_q) = (a[p], a[q]);
             for r in 0..3 {
-                let (apr, aqr) = (a[p][r], a[q][r]);
-                a[p][r] = c * apr - s * aqr;
-                a[q][r] = s * apr + c * aqr;
+                a[p][r] = c * row_p[r] - s * row_q[r];
+                a[q][r] = s * row_p[r] + c * row_q[r];
             }
             for row in &mut v {
                 let (vp, vq) = (row[p], row[q]);

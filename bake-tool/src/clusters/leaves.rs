@@ -112,7 +112,7 @@ pub fn extract_leaves(model: &ImportedModel) -> Vec<Leaf> {
         for &t in part {
             let [a, b, c] = model.triangles[t].map(|i| model.vertices[i as usize]);
             let area = f64::from((b.position - a.position).cross(c.position - a.position).length() * 0.5);
-            if !(area > 0.0) {
+            if area.is_nan() || area <= 0.0 {
                 continue;
             }
             let mat = &model.materials[usize::from(a.material)];
