@@ -122,8 +122,10 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
     let hx = bx * bx - c * dot_d(row0, row0);
     let hy = by * by - c * dot_d(row1, row1);
     var ndc: vec2<f32>;
-    if c >= 0.0 {
-        // The eye is inside (or on) the ellipsoid: cover the screen.
+    if !sphere_visible(center, max(r.x, max(r.y, r.z)), view) {
+        ndc = vec2<f32>(2.0); // outside the frustum (or behind the eye): nothing to draw
+    } else if c >= 0.0 {
+        // The ellipsoid crosses the eye plane (w = 0): its projection is unbounded.
         ndc = corner;
     } else if hx < 0.0 || hy < 0.0 {
         ndc = vec2<f32>(2.0); // degenerate: off screen
@@ -205,6 +207,15 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
     let eb = dot(b - mid, u);
     // 15 % margin: the quad lies in the plane through the midpoint, the ends may be nearer.
     let m = r * 1.15;
+    if !sphere_visible(mid, 0.5 * length(axis) + m, view) {
+        (*out).clip = vec4<f32>(2.0, 2.0, 0.5, 1.0); // outside the frustum: a degenerate quad
+        (*out).p0 = vec4<f32>(a, 1.0);
+        (*out).p1 = vec4<f32>(b, r);
+        (*out).p2 = vec4<f32>(0.0);
+        (*out).p3 = vec4<f32>(0.0);
+        (*out).color = vec4<f32>(0.0);
+        return;
+    }
     let along = select(min(ea, eb) - m, max(ea, eb) + m, corner.y > 0.0);
     let p = mid + u * along + side * (corner.x * m);
     (*out).clip = view.clip_from_eye * vec4<f32>(p, 1.0);

@@ -486,6 +486,23 @@ impl Viewer {
         self.settings.debug_bounds = bounds;
     }
 
+    /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
+    /// the simplified mesh) use clustered ellipsoids (infinity: none); `only`
+    /// restricts drawing to one family (`"meshes"`, `"ellipsoids"`, `"billboards"`,
+    /// anything else: all); `exact_depth` false keeps the ellipsoids' proxy depth.
+    pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool) {
+        use crate::render::forest::Representations;
+        self.settings.cluster_min_px =
+            if ellipsoid_min_px.is_nan() { f32::INFINITY } else { ellipsoid_min_px.max(0.0) };
+        self.settings.representations = match only {
+            "meshes" => Representations::MESHES,
+            "ellipsoids" => Representations::CLUSTERS,
+            "billboards" => Representations::BILLBOARDS,
+            _ => Representations::ALL,
+        };
+        self.settings.cluster_exact_depth = exact_depth;
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.settings.quality = quality.clamp(0.05, 4.0);

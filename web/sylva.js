@@ -111,6 +111,15 @@ class SylvaViewer {
   stats() { return JSON.parse(this.viewer.stats_json()); }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
   setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
+  /**
+   * Level-of-detail policy: `ellipsoidMinPx` (default 40; Infinity: no ellipsoids),
+   * `only` ('meshes' | 'ellipsoids' | 'billboards'; default all, mixed by size),
+   * `exactDepth` (default true; false is faster, ellipsoids keep their proxy depth).
+   */
+  setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = true } = {}) {
+    this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth);
+    this.dirty = 8;
+  }
 
   /** Device lost (driver reset, GPU process crash): a new viewer on the same canvas, same camera. */
   async recover() {

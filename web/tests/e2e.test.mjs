@@ -120,6 +120,27 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   assert.deepEqual(errors, []);
 });
 
+test('setLod switches representations: ellipsoids only, billboards only, mixed', async () => {
+  const { page, errors } = await openViewer(base);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await ready(page);
+  // Counters are read back a frame or two late: poll until they match.
+  const drawnWith = (only) => page.waitForFunction((only) => {
+    window.sylva.setLod({ only });
+    const i = window.sylva.stats().instances;
+    const total = Object.values(i).reduce((a, b) => a + b, 0);
+    if (only === 'ellipsoids') return i.ellipsoid > 0 && i.ellipsoid === total;
+    if (only === 'billboards') return i.billboard > 0 && i.billboard === total;
+    return i.billboard + i.mesh0 + i.mesh1 > 0; // mixed again (ellipsoids only where trees are 40–120 px)
+  }, only, { timeout: 30000, polling: 200 });
+  await drawnWith('ellipsoids');
+  const share = await foliageShare(page, 'ellipsoids-only');
+  assert.ok(share > 0.05, `ellipsoids cover ${share} of the page`);
+  await drawnWith('billboards');
+  await drawnWith('all');
+  assert.deepEqual(errors, []);
+});
+
 test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the hash', async () => {
   // 15.4° E 48.4° N is E 529 606.8, N 5 360 837.4 in UTM 33N (PROJ), i.e. x −10 393.2, y 837.4 from the origin.
   const { page } = await openViewer(`${base}#camera=15.4,48.4,300,0,-20`);

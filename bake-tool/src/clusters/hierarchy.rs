@@ -47,8 +47,10 @@ pub struct HierarchyOptions {
     pub scales: Vec<f32>,
     /// Noise thresholds tried (besides 0).
     pub thresholds: Vec<f32>,
-    /// Normal-noise blend of every level.
-    pub normal_blend: f32,
+    /// Normal-noise blends tried per level (the first is used while calibrating size and threshold).
+    pub normal_blends: Vec<f32>,
+    /// Size factors tried for the single-leaf ellipsoids.
+    pub leaf_scales: Vec<f32>,
     /// EM settings.
     pub em: EmOptions,
     /// Render size bounds of the calibration images (px).
@@ -64,7 +66,8 @@ impl Default for HierarchyOptions {
             seed: 1,
             scales: vec![0.55, 0.7, 0.85, 1.0, 1.2],
             thresholds: vec![0.25, 0.4],
-            normal_blend: 0.35,
+            normal_blends: vec![0.35, 0.0, 0.7],
+            leaf_scales: vec![0.6, 0.8, 1.0, 1.25],
             em: EmOptions::default(),
             min_size_px: 48,
             max_size_px: 192,
@@ -179,11 +182,33 @@ pub fn build_levels(
     if leaves.is_empty() {
         return Vec::new();
     }
+    let empty: Vec<Line> = Vec::new();
+    let blend = opts.normal_blends.first().copied().unwrap_or(0.0);
+    // First the leaves as single ellipsoids, sized so they cover what the leaves
+    // cover (§3.1); the calibrated extents feed every level's weighted PCA.
+    let leaf_scale = {
+        let base: Vec<Ellipsoid> =
+            leaves.iter().map(|l| ellipsoid_from_moments(l.center, l.covariance, l.color, 0.0)).collect();
+        let size_px = opts.max_size_px;
+        let mut best = (f64::INFINITY, 1.0f32);
+        for &s in &opts.leaf_scales {
+            let e = scaled(&base, s);
+            let lines = lines.first().unwrap_or(&empty);
+            let c = Candidate { ellipsoids: &e, lines, noise_threshold: 0.0, normal_blend: blend, size_px };
+            let err = judge.error(&c);
+            if err < best.0 {
+                best = (err, s);
+            }
+        }
+        best.1
+    };
+    let scaled_leaves: Vec<Leaf> =
+        leaves.iter().map(|l| Leaf { covariance: l.covariance * f64::from(leaf_scale * leaf_scale), ..*l }).collect();
+    let leaves = &scaled_leaves[..];
     let points: Vec<DVec3> = leaves.iter().map(|l| l.center).collect();
     let sizes = level_sizes(leaves.len());
     let mut rng = Rng::new(opts.seed);
     let mut out = Vec::with_capacity(sizes.len());
-    let empty: Vec<Line> = Vec::new();
     for (k, &n) in sizes.iter().enumerate() {
         progress(k, sizes.len());
         let level_lines = lines.get(k).or(lines.last()).unwrap_or(&empty);
@@ -212,7 +237,7 @@ pub fn build_levels(
                     ellipsoids: &e,
                     lines: level_lines,
                     noise_threshold: 0.0,
-                    normal_blend: opts.normal_blend,
+                    normal_blend: blend,
                     size_px,
                 });
                 let key = (err, -mixture.log_likelihood);
@@ -230,17 +255,27 @@ pub fn build_levels(
         for &t in &opts.thresholds {
             for s in [1.0, 1.12, 1.25] {
                 let e = scaled(&base, s);
-                let candidate = Candidate {
-                    ellipsoids: &e,
-                    lines: level_lines,
-                    noise_threshold: t,
-                    normal_blend: opts.normal_blend,
-                    size_px,
-                };
+                let candidate =
+                    Candidate { ellipsoids: &e, lines: level_lines, noise_threshold: t, normal_blend: blend, size_px };
                 let x = judge.error(&candidate);
                 if x < err {
                     (err, ell, threshold) = (x, e, t);
                 }
+            }
+        }
+        // Then the normal noise's blend, the same way.
+        let mut normal_blend = blend;
+        for &b in opts.normal_blends.iter().skip(1) {
+            let candidate = Candidate {
+                ellipsoids: &ell,
+                lines: level_lines,
+                noise_threshold: threshold,
+                normal_blend: b,
+                size_px,
+            };
+            let x = judge.error(&candidate);
+            if x < err {
+                (err, normal_blend) = (x, b);
             }
         }
         let width = median_width(&ell).max(1e-6);
@@ -250,7 +285,7 @@ pub fn build_levels(
                 select_px: ELLIPSOID_TARGET_PX * height_m / width,
                 error: err as f32,
                 noise_threshold: threshold,
-                normal_blend: opts.normal_blend,
+                normal_blend,
             },
             ellipsoids: ell,
         });
@@ -361,7 +396,14 @@ mod tests {
                 leaf(c + DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 1.5)
             })
             .collect();
-        let opts = HierarchyOptions { tries: 1, scales: vec![1.0], thresholds: vec![], ..Default::default() };
+        let opts = HierarchyOptions {
+            tries: 1,
+            scales: vec![1.0],
+            thresholds: vec![],
+            normal_blends: vec![0.35],
+            leaf_scales: vec![1.0],
+            ..Default::default()
+        };
         let levels = build_levels(&leaves, 25.0, &[], &mut VolumeJudge(50.0), &opts, &mut |_, _| {});
         check(&levels, leaves.len());
         assert!(levels[0].ellipsoids.len() > 20_000, "{}", levels[0].ellipsoids.len());
