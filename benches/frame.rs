@@ -73,12 +73,13 @@ fn representations(off: &mut OffscreenScene, m: &Manifest) {
     println!("\n## Representations at the distances where each is used ({W}x{H}, {} trees)\n", m.counts.trees);
     println!("| trees tall | method | cull ms | draw ms | total ms | vs meshes | instances drawn | error vs meshes |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
-    let methods: [(&str, Representations, bool); 5] = [
+    let methods: [(&str, Representations, bool); 6] = [
         ("meshes", Representations::MESHES, true),
-        ("ellipsoids", Representations::CLUSTERS, true),
-        ("ellipsoids, proxy depth", Representations::CLUSTERS, false),
-        ("billboards", Representations::BILLBOARDS, true),
-        ("sylva (mixed)", Representations::ALL, true),
+        ("ellipsoids", Representations::CLUSTERS, false),
+        ("ellipsoids, exact depth", Representations::CLUSTERS, true),
+        ("billboards", Representations::BILLBOARDS, false),
+        ("sylva (mixed)", Representations::ALL, false),
+        ("sylva (mixed), exact depth", Representations::ALL, true),
     ];
     for target_px in [200.0, 70.0, 25.0] {
         let d = height_m * px_per_m / target_px;
@@ -110,7 +111,7 @@ fn representations(off: &mut OffscreenScene, m: &Manifest) {
         }
     }
     off.settings.representations = Representations::ALL;
-    off.settings.cluster_exact_depth = true;
+    off.settings.cluster_exact_depth = false;
 }
 
 fn main() {

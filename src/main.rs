@@ -98,11 +98,10 @@ mod cli {
             /// are drawn with ellipsoids and lines; smaller ones with billboards.
             #[arg(long, default_value_t = sylva::render::forest::DEFAULT_CLUSTER_MIN_PX)]
             ellipsoid_min_px: f32,
-            /// Ellipsoids keep their proxy's front-most depth instead of writing exact
-            /// per-pixel depth: early depth tests stay on (faster), but
-            /// interpenetrating ellipsoids may sort wrongly.
+            /// Ellipsoids write their exact ray-cast depth per pixel (slower: no early
+            /// depth tests); by default they keep their proxy's front-most depth.
             #[arg(long)]
-            proxy_depth: bool,
+            exact_depth: bool,
             /// Draw the boxes of the batches that pass the batch test.
             #[arg(long)]
             debug_bounds: bool,
@@ -293,7 +292,7 @@ mod cli {
                 debug_lod,
                 only,
                 ellipsoid_min_px,
-                proxy_depth,
+                exact_depth,
                 debug_bounds,
                 stats,
                 timeout,
@@ -316,7 +315,7 @@ mod cli {
                         debug_lod,
                         debug_bounds,
                         cluster_min_px: ellipsoid_min_px,
-                        cluster_exact_depth: !proxy_depth,
+                        cluster_exact_depth: exact_depth,
                         representations: match only {
                             None => Representations::ALL,
                             Some(OnlyArg::Meshes) => Representations::MESHES,

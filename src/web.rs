@@ -489,7 +489,7 @@ impl Viewer {
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
     /// the simplified mesh) use clustered ellipsoids (infinity: none); `only`
     /// restricts drawing to one family (`"meshes"`, `"ellipsoids"`, `"billboards"`,
-    /// anything else: all); `exact_depth` false keeps the ellipsoids' proxy depth.
+    /// anything else: all); `exact_depth` writes the ellipsoids' exact ray-cast depth.
     pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool) {
         use crate::render::forest::Representations;
         self.settings.cluster_min_px =

@@ -114,9 +114,10 @@ class SylvaViewer {
   /**
    * Level-of-detail policy: `ellipsoidMinPx` (default 40; Infinity: no ellipsoids),
    * `only` ('meshes' | 'ellipsoids' | 'billboards'; default all, mixed by size),
-   * `exactDepth` (default true; false is faster, ellipsoids keep their proxy depth).
+   * `exactDepth` (default false: ellipsoids keep their proxy's front-most depth,
+   * which keeps early depth tests; true writes the exact ray-cast depth, slower).
    */
-  setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = true } = {}) {
+  setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false } = {}) {
     this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth);
     this.dirty = 8;
   }

@@ -97,8 +97,10 @@ pub struct RenderSettings {
     /// Which representation families may be drawn (benchmark baselines); the
     /// coarsest allowed one reaches down to 0 px, the finest up to infinity.
     pub representations: Representations,
-    /// Ellipsoids and lines write their exact per-pixel depth (false: the proxy's
-    /// depth, for measuring what exact depth costs).
+    /// Ellipsoids write their exact ray-cast depth per pixel. Off by default: the
+    /// proxy then sits at the ellipsoid's front-most depth and early depth tests
+    /// stay on — 2.2–2.5× cheaper cluster draws for +0.001 multi-scale RMSE
+    /// (docs/BENCHMARKS.md); only interpenetrating primitives can sort wrongly.
     pub cluster_exact_depth: bool,
 }
 
@@ -143,7 +145,7 @@ impl Default for RenderSettings {
             culling: CullingMode::Batches,
             cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
             representations: Representations::ALL,
-            cluster_exact_depth: true,
+            cluster_exact_depth: false,
         }
     }
 }
@@ -282,7 +284,22 @@ pub struct ForestRenderer {
     cluster_min_px: f32,
     representations: Representations,
     cluster_exact_depth: bool,
+    /// Resident tiles' boxes and tallest tree per species, to skip draws no tree can need.
+    tile_bounds: Vec<TileBounds>,
+    /// Per species: an upper bound of the projected height (px) of its resident
+    /// trees this frame (0: none within reach).
+    species_max_px: Vec<f32>,
+    fade_band: f32,
     last_view: ViewUniform,
+}
+
+/// What the CPU keeps of a resident tile: enough to bound its trees' projected sizes.
+struct TileBounds {
+    batch_start: u32,
+    lo: Vec3,
+    hi: Vec3,
+    /// (species, tallest tree in metres).
+    heights: Vec<(u32, f32)>,
 }
 
 fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
@@ -406,7 +423,10 @@ impl ForestRenderer {
             table_dirty: true,
             cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
             representations: Representations::ALL,
-            cluster_exact_depth: true,
+            cluster_exact_depth: false,
+            tile_bounds: Vec::new(),
+            species_max_px: Vec::new(),
+            fade_band: 0.12,
             last_view: bytemuck::Zeroable::zeroed(),
         }
     }
@@ -424,6 +444,7 @@ impl ForestRenderer {
     pub fn set_species_count(&mut self, count: u32) {
         assert!(count <= self.config.species, "{count} species exceed the renderer's {}", self.config.species);
         self.species_count = count;
+        self.tile_bounds.clear();
         self.resident = vec![0; count as usize];
         self.packs = (0..count).map(|_| None).collect();
         self.table_dirty = true;
@@ -488,6 +509,24 @@ impl ForestRenderer {
             u64::from(instances.start) * 8,
             bytemuck::cast_slice(&tile.instances),
         );
+        let mut bounds = TileBounds {
+            batch_start: batches.start,
+            lo: Vec3::splat(f32::MAX),
+            hi: Vec3::splat(f32::MIN),
+            heights: Vec::new(),
+        };
+        for b in &tile.batches {
+            let (c, h) = (Vec3::from(b.center_m), Vec3::from(b.half_extent_m));
+            bounds.lo = bounds.lo.min(c - h);
+            bounds.hi = bounds.hi.max(c + h);
+            match bounds.heights.iter_mut().find(|(s, _)| *s == b.species) {
+                Some(x) => x.1 = x.1.max(b.max_height_m),
+                None => bounds.heights.push((b.species, b.max_height_m)),
+            }
+        }
+        if !tile.batches.is_empty() {
+            self.tile_bounds.push(bounds);
+        }
         let mut counts: Vec<(u32, u32)> = Vec::new();
         for b in &tile.batches {
             match counts.iter_mut().find(|(s, _)| *s == b.species) {
@@ -504,6 +543,7 @@ impl ForestRenderer {
     /// Evicts a resident tile: its batches are zeroed (the cull pass skips empty
     /// batches) and its ranges returned.
     pub fn evict_tile(&mut self, queue: &wgpu::Queue, slot: TileSlot) {
+        self.tile_bounds.retain(|t| t.batch_start != slot.batches.start);
         let zeros = vec![0u8; slot.batches.len() * 80];
         queue.write_buffer(&self.pools.batches, u64::from(slot.batches.start) * 80, &zeros);
         for (s, n) in &slot.species_counts {
@@ -622,6 +662,25 @@ impl ForestRenderer {
             self.table_dirty = true;
         }
         self.cluster_exact_depth = settings.cluster_exact_depth;
+        self.fade_band = settings.fade_band;
+        // Bound each species' projected tree height from the resident tiles' boxes
+        // (nearest point) and tallest trees: draws no tree can need are skipped.
+        let eye = view.eye_hi + view.eye_lo;
+        let px = view.px_per_m_at_1m * settings.quality;
+        let reach = if settings.culling == CullingMode::None { f32::INFINITY } else { settings.draw_distance_m };
+        self.species_max_px.clear();
+        self.species_max_px.resize(self.species_count as usize, 0.0);
+        for t in &self.tile_bounds {
+            let d = (t.lo - eye).max(eye - t.hi).max(Vec3::ZERO).length();
+            if d > reach {
+                continue;
+            }
+            for &(s, h) in &t.heights {
+                if let Some(m) = self.species_max_px.get_mut(s as usize) {
+                    *m = m.max(h * px / d.max(1e-3));
+                }
+            }
+        }
         if self.table_dirty {
             self.rebuild_table(queue);
         }
@@ -712,8 +771,16 @@ impl ForestRenderer {
         let mut draws = 0;
         for (i, p) in self.packs.iter().enumerate() {
             let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
-            for repr in Repr::ALL {
+            let max_px = self.species_max_px.get(i).copied().unwrap_or(f32::INFINITY);
+            let coarsest = Repr::ALL.iter().rposition(|r| s.slot_cap[*r as usize] > 0);
+            for (k, repr) in Repr::ALL.into_iter().enumerate() {
                 if s.slot_cap[repr as usize] == 0 {
+                    continue;
+                }
+                // Nothing of the species within reach, or no tree tall enough on screen
+                // for this representation (fade bands included): skip the draw.
+                let lower = if Some(k) == coarsest { 0.0 } else { s.lower_px[repr as usize] * (1.0 - self.fade_band) };
+                if max_px <= 0.0 || lower > max_px {
                     continue;
                 }
                 let slot = i as u32 * REPR_COUNT + repr as u32;
