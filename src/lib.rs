@@ -4,10 +4,13 @@
 //! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
 //! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
 //! * [`metrics`] — image error (multi-scale RMSE, seed 002 §4).
+//! * [`bench`] — `sylva bench`: run time against image error on camera paths (native).
 //! * [`scene`] — fetching, streaming and residency of scenes.
 //!
 //! The bake tool (`bake-tool/`, crate `sylva-bake`) writes what this crate reads.
 
+#[cfg(not(target_arch = "wasm32"))]
+pub mod bench;
 pub mod format;
 pub mod geo;
 pub mod metrics;

@@ -122,6 +122,32 @@ mod cli {
             #[arg(long, default_value_t = 0)]
             level: usize,
         },
+        /// Run time against image error on a camera path, every method on the same
+        /// frames: writes frames.csv, summary.json and SVG plots (pareto,
+        /// frame_time, temporal_noise) into --out.
+        #[command(
+            after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, ellipsoid, sylva, sylva-q0.5, sylva-q0.25, or all.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
+        )]
+        Bench {
+            /// Scene directory, scene.json path or http(s) URL.
+            #[arg(long)]
+            scene: String,
+            /// Camera path: flyover, far, medium, close or PATH.json.
+            #[arg(long, default_value = "flyover")]
+            path: String,
+            /// Comma-separated methods, or all.
+            #[arg(long, default_value = "all")]
+            methods: String,
+            /// Image size, WxH.
+            #[arg(long, default_value = "640x360")]
+            size: String,
+            /// Frames along the path (a path file's own count wins).
+            #[arg(long, default_value_t = 48)]
+            frames: usize,
+            /// Output directory.
+            #[arg(long)]
+            out: PathBuf,
+        },
         /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
         Compare {
             /// First image (PNG).
@@ -143,6 +169,85 @@ mod cli {
             #[arg(long)]
             web: Option<PathBuf>,
         },
+    }
+
+    fn bench(scene: &str, path: &str, methods: &str, size: &str, frames: usize, out: &std::path::Path) -> Result<()> {
+        use sylva::bench::{self as b, NamedPath};
+        let (w, h) = parse_size(size)?;
+        if frames < 2 {
+            bail!("--frames {frames}: need at least 2");
+        }
+        let methods = b::methods(methods)?;
+        // The manifest gives the bounds the named paths are laid over.
+        let mut probe = OffscreenScene::open(scene, 16, 16, PoolConfig::default())
+            .map_err(|e| anyhow::anyhow!("{e}"))
+            .with_context(|| format!("opening {scene}"))?;
+        for e in probe.load_view(&Camera::default(), 120.0) {
+            if let StreamEvent::Fatal { message } = e {
+                bail!("{scene}: {message}");
+            }
+        }
+        let manifest = probe.stream.manifest().context("the scene manifest did not load in 120 s")?.clone();
+        // The ground at the centre, for the paths that go down to eye height.
+        let lo = glam::DVec3::from(manifest.bounds.min.map(f64::from));
+        let hi = glam::DVec3::from(manifest.bounds.max.map(f64::from));
+        let c = (lo + hi) * 0.5;
+        let down = Camera { eye_m: glam::DVec3::new(c.x, c.y, hi.z + 300.0), pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() };
+        probe.load_view(&down, 120.0);
+        let ground = probe.stream.ground_height_at(c.x as f32, c.y as f32).map(f64::from);
+        drop(probe);
+        let (keys, frames) = match path {
+            "flyover" => (b::named_path(NamedPath::Flyover, &manifest, ground), frames),
+            "far" => (b::named_path(NamedPath::Far, &manifest, ground), frames),
+            "medium" => (b::named_path(NamedPath::Medium, &manifest, ground), frames),
+            "close" => (b::named_path(NamedPath::Close, &manifest, ground), frames),
+            file => {
+                let text = std::fs::read_to_string(file)
+                    .with_context(|| format!("--path {file}: not flyover|far|medium|close and not a readable file"))?;
+                let p: b::PathFile =
+                    serde_json::from_str(&text).with_context(|| format!("{file}: not a path file (see --help)"))?;
+                if p.keyframes.len() < 2 {
+                    bail!("{file}: a path needs at least two keyframes");
+                }
+                if p.keyframes.iter().any(|k| !k.eye.iter().chain([&k.heading_deg, &k.pitch_deg]).all(|v| v.is_finite())) {
+                    bail!("{file}: keyframes must be finite numbers");
+                }
+                let n = p.frames.unwrap_or(frames).max(2);
+                (p.keyframes, n)
+            }
+        };
+        let cameras = b::interpolate(&keys, frames);
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        let total = methods.len() * cameras.len();
+        let started = std::time::Instant::now();
+        let mut done = 0usize;
+        let run = b::run(scene, &cameras, &methods, w, h, &mut |m, i, n| {
+            done += 1;
+            let eta = started.elapsed().as_secs_f64() / done as f64 * (total - done) as f64;
+            let bar = "#".repeat(done * 30 / total.max(1));
+            eprint!("\r[{bar:<30}] {done}/{total} {m} frame {}/{n}, ~{eta:.0} s left   ", i + 1);
+        })?;
+        eprintln!();
+        b::write_csv(out, &run.frames)?;
+        let summary = serde_json::json!({
+            "scene": scene,
+            "path": path,
+            "size": [w, h],
+            "frames": cameras.len(),
+            "adapter": run.adapter,
+            "methods": run.summary,
+        });
+        std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
+        b::write_plots(out, &run, &format!("{path}, {w}x{h}"))?;
+        eprintln!("{:<14} {:>9} {:>9} {:>9} {:>10}", "method", "gpu ms", "cpu ms", "error", "t. noise");
+        for (name, m) in &run.summary {
+            eprintln!(
+                "{name:<14} {:>9.2} {:>9.3} {:>9.4} {:>10.5}",
+                m.gpu_ms.median, m.cpu_ms.median, m.error.median, m.temporal_noise.median
+            );
+        }
+        eprintln!("wrote frames.csv, summary.json, pareto.svg, frame_time.svg, temporal_noise.svg to {}", out.display());
+        Ok(())
     }
 
     fn parse_size(s: &str) -> Result<(u32, u32)> {
@@ -242,6 +347,7 @@ mod cli {
 
     pub fn main() -> Result<()> {
         match Cli::parse().command {
+            Command::Bench { scene, path, methods, size, frames, out } => bench(&scene, &path, &methods, &size, frames, &out),
             Command::Compare { a, b } => {
                 let load = |p: &PathBuf| {
                     image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8())

@@ -1,0 +1,607 @@
+//! `sylva bench`: run time against image error on camera paths, every method on
+//! the same scene and the same frames (issue 6). Native only.
+//!
+//! Paths: `flyover` (seed 002 Fig. 10: overview, descent to eye height inside
+//! the forest, towards a smaller group, turn back), `far` / `medium` / `close`
+//! (360° horizontal sweeps, seed 004 ch. 5) or a JSON file of keyframes.
+//! Methods: `reference` (every tree full mesh, no LoD, 2× supersampled),
+//! `mesh` (full mesh, per-tree culling), `per-tree` (Sylva's LoD, trees culled one
+//! by one), `billboard` (meshes near, billboards beyond), `ellipsoid` (meshes
+//! near, ellipsoids beyond), `sylva` (the full mix) at quality 1, ½, ¼.
+//! Per frame: GPU ms (wall time around submit + wait, see platform.md), CPU ms,
+//! draw calls, instances per representation, GPU bytes, bytes fetched, image
+//! error against `reference` (multi-scale RMSE) and temporal noise (RMSE to the
+//! previous frame minus the reference's own frame-to-frame RMSE).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::format::Manifest;
+use crate::render::camera::Camera;
+use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
+use crate::render::offscreen::{NamedView, OffscreenScene};
+
+/// A keyframe of a camera path (scene-relative metres, degrees).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Keyframe {
+    /// Eye, metres from the scene origin (x east, y north, z up).
+    pub eye: [f64; 3],
+    /// Heading, degrees clockwise from north.
+    pub heading_deg: f64,
+    /// Pitch, degrees above the horizon.
+    pub pitch_deg: f64,
+}
+
+/// A custom path file: keyframes (interpolated with smoothstep easing) and the
+/// frame count.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathFile {
+    /// At least two keyframes.
+    pub keyframes: Vec<Keyframe>,
+    /// Frames along the whole path.
+    pub frames: Option<usize>,
+}
+
+fn camera(k: &Keyframe) -> Camera {
+    Camera {
+        eye_m: DVec3::from(k.eye),
+        heading_rad: k.heading_deg.to_radians(),
+        pitch_rad: k.pitch_deg.to_radians(),
+        ..Camera::default()
+    }
+}
+
+fn lerp_key(a: &Keyframe, b: &Keyframe, t: f64) -> Keyframe {
+    let s = t * t * (3.0 - 2.0 * t);
+    let mut dh = (b.heading_deg - a.heading_deg) % 360.0;
+    if dh > 180.0 {
+        dh -= 360.0;
+    } else if dh < -180.0 {
+        dh += 360.0;
+    }
+    Keyframe {
+        eye: std::array::from_fn(|i| a.eye[i] + (b.eye[i] - a.eye[i]) * s),
+        heading_deg: a.heading_deg + dh * s,
+        pitch_deg: a.pitch_deg + (b.pitch_deg - a.pitch_deg) * s,
+    }
+}
+
+/// `frames` cameras along `keys` (equal time per segment).
+#[must_use]
+pub fn interpolate(keys: &[Keyframe], frames: usize) -> Vec<Camera> {
+    if keys.len() < 2 || frames < 2 {
+        return keys.iter().take(frames.max(1)).map(camera).collect();
+    }
+    let segments = (keys.len() - 1) as f64;
+    (0..frames)
+        .map(|f| {
+            let u = f as f64 / (frames - 1) as f64 * segments;
+            let i = (u.floor() as usize).min(keys.len() - 2);
+            camera(&lerp_key(&keys[i], &keys[i + 1], u - i as f64))
+        })
+        .collect()
+}
+
+/// The named camera paths over a scene's bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NamedPath {
+    /// Overview, descent to eye height, towards a smaller group, turn back.
+    Flyover,
+    /// 360° sweep high over the scene's centre.
+    Far,
+    /// 360° sweep 110 m over the forest's centre.
+    Medium,
+    /// 360° sweep at eye height among the trees.
+    Close,
+}
+
+/// Keyframes of a named path over `m`; `ground` is the terrain height at the
+/// scene's centre when known (else the lowest tree base near it).
+#[must_use]
+pub fn named_path(path: NamedPath, m: &Manifest, ground: Option<f64>) -> Vec<Keyframe> {
+    let key = |c: &Camera| Keyframe {
+        eye: c.eye_m.to_array(),
+        heading_deg: c.heading_rad.to_degrees(),
+        pitch_deg: c.pitch_rad.to_degrees(),
+    };
+    let sweep = |c: Camera, pitch: f64| -> Vec<Keyframe> {
+        (0..=4)
+            .map(|k| Keyframe { eye: c.eye_m.to_array(), heading_deg: f64::from(k) * 90.0, pitch_deg: pitch })
+            .collect()
+    };
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = (lo + hi) * 0.5;
+    let ext = ((hi - lo) * 0.5).truncate().max_element().max(10.0);
+    match path {
+        // The sweeps turn on the spot over the scene's centre, so every heading
+        // looks over trees: high above, a few hundred metres up, at eye height.
+        NamedPath::Far | NamedPath::Medium | NamedPath::Close => {
+            let ground = ground.unwrap_or(NamedView::Close.camera(m).eye_m.z - 1.7);
+            let (height, pitch) = match path {
+                NamedPath::Far => (hi.z - ground + 0.45 * ext, -25.0),
+                NamedPath::Medium => (110.0, -20.0),
+                _ => (1.7, 4.0),
+            };
+            sweep(Camera { eye_m: DVec3::new(c.x, c.y, ground + height), ..Camera::default() }, pitch)
+        }
+        NamedPath::Flyover => {
+            let far = NamedView::Far.camera(m);
+            let ground = ground.unwrap_or(NamedView::Close.camera(m).eye_m.z - 1.7);
+            vec![
+                key(&far),
+                Keyframe { eye: [c.x, c.y - 0.45 * ext, ground + 0.2 * ext], heading_deg: 0.0, pitch_deg: -25.0 },
+                Keyframe { eye: [c.x, c.y - 0.1 * ext, ground + 2.0], heading_deg: 0.0, pitch_deg: 2.0 },
+                Keyframe { eye: [c.x + 0.1 * ext, c.y + 0.05 * ext, ground + 2.0], heading_deg: 60.0, pitch_deg: 0.0 },
+                Keyframe { eye: [c.x + 0.1 * ext, c.y + 0.05 * ext, ground + 6.0], heading_deg: 200.0, pitch_deg: 5.0 },
+                Keyframe { eye: [c.x, c.y - 0.5 * ext, ground + 0.3 * ext], heading_deg: 180.0, pitch_deg: -20.0 },
+            ]
+        }
+    }
+}
+
+/// One method of the comparison.
+#[derive(Debug, Clone)]
+pub struct Method {
+    /// Name in the outputs.
+    pub name: String,
+    /// Renderer settings.
+    pub settings: RenderSettings,
+    /// Supersampling factor per axis (the reference: 2).
+    pub supersample: u32,
+}
+
+/// Quality so high every visible tree is above the full mesh's threshold.
+const ALL_FULL_MESH: f32 = 1.0e6;
+
+/// The methods named in `list` (comma-separated; `all` for every one), the
+/// reference always first.
+///
+/// # Errors
+/// An unknown method name.
+pub fn methods(list: &str) -> Result<Vec<Method>> {
+    let base = RenderSettings::default();
+    let make = |name: &str| -> Result<Method> {
+        let m = |settings: RenderSettings, supersample| Method { name: name.to_string(), settings, supersample };
+        Ok(match name {
+            "reference" => m(
+                RenderSettings { quality: ALL_FULL_MESH, representations: Representations::MESHES, ..base },
+                2,
+            ),
+            "mesh" => m(
+                RenderSettings {
+                    quality: ALL_FULL_MESH,
+                    representations: Representations::MESHES,
+                    culling: CullingMode::PerTree,
+                    ..base
+                },
+                1,
+            ),
+            "per-tree" => m(RenderSettings { culling: CullingMode::PerTree, ..base }, 1),
+            "billboard" => m(
+                RenderSettings {
+                    representations: Representations { meshes: true, clusters: false, billboards: true },
+                    ..base
+                },
+                1,
+            ),
+            "ellipsoid" => m(
+                RenderSettings {
+                    representations: Representations { meshes: true, clusters: true, billboards: false },
+                    ..base
+                },
+                1,
+            ),
+            "sylva" => m(base, 1),
+            "sylva-q0.5" => m(RenderSettings { quality: 0.5, ..base }, 1),
+            "sylva-q0.25" => m(RenderSettings { quality: 0.25, ..base }, 1),
+            other => bail!(
+                "unknown method {other:?}: use reference, mesh, per-tree, billboard, ellipsoid, sylva, sylva-q0.5, sylva-q0.25 or all"
+            ),
+        })
+    };
+    let names: Vec<&str> = if list.trim() == "all" {
+        vec!["reference", "mesh", "per-tree", "billboard", "ellipsoid", "sylva", "sylva-q0.5", "sylva-q0.25"]
+    } else {
+        list.split(',').map(str::trim).filter(|s| !s.is_empty()).collect()
+    };
+    let mut out = vec![make("reference")?];
+    for n in names {
+        if n != "reference" && !out.iter().any(|m| m.name == n) {
+            out.push(make(n)?);
+        }
+    }
+    Ok(out)
+}
+
+/// One measured frame.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct FrameRecord {
+    /// Method name.
+    pub method: String,
+    /// Frame index along the path.
+    pub frame: usize,
+    /// GPU ms of the cull pass.
+    pub cull_ms: f64,
+    /// GPU ms of the draw pass.
+    pub draw_ms: f64,
+    /// GPU ms, both passes.
+    pub gpu_ms: f64,
+    /// CPU ms to prepare and record the frame.
+    pub cpu_ms: f64,
+    /// Draw calls.
+    pub draw_calls: u32,
+    /// Instances drawn per representation.
+    pub instances: BTreeMap<String, u64>,
+    /// GPU bytes (pools + packs).
+    pub gpu_bytes: u64,
+    /// Bytes fetched so far.
+    pub bytes_fetched: u64,
+    /// Multi-scale RMSE against the reference frame (0–1).
+    pub error: f64,
+    /// RMSE to this method's previous frame minus the reference's (0–1; NaN on frame 0).
+    pub temporal_noise: f64,
+}
+
+/// Median and 95th percentile.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct Stat {
+    /// Median.
+    pub median: f64,
+    /// 95th percentile.
+    pub p95: f64,
+}
+
+impl Stat {
+    /// Of the finite values (0, 0 when there are none).
+    #[must_use]
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Self {
+        let mut v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Self { median: at(0.5), p95: at(0.95) }
+    }
+}
+
+/// Per-method summary in `summary.json`.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct MethodSummary {
+    /// GPU ms (cull + draw).
+    pub gpu_ms: Stat,
+    /// CPU ms.
+    pub cpu_ms: Stat,
+    /// Multi-scale RMSE against the reference.
+    pub error: Stat,
+    /// Temporal noise.
+    pub temporal_noise: Stat,
+    /// Draw calls.
+    pub draw_calls: Stat,
+}
+
+/// Plain RMSE of two RGBA8 images over RGB (0–1).
+#[must_use]
+pub fn rmse(a: &[u8], b: &[u8]) -> f64 {
+    let mut sum = 0.0;
+    let mut n = 0.0;
+    for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for c in 0..3 {
+            let d = (f64::from(p[c]) - f64::from(q[c])) / 255.0;
+            sum += d * d;
+        }
+        n += 3.0;
+    }
+    if n > 0.0 {
+        (sum / n).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Box-downsamples an sRGB RGBA8 image by `f` per axis, averaging in linear light.
+#[must_use]
+pub fn downsample(img: &[u8], width: u32, height: u32, f: u32) -> Vec<u8> {
+    if f <= 1 {
+        return img.to_vec();
+    }
+    let to_lin: Vec<f32> = (0..256).map(|v| crate::format::cluster::srgb_to_linear(v as f32 / 255.0)).collect();
+    let (w, h) = (width / f, height / f);
+    let mut out = vec![0u8; (w * h * 4) as usize];
+    let n = (f * f) as f32;
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = [0.0f32; 4];
+            for dy in 0..f {
+                for dx in 0..f {
+                    let i = (((y * f + dy) * width + x * f + dx) * 4) as usize;
+                    for c in 0..3 {
+                        acc[c] += to_lin[img[i + c] as usize];
+                    }
+                    acc[3] += f32::from(img[i + 3]) / 255.0;
+                }
+            }
+            let o = ((y * w + x) * 4) as usize;
+            for c in 0..3 {
+                out[o + c] = (crate::format::cluster::linear_to_srgb(acc[c] / n) * 255.0).round() as u8;
+            }
+            out[o + 3] = (acc[3] / n * 255.0).round() as u8;
+        }
+    }
+    out
+}
+
+/// Everything a run produced.
+pub struct BenchRun {
+    /// Every frame of every method.
+    pub frames: Vec<FrameRecord>,
+    /// Per method.
+    pub summary: BTreeMap<String, MethodSummary>,
+    /// The adapter.
+    pub adapter: String,
+}
+
+/// Runs `methods` over `cameras` on `scene` at `width`×`height`. `progress(method,
+/// frame, frames)` is called per frame.
+///
+/// # Errors
+/// A scene that does not open, or no GPU adapter.
+pub fn run(
+    scene: &str,
+    cameras: &[Camera],
+    methods: &[Method],
+    width: u32,
+    height: u32,
+    progress: &mut dyn FnMut(&str, usize, usize),
+) -> Result<BenchRun> {
+    let mut frames = Vec::new();
+    let mut reference: Vec<Vec<u8>> = Vec::new();
+    let mut ref_motion: Vec<f64> = Vec::new();
+    let mut adapter = String::new();
+    for method in methods {
+        let ss = method.supersample.max(1);
+        let mut off = OffscreenScene::open(scene, width * ss, height * ss, PoolConfig::default())
+            .with_context(|| format!("opening {scene}"))?;
+        adapter = off.ctx.adapter_summary();
+        off.settings = method.settings;
+        let mut prev: Option<Vec<u8>> = None;
+        for (i, cam) in cameras.iter().enumerate() {
+            progress(&method.name, i, cameras.len());
+            off.load_view(cam, 120.0);
+            // One unmeasured frame settles LoD-dependent loads (packs) and pipelines.
+            off.render(cam, false);
+            let s = off.render(cam, true);
+            let img = downsample(&off.read_image(), width * ss, height * ss, ss);
+            let cull = s.gpu_ms.get("cull").copied().unwrap_or(0.0);
+            let draw = s.gpu_ms.get("draw").copied().unwrap_or(0.0);
+            let mut rec = FrameRecord {
+                method: method.name.clone(),
+                frame: i,
+                cull_ms: cull,
+                draw_ms: draw,
+                gpu_ms: cull + draw,
+                cpu_ms: s.frame_cpu_ms,
+                draw_calls: s.draw_calls,
+                instances: s.instances.clone(),
+                gpu_bytes: s.gpu_bytes,
+                bytes_fetched: s.bytes_fetched,
+                error: 0.0,
+                temporal_noise: f64::NAN,
+            };
+            if method.name == "reference" {
+                if let Some(p) = &prev {
+                    ref_motion.push(rmse(&img, p));
+                } else {
+                    ref_motion.push(f64::NAN);
+                }
+                reference.push(img.clone());
+            } else {
+                rec.error = crate::metrics::multiscale_rmse(&img, &reference[i], width, height);
+            }
+            if let Some(p) = &prev {
+                rec.temporal_noise = rmse(&img, p) - ref_motion.get(i).copied().unwrap_or(0.0);
+            }
+            prev = Some(img);
+            frames.push(rec);
+        }
+    }
+    let mut summary = BTreeMap::new();
+    for m in methods {
+        let f: Vec<&FrameRecord> = frames.iter().filter(|r| r.method == m.name).collect();
+        summary.insert(
+            m.name.clone(),
+            MethodSummary {
+                gpu_ms: Stat::of(f.iter().map(|r| r.gpu_ms)),
+                cpu_ms: Stat::of(f.iter().map(|r| r.cpu_ms)),
+                error: Stat::of(f.iter().map(|r| r.error)),
+                temporal_noise: Stat::of(f.iter().map(|r| r.temporal_noise)),
+                draw_calls: Stat::of(f.iter().map(|r| f64::from(r.draw_calls))),
+            },
+        );
+    }
+    Ok(BenchRun { frames, summary, adapter })
+}
+
+/// Writes `frames.csv` into `dir`.
+///
+/// # Errors
+/// I/O errors.
+pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
+    use std::fmt::Write as _;
+    let reprs = ["mesh0", "mesh1", "ellipsoid", "billboard"];
+    let mut s = String::from(
+        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,temporal_noise\n",
+    );
+    for r in frames {
+        let inst: Vec<String> = reprs.iter().map(|k| r.instances.get(*k).copied().unwrap_or(0).to_string()).collect();
+        let tn = if r.temporal_noise.is_finite() { format!("{:.6}", r.temporal_noise) } else { String::new() };
+        writeln!(
+            s,
+            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{}",
+            r.method,
+            r.frame,
+            r.gpu_ms,
+            r.cull_ms,
+            r.draw_ms,
+            r.cpu_ms,
+            r.draw_calls,
+            inst.join(","),
+            r.gpu_bytes,
+            r.bytes_fetched,
+            r.error,
+            tn
+        )?;
+    }
+    std::fs::write(dir.join("frames.csv"), s).with_context(|| format!("writing {}", dir.join("frames.csv").display()))
+}
+
+const PALETTE: [plotters::style::RGBColor; 8] = [
+    plotters::style::RGBColor(0, 0, 0),
+    plotters::style::RGBColor(215, 48, 39),
+    plotters::style::RGBColor(244, 109, 67),
+    plotters::style::RGBColor(253, 174, 97),
+    plotters::style::RGBColor(116, 173, 209),
+    plotters::style::RGBColor(26, 152, 80),
+    plotters::style::RGBColor(69, 117, 180),
+    plotters::style::RGBColor(49, 54, 149),
+];
+
+/// Writes the plots as SVG into `dir`: `pareto.svg` (median error vs median GPU
+/// time per method), `frame_time.svg` (GPU ms along the path, like seed 002
+/// Fig. 11) and `temporal_noise.svg` (like Fig. 13).
+///
+/// # Errors
+/// Drawing or I/O errors.
+pub fn write_plots(dir: &Path, run: &BenchRun, title: &str) -> Result<()> {
+    use plotters::prelude::*;
+    let names: Vec<&String> = run.summary.keys().collect();
+    let color = |name: &str| {
+        let i = names.iter().position(|n| n.as_str() == name).unwrap_or(0);
+        PALETTE[i % PALETTE.len()]
+    };
+    let plot_err = |e: Box<dyn std::error::Error>| anyhow::anyhow!("plotting: {e}");
+    // Pareto: error against time.
+    {
+        let path = dir.join("pareto.svg");
+        let root = SVGBackend::new(&path, (800, 520)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
+        let xmax = run.summary.values().map(|m| m.gpu_ms.median).fold(1e-3, f64::max) * 1.15;
+        let ymax = run.summary.values().map(|m| m.error.median).fold(1e-4, f64::max) * 1.2;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("Image error vs GPU time — {title}"), ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0f64..xmax, 0f64..ymax)
+            .map_err(|e| plot_err(e.into()))?;
+        chart
+            .configure_mesh()
+            .x_desc("median GPU ms per frame")
+            .y_desc("median multi-scale RMSE vs reference")
+            .draw()
+            .map_err(|e| plot_err(e.into()))?;
+        for (name, m) in &run.summary {
+            let c = color(name);
+            let p = (m.gpu_ms.median, m.error.median);
+            chart.draw_series(std::iter::once(Circle::new(p, 5, c.filled()))).map_err(|e| plot_err(e.into()))?;
+            chart
+                .draw_series(std::iter::once(Text::new(format!(" {name}"), p, ("sans-serif", 13))))
+                .map_err(|e| plot_err(e.into()))?;
+        }
+        root.present().map_err(|e| plot_err(e.into()))?;
+    }
+    // Per-frame series.
+    for (file, what, pick) in [
+        ("frame_time.svg", "GPU ms per frame", (|r: &FrameRecord| r.gpu_ms) as fn(&FrameRecord) -> f64),
+        ("temporal_noise.svg", "temporal noise (RMSE to the previous frame minus the reference's)", |r| {
+            r.temporal_noise
+        }),
+    ] {
+        let path = dir.join(file);
+        let root = SVGBackend::new(&path, (900, 520)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
+        let frames = run.frames.iter().map(|r| r.frame).max().unwrap_or(0) + 1;
+        let vals: Vec<f64> = run.frames.iter().map(pick).filter(|v| v.is_finite()).collect();
+        let ymin = vals.iter().copied().fold(0.0, f64::min);
+        let ymax = vals.iter().copied().fold(1e-6, f64::max) * 1.1;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{what} — {title}"), ("sans-serif", 16))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0f64..(frames as f64 - 1.0).max(1.0), ymin..ymax)
+            .map_err(|e| plot_err(e.into()))?;
+        chart.configure_mesh().x_desc("frame along the path").y_desc(what).draw().map_err(|e| plot_err(e.into()))?;
+        for name in &names {
+            let c = color(name);
+            let series: Vec<(f64, f64)> = run
+                .frames
+                .iter()
+                .filter(|r| &&r.method == name)
+                .map(|r| (r.frame as f64, pick(r)))
+                .filter(|p| p.1.is_finite())
+                .collect();
+            chart
+                .draw_series(LineSeries::new(series, c.stroke_width(2)))
+                .map_err(|e| plot_err(e.into()))?
+                .label(name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.85))
+            .draw()
+            .map_err(|e| plot_err(e.into()))?;
+        root.present().map_err(|e| plot_err(e.into()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_interpolate_through_their_keyframes() {
+        let keys = [
+            Keyframe { eye: [0.0, 0.0, 10.0], heading_deg: 350.0, pitch_deg: 0.0 },
+            Keyframe { eye: [100.0, 0.0, 10.0], heading_deg: 10.0, pitch_deg: -10.0 },
+        ];
+        let cams = interpolate(&keys, 11);
+        assert_eq!(cams.len(), 11);
+        assert_eq!(cams[0].eye_m, DVec3::new(0.0, 0.0, 10.0));
+        assert!((cams[10].eye_m.x - 100.0).abs() < 1e-9);
+        // The heading turns the short way (350° → 10° through 0°).
+        let mid = cams[5].heading_rad.to_degrees().rem_euclid(360.0);
+        assert!(!(20.0..340.0).contains(&mid), "{mid}");
+    }
+
+    #[test]
+    fn methods_parse_with_the_reference_first() {
+        let m = methods("sylva,mesh").unwrap();
+        assert_eq!(m.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), ["reference", "sylva", "mesh"]);
+        assert_eq!(m[0].supersample, 2);
+        assert_eq!(methods("all").unwrap().len(), 8);
+        assert!(format!("{:#}", methods("fast").unwrap_err()).contains("unknown method \"fast\""));
+    }
+
+    #[test]
+    fn stats_and_downsampling() {
+        let s = Stat::of([5.0, 1.0, 3.0, f64::NAN, 2.0, 4.0]);
+        assert_eq!(s, Stat { median: 3.0, p95: 5.0 });
+        // 2×2 of black and white → one grey pixel, averaged in linear light.
+        let img = [0, 0, 0, 255, 255, 255, 255, 255, 0, 0, 0, 255, 255, 255, 255, 255];
+        let d = downsample(&img, 2, 2, 2);
+        assert_eq!(d.len(), 4);
+        assert!((186..=189).contains(&d[0]), "linear mid-grey in sRGB: {}", d[0]);
+        assert_eq!(rmse(&img, &img), 0.0);
+    }
+}

@@ -1,0 +1,48 @@
+//! `sylva bench` end to end on the small fixture scene: every output is written,
+//! the reference has no error, the other methods a plausible one.
+
+use sylva::bench::{self, NamedPath};
+use sylva::render::camera::Camera;
+use sylva::render::forest::PoolConfig;
+use sylva::render::offscreen::OffscreenScene;
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small");
+
+#[test]
+fn bench_writes_frames_summary_and_plots() {
+    let mut probe = OffscreenScene::open(SCENE, 16, 16, PoolConfig::default()).expect("GPU adapter");
+    probe.load_view(&Camera::default(), 60.0);
+    let manifest = probe.stream.manifest().expect("manifest").clone();
+    drop(probe);
+    let cameras = bench::interpolate(&bench::named_path(NamedPath::Medium, &manifest, None), 3);
+    let methods = bench::methods("sylva,billboard").unwrap();
+    let (w, h) = (160, 90);
+    let mut calls = 0;
+    let run = bench::run(SCENE, &cameras, &methods, w, h, &mut |_, _, _| calls += 1).unwrap();
+    assert_eq!(calls, 9, "progress once per frame and method");
+    assert_eq!(run.frames.len(), 9);
+    let reference = &run.summary["reference"];
+    assert_eq!(reference.error.median, 0.0);
+    for name in ["sylva", "billboard"] {
+        let m = &run.summary[name];
+        assert!(m.error.median > 0.0 && m.error.median < 0.15, "{name}: error {}", m.error.median);
+        assert!(m.gpu_ms.median > 0.0 && m.draw_calls.median >= 1.0, "{name}");
+        assert!(m.temporal_noise.median.is_finite());
+    }
+    for r in &run.frames {
+        let drawn: u64 = r.instances.values().sum();
+        assert!(drawn > 0, "{} frame {} draws trees", r.method, r.frame);
+    }
+    let dir = std::env::temp_dir().join(format!("sylva-bench-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    bench::write_csv(&dir, &run.frames).unwrap();
+    bench::write_plots(&dir, &run, "test").unwrap();
+    let csv = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 10, "header + 9 frames");
+    assert!(csv.starts_with("method,frame,gpu_ms"));
+    for plot in ["pareto.svg", "frame_time.svg", "temporal_noise.svg"] {
+        let svg = std::fs::read_to_string(dir.join(plot)).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("sylva") && svg.len() > 2000, "{plot}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
