@@ -412,11 +412,19 @@ pub fn run(
             frames.push(rec);
         }
     }
+    let names: Vec<String> = methods.iter().map(|m| m.name.clone()).collect();
+    let summary = summarise(&frames, &names);
+    Ok(BenchRun { frames, summary, adapter })
+}
+
+/// Per-method medians and p95s of `frames`.
+#[must_use]
+pub fn summarise(frames: &[FrameRecord], names: &[String]) -> BTreeMap<String, MethodSummary> {
     let mut summary = BTreeMap::new();
-    for m in methods {
-        let f: Vec<&FrameRecord> = frames.iter().filter(|r| r.method == m.name).collect();
+    for name in names {
+        let f: Vec<&FrameRecord> = frames.iter().filter(|r| &r.method == name).collect();
         summary.insert(
-            m.name.clone(),
+            name.clone(),
             MethodSummary {
                 gpu_ms: Stat::of(f.iter().map(|r| r.gpu_ms)),
                 cpu_ms: Stat::of(f.iter().map(|r| r.cpu_ms)),
@@ -426,7 +434,45 @@ pub fn run(
             },
         );
     }
-    Ok(BenchRun { frames, summary, adapter })
+    summary
+}
+
+/// Reads a `frames.csv` written by [`write_csv`] (to re-plot a run).
+///
+/// # Errors
+/// I/O errors or a malformed file (the line is named).
+pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let bad = || anyhow::anyhow!("{} line {}: not a frames.csv row", path.display(), n + 1);
+        if f.len() != 15 {
+            return Err(bad());
+        }
+        let num = |i: usize| -> Result<f64> { f[i].parse::<f64>().map_err(|_| bad()) };
+        let int = |i: usize| -> Result<u64> { f[i].parse::<u64>().map_err(|_| bad()) };
+        let instances = ["mesh0", "mesh1", "ellipsoid", "billboard"]
+            .iter()
+            .enumerate()
+            .map(|(k, name)| Ok((name.to_string(), int(7 + k)?)))
+            .collect::<Result<BTreeMap<_, _>>>()?;
+        out.push(FrameRecord {
+            method: f[0].to_string(),
+            frame: int(1)? as usize,
+            gpu_ms: num(2)?,
+            cull_ms: num(3)?,
+            draw_ms: num(4)?,
+            cpu_ms: num(5)?,
+            draw_calls: int(6)? as u32,
+            instances,
+            gpu_bytes: int(11)?,
+            bytes_fetched: int(12)?,
+            error: num(13)?,
+            temporal_noise: if f[14].is_empty() { f64::NAN } else { num(14)? },
+        });
+    }
+    Ok(out)
 }
 
 /// Writes `frames.csv` into `dir`.
@@ -473,6 +519,38 @@ const PALETTE: [plotters::style::RGBColor; 8] = [
     plotters::style::RGBColor(49, 54, 149),
 ];
 
+/// One line per method of `pick(frame)` along the path, with a legend.
+fn per_method_lines<'a, DB, Y>(
+    chart: &mut plotters::chart::ChartContext<
+        'a,
+        DB,
+        plotters::coord::cartesian::Cartesian2d<plotters::coord::types::RangedCoordf64, Y>,
+    >,
+    run: &BenchRun,
+    names: &[&String],
+    pick: impl Fn(&FrameRecord) -> Option<f64>,
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: plotters::prelude::DrawingBackend + 'a,
+    Y: plotters::coord::ranged1d::Ranged<ValueType = f64>,
+{
+    use plotters::prelude::*;
+    for (i, name) in names.iter().enumerate() {
+        let c = PALETTE[i % PALETTE.len()];
+        let series: Vec<(f64, f64)> = run
+            .frames
+            .iter()
+            .filter(|r| &&r.method == name)
+            .filter_map(|r| pick(r).map(|v| (r.frame as f64, v)))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(series, c.stroke_width(2)))?
+            .label(name.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.85)).draw()
+}
+
 /// Writes the plots as SVG into `dir`: `pareto.svg` (median error vs median GPU
 /// time per method), `frame_time.svg` (GPU ms along the path, like seed 002
 /// Fig. 11) and `temporal_noise.svg` (like Fig. 13).
@@ -492,18 +570,20 @@ pub fn write_plots(dir: &Path, run: &BenchRun, title: &str) -> Result<()> {
         let path = dir.join("pareto.svg");
         let root = SVGBackend::new(&path, (800, 520)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
-        let xmax = run.summary.values().map(|m| m.gpu_ms.median).fold(1e-3, f64::max) * 1.15;
+        let xs = run.summary.values().map(|m| m.gpu_ms.median).filter(|x| *x > 0.0);
+        let xmin = xs.clone().fold(f64::MAX, f64::min).min(1e3) * 0.7;
+        let xmax = xs.fold(1e-3, f64::max) * 1.5;
         let ymax = run.summary.values().map(|m| m.error.median).fold(1e-4, f64::max) * 1.2;
         let mut chart = ChartBuilder::on(&root)
             .caption(format!("Image error vs GPU time — {title}"), ("sans-serif", 18))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d(0f64..xmax, 0f64..ymax)
+            .build_cartesian_2d((xmin.max(1e-3)..xmax).log_scale(), 0f64..ymax)
             .map_err(|e| plot_err(e.into()))?;
         chart
             .configure_mesh()
-            .x_desc("median GPU ms per frame")
+            .x_desc("median GPU ms per frame (log scale)")
             .y_desc("median multi-scale RMSE vs reference")
             .draw()
             .map_err(|e| plot_err(e.into()))?;
@@ -517,48 +597,51 @@ pub fn write_plots(dir: &Path, run: &BenchRun, title: &str) -> Result<()> {
         }
         root.present().map_err(|e| plot_err(e.into()))?;
     }
-    // Per-frame series.
-    for (file, what, pick) in [
-        ("frame_time.svg", "GPU ms per frame", (|r: &FrameRecord| r.gpu_ms) as fn(&FrameRecord) -> f64),
-        ("temporal_noise.svg", "temporal noise (RMSE to the previous frame minus the reference's)", |r| {
-            r.temporal_noise
-        }),
-    ] {
-        let path = dir.join(file);
+    let frames = run.frames.iter().map(|r| r.frame).max().unwrap_or(0) + 1;
+    let x_range = 0f64..(frames as f64 - 1.0).max(1.0);
+    // GPU time along the path, log scale (the methods span orders of magnitude).
+    {
+        let path = dir.join("frame_time.svg");
         let root = SVGBackend::new(&path, (900, 520)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
-        let frames = run.frames.iter().map(|r| r.frame).max().unwrap_or(0) + 1;
-        let vals: Vec<f64> = run.frames.iter().map(pick).filter(|v| v.is_finite()).collect();
-        let ymin = vals.iter().copied().fold(0.0, f64::min);
+        let vals: Vec<f64> = run.frames.iter().map(|r| r.gpu_ms).filter(|v| *v > 0.0).collect();
+        let ymin = vals.iter().copied().fold(f64::MAX, f64::min).min(1e3) * 0.7;
+        let ymax = vals.iter().copied().fold(1e-3, f64::max) * 1.5;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("GPU ms per frame along the path — {title}"), ("sans-serif", 16))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x_range.clone(), (ymin.max(1e-3)..ymax).log_scale())
+            .map_err(|e| plot_err(e.into()))?;
+        chart
+            .configure_mesh()
+            .x_desc("frame along the path")
+            .y_desc("GPU ms (log scale)")
+            .draw()
+            .map_err(|e| plot_err(e.into()))?;
+        per_method_lines(&mut chart, run, &names, |r| Some(r.gpu_ms).filter(|v| *v > 0.0))
+            .map_err(|e| plot_err(e.into()))?;
+        root.present().map_err(|e| plot_err(e.into()))?;
+    }
+    // Temporal noise along the path.
+    {
+        let what = "temporal noise (RMSE to the previous frame minus the reference's)";
+        let path = dir.join("temporal_noise.svg");
+        let root = SVGBackend::new(&path, (900, 520)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
+        let vals: Vec<f64> = run.frames.iter().map(|r| r.temporal_noise).filter(|v| v.is_finite()).collect();
+        let ymin = vals.iter().copied().fold(0.0, f64::min) * 1.1;
         let ymax = vals.iter().copied().fold(1e-6, f64::max) * 1.1;
         let mut chart = ChartBuilder::on(&root)
             .caption(format!("{what} — {title}"), ("sans-serif", 16))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d(0f64..(frames as f64 - 1.0).max(1.0), ymin..ymax)
+            .build_cartesian_2d(x_range, ymin..ymax)
             .map_err(|e| plot_err(e.into()))?;
         chart.configure_mesh().x_desc("frame along the path").y_desc(what).draw().map_err(|e| plot_err(e.into()))?;
-        for name in &names {
-            let c = color(name);
-            let series: Vec<(f64, f64)> = run
-                .frames
-                .iter()
-                .filter(|r| &&r.method == name)
-                .map(|r| (r.frame as f64, pick(r)))
-                .filter(|p| p.1.is_finite())
-                .collect();
-            chart
-                .draw_series(LineSeries::new(series, c.stroke_width(2)))
-                .map_err(|e| plot_err(e.into()))?
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.85))
-            .draw()
+        per_method_lines(&mut chart, run, &names, |r| Some(r.temporal_noise).filter(|v| v.is_finite()))
             .map_err(|e| plot_err(e.into()))?;
         root.present().map_err(|e| plot_err(e.into()))?;
     }

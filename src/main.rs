@@ -147,6 +147,9 @@ mod cli {
             /// Output directory.
             #[arg(long)]
             out: PathBuf,
+            /// Only redraw the plots from --out's frames.csv (no rendering).
+            #[arg(long)]
+            replot: bool,
         },
         /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
         Compare {
@@ -192,7 +195,11 @@ mod cli {
         let lo = glam::DVec3::from(manifest.bounds.min.map(f64::from));
         let hi = glam::DVec3::from(manifest.bounds.max.map(f64::from));
         let c = (lo + hi) * 0.5;
-        let down = Camera { eye_m: glam::DVec3::new(c.x, c.y, hi.z + 300.0), pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() };
+        let down = Camera {
+            eye_m: glam::DVec3::new(c.x, c.y, hi.z + 300.0),
+            pitch_rad: -std::f64::consts::FRAC_PI_2,
+            ..Camera::default()
+        };
         probe.load_view(&down, 120.0);
         let ground = probe.stream.ground_height_at(c.x as f32, c.y as f32).map(f64::from);
         drop(probe);
@@ -209,7 +216,10 @@ mod cli {
                 if p.keyframes.len() < 2 {
                     bail!("{file}: a path needs at least two keyframes");
                 }
-                if p.keyframes.iter().any(|k| !k.eye.iter().chain([&k.heading_deg, &k.pitch_deg]).all(|v| v.is_finite())) {
+                if p.keyframes
+                    .iter()
+                    .any(|k| !k.eye.iter().chain([&k.heading_deg, &k.pitch_deg]).all(|v| v.is_finite()))
+                {
                     bail!("{file}: keyframes must be finite numbers");
                 }
                 let n = p.frames.unwrap_or(frames).max(2);
@@ -246,7 +256,10 @@ mod cli {
                 m.gpu_ms.median, m.cpu_ms.median, m.error.median, m.temporal_noise.median
             );
         }
-        eprintln!("wrote frames.csv, summary.json, pareto.svg, frame_time.svg, temporal_noise.svg to {}", out.display());
+        eprintln!(
+            "wrote frames.csv, summary.json, pareto.svg, frame_time.svg, temporal_noise.svg to {}",
+            out.display()
+        );
         Ok(())
     }
 
@@ -347,7 +360,26 @@ mod cli {
 
     pub fn main() -> Result<()> {
         match Cli::parse().command {
-            Command::Bench { scene, path, methods, size, frames, out } => bench(&scene, &path, &methods, &size, frames, &out),
+            Command::Bench { out, replot: true, path, size, .. } => {
+                let frames = sylva::bench::read_csv(&out.join("frames.csv"))?;
+                let mut names: Vec<String> = Vec::new();
+                for f in &frames {
+                    if !names.contains(&f.method) {
+                        names.push(f.method.clone());
+                    }
+                }
+                let run = sylva::bench::BenchRun {
+                    summary: sylva::bench::summarise(&frames, &names),
+                    frames,
+                    adapter: String::new(),
+                };
+                sylva::bench::write_plots(&out, &run, &format!("{path}, {size}"))?;
+                eprintln!("redrew the plots in {}", out.display());
+                Ok(())
+            }
+            Command::Bench { scene, path, methods, size, frames, out, .. } => {
+                bench(&scene, &path, &methods, &size, frames, &out)
+            }
             Command::Compare { a, b } => {
                 let load = |p: &PathBuf| {
                     image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8())
