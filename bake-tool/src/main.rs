@@ -9,6 +9,7 @@ mod inspect;
 mod pack_build;
 mod placements;
 mod reproject;
+mod rng;
 mod scene_write;
 
 use std::path::PathBuf;
