@@ -3,11 +3,11 @@
 //! primitives, and the three representations of one tree side by side.
 
 use glam::{DVec3, Mat4, Quat, Vec3};
-use sylva::format::cluster::{ClusterLevelMeta, Ellipsoid, Line, PackedEllipsoid, PackedLine};
+use sylva::format::cluster::{Ellipsoid, Line, PackedEllipsoid, PackedLine};
 use sylva::format::decode_pack;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::capture::{render_pack_repr, BillboardFrame, PackRepr, PackView, TreeDraw, TreeRenderer};
-use sylva::render::cluster::{ClusterGpu, ClusterLevelGpu};
+use sylva::render::cluster::ClusterGpu;
 use sylva::render::GpuContext;
 
 const SIZE: u32 = 96;
@@ -31,37 +31,7 @@ impl Rng {
 }
 
 fn upload(ctx: &GpuContext, r: &TreeRenderer, ells: &[Ellipsoid], lines: &[Line]) -> ClusterGpu {
-    let mut words = Vec::new();
-    for e in ells {
-        words.extend_from_slice(bytemuck::bytes_of(&PackedEllipsoid::encode(e, LO, HI)));
-    }
-    let line_word = (words.len() / 4) as u32;
-    for l in lines {
-        words.extend_from_slice(bytemuck::bytes_of(&PackedLine::encode(l, LO, HI)));
-    }
-    let meta = ClusterLevelMeta {
-        count: ells.len() as u32,
-        select_px: 0.0,
-        error: 0.0,
-        noise_threshold: 0.0,
-        normal_blend: 0.0,
-    };
-    let level = ClusterLevelGpu {
-        ellipsoid_word: 0,
-        ellipsoids: ells.len() as u32,
-        line_word,
-        lines: lines.len() as u32,
-        meta,
-    };
-    ClusterGpu::new(
-        &ctx.device,
-        &ctx.queue,
-        &r.cluster,
-        words,
-        vec![level],
-        (LO.to_array(), (HI - LO).to_array()),
-        [0.9; 3],
-    )
+    ClusterGpu::from_level(&ctx.device, &ctx.queue, &r.cluster, ells, lines, (LO, HI), (0.0, 0.0), [0.9; 3])
 }
 
 /// The ray through the centre of pixel (x, y), as the shader builds it.

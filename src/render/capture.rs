@@ -278,7 +278,6 @@ pub enum TreeDraw<'a> {
 /// representation, through the viewer's own pipelines: previews, the image
 /// tests of the representations, and the bake's image-error calibration.
 pub struct TreeRenderer {
-    shared: SharedLayouts,
     /// Mesh pipelines (for [`MeshGpu::upload`]).
     pub mesh: MeshPipelines,
     /// Cluster pipeline (for [`ClusterGpu::upload`] / [`ClusterGpu::new`]).
@@ -308,12 +307,11 @@ impl TreeRenderer {
             mapped_at_creation: false,
         });
         let view_group = shared.view_group(&ctx.device, &view_buffer);
-        Self { shared, mesh, cluster, billboard, tree, view_buffer, view_group, format }
+        Self { mesh, cluster, billboard, tree, view_buffer, view_group, format }
     }
 
     /// Renders `what` with the camera `clip_from_eye` at `eye` (model space) into
-    /// a `width`×`height` sRGB RGBA8 image over `background`. `debug_lod` colours
-    /// by representation.
+    /// a `width`×`height` sRGB RGBA8 image over `background`.
     #[allow(clippy::too_many_arguments)]
     pub fn render(
         &self,
@@ -395,12 +393,6 @@ impl TreeRenderer {
         }
         ctx.queue.submit([encoder.finish()]);
         read_texture_rgba8(ctx, &color, 0, 0)
-    }
-
-    /// The shared layouts.
-    #[must_use]
-    pub fn layouts(&self) -> &SharedLayouts {
-        &self.shared
     }
 }
 

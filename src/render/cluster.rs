@@ -243,6 +243,45 @@ impl ClusterGpu {
         ))
     }
 
+    /// Encodes `ellipsoids` and `lines` over the bounds `lo..hi` and uploads them
+    /// as a single level (the bake's candidate levels, tests).
+    #[must_use]
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_level(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        pipeline: &ClusterPipeline,
+        ellipsoids: &[crate::format::cluster::Ellipsoid],
+        lines: &[crate::format::cluster::Line],
+        (lo, hi): (glam::Vec3, glam::Vec3),
+        noise: (f32, f32),
+        line_color: [f32; 3],
+    ) -> Self {
+        use crate::format::cluster::{PackedEllipsoid, PackedLine};
+        let mut words: Vec<u8> = Vec::new();
+        for e in ellipsoids {
+            words.extend_from_slice(bytemuck::bytes_of(&PackedEllipsoid::encode(e, lo, hi)));
+        }
+        let line_word = (words.len() / 4) as u32;
+        for l in lines {
+            words.extend_from_slice(bytemuck::bytes_of(&PackedLine::encode(l, lo, hi)));
+        }
+        let level = ClusterLevelGpu {
+            ellipsoid_word: 0,
+            ellipsoids: ellipsoids.len() as u32,
+            line_word,
+            lines: lines.len() as u32,
+            meta: ClusterLevelMeta {
+                count: ellipsoids.len() as u32,
+                select_px: 0.0,
+                error: 0.0,
+                noise_threshold: noise.0,
+                normal_blend: noise.1,
+            },
+        };
+        Self::new(device, queue, pipeline, words, vec![level], (lo.to_array(), (hi - lo).to_array()), line_color)
+    }
+
     /// Uploads records (`words`: ellipsoid and line records, little endian) laid
     /// out as `levels` say, quantised over `bounds` (min, extent).
     #[must_use]

@@ -10,7 +10,7 @@ use sylva::format::pack::{kind, MaterialKind, Section};
 use sylva::format::Pack;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::capture::{BillboardFrame, TreeDraw, TreeRenderer};
-use sylva::render::cluster::{ClusterGpu, ClusterLevelGpu};
+use sylva::render::cluster::ClusterGpu;
 use sylva::render::mesh::MeshGpu;
 use sylva::render::GpuContext;
 
@@ -74,69 +74,31 @@ impl<'a> GpuJudge<'a> {
             })
             .collect()
     }
+}
 
-    /// The images of a candidate level and of the mesh at the same size.
-    pub fn images(&mut self, c: &Candidate<'_>) -> (u32, Vec<Vec<u8>>, Vec<Vec<u8>>) {
+impl Judge for GpuJudge<'_> {
+    fn error(&mut self, c: &Candidate<'_>) -> f64 {
         let size = self.image_size(c.size_px);
         if !self.references.contains_key(&size) {
             let imgs = self.render(&TreeDraw::Mesh(&self.mesh, 0), size);
             self.renders += imgs.len();
             self.references.insert(size, imgs);
         }
-        let gpu = upload_level(self.ctx, &self.renderer, c, self.lo, self.hi, self.line_color);
+        let gpu = ClusterGpu::from_level(
+            &self.ctx.device,
+            &self.ctx.queue,
+            &self.renderer.cluster,
+            c.ellipsoids,
+            c.lines,
+            (self.lo, self.hi),
+            (c.noise_threshold, c.normal_blend),
+            self.line_color,
+        );
         let imgs = self.render(&TreeDraw::Cluster(&gpu, 0), size);
         self.renders += imgs.len();
-        (size, imgs, self.references[&size].clone())
+        let refs = &self.references[&size];
+        imgs.iter().zip(refs).map(|(a, b)| multiscale_rmse(a, b, size, size)).sum::<f64>() / imgs.len() as f64
     }
-}
-
-impl Judge for GpuJudge<'_> {
-    fn error(&mut self, c: &Candidate<'_>) -> f64 {
-        let (size, imgs, refs) = self.images(c);
-        imgs.iter().zip(&refs).map(|(a, b)| multiscale_rmse(a, b, size, size)).sum::<f64>() / imgs.len() as f64
-    }
-}
-
-/// Encodes one candidate level and uploads it as a one-level cluster set.
-fn upload_level(
-    ctx: &GpuContext,
-    r: &TreeRenderer,
-    c: &Candidate<'_>,
-    lo: Vec3,
-    hi: Vec3,
-    line_color: [f32; 3],
-) -> ClusterGpu {
-    let mut words: Vec<u8> = Vec::new();
-    for e in c.ellipsoids {
-        words.extend_from_slice(bytemuck::bytes_of(&PackedEllipsoid::encode(e, lo, hi)));
-    }
-    let line_word = (words.len() / 4) as u32;
-    for l in c.lines {
-        words.extend_from_slice(bytemuck::bytes_of(&PackedLine::encode(l, lo, hi)));
-    }
-    let level = ClusterLevelGpu {
-        ellipsoid_word: 0,
-        ellipsoids: c.ellipsoids.len() as u32,
-        line_word,
-        lines: c.lines.len() as u32,
-        meta: ClusterLevelMeta {
-            count: c.ellipsoids.len() as u32,
-            select_px: 0.0,
-            error: 0.0,
-            noise_threshold: c.noise_threshold,
-            normal_blend: c.normal_blend,
-        },
-    };
-    let ext = hi - lo;
-    ClusterGpu::new(
-        &ctx.device,
-        &ctx.queue,
-        &r.cluster,
-        words,
-        vec![level],
-        (lo.to_array(), ext.to_array()),
-        line_color,
-    )
 }
 
 /// Mean linear albedo of the model's branch material(s), area-weighted.
