@@ -73,8 +73,14 @@ function ready(page, ms = 180000) {
   ]), ms);
 }
 
+// Pages of earlier tests keep rendering in the shared browser: close them first,
+// so CPU WebGPU's time goes to the test at hand.
+let previousPage = null;
+
 async function openViewer(url, size = { width: 480, height: 320 }) {
+  await previousPage?.close().catch(() => {});
   const page = await browser.newPage({ viewport: size });
+  previousPage = page;
   const errors = [];
   page.on('pageerror', (e) => errors.push(String(e)));
   page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
@@ -103,7 +109,7 @@ async function foliageShare(page, name) {
 
 test('the viewer loads the scene, draws it and reports stats', async () => {
   const { page, errors } = await openViewer(base);
-  await page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 120000 });
   assert.equal(await page.evaluate(() => window.sylvaError), undefined);
   const readyStats = await ready(page);
   const stats = await page.evaluate(() => window.sylva.stats());
@@ -123,7 +129,7 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
 
 test('setLod switches representations: ellipsoids only, billboards only, mixed', async () => {
   const { page, errors } = await openViewer(base);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   // Counters are read back a frame or two late: poll until they match.
   const drawnWith = (only) => page.waitForFunction((only) => {
@@ -145,7 +151,7 @@ test('setLod switches representations: ellipsoids only, billboards only, mixed',
 test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the hash', async () => {
   // 15.4° E 48.4° N is E 529 606.8, N 5 360 837.4 in UTM 33N (PROJ), i.e. x −10 393.2, y 837.4 from the origin.
   const { page } = await openViewer(`${base}#camera=15.4,48.4,300,0,-20`);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   const cam = await page.evaluate(() => window.sylva.camera());
   assert.ok(Math.abs(cam.x + 10393.2) < 1 && Math.abs(cam.y - 837.4) < 1 && Math.abs(cam.pitch + 20) < 0.5, JSON.stringify(cam));
@@ -163,7 +169,7 @@ test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the 
 
 test('walking mode keeps eye height above the ground', async () => {
   const { page } = await openViewer(base);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   await page.evaluate(() => { window.sylva.setFly(true); });
   await page.focus('#view');
@@ -177,7 +183,7 @@ test('walking mode keeps eye height above the ground', async () => {
 
 test('a lost GPU device is recreated and rendering continues', async () => {
   const { page } = await openViewer(base);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   await page.evaluate(() => new Promise((resolve) => {
     window.sylva.on('recovered', resolve);
@@ -216,7 +222,7 @@ test('without WebGPU the page says what to do', async () => {
 
 test('the portal page embeds the viewer with an overview', async () => {
   const { page, errors } = await openViewer(`${base}embed.html`, { width: 900, height: 560 });
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   const share = await foliageShare(page, 'embed');
   assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
@@ -247,7 +253,7 @@ test('the browser draws what the native renderer draws for the same camera', asy
   // Camera 150 m above the south edge of the fixture looking north-down, 480×320.
   const cam = { x: 0, y: -260, z: 180, heading: 0, pitch: -30 };
   const { page, errors } = await openViewer(`${base}?ui=0#local=${cam.x},${cam.y},${cam.z},${cam.heading},${cam.pitch}`);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   const browserPng = join(artifacts, 'same-camera-browser.png');
   await page.locator('#view').screenshot({ path: browserPng });
@@ -265,7 +271,7 @@ test('the browser draws what the native renderer draws for the same camera', asy
 
 test('drag, wheel and keys move the camera', async () => {
   const { page } = await openViewer(`${base}?ui=0`);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   const cam = () => page.evaluate(() => window.sylva.camera());
   const c0 = await cam();
@@ -292,7 +298,7 @@ test('drag, wheel and keys move the camera', async () => {
 
 test('two viewers on one page, and destroy() releases one', async () => {
   const { page, errors } = await openViewer(`${base}embed.html`, { width: 900, height: 700 });
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   const second = await page.evaluate(async () => {
     const { create } = await import('./sylva.js');
@@ -319,7 +325,7 @@ test('a corrupt tile gives a warning and the rest renders', async () => {
   const { page } = await openViewer(corruptBase);
   const warnings = [];
   page.on('console', (m) => { if (m.type() === 'warning') warnings.push(m.text()); });
-  await page.waitForFunction(() => window.sylva, null, { timeout: 60000 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   assert.ok(warnings.some((w) => /not a finite number/.test(w)), `warnings: ${warnings.join(' | ')}`);
   const share = await foliageShare(page, 'corrupt-tile');
