@@ -249,11 +249,11 @@ mod cli {
         });
         std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
         b::write_plots(out, &run, &format!("{path}, {w}x{h}"))?;
-        eprintln!("{:<14} {:>9} {:>9} {:>9} {:>10}", "method", "gpu ms", "cpu ms", "error", "t. noise");
+        eprintln!("{:<14} {:>9} {:>9} {:>9} {:>9} {:>10}", "method", "gpu ms", "cpu ms", "ms-rmse", "flip", "t. noise");
         for (name, m) in &run.summary {
             eprintln!(
-                "{name:<14} {:>9.2} {:>9.3} {:>9.4} {:>10.5}",
-                m.gpu_ms.median, m.cpu_ms.median, m.error.median, m.temporal_noise.median
+                "{name:<14} {:>9.2} {:>9.3} {:>9.4} {:>9.4} {:>10.5}",
+                m.gpu_ms.median, m.cpu_ms.median, m.error.median, m.flip.median, m.temporal_noise.median
             );
         }
         eprintln!(

@@ -28,6 +28,7 @@ fn bench_writes_frames_summary_and_plots() {
         assert!(m.error.median > 0.0 && m.error.median < 0.15, "{name}: error {}", m.error.median);
         assert!(m.gpu_ms.median > 0.0 && m.draw_calls.median >= 1.0, "{name}");
         assert!(m.temporal_noise.median.is_finite());
+        assert!(m.flip.median > 0.0 && m.flip.median < 0.5, "{name}: FLIP {}", m.flip.median);
     }
     for r in &run.frames {
         let drawn: u64 = r.instances.values().sum();
@@ -40,6 +41,12 @@ fn bench_writes_frames_summary_and_plots() {
     let csv = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
     assert_eq!(csv.lines().count(), 10, "header + 9 frames");
     assert!(csv.starts_with("method,frame,gpu_ms"));
+    let back = bench::read_csv(&dir.join("frames.csv")).unwrap();
+    assert_eq!(back.len(), run.frames.len());
+    for (a, b) in back.iter().zip(&run.frames) {
+        assert_eq!((&a.method, a.frame, a.draw_calls), (&b.method, b.frame, b.draw_calls));
+        assert!((a.error - b.error).abs() < 1e-5 && (a.flip - b.flip).abs() < 1e-5);
+    }
     for plot in ["pareto.svg", "frame_time.svg", "temporal_noise.svg"] {
         let svg = std::fs::read_to_string(dir.join(plot)).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("sylva") && svg.len() > 2000, "{plot}");

@@ -25,6 +25,9 @@ use crate::render::camera::Camera;
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use crate::render::offscreen::{NamedView, OffscreenScene};
 
+mod plots;
+pub use plots::write_plots;
+
 /// A keyframe of a camera path (scene-relative metres, degrees).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -245,6 +248,9 @@ pub struct FrameRecord {
     pub bytes_fetched: u64,
     /// Multi-scale RMSE against the reference frame (0–1).
     pub error: f64,
+    /// Mean FLIP error against the reference frame (0–1, perceptual; NVIDIA's
+    /// FLIP through `nv-flip`, at its default 67 pixels per degree).
+    pub flip: f64,
     /// RMSE to this method's previous frame minus the reference's (0–1; NaN on frame 0).
     pub temporal_noise: f64,
 }
@@ -281,6 +287,8 @@ pub struct MethodSummary {
     pub cpu_ms: Stat,
     /// Multi-scale RMSE against the reference.
     pub error: Stat,
+    /// Mean FLIP against the reference.
+    pub flip: Stat,
     /// Temporal noise.
     pub temporal_noise: Stat,
     /// Draw calls.
@@ -304,6 +312,17 @@ pub fn rmse(a: &[u8], b: &[u8]) -> f64 {
     } else {
         0.0
     }
+}
+
+/// Mean FLIP error (0–1) of `test` against `reference`, both sRGB RGBA8
+/// `width`×`height` (alpha ignored).
+#[must_use]
+pub fn flip(reference: &[u8], test: &[u8], width: u32, height: u32) -> f64 {
+    let rgb = |img: &[u8]| -> Vec<u8> { img.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect() };
+    let r = nv_flip::FlipImageRgb8::with_data(width, height, &rgb(reference));
+    let t = nv_flip::FlipImageRgb8::with_data(width, height, &rgb(test));
+    let map = nv_flip::flip(r, t, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    f64::from(nv_flip::FlipPool::from_image(&map).mean())
 }
 
 /// Box-downsamples an sRGB RGBA8 image by `f` per axis, averaging in linear light.
@@ -393,6 +412,7 @@ pub fn run(
                 gpu_bytes: s.gpu_bytes,
                 bytes_fetched: s.bytes_fetched,
                 error: 0.0,
+                flip: 0.0,
                 temporal_noise: f64::NAN,
             };
             if method.name == "reference" {
@@ -404,6 +424,7 @@ pub fn run(
                 reference.push(img.clone());
             } else {
                 rec.error = crate::metrics::multiscale_rmse(&img, &reference[i], width, height);
+                rec.flip = flip(&reference[i], &img, width, height);
             }
             if let Some(p) = &prev {
                 rec.temporal_noise = rmse(&img, p) - ref_motion.get(i).copied().unwrap_or(0.0);
@@ -429,6 +450,7 @@ pub fn summarise(frames: &[FrameRecord], names: &[String]) -> BTreeMap<String, M
                 gpu_ms: Stat::of(f.iter().map(|r| r.gpu_ms)),
                 cpu_ms: Stat::of(f.iter().map(|r| r.cpu_ms)),
                 error: Stat::of(f.iter().map(|r| r.error)),
+                flip: Stat::of(f.iter().map(|r| r.flip)),
                 temporal_noise: Stat::of(f.iter().map(|r| r.temporal_noise)),
                 draw_calls: Stat::of(f.iter().map(|r| f64::from(r.draw_calls))),
             },
@@ -447,9 +469,13 @@ pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>> {
     for (n, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         let bad = || anyhow::anyhow!("{} line {}: not a frames.csv row", path.display(), n + 1);
-        if f.len() != 15 {
-            return Err(bad());
-        }
+        // 15 columns: written before the FLIP column was added.
+        let has_flip = match f.len() {
+            16 => true,
+            15 => false,
+            _ => return Err(bad()),
+        };
+        let tn = if has_flip { 15 } else { 14 };
         let num = |i: usize| -> Result<f64> { f[i].parse::<f64>().map_err(|_| bad()) };
         let int = |i: usize| -> Result<u64> { f[i].parse::<u64>().map_err(|_| bad()) };
         let instances = ["mesh0", "mesh1", "ellipsoid", "billboard"]
@@ -469,7 +495,8 @@ pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>> {
             gpu_bytes: int(11)?,
             bytes_fetched: int(12)?,
             error: num(13)?,
-            temporal_noise: if f[14].is_empty() { f64::NAN } else { num(14)? },
+            flip: if has_flip { num(14)? } else { f64::NAN },
+            temporal_noise: if f[tn].is_empty() { f64::NAN } else { num(tn)? },
         });
     }
     Ok(out)
@@ -483,14 +510,14 @@ pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
     use std::fmt::Write as _;
     let reprs = ["mesh0", "mesh1", "ellipsoid", "billboard"];
     let mut s = String::from(
-        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,temporal_noise\n",
+        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,flip,temporal_noise\n",
     );
     for r in frames {
         let inst: Vec<String> = reprs.iter().map(|k| r.instances.get(*k).copied().unwrap_or(0).to_string()).collect();
         let tn = if r.temporal_noise.is_finite() { format!("{:.6}", r.temporal_noise) } else { String::new() };
         writeln!(
             s,
-            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{}",
+            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{:.6},{}",
             r.method,
             r.frame,
             r.gpu_ms,
@@ -502,150 +529,11 @@ pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
             r.gpu_bytes,
             r.bytes_fetched,
             r.error,
+            r.flip,
             tn
         )?;
     }
     std::fs::write(dir.join("frames.csv"), s).with_context(|| format!("writing {}", dir.join("frames.csv").display()))
-}
-
-const PALETTE: [plotters::style::RGBColor; 8] = [
-    plotters::style::RGBColor(0, 0, 0),
-    plotters::style::RGBColor(215, 48, 39),
-    plotters::style::RGBColor(244, 109, 67),
-    plotters::style::RGBColor(253, 174, 97),
-    plotters::style::RGBColor(116, 173, 209),
-    plotters::style::RGBColor(26, 152, 80),
-    plotters::style::RGBColor(69, 117, 180),
-    plotters::style::RGBColor(49, 54, 149),
-];
-
-/// One line per method of `pick(frame)` along the path, with a legend.
-fn per_method_lines<'a, DB, Y>(
-    chart: &mut plotters::chart::ChartContext<
-        'a,
-        DB,
-        plotters::coord::cartesian::Cartesian2d<plotters::coord::types::RangedCoordf64, Y>,
-    >,
-    run: &BenchRun,
-    names: &[&String],
-    pick: impl Fn(&FrameRecord) -> Option<f64>,
-) -> Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
-where
-    DB: plotters::prelude::DrawingBackend + 'a,
-    Y: plotters::coord::ranged1d::Ranged<ValueType = f64>,
-{
-    use plotters::prelude::*;
-    for (i, name) in names.iter().enumerate() {
-        let c = PALETTE[i % PALETTE.len()];
-        let series: Vec<(f64, f64)> = run
-            .frames
-            .iter()
-            .filter(|r| &&r.method == name)
-            .filter_map(|r| pick(r).map(|v| (r.frame as f64, v)))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(series, c.stroke_width(2)))?
-            .label(name.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-    }
-    chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.85)).draw()
-}
-
-/// Writes the plots as SVG into `dir`: `pareto.svg` (median error vs median GPU
-/// time per method), `frame_time.svg` (GPU ms along the path, like seed 002
-/// Fig. 11) and `temporal_noise.svg` (like Fig. 13).
-///
-/// # Errors
-/// Drawing or I/O errors.
-pub fn write_plots(dir: &Path, run: &BenchRun, title: &str) -> Result<()> {
-    use plotters::prelude::*;
-    let names: Vec<&String> = run.summary.keys().collect();
-    let color = |name: &str| {
-        let i = names.iter().position(|n| n.as_str() == name).unwrap_or(0);
-        PALETTE[i % PALETTE.len()]
-    };
-    let plot_err = |e: Box<dyn std::error::Error>| anyhow::anyhow!("plotting: {e}");
-    // Pareto: error against time.
-    {
-        let path = dir.join("pareto.svg");
-        let root = SVGBackend::new(&path, (800, 520)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
-        let xs = run.summary.values().map(|m| m.gpu_ms.median).filter(|x| *x > 0.0);
-        let xmin = xs.clone().fold(f64::MAX, f64::min).min(1e3) * 0.7;
-        let xmax = xs.fold(1e-3, f64::max) * 1.5;
-        let ymax = run.summary.values().map(|m| m.error.median).fold(1e-4, f64::max) * 1.2;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(format!("Image error vs GPU time — {title}"), ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d((xmin.max(1e-3)..xmax).log_scale(), 0f64..ymax)
-            .map_err(|e| plot_err(e.into()))?;
-        chart
-            .configure_mesh()
-            .x_desc("median GPU ms per frame (log scale)")
-            .y_desc("median multi-scale RMSE vs reference")
-            .draw()
-            .map_err(|e| plot_err(e.into()))?;
-        for (name, m) in &run.summary {
-            let c = color(name);
-            let p = (m.gpu_ms.median, m.error.median);
-            chart.draw_series(std::iter::once(Circle::new(p, 5, c.filled()))).map_err(|e| plot_err(e.into()))?;
-            chart
-                .draw_series(std::iter::once(Text::new(format!(" {name}"), p, ("sans-serif", 13))))
-                .map_err(|e| plot_err(e.into()))?;
-        }
-        root.present().map_err(|e| plot_err(e.into()))?;
-    }
-    let frames = run.frames.iter().map(|r| r.frame).max().unwrap_or(0) + 1;
-    let x_range = 0f64..(frames as f64 - 1.0).max(1.0);
-    // GPU time along the path, log scale (the methods span orders of magnitude).
-    {
-        let path = dir.join("frame_time.svg");
-        let root = SVGBackend::new(&path, (900, 520)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
-        let vals: Vec<f64> = run.frames.iter().map(|r| r.gpu_ms).filter(|v| *v > 0.0).collect();
-        let ymin = vals.iter().copied().fold(f64::MAX, f64::min).min(1e3) * 0.7;
-        let ymax = vals.iter().copied().fold(1e-3, f64::max) * 1.5;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(format!("GPU ms per frame along the path — {title}"), ("sans-serif", 16))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x_range.clone(), (ymin.max(1e-3)..ymax).log_scale())
-            .map_err(|e| plot_err(e.into()))?;
-        chart
-            .configure_mesh()
-            .x_desc("frame along the path")
-            .y_desc("GPU ms (log scale)")
-            .draw()
-            .map_err(|e| plot_err(e.into()))?;
-        per_method_lines(&mut chart, run, &names, |r| Some(r.gpu_ms).filter(|v| *v > 0.0))
-            .map_err(|e| plot_err(e.into()))?;
-        root.present().map_err(|e| plot_err(e.into()))?;
-    }
-    // Temporal noise along the path.
-    {
-        let what = "temporal noise (RMSE to the previous frame minus the reference's)";
-        let path = dir.join("temporal_noise.svg");
-        let root = SVGBackend::new(&path, (900, 520)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_err(e.into()))?;
-        let vals: Vec<f64> = run.frames.iter().map(|r| r.temporal_noise).filter(|v| v.is_finite()).collect();
-        let ymin = vals.iter().copied().fold(0.0, f64::min) * 1.1;
-        let ymax = vals.iter().copied().fold(1e-6, f64::max) * 1.1;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(format!("{what} — {title}"), ("sans-serif", 16))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x_range, ymin..ymax)
-            .map_err(|e| plot_err(e.into()))?;
-        chart.configure_mesh().x_desc("frame along the path").y_desc(what).draw().map_err(|e| plot_err(e.into()))?;
-        per_method_lines(&mut chart, run, &names, |r| Some(r.temporal_noise).filter(|v| v.is_finite()))
-            .map_err(|e| plot_err(e.into()))?;
-        root.present().map_err(|e| plot_err(e.into()))?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -686,5 +574,22 @@ mod tests {
         assert_eq!(d.len(), 4);
         assert!((186..=189).contains(&d[0]), "linear mid-grey in sRGB: {}", d[0]);
         assert_eq!(rmse(&img, &img), 0.0);
+    }
+
+    #[test]
+    fn flip_is_zero_for_equal_images_and_grows_with_the_difference() {
+        let (w, h) = (32u32, 32u32);
+        let a: Vec<u8> = (0..w * h).flat_map(|i| [(i * 7 % 256) as u8, 120, 60, 255]).collect();
+        let mut b = a.clone();
+        let mut c = a.clone();
+        for p in b.chunks_exact_mut(4).take(64) {
+            p[1] = 200;
+        }
+        for p in c.chunks_exact_mut(4).take(512) {
+            p[1] = 200;
+        }
+        assert!(flip(&a, &a, w, h) < 1e-6);
+        let (fb, fc) = (flip(&a, &b, w, h), flip(&a, &c, w, h));
+        assert!(fb > 0.0 && fc > 2.0 * fb, "{fb} {fc}");
     }
 }
