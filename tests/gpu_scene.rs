@@ -16,7 +16,7 @@ use sylva::format::Manifest;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::camera::Camera;
 use sylva::render::cull::{cpu_select, unpack_item_y};
-use sylva::render::forest::{CullingMode, PoolConfig};
+use sylva::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::scene::StreamEvent;
 
@@ -207,14 +207,19 @@ fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
         let tb = std::fs::read(src.join(&t.url)).unwrap();
         let mut tile = Tile::decode(&t.url, &tb, m.species.len() as u32).unwrap();
         for b in &mut tile.batches {
+            let mut moved = 0.0f64;
             for k in 0..3 {
-                // Cell corners are whole metres: exact in f32 at 5 000 km.
+                // Cell corners are whole metres: exact in f32 at 10 000 km.
                 b.origin_m[k] += shift[k];
-                b.center_m[k] += shift[k];
-                // The centre rounds to the f32 grid there (0.5 m): widen the bounds.
-                b.half_extent_m[k] += 1.0;
+                // The centre rounds to the f32 grid there (up to 0.5 m at 10^7 m):
+                // widen the bounds by what rounding moved it, as a bake must.
+                let exact = f64::from(b.center_m[k]) + f64::from(shift[k]);
+                b.center_m[k] = exact as f32;
+                let err = (f64::from(b.center_m[k]) - exact).abs();
+                b.half_extent_m[k] = (f64::from(b.half_extent_m[k]) + err).next_up() as f32;
+                moved += err * err;
             }
-            b.radius_m += 2.0;
+            b.radius_m = (f64::from(b.radius_m) + moved.sqrt()).next_up() as f32;
         }
         std::fs::write(dst.join(&t.url), tile.encode()).unwrap();
         std::fs::copy(src.join(&t.ids_url), dst.join(&t.ids_url)).unwrap();
@@ -225,23 +230,74 @@ fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
     std::fs::write(dst.join("scene.json"), m.encode()).unwrap();
 }
 
+/// A selected tree: species, its batch's cell corner in cm with `shift` taken
+/// off, its packed instance and the representation slot and cross-fade side.
+type Selected = (u32, i64, i64, u32, u32, usize, u32);
+
+/// The cull pass's selection as a sorted set of trees (pool slots depend on the
+/// order tiles arrived in, so trees are named by what they are).
+fn culling_set(off: &OffscreenScene, shift: f64) -> Vec<Selected> {
+    let (items, batches, instances, _) = off.read_selection();
+    let cm = |v: f32| ((f64::from(v) - shift) * 100.0).round() as i64;
+    let mut v: Vec<Selected> = items
+        .into_iter()
+        .enumerate()
+        .flat_map(|(slot, list)| list.into_iter().map(move |item| (slot, item)))
+        .map(|(slot, (inst, y))| {
+            let (batch, side, _fade) = unpack_item_y(y);
+            let b = &batches[batch as usize];
+            let i = instances[inst as usize];
+            (b.species, cm(b.origin_m[0]), cm(b.origin_m[1]), i.xy, i.zysv, slot, side)
+        })
+        .collect();
+    v.sort_unstable();
+    v
+}
+
 #[test]
-fn origin_far_away_renders_like_origin_near() {
-    let shift = [5_000_000.0f32, 5_000_000.0, 0.0];
-    let far_dir = tmp("shifted");
-    shifted_copy(&fixture(), &far_dir, shift);
+fn origin_offsets_keep_the_image_and_the_culling() {
     let mut near = open(fixture().to_str().unwrap());
     manifest(&mut near);
-    let mut far = open(far_dir.to_str().unwrap());
-    manifest(&mut far);
-    for view in [NamedView::Medium, NamedView::Close] {
-        let cam = near.named_camera(view, 30.0).unwrap();
-        let cam_far = Camera { eye_m: cam.eye_m + DVec3::new(5e6, 5e6, 0.0), ..cam };
-        let a = render(&mut near, &cam);
-        let b = render(&mut far, &cam_far);
-        assert!(foliage_share(&a) > 0.2);
-        let e = multiscale_rmse(&a, &b, W, H);
-        assert!(e <= 1.0 / 255.0, "{view:?}: multi-scale RMSE {e:.5} between origin 0 and 5 000 km");
+    let views: Vec<Camera> =
+        [NamedView::Medium, NamedView::Close].iter().map(|v| near.named_camera(*v, 30.0).unwrap()).collect();
+    let base: Vec<(Vec<u8>, Vec<Selected>)> = views
+        .iter()
+        .map(|cam| {
+            let img = render(&mut near, cam);
+            assert!(foliage_share(&img) > 0.2);
+            (img, culling_set(&near, 0.0))
+        })
+        .collect();
+    drop(near);
+    // Multiples of the tile side (128 m), so the tile grid stays whole: 10^5, 10^6, 10^7 m.
+    for offset in [100_096.0f32, 999_936.0, 10_000_000.0] {
+        let dir = tmp(&format!("shifted-{offset}"));
+        shifted_copy(&fixture(), &dir, [offset, offset, 0.0]);
+        let mut far = open(dir.to_str().unwrap());
+        manifest(&mut far);
+        for (cam, (img, set)) in views.iter().zip(&base) {
+            let cam_far = Camera { eye_m: cam.eye_m + DVec3::new(f64::from(offset), f64::from(offset), 0.0), ..*cam };
+            let b = render(&mut far, &cam_far);
+            let e = multiscale_rmse(img, &b, W, H);
+            assert!(e <= 1.0 / 255.0, "offset {offset} m: multi-scale RMSE {e:.5} to the render at the origin");
+            let got = culling_set(&far, f64::from(offset));
+            // Identical up to trees on a boundary (frustum plane, draw distance, level
+            // threshold), where f32 rounding of the eye-relative position can tip a
+            // tree either way: at most 1 in 1,000.
+            assert!(!set.is_empty());
+            let differ = got.iter().filter(|t| set.binary_search(t).is_err()).count()
+                + set.iter().filter(|t| got.binary_search(t).is_err()).count();
+            assert!(
+                differ * 1000 <= set.len(),
+                "offset {offset} m: {differ} of {} selected trees or levels differ from the origin's",
+                set.len()
+            );
+            if offset < 1e6 {
+                assert!(&got == set, "offset {offset} m: the selection differs from the origin's");
+            }
+        }
+        drop(far);
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
 
@@ -281,6 +337,80 @@ fn extreme_cameras_render_without_artefacts() {
     let near = Camera::look_at(c + DVec3::new(0.0, -2_000.0, 300.0), c);
     let share = foliage_share(&render(&mut off, &near));
     assert!(share > 0.0005 && share < 0.05, "forest 2 km away covers {share}");
+}
+
+/// `cam` rendered by Sylva and with every tree as its full mesh (the accuracy
+/// reference): multi-scale RMSE between the two, and Sylva's image.
+fn error_to_full_mesh(off: &mut OffscreenScene, cam: &Camera) -> (f64, Vec<u8>) {
+    let sylva = off.settings;
+    let img = render(off, cam);
+    off.settings = RenderSettings { quality: 1.0e6, representations: Representations::MESHES, ..sylva };
+    let full = render(off, cam);
+    off.settings = sylva;
+    (multiscale_rmse(&img, &full, W, H), img)
+}
+
+#[test]
+fn cameras_at_the_extremes_stay_close_to_the_full_meshes() {
+    let mut off = open(fixture().to_str().unwrap());
+    let m = manifest(&mut off);
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = lo.lerp(hi, 0.5);
+    let down = |z: f64| Camera {
+        eye_m: DVec3::new(c.x, c.y, z),
+        pitch_rad: -std::f64::consts::FRAC_PI_2,
+        ..Camera::default()
+    };
+    // Straight down from 150 m over the canopy (the "up" vector degenerates here).
+    let (e, img) = error_to_full_mesh(&mut off, &down(hi.z + 150.0));
+    assert!(foliage_share(&img) > 0.3, "straight down: canopy share {}", foliage_share(&img));
+    assert!(e < 0.04, "straight down: error to the full meshes {e:.4}");
+    // Along the horizon from 1.7 m above the ground at the forest's edge.
+    let edge = Camera { eye_m: DVec3::new(c.x, lo.y - 5.0, lo.z + 1.7), ..Camera::default() };
+    let (e, img) = error_to_full_mesh(&mut off, &edge);
+    assert!(foliage_share(&img) > 0.1, "horizon: foliage share {}", foliage_share(&img));
+    assert!(e < 0.04, "horizon: error to the full meshes {e:.4}");
+    // Inside a batch's bounds, at its centre, looking along it.
+    let top = off.named_camera(NamedView::Top, 30.0).unwrap();
+    render(&mut off, &top);
+    let (_, batches, _, _) = off.read_selection();
+    let b = batches.iter().filter(|b| b.instance_count > 8).max_by(|a, b| a.radius_m.total_cmp(&b.radius_m)).unwrap();
+    let inside = Camera { eye_m: DVec3::from(b.center_m.map(f64::from)), heading_rad: 0.7, ..Camera::default() };
+    let (e, img) = error_to_full_mesh(&mut off, &inside);
+    assert!(foliage_share(&img) > 0.1, "inside a batch: foliage share {}", foliage_share(&img));
+    assert!(e < 0.04, "inside a batch: error to the full meshes {e:.4}");
+    // 100 km up, straight down, nothing beyond draw distance: the forest is a
+    // hundredth of a pixel, so the image is the plain background.
+    off.settings.draw_distance_m = 200_000.0;
+    let space = down(100_000.0);
+    let img = render(&mut off, &space);
+    off.settings.draw_distance_m = 1.0;
+    let background = render(&mut off, &space);
+    let e = multiscale_rmse(&img, &background, W, H);
+    assert!(e < 0.002, "100 km: image differs from the background by {e}");
+}
+
+#[test]
+fn band_edges_do_not_flicker() {
+    // Back and forth across level thresholds: the medium view has trees in every
+    // band; stepping 1 % of the distance moves many of them over a band edge.
+    let mut off = open(fixture().to_str().unwrap());
+    manifest(&mut off);
+    let a = off.named_camera(NamedView::Medium, 30.0).unwrap();
+    let b = Camera { eye_m: a.eye_m - a.forward() * (a.eye_m.length() * 0.01), ..a };
+    let frames: Vec<Vec<u8>> = (0..6).map(|i| render(&mut off, if i % 2 == 0 { &a } else { &b })).collect();
+    // The same camera gives the same image: no state that drifts between frames.
+    assert_eq!(frames[0], frames[2], "frame 0 and 2 (same camera) differ");
+    assert_eq!(frames[1], frames[5], "frame 1 and 5 (same camera) differ");
+    // Sylva's change between a and b is close to what the full meshes change.
+    let sylva_change = multiscale_rmse(&frames[0], &frames[1], W, H);
+    let sylva = off.settings;
+    off.settings = RenderSettings { quality: 1.0e6, representations: Representations::MESHES, ..sylva };
+    let full_change = multiscale_rmse(&render(&mut off, &a), &render(&mut off, &b), W, H);
+    let noise = sylva_change - full_change;
+    assert!(sylva_change > 0.0 && full_change > 0.0);
+    assert!(noise < 0.005, "band edges: Sylva changes by {sylva_change:.4}, the full meshes by {full_change:.4}");
 }
 
 /// A one-thread HTTP server over the fixture: `/tiles/<bad404>` answers 404,
