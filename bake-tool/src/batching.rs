@@ -291,6 +291,55 @@ mod tests {
     }
 
     #[test]
+    fn cell_and_tile_edges_and_extreme_scales_keep_the_bounds() {
+        // Trees exactly on, just below and just above cell and tile edges, far from
+        // the origin (10^5 to 10^6 m), 0.5 m to 120 m tall (scales 0.025 to 6 of a
+        // 20 m model) in the same cells.
+        let cell = 64.0;
+        let mut trees = Vec::new();
+        for (i, base) in [0.0, 1.0e5, 1.0e6].into_iter().enumerate() {
+            for k in -3i32..=3 {
+                let edge = base + f64::from(k) * cell * 4.0; // a tile edge every 4 cells
+                for (j, dx) in [-1e-9, 0.0, 1e-9, -0.004, 0.004, cell * 0.5].into_iter().enumerate() {
+                    let id = trees.len();
+                    trees.push(SceneTree {
+                        pos: DVec3::new(edge + dx, edge - dx, (id % 7) as f64),
+                        species: 0,
+                        scale: if (id + j) % 2 == 0 { 0.025 } else { 6.0 },
+                        yaw_rad: 0.0,
+                        variation: (i * 7 + j) as u8 % 32,
+                        id: id as u64,
+                    });
+                }
+            }
+        }
+        let tiles = build_tiles(&trees, &SHAPES, cell as u32, 4);
+        let mut seen = vec![0u32; trees.len()];
+        for bt in &tiles {
+            let tile = Tile::decode("t", &bt.tile.encode(), 3).unwrap();
+            for b in &tile.batches {
+                let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+                for (inst, id) in tile.instances[run.clone()].iter().zip(&bt.ids[run]) {
+                    let t = &trees[*id as usize];
+                    seen[*id as usize] += 1;
+                    let d = inst.decode(b);
+                    let p =
+                        DVec3::new(f64::from(d.position_m[0]), f64::from(d.position_m[1]), f64::from(d.position_m[2]));
+                    // f32 positions 10^6 m out are good to 6 cm; the quantisation itself to 1 cm.
+                    let ulp = (t.pos.x.abs().max(1.0) as f32).to_bits();
+                    let f32_step = f64::from(f32::from_bits(ulp + 1) - f32::from_bits(ulp));
+                    let err = (p - t.pos).length();
+                    assert!(err <= 0.01 + f32_step, "tree {id} at {:?}: position error {err} m", t.pos);
+                    assert!((d.scale / t.scale - 1.0).abs() < 0.01, "scale {} vs {}", d.scale, t.scale);
+                    let top = d.position_m[2] + SHAPES[0].z_max * d.scale;
+                    assert!(top <= b.center_m[2] + b.half_extent_m[2] + 1e-3, "a 120 m tree pokes out of its batch");
+                }
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1), "a tree on an edge is in no batch or in two");
+    }
+
+    #[test]
     fn tall_height_ranges_split_into_bands() {
         let mut trees = random_trees(500, 3);
         for (i, t) in trees.iter_mut().enumerate() {

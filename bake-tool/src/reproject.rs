@@ -150,6 +150,22 @@ mod tests {
     }
 
     #[test]
+    fn far_from_the_zone_centre_matches_reference_values() {
+        // EPSG:4326 → EPSG:32633 by PROJ 9 (pyproj 3.7), up to 6° from the central
+        // meridian (zone 33 spans 12°–18°; these lie in neighbouring zones).
+        let fwd = Reprojector::new(Crs::from_epsg(4326).unwrap(), &Crs::projected(32633).unwrap()).unwrap();
+        for (lon, lat, e, n) in [
+            (9.5, 48.0, 89_790.666_696, 5_330_953.163_952),
+            (20.9, 60.0, 828_796.993_392, 6_666_091.488_869),
+            (12.0, 47.5, 274_068.607_960, 5_265_092.549_077),
+            (15.0, 0.5, 500_000.0, 55_265.037_143),
+        ] {
+            let (x, y) = fwd.apply(lon, lat).unwrap();
+            assert!((x - e).abs() < 0.01 && (y - n).abs() < 0.01, "{lon},{lat}: {x:.3},{y:.3} vs {e},{n}");
+        }
+    }
+
+    #[test]
     fn geographic_scene_crs_is_refused() {
         let err = Crs::projected(4326).unwrap_err().to_string();
         assert!(err.contains("geographic"), "{err}");
