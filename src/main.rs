@@ -150,6 +150,16 @@ mod cli {
             /// Only redraw the plots from --out's frames.csv (no rendering).
             #[arg(long)]
             replot: bool,
+            /// The memory model instead: bytes per tree on disk, gzip/brotli and GPU,
+            /// per pack, against seed 004 eq. 4.1 (writes memory.json; --scene a directory).
+            #[arg(long, conflicts_with_all = ["replot", "stress"])]
+            memory: bool,
+            /// The stress run instead: Sylva alone along --path, forwards and back,
+            /// for --frames frames (10000 is the standard run), streaming without
+            /// waiting; fails unless memory stays flat and frame time does not grow
+            /// (writes stress.csv, stress.json).
+            #[arg(long, conflicts_with = "replot")]
+            stress: bool,
         },
         /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
         Compare {
@@ -174,13 +184,13 @@ mod cli {
         },
     }
 
-    fn bench(scene: &str, path: &str, methods: &str, size: &str, frames: usize, out: &std::path::Path) -> Result<()> {
+    /// The cameras of `--path` over `scene`: a named path laid over the scene's
+    /// bounds (the ground found at its centre) or a JSON keyframe file.
+    fn path_cameras(scene: &str, path: &str, frames: usize) -> Result<Vec<Camera>> {
         use sylva::bench::{self as b, NamedPath};
-        let (w, h) = parse_size(size)?;
         if frames < 2 {
             bail!("--frames {frames}: need at least 2");
         }
-        let methods = b::methods(methods)?;
         // The manifest gives the bounds the named paths are laid over.
         let mut probe = OffscreenScene::open(scene, 16, 16, PoolConfig::default())
             .map_err(|e| anyhow::anyhow!("{e}"))
@@ -226,7 +236,14 @@ mod cli {
                 (p.keyframes, n)
             }
         };
-        let cameras = b::interpolate(&keys, frames);
+        Ok(b::interpolate(&keys, frames))
+    }
+
+    fn bench(scene: &str, path: &str, methods: &str, size: &str, frames: usize, out: &std::path::Path) -> Result<()> {
+        use sylva::bench as b;
+        let (w, h) = parse_size(size)?;
+        let methods = b::methods(methods)?;
+        let cameras = path_cameras(scene, path, frames)?;
         std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
         let total = methods.len() * cameras.len();
         let started = std::time::Instant::now();
@@ -358,6 +375,45 @@ mod cli {
         Ok(())
     }
 
+    fn stress(scene: &str, path: &str, size: &str, frames: usize, out: &std::path::Path) -> Result<()> {
+        use sylva::bench::stress;
+        let (w, h) = parse_size(size)?;
+        // The path once at 200 frames, then forwards and back for --frames.
+        let cameras = stress::ping_pong(&path_cameras(scene, path, 200)?, frames.max(2));
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        let started = std::time::Instant::now();
+        let (records, summary) = stress::run(scene, &cameras, w, h, RenderSettings::default(), &mut |i, n| {
+            if i % 50 == 0 || i + 1 == n {
+                let done = (i + 1) as f64;
+                let eta = started.elapsed().as_secs_f64() / done * (n as f64 - done);
+                let bar = "#".repeat((i + 1) * 30 / n.max(1));
+                eprint!("\r[{bar:<30}] frame {}/{n}, ~{eta:.0} s left   ", i + 1);
+            }
+        })?;
+        eprintln!();
+        stress::write(out, &records, &summary)?;
+        let mb = |b: u64| b as f64 / 1e6;
+        eprintln!(
+            "{} frames: GPU ms median {:.2} over the first tenth, {:.2} over the last; RSS {:.0} MB after the first tenth, max {:.0} MB, end {:.0} MB; GPU {:.0} MB max; up to {} of {} trees resident; {:.1} MB fetched; {} non-finite frames",
+            summary.frames,
+            summary.gpu_ms_first.median,
+            summary.gpu_ms_last.median,
+            mb(summary.rss_after_first),
+            mb(summary.rss_max),
+            mb(summary.rss_end),
+            mb(summary.gpu_bytes_max),
+            summary.trees_resident_max,
+            summary.trees_total,
+            mb(summary.bytes_fetched),
+            summary.non_finite_frames
+        );
+        eprintln!("wrote stress.csv and stress.json to {}", out.display());
+        if !summary.passed {
+            bail!("stress run failed: memory grew more than 10 %, frame time grew more than 25 %, or a frame was not finite");
+        }
+        Ok(())
+    }
+
     pub fn main() -> Result<()> {
         match Cli::parse().command {
             Command::Bench { out, replot: true, path, size, .. } => {
@@ -376,6 +432,17 @@ mod cli {
                 sylva::bench::write_plots(&out, &run, &format!("{path}, {size}"))?;
                 eprintln!("redrew the plots in {}", out.display());
                 Ok(())
+            }
+            Command::Bench { scene, out, memory: true, .. } => {
+                let m = sylva::bench::memory::measure(std::path::Path::new(&scene))?;
+                print!("{}", sylva::bench::memory::report(&m));
+                std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+                std::fs::write(out.join("memory.json"), serde_json::to_string_pretty(&m)?)?;
+                eprintln!("wrote {}", out.join("memory.json").display());
+                Ok(())
+            }
+            Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
+                stress(&scene, &path, &size, frames, &out)
             }
             Command::Bench { scene, path, methods, size, frames, out, .. } => {
                 bench(&scene, &path, &methods, &size, frames, &out)

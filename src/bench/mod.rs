@@ -25,7 +25,9 @@ use crate::render::camera::Camera;
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use crate::render::offscreen::{NamedView, OffscreenScene};
 
+pub mod memory;
 mod plots;
+pub mod stress;
 pub use plots::write_plots;
 
 /// A keyframe of a camera path (scene-relative metres, degrees).

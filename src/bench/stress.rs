@@ -1,0 +1,223 @@
+//! `sylva bench --stress`: a long path (10,000 frames by default) through a scene
+//! with streaming as the viewer does it (non-blocking, tiles evicted as the
+//! camera moves): memory must stay flat, frame time must not grow, nothing may
+//! turn non-finite.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+
+use super::Stat;
+use crate::render::camera::Camera;
+use crate::render::forest::{PoolConfig, RenderSettings};
+use crate::render::offscreen::OffscreenScene;
+
+/// One frame of a stress run.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct StressFrame {
+    /// Frame index.
+    pub frame: usize,
+    /// GPU ms (cull + draw, wall time around submit + wait).
+    pub gpu_ms: f64,
+    /// CPU ms to prepare and record.
+    pub cpu_ms: f64,
+    /// Resident set size of the process, bytes (0 where /proc is missing).
+    pub rss_bytes: u64,
+    /// GPU bytes (pools + packs).
+    pub gpu_bytes: u64,
+    /// Trees resident on the GPU.
+    pub trees_resident: u64,
+    /// Tiles resident.
+    pub tiles_resident: u64,
+    /// Instances drawn, all representations.
+    pub drawn: u64,
+    /// Bytes fetched so far.
+    pub bytes_fetched: u64,
+}
+
+/// What a stress run found (`stress.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct StressSummary {
+    /// Frames rendered.
+    pub frames: usize,
+    /// GPU ms over the first and the last tenth of the path.
+    pub gpu_ms_first: Stat,
+    /// See `gpu_ms_first`.
+    pub gpu_ms_last: Stat,
+    /// Resident set size after the first tenth and at the end, bytes.
+    pub rss_after_first: u64,
+    /// See `rss_after_first`.
+    pub rss_end: u64,
+    /// Largest resident set size, bytes.
+    pub rss_max: u64,
+    /// GPU bytes, largest over the run.
+    pub gpu_bytes_max: u64,
+    /// Most trees resident at once, and the scene's total.
+    pub trees_resident_max: u64,
+    /// Trees in the scene.
+    pub trees_total: u64,
+    /// Bytes fetched over the run.
+    pub bytes_fetched: u64,
+    /// Frames whose counters were not finite (must be 0).
+    pub non_finite_frames: usize,
+    /// Whether memory stayed flat (≤ 10 % growth after the first tenth) and frame
+    /// time did not grow (last tenth's median ≤ 1.25 × the first's + 1 ms).
+    pub passed: bool,
+}
+
+/// Resident set size of this process in bytes (Linux; 0 elsewhere).
+#[must_use]
+pub fn rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1).and_then(|v| v.parse::<u64>().ok()))
+        .map_or(0, |pages| pages * 4096)
+}
+
+/// A camera path of `frames` frames that runs `cameras` forwards and back again
+/// as often as it takes.
+#[must_use]
+pub fn ping_pong(cameras: &[Camera], frames: usize) -> Vec<Camera> {
+    let n = cameras.len();
+    if n < 2 {
+        return cameras.iter().copied().cycle().take(frames).collect();
+    }
+    let period = 2 * (n - 1);
+    (0..frames)
+        .map(|i| {
+            let k = i % period;
+            cameras[if k < n { k } else { period - k }]
+        })
+        .collect()
+}
+
+/// Runs Sylva along `cameras` on `scene`, streaming without waiting.
+///
+/// # Errors
+/// A scene that does not open.
+pub fn run(
+    scene: &str,
+    cameras: &[Camera],
+    width: u32,
+    height: u32,
+    settings: RenderSettings,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(Vec<StressFrame>, StressSummary)> {
+    let mut off = OffscreenScene::open(scene, width, height, PoolConfig::default())
+        .with_context(|| format!("opening {scene}"))?;
+    off.settings = settings;
+    if let Some(first) = cameras.first() {
+        off.load_view(first, 120.0);
+    }
+    let mut out = Vec::with_capacity(cameras.len());
+    let mut non_finite = 0;
+    let mut trees_total = 0;
+    for (i, cam) in cameras.iter().enumerate() {
+        progress(i, cameras.len());
+        off.update_stream(cam);
+        let s = off.render(cam, true);
+        let gpu_ms = s.gpu_ms.values().sum::<f64>();
+        if !gpu_ms.is_finite() || !s.frame_cpu_ms.is_finite() {
+            non_finite += 1;
+        }
+        trees_total = s.trees_total;
+        out.push(StressFrame {
+            frame: i,
+            gpu_ms,
+            cpu_ms: s.frame_cpu_ms,
+            rss_bytes: rss_bytes(),
+            gpu_bytes: s.gpu_bytes,
+            trees_resident: s.trees_resident,
+            tiles_resident: s.tiles_resident,
+            drawn: s.instances.values().sum(),
+            bytes_fetched: s.bytes_fetched,
+        });
+    }
+    let summary = summarise(&out, non_finite, trees_total);
+    Ok((out, summary))
+}
+
+/// The summary of a run's frames.
+#[must_use]
+pub fn summarise(frames: &[StressFrame], non_finite_frames: usize, trees_total: u64) -> StressSummary {
+    let tenth = (frames.len() / 10).max(1);
+    let first = &frames[..tenth.min(frames.len())];
+    let last = &frames[frames.len().saturating_sub(tenth)..];
+    let gpu_ms_first = Stat::of(first.iter().map(|f| f.gpu_ms));
+    let gpu_ms_last = Stat::of(last.iter().map(|f| f.gpu_ms));
+    let rss_after_first = first.last().map_or(0, |f| f.rss_bytes);
+    let rss_end = frames.last().map_or(0, |f| f.rss_bytes);
+    let rss_max = frames.iter().map(|f| f.rss_bytes).max().unwrap_or(0);
+    let rss_after_max = frames[tenth.min(frames.len())..].iter().map(|f| f.rss_bytes).max().unwrap_or(0);
+    let memory_flat = rss_after_max as f64 <= rss_after_first as f64 * 1.10;
+    let time_flat = gpu_ms_last.median <= gpu_ms_first.median * 1.25 + 1.0;
+    StressSummary {
+        frames: frames.len(),
+        gpu_ms_first,
+        gpu_ms_last,
+        rss_after_first,
+        rss_end,
+        rss_max,
+        gpu_bytes_max: frames.iter().map(|f| f.gpu_bytes).max().unwrap_or(0),
+        trees_resident_max: frames.iter().map(|f| f.trees_resident).max().unwrap_or(0),
+        trees_total,
+        bytes_fetched: frames.last().map_or(0, |f| f.bytes_fetched),
+        non_finite_frames,
+        passed: memory_flat && time_flat && non_finite_frames == 0,
+    }
+}
+
+/// Writes `stress.csv` and `stress.json` into `dir`.
+///
+/// # Errors
+/// I/O errors.
+pub fn write(dir: &Path, frames: &[StressFrame], summary: &StressSummary) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut s =
+        String::from("frame,gpu_ms,cpu_ms,rss_bytes,gpu_bytes,trees_resident,tiles_resident,drawn,bytes_fetched\n");
+    for f in frames {
+        writeln!(
+            s,
+            "{},{:.3},{:.4},{},{},{},{},{},{}",
+            f.frame,
+            f.gpu_ms,
+            f.cpu_ms,
+            f.rss_bytes,
+            f.gpu_bytes,
+            f.trees_resident,
+            f.tiles_resident,
+            f.drawn,
+            f.bytes_fetched
+        )?;
+    }
+    std::fs::write(dir.join("stress.csv"), s).with_context(|| format!("writing {}", dir.display()))?;
+    std::fs::write(dir.join("stress.json"), serde_json::to_string_pretty(summary)?)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ping_pong_turns_at_both_ends() {
+        let cams: Vec<Camera> =
+            (0..3).map(|i| Camera { eye_m: glam::DVec3::X * f64::from(i), ..Camera::default() }).collect();
+        let xs: Vec<f64> = ping_pong(&cams, 7).iter().map(|c| c.eye_m.x).collect();
+        assert_eq!(xs, [0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0]);
+    }
+
+    #[test]
+    fn growth_fails_the_summary() {
+        let frame =
+            |i: usize, ms: f64, rss: u64| StressFrame { frame: i, gpu_ms: ms, rss_bytes: rss, ..Default::default() };
+        let flat: Vec<StressFrame> = (0..100).map(|i| frame(i, 5.0, 1_000_000)).collect();
+        assert!(summarise(&flat, 0, 10).passed);
+        let leak: Vec<StressFrame> = (0..100).map(|i| frame(i, 5.0, 1_000_000 + i as u64 * 10_000)).collect();
+        assert!(!summarise(&leak, 0, 10).passed);
+        let slow: Vec<StressFrame> = (0..100).map(|i| frame(i, 5.0 + i as f64 * 0.1, 1_000_000)).collect();
+        assert!(!summarise(&slow, 0, 10).passed);
+        assert!(!summarise(&flat, 1, 10).passed);
+    }
+}
