@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-clusters fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-clusters sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -82,6 +82,32 @@ bench-clusters: release
 	@for m in oak pine; do echo "== $$m"; /usr/bin/time -f "%e s wall, %M KB peak" \
 	  target/release/sylva-bake bench-clusters --model ../shared/data/models/eztree_$${m}_medium.glb; done
 	@echo "== 27,000 leaves"; /usr/bin/time -f "%e s wall, %M KB peak" target/release/sylva-bake bench-clusters --leaves 27000
+
+# Parameter sweeps (seed 004 ch. 5): a demo forest of SWEEP_TREES baked per value
+# (once; kept under target/sweep/), Sylva against the full-mesh reference on the
+# same path, one table row per value. The fade sweep reuses one bake.
+SWEEP_TREES ?= 20000
+SWEEP_PATH ?= medium
+SWEEP_FRAMES ?= 8
+SWEEP_SIZE ?= 480x270
+SWEEP_BENCH = --path $(SWEEP_PATH) --frames $(SWEEP_FRAMES) --size $(SWEEP_SIZE) --methods sylva
+define sweep_bake
+	@for v in $(2); do d=target/sweep/$(1)-$$v; \
+	  test -f $$d/scene.json || target/release/sylva-bake demo --trees $(SWEEP_TREES) --$(1) $$v --out $$d >/dev/null || exit 1; \
+	  target/release/sylva bench --scene $$d $(SWEEP_BENCH) --out $$d/bench || exit 1; done
+	target/release/sylva bench-table $(foreach v,$(2),target/sweep/$(1)-$(v)/bench)
+endef
+sweep-cell-size: release
+	$(call sweep_bake,cell-size,32 64 128 256 512)
+sweep-billboard-angles: release
+	$(call sweep_bake,billboard-angles,2 4 8 16)
+sweep-billboard-size: release
+	$(call sweep_bake,billboard-size,32 64 128 256)
+sweep-fade: release
+	@test -f target/sweep/base/scene.json || target/release/sylva-bake demo --trees $(SWEEP_TREES) --out target/sweep/base >/dev/null
+	@for v in 0 0.05 0.12 0.25; do target/release/sylva bench --scene target/sweep/base $(SWEEP_BENCH) \
+	  --fade-band $$v --out target/sweep/fade-$$v || exit 1; done
+	target/release/sylva bench-table target/sweep/fade-0 target/sweep/fade-0.05 target/sweep/fade-0.12 target/sweep/fade-0.25
 
 # Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
 fuzz:

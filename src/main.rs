@@ -160,6 +160,21 @@ mod cli {
             /// (writes stress.csv, stress.json).
             #[arg(long, conflicts_with = "replot")]
             stress: bool,
+            /// Half width of the cross-fade bands for every method but the
+            /// reference, as a fraction of each threshold (the fade sweep).
+            #[arg(long, default_value_t = 0.12)]
+            fade_band: f32,
+        },
+        /// One table row per bench output directory (its summary.json) for one
+        /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls
+        /// (the parameter sweeps: `make sweep-cell-size` and friends).
+        BenchTable {
+            /// Directories written by `sylva bench --out`.
+            #[arg(required = true)]
+            dirs: Vec<PathBuf>,
+            /// Method to tabulate.
+            #[arg(long, default_value = "sylva")]
+            method: String,
         },
         /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
         Compare {
@@ -239,10 +254,16 @@ mod cli {
         Ok(b::interpolate(&keys, frames))
     }
 
-    fn bench(scene: &str, path: &str, methods: &str, size: &str, frames: usize, out: &std::path::Path) -> Result<()> {
+    fn bench(
+        scene: &str,
+        path: &str,
+        methods: Vec<sylva::bench::Method>,
+        size: &str,
+        frames: usize,
+        out: &std::path::Path,
+    ) -> Result<()> {
         use sylva::bench as b;
         let (w, h) = parse_size(size)?;
-        let methods = b::methods(methods)?;
         let cameras = path_cameras(scene, path, frames)?;
         std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
         let total = methods.len() * cameras.len();
@@ -444,8 +465,40 @@ mod cli {
             Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
                 stress(&scene, &path, &size, frames, &out)
             }
-            Command::Bench { scene, path, methods, size, frames, out, .. } => {
-                bench(&scene, &path, &methods, &size, frames, &out)
+            Command::Bench { scene, path, methods, size, frames, out, fade_band, .. } => {
+                if !(0.0..0.5).contains(&fade_band) {
+                    bail!("--fade-band {fade_band}: must be in [0, 0.5)");
+                }
+                let mut methods = sylva::bench::methods(&methods)?;
+                for m in methods.iter_mut().filter(|m| m.name != "reference") {
+                    m.settings.fade_band = fade_band;
+                }
+                bench(&scene, &path, methods, &size, frames, &out)
+            }
+            Command::BenchTable { dirs, method } => {
+                println!("| run | GPU ms | MS-RMSE | FLIP | temporal noise | draw calls |");
+                println!("| --- | ---: | ---: | ---: | ---: | ---: |");
+                for d in &dirs {
+                    let p = d.join("summary.json");
+                    let text = std::fs::read_to_string(&p).with_context(|| format!("cannot read {}", p.display()))?;
+                    let v: serde_json::Value =
+                        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", p.display()))?;
+                    let m = &v["methods"][&method];
+                    if m.is_null() {
+                        bail!("{}: no method {method:?}", p.display());
+                    }
+                    let med = |k: &str| m[k]["median"].as_f64().unwrap_or(f64::NAN);
+                    println!(
+                        "| {} | {:.2} | {:.4} | {:.4} | {:.5} | {:.0} |",
+                        d.display(),
+                        med("gpu_ms"),
+                        med("error"),
+                        med("flip"),
+                        med("temporal_noise"),
+                        med("draw_calls")
+                    );
+                }
+                Ok(())
             }
             Command::Compare { a, b } => {
                 let load = |p: &PathBuf| {
