@@ -382,19 +382,29 @@ pub fn run(
     height: u32,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<BenchRun> {
-    let mut frames = Vec::new();
-    let mut reference: Vec<Vec<u8>> = Vec::new();
-    let mut ref_motion: Vec<f64> = Vec::new();
-    let mut adapter = String::new();
+    if methods.first().is_none_or(|m| m.name != "reference") {
+        bail!("the first method must be the reference (bench::methods puts it first)");
+    }
+    // Every method has its own scene and device, and the methods take turns frame
+    // by frame: anything else running on the machine then slows them alike.
+    let mut scenes = Vec::with_capacity(methods.len());
     for method in methods {
         let ss = method.supersample.max(1);
         let mut off = OffscreenScene::open(scene, width * ss, height * ss, PoolConfig::default())
             .with_context(|| format!("opening {scene}"))?;
-        adapter = off.ctx.adapter_summary();
         off.settings = method.settings;
-        let mut prev: Option<Vec<u8>> = None;
-        for (i, cam) in cameras.iter().enumerate() {
+        scenes.push(off);
+    }
+    let adapter = scenes.first().map(|s| s.ctx.adapter_summary()).unwrap_or_default();
+    let mut frames = Vec::new();
+    let mut prev: Vec<Option<Vec<u8>>> = vec![None; methods.len()];
+    let mut prev_reference: Option<Vec<u8>> = None;
+    for (i, cam) in cameras.iter().enumerate() {
+        let mut reference: Option<Vec<u8>> = None;
+        let mut ref_motion = f64::NAN;
+        for (k, (method, off)) in methods.iter().zip(scenes.iter_mut()).enumerate() {
             progress(&method.name, i, cameras.len());
+            let ss = method.supersample.max(1);
             off.load_view(cam, 120.0);
             // One unmeasured frame settles LoD-dependent loads (packs) and pipelines.
             off.render(cam, false);
@@ -417,24 +427,26 @@ pub fn run(
                 flip: 0.0,
                 temporal_noise: f64::NAN,
             };
-            if method.name == "reference" {
-                if let Some(p) = &prev {
-                    ref_motion.push(rmse(&img, p));
-                } else {
-                    ref_motion.push(f64::NAN);
+            if k == 0 {
+                // The reference (methods() puts it first).
+                if let Some(p) = &prev_reference {
+                    ref_motion = rmse(&img, p);
                 }
-                reference.push(img.clone());
-            } else {
-                rec.error = crate::metrics::multiscale_rmse(&img, &reference[i], width, height);
-                rec.flip = flip(&reference[i], &img, width, height);
+                prev_reference = Some(img.clone());
+                reference = Some(img.clone());
+            } else if let Some(r) = &reference {
+                rec.error = crate::metrics::multiscale_rmse(&img, r, width, height);
+                rec.flip = flip(r, &img, width, height);
             }
-            if let Some(p) = &prev {
-                rec.temporal_noise = rmse(&img, p) - ref_motion.get(i).copied().unwrap_or(0.0);
+            if let Some(p) = &prev[k] {
+                rec.temporal_noise = rmse(&img, p) - if k == 0 { rmse(&img, p) } else { ref_motion };
             }
-            prev = Some(img);
+            prev[k] = Some(img);
             frames.push(rec);
         }
     }
+    // Grouped by method, in path order.
+    frames.sort_by_key(|r| (methods.iter().position(|m| m.name == r.method), r.frame));
     let names: Vec<String> = methods.iter().map(|m| m.name.clone()).collect();
     let summary = summarise(&frames, &names);
     Ok(BenchRun { frames, summary, adapter })
