@@ -3,7 +3,7 @@
 // eq. 3.1; alpha-tested colour, relit with the baked normals under the same sun
 // and ambient as the meshes. Rust side: src/render/billboard.rs.
 
-@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(0) var<storage, read> view: View;
 
 @group(1) @binding(0) var bb_color: texture_2d_array<f32>;
 @group(1) @binding(1) var bb_normal: texture_2d_array<f32>;

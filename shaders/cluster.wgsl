@@ -12,7 +12,7 @@
 // - Lines: capsules on a quad around the projected segment.
 // Rust side: src/render/cluster.rs.
 
-@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(0) var<storage, read> view: View;
 
 @group(1) @binding(0) var<storage, read> records: array<u32>;
 @group(1) @binding(1) var noise_alpha: texture_cube<f32>;

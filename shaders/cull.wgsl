@@ -3,7 +3,7 @@
 // The CPU oracle of the same logic is `cpu_select` in src/render/cull.rs.
 // Rust side: src/render/cull.rs.
 
-@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(0) var<storage, read> view: View;
 
 @group(1) @binding(0) var<storage, read> batches: array<Batch>;
 @group(1) @binding(1) var<storage, read> instances: array<vec2<u32>>;
@@ -20,6 +20,9 @@
 // (a buffer may not be INDIRECT and writable storage in one dispatch).
 // Words 4–7: indirect draw arguments of the batch-bounds debug view.
 @group(2) @binding(0) var<storage, read_write> dispatch_args: array<u32, 8>;
+// `control` again, for prepare_dispatch alone: its pipeline layout leaves group 1
+// out, so the compute stage stays within WebGPU's 8 storage buffers.
+@group(2) @binding(1) var<storage, read_write> dispatch_control: array<atomic<u32>>;
 
 const WORKGROUP: u32 = 64u;
 // WebGPU's limit on workgroups per dimension.
@@ -90,7 +93,7 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 @compute @workgroup_size(1)
 fn prepare_dispatch() {
-    let n = atomicLoad(&control[0]);
+    let n = atomicLoad(&dispatch_control[0]);
     dispatch_args[0] = min(n, MAX_GROUPS_X);
     dispatch_args[1] = (n + MAX_GROUPS_X - 1u) / MAX_GROUPS_X;
     dispatch_args[2] = 1u;

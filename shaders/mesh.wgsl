@@ -3,7 +3,7 @@
 // wrote. Mode 1 (capture) writes albedo + normal for the bake's billboards.
 // Rust side: src/render/mesh.rs.
 
-@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(0) var<storage, read> view: View;
 
 // Must match `MeshUniform` in src/render/gpu_data.rs.
 struct MeshParams {

@@ -189,7 +189,7 @@ pub fn capture_billboards(
     let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("capture view"),
         size: std::mem::size_of::<ViewUniform>() as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
     let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
@@ -303,7 +303,7 @@ impl TreeRenderer {
         let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tree view"),
             size: std::mem::size_of::<ViewUniform>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let view_group = shared.view_group(&ctx.device, &view_buffer);

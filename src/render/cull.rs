@@ -49,7 +49,7 @@ impl CullPipelines {
         });
         let dispatch_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cull dispatch args"),
-            entries: &[storage_entry(0, c, false)],
+            entries: &[storage_entry(0, c, false), storage_entry(1, c, false)],
         });
         // The dispatch arguments are bound only while they are written: the
         // instance pass reads them as INDIRECT, which may not meet a writable binding.
@@ -60,7 +60,8 @@ impl CullPipelines {
         });
         let prepare_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("cull prepare"),
-            bind_group_layouts: &[Some(&shared.view), Some(&layout), Some(&dispatch_layout)],
+            // Group 1 left out: view + cull + dispatch would be 9 storage buffers.
+            bind_group_layouts: &[Some(&shared.view), None, Some(&dispatch_layout)],
             immediate_size: 0,
         });
         let make = |entry: &str, layout: &wgpu::PipelineLayout| {

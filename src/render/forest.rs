@@ -352,7 +352,7 @@ impl ForestRenderer {
             species: buffer(device, "species table", u64::from(config.species) * 80, U::STORAGE | U::COPY_DST),
             draw_params: buffer(device, "draw params", slots * 256, U::UNIFORM | U::COPY_DST),
         };
-        let view_buffer = buffer(device, "view", std::mem::size_of::<ViewUniform>() as u64, U::UNIFORM | U::COPY_DST);
+        let view_buffer = buffer(device, "view", std::mem::size_of::<ViewUniform>() as u64, U::STORAGE | U::COPY_DST);
         let view_group = shared.view_group(device, &view_buffer);
         let instance_group = shared.instance_group(device, &pools.batches, &pools.instances, &pools.items);
         let draw_group = shared.draw_group(device, &pools.draw_params);
@@ -393,7 +393,7 @@ impl ForestRenderer {
         let dispatch_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("cull dispatch"),
             layout: &cull.dispatch_layout,
-            entries: &[entry(0, &pools.dispatch)],
+            entries: &[entry(0, &pools.dispatch), entry(1, &pools.control)],
         });
         Self {
             shared,
