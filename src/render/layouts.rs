@@ -6,7 +6,10 @@ use super::gpu_data::{DrawParams, ViewUniform};
 
 /// The shared layouts, created once per device.
 pub struct SharedLayouts {
-    /// Group 0: `View` uniform.
+    /// Group 0: `View`, a read-only storage buffer rather than a uniform: Mesa 22.3's
+    /// lavapipe (Debian 12, our CI) compiles a new shader variant with the uniform
+    /// values inlined at every pipeline bind and never frees it — 1.5 MB and a JIT
+    /// compile per frame. Storage reads cost the same on real GPUs.
     pub view: wgpu::BindGroupLayout,
     /// Group 2: batches, instances, draw items (read-only storage, vertex stage).
     pub instances: wgpu::BindGroupLayout,
@@ -97,7 +100,7 @@ impl SharedLayouts {
         Self { view, instances, draw }
     }
 
-    /// Group 0 for a view uniform buffer.
+    /// Group 0 for a view buffer (STORAGE usage).
     #[must_use]
     pub fn view_group(&self, device: &wgpu::Device, buffer: &wgpu::Buffer) -> wgpu::BindGroup {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
