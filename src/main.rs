@@ -478,8 +478,10 @@ mod cli {
                 bench(&scene, &path, methods, &size, frames, &out)
             }
             Command::BenchTable { dirs, method } => {
-                println!("| run | GPU ms | MS-RMSE | FLIP | temporal noise | draw calls |");
-                println!("| --- | ---: | ---: | ---: | ---: | ---: |");
+                println!(
+                    "| run | GPU ms | cull ms | MS-RMSE | FLIP | temporal noise | draw calls | batches | packs MB |"
+                );
+                println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
                 for d in &dirs {
                     let p = d.join("summary.json");
                     let text = std::fs::read_to_string(&p).with_context(|| format!("cannot read {}", p.display()))?;
@@ -490,10 +492,37 @@ mod cli {
                         bail!("{}: no method {method:?}", p.display());
                     }
                     let med = |k: &str| m[k]["median"].as_f64().unwrap_or(f64::NAN);
+                    // The scene's batches and pack bytes, where it is a local directory.
+                    let scene = std::path::PathBuf::from(v["scene"].as_str().unwrap_or_default());
+                    let (batches, packs) = std::fs::read(scene.join("scene.json"))
+                        .ok()
+                        .and_then(|b| sylva::format::Manifest::decode("scene.json", &b).ok())
+                        .map_or((String::from("?"), String::from("?")), |man| {
+                            let bytes: u64 = man
+                                .species
+                                .iter()
+                                .filter_map(|s| std::fs::metadata(scene.join(&s.pack)).ok())
+                                .map(|md| md.len())
+                                .sum();
+                            (man.counts.batches.to_string(), format!("{:.2}", bytes as f64 / 1e6))
+                        });
+                    // Median cull ms from frames.csv (column 4).
+                    let cull = std::fs::read_to_string(d.join("frames.csv"))
+                        .ok()
+                        .map(|t| {
+                            let v: Vec<f64> = t
+                                .lines()
+                                .filter(|l| l.split(',').next() == Some(method.as_str()))
+                                .filter_map(|l| l.split(',').nth(3)?.parse().ok())
+                                .collect();
+                            sylva::bench::Stat::of(v).median
+                        })
+                        .unwrap_or(f64::NAN);
                     println!(
-                        "| {} | {:.2} | {:.4} | {:.4} | {:.5} | {:.0} |",
+                        "| {} | {:.2} | {:.2} | {:.4} | {:.4} | {:.5} | {:.0} | {batches} | {packs} |",
                         d.display(),
                         med("gpu_ms"),
+                        cull,
                         med("error"),
                         med("flip"),
                         med("temporal_noise"),
