@@ -249,6 +249,10 @@ impl<F: Fetcher> OffscreenScene<F> {
         let frame_cpu_ms = cpu.elapsed().as_secs_f64() * 1e3;
         let mut stats = FrameStats { draw_calls, frame_cpu_ms, ..Default::default() };
         let wait = |ctx: &GpuContext| ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
+        if measure {
+            // Earlier unmeasured frames may still be running: their time is not this frame's.
+            wait(&self.ctx);
+        }
         let t = Instant::now();
         self.ctx.queue.submit([cull.finish()]);
         if measure {
