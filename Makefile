@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-clusters sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -82,6 +82,18 @@ bench-clusters: release
 	@for m in oak pine; do echo "== $$m"; /usr/bin/time -f "%e s wall, %M KB peak" \
 	  target/release/sylva-bake bench-clusters --model ../shared/data/models/eztree_$${m}_medium.glb; done
 	@echo "== 27,000 leaves"; /usr/bin/time -f "%e s wall, %M KB peak" target/release/sylva-bake bench-clusters --leaves 27000
+
+# Stress runs (docs/BENCHMARKS.md): 10,000 frames forwards and back along the
+# flyover of the small test scene, then 10^7 trees baked and streamed along the
+# flyover with bounded memory. Each fails unless memory stays flat and frame time
+# does not grow.
+bench-stress: release
+	target/release/sylva bench --stress --scene tests/fixtures/forest-small --path flyover \
+	  --frames 10000 --size 320x180 --out target/bench/stress-10k-frames
+	@test -f target/bench/demo-10m/scene.json || /usr/bin/time -f "bake of 10^7 trees: %e s wall, %M KB peak" \
+	  target/release/sylva-bake demo --trees 10000000 --out target/bench/demo-10m
+	target/release/sylva bench --stress --scene target/bench/demo-10m --path flyover \
+	  --frames 1000 --size 320x180 --out target/bench/stress-10m-trees
 
 # Parameter sweeps (seed 004 ch. 5): a demo forest of SWEEP_TREES baked per value
 # (once; kept under target/sweep/), Sylva against the full-mesh reference on the
