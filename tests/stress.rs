@@ -1,0 +1,41 @@
+//! A short `sylva bench --stress` run on the fixture scene, alone in its process
+//! (it reads the process's resident set): after one warm-up pass along the path
+//! and back, memory must stay flat and every counter finite. Frame time is not
+//! asserted here — timing belongs to `make bench-stress`. This is the test that
+//! found Mesa 22.3 lavapipe compiling (and leaking) a shader variant per pipeline
+//! bind while the view was a uniform buffer: 1.5 MB per frame.
+
+use sylva::bench::{self, stress, NamedPath};
+use sylva::render::camera::Camera;
+use sylva::render::forest::{PoolConfig, RenderSettings};
+use sylva::render::offscreen::OffscreenScene;
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small");
+
+#[test]
+fn memory_stays_flat_along_a_long_path() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
+    }
+    let mut probe = OffscreenScene::open(SCENE, 16, 16, PoolConfig::default()).expect("GPU adapter");
+    probe.load_view(&Camera::default(), 60.0);
+    let manifest = probe.stream.manifest().expect("manifest").clone();
+    drop(probe);
+    let pass = bench::interpolate(&bench::named_path(NamedPath::Flyover, &manifest, None), 16);
+    let period = 2 * (pass.len() - 1);
+    let cameras = stress::ping_pong(&pass, 4 * period);
+    let (frames, summary) =
+        stress::run(SCENE, &cameras, period, 160, 90, RenderSettings::default(), &mut |_, _| {}).unwrap();
+    assert_eq!(frames.len(), 4 * period);
+    assert_eq!(summary.non_finite_frames, 0);
+    assert!(frames.iter().any(|f| f.drawn > 0), "nothing was drawn");
+    assert!(summary.rss_after_first > 0, "no resident set size (/proc missing?)");
+    let after_warmup = frames[period..].iter().map(|f| f.rss_bytes).max().unwrap();
+    let grown_mb = (after_warmup as f64 - summary.rss_after_first as f64) / 1e6;
+    assert!(
+        after_warmup as f64 <= summary.rss_after_first as f64 * 1.10,
+        "memory grew by {grown_mb:.1} MB over {} frames after the warm-up pass ({:.0} MB then)",
+        frames.len() - period,
+        summary.rss_after_first as f64 / 1e6
+    );
+}
