@@ -86,10 +86,18 @@ pub fn write_plots(dir: &Path, run: &BenchRun, title: &str) -> Result<()> {
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d((xmin.max(1e-3)..xmax).log_scale(), 0f64..ymax)
+            // log10 of the time on a linear axis, labelled in ms: plotters' own log
+            // axis crowds its labels into the top decade.
+            .build_cartesian_2d(xmin.max(1e-3).log10()..xmax.log10(), 0f64..ymax)
             .map_err(|e| plot_err(e.into()))?;
         chart
             .configure_mesh()
+            .x_labels(8)
+            .x_label_formatter(&|v| {
+                let ms = 10f64.powf(*v);
+                let digits = 10f64.powf(ms.log10().floor() - 1.0);
+                format!("{}", (ms / digits).round() * digits)
+            })
             .x_desc("median GPU ms per frame (log scale)")
             .y_desc("median multi-scale RMSE vs reference")
             .draw()
@@ -97,7 +105,7 @@ pub fn write_plots(dir: &Path, run: &BenchRun, title: &str) -> Result<()> {
         // A legend, not labels by the points: the fast methods sit close together.
         for (name, m) in &run.summary {
             let c = color(name);
-            let p = (m.gpu_ms.median, m.error.median);
+            let p = (m.gpu_ms.median.max(1e-3).log10(), m.error.median);
             chart
                 .draw_series(std::iter::once(Circle::new(p, 6, c.filled())))
                 .map_err(|e| plot_err(e.into()))?
