@@ -380,6 +380,22 @@ fn cameras_at_the_extremes_stay_close_to_the_full_meshes() {
     let (e, img) = error_to_full_mesh(&mut off, &inside);
     assert!(foliage_share(&img) > 0.1, "inside a batch: foliage share {}", foliage_share(&img));
     assert!(e < 0.04, "inside a batch: error to the full meshes {e:.4}");
+    // Inside a tree's crown, beside the trunk (leaves centimetres to decimetres from
+    // the eye, near plane 5 cm): the view is mostly leaves; that tree is its full
+    // mesh, the trees seen through gaps are LoD.
+    let (_, batches, instances, _) = off.read_selection();
+    let b = batches.iter().find(|b| b.instance_count > 0).unwrap();
+    let tree = instances[b.instance_offset as usize].decode(b);
+    let base = DVec3::from(tree.position_m.map(f64::from));
+    let crown = Camera {
+        eye_m: base + DVec3::new(1.5 * f64::from(tree.scale), 0.0, f64::from(tree.scale) * 0.7 * 25.0),
+        pitch_rad: 0.3,
+        near_m: 0.05,
+        ..Camera::default()
+    };
+    let (e, img) = error_to_full_mesh(&mut off, &crown);
+    assert!(foliage_share(&img) > 0.3, "inside a crown: foliage share {}", foliage_share(&img));
+    assert!(e < 0.04, "inside a crown: error to the full meshes {e:.4}");
     // 100 km up, straight down, nothing beyond draw distance: the forest is a
     // hundredth of a pixel, so the image is the plain background.
     off.settings.draw_distance_m = 200_000.0;
