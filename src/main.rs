@@ -506,18 +506,10 @@ mod cli {
                                 .sum();
                             (man.counts.batches.to_string(), format!("{:.2}", bytes as f64 / 1e6))
                         });
-                    // Median cull ms from frames.csv (column 4).
-                    let cull = std::fs::read_to_string(d.join("frames.csv"))
-                        .ok()
-                        .map(|t| {
-                            let v: Vec<f64> = t
-                                .lines()
-                                .filter(|l| l.split(',').next() == Some(method.as_str()))
-                                .filter_map(|l| l.split(',').nth(3)?.parse().ok())
-                                .collect();
-                            sylva::bench::Stat::of(v).median
-                        })
-                        .unwrap_or(f64::NAN);
+                    // Median cull ms from frames.csv.
+                    let cull = sylva::bench::read_csv(&d.join("frames.csv")).map_or(f64::NAN, |frames| {
+                        sylva::bench::Stat::of(frames.iter().filter(|r| r.method == method).map(|r| r.cull_ms)).median
+                    });
                     println!(
                         "| {} | {:.2} | {:.2} | {:.4} | {:.4} | {:.5} | {:.0} | {batches} | {packs} |",
                         d.display(),

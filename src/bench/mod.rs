@@ -439,7 +439,8 @@ pub fn run(
                 rec.flip = flip(r, &img, width, height);
             }
             if let Some(p) = &prev[k] {
-                rec.temporal_noise = rmse(&img, p) - if k == 0 { rmse(&img, p) } else { ref_motion };
+                // The reference's own change is the baseline: 0 for itself.
+                rec.temporal_noise = if k == 0 { 0.0 } else { rmse(&img, p) - ref_motion };
             }
             prev[k] = Some(img);
             frames.push(rec);
