@@ -339,12 +339,17 @@ fn extreme_cameras_render_without_artefacts() {
     assert!(share > 0.0005 && share < 0.05, "forest 2 km away covers {share}");
 }
 
+/// `settings` with every tree drawn as its full mesh (the accuracy reference).
+fn full_meshes(settings: RenderSettings) -> RenderSettings {
+    RenderSettings { quality: 1.0e6, representations: Representations::MESHES, ..settings }
+}
+
 /// `cam` rendered by Sylva and with every tree as its full mesh (the accuracy
 /// reference): multi-scale RMSE between the two, and Sylva's image.
 fn error_to_full_mesh(off: &mut OffscreenScene, cam: &Camera) -> (f64, Vec<u8>) {
     let sylva = off.settings;
     let img = render(off, cam);
-    off.settings = RenderSettings { quality: 1.0e6, representations: Representations::MESHES, ..sylva };
+    off.settings = full_meshes(sylva);
     let full = render(off, cam);
     off.settings = sylva;
     (multiscale_rmse(&img, &full, W, H), img)
@@ -422,7 +427,7 @@ fn band_edges_do_not_flicker() {
     // Sylva's change between a and b is close to what the full meshes change.
     let sylva_change = multiscale_rmse(&frames[0], &frames[1], W, H);
     let sylva = off.settings;
-    off.settings = RenderSettings { quality: 1.0e6, representations: Representations::MESHES, ..sylva };
+    off.settings = full_meshes(sylva);
     let full_change = multiscale_rmse(&render(&mut off, &a), &render(&mut off, &b), W, H);
     let noise = sylva_change - full_change;
     assert!(sylva_change > 0.0 && full_change > 0.0);
