@@ -421,9 +421,13 @@ fn band_edges_do_not_flicker() {
     let a = off.named_camera(NamedView::Medium, 30.0).unwrap();
     let b = Camera { eye_m: a.eye_m - a.forward() * (a.eye_m.length() * 0.01), ..a };
     let frames: Vec<Vec<u8>> = (0..6).map(|i| render(&mut off, if i % 2 == 0 { &a } else { &b })).collect();
-    // The same camera gives the same image: no state that drifts between frames.
-    assert_eq!(frames[0], frames[2], "frame 0 and 2 (same camera) differ");
-    assert_eq!(frames[1], frames[5], "frame 1 and 5 (same camera) differ");
+    // The same camera gives the same image: no state drifts between frames. Not
+    // bit for bit: the cull pass appends draw items with atomics, so trees at equal
+    // depth may draw in another order and a few pixels of a depth tie can change.
+    for (a, b) in [(0, 2), (1, 5)] {
+        let e = multiscale_rmse(&frames[a], &frames[b], W, H);
+        assert!(e < 0.0005, "frames {a} and {b} (same camera) differ by {e:.5}");
+    }
     // Sylva's change between a and b is close to what the full meshes change.
     let sylva_change = multiscale_rmse(&frames[0], &frames[1], W, H);
     let sylva = off.settings;
