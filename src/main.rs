@@ -552,7 +552,7 @@ mod cli {
                 if !web.join("pkg").join("sylva_bg.wasm").is_file() {
                     bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
                 }
-                let config = sylva::serve::ServeConfig { web_dir: web, scene_dir: dir };
+                let config = sylva::serve::ServeConfig { web_dir: web, scene_dir: dir, log: None };
                 sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
                     println!("serving the Sylva viewer on http://{addr}/");
                     use std::io::Write as _;

@@ -17,6 +17,8 @@ pub struct ServeConfig {
     pub web_dir: PathBuf,
     /// The scene served under `/scene/`.
     pub scene_dir: PathBuf,
+    /// Where to record each request as `"METHOD PATH [RANGE]"` (tests count them).
+    pub log: Option<std::sync::Arc<std::sync::Mutex<Vec<String>>>>,
 }
 
 /// MIME type by extension.
@@ -130,6 +132,11 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
     }
     let mut parts = request_line.split_whitespace();
     let (method, path) = (parts.next().unwrap_or(""), parts.next().unwrap_or("/"));
+    if let Some(log) = &config.log {
+        if let Ok(mut log) = log.lock() {
+            log.push(format!("{method} {path} {}", range.as_deref().unwrap_or("")).trim_end().to_string());
+        }
+    }
     let head_only = method == "HEAD";
     if method == "OPTIONS" {
         return respond(&mut stream, "204 No Content", &[("Access-Control-Allow-Headers", "Range".into())], b"", false);
@@ -146,8 +153,8 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
             head_only,
         );
     };
-    let mut body = Vec::new();
-    std::fs::File::open(&file)?.read_to_end(&mut body)?;
+    let mut f = std::fs::File::open(&file)?;
+    let len = f.metadata()?.len();
     let mime = mime_type(&file);
     // The viewer and manifest change when rebuilt; tiles and packs of a scene are immutable.
     let cache =
@@ -155,11 +162,15 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
     let mut headers =
         vec![("Content-Type", mime.to_string()), ("Cache-Control", cache.into()), ("Accept-Ranges", "bytes".into())];
     if let Some(r) = range {
-        let len = body.len() as u64;
         return match parse_range(&r, len) {
             Some((a, b)) => {
+                // Read only the range: a viewer fetches parts of large packs.
+                use std::io::Seek;
+                f.seek(std::io::SeekFrom::Start(a))?;
+                let mut part = Vec::new();
+                f.take(b - a + 1).read_to_end(&mut part)?;
                 headers.push(("Content-Range", format!("bytes {a}-{b}/{len}")));
-                respond(&mut stream, "206 Partial Content", &headers, &body[a as usize..=b as usize], head_only)
+                respond(&mut stream, "206 Partial Content", &headers, &part, head_only)
             }
             None => {
                 headers.push(("Content-Range", format!("bytes */{len}")));
@@ -167,6 +178,8 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
             }
         };
     }
+    let mut body = Vec::new();
+    f.read_to_end(&mut body)?;
     let compressible = mime.starts_with("text/") || mime == "application/json" || mime == "application/wasm";
     if gzip_ok && compressible && body.len() > 1024 {
         let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
@@ -209,7 +222,7 @@ mod tests {
         std::fs::write(dir.join("web/index.html"), "x").unwrap();
         std::fs::write(dir.join("scene/tiles/0_0.tile"), "t").unwrap();
         std::fs::write(dir.join("secret"), "s").unwrap();
-        let c = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene") };
+        let c = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene"), log: None };
         assert_eq!(resolve(&c, "/"), Some(dir.join("web/index.html")));
         assert_eq!(resolve(&c, "/scene/tiles/0_0.tile?x=1"), Some(dir.join("scene/tiles/0_0.tile")));
         for bad in [
@@ -251,7 +264,7 @@ mod live_tests {
         std::fs::write(dir.join("web/pkg/sylva_bg.wasm"), b"\0asm\x01\0\0\0").unwrap();
         let tile: Vec<u8> = (0..=255u8).collect();
         std::fs::write(dir.join("scene/tiles/0_0.tile"), &tile).unwrap();
-        let config = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene") };
+        let config = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene"), log: None };
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
         let base = format!("http://{}", rx.recv().unwrap());

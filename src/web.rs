@@ -28,14 +28,24 @@ pub struct WebFetcher {
     done: Rc<RefCell<Done>>,
 }
 
-async fn fetch_bytes(url: &str) -> Result<Vec<u8>, FetchError> {
+async fn fetch_bytes(url: &str, range: Option<crate::scene::fetch::ByteRange>) -> Result<Vec<u8>, FetchError> {
     let transport = |e: JsValue| FetchError::Transport {
         url: url.to_string(),
         message: e.as_string().unwrap_or_else(|| format!("{e:?}")),
     };
     let window = web_sys::window().ok_or_else(|| transport(JsValue::from_str("no window")))?;
-    let resp: web_sys::Response =
-        JsFuture::from(window.fetch_with_str(url)).await.map_err(transport)?.dyn_into().map_err(transport)?;
+    let promise = match range {
+        Some((a, b)) => {
+            // A single range is a CORS-safelisted header: no preflight on a static host.
+            let headers = web_sys::Headers::new().map_err(transport)?;
+            headers.set("Range", &format!("bytes={a}-{}", b.max(a + 1) - 1)).map_err(transport)?;
+            let init = web_sys::RequestInit::new();
+            init.set_headers(&headers);
+            window.fetch_with_str_and_init(url, &init)
+        }
+        None => window.fetch_with_str(url),
+    };
+    let resp: web_sys::Response = JsFuture::from(promise).await.map_err(transport)?.dyn_into().map_err(transport)?;
     match resp.status() {
         404 => return Err(FetchError::NotFound { url: url.to_string() }),
         s if !(200..300).contains(&s) => return Err(FetchError::Status { url: url.to_string(), status: s }),
@@ -46,13 +56,13 @@ async fn fetch_bytes(url: &str) -> Result<Vec<u8>, FetchError> {
 }
 
 impl Fetcher for WebFetcher {
-    fn start(&mut self, url: &str) -> RequestId {
+    fn start_range(&mut self, url: &str, range: Option<crate::scene::fetch::ByteRange>) -> RequestId {
         let id = self.next;
         self.next += 1;
         self.pending.set(self.pending.get() + 1);
         let (pending, done, url) = (self.pending.clone(), self.done.clone(), url.to_string());
         wasm_bindgen_futures::spawn_local(async move {
-            let result = fetch_bytes(&url).await;
+            let result = fetch_bytes(&url, range).await;
             done.borrow_mut().push((id, result));
             pending.set(pending.get() - 1);
         });
@@ -255,6 +265,7 @@ impl Viewer {
         let t0 = now_ms;
         let cam = self.camera();
         let view = cam.view_data(self.config.width, self.config.height);
+        self.renderer.measure_reach(&view, &self.settings);
         self.stream.update(
             &mut self.renderer,
             &self.device,
@@ -541,6 +552,10 @@ impl Viewer {
             "items_dropped": w.get(5).copied().unwrap_or(0),
             "tiles_resident": s.tiles_resident,
             "tiles_loading": s.loading,
+            "tiles_known": s.tiles_known,
+            "index_nodes_loaded": s.index_nodes_loaded,
+            "index_nodes_total": s.index_nodes_total,
+            "requests": s.requests,
             "bytes_fetched": s.bytes_fetched,
             "trees_total": self.stream.manifest().map_or(0, |m| m.counts.trees),
             "trees_resident": self.renderer.resident_instances(),

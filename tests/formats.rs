@@ -175,6 +175,7 @@ fn sample_manifest() -> Manifest {
                 height_m: 10.0,
                 bounds: b,
                 trees: 3,
+                head_bytes: None,
             },
             SpeciesEntry {
                 name: "b".into(),
@@ -183,6 +184,7 @@ fn sample_manifest() -> Manifest {
                 height_m: 10.0,
                 bounds: b,
                 trees: 2,
+                head_bytes: None,
             },
         ],
         tiles: vec![TileEntry {
@@ -195,6 +197,8 @@ fn sample_manifest() -> Manifest {
             batches: 2,
             bounds: b,
         }],
+        index: None,
+        shard: None,
     }
 }
 
@@ -414,7 +418,25 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 2.into(), "version 2");
+    manifest_error(|v| v["version"] = 3.into(), "version 3");
+    manifest_error(
+        |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
+        "needs manifest version 2",
+    );
+    manifest_error(
+        |v| {
+            v["version"] = 2.into();
+            v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64});
+        },
+        "empty \"tiles\" list",
+    );
+    manifest_error(
+        |v| {
+            v["version"] = 2.into();
+            v["shard"] = serde_json::json!({"index": 2, "count": 2});
+        },
+        "shard 2 of 2",
+    );
     manifest_error(|v| v["cell_size_m"] = (-1.0).into(), "must be positive");
     manifest_error(|v| v["origin_m"][1] = serde_json::Value::Null, "invalid JSON");
     manifest_error(|v| v["bounds"]["min"][0] = 1000.0.into(), "exceeds max");

@@ -192,6 +192,9 @@ fn renders_match_references() {
 fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
     let bytes = std::fs::read(src.join("scene.json")).unwrap();
     let mut m = Manifest::decode("scene.json", &bytes).unwrap();
+    // The copy lists its tiles flat.
+    m.tiles = sylva::format::index::read_all_tiles(src, &m).unwrap();
+    m.index = None;
     for k in 0..3 {
         m.origin_m[k] -= f64::from(shift[k]);
         m.bounds.min[k] += shift[k];
@@ -476,7 +479,8 @@ fn serve(root: PathBuf, bad404: String, bad500: String, truncated: String) -> u1
 #[test]
 fn streaming_over_http_survives_failing_tiles() {
     let m = Manifest::decode("scene.json", &std::fs::read(fixture().join("scene.json")).unwrap()).unwrap();
-    let urls: Vec<String> = m.tiles.iter().map(|t| t.url.clone()).collect();
+    let urls: Vec<String> =
+        sylva::format::index::read_all_tiles(&fixture(), &m).unwrap().iter().map(|t| t.url.clone()).collect();
     let port = serve(fixture(), urls[0].clone(), urls[1].clone(), urls[2].clone());
     let mut off = open(&format!("http://127.0.0.1:{port}/scene.json"));
     off.load_view(&Camera::default(), 30.0);
@@ -500,4 +504,65 @@ fn streaming_over_http_survives_failing_tiles() {
     assert_eq!(stats.tiles_resident as usize, urls.len() - 3, "the other tiles are resident");
     assert!(off.stream.is_settled());
     assert!(foliage_share(&img) > 0.1, "the rest of the scene renders");
+}
+
+/// Byte ranges `(first, last)` (inclusive) of the pack requests in a server log.
+fn pack_ranges(log: &[String], pack: &str) -> Vec<Option<(u64, u64)>> {
+    log.iter()
+        .filter(|l| l.starts_with(&format!("GET /scene/{pack}")))
+        .map(|l| {
+            let r = l.split_whitespace().nth(2)?.strip_prefix("bytes=")?;
+            let (a, b) = r.split_once('-')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        })
+        .collect()
+}
+
+#[test]
+fn a_far_view_fetches_no_mesh_or_cluster_level() {
+    use sylva::format::pack::{PackHead, PackPart};
+    use sylva::serve::{serve, ServeConfig};
+    let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let config = ServeConfig { web_dir: tmp("web"), scene_dir: fixture(), log: Some(log.clone()) };
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = serve(config, "127.0.0.1:0", |a| {
+            let _ = tx.send(a);
+        });
+    });
+    let addr = rx.recv().unwrap();
+    let mut off = open(&format!("http://{addr}/scene/scene.json"));
+    // The first view is the far one (`manifest()` would load a view at the origin).
+    let m = Manifest::decode("scene.json", &std::fs::read(fixture().join("scene.json")).unwrap()).unwrap();
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let far = Camera::look_at(DVec3::new(c.x, c.y - 1500.0, c.z + 600.0), c);
+    let img = render(&mut off, &far);
+    assert!(foliage_share(&img) > 0.005, "the far view shows the forest ({:.3})", foliage_share(&img));
+    let stats = off.stream.stats();
+    assert!(stats.index_nodes_total > 1 && stats.index_nodes_loaded >= 1, "{stats:?}");
+    let far_log = log.lock().unwrap().clone();
+    let part = |pack: &str, p: PackPart| {
+        let bytes = std::fs::read(fixture().join(pack)).unwrap();
+        PackHead::decode(pack, &bytes).unwrap().part_range(p).unwrap()
+    };
+    let overlaps = |r: (u64, u64), (a, b): (u64, u64)| r.0 < b && a <= r.1;
+    for s in &m.species {
+        let ranges = pack_ranges(&far_log, &s.pack);
+        assert!(!ranges.is_empty() && ranges.len() <= 2, "{}: head and billboards only: {ranges:?}", s.pack);
+        for r in &ranges {
+            let r = r.unwrap_or_else(|| panic!("{}: the whole pack was fetched: {far_log:?}", s.pack));
+            assert!(!overlaps(r, part(&s.pack, PackPart::Meshes)), "{}: the far view fetched mesh bytes {r:?}", s.pack);
+            assert!(!overlaps(r, part(&s.pack, PackPart::Clusters)), "{}: the far view fetched clusters {r:?}", s.pack);
+        }
+        let bb = part(&s.pack, PackPart::Billboards);
+        assert!(ranges.iter().flatten().any(|r| overlaps(*r, bb)), "{}: billboards fetched", s.pack);
+    }
+    // Close among the trees the meshes are needed, and fetched.
+    let close = off.named_camera(NamedView::Close, 30.0).unwrap();
+    render(&mut off, &close);
+    let close_log = log.lock().unwrap().clone();
+    let fetched_meshes = m.species.iter().any(|s| {
+        pack_ranges(&close_log, &s.pack).iter().flatten().any(|r| overlaps(*r, part(&s.pack, PackPart::Meshes)))
+    });
+    assert!(fetched_meshes, "the close view fetches mesh levels: {close_log:?}");
 }

@@ -71,6 +71,26 @@ pub fn default_cell_size(trees: &[SceneTree], target: f64) -> u32 {
     2f64.powf(pow) as u32
 }
 
+/// The tile (column, row) holding a tree at `pos` (metres from the origin):
+/// the same rule [`build_tiles`] groups by.
+#[must_use]
+pub fn tile_of(pos: DVec3, cell_size_m: u32, tile_cells: u32) -> (i64, i64) {
+    let cell = f64::from(cell_size_m);
+    let tc = i64::from(tile_cells);
+    (((pos.x / cell).floor() as i64).div_euclid(tc), ((pos.y / cell).floor() as i64).div_euclid(tc))
+}
+
+/// The shard (of `count`) that bakes tile `(x, y)`: a hash of the tile, so every
+/// shard gets a similar share of any region.
+#[must_use]
+pub fn shard_of_tile(x: i64, y: i64, count: u32) -> u32 {
+    let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    h ^= h >> 31;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 29;
+    (h % u64::from(count.max(1))) as u32
+}
+
 /// Builds the tiles of a scene. `cell_size_m` ≤ [`MAX_CELL_SIZE_M`].
 ///
 /// # Panics

@@ -39,7 +39,8 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut instance_bytes = 0u64;
     let mut tile_bytes = 0u64;
-    for t in &m.tiles {
+    let tiles = sylva::format::index::read_all_tiles(dir, &m).map_err(anyhow::Error::msg)?;
+    for t in &tiles {
         let p = dir.join(&t.url);
         let b = std::fs::read(&p).with_context(|| format!("cannot read tile {}", p.display()))?;
         let tile = Tile::decode(&p.display().to_string(), &b, m.species.len() as u32)?;
@@ -72,6 +73,8 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         "species_count": m.species.len(),
         "batches": m.counts.batches,
         "tiles": m.counts.tiles,
+        "index_nodes": m.index.as_ref().map_or(0, |i| i.nodes),
+        "index_depth": m.index.as_ref().map_or(0, |i| i.depth),
         "bytes_per_tree": instance_bytes as f64 / trees,
         "tile_bytes_per_tree": tile_bytes as f64 / trees,
         "tile_bytes": tile_bytes,
@@ -178,6 +181,9 @@ pub fn to_text(v: &Value) -> String {
                 "{} trees, {} species, {} batches, {} tiles; cell {} m, {} cells per tile side\n",
                 v["trees_total"], v["species_count"], v["batches"], v["tiles"], v["cell_size_m"], v["tile_cells"]
             );
+            if v["index_nodes"].as_u64().unwrap_or(0) > 0 {
+                out += &format!("hierarchical tile index: {} nodes, depth {}\n", v["index_nodes"], v["index_depth"]);
+            }
             out += &format!(
                 "instance bytes per tree {:.2} (tile files incl. batch records: {:.2}); tiles {:.2} MB, packs {:.2} MB\n",
                 v["bytes_per_tree"].as_f64().unwrap_or(0.0),

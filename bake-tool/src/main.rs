@@ -6,6 +6,7 @@ mod clusters;
 mod demo;
 mod gltf_import;
 mod inspect;
+mod merge;
 mod pack_build;
 mod placements;
 mod reproject;
@@ -25,6 +26,7 @@ use pack_build::PackOptions;
 use placements::CoordKind;
 use reproject::{Crs, Reprojector};
 use scene_write::{SceneInput, SceneSummary};
+use sylva::format::index::DEFAULT_NODE_TILES;
 
 #[derive(Parser)]
 #[command(
@@ -61,6 +63,22 @@ enum Command {
         /// EM starts per level.
         #[arg(long, default_value_t = 4)]
         tries: usize,
+    },
+    /// Join the outputs of a sharded bake (`bake --shard I/N`) into one scene,
+    /// byte-identical to a single-process bake.
+    #[command(
+        after_help = "Example:\n  for i in 0 1 2 3; do sylva-bake bake ... --shard $i/4 --out part-$i & done; wait\n  sylva-bake merge part-0 part-1 part-2 part-3 --out scene/"
+    )]
+    Merge {
+        /// The shard output directories (any order; all N of them).
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Output scene directory (replaced atomically).
+        #[arg(long)]
+        out: PathBuf,
+        /// Most tiles per index node (the value the shards were baked with).
+        #[arg(long, default_value_t = DEFAULT_NODE_TILES, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        index_node_tiles: u32,
     },
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
@@ -104,6 +122,25 @@ struct PackArgs {
     /// Grid cells per tile side.
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=256))]
     tile_cells: u32,
+    /// Most tiles per node of the hierarchical tile index; scenes with more tiles
+    /// than this get one (`merge` must be given the same value).
+    #[arg(long, default_value_t = DEFAULT_NODE_TILES, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    index_node_tiles: u32,
+    /// Bake only shard I of N of the tile grid (0-based), e.g. 0/4, as one task of
+    /// an array job; join the N outputs with `sylva-bake merge`. Shard 0 also bakes
+    /// the species packs. Every shard reads the whole input.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard)]
+    shard: Option<(u32, u32)>,
+}
+
+fn parse_shard(s: &str) -> Result<(u32, u32), String> {
+    let (i, n) = s.split_once('/').ok_or_else(|| format!("{s:?}: expected I/N, e.g. 0/4"))?;
+    let i: u32 = i.trim().parse().map_err(|_| format!("{s:?}: I must be a whole number"))?;
+    let n: u32 = n.trim().parse().map_err(|_| format!("{s:?}: N must be a whole number"))?;
+    if n == 0 || n > 65_536 || i >= n {
+        return Err(format!("{s:?}: need 0 ≤ I < N ≤ 65536"));
+    }
+    Ok((i, n))
 }
 
 impl PackArgs {
@@ -208,6 +245,20 @@ fn main() {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
+        Command::Merge { dirs, out, index_node_tiles } => {
+            let started = Instant::now();
+            merge::merge(&dirs, &out, index_node_tiles, &log).map(|m| {
+                log(&format!(
+                    "wrote {}: {} trees, {} batches, {} tiles{} in {:.1} s",
+                    out.display(),
+                    m.counts.trees,
+                    m.counts.batches,
+                    m.counts.tiles,
+                    m.index.as_ref().map_or(String::new(), |i| format!(", {} index nodes", i.nodes)),
+                    started.elapsed().as_secs_f64()
+                ));
+            })
+        }
         Command::Inspect { path, json } => inspect::inspect(&path).map(|v| {
             if json {
                 println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
@@ -259,6 +310,8 @@ fn demo(args: &DemoArgs) -> Result<()> {
         tile_cells: args.pack.tile_cells,
         pack: args.pack.options()?,
         debug_dump: args.pack.debug_dump.clone(),
+        shard: args.pack.shard,
+        index_node_tiles: args.pack.index_node_tiles,
     };
     let s = scene_write::write_scene(&input, &args.out, &log)?;
     report_summary(&s, &args.out, started);
@@ -518,6 +571,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
         tile_cells: args.pack.tile_cells,
         pack: pack_opts,
         debug_dump: args.pack.debug_dump.clone(),
+        shard: args.pack.shard,
+        index_node_tiles: args.pack.index_node_tiles,
     };
     log(&format!("batching with {} m cells", input.cell_size_m));
     let s = scene_write::write_scene(&input, &args.out, &log)?;

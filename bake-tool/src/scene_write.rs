@@ -8,16 +8,17 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
+use sylva::format::build_index;
 use sylva::format::manifest::{
-    Bounds, Counts, Crs as CrsEntry, Manifest, SpeciesEntry, TileEntry, SCENE_FORMAT, SCENE_VERSION,
+    Bounds, Counts, Crs as CrsEntry, Manifest, ShardStamp, SpeciesEntry, TileEntry, SCENE_FORMAT, SCENE_VERSION,
 };
 use sylva::format::tile::encode_ids;
 use sylva::render::capture::CapturePipelines;
 use sylva::render::GpuContext;
 
-use crate::batching::{build_tiles, SceneTree, SpeciesShape};
+use crate::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
 use crate::gltf_import::ImportedModel;
 use crate::pack_build::{build_pack, PackOptions};
 use crate::reproject::Crs;
@@ -40,6 +41,10 @@ pub struct SceneInput {
     pub pack: PackOptions,
     /// Where to write billboard PNGs, if anywhere.
     pub debug_dump: Option<PathBuf>,
+    /// Bake only shard `.0` of `.1` of the tile grid (packs only in shard 0).
+    pub shard: Option<(u32, u32)>,
+    /// Most tiles per index node; scenes with more tiles get a hierarchical index.
+    pub index_node_tiles: u32,
 }
 
 /// What was written.
@@ -77,9 +82,15 @@ pub fn shape_of(model: &ImportedModel) -> SpeciesShape {
 
 /// Bakes and writes the scene to `out` atomically.
 pub fn write_scene(input: &SceneInput, out: &Path, log: &dyn Fn(&str)) -> Result<SceneSummary> {
-    if input.trees.is_empty() {
+    if input.trees.is_empty() && input.shard.is_none() {
         bail!("no trees to bake: every placement was skipped (see the report above)");
     }
+    write_atomically(out, |tmp| write_into(input, tmp, log))
+}
+
+/// Runs `write` into a temporary sibling of `out`, then moves it into place,
+/// replacing an older scene. On failure nothing is left behind.
+pub fn write_atomically<T>(out: &Path, write: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
     let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
     let name = out.file_name().map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned());
@@ -87,8 +98,7 @@ pub fn write_scene(input: &SceneInput, out: &Path, log: &dyn Fn(&str)) -> Result
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp)?;
     }
-    let result = write_into(input, &tmp, log);
-    match result {
+    match write(&tmp) {
         Ok(summary) => {
             let old = parent.join(format!(".{name}.old-{}", std::process::id()));
             if out.exists() {
@@ -111,23 +121,109 @@ pub fn write_scene(input: &SceneInput, out: &Path, log: &dyn Fn(&str)) -> Result
     }
 }
 
+/// Bytes of a pack's header, section table and `META` section (the first section).
+fn pack_head_bytes(pack: &[u8]) -> u64 {
+    let at = sylva::format::pack::PACK_HEADER_BYTES;
+    let word = |o: usize| u64::from_le_bytes(pack[o..o + 8].try_into().expect("8 bytes"));
+    word(at + 8) + word(at + 16)
+}
+
+/// Finishes a scene in `dir` from its species and tiles: writes the index (or a
+/// flat list) and `scene.json`. Shared by the bake and by `merge`, so both give
+/// the same bytes.
+pub fn finish_scene(
+    dir: &Path,
+    mut base: Manifest,
+    mut tiles: Vec<TileEntry>,
+    node_tiles: u32,
+    flat: bool,
+) -> Result<Manifest> {
+    tiles.sort_by_key(|t| (t.y, t.x));
+    let bounds = sylva::format::index::union_bounds(tiles.iter().map(|t| &t.bounds))
+        .unwrap_or(Bounds { min: [0.0; 3], max: [0.0; 3] });
+    base.bounds = bounds;
+    base.counts = Counts {
+        trees: tiles.iter().map(|t| t.trees).sum(),
+        batches: tiles.iter().map(|t| u64::from(t.batches)).sum(),
+        tiles: tiles.len() as u64,
+    };
+    base.version = SCENE_VERSION;
+    if !flat && tiles.len() > node_tiles as usize {
+        let built = build_index(&tiles, node_tiles);
+        std::fs::create_dir_all(dir.join("index"))?;
+        for (url, node) in &built.nodes {
+            std::fs::write(dir.join(url), node.encode())?;
+        }
+        base.index = Some(built.reference);
+        base.tiles = Vec::new();
+    } else {
+        base.index = None;
+        base.tiles = tiles;
+    }
+    let bytes = base.encode();
+    // Validate what we wrote with the same decoder the viewer uses.
+    Manifest::decode("scene.json", &bytes)?;
+    std::fs::write(dir.join("scene.json"), bytes)?;
+    Ok(base)
+}
+
 fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<SceneSummary> {
     std::fs::create_dir_all(dir.join("species"))?;
     std::fs::create_dir_all(dir.join("tiles"))?;
     let t0 = Instant::now();
-    let gpu = GpuContext::new_headless_blocking().context("the billboard bake renders with the GPU (or lavapipe)")?;
-    log(&format!("rendering billboards on {}", gpu.adapter_summary()));
-    let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    // A shard keeps the trees of its tiles; shard 0 also bakes the packs.
+    let shard_trees: Vec<SceneTree>;
+    let trees: &[SceneTree] = match input.shard {
+        Some((index, count)) => {
+            shard_trees = input
+                .trees
+                .iter()
+                .filter(|t| {
+                    let (x, y) = tile_of(t.pos, input.cell_size_m, input.tile_cells);
+                    shard_of_tile(x, y, count) == index
+                })
+                .copied()
+                .collect();
+            log(&format!("shard {index}/{count}: {} of {} trees", shard_trees.len(), input.trees.len()));
+            &shard_trees
+        }
+        None => &input.trees,
+    };
+    let bake_packs = input.shard.is_none_or(|(index, _)| index == 0);
+    let gpu_and_pipelines = if bake_packs {
+        let gpu =
+            GpuContext::new_headless_blocking().context("the billboard bake renders with the GPU (or lavapipe)")?;
+        log(&format!("rendering billboards on {}", gpu.adapter_summary()));
+        let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+        Some((gpu, pipelines))
+    } else {
+        log("packs are baked by shard 0; this shard writes tiles only");
+        None
+    };
     let mut tree_counts = vec![0u64; input.species.len()];
-    for t in &input.trees {
+    for t in trees {
         tree_counts[t.species as usize] += 1;
     }
     let mut species_entries = Vec::new();
     let mut shapes = Vec::new();
     for (i, (name, model)) in input.species.iter().enumerate() {
-        let built =
-            build_pack(name, model, &input.pack, &gpu, &pipelines).with_context(|| format!("species {name:?}"))?;
+        shapes.push(shape_of(model));
         let file = format!("species/{}.pack", safe_name(name));
+        let Some((gpu, pipelines)) = &gpu_and_pipelines else {
+            let (lo, hi) = model.bounds();
+            species_entries.push(SpeciesEntry {
+                name: name.clone(),
+                pack: file,
+                bytes: 0,
+                height_m: model.height(),
+                bounds: Bounds { min: lo.to_array(), max: hi.to_array() },
+                trees: tree_counts[i],
+                head_bytes: None,
+            });
+            continue;
+        };
+        let built =
+            build_pack(name, model, &input.pack, gpu, pipelines).with_context(|| format!("species {name:?}"))?;
         std::fs::write(dir.join(&file), &built.bytes)?;
         if let Some(dump) = &input.debug_dump {
             dump_billboards(dump, name, &built)?;
@@ -146,12 +242,12 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
             height_m: built.meta.height_m,
             bounds: Bounds { min: built.meta.bounds_min, max: built.meta.bounds_max },
             trees: tree_counts[i],
+            head_bytes: Some(pack_head_bytes(&built.bytes)),
         });
-        shapes.push(shape_of(model));
     }
     let pack_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let tiles = build_tiles(&input.trees, &shapes, input.cell_size_m, input.tile_cells);
+    let tiles = build_tiles(trees, &shapes, input.cell_size_m, input.tile_cells);
     let entries: Vec<(TileEntry, u64)> = tiles
         .par_iter()
         .map(|bt| -> Result<(TileEntry, u64)> {
@@ -177,31 +273,22 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
     let tile_seconds = t1.elapsed().as_secs_f64();
     let instance_bytes = entries.iter().map(|(_, b)| b).sum();
     let tile_entries: Vec<TileEntry> = entries.into_iter().map(|(e, _)| e).collect();
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for t in &tile_entries {
-        lo = lo.min(Vec3::from(t.bounds.min));
-        hi = hi.max(Vec3::from(t.bounds.max));
-    }
-    let manifest = Manifest {
+    let base = Manifest {
         format: SCENE_FORMAT.into(),
         version: SCENE_VERSION,
         crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone() },
         origin_m: input.origin_m.to_array(),
-        bounds: Bounds { min: lo.to_array(), max: hi.to_array() },
+        bounds: Bounds { min: [0.0; 3], max: [0.0; 3] },
         cell_size_m: input.cell_size_m as f32,
         tile_cells: input.tile_cells,
-        counts: Counts {
-            trees: input.trees.len() as u64,
-            batches: tile_entries.iter().map(|t| u64::from(t.batches)).sum(),
-            tiles: tile_entries.len() as u64,
-        },
+        counts: Counts { trees: 0, batches: 0, tiles: 0 },
         species: species_entries,
-        tiles: tile_entries,
+        tiles: Vec::new(),
+        index: None,
+        shard: input.shard.map(|(index, count)| ShardStamp { index, count }),
     };
-    let bytes = manifest.encode();
-    // Validate what we wrote with the same decoder the viewer uses.
-    Manifest::decode("scene.json", &bytes)?;
-    std::fs::write(dir.join("scene.json"), bytes)?;
+    // A shard lists its tiles flat; `merge` builds the index of the whole.
+    let manifest = finish_scene(dir, base, tile_entries, input.index_node_tiles, input.shard.is_some())?;
     Ok(SceneSummary { manifest, instance_bytes, pack_seconds, tile_seconds })
 }
 

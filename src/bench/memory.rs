@@ -126,7 +126,8 @@ pub fn measure(dir: &Path) -> Result<MemoryModel> {
     let manifest = Sizes::of(&manifest_bytes)?;
     let mut tiles = Sizes::default();
     let mut ids = Sizes::default();
-    for t in &m.tiles {
+    let all_tiles = crate::format::index::read_all_tiles(dir, &m).map_err(anyhow::Error::msg)?;
+    for t in &all_tiles {
         tiles.add(Sizes::of(&read(&t.url)?)?);
         ids.add(Sizes::of(&read(&t.ids_url)?)?);
     }
@@ -168,7 +169,7 @@ pub fn measure(dir: &Path) -> Result<MemoryModel> {
     Ok(MemoryModel {
         trees: n,
         batches: t,
-        tiles: m.tiles.len() as u64,
+        tiles: all_tiles.len() as u64,
         species,
         manifest,
         tiles_bytes: tiles,

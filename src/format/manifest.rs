@@ -7,11 +7,13 @@
 use serde::{Deserialize, Serialize};
 
 use super::error::{finite, finite_all, DecodeError, Problem};
+use super::index::IndexRef;
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Manifest version written and read by this build.
-pub const SCENE_VERSION: u32 = 1;
+/// Newest manifest version, written by this build (it reads 1 and 2). Version 2
+/// added the hierarchical index, pack head sizes and shard stamps.
+pub const SCENE_VERSION: u32 = 2;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -53,6 +55,10 @@ pub struct SpeciesEntry {
     pub bounds: Bounds,
     /// Trees of this species in the scene.
     pub trees: u64,
+    /// Bytes of the pack's header, section table and `META` section: a viewer
+    /// fetches this range first and then only the sections its views need.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head_bytes: Option<u64>,
 }
 
 /// One tile of the flat tile index.
@@ -111,8 +117,25 @@ pub struct Manifest {
     pub counts: Counts,
     /// Species, indexed by `GpuBatch::species`.
     pub species: Vec<SpeciesEntry>,
-    /// The tile index (flat).
+    /// The tile index (flat); empty when `index` is given.
     pub tiles: Vec<TileEntry>,
+    /// The hierarchical tile index (version 2), instead of the flat list.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub index: Option<IndexRef>,
+    /// Set on one shard's output of a sharded bake (`sylva-bake bake --shard`):
+    /// not a scene to view until `sylva-bake merge` has joined the shards.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<ShardStamp>,
+}
+
+/// Which shard of a sharded bake wrote a directory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShardStamp {
+    /// This shard, 0-based.
+    pub index: u32,
+    /// Shards in all.
+    pub count: u32,
 }
 
 impl Manifest {
@@ -135,7 +158,7 @@ impl Manifest {
                 )));
             }
             let version = value.get("version").and_then(serde_json::Value::as_u64);
-            if version != Some(SCENE_VERSION.into()) {
+            if !matches!(version, Some(1..=2)) {
                 return Err(Problem::UnsupportedVersion {
                     found: version.unwrap_or(0).min(u32::MAX.into()) as u32,
                     supported: SCENE_VERSION,
@@ -178,6 +201,40 @@ impl Manifest {
             finite(format!("{what}.height_m"), s.height_m.into())?;
             validate_bounds(&format!("{what}.bounds"), &s.bounds)?;
         }
+        if let Some(index) = &self.index {
+            if self.version < 2 {
+                return Err(Problem::Invalid("\"index\" needs manifest version 2".into()));
+            }
+            if !self.tiles.is_empty() {
+                return Err(Problem::Invalid("a manifest with an \"index\" must have an empty \"tiles\" list".into()));
+            }
+            check_url("index.root", &index.root)?;
+            if index.nodes == 0
+                || index.node_tiles == 0
+                || index.depth == 0
+                || index.depth > super::index::MAX_INDEX_DEPTH
+            {
+                return Err(Problem::Invalid(format!(
+                    "index {index:?}: nodes, node_tiles and depth must be positive (depth ≤ 33)"
+                )));
+            }
+        }
+        if let Some(s) = &self.shard {
+            if s.count == 0 || s.index >= s.count {
+                return Err(Problem::Invalid(format!("shard {} of {}: must be 0 ≤ index < count", s.index, s.count)));
+            }
+        }
+        let species_trees = self.species.iter().fold(0u64, |a, s| a.saturating_add(s.trees));
+        if self.index.is_some() {
+            // Tile sums are checked node by node as the index is read.
+            if species_trees != self.counts.trees {
+                return Err(Problem::Invalid(format!(
+                    "counts.trees {} does not match the species ({species_trees} trees)",
+                    self.counts.trees
+                )));
+            }
+            return Ok(());
+        }
         let mut trees = 0u64;
         let mut batches = 0u64;
         for (i, t) in self.tiles.iter().enumerate() {
@@ -188,7 +245,6 @@ impl Manifest {
             trees = trees.saturating_add(t.trees);
             batches = batches.saturating_add(t.batches.into());
         }
-        let species_trees = self.species.iter().fold(0u64, |a, s| a.saturating_add(s.trees));
         if trees != self.counts.trees
             || species_trees != self.counts.trees
             || batches != self.counts.batches
@@ -204,7 +260,7 @@ impl Manifest {
     }
 }
 
-fn validate_bounds(what: &str, b: &Bounds) -> Result<(), Problem> {
+pub(crate) fn validate_bounds(what: &str, b: &Bounds) -> Result<(), Problem> {
     finite_all(&format!("{what}.min"), &b.min)?;
     finite_all(&format!("{what}.max"), &b.max)?;
     if b.min.iter().zip(&b.max).any(|(lo, hi)| lo > hi) {
@@ -214,7 +270,7 @@ fn validate_bounds(what: &str, b: &Bounds) -> Result<(), Problem> {
 }
 
 /// A URL in a manifest must stay inside the scene: relative, no `..`, no scheme.
-fn check_url(what: &str, url: &str) -> Result<(), Problem> {
+pub(crate) fn check_url(what: &str, url: &str) -> Result<(), Problem> {
     let bad = url.is_empty()
         || url.starts_with('/')
         || url.contains('\\')

@@ -8,11 +8,13 @@
 
 pub mod cluster;
 mod error;
+pub mod index;
 pub mod manifest;
 pub mod pack;
 pub mod tile;
 
 pub use error::{DecodeError, Problem};
-pub use manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry};
+pub use index::{build_index, IndexNode, IndexRef};
+pub use manifest::{Bounds, Counts, Crs, Manifest, ShardStamp, SpeciesEntry, TileEntry};
 pub use pack::{decode_pack, encode_pack, Pack, PackMeta, Section};
 pub use tile::{decode_ids, encode_ids, GpuBatch, Instance, PackedInstance, Tile};

@@ -317,7 +317,10 @@ pub fn decode_pack<'a>(file: &str, bytes: &'a [u8]) -> Result<Pack<'a>, DecodeEr
     decode_pack_inner(bytes).map_err(|p| DecodeError::new(file, p))
 }
 
-fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
+/// Reads the header and section table from `bytes` (the whole file, or when
+/// `full` is false only its first bytes). Checks every entry against the file
+/// size the header declares.
+fn read_table(bytes: &[u8], full: bool) -> Result<(Vec<SectionEntry>, u64), Problem> {
     let r = Reader::new(bytes);
     r.magic("Sylva LoD pack", &PACK_MAGIC)?;
     let version = r.u16("header.version", 4)?;
@@ -334,21 +337,17 @@ fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
         return Err(Problem::Invalid(format!("header.section_align is {align}, expected {PACK_SECTION_ALIGN}")));
     }
     let file_bytes = r.u64("header.file_bytes", 16)?;
-    if file_bytes != bytes.len() as u64 {
-        return Err(if file_bytes > bytes.len() as u64 {
-            Problem::Truncated {
-                what: "pack (header.file_bytes)".into(),
-                start: 0,
-                end: file_bytes,
-                len: bytes.len() as u64,
-            }
+    let len = bytes.len() as u64;
+    if file_bytes < len || (full && file_bytes != len) {
+        return Err(if file_bytes > len {
+            Problem::Truncated { what: "pack (header.file_bytes)".into(), start: 0, end: file_bytes, len }
         } else {
-            Problem::Invalid(format!("header.file_bytes is {file_bytes} but the file has {} bytes", bytes.len()))
+            Problem::Invalid(format!("header.file_bytes is {file_bytes} but the file has {len} bytes"))
         });
     }
     let table_end = PACK_HEADER_BYTES as u64 + count * PACK_SECTION_ENTRY_BYTES as u64;
     r.slice("section table", PACK_HEADER_BYTES as u64, table_end - PACK_HEADER_BYTES as u64)?;
-    // `count` is bounded and the table is inside the file: safe to allocate.
+    // `count` is bounded and the table is inside the bytes: safe to allocate.
     let mut sections = Vec::with_capacity(count as usize);
     let mut prev_end = table_end;
     for i in 0..count {
@@ -382,21 +381,129 @@ fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
                 entry.count, entry.stride, entry.bytes
             )));
         }
-        let data = r.slice(&name, entry.offset, entry.bytes)?;
-        prev_end = entry.offset + entry.bytes;
-        sections.push((entry, data));
+        let end = entry.offset.checked_add(entry.bytes).filter(|e| *e <= file_bytes);
+        let Some(end) = end else {
+            return Err(Problem::Truncated { what: name, start: entry.offset, end: u64::MAX, len: file_bytes });
+        };
+        prev_end = end;
+        sections.push(entry);
     }
-    let meta_bytes = match sections.first() {
-        Some((e, b)) if e.kind == kind::META => *b,
-        _ => return Err(Problem::Invalid("the first section is not META".into())),
-    };
-    let meta: PackMeta = serde_json::from_slice(meta_bytes).map_err(|e| Problem::Json(format!("META: {e}")))?;
+    if sections.first().is_none_or(|e| e.kind != kind::META) {
+        return Err(Problem::Invalid("the first section is not META".into()));
+    }
+    Ok((sections, file_bytes))
+}
+
+fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
+    let (entries, _) = read_table(bytes, true)?;
+    let sections: Vec<(SectionEntry, &[u8])> =
+        entries.into_iter().map(|e| (e, &bytes[e.offset as usize..(e.offset + e.bytes) as usize])).collect();
+    let meta: PackMeta = serde_json::from_slice(sections[0].1).map_err(|e| Problem::Json(format!("META: {e}")))?;
     let pack = Pack { meta, sections };
-    validate_meta(&pack)?;
+    validate_meta(&pack, false)?;
     Ok(pack)
 }
 
-fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
+/// The head of a pack (header, section table, `META`): what a viewer reads
+/// first, to fetch only the sections its views need by byte range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PackHead {
+    /// The metadata.
+    pub meta: PackMeta,
+    /// The section table (`META` first).
+    pub entries: Vec<SectionEntry>,
+    /// Size of the whole pack file.
+    pub file_bytes: u64,
+    /// The head bytes themselves (header, table, `META`).
+    pub bytes: Vec<u8>,
+}
+
+/// The parts of a pack a viewer fetches separately.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PackPart {
+    /// Billboard colour and normal arrays (the far field).
+    Billboards,
+    /// Ellipsoid and line levels.
+    Clusters,
+    /// Mesh levels and material textures.
+    Meshes,
+}
+
+impl PackPart {
+    /// Every part, in fetch order.
+    pub const ALL: [PackPart; 3] = [PackPart::Billboards, PackPart::Clusters, PackPart::Meshes];
+
+    /// The part a section kind belongs to (`None` for `META` and unknown kinds).
+    #[must_use]
+    pub fn of(k: [u8; 4]) -> Option<Self> {
+        match k {
+            kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL => Some(PackPart::Billboards),
+            kind::ELLIPSOIDS | kind::LINES => Some(PackPart::Clusters),
+            kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::Meshes),
+            _ => None,
+        }
+    }
+}
+
+impl PackHead {
+    /// Decodes the first bytes of a pack (at least its head; a whole pack works too).
+    ///
+    /// # Errors
+    /// A [`DecodeError`] as for [`decode_pack`], for the header, table and `META`.
+    pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
+        let inner = || -> Result<Self, Problem> {
+            let (entries, file_bytes) = read_table(bytes, false)?;
+            let m = entries[0];
+            let r = Reader::new(bytes);
+            let meta_bytes = r.slice("META section", m.offset, m.bytes)?;
+            let meta: PackMeta = serde_json::from_slice(meta_bytes).map_err(|e| Problem::Json(format!("META: {e}")))?;
+            let head_end = (m.offset + m.bytes) as usize;
+            Ok(Self { meta, entries, file_bytes, bytes: bytes[..head_end].to_vec() })
+        };
+        inner().map_err(|p| DecodeError::new(file, p))
+    }
+
+    /// The byte range (start, end exclusive) covering every section of `part`,
+    /// or `None` when the pack has none.
+    #[must_use]
+    pub fn part_range(&self, part: PackPart) -> Option<(u64, u64)> {
+        let mut it = self.entries.iter().filter(|e| PackPart::of(e.kind) == Some(part));
+        let first = it.next()?;
+        let (mut lo, mut hi) = (first.offset, first.offset + first.bytes);
+        for e in it {
+            lo = lo.min(e.offset);
+            hi = hi.max(e.offset + e.bytes);
+        }
+        Some((lo, hi))
+    }
+
+    /// A pack of the sections held in `parts` (each `(file offset, bytes)`),
+    /// validated; sections not held are simply absent.
+    ///
+    /// # Errors
+    /// A [`DecodeError`] when a held section does not match the metadata.
+    pub fn assemble<'a>(&'a self, file: &str, parts: &'a [(u64, Vec<u8>)]) -> Result<Pack<'a>, DecodeError> {
+        let mut sections = Vec::with_capacity(self.entries.len());
+        for e in &self.entries {
+            if e.kind == kind::META {
+                sections.push((*e, &self.bytes[e.offset as usize..(e.offset + e.bytes) as usize]));
+                continue;
+            }
+            let held = parts.iter().find(|(at, b)| *at <= e.offset && e.offset + e.bytes <= at + b.len() as u64);
+            if let Some((at, b)) = held {
+                let start = (e.offset - at) as usize;
+                sections.push((*e, &b[start..start + e.bytes as usize]));
+            }
+        }
+        let pack = Pack { meta: self.meta.clone(), sections };
+        validate_meta(&pack, true).map_err(|p| DecodeError::new(file, p))?;
+        Ok(pack)
+    }
+}
+
+/// Checks the metadata against the sections. `partial`: sections may be
+/// missing (not fetched); those present must match.
+fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     let m = &pack.meta;
     finite("META.height_m", m.height_m.into())?;
     finite_all("META.bounds_min", &m.bounds_min)?;
@@ -419,7 +526,10 @@ fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
         }
     }
     if let Some(t) = &m.material_texture {
-        validate_texture("META.material_texture", t, pack.section(kind::MATERIAL_TEXTURES, 0))?;
+        let data = pack.section(kind::MATERIAL_TEXTURES, 0);
+        if !(partial && data.is_none()) {
+            validate_texture("META.material_texture", t, data)?;
+        }
     }
     for (l, level) in m.mesh_levels.iter().enumerate() {
         let what = format!("META.mesh_levels[{l}]");
@@ -430,6 +540,9 @@ fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
         finite(format!("{what}.select_px"), level.select_px.into())?;
         let vtx = pack.section(kind::MESH_VERTICES, l as u32);
         let idx = pack.section(kind::MESH_INDICES, l as u32);
+        if partial && (vtx.is_none() || idx.is_none()) {
+            continue;
+        }
         let (Some(vtx), Some(idx)) = (vtx, idx) else {
             return Err(Problem::Invalid(format!("{what} has no MVTX/MIDX section with index {l}")));
         };
@@ -493,8 +606,12 @@ fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
                 b.angles, b.azimuths, b.texture.layers
             )));
         }
-        validate_texture("META.billboards.texture", &b.texture, pack.section(kind::BILLBOARD_COLOR, 0))?;
-        validate_texture("META.billboards.texture", &b.texture, pack.section(kind::BILLBOARD_NORMAL, 0))?;
+        for k in [kind::BILLBOARD_COLOR, kind::BILLBOARD_NORMAL] {
+            let data = pack.section(k, 0);
+            if !(partial && data.is_none()) {
+                validate_texture("META.billboards.texture", &b.texture, data)?;
+            }
+        }
     }
     if let Some(c) = &m.clusters {
         finite_all("META.clusters.line_color", &c.line_color)?;
@@ -507,7 +624,11 @@ fn validate_meta(pack: &Pack<'_>) -> Result<(), Problem> {
             for (l, level) in levels.iter().enumerate() {
                 let what = format!("META.clusters.{name}[{l}]");
                 finite_all(&what, &[level.select_px, level.error, level.noise_threshold, level.normal_blend])?;
-                let Some(data) = pack.section(k, l as u32) else {
+                let data = pack.section(k, l as u32);
+                if partial && data.is_none() {
+                    continue;
+                }
+                let Some(data) = data else {
                     return Err(Problem::Invalid(format!(
                         "{what} has no {} section with index {l}",
                         String::from_utf8_lossy(&k)

@@ -566,6 +566,30 @@ impl ForestRenderer {
         self.instance_alloc.free_len()
     }
 
+    /// Which parts of species `s`'s pack ([`crate::format::pack::PackPart::ALL`]
+    /// order: billboards, clusters, meshes) the resident trees within reach can
+    /// need, from the projected heights of the last [`Self::prepare`] and the
+    /// representations allowed: a far view needs neither meshes nor clusters.
+    #[must_use]
+    pub fn parts_needed(&self, s: usize, meta: &crate::format::PackMeta) -> [bool; 3] {
+        let max_px = self.species_max_px.get(s).copied().unwrap_or(0.0);
+        let allow = self.representations;
+        let has_bb = allow.billboards && meta.billboards.is_some();
+        let has_cl = allow.clusters && meta.clusters.as_ref().is_some_and(|c| !c.ellipsoid_levels.is_empty());
+        let has_mesh = allow.meshes && !meta.mesh_levels.is_empty();
+        // Cross-fades start below a threshold: fetch a little early.
+        let slack = 1.0 - self.fade_band;
+        let mesh_floor = if has_mesh {
+            meta.mesh_levels.iter().map(|l| l.select_px).fold(f32::INFINITY, f32::min)
+        } else {
+            f32::INFINITY
+        };
+        let cluster_floor = if has_bb { self.cluster_min_px } else { 0.0 };
+        let meshes = has_mesh && (max_px >= mesh_floor * slack || (!has_bb && !has_cl));
+        let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
+        [has_bb, clusters, meshes]
+    }
+
     /// GPU bytes: pools plus uploaded packs.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
@@ -654,8 +678,10 @@ impl ForestRenderer {
         self.table_dirty = false;
     }
 
-    /// Writes the frame's uniforms (and the species table if residency changed).
-    pub fn prepare(&mut self, queue: &wgpu::Queue, view: &ViewData, settings: &RenderSettings) -> ViewUniform {
+    /// Takes the view's settings and bounds each species' projected tree height
+    /// from the resident tiles' boxes: what [`Self::prepare`] skips draws by and
+    /// [`Self::parts_needed`] decides fetches by. Call before streaming a frame.
+    pub fn measure_reach(&mut self, view: &ViewData, settings: &RenderSettings) {
         if settings.cluster_min_px != self.cluster_min_px || settings.representations != self.representations {
             self.cluster_min_px = settings.cluster_min_px;
             self.representations = settings.representations;
@@ -681,6 +707,11 @@ impl ForestRenderer {
                 }
             }
         }
+    }
+
+    /// Writes the frame's uniforms (and the species table if residency changed).
+    pub fn prepare(&mut self, queue: &wgpu::Queue, view: &ViewData, settings: &RenderSettings) -> ViewUniform {
+        self.measure_reach(view, settings);
         if self.table_dirty {
             self.rebuild_table(queue);
         }

@@ -165,6 +165,16 @@ impl MeshGpu {
     #[must_use]
     pub fn upload(device: &wgpu::Device, queue: &wgpu::Queue, pipelines: &MeshPipelines, pack: &Pack<'_>) -> Self {
         let meta = &pack.meta;
+        // Levels whose sections are held (a pack fetched in parts may hold none yet).
+        let present = (0..meta.mesh_levels.len())
+            .take_while(|&l| {
+                pack.section(kind::MESH_VERTICES, l as u32).is_some()
+                    && pack.section(kind::MESH_INDICES, l as u32).is_some()
+            })
+            .count();
+        if present == 0 {
+            return Self { levels: Vec::new() };
+        }
         let texture = match (meta.material_texture, pack.section(kind::MATERIAL_TEXTURES, 0)) {
             (Some(t), Some(data)) => {
                 upload_texture_array(device, queue, "material textures", &t, data, wgpu::TextureFormat::Rgba8UnormSrgb)
@@ -208,6 +218,7 @@ impl MeshGpu {
         let levels = meta
             .mesh_levels
             .iter()
+            .take(present)
             .enumerate()
             .map(|(l, level)| {
                 let uniform = MeshUniform {

@@ -41,6 +41,16 @@ pub struct FrameStats {
     pub tiles_loading: u64,
     /// Bytes fetched so far.
     pub bytes_fetched: u64,
+    /// Requests started so far (manifest, index nodes, tiles, packs).
+    pub requests: u64,
+    /// Tiles known so far (flat list, or leaves of the index nodes read).
+    pub tiles_known: u64,
+    /// Tiles in the scene.
+    pub tiles_total: u64,
+    /// Index nodes read so far (0 for a flat manifest).
+    pub index_nodes_loaded: u64,
+    /// Index nodes in the scene (0 for a flat manifest).
+    pub index_nodes_total: u64,
     /// Trees in the scene.
     pub trees_total: u64,
     /// Trees resident on the GPU.
@@ -182,6 +192,7 @@ impl<F: Fetcher> OffscreenScene<F> {
     pub fn update_stream(&mut self, camera: &Camera) -> Vec<StreamEvent> {
         let view = camera.view_data(self.width, self.height);
         let now = self.started.elapsed().as_secs_f64();
+        self.renderer.measure_reach(&view, &self.settings);
         self.stream.update(
             &mut self.renderer,
             &self.ctx.device,
@@ -271,6 +282,11 @@ impl<F: Fetcher> OffscreenScene<F> {
         stats.tiles_resident = s.tiles_resident;
         stats.tiles_loading = s.loading;
         stats.bytes_fetched = s.bytes_fetched;
+        stats.requests = s.requests;
+        stats.tiles_known = s.tiles_known;
+        stats.tiles_total = self.stream.manifest().map_or(0, |m| m.counts.tiles);
+        stats.index_nodes_loaded = s.index_nodes_loaded;
+        stats.index_nodes_total = s.index_nodes_total;
         stats.trees_total = self.stream.manifest().map_or(0, |m| m.counts.trees);
         stats.trees_resident = self.renderer.resident_instances();
         stats.gpu_bytes = self.renderer.gpu_bytes();

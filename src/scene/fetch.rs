@@ -47,10 +47,18 @@ impl FetchError {
     }
 }
 
+/// A byte range of a file: `start..end` (end exclusive).
+pub type ByteRange = (u64, u64);
+
 /// Starts requests and returns finished ones, without blocking.
 pub trait Fetcher {
     /// Starts fetching `url` (an absolute URL or a local path).
-    fn start(&mut self, url: &str) -> RequestId;
+    fn start(&mut self, url: &str) -> RequestId {
+        self.start_range(url, None)
+    }
+    /// Starts fetching bytes `range` of `url` (all of it for `None`). A server
+    /// that ignores ranges may answer with the whole file: callers check the length.
+    fn start_range(&mut self, url: &str, range: Option<ByteRange>) -> RequestId;
     /// Finished requests since the last poll.
     fn poll(&mut self) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
     /// Requests started and not yet returned by `poll`.
@@ -89,7 +97,7 @@ mod native {
     use std::collections::HashMap;
     use std::sync::mpsc;
 
-    type Job = (RequestId, String);
+    type Job = (RequestId, String, Option<super::ByteRange>);
     type Done = (RequestId, Result<Vec<u8>, FetchError>);
 
     /// Worker threads serving local files and HTTP(S).
@@ -117,8 +125,8 @@ mod native {
                     let agent = agent.clone();
                     std::thread::spawn(move || loop {
                         let job = rx.lock().map(|r| r.recv());
-                        let Ok(Ok((id, url))) = job else { return };
-                        if tx.send((id, fetch_blocking(&agent, &url))).is_err() {
+                        let Ok(Ok((id, url, range))) = job else { return };
+                        if tx.send((id, fetch_blocking(&agent, &url, range))).is_err() {
                             return;
                         }
                     })
@@ -140,9 +148,18 @@ mod native {
     /// Most bytes one response may have (a pack with 8k² textures stays below it).
     const MAX_RESPONSE_BYTES: u64 = 1 << 30;
 
-    fn fetch_blocking(agent: &ureq::Agent, url: &str) -> Result<Vec<u8>, FetchError> {
+    fn fetch_blocking(agent: &ureq::Agent, url: &str, range: Option<super::ByteRange>) -> Result<Vec<u8>, FetchError> {
+        if let Some((a, b)) = range {
+            if b <= a {
+                return Ok(Vec::new());
+            }
+        }
         if url.starts_with("http://") || url.starts_with("https://") {
-            match agent.get(url).call() {
+            let mut req = agent.get(url);
+            if let Some((a, b)) = range {
+                req = req.header("Range", &format!("bytes={a}-{}", b - 1));
+            }
+            match req.call() {
                 Ok(mut resp) => resp
                     .body_mut()
                     .with_config()
@@ -155,7 +172,16 @@ mod native {
             }
         } else {
             let path = url.strip_prefix("file://").unwrap_or(url);
-            std::fs::read(path).map_err(|e| match e.kind() {
+            let read = || -> std::io::Result<Vec<u8>> {
+                let Some((a, b)) = range else { return std::fs::read(path) };
+                use std::io::{Read, Seek};
+                let mut f = std::fs::File::open(path)?;
+                f.seek(std::io::SeekFrom::Start(a))?;
+                let mut out = Vec::new();
+                f.take(b - a).read_to_end(&mut out)?;
+                Ok(out)
+            };
+            read().map_err(|e| match e.kind() {
                 std::io::ErrorKind::NotFound => FetchError::NotFound { url: url.into() },
                 _ => FetchError::Transport { url: url.into(), message: e.to_string() },
             })
@@ -163,12 +189,12 @@ mod native {
     }
 
     impl Fetcher for ThreadFetcher {
-        fn start(&mut self, url: &str) -> RequestId {
+        fn start_range(&mut self, url: &str, range: Option<super::ByteRange>) -> RequestId {
             let id = self.next;
             self.next += 1;
             self.pending.insert(id, url.to_string());
             if let Some(jobs) = &self.jobs {
-                let _ = jobs.send((id, url.to_string()));
+                let _ = jobs.send((id, url.to_string(), range));
             }
             id
         }

@@ -2,6 +2,7 @@
 //! `fetch`), streaming and residency.
 
 pub mod fetch;
+pub mod index_walk;
 pub mod streaming;
 
 #[cfg(not(target_arch = "wasm32"))]

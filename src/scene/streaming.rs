@@ -13,6 +13,8 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
+use super::index_walk::IndexWalk;
+use crate::format::pack::{PackHead, PackPart};
 use crate::format::{decode_pack, DecodeError, Manifest, Tile};
 use crate::render::camera::ViewData;
 use crate::render::forest::{ForestRenderer, PoolError, TileSlot};
@@ -80,8 +82,54 @@ enum TileState {
 #[derive(Debug, Clone, Copy)]
 enum Target {
     Manifest,
+    Node(usize),
     Tile(usize),
-    Pack(usize),
+    /// The pack's head (or the whole pack, for manifests without `head_bytes`).
+    PackHead(usize),
+    /// One part of a pack, by byte range.
+    PackPart(usize, usize),
+}
+
+/// A species pack, fetched whole or as a head and then the parts views need.
+struct PackLoad {
+    /// The head (or the whole pack).
+    head: Load,
+    /// The decoded head, once fetched.
+    parsed: Option<PackHead>,
+    /// Per part ([`PackPart::ALL`] order).
+    parts: [Load; 3],
+    /// Parts held: (file offset, bytes).
+    held: Vec<(u64, Vec<u8>)>,
+    have: [bool; 3],
+    /// The parts the view wanted at the last update.
+    wants: [bool; 3],
+    /// The whole pack is uploaded: nothing more to fetch.
+    whole: bool,
+}
+
+impl PackLoad {
+    fn new() -> Self {
+        Self {
+            head: Load::Idle,
+            parsed: None,
+            parts: [Load::Idle, Load::Idle, Load::Idle],
+            held: Vec::new(),
+            have: [false; 3],
+            wants: [false; 3],
+            whole: false,
+        }
+    }
+
+    /// Nothing more the view wants of it is due.
+    fn done(&self) -> bool {
+        if self.whole || self.head == Load::Broken {
+            return true;
+        }
+        let Some(head) = &self.parsed else { return false };
+        PackPart::ALL.iter().enumerate().all(|(i, p)| {
+            !self.wants[i] || self.have[i] || self.parts[i] == Load::Broken || head.part_range(*p).is_none()
+        })
+    }
 }
 
 /// Counters for stats.
@@ -97,6 +145,14 @@ pub struct StreamStats {
     pub broken: u64,
     /// Tiles the view wants.
     pub tiles_wanted: u64,
+    /// Tiles known (listed by the manifest or by index nodes read so far).
+    pub tiles_known: u64,
+    /// Index nodes read (0 for a flat manifest).
+    pub index_nodes_loaded: u64,
+    /// Index nodes in the scene (0 for a flat manifest).
+    pub index_nodes_total: u64,
+    /// Requests started, of every kind.
+    pub requests: u64,
 }
 
 /// A scene being streamed into a [`ForestRenderer`].
@@ -105,15 +161,18 @@ pub struct SceneStream<F: Fetcher> {
     manifest_url: String,
     manifest: Option<Manifest>,
     manifest_load: Load,
+    index: IndexWalk,
+    node_loads: Vec<Load>,
     tiles: Vec<TileState>,
-    packs: Vec<Load>,
-    pack_ready: Vec<bool>,
+    packs: Vec<PackLoad>,
     requests: HashMap<RequestId, Target>,
     fetcher: F,
     config: StreamConfig,
     stats: StreamStats,
     events: Vec<StreamEvent>,
     wanted: Vec<usize>,
+    /// Unread index nodes the view meets (not given up on).
+    pending_nodes: usize,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -125,15 +184,17 @@ impl<F: Fetcher> SceneStream<F> {
             manifest_url,
             manifest: None,
             manifest_load: Load::Idle,
+            index: IndexWalk::default(),
+            node_loads: Vec::new(),
             tiles: Vec::new(),
             packs: Vec::new(),
-            pack_ready: Vec::new(),
             requests: HashMap::new(),
             fetcher,
             config,
             stats: StreamStats::default(),
             events: Vec::new(),
             wanted: Vec::new(),
+            pending_nodes: 0,
         }
     }
 
@@ -159,13 +220,15 @@ impl<F: Fetcher> SceneStream<F> {
     #[must_use]
     pub fn is_settled(&self) -> bool {
         let manifest_done = self.manifest.is_some() || self.manifest_load == Load::Broken;
+        let nodes_done = !self.node_loads.iter().any(|l| matches!(l, Load::Requested { .. } | Load::Waiting { .. }))
+            && self.pending_nodes == 0;
         let tiles_done = self.wanted.iter().all(|&t| match &self.tiles[t] {
             TileState::Resident { .. } => true,
             TileState::NotResident(l) => *l == Load::Broken,
         });
         let needed = self.needed_species();
-        let packs_done = needed.iter().all(|&s| self.pack_ready[s] || self.packs[s] == Load::Broken);
-        manifest_done && tiles_done && packs_done && self.requests.is_empty()
+        let packs_done = needed.iter().all(|&s| self.packs[s].done());
+        manifest_done && nodes_done && tiles_done && packs_done && self.requests.is_empty()
     }
 
     /// The lowest tree base of the resident batch cell nearest to `(x, y)` within
@@ -232,8 +295,10 @@ impl<F: Fetcher> SceneStream<F> {
             }
             match target {
                 Target::Manifest => self.on_manifest(renderer, result, now_s),
+                Target::Node(n) => self.on_node(n, result, now_s),
                 Target::Tile(t) => self.on_tile(renderer, queue, t, result, view, now_s),
-                Target::Pack(s) => self.on_pack(renderer, device, queue, s, result, now_s),
+                Target::PackHead(s) => self.on_pack_head(renderer, device, queue, s, result, now_s),
+                Target::PackPart(s, part) => self.on_pack_part(renderer, device, queue, s, part, result, now_s),
             }
         }
         if self.manifest.is_none() {
@@ -244,17 +309,41 @@ impl<F: Fetcher> SceneStream<F> {
             };
             if let Some(attempt) = due {
                 let id = self.fetcher.start(&self.manifest_url);
+                self.stats.requests += 1;
                 self.requests.insert(id, Target::Manifest);
                 self.manifest_load = Load::Requested { attempt };
             }
         } else {
             self.request_tiles(view, draw_distance_m, now_s);
-            self.request_packs(now_s);
+            self.request_packs(renderer, now_s);
         }
         self.stats.loading = self.requests.len() as u64;
         self.stats.tiles_resident =
             self.tiles.iter().filter(|t| matches!(t, TileState::Resident { .. })).count() as u64;
         self.stats.tiles_wanted = self.wanted.len() as u64;
+        self.stats.tiles_known = self.index.tiles.len() as u64;
+        self.stats.index_nodes_loaded = self.index.nodes_loaded();
+        self.stats.index_nodes_total = self.index.nodes_declared();
+    }
+
+    fn on_node(&mut self, n: usize, result: Result<Vec<u8>, FetchError>, now_s: f64) {
+        let url = join(&self.base, self.index.node_url(n));
+        let attempt = match self.node_loads[n] {
+            Load::Requested { attempt } => attempt,
+            _ => 0,
+        };
+        let loaded = result
+            .map_err(|e| (e.to_string(), e.retryable()))
+            .and_then(|bytes| self.index.load_node(n, &url, &bytes).map_err(|e| (e, true)));
+        match loaded {
+            Ok(new_tiles) => {
+                self.node_loads[n] = Load::Idle;
+                self.tiles.extend(new_tiles.map(|_| TileState::NotResident(Load::Idle)));
+                let nodes = self.index.nodes.len();
+                self.node_loads.resize(nodes, Load::Idle);
+            }
+            Err((message, retryable)) => self.node_loads[n] = self.fail(url, &message, attempt, retryable, now_s),
+        }
     }
 
     fn on_manifest(&mut self, renderer: &mut ForestRenderer, result: Result<Vec<u8>, FetchError>, now_s: f64) {
@@ -268,9 +357,10 @@ impl<F: Fetcher> SceneStream<F> {
         match parsed {
             Ok(m) if m.species.len() as u32 <= renderer.config().species => {
                 renderer.set_species_count(m.species.len() as u32);
-                self.tiles = m.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
-                self.packs = vec![Load::Idle; m.species.len()];
-                self.pack_ready = vec![false; m.species.len()];
+                self.index = IndexWalk::new(&m);
+                self.node_loads = vec![Load::Idle; self.index.nodes.len()];
+                self.tiles = self.index.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
+                self.packs = (0..m.species.len()).map(|_| PackLoad::new()).collect();
                 self.events.push(StreamEvent::ManifestLoaded { trees: m.counts.trees });
                 self.manifest = Some(m);
             }
@@ -305,7 +395,7 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let entry = &m.tiles[t];
+        let entry = &self.index.tiles[t];
         let url = join(&self.base, &entry.url);
         let attempt = match &self.tiles[t] {
             TileState::NotResident(Load::Requested { attempt }) => *attempt,
@@ -353,7 +443,7 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    fn on_pack(
+    fn on_pack_head(
         &mut self,
         renderer: &mut ForestRenderer,
         device: &wgpu::Device,
@@ -363,32 +453,94 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let url = join(&self.base, &m.species[s].pack);
-        let attempt = match self.packs[s] {
+        let entry = &m.species[s];
+        let url = join(&self.base, &entry.pack);
+        let attempt = match self.packs[s].head {
             Load::Requested { attempt } => attempt,
             _ => 0,
         };
-        let outcome = match result {
-            Ok(bytes) => match decode_pack(&url, &bytes) {
+        let pack_bytes = entry.bytes;
+        let ranged = entry.head_bytes.is_some();
+        let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
+            // No head size in the manifest, or a server that ignores ranges: the whole pack.
+            if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
+                let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
+                renderer.upload_pack(device, queue, s as u32, &pack);
+                Ok(None)
+            } else {
+                PackHead::decode(&url, &bytes).map(Some).map_err(|e| (e.to_string(), true))
+            }
+        });
+        let load = &mut self.packs[s];
+        match outcome {
+            Ok(None) => {
+                load.head = Load::Idle;
+                load.whole = true;
+            }
+            Ok(Some(head)) => {
+                load.head = Load::Idle;
+                load.parsed = Some(head);
+            }
+            Err((message, retryable)) => self.packs[s].head = self.fail(url, &message, attempt, retryable, now_s),
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn on_pack_part(
+        &mut self,
+        renderer: &mut ForestRenderer,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        s: usize,
+        part: usize,
+        result: Result<Vec<u8>, FetchError>,
+        now_s: f64,
+    ) {
+        let Some(m) = &self.manifest else { return };
+        let url = join(&self.base, &m.species[s].pack);
+        let load = &mut self.packs[s];
+        let attempt = match load.parts[part] {
+            Load::Requested { attempt } => attempt,
+            _ => 0,
+        };
+        let Some(head) = &load.parsed else { return };
+        let Some((start, end)) = head.part_range(PackPart::ALL[part]) else { return };
+        let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
+            let len = bytes.len() as u64;
+            if len == head.file_bytes && len != end - start {
+                // The server sent the whole file instead of the range.
+                let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
+                renderer.upload_pack(device, queue, s as u32, &pack);
+                return Ok(true);
+            }
+            if len != end - start {
+                return Err((format!("{url}: asked for bytes {start}..{end}, got {len} bytes"), true));
+            }
+            load.held.push((start, bytes));
+            match head.assemble(&url, &load.held) {
                 Ok(pack) => {
                     renderer.upload_pack(device, queue, s as u32, &pack);
-                    Ok(())
+                    Ok(false)
                 }
-                Err(e) => Err((e.to_string(), true)),
-            },
-            Err(e) => Err((e.to_string(), e.retryable())),
-        };
-        match outcome {
-            Ok(()) => {
-                self.packs[s] = Load::Idle;
-                self.pack_ready[s] = true;
+                Err(e) => {
+                    load.held.pop();
+                    Err((e.to_string(), true))
+                }
             }
-            Err((message, retryable)) => self.packs[s] = self.fail(url, &message, attempt, retryable, now_s),
+        });
+        match outcome {
+            Ok(whole) => {
+                load.parts[part] = Load::Idle;
+                load.have[part] = true;
+                load.whole |= whole;
+            }
+            Err((message, retryable)) => {
+                self.packs[s].parts[part] = self.fail(url, &message, attempt, retryable, now_s)
+            }
         }
     }
 
     fn evict_one(&mut self, renderer: &mut ForestRenderer, queue: &wgpu::Queue, view: &ViewData) -> bool {
-        let Some(m) = &self.manifest else { return false };
         let eye = view.eye_hi + view.eye_lo;
         let victim = self
             .tiles
@@ -396,7 +548,7 @@ impl<F: Fetcher> SceneStream<F> {
             .enumerate()
             .filter(|(i, t)| matches!(t, TileState::Resident { .. }) && !self.wanted.contains(i))
             .max_by(|(a, _), (b, _)| {
-                let d = |i: usize| tile_distance(&m.tiles[i].bounds, eye);
+                let d = |i: usize| tile_distance(&self.index.tiles[i].bounds, eye);
                 d(*a).total_cmp(&d(*b))
             })
             .map(|(i, _)| i);
@@ -410,23 +562,32 @@ impl<F: Fetcher> SceneStream<F> {
     }
 
     fn request_tiles(&mut self, view: &ViewData, draw_distance_m: f32, now_s: f64) {
-        let Some(m) = &self.manifest else { return };
-        let eye = view.eye_hi + view.eye_lo;
-        let mut wanted: Vec<(f32, usize)> = m
-            .tiles
-            .iter()
-            .enumerate()
-            .filter_map(|(i, t)| {
-                let lo = Vec3::from(t.bounds.min) - eye;
-                let hi = Vec3::from(t.bounds.max) - eye;
-                let (c, h) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
-                let visible = view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(h) >= 0.0);
-                let d = (c.abs() - h).max(Vec3::ZERO).length();
-                (visible && d <= draw_distance_m).then_some((d, i))
-            })
-            .collect();
-        wanted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        if self.manifest.is_none() {
+            return;
+        }
+        let (wanted, nodes) = self.index.walk(view, draw_distance_m);
         self.wanted = wanted.iter().map(|(_, i)| *i).collect();
+        self.pending_nodes = 0;
+        // Index nodes first: they unlock the tiles below them.
+        for &(_, n) in &nodes {
+            let due = match self.node_loads[n] {
+                Load::Idle => Some(0),
+                Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
+                _ => None,
+            };
+            if self.node_loads[n] != Load::Broken {
+                self.pending_nodes += 1;
+            }
+            if let Some(attempt) = due {
+                if self.fetcher.in_flight() >= self.config.max_in_flight {
+                    continue;
+                }
+                let id = self.fetcher.start(&join(&self.base, self.index.node_url(n)));
+                self.stats.requests += 1;
+                self.requests.insert(id, Target::Node(n));
+                self.node_loads[n] = Load::Requested { attempt };
+            }
+        }
         for &(_, i) in &wanted {
             if self.fetcher.in_flight() >= self.config.max_in_flight {
                 break;
@@ -437,29 +598,50 @@ impl<F: Fetcher> SceneStream<F> {
                 _ => None,
             };
             if let Some(attempt) = due {
-                let id = self.fetcher.start(&join(&self.base, &m.tiles[i].url));
+                let id = self.fetcher.start(&join(&self.base, &self.index.tiles[i].url));
+                self.stats.requests += 1;
                 self.requests.insert(id, Target::Tile(i));
                 self.tiles[i] = TileState::NotResident(Load::Requested { attempt });
             }
         }
     }
 
-    fn request_packs(&mut self, now_s: f64) {
+    fn request_packs(&mut self, renderer: &ForestRenderer, now_s: f64) {
         let needed = self.needed_species();
         let Some(m) = &self.manifest else { return };
+        let due = |l: &Load| match *l {
+            Load::Idle => Some(0),
+            Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
+            _ => None,
+        };
         for s in needed {
-            if self.pack_ready[s] || self.fetcher.in_flight() >= self.config.max_in_flight {
+            let load = &mut self.packs[s];
+            if let Some(head) = &load.parsed {
+                load.wants = renderer.parts_needed(s, &head.meta);
+            }
+            if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
             }
-            let due = match self.packs[s] {
-                Load::Idle => Some(0),
-                Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
-                _ => None,
+            let url = join(&self.base, &m.species[s].pack);
+            let Some(head) = &load.parsed else {
+                if let Some(attempt) = due(&load.head) {
+                    let range = m.species[s].head_bytes.map(|h| (0, h));
+                    let id = self.fetcher.start_range(&url, range);
+                    self.stats.requests += 1;
+                    self.requests.insert(id, Target::PackHead(s));
+                    load.head = Load::Requested { attempt };
+                }
+                continue;
             };
-            if let Some(attempt) = due {
-                let id = self.fetcher.start(&join(&self.base, &m.species[s].pack));
-                self.requests.insert(id, Target::Pack(s));
-                self.packs[s] = Load::Requested { attempt };
+            for (i, part) in PackPart::ALL.iter().enumerate() {
+                if !load.wants[i] || load.have[i] || self.fetcher.in_flight() >= self.config.max_in_flight {
+                    continue;
+                }
+                let (Some(range), Some(attempt)) = (head.part_range(*part), due(&load.parts[i])) else { continue };
+                let id = self.fetcher.start_range(&url, Some(range));
+                self.stats.requests += 1;
+                self.requests.insert(id, Target::PackPart(s, i));
+                load.parts[i] = Load::Requested { attempt };
             }
         }
     }

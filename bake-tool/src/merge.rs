@@ -1,0 +1,100 @@
+//! `sylva-bake merge`: joins the outputs of a sharded bake (`bake --shard I/N`)
+//! into one scene, byte-identical to a single-process bake of the same input.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use sylva::format::{Manifest, TileEntry};
+
+use crate::scene_write::{finish_scene, write_atomically};
+
+/// Reads and checks the shard manifests, copies packs (from shard 0), tiles and
+/// id sidecars into `out` and writes the index and manifest of the whole.
+pub fn merge(dirs: &[PathBuf], out: &Path, node_tiles: u32, log: &dyn Fn(&str)) -> Result<Manifest> {
+    if dirs.is_empty() {
+        bail!("merge: name the shard directories (DIR_0 … DIR_N-1)");
+    }
+    let mut shards: Vec<(PathBuf, Manifest)> = Vec::new();
+    for dir in dirs {
+        let path = dir.join("scene.json");
+        let bytes = std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        let m = Manifest::decode(&path.display().to_string(), &bytes)?;
+        if m.shard.is_none() {
+            bail!("{}: not the output of `sylva-bake bake --shard` (no \"shard\" stamp)", path.display());
+        }
+        shards.push((dir.clone(), m));
+    }
+    shards.sort_by_key(|(_, m)| m.shard.map(|s| s.index));
+    let count = shards[0].1.shard.map_or(0, |s| s.count);
+    for (i, (dir, m)) in shards.iter().enumerate() {
+        let s = m.shard.expect("checked above");
+        if s.count != count {
+            bail!("{}: shard {} of {}, but {} is of {count}", dir.display(), s.index, s.count, shards[0].0.display());
+        }
+        if s.index as usize != i {
+            let what = if (s.index as usize) < i { "given twice" } else { "missing" };
+            bail!("shard {i} of {count} is {what} (have: {})", list_indices(&shards));
+        }
+    }
+    if shards.len() != count as usize {
+        bail!(
+            "{} shard directories given, the shards say there are {count} (have: {})",
+            shards.len(),
+            list_indices(&shards)
+        );
+    }
+    let first = &shards[0].1;
+    for (dir, m) in &shards[1..] {
+        let same = m.crs == first.crs
+            && m.origin_m == first.origin_m
+            && m.cell_size_m == first.cell_size_m
+            && m.tile_cells == first.tile_cells
+            && m.species.len() == first.species.len()
+            && m.species.iter().zip(&first.species).all(|(a, b)| a.name == b.name && a.pack == b.pack);
+        if !same {
+            bail!(
+                "{}: CRS, origin, cell size, tile size or species differ from shard 0 ({}): the shards come from different bakes",
+                dir.display(),
+                shards[0].0.display()
+            );
+        }
+    }
+    let mut base = first.clone();
+    base.shard = None;
+    for (s, entry) in base.species.iter_mut().enumerate() {
+        entry.trees = shards.iter().map(|(_, m)| m.species[s].trees).sum();
+    }
+    write_atomically(out, |tmp| {
+        std::fs::create_dir_all(tmp.join("species"))?;
+        std::fs::create_dir_all(tmp.join("tiles"))?;
+        for sp in &first.species {
+            copy(&shards[0].0, tmp, &sp.pack)?;
+        }
+        let mut tiles: Vec<TileEntry> = Vec::new();
+        for (dir, m) in &shards {
+            for t in &m.tiles {
+                copy(dir, tmp, &t.url)?;
+                copy(dir, tmp, &t.ids_url)?;
+            }
+            tiles.extend(m.tiles.iter().cloned());
+            log(&format!("merge: {} ({} tiles, {} trees)", dir.display(), m.tiles.len(), m.counts.trees));
+        }
+        tiles.sort_by_key(|t| (t.y, t.x));
+        if let Some(w) = tiles.windows(2).find(|w| (w[0].x, w[0].y) == (w[1].x, w[1].y)) {
+            bail!("tile ({}, {}) is in two shards: the shards come from different bakes", w[0].x, w[0].y);
+        }
+        finish_scene(tmp, base, tiles, node_tiles, false)
+    })
+}
+
+fn list_indices(shards: &[(PathBuf, Manifest)]) -> String {
+    let v: Vec<String> = shards.iter().filter_map(|(_, m)| m.shard.map(|s| s.index.to_string())).collect();
+    v.join(", ")
+}
+
+/// Copies `rel` from `from` to `to` (a URL the manifest decoder has checked stays inside).
+fn copy(from: &Path, to: &Path, rel: &str) -> Result<()> {
+    let (src, dst) = (from.join(rel), to.join(rel));
+    std::fs::copy(&src, &dst).with_context(|| format!("cannot copy {} to {}", src.display(), dst.display()))?;
+    Ok(())
+}

@@ -1,0 +1,367 @@
+//! The hierarchical tile index (`index/*.json`): a quadtree of small nodes over
+//! the tile grid, so a viewer loads only the nodes whose bounds meet its view
+//! and draw distance and the manifest stays small whatever the tree count.
+//!
+//! The manifest names the root node ([`IndexRef`]). A node lists either tiles
+//! (a leaf, at most [`IndexRef::node_tiles`] of them) or up to four children,
+//! one per quadrant of its square of tile coordinates, each with the bounds of
+//! every tree below it. Bounds nest: a child's bounds lie inside its parent's,
+//! so a walk that skips a node whose bounds miss the view misses no tile.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{at_most, DecodeError, Problem};
+use super::manifest::{check_url, validate_bounds, Bounds, TileEntry};
+
+/// Value of a node's `format` field.
+pub const INDEX_FORMAT: &str = "sylva-index";
+/// Index node version written and read by this build.
+pub const INDEX_VERSION: u32 = 1;
+/// Most tiles one node may list.
+pub const MAX_NODE_TILES: usize = 4096;
+/// Most levels below the root (tile coordinates are i32: 32 halvings cover them).
+pub const MAX_INDEX_DEPTH: u32 = 33;
+/// Default tiles per leaf node: a node of 64 tiles is about 16 KB of JSON.
+pub const DEFAULT_NODE_TILES: u32 = 64;
+
+/// The manifest's pointer to the index.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IndexRef {
+    /// URL of the root node, relative to the manifest.
+    pub root: String,
+    /// Nodes in the whole index.
+    pub nodes: u64,
+    /// Levels of nodes (1: the root is a leaf).
+    pub depth: u32,
+    /// Most tiles a leaf lists.
+    pub node_tiles: u32,
+}
+
+/// A child of a node: where it is and what lies below it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChildEntry {
+    /// Node URL relative to the manifest.
+    pub url: String,
+    /// Bounds of every tree below the child.
+    pub bounds: Bounds,
+    /// Trees below the child.
+    pub trees: u64,
+    /// Tiles below the child.
+    pub tiles: u64,
+}
+
+/// One node (`index/r….json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IndexNode {
+    /// Always [`INDEX_FORMAT`].
+    pub format: String,
+    /// Always [`INDEX_VERSION`].
+    pub version: u32,
+    /// Tile coordinates covered: the square `[x0, x0 + size) × [y0, y0 + size)`.
+    pub square: [i64; 3],
+    /// Bounds of every tree below the node.
+    pub bounds: Bounds,
+    /// Trees below the node.
+    pub trees: u64,
+    /// Tiles listed here (a leaf), sorted by row then column.
+    pub tiles: Vec<TileEntry>,
+    /// Children (an inner node), in quadrant order.
+    pub children: Vec<ChildEntry>,
+}
+
+impl IndexNode {
+    /// Parses and validates a node. `file` names it in errors.
+    ///
+    /// # Errors
+    /// A [`DecodeError`] for JSON that does not parse or match the schema, a wrong
+    /// format or version, bad bounds or URLs, too many entries, a node that is both
+    /// a leaf and inner, tiles outside its square, or counts that do not add up.
+    pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
+        let inner = || -> Result<Self, Problem> {
+            let n: Self = serde_json::from_slice(bytes).map_err(|e| Problem::Json(e.to_string()))?;
+            if n.format != INDEX_FORMAT {
+                return Err(Problem::Invalid(format!(
+                    "\"format\" is {:?}, expected \"{INDEX_FORMAT}\": not a Sylva index node",
+                    n.format
+                )));
+            }
+            if n.version != INDEX_VERSION {
+                return Err(Problem::UnsupportedVersion { found: n.version, supported: INDEX_VERSION });
+            }
+            n.validate()?;
+            Ok(n)
+        };
+        inner().map_err(|p| DecodeError::new(file, p))
+    }
+
+    /// Serialises to compact JSON.
+    #[must_use]
+    pub fn encode(&self) -> Vec<u8> {
+        let mut v = serde_json::to_vec(self).expect("IndexNode serialises");
+        v.push(b'\n');
+        v
+    }
+
+    fn validate(&self) -> Result<(), Problem> {
+        validate_bounds("bounds", &self.bounds)?;
+        at_most("tiles count", self.tiles.len() as u64, MAX_NODE_TILES as u64)?;
+        at_most("children count", self.children.len() as u64, 4)?;
+        let [x0, y0, size] = self.square;
+        if size <= 0 || size > 1 << 33 {
+            return Err(Problem::Invalid(format!("square size {size} must be in 1..=2^33")));
+        }
+        if !self.tiles.is_empty() && !self.children.is_empty() {
+            return Err(Problem::Invalid("a node lists tiles and children: it must be one or the other".into()));
+        }
+        let mut trees = 0u64;
+        for (i, t) in self.tiles.iter().enumerate() {
+            let what = format!("tiles[{i}]");
+            check_url(&format!("{what}.url"), &t.url)?;
+            check_url(&format!("{what}.ids_url"), &t.ids_url)?;
+            validate_bounds(&format!("{what}.bounds"), &t.bounds)?;
+            let (x, y) = (i64::from(t.x), i64::from(t.y));
+            if x < x0 || x >= x0 + size || y < y0 || y >= y0 + size {
+                return Err(Problem::Invalid(format!(
+                    "{what} ({}, {}) lies outside the node's square {:?}",
+                    t.x, t.y, self.square
+                )));
+            }
+            trees = trees.saturating_add(t.trees);
+        }
+        for (i, c) in self.children.iter().enumerate() {
+            let what = format!("children[{i}]");
+            check_url(&format!("{what}.url"), &c.url)?;
+            validate_bounds(&format!("{what}.bounds"), &c.bounds)?;
+            trees = trees.saturating_add(c.trees);
+        }
+        if trees != self.trees {
+            return Err(Problem::Invalid(format!("\"trees\" is {} but the entries hold {trees}", self.trees)));
+        }
+        Ok(())
+    }
+}
+
+/// Union of bounds (`None` for none).
+#[must_use]
+pub fn union_bounds<'a>(all: impl IntoIterator<Item = &'a Bounds>) -> Option<Bounds> {
+    all.into_iter().fold(None, |acc: Option<Bounds>, b| {
+        Some(match acc {
+            None => *b,
+            Some(a) => Bounds {
+                min: [0, 1, 2].map(|k| a.min[k].min(b.min[k])),
+                max: [0, 1, 2].map(|k| a.max[k].max(b.max[k])),
+            },
+        })
+    })
+}
+
+/// A built index: the nodes to write (URL and node, root first) and the
+/// manifest's reference to them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuiltIndex {
+    /// What the manifest says.
+    pub reference: IndexRef,
+    /// Every node with its URL, parents before children.
+    pub nodes: Vec<(String, IndexNode)>,
+}
+
+/// Builds the quadtree over `tiles` (any order; at least one) with at most
+/// `node_tiles` tiles per leaf. Deterministic: the same tiles give the same nodes.
+///
+/// # Panics
+/// If `tiles` is empty or `node_tiles` is 0.
+#[must_use]
+pub fn build_index(tiles: &[TileEntry], node_tiles: u32) -> BuiltIndex {
+    assert!(!tiles.is_empty() && node_tiles > 0);
+    let mut sorted: Vec<TileEntry> = tiles.to_vec();
+    sorted.sort_by_key(|t| (t.y, t.x));
+    let (mut x0, mut y0) = (i64::MAX, i64::MAX);
+    let (mut x1, mut y1) = (i64::MIN, i64::MIN);
+    for t in &sorted {
+        x0 = x0.min(t.x.into());
+        y0 = y0.min(t.y.into());
+        x1 = x1.max(t.x.into());
+        y1 = y1.max(t.y.into());
+    }
+    let span = (x1 - x0 + 1).max(y1 - y0 + 1);
+    let size = (span as u64).next_power_of_two() as i64;
+    let mut nodes = Vec::new();
+    let depth = build_node("index/r", [x0, y0, size], sorted, node_tiles as usize, &mut nodes);
+    BuiltIndex {
+        reference: IndexRef { root: "index/r.json".into(), nodes: nodes.len() as u64, depth, node_tiles },
+        nodes,
+    }
+}
+
+/// Builds the node `stem` over `tiles` (all inside `square`); returns its depth.
+fn build_node(
+    stem: &str,
+    square: [i64; 3],
+    tiles: Vec<TileEntry>,
+    node_tiles: usize,
+    out: &mut Vec<(String, IndexNode)>,
+) -> u32 {
+    let bounds = union_bounds(tiles.iter().map(|t| &t.bounds)).expect("a node has tiles");
+    let trees = tiles.iter().map(|t| t.trees).sum();
+    let url = format!("{stem}.json");
+    let at = out.len();
+    out.push((
+        url,
+        IndexNode {
+            format: INDEX_FORMAT.into(),
+            version: INDEX_VERSION,
+            square,
+            bounds,
+            trees,
+            tiles: Vec::new(),
+            children: Vec::new(),
+        },
+    ));
+    if tiles.len() <= node_tiles || square[2] == 1 {
+        out[at].1.tiles = tiles;
+        return 1;
+    }
+    let [x0, y0, size] = square;
+    let half = size / 2;
+    let mut quadrants: [Vec<TileEntry>; 4] = Default::default();
+    for t in tiles {
+        let q = usize::from(i64::from(t.x) >= x0 + half) + 2 * usize::from(i64::from(t.y) >= y0 + half);
+        quadrants[q].push(t);
+    }
+    let mut depth = 0;
+    let mut children = Vec::new();
+    for (q, part) in quadrants.into_iter().enumerate() {
+        if part.is_empty() {
+            continue;
+        }
+        let child_square = [x0 + half * (q as i64 % 2), y0 + half * (q as i64 / 2), half];
+        let child_stem = format!("{stem}{q}");
+        let child_at = out.len();
+        depth = depth.max(build_node(&child_stem, child_square, part, node_tiles, out));
+        let (url, node) = &out[child_at];
+        children.push(ChildEntry {
+            url: url.clone(),
+            bounds: node.bounds,
+            trees: node.trees,
+            tiles: count_tiles(out, child_at),
+        });
+    }
+    out[at].1.children = children;
+    depth + 1
+}
+
+/// Tiles below the node at `at` in `out` (its subtree follows it contiguously).
+fn count_tiles(out: &[(String, IndexNode)], at: usize) -> u64 {
+    let n = &out[at].1;
+    if n.children.is_empty() {
+        return n.tiles.len() as u64;
+    }
+    n.children.iter().map(|c| c.tiles).sum()
+}
+
+/// Every tile of a local scene directory: the manifest's flat list, or the
+/// leaves of its index read from `dir`.
+///
+/// # Errors
+/// A message naming the node that cannot be read or decoded.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_all_tiles(dir: &std::path::Path, m: &super::Manifest) -> Result<Vec<TileEntry>, String> {
+    let Some(index) = &m.index else { return Ok(m.tiles.clone()) };
+    let mut out = Vec::new();
+    let mut stack = vec![index.root.clone()];
+    let mut visited = 0u64;
+    while let Some(url) = stack.pop() {
+        visited += 1;
+        if visited > index.nodes.max(1) {
+            return Err(format!("{}: the index has more nodes than the {} it declares", dir.display(), index.nodes));
+        }
+        let path = dir.join(&url);
+        let bytes = std::fs::read(&path).map_err(|e| format!("cannot read index node {}: {e}", path.display()))?;
+        let node = IndexNode::decode(&path.display().to_string(), &bytes).map_err(|e| e.to_string())?;
+        out.extend(node.tiles);
+        stack.extend(node.children.into_iter().rev().map(|c| c.url));
+    }
+    out.sort_by_key(|t| (t.y, t.x));
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tile(x: i32, y: i32) -> TileEntry {
+        let (fx, fy) = (x as f32 * 100.0, y as f32 * 100.0);
+        TileEntry {
+            x,
+            y,
+            url: format!("tiles/{x}_{y}.tile"),
+            ids_url: format!("tiles/{x}_{y}.ids"),
+            bytes: 100,
+            trees: (x.unsigned_abs() + y.unsigned_abs() + 1).into(),
+            batches: 1,
+            bounds: Bounds { min: [fx, fy, 0.0], max: [fx + 100.0, fy + 100.0, 10.0 + x as f32] },
+        }
+    }
+
+    #[test]
+    fn builds_a_valid_nested_quadtree() {
+        let tiles: Vec<TileEntry> = (-7..9)
+            .flat_map(|y| (-3..12).map(move |x| (x, y)))
+            .filter(|(x, y)| (x * y) % 5 != 1)
+            .map(|(x, y)| tile(x, y))
+            .collect();
+        let built = build_index(&tiles, 7);
+        assert!(built.reference.depth >= 3, "depth {}", built.reference.depth);
+        assert_eq!(built.nodes[0].0, "index/r.json");
+        let by_url: std::collections::HashMap<&str, &IndexNode> =
+            built.nodes.iter().map(|(u, n)| (u.as_str(), n)).collect();
+        let mut leaf_tiles = 0;
+        for (url, node) in &built.nodes {
+            let decoded = IndexNode::decode(url, &node.encode()).unwrap();
+            assert_eq!(&decoded, node);
+            assert!(node.tiles.len() <= 7 || node.square[2] == 1);
+            leaf_tiles += node.tiles.len();
+            for c in &node.children {
+                let child = by_url[c.url.as_str()];
+                assert_eq!(child.bounds, c.bounds);
+                assert_eq!(child.trees, c.trees);
+                for k in 0..3 {
+                    assert!(node.bounds.min[k] <= c.bounds.min[k] && c.bounds.max[k] <= node.bounds.max[k]);
+                }
+            }
+        }
+        assert_eq!(leaf_tiles, tiles.len());
+        assert_eq!(built.nodes[0].1.trees, tiles.iter().map(|t| t.trees).sum::<u64>());
+        // Same input in another order: same nodes.
+        let mut shuffled = tiles.clone();
+        shuffled.reverse();
+        assert_eq!(build_index(&shuffled, 7), built);
+    }
+
+    #[test]
+    fn rejects_bad_nodes() {
+        let built = build_index(&[tile(0, 0), tile(1, 0)], 64);
+        let good = built.nodes[0].1.clone();
+        let err = |f: &dyn Fn(&mut IndexNode), needle: &str| {
+            let mut n = good.clone();
+            f(&mut n);
+            let msg = IndexNode::decode("index/r.json", &n.encode()).unwrap_err().to_string();
+            assert!(msg.contains(needle) && msg.contains("index/r.json"), "{msg}");
+        };
+        err(&|n| n.trees += 1, "entries hold");
+        err(&|n| n.tiles[0].url = "../x".into(), "relative path");
+        err(&|n| n.tiles[0].x = 99, "outside the node's square");
+        err(&|n| n.format = "x".into(), "not a Sylva index node");
+        err(&|n| n.version = 9, "version 9");
+        err(
+            &|n| {
+                n.children.push(ChildEntry { url: "index/r0.json".into(), bounds: n.bounds, trees: 0, tiles: 0 });
+            },
+            "one or the other",
+        );
+        assert!(IndexNode::decode("n", b"[1,2]").unwrap_err().to_string().contains("invalid JSON"));
+    }
+}
