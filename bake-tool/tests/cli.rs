@@ -223,3 +223,61 @@ fn inspect_reports_corrupt_files_without_panicking() {
     let e = fails(bin().arg("inspect").arg(dir.join("missing.pack")));
     assert!(e.contains("missing.pack"), "{e}");
 }
+
+#[test]
+fn sharded_bake_and_merge_equal_a_single_bake() {
+    let dir = tmp("shards");
+    let args = |out: &Path| {
+        let mut c = bin();
+        c.args(["demo", "--trees", "6000", "--seed", "5", "--billboard-size", "16", "--texture-size", "16"])
+            .args(["--cluster-tries", "1", "--cell-size", "32", "--tile-cells", "2", "--index-node-tiles", "5"])
+            .arg("--out")
+            .arg(out);
+        c
+    };
+    run(&mut args(&dir.join("single")));
+    // Three shards as three processes at once, as an array job would run them.
+    let children: Vec<_> = (0..3)
+        .map(|i| args(&dir.join(format!("part-{i}"))).args(["--shard", &format!("{i}/3")]).spawn().unwrap())
+        .collect();
+    for c in children {
+        let out = c.wait_with_output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    // Each shard holds part of the tiles; only shard 0 holds packs.
+    let parts: Vec<serde_json::Value> = (0..3)
+        .map(|i| serde_json::from_slice(&std::fs::read(dir.join(format!("part-{i}/scene.json"))).unwrap()).unwrap())
+        .collect();
+    let tiles: Vec<usize> = parts.iter().map(|p| p["tiles"].as_array().unwrap().len()).collect();
+    assert!(tiles.iter().all(|&t| t > 0), "every shard gets tiles: {tiles:?}");
+    assert!(dir.join("part-0/species").read_dir().unwrap().count() > 0);
+    assert_eq!(dir.join("part-1/species").read_dir().unwrap().count(), 0);
+    // Merge, shards in any order.
+    run(bin()
+        .arg("merge")
+        .args(["part-2", "part-0", "part-1"].map(|p| dir.join(p)))
+        .arg("--out")
+        .arg(dir.join("merged"))
+        .args(["--index-node-tiles", "5"]));
+    let single = snapshot(&dir.join("single"));
+    let merged = snapshot(&dir.join("merged"));
+    assert!(single.iter().any(|(p, _)| p.starts_with("index/")), "the scene has a hierarchical index");
+    assert_eq!(single.len(), merged.len(), "same files: {:?}", merged.iter().map(|(p, _)| p).collect::<Vec<_>>());
+    for ((pa, a), (pb, b)) in single.iter().zip(&merged) {
+        assert_eq!(pa, pb);
+        assert!(a == b, "{pa} differs between the single and the merged bake");
+    }
+    // Missing, repeated or foreign shards fail clearly.
+    let err =
+        fails(bin().arg("merge").args(["part-0", "part-2"].map(|p| dir.join(p))).arg("--out").arg(dir.join("bad")));
+    assert!(err.contains("shard 1 of 3 is missing"), "{err}");
+    let err = fails(
+        bin().arg("merge").args(["part-0", "part-1", "part-1"].map(|p| dir.join(p))).arg("--out").arg(dir.join("bad")),
+    );
+    assert!(err.contains("given twice"), "{err}");
+    let err = fails(bin().arg("merge").arg(dir.join("single")).arg("--out").arg(dir.join("bad")));
+    assert!(err.contains("no \"shard\" stamp"), "{err}");
+    let err = fails(args(&dir.join("bad")).args(["--shard", "3/3"]));
+    assert!(err.contains("0 ≤ I < N"), "{err}");
+    assert!(!dir.join("bad").exists(), "nothing is left behind");
+}

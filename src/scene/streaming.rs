@@ -355,6 +355,16 @@ impl<F: Fetcher> SceneStream<F> {
             Manifest::decode(&self.manifest_url, &bytes).map_err(|e: DecodeError| (e.to_string(), false))
         });
         match parsed {
+            Ok(m) if m.shard.is_some() => {
+                self.manifest_load = Load::Broken;
+                let s = m.shard.unwrap_or(crate::format::ShardStamp { index: 0, count: 0 });
+                self.events.push(StreamEvent::Fatal {
+                    message: format!(
+                        "{} is shard {} of {} of a sharded bake, not a whole scene: join the shards with `sylva-bake merge`",
+                        self.manifest_url, s.index, s.count
+                    ),
+                });
+            }
             Ok(m) if m.species.len() as u32 <= renderer.config().species => {
                 renderer.set_species_count(m.species.len() as u32);
                 self.index = IndexWalk::new(&m);
