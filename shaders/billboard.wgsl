@@ -36,11 +36,30 @@ fn billboard_layer(to_eye: vec3<f32>, angles: u32) -> u32 {
     return u32(clamp(i, 0.0, a - 1.0));
 }
 
+// Scale of a thinned batch's kept trees so the canopy covers about what all its
+// trees did: s = (n / kept)^THIN_BOOST_EXPONENT. An exponent of ½ keeps the
+// summed tree area; calibrated by the image metric it over-covers by 10–18 %
+// (evenly spread kept trees overlap less than the whole batch, whose tiny
+// billboards also alpha-test away part of their area) and no boost under-covers
+// by up to 50 %; 0.35 keeps coverage within ±6 % (docs/BENCHMARKS.md).
+const THIN_BOOST_EXPONENT: f32 = 0.35;
+
+fn coverage_boost(thin: vec2<f32>, b: Batch) -> f32 {
+    let n = f32(b.instance_count);
+    if thin.x >= n {
+        return 1.0;
+    }
+    return pow(n / thin.x, THIN_BOOST_EXPONENT);
+}
+
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
     let tree = unpack_instance(instances[item.x], batch, view);
+    // A thinned batch's kept trees stand in for the others: bigger, about the
+    // crown's centre (so a far canopy's top line barely rises).
+    let thin = thinning(batch, view);
     let angles = max(draw.ids.w & 0xffffu, 2u);
     let azimuths = max(draw.ids.w >> 16u, 1u);
     let base = tree.pos + vec3<f32>(0.0, 0.0, draw.bb_center.z * tree.scale);
@@ -62,9 +81,10 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
+    let boost = coverage_boost(thin, batch);
     let c = corners[vertex % 6u];
-    let half_w = draw.bb_center.w * tree.scale;
-    let half_h = draw.bb_size.x * tree.scale;
+    let half_w = draw.bb_center.w * tree.scale * boost;
+    let half_h = draw.bb_size.x * tree.scale * boost;
     let pos = base + right * (c.x * half_w) + up * (c.y * half_h);
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);

@@ -29,7 +29,7 @@ struct View {
     params: vec4<u32>,
     // Inverse of clip_from_eye: per-pixel rays of the cluster pass.
     eye_from_clip: mat4x4<f32>,
-    // x, y: viewport size (px).
+    // x, y: viewport size (px); z: prefix-thinning threshold (px, 0 off).
     viewport: vec4<f32>,
 };
 
@@ -129,6 +129,35 @@ fn unpack_instance(packed: vec2<u32>, batch: Batch, view: View) -> Tree {
     t.scale = batch.scale_min * exp2(f32(scale_q) * batch.scale_log2_step);
     t.variation = f32(packed.y >> 27u);
     return t;
+}
+
+// Batch flag: instances are density-ordered (every prefix an even thinning).
+const BATCH_DENSITY_ORDERED: u32 = 1u;
+// Fewest trees a thinned batch keeps, as a fraction (the largest boost is its root).
+const THIN_MIN_FRACTION: f32 = 0.015625;
+
+// Prefix thinning (seed 004 ch. 7). A density-ordered batch whose tallest tree
+// is below view.viewport.z px tall at the batch's nearest point draws only its
+// first n·f trees, f = (h / T)² (at least 1/64, and at least one tree): about as
+// many trees per screen area as at T px. The billboard pass scales the kept
+// trees up to keep the canopy's coverage (`coverage_boost`). Returns (trees
+// kept, fractional; n / kept, 1 when not thinned).
+// Must match `thinning` in src/render/cull.rs.
+fn thinning(b: Batch, view: View) -> vec2<f32> {
+    let n = f32(b.instance_count);
+    let t = view.viewport.z;
+    if (b.reserved0 & BATCH_DENSITY_ORDERED) == 0u || t <= 0.0 || view.lod.w > 0.5 {
+        return vec2<f32>(n, 1.0);
+    }
+    let center = eye_relative(b.center_m, vec3<f32>(0.0), view);
+    let d = max(length(max(abs(center) - b.half_extent_m, vec3<f32>(0.0))), 1e-3);
+    let h = b.max_height_m * view.lod.x / d;
+    if h >= t {
+        return vec2<f32>(n, 1.0);
+    }
+    let f = clamp((h * h) / (t * t), THIN_MIN_FRACTION, 1.0);
+    let kept = max(n * f, 1.0);
+    return vec2<f32>(kept, n / kept);
 }
 
 // Sphere against the frustum (eye-relative).

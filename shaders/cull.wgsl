@@ -161,10 +161,15 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     let batch_index = visible[v];
     let b = batches[batch_index];
     let s = species[b.species];
+    // Prefix thinning: far density-ordered batches draw their first trees only,
+    // as billboards (bigger, see `thinning`); the last one fades by its fraction.
+    let thin = thinning(b, view);
+    let thinned = thin.y > 1.0 && species_cap(s, REPR_BILLBOARD) > 0u;
+    let count = select(b.instance_count, min(u32(ceil(thin.x)), b.instance_count), thinned);
     if lid == 0u {
-        atomicAdd(&control[4], b.instance_count);
+        atomicAdd(&control[4], count);
     }
-    for (var i = lid; i < b.instance_count; i += WORKGROUP) {
+    for (var i = lid; i < count; i += WORKGROUP) {
         let instance = b.instance_offset + i;
         let tree = unpack_instance(instances[instance], b, view);
         let center = tree.pos + rotate_z(s.sphere.xyz * tree.scale, tree.yaw);
@@ -172,6 +177,12 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         let dist = max(length(center), 1e-3);
         // Mode 2 (no culling) draws every tree.
         if view.lod.w < 1.5 && (!sphere_visible(center, radius, view) || dist - radius > view.lod.y) {
+            continue;
+        }
+        if thinned {
+            // Side 0 keeps the pixels whose dither is at least the fade.
+            let fade = 1.0 - clamp(thin.x - f32(i), 0.0, 1.0);
+            emit(b.species, REPR_BILLBOARD, instance, batch_index, 0u, fade);
             continue;
         }
         let h_px = s.select.x * tree.scale * view.lod.x / dist;

@@ -102,6 +102,11 @@ mod cli {
             /// depth tests); by default they keep their proxy's front-most depth.
             #[arg(long)]
             exact_depth: bool,
+            /// Prefix thinning: far batches whose trees are below this many pixels
+            /// tall draw an even subset of them, scaled up to keep the canopy's
+            /// coverage (0 turns it off).
+            #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
+            thin_px: f32,
             /// Draw the boxes of the batches that pass the batch test.
             #[arg(long)]
             debug_bounds: bool,
@@ -574,6 +579,7 @@ mod cli {
                 only,
                 ellipsoid_min_px,
                 exact_depth,
+                thin_px,
                 debug_bounds,
                 stats,
                 timeout,
@@ -588,6 +594,9 @@ mod cli {
                 if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
                     bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
                 }
+                if !(thin_px.is_finite() && thin_px >= 0.0) {
+                    bail!("--thin-px {thin_px}: must be a number of pixels ≥ 0 (0 turns thinning off)");
+                }
                 if let Some(scene) = scene {
                     use sylva::render::forest::Representations;
                     let settings = RenderSettings {
@@ -597,6 +606,7 @@ mod cli {
                         debug_bounds,
                         cluster_min_px: ellipsoid_min_px,
                         cluster_exact_depth: exact_depth,
+                        thin_px,
                         representations: match only {
                             None => Representations::ALL,
                             Some(OnlyArg::Meshes) => Representations::MESHES,

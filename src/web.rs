@@ -500,8 +500,10 @@ impl Viewer {
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
     /// the simplified mesh) use clustered ellipsoids (infinity: none); `only`
     /// restricts drawing to one family (`"meshes"`, `"ellipsoids"`, `"billboards"`,
-    /// anything else: all); `exact_depth` writes the ellipsoids' exact ray-cast depth.
-    pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool) {
+    /// anything else: all); `exact_depth` writes the ellipsoids' exact ray-cast depth;
+    /// far batches whose trees are below `thin_px` pixels draw an even, scaled-up
+    /// subset of them (0: off).
+    pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool, thin_px: f32) {
         use crate::render::forest::Representations;
         self.settings.cluster_min_px =
             if ellipsoid_min_px.is_nan() { f32::INFINITY } else { ellipsoid_min_px.max(0.0) };
@@ -512,6 +514,7 @@ impl Viewer {
             _ => Representations::ALL,
         };
         self.settings.cluster_exact_depth = exact_depth;
+        self.settings.thin_px = if thin_px.is_finite() { thin_px.clamp(0.0, 64.0) } else { 0.0 };
     }
 
     /// LoD quality factor (1, 0.5, 0.25).

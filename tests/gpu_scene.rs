@@ -566,3 +566,46 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     });
     assert!(fetched_meshes, "the close view fetches mesh levels: {close_log:?}");
 }
+
+#[test]
+fn prefix_thinning_keeps_canopy_coverage() {
+    let mut off = open(fixture().to_str().unwrap());
+    let m = manifest(&mut off);
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = (lo + hi) * 0.5;
+    // Straight down from 1.2 km and obliquely from 1.5 km: trees a few px tall.
+    let views = [
+        ("top", Camera { eye_m: c + DVec3::Z * 1200.0, pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() }),
+        ("oblique", Camera::look_at(c + DVec3::new(0.0, -1300.0, 700.0), c)),
+    ];
+    off.settings.draw_distance_m = 20_000.0;
+    for (name, cam) in views {
+        off.settings.thin_px = 0.0;
+        let full = render(&mut off, &cam);
+        let full_drawn = off.render(&cam, true).instances["billboard"];
+        off.settings.thin_px = 12.0;
+        let thinned = render(&mut off, &cam);
+        let stats = off.render(&cam, true);
+        let drawn = stats.instances["billboard"];
+        // Thinning is on: far fewer trees drawn…
+        assert!(drawn * 3 < full_drawn, "{name}: {drawn} of {full_drawn} trees drawn");
+        // …and the canopy covers as much of the image (±10 %), close to the full image.
+        let (a, b) = (foliage_share(&full), foliage_share(&thinned));
+        assert!(a > 0.01, "{name}: the view shows the forest ({a:.3})");
+        assert!((b - a).abs() <= 0.1 * a, "{name}: coverage {b:.4} with thinning, {a:.4} without");
+        let e = multiscale_rmse(&full, &thinned, W, H);
+        assert!(e < 0.02, "{name}: thinning changes the image by {e:.4}");
+        // The GPU thins exactly as the CPU oracle does.
+        let (gpu, batches, instances, _) = off.read_selection();
+        let oracle = cpu_select(off.renderer.last_view(), &batches, &instances, off.renderer.species_table());
+        for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
+            let mut g: Vec<u32> = g.iter().map(|&(i, _)| i).collect();
+            let mut c: Vec<u32> = c.iter().map(|&(i, _)| i).collect();
+            g.sort_unstable();
+            c.sort_unstable();
+            assert_eq!(g, c, "{name}: slot {slot} differs from the oracle");
+        }
+        eprintln!("{name}: {drawn} of {full_drawn} trees, coverage {b:.4} vs {a:.4}, MS-RMSE {e:.4}");
+    }
+}

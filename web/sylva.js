@@ -115,10 +115,12 @@ class SylvaViewer {
    * Level-of-detail policy: `ellipsoidMinPx` (default 40; Infinity: no ellipsoids),
    * `only` ('meshes' | 'ellipsoids' | 'billboards'; default all, mixed by size),
    * `exactDepth` (default false: ellipsoids keep their proxy's front-most depth,
-   * which keeps early depth tests; true writes the exact ray-cast depth, slower).
+   * which keeps early depth tests; true writes the exact ray-cast depth, slower),
+   * `thinPx` (default 8; 0 off): far batches whose trees are below this many
+   * pixels tall draw an even subset of them, scaled up to keep canopy coverage.
    */
-  setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false } = {}) {
-    this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth);
+  setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false, thinPx = 8 } = {}) {
+    this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth, Number(thinPx));
     this.dirty = 8;
   }
 

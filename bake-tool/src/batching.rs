@@ -9,7 +9,9 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
-use sylva::format::tile::{GpuBatch, PackedInstance, Tile, MAX_XY_STEP_M, MAX_Z_STEP_M, SCALE_BITS, YAW_BITS, Z_BITS};
+use sylva::format::tile::{
+    GpuBatch, PackedInstance, Tile, BATCH_DENSITY_ORDERED, MAX_XY_STEP_M, MAX_Z_STEP_M, SCALE_BITS, YAW_BITS, Z_BITS,
+};
 
 /// One tree in scene coordinates.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -139,6 +141,7 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
                     let key = group[b0].0;
                     let members: Vec<&SceneTree> = group[b0..i].iter().map(|(_, t)| &trees[*t]).collect();
                     let corner = [key[3] as f64 * cell, key[2] as f64 * cell];
+                    let members = density_order(members, corner, cell);
                     let batch = make_batch(
                         &members,
                         &shapes[key[4] as usize],
@@ -163,6 +166,114 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
             BuiltTile { tile: Tile { tile_x: tx as i32, tile_y: ty as i32, batches, instances }, ids, bounds: (lo, hi) }
         })
         .collect()
+}
+
+/// Orders the trees of a batch so that every prefix is an even thinning of the
+/// whole (seed 004 ch. 7): level by level, the not yet chosen tree nearest the
+/// centre of each square of a grid twice as fine as the level before; squares
+/// of one level in a scrambled order, so a prefix that ends inside a level is
+/// still spread over the cell. Deterministic.
+pub fn density_order(members: Vec<&SceneTree>, corner: [f64; 2], cell: f64) -> Vec<&SceneTree> {
+    let n = members.len();
+    if n <= 2 {
+        return members;
+    }
+    if n <= FARTHEST_POINT_MAX {
+        return farthest_point_order(members, corner, cell);
+    }
+    let mut taken = vec![false; n];
+    let mut out = Vec::with_capacity(n);
+    let mut best: std::collections::HashMap<(u32, u32), (f64, usize)> = std::collections::HashMap::new();
+    let mut occupied: std::collections::HashSet<(u32, u32)> = std::collections::HashSet::new();
+    for level in 0..24u32 {
+        let g = 1u32 << level;
+        let size = cell / f64::from(g);
+        best.clear();
+        occupied.clear();
+        for (i, t) in members.iter().enumerate() {
+            let fx = ((t.pos.x - corner[0]) / size).clamp(0.0, f64::from(g) - 1e-9);
+            let fy = ((t.pos.y - corner[1]) / size).clamp(0.0, f64::from(g) - 1e-9);
+            let (sx, sy) = (fx.floor() as u32, fy.floor() as u32);
+            if taken[i] {
+                occupied.insert((sx, sy));
+                continue;
+            }
+            let d = (fx - f64::from(sx) - 0.5).powi(2) + (fy - f64::from(sy) - 0.5).powi(2);
+            let e = best.entry((sx, sy)).or_insert((f64::MAX, usize::MAX));
+            if (d, i) < *e {
+                *e = (d, i);
+            }
+        }
+        // Squares still empty first, so a prefix ending in this level fills gaps.
+        let mut chosen: Vec<(bool, u64, u32, u32, usize)> = best
+            .iter()
+            .map(|(&(sx, sy), &(_, i))| (occupied.contains(&(sx, sy)), scramble(sx, sy, level), sx, sy, i))
+            .collect();
+        chosen.sort_unstable();
+        for (_, _, _, _, i) in chosen {
+            taken[i] = true;
+            out.push(members[i]);
+        }
+        if out.len() == n {
+            return out;
+        }
+    }
+    // Trees closer than cell / 2^23 apart: the rest in their original order.
+    out.extend(members.iter().enumerate().filter(|(i, _)| !taken[*i]).map(|(_, t)| *t));
+    out
+}
+
+/// Batches up to this many trees are ordered by exact farthest-point sampling
+/// (O(n²)); larger ones by the grid hierarchy (O(n log n)).
+pub const FARTHEST_POINT_MAX: usize = 4096;
+
+/// Farthest-point order: first the tree nearest the cell's centre, then always
+/// the tree farthest from all chosen so far (ties: the earlier tree), distances
+/// taken around the cell as a torus. Every prefix is then within a factor 2 of
+/// the most even subset of its size (the k-centre bound).
+fn farthest_point_order(members: Vec<&SceneTree>, corner: [f64; 2], cell: f64) -> Vec<&SceneTree> {
+    let n = members.len();
+    // Cell-local f32 coordinates: exact enough (cells are ≤ 655 m) and fast.
+    let xs: Vec<f32> = members.iter().map(|t| (t.pos.x - corner[0]) as f32).collect();
+    let ys: Vec<f32> = members.iter().map(|t| (t.pos.y - corner[1]) as f32).collect();
+    let c = (cell * 0.5) as f32;
+    let w = cell as f32;
+    let mut dist: Vec<f32> = xs.iter().zip(&ys).map(|(x, y)| (x - c) * (x - c) + (y - c) * (y - c)).collect();
+    let mut next = (0..n).min_by(|&a, &b| dist[a].total_cmp(&dist[b]).then(a.cmp(&b))).unwrap_or(0);
+    dist.iter_mut().for_each(|d| *d = f32::INFINITY);
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        let p = next;
+        out.push(members[p]);
+        dist[p] = -1.0;
+        let (px, py) = (xs[p], ys[p]);
+        let mut far = -1.0f32;
+        for i in 0..n {
+            // On the torus of the cell: batches tile the plane, so a tree near one
+            // edge is near the trees beyond it (and edges are not favoured).
+            let dx = (xs[i] - px).abs();
+            let dy = (ys[i] - py).abs();
+            let (dx, dy) = (dx.min(w - dx), dy.min(w - dy));
+            let d = dx * dx + dy * dy;
+            if d < dist[i] {
+                dist[i] = d;
+            }
+            if dist[i] > far {
+                far = dist[i];
+                next = i;
+            }
+        }
+    }
+    out
+}
+
+/// A hash of a grid square, for a scrambled but deterministic order.
+fn scramble(x: u32, y: u32, level: u32) -> u64 {
+    let mut h = u64::from(x) << 32 | u64::from(y);
+    h ^= u64::from(level).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    h ^ (h >> 31)
 }
 
 /// Quantises `members` (one cell, one species, one height band) into a batch.
@@ -193,7 +304,7 @@ fn make_batch(
         scale_min: s_min,
         scale_log2_step,
         max_height_m: 0.0,
-        reserved: [0; 2],
+        reserved: [BATCH_DENSITY_ORDERED, 0],
     };
     let xy_step = cell / 65535.0;
     let z_max_q = (1u32 << Z_BITS) - 1;
@@ -259,6 +370,64 @@ mod tests {
                 id: i as u64,
             })
             .collect()
+    }
+
+    /// Covering radius of a subset: the farthest any tree of `all` is from the
+    /// subset's nearest tree (the largest gap a thinning leaves), around the cell
+    /// as a torus (batches tile the plane), in units of the spacing of a
+    /// perfectly even subset of that size, sqrt(area / k).
+    fn covering_radius(subset: &[&SceneTree], all: &[&SceneTree], cell: f64) -> f64 {
+        let r = all
+            .iter()
+            .map(|t| {
+                subset
+                    .iter()
+                    .map(|s| {
+                        let d = (s.pos - t.pos).truncate().abs();
+                        d.x.min(cell - d.x).hypot(d.y.min(cell - d.y))
+                    })
+                    .fold(f64::MAX, f64::min)
+            })
+            .fold(0.0, f64::max);
+        r / (cell * cell / subset.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn density_order_makes_every_prefix_an_even_thinning() {
+        // Farthest-point order (up to FARTHEST_POINT_MAX trees), then the grid hierarchy.
+        even_prefixes(3000, 0.9, 0.75);
+        even_prefixes(FARTHEST_POINT_MAX as u64 + 1000, 1.2, 0.9);
+    }
+
+    fn even_prefixes(n: u64, most: f64, of_random: f64) {
+        let cell = 128.0;
+        let mut seed = 7;
+        let trees: Vec<SceneTree> = (0..n)
+            .map(|i| SceneTree {
+                pos: DVec3::new(lcg(&mut seed) * cell, lcg(&mut seed) * cell, 0.0),
+                species: 0,
+                scale: 1.0,
+                yaw_rad: 0.0,
+                variation: 0,
+                id: i,
+            })
+            .collect();
+        let members: Vec<&SceneTree> = trees.iter().collect();
+        let ordered = density_order(members.clone(), [0.0, 0.0], cell);
+        // A permutation, and the same again for the same input.
+        let mut ids: Vec<u64> = ordered.iter().map(|t| t.id).collect();
+        assert_eq!(ordered, density_order(members.clone(), [0.0, 0.0], cell));
+        ids.sort_unstable();
+        assert_eq!(ids, (0..n).collect::<Vec<u64>>());
+        for k in [16, 50, 100, 300, 1000] {
+            // The input order is random: a random thinning is the baseline.
+            let random = covering_radius(&members[..k], &members, cell);
+            let even = covering_radius(&ordered[..k], &members, cell);
+            assert!(
+                even < most && even < of_random * random,
+                "prefix {k} of {n}: the largest gap is {even:.2} spacings (a random subset's: {random:.2})"
+            );
+        }
     }
 
     const SHAPES: [SpeciesShape; 3] = [

@@ -163,7 +163,10 @@ pub fn cpu_select(
             continue;
         }
         sel.visible_batches.push(i as u32);
-        for k in 0..b.instance_count {
+        let (kept, boost) = thinning(b, view);
+        let thinned = boost > 1.0 && s.slot_cap[Repr::Billboard as usize] > 0;
+        let count = if thinned { (kept.ceil() as u32).min(b.instance_count) } else { b.instance_count };
+        for k in 0..count {
             let index = b.instance_offset + k;
             let packed = instances[index as usize];
             let d = decode_eye_relative(packed, b, view);
@@ -173,12 +176,45 @@ pub fn cpu_select(
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
                 continue;
             }
+            if thinned {
+                let slot = (b.species * REPR_COUNT + Repr::Billboard as u32) as usize;
+                let fade = 1.0 - (kept - k as f32).clamp(0.0, 1.0);
+                if (sel.slots[slot].len() as u32) < s.slot_cap[Repr::Billboard as usize] {
+                    sel.slots[slot].push((index, pack_item_y(i as u32, 0, fade)));
+                } else {
+                    sel.dropped += 1;
+                }
+                continue;
+            }
             let h_px = s.select[0] * d.2 * view.lod[0] / dist;
             select(&mut sel, view, s, b.species, h_px, index, i as u32);
         }
     }
     sel
 }
+
+/// Prefix thinning of a batch, exactly as `thinning` in `shaders/common.wgsl`:
+/// (trees kept, fractional; n / kept, 1 when not thinned).
+#[must_use]
+pub fn thinning(b: &GpuBatch, view: &ViewUniform) -> (f32, f32) {
+    let n = b.instance_count as f32;
+    let t = view.viewport[2];
+    if b.reserved[0] & crate::format::tile::BATCH_DENSITY_ORDERED == 0 || t <= 0.0 || view.lod[3] > 0.5 {
+        return (n, 1.0);
+    }
+    let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
+    let d = (center.abs() - Vec3::from(b.half_extent_m)).max(Vec3::ZERO).length().max(1e-3);
+    let h = b.max_height_m * view.lod[0] / d;
+    if h >= t {
+        return (n, 1.0);
+    }
+    let f = ((h * h) / (t * t)).clamp(THIN_MIN_FRACTION, 1.0);
+    let kept = (n * f).max(1.0);
+    (kept, n / kept)
+}
+
+/// Fewest trees a thinned batch keeps, as a fraction (`THIN_MIN_FRACTION` in WGSL).
+pub const THIN_MIN_FRACTION: f32 = 1.0 / 64.0;
 
 /// (eye-relative position, yaw, scale) of an instance, exactly as `unpack_instance` in WGSL.
 fn decode_eye_relative(p: PackedInstance, b: &GpuBatch, view: &ViewUniform) -> (Vec3, f32, f32) {

@@ -102,7 +102,14 @@ pub struct RenderSettings {
     /// stay on — 2.2–2.5× cheaper cluster draws for +0.001 multi-scale RMSE
     /// (docs/BENCHMARKS.md); only interpenetrating primitives can sort wrongly.
     pub cluster_exact_depth: bool,
+    /// Prefix thinning (seed 004 ch. 7): a density-ordered batch whose trees are
+    /// below this many pixels tall draws a prefix of them, scaled up to keep the
+    /// canopy's coverage. 0: off.
+    pub thin_px: f32,
 }
+
+/// Default of [`RenderSettings::thin_px`].
+pub const DEFAULT_THIN_PX: f32 = 8.0;
 
 /// Representation families a frame may use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -146,6 +153,7 @@ impl Default for RenderSettings {
             cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
             representations: Representations::ALL,
             cluster_exact_depth: false,
+            thin_px: DEFAULT_THIN_PX,
         }
     }
 }
@@ -736,7 +744,7 @@ impl ForestRenderer {
             ],
             params: [0, self.batch_high_water, u32::from(settings.debug_lod), self.species_count],
             eye_from_clip: view.clip_from_eye.inverse().to_cols_array_2d(),
-            viewport: [view.viewport[0] as f32, view.viewport[1] as f32, 0.0, 0.0],
+            viewport: [view.viewport[0] as f32, view.viewport[1] as f32, settings.thin_px, 0.0],
         };
         queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
         self.last_view = uniform;
