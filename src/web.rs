@@ -517,6 +517,17 @@ impl Viewer {
         self.settings.thin_px = if thin_px.is_finite() { thin_px.clamp(0.0, 64.0) } else { 0.0 };
     }
 
+    /// Budgets: GPU memory for pools and packs in MB (0: none), download bytes per
+    /// second (0: none), requests in flight (at least 1). The viewer degrades within
+    /// them (coarser levels, shorter reach for new tiles) and says so in `stats()`.
+    pub fn set_budget(&mut self, gpu_mb: f64, bytes_per_s: f64, in_flight: u32) {
+        let mut c = self.stream.config();
+        c.gpu_budget_bytes = if gpu_mb.is_finite() && gpu_mb > 0.0 { (gpu_mb * 1e6) as u64 } else { 0 };
+        c.max_bytes_per_s = if bytes_per_s.is_finite() && bytes_per_s > 0.0 { bytes_per_s } else { 0.0 };
+        c.max_in_flight = in_flight.clamp(1, 64) as usize;
+        self.stream.set_config(c);
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.settings.quality = quality.clamp(0.05, 4.0);
@@ -559,6 +570,12 @@ impl Viewer {
             "index_nodes_loaded": s.index_nodes_loaded,
             "index_nodes_total": s.index_nodes_total,
             "requests": s.requests,
+            "degraded": {
+                "pools_full": s.degraded.pools_full,
+                "gpu_budget": s.degraded.gpu_budget,
+                "bandwidth": s.degraded.bandwidth,
+                "reach_m": if s.degraded.reach_m.is_finite() { f64::from(s.degraded.reach_m) } else { -1.0 },
+            },
             "bytes_fetched": s.bytes_fetched,
             "trees_total": self.stream.manifest().map_or(0, |m| m.counts.trees),
             "trees_resident": self.renderer.resident_instances(),

@@ -609,3 +609,58 @@ fn prefix_thinning_keeps_canopy_coverage() {
         eprintln!("{name}: {drawn} of {full_drawn} trees, coverage {b:.4} vs {a:.4}, MS-RMSE {e:.4}");
     }
 }
+
+#[test]
+fn budgets_and_full_pools_degrade_gracefully() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
+    }
+    // Pools for 900 trees of a 3,000-tree scene: the view wants more than fits.
+    let pools = PoolConfig { instances: 900, batches: 256, items: 1 << 14, species: 8 };
+    let mut off = OffscreenScene::open(fixture().to_str().unwrap(), W, H, pools).unwrap();
+    let m = Manifest::decode("scene.json", &std::fs::read(fixture().join("scene.json")).unwrap()).unwrap();
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let cam = Camera { eye_m: c + DVec3::Z * 400.0, pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() };
+    let events = off.load_view(&cam, 30.0);
+    assert!(!events.iter().any(|e| matches!(e, StreamEvent::Fatal { .. })), "{events:?}");
+    let s = off.stream.stats();
+    assert!(s.degraded.pools_full, "{s:?}");
+    assert!(s.degraded.reach_m < off.settings.draw_distance_m, "{s:?}");
+    assert!(events
+        .iter()
+        .any(|e| matches!(e, StreamEvent::Failed { message, .. } if message.contains("pools are full"))));
+    assert!(off.stream.is_settled(), "a degraded view settles");
+    off.render(&cam, false);
+    let img = off.read_image();
+    assert!(foliage_share(&img) > 0.05, "the nearest trees render ({:.3})", foliage_share(&img));
+    // With room again (the default pools) nothing is held back.
+    let mut off = open(fixture().to_str().unwrap());
+    off.load_view(&cam, 30.0);
+    assert!(!off.stream.stats().degraded.pools_full);
+    // A GPU budget that leaves no room for finer parts: a close view draws with
+    // billboards and says so, instead of fetching the meshes.
+    let mut off = open(fixture().to_str().unwrap());
+    // Room for the billboards (always fetched: the far field) and nothing finer.
+    let billboards: u64 = m
+        .species
+        .iter()
+        .map(|sp| {
+            let bytes = std::fs::read(fixture().join(&sp.pack)).unwrap();
+            let (a, b) = sylva::format::pack::PackHead::decode(&sp.pack, &bytes)
+                .unwrap()
+                .part_range(sylva::format::pack::PackPart::Billboards)
+                .unwrap();
+            b - a
+        })
+        .sum();
+    let budget = off.renderer.gpu_bytes() + billboards + 10_000;
+    off.stream.set_config(sylva::scene::StreamConfig { gpu_budget_bytes: budget, ..off.stream.config() });
+    let close = Camera { eye_m: DVec3::new(c.x, c.y, m.bounds.min[2] as f64 + 2.0), ..Camera::default() };
+    let events = off.load_view(&close, 30.0);
+    assert!(!events.iter().any(|e| matches!(e, StreamEvent::Fatal { .. })), "{events:?}");
+    let stats = off.render(&close, true);
+    assert!(off.stream.stats().degraded.gpu_budget, "{:?}", off.stream.stats());
+    assert!(off.renderer.gpu_bytes() <= budget, "{} > {budget}", off.renderer.gpu_bytes());
+    assert_eq!(stats.instances["mesh0"] + stats.instances["mesh1"], 0, "{:?}", stats.instances);
+    assert!(stats.instances["billboard"] > 0, "{:?}", stats.instances);
+}

@@ -124,6 +124,17 @@ class SylvaViewer {
     this.dirty = 8;
   }
 
+  /**
+   * Budgets the viewer degrades gracefully within (coarser levels, shorter reach
+   * for new tiles; `stats().degraded` says what is held back): `gpuMB` for pools
+   * and packs (0: none), `bytesPerSecond` of downloads (0: none), `inFlight`
+   * requests at once (default 6).
+   */
+  setBudget({ gpuMB = 0, bytesPerSecond = 0, inFlight = 6 } = {}) {
+    this.viewer.set_budget(Number(gpuMB), Number(bytesPerSecond), Math.max(1, inFlight | 0));
+    this.dirty = 8;
+  }
+
   /** Device lost (driver reset, GPU process crash): a new viewer on the same canvas, same camera. */
   async recover() {
     if (this.recovering) return;

@@ -475,7 +475,9 @@ impl ForestRenderer {
         let hi = Vec3::from(m.bounds_max);
         let c = (lo + hi) * 0.5;
         let level = |l: usize| m.mesh_levels.get(l);
-        let bytes = pack.sections.iter().map(|(e, _)| e.bytes).sum();
+        // What goes to the GPU: every section but the JSON metadata.
+        let bytes =
+            pack.sections.iter().filter(|(e, _)| e.kind != crate::format::pack::kind::META).map(|(e, _)| e.bytes).sum();
         *slot = Some(SpeciesGpu {
             sphere: [c.x, c.y, c.z, ((hi - lo) * 0.5).length()],
             height_m: m.height_m,

@@ -51,6 +51,9 @@ pub struct FrameStats {
     pub index_nodes_loaded: u64,
     /// Index nodes in the scene (0 for a flat manifest).
     pub index_nodes_total: u64,
+    /// What budgets or device limits hold back (`pools_full`, `gpu_budget`,
+    /// `bandwidth`, `reach_m`).
+    pub degraded: std::collections::BTreeMap<String, serde_json::Value>,
     /// Trees in the scene.
     pub trees_total: u64,
     /// Trees resident on the GPU.
@@ -287,6 +290,16 @@ impl<F: Fetcher> OffscreenScene<F> {
         stats.tiles_total = self.stream.manifest().map_or(0, |m| m.counts.tiles);
         stats.index_nodes_loaded = s.index_nodes_loaded;
         stats.index_nodes_total = s.index_nodes_total;
+        let d = s.degraded;
+        stats.degraded = [
+            ("pools_full", serde_json::json!(d.pools_full)),
+            ("gpu_budget", serde_json::json!(d.gpu_budget)),
+            ("bandwidth", serde_json::json!(d.bandwidth)),
+            ("reach_m", serde_json::json!(if d.reach_m.is_finite() { f64::from(d.reach_m) } else { -1.0 })),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect();
         stats.trees_total = self.stream.manifest().map_or(0, |m| m.counts.trees);
         stats.trees_resident = self.renderer.resident_instances();
         stats.gpu_bytes = self.renderer.gpu_bytes();

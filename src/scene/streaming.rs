@@ -19,7 +19,7 @@ use crate::format::{decode_pack, DecodeError, Manifest, Tile};
 use crate::render::camera::ViewData;
 use crate::render::forest::{ForestRenderer, PoolError, TileSlot};
 
-/// Limits of the streamer.
+/// Limits of the streamer: the budgets a viewer degrades gracefully within.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StreamConfig {
     /// Requests in flight at once.
@@ -28,12 +28,32 @@ pub struct StreamConfig {
     pub max_attempts: u32,
     /// First retry delay in seconds (doubles per attempt).
     pub retry_base_s: f64,
+    /// GPU memory budget in bytes for pools and packs (0: none). Pack parts that
+    /// would exceed it are not fetched: trees draw with the coarser parts held.
+    pub gpu_budget_bytes: u64,
+    /// Download budget in bytes per second, averaged over a second (0: none).
+    pub max_bytes_per_s: f64,
 }
 
 impl Default for StreamConfig {
     fn default() -> Self {
-        Self { max_in_flight: 6, max_attempts: 4, retry_base_s: 0.25 }
+        Self { max_in_flight: 6, max_attempts: 4, retry_base_s: 0.25, gpu_budget_bytes: 0, max_bytes_per_s: 0.0 }
     }
+}
+
+/// What a budget or device limit currently holds back (all false: nothing).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Degraded {
+    /// The GPU pools are full of wanted tiles: the draw distance for new tiles is
+    /// shortened to `reach_m`.
+    pub pools_full: bool,
+    /// Pack parts (finer levels) are held back by the GPU budget.
+    pub gpu_budget: bool,
+    /// Requests wait for the download budget.
+    pub bandwidth: bool,
+    /// The distance up to which tiles are requested (the draw distance unless the
+    /// pools are full).
+    pub reach_m: f32,
 }
 
 /// Something a user should hear about.
@@ -103,6 +123,8 @@ struct PackLoad {
     have: [bool; 3],
     /// The parts the view wanted at the last update.
     wants: [bool; 3],
+    /// Parts held back by the GPU budget at the last update.
+    blocked: [bool; 3],
     /// The whole pack is uploaded: nothing more to fetch.
     whole: bool,
 }
@@ -116,6 +138,7 @@ impl PackLoad {
             held: Vec::new(),
             have: [false; 3],
             wants: [false; 3],
+            blocked: [false; 3],
             whole: false,
         }
     }
@@ -127,7 +150,11 @@ impl PackLoad {
         }
         let Some(head) = &self.parsed else { return false };
         PackPart::ALL.iter().enumerate().all(|(i, p)| {
-            !self.wants[i] || self.have[i] || self.parts[i] == Load::Broken || head.part_range(*p).is_none()
+            !self.wants[i]
+                || self.have[i]
+                || self.blocked[i]
+                || self.parts[i] == Load::Broken
+                || head.part_range(*p).is_none()
         })
     }
 }
@@ -153,6 +180,8 @@ pub struct StreamStats {
     pub index_nodes_total: u64,
     /// Requests started, of every kind.
     pub requests: u64,
+    /// What budgets or limits hold back now.
+    pub degraded: Degraded,
 }
 
 /// A scene being streamed into a [`ForestRenderer`].
@@ -173,6 +202,12 @@ pub struct SceneStream<F: Fetcher> {
     wanted: Vec<usize>,
     /// Unread index nodes the view meets (not given up on).
     pending_nodes: usize,
+    /// Tiles are requested up to this distance (shortened when pools are full).
+    reach_m: f32,
+    /// How many of `wanted` (nearest first) lie within `reach_m`.
+    within_reach: usize,
+    /// (time, bytes) of responses in the last second, for the download budget.
+    recent: std::collections::VecDeque<(f64, u64)>,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -195,6 +230,9 @@ impl<F: Fetcher> SceneStream<F> {
             events: Vec::new(),
             wanted: Vec::new(),
             pending_nodes: 0,
+            reach_m: f32::INFINITY,
+            within_reach: 0,
+            recent: std::collections::VecDeque::new(),
         }
     }
 
@@ -202,6 +240,17 @@ impl<F: Fetcher> SceneStream<F> {
     #[must_use]
     pub fn manifest(&self) -> Option<&Manifest> {
         self.manifest.as_ref()
+    }
+
+    /// Changes the budgets (takes effect from the next update).
+    pub fn set_config(&mut self, config: StreamConfig) {
+        self.config = config;
+    }
+
+    /// The budgets.
+    #[must_use]
+    pub fn config(&self) -> StreamConfig {
+        self.config
     }
 
     /// Counters.
@@ -222,7 +271,7 @@ impl<F: Fetcher> SceneStream<F> {
         let manifest_done = self.manifest.is_some() || self.manifest_load == Load::Broken;
         let nodes_done = !self.node_loads.iter().any(|l| matches!(l, Load::Requested { .. } | Load::Waiting { .. }))
             && self.pending_nodes == 0;
-        let tiles_done = self.wanted.iter().all(|&t| match &self.tiles[t] {
+        let tiles_done = self.wanted[..self.within_reach].iter().all(|&t| match &self.tiles[t] {
             TileState::Resident { .. } => true,
             TileState::NotResident(l) => *l == Load::Broken,
         });
@@ -292,6 +341,9 @@ impl<F: Fetcher> SceneStream<F> {
             let Some(target) = self.requests.remove(&id) else { continue };
             if let Ok(bytes) = &result {
                 self.stats.bytes_fetched += bytes.len() as u64;
+                if self.config.max_bytes_per_s > 0.0 {
+                    self.recent.push_back((now_s, bytes.len() as u64));
+                }
             }
             match target {
                 Target::Manifest => self.on_manifest(renderer, result, now_s),
@@ -314,8 +366,29 @@ impl<F: Fetcher> SceneStream<F> {
                 self.manifest_load = Load::Requested { attempt };
             }
         } else {
-            self.request_tiles(view, draw_distance_m, now_s);
-            self.request_packs(renderer, now_s);
+            // Pools with room again: widen the reach step by step.
+            // (Half free, so that a reach just shortened does not grow back at once.)
+            if self.reach_m < draw_distance_m && renderer.free_instances() > renderer.config().instances / 2 {
+                self.reach_m = (self.reach_m * 1.1).max(1.0);
+            }
+            self.reach_m = self.reach_m.min(draw_distance_m);
+            while self.recent.front().is_some_and(|(t, _)| *t < now_s - 1.0) {
+                self.recent.pop_front();
+            }
+            let rate: u64 = self.recent.iter().map(|(_, b)| b).sum();
+            let over_rate = self.config.max_bytes_per_s > 0.0 && rate as f64 >= self.config.max_bytes_per_s;
+            self.stats.degraded.bandwidth = over_rate;
+            if !over_rate {
+                self.request_tiles(view, draw_distance_m, now_s);
+                self.request_packs(renderer, now_s);
+            } else {
+                // Still decide what the view wants (for is_settled and eviction).
+                let wanted = self.index.walk(view, draw_distance_m).0;
+                self.within_reach = wanted.iter().take_while(|(d, _)| *d <= self.reach_m).count();
+                self.wanted = wanted.iter().map(|(_, i)| *i).collect();
+            }
+            self.stats.degraded.pools_full = self.reach_m < draw_distance_m;
+            self.stats.degraded.reach_m = self.reach_m;
         }
         self.stats.loading = self.requests.len() as u64;
         self.stats.tiles_resident =
@@ -445,10 +518,29 @@ impl<F: Fetcher> SceneStream<F> {
                     .collect();
                 self.tiles[t] = TileState::Resident { slot, species, cells };
             }
-            Err(e) => {
-                // No room even after evicting everything unwanted: try again later.
-                self.events.push(StreamEvent::Failed { url, message: e.to_string(), retrying: true });
+            Err(PoolError::Full(what)) => {
+                // No room even after evicting everything unwanted: the view wants more
+                // than the pools hold. Degrade: request tiles only up to a little less
+                // than this one's distance (nearer tiles came first), and say so.
+                let eye = view.eye_hi + view.eye_lo;
+                let d = tile_distance(&self.index.tiles[t].bounds, eye);
+                let reach = (d * 0.9).min(self.reach_m);
+                if reach < self.reach_m {
+                    self.events.push(StreamEvent::Failed {
+                        url,
+                        message: format!(
+                            "the GPU pools are full ({what}): tiles are requested up to {reach:.0} m instead of the draw distance"
+                        ),
+                        retrying: true,
+                    });
+                    self.reach_m = reach;
+                }
                 self.tiles[t] = TileState::NotResident(Load::Waiting { attempt, retry_at_s: now_s + 1.0 });
+            }
+            Err(e) => {
+                self.events.push(StreamEvent::Failed { url, message: e.to_string(), retrying: false });
+                self.stats.broken += 1;
+                self.tiles[t] = TileState::NotResident(Load::Broken);
             }
         }
     }
@@ -571,12 +663,18 @@ impl<F: Fetcher> SceneStream<F> {
         true
     }
 
+    /// Requests index nodes and tiles of the view up to the draw distance; tiles
+    /// only up to `reach_m` (shorter while the pools are full). Tiles beyond the
+    /// reach stay wanted (their species' packs are needed, they are not evicted
+    /// for farther ones) but are not fetched.
     fn request_tiles(&mut self, view: &ViewData, draw_distance_m: f32, now_s: f64) {
         if self.manifest.is_none() {
             return;
         }
-        let (wanted, nodes) = self.index.walk(view, draw_distance_m);
+        let (mut wanted, nodes) = self.index.walk(view, draw_distance_m);
+        self.within_reach = wanted.iter().take_while(|(d, _)| *d <= self.reach_m).count();
         self.wanted = wanted.iter().map(|(_, i)| *i).collect();
+        wanted.truncate(self.within_reach);
         self.pending_nodes = 0;
         // Index nodes first: they unlock the tiles below them.
         for &(_, n) in &nodes {
@@ -618,6 +716,20 @@ impl<F: Fetcher> SceneStream<F> {
 
     fn request_packs(&mut self, renderer: &ForestRenderer, now_s: f64) {
         let needed = self.needed_species();
+        let mut over_budget = false;
+        // GPU bytes held plus parts on their way.
+        let mut committed = renderer.gpu_bytes();
+        for (s, load) in self.packs.iter().enumerate() {
+            let Some(head) = &load.parsed else { continue };
+            for (i, part) in PackPart::ALL.iter().enumerate() {
+                // Billboards of needed species are fetched whatever the budget:
+                // reserve them before anything finer.
+                let due_billboards = i == 0 && !load.have[0] && needed.contains(&s);
+                if matches!(load.parts[i], Load::Requested { .. }) || due_billboards {
+                    committed += head.part_range(*part).map_or(0, |(a, b)| b - a);
+                }
+            }
+        }
         let Some(m) = &self.manifest else { return };
         let due = |l: &Load| match *l {
             Load::Idle => Some(0),
@@ -648,12 +760,25 @@ impl<F: Fetcher> SceneStream<F> {
                     continue;
                 }
                 let (Some(range), Some(attempt)) = (head.part_range(*part), due(&load.parts[i])) else { continue };
+                // The GPU budget: finer parts wait (trees draw with coarser ones);
+                // billboards, the far field, are always fetched.
+                let budget = self.config.gpu_budget_bytes;
+                let blocked = budget > 0 && *part != PackPart::Billboards && committed + (range.1 - range.0) > budget;
+                load.blocked[i] = blocked;
+                if blocked {
+                    over_budget = true;
+                    continue;
+                }
                 let id = self.fetcher.start_range(&url, Some(range));
+                if *part != PackPart::Billboards {
+                    committed += range.1 - range.0; // billboards are reserved above
+                }
                 self.stats.requests += 1;
                 self.requests.insert(id, Target::PackPart(s, i));
                 load.parts[i] = Load::Requested { attempt };
             }
         }
+        self.stats.degraded.gpu_budget = over_budget;
     }
 }
 
