@@ -60,14 +60,26 @@ pub struct BuiltTile {
 /// Picks a cell size so an occupied cell holds about `target` trees of all species:
 /// estimate the density from occupied 64 m cells, then round to a power of two in 16–512 m.
 pub fn default_cell_size(trees: &[SceneTree], target: f64) -> u32 {
-    if trees.is_empty() {
-        return 64;
-    }
     let mut cells = std::collections::HashSet::new();
     for t in trees {
-        cells.insert(((t.pos.x / 64.0).floor() as i64, (t.pos.y / 64.0).floor() as i64));
+        cells.insert(cell64(t.pos));
     }
-    let per_cell = trees.len() as f64 / cells.len() as f64;
+    cell_size_for(trees.len() as u64, cells.len() as u64, target)
+}
+
+/// The 64 m cell of a position (the density estimate's grid).
+#[must_use]
+pub fn cell64(pos: DVec3) -> (i64, i64) {
+    ((pos.x / 64.0).floor() as i64, (pos.y / 64.0).floor() as i64)
+}
+
+/// [`default_cell_size`] from counts: `trees` in `cells` occupied 64 m cells.
+#[must_use]
+pub fn cell_size_for(trees: u64, cells: u64, target: f64) -> u32 {
+    if trees == 0 || cells == 0 {
+        return 64;
+    }
+    let per_cell = trees as f64 / cells as f64;
     let size = 64.0 * (target / per_cell).sqrt();
     let pow = size.log2().round().clamp(4.0, 9.0);
     2f64.powf(pow) as u32

@@ -2,6 +2,7 @@
 //! (LoD packs + grouped-batch tiles + manifest). See `--help`.
 
 mod batching;
+mod bucket;
 mod clusters;
 mod demo;
 mod gltf_import;
@@ -21,9 +22,11 @@ use clap::{Args, Parser, Subcommand};
 use glam::DVec3;
 
 use batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
+use bucket::TreeSource;
 use gltf_import::Classifier;
 use pack_build::PackOptions;
 use placements::CoordKind;
+use placements::{Placement, PlacementSource};
 use reproject::{Crs, Reprojector};
 use scene_write::{SceneInput, SceneSummary};
 use sylva::format::index::DEFAULT_NODE_TILES;
@@ -212,6 +215,10 @@ struct BakeArgs {
     branch_materials: Vec<String>,
     #[command(flatten)]
     pack: PackArgs,
+    /// Trees held in memory at once while tiling; larger inputs are partitioned
+    /// by tile into temporary bucket files beside --out (about 48 bytes per tree).
+    #[arg(long, default_value_t = 4_000_000, value_parser = clap::value_parser!(u64).range(1..))]
+    bucket_trees: u64,
     /// Output scene directory (replaced atomically).
     #[arg(long)]
     out: PathBuf,
@@ -304,7 +311,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
     let input = SceneInput {
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
-        trees,
+        trees: TreeSource::Memory(trees),
         crs: Crs::projected(demo::DEMO_EPSG)?,
         origin_m: demo::DEMO_ORIGIN,
         tile_cells: args.pack.tile_cells,
@@ -456,21 +463,57 @@ fn bake(args: &BakeArgs) -> Result<()> {
         None if species.len() == 1 => Some(0),
         None => None,
     };
-    // Placements.
-    let mut set = placements::read_placements(&args.placements)?;
+    // Placements, streamed: CSV is read from disk on every pass, so inputs larger
+    // than memory bake in bounded memory (trees are partitioned by tile into
+    // bucket files when there are more than --bucket-trees of them).
+    let source = PlacementSource::open(&args.placements)?;
+    let started_read = Instant::now();
+    // Pass 1: a deterministic sample (all rows up to SAMPLE_ROWS) for the CRS,
+    // the medians (origin, outliers, default height) and the row count.
+    log("pass 1/3: sampling placements");
+    let mut sample: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
+    let mut rng = rng::Rng::new(0x5EED_5A3F_1E00_0001);
+    let mut seen = 0u64;
+    let mut coords = std::collections::HashSet::new();
+    let mut duplicates = 0u64;
+    let report1 = source.for_each(&mut |p| {
+        seen += 1;
+        if coords.len() < DUPLICATE_CHECK_ROWS && !coords.insert((p.x.to_bits(), p.y.to_bits())) {
+            duplicates += 1;
+        }
+        let item = (p.x, p.y, p.height_m, p.row);
+        if sample.len() < SAMPLE_ROWS {
+            sample.push(item);
+        } else {
+            // Reservoir sampling: every row ends up in the sample with equal odds.
+            let j = rng.next_u64() % seen;
+            if j < SAMPLE_ROWS as u64 {
+                sample[j as usize] = item;
+            }
+        }
+        Ok(())
+    })?;
+    drop(coords);
+    log(&format!(
+        "  {} rows read, {} usable ({:.1} s){}",
+        report1.rows,
+        report1.kept,
+        started_read.elapsed().as_secs_f64(),
+        if seen as usize > SAMPLE_ROWS { format!("; medians from a sample of {SAMPLE_ROWS}") } else { String::new() }
+    ));
     // CRS.
-    let (src, dst) = match set.kind {
+    let (src, dst) = match source.kind {
         CoordKind::LonLat => {
             let dst = match &args.crs {
                 Some(c) => Crs::parse(c)?,
                 None => {
-                    let mut lons: Vec<f64> = set.rows.iter().map(|p| p.x).collect();
-                    let mut lats: Vec<f64> = set.rows.iter().map(|p| p.y).collect();
+                    let mut lons: Vec<f64> = sample.iter().map(|p| p.0).collect();
+                    let mut lats: Vec<f64> = sample.iter().map(|p| p.1).collect();
                     if lons.is_empty() {
                         bail!(
                             "placements {}: no usable rows ({})",
                             args.placements.display(),
-                            set.report.lines().join("; ")
+                            report1.lines().join("; ")
                         );
                     }
                     Crs::utm_for(median(&mut lons), median(&mut lats))?
@@ -494,32 +537,19 @@ fn bake(args: &BakeArgs) -> Result<()> {
     }
     log(&format!("scene CRS EPSG:{}", dst.epsg));
     let reproject = Reprojector::new(src, &dst)?;
-    let mut projected = Vec::with_capacity(set.rows.len());
-    for p in std::mem::take(&mut set.rows) {
-        match reproject.apply(p.x, p.y) {
-            Ok((x, y)) => projected.push((x, y, p)),
-            Err(_) => set.report.skip("cannot be projected to the scene CRS", p.row),
-        }
-    }
-    // Outliers: far from the median position.
-    let mut xs: Vec<f64> = projected.iter().map(|(x, _, _)| *x).collect();
-    let mut ys: Vec<f64> = projected.iter().map(|(_, y, _)| *y).collect();
+    // Medians of the projected sample: outliers are far from them.
+    let projected_sample: Vec<(f64, f64, Option<f32>)> =
+        sample.iter().filter_map(|&(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h))).collect();
+    drop(sample);
+    let mut xs: Vec<f64> = projected_sample.iter().map(|p| p.0).collect();
+    let mut ys: Vec<f64> = projected_sample.iter().map(|p| p.1).collect();
     if xs.is_empty() {
-        bail!("no usable placements ({})", set.report.lines().join("; "));
+        bail!("no usable placements ({})", report1.lines().join("; "));
     }
     let (mx, my) = (median(&mut xs), median(&mut ys));
     let limit = args.max_extent_km * 1000.0;
-    projected.retain(|(x, y, p)| {
-        let keep = (x - mx).hypot(y - my) <= limit;
-        if !keep {
-            set.report
-                .skip(&format!("farther than {} km from the median position (outlier)", args.max_extent_km), p.row);
-        }
-        keep
-    });
-    // Species.
-    let mut unmapped: std::collections::BTreeMap<String, u64> = Default::default();
-    let mut heights: Vec<f32> = projected.iter().filter_map(|(_, _, p)| p.height_m).collect();
+    let inside = |x: f64, y: f64| (x - mx).hypot(y - my) <= limit;
+    let mut heights: Vec<f32> = projected_sample.iter().filter(|p| inside(p.0, p.1)).filter_map(|p| p.2).collect();
     let default_height = match args.default_height {
         Some(h) if h.is_finite() && h > 0.0 => Some(h),
         Some(h) => bail!("--default-height {h}: must be a positive number of metres"),
@@ -530,40 +560,126 @@ fn bake(args: &BakeArgs) -> Result<()> {
         }
         None => None,
     };
+    drop(projected_sample);
     let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
     let model_heights: Vec<f32> = species.iter().map(|(_, m)| m.height().max(1e-3)).collect();
-    let mut trees = Vec::with_capacity(projected.len());
-    for (x, y, p) in &projected {
-        let label = p.species.as_deref().unwrap_or("");
-        let idx = model_index(label)
+    let species_of = |label: &str| {
+        model_index(label)
             .or_else(|| maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))
-            .or(default_model);
-        let Some(idx) = idx else {
-            *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
-            continue;
-        };
+            .or(default_model)
+    };
+    // A usable row as a tree, or why not.
+    let to_tree = |p: &Placement| -> Result<SceneTree, &'static str> {
+        let Ok((x, y)) = reproject.apply(p.x, p.y) else { return Err("cannot be projected to the scene CRS") };
+        if !inside(x, y) {
+            return Err("outlier");
+        }
+        let Some(idx) = species_of(p.species.as_deref().unwrap_or("")) else { return Err("unmapped") };
         let model_h = model_heights[idx];
         let target = p.height_m.or(default_height).unwrap_or(model_h);
         let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
-        trees.push(SceneTree {
+        Ok(SceneTree {
             pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
             species: idx as u32,
             scale: target / model_h,
             yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
             variation: ((h >> 20) % 32) as u8,
             id: p.id.unwrap_or(p.row | 1 << 63),
-        });
+        })
+    };
+    // Pass 2: the cell size from the density of the trees (unless given).
+    let cell_size_m = match args.pack.cell_size {
+        Some(_) => args.pack.cell_size(&[])?,
+        None => {
+            log("pass 2/3: tree density for the cell size");
+            let mut cells = std::collections::HashSet::new();
+            let mut trees = 0u64;
+            source.for_each(&mut |p| {
+                if let Ok(t) = to_tree(&p) {
+                    trees += 1;
+                    cells.insert(batching::cell64(t.pos));
+                }
+                Ok(())
+            })?;
+            batching::cell_size_for(trees, cells.len() as u64, 500.0)
+        }
+    };
+    // Pass 3: the trees, in memory or partitioned by tile into bucket files.
+    let buckets = report1.kept.div_ceil(args.bucket_trees.max(1)).max(1);
+    log(&format!(
+        "pass 3/3: trees{}",
+        if buckets > 1 {
+            format!(" into {buckets} bucket files by tile (--bucket-trees {})", args.bucket_trees)
+        } else {
+            String::new()
+        }
+    ));
+    let mut report;
+    let mut unmapped: std::collections::BTreeMap<String, u64> = Default::default();
+    let mut skip = |p: &Placement, why: &str, report: &mut placements::Report| match why {
+        "outlier" => {
+            report.skip(&format!("farther than {} km from the median position (outlier)", args.max_extent_km), p.row)
+        }
+        "unmapped" => {
+            let label = p.species.as_deref().unwrap_or("");
+            *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
+        }
+        other => report.skip(other, p.row),
+    };
+    let mut our_report = placements::Report::default();
+    let trees = if buckets > 1 {
+        let parent = args.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        let name = args.out.file_name().map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned());
+        let dir = parent.join(format!(".{name}.buckets-{}", std::process::id()));
+        let mut writer = bucket::BucketWriter::new(&dir, buckets as u32, cell_size_m, args.pack.tile_cells)?;
+        report = source.for_each(&mut |p| {
+            match to_tree(&p) {
+                Ok(t)
+                    if args.pack.shard.is_none_or(|(i, n)| {
+                        let (x, y) = batching::tile_of(t.pos, cell_size_m, args.pack.tile_cells);
+                        batching::shard_of_tile(x, y, n) == i
+                    }) =>
+                {
+                    writer.push(&t)?
+                }
+                Ok(_) => {}
+                Err(why) => skip(&p, why, &mut our_report),
+            }
+            Ok(())
+        })?;
+        writer.finish()?
+    } else {
+        let mut trees = Vec::with_capacity(report1.kept as usize);
+        report = source.for_each(&mut |p| {
+            match to_tree(&p) {
+                Ok(t) => trees.push(t),
+                Err(why) => skip(&p, why, &mut our_report),
+            }
+            Ok(())
+        })?;
+        TreeSource::Memory(trees)
+    };
+    for (reason, (n, rows)) in our_report.skipped {
+        let e = report.skipped.entry(reason).or_insert((0, Vec::new()));
+        e.0 += n;
+        e.1.extend(rows);
+        e.1.truncate(5);
     }
-    for line in set.report.lines() {
+    report.duplicate_coordinates = duplicates;
+    for line in report.lines() {
         log(&format!("placements: {line}"));
+    }
+    if duplicates > 0 && seen as usize > DUPLICATE_CHECK_ROWS {
+        log(&format!("placements: (duplicates counted among the first {DUPLICATE_CHECK_ROWS} rows)"));
     }
     for (label, n) in &unmapped {
         log(&format!(
             "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
         ));
     }
+    log(&format!("read the placements 3 times in {:.1} s", started_read.elapsed().as_secs_f64()));
     let input = SceneInput {
-        cell_size_m: args.pack.cell_size(&trees)?,
+        cell_size_m,
         species,
         trees,
         crs: dst,
@@ -579,6 +695,11 @@ fn bake(args: &BakeArgs) -> Result<()> {
     report_summary(&s, &args.out, started);
     Ok(())
 }
+
+/// Rows sampled for the medians; inputs up to this size use every row.
+const SAMPLE_ROWS: usize = 1_000_000;
+/// Rows checked for repeated coordinates (the check keeps a set of them).
+const DUPLICATE_CHECK_ROWS: usize = 10_000_000;
 
 fn median(v: &mut [f64]) -> f64 {
     let n = v.len();

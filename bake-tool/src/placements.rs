@@ -98,7 +98,9 @@ pub struct PlacementSet {
     pub report: Report,
 }
 
-/// Reads a `.csv` or `.geojson`/`.json` file.
+/// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
+/// with [`PlacementSource`]).
+#[cfg(test)]
 pub fn read_placements(path: &Path) -> Result<PlacementSet> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
     let mut set = match ext.as_str() {
@@ -118,6 +120,7 @@ pub fn read_placements(path: &Path) -> Result<PlacementSet> {
     Ok(set)
 }
 
+#[cfg(test)]
 fn mark_duplicates(set: &mut PlacementSet) {
     let mut seen = std::collections::HashSet::with_capacity(set.rows.len());
     for p in &set.rows {
@@ -193,15 +196,32 @@ fn parse_f64(s: &str) -> Option<f64> {
 }
 
 /// Reads CSV from any reader (the first line is the header).
+#[cfg(test)]
 pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8) -> Result<PlacementSet> {
+    let mut report = Report::default();
+    let mut rows = Vec::new();
+    let kind = stream_csv(reader, delimiter, &mut report, &mut |p| {
+        rows.push(p);
+        Ok(())
+    })?;
+    Ok(PlacementSet { kind, rows, report })
+}
+
+/// Streams CSV rows: each usable row goes to `f` as it is read (memory stays
+/// constant whatever the file size); skipped rows are counted in `report`.
+/// Returns the coordinate kind of the header.
+pub fn stream_csv<R: std::io::Read>(
+    reader: R,
+    delimiter: u8,
+    report: &mut Report,
+    f: &mut dyn FnMut(Placement) -> Result<()>,
+) -> Result<CoordKind> {
     let mut rdr =
         csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).trim(csv::Trim::All).from_reader(reader);
     let header: Vec<String> =
         rdr.headers().map_err(|e| anyhow!("cannot read the CSV header: {e}"))?.iter().map(str::to_string).collect();
     let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
     let cols = detect_columns(&header_refs)?;
-    let mut report = Report::default();
-    let mut rows = Vec::new();
     let mut record = csv::StringRecord::new();
     let mut row = 0u64;
     loop {
@@ -232,12 +252,69 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8) -> Result<PlacementS
             id: get(cols.id).and_then(|s| s.trim().parse::<u64>().ok()),
             row,
         };
-        if let Some(p) = accept(p, cols.kind, &mut report) {
-            rows.push(p);
+        if let Some(p) = accept(p, cols.kind, report) {
+            report.kept += 1;
+            f(p)?;
         }
     }
-    report.kept = rows.len() as u64;
-    Ok(PlacementSet { kind: cols.kind, rows, report })
+    Ok(cols.kind)
+}
+
+/// A placements file that can be read more than once: CSV is streamed from disk
+/// on every pass (inputs larger than memory), GeoJSON is parsed once and kept.
+pub struct PlacementSource {
+    path: std::path::PathBuf,
+    delimiter: u8,
+    parsed: Option<PlacementSet>,
+    /// Degrees or metres.
+    pub kind: CoordKind,
+}
+
+impl PlacementSource {
+    /// Opens `path` (`.csv`, `.tsv`, `.txt`, `.geojson`, `.json`) and reads its header.
+    pub fn open(path: &Path) -> Result<Self> {
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
+        match ext.as_str() {
+            "csv" | "txt" | "tsv" => {
+                let delimiter = if ext == "tsv" { b'\t' } else { b',' };
+                let file =
+                    std::fs::File::open(path).with_context(|| format!("cannot open placements {}", path.display()))?;
+                let mut rdr = csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_reader(file);
+                let header: Vec<String> = rdr
+                    .headers()
+                    .map_err(|e| anyhow!("placements {}: cannot read the CSV header: {e}", path.display()))?
+                    .iter()
+                    .map(str::to_string)
+                    .collect();
+                let refs: Vec<&str> = header.iter().map(String::as_str).collect();
+                let cols = detect_columns(&refs).with_context(|| format!("placements {}", path.display()))?;
+                Ok(Self { path: path.to_path_buf(), delimiter, parsed: None, kind: cols.kind })
+            }
+            "geojson" | "json" => {
+                let bytes =
+                    std::fs::read(path).with_context(|| format!("cannot read placements {}", path.display()))?;
+                let set = read_geojson(&bytes).with_context(|| format!("placements {}", path.display()))?;
+                Ok(Self { path: path.to_path_buf(), delimiter: b',', kind: set.kind, parsed: Some(set) })
+            }
+            _ => bail!("placements {}: unknown extension {ext:?}; use .csv or .geojson", path.display()),
+        }
+    }
+
+    /// One pass over the usable rows, in file order; returns what was read and skipped.
+    pub fn for_each(&self, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
+        if let Some(set) = &self.parsed {
+            for p in &set.rows {
+                f(p.clone())?;
+            }
+            return Ok(set.report.clone());
+        }
+        let file = std::fs::File::open(&self.path)
+            .with_context(|| format!("cannot open placements {}", self.path.display()))?;
+        let mut report = Report::default();
+        stream_csv(std::io::BufReader::with_capacity(1 << 20, file), self.delimiter, &mut report, f)
+            .with_context(|| format!("placements {}", self.path.display()))?;
+        Ok(report)
+    }
 }
 
 trait CsvErrorKind {

@@ -19,6 +19,7 @@ use sylva::render::capture::CapturePipelines;
 use sylva::render::GpuContext;
 
 use crate::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
+use crate::bucket::TreeSource;
 use crate::gltf_import::ImportedModel;
 use crate::pack_build::{build_pack, PackOptions};
 use crate::reproject::Crs;
@@ -27,8 +28,8 @@ use crate::reproject::Crs;
 pub struct SceneInput {
     /// Species names and models, indexed by `SceneTree::species`.
     pub species: Vec<(String, ImportedModel)>,
-    /// Trees relative to `origin_m`.
-    pub trees: Vec<SceneTree>,
+    /// Trees relative to `origin_m` (in memory or in bucket files).
+    pub trees: TreeSource,
     /// Scene CRS.
     pub crs: Crs,
     /// Scene origin in CRS coordinates.
@@ -171,24 +172,6 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
     std::fs::create_dir_all(dir.join("species"))?;
     std::fs::create_dir_all(dir.join("tiles"))?;
     let t0 = Instant::now();
-    // A shard keeps the trees of its tiles; shard 0 also bakes the packs.
-    let shard_trees: Vec<SceneTree>;
-    let trees: &[SceneTree] = match input.shard {
-        Some((index, count)) => {
-            shard_trees = input
-                .trees
-                .iter()
-                .filter(|t| {
-                    let (x, y) = tile_of(t.pos, input.cell_size_m, input.tile_cells);
-                    shard_of_tile(x, y, count) == index
-                })
-                .copied()
-                .collect();
-            log(&format!("shard {index}/{count}: {} of {} trees", shard_trees.len(), input.trees.len()));
-            &shard_trees
-        }
-        None => &input.trees,
-    };
     let bake_packs = input.shard.is_none_or(|(index, _)| index == 0);
     let gpu_and_pipelines = if bake_packs {
         let gpu =
@@ -200,13 +183,9 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
         log("packs are baked by shard 0; this shard writes tiles only");
         None
     };
-    let mut tree_counts = vec![0u64; input.species.len()];
-    for t in trees {
-        tree_counts[t.species as usize] += 1;
-    }
     let mut species_entries = Vec::new();
     let mut shapes = Vec::new();
-    for (i, (name, model)) in input.species.iter().enumerate() {
+    for (name, model) in &input.species {
         shapes.push(shape_of(model));
         let file = format!("species/{}.pack", safe_name(name));
         let Some((gpu, pipelines)) = &gpu_and_pipelines else {
@@ -217,7 +196,7 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
                 bytes: 0,
                 height_m: model.height(),
                 bounds: Bounds { min: lo.to_array(), max: hi.to_array() },
-                trees: tree_counts[i],
+                trees: 0,
                 head_bytes: None,
             });
             continue;
@@ -241,35 +220,69 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
             bytes: built.bytes.len() as u64,
             height_m: built.meta.height_m,
             bounds: Bounds { min: built.meta.bounds_min, max: built.meta.bounds_max },
-            trees: tree_counts[i],
+            trees: 0,
             head_bytes: Some(pack_head_bytes(&built.bytes)),
         });
     }
     let pack_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let tiles = build_tiles(trees, &shapes, input.cell_size_m, input.tile_cells);
-    let entries: Vec<(TileEntry, u64)> = tiles
-        .par_iter()
-        .map(|bt| -> Result<(TileEntry, u64)> {
-            let stem = format!("tiles/{}_{}", bt.tile.tile_x, bt.tile.tile_y);
-            let bytes = bt.tile.encode();
-            std::fs::write(dir.join(format!("{stem}.tile")), &bytes)?;
-            std::fs::write(dir.join(format!("{stem}.ids")), encode_ids(&bt.ids))?;
-            Ok((
-                TileEntry {
-                    x: bt.tile.tile_x,
-                    y: bt.tile.tile_y,
-                    url: format!("{stem}.tile"),
-                    ids_url: format!("{stem}.ids"),
-                    bytes: bytes.len() as u64,
-                    trees: bt.tile.instances.len() as u64,
-                    batches: bt.tile.batches.len() as u32,
-                    bounds: Bounds { min: bt.bounds.0, max: bt.bounds.1 },
-                },
-                bt.tile.instance_bytes() as u64,
-            ))
-        })
-        .collect::<Result<_>>()?;
+    // Tiles, one group of whole tiles in memory at a time (all trees, or one
+    // bucket of a bake larger than memory). A shard keeps the trees of its tiles.
+    let mut tree_counts = vec![0u64; input.species.len()];
+    let mut entries: Vec<(TileEntry, u64)> = Vec::new();
+    let mut kept = 0u64;
+    input.trees.for_each_group(&mut |group| {
+        let shard_trees: Vec<SceneTree>;
+        let trees: &[SceneTree] = match input.shard {
+            Some((index, count)) => {
+                shard_trees = group
+                    .iter()
+                    .filter(|t| {
+                        let (x, y) = tile_of(t.pos, input.cell_size_m, input.tile_cells);
+                        shard_of_tile(x, y, count) == index
+                    })
+                    .copied()
+                    .collect();
+                &shard_trees
+            }
+            None => group,
+        };
+        kept += trees.len() as u64;
+        for t in trees {
+            tree_counts[t.species as usize] += 1;
+        }
+        let tiles = build_tiles(trees, &shapes, input.cell_size_m, input.tile_cells);
+        let written: Vec<(TileEntry, u64)> = tiles
+            .par_iter()
+            .map(|bt| -> Result<(TileEntry, u64)> {
+                let stem = format!("tiles/{}_{}", bt.tile.tile_x, bt.tile.tile_y);
+                let bytes = bt.tile.encode();
+                std::fs::write(dir.join(format!("{stem}.tile")), &bytes)?;
+                std::fs::write(dir.join(format!("{stem}.ids")), encode_ids(&bt.ids))?;
+                Ok((
+                    TileEntry {
+                        x: bt.tile.tile_x,
+                        y: bt.tile.tile_y,
+                        url: format!("{stem}.tile"),
+                        ids_url: format!("{stem}.ids"),
+                        bytes: bytes.len() as u64,
+                        trees: bt.tile.instances.len() as u64,
+                        batches: bt.tile.batches.len() as u32,
+                        bounds: Bounds { min: bt.bounds.0, max: bt.bounds.1 },
+                    },
+                    bt.tile.instance_bytes() as u64,
+                ))
+            })
+            .collect::<Result<_>>()?;
+        entries.extend(written);
+        Ok(())
+    })?;
+    if let Some((index, count)) = input.shard {
+        log(&format!("shard {index}/{count}: {kept} of {} trees", input.trees.len()));
+    }
+    for (entry, n) in species_entries.iter_mut().zip(&tree_counts) {
+        entry.trees = *n;
+    }
     let tile_seconds = t1.elapsed().as_secs_f64();
     let instance_bytes = entries.iter().map(|(_, b)| b).sum();
     let tile_entries: Vec<TileEntry> = entries.into_iter().map(|(e, _)| e).collect();

@@ -281,3 +281,54 @@ fn sharded_bake_and_merge_equal_a_single_bake() {
     assert!(err.contains("0 ≤ I < N"), "{err}");
     assert!(!dir.join("bad").exists(), "nothing is left behind");
 }
+
+#[test]
+fn a_bake_larger_than_memory_streams_through_bucket_files_with_the_same_result() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    if !data.exists() {
+        eprintln!("skipping: {} not present", data.display());
+        return;
+    }
+    let dir = tmp("buckets");
+    // 20,000 placements (lon/lat CSV) from the demo layout.
+    run(bin()
+        .args(["demo", "--trees", "20000", "--seed", "9", "--no-clusters", "--billboard-size", "16"])
+        .args(["--texture-size", "16", "--out"])
+        .arg(dir.join("demo"))
+        .arg("--write-placements")
+        .arg(dir.join("trees.csv")));
+    let bake = |out: &str, extra: &[&str]| {
+        let mut c = bin();
+        c.arg("bake")
+            .arg("--model")
+            .arg(format!("oak={}", data.join("models/eztree_oak_medium.glb").display()))
+            .arg("--placements")
+            .arg(dir.join("trees.csv"))
+            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16", "--tile-cells", "2"])
+            .args(["--index-node-tiles", "6"])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.join(out));
+        run(&mut c)
+    };
+    bake("memory", &[]);
+    let o = bake("buckets", &["--bucket-trees", "3000"]);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("into 7 bucket files by tile"), "{log}");
+    assert_eq!(snapshot(&dir.join("memory")), snapshot(&dir.join("buckets")), "streamed = in memory");
+    assert!(
+        !std::fs::read_dir(&dir).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().contains("buckets-")),
+        "bucket files are removed"
+    );
+    // Shards stream too, and merge to the same scene.
+    bake("part-0", &["--bucket-trees", "3000", "--shard", "0/2"]);
+    bake("part-1", &["--bucket-trees", "3000", "--shard", "1/2"]);
+    run(bin()
+        .arg("merge")
+        .arg(dir.join("part-0"))
+        .arg(dir.join("part-1"))
+        .arg("--out")
+        .arg(dir.join("merged"))
+        .args(["--index-node-tiles", "6"]));
+    assert_eq!(snapshot(&dir.join("memory")), snapshot(&dir.join("merged")), "sharded + streamed = single");
+}
