@@ -557,6 +557,8 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
         let bb = part(&s.pack, PackPart::Billboards);
         assert!(ranges.iter().flatten().any(|r| overlaps(*r, bb)), "{}: billboards fetched", s.pack);
     }
+    // Nothing compiled for what the view does not use: billboard pipelines only.
+    assert_eq!(off.renderer.pipelines_built(), [false, false, true], "meshes, clusters, billboards");
     // Close among the trees the meshes are needed, and fetched.
     let close = off.named_camera(NamedView::Close, 30.0).unwrap();
     render(&mut off, &close);
@@ -565,6 +567,7 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
         pack_ranges(&close_log, &s.pack).iter().flatten().any(|r| overlaps(*r, part(&s.pack, PackPart::Meshes)))
     });
     assert!(fetched_meshes, "the close view fetches mesh levels: {close_log:?}");
+    assert_eq!(off.renderer.pipelines_built(), [true, true, true]);
 }
 
 #[test]

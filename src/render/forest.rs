@@ -265,9 +265,12 @@ struct Pools {
 pub struct ForestRenderer {
     /// Shared bind group layouts.
     pub shared: SharedLayouts,
-    mesh: MeshPipelines,
-    billboard: BillboardPipeline,
-    cluster: ClusterPipeline,
+    color_format: wgpu::TextureFormat,
+    // Draw pipelines are built when the first pack holding their representation
+    // arrives: a scene or view that never needs one never compiles it.
+    mesh: Option<MeshPipelines>,
+    billboard: Option<BillboardPipeline>,
+    cluster: Option<ClusterPipeline>,
     cull: CullPipelines,
     sky: wgpu::RenderPipeline,
     bounds: wgpu::RenderPipeline,
@@ -325,9 +328,6 @@ impl ForestRenderer {
     pub fn new(device: &wgpu::Device, color_format: wgpu::TextureFormat, config: PoolConfig) -> Self {
         use wgpu::BufferUsages as U;
         let shared = SharedLayouts::new(device);
-        let mesh = MeshPipelines::new(device, &shared, color_format);
-        let billboard = BillboardPipeline::new(device, &shared, color_format);
-        let cluster = ClusterPipeline::new(device, &shared, color_format);
         let cull = CullPipelines::new(device, &shared);
         let sky = overlay_pipeline(
             device,
@@ -405,9 +405,10 @@ impl ForestRenderer {
         });
         Self {
             shared,
-            mesh,
-            billboard,
-            cluster,
+            color_format,
+            mesh: None,
+            billboard: None,
+            cluster: None,
             cull,
             sky,
             bounds,
@@ -466,11 +467,31 @@ impl ForestRenderer {
 
     /// Uploads a decoded pack as species `index`.
     pub fn upload_pack(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, index: u32, pack: &Pack<'_>) {
-        let Some(slot) = self.packs.get_mut(index as usize) else { return };
+        if self.packs.get(index as usize).is_none() {
+            return;
+        }
         let m = &pack.meta;
-        let mesh = MeshGpu::upload(device, queue, &self.mesh, pack);
-        let billboard = BillboardGpu::upload(device, queue, &self.billboard, pack);
-        let cluster = ClusterGpu::upload(device, queue, &self.cluster, pack);
+        use crate::format::pack::kind;
+        let (shared, format) = (&self.shared, self.color_format);
+        let mesh = if pack.section(kind::MESH_VERTICES, 0).is_some() && pack.section(kind::MESH_INDICES, 0).is_some() {
+            let pipelines = self.mesh.get_or_insert_with(|| MeshPipelines::new(device, shared, format));
+            MeshGpu::upload(device, queue, pipelines, pack)
+        } else {
+            MeshGpu { levels: Vec::new() }
+        };
+        let billboard = if m.billboards.is_some() && pack.section(kind::BILLBOARD_COLOR, 0).is_some() {
+            let pipeline = self.billboard.get_or_insert_with(|| BillboardPipeline::new(device, shared, format));
+            BillboardGpu::upload(device, queue, pipeline, pack)
+        } else {
+            None
+        };
+        let cluster = if m.clusters.is_some() && pack.section(kind::ELLIPSOIDS, 0).is_some() {
+            let pipeline = self.cluster.get_or_insert_with(|| ClusterPipeline::new(device, shared, format));
+            ClusterGpu::upload(device, queue, pipeline, pack)
+        } else {
+            None
+        };
+        let Some(slot) = self.packs.get_mut(index as usize) else { return };
         let lo = Vec3::from(m.bounds_min);
         let hi = Vec3::from(m.bounds_max);
         let c = (lo + hi) * 0.5;
@@ -598,6 +619,13 @@ impl ForestRenderer {
         let meshes = has_mesh && (max_px >= mesh_floor * slack || (!has_bb && !has_cl));
         let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
         [has_bb, clusters, meshes]
+    }
+
+    /// Which draw pipelines have been built (meshes, clusters, billboards): each
+    /// only once a pack holding that representation arrived.
+    #[must_use]
+    pub fn pipelines_built(&self) -> [bool; 3] {
+        [self.mesh.is_some(), self.cluster.is_some(), self.billboard.is_some()]
     }
 
     /// GPU bytes: pools plus uploaded packs.
@@ -830,22 +858,23 @@ impl ForestRenderer {
                 match repr {
                     Repr::Mesh0 | Repr::Mesh1 => {
                         let level = repr as usize;
-                        if p.mesh.bind_level(&mut pass, &self.mesh, super::gpu_data::RenderMode::Lit, level) > 0 {
+                        let Some(pipelines) = &self.mesh else { continue };
+                        if p.mesh.bind_level(&mut pass, pipelines, super::gpu_data::RenderMode::Lit, level) > 0 {
                             pass.draw_indexed_indirect(&self.pools.args, args_offset);
                             draws += 1;
                         }
                     }
                     Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
-                        if let Some(c) = &p.cluster {
-                            pass.set_pipeline(self.cluster.pipeline(self.cluster_exact_depth));
+                        if let (Some(c), Some(pipeline)) = (&p.cluster, &self.cluster) {
+                            pass.set_pipeline(pipeline.pipeline(self.cluster_exact_depth));
                             pass.set_bind_group(1, &c.bind_group, &[]);
                             pass.draw_indirect(&self.pools.args, args_offset);
                             draws += 1;
                         }
                     }
                     Repr::Billboard => {
-                        if let Some(bb) = &p.billboard {
-                            pass.set_pipeline(self.billboard.pipeline());
+                        if let (Some(bb), Some(pipeline)) = (&p.billboard, &self.billboard) {
+                            pass.set_pipeline(pipeline.pipeline());
                             pass.set_bind_group(1, &bb.bind_group, &[]);
                             pass.draw_indirect(&self.pools.args, args_offset);
                             draws += 1;
