@@ -113,13 +113,32 @@ impl IndexWalk {
     /// unread nodes to fetch, each as (distance, id), nearest first.
     #[must_use]
     pub fn walk(&self, view: &ViewData, draw_distance_m: f32) -> (ByDistance, ByDistance) {
-        let mut tiles = Vec::new();
-        let mut fetch = Vec::new();
-        let mut stack = vec![0usize];
+        let (mut tiles, mut fetch, mut stack) = (Vec::new(), Vec::new(), Vec::new());
+        self.walk_into(view, draw_distance_m, &mut tiles, &mut fetch, &mut stack);
+        (tiles, fetch)
+    }
+
+    /// [`Self::walk`] into the caller's buffers (cleared first): no allocation
+    /// once they have grown to the view's size.
+    pub fn walk_into(
+        &self,
+        view: &ViewData,
+        draw_distance_m: f32,
+        tiles: &mut ByDistance,
+        fetch: &mut ByDistance,
+        stack: &mut Vec<usize>,
+    ) {
+        tiles.clear();
+        fetch.clear();
+        stack.clear();
+        if self.nodes.is_empty() {
+            return;
+        }
+        stack.push(0);
+        // A small margin keeps float rounding from dropping a tile on a node's edge.
+        let margin = 0.01 + 1e-6 * draw_distance_m.min(1e9);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n];
-            // A small margin keeps float rounding from dropping a tile on a node's edge.
-            let margin = 0.01 + 1e-6 * draw_distance_m.min(1e9);
             let Some(d) = box_distance(view, &node.bounds, draw_distance_m, margin) else { continue };
             match &node.content {
                 NodeContent::Unloaded => fetch.push((d, n)),
@@ -133,10 +152,10 @@ impl IndexWalk {
                 }
             }
         }
+        // Unstable sorts do not allocate; ids break ties, so the order is fixed.
         let order = |a: &(f32, usize), b: &(f32, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
-        tiles.sort_by(order);
-        fetch.sort_by(order);
-        (tiles, fetch)
+        tiles.sort_unstable_by(order);
+        fetch.sort_unstable_by(order);
     }
 
     /// Reads node `n` from `bytes`; returns the ids of the tiles it adds.

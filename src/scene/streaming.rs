@@ -206,6 +206,11 @@ pub struct SceneStream<F: Fetcher> {
     reach_m: f32,
     /// How many of `wanted` (nearest first) lie within `reach_m`.
     within_reach: usize,
+    /// Buffers reused every frame (no allocation in steady state).
+    walk_tiles: Vec<(f32, usize)>,
+    walk_nodes: Vec<(f32, usize)>,
+    walk_stack: Vec<usize>,
+    needed: Vec<usize>,
     /// (time, bytes) of responses in the last second, for the download budget.
     recent: std::collections::VecDeque<(f64, u64)>,
 }
@@ -232,6 +237,10 @@ impl<F: Fetcher> SceneStream<F> {
             pending_nodes: 0,
             reach_m: f32::INFINITY,
             within_reach: 0,
+            walk_tiles: Vec::new(),
+            walk_nodes: Vec::new(),
+            walk_stack: Vec::new(),
+            needed: Vec::new(),
             recent: std::collections::VecDeque::new(),
         }
     }
@@ -275,8 +284,7 @@ impl<F: Fetcher> SceneStream<F> {
             TileState::Resident { .. } => true,
             TileState::NotResident(l) => *l == Load::Broken,
         });
-        let needed = self.needed_species();
-        let packs_done = needed.iter().all(|&s| self.packs[s].done());
+        let packs_done = self.needed.iter().all(|&s| self.packs[s].done());
         manifest_done && nodes_done && tiles_done && packs_done && self.requests.is_empty()
     }
 
@@ -298,8 +306,11 @@ impl<F: Fetcher> SceneStream<F> {
             .map(|(_, z)| z)
     }
 
-    fn needed_species(&self) -> Vec<usize> {
-        let mut needed: Vec<usize> = Vec::new();
+    /// Species of the wanted resident tiles, into `self.needed` (no allocation
+    /// in steady state).
+    fn collect_needed_species(&mut self) {
+        let mut needed = std::mem::take(&mut self.needed);
+        needed.clear();
         for &t in &self.wanted {
             if let TileState::Resident { species, .. } = &self.tiles[t] {
                 for &s in species {
@@ -309,7 +320,7 @@ impl<F: Fetcher> SceneStream<F> {
                 }
             }
         }
-        needed
+        self.needed = needed;
     }
 
     fn fail(&mut self, url: String, err: &str, attempt: u32, retryable: bool, now_s: f64) -> Load {
@@ -383,9 +394,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.request_packs(renderer, now_s);
             } else {
                 // Still decide what the view wants (for is_settled and eviction).
-                let wanted = self.index.walk(view, draw_distance_m).0;
-                self.within_reach = wanted.iter().take_while(|(d, _)| *d <= self.reach_m).count();
-                self.wanted = wanted.iter().map(|(_, i)| *i).collect();
+                self.walk(view, draw_distance_m);
             }
             self.stats.degraded.pools_full = self.reach_m < draw_distance_m;
             self.stats.degraded.reach_m = self.reach_m;
@@ -671,11 +680,9 @@ impl<F: Fetcher> SceneStream<F> {
         if self.manifest.is_none() {
             return;
         }
-        let (mut wanted, nodes) = self.index.walk(view, draw_distance_m);
-        self.within_reach = wanted.iter().take_while(|(d, _)| *d <= self.reach_m).count();
-        self.wanted = wanted.iter().map(|(_, i)| *i).collect();
-        wanted.truncate(self.within_reach);
+        self.walk(view, draw_distance_m);
         self.pending_nodes = 0;
+        let (wanted, nodes) = (std::mem::take(&mut self.walk_tiles), std::mem::take(&mut self.walk_nodes));
         // Index nodes first: they unlock the tiles below them.
         for &(_, n) in &nodes {
             let due = match self.node_loads[n] {
@@ -696,7 +703,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.node_loads[n] = Load::Requested { attempt };
             }
         }
-        for &(_, i) in &wanted {
+        for &(_, i) in &wanted[..self.within_reach] {
             if self.fetcher.in_flight() >= self.config.max_in_flight {
                 break;
             }
@@ -712,10 +719,21 @@ impl<F: Fetcher> SceneStream<F> {
                 self.tiles[i] = TileState::NotResident(Load::Requested { attempt });
             }
         }
+        (self.walk_tiles, self.walk_nodes) = (wanted, nodes);
+    }
+
+    /// Walks the index for the view into the reused buffers: `walk_tiles`,
+    /// `walk_nodes`, `wanted` and `within_reach`.
+    fn walk(&mut self, view: &ViewData, draw_distance_m: f32) {
+        self.index.walk_into(view, draw_distance_m, &mut self.walk_tiles, &mut self.walk_nodes, &mut self.walk_stack);
+        self.within_reach = self.walk_tiles.iter().take_while(|(d, _)| *d <= self.reach_m).count();
+        self.wanted.clear();
+        self.wanted.extend(self.walk_tiles.iter().map(|(_, i)| *i));
     }
 
     fn request_packs(&mut self, renderer: &ForestRenderer, now_s: f64) {
-        let needed = self.needed_species();
+        self.collect_needed_species();
+        let needed = std::mem::take(&mut self.needed);
         let mut over_budget = false;
         // GPU bytes held plus parts on their way.
         let mut committed = renderer.gpu_bytes();
@@ -736,7 +754,7 @@ impl<F: Fetcher> SceneStream<F> {
             Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
             _ => None,
         };
-        for s in needed {
+        for &s in &needed {
             let load = &mut self.packs[s];
             if let Some(head) = &load.parsed {
                 load.wants = renderer.parts_needed(s, &head.meta);
@@ -744,11 +762,11 @@ impl<F: Fetcher> SceneStream<F> {
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
             }
-            let url = join(&self.base, &m.species[s].pack);
+            let url = || join(&self.base, &m.species[s].pack);
             let Some(head) = &load.parsed else {
                 if let Some(attempt) = due(&load.head) {
                     let range = m.species[s].head_bytes.map(|h| (0, h));
-                    let id = self.fetcher.start_range(&url, range);
+                    let id = self.fetcher.start_range(&url(), range);
                     self.stats.requests += 1;
                     self.requests.insert(id, Target::PackHead(s));
                     load.head = Load::Requested { attempt };
@@ -769,7 +787,7 @@ impl<F: Fetcher> SceneStream<F> {
                     over_budget = true;
                     continue;
                 }
-                let id = self.fetcher.start_range(&url, Some(range));
+                let id = self.fetcher.start_range(&url(), Some(range));
                 if *part != PackPart::Billboards {
                     committed += range.1 - range.0; // billboards are reserved above
                 }
@@ -779,6 +797,7 @@ impl<F: Fetcher> SceneStream<F> {
             }
         }
         self.stats.degraded.gpu_budget = over_budget;
+        self.needed = needed;
     }
 }
 

@@ -6,7 +6,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawn, execFileSync } from 'node:child_process';
-import { mkdtempSync, cpSync, readFileSync, writeFileSync } from 'node:fs';
+import { mkdtempSync, cpSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -43,8 +43,9 @@ before(async () => {
   // A copy of the scene with one corrupt tile (bytes 40.. overwritten: a NaN batch origin).
   const broken = mkdtempSync(join(tmpdir(), 'sylva-corrupt-'));
   cpSync(scene, broken, { recursive: true });
-  const manifest = JSON.parse(readFileSync(join(broken, 'scene.json'), 'utf8'));
-  const tilePath = join(broken, manifest.tiles[0].url);
+  // The first tile of the scene (its manifest may list tiles flat or in index nodes).
+  const first = readdirSync(join(broken, 'tiles')).filter((f) => f.endsWith('.tile')).sort()[0];
+  const tilePath = join(broken, 'tiles', first);
   const bytes = readFileSync(tilePath);
   bytes.writeFloatLE(NaN, 32);
   writeFileSync(tilePath, bytes);
@@ -118,6 +119,11 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   }
   assert.equal(stats.trees_total, 3000);
   assert.ok(stats.tiles_resident > 0, 'tiles resident');
+  // The fixture has a hierarchical index (5 nodes) and packs fetched in parts by
+  // byte range through the browser's fetch.
+  assert.ok(stats.index_nodes_loaded >= 1 && stats.index_nodes_total === 5, `index ${JSON.stringify(stats)}`);
+  assert.deepEqual(Object.keys(stats.degraded).sort(), ['bandwidth', 'gpu_budget', 'pools_full', 'reach_m']);
+  assert.equal(stats.degraded.pools_full, false);
   // At most one draw per species × representation (3 × 7).
   assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 21, `draw calls ${stats.draw_calls}`);
   const drawn = Object.values(readyStats.instances).reduce((a, b) => a + b, 0);

@@ -1,0 +1,62 @@
+//! Steady-state frames allocate nothing in Sylva's own per-frame code: the
+//! streaming decisions and the frame's CPU work (its own process: a counting
+//! global allocator).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn steady_state_frames_allocate_nothing_in_streaming() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
+    }
+    let fixture = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small");
+    let pools = sylva::render::forest::PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
+    let mut off = sylva::render::offscreen::OffscreenScene::open(fixture.to_str().unwrap(), 320, 180, pools).unwrap();
+    let cam = {
+        off.load_view(&sylva::render::camera::Camera::default(), 30.0);
+        off.named_camera(sylva::render::offscreen::NamedView::Medium, 30.0).unwrap()
+    };
+    off.load_view(&cam, 30.0);
+    for _ in 0..3 {
+        off.render(&cam, false);
+    }
+    let count = |f: &mut dyn FnMut()| {
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        f();
+        ALLOCATIONS.load(Ordering::Relaxed) - before
+    };
+    let mut stream = 0;
+    let mut frame = 0;
+    for _ in 0..20 {
+        stream += count(&mut || {
+            off.update_stream(&cam);
+        });
+        frame += count(&mut || {
+            off.render(&cam, false);
+        });
+    }
+    eprintln!("per frame: streaming {} allocations, render {}", stream / 20, frame / 20);
+    assert_eq!(stream, 0, "streaming decisions allocate in steady state");
+}
