@@ -574,6 +574,7 @@ impl Viewer {
                 "pools_full": s.degraded.pools_full,
                 "gpu_budget": s.degraded.gpu_budget,
                 "bandwidth": s.degraded.bandwidth,
+                "device_limit": s.degraded.device_limit,
                 "reach_m": if s.degraded.reach_m.is_finite() { f64::from(s.degraded.reach_m) } else { -1.0 },
             },
             "bytes_fetched": s.bytes_fetched,

@@ -643,6 +643,13 @@ fn budgets_and_full_pools_degrade_gracefully() {
     // A GPU budget that leaves no room for finer parts: a close view draws with
     // billboards and says so, instead of fetching the meshes.
     let mut off = open(fixture().to_str().unwrap());
+    // The manifest first: the pools are fitted to the scene when it arrives.
+    let close = Camera { eye_m: DVec3::new(c.x, c.y, m.bounds.min[2] as f64 + 2.0), ..Camera::default() };
+    while off.stream.manifest().is_none() {
+        off.update_stream(&close);
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    assert!(off.renderer.config().instances <= 3000, "pools fitted to the scene: {:?}", off.renderer.config());
     // Room for the billboards (always fetched: the far field) and nothing finer.
     let billboards: u64 = m
         .species
@@ -658,7 +665,6 @@ fn budgets_and_full_pools_degrade_gracefully() {
         .sum();
     let budget = off.renderer.gpu_bytes() + billboards + 10_000;
     off.stream.set_config(sylva::scene::StreamConfig { gpu_budget_bytes: budget, ..off.stream.config() });
-    let close = Camera { eye_m: DVec3::new(c.x, c.y, m.bounds.min[2] as f64 + 2.0), ..Camera::default() };
     let events = off.load_view(&close, 30.0);
     assert!(!events.iter().any(|e| matches!(e, StreamEvent::Fatal { .. })), "{events:?}");
     let stats = off.render(&close, true);

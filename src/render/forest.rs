@@ -49,6 +49,36 @@ impl Default for PoolConfig {
 }
 
 impl PoolConfig {
+    /// This config cut down to what `limits` allow: every pool within the largest
+    /// storage binding and buffer (WebGPU's defaults: 128 MiB and 256 MiB). Returns
+    /// whether anything was cut.
+    #[must_use]
+    pub fn within_limits(self, limits: &wgpu::Limits) -> (Self, bool) {
+        let max = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let fit = |count: u32, stride: u64| (u64::from(count).min(max / stride)) as u32;
+        let c = Self {
+            instances: fit(self.instances, 8),
+            batches: fit(self.batches, 80),
+            items: fit(self.items, 8),
+            species: self.species,
+        };
+        (c, c != self)
+    }
+
+    /// The smaller of this config and what a scene of `trees` in `batches` of
+    /// `species` species can ever need: a small scene allocates little.
+    #[must_use]
+    pub fn for_scene(self, trees: u64, batches: u64, species: u32) -> Self {
+        let clamp = |v: u64, max: u32| v.min(u64::from(max)).max(1) as u32;
+        Self {
+            instances: clamp(trees, self.instances),
+            batches: clamp(batches, self.batches),
+            // Each species' segments may each hold all its trees (one per representation).
+            items: clamp(trees.saturating_mul(u64::from(REPR_COUNT)), self.items),
+            species: species.clamp(1, self.species),
+        }
+    }
+
     /// GPU bytes the pools take.
     #[must_use]
     pub fn bytes(&self) -> u64 {
@@ -274,8 +304,11 @@ pub struct ForestRenderer {
     cull: CullPipelines,
     sky: wgpu::RenderPipeline,
     bounds: wgpu::RenderPipeline,
+    bounds_layout: wgpu::BindGroupLayout,
     bounds_group: wgpu::BindGroup,
     debug_bounds: bool,
+    /// Whether the pools were cut down to the device's limits.
+    limited: bool,
     config: PoolConfig,
     pools: Pools,
     view_buffer: wgpu::Buffer,
@@ -322,6 +355,85 @@ fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsag
     })
 }
 
+/// Bind groups over the pools.
+struct PoolGroups {
+    instance: wgpu::BindGroup,
+    cull: wgpu::BindGroup,
+    dispatch: wgpu::BindGroup,
+    draw: wgpu::BindGroup,
+    bounds: wgpu::BindGroup,
+}
+
+/// Creates the pool buffers of `config` and the bind groups over them.
+fn create_pools(
+    device: &wgpu::Device,
+    config: PoolConfig,
+    shared: &SharedLayouts,
+    cull: &CullPipelines,
+    bounds_layout: &wgpu::BindGroupLayout,
+) -> (Pools, PoolGroups) {
+    use wgpu::BufferUsages as U;
+    let slots = u64::from(config.species) * u64::from(REPR_COUNT);
+    let pools = Pools {
+        // COPY_SRC everywhere tests and stats read back from.
+        batches: buffer(device, "batch pool", u64::from(config.batches) * 80, U::STORAGE | U::COPY_DST | U::COPY_SRC),
+        instances: buffer(
+            device,
+            "instance pool",
+            u64::from(config.instances) * 8,
+            U::STORAGE | U::COPY_DST | U::COPY_SRC,
+        ),
+        items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE | U::COPY_SRC),
+        visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
+        control: buffer(device, "cull control", 8 * 4, U::STORAGE | U::COPY_SRC),
+        dispatch: buffer(device, "cull dispatch", 8 * 4, U::STORAGE | U::INDIRECT),
+        args: buffer(device, "draw args", slots * 20, U::STORAGE | U::INDIRECT | U::COPY_SRC),
+        species: buffer(
+            device,
+            "species table",
+            u64::from(config.species) * std::mem::size_of::<GpuSpecies>() as u64,
+            U::STORAGE | U::COPY_DST,
+        ),
+        draw_params: buffer(device, "draw params", slots * 256, U::UNIFORM | U::COPY_DST),
+    };
+    let instance_group = shared.instance_group(device, &pools.batches, &pools.instances, &pools.items);
+    let draw_group = shared.draw_group(device, &pools.draw_params);
+    fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+        wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }
+    }
+    let cull_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("cull"),
+        layout: &cull.layout,
+        entries: &[
+            entry(0, &pools.batches),
+            entry(1, &pools.instances),
+            entry(2, &pools.species),
+            entry(3, &pools.visible),
+            entry(4, &pools.control),
+            entry(5, &pools.items),
+            entry(6, &pools.args),
+        ],
+    });
+    let bounds_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("bounds"),
+        layout: bounds_layout,
+        entries: &[entry(0, &pools.batches), entry(1, &pools.visible)],
+    });
+    let dispatch_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("cull dispatch"),
+        layout: &cull.dispatch_layout,
+        entries: &[entry(0, &pools.dispatch), entry(1, &pools.control)],
+    });
+    let groups = PoolGroups {
+        instance: instance_group,
+        cull: cull_group,
+        dispatch: dispatch_group,
+        draw: draw_group,
+        bounds: bounds_group,
+    };
+    (pools, groups)
+}
+
 impl ForestRenderer {
     /// Creates pipelines and pools for `color_format` targets.
     #[must_use]
@@ -337,49 +449,6 @@ impl ForestRenderer {
             wgpu::PrimitiveTopology::TriangleList,
             color_format,
         );
-        let slots = u64::from(config.species) * u64::from(REPR_COUNT);
-        let pools = Pools {
-            // COPY_SRC everywhere tests and stats read back from.
-            batches: buffer(
-                device,
-                "batch pool",
-                u64::from(config.batches) * 80,
-                U::STORAGE | U::COPY_DST | U::COPY_SRC,
-            ),
-            instances: buffer(
-                device,
-                "instance pool",
-                u64::from(config.instances) * 8,
-                U::STORAGE | U::COPY_DST | U::COPY_SRC,
-            ),
-            items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE | U::COPY_SRC),
-            visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
-            control: buffer(device, "cull control", 8 * 4, U::STORAGE | U::COPY_SRC),
-            dispatch: buffer(device, "cull dispatch", 8 * 4, U::STORAGE | U::INDIRECT),
-            args: buffer(device, "draw args", slots * 20, U::STORAGE | U::INDIRECT | U::COPY_SRC),
-            species: buffer(device, "species table", u64::from(config.species) * 80, U::STORAGE | U::COPY_DST),
-            draw_params: buffer(device, "draw params", slots * 256, U::UNIFORM | U::COPY_DST),
-        };
-        let view_buffer = buffer(device, "view", std::mem::size_of::<ViewUniform>() as u64, U::STORAGE | U::COPY_DST);
-        let view_group = shared.view_group(device, &view_buffer);
-        let instance_group = shared.instance_group(device, &pools.batches, &pools.instances, &pools.items);
-        let draw_group = shared.draw_group(device, &pools.draw_params);
-        fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }
-        }
-        let cull_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("cull"),
-            layout: &cull.layout,
-            entries: &[
-                entry(0, &pools.batches),
-                entry(1, &pools.instances),
-                entry(2, &pools.species),
-                entry(3, &pools.visible),
-                entry(4, &pools.control),
-                entry(5, &pools.items),
-                entry(6, &pools.args),
-            ],
-        });
         let vertex = wgpu::ShaderStages::VERTEX;
         let bounds_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("bounds"),
@@ -393,16 +462,10 @@ impl ForestRenderer {
             wgpu::PrimitiveTopology::LineList,
             color_format,
         );
-        let bounds_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("bounds"),
-            layout: &bounds_layout,
-            entries: &[entry(0, &pools.batches), entry(1, &pools.visible)],
-        });
-        let dispatch_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("cull dispatch"),
-            layout: &cull.dispatch_layout,
-            entries: &[entry(0, &pools.dispatch), entry(1, &pools.control)],
-        });
+        let (config, limited) = config.within_limits(&device.limits());
+        let view_buffer = buffer(device, "view", std::mem::size_of::<ViewUniform>() as u64, U::STORAGE | U::COPY_DST);
+        let view_group = shared.view_group(device, &view_buffer);
+        let (pools, groups) = create_pools(device, config, &shared, &cull, &bounds_layout);
         Self {
             shared,
             color_format,
@@ -412,16 +475,18 @@ impl ForestRenderer {
             cull,
             sky,
             bounds,
-            bounds_group,
+            bounds_layout,
+            bounds_group: groups.bounds,
             debug_bounds: false,
             config,
+            limited,
             pools,
             view_buffer,
             view_group,
-            instance_group,
-            cull_group,
-            dispatch_group,
-            draw_group,
+            instance_group: groups.instance,
+            cull_group: groups.cull,
+            dispatch_group: groups.dispatch,
+            draw_group: groups.draw,
             batch_alloc: RangeAllocator::new(config.batches),
             instance_alloc: RangeAllocator::new(config.instances),
             batch_high_water: 0,
@@ -444,6 +509,35 @@ impl ForestRenderer {
     #[must_use]
     pub fn config(&self) -> PoolConfig {
         self.config
+    }
+
+    /// Re-creates the pools at `config` cut to the device's limits (when it
+    /// differs from the current one). Only while nothing is resident: call it
+    /// when a scene's manifest arrives, with [`PoolConfig::for_scene`], so a small
+    /// scene does not hold memory for millions of trees.
+    pub fn fit_pools(&mut self, device: &wgpu::Device, config: PoolConfig) {
+        let (config, limited) = config.within_limits(&device.limits());
+        if config == self.config || self.resident_instances() > 0 || self.batch_high_water > 0 {
+            return;
+        }
+        let (pools, groups) = create_pools(device, config, &self.shared, &self.cull, &self.bounds_layout);
+        self.pools = pools;
+        self.instance_group = groups.instance;
+        self.cull_group = groups.cull;
+        self.dispatch_group = groups.dispatch;
+        self.draw_group = groups.draw;
+        self.bounds_group = groups.bounds;
+        self.batch_alloc = RangeAllocator::new(config.batches);
+        self.instance_alloc = RangeAllocator::new(config.instances);
+        self.config = config;
+        self.limited |= limited;
+        self.table_dirty = true;
+    }
+
+    /// Whether the pools were cut down to the device's limits (reported in stats).
+    #[must_use]
+    pub fn pools_limited_by_device(&self) -> bool {
+        self.limited
     }
 
     /// Sets the scene's species count (from the manifest). Drops loaded packs.
@@ -990,6 +1084,23 @@ pub fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Te
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pools_fit_device_limits_and_small_scenes() {
+        // WebGPU's default limits: 128 MiB per storage binding.
+        let limits = wgpu::Limits::default();
+        let huge = PoolConfig { instances: 40 << 20, batches: 1 << 16, items: 60 << 20, species: 256 };
+        let (fit, cut) = huge.within_limits(&limits);
+        assert!(cut);
+        assert_eq!(u64::from(fit.instances) * 8, limits.max_storage_buffer_binding_size / 8 * 8);
+        assert_eq!(fit.batches, huge.batches, "what fits is kept");
+        let (same, cut) = PoolConfig::default().within_limits(&limits);
+        assert!(!cut && same == PoolConfig::default(), "the defaults fit WebGPU's limits");
+        let small = PoolConfig::default().for_scene(3000, 200, 3);
+        assert_eq!((small.instances, small.batches, small.items, small.species), (3000, 200, 21000, 3));
+        assert!(small.bytes() < PoolConfig::default().bytes() / 100);
+        assert_eq!(PoolConfig::default().for_scene(u64::MAX, 0, 0).instances, PoolConfig::default().instances);
+    }
 
     #[test]
     fn range_allocator_first_fit_and_merge() {

@@ -295,6 +295,7 @@ impl<F: Fetcher> OffscreenScene<F> {
             ("pools_full", serde_json::json!(d.pools_full)),
             ("gpu_budget", serde_json::json!(d.gpu_budget)),
             ("bandwidth", serde_json::json!(d.bandwidth)),
+            ("device_limit", serde_json::json!(d.device_limit)),
             ("reach_m", serde_json::json!(if d.reach_m.is_finite() { f64::from(d.reach_m) } else { -1.0 })),
         ]
         .into_iter()

@@ -51,6 +51,8 @@ pub struct Degraded {
     pub gpu_budget: bool,
     /// Requests wait for the download budget.
     pub bandwidth: bool,
+    /// The GPU pools were cut down to the device's limits (largest storage binding).
+    pub device_limit: bool,
     /// The distance up to which tiles are requested (the draw distance unless the
     /// pools are full).
     pub reach_m: f32,
@@ -357,7 +359,7 @@ impl<F: Fetcher> SceneStream<F> {
                 }
             }
             match target {
-                Target::Manifest => self.on_manifest(renderer, result, now_s),
+                Target::Manifest => self.on_manifest(renderer, device, result, now_s),
                 Target::Node(n) => self.on_node(n, result, now_s),
                 Target::Tile(t) => self.on_tile(renderer, queue, t, result, view, now_s),
                 Target::PackHead(s) => self.on_pack_head(renderer, device, queue, s, result, now_s),
@@ -397,6 +399,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.walk(view, draw_distance_m);
             }
             self.stats.degraded.pools_full = self.reach_m < draw_distance_m;
+            self.stats.degraded.device_limit = renderer.pools_limited_by_device();
             self.stats.degraded.reach_m = self.reach_m;
         }
         self.stats.loading = self.requests.len() as u64;
@@ -428,7 +431,13 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    fn on_manifest(&mut self, renderer: &mut ForestRenderer, result: Result<Vec<u8>, FetchError>, now_s: f64) {
+    fn on_manifest(
+        &mut self,
+        renderer: &mut ForestRenderer,
+        device: &wgpu::Device,
+        result: Result<Vec<u8>, FetchError>,
+        now_s: f64,
+    ) {
         let attempt = match self.manifest_load {
             Load::Requested { attempt } => attempt,
             _ => 0,
@@ -448,6 +457,9 @@ impl<F: Fetcher> SceneStream<F> {
                 });
             }
             Ok(m) if m.species.len() as u32 <= renderer.config().species => {
+                // Pools no bigger than the scene can fill (and within the device's limits).
+                let fitted = renderer.config().for_scene(m.counts.trees, m.counts.batches, m.species.len() as u32);
+                renderer.fit_pools(device, fitted);
                 renderer.set_species_count(m.species.len() as u32);
                 self.index = IndexWalk::new(&m);
                 self.node_loads = vec![Load::Idle; self.index.nodes.len()];

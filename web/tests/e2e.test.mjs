@@ -122,7 +122,7 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   // The fixture has a hierarchical index (5 nodes) and packs fetched in parts by
   // byte range through the browser's fetch.
   assert.ok(stats.index_nodes_loaded >= 1 && stats.index_nodes_total === 5, `index ${JSON.stringify(stats)}`);
-  assert.deepEqual(Object.keys(stats.degraded).sort(), ['bandwidth', 'gpu_budget', 'pools_full', 'reach_m']);
+  assert.deepEqual(Object.keys(stats.degraded).sort(), ['bandwidth', 'device_limit', 'gpu_budget', 'pools_full', 'reach_m']);
   assert.equal(stats.degraded.pools_full, false);
   // At most one draw per species × representation (3 × 7).
   assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 21, `draw calls ${stats.draw_calls}`);
