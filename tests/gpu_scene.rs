@@ -551,7 +551,9 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
         assert!(!ranges.is_empty() && ranges.len() <= 2, "{}: head and billboards only: {ranges:?}", s.pack);
         for r in &ranges {
             let r = r.unwrap_or_else(|| panic!("{}: the whole pack was fetched: {far_log:?}", s.pack));
-            assert!(!overlaps(r, part(&s.pack, PackPart::Meshes)), "{}: the far view fetched mesh bytes {r:?}", s.pack);
+            for p in [PackPart::MeshCoarse, PackPart::MeshFull] {
+                assert!(!overlaps(r, part(&s.pack, p)), "{}: the far view fetched mesh bytes {r:?}", s.pack);
+            }
             assert!(!overlaps(r, part(&s.pack, PackPart::Clusters)), "{}: the far view fetched clusters {r:?}", s.pack);
         }
         let bb = part(&s.pack, PackPart::Billboards);
@@ -559,13 +561,26 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     }
     // Nothing compiled for what the view does not use: billboard pipelines only.
     assert_eq!(off.renderer.pipelines_built(), [false, false, true], "meshes, clusters, billboards");
-    // Close among the trees the meshes are needed, and fetched.
+    // 40 m outside the forest's southern edge the trees reach the simplified mesh
+    // level (120 px) but not the full mesh (360 px): only the former is fetched.
+    let fetched = |log: &[String], p: PackPart| {
+        m.species.iter().any(|s| pack_ranges(log, &s.pack).iter().flatten().any(|r| overlaps(*r, part(&s.pack, p))))
+    };
+    let edge = Camera {
+        eye_m: DVec3::new(c.x, m.bounds.min[1] as f64 - 40.0, m.bounds.min[2] as f64 + 1.7),
+        pitch_rad: 0.05,
+        ..Camera::default()
+    };
+    let img = render(&mut off, &edge);
+    assert!(foliage_share(&img) > 0.1, "the edge view shows the forest ({:.3})", foliage_share(&img));
+    let edge_log = log.lock().unwrap().clone();
+    assert!(fetched(&edge_log, PackPart::MeshCoarse), "the edge view fetches the simplified level: {edge_log:?}");
+    assert!(!fetched(&edge_log, PackPart::MeshFull), "the edge view fetches no full mesh: {edge_log:?}");
+    // Close among the trees the full meshes are needed, and fetched.
     let close = off.named_camera(NamedView::Close, 30.0).unwrap();
     render(&mut off, &close);
     let close_log = log.lock().unwrap().clone();
-    let fetched_meshes = m.species.iter().any(|s| {
-        pack_ranges(&close_log, &s.pack).iter().flatten().any(|r| overlaps(*r, part(&s.pack, PackPart::Meshes)))
-    });
+    let fetched_meshes = fetched(&close_log, PackPart::MeshFull);
     assert!(fetched_meshes, "the close view fetches mesh levels: {close_log:?}");
     assert_eq!(off.renderer.pipelines_built(), [true, true, true]);
 }

@@ -418,28 +418,36 @@ pub struct PackHead {
     pub bytes: Vec<u8>,
 }
 
-/// The parts of a pack a viewer fetches separately.
+/// The parts of a pack a viewer fetches separately, each one byte range.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PackPart {
     /// Billboard colour and normal arrays (the far field).
     Billboards,
     /// Ellipsoid and line levels.
     Clusters,
-    /// Mesh levels and material textures.
-    Meshes,
+    /// The coarser mesh levels (1 and up) and the material textures every mesh
+    /// level samples.
+    MeshCoarse,
+    /// Mesh level 0, the full mesh (needed only close up; always with `MeshCoarse`).
+    MeshFull,
 }
+
+/// Number of [`PackPart`]s.
+pub const PACK_PARTS: usize = 4;
 
 impl PackPart {
     /// Every part, in fetch order.
-    pub const ALL: [PackPart; 3] = [PackPart::Billboards, PackPart::Clusters, PackPart::Meshes];
+    pub const ALL: [PackPart; PACK_PARTS] =
+        [PackPart::Billboards, PackPart::Clusters, PackPart::MeshCoarse, PackPart::MeshFull];
 
-    /// The part a section kind belongs to (`None` for `META` and unknown kinds).
+    /// The part a section belongs to (`None` for `META` and unknown kinds).
     #[must_use]
-    pub fn of(k: [u8; 4]) -> Option<Self> {
+    pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
         match k {
             kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL => Some(PackPart::Billboards),
             kind::ELLIPSOIDS | kind::LINES => Some(PackPart::Clusters),
-            kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::Meshes),
+            kind::MESH_VERTICES | kind::MESH_INDICES if index == 0 => Some(PackPart::MeshFull),
+            kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::MeshCoarse),
             _ => None,
         }
     }
@@ -467,7 +475,7 @@ impl PackHead {
     /// or `None` when the pack has none.
     #[must_use]
     pub fn part_range(&self, part: PackPart) -> Option<(u64, u64)> {
-        let mut it = self.entries.iter().filter(|e| PackPart::of(e.kind) == Some(part));
+        let mut it = self.entries.iter().filter(|e| PackPart::of(e.kind, e.index) == Some(part));
         let first = it.next()?;
         let (mut lo, mut hi) = (first.offset, first.offset + first.bytes);
         for e in it {

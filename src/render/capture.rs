@@ -449,7 +449,7 @@ pub fn render_pack_repr(
     match repr {
         PackRepr::Mesh(level) => {
             let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
-            (level < mesh.levels.len())
+            mesh.has_level(level)
                 .then(|| r.render(ctx, &TreeDraw::Mesh(&mesh, level), clip, eye, width, height, background))
         }
         PackRepr::Cluster(level) => {

@@ -274,7 +274,8 @@ struct SpeciesGpu {
     height_m: f32,
     select_px: [f32; 2],
     index_counts: [u32; 2],
-    levels: usize,
+    /// Mesh levels 0 and 1 on the GPU.
+    has_level: [bool; 2],
     bytes: u64,
 }
 
@@ -598,7 +599,7 @@ impl ForestRenderer {
             height_m: m.height_m,
             select_px: [level(0).map_or(0.0, |l| l.select_px), level(1).map_or(0.0, |l| l.select_px)],
             index_counts: [level(0).map_or(0, |l| l.index_count), level(1).map_or(0, |l| l.index_count)],
-            levels: mesh.levels.len(),
+            has_level: [mesh.has_level(0), mesh.has_level(1)],
             mesh,
             billboard,
             cluster,
@@ -692,11 +693,12 @@ impl ForestRenderer {
     }
 
     /// Which parts of species `s`'s pack ([`crate::format::pack::PackPart::ALL`]
-    /// order: billboards, clusters, meshes) the resident trees within reach can
-    /// need, from the projected heights of the last [`Self::prepare`] and the
-    /// representations allowed: a far view needs neither meshes nor clusters.
+    /// order: billboards, clusters, coarse mesh levels, full mesh) the resident
+    /// trees within reach can need, from the projected heights of the last
+    /// [`Self::measure_reach`] and the representations allowed: a far view needs
+    /// neither meshes nor clusters, a medium one not the full mesh.
     #[must_use]
-    pub fn parts_needed(&self, s: usize, meta: &crate::format::PackMeta) -> [bool; 3] {
+    pub fn parts_needed(&self, s: usize, meta: &crate::format::PackMeta) -> [bool; 4] {
         let max_px = self.species_max_px.get(s).copied().unwrap_or(0.0);
         let allow = self.representations;
         let has_bb = allow.billboards && meta.billboards.is_some();
@@ -704,15 +706,15 @@ impl ForestRenderer {
         let has_mesh = allow.meshes && !meta.mesh_levels.is_empty();
         // Cross-fades start below a threshold: fetch a little early.
         let slack = 1.0 - self.fade_band;
-        let mesh_floor = if has_mesh {
-            meta.mesh_levels.iter().map(|l| l.select_px).fold(f32::INFINITY, f32::min)
-        } else {
-            f32::INFINITY
-        };
+        let select = |l: usize| meta.mesh_levels.get(l).map_or(f32::INFINITY, |m| m.select_px);
+        let mesh_floor = if has_mesh { select(meta.mesh_levels.len() - 1) } else { f32::INFINITY };
         let cluster_floor = if has_bb { self.cluster_min_px } else { 0.0 };
-        let meshes = has_mesh && (max_px >= mesh_floor * slack || (!has_bb && !has_cl));
+        let coarsest_is_mesh = !has_bb && !has_cl;
+        let meshes = has_mesh && (max_px >= mesh_floor * slack || coarsest_is_mesh);
+        // The full mesh only where a tree can reach its threshold (one level: always).
+        let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
         let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
-        [has_bb, clusters, meshes]
+        [has_bb, clusters, meshes, full]
     }
 
     /// Which draw pipelines have been built (meshes, clusters, billboards): each
@@ -748,12 +750,12 @@ impl ForestRenderer {
                 s.select = [p.height_m, 0.0, 0.0, 0.0];
                 let mut want = [0u32; REPR_COUNT as usize];
                 let mut lower = [0f32; REPR_COUNT as usize];
-                if p.levels > 0 && allow.meshes {
+                if p.has_level[0] && allow.meshes {
                     want[Repr::Mesh0 as usize] = resident.min(MESH0_CAPACITY);
                     lower[Repr::Mesh0 as usize] = p.select_px[0];
                     s.index_count[Repr::Mesh0 as usize] = p.index_counts[0];
                 }
-                if p.levels > 1 && allow.meshes {
+                if p.has_level[1] && allow.meshes {
                     want[Repr::Mesh1 as usize] = resident.min(MESH1_CAPACITY);
                     lower[Repr::Mesh1 as usize] = p.select_px[1];
                     s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
@@ -761,7 +763,8 @@ impl ForestRenderer {
                 // Cluster tiers: the levels whose size band meets [cluster_min_px, the
                 // coarsest mesh level's threshold).
                 let mesh_floor = if allow.meshes {
-                    p.select_px[..p.levels.min(2)].last().copied().unwrap_or(f32::INFINITY)
+                    // The coarsest level on the GPU.
+                    (0..2).rev().find(|&l| p.has_level[l]).map_or(f32::INFINITY, |l| p.select_px[l])
                 } else {
                     f32::INFINITY
                 };

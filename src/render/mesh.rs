@@ -157,7 +157,8 @@ pub struct MeshLevelGpu {
 /// A pack's mesh levels and material textures on the GPU.
 pub struct MeshGpu {
     /// Levels, finest first.
-    pub levels: Vec<MeshLevelGpu>,
+    /// Levels, finest first; `None` for a level not (yet) fetched.
+    pub levels: Vec<Option<MeshLevelGpu>>,
 }
 
 impl MeshGpu {
@@ -165,14 +166,17 @@ impl MeshGpu {
     #[must_use]
     pub fn upload(device: &wgpu::Device, queue: &wgpu::Queue, pipelines: &MeshPipelines, pack: &Pack<'_>) -> Self {
         let meta = &pack.meta;
-        // Levels whose sections are held (a pack fetched in parts may hold none yet).
-        let present = (0..meta.mesh_levels.len())
-            .take_while(|&l| {
-                pack.section(kind::MESH_VERTICES, l as u32).is_some()
+        // Levels whose sections are held (a pack fetched in parts may hold some),
+        // and only with their material textures when they are textured.
+        let textures_held = meta.material_texture.is_none() || pack.section(kind::MATERIAL_TEXTURES, 0).is_some();
+        let held: Vec<bool> = (0..meta.mesh_levels.len())
+            .map(|l| {
+                textures_held
+                    && pack.section(kind::MESH_VERTICES, l as u32).is_some()
                     && pack.section(kind::MESH_INDICES, l as u32).is_some()
             })
-            .count();
-        if present == 0 {
+            .collect();
+        if !held.contains(&true) {
             return Self { levels: Vec::new() };
         }
         let texture = match (meta.material_texture, pack.section(kind::MATERIAL_TEXTURES, 0)) {
@@ -218,9 +222,11 @@ impl MeshGpu {
         let levels = meta
             .mesh_levels
             .iter()
-            .take(present)
             .enumerate()
             .map(|(l, level)| {
+                if !held[l] {
+                    return None;
+                }
                 let uniform = MeshUniform {
                     pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], 0.0],
                     pos_extent: [
@@ -266,10 +272,16 @@ impl MeshGpu {
                         },
                     ],
                 });
-                MeshLevelGpu { vertices, indices, index_count: level.index_count, bind_group }
+                Some(MeshLevelGpu { vertices, indices, index_count: level.index_count, bind_group })
             })
             .collect();
         Self { levels }
+    }
+
+    /// Whether level `l` is on the GPU.
+    #[must_use]
+    pub fn has_level(&self, l: usize) -> bool {
+        self.levels.get(l).is_some_and(Option::is_some)
     }
 
     /// Binds `level` (pipeline, group 1, buffers) for drawing; the caller has set
@@ -281,7 +293,7 @@ impl MeshGpu {
         mode: RenderMode,
         level: usize,
     ) -> u32 {
-        let Some(level) = self.levels.get(level) else { return 0 };
+        let Some(Some(level)) = self.levels.get(level) else { return 0 };
         if level.index_count == 0 {
             return 0;
         }

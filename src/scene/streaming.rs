@@ -14,7 +14,7 @@ use glam::Vec3;
 
 use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
 use super::index_walk::IndexWalk;
-use crate::format::pack::{PackHead, PackPart};
+use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
 use crate::format::{decode_pack, DecodeError, Manifest, Tile};
 use crate::render::camera::ViewData;
 use crate::render::forest::{ForestRenderer, PoolError, TileSlot};
@@ -119,14 +119,14 @@ struct PackLoad {
     /// The decoded head, once fetched.
     parsed: Option<PackHead>,
     /// Per part ([`PackPart::ALL`] order).
-    parts: [Load; 3],
+    parts: [Load; PACK_PARTS],
     /// Parts held: (file offset, bytes).
     held: Vec<(u64, Vec<u8>)>,
-    have: [bool; 3],
+    have: [bool; PACK_PARTS],
     /// The parts the view wanted at the last update.
-    wants: [bool; 3],
+    wants: [bool; PACK_PARTS],
     /// Parts held back by the GPU budget at the last update.
-    blocked: [bool; 3],
+    blocked: [bool; PACK_PARTS],
     /// The whole pack is uploaded: nothing more to fetch.
     whole: bool,
 }
@@ -136,11 +136,11 @@ impl PackLoad {
         Self {
             head: Load::Idle,
             parsed: None,
-            parts: [Load::Idle, Load::Idle, Load::Idle],
+            parts: [Load::Idle, Load::Idle, Load::Idle, Load::Idle],
             held: Vec::new(),
-            have: [false; 3],
-            wants: [false; 3],
-            blocked: [false; 3],
+            have: [false; PACK_PARTS],
+            wants: [false; PACK_PARTS],
+            blocked: [false; PACK_PARTS],
             whole: false,
         }
     }
