@@ -561,13 +561,13 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     }
     // Nothing compiled for what the view does not use: billboard pipelines only.
     assert_eq!(off.renderer.pipelines_built(), [false, false, true], "meshes, clusters, billboards");
-    // 40 m outside the forest's southern edge the trees reach the simplified mesh
+    // 25 m outside the forest's southern edge the trees reach the simplified mesh
     // level (120 px) but not the full mesh (360 px): only the former is fetched.
     let fetched = |log: &[String], p: PackPart| {
         m.species.iter().any(|s| pack_ranges(log, &s.pack).iter().flatten().any(|r| overlaps(*r, part(&s.pack, p))))
     };
     let edge = Camera {
-        eye_m: DVec3::new(c.x, m.bounds.min[1] as f64 - 40.0, m.bounds.min[2] as f64 + 1.7),
+        eye_m: DVec3::new(c.x, m.bounds.min[1] as f64 - 25.0, m.bounds.min[2] as f64 + 1.7),
         pitch_rad: 0.05,
         ..Camera::default()
     };
@@ -576,6 +576,9 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     let edge_log = log.lock().unwrap().clone();
     assert!(fetched(&edge_log, PackPart::MeshCoarse), "the edge view fetches the simplified level: {edge_log:?}");
     assert!(!fetched(&edge_log, PackPart::MeshFull), "the edge view fetches no full mesh: {edge_log:?}");
+    // …and draws with it (a pack holding level 1 without level 0).
+    let stats = off.render(&edge, true);
+    assert!(stats.instances["mesh1"] > 0 && stats.instances["mesh0"] == 0, "{:?}", stats.instances);
     // Close among the trees the full meshes are needed, and fetched.
     let close = off.named_camera(NamedView::Close, 30.0).unwrap();
     render(&mut off, &close);

@@ -138,6 +138,9 @@ pub struct RenderSettings {
     pub thin_px: f32,
 }
 
+/// Projected tree height from which a tile's batches are bounded one by one.
+const REFINE_PX: f32 = 40.0;
+
 /// Default of [`RenderSettings::thin_px`].
 pub const DEFAULT_THIN_PX: f32 = 8.0;
 
@@ -345,6 +348,9 @@ struct TileBounds {
     hi: Vec3,
     /// (species, tallest tree in metres).
     heights: Vec<(u32, f32)>,
+    /// Each batch's box (lo, hi), species and tallest tree: the tighter bound
+    /// for tiles near the eye.
+    batches: Vec<(Vec3, Vec3, u32, f32)>,
 }
 
 fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
@@ -568,7 +574,8 @@ impl ForestRenderer {
         let m = &pack.meta;
         use crate::format::pack::kind;
         let (shared, format) = (&self.shared, self.color_format);
-        let mesh = if pack.section(kind::MESH_VERTICES, 0).is_some() && pack.section(kind::MESH_INDICES, 0).is_some() {
+        let any_level = (0..m.mesh_levels.len() as u32).any(|l| pack.section(kind::MESH_VERTICES, l).is_some());
+        let mesh = if any_level {
             let pipelines = self.mesh.get_or_insert_with(|| MeshPipelines::new(device, shared, format));
             MeshGpu::upload(device, queue, pipelines, pack)
         } else {
@@ -640,11 +647,13 @@ impl ForestRenderer {
             lo: Vec3::splat(f32::MAX),
             hi: Vec3::splat(f32::MIN),
             heights: Vec::new(),
+            batches: Vec::with_capacity(tile.batches.len()),
         };
         for b in &tile.batches {
             let (c, h) = (Vec3::from(b.center_m), Vec3::from(b.half_extent_m));
             bounds.lo = bounds.lo.min(c - h);
             bounds.hi = bounds.hi.max(c + h);
+            bounds.batches.push((c - h, c + h, b.species, b.max_height_m));
             match bounds.heights.iter_mut().find(|(s, _)| *s == b.species) {
                 Some(x) => x.1 = x.1.max(b.max_height_m),
                 None => bounds.heights.push((b.species, b.max_height_m)),
@@ -715,6 +724,13 @@ impl ForestRenderer {
         let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
         let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
         [has_bb, clusters, meshes, full]
+    }
+
+    /// Each species' bound on the projected height (px) of its resident trees
+    /// within reach, from the last [`Self::measure_reach`].
+    #[must_use]
+    pub fn species_max_px(&self) -> &[f32] {
+        &self.species_max_px
     }
 
     /// Which draw pipelines have been built (meshes, clusters, billboards): each
@@ -831,9 +847,24 @@ impl ForestRenderer {
         let reach = if settings.culling == CullingMode::None { f32::INFINITY } else { settings.draw_distance_m };
         self.species_max_px.clear();
         self.species_max_px.resize(self.species_count as usize, 0.0);
+        // Tiles whose trees may reach this size on screen are bounded batch by batch
+        // (tighter: which mesh levels and clusters a view needs); the others whole.
+        let refine_px = self.cluster_min_px.min(REFINE_PX) * (1.0 - self.fade_band);
         for t in &self.tile_bounds {
             let d = (t.lo - eye).max(eye - t.hi).max(Vec3::ZERO).length();
             if d > reach {
+                continue;
+            }
+            let tallest = t.heights.iter().map(|(_, h)| *h).fold(0.0, f32::max);
+            if tallest * px / d.max(1e-3) >= refine_px {
+                for &(lo, hi, s, h) in &t.batches {
+                    let d = (lo - eye).max(eye - hi).max(Vec3::ZERO).length();
+                    if d <= reach {
+                        if let Some(m) = self.species_max_px.get_mut(s as usize) {
+                            *m = m.max(h * px / d.max(1e-3));
+                        }
+                    }
+                }
                 continue;
             }
             for &(s, h) in &t.heights {
