@@ -169,6 +169,10 @@ mod cli {
             /// reference, as a fraction of each threshold (the fade sweep).
             #[arg(long, default_value_t = 0.12)]
             fade_band: f32,
+            /// Prefix-thinning threshold (px) for every method but the reference
+            /// (0: off; the thinning comparison).
+            #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
+            thin_px: f32,
         },
         /// One table row per bench output directory (its summary.json) for one
         /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls
@@ -472,13 +476,17 @@ mod cli {
             Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
                 stress(&scene, &path, &size, frames, &out)
             }
-            Command::Bench { scene, path, methods, size, frames, out, fade_band, .. } => {
+            Command::Bench { scene, path, methods, size, frames, out, fade_band, thin_px, .. } => {
                 if !(0.0..0.5).contains(&fade_band) {
                     bail!("--fade-band {fade_band}: must be in [0, 0.5)");
+                }
+                if !(thin_px.is_finite() && thin_px >= 0.0) {
+                    bail!("--thin-px {thin_px}: must be a number of pixels ≥ 0 (0 turns thinning off)");
                 }
                 let mut methods = sylva::bench::methods(&methods)?;
                 for m in methods.iter_mut().filter(|m| m.name != "reference") {
                     m.settings.fade_band = fade_band;
+                    m.settings.thin_px = thin_px;
                 }
                 bench(&scene, &path, methods, &size, frames, &out)
             }
