@@ -98,7 +98,13 @@ pub fn tile_of(pos: DVec3, cell_size_m: u32, tile_cells: u32) -> (i64, i64) {
 /// shard gets a similar share of any region.
 #[must_use]
 pub fn shard_of_tile(x: i64, y: i64, count: u32) -> u32 {
-    let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    tile_hash(x, y, 0x9E37_79B9_7F4A_7C15, 0xC2B2_AE3D_27D4_EB4F, count)
+}
+
+/// A well-mixed hash of tile `(x, y)` with its own multipliers, modulo `count`.
+#[must_use]
+pub fn tile_hash(x: i64, y: i64, mx: u64, my: u64, count: u32) -> u32 {
+    let mut h = (x as u64).wrapping_mul(mx) ^ (y as u64).wrapping_mul(my);
     h ^= h >> 31;
     h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
     h ^= h >> 29;

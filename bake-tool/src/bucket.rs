@@ -54,11 +54,7 @@ impl From<&TreeRecord> for SceneTree {
 /// The bucket (of `count`) of tile `(x, y)`: a hash unrelated to the shard hash.
 #[must_use]
 pub fn bucket_of_tile(x: i64, y: i64, count: u32) -> u32 {
-    let mut h = (x as u64).wrapping_mul(0xD6E8_FEB8_6659_FD93) ^ (y as u64).wrapping_mul(0xA076_1D64_78BD_642F);
-    h ^= h >> 32;
-    h = h.wrapping_mul(0xE703_7ED1_A0B4_28DB);
-    h ^= h >> 29;
-    (h % u64::from(count.max(1))) as u32
+    crate::batching::tile_hash(x, y, 0xD6E8_FEB8_6659_FD93, 0xA076_1D64_78BD_642F, count)
 }
 
 /// Trees of a scene: in memory, or partitioned by tile into bucket files.

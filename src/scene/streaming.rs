@@ -90,6 +90,16 @@ enum Load {
     Broken,
 }
 
+impl Load {
+    /// The attempt of a request in flight (0 otherwise).
+    fn attempt(&self) -> u32 {
+        match self {
+            Load::Requested { attempt } => *attempt,
+            _ => 0,
+        }
+    }
+}
+
 enum TileState {
     NotResident(Load),
     /// In the pools; `cells` keeps each batch's cell rectangle and lowest ground
@@ -413,10 +423,7 @@ impl<F: Fetcher> SceneStream<F> {
 
     fn on_node(&mut self, n: usize, result: Result<Vec<u8>, FetchError>, now_s: f64) {
         let url = join(&self.base, self.index.node_url(n));
-        let attempt = match self.node_loads[n] {
-            Load::Requested { attempt } => attempt,
-            _ => 0,
-        };
+        let attempt = self.node_loads[n].attempt();
         let loaded = result
             .map_err(|e| (e.to_string(), e.retryable()))
             .and_then(|bytes| self.index.load_node(n, &url, &bytes).map_err(|e| (e, true)));
@@ -438,10 +445,7 @@ impl<F: Fetcher> SceneStream<F> {
         result: Result<Vec<u8>, FetchError>,
         now_s: f64,
     ) {
-        let attempt = match self.manifest_load {
-            Load::Requested { attempt } => attempt,
-            _ => 0,
-        };
+        let attempt = self.manifest_load.attempt();
         let parsed = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             Manifest::decode(&self.manifest_url, &bytes).map_err(|e: DecodeError| (e.to_string(), false))
         });
@@ -578,10 +582,7 @@ impl<F: Fetcher> SceneStream<F> {
         let Some(m) = &self.manifest else { return };
         let entry = &m.species[s];
         let url = join(&self.base, &entry.pack);
-        let attempt = match self.packs[s].head {
-            Load::Requested { attempt } => attempt,
-            _ => 0,
-        };
+        let attempt = self.packs[s].head.attempt();
         let pack_bytes = entry.bytes;
         let ranged = entry.head_bytes.is_some();
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
@@ -622,10 +623,7 @@ impl<F: Fetcher> SceneStream<F> {
         let Some(m) = &self.manifest else { return };
         let url = join(&self.base, &m.species[s].pack);
         let load = &mut self.packs[s];
-        let attempt = match load.parts[part] {
-            Load::Requested { attempt } => attempt,
-            _ => 0,
-        };
+        let attempt = load.parts[part].attempt();
         let Some(head) = &load.parsed else { return };
         let Some((start, end)) = head.part_range(PackPart::ALL[part]) else { return };
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
