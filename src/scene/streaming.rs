@@ -654,6 +654,14 @@ impl<F: Fetcher> SceneStream<F> {
                 load.parts[part] = Load::Idle;
                 load.have[part] = true;
                 load.whole |= whole;
+                // Every part on the GPU: the CPU copies kept for re-assembly can go.
+                let complete = load.parsed.as_ref().is_some_and(|h| {
+                    PackPart::ALL.iter().enumerate().all(|(i, p)| load.have[i] || h.part_range(*p).is_none())
+                });
+                if complete || load.whole {
+                    load.whole = true;
+                    load.held = Vec::new();
+                }
             }
             Err((message, retryable)) => {
                 self.packs[s].parts[part] = self.fail(url, &message, attempt, retryable, now_s)
