@@ -233,8 +233,9 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
     let mut kept = 0u64;
     input.trees.for_each_group(&mut |group| {
         let shard_trees: Vec<SceneTree>;
+        // (A streamed bake's buckets hold the shard's trees only already.)
         let trees: &[SceneTree] = match input.shard {
-            Some((index, count)) => {
+            Some((index, count)) if matches!(input.trees, TreeSource::Memory(_)) => {
                 shard_trees = group
                     .iter()
                     .filter(|t| {
@@ -245,7 +246,7 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
                     .collect();
                 &shard_trees
             }
-            None => group,
+            _ => group,
         };
         kept += trees.len() as u64;
         for t in trees {

@@ -337,6 +337,9 @@ pub struct ForestRenderer {
     /// Per species: an upper bound of the projected height (px) of its resident
     /// trees this frame (0: none within reach).
     species_max_px: Vec<f32>,
+    /// The view (eye, px scale, reach, thresholds) `species_max_px` was measured
+    /// for; `None` when residency changed since.
+    reach_measured: Option<[f32; 7]>,
     fade_band: f32,
     last_view: ViewUniform,
 }
@@ -507,6 +510,7 @@ impl ForestRenderer {
             cluster_exact_depth: false,
             tile_bounds: Vec::new(),
             species_max_px: Vec::new(),
+            reach_measured: None,
             fade_band: 0.12,
             last_view: bytemuck::Zeroable::zeroed(),
         }
@@ -555,6 +559,7 @@ impl ForestRenderer {
         assert!(count <= self.config.species, "{count} species exceed the renderer's {}", self.config.species);
         self.species_count = count;
         self.tile_bounds.clear();
+        self.reach_measured = None;
         self.resident = vec![0; count as usize];
         self.packs = (0..count).map(|_| None).collect();
         self.table_dirty = true;
@@ -661,6 +666,7 @@ impl ForestRenderer {
         }
         if !tile.batches.is_empty() {
             self.tile_bounds.push(bounds);
+            self.reach_measured = None;
         }
         let mut counts: Vec<(u32, u32)> = Vec::new();
         for b in &tile.batches {
@@ -679,6 +685,7 @@ impl ForestRenderer {
     /// batches) and its ranges returned.
     pub fn evict_tile(&mut self, queue: &wgpu::Queue, slot: TileSlot) {
         self.tile_bounds.retain(|t| t.batch_start != slot.batches.start);
+        self.reach_measured = None;
         let zeros = vec![0u8; slot.batches.len() * 80];
         queue.write_buffer(&self.pools.batches, u64::from(slot.batches.start) * 80, &zeros);
         for (s, n) in &slot.species_counts {
@@ -845,6 +852,12 @@ impl ForestRenderer {
         let eye = view.eye_hi + view.eye_lo;
         let px = view.px_per_m_at_1m * settings.quality;
         let reach = if settings.culling == CullingMode::None { f32::INFINITY } else { settings.draw_distance_m };
+        // Streaming and the frame both ask for the same view: measure it once.
+        let key = [eye.x, eye.y, eye.z, px, reach, self.cluster_min_px, self.fade_band];
+        if self.reach_measured == Some(key) {
+            return;
+        }
+        self.reach_measured = Some(key);
         self.species_max_px.clear();
         self.species_max_px.resize(self.species_count as usize, 0.0);
         // Tiles whose trees may reach this size on screen are bounded batch by batch
