@@ -5,9 +5,10 @@ mod batching;
 mod bucket;
 mod clusters;
 mod demo;
-mod gltf_import;
+use sylva_bake::gltf_import;
 mod inspect;
 mod merge;
+mod out_dir;
 mod pack_build;
 mod placements;
 mod reproject;
@@ -24,6 +25,7 @@ use glam::DVec3;
 use batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
 use bucket::TreeSource;
 use gltf_import::Classifier;
+use out_dir::OutDir;
 use pack_build::PackOptions;
 use placements::CoordKind;
 use placements::{Placement, PlacementSource};
@@ -76,9 +78,8 @@ enum Command {
         /// The shard output directories (any order; all N of them).
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
-        /// Output scene directory (replaced atomically).
-        #[arg(long)]
-        out: PathBuf,
+        #[command(flatten)]
+        output: OutArgs,
         /// Most tiles per index node (the value the shards were baked with).
         #[arg(long, default_value_t = DEFAULT_NODE_TILES, value_parser = clap::value_parser!(u32).range(1..=4096))]
         index_node_tiles: u32,
@@ -216,19 +217,32 @@ struct BakeArgs {
     #[command(flatten)]
     pack: PackArgs,
     /// Trees held in memory at once while tiling; larger inputs are partitioned
-    /// by tile into temporary bucket files beside --out (about 48 bytes per tree).
+    /// by tile into temporary bucket files inside --out (about 48 bytes per tree).
     #[arg(long, default_value_t = 4_000_000, value_parser = clap::value_parser!(u64).range(1..))]
     bucket_trees: u64,
-    /// Output scene directory (replaced atomically).
-    #[arg(long)]
+    #[command(flatten)]
+    output: OutArgs,
+}
+
+/// Where a scene is written.
+#[derive(Args, Clone)]
+struct OutArgs {
+    /// Output scene folder. A re-bake replaces only the files an earlier bake
+    /// wrote there (listed in its .sylva-bake-files.json), and the new scene
+    /// appears whole or not at all. A folder holding other files is refused
+    /// (see --force); a symbolic link is followed.
+    #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Write into an --out folder that holds files no bake wrote (inputs,
+    /// notes): the scene goes beside them, and they are kept.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Args)]
 struct DemoArgs {
-    /// Output scene directory.
-    #[arg(long)]
-    out: PathBuf,
+    #[command(flatten)]
+    output: OutArgs,
     /// Number of trees.
     #[arg(long, default_value_t = 100_000)]
     trees: usize,
@@ -252,19 +266,23 @@ fn main() {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
-        Command::Merge { dirs, out, index_node_tiles } => {
+        Command::Merge { dirs, output, index_node_tiles } => {
             let started = Instant::now();
-            merge::merge(&dirs, &out, index_node_tiles, &log).map(|m| {
-                log(&format!(
-                    "wrote {}: {} trees, {} batches, {} tiles{} in {:.1} s",
-                    out.display(),
-                    m.counts.trees,
-                    m.counts.batches,
-                    m.counts.tiles,
-                    m.index.as_ref().map_or(String::new(), |i| format!(", {} index nodes", i.nodes)),
-                    started.elapsed().as_secs_f64()
-                ));
-            })
+            let out = output.out.clone();
+            let inputs: Vec<&std::path::Path> = dirs.iter().map(PathBuf::as_path).collect();
+            OutDir::prepare(&output.out, &inputs, output.force, &log)
+                .and_then(|dir| merge::merge(&dirs, dir, index_node_tiles, &log))
+                .map(|m| {
+                    log(&format!(
+                        "wrote {}: {} trees, {} batches, {} tiles{} in {:.1} s",
+                        out.display(),
+                        m.counts.trees,
+                        m.counts.batches,
+                        m.counts.tiles,
+                        m.index.as_ref().map_or(String::new(), |i| format!(", {} index nodes", i.nodes)),
+                        started.elapsed().as_secs_f64()
+                    ));
+                })
         }
         Command::Inspect { path, json } => inspect::inspect(&path).map(|v| {
             if json {
@@ -301,6 +319,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
     if args.trees == 0 {
         bail!("--trees must be at least 1");
     }
+    let out = OutDir::prepare(&args.output.out, &[], args.output.force, &log)?;
     log(&format!("demo: {} trees, seed {}", args.trees, args.seed));
     let species = demo::demo_models(args.seed);
     let trees = demo::demo_layout(args.trees, args.seed);
@@ -320,8 +339,8 @@ fn demo(args: &DemoArgs) -> Result<()> {
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
     };
-    let s = scene_write::write_scene(&input, &args.out, &log)?;
-    report_summary(&s, &args.out, started);
+    let s = scene_write::write_scene(&input, out, &log)?;
+    report_summary(&s, &args.output.out, started);
     Ok(())
 }
 
@@ -433,6 +452,12 @@ fn split_pair<'a>(flag: &str, s: &'a str) -> Result<(&'a str, &'a str)> {
 fn bake(args: &BakeArgs) -> Result<()> {
     let started = Instant::now();
     let pack_opts = args.pack.options()?;
+    // The output folder is checked before any long work.
+    let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
+    for m in &args.models {
+        inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
+    }
+    let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
     let classifier =
         Classifier { leaf_patterns: args.leaf_materials.clone(), branch_patterns: args.branch_materials.clone() };
     // Models.
@@ -628,9 +653,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
     };
     let mut our_report = placements::Report::default();
     let trees = if buckets > 1 {
-        let parent = args.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
-        let name = args.out.file_name().map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned());
-        let dir = parent.join(format!(".{name}.buckets-{}", std::process::id()));
+        let dir = out.scratch("buckets");
         let mut writer = bucket::BucketWriter::new(&dir, buckets as u32, cell_size_m, args.pack.tile_cells)?;
         report = source.for_each(&mut |p| {
             match to_tree(&p) {
@@ -691,8 +714,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
         index_node_tiles: args.pack.index_node_tiles,
     };
     log(&format!("batching with {} m cells", input.cell_size_m));
-    let s = scene_write::write_scene(&input, &args.out, &log)?;
-    report_summary(&s, &args.out, started);
+    let s = scene_write::write_scene(&input, out, &log)?;
+    report_summary(&s, &args.output.out, started);
     Ok(())
 }
 

@@ -6,11 +6,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use sylva::format::{Manifest, TileEntry};
 
-use crate::scene_write::{finish_scene, write_atomically};
+use crate::out_dir::OutDir;
+use crate::scene_write::finish_scene;
 
 /// Reads and checks the shard manifests, copies packs (from shard 0), tiles and
 /// id sidecars into `out` and writes the index and manifest of the whole.
-pub fn merge(dirs: &[PathBuf], out: &Path, node_tiles: u32, log: &dyn Fn(&str)) -> Result<Manifest> {
+pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str)) -> Result<Manifest> {
     if dirs.is_empty() {
         bail!("merge: name the shard directories (DIR_0 … DIR_N-1)");
     }
@@ -64,7 +65,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path, node_tiles: u32, log: &dyn Fn(&str)) 
     for (s, entry) in base.species.iter_mut().enumerate() {
         entry.trees = shards.iter().map(|(_, m)| m.species[s].trees).sum();
     }
-    write_atomically(out, |tmp| {
+    out.write(|tmp| {
         std::fs::create_dir_all(tmp.join("species"))?;
         std::fs::create_dir_all(tmp.join("tiles"))?;
         for sp in &first.species {

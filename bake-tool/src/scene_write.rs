@@ -1,8 +1,7 @@
 //! Assembles and writes a scene directory: packs, tiles, id sidecars, manifest.
 //!
-//! Writes are atomic: everything goes to a temporary sibling directory that is
-//! renamed into place at the end, so a reader never sees a half-written scene
-//! and a failed bake leaves nothing behind. Output is deterministic.
+//! Writes are atomic and remove nothing the bake did not write
+//! ([`crate::out_dir`]). Output is deterministic.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -21,6 +20,7 @@ use sylva::render::GpuContext;
 use crate::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
 use crate::bucket::TreeSource;
 use crate::gltf_import::ImportedModel;
+use crate::out_dir::OutDir;
 use crate::pack_build::{build_pack, PackOptions};
 use crate::reproject::Crs;
 
@@ -81,45 +81,12 @@ pub fn shape_of(model: &ImportedModel) -> SpeciesShape {
     SpeciesShape { radius_xy, z_min: lo.z, z_max: hi.z }
 }
 
-/// Bakes and writes the scene to `out` atomically.
-pub fn write_scene(input: &SceneInput, out: &Path, log: &dyn Fn(&str)) -> Result<SceneSummary> {
+/// Bakes and writes the scene into `out` (atomically; see [`OutDir`]).
+pub fn write_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Result<SceneSummary> {
     if input.trees.is_empty() && input.shard.is_none() {
         bail!("no trees to bake: every placement was skipped (see the report above)");
     }
-    write_atomically(out, |tmp| write_into(input, tmp, log))
-}
-
-/// Runs `write` into a temporary sibling of `out`, then moves it into place,
-/// replacing an older scene. On failure nothing is left behind.
-pub fn write_atomically<T>(out: &Path, write: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
-    let name = out.file_name().map_or_else(|| "scene".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp)?;
-    }
-    match write(&tmp) {
-        Ok(summary) => {
-            let old = parent.join(format!(".{name}.old-{}", std::process::id()));
-            if out.exists() {
-                if !out.join("scene.json").exists() && std::fs::read_dir(out)?.next().is_some() {
-                    let _ = std::fs::remove_dir_all(&tmp);
-                    bail!("{} exists and is not a Sylva scene: refusing to replace it", out.display());
-                }
-                std::fs::rename(out, &old).with_context(|| format!("cannot move the old {} aside", out.display()))?;
-            }
-            std::fs::rename(&tmp, out).with_context(|| format!("cannot move the new scene to {}", out.display()))?;
-            if old.exists() {
-                std::fs::remove_dir_all(&old)?;
-            }
-            Ok(summary)
-        }
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            Err(e)
-        }
-    }
+    out.write(|tmp| write_into(input, tmp, log))
 }
 
 /// Bytes of a pack's header, section table and `META` section (the first section).

@@ -1,0 +1,454 @@
+//! glTF 2.0 / GLB import: one tree model as a flat triangle list with materials.
+//!
+//! Handles what real exporters write: node hierarchies with transforms, several
+//! meshes and several primitives per mesh, interleaved buffers with byteStride
+//! (via the gltf crate's accessor reader), u8/u16/u32 indices, vertex colours,
+//! images embedded in the GLB, as data URIs or as external PNG/JPEG/WebP files,
+//! alpha modes MASK/BLEND/OPAQUE and double-sided materials. glTF is Y-up; Sylva
+//! is Z-up, so (x, y, z) → (x, −z, y). The model is moved so its trunk base is
+//! at the origin.
+
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use glam::{Mat4, Vec2, Vec3};
+use sylva::format::pack::MaterialKind;
+
+mod accessors;
+mod graph;
+mod sources;
+
+/// A material of an imported model.
+#[derive(Debug, Clone)]
+pub struct ImportedMaterial {
+    /// Material name (or `material<i>`).
+    pub name: String,
+    /// Leaf or branch.
+    pub kind: MaterialKind,
+    /// Linear RGBA base colour factor.
+    pub base_color: [f32; 4],
+    /// Alpha test threshold (0 for opaque).
+    pub alpha_cutoff: f32,
+    /// Whether back faces are visible.
+    pub double_sided: bool,
+    /// Base colour texture (sRGB RGBA8), if any.
+    pub texture: Option<image::RgbaImage>,
+}
+
+/// One imported vertex (Z up, model units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImportedVertex {
+    /// Position.
+    pub position: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    /// Texture coordinate (set 0).
+    pub uv: Vec2,
+    /// Linear RGBA vertex colour (white when absent).
+    pub color: [f32; 4],
+    /// Material index.
+    pub material: u16,
+}
+
+/// A whole tree model.
+#[derive(Debug, Clone, Default)]
+pub struct ImportedModel {
+    /// Materials, indexed by `ImportedVertex::material`.
+    pub materials: Vec<ImportedMaterial>,
+    /// Vertices.
+    pub vertices: Vec<ImportedVertex>,
+    /// Triangles (indices into `vertices`).
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl ImportedModel {
+    /// Bounds (min, max) of all vertices.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.vertices.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
+            (lo.min(v.position), hi.max(v.position))
+        })
+    }
+
+    /// Height (z extent).
+    pub fn height(&self) -> f32 {
+        let (lo, hi) = self.bounds();
+        hi.z - lo.z
+    }
+
+    /// Triangles per material kind (leaf, branch).
+    pub fn triangle_counts(&self) -> (usize, usize) {
+        let mut leaf = 0;
+        for t in &self.triangles {
+            if self.materials[usize::from(self.vertices[t[0] as usize].material)].kind == MaterialKind::Leaf {
+                leaf += 1;
+            }
+        }
+        (leaf, self.triangles.len() - leaf)
+    }
+}
+
+/// How leaves and branches are told apart.
+#[derive(Debug, Clone, Default)]
+pub struct Classifier {
+    /// Substrings (case-insensitive) of material/mesh/node names forcing "leaf".
+    pub leaf_patterns: Vec<String>,
+    /// Substrings forcing "branch".
+    pub branch_patterns: Vec<String>,
+}
+
+const LEAF_WORDS: &[&str] = &["leaf", "leaves", "needle", "foliage", "frond", "blatt", "laub", "canopy", "crown"];
+const BRANCH_WORDS: &[&str] = &["bark", "trunk", "branch", "wood", "stem", "twig", "stamm", "rinde"];
+
+impl Classifier {
+    /// Explicit patterns first, then well-known words in the names, then the alpha mode
+    /// (MASK and BLEND are leaf cards; OPAQUE is wood).
+    pub fn classify(&self, names: &[&str], alpha_mode: gltf::material::AlphaMode) -> MaterialKind {
+        let lower: Vec<String> = names.iter().map(|n| n.to_lowercase()).collect();
+        let any = |pats: &[String]| pats.iter().any(|p| lower.iter().any(|n| n.contains(&p.to_lowercase())));
+        if any(&self.leaf_patterns) {
+            return MaterialKind::Leaf;
+        }
+        if any(&self.branch_patterns) {
+            return MaterialKind::Branch;
+        }
+        // Names are checked material first: a "bark" material on a "leaves" node is bark.
+        for n in &lower {
+            if LEAF_WORDS.iter().any(|w| n.contains(w)) {
+                return MaterialKind::Leaf;
+            }
+            if BRANCH_WORDS.iter().any(|w| n.contains(w)) {
+                return MaterialKind::Branch;
+            }
+        }
+        match alpha_mode {
+            gltf::material::AlphaMode::Opaque => MaterialKind::Branch,
+            _ => MaterialKind::Leaf,
+        }
+    }
+}
+
+/// Most vertices (and a quarter of the most triangles) one model may expand to.
+pub const MAX_VERTICES: usize = 8 << 20;
+/// Most triangles one model may expand to.
+pub const MAX_TRIANGLES: usize = 16 << 20;
+/// Largest model extent, in model units (a 100 m tree in millimetres is 10^5).
+pub const MAX_MODEL_EXTENT: f32 = 1.0e6;
+/// Smallest model height, in model units.
+pub const MIN_MODEL_HEIGHT: f32 = 1.0e-4;
+
+/// Imports a `.glb` or `.gltf` file. External buffers and images are read
+/// only from regular files inside the model's folder ([`sources`]).
+///
+/// # Errors
+/// An unreadable or malformed file, a broken node graph or accessor, a URI
+/// outside the model's folder, or a model without leaves or height; the
+/// message names the file and the part.
+pub fn import(path: &Path, classifier: &Classifier) -> Result<ImportedModel> {
+    let meta = std::fs::metadata(path).with_context(|| format!("cannot read model {}", path.display()))?;
+    if !meta.is_file() {
+        bail!("model {} is not a regular file", path.display());
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read model {}", path.display()))?;
+    let base = path.parent().map(|p| if p.as_os_str().is_empty() { Path::new(".") } else { p });
+    // A panic inside the gltf crate's reader is turned into an error for this
+    // file (the checks below are meant to make it unreachable).
+    let result = std::panic::catch_unwind(|| import_slice(&bytes, base, classifier));
+    match result {
+        Ok(r) => r.with_context(|| format!("model {}", path.display())),
+        Err(_) => bail!("model {}: malformed glTF data (the importer could not read an accessor)", path.display()),
+    }
+}
+
+/// Imports glTF/GLB bytes; external files are resolved inside `base`.
+///
+/// # Errors
+/// As [`import`].
+pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) -> Result<ImportedModel> {
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
+    let buffers = sources::load_buffers(&gltf.document, gltf.blob.as_deref(), base)?;
+    let doc = &gltf.document;
+    let roots = graph::roots(doc);
+    graph::check(doc, &roots)?;
+    let mut images: Vec<Option<image::RgbaImage>> = vec![None; doc.images().len()];
+    let mut model = ImportedModel::default();
+    // Materials are created on first use, with index `materials.len()` for the default one.
+    let mut material_slot: Vec<Option<u16>> = vec![None; doc.materials().len() + 1];
+    let nodes: Vec<gltf::Node<'_>> = doc.nodes().collect();
+    let mut stack: Vec<(usize, Mat4, Vec<String>)> =
+        roots.into_iter().map(|n| (n, Mat4::IDENTITY, Vec::new())).collect();
+    while let Some((index, parent, mut names)) = stack.pop() {
+        let node = &nodes[index];
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let world = parent * local;
+        if let Some(n) = node.name() {
+            names.push(n.to_string());
+        }
+        if let Some(mesh) = node.mesh() {
+            let mut mesh_names = names.clone();
+            if let Some(n) = mesh.name() {
+                mesh_names.push(n.to_string());
+            }
+            for prim in mesh.primitives() {
+                if prim.mode() != gltf::mesh::Mode::Triangles {
+                    continue;
+                }
+                let mat = prim.material();
+                let slot_index = mat.index().unwrap_or(doc.materials().len());
+                let material = match material_slot[slot_index] {
+                    Some(m) => m,
+                    None => {
+                        let m = import_material(&mat, &mesh_names, classifier, &buffers, base, &mut images)?;
+                        model.materials.push(m);
+                        let idx = u16::try_from(model.materials.len() - 1)
+                            .map_err(|_| anyhow!("more than 65535 materials"))?;
+                        material_slot[slot_index] = Some(idx);
+                        idx
+                    }
+                };
+                let what = format!("mesh {:?} primitive {}", mesh.name().unwrap_or("?"), prim.index());
+                append_primitive(&mut model, &prim, &buffers, world, material, &what)
+                    .with_context(|| format!("{what} of {}", graph::describe(doc, index)))?;
+            }
+        }
+        for child in node.children() {
+            stack.push((child.index(), world, names.clone()));
+        }
+    }
+    if model.triangles.is_empty() {
+        bail!("the model has no triangle meshes");
+    }
+    if !model.materials.iter().any(|m| m.kind == MaterialKind::Leaf) {
+        bail!("the model has no leaves: no material is alpha-masked/blended or named like leaves; name them with --leaf-material PATTERN");
+    }
+    check_extent(&model)?;
+    recenter(&mut model);
+    Ok(model)
+}
+
+/// A tree has a height, and a size a float can scale: a flat model (height 0,
+/// or a node scale of 0 or 1e-30) would be scaled thousands of times to its
+/// placement height; a node scale of 1e30 would overflow later.
+fn check_extent(model: &ImportedModel) -> Result<()> {
+    let (lo, hi) = model.bounds();
+    let size = hi - lo;
+    let widest = size.max_element();
+    // (Written so that NaN fails too.)
+    if widest.is_nan() || widest > MAX_MODEL_EXTENT {
+        bail!(
+            "the model is {:.3e} × {:.3e} × {:.3e} units, larger than {MAX_MODEL_EXTENT:e}: check the node scales",
+            size.x,
+            size.y,
+            size.z
+        );
+    }
+    if size.z.is_nan() || size.z < MIN_MODEL_HEIGHT || size.z < widest * 1e-3 {
+        bail!(
+            "the model has no height ({:.3e} units tall, {:.3e} wide): a tree must extend along glTF's +Y (up); \
+             check the node scales and the up axis",
+            size.z,
+            widest
+        );
+    }
+    Ok(())
+}
+
+fn import_material(
+    mat: &gltf::Material<'_>,
+    names: &[String],
+    classifier: &Classifier,
+    buffers: &[Vec<u8>],
+    base: Option<&Path>,
+    images: &mut [Option<image::RgbaImage>],
+) -> Result<ImportedMaterial> {
+    let name = mat.name().map_or_else(|| format!("material{}", mat.index().map_or(-1, |i| i as i64)), str::to_string);
+    let mut all_names: Vec<&str> = vec![name.as_str()];
+    all_names.extend(names.iter().rev().map(String::as_str));
+    let kind = classifier.classify(&all_names, mat.alpha_mode());
+    let pbr = mat.pbr_metallic_roughness();
+    let texture = match pbr.base_color_texture() {
+        Some(info) => {
+            let image = info.texture().source();
+            let idx = image.index();
+            if images[idx].is_none() {
+                images[idx] = Some(
+                    load_image(&image, buffers, base).with_context(|| format!("image {idx} of material {name:?}"))?,
+                );
+            }
+            images[idx].clone()
+        }
+        None => None,
+    };
+    let alpha_cutoff = match mat.alpha_mode() {
+        gltf::material::AlphaMode::Opaque => 0.0,
+        gltf::material::AlphaMode::Mask => mat.alpha_cutoff().unwrap_or(0.5),
+        // Blended leaves are drawn alpha-tested: no sorting in a forest.
+        gltf::material::AlphaMode::Blend => 0.5,
+    };
+    Ok(ImportedMaterial {
+        name,
+        kind,
+        base_color: pbr.base_color_factor(),
+        alpha_cutoff,
+        double_sided: mat.double_sided(),
+        texture,
+    })
+}
+
+fn load_image(image: &gltf::Image<'_>, buffers: &[Vec<u8>], base: Option<&Path>) -> Result<image::RgbaImage> {
+    let encoded: Vec<u8> = match image.source() {
+        gltf::image::Source::View { view, .. } => {
+            let data = buffers.get(view.buffer().index()).ok_or_else(|| anyhow!("missing buffer"))?;
+            let end = view.offset().checked_add(view.length()).ok_or_else(|| anyhow!("bad buffer view"))?;
+            data.get(view.offset()..end)
+                .ok_or_else(|| anyhow!("buffer view {}..{end} is outside its buffer", view.offset()))?
+                .to_vec()
+        }
+        gltf::image::Source::Uri { uri, .. } => {
+            sources::read_uri(uri, base, sources::MAX_IMAGE_BYTES).with_context(|| format!("external image {uri:?}"))?
+        }
+    };
+    let img = image::load_from_memory(&encoded).map_err(|e| anyhow!("cannot decode image (PNG/JPEG/WebP): {e}"))?;
+    Ok(img.to_rgba8())
+}
+
+/// glTF Y-up to Sylva Z-up.
+fn y_up_to_z_up(v: Vec3) -> Vec3 {
+    Vec3::new(v.x, -v.z, v.y)
+}
+
+fn append_primitive(
+    model: &mut ImportedModel,
+    prim: &gltf::Primitive<'_>,
+    buffers: &[Vec<u8>],
+    world: Mat4,
+    material: u16,
+    what: &str,
+) -> Result<()> {
+    // Every accessor this primitive reads, checked before the reader sees it.
+    for (semantic, accessor) in prim.attributes() {
+        let role = format!("{semantic:?} of {what}");
+        accessors::check_type(&accessor, Some(&semantic), &role)?;
+        accessors::check(&accessor, buffers, &role)?;
+    }
+    if let Some(accessor) = prim.indices() {
+        let role = format!("indices of {what}");
+        accessors::check_type(&accessor, None, &role)?;
+        accessors::check(&accessor, buffers, &role)?;
+    }
+    let position_accessor = prim.get(&gltf::Semantic::Positions).ok_or_else(|| anyhow!("no POSITION attribute"))?;
+    let n = position_accessor.count();
+    let index_count = prim.indices().map_or(n, |a| a.count());
+    if model.vertices.len().saturating_add(n) > MAX_VERTICES || model.triangles.len() + index_count / 3 > MAX_TRIANGLES
+    {
+        bail!(
+            "the model expands to more than {MAX_VERTICES} vertices or {MAX_TRIANGLES} triangles (a tree model has \
+             far fewer: check for nodes that reuse a big mesh many times)"
+        );
+    }
+    let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let positions: Vec<[f32; 3]> = reader.read_positions().ok_or_else(|| anyhow!("no POSITION attribute"))?.collect();
+    let normals: Option<Vec<[f32; 3]>> = reader.read_normals().map(Iterator::collect);
+    let uvs: Option<Vec<[f32; 2]>> = reader.read_tex_coords(0).map(|t| t.into_f32().collect());
+    let colors: Option<Vec<[f32; 4]>> = reader.read_colors(0).map(|c| c.into_rgba_f32().collect());
+    let indices: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None => (0..n as u32).collect(),
+    };
+    // The checks above make short reads impossible; a reader that still stops
+    // early must not bake part of a model silently.
+    let short = |got: usize, want: usize, name: &str| {
+        if got == want {
+            Ok(())
+        } else {
+            Err(anyhow!("read {got} of the {want} {name}: the accessor is truncated"))
+        }
+    };
+    short(positions.len(), n, "positions")?;
+    short(indices.len(), index_count, "indices")?;
+    for (got, name) in [
+        (normals.as_ref().map(Vec::len), "normals"),
+        (uvs.as_ref().map(Vec::len), "texture coordinates"),
+        (colors.as_ref().map(Vec::len), "colours"),
+    ] {
+        if let Some(got) = got {
+            if got < n {
+                bail!("read {got} {name} for {n} vertices: the accessor is too short");
+            }
+        }
+    }
+    if indices.iter().any(|&i| i as usize >= n) {
+        bail!("an index is out of range of the {n} vertices");
+    }
+    let normal_matrix = world.inverse().transpose();
+    let first = u32::try_from(model.vertices.len()).map_err(|_| anyhow!("too many vertices"))?;
+    let flip = world.determinant() < 0.0;
+    for (i, &position) in positions.iter().enumerate() {
+        let p = world.transform_point3(Vec3::from(position));
+        let nrm = normals
+            .as_ref()
+            .and_then(|ns| ns.get(i))
+            .map(|&v| normal_matrix.transform_vector3(Vec3::from(v)).normalize_or_zero())
+            .unwrap_or(Vec3::ZERO);
+        let uv = uvs.as_ref().and_then(|u| u.get(i)).copied().unwrap_or([0.0, 0.0]);
+        let color = colors.as_ref().and_then(|c| c.get(i)).copied().unwrap_or([1.0; 4]);
+        if !p.is_finite() || !Vec2::from(uv).is_finite() || color.iter().any(|c| !c.is_finite()) {
+            bail!("vertex {i} has a non-finite position, texture coordinate or colour");
+        }
+        model.vertices.push(ImportedVertex {
+            position: y_up_to_z_up(p),
+            normal: y_up_to_z_up(nrm),
+            uv: Vec2::from(uv),
+            color,
+            material,
+        });
+    }
+    let before = model.triangles.len();
+    for t in indices.chunks_exact(3) {
+        let tri = if flip { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] };
+        model.triangles.push(tri.map(|i| first + i));
+    }
+    if normals.is_none() {
+        compute_normals(model, first as usize, before);
+    }
+    Ok(())
+}
+
+/// Area-weighted vertex normals for the vertices from `first_vertex` used by triangles from `first_tri`.
+fn compute_normals(model: &mut ImportedModel, first_vertex: usize, first_tri: usize) {
+    let mut acc = vec![Vec3::ZERO; model.vertices.len() - first_vertex];
+    for t in &model.triangles[first_tri..] {
+        let [a, b, c] = t.map(|i| model.vertices[i as usize].position);
+        let n = (b - a).cross(c - a);
+        for &i in t {
+            acc[i as usize - first_vertex] += n;
+        }
+    }
+    for (v, n) in model.vertices[first_vertex..].iter_mut().zip(acc) {
+        v.normal = n.normalize_or(Vec3::Z);
+    }
+}
+
+/// Moves the trunk base to the origin: z from the lowest vertex, x/y from the
+/// centre of the lowest 2 % of the height (the trunk foot).
+fn recenter(model: &mut ImportedModel) {
+    let (lo, hi) = model.bounds();
+    let slice = lo.z + (hi.z - lo.z) * 0.02;
+    let (mut sum, mut count) = (Vec2::ZERO, 0.0f32);
+    for v in &model.vertices {
+        if v.position.z <= slice {
+            sum += v.position.truncate();
+            count += 1.0;
+        }
+    }
+    let foot = if count > 0.0 { sum / count } else { Vec2::ZERO };
+    let shift = Vec3::new(foot.x, foot.y, lo.z);
+    for v in &mut model.vertices {
+        v.position -= shift;
+        if v.normal == Vec3::ZERO {
+            v.normal = Vec3::Z;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

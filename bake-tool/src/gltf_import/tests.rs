@@ -1,0 +1,516 @@
+//! Import tests: real exporter layouts, and broken or hostile files.
+use super::*;
+use serde_json::json;
+
+/// A tiny RGBA PNG: opaque green disc on transparent black.
+pub(crate) fn leaf_png() -> Vec<u8> {
+    let img = image::RgbaImage::from_fn(8, 8, |x, y| {
+        let (dx, dy) = (x as f32 - 3.5, y as f32 - 3.5);
+        if dx * dx + dy * dy < 12.0 {
+            image::Rgba([30, 150, 40, 255])
+        } else {
+            image::Rgba([0, 0, 0, 0])
+        }
+    });
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    out.into_inner()
+}
+
+/// Packs JSON and a binary chunk into a GLB.
+pub(crate) fn glb(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut j = serde_json::to_vec(json).unwrap();
+    while !j.len().is_multiple_of(4) {
+        j.push(b' ');
+    }
+    let mut b = bin.to_vec();
+    while !b.len().is_multiple_of(4) {
+        b.push(0);
+    }
+    let total = 12 + 8 + j.len() + 8 + b.len();
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&j);
+    out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&b);
+    out
+}
+
+/// Interleaved POSITION/NORMAL/TEXCOORD_0 (stride 32) for two quads (y-up: a
+/// 1×2 trunk quad and a 2×2 leaf quad above it), u16 indices, u8 vertex colours.
+fn interleaved_buffers() -> (Vec<u8>, usize, usize, usize) {
+    let mut bin = Vec::new();
+    let quads = [
+        [[-0.5f32, 0.0, 0.0], [0.5, 0.0, 0.0], [0.5, 2.0, 0.0], [-0.5, 2.0, 0.0]],
+        [[-1.0, 2.0, 0.0], [1.0, 2.0, 0.0], [1.0, 4.0, 0.0], [-1.0, 4.0, 0.0]],
+    ];
+    let uvs = [[0.0f32, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+    for q in &quads {
+        for (p, uv) in q.iter().zip(&uvs) {
+            for v in p.iter().chain(&[0.0, 0.0, 1.0]).chain(uv) {
+                bin.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    let vertex_bytes = bin.len();
+    let colors_at = bin.len();
+    for i in 0..8u8 {
+        bin.extend_from_slice(&[255, 128, i * 30, 255]);
+    }
+    let indices_at = bin.len();
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    (bin, vertex_bytes, colors_at, indices_at)
+}
+
+fn accessors(vertex_view: usize, color_view: usize, index_view: usize, first_vertex: usize) -> serde_json::Value {
+    json!([
+        {"bufferView": vertex_view, "byteOffset": first_vertex * 32, "componentType": 5126, "count": 4, "type": "VEC3",
+         "min": [-1.0, 0.0, 0.0], "max": [1.0, 4.0, 0.0]},
+        {"bufferView": vertex_view, "byteOffset": first_vertex * 32 + 12, "componentType": 5126, "count": 4, "type": "VEC3"},
+        {"bufferView": vertex_view, "byteOffset": first_vertex * 32 + 24, "componentType": 5126, "count": 4, "type": "VEC2"},
+        {"bufferView": color_view, "byteOffset": first_vertex * 4, "componentType": 5121, "normalized": true, "count": 4, "type": "VEC4"},
+        {"bufferView": index_view, "componentType": 5123, "count": 6, "type": "SCALAR"}
+    ])
+}
+
+/// GLB: one mesh with two primitives (bark, leaves), node hierarchy with
+/// transforms, interleaved buffer, u16 indices, vertex colours, embedded PNG.
+pub(crate) fn multi_primitive_glb() -> Vec<u8> {
+    let (gltf, bin) = multi_primitive_parts();
+    glb(&gltf, &bin)
+}
+
+/// The JSON and binary chunk of [`multi_primitive_glb`], to be broken by tests.
+fn multi_primitive_parts() -> (serde_json::Value, Vec<u8>) {
+    let (mut bin, vbytes, colors_at, indices_at) = interleaved_buffers();
+    let image_at = bin.len();
+    let png = leaf_png();
+    bin.extend_from_slice(&png);
+    let mut acc = accessors(0, 1, 2, 0).as_array().unwrap().clone();
+    let acc2 = accessors(0, 1, 2, 4);
+    acc.extend(acc2.as_array().unwrap().iter().cloned());
+    let gltf = json!({
+        "asset": {"version": "2.0", "generator": "sylva test"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [
+            {"name": "Tree", "children": [1], "translation": [10.0, 0.0, 0.0], "scale": [2.0, 2.0, 2.0]},
+            {"name": "TreeMesh", "mesh": 0, "rotation": [0.0, std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2]}
+        ],
+        "meshes": [{"name": "tree", "primitives": [
+            {"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, "COLOR_0": 3}, "indices": 4, "material": 0},
+            {"attributes": {"POSITION": 5, "NORMAL": 6, "TEXCOORD_0": 7, "COLOR_0": 8}, "indices": 9, "material": 1}
+        ]}],
+        "materials": [
+            {"name": "Material.001", "pbrMetallicRoughness": {"baseColorFactor": [0.4, 0.3, 0.2, 1.0]}},
+            {"name": "Material.002", "alphaMode": "MASK", "alphaCutoff": 0.4, "doubleSided": true,
+             "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
+        ],
+        "textures": [{"source": 0}],
+        "images": [{"bufferView": 3, "mimeType": "image/png"}],
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+            {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+            {"buffer": 0, "byteOffset": indices_at, "byteLength": 12},
+            {"buffer": 0, "byteOffset": image_at, "byteLength": png.len()}
+        ],
+        "accessors": acc
+    });
+    (gltf, bin)
+}
+
+#[test]
+fn imports_interleaved_multi_primitive_glb_with_transforms() {
+    // `SYLVA_WRITE_FUZZ_SEED=DIR` writes this GLB as a seed of the import_gltf fuzz target.
+    if let Some(dir) = std::env::var_os("SYLVA_WRITE_FUZZ_SEED") {
+        std::fs::write(Path::new(&dir).join("multi_primitive.glb"), multi_primitive_glb()).unwrap();
+    }
+    let m = import_slice(&multi_primitive_glb(), None, &Classifier::default()).unwrap();
+    assert_eq!(m.materials.len(), 2);
+    assert_eq!(m.materials[0].kind, MaterialKind::Branch, "OPAQUE → branch");
+    assert_eq!(m.materials[1].kind, MaterialKind::Leaf, "MASK → leaf");
+    assert_eq!(m.materials[1].alpha_cutoff, 0.4);
+    assert!(m.materials[1].double_sided);
+    assert_eq!(m.materials[1].texture.as_ref().map(|t| t.dimensions()), Some((8, 8)));
+    assert_eq!(m.materials[0].base_color, [0.4, 0.3, 0.2, 1.0]);
+    assert_eq!(m.vertices.len(), 8);
+    assert_eq!(m.triangles.len(), 4);
+    // Node scale 2 and Y-up → Z-up: 4 units of glTF height become 8 along z.
+    assert!((m.height() - 8.0).abs() < 1e-4, "height {}", m.height());
+    let (lo, _) = m.bounds();
+    assert!(lo.z.abs() < 1e-6, "trunk base moved to z = 0");
+    // Vertex colours came through (normalised u8).
+    assert!((m.vertices[0].color[1] - 128.0 / 255.0).abs() < 1e-3);
+    // The 90° rotation about y turned the quad's +z normal into +x (glTF) = +x (Sylva).
+    assert!((m.vertices[0].normal - Vec3::X).length() < 1e-4, "{}", m.vertices[0].normal);
+}
+
+#[test]
+fn imports_gltf_with_external_bin_and_image_and_u32_indices() {
+    let dir = std::env::temp_dir().join(format!("sylva-gltf-ext-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (bin16, vbytes, colors_at, _) = interleaved_buffers();
+    let mut bin = bin16[..colors_at + 32].to_vec();
+    let indices_at = bin.len();
+    for i in [0u32, 1, 2, 0, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    std::fs::write(dir.join("tree.bin"), &bin).unwrap();
+    std::fs::write(dir.join("leaf image.png"), leaf_png()).unwrap();
+    let mut acc = accessors(0, 1, 2, 4);
+    acc[4]["componentType"] = json!(5125);
+    let gltf = json!({
+        "asset": {"version": "2.0"},
+        "nodes": [{"name": "leaves", "mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 4, "material": 0}]}],
+        "materials": [{"name": "Foliage", "alphaMode": "BLEND", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "textures": [{"source": 0}],
+        "images": [{"uri": "leaf%20image.png"}],
+        "buffers": [{"uri": "tree.bin", "byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+            {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+            {"buffer": 0, "byteOffset": indices_at, "byteLength": 24}
+        ],
+        "accessors": acc
+    });
+    let path = dir.join("tree.gltf");
+    std::fs::write(&path, serde_json::to_vec(&gltf).unwrap()).unwrap();
+    let m = import(&path, &Classifier::default()).unwrap();
+    assert_eq!(m.triangles.len(), 2);
+    assert_eq!(m.materials[0].kind, MaterialKind::Leaf);
+    assert_eq!(m.materials[0].alpha_cutoff, 0.5, "BLEND is drawn alpha-tested at 0.5");
+    assert!(m.materials[0].texture.is_some());
+    // No NORMAL attribute: normals are computed (the quad faces +z in glTF = −y in Sylva).
+    assert!((m.vertices[0].normal - Vec3::NEG_Y).length() < 1e-4, "{}", m.vertices[0].normal);
+    // A missing external image is an error naming the file.
+    std::fs::remove_file(dir.join("leaf image.png")).unwrap();
+    let e = format!("{:#}", import(&path, &Classifier::default()).unwrap_err());
+    assert!(e.contains("leaf image.png") && e.contains("tree.gltf"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn data_uri_images_and_name_overrides() {
+    use base64::Engine as _;
+    let (bin, vbytes, colors_at, indices_at) = interleaved_buffers();
+    let b64 = base64::engine::general_purpose::STANDARD.encode(leaf_png());
+    let all_accessors: Vec<serde_json::Value> =
+        [accessors(0, 1, 2, 0).as_array().unwrap().clone(), accessors(0, 1, 2, 4).as_array().unwrap().clone()].concat();
+    let gltf = json!({
+        "asset": {"version": "2.0"},
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [
+            {"attributes": {"POSITION": 0}, "indices": 4, "material": 0},
+            {"attributes": {"POSITION": 5, "TEXCOORD_0": 7}, "indices": 9, "material": 1}
+        ]}],
+        "materials": [
+            {"name": "trunk_opaque"},
+            {"name": "cards", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
+        ],
+        "textures": [{"source": 0}],
+        "images": [{"uri": format!("data:image/png;base64,{b64}")}],
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+            {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+            {"buffer": 0, "byteOffset": indices_at, "byteLength": 12}
+        ],
+        "accessors": all_accessors
+    });
+    let bytes = glb(&gltf, &bin);
+    // Both materials are OPAQUE and "cards" is no leaf word: no leaves → a clear error.
+    let e = import_slice(&bytes, None, &Classifier::default()).unwrap_err().to_string();
+    assert!(e.contains("no leaves") && e.contains("--leaf-material"), "{e}");
+    // With an explicit pattern the cards are leaves and the data-URI image loads.
+    let c = Classifier { leaf_patterns: vec!["CARDS".into()], branch_patterns: vec![] };
+    let m = import_slice(&bytes, None, &c).unwrap();
+    assert_eq!(m.materials[1].kind, MaterialKind::Leaf);
+    assert_eq!(m.materials[0].kind, MaterialKind::Branch);
+    assert_eq!(m.materials[1].texture.as_ref().map(|t| t.dimensions()), Some((8, 8)));
+}
+
+#[test]
+fn imports_embedded_webp_images() {
+    // The same GLB with its leaf image re-encoded as lossless WebP (mimeType image/webp).
+    let png = image::load_from_memory(&leaf_png()).unwrap().to_rgba8();
+    let mut webp = Vec::new();
+    image::codecs::webp::WebPEncoder::new_lossless(&mut webp)
+        .encode(png.as_raw(), 8, 8, image::ExtendedColorType::Rgba8)
+        .unwrap();
+    let (mut bin, vbytes, colors_at, indices_at) = interleaved_buffers();
+    let image_at = bin.len();
+    bin.extend_from_slice(&webp);
+    let gltf = json!({
+        "asset": {"version": "2.0"},
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 4, "material": 0}]}],
+        "materials": [{"name": "leaf", "alphaMode": "MASK", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "textures": [{"source": 0}],
+        "images": [{"bufferView": 3, "mimeType": "image/webp"}],
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": vbytes, "byteStride": 32},
+            {"buffer": 0, "byteOffset": colors_at, "byteLength": 32},
+            {"buffer": 0, "byteOffset": indices_at, "byteLength": 12},
+            {"buffer": 0, "byteOffset": image_at, "byteLength": webp.len()}
+        ],
+        "accessors": accessors(0, 1, 2, 0)
+    });
+    let m = import_slice(&glb(&gltf, &bin), None, &Classifier::default()).unwrap();
+    let tex = m.materials[0].texture.as_ref().expect("WebP decoded");
+    assert_eq!(tex.as_raw(), png.as_raw(), "lossless WebP gives the same texels");
+}
+
+#[test]
+fn broken_inputs_give_errors_not_panics() {
+    let c = Classifier::default();
+    assert!(import_slice(b"definitely not gltf", None, &c).is_err());
+    let mut truncated = multi_primitive_glb();
+    truncated.truncate(truncated.len() / 2);
+    assert!(import_slice(&truncated, None, &c).is_err());
+    let empty = glb(&json!({"asset": {"version": "2.0"}, "nodes": [{"name": "x"}]}), &[]);
+    let e = import_slice(&empty, None, &c).unwrap_err().to_string();
+    assert!(e.contains("no triangle meshes"), "{e}");
+    let e = format!("{:#}", import(Path::new("/nonexistent/tree.glb"), &c).unwrap_err());
+    assert!(e.contains("/nonexistent/tree.glb"), "{e}");
+}
+
+#[test]
+fn imports_the_shared_ez_tree_models() {
+    // Real exporter output (three.js GLTFExporter); skipped where shared/ is absent.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models");
+    for (file, leaves) in [("eztree_oak_medium.glb", 10_640 / 2), ("eztree_pine_medium.glb", 9_840 / 2)] {
+        let path = dir.join(file);
+        if !path.exists() {
+            eprintln!("skipping {}: not present", path.display());
+            continue;
+        }
+        let m = import(&path, &Classifier::default()).unwrap();
+        let (leaf, wood) = m.triangle_counts();
+        assert_eq!(leaf, leaves * 2, "{file}");
+        assert!(wood > 3000, "{file}");
+        assert!(m.height() > 40.0, "{file}: {}", m.height());
+    }
+}
+
+/// Imports `gltf` + `bin` as a GLB and returns the error text.
+fn import_error(gltf: &serde_json::Value, bin: &[u8]) -> String {
+    match import_slice(&glb(gltf, bin), None, &Classifier::default()) {
+        Ok(m) => panic!("imported {} triangles from a broken file", m.triangles.len()),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+#[test]
+fn node_cycles_and_reuse_are_refused_naming_the_node() {
+    let (base, bin) = multi_primitive_parts();
+    // A node that lists itself (this hung the bake at 100 % CPU).
+    let mut g = base.clone();
+    g["nodes"][1]["children"] = json!([1]);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("node 1 (\"TreeMesh\") lists itself"), "{e}");
+    // A two-node loop 0 → 1 → 0 (this grew memory to GBs).
+    let mut g = base.clone();
+    g["nodes"][1]["children"] = json!([0]);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("is its own descendant") && e.contains("node 0 (\"Tree\")"), "{e}");
+    // A DAG 24 levels deep, each node listing the next one twice: 2^24 copies.
+    let mut g = base.clone();
+    let mut nodes = vec![json!({"name": "Tree", "children": [1]}), json!({"name": "TreeMesh", "mesh": 0})];
+    for level in 0..24 {
+        let next = nodes.len() + 1;
+        nodes.push(json!({"name": format!("level{level}"), "mesh": 0, "children": [next, next]}));
+    }
+    nodes.push(json!({"name": "last", "mesh": 0}));
+    nodes[0]["children"] = json!([1, 2]);
+    g["nodes"] = json!(nodes);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("node instances") && e.contains("level"), "{e}");
+    // Reuse within the budget is instancing, as in glTF viewers: a node listed
+    // by two parents is imported twice.
+    let mut g = base.clone();
+    g["nodes"] = json!([
+        {"name": "Tree", "children": [1, 2]},
+        {"name": "a", "children": [3]},
+        {"name": "b", "children": [3], "translation": [5.0, 0.0, 0.0]},
+        {"name": "TreeMesh", "mesh": 0}
+    ]);
+    let m = import_slice(&glb(&g, &bin), None, &Classifier::default()).unwrap();
+    assert_eq!(m.triangles.len(), 8, "two instances of two quads");
+}
+
+#[test]
+fn accessors_past_their_buffer_are_errors_naming_the_accessor() {
+    let (base, bin) = multi_primitive_parts();
+    // An index accessor whose count runs past its view (baked 7,093 of 10,640
+    // leaf triangles silently before).
+    let mut g = base.clone();
+    g["accessors"][9]["count"] = json!(600);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("accessor 9 (indices of mesh \"tree\" primitive 1)") && e.contains("buffer view 2"), "{e}");
+    // A POSITION accessor past its view (reported as "no POSITION attribute" before).
+    let mut g = base.clone();
+    g["accessors"][0]["count"] = json!(400);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("accessor 0 (Positions of mesh \"tree\" primitive 0)") && e.contains("400 elements"), "{e}");
+    // A view past its buffer.
+    let mut g = base.clone();
+    g["bufferViews"][1]["byteOffset"] = json!(100_000);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("buffer view 1 spans bytes 100000..100032 of buffer 0"), "{e}");
+    // A stride smaller than the element.
+    let mut g = base.clone();
+    g["bufferViews"][0]["byteStride"] = json!(8);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("byteStride 8"), "{e}");
+    // A buffer that declares more than the GLB holds.
+    let mut g = base.clone();
+    g["buffers"][0]["byteLength"] = json!(bin.len() + 4096);
+    let e = import_error(&g, &bin);
+    assert!(e.contains("buffer 0 declares"), "{e}");
+}
+
+#[test]
+fn flat_tiny_and_huge_models_are_refused_up_front() {
+    let (base, bin) = multi_primitive_parts();
+    for (scale, what) in
+        [([1.0, 0.0, 1.0], "no height"), ([1e-30, 1e-30, 1e-30], "no height"), ([1e30, 1e30, 1e30], "larger than")]
+    {
+        let mut g = base.clone();
+        g["nodes"][0]["scale"] = json!(scale);
+        // The mesh node's rotation turns glTF y into y: the scale's y is the height.
+        g["nodes"][1].as_object_mut().unwrap().remove("rotation");
+        let e = import_error(&g, &bin);
+        assert!(e.contains(what) && e.contains("node scales"), "{scale:?}: {e}");
+    }
+}
+
+#[test]
+fn buffer_uris_are_confined_to_the_model_folder() {
+    let dir = std::env::temp_dir().join(format!("sylva-gltf-confined-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("model")).unwrap();
+    let (mut g, bin) = multi_primitive_parts();
+    std::fs::write(dir.join("model/tree.bin"), &bin).unwrap();
+    std::fs::write(dir.join("outside.bin"), &bin).unwrap();
+    let path = dir.join("model/tree.gltf");
+    let import_with = |g: &serde_json::Value| {
+        std::fs::write(&path, serde_json::to_vec(g).unwrap()).unwrap();
+        import(&path, &Classifier::default())
+    };
+    g["buffers"][0]["uri"] = json!("tree.bin");
+    assert_eq!(import_with(&g).unwrap().triangles.len(), 4, "a buffer beside the model loads");
+    for uri in
+        ["../outside.bin", "/etc/shadow", "/proc/self/environ", "/dev/zero", "file:///etc/passwd", "%2E%2E/outside.bin"]
+    {
+        g["buffers"][0]["uri"] = json!(uri);
+        let e = format!("{:#}", import_with(&g).unwrap_err());
+        assert!(e.contains("outside the model's folder") && e.contains("buffer 0"), "{uri}: {e}");
+    }
+    // A link inside the folder that leads out of it is refused too.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(dir.join("outside.bin"), dir.join("model/link.bin")).unwrap();
+        g["buffers"][0]["uri"] = json!("link.bin");
+        let e = format!("{:#}", import_with(&g).unwrap_err());
+        assert!(e.contains("outside the model's folder"), "{e}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A small deterministic generator for the property test (xorshift64*).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n.max(1)
+    }
+}
+
+/// Property test over node graphs and accessors: random graphs (self loops,
+/// cycles, shared children, deep chains) and random accessor, view and buffer
+/// numbers. Every import ends, without a panic, and either fails with an error
+/// or imports exactly the triangles its expanded graph and accessors say —
+/// never part of them.
+#[test]
+fn random_graphs_and_accessors_import_whole_or_fail_clearly() {
+    let (base, bin) = multi_primitive_parts();
+    let mut rng = Rng(0x5EED_0F61_F7A1);
+    let (mut ok, mut failed) = (0, 0);
+    for case in 0..400 {
+        let mut g = base.clone();
+        let n = 1 + rng.below(30) as usize;
+        let mut nodes = Vec::new();
+        for i in 0..n {
+            let mut node = json!({"name": format!("n{i}")});
+            if rng.below(2) == 0 {
+                node["mesh"] = json!(0);
+            }
+            // Mostly trees and DAGs (children after their parent), sometimes any
+            // node (loops, self loops).
+            let kids: Vec<u64> = (0..rng.below(4))
+                .filter_map(|_| match rng.below(16) {
+                    0 => Some(rng.below(n as u64)),
+                    _ if i + 1 < n => Some(i as u64 + 1 + rng.below((n - i - 1) as u64)),
+                    _ => None,
+                })
+                .collect();
+            if !kids.is_empty() {
+                node["children"] = json!(kids);
+            }
+            nodes.push(node);
+        }
+        g["nodes"] = json!(nodes);
+        g["scenes"] =
+            json!([{"nodes": (0..1 + rng.below(2)).map(|_| rng.below(1 + n as u64 / 4)).collect::<Vec<_>>()}]);
+        // Break one number in a third of the cases.
+        match rng.below(9) {
+            0 => g["accessors"][rng.below(10) as usize]["count"] = json!(rng.below(64)),
+            1 => g["accessors"][rng.below(10) as usize]["byteOffset"] = json!(rng.below(300)),
+            2 => g["bufferViews"][rng.below(4) as usize]["byteOffset"] = json!(rng.below(1200)),
+            3 => g["bufferViews"][rng.below(4) as usize]["byteLength"] = json!(1 + rng.below(1200)),
+            4 => g["buffers"][0]["byteLength"] = json!(rng.below(2 * bin.len() as u64)),
+            5 => g["bufferViews"][0]["byteStride"] = json!(4 * (1 + rng.below(20))),
+            _ => {}
+        }
+        match import_slice(&glb(&g, &bin), None, &Classifier::default()) {
+            Err(_) => failed += 1,
+            Ok(m) => {
+                ok += 1;
+                // Expand the graph here too (the import succeeded, so it is small).
+                let mut expected = 0usize;
+                let per_mesh: usize =
+                    [4usize, 9].iter().map(|&a| g["accessors"][a]["count"].as_u64().unwrap() as usize / 3).sum();
+                let mut stack: Vec<u64> =
+                    g["scenes"][0]["nodes"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+                while let Some(i) = stack.pop() {
+                    let node = &g["nodes"][i as usize];
+                    if node.get("mesh").is_some() {
+                        expected += per_mesh;
+                    }
+                    if let Some(kids) = node.get("children") {
+                        stack.extend(kids.as_array().unwrap().iter().map(|v| v.as_u64().unwrap()));
+                    }
+                }
+                assert_eq!(m.triangles.len(), expected, "case {case}: part of the model was imported");
+                assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.vertices.len()), "case {case}");
+            }
+        }
+    }
+    // Both outcomes occur, or the generator tests nothing.
+    assert!(ok > 20 && failed > 20, "{ok} imported, {failed} refused");
+}

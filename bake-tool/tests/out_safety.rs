@@ -1,0 +1,186 @@
+//! The output folder promise (docs/SECURITY.md): a bake, demo or merge removes
+//! only files that a bake wrote; a folder holding anything else is refused
+//! unless `--force`, which keeps those files; a link is followed; leftovers of
+//! an interrupted bake are removed by the next one.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::process::Command;
+
+mod common;
+use common::{bin, fails, run, snapshot, tmp};
+
+/// A quick demo bake (few trees, small textures, no cluster levels).
+fn demo(out: &Path, trees: u32, seed: u32) -> Command {
+    let mut c = bin();
+    c.args(["demo", "--trees", &trees.to_string(), "--seed", &seed.to_string()])
+        .args(["--billboard-size", "16", "--texture-size", "16", "--no-clusters", "--cell-size", "16"])
+        .args(["--tile-cells", "1"])
+        .arg("--out")
+        .arg(out);
+    c
+}
+
+/// The files under `dir` (relative paths).
+fn files(dir: &Path) -> BTreeSet<String> {
+    snapshot(dir).into_iter().map(|(p, _)| p).collect()
+}
+
+/// The files the bake in `dir` says it wrote.
+fn owned(dir: &Path) -> BTreeSet<String> {
+    let list: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join(".sylva-bake-files.json")).unwrap()).unwrap();
+    list["files"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect()
+}
+
+/// Runs `cmd` on `dir` and checks that every file that went away was one the
+/// earlier bake listed as its own. Returns the command's stderr.
+fn only_own_files_removed(dir: &Path, cmd: &mut Command, should_succeed: bool) -> String {
+    let before = files(dir);
+    let own = if dir.join(".sylva-bake-files.json").exists() {
+        owned(dir)
+    } else if dir.join("scene.json").exists() && std::fs::read(dir.join("scene.json")).unwrap() != b"{}" {
+        // A scene baked before file lists: its manifest and data folders.
+        before
+            .iter()
+            .filter(|f| ["scene.json", "species/", "tiles/", "index/"].iter().any(|p| f.starts_with(p)))
+            .cloned()
+            .collect()
+    } else {
+        BTreeSet::new()
+    };
+    let out = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.success(), should_succeed, "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let after = files(dir);
+    for gone in before.difference(&after) {
+        assert!(own.contains(gone), "{gone} was removed but no bake wrote it\n{stderr}");
+    }
+    stderr
+}
+
+#[test]
+fn a_bake_removes_only_files_a_bake_wrote() {
+    let dir = tmp("own-files");
+    let scene = dir.join("scene");
+    run(&mut demo(&scene, 300, 1));
+    let first = owned(&scene);
+    assert!(first.contains("scene.json") && first.iter().any(|f| f.starts_with("tiles/")), "{first:?}");
+    assert_eq!(files(&scene), first.iter().cloned().chain([".sylva-bake-files.json".to_string()]).collect());
+    // A re-bake with fewer trees replaces the scene: old tiles it does not
+    // write again are removed, and only those.
+    only_own_files_removed(&scene, &mut demo(&scene, 40, 2), true);
+    let second = owned(&scene);
+    assert!(second.len() < first.len(), "{} → {} files", first.len(), second.len());
+    assert_eq!(files(&scene), second.iter().cloned().chain([".sylva-bake-files.json".to_string()]).collect());
+    // Inputs kept in the scene folder: refused, nothing touched.
+    std::fs::write(scene.join("trees.csv"), "lon,lat\n15.4,48.4\n").unwrap();
+    std::fs::write(scene.join("tiles/notes.txt"), "mine").unwrap();
+    let e = only_own_files_removed(&scene, &mut demo(&scene, 40, 3), false);
+    assert!(e.contains("2 files that no bake wrote") && e.contains("trees.csv") && e.contains("--force"), "{e}");
+    // With --force the scene is replaced beside them, and they are kept.
+    only_own_files_removed(&scene, demo(&scene, 40, 3).arg("--force"), true);
+    assert_eq!(std::fs::read_to_string(scene.join("tiles/notes.txt")).unwrap(), "mine");
+    assert!(scene.join("trees.csv").exists() && scene.join("scene.json").exists());
+    // A bake whose input lies in --out is refused, naming it.
+    let glb = scene.join("oak.glb");
+    std::fs::write(&glb, b"glTF").unwrap();
+    let e = fails(
+        bin()
+            .args(["bake", "--model"])
+            .arg(format!("oak={}", glb.display()))
+            .arg("--placements")
+            .arg(scene.join("trees.csv"))
+            .arg("--out")
+            .arg(&scene),
+    );
+    assert!(e.contains("holds the input") && e.contains("trees.csv"), "{e}");
+    // Any folder with a scene.json is no scene: `{}` and a thesis stay.
+    let other = dir.join("thesis");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::write(other.join("scene.json"), "{}").unwrap();
+    std::fs::write(other.join("thesis.txt"), "four years").unwrap();
+    let e = only_own_files_removed(&other, &mut demo(&other, 40, 1), false);
+    assert!(e.contains("thesis.txt") && e.contains("scene.json"), "{e}");
+    // --force keeps them, and does not write over a scene.json it did not write.
+    let e = only_own_files_removed(&other, demo(&other, 40, 1).arg("--force"), false);
+    assert!(e.contains("scene.json") && e.contains("no bake wrote"), "{e}");
+    assert_eq!(std::fs::read_to_string(other.join("scene.json")).unwrap(), "{}");
+    assert_eq!(files(&other).len(), 2, "no working folder left behind");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_scene_baked_before_file_lists_is_replaced_but_nothing_else() {
+    // Scenes from earlier versions have no list: scene.json and the files
+    // under species/, tiles/ and index/ count as the bake's.
+    let dir = tmp("legacy");
+    let scene = dir.join("scene");
+    run(&mut demo(&scene, 100, 1));
+    std::fs::remove_file(scene.join(".sylva-bake-files.json")).unwrap();
+    std::fs::write(scene.join("README.txt"), "about this scene").unwrap();
+    let e = only_own_files_removed(&scene, &mut demo(&scene, 50, 2), false);
+    assert!(e.contains("README.txt"), "{e}");
+    std::fs::remove_file(scene.join("README.txt")).unwrap();
+    only_own_files_removed(&scene, &mut demo(&scene, 50, 2), true);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_linked_out_is_followed_and_bad_outs_are_named() {
+    let dir = tmp("links");
+    let real = dir.join("scenes/v1");
+    run(&mut demo(&real, 60, 1));
+    #[cfg(unix)]
+    {
+        let link = dir.join("current");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        let before = std::fs::read(real.join("scene.json")).unwrap();
+        run(&mut demo(&link, 30, 2));
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link is kept");
+        assert_ne!(std::fs::read(real.join("scene.json")).unwrap(), before, "the linked scene was rebaked");
+        assert_eq!(std::fs::read(link.join("scene.json")).unwrap(), std::fs::read(real.join("scene.json")).unwrap());
+        let dangling = dir.join("dangling");
+        std::os::unix::fs::symlink(dir.join("nowhere"), &dangling).unwrap();
+        let e = fails(&mut demo(&dangling, 30, 2));
+        assert!(e.contains("dangling") && e.contains("does not exist"), "{e}");
+    }
+    // An --out that is a file, or below a file: the message names the path.
+    let file = dir.join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let e = fails(&mut demo(&file, 30, 1));
+    assert!(e.contains("a-file") && e.contains("not a folder"), "{e}");
+    let e = fails(&mut demo(&file.join("sub"), 30, 1));
+    assert!(e.contains("a-file/sub"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn an_interrupted_bake_leaves_nothing_that_the_next_bake_keeps() {
+    let dir = tmp("killed");
+    let scene = dir.join("scene");
+    run(&mut demo(&scene, 60, 1));
+    let before = snapshot(&scene);
+    // kill -9 in the middle of a bake: its working folder stays behind...
+    let mut child = demo(&scene, 3000, 2).stderr(std::process::Stdio::null()).spawn().unwrap();
+    let working = scene.join(format!(".sylva-tmp-{}", child.id()));
+    let started = std::time::Instant::now();
+    while !working.exists() && started.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(working.exists(), "the bake was killed while writing");
+    // ... the old scene is whole ...
+    let old: Vec<_> = snapshot(&scene).into_iter().filter(|(p, _)| !p.starts_with(".sylva-tmp-")).collect();
+    assert_eq!(old, before, "the old scene is untouched by the killed bake");
+    // ... and the next bake removes it (and the sibling layout of earlier versions).
+    let sibling = dir.join(".scene.tmp-999999999");
+    std::fs::create_dir_all(sibling.join("tiles")).unwrap();
+    let log = String::from_utf8_lossy(&run(&mut demo(&scene, 60, 3)).stderr).into_owned();
+    assert!(log.contains("interrupted bake"), "{log}");
+    assert!(!working.exists() && !sibling.exists());
+    assert!(files(&scene).iter().all(|f| !f.starts_with(".sylva-tmp")));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
