@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-serve bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -75,6 +75,11 @@ bench-render: release
 	@for n in 10k:10000 100k:100000 1m:1000000; do name=$${n%%:*}; count=$${n##*:}; \
 	  test -f target/bench/demo-$$name/scene.json || target/release/sylva-bake demo --trees $$count --out target/bench/demo-$$name; done
 	$(CARGO) bench --locked --bench frame -- target/bench/demo-10k target/bench/demo-100k target/bench/demo-1m
+
+# Load test of `sylva serve` on 127.0.0.1 (bounded: 16 clients × 250 requests
+# and 8 idle connections over the test scene; stops by itself).
+bench-serve:
+	$(CARGO) bench --locked --bench serve
 
 # Cluster-level bake (seed 002) of the sample trees and a 27,000-leaf tree: time,
 # peak memory, and per level primitives, bytes, select_px and image error.

@@ -205,6 +205,11 @@ mod cli {
             /// The built viewer (default: web/ of this checkout; `make web` builds it).
             #[arg(long)]
             web: Option<PathBuf>,
+            /// On a loopback --bind, also answer requests for this host name
+            /// (repeatable). Other names get 403: a web page cannot reach the
+            /// server through DNS rebinding.
+            #[arg(long = "allow-host", value_name = "NAME")]
+            allow_hosts: Vec<String>,
         },
     }
 
@@ -554,7 +559,7 @@ mod cli {
                 println!("{:.6}", sylva::metrics::multiscale_rmse(ia.as_raw(), ib.as_raw(), w, h));
                 Ok(())
             }
-            Command::Serve { dir, port, bind, web } => {
+            Command::Serve { dir, port, bind, web, allow_hosts } => {
                 if !dir.join("scene.json").is_file() {
                     bail!(
                         "{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake)",
@@ -565,7 +570,10 @@ mod cli {
                 if !web.join("pkg").join("sylva_bg.wasm").is_file() {
                     bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
                 }
-                let config = sylva::serve::ServeConfig { web_dir: web, scene_dir: dir, log: None };
+                let config = sylva::serve::ServeConfig {
+                    allowed_hosts: allow_hosts,
+                    ..sylva::serve::ServeConfig::new(web, dir)
+                };
                 sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
                     println!("serving the Sylva viewer on http://{addr}/");
                     use std::io::Write as _;

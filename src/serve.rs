@@ -3,8 +3,19 @@
 //! `/` is the built viewer (`web/`, with the wasm in `web/pkg/`); `/scene/…` is
 //! the scene directory, which the viewer opens by default. Correct MIME types
 //! (`application/wasm` for streaming compilation), gzip for text and JSON when the
-//! client accepts it, single byte ranges, cache headers, CORS for embedding, and
-//! no path outside the two directories.
+//! client accepts it, single byte ranges, cache headers and CORS for embedding.
+//!
+//! What it never serves (docs/SECURITY.md): a path outside the two folders, also
+//! not through a symbolic link (paths are resolved, then checked); dotfiles or
+//! anything in a dot-folder (`.env`, `.git/`, a bake's working folder); anything
+//! but regular files. On a loopback address it answers only requests whose
+//! `Host` is a loopback name (`localhost`, `127.0.0.1`, `[::1]`, or one allowed
+//! with `--allow-host`), so a web page cannot read the scene through DNS
+//! rebinding although responses carry `Access-Control-Allow-Origin: *`.
+//!
+//! Why hand-written and not hyper + tower-http's `ServeDir`: the rules above are
+//! most of the code; the HTTP part is one request per connection, which a
+//! viewer's few dozen parallel fetches do not notice (`make bench-serve`).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -19,6 +30,36 @@ pub struct ServeConfig {
     pub scene_dir: PathBuf,
     /// Where to record each request as `"METHOD PATH [RANGE]"` (tests count them).
     pub log: Option<std::sync::Arc<std::sync::Mutex<Vec<String>>>>,
+    /// Host names answered on a loopback address besides the loopback ones.
+    pub allowed_hosts: Vec<String>,
+}
+
+impl ServeConfig {
+    /// Serves `web_dir` at `/` and `scene_dir` at `/scene/`, without a request log.
+    #[must_use]
+    pub fn new(web_dir: PathBuf, scene_dir: PathBuf) -> Self {
+        Self { web_dir, scene_dir, log: None, allowed_hosts: Vec::new() }
+    }
+
+    /// Whether a request with this `Host` header is answered by a server
+    /// listening on `local` (on a non-loopback address, any host is).
+    #[must_use]
+    pub fn host_allowed(&self, host: Option<&str>, local: std::net::IpAddr) -> bool {
+        if !local.is_loopback() {
+            return true;
+        }
+        let Some(host) = host.map(str::trim) else { return false };
+        // Without the port: "[::1]:8080" → "[::1]", "localhost:8080" → "localhost".
+        let name = match host.strip_prefix('[') {
+            Some(rest) => rest.split(']').next().unwrap_or(""),
+            None => host.rsplit_once(':').map_or(host, |(h, _)| h),
+        };
+        let name = name.to_ascii_lowercase();
+        name == "localhost"
+            || name.ends_with(".localhost")
+            || name.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+            || self.allowed_hosts.iter().any(|h| h.eq_ignore_ascii_case(&name))
+    }
 }
 
 /// MIME type by extension.
@@ -37,7 +78,8 @@ pub fn mime_type(path: &Path) -> &'static str {
     }
 }
 
-/// Maps a request path to a file, refusing anything that leaves its root.
+/// Maps a request path to a regular file inside its root, refusing anything
+/// that leaves it (also through links) and every dotfile.
 #[must_use]
 pub fn resolve(config: &ServeConfig, url_path: &str) -> Option<PathBuf> {
     let path = url_path.split(['?', '#']).next().unwrap_or("/");
@@ -48,12 +90,15 @@ pub fn resolve(config: &ServeConfig, url_path: &str) -> Option<PathBuf> {
     };
     let rest = if rest.is_empty() { "index.html".to_string() } else { rest };
     let rel = Path::new(&rest);
-    // Only plain names: no `..`, no absolute paths, no prefixes.
-    if !rel.components().all(|c| matches!(c, Component::Normal(_))) {
+    // Only plain names: no `..`, no absolute paths, no prefixes, no dotfiles.
+    let plain = |c: Component<'_>| matches!(c, Component::Normal(n) if !n.to_string_lossy().starts_with('.'));
+    if rest.contains('\\') || !rel.components().all(plain) {
         return None;
     }
-    let full = root.join(rel);
-    full.is_file().then_some(full)
+    // Links are followed, then the real path must still be inside the real root.
+    let root = std::fs::canonicalize(root).ok()?;
+    let full = std::fs::canonicalize(root.join(rel)).ok()?;
+    (full.starts_with(&root) && full.is_file()).then_some(full)
 }
 
 fn percent_decode(s: &str) -> Option<String> {
@@ -73,22 +118,47 @@ fn percent_decode(s: &str) -> Option<String> {
     String::from_utf8(out).ok()
 }
 
-/// A parsed `Range: bytes=a-b` (single range).
-fn parse_range(header: &str, len: u64) -> Option<(u64, u64)> {
-    let spec = header.trim().strip_prefix("bytes=")?;
-    if spec.contains(',') {
-        return None;
-    }
-    let (a, b) = spec.split_once('-')?;
-    let (start, end) = match (a.trim(), b.trim()) {
-        ("", suffix) => {
-            let n: u64 = suffix.parse().ok()?;
-            (len.saturating_sub(n), len.checked_sub(1)?)
+/// What a `Range` header asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RangeAsk {
+    /// Bytes `a..=b` of the file.
+    Bytes(u64, u64),
+    /// A single range that starts past the end: 416.
+    Unsatisfiable,
+    /// Several ranges or an unparsable header: ignored, the whole file (RFC 9110 §14.2).
+    Ignore,
+}
+
+/// Parses `Range: bytes=a-b`, `bytes=a-` or `bytes=-n` (single ranges only).
+fn parse_range(header: &str, len: u64) -> RangeAsk {
+    let parsed = (|| {
+        let spec = header.trim().strip_prefix("bytes=")?;
+        if spec.contains(',') {
+            return None;
         }
-        (a, "") => (a.parse().ok()?, len.checked_sub(1)?),
-        (a, b) => (a.parse().ok()?, b.parse::<u64>().ok()?.min(len.checked_sub(1)?)),
-    };
-    (start <= end && end < len).then_some((start, end))
+        let (a, b) = spec.split_once('-')?;
+        Some(match (a.trim(), b.trim()) {
+            ("", suffix) => {
+                let n: u64 = suffix.parse().ok()?;
+                if n == 0 || len == 0 {
+                    return Some(RangeAsk::Unsatisfiable);
+                }
+                RangeAsk::Bytes(len.saturating_sub(n), len - 1)
+            }
+            (a, b) => {
+                let start: u64 = a.parse().ok()?;
+                let end: Option<u64> = if b.is_empty() { None } else { Some(b.parse().ok()?) };
+                if end.is_some_and(|e| e < start) {
+                    return None;
+                }
+                if start >= len {
+                    return Some(RangeAsk::Unsatisfiable);
+                }
+                RangeAsk::Bytes(start, end.unwrap_or(len - 1).min(len - 1))
+            }
+        })
+    })();
+    parsed.unwrap_or(RangeAsk::Ignore)
 }
 
 fn respond(
@@ -112,11 +182,13 @@ fn respond(
 }
 
 fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
+    let local = stream.local_addr()?.ip();
     stream.set_read_timeout(Some(std::time::Duration::from_secs(10)))?;
     let mut reader = BufReader::new(stream.try_clone()?);
     let mut request_line = String::new();
     reader.read_line(&mut request_line)?;
     let mut range = None;
+    let mut host = None;
     let mut gzip_ok = false;
     loop {
         let mut line = String::new();
@@ -126,6 +198,8 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
         let lower = line.to_ascii_lowercase();
         if let Some(v) = lower.strip_prefix("range:") {
             range = Some(v.trim().to_string());
+        } else if let Some(v) = lower.strip_prefix("host:") {
+            host = Some(v.trim().to_string());
         } else if let Some(v) = lower.strip_prefix("accept-encoding:") {
             gzip_ok = v.contains("gzip");
         }
@@ -138,6 +212,20 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
         }
     }
     let head_only = method == "HEAD";
+    if !config.host_allowed(host.as_deref(), local) {
+        let text = format!(
+            "Host {:?} is not served: on a loopback address sylva serve answers localhost, 127.0.0.1 and [::1] \
+             only (sylva serve --allow-host NAME adds a name)\n",
+            host.as_deref().unwrap_or("")
+        );
+        return respond(
+            &mut stream,
+            "403 Forbidden",
+            &[("Content-Type", "text/plain".into())],
+            text.as_bytes(),
+            head_only,
+        );
+    }
     if method == "OPTIONS" {
         return respond(&mut stream, "204 No Content", &[("Access-Control-Allow-Headers", "Range".into())], b"", false);
     }
@@ -161,22 +249,21 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
         if path.starts_with("/scene/") && !path.ends_with(".json") { "public, max-age=3600" } else { "no-cache" };
     let mut headers =
         vec![("Content-Type", mime.to_string()), ("Cache-Control", cache.into()), ("Accept-Ranges", "bytes".into())];
-    if let Some(r) = range {
-        return match parse_range(&r, len) {
-            Some((a, b)) => {
-                // Read only the range: a viewer fetches parts of large packs.
-                use std::io::Seek;
-                f.seek(std::io::SeekFrom::Start(a))?;
-                let mut part = Vec::new();
-                f.take(b - a + 1).read_to_end(&mut part)?;
-                headers.push(("Content-Range", format!("bytes {a}-{b}/{len}")));
-                respond(&mut stream, "206 Partial Content", &headers, &part, head_only)
-            }
-            None => {
-                headers.push(("Content-Range", format!("bytes */{len}")));
-                respond(&mut stream, "416 Range Not Satisfiable", &headers, b"", head_only)
-            }
-        };
+    match range.map_or(RangeAsk::Ignore, |r| parse_range(&r, len)) {
+        RangeAsk::Bytes(a, b) => {
+            // Read only the range: a viewer fetches parts of large packs.
+            use std::io::Seek;
+            f.seek(std::io::SeekFrom::Start(a))?;
+            let mut part = Vec::new();
+            f.take(b - a + 1).read_to_end(&mut part)?;
+            headers.push(("Content-Range", format!("bytes {a}-{b}/{len}")));
+            return respond(&mut stream, "206 Partial Content", &headers, &part, head_only);
+        }
+        RangeAsk::Unsatisfiable => {
+            headers.push(("Content-Range", format!("bytes */{len}")));
+            return respond(&mut stream, "416 Range Not Satisfiable", &headers, b"", head_only);
+        }
+        RangeAsk::Ignore => {}
     }
     let mut body = Vec::new();
     f.read_to_end(&mut body)?;
@@ -222,7 +309,7 @@ mod tests {
         std::fs::write(dir.join("web/index.html"), "x").unwrap();
         std::fs::write(dir.join("scene/tiles/0_0.tile"), "t").unwrap();
         std::fs::write(dir.join("secret"), "s").unwrap();
-        let c = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene"), log: None };
+        let c = ServeConfig::new(dir.join("web"), dir.join("scene"));
         assert_eq!(resolve(&c, "/"), Some(dir.join("web/index.html")));
         assert_eq!(resolve(&c, "/scene/tiles/0_0.tile?x=1"), Some(dir.join("scene/tiles/0_0.tile")));
         for bad in [
@@ -240,12 +327,18 @@ mod tests {
 
     #[test]
     fn ranges_and_mime_types() {
-        assert_eq!(parse_range("bytes=0-9", 100), Some((0, 9)));
-        assert_eq!(parse_range("bytes=90-", 100), Some((90, 99)));
-        assert_eq!(parse_range("bytes=-10", 100), Some((90, 99)));
-        assert_eq!(parse_range("bytes=50-500", 100), Some((50, 99)));
-        assert_eq!(parse_range("bytes=100-", 100), None);
-        assert_eq!(parse_range("bytes=0-1,5-6", 100), None);
+        use RangeAsk::{Bytes, Ignore, Unsatisfiable};
+        assert_eq!(parse_range("bytes=0-9", 100), Bytes(0, 9));
+        assert_eq!(parse_range("bytes=90-", 100), Bytes(90, 99));
+        assert_eq!(parse_range("bytes=-10", 100), Bytes(90, 99));
+        assert_eq!(parse_range("bytes=-500", 100), Bytes(0, 99));
+        assert_eq!(parse_range("bytes=50-500", 100), Bytes(50, 99));
+        assert_eq!(parse_range("bytes=100-", 100), Unsatisfiable);
+        assert_eq!(parse_range("bytes=0-", 0), Unsatisfiable);
+        // Several ranges, or nonsense: ignored (200 with the whole file).
+        for ignored in ["bytes=0-1,5-6", "bytes=x-y", "items=0-9", "bytes=9-2", "bytes=", "bytes=--3"] {
+            assert_eq!(parse_range(ignored, 100), Ignore, "{ignored}");
+        }
         assert_eq!(mime_type(Path::new("a/sylva_bg.wasm")), "application/wasm");
         assert_eq!(mime_type(Path::new("scene.json")), "application/json");
     }
@@ -264,7 +357,7 @@ mod live_tests {
         std::fs::write(dir.join("web/pkg/sylva_bg.wasm"), b"\0asm\x01\0\0\0").unwrap();
         let tile: Vec<u8> = (0..=255u8).collect();
         std::fs::write(dir.join("scene/tiles/0_0.tile"), &tile).unwrap();
-        let config = ServeConfig { web_dir: dir.join("web"), scene_dir: dir.join("scene"), log: None };
+        let config = ServeConfig::new(dir.join("web"), dir.join("scene"));
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
         let base = format!("http://{}", rx.recv().unwrap());
@@ -287,7 +380,7 @@ mod live_tests {
         assert!(part.headers()["cache-control"].to_str().unwrap().contains("max-age"));
         // Raw request: ureq would decode gzip and drop the header.
         let mut raw = TcpStream::connect(base.trim_start_matches("http://")).unwrap();
-        raw.write_all(b"GET / HTTP/1.1\r\nHost: x\r\nAccept-Encoding: gzip, br\r\n\r\n").unwrap();
+        raw.write_all(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nAccept-Encoding: gzip, br\r\n\r\n").unwrap();
         let mut reply = Vec::new();
         raw.read_to_end(&mut reply).unwrap();
         let split = reply.windows(4).position(|w| w == b"\r\n\r\n").unwrap();

@@ -523,7 +523,7 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     use sylva::format::pack::{PackHead, PackPart};
     use sylva::serve::{serve, ServeConfig};
     let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-    let config = ServeConfig { web_dir: tmp("web"), scene_dir: fixture(), log: Some(log.clone()) };
+    let config = ServeConfig { log: Some(log.clone()), ..ServeConfig::new(tmp("web"), fixture()) };
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let _ = serve(config, "127.0.0.1:0", |a| {
