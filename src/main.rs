@@ -116,6 +116,11 @@ mod cli {
             /// Give up waiting for data after this many seconds.
             #[arg(long, default_value_t = 120.0)]
             timeout: f64,
+            /// Exit 0 although files of the view failed to load or did not arrive
+            /// in time (the image shows what loaded; the stats list the failures).
+            /// Without it such a render writes its PNG and stats and exits 1.
+            #[arg(long)]
+            allow_partial: bool,
             /// Pack view (with --pack).
             #[arg(long, value_enum, default_value_t = View::Oblique)]
             pack_view: View,
@@ -349,6 +354,7 @@ mod cli {
         settings: RenderSettings,
         stats_path: Option<&PathBuf>,
         timeout: f64,
+        allow_partial: bool,
     ) -> Result<()> {
         let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
         off.settings = settings;
@@ -385,9 +391,7 @@ mod cli {
                 let _ = url;
             }
         }
-        if !off.stream.is_settled() {
-            eprintln!("warning: not everything the view needs arrived within {timeout} s; rendering what is there");
-        }
+        let settled = off.stream.is_settled();
         // A first frame warms pipelines and caches; the second is measured.
         off.render(&cam, false);
         let stats = off.render(&cam, true);
@@ -407,6 +411,34 @@ mod cli {
             stats.tiles_resident,
             stats.bytes_fetched as f64 / 1e6
         );
+        // What could be drawn is drawn; a render that lacks part of its view fails
+        // (unless --allow-partial), so a script does not publish it unawares.
+        let mut missing = Vec::new();
+        if !settled {
+            missing.push(format!("not everything the view needs arrived within --timeout {timeout} s"));
+        }
+        if !stats.failed.is_empty() {
+            let shown: Vec<String> = stats.failed.iter().take(5).map(|f| f.url.clone()).collect();
+            missing.push(format!(
+                "{} file{} could not be loaded ({}{})",
+                stats.failed.len(),
+                if stats.failed.len() == 1 { "" } else { "s" },
+                shown.join(", "),
+                if stats.failed.len() > shown.len() { ", …" } else { "" }
+            ));
+        }
+        if !missing.is_empty() {
+            let what = missing.join("; ");
+            if allow_partial {
+                eprintln!("warning: the render is incomplete: {what} (accepted: --allow-partial)");
+            } else {
+                bail!(
+                    "the render is incomplete: {what}. {} shows the rest and the stats list the failures; pass \
+                     --allow-partial to accept an incomplete render",
+                    out.display()
+                );
+            }
+        }
         Ok(())
     }
 
@@ -452,6 +484,7 @@ mod cli {
     }
 
     pub fn main() -> Result<()> {
+        sylva::render::context::ensure_runtime_dir();
         match Cli::parse().command {
             Command::Bench { out, replot: true, path, size, .. } => {
                 let frames = sylva::bench::read_csv(&out.join("frames.csv"))?;
@@ -599,6 +632,7 @@ mod cli {
                 debug_bounds,
                 stats,
                 timeout,
+                allow_partial,
                 pack_view,
                 level,
                 repr,
@@ -640,6 +674,7 @@ mod cli {
                         settings,
                         stats.as_ref(),
                         timeout,
+                        allow_partial,
                     );
                 }
                 let pack = pack.expect("clap requires --scene or --pack");

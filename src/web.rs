@@ -577,6 +577,7 @@ impl Viewer {
                 "device_limit": s.degraded.device_limit,
                 "reach_m": if s.degraded.reach_m.is_finite() { f64::from(s.degraded.reach_m) } else { -1.0 },
             },
+            "failed": self.stream.failures(),
             "bytes_fetched": s.bytes_fetched,
             "trees_total": self.stream.manifest().map_or(0, |m| m.counts.trees),
             "trees_resident": self.renderer.resident_instances(),

@@ -261,6 +261,7 @@ fn log(msg: &str) {
 }
 
 fn main() {
+    sylva::render::context::ensure_runtime_dir();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Bake(args) => bake(&args),

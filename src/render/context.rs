@@ -134,3 +134,29 @@ pub fn read_texture_rgba8(ctx: &GpuContext, texture: &wgpu::Texture, layer: u32,
     buffer.unmap();
     out
 }
+
+/// Gives the process a private runtime folder when `XDG_RUNTIME_DIR` is unset
+/// or names no folder. Without one, Mesa's Vulkan driver prints "error:
+/// XDG_RUNTIME_DIR is invalid or not set in the environment." on headless
+/// machines, on runs that work. Call first thing in `main`, before threads.
+#[cfg(all(unix, not(target_arch = "wasm32")))]
+pub fn ensure_runtime_dir() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let usable = std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|p| std::fs::metadata(p).is_ok_and(|m| m.is_dir()));
+    if usable {
+        return;
+    }
+    let Ok(uid) = std::fs::metadata("/proc/self").map(|m| m.uid()) else { return };
+    let dir = std::env::temp_dir().join(format!("sylva-xdg-{uid}"));
+    let _ = std::fs::create_dir(&dir);
+    // Only a folder of ours, closed to others (as the XDG spec asks).
+    if std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir() && m.uid() == uid)
+        && std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)).is_ok()
+    {
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
+/// Elsewhere there is no such variable to set.
+#[cfg(not(any(unix, target_arch = "wasm32")))]
+pub fn ensure_runtime_dir() {}

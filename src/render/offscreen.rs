@@ -54,6 +54,9 @@ pub struct FrameStats {
     /// What budgets or device limits hold back (`pools_full`, `gpu_budget`,
     /// `bandwidth`, `reach_m`).
     pub degraded: std::collections::BTreeMap<String, serde_json::Value>,
+    /// Files given up on (not found, corrupt, or failed every retry): what the
+    /// image lacks. Empty when the view is complete.
+    pub failed: Vec<crate::scene::streaming::LoadFailure>,
     /// Trees in the scene.
     pub trees_total: u64,
     /// Trees resident on the GPU.
@@ -301,6 +304,7 @@ impl<F: Fetcher> OffscreenScene<F> {
         .into_iter()
         .map(|(k, v)| (k.to_string(), v))
         .collect();
+        stats.failed = self.stream.failures().to_vec();
         stats.trees_total = self.stream.manifest().map_or(0, |m| m.counts.trees);
         stats.trees_resident = self.renderer.resident_instances();
         stats.gpu_bytes = self.renderer.gpu_bytes();

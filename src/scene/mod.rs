@@ -8,4 +8,4 @@ pub mod streaming;
 #[cfg(not(target_arch = "wasm32"))]
 pub use fetch::ThreadFetcher;
 pub use fetch::{FetchError, Fetcher, RequestId};
-pub use streaming::{Degraded, SceneStream, StreamConfig, StreamEvent, StreamStats};
+pub use streaming::{Degraded, LoadFailure, SceneStream, StreamConfig, StreamEvent, StreamStats};

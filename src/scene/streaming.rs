@@ -58,6 +58,19 @@ pub struct Degraded {
     pub reach_m: f32,
 }
 
+/// A file given up on (not found, corrupt, or failed every retry): what the
+/// view lacks. Listed in the frame stats as `failed`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LoadFailure {
+    /// The URL.
+    pub url: String,
+    /// What went wrong.
+    pub message: String,
+}
+
+/// Most failures kept in the list (the count in [`StreamStats::broken`] goes on).
+pub const MAX_LISTED_FAILURES: usize = 64;
+
 /// Something a user should hear about.
 #[derive(Debug, Clone, PartialEq)]
 pub enum StreamEvent {
@@ -211,6 +224,7 @@ pub struct SceneStream<F: Fetcher> {
     config: StreamConfig,
     stats: StreamStats,
     events: Vec<StreamEvent>,
+    failures: Vec<LoadFailure>,
     wanted: Vec<usize>,
     /// Unread index nodes the view meets (not given up on).
     pending_nodes: usize,
@@ -245,6 +259,7 @@ impl<F: Fetcher> SceneStream<F> {
             config,
             stats: StreamStats::default(),
             events: Vec::new(),
+            failures: Vec::new(),
             wanted: Vec::new(),
             pending_nodes: 0,
             reach_m: f32::INFINITY,
@@ -254,6 +269,20 @@ impl<F: Fetcher> SceneStream<F> {
             walk_stack: Vec::new(),
             needed: Vec::new(),
             recent: std::collections::VecDeque::new(),
+        }
+    }
+
+    /// The files given up on so far (at most [`MAX_LISTED_FAILURES`]).
+    #[must_use]
+    pub fn failures(&self) -> &[LoadFailure] {
+        &self.failures
+    }
+
+    /// Records a file given up on.
+    fn give_up(&mut self, url: &str, message: &str) {
+        self.stats.broken += 1;
+        if self.failures.len() < MAX_LISTED_FAILURES {
+            self.failures.push(LoadFailure { url: url.to_string(), message: message.to_string() });
         }
     }
 
@@ -337,6 +366,9 @@ impl<F: Fetcher> SceneStream<F> {
 
     fn fail(&mut self, url: String, err: &str, attempt: u32, retryable: bool, now_s: f64) -> Load {
         let retrying = retryable && attempt + 1 < self.config.max_attempts;
+        if !retrying {
+            self.give_up(&url, err);
+        }
         self.events.push(StreamEvent::Failed { url, message: err.to_string(), retrying });
         if retrying {
             Load::Waiting {
@@ -344,7 +376,6 @@ impl<F: Fetcher> SceneStream<F> {
                 retry_at_s: now_s + self.config.retry_base_s * 2f64.powi(attempt as i32),
             }
         } else {
-            self.stats.broken += 1;
             Load::Broken
         }
     }
@@ -563,8 +594,8 @@ impl<F: Fetcher> SceneStream<F> {
                 self.tiles[t] = TileState::NotResident(Load::Waiting { attempt, retry_at_s: now_s + 1.0 });
             }
             Err(e) => {
+                self.give_up(&url, &e.to_string());
                 self.events.push(StreamEvent::Failed { url, message: e.to_string(), retrying: false });
-                self.stats.broken += 1;
                 self.tiles[t] = TileState::NotResident(Load::Broken);
             }
         }

@@ -1,0 +1,111 @@
+//! `sylva render` on broken scenes (issue 13): what can be drawn is drawn, the
+//! stats list what failed, and the exit status says the render is incomplete
+//! unless `--allow-partial` accepts it. No false "error:" lines from the
+//! Vulkan loader on a headless machine.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn tmp(name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("render-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A copy of the test scene.
+fn scene_copy(dir: &Path) -> PathBuf {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small");
+    let dst = dir.join("scene");
+    let mut stack = vec![PathBuf::new()];
+    while let Some(rel) = stack.pop() {
+        std::fs::create_dir_all(dst.join(&rel)).unwrap();
+        for e in std::fs::read_dir(src.join(&rel)).unwrap() {
+            let e = e.unwrap();
+            let child = rel.join(e.file_name());
+            if e.file_type().unwrap().is_dir() {
+                stack.push(child);
+            } else {
+                std::fs::copy(e.path(), dst.join(&child)).unwrap();
+            }
+        }
+    }
+    dst
+}
+
+/// Exit success, stats and stderr of a small render of `scene`.
+fn render(scene: &Path, view: &str, extra: &[&str]) -> (bool, serde_json::Value, String) {
+    let dir = scene.parent().unwrap();
+    let (png, stats) = (dir.join(format!("{view}.png")), dir.join(format!("{view}.json")));
+    let _ = std::fs::remove_file(&png);
+    // No runtime folder, as on a headless machine: the binary makes its own.
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .env_remove("XDG_RUNTIME_DIR")
+        .args(["render", "--scene"])
+        .arg(scene)
+        .args(["--view", view, "--size", "160x90", "--timeout", "60", "--out"])
+        .arg(&png)
+        .arg("--stats")
+        .arg(&stats)
+        .args(extra)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "the Vulkan loader's false alarm: {stderr}");
+    assert!(png.exists(), "the PNG is written in every case: {stderr}");
+    let stats = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    (out.status.success(), stats, stderr)
+}
+
+fn drawn(stats: &serde_json::Value) -> u64 {
+    stats["instances"].as_object().unwrap().values().map(|v| v.as_u64().unwrap()).sum()
+}
+
+#[test]
+fn broken_packs_and_tiles_make_render_fail_unless_partial_is_allowed() {
+    let dir = tmp("broken");
+    let scene = scene_copy(&dir);
+    let (ok, stats, stderr) = render(&scene, "far", &[]);
+    assert!(ok, "{stderr}");
+    assert_eq!(stats["failed"], serde_json::json!([]), "a whole scene fails nothing");
+    let whole = drawn(&stats);
+    assert!(whole > 1000, "{whole} trees drawn");
+    // A pack of random bytes: the other species are drawn, the render fails.
+    let mut noise = 0x1234_5678_9abc_def0u64;
+    let random: Vec<u8> = (0..20_000)
+        .map(|_| {
+            noise ^= noise << 13;
+            noise ^= noise >> 7;
+            noise ^= noise << 17;
+            noise as u8
+        })
+        .collect();
+    std::fs::write(scene.join("species/beech.pack"), &random).unwrap();
+    let (ok, stats, stderr) = render(&scene, "far", &[]);
+    assert!(!ok, "a render without a species' pack must fail: {stderr}");
+    assert!(
+        stderr.contains("incomplete") && stderr.contains("beech.pack") && stderr.contains("--allow-partial"),
+        "{stderr}"
+    );
+    let failed = stats["failed"].as_array().unwrap();
+    assert!(failed.iter().any(|f| f["url"].as_str().unwrap().ends_with("beech.pack")), "{failed:?}");
+    let partial = drawn(&stats);
+    assert!(partial > 0 && partial < whole, "the rest is drawn: {partial} of {whole}");
+    let (ok, stats, stderr) = render(&scene, "far", &["--allow-partial"]);
+    assert!(ok && stderr.contains("warning: the render is incomplete"), "{stderr}");
+    assert_eq!(stats["failed"].as_array().unwrap().len(), failed.len());
+    // A corrupt tile: dropped, listed, and the render fails.
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small/species/beech.pack"),
+        scene.join("species/beech.pack"),
+    )
+    .unwrap();
+    std::fs::write(scene.join("tiles/0_0.tile"), &random[..4096]).unwrap();
+    let (ok, stats, stderr) = render(&scene, "top", &[]);
+    assert!(!ok, "{stderr}");
+    let failed = stats["failed"].as_array().unwrap();
+    assert!(failed.iter().any(|f| f["url"].as_str().unwrap().ends_with("tiles/0_0.tile")), "{failed:?}");
+    assert!(drawn(&stats) > 0);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
