@@ -137,6 +137,14 @@ struct PackArgs {
     shard: Option<(u32, u32)>,
 }
 
+fn parse_delimiter(s: &str) -> Result<u8, String> {
+    match s {
+        "tab" | "\\t" | "\t" => Ok(b'\t'),
+        _ if s.len() == 1 && s.is_ascii() => Ok(s.as_bytes()[0]),
+        _ => Err(format!("{s:?}: one ASCII character, e.g. ';' or tab")),
+    }
+}
+
 fn parse_shard(s: &str) -> Result<(u32, u32), String> {
     let (i, n) = s.split_once('/').ok_or_else(|| format!("{s:?}: expected I/N, e.g. 0/4"))?;
     let i: u32 = i.trim().parse().map_err(|_| format!("{s:?}: I must be a whole number"))?;
@@ -193,7 +201,8 @@ struct BakeArgs {
     /// otherwise a substring). Labels equal to a model name map to it without a pattern.
     #[arg(long = "map", value_name = "PATTERN=NAME")]
     maps: Vec<String>,
-    /// Model for rows whose species maps to no model (otherwise they are skipped and reported).
+    /// Model for rows whose species maps to no model. Without it such rows are
+    /// skipped and reported, except with a single --model, which every row uses.
     #[arg(long, value_name = "NAME")]
     default_model: Option<String>,
     /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
@@ -205,6 +214,17 @@ struct BakeArgs {
     /// Height in metres for rows without one (default: the median of the given heights).
     #[arg(long)]
     default_height: Option<f32>,
+    /// Text encoding of a CSV: auto reads each field as UTF-8 where it is valid
+    /// and as Windows-1252/Latin-1 otherwise (counted in the report).
+    #[arg(long, value_enum, default_value_t = placements::Encoding::Auto)]
+    encoding: placements::Encoding,
+    /// CSV field separator (default: detected from the header line: , ; tab |).
+    /// With ; or tab, decimal commas (52,37) are read too.
+    #[arg(long, value_name = "CHAR", value_parser = parse_delimiter)]
+    delimiter: Option<u8>,
+    /// The x/longitude and y/latitude columns hold each other's values: swap them.
+    #[arg(long)]
+    swap_xy: bool,
     /// Rows farther than this from the median position are outliers and skipped.
     #[arg(long, default_value_t = 100.0)]
     max_extent_km: f64,
@@ -486,13 +506,26 @@ fn bake(args: &BakeArgs) -> Result<()> {
     }
     let default_model = match &args.default_model {
         Some(n) => Some(model_index(n).with_context(|| format!("--default-model {n}: no --model with that name"))?),
-        None if species.len() == 1 => Some(0),
+        None if species.len() == 1 => {
+            log(&format!("one --model: every tree uses {} whatever its species label", species[0].0));
+            Some(0)
+        }
         None => None,
     };
     // Placements, streamed: CSV is read from disk on every pass, so inputs larger
     // than memory bake in bounded memory (trees are partitioned by tile into
     // bucket files when there are more than --bucket-trees of them).
-    let source = PlacementSource::open(&args.placements)?;
+    let input_crs = args.input_crs.as_deref().map(Crs::parse).transpose()?;
+    let read_options = placements::ReadOptions {
+        encoding: args.encoding,
+        delimiter: args.delimiter,
+        swap_xy: args.swap_xy,
+        projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
+    };
+    let source = PlacementSource::open(&args.placements, &read_options)?;
+    for note in &source.notes {
+        log(&format!("placements: {note}"));
+    }
     let started_read = Instant::now();
     // Pass 1: a deterministic sample (all rows up to SAMPLE_ROWS) for the CRS,
     // the medians (origin, outliers, default height) and the row count.
@@ -527,6 +560,30 @@ fn bake(args: &BakeArgs) -> Result<()> {
         started_read.elapsed().as_secs_f64(),
         if seen as usize > SAMPLE_ROWS { format!("; medians from a sample of {SAMPLE_ROWS}") } else { String::new() }
     ));
+    // Longitude and latitude the other way round: most rows' "latitude" beyond
+    // ±90° whose "longitude" would be a latitude.
+    if report1.swappable > 0 && report1.swappable * 2 >= report1.rows {
+        bail!(
+            "placements {}: the x/longitude and y/latitude columns look swapped: {} of {} rows have a latitude \
+             beyond ±90° and a longitude that would be a valid latitude; pass --swap-xy (or rename the columns)",
+            args.placements.display(),
+            report1.swappable,
+            report1.rows
+        );
+    }
+    if source.kind == CoordKind::LonLat && !sample.is_empty() {
+        let mut lons: Vec<f64> = sample.iter().map(|p| p.0).collect();
+        let mut lats: Vec<f64> = sample.iter().map(|p| p.1).collect();
+        let (lon, lat) = (median(&mut lons), median(&mut lats));
+        // Said plainly, so swapped columns that are both valid (52.37, 4.90) are noticed.
+        log(&format!(
+            "placements centre: {:.4}°{} {:.4}°{} (if this is not where the trees are, the columns are swapped: --swap-xy)",
+            lat.abs(),
+            if lat >= 0.0 { "N" } else { "S" },
+            lon.abs(),
+            if lon >= 0.0 { "E" } else { "W" }
+        ));
+    }
     // CRS.
     let (src, dst) = match source.kind {
         CoordKind::LonLat => {
@@ -548,11 +605,13 @@ fn bake(args: &BakeArgs) -> Result<()> {
             (Crs::from_epsg(4326)?, dst)
         }
         CoordKind::Projected => {
-            let input = args
-                .input_crs
-                .as_deref()
-                .or(args.crs.as_deref())
-                .context("the placements have x/y columns: say which CRS they are in with --input-crs EPSG:xxxx")?;
+            let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
+            let input = args.input_crs.as_deref().or(declared.as_deref()).or(args.crs.as_deref()).context(
+                "the placements have projected x/y coordinates: say which CRS they are in with --input-crs EPSG:xxxx",
+            )?;
+            if args.input_crs.is_none() && declared.is_some() {
+                log(&format!("placements: the GeoJSON names its CRS: {input}"));
+            }
             let src = Crs::parse(input)?;
             let dst = Crs::parse(args.crs.as_deref().unwrap_or(input))?;
             (src, dst)
@@ -577,8 +636,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
     let inside = |x: f64, y: f64| (x - mx).hypot(y - my) <= limit;
     let mut heights: Vec<f32> = projected_sample.iter().filter(|p| inside(p.0, p.1)).filter_map(|p| p.2).collect();
     let default_height = match args.default_height {
-        Some(h) if h.is_finite() && h > 0.0 => Some(h),
-        Some(h) => bail!("--default-height {h}: must be a positive number of metres"),
+        Some(h) if h.is_finite() && h > 0.0 && h < MAX_TREE_HEIGHT_M => Some(h),
+        Some(h) => bail!("--default-height {h}: must be a number of metres above 0 and below {MAX_TREE_HEIGHT_M}"),
         None if !heights.is_empty() => {
             let n = heights.len();
             heights.select_nth_unstable_by(n / 2, f32::total_cmp);
@@ -719,6 +778,10 @@ fn bake(args: &BakeArgs) -> Result<()> {
     report_summary(&s, &args.output.out, started);
     Ok(())
 }
+
+/// Tallest tree height accepted (the tallest known tree is 116 m); placement
+/// heights outside (0, this) count as missing.
+const MAX_TREE_HEIGHT_M: f32 = 200.0;
 
 /// Rows sampled for the medians; inputs up to this size use every row.
 const SAMPLE_ROWS: usize = 1_000_000;

@@ -4,6 +4,13 @@
 //! outliers: rows that cannot be used are skipped and counted by reason (with
 //! the first few row numbers), never fatal. Only an unreadable file or one
 //! with no usable coordinate columns is an error.
+//!
+//! Files come as spreadsheets export them: UTF-8 or Windows-1252/Latin-1
+//! (`--encoding`, detected per field by default), separated by `,`, `;`, tab
+//! or `|` (detected from the header), with decimal commas where the separator
+//! is not a comma. Lon/lat columns that hold each other's values are caught
+//! (`--swap-xy`); GeoJSON in a projected CRS is read with `--input-crs` or its
+//! `crs` member.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -53,6 +60,10 @@ pub struct Report {
     pub missing_height: u64,
     /// Rows sharing their coordinates with an earlier row (kept).
     pub duplicate_coordinates: u64,
+    /// Rows with bytes that are no UTF-8, read as Windows-1252 (kept).
+    pub not_utf8: u64,
+    /// Rows out of lon/lat range that would be in range with x and y swapped.
+    pub swappable: u64,
 }
 
 impl Report {
@@ -80,6 +91,12 @@ impl Report {
         if self.missing_height > 0 {
             out.push(format!("{} rows have no height: they get the default height", self.missing_height));
         }
+        if self.not_utf8 > 0 {
+            out.push(format!(
+                "{} rows are not UTF-8: read as Windows-1252/Latin-1 (--encoding utf-8 refuses them)",
+                self.not_utf8
+            ));
+        }
         if self.duplicate_coordinates > 0 {
             out.push(format!("{} rows repeat the coordinates of an earlier row (kept)", self.duplicate_coordinates));
         }
@@ -98,6 +115,32 @@ pub struct PlacementSet {
     pub report: Report,
 }
 
+/// Text encoding of a CSV file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Encoding {
+    /// UTF-8 where a field is valid UTF-8, else Windows-1252 (Latin-1), counted.
+    #[default]
+    Auto,
+    /// UTF-8 only: rows with other bytes are skipped and counted.
+    Utf8,
+    /// Windows-1252 (a superset of Latin-1 / ISO-8859-1), as older spreadsheets export.
+    Latin1,
+}
+
+/// How to read a placements file.
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    /// Text encoding of CSV files.
+    pub encoding: Encoding,
+    /// Field separator of CSV files (default: detected from the header line).
+    pub delimiter: Option<u8>,
+    /// The x/lon and y/lat columns (or GeoJSON coordinates) are swapped.
+    pub swap_xy: bool,
+    /// Coordinates are projected (the bake was given `--input-crs`): applies to
+    /// GeoJSON, whose coordinates are otherwise lon/lat.
+    pub projected: bool,
+}
+
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
 /// with [`PlacementSource`]).
 #[cfg(test)]
@@ -107,11 +150,11 @@ pub fn read_placements(path: &Path) -> Result<PlacementSet> {
         "csv" | "txt" | "tsv" => {
             let file =
                 std::fs::File::open(path).with_context(|| format!("cannot open placements {}", path.display()))?;
-            read_csv(std::io::BufReader::new(file), if ext == "tsv" { b'\t' } else { b',' })
+            read_csv(std::io::BufReader::new(file), if ext == "tsv" { b'\t' } else { b',' }, &ReadOptions::default())
         }
         "geojson" | "json" => {
             let bytes = std::fs::read(path).with_context(|| format!("cannot read placements {}", path.display()))?;
-            read_geojson(&bytes)
+            read_geojson(&bytes, &ReadOptions::default())
         }
         _ => bail!("placements {}: unknown extension {ext:?}; use .csv or .geojson", path.display()),
     }
@@ -135,7 +178,8 @@ const LAT: &[&str] = &["lat", "latitude"];
 const X: &[&str] = &["x", "easting", "east", "e", "x_coord", "xcoord"];
 const Y: &[&str] = &["y", "northing", "north", "n", "y_coord", "ycoord"];
 const Z: &[&str] = &["z", "elevation", "elev", "altitude", "ground", "ground_z"];
-const HEIGHT: &[&str] = &["height", "height_m", "h", "tree_height", "treeheight", "hoehe", "boomhoogte"];
+const HEIGHT: &[&str] =
+    &["height", "height_m", "h", "tree_height", "treeheight", "hoehe", "höhe", "baumhöhe", "boomhoogte"];
 const SPECIES: &[&str] = &["species", "species_name", "genus", "taxon", "baumart", "soort", "type", "art"];
 const YAW: &[&str] = &["yaw", "rotation", "heading", "azimuth"];
 const ID: &[&str] = &["id", "tree_id", "treeid", "objectid", "fid", "gid"];
@@ -192,15 +236,64 @@ fn parse_f64(s: &str) -> Option<f64> {
     if t.is_empty() {
         return None;
     }
-    t.parse::<f64>().ok()
+    t.parse::<f64>().ok().or_else(|| parse_decimal_comma(t))
+}
+
+/// `52,3731` or `1.234,5` (a decimal comma, as European spreadsheets write
+/// numbers; only reachable where the field separator is not a comma).
+fn parse_decimal_comma(t: &str) -> Option<f64> {
+    let (int, frac) = t.rsplit_once(',')?;
+    if frac.contains('.') || !frac.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    format!("{}.{frac}", int.replace('.', "")).parse().ok()
+}
+
+/// The field separator of a header line: the most frequent of `,` `;` tab `|`
+/// outside quotes (a comma when none occurs).
+#[must_use]
+pub fn detect_delimiter(header_line: &[u8]) -> u8 {
+    let mut counts = [0usize; 4];
+    let mut quoted = false;
+    for &b in header_line {
+        match b {
+            b'"' => quoted = !quoted,
+            _ if quoted => {}
+            b',' => counts[0] += 1,
+            b';' => counts[1] += 1,
+            b'\t' => counts[2] += 1,
+            b'|' => counts[3] += 1,
+            _ => {}
+        }
+    }
+    let best = (0..4).max_by_key(|&i| (counts[i], usize::from(i == 0))).unwrap_or(0);
+    if counts[best] == 0 {
+        b','
+    } else {
+        [b',', b';', b'\t', b'|'][best]
+    }
+}
+
+/// One CSV field as text: UTF-8, or Windows-1252 where the options allow it.
+/// `None` when the bytes are no UTF-8 and only UTF-8 is accepted.
+fn decode_field<'a>(bytes: &'a [u8], encoding: Encoding, fell_back: &mut bool) -> Option<std::borrow::Cow<'a, str>> {
+    match (encoding, std::str::from_utf8(bytes)) {
+        (Encoding::Latin1, _) => Some(encoding_rs::WINDOWS_1252.decode_without_bom_handling(bytes).0),
+        (_, Ok(s)) => Some(std::borrow::Cow::Borrowed(s)),
+        (Encoding::Utf8, Err(_)) => None,
+        (Encoding::Auto, Err(_)) => {
+            *fell_back = true;
+            Some(encoding_rs::WINDOWS_1252.decode_without_bom_handling(bytes).0)
+        }
+    }
 }
 
 /// Reads CSV from any reader (the first line is the header).
 #[cfg(test)]
-pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8) -> Result<PlacementSet> {
+pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOptions) -> Result<PlacementSet> {
     let mut report = Report::default();
     let mut rows = Vec::new();
-    let kind = stream_csv(reader, delimiter, &mut report, &mut |p| {
+    let kind = stream_csv(reader, delimiter, options, &mut report, &mut |p| {
         rows.push(p);
         Ok(())
     })?;
@@ -213,19 +306,28 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8) -> Result<PlacementS
 pub fn stream_csv<R: std::io::Read>(
     reader: R,
     delimiter: u8,
+    options: &ReadOptions,
     report: &mut Report,
     f: &mut dyn FnMut(Placement) -> Result<()>,
 ) -> Result<CoordKind> {
     let mut rdr =
         csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).trim(csv::Trim::All).from_reader(reader);
-    let header: Vec<String> =
-        rdr.headers().map_err(|e| anyhow!("cannot read the CSV header: {e}"))?.iter().map(str::to_string).collect();
+    let mut fell_back = false;
+    let header: Vec<String> = rdr
+        .byte_headers()
+        .map_err(|e| anyhow!("cannot read the CSV header: {e}"))?
+        .iter()
+        .map(|h| decode_field(h, Encoding::Auto, &mut fell_back).unwrap_or_default().into_owned())
+        .collect();
     let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    let cols = detect_columns(&header_refs)?;
-    let mut record = csv::StringRecord::new();
+    let mut cols = detect_columns(&header_refs)?;
+    if options.swap_xy {
+        std::mem::swap(&mut cols.x, &mut cols.y);
+    }
+    let mut record = csv::ByteRecord::new();
     let mut row = 0u64;
     loop {
-        match rdr.read_record(&mut record) {
+        match rdr.read_byte_record(&mut record) {
             Ok(false) => break,
             Ok(true) => {}
             Err(e) => {
@@ -237,19 +339,36 @@ pub fn stream_csv<R: std::io::Read>(
         }
         row += 1;
         report.rows += 1;
-        let get = |c: Option<usize>| c.and_then(|c| record.get(c));
-        let (Some(x), Some(y)) = (get(Some(cols.x)).and_then(parse_f64), get(Some(cols.y)).and_then(parse_f64)) else {
+        let mut row_fell_back = false;
+        let mut utf8_error = false;
+        let mut get = |c: Option<usize>| {
+            let field = record.get(c?)?;
+            let text = decode_field(field, options.encoding, &mut row_fell_back);
+            utf8_error |= text.is_none();
+            text
+        };
+        let (x, y) = (get(Some(cols.x)), get(Some(cols.y)));
+        let (z, height, species, yaw, id) =
+            (get(cols.z), get(cols.height), get(cols.species), get(cols.yaw), get(cols.id));
+        if utf8_error {
+            report.skip("not UTF-8 (read it with --encoding latin1)", row);
+            continue;
+        }
+        if row_fell_back {
+            report.not_utf8 += 1;
+        }
+        let (Some(x), Some(y)) = (x.as_deref().and_then(parse_f64), y.as_deref().and_then(parse_f64)) else {
             report.skip("missing or non-numeric coordinates", row);
             continue;
         };
         let p = Placement {
             x,
             y,
-            z: get(cols.z).and_then(parse_f64),
-            height_m: get(cols.height).and_then(parse_f64).map(|h| h as f32),
-            species: get(cols.species).map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
-            yaw_deg: get(cols.yaw).and_then(parse_f64).map(|v| v as f32),
-            id: get(cols.id).and_then(|s| s.trim().parse::<u64>().ok()),
+            z: z.as_deref().and_then(parse_f64),
+            height_m: height.as_deref().and_then(parse_f64).map(|h| h as f32),
+            species: species.as_deref().map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
+            yaw_deg: yaw.as_deref().and_then(parse_f64).map(|v| v as f32),
+            id: id.as_deref().and_then(|s| s.trim().parse::<u64>().ok()),
             row,
         };
         if let Some(p) = accept(p, cols.kind, report) {
@@ -265,36 +384,81 @@ pub fn stream_csv<R: std::io::Read>(
 pub struct PlacementSource {
     path: std::path::PathBuf,
     delimiter: u8,
+    options: ReadOptions,
     parsed: Option<PlacementSet>,
     /// Degrees or metres.
     pub kind: CoordKind,
+    /// The EPSG code a GeoJSON file names in its `crs` member, if any.
+    pub declared_epsg: Option<u32>,
+    /// What was detected, for the log (separator, encoding).
+    pub notes: Vec<String>,
 }
 
 impl PlacementSource {
     /// Opens `path` (`.csv`, `.tsv`, `.txt`, `.geojson`, `.json`) and reads its header.
-    pub fn open(path: &Path) -> Result<Self> {
+    pub fn open(path: &Path, options: &ReadOptions) -> Result<Self> {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
+        let meta = std::fs::metadata(path).with_context(|| format!("cannot open placements {}", path.display()))?;
+        if !meta.is_file() {
+            bail!("placements {} is not a regular file", path.display());
+        }
         match ext.as_str() {
             "csv" | "txt" | "tsv" => {
-                let delimiter = if ext == "tsv" { b'\t' } else { b',' };
                 let file =
                     std::fs::File::open(path).with_context(|| format!("cannot open placements {}", path.display()))?;
-                let mut rdr = csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_reader(file);
+                let mut first_line = Vec::new();
+                use std::io::{BufRead, Read};
+                std::io::BufReader::new(file.take(1 << 20))
+                    .read_until(b'\n', &mut first_line)
+                    .with_context(|| format!("cannot read placements {}", path.display()))?;
+                let delimiter =
+                    options.delimiter.unwrap_or(if ext == "tsv" { b'\t' } else { detect_delimiter(&first_line) });
+                let mut notes = Vec::new();
+                if delimiter != b',' {
+                    notes.push(format!(
+                        "fields separated by {}{}",
+                        match delimiter {
+                            b'\t' => "tabs".to_string(),
+                            d => format!("{:?}", char::from(d)),
+                        },
+                        if delimiter == b';' { " (decimal commas accepted)" } else { "" }
+                    ));
+                }
+                let mut rdr =
+                    csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_reader(&first_line[..]);
+                let mut fell_back = false;
                 let header: Vec<String> = rdr
-                    .headers()
+                    .byte_headers()
                     .map_err(|e| anyhow!("placements {}: cannot read the CSV header: {e}", path.display()))?
                     .iter()
-                    .map(str::to_string)
+                    .map(|h| decode_field(h, Encoding::Auto, &mut fell_back).unwrap_or_default().into_owned())
                     .collect();
                 let refs: Vec<&str> = header.iter().map(String::as_str).collect();
                 let cols = detect_columns(&refs).with_context(|| format!("placements {}", path.display()))?;
-                Ok(Self { path: path.to_path_buf(), delimiter, parsed: None, kind: cols.kind })
+                Ok(Self {
+                    path: path.to_path_buf(),
+                    delimiter,
+                    options: options.clone(),
+                    parsed: None,
+                    kind: cols.kind,
+                    declared_epsg: None,
+                    notes,
+                })
             }
             "geojson" | "json" => {
                 let bytes =
                     std::fs::read(path).with_context(|| format!("cannot read placements {}", path.display()))?;
-                let set = read_geojson(&bytes).with_context(|| format!("placements {}", path.display()))?;
-                Ok(Self { path: path.to_path_buf(), delimiter: b',', kind: set.kind, parsed: Some(set) })
+                let set = read_geojson(&bytes, options).with_context(|| format!("placements {}", path.display()))?;
+                let declared_epsg = geojson_crs(&bytes);
+                Ok(Self {
+                    path: path.to_path_buf(),
+                    delimiter: b',',
+                    options: options.clone(),
+                    kind: set.kind,
+                    parsed: Some(set),
+                    declared_epsg,
+                    notes: Vec::new(),
+                })
             }
             _ => bail!("placements {}: unknown extension {ext:?}; use .csv or .geojson", path.display()),
         }
@@ -311,10 +475,19 @@ impl PlacementSource {
         let file = std::fs::File::open(&self.path)
             .with_context(|| format!("cannot open placements {}", self.path.display()))?;
         let mut report = Report::default();
-        stream_csv(std::io::BufReader::with_capacity(1 << 20, file), self.delimiter, &mut report, f)
+        stream_csv(std::io::BufReader::with_capacity(1 << 20, file), self.delimiter, &self.options, &mut report, f)
             .with_context(|| format!("placements {}", self.path.display()))?;
         Ok(report)
     }
+}
+
+/// The EPSG code of a GeoJSON `crs` member (GeoJSON 2008, still written by
+/// GIS exports): `"EPSG:28992"`, `"urn:ogc:def:crs:EPSG::28992"`; CRS84 is none.
+fn geojson_crs(bytes: &[u8]) -> Option<u32> {
+    let v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let name = v.get("crs")?.get("properties")?.get("name")?.as_str()?;
+    let code = name.rsplit(':').next()?;
+    code.parse().ok().filter(|&c| c != 4326)
 }
 
 trait CsvErrorKind {
@@ -324,7 +497,7 @@ trait CsvErrorKind {
 impl CsvErrorKind for csv::Error {
     fn kind_name(&self) -> &'static str {
         match self.kind() {
-            csv::ErrorKind::Utf8 { .. } => "invalid UTF-8",
+            csv::ErrorKind::Utf8 { .. } => "not UTF-8",
             csv::ErrorKind::UnequalLengths { .. } => "wrong number of fields",
             csv::ErrorKind::Io(_) => "I/O error",
             _ => "malformed record",
@@ -339,6 +512,10 @@ fn accept(mut p: Placement, kind: CoordKind, report: &mut Report) -> Option<Plac
         return None;
     }
     if kind == CoordKind::LonLat && (p.x.abs() > 180.0 || p.y.abs() > 90.0) {
+        if p.y.abs() <= 180.0 && p.x.abs() <= 90.0 {
+            // Valid the other way round: evidence of swapped columns.
+            report.swappable += 1;
+        }
         report.skip("longitude/latitude out of range", p.row);
         return None;
     }
@@ -360,7 +537,9 @@ fn accept(mut p: Placement, kind: CoordKind, report: &mut Report) -> Option<Plac
 
 /// Reads a GeoJSON FeatureCollection (or a single Feature) of Point/MultiPoint
 /// geometries; properties give species, height, yaw and id with the CSV names.
-pub fn read_geojson(bytes: &[u8]) -> Result<PlacementSet> {
+/// Coordinates are lon/lat unless `options.projected` or the file's `crs`
+/// member says otherwise.
+pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet> {
     let v: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| anyhow!("not valid JSON: {e}"))?;
     let features: Vec<&serde_json::Value> = match v.get("type").and_then(|t| t.as_str()) {
         Some("FeatureCollection") => v
@@ -374,6 +553,7 @@ pub fn read_geojson(bytes: &[u8]) -> Result<PlacementSet> {
     };
     let mut report = Report::default();
     let mut rows = Vec::new();
+    let mut points_read = Vec::new();
     for (i, f) in features.iter().enumerate() {
         let row = i as u64 + 1;
         report.rows += 1;
@@ -383,13 +563,16 @@ pub fn read_geojson(bytes: &[u8]) -> Result<PlacementSet> {
         };
         let num = |v: Option<&serde_json::Value>| v.and_then(|v| v.as_f64().or_else(|| v.as_str().and_then(parse_f64)));
         let geom = f.get("geometry");
+        let coordinates = geom.and_then(|g| g.get("coordinates"));
         let points: Vec<&serde_json::Value> = match geom.and_then(|g| g.get("type")).and_then(|t| t.as_str()) {
-            Some("Point") => geom.and_then(|g| g.get("coordinates")).into_iter().collect(),
-            Some("MultiPoint") => geom
-                .and_then(|g| g.get("coordinates"))
-                .and_then(|c| c.as_array())
-                .map(|a| a.iter().collect())
-                .unwrap_or_default(),
+            Some("Point") => vec![coordinates.unwrap_or(&serde_json::Value::Null)],
+            Some("MultiPoint") => match coordinates.and_then(|c| c.as_array()) {
+                Some(a) if !a.is_empty() => a.iter().collect(),
+                _ => {
+                    report.skip("MultiPoint without points", row);
+                    continue;
+                }
+            },
             _ => {
                 report.skip("geometry is not a Point or MultiPoint", row);
                 continue;
@@ -402,9 +585,10 @@ pub fn read_geojson(bytes: &[u8]) -> Result<PlacementSet> {
                 report.skip("point without two numeric coordinates", row);
                 continue;
             }
+            let (x, y) = if options.swap_xy { (coords[1], coords[0]) } else { (coords[0], coords[1]) };
             let p = Placement {
-                x: coords[0],
-                y: coords[1],
+                x,
+                y,
                 z: coords.get(2).copied().or_else(|| num(prop(Z))),
                 height_m: num(prop(HEIGHT)).map(|h| h as f32),
                 species: prop(SPECIES).and_then(|s| match s {
@@ -416,13 +600,34 @@ pub fn read_geojson(bytes: &[u8]) -> Result<PlacementSet> {
                 id: prop(ID).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
                 row,
             };
-            if let Some(p) = accept(p, CoordKind::LonLat, &mut report) {
-                rows.push(p);
-            }
+            points_read.push(p);
+        }
+    }
+    let kind = if options.projected || geojson_crs(bytes).is_some() {
+        CoordKind::Projected
+    } else {
+        // Projected numbers read as degrees would all be "out of range": say why.
+        let beyond = points_read.iter().filter(|p| p.x.abs() > 180.0 || p.y.abs() > 90.0).count();
+        if beyond > 0 && beyond * 2 >= points_read.len() {
+            let p = points_read.iter().find(|p| p.x.abs() > 180.0 || p.y.abs() > 90.0).expect("counted");
+            bail!(
+                "{beyond} of {} points are no lon/lat (e.g. feature {}: [{}, {}]): the coordinates are projected; \
+                 say which CRS they are in with --input-crs EPSG:xxxx",
+                points_read.len(),
+                p.row,
+                p.x,
+                p.y
+            );
+        }
+        CoordKind::LonLat
+    };
+    for p in points_read {
+        if let Some(p) = accept(p, kind, &mut report) {
+            rows.push(p);
         }
     }
     report.kept = rows.len() as u64;
-    Ok(PlacementSet { kind: CoordKind::LonLat, rows, report })
+    Ok(PlacementSet { kind, rows, report })
 }
 
 #[cfg(test)]
@@ -460,7 +665,7 @@ mod tests {
                    5,52.37,4.90,,Oak\n\
                    6,52.38,abc,9,Oak\n\
                    7,52.36,4.92,-3,Oak,extra\n";
-        let set = read_csv(csv.as_bytes(), b',').unwrap();
+        let set = read_csv(csv.as_bytes(), b',', &ReadOptions::default()).unwrap();
         assert_eq!(set.report.rows, 7);
         assert_eq!(set.rows.len(), 3, "{:?}", set.report);
         assert_eq!(set.report.skipped_total(), 4);
@@ -480,15 +685,15 @@ mod tests {
             {"type":"Feature","geometry":{"type":"LineString","coordinates":[[0,0],[1,1]]},"properties":{}},
             {"type":"Feature","geometry":null,"properties":{}}
         ]}"#;
-        let set = read_geojson(gj).unwrap();
+        let set = read_geojson(gj, &ReadOptions::default()).unwrap();
         assert_eq!(set.rows.len(), 3);
         assert_eq!(set.rows[0].z, Some(210.5));
         assert_eq!(set.rows[0].height_m, Some(21.5));
         assert_eq!(set.rows[0].id, Some(42));
         assert_eq!(set.rows[2].species.as_deref(), Some("oak"));
         assert_eq!(set.report.skipped_total(), 2);
-        assert!(read_geojson(b"{\"type\":\"Topology\"}").is_err());
-        assert!(read_geojson(b"not json").is_err());
+        assert!(read_geojson(b"{\"type\":\"Topology\"}", &ReadOptions::default()).is_err());
+        assert!(read_geojson(b"not json", &ReadOptions::default()).is_err());
     }
 
     #[test]
@@ -501,5 +706,73 @@ mod tests {
         assert_eq!(set.report.duplicate_coordinates, 1);
         assert_eq!(set.kind, CoordKind::Projected);
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn latin1_rows_are_read_not_dropped() {
+        // "Eiche müde" and a header "Höhe" in Windows-1252, as older spreadsheets export.
+        let csv = b"lat,lon,species,h\xf6he\n52.1,4.9,Eiche m\xfcde,12\n52.2,4.8,Linde,9\n";
+        let auto = read_csv(&csv[..], b',', &ReadOptions::default()).unwrap();
+        assert_eq!(auto.rows.len(), 2, "{:?}", auto.report);
+        assert_eq!(auto.rows[0].species.as_deref(), Some("Eiche müde"));
+        assert_eq!(auto.report.not_utf8, 1);
+        assert!(auto.report.lines().join("\n").contains("Windows-1252"));
+        let strict = read_csv(&csv[..], b',', &ReadOptions { encoding: Encoding::Utf8, ..Default::default() }).unwrap();
+        assert_eq!(strict.rows.len(), 1);
+        assert!(strict.report.lines().join("\n").contains("--encoding latin1"), "{:?}", strict.report);
+        let latin1 =
+            read_csv(&csv[..], b',', &ReadOptions { encoding: Encoding::Latin1, ..Default::default() }).unwrap();
+        assert_eq!(latin1.rows[0].species.as_deref(), Some("Eiche müde"));
+        assert_eq!(latin1.report.not_utf8, 0, "asked for, so not reported");
+    }
+
+    #[test]
+    fn european_exports_with_semicolons_and_decimal_commas() {
+        assert_eq!(detect_delimiter(b"lat;lon;soort;boomhoogte\r\n"), b';');
+        assert_eq!(detect_delimiter(b"x\ty\tspecies\n"), b'\t');
+        assert_eq!(detect_delimiter(b"\"a;b\",lat,lon\n"), b',', "separators inside quotes do not count");
+        assert_eq!(detect_delimiter(b"lon\n"), b',');
+        assert_eq!(parse_f64("52,3731"), Some(52.3731));
+        assert_eq!(parse_f64("1.234,5"), Some(1234.5));
+        assert_eq!(parse_f64("-4,5e"), None);
+        let csv = "lat;lon;soort;boomhoogte\n52,3731;4,8922;Tilia;12,5\n52,3740;4,8930;Quercus;\n";
+        let set = read_csv(csv.as_bytes(), b';', &ReadOptions::default()).unwrap();
+        assert_eq!(set.rows.len(), 2, "{:?}", set.report);
+        assert_eq!((set.rows[0].x, set.rows[0].y, set.rows[0].height_m), (4.8922, 52.3731, Some(12.5)));
+        let swapped = read_csv(csv.as_bytes(), b';', &ReadOptions { swap_xy: true, ..Default::default() }).unwrap();
+        assert_eq!((swapped.rows[0].x, swapped.rows[0].y), (52.3731, 4.8922));
+    }
+
+    #[test]
+    fn swapped_lon_lat_is_evident_in_the_report() {
+        // Latitudes in the lon column and longitudes beyond ±90 in the lat column.
+        let csv = "lon,lat\n-33.9,151.2\n-33.8,151.1\n";
+        let set = read_csv(csv.as_bytes(), b',', &ReadOptions::default()).unwrap();
+        assert_eq!((set.rows.len(), set.report.swappable), (0, 2));
+        let fixed = read_csv(csv.as_bytes(), b',', &ReadOptions { swap_xy: true, ..Default::default() }).unwrap();
+        assert_eq!((fixed.rows.len(), fixed.rows[0].x), (2, 151.2));
+    }
+
+    #[test]
+    fn geojson_points_without_coordinates_are_counted_and_projected_files_understood() {
+        let gj = br#"{"type":"FeatureCollection","features":[
+            {"type":"Feature","geometry":{"type":"Point"},"properties":{}},
+            {"type":"Feature","geometry":{"type":"Point","coordinates":[]},"properties":{}},
+            {"type":"Feature","geometry":{"type":"MultiPoint","coordinates":[]},"properties":{}},
+            {"type":"Feature","geometry":{"type":"Point","coordinates":[4.9,52.37]},"properties":{}}
+        ]}"#;
+        let set = read_geojson(gj, &ReadOptions::default()).unwrap();
+        assert_eq!((set.report.rows, set.rows.len(), set.report.skipped_total()), (4, 1, 3), "{:?}", set.report);
+        // Dutch RD coordinates: refused as lon/lat with a hint, read with --input-crs or the crs member.
+        let rd = br#"{"type":"FeatureCollection","features":[
+            {"type":"Feature","geometry":{"type":"Point","coordinates":[121000.5,487000.25]},"properties":{"height":9}}]}"#;
+        let e = read_geojson(rd, &ReadOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("--input-crs") && e.contains("121000.5"), "{e}");
+        let set = read_geojson(rd, &ReadOptions { projected: true, ..Default::default() }).unwrap();
+        assert_eq!((set.kind, set.rows[0].x), (CoordKind::Projected, 121000.5));
+        let named = br#"{"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"urn:ogc:def:crs:EPSG::28992"}},
+            "features":[{"type":"Feature","geometry":{"type":"Point","coordinates":[121000.5,487000.25]},"properties":{}}]}"#;
+        assert_eq!(geojson_crs(named), Some(28992));
+        assert_eq!(read_geojson(named, &ReadOptions::default()).unwrap().kind, CoordKind::Projected);
     }
 }

@@ -282,3 +282,49 @@ fn a_bake_larger_than_memory_streams_through_bucket_files_with_the_same_result()
         .args(["--index-node-tiles", "6"]));
     assert_eq!(snapshot(&dir.join("memory")), snapshot(&dir.join("merged")), "sharded + streamed = single");
 }
+
+#[test]
+fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
+    if !model.exists() {
+        eprintln!("skipping: {} not present", model.display());
+        return;
+    }
+    let dir = tmp("european");
+    // 300 trees in Vienna as a German spreadsheet exports them: semicolons,
+    // decimal commas, Windows-1252 (49 rows with ß/ü/ö), one model.
+    let mut csv = String::from("Baum-Nr;lat;lon;Baumart;Höhe\r\n");
+    for i in 0..300 {
+        let species = if i % 6 == 0 { "Roßkastanie" } else { "Linde" };
+        let (lat, lon) = (48.2 + f64::from(i % 20) * 1e-4, 16.37 + f64::from(i / 20) * 1e-4);
+        csv += &format!("{i};{lat:.5};{lon:.5};{species};{},5\r\n", 8 + i % 10).replace('.', ",");
+    }
+    let path = dir.join("baeume.csv");
+    std::fs::write(&path, encoding_rs::WINDOWS_1252.encode(&csv).0).unwrap();
+    let bake = |csv: &Path, out: &Path, extra: &[&str]| {
+        let mut c = bin();
+        c.arg("bake")
+            .arg("--model")
+            .arg(format!("oak={}", model.display()))
+            .arg("--placements")
+            .arg(csv)
+            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+            .args(extra)
+            .arg("--out")
+            .arg(out);
+        c
+    };
+    let o = run(&mut bake(&path, &dir.join("vienna"), &[]));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("separated by ';'") && log.contains("300 rows read, 300 kept"), "{log}");
+    assert!(log.contains("50 rows are not UTF-8: read as Windows-1252"), "{log}");
+    assert!(log.contains("48.20") && log.contains("16.37") && log.contains("every tree uses oak"), "{log}");
+    assert_eq!(inspect_json(&dir.join("vienna"))["trees_total"], 300);
+    // Sydney with its columns swapped: latitudes beyond ±90 give it away.
+    let swapped = dir.join("sydney.csv");
+    std::fs::write(&swapped, "lat,lon\n151.2093,-33.8688\n151.2100,-33.8690\n151.2110,-33.8700\n").unwrap();
+    let e = fails(&mut bake(&swapped, &dir.join("sydney"), &[]));
+    assert!(e.contains("look swapped") && e.contains("--swap-xy"), "{e}");
+    let o = run(&mut bake(&swapped, &dir.join("sydney"), &["--swap-xy"]));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("scene CRS EPSG:32756"), "UTM 56S");
+}
