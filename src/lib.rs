@@ -6,6 +6,7 @@
 //! * [`metrics`] — image error (multi-scale RMSE, seed 002 §4).
 //! * [`bench`] — `sylva bench`: run time against image error on camera paths (native).
 //! * [`scene`] — fetching, streaming and residency of scenes.
+//! * [`paths`] — relative paths from untrusted text (URIs, request paths).
 //!
 //! The bake tool (`bake-tool/`, crate `sylva-bake`) writes what this crate reads.
 
@@ -14,6 +15,7 @@ pub mod bench;
 pub mod format;
 pub mod geo;
 pub mod metrics;
+pub mod paths;
 pub mod render;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]

@@ -418,13 +418,14 @@ mod cli {
             missing.push(format!("not everything the view needs arrived within --timeout {timeout} s"));
         }
         if !stats.failed.is_empty() {
+            // (The list holds at most 64; the stream counts them all.)
+            let failed = off.stream.stats().broken;
             let shown: Vec<String> = stats.failed.iter().take(5).map(|f| f.url.clone()).collect();
             missing.push(format!(
-                "{} file{} could not be loaded ({}{})",
-                stats.failed.len(),
-                if stats.failed.len() == 1 { "" } else { "s" },
+                "{failed} file{} could not be loaded ({}{})",
+                if failed == 1 { "" } else { "s" },
                 shown.join(", "),
-                if stats.failed.len() > shown.len() { ", …" } else { "" }
+                if failed as usize > shown.len() { ", …" } else { "" }
             ));
         }
         if !missing.is_empty() {

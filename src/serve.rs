@@ -19,7 +19,7 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 /// What to serve.
 #[derive(Debug, Clone)]
@@ -41,25 +41,32 @@ impl ServeConfig {
         Self { web_dir, scene_dir, log: None, allowed_hosts: Vec::new() }
     }
 
-    /// Whether a request with this `Host` header is answered by a server
-    /// listening on `local` (on a non-loopback address, any host is).
+    /// Whether a request with this `Host` header is answered by a server bound
+    /// to `bound` (bound to a non-loopback address, any host is).
     #[must_use]
-    pub fn host_allowed(&self, host: Option<&str>, local: std::net::IpAddr) -> bool {
-        if !local.is_loopback() {
+    pub fn host_allowed(&self, host: Option<&str>, bound: std::net::IpAddr) -> bool {
+        if !bound.is_loopback() {
             return true;
         }
-        let Some(host) = host.map(str::trim) else { return false };
-        // Without the port: "[::1]:8080" → "[::1]", "localhost:8080" → "localhost".
-        let name = match host.strip_prefix('[') {
-            Some(rest) => rest.split(']').next().unwrap_or(""),
-            None => host.rsplit_once(':').map_or(host, |(h, _)| h),
-        };
-        let name = name.to_ascii_lowercase();
+        let Some(name) = host.map(host_name) else { return false };
         name == "localhost"
             || name.ends_with(".localhost")
-            || name.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
-            || self.allowed_hosts.iter().any(|h| h.eq_ignore_ascii_case(&name))
+            || name.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.to_canonical().is_loopback())
+            || self.allowed_hosts.iter().any(|h| host_name(h) == name)
     }
+}
+
+/// The name of a `Host` value, lower case, without port, brackets or a final
+/// dot: `[::1]:8080` → `::1`, `Localhost.:8080` → `localhost`.
+fn host_name(host: &str) -> String {
+    let host = host.trim();
+    let name = match host.strip_prefix('[') {
+        Some(rest) => rest.split(']').next().unwrap_or(""),
+        // A bare IPv6 address has several colons and no port.
+        None if host.matches(':').count() > 1 => host,
+        None => host.rsplit_once(':').map_or(host, |(h, _)| h),
+    };
+    name.trim_end_matches('.').to_ascii_lowercase()
 }
 
 /// MIME type by extension.
@@ -79,43 +86,25 @@ pub fn mime_type(path: &Path) -> &'static str {
 }
 
 /// Maps a request path to a regular file inside its root, refusing anything
-/// that leaves it (also through links) and every dotfile.
+/// that leaves it (also through links) and every dotfile (also behind a link).
 #[must_use]
 pub fn resolve(config: &ServeConfig, url_path: &str) -> Option<PathBuf> {
     let path = url_path.split(['?', '#']).next().unwrap_or("/");
-    let path = percent_decode(path)?;
+    let path = crate::paths::percent_decode(path)?;
     let (root, rest) = match path.strip_prefix("/scene/") {
         Some(rest) => (&config.scene_dir, rest.to_string()),
         None => (&config.web_dir, path.trim_start_matches('/').to_string()),
     };
     let rest = if rest.is_empty() { "index.html".to_string() } else { rest };
-    let rel = Path::new(&rest);
-    // Only plain names: no `..`, no absolute paths, no prefixes, no dotfiles.
-    let plain = |c: Component<'_>| matches!(c, Component::Normal(n) if !n.to_string_lossy().starts_with('.'));
-    if rest.contains('\\') || !rel.components().all(plain) {
+    if !crate::paths::is_plain_relative(&rest, false) {
         return None;
     }
-    // Links are followed, then the real path must still be inside the real root.
+    // Links are followed, then the real path must still be inside the real root
+    // and be no dotfile there.
     let root = std::fs::canonicalize(root).ok()?;
-    let full = std::fs::canonicalize(root.join(rel)).ok()?;
-    (full.starts_with(&root) && full.is_file()).then_some(full)
-}
-
-fn percent_decode(s: &str) -> Option<String> {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%' {
-            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
-            out.push(u8::from_str_radix(hex, 16).ok()?);
-            i += 3;
-        } else {
-            out.push(b[i]);
-            i += 1;
-        }
-    }
-    String::from_utf8(out).ok()
+    let full = std::fs::canonicalize(root.join(&rest)).ok()?;
+    let inside = full.strip_prefix(&root).ok()?;
+    (crate::paths::is_plain_relative(&inside.to_string_lossy(), false) && full.is_file()).then_some(full)
 }
 
 /// What a `Range` header asks for.
@@ -161,6 +150,16 @@ fn parse_range(header: &str, len: u64) -> RangeAsk {
     parsed.unwrap_or(RangeAsk::Ignore)
 }
 
+fn write_head(stream: &mut TcpStream, status: &str, len: u64, headers: &[(&str, String)]) -> std::io::Result<()> {
+    let mut head = format!("HTTP/1.1 {status}\r\nContent-Length: {len}\r\nConnection: close\r\n");
+    head += "Access-Control-Allow-Origin: *\r\nAccess-Control-Expose-Headers: Content-Length, Content-Range\r\n";
+    for (k, v) in headers {
+        head += &format!("{k}: {v}\r\n");
+    }
+    head += "\r\n";
+    stream.write_all(head.as_bytes())
+}
+
 fn respond(
     stream: &mut TcpStream,
     status: &str,
@@ -168,23 +167,19 @@ fn respond(
     body: &[u8],
     head_only: bool,
 ) -> std::io::Result<()> {
-    let mut head = format!("HTTP/1.1 {status}\r\nContent-Length: {}\r\nConnection: close\r\n", body.len());
-    head += "Access-Control-Allow-Origin: *\r\nAccess-Control-Expose-Headers: Content-Length, Content-Range\r\n";
-    for (k, v) in headers {
-        head += &format!("{k}: {v}\r\n");
-    }
-    head += "\r\n";
-    stream.write_all(head.as_bytes())?;
+    write_head(stream, status, body.len() as u64, headers)?;
     if !head_only {
         stream.write_all(body)?;
     }
     Ok(())
 }
 
-fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
-    let local = stream.local_addr()?.ip();
+/// Most bytes of a request head (request line and headers) read.
+const MAX_HEAD_BYTES: u64 = 16 << 10;
+
+fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) -> std::io::Result<()> {
     stream.set_read_timeout(Some(std::time::Duration::from_secs(10)))?;
-    let mut reader = BufReader::new(stream.try_clone()?);
+    let mut reader = BufReader::new(stream.try_clone()?.take(MAX_HEAD_BYTES));
     let mut request_line = String::new();
     reader.read_line(&mut request_line)?;
     let mut range = None;
@@ -212,7 +207,7 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
         }
     }
     let head_only = method == "HEAD";
-    if !config.host_allowed(host.as_deref(), local) {
+    if !config.host_allowed(host.as_deref(), bound) {
         let text = format!(
             "Host {:?} is not served: on a loopback address sylva serve answers localhost, 127.0.0.1 and [::1] \
              only (sylva serve --allow-host NAME adds a name)\n",
@@ -265,18 +260,26 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
         }
         RangeAsk::Ignore => {}
     }
-    let mut body = Vec::new();
-    f.read_to_end(&mut body)?;
     let compressible = mime.starts_with("text/") || mime == "application/json" || mime == "application/wasm";
-    if gzip_ok && compressible && body.len() > 1024 {
+    if gzip_ok && compressible && len > 1024 && len <= MAX_GZIP_BYTES {
+        let mut body = Vec::new();
+        f.read_to_end(&mut body)?;
         let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
         enc.write_all(&body)?;
-        body = enc.finish()?;
         headers.push(("Content-Encoding", "gzip".into()));
         headers.push(("Vary", "Accept-Encoding".into()));
+        return respond(&mut stream, "200 OK", &headers, &enc.finish()?, head_only);
     }
-    respond(&mut stream, "200 OK", &headers, &body, head_only)
+    // Everything else is streamed: memory per connection stays small whatever the file.
+    write_head(&mut stream, "200 OK", len, &headers)?;
+    if !head_only {
+        std::io::copy(&mut f, &mut stream)?;
+    }
+    Ok(())
 }
+
+/// Largest file compressed on the fly (the viewer's wasm and JS, manifests).
+const MAX_GZIP_BYTES: u64 = 64 << 20;
 
 /// Serves until the process ends; each connection on its own thread.
 /// Calls `on_ready` with the bound address first.
@@ -285,13 +288,14 @@ fn handle(mut stream: TcpStream, config: &ServeConfig) -> std::io::Result<()> {
 /// When the address cannot be bound.
 pub fn serve(config: ServeConfig, addr: &str, on_ready: impl FnOnce(std::net::SocketAddr)) -> std::io::Result<()> {
     let listener = TcpListener::bind(addr)?;
-    on_ready(listener.local_addr()?);
+    let bound = listener.local_addr()?;
+    on_ready(bound);
     let config = std::sync::Arc::new(config);
     for stream in listener.incoming() {
         let Ok(stream) = stream else { continue };
         let config = config.clone();
         std::thread::spawn(move || {
-            let _ = handle(stream, &config);
+            let _ = handle(stream, &config, bound.ip());
         });
     }
     Ok(())

@@ -35,11 +35,14 @@ fn start(name: &str) -> Server {
         symlink(dir.join("outside"), dir.join("scene/outside_dir")).unwrap();
         symlink("/etc/passwd", dir.join("scene/etc_passwd")).unwrap();
         symlink("/etc/passwd", dir.join("web/etc_passwd")).unwrap();
+        // A plain name inside the scene that leads to a dotfile.
+        symlink(dir.join("scene/.git/config"), dir.join("scene/config_link")).unwrap();
         // Inside the scene: allowed.
         symlink(dir.join("scene/tiles/0_0.tile"), dir.join("scene/tiles/alias.tile")).unwrap();
     }
     let mut config = ServeConfig::new(dir.join("web"), dir.join("scene"));
-    config.allowed_hosts = vec!["forest.test".into()];
+    // Given as a user might type it: case, a port, a final dot.
+    config.allowed_hosts = vec!["Forest.Test.:8080".into()];
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
     Server { addr: rx.recv().unwrap(), dir }
@@ -75,6 +78,7 @@ fn links_out_of_the_roots_dotfiles_and_traversals_get_404() {
         "/scene/passwd_link",
         "/scene/outside_dir/passwd",
         "/scene/etc_passwd",
+        "/scene/config_link",
         "/etc_passwd",
         "/scene/.env",
         "/scene/.git/config",
@@ -114,6 +118,8 @@ fn a_loopback_server_answers_loopback_and_allowed_host_names_only() {
         "LOCALHOST".into(),
         format!("[::1]:{port}"),
         "viewer.localhost".into(),
+        "localhost.".into(),
+        "[::ffff:127.0.0.1]".into(),
         format!("forest.test:{port}"),
     ] {
         assert_eq!(with_host(&ok), 200, "{ok}");

@@ -565,10 +565,15 @@ fn bake(args: &BakeArgs) -> Result<()> {
     if report1.swappable > 0 && report1.swappable * 2 >= report1.rows {
         bail!(
             "placements {}: the x/longitude and y/latitude columns look swapped: {} of {} rows have a latitude \
-             beyond ±90° and a longitude that would be a valid latitude; pass --swap-xy (or rename the columns)",
+             beyond ±90° and a longitude that would be a valid latitude; {}",
             args.placements.display(),
             report1.swappable,
-            report1.rows
+            report1.rows,
+            if args.swap_xy {
+                "they are so with --swap-xy: leave it out"
+            } else {
+                "pass --swap-xy (or rename the columns)"
+            }
         );
     }
     if source.kind == CoordKind::LonLat && !sample.is_empty() {
@@ -602,7 +607,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
                     Crs::utm_for(median(&mut lons), median(&mut lats))?
                 }
             };
-            (Crs::from_epsg(4326)?, dst)
+            // A GeoJSON may name a geographic CRS of its own (ETRS89, NAD83).
+            (Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?, dst)
         }
         CoordKind::Projected => {
             let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
@@ -647,7 +653,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
     };
     drop(projected_sample);
     let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
-    let model_heights: Vec<f32> = species.iter().map(|(_, m)| m.height().max(1e-3)).collect();
+    // (The importer refuses models without height.)
+    let model_heights: Vec<f32> = species.iter().map(|(_, m)| m.height()).collect();
     let species_of = |label: &str| {
         model_index(label)
             .or_else(|| maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))

@@ -113,6 +113,8 @@ pub struct PlacementSet {
     pub rows: Vec<Placement>,
     /// What happened.
     pub report: Report,
+    /// The EPSG code a GeoJSON file names in its `crs` member, if any.
+    pub declared_epsg: Option<u32>,
 }
 
 /// Text encoding of a CSV file.
@@ -122,6 +124,7 @@ pub enum Encoding {
     #[default]
     Auto,
     /// UTF-8 only: rows with other bytes are skipped and counted.
+    #[value(name = "utf-8", alias = "utf8")]
     Utf8,
     /// Windows-1252 (a superset of Latin-1 / ISO-8859-1), as older spreadsheets export.
     Latin1,
@@ -236,17 +239,26 @@ fn parse_f64(s: &str) -> Option<f64> {
     if t.is_empty() {
         return None;
     }
-    t.parse::<f64>().ok().or_else(|| parse_decimal_comma(t))
+    t.parse::<f64>().ok()
 }
 
-/// `52,3731` or `1.234,5` (a decimal comma, as European spreadsheets write
-/// numbers; only reachable where the field separator is not a comma).
-fn parse_decimal_comma(t: &str) -> Option<f64> {
-    let (int, frac) = t.rsplit_once(',')?;
-    if frac.contains('.') || !frac.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    format!("{}.{frac}", int.replace('.', "")).parse().ok()
+/// A number of a CSV whose separator is not a comma: `52.37`, or with a
+/// decimal comma as European spreadsheets write it, `52,37` or `1.234,5`.
+fn parse_decimal_comma(s: &str) -> Option<f64> {
+    parse_f64(s).or_else(|| {
+        let (int, frac) = s.trim().rsplit_once(',')?;
+        if frac.is_empty() || !frac.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        // Thousands separators: groups of three digits after the first.
+        let mut groups = int.split('.');
+        let first = groups.next()?;
+        let rest: Vec<&str> = groups.collect();
+        if !rest.iter().all(|g| g.len() == 3 && g.bytes().all(|b| b.is_ascii_digit())) {
+            return None;
+        }
+        format!("{first}{}.{frac}", rest.concat()).parse().ok()
+    })
 }
 
 /// The field separator of a header line: the most frequent of `,` `;` tab `|`
@@ -297,7 +309,7 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOption
         rows.push(p);
         Ok(())
     })?;
-    Ok(PlacementSet { kind, rows, report })
+    Ok(PlacementSet { kind, rows, report, declared_epsg: None })
 }
 
 /// Streams CSV rows: each usable row goes to `f` as it is read (memory stays
@@ -324,6 +336,7 @@ pub fn stream_csv<R: std::io::Read>(
     if options.swap_xy {
         std::mem::swap(&mut cols.x, &mut cols.y);
     }
+    let number = if delimiter == b',' { parse_f64 } else { parse_decimal_comma };
     let mut record = csv::ByteRecord::new();
     let mut row = 0u64;
     loop {
@@ -357,17 +370,17 @@ pub fn stream_csv<R: std::io::Read>(
         if row_fell_back {
             report.not_utf8 += 1;
         }
-        let (Some(x), Some(y)) = (x.as_deref().and_then(parse_f64), y.as_deref().and_then(parse_f64)) else {
+        let (Some(x), Some(y)) = (x.as_deref().and_then(number), y.as_deref().and_then(number)) else {
             report.skip("missing or non-numeric coordinates", row);
             continue;
         };
         let p = Placement {
             x,
             y,
-            z: z.as_deref().and_then(parse_f64),
-            height_m: height.as_deref().and_then(parse_f64).map(|h| h as f32),
+            z: z.as_deref().and_then(number),
+            height_m: height.as_deref().and_then(number).map(|h| h as f32),
             species: species.as_deref().map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
-            yaw_deg: yaw.as_deref().and_then(parse_f64).map(|v| v as f32),
+            yaw_deg: yaw.as_deref().and_then(number).map(|v| v as f32),
             id: id.as_deref().and_then(|s| s.trim().parse::<u64>().ok()),
             row,
         };
@@ -449,7 +462,7 @@ impl PlacementSource {
                 let bytes =
                     std::fs::read(path).with_context(|| format!("cannot read placements {}", path.display()))?;
                 let set = read_geojson(&bytes, options).with_context(|| format!("placements {}", path.display()))?;
-                let declared_epsg = geojson_crs(&bytes);
+                let declared_epsg = set.declared_epsg;
                 Ok(Self {
                     path: path.to_path_buf(),
                     delimiter: b',',
@@ -482,9 +495,9 @@ impl PlacementSource {
 }
 
 /// The EPSG code of a GeoJSON `crs` member (GeoJSON 2008, still written by
-/// GIS exports): `"EPSG:28992"`, `"urn:ogc:def:crs:EPSG::28992"`; CRS84 is none.
-fn geojson_crs(bytes: &[u8]) -> Option<u32> {
-    let v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+/// GIS exports): `"EPSG:28992"`, `"urn:ogc:def:crs:EPSG::28992"`; CRS84 and
+/// EPSG:4326 are none (the GeoJSON default).
+fn geojson_crs(v: &serde_json::Value) -> Option<u32> {
     let name = v.get("crs")?.get("properties")?.get("name")?.as_str()?;
     let code = name.rsplit(':').next()?;
     code.parse().ok().filter(|&c| c != 4326)
@@ -603,11 +616,23 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
             points_read.push(p);
         }
     }
-    let kind = if options.projected || geojson_crs(bytes).is_some() {
+    let declared_epsg = geojson_crs(&v);
+    // A declared geographic CRS (ETRS89, NAD83) is lon/lat too.
+    let declared_projected =
+        declared_epsg.is_some_and(|e| crate::reproject::Crs::from_epsg(e).map_or(true, |c| !c.is_geographic()));
+    let kind = if options.projected || declared_projected {
         CoordKind::Projected
     } else {
         // Projected numbers read as degrees would all be "out of range": say why.
         let beyond = points_read.iter().filter(|p| p.x.abs() > 180.0 || p.y.abs() > 90.0).count();
+        let swappable =
+            points_read.iter().filter(|p| p.y.abs() > 90.0 && p.y.abs() <= 180.0 && p.x.abs() <= 90.0).count();
+        if swappable > 0 && swappable * 2 >= points_read.len() && !options.swap_xy {
+            bail!(
+                "{swappable} of {} points are [latitude, longitude], not GeoJSON's [longitude, latitude]: pass --swap-xy",
+                points_read.len()
+            );
+        }
         if beyond > 0 && beyond * 2 >= points_read.len() {
             let p = points_read.iter().find(|p| p.x.abs() > 180.0 || p.y.abs() > 90.0).expect("counted");
             bail!(
@@ -627,7 +652,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
         }
     }
     report.kept = rows.len() as u64;
-    Ok(PlacementSet { kind, rows, report })
+    Ok(PlacementSet { kind, rows, report, declared_epsg })
 }
 
 #[cfg(test)]
@@ -732,9 +757,13 @@ mod tests {
         assert_eq!(detect_delimiter(b"x\ty\tspecies\n"), b'\t');
         assert_eq!(detect_delimiter(b"\"a;b\",lat,lon\n"), b',', "separators inside quotes do not count");
         assert_eq!(detect_delimiter(b"lon\n"), b',');
-        assert_eq!(parse_f64("52,3731"), Some(52.3731));
-        assert_eq!(parse_f64("1.234,5"), Some(1234.5));
-        assert_eq!(parse_f64("-4,5e"), None);
+        assert_eq!(parse_decimal_comma("52,3731"), Some(52.3731));
+        assert_eq!(parse_decimal_comma("1.234,5"), Some(1234.5));
+        assert_eq!(parse_decimal_comma("7.5"), Some(7.5));
+        for bad in ["-4,5e", "1.2.3,4", "1,", "12.34,5"] {
+            assert_eq!(parse_decimal_comma(bad), None, "{bad}");
+        }
+        assert_eq!(parse_f64("52,37"), None, "no decimal commas where the separator is a comma");
         let csv = "lat;lon;soort;boomhoogte\n52,3731;4,8922;Tilia;12,5\n52,3740;4,8930;Quercus;\n";
         let set = read_csv(csv.as_bytes(), b';', &ReadOptions::default()).unwrap();
         assert_eq!(set.rows.len(), 2, "{:?}", set.report);
@@ -772,7 +801,17 @@ mod tests {
         assert_eq!((set.kind, set.rows[0].x), (CoordKind::Projected, 121000.5));
         let named = br#"{"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"urn:ogc:def:crs:EPSG::28992"}},
             "features":[{"type":"Feature","geometry":{"type":"Point","coordinates":[121000.5,487000.25]},"properties":{}}]}"#;
-        assert_eq!(geojson_crs(named), Some(28992));
+        assert_eq!(geojson_crs(&serde_json::from_slice(named).unwrap()), Some(28992));
+        // ETRS89 (geographic) is lon/lat, not projected.
+        let etrs = br#"{"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"EPSG:4258"}},
+            "features":[{"type":"Feature","geometry":{"type":"Point","coordinates":[4.9,52.37]},"properties":{}}]}"#;
+        let set = read_geojson(etrs, &ReadOptions::default()).unwrap();
+        assert_eq!((set.kind, set.declared_epsg, set.rows.len()), (CoordKind::LonLat, Some(4258), 1));
+        // Sydney as [lat, lon]: the hint is --swap-xy, not a CRS.
+        let sydney = br#"{"type":"FeatureCollection","features":[
+            {"type":"Feature","geometry":{"type":"Point","coordinates":[-33.87,151.21]},"properties":{}}]}"#;
+        let e = read_geojson(sydney, &ReadOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("--swap-xy") && !e.contains("--input-crs"), "{e}");
         assert_eq!(read_geojson(named, &ReadOptions::default()).unwrap().kind, CoordKind::Projected);
     }
 }

@@ -292,7 +292,7 @@ fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
     }
     let dir = tmp("european");
     // 300 trees in Vienna as a German spreadsheet exports them: semicolons,
-    // decimal commas, Windows-1252 (49 rows with ß/ü/ö), one model.
+    // decimal commas, Windows-1252 (50 rows with ß), one model.
     let mut csv = String::from("Baum-Nr;lat;lon;Baumart;Höhe\r\n");
     for i in 0..300 {
         let species = if i % 6 == 0 { "Roßkastanie" } else { "Linde" };

@@ -33,29 +33,26 @@ fn owned(dir: &Path) -> BTreeSet<String> {
     list["files"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect()
 }
 
-/// Runs `cmd` on `dir` and checks that every file that went away was one the
-/// earlier bake listed as its own. Returns the command's stderr.
-fn only_own_files_removed(dir: &Path, cmd: &mut Command, should_succeed: bool) -> String {
+/// Runs `cmd` on `dir` and checks that every file that went away is one that
+/// a bake of this test wrote (`written`: the lists of the bakes so far, kept
+/// by the test, not by the code under test). Returns the command's stderr.
+fn only_own_files_removed(
+    dir: &Path,
+    cmd: &mut Command,
+    should_succeed: bool,
+    written: &mut BTreeSet<String>,
+) -> String {
     let before = files(dir);
-    let own = if dir.join(".sylva-bake-files.json").exists() {
-        owned(dir)
-    } else if dir.join("scene.json").exists() && std::fs::read(dir.join("scene.json")).unwrap() != b"{}" {
-        // A scene baked before file lists: its manifest and data folders.
-        before
-            .iter()
-            .filter(|f| ["scene.json", "species/", "tiles/", "index/"].iter().any(|p| f.starts_with(p)))
-            .cloned()
-            .collect()
-    } else {
-        BTreeSet::new()
-    };
     let out = cmd.output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.success(), should_succeed, "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     let after = files(dir);
     for gone in before.difference(&after) {
-        assert!(own.contains(gone), "{gone} was removed but no bake wrote it\n{stderr}");
+        assert!(written.contains(gone), "{gone} was removed but no bake of this test wrote it\n{stderr}");
+    }
+    if should_succeed {
+        written.extend(owned(dir));
     }
     stderr
 }
@@ -66,21 +63,22 @@ fn a_bake_removes_only_files_a_bake_wrote() {
     let scene = dir.join("scene");
     run(&mut demo(&scene, 300, 1));
     let first = owned(&scene);
+    let mut written = first.clone();
     assert!(first.contains("scene.json") && first.iter().any(|f| f.starts_with("tiles/")), "{first:?}");
     assert_eq!(files(&scene), first.iter().cloned().chain([".sylva-bake-files.json".to_string()]).collect());
     // A re-bake with fewer trees replaces the scene: old tiles it does not
     // write again are removed, and only those.
-    only_own_files_removed(&scene, &mut demo(&scene, 40, 2), true);
+    only_own_files_removed(&scene, &mut demo(&scene, 40, 2), true, &mut written);
     let second = owned(&scene);
     assert!(second.len() < first.len(), "{} → {} files", first.len(), second.len());
     assert_eq!(files(&scene), second.iter().cloned().chain([".sylva-bake-files.json".to_string()]).collect());
     // Inputs kept in the scene folder: refused, nothing touched.
     std::fs::write(scene.join("trees.csv"), "lon,lat\n15.4,48.4\n").unwrap();
     std::fs::write(scene.join("tiles/notes.txt"), "mine").unwrap();
-    let e = only_own_files_removed(&scene, &mut demo(&scene, 40, 3), false);
+    let e = only_own_files_removed(&scene, &mut demo(&scene, 40, 3), false, &mut written);
     assert!(e.contains("2 files that no bake wrote") && e.contains("trees.csv") && e.contains("--force"), "{e}");
     // With --force the scene is replaced beside them, and they are kept.
-    only_own_files_removed(&scene, demo(&scene, 40, 3).arg("--force"), true);
+    only_own_files_removed(&scene, demo(&scene, 40, 3).arg("--force"), true, &mut written);
     assert_eq!(std::fs::read_to_string(scene.join("tiles/notes.txt")).unwrap(), "mine");
     assert!(scene.join("trees.csv").exists() && scene.join("scene.json").exists());
     // A bake whose input lies in --out is refused, naming it.
@@ -101,10 +99,10 @@ fn a_bake_removes_only_files_a_bake_wrote() {
     std::fs::create_dir_all(&other).unwrap();
     std::fs::write(other.join("scene.json"), "{}").unwrap();
     std::fs::write(other.join("thesis.txt"), "four years").unwrap();
-    let e = only_own_files_removed(&other, &mut demo(&other, 40, 1), false);
+    let e = only_own_files_removed(&other, &mut demo(&other, 40, 1), false, &mut written);
     assert!(e.contains("thesis.txt") && e.contains("scene.json"), "{e}");
     // --force keeps them, and does not write over a scene.json it did not write.
-    let e = only_own_files_removed(&other, demo(&other, 40, 1).arg("--force"), false);
+    let e = only_own_files_removed(&other, demo(&other, 40, 1).arg("--force"), false, &mut written);
     assert!(e.contains("scene.json") && e.contains("no bake wrote"), "{e}");
     assert_eq!(std::fs::read_to_string(other.join("scene.json")).unwrap(), "{}");
     assert_eq!(files(&other).len(), 2, "no working folder left behind");
@@ -118,12 +116,65 @@ fn a_scene_baked_before_file_lists_is_replaced_but_nothing_else() {
     let dir = tmp("legacy");
     let scene = dir.join("scene");
     run(&mut demo(&scene, 100, 1));
+    let mut written = owned(&scene);
     std::fs::remove_file(scene.join(".sylva-bake-files.json")).unwrap();
     std::fs::write(scene.join("README.txt"), "about this scene").unwrap();
-    let e = only_own_files_removed(&scene, &mut demo(&scene, 50, 2), false);
-    assert!(e.contains("README.txt"), "{e}");
+    std::fs::write(scene.join("tiles/notes.txt"), "mine").unwrap();
+    let e = only_own_files_removed(&scene, &mut demo(&scene, 50, 2), false, &mut written);
+    assert!(e.contains("README.txt") && e.contains("tiles/notes.txt"), "{e}");
     std::fs::remove_file(scene.join("README.txt")).unwrap();
-    only_own_files_removed(&scene, &mut demo(&scene, 50, 2), true);
+    std::fs::remove_file(scene.join("tiles/notes.txt")).unwrap();
+    only_own_files_removed(&scene, &mut demo(&scene, 50, 2), true, &mut written);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_doctored_list_or_a_planted_link_removes_nothing_of_the_users() {
+    let dir = tmp("doctored");
+    let scene = dir.join("scene");
+    run(&mut demo(&scene, 300, 1));
+    let mut written = owned(&scene);
+    // The user's files: one beside the scene, one outside reached by a link.
+    std::fs::create_dir_all(dir.join("documents")).unwrap();
+    std::fs::write(dir.join("documents/important.doc"), "keep").unwrap();
+    std::fs::write(dir.join("outside.txt"), "keep").unwrap();
+    std::fs::write(scene.join("thesis.txt"), "keep").unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(dir.join("documents"), scene.join("lnk")).unwrap();
+    // A list that claims them (and tries to climb out).
+    let mut list: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(scene.join(".sylva-bake-files.json")).unwrap()).unwrap();
+    for f in ["thesis.txt", "lnk", "lnk/important.doc", "../outside.txt", "tiles/../thesis.txt"] {
+        list["files"].as_array_mut().unwrap().push(f.into());
+    }
+    std::fs::write(scene.join(".sylva-bake-files.json"), serde_json::to_vec(&list).unwrap()).unwrap();
+    let e = only_own_files_removed(&scene, &mut demo(&scene, 40, 2), false, &mut written);
+    assert!(e.contains("thesis.txt"), "the list does not make them the bake's: {e}");
+    only_own_files_removed(&scene, demo(&scene, 40, 2).arg("--force"), true, &mut written);
+    for kept in [dir.join("documents/important.doc"), dir.join("outside.txt"), scene.join("thesis.txt")] {
+        assert_eq!(std::fs::read_to_string(&kept).unwrap(), "keep", "{}", kept.display());
+    }
+    // A folder of the scene replaced by a link to the user's documents: nothing
+    // is written or removed through it.
+    #[cfg(unix)]
+    {
+        std::fs::remove_dir_all(scene.join("species")).unwrap();
+        std::os::unix::fs::symlink(dir.join("documents"), scene.join("species")).unwrap();
+        let e = only_own_files_removed(&scene, demo(&scene, 40, 3).arg("--force"), false, &mut written);
+        assert!(e.contains("species"), "{e}");
+        assert_eq!(std::fs::read_dir(dir.join("documents")).unwrap().count(), 1, "nothing written through the link");
+        assert!(scene.join("scene.json").exists(), "the old scene is left as it was");
+    }
+    // A folder beside --out whose name only starts like an old working folder.
+    std::fs::create_dir_all(dir.join(".scene.tmp-2023-backup")).unwrap();
+    std::fs::remove_file(scene.join("thesis.txt")).unwrap();
+    #[cfg(unix)]
+    {
+        std::fs::remove_file(scene.join("species")).unwrap();
+        std::fs::remove_file(scene.join("lnk")).unwrap();
+    }
+    run(&mut demo(&scene, 40, 4));
+    assert!(dir.join(".scene.tmp-2023-backup").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

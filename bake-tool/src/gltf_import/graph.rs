@@ -90,8 +90,8 @@ pub fn check(doc: &gltf::Document, roots: &[usize]) -> Result<()> {
             .find(|&n| children[n].iter().all(|&c| instances[c] <= MAX_NODE_INSTANCES));
         match culprit {
             Some(n) => bail!(
-                "{} expands to {} node instances (at most {MAX_NODE_INSTANCES}): its children list nodes that are \
-                 also listed elsewhere; glTF nodes must form trees",
+                "{} expands to {} node instances (at most {MAX_NODE_INSTANCES}): a tree model has far fewer; check \
+                 for nodes listed by several parents (glTF nodes must form trees)",
                 describe(doc, n),
                 if instances[n] >= u64::MAX / 2 { "more than 10^18".to_string() } else { instances[n].to_string() }
             ),

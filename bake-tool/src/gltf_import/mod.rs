@@ -135,6 +135,10 @@ pub const MAX_TRIANGLES: usize = 16 << 20;
 pub const MAX_MODEL_EXTENT: f32 = 1.0e6;
 /// Smallest model height, in model units.
 pub const MIN_MODEL_HEIGHT: f32 = 1.0e-4;
+/// Most decoded texture bytes (RGBA8) one model may hold.
+pub const MAX_TEXTURE_BYTES: u64 = 1 << 30;
+/// Node names kept per path for leaf/wood classification (the nearest ones).
+const MAX_NAMES: usize = 16;
 
 /// Imports a `.glb` or `.gltf` file. External buffers and images are read
 /// only from regular files inside the model's folder ([`sources`]).
@@ -164,6 +168,14 @@ pub fn import(path: &Path, classifier: &Classifier) -> Result<ImportedModel> {
 /// # Errors
 /// As [`import`].
 pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) -> Result<ImportedModel> {
+    // The gltf crate subtracts the 12-byte header from the GLB's declared
+    // length unchecked (found by the import_gltf fuzz target).
+    if let Some(declared) = bytes.strip_prefix(b"glTF").and_then(|b| b.get(4..8)) {
+        let declared = u32::from_le_bytes(declared.try_into().expect("4 bytes"));
+        if declared < 12 {
+            bail!("not a valid GLB file: its header declares {declared} bytes, less than the header itself");
+        }
+    }
     let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
     let buffers = sources::load_buffers(&gltf.document, gltf.blob.as_deref(), base)?;
     let doc = &gltf.document;
@@ -171,6 +183,7 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     graph::check(doc, &roots)?;
     let mut images: Vec<Option<image::RgbaImage>> = vec![None; doc.images().len()];
     let mut model = ImportedModel::default();
+    let mut texture_bytes = 0u64;
     // Materials are created on first use, with index `materials.len()` for the default one.
     let mut material_slot: Vec<Option<u16>> = vec![None; doc.materials().len() + 1];
     let nodes: Vec<gltf::Node<'_>> = doc.nodes().collect();
@@ -181,6 +194,11 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
         let local = Mat4::from_cols_array_2d(&node.transform().matrix());
         let world = parent * local;
         if let Some(n) = node.name() {
+            // The nearest names decide leaf or wood; a bounded list keeps a deep
+            // chain of named nodes linear.
+            if names.len() == MAX_NAMES {
+                names.remove(0);
+            }
             names.push(n.to_string());
         }
         if let Some(mesh) = node.mesh() {
@@ -198,6 +216,14 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
                     Some(m) => m,
                     None => {
                         let m = import_material(&mat, &mesh_names, classifier, &buffers, base, &mut images)?;
+                        texture_bytes += m.texture.as_ref().map_or(0, |t| t.as_raw().len() as u64);
+                        if texture_bytes > MAX_TEXTURE_BYTES {
+                            bail!(
+                                "the model's textures decode to more than {} MiB (material {:?}): downscale them",
+                                MAX_TEXTURE_BYTES >> 20,
+                                m.name
+                            );
+                        }
                         model.materials.push(m);
                         let idx = u16::try_from(model.materials.len() - 1)
                             .map_err(|_| anyhow!("more than 65535 materials"))?;
@@ -337,7 +363,20 @@ fn append_primitive(
     }
     let position_accessor = prim.get(&gltf::Semantic::Positions).ok_or_else(|| anyhow!("no POSITION attribute"))?;
     let n = position_accessor.count();
+    // glTF: every attribute of a primitive has the same count.
+    for (semantic, accessor) in prim.attributes() {
+        if accessor.count() != n {
+            bail!(
+                "accessor {} ({semantic:?} of {what}) has {} elements for {n} vertices",
+                accessor.index(),
+                accessor.count()
+            );
+        }
+    }
     let index_count = prim.indices().map_or(n, |a| a.count());
+    if !index_count.is_multiple_of(3) {
+        bail!("{index_count} indices are no whole number of triangles");
+    }
     if model.vertices.len().saturating_add(n) > MAX_VERTICES || model.triangles.len() + index_count / 3 > MAX_TRIANGLES
     {
         bail!(

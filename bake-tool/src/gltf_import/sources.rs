@@ -8,12 +8,13 @@
 //! buffer reads at most its declared `byteLength`.
 
 use std::io::Read;
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use base64::Engine as _;
 
-/// Largest buffer a tree model may declare (a 10^6-triangle tree is ~50 MB).
+/// Most bytes all buffers of a tree model may declare together (a
+/// 10^6-triangle tree is ~50 MB).
 pub const MAX_BUFFER_BYTES: usize = 1 << 30;
 /// Largest encoded image file.
 pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
@@ -25,14 +26,19 @@ pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
 /// A buffer that is missing, too short, larger than [`MAX_BUFFER_BYTES`], or
 /// whose URI points outside the model's folder; the message names the buffer.
 pub fn load_buffers(doc: &gltf::Document, blob: Option<&[u8]>, base: Option<&Path>) -> Result<Vec<Vec<u8>>> {
+    let total = doc.buffers().fold(0usize, |sum, b| sum.saturating_add(b.length()));
+    if total > MAX_BUFFER_BYTES {
+        bail!("the buffers declare {total} bytes together; a tree model's buffers hold at most {MAX_BUFFER_BYTES}");
+    }
     let mut out = Vec::with_capacity(doc.buffers().len());
     for buffer in doc.buffers() {
         let i = buffer.index();
         let declared = buffer.length();
-        if declared > MAX_BUFFER_BYTES {
-            bail!("buffer {i} declares {declared} bytes; a tree model's buffers hold at most {MAX_BUFFER_BYTES}");
-        }
         let mut data = match buffer.source() {
+            // Only the first buffer may be the GLB binary chunk (glTF 2.0 §4.4.3.3).
+            gltf::buffer::Source::Bin if i > 0 => {
+                bail!("buffer {i} refers to the GLB binary chunk, which only buffer 0 may")
+            }
             gltf::buffer::Source::Bin => {
                 let blob =
                     blob.ok_or_else(|| anyhow!("buffer {i} refers to the GLB binary chunk, which is missing"))?;
@@ -87,16 +93,13 @@ pub fn read_uri(uri: &str, base: Option<&Path>, max_bytes: u64) -> Result<Vec<u8
 /// When the URI is absolute, has a scheme or `..`, or resolves (through a
 /// symbolic link) to a place outside `base`.
 pub fn confined_path(base: &Path, uri: &str) -> Result<PathBuf> {
-    let decoded = percent_decode(uri);
     let outside = || anyhow!("{uri:?} points outside the model's folder {}: refused", base.display());
-    // A scheme ("file:", "http:", "C:") is no relative path.
-    if decoded.contains(':') || decoded.starts_with(['/', '\\']) || decoded.contains('\\') {
+    let decoded = sylva::paths::percent_decode(uri).ok_or_else(|| anyhow!("{uri:?} is not a valid URI"))?;
+    // No scheme ("file:", "http:", "C:"), root, `..` or backslash.
+    if !sylva::paths::is_plain_relative(&decoded, true) {
         return Err(outside());
     }
     let rel = Path::new(&decoded);
-    if !rel.components().all(|c| matches!(c, Component::Normal(_) | Component::CurDir)) {
-        return Err(outside());
-    }
     let base_real =
         std::fs::canonicalize(base).with_context(|| format!("cannot resolve the model's folder {}", base.display()))?;
     let full = base_real.join(rel);
@@ -114,24 +117,6 @@ fn short(uri: &str) -> String {
     } else {
         uri.to_string()
     }
-}
-
-fn percent_decode(s: &str) -> String {
-    let bytes = s.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        if bytes[i] == b'%' {
-            if let Some(v) = s.get(i + 1..i + 3).and_then(|h| u8::from_str_radix(h, 16).ok()) {
-                out.push(v);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(bytes[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 #[cfg(test)]

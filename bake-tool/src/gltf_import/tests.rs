@@ -278,6 +278,10 @@ fn broken_inputs_give_errors_not_panics() {
     let mut truncated = multi_primitive_glb();
     truncated.truncate(truncated.len() / 2);
     assert!(import_slice(&truncated, None, &c).is_err());
+    // A GLB header declaring fewer bytes than itself (found by the fuzz target).
+    let mut short = multi_primitive_glb();
+    short[8..12].copy_from_slice(&5u32.to_le_bytes());
+    assert!(import_slice(&short, None, &c).unwrap_err().to_string().contains("header declares 5 bytes"));
     let empty = glb(&json!({"asset": {"version": "2.0"}, "nodes": [{"name": "x"}]}), &[]);
     let e = import_slice(&empty, None, &c).unwrap_err().to_string();
     assert!(e.contains("no triangle meshes"), "{e}");

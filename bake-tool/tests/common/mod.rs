@@ -4,9 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The binary, without a runtime folder as on a headless machine (it makes its own).
 pub fn bin() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_sylva-bake"));
-    c.env("XDG_RUNTIME_DIR", std::env::var("XDG_RUNTIME_DIR").unwrap_or_else(|_| "/tmp".into()));
+    c.env_remove("XDG_RUNTIME_DIR");
     c
 }
 
@@ -25,6 +26,8 @@ pub fn run(cmd: &mut Command) -> Output {
         String::from_utf8_lossy(&out.stderr),
         String::from_utf8_lossy(&out.stdout)
     );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "a false 'error:' line on a run that worked: {stderr}");
     out
 }
 
