@@ -111,8 +111,8 @@ fn a_bake_removes_only_files_a_bake_wrote() {
 
 #[test]
 fn a_scene_baked_before_file_lists_is_replaced_but_nothing_else() {
-    // Scenes from earlier versions have no list: scene.json and the files
-    // under species/, tiles/ and index/ count as the bake's.
+    // Scenes from earlier versions have no list: a valid scene.json and the
+    // files of the scene layout count as the bake's, nothing else.
     let dir = tmp("legacy");
     let scene = dir.join("scene");
     run(&mut demo(&scene, 100, 1));

@@ -176,6 +176,7 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
             bail!("not a valid GLB file: its header declares {declared} bytes, less than the header itself");
         }
     }
+    check_position_indices(bytes)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
     let buffers = sources::load_buffers(&gltf.document, gltf.blob.as_deref(), base)?;
     let doc = &gltf.document;
@@ -249,6 +250,33 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     check_extent(&model)?;
     recenter(&mut model);
     Ok(model)
+}
+
+/// gltf-json 1.4 reads a primitive's POSITION accessor by its index before it
+/// has checked the index (a panic on hostile input, found by the import_gltf
+/// fuzz target): the indices are checked here first.
+fn check_position_indices(bytes: &[u8]) -> Result<()> {
+    let json = if bytes.starts_with(b"glTF") {
+        gltf::Glb::from_slice(bytes).map_err(|e| anyhow!("not a valid GLB file: {e}"))?.json
+    } else {
+        std::borrow::Cow::Borrowed(bytes)
+    };
+    let Ok(root) = serde_json::from_slice::<serde_json::Value>(&json) else {
+        return Ok(()); // The gltf crate says what is wrong with it.
+    };
+    let accessors = root.get("accessors").and_then(|a| a.as_array()).map_or(0, Vec::len) as u64;
+    let meshes = root.get("meshes").and_then(|m| m.as_array()).map(Vec::as_slice).unwrap_or_default();
+    for (m, mesh) in meshes.iter().enumerate() {
+        let primitives = mesh.get("primitives").and_then(|p| p.as_array()).map(Vec::as_slice).unwrap_or_default();
+        for (p, primitive) in primitives.iter().enumerate() {
+            if let Some(index) = primitive.pointer("/attributes/POSITION").and_then(serde_json::Value::as_u64) {
+                if index >= accessors {
+                    bail!("mesh {m} primitive {p}: POSITION names accessor {index}, but there are {accessors}");
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A tree has a height, and a size a float can scale: a flat model (height 0,

@@ -282,6 +282,11 @@ fn broken_inputs_give_errors_not_panics() {
     let mut short = multi_primitive_glb();
     short[8..12].copy_from_slice(&5u32.to_le_bytes());
     assert!(import_slice(&short, None, &c).unwrap_err().to_string().contains("header declares 5 bytes"));
+    // A POSITION accessor index past the accessors (gltf-json's check panicked).
+    let (mut g, bin) = multi_primitive_parts();
+    g["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99);
+    let e = import_slice(&glb(&g, &bin), None, &c).unwrap_err().to_string();
+    assert!(e.contains("POSITION names accessor 99"), "{e}");
     let empty = glb(&json!({"asset": {"version": "2.0"}, "nodes": [{"name": "x"}]}), &[]);
     let e = import_slice(&empty, None, &c).unwrap_err().to_string();
     assert!(e.contains("no triangle meshes"), "{e}");
