@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use sylva::format::{Manifest, TileEntry};
 
 use crate::out_dir::OutDir;
-use crate::scene_write::finish_scene;
+use crate::scene_write::{create_dir, finish_scene};
 
 /// Reads and checks the shard manifests, copies packs (from shard 0), tiles and
 /// id sidecars into `out` and writes the index and manifest of the whole.
@@ -66,8 +66,8 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
         entry.trees = shards.iter().map(|(_, m)| m.species[s].trees).sum();
     }
     out.write(|tmp| {
-        std::fs::create_dir_all(tmp.join("species"))?;
-        std::fs::create_dir_all(tmp.join("tiles"))?;
+        create_dir(&tmp.join("species"))?;
+        create_dir(&tmp.join("tiles"))?;
         for sp in &first.species {
             copy(&shards[0].0, tmp, &sp.pack)?;
         }

@@ -89,6 +89,16 @@ pub fn write_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Resul
     out.write(|tmp| write_into(input, tmp, log))
 }
 
+/// Writes a file; the error names it (a full disk, a read-only folder).
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Creates a folder and its parents; the error names it.
+pub fn create_dir(path: &Path) -> Result<()> {
+    std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))
+}
+
 /// Bytes of a pack's header, section table and `META` section (the first section).
 fn pack_head_bytes(pack: &[u8]) -> u64 {
     let at = sylva::format::pack::PACK_HEADER_BYTES;
@@ -118,9 +128,9 @@ pub fn finish_scene(
     base.version = SCENE_VERSION;
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);
-        std::fs::create_dir_all(dir.join("index"))?;
+        create_dir(&dir.join("index"))?;
         for (url, node) in &built.nodes {
-            std::fs::write(dir.join(url), node.encode())?;
+            write_file(&dir.join(url), &node.encode())?;
         }
         base.index = Some(built.reference);
         base.tiles = Vec::new();
@@ -131,13 +141,13 @@ pub fn finish_scene(
     let bytes = base.encode();
     // Validate what we wrote with the same decoder the viewer uses.
     Manifest::decode("scene.json", &bytes)?;
-    std::fs::write(dir.join("scene.json"), bytes)?;
+    write_file(&dir.join("scene.json"), &bytes)?;
     Ok(base)
 }
 
 fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<SceneSummary> {
-    std::fs::create_dir_all(dir.join("species"))?;
-    std::fs::create_dir_all(dir.join("tiles"))?;
+    create_dir(&dir.join("species"))?;
+    create_dir(&dir.join("tiles"))?;
     let t0 = Instant::now();
     let bake_packs = input.shard.is_none_or(|(index, _)| index == 0);
     let gpu_and_pipelines = if bake_packs {
@@ -170,7 +180,7 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
         };
         let built =
             build_pack(name, model, &input.pack, gpu, pipelines).with_context(|| format!("species {name:?}"))?;
-        std::fs::write(dir.join(&file), &built.bytes)?;
+        write_file(&dir.join(&file), &built.bytes)?;
         if let Some(dump) = &input.debug_dump {
             dump_billboards(dump, name, &built)?;
         }
@@ -225,8 +235,8 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
             .map(|bt| -> Result<(TileEntry, u64)> {
                 let stem = format!("tiles/{}_{}", bt.tile.tile_x, bt.tile.tile_y);
                 let bytes = bt.tile.encode();
-                std::fs::write(dir.join(format!("{stem}.tile")), &bytes)?;
-                std::fs::write(dir.join(format!("{stem}.ids")), encode_ids(&bt.ids))?;
+                write_file(&dir.join(format!("{stem}.tile")), &bytes)?;
+                write_file(&dir.join(format!("{stem}.ids")), &encode_ids(&bt.ids))?;
                 Ok((
                     TileEntry {
                         x: bt.tile.tile_x,
@@ -275,7 +285,7 @@ fn write_into(input: &SceneInput, dir: &Path, log: &dyn Fn(&str)) -> Result<Scen
 
 /// Writes each billboard layer (colour and normals) as PNG for a look.
 fn dump_billboards(dir: &Path, name: &str, built: &crate::pack_build::BuiltPack) -> Result<()> {
-    std::fs::create_dir_all(dir)?;
+    create_dir(dir)?;
     let Some(bb) = &built.meta.billboards else { return Ok(()) };
     let s = bb.texture.size;
     let n = built.billboard_color.len() as u32;

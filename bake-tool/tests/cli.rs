@@ -320,6 +320,9 @@ fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
     assert!(log.contains("50 rows are not UTF-8: read as Windows-1252"), "{log}");
     assert!(log.contains("48.20") && log.contains("16.37") && log.contains("every tree uses oak"), "{log}");
     assert_eq!(inspect_json(&dir.join("vienna"))["trees_total"], 300);
+    // A default height no tree has would scale trees to the stratosphere: refused up front.
+    let e = fails(&mut bake(&path, &dir.join("tall"), &["--default-height", "1e30"]));
+    assert!(e.contains("--default-height") && e.contains("below 200"), "{e}");
     // Sydney with its columns swapped: latitudes beyond ±90 give it away.
     let swapped = dir.join("sydney.csv");
     std::fs::write(&swapped, "lat,lon\n151.2093,-33.8688\n151.2100,-33.8690\n151.2110,-33.8700\n").unwrap();

@@ -216,7 +216,7 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
                 let material = match material_slot[slot_index] {
                     Some(m) => m,
                     None => {
-                        let m = import_material(&mat, &mesh_names, classifier, &buffers, base, &mut images)?;
+                        let m = import_material(&mat, &mesh_names, classifier, doc, &buffers, base, &mut images)?;
                         texture_bytes += m.texture.as_ref().map_or(0, |t| t.as_raw().len() as u64);
                         if texture_bytes > MAX_TEXTURE_BYTES {
                             bail!(
@@ -310,6 +310,7 @@ fn import_material(
     mat: &gltf::Material<'_>,
     names: &[String],
     classifier: &Classifier,
+    doc: &gltf::Document,
     buffers: &[Vec<u8>],
     base: Option<&Path>,
     images: &mut [Option<image::RgbaImage>],
@@ -325,7 +326,7 @@ fn import_material(
             let idx = image.index();
             if images[idx].is_none() {
                 images[idx] = Some(
-                    load_image(&image, buffers, base).with_context(|| format!("image {idx} of material {name:?}"))?,
+                    load_image(doc, idx, buffers, base).with_context(|| format!("image {idx} of material {name:?}"))?,
                 );
             }
             images[idx].clone()
@@ -348,18 +349,29 @@ fn import_material(
     })
 }
 
-fn load_image(image: &gltf::Image<'_>, buffers: &[Vec<u8>], base: Option<&Path>) -> Result<image::RgbaImage> {
-    let encoded: Vec<u8> = match image.source() {
-        gltf::image::Source::View { view, .. } => {
+/// The encoded bytes of image `index`, read from the JSON directly: the gltf
+/// crate's `Image::source` unwraps a missing `mimeType` or `uri` (a panic on
+/// hostile input, found by the import_gltf fuzz target).
+fn load_image(
+    doc: &gltf::Document,
+    index: usize,
+    buffers: &[Vec<u8>],
+    base: Option<&Path>,
+) -> Result<image::RgbaImage> {
+    let json = doc.as_json().images.get(index).ok_or_else(|| anyhow!("missing image"))?;
+    let encoded: Vec<u8> = match (&json.buffer_view, &json.uri) {
+        (Some(view), _) => {
+            let view = doc.views().nth(view.value()).ok_or_else(|| anyhow!("missing buffer view"))?;
             let data = buffers.get(view.buffer().index()).ok_or_else(|| anyhow!("missing buffer"))?;
             let end = view.offset().checked_add(view.length()).ok_or_else(|| anyhow!("bad buffer view"))?;
             data.get(view.offset()..end)
                 .ok_or_else(|| anyhow!("buffer view {}..{end} is outside its buffer", view.offset()))?
                 .to_vec()
         }
-        gltf::image::Source::Uri { uri, .. } => {
+        (None, Some(uri)) => {
             sources::read_uri(uri, base, sources::MAX_IMAGE_BYTES).with_context(|| format!("external image {uri:?}"))?
         }
+        (None, None) => bail!("the image has neither a bufferView nor a uri"),
     };
     let img = image::load_from_memory(&encoded).map_err(|e| anyhow!("cannot decode image (PNG/JPEG/WebP): {e}"))?;
     Ok(img.to_rgba8())

@@ -282,6 +282,14 @@ fn broken_inputs_give_errors_not_panics() {
     let mut short = multi_primitive_glb();
     short[8..12].copy_from_slice(&5u32.to_le_bytes());
     assert!(import_slice(&short, None, &c).unwrap_err().to_string().contains("header declares 5 bytes"));
+    // An image without mimeType (read: the format is in its bytes) or without
+    // any source (an error): the gltf crate unwrapped both.
+    let (mut g, bin) = multi_primitive_parts();
+    g["images"][0] = json!({"bufferView": 3});
+    assert!(import_slice(&glb(&g, &bin), None, &c).unwrap().materials[1].texture.is_some());
+    g["images"][0] = json!({"name": "nothing"});
+    let e = format!("{:#}", import_slice(&glb(&g, &bin), None, &c).unwrap_err());
+    assert!(e.contains("neither a bufferView nor a uri"), "{e}");
     // A POSITION accessor index past the accessors (gltf-json's check panicked).
     let (mut g, bin) = multi_primitive_parts();
     g["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99);
