@@ -295,6 +295,13 @@ fn broken_inputs_give_errors_not_panics() {
     g["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99);
     let e = import_slice(&glb(&g, &bin), None, &c).unwrap_err().to_string();
     assert!(e.contains("POSITION names accessor 99"), "{e}");
+    // ... also with bytes that are no UTF-8 in a key the gltf crate ignores.
+    g["accessors"][0]["unknownKEY"] = json!(1);
+    let mut bytes = glb(&g, &bin);
+    let at = bytes.windows(10).position(|w| w == b"unknownKEY").unwrap();
+    bytes[at + 7] = 0xf9;
+    let e = import_slice(&bytes, None, &c).unwrap_err().to_string();
+    assert!(e.contains("POSITION names accessor 99"), "{e}");
     let empty = glb(&json!({"asset": {"version": "2.0"}, "nodes": [{"name": "x"}]}), &[]);
     let e = import_slice(&empty, None, &c).unwrap_err().to_string();
     assert!(e.contains("no triangle meshes"), "{e}");
