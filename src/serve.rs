@@ -150,14 +150,17 @@ fn parse_range(header: &str, len: u64) -> RangeAsk {
     parsed.unwrap_or(RangeAsk::Ignore)
 }
 
-fn write_head(stream: &mut TcpStream, status: &str, len: u64, headers: &[(&str, String)]) -> std::io::Result<()> {
+fn head_text(status: &str, len: u64, headers: &[(&str, String)]) -> String {
     let mut head = format!("HTTP/1.1 {status}\r\nContent-Length: {len}\r\nConnection: close\r\n");
     head += "Access-Control-Allow-Origin: *\r\nAccess-Control-Expose-Headers: Content-Length, Content-Range\r\n";
     for (k, v) in headers {
         head += &format!("{k}: {v}\r\n");
     }
-    head += "\r\n";
-    stream.write_all(head.as_bytes())
+    head + "\r\n"
+}
+
+fn write_head(stream: &mut TcpStream, status: &str, len: u64, headers: &[(&str, String)]) -> std::io::Result<()> {
+    stream.write_all(head_text(status, len, headers).as_bytes())
 }
 
 fn respond(
@@ -167,11 +170,11 @@ fn respond(
     body: &[u8],
     head_only: bool,
 ) -> std::io::Result<()> {
-    write_head(stream, status, body.len() as u64, headers)?;
+    let mut out = head_text(status, body.len() as u64, headers).into_bytes();
     if !head_only {
-        stream.write_all(body)?;
+        out.extend_from_slice(body);
     }
-    Ok(())
+    stream.write_all(&out)
 }
 
 /// Most bytes of a request head (request line and headers) read.
@@ -270,13 +273,22 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
         headers.push(("Vary", "Accept-Encoding".into()));
         return respond(&mut stream, "200 OK", &headers, &enc.finish()?, head_only);
     }
-    // Everything else is streamed: memory per connection stays small whatever the file.
+    if len <= MAX_BUFFERED_BYTES {
+        // Small files (tiles, index nodes) in one write with their head.
+        let mut body = Vec::with_capacity(len as usize);
+        f.read_to_end(&mut body)?;
+        return respond(&mut stream, "200 OK", &headers, &body, head_only);
+    }
+    // Larger ones are streamed: memory per connection stays small whatever the file.
     write_head(&mut stream, "200 OK", len, &headers)?;
     if !head_only {
         std::io::copy(&mut f, &mut stream)?;
     }
     Ok(())
 }
+
+/// Largest file read whole before it is sent.
+const MAX_BUFFERED_BYTES: u64 = 1 << 20;
 
 /// Largest file compressed on the fly (the viewer's wasm and JS, manifests).
 const MAX_GZIP_BYTES: u64 = 64 << 20;
