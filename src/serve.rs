@@ -177,6 +177,9 @@ fn respond(
     stream.write_all(&out)
 }
 
+/// Most connections served at once (a thread each); more get 503.
+const MAX_CONNECTIONS: usize = 512;
+
 /// Most bytes of a request head (request line and headers) read.
 const MAX_HEAD_BYTES: u64 = 16 << 10;
 
@@ -303,11 +306,20 @@ pub fn serve(config: ServeConfig, addr: &str, on_ready: impl FnOnce(std::net::So
     let bound = listener.local_addr()?;
     on_ready(bound);
     let config = std::sync::Arc::new(config);
+    let open = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
     for stream in listener.incoming() {
-        let Ok(stream) = stream else { continue };
-        let config = config.clone();
+        let Ok(mut stream) = stream else { continue };
+        use std::sync::atomic::Ordering::SeqCst;
+        if open.fetch_add(1, SeqCst) >= MAX_CONNECTIONS {
+            // A flood of connections gets answers, not a thread each.
+            open.fetch_sub(1, SeqCst);
+            let _ = respond(&mut stream, "503 Service Unavailable", &[("Retry-After", "1".into())], b"busy\n", false);
+            continue;
+        }
+        let (config, open) = (config.clone(), open.clone());
         std::thread::spawn(move || {
             let _ = handle(stream, &config, bound.ip());
+            open.fetch_sub(1, SeqCst);
         });
     }
     Ok(())
