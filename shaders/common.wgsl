@@ -48,8 +48,9 @@ struct Batch {
     scale_min: f32,
     scale_log2_step: f32,
     max_height_m: f32,
-    reserved0: u32,
-    reserved1: u32,
+    // BATCH_DENSITY_ORDERED, …
+    flags: u32,
+    reserved: u32,
 };
 
 // Per-species selection data. Must match `GpuSpecies` in src/render/gpu_data.rs.
@@ -146,7 +147,7 @@ const THIN_MIN_FRACTION: f32 = 0.015625;
 fn thinning(b: Batch, view: View) -> vec2<f32> {
     let n = f32(b.instance_count);
     let t = view.viewport.z;
-    if (b.reserved0 & BATCH_DENSITY_ORDERED) == 0u || t <= 0.0 || view.lod.w > 0.5 {
+    if (b.flags & BATCH_DENSITY_ORDERED) == 0u || t <= 0.0 || view.lod.w > 0.5 {
         return vec2<f32>(n, 1.0);
     }
     let center = eye_relative(b.center_m, vec3<f32>(0.0), view);

@@ -45,7 +45,8 @@ fn sample_batch(species: u32, offset: u32, count: u32) -> GpuBatch {
         scale_min: 0.5,
         scale_log2_step: 0.01,
         max_height_m: 30.0,
-        reserved: [0; 2],
+        flags: 0,
+        reserved: 0,
     }
 }
 

@@ -322,7 +322,8 @@ fn make_batch(
         scale_min: s_min,
         scale_log2_step,
         max_height_m: 0.0,
-        reserved: [BATCH_DENSITY_ORDERED, 0],
+        flags: BATCH_DENSITY_ORDERED,
+        reserved: 0,
     };
     let xy_step = cell / 65535.0;
     let z_max_q = (1u32 << Z_BITS) - 1;

@@ -416,6 +416,9 @@ fn write_placements_csv(
     use std::io::Write as _;
     let inverse = Reprojector::new(Crs::projected(epsg)?, &Crs::from_epsg(4326)?)?;
     let heights: Vec<f32> = species.iter().map(|(_, m)| m.height()).collect();
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        scene_write::create_dir(parent)?;
+    }
     let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = std::io::BufWriter::new(file);
     writeln!(w, "id,species,lat,lng,z,height")?;

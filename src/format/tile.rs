@@ -63,11 +63,13 @@ pub struct GpuBatch {
     pub scale_log2_step: f32,
     /// Height of the tallest tree of the batch in metres.
     pub max_height_m: f32,
-    /// Word 0: flags ([`BATCH_DENSITY_ORDERED`]); word 1 reserved, zero.
-    pub reserved: [u32; 2],
+    /// Flags ([`BATCH_DENSITY_ORDERED`]).
+    pub flags: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
 }
 
-/// Batch flag (in `reserved[0]`): the instances are density-ordered, so every
+/// Batch flag (in `flags`): the instances are density-ordered, so every
 /// prefix is an even thinning of the whole (prefix thinning may draw fewer).
 pub const BATCH_DENSITY_ORDERED: u32 = 1;
 const _: () = assert!(std::mem::size_of::<GpuBatch>() == 80);

@@ -199,7 +199,7 @@ pub fn cpu_select(
 pub fn thinning(b: &GpuBatch, view: &ViewUniform) -> (f32, f32) {
     let n = b.instance_count as f32;
     let t = view.viewport[2];
-    if b.reserved[0] & crate::format::tile::BATCH_DENSITY_ORDERED == 0 || t <= 0.0 || view.lod[3] > 0.5 {
+    if b.flags & crate::format::tile::BATCH_DENSITY_ORDERED == 0 || t <= 0.0 || view.lod[3] > 0.5 {
         return (n, 1.0);
     }
     let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);

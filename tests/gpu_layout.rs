@@ -1,0 +1,88 @@
+//! Every struct shared between Rust and WGSL has the same members at the same
+//! offsets, and the same size: the composed WGSL is reflected with naga and
+//! compared with the Rust types (`offset_of!`, `size_of`). A field added,
+//! renamed or moved on one side only fails here, not as garbage on the GPU.
+
+use std::mem::{offset_of, size_of};
+
+use sylva::format::tile::GpuBatch;
+use sylva::render::gpu_data::{DrawParams, GpuSpecies, ViewUniform};
+
+/// A WGSL struct of the composed `shader`: its members (name, byte offset) and size.
+fn wgsl_struct(shader: &str, name: &str) -> (Vec<(String, u32)>, u32) {
+    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
+    let module = naga::front::wgsl::parse_str(source).expect("valid WGSL");
+    // Layouts as WGSL computes them (naga's `Layouter`, as wgpu uses).
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).expect("layout");
+    let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect("struct in WGSL");
+    let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is no struct") };
+    assert_eq!(layouter[handle].size, *span);
+    (members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect(), *span)
+}
+
+/// Checks `name` in WGSL against the Rust members `(name, offset)` and size.
+/// `rust_size` may exceed the WGSL size only by trailing padding up to `padded_to`.
+fn check(shader: &str, name: &str, rust: &[(&str, usize)], rust_size: usize, padded_to: Option<usize>) {
+    let (wgsl, wgsl_size) = wgsl_struct(shader, name);
+    let wgsl: Vec<(&str, usize)> = wgsl.iter().map(|(n, o)| (n.as_str(), *o as usize)).collect();
+    assert_eq!(wgsl, rust, "{name}: members (name, offset) of WGSL vs Rust");
+    match padded_to {
+        None => assert_eq!(wgsl_size as usize, rust_size, "{name}: size"),
+        Some(p) => assert!(
+            wgsl_size as usize <= rust_size && rust_size == p,
+            "{name}: {wgsl_size} B in WGSL, {rust_size} B in Rust"
+        ),
+    }
+}
+
+macro_rules! members {
+    ($t:ty: $($f:ident),* $(,)?) => { [$((stringify!($f), offset_of!($t, $f))),*] };
+}
+
+#[test]
+fn shared_structs_match_their_wgsl_twins() {
+    // Every pass composes shaders/common.wgsl: check in each where the struct is used.
+    for shader in ["cull", "mesh", "billboard", "cluster"] {
+        check(
+            shader,
+            "View",
+            &members!(ViewUniform: clip_from_eye, eye_hi, eye_lo, frustum, sun_dir, sun_color, ambient, lod, params, eye_from_clip, viewport),
+            size_of::<ViewUniform>(),
+            None,
+        );
+        check(
+            shader,
+            "Batch",
+            &members!(GpuBatch: origin_m, instance_offset, center_m, radius_m, half_extent_m, instance_count, species,
+                xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, reserved),
+            size_of::<GpuBatch>(),
+            None,
+        );
+        check(
+            shader,
+            "Species",
+            &members!(GpuSpecies: sphere, select, lower_px, slot_base, slot_cap, index_count),
+            size_of::<GpuSpecies>(),
+            None,
+        );
+        // Bound with a dynamic offset: the Rust struct pads to wgpu's 256-byte alignment.
+        check(
+            shader,
+            "DrawParams",
+            &members!(DrawParams: ids, bb_center, bb_size, cluster, cluster_noise, bounds_min, bounds_extent, line_color),
+            size_of::<DrawParams>(),
+            Some(256),
+        );
+    }
+}
+
+#[test]
+fn a_moved_member_is_caught() {
+    // The check itself must fail on a wrong offset (here: two members swapped).
+    let mut wrong = members!(GpuBatch: origin_m, instance_offset, center_m, radius_m, half_extent_m, instance_count,
+        species, xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, reserved);
+    wrong.swap(12, 13);
+    let caught = std::panic::catch_unwind(|| check("cull", "Batch", &wrong, size_of::<GpuBatch>(), None));
+    assert!(caught.is_err(), "a swapped pair of members went unnoticed");
+}
