@@ -4,7 +4,6 @@
 //! (`fetch`) and the surface (a canvas) differ.
 
 use std::cell::{Cell, RefCell};
-use std::collections::BTreeMap;
 use std::rc::Rc;
 
 use glam::DVec3;
@@ -15,7 +14,8 @@ use wasm_bindgen_futures::JsFuture;
 use crate::geo::GeoFrame;
 use crate::render::camera::Camera;
 use crate::render::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
-use crate::render::gpu_data::{Repr, REPR_COUNT};
+use crate::render::gpu_data::REPR_COUNT;
+use crate::render::stats::{CullCounters, FrameStats};
 use crate::scene::{FetchError, Fetcher, RequestId, SceneStream, StreamConfig, StreamEvent};
 
 type Done = Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
@@ -104,8 +104,8 @@ struct Readback {
     /// Bytes mapped by the pending request (the same range is read back).
     mapped_len: u64,
     state: Rc<Cell<u8>>, // 0 idle, 1 mapping, 2 mapped
-    words: Vec<u32>,
-    /// Frame whose counters the pending mapping holds, and of the words read.
+    counters: CullCounters,
+    /// Frame whose counters the pending mapping holds, and of the counters read.
     pending_frame: u64,
     words_frame: u64,
 }
@@ -138,6 +138,13 @@ pub struct Viewer {
     /// Walking mode: the eye stays at eye height above the ground and looks around itself.
     fly: bool,
     lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+/// `performance.now()` of the page or worker, in milliseconds.
+fn performance_now() -> Option<f64> {
+    let performance = js_sys::Reflect::get(&js_sys::global(), &JsValue::from_str("performance")).ok()?;
+    let now = js_sys::Reflect::get(&performance, &JsValue::from_str("now")).ok()?;
+    now.dyn_ref::<js_sys::Function>()?.call0(&performance).ok()?.as_f64()
 }
 
 fn js_err(e: impl std::fmt::Display) -> JsValue {
@@ -212,7 +219,7 @@ impl Viewer {
             }),
             mapped_len: 0,
             state: Rc::new(Cell::new(0)),
-            words: Vec::new(),
+            counters: CullCounters::default(),
             pending_frame: 0,
             words_frame: 0,
         };
@@ -316,13 +323,8 @@ impl Viewer {
         self.renderer.encode_cull(&mut encoder);
         self.last_draw_calls = self.renderer.encode_draw(&mut encoder, &color, &depth, self.settings.clear);
         let copy = self.readback.state.get() == 0;
-        let slot_bytes = u64::from(self.renderer.slot_count()) * 20;
         if copy {
-            let (control, args, _) = self.renderer.readback_buffers();
-            encoder.copy_buffer_to_buffer(control, 0, &self.readback.buffer, 0, 32);
-            if slot_bytes > 0 {
-                encoder.copy_buffer_to_buffer(args, 0, &self.readback.buffer, 32, slot_bytes);
-            }
+            self.renderer.copy_counters(&mut encoder, &self.readback.buffer);
         }
         self.queue.submit([encoder.finish()]);
         self.queue.present(frame);
@@ -336,13 +338,14 @@ impl Viewer {
         if copy {
             let state = self.readback.state.clone();
             state.set(1);
-            self.readback.mapped_len = 32 + slot_bytes;
+            self.readback.mapped_len = CullCounters::readback_bytes(self.renderer.slot_count());
             self.readback.pending_frame = self.frames;
-            self.readback.buffer.slice(..32 + slot_bytes).map_async(wgpu::MapMode::Read, move |r| {
+            self.readback.buffer.slice(..self.readback.mapped_len).map_async(wgpu::MapMode::Read, move |r| {
                 state.set(if r.is_ok() { 2 } else { 0 });
             });
         }
-        self.last_cpu_ms = js_sys::Date::now().max(t0) - t0;
+        // Both ends on the page's clock (`performance.now()`): Date.now() counts from 1970.
+        self.last_cpu_ms = (performance_now().unwrap_or(t0) - t0).max(0.0);
         Ok(())
     }
 
@@ -353,7 +356,7 @@ impl Viewer {
         {
             let data = self.readback.buffer.slice(..self.readback.mapped_len).get_mapped_range();
             if let Ok(data) = data {
-                self.readback.words = bytemuck::cast_slice(&data[..]).to_vec();
+                self.readback.counters = CullCounters::from_bytes(&data);
                 self.readback.words_frame = self.readback.pending_frame;
             }
         }
@@ -544,49 +547,14 @@ impl Viewer {
         self.settled_frame.is_some_and(|f| self.readback.words_frame >= f)
     }
 
-    /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md).
+    /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md),
+    /// gathered by the same code ([`FrameStats`]), plus `adapter`.
     pub fn stats_json(&self) -> String {
-        let s = self.stream.stats();
-        let w = &self.readback.words;
-        let mut instances = BTreeMap::new();
-        for repr in Repr::ALL {
-            instances.insert(repr.name(), 0u64);
-        }
-        for slot in 0..self.renderer.slot_count() as usize {
-            if let Some(n) = w.get(8 + slot * 5 + 1) {
-                *instances.entry(Repr::ALL[slot % REPR_COUNT as usize].name()).or_default() += u64::from(*n);
-            }
-        }
-        serde_json::json!({
-            "draw_calls": self.last_draw_calls,
-            "instances": instances,
-            "batches_tested": self.renderer.batch_slots(),
-            "batches_visible": w.first().copied().unwrap_or(0),
-            "instances_tested": w.get(4).copied().unwrap_or(0),
-            "items_dropped": w.get(5).copied().unwrap_or(0),
-            "tiles_resident": s.tiles_resident,
-            "tiles_loading": s.loading,
-            "tiles_known": s.tiles_known,
-            "index_nodes_loaded": s.index_nodes_loaded,
-            "index_nodes_total": s.index_nodes_total,
-            "requests": s.requests,
-            "degraded": {
-                "pools_full": s.degraded.pools_full,
-                "gpu_budget": s.degraded.gpu_budget,
-                "bandwidth": s.degraded.bandwidth,
-                "device_limit": s.degraded.device_limit,
-                "reach_m": if s.degraded.reach_m.is_finite() { f64::from(s.degraded.reach_m) } else { -1.0 },
-            },
-            "failed": self.stream.failures(),
-            "bytes_fetched": s.bytes_fetched,
-            "trees_total": self.stream.manifest().map_or(0, |m| m.counts.trees),
-            "trees_resident": self.renderer.resident_instances(),
-            "gpu_bytes": self.renderer.gpu_bytes(),
-            "frame_cpu_ms": self.last_cpu_ms,
-            "gpu_ms": {},
-            "adapter": self.adapter,
-        })
-        .to_string()
+        let mut stats = FrameStats::gather(&self.renderer, &self.stream, self.last_draw_calls, self.last_cpu_ms);
+        stats.apply_counters(&self.readback.counters);
+        let mut json = serde_json::to_value(&stats).unwrap_or_default();
+        json["adapter"] = self.adapter.clone().into();
+        json.to_string()
     }
 
     /// Loading progress: `{manifest, tiles_wanted, tiles_resident, loading, bytes_fetched, settled}`.

@@ -14,7 +14,7 @@ use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
 use super::camera::ViewData;
 use super::cluster::{cluster_tiers, ClusterGpu, ClusterPipeline};
 use super::cull::CullPipelines;
-use super::gpu_data::{DrawParams, GpuSpecies, Repr, ViewUniform, REPR_COUNT};
+use super::gpu_data::{CullControl, DrawArgs, DrawParams, GpuSpecies, Repr, ViewUniform, REPR_COUNT};
 use super::layouts::SharedLayouts;
 use super::mesh::{MeshGpu, MeshPipelines, DEPTH_FORMAT};
 use super::Lighting;
@@ -82,10 +82,15 @@ impl PoolConfig {
     /// GPU bytes the pools take.
     #[must_use]
     pub fn bytes(&self) -> u64 {
-        u64::from(self.instances) * 8
-            + u64::from(self.batches) * (80 + 4)
-            + u64::from(self.items) * 8
-            + u64::from(self.species) * (160 + u64::from(REPR_COUNT) * (20 + 256))
+        let size = |bytes: usize| bytes as u64;
+        // Instances, batches with their visible-list word, draw items (two words),
+        // and per species its table record and per slot draw args and params.
+        u64::from(self.instances) * size(size_of::<crate::format::tile::PackedInstance>())
+            + u64::from(self.batches) * size(size_of::<crate::format::tile::GpuBatch>() + 4)
+            + u64::from(self.items) * size(size_of::<[u32; 2]>())
+            + u64::from(self.species)
+                * (size(size_of::<GpuSpecies>())
+                    + u64::from(REPR_COUNT) * size(size_of::<DrawArgs>() + size_of::<DrawParams>()))
     }
 }
 
@@ -395,9 +400,9 @@ fn create_pools(
         ),
         items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE | U::COPY_SRC),
         visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
-        control: buffer(device, "cull control", 8 * 4, U::STORAGE | U::COPY_SRC),
+        control: buffer(device, "cull control", size_of::<CullControl>() as u64, U::STORAGE | U::COPY_SRC),
         dispatch: buffer(device, "cull dispatch", 8 * 4, U::STORAGE | U::INDIRECT),
-        args: buffer(device, "draw args", slots * 20, U::STORAGE | U::INDIRECT | U::COPY_SRC),
+        args: buffer(device, "draw args", slots * size_of::<DrawArgs>() as u64, U::STORAGE | U::INDIRECT | U::COPY_SRC),
         species: buffer(
             device,
             "species table",
@@ -995,7 +1000,7 @@ impl ForestRenderer {
                 }
                 let slot = i as u32 * REPR_COUNT + repr as u32;
                 pass.set_bind_group(3, &self.draw_group, &[slot * 256]);
-                let args_offset = u64::from(slot) * 20;
+                let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
                 match repr {
                     Repr::Mesh0 | Repr::Mesh1 => {
                         let level = repr as usize;
@@ -1049,6 +1054,17 @@ impl ForestRenderer {
     #[must_use]
     pub fn batch_slots(&self) -> u32 {
         self.batch_high_water
+    }
+
+    /// Copies the cull counters and draw arguments into `readback` (laid out as
+    /// [`super::stats::CullCounters`] reads them).
+    pub fn copy_counters(&self, encoder: &mut wgpu::CommandEncoder, readback: &wgpu::Buffer) {
+        let control = size_of::<CullControl>() as u64;
+        encoder.copy_buffer_to_buffer(&self.pools.control, 0, readback, 0, control);
+        let slots = u64::from(self.slot_count()) * size_of::<DrawArgs>() as u64;
+        if slots > 0 {
+            encoder.copy_buffer_to_buffer(&self.pools.args, 0, readback, control, slots);
+        }
     }
 
     /// The buffers stats and tests read back: (control, args, items).

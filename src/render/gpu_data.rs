@@ -87,6 +87,42 @@ impl Default for DrawParams {
     }
 }
 
+/// The cull pass's counters. Must match the `control` words in `shaders/cull.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+pub struct CullControl {
+    /// Batches that passed the batch test (word 0).
+    pub batches_visible: u32,
+    /// Unused (words 1–3).
+    pub unused: [u32; 3],
+    /// Trees of visible batches tested one by one (word 4).
+    pub instances_tested: u32,
+    /// Draw items lost to a full segment (word 5).
+    pub items_dropped: u32,
+    /// Unused (words 6–7).
+    pub unused_tail: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<CullControl>() == 32);
+
+/// One draw slot's indirect arguments, written by the cull pass: the indexed
+/// layout (`wgpu::util::DrawIndexedIndirectArgs`); non-indexed draws read the
+/// first four words. Must match the 5-word slots of `args` in `shaders/cull.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+pub struct DrawArgs {
+    /// Indices (meshes) or vertices (billboards, clusters) per instance.
+    pub count: u32,
+    /// Instances (trees) drawn.
+    pub instance_count: u32,
+    /// First index or vertex.
+    pub first: u32,
+    /// Base vertex of an indexed draw; first instance of a non-indexed one.
+    pub base_vertex_or_first_instance: u32,
+    /// First instance of an indexed draw.
+    pub first_instance: u32,
+}
+const _: () = assert!(std::mem::size_of::<DrawArgs>() == std::mem::size_of::<wgpu::util::DrawIndexedIndirectArgs>());
+
 /// Representations a tree can be drawn with, finest first. A draw slot is
 /// `species * REPR_COUNT + repr`. Must match `REPR_*` in `shaders/common.wgsl`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -16,6 +16,7 @@ pub mod mips;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod offscreen;
 pub mod shaders;
+pub mod stats;
 
 use glam::{Mat4, Vec3};
 

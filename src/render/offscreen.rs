@@ -5,70 +5,20 @@
 use std::time::Instant;
 
 use glam::DVec3;
-use serde::Serialize;
 
 use super::camera::Camera;
 use super::context::{read_texture_rgba8, GpuContext};
 use super::cull::DrawItem;
 use super::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
-use super::gpu_data::{Repr, REPR_COUNT};
+use super::gpu_data::{CullControl, DrawArgs, REPR_COUNT};
+use super::stats::CullCounters;
+pub use super::stats::FrameStats;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Manifest;
 use crate::scene::{Fetcher, SceneStream, StreamConfig, StreamEvent, ThreadFetcher};
 
 /// Colour format of offscreen targets (sRGB, like the browser canvas view).
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-
-/// Per-frame statistics; the keys are stable and documented (docs/FORMAT.md §stats),
-/// and the browser reports the same object.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct FrameStats {
-    /// Draw calls recorded (≤ species × representations).
-    pub draw_calls: u32,
-    /// Instances drawn per representation (`mesh0`, `mesh1`, `billboard`).
-    pub instances: std::collections::BTreeMap<String, u64>,
-    /// Batch slots the cull pass tested.
-    pub batches_tested: u32,
-    /// Batches that passed the batch test.
-    pub batches_visible: u32,
-    /// Instances the per-instance pass tested.
-    pub instances_tested: u32,
-    /// Items dropped because a segment was full (should be 0).
-    pub items_dropped: u32,
-    /// Tiles resident in the GPU pools.
-    pub tiles_resident: u64,
-    /// Requests in flight.
-    pub tiles_loading: u64,
-    /// Bytes fetched so far.
-    pub bytes_fetched: u64,
-    /// Requests started so far (manifest, index nodes, tiles, packs).
-    pub requests: u64,
-    /// Tiles known so far (flat list, or leaves of the index nodes read).
-    pub tiles_known: u64,
-    /// Tiles in the scene.
-    pub tiles_total: u64,
-    /// Index nodes read so far (0 for a flat manifest).
-    pub index_nodes_loaded: u64,
-    /// Index nodes in the scene (0 for a flat manifest).
-    pub index_nodes_total: u64,
-    /// What budgets or device limits hold back (`pools_full`, `gpu_budget`,
-    /// `bandwidth`, `reach_m`).
-    pub degraded: std::collections::BTreeMap<String, serde_json::Value>,
-    /// Files given up on (not found, corrupt, or failed every retry): what the
-    /// image lacks. Empty when the view is complete.
-    pub failed: Vec<crate::scene::streaming::LoadFailure>,
-    /// Trees in the scene.
-    pub trees_total: u64,
-    /// Trees resident on the GPU.
-    pub trees_resident: u64,
-    /// GPU memory estimate (pools + packs), bytes.
-    pub gpu_bytes: u64,
-    /// CPU time to prepare and record the frame, ms.
-    pub frame_cpu_ms: f64,
-    /// GPU time per pass, ms (wall time around submit + wait: lavapipe's compute
-    /// timestamps are unreliable).
-    pub gpu_ms: std::collections::BTreeMap<String, f64>,
-}
 
 /// Named viewpoints derived from a scene's bounds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -176,7 +126,7 @@ impl<F: Fetcher> OffscreenScene<F> {
         let slots = u64::from(pools.species * REPR_COUNT);
         let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("stats readback"),
-            size: 32 + slots * 20,
+            size: CullCounters::readback_bytes(slots as u32),
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
@@ -255,16 +205,11 @@ impl<F: Fetcher> OffscreenScene<F> {
         let color_view = self.color.create_view(&Default::default());
         let depth_view = self.depth.create_view(&Default::default());
         let draw_calls = self.renderer.encode_draw(&mut draw, &color_view, &depth_view, self.settings.clear);
-        let (control, args, _) = self.renderer.readback_buffers();
-        let slot_bytes = u64::from(self.renderer.slot_count()) * 20;
         if measure {
-            draw.copy_buffer_to_buffer(control, 0, &self.readback, 0, 32);
-            if slot_bytes > 0 {
-                draw.copy_buffer_to_buffer(args, 0, &self.readback, 32, slot_bytes);
-            }
+            self.renderer.copy_counters(&mut draw, &self.readback);
         }
         let frame_cpu_ms = cpu.elapsed().as_secs_f64() * 1e3;
-        let mut stats = FrameStats { draw_calls, frame_cpu_ms, ..Default::default() };
+        let mut stats = FrameStats::gather(&self.renderer, &self.stream, draw_calls, frame_cpu_ms);
         let wait = |ctx: &GpuContext| ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
         if measure {
             // Earlier unmeasured frames may still be running: their time is not this frame's.
@@ -281,55 +226,18 @@ impl<F: Fetcher> OffscreenScene<F> {
         if measure {
             wait(&self.ctx);
             stats.gpu_ms.insert("draw".into(), t.elapsed().as_secs_f64() * 1e3);
-            self.read_counters(&mut stats, slot_bytes);
+            stats.apply_counters(&self.read_counters());
         }
-        let s = self.stream.stats();
-        stats.batches_tested = self.renderer.batch_slots();
-        stats.tiles_resident = s.tiles_resident;
-        stats.tiles_loading = s.loading;
-        stats.bytes_fetched = s.bytes_fetched;
-        stats.requests = s.requests;
-        stats.tiles_known = s.tiles_known;
-        stats.tiles_total = self.stream.manifest().map_or(0, |m| m.counts.tiles);
-        stats.index_nodes_loaded = s.index_nodes_loaded;
-        stats.index_nodes_total = s.index_nodes_total;
-        let d = s.degraded;
-        stats.degraded = [
-            ("pools_full", serde_json::json!(d.pools_full)),
-            ("gpu_budget", serde_json::json!(d.gpu_budget)),
-            ("bandwidth", serde_json::json!(d.bandwidth)),
-            ("device_limit", serde_json::json!(d.device_limit)),
-            ("reach_m", serde_json::json!(if d.reach_m.is_finite() { f64::from(d.reach_m) } else { -1.0 })),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect();
-        stats.failed = self.stream.failures().to_vec();
-        stats.trees_total = self.stream.manifest().map_or(0, |m| m.counts.trees);
-        stats.trees_resident = self.renderer.resident_instances();
-        stats.gpu_bytes = self.renderer.gpu_bytes();
         stats
     }
 
-    fn read_counters(&self, stats: &mut FrameStats, slot_bytes: u64) {
-        let slice = self.readback.slice(..32 + slot_bytes);
+    fn read_counters(&self) -> CullCounters {
+        let slice = self.readback.slice(..CullCounters::readback_bytes(self.renderer.slot_count()));
         slice.map_async(wgpu::MapMode::Read, |r| r.expect("map stats"));
         self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
-        {
-            let data = slice.get_mapped_range().expect("mapped");
-            let words: &[u32] = bytemuck::cast_slice(&data);
-            stats.batches_visible = words[0];
-            stats.instances_tested = words[4];
-            stats.items_dropped = words[5];
-            for repr in Repr::ALL {
-                stats.instances.insert(repr.name().into(), 0);
-            }
-            for slot in 0..self.renderer.slot_count() as usize {
-                let repr = Repr::ALL[slot % REPR_COUNT as usize];
-                *stats.instances.entry(repr.name().into()).or_default() += u64::from(words[8 + slot * 5 + 1]);
-            }
-        }
+        let counters = CullCounters::from_bytes(&slice.get_mapped_range().expect("mapped"));
         self.readback.unmap();
+        counters
     }
 
     /// Reads back what the last cull pass selected, with the pools it selected
@@ -340,24 +248,26 @@ impl<F: Fetcher> OffscreenScene<F> {
         let (control, args, items) = self.renderer.readback_buffers();
         let (batches, instances) = self.renderer.pool_buffers();
         let slots = self.renderer.slot_count() as usize;
-        let control: Vec<u32> = bytemuck::cast_slice(&read_buffer(&self.ctx, control, 32)).to_vec();
-        let args: Vec<u32> = bytemuck::cast_slice(&read_buffer(&self.ctx, args, slots as u64 * 20)).to_vec();
+        let control: CullControl =
+            bytemuck::pod_read_unaligned(&read_buffer(&self.ctx, control, size_of::<CullControl>() as u64));
+        let args: Vec<DrawArgs> =
+            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, args, (slots * size_of::<DrawArgs>()) as u64));
         let item_words: Vec<u32> = bytemuck::cast_slice(&read_buffer(&self.ctx, items, items.size())).to_vec();
         let table = self.renderer.species_table();
         let per_slot = (0..slots)
             .map(|slot| {
                 let species = &table[slot / REPR_COUNT as usize];
                 let base = species.slot_base[slot % REPR_COUNT as usize] as usize;
-                let n = args[slot * 5 + 1] as usize;
+                let n = args[slot].instance_count as usize;
                 (0..n).map(|i| (item_words[2 * (base + i)], item_words[2 * (base + i) + 1])).collect()
             })
             .collect();
         let batch_count = u64::from(self.renderer.batch_slots());
         let pool_batches: Vec<GpuBatch> =
-            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, batches, batch_count * 80));
+            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, batches, batch_count * size_of::<GpuBatch>() as u64));
         let pool_instances: Vec<PackedInstance> =
             bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, instances, instances.size()));
-        (per_slot, pool_batches, pool_instances, control[0])
+        (per_slot, pool_batches, pool_instances, control.batches_visible)
     }
 
     /// The last rendered image, RGBA8 sRGB, tightly packed rows.

@@ -1,0 +1,172 @@
+//! Frame statistics, gathered once for both hosts: `sylva render --stats`
+//! (native, [`super::offscreen`]) and `stats()` in the browser (`web.rs`) report
+//! the same keys from the same code (docs/FORMAT.md §frame stats).
+
+use serde::Serialize;
+
+use super::forest::ForestRenderer;
+use super::gpu_data::{CullControl, DrawArgs, Repr, REPR_COUNT};
+use crate::scene::{Fetcher, SceneStream};
+
+/// Per-frame statistics; the keys are stable and documented (docs/FORMAT.md §stats),
+/// and the browser reports the same object.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct FrameStats {
+    /// Draw calls recorded (≤ species × representations).
+    pub draw_calls: u32,
+    /// Instances drawn per representation (`mesh0`, `mesh1`, `billboard`).
+    pub instances: std::collections::BTreeMap<String, u64>,
+    /// Batch slots the cull pass tested.
+    pub batches_tested: u32,
+    /// Batches that passed the batch test.
+    pub batches_visible: u32,
+    /// Instances the per-instance pass tested.
+    pub instances_tested: u32,
+    /// Items dropped because a segment was full (should be 0).
+    pub items_dropped: u32,
+    /// Tiles resident in the GPU pools.
+    pub tiles_resident: u64,
+    /// Requests in flight.
+    pub tiles_loading: u64,
+    /// Bytes fetched so far.
+    pub bytes_fetched: u64,
+    /// Requests started so far (manifest, index nodes, tiles, packs).
+    pub requests: u64,
+    /// Tiles known so far (flat list, or leaves of the index nodes read).
+    pub tiles_known: u64,
+    /// Tiles in the scene.
+    pub tiles_total: u64,
+    /// Index nodes read so far (0 for a flat manifest).
+    pub index_nodes_loaded: u64,
+    /// Index nodes in the scene (0 for a flat manifest).
+    pub index_nodes_total: u64,
+    /// What budgets or device limits hold back (`pools_full`, `gpu_budget`,
+    /// `bandwidth`, `reach_m`).
+    pub degraded: std::collections::BTreeMap<String, serde_json::Value>,
+    /// Files given up on (not found, corrupt, or failed every retry): what the
+    /// image lacks. Empty when the view is complete.
+    pub failed: Vec<crate::scene::LoadFailure>,
+    /// Trees in the scene.
+    pub trees_total: u64,
+    /// Trees resident on the GPU.
+    pub trees_resident: u64,
+    /// GPU memory estimate (pools + packs), bytes.
+    pub gpu_bytes: u64,
+    /// CPU time to prepare and record the frame, ms.
+    pub frame_cpu_ms: f64,
+    /// GPU time per pass, ms (wall time around submit + wait: lavapipe's compute
+    /// timestamps are unreliable).
+    pub gpu_ms: std::collections::BTreeMap<String, f64>,
+}
+
+impl FrameStats {
+    /// The stats of a frame of `renderer` fed by `stream`, without the GPU
+    /// counters (see [`Self::apply_counters`]) and GPU times.
+    #[must_use]
+    pub fn gather<F: Fetcher>(
+        renderer: &ForestRenderer,
+        stream: &SceneStream<F>,
+        draw_calls: u32,
+        frame_cpu_ms: f64,
+    ) -> Self {
+        let s = stream.stats();
+        let d = s.degraded;
+        let degraded = [
+            ("pools_full", serde_json::json!(d.pools_full)),
+            ("gpu_budget", serde_json::json!(d.gpu_budget)),
+            ("bandwidth", serde_json::json!(d.bandwidth)),
+            ("device_limit", serde_json::json!(d.device_limit)),
+            ("reach_m", serde_json::json!(if d.reach_m.is_finite() { f64::from(d.reach_m) } else { -1.0 })),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect();
+        FrameStats {
+            draw_calls,
+            instances: Repr::ALL.iter().map(|r| (r.name().to_string(), 0)).collect(),
+            batches_tested: renderer.batch_slots(),
+            tiles_resident: s.tiles_resident,
+            tiles_loading: s.loading,
+            bytes_fetched: s.bytes_fetched,
+            requests: s.requests,
+            tiles_known: s.tiles_known,
+            tiles_total: stream.manifest().map_or(0, |m| m.counts.tiles),
+            index_nodes_loaded: s.index_nodes_loaded,
+            index_nodes_total: s.index_nodes_total,
+            degraded,
+            failed: stream.failures().to_vec(),
+            trees_total: stream.manifest().map_or(0, |m| m.counts.trees),
+            trees_resident: renderer.resident_instances(),
+            gpu_bytes: renderer.gpu_bytes(),
+            frame_cpu_ms,
+            ..Default::default()
+        }
+    }
+
+    /// Fills in the cull pass's counters read back from the GPU.
+    pub fn apply_counters(&mut self, counters: &CullCounters) {
+        self.batches_visible = counters.control.batches_visible;
+        self.instances_tested = counters.control.instances_tested;
+        self.items_dropped = counters.control.items_dropped;
+        for repr in Repr::ALL {
+            self.instances.insert(repr.name().into(), 0);
+        }
+        for (slot, args) in counters.slots.iter().enumerate() {
+            let repr = Repr::ALL[slot % REPR_COUNT as usize];
+            *self.instances.entry(repr.name().into()).or_default() += u64::from(args.instance_count);
+        }
+    }
+}
+
+/// The cull pass's counters and draw arguments as read back after a frame:
+/// [`CullControl`], then one [`DrawArgs`] per draw slot.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CullCounters {
+    /// The control words.
+    pub control: CullControl,
+    /// Per draw slot (`species * REPR_COUNT + repr`).
+    pub slots: Vec<DrawArgs>,
+}
+
+impl CullCounters {
+    /// Bytes of a readback of `slot_count` slots: the control words, then the slots.
+    #[must_use]
+    pub fn readback_bytes(slot_count: u32) -> u64 {
+        (size_of::<CullControl>() + slot_count as usize * size_of::<DrawArgs>()) as u64
+    }
+
+    /// Decodes a readback (any length: whole slots only).
+    #[must_use]
+    pub fn from_bytes(bytes: &[u8]) -> Self {
+        let head = size_of::<CullControl>().min(bytes.len());
+        let mut control = CullControl::default();
+        bytemuck::bytes_of_mut(&mut control)[..head].copy_from_slice(&bytes[..head]);
+        let rest = &bytes[head..];
+        let whole = rest.len() / size_of::<DrawArgs>() * size_of::<DrawArgs>();
+        Self { control, slots: bytemuck::pod_collect_to_vec(&rest[..whole]) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counters_decode_from_a_readback() {
+        let mut words = vec![0u32; 8 + 2 * 5];
+        words[0] = 7; // batches visible
+        words[4] = 300; // instances tested
+        words[5] = 2; // items dropped
+        words[8 + 1] = 40; // slot 0: mesh0 instances
+        words[8 + 5 + 1] = 9; // slot 1: mesh1 instances
+        let c = CullCounters::from_bytes(bytemuck::cast_slice(&words));
+        assert_eq!((c.control.batches_visible, c.control.instances_tested, c.control.items_dropped), (7, 300, 2));
+        assert_eq!(c.slots.iter().map(|s| s.instance_count).collect::<Vec<_>>(), vec![40, 9]);
+        assert_eq!(CullCounters::readback_bytes(2), 32 + 40);
+        let mut stats = FrameStats::default();
+        stats.apply_counters(&c);
+        assert_eq!((stats.instances["mesh0"], stats.instances["mesh1"], stats.instances["billboard"]), (40, 9, 0));
+        // A short readback decodes what is there.
+        assert_eq!(CullCounters::from_bytes(&bytemuck::cast_slice::<u32, u8>(&words)[..10]).control.batches_visible, 7);
+    }
+}
