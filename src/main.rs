@@ -61,77 +61,7 @@ mod cli {
         #[command(
             after_help = "Examples:\n  sylva render --scene demo-scene --view medium --out medium.png --stats medium.json\n  sylva render --scene http://127.0.0.1:8080/scene.json --camera 540000,5359700,300,0,-20 --out a.png\n  sylva render --pack demo-scene/species/beech.pack --view side --out beech.png"
         )]
-        Render {
-            /// Scene directory, scene.json path or http(s) URL.
-            #[arg(long, conflicts_with = "pack", required_unless_present = "pack")]
-            scene: Option<String>,
-            /// A single LoD pack to render (one tree, lit).
-            #[arg(long)]
-            pack: Option<PathBuf>,
-            /// Output PNG.
-            #[arg(long)]
-            out: PathBuf,
-            /// Image size, WxH.
-            #[arg(long, default_value = "960x540")]
-            size: String,
-            /// Named scene viewpoint (ignored with --camera).
-            #[arg(long, value_enum, default_value_t = SceneView::Medium)]
-            view: SceneView,
-            /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
-            #[arg(long, allow_hyphen_values = true)]
-            camera: Option<String>,
-            /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
-            #[arg(long, default_value_t = 1.0)]
-            quality: f32,
-            /// Draw distance in metres.
-            #[arg(long, default_value_t = 6000.0)]
-            draw_distance: f32,
-            /// Colour trees by representation (red mesh0, yellow mesh1, greens ellipsoid
-            /// levels, blue billboard).
-            #[arg(long)]
-            debug_lod: bool,
-            /// Draw only one representation family (the benchmark baselines); the
-            /// default mixes meshes, ellipsoids and billboards by projected size.
-            #[arg(long, value_enum)]
-            only: Option<OnlyArg>,
-            /// Trees at least this tall on screen (px), and below the simplified mesh,
-            /// are drawn with ellipsoids and lines; smaller ones with billboards.
-            #[arg(long, default_value_t = sylva::render::forest::DEFAULT_CLUSTER_MIN_PX)]
-            ellipsoid_min_px: f32,
-            /// Ellipsoids write their exact ray-cast depth per pixel (slower: no early
-            /// depth tests); by default they keep their proxy's front-most depth.
-            #[arg(long)]
-            exact_depth: bool,
-            /// Prefix thinning: far batches whose trees are below this many pixels
-            /// tall draw an even subset of them, scaled up to keep the canopy's
-            /// coverage (0 turns it off).
-            #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
-            thin_px: f32,
-            /// Draw the boxes of the batches that pass the batch test.
-            #[arg(long)]
-            debug_bounds: bool,
-            /// Write frame statistics as JSON here.
-            #[arg(long)]
-            stats: Option<PathBuf>,
-            /// Give up waiting for data after this many seconds.
-            #[arg(long, default_value_t = 120.0)]
-            timeout: f64,
-            /// Exit 0 although files of the view failed to load or did not arrive
-            /// in time (the image shows what loaded; the stats list the failures).
-            /// Without it such a render writes its PNG and stats and exits 1.
-            #[arg(long)]
-            allow_partial: bool,
-            /// Pack view (with --pack).
-            #[arg(long, value_enum, default_value_t = View::Oblique)]
-            pack_view: View,
-            /// What to draw with --pack: mesh (level --level), ellipsoids (cluster
-            /// level --level: ellipsoids + lines) or billboard.
-            #[arg(long, value_enum, default_value_t = PackReprArg::Mesh)]
-            repr: PackReprArg,
-            /// Mesh or cluster level (with --pack).
-            #[arg(long, default_value_t = 0)]
-            level: usize,
-        },
+        Render(RenderArgs),
         /// Run time against image error on a camera path, every method on the same
         /// frames: writes frames.csv, summary.json and SVG plots (pareto,
         /// frame_time, temporal_noise) into --out.
@@ -216,6 +146,80 @@ mod cli {
             #[arg(long = "allow-host", value_name = "NAME")]
             allow_hosts: Vec<String>,
         },
+    }
+
+    /// `sylva render`: a scene or one pack to a PNG.
+    #[derive(clap::Args)]
+    struct RenderArgs {
+        /// Scene directory, scene.json path or http(s) URL.
+        #[arg(long, conflicts_with = "pack", required_unless_present = "pack")]
+        scene: Option<String>,
+        /// A single LoD pack to render (one tree, lit).
+        #[arg(long)]
+        pack: Option<PathBuf>,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Image size, WxH.
+        #[arg(long, default_value = "960x540")]
+        size: String,
+        /// Named scene viewpoint (ignored with --camera).
+        #[arg(long, value_enum, default_value_t = SceneView::Medium)]
+        view: SceneView,
+        /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
+        #[arg(long, allow_hyphen_values = true)]
+        camera: Option<String>,
+        /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
+        #[arg(long, default_value_t = 1.0)]
+        quality: f32,
+        /// Draw distance in metres.
+        #[arg(long, default_value_t = 6000.0)]
+        draw_distance: f32,
+        /// Colour trees by representation (red mesh0, yellow mesh1, greens ellipsoid
+        /// levels, blue billboard).
+        #[arg(long)]
+        debug_lod: bool,
+        /// Draw only one representation family (the benchmark baselines); the
+        /// default mixes meshes, ellipsoids and billboards by projected size.
+        #[arg(long, value_enum)]
+        only: Option<OnlyArg>,
+        /// Trees at least this tall on screen (px), and below the simplified mesh,
+        /// are drawn with ellipsoids and lines; smaller ones with billboards.
+        #[arg(long, default_value_t = sylva::render::forest::DEFAULT_CLUSTER_MIN_PX)]
+        ellipsoid_min_px: f32,
+        /// Ellipsoids write their exact ray-cast depth per pixel (slower: no early
+        /// depth tests); by default they keep their proxy's front-most depth.
+        #[arg(long)]
+        exact_depth: bool,
+        /// Prefix thinning: far batches whose trees are below this many pixels
+        /// tall draw an even subset of them, scaled up to keep the canopy's
+        /// coverage (0 turns it off).
+        #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
+        thin_px: f32,
+        /// Draw the boxes of the batches that pass the batch test.
+        #[arg(long)]
+        debug_bounds: bool,
+        /// Write frame statistics as JSON here.
+        #[arg(long)]
+        stats: Option<PathBuf>,
+        /// Give up waiting for data after this many seconds.
+        #[arg(long, default_value_t = 120.0)]
+        timeout: f64,
+        /// Exit 0 although files of the view failed to load or did not arrive
+        /// in time (the image shows what loaded; the stats list the failures).
+        /// Without it such a render writes its PNG and stats and exits 1.
+        #[arg(long)]
+        allow_partial: bool,
+        /// Pack view (with --pack).
+        #[arg(long, value_enum, default_value_t = View::Oblique)]
+        pack_view: View,
+        /// What to draw with --pack: mesh (level --level), ellipsoids (cluster
+        /// level --level: ellipsoids + lines) or billboard.
+        #[arg(long, value_enum, default_value_t = PackReprArg::Mesh)]
+        repr: PackReprArg,
+        /// Mesh or cluster level (with --pack).
+        #[arg(long, default_value_t = 0)]
+        level: usize,
     }
 
     /// The cameras of `--path` over `scene`: a named path laid over the scene's
@@ -317,6 +321,14 @@ mod cli {
             "wrote frames.csv, summary.json, pareto.svg, frame_time.svg, temporal_noise.svg to {}",
             out.display()
         );
+        Ok(())
+    }
+
+    /// `--thin-px` of `render` and `bench`.
+    fn check_thin_px(thin_px: f32) -> Result<()> {
+        if !(thin_px.is_finite() && thin_px >= 0.0) {
+            bail!("--thin-px {thin_px}: must be a number of pixels ≥ 0 (0 turns thinning off)");
+        }
         Ok(())
     }
 
@@ -484,34 +496,225 @@ mod cli {
         Ok(())
     }
 
+    /// `sylva render`: `--scene` to a PNG with stats, or `--pack` (one tree).
+    fn render(args: RenderArgs) -> Result<()> {
+        let RenderArgs {
+            scene,
+            pack,
+            out,
+            size,
+            view,
+            camera,
+            quality,
+            draw_distance,
+            debug_lod,
+            only,
+            ellipsoid_min_px,
+            exact_depth,
+            thin_px,
+            debug_bounds,
+            stats,
+            timeout,
+            allow_partial,
+            pack_view,
+            level,
+            repr,
+        } = args;
+        let (w, h) = parse_size(&size)?;
+        if !(quality > 0.0 && quality <= 16.0) {
+            bail!("--quality {quality}: must be in (0, 16]");
+        }
+        if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
+            bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
+        }
+        check_thin_px(thin_px)?;
+        if let Some(scene) = scene {
+            use sylva::render::forest::Representations;
+            let settings = RenderSettings {
+                quality,
+                draw_distance_m: draw_distance,
+                debug_lod,
+                debug_bounds,
+                cluster_min_px: ellipsoid_min_px,
+                cluster_exact_depth: exact_depth,
+                thin_px,
+                representations: match only {
+                    None => Representations::ALL,
+                    Some(OnlyArg::Meshes) => Representations::MESHES,
+                    Some(OnlyArg::Ellipsoids) => Representations::CLUSTERS,
+                    Some(OnlyArg::Billboards) => Representations::BILLBOARDS,
+                },
+                ..RenderSettings::default()
+            };
+            return render_scene(
+                &scene,
+                &out,
+                (w, h),
+                view,
+                camera.as_deref(),
+                settings,
+                stats.as_ref(),
+                timeout,
+                allow_partial,
+            );
+        }
+        let pack = pack.expect("clap requires --scene or --pack");
+        let bytes = std::fs::read(&pack).with_context(|| format!("cannot read {}", pack.display()))?;
+        let decoded = decode_pack(&pack.display().to_string(), &bytes)?;
+        let repr = match repr {
+            PackReprArg::Mesh => {
+                if level >= decoded.meta.mesh_levels.len() {
+                    bail!("--level {level}: the pack has {} mesh levels", decoded.meta.mesh_levels.len());
+                }
+                PackRepr::Mesh(level)
+            }
+            PackReprArg::Ellipsoids => {
+                let n = decoded.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
+                if level >= n {
+                    bail!("--level {level}: the pack has {n} cluster levels");
+                }
+                PackRepr::Cluster(level)
+            }
+            PackReprArg::Billboard => {
+                if decoded.meta.billboards.is_none() {
+                    bail!("the pack has no billboards");
+                }
+                PackRepr::Billboard
+            }
+        };
+        let gpu = GpuContext::new_headless_blocking()?;
+        let view = match pack_view {
+            View::Side => PackView::Side,
+            View::Oblique => PackView::Oblique,
+            View::Top => PackView::Top,
+        };
+        let rgba = render_pack_repr(&gpu, &decoded, repr, view, w, h, [0.62, 0.74, 0.86, 1.0])
+            .context("the pack lacks that representation")?;
+        image::save_buffer(&out, &rgba, w, h, image::ColorType::Rgba8)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        eprintln!("wrote {} ({w}x{h}, {} on {})", out.display(), decoded.meta.name, gpu.adapter_summary());
+        Ok(())
+    }
+
+    /// `sylva bench-table`: one Markdown row per bench output directory.
+    fn bench_table(dirs: &[PathBuf], method: &str) -> Result<()> {
+        println!("| run | GPU ms | cull ms | MS-RMSE | FLIP | temporal noise | draw calls | batches | packs MB |");
+        println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+        for d in dirs {
+            let p = d.join("summary.json");
+            let text = std::fs::read_to_string(&p).with_context(|| format!("cannot read {}", p.display()))?;
+            let v: serde_json::Value =
+                serde_json::from_str(&text).with_context(|| format!("{}: not JSON", p.display()))?;
+            let m = &v["methods"][&method];
+            if m.is_null() {
+                bail!("{}: no method {method:?}", p.display());
+            }
+            let med = |k: &str| m[k]["median"].as_f64().unwrap_or(f64::NAN);
+            // The scene's batches and pack bytes, where it is a local directory.
+            let scene = std::path::PathBuf::from(v["scene"].as_str().unwrap_or_default());
+            let (batches, packs) = std::fs::read(scene.join("scene.json"))
+                .ok()
+                .and_then(|b| sylva::format::Manifest::decode("scene.json", &b).ok())
+                .map_or((String::from("?"), String::from("?")), |man| {
+                    let bytes: u64 = man
+                        .species
+                        .iter()
+                        .filter_map(|s| std::fs::metadata(scene.join(&s.pack)).ok())
+                        .map(|md| md.len())
+                        .sum();
+                    (man.counts.batches.to_string(), format!("{:.2}", bytes as f64 / 1e6))
+                });
+            // Median cull ms from frames.csv.
+            let cull = sylva::bench::read_csv(&d.join("frames.csv")).map_or(f64::NAN, |frames| {
+                sylva::bench::Stat::of(frames.iter().filter(|r| r.method == method).map(|r| r.cull_ms)).median
+            });
+            println!(
+                "| {} | {:.2} | {:.2} | {:.4} | {:.4} | {:.5} | {:.0} | {batches} | {packs} |",
+                d.display(),
+                med("gpu_ms"),
+                cull,
+                med("error"),
+                med("flip"),
+                med("temporal_noise"),
+                med("draw_calls")
+            );
+        }
+        Ok(())
+    }
+
+    /// `sylva compare`: the multi-scale RMSE of two PNGs.
+    fn compare(a: &PathBuf, b: &PathBuf) -> Result<()> {
+        let load =
+            |p: &PathBuf| image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8());
+        let (ia, ib) = (load(a)?, load(b)?);
+        if ia.dimensions() != ib.dimensions() {
+            bail!(
+                "{} is {:?} but {} is {:?}: sizes must match",
+                a.display(),
+                ia.dimensions(),
+                b.display(),
+                ib.dimensions()
+            );
+        }
+        let (w, h) = ia.dimensions();
+        println!("{:.6}", sylva::metrics::multiscale_rmse(ia.as_raw(), ib.as_raw(), w, h));
+        Ok(())
+    }
+
+    /// `sylva serve`: the viewer and a scene over HTTP until the process ends.
+    fn serve(dir: PathBuf, port: u16, bind: &str, web: Option<PathBuf>, allow_hosts: Vec<String>) -> Result<()> {
+        if !dir.join("scene.json").is_file() {
+            bail!("{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake)", dir.display());
+        }
+        let web = web.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("web"));
+        if !web.join("pkg").join("sylva_bg.wasm").is_file() {
+            bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
+        }
+        let config =
+            sylva::serve::ServeConfig { allowed_hosts: allow_hosts, ..sylva::serve::ServeConfig::new(web, dir) };
+        sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
+            println!("serving the Sylva viewer on http://{addr}/");
+            use std::io::Write as _;
+            let _ = std::io::stdout().flush();
+        })
+        .with_context(|| format!("cannot listen on {bind}:{port}"))?;
+        Ok(())
+    }
+
+    /// `sylva bench --replot`: redraws the plots of an earlier run from its frames.csv.
+    fn replot(out: &std::path::Path, path: &str, size: &str) -> Result<()> {
+        let frames = sylva::bench::read_csv(&out.join("frames.csv"))?;
+        let mut names: Vec<String> = Vec::new();
+        for f in &frames {
+            if !names.contains(&f.method) {
+                names.push(f.method.clone());
+            }
+        }
+        let run = sylva::bench::BenchRun {
+            summary: sylva::bench::summarise(&frames, &names),
+            frames,
+            adapter: String::new(),
+        };
+        sylva::bench::write_plots(out, &run, &format!("{path}, {size}"))?;
+        eprintln!("redrew the plots in {}", out.display());
+        Ok(())
+    }
+
+    /// `sylva bench --memory`: bytes per tree on disk, compressed and on the GPU.
+    fn memory(scene: &str, out: &std::path::Path) -> Result<()> {
+        let m = sylva::bench::memory::measure(std::path::Path::new(&scene))?;
+        print!("{}", sylva::bench::memory::report(&m));
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        std::fs::write(out.join("memory.json"), serde_json::to_string_pretty(&m)?)?;
+        eprintln!("wrote {}", out.join("memory.json").display());
+        Ok(())
+    }
+
     pub fn main() -> Result<()> {
         sylva::render::context::ensure_runtime_dir();
         match Cli::parse().command {
-            Command::Bench { out, replot: true, path, size, .. } => {
-                let frames = sylva::bench::read_csv(&out.join("frames.csv"))?;
-                let mut names: Vec<String> = Vec::new();
-                for f in &frames {
-                    if !names.contains(&f.method) {
-                        names.push(f.method.clone());
-                    }
-                }
-                let run = sylva::bench::BenchRun {
-                    summary: sylva::bench::summarise(&frames, &names),
-                    frames,
-                    adapter: String::new(),
-                };
-                sylva::bench::write_plots(&out, &run, &format!("{path}, {size}"))?;
-                eprintln!("redrew the plots in {}", out.display());
-                Ok(())
-            }
-            Command::Bench { scene, out, memory: true, .. } => {
-                let m = sylva::bench::memory::measure(std::path::Path::new(&scene))?;
-                print!("{}", sylva::bench::memory::report(&m));
-                std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-                std::fs::write(out.join("memory.json"), serde_json::to_string_pretty(&m)?)?;
-                eprintln!("wrote {}", out.join("memory.json").display());
-                Ok(())
-            }
+            Command::Bench { out, replot: true, path, size, .. } => replot(&out, &path, &size),
+            Command::Bench { scene, out, memory: true, .. } => memory(&scene, &out),
             Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
                 stress(&scene, &path, &size, frames, &out)
             }
@@ -519,9 +722,7 @@ mod cli {
                 if !(0.0..0.5).contains(&fade_band) {
                     bail!("--fade-band {fade_band}: must be in [0, 0.5)");
                 }
-                if !(thin_px.is_finite() && thin_px >= 0.0) {
-                    bail!("--thin-px {thin_px}: must be a number of pixels ≥ 0 (0 turns thinning off)");
-                }
+                check_thin_px(thin_px)?;
                 let mut methods = sylva::bench::methods(&methods)?;
                 for m in methods.iter_mut().filter(|m| m.name != "reference") {
                     m.settings.fade_band = fade_band;
@@ -529,192 +730,10 @@ mod cli {
                 }
                 bench(&scene, &path, methods, &size, frames, &out)
             }
-            Command::BenchTable { dirs, method } => {
-                println!(
-                    "| run | GPU ms | cull ms | MS-RMSE | FLIP | temporal noise | draw calls | batches | packs MB |"
-                );
-                println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
-                for d in &dirs {
-                    let p = d.join("summary.json");
-                    let text = std::fs::read_to_string(&p).with_context(|| format!("cannot read {}", p.display()))?;
-                    let v: serde_json::Value =
-                        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", p.display()))?;
-                    let m = &v["methods"][&method];
-                    if m.is_null() {
-                        bail!("{}: no method {method:?}", p.display());
-                    }
-                    let med = |k: &str| m[k]["median"].as_f64().unwrap_or(f64::NAN);
-                    // The scene's batches and pack bytes, where it is a local directory.
-                    let scene = std::path::PathBuf::from(v["scene"].as_str().unwrap_or_default());
-                    let (batches, packs) = std::fs::read(scene.join("scene.json"))
-                        .ok()
-                        .and_then(|b| sylva::format::Manifest::decode("scene.json", &b).ok())
-                        .map_or((String::from("?"), String::from("?")), |man| {
-                            let bytes: u64 = man
-                                .species
-                                .iter()
-                                .filter_map(|s| std::fs::metadata(scene.join(&s.pack)).ok())
-                                .map(|md| md.len())
-                                .sum();
-                            (man.counts.batches.to_string(), format!("{:.2}", bytes as f64 / 1e6))
-                        });
-                    // Median cull ms from frames.csv.
-                    let cull = sylva::bench::read_csv(&d.join("frames.csv")).map_or(f64::NAN, |frames| {
-                        sylva::bench::Stat::of(frames.iter().filter(|r| r.method == method).map(|r| r.cull_ms)).median
-                    });
-                    println!(
-                        "| {} | {:.2} | {:.2} | {:.4} | {:.4} | {:.5} | {:.0} | {batches} | {packs} |",
-                        d.display(),
-                        med("gpu_ms"),
-                        cull,
-                        med("error"),
-                        med("flip"),
-                        med("temporal_noise"),
-                        med("draw_calls")
-                    );
-                }
-                Ok(())
-            }
-            Command::Compare { a, b } => {
-                let load = |p: &PathBuf| {
-                    image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8())
-                };
-                let (ia, ib) = (load(&a)?, load(&b)?);
-                if ia.dimensions() != ib.dimensions() {
-                    bail!(
-                        "{} is {:?} but {} is {:?}: sizes must match",
-                        a.display(),
-                        ia.dimensions(),
-                        b.display(),
-                        ib.dimensions()
-                    );
-                }
-                let (w, h) = ia.dimensions();
-                println!("{:.6}", sylva::metrics::multiscale_rmse(ia.as_raw(), ib.as_raw(), w, h));
-                Ok(())
-            }
-            Command::Serve { dir, port, bind, web, allow_hosts } => {
-                if !dir.join("scene.json").is_file() {
-                    bail!(
-                        "{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake)",
-                        dir.display()
-                    );
-                }
-                let web = web.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("web"));
-                if !web.join("pkg").join("sylva_bg.wasm").is_file() {
-                    bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
-                }
-                let config = sylva::serve::ServeConfig {
-                    allowed_hosts: allow_hosts,
-                    ..sylva::serve::ServeConfig::new(web, dir)
-                };
-                sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
-                    println!("serving the Sylva viewer on http://{addr}/");
-                    use std::io::Write as _;
-                    let _ = std::io::stdout().flush();
-                })
-                .with_context(|| format!("cannot listen on {bind}:{port}"))?;
-                Ok(())
-            }
-            Command::Render {
-                scene,
-                pack,
-                out,
-                size,
-                view,
-                camera,
-                quality,
-                draw_distance,
-                debug_lod,
-                only,
-                ellipsoid_min_px,
-                exact_depth,
-                thin_px,
-                debug_bounds,
-                stats,
-                timeout,
-                allow_partial,
-                pack_view,
-                level,
-                repr,
-            } => {
-                let (w, h) = parse_size(&size)?;
-                if !(quality > 0.0 && quality <= 16.0) {
-                    bail!("--quality {quality}: must be in (0, 16]");
-                }
-                if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
-                    bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
-                }
-                if !(thin_px.is_finite() && thin_px >= 0.0) {
-                    bail!("--thin-px {thin_px}: must be a number of pixels ≥ 0 (0 turns thinning off)");
-                }
-                if let Some(scene) = scene {
-                    use sylva::render::forest::Representations;
-                    let settings = RenderSettings {
-                        quality,
-                        draw_distance_m: draw_distance,
-                        debug_lod,
-                        debug_bounds,
-                        cluster_min_px: ellipsoid_min_px,
-                        cluster_exact_depth: exact_depth,
-                        thin_px,
-                        representations: match only {
-                            None => Representations::ALL,
-                            Some(OnlyArg::Meshes) => Representations::MESHES,
-                            Some(OnlyArg::Ellipsoids) => Representations::CLUSTERS,
-                            Some(OnlyArg::Billboards) => Representations::BILLBOARDS,
-                        },
-                        ..RenderSettings::default()
-                    };
-                    return render_scene(
-                        &scene,
-                        &out,
-                        (w, h),
-                        view,
-                        camera.as_deref(),
-                        settings,
-                        stats.as_ref(),
-                        timeout,
-                        allow_partial,
-                    );
-                }
-                let pack = pack.expect("clap requires --scene or --pack");
-                let bytes = std::fs::read(&pack).with_context(|| format!("cannot read {}", pack.display()))?;
-                let decoded = decode_pack(&pack.display().to_string(), &bytes)?;
-                let repr = match repr {
-                    PackReprArg::Mesh => {
-                        if level >= decoded.meta.mesh_levels.len() {
-                            bail!("--level {level}: the pack has {} mesh levels", decoded.meta.mesh_levels.len());
-                        }
-                        PackRepr::Mesh(level)
-                    }
-                    PackReprArg::Ellipsoids => {
-                        let n = decoded.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
-                        if level >= n {
-                            bail!("--level {level}: the pack has {n} cluster levels");
-                        }
-                        PackRepr::Cluster(level)
-                    }
-                    PackReprArg::Billboard => {
-                        if decoded.meta.billboards.is_none() {
-                            bail!("the pack has no billboards");
-                        }
-                        PackRepr::Billboard
-                    }
-                };
-                let gpu = GpuContext::new_headless_blocking()?;
-                let view = match pack_view {
-                    View::Side => PackView::Side,
-                    View::Oblique => PackView::Oblique,
-                    View::Top => PackView::Top,
-                };
-                let rgba = render_pack_repr(&gpu, &decoded, repr, view, w, h, [0.62, 0.74, 0.86, 1.0])
-                    .context("the pack lacks that representation")?;
-                image::save_buffer(&out, &rgba, w, h, image::ColorType::Rgba8)
-                    .with_context(|| format!("cannot write {}", out.display()))?;
-                eprintln!("wrote {} ({w}x{h}, {} on {})", out.display(), decoded.meta.name, gpu.adapter_summary());
-                Ok(())
-            }
+            Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
+            Command::Compare { a, b } => compare(&a, &b),
+            Command::Serve { dir, port, bind, web, allow_hosts } => serve(dir, port, &bind, web, allow_hosts),
+            Command::Render(args) => render(args),
         }
     }
 }
