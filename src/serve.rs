@@ -159,10 +159,6 @@ fn head_text(status: &str, len: u64, headers: &[(&str, String)]) -> String {
     head + "\r\n"
 }
 
-fn write_head(stream: &mut TcpStream, status: &str, len: u64, headers: &[(&str, String)]) -> std::io::Result<()> {
-    stream.write_all(head_text(status, len, headers).as_bytes())
-}
-
 fn respond(
     stream: &mut TcpStream,
     status: &str,
@@ -180,11 +176,45 @@ fn respond(
 /// Most connections served at once (a thread each); more get 503.
 const MAX_CONNECTIONS: usize = 512;
 
+/// A place among [`MAX_CONNECTIONS`].
+struct Slot(std::sync::Arc<std::sync::atomic::AtomicUsize>);
+
+impl Slot {
+    fn take(open: &std::sync::Arc<std::sync::atomic::AtomicUsize>) -> Option<Slot> {
+        use std::sync::atomic::Ordering::SeqCst;
+        let taken = open.fetch_update(SeqCst, SeqCst, |n| (n < MAX_CONNECTIONS).then_some(n + 1)).is_ok();
+        taken.then(|| Slot(open.clone()))
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Answers 503 without a thread: a flood of connections gets answers.
+fn busy(stream: &mut TcpStream) {
+    let _ = stream.set_write_timeout(Some(std::time::Duration::from_secs(1)));
+    let _ = respond(stream, "503 Service Unavailable", &[("Retry-After", "1".into())], b"busy\n", false);
+    // Closing with the request unread would reset the connection before the
+    // client reads the answer: close our side, then drain what has arrived
+    // (without waiting: the accept loop must not stall).
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+    let _ = stream.set_nonblocking(true);
+    let _ = stream.read(&mut [0u8; 16 << 10]);
+}
+
 /// Most bytes of a request head (request line and headers) read.
 const MAX_HEAD_BYTES: u64 = 16 << 10;
 
+/// How long a client may take to send its request head, and each write to it.
+const CLIENT_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
 fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) -> std::io::Result<()> {
-    stream.set_read_timeout(Some(std::time::Duration::from_secs(10)))?;
+    stream.set_read_timeout(Some(CLIENT_TIMEOUT))?;
+    stream.set_write_timeout(Some(CLIENT_TIMEOUT))?;
+    let started = std::time::Instant::now();
     let mut reader = BufReader::new(stream.try_clone()?.take(MAX_HEAD_BYTES));
     let mut request_line = String::new();
     reader.read_line(&mut request_line)?;
@@ -193,6 +223,10 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
     let mut gzip_ok = false;
     loop {
         let mut line = String::new();
+        // A byte every few seconds must not hold a connection: the whole head in time.
+        if started.elapsed() > CLIENT_TIMEOUT {
+            return Err(std::io::ErrorKind::TimedOut.into());
+        }
         if reader.read_line(&mut line)? == 0 || line.trim().is_empty() {
             break;
         }
@@ -255,10 +289,8 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
             // Read only the range: a viewer fetches parts of large packs.
             use std::io::Seek;
             f.seek(std::io::SeekFrom::Start(a))?;
-            let mut part = Vec::new();
-            f.take(b - a + 1).read_to_end(&mut part)?;
             headers.push(("Content-Range", format!("bytes {a}-{b}/{len}")));
-            return respond(&mut stream, "206 Partial Content", &headers, &part, head_only);
+            return send_file(&mut stream, "206 Partial Content", &headers, f.take(b - a + 1), b - a + 1, head_only);
         }
         RangeAsk::Unsatisfiable => {
             headers.push(("Content-Range", format!("bytes */{len}")));
@@ -276,17 +308,30 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
         headers.push(("Vary", "Accept-Encoding".into()));
         return respond(&mut stream, "200 OK", &headers, &enc.finish()?, head_only);
     }
+    send_file(&mut stream, "200 OK", &headers, f.take(len), len, head_only)
+}
+
+/// Sends `len` bytes of `body` after the head: up to [`MAX_BUFFERED_BYTES`]
+/// in one write with the head (tiles, index nodes), larger ones streamed, so
+/// memory per connection stays small whatever the file.
+fn send_file(
+    stream: &mut TcpStream,
+    status: &str,
+    headers: &[(&str, String)],
+    mut body: impl Read,
+    len: u64,
+    head_only: bool,
+) -> std::io::Result<()> {
+    let mut out = head_text(status, len, headers).into_bytes();
+    if head_only {
+        return stream.write_all(&out);
+    }
     if len <= MAX_BUFFERED_BYTES {
-        // Small files (tiles, index nodes) in one write with their head.
-        let mut body = Vec::with_capacity(len as usize);
-        f.read_to_end(&mut body)?;
-        return respond(&mut stream, "200 OK", &headers, &body, head_only);
+        body.read_to_end(&mut out)?;
+        return stream.write_all(&out);
     }
-    // Larger ones are streamed: memory per connection stays small whatever the file.
-    write_head(&mut stream, "200 OK", len, &headers)?;
-    if !head_only {
-        std::io::copy(&mut f, &mut stream)?;
-    }
+    stream.write_all(&out)?;
+    std::io::copy(&mut body, stream)?;
     Ok(())
 }
 
@@ -309,18 +354,21 @@ pub fn serve(config: ServeConfig, addr: &str, on_ready: impl FnOnce(std::net::So
     let open = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
     for stream in listener.incoming() {
         let Ok(mut stream) = stream else { continue };
-        use std::sync::atomic::Ordering::SeqCst;
-        if open.fetch_add(1, SeqCst) >= MAX_CONNECTIONS {
-            // A flood of connections gets answers, not a thread each.
-            open.fetch_sub(1, SeqCst);
-            let _ = respond(&mut stream, "503 Service Unavailable", &[("Retry-After", "1".into())], b"busy\n", false);
+        // A connection's place among MAX_CONNECTIONS, given back when dropped
+        // (also when its thread panics or cannot be started).
+        let slot = Slot::take(&open);
+        let Some(slot) = slot else {
+            busy(&mut stream);
             continue;
-        }
-        let (config, open) = (config.clone(), open.clone());
-        std::thread::spawn(move || {
+        };
+        let config = config.clone();
+        let spawned = std::thread::Builder::new().spawn(move || {
+            let _slot = slot;
             let _ = handle(stream, &config, bound.ip());
-            open.fetch_sub(1, SeqCst);
         });
+        if spawned.is_err() {
+            continue; // The slot was dropped with the closure; the client sees the socket close.
+        }
     }
     Ok(())
 }
@@ -351,6 +399,24 @@ mod tests {
             assert_eq!(resolve(&c, bad), None, "{bad}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn connection_slots_are_bounded_and_given_back() {
+        let open = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let slots: Vec<Slot> = (0..MAX_CONNECTIONS).map_while(|_| Slot::take(&open)).collect();
+        assert_eq!(slots.len(), MAX_CONNECTIONS);
+        assert!(Slot::take(&open).is_none(), "one more gets 503");
+        drop(slots);
+        assert_eq!(open.load(std::sync::atomic::Ordering::SeqCst), 0);
+        // A thread that panics gives its slot back.
+        let slot = Slot::take(&open).unwrap();
+        let _ = std::thread::spawn(move || {
+            let _slot = slot;
+            panic!("a handler bug");
+        })
+        .join();
+        assert_eq!(open.load(std::sync::atomic::Ordering::SeqCst), 0);
     }
 
     #[test]

@@ -213,7 +213,7 @@ impl Viewer {
         let readback = Readback {
             buffer: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("stats readback"),
-                size: 32 + slots * 20,
+                size: CullCounters::readback_bytes(slots as u32),
                 usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
                 mapped_at_creation: false,
             }),
@@ -269,7 +269,8 @@ impl Viewer {
         if self.is_lost() {
             return Ok(());
         }
-        let t0 = now_ms;
+        // CPU time of this frame alone (`now_ms` is the animation frame's start).
+        let t0 = performance_now().unwrap_or(now_ms);
         let cam = self.camera();
         let view = cam.view_data(self.config.width, self.config.height);
         self.renderer.measure_reach(&view, &self.settings);

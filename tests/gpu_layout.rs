@@ -6,7 +6,7 @@
 use std::mem::{offset_of, size_of};
 
 use sylva::format::tile::GpuBatch;
-use sylva::render::gpu_data::{DrawParams, GpuSpecies, ViewUniform};
+use sylva::render::gpu_data::{DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform};
 
 /// A WGSL struct of the composed `shader`: its members (name, byte offset) and size.
 fn wgsl_struct(shader: &str, name: &str) -> (Vec<(String, u32)>, u32) {
@@ -66,7 +66,8 @@ fn shared_structs_match_their_wgsl_twins() {
             size_of::<GpuSpecies>(),
             None,
         );
-        // Bound with a dynamic offset: the Rust struct pads to wgpu's 256-byte alignment.
+        // Bound with a dynamic offset: the Rust struct pads to wgpu's 256-byte alignment
+        // (the padding is one trailing member, `pad`, after the WGSL members).
         check(
             shader,
             "DrawParams",
@@ -78,11 +79,53 @@ fn shared_structs_match_their_wgsl_twins() {
 }
 
 #[test]
+fn mesh_pass_structs_and_indirect_args_match() {
+    check(
+        "mesh",
+        "MeshParams",
+        &members!(MeshUniform: pos_min, pos_extent, uv_min, uv_extent),
+        size_of::<MeshUniform>(),
+        None,
+    );
+    check(
+        "mesh",
+        "Material",
+        &members!(GpuMaterial: base_color, alpha_cutoff, layer, kind, pad),
+        size_of::<GpuMaterial>(),
+        None,
+    );
+    assert_eq!(offset_of!(DrawParams, pad), 128, "DrawParams: the padding follows the WGSL members");
+    // The cull pass writes indirect arguments as atomic words (no WGSL struct to
+    // reflect): the Rust twin must have wgpu's layout.
+    use wgpu::util::DrawIndexedIndirectArgs as W;
+    assert_eq!(
+        [
+            offset_of!(DrawArgs, count),
+            offset_of!(DrawArgs, instance_count),
+            offset_of!(DrawArgs, first),
+            offset_of!(DrawArgs, base_vertex_or_first_instance),
+            offset_of!(DrawArgs, first_instance),
+            size_of::<DrawArgs>()
+        ],
+        [
+            offset_of!(W, index_count),
+            offset_of!(W, instance_count),
+            offset_of!(W, first_index),
+            offset_of!(W, base_vertex),
+            offset_of!(W, first_instance),
+            size_of::<W>()
+        ]
+    );
+}
+
+#[test]
 fn a_moved_member_is_caught() {
     // The check itself must fail on a wrong offset (here: two members swapped).
     let mut wrong = members!(GpuBatch: origin_m, instance_offset, center_m, radius_m, half_extent_m, instance_count,
         species, xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, reserved);
     wrong.swap(12, 13);
     let caught = std::panic::catch_unwind(|| check("cull", "Batch", &wrong, size_of::<GpuBatch>(), None));
-    assert!(caught.is_err(), "a swapped pair of members went unnoticed");
+    let message = caught.expect_err("a swapped pair of members went unnoticed");
+    let text = message.downcast_ref::<String>().map_or("", String::as_str);
+    assert!(text.contains("Batch: members (name, offset)"), "failed for another reason: {text}");
 }

@@ -17,12 +17,15 @@ struct Server {
 fn start(name: &str) -> Server {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("serve-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    for d in ["web/pkg", "scene/tiles", "scene/.git", "outside"] {
+    for d in ["web/pkg", "scene/tiles", "scene/species", "scene/.git", "outside"] {
         std::fs::create_dir_all(dir.join(d)).unwrap();
     }
     std::fs::write(dir.join("web/index.html"), "<!doctype html>viewer").unwrap();
     std::fs::write(dir.join("scene/scene.json"), "{\"scene\":1}").unwrap();
     std::fs::write(dir.join("scene/tiles/0_0.tile"), (0..=255u8).collect::<Vec<_>>()).unwrap();
+    // Larger than what is sent in one write: streamed.
+    std::fs::write(dir.join("scene/species/big.pack"), (0..3u32 << 20).map(|i| (i % 251) as u8).collect::<Vec<_>>())
+        .unwrap();
     std::fs::write(dir.join("scene/.env"), "TOKEN=secret").unwrap();
     std::fs::write(dir.join("scene/.git/config"), "[remote] secret").unwrap();
     std::fs::write(dir.join("scene/.sylva-bake-files.json"), "{}").unwrap();
@@ -150,6 +153,15 @@ fn odd_range_headers_get_the_whole_file_and_past_the_end_gets_416() {
     let (status, head, _) = get(addr, "/scene/tiles/0_0.tile", "Range: bytes=300-\r\n");
     assert_eq!(status, 416);
     assert!(head.contains("content-range: bytes */256"), "{head}");
+    // A file and a range larger than one write are streamed whole.
+    let big: Vec<u8> = (0..3u32 << 20).map(|i| (i % 251) as u8).collect();
+    let (status, _, body) = get(addr, "/scene/species/big.pack", "");
+    assert_eq!((status, body.len()), (200, big.len()));
+    assert!(body == big);
+    let (status, head, body) = get(addr, "/scene/species/big.pack", "Range: bytes=1000-2098151\r\n");
+    assert_eq!((status, body.len()), (206, 2_097_152));
+    assert!(head.contains("content-range: bytes 1000-2098151/3145728"), "{head}");
+    assert!(body[..] == big[1000..2_098_152]);
     // HEAD: the head of a GET without its body.
     let (status, head, body) =
         request(addr, &format!("HEAD /scene/tiles/0_0.tile HTTP/1.1\r\nHost: localhost:{}\r\n\r\n", addr.port()));

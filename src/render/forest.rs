@@ -18,8 +18,11 @@ use super::gpu_data::{CullControl, DrawArgs, DrawParams, GpuSpecies, Repr, ViewU
 use super::layouts::SharedLayouts;
 use super::mesh::{MeshGpu, MeshPipelines, DEPTH_FORMAT};
 use super::Lighting;
-use crate::format::tile::{GpuBatch, Tile};
+use crate::format::tile::{GpuBatch, PackedInstance, Tile};
 use crate::format::Pack;
+
+/// Bytes of a draw item (instance index and batch slot, `vec2<u32>` in `shaders/cull.wgsl`).
+const ITEM_BYTES: u64 = size_of::<[u32; 2]>() as u64;
 
 /// Segment capacity of the full mesh level per species: only trees hundreds of
 /// pixels tall use it, a few hundred at most on any screen.
@@ -57,9 +60,9 @@ impl PoolConfig {
         let max = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let fit = |count: u32, stride: u64| (u64::from(count).min(max / stride)) as u32;
         let c = Self {
-            instances: fit(self.instances, 8),
-            batches: fit(self.batches, 80),
-            items: fit(self.items, 8),
+            instances: fit(self.instances, size_of::<PackedInstance>() as u64),
+            batches: fit(self.batches, size_of::<GpuBatch>() as u64),
+            items: fit(self.items, ITEM_BYTES),
             species: self.species,
         };
         (c, c != self)
@@ -85,9 +88,9 @@ impl PoolConfig {
         let size = |bytes: usize| bytes as u64;
         // Instances, batches with their visible-list word, draw items (two words),
         // and per species its table record and per slot draw args and params.
-        u64::from(self.instances) * size(size_of::<crate::format::tile::PackedInstance>())
-            + u64::from(self.batches) * size(size_of::<crate::format::tile::GpuBatch>() + 4)
-            + u64::from(self.items) * size(size_of::<[u32; 2]>())
+        u64::from(self.instances) * size(size_of::<PackedInstance>())
+            + u64::from(self.batches) * size(size_of::<GpuBatch>() + 4)
+            + u64::from(self.items) * ITEM_BYTES
             + u64::from(self.species)
                 * (size(size_of::<GpuSpecies>())
                     + u64::from(REPR_COUNT) * size(size_of::<DrawArgs>() + size_of::<DrawParams>()))
@@ -391,14 +394,19 @@ fn create_pools(
     let slots = u64::from(config.species) * u64::from(REPR_COUNT);
     let pools = Pools {
         // COPY_SRC everywhere tests and stats read back from.
-        batches: buffer(device, "batch pool", u64::from(config.batches) * 80, U::STORAGE | U::COPY_DST | U::COPY_SRC),
+        batches: buffer(
+            device,
+            "batch pool",
+            u64::from(config.batches) * size_of::<GpuBatch>() as u64,
+            U::STORAGE | U::COPY_DST | U::COPY_SRC,
+        ),
         instances: buffer(
             device,
             "instance pool",
-            u64::from(config.instances) * 8,
+            u64::from(config.instances) * size_of::<PackedInstance>() as u64,
             U::STORAGE | U::COPY_DST | U::COPY_SRC,
         ),
-        items: buffer(device, "draw items", u64::from(config.items) * 8, U::STORAGE | U::COPY_SRC),
+        items: buffer(device, "draw items", u64::from(config.items) * ITEM_BYTES, U::STORAGE | U::COPY_SRC),
         visible: buffer(device, "visible batches", u64::from(config.batches) * 4, U::STORAGE),
         control: buffer(device, "cull control", size_of::<CullControl>() as u64, U::STORAGE | U::COPY_SRC),
         dispatch: buffer(device, "cull dispatch", 8 * 4, U::STORAGE | U::INDIRECT),
@@ -409,7 +417,7 @@ fn create_pools(
             u64::from(config.species) * std::mem::size_of::<GpuSpecies>() as u64,
             U::STORAGE | U::COPY_DST,
         ),
-        draw_params: buffer(device, "draw params", slots * 256, U::UNIFORM | U::COPY_DST),
+        draw_params: buffer(device, "draw params", slots * size_of::<DrawParams>() as u64, U::UNIFORM | U::COPY_DST),
     };
     let instance_group = shared.instance_group(device, &pools.batches, &pools.instances, &pools.items);
     let draw_group = shared.draw_group(device, &pools.draw_params);
@@ -646,10 +654,14 @@ impl ForestRenderer {
             .iter()
             .map(|b| GpuBatch { instance_offset: b.instance_offset + instances.start, ..*b })
             .collect();
-        queue.write_buffer(&self.pools.batches, u64::from(batches.start) * 80, bytemuck::cast_slice(&rebased));
+        queue.write_buffer(
+            &self.pools.batches,
+            u64::from(batches.start) * size_of::<GpuBatch>() as u64,
+            bytemuck::cast_slice(&rebased),
+        );
         queue.write_buffer(
             &self.pools.instances,
-            u64::from(instances.start) * 8,
+            u64::from(instances.start) * size_of::<PackedInstance>() as u64,
             bytemuck::cast_slice(&tile.instances),
         );
         let mut bounds = TileBounds {
@@ -691,8 +703,8 @@ impl ForestRenderer {
     pub fn evict_tile(&mut self, queue: &wgpu::Queue, slot: TileSlot) {
         self.tile_bounds.retain(|t| t.batch_start != slot.batches.start);
         self.reach_measured = None;
-        let zeros = vec![0u8; slot.batches.len() * 80];
-        queue.write_buffer(&self.pools.batches, u64::from(slot.batches.start) * 80, &zeros);
+        let zeros = vec![0u8; slot.batches.len() * size_of::<GpuBatch>()];
+        queue.write_buffer(&self.pools.batches, u64::from(slot.batches.start) * size_of::<GpuBatch>() as u64, &zeros);
         for (s, n) in &slot.species_counts {
             self.resident[*s as usize] -= u64::from(*n);
         }
@@ -999,7 +1011,7 @@ impl ForestRenderer {
                     continue;
                 }
                 let slot = i as u32 * REPR_COUNT + repr as u32;
-                pass.set_bind_group(3, &self.draw_group, &[slot * 256]);
+                pass.set_bind_group(3, &self.draw_group, &[slot * size_of::<DrawParams>() as u32]);
                 let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
                 match repr {
                     Repr::Mesh0 | Repr::Mesh1 => {

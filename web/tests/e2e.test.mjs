@@ -120,7 +120,9 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   assert.equal(stats.trees_total, 3000);
   assert.ok(stats.tiles_resident > 0, 'tiles resident');
   // Sane values, not only keys (the same FrameStats code as `sylva render --stats`).
-  assert.ok(stats.frame_cpu_ms >= 0 && stats.frame_cpu_ms < 1000, `CPU ms per frame ${stats.frame_cpu_ms}`);
+  assert.ok(stats.frame_cpu_ms > 0 && stats.frame_cpu_ms < 1000, `CPU ms per frame ${stats.frame_cpu_ms}`);
+  assert.ok(stats.batches_visible > 0 && stats.batches_visible <= stats.batches_tested, `batches ${JSON.stringify(stats)}`);
+  assert.equal(stats.items_dropped, 0);
   assert.ok(stats.tiles_total > 0 && stats.tiles_total >= stats.tiles_resident, `tiles ${JSON.stringify(stats)}`);
   assert.deepEqual(stats.failed, []);
   // The fixture has a hierarchical index (5 nodes) and packs fetched in parts by
