@@ -36,9 +36,12 @@ pub struct ServeConfig {
 
 impl ServeConfig {
     /// Serves `web_dir` at `/` and `scene_dir` at `/scene/`, without a request log.
+    /// The folders are resolved here once (links followed), as [`resolve`] compares
+    /// real paths with them.
     #[must_use]
     pub fn new(web_dir: PathBuf, scene_dir: PathBuf) -> Self {
-        Self { web_dir, scene_dir, log: None, allowed_hosts: Vec::new() }
+        let real = |p: PathBuf| std::fs::canonicalize(&p).unwrap_or(p);
+        Self { web_dir: real(web_dir), scene_dir: real(scene_dir), log: None, allowed_hosts: Vec::new() }
     }
 
     /// Whether a request with this `Host` header is answered by a server bound
@@ -100,10 +103,9 @@ pub fn resolve(config: &ServeConfig, url_path: &str) -> Option<PathBuf> {
         return None;
     }
     // Links are followed, then the real path must still be inside the real root
-    // and be no dotfile there.
-    let root = std::fs::canonicalize(root).ok()?;
+    // (resolved by `ServeConfig::new`) and be no dotfile there.
     let full = std::fs::canonicalize(root.join(&rest)).ok()?;
-    let inside = full.strip_prefix(&root).ok()?;
+    let inside = full.strip_prefix(root).ok()?;
     (crate::paths::is_plain_relative(&inside.to_string_lossy(), false) && full.is_file()).then_some(full)
 }
 

@@ -312,6 +312,19 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOption
     Ok(PlacementSet { kind, rows, report, declared_epsg: None })
 }
 
+/// Reads the header line (UTF-8 or Windows-1252, as the fields) and detects its columns.
+fn header_columns<R: std::io::Read>(rdr: &mut csv::Reader<R>) -> Result<Columns> {
+    let mut fell_back = false;
+    let header: Vec<String> = rdr
+        .byte_headers()
+        .map_err(|e| anyhow!("cannot read the CSV header: {e}"))?
+        .iter()
+        .map(|h| decode_field(h, Encoding::Auto, &mut fell_back).unwrap_or_default().into_owned())
+        .collect();
+    let refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    detect_columns(&refs)
+}
+
 /// Streams CSV rows: each usable row goes to `f` as it is read (memory stays
 /// constant whatever the file size); skipped rows are counted in `report`.
 /// Returns the coordinate kind of the header.
@@ -324,15 +337,7 @@ pub fn stream_csv<R: std::io::Read>(
 ) -> Result<CoordKind> {
     let mut rdr =
         csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).trim(csv::Trim::All).from_reader(reader);
-    let mut fell_back = false;
-    let header: Vec<String> = rdr
-        .byte_headers()
-        .map_err(|e| anyhow!("cannot read the CSV header: {e}"))?
-        .iter()
-        .map(|h| decode_field(h, Encoding::Auto, &mut fell_back).unwrap_or_default().into_owned())
-        .collect();
-    let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    let mut cols = detect_columns(&header_refs)?;
+    let mut cols = header_columns(&mut rdr)?;
     if options.swap_xy {
         std::mem::swap(&mut cols.x, &mut cols.y);
     }
@@ -439,15 +444,7 @@ impl PlacementSource {
                 }
                 let mut rdr =
                     csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_reader(&first_line[..]);
-                let mut fell_back = false;
-                let header: Vec<String> = rdr
-                    .byte_headers()
-                    .map_err(|e| anyhow!("placements {}: cannot read the CSV header: {e}", path.display()))?
-                    .iter()
-                    .map(|h| decode_field(h, Encoding::Auto, &mut fell_back).unwrap_or_default().into_owned())
-                    .collect();
-                let refs: Vec<&str> = header.iter().map(String::as_str).collect();
-                let cols = detect_columns(&refs).with_context(|| format!("placements {}", path.display()))?;
+                let cols = header_columns(&mut rdr).with_context(|| format!("placements {}", path.display()))?;
                 Ok(Self {
                     path: path.to_path_buf(),
                     delimiter,
