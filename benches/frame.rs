@@ -12,8 +12,8 @@
 use std::time::Instant;
 
 use glam::DVec3;
+use sylva::camera::Camera;
 use sylva::format::Manifest;
-use sylva::render::camera::Camera;
 use sylva::render::forest::{CullingMode, PoolConfig, Representations};
 use sylva::render::offscreen::{FrameStats, NamedView, OffscreenScene};
 

@@ -1,5 +1,6 @@
 //! Sylva: a GPU-driven forest renderer for whole forests in the browser and headless.
 //!
+//! * [`camera`] — the camera and the view maths every layer shares (ground floor).
 //! * [`geo`] — lon/lat ↔ scene-relative metres through the scene CRS.
 //! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
 //! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
@@ -12,6 +13,7 @@
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod bench;
+pub mod camera;
 pub mod format;
 pub mod geo;
 pub mod metrics;

@@ -7,8 +7,8 @@ mod cli {
     use anyhow::{bail, Context, Result};
     use clap::{Parser, Subcommand, ValueEnum};
     use glam::DVec3;
+    use sylva::camera::Camera;
     use sylva::format::decode_pack;
-    use sylva::render::camera::Camera;
     use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
     use sylva::render::forest::{PoolConfig, RenderSettings};
     use sylva::render::offscreen::{NamedView, OffscreenScene};

@@ -11,12 +11,11 @@ use wasm_bindgen::prelude::*;
 use wasm_bindgen::JsCast;
 use wasm_bindgen_futures::JsFuture;
 
+use crate::camera::Camera;
 use crate::geo::GeoFrame;
-use crate::render::camera::Camera;
-use crate::render::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
-use crate::render::gpu_data::REPR_COUNT;
-use crate::render::stats::{CullCounters, FrameStats};
-use crate::scene::{FetchError, Fetcher, RequestId, SceneStream, StreamConfig, StreamEvent};
+use crate::render::forest::{depth_texture, PoolConfig};
+use crate::render::frame::Frame;
+use crate::scene::{FetchError, Fetcher, RequestId, StreamEvent};
 
 type Done = Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
 
@@ -98,53 +97,26 @@ impl Orbit {
     }
 }
 
-/// Counters read back from the GPU a few frames late (mapping is asynchronous on the web).
-struct Readback {
-    buffer: wgpu::Buffer,
-    /// Bytes mapped by the pending request (the same range is read back).
-    mapped_len: u64,
-    state: Rc<Cell<u8>>, // 0 idle, 1 mapping, 2 mapped
-    counters: CullCounters,
-    /// Frame whose counters the pending mapping holds, and of the counters read.
-    pending_frame: u64,
-    words_frame: u64,
-}
-
 /// The browser viewer.
 #[wasm_bindgen]
 pub struct Viewer {
     surface: wgpu::Surface<'static>,
-    device: wgpu::Device,
-    queue: wgpu::Queue,
     config: wgpu::SurfaceConfiguration,
     view_format: wgpu::TextureFormat,
-    renderer: ForestRenderer,
-    stream: SceneStream<WebFetcher>,
+    /// The frame shared with the native host: renderer, stream, settings, stats.
+    frame: Frame<WebFetcher>,
     depth: wgpu::Texture,
     orbit: Orbit,
     placed: bool,
-    settings: RenderSettings,
-    readback: Readback,
-    last_draw_calls: u32,
-    last_cpu_ms: f64,
     events: Vec<StreamEvent>,
-    adapter: String,
     geo: Option<GeoFrame>,
-    /// Frames drawn, and the first frame drawn with the stream settled since the last change.
-    frames: u64,
+    /// The first frame drawn with the stream settled since the last change.
     settled_frame: Option<u64>,
     /// A geographic camera asked for before the manifest (and so the CRS) arrived.
     pending_geo: Option<[f64; 5]>,
     /// Walking mode: the eye stays at eye height above the ground and looks around itself.
     fly: bool,
     lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
-}
-
-/// `performance.now()` of the page or worker, in milliseconds.
-fn performance_now() -> Option<f64> {
-    let performance = js_sys::Reflect::get(&js_sys::global(), &JsValue::from_str("performance")).ok()?;
-    let now = js_sys::Reflect::get(&performance, &JsValue::from_str("now")).ok()?;
-    now.dyn_ref::<js_sys::Function>()?.call0(&performance).ok()?.as_f64()
 }
 
 fn js_err(e: impl std::fmt::Display) -> JsValue {
@@ -207,42 +179,18 @@ impl Viewer {
         };
         surface.configure(&device, &config);
         let pools = PoolConfig { instances: 2 << 20, items: 3 << 20, ..PoolConfig::default() };
-        let renderer = ForestRenderer::new(&device, view_format, pools);
         let depth = depth_texture(&device, width, height);
-        let slots = u64::from(pools.species * REPR_COUNT);
-        let readback = Readback {
-            buffer: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("stats readback"),
-                size: CullCounters::readback_bytes(slots as u32),
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            }),
-            mapped_len: 0,
-            state: Rc::new(Cell::new(0)),
-            counters: CullCounters::default(),
-            pending_frame: 0,
-            words_frame: 0,
-        };
-        let info = adapter.get_info();
+        let name = adapter_name(&adapter).await;
         Ok(Viewer {
             surface,
-            device,
-            queue,
             config,
             view_format,
-            renderer,
-            stream: SceneStream::new(&scene, WebFetcher::default(), StreamConfig::default()),
+            frame: Frame::new(device, queue, name, view_format, pools, &scene, WebFetcher::default()),
             depth,
             orbit: Orbit { target: DVec3::ZERO, distance: 800.0, heading: 0.0, pitch: -0.5 },
             placed: false,
-            settings: RenderSettings::default(),
-            readback,
-            last_draw_calls: 0,
-            last_cpu_ms: 0.0,
             events: Vec::new(),
-            adapter: format!("{} ({:?})", info.name, info.backend),
             geo: None,
-            frames: 0,
             settled_frame: None,
             pending_geo: None,
             fly: false,
@@ -256,8 +204,8 @@ impl Viewer {
         if (width, height) != (self.config.width, self.config.height) {
             self.config.width = width;
             self.config.height = height;
-            self.surface.configure(&self.device, &self.config);
-            self.depth = depth_texture(&self.device, width, height);
+            self.surface.configure(&self.frame.device, &self.config);
+            self.depth = depth_texture(&self.frame.device, width, height);
         }
     }
 
@@ -269,22 +217,13 @@ impl Viewer {
         if self.is_lost() {
             return Ok(());
         }
-        // CPU time of this frame alone (`now_ms` is the animation frame's start).
-        let t0 = performance_now().unwrap_or(now_ms);
-        let cam = self.camera();
-        let view = cam.view_data(self.config.width, self.config.height);
-        self.renderer.measure_reach(&view, &self.settings);
-        self.stream.update(
-            &mut self.renderer,
-            &self.device,
-            &self.queue,
-            &view,
-            self.settings.draw_distance_m,
-            now_ms / 1e3,
-        );
-        self.events.extend(self.stream.drain_events());
+        // GPU times and counters of earlier frames, as the GPU reports them.
+        self.frame.collect();
+        let view = self.camera().view_data(self.config.width, self.config.height);
+        self.frame.stream(&view, now_ms / 1e3);
+        self.events.extend(self.frame.stream.drain_events());
         if !self.placed {
-            if let Some(m) = self.stream.manifest() {
+            if let Some(m) = self.frame.stream.manifest() {
                 // Start over the whole scene, looking north and down.
                 let lo = DVec3::from(m.bounds.min.map(f64::from));
                 let hi = DVec3::from(m.bounds.max.map(f64::from));
@@ -294,7 +233,7 @@ impl Viewer {
             }
         }
         if self.geo.is_none() {
-            if let Some(m) = self.stream.manifest() {
+            if let Some(m) = self.frame.stream.manifest() {
                 match GeoFrame::new(&m.crs.proj4, m.origin_m) {
                     Ok(g) => self.geo = Some(g),
                     Err(e) => web_sys::console::warn_1(&JsValue::from_str(&format!("sylva: {e}"))),
@@ -304,71 +243,36 @@ impl Viewer {
                 }
             }
         }
-        let frame = match self.surface.get_current_texture() {
+        let target = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
             wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(()),
             wgpu::CurrentSurfaceTexture::Outdated => {
-                self.surface.configure(&self.device, &self.config);
+                self.surface.configure(&self.frame.device, &self.config);
                 return Ok(());
             }
             other => return Err(js_err(format!("the canvas surface failed: {other:?}"))),
         };
-        let cam = self.camera();
-        let view = cam.view_data(self.config.width, self.config.height);
-        self.renderer.prepare(&self.queue, &view, &self.settings);
-        let color = frame
+        // The camera again: placing it, or the ground under it, may have moved it.
+        let view = self.camera().view_data(self.config.width, self.config.height);
+        let color = target
             .texture
             .create_view(&wgpu::TextureViewDescriptor { format: Some(self.view_format), ..Default::default() });
         let depth = self.depth.create_view(&Default::default());
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        self.renderer.encode_cull(&mut encoder);
-        self.last_draw_calls = self.renderer.encode_draw(&mut encoder, &color, &depth, self.settings.clear);
-        let copy = self.readback.state.get() == 0;
-        if copy {
-            self.renderer.copy_counters(&mut encoder, &self.readback.buffer);
-        }
-        self.queue.submit([encoder.finish()]);
-        self.queue.present(frame);
-        self.frames += 1;
-        if self.stream.is_settled() && self.stream.manifest().is_some() {
-            self.settled_frame.get_or_insert(self.frames);
+        let recorded = self.frame.record(&view, &color, &depth, true);
+        self.frame.submit(recorded, false);
+        self.frame.queue.present(target);
+        if self.frame.stream.is_settled() && self.frame.stream.manifest().is_some() {
+            self.settled_frame.get_or_insert(self.frame.frames());
         } else {
             self.settled_frame = None;
         }
-        self.collect_readback();
-        if copy {
-            let state = self.readback.state.clone();
-            state.set(1);
-            self.readback.mapped_len = CullCounters::readback_bytes(self.renderer.slot_count());
-            self.readback.pending_frame = self.frames;
-            self.readback.buffer.slice(..self.readback.mapped_len).map_async(wgpu::MapMode::Read, move |r| {
-                state.set(if r.is_ok() { 2 } else { 0 });
-            });
-        }
-        // Both ends on the page's clock (`performance.now()`): Date.now() counts from 1970.
-        self.last_cpu_ms = (performance_now().unwrap_or(t0) - t0).max(0.0);
         Ok(())
-    }
-
-    fn collect_readback(&mut self) {
-        if self.readback.state.get() != 2 {
-            return;
-        }
-        {
-            let data = self.readback.buffer.slice(..self.readback.mapped_len).get_mapped_range();
-            if let Ok(data) = data {
-                self.readback.counters = CullCounters::from_bytes(&data);
-                self.readback.words_frame = self.readback.pending_frame;
-            }
-        }
-        self.readback.buffer.unmap();
-        self.readback.state.set(0);
     }
 
     fn camera(&self) -> Camera {
         let mut cam = self.orbit.camera();
         // No tunnelling: keep the eye above the ground near it; walking keeps eye height.
-        if let Some(z) = self.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
+        if let Some(z) = self.frame.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
             let ground = f64::from(z);
             cam.eye_m.z = if self.fly { ground + 1.7 } else { cam.eye_m.z.max(ground + 1.5) };
         }
@@ -439,7 +343,7 @@ impl Viewer {
 
     /// Destroys the device as a driver reset would (for tests of the recovery).
     pub fn simulate_device_loss(&self) {
-        self.device.destroy();
+        self.frame.device.destroy();
     }
 
     /// Orbits around the target: `dx`, `dy` in radians of heading and pitch.
@@ -480,8 +384,8 @@ impl Viewer {
     /// scene origin, degrees) plus `origin` (the scene origin) and `epsg`.
     pub fn camera_json(&self) -> String {
         let c = self.camera();
-        let origin = self.stream.manifest().map_or([0.0; 3], |m| m.origin_m);
-        let epsg = self.stream.manifest().map_or(0, |m| m.crs.epsg);
+        let origin = self.frame.stream.manifest().map_or([0.0; 3], |m| m.origin_m);
+        let epsg = self.frame.stream.manifest().map_or(0, |m| m.crs.epsg);
         let mut v = serde_json::json!({
             "x": c.eye_m.x, "y": c.eye_m.y, "z": c.eye_m.z,
             "heading": c.heading_rad.to_degrees(), "pitch": c.pitch_rad.to_degrees(),
@@ -497,8 +401,8 @@ impl Viewer {
 
     /// Colours trees by representation and/or draws batch boxes.
     pub fn set_debug(&mut self, lod: bool, bounds: bool) {
-        self.settings.debug_lod = lod;
-        self.settings.debug_bounds = bounds;
+        self.frame.settings.debug_lod = lod;
+        self.frame.settings.debug_bounds = bounds;
     }
 
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
@@ -509,65 +413,62 @@ impl Viewer {
     /// subset of them (0: off).
     pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool, thin_px: f32) {
         use crate::render::forest::Representations;
-        self.settings.cluster_min_px =
+        self.frame.settings.cluster_min_px =
             if ellipsoid_min_px.is_nan() { f32::INFINITY } else { ellipsoid_min_px.max(0.0) };
-        self.settings.representations = match only {
+        self.frame.settings.representations = match only {
             "meshes" => Representations::MESHES,
             "ellipsoids" => Representations::CLUSTERS,
             "billboards" => Representations::BILLBOARDS,
             _ => Representations::ALL,
         };
-        self.settings.cluster_exact_depth = exact_depth;
-        self.settings.thin_px = if thin_px.is_finite() { thin_px.clamp(0.0, 64.0) } else { 0.0 };
+        self.frame.settings.cluster_exact_depth = exact_depth;
+        self.frame.settings.thin_px = if thin_px.is_finite() { thin_px.clamp(0.0, 64.0) } else { 0.0 };
     }
 
     /// Budgets: GPU memory for pools and packs in MB (0: none), download bytes per
     /// second (0: none), requests in flight (at least 1). The viewer degrades within
     /// them (coarser levels, shorter reach for new tiles) and says so in `stats()`.
     pub fn set_budget(&mut self, gpu_mb: f64, bytes_per_s: f64, in_flight: u32) {
-        let mut c = self.stream.config();
+        let mut c = self.frame.stream.config();
         c.gpu_budget_bytes = if gpu_mb.is_finite() && gpu_mb > 0.0 { (gpu_mb * 1e6) as u64 } else { 0 };
         c.max_bytes_per_s = if bytes_per_s.is_finite() && bytes_per_s > 0.0 { bytes_per_s } else { 0.0 };
         c.max_in_flight = in_flight.clamp(1, 64) as usize;
-        self.stream.set_config(c);
+        self.frame.stream.set_config(c);
     }
 
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
-        self.settings.quality = quality.clamp(0.05, 4.0);
+        self.frame.settings.quality = quality.clamp(0.05, 4.0);
     }
 
     /// Whether everything the current view needs is drawn.
     pub fn settled(&self) -> bool {
-        self.stream.is_settled()
+        self.frame.stream.is_settled()
     }
 
     /// Whether a frame with everything the view needs has been drawn and its
     /// counters read back (so `stats_json` describes it).
     pub fn is_ready(&self) -> bool {
-        self.settled_frame.is_some_and(|f| self.readback.words_frame >= f)
+        self.settled_frame.is_some_and(|f| self.frame.counters_frame() >= f)
     }
 
     /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md),
-    /// gathered by the same code ([`FrameStats`]), plus `adapter`.
+    /// gathered by the same code ([`Frame::stats`]); GPU times and counters are
+    /// those of the latest frame the GPU finished.
     pub fn stats_json(&self) -> String {
-        let mut stats = FrameStats::gather(&self.renderer, &self.stream, self.last_draw_calls, self.last_cpu_ms);
-        stats.apply_counters(&self.readback.counters);
-        let mut json = serde_json::to_value(&stats).unwrap_or_default();
-        json["adapter"] = self.adapter.clone().into();
-        json.to_string()
+        serde_json::to_string(&self.frame.stats()).unwrap_or_default()
     }
 
     /// Loading progress: `{manifest, tiles_wanted, tiles_resident, loading, bytes_fetched, settled}`.
     pub fn progress_json(&self) -> String {
-        let s = self.stream.stats();
+        let s = self.frame.stream.stats();
         serde_json::json!({
-            "manifest": self.stream.manifest().is_some(),
+            "manifest": self.frame.stream.manifest().is_some(),
             "tiles_wanted": s.tiles_wanted,
             "tiles_resident": s.tiles_resident,
             "loading": s.loading,
             "bytes_fetched": s.bytes_fetched,
-            "settled": self.stream.is_settled(),
+            "settled": self.frame.stream.is_settled(),
         })
         .to_string()
     }
@@ -593,4 +494,27 @@ fn console_error_panic_hook_install() {
     std::panic::set_hook(Box::new(|info| {
         web_sys::console::error_1(&JsValue::from_str(&format!("sylva panicked: {info}")));
     }));
+}
+
+/// The adapter's name: what wgpu reports, else the browser's `GPUAdapterInfo`
+/// vendor and architecture (Chromium leaves the description empty).
+async fn adapter_name(adapter: &wgpu::Adapter) -> String {
+    let info = adapter.get_info();
+    if !info.name.trim().is_empty() {
+        return format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
+    }
+    let get = |o: &JsValue, k: &str| js_sys::Reflect::get(o, &JsValue::from_str(k)).ok();
+    let text = |o: &JsValue, k: &str| get(o, k).and_then(|v| v.as_string()).filter(|s| !s.is_empty());
+    let described = async {
+        let gpu = get(&web_sys::window()?.navigator().into(), "gpu")?;
+        let request = get(&gpu, "requestAdapter")?.dyn_into::<js_sys::Function>().ok()?;
+        let promise = request.call0(&gpu).ok()?.dyn_into::<js_sys::Promise>().ok()?;
+        let js_adapter = JsFuture::from(promise).await.ok()?;
+        let js_info = get(&js_adapter, "info")?;
+        let parts: Vec<String> =
+            ["vendor", "architecture", "device", "description"].iter().filter_map(|k| text(&js_info, k)).collect();
+        (!parts.is_empty()).then(|| parts.join(" "))
+    };
+    let name = described.await.unwrap_or_else(|| "unnamed WebGPU adapter".into());
+    format!("{name} ({:?}, {:?})", info.backend, info.device_type)
 }

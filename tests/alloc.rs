@@ -35,7 +35,7 @@ fn steady_state_frames_allocate_nothing_in_streaming() {
     let pools = sylva::render::forest::PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
     let mut off = sylva::render::offscreen::OffscreenScene::open(fixture.to_str().unwrap(), 320, 180, pools).unwrap();
     let cam = {
-        off.load_view(&sylva::render::camera::Camera::default(), 30.0);
+        off.load_view(&sylva::camera::Camera::default(), 30.0);
         off.named_camera(sylva::render::offscreen::NamedView::Medium, 30.0).unwrap()
     };
     off.load_view(&cam, 30.0);

@@ -2,7 +2,7 @@
 //! the reference has no error, the other methods a plausible one.
 
 use sylva::bench::{self, NamedPath};
-use sylva::render::camera::Camera;
+use sylva::camera::Camera;
 use sylva::render::forest::PoolConfig;
 use sylva::render::offscreen::OffscreenScene;
 

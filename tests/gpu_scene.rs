@@ -11,10 +11,10 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
+use sylva::camera::Camera;
 use sylva::format::tile::Tile;
 use sylva::format::Manifest;
 use sylva::metrics::multiscale_rmse;
-use sylva::render::camera::Camera;
 use sylva::render::cull::{cpu_select, unpack_item_y};
 use sylva::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use sylva::render::offscreen::{NamedView, OffscreenScene};
@@ -682,7 +682,8 @@ fn budgets_and_full_pools_degrade_gracefully() {
         })
         .sum();
     let budget = off.renderer.gpu_bytes() + billboards + 10_000;
-    off.stream.set_config(sylva::scene::StreamConfig { gpu_budget_bytes: budget, ..off.stream.config() });
+    let config = off.stream.config();
+    off.stream.set_config(sylva::scene::StreamConfig { gpu_budget_bytes: budget, ..config });
     let events = off.load_view(&close, 30.0);
     assert!(!events.iter().any(|e| matches!(e, StreamEvent::Fatal { .. })), "{events:?}");
     let stats = off.render(&close, true);

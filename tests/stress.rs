@@ -6,7 +6,7 @@
 //! bind while the view was a uniform buffer: 1.5 MB per frame.
 
 use sylva::bench::{self, stress, NamedPath};
-use sylva::render::camera::Camera;
+use sylva::camera::Camera;
 use sylva::render::forest::{PoolConfig, RenderSettings};
 use sylva::render::offscreen::OffscreenScene;
 

@@ -20,8 +20,8 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
+use crate::camera::Camera;
 use crate::format::Manifest;
-use crate::render::camera::Camera;
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use crate::render::offscreen::{NamedView, OffscreenScene};
 

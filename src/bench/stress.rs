@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 
 use super::Stat;
-use crate::render::camera::Camera;
+use crate::camera::Camera;
 use crate::render::forest::{PoolConfig, RenderSettings};
 use crate::render::offscreen::OffscreenScene;
 

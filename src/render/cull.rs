@@ -10,6 +10,7 @@ use glam::{Vec3, Vec4};
 
 use super::gpu_data::{GpuSpecies, Repr, ViewUniform, REPR_COUNT};
 use super::layouts::{storage_entry, SharedLayouts};
+use super::pools::Pools;
 use super::shaders;
 use crate::format::tile::{GpuBatch, PackedInstance};
 
@@ -83,6 +84,30 @@ impl CullPipelines {
             layout,
             dispatch_layout,
         }
+    }
+
+    /// Records the cull pass: reset → cull_batches → prepare_dispatch →
+    /// cull_instances → finalize over the pools, for `slots` draw slots (view
+    /// uniform bound through `view_group`).
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, view_group: &wgpu::BindGroup, pools: &Pools, slots: u32) {
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("cull"), timestamp_writes: None });
+        pass.set_bind_group(0, view_group, &[]);
+        pass.set_bind_group(1, &pools.groups.cull, &[]);
+        pass.set_pipeline(&self.reset);
+        pass.dispatch_workgroups(slots.div_ceil(64).max(1), 1, 1);
+        let batches = pools.batch_high_water();
+        if batches > 0 {
+            pass.set_pipeline(&self.cull_batches);
+            pass.dispatch_workgroups(batches.div_ceil(64), 1, 1);
+        }
+        pass.set_pipeline(&self.prepare_dispatch);
+        pass.set_bind_group(2, &pools.groups.dispatch, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(&self.cull_instances);
+        pass.dispatch_workgroups_indirect(&pools.buffers.dispatch, 0);
+        pass.set_pipeline(&self.finalize);
+        pass.dispatch_workgroups(slots.div_ceil(64).max(1), 1, 1);
     }
 }
 

@@ -123,6 +123,28 @@ pub struct DrawArgs {
 }
 const _: () = assert!(std::mem::size_of::<DrawArgs>() == std::mem::size_of::<wgpu::util::DrawIndexedIndirectArgs>());
 
+/// The indirect arguments `prepare_dispatch` writes (`dispatch_args` in
+/// `shaders/cull.wgsl`): the cull_instances dispatch, then the batch-bounds
+/// debug draw (24 vertices per visible batch).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Pod, Zeroable)]
+pub struct CullDispatch {
+    /// Workgroups x, y, z of cull_instances (words 0–2).
+    pub groups: [u32; 3],
+    /// Unused (word 3).
+    pub unused: u32,
+    /// The bounds overlay's non-indexed draw: vertex count, instance count, first
+    /// vertex, first instance (words 4–7, `wgpu::util::DrawIndirectArgs`).
+    pub bounds_draw: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<CullDispatch>() == 8 * 4);
+const _: () = assert!(std::mem::size_of::<[u32; 4]>() == std::mem::size_of::<wgpu::util::DrawIndirectArgs>());
+
+impl CullDispatch {
+    /// Byte offset of [`Self::bounds_draw`] (the bounds overlay's indirect draw).
+    pub const BOUNDS_DRAW_OFFSET: u64 = std::mem::offset_of!(CullDispatch, bounds_draw) as u64;
+}
+
 /// Representations a tree can be drawn with, finest first. A draw slot is
 /// `species * REPR_COUNT + repr`. Must match `REPR_*` in `shaders/common.wgsl`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

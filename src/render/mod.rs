@@ -2,20 +2,25 @@
 //! from per-frame data, CPU twins of GPU structs in [`gpu_data`].
 
 pub mod billboard;
-pub mod camera;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod capture;
 pub mod cluster;
 pub mod context;
 pub mod cull;
 pub mod forest;
+pub mod frame;
 pub mod gpu_data;
 pub mod layouts;
 pub mod mesh;
 pub mod mips;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod offscreen;
+pub mod overlay;
+pub mod pools;
+pub mod reach;
+pub mod settings;
 pub mod shaders;
+pub mod species;
 pub mod stats;
 
 use glam::{Mat4, Vec3};

@@ -1,21 +1,21 @@
-//! Headless scene rendering (native): a [`ForestRenderer`] drawing into an
-//! offscreen target, fed by a [`SceneStream`], with stats and readback. Used by
+//! Headless scene rendering (native): the shared [`Frame`] drawing into an
+//! offscreen target, with named views, blocking loads and readback. Used by
 //! `sylva render`, the tests and the benchmarks.
 
 use std::time::Instant;
 
 use glam::DVec3;
 
-use super::camera::Camera;
 use super::context::{read_texture_rgba8, GpuContext};
 use super::cull::DrawItem;
-use super::forest::{depth_texture, ForestRenderer, PoolConfig, RenderSettings};
+use super::forest::{depth_texture, PoolConfig};
+use super::frame::Frame;
 use super::gpu_data::{CullControl, DrawArgs, REPR_COUNT};
-use super::stats::CullCounters;
 pub use super::stats::FrameStats;
+use crate::camera::Camera;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Manifest;
-use crate::scene::{Fetcher, SceneStream, StreamConfig, StreamEvent, ThreadFetcher};
+use crate::scene::{Fetcher, StreamEvent, ThreadFetcher};
 
 /// Colour format of offscreen targets (sRGB, like the browser canvas view).
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -79,22 +79,30 @@ impl NamedView {
     }
 }
 
-/// A scene rendered headless into a `width`×`height` target.
+/// A scene rendered headless into a `width`×`height` target: a [`Frame`] (it
+/// dereferences to it: `renderer`, `stream`, `settings`) with a texture target.
 pub struct OffscreenScene<F: Fetcher = ThreadFetcher> {
     /// The GPU.
     pub ctx: GpuContext,
-    /// The renderer.
-    pub renderer: ForestRenderer,
-    /// The stream.
-    pub stream: SceneStream<F>,
-    /// Drawing settings.
-    pub settings: RenderSettings,
+    frame: Frame<F>,
     color: wgpu::Texture,
     depth: wgpu::Texture,
     width: u32,
     height: u32,
     started: Instant,
-    readback: wgpu::Buffer,
+}
+
+impl<F: Fetcher> std::ops::Deref for OffscreenScene<F> {
+    type Target = Frame<F>;
+    fn deref(&self) -> &Frame<F> {
+        &self.frame
+    }
+}
+
+impl<F: Fetcher> std::ops::DerefMut for OffscreenScene<F> {
+    fn deref_mut(&mut self) -> &mut Frame<F> {
+        &mut self.frame
+    }
 }
 
 impl OffscreenScene<ThreadFetcher> {
@@ -111,7 +119,6 @@ impl OffscreenScene<ThreadFetcher> {
 impl<F: Fetcher> OffscreenScene<F> {
     /// Opens `scene` with a given fetcher and context.
     pub fn with_fetcher(ctx: GpuContext, scene: &str, fetcher: F, width: u32, height: u32, pools: PoolConfig) -> Self {
-        let renderer = ForestRenderer::new(&ctx.device, TARGET_FORMAT, pools);
         let color = ctx.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("offscreen colour"),
             size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -123,41 +130,23 @@ impl<F: Fetcher> OffscreenScene<F> {
             view_formats: &[],
         });
         let depth = depth_texture(&ctx.device, width, height);
-        let slots = u64::from(pools.species * REPR_COUNT);
-        let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("stats readback"),
-            size: CullCounters::readback_bytes(slots as u32),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
+        let (device, queue, adapter) = (ctx.device.clone(), ctx.queue.clone(), ctx.adapter_summary());
         Self {
-            stream: SceneStream::new(scene, fetcher, StreamConfig::default()),
-            renderer,
+            frame: Frame::new(device, queue, adapter, TARGET_FORMAT, pools, scene, fetcher),
             ctx,
-            settings: RenderSettings::default(),
             color,
             depth,
             width,
             height,
             started: Instant::now(),
-            readback,
         }
     }
 
     /// One streaming step for `camera` (non-blocking).
     pub fn update_stream(&mut self, camera: &Camera) -> Vec<StreamEvent> {
         let view = camera.view_data(self.width, self.height);
-        let now = self.started.elapsed().as_secs_f64();
-        self.renderer.measure_reach(&view, &self.settings);
-        self.stream.update(
-            &mut self.renderer,
-            &self.ctx.device,
-            &self.ctx.queue,
-            &view,
-            self.settings.draw_distance_m,
-            now,
-        );
-        self.stream.drain_events()
+        self.frame.stream(&view, self.started.elapsed().as_secs_f64());
+        self.frame.stream.drain_events()
     }
 
     /// Streams until everything `camera` needs is resident (or given up on), or
@@ -196,48 +185,17 @@ impl<F: Fetcher> OffscreenScene<F> {
     /// Renders one frame from `camera`; with `measure`, waits for the GPU after each
     /// pass to time it and reads the counters back.
     pub fn render(&mut self, camera: &Camera, measure: bool) -> FrameStats {
-        let cpu = Instant::now();
         let view = camera.view_data(self.width, self.height);
-        self.renderer.prepare(&self.ctx.queue, &view, &self.settings);
-        let mut cull = self.ctx.device.create_command_encoder(&Default::default());
-        self.renderer.encode_cull(&mut cull);
-        let mut draw = self.ctx.device.create_command_encoder(&Default::default());
-        let color_view = self.color.create_view(&Default::default());
-        let depth_view = self.depth.create_view(&Default::default());
-        let draw_calls = self.renderer.encode_draw(&mut draw, &color_view, &depth_view, self.settings.clear);
-        if measure {
-            self.renderer.copy_counters(&mut draw, &self.readback);
-        }
-        let frame_cpu_ms = cpu.elapsed().as_secs_f64() * 1e3;
-        let mut stats = FrameStats::gather(&self.renderer, &self.stream, draw_calls, frame_cpu_ms);
-        let wait = |ctx: &GpuContext| ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
-        if measure {
-            // Earlier unmeasured frames may still be running: their time is not this frame's.
-            wait(&self.ctx);
-        }
-        let t = Instant::now();
-        self.ctx.queue.submit([cull.finish()]);
-        if measure {
-            wait(&self.ctx);
-            stats.gpu_ms.insert("cull".into(), t.elapsed().as_secs_f64() * 1e3);
-        }
-        let t = Instant::now();
-        self.ctx.queue.submit([draw.finish()]);
-        if measure {
-            wait(&self.ctx);
-            stats.gpu_ms.insert("draw".into(), t.elapsed().as_secs_f64() * 1e3);
-            stats.apply_counters(&self.read_counters());
+        let color = self.color.create_view(&Default::default());
+        let depth = self.depth.create_view(&Default::default());
+        let recorded = self.frame.record(&view, &color, &depth, measure);
+        self.frame.submit(recorded, measure);
+        let mut stats = self.frame.stats();
+        if !measure {
+            // Not waited for: no GPU times of this frame.
+            stats.gpu_ms.clear();
         }
         stats
-    }
-
-    fn read_counters(&self) -> CullCounters {
-        let slice = self.readback.slice(..CullCounters::readback_bytes(self.renderer.slot_count()));
-        slice.map_async(wgpu::MapMode::Read, |r| r.expect("map stats"));
-        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
-        let counters = CullCounters::from_bytes(&slice.get_mapped_range().expect("mapped"));
-        self.readback.unmap();
-        counters
     }
 
     /// Reads back what the last cull pass selected, with the pools it selected

@@ -1,5 +1,5 @@
-//! Frame statistics, gathered once for both hosts: `sylva render --stats`
-//! (native, [`super::offscreen`]) and `stats()` in the browser (`web.rs`) report
+//! Frame statistics, gathered once for both hosts by [`super::frame::Frame`]:
+//! `sylva render --stats` (native) and `stats()` in the browser (`web.rs`) report
 //! the same keys from the same code (docs/FORMAT.md §frame stats).
 
 use serde::Serialize;
@@ -54,9 +54,13 @@ pub struct FrameStats {
     pub gpu_bytes: u64,
     /// CPU time to prepare and record the frame, ms.
     pub frame_cpu_ms: f64,
-    /// GPU time per pass, ms (wall time around submit + wait: lavapipe's compute
-    /// timestamps are unreliable).
+    /// GPU time per pass (`cull`, `draw`), ms: from submitting a pass until the
+    /// GPU reports it done (lavapipe's compute timestamps are unreliable).
+    /// Natively measured frames block on each pass; the browser reports the
+    /// latest frame whose passes completed.
     pub gpu_ms: std::collections::BTreeMap<String, f64>,
+    /// The GPU adapter: name (backend, type), or the browser's vendor and architecture.
+    pub adapter: String,
 }
 
 impl FrameStats {

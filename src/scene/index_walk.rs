@@ -4,9 +4,9 @@
 
 use glam::Vec3;
 
+use crate::camera::ViewData;
 use crate::format::index::IndexNode;
 use crate::format::{Bounds, Manifest, TileEntry};
-use crate::render::camera::ViewData;
 
 /// Where a node stands.
 #[derive(Debug, Clone, PartialEq)]
@@ -212,9 +212,9 @@ impl IndexWalk {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::camera::Camera;
     use crate::format::index::build_index;
     use crate::format::{Counts, Crs};
-    use crate::render::camera::Camera;
     use glam::DVec3;
 
     fn scene(n: i32) -> (Manifest, Vec<TileEntry>) {

@@ -3,9 +3,11 @@
 
 pub mod fetch;
 pub mod index_walk;
+pub mod residency;
 pub mod streaming;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use fetch::ThreadFetcher;
 pub use fetch::{FetchError, Fetcher, RequestId};
+pub use residency::{PoolError, Residency, TileSlot};
 pub use streaming::{Degraded, LoadFailure, SceneStream, StreamConfig, StreamEvent, StreamStats};

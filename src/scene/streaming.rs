@@ -14,10 +14,10 @@ use glam::Vec3;
 
 use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
 use super::index_walk::IndexWalk;
+use super::residency::{PoolError, Residency, TileSlot};
+use crate::camera::ViewData;
 use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
 use crate::format::{decode_pack, DecodeError, Manifest, Tile};
-use crate::render::camera::ViewData;
-use crate::render::forest::{ForestRenderer, PoolError, TileSlot};
 
 /// Limits of the streamer: the budgets a viewer degrades gracefully within.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -209,7 +209,7 @@ pub struct StreamStats {
     pub degraded: Degraded,
 }
 
-/// A scene being streamed into a [`ForestRenderer`].
+/// A scene being streamed into a [`Residency`] (the renderer's GPU pools).
 pub struct SceneStream<F: Fetcher> {
     base: String,
     manifest_url: String,
@@ -382,15 +382,7 @@ impl<F: Fetcher> SceneStream<F> {
 
     /// One non-blocking step: handle finished requests, then request what the view
     /// needs. `now_s` is a monotonic clock in seconds (for retry backoff).
-    pub fn update(
-        &mut self,
-        renderer: &mut ForestRenderer,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        view: &ViewData,
-        draw_distance_m: f32,
-        now_s: f64,
-    ) {
+    pub fn update(&mut self, residency: &mut impl Residency, view: &ViewData, draw_distance_m: f32, now_s: f64) {
         for (id, result) in self.fetcher.poll() {
             let Some(target) = self.requests.remove(&id) else { continue };
             if let Ok(bytes) = &result {
@@ -400,11 +392,11 @@ impl<F: Fetcher> SceneStream<F> {
                 }
             }
             match target {
-                Target::Manifest => self.on_manifest(renderer, device, result, now_s),
+                Target::Manifest => self.on_manifest(residency, result, now_s),
                 Target::Node(n) => self.on_node(n, result, now_s),
-                Target::Tile(t) => self.on_tile(renderer, queue, t, result, view, now_s),
-                Target::PackHead(s) => self.on_pack_head(renderer, device, queue, s, result, now_s),
-                Target::PackPart(s, part) => self.on_pack_part(renderer, device, queue, s, part, result, now_s),
+                Target::Tile(t) => self.on_tile(residency, t, result, view, now_s),
+                Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
+                Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
             }
         }
         if self.manifest.is_none() {
@@ -422,7 +414,8 @@ impl<F: Fetcher> SceneStream<F> {
         } else {
             // Pools with room again: widen the reach step by step.
             // (Half free, so that a reach just shortened does not grow back at once.)
-            if self.reach_m < draw_distance_m && renderer.free_instances() > renderer.config().instances / 2 {
+            let (free, total) = residency.instance_room();
+            if self.reach_m < draw_distance_m && free > total / 2 {
                 self.reach_m = (self.reach_m * 1.1).max(1.0);
             }
             self.reach_m = self.reach_m.min(draw_distance_m);
@@ -434,13 +427,13 @@ impl<F: Fetcher> SceneStream<F> {
             self.stats.degraded.bandwidth = over_rate;
             if !over_rate {
                 self.request_tiles(view, draw_distance_m, now_s);
-                self.request_packs(renderer, now_s);
+                self.request_packs(residency, now_s);
             } else {
                 // Still decide what the view wants (for is_settled and eviction).
                 self.walk(view, draw_distance_m);
             }
             self.stats.degraded.pools_full = self.reach_m < draw_distance_m;
-            self.stats.degraded.device_limit = renderer.pools_limited_by_device();
+            self.stats.degraded.device_limit = residency.limited_by_device();
             self.stats.degraded.reach_m = self.reach_m;
         }
         self.stats.loading = self.requests.len() as u64;
@@ -469,13 +462,7 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    fn on_manifest(
-        &mut self,
-        renderer: &mut ForestRenderer,
-        device: &wgpu::Device,
-        result: Result<Vec<u8>, FetchError>,
-        now_s: f64,
-    ) {
+    fn on_manifest(&mut self, residency: &mut impl Residency, result: Result<Vec<u8>, FetchError>, now_s: f64) {
         let attempt = self.manifest_load.attempt();
         let parsed = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             Manifest::decode(&self.manifest_url, &bytes).map_err(|e: DecodeError| (e.to_string(), false))
@@ -491,11 +478,9 @@ impl<F: Fetcher> SceneStream<F> {
                     ),
                 });
             }
-            Ok(m) if m.species.len() as u32 <= renderer.config().species => {
+            Ok(m) if m.species.len() as u32 <= residency.species_capacity() => {
                 // Pools no bigger than the scene can fill (and within the device's limits).
-                let fitted = renderer.config().for_scene(m.counts.trees, m.counts.batches, m.species.len() as u32);
-                renderer.fit_pools(device, fitted);
-                renderer.set_species_count(m.species.len() as u32);
+                residency.begin_scene(m.counts.trees, m.counts.batches, m.species.len() as u32);
                 self.index = IndexWalk::new(&m);
                 self.node_loads = vec![Load::Idle; self.index.nodes.len()];
                 self.tiles = self.index.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
@@ -510,7 +495,7 @@ impl<F: Fetcher> SceneStream<F> {
                         "{}: {} species exceed this viewer's {}",
                         self.manifest_url,
                         m.species.len(),
-                        renderer.config().species
+                        residency.species_capacity()
                     ),
                 });
             }
@@ -526,8 +511,7 @@ impl<F: Fetcher> SceneStream<F> {
 
     fn on_tile(
         &mut self,
-        renderer: &mut ForestRenderer,
-        queue: &wgpu::Queue,
+        residency: &mut impl Residency,
         t: usize,
         result: Result<Vec<u8>, FetchError>,
         view: &ViewData,
@@ -553,13 +537,13 @@ impl<F: Fetcher> SceneStream<F> {
                 return;
             }
         };
-        let mut result = renderer.upload_tile(queue, &tile);
+        let mut result = residency.upload_tile(&tile);
         // Full pools: evict resident tiles the view does not want, farthest first.
         while matches!(result, Err(PoolError::Full(_))) {
-            if !self.evict_one(renderer, queue, view) {
+            if !self.evict_one(residency, view) {
                 break;
             }
-            result = renderer.upload_tile(queue, &tile);
+            result = residency.upload_tile(&tile);
         }
         match result {
             Ok(slot) => {
@@ -603,9 +587,7 @@ impl<F: Fetcher> SceneStream<F> {
 
     fn on_pack_head(
         &mut self,
-        renderer: &mut ForestRenderer,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
+        residency: &mut impl Residency,
         s: usize,
         result: Result<Vec<u8>, FetchError>,
         now_s: f64,
@@ -620,7 +602,7 @@ impl<F: Fetcher> SceneStream<F> {
             // No head size in the manifest, or a server that ignores ranges: the whole pack.
             if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
-                renderer.upload_pack(device, queue, s as u32, &pack);
+                residency.upload_pack(s as u32, &pack);
                 Ok(None)
             } else {
                 PackHead::decode(&url, &bytes).map(Some).map_err(|e| (e.to_string(), true))
@@ -640,12 +622,9 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn on_pack_part(
         &mut self,
-        renderer: &mut ForestRenderer,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
+        residency: &mut impl Residency,
         s: usize,
         part: usize,
         result: Result<Vec<u8>, FetchError>,
@@ -662,7 +641,7 @@ impl<F: Fetcher> SceneStream<F> {
             if len == head.file_bytes && len != end - start {
                 // The server sent the whole file instead of the range.
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
-                renderer.upload_pack(device, queue, s as u32, &pack);
+                residency.upload_pack(s as u32, &pack);
                 return Ok(true);
             }
             if len != end - start {
@@ -671,7 +650,7 @@ impl<F: Fetcher> SceneStream<F> {
             load.held.push((start, bytes));
             match head.assemble(&url, &load.held) {
                 Ok(pack) => {
-                    renderer.upload_pack(device, queue, s as u32, &pack);
+                    residency.upload_pack(s as u32, &pack);
                     Ok(false)
                 }
                 Err(e) => {
@@ -700,7 +679,7 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    fn evict_one(&mut self, renderer: &mut ForestRenderer, queue: &wgpu::Queue, view: &ViewData) -> bool {
+    fn evict_one(&mut self, residency: &mut impl Residency, view: &ViewData) -> bool {
         let eye = view.eye_hi + view.eye_lo;
         let victim = self
             .tiles
@@ -716,7 +695,7 @@ impl<F: Fetcher> SceneStream<F> {
         if let TileState::Resident { slot, .. } =
             std::mem::replace(&mut self.tiles[v], TileState::NotResident(Load::Idle))
         {
-            renderer.evict_tile(queue, slot);
+            residency.evict_tile(slot);
         }
         true
     }
@@ -780,12 +759,12 @@ impl<F: Fetcher> SceneStream<F> {
         self.wanted.extend(self.walk_tiles.iter().map(|(_, i)| *i));
     }
 
-    fn request_packs(&mut self, renderer: &ForestRenderer, now_s: f64) {
+    fn request_packs(&mut self, residency: &impl Residency, now_s: f64) {
         self.collect_needed_species();
         let needed = std::mem::take(&mut self.needed);
         let mut over_budget = false;
         // GPU bytes held plus parts on their way.
-        let mut committed = renderer.gpu_bytes();
+        let mut committed = residency.bytes();
         for (s, load) in self.packs.iter().enumerate() {
             let Some(head) = &load.parsed else { continue };
             for (i, part) in PackPart::ALL.iter().enumerate() {
@@ -797,6 +776,14 @@ impl<F: Fetcher> SceneStream<F> {
                 }
             }
         }
+        // Billboards are reserved only once a head tells their size: finer parts
+        // wait until every needed species' head is known, or a late head's
+        // billboards would push the total over the budget.
+        let heads_pending = self.config.gpu_budget_bytes > 0
+            && needed.iter().any(|&s| {
+                let l = &self.packs[s];
+                l.parsed.is_none() && !l.whole && l.head != Load::Broken
+            });
         let Some(m) = &self.manifest else { return };
         let due = |l: &Load| match *l {
             Load::Idle => Some(0),
@@ -806,7 +793,7 @@ impl<F: Fetcher> SceneStream<F> {
         for &s in &needed {
             let load = &mut self.packs[s];
             if let Some(head) = &load.parsed {
-                load.wants = renderer.parts_needed(s, &head.meta);
+                load.wants = residency.parts_needed(s, &head.meta);
             }
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
@@ -824,6 +811,9 @@ impl<F: Fetcher> SceneStream<F> {
             };
             for (i, part) in PackPart::ALL.iter().enumerate() {
                 if !load.wants[i] || load.have[i] || self.fetcher.in_flight() >= self.config.max_in_flight {
+                    continue;
+                }
+                if heads_pending && *part != PackPart::Billboards {
                     continue;
                 }
                 let (Some(range), Some(attempt)) = (head.part_range(*part), due(&load.parts[i])) else { continue };
@@ -856,3 +846,7 @@ fn tile_distance(b: &crate::format::Bounds, eye: Vec3) -> f32 {
     let (c, h) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
     (c.abs() - h).max(Vec3::ZERO).length()
 }
+
+#[cfg(test)]
+#[path = "streaming_tests.rs"]
+mod tests;

@@ -1,0 +1,137 @@
+//! The reach of a view: per species, an upper bound of the projected height (px)
+//! of its resident trees within the draw distance, from the resident tiles'
+//! boxes and tallest trees. The frame skips draws no tree can need by it; the
+//! streamer fetches only the pack parts it allows ([`Reach::parts_needed`]).
+
+use glam::Vec3;
+
+use super::pools::TileBounds;
+use super::settings::{CullingMode, RenderSettings, Representations};
+use crate::camera::ViewData;
+use crate::format::pack::PACK_PARTS;
+use crate::format::PackMeta;
+
+/// Projected tree height from which a tile's batches are bounded one by one.
+const REFINE_PX: f32 = 40.0;
+
+/// What a measurement depends on: the same view, settings and residency give
+/// the same bounds (streaming and the frame both ask within one frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Measured {
+    eye: Vec3,
+    px_per_m: f32,
+    reach_m: f32,
+    cluster_min_px: f32,
+    fade_band: f32,
+    representations: Representations,
+    residency: u64,
+}
+
+/// Per-species projected-height bounds of the last measured view.
+#[derive(Debug, Clone, Default)]
+pub struct Reach {
+    species_max_px: Vec<f32>,
+    measured: Option<Measured>,
+}
+
+impl Reach {
+    /// Bounds each species' projected tree height for `view` from `tiles`
+    /// (residency `generation`), unless the same was measured already.
+    pub fn measure(
+        &mut self,
+        tiles: &[TileBounds],
+        generation: u64,
+        species: usize,
+        view: &ViewData,
+        settings: &RenderSettings,
+    ) {
+        let eye = view.eye_hi + view.eye_lo;
+        let px = view.px_per_m_at_1m * settings.quality;
+        let reach = if settings.culling == CullingMode::None { f32::INFINITY } else { settings.draw_distance_m };
+        let key = Measured {
+            eye,
+            px_per_m: px,
+            reach_m: reach,
+            cluster_min_px: settings.cluster_min_px,
+            fade_band: settings.fade_band,
+            representations: settings.representations,
+            residency: generation,
+        };
+        if self.measured == Some(key) && self.species_max_px.len() == species {
+            return;
+        }
+        self.measured = Some(key);
+        self.species_max_px.clear();
+        self.species_max_px.resize(species, 0.0);
+        // Tiles whose trees may reach this size on screen are bounded batch by batch
+        // (tighter: which mesh levels and clusters a view needs); the others whole.
+        let refine_px = settings.cluster_min_px.min(REFINE_PX) * (1.0 - settings.fade_band);
+        let max_px = &mut self.species_max_px;
+        let mut raise = |s: u32, h: f32, d: f32| {
+            if let Some(m) = max_px.get_mut(s as usize) {
+                *m = m.max(h * px / d.max(1e-3));
+            }
+        };
+        for t in tiles {
+            let d = (t.lo - eye).max(eye - t.hi).max(Vec3::ZERO).length();
+            if d > reach {
+                continue;
+            }
+            let tallest = t.heights.iter().map(|(_, h)| *h).fold(0.0, f32::max);
+            if tallest * px / d.max(1e-3) >= refine_px {
+                for &(lo, hi, s, h) in &t.batches {
+                    let d = (lo - eye).max(eye - hi).max(Vec3::ZERO).length();
+                    if d <= reach {
+                        raise(s, h, d);
+                    }
+                }
+                continue;
+            }
+            for &(s, h) in &t.heights {
+                raise(s, h, d);
+            }
+        }
+    }
+
+    /// Each species' bound on the projected height (px) of its resident trees
+    /// within reach (0: none).
+    #[must_use]
+    pub fn species_max_px(&self) -> &[f32] {
+        &self.species_max_px
+    }
+
+    /// The bound of species `s` (infinity before any measurement: draw everything).
+    #[must_use]
+    pub fn max_px(&self, s: usize) -> f32 {
+        if self.measured.is_none() {
+            return f32::INFINITY;
+        }
+        self.species_max_px.get(s).copied().unwrap_or(0.0)
+    }
+
+    /// Which parts of species `s`'s pack ([`crate::format::pack::PackPart::ALL`]
+    /// order: billboards, clusters, coarse mesh levels, full mesh) the resident
+    /// trees within reach can need, from the measured heights and the
+    /// representations allowed: a far view needs neither meshes nor clusters, a
+    /// medium one not the full mesh.
+    #[must_use]
+    pub fn parts_needed(&self, s: usize, meta: &PackMeta) -> [bool; PACK_PARTS] {
+        let max_px = self.species_max_px.get(s).copied().unwrap_or(0.0);
+        let Some(m) = self.measured else { return [false; PACK_PARTS] };
+        let allow = m.representations;
+        let has_bb = allow.billboards && meta.billboards.is_some();
+        let has_cl = allow.clusters && meta.clusters.as_ref().is_some_and(|c| !c.ellipsoid_levels.is_empty());
+        let has_mesh = allow.meshes && !meta.mesh_levels.is_empty();
+        // Cross-fades start below a threshold: fetch a little early.
+        let slack = 1.0 - m.fade_band;
+        let select = |l: usize| meta.mesh_levels.get(l).map_or(f32::INFINITY, |m| m.select_px);
+        let mesh_floor = if has_mesh { select(meta.mesh_levels.len() - 1) } else { f32::INFINITY };
+        let cluster_floor = if has_bb { m.cluster_min_px } else { 0.0 };
+        let coarsest_is_mesh = !has_bb && !has_cl;
+        let meshes = has_mesh && (max_px >= mesh_floor * slack || coarsest_is_mesh);
+        // The full mesh only where a tree can reach its threshold (one level: always).
+        let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
+        let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
+        [has_bb, clusters, meshes, full]
+    }
+}

@@ -1,0 +1,107 @@
+//! How a frame is drawn: quality, draw distance, transitions, representations,
+//! culling baselines and debug views. Plain data, set by the hosts and the
+//! benchmarks, read by the passes.
+
+use super::Lighting;
+
+/// Which culling the cull pass does: Sylva's, or a baseline to compare with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CullingMode {
+    /// Batches first (sphere, box, distance), then trees (seed 004).
+    #[default]
+    Batches,
+    /// Every resident tree tested on its own (the batch step skipped).
+    PerTree,
+    /// No culling: every resident tree is drawn (LoD still chosen).
+    None,
+}
+
+/// How to draw: quality, draw distance, transitions, debug colouring.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    /// Scales projected sizes before LoD selection (1, ½, ¼ like seed 002 Fig. 12).
+    pub quality: f32,
+    /// Trees farther than this are not drawn (metres).
+    pub draw_distance_m: f32,
+    /// Half width of a transition band, as a fraction of its threshold.
+    pub fade_band: f32,
+    /// Colour trees by representation.
+    pub debug_lod: bool,
+    /// Draw the boxes of the batches that pass the batch test.
+    pub debug_bounds: bool,
+    /// Sun and ambient.
+    pub lighting: Lighting,
+    /// Clear colour (linear RGBA).
+    pub clear: [f64; 4],
+    /// Culling (benchmark baselines).
+    pub culling: CullingMode,
+    /// Trees drawn at least this tall (px) but below the simplified mesh's
+    /// threshold use the clustered ellipsoids and lines of their pack (seed 002);
+    /// smaller ones billboards. Infinity: no ellipsoids; 0: no billboards.
+    pub cluster_min_px: f32,
+    /// Which representation families may be drawn (benchmark baselines); the
+    /// coarsest allowed one reaches down to 0 px, the finest up to infinity.
+    pub representations: Representations,
+    /// Ellipsoids write their exact ray-cast depth per pixel. Off by default: the
+    /// proxy then sits at the ellipsoid's front-most depth and early depth tests
+    /// stay on — 2.2–2.5× cheaper cluster draws for +0.001 multi-scale RMSE
+    /// (docs/BENCHMARKS.md); only interpenetrating primitives can sort wrongly.
+    pub cluster_exact_depth: bool,
+    /// Prefix thinning (seed 004 ch. 7): a density-ordered batch whose trees are
+    /// below this many pixels tall draws a prefix of them, scaled up to keep the
+    /// canopy's coverage. 0: off.
+    pub thin_px: f32,
+}
+
+/// Default of [`RenderSettings::thin_px`].
+pub const DEFAULT_THIN_PX: f32 = 8.0;
+
+/// Representation families a frame may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Representations {
+    /// Mesh levels.
+    pub meshes: bool,
+    /// Clustered ellipsoids and lines.
+    pub clusters: bool,
+    /// Billboards.
+    pub billboards: bool,
+}
+
+impl Representations {
+    /// Everything (Sylva's mixed pipeline).
+    pub const ALL: Self = Self { meshes: true, clusters: true, billboards: true };
+    /// Meshes only.
+    pub const MESHES: Self = Self { meshes: true, clusters: false, billboards: false };
+    /// Ellipsoids and lines only.
+    pub const CLUSTERS: Self = Self { meshes: false, clusters: true, billboards: false };
+    /// Billboards only.
+    pub const BILLBOARDS: Self = Self { meshes: false, clusters: false, billboards: true };
+}
+
+impl Default for Representations {
+    fn default() -> Self {
+        Self::ALL
+    }
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            quality: 1.0,
+            draw_distance_m: 6000.0,
+            fade_band: 0.12,
+            debug_lod: false,
+            debug_bounds: false,
+            lighting: Lighting::default(),
+            clear: [0.55, 0.68, 0.82, 1.0],
+            culling: CullingMode::Batches,
+            cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
+            representations: Representations::ALL,
+            cluster_exact_depth: false,
+            thin_px: DEFAULT_THIN_PX,
+        }
+    }
+}
+
+/// Default of [`RenderSettings::cluster_min_px`].
+pub const DEFAULT_CLUSTER_MIN_PX: f32 = 40.0;

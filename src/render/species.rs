@@ -1,0 +1,338 @@
+//! The species on the GPU: each species' pack (mesh levels, billboards,
+//! clusters), the draw pipelines (built when the first pack needing one
+//! arrives: a scene or view that never needs one never compiles it), the
+//! species table the cull pass reads (per representation: lower threshold,
+//! segment of the draw items, count) and the draw params, and the species draws
+//! of the frame: at most one indirect draw per species × representation.
+
+use glam::Vec3;
+
+use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
+use super::cluster::{cluster_tiers, ClusterGpu, ClusterPipeline};
+use super::gpu_data::{DrawArgs, DrawParams, GpuSpecies, RenderMode, Repr, REPR_COUNT};
+use super::layouts::SharedLayouts;
+use super::mesh::{MeshGpu, MeshPipelines};
+use super::pools::Pools;
+use super::reach::Reach;
+use super::settings::{RenderSettings, Representations};
+use crate::format::Pack;
+
+/// Segment capacity of the full mesh level per species: only trees hundreds of
+/// pixels tall use it, a few hundred at most on any screen.
+pub const MESH0_CAPACITY: u32 = 1 << 15;
+/// Segment capacity of the simplified mesh level per species.
+pub const MESH1_CAPACITY: u32 = 1 << 18;
+/// Segment capacity of each cluster tier per species.
+pub const CLUSTER_CAPACITY: u32 = 1 << 18;
+
+struct SpeciesGpu {
+    mesh: MeshGpu,
+    billboard: Option<BillboardGpu>,
+    cluster: Option<ClusterGpu>,
+    /// Cluster level of each cluster tier in use (set by `rebuild_table`).
+    tiers: Vec<usize>,
+    sphere: [f32; 4],
+    height_m: f32,
+    select_px: [f32; 2],
+    index_counts: [u32; 2],
+    /// Mesh levels 0 and 1 on the GPU.
+    has_level: [bool; 2],
+    bytes: u64,
+}
+
+/// What the species draws need of a frame.
+#[derive(Debug, Clone, Copy)]
+pub struct SpeciesFrame {
+    /// Half width of the transition bands.
+    pub fade_band: f32,
+    /// Ellipsoids write their exact depth.
+    pub cluster_exact_depth: bool,
+}
+
+/// Every species of the scene on the GPU, and the table over them.
+pub struct Species {
+    color_format: wgpu::TextureFormat,
+    mesh: Option<MeshPipelines>,
+    billboard: Option<BillboardPipeline>,
+    cluster: Option<ClusterPipeline>,
+    packs: Vec<Option<SpeciesGpu>>,
+    table: Vec<GpuSpecies>,
+    /// The table no longer matches packs, residency or settings.
+    dirty: bool,
+    /// The settings the table was built with.
+    cluster_min_px: f32,
+    representations: Representations,
+}
+
+impl Species {
+    /// No species yet; pipelines for `color_format` targets.
+    #[must_use]
+    pub fn new(color_format: wgpu::TextureFormat) -> Self {
+        Self {
+            color_format,
+            mesh: None,
+            billboard: None,
+            cluster: None,
+            packs: Vec::new(),
+            table: Vec::new(),
+            dirty: true,
+            cluster_min_px: super::settings::DEFAULT_CLUSTER_MIN_PX,
+            representations: Representations::ALL,
+        }
+    }
+
+    /// Starts a scene of `count` species: loaded packs are dropped.
+    pub fn set_count(&mut self, count: u32) {
+        self.packs = (0..count).map(|_| None).collect();
+        self.dirty = true;
+    }
+
+    /// Species in the scene.
+    #[must_use]
+    pub fn count(&self) -> u32 {
+        self.packs.len() as u32
+    }
+
+    /// Whether species `i`'s pack is on the GPU.
+    #[must_use]
+    pub fn has_pack(&self, i: u32) -> bool {
+        self.packs.get(i as usize).is_some_and(Option::is_some)
+    }
+
+    /// Residency changed: the table's counts must follow.
+    pub fn mark_dirty(&mut self) {
+        self.dirty = true;
+    }
+
+    /// Uploads a decoded pack as species `index`.
+    pub fn upload_pack(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        shared: &SharedLayouts,
+        index: u32,
+        pack: &Pack<'_>,
+    ) {
+        if self.packs.get(index as usize).is_none() {
+            return;
+        }
+        let m = &pack.meta;
+        use crate::format::pack::kind;
+        let format = self.color_format;
+        let any_level = (0..m.mesh_levels.len() as u32).any(|l| pack.section(kind::MESH_VERTICES, l).is_some());
+        let mesh = if any_level {
+            let pipelines = self.mesh.get_or_insert_with(|| MeshPipelines::new(device, shared, format));
+            MeshGpu::upload(device, queue, pipelines, pack)
+        } else {
+            MeshGpu { levels: Vec::new() }
+        };
+        let billboard = if m.billboards.is_some() && pack.section(kind::BILLBOARD_COLOR, 0).is_some() {
+            let pipeline = self.billboard.get_or_insert_with(|| BillboardPipeline::new(device, shared, format));
+            BillboardGpu::upload(device, queue, pipeline, pack)
+        } else {
+            None
+        };
+        let cluster = if m.clusters.is_some() && pack.section(kind::ELLIPSOIDS, 0).is_some() {
+            let pipeline = self.cluster.get_or_insert_with(|| ClusterPipeline::new(device, shared, format));
+            ClusterGpu::upload(device, queue, pipeline, pack)
+        } else {
+            None
+        };
+        let Some(slot) = self.packs.get_mut(index as usize) else { return };
+        let lo = Vec3::from(m.bounds_min);
+        let hi = Vec3::from(m.bounds_max);
+        let c = (lo + hi) * 0.5;
+        let level = |l: usize| m.mesh_levels.get(l);
+        // What goes to the GPU: every section but the JSON metadata.
+        let bytes =
+            pack.sections.iter().filter(|(e, _)| e.kind != crate::format::pack::kind::META).map(|(e, _)| e.bytes).sum();
+        *slot = Some(SpeciesGpu {
+            sphere: [c.x, c.y, c.z, ((hi - lo) * 0.5).length()],
+            height_m: m.height_m,
+            select_px: [level(0).map_or(0.0, |l| l.select_px), level(1).map_or(0.0, |l| l.select_px)],
+            index_counts: [level(0).map_or(0, |l| l.index_count), level(1).map_or(0, |l| l.index_count)],
+            has_level: [mesh.has_level(0), mesh.has_level(1)],
+            mesh,
+            billboard,
+            cluster,
+            tiers: Vec::new(),
+            bytes,
+        });
+        self.dirty = true;
+    }
+
+    /// Rebuilds the species table and draw params when packs, residency or the
+    /// representation settings changed since the last frame.
+    pub fn update_table(&mut self, queue: &wgpu::Queue, pools: &Pools, settings: &RenderSettings) {
+        if settings.cluster_min_px != self.cluster_min_px || settings.representations != self.representations {
+            self.cluster_min_px = settings.cluster_min_px;
+            self.representations = settings.representations;
+            self.dirty = true;
+        }
+        if self.dirty {
+            self.rebuild_table(queue, pools);
+        }
+    }
+
+    fn rebuild_table(&mut self, queue: &wgpu::Queue, pools: &Pools) {
+        let mut base = 0u32;
+        let count = self.packs.len();
+        let mut table = Vec::with_capacity(count);
+        let mut params = Vec::with_capacity(count * REPR_COUNT as usize);
+        let budget = pools.config().items;
+        let allow = self.representations;
+        // Without billboards the coarsest cluster level reaches down to 0 px.
+        let cluster_min_px = if allow.billboards { self.cluster_min_px } else { 0.0 };
+        for (i, pack) in self.packs.iter_mut().enumerate() {
+            let resident = pools.resident(i).min(u64::from(u32::MAX)) as u32;
+            let mut s = GpuSpecies::default();
+            let mut draw: Vec<DrawParams> = Repr::ALL
+                .iter()
+                .map(|r| DrawParams { ids: [0, *r as u32, i as u32, 0], ..Default::default() })
+                .collect();
+            if let Some(p) = pack {
+                s.sphere = p.sphere;
+                s.select = [p.height_m, 0.0, 0.0, 0.0];
+                let mut want = [0u32; REPR_COUNT as usize];
+                let mut lower = [0f32; REPR_COUNT as usize];
+                if p.has_level[0] && allow.meshes {
+                    want[Repr::Mesh0 as usize] = resident.min(MESH0_CAPACITY);
+                    lower[Repr::Mesh0 as usize] = p.select_px[0];
+                    s.index_count[Repr::Mesh0 as usize] = p.index_counts[0];
+                }
+                if p.has_level[1] && allow.meshes {
+                    want[Repr::Mesh1 as usize] = resident.min(MESH1_CAPACITY);
+                    lower[Repr::Mesh1 as usize] = p.select_px[1];
+                    s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
+                }
+                // Cluster tiers: the levels whose size band meets [cluster_min_px, the
+                // coarsest mesh level's threshold).
+                let mesh_floor = if allow.meshes {
+                    // The coarsest level on the GPU.
+                    (0..2).rev().find(|&l| p.has_level[l]).map_or(f32::INFINITY, |l| p.select_px[l])
+                } else {
+                    f32::INFINITY
+                };
+                p.tiers.clear();
+                if let Some(c) = p.cluster.as_ref().filter(|_| allow.clusters) {
+                    for (tier, (level, lo)) in
+                        cluster_tiers(&c.levels, cluster_min_px, mesh_floor).into_iter().enumerate()
+                    {
+                        let r = Repr::CLUSTERS[tier] as usize;
+                        want[r] = resident.min(CLUSTER_CAPACITY);
+                        lower[r] = lo;
+                        s.index_count[r] = c.vertices(level);
+                        c.draw_params(level, &mut draw[r]);
+                        p.tiers.push(level);
+                    }
+                }
+                if let Some(bb) = p.billboard.as_ref().filter(|_| allow.billboards) {
+                    let r = Repr::Billboard as usize;
+                    want[r] = resident;
+                    s.index_count[r] = BILLBOARD_VERTICES;
+                    draw[r].ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
+                    draw[r].bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
+                    draw[r].bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                }
+                // Billboards first: the far field must never starve for items.
+                let order = std::iter::once(Repr::Billboard as usize).chain(0..Repr::Billboard as usize);
+                for r in order {
+                    let cap = want[r].min(budget.saturating_sub(base));
+                    s.slot_base[r] = base;
+                    s.slot_cap[r] = cap;
+                    s.lower_px[r] = lower[r];
+                    base += cap;
+                }
+            }
+            for (r, d) in draw.iter_mut().enumerate() {
+                d.ids[0] = s.slot_base[r];
+            }
+            params.extend(draw);
+            table.push(s);
+        }
+        if !table.is_empty() {
+            queue.write_buffer(&pools.buffers.species, 0, bytemuck::cast_slice(&table));
+            queue.write_buffer(&pools.buffers.draw_params, 0, bytemuck::cast_slice(&params));
+        }
+        self.table = table;
+        self.dirty = false;
+    }
+
+    /// The species table as last uploaded.
+    #[must_use]
+    pub fn table(&self) -> &[GpuSpecies] {
+        &self.table
+    }
+
+    /// Which draw pipelines have been built (meshes, clusters, billboards).
+    #[must_use]
+    pub fn pipelines_built(&self) -> [bool; 3] {
+        [self.mesh.is_some(), self.cluster.is_some(), self.billboard.is_some()]
+    }
+
+    /// GPU bytes of the uploaded packs.
+    #[must_use]
+    pub fn bytes(&self) -> u64 {
+        self.packs.iter().flatten().map(|p| p.bytes).sum()
+    }
+
+    /// Records the species draws into `pass` (view bound at group 0): per species
+    /// and representation one indirect draw, skipped where no resident tree within
+    /// reach can need it. Returns the draws recorded.
+    pub fn draw<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'p>,
+        pools: &'p Pools,
+        reach: &Reach,
+        frame: SpeciesFrame,
+    ) -> u32 {
+        pass.set_bind_group(2, &pools.groups.instance, &[]);
+        let mut draws = 0;
+        for (i, p) in self.packs.iter().enumerate() {
+            let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
+            let max_px = reach.max_px(i);
+            let coarsest = Repr::ALL.iter().rposition(|r| s.slot_cap[*r as usize] > 0);
+            for (k, repr) in Repr::ALL.into_iter().enumerate() {
+                if s.slot_cap[repr as usize] == 0 {
+                    continue;
+                }
+                // Nothing of the species within reach, or no tree tall enough on screen
+                // for this representation (fade bands included): skip the draw.
+                let lower = if Some(k) == coarsest { 0.0 } else { s.lower_px[repr as usize] * (1.0 - frame.fade_band) };
+                if max_px <= 0.0 || lower > max_px {
+                    continue;
+                }
+                let slot = i as u32 * REPR_COUNT + repr as u32;
+                pass.set_bind_group(3, &pools.groups.draw, &[slot * size_of::<DrawParams>() as u32]);
+                let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
+                match repr {
+                    Repr::Mesh0 | Repr::Mesh1 => {
+                        let level = repr as usize;
+                        let Some(pipelines) = &self.mesh else { continue };
+                        if p.mesh.bind_level(pass, pipelines, RenderMode::Lit, level) > 0 {
+                            pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                    Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
+                        if let (Some(c), Some(pipeline)) = (&p.cluster, &self.cluster) {
+                            pass.set_pipeline(pipeline.pipeline(frame.cluster_exact_depth));
+                            pass.set_bind_group(1, &c.bind_group, &[]);
+                            pass.draw_indirect(&pools.buffers.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                    Repr::Billboard => {
+                        if let (Some(bb), Some(pipeline)) = (&p.billboard, &self.billboard) {
+                            pass.set_pipeline(pipeline.pipeline());
+                            pass.set_bind_group(1, &bb.bind_group, &[]);
+                            pass.draw_indirect(&pools.buffers.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                }
+            }
+        }
+        draws
+    }
+}

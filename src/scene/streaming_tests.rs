@@ -1,0 +1,405 @@
+//! The streamer without a GPU: the committed test scene (`tests/fixtures/forest-small`:
+//! 16 tiles under a two-level index, three species packs with heads) served by a
+//! fake fetcher that can hold requests back or fail them, into a fake residency
+//! with a small instance capacity.
+
+use std::collections::{HashMap, VecDeque};
+
+use glam::DVec3;
+
+use super::*;
+use crate::camera::Camera;
+use crate::format::pack::PackHead;
+use crate::scene::fetch::ByteRange;
+
+fn fixture() -> String {
+    concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small").to_string()
+}
+
+/// Serves files from disk; requests can be held back and failures scripted per
+/// URL ending.
+#[derive(Default)]
+struct FakeFetcher {
+    /// Started and not yet answered.
+    queue: VecDeque<(RequestId, String, Option<ByteRange>)>,
+    /// Every request started, in order: (url, range).
+    log: Vec<(String, Option<ByteRange>)>,
+    /// While true, nothing is answered.
+    hold: bool,
+    /// Failures to answer with, in order, for URLs ending with the key.
+    fail: HashMap<String, VecDeque<FetchError>>,
+    next: RequestId,
+}
+
+impl Fetcher for FakeFetcher {
+    fn start_range(&mut self, url: &str, range: Option<ByteRange>) -> RequestId {
+        self.next += 1;
+        self.queue.push_back((self.next, url.to_string(), range));
+        self.log.push((url.to_string(), range));
+        self.next
+    }
+
+    fn poll(&mut self) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)> {
+        if self.hold {
+            return Vec::new();
+        }
+        let answers: Vec<_> = self.queue.drain(..).collect();
+        answers
+            .into_iter()
+            .map(|(id, url, range)| {
+                let scripted =
+                    self.fail.iter_mut().find(|(k, _)| url.ends_with(k.as_str())).and_then(|(_, f)| f.pop_front());
+                if let Some(e) = scripted {
+                    return (id, Err(e));
+                }
+                let bytes = std::fs::read(&url).map_err(|_| FetchError::NotFound { url: url.clone() });
+                let sliced = bytes.map(|b| match range {
+                    Some((a, e)) => b[a as usize..(e as usize).min(b.len())].to_vec(),
+                    None => b,
+                });
+                (id, sliced)
+            })
+            .collect()
+    }
+
+    fn in_flight(&self) -> usize {
+        self.queue.len()
+    }
+}
+
+/// Holds up to `capacity` instances; records uploads, evictions and packs.
+struct FakeResidency {
+    capacity: u32,
+    used: u32,
+    next: u32,
+    species: u32,
+    /// Resident tiles: slot start → (tile x, y).
+    tiles: HashMap<u32, (i32, i32)>,
+    evicted: Vec<(i32, i32)>,
+    /// Uploads: (species, bytes of the pack as uploaded).
+    packs: Vec<(u32, u64)>,
+    pack_bytes: u64,
+}
+
+impl FakeResidency {
+    fn new(capacity: u32) -> Self {
+        Self {
+            capacity,
+            used: 0,
+            next: 0,
+            species: 0,
+            tiles: HashMap::new(),
+            evicted: Vec::new(),
+            packs: Vec::new(),
+            pack_bytes: 0,
+        }
+    }
+}
+
+impl Residency for FakeResidency {
+    fn species_capacity(&self) -> u32 {
+        8
+    }
+    fn begin_scene(&mut self, _trees: u64, _batches: u64, species: u32) {
+        self.species = species;
+    }
+    fn upload_tile(&mut self, tile: &Tile) -> Result<TileSlot, PoolError> {
+        let n = tile.instances.len() as u32;
+        if self.used + n > self.capacity {
+            return Err(PoolError::Full("instances"));
+        }
+        self.used += n;
+        let start = self.next;
+        self.next += n.max(1);
+        self.tiles.insert(start, (tile.tile_x, tile.tile_y));
+        let mut species_counts: Vec<(u32, u32)> = Vec::new();
+        for b in &tile.batches {
+            match species_counts.iter_mut().find(|(s, _)| *s == b.species) {
+                Some(c) => c.1 += b.instance_count,
+                None => species_counts.push((b.species, b.instance_count)),
+            }
+        }
+        Ok(TileSlot { batches: start..start + 1, instances: start..start + n, species_counts })
+    }
+    fn evict_tile(&mut self, slot: TileSlot) {
+        self.used -= slot.instances.len() as u32;
+        let xy = self.tiles.remove(&slot.batches.start).expect("a resident tile");
+        self.evicted.push(xy);
+    }
+    fn upload_pack(&mut self, species: u32, pack: &crate::format::Pack<'_>) {
+        // A pack grows part by part: what is held is its latest upload.
+        let bytes = pack.sections.iter().map(|(e, _)| e.bytes).sum::<u64>();
+        self.packs.push((species, bytes));
+        self.pack_bytes =
+            (0..self.species).filter_map(|s| self.packs.iter().rev().find(|p| p.0 == s).map(|p| p.1)).sum();
+    }
+    fn parts_needed(&self, _species: usize, _meta: &crate::format::PackMeta) -> [bool; PACK_PARTS] {
+        [true; PACK_PARTS]
+    }
+    fn instance_room(&self) -> (u32, u32) {
+        (self.capacity - self.used, self.capacity)
+    }
+    fn bytes(&self) -> u64 {
+        self.pack_bytes
+    }
+    fn limited_by_device(&self) -> bool {
+        false
+    }
+}
+
+const W: u32 = 640;
+const H: u32 = 360;
+
+/// From the south edge, looking north over the forest.
+fn south_view() -> ViewData {
+    Camera::look_at(DVec3::new(0.0, -420.0, 140.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H)
+}
+
+fn stream(config: StreamConfig) -> SceneStream<FakeFetcher> {
+    SceneStream::new(&fixture(), FakeFetcher::default(), config)
+}
+
+/// Runs `steps` updates `dt_s` apart from `t0`; returns the time after.
+fn run(
+    s: &mut SceneStream<FakeFetcher>,
+    r: &mut FakeResidency,
+    view: &ViewData,
+    dd: f32,
+    t0: f64,
+    dt_s: f64,
+    steps: usize,
+) -> f64 {
+    let mut t = t0;
+    for _ in 0..steps {
+        s.update(r, view, dd, t);
+        t += dt_s;
+    }
+    t
+}
+
+fn tile_urls(f: &FakeFetcher) -> Vec<String> {
+    f.log.iter().filter(|(u, _)| u.ends_with(".tile")).map(|(u, _)| u.clone()).collect()
+}
+
+fn eye(view: &ViewData) -> Vec3 {
+    view.eye_hi + view.eye_lo
+}
+
+/// Distance from the eye of the tile whose URL is `url`.
+fn distance(s: &SceneStream<FakeFetcher>, url: &str, eye: Vec3) -> f32 {
+    let t = s.index.tiles.iter().find(|t| url.ends_with(&t.url)).expect("a known tile");
+    tile_distance(&t.bounds, eye)
+}
+
+#[test]
+fn loads_the_index_first_then_tiles_nearest_first_within_the_in_flight_bound() {
+    let config = StreamConfig { max_in_flight: 2, ..StreamConfig::default() };
+    let (mut s, mut r) = (stream(config), FakeResidency::new(1 << 20));
+    let view = south_view();
+    let mut most = 0;
+    let mut t = 0.0;
+    // Answer one step in two: requests pile up against the bound in between.
+    for step in 0..400 {
+        s.fetcher.hold = step % 2 == 1;
+        s.update(&mut r, &view, 6000.0, t);
+        most = most.max(s.fetcher.in_flight());
+        assert!(s.fetcher.in_flight() <= 2, "step {step}: {} requests in flight", s.fetcher.in_flight());
+        t += 0.01;
+        if s.is_settled() {
+            break;
+        }
+    }
+    assert!(s.is_settled(), "the stream settles");
+    assert_eq!(most, 2, "the bound is reached (the test would prove nothing otherwise)");
+    let urls: Vec<&str> = s.fetcher.log.iter().map(|(u, _)| u.as_str()).collect();
+    assert!(urls[0].ends_with("scene.json") && urls[1].ends_with("index/r.json"), "{urls:?}");
+    let first_tile = urls.iter().position(|u| u.ends_with(".tile")).unwrap();
+    assert!(urls[..first_tile].iter().filter(|u| u.contains("/index/r")).count() >= 2, "a node before its tiles");
+    // Every tile once, all resident; tiles requested nearest first within each node's batch.
+    let tiles = tile_urls(&s.fetcher);
+    assert_eq!(tiles.len(), 16, "{tiles:?}");
+    assert_eq!(r.tiles.len(), 16);
+    assert_eq!(s.stats().index_nodes_loaded, 5);
+    let e = eye(&view);
+    let d: Vec<f32> = tiles.iter().map(|u| distance(&s, u, e)).collect();
+    // The first tile asked for is the nearest of the scene.
+    let nearest = s.index.tiles.iter().map(|t| tile_distance(&t.bounds, e)).fold(f32::MAX, f32::min);
+    assert_eq!(d[0], nearest, "distances in request order: {d:?}");
+    // Packs: heads by range first, then parts; every species uploaded.
+    let heads = s.fetcher.log.iter().filter(|(u, r)| u.ends_with(".pack") && r.is_some_and(|r| r.0 == 0)).count();
+    assert_eq!(heads, 3);
+    let mut species: Vec<u32> = r.packs.iter().map(|p| p.0).collect();
+    species.dedup();
+    species.sort_unstable();
+    species.dedup();
+    assert_eq!(species, vec![0, 1, 2]);
+}
+
+#[test]
+fn a_view_of_one_corner_reads_part_of_the_index() {
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+    // Straight down over the south-west quadrant, short draw distance.
+    let view = Camera { eye_m: DVec3::new(-120.0, -120.0, 60.0), pitch_rad: -1.5, ..Camera::default() }.view_data(W, H);
+    run(&mut s, &mut r, &view, 90.0, 0.0, 0.01, 100);
+    assert!(s.is_settled());
+    let loaded = s.stats().index_nodes_loaded;
+    assert!((2..5).contains(&loaded), "{loaded} of 5 nodes read");
+    let tiles = tile_urls(&s.fetcher);
+    assert!(!tiles.is_empty() && tiles.len() < 16, "{tiles:?}");
+}
+
+#[test]
+fn retries_with_backoff_and_gives_up_on_not_found() {
+    let view = south_view();
+    // Learn which tiles are asked for first, then script their failures.
+    let mut probe = stream(StreamConfig::default());
+    run(&mut probe, &mut FakeResidency::new(1 << 20), &view, 6000.0, 0.0, 0.0, 8);
+    let order = tile_urls(&probe.fetcher);
+    let (first, missing) = (order[0].clone(), order[1].clone());
+    let file = |u: &str| u.rsplit('/').next().unwrap().to_string();
+    let (name, missing_name) = (file(&first), file(&missing));
+    let mut s = stream(StreamConfig::default());
+    let mut r = FakeResidency::new(1 << 20);
+    s.fetcher.fail.insert(name.clone(), VecDeque::from([FetchError::Status { url: first.clone(), status: 503 }]));
+    s.fetcher.fail.insert(missing_name.clone(), VecDeque::from([FetchError::NotFound { url: missing.clone() }]));
+    let asked = |s: &SceneStream<FakeFetcher>, n: &str| s.fetcher.log.iter().filter(|(u, _)| u.ends_with(n)).count();
+    // Steps at t = 0 only: the 503 waits for its retry time (0.25 s).
+    run(&mut s, &mut r, &view, 6000.0, 0.0, 0.0, 10);
+    assert_eq!(asked(&s, &name), 1, "not retried before its time");
+    let events = s.drain_events();
+    assert!(events.iter().any(|e| matches!(e, StreamEvent::Failed { url, retrying: true, .. } if *url == first)));
+    assert!(events.iter().any(|e| matches!(e, StreamEvent::Failed { url, retrying: false, .. } if *url == missing)));
+    assert!(!s.is_settled(), "a retry is due");
+    run(&mut s, &mut r, &view, 6000.0, 0.3, 0.01, 50);
+    assert_eq!(asked(&s, &name), 2, "retried once after the backoff");
+    assert_eq!(asked(&s, &missing_name), 1, "404 is not retried");
+    assert!(s.is_settled(), "settled with the missing tile given up on");
+    assert_eq!(r.tiles.len(), 15);
+    assert_eq!(s.failures().len(), 1);
+    assert!(s.failures()[0].url == missing && s.failures()[0].message.contains("not found"));
+}
+
+#[test]
+fn gives_up_after_the_last_attempt() {
+    let config = StreamConfig { max_attempts: 3, retry_base_s: 0.1, ..StreamConfig::default() };
+    let (mut s, mut r) = (stream(config), FakeResidency::new(1 << 20));
+    let down = |i| FetchError::Transport { url: format!("try {i}"), message: "connection reset".into() };
+    s.fetcher.fail.insert("index/r0.json".into(), (0..10).map(down).collect());
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.05, 200);
+    let asked = s.fetcher.log.iter().filter(|(u, _)| u.ends_with("index/r0.json")).count();
+    assert_eq!(asked, 3, "three attempts, then given up");
+    assert!(s.is_settled());
+    assert_eq!(s.stats().broken, 1);
+    assert_eq!(r.tiles.len(), 12, "the other quadrants load");
+}
+
+#[test]
+fn full_pools_evict_the_farthest_unwanted_tile_first() {
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+    let view = Camera::look_at(DVec3::new(0.0, 0.0, 900.0), DVec3::new(0.0, 0.0, 0.0)).view_data(W, H);
+    run(&mut s, &mut r, &view, 6000.0, 0.0, 0.01, 100);
+    assert_eq!(r.tiles.len(), 16, "everything resident from above");
+    // Now full: a view of the north-east corner only must make room.
+    r.capacity = r.used;
+    let corner = Camera { eye_m: DVec3::new(150.0, 150.0, 40.0), pitch_rad: -1.5, ..Camera::default() };
+    let corner_view = corner.view_data(W, H);
+    // Forget the resident tiles' trees of the corner: they must be fetched again.
+    let e = eye(&corner_view);
+    let wanted_before = {
+        s.walk(&corner_view, 60.0);
+        s.wanted.clone()
+    };
+    assert!(!wanted_before.is_empty() && wanted_before.len() < 16);
+    // Evict the wanted tiles by hand so they are fetched again and need room.
+    for &t in &wanted_before {
+        if let TileState::Resident { slot, .. } = std::mem::replace(&mut s.tiles[t], TileState::NotResident(Load::Idle))
+        {
+            r.evict_tile(slot);
+        }
+    }
+    r.evicted.clear();
+    r.capacity = r.used; // room for nothing more
+    run(&mut s, &mut r, &corner_view, 60.0, 1.0, 0.01, 100);
+    assert!(s.is_settled());
+    assert!(!r.evicted.is_empty(), "tiles were evicted to make room");
+    let d = |xy: &(i32, i32)| {
+        let t = s.index.tiles.iter().find(|t| (t.x, t.y) == *xy).unwrap();
+        tile_distance(&t.bounds, e)
+    };
+    let dist: Vec<f32> = r.evicted.iter().map(d).collect();
+    assert!(dist.windows(2).all(|w| w[0] >= w[1]), "farthest first: {dist:?}");
+    // The farthest resident tile went first.
+    let farthest = s.index.tiles.iter().map(|t| tile_distance(&t.bounds, e)).fold(0.0, f32::max);
+    assert_eq!(dist[0], farthest);
+    for xy in &r.evicted {
+        assert!(
+            !wanted_before.iter().any(|&t| (s.index.tiles[t].x, s.index.tiles[t].y) == *xy),
+            "a wanted tile evicted"
+        );
+    }
+}
+
+#[test]
+fn pools_full_of_wanted_tiles_shorten_the_reach_and_say_so() {
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1000));
+    let view = Camera::look_at(DVec3::new(0.0, 0.0, 900.0), DVec3::new(0.0, 0.0, 0.0)).view_data(W, H);
+    run(&mut s, &mut r, &view, 6000.0, 0.0, 0.01, 300);
+    let d = s.stats().degraded;
+    assert!(d.pools_full, "{d:?}");
+    assert!(d.reach_m < 6000.0, "{d:?}");
+    assert!(r.used <= 1000);
+    let events = s.drain_events();
+    assert!(
+        events.iter().any(|e| matches!(e, StreamEvent::Failed { message, .. } if message.contains("pools are full"))),
+        "{events:?}"
+    );
+    // Room again: the reach grows back to the draw distance.
+    r.capacity = 1 << 20;
+    run(&mut s, &mut r, &view, 6000.0, 10.0, 0.05, 400);
+    assert!(!s.stats().degraded.pools_full, "{:?}", s.stats().degraded);
+    assert_eq!(r.tiles.len(), 16);
+}
+
+#[test]
+fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
+    let heads: Vec<PackHead> = ["spruce", "beech", "birch"]
+        .iter()
+        .map(|n| PackHead::decode(n, &std::fs::read(format!("{}/species/{n}.pack", fixture())).unwrap()).unwrap())
+        .collect();
+    let size = |h: &PackHead, p: PackPart| h.part_range(p).map_or(0, |(a, b)| b - a);
+    let billboards: u64 = heads.iter().map(|h| size(h, PackPart::Billboards)).sum();
+    let everything: u64 = heads.iter().map(|h| PackPart::ALL.iter().map(|p| size(h, *p)).sum::<u64>()).sum();
+    // Room for the billboards and about half of the rest.
+    let budget = billboards + (everything - billboards) / 2;
+    let config = StreamConfig { gpu_budget_bytes: budget, ..StreamConfig::default() };
+    let (mut s, mut r) = (stream(config), FakeResidency::new(1 << 20));
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
+    assert!(s.stats().degraded.gpu_budget, "{:?}", s.stats().degraded);
+    assert!(s.is_settled(), "held-back parts do not keep the stream busy");
+    let parts: Vec<(String, ByteRange)> =
+        s.fetcher.log.iter().filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r))).collect();
+    let fetched: u64 = parts.iter().map(|(_, (a, b))| b - a).sum();
+    assert!(fetched <= budget, "{fetched} bytes of parts fetched for a {budget} budget");
+    assert!(fetched < everything, "something was held back");
+    for (name, h) in ["spruce", "beech", "birch"].iter().zip(&heads) {
+        let bb = h.part_range(PackPart::Billboards).unwrap();
+        assert!(parts.iter().any(|(u, r)| u.contains(name) && *r == bb), "{name}'s billboards fetched");
+    }
+    // Without a budget, everything the view needs arrives.
+    let held_back = r.pack_bytes;
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
+    assert!(!s.stats().degraded.gpu_budget);
+    assert!(r.pack_bytes > held_back, "{} bytes without a budget, {held_back} with", r.pack_bytes);
+}
+
+#[test]
+fn a_shard_or_a_broken_manifest_is_fatal_and_named() {
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+    s.fetcher.fail.insert("scene.json".into(), VecDeque::from([FetchError::NotFound { url: "scene.json".into() }]));
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 5);
+    let events = s.drain_events();
+    assert!(events.iter().any(|e| matches!(e, StreamEvent::Fatal { message } if message.contains("not found"))));
+    assert!(s.is_settled() && s.manifest().is_none());
+    assert_eq!(s.fetcher.log.len(), 1, "nothing else is asked for");
+}
