@@ -181,11 +181,13 @@ impl Viewer {
         let pools = PoolConfig { instances: 2 << 20, items: 3 << 20, ..PoolConfig::default() };
         let depth = depth_texture(&device, width, height);
         let name = adapter_name(&adapter).await;
+        let mut frame = Frame::new(device, queue, name, view_format, pools, &scene, WebFetcher::default());
+        frame.use_timestamps();
         Ok(Viewer {
             surface,
             config,
             view_format,
-            frame: Frame::new(device, queue, name, view_format, pools, &scene, WebFetcher::default()),
+            frame,
             depth,
             orbit: Orbit { target: DVec3::ZERO, distance: 800.0, heading: 0.0, pitch: -0.5 },
             placed: false,
@@ -448,14 +450,16 @@ impl Viewer {
 
     /// Whether a frame with everything the view needs has been drawn and its
     /// counters read back (so `stats_json` describes it).
-    pub fn is_ready(&self) -> bool {
+    pub fn is_ready(&mut self) -> bool {
+        self.frame.collect();
         self.settled_frame.is_some_and(|f| self.frame.counters_frame() >= f)
     }
 
     /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md),
     /// gathered by the same code ([`Frame::stats`]); GPU times and counters are
     /// those of the latest frame the GPU finished.
-    pub fn stats_json(&self) -> String {
+    pub fn stats_json(&mut self) -> String {
+        self.frame.collect();
         serde_json::to_string(&self.frame.stats()).unwrap_or_default()
     }
 

@@ -1,6 +1,7 @@
 //! `sylva-bake`: turns glTF trees and tree placements into a Sylva scene
 //! (LoD packs + grouped-batch tiles + manifest). See `--help`.
 
+mod bake;
 mod batching;
 mod bucket;
 mod clusters;
@@ -22,15 +23,13 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use glam::DVec3;
 
+use bake::{trees, SceneInput, SceneSummary};
 use batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
 use bucket::TreeSource;
 use gltf_import::Classifier;
 use out_dir::OutDir;
 use pack_build::PackOptions;
-use placements::CoordKind;
-use placements::{Placement, PlacementSource};
 use reproject::{Crs, Reprojector};
-use scene_write::{SceneInput, SceneSummary};
 use sylva::format::index::DEFAULT_NODE_TILES;
 
 #[derive(Parser)]
@@ -360,7 +359,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
     };
-    let s = scene_write::write_scene(&input, out, &log)?;
+    let s = bake::bake_scene(&input, out, &log)?;
     report_summary(&s, &args.output.out, started);
     Ok(())
 }
@@ -438,34 +437,6 @@ fn write_placements_csv(
     Ok(())
 }
 
-/// Matches a species label against a `--map` pattern.
-fn pattern_matches(pattern: &str, label: &str) -> bool {
-    let p = pattern.to_lowercase();
-    let l = label.to_lowercase();
-    if !p.contains('*') {
-        return l.contains(&p);
-    }
-    // Glob with '*' only.
-    let parts: Vec<&str> = p.split('*').collect();
-    let mut rest = l.as_str();
-    for (i, part) in parts.iter().enumerate() {
-        if part.is_empty() {
-            continue;
-        }
-        if i == 0 {
-            if !rest.starts_with(part) {
-                return false;
-            }
-            rest = &rest[part.len()..];
-        } else if let Some(at) = rest.find(part) {
-            rest = &rest[at + part.len()..];
-        } else {
-            return false;
-        }
-    }
-    parts.last().is_none_or(|last| last.is_empty() || l.ends_with(last))
-}
-
 fn split_pair<'a>(flag: &str, s: &'a str) -> Result<(&'a str, &'a str)> {
     match s.split_once('=') {
         Some((a, b)) if !a.trim().is_empty() && !b.trim().is_empty() => Ok((a.trim(), b.trim())),
@@ -476,19 +447,62 @@ fn split_pair<'a>(flag: &str, s: &'a str) -> Result<(&'a str, &'a str)> {
 fn bake(args: &BakeArgs) -> Result<()> {
     let started = Instant::now();
     let pack_opts = args.pack.options()?;
+    let fixed_cell_size = args.pack.cell_size.map(|_| args.pack.cell_size(&[])).transpose()?;
     // The output folder is checked before any long work.
     let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
     for m in &args.models {
         inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
     }
     let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
+    let species = import_models(args)?;
+    let map = species_map(args, &species)?;
+    // Placements, streamed: the file is read from disk on every pass, so inputs
+    // larger than memory bake in bounded memory.
+    let input_crs = args.input_crs.as_deref().map(Crs::parse).transpose()?;
+    let options = trees::TreeOptions {
+        placements: &args.placements,
+        read: placements::ReadOptions {
+            encoding: args.encoding,
+            delimiter: args.delimiter,
+            swap_xy: args.swap_xy,
+            projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
+        },
+        crs: args.crs.as_deref(),
+        input_crs: args.input_crs.as_deref(),
+        max_extent_km: args.max_extent_km,
+        default_height: args.default_height,
+        cell_size_m: fixed_cell_size,
+        bucket_trees: args.bucket_trees,
+        tile_cells: args.pack.tile_cells,
+        shard: args.pack.shard,
+    };
+    let placed = trees::place_trees(&options, &map, &out, &log)?;
+    let input = SceneInput {
+        cell_size_m: placed.cell_size_m,
+        species,
+        trees: placed.trees,
+        crs: placed.crs,
+        origin_m: placed.origin_m,
+        tile_cells: args.pack.tile_cells,
+        pack: pack_opts,
+        debug_dump: args.pack.debug_dump.clone(),
+        shard: args.pack.shard,
+        index_node_tiles: args.pack.index_node_tiles,
+    };
+    log(&format!("batching with {} m cells", input.cell_size_m));
+    let s = bake::bake_scene(&input, out, &log)?;
+    report_summary(&s, &args.output.out, started);
+    Ok(())
+}
+
+/// The `--model` files, imported (names unique).
+fn import_models(args: &BakeArgs) -> Result<Vec<(String, gltf_import::ImportedModel)>> {
     let classifier =
         Classifier { leaf_patterns: args.leaf_materials.clone(), branch_patterns: args.branch_materials.clone() };
-    // Models.
-    let mut species = Vec::new();
+    let mut species: Vec<(String, gltf_import::ImportedModel)> = Vec::new();
     for m in &args.models {
         let (name, path) = split_pair("--model", m)?;
-        if species.iter().any(|(n, _): &(String, _)| n.eq_ignore_ascii_case(name)) {
+        if species.iter().any(|(n, _)| n.eq_ignore_ascii_case(name)) {
             bail!("--model {name} is given twice");
         }
         let model = gltf_import::import(std::path::Path::new(path), &classifier)?;
@@ -500,321 +514,29 @@ fn bake(args: &BakeArgs) -> Result<()> {
         ));
         species.push((name.to_string(), model));
     }
-    let model_index = |name: &str| species.iter().position(|(n, _)| n.eq_ignore_ascii_case(name));
-    let mut maps = Vec::new();
+    Ok(species)
+}
+
+/// Which model each species label uses, from `--map` and `--default-model`.
+fn species_map(args: &BakeArgs, species: &[(String, gltf_import::ImportedModel)]) -> Result<trees::SpeciesMap> {
+    let mut map = trees::SpeciesMap {
+        names: species.iter().map(|(n, _)| n.clone()).collect(),
+        heights: species.iter().map(|(_, m)| m.height()).collect(),
+        maps: Vec::new(),
+        default: None,
+    };
     for m in &args.maps {
         let (pattern, name) = split_pair("--map", m)?;
-        let idx = model_index(name).with_context(|| format!("--map {m}: no --model named {name:?}"))?;
-        maps.push((pattern.to_string(), idx));
+        let idx = map.model(name).with_context(|| format!("--map {m}: no --model named {name:?}"))?;
+        map.maps.push((pattern.to_string(), idx));
     }
-    let default_model = match &args.default_model {
-        Some(n) => Some(model_index(n).with_context(|| format!("--default-model {n}: no --model with that name"))?),
+    map.default = match &args.default_model {
+        Some(n) => Some(map.model(n).with_context(|| format!("--default-model {n}: no --model with that name"))?),
         None if species.len() == 1 => {
             log(&format!("one --model: every tree uses {} whatever its species label", species[0].0));
             Some(0)
         }
         None => None,
     };
-    // Placements, streamed: CSV is read from disk on every pass, so inputs larger
-    // than memory bake in bounded memory (trees are partitioned by tile into
-    // bucket files when there are more than --bucket-trees of them).
-    let input_crs = args.input_crs.as_deref().map(Crs::parse).transpose()?;
-    let read_options = placements::ReadOptions {
-        encoding: args.encoding,
-        delimiter: args.delimiter,
-        swap_xy: args.swap_xy,
-        projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
-    };
-    let source = PlacementSource::open(&args.placements, &read_options)?;
-    for note in &source.notes {
-        log(&format!("placements: {note}"));
-    }
-    let started_read = Instant::now();
-    // Pass 1: a deterministic sample (all rows up to SAMPLE_ROWS) for the CRS,
-    // the medians (origin, outliers, default height) and the row count.
-    log("pass 1/3: sampling placements");
-    let mut sample: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
-    let mut rng = rng::Rng::new(0x5EED_5A3F_1E00_0001);
-    let mut seen = 0u64;
-    let mut coords = std::collections::HashSet::new();
-    let mut duplicates = 0u64;
-    let report1 = source.for_each(&mut |p| {
-        seen += 1;
-        if coords.len() < DUPLICATE_CHECK_ROWS && !coords.insert((p.x.to_bits(), p.y.to_bits())) {
-            duplicates += 1;
-        }
-        let item = (p.x, p.y, p.height_m, p.row);
-        if sample.len() < SAMPLE_ROWS {
-            sample.push(item);
-        } else {
-            // Reservoir sampling: every row ends up in the sample with equal odds.
-            let j = rng.next_u64() % seen;
-            if j < SAMPLE_ROWS as u64 {
-                sample[j as usize] = item;
-            }
-        }
-        Ok(())
-    })?;
-    drop(coords);
-    log(&format!(
-        "  {} rows read, {} usable ({:.1} s){}",
-        report1.rows,
-        report1.kept,
-        started_read.elapsed().as_secs_f64(),
-        if seen as usize > SAMPLE_ROWS { format!("; medians from a sample of {SAMPLE_ROWS}") } else { String::new() }
-    ));
-    // Longitude and latitude the other way round: most rows' "latitude" beyond
-    // ±90° whose "longitude" would be a latitude.
-    if report1.swappable > 0 && report1.swappable * 2 >= report1.rows {
-        bail!(
-            "placements {}: the x/longitude and y/latitude columns look swapped: {} of {} rows have a latitude \
-             beyond ±90° and a longitude that would be a valid latitude; {}",
-            args.placements.display(),
-            report1.swappable,
-            report1.rows,
-            if args.swap_xy {
-                "they are so with --swap-xy: leave it out"
-            } else {
-                "pass --swap-xy (or rename the columns)"
-            }
-        );
-    }
-    if source.kind == CoordKind::LonLat && !sample.is_empty() {
-        let mut lons: Vec<f64> = sample.iter().map(|p| p.0).collect();
-        let mut lats: Vec<f64> = sample.iter().map(|p| p.1).collect();
-        let (lon, lat) = (median(&mut lons), median(&mut lats));
-        // Said plainly, so swapped columns that are both valid (52.37, 4.90) are noticed.
-        log(&format!(
-            "placements centre: {:.4}°{} {:.4}°{} (if this is not where the trees are, the columns are swapped: --swap-xy)",
-            lat.abs(),
-            if lat >= 0.0 { "N" } else { "S" },
-            lon.abs(),
-            if lon >= 0.0 { "E" } else { "W" }
-        ));
-    }
-    // CRS.
-    let (src, dst) = match source.kind {
-        CoordKind::LonLat => {
-            let dst = match &args.crs {
-                Some(c) => Crs::parse(c)?,
-                None => {
-                    let mut lons: Vec<f64> = sample.iter().map(|p| p.0).collect();
-                    let mut lats: Vec<f64> = sample.iter().map(|p| p.1).collect();
-                    if lons.is_empty() {
-                        bail!(
-                            "placements {}: no usable rows ({})",
-                            args.placements.display(),
-                            report1.lines().join("; ")
-                        );
-                    }
-                    Crs::utm_for(median(&mut lons), median(&mut lats))?
-                }
-            };
-            // A GeoJSON may name a geographic CRS of its own (ETRS89, NAD83).
-            (Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?, dst)
-        }
-        CoordKind::Projected => {
-            let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
-            let input = args.input_crs.as_deref().or(declared.as_deref()).or(args.crs.as_deref()).context(
-                "the placements have projected x/y coordinates: say which CRS they are in with --input-crs EPSG:xxxx",
-            )?;
-            if args.input_crs.is_none() && declared.is_some() {
-                log(&format!("placements: the GeoJSON names its CRS: {input}"));
-            }
-            let src = Crs::parse(input)?;
-            let dst = Crs::parse(args.crs.as_deref().unwrap_or(input))?;
-            (src, dst)
-        }
-    };
-    if dst.is_geographic() {
-        bail!("--crs EPSG:{} is geographic; a scene needs a projected CRS in metres (e.g. a UTM zone)", dst.epsg);
-    }
-    log(&format!("scene CRS EPSG:{}", dst.epsg));
-    let reproject = Reprojector::new(src, &dst)?;
-    // Medians of the projected sample: outliers are far from them.
-    let projected_sample: Vec<(f64, f64, Option<f32>)> =
-        sample.iter().filter_map(|&(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h))).collect();
-    drop(sample);
-    let mut xs: Vec<f64> = projected_sample.iter().map(|p| p.0).collect();
-    let mut ys: Vec<f64> = projected_sample.iter().map(|p| p.1).collect();
-    if xs.is_empty() {
-        bail!("no usable placements ({})", report1.lines().join("; "));
-    }
-    let (mx, my) = (median(&mut xs), median(&mut ys));
-    let limit = args.max_extent_km * 1000.0;
-    let inside = |x: f64, y: f64| (x - mx).hypot(y - my) <= limit;
-    let mut heights: Vec<f32> = projected_sample.iter().filter(|p| inside(p.0, p.1)).filter_map(|p| p.2).collect();
-    let default_height = match args.default_height {
-        Some(h) if h.is_finite() && h > 0.0 && h < MAX_TREE_HEIGHT_M => Some(h),
-        Some(h) => bail!("--default-height {h}: must be a number of metres above 0 and below {MAX_TREE_HEIGHT_M}"),
-        None if !heights.is_empty() => {
-            let n = heights.len();
-            heights.select_nth_unstable_by(n / 2, f32::total_cmp);
-            Some(heights[n / 2])
-        }
-        None => None,
-    };
-    drop(projected_sample);
-    let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
-    // (The importer refuses models without height.)
-    let model_heights: Vec<f32> = species.iter().map(|(_, m)| m.height()).collect();
-    let species_of = |label: &str| {
-        model_index(label)
-            .or_else(|| maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))
-            .or(default_model)
-    };
-    // A usable row as a tree, or why not.
-    let to_tree = |p: &Placement| -> Result<SceneTree, &'static str> {
-        let Ok((x, y)) = reproject.apply(p.x, p.y) else { return Err("cannot be projected to the scene CRS") };
-        if !inside(x, y) {
-            return Err("outlier");
-        }
-        let Some(idx) = species_of(p.species.as_deref().unwrap_or("")) else { return Err("unmapped") };
-        let model_h = model_heights[idx];
-        let target = p.height_m.or(default_height).unwrap_or(model_h);
-        let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
-        Ok(SceneTree {
-            pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
-            species: idx as u32,
-            scale: target / model_h,
-            yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
-            variation: ((h >> 20) % 32) as u8,
-            id: p.id.unwrap_or(p.row | 1 << 63),
-        })
-    };
-    // Pass 2: the cell size from the density of the trees (unless given).
-    let cell_size_m = match args.pack.cell_size {
-        Some(_) => args.pack.cell_size(&[])?,
-        None => {
-            log("pass 2/3: tree density for the cell size");
-            let mut cells = std::collections::HashSet::new();
-            let mut trees = 0u64;
-            source.for_each(&mut |p| {
-                if let Ok(t) = to_tree(&p) {
-                    trees += 1;
-                    cells.insert(batching::cell64(t.pos));
-                }
-                Ok(())
-            })?;
-            batching::cell_size_for(trees, cells.len() as u64, 500.0)
-        }
-    };
-    // Pass 3: the trees, in memory or partitioned by tile into bucket files.
-    let buckets = report1.kept.div_ceil(args.bucket_trees.max(1)).max(1);
-    log(&format!(
-        "pass 3/3: trees{}",
-        if buckets > 1 {
-            format!(" into {buckets} bucket files by tile (--bucket-trees {})", args.bucket_trees)
-        } else {
-            String::new()
-        }
-    ));
-    let mut report;
-    let mut unmapped: std::collections::BTreeMap<String, u64> = Default::default();
-    let mut skip = |p: &Placement, why: &str, report: &mut placements::Report| match why {
-        "outlier" => {
-            report.skip(&format!("farther than {} km from the median position (outlier)", args.max_extent_km), p.row)
-        }
-        "unmapped" => {
-            let label = p.species.as_deref().unwrap_or("");
-            *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
-        }
-        other => report.skip(other, p.row),
-    };
-    let mut our_report = placements::Report::default();
-    let trees = if buckets > 1 {
-        let dir = out.scratch("buckets");
-        let mut writer = bucket::BucketWriter::new(&dir, buckets as u32, cell_size_m, args.pack.tile_cells)?;
-        report = source.for_each(&mut |p| {
-            match to_tree(&p) {
-                Ok(t)
-                    if args.pack.shard.is_none_or(|(i, n)| {
-                        let (x, y) = batching::tile_of(t.pos, cell_size_m, args.pack.tile_cells);
-                        batching::shard_of_tile(x, y, n) == i
-                    }) =>
-                {
-                    writer.push(&t)?
-                }
-                Ok(_) => {}
-                Err(why) => skip(&p, why, &mut our_report),
-            }
-            Ok(())
-        })?;
-        writer.finish()?
-    } else {
-        let mut trees = Vec::with_capacity(report1.kept as usize);
-        report = source.for_each(&mut |p| {
-            match to_tree(&p) {
-                Ok(t) => trees.push(t),
-                Err(why) => skip(&p, why, &mut our_report),
-            }
-            Ok(())
-        })?;
-        TreeSource::Memory(trees)
-    };
-    for (reason, (n, rows)) in our_report.skipped {
-        let e = report.skipped.entry(reason).or_insert((0, Vec::new()));
-        e.0 += n;
-        e.1.extend(rows);
-        e.1.truncate(5);
-    }
-    report.duplicate_coordinates = duplicates;
-    for line in report.lines() {
-        log(&format!("placements: {line}"));
-    }
-    if duplicates > 0 && seen as usize > DUPLICATE_CHECK_ROWS {
-        log(&format!("placements: (duplicates counted among the first {DUPLICATE_CHECK_ROWS} rows)"));
-    }
-    for (label, n) in &unmapped {
-        log(&format!(
-            "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
-        ));
-    }
-    log(&format!("read the placements 3 times in {:.1} s", started_read.elapsed().as_secs_f64()));
-    let input = SceneInput {
-        cell_size_m,
-        species,
-        trees,
-        crs: dst,
-        origin_m: origin,
-        tile_cells: args.pack.tile_cells,
-        pack: pack_opts,
-        debug_dump: args.pack.debug_dump.clone(),
-        shard: args.pack.shard,
-        index_node_tiles: args.pack.index_node_tiles,
-    };
-    log(&format!("batching with {} m cells", input.cell_size_m));
-    let s = scene_write::write_scene(&input, out, &log)?;
-    report_summary(&s, &args.output.out, started);
-    Ok(())
-}
-
-/// Tallest tree height accepted (the tallest known tree is 116 m); placement
-/// heights outside (0, this) count as missing.
-const MAX_TREE_HEIGHT_M: f32 = 200.0;
-
-/// Rows sampled for the medians; inputs up to this size use every row.
-const SAMPLE_ROWS: usize = 1_000_000;
-/// Rows checked for repeated coordinates (the check keeps a set of them).
-const DUPLICATE_CHECK_ROWS: usize = 10_000_000;
-
-fn median(v: &mut [f64]) -> f64 {
-    let n = v.len();
-    v.select_nth_unstable_by(n / 2, f64::total_cmp);
-    v[n / 2]
-}
-
-#[cfg(test)]
-mod tests {
-    use super::pattern_matches;
-
-    #[test]
-    fn patterns() {
-        assert!(pattern_matches("quercus*", "Quercus robur"));
-        assert!(!pattern_matches("quercus*", "Acer quercus"));
-        assert!(pattern_matches("*robur", "Quercus robur"));
-        assert!(pattern_matches("oak", "Red Oak"));
-        assert!(pattern_matches("q*r", "quercus robur"));
-        assert!(!pattern_matches("pinus*", "Quercus"));
-    }
+    Ok(map)
 }

@@ -10,8 +10,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::entries::{check_url, validate_bounds, Bounds, TileEntry};
+pub use super::entries::{IndexRef, MAX_INDEX_DEPTH};
 use super::error::{at_most, DecodeError, Problem};
-use super::manifest::{check_url, validate_bounds, Bounds, TileEntry};
 
 /// Value of a node's `format` field.
 pub const INDEX_FORMAT: &str = "sylva-index";
@@ -19,24 +20,8 @@ pub const INDEX_FORMAT: &str = "sylva-index";
 pub const INDEX_VERSION: u32 = 1;
 /// Most tiles one node may list.
 pub const MAX_NODE_TILES: usize = 4096;
-/// Most levels below the root (tile coordinates are i32: 32 halvings cover them).
-pub const MAX_INDEX_DEPTH: u32 = 33;
 /// Default tiles per leaf node: a node of 64 tiles is about 16 KB of JSON.
 pub const DEFAULT_NODE_TILES: u32 = 64;
-
-/// The manifest's pointer to the index.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct IndexRef {
-    /// URL of the root node, relative to the manifest.
-    pub root: String,
-    /// Nodes in the whole index.
-    pub nodes: u64,
-    /// Levels of nodes (1: the root is a leaf).
-    pub depth: u32,
-    /// Most tiles a leaf lists.
-    pub node_tiles: u32,
-}
 
 /// A child of a node: where it is and what lies below it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -119,9 +104,7 @@ impl IndexNode {
         let mut trees = 0u64;
         for (i, t) in self.tiles.iter().enumerate() {
             let what = format!("tiles[{i}]");
-            check_url(&format!("{what}.url"), &t.url)?;
-            check_url(&format!("{what}.ids_url"), &t.ids_url)?;
-            validate_bounds(&format!("{what}.bounds"), &t.bounds)?;
+            t.validate(&what)?;
             let (x, y) = (i64::from(t.x), i64::from(t.y));
             if x < x0 || x >= x0 + size || y < y0 || y >= y0 + size {
                 return Err(Problem::Invalid(format!(

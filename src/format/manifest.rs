@@ -6,8 +6,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::error::{finite, finite_all, DecodeError, Problem};
-use super::index::IndexRef;
+use super::entries::{check_url, validate_bounds};
+pub use super::entries::{Bounds, IndexRef, TileEntry};
+use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
@@ -27,16 +28,6 @@ pub struct Crs {
     pub epsg: u32,
     /// The proj4 definition used by the bake.
     pub proj4: String,
-}
-
-/// An axis-aligned box in metres relative to the scene origin.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Bounds {
-    /// Lower corner.
-    pub min: [f32; 3],
-    /// Upper corner.
-    pub max: [f32; 3],
 }
 
 /// One species and its LoD pack.
@@ -59,28 +50,6 @@ pub struct SpeciesEntry {
     /// fetches this range first and then only the sections its views need.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub head_bytes: Option<u64>,
-}
-
-/// One tile of the flat tile index.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TileEntry {
-    /// Tile column.
-    pub x: i32,
-    /// Tile row.
-    pub y: i32,
-    /// Tile URL relative to the manifest.
-    pub url: String,
-    /// Tree-id sidecar URL relative to the manifest.
-    pub ids_url: String,
-    /// File size in bytes.
-    pub bytes: u64,
-    /// Trees in the tile.
-    pub trees: u64,
-    /// Batches in the tile.
-    pub batches: u32,
-    /// Bounds of every tree in the tile.
-    pub bounds: Bounds,
 }
 
 /// Scene-wide counts.
@@ -208,16 +177,7 @@ impl Manifest {
             if !self.tiles.is_empty() {
                 return Err(Problem::Invalid("a manifest with an \"index\" must have an empty \"tiles\" list".into()));
             }
-            check_url("index.root", &index.root)?;
-            if index.nodes == 0
-                || index.node_tiles == 0
-                || index.depth == 0
-                || index.depth > super::index::MAX_INDEX_DEPTH
-            {
-                return Err(Problem::Invalid(format!(
-                    "index {index:?}: nodes, node_tiles and depth must be positive (depth ≤ 33)"
-                )));
-            }
+            index.validate()?;
         }
         if let Some(s) = &self.shard {
             if s.count == 0 || s.index >= s.count {
@@ -238,10 +198,7 @@ impl Manifest {
         let mut trees = 0u64;
         let mut batches = 0u64;
         for (i, t) in self.tiles.iter().enumerate() {
-            let what = format!("tiles[{i}]");
-            check_url(&format!("{what}.url"), &t.url)?;
-            check_url(&format!("{what}.ids_url"), &t.ids_url)?;
-            validate_bounds(&format!("{what}.bounds"), &t.bounds)?;
+            t.validate(&format!("tiles[{i}]"))?;
             trees = trees.saturating_add(t.trees);
             batches = batches.saturating_add(t.batches.into());
         }
@@ -258,26 +215,4 @@ impl Manifest {
         }
         Ok(())
     }
-}
-
-pub(crate) fn validate_bounds(what: &str, b: &Bounds) -> Result<(), Problem> {
-    finite_all(&format!("{what}.min"), &b.min)?;
-    finite_all(&format!("{what}.max"), &b.max)?;
-    if b.min.iter().zip(&b.max).any(|(lo, hi)| lo > hi) {
-        return Err(Problem::Invalid(format!("{what}: min {:?} exceeds max {:?}", b.min, b.max)));
-    }
-    Ok(())
-}
-
-/// A URL in a manifest must stay inside the scene: relative, no `..`, no scheme.
-pub(crate) fn check_url(what: &str, url: &str) -> Result<(), Problem> {
-    let bad = url.is_empty()
-        || url.starts_with('/')
-        || url.contains('\\')
-        || url.contains(':')
-        || url.split('/').any(|seg| seg == ".." || seg.is_empty());
-    if bad {
-        return Err(Problem::Invalid(format!("{what} {url:?} must be a relative path inside the scene directory")));
-    }
-    Ok(())
 }

@@ -7,6 +7,7 @@
 //! input declares. The spec is `docs/FORMAT.md`; fuzz targets live in `fuzz/`.
 
 pub mod cluster;
+pub mod entries;
 mod error;
 pub mod index;
 pub mod manifest;

@@ -78,7 +78,8 @@ pub async fn request_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wg
     adapter
         .request_device(&wgpu::DeviceDescriptor {
             label: Some("sylva"),
-            required_features: wgpu::Features::empty(),
+            // Timestamp queries only to time the passes (the browser's stats).
+            required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
             required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,

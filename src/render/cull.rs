@@ -89,9 +89,16 @@ impl CullPipelines {
     /// Records the cull pass: reset → cull_batches → prepare_dispatch →
     /// cull_instances → finalize over the pools, for `slots` draw slots (view
     /// uniform bound through `view_group`).
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, view_group: &wgpu::BindGroup, pools: &Pools, slots: u32) {
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        view_group: &wgpu::BindGroup,
+        pools: &Pools,
+        slots: u32,
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
         let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("cull"), timestamp_writes: None });
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("cull"), timestamp_writes });
         pass.set_bind_group(0, view_group, &[]);
         pass.set_bind_group(1, &pools.groups.cull, &[]);
         pass.set_pipeline(&self.reset);

@@ -235,18 +235,31 @@ impl ForestRenderer {
     }
 
     /// Records the cull pass (after [`Self::prepare`]).
-    pub fn encode_cull(&self, encoder: &mut wgpu::CommandEncoder, _frame: &FrameData) {
-        self.cull.encode(encoder, &self.view_group, &self.pools, self.slot_count());
+    /// With `timestamps`, the pass writes its begin and end at indices 0 and 1.
+    pub fn encode_cull(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        _frame: &FrameData,
+        timestamps: Option<&wgpu::QuerySet>,
+    ) {
+        let writes = timestamps.map(|query_set| wgpu::ComputePassTimestampWrites {
+            query_set,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        });
+        self.cull.encode(encoder, &self.view_group, &self.pools, self.slot_count(), writes);
     }
 
     /// Records the draw pass: sky, species draws, overlays. Returns the number of
-    /// draw calls recorded.
+    /// draw calls recorded. With `timestamps`, the pass writes its begin and end at
+    /// indices 2 and 3.
     pub fn encode_draw(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         frame: &FrameData,
+        timestamps: Option<&wgpu::QuerySet>,
     ) -> u32 {
         let clear = frame.clear;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -265,7 +278,11 @@ impl ForestRenderer {
                 depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
                 stencil_ops: None,
             }),
-            timestamp_writes: None,
+            timestamp_writes: timestamps.map(|query_set| wgpu::RenderPassTimestampWrites {
+                query_set,
+                beginning_of_pass_write_index: Some(2),
+                end_of_pass_write_index: Some(3),
+            }),
             occlusion_query_set: None,
             multiview_mask: None,
         });

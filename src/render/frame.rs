@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex};
 
 use super::forest::{ForestRenderer, GpuResidency, PoolConfig, RenderSettings};
 use super::gpu_data::REPR_COUNT;
+use super::readback::{CounterReadback, PassTimer};
 use super::stats::{CullCounters, FrameStats};
 use crate::camera::ViewData;
 use crate::scene::{Fetcher, SceneStream, StreamConfig};
@@ -43,73 +44,6 @@ pub struct Recorded {
     read_counters: bool,
 }
 
-/// The cull counters read back from the GPU: mapped asynchronously, collected
-/// when the mapping is done (at once natively after a wait, a few frames later
-/// in the browser).
-struct CounterReadback {
-    buffer: wgpu::Buffer,
-    /// Bytes the pending mapping covers.
-    mapped_len: u64,
-    /// 0 idle, 1 copy recorded, 2 mapping, 3 mapped.
-    state: Arc<Mutex<u8>>,
-    counters: CullCounters,
-    /// The frame whose counters the pending mapping holds, and of the counters read.
-    pending_frame: u64,
-    counters_frame: u64,
-}
-
-impl CounterReadback {
-    fn new(device: &wgpu::Device, slots: u32) -> Self {
-        Self {
-            buffer: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("stats readback"),
-                size: CullCounters::readback_bytes(slots),
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            }),
-            mapped_len: 0,
-            state: Arc::new(Mutex::new(0)),
-            counters: CullCounters::default(),
-            pending_frame: 0,
-            counters_frame: 0,
-        }
-    }
-
-    fn state(&self) -> u8 {
-        *self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-
-    fn set_state(&self, s: u8) {
-        *self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = s;
-    }
-
-    /// Starts mapping after the copy was submitted.
-    fn map(&mut self, frame: u64) {
-        if self.state() != 1 {
-            return;
-        }
-        self.set_state(2);
-        self.pending_frame = frame;
-        let state = self.state.clone();
-        self.buffer.slice(..self.mapped_len).map_async(wgpu::MapMode::Read, move |r| {
-            *state.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = if r.is_ok() { 3 } else { 0 };
-        });
-    }
-
-    /// Decodes a finished mapping.
-    fn collect(&mut self) {
-        if self.state() != 3 {
-            return;
-        }
-        if let Ok(data) = self.buffer.slice(..self.mapped_len).get_mapped_range() {
-            self.counters = CullCounters::from_bytes(&data);
-            self.counters_frame = self.pending_frame;
-        }
-        self.buffer.unmap();
-        self.set_state(0);
-    }
-}
-
 /// GPU times of the passes of one frame, in ms.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct PassTimes {
@@ -133,7 +67,9 @@ pub struct Frame<F: Fetcher> {
     pub settings: RenderSettings,
     adapter: String,
     readback: CounterReadback,
-    /// Times of the frame being measured, and of the last one measured whole.
+    /// Timestamp queries around the passes, where asked for and available.
+    timer: Option<PassTimer>,
+    /// Submit-to-done times of the frame being measured, and of the last one measured whole.
     timing: Arc<Mutex<PassTimes>>,
     last_times: PassTimes,
     draw_calls: u32,
@@ -163,6 +99,7 @@ impl<F: Fetcher> Frame<F> {
             settings: RenderSettings::default(),
             adapter,
             readback,
+            timer: None,
             timing: Arc::default(),
             last_times: PassTimes::default(),
             draw_calls: 0,
@@ -171,6 +108,13 @@ impl<F: Fetcher> Frame<F> {
             device,
             queue,
         }
+    }
+
+    /// Times the passes with timestamp queries where the device has them (the
+    /// browser: it cannot wait per pass). Natively the wall clock around each
+    /// waited-for pass is used instead: lavapipe's compute timestamps read ~0.
+    pub fn use_timestamps(&mut self) {
+        self.timer = PassTimer::new(&self.device, &self.queue);
     }
 
     /// One non-blocking streaming step for `view` (`now_s`: a monotonic clock in
@@ -194,15 +138,19 @@ impl<F: Fetcher> Frame<F> {
     ) -> Recorded {
         let t0 = now_ms();
         let data = self.renderer.prepare(&self.queue, view, &self.settings);
+        let queries = self.timer.as_ref().and_then(PassTimer::queries);
+        let timed = queries.is_some();
         let mut cull = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cull") });
-        self.renderer.encode_cull(&mut cull, &data);
+        self.renderer.encode_cull(&mut cull, &data, queries);
         let mut draw = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("draw") });
-        self.draw_calls = self.renderer.encode_draw(&mut draw, color, depth, &data);
-        let read_counters = read_counters && self.readback.state() == 0;
+        self.draw_calls = self.renderer.encode_draw(&mut draw, color, depth, &data, queries);
+        if let (true, Some(timer)) = (timed, self.timer.as_mut()) {
+            timer.resolve(&mut draw);
+        }
+        let read_counters = read_counters && self.readback.is_idle();
         if read_counters {
-            self.readback.mapped_len = CullCounters::readback_bytes(self.renderer.slot_count());
-            self.renderer.copy_counters(&mut draw, &self.readback.buffer);
-            self.readback.set_state(1);
+            let len = CullCounters::readback_bytes(self.renderer.slot_count());
+            self.renderer.copy_counters(&mut draw, self.readback.record(len));
         }
         let recorded = Recorded { cull: cull.finish(), draw: draw.finish(), read_counters };
         self.cpu_ms = (now_ms() - t0).max(0.0);
@@ -248,6 +196,9 @@ impl<F: Fetcher> Frame<F> {
         if recorded.read_counters {
             self.readback.map(frame);
         }
+        if let Some(timer) = &mut self.timer {
+            timer.map(frame);
+        }
         if wait {
             block(&self.device);
         }
@@ -257,6 +208,9 @@ impl<F: Fetcher> Frame<F> {
     /// Picks up GPU times and counters the GPU has reported since the last call.
     pub fn collect(&mut self) {
         self.readback.collect();
+        if let Some(timer) = &mut self.timer {
+            timer.collect();
+        }
         let t = *self.timing.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if t.draw_done_ms.is_some() && t.frame != self.last_times.frame {
             self.last_times = t;
@@ -272,7 +226,7 @@ impl<F: Fetcher> Frame<F> {
     /// The frame whose counters [`Self::stats`] reports (0: none yet).
     #[must_use]
     pub fn counters_frame(&self) -> u64 {
-        self.readback.counters_frame
+        self.readback.latest().1
     }
 
     /// The adapter's name as shown in the stats.
@@ -287,11 +241,15 @@ impl<F: Fetcher> Frame<F> {
     pub fn stats(&self) -> FrameStats {
         let mut stats = FrameStats::gather(&self.renderer, &self.stream, self.draw_calls, self.cpu_ms);
         stats.adapter.clone_from(&self.adapter);
-        if self.readback.counters_frame > 0 {
-            stats.apply_counters(&self.readback.counters);
+        let (counters, counters_frame) = self.readback.latest();
+        if counters_frame > 0 {
+            stats.apply_counters(counters);
         }
         let t = self.last_times;
-        if let (Some(cull), Some(draw)) = (t.cull_done_ms, t.draw_done_ms) {
+        if let Some([cull, draw]) = self.timer.as_ref().and_then(PassTimer::latest) {
+            stats.gpu_ms.insert("cull".into(), cull);
+            stats.gpu_ms.insert("draw".into(), draw);
+        } else if let (Some(cull), Some(draw)) = (t.cull_done_ms, t.draw_done_ms) {
             stats.gpu_ms.insert("cull".into(), (cull - t.submitted_ms).max(0.0));
             stats.gpu_ms.insert("draw".into(), (draw - cull).max(0.0));
         }

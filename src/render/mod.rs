@@ -18,6 +18,7 @@ pub mod offscreen;
 pub mod overlay;
 pub mod pools;
 pub mod reach;
+pub mod readback;
 pub mod settings;
 pub mod shaders;
 pub mod species;

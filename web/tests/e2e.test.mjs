@@ -139,6 +139,55 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   assert.deepEqual(errors, []);
 });
 
+
+test('the browser and `sylva render --stats` report one set of keys and agree on the same view', async () => {
+  // A view of the whole fixture from the south, given in the URL so that only
+  // its tiles load (as natively).
+  const cam = { x: 0, y: -330, z: 230, heading: 0, pitch: -35 };
+  const { page, errors } = await openViewer(`${base}?ui=0#local=${cam.x},${cam.y},${cam.z},${cam.heading},${cam.pitch}`);
+  await page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 120000 });
+  assert.equal(await page.evaluate(() => window.sylvaError), undefined);
+  await ready(page);
+  // GPU times arrive when the GPU reports the passes done: wait for them.
+  await page.waitForFunction(() => Object.keys(window.sylva.stats().gpu_ms).length === 2, null, { timeout: 60000 });
+  const web = await page.evaluate(() => window.sylva.stats());
+  const used = await page.evaluate(() => window.sylva.camera());
+  const [w, h] = await page.evaluate(() => [document.getElementById('view').width, document.getElementById('view').height]);
+  const out = mkdtempSync(join(tmpdir(), 'sylva-native-'));
+  const at = [used.origin[0] + used.x, used.origin[1] + used.y, used.origin[2] + used.z, used.heading, used.pitch];
+  execFileSync(sylvaBin, ['render', '--scene', scene, '--camera', at.join(','), '--size', `${w}x${h}`,
+    '--out', join(out, 'native.png'), '--stats', join(out, 'native.json')], { stdio: ['ignore', 'ignore', 'inherit'] });
+  const native = JSON.parse(readFileSync(join(out, 'native.json'), 'utf8'));
+  writeFileSync(join(artifacts, 'stats-web.json'), JSON.stringify(web, null, 1));
+  writeFileSync(join(artifacts, 'stats-native.json'), JSON.stringify(native, null, 1));
+  const both = `web ${JSON.stringify(web)}\nnative ${JSON.stringify(native)}`;
+  assert.deepEqual(Object.keys(web).sort(), Object.keys(native).sort(), 'one set of keys');
+  assert.deepEqual(Object.keys(web.instances).sort(), Object.keys(native.instances).sort());
+  for (const s of [web, native]) {
+    assert.ok(s.frame_cpu_ms > 0 && s.frame_cpu_ms < 1000, `CPU ms per frame below a second: ${both}`);
+    assert.deepEqual(Object.keys(s.gpu_ms).sort(), ['cull', 'draw'], `GPU times present: ${both}`);
+    assert.ok(Object.values(s.gpu_ms).every((v) => v >= 0 && v < 60000), `GPU times sane: ${both}`);
+    assert.ok(s.adapter.length > 3 && !s.adapter.startsWith(' ') && !s.adapter.startsWith('('), `adapter named: ${s.adapter}`);
+    assert.equal(s.items_dropped, 0);
+    assert.deepEqual(s.failed, []);
+  }
+  // The scene as both hosts see it.
+  for (const k of ['trees_total', 'tiles_total', 'index_nodes_total', 'trees_resident', 'tiles_resident']) {
+    assert.equal(web[k], native[k], `${k}: ${both}`);
+  }
+  // The same GPU selection (SwiftShader and lavapipe may round a tree at a
+  // threshold differently: a few per cent at most).
+  const near = (a, b, what) => assert.ok(Math.abs(a - b) <= Math.max(8, 0.03 * Math.max(a, b)), `${what}: web ${a}, native ${b}`);
+  near(web.batches_visible, native.batches_visible, 'batches visible');
+  let drawn = 0;
+  for (const r of Object.keys(native.instances)) {
+    near(web.instances[r], native.instances[r], `${r} instances`);
+    drawn += native.instances[r];
+  }
+  assert.ok(drawn > 500, `trees drawn natively: ${drawn}`);
+  assert.ok(Math.abs(web.draw_calls - native.draw_calls) <= 2, `draw calls: ${both}`);
+  assert.deepEqual(errors, []);
+});
 test('setLod switches representations: ellipsoids only, billboards only, mixed', async () => {
   const { page, errors } = await openViewer(base);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });

@@ -1,0 +1,114 @@
+//! The bake as one pipeline, read top to bottom in [`bake_scene`]:
+//!
+//! 1. trees: placements → scene trees ([`trees`]: sample, CRS, medians, density;
+//!    run by `sylva-bake bake` before this, `demo` makes its trees itself);
+//! 2. species packs ([`packs`]: every LoD of every model, rendered on the GPU);
+//! 3. batches and tiles ([`tiles`]: grid cells into batches, tiles and id sidecars);
+//! 4. terrain (none yet: the DEM stage of the terrain issue goes here);
+//! 5. write: the tile index and `scene.json` ([`crate::scene_write`]).
+//!
+//! Each stage is a module that takes what the earlier ones made and calls no
+//! other stage; the folder is written atomically ([`OutDir::write`]).
+
+pub mod packs;
+pub mod tiles;
+pub mod trees;
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use glam::DVec3;
+use sylva::format::manifest::{Bounds, Counts, Crs as CrsEntry, Manifest, ShardStamp, SCENE_FORMAT, SCENE_VERSION};
+
+use crate::bucket::TreeSource;
+use crate::gltf_import::ImportedModel;
+use crate::out_dir::OutDir;
+use crate::pack_build::PackOptions;
+use crate::reproject::Crs;
+
+/// Everything a scene is made from.
+pub struct SceneInput {
+    /// Species names and models, indexed by `SceneTree::species`.
+    pub species: Vec<(String, ImportedModel)>,
+    /// Trees relative to `origin_m` (in memory or in bucket files).
+    pub trees: TreeSource,
+    /// Scene CRS.
+    pub crs: Crs,
+    /// Scene origin in CRS coordinates.
+    pub origin_m: DVec3,
+    /// Batch cell size, metres.
+    pub cell_size_m: u32,
+    /// Cells per tile side.
+    pub tile_cells: u32,
+    /// Pack options.
+    pub pack: PackOptions,
+    /// Where to write billboard PNGs, if anywhere.
+    pub debug_dump: Option<PathBuf>,
+    /// Bake only shard `.0` of `.1` of the tile grid (packs only in shard 0).
+    pub shard: Option<(u32, u32)>,
+    /// Most tiles per index node; scenes with more tiles get a hierarchical index.
+    pub index_node_tiles: u32,
+}
+
+/// What was written.
+#[derive(Debug, Clone)]
+pub struct SceneSummary {
+    /// The manifest.
+    pub manifest: Manifest,
+    /// Bytes of all instance records.
+    pub instance_bytes: u64,
+    /// Seconds spent on packs.
+    pub pack_seconds: f64,
+    /// Seconds spent on tiles.
+    pub tile_seconds: f64,
+}
+
+/// Bakes `input` into `out` (atomically; see [`OutDir`]): packs, tiles, index
+/// and manifest.
+pub fn bake_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Result<SceneSummary> {
+    if input.trees.is_empty() && input.shard.is_none() {
+        bail!("no trees to bake: every placement was skipped (see the report above)");
+    }
+    out.write(|dir| {
+        // Packs are baked by shard 0 only; the other shards write tiles.
+        let bake_packs = input.shard.is_none_or(|(index, _)| index == 0);
+        let packs = packs::bake_packs(&input.species, &input.pack, bake_packs, input.debug_dump.as_deref(), dir, log)?;
+        let tiles = tiles::write_tiles(
+            &input.trees,
+            &packs.shapes,
+            input.cell_size_m,
+            input.tile_cells,
+            input.shard,
+            dir,
+            log,
+        )?;
+        // Terrain: the DEM stage goes here.
+        let mut species = packs.entries;
+        for (entry, n) in species.iter_mut().zip(&tiles.species_trees) {
+            entry.trees = *n;
+        }
+        let base = Manifest {
+            format: SCENE_FORMAT.into(),
+            version: SCENE_VERSION,
+            crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone() },
+            origin_m: input.origin_m.to_array(),
+            bounds: Bounds { min: [0.0; 3], max: [0.0; 3] },
+            cell_size_m: input.cell_size_m as f32,
+            tile_cells: input.tile_cells,
+            counts: Counts { trees: 0, batches: 0, tiles: 0 },
+            species,
+            tiles: Vec::new(),
+            index: None,
+            shard: input.shard.map(|(index, count)| ShardStamp { index, count }),
+        };
+        // A shard lists its tiles flat; `merge` builds the index of the whole.
+        let flat = input.shard.is_some();
+        let manifest = crate::scene_write::finish_scene(dir, base, tiles.entries, input.index_node_tiles, flat)?;
+        Ok(SceneSummary {
+            manifest,
+            instance_bytes: tiles.instance_bytes,
+            pack_seconds: packs.seconds,
+            tile_seconds: tiles.seconds,
+        })
+    })
+}

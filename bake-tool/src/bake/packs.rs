@@ -1,0 +1,136 @@
+//! Stage 2 of the bake: a LoD pack per species (mesh levels, billboards rendered
+//! on the GPU, clusters; [`crate::pack_build`]), written to `species/`, with the
+//! manifest's species entries and the shapes the tiles bound batches with.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use sylva::format::manifest::{Bounds, SpeciesEntry};
+use sylva::render::capture::CapturePipelines;
+use sylva::render::GpuContext;
+
+use crate::batching::SpeciesShape;
+use crate::gltf_import::ImportedModel;
+use crate::pack_build::{build_pack, BuiltPack, PackOptions};
+use crate::scene_write::{create_dir, safe_name, write_file};
+
+/// What the packs stage made.
+pub struct Packs {
+    /// Species entries of the manifest (tree counts still 0).
+    pub entries: Vec<SpeciesEntry>,
+    /// Each species' shape, for batch bounds.
+    pub shapes: Vec<SpeciesShape>,
+    /// Seconds spent.
+    pub seconds: f64,
+}
+
+/// Builds and writes every species' pack into `dir/species/` (with `bake` false,
+/// as a shard other than 0 does, only the entries and shapes).
+pub fn bake_packs(
+    species: &[(String, ImportedModel)],
+    options: &PackOptions,
+    bake: bool,
+    debug_dump: Option<&Path>,
+    dir: &Path,
+    log: &dyn Fn(&str),
+) -> Result<Packs> {
+    let t0 = Instant::now();
+    create_dir(&dir.join("species"))?;
+    let gpu_and_pipelines = if bake {
+        let gpu =
+            GpuContext::new_headless_blocking().context("the billboard bake renders with the GPU (or lavapipe)")?;
+        log(&format!("rendering billboards on {}", gpu.adapter_summary()));
+        let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+        Some((gpu, pipelines))
+    } else {
+        log("packs are baked by shard 0; this shard writes tiles only");
+        None
+    };
+    let mut entries = Vec::new();
+    let mut shapes = Vec::new();
+    for (name, model) in species {
+        shapes.push(shape_of(model));
+        let file = format!("species/{}.pack", safe_name(name));
+        let Some((gpu, pipelines)) = &gpu_and_pipelines else {
+            let (lo, hi) = model.bounds();
+            entries.push(SpeciesEntry {
+                name: name.clone(),
+                pack: file,
+                bytes: 0,
+                height_m: model.height(),
+                bounds: Bounds { min: lo.to_array(), max: hi.to_array() },
+                trees: 0,
+                head_bytes: None,
+            });
+            continue;
+        };
+        let built = build_pack(name, model, options, gpu, pipelines).with_context(|| format!("species {name:?}"))?;
+        write_file(&dir.join(&file), &built.bytes)?;
+        if let Some(dump) = debug_dump {
+            dump_billboards(dump, name, &built)?;
+        }
+        log(&format!(
+            "  pack {name}: {} triangles in level 0, {} mesh levels, {} billboard angles, {:.2} MB",
+            built.meta.mesh_levels[0].index_count / 3,
+            built.meta.mesh_levels.len(),
+            built.meta.billboards.as_ref().map_or(0, |b| b.angles),
+            built.bytes.len() as f64 / 1e6
+        ));
+        entries.push(SpeciesEntry {
+            name: name.clone(),
+            pack: file,
+            bytes: built.bytes.len() as u64,
+            height_m: built.meta.height_m,
+            bounds: Bounds { min: built.meta.bounds_min, max: built.meta.bounds_max },
+            trees: 0,
+            head_bytes: Some(pack_head_bytes(&built.bytes)),
+        });
+    }
+    Ok(Packs { entries, shapes, seconds: t0.elapsed().as_secs_f64() })
+}
+
+/// Horizontal radius and z range of a model, for batch bounds.
+fn shape_of(model: &ImportedModel) -> SpeciesShape {
+    let (lo, hi) = model.bounds();
+    let radius_xy = model.vertices.iter().map(|v| v.position.truncate().length()).fold(0.0f32, f32::max);
+    SpeciesShape { radius_xy, z_min: lo.z, z_max: hi.z }
+}
+
+/// Bytes of a pack's header, section table and `META` section (the first section).
+fn pack_head_bytes(pack: &[u8]) -> u64 {
+    let at = sylva::format::pack::PACK_HEADER_BYTES;
+    let word = |o: usize| u64::from_le_bytes(pack[o..o + 8].try_into().expect("8 bytes"));
+    word(at + 8) + word(at + 16)
+}
+
+/// Writes each billboard layer (colour and normals) as PNG for a look.
+fn dump_billboards(dir: &Path, name: &str, built: &BuiltPack) -> Result<()> {
+    create_dir(dir)?;
+    let Some(bb) = &built.meta.billboards else { return Ok(()) };
+    let s = bb.texture.size;
+    let n = built.billboard_color.len() as u32;
+    // One strip per kind: layers side by side, over a grey checker so alpha shows.
+    for (kind, layers, checker) in [("color", &built.billboard_color, true), ("normal", &built.billboard_normal, false)]
+    {
+        let mut img = image::RgbaImage::new(s * n, s);
+        for (l, layer) in layers.iter().enumerate() {
+            for y in 0..s {
+                for x in 0..s {
+                    let i = ((y * s + x) * 4) as usize;
+                    let a = f32::from(layer[i + 3]) / 255.0;
+                    let bg = if checker && ((x / 8 + y / 8) % 2 == 0) { 200.0 } else { 150.0 };
+                    let px = if checker {
+                        [0, 1, 2].map(|c| (f32::from(layer[i + c]) * a + bg * (1.0 - a)) as u8)
+                    } else {
+                        [layer[i], layer[i + 1], layer[i + 2]]
+                    };
+                    img.put_pixel(l as u32 * s + x, y, image::Rgba([px[0], px[1], px[2], 255]));
+                }
+            }
+        }
+        let path = dir.join(format!("{}-billboards-{kind}.png", safe_name(name)));
+        img.save(&path).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,445 @@
+//! Stage 1 of `sylva-bake bake`: tree placements (any CRS, larger than memory)
+//! into scene trees, in three streamed passes over the file:
+//!
+//! 1. a deterministic sample (every row up to [`SAMPLE_ROWS`]): row count,
+//!    swapped columns, the scene CRS, the medians (origin, outliers) and the
+//!    default height;
+//! 2. the tree density, for the cell size (unless given);
+//! 3. the trees, in memory or partitioned by tile into bucket files.
+
+use std::collections::{BTreeMap, HashSet};
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use glam::DVec3;
+
+use crate::batching::{self, SceneTree};
+use crate::bucket::{BucketWriter, TreeSource};
+use crate::out_dir::OutDir;
+use crate::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
+use crate::reproject::{Crs, Reprojector};
+use crate::{demo, rng};
+
+/// Tallest tree height accepted (the tallest known tree is 116 m); placement
+/// heights outside (0, this) count as missing.
+pub const MAX_TREE_HEIGHT_M: f32 = 200.0;
+
+/// Rows sampled for the medians; inputs up to this size use every row.
+const SAMPLE_ROWS: usize = 1_000_000;
+/// Rows checked for repeated coordinates (the check keeps a set of them).
+const DUPLICATE_CHECK_ROWS: usize = 10_000_000;
+
+/// How to read and place the trees.
+pub struct TreeOptions<'a> {
+    /// The placements file.
+    pub placements: &'a Path,
+    /// Encoding, delimiter, swapped columns.
+    pub read: ReadOptions,
+    /// The scene CRS (`--crs`), if given.
+    pub crs: Option<&'a str>,
+    /// The placements' CRS (`--input-crs`), if given.
+    pub input_crs: Option<&'a str>,
+    /// Outliers lie farther than this from the median position.
+    pub max_extent_km: f64,
+    /// Height of rows without one (default: the median of the given heights).
+    pub default_height: Option<f32>,
+    /// A fixed cell size (checked), or `None` to derive it from the density.
+    pub cell_size_m: Option<u32>,
+    /// Trees held in memory at once; more go to bucket files.
+    pub bucket_trees: u64,
+    /// Cells per tile side.
+    pub tile_cells: u32,
+    /// Keep only the trees of shard `.0` of `.1` (bucketed bakes).
+    pub shard: Option<(u32, u32)>,
+}
+
+/// Which model each species label uses.
+pub struct SpeciesMap {
+    /// Model names.
+    pub names: Vec<String>,
+    /// Model heights at scale 1.
+    pub heights: Vec<f32>,
+    /// `--map` patterns and their model.
+    pub maps: Vec<(String, usize)>,
+    /// The model of labels nothing maps.
+    pub default: Option<usize>,
+}
+
+impl SpeciesMap {
+    /// The model named `name` (case-insensitive).
+    #[must_use]
+    pub fn model(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n.eq_ignore_ascii_case(name))
+    }
+
+    /// The model of a species label: by name, else by pattern, else the default.
+    #[must_use]
+    pub fn of(&self, label: &str) -> Option<usize> {
+        self.model(label)
+            .or_else(|| self.maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))
+            .or(self.default)
+    }
+}
+
+/// The placed trees and the frame they are in.
+pub struct PlacedTrees {
+    /// Trees relative to `origin_m`.
+    pub trees: TreeSource,
+    /// The scene CRS.
+    pub crs: Crs,
+    /// Scene origin in CRS coordinates (a round kilometre near the median).
+    pub origin_m: DVec3,
+    /// Batch cell size, metres.
+    pub cell_size_m: u32,
+}
+
+/// What pass 1 learns.
+struct Sample {
+    /// (x, y, height, row) of up to [`SAMPLE_ROWS`] rows.
+    rows: Vec<(f64, f64, Option<f32>, u64)>,
+    /// Rows seen.
+    seen: u64,
+    /// Rows repeating an earlier row's coordinates (among the first [`DUPLICATE_CHECK_ROWS`]).
+    duplicates: u64,
+    report: placements::Report,
+}
+
+/// Reads, checks and places the trees (see the module docs).
+pub fn place_trees(
+    opts: &TreeOptions<'_>,
+    species: &SpeciesMap,
+    out: &OutDir,
+    log: &dyn Fn(&str),
+) -> Result<PlacedTrees> {
+    let source = PlacementSource::open(opts.placements, &opts.read)?;
+    for note in &source.notes {
+        log(&format!("placements: {note}"));
+    }
+    let started = Instant::now();
+    log("pass 1/3: sampling placements");
+    let sample = sample_pass(&source)?;
+    log(&format!(
+        "  {} rows read, {} usable ({:.1} s){}",
+        sample.report.rows,
+        sample.report.kept,
+        started.elapsed().as_secs_f64(),
+        if sample.seen as usize > SAMPLE_ROWS {
+            format!("; medians from a sample of {SAMPLE_ROWS}")
+        } else {
+            String::new()
+        }
+    ));
+    check_swapped(opts, &sample.report)?;
+    if source.kind == CoordKind::LonLat && !sample.rows.is_empty() {
+        let mut lons: Vec<f64> = sample.rows.iter().map(|p| p.0).collect();
+        let mut lats: Vec<f64> = sample.rows.iter().map(|p| p.1).collect();
+        let (lon, lat) = (median(&mut lons), median(&mut lats));
+        // Said plainly, so swapped columns that are both valid (52.37, 4.90) are noticed.
+        log(&format!(
+            "placements centre: {:.4}°{} {:.4}°{} (if this is not where the trees are, the columns are swapped: --swap-xy)",
+            lat.abs(),
+            if lat >= 0.0 { "N" } else { "S" },
+            lon.abs(),
+            if lon >= 0.0 { "E" } else { "W" }
+        ));
+    }
+    let (src, dst) = choose_crs(opts, &source, &sample, log)?;
+    let reproject = Reprojector::new(src, &dst)?;
+    // Medians of the projected sample: outliers are far from them.
+    let projected: Vec<(f64, f64, Option<f32>)> =
+        sample.rows.iter().filter_map(|&(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h))).collect();
+    let mut xs: Vec<f64> = projected.iter().map(|p| p.0).collect();
+    let mut ys: Vec<f64> = projected.iter().map(|p| p.1).collect();
+    if xs.is_empty() {
+        bail!("no usable placements ({})", sample.report.lines().join("; "));
+    }
+    let (mx, my) = (median(&mut xs), median(&mut ys));
+    let limit = opts.max_extent_km * 1000.0;
+    let inside = |x: f64, y: f64| (x - mx).hypot(y - my) <= limit;
+    let default_height = match opts.default_height {
+        Some(h) if h.is_finite() && h > 0.0 && h < MAX_TREE_HEIGHT_M => Some(h),
+        Some(h) => bail!("--default-height {h}: must be a number of metres above 0 and below {MAX_TREE_HEIGHT_M}"),
+        None => {
+            let mut heights: Vec<f32> = projected.iter().filter(|p| inside(p.0, p.1)).filter_map(|p| p.2).collect();
+            let n = heights.len();
+            (n > 0).then(|| *heights.select_nth_unstable_by(n / 2, f32::total_cmp).1)
+        }
+    };
+    drop(projected);
+    let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
+    // A usable row as a tree, or why not.
+    let to_tree = |p: &Placement| -> Result<SceneTree, &'static str> {
+        let Ok((x, y)) = reproject.apply(p.x, p.y) else { return Err("cannot be projected to the scene CRS") };
+        if !inside(x, y) {
+            return Err("outlier");
+        }
+        let Some(idx) = species.of(p.species.as_deref().unwrap_or("")) else { return Err("unmapped") };
+        // (The importer refuses models without height.)
+        let model_h = species.heights[idx];
+        let target = p.height_m.or(default_height).unwrap_or(model_h);
+        let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
+        Ok(SceneTree {
+            pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
+            species: idx as u32,
+            scale: target / model_h,
+            yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
+            variation: ((h >> 20) % 32) as u8,
+            id: p.id.unwrap_or(p.row | 1 << 63),
+        })
+    };
+    let cell_size_m = match opts.cell_size_m {
+        Some(c) => c,
+        None => {
+            log("pass 2/3: tree density for the cell size");
+            density_pass(&source, &to_tree)?
+        }
+    };
+    let trees = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
+    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m })
+}
+
+/// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.
+fn sample_pass(source: &PlacementSource) -> Result<Sample> {
+    let mut rows: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
+    let mut rng = rng::Rng::new(0x5EED_5A3F_1E00_0001);
+    let mut seen = 0u64;
+    let mut coords = HashSet::new();
+    let mut duplicates = 0u64;
+    let report = source.for_each(&mut |p| {
+        seen += 1;
+        if coords.len() < DUPLICATE_CHECK_ROWS && !coords.insert((p.x.to_bits(), p.y.to_bits())) {
+            duplicates += 1;
+        }
+        let item = (p.x, p.y, p.height_m, p.row);
+        if rows.len() < SAMPLE_ROWS {
+            rows.push(item);
+        } else {
+            // Reservoir sampling: every row ends up in the sample with equal odds.
+            let j = rng.next_u64() % seen;
+            if j < SAMPLE_ROWS as u64 {
+                rows[j as usize] = item;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(Sample { rows, seen, duplicates, report })
+}
+
+/// Longitude and latitude the other way round: most rows' "latitude" beyond
+/// ±90° whose "longitude" would be a latitude.
+fn check_swapped(opts: &TreeOptions<'_>, report: &placements::Report) -> Result<()> {
+    if report.swappable > 0 && report.swappable * 2 >= report.rows {
+        bail!(
+            "placements {}: the x/longitude and y/latitude columns look swapped: {} of {} rows have a latitude \
+             beyond ±90° and a longitude that would be a valid latitude; {}",
+            opts.placements.display(),
+            report.swappable,
+            report.rows,
+            if opts.read.swap_xy {
+                "they are so with --swap-xy: leave it out"
+            } else {
+                "pass --swap-xy (or rename the columns)"
+            }
+        );
+    }
+    Ok(())
+}
+
+/// The placements' CRS and the scene's.
+fn choose_crs(
+    opts: &TreeOptions<'_>,
+    source: &PlacementSource,
+    sample: &Sample,
+    log: &dyn Fn(&str),
+) -> Result<(Crs, Crs)> {
+    let (src, dst) = match source.kind {
+        CoordKind::LonLat => {
+            let dst = match opts.crs {
+                Some(c) => Crs::parse(c)?,
+                None => {
+                    let mut lons: Vec<f64> = sample.rows.iter().map(|p| p.0).collect();
+                    let mut lats: Vec<f64> = sample.rows.iter().map(|p| p.1).collect();
+                    if lons.is_empty() {
+                        bail!(
+                            "placements {}: no usable rows ({})",
+                            opts.placements.display(),
+                            sample.report.lines().join("; ")
+                        );
+                    }
+                    Crs::utm_for(median(&mut lons), median(&mut lats))?
+                }
+            };
+            // A GeoJSON may name a geographic CRS of its own (ETRS89, NAD83).
+            (Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?, dst)
+        }
+        CoordKind::Projected => {
+            let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
+            let input = opts.input_crs.or(declared.as_deref()).or(opts.crs).context(
+                "the placements have projected x/y coordinates: say which CRS they are in with --input-crs EPSG:xxxx",
+            )?;
+            if opts.input_crs.is_none() && declared.is_some() {
+                log(&format!("placements: the GeoJSON names its CRS: {input}"));
+            }
+            let src = Crs::parse(input)?;
+            let dst = Crs::parse(opts.crs.unwrap_or(input))?;
+            (src, dst)
+        }
+    };
+    if dst.is_geographic() {
+        bail!("--crs EPSG:{} is geographic; a scene needs a projected CRS in metres (e.g. a UTM zone)", dst.epsg);
+    }
+    log(&format!("scene CRS EPSG:{}", dst.epsg));
+    Ok((src, dst))
+}
+
+/// Pass 2: the cell size from the density of the trees.
+fn density_pass(
+    source: &PlacementSource,
+    to_tree: &dyn Fn(&Placement) -> Result<SceneTree, &'static str>,
+) -> Result<u32> {
+    let mut cells = HashSet::new();
+    let mut trees = 0u64;
+    source.for_each(&mut |p| {
+        if let Ok(t) = to_tree(&p) {
+            trees += 1;
+            cells.insert(batching::cell64(t.pos));
+        }
+        Ok(())
+    })?;
+    Ok(batching::cell_size_for(trees, cells.len() as u64, 500.0))
+}
+
+/// Pass 3: the trees, in memory or partitioned by tile into bucket files; the
+/// report of every row skipped and why.
+fn tree_pass(
+    opts: &TreeOptions<'_>,
+    source: &PlacementSource,
+    sample: &Sample,
+    cell_size_m: u32,
+    to_tree: &dyn Fn(&Placement) -> Result<SceneTree, &'static str>,
+    out: &OutDir,
+    log: &dyn Fn(&str),
+) -> Result<TreeSource> {
+    let buckets = sample.report.kept.div_ceil(opts.bucket_trees.max(1)).max(1);
+    log(&format!(
+        "pass 3/3: trees{}",
+        if buckets > 1 {
+            format!(" into {buckets} bucket files by tile (--bucket-trees {})", opts.bucket_trees)
+        } else {
+            String::new()
+        }
+    ));
+    let mut unmapped: BTreeMap<String, u64> = BTreeMap::new();
+    let mut ours = placements::Report::default();
+    let mut skip = |p: &Placement, why: &str| match why {
+        "outlier" => {
+            ours.skip(&format!("farther than {} km from the median position (outlier)", opts.max_extent_km), p.row)
+        }
+        "unmapped" => {
+            let label = p.species.as_deref().unwrap_or("");
+            *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
+        }
+        other => ours.skip(other, p.row),
+    };
+    let (mut report, trees) = if buckets > 1 {
+        let dir = out.scratch("buckets");
+        let mut writer = BucketWriter::new(&dir, buckets as u32, cell_size_m, opts.tile_cells)?;
+        let report = source.for_each(&mut |p| {
+            match to_tree(&p) {
+                Ok(t)
+                    if opts.shard.is_none_or(|(i, n)| {
+                        let (x, y) = batching::tile_of(t.pos, cell_size_m, opts.tile_cells);
+                        batching::shard_of_tile(x, y, n) == i
+                    }) =>
+                {
+                    writer.push(&t)?
+                }
+                Ok(_) => {}
+                Err(why) => skip(&p, why),
+            }
+            Ok(())
+        })?;
+        (report, writer.finish()?)
+    } else {
+        let mut trees = Vec::with_capacity(sample.report.kept as usize);
+        let report = source.for_each(&mut |p| {
+            match to_tree(&p) {
+                Ok(t) => trees.push(t),
+                Err(why) => skip(&p, why),
+            }
+            Ok(())
+        })?;
+        (report, TreeSource::Memory(trees))
+    };
+    for (reason, (n, rows)) in ours.skipped {
+        let e = report.skipped.entry(reason).or_insert((0, Vec::new()));
+        e.0 += n;
+        e.1.extend(rows);
+        e.1.truncate(5);
+    }
+    report.duplicate_coordinates = sample.duplicates;
+    for line in report.lines() {
+        log(&format!("placements: {line}"));
+    }
+    if sample.duplicates > 0 && sample.seen as usize > DUPLICATE_CHECK_ROWS {
+        log(&format!("placements: (duplicates counted among the first {DUPLICATE_CHECK_ROWS} rows)"));
+    }
+    for (label, n) in &unmapped {
+        log(&format!(
+            "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
+        ));
+    }
+    Ok(trees)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    let n = v.len();
+    v.select_nth_unstable_by(n / 2, f64::total_cmp);
+    v[n / 2]
+}
+
+/// Matches a species label against a `--map` pattern: case-insensitive, `*` is
+/// a wildcard, otherwise a substring.
+pub fn pattern_matches(pattern: &str, label: &str) -> bool {
+    let p = pattern.to_lowercase();
+    let l = label.to_lowercase();
+    if !p.contains('*') {
+        return l.contains(&p);
+    }
+    // Glob with '*' only.
+    let parts: Vec<&str> = p.split('*').collect();
+    let mut rest = l.as_str();
+    for (i, part) in parts.iter().enumerate() {
+        if part.is_empty() {
+            continue;
+        }
+        if i == 0 {
+            if !rest.starts_with(part) {
+                return false;
+            }
+            rest = &rest[part.len()..];
+        } else if let Some(at) = rest.find(part) {
+            rest = &rest[at + part.len()..];
+        } else {
+            return false;
+        }
+    }
+    parts.last().is_none_or(|last| last.is_empty() || l.ends_with(last))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pattern_matches;
+
+    #[test]
+    fn patterns() {
+        assert!(pattern_matches("quercus*", "Quercus robur"));
+        assert!(!pattern_matches("quercus*", "Acer quercus"));
+        assert!(pattern_matches("*robur", "Quercus robur"));
+        assert!(pattern_matches("oak", "Red Oak"));
+        assert!(pattern_matches("q*r", "quercus robur"));
+        assert!(!pattern_matches("pinus*", "Quercus"));
+    }
+}

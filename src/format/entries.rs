@@ -1,0 +1,101 @@
+//! Entries shared by the manifest and the index nodes: bounds, tile entries,
+//! the index pointer, and their checks (each written once). Both
+//! [`super::manifest`] and [`super::index`] import from here and never from
+//! each other's types.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::{finite_all, Problem};
+
+/// Most levels below the root (tile coordinates are i32: 32 halvings cover them).
+pub const MAX_INDEX_DEPTH: u32 = 33;
+
+/// An axis-aligned box in metres relative to the scene origin.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bounds {
+    /// Lower corner.
+    pub min: [f32; 3],
+    /// Upper corner.
+    pub max: [f32; 3],
+}
+
+/// One tile of the flat tile index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TileEntry {
+    /// Tile column.
+    pub x: i32,
+    /// Tile row.
+    pub y: i32,
+    /// Tile URL relative to the manifest.
+    pub url: String,
+    /// Tree-id sidecar URL relative to the manifest.
+    pub ids_url: String,
+    /// File size in bytes.
+    pub bytes: u64,
+    /// Trees in the tile.
+    pub trees: u64,
+    /// Batches in the tile.
+    pub batches: u32,
+    /// Bounds of every tree in the tile.
+    pub bounds: Bounds,
+}
+
+/// The manifest's pointer to the index.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IndexRef {
+    /// URL of the root node, relative to the manifest.
+    pub root: String,
+    /// Nodes in the whole index.
+    pub nodes: u64,
+    /// Levels of nodes (1: the root is a leaf).
+    pub depth: u32,
+    /// Most tiles a leaf lists.
+    pub node_tiles: u32,
+}
+
+impl IndexRef {
+    /// Checks the pointer: a relative root URL, positive sizes, depth ≤ [`MAX_INDEX_DEPTH`].
+    pub(crate) fn validate(&self) -> Result<(), Problem> {
+        check_url("index.root", &self.root)?;
+        if self.nodes == 0 || self.node_tiles == 0 || self.depth == 0 || self.depth > MAX_INDEX_DEPTH {
+            return Err(Problem::Invalid(format!(
+                "index {self:?}: nodes, node_tiles and depth must be positive (depth ≤ {MAX_INDEX_DEPTH})"
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl TileEntry {
+    /// Checks the entry's URLs and bounds; `what` names it in errors.
+    pub(crate) fn validate(&self, what: &str) -> Result<(), Problem> {
+        check_url(&format!("{what}.url"), &self.url)?;
+        check_url(&format!("{what}.ids_url"), &self.ids_url)?;
+        validate_bounds(&format!("{what}.bounds"), &self.bounds)
+    }
+}
+
+pub(crate) fn validate_bounds(what: &str, b: &Bounds) -> Result<(), Problem> {
+    finite_all(&format!("{what}.min"), &b.min)?;
+    finite_all(&format!("{what}.max"), &b.max)?;
+    if b.min.iter().zip(&b.max).any(|(lo, hi)| lo > hi) {
+        return Err(Problem::Invalid(format!("{what}: min {:?} exceeds max {:?}", b.min, b.max)));
+    }
+    Ok(())
+}
+
+/// A URL in a manifest must stay inside the scene: relative, no `..`, no scheme.
+pub(crate) fn check_url(what: &str, url: &str) -> Result<(), Problem> {
+    let bad = url.is_empty()
+        || url.starts_with('/')
+        || url.contains('\\')
+        || url.contains(':')
+        || url.split('/').any(|seg| seg == ".." || seg.is_empty());
+    if bad {
+        return Err(Problem::Invalid(format!("{what} {url:?} must be a relative path inside the scene directory")));
+    }
+    Ok(())
+}

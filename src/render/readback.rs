@@ -1,0 +1,215 @@
+//! What a frame reads back from the GPU without blocking it: the cull pass's
+//! counters and, where the device has timestamp queries (the browser), the
+//! passes' GPU times. Each maps its buffer after the frame is submitted and is
+//! collected once the mapping is done: at once natively after a wait, a few
+//! frames later in the browser. One frame is in flight at a time; frames in
+//! between read nothing back.
+
+use std::sync::{Arc, Mutex};
+
+use super::stats::CullCounters;
+
+/// A mapping's state, shared with its callback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MapState {
+    /// Free for the next frame's copy.
+    Idle,
+    /// A copy was recorded into a frame not yet submitted.
+    Recorded,
+    /// Submitted, mapping.
+    Mapping,
+    /// Mapped: ready to decode.
+    Mapped,
+}
+
+/// A readback buffer and its state.
+struct Mapped {
+    buffer: wgpu::Buffer,
+    len: u64,
+    state: Arc<Mutex<MapState>>,
+    frame: u64,
+}
+
+impl Mapped {
+    fn new(device: &wgpu::Device, label: &str, size: u64) -> Self {
+        Self {
+            buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
+            len: 0,
+            state: Arc::new(Mutex::new(MapState::Idle)),
+            frame: 0,
+        }
+    }
+
+    fn state(&self) -> MapState {
+        *self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn set(&self, s: MapState) {
+        *self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = s;
+    }
+
+    /// Marks a copy of `len` bytes as recorded.
+    fn recorded(&mut self, len: u64) {
+        self.len = len;
+        self.set(MapState::Recorded);
+    }
+
+    /// Starts mapping after the frame with the copy was submitted.
+    fn map(&mut self, frame: u64) {
+        if self.state() != MapState::Recorded {
+            return;
+        }
+        self.set(MapState::Mapping);
+        self.frame = frame;
+        let state = self.state.clone();
+        self.buffer.slice(..self.len).map_async(wgpu::MapMode::Read, move |r| {
+            let next = if r.is_ok() { MapState::Mapped } else { MapState::Idle };
+            *state.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = next;
+        });
+    }
+
+    /// Decodes a finished mapping with `decode`; returns its frame.
+    fn take(&mut self, decode: impl FnOnce(&[u8])) -> Option<u64> {
+        if self.state() != MapState::Mapped {
+            return None;
+        }
+        let read = self.buffer.slice(..self.len).get_mapped_range().map(|data| decode(&data)).is_ok();
+        self.buffer.unmap();
+        self.set(MapState::Idle);
+        read.then_some(self.frame)
+    }
+}
+
+/// The cull counters read back (see the module docs).
+pub struct CounterReadback {
+    mapped: Mapped,
+    counters: CullCounters,
+    /// The frame whose counters were read (0: none yet).
+    frame: u64,
+}
+
+impl CounterReadback {
+    /// A readback of up to `slots` draw slots.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, slots: u32) -> Self {
+        Self {
+            mapped: Mapped::new(device, "stats readback", CullCounters::readback_bytes(slots)),
+            counters: CullCounters::default(),
+            frame: 0,
+        }
+    }
+
+    /// Whether a frame may record a copy now.
+    #[must_use]
+    pub fn is_idle(&self) -> bool {
+        self.mapped.state() == MapState::Idle
+    }
+
+    /// The buffer to copy `len` bytes of counters into; marks the copy recorded.
+    pub fn record(&mut self, len: u64) -> &wgpu::Buffer {
+        self.mapped.recorded(len);
+        &self.mapped.buffer
+    }
+
+    /// Starts mapping after frame `frame` was submitted.
+    pub fn map(&mut self, frame: u64) {
+        self.mapped.map(frame);
+    }
+
+    /// Decodes a finished mapping.
+    pub fn collect(&mut self) {
+        let mut counters = None;
+        if let Some(frame) = self.mapped.take(|d| counters = Some(CullCounters::from_bytes(d))) {
+            self.counters = counters.unwrap_or_default();
+            self.frame = frame;
+        }
+    }
+
+    /// The latest counters read, and their frame (0: none yet).
+    #[must_use]
+    pub fn latest(&self) -> (&CullCounters, u64) {
+        (&self.counters, self.frame)
+    }
+}
+
+/// Timestamp queries around the cull and draw passes (devices with
+/// `TIMESTAMP_QUERY`; used in the browser, where waiting per pass is impossible).
+pub struct PassTimer {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    mapped: Mapped,
+    /// Nanoseconds per tick.
+    period_ns: f64,
+    /// (cull ms, draw ms) of the latest frame read.
+    latest: Option<[f64; 2]>,
+}
+
+/// Timestamps written per frame: cull begin, cull end, draw begin, draw end.
+const TIMESTAMPS: u32 = 4;
+
+impl PassTimer {
+    /// A timer, when the device has timestamp queries.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Option<Self> {
+        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let bytes = u64::from(TIMESTAMPS) * size_of::<u64>() as u64;
+        Some(Self {
+            queries: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pass times"),
+                ty: wgpu::QueryType::Timestamp,
+                count: TIMESTAMPS,
+            }),
+            resolve: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pass times resolve"),
+                size: bytes,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+            mapped: Mapped::new(device, "pass times readback", bytes),
+            period_ns: f64::from(queue.get_timestamp_period()),
+            latest: None,
+        })
+    }
+
+    /// The query set to write this frame's timestamps into (indices 0, 1 for the
+    /// cull pass, 2, 3 for the draw pass), or `None` while the last is read.
+    #[must_use]
+    pub fn queries(&self) -> Option<&wgpu::QuerySet> {
+        (self.mapped.state() == MapState::Idle).then_some(&self.queries)
+    }
+
+    /// Records the resolve and copy after the passes wrote their timestamps.
+    pub fn resolve(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        let bytes = u64::from(TIMESTAMPS) * size_of::<u64>() as u64;
+        encoder.resolve_query_set(&self.queries, 0..TIMESTAMPS, &self.resolve, 0);
+        encoder.copy_buffer_to_buffer(&self.resolve, 0, &self.mapped.buffer, 0, bytes);
+        self.mapped.recorded(bytes);
+    }
+
+    /// Starts mapping after frame `frame` was submitted.
+    pub fn map(&mut self, frame: u64) {
+        self.mapped.map(frame);
+    }
+
+    /// Decodes a finished mapping.
+    pub fn collect(&mut self) {
+        let mut ticks = [0u64; TIMESTAMPS as usize];
+        if self.mapped.take(|d| ticks = bytemuck::pod_read_unaligned(d)).is_some() {
+            let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * self.period_ns / 1e6;
+            self.latest = Some([ms(ticks[0], ticks[1]), ms(ticks[2], ticks[3])]);
+        }
+    }
+
+    /// (cull ms, draw ms) of the latest frame read.
+    #[must_use]
+    pub fn latest(&self) -> Option<[f64; 2]> {
+        self.latest
+    }
+}
