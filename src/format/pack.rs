@@ -7,6 +7,10 @@
 //! indices and texture arrays. Readers skip section kinds they do not know,
 //! which is how later levels (ellipsoids, lines) are added without breaking
 //! older readers. Layout tables: `docs/FORMAT.md`.
+//!
+//! One file for one format (about 670 lines): the header, section table, metadata,
+//! the head/parts split a viewer fetches by range and the encoder and decoder
+//! must stay side by side, so a change to the layout is made in one place.
 
 use serde::{Deserialize, Serialize};
 

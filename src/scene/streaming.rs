@@ -16,8 +16,8 @@ use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
 use super::index_walk::IndexWalk;
 use super::residency::{PoolError, Residency, TileSlot};
 use crate::camera::ViewData;
-use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
-use crate::format::{decode_pack, DecodeError, Manifest, Tile};
+use crate::format::{DecodeError, Manifest, Tile};
+use packs::PackLoad;
 
 /// Limits of the streamer: the budgets a viewer degrades gracefully within.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,55 +133,6 @@ enum Target {
     PackHead(usize),
     /// One part of a pack, by byte range.
     PackPart(usize, usize),
-}
-
-/// A species pack, fetched whole or as a head and then the parts views need.
-struct PackLoad {
-    /// The head (or the whole pack).
-    head: Load,
-    /// The decoded head, once fetched.
-    parsed: Option<PackHead>,
-    /// Per part ([`PackPart::ALL`] order).
-    parts: [Load; PACK_PARTS],
-    /// Parts held: (file offset, bytes).
-    held: Vec<(u64, Vec<u8>)>,
-    have: [bool; PACK_PARTS],
-    /// The parts the view wanted at the last update.
-    wants: [bool; PACK_PARTS],
-    /// Parts held back by the GPU budget at the last update.
-    blocked: [bool; PACK_PARTS],
-    /// The whole pack is uploaded: nothing more to fetch.
-    whole: bool,
-}
-
-impl PackLoad {
-    fn new() -> Self {
-        Self {
-            head: Load::Idle,
-            parsed: None,
-            parts: [Load::Idle, Load::Idle, Load::Idle, Load::Idle],
-            held: Vec::new(),
-            have: [false; PACK_PARTS],
-            wants: [false; PACK_PARTS],
-            blocked: [false; PACK_PARTS],
-            whole: false,
-        }
-    }
-
-    /// Nothing more the view wants of it is due.
-    fn done(&self) -> bool {
-        if self.whole || self.head == Load::Broken {
-            return true;
-        }
-        let Some(head) = &self.parsed else { return false };
-        PackPart::ALL.iter().enumerate().all(|(i, p)| {
-            !self.wants[i]
-                || self.have[i]
-                || self.blocked[i]
-                || self.parts[i] == Load::Broken
-                || head.part_range(*p).is_none()
-        })
-    }
 }
 
 /// Counters for stats.
@@ -585,100 +536,6 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    fn on_pack_head(
-        &mut self,
-        residency: &mut impl Residency,
-        s: usize,
-        result: Result<Vec<u8>, FetchError>,
-        now_s: f64,
-    ) {
-        let Some(m) = &self.manifest else { return };
-        let entry = &m.species[s];
-        let url = join(&self.base, &entry.pack);
-        let attempt = self.packs[s].head.attempt();
-        let pack_bytes = entry.bytes;
-        let ranged = entry.head_bytes.is_some();
-        let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
-            // No head size in the manifest, or a server that ignores ranges: the whole pack.
-            if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
-                let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
-                residency.upload_pack(s as u32, &pack);
-                Ok(None)
-            } else {
-                PackHead::decode(&url, &bytes).map(Some).map_err(|e| (e.to_string(), true))
-            }
-        });
-        let load = &mut self.packs[s];
-        match outcome {
-            Ok(None) => {
-                load.head = Load::Idle;
-                load.whole = true;
-            }
-            Ok(Some(head)) => {
-                load.head = Load::Idle;
-                load.parsed = Some(head);
-            }
-            Err((message, retryable)) => self.packs[s].head = self.fail(url, &message, attempt, retryable, now_s),
-        }
-    }
-
-    fn on_pack_part(
-        &mut self,
-        residency: &mut impl Residency,
-        s: usize,
-        part: usize,
-        result: Result<Vec<u8>, FetchError>,
-        now_s: f64,
-    ) {
-        let Some(m) = &self.manifest else { return };
-        let url = join(&self.base, &m.species[s].pack);
-        let load = &mut self.packs[s];
-        let attempt = load.parts[part].attempt();
-        let Some(head) = &load.parsed else { return };
-        let Some((start, end)) = head.part_range(PackPart::ALL[part]) else { return };
-        let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
-            let len = bytes.len() as u64;
-            if len == head.file_bytes && len != end - start {
-                // The server sent the whole file instead of the range.
-                let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
-                residency.upload_pack(s as u32, &pack);
-                return Ok(true);
-            }
-            if len != end - start {
-                return Err((format!("{url}: asked for bytes {start}..{end}, got {len} bytes"), true));
-            }
-            load.held.push((start, bytes));
-            match head.assemble(&url, &load.held) {
-                Ok(pack) => {
-                    residency.upload_pack(s as u32, &pack);
-                    Ok(false)
-                }
-                Err(e) => {
-                    load.held.pop();
-                    Err((e.to_string(), true))
-                }
-            }
-        });
-        match outcome {
-            Ok(whole) => {
-                load.parts[part] = Load::Idle;
-                load.have[part] = true;
-                load.whole |= whole;
-                // Every part on the GPU: the CPU copies kept for re-assembly can go.
-                let complete = load.parsed.as_ref().is_some_and(|h| {
-                    PackPart::ALL.iter().enumerate().all(|(i, p)| load.have[i] || h.part_range(*p).is_none())
-                });
-                if complete || load.whole {
-                    load.whole = true;
-                    load.held = Vec::new();
-                }
-            }
-            Err((message, retryable)) => {
-                self.packs[s].parts[part] = self.fail(url, &message, attempt, retryable, now_s)
-            }
-        }
-    }
-
     fn evict_one(&mut self, residency: &mut impl Residency, view: &ViewData) -> bool {
         let eye = view.eye_hi + view.eye_lo;
         let victim = self
@@ -758,86 +615,6 @@ impl<F: Fetcher> SceneStream<F> {
         self.wanted.clear();
         self.wanted.extend(self.walk_tiles.iter().map(|(_, i)| *i));
     }
-
-    fn request_packs(&mut self, residency: &impl Residency, now_s: f64) {
-        self.collect_needed_species();
-        let needed = std::mem::take(&mut self.needed);
-        let mut over_budget = false;
-        // GPU bytes held plus parts on their way.
-        let mut committed = residency.bytes();
-        for (s, load) in self.packs.iter().enumerate() {
-            let Some(head) = &load.parsed else { continue };
-            for (i, part) in PackPart::ALL.iter().enumerate() {
-                // Billboards of needed species are fetched whatever the budget:
-                // reserve them before anything finer.
-                let due_billboards = i == 0 && !load.have[0] && needed.contains(&s);
-                if matches!(load.parts[i], Load::Requested { .. }) || due_billboards {
-                    committed += head.part_range(*part).map_or(0, |(a, b)| b - a);
-                }
-            }
-        }
-        // Billboards are reserved only once a head tells their size: finer parts
-        // wait until every needed species' head is known, or a late head's
-        // billboards would push the total over the budget.
-        let heads_pending = self.config.gpu_budget_bytes > 0
-            && needed.iter().any(|&s| {
-                let l = &self.packs[s];
-                l.parsed.is_none() && !l.whole && l.head != Load::Broken
-            });
-        let Some(m) = &self.manifest else { return };
-        let due = |l: &Load| match *l {
-            Load::Idle => Some(0),
-            Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => Some(attempt),
-            _ => None,
-        };
-        for &s in &needed {
-            let load = &mut self.packs[s];
-            if let Some(head) = &load.parsed {
-                load.wants = residency.parts_needed(s, &head.meta);
-            }
-            if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
-                continue;
-            }
-            let url = || join(&self.base, &m.species[s].pack);
-            let Some(head) = &load.parsed else {
-                if let Some(attempt) = due(&load.head) {
-                    let range = m.species[s].head_bytes.map(|h| (0, h));
-                    let id = self.fetcher.start_range(&url(), range);
-                    self.stats.requests += 1;
-                    self.requests.insert(id, Target::PackHead(s));
-                    load.head = Load::Requested { attempt };
-                }
-                continue;
-            };
-            for (i, part) in PackPart::ALL.iter().enumerate() {
-                if !load.wants[i] || load.have[i] || self.fetcher.in_flight() >= self.config.max_in_flight {
-                    continue;
-                }
-                if heads_pending && *part != PackPart::Billboards {
-                    continue;
-                }
-                let (Some(range), Some(attempt)) = (head.part_range(*part), due(&load.parts[i])) else { continue };
-                // The GPU budget: finer parts wait (trees draw with coarser ones);
-                // billboards, the far field, are always fetched.
-                let budget = self.config.gpu_budget_bytes;
-                let blocked = budget > 0 && *part != PackPart::Billboards && committed + (range.1 - range.0) > budget;
-                load.blocked[i] = blocked;
-                if blocked {
-                    over_budget = true;
-                    continue;
-                }
-                let id = self.fetcher.start_range(&url(), Some(range));
-                if *part != PackPart::Billboards {
-                    committed += range.1 - range.0; // billboards are reserved above
-                }
-                self.stats.requests += 1;
-                self.requests.insert(id, Target::PackPart(s, i));
-                load.parts[i] = Load::Requested { attempt };
-            }
-        }
-        self.stats.degraded.gpu_budget = over_budget;
-        self.needed = needed;
-    }
 }
 
 fn tile_distance(b: &crate::format::Bounds, eye: Vec3) -> f32 {
@@ -846,6 +623,9 @@ fn tile_distance(b: &crate::format::Bounds, eye: Vec3) -> f32 {
     let (c, h) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
     (c.abs() - h).max(Vec3::ZERO).length()
 }
+
+#[path = "stream_packs.rs"]
+mod packs;
 
 #[cfg(test)]
 #[path = "streaming_tests.rs"]

@@ -9,7 +9,7 @@ use glam::DVec3;
 
 use super::*;
 use crate::camera::Camera;
-use crate::format::pack::PackHead;
+use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
 use crate::scene::fetch::ByteRange;
 
 fn fixture() -> String {

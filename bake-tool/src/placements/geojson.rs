@@ -1,0 +1,123 @@
+//! GeoJSON placements: a FeatureCollection (or one Feature) of Point or
+//! MultiPoint geometries, properties named like the CSV columns, and the
+//! 2008 `crs` member GIS exports still write.
+
+use anyhow::Result;
+
+use super::*;
+
+/// Reads a GeoJSON FeatureCollection (or a single Feature) of Point/MultiPoint
+/// geometries; properties give species, height, yaw and id with the CSV names.
+/// Coordinates are lon/lat unless `options.projected` or the file's `crs`
+/// member says otherwise.
+pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet> {
+    let v: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| anyhow!("not valid JSON: {e}"))?;
+    let features: Vec<&serde_json::Value> = match v.get("type").and_then(|t| t.as_str()) {
+        Some("FeatureCollection") => v
+            .get("features")
+            .and_then(|f| f.as_array())
+            .ok_or_else(|| anyhow!("$.features is missing or not an array"))?
+            .iter()
+            .collect(),
+        Some("Feature") => vec![&v],
+        other => bail!("$.type is {other:?}, expected \"FeatureCollection\" or \"Feature\""),
+    };
+    let mut report = Report::default();
+    let mut rows = Vec::new();
+    let mut points_read = Vec::new();
+    for (i, f) in features.iter().enumerate() {
+        let row = i as u64 + 1;
+        report.rows += 1;
+        let props = f.get("properties").and_then(|p| p.as_object());
+        let prop = |names: &[&str]| {
+            props.and_then(|p| p.iter().find(|(k, _)| names.contains(&k.to_lowercase().as_str())).map(|(_, v)| v))
+        };
+        let num = |v: Option<&serde_json::Value>| v.and_then(|v| v.as_f64().or_else(|| v.as_str().and_then(parse_f64)));
+        let geom = f.get("geometry");
+        let coordinates = geom.and_then(|g| g.get("coordinates"));
+        let points: Vec<&serde_json::Value> = match geom.and_then(|g| g.get("type")).and_then(|t| t.as_str()) {
+            Some("Point") => vec![coordinates.unwrap_or(&serde_json::Value::Null)],
+            Some("MultiPoint") => match coordinates.and_then(|c| c.as_array()) {
+                Some(a) if !a.is_empty() => a.iter().collect(),
+                _ => {
+                    report.skip("MultiPoint without points", row);
+                    continue;
+                }
+            },
+            _ => {
+                report.skip("geometry is not a Point or MultiPoint", row);
+                continue;
+            }
+        };
+        for c in points {
+            let coords: Vec<f64> =
+                c.as_array().map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect()).unwrap_or_default();
+            if coords.len() < 2 {
+                report.skip("point without two numeric coordinates", row);
+                continue;
+            }
+            let (x, y) = if options.swap_xy { (coords[1], coords[0]) } else { (coords[0], coords[1]) };
+            let p = Placement {
+                x,
+                y,
+                z: coords.get(2).copied().or_else(|| num(prop(Z))),
+                height_m: num(prop(HEIGHT)).map(|h| h as f32),
+                species: prop(SPECIES).and_then(|s| match s {
+                    serde_json::Value::String(s) if !s.trim().is_empty() => Some(s.trim().to_string()),
+                    serde_json::Value::Number(n) => Some(n.to_string()),
+                    _ => None,
+                }),
+                yaw_deg: num(prop(YAW)).map(|v| v as f32),
+                id: prop(ID).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
+                row,
+            };
+            points_read.push(p);
+        }
+    }
+    let declared_epsg = geojson_crs(&v);
+    // A declared geographic CRS (ETRS89, NAD83) is lon/lat too.
+    let declared_projected =
+        declared_epsg.is_some_and(|e| crate::reproject::Crs::from_epsg(e).map_or(true, |c| !c.is_geographic()));
+    let kind = if options.projected || declared_projected {
+        CoordKind::Projected
+    } else {
+        // Projected numbers read as degrees would all be "out of range": say why.
+        let beyond = points_read.iter().filter(|p| p.x.abs() > 180.0 || p.y.abs() > 90.0).count();
+        let swappable =
+            points_read.iter().filter(|p| p.y.abs() > 90.0 && p.y.abs() <= 180.0 && p.x.abs() <= 90.0).count();
+        if swappable > 0 && swappable * 2 >= points_read.len() && !options.swap_xy {
+            bail!(
+                "{swappable} of {} points are [latitude, longitude], not GeoJSON's [longitude, latitude]: pass --swap-xy",
+                points_read.len()
+            );
+        }
+        if beyond > 0 && beyond * 2 >= points_read.len() {
+            let p = points_read.iter().find(|p| p.x.abs() > 180.0 || p.y.abs() > 90.0).expect("counted");
+            bail!(
+                "{beyond} of {} points are no lon/lat (e.g. feature {}: [{}, {}]): the coordinates are projected; \
+                 say which CRS they are in with --input-crs EPSG:xxxx",
+                points_read.len(),
+                p.row,
+                p.x,
+                p.y
+            );
+        }
+        CoordKind::LonLat
+    };
+    for p in points_read {
+        if let Some(p) = accept(p, kind, &mut report) {
+            rows.push(p);
+        }
+    }
+    report.kept = rows.len() as u64;
+    Ok(PlacementSet { kind, rows, report, declared_epsg })
+}
+
+/// The EPSG code of a GeoJSON `crs` member (GeoJSON 2008, still written by
+/// GIS exports): `"EPSG:28992"`, `"urn:ogc:def:crs:EPSG::28992"`; CRS84 and
+/// EPSG:4326 are none (the GeoJSON default).
+pub(super) fn geojson_crs(v: &serde_json::Value) -> Option<u32> {
+    let name = v.get("crs")?.get("properties")?.get("name")?.as_str()?;
+    let code = name.rsplit(':').next()?;
+    code.parse().ok().filter(|&c| c != 4326)
+}

@@ -1,0 +1,158 @@
+//! Tests of the placement readers.
+
+use super::*;
+
+#[test]
+fn detects_lng_lat_columns_like_amsterdam() {
+    let c = detect_columns(&["id", "species", "height", "dbh", "lat", "lng", "condition"]).unwrap();
+    assert_eq!(c.kind, CoordKind::LonLat);
+    assert_eq!((c.x, c.y), (5, 4));
+    assert_eq!((c.id, c.species, c.height), (Some(0), Some(1), Some(2)));
+}
+
+#[test]
+fn detects_projected_columns() {
+    let c = detect_columns(&["X", "Y", "Z", "Species", "Height_m", "Yaw"]).unwrap();
+    assert_eq!(c.kind, CoordKind::Projected);
+    assert_eq!((c.z, c.species, c.height, c.yaw), (Some(2), Some(3), Some(4), Some(5)));
+}
+
+#[test]
+fn header_without_coordinates_is_an_error_naming_the_header() {
+    let e = detect_columns(&["name", "value"]).unwrap_err().to_string();
+    assert!(e.contains("no coordinate columns") && e.contains("name"), "{e}");
+}
+
+#[test]
+fn bad_rows_are_counted_not_fatal() {
+    let csv = "id,lat,lng,height,species\n\
+               1,52.37,4.90,15,Oak\n\
+               2,NaN,4.90,15,Oak\n\
+               3,,4.91,9,Pine\n\
+               4,95.0,4.90,9,Pine\n\
+               5,52.37,4.90,,Oak\n\
+               6,52.38,abc,9,Oak\n\
+               7,52.36,4.92,-3,Oak,extra\n";
+    let set = read_csv(csv.as_bytes(), b',', &ReadOptions::default()).unwrap();
+    assert_eq!(set.report.rows, 7);
+    assert_eq!(set.rows.len(), 3, "{:?}", set.report);
+    assert_eq!(set.report.skipped_total(), 4);
+    assert_eq!(set.report.missing_height, 2); // row 5 empty, row 7 negative
+    assert_eq!(set.rows[0].species.as_deref(), Some("Oak"));
+    assert_eq!(set.rows[0].id, Some(1));
+    assert_eq!(set.rows[0].height_m, Some(15.0));
+    let lines = set.report.lines().join("\n");
+    assert!(lines.contains("non-finite") && lines.contains("out of range"), "{lines}");
+}
+
+#[test]
+fn geojson_points_and_properties() {
+    let gj = br#"{"type":"FeatureCollection","features":[
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[15.4,48.4,210.5]},"properties":{"species":"pine","height":"21.5","id":42}},
+        {"type":"Feature","geometry":{"type":"MultiPoint","coordinates":[[15.41,48.41],[15.42,48.42]]},"properties":{"Species":"oak"}},
+        {"type":"Feature","geometry":{"type":"LineString","coordinates":[[0,0],[1,1]]},"properties":{}},
+        {"type":"Feature","geometry":null,"properties":{}}
+    ]}"#;
+    let set = read_geojson(gj, &ReadOptions::default()).unwrap();
+    assert_eq!(set.rows.len(), 3);
+    assert_eq!(set.rows[0].z, Some(210.5));
+    assert_eq!(set.rows[0].height_m, Some(21.5));
+    assert_eq!(set.rows[0].id, Some(42));
+    assert_eq!(set.rows[2].species.as_deref(), Some("oak"));
+    assert_eq!(set.report.skipped_total(), 2);
+    assert!(read_geojson(b"{\"type\":\"Topology\"}", &ReadOptions::default()).is_err());
+    assert!(read_geojson(b"not json", &ReadOptions::default()).is_err());
+}
+
+#[test]
+fn duplicates_are_counted() {
+    let dir = std::env::temp_dir().join(format!("sylva-dup-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("d.csv");
+    std::fs::write(&p, "x,y\n1,2\n1,2\n3,4\n").unwrap();
+    let set = read_placements(&p).unwrap();
+    assert_eq!(set.report.duplicate_coordinates, 1);
+    assert_eq!(set.kind, CoordKind::Projected);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn latin1_rows_are_read_not_dropped() {
+    // "Eiche müde" and a header "Höhe" in Windows-1252, as older spreadsheets export.
+    let csv = b"lat,lon,species,h\xf6he\n52.1,4.9,Eiche m\xfcde,12\n52.2,4.8,Linde,9\n";
+    let auto = read_csv(&csv[..], b',', &ReadOptions::default()).unwrap();
+    assert_eq!(auto.rows.len(), 2, "{:?}", auto.report);
+    assert_eq!(auto.rows[0].species.as_deref(), Some("Eiche müde"));
+    assert_eq!(auto.report.not_utf8, 1);
+    assert!(auto.report.lines().join("\n").contains("Windows-1252"));
+    let strict = read_csv(&csv[..], b',', &ReadOptions { encoding: Encoding::Utf8, ..Default::default() }).unwrap();
+    assert_eq!(strict.rows.len(), 1);
+    assert!(strict.report.lines().join("\n").contains("--encoding latin1"), "{:?}", strict.report);
+    let latin1 = read_csv(&csv[..], b',', &ReadOptions { encoding: Encoding::Latin1, ..Default::default() }).unwrap();
+    assert_eq!(latin1.rows[0].species.as_deref(), Some("Eiche müde"));
+    assert_eq!(latin1.report.not_utf8, 0, "asked for, so not reported");
+}
+
+#[test]
+fn european_exports_with_semicolons_and_decimal_commas() {
+    assert_eq!(detect_delimiter(b"lat;lon;soort;boomhoogte\r\n"), b';');
+    assert_eq!(detect_delimiter(b"x\ty\tspecies\n"), b'\t');
+    assert_eq!(detect_delimiter(b"\"a;b\",lat,lon\n"), b',', "separators inside quotes do not count");
+    assert_eq!(detect_delimiter(b"lon\n"), b',');
+    assert_eq!(parse_decimal_comma("52,3731"), Some(52.3731));
+    assert_eq!(parse_decimal_comma("1.234,5"), Some(1234.5));
+    assert_eq!(parse_decimal_comma("7.5"), Some(7.5));
+    for bad in ["-4,5e", "1.2.3,4", "1,", "12.34,5"] {
+        assert_eq!(parse_decimal_comma(bad), None, "{bad}");
+    }
+    assert_eq!(parse_f64("52,37"), None, "no decimal commas where the separator is a comma");
+    let csv = "lat;lon;soort;boomhoogte\n52,3731;4,8922;Tilia;12,5\n52,3740;4,8930;Quercus;\n";
+    let set = read_csv(csv.as_bytes(), b';', &ReadOptions::default()).unwrap();
+    assert_eq!(set.rows.len(), 2, "{:?}", set.report);
+    assert_eq!((set.rows[0].x, set.rows[0].y, set.rows[0].height_m), (4.8922, 52.3731, Some(12.5)));
+    let swapped = read_csv(csv.as_bytes(), b';', &ReadOptions { swap_xy: true, ..Default::default() }).unwrap();
+    assert_eq!((swapped.rows[0].x, swapped.rows[0].y), (52.3731, 4.8922));
+}
+
+#[test]
+fn swapped_lon_lat_is_evident_in_the_report() {
+    // Latitudes in the lon column and longitudes beyond ±90 in the lat column.
+    let csv = "lon,lat\n-33.9,151.2\n-33.8,151.1\n";
+    let set = read_csv(csv.as_bytes(), b',', &ReadOptions::default()).unwrap();
+    assert_eq!((set.rows.len(), set.report.swappable), (0, 2));
+    let fixed = read_csv(csv.as_bytes(), b',', &ReadOptions { swap_xy: true, ..Default::default() }).unwrap();
+    assert_eq!((fixed.rows.len(), fixed.rows[0].x), (2, 151.2));
+}
+
+#[test]
+fn geojson_points_without_coordinates_are_counted_and_projected_files_understood() {
+    let gj = br#"{"type":"FeatureCollection","features":[
+        {"type":"Feature","geometry":{"type":"Point"},"properties":{}},
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[]},"properties":{}},
+        {"type":"Feature","geometry":{"type":"MultiPoint","coordinates":[]},"properties":{}},
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[4.9,52.37]},"properties":{}}
+    ]}"#;
+    let set = read_geojson(gj, &ReadOptions::default()).unwrap();
+    assert_eq!((set.report.rows, set.rows.len(), set.report.skipped_total()), (4, 1, 3), "{:?}", set.report);
+    // Dutch RD coordinates: refused as lon/lat with a hint, read with --input-crs or the crs member.
+    let rd = br#"{"type":"FeatureCollection","features":[
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[121000.5,487000.25]},"properties":{"height":9}}]}"#;
+    let e = read_geojson(rd, &ReadOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("--input-crs") && e.contains("121000.5"), "{e}");
+    let set = read_geojson(rd, &ReadOptions { projected: true, ..Default::default() }).unwrap();
+    assert_eq!((set.kind, set.rows[0].x), (CoordKind::Projected, 121000.5));
+    let named = br#"{"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"urn:ogc:def:crs:EPSG::28992"}},
+        "features":[{"type":"Feature","geometry":{"type":"Point","coordinates":[121000.5,487000.25]},"properties":{}}]}"#;
+    assert_eq!(geojson_crs(&serde_json::from_slice(named).unwrap()), Some(28992));
+    // ETRS89 (geographic) is lon/lat, not projected.
+    let etrs = br#"{"type":"FeatureCollection","crs":{"type":"name","properties":{"name":"EPSG:4258"}},
+        "features":[{"type":"Feature","geometry":{"type":"Point","coordinates":[4.9,52.37]},"properties":{}}]}"#;
+    let set = read_geojson(etrs, &ReadOptions::default()).unwrap();
+    assert_eq!((set.kind, set.declared_epsg, set.rows.len()), (CoordKind::LonLat, Some(4258), 1));
+    // Sydney as [lat, lon]: the hint is --swap-xy, not a CRS.
+    let sydney = br#"{"type":"FeatureCollection","features":[
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[-33.87,151.21]},"properties":{}}]}"#;
+    let e = read_geojson(sydney, &ReadOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("--swap-xy") && !e.contains("--input-crs"), "{e}");
+    assert_eq!(read_geojson(named, &ReadOptions::default()).unwrap().kind, CoordKind::Projected);
+}

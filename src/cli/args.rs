@@ -1,0 +1,243 @@
+//! The command line: subcommands, their flags and the checks of flag values.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use glam::DVec3;
+use sylva::camera::Camera;
+
+#[derive(Parser)]
+#[command(name = "sylva", version, about = "Sylva forest renderer: headless rendering of Sylva scenes and LoD packs.")]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum View {
+    Side,
+    Oblique,
+    Top,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum OnlyArg {
+    Meshes,
+    Ellipsoids,
+    Billboards,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum PackReprArg {
+    Mesh,
+    Ellipsoids,
+    Billboard,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum SceneView {
+    Far,
+    Medium,
+    Close,
+    Top,
+}
+
+#[derive(Subcommand)]
+pub(crate) enum Command {
+    /// Render a scene (or one species pack) headless to a PNG, with stats.
+    #[command(
+        after_help = "Examples:\n  sylva render --scene demo-scene --view medium --out medium.png --stats medium.json\n  sylva render --scene http://127.0.0.1:8080/scene.json --camera 540000,5359700,300,0,-20 --out a.png\n  sylva render --pack demo-scene/species/beech.pack --view side --out beech.png"
+    )]
+    Render(RenderArgs),
+    /// Run time against image error on a camera path, every method on the same
+    /// frames: writes frames.csv, summary.json and SVG plots (pareto,
+    /// frame_time, temporal_noise) into --out.
+    #[command(
+        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, ellipsoid, sylva, sylva-q0.5, sylva-q0.25, or all.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
+    )]
+    Bench {
+        /// Scene directory, scene.json path or http(s) URL.
+        #[arg(long)]
+        scene: String,
+        /// Camera path: flyover, far, medium, close or PATH.json.
+        #[arg(long, default_value = "flyover")]
+        path: String,
+        /// Comma-separated methods, or all.
+        #[arg(long, default_value = "all")]
+        methods: String,
+        /// Image size, WxH.
+        #[arg(long, default_value = "640x360")]
+        size: String,
+        /// Frames along the path (a path file's own count wins).
+        #[arg(long, default_value_t = 48)]
+        frames: usize,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Only redraw the plots from --out's frames.csv (no rendering).
+        #[arg(long)]
+        replot: bool,
+        /// The memory model instead: bytes per tree on disk, gzip/brotli and GPU,
+        /// per pack, against seed 004 eq. 4.1 (writes memory.json; --scene a directory).
+        #[arg(long, conflicts_with_all = ["replot", "stress"])]
+        memory: bool,
+        /// The stress run instead: Sylva alone along --path, forwards and back,
+        /// for --frames frames (10000 is the standard run), streaming without
+        /// waiting; fails unless memory stays flat and frame time does not grow
+        /// (writes stress.csv, stress.json).
+        #[arg(long, conflicts_with = "replot")]
+        stress: bool,
+        /// Half width of the cross-fade bands for every method but the
+        /// reference, as a fraction of each threshold (the fade sweep).
+        #[arg(long, default_value_t = 0.12)]
+        fade_band: f32,
+        /// Prefix-thinning threshold (px) for every method but the reference
+        /// (0: off; the thinning comparison).
+        #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
+        thin_px: f32,
+    },
+    /// One table row per bench output directory (its summary.json) for one
+    /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls
+    /// (the parameter sweeps: `make sweep-cell-size` and friends).
+    BenchTable {
+        /// Directories written by `sylva bench --out`.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Method to tabulate.
+        #[arg(long, default_value = "sylva")]
+        method: String,
+    },
+    /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
+    Compare {
+        /// First image (PNG).
+        a: PathBuf,
+        /// Second image (PNG).
+        b: PathBuf,
+    },
+    /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/).
+    Serve {
+        /// Scene directory.
+        dir: PathBuf,
+        /// Port (0 picks a free one).
+        #[arg(long, default_value_t = 8080)]
+        port: u16,
+        /// Address to listen on.
+        #[arg(long, default_value = "127.0.0.1")]
+        bind: String,
+        /// The built viewer (default: web/ of this checkout; `make web` builds it).
+        #[arg(long)]
+        web: Option<PathBuf>,
+        /// On a loopback --bind, also answer requests for this host name
+        /// (repeatable). Other names get 403: a web page cannot reach the
+        /// server through DNS rebinding.
+        #[arg(long = "allow-host", value_name = "NAME")]
+        allow_hosts: Vec<String>,
+    },
+}
+
+/// `sylva render`: a scene or one pack to a PNG.
+#[derive(clap::Args)]
+pub(crate) struct RenderArgs {
+    /// Scene directory, scene.json path or http(s) URL.
+    #[arg(long, conflicts_with = "pack", required_unless_present = "pack")]
+    pub(crate) scene: Option<String>,
+    /// A single LoD pack to render (one tree, lit).
+    #[arg(long)]
+    pub(crate) pack: Option<PathBuf>,
+    /// Output PNG.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// Image size, WxH.
+    #[arg(long, default_value = "960x540")]
+    pub(crate) size: String,
+    /// Named scene viewpoint (ignored with --camera).
+    #[arg(long, value_enum, default_value_t = SceneView::Medium)]
+    pub(crate) view: SceneView,
+    /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
+    #[arg(long, allow_hyphen_values = true)]
+    pub(crate) camera: Option<String>,
+    /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) quality: f32,
+    /// Draw distance in metres.
+    #[arg(long, default_value_t = 6000.0)]
+    pub(crate) draw_distance: f32,
+    /// Colour trees by representation (red mesh0, yellow mesh1, greens ellipsoid
+    /// levels, blue billboard).
+    #[arg(long)]
+    pub(crate) debug_lod: bool,
+    /// Draw only one representation family (the benchmark baselines); the
+    /// default mixes meshes, ellipsoids and billboards by projected size.
+    #[arg(long, value_enum)]
+    pub(crate) only: Option<OnlyArg>,
+    /// Trees at least this tall on screen (px), and below the simplified mesh,
+    /// are drawn with ellipsoids and lines; smaller ones with billboards.
+    #[arg(long, default_value_t = sylva::render::forest::DEFAULT_CLUSTER_MIN_PX)]
+    pub(crate) ellipsoid_min_px: f32,
+    /// Ellipsoids write their exact ray-cast depth per pixel (slower: no early
+    /// depth tests); by default they keep their proxy's front-most depth.
+    #[arg(long)]
+    pub(crate) exact_depth: bool,
+    /// Prefix thinning: far batches whose trees are below this many pixels
+    /// tall draw an even subset of them, scaled up to keep the canopy's
+    /// coverage (0 turns it off).
+    #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
+    pub(crate) thin_px: f32,
+    /// Draw the boxes of the batches that pass the batch test.
+    #[arg(long)]
+    pub(crate) debug_bounds: bool,
+    /// Write frame statistics as JSON here.
+    #[arg(long)]
+    pub(crate) stats: Option<PathBuf>,
+    /// Give up waiting for data after this many seconds.
+    #[arg(long, default_value_t = 120.0)]
+    pub(crate) timeout: f64,
+    /// Exit 0 although files of the view failed to load or did not arrive
+    /// in time (the image shows what loaded; the stats list the failures).
+    /// Without it such a render writes its PNG and stats and exits 1.
+    #[arg(long)]
+    pub(crate) allow_partial: bool,
+    /// Pack view (with --pack).
+    #[arg(long, value_enum, default_value_t = View::Oblique)]
+    pub(crate) pack_view: View,
+    /// What to draw with --pack: mesh (level --level), ellipsoids (cluster
+    /// level --level: ellipsoids + lines) or billboard.
+    #[arg(long, value_enum, default_value_t = PackReprArg::Mesh)]
+    pub(crate) repr: PackReprArg,
+    /// Mesh or cluster level (with --pack).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) level: usize,
+}
+
+/// `--thin-px` of `render` and `bench`.
+pub(crate) fn check_thin_px(thin_px: f32) -> Result<()> {
+    if !(thin_px.is_finite() && thin_px >= 0.0) {
+        bail!("--thin-px {thin_px}: must be a number of pixels ≥ 0 (0 turns thinning off)");
+    }
+    Ok(())
+}
+
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("--size {s:?}: expected WxH, e.g. 512x512"))?;
+    let (w, h): (u32, u32) = (w.trim().parse()?, h.trim().parse()?);
+    if w == 0 || h == 0 || w > 8192 || h > 8192 {
+        bail!("--size {s}: each side must be 1–8192 pixels");
+    }
+    Ok((w, h))
+}
+
+pub(crate) fn parse_camera(text: &str, origin: [f64; 3]) -> Result<Camera> {
+    let v: Vec<f64> = text.split(',').map(|p| p.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| {
+        anyhow::anyhow!("--camera {text:?}: expected EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG (numbers)")
+    })?;
+    if v.len() != 5 || v.iter().any(|x| !x.is_finite()) {
+        bail!("--camera {text:?}: expected five finite numbers: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG");
+    }
+    Ok(Camera {
+        eye_m: DVec3::new(v[0] - origin[0], v[1] - origin[1], v[2] - origin[2]),
+        heading_rad: v[3].to_radians(),
+        pitch_rad: v[4].clamp(-90.0, 90.0).to_radians(),
+        ..Camera::default()
+    })
+}

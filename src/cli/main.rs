@@ -1,0 +1,99 @@
+//! `sylva`: the native command line of the Sylva renderer. One function per
+//! subcommand: `render` ([`render`]), `bench` and `bench-table` ([`bench`]),
+//! `compare` and `serve` (here); flags in [`args`].
+
+#[cfg(not(target_arch = "wasm32"))]
+mod args;
+#[cfg(not(target_arch = "wasm32"))]
+mod bench;
+#[cfg(not(target_arch = "wasm32"))]
+mod render;
+
+#[cfg(not(target_arch = "wasm32"))]
+mod cli {
+    use std::path::PathBuf;
+
+    use anyhow::{bail, Context, Result};
+    use clap::Parser;
+
+    use super::args::*;
+    use super::bench::*;
+    use super::render::*;
+
+    /// `sylva compare`: the multi-scale RMSE of two PNGs.
+    fn compare(a: &PathBuf, b: &PathBuf) -> Result<()> {
+        let load =
+            |p: &PathBuf| image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8());
+        let (ia, ib) = (load(a)?, load(b)?);
+        if ia.dimensions() != ib.dimensions() {
+            bail!(
+                "{} is {:?} but {} is {:?}: sizes must match",
+                a.display(),
+                ia.dimensions(),
+                b.display(),
+                ib.dimensions()
+            );
+        }
+        let (w, h) = ia.dimensions();
+        println!("{:.6}", sylva::metrics::multiscale_rmse(ia.as_raw(), ib.as_raw(), w, h));
+        Ok(())
+    }
+
+    /// `sylva serve`: the viewer and a scene over HTTP until the process ends.
+    fn serve(dir: PathBuf, port: u16, bind: &str, web: Option<PathBuf>, allow_hosts: Vec<String>) -> Result<()> {
+        if !dir.join("scene.json").is_file() {
+            bail!("{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake)", dir.display());
+        }
+        let web = web.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("web"));
+        if !web.join("pkg").join("sylva_bg.wasm").is_file() {
+            bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
+        }
+        let config =
+            sylva::serve::ServeConfig { allowed_hosts: allow_hosts, ..sylva::serve::ServeConfig::new(web, dir) };
+        sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
+            println!("serving the Sylva viewer on http://{addr}/");
+            use std::io::Write as _;
+            let _ = std::io::stdout().flush();
+        })
+        .with_context(|| format!("cannot listen on {bind}:{port}"))?;
+        Ok(())
+    }
+
+    pub fn main() -> Result<()> {
+        sylva::render::context::ensure_runtime_dir();
+        match Cli::parse().command {
+            Command::Bench { out, replot: true, path, size, .. } => replot(&out, &path, &size),
+            Command::Bench { scene, out, memory: true, .. } => memory(&scene, &out),
+            Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
+                stress(&scene, &path, &size, frames, &out)
+            }
+            Command::Bench { scene, path, methods, size, frames, out, fade_band, thin_px, .. } => {
+                if !(0.0..0.5).contains(&fade_band) {
+                    bail!("--fade-band {fade_band}: must be in [0, 0.5)");
+                }
+                check_thin_px(thin_px)?;
+                let mut methods = sylva::bench::methods(&methods)?;
+                for m in methods.iter_mut().filter(|m| m.name != "reference") {
+                    m.settings.fade_band = fade_band;
+                    m.settings.thin_px = thin_px;
+                }
+                bench(&scene, &path, methods, &size, frames, &out)
+            }
+            Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
+            Command::Compare { a, b } => compare(&a, &b),
+            Command::Serve { dir, port, bind, web, allow_hosts } => serve(dir, port, &bind, web, allow_hosts),
+            Command::Render(args) => render(args),
+        }
+    }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+fn main() {
+    if let Err(e) = cli::main() {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+#[cfg(target_arch = "wasm32")]
+fn main() {}
