@@ -6,7 +6,9 @@
 use std::mem::{offset_of, size_of};
 
 use sylva::format::tile::GpuBatch;
-use sylva::render::gpu_data::{DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform};
+use sylva::render::gpu_data::{
+    CullDispatch, DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform,
+};
 
 /// A WGSL struct of the composed `shader`: its members (name, byte offset) and size.
 fn wgsl_struct(shader: &str, name: &str) -> (Vec<(String, u32)>, u32) {
@@ -116,6 +118,25 @@ fn mesh_pass_structs_and_indirect_args_match() {
             size_of::<W>()
         ]
     );
+}
+
+/// Bytes of the global variable `name` of the composed `shader`.
+fn wgsl_global_size(shader: &str, name: &str) -> u32 {
+    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
+    let module = naga::front::wgsl::parse_str(source).expect("valid WGSL");
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).expect("layout");
+    let (_, var) = module.global_variables.iter().find(|(_, v)| v.name.as_deref() == Some(name)).expect("global");
+    layouter[var.ty].size
+}
+
+#[test]
+fn the_cull_dispatch_words_match() {
+    // `prepare_dispatch` writes `array<u32, 8>`: the dispatch, then the bounds
+    // overlay's non-indexed indirect draw at word 4.
+    assert_eq!(wgsl_global_size("cull", "dispatch_args") as usize, size_of::<CullDispatch>());
+    assert_eq!(CullDispatch::BOUNDS_DRAW_OFFSET, 16);
+    assert_eq!(size_of::<[u32; 4]>(), size_of::<wgpu::util::DrawIndirectArgs>());
 }
 
 #[test]
