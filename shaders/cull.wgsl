@@ -9,11 +9,11 @@
 @group(1) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(1) @binding(2) var<storage, read> species: array<Species>;
 @group(1) @binding(3) var<storage, read_write> visible: array<u32>;
-// [0] visible batches, [1..4] unused, [4] instances tested, [5] items dropped
-// because a segment was full.
+// Words of `CullControl` (src/render/gpu_data.rs; tests/gpu_layout.rs checks them).
 @group(1) @binding(4) var<storage, read_write> control: array<atomic<u32>>;
 @group(1) @binding(5) var<storage, read_write> items: array<vec2<u32>>;
-// Indirect draw args, 5 words per slot: count, instances, first, base/first, first.
+// Indirect draw args, ARGS_WORDS per slot (`DrawArgs`: count, instances, first,
+// base/first, first).
 @group(1) @binding(6) var<storage, read_write> args: array<atomic<u32>>;
 
 // Indirect dispatch arguments of cull_instances; bound only to prepare_dispatch
@@ -24,6 +24,16 @@
 // out, so the compute stage stays within WebGPU's 8 storage buffers.
 @group(2) @binding(1) var<storage, read_write> dispatch_control: array<atomic<u32>>;
 
+// Word indices shared with the Rust twins `CullControl`, `DrawArgs` and
+// `CullDispatch` (tests/gpu_layout.rs compares them with offset_of!).
+const CONTROL_WORDS: u32 = 8u;
+const CONTROL_BATCHES_VISIBLE: u32 = 0u;
+const CONTROL_INSTANCES_TESTED: u32 = 4u;
+const CONTROL_ITEMS_DROPPED: u32 = 5u;
+const ARGS_WORDS: u32 = 5u;
+const ARGS_INSTANCE_COUNT: u32 = 1u;
+const DISPATCH_BOUNDS_DRAW: u32 = 4u;
+
 const WORKGROUP: u32 = 64u;
 // WebGPU's limit on workgroups per dimension.
 const MAX_GROUPS_X: u32 = 65535u;
@@ -32,7 +42,7 @@ const MAX_GROUPS_X: u32 = 65535u;
 fn reset(@builtin(global_invocation_id) gid: vec3<u32>) {
     let slot = gid.x;
     if slot == 0u {
-        for (var i = 0u; i < 6u; i++) {
+        for (var i = 0u; i < CONTROL_WORDS; i++) {
             atomicStore(&control[i], 0u);
         }
     }
@@ -42,9 +52,9 @@ fn reset(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let s = species[slot / REPR_COUNT];
     let repr = slot % REPR_COUNT;
-    atomicStore(&args[slot * 5u + 0u], species_indices(s, repr));
-    for (var i = 1u; i < 5u; i++) {
-        atomicStore(&args[slot * 5u + i], 0u);
+    atomicStore(&args[slot * ARGS_WORDS], species_indices(s, repr));
+    for (var i = 1u; i < ARGS_WORDS; i++) {
+        atomicStore(&args[slot * ARGS_WORDS + i], 0u);
     }
 }
 
@@ -87,31 +97,31 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
     if dot(s.slot_cap[0], vec4<u32>(1u)) + dot(s.slot_cap[1], vec4<u32>(1u)) == 0u {
         return; // nothing of this species can be drawn yet (pack not loaded)
     }
-    let at = atomicAdd(&control[0], 1u);
+    let at = atomicAdd(&control[CONTROL_BATCHES_VISIBLE], 1u);
     visible[at] = i;
 }
 
 @compute @workgroup_size(1)
 fn prepare_dispatch() {
-    let n = atomicLoad(&dispatch_control[0]);
+    let n = atomicLoad(&dispatch_control[CONTROL_BATCHES_VISIBLE]);
     dispatch_args[0] = min(n, MAX_GROUPS_X);
     dispatch_args[1] = (n + MAX_GROUPS_X - 1u) / MAX_GROUPS_X;
     dispatch_args[2] = 1u;
     // Debug view: 24 line vertices per visible batch.
-    dispatch_args[4] = 24u;
-    dispatch_args[5] = n;
-    dispatch_args[6] = 0u;
-    dispatch_args[7] = 0u;
+    dispatch_args[DISPATCH_BOUNDS_DRAW] = 24u;
+    dispatch_args[DISPATCH_BOUNDS_DRAW + 1u] = n;
+    dispatch_args[DISPATCH_BOUNDS_DRAW + 2u] = 0u;
+    dispatch_args[DISPATCH_BOUNDS_DRAW + 3u] = 0u;
 }
 
 fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fade: f32) {
     let s = species[species_index];
     let slot = species_index * REPR_COUNT + repr;
-    let at = atomicAdd(&args[slot * 5u + 1u], 1u);
+    let at = atomicAdd(&args[slot * ARGS_WORDS + ARGS_INSTANCE_COUNT], 1u);
     if at < species_cap(s, repr) {
         items[species_base(s, repr) + at] = vec2<u32>(instance, pack_item_y(batch, side, fade));
     } else {
-        atomicAdd(&control[5], 1u);
+        atomicAdd(&control[CONTROL_ITEMS_DROPPED], 1u);
     }
 }
 
@@ -155,7 +165,7 @@ fn select_and_emit(s_index: u32, h_px: f32, instance: u32, batch: u32) {
 @compute @workgroup_size(64)
 fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let v = wid.x + wid.y * MAX_GROUPS_X;
-    if v >= atomicLoad(&control[0]) {
+    if v >= atomicLoad(&control[CONTROL_BATCHES_VISIBLE]) {
         return;
     }
     let batch_index = visible[v];
@@ -167,7 +177,7 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     let thinned = thin.y > 1.0 && species_cap(s, REPR_BILLBOARD) > 0u;
     let count = select(b.instance_count, min(u32(ceil(thin.x)), b.instance_count), thinned);
     if lid == 0u {
-        atomicAdd(&control[4], count);
+        atomicAdd(&control[CONTROL_INSTANCES_TESTED], count);
     }
     for (var i = lid; i < count; i += WORKGROUP) {
         let instance = b.instance_offset + i;
@@ -199,6 +209,6 @@ fn finalize(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let cap = species_cap(species[slot / REPR_COUNT], slot % REPR_COUNT);
-    let n = atomicLoad(&args[slot * 5u + 1u]);
-    atomicStore(&args[slot * 5u + 1u], min(n, cap));
+    let n = atomicLoad(&args[slot * ARGS_WORDS + ARGS_INSTANCE_COUNT]);
+    atomicStore(&args[slot * ARGS_WORDS + ARGS_INSTANCE_COUNT], min(n, cap));
 }

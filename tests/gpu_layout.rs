@@ -130,6 +130,32 @@ fn wgsl_global_size(shader: &str, name: &str) -> u32 {
     layouter[var.ty].size
 }
 
+/// The value of the `u32` constant `name` of the composed `shader`.
+fn wgsl_const(shader: &str, name: &str) -> usize {
+    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
+    let module = naga::front::wgsl::parse_str(source).expect("valid WGSL");
+    let (_, c) = module.constants.iter().find(|(_, c)| c.name.as_deref() == Some(name)).expect("constant");
+    match module.global_expressions[c.init] {
+        naga::Expression::Literal(naga::Literal::U32(v)) => v as usize,
+        ref other => panic!("{name} is {other:?}"),
+    }
+}
+
+#[test]
+fn the_cull_counter_and_argument_words_match() {
+    // `control` and `args` are arrays of atomic words in WGSL: their word
+    // indices are named constants there, compared with the Rust twins here.
+    use sylva::render::gpu_data::CullControl;
+    let word = |bytes: usize| bytes / size_of::<u32>();
+    assert_eq!(wgsl_const("cull", "CONTROL_WORDS"), word(size_of::<CullControl>()));
+    assert_eq!(wgsl_const("cull", "CONTROL_BATCHES_VISIBLE"), word(offset_of!(CullControl, batches_visible)));
+    assert_eq!(wgsl_const("cull", "CONTROL_INSTANCES_TESTED"), word(offset_of!(CullControl, instances_tested)));
+    assert_eq!(wgsl_const("cull", "CONTROL_ITEMS_DROPPED"), word(offset_of!(CullControl, items_dropped)));
+    assert_eq!(wgsl_const("cull", "ARGS_WORDS"), word(size_of::<DrawArgs>()));
+    assert_eq!(wgsl_const("cull", "ARGS_INSTANCE_COUNT"), word(offset_of!(DrawArgs, instance_count)));
+    assert_eq!(wgsl_const("cull", "DISPATCH_BOUNDS_DRAW"), word(offset_of!(CullDispatch, bounds_draw)));
+}
+
 #[test]
 fn the_cull_dispatch_words_match() {
     // `prepare_dispatch` writes `array<u32, 8>`: the dispatch, then the bounds
