@@ -512,7 +512,10 @@ async fn adapter_name(adapter: &wgpu::Adapter) -> String {
     let described = async {
         let gpu = get(&web_sys::window()?.navigator().into(), "gpu")?;
         let request = get(&gpu, "requestAdapter")?.dyn_into::<js_sys::Function>().ok()?;
-        let promise = request.call0(&gpu).ok()?.dyn_into::<js_sys::Promise>().ok()?;
+        // The same preference as the adapter in use (a dual-GPU machine has two).
+        let options = js_sys::Object::new();
+        js_sys::Reflect::set(&options, &"powerPreference".into(), &"high-performance".into()).ok()?;
+        let promise = request.call1(&gpu, &options).ok()?.dyn_into::<js_sys::Promise>().ok()?;
         let js_adapter = JsFuture::from(promise).await.ok()?;
         let js_info = get(&js_adapter, "info")?;
         let parts: Vec<String> =

@@ -6,9 +6,7 @@
 use std::mem::{offset_of, size_of};
 
 use sylva::format::tile::GpuBatch;
-use sylva::render::gpu_data::{
-    CullDispatch, DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform,
-};
+use sylva::render::gpu_data::{CullDispatch, DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform};
 
 /// A WGSL struct of the composed `shader`: its members (name, byte offset) and size.
 fn wgsl_struct(shader: &str, name: &str) -> (Vec<(String, u32)>, u32) {

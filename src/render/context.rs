@@ -68,9 +68,10 @@ impl GpuContext {
     }
 }
 
-/// The device every Sylva context asks for: no optional features and WebGPU's
-/// default limits (raised only as far as the adapter's resolution), so what runs
-/// natively also runs in a browser.
+/// The device every Sylva context asks for: WebGPU's default limits (raised only
+/// as far as the adapter's resolution) and no optional feature a pass needs, so
+/// what runs natively also runs in a browser. `TIMESTAMP_QUERY` is asked for
+/// where the adapter has it, only to time the passes (the browser's stats).
 ///
 /// # Errors
 /// [`ContextError::Device`] when the adapter refuses.

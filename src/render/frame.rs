@@ -5,8 +5,6 @@
 //! they wait: natively a measured frame blocks until the GPU is done; the
 //! browser never blocks, so its GPU times and counters arrive a few frames late.
 
-use std::sync::{Arc, Mutex};
-
 use super::forest::{ForestRenderer, GpuResidency, PoolConfig, RenderSettings};
 use super::gpu_data::REPR_COUNT;
 use super::readback::{CounterReadback, PassTimer};
@@ -44,15 +42,6 @@ pub struct Recorded {
     read_counters: bool,
 }
 
-/// GPU times of the passes of one frame, in ms.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-struct PassTimes {
-    frame: u64,
-    submitted_ms: f64,
-    cull_done_ms: Option<f64>,
-    draw_done_ms: Option<f64>,
-}
-
 /// The frame shared by both hosts (see the module docs).
 pub struct Frame<F: Fetcher> {
     /// The device.
@@ -69,9 +58,8 @@ pub struct Frame<F: Fetcher> {
     readback: CounterReadback,
     /// Timestamp queries around the passes, where asked for and available.
     timer: Option<PassTimer>,
-    /// Submit-to-done times of the frame being measured, and of the last one measured whole.
-    timing: Arc<Mutex<PassTimes>>,
-    last_times: PassTimes,
+    /// Wall times (cull, draw) of the last frame waited for, and its number.
+    waited: Option<(u64, [f64; 2])>,
     draw_calls: u32,
     cpu_ms: f64,
     frames: u64,
@@ -100,8 +88,7 @@ impl<F: Fetcher> Frame<F> {
             adapter,
             readback,
             timer: None,
-            timing: Arc::default(),
-            last_times: PassTimes::default(),
+            waited: None,
             draw_calls: 0,
             cpu_ms: 0.0,
             frames: 0,
@@ -152,47 +139,35 @@ impl<F: Fetcher> Frame<F> {
             let len = CullCounters::readback_bytes(self.renderer.slot_count());
             self.renderer.copy_counters(&mut draw, self.readback.record(len));
         }
-        let recorded = Recorded { cull: cull.finish(), draw: draw.finish(), read_counters };
+        // Prepared and recorded; `finish` (wgpu's own validation) is not counted,
+        // as before the frame was shared (docs/BENCHMARKS.md compares like with like).
         self.cpu_ms = (now_ms() - t0).max(0.0);
-        recorded
+        Recorded { cull: cull.finish(), draw: draw.finish(), read_counters }
     }
 
     /// Submits a recorded frame. With `wait` (native, measured), each pass is
-    /// waited for and timed and the counters are read before this returns;
-    /// without, GPU times and counters are collected when the GPU reports them
-    /// (a later [`Self::collect`]).
+    /// waited for and timed by the wall clock, and the counters are read before
+    /// this returns; without, counters and timestamps (where the device has them)
+    /// are collected when the GPU is done (a later [`Self::collect`]).
     pub fn submit(&mut self, recorded: Recorded, wait: bool) {
         self.frames += 1;
         let frame = self.frames;
         let block = |device: &wgpu::Device| {
-            // A lost device has nothing left to wait for; the frame's stats stay partial.
+            // A lost device has nothing left to wait for: the frame's counters and
+            // times then never arrive, and its stats say so (none of this frame's).
             let _ = device.poll(wgpu::PollType::wait_indefinitely());
         };
         if wait {
             // Earlier unwaited frames may still be running: their time is not this frame's.
             block(&self.device);
         }
-        *self.timing.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
-            PassTimes { frame, submitted_ms: now_ms(), cull_done_ms: None, draw_done_ms: None };
+        let t0 = now_ms();
         self.queue.submit([recorded.cull]);
-        let timing = self.timing.clone();
-        self.queue.on_submitted_work_done(move || {
-            let mut t = timing.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            if t.frame == frame {
-                t.cull_done_ms = Some(now_ms());
-            }
-        });
         if wait {
             block(&self.device);
         }
+        let t1 = now_ms();
         self.queue.submit([recorded.draw]);
-        let timing = self.timing.clone();
-        self.queue.on_submitted_work_done(move || {
-            let mut t = timing.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            if t.frame == frame {
-                t.draw_done_ms = Some(now_ms());
-            }
-        });
         if recorded.read_counters {
             self.readback.map(frame);
         }
@@ -201,19 +176,16 @@ impl<F: Fetcher> Frame<F> {
         }
         if wait {
             block(&self.device);
+            self.waited = Some((frame, [t1 - t0, now_ms() - t1]));
         }
         self.collect();
     }
 
-    /// Picks up GPU times and counters the GPU has reported since the last call.
+    /// Picks up counters and timestamps the GPU has finished since the last call.
     pub fn collect(&mut self) {
         self.readback.collect();
         if let Some(timer) = &mut self.timer {
             timer.collect();
-        }
-        let t = *self.timing.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        if t.draw_done_ms.is_some() && t.frame != self.last_times.frame {
-            self.last_times = t;
         }
     }
 
@@ -235,23 +207,33 @@ impl<F: Fetcher> Frame<F> {
         &self.adapter
     }
 
-    /// The stats of the last frame: its draw calls and CPU time, the latest
-    /// counters and GPU times read back, the stream's state.
+    /// The stats of the last frame: its draw calls and CPU time, the stream's
+    /// state, and the latest counters and GPU times read back (in the browser
+    /// those of a frame or two earlier).
     #[must_use]
     pub fn stats(&self) -> FrameStats {
+        self.stats_of(None)
+    }
+
+    /// Like [`Self::stats`], but counters and GPU times only of the last frame
+    /// submitted (none when it was not waited for): what a blocking host reports.
+    #[must_use]
+    pub fn stats_of_last_frame(&self) -> FrameStats {
+        self.stats_of(Some(self.frames))
+    }
+
+    fn stats_of(&self, frame: Option<u64>) -> FrameStats {
         let mut stats = FrameStats::gather(&self.renderer, &self.stream, self.draw_calls, self.cpu_ms);
         stats.adapter.clone_from(&self.adapter);
+        let wanted = |f: u64| f > 0 && frame.is_none_or(|want| want == f);
         let (counters, counters_frame) = self.readback.latest();
-        if counters_frame > 0 {
+        if wanted(counters_frame) {
             stats.apply_counters(counters);
         }
-        let t = self.last_times;
-        if let Some([cull, draw]) = self.timer.as_ref().and_then(PassTimer::latest) {
+        let timed = self.timer.as_ref().and_then(PassTimer::latest).filter(|(f, _)| wanted(*f));
+        if let Some((_, [cull, draw])) = timed.or(self.waited.filter(|(f, _)| wanted(*f))) {
             stats.gpu_ms.insert("cull".into(), cull);
             stats.gpu_ms.insert("draw".into(), draw);
-        } else if let (Some(cull), Some(draw)) = (t.cull_done_ms, t.draw_done_ms) {
-            stats.gpu_ms.insert("cull".into(), (cull - t.submitted_ms).max(0.0));
-            stats.gpu_ms.insert("draw".into(), (draw - cull).max(0.0));
         }
         stats
     }

@@ -190,12 +190,8 @@ impl<F: Fetcher> OffscreenScene<F> {
         let depth = self.depth.create_view(&Default::default());
         let recorded = self.frame.record(&view, &color, &depth, measure);
         self.frame.submit(recorded, measure);
-        let mut stats = self.frame.stats();
-        if !measure {
-            // Not waited for: no GPU times of this frame.
-            stats.gpu_ms.clear();
-        }
-        stats
+        // Counters and GPU times of this frame only (none when not measured).
+        self.frame.stats_of_last_frame()
     }
 
     /// Reads back what the last cull pass selected, with the pools it selected

@@ -332,11 +332,12 @@ impl Pools {
         if config == self.config || self.resident_instances() > 0 || self.batch_high_water > 0 {
             return false;
         }
-        let species = self.resident.len();
-        let old_limited = self.limited;
+        let (species, old_limited, generation) = (self.resident.len(), self.limited, self.generation);
         *self = Self::new(device, config, layouts);
         self.limited = old_limited || limited;
         self.resident = vec![0; species];
+        // Caches keyed on the generation must not meet an old value again.
+        self.generation = generation + 1;
         true
     }
 

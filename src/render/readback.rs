@@ -145,8 +145,8 @@ pub struct PassTimer {
     mapped: Mapped,
     /// Nanoseconds per tick.
     period_ns: f64,
-    /// (cull ms, draw ms) of the latest frame read.
-    latest: Option<[f64; 2]>,
+    /// The latest frame read and its (cull ms, draw ms).
+    latest: Option<(u64, [f64; 2])>,
 }
 
 /// Timestamps written per frame: cull begin, cull end, draw begin, draw end.
@@ -201,15 +201,15 @@ impl PassTimer {
     /// Decodes a finished mapping.
     pub fn collect(&mut self) {
         let mut ticks = [0u64; TIMESTAMPS as usize];
-        if self.mapped.take(|d| ticks = bytemuck::pod_read_unaligned(d)).is_some() {
+        if let Some(frame) = self.mapped.take(|d| ticks = bytemuck::pod_read_unaligned(d)) {
             let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * self.period_ns / 1e6;
-            self.latest = Some([ms(ticks[0], ticks[1]), ms(ticks[2], ticks[3])]);
+            self.latest = Some((frame, [ms(ticks[0], ticks[1]), ms(ticks[2], ticks[3])]));
         }
     }
 
-    /// (cull ms, draw ms) of the latest frame read.
+    /// The latest frame read and its (cull ms, draw ms).
     #[must_use]
-    pub fn latest(&self) -> Option<[f64; 2]> {
+    pub fn latest(&self) -> Option<(u64, [f64; 2])> {
         self.latest
     }
 }

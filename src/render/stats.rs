@@ -54,10 +54,11 @@ pub struct FrameStats {
     pub gpu_bytes: u64,
     /// CPU time to prepare and record the frame, ms.
     pub frame_cpu_ms: f64,
-    /// GPU time per pass (`cull`, `draw`), ms: from submitting a pass until the
-    /// GPU reports it done (lavapipe's compute timestamps are unreliable).
-    /// Natively measured frames block on each pass; the browser reports the
-    /// latest frame whose passes completed.
+    /// GPU time per pass (`cull`, `draw`), ms. Natively, of measured frames: the
+    /// wall time from submitting a pass until the GPU is done with it (each is
+    /// waited for; lavapipe's compute timestamps read ~0). In the browser: timestamp
+    /// queries around the passes (where the adapter has them) of the latest frame
+    /// read back; empty without them.
     pub gpu_ms: std::collections::BTreeMap<String, f64>,
     /// The GPU adapter: name (backend, type), or the browser's vendor and architecture.
     pub adapter: String,

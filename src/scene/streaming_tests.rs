@@ -26,8 +26,10 @@ struct FakeFetcher {
     log: Vec<(String, Option<ByteRange>)>,
     /// While true, nothing is answered.
     hold: bool,
-    /// Failures to answer with, in order, for URLs ending with the key.
+    /// Failures to answer with, in order, for URLs ending with `/` + the key.
     fail: HashMap<String, VecDeque<FetchError>>,
+    /// Bytes served instead of the file, for URLs ending with `/` + the key.
+    replace: HashMap<String, Vec<u8>>,
     next: RequestId,
 }
 
@@ -47,12 +49,15 @@ impl Fetcher for FakeFetcher {
         answers
             .into_iter()
             .map(|(id, url, range)| {
-                let scripted =
-                    self.fail.iter_mut().find(|(k, _)| url.ends_with(k.as_str())).and_then(|(_, f)| f.pop_front());
+                let named = |k: &String| url.ends_with(&format!("/{k}"));
+                let scripted = self.fail.iter_mut().find(|(k, _)| named(k)).and_then(|(_, f)| f.pop_front());
                 if let Some(e) = scripted {
                     return (id, Err(e));
                 }
-                let bytes = std::fs::read(&url).map_err(|_| FetchError::NotFound { url: url.clone() });
+                let bytes = match self.replace.iter().find(|(k, _)| named(k)) {
+                    Some((_, b)) => Ok(b.clone()),
+                    None => std::fs::read(&url).map_err(|_| FetchError::NotFound { url: url.clone() }),
+                };
                 let sliced = bytes.map(|b| match range {
                     Some((a, e)) => b[a as usize..(e as usize).min(b.len())].to_vec(),
                     None => b,
@@ -262,7 +267,9 @@ fn retries_with_backoff_and_gives_up_on_not_found() {
     let mut r = FakeResidency::new(1 << 20);
     s.fetcher.fail.insert(name.clone(), VecDeque::from([FetchError::Status { url: first.clone(), status: 503 }]));
     s.fetcher.fail.insert(missing_name.clone(), VecDeque::from([FetchError::NotFound { url: missing.clone() }]));
-    let asked = |s: &SceneStream<FakeFetcher>, n: &str| s.fetcher.log.iter().filter(|(u, _)| u.ends_with(n)).count();
+    let asked = |s: &SceneStream<FakeFetcher>, n: &str| {
+        s.fetcher.log.iter().filter(|(u, _)| u.ends_with(&format!("/{n}"))).count()
+    };
     // Steps at t = 0 only: the 503 waits for its retry time (0.25 s).
     run(&mut s, &mut r, &view, 6000.0, 0.0, 0.0, 10);
     assert_eq!(asked(&s, &name), 1, "not retried before its time");
@@ -394,7 +401,7 @@ fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
 }
 
 #[test]
-fn a_shard_or_a_broken_manifest_is_fatal_and_named() {
+fn a_missing_manifest_is_fatal_and_named() {
     let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
     s.fetcher.fail.insert("scene.json".into(), VecDeque::from([FetchError::NotFound { url: "scene.json".into() }]));
     run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 5);
@@ -402,4 +409,23 @@ fn a_shard_or_a_broken_manifest_is_fatal_and_named() {
     assert!(events.iter().any(|e| matches!(e, StreamEvent::Fatal { message } if message.contains("not found"))));
     assert!(s.is_settled() && s.manifest().is_none());
     assert_eq!(s.fetcher.log.len(), 1, "nothing else is asked for");
+}
+
+#[test]
+fn one_shard_of_a_sharded_bake_is_refused_with_the_way_out() {
+    let path = format!("{}/scene.json", fixture());
+    let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+    m["shard"] = serde_json::json!({"index": 1, "count": 3});
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+    s.fetcher.replace.insert("scene.json".into(), serde_json::to_vec(&m).unwrap());
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 5);
+    let events = s.drain_events();
+    let fatal = events.iter().find_map(|e| match e {
+        StreamEvent::Fatal { message } => Some(message.clone()),
+        _ => None,
+    });
+    let fatal = fatal.expect("a fatal event");
+    assert!(fatal.contains("shard 1 of 3") && fatal.contains("sylva-bake merge"), "{fatal}");
+    assert!(s.manifest().is_none() && r.species == 0, "nothing of the shard is used");
+    assert_eq!(s.fetcher.log.len(), 1);
 }

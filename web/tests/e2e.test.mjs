@@ -120,7 +120,7 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   assert.equal(stats.trees_total, 3000);
   assert.ok(stats.tiles_resident > 0, 'tiles resident');
   // Sane values, not only keys (the same FrameStats code as `sylva render --stats`).
-  assert.ok(stats.frame_cpu_ms > 0 && stats.frame_cpu_ms < 1000, `CPU ms per frame ${stats.frame_cpu_ms}`);
+  assert.ok(stats.frame_cpu_ms >= 0 && stats.frame_cpu_ms < 1000, `CPU ms per frame ${stats.frame_cpu_ms}`);
   assert.ok(stats.batches_visible > 0 && stats.batches_visible <= stats.batches_tested, `batches ${JSON.stringify(stats)}`);
   assert.equal(stats.items_dropped, 0);
   assert.ok(stats.tiles_total > 0 && stats.tiles_total >= stats.tiles_resident, `tiles ${JSON.stringify(stats)}`);
@@ -164,9 +164,10 @@ test('the browser and `sylva render --stats` report one set of keys and agree on
   assert.deepEqual(Object.keys(web).sort(), Object.keys(native).sort(), 'one set of keys');
   assert.deepEqual(Object.keys(web.instances).sort(), Object.keys(native.instances).sort());
   for (const s of [web, native]) {
-    assert.ok(s.frame_cpu_ms > 0 && s.frame_cpu_ms < 1000, `CPU ms per frame below a second: ${both}`);
+    // (Without cross-origin isolation the page's clock ticks in 0.1 ms: a fast frame may read 0.)
+    assert.ok(s.frame_cpu_ms >= 0 && s.frame_cpu_ms < 1000, `CPU ms per frame below a second: ${both}`);
     assert.deepEqual(Object.keys(s.gpu_ms).sort(), ['cull', 'draw'], `GPU times present: ${both}`);
-    assert.ok(Object.values(s.gpu_ms).every((v) => v >= 0 && v < 60000), `GPU times sane: ${both}`);
+    assert.ok(s.gpu_ms.cull >= 0 && s.gpu_ms.draw > 0 && s.gpu_ms.cull + s.gpu_ms.draw < 60000, `GPU times sane: ${both}`);
     assert.ok(s.adapter.length > 3 && !s.adapter.startsWith(' ') && !s.adapter.startsWith('('), `adapter named: ${s.adapter}`);
     assert.equal(s.items_dropped, 0);
     assert.deepEqual(s.failed, []);

@@ -118,7 +118,7 @@ pub fn place_trees(
     }
     let started = Instant::now();
     log("pass 1/3: sampling placements");
-    let sample = sample_pass(&source)?;
+    let mut sample = sample_pass(&source)?;
     log(&format!(
         "  {} rows read, {} usable ({:.1} s){}",
         sample.report.rows,
@@ -147,8 +147,11 @@ pub fn place_trees(
     let (src, dst) = choose_crs(opts, &source, &sample, log)?;
     let reproject = Reprojector::new(src, &dst)?;
     // Medians of the projected sample: outliers are far from them.
-    let projected: Vec<(f64, f64, Option<f32>)> =
-        sample.rows.iter().filter_map(|&(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h))).collect();
+    // (The sample is not needed after this: up to tens of MB freed before pass 2.)
+    let projected: Vec<(f64, f64, Option<f32>)> = std::mem::take(&mut sample.rows)
+        .into_iter()
+        .filter_map(|(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h)))
+        .collect();
     let mut xs: Vec<f64> = projected.iter().map(|p| p.0).collect();
     let mut ys: Vec<f64> = projected.iter().map(|p| p.1).collect();
     if xs.is_empty() {
