@@ -40,27 +40,12 @@ impl BillboardPipeline {
             ],
             immediate_size: 0,
         });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("billboard"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
+        let target = super::layouts::PullingTarget {
             primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
             depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(color_format.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+            format: color_format,
+        };
+        let pipeline = super::layouts::pulling_pipeline(device, "billboard", &module, &layout, "fs_main", &target);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("billboard"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,

@@ -63,29 +63,13 @@ impl ClusterPipeline {
             bind_group_layouts: &[Some(&shared.view), Some(&layout), Some(&shared.instances), Some(&shared.draw)],
             immediate_size: 0,
         });
-        let make = |entry: &str| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    targets: &[Some(color_format.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+        let target = super::layouts::PullingTarget {
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+            format: color_format,
         };
+        let make =
+            |entry: &str| super::layouts::pulling_pipeline(device, entry, &module, &pipeline_layout, entry, &target);
         let pipeline = make("fs_main");
         let proxy_depth = make("fs_proxy_depth");
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {

@@ -147,3 +147,48 @@ impl SharedLayouts {
         })
     }
 }
+
+/// What a vertex-pulling pipeline draws into.
+pub struct PullingTarget {
+    /// Topology and culling.
+    pub primitive: wgpu::PrimitiveState,
+    /// Depth test and writes.
+    pub depth_stencil: Option<wgpu::DepthStencilState>,
+    /// Colour target format.
+    pub format: wgpu::TextureFormat,
+}
+
+/// A render pipeline whose vertex shader `vs_main` reads its data from storage
+/// buffers (no vertex buffers) and whose fragment entry is `fragment`: the
+/// billboard and cluster passes, the sky and the overlays.
+#[must_use]
+pub fn pulling_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    fragment: &str,
+    target: &PullingTarget,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: target.primitive,
+        depth_stencil: target.depth_stencil.clone(),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fragment),
+            compilation_options: Default::default(),
+            targets: &[Some(target.format.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}

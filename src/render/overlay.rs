@@ -89,26 +89,11 @@ fn overlay_pipeline(
         bind_group_layouts: groups,
         immediate_size: 0,
     });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
+    let target = super::layouts::PullingTarget {
         primitive: wgpu::PrimitiveState { topology, ..Default::default() },
         // The sky is at depth 0, the far end under reversed Z; overlays ignore depth.
         depth_stencil: super::mesh::depth_state(false, wgpu::CompareFunction::Always),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_main"),
-            compilation_options: Default::default(),
-            targets: &[Some(format.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+        format,
+    };
+    super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target)
 }
