@@ -1,6 +1,7 @@
 //! `sylva-bake`: turns glTF trees and tree placements into a Sylva scene
 //! (LoD packs + grouped-batch tiles + manifest). See `--help`.
 
+mod allometry;
 mod bake;
 mod batching;
 mod bucket;
@@ -49,7 +50,7 @@ enum Command {
     #[command(
         after_help = "Example:\n  sylva-bake bake --model oak=oak.glb --model pine=pine.glb \\\n    --placements trees.csv --map 'quercus*=oak' --map 'pinus*=pine' --default-model oak --out scene/"
     )]
-    Bake(BakeArgs),
+    Bake(Box<BakeArgs>),
     /// Make a complete procedural demo scene (three species, UTM 33N, no input files).
     Demo(DemoArgs),
     /// Benchmark the cluster-level bake (seed 002) of one model: timing and,
@@ -210,7 +211,8 @@ struct BakeArgs {
     /// CRS of x/y placement columns (required for projected input).
     #[arg(long)]
     input_crs: Option<String>,
-    /// Height in metres for rows without one (default: the median of the given heights).
+    /// Height in metres for rows with neither a height nor a DBH (default: the
+    /// median of the given heights).
     #[arg(long)]
     default_height: Option<f32>,
     /// Text encoding of a CSV: auto reads each field as UTF-8 where it is valid
@@ -224,6 +226,19 @@ struct BakeArgs {
     /// The x/longitude and y/latitude columns hold each other's values: swap them.
     #[arg(long)]
     swap_xy: bool,
+    /// Use column NAME for ROLE (repeatable), before the names detected by
+    /// default. Roles: lon, lat, x, y, z, height, species, dbh, crown_diameter,
+    /// crown_radius, yaw, id. E.g. --column species=species_code --column dbh=dbh_mm.
+    #[arg(long = "column", value_name = "ROLE=NAME", value_parser = placements::ColumnRole::parse_mapping)]
+    columns: Vec<(placements::ColumnRole, String)>,
+    /// Unit of a DBH column whose name does not say it (dbh_mm, dbh_cm and dbh_in do).
+    #[arg(long, value_enum, value_name = "UNIT")]
+    dbh_unit: Option<placements::DbhUnit>,
+    /// Height and crown equations from DBH to use over the built-in ones
+    /// (CSV: genus,h_p2,h_p3,h_p4,cw_b0,cw_b1,cw_b2; docs/ALLOMETRY.md). Rows
+    /// without a height get one from their DBH; with neither, --default-height.
+    #[arg(long, value_name = "FILE.csv")]
+    allometry: Option<PathBuf>,
     /// Rows farther than this from the median position are outliers and skipped.
     #[arg(long, default_value_t = 100.0)]
     max_extent_km: f64,
@@ -450,9 +465,14 @@ fn bake(args: &BakeArgs) -> Result<()> {
     let fixed_cell_size = args.pack.cell_size.map(|_| args.pack.cell_size(&[])).transpose()?;
     // The output folder is checked before any long work.
     let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
+    inputs.extend(args.allometry.as_deref());
     for m in &args.models {
         inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
     }
+    let allometry = match &args.allometry {
+        Some(path) => allometry::Allometry::with_overrides(path)?,
+        None => allometry::Allometry::built_in(),
+    };
     let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
     let species = import_models(args)?;
     let map = species_map(args, &species)?;
@@ -466,6 +486,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
             delimiter: args.delimiter,
             swap_xy: args.swap_xy,
             projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
+            columns: args.columns.clone(),
+            dbh_unit: args.dbh_unit,
         },
         crs: args.crs.as_deref(),
         input_crs: args.input_crs.as_deref(),
@@ -475,6 +497,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
         bucket_trees: args.bucket_trees,
         tile_cells: args.pack.tile_cells,
         shard: args.pack.shard,
+        allometry: &allometry,
     };
     let placed = trees::place_trees(&options, &map, &out, &log)?;
     let input = SceneInput {

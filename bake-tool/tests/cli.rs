@@ -331,3 +331,97 @@ fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
     let o = run(&mut bake(&swapped, &dir.join("sydney"), &["--swap-xy"]));
     assert!(String::from_utf8_lossy(&o.stderr).contains("scene CRS EPSG:32756"), "UTM 56S");
 }
+
+/// Heights of every baked tree: instance scale × the species' model height.
+fn baked_heights(scene: &Path) -> Vec<f32> {
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
+    let tiles = sylva::format::index::read_all_tiles(scene, &m).unwrap();
+    let mut out = Vec::new();
+    for t in tiles {
+        let bytes = std::fs::read(scene.join(&t.url)).unwrap();
+        let tile = sylva::format::Tile::decode(&t.url, &bytes, m.species.len() as u32).unwrap();
+        for b in &tile.batches {
+            let range = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+            for i in &tile.instances[range] {
+                out.push(i.decode(b).scale * m.species[b.species as usize].height_m);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
+    if !model.exists() {
+        eprintln!("skipping: {} not present", model.display());
+        return;
+    }
+    let dir = tmp("inventory");
+    let bake = |csv: &Path, out: &Path, extra: &[&str]| {
+        let mut c = bin();
+        c.arg("bake")
+            .arg("--model")
+            .arg(format!("oak={}", model.display()))
+            .arg("--placements")
+            .arg(csv)
+            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+            .args(extra)
+            .arg("--out")
+            .arg(out);
+        c
+    };
+    // A research plot: species codes, DBH in millimetres, tags, no height column.
+    let mut csv = String::from("tag,species_code,easting,northing,dbh_mm\n");
+    for i in 0..400 {
+        let code = if i % 4 == 0 { "PIAB" } else { "FASY" };
+        let dbh = 80 + (i * 37) % 720; // 8–80 cm
+        csv += &format!("{},{code},{},{},{dbh}\n", 1000 + i, 500_000 + (i % 20) * 5, 5_300_000 + (i / 20) * 5);
+    }
+    let plot = dir.join("plot.csv");
+    std::fs::write(&plot, &csv).unwrap();
+    // Without naming the species column the codes are still found (species_code is known).
+    let o = run(&mut bake(&plot, &dir.join("plot"), &["--input-crs", "EPSG:32633", "--column", "id=tag"]));
+    let log = String::from_utf8_lossy(&o.stderr);
+    for want in ["species ← \"species_code\"", "dbh ← \"dbh_mm\" (mm)", "id ← \"tag\"", "species summary (2 labels)"]
+    {
+        assert!(log.contains(want), "{want:?} missing from the log:\n{log}");
+    }
+    // Every height from the DBH (the broadleaf and conifer defaults: codes name no genus).
+    let line =
+        |label: &str| log.lines().find(|l| l.trim_start().starts_with(&format!("{label} |"))).unwrap().to_string();
+    let fasy = line("FASY");
+    assert!(fasy.ends_with("| 300"), "{fasy}");
+    let fasy_dbh = (0..400).filter(|i| i % 4 != 0).map(|i| 80 + (i * 37) % 720);
+    let (dmin, dmax) = fasy_dbh.fold((u32::MAX, 0), |(a, b), d| (a.min(d), b.max(d)));
+    let want = format!("| {:.1}–{:.1} |", f64::from(dmin) / 10.0, f64::from(dmax) / 10.0);
+    assert!(fasy.contains(&want), "DBH range in cm {want}: {fasy}");
+    let heights = baked_heights(&dir.join("plot"));
+    assert_eq!(heights.len(), 400);
+    let (lo, hi) = heights.iter().fold((f32::MAX, 0f32), |(a, b), h| (a.min(*h), b.max(*h)));
+    // FVS "other hardwoods" at 8 and 80 cm: about 8.5 and 20 m (8-bit scale steps: a few per cent).
+    assert!(lo > 6.0 && lo < 11.0 && hi > 17.0 && hi < 25.0, "heights {lo}–{hi} m");
+    // A city inventory: botanical names and DBH in cm, found without --column; one
+    // species named by genus gets its genus equation.
+    let mut city = String::from("OBJECTID,botanical_name,lat,lon,dbh\n");
+    for i in 0..200 {
+        city += &format!("{i},Tilia cordata,52.37{:02},4.89{:02},{}\n", i % 50, i / 50, 10 + i % 60);
+    }
+    let city_csv = dir.join("city.csv");
+    std::fs::write(&city_csv, &city).unwrap();
+    let o = run(&mut bake(&city_csv, &dir.join("city"), &[]));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("species ← \"botanical_name\"") && log.contains("dbh ← \"dbh\" (cm)"), "{log}");
+    let heights = baked_heights(&dir.join("city"));
+    let (lo, hi) = heights.iter().fold((f32::MAX, 0f32), |(a, b), h| (a.min(*h), b.max(*h)));
+    // FVS basswood: 21.7 m at 30 cm; 10–69 cm spans about 11–31 m.
+    assert!(lo > 8.0 && lo < 14.0 && hi > 27.0 && hi < 34.0, "Tilia heights {lo}–{hi} m");
+    // The same DBH in inches with --dbh-unit: taller trees.
+    let o = run(&mut bake(&city_csv, &dir.join("inches"), &["--dbh-unit", "in"]));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("dbh ← \"dbh\" (in)"));
+    // A column that is not there is named, with the header.
+    let e = fails(&mut bake(&city_csv, &dir.join("bad"), &["--column", "dbh=stem_mm"]));
+    assert!(e.contains("--column dbh=stem_mm") && e.contains("botanical_name"), "{e}");
+    let e = fails(&mut bake(&city_csv, &dir.join("bad"), &["--column", "girth=dbh"]));
+    assert!(e.contains("unknown role") && e.contains("crown_diameter"), "{e}");
+}

@@ -14,6 +14,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 
+use crate::allometry::Allometry;
 use crate::batching::{self, SceneTree};
 use crate::bucket::{BucketWriter, TreeSource};
 use crate::out_dir::OutDir;
@@ -52,6 +53,45 @@ pub struct TreeOptions<'a> {
     pub tile_cells: u32,
     /// Keep only the trees of shard `.0` of `.1` (bucketed bakes).
     pub shard: Option<(u32, u32)>,
+    /// Heights and crowns from DBH where a row has no height.
+    pub allometry: &'a Allometry,
+}
+
+/// Where a tree's height came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum HeightFrom {
+    /// The height column.
+    Given,
+    /// The DBH, through the allometry.
+    Dbh,
+    /// `--default-height` or the median of the given heights.
+    Default,
+    /// The model's own height.
+    Model,
+}
+
+/// What a row told about its tree, for the summary.
+#[derive(Debug, Clone, Copy)]
+struct Facts {
+    height_m: f32,
+    from: HeightFrom,
+    dbh_cm: Option<f32>,
+    crown_m: Option<f32>,
+}
+
+/// Per species label: the model used and the ranges a forester can check.
+#[derive(Debug, Clone)]
+struct SpeciesSummary {
+    model: usize,
+    trees: u64,
+    height: (f32, f32),
+    dbh: Option<(f32, f32)>,
+    crown: Option<(f32, f32)>,
+    from_dbh: u64,
+}
+
+fn widen(r: Option<(f32, f32)>, v: f32) -> (f32, f32) {
+    r.map_or((v, v), |(a, b)| (a.min(v), b.max(v)))
 }
 
 /// Which model each species label uses.
@@ -171,25 +211,37 @@ pub fn place_trees(
     };
     drop(projected);
     let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
-    // A usable row as a tree, or why not.
-    let to_tree = |p: &Placement| -> Result<SceneTree, &'static str> {
+    // A usable row as a tree (and what it said), or why not.
+    let to_tree = |p: &Placement| -> Result<(SceneTree, Facts), &'static str> {
         let Ok((x, y)) = reproject.apply(p.x, p.y) else { return Err("cannot be projected to the scene CRS") };
         if !inside(x, y) {
             return Err("outlier");
         }
-        let Some(idx) = species.of(p.species.as_deref().unwrap_or("")) else { return Err("unmapped") };
+        let label = p.species.as_deref().unwrap_or("");
+        let Some(idx) = species.of(label) else { return Err("unmapped") };
         // (The importer refuses models without height.)
         let model_h = species.heights[idx];
-        let target = p.height_m.or(default_height).unwrap_or(model_h);
+        let equations = (p.dbh_cm.is_some() || p.crown_m.is_some()).then(|| opts.allometry.for_label(label));
+        let from_dbh = p.dbh_cm.zip(equations).map(|(d, e)| e.height.metres(f64::from(d)) as f32);
+        let (target, from) = match (p.height_m, from_dbh.filter(|h| *h > 0.0 && *h < MAX_TREE_HEIGHT_M), default_height)
+        {
+            (Some(h), _, _) => (h, HeightFrom::Given),
+            (None, Some(h), _) => (h, HeightFrom::Dbh),
+            (None, None, Some(h)) => (h, HeightFrom::Default),
+            (None, None, None) => (model_h, HeightFrom::Model),
+        };
+        let crown_m = p.crown_m.or_else(|| p.dbh_cm.zip(equations).map(|(d, e)| e.crown.metres(f64::from(d)) as f32));
+        let facts = Facts { height_m: target, from, dbh_cm: p.dbh_cm, crown_m };
         let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
-        Ok(SceneTree {
+        let tree = SceneTree {
             pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
             species: idx as u32,
             scale: target / model_h,
             yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
             variation: ((h >> 20) % 32) as u8,
             id: p.id.unwrap_or(p.row | 1 << 63),
-        })
+        };
+        Ok((tree, facts))
     };
     let cell_size_m = match opts.cell_size_m {
         Some(c) => c,
@@ -198,7 +250,8 @@ pub fn place_trees(
             density_pass(&source, &to_tree)?
         }
     };
-    let trees = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    let (trees, summary) = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    log_summary(&summary, species, log);
     log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
     Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m })
 }
@@ -298,14 +351,11 @@ fn choose_crs(
 }
 
 /// Pass 2: the cell size from the density of the trees.
-fn density_pass(
-    source: &PlacementSource,
-    to_tree: &dyn Fn(&Placement) -> Result<SceneTree, &'static str>,
-) -> Result<u32> {
+fn density_pass(source: &PlacementSource, to_tree: &TreeOf<'_>) -> Result<u32> {
     let mut cells = HashSet::new();
     let mut trees = 0u64;
     source.for_each(&mut |p| {
-        if let Ok(t) = to_tree(&p) {
+        if let Ok((t, _)) = to_tree(&p) {
             trees += 1;
             cells.insert(batching::cell64(t.pos));
         }
@@ -314,17 +364,20 @@ fn density_pass(
     Ok(batching::cell_size_for(trees, cells.len() as u64, 500.0))
 }
 
+/// A usable row as a tree and what it said, or why not.
+type TreeOf<'a> = dyn Fn(&Placement) -> Result<(SceneTree, Facts), &'static str> + 'a;
+
 /// Pass 3: the trees, in memory or partitioned by tile into bucket files; the
-/// report of every row skipped and why.
+/// report of every row skipped and why, and the summary per species label.
 fn tree_pass(
     opts: &TreeOptions<'_>,
     source: &PlacementSource,
     sample: &Sample,
     cell_size_m: u32,
-    to_tree: &dyn Fn(&Placement) -> Result<SceneTree, &'static str>,
+    to_tree: &TreeOf<'_>,
     out: &OutDir,
     log: &dyn Fn(&str),
-) -> Result<TreeSource> {
+) -> Result<(TreeSource, BTreeMap<String, SpeciesSummary>)> {
     let buckets = sample.report.kept.div_ceil(opts.bucket_trees.max(1)).max(1);
     log(&format!(
         "pass 3/3: trees{}",
@@ -335,6 +388,27 @@ fn tree_pass(
         }
     ));
     let mut unmapped: BTreeMap<String, u64> = BTreeMap::new();
+    let mut summary: BTreeMap<String, SpeciesSummary> = BTreeMap::new();
+    let mut note = |p: &Placement, t: &SceneTree, f: &Facts| {
+        let label = p.species.as_deref().unwrap_or("(no species)");
+        let s = summary.entry(label.to_string()).or_insert(SpeciesSummary {
+            model: t.species as usize,
+            trees: 0,
+            height: (f.height_m, f.height_m),
+            dbh: None,
+            crown: None,
+            from_dbh: 0,
+        });
+        s.trees += 1;
+        s.height = widen(Some(s.height), f.height_m);
+        if let Some(d) = f.dbh_cm {
+            s.dbh = Some(widen(s.dbh, d));
+        }
+        if let Some(c) = f.crown_m {
+            s.crown = Some(widen(s.crown, c));
+        }
+        s.from_dbh += u64::from(f.from == HeightFrom::Dbh);
+    };
     let mut ours = placements::Report::default();
     let mut skip = |p: &Placement, why: &str| match why {
         "outlier" => {
@@ -351,12 +425,13 @@ fn tree_pass(
         let mut writer = BucketWriter::new(&dir, buckets as u32, cell_size_m, opts.tile_cells)?;
         let report = source.for_each(&mut |p| {
             match to_tree(&p) {
-                Ok(t)
+                Ok((t, f))
                     if opts.shard.is_none_or(|(i, n)| {
                         let (x, y) = batching::tile_of(t.pos, cell_size_m, opts.tile_cells);
                         batching::shard_of_tile(x, y, n) == i
                     }) =>
                 {
+                    note(&p, &t, &f);
                     writer.push(&t)?
                 }
                 Ok(_) => {}
@@ -369,7 +444,10 @@ fn tree_pass(
         let mut trees = Vec::with_capacity(sample.report.kept as usize);
         let report = source.for_each(&mut |p| {
             match to_tree(&p) {
-                Ok(t) => trees.push(t),
+                Ok((t, f)) => {
+                    note(&p, &t, &f);
+                    trees.push(t);
+                }
                 Err(why) => skip(&p, why),
             }
             Ok(())
@@ -394,7 +472,43 @@ fn tree_pass(
             "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
         ));
     }
-    Ok(trees)
+    Ok((trees, summary))
+}
+
+/// Logs, per species label, the model used, the count and the height, DBH and
+/// crown ranges — what a forester checks first — and a warning when the DBH
+/// values look like another unit.
+fn log_summary(summary: &BTreeMap<String, SpeciesSummary>, species: &SpeciesMap, log: &dyn Fn(&str)) {
+    let mut rows: Vec<(&String, &SpeciesSummary)> = summary.iter().collect();
+    rows.sort_by(|a, b| b.1.trees.cmp(&a.1.trees).then(a.0.cmp(b.0)));
+    let range = |r: Option<(f32, f32)>| r.map_or("-".to_string(), |(a, b)| format!("{a:.1}–{b:.1}"));
+    log(&format!("species summary ({} labels):", rows.len()));
+    log("  label | model | trees | height m | DBH cm | crown m | heights from DBH");
+    const SHOWN: usize = 40;
+    for (label, s) in rows.iter().take(SHOWN) {
+        log(&format!(
+            "  {label} | {} | {} | {} | {} | {} | {}",
+            species.names[s.model],
+            s.trees,
+            range(Some(s.height)),
+            range(s.dbh),
+            range(s.crown),
+            s.from_dbh
+        ));
+    }
+    if rows.len() > SHOWN {
+        let rest: u64 = rows[SHOWN..].iter().map(|(_, s)| s.trees).sum();
+        log(&format!("  … {} more labels with {rest} trees", rows.len() - SHOWN));
+    }
+    let with_dbh: Vec<&SpeciesSummary> = rows.iter().map(|(_, s)| *s).filter(|s| s.dbh.is_some()).collect();
+    if !with_dbh.is_empty() && with_dbh.iter().all(|s| s.dbh.is_some_and(|d| d.0 > 150.0)) {
+        log("placements: warning: every DBH is over 150 cm: if the column is in millimetres, pass --dbh-unit mm \
+             (or name it dbh_mm)");
+    }
+    if !with_dbh.is_empty() && with_dbh.iter().all(|s| s.dbh.is_some_and(|d| d.1 < 3.0)) {
+        log("placements: warning: every DBH is under 3 cm: if the column is in metres or inches, convert it or \
+             pass --dbh-unit in");
+    }
 }
 
 fn median(v: &mut [f64]) -> f64 {

@@ -29,9 +29,16 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
         let row = i as u64 + 1;
         report.rows += 1;
         let props = f.get("properties").and_then(|p| p.as_object());
-        let prop = |names: &[&str]| {
-            props.and_then(|p| p.iter().find(|(k, _)| names.contains(&k.to_lowercase().as_str())).map(|(_, v)| v))
+        // A property by role: the `--column` name, else the role's aliases; with its key.
+        let prop_key = |role: ColumnRole| -> Option<(&String, &serde_json::Value)> {
+            let p = props?;
+            let named = options.columns.iter().find(|(r, _)| *r == role).map(|(_, n)| n.to_lowercase());
+            match named {
+                Some(n) => p.iter().find(|(k, _)| k.to_lowercase() == n),
+                None => role.aliases().iter().find_map(|a| p.iter().find(|(k, _)| k.to_lowercase() == *a)),
+            }
         };
+        let prop = |role: ColumnRole| prop_key(role).map(|(_, v)| v);
         let num = |v: Option<&serde_json::Value>| v.and_then(|v| v.as_f64().or_else(|| v.as_str().and_then(parse_f64)));
         let geom = f.get("geometry");
         let coordinates = geom.and_then(|g| g.get("coordinates"));
@@ -60,15 +67,22 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
             let p = Placement {
                 x,
                 y,
-                z: coords.get(2).copied().or_else(|| num(prop(Z))),
-                height_m: num(prop(HEIGHT)).map(|h| h as f32),
-                species: prop(SPECIES).and_then(|s| match s {
+                z: coords.get(2).copied().or_else(|| num(prop(ColumnRole::Z))),
+                height_m: num(prop(ColumnRole::Height)).map(|h| h as f32),
+                dbh_cm: prop_key(ColumnRole::Dbh).and_then(|(k, v)| {
+                    let unit = DbhUnit::from_name(k).or(options.dbh_unit).unwrap_or_default();
+                    num(Some(v)).map(|d| (d * unit.to_cm()) as f32)
+                }),
+                crown_m: num(prop(ColumnRole::CrownDiameter))
+                    .or_else(|| num(prop(ColumnRole::CrownRadius)).map(|r| 2.0 * r))
+                    .map(|c| c as f32),
+                species: prop(ColumnRole::Species).and_then(|s| match s {
                     serde_json::Value::String(s) if !s.trim().is_empty() => Some(s.trim().to_string()),
                     serde_json::Value::Number(n) => Some(n.to_string()),
                     _ => None,
                 }),
-                yaw_deg: num(prop(YAW)).map(|v| v as f32),
-                id: prop(ID).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
+                yaw_deg: num(prop(ColumnRole::Yaw)).map(|v| v as f32),
+                id: prop(ColumnRole::Id).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
                 row,
             };
             points_read.push(p);

@@ -37,6 +37,10 @@ pub struct Placement {
     pub z: Option<f64>,
     /// Tree height, metres, if given and positive.
     pub height_m: Option<f32>,
+    /// Stem diameter at breast height, centimetres, if given and positive.
+    pub dbh_cm: Option<f32>,
+    /// Crown diameter, metres, if given (a radius column is doubled).
+    pub crown_m: Option<f32>,
     /// Species label, if given.
     pub species: Option<String>,
     /// Yaw in degrees, if given.
@@ -56,7 +60,7 @@ pub struct Report {
     pub kept: u64,
     /// Skipped rows per reason: count and the first few row numbers.
     pub skipped: BTreeMap<String, (u64, Vec<u64>)>,
-    /// Rows without a height (kept; they get the default height).
+    /// Rows without a height (kept; they get one from their DBH or the default height).
     pub missing_height: u64,
     /// Rows sharing their coordinates with an earlier row (kept).
     pub duplicate_coordinates: u64,
@@ -142,6 +146,166 @@ pub struct ReadOptions {
     /// Coordinates are projected (the bake was given `--input-crs`): applies to
     /// GeoJSON, whose coordinates are otherwise lon/lat.
     pub projected: bool,
+    /// Columns named by the user (`--column ROLE=NAME`), before any detection.
+    pub columns: Vec<(ColumnRole, String)>,
+    /// Unit of a DBH column whose name does not say (`--dbh-unit`; default cm).
+    pub dbh_unit: Option<DbhUnit>,
+}
+
+/// What a column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum ColumnRole {
+    /// Longitude (degrees).
+    Lon,
+    /// Latitude (degrees).
+    Lat,
+    /// Projected x (easting).
+    X,
+    /// Projected y (northing).
+    Y,
+    /// Ground height.
+    Z,
+    /// Tree height, metres.
+    Height,
+    /// Species label (botanical or common name, or a code).
+    Species,
+    /// Stem diameter at breast height.
+    Dbh,
+    /// Crown diameter, metres.
+    CrownDiameter,
+    /// Crown radius, metres.
+    CrownRadius,
+    /// Rotation about the vertical, degrees.
+    Yaw,
+    /// Numeric tree id.
+    Id,
+}
+
+impl ColumnRole {
+    /// Every role, in the order columns are reported.
+    pub const ALL: [ColumnRole; 12] = [
+        ColumnRole::Lon,
+        ColumnRole::Lat,
+        ColumnRole::X,
+        ColumnRole::Y,
+        ColumnRole::Z,
+        ColumnRole::Height,
+        ColumnRole::Species,
+        ColumnRole::Dbh,
+        ColumnRole::CrownDiameter,
+        ColumnRole::CrownRadius,
+        ColumnRole::Yaw,
+        ColumnRole::Id,
+    ];
+
+    /// The role's name in `--column ROLE=NAME` and in reports.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            ColumnRole::Lon => "lon",
+            ColumnRole::Lat => "lat",
+            ColumnRole::X => "x",
+            ColumnRole::Y => "y",
+            ColumnRole::Z => "z",
+            ColumnRole::Height => "height",
+            ColumnRole::Species => "species",
+            ColumnRole::Dbh => "dbh",
+            ColumnRole::CrownDiameter => "crown_diameter",
+            ColumnRole::CrownRadius => "crown_radius",
+            ColumnRole::Yaw => "yaw",
+            ColumnRole::Id => "id",
+        }
+    }
+
+    /// Header names recognised for the role, most specific first (compared
+    /// case-insensitively after trimming).
+    #[must_use]
+    pub fn aliases(self) -> &'static [&'static str] {
+        match self {
+            ColumnRole::Lon => LON,
+            ColumnRole::Lat => LAT,
+            ColumnRole::X => X,
+            ColumnRole::Y => Y,
+            ColumnRole::Z => Z,
+            ColumnRole::Height => HEIGHT,
+            ColumnRole::Species => SPECIES,
+            ColumnRole::Dbh => DBH,
+            ColumnRole::CrownDiameter => CROWN_DIAMETER,
+            ColumnRole::CrownRadius => CROWN_RADIUS,
+            ColumnRole::Yaw => YAW,
+            ColumnRole::Id => ID,
+        }
+    }
+
+    /// Parses `ROLE=NAME` (`--column`).
+    ///
+    /// # Errors
+    /// An unknown role, or no `=`.
+    pub fn parse_mapping(s: &str) -> Result<(ColumnRole, String), String> {
+        let (role, name) = s.split_once('=').ok_or_else(|| format!("{s:?}: expected ROLE=COLUMN, e.g. dbh=dbh_mm"))?;
+        let role = role.trim().to_lowercase().replace('-', "_");
+        let found =
+            ColumnRole::ALL.iter().find(|r| r.name() == role || (role == "crown" && **r == ColumnRole::CrownDiameter));
+        match (found, name.trim()) {
+            (Some(r), n) if !n.is_empty() => Ok((*r, n.to_string())),
+            (Some(_), _) => Err(format!("{s:?}: the column name is empty")),
+            (None, _) => Err(format!(
+                "{s:?}: unknown role {role:?}; roles are {}",
+                ColumnRole::ALL.map(ColumnRole::name).join(", ")
+            )),
+        }
+    }
+}
+
+/// Unit of a DBH column.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum DbhUnit {
+    /// Millimetres.
+    Mm,
+    /// Centimetres (the default).
+    #[default]
+    Cm,
+    /// Inches.
+    In,
+}
+
+impl DbhUnit {
+    /// The unit a column name says (`dbh_mm`, `diameter_cm`, `dbh_in`), if any.
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<Self> {
+        let n = name.trim().to_lowercase();
+        let ends =
+            |s: &str| n.ends_with(&format!("_{s}")) || n.ends_with(&format!("({s})")) || n.ends_with(&format!(" {s}"));
+        if ends("mm") {
+            Some(DbhUnit::Mm)
+        } else if ends("cm") {
+            Some(DbhUnit::Cm)
+        } else if ends("in") || ends("inch") || ends("inches") {
+            Some(DbhUnit::In)
+        } else {
+            None
+        }
+    }
+
+    /// Centimetres per unit.
+    #[must_use]
+    pub fn to_cm(self) -> f64 {
+        match self {
+            DbhUnit::Mm => 0.1,
+            DbhUnit::Cm => 1.0,
+            DbhUnit::In => 2.54,
+        }
+    }
+
+    /// The unit's name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            DbhUnit::Mm => "mm",
+            DbhUnit::Cm => "cm",
+            DbhUnit::In => "in",
+        }
+    }
 }
 
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
@@ -181,18 +345,80 @@ const LAT: &[&str] = &["lat", "latitude"];
 const X: &[&str] = &["x", "easting", "east", "e", "x_coord", "xcoord"];
 const Y: &[&str] = &["y", "northing", "north", "n", "y_coord", "ycoord"];
 const Z: &[&str] = &["z", "elevation", "elev", "altitude", "ground", "ground_z"];
-const HEIGHT: &[&str] =
-    &["height", "height_m", "h", "tree_height", "treeheight", "hoehe", "höhe", "baumhöhe", "boomhoogte"];
-const SPECIES: &[&str] = &["species", "species_name", "genus", "taxon", "baumart", "soort", "type", "art"];
+const HEIGHT: &[&str] = &[
+    "height",
+    "height_m",
+    "h",
+    "h_m",
+    "tree_height",
+    "treeheight",
+    "total_height",
+    "hoehe",
+    "höhe",
+    "baumhöhe",
+    "boomhoogte",
+    "hoogte",
+];
+const SPECIES: &[&str] = &[
+    "species",
+    "species_name",
+    "botanical_name",
+    "botanicalname",
+    "botanical",
+    "scientific_name",
+    "scientificname",
+    "latin_name",
+    "latin",
+    "taxon",
+    "baumart",
+    "boomsoort",
+    "soortnaam",
+    "soort",
+    "art",
+    "common_name",
+    "commonname",
+    "species_code",
+    "speciescode",
+    "spp",
+    "sp",
+    "genus",
+    "type",
+];
+const DBH: &[&str] = &[
+    "dbh",
+    "dbh_cm",
+    "dbh_mm",
+    "dbh_in",
+    "diameter",
+    "diameter_cm",
+    "diameter_mm",
+    "stem_diameter",
+    "trunk_diameter",
+    "d130",
+    "d13",
+    "bhd",
+    "stammdurchmesser",
+    "stamdiameter",
+];
+const CROWN_DIAMETER: &[&str] = &[
+    "crown_diameter",
+    "crowndiameter",
+    "crown_diam",
+    "crown_dia",
+    "crown_width",
+    "crownwidth",
+    "canopy_diameter",
+    "maxcanopydiam",
+    "kronendurchmesser",
+    "kroondiameter",
+    "kroonbreedte",
+];
+const CROWN_RADIUS: &[&str] = &["crown_radius", "crownradius", "canopy_radius", "kronenradius"];
 const YAW: &[&str] = &["yaw", "rotation", "heading", "azimuth"];
 const ID: &[&str] = &["id", "tree_id", "treeid", "objectid", "fid", "gid"];
 
-fn find_col(header: &[String], names: &[&str]) -> Option<usize> {
-    names.iter().find_map(|n| header.iter().position(|h| h == n))
-}
-
-/// Columns found in a CSV header.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Columns found in a CSV header (or GeoJSON property names).
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Columns {
     /// Coordinate kind.
     pub kind: CoordKind,
@@ -206,32 +432,105 @@ pub struct Columns {
     pub height: Option<usize>,
     /// Species column.
     pub species: Option<usize>,
+    /// DBH column.
+    pub dbh: Option<usize>,
+    /// The DBH column's unit.
+    pub dbh_unit: DbhUnit,
+    /// Crown column, and whether it holds a radius.
+    pub crown: Option<(usize, bool)>,
     /// Yaw column.
     pub yaw: Option<usize>,
     /// Id column.
     pub id: Option<usize>,
+    /// What each found column is used for, as `role ← header name`, for the report.
+    pub used: Vec<(ColumnRole, String)>,
 }
 
-/// Detects the columns of a header (names compared case-insensitively).
-pub fn detect_columns(header: &[&str]) -> Result<Columns> {
+impl Columns {
+    /// The columns used, for the log: `species ← species_code, dbh ← dbh_mm (mm), …`.
+    #[must_use]
+    pub fn describe(&self) -> String {
+        self.used
+            .iter()
+            .map(|(r, n)| {
+                let unit = if *r == ColumnRole::Dbh { format!(" ({})", self.dbh_unit.name()) } else { String::new() };
+                format!("{} ← {n:?}{unit}", r.name())
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// Detects the columns of a header (names compared case-insensitively):
+/// `options.columns` first, then the aliases of each role.
+///
+/// # Errors
+/// No coordinate columns, or a `--column` naming a column the header lacks.
+pub fn detect_columns_with(header: &[&str], options: &ReadOptions) -> Result<Columns> {
     let h: Vec<String> = header.iter().map(|s| s.trim().trim_matches('"').to_lowercase()).collect();
-    let (kind, x, y) = match (find_col(&h, LON), find_col(&h, LAT), find_col(&h, X), find_col(&h, Y)) {
+    let mut chosen: BTreeMap<ColumnRole, usize> = BTreeMap::new();
+    for (role, name) in &options.columns {
+        let want = name.trim().to_lowercase();
+        let Some(i) = h.iter().position(|c| *c == want) else {
+            bail!("--column {}={name}: the header has no column {name:?}; it has {header:?}", role.name());
+        };
+        chosen.insert(*role, i);
+    }
+    let taken = |chosen: &BTreeMap<ColumnRole, usize>, i: usize| chosen.values().any(|&c| c == i);
+    for role in ColumnRole::ALL {
+        if chosen.contains_key(&role) {
+            continue;
+        }
+        if let Some(i) =
+            role.aliases().iter().find_map(|n| h.iter().position(|c| c == n)).filter(|&i| !taken(&chosen, i))
+        {
+            chosen.insert(role, i);
+        }
+    }
+    let get = |r: ColumnRole| chosen.get(&r).copied();
+    let (kind, x, y) = match (get(ColumnRole::Lon), get(ColumnRole::Lat), get(ColumnRole::X), get(ColumnRole::Y)) {
         (Some(x), Some(y), _, _) => (CoordKind::LonLat, x, y),
         (_, _, Some(x), Some(y)) => (CoordKind::Projected, x, y),
         _ => bail!(
-            "no coordinate columns: expected lon/lat (or lng/lat, longitude/latitude) or x/y (or easting/northing); the header is {header:?}"
+            "no coordinate columns: expected lon/lat (or lng/lat, longitude/latitude) or x/y (or easting/northing), \
+             or name them with --column lon=NAME --column lat=NAME (or x=, y=); the header is {header:?}"
         ),
     };
+    let dbh = get(ColumnRole::Dbh);
+    let dbh_unit = dbh.and_then(|i| DbhUnit::from_name(&h[i])).or(options.dbh_unit).unwrap_or_default();
+    let crown = get(ColumnRole::CrownDiameter).map(|i| (i, false)).or(get(ColumnRole::CrownRadius).map(|i| (i, true)));
+    let coordinate_roles: [ColumnRole; 2] =
+        if kind == CoordKind::LonLat { [ColumnRole::Lon, ColumnRole::Lat] } else { [ColumnRole::X, ColumnRole::Y] };
+    let used = ColumnRole::ALL
+        .iter()
+        .filter(|r| {
+            !matches!(r, ColumnRole::Lon | ColumnRole::Lat | ColumnRole::X | ColumnRole::Y)
+                || coordinate_roles.contains(r)
+        })
+        .filter(|r| **r != ColumnRole::CrownRadius || crown.is_some_and(|c| c.1))
+        .filter(|r| **r != ColumnRole::CrownDiameter || crown.is_some_and(|c| !c.1))
+        .filter_map(|r| get(*r).map(|i| (*r, header[i].trim().trim_matches('"').to_string())))
+        .collect();
     Ok(Columns {
         kind,
         x,
         y,
-        z: find_col(&h, Z),
-        height: find_col(&h, HEIGHT),
-        species: find_col(&h, SPECIES),
-        yaw: find_col(&h, YAW),
-        id: find_col(&h, ID),
+        z: get(ColumnRole::Z),
+        height: get(ColumnRole::Height),
+        species: get(ColumnRole::Species),
+        dbh,
+        dbh_unit,
+        crown,
+        yaw: get(ColumnRole::Yaw),
+        id: get(ColumnRole::Id),
+        used,
     })
+}
+
+/// Detects the columns of a header with the default options (tests).
+#[cfg(test)]
+pub fn detect_columns(header: &[&str]) -> Result<Columns> {
+    detect_columns_with(header, &ReadOptions::default())
 }
 
 fn parse_f64(s: &str) -> Option<f64> {
@@ -313,7 +612,7 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOption
 }
 
 /// Reads the header line (UTF-8 or Windows-1252, as the fields) and detects its columns.
-fn header_columns<R: std::io::Read>(rdr: &mut csv::Reader<R>) -> Result<Columns> {
+fn header_columns<R: std::io::Read>(rdr: &mut csv::Reader<R>, options: &ReadOptions) -> Result<Columns> {
     let mut fell_back = false;
     let header: Vec<String> = rdr
         .byte_headers()
@@ -322,7 +621,7 @@ fn header_columns<R: std::io::Read>(rdr: &mut csv::Reader<R>) -> Result<Columns>
         .map(|h| decode_field(h, Encoding::Auto, &mut fell_back).unwrap_or_default().into_owned())
         .collect();
     let refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    detect_columns(&refs)
+    detect_columns_with(&refs, options)
 }
 
 /// Streams CSV rows: each usable row goes to `f` as it is read (memory stays
@@ -337,7 +636,7 @@ pub fn stream_csv<R: std::io::Read>(
 ) -> Result<CoordKind> {
     let mut rdr =
         csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).trim(csv::Trim::All).from_reader(reader);
-    let mut cols = header_columns(&mut rdr)?;
+    let mut cols = header_columns(&mut rdr, options)?;
     if options.swap_xy {
         std::mem::swap(&mut cols.x, &mut cols.y);
     }
@@ -368,6 +667,7 @@ pub fn stream_csv<R: std::io::Read>(
         let (x, y) = (get(Some(cols.x)), get(Some(cols.y)));
         let (z, height, species, yaw, id) =
             (get(cols.z), get(cols.height), get(cols.species), get(cols.yaw), get(cols.id));
+        let (dbh, crown) = (get(cols.dbh), get(cols.crown.map(|c| c.0)));
         if utf8_error {
             report.skip("not UTF-8 (read it with --encoding latin1)", row);
             continue;
@@ -384,6 +684,11 @@ pub fn stream_csv<R: std::io::Read>(
             y,
             z: z.as_deref().and_then(number),
             height_m: height.as_deref().and_then(number).map(|h| h as f32),
+            dbh_cm: dbh.as_deref().and_then(number).map(|d| (d * cols.dbh_unit.to_cm()) as f32),
+            crown_m: crown
+                .as_deref()
+                .and_then(number)
+                .map(|c| if cols.crown.is_some_and(|c| c.1) { 2.0 * c } else { c } as f32),
             species: species.as_deref().map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
             yaw_deg: yaw.as_deref().and_then(number).map(|v| v as f32),
             id: id.as_deref().and_then(|s| s.trim().parse::<u64>().ok()),
@@ -444,7 +749,9 @@ impl PlacementSource {
                 }
                 let mut rdr =
                     csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_reader(&first_line[..]);
-                let cols = header_columns(&mut rdr).with_context(|| format!("placements {}", path.display()))?;
+                let cols =
+                    header_columns(&mut rdr, options).with_context(|| format!("placements {}", path.display()))?;
+                notes.push(format!("columns: {}", cols.describe()));
                 Ok(Self {
                     path: path.to_path_buf(),
                     delimiter,
@@ -533,6 +840,9 @@ pub(super) fn accept(mut p: Placement, kind: CoordKind, report: &mut Report) -> 
         report.missing_height += 1;
     }
     p.yaw_deg = p.yaw_deg.filter(|y| y.is_finite());
+    // The largest known stems are under 15 m across; crowns under 100 m.
+    p.dbh_cm = p.dbh_cm.filter(|d| d.is_finite() && *d > 0.0 && *d < 1500.0);
+    p.crown_m = p.crown_m.filter(|c| c.is_finite() && *c > 0.0 && *c < 100.0);
     Some(p)
 }
 

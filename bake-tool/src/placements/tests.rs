@@ -156,3 +156,56 @@ fn geojson_points_without_coordinates_are_counted_and_projected_files_understood
     assert!(e.contains("--swap-xy") && !e.contains("--input-crs"), "{e}");
     assert_eq!(read_geojson(named, &ReadOptions::default()).unwrap().kind, CoordKind::Projected);
 }
+
+#[test]
+fn column_aliases_overrides_and_units() {
+    // Every role's aliases are found, and the report names them.
+    for (header, role, unit) in [
+        (vec!["x", "y", "botanical_name", "dbh_mm"], ColumnRole::Species, Some(DbhUnit::Mm)),
+        (vec!["x", "y", "scientific_name", "diameter_cm"], ColumnRole::Species, Some(DbhUnit::Cm)),
+        (vec!["x", "y", "common_name", "DBH_in"], ColumnRole::Species, Some(DbhUnit::In)),
+        (vec!["x", "y", "spp", "bhd"], ColumnRole::Species, Some(DbhUnit::Cm)),
+        (vec!["x", "y", "species_code", "crown_radius"], ColumnRole::CrownRadius, None),
+    ] {
+        let c = detect_columns(&header).unwrap();
+        assert!(c.species.is_some(), "{header:?}");
+        assert!(c.used.iter().any(|(r, _)| *r == role), "{header:?}: {:?}", c.used);
+        if let Some(u) = unit {
+            assert_eq!((c.dbh.is_some(), c.dbh_unit), (true, u), "{header:?}");
+        }
+    }
+    let c = detect_columns(&["x", "y", "species_code", "crown_radius"]).unwrap();
+    assert_eq!(c.crown, Some((3, true)));
+    // --column wins over the aliases; a name the header lacks is an error naming it.
+    let options = ReadOptions {
+        columns: vec![(ColumnRole::Species, "Soort".into()), (ColumnRole::Dbh, "stam".into())],
+        dbh_unit: Some(DbhUnit::Mm),
+        ..Default::default()
+    };
+    let c = detect_columns_with(&["lat", "lon", "species", "soort", "stam"], &options).unwrap();
+    assert_eq!((c.species, c.dbh, c.dbh_unit), (Some(3), Some(4), DbhUnit::Mm));
+    assert!(c.describe().contains("species ← \"soort\"") && c.describe().contains("dbh ← \"stam\" (mm)"));
+    let bad = ReadOptions { columns: vec![(ColumnRole::Height, "hoogte".into())], ..Default::default() };
+    let e = detect_columns_with(&["lat", "lon"], &bad).unwrap_err().to_string();
+    assert!(e.contains("--column height=hoogte") && e.contains("lat"), "{e}");
+    assert_eq!(ColumnRole::parse_mapping("crown=kroon").unwrap(), (ColumnRole::CrownDiameter, "kroon".into()));
+    assert!(ColumnRole::parse_mapping("girth=omtrek").unwrap_err().contains("unknown role"));
+    assert!(ColumnRole::parse_mapping("dbh").unwrap_err().contains("ROLE=COLUMN"));
+}
+
+#[test]
+fn dbh_and_crowns_are_read_in_their_units_and_checked() {
+    let csv = "lat,lon,dbh_mm,crown_radius\n52.0,4.0,350,3\n52.0,4.1,-5,0\n52.0,4.2,,200\n";
+    let set = read_csv(csv.as_bytes(), b',', &ReadOptions::default()).unwrap();
+    let dbh: Vec<Option<f32>> = set.rows.iter().map(|p| p.dbh_cm).collect();
+    let crown: Vec<Option<f32>> = set.rows.iter().map(|p| p.crown_m).collect();
+    assert_eq!(dbh, vec![Some(35.0), None, None], "mm → cm; negative dropped");
+    assert_eq!(crown, vec![Some(6.0), None, None], "a radius doubled; 0 and 400 m dropped");
+    // GeoJSON properties by the same names and units.
+    let gj = br#"{"type":"FeatureCollection","features":[
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[4.0,52.0]},
+         "properties":{"botanical_name":"Acer campestre","DBH_in":10,"crown_diameter":7.5}}]}"#;
+    let set = read_geojson(gj, &ReadOptions::default()).unwrap();
+    let p = &set.rows[0];
+    assert_eq!((p.species.as_deref(), p.dbh_cm, p.crown_m), (Some("Acer campestre"), Some(25.4), Some(7.5)));
+}
