@@ -226,9 +226,11 @@ impl Viewer {
         self.events.extend(self.frame.stream.drain_events());
         if !self.placed {
             if let Some(m) = self.frame.stream.manifest() {
-                // Start over the whole scene, looking north and down.
-                let lo = DVec3::from(m.bounds.min.map(f64::from));
-                let hi = DVec3::from(m.bounds.max.map(f64::from));
+                // Start over where the trees are (the largest group of them), looking
+                // north and down.
+                let focus = m.focus();
+                let lo = DVec3::from(focus.min.map(f64::from));
+                let hi = DVec3::from(focus.max.map(f64::from));
                 let ext = ((hi - lo) * 0.5).truncate().max_element().max(20.0);
                 self.orbit = Orbit { target: (lo + hi) * 0.5, distance: ext * 1.6, heading: 0.0, pitch: -0.6 };
                 self.placed = true;

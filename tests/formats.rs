@@ -199,6 +199,7 @@ fn sample_manifest() -> Manifest {
             bounds: b,
         }],
         index: None,
+        home: None,
         shard: None,
     }
 }
@@ -419,7 +420,7 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 3.into(), "version 3");
+    manifest_error(|v| v["version"] = 4.into(), "version 4");
     manifest_error(
         |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
         "needs manifest version 2",
@@ -448,4 +449,39 @@ fn manifest_decoder_error_paths() {
     manifest_error(|v| v["species"][1]["trees"] = 3.into(), "do not match");
     manifest_error(|v| v["unexpected"] = 1.into(), "unknown field");
     manifest_error(|v| v["species"][0]["height_m"] = 1e39.into(), "species[0].height_m");
+}
+
+#[test]
+fn the_home_of_a_scene_is_its_largest_group_of_touching_tiles() {
+    use sylva::format::manifest::densest_group;
+    let tile = |x: i32, y: i32, trees: u64| TileEntry {
+        x,
+        y,
+        url: format!("tiles/{x}_{y}.tile"),
+        ids_url: format!("tiles/{x}_{y}.ids"),
+        bytes: 1,
+        trees,
+        batches: 1,
+        bounds: Bounds {
+            min: [x as f32 * 100.0, y as f32 * 100.0, 0.0],
+            max: [x as f32 * 100.0 + 90.0, y as f32 * 100.0 + 90.0, 20.0],
+        },
+    };
+    // West: three tiles touching (one only by a corner), 60 trees; east: one tile of 50.
+    let mut tiles = vec![tile(0, 0, 20), tile(1, 1, 20), tile(0, 1, 20), tile(40, 0, 50)];
+    let home = densest_group(&tiles).unwrap();
+    assert_eq!(home.trees, 60);
+    assert_eq!((home.bounds.min[0], home.bounds.max[0], home.bounds.max[1]), (0.0, 190.0, 190.0));
+    // Whatever the order.
+    tiles.reverse();
+    assert_eq!(densest_group(&tiles), Some(home));
+    // A bigger east group wins; an empty scene has none.
+    tiles.push(tile(41, 0, 20));
+    assert_eq!(densest_group(&tiles).unwrap().trees, 70);
+    assert_eq!(densest_group(&[]), None);
+    // A manifest's focus: its home, else the group of its flat list, else its bounds.
+    let mut m = sample_manifest();
+    assert_eq!(m.focus(), m.tiles[0].bounds);
+    m.tiles.clear();
+    assert_eq!(m.focus(), m.bounds);
 }

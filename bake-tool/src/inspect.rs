@@ -60,7 +60,26 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         species.push(j);
     }
     let trees = m.counts.trees.max(1) as f64;
+    // Where the trees are: the views' first target (the largest group of touching tiles).
+    let focus = m.focus();
+    let centre = [
+        m.origin_m[0] + f64::from(focus.min[0] + focus.max[0]) * 0.5,
+        m.origin_m[1] + f64::from(focus.min[1] + focus.max[1]) * 0.5,
+    ];
+    let lonlat = crate::reproject::Crs::from_epsg(m.crs.epsg)
+        .and_then(|src| crate::reproject::Reprojector::new(src, &crate::reproject::Crs::from_epsg(4326)?))
+        .and_then(|r| r.apply(centre[0], centre[1]))
+        .ok();
+    let home_trees =
+        m.home.or_else(|| sylva::format::manifest::densest_group(&tiles)).map_or(m.counts.trees, |h| h.trees);
     Ok(json!({
+        "trees_at": {
+            "bounds": {"min": focus.min, "max": focus.max},
+            "centre": centre,
+            "centre_lonlat": lonlat.map(|(lon, lat)| [lon, lat]),
+            "extent_m": [focus.max[0] - focus.min[0], focus.max[1] - focus.min[1]],
+            "trees": home_trees,
+        },
         "kind": "scene",
         "format": m.format,
         "version": m.version,
@@ -176,6 +195,27 @@ pub fn to_text(v: &Value) -> String {
                 "bounds {} .. {} (m, relative to the origin)\n",
                 f(&v["bounds"]["min"]),
                 f(&v["bounds"]["max"])
+            );
+            let at = &v["trees_at"];
+            let ll = &at["centre_lonlat"];
+            out += &format!(
+                "trees are at {} {} of them in {:.0} × {:.0} m around {:.1}, {:.1} (scene CRS){}\n",
+                if at["trees"] == v["trees_total"] { "one place:" } else { "several places; the largest group:" },
+                at["trees"],
+                at["extent_m"][0].as_f64().unwrap_or(0.0),
+                at["extent_m"][1].as_f64().unwrap_or(0.0),
+                at["centre"][0].as_f64().unwrap_or(0.0),
+                at["centre"][1].as_f64().unwrap_or(0.0),
+                match (ll[0].as_f64(), ll[1].as_f64()) {
+                    (Some(lon), Some(lat)) => format!(
+                        " = {:.5}°{} {:.5}°{}",
+                        lat.abs(),
+                        if lat >= 0.0 { "N" } else { "S" },
+                        lon.abs(),
+                        if lon >= 0.0 { "E" } else { "W" }
+                    ),
+                    _ => String::new(),
+                }
             );
             out += &format!(
                 "{} trees, {} species, {} batches, {} tiles; cell {} m, {} cells per tile side\n",

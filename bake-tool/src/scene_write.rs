@@ -52,6 +52,7 @@ pub fn finish_scene(
         tiles: tiles.len() as u64,
     };
     base.version = SCENE_VERSION;
+    base.home = sylva::format::manifest::densest_group(&tiles);
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);
         create_dir(&dir.join("index"))?;

@@ -425,3 +425,60 @@ fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
     let e = fails(&mut bake(&city_csv, &dir.join("bad"), &["--column", "girth=dbh"]));
     assert!(e.contains("unknown role") && e.contains("crown_diameter"), "{e}");
 }
+
+#[test]
+fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
+    if !model.exists() {
+        eprintln!("skipping: {} not present", model.display());
+        return;
+    }
+    let dir = tmp("districts");
+    // Two districts of Amsterdam-like street trees, about 15 km apart; the east one larger.
+    let mut csv = String::from("id,species,lat,lon,height\n");
+    for i in 0..500 {
+        let (lat0, lon0, n) = if i < 150 { (52.370, 4.760, i) } else { (52.372, 4.980, i - 150) };
+        csv += &format!(
+            "{i},Tilia,{:.6},{:.6},{}\n",
+            lat0 + f64::from(n % 20) * 0.0002,
+            lon0 + f64::from(n / 20) * 0.0003,
+            10 + i % 8
+        );
+    }
+    let path = dir.join("districts.csv");
+    std::fs::write(&path, &csv).unwrap();
+    let out = dir.join("scene");
+    run(bin()
+        .arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--placements")
+        .arg(&path)
+        .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16", "--out"])
+        .arg(&out));
+    let v = inspect_json(&out);
+    assert_eq!(v["trees_at"]["trees"], 350, "the larger district: {}", v["trees_at"]);
+    let lon = v["trees_at"]["centre_lonlat"][0].as_f64().unwrap();
+    assert!((lon - 4.99).abs() < 0.02, "centre at {lon}°E");
+    let text = String::from_utf8_lossy(&run(bin().arg("inspect").arg(&out)).stdout).into_owned();
+    assert!(text.contains("several places; the largest group: 350 of them"), "{text}");
+    // The named views aim there and draw trees; aimed at the middle of the whole
+    // extent (as before), the same view draws none.
+    use sylva::render::offscreen::{NamedView, OffscreenScene};
+    let mut off =
+        OffscreenScene::open(out.to_str().unwrap(), 320, 180, sylva::render::forest::PoolConfig::default()).unwrap();
+    off.load_view(&sylva::camera::Camera::default(), 60.0);
+    let m = off.stream.manifest().unwrap().clone();
+    for view in [NamedView::Medium, NamedView::Far, NamedView::Top] {
+        let cam = off.named_camera(view, 60.0).unwrap();
+        off.load_view(&cam, 60.0);
+        let drawn: u64 = off.render(&cam, true).instances.values().sum();
+        assert!(drawn > 100, "{view:?}: {drawn} trees drawn");
+    }
+    let mut middle = m.clone();
+    middle.home = Some(sylva::format::Home { bounds: m.bounds, trees: 0 });
+    let cam = NamedView::Medium.camera(&middle);
+    off.load_view(&cam, 60.0);
+    let drawn: u64 = off.render(&cam, true).instances.values().sum();
+    assert_eq!(drawn, 0, "the middle of the extent is empty: the test would catch a view aimed there");
+}

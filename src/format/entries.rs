@@ -56,6 +56,60 @@ pub struct IndexRef {
     pub node_tiles: u32,
 }
 
+/// Where the trees are: the largest group of touching tiles (8-neighbours)
+/// by tree count. Views aim here first, not at the middle of the whole extent,
+/// which for two districts far apart is empty.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Home {
+    /// Bounds of every tree of the group.
+    pub bounds: Bounds,
+    /// Trees in the group.
+    pub trees: u64,
+}
+
+/// The [`Home`] of a scene's tiles: the group of touching tiles holding the
+/// most trees (ties: the one with the lowest tile row, then column). `None` for
+/// no tiles. Deterministic whatever the order of `tiles`.
+#[must_use]
+pub fn densest_group(tiles: &[TileEntry]) -> Option<Home> {
+    let mut order: Vec<usize> = (0..tiles.len()).collect();
+    order.sort_by_key(|&i| (tiles[i].y, tiles[i].x));
+    let at: std::collections::HashMap<(i32, i32), usize> =
+        order.iter().map(|&i| ((tiles[i].x, tiles[i].y), i)).collect();
+    let mut group = vec![usize::MAX; tiles.len()];
+    let mut best: Option<Home> = None;
+    for &start in &order {
+        if group[start] != usize::MAX {
+            continue;
+        }
+        group[start] = start;
+        let mut stack = vec![start];
+        let mut home = Home { bounds: tiles[start].bounds, trees: 0 };
+        while let Some(i) = stack.pop() {
+            let t = &tiles[i];
+            home.trees += t.trees;
+            for k in 0..3 {
+                home.bounds.min[k] = home.bounds.min[k].min(t.bounds.min[k]);
+                home.bounds.max[k] = home.bounds.max[k].max(t.bounds.max[k]);
+            }
+            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let n = (t.x.saturating_add(dx), t.y.saturating_add(dy));
+                if let Some(&j) = at.get(&n) {
+                    if group[j] == usize::MAX {
+                        group[j] = start;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        if best.is_none_or(|b| home.trees > b.trees) {
+            best = Some(home);
+        }
+    }
+    best
+}
+
 impl IndexRef {
     /// Checks the pointer: a relative root URL, positive sizes, depth ≤ [`MAX_INDEX_DEPTH`].
     pub(crate) fn validate(&self) -> Result<(), Problem> {

@@ -7,14 +7,15 @@
 use serde::{Deserialize, Serialize};
 
 use super::entries::{check_url, validate_bounds};
-pub use super::entries::{Bounds, IndexRef, TileEntry};
+pub use super::entries::{densest_group, Bounds, Home, IndexRef, TileEntry};
 use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version, written by this build (it reads 1 and 2). Version 2
-/// added the hierarchical index, pack head sizes and shard stamps.
-pub const SCENE_VERSION: u32 = 2;
+/// Newest manifest version, written by this build (it reads 1 to 3). Version 2
+/// added the hierarchical index, pack head sizes and shard stamps; version 3
+/// where the trees are (`home`).
+pub const SCENE_VERSION: u32 = 3;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -91,6 +92,10 @@ pub struct Manifest {
     /// The hierarchical tile index (version 2), instead of the flat list.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub index: Option<IndexRef>,
+    /// Where the trees are (version 3): the largest group of touching tiles.
+    /// Views aim here first.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub home: Option<Home>,
     /// Set on one shard's output of a sharded bake (`sylva-bake bake --shard`):
     /// not a scene to view until `sylva-bake merge` has joined the shards.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -127,7 +132,7 @@ impl Manifest {
                 )));
             }
             let version = value.get("version").and_then(serde_json::Value::as_u64);
-            if !matches!(version, Some(1..=2)) {
+            if !matches!(version, Some(1..=3)) {
                 return Err(Problem::UnsupportedVersion {
                     found: version.unwrap_or(0).min(u32::MAX.into()) as u32,
                     supported: SCENE_VERSION,
@@ -138,6 +143,13 @@ impl Manifest {
             Ok(m)
         };
         inner().map_err(|p| DecodeError::new(file, p))
+    }
+
+    /// Where the views of this scene aim first: [`Self::home`], else the densest
+    /// group of a flat tile list, else the bounds of every tree.
+    #[must_use]
+    pub fn focus(&self) -> Bounds {
+        self.home.or_else(|| densest_group(&self.tiles)).map_or(self.bounds, |h| h.bounds)
     }
 
     /// Serialises to pretty JSON.
@@ -178,6 +190,12 @@ impl Manifest {
                 return Err(Problem::Invalid("a manifest with an \"index\" must have an empty \"tiles\" list".into()));
             }
             index.validate()?;
+        }
+        if let Some(h) = &self.home {
+            if self.version < 3 {
+                return Err(Problem::Invalid("\"home\" needs manifest version 3".into()));
+            }
+            validate_bounds("home.bounds", &h.bounds)?;
         }
         if let Some(s) = &self.shard {
             if s.count == 0 || s.index >= s.count {

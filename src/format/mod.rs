@@ -16,6 +16,6 @@ pub mod tile;
 
 pub use error::{DecodeError, Problem};
 pub use index::{build_index, IndexNode, IndexRef};
-pub use manifest::{Bounds, Counts, Crs, Manifest, ShardStamp, SpeciesEntry, TileEntry};
+pub use manifest::{Bounds, Counts, Crs, Home, Manifest, ShardStamp, SpeciesEntry, TileEntry};
 pub use pack::{decode_pack, encode_pack, Pack, PackMeta, Section};
 pub use tile::{decode_ids, encode_ids, GpuBatch, Instance, PackedInstance, Tile};

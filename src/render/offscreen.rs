@@ -37,8 +37,11 @@ impl NamedView {
     /// The camera for this view of `m`.
     #[must_use]
     pub fn camera(self, m: &Manifest) -> Camera {
-        let lo = DVec3::from(m.bounds.min.map(f64::from));
-        let hi = DVec3::from(m.bounds.max.map(f64::from));
+        // Where the trees are (two districts far apart: the larger), not the
+        // middle of the whole extent.
+        let focus = m.focus();
+        let lo = DVec3::from(focus.min.map(f64::from));
+        let hi = DVec3::from(focus.max.map(f64::from));
         let c = (lo + hi) * 0.5;
         let ext = ((hi - lo) * 0.5).truncate().max_element().max(10.0);
         // Ground near the centre: the lowest tree base of the tile holding it.

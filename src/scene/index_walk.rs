@@ -254,6 +254,7 @@ mod tests {
             species: Vec::new(),
             tiles: Vec::new(),
             index: Some(built.reference.clone()),
+            home: None,
             shard: None,
         };
         (m, tiles)

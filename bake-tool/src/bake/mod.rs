@@ -99,6 +99,7 @@ pub fn bake_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Result
             species,
             tiles: Vec::new(),
             index: None,
+            home: None,
             shard: input.shard.map(|(index, count)| ShardStamp { index, count }),
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
