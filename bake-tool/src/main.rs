@@ -242,10 +242,11 @@ struct BakeArgs {
     /// Rows farther than this from the median position are outliers and skipped.
     #[arg(long, default_value_t = 100.0)]
     max_extent_km: f64,
-    /// Material/mesh/node name pattern forced to leaves (repeatable).
+    /// Material/mesh/node name pattern forced to leaves (repeatable; case-insensitive,
+    /// `*` is a wildcard like --map's, otherwise a substring; '*' is every name).
     #[arg(long = "leaf-material", value_name = "PATTERN")]
     leaf_materials: Vec<String>,
-    /// Material/mesh/node name pattern forced to branches (repeatable).
+    /// Material/mesh/node name pattern forced to branches (repeatable, as --leaf-material).
     #[arg(long = "branch-material", value_name = "PATTERN")]
     branch_materials: Vec<String>,
     #[command(flatten)]

@@ -21,6 +21,7 @@ use crate::out_dir::OutDir;
 use crate::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
 use crate::reproject::{Crs, Reprojector};
 use crate::{demo, rng};
+use sylva_bake::patterns::pattern_matches;
 
 /// Tallest tree height accepted (the tallest known tree is 116 m); placement
 /// heights outside (0, this) count as missing.
@@ -515,48 +516,4 @@ fn median(v: &mut [f64]) -> f64 {
     let n = v.len();
     v.select_nth_unstable_by(n / 2, f64::total_cmp);
     v[n / 2]
-}
-
-/// Matches a species label against a `--map` pattern: case-insensitive, `*` is
-/// a wildcard, otherwise a substring.
-pub fn pattern_matches(pattern: &str, label: &str) -> bool {
-    let p = pattern.to_lowercase();
-    let l = label.to_lowercase();
-    if !p.contains('*') {
-        return l.contains(&p);
-    }
-    // Glob with '*' only.
-    let parts: Vec<&str> = p.split('*').collect();
-    let mut rest = l.as_str();
-    for (i, part) in parts.iter().enumerate() {
-        if part.is_empty() {
-            continue;
-        }
-        if i == 0 {
-            if !rest.starts_with(part) {
-                return false;
-            }
-            rest = &rest[part.len()..];
-        } else if let Some(at) = rest.find(part) {
-            rest = &rest[at + part.len()..];
-        } else {
-            return false;
-        }
-    }
-    parts.last().is_none_or(|last| last.is_empty() || l.ends_with(last))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::pattern_matches;
-
-    #[test]
-    fn patterns() {
-        assert!(pattern_matches("quercus*", "Quercus robur"));
-        assert!(!pattern_matches("quercus*", "Acer quercus"));
-        assert!(pattern_matches("*robur", "Quercus robur"));
-        assert!(pattern_matches("oak", "Red Oak"));
-        assert!(pattern_matches("q*r", "quercus robur"));
-        assert!(!pattern_matches("pinus*", "Quercus"));
-    }
 }

@@ -90,9 +90,10 @@ impl ImportedModel {
 /// How leaves and branches are told apart.
 #[derive(Debug, Clone, Default)]
 pub struct Classifier {
-    /// Substrings (case-insensitive) of material/mesh/node names forcing "leaf".
+    /// Patterns of material/mesh/node names forcing "leaf" (case-insensitive;
+    /// `*` a wildcard, else a substring: [`crate::patterns::pattern_matches`]).
     pub leaf_patterns: Vec<String>,
-    /// Substrings forcing "branch".
+    /// Patterns forcing "branch".
     pub branch_patterns: Vec<String>,
 }
 
@@ -104,7 +105,7 @@ impl Classifier {
     /// (MASK and BLEND are leaf cards; OPAQUE is wood).
     pub fn classify(&self, names: &[&str], alpha_mode: gltf::material::AlphaMode) -> MaterialKind {
         let lower: Vec<String> = names.iter().map(|n| n.to_lowercase()).collect();
-        let any = |pats: &[String]| pats.iter().any(|p| lower.iter().any(|n| n.contains(&p.to_lowercase())));
+        let any = |pats: &[String]| pats.iter().any(|p| names.iter().any(|n| crate::patterns::pattern_matches(p, n)));
         if any(&self.leaf_patterns) {
             return MaterialKind::Leaf;
         }

@@ -538,3 +538,16 @@ fn random_graphs_and_accessors_import_whole_or_fail_clearly() {
     // Both outcomes occur, or the generator tests nothing.
     assert!(ok > 20 && failed > 20, "{ok} imported, {failed} refused");
 }
+
+#[test]
+fn leaf_and_branch_patterns_are_globs_like_map() {
+    use gltf::material::AlphaMode;
+    let c = Classifier { leaf_patterns: vec!["*".into()], branch_patterns: Vec::new() };
+    assert_eq!(c.classify(&["Bark_Mat", "trunk"], AlphaMode::Opaque), MaterialKind::Leaf, "'*' matches every name");
+    let c = Classifier { leaf_patterns: vec!["mat_0*".into()], branch_patterns: vec!["*_1".into()] };
+    assert_eq!(c.classify(&["Mat_03"], AlphaMode::Opaque), MaterialKind::Leaf);
+    assert_eq!(c.classify(&["mesh_1"], AlphaMode::Mask), MaterialKind::Branch);
+    // Without '*' a substring, as before.
+    let c = Classifier { leaf_patterns: vec!["nadel".into()], branch_patterns: Vec::new() };
+    assert_eq!(c.classify(&["Fichte_Nadeln"], AlphaMode::Opaque), MaterialKind::Leaf);
+}
