@@ -68,6 +68,14 @@ bench-bake: release
 	  --placements target/bench/placements-1m.csv --map spruce=pine --default-model oak \
 	  --out target/bench/bake-1m 2>&1 | grep -E "wrote|placements|Elapsed|Maximum resident"
 	target/release/sylva-bake inspect target/bench/bake-1m
+	@# The same rows as an inventory comes: a species-code column, DBH in mm, no
+	@# height (heights from DBH per genus), ids in a "tag" column.
+	awk -F, 'NR==1 {print "tag,species_code,lat,lng,z,dbh_mm"; next} {printf "%s,%s,%s,%s,%s,%d\n", $$1, $$2, $$3, $$4, $$5, $$6 * 30}' \
+	  target/bench/placements-1m.csv > target/bench/inventory-1m.csv
+	/usr/bin/time -v target/release/sylva-bake bake \
+	  --model oak=$(SHARED)/models/eztree_oak_medium.glb --model pine=$(SHARED)/models/eztree_pine_medium.glb \
+	  --placements target/bench/inventory-1m.csv --column id=tag --map spruce=pine --default-model oak \
+	  --out target/bench/bake-inventory-1m 2>&1 | grep -E "wrote|placements|columns|species summary|^  [a-z]+ \||Elapsed|Maximum resident"
 
 # Renderer benchmarks (docs/BENCHMARKS.md): bakes demo scenes of 10k, 100k and 1M
 # trees once, then measures them side by side.

@@ -212,6 +212,18 @@ pub fn place_trees(
     };
     drop(projected);
     let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
+    // The equations of each species label, looked up once per label.
+    let equations_of: std::cell::RefCell<std::collections::HashMap<String, &crate::allometry::Equations>> =
+        std::cell::RefCell::default();
+    let equations_for = |label: &str| {
+        let mut cache = equations_of.borrow_mut();
+        if let Some(e) = cache.get(label) {
+            return *e;
+        }
+        let e = opts.allometry.for_label(label);
+        cache.insert(label.to_string(), e);
+        e
+    };
     // A usable row as a tree (and what it said), or why not.
     let to_tree = |p: &Placement| -> Result<(SceneTree, Facts), &'static str> {
         let Ok((x, y)) = reproject.apply(p.x, p.y) else { return Err("cannot be projected to the scene CRS") };
@@ -222,7 +234,7 @@ pub fn place_trees(
         let Some(idx) = species.of(label) else { return Err("unmapped") };
         // (The importer refuses models without height.)
         let model_h = species.heights[idx];
-        let equations = (p.dbh_cm.is_some() || p.crown_m.is_some()).then(|| opts.allometry.for_label(label));
+        let equations = (p.dbh_cm.is_some() || p.crown_m.is_some()).then(|| equations_for(label));
         let from_dbh = p.dbh_cm.zip(equations).map(|(d, e)| e.height.metres(f64::from(d)) as f32);
         let (target, from) = match (p.height_m, from_dbh.filter(|h| *h > 0.0 && *h < MAX_TREE_HEIGHT_M), default_height)
         {
@@ -392,14 +404,18 @@ fn tree_pass(
     let mut summary: BTreeMap<String, SpeciesSummary> = BTreeMap::new();
     let mut note = |p: &Placement, t: &SceneTree, f: &Facts| {
         let label = p.species.as_deref().unwrap_or("(no species)");
-        let s = summary.entry(label.to_string()).or_insert(SpeciesSummary {
-            model: t.species as usize,
-            trees: 0,
-            height: (f.height_m, f.height_m),
-            dbh: None,
-            crown: None,
-            from_dbh: 0,
-        });
+        if !summary.contains_key(label) {
+            let first = SpeciesSummary {
+                model: t.species as usize,
+                trees: 0,
+                height: (f.height_m, f.height_m),
+                dbh: None,
+                crown: None,
+                from_dbh: 0,
+            };
+            summary.insert(label.to_string(), first);
+        }
+        let Some(s) = summary.get_mut(label) else { return };
         s.trees += 1;
         s.height = widen(Some(s.height), f.height_m);
         if let Some(d) = f.dbh_cm {

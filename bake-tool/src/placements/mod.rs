@@ -93,7 +93,10 @@ impl Report {
             out.push(format!("skipped {n} rows: {reason} (e.g. rows {rows:?})"));
         }
         if self.missing_height > 0 {
-            out.push(format!("{} rows have no height: they get the default height", self.missing_height));
+            out.push(format!(
+                "{} rows have no height: they get one from their DBH, else the default height",
+                self.missing_height
+            ));
         }
         if self.not_utf8 > 0 {
             out.push(format!(
