@@ -234,6 +234,7 @@ fn make_tree_scaled(style: &SpeciesStyle, seed: u64, leaf_scale: f32) -> Importe
                     alpha_cutoff: 0.0,
                     double_sided: false,
                     texture: Some(bark_texture(style, seed)),
+                    blended: false,
                 },
                 ImportedMaterial {
                     name: format!("{}_leaves", style.name),
@@ -242,6 +243,7 @@ fn make_tree_scaled(style: &SpeciesStyle, seed: u64, leaf_scale: f32) -> Importe
                     alpha_cutoff: 0.5,
                     double_sided: true,
                     texture: Some(leaf_texture(style, seed + 1)),
+                    blended: false,
                 },
             ],
             ..Default::default()

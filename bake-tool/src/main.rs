@@ -536,6 +536,9 @@ fn import_models(args: &BakeArgs) -> Result<Vec<(String, gltf_import::ImportedMo
             model.materials.len(),
             model.height()
         ));
+        for note in &model.notes {
+            log(&format!("model {name}: {note}"));
+        }
         species.push((name.to_string(), model));
     }
     Ok(species)

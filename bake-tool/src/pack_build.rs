@@ -338,8 +338,12 @@ pub fn simplify_model(model: &ImportedModel) -> ImportedModel {
         |t: &[u32; 3]| model.materials[usize::from(model.vertices[t[0] as usize].material)].kind == MaterialKind::Leaf;
     let branch_idx: Vec<u32> = model.triangles.iter().filter(|t| !is_leaf(t)).flatten().copied().collect();
     let positions: Vec<[f32; 3]> = model.vertices.iter().map(|v| v.position.to_array()).collect();
-    let mut out =
-        ImportedModel { materials: model.materials.clone(), vertices: model.vertices.clone(), triangles: Vec::new() };
+    let mut out = ImportedModel {
+        materials: model.materials.clone(),
+        vertices: model.vertices.clone(),
+        triangles: Vec::new(),
+        notes: Vec::new(),
+    };
     if !branch_idx.is_empty() {
         let adapter =
             meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0).expect("12-byte positions");

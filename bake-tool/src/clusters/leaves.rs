@@ -213,6 +213,7 @@ mod tests {
             alpha_cutoff: 0.0,
             double_sided: true,
             texture: None,
+            blended: false,
         }
     }
 

@@ -101,11 +101,16 @@ pub fn check_type(accessor: &gltf::Accessor<'_>, semantic: Option<&gltf::Semanti
     use gltf::accessor::{DataType as D, Dimensions as N};
     let (dims, data) = (accessor.dimensions(), accessor.data_type());
     let normalized_or_float = matches!(data, D::F32) || (accessor.normalized() && matches!(data, D::U8 | D::U16));
+    // KHR_mesh_quantization: 8- and 16-bit positions and texture coordinates
+    // (normalized or not), normalized signed normals.
+    let quantized = matches!(data, D::F32 | D::I8 | D::U8 | D::I16 | D::U16);
+    let signed_normalized = data == D::F32 || (accessor.normalized() && matches!(data, D::I8 | D::I16));
     let ok = match semantic {
         None => dims == N::Scalar && matches!(data, D::U8 | D::U16 | D::U32),
-        Some(gltf::Semantic::Positions | gltf::Semantic::Normals) => dims == N::Vec3 && data == D::F32,
-        Some(gltf::Semantic::Tangents) => dims == N::Vec4 && data == D::F32,
-        Some(gltf::Semantic::TexCoords(_)) => dims == N::Vec2 && normalized_or_float,
+        Some(gltf::Semantic::Positions) => dims == N::Vec3 && quantized,
+        Some(gltf::Semantic::Normals) => dims == N::Vec3 && signed_normalized,
+        Some(gltf::Semantic::Tangents) => dims == N::Vec4 && signed_normalized,
+        Some(gltf::Semantic::TexCoords(_)) => dims == N::Vec2 && quantized,
         Some(gltf::Semantic::Colors(_)) => matches!(dims, N::Vec3 | N::Vec4) && normalized_or_float,
         // Joints, weights and custom attributes are not read.
         Some(_) => true,
@@ -114,4 +119,36 @@ pub fn check_type(accessor: &gltf::Accessor<'_>, semantic: Option<&gltf::Semanti
         bail!("accessor {} ({role}) is {dims:?} of {data:?}, which glTF does not allow there", accessor.index());
     }
     Ok(())
+}
+
+/// Reads an attribute accessor of `N` components as floats, whatever its
+/// component type (`KHR_mesh_quantization`: 8- and 16-bit integers, normalized
+/// to [0, 1] / [−1, 1] when the accessor says so, otherwise their values).
+/// `None` for index-only types (u32). Stride and sparse values are the gltf
+/// crate's; [`check`] has bounded them.
+pub fn read_floats<const N: usize>(accessor: &gltf::Accessor<'_>, buffers: &[Vec<u8>]) -> Option<Vec<[f32; N]>>
+where
+    [f32; N]: gltf::accessor::Item,
+    [i8; N]: gltf::accessor::Item,
+    [u8; N]: gltf::accessor::Item,
+    [i16; N]: gltf::accessor::Item,
+    [u16; N]: gltf::accessor::Item,
+{
+    use gltf::accessor::{DataType as D, Iter};
+    let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(Vec::as_slice);
+    let normalized = accessor.normalized();
+    // glTF 2.0 §3.11: c / max, clamped at −1 for signed types.
+    let scaled = |c: f32, max: f32| if normalized { (c / max).max(-1.0) } else { c };
+    Some(match accessor.data_type() {
+        D::F32 => Iter::<[f32; N]>::new(accessor.clone(), get)?.collect(),
+        D::I8 => Iter::<[i8; N]>::new(accessor.clone(), get)?.map(|v| v.map(|c| scaled(f32::from(c), 127.0))).collect(),
+        D::U8 => Iter::<[u8; N]>::new(accessor.clone(), get)?.map(|v| v.map(|c| scaled(f32::from(c), 255.0))).collect(),
+        D::I16 => {
+            Iter::<[i16; N]>::new(accessor.clone(), get)?.map(|v| v.map(|c| scaled(f32::from(c), 32767.0))).collect()
+        }
+        D::U16 => {
+            Iter::<[u16; N]>::new(accessor.clone(), get)?.map(|v| v.map(|c| scaled(f32::from(c), 65535.0))).collect()
+        }
+        D::U32 => return None,
+    })
 }

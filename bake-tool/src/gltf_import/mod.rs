@@ -15,6 +15,7 @@ use glam::{Mat4, Vec2, Vec3};
 use sylva::format::pack::MaterialKind;
 
 mod accessors;
+mod extensions;
 mod graph;
 mod sources;
 
@@ -33,6 +34,8 @@ pub struct ImportedMaterial {
     pub double_sided: bool,
     /// Base colour texture (sRGB RGBA8), if any.
     pub texture: Option<image::RgbaImage>,
+    /// The glTF material was alpha-blended (drawn alpha-tested at `alpha_cutoff`).
+    pub blended: bool,
 }
 
 /// One imported vertex (Z up, model units).
@@ -59,6 +62,9 @@ pub struct ImportedModel {
     pub vertices: Vec<ImportedVertex>,
     /// Triangles (indices into `vertices`).
     pub triangles: Vec<[u32; 3]>,
+    /// What the import changed or left out, for the bake's log (line and point
+    /// primitives skipped, blended materials cut out, instances expanded).
+    pub notes: Vec<String>,
 }
 
 impl ImportedModel {
@@ -177,8 +183,17 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
             bail!("not a valid GLB file: its header declares {declared} bytes, less than the header itself");
         }
     }
-    check_position_indices(bytes)?;
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
+    let raw = raw_json(bytes)?;
+    check_position_indices(&raw)?;
+    extensions::check(&raw)?;
+    // The extensions handled here are taken out of `extensionsRequired`, which the
+    // gltf crate refuses otherwise; then it validates the rest as always.
+    let parsed =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
+    let mut json = parsed.document.into_json();
+    json.extensions_required.retain(|e| !extensions::HANDLED.contains(&e.as_str()));
+    let document = gltf::Document::from_json(json).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
+    let gltf = gltf::Gltf { document, blob: parsed.blob };
     let buffers = sources::load_buffers(&gltf.document, gltf.blob.as_deref(), base)?;
     let doc = &gltf.document;
     let roots = graph::roots(doc);
@@ -188,6 +203,11 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     let mut texture_bytes = 0u64;
     // Materials are created on first use, with index `materials.len()` for the default one.
     let mut material_slot: Vec<Option<u16>> = vec![None; doc.materials().len() + 1];
+    let uv_sets: Vec<extensions::UvSet> = (0..=doc.materials().len())
+        .map(|i| extensions::uv_set(&raw, (i < doc.materials().len()).then_some(i)))
+        .collect();
+    let mut skipped_modes = std::collections::BTreeMap::<String, usize>::new();
+    let mut instanced = 0usize;
     let nodes: Vec<gltf::Node<'_>> = doc.nodes().collect();
     let mut stack: Vec<(usize, Mat4, Vec<String>)> =
         roots.into_iter().map(|n| (n, Mat4::IDENTITY, Vec::new())).collect();
@@ -208,8 +228,19 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
             if let Some(n) = mesh.name() {
                 mesh_names.push(n.to_string());
             }
+            // EXT_mesh_gpu_instancing: the mesh once per instance row.
+            let instances = match extensions::instancing(&raw, index) {
+                Some(attrs) => {
+                    let list = instance_transforms(doc, &buffers, attrs, index)?;
+                    instanced += list.len();
+                    list
+                }
+                None => vec![Mat4::IDENTITY],
+            };
             for prim in mesh.primitives() {
-                if prim.mode() != gltf::mesh::Mode::Triangles {
+                use gltf::mesh::Mode;
+                if !matches!(prim.mode(), Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+                    *skipped_modes.entry(format!("{:?}", prim.mode())).or_default() += 1;
                     continue;
                 }
                 let mat = prim.material();
@@ -234,13 +265,28 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
                     }
                 };
                 let what = format!("mesh {:?} primitive {}", mesh.name().unwrap_or("?"), prim.index());
-                append_primitive(&mut model, &prim, &buffers, world, material, &what)
-                    .with_context(|| format!("{what} of {}", graph::describe(doc, index)))?;
+                let uv = uv_sets[slot_index];
+                for instance in &instances {
+                    append_primitive(&mut model, &prim, &buffers, world * *instance, material, uv, &what)
+                        .with_context(|| format!("{what} of {}", graph::describe(doc, index)))?;
+                }
             }
         }
         for child in node.children() {
             stack.push((child.index(), world, names.clone()));
         }
+    }
+    for (mode, n) in &skipped_modes {
+        model.notes.push(format!("{n} primitives drawn as {mode} (not triangles) were left out"));
+    }
+    if instanced > 0 {
+        model.notes.push(format!("{instanced} mesh instances (EXT_mesh_gpu_instancing) expanded"));
+    }
+    for m in model.materials.iter().filter(|m| m.blended) {
+        model.notes.push(format!(
+            "material {:?} is alpha-blended: drawn as a cut-out at alpha {} (no sorting in a forest)",
+            m.name, m.alpha_cutoff
+        ));
     }
     if model.triangles.is_empty() {
         bail!("the model has no triangle meshes");
@@ -253,19 +299,64 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     Ok(model)
 }
 
+/// The instance transforms of node `node`'s `EXT_mesh_gpu_instancing`
+/// (TRANSLATION, ROTATION, SCALE accessors; quantised rows allowed), checked
+/// like every accessor and bounded like node reuse.
+fn instance_transforms(
+    doc: &gltf::Document,
+    buffers: &[Vec<u8>],
+    [t, r, sc]: [Option<usize>; 3],
+    node: usize,
+) -> Result<Vec<Mat4>> {
+    let what = |k: &str| format!("{k} of EXT_mesh_gpu_instancing of node {node}");
+    let accessor = |i: Option<usize>, k: &str| -> Result<Option<gltf::Accessor<'_>>> {
+        let Some(i) = i else { return Ok(None) };
+        let a = doc.accessors().nth(i).ok_or_else(|| anyhow!("{}: accessor {i} does not exist", what(k)))?;
+        accessors::check(&a, buffers, &what(k))?;
+        Ok(Some(a))
+    };
+    let (ta, ra, sa) = (accessor(t, "TRANSLATION")?, accessor(r, "ROTATION")?, accessor(sc, "SCALE")?);
+    let count = [&ta, &ra, &sa].iter().filter_map(|a| a.as_ref().map(gltf::Accessor::count)).max().unwrap_or(0);
+    if count == 0 {
+        bail!("{}: no TRANSLATION, ROTATION or SCALE accessor", what("attributes"));
+    }
+    if count as u64 > graph::MAX_NODE_INSTANCES {
+        bail!(
+            "node {node} instances its mesh {count} times, more than {} (a tree has far fewer)",
+            graph::MAX_NODE_INSTANCES
+        );
+    }
+    let read3 = |a: &Option<gltf::Accessor<'_>>, k: &str| -> Result<Vec<[f32; 3]>> {
+        a.as_ref().map_or(Ok(Vec::new()), |a| {
+            accessors::read_floats::<3>(a, buffers).ok_or_else(|| anyhow!("{}: unreadable", what(k)))
+        })
+    };
+    let rotations = match &ra {
+        Some(a) => {
+            accessors::read_floats::<4>(a, buffers).ok_or_else(|| anyhow!("{}: unreadable", what("ROTATION")))?
+        }
+        None => Vec::new(),
+    };
+    let (translations, scales) = (read3(&ta, "TRANSLATION")?, read3(&sa, "SCALE")?);
+    Ok(extensions::instance_matrices(&translations, &rotations, &scales, count))
+}
+
 /// gltf-json 1.4 reads a primitive's POSITION accessor by its index before it
 /// has checked the index (a panic on hostile input, found by the import_gltf
 /// fuzz target): the indices are checked here first.
-fn check_position_indices(bytes: &[u8]) -> Result<()> {
+/// The file's JSON as a value (GLB: its JSON chunk), for what the gltf crate
+/// does not expose; `Null` when it does not parse (the gltf crate then says why).
+fn raw_json(bytes: &[u8]) -> Result<serde_json::Value> {
     let json = if bytes.starts_with(b"glTF") {
         gltf::Glb::from_slice(bytes).map_err(|e| anyhow!("not a valid GLB file: {e}"))?.json
     } else {
         std::borrow::Cow::Borrowed(bytes)
     };
     // Lossy: the gltf crate skips unknown keys without checking their UTF-8.
-    let Ok(root) = serde_json::from_str::<serde_json::Value>(&String::from_utf8_lossy(&json)) else {
-        return Ok(()); // The gltf crate says what is wrong with it.
-    };
+    Ok(serde_json::from_str(&String::from_utf8_lossy(&json)).unwrap_or(serde_json::Value::Null))
+}
+
+fn check_position_indices(root: &serde_json::Value) -> Result<()> {
     let accessors = root.get("accessors").and_then(|a| a.as_array()).map_or(0, Vec::len) as u64;
     let meshes = root.get("meshes").and_then(|m| m.as_array()).map(Vec::as_slice).unwrap_or_default();
     for (m, mesh) in meshes.iter().enumerate() {
@@ -348,6 +439,7 @@ fn import_material(
         alpha_cutoff,
         double_sided: mat.double_sided(),
         texture,
+        blended: mat.alpha_mode() == gltf::material::AlphaMode::Blend,
     })
 }
 
@@ -390,6 +482,7 @@ fn append_primitive(
     buffers: &[Vec<u8>],
     world: Mat4,
     material: u16,
+    uv_set: extensions::UvSet,
     what: &str,
 ) -> Result<()> {
     // Every accessor this primitive reads, checked before the reader sees it.
@@ -416,7 +509,8 @@ fn append_primitive(
         }
     }
     let index_count = prim.indices().map_or(n, |a| a.count());
-    if !index_count.is_multiple_of(3) {
+    let mode = prim.mode();
+    if mode == gltf::mesh::Mode::Triangles && !index_count.is_multiple_of(3) {
         bail!("{index_count} indices are no whole number of triangles");
     }
     if model.vertices.len().saturating_add(n) > MAX_VERTICES || model.triangles.len() + index_count / 3 > MAX_TRIANGLES
@@ -427,13 +521,37 @@ fn append_primitive(
         );
     }
     let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-    let positions: Vec<[f32; 3]> = reader.read_positions().ok_or_else(|| anyhow!("no POSITION attribute"))?.collect();
-    let normals: Option<Vec<[f32; 3]>> = reader.read_normals().map(Iterator::collect);
-    let uvs: Option<Vec<[f32; 2]>> = reader.read_tex_coords(0).map(|t| t.into_f32().collect());
+    // Positions, normals and texture coordinates may be quantised (KHR_mesh_quantization).
+    let positions: Vec<[f32; 3]> =
+        accessors::read_floats(&position_accessor, buffers).ok_or_else(|| anyhow!("no POSITION attribute"))?;
+    let normals: Option<Vec<[f32; 3]>> =
+        prim.get(&gltf::Semantic::Normals).and_then(|a| accessors::read_floats(&a, buffers));
+    // The set the base colour texture reads (texCoord / KHR_texture_transform), transformed.
+    let uvs: Option<Vec<[f32; 2]>> = prim
+        .get(&gltf::Semantic::TexCoords(uv_set.set))
+        .and_then(|a| accessors::read_floats::<2>(&a, buffers))
+        .map(|uvs| uvs.into_iter().map(|uv| uv_set.apply(uv)).collect());
     let colors: Option<Vec<[f32; 4]>> = reader.read_colors(0).map(|c| c.into_rgba_f32().collect());
-    let indices: Vec<u32> = match reader.read_indices() {
+    let strip: Vec<u32> = match reader.read_indices() {
         Some(i) => i.into_u32().collect(),
         None => (0..n as u32).collect(),
+    };
+    let strip_len = strip.len();
+    // Strips and fans as triangle lists (glTF 2.0 §3.7.2.1), windings kept.
+    let indices: Vec<u32> = match mode {
+        gltf::mesh::Mode::TriangleStrip => (0..strip.len().saturating_sub(2))
+            .flat_map(|i| {
+                if i % 2 == 0 {
+                    [strip[i], strip[i + 1], strip[i + 2]]
+                } else {
+                    [strip[i + 1], strip[i], strip[i + 2]]
+                }
+            })
+            .collect(),
+        gltf::mesh::Mode::TriangleFan => {
+            (1..strip.len().saturating_sub(1)).flat_map(|i| [strip[0], strip[i], strip[i + 1]]).collect()
+        }
+        _ => strip,
     };
     // The checks above make short reads impossible; a reader that still stops
     // early must not bake part of a model silently.
@@ -445,7 +563,7 @@ fn append_primitive(
         }
     };
     short(positions.len(), n, "positions")?;
-    short(indices.len(), index_count, "indices")?;
+    short(strip_len, index_count, "indices")?;
     for (got, name) in [
         (normals.as_ref().map(Vec::len), "normals"),
         (uvs.as_ref().map(Vec::len), "texture coordinates"),

@@ -551,3 +551,217 @@ fn leaf_and_branch_patterns_are_globs_like_map() {
     let c = Classifier { leaf_patterns: vec!["nadel".into()], branch_patterns: Vec::new() };
     assert_eq!(c.classify(&["Fichte_Nadeln"], AlphaMode::Opaque), MaterialKind::Leaf);
 }
+
+/// A one-material model as optimisers write it: `positions` (f32 unless
+/// `quantized`), `uvs` in TEXCOORD_0 and `uvs1` in TEXCOORD_1, `indices` drawn
+/// with `mode`; `extra` is merged into the root JSON (extensions, instancing).
+fn optimised_model(
+    positions: &[[f32; 3]],
+    uvs: &[[f32; 2]],
+    indices: &[u16],
+    mode: u32,
+    quantized: bool,
+    extra: serde_json::Value,
+) -> (serde_json::Value, Vec<u8>) {
+    let mut bin = Vec::new();
+    let pos_at = bin.len();
+    for p in positions {
+        for v in p {
+            if quantized {
+                bin.extend_from_slice(&(*v as i16).to_le_bytes());
+            } else {
+                bin.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        if quantized {
+            bin.extend_from_slice(&[0, 0]); // 4-byte aligned rows
+        }
+    }
+    let uv_at = bin.len();
+    for uv in uvs {
+        for v in uv {
+            bin.extend_from_slice(&((v * 65535.0) as u16).to_le_bytes());
+        }
+    }
+    let uv1_at = bin.len();
+    for uv in uvs {
+        for v in uv {
+            bin.extend_from_slice(&(v * 0.5).to_le_bytes());
+        }
+    }
+    let idx_at = bin.len();
+    for i in indices {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let tail = bin.len();
+    let n = positions.len();
+    let mut root = json!({
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": tail}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": pos_at, "byteLength": uv_at - pos_at, "byteStride": if quantized { 8 } else { 12 }},
+            {"buffer": 0, "byteOffset": uv_at, "byteLength": uv1_at - uv_at},
+            {"buffer": 0, "byteOffset": uv1_at, "byteLength": idx_at - uv1_at},
+            {"buffer": 0, "byteOffset": idx_at, "byteLength": indices.len() * 2}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": if quantized { 5122 } else { 5126 }, "count": n, "type": "VEC3",
+             "min": [-1.0, 0.0, 0.0], "max": [1.0, 4.0, 0.0]},
+            {"bufferView": 1, "componentType": 5123, "normalized": true, "count": n, "type": "VEC2"},
+            {"bufferView": 2, "componentType": 5126, "count": n, "type": "VEC2"},
+            {"bufferView": 3, "componentType": 5123, "count": indices.len(), "type": "SCALAR"}
+        ],
+        "materials": [{"name": "leaves", "alphaMode": "MASK",
+                        "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.6, 0.2, 1.0]}}],
+        "meshes": [{"name": "tree", "primitives": [
+            {"attributes": {"POSITION": 0, "TEXCOORD_0": 1, "TEXCOORD_1": 2}, "indices": 3, "material": 0, "mode": mode}]}],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+        "scene": 0
+    });
+    merge(&mut root, extra);
+    (root, bin)
+}
+
+fn merge(a: &mut serde_json::Value, b: serde_json::Value) {
+    match (a, b) {
+        (serde_json::Value::Object(a), serde_json::Value::Object(b)) => {
+            for (k, v) in b {
+                merge(a.entry(k).or_insert(serde_json::Value::Null), v);
+            }
+        }
+        (a, b) => *a = b,
+    }
+}
+
+fn import_glb(root: &serde_json::Value, bin: &[u8]) -> Result<ImportedModel> {
+    import_slice(&glb(root, bin), None, &Classifier::default())
+}
+
+const QUAD: [[f32; 3]; 4] = [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 4.0, 0.0], [1.0, 4.0, 0.0]];
+const QUAD_UV: [[f32; 2]; 4] = [[0.0, 1.0], [1.0, 1.0], [0.0, 0.0], [1.0, 0.0]];
+
+#[test]
+fn strips_and_fans_become_triangles_and_lines_are_reported() {
+    // A strip of 4 vertices: 2 triangles, the second with its winding restored.
+    let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 3], 5, false, json!({}));
+    let m = import_glb(&root, &bin).unwrap();
+    assert_eq!(m.triangles.len(), 2);
+    let normal = |t: [u32; 3]| {
+        let p = t.map(|i| m.vertices[i as usize].position);
+        (p[1] - p[0]).cross(p[2] - p[0]).normalize()
+    };
+    assert!(normal(m.triangles[0]).dot(normal(m.triangles[1])) > 0.99, "both triangles face the same way");
+    // A fan of 5 vertices: 3 triangles around vertex 0.
+    let fan = [[0.0, 2.0, 0.0], [1.0, 0.0, 0.0], [1.0, 4.0, 0.0], [-1.0, 4.0, 0.0], [-1.0, 0.0, 0.0]];
+    let (root, bin) = optimised_model(&fan, &[[0.5, 0.5]; 5], &[0, 1, 2, 3, 4], 6, false, json!({}));
+    let m = import_glb(&root, &bin).unwrap();
+    assert_eq!(m.triangles.len(), 3);
+    assert!(m.triangles.iter().all(|t| t[0] == 0));
+    // Lines next to triangles: left out, and said.
+    let (mut root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, json!({}));
+    let prim = root["meshes"][0]["primitives"][0].clone();
+    let mut line = prim.clone();
+    line["mode"] = 1.into();
+    root["meshes"][0]["primitives"] = json!([prim, line]);
+    let m = import_glb(&root, &bin).unwrap();
+    assert_eq!(m.triangles.len(), 2);
+    assert!(m.notes.iter().any(|n| n.contains("1 primitives drawn as Lines")), "{:?}", m.notes);
+}
+
+#[test]
+fn quantized_texture_transformed_and_instanced_models_as_optimisers_write_them() {
+    // KHR_mesh_quantization: i16 positions (not normalized) and u16 normalized UVs.
+    let ext = json!({"extensionsUsed": ["KHR_mesh_quantization"], "extensionsRequired": ["KHR_mesh_quantization"]});
+    let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, true, ext);
+    let m = import_glb(&root, &bin).unwrap();
+    assert_eq!(m.triangles.len(), 2);
+    let (lo, hi) = m.bounds();
+    assert!((hi.z - lo.z - 4.0).abs() < 1e-4 && (hi.x - lo.x - 2.0).abs() < 1e-4, "{lo} {hi}");
+    let mut uvs: Vec<[f32; 2]> = m.vertices.iter().map(|v| v.uv.to_array()).collect();
+    uvs.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    assert_eq!(uvs, vec![[0.0, 0.0], [0.0, 1.0], [1.0, 0.0], [1.0, 1.0]]);
+    // KHR_texture_transform (scale 2, offset 0.5) on texCoord 1 (which holds uv / 2).
+    let ext = json!({
+        "extensionsUsed": ["KHR_texture_transform"], "extensionsRequired": ["KHR_texture_transform"],
+        "materials": [{"name": "leaves", "alphaMode": "MASK", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "texCoord": 1,
+            "extensions": {"KHR_texture_transform": {"offset": [0.5, 0.25], "scale": [2.0, 2.0]}}}}}],
+        "textures": [{"source": 0}],
+        "images": [{"bufferView": 4, "mimeType": "image/png"}]
+    });
+    let (mut root, mut bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, ext);
+    let png = leaf_png();
+    let at = bin.len();
+    bin.extend_from_slice(&png);
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    root["buffers"][0]["byteLength"] = bin.len().into();
+    root["bufferViews"].as_array_mut().unwrap().push(json!({"buffer": 0, "byteOffset": at, "byteLength": png.len()}));
+    let m = import_glb(&root, &bin).unwrap();
+    let got: Vec<[f32; 2]> = m.vertices.iter().map(|v| v.uv.to_array()).collect();
+    for (g, src) in got.iter().zip(QUAD_UV) {
+        // texCoord 1 is uv / 2; × 2 + offset.
+        assert!((g[0] - (src[0] + 0.5)).abs() < 1e-5 && (g[1] - (src[1] + 0.25)).abs() < 1e-5, "{g:?} from {src:?}");
+    }
+    assert!(m.materials[0].texture.is_some());
+    // EXT_mesh_gpu_instancing: 125 leaf cards from one mesh (what gltfpack -mi writes).
+    let mut bin2 = Vec::new();
+    for i in 0..125 {
+        for v in [(i % 5) as f32 * 3.0, (i / 25) as f32 * 5.0, ((i / 5) % 5) as f32 * 3.0] {
+            bin2.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let (mut root, mut bin) = optimised_model(
+        &QUAD,
+        &QUAD_UV,
+        &[0, 1, 2, 1, 3, 2],
+        4,
+        false,
+        json!({
+            "extensionsUsed": ["EXT_mesh_gpu_instancing"], "extensionsRequired": ["EXT_mesh_gpu_instancing"]
+        }),
+    );
+    let at = bin.len();
+    bin.extend_from_slice(&bin2);
+    root["buffers"][0]["byteLength"] = bin.len().into();
+    root["bufferViews"].as_array_mut().unwrap().push(json!({"buffer": 0, "byteOffset": at, "byteLength": bin2.len()}));
+    root["accessors"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"bufferView": 4, "componentType": 5126, "count": 125, "type": "VEC3"}));
+    root["nodes"][0]["extensions"] = json!({"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": 4}}});
+    let m = import_glb(&root, &bin).unwrap();
+    assert_eq!(m.triangles.len(), 2 * 125, "every instance kept");
+    let (lo, hi) = m.bounds();
+    assert!((hi.z - lo.z - (4.0 * 5.0 + 4.0)).abs() < 1e-3, "instances stacked 5 high: {lo} {hi}");
+    assert!(m.notes.iter().any(|n| n.contains("125 mesh instances")), "{:?}", m.notes);
+    // A blended material is said to be cut out.
+    let (mut root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, json!({}));
+    root["materials"][0]["alphaMode"] = "BLEND".into();
+    let m = import_glb(&root, &bin).unwrap();
+    assert!(m.notes.iter().any(|n| n.contains("alpha-blended") && n.contains("0.5")), "{:?}", m.notes);
+}
+
+#[test]
+fn compressed_models_are_refused_by_name() {
+    for (ext, want) in [
+        ("KHR_draco_mesh_compression", "Draco"),
+        ("EXT_meshopt_compression", "gltfpack"),
+        ("KHR_texture_basisu", "KTX2"),
+        ("KHR_materials_volume_scatter_future", "KHR_materials_volume_scatter_future"),
+    ] {
+        let extra = json!({"extensionsUsed": [ext], "extensionsRequired": [ext]});
+        let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, extra);
+        let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
+        assert!(e.contains(ext) && e.contains(want), "{ext}: {e}");
+    }
+    // A KTX2 image without the extension declared.
+    let extra = json!({"images": [{"uri": "bark.ktx2"}]});
+    let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, extra);
+    let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
+    assert!(e.contains("image 0 is KTX2"), "{e}");
+}
