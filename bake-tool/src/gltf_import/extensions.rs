@@ -9,9 +9,10 @@
 //! - `EXT_mesh_gpu_instancing` (gltfpack `-mi`, glTF-Transform `instance`): a
 //!   node's mesh drawn once per TRANSLATION/ROTATION/SCALE row.
 //!
-//! Compressed geometry and textures that the bake cannot decode
-//! (`KHR_draco_mesh_compression`, `EXT_meshopt_compression`,
-//! `KHR_texture_basisu` / KTX2) are refused with their name and how to write a
+//! `EXT_meshopt_compression` / `KHR_meshopt_compression` buffers (gltfpack
+//! `-c`) are decoded with the `meshopt` crate ([`decode_meshopt`]). Compressed
+//! geometry and textures that the bake cannot decode
+//! (`KHR_draco_mesh_compression`, `KHR_texture_basisu` / KTX2) are refused with their name and how to write a
 //! plain copy; nothing is dropped without a word.
 
 use anyhow::{bail, Result};
@@ -21,6 +22,8 @@ use serde_json::Value;
 /// Extensions the importer handles itself (taken out of `extensionsRequired`
 /// before the gltf crate validates the file).
 pub const HANDLED: &[&str] = &[
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
     "EXT_mesh_gpu_instancing",
@@ -35,11 +38,6 @@ fn unsupported(ext: &str) -> Option<String> {
              sylva-bake does not decode: export it again without Draco compression (in Blender: glTF export, \
              Data › Compression off)"
             .to_string(),
-        "EXT_meshopt_compression" | "KHR_meshopt_compression" => format!(
-            "the model's buffers are meshopt-compressed ({ext}), which sylva-bake does not decode yet: gltfpack \
-             writes it only with -c or -cc; run gltfpack without them (its quantisation, -mi instancing and \
-             texture transforms are read)"
-        ),
         "KHR_texture_basisu" => "the model's textures are KTX2 / Basis Universal (KHR_texture_basisu), which \
              sylva-bake does not decode: use PNG, JPEG or WebP textures (gltfpack writes KTX2 only with -tc)"
             .to_string(),
@@ -167,6 +165,143 @@ pub fn instance_matrices(
             Mat4::from_scale_rotation_translation(s, if r.is_finite() { r } else { Quat::IDENTITY }, t)
         })
         .collect()
+}
+
+/// The meshopt extension object of `value` (either name), if any.
+fn meshopt(value: &Value) -> Option<&Value> {
+    let ext = value.get("extensions")?;
+    ext.get("EXT_meshopt_compression").or_else(|| ext.get("KHR_meshopt_compression"))
+}
+
+/// Buffers that only stand in for meshopt-compressed data (`fallback: true`):
+/// they may have no bytes of their own; [`decode_meshopt`] fills their views.
+#[must_use]
+pub fn meshopt_fallbacks(root: &Value) -> Vec<usize> {
+    let buffers = root.get("buffers").and_then(Value::as_array).map(Vec::as_slice).unwrap_or_default();
+    (0..buffers.len())
+        .filter(|&i| meshopt(&buffers[i]).and_then(|m| m.get("fallback")).and_then(Value::as_bool) == Some(true))
+        .collect()
+}
+
+/// Decodes every meshopt-compressed buffer view into the bytes its plain
+/// counterpart names (`buffers[view.buffer][view.byteOffset..]`). Returns the
+/// views decoded.
+///
+/// # Errors
+/// A compressed range outside its buffer, a decoded size that does not fit
+/// the view, an unknown mode or filter, or data the decoder refuses.
+pub fn decode_meshopt(root: &Value, buffers: &mut [Vec<u8>]) -> Result<usize> {
+    let views = root.get("bufferViews").and_then(Value::as_array).map(Vec::as_slice).unwrap_or_default();
+    let mut decoded = 0;
+    for (j, view) in views.iter().enumerate() {
+        let Some(m) = meshopt(view) else { continue };
+        let what = format!("buffer view {j} (meshopt)");
+        let u = |v: Option<&Value>| v.and_then(Value::as_u64).map(|x| x as usize);
+        let (Some(src_buffer), Some(len), Some(stride), Some(count)) =
+            (u(m.get("buffer")), u(m.get("byteLength")), u(m.get("byteStride")), u(m.get("count")))
+        else {
+            bail!("{what}: the extension needs buffer, byteLength, byteStride and count");
+        };
+        let src_offset = u(m.get("byteOffset")).unwrap_or(0);
+        let src = buffers
+            .get(src_buffer)
+            .and_then(|b| b.get(src_offset..src_offset.checked_add(len)?))
+            .ok_or_else(|| anyhow::anyhow!("{what}: bytes {src_offset}..+{len} lie outside buffer {src_buffer}"))?
+            .to_vec();
+        let size = count.checked_mul(stride).filter(|s| *s <= crate::gltf_import::sources::MAX_BUFFER_BYTES);
+        let Some(size) = size else { bail!("{what}: {count} elements of {stride} bytes are too many") };
+        let mode = m.get("mode").and_then(Value::as_str).unwrap_or("");
+        let filter = m.get("filter").and_then(Value::as_str).unwrap_or("NONE");
+        let bytes = decode_view(&src, mode, filter, stride, count).map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
+        debug_assert_eq!(bytes.len(), size);
+        let (Some(dst_buffer), dst_offset, Some(dst_len)) =
+            (u(view.get("buffer")), u(view.get("byteOffset")).unwrap_or(0), u(view.get("byteLength")))
+        else {
+            bail!("{what}: the view needs buffer and byteLength");
+        };
+        let dst = buffers
+            .get_mut(dst_buffer)
+            .and_then(|b| b.get_mut(dst_offset..dst_offset.checked_add(dst_len)?))
+            .ok_or_else(|| anyhow::anyhow!("{what}: the view lies outside buffer {dst_buffer}"))?;
+        if size > dst.len() {
+            bail!("{what}: {size} decoded bytes do not fit the view's {}", dst.len());
+        }
+        dst[..size].copy_from_slice(&bytes);
+        decoded += 1;
+    }
+    Ok(decoded)
+}
+
+/// One compressed view decoded: `count` elements of `stride` bytes.
+fn decode_view(src: &[u8], mode: &str, filter: &str, stride: usize, count: usize) -> Result<Vec<u8>, String> {
+    let err = |e: meshopt::Error| format!("the meshopt decoder refused the data ({e:?})");
+    match mode {
+        "ATTRIBUTES" => {
+            if stride == 0 || !stride.is_multiple_of(4) || stride > 128 {
+                return Err(format!("attribute stride {stride} (a multiple of 4 up to 128 is read)"));
+            }
+            let mut words: Vec<u32> = decode_words(src, stride / 4, count).map_err(err)?;
+            apply_filter(&mut words, filter, stride)?;
+            Ok(bytemuck::cast_slice(&words).to_vec())
+        }
+        "TRIANGLES" | "INDICES" => {
+            let bytes = match (stride, mode) {
+                (2, "TRIANGLES") => {
+                    bytemuck::cast_slice(&meshopt::decode_index_buffer::<u16>(src, count).map_err(err)?).to_vec()
+                }
+                (4, "TRIANGLES") => {
+                    bytemuck::cast_slice(&meshopt::decode_index_buffer::<u32>(src, count).map_err(err)?).to_vec()
+                }
+                (2, _) => {
+                    bytemuck::cast_slice(&meshopt::decode_index_sequence::<u16>(src, count).map_err(err)?).to_vec()
+                }
+                (4, _) => {
+                    bytemuck::cast_slice(&meshopt::decode_index_sequence::<u32>(src, count).map_err(err)?).to_vec()
+                }
+                _ => return Err(format!("index stride {stride} (2 or 4)")),
+            };
+            Ok(bytes)
+        }
+        other => Err(format!("unknown mode {other:?} (ATTRIBUTES, TRIANGLES, INDICES)")),
+    }
+}
+
+/// Decodes `count` vertices of `words` 32-bit words each.
+fn decode_words(src: &[u8], words: usize, count: usize) -> meshopt::Result<Vec<u32>> {
+    macro_rules! by_width {
+        ($($n:literal)*) => {
+            match words {
+                $($n => meshopt::decode_vertex_buffer::<[u32; $n]>(src, count).map(|v| v.concat()),)*
+                _ => unreachable!("checked by the caller"),
+            }
+        };
+    }
+    by_width!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31 32)
+}
+
+/// Undoes a vertex filter in place.
+fn apply_filter(words: &mut [u32], filter: &str, stride: usize) -> Result<(), String> {
+    match (filter, stride) {
+        ("NONE", _) => {}
+        ("OCTAHEDRAL", 4) => meshopt::decode_filter_oct(bytemuck::cast_slice_mut::<u32, [i8; 4]>(words)),
+        ("OCTAHEDRAL", 8) => meshopt::decode_filter_oct(bytemuck::cast_slice_mut::<u32, [i16; 4]>(words)),
+        ("QUATERNION", 8) => meshopt::decode_filter_quat(bytemuck::cast_slice_mut::<u32, [i16; 4]>(words)),
+        ("COLOR", 4) => meshopt::decode_filter_color(bytemuck::cast_slice_mut::<u32, [u8; 4]>(words)),
+        ("COLOR", 8) => meshopt::decode_filter_color(bytemuck::cast_slice_mut::<u32, [u16; 4]>(words)),
+        ("EXPONENTIAL", _) => {
+            macro_rules! by_width {
+                ($($n:literal)*) => {
+                    match stride / 4 {
+                        $($n => meshopt::decode_filter_exp(bytemuck::cast_slice_mut::<u32, [u32; $n]>(words)),)*
+                        _ => return Err(format!("EXPONENTIAL filter at stride {stride}")),
+                    }
+                };
+            }
+            by_width!(1 2 3 4 5 6 7 8)
+        }
+        (f, s) => return Err(format!("filter {f:?} at stride {s}")),
+    }
+    Ok(())
 }
 
 #[cfg(test)]

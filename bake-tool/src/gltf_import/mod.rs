@@ -194,7 +194,9 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     json.extensions_required.retain(|e| !extensions::HANDLED.contains(&e.as_str()));
     let document = gltf::Document::from_json(json).map_err(|e| anyhow!("not a valid glTF/GLB file: {e}"))?;
     let gltf = gltf::Gltf { document, blob: parsed.blob };
-    let buffers = sources::load_buffers(&gltf.document, gltf.blob.as_deref(), base)?;
+    let mut buffers =
+        sources::load_buffers(&gltf.document, gltf.blob.as_deref(), base, &extensions::meshopt_fallbacks(&raw))?;
+    let meshopt_views = extensions::decode_meshopt(&raw, &mut buffers)?;
     let doc = &gltf.document;
     let roots = graph::roots(doc);
     graph::check(doc, &roots)?;
@@ -278,6 +280,9 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     }
     for (mode, n) in &skipped_modes {
         model.notes.push(format!("{n} primitives drawn as {mode} (not triangles) were left out"));
+    }
+    if meshopt_views > 0 {
+        model.notes.push(format!("{meshopt_views} meshopt-compressed buffer views decoded"));
     }
     if instanced > 0 {
         model.notes.push(format!("{instanced} mesh instances (EXT_mesh_gpu_instancing) expanded"));

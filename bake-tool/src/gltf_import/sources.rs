@@ -25,7 +25,12 @@ pub const MAX_IMAGE_BYTES: u64 = 256 << 20;
 /// # Errors
 /// A buffer that is missing, too short, larger than [`MAX_BUFFER_BYTES`], or
 /// whose URI points outside the model's folder; the message names the buffer.
-pub fn load_buffers(doc: &gltf::Document, blob: Option<&[u8]>, base: Option<&Path>) -> Result<Vec<Vec<u8>>> {
+pub fn load_buffers(
+    doc: &gltf::Document,
+    blob: Option<&[u8]>,
+    base: Option<&Path>,
+    fallbacks: &[usize],
+) -> Result<Vec<Vec<u8>>> {
     let total = doc.buffers().fold(0usize, |sum, b| sum.saturating_add(b.length()));
     if total > MAX_BUFFER_BYTES {
         bail!("the buffers declare {total} bytes together; a tree model's buffers hold at most {MAX_BUFFER_BYTES}");
@@ -35,6 +40,9 @@ pub fn load_buffers(doc: &gltf::Document, blob: Option<&[u8]>, base: Option<&Pat
         let i = buffer.index();
         let declared = buffer.length();
         let mut data = match buffer.source() {
+            // A stand-in for meshopt-compressed data (no bytes of its own): its
+            // views are filled by the decoder.
+            gltf::buffer::Source::Bin if fallbacks.contains(&i) => vec![0; declared],
             // Only the first buffer may be the GLB binary chunk (glTF 2.0 §4.4.3.3).
             gltf::buffer::Source::Bin if i > 0 => {
                 bail!("buffer {i} refers to the GLB binary chunk, which only buffer 0 may")

@@ -750,7 +750,6 @@ fn quantized_texture_transformed_and_instanced_models_as_optimisers_write_them()
 fn compressed_models_are_refused_by_name() {
     for (ext, want) in [
         ("KHR_draco_mesh_compression", "Draco"),
-        ("EXT_meshopt_compression", "gltfpack"),
         ("KHR_texture_basisu", "KTX2"),
         ("KHR_materials_volume_scatter_future", "KHR_materials_volume_scatter_future"),
     ] {
@@ -764,4 +763,61 @@ fn compressed_models_are_refused_by_name() {
     let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, extra);
     let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
     assert!(e.contains("image 0 is KTX2"), "{e}");
+}
+
+#[test]
+fn meshopt_compressed_models_decode_to_the_same_model() {
+    // The plain model, then the same with its three views meshopt-compressed (as gltfpack -c writes).
+    let indices = [0u16, 1, 2, 1, 3, 2];
+    let (plain_root, plain_bin) = optimised_model(&QUAD, &QUAD_UV, &indices, 4, false, json!({}));
+    let plain = import_glb(&plain_root, &plain_bin).unwrap();
+    let positions: Vec<[f32; 3]> = QUAD.to_vec();
+    let uv0: Vec<[u16; 2]> = QUAD_UV.iter().map(|uv| uv.map(|v| (v * 65535.0) as u16)).collect();
+    let uv1: Vec<[f32; 2]> = QUAD_UV.iter().map(|uv| uv.map(|v| v * 0.5)).collect();
+    let idx32: Vec<u32> = indices.iter().map(|&i| u32::from(i)).collect();
+    let streams = [
+        (meshopt::encode_vertex_buffer(&positions).unwrap(), 12, 4, "ATTRIBUTES"),
+        (meshopt::encode_vertex_buffer(&uv0).unwrap(), 4, 4, "ATTRIBUTES"),
+        (meshopt::encode_vertex_buffer(&uv1).unwrap(), 8, 4, "ATTRIBUTES"),
+        (meshopt::encode_index_buffer(&idx32, 4).unwrap(), 2, 6, "TRIANGLES"),
+    ];
+    let mut bin = Vec::new();
+    let mut compressed = Vec::new();
+    for (bytes, stride, count, mode) in &streams {
+        compressed.push((bin.len(), bytes.len(), *stride, *count, *mode));
+        bin.extend_from_slice(bytes);
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+    }
+    let mut root = plain_root.clone();
+    let views = root["bufferViews"].as_array_mut().unwrap();
+    for (view, (offset, len, stride, count, mode)) in views.iter_mut().zip(&compressed) {
+        view["buffer"] = 1.into();
+        view["extensions"] = json!({"EXT_meshopt_compression": {
+            "buffer": 0, "byteOffset": offset, "byteLength": len, "byteStride": stride, "count": count, "mode": mode}});
+    }
+    root["buffers"] = json!([
+        {"byteLength": bin.len()},
+        {"byteLength": plain_bin.len(), "extensions": {"EXT_meshopt_compression": {"fallback": true}}}
+    ]);
+    root["extensionsUsed"] = json!(["EXT_meshopt_compression"]);
+    root["extensionsRequired"] = json!(["EXT_meshopt_compression"]);
+    let m = import_glb(&root, &bin).unwrap();
+    // The index codec may rotate a triangle's corners (the winding stays).
+    let canonical = |t: &[u32; 3]| {
+        let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+        [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+    };
+    let tris = |m: &ImportedModel| m.triangles.iter().map(canonical).collect::<Vec<_>>();
+    assert_eq!(tris(&m), tris(&plain));
+    assert_eq!(m.vertices, plain.vertices, "decoded exactly");
+    assert!(m.notes.iter().any(|n| n.contains("4 meshopt-compressed buffer views decoded")), "{:?}", m.notes);
+    // Garbage instead of the compressed bytes: an error naming the view, no panic.
+    let mut broken = bin.clone();
+    for b in &mut broken[..8] {
+        *b = 0xff;
+    }
+    let e = format!("{:#}", import_glb(&root, &broken).unwrap_err());
+    assert!(e.contains("buffer view 0 (meshopt)"), "{e}");
 }
