@@ -17,6 +17,7 @@ use sylva::format::pack::MaterialKind;
 mod accessors;
 mod extensions;
 mod graph;
+mod skin;
 mod sources;
 
 /// A material of an imported model.
@@ -200,6 +201,8 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     let doc = &gltf.document;
     let roots = graph::roots(doc);
     graph::check(doc, &roots)?;
+    let globals = skin::node_globals(doc, &roots);
+    let mut skinned = 0usize;
     let mut images: Vec<Option<image::RgbaImage>> = vec![None; doc.images().len()];
     let mut model = ImportedModel::default();
     let mut texture_bytes = 0u64;
@@ -231,6 +234,14 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
                 mesh_names.push(n.to_string());
             }
             // EXT_mesh_gpu_instancing: the mesh once per instance row.
+            // A skinned mesh is placed by its joints, not by its node (§3.7.3.3).
+            let joints = match node.skin() {
+                Some(s) => {
+                    skinned += 1;
+                    Some(skin::joint_matrices(&s, &buffers, &globals)?)
+                }
+                None => None,
+            };
             let instances = match extensions::instancing(&raw, index) {
                 Some(attrs) => {
                     let list = instance_transforms(doc, &buffers, attrs, index)?;
@@ -268,8 +279,13 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
                 };
                 let what = format!("mesh {:?} primitive {}", mesh.name().unwrap_or("?"), prim.index());
                 let uv = uv_sets[slot_index];
+                let per_vertex = match &joints {
+                    Some(j) => Some(skin::vertex_matrices(&prim, &buffers, j, &what)?),
+                    None => None,
+                };
                 for instance in &instances {
-                    append_primitive(&mut model, &prim, &buffers, world * *instance, material, uv, &what)
+                    let placed = Placement { world: world * *instance, per_vertex: per_vertex.as_deref() };
+                    append_primitive(&mut model, &prim, &buffers, placed, material, uv, &what)
                         .with_context(|| format!("{what} of {}", graph::describe(doc, index)))?;
                 }
             }
@@ -280,6 +296,9 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     }
     for (mode, n) in &skipped_modes {
         model.notes.push(format!("{n} primitives drawn as {mode} (not triangles) were left out"));
+    }
+    if skinned > 0 {
+        model.notes.push(format!("{skinned} skinned meshes placed in their rest pose"));
     }
     if meshopt_views > 0 {
         model.notes.push(format!("{meshopt_views} meshopt-compressed buffer views decoded"));
@@ -302,6 +321,14 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>, classifier: &Classifier) 
     check_extent(&model)?;
     recenter(&mut model);
     Ok(model)
+}
+
+/// Where a primitive's vertices go: the node's world transform, or per vertex
+/// (skinned meshes) the weighted joint matrices.
+#[derive(Clone, Copy)]
+struct Placement<'a> {
+    world: Mat4,
+    per_vertex: Option<&'a [Mat4]>,
 }
 
 /// The instance transforms of node `node`'s `EXT_mesh_gpu_instancing`
@@ -485,11 +512,12 @@ fn append_primitive(
     model: &mut ImportedModel,
     prim: &gltf::Primitive<'_>,
     buffers: &[Vec<u8>],
-    world: Mat4,
+    placed: Placement<'_>,
     material: u16,
     uv_set: extensions::UvSet,
     what: &str,
 ) -> Result<()> {
+    let world = placed.world;
     // Every accessor this primitive reads, checked before the reader sees it.
     for (semantic, accessor) in prim.attributes() {
         let role = format!("{semantic:?} of {what}");
@@ -585,13 +613,19 @@ fn append_primitive(
     }
     let normal_matrix = world.inverse().transpose();
     let first = u32::try_from(model.vertices.len()).map_err(|_| anyhow!("too many vertices"))?;
-    let flip = world.determinant() < 0.0;
+    // A skinned mesh: each vertex by its own weighted joint matrix (the node's is ignored).
+    let matrix_of = |i: usize| placed.per_vertex.and_then(|m| m.get(i)).copied();
+    let flip = matrix_of(0).unwrap_or(world).determinant() < 0.0;
     for (i, &position) in positions.iter().enumerate() {
-        let p = world.transform_point3(Vec3::from(position));
+        let (m, nm) = match matrix_of(i) {
+            Some(m) => (m, m.inverse().transpose()),
+            None => (world, normal_matrix),
+        };
+        let p = m.transform_point3(Vec3::from(position));
         let nrm = normals
             .as_ref()
             .and_then(|ns| ns.get(i))
-            .map(|&v| normal_matrix.transform_vector3(Vec3::from(v)).normalize_or_zero())
+            .map(|&v| nm.transform_vector3(Vec3::from(v)).normalize_or_zero())
             .unwrap_or(Vec3::ZERO);
         let uv = uvs.as_ref().and_then(|u| u.get(i)).copied().unwrap_or([0.0, 0.0]);
         let color = colors.as_ref().and_then(|c| c.get(i)).copied().unwrap_or([1.0; 4]);

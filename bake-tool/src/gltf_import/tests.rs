@@ -821,3 +821,47 @@ fn meshopt_compressed_models_decode_to_the_same_model() {
     let e = format!("{:#}", import_glb(&root, &broken).unwrap_err());
     assert!(e.contains("buffer view 0 (meshopt)"), "{e}");
 }
+
+#[test]
+fn skinned_meshes_are_placed_in_their_rest_pose() {
+    let (mut root, mut bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, json!({}));
+    // Vertices 0, 1 follow joint 0 (at the origin), vertices 2, 3 joint 1 (10 up).
+    let at = bin.len();
+    for j in [0u8, 0, 1, 1] {
+        bin.extend_from_slice(&[j, 0, 0, 0]);
+    }
+    let weights_at = bin.len();
+    for _ in 0..4 {
+        for w in [1.0f32, 0.0, 0.0, 0.0] {
+            bin.extend_from_slice(&w.to_le_bytes());
+        }
+    }
+    root["buffers"][0]["byteLength"] = bin.len().into();
+    let views = root["bufferViews"].as_array_mut().unwrap();
+    views.push(json!({"buffer": 0, "byteOffset": at, "byteLength": 16}));
+    views.push(json!({"buffer": 0, "byteOffset": weights_at, "byteLength": 64}));
+    let accessors = root["accessors"].as_array_mut().unwrap();
+    accessors.push(json!({"bufferView": 4, "componentType": 5121, "count": 4, "type": "VEC4"}));
+    accessors.push(json!({"bufferView": 5, "componentType": 5126, "count": 4, "type": "VEC4"}));
+    let prim = &mut root["meshes"][0]["primitives"][0]["attributes"];
+    prim["JOINTS_0"] = 4.into();
+    prim["WEIGHTS_0"] = 5.into();
+    // The skinned node's own transform (100 m aside) must not apply.
+    root["nodes"] = json!([
+        {"mesh": 0, "skin": 0, "translation": [100.0, 0.0, 0.0]},
+        {"name": "root", "children": [2]},
+        {"name": "top", "translation": [0.0, 10.0, 0.0]}
+    ]);
+    root["skins"] = json!([{"joints": [1, 2]}]);
+    root["scenes"] = json!([{"nodes": [0, 1]}]);
+    let m = import_glb(&root, &bin).unwrap();
+    let (lo, hi) = m.bounds();
+    // Recentred on the trunk base: x spans the quad's 2 m, z from 0 to 14 (4 m + 10 m up).
+    assert!((hi.x - lo.x - 2.0).abs() < 1e-4 && (hi.z - lo.z - 14.0).abs() < 1e-4, "{lo} {hi}");
+    assert!(m.notes.iter().any(|n| n.contains("1 skinned meshes")), "{:?}", m.notes);
+    // A joint index beyond the skin is an error naming it.
+    let mut bad = bin.clone();
+    bad[at + 8] = 7;
+    let e = format!("{:#}", import_glb(&root, &bad).unwrap_err());
+    assert!(e.contains("names joint 7") && e.contains("2"), "{e}");
+}
