@@ -1,4 +1,6 @@
-//! `sylva-bake inspect`: summarises a scene directory, manifest, pack, tile or id file.
+//! `sylva-bake inspect`: summarises a scene directory, manifest, pack, tile or id
+//! file, or a placements file (which columns are used for what, where the trees
+//! are, and per species the counts and ranges a forester checks).
 //! The JSON keys are documented in `docs/FORMAT.md`.
 
 use std::path::Path;
@@ -11,6 +13,10 @@ use sylva::format::{decode_ids, decode_pack, Manifest, Tile};
 /// Inspects `path` and returns the summary as JSON.
 pub fn inspect(path: &Path) -> Result<Value> {
     let (path, is_scene) = if path.is_dir() { (path.join("scene.json"), true) } else { (path.to_path_buf(), false) };
+    let lower = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
+    if matches!(lower.as_str(), "csv" | "tsv" | "txt" | "geojson") {
+        return inspect_placements(&path);
+    }
     let name = path.display().to_string();
     let bytes = std::fs::read(&path).with_context(|| format!("cannot read {name}"))?;
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
@@ -29,8 +35,73 @@ pub fn inspect(path: &Path) -> Result<Value> {
             let ids = decode_ids(&name, &bytes)?;
             Ok(json!({"kind": "ids", "count": ids.len(), "bytes": bytes.len()}))
         }
-        _ => bail!("{name}: not a scene directory, scene.json, .pack, .tile or .ids file"),
+        _ => bail!("{name}: not a scene directory, scene.json, .pack, .tile, .ids or placements (.csv, .geojson) file"),
     }
+}
+
+/// A placements file as the bake would read it (default options).
+fn inspect_placements(path: &Path) -> Result<Value> {
+    use crate::placements::{PlacementSource, ReadOptions};
+    let source = PlacementSource::open(path, &ReadOptions::default())?;
+    let allometry = crate::allometry::Allometry::built_in();
+    let mut species: std::collections::BTreeMap<String, [Option<(f32, f32)>; 3]> = Default::default();
+    let mut counts: std::collections::BTreeMap<String, u64> = Default::default();
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    let widen = |r: &mut Option<(f32, f32)>, v: Option<f32>| {
+        if let Some(v) = v {
+            *r = Some(r.map_or((v, v), |(a, b)| (a.min(v), b.max(v))));
+        }
+    };
+    let report = source.for_each(&mut |p| {
+        lo = [lo[0].min(p.x), lo[1].min(p.y)];
+        hi = [hi[0].max(p.x), hi[1].max(p.y)];
+        if xs.len() < 1_000_000 {
+            xs.push(p.x);
+            ys.push(p.y);
+        }
+        let label = p.species.clone().unwrap_or_else(|| "(no species)".into());
+        let r = species.entry(label.clone()).or_default();
+        widen(&mut r[0], p.height_m);
+        widen(&mut r[1], p.dbh_cm);
+        widen(&mut r[2], p.crown_m);
+        *counts.entry(label).or_default() += 1;
+        Ok(())
+    })?;
+    let median = |v: &mut Vec<f64>| {
+        if v.is_empty() {
+            return None;
+        }
+        let n = v.len() / 2;
+        Some(*v.select_nth_unstable_by(n, f64::total_cmp).1)
+    };
+    let range = |r: Option<(f32, f32)>| r.map(|(a, b)| json!([a, b]));
+    let mut rows: Vec<Value> = species
+        .iter()
+        .map(|(label, r)| {
+            let e = allometry.for_label(label);
+            json!({
+                "label": label,
+                "trees": counts[label],
+                "height_m": range(r[0]),
+                "dbh_cm": range(r[1]),
+                "crown_m": range(r[2]),
+                "genus": e.genus,
+            })
+        })
+        .collect();
+    rows.sort_by(|a, b| b["trees"].as_u64().cmp(&a["trees"].as_u64()));
+    Ok(json!({
+        "kind": "placements",
+        "coordinates": if source.kind == crate::placements::CoordKind::LonLat { "lon/lat" } else { "projected" },
+        "notes": source.notes,
+        "rows": report.rows,
+        "kept": report.kept,
+        "report": report.lines(),
+        "bounds": {"min": lo, "max": hi},
+        "median": [median(&mut xs), median(&mut ys)],
+        "species": rows,
+    }))
 }
 
 fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
@@ -236,6 +307,40 @@ pub fn to_text(v: &Value) -> String {
             }
         }
         Some("pack") => out += &pack_text(v),
+        Some("placements") => {
+            out += &format!(
+                "placements ({}), {} rows, {} usable\n",
+                v["coordinates"].as_str().unwrap_or("?"),
+                v["rows"],
+                v["kept"]
+            );
+            for n in v["notes"].as_array().into_iter().flatten().chain(v["report"].as_array().into_iter().flatten()) {
+                out += &format!("  {}\n", n.as_str().unwrap_or(""));
+            }
+            out += &format!(
+                "trees from {} to {}, half of them around {} (x/lon, y/lat)\n",
+                f(&v["bounds"]["min"]),
+                f(&v["bounds"]["max"]),
+                f(&v["median"])
+            );
+            out += "label | trees | height m | DBH cm | crown m | allometry genus\n";
+            let r = |x: &Value| {
+                x.as_array().map_or("-".to_string(), |a| {
+                    format!("{:.1}–{:.1}", a[0].as_f64().unwrap_or(0.0), a[1].as_f64().unwrap_or(0.0))
+                })
+            };
+            for s in v["species"].as_array().into_iter().flatten().take(60) {
+                out += &format!(
+                    "{} | {} | {} | {} | {} | {}\n",
+                    s["label"].as_str().unwrap_or("?"),
+                    s["trees"],
+                    r(&s["height_m"]),
+                    r(&s["dbh_cm"]),
+                    r(&s["crown_m"]),
+                    s["genus"].as_str().unwrap_or("?")
+                );
+            }
+        }
         _ => out += &serde_json::to_string_pretty(v).unwrap_or_default(),
     }
     out

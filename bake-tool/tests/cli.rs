@@ -387,6 +387,18 @@ fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
     {
         assert!(log.contains(want), "{want:?} missing from the log:\n{log}");
     }
+    // `inspect` on the file itself: the columns, the rows, per species the ranges.
+    let v = inspect_json(&plot);
+    assert_eq!(
+        (v["kind"].as_str(), v["rows"].as_u64(), v["kept"].as_u64()),
+        (Some("placements"), Some(400), Some(400))
+    );
+    assert!(v["notes"].to_string().contains("dbh ← \\\"dbh_mm\\\" (mm)"), "{}", v["notes"]);
+    let fasy = v["species"].as_array().unwrap().iter().find(|s| s["label"] == "FASY").unwrap();
+    assert_eq!(fasy["trees"], 300);
+    assert_eq!(fasy["genus"], "broadleaf");
+    let text = String::from_utf8_lossy(&run(bin().arg("inspect").arg(&plot)).stdout).into_owned();
+    assert!(text.contains("400 rows, 400 usable") && text.contains("FASY | 300 |"), "{text}");
     // Every height from the DBH (the broadleaf and conifer defaults: codes name no genus).
     let line =
         |label: &str| log.lines().find(|l| l.trim_start().starts_with(&format!("{label} |"))).unwrap().to_string();
