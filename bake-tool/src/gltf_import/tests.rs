@@ -638,7 +638,16 @@ fn merge(a: &mut serde_json::Value, b: serde_json::Value) {
 }
 
 fn import_glb(root: &serde_json::Value, bin: &[u8]) -> Result<ImportedModel> {
-    import_slice(&glb(root, bin), None, &Classifier::default())
+    let bytes = glb(root, bin);
+    // `SYLVA_FUZZ_SEEDS=fuzz/seeds/import_gltf cargo test -p sylva-bake --lib gltf_import`
+    // writes every model these tests build as a seed of the import_gltf fuzz target.
+    if let Some(dir) = std::env::var_os("SYLVA_FUZZ_SEEDS") {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        bytes.hash(&mut h);
+        std::fs::write(std::path::Path::new(&dir).join(format!("ext-{:016x}.glb", h.finish())), &bytes).unwrap();
+    }
+    import_slice(&bytes, None, &Classifier::default())
 }
 
 const QUAD: [[f32; 3]; 4] = [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 4.0, 0.0], [1.0, 4.0, 0.0]];
