@@ -134,7 +134,18 @@ where
     [i16; N]: gltf::accessor::Item,
     [u16; N]: gltf::accessor::Item,
 {
-    use gltf::accessor::{DataType as D, Iter};
+    use gltf::accessor::{DataType as D, Dimensions, Iter};
+    // The element must be what is read: a SCALAR read as VEC3 would misread
+    // (and trip the gltf crate's size assertion; found by the import_gltf fuzz target).
+    let dims = match N {
+        2 => Dimensions::Vec2,
+        3 => Dimensions::Vec3,
+        4 => Dimensions::Vec4,
+        _ => return None,
+    };
+    if accessor.dimensions() != dims {
+        return None;
+    }
     let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(Vec::as_slice);
     let normalized = accessor.normalized();
     // glTF 2.0 §3.11: c / max, clamped at −1 for signed types.

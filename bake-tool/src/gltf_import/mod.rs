@@ -360,13 +360,16 @@ fn instance_transforms(
     }
     let read3 = |a: &Option<gltf::Accessor<'_>>, k: &str| -> Result<Vec<[f32; 3]>> {
         a.as_ref().map_or(Ok(Vec::new()), |a| {
-            accessors::read_floats::<3>(a, buffers).ok_or_else(|| anyhow!("{}: unreadable", what(k)))
+            accessors::read_floats::<3>(a, buffers).ok_or_else(|| {
+                anyhow!("{}: accessor {} is {:?} of {:?}, not VEC3", what(k), a.index(), a.dimensions(), a.data_type())
+            })
         })
     };
     let rotations = match &ra {
-        Some(a) => {
-            accessors::read_floats::<4>(a, buffers).ok_or_else(|| anyhow!("{}: unreadable", what("ROTATION")))?
-        }
+        Some(a) => accessors::read_floats::<4>(a, buffers).ok_or_else(|| {
+            let (d, t) = (a.dimensions(), a.data_type());
+            anyhow!("{}: accessor {} is {d:?} of {t:?}, not VEC4", what("ROTATION"), a.index())
+        })?,
         None => Vec::new(),
     };
     let (translations, scales) = (read3(&ta, "TRANSLATION")?, read3(&sa, "SCALE")?);

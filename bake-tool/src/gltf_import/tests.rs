@@ -874,3 +874,18 @@ fn skinned_meshes_are_placed_in_their_rest_pose() {
     let e = format!("{:#}", import_glb(&root, &bad).unwrap_err());
     assert!(e.contains("names joint 7") && e.contains("2"), "{e}");
 }
+
+#[test]
+fn every_fuzz_seed_imports_or_fails_without_panicking() {
+    // The seeds include every crash the import_gltf fuzz target found (regression-*).
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/import_gltf");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let result = std::panic::catch_unwind(|| import_slice(&bytes, None, &Classifier::default()).map(|_| ()));
+        assert!(result.is_ok(), "{} panicked", path.display());
+        n += 1;
+    }
+    assert!(n >= 20, "{n} seeds");
+}
