@@ -189,6 +189,38 @@ test('the browser and `sylva render --stats` report one set of keys and agree on
   assert.ok(Math.abs(web.draw_calls - native.draw_calls) <= 2, `draw calls: ${both}`);
   assert.deepEqual(errors, []);
 });
+test('the first view frames the trees of two districts far apart', async (t) => {
+  const model = join(root, '..', 'shared', 'data', 'models', 'eztree_oak_medium.glb');
+  try { readFileSync(model); } catch { t.skip(`${model} not present`); return; }
+  // Two districts about 15 km apart; the east one larger. The middle of the
+  // bounds is empty: a first view aimed there drew nothing.
+  const dir = mkdtempSync(join(tmpdir(), 'sylva-districts-'));
+  let csv = 'id,species,lat,lon,height\n';
+  for (let i = 0; i < 500; i++) {
+    const [lat0, lon0, n] = i < 150 ? [52.370, 4.760, i] : [52.372, 4.980, i - 150];
+    csv += `${i},Tilia,${(lat0 + (n % 20) * 0.0002).toFixed(6)},${(lon0 + Math.floor(n / 20) * 0.0003).toFixed(6)},${10 + (i % 8)}\n`;
+  }
+  writeFileSync(join(dir, 'districts.csv'), csv);
+  const bake = process.env.SYLVA_BAKE_BIN || join(root, 'target', 'release', 'sylva-bake');
+  execFileSync(bake, ['bake', '--model', `oak=${model}`, '--placements', join(dir, 'districts.csv'), '--no-clusters',
+    '--billboard-size', '32', '--texture-size', '32', '--out', join(dir, 'scene')], { stdio: ['ignore', 'ignore', 'pipe'] });
+  const served = startServer(join(dir, 'scene'));
+  try {
+    const url = await served.url;
+    const { page, errors } = await openViewer(`${url}?ui=0`);
+    await page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 120000 });
+    assert.equal(await page.evaluate(() => window.sylvaError), undefined);
+    const stats = await ready(page);
+    const drawn = Object.values(stats.instances).reduce((a, b) => a + b, 0);
+    assert.ok(drawn > 100, `trees drawn in the first view: ${drawn} (${JSON.stringify(stats.instances)})`);
+    const share = await foliageShare(page, 'districts-first-view');
+    assert.ok(share > 0.01, `foliage covers ${share} of the first view`);
+    assert.deepEqual(errors, []);
+  } finally {
+    served.proc.kill();
+  }
+});
+
 test('setLod switches representations: ellipsoids only, billboards only, mixed', async () => {
   const { page, errors } = await openViewer(base);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
