@@ -11,6 +11,22 @@ fn inspect_json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// `sylva-bake bake` of `csv` with one model as oak, small and fast (no clusters,
+/// 16 px billboards), plus `extra` flags.
+fn quick_bake(model: &Path, csv: &Path, out: &Path, extra: &[&str]) -> std::process::Command {
+    let mut c = bin();
+    c.arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--placements")
+        .arg(csv)
+        .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+        .args(extra)
+        .arg("--out")
+        .arg(out);
+    c
+}
+
 #[test]
 fn demo_scene_is_complete_valid_and_deterministic() {
     let dir = tmp("demo");
@@ -301,19 +317,7 @@ fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
     }
     let path = dir.join("baeume.csv");
     std::fs::write(&path, encoding_rs::WINDOWS_1252.encode(&csv).0).unwrap();
-    let bake = |csv: &Path, out: &Path, extra: &[&str]| {
-        let mut c = bin();
-        c.arg("bake")
-            .arg("--model")
-            .arg(format!("oak={}", model.display()))
-            .arg("--placements")
-            .arg(csv)
-            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
-            .args(extra)
-            .arg("--out")
-            .arg(out);
-        c
-    };
+    let bake = |csv: &Path, out: &Path, extra: &[&str]| quick_bake(&model, csv, out, extra);
     let o = run(&mut bake(&path, &dir.join("vienna"), &[]));
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("separated by ';'") && log.contains("300 rows read, 300 kept"), "{log}");
@@ -358,19 +362,7 @@ fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
         return;
     }
     let dir = tmp("inventory");
-    let bake = |csv: &Path, out: &Path, extra: &[&str]| {
-        let mut c = bin();
-        c.arg("bake")
-            .arg("--model")
-            .arg(format!("oak={}", model.display()))
-            .arg("--placements")
-            .arg(csv)
-            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
-            .args(extra)
-            .arg("--out")
-            .arg(out);
-        c
-    };
+    let bake = |csv: &Path, out: &Path, extra: &[&str]| quick_bake(&model, csv, out, extra);
     // A research plot: species codes, DBH in millimetres, tags, no height column.
     let mut csv = String::from("tag,species_code,easting,northing,dbh_mm\n");
     for i in 0..400 {
@@ -460,14 +452,7 @@ fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
     let path = dir.join("districts.csv");
     std::fs::write(&path, &csv).unwrap();
     let out = dir.join("scene");
-    run(bin()
-        .arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--placements")
-        .arg(&path)
-        .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16", "--out"])
-        .arg(&out));
+    run(&mut quick_bake(&model, &path, &out, &[]));
     let v = inspect_json(&out);
     assert_eq!(v["trees_at"]["trees"], 350, "the larger district: {}", v["trees_at"]);
     let lon = v["trees_at"]["centre_lonlat"][0].as_f64().unwrap();
