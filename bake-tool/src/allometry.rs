@@ -6,7 +6,8 @@
 //!
 //! - Height, Curtis–Arney as used by the USDA Forest Vegetation Simulator
 //!   (Southern variant, `sn/htdbh.f`): `H_ft = 4.5 + p2·exp(−p3·D_in^p4)` for
-//!   D ≥ 3 in; below, linear from 4.51 ft at D = 0 to the value at 3 in.
+//!   D ≥ 3 in; below, linear from 4.51 ft at D = 0 to the value at 3 in (FVS
+//!   interpolates from D = 0.3 in; the difference is a few centimetres).
 //! - Crown diameter, Bechtold (2003, 2004): `CW_ft = b0 + b1·D_in + b2·D_in²`
 //!   for D ≥ 5 in; below, the value at 5 in × 0.509, 0.644, 0.767, 0.885 at
 //!   1–4 in (Bragg 2001), interpolated.
@@ -378,7 +379,11 @@ impl Allometry {
                 })?;
                 values[k] = Some(v);
             }
-            let base = a.equations(&genus).clone();
+            let base = match genus.as_str() {
+                "broadleaf" => a.broadleaf.clone(),
+                "conifer" => a.conifer.clone(),
+                g => a.equations(g).clone(),
+            };
             let e = Equations {
                 genus: genus.clone(),
                 height: Height {
@@ -505,7 +510,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("sylva-allometry-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("allometry.csv");
-        std::fs::write(&path, "genus,h_p2,h_p3,h_p4,cw_b0\ntilia,100,3,-0.5,\nzelkova,,,,9\nbroadleaf,,,,1\n").unwrap();
+        std::fs::write(
+            &path,
+            "genus,h_p2,h_p3,h_p4,cw_b0\ntilia,100,3,-0.5,\nzelkova,,,,9\nbroadleaf,,,,1\nconifer,,,,2\n",
+        )
+        .unwrap();
         let a = Allometry::with_overrides(&path).unwrap();
         let b = Allometry::built_in();
         let t = a.equations("tilia");
@@ -514,6 +523,10 @@ mod tests {
         assert_eq!(a.equations("zelkova").crown.b0, 9.0);
         assert_eq!(a.equations("zelkova").height, b.equations("broadleaf").height);
         assert_eq!(a.equations("broadleaf").crown.b0, 1.0);
+        // The conifer row starts from the conifer default, not the broadleaf one.
+        assert_eq!(a.for_label("Picea rubens").genus, "picea");
+        let conifer = a.equations("sequoiadendron");
+        assert_eq!((conifer.crown.b0, conifer.height), (2.0, b.equations("thuja").height));
         std::fs::write(&path, "genus,h_p2\ntilia,tall\n").unwrap();
         let e = Allometry::with_overrides(&path).unwrap_err().to_string();
         assert!(e.contains("h_p2") && e.contains("tall") && e.contains("tilia"), "{e}");

@@ -231,7 +231,7 @@ struct BakeArgs {
     /// crown_radius, yaw, id. E.g. --column species=species_code --column dbh=dbh_mm.
     #[arg(long = "column", value_name = "ROLE=NAME", value_parser = placements::ColumnRole::parse_mapping)]
     columns: Vec<(placements::ColumnRole, String)>,
-    /// Unit of a DBH column whose name does not say it (dbh_mm, dbh_cm and dbh_in do).
+    /// Unit of a DBH column whose name does not say it (dbh_mm, dbh_cm, dbh_in and dbh_m do).
     #[arg(long, value_enum, value_name = "UNIT")]
     dbh_unit: Option<placements::DbhUnit>,
     /// Height and crown equations from DBH to use over the built-in ones

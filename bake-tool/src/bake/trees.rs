@@ -89,6 +89,10 @@ struct SpeciesSummary {
     dbh: Option<(f32, f32)>,
     crown: Option<(f32, f32)>,
     from_dbh: u64,
+    /// Rows with a DBH, and of them over 150 cm and under 3 cm (unit checks).
+    dbh_rows: u64,
+    dbh_big: u64,
+    dbh_small: u64,
 }
 
 fn widen(r: Option<(f32, f32)>, v: f32) -> (f32, f32) {
@@ -412,6 +416,9 @@ fn tree_pass(
                 dbh: None,
                 crown: None,
                 from_dbh: 0,
+                dbh_rows: 0,
+                dbh_big: 0,
+                dbh_small: 0,
             };
             summary.insert(label.to_string(), first);
         }
@@ -420,6 +427,9 @@ fn tree_pass(
         s.height = widen(Some(s.height), f.height_m);
         if let Some(d) = f.dbh_cm {
             s.dbh = Some(widen(s.dbh, d));
+            s.dbh_rows += 1;
+            s.dbh_big += u64::from(d > 150.0);
+            s.dbh_small += u64::from(d < 3.0);
         }
         if let Some(c) = f.crown_m {
             s.crown = Some(widen(s.crown, c));
@@ -517,14 +527,19 @@ fn log_summary(summary: &BTreeMap<String, SpeciesSummary>, species: &SpeciesMap,
         let rest: u64 = rows[SHOWN..].iter().map(|(_, s)| s.trees).sum();
         log(&format!("  … {} more labels with {rest} trees", rows.len() - SHOWN));
     }
-    let with_dbh: Vec<&SpeciesSummary> = rows.iter().map(|(_, s)| *s).filter(|s| s.dbh.is_some()).collect();
-    if !with_dbh.is_empty() && with_dbh.iter().all(|s| s.dbh.is_some_and(|d| d.0 > 150.0)) {
-        log("placements: warning: every DBH is over 150 cm: if the column is in millimetres, pass --dbh-unit mm \
-             (or name it dbh_mm)");
+    let count = |f: fn(&SpeciesSummary) -> u64| rows.iter().map(|(_, s)| f(s)).sum::<u64>();
+    let (with_dbh, big, small) = (count(|s| s.dbh_rows), count(|s| s.dbh_big), count(|s| s.dbh_small));
+    if with_dbh > 0 && big * 2 > with_dbh {
+        log(&format!(
+            "placements: warning: {big} of {with_dbh} DBH values are over 150 cm: if the column is in millimetres, \
+             pass --dbh-unit mm (or name it dbh_mm)"
+        ));
     }
-    if !with_dbh.is_empty() && with_dbh.iter().all(|s| s.dbh.is_some_and(|d| d.1 < 3.0)) {
-        log("placements: warning: every DBH is under 3 cm: if the column is in metres or inches, convert it or \
-             pass --dbh-unit in");
+    if with_dbh > 0 && small * 2 > with_dbh {
+        log(&format!(
+            "placements: warning: {small} of {with_dbh} DBH values are under 3 cm: if the column is in metres, pass \
+             --dbh-unit m (or name it dbh_m)"
+        ));
     }
 }
 

@@ -45,8 +45,9 @@ fn unsupported(ext: &str) -> Option<String> {
     })
 }
 
-/// Checks the extensions a file requires or uses: known compressions are
-/// refused by name; any other required extension the bake does not know too.
+/// Checks the extensions a file requires: known compressions are refused by
+/// name, and so is any other required extension the bake does not know. (A
+/// KTX2 image that a texture really uses is refused when it is loaded.)
 ///
 /// # Errors
 /// An extension the bake cannot read.
@@ -57,20 +58,12 @@ pub fn check(root: &Value) -> Result<()> {
             .map(|a| a.iter().filter_map(Value::as_str).map(str::to_string).collect())
             .unwrap_or_default()
     };
-    let (required, used) = (list("extensionsRequired"), list("extensionsUsed"));
-    for ext in required.iter().chain(&used) {
+    // Only required ones: a file that merely uses them keeps plain fallbacks
+    // (uncompressed accessors, PNG/JPEG sources), which are read.
+    let required = list("extensionsRequired");
+    for ext in &required {
         if let Some(message) = unsupported(ext) {
             bail!("{message}");
-        }
-    }
-    // KTX2 images without the extension declared.
-    let images = root.get("images").and_then(Value::as_array).map(Vec::as_slice).unwrap_or_default();
-    for (i, image) in images.iter().enumerate() {
-        let mime = image.get("mimeType").and_then(Value::as_str).unwrap_or("");
-        let uri = image.get("uri").and_then(Value::as_str).unwrap_or("");
-        if mime == "image/ktx2" || uri.to_lowercase().ends_with(".ktx2") || uri.starts_with("data:image/ktx2") {
-            let message = unsupported("KHR_texture_basisu").unwrap_or_default();
-            bail!("image {i} is KTX2: {message}");
         }
     }
     let gltf_knows = gltf::json::extensions::ENABLED_EXTENSIONS;
@@ -177,6 +170,12 @@ fn meshopt(value: &Value) -> Option<&Value> {
 /// they may have no bytes of their own; [`decode_meshopt`] fills their views.
 #[must_use]
 pub fn meshopt_fallbacks(root: &Value) -> Vec<usize> {
+    let declared = root.get("extensionsUsed").and_then(Value::as_array).is_some_and(|used| {
+        used.iter().any(|e| matches!(e.as_str(), Some("EXT_meshopt_compression" | "KHR_meshopt_compression")))
+    });
+    if !declared {
+        return Vec::new();
+    }
     let buffers = root.get("buffers").and_then(Value::as_array).map(Vec::as_slice).unwrap_or_default();
     (0..buffers.len())
         .filter(|&i| meshopt(&buffers[i]).and_then(|m| m.get("fallback")).and_then(Value::as_bool) == Some(true))
@@ -212,21 +211,25 @@ pub fn decode_meshopt(root: &Value, buffers: &mut [Vec<u8>]) -> Result<usize> {
         let Some(size) = size else { bail!("{what}: {count} elements of {stride} bytes are too many") };
         let mode = m.get("mode").and_then(Value::as_str).unwrap_or("");
         let filter = m.get("filter").and_then(Value::as_str).unwrap_or("NONE");
-        let bytes = decode_view(&src, mode, filter, stride, count).map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
-        debug_assert_eq!(bytes.len(), size);
         let (Some(dst_buffer), dst_offset, Some(dst_len)) =
             (u(view.get("buffer")), u(view.get("byteOffset")).unwrap_or(0), u(view.get("byteLength")))
         else {
             bail!("{what}: the view needs buffer and byteLength");
         };
-        let dst = buffers
-            .get_mut(dst_buffer)
-            .and_then(|b| b.get_mut(dst_offset..dst_offset.checked_add(dst_len)?))
-            .ok_or_else(|| anyhow::anyhow!("{what}: the view lies outside buffer {dst_buffer}"))?;
-        if size > dst.len() {
-            bail!("{what}: {size} decoded bytes do not fit the view's {}", dst.len());
+        let fits =
+            buffers.get(dst_buffer).is_some_and(|b| dst_offset.checked_add(dst_len).is_some_and(|e| e <= b.len()));
+        if !fits {
+            bail!("{what}: the view lies outside buffer {dst_buffer}");
         }
-        dst[..size].copy_from_slice(&bytes);
+        // Checked before decoding: the declared counts must fit what the view holds.
+        if size > dst_len {
+            bail!("{what}: {count} × {stride} decoded bytes do not fit the view's {dst_len}");
+        }
+        if mode == "TRIANGLES" && !count.is_multiple_of(3) {
+            bail!("{what}: {count} triangle indices are no whole number of triangles");
+        }
+        let bytes = decode_view(&src, mode, filter, stride, count).map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
+        buffers[dst_buffer][dst_offset..dst_offset + size].copy_from_slice(&bytes);
         decoded += 1;
     }
     Ok(decoded)
@@ -321,4 +324,12 @@ mod tests {
         assert_eq!(uv_set(&root, None), UvSet::default());
         assert_eq!(uv_set(&serde_json::json!({}), Some(3)), UvSet::default());
     }
+}
+
+/// The error for image `index` when it is KTX2 (`mime`, `uri`), else `None`.
+#[must_use]
+pub fn ktx2_image(index: usize, mime: Option<&str>, uri: Option<&str>) -> Option<String> {
+    let uri = uri.unwrap_or("");
+    let ktx = mime == Some("image/ktx2") || uri.to_lowercase().ends_with(".ktx2") || uri.starts_with("data:image/ktx2");
+    ktx.then(|| format!("image {index} is KTX2: {}", unsupported("KHR_texture_basisu").unwrap_or_default()))
 }

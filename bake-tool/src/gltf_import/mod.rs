@@ -488,6 +488,10 @@ fn load_image(
     base: Option<&Path>,
 ) -> Result<image::RgbaImage> {
     let json = doc.as_json().images.get(index).ok_or_else(|| anyhow!("missing image"))?;
+    let mime = json.mime_type.as_ref().map(|m| m.0.as_str());
+    if let Some(message) = extensions::ktx2_image(index, mime, json.uri.as_deref()) {
+        bail!("{message}");
+    }
     let encoded: Vec<u8> = match (&json.buffer_view, &json.uri) {
         (Some(view), _) => {
             let view = doc.views().nth(view.value()).ok_or_else(|| anyhow!("missing buffer view"))?;
@@ -549,8 +553,11 @@ fn append_primitive(
     if mode == gltf::mesh::Mode::Triangles && !index_count.is_multiple_of(3) {
         bail!("{index_count} indices are no whole number of triangles");
     }
-    if model.vertices.len().saturating_add(n) > MAX_VERTICES || model.triangles.len() + index_count / 3 > MAX_TRIANGLES
-    {
+    let triangles = match mode {
+        gltf::mesh::Mode::TriangleStrip | gltf::mesh::Mode::TriangleFan => index_count.saturating_sub(2),
+        _ => index_count / 3,
+    };
+    if model.vertices.len().saturating_add(n) > MAX_VERTICES || model.triangles.len() + triangles > MAX_TRIANGLES {
         bail!(
             "the model expands to more than {MAX_VERTICES} vertices or {MAX_TRIANGLES} triangles (a tree model has \
              far fewer: check for nodes that reuse a big mesh many times)"

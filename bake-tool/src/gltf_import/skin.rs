@@ -88,6 +88,16 @@ pub fn vertex_matrices(
     if wa.dimensions() != N::Vec4 || !weights_ok {
         bail!("accessor {} (WEIGHTS_0 of {what}) is not VEC4 of floats or normalized u8/u16", wa.index());
     }
+    // Bounded before anything is read: as many rows as vertices, no more than a model may have.
+    let n = prim.get(&gltf::Semantic::Positions).map_or(0, |a| a.count());
+    if ja.count() != n || wa.count() != n || n > super::MAX_VERTICES {
+        bail!(
+            "{what}: {} joint and {} weight rows for {n} vertices (at most {})",
+            ja.count(),
+            wa.count(),
+            super::MAX_VERTICES
+        );
+    }
     accessors::check(&ja, buffers, &format!("JOINTS_0 of {what}"))?;
     accessors::check(&wa, buffers, &format!("WEIGHTS_0 of {what}"))?;
     let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));

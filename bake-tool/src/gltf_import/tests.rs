@@ -767,11 +767,19 @@ fn compressed_models_are_refused_by_name() {
         let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
         assert!(e.contains(ext) && e.contains(want), "{ext}: {e}");
     }
-    // A KTX2 image without the extension declared.
-    let extra = json!({"images": [{"uri": "bark.ktx2"}]});
+    // A KTX2 image a material uses, without the extension declared.
+    let extra = json!({
+        "images": [{"uri": "bark.ktx2"}],
+        "textures": [{"source": 0}],
+        "materials": [{"name": "leaves", "alphaMode": "MASK", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    });
     let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, extra);
     let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
     assert!(e.contains("image 0 is KTX2"), "{e}");
+    // Draco only used (with plain accessors as fallback): imported from the fallback.
+    let extra = json!({"extensionsUsed": ["KHR_draco_mesh_compression"]});
+    let (root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, extra);
+    assert_eq!(import_glb(&root, &bin).unwrap().triangles.len(), 2);
 }
 
 #[test]
@@ -888,4 +896,27 @@ fn every_fuzz_seed_imports_or_fails_without_panicking() {
         n += 1;
     }
     assert!(n >= 20, "{n} seeds");
+}
+
+#[test]
+fn hostile_meshopt_and_skin_declarations_are_refused_before_allocating() {
+    // A no-uri buffer claiming to be a meshopt fallback without the extension declared: refused as before.
+    let (mut root, bin) = optimised_model(&QUAD, &QUAD_UV, &[0, 1, 2, 1, 3, 2], 4, false, json!({}));
+    root["buffers"] = json!([{"byteLength": bin.len()},
+        {"byteLength": 1 << 29, "extensions": {"EXT_meshopt_compression": {"fallback": true}}}]);
+    let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
+    assert!(e.contains("buffer 1"), "{e}");
+    // Triangle indices that are no whole number of triangles: refused before decoding.
+    root["extensionsUsed"] = json!(["EXT_meshopt_compression"]);
+    root["buffers"][1]["byteLength"] = 64.into();
+    root["bufferViews"][3]["buffer"] = 1.into();
+    root["bufferViews"][3]["byteOffset"] = 0.into();
+    root["bufferViews"][3]["extensions"] = json!({"EXT_meshopt_compression": {
+        "buffer": 0, "byteOffset": 0, "byteLength": 16, "byteStride": 2, "count": 4, "mode": "TRIANGLES"}});
+    let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
+    assert!(e.contains("no whole number of triangles"), "{e}");
+    // A decoded size beyond its view: refused before decoding.
+    root["bufferViews"][3]["extensions"]["EXT_meshopt_compression"]["count"] = 3_000_000.into();
+    let e = format!("{:#}", import_glb(&root, &bin).unwrap_err());
+    assert!(e.contains("do not fit the view"), "{e}");
 }

@@ -29,14 +29,17 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
         let row = i as u64 + 1;
         report.rows += 1;
         let props = f.get("properties").and_then(|p| p.as_object());
+        // Property names lowercased once per feature.
+        let keys: Vec<(String, &serde_json::Value)> =
+            props.map(|p| p.iter().map(|(k, v)| (k.to_lowercase(), v)).collect()).unwrap_or_default();
         // A property by role: the `--column` name, else the role's aliases; with its key.
-        let prop_key = |role: ColumnRole| -> Option<(&String, &serde_json::Value)> {
-            let p = props?;
+        let prop_key = |role: ColumnRole| -> Option<(&str, &serde_json::Value)> {
             let named = options.columns.iter().find(|(r, _)| *r == role).map(|(_, n)| n.to_lowercase());
-            match named {
-                Some(n) => p.iter().find(|(k, _)| k.to_lowercase() == n),
-                None => role.aliases().iter().find_map(|a| p.iter().find(|(k, _)| k.to_lowercase() == *a)),
-            }
+            let found = match named {
+                Some(n) => keys.iter().find(|(k, _)| *k == n),
+                None => role.aliases().iter().find_map(|a| keys.iter().find(|(k, _)| k == a)),
+            };
+            found.map(|(k, v)| (k.as_str(), *v))
         };
         let prop = |role: ColumnRole| prop_key(role).map(|(_, v)| v);
         let num = |v: Option<&serde_json::Value>| v.and_then(|v| v.as_f64().or_else(|| v.as_str().and_then(parse_f64)));

@@ -270,6 +270,8 @@ pub enum DbhUnit {
     Cm,
     /// Inches.
     In,
+    /// Metres.
+    M,
 }
 
 impl DbhUnit {
@@ -285,6 +287,8 @@ impl DbhUnit {
             Some(DbhUnit::Cm)
         } else if ends("in") || ends("inch") || ends("inches") {
             Some(DbhUnit::In)
+        } else if ends("m") {
+            Some(DbhUnit::M)
         } else {
             None
         }
@@ -297,6 +301,7 @@ impl DbhUnit {
             DbhUnit::Mm => 0.1,
             DbhUnit::Cm => 1.0,
             DbhUnit::In => 2.54,
+            DbhUnit::M => 100.0,
         }
     }
 
@@ -307,6 +312,7 @@ impl DbhUnit {
             DbhUnit::Mm => "mm",
             DbhUnit::Cm => "cm",
             DbhUnit::In => "in",
+            DbhUnit::M => "m",
         }
     }
 }
@@ -362,6 +368,8 @@ const HEIGHT: &[&str] = &[
     "boomhoogte",
     "hoogte",
 ];
+// The names detected before column mapping keep their order (species, species_name,
+// genus, taxon, baumart, soort, type, art), so existing files pick the same column.
 const SPECIES: &[&str] = &[
     "species",
     "species_name",
@@ -372,27 +380,27 @@ const SPECIES: &[&str] = &[
     "scientificname",
     "latin_name",
     "latin",
+    "genus",
     "taxon",
     "baumart",
+    "soort",
+    "type",
+    "art",
     "boomsoort",
     "soortnaam",
-    "soort",
-    "art",
     "common_name",
     "commonname",
     "species_code",
     "speciescode",
     "spp",
     "sp",
-    "genus",
-    "type",
 ];
 const DBH: &[&str] = &[
     "dbh",
     "dbh_cm",
     "dbh_mm",
     "dbh_in",
-    "diameter",
+    "dbh_m",
     "diameter_cm",
     "diameter_mm",
     "stem_diameter",
@@ -484,14 +492,18 @@ pub fn detect_columns_with(header: &[&str], options: &ReadOptions) -> Result<Col
         if chosen.contains_key(&role) {
             continue;
         }
-        if let Some(i) =
-            role.aliases().iter().find_map(|n| h.iter().position(|c| c == n)).filter(|&i| !taken(&chosen, i))
-        {
+        // The first alias whose column no other role holds yet.
+        let free = role.aliases().iter().find_map(|n| h.iter().position(|c| c == n).filter(|&i| !taken(&chosen, i)));
+        if let Some(i) = free {
             chosen.insert(role, i);
         }
     }
     let get = |r: ColumnRole| chosen.get(&r).copied();
+    // Coordinates the user named decide the kind, whatever else the header has.
+    let named = |r: ColumnRole| options.columns.iter().any(|(c, _)| *c == r);
+    let projected_named = named(ColumnRole::X) || named(ColumnRole::Y);
     let (kind, x, y) = match (get(ColumnRole::Lon), get(ColumnRole::Lat), get(ColumnRole::X), get(ColumnRole::Y)) {
+        (_, _, Some(x), Some(y)) if projected_named => (CoordKind::Projected, x, y),
         (Some(x), Some(y), _, _) => (CoordKind::LonLat, x, y),
         (_, _, Some(x), Some(y)) => (CoordKind::Projected, x, y),
         _ => bail!(
@@ -501,7 +513,14 @@ pub fn detect_columns_with(header: &[&str], options: &ReadOptions) -> Result<Col
     };
     let dbh = get(ColumnRole::Dbh);
     let dbh_unit = dbh.and_then(|i| DbhUnit::from_name(&h[i])).or(options.dbh_unit).unwrap_or_default();
-    let crown = get(ColumnRole::CrownDiameter).map(|i| (i, false)).or(get(ColumnRole::CrownRadius).map(|i| (i, true)));
+    // A crown column the user named wins over a detected one.
+    let diameter = get(ColumnRole::CrownDiameter).map(|i| (i, false));
+    let radius = get(ColumnRole::CrownRadius).map(|i| (i, true));
+    let crown = if named(ColumnRole::CrownRadius) && !named(ColumnRole::CrownDiameter) {
+        radius.or(diameter)
+    } else {
+        diameter.or(radius)
+    };
     let coordinate_roles: [ColumnRole; 2] =
         if kind == CoordKind::LonLat { [ColumnRole::Lon, ColumnRole::Lat] } else { [ColumnRole::X, ColumnRole::Y] };
     let used = ColumnRole::ALL

@@ -209,3 +209,29 @@ fn dbh_and_crowns_are_read_in_their_units_and_checked() {
     let p = &set.rows[0];
     assert_eq!((p.species.as_deref(), p.dbh_cm, p.crown_m), (Some("Acer campestre"), Some(25.4), Some(7.5)));
 }
+
+#[test]
+fn named_columns_decide_over_detected_ones() {
+    // Named x/y win over lon/lat columns that are also there.
+    let options = ReadOptions {
+        columns: vec![(ColumnRole::X, "rd_x".into()), (ColumnRole::Y, "rd_y".into())],
+        ..Default::default()
+    };
+    let c = detect_columns_with(&["lon", "lat", "rd_x", "rd_y"], &options).unwrap();
+    assert_eq!((c.kind, c.x, c.y), (CoordKind::Projected, 2, 3));
+    // A named crown radius wins over a detected crown diameter.
+    let options = ReadOptions { columns: vec![(ColumnRole::CrownRadius, "r".into())], ..Default::default() };
+    let c = detect_columns_with(&["lat", "lon", "crown_diameter", "r"], &options).unwrap();
+    assert_eq!(c.crown, Some((3, true)));
+    // A role whose first alias is taken by a named column falls back to its next alias.
+    let options = ReadOptions { columns: vec![(ColumnRole::Id, "species".into())], ..Default::default() };
+    let c = detect_columns_with(&["lat", "lon", "species", "botanical_name"], &options).unwrap();
+    assert_eq!((c.id, c.species), (Some(2), Some(3)));
+    // Files that worked before pick the same species column: genus before taxon, type before art.
+    assert_eq!(detect_columns(&["lat", "lon", "taxon", "genus"]).unwrap().species, Some(3));
+    assert_eq!(detect_columns(&["lat", "lon", "art", "type"]).unwrap().species, Some(3));
+    // A plain "diameter" is not taken as DBH (it often is the crown); dbh_m is metres.
+    assert_eq!(detect_columns(&["lat", "lon", "diameter"]).unwrap().dbh, None);
+    let c = detect_columns(&["lat", "lon", "dbh_m"]).unwrap();
+    assert_eq!(c.dbh_unit, DbhUnit::M);
+}
