@@ -307,6 +307,14 @@ fn apply_filter(words: &mut [u32], filter: &str, stride: usize) -> Result<(), St
     Ok(())
 }
 
+/// The error for image `index` when it is KTX2 (`mime`, `uri`), else `None`.
+#[must_use]
+pub fn ktx2_image(index: usize, mime: Option<&str>, uri: Option<&str>) -> Option<String> {
+    let uri = uri.unwrap_or("");
+    let ktx = mime == Some("image/ktx2") || uri.to_lowercase().ends_with(".ktx2") || uri.starts_with("data:image/ktx2");
+    ktx.then(|| format!("image {index} is KTX2: {}", unsupported("KHR_texture_basisu").unwrap_or_default()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -324,12 +332,4 @@ mod tests {
         assert_eq!(uv_set(&root, None), UvSet::default());
         assert_eq!(uv_set(&serde_json::json!({}), Some(3)), UvSet::default());
     }
-}
-
-/// The error for image `index` when it is KTX2 (`mime`, `uri`), else `None`.
-#[must_use]
-pub fn ktx2_image(index: usize, mime: Option<&str>, uri: Option<&str>) -> Option<String> {
-    let uri = uri.unwrap_or("");
-    let ktx = mime == Some("image/ktx2") || uri.to_lowercase().ends_with(".ktx2") || uri.starts_with("data:image/ktx2");
-    ktx.then(|| format!("image {index} is KTX2: {}", unsupported("KHR_texture_basisu").unwrap_or_default()))
 }
