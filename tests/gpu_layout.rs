@@ -8,10 +8,15 @@ use std::mem::{offset_of, size_of};
 use sylva::format::tile::GpuBatch;
 use sylva::render::gpu_data::{CullDispatch, DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform};
 
+/// The composed `shader` (`shaders::ALL`), parsed by naga.
+fn parse(shader: &str) -> naga::Module {
+    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
+    naga::front::wgsl::parse_str(source).expect("valid WGSL")
+}
+
 /// A WGSL struct of the composed `shader`: its members (name, byte offset) and size.
 fn wgsl_struct(shader: &str, name: &str) -> (Vec<(String, u32)>, u32) {
-    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
-    let module = naga::front::wgsl::parse_str(source).expect("valid WGSL");
+    let module = parse(shader);
     // Layouts as WGSL computes them (naga's `Layouter`, as wgpu uses).
     let mut layouter = naga::proc::Layouter::default();
     layouter.update(module.to_ctx()).expect("layout");
@@ -120,8 +125,7 @@ fn mesh_pass_structs_and_indirect_args_match() {
 
 /// Bytes of the global variable `name` of the composed `shader`.
 fn wgsl_global_size(shader: &str, name: &str) -> u32 {
-    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
-    let module = naga::front::wgsl::parse_str(source).expect("valid WGSL");
+    let module = parse(shader);
     let mut layouter = naga::proc::Layouter::default();
     layouter.update(module.to_ctx()).expect("layout");
     let (_, var) = module.global_variables.iter().find(|(_, v)| v.name.as_deref() == Some(name)).expect("global");
@@ -130,8 +134,7 @@ fn wgsl_global_size(shader: &str, name: &str) -> u32 {
 
 /// The value of the `u32` constant `name` of the composed `shader`.
 fn wgsl_const(shader: &str, name: &str) -> usize {
-    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
-    let module = naga::front::wgsl::parse_str(source).expect("valid WGSL");
+    let module = parse(shader);
     let (_, c) = module.constants.iter().find(|(_, c)| c.name.as_deref() == Some(name)).expect("constant");
     match module.global_expressions[c.init] {
         naga::Expression::Literal(naga::Literal::U32(v)) => v as usize,

@@ -11,6 +11,17 @@ fn inspect_json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// The shared ez-tree oak, or `None` (with a note) where `../shared/data` is absent.
+fn oak_model() -> Option<std::path::PathBuf> {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
+    if model.exists() {
+        Some(model)
+    } else {
+        eprintln!("skipping: {} not present", model.display());
+        None
+    }
+}
+
 /// `sylva-bake bake` of `csv` with one model as oak, small and fast (no clusters,
 /// 16 px billboards), plus `extra` flags.
 fn quick_bake(model: &Path, csv: &Path, out: &Path, extra: &[&str]) -> std::process::Command {
@@ -301,11 +312,7 @@ fn a_bake_larger_than_memory_streams_through_bucket_files_with_the_same_result()
 
 #[test]
 fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
-    if !model.exists() {
-        eprintln!("skipping: {} not present", model.display());
-        return;
-    }
+    let Some(model) = oak_model() else { return };
     let dir = tmp("european");
     // 300 trees in Vienna as a German spreadsheet exports them: semicolons,
     // decimal commas, Windows-1252 (50 rows with ß), one model.
@@ -356,11 +363,7 @@ fn baked_heights(scene: &Path) -> Vec<f32> {
 
 #[test]
 fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
-    if !model.exists() {
-        eprintln!("skipping: {} not present", model.display());
-        return;
-    }
+    let Some(model) = oak_model() else { return };
     let dir = tmp("inventory");
     let bake = |csv: &Path, out: &Path, extra: &[&str]| quick_bake(&model, csv, out, extra);
     // A research plot: species codes, DBH in millimetres, tags, no height column.
@@ -432,11 +435,7 @@ fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
 
 #[test]
 fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
-    if !model.exists() {
-        eprintln!("skipping: {} not present", model.display());
-        return;
-    }
+    let Some(model) = oak_model() else { return };
     let dir = tmp("districts");
     // Two districts of Amsterdam-like street trees, about 15 km apart; the east one larger.
     let mut csv = String::from("id,species,lat,lon,height\n");
