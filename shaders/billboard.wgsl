@@ -85,7 +85,9 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let c = corners[vertex % 6u];
     let half_w = draw.bb_center.w * tree.scale * boost;
     let half_h = draw.bb_size.x * tree.scale * boost;
-    let pos = base + right * (c.x * half_w) + up * (c.y * half_h);
+    // The crown aspect stretches the quad horizontally: its width, and the
+    // horizontal part of its height seen from above.
+    let pos = base + crown_stretch(right * (c.x * half_w) + up * (c.y * half_h), tree);
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
     out.uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);

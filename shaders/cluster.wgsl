@@ -27,10 +27,10 @@
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
-    // Ellipsoid: centre (xyz), kind in w (0 ellipsoid, 1 line).
-    // Line: start point (xyz).
+    // Ellipsoid: centre (xyz), minus its largest radius in w (≤ 0).
+    // Line: start point (xyz), 1 in w.
     @location(0) @interpolate(flat) p0: vec4<f32>,
-    // Ellipsoid: axes divided by their radii (world → local unit sphere).
+    // Ellipsoid: the rows of its world → local unit sphere map.
     // Line: end point (xyz), radius (w).
     @location(1) @interpolate(flat) p1: vec4<f32>,
     @location(2) @interpolate(flat) p2: vec4<f32>,
@@ -104,15 +104,20 @@ const CORNERS = array<vec2<f32>, 6>(
 );
 
 fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexOut>) {
-    let center = tree.pos + rotate_z(e.center * tree.scale, tree.yaw);
+    let center = tree.pos + rotate_z(tree_scaled(e.center, tree), tree.yaw);
     let r = max(e.radii * tree.scale, vec3<f32>(1e-6));
     let a0 = rotate_z(quat_rotate(e.rotation, vec3<f32>(1.0, 0.0, 0.0)), tree.yaw);
     let a1 = rotate_z(quat_rotate(e.rotation, vec3<f32>(0.0, 1.0, 0.0)), tree.yaw);
     let a2 = rotate_z(quat_rotate(e.rotation, vec3<f32>(0.0, 0.0, 1.0)), tree.yaw);
-    // T: unit sphere → eye-relative space; T' = clip_from_eye · T. Its rows give
-    // the bounding rectangle in NDC as the roots of two quadratics.
+    // T: unit sphere → eye-relative space, columns D·a_i·r_i with the crown
+    // stretch D = diag(k, k, 1) (an ellipsoid stays an ellipsoid); T' =
+    // clip_from_eye · T. Its rows give the bounding rectangle in NDC as the
+    // roots of two quadratics.
+    let c0 = crown_stretch(a0 * r.x, tree);
+    let c1 = crown_stretch(a1 * r.y, tree);
+    let c2 = crown_stretch(a2 * r.z, tree);
     let t = view.clip_from_eye * mat4x4<f32>(
-        vec4<f32>(a0 * r.x, 0.0), vec4<f32>(a1 * r.y, 0.0), vec4<f32>(a2 * r.z, 0.0), vec4<f32>(center, 1.0));
+        vec4<f32>(c0, 0.0), vec4<f32>(c1, 0.0), vec4<f32>(c2, 0.0), vec4<f32>(center, 1.0));
     let row0 = vec4<f32>(t[0].x, t[1].x, t[2].x, t[3].x);
     let row1 = vec4<f32>(t[0].y, t[1].y, t[2].y, t[3].y);
     let row3 = vec4<f32>(t[0].w, t[1].w, t[2].w, t[3].w);
@@ -122,7 +127,8 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
     let hx = bx * bx - c * dot_d(row0, row0);
     let hy = by * by - c * dot_d(row1, row1);
     var ndc: vec2<f32>;
-    if !sphere_visible(center, max(r.x, max(r.y, r.z)), view) {
+    let reach = max(r.x, max(r.y, r.z)) * max(tree.aspect, 1.0);
+    if !sphere_visible(center, reach, view) {
         ndc = vec2<f32>(2.0); // outside the frustum (or behind the eye): nothing to draw
     } else if c >= 0.0 {
         // The ellipsoid crosses the eye plane (w = 0): its projection is unbounded.
@@ -147,15 +153,18 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
     if is_perspective() {
         v = normalize(center);
     }
-    let support = length(vec3<f32>(dot(a0, v) * r.x, dot(a1, v) * r.y, dot(a2, v) * r.z));
+    let support = length(vec3<f32>(dot(c0, v), dot(c1, v), dot(c2, v)));
     let front = center - v * min(support, max(dot(center, v) - 1e-3, 0.0));
     let cc = view.clip_from_eye * vec4<f32>(front, 1.0);
     let depth = clamp(cc.z / max(abs(cc.w), 1e-20), 0.0, 1.0);
     (*out).clip = vec4<f32>(ndc, depth, 1.0);
-    (*out).p0 = vec4<f32>(center, 0.0);
-    (*out).p1 = vec4<f32>(a0 / r.x, 0.0);
-    (*out).p2 = vec4<f32>(a1 / r.y, 0.0);
-    (*out).p3 = vec4<f32>(a2 / r.z, 0.0);
+    // The rows of T⁻¹ = diag(1/r) · Aᵀ · D⁻¹: world → unit sphere (and, as
+    // Tᵀ⁻¹, the normal of the unit sphere's point s is Σ s_i · p_i).
+    (*out).p0 = vec4<f32>(center, -reach);
+    let k = vec3<f32>(tree.aspect, tree.aspect, 1.0);
+    (*out).p1 = vec4<f32>(a0 / (k * r.x), 0.0);
+    (*out).p2 = vec4<f32>(a1 / (k * r.y), 0.0);
+    (*out).p3 = vec4<f32>(a2 / (k * r.z), 0.0);
     (*out).color = vec4<f32>(e.color * variation_tint(tree.variation), e.level);
 }
 
@@ -181,8 +190,8 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
     let w1 = unpack2x16unorm(records[base + 1u]);
     let w2 = unpack2x16unorm(records[base + 2u]);
     let radii = unpack_halves(records[base + 3u]);
-    let a = tree.pos + rotate_z(dequantise(vec3<f32>(w0, w1.x)) * tree.scale, tree.yaw);
-    let b = tree.pos + rotate_z(dequantise(vec3<f32>(w1.y, w2)) * tree.scale, tree.yaw);
+    let a = tree.pos + rotate_z(tree_scaled(dequantise(vec3<f32>(w0, w1.x)), tree), tree.yaw);
+    let b = tree.pos + rotate_z(tree_scaled(dequantise(vec3<f32>(w1.y, w2)), tree), tree.yaw);
     let mid = 0.5 * (a + b);
     var v: vec3<f32>;
     if is_perspective() {
@@ -295,10 +304,7 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     // ray origin is first moved next to the primitive so f32 keeps its precision
     // at any distance.
     let centre = select(in.p0.xyz, 0.5 * (in.p0.xyz + in.p1.xyz), is_line);
-    let reach = select(
-        1.0 / max(min(length(in.p1.xyz), min(length(in.p2.xyz), length(in.p3.xyz))), 1e-20),
-        0.5 * length(in.p1.xyz - in.p0.xyz) + in.p1.w,
-        is_line);
+    let reach = select(-in.p0.w, 0.5 * length(in.p1.xyz - in.p0.xyz) + in.p1.w, is_line);
     let skip = max(dot(centre - ray[0], ray[1]) - reach * 1.01, 0.0);
     let o = ray[0] + ray[1] * skip;
     let oc = o - in.p0.xyz;

@@ -48,9 +48,11 @@ struct Batch {
     scale_min: f32,
     scale_log2_step: f32,
     max_height_m: f32,
-    // BATCH_DENSITY_ORDERED, …
+    // BATCH_DENSITY_ORDERED, BATCH_CROWN_ASPECT
     flags: u32,
-    reserved: u32,
+    // Crown aspect range (BATCH_CROWN_ASPECT): bits 0–15 smallest aspect in
+    // 1/8192, bits 16–31 log2 step in 1/65536.
+    crown: u32,
 };
 
 // Per-species selection data. Must match `GpuSpecies` in src/render/gpu_data.rs.
@@ -106,9 +108,28 @@ struct DrawParams {
 struct Tree {
     pos: vec3<f32>,
     yaw: f32,
+    // Height scale of the species model.
     scale: f32,
     variation: f32,
+    // Horizontal over vertical scale (crown width relative to the model's; 1 without crown data).
+    aspect: f32,
 };
+
+// A model-space offset of `tree` scaled to the tree: xy by scale × aspect, z by scale.
+fn tree_scaled(v: vec3<f32>, tree: Tree) -> vec3<f32> {
+    return vec3<f32>(v.xy * (tree.scale * tree.aspect), v.z * tree.scale);
+}
+
+// An eye-space offset stretched horizontally by the tree's crown aspect.
+fn crown_stretch(v: vec3<f32>, tree: Tree) -> vec3<f32> {
+    return vec3<f32>(v.xy * tree.aspect, v.z);
+}
+
+// Variation of an instance of a BATCH_CROWN_ASPECT batch: a hash of its
+// position word. Must match `variation_of` in src/format/tile.rs.
+fn variation_of(xy: u32) -> u32 {
+    return (xy * 0x9E3779B1u) >> 27u;
+}
 
 // Eye-relative position of a batch-local point: (origin − eye_hi) − eye_lo + offset.
 // Both origin and eye_hi are exact f32s, so the first difference is exact for
@@ -128,12 +149,24 @@ fn unpack_instance(packed: vec2<u32>, batch: Batch, view: View) -> Tree {
     t.pos = eye_relative(batch.origin_m, vec3<f32>(x * batch.xy_step_m, y * batch.xy_step_m, z * batch.z_step_m), view);
     t.yaw = f32(yaw_q) * (6.283185307 / 256.0);
     t.scale = batch.scale_min * exp2(f32(scale_q) * batch.scale_log2_step);
-    t.variation = f32(packed.y >> 27u);
+    let top = packed.y >> 27u;
+    if (batch.flags & BATCH_CROWN_ASPECT) != 0u {
+        let min = f32(batch.crown & 0xffffu) / 8192.0;
+        let step = f32(batch.crown >> 16u) / 65536.0;
+        t.aspect = min * exp2(f32(top) * step);
+        t.variation = f32(variation_of(packed.x));
+    } else {
+        t.aspect = 1.0;
+        t.variation = f32(top);
+    }
     return t;
 }
 
 // Batch flag: instances are density-ordered (every prefix an even thinning).
 const BATCH_DENSITY_ORDERED: u32 = 1u;
+// Batch flag: the top 5 bits of word 1 are the crown aspect, not the variation.
+// Must match `BATCH_CROWN_ASPECT` in src/format/tile.rs.
+const BATCH_CROWN_ASPECT: u32 = 2u;
 // Fewest trees a thinned batch keeps, as a fraction (the largest boost is its root).
 const THIN_MIN_FRACTION: f32 = 0.015625;
 

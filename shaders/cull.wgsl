@@ -182,8 +182,8 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     for (var i = lid; i < count; i += WORKGROUP) {
         let instance = b.instance_offset + i;
         let tree = unpack_instance(instances[instance], b, view);
-        let center = tree.pos + rotate_z(s.sphere.xyz * tree.scale, tree.yaw);
-        let radius = s.sphere.w * tree.scale;
+        let center = tree.pos + rotate_z(tree_scaled(s.sphere.xyz, tree), tree.yaw);
+        let radius = s.sphere.w * tree.scale * max(tree.aspect, 1.0);
         let dist = max(length(center), 1e-3);
         // Mode 2 (no culling) draws every tree.
         if view.lod.w < 1.5 && (!sphere_visible(center, radius, view) || dist - radius > view.lod.y) {

@@ -58,11 +58,13 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     let batch = batches[item.y & 0x7fffffu];
     let tree = unpack_instance(instances[item.x], batch, view);
     let local = mesh.pos_min.xyz + vec3<f32>(in.position_material.xyz) / 65535.0 * mesh.pos_extent.xyz;
-    let eye_rel = rotate_z(local * tree.scale, tree.yaw) + tree.pos;
+    let eye_rel = rotate_z(tree_scaled(local, tree), tree.yaw) + tree.pos;
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(eye_rel, 1.0);
     out.uv = mesh.uv_min + in.uv * mesh.uv_extent;
-    out.normal = rotate_z(oct_decode(in.normal_oct.xy), tree.yaw);
+    // Normals of a horizontally stretched crown: the inverse transpose, xy / aspect.
+    let n = oct_decode(in.normal_oct.xy);
+    out.normal = rotate_z(normalize(vec3<f32>(n.xy / tree.aspect, n.z)), tree.yaw);
     out.color = vec4<f32>(in.color.rgb * variation_tint(tree.variation), in.color.a);
     out.material = in.position_material.w;
     out.item_y = item.y;

@@ -12,7 +12,10 @@ use sylva::format::pack::{
     kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section,
     TextureArrayMeta,
 };
-use sylva::format::tile::{decode_ids, encode_ids, GpuBatch, PackedInstance, Tile};
+use sylva::format::tile::{
+    decode_ids, encode_ids, variation_of, CrownRange, GpuBatch, PackedInstance, Tile, BATCH_CROWN_ASPECT,
+    BATCH_DENSITY_ORDERED,
+};
 use sylva::format::{decode_pack, encode_pack, Problem};
 
 fn golden(name: &str) -> PathBuf {
@@ -46,7 +49,7 @@ fn sample_batch(species: u32, offset: u32, count: u32) -> GpuBatch {
         scale_log2_step: 0.01,
         max_height_m: 30.0,
         flags: 0,
-        reserved: 0,
+        crown: 0,
     }
 }
 
@@ -220,6 +223,47 @@ fn tile_golden_and_round_trip() {
     assert!((d.scale - 0.5 * (255.0f32 * 0.01).exp2()).abs() < 1e-5);
 }
 
+/// The sample tile with crown aspects in its second batch (version 2).
+fn sample_crown_tile() -> Tile {
+    let mut tile = sample_tile();
+    let range = CrownRange::covering(0.5, 2.0);
+    tile.batches[1].flags = BATCH_DENSITY_ORDERED | BATCH_CROWN_ASPECT;
+    tile.batches[1].crown = range.pack();
+    tile.instances[3] = PackedInstance::new(1, 2, 3, 4, 5, range.quantise(0.5));
+    tile.instances[4] = PackedInstance::new(30000, 20000, 1000, 200, 10, range.quantise(1.3));
+    tile
+}
+
+#[test]
+fn crown_tile_golden_and_round_trip() {
+    let tile = sample_crown_tile();
+    assert_eq!(tile.version(), 2);
+    let bytes = tile.encode();
+    assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 2, "a tile with crown aspects is version 2");
+    assert_eq!(bytes.len(), 32 + 2 * 80 + 5 * 8, "crown widths cost no bytes per tree");
+    check_golden("v2.tile", &bytes);
+    let decoded = Tile::decode("v2.tile", &std::fs::read(golden("v2.tile")).unwrap(), 2).unwrap();
+    assert_eq!(decoded, tile);
+    // The first batch has no crowns: aspect 1 and the variation bits as before.
+    let plain = decoded.instances[1].decode(&decoded.batches[0]);
+    assert_eq!((plain.aspect, plain.variation), (1.0, 31));
+    // The second batch: aspects to half a step of a 4× range (2/62 octave, 2.3 %),
+    // the variation hashed from the position.
+    let b = &decoded.batches[1];
+    for (i, want) in [(3, 0.5f32), (4, 1.3)] {
+        let d = decoded.instances[i].decode(b);
+        assert!((d.aspect / want).log2().abs() <= 2.0 / 62.0 + 1e-4, "aspect {} for {want}", d.aspect);
+        assert_eq!(u32::from(d.variation), variation_of(decoded.instances[i].xy));
+        assert!((d.scale - 0.5 * (10.0f32 * 0.01).exp2()).abs() < 1e-5 || i == 3, "the scale is unchanged");
+    }
+    // Every quantised aspect of a range decodes inside it, in order.
+    let r = CrownRange::covering(0.3, 3.0);
+    let all: Vec<f32> = (0..32).map(|q| r.aspect(q)).collect();
+    assert!(all[0] <= 0.3 && all[0] > 0.299 && all[31] >= 3.0 && all[31] < 3.01, "{all:?}");
+    assert!(all.windows(2).all(|w| w[1] > w[0]));
+    assert!((0..32).all(|q| r.quantise(r.aspect(q)) == q));
+}
+
 #[test]
 fn pack_golden_and_round_trip() {
     let (meta, sections) = sample_pack();
@@ -297,6 +341,22 @@ fn tile_decoder_error_paths() {
     tile_error(|b| put_f32(b, 32 + 28, -1.0), "radius_m");
     tile_error(|b| put_u32(b, 32 + 80 + 12, 4), "instance_offset is 4, expected 3");
     tile_error(|b| put_u32(b, 32 + 44, 2), "instance_offset");
+    // Batch flags (byte 72 of a batch) and the crown word (76).
+    tile_error(|b| put_u32(b, 32 + 72, 4), "unknown flags 0x4");
+    tile_error(|b| put_u32(b, 32 + 76, 9), "crown is 0x9 without the crown flag");
+    tile_error(|b| put_u32(b, 32 + 72, BATCH_CROWN_ASPECT), "need tile version 2; this tile is version 1");
+    let crown_error = |mutate: &dyn Fn(&mut Vec<u8>), needle: &str| {
+        let mut bytes = sample_crown_tile().encode();
+        mutate(&mut bytes);
+        let e = Tile::decode("t", &bytes, 2).expect_err(needle).to_string();
+        assert!(e.contains(needle), "expected {needle:?} in {e:?}");
+    };
+    crown_error(&|b| put_u32(b, 32 + 80 + 76, 0), "smallest aspect of 0");
+    crown_error(&|b| b[4] = 3, "version 3 is not supported");
+    // A version 2 tile without crowns reads (it re-encodes as version 1).
+    let mut bytes = sample_tile().encode();
+    bytes[4] = 2;
+    assert_eq!(Tile::decode("t", &bytes, 2).unwrap(), sample_tile());
 }
 
 #[test]

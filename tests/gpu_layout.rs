@@ -60,7 +60,7 @@ fn shared_structs_match_their_wgsl_twins() {
             shader,
             "Batch",
             &members!(GpuBatch: origin_m, instance_offset, center_m, radius_m, half_extent_m, instance_count, species,
-                xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, reserved),
+                xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, crown),
             size_of::<GpuBatch>(),
             None,
         );
@@ -155,6 +155,10 @@ fn the_cull_counter_and_argument_words_match() {
     assert_eq!(wgsl_const("cull", "ARGS_WORDS"), word(size_of::<DrawArgs>()));
     assert_eq!(wgsl_const("cull", "ARGS_INSTANCE_COUNT"), word(offset_of!(DrawArgs, instance_count)));
     assert_eq!(wgsl_const("cull", "DISPATCH_BOUNDS_DRAW"), word(offset_of!(CullDispatch, bounds_draw)));
+    // Batch flags and the crown-aspect bits the shaders decode.
+    use sylva::format::tile::{BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED};
+    assert_eq!(wgsl_const("cull", "BATCH_DENSITY_ORDERED"), BATCH_DENSITY_ORDERED as usize);
+    assert_eq!(wgsl_const("cull", "BATCH_CROWN_ASPECT"), BATCH_CROWN_ASPECT as usize);
 }
 
 #[test]
@@ -170,7 +174,7 @@ fn the_cull_dispatch_words_match() {
 fn a_moved_member_is_caught() {
     // The check itself must fail on a wrong offset (here: two members swapped).
     let mut wrong = members!(GpuBatch: origin_m, instance_offset, center_m, radius_m, half_extent_m, instance_count,
-        species, xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, reserved);
+        species, xy_step_m, z_step_m, scale_min, scale_log2_step, max_height_m, flags, crown);
     wrong.swap(12, 13);
     let caught = std::panic::catch_unwind(|| check("cull", "Batch", &wrong, size_of::<GpuBatch>(), None));
     let message = caught.expect_err("a swapped pair of members went unnoticed");

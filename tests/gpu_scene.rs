@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use sylva::camera::Camera;
-use sylva::format::tile::Tile;
+use sylva::format::tile::{CrownRange, Tile, BATCH_CROWN_ASPECT};
 use sylva::format::Manifest;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::cull::{cpu_select, unpack_item_y};
@@ -67,7 +67,22 @@ fn lcg(seed: &mut u64) -> f64 {
 
 #[test]
 fn gpu_selection_matches_the_cpu_oracle() {
-    let mut off = open(fixture().to_str().unwrap());
+    selection_matches_the_oracle(&fixture());
+}
+
+#[test]
+fn gpu_selection_with_crown_widths_matches_the_cpu_oracle() {
+    // Every tree a different crown aspect, 0.4–2.5 times its model's: the cull
+    // pass's spheres (wider and off-centre) decode as the oracle's.
+    let dir = tmp("crowned-oracle");
+    let mut seed = 11;
+    crowned_copy(&fixture(), &dir, 2.5, |_| 0.4 + 2.1 * lcg(&mut seed) as f32);
+    selection_matches_the_oracle(&dir);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn selection_matches_the_oracle(scene: &Path) {
+    let mut off = open(scene.to_str().unwrap());
     let m = manifest(&mut off);
     let lo = DVec3::from(m.bounds.min.map(f64::from));
     let hi = DVec3::from(m.bounds.max.map(f64::from));
@@ -186,29 +201,51 @@ fn renders_match_references() {
     }
 }
 
+/// Writes a copy of the scene `src` to `dst` (tiles listed flat) after
+/// `edit_manifest` and `edit_tile` (each tile with its manifest entry).
+fn rewritten_copy(
+    src: &Path,
+    dst: &Path,
+    edit_manifest: impl FnOnce(&mut Manifest),
+    mut edit_tile: impl FnMut(&mut Tile, &mut sylva::format::manifest::TileEntry),
+) {
+    let bytes = std::fs::read(src.join("scene.json")).unwrap();
+    let mut m = Manifest::decode("scene.json", &bytes).unwrap();
+    m.tiles = sylva::format::index::read_all_tiles(src, &m).unwrap();
+    m.index = None;
+    edit_manifest(&mut m);
+    std::fs::create_dir_all(dst.join("tiles")).unwrap();
+    std::fs::create_dir_all(dst.join("species")).unwrap();
+    let species = m.species.len() as u32;
+    for t in &mut m.tiles {
+        let tb = std::fs::read(src.join(&t.url)).unwrap();
+        let mut tile = Tile::decode(&t.url, &tb, species).unwrap();
+        edit_tile(&mut tile, t);
+        std::fs::write(dst.join(&t.url), tile.encode()).unwrap();
+        std::fs::copy(src.join(&t.ids_url), dst.join(&t.ids_url)).unwrap();
+    }
+    for s in &m.species {
+        std::fs::copy(src.join(&s.pack), dst.join(&s.pack)).unwrap();
+    }
+    std::fs::write(dst.join("scene.json"), m.encode()).unwrap();
+}
+
 /// Writes a copy of `src` whose origin moved by −`shift` (so every relative
 /// coordinate grows by `shift`): the same world, far from its origin.
 #[allow(clippy::needless_range_loop)] // three parallel arrays indexed by axis
 fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
-    let bytes = std::fs::read(src.join("scene.json")).unwrap();
-    let mut m = Manifest::decode("scene.json", &bytes).unwrap();
-    // The copy lists its tiles flat.
-    m.tiles = sylva::format::index::read_all_tiles(src, &m).unwrap();
-    m.index = None;
-    for k in 0..3 {
-        m.origin_m[k] -= f64::from(shift[k]);
-        m.bounds.min[k] += shift[k];
-        m.bounds.max[k] += shift[k];
-    }
-    std::fs::create_dir_all(dst.join("tiles")).unwrap();
-    std::fs::create_dir_all(dst.join("species")).unwrap();
-    for t in &mut m.tiles {
+    let edit_manifest = |m: &mut Manifest| {
+        for k in 0..3 {
+            m.origin_m[k] -= f64::from(shift[k]);
+            m.bounds.min[k] += shift[k];
+            m.bounds.max[k] += shift[k];
+        }
+    };
+    rewritten_copy(src, dst, edit_manifest, |tile, t| {
         for k in 0..3 {
             t.bounds.min[k] += shift[k];
             t.bounds.max[k] += shift[k];
         }
-        let tb = std::fs::read(src.join(&t.url)).unwrap();
-        let mut tile = Tile::decode(&t.url, &tb, m.species.len() as u32).unwrap();
         for b in &mut tile.batches {
             let mut moved = 0.0f64;
             for k in 0..3 {
@@ -224,13 +261,41 @@ fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
             }
             b.radius_m = (f64::from(b.radius_m) + moved.sqrt()).next_up() as f32;
         }
-        std::fs::write(dst.join(&t.url), tile.encode()).unwrap();
-        std::fs::copy(src.join(&t.ids_url), dst.join(&t.ids_url)).unwrap();
-    }
-    for s in &m.species {
-        std::fs::copy(src.join(&s.pack), dst.join(&s.pack)).unwrap();
-    }
-    std::fs::write(dst.join("scene.json"), m.encode()).unwrap();
+    });
+}
+
+/// Writes a copy of `src` whose trees have crown aspects drawn by `aspect`
+/// (from the tree's index in its tile), with the batch and tile bounds widened
+/// to hold crowns up to `max_aspect` times the model's.
+fn crowned_copy(src: &Path, dst: &Path, max_aspect: f32, mut aspect: impl FnMut(usize) -> f32) {
+    rewritten_copy(
+        src,
+        dst,
+        |_| {},
+        |tile, t| {
+            for b in &mut tile.batches {
+                let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+                let wanted: Vec<f32> = run.clone().map(&mut aspect).collect();
+                let (lo, hi) = wanted.iter().fold((f32::MAX, f32::MIN), |(l, h), a| (l.min(*a), h.max(*a)));
+                let range = CrownRange::covering(lo, hi);
+                b.flags |= BATCH_CROWN_ASPECT;
+                b.crown = range.pack();
+                for (inst, a) in tile.instances[run].iter_mut().zip(wanted) {
+                    let keep = inst.zysv & !(31 << 27);
+                    inst.zysv = keep | range.quantise(a) << 27;
+                }
+                // Tree spread plus crown radius, both at most `max_aspect` wider.
+                for k in 0..2 {
+                    b.half_extent_m[k] *= max_aspect.max(1.0);
+                }
+                b.radius_m = glam::Vec3::from(b.half_extent_m).length();
+                for k in 0..2 {
+                    t.bounds.min[k] = t.bounds.min[k].min(b.center_m[k] - b.half_extent_m[k]);
+                    t.bounds.max[k] = t.bounds.max[k].max(b.center_m[k] + b.half_extent_m[k]);
+                }
+            }
+        },
+    );
 }
 
 /// A selected tree: species, its batch's cell corner in cm with `shift` taken
@@ -691,4 +756,66 @@ fn budgets_and_full_pools_degrade_gracefully() {
     assert!(off.renderer.gpu_bytes() <= budget, "{} > {budget}", off.renderer.gpu_bytes());
     assert_eq!(stats.instances["mesh0"] + stats.instances["mesh1"], 0, "{:?}", stats.instances);
     assert!(stats.instances["billboard"] > 0, "{:?}", stats.instances);
+}
+
+/// Topmost image row with foliage in at least three pixels (the canopy's top line).
+fn canopy_top_row(img: &[u8]) -> usize {
+    let rows = img.chunks_exact(W as usize * 4);
+    rows.enumerate()
+        .find(|(_, row)| row.chunks_exact(4).filter(|p| p[1] > p[0] + 8 && p[1] > p[2] + 8).count() >= 3)
+        .map_or(H as usize, |(i, _)| i)
+}
+
+#[test]
+fn crown_widths_widen_trees_at_every_level_without_changing_heights() {
+    // The same forest with squat (1.6× its model's crown for its height) and
+    // slender (0.6×) crowns, as meshes, clusters and billboards: seen from
+    // above the squat canopy covers more ground; seen from the side the trees
+    // are as tall.
+    let narrow = tmp("crowns-narrow");
+    let wide = tmp("crowns-wide");
+    crowned_copy(&fixture(), &narrow, 1.0, |_| 0.6);
+    crowned_copy(&fixture(), &wide, 1.6, |_| 1.6);
+    let mut scenes: Vec<OffscreenScene> = [fixture(), narrow.clone(), wide.clone()]
+        .iter()
+        .map(|p| {
+            let mut off = open(p.to_str().unwrap());
+            manifest(&mut off);
+            off
+        })
+        .collect();
+    let m = scenes[0].stream.manifest().unwrap().clone();
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = lo.lerp(hi, 0.5);
+    let above = Camera::look_at(DVec3::new(c.x, c.y - 100.0, hi.z + 200.0), c);
+    let side = Camera { eye_m: DVec3::new(c.x, lo.y - 150.0, lo.z + 2.0), ..Camera::default() };
+    for (name, reprs) in [
+        ("meshes", Representations::MESHES),
+        ("clusters", Representations::CLUSTERS),
+        ("billboards", Representations::BILLBOARDS),
+    ] {
+        let mut shares = Vec::new();
+        let mut tops = Vec::new();
+        for off in &mut scenes {
+            off.settings.representations = reprs;
+            off.settings.quality = if reprs == Representations::MESHES { 1.0e6 } else { 1.0 };
+            shares.push(foliage_share(&render(off, &above)));
+            tops.push(canopy_top_row(&render(off, &side)));
+        }
+        let [plain, slender, squat] = [shares[0], shares[1], shares[2]];
+        eprintln!("{name}: foliage from above {shares:?}, canopy top rows {tops:?}");
+        assert!(plain > 0.05, "{name}: the forest was not drawn ({plain})");
+        // (Measured on lavapipe: meshes 0.54 / 0.12 / 0.68, clusters 0.59 / 0.47 /
+        // 0.68, billboards 0.59 / 0.43 / 0.68; the canopy closes, so squat gains less.)
+        assert!(
+            slender < plain * 0.9 && squat > plain * 1.1,
+            "{name}: foliage from above {shares:?} (plain, 0.6×, 1.6×)"
+        );
+        assert!(tops.iter().all(|t| t.abs_diff(tops[0]) <= 2), "{name}: canopy top rows {tops:?} differ");
+        assert!(tops[0] > 5 && tops[0] < H as usize - 5, "{name}: no canopy line in the side view ({tops:?})");
+    }
+    drop(scenes);
+    std::fs::remove_dir_all(&narrow).ok();
+    std::fs::remove_dir_all(&wide).ok();
 }

@@ -10,7 +10,8 @@
 use glam::DVec3;
 use rayon::prelude::*;
 use sylva::format::tile::{
-    GpuBatch, PackedInstance, Tile, BATCH_DENSITY_ORDERED, MAX_XY_STEP_M, MAX_Z_STEP_M, SCALE_BITS, YAW_BITS, Z_BITS,
+    CrownRange, GpuBatch, PackedInstance, Tile, BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED, MAX_XY_STEP_M, MAX_Z_STEP_M,
+    SCALE_BITS, YAW_BITS, Z_BITS,
 };
 
 /// One tree in scene coordinates.
@@ -20,8 +21,11 @@ pub struct SceneTree {
     pub pos: DVec3,
     /// Species index.
     pub species: u32,
-    /// Uniform scale of the species model.
+    /// Scale of the species model (its height over the model's).
     pub scale: f32,
+    /// Horizontal over vertical scale: the crown width relative to the model's
+    /// at this height (1: the model's own proportions).
+    pub aspect: f32,
     /// Yaw in radians.
     pub yaw_rad: f32,
     /// Tint/variation 0–31.
@@ -309,6 +313,10 @@ fn make_batch(
     let (s_min, s_max) = members.iter().fold((f32::MAX, f32::MIN), |(lo, hi), t| (lo.min(t.scale), hi.max(t.scale)));
     let scale_levels = ((1u32 << SCALE_BITS) - 1) as f32;
     let scale_log2_step = if s_max > s_min { (s_max / s_min).log2() / scale_levels } else { 0.0 };
+    // Crown aspects only where a tree differs from its model's proportions;
+    // other batches keep the variation bits (and the tile stays version 1).
+    let (a_min, a_max) = members.iter().fold((f32::MAX, f32::MIN), |(lo, hi), t| (lo.min(t.aspect), hi.max(t.aspect)));
+    let crown = (a_min != 1.0 || a_max != 1.0).then(|| CrownRange::covering(a_min, a_max));
     let mut batch = GpuBatch {
         origin_m: [corner[0] as f32, corner[1] as f32, z0 as f32],
         instance_offset: offset,
@@ -322,8 +330,8 @@ fn make_batch(
         scale_min: s_min,
         scale_log2_step,
         max_height_m: 0.0,
-        flags: BATCH_DENSITY_ORDERED,
-        reserved: 0,
+        flags: BATCH_DENSITY_ORDERED | if crown.is_some() { BATCH_CROWN_ASPECT } else { 0 },
+        crown: crown.map_or(0, CrownRange::pack),
     };
     let xy_step = cell / 65535.0;
     let z_max_q = (1u32 << Z_BITS) - 1;
@@ -340,10 +348,11 @@ fn make_batch(
         } else {
             0
         };
-        let packed = PackedInstance::new(qx, qy, qz, qyaw, qs, u32::from(t.variation));
+        let top = crown.map_or(u32::from(t.variation), |c| c.quantise(t.aspect));
+        let packed = PackedInstance::new(qx, qy, qz, qyaw, qs, top);
         // Bounds from the decoded values: exactly what the GPU will draw.
         let d = packed.decode(&batch);
-        let r = shape.radius_xy * d.scale;
+        let r = shape.radius_xy * d.scale * d.aspect;
         lo[0] = lo[0].min(d.position_m[0] - r);
         lo[1] = lo[1].min(d.position_m[1] - r);
         lo[2] = lo[2].min(d.position_m[2] + shape.z_min * d.scale);
@@ -382,8 +391,10 @@ mod tests {
                     lcg(&mut s) * 2000.0 - 700.0,
                     lcg(&mut s) * 120.0 - 20.0,
                 ),
-                species: (lcg(&mut s) * 3.0) as u32,
+                species: (i % 3) as u32,
                 scale: 0.2 + lcg(&mut s) as f32 * 1.5,
+                // Species 0 keeps its model's proportions (no crown data).
+                aspect: if i % 3 == 0 { 1.0 } else { 0.3 + lcg(&mut s) as f32 * 2.7 },
                 yaw_rad: lcg(&mut s) as f32 * 7.0,
                 variation: (lcg(&mut s) * 32.0) as u8,
                 id: i as u64,
@@ -426,6 +437,7 @@ mod tests {
                 pos: DVec3::new(lcg(&mut seed) * cell, lcg(&mut seed) * cell, 0.0),
                 species: 0,
                 scale: 1.0,
+                aspect: 1.0,
                 yaw_rad: 0.0,
                 variation: 0,
                 id: i,
@@ -477,25 +489,44 @@ mod tests {
                             - t.pos;
                     assert!(err.length() <= 0.01, "position error {err} m");
                     assert!((d.scale / t.scale - 1.0).abs() < 0.01, "scale {} vs {}", d.scale, t.scale);
+                    // Crown aspects to half a quantisation step (a 10× range in a
+                    // batch: 1/62 of log2(10), 3.8 %).
+                    let half_step = f32::from(CrownRange::unpack(b.crown).log2_step_q) / 65536.0 / 2.0;
+                    let err = (d.aspect / t.aspect).log2().abs();
+                    assert!(err <= half_step + 1e-4 && err < 0.06, "aspect {} vs {}", d.aspect, t.aspect);
                     let shape = SHAPES[t.species as usize];
                     for k in 0..3 {
                         let top = if k == 2 {
                             d.position_m[2] + shape.z_max * d.scale
                         } else {
-                            d.position_m[k] + shape.radius_xy * d.scale
+                            d.position_m[k] + shape.radius_xy * d.scale * d.aspect
                         };
                         assert!(top <= b.center_m[k] + b.half_extent_m[k], "tree outside its batch bounds");
                         assert!(d.position_m[k] >= b.center_m[k] - b.half_extent_m[k] - 1e-3);
                     }
                     let yaw_err = (d.yaw_rad - t.yaw_rad.rem_euclid(std::f32::consts::TAU)).abs();
                     assert!(yaw_err < 0.013 || (std::f32::consts::TAU - yaw_err) < 0.013, "yaw {yaw_err}");
-                    assert_eq!(d.variation, t.variation);
+                    if b.flags & BATCH_CROWN_ASPECT == 0 {
+                        assert_eq!(d.variation, t.variation);
+                        assert_eq!(t.aspect, 1.0, "a tree with a crown aspect in a batch without");
+                    } else {
+                        assert_eq!(u32::from(d.variation), sylva::format::tile::variation_of(inst.xy));
+                    }
                 }
                 // The sphere contains the box.
                 assert!(b.radius_m >= glam::Vec3::from(b.half_extent_m).length() - 1e-3);
             }
         }
         assert!(seen.iter().all(|&n| n == 1), "some tree is in no batch or in two");
+        // Both kinds of batch were made: species 0 without crowns (tile version
+        // 1 where it is alone), the others with.
+        let all: Vec<&GpuBatch> = tiles.iter().flat_map(|t| &t.tile.batches).collect();
+        assert!(all.iter().any(|b| b.species == 0 && b.flags & BATCH_CROWN_ASPECT == 0));
+        assert!(all.iter().filter(|b| b.species != 0).all(|b| b.flags & BATCH_CROWN_ASPECT != 0));
+        assert!(tiles.iter().all(|t| t.tile.version() == 2));
+        let only_plain =
+            build_tiles(&trees.iter().filter(|t| t.species == 0).copied().collect::<Vec<_>>(), &SHAPES, 128, 4);
+        assert!(only_plain.iter().all(|t| t.tile.version() == 1 && t.tile.encode()[4] == 1));
     }
 
     #[test]
@@ -514,6 +545,7 @@ mod tests {
                         pos: DVec3::new(edge + dx, edge - dx, (id % 7) as f64),
                         species: 0,
                         scale: if (id + j) % 2 == 0 { 0.025 } else { 6.0 },
+                        aspect: 1.0,
                         yaw_rad: 0.0,
                         variation: (i * 7 + j) as u8 % 32,
                         id: id as u64,

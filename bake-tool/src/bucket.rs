@@ -11,7 +11,7 @@ use glam::DVec3;
 
 use crate::batching::{tile_of, SceneTree};
 
-/// A tree as stored in a bucket file (48 bytes, native endian: the file never
+/// A tree as stored in a bucket file (56 bytes, native endian: the file never
 /// leaves the machine that wrote it).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -22,8 +22,10 @@ struct TreeRecord {
     yaw_rad: f32,
     species: u32,
     variation: u32,
+    aspect: f32,
+    pad: u32,
 }
-const _: () = assert!(std::mem::size_of::<TreeRecord>() == 48);
+const _: () = assert!(std::mem::size_of::<TreeRecord>() == 56);
 
 impl From<&SceneTree> for TreeRecord {
     fn from(t: &SceneTree) -> Self {
@@ -34,6 +36,8 @@ impl From<&SceneTree> for TreeRecord {
             yaw_rad: t.yaw_rad,
             species: t.species,
             variation: u32::from(t.variation),
+            aspect: t.aspect,
+            pad: 0,
         }
     }
 }
@@ -44,6 +48,7 @@ impl From<&TreeRecord> for SceneTree {
             pos: DVec3::from_array(r.pos),
             species: r.species,
             scale: r.scale,
+            aspect: r.aspect,
             yaw_rad: r.yaw_rad,
             variation: r.variation as u8,
             id: r.id,

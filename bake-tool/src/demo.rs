@@ -335,6 +335,8 @@ pub fn demo_layout(count: usize, seed: u64) -> Vec<SceneTree> {
             pos: DVec3::new(x, y, z),
             species,
             scale: rng.range(0.7, 1.15),
+            // The demo's trees keep their models' proportions.
+            aspect: 1.0,
             yaw_rad: rng.range(0.0, std::f32::consts::TAU),
             variation: (rng.next_u64() % 32) as u8,
             id,

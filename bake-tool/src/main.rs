@@ -549,6 +549,7 @@ fn species_map(args: &BakeArgs, species: &[(String, gltf_import::ImportedModel)]
     let mut map = trees::SpeciesMap {
         names: species.iter().map(|(n, _)| n.clone()).collect(),
         heights: species.iter().map(|(_, m)| m.height()).collect(),
+        crown_widths: species.iter().map(|(_, m)| m.crown_width()).collect(),
         maps: Vec::new(),
         default: None,
     };

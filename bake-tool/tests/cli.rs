@@ -361,6 +361,82 @@ fn baked_heights(scene: &Path) -> Vec<f32> {
     out
 }
 
+/// (height, crown width, tile version) of every baked tree: the instance's
+/// scale × the model's height, and scale × crown aspect × the model's crown
+/// width (the mean of its x and y extents).
+fn baked_trees(scene: &Path) -> Vec<(f32, f32, u16)> {
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
+    let tiles = sylva::format::index::read_all_tiles(scene, &m).unwrap();
+    let mut out = Vec::new();
+    for t in tiles {
+        let bytes = std::fs::read(scene.join(&t.url)).unwrap();
+        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+        let tile = sylva::format::Tile::decode(&t.url, &bytes, m.species.len() as u32).unwrap();
+        assert_eq!(bytes.len(), 32 + 80 * tile.batches.len() + 8 * tile.instances.len(), "8 bytes per tree");
+        for b in &tile.batches {
+            let s = &m.species[b.species as usize];
+            let model_w = ((s.bounds.max[0] - s.bounds.min[0]) + (s.bounds.max[1] - s.bounds.min[1])) * 0.5;
+            let range = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+            for i in &tile.instances[range] {
+                let d = i.decode(b);
+                out.push((d.scale * s.height_m, d.scale * d.aspect * model_w, version));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn crown_widths_from_a_column_or_the_dbh_scale_each_tree_apart_from_its_height() {
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("crowns");
+    // 12 m trees with 4 m (slender) and 14 m (squat) crowns, 12 m trees without
+    // a crown width, and a few 5 m trees with an 80 m "crown" (a unit mistake).
+    let mut csv = String::from("id,x,y,height,crown_diameter\n");
+    for i in 0..300 {
+        let crown = match i % 3 {
+            0 => "4",
+            1 => "14",
+            _ => "",
+        };
+        let (h, crown) = if i % 100 == 99 { ("5", "80") } else { ("12", crown) };
+        csv += &format!("{i},{},{},{h},{crown}\n", 500_000 + (i % 20) * 6, 5_300_000 + (i / 20) * 6);
+    }
+    let path = dir.join("crowns.csv");
+    std::fs::write(&path, &csv).unwrap();
+    let crs = ["--input-crs", "EPSG:32633"];
+    let o = run(&mut quick_bake(&model, &path, &dir.join("memory"), &crs));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("crown_diameter") && log.contains("crown × model"), "{log}");
+    assert!(log.contains("warning: 3 trees have crowns more than 4× wider"), "{log}");
+    let trees = baked_trees(&dir.join("memory"));
+    assert_eq!(trees.len(), 300);
+    assert!(trees.iter().all(|t| t.2 == 2), "tiles with crown widths are version 2");
+    let near = |a: f32, b: f32, tol: f32| (a / b - 1.0).abs() <= tol;
+    let count = |crown: f32| trees.iter().filter(|t| near(t.0, 12.0, 0.02) && near(t.1, crown, 0.04)).count();
+    // Heights to the 8-bit scale steps, crowns to half a step of the batch's aspect range.
+    assert_eq!(count(4.0), 99, "slender 12 m trees with 4 m crowns: {trees:?}");
+    assert_eq!(count(14.0), 99, "squat 12 m trees with 14 m crowns");
+    // Trees without a crown width keep their model's proportions (12 m tall, the
+    // oak's crown-to-height ratio); the unit mistakes are drawn at 4× it.
+    let oak = {
+        let m = sylva::format::Manifest::decode("s", &std::fs::read(dir.join("memory/scene.json")).unwrap()).unwrap();
+        let b = m.species[0].bounds;
+        ((b.max[0] - b.min[0]) + (b.max[1] - b.min[1])) * 0.5 / m.species[0].height_m
+    };
+    assert_eq!(count(12.0 * oak), 99, "trees without a crown width keep the model's shape");
+    let clamped = trees.iter().filter(|t| near(t.0, 5.0, 0.02) && near(t.1, 5.0 * oak * 4.0, 0.04)).count();
+    assert_eq!(clamped, 3);
+    // Bucketed (larger than memory) bakes carry the crowns through their files.
+    run(&mut quick_bake(&model, &path, &dir.join("buckets"), &[&crs[..], &["--bucket-trees", "100"]].concat()));
+    assert_eq!(snapshot(&dir.join("memory")), snapshot(&dir.join("buckets")), "streamed = in memory");
+    // Without crown data, tiles stay version 1 (readable by older viewers).
+    let heights_only: String = csv.lines().map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n").collect();
+    std::fs::write(&path, heights_only).unwrap();
+    run(&mut quick_bake(&model, &path, &dir.join("plain"), &crs));
+    assert!(baked_trees(&dir.join("plain")).iter().all(|t| t.2 == 1));
+}
+
 #[test]
 fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
     let Some(model) = oak_model() else { return };

@@ -10,8 +10,13 @@ use super::error::{at_most, finite_all, pod_vec, DecodeError, Problem, Reader};
 
 /// First four bytes of a tile file.
 pub const TILE_MAGIC: [u8; 4] = *b"SYTL";
-/// Tile format version written and read by this build.
-pub const TILE_VERSION: u16 = 1;
+/// Newest tile format version written and read by this build. A tile is
+/// written as version 1 unless a batch carries crown aspects
+/// ([`BATCH_CROWN_ASPECT`], version 2), so scenes without crown widths stay
+/// readable by older viewers.
+pub const TILE_VERSION: u16 = 2;
+/// Oldest tile format version this build reads.
+pub const TILE_VERSION_MIN: u16 = 1;
 /// Bytes in the tile header.
 pub const TILE_HEADER_BYTES: usize = 32;
 /// Most batches one tile may declare (decoders refuse more before allocating).
@@ -27,6 +32,9 @@ pub const YAW_BITS: u32 = 8;
 pub const SCALE_BITS: u32 = 8;
 /// Bits of the tint/variation index.
 pub const VARIATION_BITS: u32 = 5;
+/// Bits of the quantised crown aspect (they replace the variation bits in a
+/// [`BATCH_CROWN_ASPECT`] batch).
+pub const CROWN_BITS: u32 = 5;
 /// Largest horizontal quantisation step: keeps position error ≤ 0.5 cm.
 pub const MAX_XY_STEP_M: f32 = 0.01;
 /// Largest vertical quantisation step: height error ≤ 0.8 cm, so with the
@@ -63,22 +71,92 @@ pub struct GpuBatch {
     pub scale_log2_step: f32,
     /// Height of the tallest tree of the batch in metres.
     pub max_height_m: f32,
-    /// Flags ([`BATCH_DENSITY_ORDERED`]).
+    /// Flags ([`BATCH_DENSITY_ORDERED`], [`BATCH_CROWN_ASPECT`]).
     pub flags: u32,
-    /// Reserved, zero.
-    pub reserved: u32,
+    /// Crown aspect range of a [`BATCH_CROWN_ASPECT`] batch (zero otherwise):
+    /// bits 0–15 the smallest aspect in 1/8192, bits 16–31 the log2 ratio
+    /// between consecutive quantised aspects in 1/65536 (see [`CrownRange`]).
+    pub crown: u32,
 }
 
 /// Batch flag (in `flags`): the instances are density-ordered, so every
 /// prefix is an even thinning of the whole (prefix thinning may draw fewer).
 pub const BATCH_DENSITY_ORDERED: u32 = 1;
+/// Batch flag (in `flags`, tile version 2): the top 5 bits of each instance's
+/// word 1 are its crown aspect (crown width over height, relative to the
+/// species model) instead of its variation, and the variation is a hash of
+/// its position ([`variation_of`]).
+pub const BATCH_CROWN_ASPECT: u32 = 2;
+/// Every batch flag this build knows.
+pub const BATCH_FLAGS: u32 = BATCH_DENSITY_ORDERED | BATCH_CROWN_ASPECT;
+
+/// The crown aspects of a [`BATCH_CROWN_ASPECT`] batch: quantised aspect q
+/// (0–31) means `min · 2^(q · log2_step)`, both fixed-point in [`GpuBatch::crown`]
+/// so that the CPU and every GPU decode the same f32.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CrownRange {
+    /// Smallest aspect, 1/8192 steps (up to 8).
+    pub min_q: u16,
+    /// log2 ratio between consecutive quantised aspects, 1/65536 steps (up to 1).
+    pub log2_step_q: u16,
+}
+
+impl CrownRange {
+    /// The range packed in a batch's `crown` word.
+    #[must_use]
+    pub fn unpack(word: u32) -> Self {
+        Self { min_q: (word & 0xffff) as u16, log2_step_q: (word >> 16) as u16 }
+    }
+
+    /// The batch's `crown` word.
+    #[must_use]
+    pub fn pack(self) -> u32 {
+        u32::from(self.min_q) | u32::from(self.log2_step_q) << 16
+    }
+
+    /// The smallest range holding aspects `lo..=hi` (clamped to 1/8192–8 and a
+    /// ratio of at most 2^31 between them).
+    #[must_use]
+    pub fn covering(lo: f32, hi: f32) -> Self {
+        let min_q = (lo * 8192.0).floor().clamp(1.0, 65535.0) as u16;
+        let min = f32::from(min_q) / 8192.0;
+        let levels = ((1u32 << CROWN_BITS) - 1) as f32;
+        let step = (hi.max(min) / min).log2() / levels;
+        Self { min_q, log2_step_q: (step * 65536.0).ceil().clamp(0.0, 65535.0) as u16 }
+    }
+
+    /// Aspect of quantised value `q` (as `unpack_instance` in WGSL computes it).
+    #[must_use]
+    pub fn aspect(self, q: u32) -> f32 {
+        f32::from(self.min_q) / 8192.0 * (q as f32 * (f32::from(self.log2_step_q) / 65536.0)).exp2()
+    }
+
+    /// The quantised value nearest to `aspect` (in log2).
+    #[must_use]
+    pub fn quantise(self, aspect: f32) -> u32 {
+        let step = f32::from(self.log2_step_q) / 65536.0;
+        let levels = ((1u32 << CROWN_BITS) - 1) as f32;
+        if step <= 0.0 {
+            return 0;
+        }
+        ((aspect / (f32::from(self.min_q) / 8192.0)).log2() / step).round().clamp(0.0, levels) as u32
+    }
+}
+
+/// Variation (0–31) of an instance of a [`BATCH_CROWN_ASPECT`] batch: a hash of
+/// its quantised position word (as `variation_of` in WGSL).
+#[must_use]
+pub fn variation_of(xy: u32) -> u32 {
+    xy.wrapping_mul(0x9E37_79B1) >> (32 - VARIATION_BITS)
+}
 const _: () = assert!(std::mem::size_of::<GpuBatch>() == 80);
 
 /// One tree: 8 bytes, relative to its batch origin.
 ///
 /// Word 0: x (bits 0–15), y (16–31) in `xy_step_m` steps.
 /// Word 1: z (bits 0–10) in `z_step_m` steps, yaw (11–18) in 1/256 turns,
-/// scale (19–26) in `scale_log2_step` steps above `scale_min`, variation (27–31).
+/// scale (19–26) in `scale_log2_step` steps above `scale_min`, variation (27–31)
+/// — or, in a [`BATCH_CROWN_ASPECT`] batch, the crown aspect (27–31) of the batch's [`CrownRange`].
 /// Must match `unpack_instance` in `shaders/common.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, bytemuck::Pod, bytemuck::Zeroable)]
@@ -97,8 +175,11 @@ pub struct Instance {
     pub position_m: [f32; 3],
     /// Rotation about the up axis in radians, in `[0, 2π)`.
     pub yaw_rad: f32,
-    /// Uniform scale applied to the species model.
+    /// Scale applied to the species model (its height).
     pub scale: f32,
+    /// Horizontal over vertical scale: the crown width relative to the
+    /// model's at this height (1 unless the batch has [`BATCH_CROWN_ASPECT`]).
+    pub aspect: f32,
     /// Tint/variation index, 0–31.
     pub variation: u8,
 }
@@ -125,7 +206,12 @@ impl PackedInstance {
         let z = (self.zysv & ((1 << Z_BITS) - 1)) as f32;
         let yaw = (self.zysv >> Z_BITS) & ((1 << YAW_BITS) - 1);
         let scale = (self.zysv >> (Z_BITS + YAW_BITS)) & ((1 << SCALE_BITS) - 1);
-        let variation = self.zysv >> (Z_BITS + YAW_BITS + SCALE_BITS);
+        let top = self.zysv >> (Z_BITS + YAW_BITS + SCALE_BITS);
+        let (aspect, variation) = if batch.flags & BATCH_CROWN_ASPECT != 0 {
+            (CrownRange::unpack(batch.crown).aspect(top), variation_of(self.xy))
+        } else {
+            (1.0, top)
+        };
         Instance {
             position_m: [
                 batch.origin_m[0] + x * batch.xy_step_m,
@@ -134,6 +220,7 @@ impl PackedInstance {
             ],
             yaw_rad: yaw as f32 * (std::f32::consts::TAU / (1 << YAW_BITS) as f32),
             scale: batch.scale_min * (scale as f32 * batch.scale_log2_step).exp2(),
+            aspect,
             variation: variation as u8,
         }
     }
@@ -153,14 +240,24 @@ pub struct Tile {
 }
 
 impl Tile {
-    /// Encodes the tile into its file bytes.
+    /// The version this tile is written as: 2 if a batch carries crown aspects, else 1.
+    #[must_use]
+    pub fn version(&self) -> u16 {
+        if self.batches.iter().any(|b| b.flags & BATCH_CROWN_ASPECT != 0) {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// Encodes the tile into its file bytes (as [`Tile::version`]).
     #[must_use]
     pub fn encode(&self) -> Vec<u8> {
         let mut out = Vec::with_capacity(
             TILE_HEADER_BYTES + self.batches.len() * std::mem::size_of::<GpuBatch>() + self.instances.len() * 8,
         );
         out.extend_from_slice(&TILE_MAGIC);
-        out.extend_from_slice(&TILE_VERSION.to_le_bytes());
+        out.extend_from_slice(&self.version().to_le_bytes());
         out.extend_from_slice(&(TILE_HEADER_BYTES as u16).to_le_bytes());
         out.extend_from_slice(&(self.batches.len() as u32).to_le_bytes());
         out.extend_from_slice(&(self.instances.len() as u32).to_le_bytes());
@@ -197,7 +294,7 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
     let r = Reader::new(bytes);
     r.magic("Sylva tile", &TILE_MAGIC)?;
     let version = r.u16("header.version", 4)?;
-    if version != TILE_VERSION {
+    if !(TILE_VERSION_MIN..=TILE_VERSION).contains(&version) {
         return Err(Problem::UnsupportedVersion { found: version.into(), supported: TILE_VERSION.into() });
     }
     let header_bytes = r.u16("header.header_bytes", 6)?;
@@ -220,7 +317,9 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
     }
     let flags = r.u32("header.flags", 28)?;
     if flags != 0 {
-        return Err(Problem::Invalid(format!("header.flags is {flags:#x}; version 1 defines no flags (must be 0)")));
+        return Err(Problem::Invalid(format!(
+            "header.flags is {flags:#x}; tile versions 1 and 2 define no header flags (must be 0)"
+        )));
     }
     let batch_start = TILE_HEADER_BYTES as u64;
     let batch_len = batch_count * 80;
@@ -247,6 +346,11 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
     let instances: Vec<PackedInstance> = pod_vec(r.slice("instances", instance_start, instance_len)?);
     let mut next = 0u64;
     for (i, b) in batches.iter().enumerate() {
+        if version < 2 && b.flags & BATCH_CROWN_ASPECT != 0 {
+            return Err(Problem::Invalid(format!(
+                "batch[{i}] has crown aspects (flag {BATCH_CROWN_ASPECT}), which need tile version 2; this tile is version {version}"
+            )));
+        }
         validate_batch(i, b, species_count)?;
         if u64::from(b.instance_offset) != next {
             return Err(Problem::Invalid(format!(
@@ -286,6 +390,19 @@ fn validate_batch(i: usize, b: &GpuBatch, species_count: u32) -> Result<(), Prob
     }
     if b.half_extent_m.iter().any(|&h| h < 0.0) || b.scale_log2_step < 0.0 || b.max_height_m < 0.0 {
         return Err(Problem::Invalid(format!("{what} has a negative extent, scale step or height")));
+    }
+    if b.flags & !BATCH_FLAGS != 0 {
+        return Err(Problem::Invalid(format!(
+            "{what}.flags is {:#x}: unknown flags {:#x}",
+            b.flags,
+            b.flags & !BATCH_FLAGS
+        )));
+    }
+    if b.flags & BATCH_CROWN_ASPECT == 0 && b.crown != 0 {
+        return Err(Problem::Invalid(format!("{what}.crown is {:#x} without the crown flag (must be 0)", b.crown)));
+    }
+    if b.flags & BATCH_CROWN_ASPECT != 0 && CrownRange::unpack(b.crown).min_q == 0 {
+        return Err(Problem::Invalid(format!("{what}.crown has a smallest aspect of 0 (must be positive)")));
     }
     if b.xy_step_m > MAX_XY_STEP_M * 1.0001 || b.z_step_m > MAX_Z_STEP_M * 1.0001 {
         return Err(Problem::Invalid(format!(

@@ -120,7 +120,7 @@ impl SingleTree {
             scale_log2_step: 0.0,
             max_height_m: 1.0,
             flags: 0,
-            reserved: 0,
+            crown: 0,
         };
         // Variation 15 of 0–31 is the neutral tint.
         let instance = PackedInstance::new(0, 0, 0, 0, 0, 15);

@@ -12,7 +12,7 @@ use super::gpu_data::{GpuSpecies, Repr, ViewUniform, REPR_COUNT};
 use super::layouts::{storage_entry, SharedLayouts};
 use super::pools::Pools;
 use super::shaders;
-use crate::format::tile::{GpuBatch, PackedInstance};
+use crate::format::tile::{CrownRange, GpuBatch, PackedInstance, BATCH_CROWN_ASPECT};
 
 /// The compute pipelines of the cull pass.
 pub struct CullPipelines {
@@ -202,8 +202,9 @@ pub fn cpu_select(
             let index = b.instance_offset + k;
             let packed = instances[index as usize];
             let d = decode_eye_relative(packed, b, view);
-            let c = d.0 + rotate_z(Vec3::new(s.sphere[0], s.sphere[1], s.sphere[2]) * d.2, d.1);
-            let r = s.sphere[3] * d.2;
+            let stretch = Vec3::new(d.3, d.3, 1.0);
+            let c = d.0 + rotate_z(Vec3::new(s.sphere[0], s.sphere[1], s.sphere[2]) * d.2 * stretch, d.1);
+            let r = s.sphere[3] * d.2 * d.3.max(1.0);
             let dist = c.length().max(1e-3);
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
                 continue;
@@ -248,15 +249,16 @@ pub fn thinning(b: &GpuBatch, view: &ViewUniform) -> (f32, f32) {
 /// Fewest trees a thinned batch keeps, as a fraction (`THIN_MIN_FRACTION` in WGSL).
 pub const THIN_MIN_FRACTION: f32 = 1.0 / 64.0;
 
-/// (eye-relative position, yaw, scale) of an instance, exactly as `unpack_instance` in WGSL.
-fn decode_eye_relative(p: PackedInstance, b: &GpuBatch, view: &ViewUniform) -> (Vec3, f32, f32) {
+/// (eye-relative position, yaw, scale, crown aspect) of an instance, exactly as `unpack_instance` in WGSL.
+fn decode_eye_relative(p: PackedInstance, b: &GpuBatch, view: &ViewUniform) -> (Vec3, f32, f32, f32) {
     let x = (p.xy & 0xffff) as f32;
     let y = (p.xy >> 16) as f32;
     let z = (p.zysv & 0x7ff) as f32;
     let yaw = ((p.zysv >> 11) & 0xff) as f32 * (std::f32::consts::TAU / 256.0);
     let scale = b.scale_min * (((p.zysv >> 19) & 0xff) as f32 * b.scale_log2_step).exp2();
     let pos = eye_relative(Vec3::from(b.origin_m), Vec3::new(x * b.xy_step_m, y * b.xy_step_m, z * b.z_step_m), view);
-    (pos, yaw, scale)
+    let aspect = if b.flags & BATCH_CROWN_ASPECT != 0 { CrownRange::unpack(b.crown).aspect(p.zysv >> 27) } else { 1.0 };
+    (pos, yaw, scale, aspect)
 }
 
 fn select(sel: &mut Selection, view: &ViewUniform, s: &GpuSpecies, species: u32, h_px: f32, instance: u32, batch: u32) {

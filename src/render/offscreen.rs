@@ -25,7 +25,7 @@ pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSr
 pub enum NamedView {
     /// The whole scene from afar, oblique.
     Far,
-    /// A few hundred metres over the forest.
+    /// A few hundred metres over the forest (nearer over a small plot).
     Medium,
     /// Near the ground among the trees.
     Close,
@@ -59,7 +59,13 @@ impl NamedView {
                 Camera::look_at(DVec3::new(c.x, c.y - 1.1 * ext, hi.z + 0.45 * ext), DVec3::new(c.x, c.y, lo.z))
             }
             NamedView::Medium => {
-                Camera::look_at(DVec3::new(c.x, c.y - 260.0, ground + 110.0), DVec3::new(c.x, c.y + 120.0, ground))
+                // A small plot (under 300 m across) is seen from nearer, so it
+                // fills the view, but far enough to see its tallest trees whole.
+                let s = (ext.max(1.2 * (hi.z - ground)) / 150.0).min(1.0);
+                Camera::look_at(
+                    DVec3::new(c.x, c.y - 260.0 * s, ground + 110.0 * s),
+                    DVec3::new(c.x, c.y + 120.0 * s, ground),
+                )
             }
             // At the southern edge of the forest, looking in, at eye height.
             NamedView::Close => Camera {

@@ -27,6 +27,11 @@ use sylva_bake::patterns::pattern_matches;
 /// heights outside (0, this) count as missing.
 pub const MAX_TREE_HEIGHT_M: f32 = 200.0;
 
+/// Crown aspects (crown width over height, relative to the model's) are kept
+/// within this factor of the model's proportions; beyond it a crown width is
+/// more likely a unit or column mistake than a tree.
+pub const MAX_CROWN_ASPECT: f32 = 4.0;
+
 /// Rows sampled for the medians; inputs up to this size use every row.
 const SAMPLE_ROWS: usize = 1_000_000;
 /// Rows checked for repeated coordinates (the check keeps a set of them).
@@ -78,6 +83,10 @@ struct Facts {
     from: HeightFrom,
     dbh_cm: Option<f32>,
     crown_m: Option<f32>,
+    /// Crown width over height relative to the model's (1 without a crown width).
+    aspect: f32,
+    /// The aspect was clamped to [`MAX_CROWN_ASPECT`].
+    aspect_clamped: bool,
 }
 
 /// Per species label: the model used and the ranges a forester can check.
@@ -88,6 +97,10 @@ struct SpeciesSummary {
     height: (f32, f32),
     dbh: Option<(f32, f32)>,
     crown: Option<(f32, f32)>,
+    /// Range of the crown aspects (trees with a crown width only).
+    aspect: Option<(f32, f32)>,
+    /// Trees whose aspect was clamped.
+    aspect_clamped: u64,
     from_dbh: u64,
     /// Rows with a DBH, and of them over 150 cm and under 3 cm (unit checks).
     dbh_rows: u64,
@@ -105,6 +118,8 @@ pub struct SpeciesMap {
     pub names: Vec<String>,
     /// Model heights at scale 1.
     pub heights: Vec<f32>,
+    /// Model crown widths at scale 1 ([`crate::gltf_import::ImportedModel::crown_width`]).
+    pub crown_widths: Vec<f32>,
     /// `--map` patterns and their model.
     pub maps: Vec<(String, usize)>,
     /// The model of labels nothing maps.
@@ -248,12 +263,20 @@ pub fn place_trees(
             (None, None, None) => (model_h, HeightFrom::Model),
         };
         let crown_m = p.crown_m.or_else(|| p.dbh_cm.zip(equations).map(|(d, e)| e.crown.metres(f64::from(d)) as f32));
-        let facts = Facts { height_m: target, from, dbh_cm: p.dbh_cm, crown_m };
+        // Crown width and height scale the model separately: the crown's aspect
+        // relative to the model's proportions.
+        let model_w = species.crown_widths[idx];
+        let raw =
+            crown_m.filter(|c| c.is_finite() && *c > 0.0 && model_w > 0.0).map(|c| (c / model_w) / (target / model_h));
+        let aspect = raw.map_or(1.0, |a| a.clamp(1.0 / MAX_CROWN_ASPECT, MAX_CROWN_ASPECT));
+        let aspect_clamped = raw.is_some_and(|a| a != aspect);
+        let facts = Facts { height_m: target, from, dbh_cm: p.dbh_cm, crown_m, aspect, aspect_clamped };
         let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
         let tree = SceneTree {
             pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
             species: idx as u32,
             scale: target / model_h,
+            aspect,
             yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
             variation: ((h >> 20) % 32) as u8,
             id: p.id.unwrap_or(p.row | 1 << 63),
@@ -415,6 +438,8 @@ fn tree_pass(
                 height: (f.height_m, f.height_m),
                 dbh: None,
                 crown: None,
+                aspect: None,
+                aspect_clamped: 0,
                 from_dbh: 0,
                 dbh_rows: 0,
                 dbh_big: 0,
@@ -433,6 +458,8 @@ fn tree_pass(
         }
         if let Some(c) = f.crown_m {
             s.crown = Some(widen(s.crown, c));
+            s.aspect = Some(widen(s.aspect, f.aspect));
+            s.aspect_clamped += u64::from(f.aspect_clamped);
         }
         s.from_dbh += u64::from(f.from == HeightFrom::Dbh);
     };
@@ -510,17 +537,28 @@ fn log_summary(summary: &BTreeMap<String, SpeciesSummary>, species: &SpeciesMap,
     rows.sort_by(|a, b| b.1.trees.cmp(&a.1.trees).then(a.0.cmp(b.0)));
     let range = |r: Option<(f32, f32)>| r.map_or("-".to_string(), |(a, b)| format!("{a:.1}–{b:.1}"));
     log(&format!("species summary ({} labels):", rows.len()));
-    log("  label | model | trees | height m | DBH cm | crown m | heights from DBH");
+    log("  label | model | trees | height m | DBH cm | crown m | crown × model | heights from DBH");
     const SHOWN: usize = 40;
+    let ratio = |r: Option<(f32, f32)>| r.map_or("-".to_string(), |(a, b)| format!("{a:.2}–{b:.2}"));
     for (label, s) in rows.iter().take(SHOWN) {
         log(&format!(
-            "  {label} | {} | {} | {} | {} | {} | {}",
+            "  {label} | {} | {} | {} | {} | {} | {} | {}",
             species.names[s.model],
             s.trees,
             range(Some(s.height)),
             range(s.dbh),
             range(s.crown),
+            ratio(s.aspect),
             s.from_dbh
+        ));
+    }
+    log("  (crown × model: each tree's crown width over height against its model's; 1 keeps the model's shape)");
+    let clamped: u64 = rows.iter().map(|(_, s)| s.aspect_clamped).sum();
+    if clamped > 0 {
+        log(&format!(
+            "placements: warning: {clamped} trees have crowns more than {MAX_CROWN_ASPECT}× wider or narrower for \
+             their height than their model's; they were drawn at {MAX_CROWN_ASPECT}× (check the crown column's unit: \
+             a diameter read as a radius, or centimetres as metres)"
         ));
     }
     if rows.len() > SHOWN {

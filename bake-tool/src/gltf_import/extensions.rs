@@ -35,8 +35,9 @@ pub const HANDLED: &[&str] = &[
 fn unsupported(ext: &str) -> Option<String> {
     Some(match ext {
         "KHR_draco_mesh_compression" => "the model's geometry is Draco-compressed (KHR_draco_mesh_compression), which \
-             sylva-bake does not decode: export it again without Draco compression (in Blender: glTF export, \
-             Data › Compression off)"
+             sylva-bake does not decode: decompress it with `npx @gltf-transform/cli cp model.glb model-plain.glb` \
+             (glTF Transform decodes Draco when it reads a file and writes plain geometry), or export it again \
+             without Draco compression (in Blender: glTF export, Data › Compression off)"
             .to_string(),
         "KHR_texture_basisu" => "the model's textures are KTX2 / Basis Universal (KHR_texture_basisu), which \
              sylva-bake does not decode: use PNG, JPEG or WebP textures (gltfpack writes KTX2 only with -tc)"

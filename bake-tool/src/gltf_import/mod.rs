@@ -82,6 +82,13 @@ impl ImportedModel {
         hi.z - lo.z
     }
 
+    /// Crown width: the mean of the x and y extents (as foresters average two
+    /// perpendicular crown widths).
+    pub fn crown_width(&self) -> f32 {
+        let (lo, hi) = self.bounds();
+        ((hi.x - lo.x) + (hi.y - lo.y)) * 0.5
+    }
+
     /// Triangles per material kind (leaf, branch).
     pub fn triangle_counts(&self) -> (usize, usize) {
         let mut leaf = 0;
