@@ -262,6 +262,11 @@ fn crown_tile_golden_and_round_trip() {
     assert!(all[0] <= 0.3 && all[0] > 0.299 && all[31] >= 3.0 && all[31] < 3.01, "{all:?}");
     assert!(all.windows(2).all(|w| w[1] > w[0]));
     assert!((0..32).all(|q| r.quantise(r.aspect(q)) == q));
+    // Nonsense in: a range the decoder accepts (a positive smallest aspect).
+    for (lo, hi) in [(f32::NAN, f32::NAN), (0.0, 0.0), (-1.0, f32::INFINITY), (f32::MAX, f32::MIN)] {
+        let c = CrownRange::covering(lo, hi);
+        assert!(c.min_q > 0 && (0..32).all(|q| c.aspect(q).is_finite() && c.aspect(q) > 0.0), "{lo} {hi}: {c:?}");
+    }
 }
 
 #[test]

@@ -17,6 +17,9 @@ pub fn inspect(path: &Path) -> Result<Value> {
     if matches!(lower.as_str(), "csv" | "tsv" | "txt" | "geojson") {
         return inspect_placements(&path);
     }
+    if matches!(lower.as_str(), "tif" | "tiff") {
+        return inspect_dem(&path);
+    }
     let name = path.display().to_string();
     let bytes = std::fs::read(&path).with_context(|| format!("cannot read {name}"))?;
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
@@ -35,8 +38,28 @@ pub fn inspect(path: &Path) -> Result<Value> {
             let ids = decode_ids(&name, &bytes)?;
             Ok(json!({"kind": "ids", "count": ids.len(), "bytes": bytes.len()}))
         }
-        _ => bail!("{name}: not a scene directory, scene.json, .pack, .tile, .ids or placements (.csv, .geojson) file"),
+        _ => bail!(
+            "{name}: not a scene directory, scene.json, .pack, .tile, .ids, placements (.csv, .geojson) or DEM (.tif) file"
+        ),
     }
+}
+
+/// A GeoTIFF DEM as `bake --dem` reads it.
+fn inspect_dem(path: &Path) -> Result<Value> {
+    let dem = sylva_bake::dem::Dem::open(path)?;
+    let s = dem.summary();
+    Ok(json!({
+        "kind": "dem",
+        "width": dem.width,
+        "height": dem.height,
+        "epsg": dem.epsg,
+        "layout": dem.layout,
+        "extent": s.extent,
+        "resolution": s.resolution,
+        "height_range": s.range.map(|(a, b)| [a, b]),
+        "nodata": dem.nodata,
+        "holes": s.holes,
+    }))
 }
 
 /// A placements file as the bake would read it (default options).
@@ -307,6 +330,30 @@ pub fn to_text(v: &Value) -> String {
             }
         }
         Some("pack") => out += &pack_text(v),
+        Some("dem") => {
+            let e = |i: usize| v["extent"][i].as_f64().unwrap_or(0.0);
+            out += &format!(
+                "DEM {}×{} pixels of {} × {} (map units), {}, {}\n",
+                v["width"],
+                v["height"],
+                v["resolution"][0],
+                v["resolution"][1],
+                v["epsg"]
+                    .as_u64()
+                    .map_or("no EPSG code in its GeoKeys (pass --dem-crs)".to_string(), |c| format!("EPSG:{c}")),
+                v["layout"].as_str().unwrap_or("?")
+            );
+            out += &format!("extent x {:.2}–{:.2}, y {:.2}–{:.2}\n", e(0), e(2), e(1), e(3));
+            out += &match v["height_range"].as_array() {
+                Some(r) => format!(
+                    "heights {:.2}–{:.2} m, {} pixels without data\n",
+                    r[0].as_f64().unwrap_or(0.0),
+                    r[1].as_f64().unwrap_or(0.0),
+                    v["holes"]
+                ),
+                None => "no heights: every pixel is nodata\n".to_string(),
+            };
+        }
         Some("placements") => {
             out += &format!(
                 "placements ({}), {} rows, {} usable\n",

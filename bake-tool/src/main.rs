@@ -249,10 +249,26 @@ struct BakeArgs {
     /// Material/mesh/node name pattern forced to branches (repeatable, as --leaf-material).
     #[arg(long = "branch-material", value_name = "PATTERN")]
     branch_materials: Vec<String>,
+    /// Elevation model, a GeoTIFF (repeat for several tiles; float32, int16 or
+    /// uint16 heights, strips or tiles, deflate/LZW, GDAL nodata): every tree
+    /// stands on its ground, sampled bilinearly, unless the row has a z (see --z).
+    #[arg(long = "dem", value_name = "FILE.tif")]
+    dems: Vec<PathBuf>,
+    /// CRS of the --dem files, when their GeoKeys name none (or name the wrong one).
+    #[arg(long, value_name = "EPSG:xxxx")]
+    dem_crs: Option<String>,
+    /// How a z column is meant with --dem: absolute (a ground elevation: the DEM
+    /// is not used for that row) or relative (height above the DEM's ground).
+    #[arg(long, value_enum, default_value_t = bake::ground::ZMode::Absolute)]
+    z: bake::ground::ZMode,
+    /// Trees outside every --dem (or on its nodata pixels): error stops the bake
+    /// and says how many and where; skip leaves them out (reported).
+    #[arg(long, value_enum, default_value_t = bake::ground::OutsideDem::Error)]
+    outside_dem: bake::ground::OutsideDem,
     #[command(flatten)]
     pack: PackArgs,
     /// Trees held in memory at once while tiling; larger inputs are partitioned
-    /// by tile into temporary bucket files inside --out (about 48 bytes per tree).
+    /// by tile into temporary bucket files inside --out (about 56 bytes per tree).
     #[arg(long, default_value_t = 4_000_000, value_parser = clap::value_parser!(u64).range(1..))]
     bucket_trees: u64,
     #[command(flatten)]
@@ -467,6 +483,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
     // The output folder is checked before any long work.
     let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
     inputs.extend(args.allometry.as_deref());
+    inputs.extend(args.dems.iter().map(PathBuf::as_path));
     for m in &args.models {
         inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
     }
@@ -499,6 +516,10 @@ fn bake(args: &BakeArgs) -> Result<()> {
         tile_cells: args.pack.tile_cells,
         shard: args.pack.shard,
         allometry: &allometry,
+        dems: &args.dems,
+        dem_crs: args.dem_crs.as_deref(),
+        z_mode: args.z,
+        outside_dem: args.outside_dem,
     };
     let placed = trees::place_trees(&options, &map, &out, &log)?;
     let input = SceneInput {

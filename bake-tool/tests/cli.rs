@@ -437,6 +437,130 @@ fn crown_widths_from_a_column_or_the_dbh_scale_each_tree_apart_from_its_height()
     assert!(baked_trees(&dir.join("plain")).iter().all(|t| t.2 == 1));
 }
 
+/// A float32 GeoTIFF DEM of `n`×`n` pixels of 5 m in EPSG:32633, corner at
+/// (500000, 5300000), heights on the plane [`dem_plane`].
+fn write_dem(path: &Path, n: u32) {
+    use tiff::encoder::{colortype, TiffEncoder};
+    use tiff::tags::Tag;
+    let mut file = std::fs::File::create(path).unwrap();
+    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut img = enc.new_image::<colortype::Gray32Float>(n, n).unwrap();
+    let e = img.encoder();
+    e.write_tag(Tag::ModelPixelScaleTag, &[5.0f64, 5.0, 0.0][..]).unwrap();
+    e.write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, 500_000.0, 5_300_000.0, 0.0][..]).unwrap();
+    let keys: [u16; 12] = [1, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633];
+    e.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
+    // Pixel centres: x = 500002.5 + 5c, y = 5299997.5 − 5r.
+    let data: Vec<f32> = (0..n)
+        .flat_map(|r| (0..n).map(move |c| (c, r)))
+        .map(|(c, r)| dem_plane(500_002.5 + 5.0 * f64::from(c), 5_299_997.5 - 5.0 * f64::from(r)) as f32)
+        .collect();
+    img.write_data(&data).unwrap();
+}
+
+/// The test DEM's ground: a slope rising 0.3 m per metre east and 0.1 m per metre south.
+fn dem_plane(x: f64, y: f64) -> f64 {
+    300.0 + 0.3 * (x - 500_000.0) + 0.1 * (5_300_000.0 - y)
+}
+
+/// (x, y, z) of every baked tree's base, in the scene CRS.
+fn baked_bases(scene: &Path) -> Vec<[f64; 3]> {
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
+    let mut out = Vec::new();
+    for t in sylva::format::index::read_all_tiles(scene, &m).unwrap() {
+        let tile = sylva::format::Tile::decode(&t.url, &std::fs::read(scene.join(&t.url)).unwrap(), 8).unwrap();
+        for b in &tile.batches {
+            let range = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+            for i in &tile.instances[range] {
+                let p = i.decode(b).position_m;
+                out.push([0, 1, 2].map(|k| m.origin_m[k] + f64::from(p[k])));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn trees_stand_on_the_ground_of_a_dem() {
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("dem");
+    let dem = dir.join("ground.tif");
+    write_dem(&dem, 40); // 200 m × 200 m, heights 300–380 m
+    let v = inspect_json(&dem);
+    assert_eq!((v["kind"].as_str(), v["width"].as_u64(), v["epsg"].as_u64()), (Some("dem"), Some(40), Some(32633)));
+    assert_eq!(v["extent"], serde_json::json!([500_000.0, 5_299_800.0, 500_200.0, 5_300_000.0]));
+    let text = String::from_utf8_lossy(&run(bin().arg("inspect").arg(&dem)).stdout).into_owned();
+    assert!(text.contains("DEM 40×40 pixels") && text.contains("EPSG:32633"), "{text}");
+    // 60 trees inside; rows 0–9 give a z of 2 (absolute by default, relative with --z relative).
+    let mut csv = String::from("id,x,y,z,height\n");
+    for i in 0..60 {
+        let z = if i < 10 { "2" } else { "" };
+        csv += &format!("{i},{},{},{z},12\n", 500_010 + (i % 10) * 17, 5_299_990 - (i / 10) * 29);
+    }
+    let path = dir.join("trees.csv");
+    std::fs::write(&path, &csv).unwrap();
+    let crs = ["--input-crs", "EPSG:32633"];
+    let bake = |out: &str, extra: &[&str]| {
+        let dem_args = ["--dem", dem.to_str().unwrap()];
+        quick_bake(&model, &path, &dir.join(out), &[&crs[..], &dem_args[..], extra].concat())
+    };
+    let o = run(&mut bake("abs", &[]));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("40×40 pixels of 5.00 m, EPSG:32633, float32, uncompressed"), "{log}");
+    let check = |scene: &str, relative: bool| {
+        let bases = baked_bases(&dir.join(scene));
+        assert_eq!(bases.len(), 60);
+        for [x, y, z] in bases {
+            let (i, j) = (((x - 500_010.0) / 17.0).round() as i64, ((5_299_990.0 - y) / 29.0).round() as i64);
+            let given = i + j * 10 < 10;
+            let want = match (given, relative) {
+                (true, false) => 2.0,
+                (true, true) => dem_plane(x, y) + 2.0,
+                (false, _) => dem_plane(x, y),
+            };
+            assert!((z - want).abs() < 0.02, "{scene}: tree at {x:.2}, {y:.2} stands at {z:.3} m, not {want:.3} m");
+        }
+    };
+    check("abs", false);
+    run(&mut bake("rel", &["--z", "relative"]));
+    check("rel", true);
+    // The bounds hold the real heights (batches and the scene), so culling stays tight.
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(dir.join("rel/scene.json")).unwrap()).unwrap();
+    assert!(m.bounds.min[2] > 300.0 && m.bounds.max[2] < 400.0, "{:?}", m.bounds);
+    // Trees outside the DEM: the bake stops and says how many and where; skip leaves them out.
+    let mut outside = csv.clone();
+    outside += "100,500300,5299990,,12\n101,500310,5299980,,12\n";
+    let far = dir.join("far.csv");
+    std::fs::write(&far, &outside).unwrap();
+    let dem_args = ["--dem", dem.to_str().unwrap()];
+    let e = fails(&mut quick_bake(&model, &far, &dir.join("far"), &[&crs[..], &dem_args[..]].concat()));
+    assert!(e.contains("2 of 62 trees fall outside every --dem") && e.contains("x 500300.000000–500310.000000"), "{e}");
+    assert!(e.contains("ground.tif covers x 500000.0–500200.0") && e.contains("--outside-dem skip"), "{e}");
+    assert!(!dir.join("far").exists(), "a failed bake leaves nothing");
+    let skip = [&crs[..], &dem_args[..], &["--outside-dem", "skip"]].concat();
+    let o = run(&mut quick_bake(&model, &far, &dir.join("far"), &skip));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("skipped 2 rows: outside every --dem"));
+    assert_eq!(baked_bases(&dir.join("far")).len(), 60);
+    // A scene in another CRS than the DEM's: the ground is looked up through the projection.
+    let o = run(&mut bake("laea", &["--crs", "EPSG:3035"]));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("scene CRS EPSG:3035"));
+    let (a, b) = (baked_bases(&dir.join("abs")), baked_bases(&dir.join("laea")));
+    let (mut za, mut zb): (Vec<f64>, Vec<f64>) = (a.iter().map(|p| p[2]).collect(), b.iter().map(|p| p[2]).collect());
+    za.sort_by(f64::total_cmp);
+    zb.sort_by(f64::total_cmp);
+    assert!(za.iter().zip(&zb).all(|(p, q)| (p - q).abs() < 0.05), "heights differ through EPSG:3035");
+    // Bad DEM inputs are named.
+    let e = fails(&mut quick_bake(
+        &model,
+        &path,
+        &dir.join("bad"),
+        &[&crs[..], &["--dem", path.to_str().unwrap()]].concat(),
+    ));
+    assert!(e.contains("trees.csv") && e.contains("not a readable TIFF"), "{e}");
+    let e = fails(&mut quick_bake(&model, &path, &dir.join("bad"), &[&crs[..], &["--z", "relative"]].concat()));
+    assert!(e.contains("--z relative needs a --dem"), "{e}");
+}
+
 #[test]
 fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
     let Some(model) = oak_model() else { return };

@@ -36,11 +36,11 @@ pub enum Problem {
         found: Vec<u8>,
     },
     /// A version this build cannot read.
-    #[error("format version {found} is not supported (this build reads version {supported})")]
+    #[error("format version {found} is not supported (the newest this build reads is version {supported})")]
     UnsupportedVersion {
         /// Version in the file.
         found: u32,
-        /// Version this build reads.
+        /// Newest version this build reads.
         supported: u32,
     },
     /// The file ends before a structure it declares.

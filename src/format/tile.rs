@@ -114,10 +114,13 @@ impl CrownRange {
         u32::from(self.min_q) | u32::from(self.log2_step_q) << 16
     }
 
-    /// The smallest range holding aspects `lo..=hi` (clamped to 1/8192–8 and a
-    /// ratio of at most 2^31 between them).
+    /// The smallest range holding aspects `lo..=hi`: the smallest aspect is
+    /// clamped to 1/8192–8 (not finite or not positive: 1/8192), the step to
+    /// at most an octave (a top aspect up to 2^31 times the smallest).
     #[must_use]
     pub fn covering(lo: f32, hi: f32) -> Self {
+        let lo = if lo.is_finite() && lo > 0.0 { lo } else { 1.0 / 8192.0 };
+        let hi = if hi.is_finite() { hi } else { lo };
         let min_q = (lo * 8192.0).floor().clamp(1.0, 65535.0) as u16;
         let min = f32::from(min_q) / 8192.0;
         let levels = ((1u32 << CROWN_BITS) - 1) as f32;

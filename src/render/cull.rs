@@ -202,8 +202,9 @@ pub fn cpu_select(
             let index = b.instance_offset + k;
             let packed = instances[index as usize];
             let d = decode_eye_relative(packed, b, view);
-            let stretch = Vec3::new(d.3, d.3, 1.0);
-            let c = d.0 + rotate_z(Vec3::new(s.sphere[0], s.sphere[1], s.sphere[2]) * d.2 * stretch, d.1);
+            // As `tree_scaled` in WGSL: xy · (scale · aspect), z · scale.
+            let sa = d.2 * d.3;
+            let c = d.0 + rotate_z(Vec3::new(s.sphere[0] * sa, s.sphere[1] * sa, s.sphere[2] * d.2), d.1);
             let r = s.sphere[3] * d.2 * d.3.max(1.0);
             let dist = c.length().max(1e-3);
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {

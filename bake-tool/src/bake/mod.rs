@@ -1,7 +1,8 @@
 //! The bake as one pipeline, read top to bottom in [`bake_scene`]:
 //!
-//! 1. trees: placements → scene trees ([`trees`]: sample, CRS, medians, density;
-//!    run by `sylva-bake bake` before this, `demo` makes its trees itself);
+//! 1. trees: placements → scene trees ([`trees`]: sample, CRS, medians, density,
+//!    ground heights from `--dem` ([`ground`]); run by `sylva-bake bake` before
+//!    this, `demo` makes its trees itself);
 //! 2. species packs ([`packs`]: every LoD of every model, rendered on the GPU);
 //! 3. batches and tiles ([`tiles`]: grid cells into batches, tiles and id sidecars);
 //! 4. terrain (none yet: the DEM stage of the terrain issue goes here);
@@ -10,6 +11,7 @@
 //! Each stage is a module that takes what the earlier ones made and calls no
 //! other stage; the folder is written atomically ([`OutDir::write`]).
 
+pub mod ground;
 pub mod packs;
 pub mod tiles;
 pub mod trees;

@@ -14,6 +14,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 
+use super::ground::{Dems, OutsideDem, ZMode};
 use crate::allometry::Allometry;
 use crate::batching::{self, SceneTree};
 use crate::bucket::{BucketWriter, TreeSource};
@@ -61,7 +62,18 @@ pub struct TreeOptions<'a> {
     pub shard: Option<(u32, u32)>,
     /// Heights and crowns from DBH where a row has no height.
     pub allometry: &'a Allometry,
+    /// Elevation models (`--dem`): the trees' ground.
+    pub dems: &'a [std::path::PathBuf],
+    /// CRS of the DEMs (`--dem-crs`), over their GeoKeys.
+    pub dem_crs: Option<&'a str>,
+    /// How a z column is meant with a DEM.
+    pub z_mode: ZMode,
+    /// Trees outside every DEM: stop or leave them out.
+    pub outside_dem: OutsideDem,
 }
+
+/// Why a row outside every DEM is skipped (and, by default, stops the bake).
+const OUTSIDE_DEM: &str = "outside every --dem (or where it has no data)";
 
 /// Where a tree's height came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -173,6 +185,11 @@ pub fn place_trees(
     log: &dyn Fn(&str),
 ) -> Result<PlacedTrees> {
     let source = PlacementSource::open(opts.placements, &opts.read)?;
+    // DEMs are read before any long work, so a bad file fails fast.
+    let dems = Dems::open(opts.dems, opts.dem_crs, log)?;
+    if dems.is_empty() && opts.z_mode == ZMode::Relative {
+        bail!("--z relative needs a --dem (z is then the height above its ground)");
+    }
     for note in &source.notes {
         log(&format!("placements: {note}"));
     }
@@ -205,6 +222,7 @@ pub fn place_trees(
         ));
     }
     let (src, dst) = choose_crs(opts, &source, &sample, log)?;
+    let ground = if dems.is_empty() { None } else { Some(dems.in_scene(&dst)?) };
     let reproject = Reprojector::new(src, &dst)?;
     // Medians of the projected sample: outliers are far from them.
     // (The sample is not needed after this: up to tens of MB freed before pass 2.)
@@ -271,9 +289,18 @@ pub fn place_trees(
         let aspect = raw.map_or(1.0, |a| a.clamp(1.0 / MAX_CROWN_ASPECT, MAX_CROWN_ASPECT));
         let aspect_clamped = raw.is_some_and(|a| a != aspect);
         let facts = Facts { height_m: target, from, dbh_cm: p.dbh_cm, crown_m, aspect, aspect_clamped };
+        // Ground: a given absolute z, else the DEM (plus a relative z), else 0.
+        let z = match (&ground, p.z, opts.z_mode) {
+            (None, z, _) => z.unwrap_or(0.0),
+            (Some(_), Some(z), ZMode::Absolute) => z,
+            (Some(g), z, _) => match g.height_at(x, y) {
+                Some(h) => f64::from(h) + z.unwrap_or(0.0),
+                None => return Err(OUTSIDE_DEM),
+            },
+        };
         let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
         let tree = SceneTree {
-            pos: DVec3::new(x - origin.x, y - origin.y, p.z.unwrap_or(0.0) - origin.z),
+            pos: DVec3::new(x - origin.x, y - origin.y, z - origin.z),
             species: idx as u32,
             scale: target / model_h,
             aspect,
@@ -290,7 +317,23 @@ pub fn place_trees(
             density_pass(&source, &to_tree)?
         }
     };
-    let (trees, summary) = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    let (trees, summary, outside) = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    if outside.trees > 0 && opts.outside_dem == OutsideDem::Error {
+        let b = outside.bounds;
+        bail!(
+            "{} of {} trees fall outside every --dem or on its nodata pixels: they lie within x {:.6}–{:.6}, \
+             y {:.6}–{:.6} (placement coordinates), e.g. rows {:?}; {}. Add a DEM that covers them, or pass \
+             --outside-dem skip to leave them out",
+            outside.trees,
+            outside.rows_read,
+            b[0],
+            b[2],
+            b[1],
+            b[3],
+            outside.rows,
+            ground.as_ref().map(super::ground::Ground::describe).unwrap_or_default()
+        );
+    }
     log_summary(&summary, species, log);
     log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
     Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m })
@@ -417,7 +460,7 @@ fn tree_pass(
     to_tree: &TreeOf<'_>,
     out: &OutDir,
     log: &dyn Fn(&str),
-) -> Result<(TreeSource, BTreeMap<String, SpeciesSummary>)> {
+) -> Result<(TreeSource, BTreeMap<String, SpeciesSummary>, Outside)> {
     let buckets = sample.report.kept.div_ceil(opts.bucket_trees.max(1)).max(1);
     log(&format!(
         "pass 3/3: trees{}",
@@ -464,7 +507,17 @@ fn tree_pass(
         s.from_dbh += u64::from(f.from == HeightFrom::Dbh);
     };
     let mut ours = placements::Report::default();
+    let mut outside = Outside { bounds: [f64::MAX, f64::MAX, f64::MIN, f64::MIN], ..Outside::default() };
     let mut skip = |p: &Placement, why: &str| match why {
+        OUTSIDE_DEM => {
+            outside.trees += 1;
+            let b = &mut outside.bounds;
+            *b = [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)];
+            if outside.rows.len() < 5 {
+                outside.rows.push(p.row);
+            }
+            ours.skip(why, p.row);
+        }
         "outlier" => {
             ours.skip(&format!("farther than {} km from the median position (outlier)", opts.max_extent_km), p.row)
         }
@@ -526,7 +579,18 @@ fn tree_pass(
             "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
         ));
     }
-    Ok((trees, summary))
+    outside.rows_read = report.rows;
+    Ok((trees, summary, outside))
+}
+
+/// Trees outside every DEM: how many, where (placement coordinates) and which rows.
+#[derive(Debug, Default)]
+struct Outside {
+    trees: u64,
+    bounds: [f64; 4],
+    rows: Vec<u64>,
+    /// Rows read in all.
+    rows_read: u64,
 }
 
 /// Logs, per species label, the model used, the count and the height, DBH and
@@ -557,7 +621,7 @@ fn log_summary(summary: &BTreeMap<String, SpeciesSummary>, species: &SpeciesMap,
     if clamped > 0 {
         log(&format!(
             "placements: warning: {clamped} trees have crowns more than {MAX_CROWN_ASPECT}× wider or narrower for \
-             their height than their model's; they were drawn at {MAX_CROWN_ASPECT}× (check the crown column's unit: \
+             their height than their model's; they were drawn at {MAX_CROWN_ASPECT}× (or 1/{MAX_CROWN_ASPECT}) (check the crown column's unit: \
              a diameter read as a radius, or centimetres as metres)"
         ));
     }
