@@ -204,6 +204,7 @@ fn sample_manifest() -> Manifest {
         index: None,
         home: None,
         shard: None,
+        terrain: None,
     }
 }
 

@@ -380,6 +380,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
         log(&format!("wrote {} placements to {}", trees.len(), path.display()));
     }
     let input = SceneInput {
+        terrain: None,
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
         trees: TreeSource::Memory(trees),
@@ -522,7 +523,15 @@ fn bake(args: &BakeArgs) -> Result<()> {
         outside_dem: args.outside_dem,
     };
     let placed = trees::place_trees(&options, &map, &out, &log)?;
+    let ground_height = placed.ground.as_ref().map(|(g, _)| {
+        let (ox, oy, oz) = (placed.origin_m.x, placed.origin_m.y, placed.origin_m.z);
+        move |x: f64, y: f64| g.height_at(x + ox, y + oy).map(|h| h - oz as f32)
+    });
+    let terrain = placed.ground.as_ref().zip(ground_height.as_ref()).map(|((g, region), height)| {
+        bake::terrain::TerrainSource { height, region: *region, resolution_m: g.resolution_m(), source: g.names() }
+    });
     let input = SceneInput {
+        terrain,
         cell_size_m: placed.cell_size_m,
         species,
         trees: placed.trees,

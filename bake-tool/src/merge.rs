@@ -71,6 +71,10 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
         for sp in &first.species {
             copy(&shards[0].0, tmp, &sp.pack)?;
         }
+        // Terrain: written by shard 0 only, copied whole.
+        if let Some(t) = &first.terrain {
+            copy_terrain(&shards[0].0, tmp, t)?;
+        }
         let mut tiles: Vec<TileEntry> = Vec::new();
         for (dir, m) in &shards {
             for t in &m.tiles {
@@ -91,6 +95,28 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
 fn list_indices(shards: &[(PathBuf, Manifest)]) -> String {
     let v: Vec<String> = shards.iter().filter_map(|(_, m)| m.shard.map(|s| s.index.to_string())).collect();
     v.join(", ")
+}
+
+/// Copies the terrain quadtree of `t` from `from` to `to`, walking it from the
+/// root by the child masks (so only tiles of the tree are copied).
+fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Result<()> {
+    let mut stack = vec![(0u8, 0u32, 0u32)];
+    while let Some((level, x, y)) = stack.pop() {
+        let rel = t.tile_url(level, x, y);
+        let bytes =
+            std::fs::read(from.join(&rel)).with_context(|| format!("cannot read {}", from.join(&rel).display()))?;
+        let tile = sylva::format::TerrainTile::decode(&rel, &bytes)?;
+        if let Some(parent) = to.join(&rel).parent() {
+            create_dir(parent)?;
+        }
+        std::fs::write(to.join(&rel), &bytes).with_context(|| format!("cannot write {}", to.join(&rel).display()))?;
+        for (k, c) in tile.children.iter().enumerate() {
+            if c.exists && level + 1 < t.levels {
+                stack.push((level + 1, 2 * x + (k as u32 & 1), 2 * y + (k as u32 >> 1)));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Copies `rel` from `from` to `to` (a URL the manifest decoder has checked stays inside).

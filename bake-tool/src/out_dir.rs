@@ -83,6 +83,7 @@ pub fn is_bake_file(rel: &str) -> bool {
         ["species", f] => plain(f, &[".pack"]),
         ["tiles", f] => plain(f, &[".tile", ".ids"]),
         ["index", f] => plain(f, &[".json"]),
+        ["terrain", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".terr"]),
         _ => false,
     }
 }
@@ -226,12 +227,13 @@ impl OutDir {
                 continue;
             }
             std::fs::remove_file(&path).with_context(|| format!("cannot remove the old {}", path.display()))?;
-            if let Some(d) = Path::new(rel).parent().filter(|d| !d.as_os_str().is_empty()) {
+            for d in Path::new(rel).ancestors().skip(1).filter(|d| !d.as_os_str().is_empty()) {
                 dirs.insert(d.to_path_buf());
             }
         }
-        // Folders the old scene used and the new one does not, if now empty.
-        for d in &dirs {
+        // Folders the old scene used and the new one does not, if now empty
+        // (deepest first: terrain/3 before terrain).
+        for d in dirs.iter().rev() {
             let _ = std::fs::remove_dir(self.real.join(d));
         }
         self.record(&new)
@@ -393,7 +395,14 @@ mod tests {
 
     #[test]
     fn only_names_of_the_layout_are_bake_files() {
-        for ok in ["scene.json", "species/oak.pack", "tiles/-1_2.tile", "tiles/0_0.ids", "index/r0.json"] {
+        for ok in [
+            "scene.json",
+            "species/oak.pack",
+            "tiles/-1_2.tile",
+            "tiles/0_0.ids",
+            "index/r0.json",
+            "terrain/3/5_7.terr",
+        ] {
             assert!(is_bake_file(ok), "{ok}");
         }
         for not in [

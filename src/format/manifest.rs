@@ -12,10 +12,11 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version, written by this build (it reads 1 to 3). Version 2
-/// added the hierarchical index, pack head sizes and shard stamps; version 3
-/// where the trees are (`home`).
-pub const SCENE_VERSION: u32 = 3;
+/// Newest manifest version this build writes and reads (it reads 1 to 4).
+/// Version 2 added the hierarchical index, pack head sizes and shard stamps;
+/// version 3 where the trees are (`home`); version 4 the terrain. The bake
+/// writes version 3 for scenes without terrain, so older viewers read them.
+pub const SCENE_VERSION: u32 = 4;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -100,6 +101,9 @@ pub struct Manifest {
     /// not a scene to view until `sylva-bake merge` has joined the shards.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<ShardStamp>,
+    /// The terrain quadtree (version 4), if the scene has ground heights.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terrain: Option<super::terrain::TerrainEntry>,
 }
 
 /// Which shard of a sharded bake wrote a directory.
@@ -132,7 +136,7 @@ impl Manifest {
                 )));
             }
             let version = value.get("version").and_then(serde_json::Value::as_u64);
-            if !matches!(version, Some(1..=3)) {
+            if !matches!(version, Some(1..=4)) {
                 return Err(Problem::UnsupportedVersion {
                     found: version.unwrap_or(0).min(u32::MAX.into()) as u32,
                     supported: SCENE_VERSION,
@@ -161,6 +165,12 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<(), Problem> {
+        if let Some(t) = &self.terrain {
+            if self.version < 4 {
+                return Err(Problem::Invalid("\"terrain\" needs manifest version 4".into()));
+            }
+            t.validate()?;
+        }
         for (i, o) in self.origin_m.iter().enumerate() {
             finite(format!("origin_m[{i}]"), *o)?;
         }

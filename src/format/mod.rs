@@ -12,10 +12,12 @@ mod error;
 pub mod index;
 pub mod manifest;
 pub mod pack;
+pub mod terrain;
 pub mod tile;
 
 pub use error::{DecodeError, Problem};
 pub use index::{build_index, IndexNode, IndexRef};
 pub use manifest::{Bounds, Counts, Crs, Home, Manifest, ShardStamp, SpeciesEntry, TileEntry};
 pub use pack::{decode_pack, encode_pack, Pack, PackMeta, Section};
+pub use terrain::{TerrainEntry, TerrainTile};
 pub use tile::{decode_ids, encode_ids, GpuBatch, Instance, PackedInstance, Tile};

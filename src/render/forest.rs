@@ -27,6 +27,7 @@ use super::pools::{buffer, PoolLayouts, Pools};
 use super::reach::Reach;
 pub use super::settings::{CullingMode, RenderSettings, Representations, DEFAULT_CLUSTER_MIN_PX, DEFAULT_THIN_PX};
 use super::species::{Species, SpeciesFrame};
+use super::terrain::TerrainPass;
 use crate::camera::ViewData;
 use crate::format::pack::PACK_PARTS;
 use crate::format::{Pack, PackMeta, Tile};
@@ -51,6 +52,7 @@ pub struct ForestRenderer {
     pub shared: SharedLayouts,
     cull: CullPipelines,
     sky: SkyPass,
+    terrain: TerrainPass,
     bounds: BoundsPass,
     pools: Pools,
     species: Species,
@@ -68,6 +70,7 @@ impl ForestRenderer {
         let shared = SharedLayouts::new(device);
         let cull = CullPipelines::new(device, &shared);
         let sky = SkyPass::new(device, &shared, color_format);
+        let terrain = TerrainPass::new(device, &shared, color_format);
         let bounds = BoundsPass::new(device, &shared, color_format);
         let pools = Pools::new(device, config, &PoolLayouts { shared: &shared, cull: &cull, bounds: &bounds.layout });
         let view_buffer = buffer(device, "view", size_of::<ViewUniform>() as u64, U::STORAGE | U::COPY_DST);
@@ -76,6 +79,7 @@ impl ForestRenderer {
             shared,
             cull,
             sky,
+            terrain,
             bounds,
             pools,
             species: Species::new(color_format),
@@ -234,6 +238,25 @@ impl ForestRenderer {
         }
     }
 
+    /// Uploads what the terrain pass draws this frame: `draws` is the stream's
+    /// selection at `threshold_px`.
+    pub fn prepare_terrain(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        draws: &[crate::scene::terrain::TerrainDraw],
+        threshold_px: f32,
+        debug: bool,
+    ) {
+        self.terrain.prepare(device, queue, draws, threshold_px, debug);
+    }
+
+    /// The terrain pass (tiles drawn, uploads, GPU bytes).
+    #[must_use]
+    pub fn terrain(&self) -> &TerrainPass {
+        &self.terrain
+    }
+
     /// Records the cull pass (after [`Self::prepare`]).
     /// With `timestamps`, the pass writes its begin and end at indices 0 and 1.
     pub fn encode_cull(
@@ -250,7 +273,7 @@ impl ForestRenderer {
         self.cull.encode(encoder, &self.view_group, &self.pools, self.slot_count(), writes);
     }
 
-    /// Records the draw pass: sky, species draws, overlays. Returns the number of
+    /// Records the draw pass: sky, terrain, species draws, overlays. Returns the number of
     /// draw calls recorded. With `timestamps`, the pass writes its begin and end at
     /// indices 2 and 3.
     pub fn encode_draw(
@@ -288,7 +311,8 @@ impl ForestRenderer {
         });
         pass.set_bind_group(0, &self.view_group, &[]);
         self.sky.draw(&mut pass);
-        let mut draws = self.species.draw(&mut pass, &self.pools, &self.reach, frame.species);
+        let mut draws = self.terrain.draw(&mut pass);
+        draws += self.species.draw(&mut pass, &self.pools, &self.reach, frame.species);
         if frame.debug_bounds {
             draws += self.bounds.draw(&mut pass, &self.pools);
         }

@@ -23,6 +23,7 @@ pub mod settings;
 pub mod shaders;
 pub mod species;
 pub mod stats;
+pub mod terrain;
 
 use glam::{Mat4, Vec3};
 

@@ -56,6 +56,8 @@ impl NamedView {
             .fold(lo.z, f64::max);
         match self {
             NamedView::Far => {
+                // A small plot is seen from farther than its own size: its tallest trees whole.
+                let ext = ext.max(4.0 * (hi.z - ground));
                 Camera::look_at(DVec3::new(c.x, c.y - 1.1 * ext, hi.z + 0.45 * ext), DVec3::new(c.x, c.y, lo.z))
             }
             NamedView::Medium => {

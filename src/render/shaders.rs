@@ -21,6 +21,17 @@ pub const SKY: &str = concat!(include_str!("../../shaders/common.wgsl"), include
 /// The batch-bounds debug view.
 pub const BOUNDS: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/bounds.wgsl"));
 
+/// The terrain pass.
+pub const TERRAIN: &str =
+    concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/terrain.wgsl"));
+
 /// Every composed shader with its name, for validation tests.
-pub const ALL: &[(&str, &str)] =
-    &[("mesh", MESH), ("billboard", BILLBOARD), ("cluster", CLUSTER), ("cull", CULL), ("sky", SKY), ("bounds", BOUNDS)];
+pub const ALL: &[(&str, &str)] = &[
+    ("mesh", MESH),
+    ("billboard", BILLBOARD),
+    ("cluster", CLUSTER),
+    ("cull", CULL),
+    ("sky", SKY),
+    ("bounds", BOUNDS),
+    ("terrain", TERRAIN),
+];

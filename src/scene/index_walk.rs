@@ -256,6 +256,7 @@ mod tests {
             index: Some(built.reference.clone()),
             home: None,
             shard: None,
+            terrain: None,
         };
         (m, tiles)
     }

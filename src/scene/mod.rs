@@ -5,6 +5,7 @@ pub mod fetch;
 pub mod index_walk;
 pub mod residency;
 pub mod streaming;
+pub mod terrain;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use fetch::ThreadFetcher;

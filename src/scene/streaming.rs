@@ -15,7 +15,9 @@ use glam::Vec3;
 use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
 use super::index_walk::IndexWalk;
 use super::residency::{PoolError, Residency, TileSlot};
+use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
+use crate::format::terrain::TerrainTile;
 use crate::format::{DecodeError, Manifest, Tile};
 use packs::PackLoad;
 
@@ -33,11 +35,21 @@ pub struct StreamConfig {
     pub gpu_budget_bytes: u64,
     /// Download budget in bytes per second, averaged over a second (0: none).
     pub max_bytes_per_s: f64,
+    /// Terrain level selection: a tile is refined while its geometric error
+    /// projects to more than this many pixels.
+    pub terrain_error_px: f32,
 }
 
 impl Default for StreamConfig {
     fn default() -> Self {
-        Self { max_in_flight: 6, max_attempts: 4, retry_base_s: 0.25, gpu_budget_bytes: 0, max_bytes_per_s: 0.0 }
+        Self {
+            max_in_flight: 6,
+            max_attempts: 4,
+            retry_base_s: 0.25,
+            gpu_budget_bytes: 0,
+            max_bytes_per_s: 0.0,
+            terrain_error_px: 2.0,
+        }
     }
 }
 
@@ -133,6 +145,8 @@ enum Target {
     PackHead(usize),
     /// One part of a pack, by byte range.
     PackPart(usize, usize),
+    /// A terrain tile.
+    Terrain(TerrainKey),
 }
 
 /// Counters for stats.
@@ -158,6 +172,10 @@ pub struct StreamStats {
     pub requests: u64,
     /// What budgets or limits hold back now.
     pub degraded: Degraded,
+    /// Terrain tiles decoded and kept.
+    pub terrain_resident: u64,
+    /// Terrain tiles drawn by the current view.
+    pub terrain_drawn: u64,
 }
 
 /// A scene being streamed into a [`Residency`] (the renderer's GPU pools).
@@ -190,6 +208,12 @@ pub struct SceneStream<F: Fetcher> {
     needed: Vec<usize>,
     /// (time, bytes) of responses in the last second, for the download budget.
     recent: std::collections::VecDeque<(f64, u64)>,
+    /// The terrain, if the scene has one, what the view draws of it and the
+    /// tiles it waits for (and their failed attempts).
+    terrain: Option<TerrainTree>,
+    terrain_draws: Vec<TerrainDraw>,
+    terrain_wanted: Vec<(f32, TerrainKey)>,
+    terrain_attempts: HashMap<TerrainKey, u32>,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -220,7 +244,23 @@ impl<F: Fetcher> SceneStream<F> {
             walk_stack: Vec::new(),
             needed: Vec::new(),
             recent: std::collections::VecDeque::new(),
+            terrain: None,
+            terrain_draws: Vec::new(),
+            terrain_wanted: Vec::new(),
+            terrain_attempts: HashMap::new(),
         }
+    }
+
+    /// The terrain tiles the current view draws (empty without terrain).
+    #[must_use]
+    pub fn terrain_draws(&self) -> &[TerrainDraw] {
+        &self.terrain_draws
+    }
+
+    /// The scene's terrain, if it has one.
+    #[must_use]
+    pub fn terrain(&self) -> Option<&TerrainTree> {
+        self.terrain.as_ref()
     }
 
     /// The files given up on so far (at most [`MAX_LISTED_FAILURES`]).
@@ -277,13 +317,18 @@ impl<F: Fetcher> SceneStream<F> {
             TileState::NotResident(l) => *l == Load::Broken,
         });
         let packs_done = self.needed.iter().all(|&s| self.packs[s].done());
-        manifest_done && nodes_done && tiles_done && packs_done && self.requests.is_empty()
+        let terrain_done = self.terrain_wanted.is_empty();
+        manifest_done && nodes_done && tiles_done && packs_done && terrain_done && self.requests.is_empty()
     }
 
-    /// The lowest tree base of the resident batch cell nearest to `(x, y)` within
-    /// 200 m (metres relative to the scene origin): a ground estimate without a DEM.
+    /// The ground height at `(x, y)` (metres relative to the scene origin): the
+    /// terrain's where it has data, else the lowest tree base of the resident
+    /// batch cell nearest within 200 m (a ground estimate without a DEM).
     #[must_use]
     pub fn ground_height_at(&self, x: f32, y: f32) -> Option<f32> {
+        if let Some(h) = self.terrain.as_ref().and_then(|t| t.height_at(f64::from(x), f64::from(y))) {
+            return Some(h);
+        }
         let distance = |c: &[f32; 5]| ((c[0] - x).max(x - c[2]).max(0.0)).hypot((c[1] - y).max(y - c[3]).max(0.0));
         self.tiles
             .iter()
@@ -348,6 +393,7 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::Tile(t) => self.on_tile(residency, t, result, view, now_s),
                 Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
                 Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
+                Target::Terrain(key) => self.on_terrain(key, result),
             }
         }
         if self.manifest.is_none() {
@@ -376,9 +422,11 @@ impl<F: Fetcher> SceneStream<F> {
             let rate: u64 = self.recent.iter().map(|(_, b)| b).sum();
             let over_rate = self.config.max_bytes_per_s > 0.0 && rate as f64 >= self.config.max_bytes_per_s;
             self.stats.degraded.bandwidth = over_rate;
+            self.select_terrain(view);
             if !over_rate {
                 self.request_tiles(view, draw_distance_m, now_s);
                 self.request_packs(residency, now_s);
+                self.request_terrain();
             } else {
                 // Still decide what the view wants (for is_settled and eviction).
                 self.walk(view, draw_distance_m);
@@ -394,6 +442,56 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.tiles_known = self.index.tiles.len() as u64;
         self.stats.index_nodes_loaded = self.index.nodes_loaded();
         self.stats.index_nodes_total = self.index.nodes_declared();
+        self.stats.terrain_resident = self.terrain.as_ref().map_or(0, |t| t.resident() as u64);
+        self.stats.terrain_drawn = self.terrain_draws.len() as u64;
+    }
+
+    /// Picks the terrain tiles the view draws and the ones it waits for.
+    fn select_terrain(&mut self, view: &ViewData) {
+        self.terrain_wanted.clear();
+        let Some(t) = &mut self.terrain else { return };
+        let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
+        t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws, &mut self.terrain_wanted);
+    }
+
+    /// Requests wanted terrain tiles, nearest first, within the in-flight budget.
+    fn request_terrain(&mut self) {
+        let Some(t) = &mut self.terrain else { return };
+        for &(_, key) in &self.terrain_wanted {
+            if self.fetcher.in_flight() >= self.config.max_in_flight {
+                break;
+            }
+            if !t.is_unknown(key) {
+                continue;
+            }
+            let id = self.fetcher.start(&join(&self.base, &t.entry().tile_url(key.0, key.1, key.2)));
+            self.stats.requests += 1;
+            self.requests.insert(id, Target::Terrain(key));
+            t.mark_loading(key);
+        }
+    }
+
+    /// A terrain tile arrived (or failed): kept, retried or given up on (its
+    /// parent is drawn instead; the rest of the scene goes on).
+    fn on_terrain(&mut self, key: TerrainKey, result: Result<Vec<u8>, FetchError>) {
+        let Some(t) = &mut self.terrain else { return };
+        let url = join(&self.base, &t.entry().tile_url(key.0, key.1, key.2));
+        let outcome = result
+            .map_err(|e| (e.to_string(), e.retryable()))
+            .and_then(|bytes| TerrainTile::decode(&url, &bytes).map_err(|e| (e.to_string(), false)))
+            .and_then(|tile| t.insert(key, tile).map_err(|e| (format!("{url}: {e}"), false)));
+        if let Err((message, retryable)) = outcome {
+            let attempts = self.terrain_attempts.entry(key).or_insert(0);
+            *attempts += 1;
+            let retrying = retryable && *attempts < self.config.max_attempts;
+            if retrying {
+                t.forget(key);
+            } else {
+                t.mark_broken(key);
+                self.give_up(&url, &message);
+            }
+            self.events.push(StreamEvent::Failed { url, message, retrying });
+        }
     }
 
     fn on_node(&mut self, n: usize, result: Result<Vec<u8>, FetchError>, now_s: f64) {
@@ -436,6 +534,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.node_loads = vec![Load::Idle; self.index.nodes.len()];
                 self.tiles = self.index.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
                 self.packs = (0..m.species.len()).map(|_| PackLoad::new()).collect();
+                self.terrain = m.terrain.clone().map(TerrainTree::new);
                 self.events.push(StreamEvent::ManifestLoaded { trees: m.counts.trees });
                 self.manifest = Some(m);
             }

@@ -92,7 +92,7 @@ impl Dems {
                         .with_context(|| format!("DEM {}: from the scene CRS", path.display()))?,
                 )
             };
-            out.push(GroundDem { path, dem, to_dem });
+            out.push(GroundDem { path, dem, to_dem, geographic: crs.is_geographic() });
         }
         Ok(Ground { dems: out })
     }
@@ -102,6 +102,8 @@ struct GroundDem {
     path: PathBuf,
     dem: Dem,
     to_dem: Option<Reprojector>,
+    /// The DEM's CRS is in degrees.
+    geographic: bool,
 }
 
 /// The DEMs in the scene CRS.
@@ -119,6 +121,23 @@ impl Ground {
             };
             g.dem.sample(dx, dy)
         })
+    }
+
+    /// The finest DEM pixel size in metres (a geographic DEM's degrees taken
+    /// as 111 km, their length along a meridian).
+    pub fn resolution_m(&self) -> f64 {
+        self.dems
+            .iter()
+            .map(|g| {
+                let r = g.dem.summary().resolution;
+                r[0].min(r[1]) * if g.geographic { 111_000.0 } else { 1.0 }
+            })
+            .fold(f64::MAX, f64::min)
+    }
+
+    /// The DEM file names, for reports.
+    pub fn names(&self) -> String {
+        self.dems.iter().map(|g| name(&g.path)).collect::<Vec<_>>().join(", ")
     }
 
     /// The DEMs' extents in their own CRSs, for errors.

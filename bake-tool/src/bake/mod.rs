@@ -5,7 +5,8 @@
 //!    this, `demo` makes its trees itself);
 //! 2. species packs ([`packs`]: every LoD of every model, rendered on the GPU);
 //! 3. batches and tiles ([`tiles`]: grid cells into batches, tiles and id sidecars);
-//! 4. terrain (none yet: the DEM stage of the terrain issue goes here);
+//! 4. terrain ([`terrain`]: a quadtree of height grids from the `--dem`
+//!    GeoTIFFs or the demo's hills);
 //! 5. write: the tile index and `scene.json` ([`crate::scene_write`]).
 //!
 //! Each stage is a module that takes what the earlier ones made and calls no
@@ -13,6 +14,7 @@
 
 pub mod ground;
 pub mod packs;
+pub mod terrain;
 pub mod tiles;
 pub mod trees;
 
@@ -29,7 +31,9 @@ use crate::pack_build::PackOptions;
 use crate::reproject::Crs;
 
 /// Everything a scene is made from.
-pub struct SceneInput {
+pub struct SceneInput<'a> {
+    /// Ground heights for the terrain tiles, if any (written by shard 0 only).
+    pub terrain: Option<terrain::TerrainSource<'a>>,
     /// Species names and models, indexed by `SceneTree::species`.
     pub species: Vec<(String, ImportedModel)>,
     /// Trees relative to `origin_m` (in memory or in bucket files).
@@ -67,7 +71,7 @@ pub struct SceneSummary {
 
 /// Bakes `input` into `out` (atomically; see [`OutDir`]): packs, tiles, index
 /// and manifest.
-pub fn bake_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Result<SceneSummary> {
+pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Result<SceneSummary> {
     if input.trees.is_empty() && input.shard.is_none() {
         bail!("no trees to bake: every placement was skipped (see the report above)");
     }
@@ -84,14 +88,19 @@ pub fn bake_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Result
             dir,
             log,
         )?;
-        // Terrain: the DEM stage goes here.
+        // Terrain, by shard 0 only (like the packs; `merge` copies it).
+        let terrain = match &input.terrain {
+            Some(src) if bake_packs => terrain::write_terrain(src, dir, log)?,
+            _ => None,
+        };
         let mut species = packs.entries;
         for (entry, n) in species.iter_mut().zip(&tiles.species_trees) {
             entry.trees = *n;
         }
         let base = Manifest {
             format: SCENE_FORMAT.into(),
-            version: SCENE_VERSION,
+            // Version 4 only where it is needed, so older viewers read the rest.
+            version: if terrain.is_some() { SCENE_VERSION } else { 3 },
             crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone() },
             origin_m: input.origin_m.to_array(),
             bounds: Bounds { min: [0.0; 3], max: [0.0; 3] },
@@ -103,6 +112,7 @@ pub fn bake_scene(input: &SceneInput, out: OutDir, log: &dyn Fn(&str)) -> Result
             index: None,
             home: None,
             shard: input.shard.map(|(index, count)| ShardStamp { index, count }),
+            terrain,
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
         let flat = input.shard.is_some();

@@ -164,6 +164,9 @@ pub struct PlacedTrees {
     pub origin_m: DVec3,
     /// Batch cell size, metres.
     pub cell_size_m: u32,
+    /// The DEMs in the scene CRS, if any, and the region their terrain covers
+    /// (metres relative to the origin: min x, min y, max x, max y).
+    pub ground: Option<(super::ground::Ground, [f64; 4])>,
 }
 
 /// What pass 1 learns.
@@ -230,6 +233,10 @@ pub fn place_trees(
         .into_iter()
         .filter_map(|(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h)))
         .collect();
+    // The trees' extent from the sample (the same in every shard): the terrain covers it.
+    let sample_box = projected.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, p| {
+        [b[0].min(p.0), b[1].min(p.1), b[2].max(p.0), b[3].max(p.1)]
+    });
     let mut xs: Vec<f64> = projected.iter().map(|p| p.0).collect();
     let mut ys: Vec<f64> = projected.iter().map(|p| p.1).collect();
     if xs.is_empty() {
@@ -336,7 +343,21 @@ pub fn place_trees(
     }
     log_summary(&summary, species, log);
     log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
-    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m })
+    // The terrain: the trees' extent (outliers left out) and a margin of a
+    // quarter of it (at least 500 m: the hills around a plot) around, within the DEMs.
+    let ground = ground.map(|g| {
+        let b = [
+            sample_box[0].max(mx - limit),
+            sample_box[1].max(my - limit),
+            sample_box[2].min(mx + limit),
+            sample_box[3].min(my + limit),
+        ];
+        let margin = ((b[2] - b[0]).max(b[3] - b[1]) * 0.25).max(500.0);
+        let region =
+            [b[0] - margin - origin.x, b[1] - margin - origin.y, b[2] + margin - origin.x, b[3] + margin - origin.y];
+        (g, region)
+    });
+    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground })
 }
 
 /// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.

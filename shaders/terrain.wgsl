@@ -1,0 +1,152 @@
+// Terrain pass: every selected terrain tile in one instanced draw, before the
+// trees, lit like them. A tile is a (grid + 1)² height grid pulled from the
+// resident height pool, with a skirt (an extra ring of vertices dropped below
+// the edge) against cracks between levels, and vertices morphed towards the
+// parent level's surface where the parent's error projects to little more
+// than the threshold, so level changes do not pop (CDLOD-style geomorphing).
+// Rust side: src/render/terrain.rs; selection: src/scene/terrain.rs.
+
+@group(0) @binding(0) var<storage, read> view: View;
+
+// Quantised heights, two u16 per word, `words` words per pool slot.
+@group(1) @binding(0) var<storage, read> heights: array<u32>;
+@group(1) @binding(1) var<storage, read> tiles: array<TerrainDraw>;
+@group(1) @binding(2) var<uniform> params: TerrainParams;
+
+// Must match `GpuTerrainDraw` in src/render/terrain.rs.
+struct TerrainDraw {
+    // South-west corner (xy, metres relative to the scene origin), lowest height (z).
+    origin_m: vec3<f32>,
+    // Pool slot of the heights.
+    slot: u32,
+    // Side of the square, metres.
+    size_m: f32,
+    // Highest minus lowest height (quantisation range).
+    range_m: f32,
+    // The parent's geometric error (metres; a huge value for the root).
+    parent_error_m: f32,
+    // How far the skirt hangs below the edge, metres.
+    skirt_m: f32,
+};
+
+// Must match `TerrainParams` in src/render/terrain.rs.
+struct TerrainParams {
+    // Cells per tile side.
+    grid: u32,
+    // Words per pool slot.
+    words: u32,
+    // Selection threshold, pixels.
+    threshold_px: f32,
+    // 1: colour by level (debug view).
+    debug: u32,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    // 1 where every vertex of the triangle has data (holes: < 1, discarded).
+    @location(1) valid: f32,
+    @location(2) @interpolate(flat) level_tint: f32,
+};
+
+const HOLE: u32 = 0xffffu;
+
+fn quantised(slot: u32, i: u32, j: u32) -> u32 {
+    let v = j * (params.grid + 1u) + i;
+    let word = heights[slot * params.words + (v >> 1u)];
+    return (word >> ((v & 1u) * 16u)) & 0xffffu;
+}
+
+// (height, 1) at vertex (i, j) of tile `t`, or (0, 0) for a hole.
+fn height_at(t: TerrainDraw, i: u32, j: u32) -> vec2<f32> {
+    let q = quantised(t.slot, i, j);
+    if q == HOLE {
+        return vec2<f32>(0.0, 0.0);
+    }
+    return vec2<f32>(t.origin_m.z + f32(q) / 65534.0 * t.range_m, 1.0);
+}
+
+// Mean height of the valid vertices among a few, or the fallback.
+fn mean_valid(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, d: vec2<f32>, fallback: f32) -> f32 {
+    let n = a.y + b.y + c.y + d.y;
+    if n < 0.5 {
+        return fallback;
+    }
+    return (a.x * a.y + b.x * b.y + c.x * c.y + d.x * d.y) / n;
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
+    let t = tiles[instance];
+    let n = params.grid;
+    let ring = n + 3u; // vertices per row with the skirt ring
+    let gi = vertex % ring;
+    let gj = vertex / ring;
+    let i = u32(clamp(i32(gi) - 1, 0, i32(n)));
+    let j = u32(clamp(i32(gj) - 1, 0, i32(n)));
+    let skirt = gi == 0u || gj == 0u || gi == ring - 1u || gj == ring - 1u;
+    let step = t.size_m / f32(n);
+    let own = height_at(t, i, j);
+    var h = own.x;
+    // The parent's surface here: its vertices are this tile's even ones.
+    let im = u32(max(i32(i) - 1, 0));
+    let ip = min(i + 1u, n);
+    let jm = u32(max(i32(j) - 1, 0));
+    let jp = min(j + 1u, n);
+    var coarse = h;
+    let odd_i = (i & 1u) == 1u;
+    let odd_j = (j & 1u) == 1u;
+    if odd_i && odd_j {
+        coarse = mean_valid(height_at(t, im, jm), height_at(t, ip, jm), height_at(t, im, jp), height_at(t, ip, jp), h);
+    } else if odd_i {
+        let a = height_at(t, im, j);
+        let b = height_at(t, ip, j);
+        coarse = mean_valid(a, b, a, b, h);
+    } else if odd_j {
+        let a = height_at(t, i, jm);
+        let b = height_at(t, i, jp);
+        coarse = mean_valid(a, b, a, b, h);
+    }
+    let local = vec3<f32>(f32(i) * step, f32(j) * step, 0.0);
+    let probe = eye_relative(vec3<f32>(t.origin_m.xy, 0.0), local + vec3<f32>(0.0, 0.0, h), view);
+    let parent_px = t.parent_error_m * view.lod.x / max(length(probe), 1e-3);
+    let morph = clamp(parent_px / max(params.threshold_px, 1e-3) - 1.0, 0.0, 1.0);
+    h = mix(coarse, h, morph);
+    if skirt {
+        h -= t.skirt_m;
+    }
+    // Normal from central differences of the (unmorphed) neighbours.
+    let hx0 = height_at(t, im, j);
+    let hx1 = height_at(t, ip, j);
+    let hy0 = height_at(t, i, jm);
+    let hy1 = height_at(t, i, jp);
+    let dx = select(own.x, hx1.x, hx1.y > 0.5) - select(own.x, hx0.x, hx0.y > 0.5);
+    let dy = select(own.x, hy1.x, hy1.y > 0.5) - select(own.x, hy0.x, hy0.y > 0.5);
+    let normal = normalize(vec3<f32>(-dx / (f32(ip - im) * step), -dy / (f32(jp - jm) * step), 1.0));
+    var out: VertexOut;
+    let pos = eye_relative(vec3<f32>(t.origin_m.xy, 0.0), local + vec3<f32>(0.0, 0.0, h), view);
+    out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
+    out.normal = normal;
+    out.valid = own.y;
+    out.level_tint = log2(max(t.size_m, 1.0));
+    return out;
+}
+
+// Ground colours (linear RGB): grass and litter on gentle ground, soil on steep.
+const GRASS: vec3<f32> = vec3<f32>(0.16, 0.19, 0.07);
+const SOIL: vec3<f32> = vec3<f32>(0.24, 0.20, 0.13);
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    if in.valid < 0.999 {
+        discard;
+    }
+    let n = normalize(in.normal);
+    var albedo = mix(GRASS, SOIL, smoothstep(0.82, 0.55, n.z));
+    if params.debug == 1u {
+        // Alternating tints per level (tile size), to see the selection.
+        let k = u32(in.level_tint) % 3u;
+        albedo = select(select(vec3<f32>(0.5, 0.3, 0.3), vec3<f32>(0.3, 0.5, 0.3), k == 1u), vec3<f32>(0.3, 0.3, 0.5), k == 2u);
+    }
+    return vec4<f32>(shade(albedo, n, false, view), 1.0);
+}

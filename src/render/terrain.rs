@@ -1,0 +1,294 @@
+//! The terrain pass: the tiles the stream selected (`scene::terrain`) drawn in
+//! one instanced draw before the trees. Heights live in a pool of fixed slots
+//! on the GPU (a tile is uploaded once, when first drawn, and stays until its
+//! slot is needed by a tile drawn later); each frame writes only the small
+//! per-tile draw records. Shader: `shaders/terrain.wgsl`.
+
+use std::collections::HashMap;
+
+use super::layouts::{storage_entry, SharedLayouts};
+use super::mesh::{depth_state, DEPTH_FORMAT};
+use crate::scene::terrain::{TerrainDraw, TerrainKey};
+
+/// Height slots in the pool (a 64-cell tile is 8.5 KB: 8.7 MB in all).
+pub const TERRAIN_SLOTS: usize = 1024;
+
+/// One drawn tile. Must match `TerrainDraw` in `shaders/terrain.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuTerrainDraw {
+    /// South-west corner (metres relative to the scene origin) and lowest height.
+    pub origin_m: [f32; 3],
+    /// Pool slot of the heights.
+    pub slot: u32,
+    /// Side of the square, metres.
+    pub size_m: f32,
+    /// Highest minus lowest height.
+    pub range_m: f32,
+    /// The parent's geometric error, metres (1e30 for the root).
+    pub parent_error_m: f32,
+    /// Skirt depth below the edge, metres.
+    pub skirt_m: f32,
+}
+
+/// Pass constants. Must match `TerrainParams` in `shaders/terrain.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TerrainParams {
+    /// Cells per tile side.
+    pub grid: u32,
+    /// Words per pool slot.
+    pub words: u32,
+    /// Selection threshold, pixels.
+    pub threshold_px: f32,
+    /// 1: colour by level.
+    pub debug: u32,
+}
+
+/// GPU buffers for one grid size.
+struct Pool {
+    grid: u16,
+    words: u32,
+    heights: wgpu::Buffer,
+    draws: wgpu::Buffer,
+    params: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    group: wgpu::BindGroup,
+    /// Tile in each slot and the frame it was last drawn.
+    slots: Vec<Option<(TerrainKey, u64)>>,
+    by_key: HashMap<TerrainKey, u32>,
+}
+
+/// The terrain pass.
+pub struct TerrainPass {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    pool: Option<Pool>,
+    frame: u64,
+    /// Tiles drawn this frame.
+    count: u32,
+    /// Tiles selected but not drawn (more than the pool holds).
+    pub dropped: u32,
+    /// Tiles uploaded since the start (for stats and tests).
+    pub uploads: u64,
+}
+
+impl TerrainPass {
+    /// The pipeline for `format` targets.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, shared: &SharedLayouts, format: wgpu::TextureFormat) -> Self {
+        let vertex = wgpu::ShaderStages::VERTEX;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("terrain"),
+            entries: &[
+                storage_entry(0, vertex, true),
+                storage_entry(1, vertex, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("terrain"),
+            source: wgpu::ShaderSource::Wgsl(super::shaders::TERRAIN.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("terrain"),
+            bind_group_layouts: &[Some(&shared.view), Some(&layout)],
+            immediate_size: 0,
+        });
+        let target = super::layouts::PullingTarget {
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: depth_state(true, wgpu::CompareFunction::Greater),
+            format,
+        };
+        let _ = DEPTH_FORMAT;
+        let pipeline =
+            super::layouts::pulling_pipeline(device, "terrain", &module, &pipeline_layout, "fs_main", &target);
+        Self { pipeline, layout, pool: None, frame: 0, count: 0, dropped: 0, uploads: 0 }
+    }
+
+    /// Bytes of GPU memory held.
+    #[must_use]
+    pub fn gpu_bytes(&self) -> u64 {
+        self.pool.as_ref().map_or(0, |p| p.heights.size() + p.draws.size() + p.indices.size())
+    }
+
+    /// Tiles drawn by the last prepared frame.
+    #[must_use]
+    pub fn drawn(&self) -> u32 {
+        self.count
+    }
+
+    /// Uploads the heights of newly drawn tiles and writes this frame's draw
+    /// records for `draws` (the stream's selection).
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        draws: &[TerrainDraw],
+        threshold_px: f32,
+        debug: bool,
+    ) {
+        self.frame += 1;
+        self.count = 0;
+        self.dropped = 0;
+        let Some(first) = draws.first() else { return };
+        let grid = first.tile.grid;
+        if self.pool.as_ref().is_none_or(|p| p.grid != grid) {
+            self.pool = Some(self.make_pool(device, grid));
+        }
+        let Some(pool) = self.pool.as_mut() else { return };
+        queue.write_buffer(
+            &pool.params,
+            0,
+            bytemuck::bytes_of(&TerrainParams {
+                grid: u32::from(grid),
+                words: pool.words,
+                threshold_px,
+                debug: u32::from(debug),
+            }),
+        );
+        let mut records = Vec::with_capacity(draws.len().min(TERRAIN_SLOTS));
+        for d in draws {
+            if d.tile.grid != grid {
+                self.dropped += 1;
+                continue;
+            }
+            let slot = match pool.by_key.get(&d.key) {
+                Some(&s) => s,
+                None => {
+                    // A free slot, else the one drawn longest ago (not this frame).
+                    let free = pool.slots.iter().position(Option::is_none).or_else(|| {
+                        pool.slots
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, s)| s.is_some_and(|(_, used)| used < self.frame))
+                            .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
+                            .map(|(i, _)| i)
+                    });
+                    let Some(free) = free else {
+                        self.dropped += 1;
+                        continue;
+                    };
+                    if let Some((old, _)) = pool.slots[free] {
+                        pool.by_key.remove(&old);
+                    }
+                    let mut words: Vec<u32> = d
+                        .tile
+                        .heights
+                        .chunks(2)
+                        .map(|p| u32::from(p[0]) | u32::from(*p.get(1).unwrap_or(&0)) << 16)
+                        .collect();
+                    words.resize(pool.words as usize, 0);
+                    queue.write_buffer(
+                        &pool.heights,
+                        u64::from(pool.words) * 4 * free as u64,
+                        bytemuck::cast_slice(&words),
+                    );
+                    self.uploads += 1;
+                    pool.by_key.insert(d.key, free as u32);
+                    free as u32
+                }
+            };
+            pool.slots[slot as usize] = Some((d.key, self.frame));
+            let cell = d.size_m / f64::from(grid);
+            records.push(GpuTerrainDraw {
+                origin_m: [d.origin_m[0] as f32, d.origin_m[1] as f32, d.tile.min_m],
+                slot,
+                size_m: d.size_m as f32,
+                range_m: d.tile.max_m - d.tile.min_m,
+                parent_error_m: if d.parent_error_m.is_finite() { d.parent_error_m } else { 1e30 },
+                // Deep enough to hide the largest step a coarser neighbour can leave.
+                skirt_m: (2.0 * d.parent_error_m.min(d.tile.max_m - d.tile.min_m) + 0.5 * cell as f32).max(0.5),
+            });
+        }
+        if !records.is_empty() {
+            queue.write_buffer(&pool.draws, 0, bytemuck::cast_slice(&records));
+        }
+        self.count = records.len() as u32;
+    }
+
+    fn make_pool(&self, device: &wgpu::Device, grid: u16) -> Pool {
+        let side = u32::from(grid) + 1;
+        let words = (side * side).div_ceil(2);
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let heights = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain heights"),
+            size: u64::from(words) * 4 * TERRAIN_SLOTS as u64,
+            usage: storage,
+            mapped_at_creation: false,
+        });
+        let draws = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain draws"),
+            size: (std::mem::size_of::<GpuTerrainDraw>() * TERRAIN_SLOTS) as u64,
+            usage: storage,
+            mapped_at_creation: false,
+        });
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain params"),
+            size: std::mem::size_of::<TerrainParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        // A (grid + 3)² vertex grid: the tile's vertices and the skirt ring.
+        let ring = u32::from(grid) + 3;
+        let mut index: Vec<u32> = Vec::with_capacity(((ring - 1) * (ring - 1) * 6) as usize);
+        for b in 0..ring - 1 {
+            for a in 0..ring - 1 {
+                let v = b * ring + a;
+                index.extend_from_slice(&[v, v + 1, v + ring + 1, v, v + ring + 1, v + ring]);
+            }
+        }
+        let indices = wgpu::util::DeviceExt::create_buffer_init(
+            device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("terrain indices"),
+                contents: bytemuck::cast_slice(&index),
+                usage: wgpu::BufferUsages::INDEX,
+            },
+        );
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("terrain"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: heights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: draws.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: params.as_entire_binding() },
+            ],
+        });
+        Pool {
+            grid,
+            words,
+            heights,
+            draws,
+            params,
+            indices,
+            index_count: index.len() as u32,
+            group,
+            slots: vec![None; TERRAIN_SLOTS],
+            by_key: HashMap::new(),
+        }
+    }
+
+    /// Draws the prepared tiles (view bound at group 0); returns the draw calls (0 or 1).
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
+        let Some(pool) = &self.pool else { return 0 };
+        if self.count == 0 {
+            return 0;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(1, &pool.group, &[]);
+        pass.set_index_buffer(pool.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..pool.index_count, 0, 0..self.count);
+        1
+    }
+}

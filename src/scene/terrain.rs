@@ -1,0 +1,423 @@
+//! Terrain streaming and level selection (CPU; the GPU pass draws what this
+//! picks, `src/render/terrain.rs`).
+//!
+//! The terrain is a quadtree ([`crate::format::terrain`]) whose tiles carry
+//! their children's height ranges and errors, so a walk from the root decides
+//! every level from data it has. Each frame [`TerrainTree::select`] walks the
+//! resident tiles: a tile inside the view frustum whose geometric error,
+//! projected at its nearest point, exceeds the threshold (pixels) is replaced
+//! by its children once all of them are resident (and asks for the missing
+//! ones, nearest first); otherwise it is drawn. The cut is a complete cover of
+//! the terrain with data: no tile and its ancestor are both drawn. Work per
+//! frame is O(tiles drawn); memory is bounded by [`TerrainTree::max_resident`]
+//! tiles (least recently used evicted, never the root or a tile in use).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use glam::{DVec3, Vec3};
+
+use crate::camera::ViewData;
+use crate::format::terrain::{TerrainEntry, TerrainTile};
+
+/// A tile's key: (level, x, y).
+pub type TerrainKey = (u8, u32, u32);
+
+/// One tile to draw this frame.
+#[derive(Debug, Clone)]
+pub struct TerrainDraw {
+    /// Which tile.
+    pub key: TerrainKey,
+    /// Its data.
+    pub tile: Arc<TerrainTile>,
+    /// South-west corner, metres relative to the scene origin.
+    pub origin_m: [f64; 2],
+    /// Side, metres.
+    pub size_m: f64,
+    /// The parent's geometric error (metres; infinite for the root): the
+    /// vertices morph towards the parent's surface where its error projects
+    /// below twice the threshold, so a level change does not pop.
+    pub parent_error_m: f32,
+}
+
+/// Where a tile stands.
+#[derive(Debug, Clone)]
+enum Slot {
+    /// Requested (attempt count for retries), or waiting to be retried at a time.
+    Loading,
+    /// Failed for good: drawn as its parent.
+    Broken,
+    /// Decoded and kept.
+    Resident { tile: Arc<TerrainTile>, used: u64 },
+}
+
+/// The terrain of one scene: what is resident and what a view selects.
+#[derive(Debug)]
+pub struct TerrainTree {
+    entry: TerrainEntry,
+    slots: HashMap<TerrainKey, Slot>,
+    frame: u64,
+    /// Most tiles kept decoded.
+    pub max_resident: usize,
+}
+
+impl TerrainTree {
+    /// A tree for the manifest's terrain entry; nothing resident yet.
+    #[must_use]
+    pub fn new(entry: TerrainEntry) -> Self {
+        Self { entry, slots: HashMap::new(), frame: 0, max_resident: 2048 }
+    }
+
+    /// The manifest entry.
+    #[must_use]
+    pub fn entry(&self) -> &TerrainEntry {
+        &self.entry
+    }
+
+    /// Tiles decoded and kept.
+    #[must_use]
+    pub fn resident(&self) -> usize {
+        self.slots.values().filter(|s| matches!(s, Slot::Resident { .. })).count()
+    }
+
+    /// Marks `key` as requested.
+    pub fn mark_loading(&mut self, key: TerrainKey) {
+        self.slots.insert(key, Slot::Loading);
+    }
+
+    /// Whether `key` is neither resident, requested nor broken.
+    #[must_use]
+    pub fn is_unknown(&self, key: TerrainKey) -> bool {
+        !self.slots.contains_key(&key)
+    }
+
+    /// Stores a decoded tile (checked to be the tile asked for).
+    ///
+    /// # Errors
+    /// The tile's level or position is not `key`'s.
+    pub fn insert(&mut self, key: TerrainKey, tile: TerrainTile) -> Result<(), String> {
+        if (tile.level, tile.x, tile.y) != key || tile.grid != self.entry.grid {
+            return Err(format!(
+                "terrain tile {}/{}/{} (grid {}) where {}/{}/{} (grid {}) was asked for",
+                tile.level, tile.x, tile.y, tile.grid, key.0, key.1, key.2, self.entry.grid
+            ));
+        }
+        self.slots.insert(key, Slot::Resident { tile: Arc::new(tile), used: self.frame });
+        self.evict();
+        Ok(())
+    }
+
+    /// Gives up on `key` (its parent is drawn instead).
+    pub fn mark_broken(&mut self, key: TerrainKey) {
+        self.slots.insert(key, Slot::Broken);
+    }
+
+    /// Forgets a failed request so it is asked for again.
+    pub fn forget(&mut self, key: TerrainKey) {
+        self.slots.remove(&key);
+    }
+
+    /// The ground height at a point (metres relative to the scene origin) from
+    /// the finest resident tile holding it, bilinear; `None` without data.
+    #[must_use]
+    pub fn height_at(&self, x: f64, y: f64) -> Option<f32> {
+        let mut key = (0u8, 0u32, 0u32);
+        let mut best = None;
+        loop {
+            let Some(Slot::Resident { tile, .. }) = self.slots.get(&key) else { break };
+            let [ox, oy] = self.entry.tile_origin_m(key.0, key.1, key.2);
+            let size = self.entry.tile_size_m(key.0);
+            let (u, v) = ((x - ox) / size, (y - oy) / size);
+            if !(0.0..=1.0).contains(&u) || !(0.0..=1.0).contains(&v) {
+                break;
+            }
+            if let Some(h) = sample(tile, u, v) {
+                best = Some(h);
+            }
+            if key.0 + 1 >= self.entry.levels {
+                break;
+            }
+            let (cx, cy) = (u32::from(u >= 0.5), u32::from(v >= 0.5));
+            key = (key.0 + 1, 2 * key.1 + cx, 2 * key.2 + cy);
+        }
+        best
+    }
+
+    /// Selects the tiles to draw for `view` (eye at `eye_m`, relative to the
+    /// scene origin) at `threshold_px` pixels of geometric error, and appends
+    /// the tiles to fetch (nearest first) to `wanted`.
+    pub fn select(
+        &mut self,
+        view: &ViewData,
+        eye_m: DVec3,
+        threshold_px: f32,
+        draws: &mut Vec<TerrainDraw>,
+        wanted: &mut Vec<(f32, TerrainKey)>,
+    ) {
+        self.frame += 1;
+        draws.clear();
+        let root = (0u8, 0u32, 0u32);
+        if self.is_unknown(root) {
+            wanted.push((0.0, root));
+        }
+        let mut stack = vec![(root, f32::INFINITY)];
+        while let Some((key, parent_error)) = stack.pop() {
+            let frame = self.frame;
+            let Some(Slot::Resident { tile, used }) = self.slots.get_mut(&key) else { continue };
+            *used = frame;
+            let tile = Arc::clone(tile);
+            let (origin, size) = (self.entry.tile_origin_m(key.0, key.1, key.2), self.entry.tile_size_m(key.0));
+            let lo = DVec3::new(origin[0], origin[1], f64::from(tile.min_m));
+            let hi = DVec3::new(origin[0] + size, origin[1] + size, f64::from(tile.max_m));
+            if !box_visible(view, lo - eye_m, hi - eye_m) {
+                continue;
+            }
+            let distance = box_distance(lo - eye_m, hi - eye_m).max(1e-3) as f32;
+            let error_px = tile.error_m * view.px_per_m_at_1m / distance;
+            let children: Vec<(TerrainKey, usize)> = (0..4)
+                .filter(|&k| tile.children[k].exists && key.0 + 1 < self.entry.levels)
+                .map(|k| ((key.0 + 1, 2 * key.1 + (k as u32 & 1), 2 * key.2 + (k as u32 >> 1)), k))
+                .collect();
+            let refine = error_px > threshold_px && !children.is_empty();
+            let ready =
+                children.iter().all(|(c, _)| matches!(self.slots.get(c), Some(Slot::Resident { .. } | Slot::Broken)));
+            let any_broken = children.iter().any(|(c, _)| matches!(self.slots.get(c), Some(Slot::Broken)));
+            if refine && ready && !any_broken {
+                for (c, _) in children {
+                    stack.push((c, tile.error_m));
+                }
+                continue;
+            }
+            if refine {
+                for (c, k) in children {
+                    if self.is_unknown(c) {
+                        let s = self.entry.tile_size_m(c.0);
+                        let o = self.entry.tile_origin_m(c.0, c.1, c.2);
+                        let info = tile.children[k];
+                        let clo = DVec3::new(o[0], o[1], f64::from(info.min_m)) - eye_m;
+                        let chi = DVec3::new(o[0] + s, o[1] + s, f64::from(info.max_m)) - eye_m;
+                        wanted.push((box_distance(clo, chi) as f32, c));
+                    }
+                }
+            }
+            draws.push(TerrainDraw { key, tile, origin_m: origin, size_m: size, parent_error_m: parent_error });
+        }
+        wanted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+
+    /// Drops the least recently used tiles beyond [`Self::max_resident`]
+    /// (never the root, never one used this frame).
+    fn evict(&mut self) {
+        let resident = self.resident();
+        if resident <= self.max_resident {
+            return;
+        }
+        let mut old: Vec<(u64, TerrainKey)> = self
+            .slots
+            .iter()
+            .filter_map(|(k, s)| match s {
+                Slot::Resident { used, .. } if k.0 > 0 && *used < self.frame => Some((*used, *k)),
+                _ => None,
+            })
+            .collect();
+        old.sort_unstable();
+        for (_, k) in old.into_iter().take(resident - self.max_resident) {
+            self.slots.remove(&k);
+        }
+    }
+}
+
+/// Bilinear height of a tile at fractional position `(u, v)` in `[0, 1]²`.
+fn sample(tile: &TerrainTile, u: f64, v: f64) -> Option<f32> {
+    let n = f64::from(tile.grid);
+    let (fu, fv) = (u * n, v * n);
+    let (i0, j0) =
+        ((fu.floor() as usize).min(tile.grid as usize - 1), (fv.floor() as usize).min(tile.grid as usize - 1));
+    let (a, b) = ((fu - i0 as f64) as f32, (fv - j0 as f64) as f32);
+    let mut sum = 0.0;
+    let mut weight = 0.0;
+    for (di, dj, w) in [(0, 0, (1.0 - a) * (1.0 - b)), (1, 0, a * (1.0 - b)), (0, 1, (1.0 - a) * b), (1, 1, a * b)] {
+        if let Some(h) = tile.height(i0 + di, j0 + dj) {
+            if w > 0.0 {
+                sum += h * w;
+                weight += w;
+            }
+        }
+    }
+    (weight > 0.0).then(|| sum / weight)
+}
+
+/// Whether the eye-relative box `lo..hi` meets the view frustum.
+fn box_visible(view: &ViewData, lo: DVec3, hi: DVec3) -> bool {
+    let c = ((lo + hi) * 0.5).as_vec3();
+    let h = ((hi - lo) * 0.5).as_vec3();
+    view.frustum.iter().all(|p| {
+        let n = Vec3::new(p.x, p.y, p.z);
+        n.dot(c) + p.w + n.abs().dot(h) >= 0.0
+    })
+}
+
+/// Distance from the eye (the origin) to the eye-relative box `lo..hi`.
+fn box_distance(lo: DVec3, hi: DVec3) -> f64 {
+    let c = (lo + hi) * 0.5;
+    let h = (hi - lo) * 0.5;
+    (c.abs() - h).max(DVec3::ZERO).length()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use crate::format::terrain::{quantise, TerrainChild};
+
+    /// A full quadtree of `levels` over a 1024 m root at the origin, heights
+    /// 0–10 m, errors halving per level (the finest 0).
+    fn tree(levels: u8) -> TerrainTree {
+        let entry = TerrainEntry {
+            path: "terrain".into(),
+            origin_m: [0.0, 0.0],
+            root_size_m: 1024.0,
+            grid: 4,
+            levels,
+            resolution_m: 1024.0 / 4.0 / f64::from(1u32 << (levels - 1)),
+            height_range_m: [0.0, 10.0],
+            tiles: 0,
+            bytes: 0,
+            source: "test".into(),
+        };
+        let mut t = TerrainTree::new(entry);
+        let error = |l: u8| if l + 1 == levels { 0.0 } else { 8.0 / f32::from(1u8 << l) };
+        for l in 0..levels {
+            for x in 0..(1u32 << l) {
+                for y in 0..(1u32 << l) {
+                    let child = TerrainChild { exists: l + 1 < levels, min_m: 0.0, max_m: 10.0, error_m: error(l + 1) };
+                    let tile = TerrainTile {
+                        level: l,
+                        x,
+                        y,
+                        grid: 4,
+                        min_m: 0.0,
+                        max_m: 10.0,
+                        error_m: error(l),
+                        children: [if l + 1 < levels { child } else { TerrainChild::default() }; 4],
+                        heights: (0..25).map(|i| quantise(i as f32 * 0.4, 0.0, 10.0)).collect(),
+                    };
+                    t.insert((l, x, y), tile).unwrap();
+                }
+            }
+        }
+        t
+    }
+
+    fn view_from(eye: DVec3, target: DVec3) -> (ViewData, DVec3) {
+        let cam = Camera::look_at(eye, target);
+        (cam.view_data(640, 360), eye)
+    }
+
+    #[test]
+    fn the_selection_is_a_complete_cover_refined_near_the_eye() {
+        let mut t = tree(5);
+        // From the south, high enough to see the whole square, at a threshold
+        // between level 2's error seen at the near (south) and far (north) edges.
+        let (view, eye) = view_from(DVec3::new(512.0, -1500.0, 1200.0), DVec3::new(512.0, 512.0, 0.0));
+        let (near_d, far_d) = (1500f32.hypot(1190.0), 2524f32.hypot(1190.0));
+        let threshold = 2.0 * view.px_per_m_at_1m / (near_d * far_d).sqrt();
+        let (mut draws, mut wanted) = (Vec::new(), Vec::new());
+        t.select(&view, eye, threshold, &mut draws, &mut wanted);
+        assert!(wanted.is_empty(), "everything is resident");
+        // No tile drawn with one of its ancestors, and the drawn squares cover
+        // the root exactly (areas add up; the whole square is in view).
+        let area: f64 = draws.iter().map(|d| d.size_m * d.size_m).sum();
+        assert!((area - 1024.0 * 1024.0).abs() < 1e-6, "covered {area} m²");
+        for a in &draws {
+            for b in &draws {
+                if a.key.0 < b.key.0 {
+                    let shift = b.key.0 - a.key.0;
+                    assert!(
+                        (b.key.1 >> shift, b.key.2 >> shift) != (a.key.1, a.key.2),
+                        "{:?} under {:?}",
+                        b.key,
+                        a.key
+                    );
+                }
+            }
+        }
+        // Finer near the eye (the south edge), coarser far (the north edge).
+        let level_at = |x: f64, y: f64| {
+            let d = draws.iter().find(|d| {
+                (d.origin_m[0]..d.origin_m[0] + d.size_m).contains(&x)
+                    && (d.origin_m[1]..d.origin_m[1] + d.size_m).contains(&y)
+            });
+            d.unwrap().key.0
+        };
+        assert!(
+            level_at(512.0, 10.0) > level_at(512.0, 1000.0),
+            "near {} far {}",
+            level_at(512.0, 10.0),
+            level_at(512.0, 1000.0)
+        );
+        // The error of every drawn tile projects within the threshold, or it is the finest.
+        for d in &draws {
+            let lo = DVec3::new(d.origin_m[0], d.origin_m[1], 0.0) - eye;
+            let hi = DVec3::new(d.origin_m[0] + d.size_m, d.origin_m[1] + d.size_m, 10.0) - eye;
+            let px = d.tile.error_m * view.px_per_m_at_1m / box_distance(lo, hi).max(1e-3) as f32;
+            assert!(px <= threshold || d.key.0 == 4, "{:?}: {px} px", d.key);
+        }
+        // Close to the ground the tile under the eye is the finest level.
+        let (low, eye_low) = view_from(DVec3::new(100.0, 100.0, 15.0), DVec3::new(300.0, 300.0, 0.0));
+        t.select(&low, eye_low, 2.0, &mut draws, &mut wanted);
+        assert!(draws.iter().any(|d| d.key.0 == 4), "{:?}", draws.iter().map(|d| d.key).collect::<Vec<_>>());
+        // Looking away from the square, nothing is drawn.
+        let (away, eye) = view_from(DVec3::new(-50.0, -50.0, 200.0), DVec3::new(-500.0, -500.0, 150.0));
+        t.select(&away, eye, 2.0, &mut draws, &mut wanted);
+        assert!(draws.is_empty(), "{} tiles behind the camera", draws.len());
+    }
+
+    #[test]
+    fn missing_children_are_wanted_nearest_first_and_their_parent_drawn() {
+        let full = tree(3);
+        let mut t = TerrainTree::new(full.entry.clone());
+        for (k, s) in &full.slots {
+            if k.0 < 2 {
+                t.slots.insert(*k, s.clone());
+            }
+        }
+        let (view, eye) = view_from(DVec3::new(10.0, 10.0, 30.0), DVec3::new(300.0, 300.0, 0.0));
+        let (mut draws, mut wanted) = (Vec::new(), Vec::new());
+        t.select(&view, eye, 2.0, &mut draws, &mut wanted);
+        assert!(draws.iter().all(|d| d.key.0 <= 1), "only resident levels are drawn");
+        assert!(!wanted.is_empty() && wanted.iter().all(|w| w.1 .0 == 2));
+        assert!(wanted.windows(2).all(|w| w[0].0 <= w[1].0), "nearest first");
+        assert_eq!(wanted[0].1, (2, 0, 0), "the tile under the eye first");
+        // A broken child keeps its parent drawn.
+        t.mark_broken((2, 0, 0));
+        wanted.clear();
+        t.select(&view, eye, 2.0, &mut draws, &mut wanted);
+        assert!(draws.iter().any(|d| d.key == (1, 0, 0)));
+    }
+
+    #[test]
+    fn heights_come_from_the_finest_resident_tile_and_eviction_keeps_the_root() {
+        let mut t = tree(3);
+        // Heights rise 0.4 m per vertex index (row-major): vertex (i, j) = (5j + i)·0.4.
+        let h = t.height_at(0.0, 0.0).unwrap();
+        assert!(h.abs() < 1e-3);
+        let size = 1024.0 / 4.0 / 4.0; // level 2 cell
+        let h = t.height_at(size, 0.0).unwrap();
+        assert!((h - 0.4).abs() < 1e-3, "{h}");
+        assert_eq!(t.height_at(-1.0, 5.0), None);
+        t.max_resident = 3;
+        t.frame += 1;
+        t.evict();
+        assert_eq!(t.resident(), 3);
+        assert!(matches!(t.slots.get(&(0, 0, 0)), Some(Slot::Resident { .. })));
+        let _ = t.insert((0, 0, 0), TerrainTile { level: 1, ..(*full_root(&t)).clone() }).unwrap_err();
+    }
+
+    fn full_root(t: &TerrainTree) -> Arc<TerrainTile> {
+        match t.slots.get(&(0, 0, 0)) {
+            Some(Slot::Resident { tile, .. }) => Arc::clone(tile),
+            _ => panic!("no root"),
+        }
+    }
+}
