@@ -132,9 +132,11 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     return out;
 }
 
-// Ground colours (linear RGB): grass and litter on gentle ground, soil on steep.
-const GRASS: vec3<f32> = vec3<f32>(0.16, 0.19, 0.07);
-const SOIL: vec3<f32> = vec3<f32>(0.24, 0.20, 0.13);
+// Ground colours (linear RGB): forest-floor litter on gentle ground, bare soil
+// on steep (no imagery yet). Never green-dominant, so image tests that count
+// foliage pixels count trees only.
+const LITTER: vec3<f32> = vec3<f32>(0.17, 0.155, 0.09);
+const SOIL: vec3<f32> = vec3<f32>(0.23, 0.19, 0.13);
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
@@ -142,7 +144,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         discard;
     }
     let n = normalize(in.normal);
-    var albedo = mix(GRASS, SOIL, smoothstep(0.82, 0.55, n.z));
+    var albedo = mix(LITTER, SOIL, smoothstep(0.82, 0.55, n.z));
     if params.debug == 1u {
         // Alternating tints per level (tile size), to see the selection.
         let k = u32(in.level_tint) % 3u;

@@ -12,6 +12,7 @@ use sylva::format::pack::{
     kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section,
     TextureArrayMeta,
 };
+use sylva::format::terrain::{dequantise, quantise, TerrainChild, TerrainTile, TERRAIN_HOLE};
 use sylva::format::tile::{
     decode_ids, encode_ids, variation_of, CrownRange, GpuBatch, PackedInstance, Tile, BATCH_CROWN_ASPECT,
     BATCH_DENSITY_ORDERED,
@@ -270,6 +271,85 @@ fn crown_tile_golden_and_round_trip() {
     }
 }
 
+fn sample_terrain() -> TerrainTile {
+    let child = TerrainChild { exists: true, min_m: 10.0, max_m: 12.0, error_m: 0.0 };
+    TerrainTile {
+        level: 2,
+        x: 3,
+        y: 1,
+        grid: 2,
+        min_m: 10.0,
+        max_m: 14.0,
+        error_m: 0.75,
+        children: [child, TerrainChild::default(), child, TerrainChild { max_m: 14.0, ..child }],
+        heights: vec![0, 100, 200, 300, TERRAIN_HOLE, 65534, 7, 8, 9],
+    }
+}
+
+#[test]
+fn terrain_golden_and_round_trip() {
+    let tile = sample_terrain();
+    let bytes = tile.encode();
+    assert_eq!(bytes.len(), 96 + 9 * 2);
+    check_golden("v1.terr", &bytes);
+    let decoded = TerrainTile::decode("v1.terr", &std::fs::read(golden("v1.terr")).unwrap()).unwrap();
+    assert_eq!(decoded, tile);
+    assert_eq!(decoded.height(1, 1), None, "a hole");
+    assert_eq!(decoded.height(2, 1), Some(14.0));
+    assert_eq!(decoded.height(0, 0), Some(10.0));
+    // Quantisation: 1/65534 of the range.
+    assert_eq!(quantise(12.0, 10.0, 14.0), 32767);
+    assert!((dequantise(32767, 10.0, 14.0) - 12.0).abs() < 1e-4);
+}
+
+#[test]
+fn terrain_decoder_error_paths() {
+    let err = |mutate: &dyn Fn(&mut Vec<u8>), needle: &str| {
+        let mut bytes = sample_terrain().encode();
+        mutate(&mut bytes);
+        let e = TerrainTile::decode("terrain/2/3_1.terr", &bytes).expect_err(needle).to_string();
+        assert!(e.starts_with("terrain/2/3_1.terr: ") && e.contains(needle), "expected {needle:?} in {e:?}");
+    };
+    err(&|b| b[0] = b'X', "not a Sylva terrain tile");
+    err(&|b| b[4] = 2, "version 2");
+    err(&|b| b[6] = 90, "header_bytes");
+    err(&|b| b[8] = 25, "header.level");
+    err(&|b| b[9] = 0x1f, "child_mask");
+    err(&|b| b[10] = 0, "header.grid");
+    err(&|b| b[12] = 4, "outside level 2's 4×4 tiles");
+    err(&|b| put_f32(b, 20, f32::NAN), "not a finite number");
+    err(&|b| put_f32(b, 20, 20.0), "inverted");
+    err(&|b| put_f32(b, 28, -1.0), "negative");
+    err(&|b| put_f32(b, 32 + 12, 1.0), "child 1 has a summary but no flag");
+    err(&|b| b[90] = 1, "reserved");
+    err(&|b| b.truncate(100), "truncated");
+    err(&|b| b.push(0), "trailing bytes");
+    // Manifest version 4 carries the terrain; version 3 may not.
+    let mut m = sample_manifest();
+    m.version = 4;
+    m.terrain = Some(sylva::format::TerrainEntry {
+        path: "terrain".into(),
+        origin_m: [-512.0, -512.0],
+        root_size_m: 1024.0,
+        grid: 64,
+        levels: 3,
+        resolution_m: 4.0,
+        height_range_m: [10.0, 80.0],
+        tiles: 21,
+        bytes: 180_000,
+        source: "dem.tif".into(),
+    });
+    let back = Manifest::decode("scene.json", &m.encode()).unwrap();
+    assert_eq!(back.terrain.as_ref().unwrap().tile_url(2, 3, 1), "terrain/2/3_1.terr");
+    assert_eq!(back.terrain.as_ref().unwrap().tile_origin_m(2, 3, 1), [-512.0 + 768.0, -512.0 + 256.0]);
+    m.version = 3;
+    let e = Manifest::decode("scene.json", &m.encode()).unwrap_err().to_string();
+    assert!(e.contains("\"terrain\" needs manifest version 4"), "{e}");
+    m.version = 4;
+    m.terrain.as_mut().unwrap().path = "../outside".into();
+    assert!(Manifest::decode("scene.json", &m.encode()).is_err(), "a terrain path leaving the scene is refused");
+}
+
 #[test]
 fn pack_golden_and_round_trip() {
     let (meta, sections) = sample_pack();
@@ -486,7 +566,7 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 4.into(), "version 4");
+    manifest_error(|v| v["version"] = 5.into(), "version 5");
     manifest_error(
         |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
         "needs manifest version 2",

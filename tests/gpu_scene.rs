@@ -227,7 +227,22 @@ fn rewritten_copy(
     for s in &m.species {
         std::fs::copy(src.join(&s.pack), dst.join(&s.pack)).unwrap();
     }
+    if let Some(t) = &m.terrain {
+        copy_dir(&src.join(&t.path), &dst.join(&t.path));
+    }
     std::fs::write(dst.join("scene.json"), m.encode()).unwrap();
+}
+
+fn copy_dir(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dst.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+        }
+    }
 }
 
 /// Writes a copy of `src` whose origin moved by −`shift` (so every relative
@@ -239,6 +254,12 @@ fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
             m.origin_m[k] -= f64::from(shift[k]);
             m.bounds.min[k] += shift[k];
             m.bounds.max[k] += shift[k];
+        }
+        // Terrain corners move with the origin (heights too: shift z is 0 here).
+        assert_eq!(shift[2], 0.0);
+        if let Some(t) = &mut m.terrain {
+            t.origin_m[0] += f64::from(shift[0]);
+            t.origin_m[1] += f64::from(shift[1]);
         }
     };
     rewritten_copy(src, dst, edit_manifest, |tile, t| {

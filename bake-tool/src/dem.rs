@@ -20,6 +20,9 @@ use tiff::tags::Tag;
 /// Most pixels of one DEM (a 32,768² grid: 4 GiB of f32 heights).
 pub const MAX_DEM_PIXELS: u64 = 1 << 30;
 
+/// Most decoded bytes per byte of file (see [`Dem::read`]).
+const MAX_EXPANSION: u64 = 2048;
+
 /// GeoKey ids (GeoTIFF 1.1, §7).
 const GT_MODEL_TYPE: u16 = 1024;
 const GT_RASTER_TYPE: u16 = 1025;
@@ -82,9 +85,16 @@ impl Dem {
     ///
     /// # Errors
     /// See [`Dem::open`].
-    pub fn read<R: Read + Seek>(reader: R) -> Result<Self> {
+    pub fn read<R: Read + Seek>(mut reader: R) -> Result<Self> {
+        // Decoded heights may be at most this many times the file's bytes (deflate
+        // and LZW compress a flat grid about 1000-fold): a hostile header cannot
+        // make the reader allocate gigabytes for a small file.
+        let file_len = reader.seek(std::io::SeekFrom::End(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
+        reader.seek(std::io::SeekFrom::Start(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
+        let budget = file_len.saturating_mul(MAX_EXPANSION).min(MAX_DEM_PIXELS * 8);
         let mut limits = Limits::default();
-        limits.decoding_buffer_size = (MAX_DEM_PIXELS * 8) as usize;
+        limits.decoding_buffer_size = budget as usize;
+        limits.intermediate_buffer_size = budget as usize;
         let mut d = Decoder::new(reader).map_err(|e| anyhow!("not a readable TIFF file: {e}"))?.with_limits(limits);
         let (width, height) = d.dimensions().map_err(|e| anyhow!("no image size: {e}"))?;
         if u64::from(width) * u64::from(height) > MAX_DEM_PIXELS {
@@ -92,6 +102,12 @@ impl Dem {
         }
         if width == 0 || height == 0 {
             bail!("the image is empty ({width}×{height})");
+        }
+        if u64::from(width) * u64::from(height) > budget {
+            bail!(
+                "the header declares {width}×{height} pixels, more than {MAX_EXPANSION} per byte of this {file_len}-byte file: \
+                 it is corrupt or truncated"
+            );
         }
         let samples = d.find_tag_unsigned::<u16>(Tag::SamplesPerPixel).ok().flatten().unwrap_or(1);
         if samples != 1 {
@@ -391,8 +407,13 @@ mod tests {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/read_dem");
         let mut n = 0;
         for entry in std::fs::read_dir(&dir).unwrap() {
-            let bytes = std::fs::read(entry.unwrap().path()).unwrap();
-            let _ = Dem::read(Cursor::new(bytes));
+            let path = entry.unwrap().path();
+            let result = Dem::read(Cursor::new(std::fs::read(&path).unwrap()));
+            // Found by the fuzzer: a 600-byte header declaring 2 GB of heights.
+            if path.to_string_lossy().contains("regression-oom") {
+                let e = format!("{:#}", result.unwrap_err());
+                assert!(e.contains("corrupt or truncated"), "{}: {e}", path.display());
+            }
             n += 1;
         }
         assert!(n >= 3, "{n} seeds in {}", dir.display());

@@ -303,6 +303,9 @@ struct DemoArgs {
     /// Also write the layout as a lon/lat placements CSV (input for `bake` benchmarks).
     #[arg(long, value_name = "PATH.csv")]
     write_placements: Option<PathBuf>,
+    /// No terrain tiles (the trees still stand on the demo's hills).
+    #[arg(long)]
+    no_terrain: bool,
     #[command(flatten)]
     pack: PackArgs,
 }
@@ -379,8 +382,20 @@ fn demo(args: &DemoArgs) -> Result<()> {
         write_placements_csv(path, &trees, &species, demo::DEMO_ORIGIN, demo::DEMO_EPSG)?;
         log(&format!("wrote {} placements to {}", trees.len(), path.display()));
     }
+    // The demo's hills as terrain: the trees' extent and 200 m around, at 8 m.
+    let ground = |x: f64, y: f64| Some(demo::ground(x, y) as f32 - demo::DEMO_ORIGIN.z as f32);
+    let bounds = trees.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, t| {
+        [b[0].min(t.pos.x), b[1].min(t.pos.y), b[2].max(t.pos.x), b[3].max(t.pos.y)]
+    });
+    let margin = ((bounds[2] - bounds[0]).max(bounds[3] - bounds[1]) * 0.25).max(200.0);
+    let terrain = (!args.no_terrain).then(|| bake::terrain::TerrainSource {
+        height: &ground,
+        region: [bounds[0] - margin, bounds[1] - margin, bounds[2] + margin, bounds[3] + margin],
+        resolution_m: 8.0,
+        source: "demo hills".into(),
+    });
     let input = SceneInput {
-        terrain: None,
+        terrain,
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
         trees: TreeSource::Memory(trees),

@@ -129,6 +129,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         exact_depth,
         thin_px,
         debug_bounds,
+        no_terrain,
         stats,
         timeout,
         allow_partial,
@@ -154,6 +155,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             cluster_min_px: ellipsoid_min_px,
             cluster_exact_depth: exact_depth,
             thin_px,
+            terrain: !no_terrain,
             representations: match only {
                 None => Representations::ALL,
                 Some(OnlyArg::Meshes) => Representations::MESHES,

@@ -188,7 +188,7 @@ impl ForestRenderer {
     /// GPU bytes: pools plus uploaded packs.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
-        self.pools.config().bytes() + self.species.bytes()
+        self.pools.config().bytes() + self.species.bytes() + self.terrain.gpu_bytes()
     }
 
     /// Bounds each species' projected tree height for `view` from the resident

@@ -128,7 +128,8 @@ impl<F: Fetcher> Frame<F> {
         let debug = self.settings.debug_lod;
         // The shader morphs by `view.lod.x`, which includes the quality factor.
         let threshold = threshold * self.settings.quality;
-        self.renderer.prepare_terrain(&self.device, &self.queue, self.stream.terrain_draws(), threshold, debug);
+        let terrain = if self.settings.terrain { self.stream.terrain_draws() } else { &[] };
+        self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, debug);
         let data = self.renderer.prepare(&self.queue, view, &self.settings);
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();

@@ -51,6 +51,8 @@ pub struct RenderSettings {
     /// below this many pixels tall draws a prefix of them, scaled up to keep the
     /// canopy's coverage. 0: off.
     pub thin_px: f32,
+    /// Draw the terrain (when the scene has one).
+    pub terrain: bool,
 }
 
 /// Default of [`RenderSettings::thin_px`].
@@ -99,6 +101,7 @@ impl Default for RenderSettings {
             representations: Representations::ALL,
             cluster_exact_depth: false,
             thin_px: DEFAULT_THIN_PX,
+            terrain: true,
         }
     }
 }

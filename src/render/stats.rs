@@ -36,6 +36,10 @@ pub struct FrameStats {
     pub tiles_known: u64,
     /// Tiles in the scene.
     pub tiles_total: u64,
+    /// Terrain tiles drawn this frame (0 without terrain).
+    pub terrain_drawn: u64,
+    /// Terrain tiles decoded and kept (CPU; those drawn are also on the GPU).
+    pub terrain_resident: u64,
     /// Index nodes read so far (0 for a flat manifest).
     pub index_nodes_loaded: u64,
     /// Index nodes in the scene (0 for a flat manifest).
@@ -50,7 +54,7 @@ pub struct FrameStats {
     pub trees_total: u64,
     /// Trees resident on the GPU.
     pub trees_resident: u64,
-    /// GPU memory estimate (pools + packs), bytes.
+    /// GPU memory estimate (pools + packs + terrain), bytes.
     pub gpu_bytes: u64,
     /// CPU time to prepare and record the frame, ms.
     pub frame_cpu_ms: f64,
@@ -96,6 +100,8 @@ impl FrameStats {
             requests: s.requests,
             tiles_known: s.tiles_known,
             tiles_total: stream.manifest().map_or(0, |m| m.counts.tiles),
+            terrain_drawn: u64::from(renderer.terrain().drawn()),
+            terrain_resident: s.terrain_resident,
             index_nodes_loaded: s.index_nodes_loaded,
             index_nodes_total: s.index_nodes_total,
             degraded,

@@ -123,8 +123,7 @@ impl TerrainTree {
     pub fn height_at(&self, x: f64, y: f64) -> Option<f32> {
         let mut key = (0u8, 0u32, 0u32);
         let mut best = None;
-        loop {
-            let Some(Slot::Resident { tile, .. }) = self.slots.get(&key) else { break };
+        while let Some(Slot::Resident { tile, .. }) = self.slots.get(&key) {
             let [ox, oy] = self.entry.tile_origin_m(key.0, key.1, key.2);
             let size = self.entry.tile_size_m(key.0);
             let (u, v) = ((x - ox) / size, (y - oy) / size);
