@@ -384,16 +384,28 @@ impl Viewer {
         self.placed = true;
     }
 
+    /// Ground height (metres, in the scene's vertical datum) at WGS 84 `lon`,
+    /// `lat`: the terrain's where it is loaded, else the trees' bases nearby;
+    /// NaN where nothing is known (yet) or before the scene's CRS is.
+    pub fn height_at(&self, lon: f64, lat: f64) -> f64 {
+        let (Some(geo), Some(m)) = (&self.geo, self.frame.stream.manifest()) else { return f64::NAN };
+        let Ok(p) = geo.to_local(lon, lat, 0.0) else { return f64::NAN };
+        self.frame.stream.ground_height_at(p.x as f32, p.y as f32).map_or(f64::NAN, |h| f64::from(h) + m.origin_m[2])
+    }
+
     /// The camera as JSON: `{x, y, z, heading, pitch}` (metres relative to the
-    /// scene origin, degrees) plus `origin` (the scene origin) and `epsg`.
+    /// scene origin, degrees) plus `origin` (the scene origin), `epsg` and
+    /// `ground` (the ground height under the eye, scene-relative like `z`; null
+    /// where unknown).
     pub fn camera_json(&self) -> String {
         let c = self.camera();
         let origin = self.frame.stream.manifest().map_or([0.0; 3], |m| m.origin_m);
         let epsg = self.frame.stream.manifest().map_or(0, |m| m.crs.epsg);
+        let ground = self.frame.stream.ground_height_at(c.eye_m.x as f32, c.eye_m.y as f32);
         let mut v = serde_json::json!({
             "x": c.eye_m.x, "y": c.eye_m.y, "z": c.eye_m.z,
             "heading": c.heading_rad.to_degrees(), "pitch": c.pitch_rad.to_degrees(),
-            "origin": origin, "epsg": epsg, "fly": self.fly,
+            "origin": origin, "epsg": epsg, "fly": self.fly, "ground": ground,
         });
         if let Some((lon, lat, height)) = self.geo.as_ref().and_then(|g| g.to_geo(c.eye_m).ok()) {
             v["lon"] = lon.into();

@@ -5,7 +5,8 @@
 //   v.setCamera({lon, lat, height, heading, pitch})   WGS 84 degrees, metres, degrees
 //   v.setCamera({x, y, z, heading, pitch})   or metres relative to the scene origin
 //   v.setFly(true)                          walking mode (eye height above the ground)
-//   v.flyTo({...}, seconds)                 smooth move
+//   v.flyTo({...}, seconds)                 smooth move; {lon, lat, aboveGround} flies to a height above the ground
+//   v.heightAt(lon, lat)                    ground height there (metres, the scene's datum), null if unknown
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -66,7 +67,14 @@ class SylvaViewer {
     this.viewer.resize(w, h);
   }
 
-  /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg). */
+  /** Ground height (metres, the scene's vertical datum) at WGS 84 lon/lat: the
+   * terrain's where loaded, else the trees' bases nearby; null where unknown. */
+  heightAt(lon, lat) {
+    const h = this.viewer.height_at(lon, lat);
+    return Number.isFinite(h) ? h : null;
+  }
+
+  /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg, ground under the eye). */
   camera() { return JSON.parse(this.viewer.camera_json()); }
 
   setCamera(c) {
@@ -90,6 +98,11 @@ class SylvaViewer {
 
   flyTo(c, seconds = 1.5) {
     const from = this.camera();
+    if (c.lon !== undefined && c.aboveGround !== undefined) {
+      // A height above the ground there (where the ground is known).
+      const g = this.heightAt(c.lon, c.lat);
+      if (g !== null) c = { ...c, height: g + c.aboveGround };
+    }
     if (c.lon !== undefined) {
       const p = this.toLocal(c.lon, c.lat, c.height ?? from.z);
       if (!p) { this.setCamera(c); return; }

@@ -130,8 +130,8 @@ test('the viewer loads the scene, draws it and reports stats', async () => {
   assert.ok(stats.index_nodes_loaded >= 1 && stats.index_nodes_total === 5, `index ${JSON.stringify(stats)}`);
   assert.deepEqual(Object.keys(stats.degraded).sort(), ['bandwidth', 'device_limit', 'gpu_budget', 'pools_full', 'reach_m']);
   assert.equal(stats.degraded.pools_full, false);
-  // At most one draw per species × representation (3 × 7).
-  assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 21, `draw calls ${stats.draw_calls}`);
+  // At most one draw per species × representation (3 × 7), and one for the terrain.
+  assert.ok(stats.draw_calls >= 3 && stats.draw_calls <= 22, `draw calls ${stats.draw_calls}`);
   const drawn = Object.values(readyStats.instances).reduce((a, b) => a + b, 0);
   assert.ok(drawn > 100, `instances drawn ${drawn}`);
   const share = await foliageShare(page, 'viewer');
@@ -271,8 +271,40 @@ test('walking mode keeps eye height above the ground', async () => {
   await page.waitForTimeout(300);
   const cam = await page.evaluate(() => window.sylva.camera());
   assert.equal(cam.fly, true);
-  assert.ok(cam.z > 20 && cam.z < 40, `eye height ${cam.z} (ground of the fixture is ~21–29 m)`);
+  // The fixture's terrain is 15.4–21.7 m high; the eye stays 1.7 m above it.
+  assert.ok(cam.ground > 15 && cam.ground < 22, `ground under the eye ${cam.ground}`);
+  assert.ok(Math.abs(cam.z - cam.ground - 1.7) < 0.05, `eye height ${cam.z} over ground ${cam.ground}`);
   await foliageShare(page, 'walking');
+});
+
+test('the terrain is drawn under the trees and heightAt reads it', async () => {
+  const { page, errors } = await openViewer(base);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
+  const stats = await ready(page);
+  // The fixture's demo hills: 5 terrain tiles (a root and four children).
+  assert.ok(stats.terrain_drawn >= 1 && stats.terrain_resident >= 1, `terrain ${JSON.stringify(stats)}`);
+  const probe = await page.evaluate(() => {
+    const v = window.sylva;
+    const c = v.camera();
+    // The ground under the view's centre, and far outside the scene.
+    const ll = v.viewer.camera_json && JSON.parse(v.viewer.camera_json());
+    return { inside: v.heightAt(ll.lon, ll.lat), outside: v.heightAt(ll.lon + 1, ll.lat + 1), ground: c.ground };
+  });
+  assert.ok(probe.inside > 15 && probe.inside < 22, `heightAt under the camera ${probe.inside}`);
+  assert.ok(Math.abs(probe.inside - probe.ground) < 0.01, `heightAt ${probe.inside} vs camera().ground ${probe.ground}`);
+  assert.equal(probe.outside, null, 'no ground known 100 km away');
+  // flyTo a height above the ground.
+  const before = await page.evaluate(() => {
+    const v = window.sylva;
+    const c = v.camera();
+    v.flyTo({ lon: c.lon, lat: c.lat, aboveGround: 50, heading: c.heading, pitch: -20 }, 0.05);
+    return { c, h: v.heightAt(c.lon, c.lat), local: v.toLocal(c.lon, c.lat, 70) };
+  });
+  // (Frames are slow on lavapipe: wait for the flight to land, not a fixed time.)
+  await page.waitForFunction(() => window.sylva.flight === null, null, { timeout: 60000 });
+  const cam = await page.evaluate(() => window.sylva.camera());
+  assert.ok(Math.abs(cam.z - cam.ground - 50) < 1, `flew to ${JSON.stringify(cam)} from ${JSON.stringify(before)}`);
+  assert.deepEqual(errors, []);
 });
 
 test('a lost GPU device is recreated and rendering continues', async () => {
