@@ -261,6 +261,10 @@ struct BakeArgs {
     /// is not used for that row) or relative (height above the DEM's ground).
     #[arg(long, value_enum, default_value_t = bake::ground::ZMode::Absolute)]
     z: bake::ground::ZMode,
+    /// Vertex spacing of the finest terrain level in metres (default: the
+    /// DEM's pixel size; coarser spacing: fewer bytes, smoother ground).
+    #[arg(long, value_name = "M")]
+    terrain_resolution: Option<f64>,
     /// Trees outside every --dem (or on its nodata pixels): error stops the bake
     /// and says how many and where; skip leaves them out (reported).
     #[arg(long, value_enum, default_value_t = bake::ground::OutsideDem::Error)]
@@ -493,6 +497,14 @@ fn split_pair<'a>(flag: &str, s: &'a str) -> Result<(&'a str, &'a str)> {
 }
 
 fn bake(args: &BakeArgs) -> Result<()> {
+    if let Some(r) = args.terrain_resolution {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--terrain-resolution {r}: must be a positive number of metres");
+        }
+        if args.dems.is_empty() {
+            bail!("--terrain-resolution needs a --dem");
+        }
+    }
     let started = Instant::now();
     let pack_opts = args.pack.options()?;
     let fixed_cell_size = args.pack.cell_size.map(|_| args.pack.cell_size(&[])).transpose()?;
@@ -542,9 +554,13 @@ fn bake(args: &BakeArgs) -> Result<()> {
         let (ox, oy, oz) = (placed.origin_m.x, placed.origin_m.y, placed.origin_m.z);
         move |x: f64, y: f64| g.height_at(x + ox, y + oy).map(|h| h - oz as f32)
     });
-    let terrain = placed.ground.as_ref().zip(ground_height.as_ref()).map(|((g, region), height)| {
-        bake::terrain::TerrainSource { height, region: *region, resolution_m: g.resolution_m(), source: g.names() }
-    });
+    let terrain =
+        placed.ground.as_ref().zip(ground_height.as_ref()).map(|((g, region), height)| bake::terrain::TerrainSource {
+            height,
+            region: *region,
+            resolution_m: args.terrain_resolution.unwrap_or_else(|| g.resolution_m()),
+            source: g.names(),
+        });
     let input = SceneInput {
         terrain,
         cell_size_m: placed.cell_size_m,

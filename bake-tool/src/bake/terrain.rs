@@ -93,7 +93,7 @@ pub fn write_terrain(src: &TerrainSource<'_>, dir: &Path, log: &dyn Fn(&str)) ->
     entry.tiles = tiles.load(Ordering::Relaxed);
     entry.bytes = bytes.load(Ordering::Relaxed);
     log(&format!(
-        "terrain: {} tiles in {} levels, {:.2} m finest spacing over {:.0} m, heights {:.1}–{:.1} m, {:.2} MB ({:.1} s)",
+        "terrain: {} tiles in {} levels, {:.2} m finest spacing over {:.0} m, heights {:.1}–{:.1} m, {:.2} MB ({:.2} s)",
         entry.tiles,
         entry.levels,
         entry.resolution_m,
