@@ -193,6 +193,16 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         "tile_bytes": tile_bytes,
         "pack_bytes": m.species.iter().map(|s| s.bytes).sum::<u64>(),
         "species": species,
+        "terrain": m.terrain.as_ref().map(|t| json!({
+            "extent": [t.origin_m[0], t.origin_m[1], t.origin_m[0] + t.root_size_m, t.origin_m[1] + t.root_size_m],
+            "resolution_m": t.resolution_m,
+            "height_range_m": t.height_range_m,
+            "levels": t.levels,
+            "grid": t.grid,
+            "tiles": t.tiles,
+            "bytes": t.bytes,
+            "source": t.source,
+        })),
     }))
 }
 
@@ -325,6 +335,27 @@ pub fn to_text(v: &Value) -> String {
                 v["tile_bytes"].as_f64().unwrap_or(0.0) / 1e6,
                 v["pack_bytes"].as_f64().unwrap_or(0.0) / 1e6
             );
+            let t = &v["terrain"];
+            if t.is_object() {
+                let n = |k: &str, i: usize| t[k][i].as_f64().unwrap_or(0.0);
+                out += &format!(
+                    "terrain from {}: {} tiles in {} levels, {:.2} m finest spacing, heights {:.1}–{:.1} m, {:.2} MB; \
+                     root square x {:.0}–{:.0}, y {:.0}–{:.0} (m, relative to the origin)\n",
+                    t["source"].as_str().unwrap_or("?"),
+                    t["tiles"],
+                    t["levels"],
+                    t["resolution_m"].as_f64().unwrap_or(0.0),
+                    n("height_range_m", 0),
+                    n("height_range_m", 1),
+                    t["bytes"].as_f64().unwrap_or(0.0) / 1e6,
+                    n("extent", 0),
+                    n("extent", 2),
+                    n("extent", 1),
+                    n("extent", 3)
+                );
+            } else {
+                out += "no terrain (bake with --dem for one)\n";
+            }
             for s in v["species"].as_array().into_iter().flatten() {
                 out += &pack_text(s);
             }

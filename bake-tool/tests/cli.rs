@@ -549,6 +549,33 @@ fn trees_stand_on_the_ground_of_a_dem() {
     za.sort_by(f64::total_cmp);
     zb.sort_by(f64::total_cmp);
     assert!(za.iter().zip(&zb).all(|(p, q)| (p - q).abs() < 0.05), "heights differ through EPSG:3035");
+    // inspect reports the terrain; shards and merge give the same bytes as one
+    // process (shard 0 writes the terrain, merge copies it).
+    let v = inspect_json(&dir.join("abs"));
+    let t = &v["terrain"];
+    assert!(t["tiles"].as_u64().unwrap() >= 1 && t["resolution_m"] == 5.0, "{t}");
+    assert!(
+        t["height_range_m"][0].as_f64().unwrap() >= 299.0 && t["height_range_m"][1].as_f64().unwrap() <= 381.0,
+        "{t}"
+    );
+    for i in 0..2 {
+        let part = format!("{i}/2");
+        let shard = [&crs[..], &dem_args[..], &["--tile-cells", "1", "--cell-size", "32", "--shard", &part]].concat();
+        run(&mut quick_bake(&model, &path, &dir.join(format!("part-{i}")), &shard));
+    }
+    run(&mut quick_bake(
+        &model,
+        &path,
+        &dir.join("one"),
+        &[&crs[..], &dem_args[..], &["--tile-cells", "1", "--cell-size", "32"]].concat(),
+    ));
+    run(bin().arg("merge").arg(dir.join("part-1")).arg(dir.join("part-0")).arg("--out").arg(dir.join("merged")));
+    let strip = |dir: &Path| -> Vec<(String, Vec<u8>)> {
+        snapshot(dir).into_iter().filter(|(f, _)| !f.starts_with(".sylva")).collect()
+    };
+    let one = strip(&dir.join("one"));
+    assert!(one.iter().any(|(f, _)| f.starts_with("terrain/")), "the single bake has terrain");
+    assert_eq!(one, strip(&dir.join("merged")), "sharded + merged = one process, terrain included");
     // Bad DEM inputs are named.
     let e = fails(&mut quick_bake(
         &model,
