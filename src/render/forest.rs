@@ -251,6 +251,11 @@ impl ForestRenderer {
         self.terrain.prepare(device, queue, draws, threshold_px, debug);
     }
 
+    /// Sizes the terrain pool for a scene's terrain (see [`TerrainPass::reserve`]).
+    pub fn reserve_terrain(&mut self, device: &wgpu::Device, grid: u16, tiles: u64) {
+        self.terrain.reserve(device, grid, tiles);
+    }
+
     /// The terrain pass (tiles drawn, uploads, GPU bytes).
     #[must_use]
     pub fn terrain(&self) -> &TerrainPass {

@@ -111,6 +111,9 @@ impl<F: Fetcher> Frame<F> {
         self.renderer.measure_reach(view, &self.settings);
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);
+        if let Some(t) = self.stream.manifest().and_then(|m| m.terrain.as_ref()) {
+            self.renderer.reserve_terrain(&self.device, t.grid, t.tiles);
+        }
     }
 
     /// Prepares and records a frame of `view` into `color` and `depth`; with

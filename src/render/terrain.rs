@@ -10,7 +10,8 @@ use super::layouts::{storage_entry, SharedLayouts};
 use super::mesh::{depth_state, DEPTH_FORMAT};
 use crate::scene::terrain::{TerrainDraw, TerrainKey};
 
-/// Height slots in the pool (a 64-cell tile is 8.5 KB: 8.7 MB in all).
+/// Most height slots in the pool (a 64-cell tile is 8.5 KB: 8.7 MB at most);
+/// a scene with fewer terrain tiles gets one slot per tile.
 pub const TERRAIN_SLOTS: usize = 1024;
 
 /// One drawn tile. Must match `TerrainDraw` in `shaders/terrain.wgsl`.
@@ -48,6 +49,8 @@ pub struct TerrainParams {
 /// GPU buffers for one grid size.
 struct Pool {
     grid: u16,
+    /// Slots (and draw records) the pool holds.
+    capacity: usize,
     words: u32,
     heights: wgpu::Buffer,
     draws: wgpu::Buffer,
@@ -144,7 +147,7 @@ impl TerrainPass {
         let Some(first) = draws.first() else { return };
         let grid = first.tile.grid;
         if self.pool.as_ref().is_none_or(|p| p.grid != grid) {
-            self.pool = Some(self.make_pool(device, grid));
+            self.pool = Some(self.make_pool(device, grid, TERRAIN_SLOTS));
         }
         let Some(pool) = self.pool.as_mut() else { return };
         queue.write_buffer(
@@ -157,7 +160,7 @@ impl TerrainPass {
                 debug: u32::from(debug),
             }),
         );
-        let mut records = Vec::with_capacity(draws.len().min(TERRAIN_SLOTS));
+        let mut records = Vec::with_capacity(draws.len().min(pool.capacity));
         for d in draws {
             if d.tile.grid != grid {
                 self.dropped += 1;
@@ -217,19 +220,29 @@ impl TerrainPass {
         self.count = records.len() as u32;
     }
 
-    fn make_pool(&self, device: &wgpu::Device, grid: u16) -> Pool {
+    /// Sizes the pool for a scene's terrain of `tiles` tiles of `grid` cells
+    /// (when its manifest arrives, so the GPU memory it takes is known before
+    /// anything is drawn: budgets count it).
+    pub fn reserve(&mut self, device: &wgpu::Device, grid: u16, tiles: u64) {
+        let capacity = (tiles.max(1) as usize).min(TERRAIN_SLOTS);
+        if self.pool.as_ref().is_none_or(|p| p.grid != grid || p.capacity != capacity) {
+            self.pool = Some(self.make_pool(device, grid, capacity));
+        }
+    }
+
+    fn make_pool(&self, device: &wgpu::Device, grid: u16, capacity: usize) -> Pool {
         let side = u32::from(grid) + 1;
         let words = (side * side).div_ceil(2);
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let heights = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("terrain heights"),
-            size: u64::from(words) * 4 * TERRAIN_SLOTS as u64,
+            size: u64::from(words) * 4 * capacity as u64,
             usage: storage,
             mapped_at_creation: false,
         });
         let draws = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("terrain draws"),
-            size: (std::mem::size_of::<GpuTerrainDraw>() * TERRAIN_SLOTS) as u64,
+            size: (std::mem::size_of::<GpuTerrainDraw>() * capacity) as u64,
             usage: storage,
             mapped_at_creation: false,
         });
@@ -267,6 +280,7 @@ impl TerrainPass {
         });
         Pool {
             grid,
+            capacity,
             words,
             heights,
             draws,
@@ -274,7 +288,7 @@ impl TerrainPass {
             indices,
             index_count: index.len() as u32,
             group,
-            slots: vec![None; TERRAIN_SLOTS],
+            slots: vec![None; capacity],
             by_key: HashMap::new(),
         }
     }

@@ -57,6 +57,8 @@ pub struct TerrainTree {
     entry: TerrainEntry,
     slots: HashMap<TerrainKey, Slot>,
     frame: u64,
+    /// The selection walk's stack, kept between frames (no allocation in steady state).
+    stack: Vec<(TerrainKey, f32)>,
     /// Most tiles kept decoded.
     pub max_resident: usize,
 }
@@ -65,7 +67,7 @@ impl TerrainTree {
     /// A tree for the manifest's terrain entry; nothing resident yet.
     #[must_use]
     pub fn new(entry: TerrainEntry) -> Self {
-        Self { entry, slots: HashMap::new(), frame: 0, max_resident: 2048 }
+        Self { entry, slots: HashMap::new(), frame: 0, stack: Vec::new(), max_resident: 2048 }
     }
 
     /// The manifest entry.
@@ -159,7 +161,9 @@ impl TerrainTree {
         if self.is_unknown(root) {
             wanted.push((0.0, root));
         }
-        let mut stack = vec![(root, f32::INFINITY)];
+        let mut stack = std::mem::take(&mut self.stack);
+        stack.clear();
+        stack.push((root, f32::INFINITY));
         while let Some((key, parent_error)) = stack.pop() {
             let frame = self.frame;
             let Some(Slot::Resident { tile, used }) = self.slots.get_mut(&key) else { continue };
@@ -173,22 +177,28 @@ impl TerrainTree {
             }
             let distance = box_distance(lo - eye_m, hi - eye_m).max(1e-3) as f32;
             let error_px = tile.error_m * view.px_per_m_at_1m / distance;
-            let children: Vec<(TerrainKey, usize)> = (0..4)
-                .filter(|&k| tile.children[k].exists && key.0 + 1 < self.entry.levels)
-                .map(|k| ((key.0 + 1, 2 * key.1 + (k as u32 & 1), 2 * key.2 + (k as u32 >> 1)), k))
-                .collect();
+            // The existing children (at most four, no allocation).
+            let mut kids = [((0u8, 0u32, 0u32), 0usize); 4];
+            let mut n = 0;
+            for k in 0..4 {
+                if tile.children[k].exists && key.0 + 1 < self.entry.levels {
+                    kids[n] = ((key.0 + 1, 2 * key.1 + (k as u32 & 1), 2 * key.2 + (k as u32 >> 1)), k);
+                    n += 1;
+                }
+            }
+            let children = &kids[..n];
             let refine = error_px > threshold_px && !children.is_empty();
             let ready =
                 children.iter().all(|(c, _)| matches!(self.slots.get(c), Some(Slot::Resident { .. } | Slot::Broken)));
             let any_broken = children.iter().any(|(c, _)| matches!(self.slots.get(c), Some(Slot::Broken)));
             if refine && ready && !any_broken {
-                for (c, _) in children {
+                for &(c, _) in children {
                     stack.push((c, tile.error_m));
                 }
                 continue;
             }
             if refine {
-                for (c, k) in children {
+                for &(c, k) in children {
                     if self.is_unknown(c) {
                         let s = self.entry.tile_size_m(c.0);
                         let o = self.entry.tile_origin_m(c.0, c.1, c.2);
@@ -201,7 +211,8 @@ impl TerrainTree {
             }
             draws.push(TerrainDraw { key, tile, origin_m: origin, size_m: size, parent_error_m: parent_error });
         }
-        wanted.sort_by(|a, b| a.0.total_cmp(&b.0));
+        wanted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        self.stack = stack;
     }
 
     /// Drops the least recently used tiles beyond [`Self::max_resident`]
