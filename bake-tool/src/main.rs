@@ -261,6 +261,10 @@ struct BakeArgs {
     /// is not used for that row) or relative (height above the DEM's ground).
     #[arg(long, value_enum, default_value_t = bake::ground::ZMode::Absolute)]
     z: bake::ground::ZMode,
+    /// No terrain tiles (trees still stand on --dem heights). Without it, a
+    /// scene without a DEM gets a ground fitted to its trees' bases.
+    #[arg(long)]
+    no_terrain: bool,
     /// Vertex spacing of the finest terrain level in metres (default: the
     /// DEM's pixel size; coarser spacing: fewer bytes, smoother ground).
     #[arg(long, value_name = "M")]
@@ -548,12 +552,21 @@ fn bake(args: &BakeArgs) -> Result<()> {
         dem_crs: args.dem_crs.as_deref(),
         z_mode: args.z,
         outside_dem: args.outside_dem,
+        fit_ground: !args.no_terrain,
     };
     let placed = trees::place_trees(&options, &map, &out, &log)?;
     let ground_height = placed.ground.as_ref().map(|(g, _)| {
         let (ox, oy, oz) = (placed.origin_m.x, placed.origin_m.y, placed.origin_m.z);
         move |x: f64, y: f64| g.height_at(x + ox, y + oy).map(|h| h - oz as f32)
     });
+    let fitted_height = placed.fitted.as_ref().map(|(f, _)| move |x: f64, y: f64| Some(f.height(x, y)));
+    let fitted =
+        placed.fitted.as_ref().zip(fitted_height.as_ref()).map(|((f, region), height)| bake::terrain::TerrainSource {
+            height,
+            region: *region,
+            resolution_m: f.cell_m(),
+            source: "fitted to the trees' bases (no --dem)".into(),
+        });
     let terrain =
         placed.ground.as_ref().zip(ground_height.as_ref()).map(|((g, region), height)| bake::terrain::TerrainSource {
             height,
@@ -561,6 +574,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
             resolution_m: args.terrain_resolution.unwrap_or_else(|| g.resolution_m()),
             source: g.names(),
         });
+    let terrain = if args.no_terrain { None } else { terrain.or(fitted) };
     let input = SceneInput {
         terrain,
         cell_size_m: placed.cell_size_m,

@@ -576,6 +576,23 @@ fn trees_stand_on_the_ground_of_a_dem() {
     let one = strip(&dir.join("one"));
     assert!(one.iter().any(|(f, _)| f.starts_with("terrain/")), "the single bake has terrain");
     assert_eq!(one, strip(&dir.join("merged")), "sharded + merged = one process, terrain included");
+    // Without a DEM the terrain is fitted to the trees' bases (here a z column
+    // on a slope: 100 + 0.2 x), unless --no-terrain.
+    let mut sloped = String::from("id,x,y,z,height\n");
+    for i in 0..200 {
+        let (x, y) = (500_000 + (i % 20) * 10, 5_299_800 + (i / 20) * 10);
+        sloped += &format!("{i},{x},{y},{},12\n", 100.0 + 0.2 * f64::from(x - 500_000));
+    }
+    let sloped_csv = dir.join("sloped.csv");
+    std::fs::write(&sloped_csv, sloped).unwrap();
+    let o = run(&mut quick_bake(&model, &sloped_csv, &dir.join("fitted"), &crs));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("terrain: "), "a terrain is baked");
+    let t = inspect_json(&dir.join("fitted"))["terrain"].clone();
+    assert!(t["source"].as_str().unwrap().contains("fitted to the trees' bases"), "{t}");
+    let (lo, hi) = (t["height_range_m"][0].as_f64().unwrap(), t["height_range_m"][1].as_f64().unwrap());
+    assert!(lo > 98.0 && lo < 102.0 && hi > 136.0 && hi < 140.0, "fitted heights {lo}–{hi} (the trees: 100–138)");
+    run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
+    assert!(inspect_json(&dir.join("bare"))["terrain"].is_null());
     // Bad DEM inputs are named.
     let e = fails(&mut quick_bake(
         &model,

@@ -156,3 +156,149 @@ impl Ground {
 fn name(p: &Path) -> String {
     p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
+
+/// A ground surface fitted to the trees' bases, for scenes without a DEM: the
+/// mean base height per grid cell, cells without trees filled from coarser
+/// averages (pull–push), sampled bilinearly between cell centres.
+#[derive(Debug, Clone)]
+pub struct GroundFit {
+    x0: f64,
+    y0: f64,
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    sum: Vec<f64>,
+    count: Vec<u32>,
+}
+
+impl GroundFit {
+    /// A fit over `region` (metres relative to the scene origin: min x, min y,
+    /// max x, max y) with cells of `region / 256`, 4–64 m.
+    pub fn new(region: [f64; 4]) -> Self {
+        let extent = (region[2] - region[0]).max(region[3] - region[1]).max(1.0);
+        let cell = (extent / 256.0).clamp(4.0, 64.0);
+        let nx = ((region[2] - region[0]) / cell).ceil().max(1.0) as usize + 1;
+        let ny = ((region[3] - region[1]) / cell).ceil().max(1.0) as usize + 1;
+        Self { x0: region[0], y0: region[1], cell, nx, ny, sum: vec![0.0; nx * ny], count: vec![0; nx * ny] }
+    }
+
+    /// Adds a tree base (metres relative to the scene origin); points outside are ignored.
+    pub fn add(&mut self, x: f64, y: f64, z: f64) {
+        let (i, j) = (((x - self.x0) / self.cell).round(), ((y - self.y0) / self.cell).round());
+        if i < 0.0 || j < 0.0 || i >= self.nx as f64 || j >= self.ny as f64 || !z.is_finite() {
+            return;
+        }
+        let k = j as usize * self.nx + i as usize;
+        self.sum[k] += z;
+        self.count[k] += 1;
+    }
+
+    /// The filled surface, or `None` without any tree.
+    pub fn finish(self) -> Option<FittedGround> {
+        let mut z: Vec<f32> = self
+            .sum
+            .iter()
+            .zip(&self.count)
+            .map(|(s, &n)| if n > 0 { (s / f64::from(n)) as f32 } else { f32::NAN })
+            .collect();
+        if z.iter().all(|v| v.is_nan()) {
+            return None;
+        }
+        fill(&mut z, self.nx, self.ny);
+        Some(FittedGround { x0: self.x0, y0: self.y0, cell: self.cell, nx: self.nx, ny: self.ny, z })
+    }
+}
+
+/// Fills the NaN cells of an `nx`×`ny` grid from a grid half as fine (pull–push).
+fn fill(z: &mut [f32], nx: usize, ny: usize) {
+    if !z.iter().any(|v| v.is_nan()) || z.iter().all(|v| v.is_nan()) {
+        return;
+    }
+    let (cx, cy) = (nx.div_ceil(2), ny.div_ceil(2));
+    let mut coarse = vec![f32::NAN; cx * cy];
+    for (k, c) in coarse.iter_mut().enumerate() {
+        let (ci, cj) = (k % cx, k / cx);
+        let (mut s, mut n) = (0.0, 0);
+        for (i, j) in [(2 * ci, 2 * cj), (2 * ci + 1, 2 * cj), (2 * ci, 2 * cj + 1), (2 * ci + 1, 2 * cj + 1)] {
+            if i < nx && j < ny && !z[j * nx + i].is_nan() {
+                s += z[j * nx + i];
+                n += 1;
+            }
+        }
+        if n > 0 {
+            *c = s / n as f32;
+        }
+    }
+    fill(&mut coarse, cx, cy);
+    for j in 0..ny {
+        for i in 0..nx {
+            if z[j * nx + i].is_nan() {
+                // Bilinear in the coarse grid (its cell centres sit between pairs of fine cells).
+                let u = ((i as f32 - 0.5) * 0.5).clamp(0.0, (cx - 1) as f32);
+                let v = ((j as f32 - 0.5) * 0.5).clamp(0.0, (cy - 1) as f32);
+                z[j * nx + i] = bilinear(&coarse, cx, cy, u, v);
+            }
+        }
+    }
+}
+
+fn bilinear(z: &[f32], nx: usize, ny: usize, u: f32, v: f32) -> f32 {
+    let (i0, j0) = ((u.floor() as usize).min(nx - 1), (v.floor() as usize).min(ny - 1));
+    let (i1, j1) = ((i0 + 1).min(nx - 1), (j0 + 1).min(ny - 1));
+    let (a, b) = (u - i0 as f32, v - j0 as f32);
+    let row = |j: usize| z[j * nx + i0] * (1.0 - a) + z[j * nx + i1] * a;
+    row(j0) * (1.0 - b) + row(j1) * b
+}
+
+/// A ground surface fitted to the trees (see [`GroundFit`]).
+#[derive(Debug, Clone)]
+pub struct FittedGround {
+    x0: f64,
+    y0: f64,
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    z: Vec<f32>,
+}
+
+impl FittedGround {
+    /// Ground height at a point (metres relative to the scene origin), clamped to the fit's edge.
+    pub fn height(&self, x: f64, y: f64) -> f32 {
+        let u = (((x - self.x0) / self.cell) as f32).clamp(0.0, (self.nx - 1) as f32);
+        let v = (((y - self.y0) / self.cell) as f32).clamp(0.0, (self.ny - 1) as f32);
+        bilinear(&self.z, self.nx, self.ny, u, v)
+    }
+
+    /// Cell size, metres (the terrain's finest spacing).
+    pub fn cell_m(&self) -> f64 {
+        self.cell
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fit_follows_the_trees_and_fills_the_gaps_smoothly() {
+        // Trees on a slope z = 0.2 x in two clusters far apart; nothing between.
+        let mut fit = GroundFit::new([0.0, 0.0, 1024.0, 256.0]);
+        assert_eq!(fit.cell, 4.0);
+        for k in 0..400 {
+            let (x, y) = (f64::from(k % 20) * 3.0, f64::from(k / 20) * 3.0 + 100.0);
+            fit.add(x, y, 0.2 * x);
+            fit.add(x + 900.0, y, 0.2 * (x + 900.0));
+        }
+        let g = fit.finish().unwrap();
+        // Under the trees: the slope to within a cell's averaging.
+        for x in [10.0, 40.0, 920.0, 950.0] {
+            assert!((f64::from(g.height(x, 130.0)) - 0.2 * x).abs() < 1.0, "{x}: {}", g.height(x, 130.0));
+        }
+        // Between the clusters: between their heights, no NaN, no wild values.
+        for x in (100..880).step_by(40) {
+            let h = g.height(f64::from(x), 130.0);
+            assert!(h.is_finite() && (0.0..=200.0).contains(&h), "{x}: {h}");
+        }
+        assert!(GroundFit::new([0.0, 0.0, 10.0, 10.0]).finish().is_none());
+    }
+}

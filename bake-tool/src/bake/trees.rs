@@ -70,6 +70,8 @@ pub struct TreeOptions<'a> {
     pub z_mode: ZMode,
     /// Trees outside every DEM: stop or leave them out.
     pub outside_dem: OutsideDem,
+    /// Without a DEM, fit a ground surface to the trees' bases for the terrain.
+    pub fit_ground: bool,
 }
 
 /// Why a row outside every DEM is skipped (and, by default, stops the bake).
@@ -167,6 +169,8 @@ pub struct PlacedTrees {
     /// The DEMs in the scene CRS, if any, and the region their terrain covers
     /// (metres relative to the origin: min x, min y, max x, max y).
     pub ground: Option<(super::ground::Ground, [f64; 4])>,
+    /// Without a DEM: a ground fitted to the trees' bases and its region.
+    pub fitted: Option<(super::ground::FittedGround, [f64; 4])>,
 }
 
 /// What pass 1 learns.
@@ -178,6 +182,9 @@ struct Sample {
     /// Rows repeating an earlier row's coordinates (among the first [`DUPLICATE_CHECK_ROWS`]).
     duplicates: u64,
     report: placements::Report,
+    /// Without a DEM: the region (relative metres) over which pass 3 fits a
+    /// ground surface to the trees' bases (every shard fits the same one).
+    ground_region: Option<[f64; 4]>,
 }
 
 /// Reads, checks and places the trees (see the module docs).
@@ -324,7 +331,19 @@ pub fn place_trees(
             density_pass(&source, &to_tree)?
         }
     };
-    let (trees, summary, outside) = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    if ground.is_none() && opts.fit_ground {
+        // The trees' extent and 100 m around (or a quarter of it).
+        let b = sample_box;
+        let margin = ((b[2] - b[0]).max(b[3] - b[1]) * 0.25).max(100.0);
+        let b = [b[0].max(mx - limit), b[1].max(my - limit), b[2].min(mx + limit), b[3].min(my + limit)];
+        sample.ground_region = Some([
+            b[0] - margin - origin.x,
+            b[1] - margin - origin.y,
+            b[2] + margin - origin.x,
+            b[3] + margin - origin.y,
+        ]);
+    }
+    let (trees, summary, outside, fit) = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
     if outside.trees > 0 && opts.outside_dem == OutsideDem::Error {
         let b = outside.bounds;
         bail!(
@@ -357,7 +376,8 @@ pub fn place_trees(
             [b[0] - margin - origin.x, b[1] - margin - origin.y, b[2] + margin - origin.x, b[3] + margin - origin.y];
         (g, region)
     });
-    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground })
+    let fitted = fit.and_then(super::ground::GroundFit::finish).zip(sample.ground_region);
+    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted })
 }
 
 /// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.
@@ -384,7 +404,7 @@ fn sample_pass(source: &PlacementSource) -> Result<Sample> {
         }
         Ok(())
     })?;
-    Ok(Sample { rows, seen, duplicates, report })
+    Ok(Sample { rows, seen, duplicates, report, ground_region: None })
 }
 
 /// Longitude and latitude the other way round: most rows' "latitude" beyond
@@ -481,7 +501,7 @@ fn tree_pass(
     to_tree: &TreeOf<'_>,
     out: &OutDir,
     log: &dyn Fn(&str),
-) -> Result<(TreeSource, BTreeMap<String, SpeciesSummary>, Outside)> {
+) -> Result<(TreeSource, BTreeMap<String, SpeciesSummary>, Outside, Option<super::ground::GroundFit>)> {
     let buckets = sample.report.kept.div_ceil(opts.bucket_trees.max(1)).max(1);
     log(&format!(
         "pass 3/3: trees{}",
@@ -529,6 +549,13 @@ fn tree_pass(
     };
     let mut ours = placements::Report::default();
     let mut outside = Outside { bounds: [f64::MAX, f64::MAX, f64::MIN, f64::MIN], ..Outside::default() };
+    // Every tree of every shard goes into the fitted ground, so shards agree on it.
+    let mut fit = sample.ground_region.map(super::ground::GroundFit::new);
+    let mut fit_add = |t: &SceneTree| {
+        if let Some(f) = fit.as_mut() {
+            f.add(t.pos.x, t.pos.y, t.pos.z);
+        }
+    };
     let mut skip = |p: &Placement, why: &str| match why {
         OUTSIDE_DEM => {
             outside.trees += 1;
@@ -552,7 +579,11 @@ fn tree_pass(
         let dir = out.scratch("buckets");
         let mut writer = BucketWriter::new(&dir, buckets as u32, cell_size_m, opts.tile_cells)?;
         let report = source.for_each(&mut |p| {
-            match to_tree(&p) {
+            let placed = to_tree(&p);
+            if let Ok((t, _)) = &placed {
+                fit_add(t);
+            }
+            match placed {
                 Ok((t, f))
                     if opts.shard.is_none_or(|(i, n)| {
                         let (x, y) = batching::tile_of(t.pos, cell_size_m, opts.tile_cells);
@@ -573,6 +604,7 @@ fn tree_pass(
         let report = source.for_each(&mut |p| {
             match to_tree(&p) {
                 Ok((t, f)) => {
+                    fit_add(&t);
                     note(&p, &t, &f);
                     trees.push(t);
                 }
@@ -601,7 +633,7 @@ fn tree_pass(
         ));
     }
     outside.rows_read = report.rows;
-    Ok((trees, summary, outside))
+    Ok((trees, summary, outside, fit))
 }
 
 /// Trees outside every DEM: how many, where (placement coordinates) and which rows.
