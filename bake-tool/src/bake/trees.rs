@@ -343,7 +343,7 @@ pub fn place_trees(
             b[3] + margin - origin.y,
         ]);
     }
-    let (trees, summary, outside, fit) = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    let Pass3 { trees, summary, outside, fit } = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
     if outside.trees > 0 && opts.outside_dem == OutsideDem::Error {
         let b = outside.bounds;
         bail!(
@@ -501,7 +501,7 @@ fn tree_pass(
     to_tree: &TreeOf<'_>,
     out: &OutDir,
     log: &dyn Fn(&str),
-) -> Result<(TreeSource, BTreeMap<String, SpeciesSummary>, Outside, Option<super::ground::GroundFit>)> {
+) -> Result<Pass3> {
     let buckets = sample.report.kept.div_ceil(opts.bucket_trees.max(1)).max(1);
     log(&format!(
         "pass 3/3: trees{}",
@@ -633,7 +633,16 @@ fn tree_pass(
         ));
     }
     outside.rows_read = report.rows;
-    Ok((trees, summary, outside, fit))
+    Ok(Pass3 { trees, summary, outside, fit })
+}
+
+/// What pass 3 makes: the trees, the summary per species label, the trees
+/// outside every DEM and the ground fitted to the trees (without a DEM).
+struct Pass3 {
+    trees: TreeSource,
+    summary: BTreeMap<String, SpeciesSummary>,
+    outside: Outside,
+    fit: Option<super::ground::GroundFit>,
 }
 
 /// Trees outside every DEM: how many, where (placement coordinates) and which rows.
