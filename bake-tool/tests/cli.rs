@@ -4,7 +4,7 @@
 use std::path::Path;
 
 mod common;
-use common::{bin, fails, run, snapshot, tmp, SMALL};
+use common::{bin, fails, run, snapshot, tmp, write_geotiff_dem, SMALL};
 
 fn inspect_json(path: &Path) -> serde_json::Value {
     let out = run(bin().args(["inspect", "--json"]).arg(path));
@@ -437,27 +437,6 @@ fn crown_widths_from_a_column_or_the_dbh_scale_each_tree_apart_from_its_height()
     assert!(baked_trees(&dir.join("plain")).iter().all(|t| t.2 == 1));
 }
 
-/// A float32 GeoTIFF DEM of `n`×`n` pixels of 5 m in EPSG:32633, corner at
-/// (500000, 5300000), heights on the plane [`dem_plane`].
-fn write_dem(path: &Path, n: u32) {
-    use tiff::encoder::{colortype, TiffEncoder};
-    use tiff::tags::Tag;
-    let mut file = std::fs::File::create(path).unwrap();
-    let mut enc = TiffEncoder::new(&mut file).unwrap();
-    let mut img = enc.new_image::<colortype::Gray32Float>(n, n).unwrap();
-    let e = img.encoder();
-    e.write_tag(Tag::ModelPixelScaleTag, &[5.0f64, 5.0, 0.0][..]).unwrap();
-    e.write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, 500_000.0, 5_300_000.0, 0.0][..]).unwrap();
-    let keys: [u16; 12] = [1, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633];
-    e.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
-    // Pixel centres: x = 500002.5 + 5c, y = 5299997.5 − 5r.
-    let data: Vec<f32> = (0..n)
-        .flat_map(|r| (0..n).map(move |c| (c, r)))
-        .map(|(c, r)| dem_plane(500_002.5 + 5.0 * f64::from(c), 5_299_997.5 - 5.0 * f64::from(r)) as f32)
-        .collect();
-    img.write_data(&data).unwrap();
-}
-
 /// The test DEM's ground: a slope rising 0.3 m per metre east and 0.1 m per metre south.
 fn dem_plane(x: f64, y: f64) -> f64 {
     300.0 + 0.3 * (x - 500_000.0) + 0.1 * (5_300_000.0 - y)
@@ -485,7 +464,7 @@ fn trees_stand_on_the_ground_of_a_dem() {
     let Some(model) = oak_model() else { return };
     let dir = tmp("dem");
     let dem = dir.join("ground.tif");
-    write_dem(&dem, 40); // 200 m × 200 m, heights 300–380 m
+    write_geotiff_dem(&dem, 40, 5.0, dem_plane); // 200 m × 200 m, heights 300–380 m
     let v = inspect_json(&dem);
     assert_eq!((v["kind"].as_str(), v["width"].as_u64(), v["epsg"].as_u64()), (Some("dem"), Some(40), Some(32633)));
     assert_eq!(v["extent"], serde_json::json!([500_000.0, 5_299_800.0, 500_200.0, 5_300_000.0]));

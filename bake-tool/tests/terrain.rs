@@ -8,7 +8,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{run, tmp};
+use common::{run, tmp, write_geotiff_dem};
 use glam::DVec3;
 use sylva::camera::Camera;
 use sylva::render::forest::PoolConfig;
@@ -21,27 +21,6 @@ const H: u32 = 160;
 fn hills(x: f64, y: f64) -> f64 {
     let (u, v) = (x - 500_000.0, y - 5_299_400.0);
     400.0 + 50.0 * (u / 70.0).sin() * (v / 55.0).cos() + 15.0 * (u / 23.0 + v / 31.0).sin() + 0.05 * u
-}
-
-/// A float32 GeoTIFF of 300 × 300 pixels of 2 m in EPSG:32633, corner at
-/// (500000, 5300000), heights [`hills`] at pixel centres.
-fn write_dem(path: &Path) {
-    use tiff::encoder::{colortype, TiffEncoder};
-    use tiff::tags::Tag;
-    let n = 300u32;
-    let mut file = std::fs::File::create(path).unwrap();
-    let mut enc = TiffEncoder::new(&mut file).unwrap();
-    let mut img = enc.new_image::<colortype::Gray32Float>(n, n).unwrap();
-    let e = img.encoder();
-    e.write_tag(Tag::ModelPixelScaleTag, &[2.0f64, 2.0, 0.0][..]).unwrap();
-    e.write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, 500_000.0, 5_300_000.0, 0.0][..]).unwrap();
-    let keys: [u16; 12] = [1, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633];
-    e.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
-    let data: Vec<f32> = (0..n)
-        .flat_map(|r| (0..n).map(move |c| (c, r)))
-        .map(|(c, r)| hills(500_001.0 + 2.0 * f64::from(c), 5_299_999.0 - 2.0 * f64::from(r)) as f32)
-        .collect();
-    img.write_data(&data).unwrap();
 }
 
 fn open(scene: &Path) -> OffscreenScene {
@@ -65,8 +44,8 @@ fn the_ground_of_a_dem_is_drawn_without_cracks_and_the_trees_stand_on_it() {
     }
     let dir = tmp("terrain-render");
     let dem = dir.join("hills.tif");
-    write_dem(&dem);
-    // 120 trees in the middle of the DEM.
+    write_geotiff_dem(&dem, 300, 2.0, hills); // 600 m × 600 m
+                                              // 120 trees in the middle of the DEM.
     let mut csv = String::from("id,x,y,height\n");
     for i in 0..120 {
         csv += &format!("{i},{},{},14\n", 500_250 + (i % 12) * 9, 5_299_650 - (i / 12) * 9);
