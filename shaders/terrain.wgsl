@@ -61,7 +61,8 @@ fn quantised(slot: u32, i: u32, j: u32) -> u32 {
 fn height_at(t: TerrainDraw, i: u32, j: u32) -> vec2<f32> {
     let q = quantised(t.slot, i, j);
     if q == HOLE {
-        return vec2<f32>(0.0, 0.0);
+        // At the tile's lowest height, so the sliver left by the discard is short.
+        return vec2<f32>(t.origin_m.z, 0.0);
     }
     return vec2<f32>(t.origin_m.z + f32(q) / 65534.0 * t.range_m, 1.0);
 }
@@ -97,7 +98,12 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let odd_i = (i & 1u) == 1u;
     let odd_j = (j & 1u) == 1u;
     if odd_i && odd_j {
-        coarse = mean_valid(height_at(t, im, jm), height_at(t, ip, jm), height_at(t, im, jp), height_at(t, ip, jp), h);
+        // A parent cell's centre: its triangles split it along the south-west –
+        // north-east diagonal (as the index buffer does), so the parent surface
+        // there is the mean of those two corners.
+        let a = height_at(t, im, jm);
+        let b = height_at(t, ip, jp);
+        coarse = mean_valid(a, b, a, b, h);
     } else if odd_i {
         let a = height_at(t, im, j);
         let b = height_at(t, ip, j);

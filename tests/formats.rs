@@ -316,6 +316,9 @@ fn terrain_decoder_error_paths() {
     err(&|b| b[8] = 25, "header.level");
     err(&|b| b[9] = 0x1f, "child_mask");
     err(&|b| b[10] = 0, "header.grid");
+    err(&|b| b[10] = 3, "an even");
+    err(&|b| put_f32(b, 20, -2.0e6), "beyond");
+    err(&|b| put_f32(b, 32 + 4, 3.0e6), "child 0: range or error beyond");
     err(&|b| b[12] = 4, "outside level 2's 4×4 tiles");
     err(&|b| put_f32(b, 20, f32::NAN), "not a finite number");
     err(&|b| put_f32(b, 20, 20.0), "inverted");

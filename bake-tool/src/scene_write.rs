@@ -51,7 +51,8 @@ pub fn finish_scene(
         batches: tiles.iter().map(|t| u64::from(t.batches)).sum(),
         tiles: tiles.len() as u64,
     };
-    base.version = SCENE_VERSION;
+    // Version 4 only with terrain, so older viewers read the rest.
+    base.version = if base.terrain.is_some() { SCENE_VERSION } else { 3 };
     base.home = sylva::format::manifest::densest_group(&tiles);
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);

@@ -571,7 +571,10 @@ fn trees_stand_on_the_ground_of_a_dem() {
     let (lo, hi) = (t["height_range_m"][0].as_f64().unwrap(), t["height_range_m"][1].as_f64().unwrap());
     assert!(lo > 98.0 && lo < 102.0 && hi > 136.0 && hi < 140.0, "fitted heights {lo}–{hi} (the trees: 100–138)");
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
-    assert!(inspect_json(&dir.join("bare"))["terrain"].is_null());
+    let bare = inspect_json(&dir.join("bare"));
+    assert!(bare["terrain"].is_null());
+    assert_eq!(bare["version"], 3, "a scene without terrain is manifest version 3 (older viewers read it)");
+    assert_eq!(inspect_json(&dir.join("fitted"))["version"], 4);
     // Bad DEM inputs are named.
     let e = fails(&mut quick_bake(
         &model,

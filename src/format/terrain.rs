@@ -31,6 +31,9 @@ pub const TERRAIN_Q_MAX: u16 = u16::MAX - 1;
 pub const MAX_TERRAIN_GRID: u16 = 256;
 /// Deepest level (a 2^24 subdivision of the root: millimetres over a continent).
 pub const MAX_TERRAIN_LEVEL: u8 = 24;
+/// Largest height magnitude a tile may declare, metres (beyond any ground on
+/// Earth, far from where f32 arithmetic on ranges overflows).
+pub const MAX_TERRAIN_HEIGHT_M: f32 = 1.0e6;
 
 /// A child's summary in its parent (`exists` false: no data there, no file).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -56,7 +59,7 @@ pub struct TerrainTile {
     pub y: u32,
     /// Cells per side (`grid + 1` vertices).
     pub grid: u16,
-    /// Lowest height, metres relative to the scene origin (0 when every vertex is a hole).
+    /// Lowest height, metres relative to the scene origin (of its vertices and its children's).
     pub min_m: f32,
     /// Highest height.
     pub max_m: f32,
@@ -162,11 +165,13 @@ fn decode_terrain(bytes: &[u8]) -> Result<TerrainTile, Problem> {
         return Err(Problem::Invalid(format!("header.child_mask is {mask:#x}: only bits 0–3 (four children) exist")));
     }
     let grid = r.u16("header.grid", 10)?;
-    if grid == 0 || grid > MAX_TERRAIN_GRID {
+    if grid == 0 || grid > MAX_TERRAIN_GRID || !grid.is_multiple_of(2) {
         return Err(Problem::OutOfRange {
             what: "header.grid".into(),
             value: grid.into(),
-            allowed: format!("1–{MAX_TERRAIN_GRID} cells per side"),
+            allowed: format!(
+                "an even 2–{MAX_TERRAIN_GRID} cells per side (a parent's vertices are its children's even ones)"
+            ),
         });
     }
     let (x, y) = (r.u32("header.x", 12)?, r.u32("header.y", 16)?);
@@ -177,6 +182,11 @@ fn decode_terrain(bytes: &[u8]) -> Result<TerrainTile, Problem> {
     let f = |at: usize| f32::from_le_bytes([head[at], head[at + 1], head[at + 2], head[at + 3]]);
     let (min_m, max_m, error_m) = (f(20), f(24), f(28));
     finite_all("header height range and error", &[min_m, max_m, error_m])?;
+    if [min_m, max_m, error_m].iter().any(|v| v.abs() > MAX_TERRAIN_HEIGHT_M) {
+        return Err(Problem::Invalid(format!(
+            "header range {min_m}..{max_m} or error {error_m} is beyond ±{MAX_TERRAIN_HEIGHT_M} m"
+        )));
+    }
     if min_m > max_m || error_m < 0.0 {
         return Err(Problem::Invalid(format!(
             "header range {min_m}..{max_m} or error {error_m} is inverted or negative"
@@ -191,6 +201,9 @@ fn decode_terrain(bytes: &[u8]) -> Result<TerrainTile, Problem> {
             return Err(Problem::Invalid(format!("child {k} has a summary but no flag in the child mask")));
         }
         finite_all(&format!("child {k}"), &[cmin, cmax, cerr])?;
+        if [cmin, cmax, cerr].iter().any(|v| v.abs() > MAX_TERRAIN_HEIGHT_M) {
+            return Err(Problem::Invalid(format!("child {k}: range or error beyond ±{MAX_TERRAIN_HEIGHT_M} m")));
+        }
         if cmin > cmax || cerr < 0.0 {
             return Err(Problem::Invalid(format!(
                 "child {k}: range {cmin}..{cmax} or error {cerr} is inverted or negative"
@@ -274,8 +287,11 @@ impl TerrainEntry {
             ));
         }
         finite_all("terrain.height_range_m", &self.height_range_m)?;
-        if self.grid == 0 || self.grid > MAX_TERRAIN_GRID {
-            return Err(Problem::Invalid(format!("terrain.grid {} is not 1–{MAX_TERRAIN_GRID}", self.grid)));
+        if self.grid == 0 || self.grid > MAX_TERRAIN_GRID || !self.grid.is_multiple_of(2) {
+            return Err(Problem::Invalid(format!("terrain.grid {} is not an even 2–{MAX_TERRAIN_GRID}", self.grid)));
+        }
+        if self.height_range_m.iter().any(|v| v.abs() > MAX_TERRAIN_HEIGHT_M) {
+            return Err(Problem::Invalid(format!("terrain.height_range_m is beyond ±{MAX_TERRAIN_HEIGHT_M} m")));
         }
         if self.levels == 0 || self.levels > MAX_TERRAIN_LEVEL + 1 {
             return Err(Problem::Invalid(format!("terrain.levels {} is not 1–{}", self.levels, MAX_TERRAIN_LEVEL + 1)));

@@ -147,7 +147,7 @@ impl TerrainPass {
         let Some(first) = draws.first() else { return };
         let grid = first.tile.grid;
         if self.pool.as_ref().is_none_or(|p| p.grid != grid) {
-            self.pool = Some(self.make_pool(device, grid, TERRAIN_SLOTS));
+            self.reserve(device, grid, TERRAIN_SLOTS as u64);
         }
         let Some(pool) = self.pool.as_mut() else { return };
         queue.write_buffer(
@@ -224,7 +224,11 @@ impl TerrainPass {
     /// (when its manifest arrives, so the GPU memory it takes is known before
     /// anything is drawn: budgets count it).
     pub fn reserve(&mut self, device: &wgpu::Device, grid: u16, tiles: u64) {
-        let capacity = (tiles.max(1) as usize).min(TERRAIN_SLOTS);
+        // At most what one storage binding of the device holds.
+        let side = u64::from(grid) + 1;
+        let slot_bytes = (side * side).div_ceil(2) * 4;
+        let fits = device.limits().max_storage_buffer_binding_size / slot_bytes.max(1);
+        let capacity = tiles.clamp(1, (TERRAIN_SLOTS as u64).min(fits.max(1))) as usize;
         if self.pool.as_ref().is_none_or(|p| p.grid != grid || p.capacity != capacity) {
             self.pool = Some(self.make_pool(device, grid, capacity));
         }

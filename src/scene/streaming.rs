@@ -213,7 +213,8 @@ pub struct SceneStream<F: Fetcher> {
     terrain: Option<TerrainTree>,
     terrain_draws: Vec<TerrainDraw>,
     terrain_wanted: Vec<(f32, TerrainKey)>,
-    terrain_attempts: HashMap<TerrainKey, u32>,
+    /// Failed attempts per terrain tile and when the next one is due (∞: asked for).
+    terrain_attempts: HashMap<TerrainKey, (u32, f64)>,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -317,7 +318,8 @@ impl<F: Fetcher> SceneStream<F> {
             TileState::NotResident(l) => *l == Load::Broken,
         });
         let packs_done = self.needed.iter().all(|&s| self.packs[s].done());
-        let terrain_done = self.terrain_wanted.is_empty();
+        let terrain_done =
+            self.terrain_wanted.is_empty() && !self.terrain_attempts.values().any(|(_, due)| due.is_finite());
         manifest_done && nodes_done && tiles_done && packs_done && terrain_done && self.requests.is_empty()
     }
 
@@ -393,7 +395,7 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::Tile(t) => self.on_tile(residency, t, result, view, now_s),
                 Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
                 Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
-                Target::Terrain(key) => self.on_terrain(key, result),
+                Target::Terrain(key) => self.on_terrain(key, result, now_s),
             }
         }
         if self.manifest.is_none() {
@@ -422,6 +424,7 @@ impl<F: Fetcher> SceneStream<F> {
             let rate: u64 = self.recent.iter().map(|(_, b)| b).sum();
             let over_rate = self.config.max_bytes_per_s > 0.0 && rate as f64 >= self.config.max_bytes_per_s;
             self.stats.degraded.bandwidth = over_rate;
+            self.retry_terrain(now_s);
             self.select_terrain(view);
             if !over_rate {
                 self.request_tiles(view, draw_distance_m, now_s);
@@ -444,6 +447,17 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.index_nodes_total = self.index.nodes_declared();
         self.stats.terrain_resident = self.terrain.as_ref().map_or(0, |t| t.resident() as u64);
         self.stats.terrain_drawn = self.terrain_draws.len() as u64;
+    }
+
+    /// Terrain tiles whose retry is due are asked for again (with backoff, as tiles).
+    fn retry_terrain(&mut self, now_s: f64) {
+        let Some(t) = &mut self.terrain else { return };
+        for (key, (_, due)) in &mut self.terrain_attempts {
+            if *due <= now_s {
+                t.forget(*key);
+                *due = f64::INFINITY;
+            }
+        }
     }
 
     /// Picks the terrain tiles the view draws and the ones it waits for.
@@ -473,7 +487,7 @@ impl<F: Fetcher> SceneStream<F> {
 
     /// A terrain tile arrived (or failed): kept, retried or given up on (its
     /// parent is drawn instead; the rest of the scene goes on).
-    fn on_terrain(&mut self, key: TerrainKey, result: Result<Vec<u8>, FetchError>) {
+    fn on_terrain(&mut self, key: TerrainKey, result: Result<Vec<u8>, FetchError>, now_s: f64) {
         let Some(t) = &mut self.terrain else { return };
         let url = join(&self.base, &t.entry().tile_url(key.0, key.1, key.2));
         let outcome = result
@@ -481,16 +495,19 @@ impl<F: Fetcher> SceneStream<F> {
             .and_then(|bytes| TerrainTile::decode(&url, &bytes).map_err(|e| (e.to_string(), false)))
             .and_then(|tile| t.insert(key, tile).map_err(|e| (format!("{url}: {e}"), false)));
         if let Err((message, retryable)) = outcome {
-            let attempts = self.terrain_attempts.entry(key).or_insert(0);
+            let (attempts, due) = self.terrain_attempts.entry(key).or_insert((0, f64::INFINITY));
             *attempts += 1;
             let retrying = retryable && *attempts < self.config.max_attempts;
             if retrying {
-                t.forget(key);
+                // Stays "loading" until the retry is due.
+                *due = now_s + self.config.retry_base_s * 2f64.powi(*attempts as i32 - 1);
             } else {
                 t.mark_broken(key);
                 self.give_up(&url, &message);
             }
             self.events.push(StreamEvent::Failed { url, message, retrying });
+        } else {
+            self.terrain_attempts.remove(&key);
         }
     }
 

@@ -429,3 +429,36 @@ fn one_shard_of_a_sharded_bake_is_refused_with_the_way_out() {
     assert!(s.manifest().is_none() && r.species == 0, "nothing of the shard is used");
     assert_eq!(s.fetcher.log.len(), 1);
 }
+
+#[test]
+fn terrain_tiles_stream_retry_with_backoff_and_a_lost_one_leaves_its_parent() {
+    // The fixture has a terrain of a root and four children (the demo's hills).
+    let view = south_view();
+    let mut s = stream(StreamConfig { terrain_error_px: 0.01, ..StreamConfig::default() });
+    let mut r = FakeResidency::new(1 << 20);
+    // The root fails once with a 503; child 1/0_0 is missing.
+    s.fetcher.fail.insert(
+        "terrain/0/0_0.terr".into(),
+        VecDeque::from([FetchError::Status { url: "terrain/0/0_0.terr".into(), status: 503 }]),
+    );
+    s.fetcher.fail.insert(
+        "terrain/1/0_0.terr".into(),
+        VecDeque::from([FetchError::NotFound { url: "terrain/1/0_0.terr".into() }]),
+    );
+    let asked = |s: &SceneStream<FakeFetcher>, n: &str| s.fetcher.log.iter().filter(|(u, _)| u.ends_with(n)).count();
+    run(&mut s, &mut r, &view, 6000.0, 0.0, 0.0, 10);
+    assert_eq!(asked(&s, "terrain/0/0_0.terr"), 1, "not retried before its time");
+    assert!(!s.is_settled(), "a terrain retry is due");
+    assert!(s.terrain_draws().is_empty());
+    run(&mut s, &mut r, &view, 6000.0, 0.3, 0.01, 60);
+    assert_eq!(asked(&s, "terrain/0/0_0.terr"), 2, "retried once after the backoff");
+    assert_eq!(asked(&s, "terrain/1/0_0.terr"), 1, "404 is not retried");
+    assert!(s.is_settled());
+    // A child is lost, so the root is drawn instead of its four children.
+    let keys: Vec<_> = s.terrain_draws().iter().map(|d| d.key).collect();
+    assert_eq!(keys, vec![(0, 0, 0)], "{keys:?}");
+    assert_eq!(s.stats().terrain_resident, 4, "the root and three children");
+    assert!(s.failures().iter().any(|f| f.url.ends_with("terrain/1/0_0.terr")));
+    // The ground is known where the terrain is.
+    assert!(s.ground_height_at(0.0, 0.0).is_some_and(|h| (10.0..30.0).contains(&h)));
+}

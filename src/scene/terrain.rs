@@ -43,7 +43,7 @@ pub struct TerrainDraw {
 /// Where a tile stands.
 #[derive(Debug, Clone)]
 enum Slot {
-    /// Requested (attempt count for retries), or waiting to be retried at a time.
+    /// Requested, or waiting for a retry (the stream keeps the attempts).
     Loading,
     /// Failed for good: drawn as its parent.
     Broken,
@@ -230,7 +230,9 @@ impl TerrainTree {
                 _ => None,
             })
             .collect();
-        old.sort_unstable();
+        // Oldest first, and of the same frame the finest first (a child before
+        // its parent: a tile is only reached through its ancestors).
+        old.sort_unstable_by_key(|(used, k)| (*used, std::cmp::Reverse(k.0), k.1, k.2));
         for (_, k) in old.into_iter().take(resident - self.max_resident) {
             self.slots.remove(&k);
         }

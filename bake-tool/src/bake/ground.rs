@@ -92,7 +92,11 @@ impl Dems {
                         .with_context(|| format!("DEM {}: from the scene CRS", path.display()))?,
                 )
             };
-            out.push(GroundDem { path, dem, to_dem, geographic: crs.is_geographic() });
+            let from_dem = match to_dem {
+                Some(_) => Some(Reprojector::new(Crs::from_epsg(crs.epsg)?, &Crs::from_epsg(scene.epsg)?)?),
+                None => None,
+            };
+            out.push(GroundDem { path, dem, to_dem, from_dem, geographic: crs.is_geographic() });
         }
         Ok(Ground { dems: out })
     }
@@ -102,6 +106,8 @@ struct GroundDem {
     path: PathBuf,
     dem: Dem,
     to_dem: Option<Reprojector>,
+    /// DEM CRS → scene CRS (with `to_dem`).
+    from_dem: Option<Reprojector>,
     /// The DEM's CRS is in degrees.
     geographic: bool,
 }
@@ -133,6 +139,26 @@ impl Ground {
                 r[0].min(r[1]) * if g.geographic { 111_000.0 } else { 1.0 }
             })
             .fold(f64::MAX, f64::min)
+    }
+
+    /// The union of the DEMs' extents in the scene CRS (each DEM's corners and
+    /// edge midpoints projected), or `None` if a projection fails.
+    pub fn scene_extent(&self) -> Option<[f64; 4]> {
+        let mut b = [f64::MAX, f64::MAX, f64::MIN, f64::MIN];
+        for g in &self.dems {
+            let e = g.dem.summary().extent;
+            let (cx, cy) = ((e[0] + e[2]) * 0.5, (e[1] + e[3]) * 0.5);
+            for (x, y) in
+                [(e[0], e[1]), (e[2], e[1]), (e[0], e[3]), (e[2], e[3]), (cx, e[1]), (cx, e[3]), (e[0], cy), (e[2], cy)]
+            {
+                let (sx, sy) = match &g.from_dem {
+                    None => (x, y),
+                    Some(r) => r.apply(x, y).ok()?,
+                };
+                b = [b[0].min(sx), b[1].min(sy), b[2].max(sx), b[3].max(sy)];
+            }
+        }
+        (b[0] <= b[2]).then_some(b)
     }
 
     /// The DEM file names, for reports.

@@ -99,8 +99,7 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
         }
         let base = Manifest {
             format: SCENE_FORMAT.into(),
-            // Version 4 only where it is needed, so older viewers read the rest.
-            version: if terrain.is_some() { SCENE_VERSION } else { 3 },
+            version: SCENE_VERSION, // finish_scene writes 3 without terrain
             crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone() },
             origin_m: input.origin_m.to_array(),
             bounds: Bounds { min: [0.0; 3], max: [0.0; 3] },

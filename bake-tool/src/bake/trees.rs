@@ -240,10 +240,6 @@ pub fn place_trees(
         .into_iter()
         .filter_map(|(x, y, h, _)| reproject.apply(x, y).ok().map(|(x, y)| (x, y, h)))
         .collect();
-    // The trees' extent from the sample (the same in every shard): the terrain covers it.
-    let sample_box = projected.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, p| {
-        [b[0].min(p.0), b[1].min(p.1), b[2].max(p.0), b[3].max(p.1)]
-    });
     let mut xs: Vec<f64> = projected.iter().map(|p| p.0).collect();
     let mut ys: Vec<f64> = projected.iter().map(|p| p.1).collect();
     if xs.is_empty() {
@@ -252,6 +248,12 @@ pub fn place_trees(
     let (mx, my) = (median(&mut xs), median(&mut ys));
     let limit = opts.max_extent_km * 1000.0;
     let inside = |x: f64, y: f64| (x - mx).hypot(y - my) <= limit;
+    // The trees' extent from the sample, outliers left out (the same in every
+    // shard): the terrain covers it.
+    let sample_box =
+        projected.iter().filter(|p| inside(p.0, p.1)).fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, p| {
+            [b[0].min(p.0), b[1].min(p.1), b[2].max(p.0), b[3].max(p.1)]
+        });
     let default_height = match opts.default_height {
         Some(h) if h.is_finite() && h > 0.0 && h < MAX_TREE_HEIGHT_M => Some(h),
         Some(h) => bail!("--default-height {h}: must be a number of metres above 0 and below {MAX_TREE_HEIGHT_M}"),
@@ -335,7 +337,6 @@ pub fn place_trees(
         // The trees' extent and 100 m around (or a quarter of it).
         let b = sample_box;
         let margin = ((b[2] - b[0]).max(b[3] - b[1]) * 0.25).max(100.0);
-        let b = [b[0].max(mx - limit), b[1].max(my - limit), b[2].min(mx + limit), b[3].min(my + limit)];
         sample.ground_region = Some([
             b[0] - margin - origin.x,
             b[1] - margin - origin.y,
@@ -365,16 +366,14 @@ pub fn place_trees(
     // The terrain: the trees' extent (outliers left out) and a margin of a
     // quarter of it (at least 500 m: the hills around a plot) around, within the DEMs.
     let ground = ground.map(|g| {
-        let b = [
-            sample_box[0].max(mx - limit),
-            sample_box[1].max(my - limit),
-            sample_box[2].min(mx + limit),
-            sample_box[3].min(my + limit),
-        ];
+        let b = sample_box;
         let margin = ((b[2] - b[0]).max(b[3] - b[1]) * 0.25).max(500.0);
-        let region =
-            [b[0] - margin - origin.x, b[1] - margin - origin.y, b[2] + margin - origin.x, b[3] + margin - origin.y];
-        (g, region)
+        let mut region = [b[0] - margin, b[1] - margin, b[2] + margin, b[3] + margin];
+        // Within the DEMs (their extents in the scene CRS).
+        if let Some(e) = g.scene_extent() {
+            region = [region[0].max(e[0]), region[1].max(e[1]), region[2].min(e[2]), region[3].min(e[3])];
+        }
+        (g, [region[0] - origin.x, region[1] - origin.y, region[2] - origin.x, region[3] - origin.y])
     });
     let fitted = fit.and_then(super::ground::GroundFit::finish).zip(sample.ground_region);
     Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted })
