@@ -187,8 +187,8 @@ pub(crate) struct RenderArgs {
     /// Draw the boxes of the batches that pass the batch test.
     #[arg(long)]
     pub(crate) debug_bounds: bool,
-    /// Leave the terrain out (the trees over the plain background; the
-    /// with/without-terrain frame-time comparison).
+    /// Leave the terrain out: neither fetched nor drawn (the trees over the
+    /// plain background; the with/without-terrain comparison).
     #[arg(long)]
     pub(crate) no_terrain: bool,
     /// Write frame statistics as JSON here.

@@ -108,6 +108,11 @@ impl<F: Fetcher> Frame<F> {
     /// seconds, for retry backoff). Events wait in the stream
     /// ([`SceneStream::drain_events`]).
     pub fn stream(&mut self, view: &ViewData, now_s: f64) {
+        // The terrain setting decides what is fetched too, not only what is drawn.
+        if self.stream.config().terrain != self.settings.terrain {
+            let config = crate::scene::StreamConfig { terrain: self.settings.terrain, ..self.stream.config() };
+            self.stream.set_config(config);
+        }
         self.renderer.measure_reach(view, &self.settings);
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);

@@ -51,7 +51,7 @@ pub struct RenderSettings {
     /// below this many pixels tall draws a prefix of them, scaled up to keep the
     /// canopy's coverage. 0: off.
     pub thin_px: f32,
-    /// Draw the terrain (when the scene has one).
+    /// Fetch and draw the terrain (when the scene has one).
     pub terrain: bool,
 }
 

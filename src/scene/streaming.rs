@@ -38,6 +38,8 @@ pub struct StreamConfig {
     /// Terrain level selection: a tile is refined while its geometric error
     /// projects to more than this many pixels.
     pub terrain_error_px: f32,
+    /// Stream (and select) the terrain at all; off, no terrain tile is fetched.
+    pub terrain: bool,
 }
 
 impl Default for StreamConfig {
@@ -49,6 +51,7 @@ impl Default for StreamConfig {
             gpu_budget_bytes: 0,
             max_bytes_per_s: 0.0,
             terrain_error_px: 2.0,
+            terrain: true,
         }
     }
 }
@@ -463,6 +466,10 @@ impl<F: Fetcher> SceneStream<F> {
     /// Picks the terrain tiles the view draws and the ones it waits for.
     fn select_terrain(&mut self, view: &ViewData) {
         self.terrain_wanted.clear();
+        if !self.config.terrain {
+            self.terrain_draws.clear();
+            return;
+        }
         let Some(t) = &mut self.terrain else { return };
         let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
         t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws, &mut self.terrain_wanted);
