@@ -452,6 +452,15 @@ impl Viewer {
         self.frame.stream.set_config(c);
     }
 
+    /// Terrain on or off (off: neither fetched nor drawn), and the projected
+    /// geometric error (pixels) up to which a coarser terrain level is kept.
+    pub fn set_terrain(&mut self, on: bool, error_px: f32) {
+        self.frame.settings.terrain = on;
+        let mut c = self.frame.stream.config();
+        c.terrain_error_px = if error_px.is_finite() { error_px.clamp(0.25, 64.0) } else { 2.0 };
+        self.frame.stream.set_config(c);
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.frame.settings.quality = quality.clamp(0.05, 4.0);

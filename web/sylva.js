@@ -7,6 +7,7 @@
 //   v.setFly(true)                          walking mode (eye height above the ground)
 //   v.flyTo({...}, seconds)                 smooth move; {lon, lat, aboveGround} flies to a height above the ground
 //   v.heightAt(lon, lat)                    ground height there (metres, the scene's datum), null if unknown
+//   v.setTerrain(on, errorPx = 2)           terrain on/off; coarser terrain with a larger errorPx
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -73,6 +74,10 @@ class SylvaViewer {
     const h = this.viewer.height_at(lon, lat);
     return Number.isFinite(h) ? h : null;
   }
+
+  /** Terrain on or off (off: neither fetched nor drawn); `errorPx` is the
+   * projected geometric error in pixels up to which coarser terrain is kept. */
+  setTerrain(on, errorPx = 2) { this.viewer.set_terrain(!!on, errorPx); this.dirty = 8; }
 
   /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg, ground under the eye). */
   camera() { return JSON.parse(this.viewer.camera_json()); }

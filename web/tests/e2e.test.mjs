@@ -303,6 +303,11 @@ test('the terrain is drawn under the trees and heightAt reads it', async () => {
   // (Frames are slow on lavapipe: wait for the flight to land, not a fixed time.)
   await page.waitForFunction(() => window.sylva.flight === null, null, { timeout: 60000 });
   const cam = await page.evaluate(() => window.sylva.camera());
+  // Terrain off: not drawn; on again: drawn.
+  await page.evaluate(() => window.sylva.setTerrain(false));
+  await page.waitForFunction(() => window.sylva.stats().terrain_drawn === 0, null, { timeout: 60000 });
+  await page.evaluate(() => window.sylva.setTerrain(true, 4));
+  await page.waitForFunction(() => window.sylva.stats().terrain_drawn > 0, null, { timeout: 60000 });
   assert.ok(Math.abs(cam.z - cam.ground - 50) < 1, `flew to ${JSON.stringify(cam)} from ${JSON.stringify(before)}`);
   assert.deepEqual(errors, []);
 });
