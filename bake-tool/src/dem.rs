@@ -233,13 +233,26 @@ impl Dem {
         h.is_finite().then_some(h)
     }
 
-    /// Extent, resolution, height range and holes.
+    /// Map bounds of the pixel areas (min x, min y, max x, max y), without
+    /// reading the heights.
     #[must_use]
-    pub fn summary(&self) -> DemSummary {
+    pub fn extent(&self) -> [f64; 4] {
         let xa = self.x0 - 0.5 * self.dx;
         let xb = self.x0 + (f64::from(self.width) - 0.5) * self.dx;
         let ya = self.y0 - 0.5 * self.dy;
         let yb = self.y0 + (f64::from(self.height) - 0.5) * self.dy;
+        [xa.min(xb), ya.min(yb), xa.max(xb), ya.max(yb)]
+    }
+
+    /// Pixel size (x, y), map units.
+    #[must_use]
+    pub fn resolution(&self) -> [f64; 2] {
+        [self.dx.abs(), self.dy.abs()]
+    }
+
+    /// Extent, resolution, height range and holes (reads every height).
+    #[must_use]
+    pub fn summary(&self) -> DemSummary {
         let mut range: Option<(f32, f32)> = None;
         let mut holes = 0;
         for &h in &self.heights {
@@ -249,12 +262,7 @@ impl Dem {
                 holes += 1;
             }
         }
-        DemSummary {
-            extent: [xa.min(xb), ya.min(yb), xa.max(xb), ya.max(yb)],
-            resolution: [self.dx.abs(), self.dy.abs()],
-            range,
-            holes,
-        }
+        DemSummary { extent: self.extent(), resolution: self.resolution(), range, holes }
     }
 }
 

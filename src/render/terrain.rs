@@ -75,6 +75,8 @@ pub struct TerrainPass {
     pub dropped: u32,
     /// Tiles uploaded since the start (for stats and tests).
     pub uploads: u64,
+    /// This frame's draw records (kept between frames: no allocation in steady state).
+    records: Vec<GpuTerrainDraw>,
 }
 
 impl TerrainPass {
@@ -116,7 +118,7 @@ impl TerrainPass {
         let _ = DEPTH_FORMAT;
         let pipeline =
             super::layouts::pulling_pipeline(device, "terrain", &module, &pipeline_layout, "fs_main", &target);
-        Self { pipeline, layout, pool: None, frame: 0, count: 0, dropped: 0, uploads: 0 }
+        Self { pipeline, layout, pool: None, frame: 0, count: 0, dropped: 0, uploads: 0, records: Vec::new() }
     }
 
     /// Bytes of GPU memory held.
@@ -160,7 +162,8 @@ impl TerrainPass {
                 debug: u32::from(debug),
             }),
         );
-        let mut records = Vec::with_capacity(draws.len().min(pool.capacity));
+        let mut records = std::mem::take(&mut self.records);
+        records.clear();
         for d in draws {
             if d.tile.grid != grid {
                 self.dropped += 1;
@@ -218,6 +221,7 @@ impl TerrainPass {
             queue.write_buffer(&pool.draws, 0, bytemuck::cast_slice(&records));
         }
         self.count = records.len() as u32;
+        self.records = records;
     }
 
     /// Sizes the pool for a scene's terrain of `tiles` tiles of `grid` cells

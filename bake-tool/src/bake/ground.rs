@@ -135,7 +135,7 @@ impl Ground {
         self.dems
             .iter()
             .map(|g| {
-                let r = g.dem.summary().resolution;
+                let r = g.dem.resolution();
                 r[0].min(r[1]) * if g.geographic { 111_000.0 } else { 1.0 }
             })
             .fold(f64::MAX, f64::min)
@@ -146,7 +146,7 @@ impl Ground {
     pub fn scene_extent(&self) -> Option<[f64; 4]> {
         let mut b = [f64::MAX, f64::MAX, f64::MIN, f64::MIN];
         for g in &self.dems {
-            let e = g.dem.summary().extent;
+            let e = g.dem.extent();
             let (cx, cy) = ((e[0] + e[2]) * 0.5, (e[1] + e[3]) * 0.5);
             for (x, y) in
                 [(e[0], e[1]), (e[2], e[1]), (e[0], e[3]), (e[2], e[3]), (cx, e[1]), (cx, e[3]), (e[0], cy), (e[2], cy)]
@@ -171,7 +171,7 @@ impl Ground {
         self.dems
             .iter()
             .map(|g| {
-                let e = g.dem.summary().extent;
+                let e = g.dem.extent();
                 format!("{} covers x {:.1}–{:.1}, y {:.1}–{:.1}", name(&g.path), e[0], e[2], e[1], e[3])
             })
             .collect::<Vec<_>>()
