@@ -12,6 +12,9 @@
 @group(1) @binding(0) var<storage, read> heights: array<u32>;
 @group(1) @binding(1) var<storage, read> tiles: array<TerrainDraw>;
 @group(1) @binding(2) var<uniform> params: TerrainParams;
+// Ground images (scene::imagery): 256² sRGB layers with mipmaps, alpha = coverage.
+@group(2) @binding(0) var images: texture_2d_array<f32>;
+@group(2) @binding(1) var image_sampler: sampler;
 
 // Must match `GpuTerrainDraw` in src/render/terrain.rs.
 struct TerrainDraw {
@@ -27,7 +30,16 @@ struct TerrainDraw {
     parent_error_m: f32,
     // How far the skirt hangs below the edge, metres.
     skirt_m: f32,
+    // Where the tile lies in its image: uv offset (xy) and scale (zw).
+    image_uv: vec4<f32>,
+    // Layer of the image, NO_IMAGE for none.
+    layer: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 };
+
+const NO_IMAGE: u32 = 0xffffffffu;
 
 // Must match `TerrainParams` in src/render/terrain.rs.
 struct TerrainParams {
@@ -47,6 +59,9 @@ struct VertexOut {
     // 1 where every vertex of the triangle has data (holes: < 1, discarded).
     @location(1) valid: f32,
     @location(2) @interpolate(flat) level_tint: f32,
+    // Position in the tile (east, north; 0–1) mapped into its image's uv.
+    @location(3) image_uv: vec2<f32>,
+    @location(4) @interpolate(flat) layer: u32,
 };
 
 const HOLE: u32 = 0xffffu;
@@ -135,6 +150,9 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.normal = normal;
     out.valid = own.y;
     out.level_tint = log2(max(t.size_m, 1.0));
+    let tile_uv = vec2<f32>(f32(i), f32(j)) / f32(n);
+    out.image_uv = t.image_uv.xy + tile_uv * t.image_uv.zw;
+    out.layer = t.layer;
     return out;
 }
 
@@ -156,5 +174,14 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         let k = u32(in.level_tint) % 3u;
         albedo = select(select(vec3<f32>(0.5, 0.3, 0.3), vec3<f32>(0.3, 0.5, 0.3), k == 1u), vec3<f32>(0.3, 0.3, 0.5), k == 2u);
     }
-    return vec4<f32>(shade(albedo, n, false, view), 1.0);
+    var lit = shade(albedo, n, false, view);
+    // Sampled everywhere (uniform control flow), used where there is an image.
+    let has = in.layer != NO_IMAGE && params.debug == 0u;
+    let photo = textureSample(images, image_sampler, vec2<f32>(in.image_uv.x, 1.0 - in.image_uv.y), select(0u, in.layer, has));
+    // A photograph already holds the light of its day: relit by the slope
+    // relative to flat ground, so level ground shows its own colours.
+    let flat_light = view.ambient.rgb + view.sun_color.rgb * max(view.sun_dir.z, 0.0);
+    let relit = shade(photo.rgb, n, false, view) / max(flat_light, vec3<f32>(1e-3));
+    lit = mix(lit, relit, select(0.0, photo.a, has));
+    return vec4<f32>(lit, 1.0);
 }

@@ -341,6 +341,7 @@ fn terrain_decoder_error_paths() {
         tiles: 21,
         bytes: 180_000,
         source: "dem.tif".into(),
+        imagery: None,
     });
     let back = Manifest::decode("scene.json", &m.encode()).unwrap();
     assert_eq!(back.terrain.as_ref().unwrap().tile_url(2, 3, 1), "terrain/2/3_1.terr");
@@ -351,6 +352,36 @@ fn terrain_decoder_error_paths() {
     m.version = 4;
     m.terrain.as_mut().unwrap().path = "../outside".into();
     assert!(Manifest::decode("scene.json", &m.encode()).is_err(), "a terrain path leaving the scene is refused");
+    // Version 5 adds ground imagery.
+    m.terrain.as_mut().unwrap().path = "terrain".into();
+    m.terrain.as_mut().unwrap().imagery = Some(sylva::format::terrain::ImageryEntry {
+        path: "terrain/img".into(),
+        tile_px: 256,
+        levels: 2,
+        extent_m: [-300.0, -300.0, 300.0, 250.0],
+        resolution_m: 0.5,
+        tiles: 5,
+        bytes: 90_000,
+        source: "ortho.tif".into(),
+    });
+    let e = Manifest::decode("scene.json", &m.encode()).unwrap_err().to_string();
+    assert!(e.contains("\"terrain.imagery\" needs manifest version 5"), "{e}");
+    m.version = 5;
+    let back = Manifest::decode("scene.json", &m.encode()).unwrap();
+    assert_eq!(back.terrain.as_ref().unwrap().imagery.as_ref().unwrap().tile_url(1, 0, 1), "terrain/img/1/0_1.jpg");
+    type Edit = fn(&mut sylva::format::terrain::ImageryEntry);
+    let edits: [(Edit, &str); 4] = [
+        (|i: &mut sylva::format::terrain::ImageryEntry| i.levels = 4, "levels"),
+        (|i: &mut sylva::format::terrain::ImageryEntry| i.tile_px = 300, "tile_px"),
+        (|i: &mut sylva::format::terrain::ImageryEntry| i.extent_m[0] = f64::NAN, "extent_m"),
+        (|i: &mut sylva::format::terrain::ImageryEntry| i.path = "/etc".into(), "path"),
+    ];
+    for (bad, why) in edits {
+        let mut m = m.clone();
+        bad(m.terrain.as_mut().unwrap().imagery.as_mut().unwrap());
+        let e = Manifest::decode("scene.json", &m.encode());
+        assert!(e.is_err(), "{why} is refused");
+    }
 }
 
 #[test]
@@ -569,7 +600,7 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 5.into(), "version 5");
+    manifest_error(|v| v["version"] = 6.into(), "version 6");
     manifest_error(
         |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
         "needs manifest version 2",

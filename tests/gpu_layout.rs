@@ -46,6 +46,25 @@ macro_rules! members {
 }
 
 #[test]
+fn the_terrain_structs_match_their_wgsl_twins() {
+    use sylva::render::terrain::{GpuTerrainDraw, TerrainParams};
+    check(
+        "terrain",
+        "TerrainDraw",
+        &members!(GpuTerrainDraw: origin_m, slot, size_m, range_m, parent_error_m, skirt_m, image_uv, layer, pad0, pad1, pad2),
+        size_of::<GpuTerrainDraw>(),
+        None,
+    );
+    check(
+        "terrain",
+        "TerrainParams",
+        &members!(TerrainParams: grid, words, threshold_px, debug),
+        size_of::<TerrainParams>(),
+        None,
+    );
+}
+
+#[test]
 fn shared_structs_match_their_wgsl_twins() {
     // Every pass composes shaders/common.wgsl: check in each where the struct is used.
     for shader in ["cull", "mesh", "billboard", "cluster"] {

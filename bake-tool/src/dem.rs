@@ -21,11 +21,11 @@ use tiff::tags::Tag;
 pub const MAX_DEM_PIXELS: u64 = 1 << 30;
 
 /// Most decoded bytes per byte of file (see [`Dem::read`]).
-const MAX_EXPANSION: u64 = 2048;
+pub(crate) const MAX_EXPANSION: u64 = 2048;
 
 /// GeoKey ids (GeoTIFF 1.1, §7).
 const GT_MODEL_TYPE: u16 = 1024;
-const GT_RASTER_TYPE: u16 = 1025;
+pub(crate) const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const PROJECTED_CS_TYPE: u16 = 3072;
 /// A user-defined CRS code in a GeoKey.
@@ -277,7 +277,7 @@ fn kind_name(r: &DecodingResult) -> &'static str {
 
 /// (x of pixel (0,0)'s tie corner, x step, y, y step, tiepoint-is-centre) from
 /// the GeoTIFF model tags.
-fn georeference<R: Read + Seek>(d: &mut Decoder<R>) -> Result<(f64, f64, f64, f64, bool)> {
+pub(crate) fn georeference<R: Read + Seek>(d: &mut Decoder<R>) -> Result<(f64, f64, f64, f64, bool)> {
     let scale = d.find_tag(Tag::ModelPixelScaleTag).ok().flatten().and_then(|v| v.into_f64_vec().ok());
     let tie = d.find_tag(Tag::ModelTiepointTag).ok().flatten().and_then(|v| v.into_f64_vec().ok());
     if let (Some(s), Some(t)) = (&scale, &tie) {
@@ -315,7 +315,7 @@ fn georeference<R: Read + Seek>(d: &mut Decoder<R>) -> Result<(f64, f64, f64, f6
 }
 
 /// The GeoKey directory as (key, value) pairs of the inline SHORT keys.
-fn geokeys<R: Read + Seek>(d: &mut Decoder<R>) -> Vec<(u16, u16)> {
+pub(crate) fn geokeys<R: Read + Seek>(d: &mut Decoder<R>) -> Vec<(u16, u16)> {
     let Ok(Some(v)) = d.find_tag(Tag::GeoKeyDirectoryTag) else { return Vec::new() };
     let Ok(words) = v.into_u16_vec() else { return Vec::new() };
     if words.len() < 4 {
@@ -326,7 +326,7 @@ fn geokeys<R: Read + Seek>(d: &mut Decoder<R>) -> Vec<(u16, u16)> {
 }
 
 /// The EPSG code the GeoKeys name, `None` when they name none.
-fn crs_code(keys: &[(u16, u16)]) -> Result<Option<u32>> {
+pub(crate) fn crs_code(keys: &[(u16, u16)]) -> Result<Option<u32>> {
     let get = |id: u16| keys.iter().find(|k| k.0 == id).map(|k| k.1);
     let code = match get(GT_MODEL_TYPE) {
         Some(2) => get(GEOGRAPHIC_TYPE),

@@ -4,4 +4,5 @@
 
 pub mod dem;
 pub mod gltf_import;
+pub mod ortho;
 pub mod patterns;

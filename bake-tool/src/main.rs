@@ -273,6 +273,15 @@ struct BakeArgs {
     /// and says how many and where; skip leaves them out (reported).
     #[arg(long, value_enum, default_value_t = bake::ground::OutsideDem::Error)]
     outside_dem: bake::ground::OutsideDem,
+    /// Orthophoto, an RGB(A) GeoTIFF (repeat for several; 8- or 16-bit grey,
+    /// RGB or RGBA, strips or tiles, deflate/LZW, GDAL nodata): draped on the
+    /// terrain as ground imagery, baked into one 256² JPEG per terrain tile
+    /// down to the photo's resolution. Needs terrain (--dem, or a fitted ground).
+    #[arg(long = "ortho", value_name = "FILE.tif")]
+    orthos: Vec<PathBuf>,
+    /// CRS of the --ortho files, when their GeoKeys name none (or name the wrong one).
+    #[arg(long, value_name = "EPSG:xxxx")]
+    ortho_crs: Option<String>,
     #[command(flatten)]
     pack: PackArgs,
     /// Trees held in memory at once while tiling; larger inputs are partitioned
@@ -404,6 +413,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
     });
     let input = SceneInput {
         terrain,
+        imagery: None,
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
         trees: TreeSource::Memory(trees),
@@ -516,6 +526,11 @@ fn bake(args: &BakeArgs) -> Result<()> {
     let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
     inputs.extend(args.allometry.as_deref());
     inputs.extend(args.dems.iter().map(PathBuf::as_path));
+    inputs.extend(args.orthos.iter().map(PathBuf::as_path));
+    if !args.orthos.is_empty() && args.no_terrain {
+        bail!("--ortho drapes imagery on the terrain: it cannot be used with --no-terrain");
+    }
+    let orthos = bake::imagery::Orthos::open(&args.orthos, args.ortho_crs.as_deref(), &log)?;
     for m in &args.models {
         inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
     }
@@ -575,8 +590,27 @@ fn bake(args: &BakeArgs) -> Result<()> {
             source: g.names(),
         });
     let terrain = if args.no_terrain { None } else { terrain.or(fitted) };
+    let orthos = if orthos.is_empty() { None } else { Some(orthos.in_scene(&placed.crs)?) };
+    let ortho_colour = orthos.as_ref().map(|o| {
+        let (ox, oy) = (placed.origin_m.x, placed.origin_m.y);
+        move |x: f64, y: f64| o.colour_at(x + ox, y + oy)
+    });
+    let imagery = match (&orthos, &ortho_colour) {
+        (Some(o), Some(colour)) => {
+            let e = o.scene_extent().context("the --ortho extent cannot be projected into the scene CRS")?;
+            let (ox, oy) = (placed.origin_m.x, placed.origin_m.y);
+            Some(bake::imagery::ImagerySource {
+                colour,
+                extent_m: [e[0] - ox, e[1] - oy, e[2] - ox, e[3] - oy],
+                resolution_m: o.resolution_m(),
+                source: o.names(),
+            })
+        }
+        _ => None,
+    };
     let input = SceneInput {
         terrain,
+        imagery,
         cell_size_m: placed.cell_size_m,
         species,
         trees: placed.trees,

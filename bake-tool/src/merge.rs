@@ -110,6 +110,13 @@ fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Resu
             create_dir(parent)?;
         }
         std::fs::write(to.join(&rel), &bytes).with_context(|| format!("cannot write {}", to.join(&rel).display()))?;
+        if let Some(i) = t.imagery.as_ref().filter(|_| t.has_imagery(level, x, y)) {
+            let img = i.tile_url(level, x, y);
+            if let Some(parent) = to.join(&img).parent() {
+                create_dir(parent)?;
+            }
+            copy(from, to, &img)?;
+        }
         for (k, c) in tile.children.iter().enumerate() {
             if c.exists && level + 1 < t.levels {
                 stack.push((level + 1, 2 * x + (k as u32 & 1), 2 * y + (k as u32 >> 1)));

@@ -84,6 +84,7 @@ pub fn is_bake_file(rel: &str) -> bool {
         ["tiles", f] => plain(f, &[".tile", ".ids"]),
         ["index", f] => plain(f, &[".json"]),
         ["terrain", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".terr"]),
+        ["terrain", "img", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".jpg"]),
         _ => false,
     }
 }
@@ -402,6 +403,7 @@ mod tests {
             "tiles/0_0.ids",
             "index/r0.json",
             "terrain/3/5_7.terr",
+            "terrain/img/2/1_3.jpg",
         ] {
             assert!(is_bake_file(ok), "{ok}");
         }
@@ -416,6 +418,8 @@ mod tests {
             "lnk/important.doc",
             "species/../thesis.txt",
             "tiles",
+            "terrain/img/x/1_3.jpg",
+            "terrain/img/2/photo.png",
         ] {
             assert!(!is_bake_file(not), "{not}");
         }

@@ -51,8 +51,12 @@ pub fn finish_scene(
         batches: tiles.iter().map(|t| u64::from(t.batches)).sum(),
         tiles: tiles.len() as u64,
     };
-    // Version 4 only with terrain, so older viewers read the rest.
-    base.version = if base.terrain.is_some() { SCENE_VERSION } else { 3 };
+    // The oldest version that holds what the scene has, so older viewers read it.
+    base.version = match &base.terrain {
+        Some(t) if t.imagery.is_some() => SCENE_VERSION,
+        Some(_) => 4,
+        None => 3,
+    };
     base.home = sylva::format::manifest::densest_group(&tiles);
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);

@@ -140,3 +140,173 @@ fn the_ground_of_a_dem_is_drawn_without_cracks_and_the_trees_stand_on_it() {
     assert_eq!(checked, 120);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Red and blue 40 m squares (UTM metres), the orthophoto's pattern.
+fn checker(x: f64, y: f64) -> [u8; 3] {
+    if ((x / 40.0).floor() + (y / 40.0).floor()) as i64 % 2 == 0 {
+        [200, 40, 40]
+    } else {
+        [40, 60, 200]
+    }
+}
+
+/// Green and yellow squares of 0.0005° (about 40 × 55 m): the XYZ source's pattern.
+fn lonlat_checker(lon: f64, lat: f64) -> [u8; 3] {
+    if ((lon * 2000.0).floor() + (lat * 2000.0).floor()) as i64 % 2 == 0 {
+        [30, 190, 40]
+    } else {
+        [230, 220, 30]
+    }
+}
+
+/// Pixels whose hue is clearly `which`: 0 red, 1 green, 2 blue (count only
+/// strongly tinted pixels: the ground material and the sky are neither).
+fn tinted(img: &[u8], which: usize) -> usize {
+    img.chunks_exact(4)
+        .filter(|p| {
+            let c = [i32::from(p[0]), i32::from(p[1]), i32::from(p[2])];
+            (0..3).filter(|&k| k != which).all(|k| c[which] > c[k] + 50)
+        })
+        .count()
+}
+
+#[test]
+fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
+    if !model.exists() {
+        eprintln!("skipping: {} not present", model.display());
+        return;
+    }
+    let dir = tmp("terrain-imagery");
+    let dem = dir.join("hills.tif");
+    write_geotiff_dem(&dem, 300, 2.0, hills); // x 500000–500600, y 5299400–5300000
+    let ortho = dir.join("ortho.tif");
+    // 1 m pixels over x 500050–500550, y 5299450–5299950.
+    common::write_geotiff_ortho(&ortho, (500, 500), 1.0, (500_050.0, 5_299_950.0), checker);
+    std::fs::write(dir.join("trees.csv"), "id,x,y,height\n1,500020,5299420,12\n2,500030,5299420,12\n").unwrap();
+    let scene = dir.join("scene");
+    let o = run(common::bin()
+        .arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--placements")
+        .arg(dir.join("trees.csv"))
+        .args(["--input-crs", "EPSG:32633", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+        .arg("--dem")
+        .arg(&dem)
+        .arg("--ortho")
+        .arg(&ortho)
+        .arg("--out")
+        .arg(&scene));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("imagery: ") && log.contains("ortho.tif"), "{log}");
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
+    assert_eq!(m.version, 5, "imagery needs manifest version 5");
+    let t = m.terrain.clone().unwrap();
+    let i = t.imagery.clone().expect("an imagery entry");
+    let origin = DVec3::from(m.origin_m);
+    assert!(
+        (i.extent_m[0] + origin.x - 500_050.0).abs() < 1e-6 && (i.extent_m[3] + origin.y - 5_299_950.0).abs() < 1e-6
+    );
+    assert_eq!(i.resolution_m, 1.0);
+    // The finest images have pixels of at most 1 m (the photo's).
+    assert!(t.tile_size_m(i.levels - 1) / 256.0 <= 1.0 + 1e-9, "{t:?}");
+    assert!(i.levels >= 2 && i.tiles >= 5, "{i:?}");
+    // An image of the finest level holds the photo where it is (JPEG: within a few levels).
+    let mut checked = 0;
+    for x in 0..(1u32 << (i.levels - 1)) {
+        for y in 0..(1u32 << (i.levels - 1)) {
+            let l = i.levels - 1;
+            let Ok(bytes) = std::fs::read(scene.join(i.tile_url(l, x, y))) else { continue };
+            assert!(t.has_imagery(l, x, y));
+            let img = sylva::format::imagery::decode_image("img", &bytes, 256).unwrap();
+            let [ox, oy] = t.tile_origin_m(l, x, y);
+            let s = t.tile_size_m(l);
+            for (pi, pj) in [(40u32, 40u32), (128, 128), (200, 90), (90, 220)] {
+                let (mx, my) = (
+                    origin.x + ox + s * (f64::from(pi) + 0.5) / 256.0,
+                    origin.y + oy + s * (1.0 - (f64::from(pj) + 0.5) / 256.0),
+                );
+                let inside = (500_052.0..500_548.0).contains(&mx) && (5_299_452.0..5_299_948.0).contains(&my);
+                let near_edge = [mx, my].iter().any(|v| (v.rem_euclid(40.0) - 20.0).abs() > 17.0);
+                if !inside || near_edge {
+                    continue;
+                }
+                let at = ((pj * 256 + pi) * 4) as usize;
+                let want = checker(mx, my);
+                for k in 0..3 {
+                    let d = (i32::from(img.pixels[at + k]) - i32::from(want[k])).abs();
+                    assert!(
+                        d < 30,
+                        "image {l}/{x}/{y} pixel {pi},{pj} at {mx:.1},{my:.1}: {:?} vs {want:?}",
+                        &img.pixels[at..at + 3]
+                    );
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 8, "only {checked} pixels checked");
+
+    // Drawn: looking down on the photo's middle, the ground shows its red and
+    // blue squares; without imagery neither colour.
+    let mut off = open(&scene);
+    off.settings.draw_distance_m = 1.0; // ground only
+    let (cx, cy) = (500_300.0, 5_299_700.0);
+    let eye = DVec3::new(cx - origin.x, cy - origin.y, hills(cx, cy) - origin.z + 160.0);
+    let cam = Camera { eye_m: eye, pitch_rad: -1.5, ..Camera::default() };
+    let img = render(&mut off, &cam);
+    if let Ok(d) = std::env::var("SYLVA_TEST_IMAGES") {
+        image::save_buffer(Path::new(&d).join("imagery-ortho.png"), &img, W, H, image::ColorType::Rgba8).unwrap();
+    }
+    let (red, blue) = (tinted(&img, 0), tinted(&img, 2));
+    let all = (W * H) as usize;
+    assert!(red > all / 5 && blue > all / 5, "red {red}, blue {blue} of {all} pixels");
+    assert!(off.stream.stats().imagery_drawn > 0);
+    off.stream.set_imagery(sylva::scene::imagery::ImageryChoice::Off);
+    let plain = render(&mut off, &cam);
+    assert_eq!((tinted(&plain, 0), tinted(&plain, 2)), (0, 0), "the ground material is neither red nor blue");
+
+    // An XYZ source on a local server replaces it, reprojected from Web
+    // Mercator onto the scene's UTM terrain.
+    let (template, served) = common::xyz_server(lonlat_checker);
+    let src = sylva::scene::imagery::XyzSource::new(&template, 19).unwrap();
+    off.stream.set_imagery(sylva::scene::imagery::ImageryChoice::Xyz(src));
+    let img = render(&mut off, &cam);
+    if let Ok(d) = std::env::var("SYLVA_TEST_IMAGES") {
+        image::save_buffer(Path::new(&d).join("imagery-xyz.png"), &img, W, H, image::ColorType::Rgba8).unwrap();
+    }
+    assert!(served.load(std::sync::atomic::Ordering::SeqCst) > 0, "the tile server was not asked");
+    let (green, yellow) =
+        (tinted(&img, 1), img.chunks_exact(4).filter(|p| p[0] > 150 && p[1] > 150 && p[2] < 90).count());
+    assert!(green > all / 5 && yellow > all / 5, "green {green}, yellow {yellow} of {all}");
+    assert_eq!((tinted(&img, 0), tinted(&img, 2)), (0, 0), "the baked photo is replaced");
+    // Each composed image holds the source's colour at its pixels' lon/lat.
+    let geo = sylva::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
+    let mut compared = 0;
+    for d in off.stream.terrain_draws() {
+        let Some(di) = &d.imagery else { continue };
+        let k = di.key.1;
+        let [ox, oy] = t.tile_origin_m(k.0, k.1, k.2);
+        let s = t.tile_size_m(k.0);
+        for (pi, pj) in [(30u32, 30u32), (128, 128), (220, 60), (60, 200), (170, 170)] {
+            let p =
+                DVec3::new(ox + s * (f64::from(pi) + 0.5) / 256.0, oy + s * (1.0 - (f64::from(pj) + 0.5) / 256.0), 0.0);
+            let (lon, lat, _) = geo.to_geo(p).unwrap();
+            let edge = [lon * 2000.0, lat * 2000.0].iter().any(|v| (v.fract().abs() - 0.5).abs() > 0.42);
+            if edge {
+                continue;
+            }
+            let at = ((pj * 256 + pi) * 4) as usize;
+            let want = lonlat_checker(lon, lat);
+            let got = &di.tile.rgba[at..at + 4];
+            assert!(
+                (0..3).all(|c| (i32::from(got[c]) - i32::from(want[c])).abs() < 12) && got[3] == 255,
+                "image {k:?} pixel {pi},{pj} at {lon:.6},{lat:.6}: {got:?} vs {want:?}"
+            );
+            compared += 1;
+        }
+    }
+    assert!(compared >= 10, "only {compared} pixels compared");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -191,6 +191,19 @@ pub(crate) struct RenderArgs {
     /// plain background; the with/without-terrain comparison).
     #[arg(long)]
     pub(crate) no_terrain: bool,
+    /// Ground imagery from an XYZ or WMTS raster source in Web Mercator
+    /// instead of the scene's own: a URL template with {z}/{x}/{y} ({-y} for
+    /// TMS rows) or WMTS {TileMatrix}/{TileCol}/{TileRow}, reprojected onto
+    /// the scene's terrain (e.g. http://127.0.0.1:8080/{z}/{x}/{y}.png).
+    #[arg(long, value_name = "URL_TEMPLATE", conflicts_with = "no_imagery")]
+    pub(crate) imagery: Option<String>,
+    /// Finest zoom level the --imagery source serves.
+    #[arg(long, default_value_t = 19)]
+    pub(crate) imagery_max_zoom: u8,
+    /// No ground imagery (the terrain's own ground material), even where the
+    /// scene has baked imagery.
+    #[arg(long)]
+    pub(crate) no_imagery: bool,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,

@@ -9,6 +9,7 @@ use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
 use sylva::render::forest::{PoolConfig, RenderSettings};
 use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::render::GpuContext;
+use sylva::scene::imagery::{ImageryChoice, XyzSource};
 use sylva::scene::StreamEvent;
 
 use super::args::*;
@@ -21,12 +22,14 @@ pub(crate) fn render_scene(
     view: SceneView,
     camera: Option<&str>,
     settings: RenderSettings,
+    imagery: ImageryChoice,
     stats_path: Option<&PathBuf>,
     timeout: f64,
     allow_partial: bool,
 ) -> Result<()> {
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     off.settings = settings;
+    off.stream.set_imagery(imagery);
     // The manifest first: the named views are derived from its bounds.
     let mut events = off.load_view(&Camera::default(), timeout);
     let manifest = match off.stream.manifest() {
@@ -130,6 +133,9 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         thin_px,
         debug_bounds,
         no_terrain,
+        imagery,
+        imagery_max_zoom,
+        no_imagery,
         stats,
         timeout,
         allow_partial,
@@ -145,6 +151,13 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
     }
     check_thin_px(thin_px)?;
+    let imagery = match (imagery, no_imagery) {
+        (_, true) => ImageryChoice::Off,
+        (Some(t), false) => {
+            ImageryChoice::Xyz(XyzSource::new(&t, imagery_max_zoom).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?)
+        }
+        (None, false) => ImageryChoice::Scene,
+    };
     if let Some(scene) = scene {
         use sylva::render::forest::Representations;
         let settings = RenderSettings {
@@ -171,6 +184,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             view,
             camera.as_deref(),
             settings,
+            imagery,
             stats.as_ref(),
             timeout,
             allow_partial,

@@ -12,11 +12,13 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 4).
+/// Newest manifest version this build writes and reads (it reads 1 to 5).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
-/// version 3 where the trees are (`home`); version 4 the terrain. The bake
-/// writes version 3 for scenes without terrain, so older viewers read them.
-pub const SCENE_VERSION: u32 = 4;
+/// version 3 where the trees are (`home`); version 4 the terrain; version 5
+/// ground imagery (`terrain.imagery`). The bake writes the oldest version
+/// that holds what a scene has (3 without terrain, 4 with terrain and no
+/// imagery), so older viewers read them.
+pub const SCENE_VERSION: u32 = 5;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -136,7 +138,7 @@ impl Manifest {
                 )));
             }
             let version = value.get("version").and_then(serde_json::Value::as_u64);
-            if !matches!(version, Some(1..=4)) {
+            if !matches!(version, Some(1..=5)) {
                 return Err(Problem::UnsupportedVersion {
                     found: version.unwrap_or(0).min(u32::MAX.into()) as u32,
                     supported: SCENE_VERSION,
@@ -168,6 +170,9 @@ impl Manifest {
         if let Some(t) = &self.terrain {
             if self.version < 4 {
                 return Err(Problem::Invalid("\"terrain\" needs manifest version 4".into()));
+            }
+            if t.imagery.is_some() && self.version < 5 {
+                return Err(Problem::Invalid("\"terrain.imagery\" needs manifest version 5".into()));
             }
             t.validate()?;
         }

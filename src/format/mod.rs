@@ -9,6 +9,7 @@
 pub mod cluster;
 pub mod entries;
 mod error;
+pub mod imagery;
 pub mod index;
 pub mod manifest;
 pub mod pack;

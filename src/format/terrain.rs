@@ -256,6 +256,71 @@ pub struct TerrainEntry {
     pub bytes: u64,
     /// Where the heights came from (e.g. the DEM file names), for reports.
     pub source: String,
+    /// Ground imagery draped on the terrain (manifest version 5), if baked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub imagery: Option<ImageryEntry>,
+}
+
+/// Ground imagery baked from orthophotos (`--ortho`): one JPEG of
+/// [`ImageryEntry::tile_px`]² pixels per terrain tile of the first
+/// [`ImageryEntry::levels`] levels that meets [`ImageryEntry::extent_m`],
+/// covering the tile's square, row 0 at the north edge. Finer terrain tiles
+/// drape a part of their nearest ancestor's image. Texels outside `extent_m`
+/// have no imagery (a viewer shows its own ground material there).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImageryEntry {
+    /// Folder of the images relative to the manifest: tile `(l, x, y)` is `<path>/<l>/<x>_<y>.jpg`.
+    pub path: String,
+    /// Pixels per image side.
+    pub tile_px: u32,
+    /// Terrain levels with images (the finest is `levels − 1`).
+    pub levels: u8,
+    /// Where the imagery has data, metres relative to the scene origin: min x, min y, max x, max y.
+    pub extent_m: [f64; 4],
+    /// Pixel size of the source imagery, metres.
+    pub resolution_m: f64,
+    /// Images.
+    pub tiles: u64,
+    /// Bytes of all images.
+    pub bytes: u64,
+    /// Where the imagery came from (e.g. the orthophoto file names), for reports.
+    pub source: String,
+}
+
+/// Most pixels per imagery side.
+pub const MAX_IMAGERY_PX: u32 = 1024;
+
+impl ImageryEntry {
+    /// URL of the image of terrain tile `(level, x, y)` relative to the manifest.
+    #[must_use]
+    pub fn tile_url(&self, level: u8, x: u32, y: u32) -> String {
+        format!("{}/{level}/{x}_{y}.jpg", self.path)
+    }
+
+    pub(crate) fn validate(&self, terrain_levels: u8) -> Result<(), Problem> {
+        check_url("terrain.imagery.path", &self.path)?;
+        let [x0, y0, x1, y1] = self.extent_m;
+        if !(x0 <= x1 && y0 <= y1 && self.extent_m.iter().all(|v| v.is_finite())) {
+            return Err(Problem::Invalid("terrain.imagery.extent_m must be finite and min ≤ max".into()));
+        }
+        if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
+            return Err(Problem::Invalid("terrain.imagery.resolution_m must be positive".into()));
+        }
+        if !(8..=MAX_IMAGERY_PX).contains(&self.tile_px) || !self.tile_px.is_power_of_two() {
+            return Err(Problem::Invalid(format!(
+                "terrain.imagery.tile_px {} is not a power of two 8–{MAX_IMAGERY_PX}",
+                self.tile_px
+            )));
+        }
+        if self.levels == 0 || self.levels > terrain_levels {
+            return Err(Problem::Invalid(format!(
+                "terrain.imagery.levels {} is not 1–{terrain_levels} (the terrain's levels)",
+                self.levels
+            )));
+        }
+        Ok(())
+    }
 }
 
 impl TerrainEntry {
@@ -278,6 +343,17 @@ impl TerrainEntry {
         [self.origin_m[0] + f64::from(x) * s, self.origin_m[1] + f64::from(y) * s]
     }
 
+    /// Whether terrain tile `(level, x, y)` (which exists) has an image: it
+    /// is one of the imagery's levels and its square meets the imagery extent.
+    #[must_use]
+    pub fn has_imagery(&self, level: u8, x: u32, y: u32) -> bool {
+        let Some(i) = &self.imagery else { return false };
+        let [ox, oy] = self.tile_origin_m(level, x, y);
+        let s = self.tile_size_m(level);
+        let [x0, y0, x1, y1] = i.extent_m;
+        level < i.levels && ox < x1 && ox + s > x0 && oy < y1 && oy + s > y0
+    }
+
     pub(crate) fn validate(&self) -> Result<(), Problem> {
         check_url("terrain.path", &self.path)?;
         let finite = [self.origin_m[0], self.origin_m[1], self.root_size_m, self.resolution_m];
@@ -295,6 +371,9 @@ impl TerrainEntry {
         }
         if self.levels == 0 || self.levels > MAX_TERRAIN_LEVEL + 1 {
             return Err(Problem::Invalid(format!("terrain.levels {} is not 1–{}", self.levels, MAX_TERRAIN_LEVEL + 1)));
+        }
+        if let Some(i) = &self.imagery {
+            i.validate(self.levels)?;
         }
         Ok(())
     }

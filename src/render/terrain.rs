@@ -2,17 +2,109 @@
 //! one instanced draw before the trees. Heights live in a pool of fixed slots
 //! on the GPU (a tile is uploaded once, when first drawn, and stays until its
 //! slot is needed by a tile drawn later); each frame writes only the small
-//! per-tile draw records. Shader: `shaders/terrain.wgsl`.
+//! per-tile draw records. Ground images (`scene::imagery`) live in a texture
+//! array of [`IMAGE_LAYERS`] mipmapped layers, kept the same way; a tile whose
+//! image finds no free layer is drawn with the ground material.
+//! Shader: `shaders/terrain.wgsl`.
 
 use std::collections::HashMap;
 
-use super::layouts::{storage_entry, SharedLayouts};
+use super::layouts::{sampler_entry, storage_entry, texture_array_entry, SharedLayouts};
 use super::mesh::{depth_state, DEPTH_FORMAT};
+use crate::scene::imagery::IMAGE_PX;
 use crate::scene::terrain::{TerrainDraw, TerrainKey};
+
+/// An sRGB RGBA8 2D-array texture of `layers` layers of `px`², `mips` levels.
+fn image_texture(device: &wgpu::Device, px: u32, layers: u32, mips: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("terrain images"),
+        size: wgpu::Extent3d { width: px, height: px, depth_or_array_layers: layers },
+        mip_level_count: mips,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    })
+}
+
+fn image_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    texture: &wgpu::Texture,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    let view = texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("terrain images"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::Sampler(sampler) },
+        ],
+    })
+}
+
+/// Writes an image and its mip chain (2 × 2 box averages, premultiplied by
+/// coverage so uncovered pixels do not darken the edge) into `layer`.
+fn upload_mips(queue: &wgpu::Queue, texture: &wgpu::Texture, layer: u32, rgba: &[u8]) {
+    let mut level = rgba.to_vec();
+    let mut px = IMAGE_PX;
+    for mip in 0..IMAGE_MIPS {
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: mip,
+                origin: wgpu::Origin3d { x: 0, y: 0, z: layer },
+                aspect: wgpu::TextureAspect::All,
+            },
+            &level,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(px * 4), rows_per_image: Some(px) },
+            wgpu::Extent3d { width: px, height: px, depth_or_array_layers: 1 },
+        );
+        if px == 1 {
+            break;
+        }
+        let half = px / 2;
+        let mut next = vec![0u8; (half * half * 4) as usize];
+        for j in 0..half as usize {
+            for i in 0..half as usize {
+                let mut sum = [0u32; 4];
+                for (di, dj) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let at = ((2 * j + dj) * px as usize + 2 * i + di) * 4;
+                    let a = u32::from(level[at + 3]);
+                    for k in 0..3 {
+                        sum[k] += u32::from(level[at + k]) * a;
+                    }
+                    sum[3] += a;
+                }
+                let at = (j * half as usize + i) * 4;
+                for k in 0..3 {
+                    next[at + k] = sum[k].checked_div(sum[3]).unwrap_or(0) as u8;
+                }
+                next[at + 3] = (sum[3] / 4) as u8;
+            }
+        }
+        level = next;
+        px = half;
+    }
+}
 
 /// Most height slots in the pool (a 64-cell tile is 8.5 KB: 8.7 MB at most);
 /// a scene with fewer terrain tiles gets one slot per tile.
 pub const TERRAIN_SLOTS: usize = 1024;
+/// Layers of the ground-image array (256² RGBA8 with mipmaps: 350 KB each).
+pub const IMAGE_LAYERS: u32 = 96;
+/// Mip levels of a ground image (256 down to 1).
+const IMAGE_MIPS: u32 = IMAGE_PX.ilog2() + 1;
+/// `GpuTerrainDraw::layer` of a tile without an image.
+pub const NO_IMAGE: u32 = u32::MAX;
+
+/// A ground image's identity: (source generation, terrain tile it covers).
+type ImageKey = (u32, TerrainKey);
 
 /// One drawn tile. Must match `TerrainDraw` in `shaders/terrain.wgsl`.
 #[repr(C)]
@@ -30,6 +122,16 @@ pub struct GpuTerrainDraw {
     pub parent_error_m: f32,
     /// Skirt depth below the edge, metres.
     pub skirt_m: f32,
+    /// Where this tile lies in its image: uv offset (x, y) and scale (z, w).
+    pub image_uv: [f32; 4],
+    /// Layer of the image in the array, [`NO_IMAGE`] for none.
+    pub layer: u32,
+    /// Padding to 16 bytes.
+    pub pad0: u32,
+    /// Padding.
+    pub pad1: u32,
+    /// Padding.
+    pub pad2: u32,
 }
 
 /// Pass constants. Must match `TerrainParams` in `shaders/terrain.wgsl`.
@@ -63,10 +165,28 @@ struct Pool {
     by_key: HashMap<TerrainKey, u32>,
 }
 
+/// The ground images on the GPU.
+struct Images {
+    texture: wgpu::Texture,
+    group: wgpu::BindGroup,
+    /// Image in each layer and the frame it was last drawn.
+    layers: Vec<Option<(ImageKey, u64)>>,
+    by_key: HashMap<ImageKey, u32>,
+}
+
 /// The terrain pass.
 pub struct TerrainPass {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
+    image_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// A 1×1 array bound while there are no images.
+    no_images: wgpu::BindGroup,
+    images: Option<Images>,
+    /// Images uploaded since the start.
+    pub image_uploads: u64,
+    /// Tiles drawn with an image this frame.
+    pub imaged: u32,
     pool: Option<Pool>,
     frame: u64,
     /// Tiles drawn this frame.
@@ -77,6 +197,8 @@ pub struct TerrainPass {
     pub uploads: u64,
     /// This frame's draw records (kept between frames: no allocation in steady state).
     records: Vec<GpuTerrainDraw>,
+    /// This frame's image layer per draw (kept between frames too).
+    layers: Vec<u32>,
 }
 
 impl TerrainPass {
@@ -101,13 +223,29 @@ impl TerrainPass {
                 },
             ],
         });
+        let image_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("terrain images"),
+            entries: &[texture_array_entry(0), sampler_entry(1)],
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("terrain images"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            anisotropy_clamp: 4,
+            ..Default::default()
+        });
+        let blank = image_texture(device, 1, 1, 1);
+        let no_images = image_group(device, &image_layout, &blank, &sampler);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("terrain"),
             source: wgpu::ShaderSource::Wgsl(super::shaders::TERRAIN.into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("terrain"),
-            bind_group_layouts: &[Some(&shared.view), Some(&layout)],
+            bind_group_layouts: &[Some(&shared.view), Some(&layout), Some(&image_layout)],
             immediate_size: 0,
         });
         let target = super::layouts::PullingTarget {
@@ -118,13 +256,69 @@ impl TerrainPass {
         let _ = DEPTH_FORMAT;
         let pipeline =
             super::layouts::pulling_pipeline(device, "terrain", &module, &pipeline_layout, "fs_main", &target);
-        Self { pipeline, layout, pool: None, frame: 0, count: 0, dropped: 0, uploads: 0, records: Vec::new() }
+        Self {
+            pipeline,
+            layout,
+            image_layout,
+            sampler,
+            no_images,
+            images: None,
+            image_uploads: 0,
+            imaged: 0,
+            pool: None,
+            frame: 0,
+            count: 0,
+            dropped: 0,
+            uploads: 0,
+            records: Vec::new(),
+            layers: Vec::new(),
+        }
+    }
+
+    /// The layer holding the image of `d` (uploaded now if it is new), or
+    /// [`NO_IMAGE`] when it has none or every layer is drawn this frame.
+    fn image_layer(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, d: &TerrainDraw) -> u32 {
+        let Some(img) = &d.imagery else { return NO_IMAGE };
+        if img.tile.px != IMAGE_PX || img.tile.rgba.len() != (IMAGE_PX * IMAGE_PX * 4) as usize {
+            return NO_IMAGE;
+        }
+        let images = self.images.get_or_insert_with(|| {
+            let texture = image_texture(device, IMAGE_PX, IMAGE_LAYERS, IMAGE_MIPS);
+            let group = image_group(device, &self.image_layout, &texture, &self.sampler);
+            Images { texture, group, layers: vec![None; IMAGE_LAYERS as usize], by_key: HashMap::new() }
+        });
+        if let Some(&layer) = images.by_key.get(&img.key) {
+            images.layers[layer as usize] = Some((img.key, self.frame));
+            return layer;
+        }
+        let free = images.layers.iter().position(Option::is_none).or_else(|| {
+            images
+                .layers
+                .iter()
+                .enumerate()
+                .filter(|(_, s)| s.is_some_and(|(_, used)| used < self.frame))
+                .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
+                .map(|(i, _)| i)
+        });
+        let Some(free) = free else { return NO_IMAGE };
+        if let Some((old, _)) = images.layers[free] {
+            images.by_key.remove(&old);
+        }
+        upload_mips(queue, &images.texture, free as u32, &img.tile.rgba);
+        self.image_uploads += 1;
+        images.layers[free] = Some((img.key, self.frame));
+        images.by_key.insert(img.key, free as u32);
+        free as u32
     }
 
     /// Bytes of GPU memory held.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
-        self.pool.as_ref().map_or(0, |p| p.heights.size() + p.draws.size() + p.indices.size())
+        let images = self.images.as_ref().map_or(0, |_| {
+            // The mip chain adds a third.
+            u64::from(IMAGE_PX) * u64::from(IMAGE_PX) * 4 * u64::from(IMAGE_LAYERS) * 4 / 3
+        });
+        self.pool.as_ref().map_or(0, |p| p.heights.size() + p.draws.size() + p.indices.size()) + images
     }
 
     /// Tiles drawn by the last prepared frame.
@@ -146,10 +340,18 @@ impl TerrainPass {
         self.frame += 1;
         self.count = 0;
         self.dropped = 0;
+        self.imaged = 0;
         let Some(first) = draws.first() else { return };
         let grid = first.tile.grid;
         if self.pool.as_ref().is_none_or(|p| p.grid != grid) {
             self.reserve(device, grid, TERRAIN_SLOTS as u64);
+        }
+        // Images first (their layers), then the heights.
+        let mut layers = std::mem::take(&mut self.layers);
+        layers.clear();
+        for d in draws {
+            let layer = self.image_layer(device, queue, d);
+            layers.push(layer);
         }
         let Some(pool) = self.pool.as_mut() else { return };
         queue.write_buffer(
@@ -164,7 +366,7 @@ impl TerrainPass {
         );
         let mut records = std::mem::take(&mut self.records);
         records.clear();
-        for d in draws {
+        for (d, &layer) in draws.iter().zip(&layers) {
             if d.tile.grid != grid {
                 self.dropped += 1;
                 continue;
@@ -207,6 +409,7 @@ impl TerrainPass {
             };
             pool.slots[slot as usize] = Some((d.key, self.frame));
             let cell = d.size_m / f64::from(grid);
+            self.imaged += u32::from(layer != NO_IMAGE);
             records.push(GpuTerrainDraw {
                 origin_m: [d.origin_m[0] as f32, d.origin_m[1] as f32, d.tile.min_m],
                 slot,
@@ -215,6 +418,11 @@ impl TerrainPass {
                 parent_error_m: if d.parent_error_m.is_finite() { d.parent_error_m } else { 1e30 },
                 // Deep enough to hide the largest step a coarser neighbour can leave.
                 skirt_m: (2.0 * d.parent_error_m.min(d.tile.max_m - d.tile.min_m) + 0.5 * cell as f32).max(0.5),
+                image_uv: d.imagery.as_ref().map_or([0.0, 0.0, 1.0, 1.0], |i| i.uv),
+                layer,
+                pad0: 0,
+                pad1: 0,
+                pad2: 0,
             });
         }
         if !records.is_empty() {
@@ -222,6 +430,7 @@ impl TerrainPass {
         }
         self.count = records.len() as u32;
         self.records = records;
+        self.layers = layers;
     }
 
     /// Sizes the pool for a scene's terrain of `tiles` tiles of `grid` cells
@@ -309,6 +518,7 @@ impl TerrainPass {
         }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(1, &pool.group, &[]);
+        pass.set_bind_group(2, self.images.as_ref().map_or(&self.no_images, |i| &i.group), &[]);
         pass.set_index_buffer(pool.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..pool.index_count, 0, 0..self.count);
         1

@@ -2,6 +2,7 @@
 //! `fetch`), streaming and residency.
 
 pub mod fetch;
+pub mod imagery;
 pub mod index_walk;
 pub mod residency;
 pub mod streaming;

@@ -13,12 +13,14 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
+use super::imagery::{Imagery, ImageryChoice, ImageryFetch};
 use super::index_walk::IndexWalk;
 use super::residency::{PoolError, Residency, TileSlot};
 use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
 use crate::format::terrain::TerrainTile;
 use crate::format::{DecodeError, Manifest, Tile};
+use crate::geo::GeoFrame;
 use packs::PackLoad;
 
 /// Limits of the streamer: the budgets a viewer degrades gracefully within.
@@ -150,6 +152,10 @@ enum Target {
     PackPart(usize, usize),
     /// A terrain tile.
     Terrain(TerrainKey),
+    /// A baked imagery image (source generation, terrain tile).
+    Image(u32, TerrainKey),
+    /// A tile of an XYZ/WMTS imagery source (source generation, z/x/y).
+    ImageSource(u32, (u8, u32, u32)),
 }
 
 /// Counters for stats.
@@ -179,6 +185,10 @@ pub struct StreamStats {
     pub terrain_resident: u64,
     /// Terrain tiles drawn by the current view.
     pub terrain_drawn: u64,
+    /// Ground imagery images decoded and kept.
+    pub imagery_resident: u64,
+    /// Terrain tiles drawn with an image this frame.
+    pub imagery_drawn: u64,
 }
 
 /// A scene being streamed into a [`Residency`] (the renderer's GPU pools).
@@ -218,6 +228,11 @@ pub struct SceneStream<F: Fetcher> {
     terrain_wanted: Vec<(f32, TerrainKey)>,
     /// Failed attempts per terrain tile and when the next one is due (∞: asked for).
     terrain_attempts: HashMap<TerrainKey, (u32, f64)>,
+    /// Ground imagery for the terrain and the images the view waits for.
+    imagery: Imagery,
+    imagery_wanted: Vec<TerrainKey>,
+    /// The scene CRS ↔ lon/lat (for imagery sources in Web Mercator), once the manifest is in.
+    geo: Option<GeoFrame>,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -252,7 +267,21 @@ impl<F: Fetcher> SceneStream<F> {
             terrain_draws: Vec::new(),
             terrain_wanted: Vec::new(),
             terrain_attempts: HashMap::new(),
+            imagery: Imagery::new(),
+            imagery_wanted: Vec::new(),
+            geo: None,
         }
+    }
+
+    /// Where ground imagery comes from (the scene's own by default).
+    pub fn set_imagery(&mut self, choice: ImageryChoice) {
+        self.imagery.set_choice(choice);
+    }
+
+    /// The ground imagery held.
+    #[must_use]
+    pub fn imagery(&self) -> &Imagery {
+        &self.imagery
     }
 
     /// The terrain tiles the current view draws (empty without terrain).
@@ -321,8 +350,9 @@ impl<F: Fetcher> SceneStream<F> {
             TileState::NotResident(l) => *l == Load::Broken,
         });
         let packs_done = self.needed.iter().all(|&s| self.packs[s].done());
-        let terrain_done =
-            self.terrain_wanted.is_empty() && !self.terrain_attempts.values().any(|(_, due)| due.is_finite());
+        let terrain_done = self.terrain_wanted.is_empty()
+            && !self.terrain_attempts.values().any(|(_, due)| due.is_finite())
+            && self.imagery_wanted.is_empty();
         manifest_done && nodes_done && tiles_done && packs_done && terrain_done && self.requests.is_empty()
     }
 
@@ -399,6 +429,8 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
                 Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
                 Target::Terrain(key) => self.on_terrain(key, result, now_s),
+                Target::Image(generation, key) => self.on_image(generation, key, result),
+                Target::ImageSource(generation, tile) => self.on_image_source(generation, tile, result),
             }
         }
         if self.manifest.is_none() {
@@ -433,6 +465,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.request_tiles(view, draw_distance_m, now_s);
                 self.request_packs(residency, now_s);
                 self.request_terrain();
+                self.request_imagery();
             } else {
                 // Still decide what the view wants (for is_settled and eviction).
                 self.walk(view, draw_distance_m);
@@ -450,6 +483,64 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.index_nodes_total = self.index.nodes_declared();
         self.stats.terrain_resident = self.terrain.as_ref().map_or(0, |t| t.resident() as u64);
         self.stats.terrain_drawn = self.terrain_draws.len() as u64;
+        self.stats.imagery_resident = self.imagery.resident() as u64;
+        self.stats.imagery_drawn = self.terrain_draws.iter().filter(|d| d.imagery.is_some()).count() as u64;
+    }
+
+    /// Requests the images the drawn terrain wants, within the in-flight budget.
+    fn request_imagery(&mut self) {
+        let Some(t) = &self.terrain else { return };
+        let generation = self.imagery.generation();
+        for &key in &self.imagery_wanted {
+            if self.fetcher.in_flight() >= self.config.max_in_flight {
+                break;
+            }
+            for fetch in self.imagery.start(t.entry(), self.geo.as_ref(), key) {
+                let (url, target) = match fetch {
+                    ImageryFetch::Baked(k, rel) => (join(&self.base, &rel), Target::Image(generation, k)),
+                    ImageryFetch::Source(tile, url) => (url, Target::ImageSource(generation, tile)),
+                };
+                let id = self.fetcher.start(&url);
+                self.stats.requests += 1;
+                self.requests.insert(id, target);
+            }
+        }
+    }
+
+    /// A baked image arrived or failed (the tile then drapes its ancestor's image).
+    fn on_image(&mut self, generation: u32, key: TerrainKey, result: Result<Vec<u8>, FetchError>) {
+        let Some(t) = &self.terrain else { return };
+        let Some(i) = &t.entry().imagery else { return };
+        let url = join(&self.base, &i.tile_url(key.0, key.1, key.2));
+        let outcome = match &result {
+            Ok(bytes) => self.imagery.on_baked(t.entry(), generation, key, &url, Some(bytes)),
+            Err(e) => {
+                let _ = self.imagery.on_baked(t.entry(), generation, key, &url, None);
+                Err(e.to_string())
+            }
+        };
+        if let Err(message) = outcome {
+            self.give_up(&url, &message);
+            self.events.push(StreamEvent::Failed { url, message, retrying: false });
+        }
+    }
+
+    /// A tile of the XYZ/WMTS source arrived or failed (missing tiles leave
+    /// their part without imagery; only undecodable ones are reported).
+    fn on_image_source(&mut self, generation: u32, tile: (u8, u32, u32), result: Result<Vec<u8>, FetchError>) {
+        let url = match self.imagery.choice() {
+            ImageryChoice::Xyz(src) => src.url(tile.0, tile.1, tile.2),
+            _ => String::new(),
+        };
+        let outcome = self.imagery.on_source(generation, tile, &url, result.as_deref().ok());
+        let failure = match (outcome, result) {
+            (Err(message), _) => Some(message),
+            (Ok(()), Err(e)) if !matches!(e, FetchError::NotFound { .. }) => Some(e.to_string()),
+            _ => None,
+        };
+        if let Some(message) = failure {
+            self.events.push(StreamEvent::Failed { url, message, retrying: false });
+        }
     }
 
     /// Terrain tiles whose retry is due are asked for again (with backoff, as tiles).
@@ -473,6 +564,8 @@ impl<F: Fetcher> SceneStream<F> {
         let Some(t) = &mut self.terrain else { return };
         let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
         t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws, &mut self.terrain_wanted);
+        self.imagery_wanted.clear();
+        self.imagery.attach(t.entry(), self.geo.as_ref(), &mut self.terrain_draws, &mut self.imagery_wanted);
     }
 
     /// Requests wanted terrain tiles, nearest first, within the in-flight budget.
@@ -559,6 +652,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.tiles = self.index.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
                 self.packs = (0..m.species.len()).map(|_| PackLoad::new()).collect();
                 self.terrain = m.terrain.clone().map(TerrainTree::new);
+                self.geo = GeoFrame::new(&m.crs.proj4, m.origin_m).ok();
                 self.events.push(StreamEvent::ManifestLoaded { trees: m.counts.trees });
                 self.manifest = Some(m);
             }

@@ -38,6 +38,8 @@ pub struct TerrainDraw {
     /// vertices morph towards the parent's surface where its error projects
     /// below twice the threshold, so a level change does not pop.
     pub parent_error_m: f32,
+    /// The ground image it drapes, if any (attached by the stream's imagery).
+    pub imagery: Option<super::imagery::DrawImagery>,
 }
 
 /// Where a tile stands.
@@ -209,7 +211,14 @@ impl TerrainTree {
                     }
                 }
             }
-            draws.push(TerrainDraw { key, tile, origin_m: origin, size_m: size, parent_error_m: parent_error });
+            draws.push(TerrainDraw {
+                key,
+                tile,
+                origin_m: origin,
+                size_m: size,
+                parent_error_m: parent_error,
+                imagery: None,
+            });
         }
         wanted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         self.stack = stack;
@@ -296,6 +305,7 @@ mod tests {
             tiles: 0,
             bytes: 0,
             source: "test".into(),
+            imagery: None,
         };
         let mut t = TerrainTree::new(entry);
         let error = |l: u8| if l + 1 == levels { 0.0 } else { 8.0 / f32::from(1u8 << l) };

@@ -13,6 +13,7 @@
 //! other stage; the folder is written atomically ([`OutDir::write`]).
 
 pub mod ground;
+pub mod imagery;
 pub mod packs;
 pub mod terrain;
 pub mod tiles;
@@ -34,6 +35,8 @@ use crate::reproject::Crs;
 pub struct SceneInput<'a> {
     /// Ground heights for the terrain tiles, if any (written by shard 0 only).
     pub terrain: Option<terrain::TerrainSource<'a>>,
+    /// Imagery to drape on the terrain, if any (written by shard 0 only, with the terrain).
+    pub imagery: Option<imagery::ImagerySource<'a>>,
     /// Species names and models, indexed by `SceneTree::species`.
     pub species: Vec<(String, ImportedModel)>,
     /// Trees relative to `origin_m` (in memory or in bucket files).
@@ -89,10 +92,13 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             log,
         )?;
         // Terrain, by shard 0 only (like the packs; `merge` copies it).
-        let terrain = match &input.terrain {
+        let mut terrain = match &input.terrain {
             Some(src) if bake_packs => terrain::write_terrain(src, dir, log)?,
             _ => None,
         };
+        if let (Some(t), Some(src)) = (terrain.as_mut(), &input.imagery) {
+            t.imagery = imagery::write_imagery(src, t, dir, log)?;
+        }
         let mut species = packs.entries;
         for (entry, n) in species.iter_mut().zip(&tiles.species_trees) {
             entry.trees = *n;

@@ -80,6 +80,7 @@ pub fn write_terrain(src: &TerrainSource<'_>, dir: &Path, log: &dyn Fn(&str)) ->
         tiles: 0,
         bytes: 0,
         source: src.source.clone(),
+        imagery: None,
     };
     let tiles = AtomicU64::new(0);
     let bytes = AtomicU64::new(0);

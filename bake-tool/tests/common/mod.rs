@@ -83,3 +83,97 @@ pub fn write_geotiff_dem(path: &Path, n: u32, pixel_m: f64, height: impl Fn(f64,
         .collect();
     img.write_data(&data).unwrap();
 }
+
+/// Writes an RGB8 GeoTIFF orthophoto of `w`×`h` pixels of `pixel_m` metres in
+/// EPSG:32633 whose north-west corner is `(x0, y0)`, colours `colour(x, y)` at
+/// the pixel centres (map coordinates).
+pub fn write_geotiff_ortho(
+    path: &Path,
+    (w, h): (u32, u32),
+    pixel_m: f64,
+    (x0, y0): (f64, f64),
+    colour: impl Fn(f64, f64) -> [u8; 3],
+) {
+    use tiff::encoder::{colortype, TiffEncoder};
+    use tiff::tags::Tag;
+    let mut file = std::fs::File::create(path).unwrap();
+    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut img = enc.new_image::<colortype::RGB8>(w, h).unwrap();
+    let e = img.encoder();
+    e.write_tag(Tag::ModelPixelScaleTag, &[pixel_m, pixel_m, 0.0][..]).unwrap();
+    e.write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, x0, y0, 0.0][..]).unwrap();
+    let keys: [u16; 12] = [1, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633];
+    e.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
+    let half = pixel_m * 0.5;
+    let data: Vec<u8> = (0..h)
+        .flat_map(|r| (0..w).map(move |c| (c, r)))
+        .flat_map(|(c, r)| colour(x0 + half + pixel_m * f64::from(c), y0 - half - pixel_m * f64::from(r)))
+        .collect();
+    img.write_data(&data).unwrap();
+}
+
+/// A local XYZ tile server (never the internet): answers `GET /{z}/{x}/{y}.png`
+/// with a 256² PNG whose pixel colours are `colour(lon, lat)` at the pixel
+/// centres, `404` for anything else. Returns its URL template and a request counter.
+pub fn xyz_server(
+    colour: impl Fn(f64, f64) -> [u8; 3] + Send + Sync + 'static,
+) -> (String, std::sync::Arc<std::sync::atomic::AtomicUsize>) {
+    use std::io::{BufRead, BufReader, Write};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let count = Arc::new(AtomicUsize::new(0));
+    let colour = Arc::new(colour);
+    let served = Arc::clone(&count);
+    std::thread::spawn(move || {
+        for stream in listener.incoming() {
+            let Ok(mut stream) = stream else { continue };
+            let (colour, served) = (Arc::clone(&colour), Arc::clone(&served));
+            std::thread::spawn(move || {
+                let mut line = String::new();
+                let mut reader = BufReader::new(stream.try_clone().unwrap());
+                if reader.read_line(&mut line).is_err() {
+                    return;
+                }
+                // Drain the headers.
+                let mut h = String::new();
+                while reader.read_line(&mut h).is_ok_and(|n| n > 2) {
+                    h.clear();
+                }
+                let path = line.split_whitespace().nth(1).unwrap_or("").to_string();
+                let parts: Vec<u32> = path
+                    .trim_start_matches('/')
+                    .trim_end_matches(".png")
+                    .split('/')
+                    .filter_map(|p| p.parse().ok())
+                    .collect();
+                let body = if let [z, x, y] = parts[..] {
+                    served.fetch_add(1, Ordering::SeqCst);
+                    let n = f64::from(1u32 << z) * 256.0;
+                    let img = image::RgbImage::from_fn(256, 256, |i, j| {
+                        let (mx, my) = ((f64::from(x * 256 + i) + 0.5) / n, (f64::from(y * 256 + j) + 0.5) / n);
+                        let lon = mx * 360.0 - 180.0;
+                        let lat = (std::f64::consts::PI * (1.0 - 2.0 * my)).sinh().atan().to_degrees();
+                        image::Rgb(colour(lon, lat))
+                    });
+                    let mut png = std::io::Cursor::new(Vec::new());
+                    img.write_to(&mut png, image::ImageFormat::Png).unwrap();
+                    Some(png.into_inner())
+                } else {
+                    None
+                };
+                let _ = match body {
+                    Some(b) => stream
+                        .write_all(
+                            format!("HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: {}\r\nConnection: close\r\n\r\n", b.len())
+                                .as_bytes(),
+                        )
+                        .and_then(|()| stream.write_all(&b)),
+                    None => stream.write_all(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"),
+                };
+            });
+        }
+    });
+    (format!("http://127.0.0.1:{port}/{{z}}/{{x}}/{{y}}.png"), count)
+}
