@@ -461,6 +461,24 @@ impl Viewer {
         self.frame.stream.set_config(c);
     }
 
+    /// Where ground imagery comes from: `"scene"` (the scene's baked imagery,
+    /// the default), `"off"`, or an XYZ/WMTS URL template in Web Mercator
+    /// (`{z}/{x}/{y}`, `{-y}`, or `{TileMatrix}/{TileCol}/{TileRow}`) whose
+    /// finest zoom is `max_zoom`.
+    ///
+    /// # Errors
+    /// A template without the placeholders (the message says which are needed).
+    pub fn set_imagery(&mut self, source: &str, max_zoom: u8) -> Result<(), JsValue> {
+        use crate::scene::imagery::{ImageryChoice, XyzSource};
+        let choice = match source {
+            "" | "scene" => ImageryChoice::Scene,
+            "off" => ImageryChoice::Off,
+            t => ImageryChoice::Xyz(XyzSource::new(t, max_zoom).map_err(|e| JsValue::from_str(&e))?),
+        };
+        self.frame.stream.set_imagery(choice);
+        Ok(())
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.frame.settings.quality = quality.clamp(0.05, 4.0);

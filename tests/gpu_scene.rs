@@ -54,6 +54,14 @@ fn render(off: &mut OffscreenScene, cam: &Camera) -> Vec<u8> {
     off.read_image()
 }
 
+/// The ground height at `(x, y)` (metres relative to the scene origin): the
+/// terrain's, once streamed there from above.
+fn ground_z(off: &mut OffscreenScene, x: f64, y: f64) -> f64 {
+    let cam = Camera { eye_m: DVec3::new(x, y, 400.0), pitch_rad: -1.5, ..Camera::default() };
+    off.load_view(&cam, 30.0);
+    off.stream.ground_height_at(x as f32, y as f32).map_or(0.0, f64::from)
+}
+
 /// Share of pixels whose green channel dominates: trees (not sky or ground).
 fn foliage_share(img: &[u8]) -> f64 {
     let n = img.chunks_exact(4).filter(|p| p[1] > p[0] + 8 && p[1] > p[2] + 8).count();
@@ -260,6 +268,11 @@ fn shifted_copy(src: &Path, dst: &Path, shift: [f32; 3]) {
         if let Some(t) = &mut m.terrain {
             t.origin_m[0] += f64::from(shift[0]);
             t.origin_m[1] += f64::from(shift[1]);
+            if let Some(i) = &mut t.imagery {
+                for k in 0..4 {
+                    i.extent_m[k] += f64::from(shift[k % 2]);
+                }
+            }
         }
     };
     rewritten_copy(src, dst, edit_manifest, |tile, t| {
@@ -398,7 +411,17 @@ fn extreme_cameras_render_without_artefacts() {
     let top = off.named_camera(NamedView::Top, 30.0).unwrap();
     render(&mut off, &top);
     let (_, batches, instances, _) = off.read_selection();
-    let b = batches.iter().find(|b| b.instance_count > 0).unwrap();
+    // A spruce (brown bark; the beech's is grey, the birch's white).
+    let spruce = m.species.iter().position(|s| s.name == "spruce").unwrap() as u32;
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let b = batches
+        .iter()
+        .filter(|b| b.instance_count > 0 && b.species == spruce)
+        .min_by(|a, b| {
+            let d = |b: &&sylva::format::GpuBatch| (DVec3::from(b.center_m.map(f64::from)) - c).truncate().length();
+            d(a).total_cmp(&d(b))
+        })
+        .unwrap();
     let tree = instances[b.instance_offset as usize].decode(b);
     let p = DVec3::new(f64::from(tree.position_m[0]), f64::from(tree.position_m[1]), f64::from(tree.position_m[2]));
     // Trunk radius of the demo trees is 1.8 % of their height (≈ 0.4 m); look at it from 0.2 m outside.
@@ -461,7 +484,8 @@ fn cameras_at_the_extremes_stay_close_to_the_full_meshes() {
     assert!(foliage_share(&img) > 0.3, "straight down: canopy share {}", foliage_share(&img));
     assert!(e < 0.04, "straight down: error to the full meshes {e:.4}");
     // Along the horizon from 1.7 m above the ground at the forest's edge.
-    let edge = Camera { eye_m: DVec3::new(c.x, lo.y - 5.0, lo.z + 1.7), ..Camera::default() };
+    let edge =
+        Camera { eye_m: DVec3::new(c.x, lo.y - 5.0, ground_z(&mut off, c.x, lo.y - 5.0) + 1.7), ..Camera::default() };
     let (e, img) = error_to_full_mesh(&mut off, &edge);
     assert!(foliage_share(&img) > 0.1, "horizon: foliage share {}", foliage_share(&img));
     assert!(e < 0.04, "horizon: error to the full meshes {e:.4}");
@@ -478,7 +502,17 @@ fn cameras_at_the_extremes_stay_close_to_the_full_meshes() {
     // the eye, near plane 5 cm): the view is mostly leaves; that tree is its full
     // mesh, the trees seen through gaps are LoD.
     let (_, batches, instances, _) = off.read_selection();
-    let b = batches.iter().find(|b| b.instance_count > 0).unwrap();
+    // A spruce's (whose height the crown position assumes), the same one
+    // whatever order the tiles arrived in: the batch nearest the scene's middle.
+    let spruce = m.species.iter().position(|s| s.name == "spruce").unwrap() as u32;
+    let b = batches
+        .iter()
+        .filter(|b| b.instance_count > 0 && b.species == spruce)
+        .min_by(|a, b| {
+            let d = |b: &&sylva::format::GpuBatch| (DVec3::from(b.center_m.map(f64::from)) - c).truncate().length();
+            d(a).total_cmp(&d(b))
+        })
+        .unwrap();
     let tree = instances[b.instance_offset as usize].decode(b);
     let base = DVec3::from(tree.position_m.map(f64::from));
     let crown = Camera {
@@ -652,8 +686,9 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     let fetched = |log: &[String], p: PackPart| {
         m.species.iter().any(|s| pack_ranges(log, &s.pack).iter().flatten().any(|r| overlaps(*r, part(&s.pack, p))))
     };
+    let edge_y = m.bounds.min[1] as f64 - 25.0;
     let edge = Camera {
-        eye_m: DVec3::new(c.x, m.bounds.min[1] as f64 - 25.0, m.bounds.min[2] as f64 + 1.7),
+        eye_m: DVec3::new(c.x, edge_y, ground_z(&mut off, c.x, edge_y) + 1.7),
         pitch_rad: 0.05,
         ..Camera::default()
     };
@@ -810,7 +845,8 @@ fn crown_widths_widen_trees_at_every_level_without_changing_heights() {
     let hi = DVec3::from(m.bounds.max.map(f64::from));
     let c = lo.lerp(hi, 0.5);
     let above = Camera::look_at(DVec3::new(c.x, c.y - 100.0, hi.z + 200.0), c);
-    let side = Camera { eye_m: DVec3::new(c.x, lo.y - 150.0, lo.z + 2.0), ..Camera::default() };
+    let side_z = ground_z(&mut scenes[0], c.x, lo.y - 150.0) + 2.0;
+    let side = Camera { eye_m: DVec3::new(c.x, lo.y - 150.0, side_z), ..Camera::default() };
     for (name, reprs) in [
         ("meshes", Representations::MESHES),
         ("clusters", Representations::CLUSTERS),

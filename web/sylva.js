@@ -8,6 +8,8 @@
 //   v.flyTo({...}, seconds)                 smooth move; {lon, lat, aboveGround} flies to a height above the ground
 //   v.heightAt(lon, lat)                    ground height there (metres, the scene's datum), null if unknown
 //   v.setTerrain(on, errorPx = 2)           terrain on/off; coarser terrain with a larger errorPx
+//   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
+//                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -129,6 +131,15 @@ class SylvaViewer {
   stats() { return JSON.parse(this.viewer.stats_json()); }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
   setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
+  /** Ground imagery on the terrain: 'scene' (the scene's baked imagery), null
+   * (none: the ground material), or an XYZ/WMTS raster source in Web Mercator
+   * as a URL template, reprojected onto the scene's terrain. Throws for a
+   * template without {z}/{x}/{y} (or {TileMatrix}/{TileCol}/{TileRow}). */
+  setImagery(source, { maxZoom = 19 } = {}) {
+    const s = source === null || source === undefined || source === false ? 'off' : String(source);
+    this.viewer.set_imagery(s, Math.max(0, Math.min(24, maxZoom | 0)));
+    this.dirty = 8;
+  }
   /**
    * Level-of-detail policy: `ellipsoidMinPx` (default 40; Infinity: no ellipsoids),
    * `only` ('meshes' | 'ellipsoids' | 'billboards'; default all, mixed by size),

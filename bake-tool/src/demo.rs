@@ -42,7 +42,7 @@ fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
 }
 
 /// Fractal noise, three octaves, period ~`scale` metres.
-fn fbm(seed: u64, x: f64, y: f64, scale: f64) -> f64 {
+pub(crate) fn fbm(seed: u64, x: f64, y: f64, scale: f64) -> f64 {
     let mut sum = 0.0;
     let mut amp = 0.5;
     let mut f = 1.0 / scale;
@@ -54,9 +54,44 @@ fn fbm(seed: u64, x: f64, y: f64, scale: f64) -> f64 {
     sum / 0.875
 }
 
-/// Ground height of the demo terrain (metres above the origin).
+/// Crown radius (metres) of a demo tree of species `species` at `scale`.
+pub fn crown_radius_m(species: u32, scale: f32) -> f64 {
+    let s = &STYLES[(species as usize).min(STYLES.len() - 1)];
+    f64::from(s.height * s.crown_radius * scale)
+}
+
+/// Signed distance (metres, roughly) from the demo valley's stream: the
+/// stream meanders west–east through the origin.
+pub fn valley_offset(x: f64, y: f64) -> f64 {
+    y - (70.0 * (x / 260.0).sin() + 45.0 * (x / 610.0).sin())
+}
+
+/// The demo's ground imagery at `(x, y)`: the forest floor by canopy cover
+/// and slope ([`crate::bake::ground_material::forest_floor`]), a stream of a
+/// few metres along the valley with gravel banks, and a meadow beside it.
+pub fn ground_colour(x: f64, y: f64, cover: f32, slope: f32) -> [f32; 4] {
+    let d = valley_offset(x, y).abs() + 2.0 * (fbm(97, x, y, 40.0) - 0.5);
+    let mut c = crate::bake::ground_material::forest_floor(x, y, cover, slope);
+    let water = [58.0, 66.0, 70.0];
+    let gravel = [150.0, 140.0, 120.0];
+    let t = |a: f64, b: f64| ((d - a) / (b - a)).clamp(0.0, 1.0) as f32;
+    for k in 0..3 {
+        let bank = water[k] + (gravel[k] - water[k]) * t(2.0, 3.0);
+        c[k] = bank + (c[k] - bank) * t(3.5, 6.0);
+    }
+    c
+}
+
+/// Ground height of the demo terrain (metres above the origin): a valley
+/// through the origin whose slopes rise about 60 m to ridges on both sides,
+/// cut by side gullies, over rolling hills.
 pub fn ground(x: f64, y: f64) -> f64 {
-    25.0 * fbm(99, x, y, 900.0) + 2.0 * fbm(98, x, y, 150.0)
+    let d = valley_offset(x, y);
+    let across = 1.0 - (-(d / 230.0).powi(2)).exp();
+    // Side gullies and spurs running down the slopes, fading out on the valley floor.
+    let spurs = 9.0 * (x / 95.0 + d.abs() / 170.0).sin() * (1.0 - (-(d / 110.0).powi(2)).exp());
+    // The valley floor falls gently eastwards.
+    58.0 * across + spurs - 0.01 * x + 20.0 * fbm(99, x, y, 900.0) + 1.5 * fbm(98, x, y, 150.0)
 }
 
 #[derive(Clone, Copy)]
@@ -314,8 +349,10 @@ pub fn demo_layout(count: usize, seed: u64) -> Vec<SceneTree> {
         let y = f64::from(rng.f32()) * 2.0 * half - half;
         let density = fbm(seed + 1, x, y, 400.0 * k);
         let clump = fbm(seed + 2, x, y, 60.0 * k.sqrt());
-        // Clearings where the density field is low; clumps where both are high.
-        let p = ((density - 0.38) * 3.0).clamp(0.0, 1.0) * (0.55 + 0.45 * clump);
+        // Clearings where the density field is low; clumps where both are high;
+        // meadows along the stream.
+        let meadow = ((valley_offset(x, y).abs() - 18.0) / 40.0).clamp(0.0, 1.0);
+        let p = ((density - 0.38) * 3.0).clamp(0.0, 1.0) * (0.55 + 0.45 * clump) * meadow;
         if f64::from(rng.f32()) > p {
             continue;
         }

@@ -202,6 +202,15 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
             "tiles": t.tiles,
             "bytes": t.bytes,
             "source": t.source,
+            "imagery": t.imagery.as_ref().map(|i| json!({
+                "extent": i.extent_m,
+                "resolution_m": i.resolution_m,
+                "levels": i.levels,
+                "tile_px": i.tile_px,
+                "tiles": i.tiles,
+                "bytes": i.bytes,
+                "source": i.source,
+            })),
         })),
     }))
 }
@@ -353,6 +362,20 @@ pub fn to_text(v: &Value) -> String {
                     n("extent", 1),
                     n("extent", 3)
                 );
+                let i = &t["imagery"];
+                if i.is_object() {
+                    out += &format!(
+                        "ground imagery from {}: {} images of {}² in {} levels (source {:.2} m per pixel), {:.2} MB\n",
+                        i["source"].as_str().unwrap_or("?"),
+                        i["tiles"],
+                        i["tile_px"],
+                        i["levels"],
+                        i["resolution_m"].as_f64().unwrap_or(0.0),
+                        i["bytes"].as_f64().unwrap_or(0.0) / 1e6
+                    );
+                } else {
+                    out += "no ground imagery (bake with --ortho, or without --plain-ground)\n";
+                }
             } else {
                 out += "no terrain (bake with --dem for one)\n";
             }

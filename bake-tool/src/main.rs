@@ -282,6 +282,12 @@ struct BakeArgs {
     /// CRS of the --ortho files, when their GeoKeys name none (or name the wrong one).
     #[arg(long, value_name = "EPSG:xxxx")]
     ortho_crs: Option<String>,
+    /// Without --ortho the terrain gets a procedural forest floor as its
+    /// imagery (litter under the canopy, dry grass in clearings, soil on steep
+    /// slopes, from the trees' crowns); this leaves it out (fewer bytes: the
+    /// viewer's plain ground material by slope).
+    #[arg(long, conflicts_with = "orthos")]
+    plain_ground: bool,
     #[command(flatten)]
     pack: PackArgs,
     /// Trees held in memory at once while tiling; larger inputs are partitioned
@@ -405,15 +411,31 @@ fn demo(args: &DemoArgs) -> Result<()> {
         [b[0].min(t.pos.x), b[1].min(t.pos.y), b[2].max(t.pos.x), b[3].max(t.pos.y)]
     });
     let margin = ((bounds[2] - bounds[0]).max(bounds[3] - bounds[1]) * 0.25).max(200.0);
+    let region = [bounds[0] - margin, bounds[1] - margin, bounds[2] + margin, bounds[3] + margin];
     let terrain = (!args.no_terrain).then(|| bake::terrain::TerrainSource {
         height: &ground,
-        region: [bounds[0] - margin, bounds[1] - margin, bounds[2] + margin, bounds[3] + margin],
-        resolution_m: 8.0,
-        source: "demo hills".into(),
+        region,
+        resolution_m: 4.0,
+        source: "demo valley".into(),
+    });
+    // Its ground imagery: the forest floor under the demo's crowns, the stream and its meadows.
+    let mut canopy = bake::ground_material::CanopyCover::new(bounds, 2.0);
+    for t in &trees {
+        canopy.add(t.pos.x, t.pos.y, demo::crown_radius_m(t.species, t.scale));
+    }
+    let colour = |x: f64, y: f64| {
+        let slope = bake::ground_material::slope_of(&ground, x, y, 1.0);
+        Some(demo::ground_colour(x, y, canopy.at(x, y), slope))
+    };
+    let imagery = terrain.as_ref().map(|_| bake::imagery::ImagerySource {
+        colour: &colour,
+        extent_m: region,
+        resolution_m: bake::ground_material::FLOOR_RESOLUTION_M,
+        source: "demo forest floor, stream and meadows".into(),
     });
     let input = SceneInput {
         terrain,
-        imagery: None,
+        imagery,
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
         trees: TreeSource::Memory(trees),
@@ -595,7 +617,24 @@ fn bake(args: &BakeArgs) -> Result<()> {
         let (ox, oy) = (placed.origin_m.x, placed.origin_m.y);
         move |x: f64, y: f64| o.colour_at(x + ox, y + oy)
     });
+    // Without an orthophoto: the forest floor by canopy and slope.
+    let height_fn: Option<&(dyn Fn(f64, f64) -> Option<f32> + Sync)> = terrain.as_ref().map(|t| t.height);
+    let floor_colour = height_fn.map(|height| {
+        let canopy = &placed.canopy;
+        move |x: f64, y: f64| {
+            let slope = bake::ground_material::slope_of(height, x, y, 1.0);
+            height(x, y).map(|_| bake::ground_material::forest_floor(x, y, canopy.at(x, y), slope))
+        }
+    });
     let imagery = match (&orthos, &ortho_colour) {
+        (None, _) if !args.plain_ground => {
+            terrain.as_ref().zip(floor_colour.as_ref()).map(|(t, colour)| bake::imagery::ImagerySource {
+                colour,
+                extent_m: t.region,
+                resolution_m: bake::ground_material::FLOOR_RESOLUTION_M,
+                source: "procedural forest floor (canopy cover and slope)".into(),
+            })
+        }
         (Some(o), Some(colour)) => {
             let e = o.scene_extent().context("the --ortho extent cannot be projected into the scene CRS")?;
             let (ox, oy) = (placed.origin_m.x, placed.origin_m.y);

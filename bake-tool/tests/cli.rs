@@ -574,7 +574,15 @@ fn trees_stand_on_the_ground_of_a_dem() {
     let bare = inspect_json(&dir.join("bare"));
     assert!(bare["terrain"].is_null());
     assert_eq!(bare["version"], 3, "a scene without terrain is manifest version 3 (older viewers read it)");
-    assert_eq!(inspect_json(&dir.join("fitted"))["version"], 4);
+    // The fitted ground carries the procedural forest floor as imagery (version 5);
+    // --plain-ground leaves it out (version 4).
+    let fitted = inspect_json(&dir.join("fitted"));
+    assert_eq!(fitted["version"], 5);
+    assert!(fitted["terrain"]["imagery"]["source"].as_str().unwrap().contains("procedural forest floor"), "{fitted}");
+    run(&mut quick_bake(&model, &sloped_csv, &dir.join("plain"), &[&crs[..], &["--plain-ground"]].concat()));
+    let plain = inspect_json(&dir.join("plain"));
+    assert_eq!(plain["version"], 4);
+    assert!(plain["terrain"]["imagery"].is_null());
     // Bad DEM inputs are named.
     let e = fails(&mut quick_bake(
         &model,

@@ -1,10 +1,13 @@
 //! Ground imagery images: the baked JPEGs of `terrain.imagery`
-//! ([`super::terrain::ImageryEntry`]) and the PNG/JPEG/WebP tiles of an XYZ or
-//! WMTS raster source, decoded with the `image` crate into RGBA8 (sRGB).
+//! ([`super::terrain::ImageryEntry`]) and the PNG or JPEG tiles of an XYZ or
+//! WMTS raster source, decoded into RGBA8 (sRGB) with the `png` and
+//! `zune-jpeg` crates (the decoders `image` uses, without its weight in the
+//! wasm module).
 //!
 //! The decoder bounds what it allocates: the image's side may not exceed
-//! `max_px` and the decoder's own allocations are capped, so a hostile file
-//! cannot make it allocate more than a few times the largest allowed image.
+//! `max_px` (checked from the header before the pixels are decoded) and the
+//! PNG decoder's allocations are capped, so a hostile file cannot make it
+//! allocate more than a few times the largest allowed image.
 
 use super::error::{DecodeError, Problem};
 
@@ -19,31 +22,67 @@ pub struct Rgba8 {
     pub pixels: Vec<u8>,
 }
 
-/// Decodes a PNG, JPEG or WebP image of at most `max_px` pixels a side.
+/// Decodes a PNG or JPEG image of at most `max_px` pixels a side.
 ///
 /// # Errors
 /// A [`DecodeError`] naming `file` for bytes that are no such image, a
 /// corrupt image, or one larger than `max_px` a side.
 pub fn decode_image(file: &str, bytes: &[u8], max_px: u32) -> Result<Rgba8, DecodeError> {
     let bad = |m: String| DecodeError::new(file, Problem::Invalid(m));
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| bad(format!("cannot read the image: {e}")))?;
-    if reader.format().is_none() {
-        return Err(bad("not a PNG, JPEG or WebP image".into()));
+    let img = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        decode_png(bytes, max_px).map_err(|e| bad(format!("cannot decode the PNG image: {e}")))?
+    } else if bytes.starts_with(&[0xff, 0xd8]) {
+        decode_jpeg(bytes, max_px).map_err(|e| bad(format!("cannot decode the JPEG image: {e}")))?
+    } else {
+        return Err(bad("not a PNG or JPEG image".into()));
+    };
+    if img.width == 0 || img.height == 0 || img.width > max_px || img.height > max_px {
+        return Err(bad(format!("a {}×{} image: sides of 1–{max_px} pixels are read", img.width, img.height)));
     }
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(max_px);
-    limits.max_image_height = Some(max_px);
-    limits.max_alloc = Some(u64::from(max_px) * u64::from(max_px) * 16 + (1 << 20));
-    reader.limits(limits);
-    let img = reader.decode().map_err(|e| bad(format!("cannot decode the image: {e}")))?;
-    let rgba = img.into_rgba8();
-    let (width, height) = rgba.dimensions();
-    if width == 0 || height == 0 {
-        return Err(bad("the image is empty".into()));
+    if img.pixels.len() != img.width as usize * img.height as usize * 4 {
+        return Err(bad("the image data does not match its size".into()));
     }
-    Ok(Rgba8 { width, height, pixels: rgba.into_raw() })
+    Ok(img)
+}
+
+fn decode_png(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
+    let limits = png::Limits { bytes: (max_px as usize).pow(2) * 8 + (1 << 16) };
+    let mut decoder = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), limits);
+    decoder.set_transformations(png::Transformations::normalize_to_color8());
+    let mut reader = decoder.read_info().map_err(|e| e.to_string())?;
+    let (w, h) = (reader.info().width, reader.info().height);
+    if w > max_px || h > max_px {
+        return Err(format!("{w}×{h} pixels is more than {max_px} a side"));
+    }
+    let size = reader.output_buffer_size().ok_or("the image is too large")?;
+    let mut buf = vec![0; size];
+    let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
+    buf.truncate(info.buffer_size());
+    let n = (w * h) as usize;
+    let pixels: Vec<u8> = match info.color_type {
+        png::ColorType::Rgba => buf,
+        png::ColorType::Rgb => buf.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect(),
+        png::ColorType::Grayscale => buf.iter().flat_map(|&g| [g, g, g, 255]).collect(),
+        png::ColorType::GrayscaleAlpha => buf.chunks_exact(2).flat_map(|p| [p[0], p[0], p[0], p[1]]).collect(),
+        png::ColorType::Indexed => return Err("an indexed image was not expanded".into()),
+    };
+    if pixels.len() != n * 4 {
+        return Err(format!("{} bytes of pixels for {w}×{h}", pixels.len()));
+    }
+    Ok(Rgba8 { width: w, height: h, pixels })
+}
+
+fn decode_jpeg(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
+    use zune_jpeg::zune_core::colorspace::ColorSpace;
+    use zune_jpeg::zune_core::options::DecoderOptions;
+    let options = DecoderOptions::default()
+        .set_max_width(max_px as usize)
+        .set_max_height(max_px as usize)
+        .jpeg_set_out_colorspace(ColorSpace::RGBA);
+    let mut decoder = zune_jpeg::JpegDecoder::new_with_options(std::io::Cursor::new(bytes), options);
+    let pixels = decoder.decode().map_err(|e| e.to_string())?;
+    let info = decoder.info().ok_or("no image header")?;
+    Ok(Rgba8 { width: u32::from(info.width), height: u32::from(info.height), pixels })
 }
 
 #[cfg(test)]
@@ -66,6 +105,15 @@ mod tests {
         assert!(e.starts_with("big.png: ") && e.contains("decode"), "{e}");
         let e = decode_image("x.jpg", b"not an image at all", 256).unwrap_err().to_string();
         assert!(e.contains("x.jpg") && e.contains("not a PNG"), "{e}");
+        // A JPEG too.
+        let mut jpg = std::io::Cursor::new(Vec::new());
+        image::RgbImage::from_fn(32, 16, |x, _| image::Rgb([x as u8 * 8, 100, 50]))
+            .write_to(&mut jpg, image::ImageFormat::Jpeg)
+            .unwrap();
+        let img = decode_image("a.jpg", jpg.get_ref(), 256).unwrap();
+        assert_eq!((img.width, img.height), (32, 16));
+        assert!((i32::from(img.pixels[4 * 20 + 1]) - 100).abs() < 8);
+        assert!(decode_image("big.jpg", jpg.get_ref(), 16).is_err());
         let mut cut = png(16, 8);
         cut.truncate(cut.len() / 2);
         assert!(decode_image("cut.png", &cut, 256).is_err());

@@ -252,8 +252,11 @@ impl ForestRenderer {
     }
 
     /// Sizes the terrain pool for a scene's terrain (see [`TerrainPass::reserve`]).
-    pub fn reserve_terrain(&mut self, device: &wgpu::Device, grid: u16, tiles: u64) {
+    pub fn reserve_terrain(&mut self, device: &wgpu::Device, grid: u16, tiles: u64, images: u64) {
         self.terrain.reserve(device, grid, tiles);
+        if images > 0 {
+            self.terrain.reserve_images(device, images);
+        }
     }
 
     /// The terrain pass (tiles drawn, uploads, GPU bytes).

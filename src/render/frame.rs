@@ -117,7 +117,7 @@ impl<F: Fetcher> Frame<F> {
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);
         if let Some(t) = self.stream.manifest().and_then(|m| m.terrain.as_ref()) {
-            self.renderer.reserve_terrain(&self.device, t.grid, t.tiles);
+            self.renderer.reserve_terrain(&self.device, t.grid, t.tiles, t.imagery.as_ref().map_or(0, |i| i.tiles));
         }
     }
 

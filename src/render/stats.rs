@@ -40,6 +40,10 @@ pub struct FrameStats {
     pub terrain_drawn: u64,
     /// Terrain tiles decoded and kept (CPU; those drawn are also on the GPU).
     pub terrain_resident: u64,
+    /// Terrain tiles drawn with a ground image this frame.
+    pub imagery_drawn: u64,
+    /// Ground images decoded and kept (CPU; those drawn are also on the GPU).
+    pub imagery_resident: u64,
     /// Index nodes read so far (0 for a flat manifest).
     pub index_nodes_loaded: u64,
     /// Index nodes in the scene (0 for a flat manifest).
@@ -102,6 +106,8 @@ impl FrameStats {
             tiles_total: stream.manifest().map_or(0, |m| m.counts.tiles),
             terrain_drawn: u64::from(renderer.terrain().drawn()),
             terrain_resident: s.terrain_resident,
+            imagery_drawn: u64::from(renderer.terrain().imaged),
+            imagery_resident: s.imagery_resident,
             index_nodes_loaded: s.index_nodes_loaded,
             index_nodes_total: s.index_nodes_total,
             degraded,

@@ -199,6 +199,8 @@ pub struct TerrainPass {
     records: Vec<GpuTerrainDraw>,
     /// This frame's image layer per draw (kept between frames too).
     layers: Vec<u32>,
+    /// This frame's distinct images (kept between frames too).
+    image_keys: Vec<ImageKey>,
 }
 
 impl TerrainPass {
@@ -272,21 +274,18 @@ impl TerrainPass {
             uploads: 0,
             records: Vec::new(),
             layers: Vec::new(),
+            image_keys: Vec::new(),
         }
     }
 
     /// The layer holding the image of `d` (uploaded now if it is new), or
     /// [`NO_IMAGE`] when it has none or every layer is drawn this frame.
-    fn image_layer(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, d: &TerrainDraw) -> u32 {
+    fn image_layer(&mut self, queue: &wgpu::Queue, d: &TerrainDraw) -> u32 {
         let Some(img) = &d.imagery else { return NO_IMAGE };
         if img.tile.px != IMAGE_PX || img.tile.rgba.len() != (IMAGE_PX * IMAGE_PX * 4) as usize {
             return NO_IMAGE;
         }
-        let images = self.images.get_or_insert_with(|| {
-            let texture = image_texture(device, IMAGE_PX, IMAGE_LAYERS, IMAGE_MIPS);
-            let group = image_group(device, &self.image_layout, &texture, &self.sampler);
-            Images { texture, group, layers: vec![None; IMAGE_LAYERS as usize], by_key: HashMap::new() }
-        });
+        let Some(images) = self.images.as_mut() else { return NO_IMAGE };
         if let Some(&layer) = images.by_key.get(&img.key) {
             images.layers[layer as usize] = Some((img.key, self.frame));
             return layer;
@@ -311,12 +310,25 @@ impl TerrainPass {
         free as u32
     }
 
+    /// Sizes the image array for `layers` images (at most [`IMAGE_LAYERS`];
+    /// when a baked scene's manifest arrives, so budgets count it). A larger
+    /// array replaces the former (its images are uploaded again when drawn).
+    pub fn reserve_images(&mut self, device: &wgpu::Device, layers: u64) {
+        let layers = layers.clamp(1, u64::from(IMAGE_LAYERS)) as u32;
+        if self.images.as_ref().is_some_and(|i| i.layers.len() as u32 >= layers) {
+            return;
+        }
+        let texture = image_texture(device, IMAGE_PX, layers, IMAGE_MIPS);
+        let group = image_group(device, &self.image_layout, &texture, &self.sampler);
+        self.images = Some(Images { texture, group, layers: vec![None; layers as usize], by_key: HashMap::new() });
+    }
+
     /// Bytes of GPU memory held.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
-        let images = self.images.as_ref().map_or(0, |_| {
+        let images = self.images.as_ref().map_or(0, |i| {
             // The mip chain adds a third.
-            u64::from(IMAGE_PX) * u64::from(IMAGE_PX) * 4 * u64::from(IMAGE_LAYERS) * 4 / 3
+            u64::from(IMAGE_PX) * u64::from(IMAGE_PX) * 4 * i.layers.len() as u64 * 4 / 3
         });
         self.pool.as_ref().map_or(0, |p| p.heights.size() + p.draws.size() + p.indices.size()) + images
     }
@@ -346,11 +358,22 @@ impl TerrainPass {
         if self.pool.as_ref().is_none_or(|p| p.grid != grid) {
             self.reserve(device, grid, TERRAIN_SLOTS as u64);
         }
-        // Images first (their layers), then the heights.
+        // Images first (their layers), then the heights. The array grows (up to
+        // IMAGE_LAYERS) when this frame drapes more images than it holds.
+        let mut keys = std::mem::take(&mut self.image_keys);
+        keys.clear();
+        keys.extend(draws.iter().filter_map(|d| d.imagery.as_ref().map(|i| i.key)));
+        keys.sort_unstable();
+        keys.dedup();
+        let held = self.images.as_ref().map_or(0, |i| i.layers.len());
+        if keys.len() > held && held < IMAGE_LAYERS as usize {
+            self.reserve_images(device, (keys.len() as u64).next_power_of_two().max(16));
+        }
+        self.image_keys = keys;
         let mut layers = std::mem::take(&mut self.layers);
         layers.clear();
         for d in draws {
-            let layer = self.image_layer(device, queue, d);
+            let layer = self.image_layer(queue, d);
             layers.push(layer);
         }
         let Some(pool) = self.pool.as_mut() else { return };

@@ -8,6 +8,8 @@ import assert from 'node:assert/strict';
 import { spawn, execFileSync } from 'node:child_process';
 import { mkdtempSync, cpSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
+import { createServer } from 'node:http';
+import { deflateSync } from 'node:zlib';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { chromium } from 'playwright-core';
@@ -21,6 +23,60 @@ const WEBGPU_FLAGS = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-featur
   '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 
 let server, base, browser, corruptServer, corruptBase;
+
+// The fixture's ground heights (the scene's datum): the terrain's range from its manifest.
+const fixtureManifest = JSON.parse(readFileSync(join(scene, 'scene.json'), 'utf8'));
+const [groundLo, groundHi] = fixtureManifest.terrain.height_range_m.map((h) => h + fixtureManifest.origin_m[2]);
+
+/** A PNG of w×h RGB pixels from `rgb(x, y)` (node's zlib; no dependency). */
+function png(w, h, rgb) {
+  const crcTable = Array.from({ length: 256 }, (_, n) => {
+    let c = n;
+    for (let k = 0; k < 8; k++) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
+    return c >>> 0;
+  });
+  const crc = (buf) => {
+    let c = 0xffffffff;
+    for (const b of buf) c = crcTable[(c ^ b) & 0xff] ^ (c >>> 8);
+    return (c ^ 0xffffffff) >>> 0;
+  };
+  const chunk = (type, data) => {
+    const head = Buffer.alloc(8);
+    head.writeUInt32BE(data.length, 0);
+    head.write(type, 4, 'ascii');
+    const tail = Buffer.alloc(4);
+    tail.writeUInt32BE(crc(Buffer.concat([head.subarray(4), data])), 0);
+    return Buffer.concat([head, data, tail]);
+  };
+  const ihdr = Buffer.alloc(13);
+  ihdr.writeUInt32BE(w, 0);
+  ihdr.writeUInt32BE(h, 4);
+  ihdr.set([8, 2, 0, 0, 0], 8); // 8-bit RGB
+  const raw = Buffer.alloc((w * 3 + 1) * h);
+  for (let y = 0; y < h; y++) {
+    for (let x = 0; x < w; x++) raw.set(rgb(x, y), y * (w * 3 + 1) + 1 + x * 3);
+  }
+  return Buffer.concat([Buffer.from([0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a]), chunk('IHDR', ihdr),
+    chunk('IDAT', deflateSync(raw)), chunk('IEND', Buffer.alloc(0))]);
+}
+
+/** A local XYZ tile server (never the internet): /{z}/{x}/{y}.png is magenta
+ * where x + y is even and cyan where odd; anything else 404. CORS open, as
+ * public tile servers are. Resolves with {url, requests(), close()}. */
+function tileServer() {
+  let requests = 0;
+  const tiles = [png(256, 256, () => [210, 40, 210]), png(256, 256, () => [40, 200, 210])];
+  const srv = createServer((req, res) => {
+    const m = /^\/(\d+)\/(\d+)\/(\d+)\.png$/.exec(req.url);
+    if (!m) { res.writeHead(404, { 'Access-Control-Allow-Origin': '*' }); res.end(); return; }
+    requests++;
+    res.writeHead(200, { 'Content-Type': 'image/png', 'Access-Control-Allow-Origin': '*' });
+    res.end(tiles[(Number(m[2]) + Number(m[3])) % 2]);
+  });
+  return new Promise((resolve) => srv.listen(0, '127.0.0.1', () => resolve({
+    url: `http://127.0.0.1:${srv.address().port}/{z}/{x}/{y}.png`, requests: () => requests, close: () => srv.close(),
+  })));
+}
 
 /** Starts `sylva serve DIR --port 0` and resolves with its base URL. */
 function startServer(dir) {
@@ -271,8 +327,8 @@ test('walking mode keeps eye height above the ground', async () => {
   await page.waitForTimeout(300);
   const cam = await page.evaluate(() => window.sylva.camera());
   assert.equal(cam.fly, true);
-  // The fixture's terrain is 15.4–21.7 m high; the eye stays 1.7 m above it.
-  assert.ok(cam.ground > 15 && cam.ground < 22, `ground under the eye ${cam.ground}`);
+  // On the fixture's terrain; the eye stays 1.7 m above it.
+  assert.ok(cam.ground >= groundLo - 0.1 && cam.ground <= groundHi + 0.1, `ground under the eye ${cam.ground}`);
   assert.ok(Math.abs(cam.z - cam.ground - 1.7) < 0.05, `eye height ${cam.z} over ground ${cam.ground}`);
   await foliageShare(page, 'walking');
 });
@@ -281,7 +337,7 @@ test('the terrain is drawn under the trees and heightAt reads it', async () => {
   const { page, errors } = await openViewer(base);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   const stats = await ready(page);
-  // The fixture's demo hills: 5 terrain tiles (a root and four children).
+  // The fixture's demo valley: 21 terrain tiles in 3 levels.
   assert.ok(stats.terrain_drawn >= 1 && stats.terrain_resident >= 1, `terrain ${JSON.stringify(stats)}`);
   const probe = await page.evaluate(() => {
     const v = window.sylva;
@@ -290,7 +346,7 @@ test('the terrain is drawn under the trees and heightAt reads it', async () => {
     const ll = v.viewer.camera_json && JSON.parse(v.viewer.camera_json());
     return { inside: v.heightAt(ll.lon, ll.lat), outside: v.heightAt(ll.lon + 1, ll.lat + 1), ground: c.ground };
   });
-  assert.ok(probe.inside > 15 && probe.inside < 22, `heightAt under the camera ${probe.inside}`);
+  assert.ok(probe.inside >= groundLo - 0.1 && probe.inside <= groundHi + 0.1, `heightAt under the camera ${probe.inside}`);
   assert.ok(Math.abs(probe.inside - probe.ground) < 0.01, `heightAt ${probe.inside} vs camera().ground ${probe.ground}`);
   assert.equal(probe.outside, null, 'no ground known 100 km away');
   // flyTo a height above the ground.
@@ -310,6 +366,56 @@ test('the terrain is drawn under the trees and heightAt reads it', async () => {
   await page.waitForFunction(() => window.sylva.stats().terrain_drawn > 0, null, { timeout: 60000 });
   assert.ok(Math.abs(cam.z - cam.ground - 50) < 1, `flew to ${JSON.stringify(cam)} from ${JSON.stringify(before)}`);
   assert.deepEqual(errors, []);
+});
+
+test('ground imagery: the baked forest floor is draped, and an XYZ source on a local server replaces it', async () => {
+  const tiles = await tileServer();
+  try {
+    const { page, errors } = await openViewer(base);
+    await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
+    const stats = await ready(page);
+    // The fixture's procedural forest floor, baked as imagery.
+    assert.ok(stats.imagery_drawn >= 1 && stats.imagery_resident >= 1, `baked imagery ${JSON.stringify(stats)}`);
+    const shot = async (name) => {
+      const b64 = (await page.screenshot({ path: join(artifacts, `${name}.png`) })).toString('base64');
+      return page.evaluate(async (b64) => {
+        const img = new Image();
+        img.src = `data:image/png;base64,${b64}`;
+        await img.decode();
+        const c = document.createElement('canvas');
+        c.width = img.width; c.height = img.height;
+        const g = c.getContext('2d');
+        g.drawImage(img, 0, 0);
+        const d = g.getImageData(0, 0, c.width, c.height).data;
+        let magenta = 0, cyan = 0;
+        for (let i = 0; i < d.length; i += 4) {
+          if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
+          if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
+        }
+        return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };
+      }, b64);
+    };
+    const plain = await shot('imagery-baked');
+    assert.equal(plain.magenta + plain.cyan, 0, 'the forest floor has neither colour');
+    // A template without placeholders is refused with a message.
+    const refused = await page.evaluate(() => { try { window.sylva.setImagery('http://x/tiles.png'); return null; } catch (e) { return String(e); } });
+    assert.ok(refused && refused.includes('{z}'), `bad template: ${refused}`);
+    await page.evaluate((url) => window.sylva.setImagery(url, { maxZoom: 18 }), tiles.url);
+    await page.waitForFunction(() => {
+      const s = window.sylva.stats();
+      return s.terrain_drawn > 0 && s.imagery_drawn === s.terrain_drawn && window.sylva.viewer.settled();
+    }, null, { timeout: 120000 });
+    await page.waitForTimeout(500);
+    const xyz = await shot('imagery-xyz');
+    assert.ok(tiles.requests() > 0, 'the tile server was asked');
+    assert.ok(xyz.magenta + xyz.cyan > 0.05, `the source's tiles drape the ground: ${JSON.stringify(xyz)}`);
+    // None: the terrain's own material.
+    await page.evaluate(() => window.sylva.setImagery(null));
+    await page.waitForFunction(() => window.sylva.stats().imagery_drawn === 0, null, { timeout: 60000 });
+    assert.deepEqual(errors, []);
+  } finally {
+    tiles.close();
+  }
 });
 
 test('a lost GPU device is recreated and rendering continues', async () => {

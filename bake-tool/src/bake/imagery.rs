@@ -206,7 +206,8 @@ pub fn write_imagery(
         path: format!("{}/img", terrain.path),
         tile_px: IMAGERY_PX,
         levels: finest + 1,
-        extent_m: src.extent_m,
+        // Millimetres: short decimals read back exactly (a merge re-reads the manifest).
+        extent_m: src.extent_m.map(|v| (v * 1000.0).round() / 1000.0),
         resolution_m: src.resolution_m,
         tiles: 0,
         bytes: 0,

@@ -13,6 +13,7 @@
 //! other stage; the folder is written atomically ([`OutDir::write`]).
 
 pub mod ground;
+pub mod ground_material;
 pub mod imagery;
 pub mod packs;
 pub mod terrain;

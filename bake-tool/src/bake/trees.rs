@@ -171,6 +171,8 @@ pub struct PlacedTrees {
     pub ground: Option<(super::ground::Ground, [f64; 4])>,
     /// Without a DEM: a ground fitted to the trees' bases and its region.
     pub fitted: Option<(super::ground::FittedGround, [f64; 4])>,
+    /// The crown cover of every tree (of every shard), for the procedural ground material.
+    pub canopy: super::ground_material::CanopyCover,
 }
 
 /// What pass 1 learns.
@@ -185,6 +187,8 @@ struct Sample {
     /// Without a DEM: the region (relative metres) over which pass 3 fits a
     /// ground surface to the trees' bases (every shard fits the same one).
     ground_region: Option<[f64; 4]>,
+    /// The region (relative metres) of the canopy cover grid: the trees and 50 m around.
+    canopy_region: [f64; 4],
 }
 
 /// Reads, checks and places the trees (see the module docs).
@@ -344,7 +348,17 @@ pub fn place_trees(
             b[3] + margin - origin.y,
         ]);
     }
-    let Pass3 { trees, summary, outside, fit } = tree_pass(opts, &source, &sample, cell_size_m, &to_tree, out, log)?;
+    let b = sample_box;
+    sample.canopy_region =
+        [b[0] - 50.0 - origin.x, b[1] - 50.0 - origin.y, b[2] + 50.0 - origin.x, b[3] + 50.0 - origin.y];
+    let crown_radius = |t: &SceneTree| {
+        let w = species.crown_widths[t.species as usize];
+        let h = species.heights[t.species as usize];
+        let r = if w > 0.0 { 0.5 * w * t.aspect } else { 0.2 * h };
+        f64::from(r * t.scale)
+    };
+    let Pass3 { trees, summary, outside, fit, canopy } =
+        tree_pass(opts, &source, &sample, cell_size_m, &to_tree, &crown_radius, out, log)?;
     if outside.trees > 0 && opts.outside_dem == OutsideDem::Error {
         let b = outside.bounds;
         bail!(
@@ -376,7 +390,7 @@ pub fn place_trees(
         (g, [region[0] - origin.x, region[1] - origin.y, region[2] - origin.x, region[3] - origin.y])
     });
     let fitted = fit.and_then(super::ground::GroundFit::finish).zip(sample.ground_region);
-    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted })
+    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy })
 }
 
 /// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.
@@ -403,7 +417,7 @@ fn sample_pass(source: &PlacementSource) -> Result<Sample> {
         }
         Ok(())
     })?;
-    Ok(Sample { rows, seen, duplicates, report, ground_region: None })
+    Ok(Sample { rows, seen, duplicates, report, ground_region: None, canopy_region: [0.0; 4] })
 }
 
 /// Longitude and latitude the other way round: most rows' "latitude" beyond
@@ -498,6 +512,7 @@ fn tree_pass(
     sample: &Sample,
     cell_size_m: u32,
     to_tree: &TreeOf<'_>,
+    crown_radius: &dyn Fn(&SceneTree) -> f64,
     out: &OutDir,
     log: &dyn Fn(&str),
 ) -> Result<Pass3> {
@@ -550,10 +565,13 @@ fn tree_pass(
     let mut outside = Outside { bounds: [f64::MAX, f64::MAX, f64::MIN, f64::MIN], ..Outside::default() };
     // Every tree of every shard goes into the fitted ground, so shards agree on it.
     let mut fit = sample.ground_region.map(super::ground::GroundFit::new);
+    // Likewise the canopy cover (2 m cells).
+    let mut canopy = super::ground_material::CanopyCover::new(sample.canopy_region, 2.0);
     let mut fit_add = |t: &SceneTree| {
         if let Some(f) = fit.as_mut() {
             f.add(t.pos.x, t.pos.y, t.pos.z);
         }
+        canopy.add(t.pos.x, t.pos.y, crown_radius(t));
     };
     let mut skip = |p: &Placement, why: &str| match why {
         OUTSIDE_DEM => {
@@ -632,7 +650,7 @@ fn tree_pass(
         ));
     }
     outside.rows_read = report.rows;
-    Ok(Pass3 { trees, summary, outside, fit })
+    Ok(Pass3 { trees, summary, outside, fit, canopy })
 }
 
 /// What pass 3 makes: the trees, the summary per species label, the trees
@@ -642,6 +660,7 @@ struct Pass3 {
     summary: BTreeMap<String, SpeciesSummary>,
     outside: Outside,
     fit: Option<super::ground::GroundFit>,
+    canopy: super::ground_material::CanopyCover,
 }
 
 /// Trees outside every DEM: how many, where (placement coordinates) and which rows.
