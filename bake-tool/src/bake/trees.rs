@@ -506,6 +506,7 @@ type TreeOf<'a> = dyn Fn(&Placement) -> Result<(SceneTree, Facts), &'static str>
 
 /// Pass 3: the trees, in memory or partitioned by tile into bucket files; the
 /// report of every row skipped and why, and the summary per species label.
+#[allow(clippy::too_many_arguments)] // the pass's inputs, each used once
 fn tree_pass(
     opts: &TreeOptions<'_>,
     source: &PlacementSource,
