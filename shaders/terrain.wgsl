@@ -1,9 +1,10 @@
 // Terrain pass: every selected terrain tile in one instanced draw, before the
 // trees, lit like them. A tile is a (grid + 1)² height grid pulled from the
 // resident height pool, with a skirt (an extra ring of vertices dropped below
-// the edge) against cracks between levels, and vertices morphed towards the
-// parent level's surface where the parent's error projects to little more
-// than the threshold, so level changes do not pop (CDLOD-style geomorphing).
+// the edge) against cracks between levels, and its vertices (and normals)
+// morphed towards the parent level's surface by the tile's morph factor, so
+// level changes do not pop (CDLOD-style geomorphing, one factor per tile:
+// scene::terrain::morph).
 // Rust side: src/render/terrain.rs; selection: src/scene/terrain.rs.
 
 @group(0) @binding(0) var<storage, read> view: View;
@@ -26,8 +27,9 @@ struct TerrainDraw {
     size_m: f32,
     // Highest minus lowest height (quantisation range).
     range_m: f32,
-    // The parent's geometric error (metres; a huge value for the root).
-    parent_error_m: f32,
+    // Morph from the parent's surface (0) to the tile's own (1), per tile
+    // (scene::terrain::morph: measured where the selection measures).
+    morph: f32,
     // How far the skirt hangs below the edge, metres.
     skirt_m: f32,
     // Where the tile lies in its image: uv offset (xy) and scale (zw).
@@ -49,7 +51,7 @@ struct TerrainParams {
     words: u32,
     // Selection threshold, pixels.
     threshold_px: f32,
-    // 1: colour by level (debug view).
+    // Bits: 1 colour by level (debug view), 2 no geomorphing (comparisons).
     debug: u32,
 };
 
@@ -91,6 +93,26 @@ fn mean_valid(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, d: vec2<f32>, fallback: 
     return (a.x * a.y + b.x * b.y + c.x * c.y + d.x * d.y) / n;
 }
 
+// Normal at vertex (i, j) from the heights at columns a0/a1 (row j) and rows
+// b0/b1 (column i); missing neighbours count as `h` (a flat side).
+fn grid_normal(t: TerrainDraw, i: u32, j: u32, a0: u32, a1: u32, b0: u32, b1: u32, h: f32, step: f32) -> vec3<f32> {
+    let x0 = height_at(t, a0, j);
+    let x1 = height_at(t, a1, j);
+    let y0 = height_at(t, i, b0);
+    let y1 = height_at(t, i, b1);
+    let dx = select(h, x1.x, x1.y > 0.5) - select(h, x0.x, x0.y > 0.5);
+    let dy = select(h, y1.x, y1.y > 0.5) - select(h, y0.x, y0.y > 0.5);
+    return normalize(vec3<f32>(-dx / max(f32(a1 - a0) * step, 1e-6), -dy / max(f32(b1 - b0) * step, 1e-6), 1.0));
+}
+
+// The parent level's normal at this tile's even vertex (i, j): differences
+// over the parent's neighbours, two of this tile's steps away.
+fn parent_normal(t: TerrainDraw, i: u32, j: u32, step: f32) -> vec3<f32> {
+    let n = params.grid;
+    let h = height_at(t, i, j).x;
+    return grid_normal(t, i, j, u32(max(i32(i) - 2, 0)), min(i + 2u, n), u32(max(i32(j) - 2, 0)), min(j + 2u, n), h, step);
+}
+
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let t = tiles[instance];
@@ -129,21 +151,30 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         coarse = mean_valid(a, b, a, b, h);
     }
     let local = vec3<f32>(f32(i) * step, f32(j) * step, 0.0);
-    let probe = eye_relative(vec3<f32>(t.origin_m.xy, 0.0), local + vec3<f32>(0.0, 0.0, h), view);
-    let parent_px = t.parent_error_m * view.lod.x / max(length(probe), 1e-3);
-    let morph = clamp(parent_px / max(params.threshold_px, 1e-3) - 1.0, 0.0, 1.0);
+    var morph = t.morph;
+    if (params.debug & 2u) != 0u {
+        morph = 1.0;
+    }
     h = mix(coarse, h, morph);
     if skirt {
         h -= t.skirt_m;
     }
-    // Normal from central differences of the (unmorphed) neighbours.
-    let hx0 = height_at(t, im, j);
-    let hx1 = height_at(t, ip, j);
-    let hy0 = height_at(t, i, jm);
-    let hy1 = height_at(t, i, jp);
-    let dx = select(own.x, hx1.x, hx1.y > 0.5) - select(own.x, hx0.x, hx0.y > 0.5);
-    let dy = select(own.x, hy1.x, hy1.y > 0.5) - select(own.x, hy0.x, hy0.y > 0.5);
-    let normal = normalize(vec3<f32>(-dx / (f32(ip - im) * step), -dy / (f32(jp - jm) * step), 1.0));
+    // Normal from central differences of the neighbours, morphed like the
+    // height: towards the parent's normal (the same differences over its
+    // vertices, this tile's even ones), so the light does not pop either.
+    let fine_n = grid_normal(t, i, j, im, ip, jm, jp, own.x, step);
+    // The parent interpolates its vertex normals across its triangles: at an
+    // edge's middle the mean of the edge's ends, at a cell's centre (on the
+    // diagonal) the mean of its south-west and north-east corners.
+    var coarse_n = parent_normal(t, i, j, step);
+    if odd_i && odd_j {
+        coarse_n = parent_normal(t, im, jm, step) + parent_normal(t, ip, jp, step);
+    } else if odd_i {
+        coarse_n = parent_normal(t, im, j, step) + parent_normal(t, ip, j, step);
+    } else if odd_j {
+        coarse_n = parent_normal(t, i, jm, step) + parent_normal(t, i, jp, step);
+    }
+    let normal = normalize(mix(normalize(coarse_n), fine_n, morph));
     var out: VertexOut;
     let pos = eye_relative(vec3<f32>(t.origin_m.xy, 0.0), local + vec3<f32>(0.0, 0.0, h), view);
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
@@ -169,14 +200,14 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     }
     let n = normalize(in.normal);
     var albedo = mix(LITTER, SOIL, smoothstep(0.82, 0.55, n.z));
-    if params.debug == 1u {
+    if (params.debug & 1u) != 0u {
         // Alternating tints per level (tile size), to see the selection.
         let k = u32(in.level_tint) % 3u;
         albedo = select(select(vec3<f32>(0.5, 0.3, 0.3), vec3<f32>(0.3, 0.5, 0.3), k == 1u), vec3<f32>(0.3, 0.3, 0.5), k == 2u);
     }
     var lit = shade(albedo, n, false, view);
     // Sampled everywhere (uniform control flow), used where there is an image.
-    let has = in.layer != NO_IMAGE && params.debug == 0u;
+    let has = in.layer != NO_IMAGE && (params.debug & 1u) == 0u;
     let photo = textureSample(images, image_sampler, vec2<f32>(in.image_uv.x, 1.0 - in.image_uv.y), select(0u, in.layer, has));
     // A photograph already holds the light of its day: relit by the slope
     // relative to flat ground, so level ground shows its own colours.

@@ -393,6 +393,12 @@ impl Viewer {
         self.frame.stream.ground_height_at(p.x as f32, p.y as f32).map_or(f64::NAN, |h| f64::from(h) + m.origin_m[2])
     }
 
+    /// Ground height at `(x, y)` metres relative to the scene origin,
+    /// relative to the origin like the camera's `z`; NaN where unknown.
+    pub fn height_at_local(&self, x: f64, y: f64) -> f64 {
+        self.frame.stream.ground_height_at(x as f32, y as f32).map_or(f64::NAN, f64::from)
+    }
+
     /// The camera as JSON: `{x, y, z, heading, pitch}` (metres relative to the
     /// scene origin, degrees) plus `origin` (the scene origin), `epsg` and
     /// `ground` (the ground height under the eye, scene-relative like `z`; null

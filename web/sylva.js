@@ -7,6 +7,7 @@
 //   v.setFly(true)                          walking mode (eye height above the ground)
 //   v.flyTo({...}, seconds)                 smooth move; {lon, lat, aboveGround} flies to a height above the ground
 //   v.heightAt(lon, lat)                    ground height there (metres, the scene's datum), null if unknown
+//   v.heightAtLocal(x, y)                   the same at scene metres (relative to the origin, like camera().z)
 //   v.setTerrain(on, errorPx = 2)           terrain on/off; coarser terrain with a larger errorPx
 //   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
 //                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
@@ -74,6 +75,14 @@ class SylvaViewer {
    * terrain's where loaded, else the trees' bases nearby; null where unknown. */
   heightAt(lon, lat) {
     const h = this.viewer.height_at(lon, lat);
+    return Number.isFinite(h) ? h : null;
+  }
+
+  /** Ground height at `(x, y)` metres relative to the scene origin, relative
+   * to the origin like `camera().z` (for 2D overviews in scene coordinates);
+   * null where unknown. */
+  heightAtLocal(x, y) {
+    const h = this.viewer.height_at_local(x, y);
     return Number.isFinite(h) ? h : null;
   }
 

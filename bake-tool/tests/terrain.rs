@@ -310,3 +310,105 @@ fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() 
     assert!(compared >= 10, "only {compared} pixels compared");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn geomorphing_hides_level_changes_as_the_camera_moves() {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
+    if !model.exists() {
+        eprintln!("skipping: {} not present", model.display());
+        return;
+    }
+    let dir = tmp("terrain-morph");
+    let dem = dir.join("hills.tif");
+    write_geotiff_dem(&dem, 300, 2.0, hills);
+    std::fs::write(dir.join("trees.csv"), "id,x,y,height\n1,500020,5299420,12\n").unwrap();
+    let scene = dir.join("scene");
+    run(common::bin()
+        .arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--placements")
+        .arg(dir.join("trees.csv"))
+        .args(["--input-crs", "EPSG:32633", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+        .arg("--dem")
+        .arg(&dem)
+        .arg("--plain-ground")
+        .arg("--out")
+        .arg(&scene));
+    let mut off = open(&scene);
+    off.load_view(&Camera::default(), 30.0);
+    let origin = DVec3::from(off.stream.manifest().unwrap().origin_m);
+    off.settings.draw_distance_m = 1.0; // ground only
+                                        // A low oblique view over the hills. The selection threshold falls in small
+                                        // steps, which is what nearing the ground does to the projected errors:
+                                        // wherever a tile is replaced by its children between two steps, the
+                                        // image before and after should be the same (the children start out
+                                        // morphed onto their parent's surface).
+    let (x, y) = (500_300.0, 5_299_430.0);
+    let cam = Camera {
+        eye_m: DVec3::new(x - origin.x, y - origin.y, hills(x, y) - origin.z + 90.0),
+        pitch_rad: -0.5,
+        ..Camera::default()
+    };
+    let mut at = |off: &mut OffscreenScene, threshold: f32| {
+        let config = sylva::scene::StreamConfig { terrain_error_px: threshold, ..off.stream.config() };
+        off.stream.set_config(config);
+        let img = render(off, &cam);
+        let mut keys: Vec<TerrainKeyOf> = off.stream.terrain_draws().iter().map(|d| d.key).collect();
+        keys.sort_unstable();
+        (img, keys)
+    };
+    // Thresholds where the selection changes, each bracketed to 0.2 % (so the
+    // morph factors of the other tiles barely move between the two images).
+    let mut switches = Vec::new();
+    let mut hi = (48.0f32, at(&mut off, 48.0).1);
+    for k in 1..48 {
+        let t = 48.0 * 0.93f32.powi(k);
+        let keys = at(&mut off, t).1;
+        if keys != hi.1 {
+            let (mut a, mut b) = (hi.0, t);
+            while a / b > 1.002 {
+                let m = (a * b).sqrt();
+                if at(&mut off, m).1 == hi.1 {
+                    a = m;
+                } else {
+                    b = m;
+                }
+            }
+            switches.push((a, b));
+        }
+        hi = (t, keys);
+    }
+    // Pixels that change visibly (by more than 3 levels) across the switches.
+    let mut popped = |off: &mut OffscreenScene| -> usize {
+        switches
+            .iter()
+            .map(|&(a, b)| {
+                let (before, after) = (at(off, a).0, at(off, b).0);
+                if let Ok(d) = std::env::var("SYLVA_TEST_IMAGES") {
+                    let tag = if off.settings.terrain_morph { "m" } else { "p" };
+                    for (name, img) in [("a", &before), ("b", &after)] {
+                        let path = Path::new(&d).join(format!("switch-{tag}-{a:.3}-{name}.png"));
+                        image::save_buffer(path, img, W, H, image::ColorType::Rgba8).unwrap();
+                    }
+                }
+                before
+                    .chunks_exact(4)
+                    .zip(after.chunks_exact(4))
+                    .filter(|(p, q)| (0..3).any(|c| p[c].abs_diff(q[c]) > 3))
+                    .count()
+            })
+            .sum()
+    };
+    let morphed = popped(&mut off);
+    off.settings.terrain_morph = false;
+    let popping = popped(&mut off);
+    eprintln!("{} level changes: {morphed} pixels changed with geomorphing, {popping} without", switches.len());
+    assert!(switches.len() >= 3, "the thresholds should change the levels ({switches:?})");
+    // (Measured on lavapipe: 3 level changes, 2 pixels with geomorphing, 24 without.)
+    assert!(popping >= 12, "without geomorphing level changes should pop ({popping} pixels)");
+    assert!(morphed * 4 < popping, "geomorphing should hide the pops: {morphed} pixels vs {popping} without");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+type TerrainKeyOf = sylva::scene::terrain::TerrainKey;

@@ -246,9 +246,9 @@ impl ForestRenderer {
         queue: &wgpu::Queue,
         draws: &[crate::scene::terrain::TerrainDraw],
         threshold_px: f32,
-        debug: bool,
+        flags: u32,
     ) {
-        self.terrain.prepare(device, queue, draws, threshold_px, debug);
+        self.terrain.prepare(device, queue, draws, threshold_px, flags);
     }
 
     /// Sizes the terrain pool for a scene's terrain (see [`TerrainPass::reserve`]).

@@ -133,11 +133,12 @@ impl<F: Fetcher> Frame<F> {
     ) -> Recorded {
         let t0 = now_ms();
         let threshold = self.stream.config().terrain_error_px;
-        let debug = self.settings.debug_lod;
+        let flags = if self.settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
+            | if self.settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
         // The shader morphs by `view.lod.x`, which includes the quality factor.
         let threshold = threshold * self.settings.quality;
         let terrain = if self.settings.terrain { self.stream.terrain_draws() } else { &[] };
-        self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, debug);
+        self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
         let data = self.renderer.prepare(&self.queue, view, &self.settings);
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();

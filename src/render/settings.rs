@@ -53,6 +53,9 @@ pub struct RenderSettings {
     pub thin_px: f32,
     /// Fetch and draw the terrain (when the scene has one).
     pub terrain: bool,
+    /// Morph terrain vertices towards the coarser level as it nears (no
+    /// popping at level changes); off only for comparisons.
+    pub terrain_morph: bool,
 }
 
 /// Default of [`RenderSettings::thin_px`].
@@ -102,6 +105,7 @@ impl Default for RenderSettings {
             cluster_exact_depth: false,
             thin_px: DEFAULT_THIN_PX,
             terrain: true,
+            terrain_morph: true,
         }
     }
 }

@@ -100,6 +100,10 @@ pub const TERRAIN_SLOTS: usize = 1024;
 pub const IMAGE_LAYERS: u32 = 96;
 /// Mip levels of a ground image (256 down to 1).
 const IMAGE_MIPS: u32 = IMAGE_PX.ilog2() + 1;
+/// `TerrainParams::debug` bit: colour tiles by level.
+pub const TERRAIN_LEVEL_COLOURS: u32 = 1;
+/// `TerrainParams::debug` bit: no geomorphing (comparisons only).
+pub const TERRAIN_NO_MORPH: u32 = 2;
 /// `GpuTerrainDraw::layer` of a tile without an image.
 pub const NO_IMAGE: u32 = u32::MAX;
 
@@ -118,8 +122,8 @@ pub struct GpuTerrainDraw {
     pub size_m: f32,
     /// Highest minus lowest height.
     pub range_m: f32,
-    /// The parent's geometric error, metres (1e30 for the root).
-    pub parent_error_m: f32,
+    /// Morph from the parent's surface (0) to the tile's own (1).
+    pub morph: f32,
     /// Skirt depth below the edge, metres.
     pub skirt_m: f32,
     /// Where this tile lies in its image: uv offset (x, y) and scale (z, w).
@@ -144,7 +148,7 @@ pub struct TerrainParams {
     pub words: u32,
     /// Selection threshold, pixels.
     pub threshold_px: f32,
-    /// 1: colour by level.
+    /// Bits: [`TERRAIN_LEVEL_COLOURS`], [`TERRAIN_NO_MORPH`].
     pub debug: u32,
 }
 
@@ -347,7 +351,7 @@ impl TerrainPass {
         queue: &wgpu::Queue,
         draws: &[TerrainDraw],
         threshold_px: f32,
-        debug: bool,
+        flags: u32,
     ) {
         self.frame += 1;
         self.count = 0;
@@ -380,12 +384,7 @@ impl TerrainPass {
         queue.write_buffer(
             &pool.params,
             0,
-            bytemuck::bytes_of(&TerrainParams {
-                grid: u32::from(grid),
-                words: pool.words,
-                threshold_px,
-                debug: u32::from(debug),
-            }),
+            bytemuck::bytes_of(&TerrainParams { grid: u32::from(grid), words: pool.words, threshold_px, debug: flags }),
         );
         let mut records = std::mem::take(&mut self.records);
         records.clear();
@@ -438,7 +437,7 @@ impl TerrainPass {
                 slot,
                 size_m: d.size_m as f32,
                 range_m: d.tile.max_m - d.tile.min_m,
-                parent_error_m: if d.parent_error_m.is_finite() { d.parent_error_m } else { 1e30 },
+                morph: d.morph,
                 // Deep enough to hide the largest step a coarser neighbour can leave.
                 skirt_m: (2.0 * d.parent_error_m.min(d.tile.max_m - d.tile.min_m) + 0.5 * cell as f32).max(0.5),
                 image_uv: d.imagery.as_ref().map_or([0.0, 0.0, 1.0, 1.0], |i| i.uv),

@@ -34,10 +34,11 @@ pub struct TerrainDraw {
     pub origin_m: [f64; 2],
     /// Side, metres.
     pub size_m: f64,
-    /// The parent's geometric error (metres; infinite for the root): the
-    /// vertices morph towards the parent's surface where its error projects
-    /// below twice the threshold, so a level change does not pop.
+    /// The parent's geometric error (metres; infinite for the root).
     pub parent_error_m: f32,
+    /// How far the tile has morphed from its parent's surface (0) to its own
+    /// (1); see [`morph`].
+    pub morph: f32,
     /// The ground image it drapes, if any (attached by the stream's imagery).
     pub imagery: Option<super::imagery::DrawImagery>,
 }
@@ -211,12 +212,14 @@ impl TerrainTree {
                     }
                 }
             }
+            let morph = morph(parent_error, tile.error_m, view.px_per_m_at_1m / distance, threshold_px);
             draws.push(TerrainDraw {
                 key,
                 tile,
                 origin_m: origin,
                 size_m: size,
                 parent_error_m: parent_error,
+                morph,
                 imagery: None,
             });
         }
@@ -246,6 +249,31 @@ impl TerrainTree {
             self.slots.remove(&k);
         }
     }
+}
+
+/// The morph of a drawn tile (CDLOD-style geomorphing, one value per tile):
+/// 0 shows its parent's surface, 1 its own. It is measured at the tile's box
+/// nearest the eye — the distance the selection uses — and runs from where
+/// the parent was replaced by this tile (the parent's error projects to the
+/// threshold: 0) to where this tile will be replaced by its children (its own
+/// error at the threshold), or half that distance if sooner. So at every level
+/// change the children start on their parent's surface and the parent has
+/// become wholly itself: nothing pops. (A per-vertex morph by distance cannot
+/// promise this when errors do not halve per level: a large tile's far
+/// vertices would still be morphing when it splits.) Neighbours of one level
+/// may morph by different amounts; the skirts cover the step between them.
+/// `px_per_m` is pixels per metre at the box's distance.
+#[must_use]
+pub fn morph(parent_error_m: f32, error_m: f32, px_per_m: f32, threshold_px: f32) -> f32 {
+    if !parent_error_m.is_finite() || parent_error_m <= 0.0 {
+        return 1.0;
+    }
+    let parent_px = parent_error_m * px_per_m;
+    let own_share = (error_m / parent_error_m).clamp(0.5, 1.0);
+    if own_share >= 1.0 {
+        return if parent_px > threshold_px { 1.0 } else { 0.0 };
+    }
+    ((1.0 - threshold_px.max(1e-3) / parent_px.max(1e-9)) / (1.0 - own_share)).clamp(0.0, 1.0)
 }
 
 /// Bilinear height of a tile at fractional position `(u, v)` in `[0, 1]²`.
@@ -334,6 +362,23 @@ mod tests {
     fn view_from(eye: DVec3, target: DVec3) -> (ViewData, DVec3) {
         let cam = Camera::look_at(eye, target);
         (cam.view_data(640, 360), eye)
+    }
+
+    #[test]
+    fn a_tile_starts_on_its_parents_surface_and_is_itself_before_it_splits() {
+        // Parent error 8 m, own 6 m, threshold 2 px: the parent split where
+        // 8 m projected to 2 px; this tile splits where 6 m does.
+        let at = |px_per_m: f32| morph(8.0, 6.0, px_per_m, 2.0);
+        assert_eq!(at(2.0 / 8.0), 0.0);
+        assert!((at(2.0 / 6.0) - 1.0).abs() < 1e-6);
+        let mid = at(2.0 / 7.0);
+        assert!(mid > 0.2 && mid < 0.8, "{mid}");
+        // Errors that halve: CDLOD's range, done at twice the parent's projection.
+        assert!((morph(8.0, 1.0, 4.0 / 8.0, 2.0) - 1.0).abs() < 1e-6);
+        assert!(morph(8.0, 1.0, 3.0 / 8.0, 2.0) < 1.0);
+        // The root has no parent; a leaf with its parent's error switches at once.
+        assert_eq!(morph(f32::INFINITY, 3.0, 0.01, 2.0), 1.0);
+        assert_eq!(morph(4.0, 4.0, 1.0, 2.0), 1.0);
     }
 
     #[test]

@@ -464,6 +464,14 @@ test('the portal page embeds the viewer with an overview', async () => {
   const share = await foliageShare(page, 'embed');
   assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
   assert.match(await page.textContent('#facts'), /3,000 trees/);
+  // The overview reports the ground: under the camera, and under the pointer (the forest's middle).
+  await page.waitForFunction(() => /Camera: ground -?[0-9.]+ m, eye [0-9.]+ m above it/.test(document.getElementById('ground').textContent), null, { timeout: 60000 });
+  const box = await page.locator('#overview').boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  const ground = await page.textContent('#ground');
+  const m = /pointer: ground (-?[0-9.]+) m/.exec(ground);
+  assert.ok(m, `ground under the pointer: ${ground}`);
+  assert.ok(Number(m[1]) >= groundLo - 0.1 && Number(m[1]) <= groundHi + 0.1, `pointer ground ${m[1]} in ${groundLo}–${groundHi}`);
   assert.deepEqual(errors, []);
 });
 
