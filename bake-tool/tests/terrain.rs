@@ -350,7 +350,7 @@ fn geomorphing_hides_level_changes_as_the_camera_moves() {
         pitch_rad: -0.5,
         ..Camera::default()
     };
-    let mut at = |off: &mut OffscreenScene, threshold: f32| {
+    let at = |off: &mut OffscreenScene, threshold: f32| {
         let config = sylva::scene::StreamConfig { terrain_error_px: threshold, ..off.stream.config() };
         off.stream.set_config(config);
         let img = render(off, &cam);
@@ -380,7 +380,7 @@ fn geomorphing_hides_level_changes_as_the_camera_moves() {
         hi = (t, keys);
     }
     // Pixels that change visibly (by more than 3 levels) across the switches.
-    let mut popped = |off: &mut OffscreenScene| -> usize {
+    let popped = |off: &mut OffscreenScene| -> usize {
         switches
             .iter()
             .map(|&(a, b)| {
