@@ -114,6 +114,7 @@ class SylvaViewer {
 
   flyTo(c, seconds = 1.5) {
     const from = this.camera();
+    const above = c.lon !== undefined ? c.aboveGround : undefined;
     if (c.lon !== undefined && c.aboveGround !== undefined) {
       // A height above the ground there (where the ground is known).
       const g = this.heightAt(c.lon, c.lat);
@@ -131,6 +132,12 @@ class SylvaViewer {
       const t = Math.min(1, (now - start) / (seconds * 1000));
       const s = t * t * (3 - 2 * t);
       const lerp = (a, b) => a + (b - a) * s;
+      if (above !== undefined) {
+        // The ground there is read again as finer terrain arrives during the
+        // flight (at the start only a coarse tile may be resident).
+        const g = this.heightAtLocal(to.x, to.y);
+        if (g !== null) to.z = g + above;
+      }
       this.viewer.set_camera(lerp(from.x, to.x), lerp(from.y, to.y), lerp(from.z, to.z), from.heading + dh * s, lerp(from.pitch, to.pitch));
       if (t >= 1) this.flight = null;
     };
