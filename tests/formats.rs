@@ -373,14 +373,14 @@ fn terrain_decoder_error_paths() {
     let edits: [(Edit, &str); 4] = [
         (|i: &mut sylva::format::terrain::ImageryEntry| i.levels = 4, "levels"),
         (|i: &mut sylva::format::terrain::ImageryEntry| i.tile_px = 300, "tile_px"),
-        (|i: &mut sylva::format::terrain::ImageryEntry| i.extent_m[0] = f64::NAN, "extent_m"),
+        (|i: &mut sylva::format::terrain::ImageryEntry| i.extent_m[0] = 400.0, "extent_m"),
         (|i: &mut sylva::format::terrain::ImageryEntry| i.path = "/etc".into(), "path"),
     ];
     for (bad, why) in edits {
         let mut m = m.clone();
         bad(m.terrain.as_mut().unwrap().imagery.as_mut().unwrap());
-        let e = Manifest::decode("scene.json", &m.encode());
-        assert!(e.is_err(), "{why} is refused");
+        let e = Manifest::decode("scene.json", &m.encode()).expect_err(why).to_string();
+        assert!(e.contains(why), "{why}: {e}");
     }
 }
 

@@ -13,6 +13,26 @@ use tiff::tags::Tag;
 
 use crate::dem::{crs_code, geokeys, georeference, GT_RASTER_TYPE, MAX_DEM_PIXELS, MAX_EXPANSION};
 
+/// RGBA pixels of `n`-sample values (grey, RGB or RGBA): alpha 0 where every
+/// colour sample equals `nodata`.
+fn to_rgba<T: Copy + Into<f64>>(values: &[T], n: usize, nodata: Option<f64>, to8: impl Fn(T) -> u8) -> Vec<[u8; 4]> {
+    values
+        .chunks_exact(n)
+        .map(|p| {
+            let no_data = nodata.is_some_and(|nd| p.iter().take(n.min(3)).all(|&v| v.into() == nd));
+            let [r, g, b] = if n == 1 { [p[0]; 3] } else { [p[0], p[1], p[2]] };
+            let a = if no_data {
+                0
+            } else if n == 4 {
+                to8(p[3])
+            } else {
+                255
+            };
+            [to8(r), to8(g), to8(b), a]
+        })
+        .collect()
+}
+
 /// A georeferenced colour image.
 #[derive(Debug, Clone)]
 pub struct Ortho {
@@ -93,31 +113,22 @@ impl Ortho {
             _ => None,
         };
         let image = d.read_image().map_err(|e| anyhow!("cannot decode the pixels: {e}"))?;
-        let (bits, values): (u8, Vec<u16>) = match image {
-            DecodingResult::U8(v) => (8, v.into_iter().map(u16::from).collect()),
-            DecodingResult::U16(v) => (16, v),
+        let n = usize::from(samples);
+        let expect = pixels * u64::from(samples);
+        // Samples as 8 bits: 16-bit images are scaled by their largest value
+        // (so 12-bit data stored in 16 bits keeps its range).
+        let (bits, rgba) = match image {
+            DecodingResult::U8(v) if v.len() as u64 == expect => (8, to_rgba(&v, n, nodata, |x| x)),
+            DecodingResult::U16(v) if v.len() as u64 == expect => {
+                let max = v.iter().copied().max().unwrap_or(0).max(255);
+                let scale = 255.0 / f32::from(max);
+                (16, to_rgba(&v, n, nodata, |x| (f32::from(x) * scale).round() as u8))
+            }
+            DecodingResult::U8(_) | DecodingResult::U16(_) => {
+                bail!("decoded the wrong number of samples for {width}×{height} pixels of {samples}")
+            }
             _ => bail!("unsupported sample format: an orthophoto has 8- or 16-bit unsigned samples"),
         };
-        let n = usize::from(samples);
-        if values.len() as u64 != pixels * u64::from(samples) {
-            bail!("decoded {} samples for {width}×{height} pixels of {samples}", values.len());
-        }
-        let to8 = |v: u16| if bits == 16 { (v >> 8) as u8 } else { v as u8 };
-        let rgba = values
-            .chunks_exact(n)
-            .map(|p| {
-                let no_data = nodata.is_some_and(|nd| p.iter().take(n.min(3)).all(|&v| f64::from(v) == nd));
-                let [r, g, b] = if n == 1 { [p[0]; 3] } else { [p[0], p[1], p[2]] };
-                let a = if no_data {
-                    0
-                } else if n == 4 {
-                    to8(p[3])
-                } else {
-                    255
-                };
-                [to8(r), to8(g), to8(b), a]
-            })
-            .collect();
         let kind = match samples {
             1 => "grey",
             3 => "RGB",

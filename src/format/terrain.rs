@@ -288,8 +288,8 @@ pub struct ImageryEntry {
     pub source: String,
 }
 
-/// Most pixels per imagery side.
-pub const MAX_IMAGERY_PX: u32 = 1024;
+/// Pixels per side of a baked ground image (the only size this build reads).
+pub const IMAGERY_PX: u32 = 256;
 
 impl ImageryEntry {
     /// URL of the image of terrain tile `(level, x, y)` relative to the manifest.
@@ -307,9 +307,9 @@ impl ImageryEntry {
         if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
             return Err(Problem::Invalid("terrain.imagery.resolution_m must be positive".into()));
         }
-        if !(8..=MAX_IMAGERY_PX).contains(&self.tile_px) || !self.tile_px.is_power_of_two() {
+        if self.tile_px != IMAGERY_PX {
             return Err(Problem::Invalid(format!(
-                "terrain.imagery.tile_px {} is not a power of two 8–{MAX_IMAGERY_PX}",
+                "terrain.imagery.tile_px {} is not {IMAGERY_PX}, the image size this build reads",
                 self.tile_px
             )));
         }

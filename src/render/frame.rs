@@ -135,7 +135,8 @@ impl<F: Fetcher> Frame<F> {
         let threshold = self.stream.config().terrain_error_px;
         let flags = if self.settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
             | if self.settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
-        // The shader morphs by `view.lod.x`, which includes the quality factor.
+        // (The threshold travels to the shader for reference only: the morph
+        // is worked out per tile by the selection.)
         let threshold = threshold * self.settings.quality;
         let terrain = if self.settings.terrain { self.stream.terrain_draws() } else { &[] };
         self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);

@@ -15,7 +15,11 @@
 //! the finest tile at or above it that is resident (finer tiles drape a part
 //! of it: an offset and scale in the tile's uv), and asks for the image the
 //! tile should have. At most [`Imagery::max_resident`] images are kept (least
-//! recently used dropped).
+//! recently used dropped; images drawn this frame and the root's are kept
+//! even beyond it). One image of an XYZ source may start several source
+//! fetches at once (up to 16, usually 1–4), beyond the stream's in-flight
+//! limit; baked images that fail with a server error are retried with backoff
+//! like tiles.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -28,7 +32,7 @@ use crate::format::terrain::TerrainEntry;
 use crate::geo::GeoFrame;
 
 /// Pixels per image side.
-pub const IMAGE_PX: u32 = 256;
+pub const IMAGE_PX: u32 = crate::format::terrain::IMAGERY_PX;
 /// Largest side of an XYZ/WMTS tile accepted.
 pub const MAX_SOURCE_TILE_PX: u32 = 1024;
 /// Points per side of the grid projected exactly for an XYZ image.
@@ -123,9 +127,24 @@ pub enum ImageryFetch {
 
 #[derive(Debug)]
 enum Slot {
-    Loading,
+    /// Asked for, after `attempts` failed attempts.
+    Loading {
+        attempts: u32,
+    },
+    /// A failed fetch (the attempts so far) waiting for its retry at `due_s`.
+    Waiting {
+        attempts: u32,
+        due_s: f64,
+    },
+    /// Asked again after `attempts` failures.
+    Retrying {
+        attempts: u32,
+    },
     Broken,
-    Resident { tile: Arc<ImageryTile>, used: u64 },
+    Resident {
+        tile: Arc<ImageryTile>,
+        used: u64,
+    },
 }
 
 #[derive(Debug)]
@@ -159,6 +178,9 @@ pub struct Imagery {
     pending: HashMap<TerrainKey, Compose>,
     source: HashMap<(u8, u32, u32), SourceSlot>,
     frame: u64,
+    /// The image each drawn tile should drape (for an XYZ source: worked out
+    /// once per tile, as it takes projections).
+    targets: HashMap<TerrainKey, Option<TerrainKey>>,
     /// Most images kept decoded (256 KB each).
     pub max_resident: usize,
 }
@@ -185,6 +207,7 @@ impl Imagery {
             self.slots.clear();
             self.pending.clear();
             self.source.clear();
+            self.targets.clear();
         }
     }
 
@@ -211,7 +234,7 @@ impl Imagery {
 
     /// The tile whose image `key` should drape: itself, or the ancestor at the
     /// finest level with images (`None`: no image for it).
-    fn target(&self, entry: &TerrainEntry, geo: Option<&GeoFrame>, key: TerrainKey) -> Option<TerrainKey> {
+    fn target(&mut self, entry: &TerrainEntry, geo: Option<&GeoFrame>, key: TerrainKey) -> Option<TerrainKey> {
         match &self.choice {
             ImageryChoice::Off => None,
             ImageryChoice::Scene => {
@@ -220,12 +243,19 @@ impl Imagery {
                 entry.has_imagery(k.0, k.1, k.2).then_some(k)
             }
             ImageryChoice::Xyz(src) => {
+                if let Some(t) = self.targets.get(&key) {
+                    return *t;
+                }
                 let geo = geo?;
                 let mut k = key;
                 // Up while the image would be more than twice as sharp as the source.
                 while k.0 > 0 && zoom_for(entry, geo, k).is_some_and(|z| z > u32::from(src.max_zoom) + 1) {
                     k = ancestor(k, k.0 - 1);
                 }
+                if self.targets.len() > 16_384 {
+                    self.targets.clear();
+                }
+                self.targets.insert(key, Some(k));
                 Some(k)
             }
         }
@@ -244,7 +274,7 @@ impl Imagery {
         for d in draws.iter_mut() {
             d.imagery = None;
             let Some(target) = self.target(entry, geo, d.key) else { continue };
-            if !self.slots.contains_key(&target) && !wanted.contains(&target) {
+            if self.askable(target) && !wanted.contains(&target) {
                 wanted.push(target);
             }
             let mut k = target;
@@ -263,7 +293,7 @@ impl Imagery {
             // Nothing yet: the coarsest image first, so the ground shows something soon.
             if d.imagery.is_none() {
                 let root = ancestor(target, 0);
-                if root != target && !self.slots.contains_key(&root) && !wanted.contains(&root) {
+                if root != target && self.askable(root) && !wanted.contains(&root) {
                     wanted.insert(0, root);
                 }
             }
@@ -274,11 +304,19 @@ impl Imagery {
     /// is composed from source tiles already held, or cannot be made).
     pub fn start(&mut self, entry: &TerrainEntry, geo: Option<&GeoFrame>, key: TerrainKey) -> Vec<ImageryFetch> {
         let mut out = Vec::new();
+        if !self.askable(key) {
+            return out;
+        }
         match &self.choice {
             ImageryChoice::Off => {}
             ImageryChoice::Scene => {
                 if let Some(i) = &entry.imagery {
-                    self.slots.insert(key, Slot::Loading);
+                    // A retry keeps its attempt count.
+                    let attempts = match self.slots.get(&key) {
+                        Some(Slot::Retrying { attempts }) => *attempts,
+                        _ => 0,
+                    };
+                    self.slots.insert(key, Slot::Loading { attempts });
                     out.push(ImageryFetch::Baked(key, i.tile_url(key.0, key.1, key.2)));
                 }
             }
@@ -294,7 +332,7 @@ impl Imagery {
                         out.push(ImageryFetch::Source(t, src.url(t.0, t.1, t.2)));
                     }
                 }
-                self.slots.insert(key, Slot::Loading);
+                self.slots.insert(key, Slot::Loading { attempts: 0 });
                 self.pending.insert(key, c);
             }
         }
@@ -308,14 +346,10 @@ impl Imagery {
     pub fn on_baked(
         &mut self,
         entry: &TerrainEntry,
-        generation: u32,
         key: TerrainKey,
         url: &str,
         bytes: Option<&[u8]>,
     ) -> Result<(), String> {
-        if generation != self.generation {
-            return Ok(());
-        }
         let Some(bytes) = bytes else {
             self.slots.insert(key, Slot::Broken);
             return Ok(());
@@ -354,21 +388,44 @@ impl Imagery {
         }
     }
 
+    /// A baked image failed in a way a retry may mend: it waits `base_s ·
+    /// 2^(attempts − 1)` seconds and is asked for again, up to `max_attempts`
+    /// attempts. Returns whether it will be retried (else it is given up on).
+    pub fn retry_later(&mut self, key: TerrainKey, now_s: f64, base_s: f64, max_attempts: u32) -> bool {
+        let attempts = match self.slots.get(&key) {
+            Some(Slot::Loading { attempts }) => attempts + 1,
+            _ => 1,
+        };
+        if attempts >= max_attempts {
+            self.slots.insert(key, Slot::Broken);
+            return false;
+        }
+        self.slots.insert(key, Slot::Waiting { attempts, due_s: now_s + base_s * 2f64.powi(attempts as i32 - 1) });
+        true
+    }
+
+    /// Failed images whose retry is due become wanted again.
+    pub fn retry_due(&mut self, now_s: f64) {
+        for slot in self.slots.values_mut() {
+            if let Slot::Waiting { attempts, due_s } = *slot {
+                if due_s <= now_s {
+                    *slot = Slot::Retrying { attempts };
+                }
+            }
+        }
+    }
+
+    /// Whether the image of `key` is to be asked for (never asked, or a retry is due).
+    fn askable(&self, key: TerrainKey) -> bool {
+        matches!(self.slots.get(&key), None | Some(Slot::Retrying { .. }))
+    }
+
     /// A source tile arrived (`None`: failed; its part of the images stays
     /// without imagery). Images whose tiles are all in are composed.
     ///
     /// # Errors
     /// The bytes are no image (the message names `url`); the tile counts as failed.
-    pub fn on_source(
-        &mut self,
-        generation: u32,
-        tile: (u8, u32, u32),
-        url: &str,
-        bytes: Option<&[u8]>,
-    ) -> Result<(), String> {
-        if generation != self.generation {
-            return Ok(());
-        }
+    pub fn on_source(&mut self, tile: (u8, u32, u32), url: &str, bytes: Option<&[u8]>) -> Result<(), String> {
         let mut result = Ok(());
         let slot = match bytes.map(|b| decode_image(url, b, MAX_SOURCE_TILE_PX)) {
             Some(Ok(img)) => SourceSlot::Ready(Arc::new(img)),
@@ -473,10 +530,20 @@ fn mercator_grid(entry: &TerrainEntry, geo: &GeoFrame, key: TerrainKey) -> Optio
     Some(grid)
 }
 
-/// The zoom whose pixels match an image of tile `key` (unclamped).
+/// The zoom whose pixels match an image of tile `key` (unclamped), from its
+/// corners and centre.
 fn zoom_for(entry: &TerrainEntry, geo: &GeoFrame, key: TerrainKey) -> Option<u32> {
-    let g = mercator_grid(entry, geo, key)?;
-    Some(zoom_of(&g))
+    let [ox, oy] = entry.tile_origin_m(key.0, key.1, key.2);
+    let s = entry.tile_size_m(key.0);
+    let mut points = [[0.0; 2]; 5];
+    for (p, (u, v)) in points.iter_mut().zip([(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)]) {
+        let (lon, lat, _) = geo.to_geo(DVec3::new(ox + s * u, oy + s * v, 0.0)).ok()?;
+        if !(lon.is_finite() && lat.is_finite()) {
+            return None;
+        }
+        *p = mercator(lon, lat);
+    }
+    Some(zoom_of(&points))
 }
 
 fn zoom_of(grid: &[[f64; 2]]) -> u32 {
@@ -516,10 +583,18 @@ fn compose(c: &Compose, tiles: &SourceTiles) -> ImageryTile {
     let n = IMAGE_PX as usize;
     let world_px = f64::from(1u32 << c.zoom) * 256.0;
     let mut rgba = vec![0u8; n * n * 4];
+    // The tiles form a rectangle (row-major from its north-west tile): index it.
+    let x0 = tiles.iter().map(|(t, _)| i64::from(t.1)).min().unwrap_or(0);
+    let y0 = tiles.iter().map(|(t, _)| i64::from(t.2)).min().unwrap_or(0);
+    let w = tiles.iter().map(|(t, _)| i64::from(t.1)).max().unwrap_or(0) - x0 + 1;
     let texel = |gx: i64, gy: i64| -> Option<[f32; 4]> {
         // Global pixel (256 per tile at this zoom) → tile and pixel in it.
-        let (tx, ty) = (gx.div_euclid(256), gy.div_euclid(256));
-        let (_, img) = tiles.iter().find(|(t, _)| i64::from(t.1) == tx && i64::from(t.2) == ty)?;
+        let (tx, ty) = (gx.div_euclid(256) - x0, gy.div_euclid(256) - y0);
+        if tx < 0 || ty < 0 || tx >= w {
+            return None;
+        }
+        let (t, img) = tiles.get((ty * w + tx) as usize)?;
+        debug_assert_eq!((i64::from(t.1) - x0, i64::from(t.2) - y0), (tx, ty));
         let img = img.as_ref()?;
         let (px, py) = (gx.rem_euclid(256), gy.rem_euclid(256));
         // Tiles of another size (e.g. 512 "retina" tiles) are scaled.

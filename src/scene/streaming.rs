@@ -429,7 +429,7 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
                 Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
                 Target::Terrain(key) => self.on_terrain(key, result, now_s),
-                Target::Image(generation, key) => self.on_image(generation, key, result),
+                Target::Image(generation, key) => self.on_image(generation, key, result, now_s),
                 Target::ImageSource(generation, tile) => self.on_image_source(generation, tile, result),
             }
         }
@@ -460,6 +460,7 @@ impl<F: Fetcher> SceneStream<F> {
             let over_rate = self.config.max_bytes_per_s > 0.0 && rate as f64 >= self.config.max_bytes_per_s;
             self.stats.degraded.bandwidth = over_rate;
             self.retry_terrain(now_s);
+            self.imagery.retry_due(now_s);
             self.select_terrain(view);
             if !over_rate {
                 self.request_tiles(view, draw_distance_m, now_s);
@@ -490,6 +491,9 @@ impl<F: Fetcher> SceneStream<F> {
     /// Requests the images the drawn terrain wants, within the in-flight budget.
     fn request_imagery(&mut self) {
         let Some(t) = &self.terrain else { return };
+        if !self.config.terrain {
+            return;
+        }
         let generation = self.imagery.generation();
         for &key in &self.imagery_wanted {
             if self.fetcher.in_flight() >= self.config.max_in_flight {
@@ -507,32 +511,47 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    /// A baked image arrived or failed (the tile then drapes its ancestor's image).
-    fn on_image(&mut self, generation: u32, key: TerrainKey, result: Result<Vec<u8>, FetchError>) {
+    /// A baked image arrived or failed: kept, retried with backoff (server
+    /// errors, broken connections) or given up on (the tile then drapes its
+    /// ancestor's image). Answers for a former imagery source are dropped.
+    fn on_image(&mut self, generation: u32, key: TerrainKey, result: Result<Vec<u8>, FetchError>, now_s: f64) {
+        if generation != self.imagery.generation() {
+            return;
+        }
         let Some(t) = &self.terrain else { return };
         let Some(i) = &t.entry().imagery else { return };
         let url = join(&self.base, &i.tile_url(key.0, key.1, key.2));
-        let outcome = match &result {
-            Ok(bytes) => self.imagery.on_baked(t.entry(), generation, key, &url, Some(bytes)),
+        let (outcome, retrying) = match &result {
+            Ok(bytes) => (self.imagery.on_baked(t.entry(), key, &url, Some(bytes)), false),
+            Err(e) if e.retryable() => {
+                let retry = self.config.retry_base_s;
+                let retrying = self.imagery.retry_later(key, now_s, retry, self.config.max_attempts);
+                (Err(e.to_string()), retrying)
+            }
             Err(e) => {
-                let _ = self.imagery.on_baked(t.entry(), generation, key, &url, None);
-                Err(e.to_string())
+                let _ = self.imagery.on_baked(t.entry(), key, &url, None);
+                (Err(e.to_string()), false)
             }
         };
         if let Err(message) = outcome {
-            self.give_up(&url, &message);
-            self.events.push(StreamEvent::Failed { url, message, retrying: false });
+            if !retrying {
+                self.give_up(&url, &message);
+            }
+            self.events.push(StreamEvent::Failed { url, message, retrying });
         }
     }
 
     /// A tile of the XYZ/WMTS source arrived or failed (missing tiles leave
     /// their part without imagery; only undecodable ones are reported).
     fn on_image_source(&mut self, generation: u32, tile: (u8, u32, u32), result: Result<Vec<u8>, FetchError>) {
+        if generation != self.imagery.generation() {
+            return;
+        }
         let url = match self.imagery.choice() {
             ImageryChoice::Xyz(src) => src.url(tile.0, tile.1, tile.2),
             _ => String::new(),
         };
-        let outcome = self.imagery.on_source(generation, tile, &url, result.as_deref().ok());
+        let outcome = self.imagery.on_source(tile, &url, result.as_deref().ok());
         let failure = match (outcome, result) {
             (Err(message), _) => Some(message),
             (Ok(()), Err(e)) if !matches!(e, FetchError::NotFound { .. }) => Some(e.to_string()),
@@ -557,6 +576,7 @@ impl<F: Fetcher> SceneStream<F> {
     /// Picks the terrain tiles the view draws and the ones it waits for.
     fn select_terrain(&mut self, view: &ViewData) {
         self.terrain_wanted.clear();
+        self.imagery_wanted.clear();
         if !self.config.terrain {
             self.terrain_draws.clear();
             return;
@@ -564,7 +584,6 @@ impl<F: Fetcher> SceneStream<F> {
         let Some(t) = &mut self.terrain else { return };
         let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
         t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws, &mut self.terrain_wanted);
-        self.imagery_wanted.clear();
         self.imagery.attach(t.entry(), self.geo.as_ref(), &mut self.terrain_draws, &mut self.imagery_wanted);
     }
 

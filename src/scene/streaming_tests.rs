@@ -11,6 +11,7 @@ use super::*;
 use crate::camera::Camera;
 use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
 use crate::scene::fetch::ByteRange;
+use crate::scene::imagery::ImageryChoice;
 
 fn fixture() -> String {
     concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small").to_string()
@@ -461,4 +462,72 @@ fn terrain_tiles_stream_retry_with_backoff_and_a_lost_one_leaves_its_parent() {
     assert!(s.failures().iter().any(|f| f.url.ends_with("terrain/1/0_0.terr")));
     // The ground is known where the terrain is.
     assert!(s.ground_height_at(0.0, 0.0).is_some_and(|h| (10.0..30.0).contains(&h)));
+}
+
+#[test]
+fn ground_images_stream_retry_and_stop_with_the_terrain() {
+    // The fixture's terrain carries its baked forest floor: images for levels 0 and 1.
+    let view = south_view();
+    let mut s = stream(StreamConfig { terrain_error_px: 0.01, ..StreamConfig::default() });
+    let mut r = FakeResidency::new(1 << 20);
+    // The root's image fails once with a 503; image 1/1_0 is missing.
+    s.fetcher.fail.insert(
+        "terrain/img/0/0_0.jpg".into(),
+        VecDeque::from([FetchError::Status { url: "terrain/img/0/0_0.jpg".into(), status: 503 }]),
+    );
+    s.fetcher.fail.insert(
+        "terrain/img/1/1_0.jpg".into(),
+        VecDeque::from([FetchError::NotFound { url: "terrain/img/1/1_0.jpg".into() }]),
+    );
+    let asked = |s: &SceneStream<FakeFetcher>, n: &str| s.fetcher.log.iter().filter(|(u, _)| u.ends_with(n)).count();
+    let images = |s: &SceneStream<FakeFetcher>| s.fetcher.log.iter().filter(|(u, _)| u.ends_with(".jpg")).count();
+    let t = run(&mut s, &mut r, &view, 6000.0, 0.0, 0.0, 10);
+    assert_eq!(asked(&s, "terrain/img/0/0_0.jpg"), 1, "not retried before its time");
+    let t = run(&mut s, &mut r, &view, 6000.0, t + 0.3, 0.01, 80);
+    assert_eq!(asked(&s, "terrain/img/0/0_0.jpg"), 2, "retried once after the backoff");
+    assert_eq!(asked(&s, "terrain/img/1/1_0.jpg"), 1, "404 is not retried");
+    assert!(s.is_settled());
+    assert!(s.failures().iter().any(|f| f.url.ends_with("terrain/img/1/1_0.jpg")));
+    // Every drawn tile drapes an image: its own level's, its level-1 ancestor's
+    // or, under the missing one, the root's.
+    let draws = s.terrain_draws();
+    assert!(draws.len() > 4, "{} tiles drawn", draws.len());
+    for d in draws {
+        let img = d.imagery.as_ref().unwrap_or_else(|| panic!("tile {:?} has no image", d.key));
+        let k = img.key.1;
+        assert!(k.0 <= d.key.0 && (d.key.1 >> (d.key.0 - k.0), d.key.2 >> (d.key.0 - k.0)) == (k.1, k.2));
+        let under_lost = d.key.0 >= 1 && (d.key.1 >> (d.key.0 - 1), d.key.2 >> (d.key.0 - 1)) == (1, 0);
+        assert_eq!(k.0, if under_lost { 0 } else { 1 }, "tile {:?} drapes {k:?}", d.key);
+        let scale = 1.0 / f32::from(1u16 << (d.key.0 - k.0));
+        assert_eq!(img.uv[2], scale);
+    }
+    assert_eq!(s.stats().imagery_drawn as usize, draws.len());
+    // Terrain off: nothing drawn, nothing more asked for, and the stream settles.
+    let before = images(&s);
+    s.set_config(StreamConfig { terrain: false, ..s.config() });
+    run(&mut s, &mut r, &view, 6000.0, t, 0.01, 50);
+    assert_eq!(images(&s), before, "no image is fetched again");
+    assert!(s.is_settled());
+    assert!(s.terrain_draws().is_empty());
+    // Another source drops what was held; switching back fetches again.
+    s.set_config(StreamConfig { terrain: true, ..s.config() });
+    s.set_imagery(ImageryChoice::Off);
+    run(&mut s, &mut r, &view, 6000.0, t + 1.0, 0.01, 5);
+    assert!(s.terrain_draws().iter().all(|d| d.imagery.is_none()));
+    assert_eq!(s.imagery().resident(), 0);
+    assert!(s.is_settled());
+    // Terrain off while images are on their way: they are not asked for again.
+    let mut s = stream(StreamConfig { terrain_error_px: 0.01, ..StreamConfig::default() });
+    let mut r = FakeResidency::new(1 << 20);
+    let mut t = 0.0;
+    while images(&s) == 0 && t < 1.0 {
+        s.update(&mut r, &view, 6000.0, t);
+        t += 0.01;
+    }
+    assert!(images(&s) > 0, "images were asked for");
+    s.set_config(StreamConfig { terrain: false, ..s.config() });
+    let before = images(&s);
+    run(&mut s, &mut r, &view, 6000.0, t, 0.01, 50);
+    assert_eq!(images(&s), before, "no image is asked for with the terrain off");
+    assert!(s.is_settled());
 }

@@ -22,7 +22,7 @@ use crate::reproject::{Crs, Reprojector};
 use crate::scene_write;
 
 /// Pixels per imagery side.
-pub const IMAGERY_PX: u32 = 256;
+pub const IMAGERY_PX: u32 = sylva::format::terrain::IMAGERY_PX;
 /// JPEG quality of the images.
 const JPEG_QUALITY: u8 = 85;
 
@@ -283,14 +283,20 @@ impl Ctx<'_> {
                     let (pi, pj) = (qi + i, qj + j);
                     img[pj * n + pi] = match kid {
                         Some(c) => {
+                            // Weighted by coverage, so uncovered pixels do not darken the average.
                             let mut s = [0.0f32; 4];
                             for (di, dj) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                                 let p = c[(2 * j + dj) * n + 2 * i + di];
-                                for (a, b) in s.iter_mut().zip(p) {
-                                    *a += b * 0.25;
+                                for k in 0..3 {
+                                    s[k] += p[k] * p[3];
                                 }
+                                s[3] += p[3];
                             }
-                            s
+                            if s[3] > 0.0 {
+                                [s[0] / s[3], s[1] / s[3], s[2] / s[3], s[3] * 0.25]
+                            } else {
+                                [0.0; 4]
+                            }
                         }
                         None => {
                             // Supersampled from the orthophotos.
