@@ -388,6 +388,7 @@ mod tests {
         let i16s: Vec<i16> = u16s.iter().map(|v| *v as i16 - 200).collect();
         vec![
             ("float32.tif", geotiff(8, 8, |c, r| f32::from(ramp(c, r)), Some("-9999"))),
+            ("float32-tiled.tif", tiled_geotiff(8, 8, 16, |c, r| f32::from(ramp(c, r)))),
             ("uint16-lzw.tif", geotiff_of::<colortype::Gray16>(8, 8, &u16s, Compression::Lzw, None)),
             (
                 "int16-deflate.tif",
@@ -408,6 +409,89 @@ mod tests {
             assert_eq!(dem.at(7, 7), want + 70.0, "{name}");
             assert!(dem.layout.contains(name.split(['-', '.']).next().unwrap()), "{name}: {}", dem.layout);
         }
+    }
+
+    /// A tiled float32 GeoTIFF written byte by byte (the `tiff` encoder writes
+    /// strips only): `w`×`h` pixels in `tile`² tiles, uncompressed, edge tiles
+    /// padded as the TIFF spec has them, georeferenced as [`geotiff`].
+    fn tiled_geotiff(w: u32, h: u32, tile: u32, f: impl Fn(u32, u32) -> f32) -> Vec<u8> {
+        let (across, down) = (w.div_ceil(tile), h.div_ceil(tile));
+        let mut pixels = Vec::new();
+        let mut offsets = Vec::new();
+        let data_at = 8u32;
+        for ty in 0..down {
+            for tx in 0..across {
+                offsets.push(data_at + pixels.len() as u32);
+                for r in 0..tile {
+                    for c in 0..tile {
+                        let (x, y) = (tx * tile + c, ty * tile + r);
+                        let v = if x < w && y < h { f(x, y) } else { 0.0 };
+                        pixels.extend_from_slice(&v.to_le_bytes());
+                    }
+                }
+            }
+        }
+        let count = offsets.len() as u32;
+        let tile_bytes = tile * tile * 4;
+        // Out-of-line values after the pixels: offsets, byte counts, scale, tiepoint, keys.
+        let mut extra = Vec::new();
+        let extra_at = data_at + pixels.len() as u32;
+        let mut put = |bytes: Vec<u8>| {
+            let at = extra_at + extra.len() as u32;
+            extra.extend_from_slice(&bytes);
+            at
+        };
+        let offs = put(offsets.iter().flat_map(|o| o.to_le_bytes()).collect());
+        let counts = put((0..count).flat_map(|_| tile_bytes.to_le_bytes()).collect());
+        let scale = put([5.0f64, 5.0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect());
+        let tie = put([0.0f64, 0.0, 0.0, 500_000.0, 5_300_000.0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect());
+        let keys = put([1u16, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633].iter().flat_map(|v| v.to_le_bytes()).collect());
+        // (tag, type, count, value or offset); types: 3 SHORT, 4 LONG, 12 DOUBLE.
+        let entries: [(u16, u16, u32, u32); 14] = [
+            (256, 4, 1, w),
+            (257, 4, 1, h),
+            (258, 3, 1, 32),
+            (259, 3, 1, 1),
+            (262, 3, 1, 1),
+            (277, 3, 1, 1),
+            (322, 4, 1, tile),
+            (323, 4, 1, tile),
+            // A single LONG is stored in the entry itself.
+            (324, 4, count, if count == 1 { offsets[0] } else { offs }),
+            (325, 4, count, if count == 1 { tile_bytes } else { counts }),
+            (339, 3, 1, 3),
+            (33550, 12, 3, scale),
+            (33922, 12, 6, tie),
+            (34735, 3, 12, keys),
+        ];
+        let ifd_at = extra_at + extra.len() as u32;
+        let mut out = b"II*\0".to_vec();
+        out.extend_from_slice(&ifd_at.to_le_bytes());
+        out.extend_from_slice(&pixels);
+        out.extend_from_slice(&extra);
+        out.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+        for (tag, ty, n, v) in entries {
+            out.extend_from_slice(&tag.to_le_bytes());
+            out.extend_from_slice(&ty.to_le_bytes());
+            out.extend_from_slice(&n.to_le_bytes());
+            // A lone LONG is its own value; a lone SHORT sits in the first two bytes.
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&0u32.to_le_bytes());
+        out
+    }
+
+    #[test]
+    fn a_tiled_geotiff_reads_like_a_striped_one() {
+        let f = |c: u32, r: u32| 200.0 + c as f32 * 1.5 - r as f32 * 0.25;
+        let tiled = Dem::read(Cursor::new(tiled_geotiff(40, 24, 16, f))).unwrap();
+        let striped = Dem::read(Cursor::new(geotiff(40, 24, f, None))).unwrap();
+        assert!(tiled.layout.contains("tiles 16×16"), "{}", tiled.layout);
+        assert!(striped.layout.contains("strips"), "{}", striped.layout);
+        assert_eq!((tiled.width, tiled.height), (40, 24));
+        assert_eq!(tiled.heights, striped.heights, "every pixel, edge tiles included");
+        assert_eq!(tiled.extent(), striped.extent());
+        assert_eq!(tiled.at(39, 23), f(39, 23));
     }
 
     #[test]
