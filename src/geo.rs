@@ -73,6 +73,28 @@ impl GeoFrame {
     }
 }
 
+impl GeoFrame {
+    /// Unit vector towards a sun at `azimuth_deg` (clockwise from true north)
+    /// and `elevation_deg`, in scene coordinates at the scene-relative point
+    /// `local`: the scene's grid north is turned from true north by the
+    /// projection's convergence there (up to a few degrees in UTM).
+    ///
+    /// # Errors
+    /// [`GeoError::Point`] for points the projection cannot take.
+    pub fn sun_direction(&self, local: DVec3, azimuth_deg: f64, elevation_deg: f64) -> Result<DVec3, GeoError> {
+        let (lon, lat, _) = self.to_geo(local)?;
+        let ahead = self.to_local(lon, (lat + 1e-3).min(90.0), local.z)?;
+        let north = (ahead - local).truncate().normalize_or_zero();
+        if north == glam::DVec2::ZERO {
+            return Err(GeoError::Point(format!("no north at {lon}, {lat}")));
+        }
+        let east = glam::DVec2::new(north.y, -north.x);
+        let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+        let flat = east * az.sin() * el.cos() + north * az.cos() * el.cos();
+        Ok(DVec3::new(flat.x, flat.y, el.sin()).normalize())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

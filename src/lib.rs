@@ -22,5 +22,6 @@ pub mod render;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;
+pub mod sun;
 #[cfg(target_arch = "wasm32")]
 pub mod web;

@@ -485,6 +485,46 @@ impl Viewer {
         Ok(())
     }
 
+    /// The sun at a local date and time of the scene's place (ISO 8601, e.g.
+    /// `2026-06-21T15:00`, `Z` or `±HH:MM` for the offset from UTC; without
+    /// one the whole hour of the place's longitude); `""` restores the
+    /// default light. Returns `{azimuth, elevation}` (degrees) as JSON.
+    ///
+    /// # Errors
+    /// A time that does not parse (the message shows the form), or a scene
+    /// not loaded yet.
+    pub fn set_sun_time(&mut self, time: &str) -> Result<String, JsValue> {
+        if time.trim().is_empty() {
+            self.frame.settings.lighting = crate::render::Lighting::default();
+            return Ok("null".into());
+        }
+        let t = crate::sun::SunTime::parse(time).map_err(|e| JsValue::from_str(&e))?;
+        let (Some(geo), Some(m)) = (&self.geo, self.frame.stream.manifest()) else {
+            return Err(JsValue::from_str("the scene is not loaded yet"));
+        };
+        let (l, p) = crate::render::Lighting::at_time(geo, crate::render::Lighting::sun_point(m), &t)
+            .map_err(|e| JsValue::from_str(&e))?;
+        self.frame.settings.lighting = l;
+        Ok(serde_json::json!({ "azimuth": p.azimuth_deg, "elevation": p.elevation_deg }).to_string())
+    }
+
+    /// The sun at `azimuth` (degrees clockwise from north) and `elevation`.
+    ///
+    /// # Errors
+    /// A scene not loaded yet, or angles out of range.
+    pub fn set_sun_angles(&mut self, azimuth: f64, elevation: f64) -> Result<(), JsValue> {
+        if !(azimuth.is_finite() && (-90.0..=90.0).contains(&elevation)) {
+            return Err(JsValue::from_str("setSun: azimuth in degrees, elevation −90–90"));
+        }
+        let (Some(geo), Some(m)) = (&self.geo, self.frame.stream.manifest()) else {
+            return Err(JsValue::from_str("the scene is not loaded yet"));
+        };
+        self.frame.settings.lighting =
+            crate::render::Lighting::at_angles(geo, crate::render::Lighting::sun_point(m), azimuth, elevation)
+                .map_err(|e| JsValue::from_str(&e))?;
+        Ok(())
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.frame.settings.quality = quality.clamp(0.05, 4.0);

@@ -109,3 +109,56 @@ fn broken_packs_and_tiles_make_render_fail_unless_partial_is_allowed() {
     assert!(drawn(&stats) > 0);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Mean of the RGB values of a PNG.
+fn brightness(path: &Path) -> f64 {
+    let img = image::open(path).unwrap().to_rgb8();
+    img.as_raw().iter().map(|&v| f64::from(v)).sum::<f64>() / img.as_raw().len() as f64
+}
+
+#[test]
+fn a_shadow_study_renders_one_image_per_time_as_the_sun_moves() {
+    let dir = tmp("sun");
+    let scene = scene_copy(&dir);
+    let out = dir.join("study.png");
+    let run = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_sylva"))
+            .env_remove("XDG_RUNTIME_DIR")
+            .args(["render", "--scene"])
+            .arg(&scene)
+            .args(["--view", "top", "--size", "160x90", "--timeout", "60", "--out"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    // The fixture stands in the Wachau (48.4° N, 15.5° E): on the June solstice
+    // the sun rises in the north-east before 05:00 summer time, is due south near
+    // 13:15 and has set by 21:15.
+    let o = run(&["--sun-time", "2026-06-21T07:00+02:00,2026-06-21T13:15+02:00,2026-06-21T21:30+02:00"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let names = ["study-2026-06-21T0700.png", "study-2026-06-21T1315.png", "study-2026-06-21T2130.png"];
+    for n in names {
+        assert!(dir.join(n).exists(), "{n}: {stderr}");
+    }
+    let az = |t: &str| -> f64 {
+        let line = stderr.lines().find(|l| l.contains(t)).unwrap_or_else(|| panic!("{t}: {stderr}"));
+        line.split("azimuth ").nth(1).unwrap().split('°').next().unwrap().parse().unwrap()
+    };
+    assert!((70.0..110.0).contains(&az("T0700")), "morning sun in the east: {stderr}");
+    assert!((170.0..190.0).contains(&az("T1315")), "noon sun in the south: {stderr}");
+    assert!(stderr.contains("3 images beside"), "{stderr}");
+    // Noon is brightest; after sunset the ground and canopy lose the sun.
+    let [morning, noon, night] = names.map(|n| brightness(&dir.join(n)));
+    assert!(noon > morning && morning > night + 5.0, "brightness {morning:.1} / {noon:.1} / {night:.1}");
+    // Angles instead of a time; bad values are named.
+    let o = run(&["--sun", "225,35"]);
+    assert!(o.status.success() && out.exists(), "{}", String::from_utf8_lossy(&o.stderr));
+    for bad in [["--sun-time", "21.06.2026 15:00"], ["--sun", "225"], ["--sun", "10,120"]] {
+        let o = run(&bad);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && e.contains(bad[0]) && !e.contains("panicked"), "{bad:?}: {e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -11,6 +11,7 @@
 //   v.setTerrain(on, errorPx = 2)           terrain on/off; coarser terrain with a larger errorPx
 //   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
 //                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
+//   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -142,6 +143,26 @@ class SylvaViewer {
       if (t >= 1) this.flight = null;
     };
     this.dirty = 8;
+  }
+
+  /** The sun: `{date: '2026-06-21', time: '15:00', utcOffset: '+02:00'}` (local
+   * time of the scene's place; without `utcOffset` the whole hour of its
+   * longitude), or `{azimuth, elevation}` in degrees, or null for the default
+   * light. Returns `{azimuth, elevation}`. Throws with the reason for a bad
+   * date or time, or before the scene is loaded. */
+  setSun(sun) {
+    let result = null;
+    if (!sun) {
+      this.viewer.set_sun_time('');
+    } else if (sun.azimuth !== undefined) {
+      this.viewer.set_sun_angles(Number(sun.azimuth), Number(sun.elevation));
+      result = { azimuth: Number(sun.azimuth), elevation: Number(sun.elevation) };
+    } else {
+      result = JSON.parse(this.viewer.set_sun_time(`${sun.date}T${sun.time}${sun.utcOffset ?? ''}`));
+    }
+    this.sun = result;
+    this.dirty = 8;
+    return result;
   }
 
   stats() { return JSON.parse(this.viewer.stats_json()); }

@@ -445,7 +445,8 @@ mod tests {
         let counts = put((0..count).flat_map(|_| tile_bytes.to_le_bytes()).collect());
         let scale = put([5.0f64, 5.0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect());
         let tie = put([0.0f64, 0.0, 0.0, 500_000.0, 5_300_000.0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect());
-        let keys = put([1u16, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633].iter().flat_map(|v| v.to_le_bytes()).collect());
+        let keys =
+            put([1u16, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32633].iter().flat_map(|v| v.to_le_bytes()).collect());
         // (tag, type, count, value or offset); types: 3 SHORT, 4 LONG, 12 DOUBLE.
         let entries: [(u16, u16, u32, u32); 14] = [
             (256, 4, 1, w),

@@ -204,6 +204,17 @@ pub(crate) struct RenderArgs {
     /// scene has baked imagery.
     #[arg(long)]
     pub(crate) no_imagery: bool,
+    /// The sun at a local date and time of the scene's place (NOAA solar
+    /// position): ISO 8601 such as 2026-06-21T15:00, with Z or ±HH:MM for the
+    /// offset from UTC (without one: the whole hour of the place's longitude).
+    /// Several, comma-separated, make a shadow study: one image per time,
+    /// named OUT-<date>T<hhmm>.png.
+    #[arg(long, value_name = "TIME[,TIME…]", conflicts_with = "sun")]
+    pub(crate) sun_time: Option<String>,
+    /// The sun at an azimuth (degrees clockwise from north) and an elevation
+    /// above the horizon: AZIMUTH,ELEVATION (e.g. 225,35).
+    #[arg(long, value_name = "AZ,EL", allow_hyphen_values = true)]
+    pub(crate) sun: Option<String>,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,

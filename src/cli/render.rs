@@ -23,6 +23,7 @@ pub(crate) fn render_scene(
     camera: Option<&str>,
     settings: RenderSettings,
     imagery: ImageryChoice,
+    sun: &SunArg,
     stats_path: Option<&PathBuf>,
     timeout: f64,
     allow_partial: bool,
@@ -64,19 +65,37 @@ pub(crate) fn render_scene(
         }
     }
     let settled = off.stream.is_settled();
-    // A first frame warms pipelines and caches; the second is measured.
-    off.render(&cam, false);
-    let stats = off.render(&cam, true);
-    let rgba = off.read_image();
-    image::save_buffer(out, &rgba, w, h, image::ColorType::Rgba8)
-        .with_context(|| format!("cannot write {}", out.display()))?;
-    let json = serde_json::to_string_pretty(&stats)?;
-    if let Some(p) = stats_path {
-        std::fs::write(p, format!("{json}\n")).with_context(|| format!("cannot write {}", p.display()))?;
+    // The sun (one image per time of a shadow study).
+    let suns = sun_lighting(sun, &manifest, off.settings.lighting)?;
+    let several = suns.len() > 1;
+    let mut stats = None;
+    for (label, lighting) in suns {
+        off.settings.lighting = lighting;
+        // A first frame warms pipelines and caches; the second is measured.
+        off.render(&cam, false);
+        let s = off.render(&cam, true);
+        let rgba = off.read_image();
+        let path = if several { suffixed(out, &label) } else { out.clone() };
+        image::save_buffer(&path, &rgba, w, h, image::ColorType::Rgba8)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        if several || !label.is_empty() {
+            eprintln!("{}: {label}", path.display());
+        }
+        let json = serde_json::to_string_pretty(&s)?;
+        if let Some(p) = stats_path {
+            let p = if several { suffixed(p, &label) } else { p.clone() };
+            std::fs::write(&p, format!("{json}\n")).with_context(|| format!("cannot write {}", p.display()))?;
+        }
+        stats = Some(s);
     }
+    let stats = stats.context("no sun to render with")?;
+    let what = if several {
+        format!("{} images beside {}", sun.times.len(), out.display())
+    } else {
+        out.display().to_string()
+    };
     eprintln!(
-        "wrote {} ({w}x{h}) on {}: {} draw calls, instances {:?}, {} tiles resident, {:.1} MB fetched (loaded in {load_s:.1} s)",
-        out.display(),
+        "wrote {what} ({w}x{h}) on {}: {} draw calls, instances {:?}, {} tiles resident, {:.1} MB fetched (loaded in {load_s:.1} s)",
         off.ctx.adapter_summary(),
         stats.draw_calls,
         stats.instances,
@@ -115,6 +134,94 @@ pub(crate) fn render_scene(
     Ok(())
 }
 
+/// How `--sun-time` / `--sun` set the light.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct SunArg {
+    /// Local times of the scene's place (several: a shadow study).
+    pub times: Vec<sylva::sun::SunTime>,
+    /// Azimuth and elevation, degrees.
+    pub angles: Option<(f64, f64)>,
+}
+
+impl SunArg {
+    /// From the flags' text.
+    pub(crate) fn parse(times: Option<&str>, angles: Option<&str>) -> Result<Self> {
+        let times = match times {
+            Some(t) => t
+                .split(',')
+                .map(|t| sylva::sun::SunTime::parse(t).map_err(|e| anyhow::anyhow!("--sun-time: {e}")))
+                .collect::<Result<_>>()?,
+            None => Vec::new(),
+        };
+        let angles = match angles {
+            Some(a) => {
+                let v: Vec<f64> =
+                    a.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| {
+                        anyhow::anyhow!("--sun {a:?}: expected AZIMUTH,ELEVATION in degrees (e.g. 225,35)")
+                    })?;
+                match v[..] {
+                    [az, el] if az.is_finite() && (-90.0..=90.0).contains(&el) => Some((az, el)),
+                    _ => bail!("--sun {a:?}: expected AZIMUTH,ELEVATION in degrees, elevation −90–90 (e.g. 225,35)"),
+                }
+            }
+            None => None,
+        };
+        Ok(Self { times, angles })
+    }
+}
+
+/// The lights to render with, each with a label (the time or the angles;
+/// empty for the default light).
+fn sun_lighting(
+    sun: &SunArg,
+    m: &sylva::format::Manifest,
+    default: sylva::render::Lighting,
+) -> Result<Vec<(String, sylva::render::Lighting)>> {
+    if sun.times.is_empty() && sun.angles.is_none() {
+        return Ok(vec![(String::new(), default)]);
+    }
+    let geo =
+        sylva::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).map_err(|e| anyhow::anyhow!("--sun-time/--sun: {e}"))?;
+    let centre = sylva::render::Lighting::sun_point(m);
+    if let Some((az, el)) = sun.angles {
+        let l = sylva::render::Lighting::at_angles(&geo, centre, az, el).map_err(|e| anyhow::anyhow!("--sun: {e}"))?;
+        return Ok(vec![(format!("sun azimuth {az:.1}°, elevation {el:.1}°"), l)]);
+    }
+    sun.times
+        .iter()
+        .map(|t| {
+            let (l, p) =
+                sylva::render::Lighting::at_time(&geo, centre, t).map_err(|e| anyhow::anyhow!("--sun-time: {e}"))?;
+            let (lon, _) = geo.to_geo(centre).map(|(lon, lat, _)| (lon, lat)).unwrap_or((0.0, 0.0));
+            let off = t.offset_min(lon);
+            Ok((
+                format!(
+                    "{:04}-{:02}-{:02}T{:02}{:02}{}{:02}{:02}: sun azimuth {:.1}°, elevation {:.1}°",
+                    t.year,
+                    t.month,
+                    t.day,
+                    t.hour,
+                    t.minute,
+                    if off < 0 { '-' } else { '+' },
+                    off.abs() / 60,
+                    off.abs() % 60,
+                    p.azimuth_deg,
+                    p.elevation_deg
+                ),
+                l,
+            ))
+        })
+        .collect()
+}
+
+/// `out.png` + label `2026-06-21T1500+0200: …` → `out-2026-06-21T1500.png`.
+fn suffixed(path: &std::path::Path, label: &str) -> PathBuf {
+    let tag: String = label.chars().take(15).filter(|c| c.is_ascii_alphanumeric() || *c == '-').collect();
+    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let ext = path.extension().map_or_else(String::new, |e| format!(".{}", e.to_string_lossy()));
+    path.with_file_name(format!("{stem}-{tag}{ext}"))
+}
+
 /// `sylva render`: `--scene` to a PNG with stats, or `--pack` (one tree).
 pub(crate) fn render(args: RenderArgs) -> Result<()> {
     let RenderArgs {
@@ -136,6 +243,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         imagery,
         imagery_max_zoom,
         no_imagery,
+        sun_time,
+        sun,
         stats,
         timeout,
         allow_partial,
@@ -158,6 +267,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         }
         (None, false) => ImageryChoice::Scene,
     };
+    let sun = SunArg::parse(sun_time.as_deref(), sun.as_deref())?;
     if let Some(scene) = scene {
         use sylva::render::forest::Representations;
         let settings = RenderSettings {
@@ -185,6 +295,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             camera.as_deref(),
             settings,
             imagery,
+            &sun,
             stats.as_ref(),
             timeout,
             allow_partial,

@@ -53,6 +53,70 @@ impl Default for Lighting {
 }
 
 impl Lighting {
+    /// Light of a sun in direction `sun_dir` (unit, towards the sun) standing
+    /// `elevation_deg` above the horizon: warmer and weaker towards the
+    /// horizon (the longer path through the air), gone below it, with the sky
+    /// light fading through dusk.
+    #[must_use]
+    pub fn for_sun(sun_dir: Vec3, elevation_deg: f32) -> Self {
+        let day = Self::default();
+        let smooth = |a: f32, b: f32, x: f32| {
+            let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
+            t * t * (3.0 - 2.0 * t)
+        };
+        let up = smooth(-1.0, 8.0, elevation_deg);
+        let high = smooth(2.0, 30.0, elevation_deg);
+        let warm = Vec3::new(1.0, 0.72, 0.45).lerp(Vec3::ONE, high);
+        let sky = 0.25 + 0.75 * smooth(-8.0, 15.0, elevation_deg);
+        Self {
+            sun_dir: sun_dir.normalize_or(Vec3::Z),
+            sun_color: day.sun_color * warm * up,
+            ambient: day.ambient * sky,
+        }
+    }
+
+    /// Where a scene's sun is worked out: the middle of where its trees are
+    /// (scene-relative, at the lowest tree base).
+    #[must_use]
+    pub fn sun_point(m: &crate::format::Manifest) -> glam::DVec3 {
+        let f = m.focus();
+        glam::DVec3::new(
+            f64::from(f.min[0] + f.max[0]) * 0.5,
+            f64::from(f.min[1] + f.max[1]) * 0.5,
+            f64::from(f.min[2]),
+        )
+    }
+
+    /// The light of the sun at `time` over the scene-relative point `local`
+    /// of a scene whose CRS `geo` knows; with the sun's position.
+    ///
+    /// # Errors
+    /// The point cannot be turned into lon/lat (a scene CRS proj4rs cannot invert).
+    pub fn at_time(
+        geo: &crate::geo::GeoFrame,
+        local: glam::DVec3,
+        time: &crate::sun::SunTime,
+    ) -> Result<(Self, crate::sun::SolarPosition), String> {
+        let (lon, lat, _) = geo.to_geo(local).map_err(|e| e.to_string())?;
+        let p = crate::sun::solar_position(time, lat, lon);
+        Ok((Self::at_angles(geo, local, p.azimuth_deg, p.elevation_deg)?, p))
+    }
+
+    /// The light of a sun at `azimuth_deg` (clockwise from true north) and
+    /// `elevation_deg` over the scene-relative point `local`.
+    ///
+    /// # Errors
+    /// As [`Self::at_time`].
+    pub fn at_angles(
+        geo: &crate::geo::GeoFrame,
+        local: glam::DVec3,
+        azimuth_deg: f64,
+        elevation_deg: f64,
+    ) -> Result<Self, String> {
+        let dir = geo.sun_direction(local, azimuth_deg, elevation_deg).map_err(|e| e.to_string())?;
+        Ok(Self::for_sun(dir.as_vec3(), elevation_deg as f32))
+    }
+
     /// The view uniform for a lit render of a single tree (previews and captures:
     /// no culling, so no frustum or LoD data).
     #[must_use]
