@@ -17,7 +17,7 @@ use super::args::*;
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render_scene(
     scene: &str,
-    out: &PathBuf,
+    out: &std::path::Path,
     (w, h): (u32, u32),
     view: SceneView,
     camera: Option<&str>,
@@ -75,7 +75,7 @@ pub(crate) fn render_scene(
         off.render(&cam, false);
         let s = off.render(&cam, true);
         let rgba = off.read_image();
-        let path = if several { suffixed(out, &label) } else { out.clone() };
+        let path = if several { suffixed(out, &label) } else { out.to_path_buf() };
         image::save_buffer(&path, &rgba, w, h, image::ColorType::Rgba8)
             .with_context(|| format!("cannot write {}", path.display()))?;
         if several || !label.is_empty() {
