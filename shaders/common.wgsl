@@ -249,13 +249,29 @@ fn rotate_z(v: vec3<f32>, yaw: f32) -> vec3<f32> {
 
 // One lighting model for every representation, so a tree keeps its colour when
 // its LoD changes. Leaves also pass some light through (wrap term).
+// Sky light: a hemisphere instead of a flat ambient term. Surfaces facing up
+// see the sky (a little brighter and bluer than `view.ambient`), surfaces
+// facing down the light the ground bounces back (darker, warmer), so the
+// undersides of crowns and the shaded sides of trunks read. Leaves (thin,
+// scattering, normals only roughly meaningful) lean half as far either way.
+const SKY_TINT: vec3<f32> = vec3<f32>(1.1, 1.12, 1.18);
+const GROUND_BOUNCE: vec3<f32> = vec3<f32>(0.62, 0.58, 0.5);
+
+fn sky_light(n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32> {
+    var up = 0.5 + 0.5 * clamp(n.z, -1.0, 1.0);
+    if is_leaf {
+        up = 0.5 + 0.25 * clamp(n.z, -1.0, 1.0);
+    }
+    return view.ambient.rgb * mix(GROUND_BOUNCE, SKY_TINT, up);
+}
+
 fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32> {
     let ndl = dot(n, view.sun_dir.xyz);
     var diffuse = max(ndl, 0.0);
     if is_leaf {
         diffuse = max(ndl, 0.0) * 0.75 + abs(ndl) * 0.25;
     }
-    return albedo * (view.ambient.rgb + view.sun_color.rgb * diffuse);
+    return albedo * (sky_light(n, is_leaf, view) + view.sun_color.rgb * diffuse);
 }
 
 // Per-tree tint/variation (0–31) → a small brightness/hue change.

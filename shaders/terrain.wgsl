@@ -211,7 +211,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let photo = textureSample(images, image_sampler, vec2<f32>(in.image_uv.x, 1.0 - in.image_uv.y), select(0u, in.layer, has));
     // A photograph already holds the light of its day: relit by the slope
     // relative to flat ground, so level ground shows its own colours.
-    let flat_light = view.ambient.rgb + view.sun_color.rgb * max(view.sun_dir.z, 0.0);
+    let flat_light = sky_light(vec3<f32>(0.0, 0.0, 1.0), false, view) + view.sun_color.rgb * max(view.sun_dir.z, 0.0);
     let relit = shade(photo.rgb, n, false, view) / max(flat_light, vec3<f32>(1e-3));
     lit = mix(lit, relit, select(0.0, photo.a, has));
     return vec4<f32>(lit, 1.0);

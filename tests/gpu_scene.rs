@@ -62,6 +62,22 @@ fn ground_z(off: &mut OffscreenScene, x: f64, y: f64) -> f64 {
     off.stream.ground_height_at(x as f32, y as f32).map_or(0.0, f64::from)
 }
 
+/// The first spruce of the resident batch of spruces nearest the scene's
+/// middle (the same tree whatever order the tiles arrived in), as the cull
+/// pass's pools hold it.
+fn middle_spruce(off: &OffscreenScene, m: &Manifest) -> sylva::format::tile::Instance {
+    let (_, batches, instances, _) = off.read_selection();
+    let spruce = m.species.iter().position(|s| s.name == "spruce").unwrap() as u32;
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let d = |b: &sylva::format::GpuBatch| (DVec3::from(b.center_m.map(f64::from)) - c).truncate().length();
+    let b = batches
+        .iter()
+        .filter(|b| b.instance_count > 0 && b.species == spruce)
+        .min_by(|a, b| d(a).total_cmp(&d(b)))
+        .expect("a resident spruce");
+    instances[b.instance_offset as usize].decode(b)
+}
+
 /// Share of pixels whose green channel dominates: trees (not sky or ground).
 fn foliage_share(img: &[u8]) -> f64 {
     let n = img.chunks_exact(4).filter(|p| p[1] > p[0] + 8 && p[1] > p[2] + 8).count();
@@ -410,19 +426,8 @@ fn extreme_cameras_render_without_artefacts() {
     // 0.2 m in front of a trunk: find a tree through the cull pass's own pools.
     let top = off.named_camera(NamedView::Top, 30.0).unwrap();
     render(&mut off, &top);
-    let (_, batches, instances, _) = off.read_selection();
     // A spruce (brown bark; the beech's is grey, the birch's white).
-    let spruce = m.species.iter().position(|s| s.name == "spruce").unwrap() as u32;
-    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
-    let b = batches
-        .iter()
-        .filter(|b| b.instance_count > 0 && b.species == spruce)
-        .min_by(|a, b| {
-            let d = |b: &&sylva::format::GpuBatch| (DVec3::from(b.center_m.map(f64::from)) - c).truncate().length();
-            d(a).total_cmp(&d(b))
-        })
-        .unwrap();
-    let tree = instances[b.instance_offset as usize].decode(b);
+    let tree = middle_spruce(&off, &m);
     let p = DVec3::new(f64::from(tree.position_m[0]), f64::from(tree.position_m[1]), f64::from(tree.position_m[2]));
     // Trunk radius of the demo trees is 1.8 % of their height (≈ 0.4 m); look at it from 0.2 m outside.
     let cam = Camera {
@@ -501,19 +506,8 @@ fn cameras_at_the_extremes_stay_close_to_the_full_meshes() {
     // Inside a tree's crown, beside the trunk (leaves centimetres to decimetres from
     // the eye, near plane 5 cm): the view is mostly leaves; that tree is its full
     // mesh, the trees seen through gaps are LoD.
-    let (_, batches, instances, _) = off.read_selection();
-    // A spruce's (whose height the crown position assumes), the same one
-    // whatever order the tiles arrived in: the batch nearest the scene's middle.
-    let spruce = m.species.iter().position(|s| s.name == "spruce").unwrap() as u32;
-    let b = batches
-        .iter()
-        .filter(|b| b.instance_count > 0 && b.species == spruce)
-        .min_by(|a, b| {
-            let d = |b: &&sylva::format::GpuBatch| (DVec3::from(b.center_m.map(f64::from)) - c).truncate().length();
-            d(a).total_cmp(&d(b))
-        })
-        .unwrap();
-    let tree = instances[b.instance_offset as usize].decode(b);
+    // A spruce's (whose height the crown position assumes).
+    let tree = middle_spruce(&off, &m);
     let base = DVec3::from(tree.position_m.map(f64::from));
     let crown = Camera {
         eye_m: base + DVec3::new(1.5 * f64::from(tree.scale), 0.0, f64::from(tree.scale) * 0.7 * 25.0),

@@ -21,7 +21,7 @@ use tiff::tags::Tag;
 pub const MAX_DEM_PIXELS: u64 = 1 << 30;
 
 /// Most decoded bytes per byte of file (see [`Dem::read`]).
-pub(crate) const MAX_EXPANSION: u64 = 2048;
+const MAX_EXPANSION: u64 = 2048;
 
 /// GeoKey ids (GeoTIFF 1.1, §7).
 const GT_MODEL_TYPE: u16 = 1024;
@@ -85,24 +85,8 @@ impl Dem {
     ///
     /// # Errors
     /// See [`Dem::open`].
-    pub fn read<R: Read + Seek>(mut reader: R) -> Result<Self> {
-        // Decoded heights may be at most this many times the file's bytes (deflate
-        // and LZW compress a flat grid about 1000-fold): a hostile header cannot
-        // make the reader allocate gigabytes for a small file.
-        let file_len = reader.seek(std::io::SeekFrom::End(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
-        reader.seek(std::io::SeekFrom::Start(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
-        let budget = file_len.saturating_mul(MAX_EXPANSION).min(MAX_DEM_PIXELS * 8);
-        let mut limits = Limits::default();
-        limits.decoding_buffer_size = budget as usize;
-        limits.intermediate_buffer_size = budget as usize;
-        let mut d = Decoder::new(reader).map_err(|e| anyhow!("not a readable TIFF file: {e}"))?.with_limits(limits);
-        let (width, height) = d.dimensions().map_err(|e| anyhow!("no image size: {e}"))?;
-        if u64::from(width) * u64::from(height) > MAX_DEM_PIXELS {
-            bail!("{width}×{height} pixels is more than the {MAX_DEM_PIXELS} one DEM may have: split it into tiles (pass several --dem)");
-        }
-        if width == 0 || height == 0 {
-            bail!("the image is empty ({width}×{height})");
-        }
+    pub fn read<R: Read + Seek>(reader: R) -> Result<Self> {
+        let (mut d, width, height, budget, file_len) = bounded_decoder(reader, "--dem")?;
         if u64::from(width) * u64::from(height) > budget {
             bail!(
                 "the header declares {width}×{height} pixels, more than {MAX_EXPANSION} per byte of this {file_len}-byte file: \
@@ -273,6 +257,30 @@ fn kind_name(r: &DecodingResult) -> &'static str {
         DecodingResult::F16(_) => "float16",
         _ => "other",
     }
+}
+
+/// A TIFF decoder over `reader` whose decoded bytes are bounded, with the
+/// image's width and height (checked: not empty, at most [`MAX_DEM_PIXELS`]),
+/// the bound and the file's length. Decoded samples may be at most
+/// [`MAX_EXPANSION`] times the file's bytes (deflate and LZW compress a flat
+/// grid about 1000-fold): a hostile header cannot make the reader allocate
+/// gigabytes for a small file. `flag` names the option in the advice.
+pub(crate) fn bounded_decoder<R: Read + Seek>(mut reader: R, flag: &str) -> Result<(Decoder<R>, u32, u32, u64, u64)> {
+    let file_len = reader.seek(std::io::SeekFrom::End(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
+    reader.seek(std::io::SeekFrom::Start(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
+    let budget = file_len.saturating_mul(MAX_EXPANSION).min(MAX_DEM_PIXELS * 8);
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = budget as usize;
+    limits.intermediate_buffer_size = budget as usize;
+    let mut d = Decoder::new(reader).map_err(|e| anyhow!("not a readable TIFF file: {e}"))?.with_limits(limits);
+    let (width, height) = d.dimensions().map_err(|e| anyhow!("no image size: {e}"))?;
+    if width == 0 || height == 0 {
+        bail!("the image is empty ({width}×{height})");
+    }
+    if u64::from(width) * u64::from(height) > MAX_DEM_PIXELS {
+        bail!("{width}×{height} pixels is more than the {MAX_DEM_PIXELS} one file may have: split it into tiles (pass several {flag})");
+    }
+    Ok((d, width, height, budget, file_len))
 }
 
 /// (x of pixel (0,0)'s tie corner, x step, y, y step, tiepoint-is-centre) from

@@ -8,10 +8,10 @@ use std::io::{Read, Seek};
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
-use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::decoder::DecodingResult;
 use tiff::tags::Tag;
 
-use crate::dem::{crs_code, geokeys, georeference, GT_RASTER_TYPE, MAX_DEM_PIXELS, MAX_EXPANSION};
+use crate::dem::{bounded_decoder, crs_code, geokeys, georeference, GT_RASTER_TYPE};
 
 /// RGBA pixels of `n`-sample values (grey, RGB or RGBA): alpha 0 where every
 /// colour sample equals `nodata`.
@@ -62,7 +62,7 @@ impl Ortho {
     /// # Errors
     /// A file that cannot be opened or is no TIFF, a sample layout other than
     /// grey, RGB or RGBA of 8 or 16 bits, no georeferencing, a rotated grid, or
-    /// more than [`MAX_DEM_PIXELS`] pixels; the message names the file.
+    /// more than [`crate::dem::MAX_DEM_PIXELS`] pixels; the message names the file.
     pub fn open(path: &Path) -> Result<Self> {
         let file = std::fs::File::open(path).with_context(|| format!("ortho {}: cannot open", path.display()))?;
         Self::read(std::io::BufReader::new(file)).with_context(|| format!("ortho {}", path.display()))
@@ -72,30 +72,17 @@ impl Ortho {
     ///
     /// # Errors
     /// See [`Ortho::open`].
-    pub fn read<R: Read + Seek>(mut reader: R) -> Result<Self> {
-        let file_len = reader.seek(std::io::SeekFrom::End(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
-        reader.seek(std::io::SeekFrom::Start(0)).map_err(|e| anyhow!("cannot read: {e}"))?;
-        let budget = file_len.saturating_mul(MAX_EXPANSION).min(MAX_DEM_PIXELS * 8);
-        let mut limits = Limits::default();
-        limits.decoding_buffer_size = budget as usize;
-        limits.intermediate_buffer_size = budget as usize;
-        let mut d = Decoder::new(reader).map_err(|e| anyhow!("not a readable TIFF file: {e}"))?.with_limits(limits);
-        let (width, height) = d.dimensions().map_err(|e| anyhow!("no image size: {e}"))?;
-        if width == 0 || height == 0 {
-            bail!("the image is empty ({width}×{height})");
-        }
+    pub fn read<R: Read + Seek>(reader: R) -> Result<Self> {
+        let (mut d, width, height, budget, file_len) = bounded_decoder(reader, "--ortho")?;
         let pixels = u64::from(width) * u64::from(height);
-        if pixels > MAX_DEM_PIXELS {
-            bail!("{width}×{height} pixels is more than the {MAX_DEM_PIXELS} one image may have: split it (pass several --ortho)");
-        }
         let samples = d.find_tag_unsigned::<u16>(Tag::SamplesPerPixel).ok().flatten().unwrap_or(1);
         if !matches!(samples, 1 | 3 | 4) {
             bail!("{samples} samples per pixel: an orthophoto has 1 (grey), 3 (RGB) or 4 (RGBA)");
         }
         if pixels * u64::from(samples) > budget {
             bail!(
-                "the header declares {width}×{height} pixels, more than {MAX_EXPANSION} bytes per byte of this \
-                 {file_len}-byte file: it is corrupt or truncated"
+                "the header declares {width}×{height} pixels of {samples} samples, more than this {file_len}-byte \
+                 file can hold: it is corrupt or truncated"
             );
         }
         if d.find_tag_unsigned::<u16>(Tag::PlanarConfiguration).ok().flatten().unwrap_or(1) != 1 {

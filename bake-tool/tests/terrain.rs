@@ -23,6 +23,30 @@ fn hills(x: f64, y: f64) -> f64 {
     400.0 + 50.0 * (u / 70.0).sin() * (v / 55.0).cos() + 15.0 * (u / 23.0 + v / 31.0).sin() + 0.05 * u
 }
 
+/// Bakes `dir/trees.csv` with the oak `model` on `dem` (plus `extra` flags)
+/// into `dir/scene`: the scene and the bake's output.
+fn bake(
+    dir: &Path,
+    model: &Path,
+    dem: &Path,
+    extra: &[&std::ffi::OsStr],
+) -> (std::path::PathBuf, std::process::Output) {
+    let scene = dir.join("scene");
+    let o = run(common::bin()
+        .arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--placements")
+        .arg(dir.join("trees.csv"))
+        .args(["--input-crs", "EPSG:32633", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+        .arg("--dem")
+        .arg(dem)
+        .args(extra)
+        .arg("--out")
+        .arg(&scene));
+    (scene, o)
+}
+
 fn open(scene: &Path) -> OffscreenScene {
     sylva::render::context::ensure_runtime_dir();
     let pools = PoolConfig { instances: 1 << 14, batches: 1 << 10, items: 1 << 15, species: 4 };
@@ -51,18 +75,7 @@ fn the_ground_of_a_dem_is_drawn_without_cracks_and_the_trees_stand_on_it() {
         csv += &format!("{i},{},{},14\n", 500_250 + (i % 12) * 9, 5_299_650 - (i / 12) * 9);
     }
     std::fs::write(dir.join("trees.csv"), csv).unwrap();
-    let scene = dir.join("scene");
-    let o = run(common::bin()
-        .arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--placements")
-        .arg(dir.join("trees.csv"))
-        .args(["--input-crs", "EPSG:32633", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
-        .arg("--dem")
-        .arg(&dem)
-        .arg("--out")
-        .arg(&scene));
+    let (scene, o) = bake(&dir, &model, &dem, &[]);
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("terrain: ") && log.contains("2.00 m finest spacing"), "{log}");
     let mut off = open(&scene);
@@ -184,20 +197,7 @@ fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() 
     // 1 m pixels over x 500050–500550, y 5299450–5299950.
     common::write_geotiff_ortho(&ortho, (500, 500), 1.0, (500_050.0, 5_299_950.0), checker);
     std::fs::write(dir.join("trees.csv"), "id,x,y,height\n1,500020,5299420,12\n2,500030,5299420,12\n").unwrap();
-    let scene = dir.join("scene");
-    let o = run(common::bin()
-        .arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--placements")
-        .arg(dir.join("trees.csv"))
-        .args(["--input-crs", "EPSG:32633", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
-        .arg("--dem")
-        .arg(&dem)
-        .arg("--ortho")
-        .arg(&ortho)
-        .arg("--out")
-        .arg(&scene));
+    let (scene, o) = bake(&dir, &model, &dem, &["--ortho".as_ref(), ortho.as_os_str()]);
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("imagery: ") && log.contains("ortho.tif"), "{log}");
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
@@ -322,19 +322,7 @@ fn geomorphing_hides_level_changes_as_the_camera_moves() {
     let dem = dir.join("hills.tif");
     write_geotiff_dem(&dem, 300, 2.0, hills);
     std::fs::write(dir.join("trees.csv"), "id,x,y,height\n1,500020,5299420,12\n").unwrap();
-    let scene = dir.join("scene");
-    run(common::bin()
-        .arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--placements")
-        .arg(dir.join("trees.csv"))
-        .args(["--input-crs", "EPSG:32633", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
-        .arg("--dem")
-        .arg(&dem)
-        .arg("--plain-ground")
-        .arg("--out")
-        .arg(&scene));
+    let (scene, _) = bake(&dir, &model, &dem, &["--plain-ground".as_ref()]);
     let mut off = open(&scene);
     off.load_view(&Camera::default(), 30.0);
     let origin = DVec3::from(off.stream.manifest().unwrap().origin_m);

@@ -145,11 +145,12 @@ async function openViewer(url, size = { width: 480, height: 320 }) {
   return { page, errors };
 }
 
-/** Share of screenshot pixels that are foliage green (the screenshot is a PNG). */
-async function foliageShare(page, name) {
+/** Screenshots the page (kept as `name`.png) and reduces its RGBA pixels in the
+ * page with `reduce`, the source of a function body over `d` (the pixel bytes). */
+async function screenshotStat(page, name, reduce) {
   const png = await page.screenshot({ path: join(artifacts, `${name}.png`) });
   // Decode in the page with a 2D canvas (the screenshot, not the WebGPU canvas).
-  return page.evaluate(async (b64) => {
+  return page.evaluate(async ([b64, reduce]) => {
     const img = new Image();
     img.src = `data:image/png;base64,${b64}`;
     await img.decode();
@@ -157,11 +158,16 @@ async function foliageShare(page, name) {
     c.width = img.width; c.height = img.height;
     const g = c.getContext('2d');
     g.drawImage(img, 0, 0);
-    const d = g.getImageData(0, 0, c.width, c.height).data;
+    return new Function('d', reduce)(g.getImageData(0, 0, c.width, c.height).data);
+  }, [png.toString('base64'), reduce]);
+}
+
+/** Share of screenshot pixels that are foliage green. */
+function foliageShare(page, name) {
+  return screenshotStat(page, name, `
     let n = 0;
     for (let i = 0; i < d.length; i += 4) if (d[i + 1] > d[i] + 8 && d[i + 1] > d[i + 2] + 8) n++;
-    return n / (d.length / 4);
-  }, png.toString('base64'));
+    return n / (d.length / 4);`);
 }
 
 test('the viewer loads the scene, draws it and reports stats', async () => {
@@ -376,25 +382,13 @@ test('ground imagery: the baked forest floor is draped, and an XYZ source on a l
     const stats = await ready(page);
     // The fixture's procedural forest floor, baked as imagery.
     assert.ok(stats.imagery_drawn >= 1 && stats.imagery_resident >= 1, `baked imagery ${JSON.stringify(stats)}`);
-    const shot = async (name) => {
-      const b64 = (await page.screenshot({ path: join(artifacts, `${name}.png`) })).toString('base64');
-      return page.evaluate(async (b64) => {
-        const img = new Image();
-        img.src = `data:image/png;base64,${b64}`;
-        await img.decode();
-        const c = document.createElement('canvas');
-        c.width = img.width; c.height = img.height;
-        const g = c.getContext('2d');
-        g.drawImage(img, 0, 0);
-        const d = g.getImageData(0, 0, c.width, c.height).data;
-        let magenta = 0, cyan = 0;
-        for (let i = 0; i < d.length; i += 4) {
-          if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
-          if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
-        }
-        return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };
-      }, b64);
-    };
+    const shot = (name) => screenshotStat(page, name, `
+      let magenta = 0, cyan = 0;
+      for (let i = 0; i < d.length; i += 4) {
+        if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
+        if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
+      }
+      return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };`);
     const plain = await shot('imagery-baked');
     assert.equal(plain.magenta + plain.cyan, 0, 'the forest floor has neither colour');
     // A template without placeholders is refused with a message.
@@ -422,22 +416,10 @@ test('the sun follows a date and time at the scene and the time-of-day control',
   const { page, errors } = await openViewer(base);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
-  const meanBrightness = async (name) => {
-    const b64 = (await page.screenshot({ path: join(artifacts, `${name}.png`) })).toString('base64');
-    return page.evaluate(async (b64) => {
-      const img = new Image();
-      img.src = `data:image/png;base64,${b64}`;
-      await img.decode();
-      const c = document.createElement('canvas');
-      c.width = img.width; c.height = img.height;
-      const g = c.getContext('2d');
-      g.drawImage(img, 0, 0);
-      const d = g.getImageData(0, 0, c.width, c.height).data;
-      let sum = 0;
-      for (let i = 0; i < d.length; i += 4) sum += d[i] + d[i + 1] + d[i + 2];
-      return sum / (d.length / 4) / 3;
-    }, b64);
-  };
+  const meanBrightness = (name) => screenshotStat(page, name, `
+    let sum = 0;
+    for (let i = 0; i < d.length; i += 4) sum += d[i] + d[i + 1] + d[i + 2];
+    return sum / (d.length / 4) / 3;`);
   // The fixture's place (48.4° N, 15.5° E) at 13:15 summer time on the solstice: due south, about 65° up.
   const noon = await page.evaluate(() => window.sylva.setSun({ date: '2026-06-21', time: '13:15', utcOffset: '+02:00' }));
   assert.ok(Math.abs(noon.azimuth - 180) < 10 && noon.elevation > 60 && noon.elevation < 67, JSON.stringify(noon));
