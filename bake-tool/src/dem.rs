@@ -25,7 +25,7 @@ const MAX_EXPANSION: u64 = 2048;
 
 /// GeoKey ids (GeoTIFF 1.1, §7).
 const GT_MODEL_TYPE: u16 = 1024;
-pub(crate) const GT_RASTER_TYPE: u16 = 1025;
+const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const PROJECTED_CS_TYPE: u16 = 3072;
 /// A user-defined CRS code in a GeoKey.
@@ -97,17 +97,7 @@ impl Dem {
         if samples != 1 {
             bail!("{samples} samples per pixel: a DEM has one (heights); is this an image (use --ortho for imagery)?");
         }
-        let (x0, dx, y0, dy, point) = georeference(&mut d)?;
-        let keys = geokeys(&mut d);
-        let epsg = crs_code(&keys)?;
-        // Pixel-is-area (the default): the tiepoint is the corner of pixel (0, 0);
-        // sample positions are pixel centres.
-        let is_point = point || keys.iter().any(|k| k.0 == GT_RASTER_TYPE && k.1 == 2);
-        let (x0, y0) = if is_point { (x0, y0) } else { (x0 + 0.5 * dx, y0 + 0.5 * dy) };
-        let nodata = match d.find_tag(Tag::GdalNodata) {
-            Ok(Some(v)) => v.into_string().ok().and_then(|s| s.trim_matches(char::from(0)).trim().parse::<f64>().ok()),
-            _ => None,
-        };
+        let Grid { x0, dx, y0, dy, epsg, nodata } = grid_of(&mut d)?;
         let compression = match d.find_tag_unsigned::<u16>(Tag::Compression).ok().flatten().unwrap_or(1) {
             1 => "uncompressed",
             5 => "LZW",
@@ -259,6 +249,33 @@ fn kind_name(r: &DecodingResult) -> &'static str {
     }
 }
 
+/// Where a GeoTIFF's pixels are: the map position of pixel (0, 0)'s centre
+/// and the steps per column and row, its CRS and its nodata value.
+pub(crate) struct Grid {
+    pub x0: f64,
+    pub dx: f64,
+    pub y0: f64,
+    pub dy: f64,
+    pub epsg: Option<u32>,
+    pub nodata: Option<f64>,
+}
+
+/// The [`Grid`] of a GeoTIFF from its model tags, GeoKeys and `GDAL_NODATA`.
+pub(crate) fn grid_of<R: Read + Seek>(d: &mut Decoder<R>) -> Result<Grid> {
+    let (x0, dx, y0, dy, point) = georeference(d)?;
+    let keys = geokeys(d);
+    let epsg = crs_code(&keys)?;
+    // Pixel-is-area (the default): the tiepoint is the corner of pixel (0, 0);
+    // sample positions are pixel centres.
+    let is_point = point || keys.iter().any(|k| k.0 == GT_RASTER_TYPE && k.1 == 2);
+    let (x0, y0) = if is_point { (x0, y0) } else { (x0 + 0.5 * dx, y0 + 0.5 * dy) };
+    let nodata = match d.find_tag(Tag::GdalNodata) {
+        Ok(Some(v)) => v.into_string().ok().and_then(|s| s.trim_matches(char::from(0)).trim().parse::<f64>().ok()),
+        _ => None,
+    };
+    Ok(Grid { x0, dx, y0, dy, epsg, nodata })
+}
+
 /// A TIFF decoder over `reader` whose decoded bytes are bounded, with the
 /// image's width and height (checked: not empty, at most [`MAX_DEM_PIXELS`]),
 /// the bound and the file's length. Decoded samples may be at most
@@ -285,7 +302,7 @@ pub(crate) fn bounded_decoder<R: Read + Seek>(mut reader: R, flag: &str) -> Resu
 
 /// (x of pixel (0,0)'s tie corner, x step, y, y step, tiepoint-is-centre) from
 /// the GeoTIFF model tags.
-pub(crate) fn georeference<R: Read + Seek>(d: &mut Decoder<R>) -> Result<(f64, f64, f64, f64, bool)> {
+fn georeference<R: Read + Seek>(d: &mut Decoder<R>) -> Result<(f64, f64, f64, f64, bool)> {
     let scale = d.find_tag(Tag::ModelPixelScaleTag).ok().flatten().and_then(|v| v.into_f64_vec().ok());
     let tie = d.find_tag(Tag::ModelTiepointTag).ok().flatten().and_then(|v| v.into_f64_vec().ok());
     if let (Some(s), Some(t)) = (&scale, &tie) {
@@ -323,7 +340,7 @@ pub(crate) fn georeference<R: Read + Seek>(d: &mut Decoder<R>) -> Result<(f64, f
 }
 
 /// The GeoKey directory as (key, value) pairs of the inline SHORT keys.
-pub(crate) fn geokeys<R: Read + Seek>(d: &mut Decoder<R>) -> Vec<(u16, u16)> {
+fn geokeys<R: Read + Seek>(d: &mut Decoder<R>) -> Vec<(u16, u16)> {
     let Ok(Some(v)) = d.find_tag(Tag::GeoKeyDirectoryTag) else { return Vec::new() };
     let Ok(words) = v.into_u16_vec() else { return Vec::new() };
     if words.len() < 4 {
@@ -334,7 +351,7 @@ pub(crate) fn geokeys<R: Read + Seek>(d: &mut Decoder<R>) -> Vec<(u16, u16)> {
 }
 
 /// The EPSG code the GeoKeys name, `None` when they name none.
-pub(crate) fn crs_code(keys: &[(u16, u16)]) -> Result<Option<u32>> {
+fn crs_code(keys: &[(u16, u16)]) -> Result<Option<u32>> {
     let get = |id: u16| keys.iter().find(|k| k.0 == id).map(|k| k.1);
     let code = match get(GT_MODEL_TYPE) {
         Some(2) => get(GEOGRAPHIC_TYPE),

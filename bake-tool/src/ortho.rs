@@ -11,7 +11,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use tiff::decoder::DecodingResult;
 use tiff::tags::Tag;
 
-use crate::dem::{bounded_decoder, crs_code, geokeys, georeference, GT_RASTER_TYPE};
+use crate::dem::{bounded_decoder, grid_of, Grid};
 
 /// RGBA pixels of `n`-sample values (grey, RGB or RGBA): alpha 0 where every
 /// colour sample equals `nodata`.
@@ -90,15 +90,7 @@ impl Ortho {
                 "the bands are stored in separate planes: convert to interleaved (gdal_translate -co INTERLEAVE=PIXEL)"
             );
         }
-        let (x0, dx, y0, dy, point) = georeference(&mut d)?;
-        let keys = geokeys(&mut d);
-        let epsg = crs_code(&keys)?;
-        let is_point = point || keys.iter().any(|k| k.0 == GT_RASTER_TYPE && k.1 == 2);
-        let (x0, y0) = if is_point { (x0, y0) } else { (x0 + 0.5 * dx, y0 + 0.5 * dy) };
-        let nodata = match d.find_tag(Tag::GdalNodata) {
-            Ok(Some(v)) => v.into_string().ok().and_then(|s| s.trim_matches(char::from(0)).trim().parse::<f64>().ok()),
-            _ => None,
-        };
+        let Grid { x0, dx, y0, dy, epsg, nodata } = grid_of(&mut d)?;
         let image = d.read_image().map_err(|e| anyhow!("cannot decode the pixels: {e}"))?;
         let n = usize::from(samples);
         let expect = pixels * u64::from(samples);
