@@ -112,5 +112,5 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }
-    return vec4<f32>(shade(albedo, n, is_leaf, view), 1.0);
+    return vec4<f32>(haze(shade(albedo, n, is_leaf, view), in.clip, view), 1.0);
 }

@@ -359,7 +359,7 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }
-    out.color = vec4<f32>(shade(albedo, n, !is_line, view), 1.0);
+    out.color = vec4<f32>(haze_at(shade(albedo, n, !is_line, view), p, view), 1.0);
     return out;
 }
 

@@ -265,6 +265,41 @@ fn sky_light(n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32> {
     return view.ambient.rgb * mix(GROUND_BOUNCE, SKY_TINT, up);
 }
 
+// Aerial perspective: light scattered by the air between the eye and a
+// surface veils it towards the horizon's colour, more with distance and less
+// high up (density falling by e every HAZE_HEIGHT_M above the scene origin).
+// Visibility (3/β) about 50 km at the ground (a clear day). Not in the LoD
+// debug colours.
+const HAZE_PER_M: f32 = 1.0 / 16000.0;
+const HAZE_HEIGHT_M: f32 = 1500.0;
+// The sky's horizon colour (shaders/sky.wgsl): far things fade into it.
+const HAZE_COLOR: vec3<f32> = vec3<f32>(0.62, 0.74, 0.86);
+
+// How bright the sky is relative to day (the ambient light's luminance
+// against the default's): the sky and the haze darken at dusk.
+fn sky_scale(view: View) -> f32 {
+    return clamp(dot(view.ambient.rgb, vec3<f32>(0.2126, 0.7152, 0.0722)) / 0.4573, 0.15, 1.5);
+}
+
+// `color` seen through the air at `rel` (metres from the eye, world axes).
+fn haze_at(color: vec3<f32>, rel: vec3<f32>, view: View) -> vec3<f32> {
+    if view.params.z == 1u {
+        return color;
+    }
+    let eye_z = view.eye_hi.z + view.eye_lo.z;
+    let h = max(eye_z + 0.5 * rel.z, 0.0);
+    let f = 1.0 - exp(-length(rel) * HAZE_PER_M * exp(-h / HAZE_HEIGHT_M));
+    return mix(color, HAZE_COLOR * sky_scale(view), f);
+}
+
+// `color` of the fragment at `frag` (@builtin(position): pixel and depth),
+// its distance recovered through the inverse projection.
+fn haze(color: vec3<f32>, frag: vec4<f32>, view: View) -> vec3<f32> {
+    let ndc = vec2<f32>(frag.x / view.viewport.x * 2.0 - 1.0, 1.0 - frag.y / view.viewport.y * 2.0);
+    let p = view.eye_from_clip * vec4<f32>(ndc, frag.z, 1.0);
+    return haze_at(color, p.xyz / p.w, view);
+}
+
 fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32> {
     let ndl = dot(n, view.sun_dir.xyz);
     var diffuse = max(ndl, 0.0);

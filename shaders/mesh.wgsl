@@ -102,7 +102,7 @@ fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
     }
-    return vec4<f32>(shade(albedo, s.normal, s.is_leaf, view), 1.0);
+    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view), in.clip, view), 1.0);
 }
 
 struct CaptureOut {

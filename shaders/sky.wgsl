@@ -21,7 +21,7 @@ fn vs_main(@builtin(vertex_index) i: u32) -> VertexOut {
 
 // Must match `SKY_*` colours in src/render/forest.rs (linear RGB).
 const SKY_ZENITH: vec3<f32> = vec3<f32>(0.23, 0.42, 0.72);
-const SKY_HORIZON: vec3<f32> = vec3<f32>(0.62, 0.74, 0.86);
+const SKY_HORIZON: vec3<f32> = HAZE_COLOR;
 const GROUND: vec3<f32> = vec3<f32>(0.16, 0.15, 0.08);
 
 @fragment
@@ -37,7 +37,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     } else {
         color = mix(SKY_HORIZON * 0.5 + GROUND * 0.5, GROUND, sqrt(min(-up * 4.0, 1.0)));
     }
-    return vec4<f32>(color, 1.0);
+    return vec4<f32>(color * sky_scale(view), 1.0);
 }
 
 // General 4×4 inverse (WGSL has none); used once per pixel of a cheap pass.

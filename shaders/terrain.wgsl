@@ -43,6 +43,10 @@ struct TerrainDraw {
 
 const NO_IMAGE: u32 = 0xffffffffu;
 
+// Light on level ground under the default daylight (render::Lighting::default:
+// the sky light facing up plus the sun at its default height).
+const DAY_FLAT_LIGHT: vec3<f32> = vec3<f32>(1.159, 1.184, 1.227);
+
 // Must match `TerrainParams` in src/render/terrain.rs.
 struct TerrainParams {
     // Cells per tile side.
@@ -209,10 +213,10 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     // Sampled everywhere (uniform control flow), used where there is an image.
     let has = in.layer != NO_IMAGE && (params.debug & 1u) == 0u;
     let photo = textureSample(images, image_sampler, vec2<f32>(in.image_uv.x, 1.0 - in.image_uv.y), select(0u, in.layer, has));
-    // A photograph already holds the light of its day: relit by the slope
-    // relative to flat ground, so level ground shows its own colours.
-    let flat_light = sky_light(vec3<f32>(0.0, 0.0, 1.0), false, view) + view.sun_color.rgb * max(view.sun_dir.z, 0.0);
-    let relit = shade(photo.rgb, n, false, view) / max(flat_light, vec3<f32>(1e-3));
+    // A photograph already holds the light of its day: relit relative to flat
+    // ground under the default daylight, so level ground at midday shows its
+    // own colours, slopes their relief, and dusk darkens it like the rest.
+    let relit = shade(photo.rgb, n, false, view) / DAY_FLAT_LIGHT;
     lit = mix(lit, relit, select(0.0, photo.a, has));
-    return vec4<f32>(lit, 1.0);
+    return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }
