@@ -377,7 +377,9 @@ test('the terrain is drawn under the trees and heightAt reads it', async () => {
 test('ground imagery: the baked forest floor is draped, and an XYZ source on a local server replaces it', async () => {
   const tiles = await tileServer();
   try {
-    const { page, errors } = await openViewer(base);
+    // Without the overlays (?ui=0): the colour counts are of the scene only
+    // (the time-of-day slider's accent is cyan-ish).
+    const { page, errors } = await openViewer(`${base}?ui=0`);
     await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
     const stats = await ready(page);
     // The fixture's procedural forest floor, baked as imagery.
