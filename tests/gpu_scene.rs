@@ -870,3 +870,34 @@ fn crown_widths_widen_trees_at_every_level_without_changing_heights() {
     std::fs::remove_dir_all(&narrow).ok();
     std::fs::remove_dir_all(&wide).ok();
 }
+
+#[test]
+fn far_ground_fades_towards_the_horizon_haze() {
+    // One spot of ground (plain material, no imagery, no trees) seen from
+    // 50 m straight above and from 1.4 km away: the far view of it is
+    // veiled towards the sky's horizon colour, the near one barely.
+    let mut off = open(fixture().to_str().unwrap());
+    let m = manifest(&mut off);
+    off.stream.set_imagery(sylva::scene::imagery::ImageryChoice::Off);
+    off.settings.draw_distance_m = 1.0;
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = lo.lerp(hi, 0.5);
+    let spot = DVec3::new(c.x, c.y, ground_z(&mut off, c.x, c.y));
+    let centre = |img: &[u8]| {
+        let at = ((H / 2 * W + W / 2) * 4) as usize;
+        [img[at], img[at + 1], img[at + 2]].map(f64::from)
+    };
+    let near = centre(&render(&mut off, &Camera::look_at(spot + DVec3::new(0.0, -1.0, 50.0), spot)));
+    let far = centre(&render(&mut off, &Camera::look_at(spot + DVec3::new(0.0, -1400.0, 150.0), spot)));
+    // The horizon colour (linear 0.62, 0.74, 0.86) in sRGB.
+    let haze = [206.0, 225.0, 239.0];
+    let to_haze = |p: [f64; 3]| (0..3).map(|k| (p[k] - haze[k]).powi(2)).sum::<f64>().sqrt();
+    eprintln!("near {near:?}, far {far:?}");
+    assert!(near.iter().sum::<f64>() > 60.0, "the ground is drawn: {near:?}");
+    assert!(to_haze(far) < to_haze(near) - 8.0, "far {far:?} should be nearer the haze than near {near:?}");
+    // The veil is a blend towards it: every channel moves the same way.
+    for k in 0..3 {
+        assert!((far[k] - near[k]) * (haze[k] - near[k]) >= 0.0, "channel {k}: near {near:?}, far {far:?}");
+    }
+}
