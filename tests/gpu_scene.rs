@@ -874,7 +874,7 @@ fn crown_widths_widen_trees_at_every_level_without_changing_heights() {
 #[test]
 fn far_ground_fades_towards_the_horizon_haze() {
     // One spot of ground (plain material, no imagery, no trees) seen from
-    // 50 m straight above and from 1.4 km away: the far view of it is
+    // 50 m straight above and from 1.5 km away: the far view of it is
     // veiled towards the sky's horizon colour, the near one barely.
     let mut off = open(fixture().to_str().unwrap());
     let m = manifest(&mut off);
@@ -888,8 +888,21 @@ fn far_ground_fades_towards_the_horizon_haze() {
         let at = ((H / 2 * W + W / 2) * 4) as usize;
         [img[at], img[at + 1], img[at + 2]].map(f64::from)
     };
-    let near = centre(&render(&mut off, &Camera::look_at(spot + DVec3::new(0.0, -1.0, 50.0), spot)));
-    let far = centre(&render(&mut off, &Camera::look_at(spot + DVec3::new(0.0, -1400.0, 150.0), spot)));
+    let (near_cam, far_cam) = (
+        Camera::look_at(spot + DVec3::new(0.0, -1.0, 50.0), spot),
+        Camera::look_at(spot + DVec3::new(0.0, -1400.0, 600.0), spot),
+    );
+    let near = centre(&render(&mut off, &near_cam));
+    let far = centre(&render(&mut off, &far_cam));
+    // The centre pixels are the ground, not the sky pass's colour below the
+    // horizon (which also pales towards the horizon): without the terrain
+    // both views show something else there.
+    off.settings.terrain = false;
+    for (cam, with) in [(&near_cam, near), (&far_cam, far)] {
+        let without = centre(&render(&mut off, cam));
+        assert!((0..3).any(|k| (with[k] - without[k]).abs() > 10.0), "ground {with:?} vs background {without:?}");
+    }
+    off.settings.terrain = true;
     // The horizon colour (linear 0.62, 0.74, 0.86) in sRGB.
     let haze = [206.0, 225.0, 239.0];
     let to_haze = |p: [f64; 3]| (0..3).map(|k| (p[k] - haze[k]).powi(2)).sum::<f64>().sqrt();
