@@ -23,6 +23,8 @@ struct VertexOut {
     @location(2) @interpolate(flat) normal_yaw: f32,
     @location(3) @interpolate(flat) item_y: u32,
     @location(4) @interpolate(flat) tint: vec3<f32>,
+    // How far the quad's shadow lookups move towards the sun (m): its half width.
+    @location(5) @interpolate(flat) lift: f32,
 };
 
 const PI: f32 = 3.14159265;
@@ -63,7 +65,9 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let angles = max(draw.ids.w & 0xffffu, 2u);
     let azimuths = max(draw.ids.w >> 16u, 1u);
     let base = tree.pos + vec3<f32>(0.0, 0.0, draw.bb_center.z * tree.scale);
-    let to_eye = -base;
+    // Towards the eye, or in a shadow cascade towards the sun: billboards cast
+    // the silhouette the sun sees.
+    let to_eye = towards_eye(base, view);
     let phi = atan2(to_eye.y, to_eye.x);
     let k = billboard_layer(to_eye, angles);
     // Azimuth layer: the captured direction closest to the eye, in the tree's frame.
@@ -95,6 +99,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.normal_yaw = phi - f32(az) * az_step;
     out.item_y = item.y;
     out.tint = variation_tint(tree.variation);
+    out.lift = half_w * max(tree.aspect, 1.0);
     return out;
 }
 
@@ -112,5 +117,15 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }
-    return vec4<f32>(haze(shade(albedo, n, is_leaf, view), in.clip, view), 1.0);
+    let sun = sun_visibility(frag_rel(in.clip, view), n, in.lift);
+    return vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun), in.clip, view), 1.0);
+}
+
+// Shadow cascades: depth only, alpha-tested.
+@fragment
+fn fs_shadow(in: VertexOut) {
+    let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
+    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+        discard;
+    }
 }

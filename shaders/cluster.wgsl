@@ -154,7 +154,13 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
         v = normalize(center);
     }
     let support = length(vec3<f32>(dot(c0, v), dot(c1, v), dot(c2, v)));
-    let front = center - v * min(support, max(dot(center, v) - 1e-3, 0.0));
+    var front = center - v * min(support, max(dot(center, v) - 1e-3, 0.0));
+    if view.viewport.w > 0.5 {
+        // A shadow cascade keeps the proxy at the centre's depth: early depth
+        // tests stay on, and the crown's sunward half is nearer the sun than
+        // its shadow-map depth (lit), its far half farther (shaded).
+        front = center;
+    }
     let cc = view.clip_from_eye * vec4<f32>(front, 1.0);
     let depth = clamp(cc.z / max(abs(cc.w), 1e-20), 0.0, 1.0);
     (*out).clip = vec4<f32>(ndc, depth, 1.0);
@@ -296,7 +302,17 @@ fn capsule_hit(ro: vec3<f32>, rd: vec3<f32>, pa: vec3<f32>, pb: vec3<f32>, r: f3
     return best;
 }
 
-fn cluster_fragment(in: VertexOut) -> FragmentOut {
+// Where a pixel's ray meets the primitive (discarded where it misses).
+struct ClusterHit {
+    // Eye-relative point and normal.
+    p: vec3<f32>,
+    n: vec3<f32>,
+    // Its depth in this view.
+    depth: f32,
+    is_line: bool,
+};
+
+fn cluster_hit(in: VertexOut) -> ClusterHit {
     let ndc = vec2<f32>(in.clip.x / view.viewport.x * 2.0 - 1.0, 1.0 - in.clip.y / view.viewport.y * 2.0);
     let ray = pixel_ray(ndc);
     let is_line = in.p0.w > 0.5;
@@ -325,7 +341,6 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     let size_log2 = draw.cluster_noise.z;
     let footprint = max(length(dpdx(s)), length(dpdy(s))) * exp2(size_log2);
     let mip = max(size_log2 - in.color.w, log2(max(footprint, 1e-6)));
-    var out: FragmentOut;
     var n: vec3<f32>;
     var t: f32;
     if is_line {
@@ -352,14 +367,25 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     if !fade_keeps(in.item_y, in.clip.xy) {
         discard;
     }
-    let p = ray[0] + ray[1] * t;
-    let clip = view.clip_from_eye * vec4<f32>(p, 1.0);
-    out.depth = clamp(clip.z / clip.w, 0.0, 1.0);
+    var hit: ClusterHit;
+    hit.p = ray[0] + ray[1] * t;
+    let clip = view.clip_from_eye * vec4<f32>(hit.p, 1.0);
+    hit.depth = clamp(clip.z / clip.w, 0.0, 1.0);
+    hit.n = n;
+    hit.is_line = is_line;
+    return hit;
+}
+
+fn cluster_fragment(in: VertexOut) -> FragmentOut {
+    let hit = cluster_hit(in);
+    var out: FragmentOut;
+    out.depth = hit.depth;
     var albedo = in.color.rgb;
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }
-    out.color = vec4<f32>(haze_at(shade(albedo, n, !is_line, view), p, view), 1.0);
+    let sun = sun_visibility(hit.p, hit.n, 0.0);
+    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun), hit.p, view), 1.0);
     return out;
 }
 
@@ -373,4 +399,11 @@ fn fs_main(in: VertexOut) -> FragmentOut {
 @fragment
 fn fs_proxy_depth(in: VertexOut) -> @location(0) vec4<f32> {
     return cluster_fragment(in).color;
+}
+
+// Shadow cascades: depth only, the proxy's depth (the primitive's centre, see
+// `ellipsoid_vertex`) where the ray meets the primitive.
+@fragment
+fn fs_shadow(in: VertexOut) {
+    _ = cluster_hit(in);
 }

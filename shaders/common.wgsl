@@ -29,8 +29,15 @@ struct View {
     params: vec4<u32>,
     // Inverse of clip_from_eye: per-pixel rays of the cluster pass.
     eye_from_clip: mat4x4<f32>,
-    // x, y: viewport size (px); z: prefix-thinning threshold (px, 0 off).
+    // x, y: viewport size (px); z: prefix-thinning threshold (px, 0 off);
+    // w: 1 for an orthographic view sized in texels (a shadow cascade).
     viewport: vec4<f32>,
+    // Per shadow cascade: clip transform of eye-relative positions.
+    shadow_from_eye: array<mat4x4<f32>, 4>,
+    // Per cascade: metres per shadow texel.
+    shadow_texel: vec4<f32>,
+    // x: cascades in use (0 off), y: map size, z: PCF radius (texels), w: fade-out distance (m).
+    shadow: vec4<f32>,
 };
 
 // One batch of the resident pool. Must match `GpuBatch` in src/format/tile.rs
@@ -295,18 +302,36 @@ fn haze_at(color: vec3<f32>, rel: vec3<f32>, view: View) -> vec3<f32> {
 // `color` of the fragment at `frag` (@builtin(position): pixel and depth),
 // its distance recovered through the inverse projection.
 fn haze(color: vec3<f32>, frag: vec4<f32>, view: View) -> vec3<f32> {
-    let ndc = vec2<f32>(frag.x / view.viewport.x * 2.0 - 1.0, 1.0 - frag.y / view.viewport.y * 2.0);
-    let p = view.eye_from_clip * vec4<f32>(ndc, frag.z, 1.0);
-    return haze_at(color, p.xyz / p.w, view);
+    return haze_at(color, frag_rel(frag, view), view);
 }
 
-fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32> {
+// Eye-relative position of the fragment at `frag` (@builtin(position): pixel
+// and depth), through the inverse projection.
+fn frag_rel(frag: vec4<f32>, view: View) -> vec3<f32> {
+    let ndc = vec2<f32>(frag.x / view.viewport.x * 2.0 - 1.0, 1.0 - frag.y / view.viewport.y * 2.0);
+    let p = view.eye_from_clip * vec4<f32>(ndc, frag.z, 1.0);
+    return p.xyz / p.w;
+}
+
+// `sun` is the fraction of the sun that reaches the surface (shadows, 1 lit).
+fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View, sun: f32) -> vec3<f32> {
     let ndl = dot(n, view.sun_dir.xyz);
     var diffuse = max(ndl, 0.0);
     if is_leaf {
         diffuse = max(ndl, 0.0) * 0.75 + abs(ndl) * 0.25;
     }
-    return albedo * (sky_light(n, is_leaf, view) + view.sun_color.rgb * diffuse);
+    return albedo * (sky_light(n, is_leaf, view) + view.sun_color.rgb * (diffuse * sun));
+}
+
+// Direction from `p` (eye-relative) towards the eye; in an orthographic view
+// (a shadow cascade: the eye is the sun) the same for every point.
+fn towards_eye(p: vec3<f32>, view: View) -> vec3<f32> {
+    if view.viewport.w > 0.5 {
+        let near = view.eye_from_clip * vec4<f32>(0.0, 0.0, 1.0, 1.0);
+        let far = view.eye_from_clip * vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        return normalize(near.xyz / near.w - far.xyz / far.w);
+    }
+    return -p;
 }
 
 // Per-tree tint/variation (0–31) → a small brightness/hue change.

@@ -195,7 +195,8 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
             emit(b.species, REPR_BILLBOARD, instance, batch_index, 0u, fade);
             continue;
         }
-        let h_px = s.select.x * tree.scale * view.lod.x / dist;
+        // An orthographic view (a shadow cascade) sizes trees in texels, at any distance.
+        let h_px = s.select.x * tree.scale * view.lod.x / select(dist, 1.0, view.viewport.w > 0.5);
         select_and_emit(b.species, h_px, instance, batch_index);
     }
 }

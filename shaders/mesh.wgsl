@@ -102,7 +102,14 @@ fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
     }
-    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view), in.clip, view), 1.0);
+    let sun = sun_visibility(frag_rel(in.clip, view), s.normal, 0.0);
+    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun), in.clip, view), 1.0);
+}
+
+// Shadow cascades: depth only, alpha-tested leaves (dappled shade).
+@fragment
+fn fs_shadow(in: VertexOut, @builtin(front_facing) front: bool) {
+    _ = surface(in, front);
 }
 
 struct CaptureOut {

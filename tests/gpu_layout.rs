@@ -71,7 +71,8 @@ fn shared_structs_match_their_wgsl_twins() {
         check(
             shader,
             "View",
-            &members!(ViewUniform: clip_from_eye, eye_hi, eye_lo, frustum, sun_dir, sun_color, ambient, lod, params, eye_from_clip, viewport),
+            &members!(ViewUniform: clip_from_eye, eye_hi, eye_lo, frustum, sun_dir, sun_color, ambient, lod, params, eye_from_clip, viewport,
+                shadow_from_eye, shadow_texel, shadow),
             size_of::<ViewUniform>(),
             None,
         );

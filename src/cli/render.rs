@@ -245,6 +245,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         no_imagery,
         sun_time,
         sun,
+        shadows,
         stats,
         timeout,
         allow_partial,
@@ -279,6 +280,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             cluster_exact_depth: exact_depth,
             thin_px,
             terrain: !no_terrain,
+            shadows,
             representations: match only {
                 None => Representations::ALL,
                 Some(OnlyArg::Meshes) => Representations::MESHES,

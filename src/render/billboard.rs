@@ -15,6 +15,7 @@ pub struct BillboardPipeline {
     /// Group 1: colour array, normal array, sampler.
     pub texture_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
+    shadow: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
 }
 
@@ -46,6 +47,7 @@ impl BillboardPipeline {
             format: color_format,
         };
         let pipeline = super::layouts::pulling_pipeline(device, "billboard", &module, &layout, "fs_main", &target);
+        let shadow = super::layouts::shadow_caster_pipeline(device, "billboard shadow", &module, &layout, &[]);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("billboard"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -55,13 +57,19 @@ impl BillboardPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { texture_layout, pipeline, sampler }
+        Self { texture_layout, pipeline, shadow, sampler }
     }
 
     /// The pipeline.
     #[must_use]
     pub fn pipeline(&self) -> &wgpu::RenderPipeline {
         &self.pipeline
+    }
+
+    /// The shadow casters' pipeline (depth only, quads turned to the sun).
+    #[must_use]
+    pub fn shadow_pipeline(&self) -> &wgpu::RenderPipeline {
+        &self.shadow
     }
 }
 

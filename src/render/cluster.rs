@@ -24,6 +24,7 @@ pub struct ClusterPipeline {
     pub layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     proxy_depth: wgpu::RenderPipeline,
+    shadow: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
     noise: OnceLock<(wgpu::TextureView, wgpu::TextureView)>,
 }
@@ -72,6 +73,7 @@ impl ClusterPipeline {
             |entry: &str| super::layouts::pulling_pipeline(device, entry, &module, &pipeline_layout, entry, &target);
         let pipeline = make("fs_main");
         let proxy_depth = make("fs_proxy_depth");
+        let shadow = super::layouts::shadow_caster_pipeline(device, "cluster shadow", &module, &pipeline_layout, &[]);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("cluster noise"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -79,7 +81,7 @@ impl ClusterPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { layout, pipeline, proxy_depth, sampler, noise: OnceLock::new() }
+        Self { layout, pipeline, proxy_depth, shadow, sampler, noise: OnceLock::new() }
     }
 
     /// The pipeline: exact per-pixel depth, or (benchmarks) the proxy's depth.
@@ -90,6 +92,12 @@ impl ClusterPipeline {
         } else {
             &self.proxy_depth
         }
+    }
+
+    /// The shadow casters' pipeline (depth only, exact ray-cast depth).
+    #[must_use]
+    pub fn shadow_pipeline(&self) -> &wgpu::RenderPipeline {
+        &self.shadow
     }
 
     fn noise(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> &(wgpu::TextureView, wgpu::TextureView) {

@@ -220,7 +220,7 @@ pub fn cpu_select(
                 }
                 continue;
             }
-            let h_px = s.select[0] * d.2 * view.lod[0] / dist;
+            let h_px = s.select[0] * d.2 * view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
             select(&mut sel, view, s, b.species, h_px, index, i as u32);
         }
     }

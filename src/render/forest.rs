@@ -18,7 +18,7 @@
 //! when they arrive; nothing per tree is touched by the CPU after that.
 
 use super::cull::CullPipelines;
-use super::gpu_data::{CullControl, DrawArgs, GpuSpecies, ViewUniform, REPR_COUNT};
+use super::gpu_data::{CullControl, DrawArgs, GpuSpecies, ViewUniform, REPR_COUNT, VIEW_STRIDE};
 use super::layouts::SharedLayouts;
 use super::mesh::DEPTH_FORMAT;
 use super::overlay::{BoundsPass, SkyPass};
@@ -26,6 +26,7 @@ pub use super::pools::PoolConfig;
 use super::pools::{buffer, PoolLayouts, Pools};
 use super::reach::Reach;
 pub use super::settings::{CullingMode, RenderSettings, Representations, DEFAULT_CLUSTER_MIN_PX, DEFAULT_THIN_PX};
+use super::shadow::{ShadowMaps, MAX_CASCADES};
 use super::species::{Species, SpeciesFrame};
 use super::terrain::TerrainPass;
 use crate::camera::ViewData;
@@ -44,6 +45,8 @@ pub struct FrameData {
     debug_bounds: bool,
     /// Clear colour (linear RGBA).
     clear: [f64; 4],
+    /// Shadow cascades drawn this frame (0: no shadows).
+    pub cascades: u32,
 }
 
 /// The GPU-driven forest renderer (see the module docs).
@@ -57,9 +60,20 @@ pub struct ForestRenderer {
     pools: Pools,
     species: Species,
     reach: Reach,
+    /// The camera's view, then one per shadow cascade, [`VIEW_STRIDE`] apart.
     view_buffer: wgpu::Buffer,
+    /// Group 0 of the camera's view (with the shadow map).
     view_group: wgpu::BindGroup,
+    /// Group 0 of each cascade's view (without: it draws into the map).
+    cascade_groups: Vec<wgpu::BindGroup>,
+    shadow_maps: Option<ShadowMaps>,
+    /// Each cascade's draw arguments after its cull pass (for the stats).
+    shadow_args: Option<wgpu::Buffer>,
+    /// How far apart the scene's lowest ground and highest tree top are (m):
+    /// how far towards the sun a cascade's casters can stand.
+    height_span_m: f32,
     last_view: ViewUniform,
+    last_cascades: Vec<ViewUniform>,
 }
 
 impl ForestRenderer {
@@ -73,8 +87,12 @@ impl ForestRenderer {
         let terrain = TerrainPass::new(device, &shared, color_format);
         let bounds = BoundsPass::new(device, &shared, color_format);
         let pools = Pools::new(device, config, &PoolLayouts { shared: &shared, cull: &cull, bounds: &bounds.layout });
-        let view_buffer = buffer(device, "view", size_of::<ViewUniform>() as u64, U::STORAGE | U::COPY_DST);
+        let views = VIEW_STRIDE * (1 + MAX_CASCADES as u64);
+        let view_buffer = buffer(device, "views", views, U::STORAGE | U::COPY_DST);
         let view_group = shared.view_group(device, &view_buffer);
+        let cascade_groups = (1..=MAX_CASCADES as u64)
+            .map(|i| shared.view_group_at(device, &view_buffer, i * VIEW_STRIDE, None))
+            .collect();
         Self {
             shared,
             cull,
@@ -86,7 +104,12 @@ impl ForestRenderer {
             reach: Reach::default(),
             view_buffer,
             view_group,
+            cascade_groups,
+            shadow_maps: None,
+            shadow_args: None,
+            height_span_m: 60.0,
             last_view: bytemuck::Zeroable::zeroed(),
+            last_cascades: Vec::new(),
         }
     }
 
@@ -185,10 +208,41 @@ impl ForestRenderer {
         self.species.pipelines_built()
     }
 
-    /// GPU bytes: pools plus uploaded packs.
+    /// GPU bytes: pools plus uploaded packs, terrain and the shadow map.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
-        self.pools.config().bytes() + self.species.bytes() + self.terrain.gpu_bytes()
+        self.pools.config().bytes() + self.species.bytes() + self.terrain.gpu_bytes() + self.shadow_bytes()
+    }
+
+    /// GPU bytes of the shadow map (0 until shadows are first drawn).
+    #[must_use]
+    pub fn shadow_bytes(&self) -> u64 {
+        self.shadow_maps.as_ref().map_or(0, |m| m.config.bytes())
+    }
+
+    /// Tells the shadows how far apart the scene's lowest ground and highest
+    /// tree top are (m; from the manifest).
+    pub fn set_height_span(&mut self, span_m: f32) {
+        if span_m.is_finite() && span_m > 0.0 {
+            self.height_span_m = span_m;
+        }
+    }
+
+    /// The shadow map for `config`, made (and the camera's view group rebound)
+    /// when the quality changed.
+    fn ensure_shadow_maps(&mut self, device: &wgpu::Device, config: super::shadow::ShadowConfig) {
+        let wanted = |m: &ShadowMaps| {
+            m.config.pcf_radius == config.pcf_radius
+                && m.config.distance_m == config.distance_m
+                && m.layers.len() as u32 == config.cascades.min(MAX_CASCADES as u32)
+                && m.config.size == config.size.min(device.limits().max_texture_dimension_2d)
+        };
+        if self.shadow_maps.as_ref().is_some_and(wanted) {
+            return;
+        }
+        let maps = ShadowMaps::new(device, config);
+        self.view_group = self.shared.view_group_at(device, &self.view_buffer, 0, Some(&maps.array));
+        self.shadow_maps = Some(maps);
     }
 
     /// Bounds each species' projected tree height for `view` from the resident
@@ -201,8 +255,15 @@ impl ForestRenderer {
     }
 
     /// Writes the frame's uniforms (and the species table if residency or the
-    /// representation settings changed) and returns what the passes draw.
-    pub fn prepare(&mut self, queue: &wgpu::Queue, view: &ViewData, settings: &RenderSettings) -> FrameData {
+    /// representation settings changed; the shadow map if the shadow quality
+    /// did) and returns what the passes draw.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        view: &ViewData,
+        settings: &RenderSettings,
+    ) -> FrameData {
         self.measure_reach(view, settings);
         self.species.update_table(queue, &self.pools, settings);
         let l = &settings.lighting;
@@ -227,7 +288,31 @@ impl ForestRenderer {
             params: [0, self.pools.batch_high_water(), u32::from(settings.debug_lod), self.species.count()],
             eye_from_clip: view.clip_from_eye.inverse().to_cols_array_2d(),
             viewport: [view.viewport[0] as f32, view.viewport[1] as f32, settings.thin_px, 0.0],
+            shadow_from_eye: [[[0.0; 4]; 4]; super::gpu_data::MAX_CASCADES],
+            shadow_texel: [0.0; 4],
+            shadow: [0.0; 4],
         };
+        let mut uniform = uniform;
+        self.last_cascades.clear();
+        // Shadows while the sun is up (and lights anything).
+        let sun_up = l.sun_dir.z > 0.01 && l.sun_color.max_element() > 1e-3;
+        if let (Some(config), true) = (settings.shadows.config(), sun_up) {
+            self.ensure_shadow_maps(device, config);
+            let config = self.shadow_maps.as_ref().map_or(config, |m| m.config);
+            let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
+            // Casters stand up to the height span above a receiver: that far up
+            // the sun's ray, within reason at a low sun.
+            let reach = (self.height_span_m / l.sun_dir.z.max(0.05)).clamp(self.height_span_m, 4000.0);
+            let distance = config.distance_m.min(settings.draw_distance_m);
+            let cascades = super::shadow::cascades(view.clip_from_eye, eye, l.sun_dir, &config, distance, reach);
+            for (i, c) in cascades.iter().enumerate() {
+                let mut v = super::shadow::cascade_view(&uniform, c, config.size);
+                v.lod[0] *= settings.quality * config.lod_scale;
+                queue.write_buffer(&self.view_buffer, (1 + i as u64) * VIEW_STRIDE, bytemuck::bytes_of(&v));
+                self.last_cascades.push(v);
+            }
+            super::shadow::apply_to_view(&mut uniform, &cascades, &config);
+        }
         queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
         self.last_view = uniform;
         FrameData {
@@ -235,7 +320,59 @@ impl ForestRenderer {
             species: SpeciesFrame { fade_band: settings.fade_band, cluster_exact_depth: settings.cluster_exact_depth },
             debug_bounds: settings.debug_bounds,
             clear: settings.clear,
+            cascades: self.last_cascades.len() as u32,
         }
+    }
+
+    /// Records the shadow cascades of a prepared frame: for each, the cull
+    /// pass with the cascade's view, then its casters depth-only into its
+    /// layer of the shadow map. Returns the draw calls recorded (0 without
+    /// shadows). Submit it before the camera's cull pass: the two share the
+    /// draw items.
+    pub fn encode_shadows(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        frame: &FrameData,
+    ) -> u32 {
+        let Some(maps) = self.shadow_maps.as_ref().filter(|_| frame.cascades > 0) else { return 0 };
+        let slots = self.slot_count();
+        let slot_bytes = u64::from(slots) * size_of::<DrawArgs>() as u64;
+        let need = (slot_bytes * MAX_CASCADES as u64).max(4);
+        if self.shadow_args.as_ref().is_none_or(|b| b.size() < need) {
+            use wgpu::BufferUsages as U;
+            self.shadow_args = Some(buffer(device, "shadow casters", need, U::COPY_DST | U::COPY_SRC));
+        }
+        let mut draws = 0;
+        for (i, layer) in maps.layers.iter().enumerate().take(frame.cascades as usize) {
+            let group = &self.cascade_groups[i];
+            self.cull.encode(encoder, group, &self.pools, slots, None);
+            if let (Some(args), true) = (&self.shadow_args, slot_bytes > 0) {
+                encoder.copy_buffer_to_buffer(&self.pools.buffers.args, 0, args, i as u64 * slot_bytes, slot_bytes);
+            }
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow cascade"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: layer,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, group, &[]);
+            draws += self.species.draw_shadow(&mut pass, &self.pools);
+        }
+        draws
+    }
+
+    /// The view uniforms of the last frame's shadow cascades (for the CPU
+    /// oracle and tests).
+    #[must_use]
+    pub fn last_cascades(&self) -> &[ViewUniform] {
+        &self.last_cascades
     }
 
     /// Uploads what the terrain pass draws this frame: `draws` is the stream's
@@ -346,13 +483,18 @@ impl ForestRenderer {
     }
 
     /// Copies the cull counters and draw arguments into `readback` (laid out as
-    /// [`super::stats::CullCounters`] reads them).
-    pub fn copy_counters(&self, encoder: &mut wgpu::CommandEncoder, readback: &wgpu::Buffer) {
+    /// [`super::stats::CullCounters`] reads them): the camera's, then those of
+    /// the frame's `cascades` shadow cascades.
+    pub fn copy_counters(&self, encoder: &mut wgpu::CommandEncoder, readback: &wgpu::Buffer, cascades: u32) {
         let control = size_of::<CullControl>() as u64;
         encoder.copy_buffer_to_buffer(&self.pools.buffers.control, 0, readback, 0, control);
         let slots = u64::from(self.slot_count()) * size_of::<DrawArgs>() as u64;
         if slots > 0 {
             encoder.copy_buffer_to_buffer(&self.pools.buffers.args, 0, readback, control, slots);
+            if let (Some(args), true) = (&self.shadow_args, cascades > 0) {
+                let bytes = slots * u64::from(cascades);
+                encoder.copy_buffer_to_buffer(args, 0, readback, control + slots, bytes);
+            }
         }
     }
 

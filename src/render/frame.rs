@@ -34,9 +34,12 @@ pub fn now_ms() -> f64 {
     }
 }
 
-/// A frame's command buffers: the cull pass, then the draw pass (submitted
-/// apart so each one's GPU time can be measured).
+/// A frame's command buffers: the shadow cascades (when shadows are on), the
+/// cull pass, then the draw pass (submitted apart so each one's GPU time can
+/// be measured).
 pub struct Recorded {
+    /// The shadow cascades (cull and casters of each), when shadows are drawn.
+    shadow: Option<wgpu::CommandBuffer>,
     cull: wgpu::CommandBuffer,
     draw: wgpu::CommandBuffer,
     read_counters: bool,
@@ -58,8 +61,10 @@ pub struct Frame<F: Fetcher> {
     readback: CounterReadback,
     /// Timestamp queries around the passes, where asked for and available.
     timer: Option<PassTimer>,
-    /// Wall times (cull, draw) of the last frame waited for, and its number.
-    waited: Option<(u64, [f64; 2])>,
+    /// Wall times (cull, draw, shadow) of the last frame waited for, and its number.
+    waited: Option<(u64, [f64; 3])>,
+    /// Shadow cascades of the last frame recorded.
+    cascades: u32,
     draw_calls: u32,
     cpu_ms: f64,
     frames: u64,
@@ -89,6 +94,7 @@ impl<F: Fetcher> Frame<F> {
             readback,
             timer: None,
             waited: None,
+            cascades: 0,
             draw_calls: 0,
             cpu_ms: 0.0,
             frames: 0,
@@ -116,6 +122,10 @@ impl<F: Fetcher> Frame<F> {
         self.renderer.measure_reach(view, &self.settings);
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);
+        if let Some(m) = self.stream.manifest() {
+            let low = m.terrain.as_ref().map_or(m.bounds.min[2], |t| t.height_range_m[0].min(m.bounds.min[2]));
+            self.renderer.set_height_span(m.bounds.max[2] - low);
+        }
         if let Some(t) = self.stream.manifest().and_then(|m| m.terrain.as_ref()) {
             self.renderer.reserve_terrain(&self.device, t.grid, t.tiles, t.imagery.as_ref().map_or(0, |i| i.tiles));
         }
@@ -140,25 +150,29 @@ impl<F: Fetcher> Frame<F> {
         let threshold = threshold * self.settings.quality;
         let terrain = if self.settings.terrain { self.stream.terrain_draws() } else { &[] };
         self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
-        let data = self.renderer.prepare(&self.queue, view, &self.settings);
+        let data = self.renderer.prepare(&self.device, &self.queue, view, &self.settings);
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();
+        let mut shadow = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shadow") });
+        let shadow_draws = self.renderer.encode_shadows(&self.device, &mut shadow, &data);
+        self.cascades = data.cascades;
         let mut cull = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cull") });
         self.renderer.encode_cull(&mut cull, &data, queries);
         let mut draw = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("draw") });
-        self.draw_calls = self.renderer.encode_draw(&mut draw, color, depth, &data, queries);
+        self.draw_calls = self.renderer.encode_draw(&mut draw, color, depth, &data, queries) + shadow_draws;
         if let (true, Some(timer)) = (timed, self.timer.as_mut()) {
             timer.resolve(&mut draw);
         }
         let read_counters = read_counters && self.readback.is_idle();
         if read_counters {
-            let len = CullCounters::readback_bytes(self.renderer.slot_count());
-            self.renderer.copy_counters(&mut draw, self.readback.record(len));
+            let len = CullCounters::readback_bytes(self.renderer.slot_count(), data.cascades);
+            self.renderer.copy_counters(&mut draw, self.readback.record(len), data.cascades);
         }
         // Prepared and recorded; `finish` (wgpu's own validation) is not counted,
         // as before the frame was shared (docs/BENCHMARKS.md compares like with like).
         self.cpu_ms = (now_ms() - t0).max(0.0);
-        Recorded { cull: cull.finish(), draw: draw.finish(), read_counters }
+        let shadow = (data.cascades > 0).then(|| shadow.finish());
+        Recorded { shadow, cull: cull.finish(), draw: draw.finish(), read_counters }
     }
 
     /// Submits a recorded frame. With `wait` (native, measured), each pass is
@@ -177,6 +191,14 @@ impl<F: Fetcher> Frame<F> {
             // Earlier unwaited frames may still be running: their time is not this frame's.
             block(&self.device);
         }
+        let ts = now_ms();
+        let shadowed = recorded.shadow.is_some();
+        if let Some(shadow) = recorded.shadow {
+            self.queue.submit([shadow]);
+            if wait {
+                block(&self.device);
+            }
+        }
         let t0 = now_ms();
         self.queue.submit([recorded.cull]);
         if wait {
@@ -192,7 +214,8 @@ impl<F: Fetcher> Frame<F> {
         }
         if wait {
             block(&self.device);
-            self.waited = Some((frame, [t1 - t0, now_ms() - t1]));
+            let shadow_ms = if shadowed { t0 - ts } else { 0.0 };
+            self.waited = Some((frame, [t1 - t0, now_ms() - t1, shadow_ms]));
         }
         self.collect();
     }
@@ -244,12 +267,19 @@ impl<F: Fetcher> Frame<F> {
         let wanted = |f: u64| f > 0 && frame.is_none_or(|want| want == f);
         let (counters, counters_frame) = self.readback.latest();
         if wanted(counters_frame) {
-            stats.apply_counters(counters);
+            stats.apply_counters(counters, self.renderer.slot_count());
         }
+        stats.shadow_cascades = self.cascades;
         let timed = self.timer.as_ref().and_then(PassTimer::latest).filter(|(f, _)| wanted(*f));
-        if let Some((_, [cull, draw])) = timed.or(self.waited.filter(|(f, _)| wanted(*f))) {
+        if let Some((_, [cull, draw])) = timed {
             stats.gpu_ms.insert("cull".into(), cull);
             stats.gpu_ms.insert("draw".into(), draw);
+        } else if let Some((_, [cull, draw, shadow])) = self.waited.filter(|(f, _)| wanted(*f)) {
+            stats.gpu_ms.insert("cull".into(), cull);
+            stats.gpu_ms.insert("draw".into(), draw);
+            if self.cascades > 0 {
+                stats.gpu_ms.insert("shadow".into(), shadow);
+            }
         }
         stats
     }

@@ -27,10 +27,28 @@ pub struct ViewUniform {
     pub params: [u32; 4],
     /// Inverse of `clip_from_eye` (the cluster pass's per-pixel rays).
     pub eye_from_clip: [[f32; 4]; 4],
-    /// x, y: viewport size in pixels; z, w unused.
+    /// x, y: viewport size in pixels; z: prefix-thinning threshold (px, 0 off);
+    /// w: 1 for an orthographic view whose projected sizes do not shrink with
+    /// distance (a shadow cascade: LoD by texel size), else 0.
     pub viewport: [f32; 4],
+    /// Per shadow cascade: the cascade's clip transform of eye-relative
+    /// positions (orthographic, reversed Z; texel-snapped).
+    pub shadow_from_eye: [[[f32; 4]; 4]; MAX_CASCADES],
+    /// Per cascade: metres per shadow texel.
+    pub shadow_texel: [f32; 4],
+    /// x: cascades in use (0: no shadows), y: shadow map size (texels), z: PCF
+    /// kernel radius (texels: 0 one tap), w: distance (m) where shadows have faded out.
+    pub shadow: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<ViewUniform>() == 352);
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 640);
+
+/// Most shadow cascades a view carries.
+pub const MAX_CASCADES: usize = 4;
+
+/// Byte stride of views in the view buffer (main view, then one per cascade):
+/// the size rounded up to WebGPU's 256-byte storage offset alignment.
+pub const VIEW_STRIDE: u64 = 768;
+const _: () = assert!(std::mem::size_of::<ViewUniform>() as u64 <= VIEW_STRIDE);
 
 /// Per-species selection data. Must match `Species` in `shaders/common.wgsl`.
 #[repr(C)]
@@ -245,4 +263,7 @@ pub enum RenderMode {
     Lit = 0,
     /// Albedo + normal (billboard capture).
     Capture = 1,
+    /// Depth only, alpha-tested (shadow casters; not a view's mode: cascades
+    /// are drawn with [`RenderMode::Lit`] views and the shadow pipelines).
+    Shadow = 2,
 }

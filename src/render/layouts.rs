@@ -10,11 +10,18 @@ pub struct SharedLayouts {
     /// lavapipe (Debian 12, our CI) compiles a new shader variant with the uniform
     /// values inlined at every pipeline bind and never frees it — 1.5 MB and a JIT
     /// compile per frame. Storage reads cost the same on real GPUs.
+    /// Bindings 1 and 2 are the sun's shadow map (a depth array, one layer
+    /// per cascade) and its comparison sampler: see [`super::shadow`].
     pub view: wgpu::BindGroupLayout,
     /// Group 2: batches, instances, draw items (read-only storage, vertex stage).
     pub instances: wgpu::BindGroupLayout,
     /// Group 3: `DrawParams` uniform with a dynamic offset.
     pub draw: wgpu::BindGroupLayout,
+    /// A 1×1 shadow map for views drawn without shadows (and for the shadow
+    /// cascades themselves, which may not sample the map they draw into).
+    no_shadow_map: wgpu::TextureView,
+    /// The shadow map's comparison sampler (bilinear: 2×2 PCF per tap).
+    shadow_sampler: wgpu::Sampler,
 }
 
 fn storage(binding: u32, visibility: wgpu::ShaderStages, read_only: bool) -> wgpu::BindGroupLayoutEntry {
@@ -68,16 +75,34 @@ impl SharedLayouts {
     pub fn new(device: &wgpu::Device) -> Self {
         let view = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("view"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
+                    },
+                    count: None,
                 },
-                count: None,
-            }],
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison),
+                    count: None,
+                },
+            ],
         });
         let v = wgpu::ShaderStages::VERTEX;
         let instances = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -97,16 +122,55 @@ impl SharedLayouts {
                 count: None,
             }],
         });
-        Self { view, instances, draw }
+        let no_shadow_map = super::shadow::shadow_map(device, 1, 1).create_view(&wgpu::TextureViewDescriptor {
+            label: Some("no shadow map"),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let shadow_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("shadow map"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            compare: Some(wgpu::CompareFunction::GreaterEqual),
+            ..Default::default()
+        });
+        Self { view, instances, draw, no_shadow_map, shadow_sampler }
     }
 
-    /// Group 0 for a view buffer (STORAGE usage).
+    /// Group 0 for a view buffer (STORAGE usage), without shadows.
     #[must_use]
     pub fn view_group(&self, device: &wgpu::Device, buffer: &wgpu::Buffer) -> wgpu::BindGroup {
+        self.view_group_at(device, buffer, 0, None)
+    }
+
+    /// Group 0 for the view at byte `offset` of `buffer`, with the shadow map
+    /// `shadows` (a depth array view) or none.
+    #[must_use]
+    pub fn view_group_at(
+        &self,
+        device: &wgpu::Device,
+        buffer: &wgpu::Buffer,
+        offset: u64,
+        shadows: Option<&wgpu::TextureView>,
+    ) -> wgpu::BindGroup {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("view"),
             layout: &self.view,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer,
+                        offset,
+                        size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(shadows.unwrap_or(&self.no_shadow_map)),
+                },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.shadow_sampler) },
+            ],
         })
     }
 
@@ -187,6 +251,40 @@ pub fn pulling_pipeline(
             entry_point: Some(fragment),
             compilation_options: Default::default(),
             targets: &[Some(target.format.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// The depth-only pipeline a pass draws shadow casters with: vertex stage
+/// `vs_main` (reading `buffers`), fragment stage `fs_shadow` (alpha tests,
+/// exact depths), no colour targets, the cascade's reversed-Z depth.
+#[must_use]
+pub fn shadow_caster_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers,
+        },
+        primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+        depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_shadow"),
+            compilation_options: Default::default(),
+            targets: &[],
         }),
         multiview_mask: None,
         cache: None,

@@ -38,6 +38,7 @@ pub struct MeshPipelines {
     pub mesh_layout: wgpu::BindGroupLayout,
     lit: wgpu::RenderPipeline,
     capture: wgpu::RenderPipeline,
+    shadow: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
 }
 
@@ -124,6 +125,7 @@ impl MeshPipelines {
             "fs_capture",
             &[Some(CAPTURE_ALBEDO_FORMAT.into()), Some(CAPTURE_NORMAL_FORMAT.into())],
         );
+        let shadow = super::layouts::shadow_caster_pipeline(device, "mesh shadow", &module, &layout, &buffers);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("material"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -133,7 +135,7 @@ impl MeshPipelines {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { mesh_layout, lit, capture, sampler }
+        Self { mesh_layout, lit, capture, shadow, sampler }
     }
 
     /// The pipeline for `mode`.
@@ -142,6 +144,7 @@ impl MeshPipelines {
         match mode {
             RenderMode::Lit => &self.lit,
             RenderMode::Capture => &self.capture,
+            RenderMode::Shadow => &self.shadow,
         }
     }
 }

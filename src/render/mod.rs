@@ -21,6 +21,7 @@ pub mod reach;
 pub mod readback;
 pub mod settings;
 pub mod shaders;
+pub mod shadow;
 pub mod species;
 pub mod stats;
 pub mod terrain;
@@ -133,6 +134,9 @@ impl Lighting {
             params: [RenderMode::Lit as u32, 0, 0, 0],
             eye_from_clip: clip_from_eye.inverse().to_cols_array_2d(),
             viewport: [viewport[0] as f32, viewport[1] as f32, 0.0, 0.0],
+            shadow_from_eye: [[[0.0; 4]; 4]; gpu_data::MAX_CASCADES],
+            shadow_texel: [0.0; 4],
+            shadow: [0.0; 4],
         }
     }
 }

@@ -98,7 +98,11 @@ impl CounterReadback {
     #[must_use]
     pub fn new(device: &wgpu::Device, slots: u32) -> Self {
         Self {
-            mapped: Mapped::new(device, "stats readback", CullCounters::readback_bytes(slots)),
+            mapped: Mapped::new(
+                device,
+                "stats readback",
+                CullCounters::readback_bytes(slots, super::shadow::MAX_CASCADES as u32),
+            ),
             counters: CullCounters::default(),
             frame: 0,
         }

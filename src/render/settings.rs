@@ -2,6 +2,7 @@
 //! culling baselines and debug views. Plain data, set by the hosts and the
 //! benchmarks, read by the passes.
 
+pub use super::shadow::ShadowQuality;
 use super::Lighting;
 
 /// Which culling the cull pass does: Sylva's, or a baseline to compare with.
@@ -56,6 +57,8 @@ pub struct RenderSettings {
     /// Morph terrain vertices towards the coarser level as it nears (no
     /// popping at level changes); off only for comparisons.
     pub terrain_morph: bool,
+    /// The sun's shadows ([`super::shadow`]).
+    pub shadows: ShadowQuality,
 }
 
 /// Default of [`RenderSettings::thin_px`].
@@ -106,6 +109,7 @@ impl Default for RenderSettings {
             thin_px: DEFAULT_THIN_PX,
             terrain: true,
             terrain_morph: true,
+            shadows: ShadowQuality::Off,
         }
     }
 }

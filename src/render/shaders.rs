@@ -1,16 +1,27 @@
 //! WGSL sources, composed at compile time: `shaders/common.wgsl` is prepended
-//! to each pass's file (WGSL has no includes).
+//! to each pass's file (WGSL has no includes), and `shaders/shadow.wgsl` (the
+//! shadow map and its lookup) to the lit passes'.
 
 /// The mesh pass (and the bake's billboard capture).
-pub const MESH: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/mesh.wgsl"));
+pub const MESH: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/shadow.wgsl"),
+    include_str!("../../shaders/mesh.wgsl")
+);
 
 /// The billboard pass.
-pub const BILLBOARD: &str =
-    concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/billboard.wgsl"));
+pub const BILLBOARD: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/shadow.wgsl"),
+    include_str!("../../shaders/billboard.wgsl")
+);
 
 /// The cluster pass (ellipsoids and lines).
-pub const CLUSTER: &str =
-    concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cluster.wgsl"));
+pub const CLUSTER: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/shadow.wgsl"),
+    include_str!("../../shaders/cluster.wgsl")
+);
 
 /// The cull and LoD-selection compute passes.
 pub const CULL: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cull.wgsl"));
@@ -22,8 +33,11 @@ pub const SKY: &str = concat!(include_str!("../../shaders/common.wgsl"), include
 pub const BOUNDS: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/bounds.wgsl"));
 
 /// The terrain pass.
-pub const TERRAIN: &str =
-    concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/terrain.wgsl"));
+pub const TERRAIN: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/shadow.wgsl"),
+    include_str!("../../shaders/terrain.wgsl")
+);
 
 /// Every composed shader with its name, for validation tests.
 pub const ALL: &[(&str, &str)] = &[

@@ -335,4 +335,51 @@ impl Species {
         }
         draws
     }
+
+    /// Records the species draws of a shadow cascade into `pass` (the
+    /// cascade's view bound at group 0, its cull pass run): the depth-only
+    /// pipelines, one indirect draw per ready species × representation (the
+    /// camera's reach says nothing about what shades its view). Returns the
+    /// draws recorded.
+    pub fn draw_shadow<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, pools: &'p Pools) -> u32 {
+        pass.set_bind_group(2, &pools.groups.instance, &[]);
+        let mut draws = 0;
+        for (i, p) in self.packs.iter().enumerate() {
+            let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
+            for repr in Repr::ALL {
+                if s.slot_cap[repr as usize] == 0 {
+                    continue;
+                }
+                let slot = i as u32 * REPR_COUNT + repr as u32;
+                pass.set_bind_group(3, &pools.groups.draw, &[slot * size_of::<DrawParams>() as u32]);
+                let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
+                match repr {
+                    Repr::Mesh0 | Repr::Mesh1 => {
+                        let Some(pipelines) = &self.mesh else { continue };
+                        if p.mesh.bind_level(pass, pipelines, RenderMode::Shadow, repr as usize) > 0 {
+                            pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                    Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
+                        if let (Some(c), Some(pipeline)) = (&p.cluster, &self.cluster) {
+                            pass.set_pipeline(pipeline.shadow_pipeline());
+                            pass.set_bind_group(1, &c.bind_group, &[]);
+                            pass.draw_indirect(&pools.buffers.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                    Repr::Billboard => {
+                        if let (Some(bb), Some(pipeline)) = (&p.billboard, &self.billboard) {
+                            pass.set_pipeline(pipeline.shadow_pipeline());
+                            pass.set_bind_group(1, &bb.bind_group, &[]);
+                            pass.draw_indirect(&pools.buffers.args, args_offset);
+                            draws += 1;
+                        }
+                    }
+                }
+            }
+        }
+        draws
+    }
 }

@@ -14,8 +14,13 @@ use crate::scene::{Fetcher, SceneStream};
 pub struct FrameStats {
     /// Draw calls recorded (≤ species × representations).
     pub draw_calls: u32,
-    /// Instances drawn per representation (`mesh0`, `mesh1`, `billboard`).
+    /// Instances drawn per representation (`mesh0`, `mesh1`, `ellipsoid`, `billboard`).
     pub instances: std::collections::BTreeMap<String, u64>,
+    /// Shadow casters drawn per representation, summed over the cascades
+    /// (empty without shadows).
+    pub shadow_casters: std::collections::BTreeMap<String, u64>,
+    /// Shadow cascades drawn (0: shadows off, or the sun is down).
+    pub shadow_cascades: u32,
     /// Batch slots the cull pass tested.
     pub batches_tested: u32,
     /// Batches that passed the batch test.
@@ -120,17 +125,21 @@ impl FrameStats {
         }
     }
 
-    /// Fills in the cull pass's counters read back from the GPU.
-    pub fn apply_counters(&mut self, counters: &CullCounters) {
+    /// Fills in the cull pass's counters read back from the GPU: the first
+    /// `slot_count` slots are the camera's, any after them the shadow cascades'.
+    pub fn apply_counters(&mut self, counters: &CullCounters, slot_count: u32) {
         self.batches_visible = counters.control.batches_visible;
         self.instances_tested = counters.control.instances_tested;
         self.items_dropped = counters.control.items_dropped;
+        self.shadow_casters.clear();
         for repr in Repr::ALL {
             self.instances.insert(repr.name().into(), 0);
         }
+        let main = (slot_count as usize).min(counters.slots.len());
         for (slot, args) in counters.slots.iter().enumerate() {
             let repr = Repr::ALL[slot % REPR_COUNT as usize];
-            *self.instances.entry(repr.name().into()).or_default() += u64::from(args.instance_count);
+            let map = if slot < main { &mut self.instances } else { &mut self.shadow_casters };
+            *map.entry(repr.name().into()).or_default() += u64::from(args.instance_count);
         }
     }
 }
@@ -146,10 +155,11 @@ pub struct CullCounters {
 }
 
 impl CullCounters {
-    /// Bytes of a readback of `slot_count` slots: the control words, then the slots.
+    /// Bytes of a readback of `slot_count` slots for the camera and each of
+    /// `cascades` shadow cascades: the control words, then the slots.
     #[must_use]
-    pub fn readback_bytes(slot_count: u32) -> u64 {
-        (size_of::<CullControl>() + slot_count as usize * size_of::<DrawArgs>()) as u64
+    pub fn readback_bytes(slot_count: u32, cascades: u32) -> u64 {
+        (size_of::<CullControl>() + slot_count as usize * (1 + cascades as usize) * size_of::<DrawArgs>()) as u64
     }
 
     /// Decodes a readback (any length: whole slots only).
@@ -179,9 +189,11 @@ mod tests {
         let c = CullCounters::from_bytes(bytemuck::cast_slice(&words));
         assert_eq!((c.control.batches_visible, c.control.instances_tested, c.control.items_dropped), (7, 300, 2));
         assert_eq!(c.slots.iter().map(|s| s.instance_count).collect::<Vec<_>>(), vec![40, 9]);
-        assert_eq!(CullCounters::readback_bytes(2), 32 + 40);
+        assert_eq!(CullCounters::readback_bytes(2, 0), 32 + 40);
+        assert_eq!(CullCounters::readback_bytes(2, 1), 32 + 80);
         let mut stats = FrameStats::default();
-        stats.apply_counters(&c);
+        stats.apply_counters(&c, 2);
+        assert!(stats.shadow_casters.is_empty());
         assert_eq!((stats.instances["mesh0"], stats.instances["mesh1"], stats.instances["billboard"]), (40, 9, 0));
         // A short readback decodes what is there.
         assert_eq!(CullCounters::from_bytes(&bytemuck::cast_slice::<u32, u8>(&words)[..10]).control.batches_visible, 7);
