@@ -368,6 +368,15 @@ impl ForestRenderer {
         draws
     }
 
+    /// Records the cull pass of the last frame's shadow cascade `i` alone (tests).
+    ///
+    /// # Panics
+    /// If the last frame had no cascade `i`.
+    pub fn encode_cascade_cull(&self, encoder: &mut wgpu::CommandEncoder, i: usize) {
+        assert!(i < self.last_cascades.len(), "the last frame had {} cascades", self.last_cascades.len());
+        self.cull.encode(encoder, &self.cascade_groups[i], &self.pools, self.slot_count(), None);
+    }
+
     /// The view uniforms of the last frame's shadow cascades (for the CPU
     /// oracle and tests).
     #[must_use]

@@ -205,6 +205,19 @@ impl<F: Fetcher> OffscreenScene<F> {
         self.frame.stats_of_last_frame()
     }
 
+    /// Runs the cull pass of the last frame's shadow cascade `i` again, alone,
+    /// so [`Self::read_selection`] reads the casters it chose (tests against
+    /// [`super::cull::cpu_select`] with the cascade's view).
+    ///
+    /// # Panics
+    /// If the last frame had no cascade `i`.
+    pub fn rerun_cascade_cull(&mut self, i: usize) {
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        self.frame.renderer.encode_cascade_cull(&mut encoder, i);
+        self.ctx.queue.submit([encoder.finish()]);
+        let _ = self.ctx.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+
     /// Reads back what the last cull pass selected, with the pools it selected
     /// from: (per-slot draw items, batches, instances, visible batch count).
     /// For tests against [`super::cull::cpu_select`].
