@@ -183,6 +183,8 @@ impl Viewer {
         let name = adapter_name(&adapter).await;
         let mut frame = Frame::new(device, queue, name, view_format, pools, &scene, WebFetcher::default());
         frame.use_timestamps();
+        // The sun casts shadows unless a page turns them down (`setLighting`).
+        frame.settings.shadows = crate::render::shadow::ShadowQuality::High;
         Ok(Viewer {
             surface,
             config,
@@ -522,6 +524,16 @@ impl Viewer {
         self.frame.settings.lighting =
             crate::render::Lighting::at_angles(geo, crate::render::Lighting::sun_point(m), azimuth, elevation)
                 .map_err(|e| JsValue::from_str(&e))?;
+        Ok(())
+    }
+
+    /// The sun's shadows: `"off"`, `"low"` or `"high"`.
+    ///
+    /// # Errors
+    /// Any other quality (the message names the three).
+    pub fn set_shadows(&mut self, quality: &str) -> Result<(), JsValue> {
+        self.frame.settings.shadows =
+            quality.parse().map_err(|e: String| JsValue::from_str(&format!("setLighting: {e}")))?;
         Ok(())
     }
 

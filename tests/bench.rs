@@ -15,7 +15,7 @@ fn bench_writes_frames_summary_and_plots() {
     let manifest = probe.stream.manifest().expect("manifest").clone();
     drop(probe);
     let cameras = bench::interpolate(&bench::named_path(NamedPath::Medium, &manifest, None), 3);
-    let methods = bench::methods("sylva,billboard").unwrap();
+    let methods = bench::methods("sylva,billboard", sylva::render::shadow::ShadowQuality::Off).unwrap();
     let (w, h) = (160, 90);
     let mut calls = 0;
     let run = bench::run(SCENE, &cameras, &methods, w, h, &mut |_, _, _| calls += 1).unwrap();

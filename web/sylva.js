@@ -12,6 +12,7 @@
 //   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
 //                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
+//   v.setLighting({shadows})               the sun's shadows: 'off' | 'low' | 'high' (the default)
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -165,6 +166,18 @@ class SylvaViewer {
     return result;
   }
 
+  /** Light settings: `shadows` 'off' | 'low' (2 cascades of 1024² over 300 m)
+   * | 'high' (3 of 1536² over 600 m, softer; the default). Throws for an
+   * unknown key or quality. */
+  setLighting(options = {}) {
+    for (const key of Object.keys(options)) {
+      if (key !== 'shadows') throw new Error(`setLighting: unknown setting ${key} (known: shadows)`);
+    }
+    if (options.shadows !== undefined) this.viewer.set_shadows(String(options.shadows));
+    this.lighting = { ...this.lighting, ...options };
+    this.dirty = 8;
+  }
+
   stats() { return JSON.parse(this.viewer.stats_json()); }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
   setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
@@ -212,6 +225,7 @@ class SylvaViewer {
       this.viewer = await Viewer.create(this.canvas, this.options.scene || 'scene/scene.json');
       this.resize();
       this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
+      if (this.lighting) this.setLighting(this.lighting);
       this.dirty = 8;
       this.emit('recovered', {});
     } catch (e) {
@@ -368,6 +382,7 @@ export async function create(target, options = {}) {
   const viewer = await Viewer.create(canvas, scene);
   const v = new SylvaViewer(canvas, viewer, options);
   if (options.camera) v.setCamera(options.camera);
+  if (options.lighting) v.setLighting(options.lighting);
   return v;
 }
 

@@ -24,6 +24,7 @@ use crate::camera::Camera;
 use crate::format::Manifest;
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use crate::render::offscreen::{NamedView, OffscreenScene};
+use crate::render::shadow::ShadowQuality;
 
 pub mod memory;
 mod plots;
@@ -160,34 +161,39 @@ pub struct Method {
     pub settings: RenderSettings,
     /// Supersampling factor per axis (the reference: 2).
     pub supersample: u32,
+    /// The index of the reference this method's error is measured against
+    /// (`None`: it is one): the shadowed reference for shadowed methods.
+    pub reference: Option<usize>,
 }
+
+/// The reference of shadowed methods: every tree a full mesh, and casters too,
+/// in four 3072² cascades.
+pub const SHADOWED_REFERENCE: &str = "reference-shadows";
 
 /// Quality so high every visible tree is above the full mesh's threshold.
 const ALL_FULL_MESH: f32 = 1.0e6;
 
 /// The methods named in `list` (comma-separated; `all` for every one), the
-/// reference always first.
+/// references first: `reference` for methods drawn without shadows,
+/// [`SHADOWED_REFERENCE`] for those drawn with (`sylva-shadows-low`,
+/// `sylva-shadows-high`, or every method when `shadows` is not off).
 ///
 /// # Errors
 /// An unknown method name.
-pub fn methods(list: &str) -> Result<Vec<Method>> {
-    let base = RenderSettings::default();
+pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
+    let base = RenderSettings { shadows, ..RenderSettings::default() };
+    let full = RenderSettings { quality: ALL_FULL_MESH, representations: Representations::MESHES, ..base };
     let make = |name: &str| -> Result<Method> {
-        let m = |settings: RenderSettings, supersample| Method { name: name.to_string(), settings, supersample };
+        let m = |settings: RenderSettings, supersample| Method {
+            name: name.to_string(),
+            settings,
+            supersample,
+            reference: Some(0),
+        };
         Ok(match name {
-            "reference" => m(
-                RenderSettings { quality: ALL_FULL_MESH, representations: Representations::MESHES, ..base },
-                2,
-            ),
-            "mesh" => m(
-                RenderSettings {
-                    quality: ALL_FULL_MESH,
-                    representations: Representations::MESHES,
-                    culling: CullingMode::PerTree,
-                    ..base
-                },
-                1,
-            ),
+            "reference" => m(RenderSettings { shadows: ShadowQuality::Off, ..full }, 2),
+            SHADOWED_REFERENCE => m(RenderSettings { shadows: ShadowQuality::Reference, ..full }, 2),
+            "mesh" => m(RenderSettings { culling: CullingMode::PerTree, ..full }, 1),
             "per-tree" => m(RenderSettings { culling: CullingMode::PerTree, ..base }, 1),
             "billboard" => m(
                 RenderSettings {
@@ -206,21 +212,50 @@ pub fn methods(list: &str) -> Result<Vec<Method>> {
             "sylva" => m(base, 1),
             "sylva-q0.5" => m(RenderSettings { quality: 0.5, ..base }, 1),
             "sylva-q0.25" => m(RenderSettings { quality: 0.25, ..base }, 1),
+            "sylva-shadows-low" => m(RenderSettings { shadows: ShadowQuality::Low, ..base }, 1),
+            "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
             other => bail!(
-                "unknown method {other:?}: use reference, mesh, per-tree, billboard, ellipsoid, sylva, sylva-q0.5, sylva-q0.25 or all"
+                "unknown method {other:?}: use reference, mesh, per-tree, billboard, ellipsoid, sylva, sylva-q0.5, \
+                 sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
             ),
         })
     };
     let names: Vec<&str> = if list.trim() == "all" {
-        vec!["reference", "mesh", "per-tree", "billboard", "ellipsoid", "sylva", "sylva-q0.5", "sylva-q0.25"]
+        vec![
+            "mesh",
+            "per-tree",
+            "billboard",
+            "ellipsoid",
+            "sylva",
+            "sylva-q0.5",
+            "sylva-q0.25",
+            "sylva-shadows-low",
+            "sylva-shadows-high",
+        ]
     } else {
         list.split(',').map(str::trim).filter(|s| !s.is_empty()).collect()
     };
-    let mut out = vec![make("reference")?];
+    let mut rest: Vec<Method> = Vec::new();
     for n in names {
-        if n != "reference" && !out.iter().any(|m| m.name == n) {
-            out.push(make(n)?);
+        if n != "reference" && n != SHADOWED_REFERENCE && !rest.iter().any(|m| m.name == n) {
+            rest.push(make(n)?);
         }
+    }
+    let shadowed = |m: &Method| m.settings.shadows != ShadowQuality::Off;
+    let mut out = Vec::new();
+    if rest.is_empty() || rest.iter().any(|m| !shadowed(m)) {
+        out.push(make("reference")?);
+    }
+    if rest.iter().any(shadowed) {
+        out.push(make(SHADOWED_REFERENCE)?);
+    }
+    for m in &mut out {
+        m.reference = None;
+    }
+    for mut m in rest {
+        let want = if shadowed(&m) { SHADOWED_REFERENCE } else { "reference" };
+        m.reference = out.iter().position(|r| r.name == want);
+        out.push(m);
     }
     Ok(out)
 }
@@ -236,7 +271,9 @@ pub struct FrameRecord {
     pub cull_ms: f64,
     /// GPU ms of the draw pass.
     pub draw_ms: f64,
-    /// GPU ms, both passes.
+    /// GPU ms of the shadow cascades (their cull passes and casters; 0 without shadows).
+    pub shadow_ms: f64,
+    /// GPU ms, every pass.
     pub gpu_ms: f64,
     /// CPU ms to prepare and record the frame.
     pub cpu_ms: f64,
@@ -382,8 +419,10 @@ pub fn run(
     height: u32,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<BenchRun> {
-    if methods.first().is_none_or(|m| m.name != "reference") {
-        bail!("the first method must be the reference (bench::methods puts it first)");
+    if methods.first().is_none_or(|m| m.reference.is_some())
+        || methods.iter().any(|m| m.reference.is_some_and(|r| methods.get(r).is_none_or(|r| r.reference.is_some())))
+    {
+        bail!("the references must come first and every method name one (bench::methods does)");
     }
     // Every method has its own scene and device, and the methods take turns frame
     // by frame: anything else running on the machine then slows them alike.
@@ -398,10 +437,10 @@ pub fn run(
     let adapter = scenes.first().map(|s| s.ctx.adapter_summary()).unwrap_or_default();
     let mut frames = Vec::new();
     let mut prev: Vec<Option<Vec<u8>>> = vec![None; methods.len()];
-    let mut prev_reference: Option<Vec<u8>> = None;
     for (i, cam) in cameras.iter().enumerate() {
-        let mut reference: Option<Vec<u8>> = None;
-        let mut ref_motion = f64::NAN;
+        // Each reference's image of this frame and its own change since the last.
+        let mut reference: Vec<Option<Vec<u8>>> = vec![None; methods.len()];
+        let mut ref_motion = vec![f64::NAN; methods.len()];
         for (k, (method, off)) in methods.iter().zip(scenes.iter_mut()).enumerate() {
             progress(&method.name, i, cameras.len());
             let ss = method.supersample.max(1);
@@ -412,12 +451,14 @@ pub fn run(
             let img = downsample(&off.read_image(), width * ss, height * ss, ss);
             let cull = s.gpu_ms.get("cull").copied().unwrap_or(0.0);
             let draw = s.gpu_ms.get("draw").copied().unwrap_or(0.0);
+            let shadow = s.gpu_ms.get("shadow").copied().unwrap_or(0.0);
             let mut rec = FrameRecord {
                 method: method.name.clone(),
                 frame: i,
                 cull_ms: cull,
                 draw_ms: draw,
-                gpu_ms: cull + draw,
+                shadow_ms: shadow,
+                gpu_ms: cull + draw + shadow,
                 cpu_ms: s.frame_cpu_ms,
                 draw_calls: s.draw_calls,
                 instances: s.instances.clone(),
@@ -427,20 +468,27 @@ pub fn run(
                 flip: 0.0,
                 temporal_noise: f64::NAN,
             };
-            if k == 0 {
-                // The reference (methods() puts it first).
-                if let Some(p) = &prev_reference {
-                    ref_motion = rmse(&img, p);
+            match method.reference {
+                None => {
+                    // A reference (methods() puts them first).
+                    if let Some(p) = &prev[k] {
+                        ref_motion[k] = rmse(&img, p);
+                    }
+                    reference[k] = Some(img.clone());
                 }
-                prev_reference = Some(img.clone());
-                reference = Some(img.clone());
-            } else if let Some(r) = &reference {
-                rec.error = crate::metrics::multiscale_rmse(&img, r, width, height);
-                rec.flip = flip(r, &img, width, height);
+                Some(r) => {
+                    if let Some(r) = &reference[r] {
+                        rec.error = crate::metrics::multiscale_rmse(&img, r, width, height);
+                        rec.flip = flip(r, &img, width, height);
+                    }
+                }
             }
             if let Some(p) = &prev[k] {
                 // The reference's own change is the baseline: 0 for itself.
-                rec.temporal_noise = if k == 0 { 0.0 } else { rmse(&img, p) - ref_motion };
+                rec.temporal_noise = match method.reference {
+                    None => 0.0,
+                    Some(r) => rmse(&img, p) - ref_motion[r],
+                };
             }
             prev[k] = Some(img);
             frames.push(rec);
@@ -484,15 +532,16 @@ pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>> {
     for (n, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         let bad = || anyhow::anyhow!("{} line {}: not a frames.csv row", path.display(), n + 1);
-        // 15 columns: written before the FLIP column was added.
+        // 15 columns: written before the FLIP column was added; 16 before shadow_ms.
         let has_flip = match f.len() {
-            16 => true,
+            16 | 17 => true,
             15 => false,
             _ => return Err(bad()),
         };
         let tn = if has_flip { 15 } else { 14 };
         let num = |i: usize| -> Result<f64> { f[i].parse::<f64>().map_err(|_| bad()) };
         let int = |i: usize| -> Result<u64> { f[i].parse::<u64>().map_err(|_| bad()) };
+        let shadow_ms = if f.len() == 17 { num(16)? } else { 0.0 };
         let instances = ["mesh0", "mesh1", "ellipsoid", "billboard"]
             .iter()
             .enumerate()
@@ -504,6 +553,7 @@ pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>> {
             gpu_ms: num(2)?,
             cull_ms: num(3)?,
             draw_ms: num(4)?,
+            shadow_ms,
             cpu_ms: num(5)?,
             draw_calls: int(6)? as u32,
             instances,
@@ -525,14 +575,14 @@ pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
     use std::fmt::Write as _;
     let reprs = ["mesh0", "mesh1", "ellipsoid", "billboard"];
     let mut s = String::from(
-        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,flip,temporal_noise\n",
+        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,flip,temporal_noise,shadow_ms\n",
     );
     for r in frames {
         let inst: Vec<String> = reprs.iter().map(|k| r.instances.get(*k).copied().unwrap_or(0).to_string()).collect();
         let tn = if r.temporal_noise.is_finite() { format!("{:.6}", r.temporal_noise) } else { String::new() };
         writeln!(
             s,
-            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{:.6},{}",
+            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{:.6},{},{:.3}",
             r.method,
             r.frame,
             r.gpu_ms,
@@ -545,7 +595,8 @@ pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
             r.bytes_fetched,
             r.error,
             r.flip,
-            tn
+            tn,
+            r.shadow_ms
         )?;
     }
     std::fs::write(dir.join("frames.csv"), s).with_context(|| format!("writing {}", dir.join("frames.csv").display()))
@@ -572,11 +623,22 @@ mod tests {
 
     #[test]
     fn methods_parse_with_the_reference_first() {
-        let m = methods("sylva,mesh").unwrap();
+        let m = methods("sylva,mesh", ShadowQuality::Off).unwrap();
         assert_eq!(m.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), ["reference", "sylva", "mesh"]);
         assert_eq!(m[0].supersample, 2);
-        assert_eq!(methods("all").unwrap().len(), 8);
-        assert!(format!("{:#}", methods("fast").unwrap_err()).contains("unknown method \"fast\""));
+        assert!(m[1..].iter().all(|m| m.reference == Some(0)));
+        // Shadowed methods are measured against the shadowed reference.
+        let all = methods("all", ShadowQuality::Off).unwrap();
+        assert_eq!(all.len(), 11);
+        assert_eq!((all[0].name.as_str(), all[1].name.as_str()), ("reference", SHADOWED_REFERENCE));
+        let high = all.iter().find(|m| m.name == "sylva-shadows-high").unwrap();
+        assert_eq!((high.reference, high.settings.shadows), (Some(1), ShadowQuality::High));
+        assert_eq!(all.iter().find(|m| m.name == "sylva").unwrap().reference, Some(0));
+        // --shadows low: every method shadowed, one (shadowed) reference.
+        let low = methods("sylva,billboard", ShadowQuality::Low).unwrap();
+        assert_eq!(low.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), [SHADOWED_REFERENCE, "sylva", "billboard"]);
+        assert!(low[1..].iter().all(|m| m.reference == Some(0) && m.settings.shadows == ShadowQuality::Low));
+        assert!(format!("{:#}", methods("fast", ShadowQuality::Off).unwrap_err()).contains("unknown method \"fast\""));
     }
 
     #[test]

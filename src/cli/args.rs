@@ -96,6 +96,12 @@ pub(crate) enum Command {
         /// (0: off; the thinning comparison).
         #[arg(long, default_value_t = sylva::render::forest::DEFAULT_THIN_PX)]
         thin_px: f32,
+        /// Draw every method with the sun's shadows at this quality (off, low,
+        /// high), measured against the shadowed reference (full meshes cast
+        /// into four 3072² cascades). The methods sylva-shadows-low and
+        /// sylva-shadows-high are shadowed in any run.
+        #[arg(long, value_name = "off|low|high", default_value = "off")]
+        shadows: sylva::render::shadow::ShadowQuality,
     },
     /// One table row per bench output directory (its summary.json) for one
     /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls

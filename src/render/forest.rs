@@ -297,7 +297,7 @@ impl ForestRenderer {
         // Shadows while the sun is up (and lights anything).
         let sun_up = l.sun_dir.z > 0.01 && l.sun_color.max_element() > 1e-3;
         if let (Some(config), true) = (settings.shadows.config(), sun_up) {
-            self.ensure_shadow_maps(device, config);
+            self.ensure_shadow_maps(device, config.fitted(view.viewport));
             let config = self.shadow_maps.as_ref().map_or(config, |m| m.config);
             let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
             // Casters stand up to the height span above a receiver: that far up
@@ -307,11 +307,15 @@ impl ForestRenderer {
             let cascades = super::shadow::cascades(view.clip_from_eye, eye, l.sun_dir, &config, distance, reach);
             for (i, c) in cascades.iter().enumerate() {
                 let mut v = super::shadow::cascade_view(&uniform, c, config.size);
-                v.lod[0] *= settings.quality * config.lod_scale;
+                v.lod[0] *= settings.quality * config.cascade_lod_scale(i);
                 queue.write_buffer(&self.view_buffer, (1 + i as u64) * VIEW_STRIDE, bytemuck::bytes_of(&v));
                 self.last_cascades.push(v);
             }
             super::shadow::apply_to_view(&mut uniform, &cascades, &config);
+        } else if settings.shadows.config().is_none() && self.shadow_maps.is_some() {
+            // Shadows turned off: give the map's memory back.
+            self.shadow_maps = None;
+            self.view_group = self.shared.view_group(device, &self.view_buffer);
         }
         queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
         self.last_view = uniform;

@@ -29,10 +29,15 @@ pub enum ShadowQuality {
     /// No shadows.
     #[default]
     Off,
-    /// Two 1024² cascades over 300 m, one bilinear tap.
+    /// Two cascades over 300 m (maps of 0.8 texels per screen pixel, 512²–1024²),
+    /// one bilinear tap.
     Low,
-    /// Three 1536² cascades over 600 m, 3×3 bilinear taps.
+    /// Three cascades over 600 m (1.6 texels per screen pixel, 1024²–2048²),
+    /// 3×3 bilinear taps.
     High,
+    /// The benchmarks' reference (not offered to users): four 3072² cascades
+    /// over the same 600 m, casters at the camera's level of detail.
+    Reference,
 }
 
 impl ShadowQuality {
@@ -46,20 +51,45 @@ impl ShadowQuality {
             ShadowQuality::Off => "off",
             ShadowQuality::Low => "low",
             ShadowQuality::High => "high",
+            ShadowQuality::Reference => "reference",
         }
     }
 
-    /// The cascades of this quality (`None` when off).
+    /// The cascades of this quality (`None` when off), their maps at their
+    /// largest: [`ShadowConfig::fitted`] sizes them to a viewport.
     #[must_use]
     pub fn config(self) -> Option<ShadowConfig> {
+        let c = ShadowConfig {
+            cascades: 3,
+            size: 2048,
+            min_size: 1024,
+            texels_per_px: 1.6,
+            distance_m: 600.0,
+            pcf_radius: 1,
+            lod_scale: 0.5,
+            lod_decay: 0.5,
+        };
         match self {
             ShadowQuality::Off => None,
-            ShadowQuality::Low => {
-                Some(ShadowConfig { cascades: 2, size: 1024, distance_m: 300.0, pcf_radius: 0, lod_scale: 0.5 })
-            }
-            ShadowQuality::High => {
-                Some(ShadowConfig { cascades: 3, size: 1536, distance_m: 600.0, pcf_radius: 1, lod_scale: 0.5 })
-            }
+            ShadowQuality::Low => Some(ShadowConfig {
+                cascades: 2,
+                size: 1024,
+                min_size: 512,
+                texels_per_px: 0.8,
+                distance_m: 300.0,
+                pcf_radius: 0,
+                ..c
+            }),
+            ShadowQuality::High => Some(c),
+            ShadowQuality::Reference => Some(ShadowConfig {
+                cascades: 4,
+                size: 3072,
+                min_size: 3072,
+                texels_per_px: 0.0,
+                lod_scale: 1.0,
+                lod_decay: 1.0,
+                ..c
+            }),
         }
     }
 }
@@ -86,8 +116,14 @@ impl std::fmt::Display for ShadowQuality {
 pub struct ShadowConfig {
     /// Cascades (1–[`MAX_CASCADES`]).
     pub cascades: u32,
-    /// Texels a side of each cascade's map.
+    /// Texels a side of each cascade's map (the largest, before [`Self::fitted`]).
     pub size: u32,
+    /// The smallest map [`Self::fitted`] makes.
+    pub min_size: u32,
+    /// Map texels per screen pixel of the viewport's longer side (0: always `size`):
+    /// shadows as sharp on a phone as on a wall screen, at a cost that follows
+    /// the screen's.
+    pub texels_per_px: f32,
     /// Shadows fade out by this distance from the eye (m; at most the draw distance).
     pub distance_m: f32,
     /// PCF kernel radius in texels (0: one bilinear tap, 1: 3×3 taps).
@@ -96,9 +132,29 @@ pub struct ShadowConfig {
     /// is picked: a shadow shows a silhouette, softened by the filter, and
     /// needs less detail than the tree seen directly.
     pub lod_scale: f32,
+    /// And by this again for each farther cascade: ray-cast ellipsoids cast in
+    /// the near cascades, billboards beyond (the far casters are many and small).
+    pub lod_decay: f32,
 }
 
 impl ShadowConfig {
+    /// This configuration with its maps sized for a `viewport` (px): `size`
+    /// at most, `min_size` at least, in steps of 256 texels.
+    #[must_use]
+    pub fn fitted(self, viewport: [u32; 2]) -> Self {
+        if self.texels_per_px <= 0.0 {
+            return self;
+        }
+        let want = (viewport[0].max(viewport[1]) as f32 * self.texels_per_px / 256.0).ceil() as u32 * 256;
+        Self { size: want.clamp(self.min_size, self.size.max(self.min_size)), ..self }
+    }
+
+    /// The LoD scale of cascade `i`'s casters.
+    #[must_use]
+    pub fn cascade_lod_scale(&self, i: usize) -> f32 {
+        self.lod_scale * self.lod_decay.powi(i as i32)
+    }
+
     /// GPU bytes of the shadow map (32-bit depth).
     #[must_use]
     pub fn bytes(&self) -> u64 {
@@ -383,7 +439,15 @@ mod tests {
         assert_eq!("HIGH".parse::<ShadowQuality>(), Ok(ShadowQuality::High));
         assert!("medium".parse::<ShadowQuality>().unwrap_err().contains("off, low or high"));
         assert_eq!(ShadowQuality::Off.config(), None);
-        assert_eq!(ShadowQuality::High.config().unwrap().bytes(), 3 * 1536 * 1536 * 4);
-        assert_eq!(ShadowQuality::Low.config().unwrap().bytes(), 2 * 1024 * 1024 * 4);
+        let high = ShadowQuality::High.config().unwrap();
+        assert_eq!(high.bytes(), 3 * 2048 * 2048 * 4);
+        // Maps follow the screen: 1.6 texels per pixel, 1024–2048.
+        assert_eq!(high.fitted([640, 360]).size, 1024);
+        assert_eq!(high.fitted([1000, 700]).size, 1792);
+        assert_eq!(high.fitted([3840, 2160]).size, 2048);
+        assert_eq!(ShadowQuality::Low.config().unwrap().fitted([1280, 720]).size, 1024);
+        assert_eq!(ShadowQuality::Low.config().unwrap().fitted([320, 240]).size, 512);
+        assert_eq!(ShadowQuality::Reference.config().unwrap().fitted([320, 240]).size, 3072);
+        assert!(high.cascade_lod_scale(2) < high.cascade_lod_scale(0));
     }
 }

@@ -440,6 +440,35 @@ test('the sun follows a date and time at the scene and the time-of-day control',
   assert.deepEqual(errors, []);
 });
 
+test('the sun casts shadows by default and setLighting turns them off', async () => {
+  const { page, errors } = await openViewer(`${base}?ui=0`);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
+  await ready(page);
+  const meanBrightness = (name) => screenshotStat(page, name, `
+    let sum = 0;
+    for (let i = 0; i < d.length; i += 4) sum += d[i] + d[i + 1] + d[i + 2];
+    return sum / (d.length / 4) / 3;`);
+  // A low sun: long shadows over the forest and its clearings.
+  await page.evaluate(() => window.sylva.setSun({ azimuth: 200, elevation: 25 }));
+  await page.waitForFunction(() => {
+    const s = window.sylva.stats();
+    const casters = Object.values(s.shadow_casters || {}).reduce((a, b) => a + b, 0);
+    return s.shadow_cascades === 3 && casters > 0;
+  }, null, { timeout: 60000 });
+  await page.waitForTimeout(1000);
+  const stats = await page.evaluate(() => window.sylva.stats());
+  assert.ok(stats.shadow_casters.billboard + stats.shadow_casters.ellipsoid + stats.shadow_casters.mesh1 > 100, JSON.stringify(stats.shadow_casters));
+  const shaded = await meanBrightness('shadows-high');
+  await page.evaluate(() => window.sylva.setLighting({ shadows: 'off' }));
+  await page.waitForFunction(() => window.sylva.stats().shadow_cascades === 0, null, { timeout: 60000 });
+  await page.waitForTimeout(1000);
+  const unshaded = await meanBrightness('shadows-off');
+  assert.ok(unshaded > shaded + 2, `shadows darken the view: off ${unshaded.toFixed(1)} vs high ${shaded.toFixed(1)}`);
+  const refused = await page.evaluate(() => { try { window.sylva.setLighting({ shadows: 'ultra' }); return null; } catch (e) { return String(e); } });
+  assert.ok(refused && refused.includes('off, low or high'), refused);
+  assert.deepEqual(errors, []);
+});
+
 test('a lost GPU device is recreated and rendering continues', async () => {
   const { page } = await openViewer(base);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
