@@ -25,6 +25,8 @@ struct VertexOut {
     @location(4) @interpolate(flat) tint: vec3<f32>,
     // How far the quad's shadow lookups move towards the sun (m): its half width.
     @location(5) @interpolate(flat) lift: f32,
+    // Forest-scale occlusion (`canopy_occlusion`), by height in the quad.
+    @location(6) canopy: f32,
 };
 
 const PI: f32 = 3.14159265;
@@ -100,6 +102,11 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.item_y = item.y;
     out.tint = variation_tint(tree.variation);
     out.lift = half_w * max(tree.aspect, 1.0);
+    // The height in the crown of what this point of the quad shows: along the
+    // quad's up seen from the side, the crown's top seen from above.
+    let top = draw.bb_center.z + draw.bb_size.x;
+    let shown = draw.bb_center.z + draw.bb_size.x * (up.z * c.y + 0.8 * sin(elevation));
+    out.canopy = canopy_occlusion(batch, shown / max(top, 1e-3));
     return out;
 }
 
@@ -117,8 +124,8 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }
-    let sun = sun_visibility(frag_rel(in.clip, view), n, in.lift);
-    return vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun), in.clip, view), 1.0);
+    let sun = sun_visibility(frag_rel(in.clip, view), n, in.lift, open_sun(in.canopy));
+    return vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun, in.canopy), in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested.

@@ -38,6 +38,8 @@ struct VertexOut {
     // Albedo (rgb), noise mip (w).
     @location(4) @interpolate(flat) color: vec4<f32>,
     @location(5) @interpolate(flat) item_y: u32,
+    // Forest-scale occlusion (`canopy_occlusion`) at the primitive's height.
+    @location(6) @interpolate(flat) canopy: f32,
 };
 
 struct Ellipsoid {
@@ -172,6 +174,7 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
     (*out).p2 = vec4<f32>(a1 / (k * r.y), 0.0);
     (*out).p3 = vec4<f32>(a2 / (k * r.z), 0.0);
     (*out).color = vec4<f32>(e.color * variation_tint(tree.variation), e.level);
+    (*out).canopy = e.center.z / max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
 }
 
 fn is_perspective() -> bool {
@@ -239,6 +242,8 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
     (*out).p2 = vec4<f32>(0.0);
     (*out).p3 = vec4<f32>(0.0);
     (*out).color = vec4<f32>(draw.line_color.rgb * variation_tint(tree.variation), 0.0);
+    let top = max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
+    (*out).canopy = 0.5 * (dequantise(vec3<f32>(w0, w1.x)).z + dequantise(vec3<f32>(w1.y, w2)).z) / top;
 }
 
 @vertex
@@ -255,6 +260,8 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         line_vertex(prim - draw.cluster.y, tree, corner, &out);
     }
     out.item_y = item.y;
+    // The primitive functions left its relative height here.
+    out.canopy = canopy_occlusion(batch, out.canopy);
     return out;
 }
 
@@ -384,8 +391,8 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }
-    let sun = sun_visibility(hit.p, hit.n, 0.0);
-    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun), hit.p, view), 1.0);
+    let sun = sun_visibility(hit.p, hit.n, 0.0, open_sun(in.canopy));
+    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, in.canopy), hit.p, view), 1.0);
     return out;
 }
 

@@ -50,6 +50,8 @@ struct VertexOut {
     @location(2) color: vec4<f32>,
     @location(3) @interpolate(flat) material: u32,
     @location(4) @interpolate(flat) item_y: u32,
+    // Forest-scale occlusion (`canopy_occlusion`).
+    @location(5) canopy: f32,
 };
 
 @vertex
@@ -68,6 +70,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.color = vec4<f32>(in.color.rgb * variation_tint(tree.variation), in.color.a);
     out.material = in.position_material.w;
     out.item_y = item.y;
+    out.canopy = canopy_occlusion(batch, local.z / max(mesh.pos_min.z + mesh.pos_extent.z, 1e-3));
     return out;
 }
 
@@ -102,8 +105,8 @@ fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
     }
-    let sun = sun_visibility(frag_rel(in.clip, view), s.normal, 0.0);
-    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun), in.clip, view), 1.0);
+    let sun = sun_visibility(frag_rel(in.clip, view), s.normal, 0.0, open_sun(in.canopy));
+    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun, in.canopy), in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested leaves (dappled shade).

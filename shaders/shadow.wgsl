@@ -32,15 +32,20 @@ fn shadow_pcf(uv: vec2<f32>, layer: u32, depth: f32) -> f32 {
 // How much of the sun reaches the eye-relative point `rel` with normal `n`
 // (1 lit, 0 shadowed). `lift_m` moves the receiver towards the sun first
 // (flat billboards, which stand for a whole crown, lift by their half width
-// so they are shaded by other trees, not by their own caster).
-fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> f32 {
+// so they are shaded by other trees, not by their own caster). Where no
+// cascade holds the point (shadows off, beyond the shadow distance) the
+// precomputed `open` term stands in, and the shadows fade into it.
+fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
     let count = u32(view.shadow.x);
-    if count == 0u || view.params.x != 0u {
+    if view.params.x != 0u {
         return 1.0;
+    }
+    if count == 0u {
+        return open;
     }
     let fade = smoothstep(SHADOW_FADE_START * view.shadow.w, view.shadow.w, length(rel));
     if fade >= 1.0 {
-        return 1.0;
+        return open;
     }
     let sun = view.sun_dir.xyz;
     let towards_sun = select(-n, n, dot(n, sun) >= 0.0);
@@ -52,10 +57,10 @@ fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> f32 {
         let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
         if all(uv >= vec2<f32>(margin)) && all(uv <= vec2<f32>(1.0 - margin)) && c.z >= 0.0 {
             if c.z > 1.0 {
-                return 1.0; // above every caster
+                return mix(1.0, open, fade); // above every caster
             }
-            return mix(shadow_pcf(uv, i, c.z), 1.0, fade);
+            return mix(shadow_pcf(uv, i, c.z), open, fade);
         }
     }
-    return 1.0;
+    return open;
 }

@@ -89,8 +89,9 @@ fn shadow_casters_match_the_cpu_oracle_in_every_cascade() {
 }
 
 /// A copy of the fixture holding one tree: the first of the batch nearest the
-/// middle of the trees, on the fixture's terrain.
-fn single_tree_copy(dst: &Path) {
+/// middle of the trees, on the fixture's terrain; `copies` times over in the
+/// same spot (one tree to the eye, a dense stand to the batch's density).
+fn single_tree_copy(dst: &Path, copies: u32) {
     let src = fixture();
     let bytes = std::fs::read(src.join("scene.json")).unwrap();
     let m = Manifest::decode("scene.json", &bytes).unwrap();
@@ -120,23 +121,23 @@ fn single_tree_copy(dst: &Path) {
         dst,
         |m| {
             m.tiles.retain(|t| t.url == keep);
-            m.counts.trees = 1;
+            m.counts.trees = u64::from(copies);
             m.counts.batches = 1;
             m.counts.tiles = 1;
             m.home = None;
             for s in &mut m.species {
                 s.trees = 0;
             }
-            m.species[species].trees = 1;
+            m.species[species].trees = u64::from(copies);
         },
         |tile, t| {
             let mut b = tile.batches[index];
             let first = tile.instances[b.instance_offset as usize];
             b.instance_offset = 0;
-            b.instance_count = 1;
+            b.instance_count = copies;
             tile.batches = vec![b];
-            tile.instances = vec![first];
-            t.trees = 1;
+            tile.instances = vec![first; copies as usize];
+            t.trees = u64::from(copies);
             t.batches = 1;
         },
     );
@@ -229,7 +230,7 @@ fn centroid(pixels: &[(usize, usize)]) -> (f64, f64) {
 fn a_single_tree_casts_its_shadow_where_the_cpu_puts_it_without_acne() {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("shadow-one-tree-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    single_tree_copy(&dir);
+    single_tree_copy(&dir, 1);
     let mut off = open(&dir);
     let m = {
         let events = off.load_view(&Camera::default(), 30.0);
@@ -333,4 +334,77 @@ fn a_single_tree_casts_its_shadow_where_the_cpu_puts_it_without_acne() {
         .filter(|&i| !tree_px[i] && !near_shadow(i) && luma(&px(&shaded, i)) < luma(&px(&lit_mesh, i)) - 2.0)
         .count();
     assert_eq!(speckles, 0, "sunlit ground darkened outside the tree's shadow (acne)");
+}
+
+/// Mean luminance of the tree's pixels (those that differ from `bare`) in the
+/// top and the bottom third of its rows on screen, and how many there are.
+fn crown_thirds(img: &[u8], bare: &[u8]) -> (f32, f32, usize) {
+    let tree: Vec<usize> =
+        (0..(W * H) as usize).filter(|&i| (0..3).any(|k| img[i * 4 + k].abs_diff(bare[i * 4 + k]) > 2)).collect();
+    let rows: Vec<usize> = tree.iter().map(|i| i / W as usize).collect();
+    let (top, bottom) = (rows.iter().min().copied().unwrap_or(0), rows.iter().max().copied().unwrap_or(0));
+    let third = (bottom - top) / 3;
+    let mean = |f: &dyn Fn(usize) -> bool| {
+        let v: Vec<f32> = tree.iter().filter(|&&i| f(i / W as usize)).map(|&i| luma(&img[i * 4..i * 4 + 4])).collect();
+        v.iter().sum::<f32>() / v.len().max(1) as f32
+    };
+    (mean(&|r| r <= top + third), mean(&|r| r >= bottom - third), tree.len())
+}
+
+#[test]
+fn a_dense_stand_darkens_its_lower_crowns_alike_at_every_level() {
+    // The same tree alone, and as a stand of 60 in its batch (all in one spot,
+    // so the image shows one tree): the stand's crowns lose sky and sun low
+    // down, their tops stay lit — in meshes, ellipsoids and billboards alike.
+    let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("canopy-{}", std::process::id()));
+    let mut ratios = Vec::new();
+    for (family, only) in [
+        ("meshes", Representations::MESHES),
+        ("ellipsoids", Representations::CLUSTERS),
+        ("billboards", Representations::BILLBOARDS),
+    ] {
+        let mut measured = Vec::new();
+        for copies in [1, 60] {
+            let dir = base.join(format!("{family}-{copies}"));
+            let _ = std::fs::remove_dir_all(&dir);
+            single_tree_copy(&dir, copies);
+            let mut off = open(&dir);
+            off.load_view(&Camera::default(), 30.0);
+            let m = off.stream.manifest().expect("manifest").clone();
+            let c = DVec3::from(m.tiles[0].bounds.min.map(f64::from))
+                .lerp(DVec3::from(m.tiles[0].bounds.max.map(f64::from)), 0.5);
+            let above = Camera { eye_m: c + DVec3::Z * 300.0, pitch_rad: -1.5, ..Camera::default() };
+            off.load_view(&above, 30.0);
+            off.render(&above, false);
+            let (_, batches, instances, _) = off.read_selection();
+            let b = batches.iter().find(|b| b.instance_count > 0).unwrap();
+            let tree = instances[b.instance_offset as usize].decode(b);
+            let h = f64::from(m.species[b.species as usize].height_m * tree.scale);
+            // From the side, level with the middle of the crown, the sun behind the eye.
+            let at = DVec3::from(tree.position_m.map(f64::from)) + DVec3::Z * (0.5 * h);
+            let cam = Camera::look_at(at + DVec3::new(0.0, -1.6 * h, 0.0), at);
+            off.settings.lighting = sun(190.0, 35.0);
+            off.settings.shadows = ShadowQuality::Off;
+            off.settings.representations = Representations { meshes: false, clusters: false, billboards: false };
+            let bare = render(&mut off, &cam);
+            off.settings.representations = only;
+            // Levels by family: the full mesh, the finest ellipsoids, billboards at any size.
+            off.settings.quality = if family == "meshes" { 1.0e6 } else { 1.0 };
+            off.settings.cluster_min_px = 0.0;
+            let img = render(&mut off, &cam);
+            measured.push(crown_thirds(&img, &bare));
+            std::fs::remove_dir_all(&dir).ok();
+        }
+        let [(top1, low1, n1), (top60, low60, n60)] = [measured[0], measured[1]];
+        assert!(n1 > 500 && n60 > 500, "{family}: the tree covers {n1} / {n60} px");
+        eprintln!("{family}: alone top {top1:.1} bottom {low1:.1}; in a stand top {top60:.1} bottom {low60:.1}");
+        // Tops barely change, the lower crown darkens clearly.
+        assert!(top60 > 0.85 * top1, "{family}: the stand's crown tops darkened too much");
+        let ratio = low60 / low1;
+        assert!(ratio < 0.85, "{family}: the lower crown of a dense stand is not darker ({ratio:.2})");
+        ratios.push(ratio);
+    }
+    // The same tree looks equally dark at every level of detail.
+    let (lo, hi) = ratios.iter().fold((f32::MAX, f32::MIN), |(l, h), r| (l.min(*r), h.max(*r)));
+    assert!(hi - lo < 0.15, "levels darken differently: {ratios:?}");
 }
