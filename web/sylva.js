@@ -166,8 +166,9 @@ class SylvaViewer {
     return result;
   }
 
-  /** Light settings: `shadows` 'off' | 'low' (2 cascades of 1024² over 300 m)
-   * | 'high' (3 of 1536² over 600 m, softer; the default). Throws for an
+  /** Light settings: `shadows` 'off' | 'low' (2 cascades over 300 m, maps of
+   * 0.8 texels per canvas pixel) | 'high' (3 over 600 m, 1.6 texels per pixel,
+   * softer; the default). Throws for an
    * unknown key or quality. */
   setLighting(options = {}) {
     for (const key of Object.keys(options)) {

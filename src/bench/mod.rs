@@ -448,6 +448,13 @@ pub fn run(
             // One unmeasured frame settles LoD-dependent loads (packs) and pipelines.
             off.render(cam, false);
             let s = off.render(cam, true);
+            if method.reference.is_none() && s.items_dropped + s.shadow_items_dropped > 0 {
+                eprintln!(
+                    "warning: {} frame {i} lost {} trees and {} shadow casters to full segments: \
+                     its image lacks them (a smaller scene or view keeps the reference whole)",
+                    method.name, s.items_dropped, s.shadow_items_dropped
+                );
+            }
             let img = downsample(&off.read_image(), width * ss, height * ss, ss);
             let cull = s.gpu_ms.get("cull").copied().unwrap_or(0.0);
             let draw = s.gpu_ms.get("draw").copied().unwrap_or(0.0);

@@ -20,12 +20,13 @@ const PALETTE: [plotters::style::RGBColor; 10] = [
     plotters::style::RGBColor(23, 190, 207),
 ];
 
-/// The reference in black, the others in the order of `names`.
+/// The references (shadowed or not) in black, the others in the order of `names`.
 fn method_color(names: &[&String], name: &str) -> plotters::style::RGBColor {
-    if name == "reference" {
+    let is_reference = |n: &str| n == "reference" || n == super::SHADOWED_REFERENCE;
+    if is_reference(name) {
         return PALETTE[0];
     }
-    let i = names.iter().filter(|n| n.as_str() != "reference").position(|n| n.as_str() == name).unwrap_or(0);
+    let i = names.iter().filter(|n| !is_reference(n)).position(|n| n.as_str() == name).unwrap_or(0);
     PALETTE[1 + i % (PALETTE.len() - 1)]
 }
 

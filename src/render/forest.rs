@@ -28,6 +28,7 @@ use super::reach::Reach;
 pub use super::settings::{CullingMode, RenderSettings, Representations, DEFAULT_CLUSTER_MIN_PX, DEFAULT_THIN_PX};
 use super::shadow::{ShadowMaps, MAX_CASCADES};
 use super::species::{Species, SpeciesFrame};
+use super::stats::CullCounters;
 use super::terrain::TerrainPass;
 use crate::camera::ViewData;
 use crate::format::pack::PACK_PARTS;
@@ -333,26 +334,48 @@ impl ForestRenderer {
     /// layer of the shadow map. Returns the draw calls recorded (0 without
     /// shadows). Submit it before the camera's cull pass: the two share the
     /// draw items.
+    /// With `timestamps`, the first cascade's cull pass writes index 4 at its
+    /// beginning and the last cascade's draw index 5 at its end.
     pub fn encode_shadows(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         frame: &FrameData,
+        timestamps: Option<&wgpu::QuerySet>,
     ) -> u32 {
         let Some(maps) = self.shadow_maps.as_ref().filter(|_| frame.cascades > 0) else { return 0 };
         let slots = self.slot_count();
         let slot_bytes = u64::from(slots) * size_of::<DrawArgs>() as u64;
-        let need = (slot_bytes * MAX_CASCADES as u64).max(4);
+        let part = CullCounters::cascade_bytes(slots);
+        let need = part * MAX_CASCADES as u64;
         if self.shadow_args.as_ref().is_none_or(|b| b.size() < need) {
             use wgpu::BufferUsages as U;
             self.shadow_args = Some(buffer(device, "shadow casters", need, U::COPY_DST | U::COPY_SRC));
         }
         let mut draws = 0;
+        let last = frame.cascades as usize - 1;
         for (i, layer) in maps.layers.iter().enumerate().take(frame.cascades as usize) {
             let group = &self.cascade_groups[i];
-            self.cull.encode(encoder, group, &self.pools, slots, None);
-            if let (Some(args), true) = (&self.shadow_args, slot_bytes > 0) {
-                encoder.copy_buffer_to_buffer(&self.pools.buffers.args, 0, args, i as u64 * slot_bytes, slot_bytes);
+            let begin = timestamps.filter(|_| i == 0).map(|query_set| wgpu::ComputePassTimestampWrites {
+                query_set,
+                beginning_of_pass_write_index: Some(4),
+                end_of_pass_write_index: None,
+            });
+            self.cull.encode(encoder, group, &self.pools, slots, begin);
+            // Its counters (control words, then slots) for the stats, as
+            // `CullCounters` reads them after the camera's.
+            if let Some(out) = &self.shadow_args {
+                let control = size_of::<CullControl>() as u64;
+                encoder.copy_buffer_to_buffer(&self.pools.buffers.control, 0, out, i as u64 * part, control);
+                if slot_bytes > 0 {
+                    encoder.copy_buffer_to_buffer(
+                        &self.pools.buffers.args,
+                        0,
+                        out,
+                        i as u64 * part + control,
+                        slot_bytes,
+                    );
+                }
             }
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("shadow cascade"),
@@ -362,12 +385,18 @@ impl ForestRenderer {
                     depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: None,
+                timestamp_writes: timestamps.filter(|_| i == last).map(|query_set| wgpu::RenderPassTimestampWrites {
+                    query_set,
+                    beginning_of_pass_write_index: None,
+                    end_of_pass_write_index: Some(5),
+                }),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
             pass.set_bind_group(0, group, &[]);
-            draws += self.species.draw_shadow(&mut pass, &self.pools);
+            let texels_per_m = self.last_cascades[i].lod[0];
+            draws +=
+                self.species.draw_shadow(&mut pass, &self.pools, &self.reach, texels_per_m, frame.species.fade_band);
         }
         draws
     }
@@ -504,10 +533,10 @@ impl ForestRenderer {
         let slots = u64::from(self.slot_count()) * size_of::<DrawArgs>() as u64;
         if slots > 0 {
             encoder.copy_buffer_to_buffer(&self.pools.buffers.args, 0, readback, control, slots);
-            if let (Some(args), true) = (&self.shadow_args, cascades > 0) {
-                let bytes = slots * u64::from(cascades);
-                encoder.copy_buffer_to_buffer(args, 0, readback, control + slots, bytes);
-            }
+        }
+        if let (Some(args), true) = (&self.shadow_args, cascades > 0) {
+            let bytes = CullCounters::cascade_bytes(self.slot_count()) * u64::from(cascades);
+            encoder.copy_buffer_to_buffer(args, 0, readback, control + slots, bytes);
         }
     }
 

@@ -8,7 +8,7 @@
 use super::forest::{ForestRenderer, GpuResidency, PoolConfig, RenderSettings};
 use super::gpu_data::REPR_COUNT;
 use super::readback::{CounterReadback, PassTimer};
-use super::stats::{CullCounters, FrameStats};
+use super::stats::FrameStats;
 use crate::camera::ViewData;
 use crate::scene::{Fetcher, SceneStream, StreamConfig};
 
@@ -154,7 +154,7 @@ impl<F: Fetcher> Frame<F> {
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();
         let mut shadow = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shadow") });
-        let shadow_draws = self.renderer.encode_shadows(&self.device, &mut shadow, &data);
+        let shadow_draws = self.renderer.encode_shadows(&self.device, &mut shadow, &data, queries);
         self.cascades = data.cascades;
         let mut cull = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cull") });
         self.renderer.encode_cull(&mut cull, &data, queries);
@@ -165,8 +165,8 @@ impl<F: Fetcher> Frame<F> {
         }
         let read_counters = read_counters && self.readback.is_idle();
         if read_counters {
-            let len = CullCounters::readback_bytes(self.renderer.slot_count(), data.cascades);
-            self.renderer.copy_counters(&mut draw, self.readback.record(len), data.cascades);
+            let slots = self.renderer.slot_count();
+            self.renderer.copy_counters(&mut draw, self.readback.record(slots, data.cascades), data.cascades);
         }
         // Prepared and recorded; `finish` (wgpu's own validation) is not counted,
         // as before the frame was shared (docs/BENCHMARKS.md compares like with like).
@@ -267,13 +267,17 @@ impl<F: Fetcher> Frame<F> {
         let wanted = |f: u64| f > 0 && frame.is_none_or(|want| want == f);
         let (counters, counters_frame) = self.readback.latest();
         if wanted(counters_frame) {
-            stats.apply_counters(counters, self.renderer.slot_count());
+            stats.apply_counters(counters);
+        } else {
+            stats.shadow_cascades = self.cascades;
         }
-        stats.shadow_cascades = self.cascades;
         let timed = self.timer.as_ref().and_then(PassTimer::latest).filter(|(f, _)| wanted(*f));
-        if let Some((_, [cull, draw])) = timed {
+        if let Some((_, [cull, draw, shadow])) = timed {
             stats.gpu_ms.insert("cull".into(), cull);
             stats.gpu_ms.insert("draw".into(), draw);
+            if stats.shadow_cascades > 0 {
+                stats.gpu_ms.insert("shadow".into(), shadow);
+            }
         } else if let Some((_, [cull, draw, shadow])) = self.waited.filter(|(f, _)| wanted(*f)) {
             stats.gpu_ms.insert("cull".into(), cull);
             stats.gpu_ms.insert("draw".into(), draw);

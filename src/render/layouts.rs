@@ -234,27 +234,15 @@ pub fn pulling_pipeline(
     fragment: &str,
     target: &PullingTarget,
 ) -> wgpu::RenderPipeline {
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        primitive: target.primitive,
-        depth_stencil: target.depth_stencil.clone(),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some(fragment),
-            compilation_options: Default::default(),
-            targets: &[Some(target.format.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    let stages = Stages { module, layout, buffers: &[], fragment };
+    render_pipeline(
+        device,
+        label,
+        &stages,
+        target.primitive,
+        target.depth_stencil.clone(),
+        &[Some(target.format.into())],
+    )
 }
 
 /// The depth-only pipeline a pass draws shadow casters with: vertex stage
@@ -268,23 +256,51 @@ pub fn shadow_caster_pipeline(
     layout: &wgpu::PipelineLayout,
     buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
 ) -> wgpu::RenderPipeline {
+    let stages = Stages { module, layout, buffers, fragment: "fs_shadow" };
+    let primitive = wgpu::PrimitiveState { cull_mode: None, ..Default::default() };
+    render_pipeline(
+        device,
+        label,
+        &stages,
+        primitive,
+        super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+        &[],
+    )
+}
+
+/// A module's `vs_main` (reading `buffers`) and `fragment` entry points under `layout`.
+struct Stages<'a> {
+    module: &'a wgpu::ShaderModule,
+    layout: &'a wgpu::PipelineLayout,
+    buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
+    fragment: &'a str,
+}
+
+fn render_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    stages: &Stages<'_>,
+    primitive: wgpu::PrimitiveState,
+    depth_stencil: Option<wgpu::DepthStencilState>,
+    targets: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(label),
-        layout: Some(layout),
+        layout: Some(stages.layout),
         vertex: wgpu::VertexState {
-            module,
+            module: stages.module,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers,
+            buffers: stages.buffers,
         },
-        primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-        depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+        primitive,
+        depth_stencil,
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some("fs_shadow"),
+            module: stages.module,
+            entry_point: Some(stages.fragment),
             compilation_options: Default::default(),
-            targets: &[],
+            targets,
         }),
         multiview_mask: None,
         cache: None,

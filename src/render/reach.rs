@@ -31,6 +31,8 @@ struct Measured {
 #[derive(Debug, Clone, Default)]
 pub struct Reach {
     species_max_px: Vec<f32>,
+    /// Each species' tallest resident tree (m), within reach or not.
+    species_tallest_m: Vec<f32>,
     measured: Option<Measured>,
 }
 
@@ -63,6 +65,15 @@ impl Reach {
         self.measured = Some(key);
         self.species_max_px.clear();
         self.species_max_px.resize(species, 0.0);
+        self.species_tallest_m.clear();
+        self.species_tallest_m.resize(species, 0.0);
+        for t in tiles {
+            for &(s, h) in &t.heights {
+                if let Some(m) = self.species_tallest_m.get_mut(s as usize) {
+                    *m = m.max(h);
+                }
+            }
+        }
         // Tiles whose trees may reach this size on screen are bounded batch by batch
         // (tighter: which mesh levels and clusters a view needs); the others whole.
         let refine_px = settings.cluster_min_px.min(REFINE_PX) * (1.0 - settings.fade_band);
@@ -98,6 +109,15 @@ impl Reach {
     #[must_use]
     pub fn species_max_px(&self) -> &[f32] {
         &self.species_max_px
+    }
+
+    /// Species `s`'s tallest resident tree (m; infinite before the first measure).
+    #[must_use]
+    pub fn tallest_m(&self, s: usize) -> f32 {
+        if self.measured.is_none() {
+            return f32::INFINITY;
+        }
+        self.species_tallest_m.get(s).copied().unwrap_or(0.0)
     }
 
     /// The bound of species `s` (infinity before any measurement: draw everything).

@@ -88,6 +88,8 @@ impl Mapped {
 /// The cull counters read back (see the module docs).
 pub struct CounterReadback {
     mapped: Mapped,
+    /// (slots, cascades) of the copy recorded last.
+    layout: (u32, u32),
     counters: CullCounters,
     /// The frame whose counters were read (0: none yet).
     frame: u64,
@@ -104,6 +106,7 @@ impl CounterReadback {
                 CullCounters::readback_bytes(slots, super::shadow::MAX_CASCADES as u32),
             ),
             counters: CullCounters::default(),
+            layout: (0, 0),
             frame: 0,
         }
     }
@@ -114,9 +117,11 @@ impl CounterReadback {
         self.mapped.state() == MapState::Idle
     }
 
-    /// The buffer to copy `len` bytes of counters into; marks the copy recorded.
-    pub fn record(&mut self, len: u64) -> &wgpu::Buffer {
-        self.mapped.recorded(len);
+    /// The buffer to copy the counters of `slots` draw slots and `cascades`
+    /// shadow cascades into; marks the copy recorded.
+    pub fn record(&mut self, slots: u32, cascades: u32) -> &wgpu::Buffer {
+        self.layout = (slots, cascades);
+        self.mapped.recorded(CullCounters::readback_bytes(slots, cascades));
         &self.mapped.buffer
     }
 
@@ -128,7 +133,8 @@ impl CounterReadback {
     /// Decodes a finished mapping.
     pub fn collect(&mut self) {
         let mut counters = None;
-        if let Some(frame) = self.mapped.take(|d| counters = Some(CullCounters::from_bytes(d))) {
+        let (slots, cascades) = self.layout;
+        if let Some(frame) = self.mapped.take(|d| counters = Some(CullCounters::from_bytes(d, slots, cascades))) {
             self.counters = counters.unwrap_or_default();
             self.frame = frame;
         }
@@ -141,7 +147,7 @@ impl CounterReadback {
     }
 }
 
-/// Timestamp queries around the cull and draw passes (devices with
+/// Timestamp queries around the shadow, cull and draw passes (devices with
 /// `TIMESTAMP_QUERY`; used in the browser, where waiting per pass is impossible).
 pub struct PassTimer {
     queries: wgpu::QuerySet,
@@ -149,12 +155,14 @@ pub struct PassTimer {
     mapped: Mapped,
     /// Nanoseconds per tick.
     period_ns: f64,
-    /// The latest frame read and its (cull ms, draw ms).
-    latest: Option<(u64, [f64; 2])>,
+    /// The latest frame read and its (cull ms, draw ms, shadow ms).
+    latest: Option<(u64, [f64; 3])>,
 }
 
-/// Timestamps written per frame: cull begin, cull end, draw begin, draw end.
-const TIMESTAMPS: u32 = 4;
+/// Timestamps written per frame: cull begin, cull end, draw begin, draw end,
+/// shadow cascades begin (their first cull pass) and end (their last draw;
+/// both 0 in a frame without shadows).
+const TIMESTAMPS: u32 = 6;
 
 impl PassTimer {
     /// A timer, when the device has timestamp queries.
@@ -183,7 +191,8 @@ impl PassTimer {
     }
 
     /// The query set to write this frame's timestamps into (indices 0, 1 for the
-    /// cull pass, 2, 3 for the draw pass), or `None` while the last is read.
+    /// cull pass, 2, 3 for the draw pass, 4, 5 around the shadow cascades), or
+    /// `None` while the last is read.
     #[must_use]
     pub fn queries(&self) -> Option<&wgpu::QuerySet> {
         (self.mapped.state() == MapState::Idle).then_some(&self.queries)
@@ -207,13 +216,13 @@ impl PassTimer {
         let mut ticks = [0u64; TIMESTAMPS as usize];
         if let Some(frame) = self.mapped.take(|d| ticks = bytemuck::pod_read_unaligned(d)) {
             let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * self.period_ns / 1e6;
-            self.latest = Some((frame, [ms(ticks[0], ticks[1]), ms(ticks[2], ticks[3])]));
+            self.latest = Some((frame, [ms(ticks[0], ticks[1]), ms(ticks[2], ticks[3]), ms(ticks[4], ticks[5])]));
         }
     }
 
-    /// The latest frame read and its (cull ms, draw ms).
+    /// The latest frame read and its (cull ms, draw ms, shadow ms).
     #[must_use]
-    pub fn latest(&self) -> Option<(u64, [f64; 2])> {
+    pub fn latest(&self) -> Option<(u64, [f64; 3])> {
         self.latest
     }
 }

@@ -219,31 +219,30 @@ pub fn cascades(
     distance_m: f32,
     caster_reach_m: f32,
 ) -> Vec<Cascade> {
-    let eye_from_clip = clip_from_eye.inverse();
-    let unproject = |x: f32, y: f32| {
-        let p = eye_from_clip * Vec4::new(x, y, 1.0, 1.0);
-        p.truncate() / p.w
-    };
-    let forward = unproject(0.0, 0.0).normalize_or(Vec3::Y);
-    // The four corner rays, scaled to view depth 1.
-    let rays: Vec<Vec3> = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
-        .iter()
-        .map(|&(x, y)| {
-            let p = unproject(x, y);
-            p / p.dot(forward).max(1e-9)
-        })
-        .collect();
+    // The camera's axes and half-angles from its rotation + projection: row 3
+    // is the view direction (w = depth), rows 0 and 1 its right and up scaled
+    // by 1/tan of the half-angles. Rounded so rotation noise never changes a
+    // slice's sphere (its radius must not flicker between texel sizes).
+    let row = |i: usize| clip_from_eye.row(i).truncate();
+    let round = |v: f32| (v * 1e5).round() / 1e5;
+    let forward = row(3).normalize_or(Vec3::Y);
+    let tan_x = round(1.0 / row(0).length().max(1e-6));
+    let tan_y = round(1.0 / row(1).length().max(1e-6));
     let (right, up, f) = light_basis(sun_dir);
     let size = config.size as f64;
     let splits = split_distances(config.cascades.clamp(1, MAX_CASCADES as u32), distance_m);
     let mut near = 0.0f32;
     let mut out = Vec::with_capacity(splits.len());
     for far in splits {
-        let corners: Vec<Vec3> = rays.iter().flat_map(|r| [*r * near, *r * far]).collect();
-        let centre = corners.iter().copied().sum::<Vec3>() / corners.len() as f32;
-        let radius = corners.iter().map(|c| c.distance(centre)).fold(0.0f32, f32::max);
-        // Rounded up so the texel size only changes when the projection does.
-        let radius = f64::from((radius * 16.0).ceil() / 16.0).max(1.0);
+        // The slice's bounding sphere in camera space: centred on the axis
+        // where the near and far corners are equally far (or at the far
+        // plane's centre when that is nearer), rounded up to 1/16 m.
+        let (n, f_) = (f64::from(near), f64::from(far));
+        let k2 = f64::from(tan_x).powi(2) + f64::from(tan_y).powi(2);
+        let z = ((n + f_) * 0.5 * (1.0 + k2)).min(f_);
+        let radius = ((f_ - z).powi(2) + f_ * f_ * k2).max((z - n).powi(2) + n * n * k2).sqrt();
+        let radius = ((radius * 16.0).ceil() / 16.0).max(1.0);
+        let centre = forward * z as f32;
         let texel = 2.0 * radius / size;
         // Snap the centre to whole texels of the light's plane, in scene coordinates.
         let c_abs = eye + centre.as_dvec3();
@@ -397,13 +396,15 @@ mod tests {
                 for depth in [near + 0.01, c.far_m - 0.01] {
                     let q = dir * (depth / dir.dot(fwd));
                     let s = c.clip_from_eye * q.extend(1.0);
-                    assert!(s.x.abs() <= 1.0 && s.y.abs() <= 1.0, "{s} of {q}");
+                    // (Snapping moves the centre by up to half a texel.)
+                    let edge = 1.0 + 1.0 / config.size as f32;
+                    assert!(s.x.abs() <= edge && s.y.abs() <= edge, "{s} of {q}");
                     assert!((0.0..=1.0).contains(&s.z), "depth {s}");
                     assert!(c.frustum.iter().all(|pl| pl.truncate().dot(q) + pl.w >= -1e-3));
                     // A caster 150 m towards the sun from it is in the box too.
                     let caster = q + sun * 150.0;
                     let s = c.clip_from_eye * caster.extend(1.0);
-                    assert!((0.0..=1.0).contains(&s.z) && s.x.abs() <= 1.0 + 1e-4, "caster {s}");
+                    assert!((0.0..=1.0).contains(&s.z) && s.x.abs() <= edge, "caster {s}");
                 }
             }
             near = c.far_m;

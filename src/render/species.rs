@@ -40,6 +40,15 @@ struct SpeciesGpu {
     bytes: u64,
 }
 
+/// Which pipelines a species draw uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pipeline {
+    /// The lit ones (ellipsoids with their exact depth or not).
+    Lit(bool),
+    /// The shadow casters' (depth only).
+    Shadow,
+}
+
 /// What the species draws need of a frame.
 #[derive(Debug, Clone, Copy)]
 pub struct SpeciesFrame {
@@ -303,81 +312,87 @@ impl Species {
                     continue;
                 }
                 let slot = i as u32 * REPR_COUNT + repr as u32;
-                pass.set_bind_group(3, &pools.groups.draw, &[slot * size_of::<DrawParams>() as u32]);
-                let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
-                match repr {
-                    Repr::Mesh0 | Repr::Mesh1 => {
-                        let level = repr as usize;
-                        let Some(pipelines) = &self.mesh else { continue };
-                        if p.mesh.bind_level(pass, pipelines, RenderMode::Lit, level) > 0 {
-                            pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
-                            draws += 1;
-                        }
-                    }
-                    Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
-                        if let (Some(c), Some(pipeline)) = (&p.cluster, &self.cluster) {
-                            pass.set_pipeline(pipeline.pipeline(frame.cluster_exact_depth));
-                            pass.set_bind_group(1, &c.bind_group, &[]);
-                            pass.draw_indirect(&pools.buffers.args, args_offset);
-                            draws += 1;
-                        }
-                    }
-                    Repr::Billboard => {
-                        if let (Some(bb), Some(pipeline)) = (&p.billboard, &self.billboard) {
-                            pass.set_pipeline(pipeline.pipeline());
-                            pass.set_bind_group(1, &bb.bind_group, &[]);
-                            pass.draw_indirect(&pools.buffers.args, args_offset);
-                            draws += 1;
-                        }
-                    }
-                }
+                draws +=
+                    u32::from(self.draw_slot(pass, pools, p, repr, slot, Pipeline::Lit(frame.cluster_exact_depth)));
             }
         }
         draws
     }
 
+    /// Records species `p`'s draw of `repr` (draw slot `slot`) with the lit or
+    /// the shadow casters' pipeline; false where nothing of it is on the GPU.
+    fn draw_slot<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'p>,
+        pools: &'p Pools,
+        p: &'p SpeciesGpu,
+        repr: Repr,
+        slot: u32,
+        pipeline: Pipeline,
+    ) -> bool {
+        pass.set_bind_group(3, &pools.groups.draw, &[slot * size_of::<DrawParams>() as u32]);
+        let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
+        match repr {
+            Repr::Mesh0 | Repr::Mesh1 => {
+                let Some(pipelines) = &self.mesh else { return false };
+                let mode = if pipeline == Pipeline::Shadow { RenderMode::Shadow } else { RenderMode::Lit };
+                if p.mesh.bind_level(pass, pipelines, mode, repr as usize) == 0 {
+                    return false;
+                }
+                pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
+            }
+            Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
+                let (Some(c), Some(cluster)) = (&p.cluster, &self.cluster) else { return false };
+                pass.set_pipeline(match pipeline {
+                    Pipeline::Lit(exact_depth) => cluster.pipeline(exact_depth),
+                    Pipeline::Shadow => cluster.shadow_pipeline(),
+                });
+                pass.set_bind_group(1, &c.bind_group, &[]);
+                pass.draw_indirect(&pools.buffers.args, args_offset);
+            }
+            Repr::Billboard => {
+                let (Some(bb), Some(billboard)) = (&p.billboard, &self.billboard) else { return false };
+                pass.set_pipeline(match pipeline {
+                    Pipeline::Lit(_) => billboard.pipeline(),
+                    Pipeline::Shadow => billboard.shadow_pipeline(),
+                });
+                pass.set_bind_group(1, &bb.bind_group, &[]);
+                pass.draw_indirect(&pools.buffers.args, args_offset);
+            }
+        }
+        true
+    }
+
     /// Records the species draws of a shadow cascade into `pass` (the
     /// cascade's view bound at group 0, its cull pass run): the depth-only
-    /// pipelines, one indirect draw per ready species × representation (the
-    /// camera's reach says nothing about what shades its view). Returns the
-    /// draws recorded.
-    pub fn draw_shadow<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, pools: &'p Pools) -> u32 {
+    /// pipelines, one indirect draw per ready species × representation that
+    /// the species' tallest resident tree can reach at the cascade's
+    /// `texels_per_m` (anywhere: the camera's reach says nothing about what
+    /// shades its view). Returns the draws recorded.
+    pub fn draw_shadow<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'p>,
+        pools: &'p Pools,
+        reach: &Reach,
+        texels_per_m: f32,
+        fade_band: f32,
+    ) -> u32 {
         pass.set_bind_group(2, &pools.groups.instance, &[]);
         let mut draws = 0;
         for (i, p) in self.packs.iter().enumerate() {
             let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
-            for repr in Repr::ALL {
+            let max_px = reach.tallest_m(i) * texels_per_m;
+            let coarsest = Repr::ALL.iter().rposition(|r| s.slot_cap[*r as usize] > 0);
+            for (k, repr) in Repr::ALL.into_iter().enumerate() {
                 if s.slot_cap[repr as usize] == 0 {
                     continue;
                 }
-                let slot = i as u32 * REPR_COUNT + repr as u32;
-                pass.set_bind_group(3, &pools.groups.draw, &[slot * size_of::<DrawParams>() as u32]);
-                let args_offset = u64::from(slot) * size_of::<DrawArgs>() as u64;
-                match repr {
-                    Repr::Mesh0 | Repr::Mesh1 => {
-                        let Some(pipelines) = &self.mesh else { continue };
-                        if p.mesh.bind_level(pass, pipelines, RenderMode::Shadow, repr as usize) > 0 {
-                            pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
-                            draws += 1;
-                        }
-                    }
-                    Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
-                        if let (Some(c), Some(pipeline)) = (&p.cluster, &self.cluster) {
-                            pass.set_pipeline(pipeline.shadow_pipeline());
-                            pass.set_bind_group(1, &c.bind_group, &[]);
-                            pass.draw_indirect(&pools.buffers.args, args_offset);
-                            draws += 1;
-                        }
-                    }
-                    Repr::Billboard => {
-                        if let (Some(bb), Some(pipeline)) = (&p.billboard, &self.billboard) {
-                            pass.set_pipeline(pipeline.shadow_pipeline());
-                            pass.set_bind_group(1, &bb.bind_group, &[]);
-                            pass.draw_indirect(&pools.buffers.args, args_offset);
-                            draws += 1;
-                        }
-                    }
+                let lower = if Some(k) == coarsest { 0.0 } else { s.lower_px[repr as usize] * (1.0 - fade_band) };
+                if max_px <= 0.0 || lower > max_px {
+                    continue;
                 }
+                let slot = i as u32 * REPR_COUNT + repr as u32;
+                draws += u32::from(self.draw_slot(pass, pools, p, repr, slot, Pipeline::Shadow));
             }
         }
         draws

@@ -21,6 +21,8 @@ pub struct FrameStats {
     pub shadow_casters: std::collections::BTreeMap<String, u64>,
     /// Shadow cascades drawn (0: shadows off, or the sun is down).
     pub shadow_cascades: u32,
+    /// Shadow casters dropped because a segment was full (should be 0).
+    pub shadow_items_dropped: u32,
     /// Batch slots the cull pass tested.
     pub batches_tested: u32,
     /// Batches that passed the batch test.
@@ -125,52 +127,82 @@ impl FrameStats {
         }
     }
 
-    /// Fills in the cull pass's counters read back from the GPU: the first
-    /// `slot_count` slots are the camera's, any after them the shadow cascades'.
-    pub fn apply_counters(&mut self, counters: &CullCounters, slot_count: u32) {
+    /// Fills in the cull passes' counters read back from the GPU (the
+    /// camera's, and the shadow cascades' of the same frame).
+    pub fn apply_counters(&mut self, counters: &CullCounters) {
         self.batches_visible = counters.control.batches_visible;
         self.instances_tested = counters.control.instances_tested;
         self.items_dropped = counters.control.items_dropped;
+        self.shadow_cascades = counters.cascades;
+        self.shadow_items_dropped = counters.shadow_dropped;
         self.shadow_casters.clear();
         for repr in Repr::ALL {
             self.instances.insert(repr.name().into(), 0);
         }
-        let main = (slot_count as usize).min(counters.slots.len());
-        for (slot, args) in counters.slots.iter().enumerate() {
-            let repr = Repr::ALL[slot % REPR_COUNT as usize];
-            let map = if slot < main { &mut self.instances } else { &mut self.shadow_casters };
-            *map.entry(repr.name().into()).or_default() += u64::from(args.instance_count);
-        }
+        let count = |map: &mut std::collections::BTreeMap<String, u64>, slots: &[DrawArgs]| {
+            for (slot, args) in slots.iter().enumerate() {
+                let repr = Repr::ALL[slot % REPR_COUNT as usize];
+                *map.entry(repr.name().into()).or_default() += u64::from(args.instance_count);
+            }
+        };
+        count(&mut self.instances, &counters.slots);
+        count(&mut self.shadow_casters, &counters.shadow_slots);
     }
 }
 
 /// The cull pass's counters and draw arguments as read back after a frame:
-/// [`CullControl`], then one [`DrawArgs`] per draw slot.
+/// [`CullControl`], then one [`DrawArgs`] per draw slot; then, per shadow
+/// cascade, its cull pass's control words and slots.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct CullCounters {
     /// The control words.
     pub control: CullControl,
     /// Per draw slot (`species * REPR_COUNT + repr`).
     pub slots: Vec<DrawArgs>,
+    /// Shadow cascades read back with them.
+    pub cascades: u32,
+    /// Items the cascades' cull passes dropped (full segments), summed.
+    pub shadow_dropped: u32,
+    /// The cascades' slots, one after another.
+    pub shadow_slots: Vec<DrawArgs>,
 }
 
 impl CullCounters {
-    /// Bytes of a readback of `slot_count` slots for the camera and each of
-    /// `cascades` shadow cascades: the control words, then the slots.
+    /// Bytes of one cascade's part: its control words, then its slots.
     #[must_use]
-    pub fn readback_bytes(slot_count: u32, cascades: u32) -> u64 {
-        (size_of::<CullControl>() + slot_count as usize * (1 + cascades as usize) * size_of::<DrawArgs>()) as u64
+    pub fn cascade_bytes(slot_count: u32) -> u64 {
+        (size_of::<CullControl>() + slot_count as usize * size_of::<DrawArgs>()) as u64
     }
 
-    /// Decodes a readback (any length: whole slots only).
+    /// Bytes of a readback of `slot_count` slots for the camera and each of
+    /// `cascades` shadow cascades.
     #[must_use]
-    pub fn from_bytes(bytes: &[u8]) -> Self {
-        let head = size_of::<CullControl>().min(bytes.len());
-        let mut control = CullControl::default();
-        bytemuck::bytes_of_mut(&mut control)[..head].copy_from_slice(&bytes[..head]);
-        let rest = &bytes[head..];
-        let whole = rest.len() / size_of::<DrawArgs>() * size_of::<DrawArgs>();
-        Self { control, slots: bytemuck::pod_collect_to_vec(&rest[..whole]) }
+    pub fn readback_bytes(slot_count: u32, cascades: u32) -> u64 {
+        Self::cascade_bytes(slot_count) * (1 + u64::from(cascades))
+    }
+
+    /// Decodes a readback of `slot_count` slots and `cascades` cascades (a
+    /// shorter one decodes what is there: whole slots only).
+    #[must_use]
+    pub fn from_bytes(bytes: &[u8], slot_count: u32, cascades: u32) -> Self {
+        let part = Self::cascade_bytes(slot_count) as usize;
+        let decode = |bytes: &[u8]| {
+            let head = size_of::<CullControl>().min(bytes.len());
+            let mut control = CullControl::default();
+            bytemuck::bytes_of_mut(&mut control)[..head].copy_from_slice(&bytes[..head]);
+            let rest = &bytes[head..bytes.len().min(part).max(head)];
+            let whole = rest.len() / size_of::<DrawArgs>() * size_of::<DrawArgs>();
+            (control, bytemuck::pod_collect_to_vec::<u8, DrawArgs>(&rest[..whole]))
+        };
+        let (control, slots) = decode(bytes);
+        let mut out = Self { control, slots, cascades, ..Self::default() };
+        for c in 0..cascades as usize {
+            let Some(cascade) = bytes.get(part * (1 + c)..) else { break };
+            let (control, slots) = decode(cascade);
+            out.shadow_dropped += control.items_dropped;
+            out.shadow_slots.extend(slots);
+        }
+        out
     }
 }
 
@@ -186,16 +218,27 @@ mod tests {
         words[5] = 2; // items dropped
         words[8 + 1] = 40; // slot 0: mesh0 instances
         words[8 + 5 + 1] = 9; // slot 1: mesh1 instances
-        let c = CullCounters::from_bytes(bytemuck::cast_slice(&words));
+        let c = CullCounters::from_bytes(bytemuck::cast_slice(&words), 2, 0);
         assert_eq!((c.control.batches_visible, c.control.instances_tested, c.control.items_dropped), (7, 300, 2));
         assert_eq!(c.slots.iter().map(|s| s.instance_count).collect::<Vec<_>>(), vec![40, 9]);
         assert_eq!(CullCounters::readback_bytes(2, 0), 32 + 40);
-        assert_eq!(CullCounters::readback_bytes(2, 1), 32 + 80);
+        assert_eq!(CullCounters::readback_bytes(2, 1), 2 * (32 + 40));
         let mut stats = FrameStats::default();
-        stats.apply_counters(&c, 2);
+        stats.apply_counters(&c);
         assert!(stats.shadow_casters.is_empty());
+        // With a cascade: its control words (3 dropped) and slots after the camera's.
+        let mut with = words.clone();
+        with.extend([0, 0, 0, 0, 0, 3, 0, 0]);
+        with.extend([0, 11, 0, 0, 0, 0, 0, 0, 0, 0]);
+        let c = CullCounters::from_bytes(bytemuck::cast_slice(&with), 2, 1);
+        stats.apply_counters(&c);
+        assert_eq!((stats.shadow_cascades, stats.shadow_items_dropped), (1, 3));
+        assert_eq!((stats.shadow_casters["mesh0"], stats.instances["mesh0"]), (11, 40));
         assert_eq!((stats.instances["mesh0"], stats.instances["mesh1"], stats.instances["billboard"]), (40, 9, 0));
         // A short readback decodes what is there.
-        assert_eq!(CullCounters::from_bytes(&bytemuck::cast_slice::<u32, u8>(&words)[..10]).control.batches_visible, 7);
+        assert_eq!(
+            CullCounters::from_bytes(&bytemuck::cast_slice::<u32, u8>(&words)[..10], 2, 0).control.batches_visible,
+            7
+        );
     }
 }
