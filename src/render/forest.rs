@@ -232,13 +232,7 @@ impl ForestRenderer {
     /// The shadow map for `config`, made (and the camera's view group rebound)
     /// when the quality changed.
     fn ensure_shadow_maps(&mut self, device: &wgpu::Device, config: super::shadow::ShadowConfig) {
-        let wanted = |m: &ShadowMaps| {
-            m.config.pcf_radius == config.pcf_radius
-                && m.config.distance_m == config.distance_m
-                && m.layers.len() as u32 == config.cascades.min(MAX_CASCADES as u32)
-                && m.config.size == config.size.min(device.limits().max_texture_dimension_2d)
-        };
-        if self.shadow_maps.as_ref().is_some_and(wanted) {
+        if self.shadow_maps.as_ref().is_some_and(|m| m.requested == config) {
             return;
         }
         let maps = ShadowMaps::new(device, config);

@@ -322,7 +322,9 @@ pub fn shadow_map(device: &wgpu::Device, size: u32, layers: u32) -> wgpu::Textur
 
 /// The shadow map of the current quality and its views.
 pub struct ShadowMaps {
-    /// The quality the map was made for.
+    /// The configuration asked for.
+    pub requested: ShadowConfig,
+    /// That configuration cut to the device's limits: what the map is.
     pub config: ShadowConfig,
     /// All layers, for sampling.
     pub array: wgpu::TextureView,
@@ -333,7 +335,8 @@ pub struct ShadowMaps {
 impl ShadowMaps {
     /// Makes the map for `config`, cut to the device's texture size limit.
     #[must_use]
-    pub fn new(device: &wgpu::Device, config: ShadowConfig) -> Self {
+    pub fn new(device: &wgpu::Device, requested: ShadowConfig) -> Self {
+        let config = requested;
         let limits = device.limits();
         let config = ShadowConfig {
             size: config.size.min(limits.max_texture_dimension_2d),
@@ -357,7 +360,7 @@ impl ShadowMaps {
                 })
             })
             .collect();
-        Self { config, array, layers }
+        Self { requested, config, array, layers }
     }
 }
 
