@@ -1,6 +1,7 @@
 //! A short `sylva bench --stress` run on the fixture scene, alone in its process
 //! (it reads the process's resident set): after one warm-up pass along the path
-//! and back, memory must stay flat and every counter finite. Frame time is not
+//! and back, memory must stay flat (the median resident set of the last pass
+//! against the second's) and every counter finite. Frame time is not
 //! asserted here — timing belongs to `make bench-stress`. This is the test that
 //! found Mesa 22.3 lavapipe compiling (and leaking) a shader variant per pipeline
 //! bind while the view was a uniform buffer: 1.5 MB per frame.
@@ -30,12 +31,12 @@ fn memory_stays_flat_along_a_long_path() {
     assert_eq!(summary.non_finite_frames, 0);
     assert!(frames.iter().any(|f| f.drawn > 0), "nothing was drawn");
     assert!(summary.rss_after_first > 0, "no resident set size (/proc missing?)");
-    let after_warmup = frames[period..].iter().map(|f| f.rss_bytes).max().unwrap();
-    let grown_mb = (after_warmup as f64 - summary.rss_after_first as f64) / 1e6;
+    // Medians, pass against pass (the same views): single frames spike by 10-20 MB
+    // on lavapipe as the driver takes and returns memory, a leak moves the median.
+    let (first, last) = (summary.rss_first.median / 1e6, summary.rss_last.median / 1e6);
     assert!(
-        after_warmup as f64 <= summary.rss_after_first as f64 * 1.10,
-        "memory grew by {grown_mb:.1} MB over {} frames after the warm-up pass ({:.0} MB then)",
-        frames.len() - period,
-        summary.rss_after_first as f64 / 1e6
+        last <= first * 1.10,
+        "memory grew from a median {first:.1} MB over the second pass to {last:.1} MB over the last ({} frames later)",
+        2 * period
     );
 }
