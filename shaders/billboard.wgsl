@@ -8,6 +8,8 @@
 @group(1) @binding(0) var bb_color: texture_2d_array<f32>;
 @group(1) @binding(1) var bb_normal: texture_2d_array<f32>;
 @group(1) @binding(2) var bb_sampler: sampler;
+// The tree's own baked sky visibility (r; one white texel where not baked).
+@group(1) @binding(3) var bb_ao: texture_2d_array<f32>;
 
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
@@ -114,6 +116,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
     let packed_normal = textureSample(bb_normal, bb_sampler, in.uv, in.layer);
+    let baked_ao = textureSample(bb_ao, bb_sampler, in.uv, in.layer).r;
     if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
         discard;
     }
@@ -124,8 +127,9 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }
+    let ao = own_ao(baked_ao, view);
     let sun = sun_visibility(frag_rel(in.clip, view), n, in.lift, open_sun(in.canopy));
-    return vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun, in.canopy), in.clip, view), 1.0);
+    return vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested.

@@ -40,7 +40,15 @@ struct VertexOut {
     @location(5) @interpolate(flat) item_y: u32,
     // Forest-scale occlusion (`canopy_occlusion`) at the primitive's height.
     @location(6) @interpolate(flat) canopy: f32,
+    // The tree's own baked sky visibility over the primitive (1 where not baked).
+    @location(7) @interpolate(flat) ao: f32,
 };
+
+// An occlusion byte of ellipsoids and lines: 0 not baked (open), 1–255 sky
+// visibility 0–1. Must match `ao_from_byte` in src/format/pack.rs.
+fn ao_byte(b: u32) -> f32 {
+    return select(1.0, f32(b) / 254.0 - 1.0 / 254.0, b >= 1u);
+}
 
 struct Ellipsoid {
     center: vec3<f32>,
@@ -48,6 +56,7 @@ struct Ellipsoid {
     radii: vec3<f32>,
     color: vec3<f32>,
     level: f32,
+    ao: f32,
 };
 
 // IEEE half float → f32 by hand: `unpack2x16float` needs a capability some
@@ -83,6 +92,7 @@ fn unpack_ellipsoid(i: u32) -> Ellipsoid {
     e.center = dequantise(vec3<f32>(xy, zl.x));
     e.level = zl.y * 16.0;
     e.radii = vec3<f32>(rxy, rz.x);
+    e.ao = ao_byte((records[base + 3u] >> 16u) & 0xffu);
     e.rotation = normalize(unpack4x8snorm(records[base + 4u]));
     let c = unpack4x8unorm(records[base + 5u]).rgb;
     // sRGB → linear (the records store sRGB bytes).
@@ -175,6 +185,7 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
     (*out).p3 = vec4<f32>(a2 / (k * r.z), 0.0);
     (*out).color = vec4<f32>(e.color * variation_tint(tree.variation), e.level);
     (*out).canopy = e.center.z / max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
+    (*out).ao = e.ao;
 }
 
 fn is_perspective() -> bool {
@@ -244,6 +255,11 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
     (*out).color = vec4<f32>(draw.line_color.rgb * variation_tint(tree.variation), 0.0);
     let top = max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
     (*out).canopy = 0.5 * (dequantise(vec3<f32>(w0, w1.x)).z + dequantise(vec3<f32>(w1.y, w2)).z) / top;
+    (*out).ao = 1.0;
+    if draw.cluster_ao.y == 1u {
+        let word = records[draw.cluster_ao.x + i / 4u];
+        (*out).ao = ao_byte((word >> (8u * (i % 4u))) & 0xffu);
+    }
 }
 
 @vertex
@@ -391,8 +407,9 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }
+    let ao = own_ao(in.ao, view);
     let sun = sun_visibility(hit.p, hit.n, 0.0, open_sun(in.canopy));
-    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, in.canopy), hit.p, view), 1.0);
+    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, in.canopy, ao), hit.p, view), 1.0);
     return out;
 }
 

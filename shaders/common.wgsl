@@ -109,6 +109,8 @@ struct DrawParams {
     bounds_extent: vec4<f32>,
     // Linear RGB of the lines.
     line_color: vec4<f32>,
+    // x: first word of the lines' occlusion bytes (LNAO), y: 1 when present.
+    cluster_ao: vec4<u32>,
 };
 
 // A decoded tree, eye-relative.
@@ -315,33 +317,45 @@ fn frag_rel(frag: vec4<f32>, view: View) -> vec3<f32> {
 
 // `sun` is the fraction of the sun that reaches the surface (shadows, 1 lit);
 // `occlusion` the fraction of the sky its surroundings hide (`canopy_occlusion`).
-fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View, sun: f32, occlusion: f32) -> vec3<f32> {
+fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View, sun: f32, occlusion: f32, ao: f32) -> vec3<f32> {
     let ndl = dot(n, view.sun_dir.xyz);
     var diffuse = max(ndl, 0.0);
     if is_leaf {
         diffuse = max(ndl, 0.0) * 0.75 + abs(ndl) * 0.25;
     }
-    let sky = sky_light(n, is_leaf, view) * (1.0 - CANOPY_SKY_OCCLUSION * occlusion);
+    let sky = sky_light(n, is_leaf, view) * (1.0 - CANOPY_SKY_OCCLUSION * occlusion) * ao;
     return albedo * (sky + view.sun_color.rgb * (diffuse * sun));
+}
+
+// A tree's own ambient occlusion, baked per species (bake-tool/src/ao.rs): the
+// sky a point inside its crown sees through the tree's leaves and wood, the
+// same field sampled by every level of detail (mesh vertices, the billboard
+// capture, ellipsoids, lines). `baked` is 1 where a pack has none; the view's
+// ambient.w switches it on (1) or off (0).
+fn own_ao(baked: f32, view: View) -> f32 {
+    return mix(1.0, clamp(baked, 0.0, 1.0), view.ambient.w);
 }
 
 // Forest-scale occlusion, the same for every representation of a tree: in a
 // dense stand the neighbours' crowns hide part of the sky and of the sun from
 // a tree, the more the lower in its crown (its top stays open), so clearings,
 // edges and thinned stands read lighter than closed canopy. The stand's
-// density is its batch's (trees × crown area over the batch's footprint,
-// crown radius a fifth of the tallest tree's height); within the shadow
+// density is its batch's (a tree's neighbours × crown area over the batch's
+// footprint, crown radius a fifth of the tallest tree's height: a lone tree
+// is open); within the shadow
 // distance the shadow map replaces the sun term (`sun_visibility`).
 const CANOPY_CROWN_RADIUS: f32 = 0.2;
 // At full cover, the bottom of a crown loses this much of the sky and of the sun.
 const CANOPY_SKY_OCCLUSION: f32 = 0.45;
 const CANOPY_SUN_OCCLUSION: f32 = 0.6;
 
-// Fraction of the ground a batch's crowns cover (0–1).
+// Fraction of the ground around one of a batch's trees that its neighbours'
+// crowns cover (0–1).
 fn batch_cover(b: Batch) -> f32 {
     let footprint = 4.0 * max(b.half_extent_m.x * b.half_extent_m.y, 1.0);
     let r = CANOPY_CROWN_RADIUS * b.max_height_m;
-    return clamp(f32(b.instance_count) * 3.14159265 * r * r / footprint, 0.0, 1.0);
+    let neighbours = f32(max(b.instance_count, 1u) - 1u);
+    return clamp(neighbours * 3.14159265 * r * r / footprint, 0.0, 1.0);
 }
 
 // Occlusion (0 open – 1 closed) of a point at `rel_height` (0 base – 1 top) of a tree of batch `b`.
@@ -350,6 +364,9 @@ fn canopy_occlusion(b: Batch, rel_height: f32) -> f32 {
 }
 
 // The sun reaching a point with that occlusion where no shadow map covers it.
+// (A tree's own ambient occlusion dims only its sky light: it is an average
+// over the sky, and the shadow map, where it covers, knows which leaves the
+// sun reaches — dimming the sun by it too would make shadows brighten trees.)
 fn open_sun(occlusion: f32) -> f32 {
     return 1.0 - CANOPY_SUN_OCCLUSION * occlusion;
 }

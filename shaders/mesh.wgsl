@@ -1,6 +1,7 @@
 // Mesh pass: alpha-tested, quantised tree meshes (LoD pack mesh levels), one
 // indirect draw per (species × mesh level) over the draw items the cull pass
-// wrote. Mode 1 (capture) writes albedo + normal for the bake's billboards.
+// wrote. Mode 1 (capture) writes albedo, normal and baked occlusion for the
+// bake's billboards.
 // Rust side: src/render/mesh.rs.
 
 @group(0) @binding(0) var<storage, read> view: View;
@@ -52,7 +53,16 @@ struct VertexOut {
     @location(4) @interpolate(flat) item_y: u32,
     // Forest-scale occlusion (`canopy_occlusion`).
     @location(5) canopy: f32,
+    // The tree's own baked sky visibility (`vertex_ao`; 1 where not baked).
+    @location(6) ao: f32,
 };
+
+// The occlusion byte of a vertex (`normal_oct` byte 2, snorm8): 0 not baked
+// (open), 1–127 sky visibility 0–1. Must match `ao_from_snorm8` in src/format/pack.rs.
+fn vertex_ao(z: f32) -> f32 {
+    let q = round(z * 127.0);
+    return select(1.0, (q - 1.0) / 126.0, q >= 1.0);
+}
 
 @vertex
 fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
@@ -71,6 +81,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.material = in.position_material.w;
     out.item_y = item.y;
     out.canopy = canopy_occlusion(batch, local.z / max(mesh.pos_min.z + mesh.pos_extent.z, 1e-3));
+    out.ao = vertex_ao(in.normal_oct.z);
     return out;
 }
 
@@ -105,8 +116,9 @@ fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
     }
+    let ao = own_ao(in.ao, view);
     let sun = sun_visibility(frag_rel(in.clip, view), s.normal, 0.0, open_sun(in.canopy));
-    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun, in.canopy), in.clip, view), 1.0);
+    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested leaves (dappled shade).
@@ -120,6 +132,8 @@ struct CaptureOut {
     @location(0) albedo: vec4<f32>,
     // Model-frame normal * 0.5 + 0.5; alpha 1 for leaves, 0.5 for wood.
     @location(1) normal: vec4<f32>,
+    // The baked sky visibility (rgb), for the billboards' BBAO array.
+    @location(2) ao: vec4<f32>,
 };
 
 @fragment
@@ -128,5 +142,6 @@ fn fs_capture(in: VertexOut, @builtin(front_facing) front: bool) -> CaptureOut {
     var out: CaptureOut;
     out.albedo = vec4<f32>(s.albedo.rgb, 1.0);
     out.normal = vec4<f32>(s.normal * 0.5 + 0.5, select(0.5, 1.0, s.is_leaf));
+    out.ao = vec4<f32>(vec3<f32>(in.ao), 1.0);
     return out;
 }

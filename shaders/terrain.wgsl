@@ -210,14 +210,14 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         albedo = select(select(vec3<f32>(0.5, 0.3, 0.3), vec3<f32>(0.3, 0.5, 0.3), k == 1u), vec3<f32>(0.3, 0.3, 0.5), k == 2u);
     }
     let sun = sun_visibility(frag_rel(in.clip, view), n, 0.0, 1.0);
-    var lit = shade(albedo, n, false, view, sun, 0.0);
+    var lit = shade(albedo, n, false, view, sun, 0.0, 1.0);
     // Sampled everywhere (uniform control flow), used where there is an image.
     let has = in.layer != NO_IMAGE && (params.debug & 1u) == 0u;
     let photo = textureSample(images, image_sampler, vec2<f32>(in.image_uv.x, 1.0 - in.image_uv.y), select(0u, in.layer, has));
     // A photograph already holds the light of its day: relit relative to flat
     // ground under the default daylight, so level ground at midday shows its
     // own colours, slopes their relief, and dusk darkens it like the rest.
-    let relit = shade(photo.rgb, n, false, view, sun, 0.0) / DAY_FLAT_LIGHT;
+    let relit = shade(photo.rgb, n, false, view, sun, 0.0, 1.0) / DAY_FLAT_LIGHT;
     lit = mix(lit, relit, select(0.0, photo.a, has));
     return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }

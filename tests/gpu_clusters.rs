@@ -130,6 +130,7 @@ fn ray_cast_ellipsoids_match_the_cpu_reference() {
             radii,
             color: Vec3::splat(0.9),
             noise_level: 0.0,
+            ao: 1.0,
         };
         // What the GPU reads: the quantised record.
         let q = PackedEllipsoid::encode(&e, LO, HI).decode(LO, HI);
@@ -165,6 +166,7 @@ fn intersecting_ellipsoids_and_lines_keep_correct_depth() {
         radii: Vec3::new(3.0, 1.2, 0.8),
         color: Vec3::new(0.9, 0.05, 0.05),
         noise_level: 0.0,
+        ao: 1.0,
     };
     let blue = Ellipsoid {
         center: Vec3::new(0.5, 0.3, 5.5),
@@ -172,9 +174,11 @@ fn intersecting_ellipsoids_and_lines_keep_correct_depth() {
         radii: Vec3::new(1.0, 2.5, 1.0),
         color: Vec3::new(0.05, 0.05, 0.9),
         noise_level: 0.0,
+        ao: 1.0,
     };
     // A line through both (drawn in the line colour, light grey).
-    let line = Line { a: Vec3::new(-3.0, -1.0, 2.0), b: Vec3::new(3.0, 1.5, 8.0), radius_a: 0.3, radius_b: 0.3 };
+    let line =
+        Line { a: Vec3::new(-3.0, -1.0, 2.0), b: Vec3::new(3.0, 1.5, 8.0), radius_a: 0.3, radius_b: 0.3, ao: 1.0 };
     let c = upload(&ctx, &r, &[red, blue], &[line]);
     let decoded: Vec<Ellipsoid> =
         [red, blue].iter().map(|e| PackedEllipsoid::encode(e, LO, HI).decode(LO, HI)).collect();
@@ -248,7 +252,8 @@ fn three_representations_of_one_tree_side_by_side() {
         .expect("a level below mesh 1");
     let size = 128;
     let bg = [0.62, 0.74, 0.86, 1.0];
-    let render = |repr| render_pack_repr(&ctx, &pack, repr, PackView::Side, size, size, bg).expect("representation");
+    let render =
+        |repr| render_pack_repr(&ctx, &pack, repr, PackView::Side, size, size, bg, true).expect("representation");
     let mesh = render(PackRepr::Mesh(0));
     let cluster = render(PackRepr::Cluster(level));
     let billboard = render(PackRepr::Billboard);

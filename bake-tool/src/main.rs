@@ -2,6 +2,7 @@
 //! (LoD packs + grouped-batch tiles + manifest). See `--help`.
 
 mod allometry;
+mod ao;
 mod bake;
 mod batching;
 mod bucket;
@@ -114,6 +115,10 @@ struct PackArgs {
     /// Do not add clustered-ellipsoid and line levels (seed 002).
     #[arg(long)]
     no_clusters: bool,
+    /// Do not bake each tree's own ambient occlusion (darker inside the crown,
+    /// alike at every level of detail); the viewer then draws crowns unoccluded.
+    #[arg(long)]
+    no_ao: bool,
     /// EM starts per cluster level; the one with the lowest image error is kept.
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=32))]
     cluster_tries: u32,
@@ -175,6 +180,7 @@ impl PackArgs {
             simplified_level: !self.no_simplified_level,
             clusters: !self.no_clusters,
             cluster_tries: self.cluster_tries as usize,
+            ao: !self.no_ao,
         })
     }
 

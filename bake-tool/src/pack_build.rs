@@ -5,14 +5,15 @@
 use anyhow::{Context, Result};
 use glam::{Vec2, Vec3};
 use sylva::format::pack::{
-    encode_pack, kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta,
-    Section, TextureArrayMeta,
+    ao_to_snorm8, encode_pack, kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex,
+    PackMeta, Section, TextureArrayMeta,
 };
 use sylva::render::capture::CapturePipelines;
 use sylva::render::capture::{capture_billboards, BillboardFrame};
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 use sylva::render::GpuContext;
 
+use crate::ao::AoField;
 use crate::gltf_import::{ImportedModel, ImportedVertex};
 
 /// Knobs of the pack bake.
@@ -32,6 +33,8 @@ pub struct PackOptions {
     pub clusters: bool,
     /// EM starts per cluster level.
     pub cluster_tries: usize,
+    /// Whether to bake the tree's own ambient occlusion ([`crate::ao`]).
+    pub ao: bool,
 }
 
 impl Default for PackOptions {
@@ -44,6 +47,7 @@ impl Default for PackOptions {
             simplified_level: true,
             clusters: true,
             cluster_tries: 4,
+            ao: true,
         }
     }
 }
@@ -80,11 +84,26 @@ pub fn build_pack(
     let (lo, hi) = model.bounds();
     let height = (hi.z - lo.z).max(1e-3);
     let (materials, texture_meta, texture_bytes) = build_materials(model, opts.texture_size);
-    let mut levels = vec![build_mesh_level(model, SELECT_PX_MESH0)];
+    // The tree's own occlusion, one field for every level (mesh vertices, the
+    // billboard capture through them, ellipsoids, lines).
+    let started = std::time::Instant::now();
+    let ao = if opts.ao { AoField::build(model) } else { AoField::open() };
+    let vertex_ao: Vec<f32> = model.vertices.iter().map(|v| ao.at(v.position)).collect();
+    if opts.ao {
+        let (lo_v, hi_v) = vertex_ao.iter().fold((1.0f32, 0.0f32), |(a, b), v| (a.min(*v), b.max(*v)));
+        eprintln!(
+            "    ambient occlusion: sky visibility {lo_v:.2}–{hi_v:.2} at the vertices ({:.1} s)",
+            started.elapsed().as_secs_f64()
+        );
+    }
+    let mut levels = vec![build_mesh_level(model, SELECT_PX_MESH0, opts.ao.then_some(&vertex_ao[..]))];
     if opts.simplified_level {
-        let simple = simplify_model(model);
+        // Kept leaf cards keep their vertices' occlusion from where they were
+        // before being enlarged (their corners now reach out into the open).
+        let (simple, source) = simplify_model(model);
         if simple.triangles.len() < model.triangles.len() {
-            levels.push(build_mesh_level(&simple, SELECT_PX_MESH1));
+            let simple_ao: Vec<f32> = source.iter().map(|&i| vertex_ao[i as usize]).collect();
+            levels.push(build_mesh_level(&simple, SELECT_PX_MESH1, opts.ao.then_some(&simple_ao[..])));
         }
     }
     let mut sections = Vec::new();
@@ -161,10 +180,31 @@ pub fn build_pack(
         stride: 0,
         data: mip_major(&normal_chains, tex.mips),
     });
+    if opts.ao {
+        // One byte per texel (the red channel), mips weighted by coverage like the normals'.
+        let ao_chains: Vec<Vec<Vec<u8>>> = captured
+            .ao
+            .iter()
+            .zip(&captured.color)
+            .map(|(a, c)| {
+                alpha_aware_mips(a, c, capture_size, ColorEncoding::Linear, None)[1..]
+                    .iter()
+                    .map(|mip| mip.chunks_exact(4).map(|t| t[0]).collect())
+                    .collect()
+            })
+            .collect();
+        sections.push(Section {
+            kind: kind::BILLBOARD_AO,
+            index: 0,
+            count: 0,
+            stride: 0,
+            data: mip_major(&ao_chains, tex.mips),
+        });
+    }
     if opts.clusters {
         let hopts = crate::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
         let mut log = |m: &str| eprintln!("{m}");
-        if let Some(c) = crate::clusters::bake::build_clusters(model, &decoded, gpu, &hopts, &mut log)? {
+        if let Some(c) = crate::clusters::bake::build_clusters(model, &decoded, gpu, &hopts, &ao, &mut log)? {
             sections.extend(c.sections);
             meta.clusters = Some(c.meta);
         }
@@ -243,7 +283,12 @@ fn oct_encode(n: Vec3) -> [i8; 2] {
 }
 
 /// One quantised, cache-optimised mesh level: metadata, vertices, indices.
-fn build_mesh_level(model: &ImportedModel, select_px: f32) -> (MeshLevelMeta, Vec<MeshVertex>, Vec<u32>) {
+/// `ao`: each vertex's own occlusion (sky visibility), when baked.
+fn build_mesh_level(
+    model: &ImportedModel,
+    select_px: f32,
+    ao: Option<&[f32]>,
+) -> (MeshLevelMeta, Vec<MeshVertex>, Vec<u32>) {
     // Group triangles by material: one draw range per material.
     let mut order: Vec<usize> = (0..model.triangles.len()).collect();
     order.sort_by_key(|&t| model.vertices[model.triangles[t][0] as usize].material);
@@ -263,7 +308,12 @@ fn build_mesh_level(model: &ImportedModel, select_px: f32) -> (MeshLevelMeta, Ve
         let optimised = meshopt::optimize_vertex_cache(&indices[range.clone()], model.vertices.len());
         indices[range].copy_from_slice(&optimised);
     }
-    let vertices: Vec<ImportedVertexPod> = model.vertices.iter().map(ImportedVertexPod::from).collect();
+    let vertices: Vec<ImportedVertexPod> = model
+        .vertices
+        .iter()
+        .enumerate()
+        .map(|(i, v)| ImportedVertexPod { ao: ao.map_or(-1.0, |a| a[i]), ..ImportedVertexPod::from(v) })
+        .collect();
     let vertices = meshopt::optimize_vertex_fetch(&mut indices, &vertices);
     let (mut pmin, mut pmax) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
     let (mut umin, mut umax) = (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN));
@@ -288,7 +338,7 @@ fn build_mesh_level(model: &ImportedModel, select_px: f32) -> (MeshLevelMeta, Ve
             MeshVertex {
                 position: [q16(p.x), q16(p.y), q16(p.z)],
                 material: v.material as u16,
-                normal_oct: [ox, oy, 0, 0],
+                normal_oct: [ox, oy, if v.ao < 0.0 { 0 } else { ao_to_snorm8(v.ao) }, 0],
                 uv: [q16(uv.x), q16(uv.y)],
                 color: v.color.map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8),
             }
@@ -315,6 +365,8 @@ struct ImportedVertexPod {
     uv: [f32; 2],
     color: [f32; 4],
     material: u32,
+    /// Own occlusion (sky visibility), negative when not baked.
+    ao: f32,
 }
 
 impl From<&ImportedVertex> for ImportedVertexPod {
@@ -325,6 +377,7 @@ impl From<&ImportedVertex> for ImportedVertexPod {
             uv: v.uv.to_array(),
             color: v.color,
             material: u32::from(v.material),
+            ao: -1.0,
         }
     }
 }
@@ -332,8 +385,9 @@ impl From<&ImportedVertex> for ImportedVertexPod {
 /// The simplified mesh level: branches simplified to about a quarter of their
 /// triangles by meshoptimizer (silhouette-preserving edge collapses), and one in
 /// three leaf cards kept, each enlarged by √3 about its centre so the canopy
-/// keeps its coverage (edge collapses would destroy alpha-tested cards).
-pub fn simplify_model(model: &ImportedModel) -> ImportedModel {
+/// keeps its coverage (edge collapses would destroy alpha-tested cards). With
+/// it, the index in `model` of each of its vertices.
+pub fn simplify_model(model: &ImportedModel) -> (ImportedModel, Vec<u32>) {
     let is_leaf =
         |t: &[u32; 3]| model.materials[usize::from(model.vertices[t[0] as usize].material)].kind == MaterialKind::Leaf;
     let branch_idx: Vec<u32> = model.triangles.iter().filter(|t| !is_leaf(t)).flatten().copied().collect();
@@ -396,17 +450,19 @@ pub fn simplify_model(model: &ImportedModel) -> ImportedModel {
     // Drop unused vertices.
     let mut remap = vec![u32::MAX; out.vertices.len()];
     let mut vertices = Vec::new();
+    let mut source = Vec::new();
     for t in &mut out.triangles {
         for i in t.iter_mut() {
             if remap[*i as usize] == u32::MAX {
                 remap[*i as usize] = vertices.len() as u32;
                 vertices.push(out.vertices[*i as usize]);
+                source.push(*i);
             }
             *i = remap[*i as usize];
         }
     }
     out.vertices = vertices;
-    out
+    (out, source)
 }
 
 #[cfg(test)]

@@ -124,7 +124,7 @@ fn bakes_the_shared_real_data() {
         use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
         let bg = [0.62, 0.74, 0.86, 1.0];
         let size = 128;
-        let render = |r| render_pack_repr(&ctx, &pack, r, PackView::Side, size, size, bg).unwrap();
+        let render = |r| render_pack_repr(&ctx, &pack, r, PackView::Side, size, size, bg, true).unwrap();
         let mesh = render(PackRepr::Mesh(0));
         let errors: Vec<f64> =
             (0..n).map(|l| sylva::metrics::multiscale_rmse(&render(PackRepr::Cluster(l)), &mesh, size, size)).collect();

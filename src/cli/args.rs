@@ -102,6 +102,10 @@ pub(crate) enum Command {
         /// sylva-shadows-high are shadowed in any run.
         #[arg(long, value_name = "off|low|high", default_value = "off")]
         shadows: sylva::render::shadow::ShadowQuality,
+        /// Draw every method (the references too) with each tree's own baked
+        /// ambient occlusion (on) or without (off).
+        #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+        ao: bool,
     },
     /// One table row per bench output directory (its summary.json) for one
     /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls
@@ -227,6 +231,10 @@ pub(crate) struct RenderArgs {
     /// ground and each other; casters are picked on the GPU like the view's.
     #[arg(long, value_name = "off|low|high", default_value = "high")]
     pub(crate) shadows: sylva::render::shadow::ShadowQuality,
+    /// Each tree's own ambient occlusion, baked into its pack: crowns darker
+    /// inside, alike at every level of detail (off: crowns unoccluded).
+    #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    pub(crate) ao: bool,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,
@@ -280,4 +288,13 @@ pub(crate) fn parse_camera(text: &str, origin: [f64; 3]) -> Result<Camera> {
         pitch_rad: v[4].clamp(-90.0, 90.0).to_radians(),
         ..Camera::default()
     })
+}
+
+/// `on`/`off` (also true/false, yes/no, 1/0).
+pub(crate) fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s.to_ascii_lowercase().as_str() {
+        "on" | "true" | "yes" | "1" => Ok(true),
+        "off" | "false" | "no" | "0" => Ok(false),
+        _ => Err(format!("{s:?}: expected on or off")),
+    }
 }

@@ -67,12 +67,15 @@ mod cli {
             Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
                 stress(&scene, &path, &size, frames, &out)
             }
-            Command::Bench { scene, path, methods, size, frames, out, fade_band, thin_px, shadows, .. } => {
+            Command::Bench { scene, path, methods, size, frames, out, fade_band, thin_px, shadows, ao, .. } => {
                 if !(0.0..0.5).contains(&fade_band) {
                     bail!("--fade-band {fade_band}: must be in [0, 0.5)");
                 }
                 check_thin_px(thin_px)?;
                 let mut methods = sylva::bench::methods(&methods, shadows)?;
+                for m in &mut methods {
+                    m.settings.ao = ao;
+                }
                 for m in methods.iter_mut().filter(|m| m.reference.is_some()) {
                     m.settings.fade_band = fade_band;
                     m.settings.thin_px = thin_px;

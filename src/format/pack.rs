@@ -45,8 +45,14 @@ pub mod kind {
     pub const MATERIAL_TEXTURES: [u8; 4] = *b"MTEX";
     /// Billboard colour+alpha array, RGBA8 (sRGB), mip-major.
     pub const BILLBOARD_COLOR: [u8; 4] = *b"BBCO";
-    /// Billboard normal (xyz) + depth (w) array, RGBA8, mip-major.
+    /// Billboard normal (xyz) + leaf flag (w) array, RGBA8, mip-major.
     pub const BILLBOARD_NORMAL: [u8; 4] = *b"BBNO";
+    /// Billboard ambient occlusion (the tree's own sky visibility), R8, mip-major.
+    /// Optional: a pack without it draws its billboards unoccluded.
+    pub const BILLBOARD_AO: [u8; 4] = *b"BBAO";
+    /// Ambient occlusion of line level `index`, one byte per line (0 not baked,
+    /// 1–255 sky visibility 0–1). Optional.
+    pub const LINE_AO: [u8; 4] = *b"LNAO";
     /// Ellipsoid records of one cluster level (`index` = level), 24 bytes each.
     pub const ELLIPSOIDS: [u8; 4] = *b"ELPS";
     /// Line records of one cluster level (`index` = level), 16 bytes each.
@@ -63,7 +69,9 @@ pub struct MeshVertex {
     pub position: [u16; 3],
     /// Index into the pack's materials.
     pub material: u16,
-    /// Octahedral-encoded normal (snorm8 x, y); bytes 2–3 reserved (0).
+    /// Octahedral-encoded normal (snorm8 x, y); byte 2 the tree's own ambient
+    /// occlusion (0 not baked, 1–127 sky visibility 0–1, see [`ao_from_snorm8`]);
+    /// byte 3 reserved (0).
     pub normal_oct: [i8; 4],
     /// Texture coordinate in 1/65535 steps of the level's `uv_min..uv_max`.
     pub uv: [u16; 2],
@@ -71,6 +79,41 @@ pub struct MeshVertex {
     pub color: [u8; 4],
 }
 const _: () = assert!(std::mem::size_of::<MeshVertex>() == 20);
+
+/// Sky visibility (0–1) of a mesh vertex's occlusion byte: 0 is "not baked"
+/// (open, 1), 1–127 map to 0–1. Must match `vertex_ao` in `shaders/mesh.wgsl`.
+#[must_use]
+pub fn ao_from_snorm8(v: i8) -> f32 {
+    if v <= 0 {
+        1.0
+    } else {
+        f32::from(v - 1) / 126.0
+    }
+}
+
+/// The occlusion byte of a mesh vertex for sky visibility `v` (0–1): 1–127.
+#[must_use]
+pub fn ao_to_snorm8(v: f32) -> i8 {
+    1 + (v.clamp(0.0, 1.0) * 126.0).round() as i8
+}
+
+/// The occlusion byte of an ellipsoid or a line for sky visibility `v` (0–1): 1–255.
+#[must_use]
+pub fn ao_to_byte(v: f32) -> u8 {
+    1 + (v.clamp(0.0, 1.0) * 254.0).round() as u8
+}
+
+/// Sky visibility (0–1) of an occlusion byte of ellipsoids and lines: 0 is
+/// "not baked" (open, 1), 1–255 map to 0–1. Must match `ao_byte` in
+/// `shaders/cluster.wgsl`.
+#[must_use]
+pub fn ao_from_byte(b: u8) -> f32 {
+    if b == 0 {
+        1.0
+    } else {
+        f32::from(b - 1) / 254.0
+    }
+}
 
 /// Whether a material is foliage or wood; decides LoD treatment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -150,19 +193,25 @@ impl TextureArrayMeta {
     /// Bytes of the whole RGBA8 array with all its mips.
     #[must_use]
     pub fn byte_len(&self) -> u64 {
+        self.byte_len_of(4)
+    }
+
+    /// Bytes of the whole array with all its mips at `texel_bytes` per texel.
+    #[must_use]
+    pub fn byte_len_of(&self, texel_bytes: u64) -> u64 {
         (0..self.mips)
             .map(|m| {
                 let s = u64::from((self.size >> m).max(1));
-                s * s * 4 * u64::from(self.layers)
+                s * s * texel_bytes * u64::from(self.layers)
             })
             .sum()
     }
 
     /// Byte offset of mip `m` within the section (mips are stored one after another,
-    /// each holding all layers).
+    /// each holding all layers) at `texel_bytes` per texel.
     #[must_use]
-    pub fn mip_offset(&self, m: u32) -> u64 {
-        TextureArrayMeta { mips: m, ..*self }.byte_len()
+    pub fn mip_offset(&self, m: u32, texel_bytes: u64) -> u64 {
+        TextureArrayMeta { mips: m, ..*self }.byte_len_of(texel_bytes)
     }
 }
 
@@ -448,8 +497,8 @@ impl PackPart {
     #[must_use]
     pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
         match k {
-            kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL => Some(PackPart::Billboards),
-            kind::ELLIPSOIDS | kind::LINES => Some(PackPart::Clusters),
+            kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL | kind::BILLBOARD_AO => Some(PackPart::Billboards),
+            kind::ELLIPSOIDS | kind::LINES | kind::LINE_AO => Some(PackPart::Clusters),
             kind::MESH_VERTICES | kind::MESH_INDICES if index == 0 => Some(PackPart::MeshFull),
             kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::MeshCoarse),
             _ => None,
@@ -540,7 +589,7 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     if let Some(t) = &m.material_texture {
         let data = pack.section(kind::MATERIAL_TEXTURES, 0);
         if !(partial && data.is_none()) {
-            validate_texture("META.material_texture", t, data)?;
+            validate_texture("META.material_texture", t, data, 4)?;
         }
     }
     for (l, level) in m.mesh_levels.iter().enumerate() {
@@ -621,8 +670,12 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         for k in [kind::BILLBOARD_COLOR, kind::BILLBOARD_NORMAL] {
             let data = pack.section(k, 0);
             if !(partial && data.is_none()) {
-                validate_texture("META.billboards.texture", &b.texture, data)?;
+                validate_texture("META.billboards.texture", &b.texture, data, 4)?;
             }
+        }
+        // Optional at any time: older packs have no occlusion.
+        if let Some(data) = pack.section(kind::BILLBOARD_AO, 0) {
+            validate_texture("META.billboards.texture (BBAO)", &b.texture, Some(data), 1)?;
         }
     }
     if let Some(c) = &m.clusters {
@@ -655,11 +708,22 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                 }
             }
         }
+        for (l, level) in c.line_levels.iter().enumerate() {
+            if let Some(data) = pack.section(kind::LINE_AO, l as u32) {
+                if data.len() as u64 != u64::from(level.count) {
+                    return Err(Problem::Invalid(format!(
+                        "META.clusters.line_levels[{l}] declares {} lines, its LNAO section holds {} bytes",
+                        level.count,
+                        data.len()
+                    )));
+                }
+            }
+        }
     }
     Ok(())
 }
 
-fn validate_texture(what: &str, t: &TextureArrayMeta, data: Option<&[u8]>) -> Result<(), Problem> {
+fn validate_texture(what: &str, t: &TextureArrayMeta, data: Option<&[u8]>, texel_bytes: u64) -> Result<(), Problem> {
     at_most(format!("{what}.size"), t.size.into(), MAX_TEXTURE_SIZE.into())?;
     at_most(format!("{what}.layers"), t.layers.into(), MAX_TEXTURE_LAYERS.into())?;
     let full_chain = 32 - t.size.max(1).leading_zeros();
@@ -670,8 +734,9 @@ fn validate_texture(what: &str, t: &TextureArrayMeta, data: Option<&[u8]>) -> Re
     let Some(data) = data else {
         return Err(Problem::Invalid(format!("{what} has no texture section")));
     };
-    if data.len() as u64 != t.byte_len() {
-        return Err(Problem::Invalid(format!("{what} needs {} bytes, the section holds {}", t.byte_len(), data.len())));
+    let need = t.byte_len_of(texel_bytes);
+    if data.len() as u64 != need {
+        return Err(Problem::Invalid(format!("{what} needs {need} bytes, the section holds {}", data.len())));
     }
     Ok(())
 }

@@ -12,7 +12,7 @@ pub const BILLBOARD_VERTICES: u32 = 6;
 
 /// The billboard pipeline and its texture layout.
 pub struct BillboardPipeline {
-    /// Group 1: colour array, normal array, sampler.
+    /// Group 1: colour array, normal array, sampler, occlusion array.
     pub texture_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
@@ -29,7 +29,7 @@ impl BillboardPipeline {
         });
         let texture_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("billboard textures"),
-            entries: &[texture_array_entry(0), texture_array_entry(1), sampler_entry(2)],
+            entries: &[texture_array_entry(0), texture_array_entry(1), sampler_entry(2), texture_array_entry(3)],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("billboard"),
@@ -111,6 +111,27 @@ impl BillboardGpu {
             normal,
             wgpu::TextureFormat::Rgba8Unorm,
         );
+        // The tree's own occlusion (`BBAO`, R8); a pack without it gets one
+        // open (white) texel per layer.
+        let ao = pack.section(kind::BILLBOARD_AO, 0);
+        let ao_tex = match ao {
+            Some(bytes) => upload_texture_array(
+                device,
+                queue,
+                "billboard occlusion",
+                &meta.texture,
+                bytes,
+                wgpu::TextureFormat::R8Unorm,
+            ),
+            None => upload_texture_array(
+                device,
+                queue,
+                "billboard occlusion (none)",
+                &crate::format::pack::TextureArrayMeta { size: 1, layers: meta.texture.layers, mips: 1 },
+                &vec![255; meta.texture.layers as usize],
+                wgpu::TextureFormat::R8Unorm,
+            ),
+        };
         let view = |t: &wgpu::Texture| {
             t.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
@@ -124,8 +145,10 @@ impl BillboardGpu {
                 wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view(&color_tex)) },
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&view(&normal_tex)) },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&pipeline.sampler) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&view(&ao_tex)) },
             ],
         });
-        Some(Self { bind_group, bytes: (color.len() + normal.len()) as u64, meta })
+        let bytes = (color.len() + normal.len() + ao.map_or(0, <[u8]>::len)) as u64;
+        Some(Self { bind_group, bytes, meta })
     }
 }

@@ -10,7 +10,9 @@ use super::cluster::{ClusterGpu, ClusterPipeline};
 use super::context::{read_texture_rgba8, GpuContext};
 use super::gpu_data::{DrawParams, RenderMode, ViewUniform};
 use super::layouts::SharedLayouts;
-use super::mesh::{MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_NORMAL_FORMAT, DEPTH_FORMAT};
+use super::mesh::{
+    MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_AO_FORMAT, CAPTURE_NORMAL_FORMAT, DEPTH_FORMAT,
+};
 use super::Lighting;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Pack;
@@ -78,6 +80,8 @@ pub struct CapturedBillboards {
     pub color: Vec<Vec<u8>>,
     /// Normal * 0.5 + 0.5 and leaf flag, one `Vec` per layer.
     pub normal: Vec<Vec<u8>>,
+    /// The vertices' baked sky visibility in r, g, b (255 where the mesh has none).
+    pub ao: Vec<Vec<u8>>,
 }
 
 /// A render target that can be read back.
@@ -181,10 +185,12 @@ pub fn capture_billboards(
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
     let albedo = target(ctx, size, size, CAPTURE_ALBEDO_FORMAT);
     let normal = target(ctx, size, size, CAPTURE_NORMAL_FORMAT);
+    let ao = target(ctx, size, size, CAPTURE_AO_FORMAT);
     let depth = target(ctx, size, size, DEPTH_FORMAT);
-    let (albedo_view, normal_view, depth_view) = (
+    let (albedo_view, normal_view, ao_view, depth_view) = (
         albedo.create_view(&Default::default()),
         normal.create_view(&Default::default()),
+        ao.create_view(&Default::default()),
         depth.create_view(&Default::default()),
     );
     let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -196,7 +202,7 @@ pub fn capture_billboards(
     let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
     // The capture works in model space: the eye is the model origin.
     let tree = SingleTree::new(ctx, &pipelines.shared);
-    let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new() };
+    let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new(), ao: Vec::new() };
     for a in 0..azimuths {
         let azimuth = std::f32::consts::TAU * a as f32 / azimuths as f32;
         for k in 0..angles {
@@ -228,6 +234,12 @@ pub fn capture_billboards(
                             resolve_target: None,
                             ops: clear,
                         }),
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &ao_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
                     ],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth_view,
@@ -249,6 +261,7 @@ pub fn capture_billboards(
             ctx.queue.submit([encoder.finish()]);
             out.color.push(read_texture_rgba8(ctx, &albedo, 0, 0));
             out.normal.push(read_texture_rgba8(ctx, &normal, 0, 0));
+            out.ao.push(read_texture_rgba8(ctx, &ao, 0, 0));
         }
     }
     out
@@ -289,6 +302,8 @@ pub struct TreeRenderer {
     view_buffer: wgpu::Buffer,
     view_group: wgpu::BindGroup,
     format: wgpu::TextureFormat,
+    /// Draw with the trees' own baked occlusion (on by default).
+    pub ao: bool,
 }
 
 impl TreeRenderer {
@@ -308,7 +323,7 @@ impl TreeRenderer {
             mapped_at_creation: false,
         });
         let view_group = shared.view_group(&ctx.device, &view_buffer);
-        Self { mesh, cluster, billboard, tree, view_buffer, view_group, format }
+        Self { mesh, cluster, billboard, tree, view_buffer, view_group, format, ao: true }
     }
 
     /// Renders `what` with the camera `clip_from_eye` at `eye` (model space) into
@@ -325,6 +340,7 @@ impl TreeRenderer {
         background: [f64; 4],
     ) -> Vec<u8> {
         let mut uniform = Lighting::default().view_uniform(clip_from_eye, eye, [width, height]);
+        uniform.ambient[3] = f32::from(u8::from(self.ao));
         // Pixels per metre at 1 m, for the lines' minimum width.
         let row1 = Vec3::new(clip_from_eye.x_axis.y, clip_from_eye.y_axis.y, clip_from_eye.z_axis.y);
         uniform.lod[0] = 0.5 * height as f32 * row1.length();
@@ -432,9 +448,10 @@ pub enum PackRepr {
 }
 
 /// Renders one tree of `pack` lit, with a perspective camera framing the whole
-/// tree, into a `width`×`height` sRGB RGBA8 image. `None` if the pack lacks the
-/// representation.
+/// tree, into a `width`×`height` sRGB RGBA8 image, with the tree's own baked
+/// occlusion when `ao`. `None` if the pack lacks the representation.
 #[must_use]
+#[allow(clippy::too_many_arguments)]
 pub fn render_pack_repr(
     ctx: &GpuContext,
     pack: &Pack<'_>,
@@ -443,8 +460,10 @@ pub fn render_pack_repr(
     width: u32,
     height: u32,
     background: [f64; 4],
+    ao: bool,
 ) -> Option<Vec<u8>> {
-    let r = TreeRenderer::new(ctx);
+    let mut r = TreeRenderer::new(ctx);
+    r.ao = ao;
     let (clip, eye) =
         preview_camera(Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max), view, width, height);
     match repr {
@@ -477,6 +496,6 @@ pub fn render_pack_preview(
     height: u32,
     background: [f64; 4],
 ) -> Vec<u8> {
-    render_pack_repr(ctx, pack, PackRepr::Mesh(level), view, width, height, background)
+    render_pack_repr(ctx, pack, PackRepr::Mesh(level), view, width, height, background, true)
         .unwrap_or_else(|| vec![0; (width * height * 4) as usize])
 }

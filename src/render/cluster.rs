@@ -163,6 +163,8 @@ pub struct ClusterLevelGpu {
     pub line_word: u32,
     /// Lines.
     pub lines: u32,
+    /// First word of the line level's occlusion bytes (`LNAO`), if baked.
+    pub line_ao_word: Option<u32>,
     /// The ellipsoid level's metadata.
     pub meta: ClusterLevelMeta,
 }
@@ -205,6 +207,16 @@ impl ClusterGpu {
             line_words.push((words.len() / 4) as u32);
             words.extend_from_slice(pack.section(kind::LINES, l as u32)?);
         }
+        // Occlusion bytes of each line level after all records, word-aligned.
+        let mut line_ao_words = Vec::new();
+        for l in 0..meta.line_levels.len() {
+            line_ao_words.push(pack.section(kind::LINE_AO, l as u32).map(|bytes| {
+                let at = (words.len() / 4) as u32;
+                words.extend_from_slice(bytes);
+                words.resize(words.len().next_multiple_of(4), 0);
+                at
+            }));
+        }
         let levels = meta
             .ellipsoid_levels
             .iter()
@@ -218,6 +230,7 @@ impl ClusterGpu {
                     ellipsoids: m.count,
                     line_word: line_words.get(line).copied().unwrap_or(0),
                     lines,
+                    line_ao_word: line_ao_words.get(line).copied().flatten(),
                     meta: m.clone(),
                 }
             })
@@ -258,11 +271,15 @@ impl ClusterGpu {
         for l in lines {
             words.extend_from_slice(bytemuck::bytes_of(&PackedLine::encode(l, lo, hi)));
         }
+        let line_ao_word = (words.len() / 4) as u32;
+        words.extend(lines.iter().map(|l| crate::format::pack::ao_to_byte(l.ao)));
+        words.resize(words.len().next_multiple_of(4), 0);
         let level = ClusterLevelGpu {
             ellipsoid_word: 0,
             ellipsoids: ellipsoids.len() as u32,
             line_word,
             lines: lines.len() as u32,
+            line_ao_word: Some(line_ao_word),
             meta: ClusterLevelMeta {
                 count: ellipsoids.len() as u32,
                 select_px: 0.0,
@@ -317,6 +334,7 @@ impl ClusterGpu {
         d.bounds_min = [self.bounds.0[0], self.bounds.0[1], self.bounds.0[2], 0.0];
         d.bounds_extent = [self.bounds.1[0], self.bounds.1[1], self.bounds.1[2], 0.0];
         d.line_color = [self.line_color[0], self.line_color[1], self.line_color[2], 1.0];
+        d.cluster_ao = [l.line_ao_word.unwrap_or(0), u32::from(l.line_ao_word.is_some()), 0, 0];
     }
 
     /// Vertices per tree of level `level`.
@@ -359,6 +377,7 @@ mod tests {
             ellipsoid_word: 0,
             ellipsoids: 1,
             line_word: 0,
+            line_ao_word: None,
             lines: 0,
             meta: ClusterLevelMeta { count: 1, select_px, error: 0.0, noise_threshold: 0.0, normal_blend: 0.0 },
         }

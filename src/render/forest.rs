@@ -269,7 +269,8 @@ impl ForestRenderer {
             frustum: view.frustum.map(|p| p.to_array()),
             sun_dir: l.sun_dir.extend(0.0).to_array(),
             sun_color: l.sun_color.extend(0.0).to_array(),
-            ambient: l.ambient.extend(0.0).to_array(),
+            // w: the trees' own baked occlusion on (1) or off (0), `own_ao` in common.wgsl.
+            ambient: l.ambient.extend(f32::from(u8::from(settings.ao))).to_array(),
             lod: [
                 view.px_per_m_at_1m * settings.quality,
                 settings.draw_distance_m,

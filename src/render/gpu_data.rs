@@ -94,8 +94,10 @@ pub struct DrawParams {
     pub bounds_extent: [f32; 4],
     /// Linear RGB of the lines.
     pub line_color: [f32; 4],
+    /// x: first word of the lines' occlusion bytes (`LNAO`, four per word), y: 1 when present.
+    pub cluster_ao: [u32; 4],
     /// Padding to the 256-byte dynamic-offset alignment.
-    pub pad: [u32; 32],
+    pub pad: [u32; 28],
 }
 const _: () = assert!(std::mem::size_of::<DrawParams>() == 256);
 

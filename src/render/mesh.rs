@@ -18,6 +18,8 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 pub const CAPTURE_ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 /// Normal target of the capture mode (n * 0.5 + 0.5, alpha = leaf flag).
 pub const CAPTURE_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// Occlusion target of the capture mode (the baked sky visibility in r, g, b).
+pub const CAPTURE_AO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
 /// The depth state of every Sylva pipeline: reversed Z, so nearer is greater.
 /// Overlays pass `write = false` and `CompareFunction::Always`.
@@ -123,7 +125,7 @@ impl MeshPipelines {
         let capture = make(
             "mesh capture",
             "fs_capture",
-            &[Some(CAPTURE_ALBEDO_FORMAT.into()), Some(CAPTURE_NORMAL_FORMAT.into())],
+            &[Some(CAPTURE_ALBEDO_FORMAT.into()), Some(CAPTURE_NORMAL_FORMAT.into()), Some(CAPTURE_AO_FORMAT.into())],
         );
         let shadow = super::layouts::shadow_caster_pipeline(device, "mesh shadow", &module, &layout, &buffers);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -336,6 +338,7 @@ pub fn upload_texture_array(
     data: &[u8],
     format: wgpu::TextureFormat,
 ) -> wgpu::Texture {
+    let texel_bytes = format.block_copy_size(None).unwrap_or(4);
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
         size: wgpu::Extent3d { width: meta.size, height: meta.size, depth_or_array_layers: meta.layers },
@@ -348,8 +351,8 @@ pub fn upload_texture_array(
     });
     for mip in 0..meta.mips {
         let size = (meta.size >> mip).max(1);
-        let start = meta.mip_offset(mip) as usize;
-        let len = (size * size * 4 * meta.layers) as usize;
+        let start = meta.mip_offset(mip, texel_bytes.into()) as usize;
+        let len = (size * size * texel_bytes * meta.layers) as usize;
         let Some(bytes) = data.get(start..start + len) else { break };
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
@@ -359,7 +362,11 @@ pub fn upload_texture_array(
                 aspect: wgpu::TextureAspect::All,
             },
             bytes,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(size * 4), rows_per_image: Some(size) },
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(size * texel_bytes),
+                rows_per_image: Some(size),
+            },
             wgpu::Extent3d { width: size, height: size, depth_or_array_layers: meta.layers },
         );
     }

@@ -129,7 +129,8 @@ impl Lighting {
             frustum: [[0.0, 0.0, 0.0, 1.0]; 6],
             sun_dir: self.sun_dir.extend(0.0).to_array(),
             sun_color: self.sun_color.extend(0.0).to_array(),
-            ambient: self.ambient.extend(0.0).to_array(),
+            // w: the trees' own baked occlusion on (`own_ao` in common.wgsl).
+            ambient: self.ambient.extend(1.0).to_array(),
             lod: [0.0; 4],
             params: [RenderMode::Lit as u32, 0, 0, 0],
             eye_from_clip: clip_from_eye.inverse().to_cols_array_2d(),

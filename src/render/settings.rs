@@ -59,6 +59,10 @@ pub struct RenderSettings {
     pub terrain_morph: bool,
     /// The sun's shadows ([`super::shadow`]).
     pub shadows: ShadowQuality,
+    /// Each tree's own ambient occlusion, baked into its pack (`sylva-bake`'s
+    /// AO field): darker inside crowns at every level of detail. Packs baked
+    /// before it draw unoccluded either way.
+    pub ao: bool,
 }
 
 /// Default of [`RenderSettings::thin_px`].
@@ -110,6 +114,7 @@ impl Default for RenderSettings {
             terrain: true,
             terrain_morph: true,
             shadows: ShadowQuality::Off,
+            ao: true,
         }
     }
 }

@@ -5,8 +5,9 @@ use std::collections::HashMap;
 
 use anyhow::Result;
 use glam::Vec3;
+use sylva::format::cluster::Ellipsoid;
 use sylva::format::cluster::{ClusterLevelMeta, ClusterMeta, Line, PackedEllipsoid, PackedLine};
-use sylva::format::pack::{kind, MaterialKind, Section};
+use sylva::format::pack::{ao_to_byte, kind, MaterialKind, Section};
 use sylva::format::Pack;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::capture::{BillboardFrame, TreeDraw, TreeRenderer};
@@ -17,6 +18,7 @@ use sylva::render::GpuContext;
 use super::hierarchy::{build_levels, level_sizes, Candidate, HierarchyOptions, Judge};
 use super::leaves::extract_leaves;
 use super::lines::{simplify, skeleton, LineOptions};
+use crate::ao::AoField;
 use crate::gltf_import::ImportedModel;
 
 /// Background of the judging renders (the viewer's sky).
@@ -34,6 +36,7 @@ pub struct GpuJudge<'a> {
     lo: Vec3,
     hi: Vec3,
     line_color: [f32; 3],
+    ao: &'a AoField,
     references: HashMap<u32, Vec<Vec<u8>>>,
     /// Renders made.
     pub renders: usize,
@@ -42,7 +45,7 @@ pub struct GpuJudge<'a> {
 impl<'a> GpuJudge<'a> {
     /// A judge for the tree of `pack`.
     #[must_use]
-    pub fn new(ctx: &'a GpuContext, pack: &Pack<'_>, line_color: [f32; 3]) -> Self {
+    pub fn new(ctx: &'a GpuContext, pack: &Pack<'_>, line_color: [f32; 3], ao: &'a AoField) -> Self {
         let renderer = TreeRenderer::new(ctx);
         let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &renderer.mesh, pack);
         let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
@@ -54,6 +57,7 @@ impl<'a> GpuJudge<'a> {
             lo,
             hi,
             line_color,
+            ao,
             references: HashMap::new(),
             renders: 0,
         }
@@ -88,8 +92,8 @@ impl Judge for GpuJudge<'_> {
             &self.ctx.device,
             &self.ctx.queue,
             &self.renderer.cluster,
-            c.ellipsoids,
-            c.lines,
+            &with_ao(c.ellipsoids, self.ao),
+            &lines_with_ao(c.lines, self.ao),
             (self.lo, self.hi),
             (c.noise_threshold, c.normal_blend),
             self.line_color,
@@ -99,6 +103,55 @@ impl Judge for GpuJudge<'_> {
         let refs = &self.references[&size];
         imgs.iter().zip(refs).map(|(a, b)| multiscale_rmse(a, b, size, size)).sum::<f64>() / imgs.len() as f64
     }
+}
+
+/// Directions from an ellipsoid's centre to the surface points where its
+/// occlusion is sampled: the six axes and the eight diagonals.
+const AO_SAMPLES: [[f32; 3]; 14] = {
+    const D: f32 = 0.577_350_3;
+    [
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+        [D, D, D],
+        [D, D, -D],
+        [D, -D, D],
+        [D, -D, -D],
+        [-D, D, D],
+        [-D, D, -D],
+        [-D, -D, D],
+        [-D, -D, -D],
+    ]
+};
+
+/// `ellipsoids` with their occlusion from `field`, sampled at points on each
+/// one's surface: the mean of the brighter half, as the side of a cluster
+/// that is seen (from outside the crown) is the side facing out of it, where
+/// the leaves it stands for see more sky.
+#[must_use]
+pub fn with_ao(ellipsoids: &[Ellipsoid], field: &AoField) -> Vec<Ellipsoid> {
+    ellipsoids
+        .iter()
+        .map(|e| {
+            let mut v: Vec<f32> =
+                AO_SAMPLES.iter().map(|d| field.at(e.center + e.rotation * (Vec3::from(*d) * e.radii))).collect();
+            v.sort_by(|a, b| b.total_cmp(a));
+            let half = &v[..v.len() / 2];
+            Ellipsoid { ao: half.iter().sum::<f32>() / half.len() as f32, ..*e }
+        })
+        .collect()
+}
+
+/// `lines` with their occlusion from `field`: the mean at both ends and the middle.
+#[must_use]
+pub fn lines_with_ao(lines: &[Line], field: &AoField) -> Vec<Line> {
+    lines
+        .iter()
+        .map(|l| Line { ao: (field.at(l.a) + field.at(0.5 * (l.a + l.b)) + field.at(l.b)) / 3.0, ..*l })
+        .collect()
 }
 
 /// Mean linear albedo of the model's branch material(s), area-weighted.
@@ -153,6 +206,7 @@ pub fn build_clusters(
     mesh_pack: &Pack<'_>,
     ctx: &GpuContext,
     opts: &HierarchyOptions,
+    ao: &AoField,
     log: &mut dyn FnMut(&str),
 ) -> Result<Option<BuiltClusters>> {
     let started = std::time::Instant::now();
@@ -169,7 +223,7 @@ pub fn build_clusters(
         if sk.is_empty() { Vec::new() } else { simplify(&sk, &targets, (lo, hi), &LineOptions::default()) };
     let lines: Vec<Vec<Line>> = line_levels.iter().map(|l| l.lines.clone()).collect();
     let line_color = bark_color(model);
-    let mut judge = GpuJudge::new(ctx, mesh_pack, line_color);
+    let mut judge = GpuJudge::new(ctx, mesh_pack, line_color, ao);
     let height = (hi.z - lo.z).max(1e-3);
     let levels = build_levels(&leaves, height, &lines, &mut judge, opts, &mut |k, n| {
         if k < n {
@@ -186,8 +240,7 @@ pub fn build_clusters(
     ));
     let mut sections = Vec::new();
     for (k, l) in levels.iter().enumerate() {
-        let data: Vec<u8> = l
-            .ellipsoids
+        let data: Vec<u8> = with_ao(&l.ellipsoids, ao)
             .iter()
             .flat_map(|e| bytemuck::bytes_of(&PackedEllipsoid::encode(e, lo, hi)).to_vec())
             .collect();
@@ -204,6 +257,16 @@ pub fn build_clusters(
         let data: Vec<u8> =
             l.lines.iter().flat_map(|x| bytemuck::bytes_of(&PackedLine::encode(x, lo, hi)).to_vec()).collect();
         sections.push(Section { kind: kind::LINES, index: k as u32, count: l.lines.len() as u32, stride: 16, data });
+        if !ao.is_open() {
+            let bytes: Vec<u8> = lines_with_ao(&l.lines, ao).iter().map(|x| ao_to_byte(x.ao)).collect();
+            sections.push(Section {
+                kind: kind::LINE_AO,
+                index: k as u32,
+                count: bytes.len() as u32,
+                stride: 1,
+                data: bytes,
+            });
+        }
         line_meta.push(ClusterLevelMeta {
             count: l.lines.len() as u32,
             select_px: levels.get(k).map_or(0.0, |e| e.meta.select_px),
