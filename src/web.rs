@@ -537,6 +537,11 @@ impl Viewer {
         Ok(())
     }
 
+    /// Each tree's own baked ambient occlusion on or off.
+    pub fn set_ao(&mut self, on: bool) {
+        self.frame.settings.ao = on;
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.frame.settings.quality = quality.clamp(0.05, 4.0);

@@ -12,7 +12,8 @@
 //   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
 //                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
-//   v.setLighting({shadows})               the sun's shadows: 'off' | 'low' | 'high' (the default)
+//   v.setLighting({shadows, ao})           the sun's shadows: 'off' | 'low' | 'high' (the default);
+//                                           ao: each tree's own baked ambient occlusion, true (the default) | false
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -168,13 +169,17 @@ class SylvaViewer {
 
   /** Light settings: `shadows` 'off' | 'low' (2 cascades over 300 m, maps of
    * 0.8 texels per canvas pixel) | 'high' (3 over 600 m, 1.6 texels per pixel,
-   * softer; the default). Throws for an
-   * unknown key or quality. */
+   * softer; the default); `ao` true (the default: crowns darker inside, as
+   * baked into each species' pack) | false. Throws for an unknown key or value. */
   setLighting(options = {}) {
     for (const key of Object.keys(options)) {
-      if (key !== 'shadows') throw new Error(`setLighting: unknown setting ${key} (known: shadows)`);
+      if (key !== 'shadows' && key !== 'ao') throw new Error(`setLighting: unknown setting ${key} (known: shadows, ao)`);
+    }
+    if (options.ao !== undefined && typeof options.ao !== 'boolean') {
+      throw new Error(`setLighting: ao must be true or false, not ${JSON.stringify(options.ao)}`);
     }
     if (options.shadows !== undefined) this.viewer.set_shadows(String(options.shadows));
+    if (options.ao !== undefined) this.viewer.set_ao(options.ao);
     this.lighting = { ...this.lighting, ...options };
     this.dirty = 8;
   }

@@ -455,7 +455,7 @@ test('the sun follows a date and time at the scene and the time-of-day control',
   assert.deepEqual(errors, []);
 });
 
-test('the sun casts shadows by default and setLighting turns them off', async () => {
+test('the sun casts shadows and crowns are occluded by default; setLighting turns both off', async () => {
   const { page, errors } = await openViewer(`${base}?ui=0`);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
@@ -478,6 +478,13 @@ test('the sun casts shadows by default and setLighting turns them off', async ()
   assert.ok(unshaded > shaded + 2, `shadows darken the view: off ${unshaded.toFixed(1)} vs high ${shaded.toFixed(1)}`);
   const refused = await page.evaluate(() => { try { window.sylva.setLighting({ shadows: 'ultra' }); return null; } catch (e) { return String(e); } });
   assert.ok(refused && refused.includes('off, low or high'), refused);
+  // Each tree's own occlusion (on by default) darkens the crowns; off brightens them.
+  await page.evaluate(() => window.sylva.setLighting({ ao: false }));
+  await page.waitForTimeout(1000);
+  const open = await meanBrightness('ao-off');
+  assert.ok(open > unshaded + 1, `occlusion darkens the crowns: off ${open.toFixed(1)} vs on ${unshaded.toFixed(1)}`);
+  const badAo = await page.evaluate(() => { try { window.sylva.setLighting({ ao: 'maybe' }); return null; } catch (e) { return String(e); } });
+  assert.ok(badAo && badAo.includes('true or false'), badAo);
   assert.deepEqual(errors, []);
 });
 
