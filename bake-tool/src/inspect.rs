@@ -260,7 +260,8 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
     }
     if let Some(bb) = &meta.billboards {
         let b = pack.section(kind::BILLBOARD_COLOR, 0).map_or(0, <[u8]>::len)
-            + pack.section(kind::BILLBOARD_NORMAL, 0).map_or(0, <[u8]>::len);
+            + pack.section(kind::BILLBOARD_NORMAL, 0).map_or(0, <[u8]>::len)
+            + pack.section(kind::BILLBOARD_AO, 0).map_or(0, <[u8]>::len);
         levels.push(json!({
             "kind": "billboards",
             "count": bb.angles * bb.azimuths,
@@ -272,6 +273,23 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
             "select_px": bb.select_px,
         }));
     }
+    // The tree's own ambient occlusion: where it is baked, and its range over the full mesh.
+    let vertex_ao: Vec<f32> = pack
+        .mesh_vertices(0)
+        .iter()
+        .filter(|v| v.normal_oct[2] > 0)
+        .map(|v| sylva::format::pack::ao_from_snorm8(v.normal_oct[2]))
+        .collect();
+    let ellipsoid_ao = pack.section(kind::ELLIPSOIDS, 0).is_some_and(|b| b.chunks_exact(24).any(|r| r[14] > 0));
+    let ao = json!({
+        "mesh_vertices": !vertex_ao.is_empty(),
+        "billboards": pack.section(kind::BILLBOARD_AO, 0).is_some(),
+        "ellipsoids": ellipsoid_ao,
+        "lines": pack.section(kind::LINE_AO, 0).is_some(),
+        "sky_visibility": (!vertex_ao.is_empty()).then(|| {
+            json!([vertex_ao.iter().copied().fold(1.0f32, f32::min), vertex_ao.iter().copied().fold(0.0f32, f32::max)])
+        }),
+    });
     json!({
         "kind": "pack",
         "name": meta.name,
@@ -281,6 +299,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
         "materials": meta.materials.iter().map(|m| json!({"name": m.name, "kind": m.kind, "alpha_cutoff": m.alpha_cutoff, "textured": m.texture_layer.is_some()})).collect::<Vec<_>>(),
         "material_texture": meta.material_texture.map(|t| json!({"size": t.size, "layers": t.layers, "mips": t.mips, "bytes": t.byte_len()})),
         "levels": levels,
+        "ambient_occlusion": ao,
     })
 }
 
@@ -489,6 +508,22 @@ fn pack_text(s: &Value) -> String {
             }
             _ => {}
         }
+    }
+    let ao = &s["ambient_occlusion"];
+    let baked: Vec<&str> = ["mesh_vertices", "billboards", "ellipsoids", "lines"]
+        .into_iter()
+        .filter(|k| ao[*k].as_bool() == Some(true))
+        .collect();
+    match ao["sky_visibility"].as_array() {
+        Some(r) if !baked.is_empty() => {
+            out += &format!(
+                "  ambient occlusion: sky visibility {:.2}–{:.2} at the full mesh's vertices; in {}\n",
+                r[0].as_f64().unwrap_or(0.0),
+                r[1].as_f64().unwrap_or(0.0),
+                baked.join(", ").replace('_', " ")
+            );
+        }
+        _ => out += "  ambient occlusion: not baked (crowns drawn unoccluded)\n",
     }
     out
 }

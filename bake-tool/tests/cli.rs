@@ -71,6 +71,13 @@ fn demo_scene_is_complete_valid_and_deterministic() {
             assert!(w[0]["select_px"].as_f64() >= w[1]["select_px"].as_f64(), "finer levels need larger trees");
         }
         assert_eq!(ell.last().unwrap()["count"], 1, "down to one cluster");
+        // Each tree's own occlusion in every level, some of the crown well hidden.
+        let ao = &s["ambient_occlusion"];
+        for k in ["mesh_vertices", "billboards", "ellipsoids", "lines"] {
+            assert_eq!(ao[k], true, "{}: {k} lack occlusion: {ao}", s["name"]);
+        }
+        let range = ao["sky_visibility"].as_array().unwrap();
+        assert!(range[0].as_f64().unwrap() < 0.4 && range[1].as_f64().unwrap() > 0.8, "{}: {ao}", s["name"]);
         for l in levels.iter().filter(|l| l["kind"] == "ellipsoids" || l["kind"] == "lines") {
             let limit = if l["kind"] == "ellipsoids" { 32.0 } else { 16.0 };
             assert!(l["bytes_per_primitive"].as_f64().unwrap() <= limit, "{l}");
@@ -81,6 +88,17 @@ fn demo_scene_is_complete_valid_and_deterministic() {
     // The text form names the same things.
     let text = String::from_utf8(run(bin().arg("inspect").arg(&a)).stdout).unwrap();
     assert!(text.contains("3000 trees, 3 species") && text.contains("billboards: 8 angles"), "{text}");
+    assert!(text.contains("ambient occlusion: sky visibility"), "{text}");
+    // --no-ao leaves it out, and says so.
+    let plain = dir.join("plain");
+    run(bin().args(["demo", "--trees", "30", "--no-ao", "--no-clusters"]).args(SMALL).arg("--out").arg(&plain));
+    let v = inspect_json(&plain);
+    for s in v["species"].as_array().unwrap() {
+        assert_eq!(s["ambient_occlusion"]["mesh_vertices"], false, "{s}");
+        assert_eq!(s["ambient_occlusion"]["billboards"], false, "{s}");
+    }
+    let text = String::from_utf8(run(bin().arg("inspect").arg(&plain)).stdout).unwrap();
+    assert!(text.contains("ambient occlusion: not baked"), "{text}");
 }
 
 #[test]
@@ -133,6 +151,28 @@ fn bakes_the_shared_real_data() {
             assert!(w[0] <= w[1] + 0.01, "{species}: a finer level is worse: {errors:?}");
         }
         assert!(errors[0] + 0.01 < errors[n - 1], "{species}: the finest beats the coarsest: {errors:?}");
+        // The tree's own occlusion darkens each level about as much as the full mesh
+        // (mean brightness of the tree's pixels with it over without it).
+        let plain = |r| render_pack_repr(&ctx, &pack, r, PackView::Side, size, size, bg, false).unwrap();
+        let darkening = |r| {
+            let (on, off) = (render(r), plain(r));
+            let bgpx = &off[..4];
+            let (mut a, mut b) = (0.0, 0.0);
+            for (p, q) in on.chunks(4).zip(off.chunks(4)) {
+                if q.iter().zip(bgpx).take(3).any(|(x, y)| x.abs_diff(*y) > 2) {
+                    a += f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+                    b += f64::from(q[0]) + f64::from(q[1]) + f64::from(q[2]);
+                }
+            }
+            a / b.max(1.0)
+        };
+        let full = darkening(PackRepr::Mesh(0));
+        assert!(full < 0.95, "{species}: occlusion darkens the full mesh to {full:.3}");
+        for r in [PackRepr::Mesh(1), PackRepr::Cluster(0), PackRepr::Cluster(1), PackRepr::Billboard] {
+            let d = darkening(r);
+            eprintln!("{species}: {r:?} darkened to {d:.3}, the full mesh to {full:.3}");
+            assert!((d - full).abs() < 0.06, "{species}: {r:?} darkened to {d:.3}, the full mesh to {full:.3}");
+        }
     }
 }
 
