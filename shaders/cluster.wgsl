@@ -18,6 +18,10 @@
 @group(1) @binding(1) var noise_alpha: texture_cube<f32>;
 @group(1) @binding(2) var noise_normal: texture_cube<f32>;
 @group(1) @binding(3) var noise_sampler: sampler;
+// The tree's own sky visibility (bake-tool/src/ao.rs) over the box
+// draw.ao_field_min .. + ao_field_size in model space; one white texel where
+// the pack has none.
+@group(1) @binding(4) var ao_field: texture_3d<f32>;
 
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
@@ -38,16 +42,27 @@ struct VertexOut {
     // Albedo (rgb), noise mip (w).
     @location(4) @interpolate(flat) color: vec4<f32>,
     @location(5) @interpolate(flat) item_y: u32,
-    // Forest-scale occlusion (`canopy_occlusion`) at the primitive's height.
-    @location(6) @interpolate(flat) canopy: f32,
-    // The tree's own baked sky visibility over the primitive (1 where not baked).
-    @location(7) @interpolate(flat) ao: f32,
+    // Forest-scale occlusion: the batch's crown cover (`batch_cover`), taken
+    // per pixel at the hit's height like the meshes' per vertex.
+    @location(6) @interpolate(flat) cover: f32,
+    // The tree's eye-relative position (xyz) and yaw (w), and its height scale
+    // and crown aspect: the hit point back into model space for `field_ao`.
+    @location(7) @interpolate(flat) tree_at: vec4<f32>,
+    @location(8) @interpolate(flat) tree_size: vec2<f32>,
 };
 
-// An occlusion byte of ellipsoids and lines: 0 not baked (open), 1–255 sky
-// visibility 0–1. Must match `ao_from_byte` in src/format/pack.rs.
-fn ao_byte(b: u32) -> f32 {
-    return select(1.0, f32(b) / 254.0 - 1.0 / 254.0, b >= 1u);
+// An eye-relative point in the tree's model space (scale 1).
+fn to_model(p: vec3<f32>, in: VertexOut) -> vec3<f32> {
+    let local = rotate_z(p - in.tree_at.xyz, -in.tree_at.w);
+    let s = max(in.tree_size.x, 1e-6);
+    return vec3<f32>(local.xy / (s * max(in.tree_size.y, 1e-6)), local.z / s);
+}
+
+// The tree's own occlusion at `model`: its field, the same field the mesh
+// vertices and billboards were baked from.
+fn field_ao(model: vec3<f32>) -> f32 {
+    let uvw = (model - draw.ao_field_min.xyz) / max(draw.ao_field_size.xyz, vec3<f32>(1e-6));
+    return textureSampleLevel(ao_field, noise_sampler, uvw, 0.0).r;
 }
 
 struct Ellipsoid {
@@ -56,7 +71,6 @@ struct Ellipsoid {
     radii: vec3<f32>,
     color: vec3<f32>,
     level: f32,
-    ao: f32,
 };
 
 // IEEE half float → f32 by hand: `unpack2x16float` needs a capability some
@@ -92,7 +106,6 @@ fn unpack_ellipsoid(i: u32) -> Ellipsoid {
     e.center = dequantise(vec3<f32>(xy, zl.x));
     e.level = zl.y * 16.0;
     e.radii = vec3<f32>(rxy, rz.x);
-    e.ao = ao_byte((records[base + 3u] >> 16u) & 0xffu);
     e.rotation = normalize(unpack4x8snorm(records[base + 4u]));
     let c = unpack4x8unorm(records[base + 5u]).rgb;
     // sRGB → linear (the records store sRGB bytes).
@@ -184,8 +197,6 @@ fn ellipsoid_vertex(e: Ellipsoid, tree: Tree, corner: vec2<f32>, out: ptr<functi
     (*out).p2 = vec4<f32>(a1 / (k * r.y), 0.0);
     (*out).p3 = vec4<f32>(a2 / (k * r.z), 0.0);
     (*out).color = vec4<f32>(e.color * variation_tint(tree.variation), e.level);
-    (*out).canopy = e.center.z / max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
-    (*out).ao = e.ao;
 }
 
 fn is_perspective() -> bool {
@@ -253,13 +264,6 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
     (*out).p2 = vec4<f32>(0.0);
     (*out).p3 = vec4<f32>(0.0);
     (*out).color = vec4<f32>(draw.line_color.rgb * variation_tint(tree.variation), 0.0);
-    let top = max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
-    (*out).canopy = 0.5 * (dequantise(vec3<f32>(w0, w1.x)).z + dequantise(vec3<f32>(w1.y, w2)).z) / top;
-    (*out).ao = 1.0;
-    if draw.cluster_ao.y == 1u {
-        let word = records[draw.cluster_ao.x + i / 4u];
-        (*out).ao = ao_byte((word >> (8u * (i % 4u))) & 0xffu);
-    }
 }
 
 @vertex
@@ -276,8 +280,9 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         line_vertex(prim - draw.cluster.y, tree, corner, &out);
     }
     out.item_y = item.y;
-    // The primitive functions left its relative height here.
-    out.canopy = canopy_occlusion(batch, out.canopy);
+    out.tree_at = vec4<f32>(tree.pos, tree.yaw);
+    out.tree_size = vec2<f32>(tree.scale, tree.aspect);
+    out.cover = batch_cover(batch);
     return out;
 }
 
@@ -407,9 +412,13 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }
-    let ao = own_ao(in.ao, view);
-    let sun = sun_visibility(hit.p, hit.n, 0.0, open_sun(in.canopy));
-    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, in.canopy, ao), hit.p, view), 1.0);
+    // Forest-scale occlusion at the hit's height, as meshes have it per vertex.
+    let model = to_model(hit.p, in);
+    let top = max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
+    let canopy = in.cover * (1.0 - clamp(model.z / top, 0.0, 1.0));
+    let ao = own_ao(field_ao(to_model(hit.p + hit.n * (draw.ao_field_min.w * in.tree_size.x), in)), view);
+    let sun = sun_visibility(hit.p, hit.n, 0.0, open_sun(canopy));
+    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, canopy, ao), hit.p, view), 1.0);
     return out;
 }
 

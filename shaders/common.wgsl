@@ -109,8 +109,10 @@ struct DrawParams {
     bounds_extent: vec4<f32>,
     // Linear RGB of the lines.
     line_color: vec4<f32>,
-    // x: first word of the lines' occlusion bytes (LNAO), y: 1 when present.
-    cluster_ao: vec4<u32>,
+    // The tree's occlusion field box (model space at scale 1): min corner
+    // (xyz); w how far out along the normal clusters look it up.
+    ao_field_min: vec4<f32>,
+    ao_field_size: vec4<f32>,
 };
 
 // A decoded tree, eye-relative.

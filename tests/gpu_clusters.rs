@@ -31,7 +31,7 @@ impl Rng {
 }
 
 fn upload(ctx: &GpuContext, r: &TreeRenderer, ells: &[Ellipsoid], lines: &[Line]) -> ClusterGpu {
-    ClusterGpu::from_level(&ctx.device, &ctx.queue, &r.cluster, ells, lines, (LO, HI), (0.0, 0.0), [0.9; 3])
+    ClusterGpu::from_level(&ctx.device, &ctx.queue, &r.cluster, ells, lines, (LO, HI), (0.0, 0.0), [0.9; 3], None)
 }
 
 /// The ray through the centre of pixel (x, y), as the shader builds it.
@@ -130,7 +130,6 @@ fn ray_cast_ellipsoids_match_the_cpu_reference() {
             radii,
             color: Vec3::splat(0.9),
             noise_level: 0.0,
-            ao: 1.0,
         };
         // What the GPU reads: the quantised record.
         let q = PackedEllipsoid::encode(&e, LO, HI).decode(LO, HI);
@@ -166,7 +165,6 @@ fn intersecting_ellipsoids_and_lines_keep_correct_depth() {
         radii: Vec3::new(3.0, 1.2, 0.8),
         color: Vec3::new(0.9, 0.05, 0.05),
         noise_level: 0.0,
-        ao: 1.0,
     };
     let blue = Ellipsoid {
         center: Vec3::new(0.5, 0.3, 5.5),
@@ -174,11 +172,9 @@ fn intersecting_ellipsoids_and_lines_keep_correct_depth() {
         radii: Vec3::new(1.0, 2.5, 1.0),
         color: Vec3::new(0.05, 0.05, 0.9),
         noise_level: 0.0,
-        ao: 1.0,
     };
     // A line through both (drawn in the line colour, light grey).
-    let line =
-        Line { a: Vec3::new(-3.0, -1.0, 2.0), b: Vec3::new(3.0, 1.5, 8.0), radius_a: 0.3, radius_b: 0.3, ao: 1.0 };
+    let line = Line { a: Vec3::new(-3.0, -1.0, 2.0), b: Vec3::new(3.0, 1.5, 8.0), radius_a: 0.3, radius_b: 0.3 };
     let c = upload(&ctx, &r, &[red, blue], &[line]);
     let decoded: Vec<Ellipsoid> =
         [red, blue].iter().map(|e| PackedEllipsoid::encode(e, LO, HI).decode(LO, HI)).collect();

@@ -96,6 +96,13 @@ impl AoField {
         sum
     }
 
+    /// The pack's `AOFD` section of this field (one byte per cell).
+    #[must_use]
+    pub fn section_bytes(&self) -> Vec<u8> {
+        let cells: Vec<u8> = self.visibility.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+        sylva::format::pack::AoFieldRef::encode(self.dims.map(|d| d as u32), self.origin.to_array(), self.cell, &cells)
+    }
+
     /// Whether this is the field of [`AoField::open`] (nothing baked).
     #[must_use]
     pub fn is_open(&self) -> bool {
@@ -277,6 +284,21 @@ mod tests {
         leaf.materials[0].kind = MaterialKind::Branch;
         let woody = AoField::build(&leaf).at(Vec3::new(0.0, 0.0, 2.5));
         assert!(woody > leafy, "closed surfaces block a quarter of their area: {woody} vs {leafy}");
+    }
+
+    #[test]
+    fn the_section_round_trips_through_the_pack_reader() {
+        let field = AoField::build(&crown(6));
+        let bytes = field.section_bytes();
+        let r = sylva::format::pack::AoFieldRef::parse(&bytes).unwrap();
+        assert_eq!(r.dims.map(|d| d as usize), field.dims);
+        assert_eq!(r.cell, field.cell);
+        let mid = field.dims.map(|d| d / 2);
+        let i = mid[0] + field.dims[0] * (mid[1] + field.dims[1] * mid[2]);
+        assert_eq!(r.cells[i], (field.visibility[i] * 255.0).round() as u8);
+        let centre = Vec3::from_array(r.origin) + Vec3::new(mid[0] as f32, mid[1] as f32, mid[2] as f32) * r.cell;
+        assert!((field.at(centre) - field.visibility[i]).abs() < 1e-4, "cell centres line up");
+        assert!(sylva::format::pack::AoFieldRef::parse(&bytes[..bytes.len() - 1]).is_err());
     }
 
     #[test]

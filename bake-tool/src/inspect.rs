@@ -280,12 +280,10 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
         .filter(|v| v.normal_oct[2] > 0)
         .map(|v| sylva::format::pack::ao_from_snorm8(v.normal_oct[2]))
         .collect();
-    let ellipsoid_ao = pack.section(kind::ELLIPSOIDS, 0).is_some_and(|b| b.chunks_exact(24).any(|r| r[14] > 0));
     let ao = json!({
         "mesh_vertices": !vertex_ao.is_empty(),
         "billboards": pack.section(kind::BILLBOARD_AO, 0).is_some(),
-        "ellipsoids": ellipsoid_ao,
-        "lines": pack.section(kind::LINE_AO, 0).is_some(),
+        "clusters": pack.section(kind::AO_FIELD, 0).is_some(),
         "sky_visibility": (!vertex_ao.is_empty()).then(|| {
             json!([vertex_ao.iter().copied().fold(1.0f32, f32::min), vertex_ao.iter().copied().fold(0.0f32, f32::max)])
         }),
@@ -510,10 +508,8 @@ fn pack_text(s: &Value) -> String {
         }
     }
     let ao = &s["ambient_occlusion"];
-    let baked: Vec<&str> = ["mesh_vertices", "billboards", "ellipsoids", "lines"]
-        .into_iter()
-        .filter(|k| ao[*k].as_bool() == Some(true))
-        .collect();
+    let baked: Vec<&str> =
+        ["mesh_vertices", "billboards", "clusters"].into_iter().filter(|k| ao[*k].as_bool() == Some(true)).collect();
     match ao["sky_visibility"].as_array() {
         Some(r) if !baked.is_empty() => {
             out += &format!(

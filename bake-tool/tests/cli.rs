@@ -73,7 +73,7 @@ fn demo_scene_is_complete_valid_and_deterministic() {
         assert_eq!(ell.last().unwrap()["count"], 1, "down to one cluster");
         // Each tree's own occlusion in every level, some of the crown well hidden.
         let ao = &s["ambient_occlusion"];
-        for k in ["mesh_vertices", "billboards", "ellipsoids", "lines"] {
+        for k in ["mesh_vertices", "billboards", "clusters"] {
             assert_eq!(ao[k], true, "{}: {k} lack occlusion: {ao}", s["name"]);
         }
         let range = ao["sky_visibility"].as_array().unwrap();

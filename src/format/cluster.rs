@@ -56,9 +56,6 @@ pub struct Ellipsoid {
     pub color: Vec3,
     /// Noise mip level `l_j = 0.5 (1 + log2 Σ_i w_ij)` (seed 002 §3.1).
     pub noise_level: f32,
-    /// The tree's own sky visibility over the ellipsoid (0 closed – 1 open; 1
-    /// when not baked). Stored as a byte in word 3 (see [`super::pack::ao_to_byte`]).
-    pub ao: f32,
 }
 
 /// A line (a capsule from `a` to `b`), model space, metres at scale 1.
@@ -72,9 +69,6 @@ pub struct Line {
     pub radius_a: f32,
     /// Radius at `b`.
     pub radius_b: f32,
-    /// The tree's own sky visibility along the line (1 when not baked). Not in
-    /// the record: the optional `LNAO` section holds one byte per line.
-    pub ao: f32,
 }
 
 /// Largest noise level a record holds.
@@ -85,7 +79,7 @@ pub const MAX_NOISE_LEVEL: f32 = 16.0;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct PackedEllipsoid {
     /// 0: centre x, y (unorm16 over the bounds); 1: centre z, noise level / 16 (unorm16);
-    /// 2: radii x, y (f16); 3: radius z (f16), occlusion byte (bits 16–23, 0 not baked); 4: rotation xyzw (snorm8);
+    /// 2: radii x, y (f16); 3: radius z, 0 (f16); 4: rotation xyzw (snorm8);
     /// 5: sRGB colour, alpha 255 (unorm8).
     pub words: [u32; 6],
 }
@@ -165,7 +159,7 @@ impl PackedEllipsoid {
                 pack2(unorm16(e.center.x, lo.x, hi.x), unorm16(e.center.y, lo.y, hi.y)),
                 pack2(unorm16(e.center.z, lo.z, hi.z), level),
                 pack2(f16_bits(e.radii.x), f16_bits(e.radii.y)),
-                pack2(f16_bits(e.radii.z), u32::from(super::pack::ao_to_byte(e.ao))),
+                pack2(f16_bits(e.radii.z), 0),
                 snorm8(q.x) | (snorm8(q.y) << 8) | (snorm8(q.z) << 16) | (snorm8(q.w) << 24),
                 c[0] | (c[1] << 8) | (c[2] << 16) | (255 << 24),
             ],
@@ -196,7 +190,6 @@ impl PackedEllipsoid {
                 srgb_to_linear(((w[5] >> 16) & 0xff) as f32 / 255.0),
             ),
             noise_level: from_unorm16(w[1] >> 16, 0.0, MAX_NOISE_LEVEL),
-            ao: super::pack::ao_from_byte(((w[3] >> 16) & 0xff) as u8),
         }
     }
 }
@@ -232,7 +225,6 @@ impl PackedLine {
             ),
             radius_a: from_f16(w[3]),
             radius_b: from_f16(w[3] >> 16),
-            ao: 1.0,
         }
     }
 }
@@ -251,14 +243,8 @@ mod tests {
             radii: Vec3::new(2.0, 0.75, 0.01),
             color: Vec3::new(0.1, 0.3, 0.05),
             noise_level: 3.4,
-            ao: 0.37,
         };
         let d = PackedEllipsoid::encode(&e, lo, hi).decode(lo, hi);
-        assert!((d.ao - 0.37).abs() < 0.5 / 254.0, "{}", d.ao);
-        // Records written before occlusion was baked hold 0 there: open.
-        let mut old = PackedEllipsoid::encode(&e, lo, hi);
-        old.words[3] &= 0xffff;
-        assert_eq!(old.decode(lo, hi).ao, 1.0);
         assert!((d.center - e.center).abs().max_element() < 20.0 / 65535.0);
         assert!((d.radii - e.radii).abs().max_element() < 2e-3);
         assert!(d.rotation.dot(e.rotation).abs() > 0.999, "{:?} vs {:?}", d.rotation, e.rotation);
@@ -270,8 +256,7 @@ mod tests {
     fn line_round_trip_within_quantisation() {
         let lo = Vec3::new(-5.0, -5.0, 0.0);
         let hi = Vec3::new(5.0, 5.0, 20.0);
-        let l =
-            Line { a: Vec3::new(0.0, 0.0, 0.0), b: Vec3::new(3.0, -1.0, 12.0), radius_a: 0.4, radius_b: 0.05, ao: 1.0 };
+        let l = Line { a: Vec3::new(0.0, 0.0, 0.0), b: Vec3::new(3.0, -1.0, 12.0), radius_a: 0.4, radius_b: 0.05 };
         let d = PackedLine::encode(&l, lo, hi).decode(lo, hi);
         assert!((d.a - l.a).abs().max_element() < 1e-3 && (d.b - l.b).abs().max_element() < 1e-3);
         assert!((d.radius_a - 0.4).abs() < 1e-3 && (d.radius_b - 0.05).abs() < 1e-4);

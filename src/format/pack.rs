@@ -50,9 +50,9 @@ pub mod kind {
     /// Billboard ambient occlusion (the tree's own sky visibility), R8, mip-major.
     /// Optional: a pack without it draws its billboards unoccluded.
     pub const BILLBOARD_AO: [u8; 4] = *b"BBAO";
-    /// Ambient occlusion of line level `index`, one byte per line (0 not baked,
-    /// 1–255 sky visibility 0–1). Optional.
-    pub const LINE_AO: [u8; 4] = *b"LNAO";
+    /// The tree's own ambient occlusion field ([`AoFieldRef`]): a grid of sky
+    /// visibility that ellipsoids and lines sample where a ray hits them. Optional.
+    pub const AO_FIELD: [u8; 4] = *b"AOFD";
     /// Ellipsoid records of one cluster level (`index` = level), 24 bytes each.
     pub const ELLIPSOIDS: [u8; 4] = *b"ELPS";
     /// Line records of one cluster level (`index` = level), 16 bytes each.
@@ -97,21 +97,81 @@ pub fn ao_to_snorm8(v: f32) -> i8 {
     1 + (v.clamp(0.0, 1.0) * 126.0).round() as i8
 }
 
-/// The occlusion byte of an ellipsoid or a line for sky visibility `v` (0–1): 1–255.
-#[must_use]
-pub fn ao_to_byte(v: f32) -> u8 {
-    1 + (v.clamp(0.0, 1.0) * 254.0).round() as u8
+/// Bytes of the `AOFD` section's header.
+pub const AO_FIELD_HEADER_BYTES: usize = 32;
+/// Most cells along one side of an `AOFD` grid (WebGPU's 3D texture limit is 2048).
+pub const MAX_AO_FIELD_CELLS: u32 = 256;
+
+/// The `AOFD` section: a tree's own sky visibility on a grid (model space,
+/// scale 1). Header (little endian): cells along x, y, z (u32 × 3), the centre
+/// of cell (0, 0, 0) (f32 × 3), the cell side (f32), 0 (u32); then one byte per
+/// cell (0–255 = visibility 0–1), x fastest, then y, then z.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AoFieldRef<'a> {
+    /// Cells along x, y, z.
+    pub dims: [u32; 3],
+    /// Centre of cell (0, 0, 0).
+    pub origin: [f32; 3],
+    /// Side of a cell.
+    pub cell: f32,
+    /// One byte per cell.
+    pub cells: &'a [u8],
 }
 
-/// Sky visibility (0–1) of an occlusion byte of ellipsoids and lines: 0 is
-/// "not baked" (open, 1), 1–255 map to 0–1. Must match `ao_byte` in
-/// `shaders/cluster.wgsl`.
-#[must_use]
-pub fn ao_from_byte(b: u8) -> f32 {
-    if b == 0 {
-        1.0
-    } else {
-        f32::from(b - 1) / 254.0
+impl<'a> AoFieldRef<'a> {
+    /// Reads and checks a section.
+    ///
+    /// # Errors
+    /// A header that does not match the bytes, dimensions of 0 or over
+    /// [`MAX_AO_FIELD_CELLS`], non-finite or non-positive geometry.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, Problem> {
+        let r = Reader::new(bytes);
+        let dims = [r.u32("AOFD.dims", 0)?, r.u32("AOFD.dims", 4)?, r.u32("AOFD.dims", 8)?];
+        let f = |at| r.u32("AOFD", at).map(f32::from_bits);
+        let origin = [f(12)?, f(16)?, f(20)?];
+        let cell = f(24)?;
+        finite_all("AOFD.origin", &origin)?;
+        finite("AOFD.cell", cell.into())?;
+        if cell <= 0.0 {
+            return Err(Problem::Invalid(format!("AOFD.cell is {cell}, must be positive")));
+        }
+        for d in dims {
+            if d == 0 || d > MAX_AO_FIELD_CELLS {
+                return Err(Problem::OutOfRange {
+                    what: "AOFD.dims".into(),
+                    value: d.into(),
+                    allowed: format!("1–{MAX_AO_FIELD_CELLS}"),
+                });
+            }
+        }
+        let n = dims.iter().map(|d| *d as usize).product::<usize>();
+        if bytes.len() != AO_FIELD_HEADER_BYTES + n {
+            return Err(Problem::Invalid(format!(
+                "AOFD holds {} bytes, its {}×{}×{} grid needs {}",
+                bytes.len(),
+                dims[0],
+                dims[1],
+                dims[2],
+                AO_FIELD_HEADER_BYTES + n
+            )));
+        }
+        Ok(Self { dims, origin, cell, cells: &bytes[AO_FIELD_HEADER_BYTES..] })
+    }
+
+    /// The section's bytes for a grid.
+    #[must_use]
+    pub fn encode(dims: [u32; 3], origin: [f32; 3], cell: f32, cells: &[u8]) -> Vec<u8> {
+        let mut out = Vec::with_capacity(AO_FIELD_HEADER_BYTES + cells.len());
+        for d in dims {
+            out.extend_from_slice(&d.to_le_bytes());
+        }
+        for v in origin {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&cell.to_le_bytes());
+        out.extend_from_slice(&0u32.to_le_bytes());
+        out.extend_from_slice(cells);
+        out
     }
 }
 
@@ -315,6 +375,12 @@ impl Pack<'_> {
         self.section(kind::MESH_VERTICES, level).map(bytemuck::pod_collect_to_vec).unwrap_or_default()
     }
 
+    /// The tree's own ambient occlusion field, if the pack has one (validated on decode).
+    #[must_use]
+    pub fn ao_field(&self) -> Option<AoFieldRef<'_>> {
+        self.section(kind::AO_FIELD, 0).and_then(|b| AoFieldRef::parse(b).ok())
+    }
+
     /// Indices of mesh level `level`, copied into an aligned vector.
     #[must_use]
     pub fn mesh_indices(&self, level: u32) -> Vec<u32> {
@@ -498,7 +564,7 @@ impl PackPart {
     pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
         match k {
             kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL | kind::BILLBOARD_AO => Some(PackPart::Billboards),
-            kind::ELLIPSOIDS | kind::LINES | kind::LINE_AO => Some(PackPart::Clusters),
+            kind::ELLIPSOIDS | kind::LINES | kind::AO_FIELD => Some(PackPart::Clusters),
             kind::MESH_VERTICES | kind::MESH_INDICES if index == 0 => Some(PackPart::MeshFull),
             kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::MeshCoarse),
             _ => None,
@@ -708,17 +774,9 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                 }
             }
         }
-        for (l, level) in c.line_levels.iter().enumerate() {
-            if let Some(data) = pack.section(kind::LINE_AO, l as u32) {
-                if data.len() as u64 != u64::from(level.count) {
-                    return Err(Problem::Invalid(format!(
-                        "META.clusters.line_levels[{l}] declares {} lines, its LNAO section holds {} bytes",
-                        level.count,
-                        data.len()
-                    )));
-                }
-            }
-        }
+    }
+    if let Some(data) = pack.section(kind::AO_FIELD, 0) {
+        AoFieldRef::parse(data)?;
     }
     Ok(())
 }

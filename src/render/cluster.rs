@@ -8,8 +8,13 @@ use super::gpu_data::DrawParams;
 use super::layouts::{sampler_entry, storage_entry, SharedLayouts};
 use super::shaders;
 use crate::format::cluster::{ClusterLevelMeta, ClusterMeta};
-use crate::format::pack::{kind, TextureArrayMeta};
+use crate::format::pack::{kind, AoFieldRef, TextureArrayMeta};
 use crate::format::Pack;
+
+/// How far out along its normal (in field cells) an ellipsoid or a line looks
+/// up its occlusion: a cluster's surface lies inside the leaves it stands for,
+/// whose outermost ones are the ones seen.
+pub const AO_LIFT_CELLS: f32 = 1.5;
 
 /// Vertices per primitive (a two-triangle proxy).
 pub const CLUSTER_VERTICES: u32 = 6;
@@ -20,7 +25,7 @@ pub const NOISE_SIZE_LOG2: u32 = 6;
 
 /// The cluster pipeline, its group-1 layout and the shared noise textures.
 pub struct ClusterPipeline {
-    /// Group 1: records, alpha noise cube, normal noise cube, sampler.
+    /// Group 1: records, alpha noise cube, normal noise cube, sampler, occlusion field (3D).
     pub layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     proxy_depth: wgpu::RenderPipeline,
@@ -57,6 +62,16 @@ impl ClusterPipeline {
                 cube_entry(1),
                 cube_entry(2),
                 sampler_entry(3),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -163,8 +178,6 @@ pub struct ClusterLevelGpu {
     pub line_word: u32,
     /// Lines.
     pub lines: u32,
-    /// First word of the line level's occlusion bytes (`LNAO`), if baked.
-    pub line_ao_word: Option<u32>,
     /// The ellipsoid level's metadata.
     pub meta: ClusterLevelMeta,
 }
@@ -179,6 +192,10 @@ pub struct ClusterGpu {
     pub bounds: ([f32; 3], [f32; 3]),
     /// Linear RGB of the lines.
     pub line_color: [f32; 3],
+    /// The occlusion field's box (min, size; model space at scale 1), if baked.
+    pub ao_box: Option<([f32; 3], [f32; 3])>,
+    /// Its cell side (0 without one).
+    pub ao_cell: f32,
     /// Bytes uploaded.
     pub bytes: u64,
 }
@@ -207,16 +224,7 @@ impl ClusterGpu {
             line_words.push((words.len() / 4) as u32);
             words.extend_from_slice(pack.section(kind::LINES, l as u32)?);
         }
-        // Occlusion bytes of each line level after all records, word-aligned.
-        let mut line_ao_words = Vec::new();
-        for l in 0..meta.line_levels.len() {
-            line_ao_words.push(pack.section(kind::LINE_AO, l as u32).map(|bytes| {
-                let at = (words.len() / 4) as u32;
-                words.extend_from_slice(bytes);
-                words.resize(words.len().next_multiple_of(4), 0);
-                at
-            }));
-        }
+
         let levels = meta
             .ellipsoid_levels
             .iter()
@@ -230,7 +238,6 @@ impl ClusterGpu {
                     ellipsoids: m.count,
                     line_word: line_words.get(line).copied().unwrap_or(0),
                     lines,
-                    line_ao_word: line_ao_words.get(line).copied().flatten(),
                     meta: m.clone(),
                 }
             })
@@ -245,6 +252,7 @@ impl ClusterGpu {
             levels,
             (lo, [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]),
             meta.line_color,
+            pack.ao_field(),
         ))
     }
 
@@ -261,6 +269,7 @@ impl ClusterGpu {
         (lo, hi): (glam::Vec3, glam::Vec3),
         noise: (f32, f32),
         line_color: [f32; 3],
+        ao_field: Option<AoFieldRef<'_>>,
     ) -> Self {
         use crate::format::cluster::{PackedEllipsoid, PackedLine};
         let mut words: Vec<u8> = Vec::new();
@@ -271,15 +280,11 @@ impl ClusterGpu {
         for l in lines {
             words.extend_from_slice(bytemuck::bytes_of(&PackedLine::encode(l, lo, hi)));
         }
-        let line_ao_word = (words.len() / 4) as u32;
-        words.extend(lines.iter().map(|l| crate::format::pack::ao_to_byte(l.ao)));
-        words.resize(words.len().next_multiple_of(4), 0);
         let level = ClusterLevelGpu {
             ellipsoid_word: 0,
             ellipsoids: ellipsoids.len() as u32,
             line_word,
             lines: lines.len() as u32,
-            line_ao_word: Some(line_ao_word),
             meta: ClusterLevelMeta {
                 count: ellipsoids.len() as u32,
                 select_px: 0.0,
@@ -288,12 +293,23 @@ impl ClusterGpu {
                 normal_blend: noise.1,
             },
         };
-        Self::new(device, queue, pipeline, words, vec![level], (lo.to_array(), (hi - lo).to_array()), line_color)
+        Self::new(
+            device,
+            queue,
+            pipeline,
+            words,
+            vec![level],
+            (lo.to_array(), (hi - lo).to_array()),
+            line_color,
+            ao_field,
+        )
     }
 
     /// Uploads records (`words`: ellipsoid and line records, little endian) laid
-    /// out as `levels` say, quantised over `bounds` (min, extent).
+    /// out as `levels` say, quantised over `bounds` (min, extent), with the
+    /// tree's own occlusion field (an open one where there is none).
     #[must_use]
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -302,8 +318,36 @@ impl ClusterGpu {
         levels: Vec<ClusterLevelGpu>,
         bounds: ([f32; 3], [f32; 3]),
         line_color: [f32; 3],
+        ao_field: Option<AoFieldRef<'_>>,
     ) -> Self {
         words.resize(words.len().max(16), 0);
+        // The field as a 3D texture; texel centres are cell centres, so the box
+        // runs from half a cell before the first centre over dims × cell.
+        let (dims, cells, ao_box) = match ao_field {
+            Some(f) => {
+                let min = std::array::from_fn(|i| f.origin[i] - 0.5 * f.cell);
+                let size = std::array::from_fn(|i| f.cell * f.dims[i] as f32);
+                (f.dims, f.cells, Some((min, size)))
+            }
+            None => ([1, 1, 1], &[255u8][..], None),
+        };
+        let field = wgpu::util::DeviceExt::create_texture_with_data(
+            device,
+            queue,
+            &wgpu::TextureDescriptor {
+                label: Some("occlusion field"),
+                size: wgpu::Extent3d { width: dims[0], height: dims[1], depth_or_array_layers: dims[2] },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: wgpu::TextureFormat::R8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            cells,
+        );
+        let field_view = field.create_view(&wgpu::TextureViewDescriptor::default());
         let buffer = wgpu::util::DeviceExt::create_buffer_init(
             device,
             &wgpu::util::BufferInitDescriptor {
@@ -321,9 +365,12 @@ impl ClusterGpu {
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(alpha) },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(normal) },
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&pipeline.sampler) },
+                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&field_view) },
             ],
         });
-        Self { bind_group, levels, bounds, line_color, bytes: words.len() as u64 }
+        let bytes = (words.len() + cells.len()) as u64;
+        let ao_cell = ao_field.map_or(0.0, |f| f.cell);
+        Self { bind_group, levels, bounds, line_color, ao_box, ao_cell, bytes }
     }
 
     /// Fills the cluster fields of a draw's parameters for level `level`.
@@ -334,7 +381,10 @@ impl ClusterGpu {
         d.bounds_min = [self.bounds.0[0], self.bounds.0[1], self.bounds.0[2], 0.0];
         d.bounds_extent = [self.bounds.1[0], self.bounds.1[1], self.bounds.1[2], 0.0];
         d.line_color = [self.line_color[0], self.line_color[1], self.line_color[2], 1.0];
-        d.cluster_ao = [l.line_ao_word.unwrap_or(0), u32::from(l.line_ao_word.is_some()), 0, 0];
+        // Without a field the 1×1×1 white texture answers open everywhere.
+        let (min, size) = self.ao_box.unwrap_or(([0.0; 3], [1.0; 3]));
+        d.ao_field_min = [min[0], min[1], min[2], AO_LIFT_CELLS * self.ao_cell];
+        d.ao_field_size = [size[0], size[1], size[2], 0.0];
     }
 
     /// Vertices per tree of level `level`.
@@ -377,7 +427,6 @@ mod tests {
             ellipsoid_word: 0,
             ellipsoids: 1,
             line_word: 0,
-            line_ao_word: None,
             lines: 0,
             meta: ClusterLevelMeta { count: 1, select_px, error: 0.0, noise_threshold: 0.0, normal_blend: 0.0 },
         }

@@ -94,10 +94,12 @@ pub struct DrawParams {
     pub bounds_extent: [f32; 4],
     /// Linear RGB of the lines.
     pub line_color: [f32; 4],
-    /// x: first word of the lines' occlusion bytes (`LNAO`, four per word), y: 1 when present.
-    pub cluster_ao: [u32; 4],
+    /// The tree's occlusion field box (model space at scale 1): min corner xyz.
+    pub ao_field_min: [f32; 4],
+    /// Its size xyz.
+    pub ao_field_size: [f32; 4],
     /// Padding to the 256-byte dynamic-offset alignment.
-    pub pad: [u32; 28],
+    pub pad: [u32; 24],
 }
 const _: () = assert!(std::mem::size_of::<DrawParams>() == 256);
 

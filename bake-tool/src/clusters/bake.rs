@@ -5,9 +5,8 @@ use std::collections::HashMap;
 
 use anyhow::Result;
 use glam::Vec3;
-use sylva::format::cluster::Ellipsoid;
 use sylva::format::cluster::{ClusterLevelMeta, ClusterMeta, Line, PackedEllipsoid, PackedLine};
-use sylva::format::pack::{ao_to_byte, kind, MaterialKind, Section};
+use sylva::format::pack::{kind, AoFieldRef, MaterialKind, Section};
 use sylva::format::Pack;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::capture::{BillboardFrame, TreeDraw, TreeRenderer};
@@ -36,7 +35,8 @@ pub struct GpuJudge<'a> {
     lo: Vec3,
     hi: Vec3,
     line_color: [f32; 3],
-    ao: &'a AoField,
+    /// The tree's `AOFD` section, when baked.
+    ao: Option<Vec<u8>>,
     references: HashMap<u32, Vec<Vec<u8>>>,
     /// Renders made.
     pub renders: usize,
@@ -45,7 +45,7 @@ pub struct GpuJudge<'a> {
 impl<'a> GpuJudge<'a> {
     /// A judge for the tree of `pack`.
     #[must_use]
-    pub fn new(ctx: &'a GpuContext, pack: &Pack<'_>, line_color: [f32; 3], ao: &'a AoField) -> Self {
+    pub fn new(ctx: &'a GpuContext, pack: &Pack<'_>, line_color: [f32; 3], ao: &AoField) -> Self {
         let renderer = TreeRenderer::new(ctx);
         let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &renderer.mesh, pack);
         let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
@@ -57,7 +57,7 @@ impl<'a> GpuJudge<'a> {
             lo,
             hi,
             line_color,
-            ao,
+            ao: (!ao.is_open()).then(|| ao.section_bytes()),
             references: HashMap::new(),
             renders: 0,
         }
@@ -92,66 +92,18 @@ impl Judge for GpuJudge<'_> {
             &self.ctx.device,
             &self.ctx.queue,
             &self.renderer.cluster,
-            &with_ao(c.ellipsoids, self.ao),
-            &lines_with_ao(c.lines, self.ao),
+            c.ellipsoids,
+            c.lines,
             (self.lo, self.hi),
             (c.noise_threshold, c.normal_blend),
             self.line_color,
+            self.ao.as_deref().and_then(|b| AoFieldRef::parse(b).ok()),
         );
         let imgs = self.render(&TreeDraw::Cluster(&gpu, 0), size);
         self.renders += imgs.len();
         let refs = &self.references[&size];
         imgs.iter().zip(refs).map(|(a, b)| multiscale_rmse(a, b, size, size)).sum::<f64>() / imgs.len() as f64
     }
-}
-
-/// Directions from an ellipsoid's centre to the surface points where its
-/// occlusion is sampled: the six axes and the eight diagonals.
-const AO_SAMPLES: [[f32; 3]; 14] = {
-    const D: f32 = 0.577_350_3;
-    [
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-        [D, D, D],
-        [D, D, -D],
-        [D, -D, D],
-        [D, -D, -D],
-        [-D, D, D],
-        [-D, D, -D],
-        [-D, -D, D],
-        [-D, -D, -D],
-    ]
-};
-
-/// `ellipsoids` with their occlusion from `field`, sampled at points on each
-/// one's surface: the mean of the brighter half, as the side of a cluster
-/// that is seen (from outside the crown) is the side facing out of it, where
-/// the leaves it stands for see more sky.
-#[must_use]
-pub fn with_ao(ellipsoids: &[Ellipsoid], field: &AoField) -> Vec<Ellipsoid> {
-    ellipsoids
-        .iter()
-        .map(|e| {
-            let mut v: Vec<f32> =
-                AO_SAMPLES.iter().map(|d| field.at(e.center + e.rotation * (Vec3::from(*d) * e.radii))).collect();
-            v.sort_by(|a, b| b.total_cmp(a));
-            let half = &v[..v.len() / 2];
-            Ellipsoid { ao: half.iter().sum::<f32>() / half.len() as f32, ..*e }
-        })
-        .collect()
-}
-
-/// `lines` with their occlusion from `field`: the mean at both ends and the middle.
-#[must_use]
-pub fn lines_with_ao(lines: &[Line], field: &AoField) -> Vec<Line> {
-    lines
-        .iter()
-        .map(|l| Line { ao: (field.at(l.a) + field.at(0.5 * (l.a + l.b)) + field.at(l.b)) / 3.0, ..*l })
-        .collect()
 }
 
 /// Mean linear albedo of the model's branch material(s), area-weighted.
@@ -192,7 +144,7 @@ fn mean_texture_color(img: &image::RgbaImage) -> Vec3 {
 pub struct BuiltClusters {
     /// Metadata for `META.clusters`.
     pub meta: ClusterMeta,
-    /// `ELPS` and `LINE` sections.
+    /// `ELPS` and `LINE` sections, and `AOFD` when the occlusion is baked.
     pub sections: Vec<Section>,
 }
 
@@ -240,7 +192,8 @@ pub fn build_clusters(
     ));
     let mut sections = Vec::new();
     for (k, l) in levels.iter().enumerate() {
-        let data: Vec<u8> = with_ao(&l.ellipsoids, ao)
+        let data: Vec<u8> = l
+            .ellipsoids
             .iter()
             .flat_map(|e| bytemuck::bytes_of(&PackedEllipsoid::encode(e, lo, hi)).to_vec())
             .collect();
@@ -257,16 +210,6 @@ pub fn build_clusters(
         let data: Vec<u8> =
             l.lines.iter().flat_map(|x| bytemuck::bytes_of(&PackedLine::encode(x, lo, hi)).to_vec()).collect();
         sections.push(Section { kind: kind::LINES, index: k as u32, count: l.lines.len() as u32, stride: 16, data });
-        if !ao.is_open() {
-            let bytes: Vec<u8> = lines_with_ao(&l.lines, ao).iter().map(|x| ao_to_byte(x.ao)).collect();
-            sections.push(Section {
-                kind: kind::LINE_AO,
-                index: k as u32,
-                count: bytes.len() as u32,
-                stride: 1,
-                data: bytes,
-            });
-        }
         line_meta.push(ClusterLevelMeta {
             count: l.lines.len() as u32,
             select_px: levels.get(k).map_or(0.0, |e| e.meta.select_px),
@@ -274,6 +217,10 @@ pub fn build_clusters(
             noise_threshold: 0.0,
             normal_blend: 0.0,
         });
+    }
+    // The occlusion field ellipsoids and lines sample per pixel, with the cluster part.
+    if !ao.is_open() {
+        sections.push(Section { kind: kind::AO_FIELD, index: 0, count: 0, stride: 0, data: ao.section_bytes() });
     }
     Ok(Some(BuiltClusters {
         meta: ClusterMeta {

@@ -116,7 +116,7 @@ pub fn ellipsoid_from_moments(center: DVec3, covariance: DMat3, color: Vec3, noi
     let widest = r.x.max(1e-6);
     let radii = r.max(Vec3::splat(widest * 0.05));
     let rotation = Quat::from_mat3(&vecs.as_mat3()).normalize();
-    Ellipsoid { center: center.as_vec3(), rotation, radii, color, noise_level, ao: 1.0 }
+    Ellipsoid { center: center.as_vec3(), rotation, radii, color, noise_level }
 }
 
 /// Weighted PCA of the leaves per component (Fig. 5): mean and covariance of the
@@ -417,7 +417,6 @@ mod tests {
             radii: Vec3::splat(r),
             color: Vec3::ONE,
             noise_level: 0.0,
-            ao: 1.0,
         };
         let kept = drop_tiny(vec![mk(1.0), mk(0.2), mk(0.05)]);
         assert_eq!(kept.len(), 2, "0.05² = 0.25 % of the area");

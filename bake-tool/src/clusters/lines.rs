@@ -105,7 +105,7 @@ pub fn skeleton(model: &ImportedModel) -> Vec<SkeletonLine> {
         let parent = nearest_line(&out, nodes[0].0);
         for (k, w) in nodes.windows(2).enumerate() {
             let (a, b) = (w[0], w[1]);
-            let line = Line { a: a.0.as_vec3(), b: b.0.as_vec3(), radius_a: a.1 as f32, radius_b: b.1 as f32, ao: 1.0 };
+            let line = Line { a: a.0.as_vec3(), b: b.0.as_vec3(), radius_a: a.1 as f32, radius_b: b.1 as f32 };
             out.push(SkeletonLine {
                 line,
                 parent: if k == 0 { parent } else { Some(out.len() - 1) },
@@ -254,7 +254,7 @@ fn merged(lines: &[SkeletonLine], m: Merge) -> SkeletonLine {
         Merge::Straighten(a, b) => {
             let (x, y) = (lines[a], lines[b]);
             SkeletonLine {
-                line: Line { a: x.line.a, b: y.line.b, radius_a: x.line.radius_a, radius_b: y.line.radius_b, ao: 1.0 },
+                line: Line { a: x.line.a, b: y.line.b, radius_a: x.line.radius_a, radius_b: y.line.radius_b },
                 parent: x.parent,
                 continuation: x.continuation,
                 weight: x.weight + y.weight,
@@ -270,7 +270,6 @@ fn merged(lines: &[SkeletonLine], m: Merge) -> SkeletonLine {
                     b: x.line.b * fx + y.line.b * fy,
                     radius_a: x.line.radius_a * fx + y.line.radius_a * fy,
                     radius_b: x.line.radius_b * fx + y.line.radius_b * fy,
-                    ao: 1.0,
                 },
                 parent: x.parent,
                 continuation: x.continuation || y.continuation,
@@ -387,7 +386,7 @@ mod tests {
         // A trunk of 3 segments with 6 side branches of 2 segments.
         let mut out = Vec::new();
         let push = |a: Vec3, b: Vec3, r: f32, parent: Option<usize>, cont: bool, out: &mut Vec<SkeletonLine>| {
-            let line = Line { a, b, radius_a: r, radius_b: r * 0.8, ao: 1.0 };
+            let line = Line { a, b, radius_a: r, radius_b: r * 0.8 };
             out.push(SkeletonLine { line, parent, continuation: cont, weight: line_volume(&line) });
             out.len() - 1
         };
@@ -427,8 +426,7 @@ mod tests {
     #[test]
     fn raster_add_remove_is_exact() {
         let mut r = CoverageRaster::new(32, Vec3::ZERO, Vec3::splat(10.0));
-        let l =
-            Line { a: Vec3::new(1.0, 1.0, 1.0), b: Vec3::new(8.0, 5.0, 9.0), radius_a: 0.5, radius_b: 0.2, ao: 1.0 };
+        let l = Line { a: Vec3::new(1.0, 1.0, 1.0), b: Vec3::new(8.0, 5.0, 9.0), radius_a: 0.5, radius_b: 0.2 };
         let empty = r.coverage();
         r.draw(&l, true);
         assert!(r.coverage().iter().sum::<f32>() > 20.0);
