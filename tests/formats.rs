@@ -550,6 +550,25 @@ fn pack_decoder_error_paths() {
     );
     pack_error(|_, s| drop(s.remove(2)), "has no texture section");
     pack_error(|m, _| m.billboards.as_mut().unwrap().angles = 3, "3 angles");
+    // The optional occlusion: a billboard array of one byte per texel, a field
+    // whose header matches its bytes.
+    pack_error(|_, s| s.push(Section { kind: *b"BBAO", index: 0, count: 0, stride: 0, data: vec![0; 3] }), "BBAO");
+    let field = sylva::format::pack::AoFieldRef::encode([2, 2, 3], [0.0; 3], 0.5, &[200; 12]);
+    let with_field = |data: Vec<u8>| move |_: &mut PackMeta, s: &mut Vec<Section>| {
+        s.push(Section { kind: *b"AOFD", index: 0, count: 0, stride: 0, data });
+    };
+    pack_error(with_field(field[..field.len() - 1].to_vec()), "needs 44");
+    let mut zero = field.clone();
+    zero[0..4].copy_from_slice(&0u32.to_le_bytes());
+    pack_error(with_field(zero), "AOFD.dims = 0");
+    let mut flat = field.clone();
+    flat[24..28].copy_from_slice(&0f32.to_le_bytes());
+    pack_error(with_field(flat), "AOFD.cell is 0");
+    let (meta, mut sections) = sample_pack();
+    sections.push(Section { kind: *b"AOFD", index: 0, count: 0, stride: 0, data: field });
+    let bytes = encode_pack(&meta, &sections);
+    let pack = decode_pack("x", &bytes).unwrap();
+    assert_eq!(pack.ao_field().map(|f| (f.dims, f.cell, f.cells.len())), Some(([2, 2, 3], 0.5, 12)));
     // Unknown section kinds are skipped (forward compatibility).
     let (meta, mut sections) = sample_pack();
     sections.push(Section { kind: *b"ELPS", index: 0, count: 2, stride: 32, data: vec![0; 64] });
