@@ -554,8 +554,10 @@ fn pack_decoder_error_paths() {
     // whose header matches its bytes.
     pack_error(|_, s| s.push(Section { kind: *b"BBAO", index: 0, count: 0, stride: 0, data: vec![0; 3] }), "BBAO");
     let field = sylva::format::pack::AoFieldRef::encode([2, 2, 3], [0.0; 3], 0.5, &[200; 12]);
-    let with_field = |data: Vec<u8>| move |_: &mut PackMeta, s: &mut Vec<Section>| {
-        s.push(Section { kind: *b"AOFD", index: 0, count: 0, stride: 0, data });
+    let with_field = |data: Vec<u8>| {
+        move |_: &mut PackMeta, s: &mut Vec<Section>| {
+            s.push(Section { kind: *b"AOFD", index: 0, count: 0, stride: 0, data });
+        }
     };
     pack_error(with_field(field[..field.len() - 1].to_vec()), "needs 44");
     let mut zero = field.clone();
