@@ -416,7 +416,9 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     let model = to_model(hit.p, in);
     let top = max(draw.bounds_min.z + draw.bounds_extent.z, 1e-3);
     let canopy = in.cover * (1.0 - clamp(model.z / top, 0.0, 1.0));
-    let ao = own_ao(field_ao(to_model(hit.p + hit.n * (draw.ao_field_min.w * in.tree_size.x), in)), view);
+    // Looked up a little out along the normal, in model space (the same
+    // distance sideways and up, whatever the crown's aspect).
+    let ao = own_ao(field_ao(model + rotate_z(hit.n, -in.tree_at.w) * draw.ao_field_min.w), view);
     let sun = sun_visibility(hit.p, hit.n, 0.0, open_sun(canopy));
     out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, canopy, ao), hit.p, view), 1.0);
     return out;

@@ -566,6 +566,9 @@ fn pack_decoder_error_paths() {
     let mut flat = field.clone();
     flat[24..28].copy_from_slice(&0f32.to_le_bytes());
     pack_error(with_field(flat), "AOFD.cell is 0");
+    let mut reserved = field.clone();
+    reserved[28] = 1;
+    pack_error(with_field(reserved), "AOFD.reserved is 1");
     let (meta, mut sections) = sample_pack();
     sections.push(Section { kind: *b"AOFD", index: 0, count: 0, stride: 0, data: field });
     let bytes = encode_pack(&meta, &sections);

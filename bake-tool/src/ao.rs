@@ -53,7 +53,8 @@ impl AoField {
         let (lo, hi) = model.bounds();
         let extent = (hi - lo).max(Vec3::splat(1e-3));
         let cell = extent.max_element() / AO_GRID_CELLS as f32;
-        // One empty cell of margin on every side: the field reaches 1 outside the tree.
+        // Empty margin cells (one below, at least two above): the field reaches
+        // open sky outside the tree.
         let dims = ((extent / cell).ceil().as_uvec3() + 3).to_array().map(|d| d as usize);
         let origin = lo - Vec3::splat(cell) + 0.5 * cell;
         let extinction = extinction_grid(model, origin, cell, dims);

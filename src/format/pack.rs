@@ -130,6 +130,10 @@ impl<'a> AoFieldRef<'a> {
         let f = |at| r.u32("AOFD", at).map(f32::from_bits);
         let origin = [f(12)?, f(16)?, f(20)?];
         let cell = f(24)?;
+        let reserved = r.u32("AOFD.reserved", 28)?;
+        if reserved != 0 {
+            return Err(Problem::Invalid(format!("AOFD.reserved is {reserved}, must be 0")));
+        }
         finite_all("AOFD.origin", &origin)?;
         finite("AOFD.cell", cell.into())?;
         if cell <= 0.0 {

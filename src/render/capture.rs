@@ -80,7 +80,8 @@ pub struct CapturedBillboards {
     pub color: Vec<Vec<u8>>,
     /// Normal * 0.5 + 0.5 and leaf flag, one `Vec` per layer.
     pub normal: Vec<Vec<u8>>,
-    /// The vertices' baked sky visibility in r, g, b (255 where the mesh has none).
+    /// The vertices' baked sky visibility in r, g, b (255 where the mesh has
+    /// none, and on the background).
     pub ao: Vec<Vec<u8>>,
 }
 
@@ -238,7 +239,12 @@ pub fn capture_billboards(
                             view: &ao_view,
                             depth_slice: None,
                             resolve_target: None,
-                            ops: clear,
+                            // Open where nothing is drawn: filtering at the silhouette
+                            // must not mix "fully occluded" into the edge texels.
+                            ops: wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 0.0 }),
+                                store: wgpu::StoreOp::Store,
+                            },
                         }),
                     ],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {

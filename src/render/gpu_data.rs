@@ -94,7 +94,8 @@ pub struct DrawParams {
     pub bounds_extent: [f32; 4],
     /// Linear RGB of the lines.
     pub line_color: [f32; 4],
-    /// The tree's occlusion field box (model space at scale 1): min corner xyz.
+    /// The tree's occlusion field box (model space at scale 1): min corner xyz;
+    /// w how far out along the normal (model units) clusters look it up.
     pub ao_field_min: [f32; 4],
     /// Its size xyz.
     pub ao_field_size: [f32; 4],
