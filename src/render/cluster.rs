@@ -5,7 +5,7 @@
 use std::sync::OnceLock;
 
 use super::gpu_data::DrawParams;
-use super::layouts::{sampler_entry, storage_entry, SharedLayouts};
+use super::layouts::{sampler_entry, storage_entry, texture_entry, SharedLayouts};
 use super::shaders;
 use crate::format::cluster::{ClusterLevelMeta, ClusterMeta};
 use crate::format::pack::{kind, AoFieldRef, TextureArrayMeta};
@@ -34,19 +34,6 @@ pub struct ClusterPipeline {
     noise: OnceLock<(wgpu::TextureView, wgpu::TextureView)>,
 }
 
-fn cube_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::Cube,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
 impl ClusterPipeline {
     /// Creates the pipeline for `color_format` targets.
     #[must_use]
@@ -59,19 +46,10 @@ impl ClusterPipeline {
             label: Some("cluster level"),
             entries: &[
                 storage_entry(0, wgpu::ShaderStages::VERTEX, true),
-                cube_entry(1),
-                cube_entry(2),
+                texture_entry(1, wgpu::TextureViewDimension::Cube),
+                texture_entry(2, wgpu::TextureViewDimension::Cube),
                 sampler_entry(3),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_entry(4, wgpu::TextureViewDimension::D3),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -46,12 +46,18 @@ pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages, read_only: bo
 /// A filterable 2D-array texture read by the fragment stage (material and billboard arrays).
 #[must_use]
 pub fn texture_array_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    texture_entry(binding, wgpu::TextureViewDimension::D2Array)
+}
+
+/// A filterable texture of `dimension` read by the fragment stage.
+#[must_use]
+pub fn texture_entry(binding: u32, dimension: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::FRAGMENT,
         ty: wgpu::BindingType::Texture {
             sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D2Array,
+            view_dimension: dimension,
             multisampled: false,
         },
         count: None,
