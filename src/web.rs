@@ -5,6 +5,8 @@
 
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::Arc;
 
 use glam::DVec3;
 use wasm_bindgen::prelude::*;
@@ -116,8 +118,15 @@ pub struct Viewer {
     pending_geo: Option<[f64; 5]>,
     /// Walking mode: the eye stays at eye height above the ground and looks around itself.
     fly: bool,
-    lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    lost: Arc<AtomicBool>,
+    /// Frames submitted whose GPU work has not finished (the queue says when).
+    frames_ahead: Arc<AtomicU32>,
 }
+
+/// At most this many frames queued on the GPU: on a slow GPU (a CPU one, a
+/// phone) further frames are skipped until one finishes, so input lag stays
+/// at a frame or two instead of growing with every animation frame.
+const MAX_FRAMES_AHEAD: u32 = 2;
 
 fn js_err(e: impl std::fmt::Display) -> JsValue {
     JsValue::from_str(&e.to_string())
@@ -156,11 +165,11 @@ impl Viewer {
                 ))
             })?;
         let (device, queue) = crate::render::context::request_device(&adapter).await.map_err(js_err)?;
-        let lost = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let lost = Arc::new(AtomicBool::new(false));
         let flag = lost.clone();
         device.set_device_lost_callback(move |reason, message| {
             web_sys::console::warn_1(&JsValue::from_str(&format!("sylva: GPU device lost ({reason:?}): {message}")));
-            flag.store(true, std::sync::atomic::Ordering::SeqCst);
+            flag.store(true, Ordering::SeqCst);
         });
         let caps = surface.get_capabilities(&adapter);
         let format = caps.formats.first().copied().unwrap_or(wgpu::TextureFormat::Bgra8Unorm);
@@ -199,6 +208,7 @@ impl Viewer {
             pending_geo: None,
             fly: false,
             lost,
+            frames_ahead: Default::default(),
         })
     }
 
@@ -213,13 +223,15 @@ impl Viewer {
         }
     }
 
-    /// Streams and draws one frame. `now_ms` is `performance.now()`.
+    /// Streams and draws one frame. `now_ms` is `performance.now()`. Returns
+    /// whether a frame was drawn: not while [`MAX_FRAMES_AHEAD`] frames are
+    /// still on the GPU (streaming goes on; draw again on a later animation frame).
     ///
     /// # Errors
     /// When the surface is lost for good (the page should recreate the viewer).
-    pub fn frame(&mut self, now_ms: f64) -> Result<(), JsValue> {
+    pub fn frame(&mut self, now_ms: f64) -> Result<bool, JsValue> {
         if self.is_lost() {
-            return Ok(());
+            return Ok(false);
         }
         // GPU times and counters of earlier frames, as the GPU reports them.
         self.frame.collect();
@@ -249,12 +261,15 @@ impl Viewer {
                 }
             }
         }
+        if self.frames_ahead.load(Ordering::Relaxed) >= MAX_FRAMES_AHEAD {
+            return Ok(false);
+        }
         let target = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
-            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(()),
+            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(false),
             wgpu::CurrentSurfaceTexture::Outdated => {
                 self.surface.configure(&self.frame.device, &self.config);
-                return Ok(());
+                return Ok(false);
             }
             other => return Err(js_err(format!("the canvas surface failed: {other:?}"))),
         };
@@ -267,12 +282,17 @@ impl Viewer {
         let recorded = self.frame.record(&view, &color, &depth, true);
         self.frame.submit(recorded, false);
         self.frame.queue.present(target);
+        self.frames_ahead.fetch_add(1, Ordering::Relaxed);
+        let ahead = self.frames_ahead.clone();
+        self.frame.queue.on_submitted_work_done(move || {
+            ahead.fetch_sub(1, Ordering::Relaxed);
+        });
         if self.frame.stream.is_settled() && self.frame.stream.manifest().is_some() {
             self.settled_frame.get_or_insert(self.frame.frames());
         } else {
             self.settled_frame = None;
         }
-        Ok(())
+        Ok(true)
     }
 
     fn camera(&self) -> Camera {
@@ -344,7 +364,12 @@ impl Viewer {
 
     /// Whether the GPU device was lost (the page then creates a new viewer).
     pub fn is_lost(&self) -> bool {
-        self.lost.load(std::sync::atomic::Ordering::SeqCst)
+        self.lost.load(Ordering::SeqCst)
+    }
+
+    /// Frames submitted whose GPU work has not finished yet (at most 2).
+    pub fn frames_in_flight(&self) -> u32 {
+        self.frames_ahead.load(Ordering::Relaxed)
     }
 
     /// Destroys the device as a driver reset would (for tests of the recovery).

@@ -251,17 +251,21 @@ class SylvaViewer {
     // first complete frame's counters are back; idle otherwise.
     if (!progress.settled || this.flight || this.dirty > 0 || (!this.readySettled && !this.viewer.is_ready())) {
       const t0 = performance.now();
+      let drawn;
       try {
-        this.viewer.frame(now);
+        // False while the GPU is still busy with earlier frames (a slow GPU): try again next time.
+        drawn = this.viewer.frame(now);
       } catch (e) {
         this.emit('error', { message: String(e) });
         this.rejectReady(new Error(String(e)));
         this.destroy();
         return;
       }
-      this.frameTimes.push(performance.now() - t0);
-      if (this.frameTimes.length > 60) this.frameTimes.shift();
-      if (this.dirty > 0) this.dirty--;
+      if (drawn) {
+        this.frameTimes.push(performance.now() - t0);
+        if (this.frameTimes.length > 60) this.frameTimes.shift();
+        if (this.dirty > 0) this.dirty--;
+      }
       if (!progress.settled) this.dirty = Math.max(this.dirty, 4);
     }
     for (const e of JSON.parse(this.viewer.take_events_json())) {

@@ -148,7 +148,13 @@ async function openViewer(url, size = { width: 480, height: 320 }) {
 /** Screenshots the page (kept as `name`.png) and reduces its RGBA pixels in the
  * page with `reduce`, the source of a function body over `d` (the pixel bytes). */
 async function screenshotStat(page, name, reduce) {
-  const png = await page.screenshot({ path: join(artifacts, `${name}.png`) });
+  // Let a viewer finish what it is drawing first: a screenshot waits for the
+  // GPU, and a CPU GPU takes seconds per frame close to trees with shadows.
+  await page.waitForFunction(() => {
+    const s = window.sylva;
+    return !s?.viewer?.frames_in_flight || (s.dirty === 0 && s.viewer.frames_in_flight() === 0);
+  }, null, { timeout: 90000, polling: 250 }).catch(() => {});
+  const png = await page.screenshot({ path: join(artifacts, `${name}.png`), timeout: 60000 });
   // Decode in the page with a 2D canvas (the screenshot, not the WebGPU canvas).
   return page.evaluate(async ([b64, reduce]) => {
     const img = new Image();
@@ -354,7 +360,9 @@ test('walking mode keeps eye height above the ground', async () => {
   // On the fixture's terrain; the eye stays 1.7 m above it.
   assert.ok(cam.ground >= groundLo - 0.1 && cam.ground <= groundHi + 0.1, `ground under the eye ${cam.ground}`);
   assert.ok(Math.abs(cam.z - cam.ground - 1.7) < 0.05, `eye height ${cam.z} over ground ${cam.ground}`);
-  await foliageShare(page, 'walking');
+  // Among the trees: their crowns fill much of the view.
+  const share = await foliageShare(page, 'walking');
+  assert.ok(share > 0.15, `foliage covers ${share} of the walking view`);
 });
 
 test('the terrain is drawn under the trees and heightAt reads it', async () => {
