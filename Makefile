@@ -144,5 +144,5 @@ fuzz:
 # with SYLVA_BLESS=1 cargo test --test gpu_scene).
 fixtures: release
 	rm -rf tests/fixtures/forest-small
-	target/release/sylva-bake demo --trees 3000 --seed 3 --billboard-size 32 --texture-size 64 \
+	target/release/sylva-bake demo --trees 3000 --seed 3 --billboard-size 32 --impostor-size 32 --texture-size 64 \
 	  --cell-size 32 --tile-cells 4 --index-node-tiles 4 --out tests/fixtures/forest-small

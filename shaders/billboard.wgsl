@@ -42,22 +42,6 @@ fn billboard_layer(to_eye: vec3<f32>, angles: u32) -> u32 {
     return u32(clamp(i, 0.0, a - 1.0));
 }
 
-// Scale of a thinned batch's kept trees so the canopy covers about what all its
-// trees did: s = (n / kept)^THIN_BOOST_EXPONENT. An exponent of ½ keeps the
-// summed tree area; calibrated by the image metric it over-covers by 10–18 %
-// (evenly spread kept trees overlap less than the whole batch, whose tiny
-// billboards also alpha-test away part of their area) and no boost under-covers
-// by up to 50 %; 0.35 keeps coverage within ±6 % (docs/BENCHMARKS.md).
-const THIN_BOOST_EXPONENT: f32 = 0.35;
-
-fn coverage_boost(thin: vec2<f32>, b: Batch) -> f32 {
-    let n = f32(b.instance_count);
-    if thin.x >= n {
-        return 1.0;
-    }
-    return pow(n / thin.x, THIN_BOOST_EXPONENT);
-}
-
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];

@@ -137,6 +137,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
             select_px: 0.0,
         }),
         clusters: None,
+        impostors: None,
     };
     let fill = |n: u64, v: u8| vec![v; n as usize];
     let sections = vec![

@@ -94,6 +94,7 @@ fn toy_pack() -> Vec<u8> {
         }],
         billboards: None,
         clusters: None,
+        impostors: None,
     };
     let sections = vec![
         Section {

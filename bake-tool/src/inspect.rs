@@ -273,6 +273,19 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
             "select_px": bb.select_px,
         }));
     }
+    if let Some(imp) = &meta.impostors {
+        let b = pack.section(kind::IMPOSTOR_COLOR, 0).map_or(0, <[u8]>::len)
+            + pack.section(kind::IMPOSTOR_SURFACE, 0).map_or(0, <[u8]>::len);
+        levels.push(json!({
+            "kind": "impostors",
+            "count": imp.grid * imp.grid,
+            "grid": imp.grid,
+            "resolution": imp.texture.size,
+            "mips": imp.texture.mips,
+            "radius": imp.radius,
+            "bytes": b,
+        }));
+    }
     // The tree's own ambient occlusion: where it is baked, and its range over the full mesh.
     let vertex_ao: Vec<f32> = pack
         .mesh_vertices(0)
@@ -499,6 +512,15 @@ fn pack_text(s: &Value) -> String {
                     "  billboards: {} angles × {} azimuths at {}², {} mips, {:.1} KB\n",
                     l["angles"],
                     l["azimuths"],
+                    l["resolution"],
+                    l["mips"],
+                    l["bytes"].as_f64().unwrap_or(0.0) / 1e3
+                )
+            }
+            Some("impostors") => {
+                out += &format!(
+                    "  impostors: {0}×{0} hemi-octahedral views at {1}², {2} mips, {3:.1} KB\n",
+                    l["grid"],
                     l["resolution"],
                     l["mips"],
                     l["bytes"].as_f64().unwrap_or(0.0) / 1e3

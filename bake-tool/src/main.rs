@@ -30,7 +30,7 @@ use batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
 use bucket::TreeSource;
 use gltf_import::Classifier;
 use out_dir::OutDir;
-use pack_build::PackOptions;
+use pack_build::{FarBake, PackOptions};
 use reproject::{Crs, Reprojector};
 use sylva::format::index::DEFAULT_NODE_TILES;
 
@@ -106,6 +106,17 @@ struct PackArgs {
     /// Billboard resolution per layer (power of two).
     #[arg(long, default_value_t = 128)]
     billboard_size: u32,
+    /// Far-field representations to bake: multi-view impostors (blended views
+    /// over the hemisphere, the tree keeps its shape all round), seed 004's
+    /// view-angle billboards, or both (the viewer draws the impostors).
+    #[arg(long, value_enum, default_value_t = FarBake::Both)]
+    far_tier: FarBake,
+    /// Impostor views per side of the hemi-octahedral grid (grid² views).
+    #[arg(long, default_value_t = pack_build::DEFAULT_IMPOSTOR_GRID, value_parser = clap::value_parser!(u32).range(2..=16))]
+    impostor_grid: u32,
+    /// Impostor resolution per view (power of two).
+    #[arg(long, default_value_t = pack_build::DEFAULT_IMPOSTOR_SIZE)]
+    impostor_size: u32,
     /// Material texture size (power of two).
     #[arg(long, default_value_t = 512)]
     texture_size: u32,
@@ -162,9 +173,11 @@ fn parse_shard(s: &str) -> Result<(u32, u32), String> {
 
 impl PackArgs {
     fn options(&self) -> Result<PackOptions> {
-        for (name, v, max) in
-            [("--billboard-size", self.billboard_size, 2048), ("--texture-size", self.texture_size, 4096)]
-        {
+        for (name, v, max) in [
+            ("--billboard-size", self.billboard_size, 2048),
+            ("--texture-size", self.texture_size, 4096),
+            ("--impostor-size", self.impostor_size, 1024),
+        ] {
             if !v.is_power_of_two() || v < 4 || v > max {
                 bail!("{name} {v}: must be a power of two between 4 and {max}");
             }
@@ -181,6 +194,9 @@ impl PackArgs {
             clusters: !self.no_clusters,
             cluster_tries: self.cluster_tries as usize,
             ao: !self.no_ao,
+            far_tier: self.far_tier,
+            impostor_grid: self.impostor_grid,
+            impostor_size: self.impostor_size,
         })
     }
 

@@ -5,11 +5,12 @@
 use anyhow::{Context, Result};
 use glam::{Vec2, Vec3};
 use sylva::format::pack::{
-    ao_to_snorm8, encode_pack, kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex,
-    PackMeta, Section, TextureArrayMeta,
+    ao_to_snorm8, encode_pack, kind, BillboardMeta, DrawRange, ImpostorMeta, MaterialKind, MaterialMeta, MeshLevelMeta,
+    MeshVertex, PackMeta, Section, TextureArrayMeta,
 };
 use sylva::render::capture::CapturePipelines;
-use sylva::render::capture::{capture_billboards, BillboardFrame};
+use sylva::render::capture::{capture_billboards, capture_views, BillboardFrame};
+use sylva::render::impostor;
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 use sylva::render::GpuContext;
 
@@ -35,6 +36,32 @@ pub struct PackOptions {
     pub cluster_tries: usize,
     /// Whether to bake the tree's own ambient occlusion ([`crate::ao`]).
     pub ao: bool,
+    /// Which far-field representations to bake.
+    pub far_tier: FarBake,
+    /// Views per side of the impostors' hemi-octahedral grid.
+    pub impostor_grid: u32,
+    /// Impostor view side (power of two).
+    pub impostor_size: u32,
+}
+
+/// The far-field representations a pack gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FarBake {
+    /// Multi-view impostors only.
+    Impostors,
+    /// View-angle billboards only (seed 004).
+    Billboards,
+    /// Both (the viewer draws the impostors; benchmarks compare them).
+    Both,
+}
+
+impl FarBake {
+    fn impostors(self) -> bool {
+        self != FarBake::Billboards
+    }
+    fn billboards(self) -> bool {
+        self != FarBake::Impostors
+    }
 }
 
 impl Default for PackOptions {
@@ -48,6 +75,9 @@ impl Default for PackOptions {
             clusters: true,
             cluster_tries: 4,
             ao: true,
+            far_tier: FarBake::Both,
+            impostor_grid: DEFAULT_IMPOSTOR_GRID,
+            impostor_size: DEFAULT_IMPOSTOR_SIZE,
         }
     }
 }
@@ -57,6 +87,11 @@ impl Default for PackOptions {
 pub const SELECT_PX_MESH0: f32 = 360.0;
 /// See [`SELECT_PX_MESH0`].
 pub const SELECT_PX_MESH1: f32 = 120.0;
+
+/// Default views per side of the impostor grid (36 views over the hemisphere).
+pub const DEFAULT_IMPOSTOR_GRID: u32 = 6;
+/// Default impostor view side.
+pub const DEFAULT_IMPOSTOR_SIZE: u32 = 128;
 
 /// Alpha-test threshold of billboards (the viewer discards below it).
 pub const BILLBOARD_ALPHA_CUTOFF: f32 = 0.5;
@@ -136,70 +171,85 @@ pub fn build_pack(
         mesh_levels: levels.iter().map(|(m, _, _)| m.clone()).collect(),
         billboards: None,
         clusters: None,
+        impostors: None,
     };
     // Capture the billboards from the mesh-only pack, through the same decoder the viewer uses.
     let mesh_only = encode_pack(&meta, &sections);
     let decoded = sylva::format::decode_pack(name, &mesh_only).context("the mesh-only pack does not validate")?;
     let frame = BillboardFrame::from_bounds(lo, hi);
-    let capture_size = opts.billboard_size * 2;
-    let captured = capture_billboards(
-        gpu,
-        pipelines,
-        &decoded,
-        &frame,
-        opts.billboard_angles,
-        opts.billboard_azimuths,
-        capture_size,
-    );
-    let layers = opts.billboard_angles * opts.billboard_azimuths;
-    let tex = TextureArrayMeta { size: opts.billboard_size, layers, mips: opts.billboard_size.trailing_zeros() + 1 };
-    // Supersampled 2× capture: mip 1 of the alpha-aware chain is the stored mip 0,
-    // so stored alpha is real coverage rather than a hard alpha test.
-    let color_chains: Vec<Vec<Vec<u8>>> = captured
-        .color
-        .iter()
-        .map(|c| alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..].to_vec())
-        .collect();
-    let normal_chains: Vec<Vec<Vec<u8>>> = captured
-        .normal
-        .iter()
-        .zip(&captured.color)
-        .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear, None)[1..].to_vec())
-        .collect();
-    sections.push(Section {
-        kind: kind::BILLBOARD_COLOR,
-        index: 0,
-        count: 0,
-        stride: 0,
-        data: mip_major(&color_chains, tex.mips),
-    });
-    sections.push(Section {
-        kind: kind::BILLBOARD_NORMAL,
-        index: 0,
-        count: 0,
-        stride: 0,
-        data: mip_major(&normal_chains, tex.mips),
-    });
-    if opts.ao {
-        // One byte per texel (the red channel), mips weighted by coverage like the normals'.
-        let ao_chains: Vec<Vec<Vec<u8>>> = captured
-            .ao
+    let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
+    let mut normal_chains: Vec<Vec<Vec<u8>>> = Vec::new();
+    let tex = TextureArrayMeta {
+        size: opts.billboard_size,
+        layers: opts.billboard_angles * opts.billboard_azimuths,
+        mips: opts.billboard_size.trailing_zeros() + 1,
+    };
+    if opts.far_tier.billboards() {
+        let capture_size = opts.billboard_size * 2;
+        let captured = capture_billboards(
+            gpu,
+            pipelines,
+            &decoded,
+            &frame,
+            opts.billboard_angles,
+            opts.billboard_azimuths,
+            capture_size,
+        );
+        // Supersampled 2× capture: mip 1 of the alpha-aware chain is the stored mip 0,
+        // so stored alpha is real coverage rather than a hard alpha test.
+        color_chains = captured
+            .color
             .iter()
-            .zip(&captured.color)
-            .map(|(a, c)| {
-                alpha_aware_mips(a, c, capture_size, ColorEncoding::Linear, None)[1..]
-                    .iter()
-                    .map(|mip| mip.chunks_exact(4).map(|t| t[0]).collect())
-                    .collect()
+            .map(|c| {
+                alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..].to_vec()
             })
             .collect();
+        normal_chains = captured
+            .normal
+            .iter()
+            .zip(&captured.color)
+            .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear, None)[1..].to_vec())
+            .collect();
         sections.push(Section {
-            kind: kind::BILLBOARD_AO,
+            kind: kind::BILLBOARD_COLOR,
             index: 0,
             count: 0,
             stride: 0,
-            data: mip_major(&ao_chains, tex.mips),
+            data: mip_major(&color_chains, tex.mips),
         });
+        sections.push(Section {
+            kind: kind::BILLBOARD_NORMAL,
+            index: 0,
+            count: 0,
+            stride: 0,
+            data: mip_major(&normal_chains, tex.mips),
+        });
+        if opts.ao {
+            // One byte per texel (the red channel), mips weighted by coverage like the normals'.
+            let ao_chains: Vec<Vec<Vec<u8>>> = captured
+                .ao
+                .iter()
+                .zip(&captured.color)
+                .map(|(a, c)| {
+                    alpha_aware_mips(a, c, capture_size, ColorEncoding::Linear, None)[1..]
+                        .iter()
+                        .map(|mip| mip.chunks_exact(4).map(|t| t[0]).collect())
+                        .collect()
+                })
+                .collect();
+            sections.push(Section {
+                kind: kind::BILLBOARD_AO,
+                index: 0,
+                count: 0,
+                stride: 0,
+                data: mip_major(&ao_chains, tex.mips),
+            });
+        }
+    }
+    if opts.far_tier.impostors() {
+        let (m, imp_sections) = build_impostors(gpu, pipelines, &decoded, lo, hi, opts);
+        sections.extend(imp_sections);
+        meta.impostors = Some(m);
     }
     if opts.clusters {
         let hopts = crate::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
@@ -209,7 +259,7 @@ pub fn build_pack(
             meta.clusters = Some(c.meta);
         }
     }
-    meta.billboards = Some(BillboardMeta {
+    meta.billboards = opts.far_tier.billboards().then(|| BillboardMeta {
         angles: opts.billboard_angles,
         azimuths: opts.billboard_azimuths,
         texture: tex,
@@ -226,6 +276,116 @@ pub fn build_pack(
         billboard_color: color_chains.iter().map(|c| c[0].clone()).collect(),
         billboard_normal: normal_chains.iter().map(|c| c[0].clone()).collect(),
     })
+}
+
+/// The multi-view impostors of a mesh-only pack: `grid`² orthographic views
+/// over the upper hemisphere ([`impostor::capture_clip_from_model`]), each
+/// framing the bounding sphere, rendered at twice the stored size through the
+/// viewer's own mesh pass. Colour mips as the billboards' (alpha-aware, coverage
+/// kept); the surface layer (normal, depth, occlusion and leaf flag) averaged
+/// weighted by coverage.
+fn build_impostors(
+    gpu: &GpuContext,
+    pipelines: &CapturePipelines,
+    decoded: &sylva::format::Pack<'_>,
+    lo: Vec3,
+    hi: Vec3,
+    opts: &PackOptions,
+) -> (ImpostorMeta, Vec<Section>) {
+    let grid = opts.impostor_grid;
+    let center = (lo + hi) * 0.5;
+    let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.01;
+    let views: Vec<_> = (0..grid * grid).map(|l| impostor::capture_clip_from_model(center, radius, l, grid)).collect();
+    let capture_size = opts.impostor_size * 2;
+    let captured = capture_views(gpu, pipelines, decoded, &views, capture_size);
+    let mut color_chains = Vec::new();
+    let mut surface_chains = Vec::new();
+    for layer in 0..views.len() {
+        let color = &captured.color[layer];
+        color_chains.push(
+            alpha_aware_mips(color, color, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..]
+                .to_vec(),
+        );
+        let surface: Vec<u8> = (0..(capture_size * capture_size) as usize)
+            .flat_map(|i| {
+                let n = &captured.normal[layer][i * 4..i * 4 + 4];
+                if color[i * 4 + 3] == 0 {
+                    // Background: the plane, open, weighted out of every mip.
+                    return [128, 128, 128, impostor::pack_ao_leaf(1.0, false)];
+                }
+                let normal = Vec3::new(f32::from(n[0]), f32::from(n[1]), f32::from(n[2])) / 127.5 - Vec3::ONE;
+                let e = oct_encode(normal.normalize_or(Vec3::Z));
+                let unorm = |v: i8| ((f32::from(v) / 127.0 * 0.5 + 0.5) * 255.0).round() as u8;
+                let depth = impostor::depth_to_offset(captured.depth[layer][i]) * 0.5 + 0.5;
+                let ao = f32::from(captured.ao[layer][i * 4]) / 255.0;
+                [
+                    unorm(e[0]),
+                    unorm(e[1]),
+                    (depth.clamp(0.0, 1.0) * 255.0).round() as u8,
+                    impostor::pack_ao_leaf(ao, n[3] > 191),
+                ]
+            })
+            .collect();
+        surface_chains.push(coverage_weighted_mips(&surface, color, capture_size)[1..].to_vec());
+    }
+    let texture = TextureArrayMeta {
+        size: opts.impostor_size,
+        layers: grid * grid,
+        mips: opts.impostor_size.trailing_zeros() + 1,
+    };
+    let sections = vec![
+        Section {
+            kind: kind::IMPOSTOR_COLOR,
+            index: 0,
+            count: 0,
+            stride: 0,
+            data: mip_major(&color_chains, texture.mips),
+        },
+        Section {
+            kind: kind::IMPOSTOR_SURFACE,
+            index: 0,
+            count: 0,
+            stride: 0,
+            data: mip_major(&surface_chains, texture.mips),
+        },
+    ];
+    (ImpostorMeta { grid, texture, center: center.to_array(), radius }, sections)
+}
+
+/// Mip chain (mip 0 included) of a square RGBA8 data layer whose four channels
+/// are all averaged weighted by `color`'s alpha (coverage); where a 2×2 block
+/// has none, by plain average.
+fn coverage_weighted_mips(layer: &[u8], color: &[u8], size: u32) -> Vec<Vec<u8>> {
+    let mut texels: Vec<[f32; 4]> = layer.chunks_exact(4).map(|t| [t[0], t[1], t[2], t[3]].map(f32::from)).collect();
+    let mut weights: Vec<f32> = color.chunks_exact(4).map(|t| f32::from(t[3])).collect();
+    let encode = |t: &[[f32; 4]]| t.iter().flat_map(|c| c.map(|v| v.round().clamp(0.0, 255.0) as u8)).collect();
+    let mut chain: Vec<Vec<u8>> = vec![encode(&texels)];
+    let mut s = size;
+    while s > 1 {
+        let h = s / 2;
+        let mut next = Vec::with_capacity((h * h) as usize);
+        let mut next_w = Vec::with_capacity((h * h) as usize);
+        for y in 0..h {
+            for x in 0..h {
+                let quad = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| ((2 * y + dy) * s + 2 * x + dx) as usize);
+                let w_sum: f32 = quad.iter().map(|&i| weights[i]).sum();
+                let mut c = [0.0; 4];
+                for &i in &quad {
+                    let w = if w_sum > 0.0 { weights[i] / w_sum } else { 0.25 };
+                    for k in 0..4 {
+                        c[k] += texels[i][k] * w;
+                    }
+                }
+                next.push(c);
+                next_w.push(w_sum * 0.25);
+            }
+        }
+        texels = next;
+        weights = next_w;
+        s = h;
+        chain.push(encode(&texels));
+    }
+    chain
 }
 
 /// Lays out per-layer mip chains mip-major (all layers of mip 0, then mip 1, …),

@@ -24,6 +24,7 @@ use crate::camera::Camera;
 use crate::format::Manifest;
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use crate::render::offscreen::{NamedView, OffscreenScene};
+use crate::render::settings::FarTier;
 use crate::render::shadow::ShadowQuality;
 
 pub mod memory;
@@ -198,6 +199,15 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "billboard" => m(
                 RenderSettings {
                     representations: Representations { meshes: true, clusters: false, billboards: true },
+                    far_tier: FarTier::Billboards,
+                    ..base
+                },
+                1,
+            ),
+            "impostor" => m(
+                RenderSettings {
+                    representations: Representations { meshes: true, clusters: false, billboards: true },
+                    far_tier: FarTier::Impostors,
                     ..base
                 },
                 1,
@@ -215,7 +225,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "sylva-shadows-low" => m(RenderSettings { shadows: ShadowQuality::Low, ..base }, 1),
             "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
             other => bail!(
-                "unknown method {other:?}: use reference, mesh, per-tree, billboard, ellipsoid, sylva, sylva-q0.5, \
+                "unknown method {other:?}: use reference, mesh, per-tree, billboard, impostor, ellipsoid, sylva, sylva-q0.5, \
                  sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
             ),
         })
@@ -225,6 +235,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "mesh",
             "per-tree",
             "billboard",
+            "impostor",
             "ellipsoid",
             "sylva",
             "sylva-q0.5",

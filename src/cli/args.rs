@@ -33,6 +33,8 @@ pub(crate) enum PackReprArg {
     Mesh,
     Ellipsoids,
     Billboard,
+    /// Multi-view impostors.
+    Impostor,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

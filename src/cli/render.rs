@@ -328,6 +328,12 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             }
             PackRepr::Billboard
         }
+        PackReprArg::Impostor => {
+            if decoded.meta.impostors.is_none() {
+                bail!("the pack has no impostors (bake it with --far-tier impostors or both)");
+            }
+            PackRepr::Impostor
+        }
     };
     let gpu = GpuContext::new_headless_blocking()?;
     let view = match pack_view {

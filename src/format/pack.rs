@@ -53,6 +53,13 @@ pub mod kind {
     /// The tree's own ambient occlusion field ([`AoFieldRef`]): a grid of sky
     /// visibility that ellipsoids and lines sample where a ray hits them. Optional.
     pub const AO_FIELD: [u8; 4] = *b"AOFD";
+    /// Multi-view impostor colour+alpha array ([`super::ImpostorMeta`]), RGBA8
+    /// (sRGB), one layer per hemi-octahedral view, mip-major. Optional.
+    pub const IMPOSTOR_COLOR: [u8; 4] = *b"IMCO";
+    /// Multi-view impostor surface array, RGBA8, mip-major: octahedral normal
+    /// (r, g), depth (b: −radius … +radius towards the view as 0 … 1) and
+    /// occlusion with the leaf flag (a: leaf ? ½ + ½·ao : ½·ao).
+    pub const IMPOSTOR_SURFACE: [u8; 4] = *b"IMSF";
     /// Ellipsoid records of one cluster level (`index` = level), 24 bytes each.
     pub const ELLIPSOIDS: [u8; 4] = *b"ELPS";
     /// Line records of one cluster level (`index` = level), 16 bytes each.
@@ -300,6 +307,24 @@ pub struct BillboardMeta {
     pub select_px: f32,
 }
 
+/// Multi-view impostors: the tree rendered orthographically from the vertices
+/// of a `grid`×`grid` hemi-octahedral grid of directions over the upper
+/// hemisphere, each view framing the bounding sphere (`center`, `radius`).
+/// The viewer blends the three views nearest the eye per pixel, reprojected
+/// with each view's depth (`shaders/impostor.wgsl`); layer = row · grid + column.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImpostorMeta {
+    /// Views per side of the hemi-octahedral grid (2–16).
+    pub grid: u32,
+    /// The colour and surface arrays' layout (grid² layers).
+    pub texture: TextureArrayMeta,
+    /// Centre of the bounding sphere (model space, metres at scale 1).
+    pub center: [f32; 3],
+    /// Its radius: every view's half extent, and the depth range's half.
+    pub radius: f32,
+}
+
 /// The `META` section of a pack.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -323,6 +348,10 @@ pub struct PackMeta {
     /// Clustered-ellipsoid and line levels (seed 002), if baked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clusters: Option<super::cluster::ClusterMeta>,
+    /// Multi-view impostors of the far field, if baked (drawn instead of the
+    /// billboards where both are present, unless a viewer asks for billboards).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub impostors: Option<ImpostorMeta>,
 }
 
 /// A section-table entry.
@@ -567,7 +596,11 @@ impl PackPart {
     #[must_use]
     pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
         match k {
-            kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL | kind::BILLBOARD_AO => Some(PackPart::Billboards),
+            kind::BILLBOARD_COLOR
+            | kind::BILLBOARD_NORMAL
+            | kind::BILLBOARD_AO
+            | kind::IMPOSTOR_COLOR
+            | kind::IMPOSTOR_SURFACE => Some(PackPart::Billboards),
             kind::ELLIPSOIDS | kind::LINES | kind::AO_FIELD => Some(PackPart::Clusters),
             kind::MESH_VERTICES | kind::MESH_INDICES if index == 0 => Some(PackPart::MeshFull),
             kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::MeshCoarse),
@@ -746,6 +779,22 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         // Optional at any time: older packs have no occlusion.
         if let Some(data) = pack.section(kind::BILLBOARD_AO, 0) {
             validate_texture("META.billboards.texture (BBAO)", &b.texture, Some(data), 1)?;
+        }
+    }
+    if let Some(i) = &m.impostors {
+        finite_all("META.impostors.center", &i.center)?;
+        finite("META.impostors.radius", f64::from(i.radius))?;
+        if !(2..=16).contains(&i.grid) || i.grid * i.grid != i.texture.layers || i.radius <= 0.0 {
+            return Err(Problem::Invalid(format!(
+                "META.impostors has a {0}×{0} grid (2–16 per side), {1} layers (need grid²) and radius {2} (need > 0)",
+                i.grid, i.texture.layers, i.radius
+            )));
+        }
+        for k in [kind::IMPOSTOR_COLOR, kind::IMPOSTOR_SURFACE] {
+            let data = pack.section(k, 0);
+            if !(partial && data.is_none()) {
+                validate_texture("META.impostors.texture", &i.texture, data, 4)?;
+            }
         }
     }
     if let Some(c) = &m.clusters {

@@ -9,6 +9,7 @@ use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
 use super::cluster::{ClusterGpu, ClusterPipeline};
 use super::context::{read_texture_rgba8, GpuContext};
 use super::gpu_data::{DrawParams, RenderMode, ViewUniform};
+use super::impostor::{ImpostorGpu, ImpostorPipeline, IMPOSTOR_VERTICES};
 use super::layouts::SharedLayouts;
 use super::mesh::{
     MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_AO_FORMAT, CAPTURE_NORMAL_FORMAT, DEPTH_FORMAT,
@@ -83,6 +84,8 @@ pub struct CapturedBillboards {
     /// The vertices' baked sky visibility in r, g, b (255 where the mesh has
     /// none, and on the background).
     pub ao: Vec<Vec<u8>>,
+    /// Reversed-Z depth (1 near … 0 far; 0 on the background), one `Vec` per layer.
+    pub depth: Vec<Vec<f32>>,
 }
 
 /// A render target that can be read back.
@@ -183,6 +186,28 @@ pub fn capture_billboards(
     azimuths: u32,
     size: u32,
 ) -> CapturedBillboards {
+    let mut views = Vec::new();
+    for a in 0..azimuths {
+        let azimuth = std::f32::consts::TAU * a as f32 / azimuths as f32;
+        for k in 0..angles {
+            let elevation = std::f32::consts::FRAC_PI_2 * k as f32 / (angles - 1).max(1) as f32;
+            views.push(frame.clip_from_model(elevation, azimuth));
+        }
+    }
+    capture_views(ctx, pipelines, pack, &views, size)
+}
+
+/// Renders mesh level 0 of `pack` with each orthographic `views` transform
+/// (clip from model, reversed Z) into `size`² layers: albedo, normal, occlusion
+/// and depth, one layer per view.
+#[must_use]
+pub fn capture_views(
+    ctx: &GpuContext,
+    pipelines: &CapturePipelines,
+    pack: &Pack<'_>,
+    views: &[Mat4],
+    size: u32,
+) -> CapturedBillboards {
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
     let albedo = target(ctx, size, size, CAPTURE_ALBEDO_FORMAT);
     let normal = target(ctx, size, size, CAPTURE_NORMAL_FORMAT);
@@ -203,72 +228,66 @@ pub fn capture_billboards(
     let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
     // The capture works in model space: the eye is the model origin.
     let tree = SingleTree::new(ctx, &pipelines.shared);
-    let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new(), ao: Vec::new() };
-    for a in 0..azimuths {
-        let azimuth = std::f32::consts::TAU * a as f32 / azimuths as f32;
-        for k in 0..angles {
-            let elevation = std::f32::consts::FRAC_PI_2 * k as f32 / (angles - 1).max(1) as f32;
-            let uniform = ViewUniform {
-                clip_from_eye: frame.clip_from_model(elevation, azimuth).to_cols_array_2d(),
-                params: [RenderMode::Capture as u32, 0, 0, 0],
-                ..Lighting::default().view_uniform(frame.clip_from_model(elevation, azimuth), Vec3::ZERO, [size, size])
-            };
-            ctx.queue.write_buffer(&view_buffer, 0, bytemuck::bytes_of(&uniform));
-            let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            {
-                let clear = wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                };
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("billboard capture"),
-                    color_attachments: &[
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &albedo_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &normal_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &ao_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            // Open where nothing is drawn: filtering at the silhouette
-                            // must not mix "fully occluded" into the edge texels.
-                            ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 0.0 }),
-                                store: wgpu::StoreOp::Store,
-                            },
-                        }),
-                    ],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_view,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(0.0),
-                            store: wgpu::StoreOp::Discard,
-                        }),
-                        stencil_ops: None,
+    let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new(), ao: Vec::new(), depth: Vec::new() };
+    for clip_from_model in views {
+        let uniform = ViewUniform {
+            clip_from_eye: clip_from_model.to_cols_array_2d(),
+            params: [RenderMode::Capture as u32, 0, 0, 0],
+            ..Lighting::default().view_uniform(*clip_from_model, Vec3::ZERO, [size, size])
+        };
+        ctx.queue.write_buffer(&view_buffer, 0, bytemuck::bytes_of(&uniform));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let clear =
+                wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store };
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("view capture"),
+                color_attachments: &[
+                    Some(wgpu::RenderPassColorAttachment {
+                        view: &albedo_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: clear,
                     }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                pass.set_bind_group(0, &view_group, &[]);
-                tree.bind(&mut pass);
-                let indices = mesh.bind_level(&mut pass, &pipelines.mesh, RenderMode::Capture, 0);
-                pass.draw_indexed(0..indices, 0, 0..1);
-            }
-            ctx.queue.submit([encoder.finish()]);
-            out.color.push(read_texture_rgba8(ctx, &albedo, 0, 0));
-            out.normal.push(read_texture_rgba8(ctx, &normal, 0, 0));
-            out.ao.push(read_texture_rgba8(ctx, &ao, 0, 0));
+                    Some(wgpu::RenderPassColorAttachment {
+                        view: &normal_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: clear,
+                    }),
+                    Some(wgpu::RenderPassColorAttachment {
+                        view: &ao_view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        // Open where nothing is drawn: filtering at the silhouette
+                        // must not mix "fully occluded" into the edge texels.
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 0.0 }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    }),
+                ],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &view_group, &[]);
+            tree.bind(&mut pass);
+            let indices = mesh.bind_level(&mut pass, &pipelines.mesh, RenderMode::Capture, 0);
+            pass.draw_indexed(0..indices, 0, 0..1);
         }
+        ctx.queue.submit([encoder.finish()]);
+        out.color.push(read_texture_rgba8(ctx, &albedo, 0, 0));
+        out.normal.push(read_texture_rgba8(ctx, &normal, 0, 0));
+        out.ao.push(read_texture_rgba8(ctx, &ao, 0, 0));
+        // Depth32Float: four bytes per texel, as the RGBA8 readback copies them.
+        let d = read_texture_rgba8(ctx, &depth, 0, 0);
+        out.depth.push(d.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect());
     }
     out
 }
@@ -292,6 +311,8 @@ pub enum TreeDraw<'a> {
     Cluster(&'a ClusterGpu, usize),
     /// The billboards.
     Billboard(&'a BillboardGpu),
+    /// The multi-view impostors.
+    Impostor(&'a ImpostorGpu),
 }
 
 /// Lit renders of one tree (scale 1, yaw 0, at the model origin) with any
@@ -304,6 +325,8 @@ pub struct TreeRenderer {
     pub cluster: ClusterPipeline,
     /// Billboard pipeline (for [`BillboardGpu::upload`]).
     pub billboard: BillboardPipeline,
+    /// Impostor pipeline (for [`ImpostorGpu::upload`]).
+    pub impostor: ImpostorPipeline,
     tree: SingleTree,
     view_buffer: wgpu::Buffer,
     view_group: wgpu::BindGroup,
@@ -321,6 +344,7 @@ impl TreeRenderer {
         let mesh = MeshPipelines::new(&ctx.device, &shared, format);
         let cluster = ClusterPipeline::new(&ctx.device, &shared, format);
         let billboard = BillboardPipeline::new(&ctx.device, &shared, format);
+        let impostor = ImpostorPipeline::new(&ctx.device, &shared, format);
         let tree = SingleTree::new(ctx, &shared);
         let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tree view"),
@@ -329,7 +353,7 @@ impl TreeRenderer {
             mapped_at_creation: false,
         });
         let view_group = shared.view_group(&ctx.device, &view_buffer);
-        Self { mesh, cluster, billboard, tree, view_buffer, view_group, format, ao: true }
+        Self { mesh, cluster, billboard, impostor, tree, view_buffer, view_group, format, ao: true }
     }
 
     /// Renders `what` with the camera `clip_from_eye` at `eye` (model space) into
@@ -363,6 +387,10 @@ impl TreeRenderer {
                 params.ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
                 params.bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
                 params.bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+            }
+            TreeDraw::Impostor(imp) => {
+                params.ids[1] = 6;
+                imp.draw_params(&mut params);
             }
         }
         ctx.queue.write_buffer(&self.tree.params, 0, bytemuck::bytes_of(&params));
@@ -412,6 +440,11 @@ impl TreeRenderer {
                     pass.set_bind_group(1, &bb.bind_group, &[]);
                     pass.draw(0..BILLBOARD_VERTICES, 0..1);
                 }
+                TreeDraw::Impostor(imp) => {
+                    pass.set_pipeline(self.impostor.pipeline());
+                    pass.set_bind_group(1, &imp.bind_group, &[]);
+                    pass.draw(0..IMPOSTOR_VERTICES, 0..1);
+                }
             }
         }
         ctx.queue.submit([encoder.finish()]);
@@ -451,6 +484,8 @@ pub enum PackRepr {
     Cluster(usize),
     /// The billboards.
     Billboard,
+    /// The multi-view impostors.
+    Impostor,
 }
 
 /// Renders one tree of `pack` lit, with a perspective camera framing the whole
@@ -486,6 +521,10 @@ pub fn render_pack_repr(
         PackRepr::Billboard => {
             let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, pack)?;
             Some(r.render(ctx, &TreeDraw::Billboard(&bb), clip, eye, width, height, background))
+        }
+        PackRepr::Impostor => {
+            let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, pack)?;
+            Some(r.render(ctx, &TreeDraw::Impostor(&imp), clip, eye, width, height, background))
         }
     }
 }

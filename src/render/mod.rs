@@ -10,6 +10,7 @@ pub mod cull;
 pub mod forest;
 pub mod frame;
 pub mod gpu_data;
+pub mod impostor;
 pub mod layouts;
 pub mod mesh;
 pub mod mips;

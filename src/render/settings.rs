@@ -63,6 +63,19 @@ pub struct RenderSettings {
     /// AO field): darker inside crowns at every level of detail. Packs baked
     /// before it draw unoccluded either way.
     pub ao: bool,
+    /// The far tier where a pack has both: multi-view impostors (default) or
+    /// the single-view billboards. A pack with one of them draws that one.
+    pub far_tier: FarTier,
+}
+
+/// Which far-field representation a species draws where its pack has both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FarTier {
+    /// Multi-view impostors ([`super::impostor`]).
+    #[default]
+    Impostors,
+    /// View-angle billboards ([`super::billboard`]).
+    Billboards,
 }
 
 /// Default of [`RenderSettings::thin_px`].
@@ -115,6 +128,7 @@ impl Default for RenderSettings {
             terrain_morph: true,
             shadows: ShadowQuality::Off,
             ao: true,
+            far_tier: FarTier::Impostors,
         }
     }
 }

@@ -16,6 +16,14 @@ pub const BILLBOARD: &str = concat!(
     include_str!("../../shaders/billboard.wgsl")
 );
 
+/// The multi-view impostor pass.
+pub const IMPOSTOR: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/shadow.wgsl"),
+    include_str!("../../shaders/impostor_views.wgsl"),
+    include_str!("../../shaders/impostor.wgsl")
+);
+
 /// The cluster pass (ellipsoids and lines).
 pub const CLUSTER: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
@@ -43,6 +51,7 @@ pub const TERRAIN: &str = concat!(
 pub const ALL: &[(&str, &str)] = &[
     ("mesh", MESH),
     ("billboard", BILLBOARD),
+    ("impostor", IMPOSTOR),
     ("cluster", CLUSTER),
     ("cull", CULL),
     ("sky", SKY),

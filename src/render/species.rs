@@ -10,11 +10,12 @@ use glam::Vec3;
 use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
 use super::cluster::{cluster_tiers, ClusterGpu, ClusterPipeline};
 use super::gpu_data::{DrawArgs, DrawParams, GpuSpecies, RenderMode, Repr, REPR_COUNT};
+use super::impostor::{ImpostorGpu, ImpostorPipeline, IMPOSTOR_VERTICES};
 use super::layouts::SharedLayouts;
 use super::mesh::{MeshGpu, MeshPipelines};
 use super::pools::Pools;
 use super::reach::Reach;
-use super::settings::{RenderSettings, Representations};
+use super::settings::{FarTier, RenderSettings, Representations};
 use crate::format::Pack;
 
 /// Segment capacity of the full mesh level per species: only trees hundreds of
@@ -28,6 +29,9 @@ pub const CLUSTER_CAPACITY: u32 = 1 << 18;
 struct SpeciesGpu {
     mesh: MeshGpu,
     billboard: Option<BillboardGpu>,
+    impostor: Option<ImpostorGpu>,
+    /// The far-tier slot draws the impostors (set by `rebuild_table`).
+    far_impostor: bool,
     cluster: Option<ClusterGpu>,
     /// Cluster level of each cluster tier in use (set by `rebuild_table`).
     tiers: Vec<usize>,
@@ -63,6 +67,7 @@ pub struct Species {
     color_format: wgpu::TextureFormat,
     mesh: Option<MeshPipelines>,
     billboard: Option<BillboardPipeline>,
+    impostor: Option<ImpostorPipeline>,
     cluster: Option<ClusterPipeline>,
     packs: Vec<Option<SpeciesGpu>>,
     table: Vec<GpuSpecies>,
@@ -71,6 +76,7 @@ pub struct Species {
     /// The settings the table was built with.
     cluster_min_px: f32,
     representations: Representations,
+    far_tier: FarTier,
 }
 
 impl Species {
@@ -81,12 +87,14 @@ impl Species {
             color_format,
             mesh: None,
             billboard: None,
+            impostor: None,
             cluster: None,
             packs: Vec::new(),
             table: Vec::new(),
             dirty: true,
             cluster_min_px: super::settings::DEFAULT_CLUSTER_MIN_PX,
             representations: Representations::ALL,
+            far_tier: FarTier::Impostors,
         }
     }
 
@@ -141,6 +149,12 @@ impl Species {
         } else {
             None
         };
+        let impostor = if m.impostors.is_some() && pack.section(kind::IMPOSTOR_COLOR, 0).is_some() {
+            let pipeline = self.impostor.get_or_insert_with(|| ImpostorPipeline::new(device, shared, format));
+            ImpostorGpu::upload(device, queue, pipeline, pack)
+        } else {
+            None
+        };
         let cluster = if m.clusters.is_some() && pack.section(kind::ELLIPSOIDS, 0).is_some() {
             let pipeline = self.cluster.get_or_insert_with(|| ClusterPipeline::new(device, shared, format));
             ClusterGpu::upload(device, queue, pipeline, pack)
@@ -163,6 +177,8 @@ impl Species {
             has_level: [mesh.has_level(0), mesh.has_level(1)],
             mesh,
             billboard,
+            impostor,
+            far_impostor: false,
             cluster,
             tiers: Vec::new(),
             bytes,
@@ -173,9 +189,13 @@ impl Species {
     /// Rebuilds the species table and draw params when packs, residency or the
     /// representation settings changed since the last frame.
     pub fn update_table(&mut self, queue: &wgpu::Queue, pools: &Pools, settings: &RenderSettings) {
-        if settings.cluster_min_px != self.cluster_min_px || settings.representations != self.representations {
+        if settings.cluster_min_px != self.cluster_min_px
+            || settings.representations != self.representations
+            || settings.far_tier != self.far_tier
+        {
             self.cluster_min_px = settings.cluster_min_px;
             self.representations = settings.representations;
+            self.far_tier = settings.far_tier;
             self.dirty = true;
         }
         if self.dirty {
@@ -235,13 +255,24 @@ impl Species {
                         p.tiers.push(level);
                     }
                 }
-                if let Some(bb) = p.billboard.as_ref().filter(|_| allow.billboards) {
-                    let r = Repr::Billboard as usize;
-                    want[r] = resident;
-                    s.index_count[r] = BILLBOARD_VERTICES;
-                    draw[r].ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
-                    draw[r].bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
-                    draw[r].bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                // The far tier: impostors or billboards (settings.far_tier where both).
+                p.far_impostor = p.impostor.is_some() && (self.far_tier == FarTier::Impostors || p.billboard.is_none());
+                let r = Repr::Billboard as usize;
+                match (&p.impostor, &p.billboard) {
+                    (Some(imp), _) if p.far_impostor && allow.billboards => {
+                        want[r] = resident;
+                        s.index_count[r] = IMPOSTOR_VERTICES;
+                        imp.draw_params(&mut draw[r]);
+                    }
+                    (_, Some(bb)) if allow.billboards => {
+                        want[r] = resident;
+                        s.index_count[r] = BILLBOARD_VERTICES;
+                        draw[r].ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
+                        draw[r].bb_center =
+                            [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
+                        draw[r].bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                    }
+                    _ => {}
                 }
                 // Billboards first: the far field must never starve for items.
                 let order = std::iter::once(Repr::Billboard as usize).chain(0..Repr::Billboard as usize);
@@ -276,7 +307,7 @@ impl Species {
     /// Which draw pipelines have been built (meshes, clusters, billboards).
     #[must_use]
     pub fn pipelines_built(&self) -> [bool; 3] {
-        [self.mesh.is_some(), self.cluster.is_some(), self.billboard.is_some()]
+        [self.mesh.is_some(), self.cluster.is_some(), self.billboard.is_some() || self.impostor.is_some()]
     }
 
     /// GPU bytes of the uploaded packs.
@@ -348,6 +379,15 @@ impl Species {
                     Pipeline::Shadow => cluster.shadow_pipeline(),
                 });
                 pass.set_bind_group(1, &c.bind_group, &[]);
+                pass.draw_indirect(&pools.buffers.args, args_offset);
+            }
+            Repr::Billboard if p.far_impostor => {
+                let (Some(imp), Some(impostor)) = (&p.impostor, &self.impostor) else { return false };
+                pass.set_pipeline(match pipeline {
+                    Pipeline::Lit(_) => impostor.pipeline(),
+                    Pipeline::Shadow => impostor.shadow_pipeline(),
+                });
+                pass.set_bind_group(1, &imp.bind_group, &[]);
                 pass.draw_indirect(&pools.buffers.args, args_offset);
             }
             Repr::Billboard => {

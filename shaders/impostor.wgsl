@@ -1,0 +1,211 @@
+// Multi-view impostors: one quad per tree facing the eye, on which each pixel
+// casts its ray into the three baked views nearest the eye direction
+// (hemi-octahedral grid, `impostor_views`), reprojected with each view's depth
+// (one parallax step), and blends them: colour, coverage, normal, depth and the
+// tree's own occlusion. The tree keeps its shape as the camera goes round it
+// (a billboard turns with the camera), and writes its depth, so crowns
+// interleave with their neighbours'. Lit like every other representation.
+// Rust side: src/render/impostor.rs.
+
+@group(0) @binding(0) var<storage, read> view: View;
+
+@group(1) @binding(0) var imp_color: texture_2d_array<f32>;
+@group(1) @binding(1) var imp_surface: texture_2d_array<f32>;
+@group(1) @binding(2) var imp_sampler: sampler;
+
+@group(2) @binding(0) var<storage, read> batches: array<Batch>;
+@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
+@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+
+@group(3) @binding(0) var<uniform> draw: DrawParams;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    // The pixel's ray in model space (scale 1): a point on it and its direction.
+    @location(0) ray_at: vec3<f32>,
+    @location(1) ray_dir: vec3<f32>,
+    @location(2) @interpolate(flat) layers: vec3<u32>,
+    @location(3) @interpolate(flat) weights: vec3<f32>,
+    // The sphere's centre (eye-relative) and the yaw.
+    @location(4) @interpolate(flat) tree_at: vec4<f32>,
+    // Scale (with the thinning boost) and crown aspect.
+    @location(5) @interpolate(flat) tree_size: vec2<f32>,
+    @location(6) @interpolate(flat) item_y: u32,
+    @location(7) @interpolate(flat) tint: vec3<f32>,
+    // The batch's canopy cover (`batch_cover`).
+    @location(8) @interpolate(flat) cover: f32,
+};
+
+// Model offset from the sphere's centre → eye-relative offset, and back.
+fn imp_to_world(m: vec3<f32>, in: VertexOut) -> vec3<f32> {
+    let s = in.tree_size.x;
+    return rotate_z(vec3<f32>(m.xy * (s * in.tree_size.y), m.z * s), in.tree_at.w);
+}
+
+fn imp_to_model_dir(w: vec3<f32>, yaw: f32, s: f32, aspect: f32) -> vec3<f32> {
+    let l = rotate_z(w, -yaw);
+    return vec3<f32>(l.xy / (s * aspect), l.z / s);
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
+    let item = items[draw.ids.x + instance];
+    let batch = batches[item.y & 0x7fffffu];
+    let tree = unpack_instance(instances[item.x], batch, view);
+    let grid = max(draw.ids.w, 2u);
+    let center = draw.bb_center.xyz;
+    let radius = draw.bb_center.w;
+    // A thinned batch's kept trees grow about their centre (as billboards do).
+    let s = tree.scale * coverage_boost(thinning(batch, view), batch);
+    let aspect = max(tree.aspect, 1e-3);
+    let cw = tree.pos + rotate_z(vec3<f32>(center.xy * (tree.scale * aspect), center.z * tree.scale), tree.yaw);
+    let to_eye = normalize(towards_eye(cw, view));
+    // The views around the eye's direction in the model's frame.
+    let views = impostor_views(normalize(imp_to_model_dir(to_eye, tree.yaw, s, aspect)), grid);
+    // A quad facing the eye at the front of the bounding sphere covers its
+    // outline from any distance.
+    let r = radius * s * max(aspect, 1.0);
+    var right = cross(vec3<f32>(0.0, 0.0, 1.0), to_eye);
+    right = select(vec3<f32>(1.0, 0.0, 0.0), normalize(right), dot(right, right) > 1e-8);
+    let up = cross(to_eye, right);
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    );
+    let c = corners[vertex % 6u];
+    let pos = cw + to_eye * r + (right * c.x + up * c.y) * r;
+    var out: VertexOut;
+    out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
+    // Rays from the eye through the quad (parallel towards the sun in a cascade).
+    var dir = pos;
+    if view.viewport.w > 0.5 {
+        dir = -to_eye;
+    }
+    out.ray_at = center + imp_to_model_dir(pos - cw, tree.yaw, s, aspect);
+    out.ray_dir = imp_to_model_dir(dir, tree.yaw, s, aspect);
+    out.layers = views.layers;
+    out.weights = views.weights;
+    out.tree_at = vec4<f32>(cw, tree.yaw);
+    out.tree_size = vec2<f32>(s, aspect);
+    out.item_y = item.y;
+    out.tint = variation_tint(tree.variation);
+    out.cover = batch_cover(batch);
+    return out;
+}
+
+// What the blended views show at a pixel.
+struct ImpostorHit {
+    color: vec4<f32>,
+    // Model space, unnormalised; the surface's data (ao and leaf packed).
+    normal: vec3<f32>,
+    packed: f32,
+    // Model-space point the ray hits.
+    at: vec3<f32>,
+};
+
+fn impostor_texcoord(p: vec3<f32>, right: vec3<f32>, up: vec3<f32>, radius: f32) -> vec2<f32> {
+    return vec2<f32>(0.5 + 0.5 * dot(p, right) / radius, 0.5 - 0.5 * dot(p, up) / radius);
+}
+
+fn impostor_hit(in: VertexOut) -> ImpostorHit {
+    let grid = max(draw.ids.w, 2u);
+    let center = draw.bb_center.xyz;
+    let radius = draw.bb_center.w;
+    let d = normalize(in.ray_dir);
+    let o = in.ray_at;
+    // One mip level for the three views: the first view's footprint on its plane.
+    let d0 = impostor_view_dir(in.layers.x, grid);
+    let r0 = impostor_view_right(d0);
+    let p0 = o + d * (dot(center - o, d0) / min(dot(d, d0), -1e-3)) - center;
+    let uv0 = impostor_texcoord(p0, r0, cross(d0, r0), radius);
+    let size = f32(textureDimensions(imp_color).x);
+    let footprint = max(length(dpdx(uv0)), length(dpdy(uv0))) * size;
+    let lod = log2(max(footprint, 1e-6));
+    var hit: ImpostorHit;
+    var weight = 0.0;
+    for (var k = 0u; k < 3u; k++) {
+        let w = in.weights[k];
+        if w <= 0.0 {
+            continue;
+        }
+        let layer = in.layers[k];
+        let vd = impostor_view_dir(layer, grid);
+        let vr = impostor_view_right(vd);
+        let vu = cross(vd, vr);
+        // Rays run against the view's direction; grazing ones are clamped.
+        let denom = min(dot(d, vd), -1e-3);
+        let to_plane = dot(center - o, vd);
+        var t = to_plane / denom;
+        var surface = vec4<f32>(0.5);
+        // Parallax: step to where the ray meets the depth the view saw, twice.
+        for (var i = 0; i < 2; i++) {
+            let uv = impostor_texcoord(o + d * t - center, vr, vu, radius);
+            surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, lod);
+            t = (to_plane + (surface.b * 2.0 - 1.0) * radius) / denom;
+        }
+        let at = o + d * t;
+        let uv = impostor_texcoord(at - center, vr, vu, radius);
+        let color = textureSampleLevel(imp_color, imp_sampler, uv, layer, lod);
+        surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, lod);
+        let wa = w * color.a;
+        hit.color += vec4<f32>(color.rgb * wa, w * color.a);
+        hit.normal += oct_decode(surface.rg * 2.0 - 1.0) * wa;
+        hit.packed += surface.a * wa;
+        hit.at += at * wa;
+        weight += wa;
+    }
+    let inv = 1.0 / max(weight, 1e-6);
+    hit.color = vec4<f32>(hit.color.rgb * inv, hit.color.a);
+    hit.packed *= inv;
+    hit.at = select(o + d * (dot(center - o, d0) / min(dot(d, d0), -1e-3)), hit.at * inv, weight > 0.0);
+    return hit;
+}
+
+// The depth of the model point `at` in this view (reversed Z).
+fn impostor_depth(at: vec3<f32>, in: VertexOut) -> f32 {
+    let rel = in.tree_at.xyz + imp_to_world(at - draw.bb_center.xyz, in);
+    let clip = view.clip_from_eye * vec4<f32>(rel, 1.0);
+    return clamp(clip.z / clip.w, 0.0, 1.0);
+}
+
+struct FragmentOut {
+    @location(0) color: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+};
+
+@fragment
+fn fs_main(in: VertexOut) -> FragmentOut {
+    let hit = impostor_hit(in);
+    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+        discard;
+    }
+    let is_leaf = hit.packed >= 0.5;
+    let baked_ao = clamp((hit.packed - select(0.0, 128.0 / 255.0, is_leaf)) * (255.0 / 127.0), 0.0, 1.0);
+    // Normals follow the crown's stretch (inverse transpose of the scaling).
+    let nm = hit.normal;
+    let n = normalize(rotate_z(vec3<f32>(nm.xy / in.tree_size.y, nm.z), in.tree_at.w));
+    let rel = in.tree_at.xyz + imp_to_world(hit.at - draw.bb_center.xyz, in);
+    var albedo = hit.color.rgb * in.tint;
+    if view.params.z == 1u {
+        albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * hit.color.g);
+    }
+    let top = max(draw.bb_center.z + draw.bb_center.w, 1e-3);
+    let canopy = in.cover * (1.0 - clamp(hit.at.z / top, 0.0, 1.0));
+    let ao = own_ao(baked_ao, view);
+    let lift = draw.bb_center.w * in.tree_size.x * 0.25;
+    let sun = sun_visibility(rel, n, lift, open_sun(canopy));
+    var out: FragmentOut;
+    out.color = vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun, canopy, ao), in.clip, view), 1.0);
+    out.depth = impostor_depth(hit.at, in);
+    return out;
+}
+
+// Shadow cascades: depth only, the blended coverage tested, the hit's depth.
+@fragment
+fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
+    let hit = impostor_hit(in);
+    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+        discard;
+    }
+    return impostor_depth(hit.at, in);
+}
