@@ -7,7 +7,8 @@ struct View {
     clip_from_eye: mat4x4<f32>,
     // Eye position relative to the scene origin, split into a high and a low f32
     // part (relative-to-eye rendering: batch origin − eye_hi − eye_lo keeps
-    // centimetres at UTM-sized coordinates).
+    // centimetres at UTM-sized coordinates). eye_hi.w: 1 when alpha tests read
+    // the textures' full resolution (the accuracy reference), else 0.
     eye_hi: vec4<f32>,
     eye_lo: vec4<f32>,
     // Frustum planes in eye-relative space, inside where dot(n, p) + d >= 0.

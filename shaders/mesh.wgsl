@@ -96,10 +96,19 @@ fn surface(in: VertexOut, front: bool) -> Surface {
     // Sample unconditionally (uniform control flow), then select.
     let texel = textureSample(material_tex, material_sampler, in.uv, max(mat.layer, 0));
     var albedo = mat.base_color * in.color;
+    var coverage = albedo.a;
     if mat.layer >= 0 {
         albedo *= texel;
+        coverage = albedo.a;
+        // The accuracy reference tests coverage at the texture's full
+        // resolution: a mip's alpha is an average that a far leaf card, all of
+        // it sampled from the 1×1 mip, fails everywhere (the leaves vanish).
+        if view.eye_hi.w > 0.5 {
+            let fine = textureSampleLevel(material_tex, material_sampler, in.uv, mat.layer, 0.0);
+            coverage = mat.base_color.a * in.color.a * fine.a;
+        }
     }
-    if albedo.a < mat.alpha_cutoff || !fade_keeps(in.item_y, in.clip.xy) {
+    if coverage < mat.alpha_cutoff || !fade_keeps(in.item_y, in.clip.xy) {
         discard;
     }
     var s: Surface;

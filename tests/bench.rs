@@ -18,7 +18,7 @@ fn bench_writes_frames_summary_and_plots() {
     let methods = bench::methods("sylva,billboard", sylva::render::shadow::ShadowQuality::Off).unwrap();
     let (w, h) = (160, 90);
     let mut calls = 0;
-    let run = bench::run(SCENE, &cameras, &methods, w, h, &mut |_, _, _| calls += 1).unwrap();
+    let run = bench::run(SCENE, &cameras, &methods, w, h, None, &mut |_, _, _| calls += 1).unwrap();
     assert_eq!(calls, 9, "progress once per frame and method");
     assert_eq!(run.frames.len(), 9);
     let reference = &run.summary["reference"];

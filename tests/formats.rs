@@ -575,6 +575,25 @@ fn pack_decoder_error_paths() {
     let bytes = encode_pack(&meta, &sections);
     let pack = decode_pack("x", &bytes).unwrap();
     assert_eq!(pack.ao_field().map(|f| (f.dims, f.cell, f.cells.len())), Some(([2, 2, 3], 0.5, 12)));
+    // Impostors: grid² layers, both arrays, the right byte counts, a positive radius.
+    let imp_tex = TextureArrayMeta { size: 2, layers: 4, mips: 2 };
+    let with_impostors = |grid: u32, radius: f32, surface: bool| {
+        move |m: &mut PackMeta, s: &mut Vec<Section>| {
+            m.impostors = Some(sylva::format::pack::ImpostorMeta { grid, texture: imp_tex, center: [0.0; 3], radius });
+            s.push(Section { kind: kind::IMPOSTOR_COLOR, index: 0, count: 0, stride: 0, data: vec![0; 80] });
+            if surface {
+                s.push(Section { kind: kind::IMPOSTOR_SURFACE, index: 0, count: 0, stride: 0, data: vec![0; 80] });
+            }
+        }
+    };
+    pack_error(with_impostors(3, 1.0, true), "a 3×3 grid");
+    pack_error(with_impostors(2, 0.0, true), "radius 0");
+    pack_error(with_impostors(2, f32::INFINITY, true), "expected f32");
+    pack_error(with_impostors(2, 1.0, false), "META.impostors.texture has no texture section");
+    let (mut meta, mut sections) = sample_pack();
+    with_impostors(2, 1.0, true)(&mut meta, &mut sections);
+    let pack = decode_pack("x", &encode_pack(&meta, &sections)).expect("a valid impostor pack");
+    assert_eq!(pack.meta.impostors.as_ref().map(|i| i.grid), Some(2));
     // Unknown section kinds are skipped (forward compatibility).
     let (meta, mut sections) = sample_pack();
     sections.push(Section { kind: *b"ELPS", index: 0, count: 2, stride: 32, data: vec![0; 64] });

@@ -306,27 +306,34 @@ fn build_impostors(
             alpha_aware_mips(color, color, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..]
                 .to_vec(),
         );
-        let surface: Vec<u8> = (0..(capture_size * capture_size) as usize)
-            .flat_map(|i| {
+        // Per texel: normal xyz, depth offset (−1 … 1), occlusion, leaf (0/1),
+        // averaged as such down the mips and only then encoded: averaging
+        // octahedral codes would bend normals near the fold (downward ones up).
+        let surface: Vec<[f32; 6]> = (0..(capture_size * capture_size) as usize)
+            .map(|i| {
                 let n = &captured.normal[layer][i * 4..i * 4 + 4];
                 if color[i * 4 + 3] == 0 {
                     // Background: the plane, open, weighted out of every mip.
-                    return [128, 128, 128, impostor::pack_ao_leaf(1.0, false)];
+                    return [0.0, 0.0, 1.0, 0.0, 1.0, 0.0];
                 }
                 let normal = Vec3::new(f32::from(n[0]), f32::from(n[1]), f32::from(n[2])) / 127.5 - Vec3::ONE;
-                let e = oct_encode(normal.normalize_or(Vec3::Z));
-                let unorm = |v: i8| ((f32::from(v) / 127.0 * 0.5 + 0.5) * 255.0).round() as u8;
-                let depth = impostor::depth_to_offset(captured.depth[layer][i]) * 0.5 + 0.5;
+                let depth = impostor::depth_to_offset(captured.depth[layer][i]);
                 let ao = f32::from(captured.ao[layer][i * 4]) / 255.0;
-                [
-                    unorm(e[0]),
-                    unorm(e[1]),
-                    (depth.clamp(0.0, 1.0) * 255.0).round() as u8,
-                    impostor::pack_ao_leaf(ao, n[3] > 191),
-                ]
+                [normal.x, normal.y, normal.z, depth, ao, f32::from(u8::from(n[3] > 191))]
             })
             .collect();
-        surface_chains.push(coverage_weighted_mips(&surface, color, capture_size)[1..].to_vec());
+        let encode = |t: &[f32; 6]| {
+            let e = oct_encode(Vec3::new(t[0], t[1], t[2]).normalize_or(Vec3::Z));
+            let unorm = |v: i8| ((f32::from(v) / 127.0 * 0.5 + 0.5) * 255.0).round() as u8;
+            let depth = ((t[3] * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0).round() as u8;
+            [unorm(e[0]), unorm(e[1]), depth, impostor::pack_ao_leaf(t[4], t[5] >= 0.5)]
+        };
+        surface_chains.push(
+            coverage_weighted_mips(surface, color, capture_size)[1..]
+                .iter()
+                .map(|level| level.iter().flat_map(encode).collect())
+                .collect::<Vec<Vec<u8>>>(),
+        );
     }
     let texture = TextureArrayMeta {
         size: opts.impostor_size,
@@ -352,38 +359,36 @@ fn build_impostors(
     (ImpostorMeta { grid, texture, center: center.to_array(), radius }, sections)
 }
 
-/// Mip chain (mip 0 included) of a square RGBA8 data layer whose four channels
-/// are all averaged weighted by `color`'s alpha (coverage); where a 2×2 block
-/// has none, by plain average.
-fn coverage_weighted_mips(layer: &[u8], color: &[u8], size: u32) -> Vec<Vec<u8>> {
-    let mut texels: Vec<[f32; 4]> = layer.chunks_exact(4).map(|t| [t[0], t[1], t[2], t[3]].map(f32::from)).collect();
+/// Mip chain (mip 0 included) of a square layer of `N` floats per texel, all
+/// averaged weighted by `color`'s alpha (coverage); where a 2×2 block has none,
+/// by plain average.
+fn coverage_weighted_mips<const N: usize>(layer: Vec<[f32; N]>, color: &[u8], size: u32) -> Vec<Vec<[f32; N]>> {
     let mut weights: Vec<f32> = color.chunks_exact(4).map(|t| f32::from(t[3])).collect();
-    let encode = |t: &[[f32; 4]]| t.iter().flat_map(|c| c.map(|v| v.round().clamp(0.0, 255.0) as u8)).collect();
-    let mut chain: Vec<Vec<u8>> = vec![encode(&texels)];
+    let mut chain = vec![layer];
     let mut s = size;
     while s > 1 {
         let h = s / 2;
+        let texels = chain.last().expect("mip 0");
         let mut next = Vec::with_capacity((h * h) as usize);
         let mut next_w = Vec::with_capacity((h * h) as usize);
         for y in 0..h {
             for x in 0..h {
                 let quad = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| ((2 * y + dy) * s + 2 * x + dx) as usize);
                 let w_sum: f32 = quad.iter().map(|&i| weights[i]).sum();
-                let mut c = [0.0; 4];
+                let mut c = [0.0; N];
                 for &i in &quad {
                     let w = if w_sum > 0.0 { weights[i] / w_sum } else { 0.25 };
-                    for k in 0..4 {
-                        c[k] += texels[i][k] * w;
+                    for (k, v) in c.iter_mut().enumerate() {
+                        *v += texels[i][k] * w;
                     }
                 }
                 next.push(c);
                 next_w.push(w_sum * 0.25);
             }
         }
-        texels = next;
         weights = next_w;
         s = h;
-        chain.push(encode(&texels));
+        chain.push(next);
     }
     chain
 }

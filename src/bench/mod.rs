@@ -192,8 +192,10 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             reference: Some(0),
         };
         Ok(match name {
-            "reference" => m(RenderSettings { shadows: ShadowQuality::Off, ..full }, 2),
-            SHADOWED_REFERENCE => m(RenderSettings { shadows: ShadowQuality::Reference, ..full }, 2),
+            "reference" => m(RenderSettings { shadows: ShadowQuality::Off, full_res_alpha: true, ..full }, 2),
+            SHADOWED_REFERENCE => {
+                m(RenderSettings { shadows: ShadowQuality::Reference, full_res_alpha: true, ..full }, 2)
+            }
             "mesh" => m(RenderSettings { culling: CullingMode::PerTree, ..full }, 1),
             "per-tree" => m(RenderSettings { culling: CullingMode::PerTree, ..base }, 1),
             "billboard" => m(
@@ -418,16 +420,19 @@ pub struct BenchRun {
 }
 
 /// Runs `methods` over `cameras` on `scene` at `width`×`height`. `progress(method,
-/// frame, frames)` is called per frame.
+/// frame, frames)` is called per frame. With `frames_dir`, each method's frames
+/// are written there as `NNN-method.png`, and per frame a strip of all of them
+/// side by side in the methods' order (`NNN-strip.png`, the reference first).
 ///
 /// # Errors
-/// A scene that does not open, or no GPU adapter.
+/// A scene that does not open, no GPU adapter, or a frame that cannot be written.
 pub fn run(
     scene: &str,
     cameras: &[Camera],
     methods: &[Method],
     width: u32,
     height: u32,
+    frames_dir: Option<&Path>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<BenchRun> {
     if methods.first().is_none_or(|m| m.reference.is_some())
@@ -452,6 +457,7 @@ pub fn run(
         // Each reference's image of this frame and its own change since the last.
         let mut reference: Vec<Option<Vec<u8>>> = vec![None; methods.len()];
         let mut ref_motion = vec![f64::NAN; methods.len()];
+        let mut strip: Vec<Vec<u8>> = Vec::new();
         for (k, (method, off)) in methods.iter().zip(scenes.iter_mut()).enumerate() {
             progress(&method.name, i, cameras.len());
             let ss = method.supersample.max(1);
@@ -508,8 +514,28 @@ pub fn run(
                     Some(r) => rmse(&img, p) - ref_motion[r],
                 };
             }
+            if let Some(dir) = frames_dir {
+                let path = dir.join(format!("{i:03}-{}.png", method.name));
+                image::save_buffer(&path, &img, width, height, image::ColorType::Rgba8)
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+                strip.push(img.clone());
+            }
             prev[k] = Some(img);
             frames.push(rec);
+        }
+        if let Some(dir) = frames_dir {
+            let path = dir.join(format!("{i:03}-strip.png"));
+            let n = strip.len() as u32;
+            let mut side = vec![0u8; (width * n * height * 4) as usize];
+            for (k, img) in strip.iter().enumerate() {
+                for y in 0..height as usize {
+                    let row = width as usize * 4;
+                    let at = (y * n as usize + k) * row;
+                    side[at..at + row].copy_from_slice(&img[y * row..(y + 1) * row]);
+                }
+            }
+            image::save_buffer(&path, &side, width * n, height, image::ColorType::Rgba8)
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
     }
     // Grouped by method, in path order.

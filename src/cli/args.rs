@@ -56,7 +56,7 @@ pub(crate) enum Command {
     /// frames: writes frames.csv, summary.json and SVG plots (pareto,
     /// frame_time, temporal_noise) into --out.
     #[command(
-        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, ellipsoid, sylva, sylva-q0.5, sylva-q0.25, or all.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
+        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-q0.5, sylva-q0.25, sylva-shadows-low,\n  sylva-shadows-high, or all.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
     )]
     Bench {
         /// Scene directory, scene.json path or http(s) URL.
@@ -108,6 +108,11 @@ pub(crate) enum Command {
         /// ambient occlusion (on) or without (off).
         #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
         ao: bool,
+        /// Also write every method's frames as PNGs into --out/frames, and per
+        /// frame a strip of them side by side in the methods' order, the
+        /// reference first (NNN-strip.png), to look at the error.
+        #[arg(long, conflicts_with_all = ["replot", "stress", "memory"])]
+        save_frames: bool,
     },
     /// One table row per bench output directory (its summary.json) for one
     /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls

@@ -69,6 +69,7 @@ pub(crate) fn bench(
     size: &str,
     frames: usize,
     out: &std::path::Path,
+    save_frames: bool,
 ) -> Result<()> {
     use sylva::bench as b;
     let (w, h) = parse_size(size)?;
@@ -77,7 +78,11 @@ pub(crate) fn bench(
     let total = methods.len() * cameras.len();
     let started = std::time::Instant::now();
     let mut done = 0usize;
-    let run = b::run(scene, &cameras, &methods, w, h, &mut |m, i, n| {
+    let frames_dir = out.join("frames");
+    if save_frames {
+        std::fs::create_dir_all(&frames_dir).with_context(|| format!("cannot create {}", frames_dir.display()))?;
+    }
+    let run = b::run(scene, &cameras, &methods, w, h, save_frames.then_some(frames_dir.as_path()), &mut |m, i, n| {
         done += 1;
         let eta = started.elapsed().as_secs_f64() / done as f64 * (total - done) as f64;
         let bar = "#".repeat(done * 30 / total.max(1));

@@ -67,7 +67,20 @@ mod cli {
             Command::Bench { scene, path, size, frames, out, stress: true, .. } => {
                 stress(&scene, &path, &size, frames, &out)
             }
-            Command::Bench { scene, path, methods, size, frames, out, fade_band, thin_px, shadows, ao, .. } => {
+            Command::Bench {
+                scene,
+                path,
+                methods,
+                size,
+                frames,
+                out,
+                fade_band,
+                thin_px,
+                shadows,
+                ao,
+                save_frames,
+                ..
+            } => {
                 if !(0.0..0.5).contains(&fade_band) {
                     bail!("--fade-band {fade_band}: must be in [0, 0.5)");
                 }
@@ -80,7 +93,7 @@ mod cli {
                     m.settings.fade_band = fade_band;
                     m.settings.thin_px = thin_px;
                 }
-                bench(&scene, &path, methods, &size, frames, &out)
+                bench(&scene, &path, methods, &size, frames, &out, save_frames)
             }
             Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
             Command::Compare { a, b } => compare(&a, &b),

@@ -264,7 +264,8 @@ impl ForestRenderer {
         let l = &settings.lighting;
         let uniform = ViewUniform {
             clip_from_eye: view.clip_from_eye.to_cols_array_2d(),
-            eye_hi: view.eye_hi.extend(0.0).to_array(),
+            // w: alpha tests at the textures' full resolution (the accuracy reference).
+            eye_hi: view.eye_hi.extend(f32::from(u8::from(settings.full_res_alpha))).to_array(),
             eye_lo: view.eye_lo.extend(0.0).to_array(),
             frustum: view.frustum.map(|p| p.to_array()),
             sun_dir: l.sun_dir.extend(0.0).to_array(),

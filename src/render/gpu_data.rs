@@ -8,7 +8,8 @@ use bytemuck::{Pod, Zeroable};
 pub struct ViewUniform {
     /// Clip transform of eye-relative positions (rotation + projection only).
     pub clip_from_eye: [[f32; 4]; 4],
-    /// Eye position relative to the scene origin, high f32 part (xyz).
+    /// Eye position relative to the scene origin, high f32 part (xyz); w 1
+    /// where alpha tests read the textures' full resolution (`full_res_alpha`).
     pub eye_hi: [f32; 4],
     /// Low f32 part: `eye_hi + eye_lo` is the f64 eye to ~1e-7 relative.
     pub eye_lo: [f32; 4],

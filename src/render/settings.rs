@@ -66,6 +66,12 @@ pub struct RenderSettings {
     /// The far tier where a pack has both: multi-view impostors (default) or
     /// the single-view billboards. A pack with one of them draws that one.
     pub far_tier: FarTier,
+    /// Mesh leaves are alpha-tested at their texture's full resolution rather
+    /// than its mip (the accuracy reference): a far leaf card, smaller than a
+    /// pixel, is then kept where it covers the pixel's centre, so a far crown
+    /// keeps its true coverage instead of vanishing with its textures' coarse
+    /// mips. Off for drawing (it aliases).
+    pub full_res_alpha: bool,
 }
 
 /// Which far-field representation a species draws where its pack has both.
@@ -129,6 +135,7 @@ impl Default for RenderSettings {
             shadows: ShadowQuality::Off,
             ao: true,
             far_tier: FarTier::Impostors,
+            full_res_alpha: false,
         }
     }
 }
