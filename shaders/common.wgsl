@@ -97,9 +97,10 @@ const REPR_COUNT: u32 = 7u;
 struct DrawParams {
     // x: first draw item of the slot, y: representation, z: species, w: billboard angles.
     ids: vec4<u32>,
-    // Billboard quad: centre (xyz, model space at scale 1), w: half width.
+    // Billboard quad: centre (xyz, model space at scale 1), w: half width;
+    // impostors: the bounding sphere (centre, radius).
     bb_center: vec4<f32>,
-    // x: billboard half height, yzw unused.
+    // x: billboard half height, yzw unused; impostors: xyz the model box's half extents.
     bb_size: vec4<f32>,
     // Cluster level: x first ellipsoid word, y ellipsoids, z first line word, w lines.
     cluster: vec4<u32>,

@@ -62,18 +62,26 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let to_eye = normalize(towards_eye(cw, view));
     // The views around the eye's direction in the model's frame.
     let views = impostor_views(normalize(imp_to_model_dir(to_eye, tree.yaw, s, aspect)), grid);
-    // A quad facing the eye at the front of the bounding sphere covers its
-    // outline from any distance.
-    let r = radius * s * max(aspect, 1.0);
+    // A quad facing the eye, the model's box projected onto it, at the box's
+    // front: from any distance it covers the tree's outline (points farther
+    // back project nearer its centre), and no more (fewer pixels to shade).
     var right = cross(vec3<f32>(0.0, 0.0, 1.0), to_eye);
     right = select(vec3<f32>(1.0, 0.0, 0.0), normalize(right), dot(right, right) > 1e-8);
     let up = cross(to_eye, right);
+    let he = draw.bb_size.xyz * vec3<f32>(s * aspect, s * aspect, s);
+    let ax = rotate_z(vec3<f32>(1.0, 0.0, 0.0), tree.yaw);
+    let ay = rotate_z(vec3<f32>(0.0, 1.0, 0.0), tree.yaw);
+    let box_extent = vec3<f32>(
+        abs(dot(right, ax)) * he.x + abs(dot(right, ay)) * he.y + abs(right.z) * he.z,
+        abs(dot(up, ax)) * he.x + abs(dot(up, ay)) * he.y + abs(up.z) * he.z,
+        abs(dot(to_eye, ax)) * he.x + abs(dot(to_eye, ay)) * he.y + abs(to_eye.z) * he.z,
+    );
     var corners = array<vec2<f32>, 6>(
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
     let c = corners[vertex % 6u];
-    let pos = cw + to_eye * r + (right * c.x + up * c.y) * r;
+    let pos = cw + to_eye * box_extent.z + right * (c.x * box_extent.x) + up * (c.y * box_extent.y);
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
     // Rays from the eye through the quad (parallel towards the sun in a cascade).
@@ -120,7 +128,10 @@ fn impostor_hit(in: VertexOut) -> ImpostorHit {
     let uv0 = impostor_texcoord(p0, r0, cross(d0, r0), radius);
     let size = f32(textureDimensions(imp_color).x);
     let footprint = max(length(dpdx(uv0)), length(dpdy(uv0))) * size;
-    let lod = log2(max(footprint, 1e-6));
+    // No coarser than 8×8 texels a view: a coarser mip's few texels pass or
+    // fail the alpha test as blocks as wide as the bounding sphere (a far tree
+    // became a square); finer ones alias a little instead.
+    let lod = clamp(log2(max(footprint, 1e-6)), 0.0, max(log2(size) - 3.0, 0.0));
     var hit: ImpostorHit;
     var weight = 0.0;
     for (var k = 0u; k < 3u; k++) {
@@ -137,8 +148,10 @@ fn impostor_hit(in: VertexOut) -> ImpostorHit {
         let to_plane = dot(center - o, vd);
         var t = to_plane / denom;
         var surface = vec4<f32>(0.5);
-        // Parallax: step to where the ray meets the depth the view saw, twice.
-        for (var i = 0; i < 2; i++) {
+        // Parallax: step to where the ray meets the depth the view saw, twice
+        // (once on a far tree, where a step moves less than a texel).
+        let steps = select(2, 1, lod > 2.0);
+        for (var i = 0; i < steps; i++) {
             let uv = impostor_texcoord(o + d * t - center, vr, vu, radius);
             surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, lod);
             t = (to_plane + (surface.b * 2.0 - 1.0) * radius) / denom;

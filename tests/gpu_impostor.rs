@@ -206,3 +206,55 @@ fn a_tree_seen_all_round_keeps_its_silhouette() {
         report.join("\n")
     );
 }
+
+/// Not a test: the far tiers' error against a supersampled full-resolution
+/// mesh at several sizes (`cargo test --release --test gpu_impostor -- --ignored --nocapture`).
+#[test]
+#[ignore = "a measurement"]
+fn far_tier_error_by_size() {
+    let ctx = ctx();
+    let mut r = TreeRenderer::new(&ctx);
+    let bg = [0.42, 0.45, 0.25, 1.0];
+    let path = std::env::var("PACK")
+        .unwrap_or_else(|_| format!("{}/tests/fixtures/forest-small/species/beech.pack", env!("CARGO_MANIFEST_DIR")));
+    let bytes = std::fs::read(&path).expect("pack");
+    let pack = decode_pack(&path, &bytes).expect("pack decodes");
+    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, &pack);
+    let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, &pack).expect("impostors");
+    let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, &pack).expect("billboards");
+    let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
+    let center = (lo + hi) * 0.5;
+    const SIZE: u32 = 64;
+    for px in [8.0f32, 16.0, 32.0, 56.0] {
+        let (mut e_i, mut e_b, mut e_m) = (0.0, 0.0, 0.0);
+        let distance = (hi.z - lo.z) / (px / SIZE as f32) / (15f32.to_radians().tan() * 2.0);
+        for (azimuth, elevation) in [(0.0, 5.0), (55.0, 10.0), (130.0, 20.0), (215.0, 5.0), (300.0, 30.0)] {
+            let (clip, eye) = camera(center, distance, azimuth, elevation);
+            r.full_res_alpha = true;
+            let big = r.render(&ctx, &TreeDraw::Mesh(&mesh, 0), clip, eye, SIZE * 4, SIZE * 4, bg);
+            r.full_res_alpha = false;
+            let mut reference = vec![0u8; (SIZE * SIZE * 4) as usize];
+            for y in 0..SIZE as usize {
+                for x in 0..SIZE as usize {
+                    for k in 0..4 {
+                        let mut sum = 0.0f32;
+                        for dy in 0..4 {
+                            for dx in 0..4 {
+                                let v = f32::from(big[((y * 4 + dy) * SIZE as usize * 4 + x * 4 + dx) * 4 + k]) / 255.0;
+                                sum += if k < 3 { v.powf(2.2) } else { v };
+                            }
+                        }
+                        let m = sum / 16.0;
+                        reference[(y * SIZE as usize + x) * 4 + k] =
+                            ((if k < 3 { m.powf(1.0 / 2.2) } else { m }) * 255.0).round() as u8;
+                    }
+                }
+            }
+            let draw = |what: &TreeDraw<'_>| r.render(&ctx, what, clip, eye, SIZE, SIZE, bg);
+            e_m += multiscale_rmse(&draw(&TreeDraw::Mesh(&mesh, 0)), &reference, SIZE, SIZE);
+            e_i += multiscale_rmse(&draw(&TreeDraw::Impostor(&imp)), &reference, SIZE, SIZE);
+            e_b += multiscale_rmse(&draw(&TreeDraw::Billboard(&bb)), &reference, SIZE, SIZE);
+        }
+        eprintln!("{px:>4} px: mesh {:.4} billboard {:.4} impostor {:.4}", e_m / 5.0, e_b / 5.0, e_i / 5.0);
+    }
+}

@@ -38,6 +38,12 @@ pub(crate) enum PackReprArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+pub(crate) enum FarTierArg {
+    Impostors,
+    Billboards,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 pub(crate) enum SceneView {
     Far,
     Medium,
@@ -242,6 +248,10 @@ pub(crate) struct RenderArgs {
     /// inside, alike at every level of detail (off: crowns unoccluded).
     #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     pub(crate) ao: bool,
+    /// The far tier where a pack has both: multi-view impostors (the tree keeps
+    /// its shape all round) or view-angle billboards.
+    #[arg(long, value_enum, default_value = "impostors")]
+    pub(crate) far_tier: FarTierArg,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,

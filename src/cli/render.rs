@@ -225,6 +225,7 @@ fn suffixed(path: &std::path::Path, label: &str) -> PathBuf {
 /// `sylva render`: `--scene` to a PNG with stats, or `--pack` (one tree).
 pub(crate) fn render(args: RenderArgs) -> Result<()> {
     let RenderArgs {
+        far_tier,
         scene,
         pack,
         out,
@@ -283,6 +284,10 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             terrain: !no_terrain,
             shadows,
             ao,
+            far_tier: match far_tier {
+                FarTierArg::Impostors => sylva::render::settings::FarTier::Impostors,
+                FarTierArg::Billboards => sylva::render::settings::FarTier::Billboards,
+            },
             representations: match only {
                 None => Representations::ALL,
                 Some(OnlyArg::Meshes) => Representations::MESHES,

@@ -333,6 +333,9 @@ pub struct TreeRenderer {
     format: wgpu::TextureFormat,
     /// Draw with the trees' own baked occlusion (on by default).
     pub ao: bool,
+    /// Alpha-test mesh leaves at their textures' full resolution (the accuracy
+    /// reference's [`super::settings::RenderSettings::full_res_alpha`]).
+    pub full_res_alpha: bool,
 }
 
 impl TreeRenderer {
@@ -353,7 +356,18 @@ impl TreeRenderer {
             mapped_at_creation: false,
         });
         let view_group = shared.view_group(&ctx.device, &view_buffer);
-        Self { mesh, cluster, billboard, impostor, tree, view_buffer, view_group, format, ao: true }
+        Self {
+            mesh,
+            cluster,
+            billboard,
+            impostor,
+            tree,
+            view_buffer,
+            view_group,
+            format,
+            ao: true,
+            full_res_alpha: false,
+        }
     }
 
     /// Renders `what` with the camera `clip_from_eye` at `eye` (model space) into
@@ -371,6 +385,7 @@ impl TreeRenderer {
     ) -> Vec<u8> {
         let mut uniform = Lighting::default().view_uniform(clip_from_eye, eye, [width, height]);
         uniform.ambient[3] = f32::from(u8::from(self.ao));
+        uniform.eye_hi[3] = f32::from(u8::from(self.full_res_alpha));
         // Pixels per metre at 1 m, for the lines' minimum width.
         let row1 = Vec3::new(clip_from_eye.x_axis.y, clip_from_eye.y_axis.y, clip_from_eye.z_axis.y);
         uniform.lod[0] = 0.5 * height as f32 * row1.length();

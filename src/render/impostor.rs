@@ -166,6 +166,8 @@ pub struct ImpostorGpu {
     pub meta: ImpostorMeta,
     /// Bytes uploaded.
     pub bytes: u64,
+    /// Half extents of the model's box about the sphere's centre.
+    pub half_extent: [f32; 3],
 }
 
 impl ImpostorGpu {
@@ -211,14 +213,18 @@ impl ImpostorGpu {
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&pipeline.sampler) },
             ],
         });
-        Some(Self { bind_group, bytes: (color.len() + surface.len()) as u64, meta })
+        // The box about the sphere's centre (the centre is the box's own).
+        let c = glam::Vec3::from(meta.center);
+        let half = (glam::Vec3::from(pack.meta.bounds_max) - c).max(c - glam::Vec3::from(pack.meta.bounds_min));
+        Some(Self { bind_group, bytes: (color.len() + surface.len()) as u64, meta, half_extent: half.to_array() })
     }
 
     /// Fills the draw params of the far-tier slot: ids.w the grid, bb_center
-    /// the sphere (centre, radius).
+    /// the sphere (centre, radius), bb_size the box's half extents.
     pub fn draw_params(&self, params: &mut super::gpu_data::DrawParams) {
         params.ids[3] = self.meta.grid;
         params.bb_center = [self.meta.center[0], self.meta.center[1], self.meta.center[2], self.meta.radius];
+        params.bb_size = [self.half_extent[0], self.half_extent[1], self.half_extent[2], 0.0];
     }
 }
 
