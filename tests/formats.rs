@@ -592,7 +592,8 @@ fn pack_decoder_error_paths() {
     pack_error(with_impostors(2, 1.0, false), "META.impostors.texture has no texture section");
     let (mut meta, mut sections) = sample_pack();
     with_impostors(2, 1.0, true)(&mut meta, &mut sections);
-    let pack = decode_pack("x", &encode_pack(&meta, &sections)).expect("a valid impostor pack");
+    let bytes = encode_pack(&meta, &sections);
+    let pack = decode_pack("x", &bytes).expect("a valid impostor pack");
     assert_eq!(pack.meta.impostors.as_ref().map(|i| i.grid), Some(2));
     // Unknown section kinds are skipped (forward compatibility).
     let (meta, mut sections) = sample_pack();

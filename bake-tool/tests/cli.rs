@@ -60,7 +60,7 @@ fn demo_scene_is_complete_valid_and_deterministic() {
         let mut want = vec!["mesh", "mesh"];
         want.extend(std::iter::repeat_n("ellipsoids", k));
         want.extend(std::iter::repeat_n("lines", k));
-        want.push("billboards");
+        want.extend(["billboards", "impostors"]);
         assert_eq!(kinds, want, "{}", s["name"]);
         for l in levels {
             assert!(l["count"].as_u64().unwrap() > 0 && l["bytes"].as_u64().unwrap() > 0);
@@ -99,6 +99,27 @@ fn demo_scene_is_complete_valid_and_deterministic() {
     }
     let text = String::from_utf8(run(bin().arg("inspect").arg(&plain)).stdout).unwrap();
     assert!(text.contains("ambient occlusion: not baked"), "{text}");
+    // --far-tier picks the far representations a pack gets.
+    for (tier, has) in [("impostors", ["impostors"]), ("billboards", ["billboards"])] {
+        let out = dir.join(tier);
+        run(bin()
+            .args(["demo", "--trees", "30", "--no-clusters", "--far-tier", tier])
+            .args(SMALL)
+            .arg("--out")
+            .arg(&out));
+        for s in inspect_json(&out)["species"].as_array().unwrap() {
+            let far: Vec<&str> = s["levels"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|l| l["kind"].as_str().unwrap())
+                .filter(|k| *k == "billboards" || *k == "impostors")
+                .collect();
+            assert_eq!(far, has, "--far-tier {tier}: {s}");
+        }
+    }
+    let text = String::from_utf8(run(bin().arg("inspect").arg(&a)).stdout).unwrap();
+    assert!(text.contains("impostors: 6×6 hemi-octahedral views"), "{text}");
 }
 
 #[test]

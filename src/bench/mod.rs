@@ -673,7 +673,12 @@ mod tests {
         assert!(m[1..].iter().all(|m| m.reference == Some(0)));
         // Shadowed methods are measured against the shadowed reference.
         let all = methods("all", ShadowQuality::Off).unwrap();
-        assert_eq!(all.len(), 11);
+        assert_eq!(all.len(), 12);
+        // The references see far crowns whole; the far tiers are told apart.
+        assert!(all[..2].iter().all(|m| m.settings.full_res_alpha));
+        assert!(all[2..].iter().all(|m| !m.settings.full_res_alpha));
+        let tier = |n: &str| all.iter().find(|m| m.name == n).unwrap().settings.far_tier;
+        assert_eq!((tier("billboard"), tier("impostor")), (FarTier::Billboards, FarTier::Impostors));
         assert_eq!((all[0].name.as_str(), all[1].name.as_str()), ("reference", SHADOWED_REFERENCE));
         let high = all.iter().find(|m| m.name == "sylva-shadows-high").unwrap();
         assert_eq!((high.reference, high.settings.shadows), (Some(1), ShadowQuality::High));

@@ -57,7 +57,7 @@ pub fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
     out
 }
 
-pub const SMALL: [&str; 4] = ["--billboard-size", "32", "--texture-size", "64"];
+pub const SMALL: [&str; 6] = ["--billboard-size", "32", "--impostor-size", "32", "--texture-size", "64"];
 
 /// Writes a float32 GeoTIFF DEM of `n`×`n` pixels of `pixel_m` metres in
 /// EPSG:32633 whose north-west corner is (500000, 5300000), heights
