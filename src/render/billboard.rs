@@ -10,29 +10,48 @@ use crate::format::Pack;
 /// Vertices per billboard (two triangles, no index buffer).
 pub const BILLBOARD_VERTICES: u32 = 6;
 
-/// The billboard pipeline and its texture layout.
-pub struct BillboardPipeline {
-    /// Group 1: colour array, normal array, sampler, occlusion array.
+/// A far-tier pass's pipelines (billboards, impostors): texture arrays and one
+/// linear, clamped, mipmapped sampler in group 1 (arrays at bindings 0, 1, the
+/// sampler at 2, further arrays from 3), the draw items in groups 2–3, a lit
+/// variant and a depth-only one for the shadow casters.
+pub struct FarTierPipeline {
+    /// Group 1.
     pub texture_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
 }
 
-impl BillboardPipeline {
-    /// Creates the pipeline for `color_format` targets.
+/// The billboard pipeline (`shaders/billboard.wgsl`): colour, normal, sampler, occlusion.
+pub type BillboardPipeline = FarTierPipeline;
+
+impl FarTierPipeline {
+    /// The billboards' pipelines for `color_format` targets.
     #[must_use]
-    pub fn new(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
+    pub fn billboard(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
+        Self::new(device, shared, color_format, "billboard", shaders::BILLBOARD, 3)
+    }
+
+    /// A far tier's pipelines from WGSL `source` with `arrays` texture arrays.
+    #[must_use]
+    pub fn new(
+        device: &wgpu::Device,
+        shared: &SharedLayouts,
+        color_format: wgpu::TextureFormat,
+        label: &str,
+        source: &str,
+        arrays: u32,
+    ) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("billboard.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::BILLBOARD.into()),
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
         });
-        let texture_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("billboard textures"),
-            entries: &[texture_array_entry(0), texture_array_entry(1), sampler_entry(2), texture_array_entry(3)],
-        });
+        let entries: Vec<_> =
+            (0..=arrays).map(|b| if b == 2 { sampler_entry(2) } else { texture_array_entry(b) }).collect();
+        let texture_layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("billboard"),
+            label: Some(label),
             bind_group_layouts: &[
                 Some(&shared.view),
                 Some(&texture_layout),
@@ -46,10 +65,10 @@ impl BillboardPipeline {
             depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
             format: color_format,
         };
-        let pipeline = super::layouts::pulling_pipeline(device, "billboard", &module, &layout, "fs_main", &target);
-        let shadow = super::layouts::shadow_caster_pipeline(device, "billboard shadow", &module, &layout, &[]);
+        let pipeline = super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target);
+        let shadow = super::layouts::shadow_caster_pipeline(device, &format!("{label} shadow"), &module, &layout, &[]);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("billboard"),
+            label: Some(label),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
             address_mode_v: wgpu::AddressMode::ClampToEdge,
             mag_filter: wgpu::FilterMode::Linear,
@@ -60,16 +79,45 @@ impl BillboardPipeline {
         Self { texture_layout, pipeline, shadow, sampler }
     }
 
-    /// The pipeline.
+    /// The lit pipeline.
     #[must_use]
     pub fn pipeline(&self) -> &wgpu::RenderPipeline {
         &self.pipeline
     }
 
-    /// The shadow casters' pipeline (depth only, quads turned to the sun).
+    /// The shadow casters' pipeline (depth only).
     #[must_use]
     pub fn shadow_pipeline(&self) -> &wgpu::RenderPipeline {
         &self.shadow
+    }
+
+    /// Group 1 over `arrays` (2D-array views; the sampler goes between the
+    /// second and the third).
+    #[must_use]
+    pub fn bind_group(&self, device: &wgpu::Device, label: &str, arrays: &[&wgpu::Texture]) -> wgpu::BindGroup {
+        let views: Vec<wgpu::TextureView> = arrays
+            .iter()
+            .map(|t| {
+                t.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2Array),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let mut entries: Vec<wgpu::BindGroupEntry<'_>> = views
+            .iter()
+            .enumerate()
+            .map(|(i, v)| wgpu::BindGroupEntry {
+                binding: if i < 2 { i as u32 } else { i as u32 + 1 },
+                resource: wgpu::BindingResource::TextureView(v),
+            })
+            .collect();
+        entries.push(wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&self.sampler) });
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &self.texture_layout,
+            entries: &entries,
+        })
     }
 }
 
@@ -132,22 +180,7 @@ impl BillboardGpu {
                 wgpu::TextureFormat::R8Unorm,
             ),
         };
-        let view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("billboard textures"),
-            layout: &pipeline.texture_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view(&color_tex)) },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&view(&normal_tex)) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&pipeline.sampler) },
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&view(&ao_tex)) },
-            ],
-        });
+        let bind_group = pipeline.bind_group(device, "billboard textures", &[&color_tex, &normal_tex, &ao_tex]);
         let bytes = (color.len() + normal.len() + ao.map_or(0, <[u8]>::len)) as u64;
         Some(Self { bind_group, bytes, meta })
     }

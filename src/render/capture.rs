@@ -346,8 +346,8 @@ impl TreeRenderer {
         let shared = SharedLayouts::new(&ctx.device);
         let mesh = MeshPipelines::new(&ctx.device, &shared, format);
         let cluster = ClusterPipeline::new(&ctx.device, &shared, format);
-        let billboard = BillboardPipeline::new(&ctx.device, &shared, format);
-        let impostor = ImpostorPipeline::new(&ctx.device, &shared, format);
+        let billboard = BillboardPipeline::billboard(&ctx.device, &shared, format);
+        let impostor = super::impostor::impostor_pipeline(&ctx.device, &shared, format);
         let tree = SingleTree::new(ctx, &shared);
         let view_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tree view"),

@@ -7,8 +7,8 @@
 
 use glam::{Mat4, Vec2, Vec3};
 
-use super::billboard::BILLBOARD_VERTICES;
-use super::layouts::{sampler_entry, texture_array_entry, SharedLayouts};
+use super::billboard::{FarTierPipeline, BILLBOARD_VERTICES};
+use super::layouts::SharedLayouts;
 use super::mesh::upload_texture_array;
 use super::shaders;
 use crate::format::pack::{kind, ImpostorMeta};
@@ -95,67 +95,17 @@ pub fn pack_ao_leaf(ao: f32, leaf: bool) -> u8 {
     u8::from(leaf) * 128 + (ao.clamp(0.0, 1.0) * 127.0).round() as u8
 }
 
-/// The impostor pipeline and its texture layout.
-pub struct ImpostorPipeline {
-    /// Group 1: colour array, surface array, sampler.
-    pub texture_layout: wgpu::BindGroupLayout,
-    pipeline: wgpu::RenderPipeline,
-    shadow: wgpu::RenderPipeline,
-    sampler: wgpu::Sampler,
-}
+/// The impostor pipeline (`shaders/impostor.wgsl`): colour, surface, sampler.
+pub type ImpostorPipeline = FarTierPipeline;
 
-impl ImpostorPipeline {
-    /// Creates the pipeline for `color_format` targets.
-    #[must_use]
-    pub fn new(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("impostor.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::IMPOSTOR.into()),
-        });
-        let texture_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("impostor textures"),
-            entries: &[texture_array_entry(0), texture_array_entry(1), sampler_entry(2)],
-        });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("impostor"),
-            bind_group_layouts: &[
-                Some(&shared.view),
-                Some(&texture_layout),
-                Some(&shared.instances),
-                Some(&shared.draw),
-            ],
-            immediate_size: 0,
-        });
-        let target = super::layouts::PullingTarget {
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
-            format: color_format,
-        };
-        let pipeline = super::layouts::pulling_pipeline(device, "impostor", &module, &layout, "fs_main", &target);
-        let shadow = super::layouts::shadow_caster_pipeline(device, "impostor shadow", &module, &layout, &[]);
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("impostor"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            mipmap_filter: wgpu::MipmapFilterMode::Linear,
-            ..Default::default()
-        });
-        Self { texture_layout, pipeline, shadow, sampler }
-    }
-
-    /// The lit pipeline.
-    #[must_use]
-    pub fn pipeline(&self) -> &wgpu::RenderPipeline {
-        &self.pipeline
-    }
-
-    /// The shadow casters' pipeline (depth only).
-    #[must_use]
-    pub fn shadow_pipeline(&self) -> &wgpu::RenderPipeline {
-        &self.shadow
-    }
+/// The impostors' pipelines for `color_format` targets.
+#[must_use]
+pub fn impostor_pipeline(
+    device: &wgpu::Device,
+    shared: &SharedLayouts,
+    color_format: wgpu::TextureFormat,
+) -> ImpostorPipeline {
+    FarTierPipeline::new(device, shared, color_format, "impostor", shaders::IMPOSTOR, 2)
 }
 
 /// One species' impostor arrays on the GPU.
@@ -198,21 +148,7 @@ impl ImpostorGpu {
             surface,
             wgpu::TextureFormat::Rgba8Unorm,
         );
-        let view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("impostor textures"),
-            layout: &pipeline.texture_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view(&color_tex)) },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&view(&surface_tex)) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&pipeline.sampler) },
-            ],
-        });
+        let bind_group = pipeline.bind_group(device, "impostor textures", &[&color_tex, &surface_tex]);
         // The box about the sphere's centre (the centre is the box's own).
         let c = glam::Vec3::from(meta.center);
         let half = (glam::Vec3::from(pack.meta.bounds_max) - c).max(c - glam::Vec3::from(pack.meta.bounds_min));

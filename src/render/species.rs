@@ -144,13 +144,14 @@ impl Species {
             MeshGpu { levels: Vec::new() }
         };
         let billboard = if m.billboards.is_some() && pack.section(kind::BILLBOARD_COLOR, 0).is_some() {
-            let pipeline = self.billboard.get_or_insert_with(|| BillboardPipeline::new(device, shared, format));
+            let pipeline = self.billboard.get_or_insert_with(|| BillboardPipeline::billboard(device, shared, format));
             BillboardGpu::upload(device, queue, pipeline, pack)
         } else {
             None
         };
         let impostor = if m.impostors.is_some() && pack.section(kind::IMPOSTOR_COLOR, 0).is_some() {
-            let pipeline = self.impostor.get_or_insert_with(|| ImpostorPipeline::new(device, shared, format));
+            let pipeline =
+                self.impostor.get_or_insert_with(|| super::impostor::impostor_pipeline(device, shared, format));
             ImpostorGpu::upload(device, queue, pipeline, pack)
         } else {
             None
