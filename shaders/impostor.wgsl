@@ -81,7 +81,13 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
     let c = corners[vertex % 6u];
-    let pos = cw + to_eye * box_extent.z + right * (c.x * box_extent.x) + up * (c.y * box_extent.y);
+    // In front of the eye even where it stands inside the box (a near tree
+    // forced into the far tier: `--only billboards`).
+    var front = box_extent.z;
+    if view.viewport.w < 0.5 {
+        front = min(front, 0.9 * length(cw));
+    }
+    let pos = cw + to_eye * front + right * (c.x * box_extent.x) + up * (c.y * box_extent.y);
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
     // Rays from the eye through the quad (parallel towards the sun in a cascade).
@@ -202,7 +208,8 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * hit.color.g);
     }
-    let top = max(draw.bb_center.z + draw.bb_center.w, 1e-3);
+    // The model's top, as the other tiers measure height in the crown.
+    let top = max(draw.bb_center.z + draw.bb_size.z, 1e-3);
     let canopy = in.cover * (1.0 - clamp(hit.at.z / top, 0.0, 1.0));
     let ao = own_ao(baked_ao, view);
     let lift = draw.bb_center.w * in.tree_size.x * 0.25;

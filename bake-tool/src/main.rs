@@ -182,6 +182,18 @@ impl PackArgs {
                 bail!("{name} {v}: must be a power of two between 4 and {max}");
             }
         }
+        // The capture holds every view at twice the size (colour, normal,
+        // occlusion, depth: 16 bytes a texel) until the mips are built.
+        let capture_bytes = u64::from(self.impostor_grid).pow(2) * (2 * u64::from(self.impostor_size)).pow(2) * 16;
+        if capture_bytes > 1 << 30 {
+            bail!(
+                "--impostor-grid {} with --impostor-size {} needs {:.1} GiB while baking: at most 1 GiB \
+                 (e.g. --impostor-grid 8 --impostor-size 256)",
+                self.impostor_grid,
+                self.impostor_size,
+                capture_bytes as f64 / f64::from(1u32 << 30)
+            );
+        }
         if u64::from(self.billboard_angles) * u64::from(self.billboard_azimuths) > 256 {
             bail!("--billboard-angles × --billboard-azimuths must be at most 256 (WebGPU's array layer limit)");
         }

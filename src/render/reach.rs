@@ -139,7 +139,8 @@ impl Reach {
         let max_px = self.species_max_px.get(s).copied().unwrap_or(0.0);
         let Some(m) = self.measured else { return [false; PACK_PARTS] };
         let allow = m.representations;
-        let has_bb = allow.billboards && meta.billboards.is_some();
+        // The far tier: billboards or impostors (one part holds both).
+        let has_bb = allow.billboards && (meta.billboards.is_some() || meta.impostors.is_some());
         let has_cl = allow.clusters && meta.clusters.as_ref().is_some_and(|c| !c.ellipsoid_levels.is_empty());
         let has_mesh = allow.meshes && !meta.mesh_levels.is_empty();
         // Cross-fades start below a threshold: fetch a little early.
@@ -153,5 +154,60 @@ impl Reach {
         let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
         let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
         [has_bb, clusters, meshes, full]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::pack::{ImpostorMeta, MeshLevelMeta, TextureArrayMeta};
+
+    /// A far view (trees 5 px tall) of a pack whose far tier is impostors only:
+    /// the far part is fetched, no mesh.
+    #[test]
+    fn a_far_view_fetches_impostors_only_packs_far_part() {
+        let reach = Reach {
+            species_max_px: vec![5.0],
+            species_tallest_m: vec![20.0],
+            measured: Some(Measured {
+                eye: Vec3::ZERO,
+                px_per_m: 500.0,
+                reach_m: 6000.0,
+                cluster_min_px: 40.0,
+                fade_band: 0.12,
+                representations: Representations::ALL,
+                residency: 0,
+            }),
+        };
+        let mut meta = PackMeta {
+            name: "oak".into(),
+            height_m: 20.0,
+            bounds_min: [-5.0, -5.0, 0.0],
+            bounds_max: [5.0, 5.0, 20.0],
+            materials: Vec::new(),
+            material_texture: None,
+            mesh_levels: vec![MeshLevelMeta {
+                vertex_count: 3,
+                index_count: 3,
+                pos_min: [0.0; 3],
+                pos_max: [1.0; 3],
+                uv_min: [0.0; 2],
+                uv_max: [1.0; 2],
+                draws: Vec::new(),
+                select_px: 120.0,
+            }],
+            billboards: None,
+            clusters: None,
+            impostors: Some(ImpostorMeta {
+                grid: 2,
+                texture: TextureArrayMeta { size: 4, layers: 4, mips: 3 },
+                center: [0.0, 0.0, 10.0],
+                radius: 12.0,
+            }),
+        };
+        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
+        // Without any far tier the mesh is the coarsest and is fetched.
+        meta.impostors = None;
+        assert_eq!(reach.parts_needed(0, &meta), [false, false, true, true]);
     }
 }
