@@ -101,7 +101,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
     let packed_normal = textureSample(bb_normal, bb_sampler, in.uv, in.layer);
     let baked_ao = textureSample(bb_ao, bb_sampler, in.uv, in.layer).r;
-    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     let n_model = normalize(packed_normal.xyz * 2.0 - 1.0);
@@ -120,7 +120,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 @fragment
 fn fs_shadow(in: VertexOut) {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
 }

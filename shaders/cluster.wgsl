@@ -392,7 +392,7 @@ fn cluster_hit(in: VertexOut) -> ClusterHit {
         n = normalize(mix(n, normalize(nn + vec3<f32>(1e-6)), draw.cluster_noise.y));
         t = skip + t_hit;
     }
-    if !fade_keeps(in.item_y, in.clip.xy) {
+    if !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     var hit: ClusterHit;

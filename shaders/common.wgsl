@@ -9,6 +9,8 @@ struct View {
     // part (relative-to-eye rendering: batch origin − eye_hi − eye_lo keeps
     // centimetres at UTM-sized coordinates). eye_hi.w: 1 when alpha tests read
     // the textures' full resolution (the accuracy reference), else 0.
+    // eye_lo.w: the progressive-refinement step shifting the cross-fade dither
+    // (`fade_keeps`; 0 without refinement).
     eye_hi: vec4<f32>,
     eye_lo: vec4<f32>,
     // Frustum planes in eye-relative space, inside where dot(n, p) + d >= 0.
@@ -252,11 +254,14 @@ fn dither8(p: vec2<f32>) -> f32 {
     return (f32(m) + 0.5) / 64.0;
 }
 
-// Whether an item's pixel survives its cross-fade mask.
-fn fade_keeps(item_y: u32, frag: vec2<f32>) -> bool {
+// Whether an item's pixel survives its cross-fade mask. `seed` (the view's
+// eye_lo.w: the progressive-refinement step, 0 otherwise) shifts the dither
+// pattern, so accumulated steps blend the two sides instead of keeping one.
+fn fade_keeps(item_y: u32, frag: vec2<f32>, seed: f32) -> bool {
     let fade = f32(item_y >> 24u) / 255.0;
     let side = (item_y >> 23u) & 1u;
-    let d = dither8(frag);
+    let s = u32(seed);
+    let d = dither8(frag + vec2<f32>(f32(s & 7u), f32((s * 5u + (s >> 3u) * 3u) & 7u)));
     return select(d >= fade, d < fade, side == 1u);
 }
 

@@ -195,7 +195,7 @@ struct FragmentOut {
 @fragment
 fn fs_main(in: VertexOut) -> FragmentOut {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     let is_leaf = hit.packed >= 0.5;
@@ -224,7 +224,7 @@ fn fs_main(in: VertexOut) -> FragmentOut {
 @fragment
 fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy) {
+    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     return impostor_depth(hit.at, in);

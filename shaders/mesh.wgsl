@@ -108,7 +108,7 @@ fn surface(in: VertexOut, front: bool) -> Surface {
             coverage = mat.base_color.a * in.color.a * fine.a;
         }
     }
-    if coverage < mat.alpha_cutoff || !fade_keeps(in.item_y, in.clip.xy) {
+    if coverage < mat.alpha_cutoff || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     var s: Surface;

@@ -192,6 +192,8 @@ impl Viewer {
         let name = adapter_name(&adapter).await;
         let mut frame = Frame::new(device, queue, name, view_format, pools, &scene, WebFetcher::default());
         frame.use_timestamps();
+        // A resting camera refines its image, then the viewer idles (`setRefine`).
+        frame.refine.config.enabled = true;
         // The sun casts shadows unless a page turns them down (`setLighting`).
         frame.settings.shadows = crate::render::shadow::ShadowQuality::High;
         Ok(Viewer {
@@ -565,6 +567,28 @@ impl Viewer {
     /// Each tree's own baked ambient occlusion on or off.
     pub fn set_ao(&mut self, on: bool) {
         self.frame.settings.ao = on;
+    }
+
+    /// Progressive refinement while the camera rests: on or off, jittered
+    /// frames per quality level (1–256) and quality levels above the plain
+    /// frame (0–4, the last one full meshes).
+    pub fn set_refine(&mut self, on: bool, frames: u32, levels: u32) {
+        self.frame.refine.config = crate::render::refine::RefineConfig {
+            enabled: on,
+            jitter_frames: frames.clamp(1, 256),
+            levels: levels.min(crate::render::refine::MAX_REFINE_LEVELS),
+        };
+    }
+
+    /// Whether a refinement is under way: more frames would improve the image.
+    /// False when it has converged (the viewer idles) or is off.
+    pub fn refining(&self) -> bool {
+        self.frame.refine.config.enabled && !self.frame.refine.converged()
+    }
+
+    /// Frames submitted to the GPU so far.
+    pub fn frames_drawn(&self) -> f64 {
+        self.frame.frames() as f64
     }
 
     /// LoD quality factor (1, 0.5, 0.25).

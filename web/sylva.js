@@ -187,6 +187,19 @@ class SylvaViewer {
   stats() { return JSON.parse(this.viewer.stats_json()); }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
   setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
+  /**
+   * Progressive refinement while the camera rests (on by default): jittered
+   * frames accumulate into an anti-aliased image while the level of detail
+   * rises (`levels` steps, 0–4, the last one full meshes for what is in view),
+   * `frames` per step (1–256); then the viewer stops drawing until something
+   * changes. Any camera move starts over at once. `stats()` reports
+   * `refine_step`, `refine_level` and `refine_converged`.
+   */
+  setRefine(on = true, { frames = 16, levels = 3 } = {}) {
+    this.refine = { on: !!on, frames, levels };
+    this.viewer.set_refine(!!on, Math.max(1, frames | 0), Math.max(0, levels | 0));
+    this.dirty = 8;
+  }
   /** Ground imagery on the terrain: 'scene' (the scene's baked imagery), null
    * (none: the ground material), or an XYZ/WMTS raster source in Web Mercator
    * as a URL template, reprojected onto the scene's terrain. Throws for a
@@ -232,6 +245,7 @@ class SylvaViewer {
       this.resize();
       this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
       if (this.lighting) this.setLighting(this.lighting);
+      if (this.refine) this.setRefine(this.refine.on, this.refine);
       this.dirty = 8;
       this.emit('recovered', {});
     } catch (e) {
@@ -247,9 +261,11 @@ class SylvaViewer {
     if (this.viewer.is_lost()) { this.recover(); return; }
     if (this.flight) this.flight(now);
     const progress = JSON.parse(this.viewer.progress_json());
-    // Render on demand: while loading, moving or just after a change, and until the
-    // first complete frame's counters are back; idle otherwise.
-    if (!progress.settled || this.flight || this.dirty > 0 || (!this.readySettled && !this.viewer.is_ready())) {
+    // Render on demand: while loading, moving or just after a change, until the
+    // first complete frame's counters are back, and while a resting camera's
+    // image refines; idle otherwise.
+    if (!progress.settled || this.flight || this.dirty > 0 || this.viewer.refining() ||
+        (!this.readySettled && !this.viewer.is_ready())) {
       const t0 = performance.now();
       let drawn;
       try {
@@ -393,11 +409,21 @@ export async function create(target, options = {}) {
   const v = new SylvaViewer(canvas, viewer, options);
   if (options.camera) v.setCamera(options.camera);
   if (options.lighting) v.setLighting(options.lighting);
+  if (options.refine !== undefined) {
+    const r = options.refine;
+    if (typeof r === 'object' && r !== null) v.setRefine(r.on !== false, r);
+    else v.setRefine(!!r);
+  }
   return v;
 }
 
-/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch">` */
+/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off">`
+ * (refine: progressive refinement at rest, on unless "off"). */
 class SylvaElement extends HTMLElement {
+  static get observedAttributes() { return ['refine']; }
+  attributeChangedCallback(name) {
+    if (name === 'refine' && this.viewer) this.viewer.setRefine(this.getAttribute('refine') !== 'off');
+  }
   async connectedCallback() {
     if (this.viewer || this.starting) return;
     this.starting = true;
@@ -407,6 +433,7 @@ class SylvaElement extends HTMLElement {
     const camera = cam ? (([lon, lat, height, heading, pitch]) => ({ lon, lat, height, heading, pitch }))(cam.split(',').map(Number)) : undefined;
     try {
       this.viewer = await create(this, { scene: this.getAttribute('src') || undefined, camera });
+      if (this.getAttribute('refine') === 'off') this.viewer.setRefine(false);
       this.dispatchEvent(new CustomEvent('sylva-ready', { detail: this.viewer }));
     } catch (e) {
       this.textContent = String(e.message || e);

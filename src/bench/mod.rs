@@ -7,7 +7,10 @@
 //! Methods: `reference` (every tree full mesh, no LoD, 2× supersampled),
 //! `mesh` (full mesh, per-tree culling), `per-tree` (Sylva's LoD, trees culled one
 //! by one), `billboard` (meshes near, billboards beyond), `ellipsoid` (meshes
-//! near, ellipsoids beyond), `sylva` (the full mix) at quality 1, ½, ¼.
+//! near, ellipsoids beyond), `impostor` (meshes near, multi-view impostors
+//! beyond), `sylva` (the full mix) at quality 1, ½, ¼, and `sylva-converged`
+//! (the full mix refined while the camera rests: the converged image of
+//! progressive refinement, its GPU time summed over the steps).
 //! Per frame: GPU ms (wall time around submit + wait, see platform.md), CPU ms,
 //! draw calls, instances per representation, GPU bytes, bytes fetched, image
 //! error against `reference` (multi-scale RMSE) and temporal noise (RMSE to the
@@ -24,6 +27,7 @@ use crate::camera::Camera;
 use crate::format::Manifest;
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
 use crate::render::offscreen::{NamedView, OffscreenScene};
+use crate::render::refine::RefineConfig;
 use crate::render::settings::FarTier;
 use crate::render::shadow::ShadowQuality;
 
@@ -165,6 +169,9 @@ pub struct Method {
     /// The index of the reference this method's error is measured against
     /// (`None`: it is one): the shadowed reference for shadowed methods.
     pub reference: Option<usize>,
+    /// Progressive refinement: each frame is the converged image of the
+    /// camera at rest (its GPU time the sum over the steps).
+    pub refine: Option<RefineConfig>,
 }
 
 /// The reference of shadowed methods: every tree a full mesh, and casters too,
@@ -172,7 +179,7 @@ pub struct Method {
 pub const SHADOWED_REFERENCE: &str = "reference-shadows";
 
 /// Quality so high every visible tree is above the full mesh's threshold.
-const ALL_FULL_MESH: f32 = 1.0e6;
+const ALL_FULL_MESH: f32 = crate::render::refine::FULL_MESH_QUALITY;
 
 /// The methods named in `list` (comma-separated; `all` for every one), the
 /// references first: `reference` for methods drawn without shadows,
@@ -190,6 +197,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             settings,
             supersample,
             reference: Some(0),
+            refine: None,
         };
         Ok(match name {
             "reference" => m(RenderSettings { shadows: ShadowQuality::Off, full_res_alpha: true, ..full }, 2),
@@ -222,13 +230,17 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
                 1,
             ),
             "sylva" => m(base, 1),
+            "sylva-converged" => Method {
+                refine: Some(RefineConfig { enabled: true, ..RefineConfig::default() }),
+                ..m(base, 1)
+            },
             "sylva-q0.5" => m(RenderSettings { quality: 0.5, ..base }, 1),
             "sylva-q0.25" => m(RenderSettings { quality: 0.25, ..base }, 1),
             "sylva-shadows-low" => m(RenderSettings { shadows: ShadowQuality::Low, ..base }, 1),
             "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
             other => bail!(
-                "unknown method {other:?}: use reference, mesh, per-tree, billboard, impostor, ellipsoid, sylva, sylva-q0.5, \
-                 sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
+                "unknown method {other:?}: use reference, mesh, per-tree, billboard, impostor, ellipsoid, sylva, sylva-converged, \
+                 sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
             ),
         })
     };
@@ -240,6 +252,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "impostor",
             "ellipsoid",
             "sylva",
+            "sylva-converged",
             "sylva-q0.5",
             "sylva-q0.25",
             "sylva-shadows-low",
@@ -464,7 +477,17 @@ pub fn run(
             off.load_view(cam, 120.0);
             // One unmeasured frame settles LoD-dependent loads (packs) and pipelines.
             off.render(cam, false);
-            let s = off.render(cam, true);
+            let s = match method.refine {
+                Some(config) => {
+                    let (mut s, total) = off.render_converged(cam, config, 4 * config.total_steps());
+                    if !s.refine_converged {
+                        eprintln!("warning: {} frame {i} did not converge (step {})", method.name, s.refine_step);
+                    }
+                    s.gpu_ms = total;
+                    s
+                }
+                None => off.render(cam, true),
+            };
             if method.reference.is_none() && s.items_dropped + s.shadow_items_dropped > 0 {
                 eprintln!(
                     "warning: {} frame {i} lost {} trees and {} shadow casters to full segments: \

@@ -62,7 +62,7 @@ pub(crate) enum Command {
     /// frames: writes frames.csv, summary.json and SVG plots (pareto,
     /// frame_time, temporal_noise) into --out.
     #[command(
-        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-q0.5, sylva-q0.25, sylva-shadows-low,\n  sylva-shadows-high, or all.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
+        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-converged (refined at rest), sylva-q0.5,\n  sylva-q0.25, sylva-shadows-low, sylva-shadows-high, or all.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
     )]
     Bench {
         /// Scene directory, scene.json path or http(s) URL.
@@ -252,6 +252,19 @@ pub(crate) struct RenderArgs {
     /// its shape all round) or view-angle billboards.
     #[arg(long, value_enum, default_value = "impostors")]
     pub(crate) far_tier: FarTierArg,
+    /// Write the converged image of progressive refinement, as the viewer
+    /// shows it once the camera rests: sub-pixel jittered frames accumulate
+    /// into an anti-aliased image while the level of detail rises step by step
+    /// (projected sizes ×2, ×4, …) towards full meshes.
+    #[arg(long, conflicts_with = "pack")]
+    pub(crate) converge: bool,
+    /// With --converge: jittered frames accumulated per quality level.
+    #[arg(long, default_value_t = 16, requires = "converge", value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub(crate) converge_frames: u32,
+    /// With --converge: quality levels above the normal frame (0–4; each
+    /// doubles projected sizes before the LoD choice).
+    #[arg(long, default_value_t = 2, requires = "converge", value_parser = clap::value_parser!(u32).range(0..=4))]
+    pub(crate) converge_levels: u32,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,

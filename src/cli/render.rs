@@ -8,6 +8,7 @@ use sylva::format::decode_pack;
 use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
 use sylva::render::forest::{PoolConfig, RenderSettings};
 use sylva::render::offscreen::{NamedView, OffscreenScene};
+use sylva::render::refine::RefineConfig;
 use sylva::render::GpuContext;
 use sylva::scene::imagery::{ImageryChoice, XyzSource};
 use sylva::scene::StreamEvent;
@@ -27,6 +28,7 @@ pub(crate) fn render_scene(
     stats_path: Option<&PathBuf>,
     timeout: f64,
     allow_partial: bool,
+    refine: RefineConfig,
 ) -> Result<()> {
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     off.settings = settings;
@@ -73,7 +75,25 @@ pub(crate) fn render_scene(
         off.settings.lighting = lighting;
         // A first frame warms pipelines and caches; the second is measured.
         off.render(&cam, false);
-        let s = off.render(&cam, true);
+        let s = if refine.enabled {
+            let (mut s, total) = off.render_converged(&cam, refine, 4 * refine.total_steps());
+            if !s.refine_converged {
+                eprintln!(
+                    "warning: the refinement did not converge (data kept arriving); writing step {}",
+                    s.refine_step
+                );
+            }
+            eprintln!(
+                "refined in {} steps to quality level {}: {:.1} ms of GPU time in all",
+                s.refine_step,
+                s.refine_level,
+                total.values().sum::<f64>()
+            );
+            s.gpu_ms = total;
+            s
+        } else {
+            off.render(&cam, true)
+        };
         let rgba = off.read_image();
         let path = if several { suffixed(out, &label) } else { out.to_path_buf() };
         image::save_buffer(&path, &rgba, w, h, image::ColorType::Rgba8)
@@ -248,6 +268,9 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         sun,
         shadows,
         ao,
+        converge,
+        converge_frames,
+        converge_levels,
         stats,
         timeout,
         allow_partial,
@@ -308,6 +331,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             stats.as_ref(),
             timeout,
             allow_partial,
+            RefineConfig { enabled: converge, jitter_frames: converge_frames, levels: converge_levels },
         );
     }
     let pack = pack.expect("clap requires --scene or --pack");

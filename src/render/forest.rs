@@ -266,7 +266,8 @@ impl ForestRenderer {
             clip_from_eye: view.clip_from_eye.to_cols_array_2d(),
             // w: alpha tests at the textures' full resolution (the accuracy reference).
             eye_hi: view.eye_hi.extend(f32::from(u8::from(settings.full_res_alpha))).to_array(),
-            eye_lo: view.eye_lo.extend(0.0).to_array(),
+            // w: the cross-fade dither's shift (`fade_keeps` in common.wgsl).
+            eye_lo: view.eye_lo.extend(settings.refine_seed as f32).to_array(),
             frustum: view.frustum.map(|p| p.to_array()),
             sun_dir: l.sun_dir.extend(0.0).to_array(),
             sun_color: l.sun_color.extend(0.0).to_array(),

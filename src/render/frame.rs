@@ -8,6 +8,7 @@
 use super::forest::{ForestRenderer, GpuResidency, PoolConfig, RenderSettings};
 use super::gpu_data::REPR_COUNT;
 use super::readback::{CounterReadback, PassTimer};
+use super::refine::{Accumulator, Plan, Refinement};
 use super::stats::FrameStats;
 use crate::camera::ViewData;
 use crate::scene::{Fetcher, SceneStream, StreamConfig};
@@ -40,8 +41,11 @@ pub fn now_ms() -> f64 {
 pub struct Recorded {
     /// The shadow cascades (cull and casters of each), when shadows are drawn.
     shadow: Option<wgpu::CommandBuffer>,
-    cull: wgpu::CommandBuffer,
+    /// None when a converged refinement draws no scene.
+    cull: Option<wgpu::CommandBuffer>,
     draw: wgpu::CommandBuffer,
+    /// The refinement's accumulate and resolve passes, after the draw.
+    refine: Option<wgpu::CommandBuffer>,
     read_counters: bool,
 }
 
@@ -57,6 +61,11 @@ pub struct Frame<F: Fetcher> {
     pub stream: SceneStream<F>,
     /// How to draw.
     pub settings: RenderSettings,
+    /// Progressive refinement while the camera rests (off unless its
+    /// `config.enabled`; [`super::refine`]).
+    pub refine: Refinement,
+    accumulator: Option<Accumulator>,
+    color_format: wgpu::TextureFormat,
     adapter: String,
     readback: CounterReadback,
     /// Timestamp queries around the passes, where asked for and available.
@@ -90,6 +99,9 @@ impl<F: Fetcher> Frame<F> {
             renderer,
             stream: SceneStream::new(scene, fetcher, StreamConfig::default()),
             settings: RenderSettings::default(),
+            refine: Refinement::default(),
+            accumulator: None,
+            color_format,
             adapter,
             readback,
             timer: None,
@@ -119,7 +131,9 @@ impl<F: Fetcher> Frame<F> {
             let config = crate::scene::StreamConfig { terrain: self.settings.terrain, ..self.stream.config() };
             self.stream.set_config(config);
         }
-        self.renderer.measure_reach(view, &self.settings);
+        // A refinement's finer levels need finer parts of the packs: fetch for them.
+        let settings = self.refine_plan(view).map_or(self.settings, |p| self.refine.settings(&self.settings, &p));
+        self.renderer.measure_reach(view, &settings);
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);
         if let Some(m) = self.stream.manifest() {
@@ -141,16 +155,64 @@ impl<F: Fetcher> Frame<F> {
         depth: &wgpu::TextureView,
         read_counters: bool,
     ) -> Recorded {
+        let Some(plan) = self.refine_plan(view) else {
+            let settings = self.settings;
+            return self.record_scene(view, &settings, color, depth, read_counters);
+        };
+        // Refining: the scene goes into the accumulator's target, which is
+        // blended into the accumulation and resolved into `color`.
+        let (counters, counters_frame) = self.readback.latest();
+        self.refine.note_counters(counters_frame, counters.control.items_dropped);
+        let accumulator = self.accumulator.get_or_insert_with(|| Accumulator::new(&self.device, self.color_format));
+        let scene = accumulator.scene_target(&self.device, view.viewport);
+        let mut recorded = if plan.render {
+            let settings = self.refine.settings(&self.settings, &plan);
+            let jittered = super::refine::jittered(view, plan.jitter_px);
+            self.record_scene(&jittered, &settings, &scene, depth, read_counters)
+        } else {
+            // Converged: only the image is shown again.
+            let draw = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("draw") });
+            self.draw_calls = 0;
+            Recorded { shadow: None, cull: None, draw: draw.finish(), refine: None, read_counters: false }
+        };
+        let swap = self.refine.advance(self.frames + 1);
+        let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("refine") });
+        if let Some(accumulator) = self.accumulator.as_mut() {
+            accumulator.encode(&mut encoder, &plan, swap, color);
+        }
+        // After the scene's draw (and its counter copy), in the same submission.
+        recorded.refine = Some(encoder.finish());
+        recorded
+    }
+
+    /// The refinement step `view` would draw next (None: not refining).
+    fn refine_plan(&mut self, view: &ViewData) -> Option<Plan> {
+        if !self.refine.config.enabled {
+            return None;
+        }
+        let settled = self.stream.is_settled() && self.stream.manifest().is_some();
+        self.refine.observe(view, &self.settings, settled, self.stream.stats().bytes_fetched);
+        Some(self.refine.plan())
+    }
+
+    fn record_scene(
+        &mut self,
+        view: &ViewData,
+        settings: &RenderSettings,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        read_counters: bool,
+    ) -> Recorded {
         let t0 = now_ms();
         let threshold = self.stream.config().terrain_error_px;
-        let flags = if self.settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
-            | if self.settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
+        let flags = if settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
+            | if settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
         // (The threshold travels to the shader for reference only: the morph
         // is worked out per tile by the selection.)
-        let threshold = threshold * self.settings.quality;
-        let terrain = if self.settings.terrain { self.stream.terrain_draws() } else { &[] };
+        let threshold = threshold * settings.quality;
+        let terrain = if settings.terrain { self.stream.terrain_draws() } else { &[] };
         self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
-        let data = self.renderer.prepare(&self.device, &self.queue, view, &self.settings);
+        let data = self.renderer.prepare(&self.device, &self.queue, view, settings);
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();
         let mut shadow = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shadow") });
@@ -172,7 +234,7 @@ impl<F: Fetcher> Frame<F> {
         // as before the frame was shared (docs/BENCHMARKS.md compares like with like).
         self.cpu_ms = (now_ms() - t0).max(0.0);
         let shadow = (data.cascades > 0).then(|| shadow.finish());
-        Recorded { shadow, cull: cull.finish(), draw: draw.finish(), read_counters }
+        Recorded { shadow, cull: Some(cull.finish()), draw: draw.finish(), refine: None, read_counters }
     }
 
     /// Submits a recorded frame. With `wait` (native, measured), each pass is
@@ -200,12 +262,14 @@ impl<F: Fetcher> Frame<F> {
             }
         }
         let t0 = now_ms();
-        self.queue.submit([recorded.cull]);
+        if let Some(cull) = recorded.cull {
+            self.queue.submit([cull]);
+        }
         if wait {
             block(&self.device);
         }
         let t1 = now_ms();
-        self.queue.submit([recorded.draw]);
+        self.queue.submit(std::iter::once(recorded.draw).chain(recorded.refine));
         if recorded.read_counters {
             self.readback.map(frame);
         }
@@ -264,6 +328,12 @@ impl<F: Fetcher> Frame<F> {
     fn stats_of(&self, frame: Option<u64>) -> FrameStats {
         let mut stats = FrameStats::gather(&self.renderer, &self.stream, self.draw_calls, self.cpu_ms);
         stats.adapter.clone_from(&self.adapter);
+        if self.refine.config.enabled {
+            stats.refine_step = self.refine.step();
+            stats.refine_level = self.refine.level();
+            stats.refine_converged = self.refine.converged();
+        }
+        stats.gpu_bytes += self.accumulator.as_ref().map_or(0, Accumulator::bytes);
         let wanted = |f: u64| f > 0 && frame.is_none_or(|want| want == f);
         let (counters, counters_frame) = self.readback.latest();
         if wanted(counters_frame) {

@@ -20,6 +20,7 @@ pub mod overlay;
 pub mod pools;
 pub mod reach;
 pub mod readback;
+pub mod refine;
 pub mod settings;
 pub mod shaders;
 pub mod shadow;

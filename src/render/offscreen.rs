@@ -205,6 +205,35 @@ impl<F: Fetcher> OffscreenScene<F> {
         self.frame.stats_of_last_frame()
     }
 
+    /// Refines the image of `camera` while it rests ([`super::refine`], with
+    /// `config`, enabled here) until it has converged or `max_steps` frames
+    /// were drawn, streaming what the finer levels need between steps. Each
+    /// step is measured. Returns the last step's stats and the steps' summed
+    /// GPU times (ms; `cull`, `draw`, `shadow`). [`Self::read_image`] then
+    /// reads the refined image.
+    pub fn render_converged(
+        &mut self,
+        camera: &Camera,
+        config: super::refine::RefineConfig,
+        max_steps: u32,
+    ) -> (FrameStats, std::collections::BTreeMap<String, f64>) {
+        self.frame.refine.config = super::refine::RefineConfig { enabled: true, ..config };
+        let mut total = std::collections::BTreeMap::new();
+        let mut stats = FrameStats::default();
+        for _ in 0..max_steps.max(1) {
+            // Finer levels may need finer parts of the packs: wait for them.
+            self.load_view(camera, 60.0);
+            stats = self.render(camera, true);
+            for (pass, ms) in &stats.gpu_ms {
+                *total.entry(pass.clone()).or_insert(0.0) += ms;
+            }
+            if stats.refine_converged {
+                break;
+            }
+        }
+        (stats, total)
+    }
+
     /// Runs the cull pass of the last frame's shadow cascade `i` again, alone,
     /// so [`Self::read_selection`] reads the casters it chose (tests against
     /// [`super::cull::cpu_select`] with the cascade's view).

@@ -72,6 +72,10 @@ pub struct RenderSettings {
     /// keeps its true coverage instead of vanishing with its textures' coarse
     /// mips. Off for drawing (it aliases).
     pub full_res_alpha: bool,
+    /// Shifts the cross-fade dither pattern (the progressive-refinement step,
+    /// [`super::refine`]): accumulated steps then blend both sides of a
+    /// transition. 0: the fixed pattern.
+    pub refine_seed: u32,
 }
 
 /// Which far-field representation a species draws where its pack has both.
@@ -136,6 +140,7 @@ impl Default for RenderSettings {
             ao: true,
             far_tier: FarTier::Impostors,
             full_res_alpha: false,
+            refine_seed: 0,
         }
     }
 }

@@ -47,6 +47,9 @@ pub const TERRAIN: &str = concat!(
     include_str!("../../shaders/terrain.wgsl")
 );
 
+/// Progressive refinement's accumulate and resolve passes.
+pub const ACCUMULATE: &str = include_str!("../../shaders/accumulate.wgsl");
+
 /// Every composed shader with its name, for validation tests.
 pub const ALL: &[(&str, &str)] = &[
     ("mesh", MESH),
@@ -57,4 +60,5 @@ pub const ALL: &[(&str, &str)] = &[
     ("sky", SKY),
     ("bounds", BOUNDS),
     ("terrain", TERRAIN),
+    ("accumulate", ACCUMULATE),
 ];

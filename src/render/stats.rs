@@ -77,6 +77,14 @@ pub struct FrameStats {
     pub gpu_ms: std::collections::BTreeMap<String, f64>,
     /// The GPU adapter: name (backend, type), or the browser's vendor and architecture.
     pub adapter: String,
+    /// Progressive refinement ([`super::refine`]): steps done since the camera
+    /// came to rest (0 when moving or not refining).
+    pub refine_step: u32,
+    /// The quality level being refined (projected sizes × 2^level).
+    pub refine_level: u32,
+    /// Refinement done: the image is final and the host stops drawing. Always
+    /// false when refinement is off.
+    pub refine_converged: bool,
 }
 
 impl FrameStats {

@@ -134,7 +134,17 @@ function ready(page, ms = 180000) {
 // so CPU WebGPU's time goes to the test at hand.
 let previousPage = null;
 
+/** `url` with progressive refinement off (`refine=0`) unless it says otherwise:
+ * a refining viewer keeps CPU WebGPU busy for dozens of frames after each
+ * change, and most tests look at the plain frame. */
+function plainFrames(url) {
+  if (url === 'about:blank' || /[?&]refine=/.test(url)) return url;
+  const [path, hash] = url.split('#');
+  return `${path}${path.includes('?') ? '&' : '?'}refine=0${hash === undefined ? '' : `#${hash}`}`;
+}
+
 async function openViewer(url, size = { width: 480, height: 320 }) {
+  url = plainFrames(url);
   await previousPage?.close().catch(() => {});
   const page = await browser.newPage({ viewport: size });
   previousPage = page;
@@ -553,6 +563,58 @@ test('the portal page embeds the viewer with an overview', async () => {
   assert.deepEqual(errors, []);
 });
 
+test('a resting camera refines its image, then the viewer idles; a move starts over', async () => {
+  const { page, errors } = await openViewer(`${base}?ui=0&refine=1&shadows=off`, { width: 240, height: 160 });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
+  await ready(page);
+  const idle = () => page.waitForFunction(() => window.sylva.dirty === 0 && window.sylva.viewer.frames_in_flight() === 0,
+    null, { timeout: 120000, polling: 100 });
+  // The plain frame first (refinement off), then refined: 4 jittered frames at
+  // the plain level of detail, 4 with every tree in view a full mesh.
+  await page.evaluate(() => window.sylva.setRefine(false));
+  await idle();
+  const plain = await page.locator('#view').screenshot();
+  await page.evaluate(() => window.sylva.setRefine(true, { frames: 4, levels: 1 }));
+  await page.waitForFunction(() => window.sylva.stats().refine_converged, null, { timeout: 240000, polling: 250 });
+  await idle();
+  const s = await page.evaluate(() => window.sylva.stats());
+  assert.equal(s.refine_step, 8, JSON.stringify(s));
+  assert.equal(s.refine_level, 1);
+  // Converged: the viewer draws nothing more.
+  const drawn = () => page.evaluate(() => window.sylva.viewer.frames_drawn());
+  const f0 = await drawn();
+  await page.waitForTimeout(1500);
+  assert.equal(await drawn(), f0, 'a converged viewer idles');
+  // The refined image shows the forest and differs from the plain frame.
+  const share = await foliageShare(page, 'refined');
+  assert.ok(share > 0.1, `refined foliage share ${share}`);
+  const refined = await page.locator('#view').screenshot();
+  const diff = await page.evaluate(async ([a, b]) => {
+    const load = async (b64) => {
+      const img = new Image();
+      img.src = `data:image/png;base64,${b64}`;
+      await img.decode();
+      const c = document.createElement('canvas');
+      c.width = img.width; c.height = img.height;
+      const g = c.getContext('2d');
+      g.drawImage(img, 0, 0);
+      return g.getImageData(0, 0, c.width, c.height).data;
+    };
+    const [x, y] = [await load(a), await load(b)];
+    let sum = 0;
+    for (let i = 0; i < x.length; i += 4) sum += Math.abs(x[i] - y[i]) + Math.abs(x[i + 1] - y[i + 1]) + Math.abs(x[i + 2] - y[i + 2]);
+    return sum / (x.length / 4 * 3);
+  }, [plain.toString('base64'), refined.toString('base64')]);
+  assert.ok(diff > 0.3, `the refined image differs from the plain frame by ${diff} levels on average`);
+  // A camera move starts over at once, and converges again.
+  const cam = await page.evaluate(() => window.sylva.camera());
+  await page.evaluate((c) => window.sylva.setCamera({ x: c.x + 5, y: c.y, z: c.z, heading: c.heading + 3, pitch: c.pitch }), cam);
+  await page.waitForFunction(() => !window.sylva.stats().refine_converged, null, { timeout: 30000, polling: 50 });
+  await page.waitForFunction(() => window.sylva.stats().refine_converged, null, { timeout: 240000, polling: 250 });
+  assert.ok(await drawn() >= f0 + 8, 'the moved camera refined again');
+  assert.deepEqual(errors, []);
+});
+
 test('an iframe is driven by postMessage', async () => {
   const { page } = await openViewer('about:blank');
   await page.goto(`${base}embed.html`); // same origin as the viewer, to host the iframe
@@ -560,7 +622,7 @@ test('an iframe is driven by postMessage', async () => {
     document.body.innerHTML = `<iframe id="f" src="${url}" style="width:400px;height:300px"></iframe>`;
     window.replies = [];
     window.addEventListener('message', (e) => { if (e.data && e.data.sylva) window.replies.push(e.data); });
-  }, base);
+  }, plainFrames(base));
   await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'ready'), null, { timeout: 90000 });
   await page.evaluate(() => {
     const f = document.getElementById('f').contentWindow;
