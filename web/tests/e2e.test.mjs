@@ -690,7 +690,7 @@ test('two viewers on one page, and destroy() releases one', async () => {
     const div = document.createElement('div');
     div.style.cssText = 'width:300px;height:200px';
     document.body.appendChild(div);
-    const v = await create(div, { scene: 'scene/scene.json' });
+    const v = await create(div, { scene: 'scene/scene.json', refine: false });
     window.second = v;
     const stats = await v.ready;
     return stats.trees_total;
