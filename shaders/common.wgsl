@@ -7,8 +7,9 @@ struct View {
     clip_from_eye: mat4x4<f32>,
     // Eye position relative to the scene origin, split into a high and a low f32
     // part (relative-to-eye rendering: batch origin − eye_hi − eye_lo keeps
-    // centimetres at UTM-sized coordinates). eye_hi.w: 1 when alpha tests read
-    // the textures' full resolution (the accuracy reference), else 0.
+    // centimetres at UTM-sized coordinates). eye_hi.w: the mesh leaves' alpha
+    // test: 1 at the textures' full resolution (the accuracy reference),
+    // 2 adaptive transparency (hashed at the coarsest mips), 0 plain.
     // eye_lo.w: the progressive-refinement step shifting the cross-fade dither
     // (`fade_keeps`; 0 without refinement).
     eye_hi: vec4<f32>,

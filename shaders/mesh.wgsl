@@ -22,7 +22,8 @@ struct Material {
     layer: i32,
     // 0 leaf, 1 branch.
     kind: u32,
-    pad: u32,
+    // Share of the texture's full-resolution texels passing alpha_cutoff (0 untextured).
+    coverage: f32,
 };
 
 @group(1) @binding(0) var<uniform> mesh: MeshParams;
@@ -91,24 +92,65 @@ struct Surface {
     is_leaf: bool,
 };
 
+// Adaptive transparency: how far (0–1) a pixel's alpha test moves from the
+// texture's alpha to a hashed test against its full-resolution coverage. A
+// leaf card seen at its texture's coarsest mips (4×4 texels and below, the
+// whole leaf within a pixel or two) has a mip alpha that is the same for the
+// whole card: coverage-preserving mips keep the share of passing texels, but
+// with four texels or one that share rounds to all or nothing, so far leaves
+// vanish or turn into opaque squares. A hashed test keeps each such pixel
+// with the leaf's true coverage instead: the crown keeps its density, and
+// accumulated refinement steps (their seed shifts the hash) see through it.
+fn hashed_alpha_weight(texels_per_px: f32, levels: u32) -> f32 {
+    let lod = log2(max(texels_per_px, 1e-6));
+    return clamp(lod - (f32(levels) - 4.0), 0.0, 1.0);
+}
+
+// Two uniform numbers in [0, 1) for a fragment: from its pixel, its depth (so
+// leaves stacked in one pixel test apart) and the refinement step.
+fn fragment_hash(frag: vec4<f32>, seed: f32) -> vec2<f32> {
+    var v = vec3<u32>(u32(frag.x), u32(frag.y), bitcast<u32>(frag.z) ^ (u32(seed) * 0x9e3779b9u));
+    v = v * 1664525u + 1013904223u;
+    v.x += v.y * v.z;
+    v.y += v.z * v.x;
+    v.z += v.x * v.y;
+    v ^= v >> vec3<u32>(16u);
+    v.x += v.y * v.z;
+    v.y += v.z * v.x;
+    v.z += v.x * v.y;
+    return vec2<f32>(f32(v.x >> 8u), f32(v.y >> 8u)) / 16777216.0;
+}
+
 fn surface(in: VertexOut, front: bool) -> Surface {
     let mat = materials[in.material];
     // Sample unconditionally (uniform control flow), then select.
     let texel = textureSample(material_tex, material_sampler, in.uv, max(mat.layer, 0));
+    let size = vec2<f32>(textureDimensions(material_tex));
+    let texels_per_px = max(length(dpdx(in.uv) * size), length(dpdy(in.uv) * size));
     var albedo = mat.base_color * in.color;
     var coverage = albedo.a;
+    var keep = true;
     if mat.layer >= 0 {
         albedo *= texel;
         coverage = albedo.a;
-        // The accuracy reference tests coverage at the texture's full
-        // resolution: a mip's alpha is an average that a far leaf card, all of
-        // it sampled from the 1×1 mip, fails everywhere (the leaves vanish).
-        if view.eye_hi.w > 0.5 {
+        keep = coverage >= mat.alpha_cutoff;
+        if view.eye_hi.w > 0.5 && view.eye_hi.w < 1.5 {
+            // The accuracy reference tests coverage at the texture's full
+            // resolution: a mip's alpha is an average that a far leaf card, all
+            // of it sampled from the 1×1 mip, fails everywhere (the leaves vanish).
             let fine = textureSampleLevel(material_tex, material_sampler, in.uv, mat.layer, 0.0);
-            coverage = mat.base_color.a * in.color.a * fine.a;
+            keep = mat.base_color.a * in.color.a * fine.a >= mat.alpha_cutoff;
+        } else if view.eye_hi.w > 1.5 && view.params.x == 0u && mat.coverage > 0.0 {
+            // Drawing (not the bake's capture): adaptive transparency.
+            let h = fragment_hash(in.clip, view.eye_lo.w);
+            if h.y < hashed_alpha_weight(texels_per_px, textureNumLevels(material_tex)) {
+                keep = h.x < mat.coverage * mat.base_color.a * in.color.a;
+            }
         }
+    } else {
+        keep = coverage >= mat.alpha_cutoff;
     }
-    if coverage < mat.alpha_cutoff || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    if !keep || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     var s: Surface;

@@ -485,6 +485,7 @@ impl Viewer {
         c.max_bytes_per_s = if bytes_per_s.is_finite() && bytes_per_s > 0.0 { bytes_per_s } else { 0.0 };
         c.max_in_flight = in_flight.clamp(1, 64) as usize;
         self.frame.stream.set_config(c);
+        self.frame.refine.invalidate();
     }
 
     /// Terrain on or off (off: neither fetched nor drawn), and the projected
@@ -494,6 +495,7 @@ impl Viewer {
         let mut c = self.frame.stream.config();
         c.terrain_error_px = if error_px.is_finite() { error_px.clamp(0.25, 64.0) } else { 2.0 };
         self.frame.stream.set_config(c);
+        self.frame.refine.invalidate();
     }
 
     /// Where ground imagery comes from: `"scene"` (the scene's baked imagery,
@@ -511,6 +513,7 @@ impl Viewer {
             t => ImageryChoice::Xyz(XyzSource::new(t, max_zoom).map_err(|e| JsValue::from_str(&e))?),
         };
         self.frame.stream.set_imagery(choice);
+        self.frame.refine.invalidate();
         Ok(())
     }
 
@@ -583,7 +586,7 @@ impl Viewer {
     /// Whether a refinement is under way: more frames would improve the image.
     /// False when it has converged (the viewer idles) or is off.
     pub fn refining(&self) -> bool {
-        self.frame.refine.config.enabled && !self.frame.refine.converged()
+        self.frame.refine.config.enabled && !self.frame.refine.converged() && self.frame.stream.manifest().is_some()
     }
 
     /// Frames submitted to the GPU so far.
@@ -605,7 +608,10 @@ impl Viewer {
     /// counters read back (so `stats_json` describes it).
     pub fn is_ready(&mut self) -> bool {
         self.frame.collect();
-        self.settled_frame.is_some_and(|f| self.frame.counters_frame() >= f)
+        // A converged refinement draws no scene, so no later counters come:
+        // the last ones read are the view's.
+        let converged = self.frame.refine.converged() && self.frame.counters_frame() > 0;
+        self.settled_frame.is_some_and(|f| self.frame.counters_frame() >= f || converged)
     }
 
     /// Frame statistics with the keys of `sylva render --stats` (docs/FORMAT.md),

@@ -115,7 +115,7 @@ fn mesh_pass_structs_and_indirect_args_match() {
     check(
         "mesh",
         "Material",
-        &members!(GpuMaterial: base_color, alpha_cutoff, layer, kind, pad),
+        &members!(GpuMaterial: base_color, alpha_cutoff, layer, kind, coverage),
         size_of::<GpuMaterial>(),
         None,
     );

@@ -899,3 +899,39 @@ fn far_ground_fades_towards_the_horizon_haze() {
         assert!((far[k] - near[k]) * (haze[k] - near[k]) >= 0.0, "channel {k}: near {near:?}, far {far:?}");
     }
 }
+
+#[test]
+fn far_mesh_leaves_keep_their_coverage() {
+    // Every tree a full mesh, seen from afar: leaf cards a pixel or two wide
+    // sample their texture's coarsest mips, whose alpha is all or nothing per
+    // card. Adaptive transparency keeps each pixel with the leaf's true
+    // coverage; the reference tests the full-resolution alpha, 2× supersampled.
+    let mut off = open(fixture().to_str().unwrap());
+    let m = manifest(&mut off);
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = lo.lerp(hi, 0.5);
+    let cam = Camera::look_at(c + DVec3::new(0.0, -900.0, 160.0), c);
+    let meshes = full_meshes(RenderSettings::default());
+    let reference = {
+        let mut big = OffscreenScene::open(fixture().to_str().unwrap(), 2 * W, 2 * H, PoolConfig::default()).unwrap();
+        big.settings = RenderSettings { full_res_alpha: true, ..meshes };
+        big.load_view(&cam, 30.0);
+        big.render(&cam, false);
+        sylva::bench::downsample(&big.read_image(), 2 * W, 2 * H, 2)
+    };
+    let share = foliage_share(&reference);
+    assert!(share > 0.005, "the reference shows the forest: foliage share {share:.4}");
+    let mut error = |adaptive_alpha: bool| {
+        off.settings = RenderSettings { adaptive_alpha, ..meshes };
+        let img = render(&mut off, &cam);
+        // Mean luminance: the canopy's coverage over the bright ground and sky.
+        let luma =
+            |img: &[u8]| img.chunks_exact(4).map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])).sum::<f64>();
+        ((luma(&img) - luma(&reference)) / luma(&reference)).abs()
+    };
+    let (plain, adaptive) = (error(false), error(true));
+    eprintln!("mean brightness off the reference: plain alpha {plain:.4}, adaptive {adaptive:.4}");
+    assert!(adaptive < 0.5 * plain, "adaptive transparency {adaptive:.4} vs the plain alpha test {plain:.4}");
+    assert!(adaptive < 0.02, "adaptive transparency off the reference's brightness by {adaptive:.4}");
+}

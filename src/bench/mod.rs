@@ -205,6 +205,9 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
                 m(RenderSettings { shadows: ShadowQuality::Reference, full_res_alpha: true, ..full }, 2)
             }
             "mesh" => m(RenderSettings { culling: CullingMode::PerTree, ..full }, 1),
+            "mesh-plain-alpha" => {
+                m(RenderSettings { culling: CullingMode::PerTree, adaptive_alpha: false, ..full }, 1)
+            }
             "per-tree" => m(RenderSettings { culling: CullingMode::PerTree, ..base }, 1),
             "billboard" => m(
                 RenderSettings {
@@ -230,6 +233,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
                 1,
             ),
             "sylva" => m(base, 1),
+            "sylva-plain-alpha" => m(RenderSettings { adaptive_alpha: false, ..base }, 1),
             "sylva-converged" => Method {
                 refine: Some(RefineConfig { enabled: true, ..RefineConfig::default() }),
                 ..m(base, 1)
@@ -239,8 +243,8 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "sylva-shadows-low" => m(RenderSettings { shadows: ShadowQuality::Low, ..base }, 1),
             "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
             other => bail!(
-                "unknown method {other:?}: use reference, mesh, per-tree, billboard, impostor, ellipsoid, sylva, sylva-converged, \
-                 sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
+                "unknown method {other:?}: use reference, mesh, mesh-plain-alpha, per-tree, billboard, impostor, ellipsoid, sylva, sylva-plain-alpha, \
+                 sylva-converged, sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
             ),
         })
     };
@@ -479,7 +483,7 @@ pub fn run(
             off.render(cam, false);
             let s = match method.refine {
                 Some(config) => {
-                    let (mut s, total) = off.render_converged(cam, config, 4 * config.total_steps());
+                    let (mut s, total) = off.render_converged(cam, config, 8 * config.total_steps(), 600.0);
                     if !s.refine_converged {
                         eprintln!("warning: {} frame {i} did not converge (step {})", method.name, s.refine_step);
                     }

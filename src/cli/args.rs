@@ -262,8 +262,9 @@ pub(crate) struct RenderArgs {
     #[arg(long, default_value_t = 16, requires = "converge", value_parser = clap::value_parser!(u32).range(1..=256))]
     pub(crate) converge_frames: u32,
     /// With --converge: quality levels above the normal frame (0–4; each
-    /// doubles projected sizes before the LoD choice).
-    #[arg(long, default_value_t = 2, requires = "converge", value_parser = clap::value_parser!(u32).range(0..=4))]
+    /// doubles projected sizes before the LoD choice, the last draws every
+    /// tree in view as its full mesh).
+    #[arg(long, default_value_t = 3, requires = "converge", value_parser = clap::value_parser!(u32).range(0..=4))]
     pub(crate) converge_levels: u32,
     /// Write frame statistics as JSON here.
     #[arg(long)]

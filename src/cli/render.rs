@@ -76,11 +76,19 @@ pub(crate) fn render_scene(
         // A first frame warms pipelines and caches; the second is measured.
         off.render(&cam, false);
         let s = if refine.enabled {
-            let (mut s, total) = off.render_converged(&cam, refine, 4 * refine.total_steps());
+            let (mut s, total) = off.render_converged(&cam, refine, 8 * refine.total_steps(), timeout);
             if !s.refine_converged {
                 eprintln!(
-                    "warning: the refinement did not converge (data kept arriving); writing step {}",
+                    "warning: the refinement did not converge within --timeout {timeout} s (data kept arriving); \
+                     writing step {}",
                     s.refine_step
+                );
+            }
+            if off.refine.dropped() {
+                eprintln!(
+                    "warning: quality level {} drew more trees than the pools hold: the image stops at level {}",
+                    s.refine_level + 1,
+                    s.refine_level
                 );
             }
             eprintln!(

@@ -264,8 +264,18 @@ impl ForestRenderer {
         let l = &settings.lighting;
         let uniform = ViewUniform {
             clip_from_eye: view.clip_from_eye.to_cols_array_2d(),
-            // w: alpha tests at the textures' full resolution (the accuracy reference).
-            eye_hi: view.eye_hi.extend(f32::from(u8::from(settings.full_res_alpha))).to_array(),
+            // w: the mesh leaves' alpha test (`surface` in mesh.wgsl): 1 at the
+            // textures' full resolution (the accuracy reference), 2 adaptive, 0 plain.
+            eye_hi: view
+                .eye_hi
+                .extend(if settings.full_res_alpha {
+                    1.0
+                } else if settings.adaptive_alpha {
+                    2.0
+                } else {
+                    0.0
+                })
+                .to_array(),
             // w: the cross-fade dither's shift (`fade_keeps` in common.wgsl).
             eye_lo: view.eye_lo.extend(settings.refine_seed as f32).to_array(),
             frustum: view.frustum.map(|p| p.to_array()),

@@ -155,14 +155,17 @@ impl<F: Fetcher> Frame<F> {
         depth: &wgpu::TextureView,
         read_counters: bool,
     ) -> Recorded {
-        let Some(plan) = self.refine_plan(view) else {
-            let settings = self.settings;
-            return self.record_scene(view, &settings, color, depth, read_counters);
-        };
         // Refining: the scene goes into the accumulator's target, which is
         // blended into the accumulation and resolved into `color`.
         let (counters, counters_frame) = self.readback.latest();
         self.refine.note_counters(counters_frame, counters.control.items_dropped);
+        let Some(plan) = self.refine_plan(view) else {
+            // Not refining: no accumulation images held either.
+            self.accumulator = None;
+            let settings = self.settings;
+            return self.record_scene(view, &settings, color, depth, read_counters);
+        };
+        let t0 = now_ms();
         let accumulator = self.accumulator.get_or_insert_with(|| Accumulator::new(&self.device, self.color_format));
         let scene = accumulator.scene_target(&self.device, view.viewport);
         let mut recorded = if plan.render {
@@ -173,6 +176,8 @@ impl<F: Fetcher> Frame<F> {
             // Converged: only the image is shown again.
             let draw = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("draw") });
             self.draw_calls = 0;
+            self.cascades = 0;
+            self.cpu_ms = (now_ms() - t0).max(0.0);
             Recorded { shadow: None, cull: None, draw: draw.finish(), refine: None, read_counters: false }
         };
         let swap = self.refine.advance(self.frames + 1);
@@ -190,8 +195,14 @@ impl<F: Fetcher> Frame<F> {
         if !self.refine.config.enabled {
             return None;
         }
-        let settled = self.stream.is_settled() && self.stream.manifest().is_some();
-        self.refine.observe(view, &self.settings, settled, self.stream.stats().bytes_fetched);
+        // What is resident: a change (arrivals, evictions) restarts the level.
+        let s = self.stream.stats();
+        let data = [s.bytes_fetched, s.tiles_resident, s.terrain_resident, s.imagery_resident]
+            .iter()
+            .fold(self.renderer.resident_instances(), |h, &v| {
+                h.rotate_left(13) ^ v.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            });
+        self.refine.observe(view, &self.settings, self.stream.is_settled(), data);
         Some(self.refine.plan())
     }
 

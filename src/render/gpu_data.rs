@@ -8,10 +8,12 @@ use bytemuck::{Pod, Zeroable};
 pub struct ViewUniform {
     /// Clip transform of eye-relative positions (rotation + projection only).
     pub clip_from_eye: [[f32; 4]; 4],
-    /// Eye position relative to the scene origin, high f32 part (xyz); w 1
-    /// where alpha tests read the textures' full resolution (`full_res_alpha`).
+    /// Eye position relative to the scene origin, high f32 part (xyz); w the
+    /// mesh leaves' alpha test: 1 at the textures' full resolution
+    /// (`full_res_alpha`), 2 adaptive (`adaptive_alpha`), 0 plain.
     pub eye_hi: [f32; 4],
-    /// Low f32 part: `eye_hi + eye_lo` is the f64 eye to ~1e-7 relative.
+    /// Low f32 part: `eye_hi + eye_lo` is the f64 eye to ~1e-7 relative; w the
+    /// refinement step shifting the dither and hash patterns (`refine_seed`).
     pub eye_lo: [f32; 4],
     /// Frustum planes in eye-relative space (inside: `n·p + d ≥ 0`); unused planes are zero.
     pub frustum: [[f32; 4]; 6],
@@ -256,8 +258,10 @@ pub struct GpuMaterial {
     pub layer: i32,
     /// 0 leaf, 1 branch.
     pub kind: u32,
-    /// Padding.
-    pub pad: u32,
+    /// Share of the texture's full-resolution texels that pass `alpha_cutoff`
+    /// (0 untextured): the keep probability of a leaf card seen at its
+    /// texture's coarsest mips (adaptive transparency, `mesh.wgsl`).
+    pub coverage: f32,
 }
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 32);
 

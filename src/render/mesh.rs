@@ -201,6 +201,7 @@ impl MeshGpu {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
+        let texels = meta.material_texture.zip(pack.section(kind::MATERIAL_TEXTURES, 0));
         let mut materials: Vec<GpuMaterial> = meta
             .materials
             .iter()
@@ -212,7 +213,10 @@ impl MeshGpu {
                     MaterialKind::Leaf => 0,
                     MaterialKind::Branch => 1,
                 },
-                pad: 0,
+                coverage: match (m.texture_layer, texels) {
+                    (Some(l), Some((t, data))) => layer_coverage(&t, data, l, m.alpha_cutoff),
+                    _ => 0.0,
+                },
             })
             .collect();
         if materials.is_empty() {
@@ -308,6 +312,20 @@ impl MeshGpu {
         pass.set_index_buffer(level.indices.slice(..), wgpu::IndexFormat::Uint32);
         level.index_count
     }
+}
+
+/// Share of layer `layer`'s full-resolution texels (mip 0 of a mip-major RGBA8
+/// array) whose alpha passes `cutoff`; 1 without a cutoff, 0 when the layer
+/// is not in `data`.
+#[must_use]
+pub fn layer_coverage(meta: &TextureArrayMeta, data: &[u8], layer: u32, cutoff: f32) -> f32 {
+    let texels = (meta.size as usize).pow(2);
+    let start = meta.mip_offset(0, 4) as usize + layer as usize * texels * 4;
+    let Some(bytes) = data.get(start..start + texels * 4) else { return 0.0 };
+    if cutoff <= 0.0 {
+        return 1.0;
+    }
+    crate::render::mips::alpha_coverage(bytes, cutoff) as f32
 }
 
 impl GpuMaterial {

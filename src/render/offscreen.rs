@@ -206,31 +206,36 @@ impl<F: Fetcher> OffscreenScene<F> {
     }
 
     /// Refines the image of `camera` while it rests ([`super::refine`], with
-    /// `config`, enabled here) until it has converged or `max_steps` frames
-    /// were drawn, streaming what the finer levels need between steps. Each
-    /// step is measured. Returns the last step's stats and the steps' summed
-    /// GPU times (ms; `cull`, `draw`, `shadow`). [`Self::read_image`] then
-    /// reads the refined image.
+    /// `config`, enabled here and off again after) from the plain frame until
+    /// it has converged, `max_steps` frames were drawn or `timeout_s` passed,
+    /// streaming what the finer levels need between steps. Each step is
+    /// measured. Returns the last step's stats and the steps' summed GPU times
+    /// (ms; `cull`, `draw`, `shadow`). [`Self::read_image`] then reads the
+    /// refined image.
     pub fn render_converged(
         &mut self,
         camera: &Camera,
         config: super::refine::RefineConfig,
         max_steps: u32,
+        timeout_s: f64,
     ) -> (FrameStats, std::collections::BTreeMap<String, f64>) {
-        self.frame.refine.config = super::refine::RefineConfig { enabled: true, ..config };
+        self.frame.refine = super::refine::Refinement::new(super::refine::RefineConfig { enabled: true, ..config });
+        let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s.max(0.0));
         let mut total = std::collections::BTreeMap::new();
         let mut stats = FrameStats::default();
         for _ in 0..max_steps.max(1) {
             // Finer levels may need finer parts of the packs: wait for them.
-            self.load_view(camera, 60.0);
+            let left = deadline.saturating_duration_since(Instant::now()).as_secs_f64();
+            self.load_view(camera, left);
             stats = self.render(camera, true);
             for (pass, ms) in &stats.gpu_ms {
                 *total.entry(pass.clone()).or_insert(0.0) += ms;
             }
-            if stats.refine_converged {
+            if stats.refine_converged || Instant::now() > deadline {
                 break;
             }
         }
+        self.frame.refine.config.enabled = false;
         (stats, total)
     }
 

@@ -95,11 +95,15 @@ pub struct Refinement {
     /// How to refine.
     pub config: RefineConfig,
     key: Option<Key>,
-    fetched: u64,
+    /// What the drawn data was the last time (see [`Self::observe`]).
+    data: u64,
+    settled: bool,
     level: u32,
     n: u32,
     converged: bool,
     dropped: bool,
+    /// Counters of a frame of the current level have been seen.
+    counted: bool,
     level_start_frame: u64,
 }
 
@@ -148,10 +152,11 @@ impl Refinement {
     }
 
     /// Looks at the frame about to be drawn: a different camera, viewport or
-    /// settings start over; data still loading (`settled` false) or newly
-    /// arrived (`fetched`, the stream's byte count, changed) restart the level
-    /// being accumulated. Returns whether it started over.
-    pub fn observe(&mut self, view: &ViewData, settings: &RenderSettings, settled: bool, fetched: u64) -> bool {
+    /// settings start over; data still loading (`settled` false) or changed
+    /// (`data`, a digest of what is resident: bytes fetched, tiles, terrain
+    /// and imagery, trees) restart the level being accumulated. Returns
+    /// whether it started over.
+    pub fn observe(&mut self, view: &ViewData, settings: &RenderSettings, settled: bool, data: u64) -> bool {
         let key = Key {
             clip: view.clip_from_eye,
             eye_hi: view.eye_hi,
@@ -163,21 +168,32 @@ impl Refinement {
         let moved = self.key != Some(key);
         if moved {
             self.key = Some(key);
-            self.level = 0;
-            self.n = 0;
-            self.converged = false;
-            self.dropped = false;
-        } else if !settled || fetched != self.fetched {
+            self.restart_all();
+        } else if !settled || data != self.data {
             if self.converged {
                 // The data changed under a converged image: start over.
-                self.level = 0;
-                self.converged = false;
-                self.dropped = false;
+                self.restart_all();
             }
             self.n = 0;
         }
-        self.fetched = fetched;
+        self.data = data;
+        self.settled = settled;
         moved
+    }
+
+    /// Starts over from the plain frame: something the refinement cannot see
+    /// changed what is drawn (a host's stream or imagery settings).
+    pub fn invalidate(&mut self) {
+        self.key = None;
+        self.restart_all();
+    }
+
+    fn restart_all(&mut self) {
+        self.level = 0;
+        self.n = 0;
+        self.converged = false;
+        self.dropped = false;
+        self.counted = false;
     }
 
     /// What the next step draws.
@@ -198,48 +214,64 @@ impl Refinement {
 
     /// The step just planned was drawn as frame `frame` (the host's count).
     /// Returns true when the pending image has converged and is now the one
-    /// to show (the host swaps its images).
+    /// to show (the host swaps its images). A frame drawn while data was still
+    /// loading counts for nothing. A finer level is shown only once counters
+    /// of one of its frames came back without dropped draw items (in the
+    /// browser they arrive a few frames late: it accumulates on meanwhile).
     pub fn advance(&mut self, frame: u64) -> bool {
-        if self.converged || !self.config.enabled {
+        if self.converged || !self.config.enabled || !self.settled {
             return false;
         }
-        if self.n == 0 {
-            self.level_start_frame = frame;
-        }
         self.n += 1;
-        if self.n < self.frames_per_level() {
+        let per_level = self.frames_per_level();
+        if self.n < per_level || (self.level > 0 && !self.counted && self.n < 4 * per_level) {
             return false;
         }
         let finished = self.level;
-        let swap = finished > 0 && !self.dropped;
-        if self.dropped || finished >= self.levels() {
+        if finished >= self.levels() {
             self.converged = true;
         } else {
             self.level += 1;
             self.n = 0;
+            self.counted = false;
+            self.level_start_frame = frame + 1;
         }
-        swap
+        finished > 0
     }
 
     /// The counters of frame `frame` came back with `items_dropped` items lost
-    /// to full segments: a finer level that drops trees is given up.
+    /// to full segments: a finer level that drops trees is given up at once,
+    /// and the refinement ends at the level before (the image shown).
     pub fn note_counters(&mut self, frame: u64, items_dropped: u32) {
-        if self.level > 0 && self.n > 0 && frame >= self.level_start_frame && items_dropped > 0 {
-            self.dropped = true;
+        if self.converged || self.level == 0 || frame < self.level_start_frame {
+            return;
         }
+        self.counted = true;
+        if items_dropped > 0 {
+            self.dropped = true;
+            self.level -= 1;
+            self.converged = true;
+        }
+    }
+
+    /// A finer level was given up because it dropped trees (the memory budget).
+    #[must_use]
+    pub fn dropped(&self) -> bool {
+        self.dropped
     }
 
     /// Steps done since the camera came to rest (`level × jitter_frames + n`;
-    /// [`RefineConfig::total_steps`] when converged).
+    /// `(level + 1) × jitter_frames` when converged, [`RefineConfig::total_steps`]
+    /// unless a level was given up).
     #[must_use]
     pub fn step(&self) -> u32 {
         if self.converged {
-            return self.config.total_steps();
+            return (self.level + 1) * self.frames_per_level();
         }
-        self.level * self.frames_per_level() + self.n
+        self.level * self.frames_per_level() + self.n.min(self.frames_per_level())
     }
 
-    /// The quality level being accumulated.
+    /// The quality level being accumulated (once converged: the one shown).
     #[must_use]
     pub fn level(&self) -> u32 {
         self.level
@@ -452,17 +484,19 @@ mod tests {
         Camera::look_at(glam::DVec3::new(0.0, -50.0, 20.0), glam::DVec3::ZERO).view_data(64, 48)
     }
 
-    /// Runs steps until converged (at most `limit`), returning the plans.
+    /// Runs steps until converged (at most `limit`), returning the plans; the
+    /// counters of each frame come back before the next (as natively).
     fn run(r: &mut Refinement, view: &ViewData, limit: usize) -> Vec<(Plan, bool)> {
         let s = RenderSettings::default();
         let mut out = Vec::new();
-        for f in 0..limit {
+        for f in 0..limit as u64 {
             r.observe(view, &s, true, 7);
+            r.note_counters(f, 0);
             let plan = r.plan();
             if !plan.render {
                 break;
             }
-            out.push((plan, r.advance(f as u64 + 1)));
+            out.push((plan, r.advance(f + 1)));
         }
         out
     }
@@ -527,17 +561,47 @@ mod tests {
             r.observe(&v, &s, true, 0);
             r.advance(f);
         }
-        assert_eq!(r.level(), 1);
+        assert_eq!((r.level(), r.step()), (1, 4));
         // Counters of a level-0 frame do not count against level 1.
         r.note_counters(2, 50);
-        r.observe(&v, &s, true, 0);
-        assert!(!r.advance(5));
-        r.note_counters(5, 50);
-        r.observe(&v, &s, true, 0);
-        // The level ends without being shown, and the refinement with it.
-        assert!(!r.advance(6));
-        assert!(r.converged());
+        assert!(!r.converged());
+        // Level 1's first frame dropped trees: it is given up at once, and the
+        // refinement ends with level 0's image.
+        r.note_counters(4, 50);
+        assert!(r.converged() && r.dropped());
+        assert_eq!((r.level(), r.step()), (0, 3));
         assert!(!r.plan().render);
+    }
+
+    #[test]
+    fn a_finer_level_waits_for_its_counters_and_loading_frames_count_for_nothing() {
+        let mut r = Refinement::new(RefineConfig { enabled: true, jitter_frames: 2, levels: 1 });
+        let v = view();
+        let s = RenderSettings::default();
+        // Still loading: frames are drawn, nothing accumulates.
+        r.observe(&v, &s, false, 0);
+        assert!(!r.advance(1));
+        assert_eq!(r.step(), 0);
+        for f in 2..=3 {
+            r.observe(&v, &s, true, 0);
+            r.advance(f);
+        }
+        assert_eq!(r.level(), 1);
+        // Level 1 has its frames but no counters yet (the browser's lag): it
+        // accumulates on rather than being shown unchecked.
+        for f in 4..=5 {
+            r.observe(&v, &s, true, 0);
+            assert!(!r.advance(f));
+        }
+        r.note_counters(4, 0);
+        r.observe(&v, &s, true, 0);
+        assert!(r.advance(6), "shown once its counters came back clean");
+        assert!(r.converged() && !r.dropped());
+        assert_eq!((r.level(), r.step()), (1, 4));
+        // Something the refinement cannot see changed: start over.
+        r.invalidate();
+        r.observe(&v, &s, true, 0);
+        assert_eq!((r.level(), r.step(), r.converged()), (0, 0, false));
     }
 
     #[test]

@@ -72,6 +72,11 @@ pub struct RenderSettings {
     /// keeps its true coverage instead of vanishing with its textures' coarse
     /// mips. Off for drawing (it aliases).
     pub full_res_alpha: bool,
+    /// Adaptive transparency (`mesh.wgsl`): a mesh leaf seen at its
+    /// texture's coarsest mips keeps each pixel with the leaf's true coverage
+    /// (a hashed test) instead of the mip's all-or-nothing alpha. Off: the
+    /// plain alpha test (comparisons).
+    pub adaptive_alpha: bool,
     /// Shifts the cross-fade dither pattern (the progressive-refinement step,
     /// [`super::refine`]): accumulated steps then blend both sides of a
     /// transition. 0: the fixed pattern.
@@ -140,6 +145,7 @@ impl Default for RenderSettings {
             ao: true,
             far_tier: FarTier::Impostors,
             full_res_alpha: false,
+            adaptive_alpha: true,
             refine_seed: 0,
         }
     }

@@ -78,7 +78,8 @@ pub struct FrameStats {
     /// The GPU adapter: name (backend, type), or the browser's vendor and architecture.
     pub adapter: String,
     /// Progressive refinement ([`super::refine`]): steps done since the camera
-    /// came to rest (0 when moving or not refining).
+    /// came to rest (1 on a moving camera's frames, its plain first step; 0
+    /// when not refining).
     pub refine_step: u32,
     /// The quality level being refined (projected sizes × 2^level).
     pub refine_level: u32,
