@@ -13,6 +13,9 @@ use sylva::render::forest::{PoolConfig, RenderSettings, Representations};
 use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::render::refine::{RefineConfig, FULL_MESH_QUALITY};
 
+mod common;
+use common::foliage_share;
+
 const W: u32 = 192;
 const H: u32 = 108;
 
@@ -30,15 +33,6 @@ fn plain(off: &mut OffscreenScene, cam: &Camera) -> Vec<u8> {
     off.load_view(cam, 30.0);
     off.render(cam, false);
     off.read_image()
-}
-
-/// Share of pixels whose green stands out (foliage; as in gpu_scene.rs).
-fn foliage_share(img: &[u8]) -> f64 {
-    let green = |p: &[u8]| {
-        let margin = (f32::from(p[1]) * 0.12).clamp(3.0, 8.0);
-        f32::from(p[1]) > f32::from(p[0]) + margin && f32::from(p[1]) > f32::from(p[2]) + margin
-    };
-    img.chunks_exact(4).filter(|p| green(p)).count() as f64 / (img.len() / 4) as f64
 }
 
 fn max_difference(a: &[u8], b: &[u8]) -> u8 {

@@ -21,7 +21,7 @@ use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::scene::StreamEvent;
 
 mod common;
-use common::rewritten_copy;
+use common::{foliage_share, rewritten_copy};
 
 const W: u32 = 320;
 const H: u32 = 180;
@@ -79,19 +79,6 @@ fn middle_spruce(off: &OffscreenScene, m: &Manifest) -> sylva::format::tile::Ins
         .min_by(|a, b| d(a).total_cmp(&d(b)))
         .expect("a resident spruce");
     instances[b.instance_offset as usize].decode(b)
-}
-
-/// Share of pixels whose green channel dominates: trees (not sky or ground).
-/// Share of pixels whose green stands out over red and blue by 8 levels or
-/// 12 % of the green, whichever is less (shaded foliage is dark, and the
-/// trees' own occlusion darkens it further; sky, ground and haze are not green).
-fn foliage_share(img: &[u8]) -> f64 {
-    let green = |p: &[u8]| {
-        let margin = (f32::from(p[1]) * 0.12).clamp(3.0, 8.0);
-        f32::from(p[1]) > f32::from(p[0]) + margin && f32::from(p[1]) > f32::from(p[2]) + margin
-    };
-    let n = img.chunks_exact(4).filter(|p| green(p)).count();
-    n as f64 / (img.len() / 4) as f64
 }
 
 fn lcg(seed: &mut u64) -> f64 {

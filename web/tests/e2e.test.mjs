@@ -156,8 +156,9 @@ async function openViewer(url, size = { width: 480, height: 320 }) {
 }
 
 /** Screenshots the page (kept as `name`.png) and reduces its RGBA pixels in the
- * page with `reduce`, the source of a function body over `d` (the pixel bytes). */
-async function screenshotStat(page, name, reduce) {
+ * page with `reduce`, the source of a function body over `d` (the pixel bytes)
+ * and `o` (those of `other`, an earlier screenshot's PNG, when given). */
+async function screenshotStat(page, name, reduce, other = null) {
   // Let a viewer finish what it is drawing first: a screenshot waits for the
   // GPU, and a CPU GPU takes seconds per frame close to trees with shadows.
   await page.waitForFunction(() => {
@@ -166,16 +167,19 @@ async function screenshotStat(page, name, reduce) {
   }, null, { timeout: 90000, polling: 250 }).catch(() => {});
   const png = await page.screenshot({ path: join(artifacts, `${name}.png`), timeout: 60000 });
   // Decode in the page with a 2D canvas (the screenshot, not the WebGPU canvas).
-  return page.evaluate(async ([b64, reduce]) => {
-    const img = new Image();
-    img.src = `data:image/png;base64,${b64}`;
-    await img.decode();
-    const c = document.createElement('canvas');
-    c.width = img.width; c.height = img.height;
-    const g = c.getContext('2d');
-    g.drawImage(img, 0, 0);
-    return new Function('d', reduce)(g.getImageData(0, 0, c.width, c.height).data);
-  }, [png.toString('base64'), reduce]);
+  return page.evaluate(async ([b64, reduce, other]) => {
+    const pixels = async (b64) => {
+      const img = new Image();
+      img.src = `data:image/png;base64,${b64}`;
+      await img.decode();
+      const c = document.createElement('canvas');
+      c.width = img.width; c.height = img.height;
+      const g = c.getContext('2d');
+      g.drawImage(img, 0, 0);
+      return g.getImageData(0, 0, c.width, c.height).data;
+    };
+    return new Function('d', 'o', reduce)(await pixels(b64), other && await pixels(other));
+  }, [png.toString('base64'), reduce, other && other.toString('base64')]);
 }
 
 /** Mean of R, G and B over a screenshot of the page (0–255). */
@@ -573,7 +577,7 @@ test('a resting camera refines its image, then the viewer idles; a move starts o
   // the plain level of detail, 4 with every tree in view a full mesh.
   await page.evaluate(() => window.sylva.setRefine(false));
   await idle();
-  const plain = await page.locator('#view').screenshot();
+  const plain = await page.screenshot({ path: join(artifacts, 'refine-plain.png') });
   await page.evaluate(() => window.sylva.setRefine(true, { frames: 4, levels: 1 }));
   await page.waitForFunction(() => window.sylva.stats().refine_converged, null, { timeout: 240000, polling: 250 });
   await idle();
@@ -588,23 +592,10 @@ test('a resting camera refines its image, then the viewer idles; a move starts o
   // The refined image shows the forest and differs from the plain frame.
   const share = await foliageShare(page, 'refined');
   assert.ok(share > 0.1, `refined foliage share ${share}`);
-  const refined = await page.locator('#view').screenshot();
-  const diff = await page.evaluate(async ([a, b]) => {
-    const load = async (b64) => {
-      const img = new Image();
-      img.src = `data:image/png;base64,${b64}`;
-      await img.decode();
-      const c = document.createElement('canvas');
-      c.width = img.width; c.height = img.height;
-      const g = c.getContext('2d');
-      g.drawImage(img, 0, 0);
-      return g.getImageData(0, 0, c.width, c.height).data;
-    };
-    const [x, y] = [await load(a), await load(b)];
+  const diff = await screenshotStat(page, 'refined', `
     let sum = 0;
-    for (let i = 0; i < x.length; i += 4) sum += Math.abs(x[i] - y[i]) + Math.abs(x[i + 1] - y[i + 1]) + Math.abs(x[i + 2] - y[i + 2]);
-    return sum / (x.length / 4 * 3);
-  }, [plain.toString('base64'), refined.toString('base64')]);
+    for (let i = 0; i < d.length; i += 4) for (let k = 0; k < 3; k++) sum += Math.abs(d[i + k] - o[i + k]);
+    return sum / (d.length / 4 * 3);`, plain);
   assert.ok(diff > 0.3, `the refined image differs from the plain frame by ${diff} levels on average`);
   // A camera move starts over at once, and converges again.
   const cam = await page.evaluate(() => window.sylva.camera());
