@@ -101,9 +101,12 @@ struct Surface {
 // vanish or turn into opaque squares. A hashed test keeps each such pixel
 // with the leaf's true coverage instead: the crown keeps its density, and
 // accumulated refinement steps (their seed shifts the hash) see through it.
-fn hashed_alpha_weight(texels_per_px: f32, levels: u32) -> f32 {
+// (From the texture's size, not its mip count: a pack may hold a shorter chain.)
+// The hash takes the fragment's depth, so it changes as the camera moves: far
+// crowns shimmer a little in motion, as their all-or-nothing cards did.
+fn hashed_alpha_weight(texels_per_px: f32, size: f32) -> f32 {
     let lod = log2(max(texels_per_px, 1e-6));
-    return clamp(lod - (f32(levels) - 4.0), 0.0, 1.0);
+    return clamp(lod - (log2(max(size, 1.0)) - 3.0), 0.0, 1.0);
 }
 
 // Two uniform numbers in [0, 1) for a fragment: from its pixel, its depth (so
@@ -143,7 +146,7 @@ fn surface(in: VertexOut, front: bool) -> Surface {
         } else if view.eye_hi.w > 1.5 && view.params.x == 0u && mat.coverage > 0.0 {
             // Drawing (not the bake's capture): adaptive transparency.
             let h = fragment_hash(in.clip, view.eye_lo.w);
-            if h.y < hashed_alpha_weight(texels_per_px, textureNumLevels(material_tex)) {
+            if h.y < hashed_alpha_weight(texels_per_px, size.x) {
                 keep = h.x < mat.coverage * mat.base_color.a * in.color.a;
             }
         }

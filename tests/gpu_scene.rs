@@ -25,6 +25,8 @@ use common::{foliage_share, rewritten_copy};
 
 const W: u32 = 320;
 const H: u32 = 180;
+/// Pools of the test scenes (room for every fixture tree as a full mesh).
+const POOLS: PoolConfig = PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
 
 fn fixture() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small")
@@ -41,8 +43,7 @@ fn open(scene: &str) -> OffscreenScene {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
     }
-    let pools = PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
-    OffscreenScene::open(scene, W, H, pools).expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)")
+    OffscreenScene::open(scene, W, H, POOLS).expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)")
 }
 
 fn manifest(off: &mut OffscreenScene) -> Manifest {
@@ -901,17 +902,20 @@ fn far_mesh_leaves_keep_their_coverage() {
     let cam = Camera::look_at(c + DVec3::new(0.0, -900.0, 160.0), c);
     let meshes = full_meshes(RenderSettings::default());
     let reference = {
-        let mut big = OffscreenScene::open(fixture().to_str().unwrap(), 2 * W, 2 * H, PoolConfig::default()).unwrap();
+        let mut big = OffscreenScene::open(fixture().to_str().unwrap(), 2 * W, 2 * H, POOLS).unwrap();
         big.settings = RenderSettings { full_res_alpha: true, ..meshes };
         big.load_view(&cam, 30.0);
-        big.render(&cam, false);
+        let s = big.render(&cam, true);
+        assert_eq!(s.items_dropped, 0, "the reference draws every tree");
         sylva::bench::downsample(&big.read_image(), 2 * W, 2 * H, 2)
     };
     let share = foliage_share(&reference);
     assert!(share > 0.005, "the reference shows the forest: foliage share {share:.4}");
     let mut error = |adaptive_alpha: bool| {
         off.settings = RenderSettings { adaptive_alpha, ..meshes };
-        let img = render(&mut off, &cam);
+        render(&mut off, &cam);
+        assert_eq!(off.render(&cam, true).items_dropped, 0, "every tree drawn");
+        let img = off.read_image();
         // Mean luminance: the canopy's coverage over the bright ground and sky.
         let luma =
             |img: &[u8]| img.chunks_exact(4).map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])).sum::<f64>();

@@ -315,17 +315,18 @@ impl MeshGpu {
 }
 
 /// Share of layer `layer`'s full-resolution texels (mip 0 of a mip-major RGBA8
-/// array) whose alpha passes `cutoff`; 1 without a cutoff, 0 when the layer
-/// is not in `data`.
+/// array) whose alpha passes `cutoff`: a leaf's coverage for adaptive
+/// transparency (the material's and vertex alphas scale it in the shader,
+/// exact where they are 1, as on leaves). 0 (no adaptive test) without a
+/// cutoff or when the layer is not in `data`.
 #[must_use]
 pub fn layer_coverage(meta: &TextureArrayMeta, data: &[u8], layer: u32, cutoff: f32) -> f32 {
     let texels = (meta.size as usize).pow(2);
     let start = meta.mip_offset(0, 4) as usize + layer as usize * texels * 4;
-    let Some(bytes) = data.get(start..start + texels * 4) else { return 0.0 };
-    if cutoff <= 0.0 {
-        return 1.0;
+    match data.get(start..start + texels * 4) {
+        Some(bytes) if cutoff > 0.0 => crate::render::mips::alpha_coverage(bytes, cutoff) as f32,
+        _ => 0.0,
     }
-    crate::render::mips::alpha_coverage(bytes, cutoff) as f32
 }
 
 impl GpuMaterial {

@@ -215,12 +215,18 @@ impl Refinement {
     /// The step just planned was drawn as frame `frame` (the host's count).
     /// Returns true when the pending image has converged and is now the one
     /// to show (the host swaps its images). A frame drawn while data was still
-    /// loading counts for nothing. A finer level is shown only once counters
-    /// of one of its frames came back without dropped draw items (in the
-    /// browser they arrive a few frames late: it accumulates on meanwhile).
+    /// loading counts for nothing. A finer level is shown once counters of one
+    /// of its frames came back without dropped draw items (in the browser they
+    /// arrive a few frames late: it accumulates on meanwhile), or after four
+    /// times its frames without any (a host that reads no counters).
     pub fn advance(&mut self, frame: u64) -> bool {
         if self.converged || !self.config.enabled || !self.settled {
             return false;
+        }
+        if self.n == 0 && self.level > 0 {
+            // A finer level (re)starts: only its own frames' counters count.
+            self.level_start_frame = frame;
+            self.counted = false;
         }
         self.n += 1;
         let per_level = self.frames_per_level();

@@ -79,7 +79,7 @@ pub struct FrameStats {
     pub adapter: String,
     /// Progressive refinement ([`super::refine`]): steps done since the camera
     /// came to rest (1 on a moving camera's frames, its plain first step; 0
-    /// when not refining).
+    /// while data is loading or when not refining).
     pub refine_step: u32,
     /// The quality level being refined (projected sizes × 2^level).
     pub refine_level: u32,
