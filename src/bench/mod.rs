@@ -700,7 +700,13 @@ mod tests {
         assert!(m[1..].iter().all(|m| m.reference == Some(0)));
         // Shadowed methods are measured against the shadowed reference.
         let all = methods("all", ShadowQuality::Off).unwrap();
-        assert_eq!(all.len(), 12);
+        assert_eq!(all.len(), 13);
+        // Only sylva-converged refines; the plain-alpha comparisons parse.
+        let refined: Vec<&str> = all.iter().filter(|m| m.refine.is_some()).map(|m| m.name.as_str()).collect();
+        assert_eq!(refined, ["sylva-converged"]);
+        let plain = methods("mesh-plain-alpha,sylva-plain-alpha", ShadowQuality::Off).unwrap();
+        assert!(plain[1..].iter().all(|m| !m.settings.adaptive_alpha));
+        assert!(all.iter().all(|m| m.settings.adaptive_alpha));
         // The references see far crowns whole; the far tiers are told apart.
         assert!(all[..2].iter().all(|m| m.settings.full_res_alpha));
         assert!(all[2..].iter().all(|m| !m.settings.full_res_alpha));
