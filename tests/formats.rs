@@ -138,6 +138,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
         }),
         clusters: None,
         impostors: None,
+        cloud: None,
     };
     let fill = |n: u64, v: u8| vec![v; n as usize];
     let sections = vec![

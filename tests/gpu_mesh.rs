@@ -95,6 +95,7 @@ fn toy_pack() -> Vec<u8> {
         billboards: None,
         clusters: None,
         impostors: None,
+        cloud: None,
     };
     let sections = vec![
         Section {

@@ -6,6 +6,7 @@ mod ao;
 mod bake;
 mod batching;
 mod bucket;
+mod cloud;
 mod clusters;
 mod demo;
 use sylva_bake::gltf_import;
@@ -117,6 +118,11 @@ struct PackArgs {
     /// Impostor resolution per view (power of two).
     #[arg(long, default_value_t = pack_build::DEFAULT_IMPOSTOR_SIZE)]
     impostor_size: u32,
+    /// Planes of the billboard cloud (seed 001: leaves kept exact on planes
+    /// fitted to the foliage, drawn between the simplified mesh and the far
+    /// tier); 0 bakes none.
+    #[arg(long, default_value_t = pack_build::DEFAULT_CLOUD_PLANES, value_parser = clap::value_parser!(u32).range(0..=1024))]
+    cloud_planes: u32,
     /// Material texture size (power of two).
     #[arg(long, default_value_t = 512)]
     texture_size: u32,
@@ -209,6 +215,7 @@ impl PackArgs {
             far_tier: self.far_tier,
             impostor_grid: self.impostor_grid,
             impostor_size: self.impostor_size,
+            cloud_planes: self.cloud_planes,
         })
     }
 

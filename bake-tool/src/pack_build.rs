@@ -4,6 +4,7 @@
 
 use anyhow::{Context, Result};
 use glam::{Vec2, Vec3};
+use sylva::format::cloud::{encode_cloud, CloudMeta};
 use sylva::format::pack::{
     ao_to_snorm8, encode_pack, kind, BillboardMeta, DrawRange, ImpostorMeta, MaterialKind, MaterialMeta, MeshLevelMeta,
     MeshVertex, PackMeta, Section, TextureArrayMeta,
@@ -42,6 +43,8 @@ pub struct PackOptions {
     pub impostor_grid: u32,
     /// Impostor view side (power of two).
     pub impostor_size: u32,
+    /// Planes of the billboard cloud (seed 001); 0: no cloud.
+    pub cloud_planes: u32,
 }
 
 /// The far-field representations a pack gets.
@@ -78,6 +81,7 @@ impl Default for PackOptions {
             far_tier: FarBake::Both,
             impostor_grid: DEFAULT_IMPOSTOR_GRID,
             impostor_size: DEFAULT_IMPOSTOR_SIZE,
+            cloud_planes: DEFAULT_CLOUD_PLANES,
         }
     }
 }
@@ -87,6 +91,13 @@ impl Default for PackOptions {
 pub const SELECT_PX_MESH0: f32 = 360.0;
 /// See [`SELECT_PX_MESH0`].
 pub const SELECT_PX_MESH1: f32 = 120.0;
+
+/// Projected tree height (pixels) above which the billboard cloud is drawn
+/// (below the simplified mesh's threshold).
+pub const SELECT_PX_CLOUD: f32 = 40.0;
+/// Default planes of the billboard cloud (the paper uses 60–260 for whole
+/// trees; ours carry no wood, which stays geometry).
+pub const DEFAULT_CLOUD_PLANES: u32 = 64;
 
 /// Default views per side of the impostor grid (36 views over the hemisphere).
 pub const DEFAULT_IMPOSTOR_GRID: u32 = 6;
@@ -132,6 +143,8 @@ pub fn build_pack(
         );
     }
     let mut levels = vec![build_mesh_level(model, SELECT_PX_MESH0, opts.ao.then_some(&vertex_ao[..]))];
+    // The coarsest level's model and occlusion (the cloud's wood).
+    let mut coarsest: Option<(ImportedModel, Vec<f32>)> = None;
     if opts.simplified_level {
         // Kept leaf cards keep their vertices' occlusion from where they were
         // before being enlarged (their corners now reach out into the open).
@@ -139,6 +152,7 @@ pub fn build_pack(
         if simple.triangles.len() < model.triangles.len() {
             let simple_ao: Vec<f32> = source.iter().map(|&i| vertex_ao[i as usize]).collect();
             levels.push(build_mesh_level(&simple, SELECT_PX_MESH1, opts.ao.then_some(&simple_ao[..])));
+            coarsest = Some((simple, simple_ao));
         }
     }
     let mut sections = Vec::new();
@@ -161,6 +175,67 @@ pub fn build_pack(
     if let Some(bytes) = texture_bytes {
         sections.push(Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: bytes });
     }
+    let mut materials = materials;
+    let cloud = (opts.cloud_planes > 0)
+        .then(|| {
+            let started = std::time::Instant::now();
+            let (wood, wood_ao) = coarsest.as_ref().map_or((model, &vertex_ao[..]), |(m, a)| (m, &a[..]));
+            let built = crate::cloud::build_cloud(model, &vertex_ao, wood, wood_ao, opts.cloud_planes as usize)?;
+            let (mut level, vtx, idx) =
+                build_mesh_level(&built.model, SELECT_PX_CLOUD, opts.ao.then_some(&built.model_ao[..]));
+            level.select_px = SELECT_PX_CLOUD;
+            let material = materials.len() as u32;
+            let cloud_material = built.model.materials.last().expect("the cloud material");
+            materials.push(MaterialMeta {
+                name: cloud_material.name.clone(),
+                kind: MaterialKind::Cloud,
+                base_color: cloud_material.base_color,
+                alpha_cutoff: 0.0,
+                double_sided: true,
+                texture_layer: None,
+            });
+            let words = encode_cloud(&built.planes, &built.cells, &built.fragments);
+            eprintln!(
+                "    billboard cloud: {} planes, {} cells, {} list entries of {}/{} leaves ({} KiB, {:.1} s)",
+                built.planes.len(),
+                built.cells.len(),
+                built.fragments.len(),
+                built.leaves.0,
+                built.leaves.1,
+                (words.len() * 4 + vtx.len() * 20 + idx.len() * 4) / 1024,
+                started.elapsed().as_secs_f64()
+            );
+            sections.push(Section {
+                kind: kind::CLOUD_VERTICES,
+                index: 0,
+                count: vtx.len() as u32,
+                stride: 20,
+                data: bytemuck::cast_slice(&vtx).to_vec(),
+            });
+            sections.push(Section {
+                kind: kind::CLOUD_INDICES,
+                index: 0,
+                count: idx.len() as u32,
+                stride: 4,
+                data: bytemuck::cast_slice(&idx).to_vec(),
+            });
+            sections.push(Section {
+                kind: kind::CLOUD_DATA,
+                index: 0,
+                count: words.len() as u32,
+                stride: 4,
+                data: bytemuck::cast_slice(&words).to_vec(),
+            });
+            Some(CloudMeta {
+                planes: built.planes.len() as u32,
+                cells: built.cells.len() as u32,
+                fragments: built.fragments.len() as u32,
+                material,
+                select_px: SELECT_PX_CLOUD,
+                mesh: level,
+            })
+        })
+        .flatten();
     let mut meta = PackMeta {
         name: name.to_string(),
         height_m: height,
@@ -172,6 +247,7 @@ pub fn build_pack(
         billboards: None,
         clusters: None,
         impostors: None,
+        cloud,
     };
     // Capture the billboards from the mesh-only pack, through the same decoder the viewer uses.
     let mesh_only = encode_pack(&meta, &sections);

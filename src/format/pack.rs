@@ -64,6 +64,14 @@ pub mod kind {
     pub const ELLIPSOIDS: [u8; 4] = *b"ELPS";
     /// Line records of one cluster level (`index` = level), 16 bytes each.
     pub const LINES: [u8; 4] = *b"LINE";
+    /// Billboard cloud geometry ([`super::MeshVertex`]): the coarsest mesh
+    /// level's wood and one quad per plane (seed 001). Optional.
+    pub const CLOUD_VERTICES: [u8; 4] = *b"CLVX";
+    /// Billboard cloud indices (u32).
+    pub const CLOUD_INDICES: [u8; 4] = *b"CLIX";
+    /// Billboard cloud planes, cells and list entries (u32 words,
+    /// [`crate::format::cloud`]).
+    pub const CLOUD_DATA: [u8; 4] = *b"CLDA";
 }
 
 /// One mesh vertex, 20 bytes, quantised against its level's bounds.
@@ -194,6 +202,9 @@ pub enum MaterialKind {
     Leaf,
     /// Trunk and branches.
     Branch,
+    /// The planes of a billboard cloud (seed 001): their fragments draw the
+    /// leaves listed in the cloud's cells (`META.cloud`).
+    Cloud,
 }
 
 /// A material of the species.
@@ -352,6 +363,9 @@ pub struct PackMeta {
     /// billboards where both are present, unless a viewer asks for billboards).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub impostors: Option<ImpostorMeta>,
+    /// The billboard cloud (seed 001), if baked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cloud: Option<super::cloud::CloudMeta>,
 }
 
 /// A section-table entry.
@@ -603,7 +617,12 @@ impl PackPart {
             | kind::IMPOSTOR_SURFACE => Some(PackPart::Billboards),
             kind::ELLIPSOIDS | kind::LINES | kind::AO_FIELD => Some(PackPart::Clusters),
             kind::MESH_VERTICES | kind::MESH_INDICES if index == 0 => Some(PackPart::MeshFull),
-            kind::MESH_VERTICES | kind::MESH_INDICES | kind::MATERIAL_TEXTURES => Some(PackPart::MeshCoarse),
+            kind::MESH_VERTICES
+            | kind::MESH_INDICES
+            | kind::MATERIAL_TEXTURES
+            | kind::CLOUD_VERTICES
+            | kind::CLOUD_INDICES
+            | kind::CLOUD_DATA => Some(PackPart::MeshCoarse),
             _ => None,
         }
     }
@@ -696,68 +715,23 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         }
     }
     for (l, level) in m.mesh_levels.iter().enumerate() {
-        let what = format!("META.mesh_levels[{l}]");
-        finite_all(&format!("{what}.pos_min"), &level.pos_min)?;
-        finite_all(&format!("{what}.pos_max"), &level.pos_max)?;
-        finite_all(&format!("{what}.uv_min"), &level.uv_min)?;
-        finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
-        finite(format!("{what}.select_px"), level.select_px.into())?;
         let vtx = pack.section(kind::MESH_VERTICES, l as u32);
         let idx = pack.section(kind::MESH_INDICES, l as u32);
         if partial && (vtx.is_none() || idx.is_none()) {
             continue;
         }
-        let (Some(vtx), Some(idx)) = (vtx, idx) else {
-            return Err(Problem::Invalid(format!("{what} has no MVTX/MIDX section with index {l}")));
-        };
-        if vtx.len() as u64 != u64::from(level.vertex_count) * 20
-            || idx.len() as u64 != u64::from(level.index_count) * 4
-        {
-            return Err(Problem::Invalid(format!(
-                "{what} declares {} vertices and {} indices, the sections hold {} and {} bytes",
-                level.vertex_count,
-                level.index_count,
-                vtx.len(),
-                idx.len()
-            )));
-        }
-        for (d, draw) in level.draws.iter().enumerate() {
-            let end = u64::from(draw.first_index) + u64::from(draw.index_count);
-            if end > u64::from(level.index_count) || !draw.index_count.is_multiple_of(3) {
-                return Err(Problem::Invalid(format!(
-                    "{what}.draws[{d}] covers indices {}..{end} of {} (or is not whole triangles)",
-                    draw.first_index, level.index_count
-                )));
-            }
-            if draw.material as usize >= m.materials.len() {
-                return Err(Problem::OutOfRange {
-                    what: format!("{what}.draws[{d}].material"),
-                    value: draw.material.into(),
-                    allowed: format!("less than {} materials", m.materials.len()),
-                });
-            }
-        }
-        // Indices must address existing vertices: the GPU would read out of bounds otherwise.
-        let vertex_count = level.vertex_count;
-        for (i, c) in idx.chunks_exact(4).enumerate() {
-            let v = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-            if v >= vertex_count {
-                return Err(Problem::OutOfRange {
-                    what: format!("{what} index[{i}]"),
-                    value: v.into(),
-                    allowed: format!("less than {vertex_count} vertices"),
-                });
-            }
-        }
-        for (i, c) in vtx.chunks_exact(20).enumerate() {
-            let material = u16::from_le_bytes([c[6], c[7]]);
-            if usize::from(material) >= m.materials.len() {
-                return Err(Problem::OutOfRange {
-                    what: format!("{what} vertex[{i}].material"),
-                    value: material.into(),
-                    allowed: format!("less than {} materials", m.materials.len()),
-                });
-            }
+        validate_mesh(&format!("META.mesh_levels[{l}]"), level, vtx, idx, m.materials.len(), "MVTX/MIDX")?;
+    }
+    if let Some(c) = &m.cloud {
+        let vtx = pack.section(kind::CLOUD_VERTICES, 0);
+        let idx = pack.section(kind::CLOUD_INDICES, 0);
+        let data = pack.section(kind::CLOUD_DATA, 0);
+        if !(partial && (vtx.is_none() || idx.is_none() || data.is_none())) {
+            validate_mesh("META.cloud.mesh", &c.mesh, vtx, idx, m.materials.len(), "CLVX/CLIX")?;
+            let Some(data) = data else {
+                return Err(Problem::Invalid("META.cloud has no CLDA section".into()));
+            };
+            super::cloud::validate_cloud(c, data, m.materials.len())?;
         }
     }
     if let Some(b) = &m.billboards {
@@ -830,6 +804,74 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     }
     if let Some(data) = pack.section(kind::AO_FIELD, 0) {
         AoFieldRef::parse(data)?;
+    }
+    Ok(())
+}
+
+/// Checks one mesh level's sections against its metadata (`sections` names
+/// the section kinds in messages).
+fn validate_mesh(
+    what: &str,
+    level: &MeshLevelMeta,
+    vtx: Option<&[u8]>,
+    idx: Option<&[u8]>,
+    materials: usize,
+    sections: &str,
+) -> Result<(), Problem> {
+    finite_all(&format!("{what}.pos_min"), &level.pos_min)?;
+    finite_all(&format!("{what}.pos_max"), &level.pos_max)?;
+    finite_all(&format!("{what}.uv_min"), &level.uv_min)?;
+    finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
+    finite(format!("{what}.select_px"), level.select_px.into())?;
+    let (Some(vtx), Some(idx)) = (vtx, idx) else {
+        return Err(Problem::Invalid(format!("{what} has no {sections} sections")));
+    };
+    if vtx.len() as u64 != u64::from(level.vertex_count) * 20 || idx.len() as u64 != u64::from(level.index_count) * 4 {
+        return Err(Problem::Invalid(format!(
+            "{what} declares {} vertices and {} indices, the sections hold {} and {} bytes",
+            level.vertex_count,
+            level.index_count,
+            vtx.len(),
+            idx.len()
+        )));
+    }
+    for (d, draw) in level.draws.iter().enumerate() {
+        let end = u64::from(draw.first_index) + u64::from(draw.index_count);
+        if end > u64::from(level.index_count) || !draw.index_count.is_multiple_of(3) {
+            return Err(Problem::Invalid(format!(
+                "{what}.draws[{d}] covers indices {}..{end} of {} (or is not whole triangles)",
+                draw.first_index, level.index_count
+            )));
+        }
+        if draw.material as usize >= materials {
+            return Err(Problem::OutOfRange {
+                what: format!("{what}.draws[{d}].material"),
+                value: draw.material.into(),
+                allowed: format!("less than {} materials", materials),
+            });
+        }
+    }
+    // Indices must address existing vertices: the GPU would read out of bounds otherwise.
+    let vertex_count = level.vertex_count;
+    for (i, c) in idx.chunks_exact(4).enumerate() {
+        let v = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        if v >= vertex_count {
+            return Err(Problem::OutOfRange {
+                what: format!("{what} index[{i}]"),
+                value: v.into(),
+                allowed: format!("less than {vertex_count} vertices"),
+            });
+        }
+    }
+    for (i, c) in vtx.chunks_exact(20).enumerate() {
+        let material = u16::from_le_bytes([c[6], c[7]]);
+        if usize::from(material) >= materials {
+            return Err(Problem::OutOfRange {
+                what: format!("{what} vertex[{i}].material"),
+                value: material.into(),
+                allowed: format!("less than {} materials", materials),
+            });
+        }
     }
     Ok(())
 }

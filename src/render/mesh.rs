@@ -212,6 +212,7 @@ impl MeshGpu {
                 kind: match m.kind {
                     MaterialKind::Leaf => 0,
                     MaterialKind::Branch => 1,
+                    MaterialKind::Cloud => 2,
                 },
                 coverage: match (m.texture_layer, texels) {
                     (Some(l), Some((t, data))) => layer_coverage(&t, data, l, m.alpha_cutoff),

@@ -85,7 +85,7 @@ pub fn connected_parts(model: &ImportedModel, kind: MaterialKind) -> Vec<Vec<usi
 }
 
 /// Texel of `img` at `uv` (repeat wrap, nearest), as linear RGB and alpha.
-fn texel(img: &image::RgbaImage, uv: Vec2) -> ([f32; 3], f32) {
+pub(crate) fn texel(img: &image::RgbaImage, uv: Vec2) -> ([f32; 3], f32) {
     let (w, h) = img.dimensions();
     let x = ((uv.x.rem_euclid(1.0)) * w as f32) as u32;
     let y = ((uv.y.rem_euclid(1.0)) * h as f32) as u32;
