@@ -89,12 +89,14 @@ fn species_cap(s: Species, r: u32) -> u32 { return s.slot_cap[r >> 2u][r & 3u]; 
 fn species_indices(s: Species, r: u32) -> u32 { return s.index_count[r >> 2u][r & 3u]; }
 
 // Representations, in order of detail. A slot is species * REPR_COUNT + repr.
-// 2–5 are the cluster tiers (ellipsoids + lines of one level each, seed 002).
+// 2 is the billboard cloud (seed 001), 3–6 the cluster tiers (ellipsoids +
+// lines of one level each, seed 002), 7 the far tier.
 const REPR_MESH0: u32 = 0u;
 const REPR_MESH1: u32 = 1u;
-const REPR_CLUSTER0: u32 = 2u;
-const REPR_BILLBOARD: u32 = 6u;
-const REPR_COUNT: u32 = 7u;
+const REPR_CLOUD: u32 = 2u;
+const REPR_CLUSTER0: u32 = 3u;
+const REPR_BILLBOARD: u32 = 7u;
+const REPR_COUNT: u32 = 8u;
 
 // Per-draw constants (dynamic uniform offset). Must match `DrawParams` in src/render/gpu_data.rs.
 struct DrawParams {
@@ -419,10 +421,11 @@ fn repr_color(repr: u32) -> vec3<f32> {
     switch repr {
         case 0u: { return vec3<f32>(0.9, 0.2, 0.2); }
         case 1u: { return vec3<f32>(0.95, 0.8, 0.2); }
-        case 2u: { return vec3<f32>(0.2, 0.85, 0.3); }
-        case 3u: { return vec3<f32>(0.1, 0.65, 0.45); }
-        case 4u: { return vec3<f32>(0.1, 0.5, 0.55); }
-        case 5u: { return vec3<f32>(0.3, 0.4, 0.6); }
+        case 2u: { return vec3<f32>(0.85, 0.3, 0.85); }
+        case 3u: { return vec3<f32>(0.2, 0.85, 0.3); }
+        case 4u: { return vec3<f32>(0.1, 0.65, 0.45); }
+        case 5u: { return vec3<f32>(0.1, 0.5, 0.55); }
+        case 6u: { return vec3<f32>(0.3, 0.4, 0.6); }
         default: { return vec3<f32>(0.2, 0.5, 0.95); }
     }
 }

@@ -130,8 +130,8 @@ fn emit(species_index: u32, repr: u32, instance: u32, batch: u32, side: u32, fad
 fn select_and_emit(s_index: u32, h_px: f32, instance: u32, batch: u32) {
     let s = species[s_index];
     // Ready representations, finest first, with their lower thresholds in px.
-    var reprs: array<u32, 7>;
-    var lower: array<f32, 7>;
+    var reprs: array<u32, 8>;
+    var lower: array<f32, 8>;
     var n = 0u;
     for (var r = 0u; r < REPR_COUNT; r++) {
         if species_cap(s, r) > 0u {

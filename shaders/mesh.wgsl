@@ -6,7 +6,9 @@
 
 @group(0) @binding(0) var<storage, read> view: View;
 
-// Must match `MeshUniform` in src/render/gpu_data.rs.
+// Must match `MeshUniform` in src/render/gpu_data.rs. pos_min.w and
+// pos_extent.w: the first cell and first fragment word of the billboard cloud
+// (bit patterns of u32s; 0 for mesh levels).
 struct MeshParams {
     pos_min: vec4<f32>,
     pos_extent: vec4<f32>,
@@ -20,7 +22,7 @@ struct Material {
     alpha_cutoff: f32,
     // Texture array layer, or -1 when untextured.
     layer: i32,
-    // 0 leaf, 1 branch.
+    // 0 leaf, 1 branch, 2 the planes of a billboard cloud.
     kind: u32,
     // Share of the texture's full-resolution texels passing alpha_cutoff (0 untextured).
     coverage: f32,
@@ -30,6 +32,9 @@ struct Material {
 @group(1) @binding(1) var<storage, read> materials: array<Material>;
 @group(1) @binding(2) var material_tex: texture_2d_array<f32>;
 @group(1) @binding(3) var material_sampler: sampler;
+// The billboard cloud's planes, cells and list entries (src/format/cloud.rs;
+// a placeholder word for mesh levels).
+@group(1) @binding(4) var<storage, read> cloud: array<u32>;
 
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
@@ -56,6 +61,11 @@ struct VertexOut {
     @location(5) canopy: f32,
     // The tree's own baked sky visibility (`vertex_ao`; 1 where not baked).
     @location(6) ao: f32,
+    // Billboard cloud quads: the plane (vertex colour red + 256 green), the
+    // tree's yaw and crown aspect, and its colour variation.
+    @location(7) @interpolate(flat) plane: u32,
+    @location(8) @interpolate(flat) frame: vec2<f32>,
+    @location(9) @interpolate(flat) tint: vec3<f32>,
 };
 
 // The occlusion byte of a vertex (`normal_oct` byte 2, snorm8): 0 not baked
@@ -78,7 +88,11 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     // Normals of a horizontally stretched crown: the inverse transpose, xy / aspect.
     let n = oct_decode(in.normal_oct.xy);
     out.normal = rotate_z(normalize(vec3<f32>(n.xy / tree.aspect, n.z)), tree.yaw);
-    out.color = vec4<f32>(in.color.rgb * variation_tint(tree.variation), in.color.a);
+    let tint = variation_tint(tree.variation);
+    out.color = vec4<f32>(in.color.rgb * tint, in.color.a);
+    out.plane = u32(round(in.color.r * 255.0)) + u32(round(in.color.g * 255.0)) * 256u;
+    out.frame = vec2<f32>(tree.yaw, tree.aspect);
+    out.tint = tint;
     out.material = in.position_material.w;
     out.item_y = item.y;
     out.canopy = canopy_occlusion(batch, local.z / max(mesh.pos_min.z + mesh.pos_extent.z, 1e-3));
@@ -90,7 +104,100 @@ struct Surface {
     albedo: vec4<f32>,
     normal: vec3<f32>,
     is_leaf: bool,
+    // The tree's own sky visibility there.
+    ao: f32,
 };
+
+// Shader-level LoD of the billboard cloud (seed 001 §5.1): list entries
+// evaluated per pixel a cell spans on screen; the rest come from the cell's
+// average (the low-resolution texture).
+const CLOUD_ENTRIES_PER_PX: f32 = 2.0;
+
+struct CloudHit {
+    keep: bool,
+    albedo: vec4<f32>,
+    // Model space, towards the plane's front.
+    normal: vec3<f32>,
+    ao: f32,
+};
+
+// A billboard cloud plane at plane coordinates `in.uv` (seed 001 §5): the
+// cell's list of leaves, front to back (back to front from behind), each
+// mapped to its own texture coordinates and alpha-tested like the mesh's
+// leaves; the first that passes is the pixel. Entries beyond the shader LoD
+// are replaced by the cell's average coverage (a hashed test) and colour.
+fn cloud_surface(in: VertexOut, front: bool, duv_dx: vec2<f32>, duv_dy: vec2<f32>) -> CloudHit {
+    var out: CloudHit;
+    out.keep = false;
+    let cells_at = bitcast<u32>(mesh.pos_min.w);
+    let fragments_at = bitcast<u32>(mesh.pos_extent.w);
+    let p = in.plane * 16u;
+    let grid = vec2<u32>(max(cloud[p + 7u], 1u), max(cloud[p + 11u], 1u));
+    let st = clamp(in.uv, vec2<f32>(0.0), vec2<f32>(1.0));
+    let c = min(vec2<u32>(st * vec2<f32>(grid)), grid - 1u);
+    let cell = cells_at + (cloud[p + 3u] + c.y * grid.x + c.x) * 3u;
+    let head = cloud[cell];
+    let first = head & 0xffffffu;
+    let count = head >> 24u;
+    // Pixels a cell spans on screen.
+    let cell_px = 1.0 / max(max(length(duv_dx * vec2<f32>(grid)), length(duv_dy * vec2<f32>(grid))), 1e-6);
+    var n = min(count, u32(ceil(CLOUD_ENTRIES_PER_PX * cell_px)));
+    if view.eye_hi.w > 0.5 && view.eye_hi.w < 1.5 {
+        n = count; // full-resolution reference: every entry
+    }
+    for (var i = 0u; i < n; i++) {
+        let k = select(first + count - 1u - i, first + i, front);
+        let f = fragments_at + k * 10u;
+        let a = vec4<f32>(
+            bitcast<f32>(cloud[f]),
+            bitcast<f32>(cloud[f + 1u]),
+            bitcast<f32>(cloud[f + 2u]),
+            bitcast<f32>(cloud[f + 3u]),
+        );
+        let b = vec2<f32>(bitcast<f32>(cloud[f + 4u]), bitcast<f32>(cloud[f + 5u]));
+        let uv = vec2<f32>(dot(a.xy, st), dot(a.zw, st)) + b;
+        let lo = unpack2x16float(cloud[f + 6u]);
+        let hi = unpack2x16float(cloud[f + 7u]);
+        if any(uv < lo) || any(uv > hi) {
+            continue;
+        }
+        let w8 = cloud[f + 8u];
+        let mat = materials[w8 & 0xffffu];
+        let gx = vec2<f32>(dot(a.xy, duv_dx), dot(a.zw, duv_dx));
+        let gy = vec2<f32>(dot(a.xy, duv_dy), dot(a.zw, duv_dy));
+        var texel = vec4<f32>(1.0);
+        if mat.layer >= 0 {
+            texel = textureSampleGrad(material_tex, material_sampler, uv, mat.layer, gx, gy);
+        }
+        if mat.base_color.a * texel.a < mat.alpha_cutoff {
+            continue;
+        }
+        let colour = unpack4x8unorm(cloud[f + 9u]);
+        out.keep = true;
+        out.albedo = mat.base_color * texel * vec4<f32>(colour.rgb * in.tint, 1.0);
+        out.normal = oct_decode(unpack4x8snorm(w8).zw);
+        out.ao = colour.a;
+        return out;
+    }
+    if n < count {
+        // The cell's average: its coverage by a hashed test, so a far plane
+        // keeps its leaves' density; colour, normal and occlusion averaged.
+        let avg = unpack4x8unorm(cloud[cell + 1u]);
+        let h = fragment_hash(in.clip, view.eye_lo.w);
+        if h.x < avg.a {
+            let nw = cloud[cell + 2u];
+            out.keep = true;
+            out.albedo = vec4<f32>(srgb_to_linear3(avg.rgb) * in.tint, 1.0);
+            out.normal = oct_decode(unpack4x8snorm(nw).xy);
+            out.ao = unpack4x8unorm(nw).z;
+        }
+    }
+    return out;
+}
+
+fn srgb_to_linear3(c: vec3<f32>) -> vec3<f32> {
+    return select(pow((c + 0.055) / 1.055, vec3<f32>(2.4)), c / 12.92, c <= vec3<f32>(0.04045));
+}
 
 // Adaptive transparency: how far (0–1) a pixel's alpha test moves from the
 // texture's alpha to a hashed test against its full-resolution coverage. A
@@ -129,7 +236,23 @@ fn surface(in: VertexOut, front: bool) -> Surface {
     // Sample unconditionally (uniform control flow), then select.
     let texel = textureSample(material_tex, material_sampler, in.uv, max(mat.layer, 0));
     let size = vec2<f32>(textureDimensions(material_tex));
-    let texels_per_px = max(length(dpdx(in.uv) * size), length(dpdy(in.uv) * size));
+    let duv_dx = dpdx(in.uv);
+    let duv_dy = dpdy(in.uv);
+    let texels_per_px = max(length(duv_dx * size), length(duv_dy * size));
+    if mat.kind == 2u {
+        let hit = cloud_surface(in, front, duv_dx, duv_dy);
+        if !hit.keep || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+            discard;
+        }
+        // Seen from behind the plane, the leaves show their other side.
+        let m = select(-hit.normal, hit.normal, front);
+        var s: Surface;
+        s.albedo = hit.albedo;
+        s.normal = rotate_z(normalize(vec3<f32>(m.xy / in.frame.y, m.z)), in.frame.x);
+        s.is_leaf = true;
+        s.ao = hit.ao;
+        return s;
+    }
     var albedo = mat.base_color * in.color;
     var coverage = albedo.a;
     var keep = true;
@@ -160,6 +283,7 @@ fn surface(in: VertexOut, front: bool) -> Surface {
     s.albedo = albedo;
     s.normal = normalize(select(-in.normal, in.normal, front));
     s.is_leaf = mat.kind == 0u;
+    s.ao = in.ao;
     return s;
 }
 
@@ -170,7 +294,7 @@ fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
     }
-    let ao = own_ao(in.ao, view);
+    let ao = own_ao(s.ao, view);
     let sun = sun_visibility(frag_rel(in.clip, view), s.normal, 0.0, open_sun(in.canopy));
     return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
 }
@@ -196,6 +320,6 @@ fn fs_capture(in: VertexOut, @builtin(front_facing) front: bool) -> CaptureOut {
     var out: CaptureOut;
     out.albedo = vec4<f32>(s.albedo.rgb, 1.0);
     out.normal = vec4<f32>(s.normal * 0.5 + 0.5, select(0.5, 1.0, s.is_leaf));
-    out.ao = vec4<f32>(vec3<f32>(in.ao), 1.0);
+    out.ao = vec4<f32>(vec3<f32>(s.ao), 1.0);
     return out;
 }

@@ -682,7 +682,8 @@ fn prefix_thinning_keeps_canopy_coverage() {
     for (name, cam) in views {
         // Coverage: pixels the trees change (against the same view without
         // trees), whatever their shade.
-        off.settings.representations = Representations { meshes: false, clusters: false, billboards: false };
+        off.settings.representations =
+            Representations { meshes: false, clusters: false, billboards: false, clouds: false };
         let bare = render(&mut off, &cam);
         off.settings.representations = Representations::ALL;
         let covered = |img: &[u8]| {

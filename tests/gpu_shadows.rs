@@ -260,7 +260,7 @@ fn a_single_tree_casts_its_shadow_where_the_cpu_puts_it_without_acne() {
         ..Camera::default()
     };
     off.settings.shadows = ShadowQuality::Off;
-    off.settings.representations = Representations { meshes: false, clusters: false, billboards: false };
+    off.settings.representations = Representations { meshes: false, clusters: false, billboards: false, clouds: false };
     let bare = render(&mut off, &cam);
     off.settings.representations = Representations::MESHES;
     off.settings.quality = 1.0e6; // the finest mesh, as the CPU casts it
@@ -385,7 +385,8 @@ fn a_dense_stand_darkens_its_lower_crowns_alike_at_every_level() {
             let cam = Camera::look_at(at + DVec3::new(0.0, -1.6 * h, 0.0), at);
             off.settings.lighting = sun(190.0, 35.0);
             off.settings.shadows = ShadowQuality::Off;
-            off.settings.representations = Representations { meshes: false, clusters: false, billboards: false };
+            off.settings.representations =
+                Representations { meshes: false, clusters: false, billboards: false, clouds: false };
             let bare = render(&mut off, &cam);
             off.settings.representations = only;
             // Levels by family: the full mesh, the finest ellipsoids, billboards at any size.

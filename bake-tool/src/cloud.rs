@@ -78,7 +78,7 @@ fn leaves_of(model: &ImportedModel, vertex_ao: &[f32]) -> Vec<CloudLeaf> {
             normal += n;
             area += n.length() * 0.5;
         }
-        if !(area > 0.0) || normal.length_squared() == 0.0 {
+        if area.is_nan() || area <= 0.0 || normal.length_squared() == 0.0 {
             continue;
         }
         let vs: Vec<&ImportedVertex> = ids.iter().map(|&i| &model.vertices[i as usize]).collect();
@@ -373,7 +373,7 @@ fn affine_fit(points: impl Iterator<Item = (Vec2, Vec2)>) -> Option<([f32; 4], [
     // A projection with (numerically) no area: the leaf is edge-on to the plane.
     let det = m.determinant();
     let tr = m.x_axis.x + m.y_axis.y;
-    if !(det > 1e-12 * tr * tr) {
+    if det.is_nan() || det <= 1e-12 * tr * tr {
         return None;
     }
     let inv = m.inverse();

@@ -119,8 +119,8 @@ struct PackArgs {
     #[arg(long, default_value_t = pack_build::DEFAULT_IMPOSTOR_SIZE)]
     impostor_size: u32,
     /// Planes of the billboard cloud (seed 001: leaves kept exact on planes
-    /// fitted to the foliage, drawn between the simplified mesh and the far
-    /// tier); 0 bakes none.
+    /// fitted to the foliage; e.g. 64). 0 bakes none. The viewer draws it only
+    /// when asked (`sylva render --only clouds`, bench method `billboard-cloud`).
     #[arg(long, default_value_t = pack_build::DEFAULT_CLOUD_PLANES, value_parser = clap::value_parser!(u32).range(0..=1024))]
     cloud_planes: u32,
     /// Material texture size (power of two).

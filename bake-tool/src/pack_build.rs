@@ -95,9 +95,11 @@ pub const SELECT_PX_MESH1: f32 = 120.0;
 /// Projected tree height (pixels) above which the billboard cloud is drawn
 /// (below the simplified mesh's threshold).
 pub const SELECT_PX_CLOUD: f32 = 40.0;
-/// Default planes of the billboard cloud (the paper uses 60–260 for whole
-/// trees; ours carry no wood, which stays geometry).
-pub const DEFAULT_CLOUD_PLANES: u32 = 64;
+/// Default planes of the billboard cloud: none (the viewer does not draw
+/// clouds by default, see `Representations::default`); `--cloud-planes 64`
+/// bakes one (the paper uses 60–260 for whole trees; ours carry no wood,
+/// which stays geometry).
+pub const DEFAULT_CLOUD_PLANES: u32 = 0;
 
 /// Default views per side of the impostor grid (36 views over the hemisphere).
 pub const DEFAULT_IMPOSTOR_GRID: u32 = 6;
@@ -195,13 +197,22 @@ pub fn build_pack(
                 texture_layer: None,
             });
             let words = encode_cloud(&built.planes, &built.cells, &built.fragments);
+            // Its coverage of the leaves, seen from the side (tested in crate::cloud).
+            let check = crate::cloud::Cloud {
+                planes: built.planes.clone(),
+                cells: built.cells.clone(),
+                fragments: built.fragments.clone(),
+            };
+            let (leaf_px, cloud_px, _) = crate::cloud::view_coverage(model, &check, Vec3::X, 64);
             eprintln!(
-                "    billboard cloud: {} planes, {} cells, {} list entries of {}/{} leaves ({} KiB, {:.1} s)",
+                "    billboard cloud: {} planes, {} cells, {} list entries of {}/{} leaves, {:.2}× the leaves' \
+                 coverage from the side ({} KiB, {:.1} s)",
                 built.planes.len(),
                 built.cells.len(),
                 built.fragments.len(),
                 built.leaves.0,
                 built.leaves.1,
+                cloud_px as f64 / leaf_px.max(1) as f64,
                 (words.len() * 4 + vtx.len() * 20 + idx.len() * 4) / 1024,
                 started.elapsed().as_secs_f64()
             );

@@ -211,7 +211,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "per-tree" => m(RenderSettings { culling: CullingMode::PerTree, ..base }, 1),
             "billboard" => m(
                 RenderSettings {
-                    representations: Representations { meshes: true, clusters: false, billboards: true },
+                    representations: Representations { meshes: true, clusters: false, billboards: true, clouds: false },
                     far_tier: FarTier::Billboards,
                     ..base
                 },
@@ -219,7 +219,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             ),
             "impostor" => m(
                 RenderSettings {
-                    representations: Representations { meshes: true, clusters: false, billboards: true },
+                    representations: Representations { meshes: true, clusters: false, billboards: true, clouds: false },
                     far_tier: FarTier::Impostors,
                     ..base
                 },
@@ -227,7 +227,16 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             ),
             "ellipsoid" => m(
                 RenderSettings {
-                    representations: Representations { meshes: true, clusters: true, billboards: false },
+                    representations: Representations { meshes: true, clusters: true, billboards: false, clouds: false },
+                    ..base
+                },
+                1,
+            ),
+            // Seed 001's pipeline: meshes close, the billboard cloud (with its
+            // shader LoD) for every tree below the simplified mesh.
+            "billboard-cloud" => m(
+                RenderSettings {
+                    representations: Representations { meshes: true, clusters: false, billboards: false, clouds: true },
                     ..base
                 },
                 1,
@@ -243,7 +252,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "sylva-shadows-low" => m(RenderSettings { shadows: ShadowQuality::Low, ..base }, 1),
             "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
             other => bail!(
-                "unknown method {other:?}: use reference, mesh, mesh-plain-alpha, per-tree, billboard, impostor, ellipsoid, sylva, sylva-plain-alpha, \
+                "unknown method {other:?}: use reference, mesh, mesh-plain-alpha, per-tree, billboard, impostor, billboard-cloud, ellipsoid, sylva, sylva-plain-alpha, \
                  sylva-converged, sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
             ),
         })
@@ -254,6 +263,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "per-tree",
             "billboard",
             "impostor",
+            "billboard-cloud",
             "ellipsoid",
             "sylva",
             "sylva-converged",
@@ -700,7 +710,7 @@ mod tests {
         assert!(m[1..].iter().all(|m| m.reference == Some(0)));
         // Shadowed methods are measured against the shadowed reference.
         let all = methods("all", ShadowQuality::Off).unwrap();
-        assert_eq!(all.len(), 13);
+        assert_eq!(all.len(), 14);
         // Only sylva-converged refines; the plain-alpha comparisons parse.
         let refined: Vec<&str> = all.iter().filter(|m| m.refine.is_some()).map(|m| m.name.as_str()).collect();
         assert_eq!(refined, ["sylva-converged"]);

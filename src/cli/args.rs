@@ -26,6 +26,8 @@ pub(crate) enum OnlyArg {
     Meshes,
     Ellipsoids,
     Billboards,
+    /// Billboard clouds (seed 001).
+    Clouds,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]

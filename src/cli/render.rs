@@ -320,10 +320,11 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 FarTierArg::Billboards => sylva::render::settings::FarTier::Billboards,
             },
             representations: match only {
-                None => Representations::ALL,
+                None => Representations::default(),
                 Some(OnlyArg::Meshes) => Representations::MESHES,
                 Some(OnlyArg::Ellipsoids) => Representations::CLUSTERS,
                 Some(OnlyArg::Billboards) => Representations::BILLBOARDS,
+                Some(OnlyArg::Clouds) => Representations::CLOUDS,
             },
             ..RenderSettings::default()
         };

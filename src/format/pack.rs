@@ -720,14 +720,15 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         if partial && (vtx.is_none() || idx.is_none()) {
             continue;
         }
-        validate_mesh(&format!("META.mesh_levels[{l}]"), level, vtx, idx, m.materials.len(), "MVTX/MIDX")?;
+        let sections = format!("MVTX/MIDX section with index {l}");
+        validate_mesh(&format!("META.mesh_levels[{l}]"), level, vtx, idx, m.materials.len(), &sections)?;
     }
     if let Some(c) = &m.cloud {
         let vtx = pack.section(kind::CLOUD_VERTICES, 0);
         let idx = pack.section(kind::CLOUD_INDICES, 0);
         let data = pack.section(kind::CLOUD_DATA, 0);
         if !(partial && (vtx.is_none() || idx.is_none() || data.is_none())) {
-            validate_mesh("META.cloud.mesh", &c.mesh, vtx, idx, m.materials.len(), "CLVX/CLIX")?;
+            validate_mesh("META.cloud.mesh", &c.mesh, vtx, idx, m.materials.len(), "CLVX/CLIX sections")?;
             let Some(data) = data else {
                 return Err(Problem::Invalid("META.cloud has no CLDA section".into()));
             };
@@ -824,7 +825,7 @@ fn validate_mesh(
     finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
     finite(format!("{what}.select_px"), level.select_px.into())?;
     let (Some(vtx), Some(idx)) = (vtx, idx) else {
-        return Err(Problem::Invalid(format!("{what} has no {sections} sections")));
+        return Err(Problem::Invalid(format!("{what} has no {sections}")));
     };
     if vtx.len() as u64 != u64::from(level.vertex_count) * 20 || idx.len() as u64 != u64::from(level.index_count) * 4 {
         return Err(Problem::Invalid(format!(

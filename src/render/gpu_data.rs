@@ -180,20 +180,23 @@ pub enum Repr {
     Mesh0 = 0,
     /// Mesh level 1 (simplified).
     Mesh1 = 1,
+    /// The billboard cloud (seed 001): the coarsest level's wood and the
+    /// leaves on planes.
+    Cloud = 2,
     /// The finest cluster level in use (ellipsoids + lines, seed 002).
-    Cluster0 = 2,
+    Cluster0 = 3,
     /// The next cluster level.
-    Cluster1 = 3,
+    Cluster1 = 4,
     /// The next cluster level.
-    Cluster2 = 4,
+    Cluster2 = 5,
     /// The coarsest cluster level in use.
-    Cluster3 = 5,
-    /// View-angle billboards.
-    Billboard = 6,
+    Cluster3 = 6,
+    /// View-angle billboards or multi-view impostors (the far tier).
+    Billboard = 7,
 }
 
 /// Number of representations (draw slots per species).
-pub const REPR_COUNT: u32 = 7;
+pub const REPR_COUNT: u32 = 8;
 
 /// Cluster levels a species can use at once (the levels whose projected size
 /// band meets the cluster range).
@@ -201,8 +204,16 @@ pub const CLUSTER_TIERS: usize = 4;
 
 impl Repr {
     /// All, finest first.
-    pub const ALL: [Repr; 7] =
-        [Repr::Mesh0, Repr::Mesh1, Repr::Cluster0, Repr::Cluster1, Repr::Cluster2, Repr::Cluster3, Repr::Billboard];
+    pub const ALL: [Repr; 8] = [
+        Repr::Mesh0,
+        Repr::Mesh1,
+        Repr::Cloud,
+        Repr::Cluster0,
+        Repr::Cluster1,
+        Repr::Cluster2,
+        Repr::Cluster3,
+        Repr::Billboard,
+    ];
 
     /// The cluster tiers.
     pub const CLUSTERS: [Repr; CLUSTER_TIERS] = [Repr::Cluster0, Repr::Cluster1, Repr::Cluster2, Repr::Cluster3];
@@ -213,6 +224,7 @@ impl Repr {
         match self {
             Repr::Mesh0 => "mesh0",
             Repr::Mesh1 => "mesh1",
+            Repr::Cloud => "cloud",
             Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => "ellipsoid",
             Repr::Billboard => "billboard",
         }

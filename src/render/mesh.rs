@@ -9,7 +9,7 @@ use wgpu::util::DeviceExt;
 use super::gpu_data::{GpuMaterial, MeshUniform, RenderMode};
 use super::layouts::{sampler_entry, texture_array_entry, SharedLayouts};
 use super::shaders;
-use crate::format::pack::{kind, MaterialKind, TextureArrayMeta};
+use crate::format::pack::{kind, MaterialKind, MeshLevelMeta, TextureArrayMeta};
 use crate::format::Pack;
 
 /// Depth format of every Sylva pass (reversed Z: clear to 0, keep greater).
@@ -61,7 +61,7 @@ impl MeshPipelines {
             entries: &[
                 wgpu::BindGroupLayoutEntry {
                     binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
@@ -81,6 +81,16 @@ impl MeshPipelines {
                 },
                 texture_array_entry(2),
                 sampler_entry(3),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(4),
+                    },
+                    count: None,
+                },
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -161,9 +171,10 @@ pub struct MeshLevelGpu {
 
 /// A pack's mesh levels and material textures on the GPU.
 pub struct MeshGpu {
-    /// Levels, finest first.
     /// Levels, finest first; `None` for a level not (yet) fetched.
     pub levels: Vec<Option<MeshLevelGpu>>,
+    /// The billboard cloud (seed 001), when the pack has one and it is fetched.
+    pub cloud: Option<MeshLevelGpu>,
 }
 
 impl MeshGpu {
@@ -181,8 +192,13 @@ impl MeshGpu {
                     && pack.section(kind::MESH_INDICES, l as u32).is_some()
             })
             .collect();
-        if !held.contains(&true) {
-            return Self { levels: Vec::new() };
+        let cloud_held = textures_held
+            && meta.cloud.is_some()
+            && [kind::CLOUD_VERTICES, kind::CLOUD_INDICES, kind::CLOUD_DATA]
+                .iter()
+                .all(|k| pack.section(*k, 0).is_some());
+        if !held.contains(&true) && !cloud_held {
+            return Self { levels: Vec::new(), cloud: None };
         }
         let texture = match (meta.material_texture, pack.section(kind::MATERIAL_TEXTURES, 0)) {
             (Some(t), Some(data)) => {
@@ -229,6 +245,55 @@ impl MeshGpu {
             contents: bytemuck::cast_slice(&materials),
             usage: wgpu::BufferUsages::STORAGE,
         });
+        let placeholder = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("no billboard cloud"),
+            contents: &[0; 4],
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        // One level: its dequantisation (and the cloud's record offsets), buffers, bind group.
+        let make = |level: &MeshLevelMeta, vtx: &[u8], idx: &[u8], cloud: Option<(&wgpu::Buffer, [u32; 2])>| {
+            let offsets = cloud.map_or([0, 0], |(_, o)| o);
+            let uniform = MeshUniform {
+                pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], f32::from_bits(offsets[0])],
+                pos_extent: [
+                    level.pos_max[0] - level.pos_min[0],
+                    level.pos_max[1] - level.pos_min[1],
+                    level.pos_max[2] - level.pos_min[2],
+                    f32::from_bits(offsets[1]),
+                ],
+                uv_min: level.uv_min,
+                uv_extent: [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]],
+            };
+            let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh level"),
+                contents: bytemuck::bytes_of(&uniform),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            // Sections are 256-byte aligned in the file and validated: upload as they are.
+            let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh vertices"),
+                contents: pad4(vtx).as_ref(),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+            let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("mesh indices"),
+                contents: idx,
+                usage: wgpu::BufferUsages::INDEX,
+            });
+            let records = cloud.map_or(&placeholder, |(b, _)| b);
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("mesh level"),
+                layout: &pipelines.mesh_layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: uniform_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: material_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&texture_view) },
+                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&pipelines.sampler) },
+                    wgpu::BindGroupEntry { binding: 4, resource: records.as_entire_binding() },
+                ],
+            });
+            MeshLevelGpu { vertices, indices, index_count: level.index_count, bind_group }
+        };
         let levels = meta
             .mesh_levels
             .iter()
@@ -237,55 +302,25 @@ impl MeshGpu {
                 if !held[l] {
                     return None;
                 }
-                let uniform = MeshUniform {
-                    pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], 0.0],
-                    pos_extent: [
-                        level.pos_max[0] - level.pos_min[0],
-                        level.pos_max[1] - level.pos_min[1],
-                        level.pos_max[2] - level.pos_min[2],
-                        0.0,
-                    ],
-                    uv_min: level.uv_min,
-                    uv_extent: [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]],
-                };
-                let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("mesh level"),
-                    contents: bytemuck::bytes_of(&uniform),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
                 let vtx = pack.section(kind::MESH_VERTICES, l as u32).unwrap_or_default();
                 let idx = pack.section(kind::MESH_INDICES, l as u32).unwrap_or_default();
-                // Sections are 256-byte aligned in the file and validated: upload as they are.
-                let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("mesh vertices"),
-                    contents: pad4(vtx).as_ref(),
-                    usage: wgpu::BufferUsages::VERTEX,
-                });
-                let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("mesh indices"),
-                    contents: idx,
-                    usage: wgpu::BufferUsages::INDEX,
-                });
-                let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("mesh level"),
-                    layout: &pipelines.mesh_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: uniform_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: material_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&texture_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::Sampler(&pipelines.sampler),
-                        },
-                    ],
-                });
-                Some(MeshLevelGpu { vertices, indices, index_count: level.index_count, bind_group })
+                Some(make(level, vtx, idx, None))
             })
             .collect();
-        Self { levels }
+        let cloud = meta.cloud.as_ref().filter(|_| cloud_held).map(|c| {
+            let data = pack.section(kind::CLOUD_DATA, 0).unwrap_or_default();
+            let records = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("billboard cloud"),
+                contents: pad4(data).as_ref(),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            let cells_at = c.planes * crate::format::cloud::PLANE_WORDS as u32;
+            let fragments_at = cells_at + c.cells * crate::format::cloud::CELL_WORDS as u32;
+            let vtx = pack.section(kind::CLOUD_VERTICES, 0).unwrap_or_default();
+            let idx = pack.section(kind::CLOUD_INDICES, 0).unwrap_or_default();
+            make(&c.mesh, vtx, idx, Some((&records, [cells_at, fragments_at])))
+        });
+        Self { levels, cloud }
     }
 
     /// Whether level `l` is on the GPU.
@@ -303,7 +338,21 @@ impl MeshGpu {
         mode: RenderMode,
         level: usize,
     ) -> u32 {
-        let Some(Some(level)) = self.levels.get(level) else { return 0 };
+        Self::bind(self.levels.get(level).and_then(Option::as_ref), pass, pipelines, mode)
+    }
+
+    /// As [`Self::bind_level`], for the billboard cloud.
+    pub fn bind_cloud(&self, pass: &mut wgpu::RenderPass<'_>, pipelines: &MeshPipelines, mode: RenderMode) -> u32 {
+        Self::bind(self.cloud.as_ref(), pass, pipelines, mode)
+    }
+
+    fn bind(
+        level: Option<&MeshLevelGpu>,
+        pass: &mut wgpu::RenderPass<'_>,
+        pipelines: &MeshPipelines,
+        mode: RenderMode,
+    ) -> u32 {
+        let Some(level) = level else { return 0 };
         if level.index_count == 0 {
             return 0;
         }

@@ -474,7 +474,7 @@ mod tests {
         let (same, cut) = PoolConfig::default().within_limits(&limits);
         assert!(!cut && same == PoolConfig::default(), "the defaults fit WebGPU's limits");
         let small = PoolConfig::default().for_scene(3000, 200, 3);
-        assert_eq!((small.instances, small.batches, small.items, small.species), (3000, 200, 21000, 3));
+        assert_eq!((small.instances, small.batches, small.items, small.species), (3000, 200, 24000, 3));
         assert!(small.bytes() < PoolConfig::default().bytes() / 100);
         assert_eq!(PoolConfig::default().for_scene(u64::MAX, 0, 0).instances, PoolConfig::default().instances);
     }

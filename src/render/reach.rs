@@ -148,12 +148,15 @@ impl Reach {
         let select = |l: usize| meta.mesh_levels.get(l).map_or(f32::INFINITY, |m| m.select_px);
         let mesh_floor = if has_mesh { select(meta.mesh_levels.len() - 1) } else { f32::INFINITY };
         let cluster_floor = if has_bb { m.cluster_min_px } else { 0.0 };
-        let coarsest_is_mesh = !has_bb && !has_cl;
+        // The billboard cloud (in the coarse meshes' part) takes over below the meshes.
+        let cloud_floor = meta.cloud.as_ref().filter(|_| allow.clouds).map(|c| c.select_px);
+        let coarsest_is_mesh = !has_bb && !has_cl && cloud_floor.is_none();
         let meshes = has_mesh && (max_px >= mesh_floor * slack || coarsest_is_mesh);
+        let cloud = cloud_floor.is_some_and(|f| max_px >= f * slack || (!has_bb && !has_cl));
         // The full mesh only where a tree can reach its threshold (one level: always).
         let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
-        let clusters = has_cl && cluster_floor < mesh_floor && max_px >= cluster_floor * slack;
-        [has_bb, clusters, meshes, full]
+        let clusters = has_cl && cluster_floor < cloud_floor.unwrap_or(mesh_floor) && max_px >= cluster_floor * slack;
+        [has_bb, clusters, meshes || cloud, full]
     }
 }
 
@@ -204,8 +207,24 @@ mod tests {
                 center: [0.0, 0.0, 10.0],
                 radius: 12.0,
             }),
+            cloud: None,
         };
         assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
+        // A billboard cloud from 40 px: not for 5 px trees; for 45 px ones the
+        // coarse part (which holds it), not the full mesh.
+        meta.cloud = Some(crate::format::cloud::CloudMeta {
+            planes: 1,
+            cells: 1,
+            fragments: 0,
+            material: 0,
+            select_px: 40.0,
+            mesh: meta.mesh_levels[0].clone(),
+        });
+        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
+        let mut closer = reach.clone();
+        closer.species_max_px = vec![45.0];
+        assert_eq!(closer.parts_needed(0, &meta), [true, false, true, false]);
+        meta.cloud = None;
         // Without any far tier the mesh is the coarsest and is fetched.
         meta.impostors = None;
         assert_eq!(reach.parts_needed(0, &meta), [false, false, true, true]);

@@ -41,6 +41,8 @@ struct SpeciesGpu {
     index_counts: [u32; 2],
     /// Mesh levels 0 and 1 on the GPU.
     has_level: [bool; 2],
+    /// The billboard cloud's threshold and index count, when on the GPU.
+    cloud: Option<(f32, u32)>,
     bytes: u64,
 }
 
@@ -93,7 +95,7 @@ impl Species {
             table: Vec::new(),
             dirty: true,
             cluster_min_px: super::settings::DEFAULT_CLUSTER_MIN_PX,
-            representations: Representations::ALL,
+            representations: Representations::default(),
             far_tier: FarTier::Impostors,
         }
     }
@@ -136,12 +138,13 @@ impl Species {
         let m = &pack.meta;
         use crate::format::pack::kind;
         let format = self.color_format;
-        let any_level = (0..m.mesh_levels.len() as u32).any(|l| pack.section(kind::MESH_VERTICES, l).is_some());
+        let any_level = (0..m.mesh_levels.len() as u32).any(|l| pack.section(kind::MESH_VERTICES, l).is_some())
+            || pack.section(kind::CLOUD_VERTICES, 0).is_some();
         let mesh = if any_level {
             let pipelines = self.mesh.get_or_insert_with(|| MeshPipelines::new(device, shared, format));
             MeshGpu::upload(device, queue, pipelines, pack)
         } else {
-            MeshGpu { levels: Vec::new() }
+            MeshGpu { levels: Vec::new(), cloud: None }
         };
         let billboard = if m.billboards.is_some() && pack.section(kind::BILLBOARD_COLOR, 0).is_some() {
             let pipeline = self.billboard.get_or_insert_with(|| BillboardPipeline::billboard(device, shared, format));
@@ -176,6 +179,7 @@ impl Species {
             select_px: [level(0).map_or(0.0, |l| l.select_px), level(1).map_or(0.0, |l| l.select_px)],
             index_counts: [level(0).map_or(0, |l| l.index_count), level(1).map_or(0, |l| l.index_count)],
             has_level: [mesh.has_level(0), mesh.has_level(1)],
+            cloud: m.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| (c.select_px, c.mesh.index_count)),
             mesh,
             billboard,
             impostor,
@@ -235,9 +239,17 @@ impl Species {
                     lower[Repr::Mesh1 as usize] = p.select_px[1];
                     s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
                 }
+                // The billboard cloud, below the meshes.
+                if let Some((select_px, indices)) = p.cloud.filter(|_| allow.clouds) {
+                    want[Repr::Cloud as usize] = resident.min(MESH1_CAPACITY);
+                    lower[Repr::Cloud as usize] = select_px;
+                    s.index_count[Repr::Cloud as usize] = indices;
+                }
                 // Cluster tiers: the levels whose size band meets [cluster_min_px, the
-                // coarsest mesh level's threshold).
-                let mesh_floor = if allow.meshes {
+                // coarsest mesh level's (or the cloud's) threshold).
+                let mesh_floor = if allow.clouds && p.cloud.is_some() {
+                    p.cloud.map_or(f32::INFINITY, |c| c.0)
+                } else if allow.meshes {
                     // The coarsest level on the GPU.
                     (0..2).rev().find(|&l| p.has_level[l]).map_or(f32::INFINITY, |l| p.select_px[l])
                 } else {
@@ -369,6 +381,14 @@ impl Species {
                 let Some(pipelines) = &self.mesh else { return false };
                 let mode = if pipeline == Pipeline::Shadow { RenderMode::Shadow } else { RenderMode::Lit };
                 if p.mesh.bind_level(pass, pipelines, mode, repr as usize) == 0 {
+                    return false;
+                }
+                pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
+            }
+            Repr::Cloud => {
+                let Some(pipelines) = &self.mesh else { return false };
+                let mode = if pipeline == Pipeline::Shadow { RenderMode::Shadow } else { RenderMode::Lit };
+                if p.mesh.bind_cloud(pass, pipelines, mode) == 0 {
                     return false;
                 }
                 pass.draw_indexed_indirect(&pools.buffers.args, args_offset);
