@@ -141,10 +141,12 @@ fn bakes_the_shared_real_data() {
         .arg(data.join("placements/amsterdam_trees.csv"))
         .args(["--map", "pinus*=pine", "--map", "thuja*=pine", "--map", "juniperus*=pine"])
         .args(SMALL)
+        .args(["--cloud-planes", "48"])
         .arg("--out")
         .arg(&out));
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("scene CRS EPSG:32631"), "{log}");
+    assert!(log.contains("billboard cloud: 48 planes"), "{log}");
     // No --default-model: broadleaf species are reported and skipped, not fatal.
     assert!(log.contains("skipped") && log.contains("quercus robur"), "{log}");
     let v = inspect_json(&out);
@@ -189,7 +191,29 @@ fn bakes_the_shared_real_data() {
         };
         let full = darkening(PackRepr::Mesh(0));
         assert!(full < 0.95, "{species}: occlusion darkens the full mesh to {full:.3}");
-        for r in [PackRepr::Mesh(1), PackRepr::Cluster(0), PackRepr::Cluster(1), PackRepr::Billboard] {
+        // The billboard cloud (seed 001) through the viewer's mesh pass: from the
+        // side, obliquely and from above (the lists walked from the back), it
+        // covers about the full mesh's pixels and is closer to it than the
+        // billboards are.
+        let covered = |img: &[u8]| {
+            let bgpx = [img[0], img[1], img[2]];
+            img.chunks(4).filter(|p| p.iter().zip(&bgpx).take(3).any(|(x, y)| x.abs_diff(*y) > 2)).count()
+        };
+        for view in [PackView::Side, PackView::Oblique, PackView::Top] {
+            let at = |r| render_pack_repr(&ctx, &pack, r, view, size, size, bg, true).unwrap();
+            let mesh = at(PackRepr::Mesh(0));
+            let (cloud, billboard) = (at(PackRepr::Cloud), at(PackRepr::Billboard));
+            let err = |img: &[u8]| sylva::metrics::multiscale_rmse(img, &mesh, size, size);
+            let ratio = covered(&cloud) as f64 / covered(&mesh) as f64;
+            eprintln!(
+                "{species} {view:?}: cloud error {:.4}, billboard {:.4}; cloud covers {ratio:.2}× the mesh's pixels",
+                err(&cloud),
+                err(&billboard)
+            );
+            assert!((0.85..=1.3).contains(&ratio), "{species} {view:?}: cloud covers {ratio:.2}× the mesh");
+            assert!(err(&cloud) < err(&billboard), "{species} {view:?}: the cloud is further off than the billboards");
+        }
+        for r in [PackRepr::Mesh(1), PackRepr::Cloud, PackRepr::Cluster(0), PackRepr::Cluster(1), PackRepr::Billboard] {
             let d = darkening(r);
             eprintln!("{species}: {r:?} darkened to {d:.3}, the full mesh to {full:.3}");
             assert!((d - full).abs() < 0.06, "{species}: {r:?} darkened to {d:.3}, the full mesh to {full:.3}");

@@ -37,6 +37,8 @@ pub(crate) enum PackReprArg {
     Billboard,
     /// Multi-view impostors.
     Impostor,
+    /// The billboard cloud (seed 001).
+    Cloud,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

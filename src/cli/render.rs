@@ -372,6 +372,12 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             }
             PackRepr::Impostor
         }
+        PackReprArg::Cloud => {
+            if decoded.meta.cloud.is_none() {
+                bail!("the pack has no billboard cloud (bake it with --cloud-planes 64)");
+            }
+            PackRepr::Cloud
+        }
     };
     let gpu = GpuContext::new_headless_blocking()?;
     let view = match pack_view {

@@ -8,7 +8,7 @@ use wgpu::util::DeviceExt;
 use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
 use super::cluster::{ClusterGpu, ClusterPipeline};
 use super::context::{read_texture_rgba8, GpuContext};
-use super::gpu_data::{DrawParams, RenderMode, ViewUniform};
+use super::gpu_data::{DrawParams, RenderMode, Repr, ViewUniform};
 use super::impostor::{ImpostorGpu, ImpostorPipeline, IMPOSTOR_VERTICES};
 use super::layouts::SharedLayouts;
 use super::mesh::{
@@ -313,6 +313,8 @@ pub enum TreeDraw<'a> {
     Billboard(&'a BillboardGpu),
     /// The multi-view impostors.
     Impostor(&'a ImpostorGpu),
+    /// The billboard cloud (seed 001).
+    Cloud(&'a MeshGpu),
 }
 
 /// Lit renders of one tree (scale 1, yaw 0, at the model origin) with any
@@ -393,18 +395,19 @@ impl TreeRenderer {
         let mut params = DrawParams::default();
         match what {
             TreeDraw::Mesh(_, level) => params.ids[1] = (*level).min(1) as u32,
+            TreeDraw::Cloud(_) => params.ids[1] = Repr::Cloud as u32,
             TreeDraw::Cluster(c, level) => {
-                params.ids[1] = 2;
+                params.ids[1] = Repr::Cluster0 as u32;
                 c.draw_params(*level, &mut params);
             }
             TreeDraw::Billboard(bb) => {
-                params.ids[1] = 6;
+                params.ids[1] = Repr::Billboard as u32;
                 params.ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
                 params.bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
                 params.bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
             }
             TreeDraw::Impostor(imp) => {
-                params.ids[1] = 6;
+                params.ids[1] = Repr::Billboard as u32;
                 imp.draw_params(&mut params);
             }
         }
@@ -443,6 +446,10 @@ impl TreeRenderer {
             match what {
                 TreeDraw::Mesh(mesh, level) => {
                     let indices = mesh.bind_level(&mut pass, &self.mesh, RenderMode::Lit, *level);
+                    pass.draw_indexed(0..indices, 0, 0..1);
+                }
+                TreeDraw::Cloud(mesh) => {
+                    let indices = mesh.bind_cloud(&mut pass, &self.mesh, RenderMode::Lit);
                     pass.draw_indexed(0..indices, 0, 0..1);
                 }
                 TreeDraw::Cluster(c, level) => {
@@ -501,6 +508,8 @@ pub enum PackRepr {
     Billboard,
     /// The multi-view impostors.
     Impostor,
+    /// The billboard cloud.
+    Cloud,
 }
 
 /// Renders one tree of `pack` lit, with a perspective camera framing the whole
@@ -540,6 +549,10 @@ pub fn render_pack_repr(
         PackRepr::Impostor => {
             let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, pack)?;
             Some(r.render(ctx, &TreeDraw::Impostor(&imp), clip, eye, width, height, background))
+        }
+        PackRepr::Cloud => {
+            let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
+            mesh.cloud.is_some().then(|| r.render(ctx, &TreeDraw::Cloud(&mesh), clip, eye, width, height, background))
         }
     }
 }
