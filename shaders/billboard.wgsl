@@ -104,8 +104,9 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
-    let n_model = normalize(packed_normal.xyz * 2.0 - 1.0);
-    let n = rotate_z(n_model, in.normal_yaw);
+    // The mean of the texel's normals (not normalised: see `shade_filtered`).
+    let m = rotate_z(packed_normal.xyz * 2.0 - 1.0, in.normal_yaw);
+    let n = normalize(m);
     let is_leaf = packed_normal.a > 0.75;
     var albedo = color.rgb * in.tint;
     if view.params.z == 1u {
@@ -113,7 +114,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     }
     let ao = own_ao(baked_ao, view);
     let sun = sun_visibility(frag_rel(in.clip, view), n, in.lift, open_sun(in.canopy));
-    return vec4<f32>(haze(shade(albedo, n, is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
+    return vec4<f32>(haze(shade_filtered(albedo, m, is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested.

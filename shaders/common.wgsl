@@ -355,6 +355,30 @@ fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View, sun: f32, o
     return albedo * (sky + view.sun_color.rgb * (diffuse * sun));
 }
 
+// `shade` for a pre-filtered surface (a billboard's or an impostor's texel
+// averages many leaves): `m` is the mean of the unit normals it covers, whose
+// length r (≤ 1) says how much they agree. Shading the normalised mean lights
+// a spread of leaves as one leaf turned towards it (a far crown read 5–15 %
+// off its leaves); the mean of the shading is wanted. The sky term and the
+// signed part of the sun's are linear in the normal, so the mean normal gives
+// them exactly. For the mean |n·l|, the normals are taken as spread evenly in
+// a cone about the mean (r = (1 + cos α) / 2): from |n̂·l| for one direction
+// (r = 1) to ½ for a hemisphere (r = ½, as the leaves facing a viewer are),
+// linearly in r.
+fn shade_filtered(albedo: vec3<f32>, m: vec3<f32>, is_leaf: bool, view: View, sun: f32, occlusion: f32, ao: f32) -> vec3<f32> {
+    let r = clamp(length(m), 1e-4, 1.0);
+    let ndl = dot(m, view.sun_dir.xyz);
+    let spread = clamp(2.0 * r - 1.0, 0.0, 1.0);
+    let mean_abs = mix(0.5, abs(ndl) / r, spread);
+    // max(x, 0) = (x + |x|) / 2; leaves: 0.75 max(x, 0) + 0.25 |x|.
+    var diffuse = 0.5 * ndl + 0.5 * mean_abs;
+    if is_leaf {
+        diffuse = 0.375 * ndl + 0.625 * mean_abs;
+    }
+    let sky = sky_light(m, is_leaf, view) * (1.0 - CANOPY_SKY_OCCLUSION * occlusion) * ao;
+    return albedo * (sky + view.sun_color.rgb * (max(diffuse, 0.0) * sun));
+}
+
 // A tree's own ambient occlusion, baked per species (bake-tool/src/ao.rs): the
 // sky a point inside its crown sees through the tree's leaves and wood, the
 // same field sampled by every level of detail (mesh vertices, the billboard

@@ -580,7 +580,13 @@ fn pack_decoder_error_paths() {
     let imp_tex = TextureArrayMeta { size: 2, layers: 4, mips: 2 };
     let with_impostors = |grid: u32, radius: f32, surface: bool| {
         move |m: &mut PackMeta, s: &mut Vec<Section>| {
-            m.impostors = Some(sylva::format::pack::ImpostorMeta { grid, texture: imp_tex, center: [0.0; 3], radius });
+            m.impostors = Some(sylva::format::pack::ImpostorMeta {
+                grid,
+                texture: imp_tex,
+                center: [0.0; 3],
+                radius,
+                normal_length: Vec::new(),
+            });
             s.push(Section { kind: kind::IMPOSTOR_COLOR, index: 0, count: 0, stride: 0, data: vec![0; 80] });
             if surface {
                 s.push(Section { kind: kind::IMPOSTOR_SURFACE, index: 0, count: 0, stride: 0, data: vec![0; 80] });

@@ -385,8 +385,10 @@ fn build_impostors(
     let views: Vec<_> = (0..grid * grid).map(|l| impostor::capture_clip_from_model(center, radius, l, grid)).collect();
     let capture_size = opts.impostor_size * 2;
     let captured = capture_views(gpu, pipelines, decoded, &views, capture_size);
-    let mut color_chains = Vec::new();
+    let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut surface_chains = Vec::new();
+    // Per stored mip: Σ coverage × |mean normal| and Σ coverage over all views.
+    let mut spread = vec![(0.0f64, 0.0f64); opts.impostor_size.trailing_zeros() as usize + 1];
     for layer in 0..views.len() {
         let color = &captured.color[layer];
         color_chains.push(
@@ -415,13 +417,23 @@ fn build_impostors(
             let depth = ((t[3] * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0).round() as u8;
             [unorm(e[0]), unorm(e[1]), depth, impostor::pack_ao_leaf(t[4], t[5] >= 0.5)]
         };
-        surface_chains.push(
-            coverage_weighted_mips(surface, color, capture_size)[1..]
-                .iter()
-                .map(|level| level.iter().flat_map(encode).collect())
-                .collect::<Vec<Vec<u8>>>(),
-        );
+        let mips = coverage_weighted_mips(surface, color, capture_size);
+        for (l, level) in mips[1..].iter().enumerate() {
+            let alpha = &color_chains[layer][l];
+            for (i, t) in level.iter().enumerate() {
+                let a = f64::from(alpha[i * 4 + 3]) / 255.0;
+                spread[l].0 += a * f64::from(Vec3::new(t[0], t[1], t[2]).length().min(1.0));
+                spread[l].1 += a;
+            }
+        }
+        surface_chains
+            .push(mips[1..].iter().map(|level| level.iter().flat_map(encode).collect()).collect::<Vec<Vec<u8>>>());
     }
+    // How much the normals under a texel agree, per mip (1 at full resolution
+    // on one leaf; less as texels cover more leaves): the viewer shades the
+    // filtered normal with it (`shade_filtered`).
+    let normal_length: Vec<f32> =
+        spread.iter().map(|(w, n)| if *n > 0.0 { (w / n).clamp(0.0, 1.0) as f32 } else { 1.0 }).collect();
     let texture = TextureArrayMeta {
         size: opts.impostor_size,
         layers: grid * grid,
@@ -443,7 +455,7 @@ fn build_impostors(
             data: mip_major(&surface_chains, texture.mips),
         },
     ];
-    (ImpostorMeta { grid, texture, center: center.to_array(), radius }, sections)
+    (ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length }, sections)
 }
 
 /// Mip chain (mip 0 included) of a square layer of `N` floats per texel, all

@@ -213,6 +213,30 @@ fn bakes_the_shared_real_data() {
             assert!((0.85..=1.3).contains(&ratio), "{species} {view:?}: cloud covers {ratio:.2}× the mesh");
             assert!(err(&cloud) < err(&billboard), "{species} {view:?}: the cloud is further off than the billboards");
         }
+        // Far trees keep the full mesh's brightness: at 48 px the far tiers'
+        // filtered normals are shaded as the mean of their leaves' shading
+        // (`shade_filtered`), not as one leaf facing the mean direction (which
+        // read 5–15 % lighter). Reference: the mesh at 4× the size, averaged
+        // down over the tree's pixels.
+        let mean_rgb = |img: &[u8], bgpx: [u8; 3]| {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for p in img.chunks(4) {
+                if p.iter().zip(&bgpx).take(3).any(|(x, y)| x.abs_diff(*y) > 2) {
+                    sum += f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+                    n += 1;
+                }
+            }
+            sum / n.max(1) as f64
+        };
+        let big = render_pack_repr(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, 192, 192, bg, true).unwrap();
+        let bgpx = [big[0], big[1], big[2]];
+        let truth = mean_rgb(&big, bgpx);
+        for r in [PackRepr::Impostor, PackRepr::Billboard] {
+            let small = render_pack_repr(&ctx, &pack, r, PackView::Side, 48, 48, bg, true).unwrap();
+            let ratio = mean_rgb(&small, bgpx) / truth;
+            eprintln!("{species}: {r:?} at 48 px is {ratio:.3}× the mesh's brightness");
+            assert!((ratio - 1.0).abs() < 0.08, "{species}: {r:?} at 48 px is {ratio:.3}× the mesh's brightness");
+        }
         for r in [PackRepr::Mesh(1), PackRepr::Cloud, PackRepr::Cluster(0), PackRepr::Cluster(1), PackRepr::Billboard] {
             let d = darkening(r);
             eprintln!("{species}: {r:?} darkened to {d:.3}, the full mesh to {full:.3}");

@@ -334,6 +334,11 @@ pub struct ImpostorMeta {
     pub center: [f32; 3],
     /// Its radius: every view's half extent, and the depth range's half.
     pub radius: f32,
+    /// Per mip (mip 0 first): the coverage-weighted mean length of the texels'
+    /// mean normal (0–1), how much the normals a texel covers agree; the
+    /// viewer shades filtered normals with it. Empty in older packs (1).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub normal_length: Vec<f32>,
 }
 
 /// The `META` section of a pack.
@@ -763,6 +768,14 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
             return Err(Problem::Invalid(format!(
                 "META.impostors has a {0}×{0} grid (2–16 per side), {1} layers (need grid²) and radius {2} (need > 0)",
                 i.grid, i.texture.layers, i.radius
+            )));
+        }
+        finite_all("META.impostors.normal_length", &i.normal_length)?;
+        if i.normal_length.len() > i.texture.mips as usize || i.normal_length.iter().any(|l| !(0.0..=1.0).contains(l)) {
+            return Err(Problem::Invalid(format!(
+                "META.impostors.normal_length has {} values (at most one per mip, {}), each 0–1",
+                i.normal_length.len(),
+                i.texture.mips
             )));
         }
         for k in [kind::IMPOSTOR_COLOR, kind::IMPOSTOR_SURFACE] {

@@ -161,6 +161,10 @@ impl ImpostorGpu {
         params.ids[3] = self.meta.grid;
         params.bb_center = [self.meta.center[0], self.meta.center[1], self.meta.center[2], self.meta.radius];
         params.bb_size = [self.half_extent[0], self.half_extent[1], self.half_extent[2], 0.0];
+        // The normals' agreement per mip (1 where the pack has none).
+        let r = |m: usize| self.meta.normal_length.get(m).copied().unwrap_or(1.0);
+        params.bounds_min = [r(0), r(1), r(2), r(3)];
+        params.bounds_extent = [r(4), r(5), r(6), r(7)];
     }
 }
 

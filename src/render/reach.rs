@@ -206,6 +206,7 @@ mod tests {
                 texture: TextureArrayMeta { size: 4, layers: 4, mips: 3 },
                 center: [0.0, 0.0, 10.0],
                 radius: 12.0,
+                normal_length: Vec::new(),
             }),
             cloud: None,
         };
