@@ -244,6 +244,7 @@ pub fn build_pack(
                 material,
                 select_px: SELECT_PX_CLOUD,
                 mesh: level,
+                pareto_error: None,
             })
         })
         .flatten();
@@ -355,14 +356,105 @@ pub fn build_pack(
         half_height: frame.half_height,
         select_px: 0.0,
     });
-    let bytes = encode_pack(&meta, &sections);
-    sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
+    let mut bytes = encode_pack(&meta, &sections);
+    // The LoD policy: which cluster levels and whether the cloud are default
+    // tiers, from their error and the far tier's at their entry sizes.
+    let (levels, cloud) = {
+        let decoded = sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
+        measure_policy(gpu, &decoded)
+    };
+    if levels.iter().any(Option::is_some) || cloud.is_some() {
+        let mut report = Vec::new();
+        if let Some(c) = meta.clusters.as_mut() {
+            for (l, e) in c.ellipsoid_levels.iter_mut().zip(&levels) {
+                l.pareto_error = *e;
+                if let Some([own, far]) = e {
+                    let kept = sylva::format::cluster::policy_keeps(*e, true);
+                    report.push(format!(
+                        "{:.0} px {own:.4}/{far:.4} {}",
+                        l.select_px,
+                        if kept { "kept" } else { "dropped" }
+                    ));
+                }
+            }
+        }
+        if let (Some(c), Some([own, far])) = (meta.cloud.as_mut(), cloud) {
+            c.pareto_error = cloud;
+            let kept = sylva::format::cluster::policy_keeps(cloud, false);
+            report.push(format!(
+                "cloud {:.0} px {own:.4}/{far:.4} {}",
+                c.select_px,
+                if kept { "kept" } else { "dropped" }
+            ));
+        }
+        eprintln!("    LoD policy (error / far tier's at the entry size): {}", report.join(", "));
+        bytes = encode_pack(&meta, &sections);
+        sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
+    }
     Ok(BuiltPack {
         bytes,
         meta,
         billboard_color: color_chains.iter().map(|c| c[0].clone()).collect(),
         billboard_normal: normal_chains.iter().map(|c| c[0].clone()).collect(),
     })
+}
+
+/// The bake's LoD policy measurements (issue 18): for each ellipsoid level and
+/// the billboard cloud, its multi-scale RMSE and the far tier's (impostors, or
+/// billboards) against the full mesh (alpha-tested at full resolution), all
+/// drawn by the viewer's pipelines with the tree `select_px` tall, from the
+/// side and from 35° up (averaged). `None` where the pack has no far tier.
+fn measure_policy(gpu: &GpuContext, pack: &sylva::format::Pack<'_>) -> (Vec<Option<[f32; 2]>>, Option<[f32; 2]>) {
+    use sylva::render::billboard::BillboardGpu;
+    use sylva::render::capture::{preview_camera, PackView, TreeDraw, TreeRenderer};
+    use sylva::render::cluster::ClusterGpu;
+    use sylva::render::impostor::ImpostorGpu;
+    use sylva::render::mesh::MeshGpu;
+    const BACKGROUND: [f64; 4] = [0.55, 0.68, 0.82, 1.0];
+    let levels = pack.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
+    let mut r = TreeRenderer::new(gpu);
+    let (dev, q) = (&gpu.device, &gpu.queue);
+    let impostor = ImpostorGpu::upload(dev, q, &r.impostor, pack);
+    let billboard = if impostor.is_none() { BillboardGpu::upload(dev, q, &r.billboard, pack) } else { None };
+    let far = match (&impostor, &billboard) {
+        (Some(i), _) => TreeDraw::Impostor(i),
+        (None, Some(b)) => TreeDraw::Billboard(b),
+        _ => return (vec![None; levels], None),
+    };
+    let mesh = MeshGpu::upload(dev, q, &r.mesh, pack);
+    if !mesh.has_level(0) {
+        return (vec![None; levels], None);
+    }
+    let cluster = ClusterGpu::upload(dev, q, &r.cluster, pack);
+    let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
+    let radius = ((hi - lo) * 0.5).length().max(1e-3);
+    let height = (hi.z - lo.z).max(1e-3);
+    // Errors of `own` and the far tier with the tree `px` tall.
+    let mut errors = |own: &TreeDraw<'_>, px: f32| -> [f32; 2] {
+        let size = ((px * 2.0 * radius * 1.05 / height).round() as u32).clamp(16, 512);
+        let mut sum = [0.0f64; 2];
+        for view in [PackView::Side, PackView::Oblique] {
+            let (clip, eye) = preview_camera(lo, hi, view, size, size);
+            r.full_res_alpha = true;
+            let reference = r.render(gpu, &TreeDraw::Mesh(&mesh, 0), clip, eye, size, size, BACKGROUND);
+            r.full_res_alpha = false;
+            for (k, what) in [own, &far].into_iter().enumerate() {
+                let img = r.render(gpu, what, clip, eye, size, size, BACKGROUND);
+                sum[k] += sylva::metrics::multiscale_rmse(&img, &reference, size, size) / 2.0;
+            }
+        }
+        sum.map(|e| e as f32)
+    };
+    let level_errors = (0..levels)
+        .map(|l| {
+            let c = cluster.as_ref().filter(|c| l < c.levels.len())?;
+            let px = pack.meta.clusters.as_ref()?.ellipsoid_levels[l].select_px;
+            Some(errors(&TreeDraw::Cluster(c, l), px))
+        })
+        .collect();
+    let cloud =
+        pack.meta.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| errors(&TreeDraw::Cloud(&mesh), c.select_px));
+    (level_errors, cloud)
 }
 
 /// The multi-view impostors of a mesh-only pack: `grid`² orthographic views

@@ -147,6 +147,8 @@ fn bakes_the_shared_real_data() {
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("scene CRS EPSG:32631"), "{log}");
     assert!(log.contains("billboard cloud: 48 planes"), "{log}");
+    // The LoD policy measured every ellipsoid level and the cloud of each species.
+    assert_eq!(log.matches("LoD policy (error / far tier's at the entry size)").count(), 2, "{log}");
     // No --default-model: broadleaf species are reported and skipped, not fatal.
     assert!(log.contains("skipped") && log.contains("quercus robur"), "{log}");
     let v = inspect_json(&out);
@@ -162,6 +164,12 @@ fn bakes_the_shared_real_data() {
         let pack = sylva::format::decode_pack(species, &bytes).unwrap();
         let n = pack.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
         assert!(n >= 5, "{species}: {n} cluster levels");
+        let c = pack.meta.clusters.as_ref().unwrap();
+        assert!(c
+            .ellipsoid_levels
+            .iter()
+            .all(|l| l.pareto_error.is_some_and(|e| e.iter().all(|x| *x > 0.0 && *x < 0.5))));
+        assert!(pack.meta.cloud.as_ref().and_then(|c| c.pareto_error).is_some());
         use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
         let bg = [0.62, 0.74, 0.86, 1.0];
         let size = 128;

@@ -228,6 +228,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "ellipsoid" => m(
                 RenderSettings {
                     representations: Representations { meshes: true, clusters: true, billboards: false, clouds: false },
+                    lod_policy: false,
                     ..base
                 },
                 1,
@@ -237,6 +238,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "billboard-cloud" => m(
                 RenderSettings {
                     representations: Representations { meshes: true, clusters: false, billboards: false, clouds: true },
+                    lod_policy: false,
                     ..base
                 },
                 1,

@@ -319,6 +319,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 FarTierArg::Impostors => sylva::render::settings::FarTier::Impostors,
                 FarTierArg::Billboards => sylva::render::settings::FarTier::Billboards,
             },
+            // `--only` draws every baked level of the family (no LoD policy).
+            lod_policy: only.is_none(),
             representations: match only {
                 None => Representations::default(),
                 Some(OnlyArg::Meshes) => Representations::MESHES,

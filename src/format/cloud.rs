@@ -51,6 +51,11 @@ pub struct CloudMeta {
     /// The cloud's geometry: the coarsest mesh level's wood and one quad per
     /// plane (`CLVX`, `CLIX`; `select_px` as above).
     pub mesh: MeshLevelMeta,
+    /// The bake's LoD policy measurement (`crate::format::cluster::policy_keeps`):
+    /// the cloud's and the far tier's error against the full mesh at
+    /// `select_px`. Without it the cloud is not a default tier.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pareto_error: Option<[f32; 2]>,
 }
 
 impl CloudMeta {
@@ -331,6 +336,7 @@ mod tests {
                 draws: Vec::new(),
                 select_px: 40.0,
             },
+            pareto_error: None,
         };
         let words = encode_cloud(&planes, &cells, &fragments);
         assert_eq!(

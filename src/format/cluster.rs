@@ -28,6 +28,45 @@ pub struct ClusterLevelMeta {
     /// Blend of the surface normal towards the noise normal (0–1).
     #[serde(default)]
     pub normal_blend: f32,
+    /// The bake's LoD policy measurement ([`policy_keeps`]): this level's
+    /// multi-scale RMSE and the far tier's against the full mesh, both rendered
+    /// by the viewer's pipelines at `select_px` from two views. Absent in older
+    /// packs (the level is then drawn).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pareto_error: Option<[f32; 2]>,
+}
+
+/// The bake's LoD policy (issue 18): of two representations for a size, the
+/// default is the cheaper one unless the costlier is more faithful by this
+/// factor. The far tier (impostors, or billboards) is the cheapest per tree, so
+/// a cluster level or a billboard cloud is a default tier only where its error
+/// times this is below the far tier's.
+pub const POLICY_MARGIN: f32 = 1.1;
+
+/// Whether the policy keeps a representation measured `[own, far]` (see
+/// [`POLICY_MARGIN`]); `unmeasured` when there is no measurement.
+#[must_use]
+pub fn policy_keeps(pareto_error: Option<[f32; 2]>, unmeasured: bool) -> bool {
+    pareto_error.map_or(unmeasured, |[own, far]| own * POLICY_MARGIN < far)
+}
+
+/// The smallest projected height (px) from which the policy keeps cluster
+/// levels below `mesh_floor`: levels are walked finest first, and the band
+/// ends above the first level it drops (the far tier takes over there).
+/// `mesh_floor` when it keeps none.
+#[must_use]
+pub fn policy_floor<'a>(levels: impl Iterator<Item = &'a ClusterLevelMeta>, mesh_floor: f32) -> f32 {
+    let mut floor = mesh_floor;
+    for l in levels {
+        if l.select_px >= mesh_floor {
+            continue;
+        }
+        if !policy_keeps(l.pareto_error, true) {
+            break;
+        }
+        floor = l.select_px;
+    }
+    floor
 }
 
 /// The cluster levels of a pack.
@@ -232,6 +271,36 @@ impl PackedLine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lod_policy_keeps_levels_only_where_they_beat_the_far_tier() {
+        let level = |select_px: f32, e: Option<[f32; 2]>| ClusterLevelMeta {
+            count: 1,
+            select_px,
+            error: 0.0,
+            noise_threshold: 0.0,
+            normal_blend: 0.0,
+            pareto_error: e,
+        };
+        assert!(policy_keeps(Some([0.02, 0.03]), false));
+        assert!(!policy_keeps(Some([0.029, 0.03]), true), "within the margin: the cheaper far tier");
+        assert!(policy_keeps(None, true) && !policy_keeps(None, false));
+        // Finest first: 400 px is above the mesh floor (ignored), 100 and 60
+        // beat the far tier, 30 does not: clusters from 60 px; below, the far tier.
+        let levels = [
+            level(400.0, Some([0.05, 0.01])),
+            level(100.0, Some([0.01, 0.02])),
+            level(60.0, Some([0.02, 0.03])),
+            level(30.0, Some([0.04, 0.03])),
+            level(15.0, Some([0.01, 0.03])),
+        ];
+        assert_eq!(policy_floor(levels.iter(), 120.0), 60.0);
+        // The first level in the band dropped: none (the floor stays the mesh's).
+        assert_eq!(policy_floor(levels[3..].iter(), 120.0), 120.0);
+        // Unmeasured (older packs): every level.
+        let old = [level(100.0, None), level(30.0, None)];
+        assert_eq!(policy_floor(old.iter(), 120.0), 30.0);
+    }
 
     #[test]
     fn ellipsoid_round_trip_within_quantisation() {

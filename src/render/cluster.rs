@@ -269,6 +269,7 @@ impl ClusterGpu {
                 error: 0.0,
                 noise_threshold: noise.0,
                 normal_blend: noise.1,
+                pareto_error: None,
             },
         };
         Self::new(
@@ -406,7 +407,14 @@ mod tests {
             ellipsoids: 1,
             line_word: 0,
             lines: 0,
-            meta: ClusterLevelMeta { count: 1, select_px, error: 0.0, noise_threshold: 0.0, normal_blend: 0.0 },
+            meta: ClusterLevelMeta {
+                count: 1,
+                select_px,
+                error: 0.0,
+                noise_threshold: 0.0,
+                normal_blend: 0.0,
+                pareto_error: None,
+            },
         }
     }
 

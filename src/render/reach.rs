@@ -24,6 +24,7 @@ struct Measured {
     cluster_min_px: f32,
     fade_band: f32,
     representations: Representations,
+    lod_policy: bool,
     residency: u64,
 }
 
@@ -57,6 +58,7 @@ impl Reach {
             cluster_min_px: settings.cluster_min_px,
             fade_band: settings.fade_band,
             representations: settings.representations,
+            lod_policy: settings.lod_policy,
             residency: generation,
         };
         if self.measured == Some(key) && self.species_max_px.len() == species {
@@ -149,7 +151,12 @@ impl Reach {
         let mesh_floor = if has_mesh { select(meta.mesh_levels.len() - 1) } else { f32::INFINITY };
         let cluster_floor = if has_bb { m.cluster_min_px } else { 0.0 };
         // The billboard cloud (in the coarse meshes' part) takes over below the meshes.
-        let cloud_floor = meta.cloud.as_ref().filter(|_| allow.clouds).map(|c| c.select_px);
+        let policy = m.lod_policy;
+        let cloud_floor = meta
+            .cloud
+            .as_ref()
+            .filter(|c| allow.clouds && (!policy || crate::format::cluster::policy_keeps(c.pareto_error, false)))
+            .map(|c| c.select_px);
         let coarsest_is_mesh = !has_bb && !has_cl && cloud_floor.is_none();
         let meshes = has_mesh && (max_px >= mesh_floor * slack || coarsest_is_mesh);
         let cloud = cloud_floor.is_some_and(|f| max_px >= f * slack || (!has_bb && !has_cl));
@@ -179,6 +186,7 @@ mod tests {
                 cluster_min_px: 40.0,
                 fade_band: 0.12,
                 representations: Representations::ALL,
+                lod_policy: false,
                 residency: 0,
             }),
         };
@@ -220,11 +228,22 @@ mod tests {
             material: 0,
             select_px: 40.0,
             mesh: meta.mesh_levels[0].clone(),
+            pareto_error: None,
         });
         assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
         let mut closer = reach.clone();
         closer.species_max_px = vec![45.0];
         assert_eq!(closer.parts_needed(0, &meta), [true, false, true, false]);
+        // The LoD policy: a cloud the bake found no better than the far tier is
+        // not fetched; one it kept is.
+        let mut policy = closer.clone();
+        if let Some(m) = policy.measured.as_mut() {
+            m.lod_policy = true;
+        }
+        meta.cloud.as_mut().unwrap().pareto_error = Some([0.03, 0.031]);
+        assert_eq!(policy.parts_needed(0, &meta), [true, false, false, false]);
+        meta.cloud.as_mut().unwrap().pareto_error = Some([0.02, 0.031]);
+        assert_eq!(policy.parts_needed(0, &meta), [true, false, true, false]);
         meta.cloud = None;
         // Without any far tier the mesh is the coarsest and is fetched.
         meta.impostors = None;

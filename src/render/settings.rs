@@ -77,6 +77,11 @@ pub struct RenderSettings {
     /// (a hashed test) instead of the mip's all-or-nothing alpha. Off: the
     /// plain alpha test (comparisons).
     pub adaptive_alpha: bool,
+    /// The bake's LoD policy (`crate::format::cluster::policy_keeps`): a cluster
+    /// level or the billboard cloud is drawn only where the bake measured it
+    /// more faithful than the far tier by [`crate::format::cluster::POLICY_MARGIN`].
+    /// Off: every baked level within `representations` (benchmark baselines).
+    pub lod_policy: bool,
     /// Shifts the cross-fade dither pattern (the progressive-refinement step,
     /// [`super::refine`]): accumulated steps then blend both sides of a
     /// transition. 0: the fixed pattern.
@@ -123,11 +128,10 @@ impl Representations {
 }
 
 impl Default for Representations {
-    /// Everything but the billboard clouds: measured on the Amsterdam scene
-    /// they cost ~18× the impostors' GPU time for a lower FLIP but a higher
-    /// MS-RMSE (docs/BENCHMARKS.md), so they are not a default tier (yet).
+    /// Everything: which cluster levels and clouds a species draws by default
+    /// is the bake's LoD policy ([`RenderSettings::lod_policy`]).
     fn default() -> Self {
-        Self { clouds: false, ..Self::ALL }
+        Self::ALL
     }
 }
 
@@ -153,6 +157,7 @@ impl Default for RenderSettings {
             far_tier: FarTier::Impostors,
             full_res_alpha: false,
             adaptive_alpha: true,
+            lod_policy: true,
             refine_seed: 0,
         }
     }

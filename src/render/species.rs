@@ -16,6 +16,7 @@ use super::mesh::{MeshGpu, MeshPipelines};
 use super::pools::Pools;
 use super::reach::Reach;
 use super::settings::{FarTier, RenderSettings, Representations};
+use crate::format::cluster::{policy_floor, policy_keeps};
 use crate::format::Pack;
 
 /// Segment capacity of the full mesh level per species: only trees hundreds of
@@ -43,6 +44,8 @@ struct SpeciesGpu {
     has_level: [bool; 2],
     /// The billboard cloud's threshold and index count, when on the GPU.
     cloud: Option<(f32, u32)>,
+    /// The bake's LoD policy keeps the cloud as a default tier.
+    cloud_kept: bool,
     bytes: u64,
 }
 
@@ -79,6 +82,7 @@ pub struct Species {
     cluster_min_px: f32,
     representations: Representations,
     far_tier: FarTier,
+    lod_policy: bool,
 }
 
 impl Species {
@@ -97,6 +101,7 @@ impl Species {
             cluster_min_px: super::settings::DEFAULT_CLUSTER_MIN_PX,
             representations: Representations::default(),
             far_tier: FarTier::Impostors,
+            lod_policy: true,
         }
     }
 
@@ -180,6 +185,7 @@ impl Species {
             index_counts: [level(0).map_or(0, |l| l.index_count), level(1).map_or(0, |l| l.index_count)],
             has_level: [mesh.has_level(0), mesh.has_level(1)],
             cloud: m.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| (c.select_px, c.mesh.index_count)),
+            cloud_kept: m.cloud.as_ref().is_some_and(|c| policy_keeps(c.pareto_error, false)),
             mesh,
             billboard,
             impostor,
@@ -197,10 +203,12 @@ impl Species {
         if settings.cluster_min_px != self.cluster_min_px
             || settings.representations != self.representations
             || settings.far_tier != self.far_tier
+            || settings.lod_policy != self.lod_policy
         {
             self.cluster_min_px = settings.cluster_min_px;
             self.representations = settings.representations;
             self.far_tier = settings.far_tier;
+            self.lod_policy = settings.lod_policy;
             self.dirty = true;
         }
         if self.dirty {
@@ -215,6 +223,7 @@ impl Species {
         let mut params = Vec::with_capacity(count * REPR_COUNT as usize);
         let budget = pools.config().items;
         let allow = self.representations;
+        let policy = self.lod_policy;
         // Without billboards the coarsest cluster level reaches down to 0 px.
         let cluster_min_px = if allow.billboards { self.cluster_min_px } else { 0.0 };
         for (i, pack) in self.packs.iter_mut().enumerate() {
@@ -240,14 +249,14 @@ impl Species {
                     s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
                 }
                 // The billboard cloud, below the meshes.
-                if let Some((select_px, indices)) = p.cloud.filter(|_| allow.clouds) {
+                if let Some((select_px, indices)) = p.cloud.filter(|_| allow.clouds && (!policy || p.cloud_kept)) {
                     want[Repr::Cloud as usize] = resident.min(MESH1_CAPACITY);
                     lower[Repr::Cloud as usize] = select_px;
                     s.index_count[Repr::Cloud as usize] = indices;
                 }
                 // Cluster tiers: the levels whose size band meets [cluster_min_px, the
                 // coarsest mesh level's (or the cloud's) threshold).
-                let mesh_floor = if allow.clouds && p.cloud.is_some() {
+                let mesh_floor = if allow.clouds && p.cloud.is_some() && (!policy || p.cloud_kept) {
                     p.cloud.map_or(f32::INFINITY, |c| c.0)
                 } else if allow.meshes {
                     // The coarsest level on the GPU.
@@ -257,9 +266,14 @@ impl Species {
                 };
                 p.tiers.clear();
                 if let Some(c) = p.cluster.as_ref().filter(|_| allow.clusters) {
-                    for (tier, (level, lo)) in
-                        cluster_tiers(&c.levels, cluster_min_px, mesh_floor).into_iter().enumerate()
-                    {
+                    // With a far tier to take over, the policy's band only.
+                    let has_far = allow.billboards && (p.impostor.is_some() || p.billboard.is_some());
+                    let min_px = if policy && has_far {
+                        cluster_min_px.max(policy_floor(c.levels.iter().map(|l| &l.meta), mesh_floor))
+                    } else {
+                        cluster_min_px
+                    };
+                    for (tier, (level, lo)) in cluster_tiers(&c.levels, min_px, mesh_floor).into_iter().enumerate() {
                         let r = Repr::CLUSTERS[tier] as usize;
                         want[r] = resident.min(CLUSTER_CAPACITY);
                         lower[r] = lo;

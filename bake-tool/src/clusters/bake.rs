@@ -216,6 +216,7 @@ pub fn build_clusters(
             error: l.error as f32,
             noise_threshold: 0.0,
             normal_blend: 0.0,
+            pareto_error: None,
         });
     }
     // The occlusion field ellipsoids and lines sample per pixel, with the cluster part.

@@ -286,6 +286,7 @@ pub fn build_levels(
                 error: err as f32,
                 noise_threshold: threshold,
                 normal_blend,
+                pareto_error: None,
             },
             ellipsoids: ell,
         });
