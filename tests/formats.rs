@@ -126,6 +126,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
                 DrawRange { material: 1, first_index: 3, index_count: 3 },
             ],
             select_px: 360.0,
+            policy_px: None,
         }],
         billboards: Some(BillboardMeta {
             angles: 2,

@@ -91,6 +91,7 @@ fn toy_pack() -> Vec<u8> {
                 DrawRange { material: 1, first_index: 6, index_count: 6 },
             ],
             select_px: 0.0,
+            policy_px: None,
         }],
         billboards: None,
         clusters: None,

@@ -359,12 +359,22 @@ pub fn build_pack(
     let mut bytes = encode_pack(&meta, &sections);
     // The LoD policy: which cluster levels and whether the cloud are default
     // tiers, from their error and the far tier's at their entry sizes.
-    let (levels, cloud) = {
+    let (levels, cloud, mesh_policy) = {
         let decoded = sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
         measure_policy(gpu, &decoded)
     };
-    if levels.iter().any(Option::is_some) || cloud.is_some() {
+    if levels.iter().any(Option::is_some) || cloud.is_some() || mesh_policy.iter().any(Option::is_some) {
         let mut report = Vec::new();
+        for (l, p) in mesh_policy.iter().enumerate() {
+            meta.mesh_levels[l + 1].policy_px = *p;
+            if let Some(p) = p {
+                report.push(if *p >= meta.mesh_levels[l].select_px {
+                    format!("mesh level {} dropped (the far tier is as faithful up to {:.0} px)", l + 1, p)
+                } else {
+                    format!("mesh level {} from {p:.0} px", l + 1)
+                });
+            }
+        }
         if let Some(c) = meta.clusters.as_mut() {
             for (l, e) in c.ellipsoid_levels.iter_mut().zip(&levels) {
                 l.pareto_error = *e;
@@ -404,7 +414,12 @@ pub fn build_pack(
 /// billboards) against the full mesh (alpha-tested at full resolution), all
 /// drawn by the viewer's pipelines with the tree `select_px` tall, from the
 /// side and from 35° up (averaged). `None` where the pack has no far tier.
-fn measure_policy(gpu: &GpuContext, pack: &sylva::format::Pack<'_>) -> (Vec<Option<[f32; 2]>>, Option<[f32; 2]>) {
+/// Also, per simplified mesh level (1, 2, …), the policy's threshold.
+#[allow(clippy::type_complexity)]
+fn measure_policy(
+    gpu: &GpuContext,
+    pack: &sylva::format::Pack<'_>,
+) -> (Vec<Option<[f32; 2]>>, Option<[f32; 2]>, Vec<Option<f32>>) {
     use sylva::render::billboard::BillboardGpu;
     use sylva::render::capture::{preview_camera, PackView, TreeDraw, TreeRenderer};
     use sylva::render::cluster::ClusterGpu;
@@ -419,11 +434,11 @@ fn measure_policy(gpu: &GpuContext, pack: &sylva::format::Pack<'_>) -> (Vec<Opti
     let far = match (&impostor, &billboard) {
         (Some(i), _) => TreeDraw::Impostor(i),
         (None, Some(b)) => TreeDraw::Billboard(b),
-        _ => return (vec![None; levels], None),
+        _ => return (vec![None; levels], None, Vec::new()),
     };
     let mesh = MeshGpu::upload(dev, q, &r.mesh, pack);
     if !mesh.has_level(0) {
-        return (vec![None; levels], None);
+        return (vec![None; levels], None, Vec::new());
     }
     let cluster = ClusterGpu::upload(dev, q, &r.cluster, pack);
     let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
@@ -454,7 +469,26 @@ fn measure_policy(gpu: &GpuContext, pack: &sylva::format::Pack<'_>) -> (Vec<Opti
         .collect();
     let cloud =
         pack.meta.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| errors(&TreeDraw::Cloud(&mesh), c.select_px));
-    (level_errors, cloud)
+    // Simplified mesh levels: from their threshold up to the finer level's, in
+    // steps of 1.5×, the first size where the level beats the far tier.
+    let levels = &pack.meta.mesh_levels;
+    let mesh_policy = (1..levels.len())
+        .map(|l| {
+            if !mesh.has_level(l) {
+                return None;
+            }
+            let (from, to) = (levels[l].select_px.max(1.0), levels[l - 1].select_px);
+            let mut px = from;
+            while px < to {
+                if sylva::format::cluster::policy_keeps(Some(errors(&TreeDraw::Mesh(&mesh, l), px)), true) {
+                    return Some(px);
+                }
+                px *= 1.5;
+            }
+            Some(to)
+        })
+        .collect();
+    (level_errors, cloud, mesh_policy)
 }
 
 /// The multi-view impostors of a mesh-only pack: `grid`² orthographic views
@@ -709,6 +743,7 @@ fn build_mesh_level(
         uv_max: (umin + uext).to_array(),
         draws,
         select_px,
+        policy_px: None,
     };
     (meta, packed, indices)
 }

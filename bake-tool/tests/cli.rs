@@ -170,6 +170,8 @@ fn bakes_the_shared_real_data() {
             .iter()
             .all(|l| l.pareto_error.is_some_and(|e| e.iter().all(|x| *x > 0.0 && *x < 0.5))));
         assert!(pack.meta.cloud.as_ref().and_then(|c| c.pareto_error).is_some());
+        // …and the simplified mesh's threshold (at or above the full mesh's: left out).
+        assert!(pack.meta.mesh_levels[1].policy_px.is_some_and(|px| px >= pack.meta.mesh_levels[1].select_px));
         use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
         let bg = [0.62, 0.74, 0.86, 1.0];
         let size = 128;

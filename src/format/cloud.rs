@@ -335,6 +335,7 @@ mod tests {
                 uv_max: [1.0; 2],
                 draws: Vec::new(),
                 select_px: 40.0,
+                policy_px: None,
             },
             pareto_error: None,
         };

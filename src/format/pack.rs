@@ -257,6 +257,12 @@ pub struct MeshLevelMeta {
     pub draws: Vec<DrawRange>,
     /// This level is drawn while the tree's projected height is at least this many pixels.
     pub select_px: f32,
+    /// The bake's LoD policy for a simplified level (`crate::format::cluster::policy_keeps`):
+    /// the projected height from which it is more faithful than the far tier
+    /// (the far tier is drawn below); at or above the finer level's threshold
+    /// the level is not a default tier. Absent: `select_px`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy_px: Option<f32>,
 }
 
 /// A texture array stored in a section.
@@ -837,6 +843,9 @@ fn validate_mesh(
     finite_all(&format!("{what}.uv_min"), &level.uv_min)?;
     finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
     finite(format!("{what}.select_px"), level.select_px.into())?;
+    if let Some(p) = level.policy_px {
+        finite(format!("{what}.policy_px"), p.into())?;
+    }
     let (Some(vtx), Some(idx)) = (vtx, idx) else {
         return Err(Problem::Invalid(format!("{what} has no {sections}")));
     };

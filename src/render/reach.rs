@@ -148,10 +148,20 @@ impl Reach {
         // Cross-fades start below a threshold: fetch a little early.
         let slack = 1.0 - m.fade_band;
         let select = |l: usize| meta.mesh_levels.get(l).map_or(f32::INFINITY, |m| m.select_px);
-        let mesh_floor = if has_mesh { select(meta.mesh_levels.len() - 1) } else { f32::INFINITY };
+        // The coarsest mesh level's threshold, as the LoD policy moves it (with a
+        // far tier to take over); a level it leaves out leaves the finer one's.
+        let policy = m.lod_policy;
+        let mesh_floor = if has_mesh {
+            let last = meta.mesh_levels.len() - 1;
+            match meta.mesh_levels[last].policy_px {
+                Some(px) if policy && has_bb && last > 0 => px.max(select(last)).min(select(last - 1)),
+                _ => select(last),
+            }
+        } else {
+            f32::INFINITY
+        };
         let cluster_floor = if has_bb { m.cluster_min_px } else { 0.0 };
         // The billboard cloud (in the coarse meshes' part) takes over below the meshes.
-        let policy = m.lod_policy;
         let cloud_floor = meta
             .cloud
             .as_ref()
@@ -206,6 +216,7 @@ mod tests {
                 uv_max: [1.0; 2],
                 draws: Vec::new(),
                 select_px: 120.0,
+                policy_px: None,
             }],
             billboards: None,
             clusters: None,

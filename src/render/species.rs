@@ -42,6 +42,8 @@ struct SpeciesGpu {
     index_counts: [u32; 2],
     /// Mesh levels 0 and 1 on the GPU.
     has_level: [bool; 2],
+    /// The bake's LoD policy threshold of each mesh level, when measured.
+    policy_px: [Option<f32>; 2],
     /// The billboard cloud's threshold and index count, when on the GPU.
     cloud: Option<(f32, u32)>,
     /// The bake's LoD policy keeps the cloud as a default tier.
@@ -184,6 +186,7 @@ impl Species {
             select_px: [level(0).map_or(0.0, |l| l.select_px), level(1).map_or(0.0, |l| l.select_px)],
             index_counts: [level(0).map_or(0, |l| l.index_count), level(1).map_or(0, |l| l.index_count)],
             has_level: [mesh.has_level(0), mesh.has_level(1)],
+            policy_px: [level(0).and_then(|l| l.policy_px), level(1).and_then(|l| l.policy_px)],
             cloud: m.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| (c.select_px, c.mesh.index_count)),
             cloud_kept: m.cloud.as_ref().is_some_and(|c| policy_keeps(c.pareto_error, false)),
             mesh,
@@ -243,9 +246,17 @@ impl Species {
                     lower[Repr::Mesh0 as usize] = p.select_px[0];
                     s.index_count[Repr::Mesh0 as usize] = p.index_counts[0];
                 }
-                if p.has_level[1] && allow.meshes {
+                // With a far tier to take over, the bake's LoD policy may start the
+                // simplified mesh higher, or leave it out.
+                let has_far = allow.billboards && (p.impostor.is_some() || p.billboard.is_some());
+                let mesh1_lower = match p.policy_px[1] {
+                    Some(px) if policy && has_far => px.max(p.select_px[1]),
+                    _ => p.select_px[1],
+                };
+                let mesh1 = p.has_level[1] && allow.meshes && (!p.has_level[0] || mesh1_lower < p.select_px[0]);
+                if mesh1 {
                     want[Repr::Mesh1 as usize] = resident.min(MESH1_CAPACITY);
-                    lower[Repr::Mesh1 as usize] = p.select_px[1];
+                    lower[Repr::Mesh1 as usize] = mesh1_lower;
                     s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
                 }
                 // The billboard cloud, below the meshes.
@@ -258,16 +269,16 @@ impl Species {
                 // coarsest mesh level's (or the cloud's) threshold).
                 let mesh_floor = if allow.clouds && p.cloud.is_some() && (!policy || p.cloud_kept) {
                     p.cloud.map_or(f32::INFINITY, |c| c.0)
-                } else if allow.meshes {
-                    // The coarsest level on the GPU.
-                    (0..2).rev().find(|&l| p.has_level[l]).map_or(f32::INFINITY, |l| p.select_px[l])
+                } else if allow.meshes && mesh1 {
+                    mesh1_lower
+                } else if allow.meshes && p.has_level[0] {
+                    p.select_px[0]
                 } else {
                     f32::INFINITY
                 };
                 p.tiers.clear();
                 if let Some(c) = p.cluster.as_ref().filter(|_| allow.clusters) {
                     // With a far tier to take over, the policy's band only.
-                    let has_far = allow.billboards && (p.impostor.is_some() || p.billboard.is_some());
                     let min_px = if policy && has_far {
                         cluster_min_px.max(policy_floor(c.levels.iter().map(|l| &l.meta), mesh_floor))
                     } else {
