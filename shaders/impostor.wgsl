@@ -139,7 +139,7 @@ fn impostor_texcoord(p: vec3<f32>, right: vec3<f32>, up: vec3<f32>, radius: f32)
 // which bends normals across the code's fold: downward-facing leaves turned
 // up and a crown lit ~7 % too brightly.)
 fn impostor_normal(uv: vec2<f32>, layer: u32, lod: f32) -> vec3<f32> {
-    let level = u32(round(lod));
+    let level = min(u32(round(lod)), textureNumLevels(imp_surface) - 1u);
     let dims = vec2<i32>(textureDimensions(imp_surface, level));
     let at = uv * vec2<f32>(dims) - 0.5;
     let base = vec2<i32>(floor(at));

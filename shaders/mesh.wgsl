@@ -6,14 +6,15 @@
 
 @group(0) @binding(0) var<storage, read> view: View;
 
-// Must match `MeshUniform` in src/render/gpu_data.rs. pos_min.w and
-// pos_extent.w: the first cell and first fragment word of the billboard cloud
-// (bit patterns of u32s; 0 for mesh levels).
+// Must match `MeshUniform` in src/render/gpu_data.rs.
 struct MeshParams {
     pos_min: vec4<f32>,
     pos_extent: vec4<f32>,
     uv_min: vec2<f32>,
     uv_extent: vec2<f32>,
+    // Billboard cloud: x the first cell word (16 × planes), y the first
+    // fragment word of `cloud`; 0 for mesh levels.
+    cloud: vec4<u32>,
 };
 
 // Must match `GpuMaterial` in src/render/gpu_data.rs.
@@ -129,8 +130,12 @@ struct CloudHit {
 fn cloud_surface(in: VertexOut, front: bool, duv_dx: vec2<f32>, duv_dy: vec2<f32>) -> CloudHit {
     var out: CloudHit;
     out.keep = false;
-    let cells_at = bitcast<u32>(mesh.pos_min.w);
-    let fragments_at = bitcast<u32>(mesh.pos_extent.w);
+    let cells_at = mesh.cloud.x;
+    let fragments_at = mesh.cloud.y;
+    // A plane the cloud does not have (the pack's validation refuses them).
+    if in.plane >= cells_at / 16u {
+        return out;
+    }
     let p = in.plane * 16u;
     let grid = vec2<u32>(max(cloud[p + 7u], 1u), max(cloud[p + 11u], 1u));
     let st = clamp(in.uv, vec2<f32>(0.0), vec2<f32>(1.0));

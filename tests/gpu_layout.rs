@@ -108,7 +108,7 @@ fn mesh_pass_structs_and_indirect_args_match() {
     check(
         "mesh",
         "MeshParams",
-        &members!(MeshUniform: pos_min, pos_extent, uv_min, uv_extent),
+        &members!(MeshUniform: pos_min, pos_extent, uv_min, uv_extent, cloud),
         size_of::<MeshUniform>(),
         None,
     );

@@ -212,6 +212,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "billboard" => m(
                 RenderSettings {
                     representations: Representations { meshes: true, clusters: false, billboards: true, clouds: false },
+                    lod_policy: false,
                     far_tier: FarTier::Billboards,
                     ..base
                 },
@@ -220,6 +221,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "impostor" => m(
                 RenderSettings {
                     representations: Representations { meshes: true, clusters: false, billboards: true, clouds: false },
+                    lod_policy: false,
                     far_tier: FarTier::Impostors,
                     ..base
                 },
@@ -615,21 +617,25 @@ pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>> {
     for (n, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         let bad = || anyhow::anyhow!("{} line {}: not a frames.csv row", path.display(), n + 1);
-        // 15 columns: written before the FLIP column was added; 16 before shadow_ms.
+        // 15 columns: written before the FLIP column was added; 16 before
+        // shadow_ms; 17 before cloud.
         let has_flip = match f.len() {
-            16 | 17 => true,
+            16..=18 => true,
             15 => false,
             _ => return Err(bad()),
         };
         let tn = if has_flip { 15 } else { 14 };
         let num = |i: usize| -> Result<f64> { f[i].parse::<f64>().map_err(|_| bad()) };
         let int = |i: usize| -> Result<u64> { f[i].parse::<u64>().map_err(|_| bad()) };
-        let shadow_ms = if f.len() == 17 { num(16)? } else { 0.0 };
-        let instances = ["mesh0", "mesh1", "ellipsoid", "billboard"]
+        let shadow_ms = if f.len() >= 17 { num(16)? } else { 0.0 };
+        let mut instances = ["mesh0", "mesh1", "ellipsoid", "billboard"]
             .iter()
             .enumerate()
             .map(|(k, name)| Ok((name.to_string(), int(7 + k)?)))
             .collect::<Result<BTreeMap<_, _>>>()?;
+        if f.len() == 18 {
+            instances.insert("cloud".to_string(), int(17)?);
+        }
         out.push(FrameRecord {
             method: f[0].to_string(),
             frame: int(1)? as usize,
@@ -658,14 +664,14 @@ pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
     use std::fmt::Write as _;
     let reprs = ["mesh0", "mesh1", "ellipsoid", "billboard"];
     let mut s = String::from(
-        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,flip,temporal_noise,shadow_ms\n",
+        "method,frame,gpu_ms,cull_ms,draw_ms,cpu_ms,draw_calls,mesh0,mesh1,ellipsoid,billboard,gpu_bytes,bytes_fetched,error,flip,temporal_noise,shadow_ms,cloud\n",
     );
     for r in frames {
         let inst: Vec<String> = reprs.iter().map(|k| r.instances.get(*k).copied().unwrap_or(0).to_string()).collect();
         let tn = if r.temporal_noise.is_finite() { format!("{:.6}", r.temporal_noise) } else { String::new() };
         writeln!(
             s,
-            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{:.6},{},{:.3}",
+            "{},{},{:.3},{:.3},{:.3},{:.4},{},{},{},{},{:.6},{:.6},{},{:.3},{}",
             r.method,
             r.frame,
             r.gpu_ms,
@@ -679,7 +685,8 @@ pub fn write_csv(dir: &Path, frames: &[FrameRecord]) -> Result<()> {
             r.error,
             r.flip,
             tn,
-            r.shadow_ms
+            r.shadow_ms,
+            r.instances.get("cloud").copied().unwrap_or(0)
         )?;
     }
     std::fs::write(dir.join("frames.csv"), s).with_context(|| format!("writing {}", dir.join("frames.csv").display()))

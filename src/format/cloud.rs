@@ -32,6 +32,8 @@ pub const MAX_GRID: u32 = 256;
 pub const MAX_CELL_FRAGMENTS: u32 = 255;
 /// Most fragments a cloud may hold (a cell's first fragment is 24 bits).
 pub const MAX_FRAGMENTS: u32 = 1 << 24;
+/// Most `CLDA` words (64 MiB: within WebGPU's default 128 MiB storage binding).
+pub const MAX_WORDS: u64 = 16 << 20;
 
 /// The billboard cloud of a pack (`META.cloud`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -220,10 +222,11 @@ pub fn decode_cloud(meta: &CloudMeta, words: &[u32]) -> DecodedCloud {
     DecodedCloud { planes, cells, fragments }
 }
 
-/// Checks a `CLDA` section against `meta`: its length, every plane's grid
-/// inside the cells, every cell's list inside the fragments, every fragment's
-/// material below `materials`, finite floats. The shader then never reads
-/// outside the buffer or the materials.
+/// Checks a `CLDA` section against `meta`: at least one plane and at most
+/// [`MAX_WORDS`], its length, every plane's grid inside the cells, every cell's
+/// list inside the fragments, every fragment's material below `materials`,
+/// finite floats. With the quads' plane ids checked against `planes` (the
+/// pack's validation) the shader reads only inside the buffer.
 ///
 /// # Errors
 /// The first problem found.
@@ -236,6 +239,13 @@ pub fn validate_cloud(meta: &CloudMeta, data: &[u8], materials: usize) -> Result
         });
     }
     finite("META.cloud.select_px", meta.select_px.into())?;
+    if meta.planes == 0 || meta.words() > MAX_WORDS {
+        return Err(Problem::Invalid(format!(
+            "META.cloud has {} planes and {} words (need 1 or more planes, at most {MAX_WORDS} words)",
+            meta.planes,
+            meta.words()
+        )));
+    }
     if meta.material as usize >= materials {
         return Err(Problem::OutOfRange {
             what: "META.cloud.material".into(),
@@ -377,5 +387,10 @@ mod tests {
         let mut origin = words;
         origin[0] = f32::INFINITY.to_bits();
         assert!(check(&origin, 3).is_err());
+        // No planes (an empty storage binding), or more words than a binding holds.
+        let empty = CloudMeta { planes: 0, cells: 0, fragments: 0, ..meta.clone() };
+        assert!(validate_cloud(&empty, &[], 3).unwrap_err().to_string().contains("planes"));
+        let huge = CloudMeta { fragments: MAX_WORDS as u32 / 10 + 1, ..meta.clone() };
+        assert!(validate_cloud(&huge, &[], 3).unwrap_err().to_string().contains("words"));
     }
 }

@@ -728,6 +728,7 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     for (l, level) in m.mesh_levels.iter().enumerate() {
         let vtx = pack.section(kind::MESH_VERTICES, l as u32);
         let idx = pack.section(kind::MESH_INDICES, l as u32);
+        mesh_meta_finite(&format!("META.mesh_levels[{l}]"), level)?;
         if partial && (vtx.is_none() || idx.is_none()) {
             continue;
         }
@@ -735,6 +736,8 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         validate_mesh(&format!("META.mesh_levels[{l}]"), level, vtx, idx, m.materials.len(), &sections)?;
     }
     if let Some(c) = &m.cloud {
+        mesh_meta_finite("META.cloud.mesh", &c.mesh)?;
+        finite("META.cloud.select_px", c.select_px.into())?;
         let vtx = pack.section(kind::CLOUD_VERTICES, 0);
         let idx = pack.section(kind::CLOUD_INDICES, 0);
         let data = pack.section(kind::CLOUD_DATA, 0);
@@ -744,6 +747,32 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                 return Err(Problem::Invalid("META.cloud has no CLDA section".into()));
             };
             super::cloud::validate_cloud(c, data, m.materials.len())?;
+            if m.materials[c.material as usize].kind != MaterialKind::Cloud {
+                return Err(Problem::Invalid("META.cloud.material is not a `cloud` material".into()));
+            }
+            // Each quad's plane (vertex colour red + 256 × green) must exist.
+            for (i, v) in vtx.unwrap_or_default().chunks_exact(20).enumerate() {
+                let material = usize::from(u16::from_le_bytes([v[6], v[7]]));
+                let plane = u32::from(v[16]) + 256 * u32::from(v[17]);
+                if m.materials[material].kind == MaterialKind::Cloud && plane >= c.planes {
+                    return Err(Problem::OutOfRange {
+                        what: format!("META.cloud.mesh vertex[{i}] plane"),
+                        value: plane.into(),
+                        allowed: format!("less than {} planes", c.planes),
+                    });
+                }
+            }
+        }
+    }
+    // Mesh levels draw no cloud planes.
+    for (l, _) in m.mesh_levels.iter().enumerate() {
+        for (i, v) in pack.section(kind::MESH_VERTICES, l as u32).unwrap_or_default().chunks_exact(20).enumerate() {
+            let material = usize::from(u16::from_le_bytes([v[6], v[7]]));
+            if m.materials.get(material).is_some_and(|x| x.kind == MaterialKind::Cloud) {
+                return Err(Problem::Invalid(format!(
+                    "META.mesh_levels[{l}] vertex[{i}] uses the `cloud` material {material}"
+                )));
+            }
         }
     }
     if let Some(b) = &m.billboards {
@@ -828,6 +857,19 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     Ok(())
 }
 
+/// A mesh level's floats are finite (checked whether its sections are held or not).
+fn mesh_meta_finite(what: &str, level: &MeshLevelMeta) -> Result<(), Problem> {
+    finite_all(&format!("{what}.pos_min"), &level.pos_min)?;
+    finite_all(&format!("{what}.pos_max"), &level.pos_max)?;
+    finite_all(&format!("{what}.uv_min"), &level.uv_min)?;
+    finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
+    finite(format!("{what}.select_px"), level.select_px.into())?;
+    if let Some(p) = level.policy_px {
+        finite(format!("{what}.policy_px"), p.into())?;
+    }
+    Ok(())
+}
+
 /// Checks one mesh level's sections against its metadata (`sections` names
 /// the section kinds in messages).
 fn validate_mesh(
@@ -838,14 +880,7 @@ fn validate_mesh(
     materials: usize,
     sections: &str,
 ) -> Result<(), Problem> {
-    finite_all(&format!("{what}.pos_min"), &level.pos_min)?;
-    finite_all(&format!("{what}.pos_max"), &level.pos_max)?;
-    finite_all(&format!("{what}.uv_min"), &level.uv_min)?;
-    finite_all(&format!("{what}.uv_max"), &level.uv_max)?;
-    finite(format!("{what}.select_px"), level.select_px.into())?;
-    if let Some(p) = level.policy_px {
-        finite(format!("{what}.policy_px"), p.into())?;
-    }
+    mesh_meta_finite(what, level)?;
     let (Some(vtx), Some(idx)) = (vtx, idx) else {
         return Err(Problem::Invalid(format!("{what} has no {sections}")));
     };

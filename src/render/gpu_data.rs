@@ -255,8 +255,11 @@ pub struct MeshUniform {
     pub uv_min: [f32; 2],
     /// Texture coordinate span.
     pub uv_extent: [f32; 2],
+    /// Billboard cloud: x the first cell word, y the first fragment word of
+    /// its `CLDA` buffer (x = 16 × planes); zw unused. Zero for mesh levels.
+    pub cloud: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<MeshUniform>() == 48);
+const _: () = assert!(std::mem::size_of::<MeshUniform>() == 64);
 
 /// A material. Must match `Material` in `shaders/mesh.wgsl`.
 #[repr(C)]

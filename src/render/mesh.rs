@@ -254,15 +254,16 @@ impl MeshGpu {
         let make = |level: &MeshLevelMeta, vtx: &[u8], idx: &[u8], cloud: Option<(&wgpu::Buffer, [u32; 2])>| {
             let offsets = cloud.map_or([0, 0], |(_, o)| o);
             let uniform = MeshUniform {
-                pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], f32::from_bits(offsets[0])],
+                pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], 0.0],
                 pos_extent: [
                     level.pos_max[0] - level.pos_min[0],
                     level.pos_max[1] - level.pos_min[1],
                     level.pos_max[2] - level.pos_min[2],
-                    f32::from_bits(offsets[1]),
+                    0.0,
                 ],
                 uv_min: level.uv_min,
                 uv_extent: [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]],
+                cloud: [offsets[0], offsets[1], 0, 0],
             };
             let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("mesh level"),
@@ -307,7 +308,11 @@ impl MeshGpu {
                 Some(make(level, vtx, idx, None))
             })
             .collect();
-        let cloud = meta.cloud.as_ref().filter(|_| cloud_held).map(|c| {
+        // A cloud larger than the device's storage binding limit is left out.
+        let fits = |c: &crate::format::cloud::CloudMeta| {
+            c.words() * 4 <= u64::from(device.limits().max_storage_buffer_binding_size)
+        };
+        let cloud = meta.cloud.as_ref().filter(|c| cloud_held && fits(c)).map(|c| {
             let data = pack.section(kind::CLOUD_DATA, 0).unwrap_or_default();
             let records = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("billboard cloud"),

@@ -172,7 +172,16 @@ impl Reach {
         let cloud = cloud_floor.is_some_and(|f| max_px >= f * slack || (!has_bb && !has_cl));
         // The full mesh only where a tree can reach its threshold (one level: always).
         let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
-        let clusters = has_cl && cluster_floor < cloud_floor.unwrap_or(mesh_floor) && max_px >= cluster_floor * slack;
+        // The policy's band of cluster levels (with a far tier to take over), as
+        // the species table draws them.
+        let floor = cloud_floor.unwrap_or(mesh_floor);
+        let cluster_floor = match (&meta.clusters, policy && has_bb) {
+            (Some(c), true) => {
+                cluster_floor.max(crate::format::cluster::policy_floor(c.ellipsoid_levels.iter(), floor))
+            }
+            _ => cluster_floor,
+        };
+        let clusters = has_cl && cluster_floor < floor && max_px >= cluster_floor * slack;
         [has_bb, clusters, meshes || cloud, full]
     }
 }
