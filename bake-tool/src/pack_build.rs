@@ -159,20 +159,8 @@ pub fn build_pack(
     }
     let mut sections = Vec::new();
     for (i, (_, vtx, idx)) in levels.iter().enumerate() {
-        sections.push(Section {
-            kind: kind::MESH_VERTICES,
-            index: i as u32,
-            count: vtx.len() as u32,
-            stride: 20,
-            data: bytemuck::cast_slice(vtx).to_vec(),
-        });
-        sections.push(Section {
-            kind: kind::MESH_INDICES,
-            index: i as u32,
-            count: idx.len() as u32,
-            stride: 4,
-            data: bytemuck::cast_slice(idx).to_vec(),
-        });
+        sections.push(records(kind::MESH_VERTICES, i as u32, vtx));
+        sections.push(records(kind::MESH_INDICES, i as u32, idx));
     }
     if let Some(bytes) = texture_bytes {
         sections.push(Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: bytes });
@@ -216,27 +204,9 @@ pub fn build_pack(
                 (words.len() * 4 + vtx.len() * 20 + idx.len() * 4) / 1024,
                 started.elapsed().as_secs_f64()
             );
-            sections.push(Section {
-                kind: kind::CLOUD_VERTICES,
-                index: 0,
-                count: vtx.len() as u32,
-                stride: 20,
-                data: bytemuck::cast_slice(&vtx).to_vec(),
-            });
-            sections.push(Section {
-                kind: kind::CLOUD_INDICES,
-                index: 0,
-                count: idx.len() as u32,
-                stride: 4,
-                data: bytemuck::cast_slice(&idx).to_vec(),
-            });
-            sections.push(Section {
-                kind: kind::CLOUD_DATA,
-                index: 0,
-                count: words.len() as u32,
-                stride: 4,
-                data: bytemuck::cast_slice(&words).to_vec(),
-            });
+            sections.push(records(kind::CLOUD_VERTICES, 0, &vtx));
+            sections.push(records(kind::CLOUD_INDICES, 0, &idx));
+            sections.push(records(kind::CLOUD_DATA, 0, &words));
             Some(CloudMeta {
                 planes: built.planes.len() as u32,
                 cells: built.cells.len() as u32,
@@ -407,6 +377,17 @@ pub fn build_pack(
         billboard_color: color_chains.iter().map(|c| c[0].clone()).collect(),
         billboard_normal: normal_chains.iter().map(|c| c[0].clone()).collect(),
     })
+}
+
+/// A section of fixed-size records (`count` and `stride` from `items`).
+fn records<T: bytemuck::Pod>(kind: [u8; 4], index: u32, items: &[T]) -> Section {
+    Section {
+        kind,
+        index,
+        count: items.len() as u32,
+        stride: std::mem::size_of::<T>() as u32,
+        data: bytemuck::cast_slice(items).to_vec(),
+    }
 }
 
 /// The bake's LoD policy measurements (issue 18): for each ellipsoid level and

@@ -309,9 +309,8 @@ impl MeshGpu {
             })
             .collect();
         // A cloud larger than the device's storage binding limit is left out.
-        let fits = |c: &crate::format::cloud::CloudMeta| {
-            c.words() * 4 <= u64::from(device.limits().max_storage_buffer_binding_size)
-        };
+        let fits =
+            |c: &crate::format::cloud::CloudMeta| c.words() * 4 <= device.limits().max_storage_buffer_binding_size;
         let cloud = meta.cloud.as_ref().filter(|c| cloud_held && fits(c)).map(|c| {
             let data = pack.section(kind::CLOUD_DATA, 0).unwrap_or_default();
             let records = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
