@@ -459,8 +459,8 @@ impl Viewer {
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
     /// the simplified mesh) use clustered ellipsoids (infinity: none); `only`
     /// restricts drawing to one family (`"meshes"`, `"ellipsoids"`, `"billboards"`,
-    /// `clouds`, `all`: every baked level of every family; anything else: the
-    /// default tiers, the bake's LoD policy); `exact_depth` writes the ellipsoids' exact ray-cast depth;
+    /// `clouds`: every baked level of that family; anything else, e.g. `all`:
+    /// the default mix by size, the bake's LoD policy); `exact_depth` writes the ellipsoids' exact ray-cast depth;
     /// far batches whose trees are below `thin_px` pixels draw an even, scaled-up
     /// subset of them (0: off).
     pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool, thin_px: f32) {
@@ -472,11 +472,10 @@ impl Viewer {
             "ellipsoids" => Representations::CLUSTERS,
             "billboards" => Representations::BILLBOARDS,
             "clouds" => Representations::CLOUDS,
-            "all" => Representations::ALL,
             _ => Representations::default(),
         };
         // A family asked for by name draws every baked level (no LoD policy).
-        self.frame.settings.lod_policy = !matches!(only, "meshes" | "ellipsoids" | "billboards" | "clouds" | "all");
+        self.frame.settings.lod_policy = !matches!(only, "meshes" | "ellipsoids" | "billboards" | "clouds");
         self.frame.settings.cluster_exact_depth = exact_depth;
         self.frame.settings.thin_px = if thin_px.is_finite() { thin_px.clamp(0.0, 64.0) } else { 0.0 };
     }

@@ -211,7 +211,7 @@ class SylvaViewer {
   }
   /**
    * Level-of-detail policy: `ellipsoidMinPx` (default 40; Infinity: no ellipsoids),
-   * `only` ('meshes' | 'ellipsoids' | 'billboards'; default all, mixed by size),
+   * `only` ('meshes' | 'ellipsoids' | 'billboards' | 'clouds': every baked level of one family; default 'all', mixed by size and the bake's LoD policy),
    * `exactDepth` (default false: ellipsoids keep their proxy's front-most depth,
    * which keeps early depth tests; true writes the exact ray-cast depth, slower),
    * `thinPx` (default 8; 0 off): far batches whose trees are below this many
