@@ -73,24 +73,6 @@ struct Ellipsoid {
     level: f32,
 };
 
-// IEEE half float → f32 by hand: `unpack2x16float` needs a capability some
-// native backends lack.
-fn half_to_f32(h: u32) -> f32 {
-    let e = (h >> 10u) & 0x1fu;
-    let m = f32(h & 0x3ffu);
-    var v = (1.0 + m / 1024.0) * exp2(f32(e) - 15.0);
-    if e == 0u {
-        v = m * exp2(-24.0);
-    } else if e == 31u {
-        v = 65504.0;
-    }
-    return select(v, -v, ((h >> 15u) & 1u) == 1u);
-}
-
-fn unpack_halves(w: u32) -> vec2<f32> {
-    return vec2<f32>(half_to_f32(w & 0xffffu), half_to_f32(w >> 16u));
-}
-
 fn dequantise(q: vec3<f32>) -> vec3<f32> {
     return draw.bounds_min.xyz + q * draw.bounds_extent.xyz;
 }

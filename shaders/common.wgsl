@@ -453,3 +453,22 @@ fn repr_color(repr: u32) -> vec3<f32> {
         default: { return vec3<f32>(0.2, 0.5, 0.95); }
     }
 }
+
+// IEEE half floats (low 16 bits first) → f32, decoded by hand:
+// `unpack2x16float` needs a capability (SHADER_FLOAT16_IN_FLOAT32) that naga's
+// WebGPU validation and some native backends do not grant.
+fn half_to_f32(h: u32) -> f32 {
+    let e = (h >> 10u) & 0x1fu;
+    let m = f32(h & 0x3ffu);
+    var v = (1.0 + m / 1024.0) * exp2(f32(e) - 15.0);
+    if e == 0u {
+        v = m * exp2(-24.0);
+    } else if e == 31u {
+        v = 65504.0;
+    }
+    return select(v, -v, (h & 0x8000u) != 0u);
+}
+
+fn unpack_halves(w: u32) -> vec2<f32> {
+    return vec2<f32>(half_to_f32(w & 0xffffu), half_to_f32(w >> 16u));
+}

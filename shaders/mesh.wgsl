@@ -200,24 +200,6 @@ fn cloud_surface(in: VertexOut, front: bool, duv_dx: vec2<f32>, duv_dy: vec2<f32
     return out;
 }
 
-// IEEE half floats (low 16 bits first), decoded by hand: `unpack2x16float`
-// needs a capability the shader validator does not grant everywhere.
-fn half_to_f32(h: u32) -> f32 {
-    let e = (h >> 10u) & 0x1fu;
-    let m = f32(h & 0x3ffu);
-    var v = (1.0 + m / 1024.0) * exp2(f32(e) - 15.0);
-    if e == 0u {
-        v = m * exp2(-24.0);
-    } else if e == 31u {
-        v = 65504.0;
-    }
-    return select(v, -v, (h & 0x8000u) != 0u);
-}
-
-fn unpack_halves(w: u32) -> vec2<f32> {
-    return vec2<f32>(half_to_f32(w & 0xffffu), half_to_f32(w >> 16u));
-}
-
 fn srgb_to_linear3(c: vec3<f32>) -> vec3<f32> {
     return select(pow((c + 0.055) / 1.055, vec3<f32>(2.4)), c / 12.92, c <= vec3<f32>(0.04045));
 }
