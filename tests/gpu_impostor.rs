@@ -7,7 +7,7 @@ use glam::{Mat4, Vec3};
 use sylva::format::decode_pack;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::billboard::BillboardGpu;
-use sylva::render::capture::{TreeDraw, TreeRenderer};
+use sylva::render::capture::{PackView, TreeDraw, TreeRenderer};
 use sylva::render::impostor::{blend_views, ImpostorGpu};
 use sylva::render::mesh::MeshGpu;
 use sylva::render::GpuContext;
@@ -205,6 +205,54 @@ fn a_tree_seen_all_round_keeps_its_silhouette() {
         "impostor error {imp_total:.4} vs billboard {bb_total:.4}, IoU gain {gain:.3}\n{}",
         report.join("\n")
     );
+}
+
+/// The LoD policy's time model reads the draws' work from a pipeline-statistics
+/// query: the counts repeat exactly, grow with the tree's size on screen, and
+/// the modelled time puts the mesh above the impostor above the billboard.
+#[test]
+fn work_counts_are_exact_and_scale_with_size() {
+    use sylva::format::policy::{modelled_us, CostKind};
+    let ctx = ctx();
+    if !ctx.device.features().contains(wgpu::Features::PIPELINE_STATISTICS_QUERY) {
+        eprintln!("skipped: {} has no pipeline statistics", ctx.adapter_summary());
+        return;
+    }
+    let r = TreeRenderer::new(&ctx);
+    let path = format!("{}/tests/fixtures/forest-small/species/beech.pack", env!("CARGO_MANIFEST_DIR"));
+    let bytes = std::fs::read(&path).expect("fixture pack (make fixtures)");
+    let pack = decode_pack(&path, &bytes).expect("fixture pack decodes");
+    let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, &pack);
+    let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, &pack).expect("impostors");
+    let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, &pack).expect("billboards");
+    let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
+    let work = |what: &TreeDraw<'_>, size: u32| {
+        let (clip, eye) = sylva::render::capture::preview_camera(lo, hi, PackView::Side, size, size);
+        r.work(&ctx, what, clip, eye, size, size).expect("pipeline statistics")
+    };
+    for (what, kind) in [
+        (TreeDraw::Mesh(&mesh, 0), CostKind::Mesh),
+        (TreeDraw::Impostor(&imp), CostKind::Impostor),
+        (TreeDraw::Billboard(&bb), CostKind::Billboard),
+    ] {
+        let (small, big) = (work(&what, 64), work(&what, 256));
+        assert_eq!(small, work(&what, 64), "{kind:?}: counts repeat");
+        let ratio = big.fragments as f64 / small.fragments.max(1) as f64;
+        // Quads: at 16× the pixels, fewer than 16× the fragments where
+        // triangles are small (2×2 quads at their edges), never more.
+        assert!((3.0..17.0).contains(&ratio), "{kind:?}: 16× the pixels, {ratio:.1}× the fragments");
+        assert!(small.fragments > 100 && small.vertices >= 4, "{kind:?}: {small:?}");
+    }
+    let us = |what: &TreeDraw<'_>, kind| {
+        let w = work(what, 128);
+        modelled_us(kind, w.vertices, w.fragments)
+    };
+    let (m, i, b) = (
+        us(&TreeDraw::Mesh(&mesh, 0), CostKind::Mesh),
+        us(&TreeDraw::Impostor(&imp), CostKind::Impostor),
+        us(&TreeDraw::Billboard(&bb), CostKind::Billboard),
+    );
+    assert!(m > i && i > b, "modelled µs: mesh {m:.1}, impostor {i:.1}, billboard {b:.1}");
 }
 
 /// Not a test: the far tiers' error against a supersampled full-resolution

@@ -215,6 +215,7 @@ pub fn build_pack(
                 select_px: SELECT_PX_CLOUD,
                 mesh: level,
                 pareto_error: None,
+                pareto_cost: None,
             })
         })
         .flatten();
@@ -339,35 +340,33 @@ pub fn build_pack(
             meta.mesh_levels[l + 1].policy_px = *p;
             if let Some(p) = p {
                 report.push(if *p >= meta.mesh_levels[l].select_px {
-                    format!("mesh level {} dropped (the far tier is as faithful up to {:.0} px)", l + 1, p)
+                    format!("mesh level {} dropped (the far tier is preferred up to {:.0} px)", l + 1, p)
                 } else {
                     format!("mesh level {} from {p:.0} px", l + 1)
                 });
             }
         }
         if let Some(c) = meta.clusters.as_mut() {
-            for (l, e) in c.ellipsoid_levels.iter_mut().zip(&levels) {
-                l.pareto_error = *e;
-                if let Some([own, far]) = e {
-                    let kept = sylva::format::cluster::policy_keeps(*e, true);
-                    report.push(format!(
-                        "{:.0} px {own:.4}/{far:.4} {}",
-                        l.select_px,
-                        if kept { "kept" } else { "dropped" }
-                    ));
+            // (The band ends above the first level dropped: `policy_floor`.)
+            for (l, m) in c.ellipsoid_levels.iter_mut().zip(&levels) {
+                l.pareto_error = m.map(|m| m.error);
+                l.pareto_cost = m.and_then(|m| m.cost);
+                if let Some(m) = m {
+                    let verdict = if Measured::keeps(Some(*m), true) { "wins" } else { "loses" };
+                    report.push(format!("ellipsoids {:.0} px: {m} {verdict}", l.select_px));
                 }
             }
         }
-        if let (Some(c), Some([own, far])) = (meta.cloud.as_mut(), cloud) {
-            c.pareto_error = cloud;
-            let kept = sylva::format::cluster::policy_keeps(cloud, false);
-            report.push(format!(
-                "cloud {:.0} px {own:.4}/{far:.4} {}",
-                c.select_px,
-                if kept { "kept" } else { "dropped" }
-            ));
+        if let (Some(c), Some(m)) = (meta.cloud.as_mut(), cloud) {
+            c.pareto_error = Some(m.error);
+            c.pareto_cost = m.cost;
+            let kept = Measured::keeps(Some(m), false);
+            report.push(format!("cloud {:.0} px: {m} {}", c.select_px, if kept { "kept" } else { "dropped" }));
         }
-        eprintln!("    LoD policy (error / far tier's at the entry size): {}", report.join(", "));
+        eprintln!(
+            "    LoD policy (error / far tier's at the entry size, in modelled µs per tree): {}",
+            report.join(", ")
+        );
         bytes = encode_pack(&meta, &sections);
         sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
     }
@@ -390,17 +389,48 @@ fn records<T: bytemuck::Pod>(kind: [u8; 4], index: u32, items: &[T]) -> Section 
     }
 }
 
-/// The bake's LoD policy measurements (issue 18): for each ellipsoid level and
-/// the billboard cloud, its multi-scale RMSE and the far tier's (impostors, or
-/// billboards) against the full mesh (alpha-tested at full resolution), all
-/// drawn by the viewer's pipelines with the tree `select_px` tall, from the
-/// side and from 35° up (averaged). `None` where the pack has no far tier.
-/// Also, per simplified mesh level (1, 2, …), the policy's threshold.
+/// One measurement of the LoD policy (`sylva::format::policy`): a
+/// representation's and the far tier's error and modelled time per tree.
+#[derive(Debug, Clone, Copy)]
+struct Measured {
+    /// Multi-scale RMSE against the full mesh: [own, far tier].
+    error: [f32; 2],
+    /// Modelled GPU time per tree (µs): [own, far tier]; `None` where the
+    /// device cannot count the work.
+    cost: Option<[f32; 2]>,
+}
+
+impl std::fmt::Display for Measured {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [own, far] = self.error;
+        write!(f, "{own:.4}/{far:.4}")?;
+        if let Some([own, far]) = self.cost {
+            write!(f, " in {own:.1}/{far:.1} µs")?;
+        }
+        Ok(())
+    }
+}
+
+impl Measured {
+    fn keeps(m: Option<Self>, unmeasured: bool) -> bool {
+        sylva::format::policy::policy_keeps(m.map(|m| m.error), m.and_then(|m| m.cost), unmeasured)
+    }
+}
+
+/// The LoD policy's measurements: per ellipsoid cluster level (finest first)
+/// and for the billboard cloud, its multi-scale RMSE and the far tier's
+/// (impostors, or billboards) against the full mesh (alpha-tested at full
+/// resolution), all drawn by the viewer's pipelines with the tree `select_px`
+/// tall (a cluster level: also at the top of its band, where that decides),
+/// from the side and from 35° up (averaged), and the draws' modelled GPU time
+/// from their work counts. `None` where the pack has no far tier. Also, per
+/// simplified mesh level (1, 2, …), the policy's threshold.
 #[allow(clippy::type_complexity)]
 fn measure_policy(
     gpu: &GpuContext,
     pack: &sylva::format::Pack<'_>,
-) -> (Vec<Option<[f32; 2]>>, Option<[f32; 2]>, Vec<Option<f32>>) {
+) -> (Vec<Option<Measured>>, Option<Measured>, Vec<Option<f32>>) {
+    use sylva::format::policy::{modelled_us, CostKind};
     use sylva::render::billboard::BillboardGpu;
     use sylva::render::capture::{preview_camera, PackView, TreeDraw, TreeRenderer};
     use sylva::render::cluster::ClusterGpu;
@@ -425,10 +455,21 @@ fn measure_policy(
     let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
     let radius = ((hi - lo) * 0.5).length().max(1e-3);
     let height = (hi.z - lo.z).max(1e-3);
-    // Errors of `own` and the far tier with the tree `px` tall.
-    let mut errors = |own: &TreeDraw<'_>, px: f32| -> [f32; 2] {
+    let kind = |what: &TreeDraw<'_>| match what {
+        TreeDraw::Mesh(..) => CostKind::Mesh,
+        TreeDraw::Cloud(..) => CostKind::Cloud,
+        TreeDraw::Cluster(..) => CostKind::Cluster,
+        TreeDraw::Billboard(..) => CostKind::Billboard,
+        TreeDraw::Impostor(..) => CostKind::Impostor,
+    };
+    // With SYLVA_POLICY_CALIBRATE set, each draw's work counts and wall time
+    // are printed (for fitting `sylva::format::policy::COSTS`).
+    let calibrate = std::env::var_os("SYLVA_POLICY_CALIBRATE").is_some();
+    // `own` and the far tier with the tree `px` tall.
+    let mut measure = |own: &TreeDraw<'_>, px: f32| -> Measured {
         let size = ((px * 2.0 * radius * 1.05 / height).round() as u32).clamp(16, 512);
         let mut sum = [0.0f64; 2];
+        let mut cost = Some([0.0f32; 2]);
         for view in [PackView::Side, PackView::Oblique] {
             let (clip, eye) = preview_camera(lo, hi, view, size, size);
             r.full_res_alpha = true;
@@ -437,31 +478,61 @@ fn measure_policy(
             for (k, what) in [own, &far].into_iter().enumerate() {
                 let img = r.render(gpu, what, clip, eye, size, size, BACKGROUND);
                 sum[k] += sylva::metrics::multiscale_rmse(&img, &reference, size, size) / 2.0;
+                let work = r.work(gpu, what, clip, eye, size, size);
+                if let (Some(c), Some(w)) = (cost.as_mut(), work) {
+                    c[k] += modelled_us(kind(what), w.vertices, w.fragments) / 2.0;
+                } else {
+                    cost = None;
+                }
+                if calibrate && view == PackView::Side {
+                    let ms = r.wall_ms(gpu, what, clip, eye, size, size, 7);
+                    let (v, f) = work.map_or((0, 0), |w| (w.vertices, w.fragments));
+                    eprintln!(
+                        "CALIBRATE {} {:?} px {px:.0} size {size} vertices {v} fragments {f} ms {ms:.4}",
+                        ["own", "far"][k],
+                        kind(what)
+                    );
+                }
             }
         }
-        sum.map(|e| e as f32)
+        Measured { error: sum.map(|e| e as f32), cost }
     };
-    let level_errors = (0..levels)
-        .map(|l| {
-            let c = cluster.as_ref().filter(|c| l < c.levels.len())?;
-            let px = pack.meta.clusters.as_ref()?.ellipsoid_levels[l].select_px;
-            Some(errors(&TreeDraw::Cluster(c, l), px))
-        })
-        .collect();
-    let cloud =
-        pack.meta.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| errors(&TreeDraw::Cloud(&mesh), c.select_px));
+    if calibrate {
+        for px in [24.0, 48.0, 96.0, 192.0, 384.0] {
+            for l in 0..pack.meta.mesh_levels.len() {
+                if mesh.has_level(l) {
+                    measure(&TreeDraw::Mesh(&mesh, l), px);
+                }
+            }
+            if let Some(c) = cluster.as_ref() {
+                for l in 0..c.levels.len() {
+                    measure(&TreeDraw::Cluster(c, l), px);
+                }
+            }
+            if mesh.cloud.is_some() {
+                measure(&TreeDraw::Cloud(&mesh), px);
+            }
+        }
+    }
+    let cloud = pack
+        .meta
+        .cloud
+        .as_ref()
+        .filter(|_| mesh.cloud.is_some())
+        .map(|c| measure(&TreeDraw::Cloud(&mesh), c.select_px));
     // Simplified mesh levels: from their threshold up to the finer level's, in
-    // steps of 1.5×, the first size where the level beats the far tier.
-    let levels = &pack.meta.mesh_levels;
-    let mesh_policy = (1..levels.len())
+    // steps of 1.5×, the first size where the policy prefers the level to the
+    // far tier.
+    let mesh_levels = &pack.meta.mesh_levels;
+    let mesh_policy: Vec<Option<f32>> = (1..mesh_levels.len())
         .map(|l| {
             if !mesh.has_level(l) {
                 return None;
             }
-            let (from, to) = (levels[l].select_px.max(1.0), levels[l - 1].select_px);
+            let (from, to) = (mesh_levels[l].select_px.max(1.0), mesh_levels[l - 1].select_px);
             let mut px = from;
             while px < to {
-                if sylva::format::cluster::policy_keeps(Some(errors(&TreeDraw::Mesh(&mesh, l), px)), true) {
+                if Measured::keeps(Some(measure(&TreeDraw::Mesh(&mesh, l), px)), true) {
                     return Some(px);
                 }
                 px *= 1.5;
@@ -469,6 +540,42 @@ fn measure_policy(
             Some(to)
         })
         .collect();
+    // Cluster levels: each over its band, from its entry size up to the finer
+    // level's (the finest: up to the lowest mesh level the policy keeps, or the
+    // cloud), measured at both ends; the measurement where it loses decides.
+    let mut top = mesh_levels.first().map_or(f32::INFINITY, |m| m.select_px);
+    for (l, p) in mesh_policy.iter().enumerate() {
+        let px = p.unwrap_or(mesh_levels[l + 1].select_px);
+        if mesh.has_level(l + 1) && px < top {
+            top = px;
+        }
+    }
+    if let (Some(c), Some(m)) = (&pack.meta.cloud, cloud) {
+        if Measured::keeps(Some(m), false) {
+            top = top.min(c.select_px);
+        }
+    }
+    let mut level_errors = Vec::with_capacity(levels);
+    for l in 0..levels {
+        let c = cluster.as_ref().filter(|c| l < c.levels.len());
+        let Some((c, entry)) = c.zip(pack.meta.clusters.as_ref().map(|m| m.ellipsoid_levels[l].select_px)) else {
+            level_errors.push(None);
+            continue;
+        };
+        let at_entry = measure(&TreeDraw::Cluster(c, l), entry);
+        let band_top = top / 1.05;
+        level_errors.push(Some(if Measured::keeps(Some(at_entry), true) && band_top > entry * 1.2 {
+            let at_top = measure(&TreeDraw::Cluster(c, l), band_top);
+            if Measured::keeps(Some(at_top), true) {
+                at_entry
+            } else {
+                at_top
+            }
+        } else {
+            at_entry
+        }));
+        top = top.min(entry);
+    }
     (level_errors, cloud, mesh_policy)
 }
 

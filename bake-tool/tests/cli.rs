@@ -148,7 +148,11 @@ fn bakes_the_shared_real_data() {
     assert!(log.contains("scene CRS EPSG:32631"), "{log}");
     assert!(log.contains("billboard cloud: 48 planes"), "{log}");
     // The LoD policy measured every ellipsoid level and the cloud of each species.
-    assert_eq!(log.matches("LoD policy (error / far tier's at the entry size)").count(), 2, "{log}");
+    assert_eq!(
+        log.matches("LoD policy (error / far tier's at the entry size, in modelled µs per tree)").count(),
+        2,
+        "{log}"
+    );
     // No --default-model: broadleaf species are reported and skipped, not fatal.
     assert!(log.contains("skipped") && log.contains("quercus robur"), "{log}");
     let v = inspect_json(&out);
@@ -170,6 +174,14 @@ fn bakes_the_shared_real_data() {
             .iter()
             .all(|l| l.pareto_error.is_some_and(|e| e.iter().all(|x| *x > 0.0 && *x < 0.5))));
         assert!(pack.meta.cloud.as_ref().and_then(|c| c.pareto_error).is_some());
+        // Time enters the policy where the device counts work: every level's
+        // modelled cost, the finest level's above the coarsest's.
+        if ctx.device.features().contains(wgpu::Features::PIPELINE_STATISTICS_QUERY) {
+            let costs: Vec<[f32; 2]> = c.ellipsoid_levels.iter().map(|l| l.pareto_cost.expect("pareto_cost")).collect();
+            assert!(costs.iter().flatten().all(|t| t.is_finite() && *t > 0.0), "{species}: {costs:?}");
+            assert!(costs[0][0] > costs[n - 1][0], "{species}: finest level costs more: {costs:?}");
+            assert!(pack.meta.cloud.as_ref().and_then(|c| c.pareto_cost).is_some());
+        }
         // …and the simplified mesh's threshold (at or above the full mesh's: left out).
         assert!(pack.meta.mesh_levels[1].policy_px.is_some_and(|px| px >= pack.meta.mesh_levels[1].select_px));
         use sylva::render::capture::{render_pack_repr, PackRepr, PackView};

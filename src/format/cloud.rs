@@ -53,11 +53,15 @@ pub struct CloudMeta {
     /// The cloud's geometry: the coarsest mesh level's wood and one quad per
     /// plane (`CLVX`, `CLIX`; `select_px` as above).
     pub mesh: MeshLevelMeta,
-    /// The bake's LoD policy measurement (`crate::format::cluster::policy_keeps`):
+    /// The bake's LoD policy measurement (`crate::format::policy::policy_keeps`):
     /// the cloud's and the far tier's error against the full mesh at
     /// `select_px`. Without it the cloud is not a default tier.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pareto_error: Option<[f32; 2]>,
+    /// The same draws' modelled GPU time per tree (µs), the cloud's and the far
+    /// tier's (`crate::format::policy`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pareto_cost: Option<[f32; 2]>,
 }
 
 impl CloudMeta {
@@ -348,6 +352,7 @@ mod tests {
                 policy_px: None,
             },
             pareto_error: None,
+            pareto_cost: None,
         };
         let words = encode_cloud(&planes, &cells, &fragments);
         assert_eq!(

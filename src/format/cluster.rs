@@ -11,6 +11,8 @@ use glam::{Quat, Vec3};
 use half::f16;
 use serde::{Deserialize, Serialize};
 
+use super::policy::policy_keeps;
+
 /// One level of ellipsoids or lines.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -34,20 +36,11 @@ pub struct ClusterLevelMeta {
     /// packs (the level is then drawn).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pareto_error: Option<[f32; 2]>,
-}
-
-/// The bake's LoD policy (issue 18): of two representations for a size, the
-/// default is the cheaper one unless the costlier is more faithful by this
-/// factor. The far tier (impostors, or billboards) is the cheapest per tree, so
-/// a cluster level or a billboard cloud is a default tier only where its error
-/// times this is below the far tier's.
-pub const POLICY_MARGIN: f32 = 1.1;
-
-/// Whether the policy keeps a representation measured `[own, far]` (see
-/// [`POLICY_MARGIN`]); `unmeasured` when there is no measurement.
-#[must_use]
-pub fn policy_keeps(pareto_error: Option<[f32; 2]>, unmeasured: bool) -> bool {
-    pareto_error.map_or(unmeasured, |[own, far]| own * POLICY_MARGIN < far)
+    /// The same draws' modelled GPU time per tree (µs), this level's and the far
+    /// tier's (`crate::format::policy`). Absent: the far tier is taken as half
+    /// the cost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pareto_cost: Option<[f32; 2]>,
 }
 
 /// The smallest projected height (px) from which the policy keeps cluster
@@ -61,7 +54,7 @@ pub fn policy_floor<'a>(levels: impl Iterator<Item = &'a ClusterLevelMeta>, mesh
         if l.select_px >= mesh_floor {
             continue;
         }
-        if !policy_keeps(l.pareto_error, true) {
+        if !policy_keeps(l.pareto_error, l.pareto_cost, true) {
             break;
         }
         floor = l.select_px;
@@ -281,10 +274,8 @@ mod tests {
             noise_threshold: 0.0,
             normal_blend: 0.0,
             pareto_error: e,
+            pareto_cost: None,
         };
-        assert!(policy_keeps(Some([0.02, 0.03]), false));
-        assert!(!policy_keeps(Some([0.029, 0.03]), true), "within the margin: the cheaper far tier");
-        assert!(policy_keeps(None, true) && !policy_keeps(None, false));
         // Finest first: 400 px is above the mesh floor (ignored), 100 and 60
         // beat the far tier, 30 does not: clusters from 60 px; below, the far tier.
         let levels = [

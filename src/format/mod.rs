@@ -14,6 +14,7 @@ pub mod imagery;
 pub mod index;
 pub mod manifest;
 pub mod pack;
+pub mod policy;
 pub mod terrain;
 pub mod tile;
 

@@ -257,7 +257,7 @@ pub struct MeshLevelMeta {
     pub draws: Vec<DrawRange>,
     /// This level is drawn while the tree's projected height is at least this many pixels.
     pub select_px: f32,
-    /// The bake's LoD policy for a simplified level (`crate::format::cluster::policy_keeps`):
+    /// The bake's LoD policy for a simplified level (`crate::format::policy::policy_keeps`):
     /// the projected height from which it is more faithful than the far tier
     /// (the far tier is drawn below); at or above the finer level's threshold
     /// the level is not a default tier. Absent: `select_px`.

@@ -385,6 +385,115 @@ impl TreeRenderer {
         height: u32,
         background: [f64; 4],
     ) -> Vec<u8> {
+        let (encoder, color) = self.encode(ctx, what, clip_from_eye, eye, width, height, background, None, 1);
+        ctx.queue.submit([encoder.finish()]);
+        read_texture_rgba8(ctx, &color, 0, 0)
+    }
+
+    /// The GPU work of drawing `what` as [`Self::render`] would: vertex and
+    /// fragment shader invocations, counted by a pipeline-statistics query
+    /// (deterministic, unlike a timer: the bake's LoD policy models time from
+    /// it). `None` where the device lacks `PIPELINE_STATISTICS_QUERY`.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[allow(clippy::too_many_arguments)]
+    #[must_use]
+    pub fn work(
+        &self,
+        ctx: &GpuContext,
+        what: &TreeDraw<'_>,
+        clip_from_eye: Mat4,
+        eye: Vec3,
+        width: u32,
+        height: u32,
+    ) -> Option<Work> {
+        if !ctx.device.features().contains(wgpu::Features::PIPELINE_STATISTICS_QUERY) {
+            return None;
+        }
+        let query = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("tree work"),
+            ty: wgpu::QueryType::PipelineStatistics(
+                wgpu::PipelineStatisticsTypes::VERTEX_SHADER_INVOCATIONS
+                    | wgpu::PipelineStatisticsTypes::FRAGMENT_SHADER_INVOCATIONS,
+            ),
+            count: 1,
+        });
+        let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tree work resolve"),
+            size: 16,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tree work read"),
+            size: 16,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let (mut encoder, _color) =
+            self.encode(ctx, what, clip_from_eye, eye, width, height, [0.0; 4], Some(&query), 1);
+        encoder.resolve_query_set(&query, 0..1, &resolve, 0);
+        encoder.copy_buffer_to_buffer(&resolve, 0, &read, 0, 16);
+        ctx.queue.submit([encoder.finish()]);
+        let slice = read.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        ctx.device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
+        let words: [u64; 2] = bytemuck::pod_read_unaligned(&slice.get_mapped_range().ok()?[..16]);
+        Some(Work { vertices: words[0], fragments: words[1] })
+    }
+
+    /// Wall time (ms) of drawing `what` once at this size, net of an empty
+    /// pass: the median of `runs` submissions of 8 passes each. For
+    /// calibrating the LoD policy's cost model ([`Work`]); a timer, so not
+    /// deterministic.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[allow(clippy::too_many_arguments)]
+    #[must_use]
+    pub fn wall_ms(
+        &self,
+        ctx: &GpuContext,
+        what: &TreeDraw<'_>,
+        clip_from_eye: Mat4,
+        eye: Vec3,
+        width: u32,
+        height: u32,
+        runs: usize,
+    ) -> f64 {
+        const PASSES: u32 = 8;
+        let time = |draws: u32| {
+            let mut samples: Vec<f64> = (0..runs.max(1))
+                .map(|_| {
+                    let encoders: Vec<_> = (0..PASSES)
+                        .map(|_| self.encode(ctx, what, clip_from_eye, eye, width, height, [0.0; 4], None, draws))
+                        .collect();
+                    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+                    let start = std::time::Instant::now();
+                    ctx.queue.submit(encoders.into_iter().map(|(e, _)| e.finish()));
+                    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+                    start.elapsed().as_secs_f64() * 1e3 / f64::from(PASSES)
+                })
+                .collect();
+            samples.sort_by(f64::total_cmp);
+            samples[samples.len() / 2]
+        };
+        (time(1) - time(0)).max(0.0)
+    }
+
+    /// Draws `what` `draws` times into fresh targets: the encoder (not
+    /// submitted) and the colour target. With `query`, the draws are inside a
+    /// pipeline-statistics query at index 0.
+    #[allow(clippy::too_many_arguments)]
+    fn encode(
+        &self,
+        ctx: &GpuContext,
+        what: &TreeDraw<'_>,
+        clip_from_eye: Mat4,
+        eye: Vec3,
+        width: u32,
+        height: u32,
+        background: [f64; 4],
+        query: Option<&wgpu::QuerySet>,
+        draws: u32,
+    ) -> (wgpu::CommandEncoder, wgpu::Texture) {
         let mut uniform = Lighting::default().view_uniform(clip_from_eye, eye, [width, height]);
         uniform.ambient[3] = f32::from(u8::from(self.ao));
         uniform.eye_hi[3] = f32::from(u8::from(self.full_res_alpha));
@@ -441,37 +550,53 @@ impl TreeRenderer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
+            if let Some(q) = query {
+                pass.begin_pipeline_statistics_query(q, 0);
+            }
             pass.set_bind_group(0, &self.view_group, &[]);
             self.tree.bind(&mut pass);
-            match what {
-                TreeDraw::Mesh(mesh, level) => {
-                    let indices = mesh.bind_level(&mut pass, &self.mesh, RenderMode::Lit, *level);
-                    pass.draw_indexed(0..indices, 0, 0..1);
-                }
-                TreeDraw::Cloud(mesh) => {
-                    let indices = mesh.bind_cloud(&mut pass, &self.mesh, RenderMode::Lit);
-                    pass.draw_indexed(0..indices, 0, 0..1);
-                }
-                TreeDraw::Cluster(c, level) => {
-                    pass.set_pipeline(self.cluster.pipeline(true));
-                    pass.set_bind_group(1, &c.bind_group, &[]);
-                    pass.draw(0..c.vertices(*level), 0..1);
-                }
-                TreeDraw::Billboard(bb) => {
-                    pass.set_pipeline(self.billboard.pipeline());
-                    pass.set_bind_group(1, &bb.bind_group, &[]);
-                    pass.draw(0..BILLBOARD_VERTICES, 0..1);
-                }
-                TreeDraw::Impostor(imp) => {
-                    pass.set_pipeline(self.impostor.pipeline());
-                    pass.set_bind_group(1, &imp.bind_group, &[]);
-                    pass.draw(0..IMPOSTOR_VERTICES, 0..1);
+            for _ in 0..draws {
+                match what {
+                    TreeDraw::Mesh(mesh, level) => {
+                        let indices = mesh.bind_level(&mut pass, &self.mesh, RenderMode::Lit, *level);
+                        pass.draw_indexed(0..indices, 0, 0..1);
+                    }
+                    TreeDraw::Cloud(mesh) => {
+                        let indices = mesh.bind_cloud(&mut pass, &self.mesh, RenderMode::Lit);
+                        pass.draw_indexed(0..indices, 0, 0..1);
+                    }
+                    TreeDraw::Cluster(c, level) => {
+                        pass.set_pipeline(self.cluster.pipeline(true));
+                        pass.set_bind_group(1, &c.bind_group, &[]);
+                        pass.draw(0..c.vertices(*level), 0..1);
+                    }
+                    TreeDraw::Billboard(bb) => {
+                        pass.set_pipeline(self.billboard.pipeline());
+                        pass.set_bind_group(1, &bb.bind_group, &[]);
+                        pass.draw(0..BILLBOARD_VERTICES, 0..1);
+                    }
+                    TreeDraw::Impostor(imp) => {
+                        pass.set_pipeline(self.impostor.pipeline());
+                        pass.set_bind_group(1, &imp.bind_group, &[]);
+                        pass.draw(0..IMPOSTOR_VERTICES, 0..1);
+                    }
                 }
             }
+            if query.is_some() {
+                pass.end_pipeline_statistics_query();
+            }
         }
-        ctx.queue.submit([encoder.finish()]);
-        read_texture_rgba8(ctx, &color, 0, 0)
+        (encoder, color)
     }
+}
+
+/// The GPU work of one draw ([`TreeRenderer::work`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Work {
+    /// Vertex shader invocations.
+    pub vertices: u64,
+    /// Fragment shader invocations (2×2 quads included).
+    pub fragments: u64,
 }
 
 /// A perspective camera framing a whole tree with bounds `min..max` from

@@ -270,6 +270,7 @@ impl ClusterGpu {
                 noise_threshold: noise.0,
                 normal_blend: noise.1,
                 pareto_error: None,
+                pareto_cost: None,
             },
         };
         Self::new(
@@ -414,6 +415,7 @@ mod tests {
                 noise_threshold: 0.0,
                 normal_blend: 0.0,
                 pareto_error: None,
+                pareto_cost: None,
             },
         }
     }

@@ -71,7 +71,8 @@ impl GpuContext {
 /// The device every Sylva context asks for: WebGPU's default limits (raised only
 /// as far as the adapter's resolution) and no optional feature a pass needs, so
 /// what runs natively also runs in a browser. `TIMESTAMP_QUERY` is asked for
-/// where the adapter has it, only to time the passes (the browser's stats).
+/// where the adapter has it, only to time the passes (the browser's stats), and
+/// `PIPELINE_STATISTICS_QUERY` (native only) for the bake's work counts.
 ///
 /// # Errors
 /// [`ContextError::Device`] when the adapter refuses.
@@ -79,8 +80,10 @@ pub async fn request_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wg
     adapter
         .request_device(&wgpu::DeviceDescriptor {
             label: Some("sylva"),
-            // Timestamp queries only to time the passes (the browser's stats).
-            required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
+            // Timestamp queries only to time the passes (the browser's stats);
+            // pipeline statistics only for the bake's LoD policy (work counts).
+            required_features: adapter.features()
+                & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::PIPELINE_STATISTICS_QUERY),
             required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,

@@ -165,7 +165,9 @@ impl Reach {
         let cloud_floor = meta
             .cloud
             .as_ref()
-            .filter(|c| allow.clouds && (!policy || crate::format::cluster::policy_keeps(c.pareto_error, false)))
+            .filter(|c| {
+                allow.clouds && (!policy || crate::format::policy::policy_keeps(c.pareto_error, c.pareto_cost, false))
+            })
             .map(|c| c.select_px);
         let coarsest_is_mesh = !has_bb && !has_cl && cloud_floor.is_none();
         let meshes = has_mesh && (max_px >= mesh_floor * slack || coarsest_is_mesh);
@@ -249,6 +251,7 @@ mod tests {
             select_px: 40.0,
             mesh: meta.mesh_levels[0].clone(),
             pareto_error: None,
+            pareto_cost: None,
         });
         assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
         let mut closer = reach.clone();

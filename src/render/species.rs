@@ -16,7 +16,8 @@ use super::mesh::{MeshGpu, MeshPipelines};
 use super::pools::Pools;
 use super::reach::Reach;
 use super::settings::{FarTier, RenderSettings, Representations};
-use crate::format::cluster::{policy_floor, policy_keeps};
+use crate::format::cluster::policy_floor;
+use crate::format::policy::policy_keeps;
 use crate::format::Pack;
 
 /// Segment capacity of the full mesh level per species: only trees hundreds of
@@ -188,7 +189,7 @@ impl Species {
             has_level: [mesh.has_level(0), mesh.has_level(1)],
             policy_px: [level(0).and_then(|l| l.policy_px), level(1).and_then(|l| l.policy_px)],
             cloud: m.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| (c.select_px, c.mesh.index_count)),
-            cloud_kept: m.cloud.as_ref().is_some_and(|c| policy_keeps(c.pareto_error, false)),
+            cloud_kept: m.cloud.as_ref().is_some_and(|c| policy_keeps(c.pareto_error, c.pareto_cost, false)),
             mesh,
             billboard,
             impostor,

@@ -217,6 +217,7 @@ pub fn build_clusters(
             noise_threshold: 0.0,
             normal_blend: 0.0,
             pareto_error: None,
+            pareto_cost: None,
         });
     }
     // The occlusion field ellipsoids and lines sample per pixel, with the cluster part.

@@ -287,6 +287,7 @@ pub fn build_levels(
                 noise_threshold: threshold,
                 normal_blend,
                 pareto_error: None,
+                pareto_cost: None,
             },
             ellipsoids: ell,
         });
