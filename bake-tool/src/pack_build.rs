@@ -353,7 +353,7 @@ pub fn build_pack(
                 l.pareto_cost = m.and_then(|m| m.cost);
                 if let Some(m) = m {
                     let verdict = if Measured::keeps(Some(*m), true) { "wins" } else { "loses" };
-                    report.push(format!("ellipsoids {:.0} px: {m} {verdict}", l.select_px));
+                    report.push(format!("ellipsoids from {:.0} px: {m} {verdict}", l.select_px));
                 }
             }
         }
@@ -361,12 +361,9 @@ pub fn build_pack(
             c.pareto_error = Some(m.error);
             c.pareto_cost = m.cost;
             let kept = Measured::keeps(Some(m), false);
-            report.push(format!("cloud {:.0} px: {m} {}", c.select_px, if kept { "kept" } else { "dropped" }));
+            report.push(format!("cloud from {:.0} px: {m} {}", c.select_px, if kept { "kept" } else { "dropped" }));
         }
-        eprintln!(
-            "    LoD policy (error / far tier's at the entry size, in modelled µs per tree): {}",
-            report.join(", ")
-        );
+        eprintln!("    LoD policy (error / far tier's, in modelled µs per tree): {}", report.join(", "));
         bytes = encode_pack(&meta, &sections);
         sylva::format::decode_pack(name, &bytes).context("the finished pack does not validate")?;
     }
@@ -398,12 +395,14 @@ struct Measured {
     /// Modelled GPU time per tree (µs): [own, far tier]; `None` where the
     /// device cannot count the work.
     cost: Option<[f32; 2]>,
+    /// The tree's projected height (px) it was measured at.
+    px: f32,
 }
 
 impl std::fmt::Display for Measured {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let [own, far] = self.error;
-        write!(f, "{own:.4}/{far:.4}")?;
+        write!(f, "at {:.0} px {own:.4}/{far:.4}", self.px)?;
         if let Some([own, far]) = self.cost {
             write!(f, " in {own:.1}/{far:.1} µs")?;
         }
@@ -421,7 +420,8 @@ impl Measured {
 /// and for the billboard cloud, its multi-scale RMSE and the far tier's
 /// (impostors, or billboards) against the full mesh (alpha-tested at full
 /// resolution), all drawn by the viewer's pipelines with the tree `select_px`
-/// tall (a cluster level: also at the top of its band, where that decides),
+/// tall (a cluster level or the cloud: also at the top of its band, up to the
+/// meshes, and the measurement where it loses decides),
 /// from the side and from 35° up (averaged), and the draws' modelled GPU time
 /// from their work counts. `None` where the pack has no far tier. Also, per
 /// simplified mesh level (1, 2, …), the policy's threshold.
@@ -467,7 +467,7 @@ fn measure_policy(
     let calibrate = std::env::var_os("SYLVA_POLICY_CALIBRATE").is_some();
     // `own` and the far tier with the tree `px` tall.
     let mut measure = |own: &TreeDraw<'_>, px: f32| -> Measured {
-        let size = ((px * 2.0 * radius * 1.05 / height).round() as u32).clamp(16, 512);
+        let size = ((px * 2.0 * radius * 1.05 / height).round() as u32).clamp(16, 1024);
         let mut sum = [0.0f64; 2];
         let mut cost = Some([0.0f32; 2]);
         for view in [PackView::Side, PackView::Oblique] {
@@ -495,7 +495,8 @@ fn measure_policy(
                 }
             }
         }
-        Measured { error: sum.map(|e| e as f32), cost }
+        // The size actually drawn (the image is clamped).
+        Measured { error: sum.map(|e| e as f32), cost, px: size as f32 * height / (2.0 * radius * 1.05) }
     };
     if calibrate {
         for px in [24.0, 48.0, 96.0, 192.0, 384.0] {
@@ -514,7 +515,7 @@ fn measure_policy(
             }
         }
     }
-    let cloud = pack
+    let cloud_entry = pack
         .meta
         .cloud
         .as_ref()
@@ -550,6 +551,17 @@ fn measure_policy(
             top = px;
         }
     }
+    // The cloud, too, over its band up to the meshes.
+    let cloud = cloud_entry.map(|at_entry| {
+        let band_top = top / 1.05;
+        if Measured::keeps(Some(at_entry), false) && band_top > at_entry.px * 1.2 {
+            let at_top = measure(&TreeDraw::Cloud(&mesh), band_top);
+            if !Measured::keeps(Some(at_top), false) {
+                return at_top;
+            }
+        }
+        at_entry
+    });
     if let (Some(c), Some(m)) = (&pack.meta.cloud, cloud) {
         if Measured::keeps(Some(m), false) {
             top = top.min(c.select_px);

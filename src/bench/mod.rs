@@ -164,7 +164,8 @@ pub struct Method {
     pub name: String,
     /// Renderer settings.
     pub settings: RenderSettings,
-    /// Supersampling factor per axis (the reference: 2).
+    /// Supersampling factor per axis (the references: 2, or
+    /// `sylva bench --reference-supersample`).
     pub supersample: u32,
     /// The index of the reference this method's error is measured against
     /// (`None`: it is one): the shadowed reference for shadowed methods.

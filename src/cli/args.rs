@@ -123,6 +123,12 @@ pub(crate) enum Command {
         /// reference first (NNN-strip.png), to look at the error.
         #[arg(long, conflicts_with_all = ["replot", "stress", "memory"])]
         save_frames: bool,
+        /// Supersampling of the references, per axis (N² samples per pixel):
+        /// 2 by default; 4 to judge `sylva-converged`, whose 16 jittered steps
+        /// sample each pixel more finely than a 2× reference does.
+        #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4),
+              conflicts_with_all = ["replot", "stress", "memory"])]
+        reference_supersample: u32,
     },
     /// One table row per bench output directory (its summary.json) for one
     /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls

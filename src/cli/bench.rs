@@ -73,6 +73,11 @@ pub(crate) fn bench(
 ) -> Result<()> {
     use sylva::bench as b;
     let (w, h) = parse_size(size)?;
+    // WebGPU's default texture limit bounds the supersampled targets.
+    let ss = methods.iter().map(|m| m.supersample.max(1)).max().unwrap_or(1);
+    if w.max(h) * ss > 8192 {
+        bail!("--size {w}x{h} at {ss}× supersampling needs {} px a side; the most is 8192", w.max(h) * ss);
+    }
     let cameras = path_cameras(scene, path, frames)?;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let total = methods.len() * cameras.len();
@@ -96,6 +101,7 @@ pub(crate) fn bench(
         "size": [w, h],
         "frames": cameras.len(),
         "adapter": run.adapter,
+        "reference_supersample": methods.iter().find(|m| m.reference.is_none()).map_or(2, |m| m.supersample),
         "methods": run.summary,
     });
     std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;

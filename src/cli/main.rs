@@ -79,6 +79,7 @@ mod cli {
                 shadows,
                 ao,
                 save_frames,
+                reference_supersample,
                 ..
             } => {
                 if !(0.0..0.5).contains(&fade_band) {
@@ -89,9 +90,13 @@ mod cli {
                 for m in &mut methods {
                     m.settings.ao = ao;
                 }
-                for m in methods.iter_mut().filter(|m| m.reference.is_some()) {
-                    m.settings.fade_band = fade_band;
-                    m.settings.thin_px = thin_px;
+                for m in methods.iter_mut() {
+                    if m.reference.is_some() {
+                        m.settings.fade_band = fade_band;
+                        m.settings.thin_px = thin_px;
+                    } else {
+                        m.supersample = reference_supersample;
+                    }
                 }
                 bench(&scene, &path, methods, &size, frames, &out, save_frames)
             }

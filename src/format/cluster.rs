@@ -291,6 +291,12 @@ mod tests {
         // Unmeasured (older packs): every level.
         let old = [level(100.0, None), level(30.0, None)];
         assert_eq!(policy_floor(old.iter(), 120.0), 30.0);
+        // Time counts: 20 % less error is not worth 10× the time (27 % is needed).
+        let mut costly = level(60.0, Some([0.024, 0.03]));
+        costly.pareto_cost = Some([10.0, 1.0]);
+        assert_eq!(policy_floor([costly.clone()].iter(), 120.0), 120.0);
+        costly.pareto_cost = Some([1.0, 1.0]);
+        assert_eq!(policy_floor([costly].iter(), 120.0), 60.0);
     }
 
     #[test]

@@ -2,13 +2,16 @@
 //! default at a size, chosen from the measured front of error against time.
 //!
 //! At bake time each candidate (a cluster level, the billboard cloud, a
-//! simplified mesh level) and the far tier are rendered at the candidate's
-//! entry size by the viewer's own pipelines: the error is their multi-scale
+//! simplified mesh level) and the far tier are rendered by the viewer's own
+//! pipelines at the candidate's entry size (a cluster level and the cloud also
+//! at the top of their band; the losing measurement is stored): the error is their multi-scale
 //! RMSE against the full mesh, the time a model of the GPU time of drawing one
 //! tree from the work the draw did (vertex and fragment shader invocations,
 //! counted by a pipeline-statistics query) times per-invocation costs measured
 //! on the reference device ([`COSTS`]). A timer would make bakes differ from
-//! run to run (and a sharded bake from a single one); the counts do not.
+//! run to run (and a sharded bake from a single one); the counts do not on one
+//! kind of device (another GPU may count helper invocations or vertex reuse
+//! differently; a device without pipeline statistics stores no cost).
 //!
 //! The rule: the default is the representation with the smaller
 //! `error × time^ALPHA`, `ALPHA = log2(1.1)`: a representation that costs twice
@@ -37,10 +40,10 @@ pub enum CostKind {
 
 /// Per-invocation costs (ns per vertex, ns per fragment) of each kind on the
 /// reference device: lavapipe (Mesa's CPU Vulkan) on 2 cores, fitted to wall
-/// times of single-tree draws from 16 to 512 px of the ez-tree oak and pine
+/// times of single-tree draws from 16 to 512 px of the Amsterdam (ez-tree) oak and pine
 /// and the demo trees (`SYLVA_POLICY_CALIBRATE=1 sylva-bake …`, see
-/// docs/BENCHMARKS.md, "The LoD policy chosen at bake time"). Only their
-/// ratios matter to the rule.
+/// docs/BENCHMARKS.md, "Time in the policy"). Only their ratios matter to the
+/// rule.
 pub const COSTS: [(CostKind, f32, f32); 5] = [
     (CostKind::Mesh, 100.0, 35.0),
     (CostKind::Cloud, 100.0, 83.0),
@@ -64,7 +67,8 @@ pub fn modelled_us(kind: CostKind, vertices: u64, fragments: u64) -> f32 {
 pub fn policy_keeps(error: Option<[f32; 2]>, cost: Option<[f32; 2]>, unmeasured: bool) -> bool {
     let Some([own, far]) = error else { return unmeasured };
     let ratio = match cost {
-        Some([own_t, far_t]) if own_t > 0.0 && far_t > 0.0 => own_t / far_t,
+        // (At most tenfold either way: a pack's numbers cannot force a decision.)
+        Some([own_t, far_t]) if own_t > 0.0 && far_t > 0.0 => (own_t / far_t).clamp(0.1, 10.0),
         _ => 2.0,
     };
     own * ratio.powf(ALPHA) < far
@@ -89,6 +93,9 @@ mod tests {
         assert!(!policy_keeps(Some([0.0275, 0.03]), None, true));
         assert!(policy_keeps(Some([0.0270, 0.03]), None, false));
         assert!(policy_keeps(None, None, true) && !policy_keeps(None, Some([1.0, 1.0]), false));
+        // Hostile numbers decide nothing by themselves.
+        assert!(!policy_keeps(Some([0.05, 0.03]), Some([1e-30, 1e30]), true));
+        assert!(!policy_keeps(Some([0.05, 0.03]), Some([f32::NAN, 1.0]), true));
     }
 
     #[test]
