@@ -209,6 +209,7 @@ fn sample_manifest() -> Manifest {
         home: None,
         shard: None,
         terrain: None,
+        attributes: None,
     }
 }
 
@@ -653,7 +654,7 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 6.into(), "version 6");
+    manifest_error(|v| v["version"] = 7.into(), "version 7");
     manifest_error(
         |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
         "needs manifest version 2",

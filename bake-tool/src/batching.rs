@@ -32,6 +32,8 @@ pub struct SceneTree {
     pub variation: u8,
     /// Tree id (see `docs/FORMAT.md`).
     pub id: u64,
+    /// 1-based input row, for the attribute sidecars (0: none, e.g. the demo).
+    pub row: u32,
 }
 
 /// A species model's extent at scale 1, for batch bounds.
@@ -57,6 +59,8 @@ pub struct BuiltTile {
     pub tile: Tile,
     /// Tree ids, one per instance.
     pub ids: Vec<u64>,
+    /// Input rows (1-based; 0: none), one per instance, for the attributes.
+    pub rows: Vec<u32>,
     /// Bounds of all trees, relative to the origin (min, max).
     pub bounds: ([f32; 3], [f32; 3]),
 }
@@ -154,6 +158,7 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
             let mut batches = Vec::new();
             let mut instances = Vec::with_capacity(group.len());
             let mut ids = Vec::with_capacity(group.len());
+            let mut rows = Vec::with_capacity(group.len());
             let mut b0 = 0;
             for i in 1..=group.len() {
                 let split = i == group.len()
@@ -173,6 +178,7 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
                         &mut instances,
                     );
                     ids.extend(members.iter().map(|t| t.id));
+                    rows.extend(members.iter().map(|t| t.row));
                     batches.push(batch);
                     b0 = i;
                 }
@@ -185,7 +191,12 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
                     hi[k] = hi[k].max(b.center_m[k] + b.half_extent_m[k]);
                 }
             }
-            BuiltTile { tile: Tile { tile_x: tx as i32, tile_y: ty as i32, batches, instances }, ids, bounds: (lo, hi) }
+            BuiltTile {
+                tile: Tile { tile_x: tx as i32, tile_y: ty as i32, batches, instances },
+                ids,
+                rows,
+                bounds: (lo, hi),
+            }
         })
         .collect()
 }
@@ -398,6 +409,7 @@ mod tests {
                 yaw_rad: lcg(&mut s) as f32 * 7.0,
                 variation: (lcg(&mut s) * 32.0) as u8,
                 id: i as u64,
+                row: 0,
             })
             .collect()
     }
@@ -441,6 +453,7 @@ mod tests {
                 yaw_rad: 0.0,
                 variation: 0,
                 id: i,
+                row: 0,
             })
             .collect();
         let members: Vec<&SceneTree> = trees.iter().collect();
@@ -549,6 +562,7 @@ mod tests {
                         yaw_rad: 0.0,
                         variation: (i * 7 + j) as u8 % 32,
                         id: id as u64,
+                        row: 0,
                     });
                 }
             }

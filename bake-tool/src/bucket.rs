@@ -23,7 +23,7 @@ struct TreeRecord {
     species: u32,
     variation: u32,
     aspect: f32,
-    pad: u32,
+    row: u32,
 }
 const _: () = assert!(std::mem::size_of::<TreeRecord>() == 56);
 
@@ -37,7 +37,7 @@ impl From<&SceneTree> for TreeRecord {
             species: t.species,
             variation: u32::from(t.variation),
             aspect: t.aspect,
-            pad: 0,
+            row: t.row,
         }
     }
 }
@@ -52,6 +52,7 @@ impl From<&TreeRecord> for SceneTree {
             yaw_rad: r.yaw_rad,
             variation: r.variation as u8,
             id: r.id,
+            row: r.row,
         }
     }
 }

@@ -377,6 +377,7 @@ pub fn demo_layout(count: usize, seed: u64) -> Vec<SceneTree> {
             yaw_rad: rng.range(0.0, std::f32::consts::TAU),
             variation: (rng.next_u64() % 32) as u8,
             id,
+            row: 0,
         });
     }
     trees

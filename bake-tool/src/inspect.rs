@@ -133,6 +133,7 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut instance_bytes = 0u64;
     let mut tile_bytes = 0u64;
+    let mut attribute_bytes = 0u64;
     let tiles = sylva::format::index::read_all_tiles(dir, &m).map_err(anyhow::Error::msg)?;
     for t in &tiles {
         let p = dir.join(&t.url);
@@ -143,6 +144,13 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         }
         instance_bytes += tile.instance_bytes() as u64;
         tile_bytes += b.len() as u64;
+        if let Some(schema) = &m.attributes {
+            let url = sylva::format::attributes::attributes_url(&t.url);
+            let p = dir.join(&url);
+            let b = std::fs::read(&p).with_context(|| format!("cannot read attributes {}", p.display()))?;
+            sylva::format::attributes::decode_attributes(&p.display().to_string(), &b, schema, tile.instances.len())?;
+            attribute_bytes += b.len() as u64;
+        }
     }
     let mut species = Vec::new();
     for s in &m.species {
@@ -193,6 +201,19 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         "tile_bytes": tile_bytes,
         "pack_bytes": m.species.iter().map(|s| s.bytes).sum::<u64>(),
         "species": species,
+        "attributes": m.attributes.as_ref().map(|a| json!({
+            "columns": a.columns.iter().map(|c| json!({
+                "name": c.name,
+                "type": c.kind,
+                "width": c.width,
+                "min": c.min,
+                "max": c.max,
+                "categories": c.categories.len(),
+                "trees_with_value": c.count,
+            })).collect::<Vec<_>>(),
+            "bytes": attribute_bytes,
+            "bytes_per_tree": attribute_bytes as f64 / trees,
+        })),
         "terrain": m.terrain.as_ref().map(|t| json!({
             "extent": [t.origin_m[0], t.origin_m[1], t.origin_m[0] + t.root_size_m, t.origin_m[1] + t.root_size_m],
             "resolution_m": t.resolution_m,
@@ -374,6 +395,26 @@ pub fn to_text(v: &Value) -> String {
                 v["tile_bytes"].as_f64().unwrap_or(0.0) / 1e6,
                 v["pack_bytes"].as_f64().unwrap_or(0.0) / 1e6
             );
+            let a = &v["attributes"];
+            if let Some(columns) = a["columns"].as_array() {
+                let list: Vec<String> = columns
+                    .iter()
+                    .map(|c| match c["type"].as_str() {
+                        Some("category") => {
+                            format!("{} (category, {} values)", c["name"].as_str().unwrap_or("?"), c["categories"])
+                        }
+                        Some(kind) => {
+                            format!("{} ({kind} {}–{})", c["name"].as_str().unwrap_or("?"), c["min"], c["max"])
+                        }
+                        None => String::new(),
+                    })
+                    .collect();
+                out += &format!(
+                    "attributes: {}; {:.2} bytes per tree in .attr sidecars\n",
+                    list.join(", "),
+                    a["bytes_per_tree"].as_f64().unwrap_or(0.0)
+                );
+            }
             let t = &v["terrain"];
             if t.is_object() {
                 let n = |k: &str, i: usize| t[k][i].as_f64().unwrap_or(0.0);

@@ -3,6 +3,7 @@
 
 mod allometry;
 mod ao;
+mod attributes;
 mod bake;
 mod batching;
 mod bucket;
@@ -275,6 +276,16 @@ struct BakeArgs {
     /// Unit of a DBH column whose name does not say it (dbh_mm, dbh_cm, dbh_in and dbh_m do).
     #[arg(long, value_enum, value_name = "UNIT")]
     dbh_unit: Option<placements::DbhUnit>,
+    /// Keep only these columns as per-tree attributes (comma-separated names;
+    /// default: every column but the coordinates and the id). Numbers,
+    /// integers, dates (YYYY-MM-DD) and categories are typed from the values;
+    /// free text (over 4,096 different values) is left out. Stored per tile in
+    /// `.attr` sidecars for picking, styling and search.
+    #[arg(long, value_name = "A,B,C", value_delimiter = ',', conflicts_with = "no_attributes")]
+    attributes: Option<Vec<String>>,
+    /// Keep no per-tree attributes.
+    #[arg(long)]
+    no_attributes: bool,
     /// Height and crown equations from DBH to use over the built-in ones
     /// (CSV: genus,h_p2,h_p3,h_p4,cw_b0,cw_b1,cw_b2; docs/ALLOMETRY.md). Rows
     /// without a height get one from their DBH; with neither, --default-height.
@@ -487,6 +498,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
         debug_dump: args.pack.debug_dump.clone(),
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
+        attributes: None,
     };
     let s = bake::bake_scene(&input, out, &log)?;
     report_summary(&s, &args.output.out, started);
@@ -616,6 +628,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
             projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
             columns: args.columns.clone(),
             dbh_unit: args.dbh_unit,
+            attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
         },
         crs: args.crs.as_deref(),
         input_crs: args.input_crs.as_deref(),
@@ -701,6 +714,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
         debug_dump: args.pack.debug_dump.clone(),
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
+        attributes: placed.attributes,
     };
     log(&format!("batching with {} m cells", input.cell_size_m));
     let s = bake::bake_scene(&input, out, &log)?;

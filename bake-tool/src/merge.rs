@@ -51,10 +51,11 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
             && m.cell_size_m == first.cell_size_m
             && m.tile_cells == first.tile_cells
             && m.species.len() == first.species.len()
-            && m.species.iter().zip(&first.species).all(|(a, b)| a.name == b.name && a.pack == b.pack);
+            && m.species.iter().zip(&first.species).all(|(a, b)| a.name == b.name && a.pack == b.pack)
+            && m.attributes.as_ref().map(|a| &a.columns) == first.attributes.as_ref().map(|a| &a.columns);
         if !same {
             bail!(
-                "{}: CRS, origin, cell size, tile size or species differ from shard 0 ({}): the shards come from different bakes",
+                "{}: CRS, origin, cell size, tile size, species or attributes differ from shard 0 ({}): the shards come from different bakes",
                 dir.display(),
                 shards[0].0.display()
             );
@@ -80,6 +81,9 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
             for t in &m.tiles {
                 copy(dir, tmp, &t.url)?;
                 copy(dir, tmp, &t.ids_url)?;
+                if m.attributes.is_some() {
+                    copy(dir, tmp, &sylva::format::attributes::attributes_url(&t.url))?;
+                }
             }
             tiles.extend(m.tiles.iter().cloned());
             log(&format!("merge: {} ({} tiles, {} trees)", dir.display(), m.tiles.len(), m.counts.trees));

@@ -73,7 +73,7 @@ struct Survey {
 }
 
 /// Whether `rel` is a name of the bake's own layout: `scene.json`,
-/// `species/*.pack`, `tiles/*.tile`, `tiles/*.ids`, `index/*.json`
+/// `species/*.pack`, `tiles/*.tile`, `tiles/*.ids`, `tiles/*.attr`, `index/*.json`
 /// (docs/FORMAT.md). A new kind of scene file must be added here.
 #[must_use]
 pub fn is_bake_file(rel: &str) -> bool {
@@ -81,7 +81,7 @@ pub fn is_bake_file(rel: &str) -> bool {
     match rel.split('/').collect::<Vec<_>>().as_slice() {
         ["scene.json"] => true,
         ["species", f] => plain(f, &[".pack"]),
-        ["tiles", f] => plain(f, &[".tile", ".ids"]),
+        ["tiles", f] => plain(f, &[".tile", ".ids", ".attr"]),
         ["index", f] => plain(f, &[".json"]),
         ["terrain", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".terr"]),
         ["terrain", "img", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".jpg"]),

@@ -53,7 +53,8 @@ pub fn finish_scene(
     };
     // The oldest version that holds what the scene has, so older viewers read it.
     base.version = match &base.terrain {
-        Some(t) if t.imagery.is_some() => SCENE_VERSION,
+        _ if base.attributes.is_some() => SCENE_VERSION,
+        Some(t) if t.imagery.is_some() => 5,
         Some(_) => 4,
         None => 3,
     };

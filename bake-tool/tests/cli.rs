@@ -691,6 +691,8 @@ fn trees_stand_on_the_ground_of_a_dem() {
     }
     let sloped_csv = dir.join("sloped.csv");
     std::fs::write(&sloped_csv, sloped).unwrap();
+    // (Without attributes: the manifest versions below are those of the ground.)
+    let crs = [&crs[..], &["--no-attributes"]].concat();
     let o = run(&mut quick_bake(&model, &sloped_csv, &dir.join("fitted"), &crs));
     assert!(String::from_utf8_lossy(&o.stderr).contains("terrain: "), "a terrain is baked");
     let t = inspect_json(&dir.join("fitted"))["terrain"].clone();
@@ -838,4 +840,97 @@ fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
     off.load_view(&cam, 60.0);
     let drawn: u64 = off.render(&cam, true).instances.values().sum();
     assert_eq!(drawn, 0, "the middle of the extent is empty: the test would catch a view aimed there");
+}
+
+/// Per-tree attributes (issue 19): the other columns of an inventory are typed,
+/// coded per tile in instance order (`.attr`), and every tree's values read
+/// back equal its row's; free text and empty columns are left out; the choice
+/// of columns and `--no-attributes` are honoured; a wrong name fails clearly.
+#[test]
+fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
+    use sylva::format::attributes::{attributes_url, decode_attributes, format_date, AttributeType, AttributeValue};
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("attributes");
+    let csv = dir.join("trees.csv");
+    let species = ["quercus robur", "tilia cordata", "acer campestre"];
+    let conditions = ["good", "fair", "poor", "dead"];
+    let mut text = String::from("lon,lat,tree_id,species,height,dbh,condition,planted,note,owner,mixed\n");
+    let rows: usize = 4200;
+    for i in 0..rows {
+        let (lon, lat) = (13.40 + (i % 70) as f64 * 0.0002, 52.50 + (i / 70) as f64 * 0.0002);
+        let planted = if i % 9 == 0 { String::new() } else { format_date(9000 + (i as i64 * 37) % 9000) };
+        let mixed = if i.is_multiple_of(2) { format!("{}", i % 5) } else { "n/a".into() };
+        text.push_str(&format!(
+            "{lon:.6},{lat:.6},{},{},{:.1},{:.2},{},{planted},note {i},,{mixed}\n",
+            1000 + i,
+            species[i % 3],
+            8.0 + (i % 23) as f64 * 0.5,
+            10.0 + (i % 97) as f64 * 0.7,
+            conditions[i % 4]
+        ));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let out = dir.join("scene");
+    let o = run(&mut quick_bake(&model, &csv, &out, &["--default-model", "oak"]));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("attribute \"note\" left out: more than 4096 different texts"), "{log}");
+    assert!(log.contains("attribute \"owner\" left out: no values"), "{log}");
+    let manifest =
+        sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    assert_eq!(manifest.version, 6);
+    let schema = manifest.attributes.clone().expect("attributes");
+    let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed"]);
+    let kinds: Vec<AttributeType> = schema.columns.iter().map(|c| c.kind).collect();
+    use AttributeType::{Category, Date, Number};
+    assert_eq!(kinds, [Category, Number, Number, Category, Date, Category]);
+    assert_eq!(schema.columns[4].count, (0..rows).filter(|i| !i.is_multiple_of(9)).count() as u64);
+    // Every tree, tile by tile, against its row.
+    let mut seen = 0;
+    for t in &manifest.tiles {
+        let tile = sylva::format::Tile::decode(
+            &t.url,
+            &std::fs::read(out.join(&t.url)).unwrap(),
+            manifest.species.len() as u32,
+        )
+        .unwrap();
+        let ids = sylva::format::decode_ids(&t.ids_url, &std::fs::read(out.join(&t.ids_url)).unwrap()).unwrap();
+        let url = attributes_url(&t.url);
+        let codes =
+            decode_attributes(&url, &std::fs::read(out.join(&url)).unwrap(), &schema, tile.instances.len()).unwrap();
+        for (k, id) in ids.iter().enumerate() {
+            let i = (*id - 1000) as usize;
+            let v = |c: usize| codes.value(&schema, c, k);
+            assert_eq!(v(0), Some(AttributeValue::Category(species[i % 3])), "tree {id}");
+            let Some(AttributeValue::Number(h)) = v(1) else { panic!("tree {id}: no height") };
+            assert!((h - (8.0 + (i % 23) as f64 * 0.5)).abs() < 0.01, "tree {id}: height {h}");
+            let Some(AttributeValue::Number(d)) = v(2) else { panic!("tree {id}: no dbh") };
+            assert!((d - (10.0 + (i % 97) as f64 * 0.7)).abs() < 0.01, "tree {id}: dbh {d}");
+            assert_eq!(v(3), Some(AttributeValue::Category(conditions[i % 4])), "tree {id}");
+            let planted = (!i.is_multiple_of(9)).then(|| AttributeValue::Date(9000 + (i as i64 * 37) % 9000));
+            assert_eq!(v(4), planted, "tree {id}");
+            let mixed = if i.is_multiple_of(2) { format!("{}", i % 5) } else { "n/a".into() };
+            assert_eq!(v(5), Some(AttributeValue::Category(&mixed)), "tree {id}");
+            seen += 1;
+        }
+    }
+    assert_eq!(seen, rows, "every tree has its values");
+    // Chosen columns only; an unknown name fails with the columns listed.
+    let chosen = dir.join("chosen");
+    run(&mut quick_bake(&model, &csv, &chosen, &["--default-model", "oak", "--attributes", "Condition,planted"]));
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(chosen.join("scene.json")).unwrap()).unwrap();
+    let names: Vec<String> = m.attributes.unwrap().columns.into_iter().map(|c| c.name).collect();
+    assert_eq!(names, ["condition", "planted"]);
+    let err = fails(&mut quick_bake(&model, &csv, &dir.join("bad"), &["--attributes", "condtion"]));
+    assert!(err.contains("--attributes \"condtion\": no such column") && err.contains("\"condition\""), "{err}");
+    // None: no sidecars, and the oldest manifest version that holds the scene.
+    let none = dir.join("none");
+    run(&mut quick_bake(&model, &csv, &none, &["--default-model", "oak", "--no-attributes"]));
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(none.join("scene.json")).unwrap()).unwrap();
+    assert!(m.attributes.is_none() && m.version < 6);
+    assert!(!std::fs::read_dir(none.join("tiles")).unwrap().any(|e| e
+        .unwrap()
+        .path()
+        .extension()
+        .is_some_and(|x| x == "attr")));
 }

@@ -12,13 +12,14 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 5).
+/// Newest manifest version this build writes and reads (it reads 1 to 6).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
-/// ground imagery (`terrain.imagery`). The bake writes the oldest version
-/// that holds what a scene has (3 without terrain, 4 with terrain and no
-/// imagery), so older viewers read them.
-pub const SCENE_VERSION: u32 = 5;
+/// ground imagery (`terrain.imagery`); version 6 per-tree attributes
+/// (`attributes`). The bake writes the oldest version that holds what a scene
+/// has (3 without terrain, 4 with terrain and no imagery, 5 with imagery), so
+/// older viewers read them.
+pub const SCENE_VERSION: u32 = 6;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -106,6 +107,11 @@ pub struct Manifest {
     /// The terrain quadtree (version 4), if the scene has ground heights.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub terrain: Option<super::terrain::TerrainEntry>,
+    /// The per-tree attribute columns (version 6), if the bake kept any: each
+    /// tile's values are in the sidecar next to it
+    /// ([`super::attributes::attributes_url`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attributes: Option<super::attributes::AttributeSchema>,
 }
 
 /// Which shard of a sharded bake wrote a directory.
@@ -138,7 +144,7 @@ impl Manifest {
                 )));
             }
             let version = value.get("version").and_then(serde_json::Value::as_u64);
-            if !matches!(version, Some(1..=5)) {
+            if !version.is_some_and(|v| (1..=u64::from(SCENE_VERSION)).contains(&v)) {
                 return Err(Problem::UnsupportedVersion {
                     found: version.unwrap_or(0).min(u32::MAX.into()) as u32,
                     supported: SCENE_VERSION,
@@ -167,6 +173,12 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<(), Problem> {
+        if let Some(a) = &self.attributes {
+            if self.version < 6 {
+                return Err(Problem::Invalid("\"attributes\" needs manifest version 6".into()));
+            }
+            a.validate()?;
+        }
         if let Some(t) = &self.terrain {
             if self.version < 4 {
                 return Err(Problem::Invalid("\"terrain\" needs manifest version 4".into()));

@@ -6,6 +6,7 @@
 //! allocate more than a small multiple of the input size, whatever counts the
 //! input declares. The spec is `docs/FORMAT.md`; fuzz targets live in `fuzz/`.
 
+pub mod attributes;
 pub mod cloud;
 pub mod cluster;
 pub mod entries;

@@ -257,6 +257,7 @@ mod tests {
             home: None,
             shard: None,
             terrain: None,
+            attributes: None,
         };
         (m, tiles)
     }

@@ -58,6 +58,8 @@ pub struct SceneInput<'a> {
     pub shard: Option<(u32, u32)>,
     /// Most tiles per index node; scenes with more tiles get a hierarchical index.
     pub index_node_tiles: u32,
+    /// The per-tree attributes, if kept (`.attr` sidecars next to the tiles).
+    pub attributes: Option<crate::attributes::AttributeTable>,
 }
 
 /// What was written.
@@ -89,6 +91,7 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             input.cell_size_m,
             input.tile_cells,
             input.shard,
+            input.attributes.as_ref(),
             dir,
             log,
         )?;
@@ -119,6 +122,7 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             home: None,
             shard: input.shard.map(|(index, count)| ShardStamp { index, count }),
             terrain,
+            attributes: input.attributes.as_ref().map(|a| a.schema.clone()),
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
         let flat = input.shard.is_some();

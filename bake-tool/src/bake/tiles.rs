@@ -1,5 +1,5 @@
 //! Stage 3 of the bake: the trees into grid-cell batches and tiles
-//! ([`crate::batching`]), written to `tiles/` with their id sidecars, one group
+//! ([`crate::batching`]), written to `tiles/` with their id and attribute sidecars, one group
 //! of whole tiles in memory at a time (all trees, or one bucket of a bake larger
 //! than memory). A shard keeps the trees of its own tiles.
 
@@ -8,8 +8,11 @@ use std::time::Instant;
 
 use anyhow::Result;
 use rayon::prelude::*;
+use sylva::format::attributes::encode_attributes;
 use sylva::format::manifest::{Bounds, TileEntry};
 use sylva::format::tile::encode_ids;
+
+use crate::attributes::AttributeTable;
 
 use crate::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
 use crate::bucket::TreeSource;
@@ -29,13 +32,15 @@ pub struct Tiles {
 
 /// Batches `trees` of the species `shapes` into tiles of `tile_cells` cells of
 /// `cell_size_m` and writes them into `dir/tiles/` (only shard `.0` of `.1`'s
-/// tiles with `shard`).
+/// tiles with `shard`), with their attribute sidecars from `attributes`.
+#[allow(clippy::too_many_arguments)] // the stage's inputs, each used once
 pub fn write_tiles(
     trees: &TreeSource,
     shapes: &[SpeciesShape],
     cell_size_m: u32,
     tile_cells: u32,
     shard: Option<(u32, u32)>,
+    attributes: Option<&AttributeTable>,
     dir: &Path,
     log: &dyn Fn(&str),
 ) -> Result<Tiles> {
@@ -73,6 +78,10 @@ pub fn write_tiles(
                 let bytes = bt.tile.encode();
                 write_file(&dir.join(format!("{stem}.tile")), &bytes)?;
                 write_file(&dir.join(format!("{stem}.ids")), &encode_ids(&bt.ids))?;
+                if let Some(a) = attributes {
+                    let codes = a.codes_for(&bt.rows);
+                    write_file(&dir.join(format!("{stem}.attr")), &encode_attributes(&a.schema, &codes))?;
+                }
                 Ok((
                     TileEntry {
                         x: bt.tile.tile_x,

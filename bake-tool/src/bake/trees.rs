@@ -173,6 +173,8 @@ pub struct PlacedTrees {
     pub fitted: Option<(super::ground::FittedGround, [f64; 4])>,
     /// The crown cover of every tree (of every shard), for the procedural ground material.
     pub canopy: super::ground_material::CanopyCover,
+    /// The placements' other columns as per-tree attributes, if any are kept.
+    pub attributes: Option<crate::attributes::AttributeTable>,
 }
 
 /// What pass 1 learns.
@@ -327,6 +329,7 @@ pub fn place_trees(
             yaw_rad: p.yaw_deg.map_or((h % 3600) as f32 / 3600.0 * std::f32::consts::TAU, f32::to_radians),
             variation: ((h >> 20) % 32) as u8,
             id: p.id.unwrap_or(p.row | 1 << 63),
+            row: u32::try_from(p.row).unwrap_or(0),
         };
         Ok((tree, facts))
     };
@@ -390,7 +393,19 @@ pub fn place_trees(
         (g, [region[0] - origin.x, region[1] - origin.y, region[2] - origin.x, region[3] - origin.y])
     });
     let fitted = fit.and_then(super::ground::GroundFit::finish).zip(sample.ground_region);
-    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy })
+    let attributes = if source.attribute_names().is_empty() {
+        if opts.read.attributes.as_ref().is_none_or(|a| !a.is_empty()) && source.is_geojson() {
+            log("attributes: GeoJSON properties are not kept as attributes yet (CSV columns are)");
+        }
+        None
+    } else {
+        let started = Instant::now();
+        log("attributes: typing and coding the other columns (2 passes)");
+        let table = crate::attributes::AttributeTable::build(&source, log)?;
+        log(&format!("  ({:.1} s)", started.elapsed().as_secs_f64()));
+        table
+    };
+    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy, attributes })
 }
 
 /// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.

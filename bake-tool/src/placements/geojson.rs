@@ -86,6 +86,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
                 }),
                 yaw_deg: num(prop(ColumnRole::Yaw)).map(|v| v as f32),
                 id: prop(ColumnRole::Id).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
+                attrs: Vec::new(),
                 row,
             };
             points_read.push(p);

@@ -47,6 +47,9 @@ pub struct Placement {
     pub yaw_deg: Option<f32>,
     /// Numeric tree id, if given.
     pub id: Option<u64>,
+    /// The attribute columns' text ([`Columns::attrs`] order; empty when not
+    /// asked for: [`PlacementSource::for_each_with_attributes`]).
+    pub attrs: Vec<Option<String>>,
     /// 1-based data row (CSV line minus the header) or feature index.
     pub row: u64,
 }
@@ -153,6 +156,9 @@ pub struct ReadOptions {
     pub columns: Vec<(ColumnRole, String)>,
     /// Unit of a DBH column whose name does not say (`--dbh-unit`; default cm).
     pub dbh_unit: Option<DbhUnit>,
+    /// The columns kept as per-tree attributes (`--attributes`): `None` every
+    /// column but the coordinates and the id, `Some` these (none if empty).
+    pub attributes: Option<Vec<String>>,
 }
 
 /// What a column holds.
@@ -455,6 +461,8 @@ pub struct Columns {
     pub id: Option<usize>,
     /// What each found column is used for, as `role ← header name`, for the report.
     pub used: Vec<(ColumnRole, String)>,
+    /// The columns kept as attributes: index and header name.
+    pub attrs: Vec<(usize, String)>,
 }
 
 impl Columns {
@@ -533,6 +541,31 @@ pub fn detect_columns_with(header: &[&str], options: &ReadOptions) -> Result<Col
         .filter(|r| **r != ColumnRole::CrownDiameter || crown.is_some_and(|c| !c.1))
         .filter_map(|r| get(*r).map(|i| (*r, header[i].trim().trim_matches('"').to_string())))
         .collect();
+    // Attributes: every named column but the coordinates and the id (which
+    // the `.ids` sidecar keeps), or the ones asked for.
+    let id = get(ColumnRole::Id);
+    let names: Vec<String> = header.iter().map(|s| s.trim().trim_matches('"').to_string()).collect();
+    let candidates: Vec<(usize, String)> = names
+        .iter()
+        .enumerate()
+        .filter(|(i, n)| *i != x && *i != y && Some(*i) != id && !n.is_empty())
+        .map(|(i, n)| (i, n.clone()))
+        .collect();
+    let attrs = match &options.attributes {
+        None => candidates,
+        Some(wanted) => wanted
+            .iter()
+            .map(|w| {
+                candidates.iter().find(|(_, n)| n.eq_ignore_ascii_case(w.trim())).cloned().with_context(|| {
+                    format!(
+                        "--attributes {w:?}: no such column (the coordinates and the id are not attributes); \
+                         the columns are {:?}",
+                        candidates.iter().map(|(_, n)| n.as_str()).collect::<Vec<_>>()
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>>>()?,
+    };
     Ok(Columns {
         kind,
         x,
@@ -544,8 +577,9 @@ pub fn detect_columns_with(header: &[&str], options: &ReadOptions) -> Result<Col
         dbh_unit,
         crown,
         yaw: get(ColumnRole::Yaw),
-        id: get(ColumnRole::Id),
+        id,
         used,
+        attrs,
     })
 }
 
@@ -626,7 +660,7 @@ fn decode_field<'a>(bytes: &'a [u8], encoding: Encoding, fell_back: &mut bool) -
 pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOptions) -> Result<PlacementSet> {
     let mut report = Report::default();
     let mut rows = Vec::new();
-    let kind = stream_csv(reader, delimiter, options, &mut report, &mut |p| {
+    let kind = stream_csv(reader, delimiter, options, true, &mut report, &mut |p| {
         rows.push(p);
         Ok(())
     })?;
@@ -653,6 +687,7 @@ pub fn stream_csv<R: std::io::Read>(
     reader: R,
     delimiter: u8,
     options: &ReadOptions,
+    with_attributes: bool,
     report: &mut Report,
     f: &mut dyn FnMut(Placement) -> Result<()>,
 ) -> Result<CoordKind> {
@@ -690,6 +725,14 @@ pub fn stream_csv<R: std::io::Read>(
         let (z, height, species, yaw, id) =
             (get(cols.z), get(cols.height), get(cols.species), get(cols.yaw), get(cols.id));
         let (dbh, crown) = (get(cols.dbh), get(cols.crown.map(|c| c.0)));
+        let attrs: Vec<Option<String>> = if with_attributes {
+            cols.attrs
+                .iter()
+                .map(|(i, _)| get(Some(*i)).map(|t| t.trim().to_string()).filter(|t| !t.is_empty()))
+                .collect()
+        } else {
+            Vec::new()
+        };
         if utf8_error {
             report.skip("not UTF-8 (read it with --encoding latin1)", row);
             continue;
@@ -714,6 +757,7 @@ pub fn stream_csv<R: std::io::Read>(
             species: species.as_deref().map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
             yaw_deg: yaw.as_deref().and_then(number).map(|v| v as f32),
             id: id.as_deref().and_then(|s| s.trim().parse::<u64>().ok()),
+            attrs,
             row,
         };
         if let Some(p) = accept(p, cols.kind, report) {
@@ -737,6 +781,7 @@ pub struct PlacementSource {
     pub declared_epsg: Option<u32>,
     /// What was detected, for the log (separator, encoding).
     pub notes: Vec<String>,
+    attribute_names: Vec<String>,
 }
 
 impl PlacementSource {
@@ -782,6 +827,7 @@ impl PlacementSource {
                     kind: cols.kind,
                     declared_epsg: None,
                     notes,
+                    attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
                 })
             }
             "geojson" | "json" => {
@@ -797,6 +843,7 @@ impl PlacementSource {
                     parsed: Some(set),
                     declared_epsg,
                     notes: Vec::new(),
+                    attribute_names: Vec::new(),
                 })
             }
             _ => bail!("placements {}: unknown extension {ext:?}; use .csv or .geojson", path.display()),
@@ -805,6 +852,25 @@ impl PlacementSource {
 
     /// One pass over the usable rows, in file order; returns what was read and skipped.
     pub fn for_each(&self, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
+        self.pass(false, f)
+    }
+
+    /// [`Self::for_each`] with each row's attribute columns ([`Placement::attrs`]).
+    pub fn for_each_with_attributes(&self, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
+        self.pass(true, f)
+    }
+
+    /// Whether the file is GeoJSON (read whole).
+    pub fn is_geojson(&self) -> bool {
+        self.parsed.is_some()
+    }
+
+    /// The attribute columns' names (CSV; GeoJSON keeps none yet).
+    pub fn attribute_names(&self) -> Vec<String> {
+        self.attribute_names.clone()
+    }
+
+    fn pass(&self, with_attributes: bool, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
         if let Some(set) = &self.parsed {
             for p in &set.rows {
                 f(p.clone())?;
@@ -814,7 +880,8 @@ impl PlacementSource {
         let file = std::fs::File::open(&self.path)
             .with_context(|| format!("cannot open placements {}", self.path.display()))?;
         let mut report = Report::default();
-        stream_csv(std::io::BufReader::with_capacity(1 << 20, file), self.delimiter, &self.options, &mut report, f)
+        let reader = std::io::BufReader::with_capacity(1 << 20, file);
+        stream_csv(reader, self.delimiter, &self.options, with_attributes, &mut report, f)
             .with_context(|| format!("placements {}", self.path.display()))?;
         Ok(report)
     }
