@@ -4,30 +4,10 @@
 /// Whether `label` matches `pattern`: case-insensitive; with `*` a glob (`*`
 /// alone matches everything), without one a substring.
 pub fn pattern_matches(pattern: &str, label: &str) -> bool {
-    let p = pattern.to_lowercase();
-    let l = label.to_lowercase();
-    if !p.contains('*') {
-        return l.contains(&p);
+    if !pattern.contains('*') {
+        return label.to_lowercase().contains(&pattern.to_lowercase());
     }
-    // Glob with '*' only.
-    let parts: Vec<&str> = p.split('*').collect();
-    let mut rest = l.as_str();
-    for (i, part) in parts.iter().enumerate() {
-        if part.is_empty() {
-            continue;
-        }
-        if i == 0 {
-            if !rest.starts_with(part) {
-                return false;
-            }
-            rest = &rest[part.len()..];
-        } else if let Some(at) = rest.find(part) {
-            rest = &rest[at + part.len()..];
-        } else {
-            return false;
-        }
-    }
-    parts.last().is_none_or(|last| last.is_empty() || l.ends_with(last))
+    sylva::format::attributes::glob_matches(pattern, label)
 }
 
 #[cfg(test)]

@@ -915,6 +915,35 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
         }
     }
     assert_eq!(seen, rows, "every tree has its values");
+    // Search: the ids found equal a scan of the rows.
+    let scan = |keep: &dyn Fn(usize) -> bool| -> Vec<u64> {
+        (0..rows).filter(|&i| keep(i)).map(|i| 1000 + i as u64).collect()
+    };
+    let dbh = |i: usize| 10.0 + (i % 97) as f64 * 0.7;
+    let planted = |i: usize| (!i.is_multiple_of(9)).then(|| 9000 + (i as i64 * 37) % 9000);
+    let cases: Vec<(serde_json::Value, Vec<u64>)> = vec![
+        (serde_json::json!({"species": "Quercus*"}), scan(&|i| i % 3 == 0)),
+        (
+            serde_json::json!({"species": "*a*", "dbh": [30.05, 50.05]}),
+            scan(&|i| i % 3 != 0 && (30.05..=50.05).contains(&dbh(i))),
+        ),
+        (serde_json::json!({"condition": ["poor", "dead"]}), scan(&|i| i % 4 >= 2)),
+        (
+            serde_json::json!({"planted": [format_date(12000), null], "mixed": "3"}),
+            scan(&|i| planted(i).is_some_and(|d| d >= 12000) && i.is_multiple_of(2) && i % 5 == 3),
+        ),
+        (serde_json::json!({"id": [1000, 1001, 99]}), vec![1000, 1001]),
+    ];
+    for (filter, want) in cases {
+        let found = sylva::scene::query::query_dir(&out, &filter, usize::MAX).unwrap();
+        let mut ids = found.ids.clone();
+        ids.sort_unstable();
+        assert_eq!(found.count as usize, want.len(), "{filter}");
+        assert!(!want.is_empty(), "{filter}: a case that matches something");
+        assert_eq!(ids, want, "{filter}");
+    }
+    let e = sylva::scene::query::query_dir(&out, &serde_json::json!({"hight": [1, 2]}), 10).unwrap_err();
+    assert!(e.contains("\"height\""), "{e}");
     // Chosen columns only; an unknown name fails with the columns listed.
     let chosen = dir.join("chosen");
     run(&mut quick_bake(&model, &csv, &chosen, &["--default-model", "oak", "--attributes", "Condition,planted"]));

@@ -141,6 +141,22 @@ pub(crate) enum Command {
         #[arg(long, default_value = "sylva")]
         method: String,
     },
+    /// Find trees by their attributes (the inventory's columns the bake kept)
+    /// and ids; prints {count, ids, bounds, tiles} as JSON.
+    #[command(
+        after_help = "Filter (JSON): per attribute a text or list (categories; * is a wildcard), [min, max] with\n  null for an open end, or one value (numbers, integers, dates as YYYY-MM-DD); \"id\": ids.\nExamples:\n  sylva query --scene ams --filter '{\"species\": \"quercus*\", \"dbh\": [30, null]}'\n  sylva query --scene ams --filter '{\"condition\": [\"poor\", \"dead\"]}' --limit 0"
+    )]
+    Query {
+        /// Scene directory (a baked scene with attributes).
+        #[arg(long)]
+        scene: PathBuf,
+        /// The filter, a JSON object (see below); {} matches every tree.
+        #[arg(long, default_value = "{}")]
+        filter: String,
+        /// Most ids listed (the count is always whole).
+        #[arg(long, default_value_t = 1000)]
+        limit: usize,
+    },
     /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
     Compare {
         /// First image (PNG).

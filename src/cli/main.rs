@@ -102,6 +102,14 @@ mod cli {
             }
             Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
             Command::Compare { a, b } => compare(&a, &b),
+            Command::Query { scene, filter, limit } => {
+                let filter: serde_json::Value =
+                    serde_json::from_str(&filter).map_err(|e| anyhow::anyhow!("--filter is not JSON: {e}"))?;
+                let found = sylva::scene::query::query_dir(&scene, &filter, limit)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
+                println!("{}", serde_json::to_string_pretty(&found.to_json())?);
+                Ok(())
+            }
             Command::Serve { dir, port, bind, web, allow_hosts } => serve(dir, port, &bind, web, allow_hosts),
             Command::Render(args) => render(args),
         }

@@ -384,6 +384,35 @@ pub fn decode_attributes(
     Ok(AttributeCodes { count: instances, columns: out })
 }
 
+/// Whether `text` matches `pattern`, case-insensitively: `*` matches any run of
+/// characters (a glob, anchored at both ends); without one, the whole text.
+#[must_use]
+pub fn glob_matches(pattern: &str, text: &str) -> bool {
+    let p = pattern.to_lowercase();
+    let l = text.to_lowercase();
+    if !p.contains('*') {
+        return p == l;
+    }
+    let parts: Vec<&str> = p.split('*').collect();
+    let mut rest = l.as_str();
+    for (i, part) in parts.iter().enumerate() {
+        if part.is_empty() {
+            continue;
+        }
+        if i == 0 {
+            if !rest.starts_with(part) {
+                return false;
+            }
+            rest = &rest[part.len()..];
+        } else if let Some(at) = rest.find(part) {
+            rest = &rest[at + part.len()..];
+        } else {
+            return false;
+        }
+    }
+    parts.last().is_none_or(|last| last.is_empty() || l.ends_with(last))
+}
+
 /// Days since 1970-01-01 of an ISO 8601 date (`YYYY-MM-DD`, also with a time
 /// after it, or `YYYY/MM/DD`); `None` otherwise.
 #[must_use]

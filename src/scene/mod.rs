@@ -4,6 +4,7 @@
 pub mod fetch;
 pub mod imagery;
 pub mod index_walk;
+pub mod query;
 pub mod residency;
 pub mod streaming;
 pub mod terrain;

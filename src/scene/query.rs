@@ -1,0 +1,321 @@
+//! Search by attributes (issue 19): a filter over the per-tree attribute
+//! columns (`format::attributes`) and the tree ids, matched tile by tile
+//! against the sidecars. The filter is JSON, as the browser API takes it:
+//!
+//! ```json
+//! {"species": "quercus*", "dbh": [30, null], "condition": ["good", "fair"],
+//!  "planted": ["1990-01-01", null], "id": [113001, 113054]}
+//! ```
+//!
+//! - a category column: a text (a `*` glob, case-insensitive; without `*` the
+//!   whole value) or a list of them;
+//! - a number, integer or date column: `[min, max]` (either `null`: open;
+//!   dates as `YYYY-MM-DD`), or one value (a number's within half its
+//!   quantisation step);
+//! - `id`: an id or a list of ids.
+//!
+//! Every condition must hold; a tree without a value in a column never
+//! matches a condition on it.
+
+use std::collections::HashSet;
+
+use serde_json::Value;
+
+use crate::format::attributes::{
+    glob_matches, null_code, parse_date, AttributeCodes, AttributeColumn, AttributeSchema, AttributeType,
+};
+
+/// One column's condition, compiled against its column.
+#[derive(Debug, Clone)]
+enum Condition {
+    /// The category codes that match.
+    Codes(Vec<bool>),
+    /// A closed range of values (numbers, integers, dates in days).
+    Range(f64, f64),
+}
+
+/// A compiled filter.
+#[derive(Debug, Clone, Default)]
+pub struct Filter {
+    conditions: Vec<(usize, Condition)>,
+    ids: Option<HashSet<u64>>,
+}
+
+impl Filter {
+    /// Compiles a JSON filter against `schema` (`None`: a scene without
+    /// attributes, where only `id` can be asked for).
+    ///
+    /// # Errors
+    /// Not an object, an unknown attribute (the message lists them), or a value
+    /// of the wrong kind for its column.
+    pub fn parse(schema: Option<&AttributeSchema>, filter: &Value) -> Result<Self, String> {
+        let Some(object) = filter.as_object() else {
+            return Err(format!("a filter is a JSON object of attribute names, not {filter}"));
+        };
+        let mut out = Self::default();
+        for (name, want) in object {
+            if name == "id" {
+                let ids = as_list(want)
+                    .iter()
+                    .map(|v| v.as_u64().ok_or_else(|| format!("id: {v} is not a tree id (a whole number)")))
+                    .collect::<Result<HashSet<u64>, String>>()?;
+                out.ids = Some(ids);
+                continue;
+            }
+            let Some((index, column)) = schema.and_then(|s| s.column(name)) else {
+                let names: Vec<&str> =
+                    schema.map_or(Vec::new(), |s| s.columns.iter().map(|c| c.name.as_str()).collect());
+                return Err(if names.is_empty() {
+                    format!("{name:?}: the scene has no attributes (bake it with its inventory's columns)")
+                } else {
+                    format!("{name:?} is not an attribute of the scene; it has {names:?} and \"id\"")
+                });
+            };
+            out.conditions.push((index, compile(column, want).map_err(|e| format!("{name}: {e}"))?));
+        }
+        Ok(out)
+    }
+
+    /// Whether the filter needs the attribute sidecars (not only the ids).
+    #[must_use]
+    pub fn needs_attributes(&self) -> bool {
+        !self.conditions.is_empty()
+    }
+
+    /// Whether instance `i` (id `id`, codes `codes` of its tile) matches.
+    #[must_use]
+    pub fn matches(&self, schema: Option<&AttributeSchema>, codes: Option<&AttributeCodes>, i: usize, id: u64) -> bool {
+        if self.ids.as_ref().is_some_and(|ids| !ids.contains(&id)) {
+            return false;
+        }
+        self.conditions.iter().all(|(c, condition)| {
+            let (Some(schema), Some(codes)) = (schema, codes) else { return false };
+            let Some(&code) = codes.columns.get(*c).and_then(|v| v.get(i)) else { return false };
+            let column = &schema.columns[*c];
+            if code == null_code(column.width) {
+                return false;
+            }
+            match condition {
+                Condition::Codes(ok) => ok.get(code as usize).copied().unwrap_or(false),
+                Condition::Range(lo, hi) => number_of(column, code).is_some_and(|v| v >= *lo && v <= *hi),
+            }
+        })
+    }
+}
+
+fn as_list(v: &Value) -> Vec<&Value> {
+    match v {
+        Value::Array(a) => a.iter().collect(),
+        other => vec![other],
+    }
+}
+
+/// A code's value as a number (dates in days).
+fn number_of(column: &AttributeColumn, code: u32) -> Option<f64> {
+    use crate::format::attributes::AttributeValue as V;
+    match column.value(code)? {
+        V::Number(v) => Some(v),
+        V::Integer(v) | V::Date(v) => Some(v as f64),
+        V::Category(_) => None,
+    }
+}
+
+fn compile(column: &AttributeColumn, want: &Value) -> Result<Condition, String> {
+    if column.kind == AttributeType::Category {
+        let patterns: Vec<&str> = as_list(want)
+            .into_iter()
+            .map(|v| v.as_str().ok_or_else(|| format!("{v} is not a text (the column is a category)")))
+            .collect::<Result<_, _>>()?;
+        return Ok(Condition::Codes(
+            column.categories.iter().map(|c| patterns.iter().any(|p| glob_matches(p, c))).collect(),
+        ));
+    }
+    // Numbers, integers, dates: a value or [min, max].
+    let value = |v: &Value| -> Result<Option<f64>, String> {
+        match (v, column.kind) {
+            (Value::Null, _) => Ok(None),
+            (Value::String(s), AttributeType::Date) => {
+                parse_date(s).map(|d| Some(d as f64)).ok_or_else(|| format!("{s:?} is not a date (YYYY-MM-DD)"))
+            }
+            (Value::Number(n), AttributeType::Number | AttributeType::Integer) => {
+                n.as_f64().filter(|v| v.is_finite()).map(Some).ok_or_else(|| format!("{n} is not a finite number"))
+            }
+            (v, kind) => Err(format!("{v} does not fit a {} column", serde_json::json!(kind).as_str().unwrap_or("?"))),
+        }
+    };
+    // Half a quantisation step of slack for numbers.
+    let slack = if column.kind == AttributeType::Number {
+        (column.max - column.min) / f64::from(null_code(column.width) - 1) * 0.5
+    } else {
+        0.0
+    };
+    match want {
+        Value::Array(a) if a.len() == 2 => {
+            let lo = value(&a[0])?.unwrap_or(f64::NEG_INFINITY);
+            let hi = value(&a[1])?.unwrap_or(f64::INFINITY);
+            Ok(Condition::Range(lo - slack, hi + slack))
+        }
+        Value::Array(_) => Err("a range is [min, max] (null for an open end)".into()),
+        v => {
+            let x = value(v)?.ok_or("null matches nothing; leave the attribute out")?;
+            Ok(Condition::Range(x - slack, x + slack))
+        }
+    }
+}
+
+/// What a search found.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct QueryResult {
+    /// Trees that match.
+    pub count: u64,
+    /// Their ids, in tile and instance order, up to the limit asked for.
+    pub ids: Vec<u64>,
+    /// Bounds of their trunk bases, metres relative to the scene origin
+    /// (`None`: no match).
+    pub bounds: Option<([f32; 3], [f32; 3])>,
+    /// Tiles read.
+    pub tiles: u64,
+}
+
+impl QueryResult {
+    /// Adds a matching tree.
+    pub fn add(&mut self, id: u64, position_m: [f32; 3], limit: usize) {
+        self.count += 1;
+        if self.ids.len() < limit {
+            self.ids.push(id);
+        }
+        let (lo, hi) = self.bounds.get_or_insert((position_m, position_m));
+        for k in 0..3 {
+            lo[k] = lo[k].min(position_m[k]);
+            hi[k] = hi[k].max(position_m[k]);
+        }
+    }
+
+    /// The result as JSON: `{count, ids, bounds: {min, max} | null, tiles}`.
+    #[must_use]
+    pub fn to_json(&self) -> Value {
+        serde_json::json!({
+            "count": self.count,
+            "ids": self.ids,
+            "bounds": self.bounds.map(|(min, max)| serde_json::json!({"min": min, "max": max})),
+            "tiles": self.tiles,
+        })
+    }
+}
+
+/// Searches a baked scene in a local folder: every tile's ids and (when the
+/// filter needs them) attributes, up to `limit` ids listed.
+///
+/// # Errors
+/// An unreadable or invalid manifest, tile or sidecar (named), or a filter that
+/// does not fit the scene.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<QueryResult, String> {
+    use crate::format::attributes::{attributes_url, decode_attributes};
+    use crate::format::{decode_ids, Manifest, Tile};
+    let read =
+        |url: &str| std::fs::read(dir.join(url)).map_err(|e| format!("cannot read {}: {e}", dir.join(url).display()));
+    let m = Manifest::decode("scene.json", &read("scene.json")?).map_err(|e| e.to_string())?;
+    let schema = m.attributes.as_ref();
+    let filter = Filter::parse(schema, filter)?;
+    let mut result = QueryResult::default();
+    for t in crate::format::index::read_all_tiles(dir, &m)? {
+        let tile = Tile::decode(&t.url, &read(&t.url)?, m.species.len() as u32).map_err(|e| e.to_string())?;
+        let ids = decode_ids(&t.ids_url, &read(&t.ids_url)?).map_err(|e| e.to_string())?;
+        if ids.len() != tile.instances.len() {
+            return Err(format!("{}: {} ids for {} trees", t.ids_url, ids.len(), tile.instances.len()));
+        }
+        let codes = match schema.filter(|_| filter.needs_attributes()) {
+            Some(s) => {
+                let url = attributes_url(&t.url);
+                Some(decode_attributes(&url, &read(&url)?, s, tile.instances.len()).map_err(|e| e.to_string())?)
+            }
+            None => None,
+        };
+        result.tiles += 1;
+        for batch in &tile.batches {
+            let run = batch.instance_offset as usize..(batch.instance_offset + batch.instance_count) as usize;
+            for i in run {
+                if filter.matches(schema, codes.as_ref(), i, ids[i]) {
+                    result.add(ids[i], tile.instances[i].decode(batch).position_m, limit);
+                }
+            }
+        }
+    }
+    Ok(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::attributes::AttributeColumn;
+    use serde_json::json;
+
+    fn schema() -> AttributeSchema {
+        let column = |name: &str, kind, width, min, max, categories: &[&str]| AttributeColumn {
+            name: name.into(),
+            kind,
+            width,
+            min,
+            max,
+            categories: categories.iter().map(|s| (*s).to_string()).collect(),
+            count: 0,
+        };
+        AttributeSchema {
+            columns: vec![
+                column(
+                    "species",
+                    AttributeType::Category,
+                    1,
+                    0.0,
+                    0.0,
+                    &["acer campestre", "quercus robur", "quercus rubra"],
+                ),
+                column("dbh", AttributeType::Number, 2, 0.0, 100.0, &[]),
+                column("planted", AttributeType::Date, 2, 0.0, 20000.0, &[]),
+            ],
+        }
+    }
+
+    #[test]
+    fn filters_match_what_they_say() {
+        let s = schema();
+        let c = &s.columns;
+        // Three trees: (quercus robur, 50, 2000-01-01), (acer, 20, none), (quercus rubra, 80, 1990-06-01).
+        let codes = AttributeCodes {
+            count: 3,
+            columns: vec![
+                vec![1, 0, 2],
+                vec![c[1].code_of_number(50.0), c[1].code_of_number(20.0), c[1].code_of_number(80.0)],
+                vec![
+                    c[2].code_of_number(parse_date("2000-01-01").unwrap() as f64),
+                    null_code(2),
+                    c[2].code_of_number(parse_date("1990-06-01").unwrap() as f64),
+                ],
+            ],
+        };
+        let hits = |f: Value| -> Vec<usize> {
+            let f = Filter::parse(Some(&s), &f).unwrap();
+            (0..3).filter(|&i| f.matches(Some(&s), Some(&codes), i, 100 + i as u64)).collect()
+        };
+        assert_eq!(hits(json!({"species": "Quercus*"})), [0, 2]);
+        assert_eq!(hits(json!({"species": "quercus robur"})), [0]);
+        assert_eq!(hits(json!({"species": ["acer*", "*rubra"]})), [1, 2]);
+        assert_eq!(hits(json!({"dbh": [30, null]})), [0, 2]);
+        assert_eq!(hits(json!({"dbh": [null, 50]})), [0, 1]);
+        assert_eq!(hits(json!({"dbh": 20})), [1]);
+        assert_eq!(hits(json!({"planted": ["1995-01-01", null]})), [0]);
+        assert_eq!(hits(json!({"planted": [null, null]})), [0, 2], "no value: no match");
+        assert_eq!(hits(json!({"species": "quercus*", "dbh": [60, 90]})), [2]);
+        assert_eq!(hits(json!({"id": [101, 102]})), [1, 2]);
+        assert_eq!(hits(json!({})), [0, 1, 2]);
+        let err = |f: Value| Filter::parse(Some(&s), &f).unwrap_err();
+        assert!(err(json!({"height": 3})).contains("\"species\""));
+        assert!(err(json!({"species": 3})).contains("not a text"));
+        assert!(err(json!({"dbh": "big"})).contains("does not fit"));
+        assert!(err(json!({"planted": ["2000-13-01", null]})).contains("not a date"));
+        assert!(err(json!({"dbh": [1, 2, 3]})).contains("[min, max]"));
+        assert!(err(json!([1])).contains("JSON object"));
+        assert!(Filter::parse(None, &json!({"dbh": 1})).unwrap_err().contains("no attributes"));
+    }
+}
