@@ -963,3 +963,60 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
         .extension()
         .is_some_and(|x| x == "attr")));
 }
+
+/// GeoJSON properties are attributes too: every property any feature has
+/// (numbers, texts, booleans; not the id), typed as CSV columns are.
+#[test]
+fn geojson_properties_are_attributes() {
+    use sylva::format::attributes::AttributeType;
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("geojson-attributes");
+    let features: Vec<serde_json::Value> = (0..40)
+        .map(|i| {
+            let mut props = serde_json::json!({
+                "fid": 500 + i,
+                "Species": if i % 2 == 0 { "Quercus robur" } else { "Fagus sylvatica" },
+                "dbh_cm": 20 + i,
+                "healthy": i % 3 != 0,
+                "tags": ["a", "b"],
+            });
+            if i % 5 == 0 {
+                props["surveyed"] = serde_json::json!("2024-05-01");
+            }
+            serde_json::json!({
+                "type": "Feature",
+                "geometry": {"type": "Point", "coordinates": [13.4 + f64::from(i) * 0.0003, 52.5]},
+                "properties": props,
+            })
+        })
+        .collect();
+    let path = dir.join("trees.geojson");
+    std::fs::write(&path, serde_json::json!({"type": "FeatureCollection", "features": features}).to_string()).unwrap();
+    let out = dir.join("scene");
+    run(&mut quick_bake(&model, &path, &out, &["--default-model", "oak"]));
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    let schema = m.attributes.expect("attributes");
+    let got: Vec<(&str, AttributeType)> = schema.columns.iter().map(|c| (c.name.as_str(), c.kind)).collect();
+    assert_eq!(
+        got,
+        [
+            ("Species", AttributeType::Category),
+            ("dbh_cm", AttributeType::Integer),
+            ("healthy", AttributeType::Category),
+            ("surveyed", AttributeType::Date),
+        ],
+        "the id (fid) and the list-valued tags are no attributes"
+    );
+    let found = |f: serde_json::Value| {
+        let mut ids = sylva::scene::query::query_dir(&out, &f, usize::MAX).unwrap().ids;
+        ids.sort_unstable();
+        ids
+    };
+    let scan = |keep: &dyn Fn(u64) -> bool| (0..40u64).filter(|&i| keep(i)).map(|i| 500 + i).collect::<Vec<_>>();
+    assert_eq!(
+        found(serde_json::json!({"species": "quercus*", "dbh_cm": [30, 50]})),
+        scan(&|i| i % 2 == 0 && (10..=30).contains(&i))
+    );
+    assert_eq!(found(serde_json::json!({"healthy": "false"})), scan(&|i| i % 3 == 0));
+    assert_eq!(found(serde_json::json!({"surveyed": ["2024-01-01", null]})), scan(&|i| i % 5 == 0));
+}

@@ -259,10 +259,11 @@ impl AttributeSchema {
         Ok(())
     }
 
-    /// The column named `name`.
+    /// The column named `name` (exactly, else ignoring ASCII case).
     #[must_use]
     pub fn column(&self, name: &str) -> Option<(usize, &AttributeColumn)> {
-        self.columns.iter().enumerate().find(|(_, c)| c.name == name)
+        let mut all = self.columns.iter().enumerate();
+        all.clone().find(|(_, c)| c.name == name).or_else(|| all.find(|(_, c)| c.name.eq_ignore_ascii_case(name)))
     }
 }
 

@@ -394,9 +394,6 @@ pub fn place_trees(
     });
     let fitted = fit.and_then(super::ground::GroundFit::finish).zip(sample.ground_region);
     let attributes = if source.attribute_names().is_empty() {
-        if opts.read.attributes.as_ref().is_none_or(|a| !a.is_empty()) && source.is_geojson() {
-            log("attributes: GeoJSON properties are not kept as attributes yet (CSV columns are)");
-        }
         None
     } else {
         let started = Instant::now();

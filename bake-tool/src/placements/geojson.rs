@@ -6,6 +6,40 @@ use anyhow::Result;
 
 use super::*;
 
+/// The properties kept as attributes: every name any feature has (first seen
+/// first), but the id, or the ones `--attributes` names.
+fn geojson_attributes(features: &[&serde_json::Value], options: &ReadOptions) -> Result<Vec<String>> {
+    let id_names: Vec<String> = match options.columns.iter().find(|(r, _)| *r == ColumnRole::Id) {
+        Some((_, n)) => vec![n.to_lowercase()],
+        None => ColumnRole::Id.aliases().iter().map(|a| (*a).to_string()).collect(),
+    };
+    let mut names: Vec<String> = Vec::new();
+    for f in features {
+        if let Some(p) = f.get("properties").and_then(|p| p.as_object()) {
+            for k in p.keys() {
+                if !names.iter().any(|n| n.eq_ignore_ascii_case(k)) {
+                    names.push(k.clone());
+                }
+            }
+        }
+    }
+    // The id: the first of its names present (the others stay attributes).
+    if let Some(id) = id_names.iter().find(|a| names.iter().any(|n| n.to_lowercase() == **a)) {
+        names.retain(|n| n.to_lowercase() != *id);
+    }
+    match &options.attributes {
+        None => Ok(names),
+        Some(wanted) => wanted
+            .iter()
+            .map(|w| {
+                names.iter().find(|n| n.eq_ignore_ascii_case(w.trim())).cloned().with_context(|| {
+                    format!("--attributes {w:?}: no such property (the id is not an attribute); the properties are {names:?}")
+                })
+            })
+            .collect(),
+    }
+}
+
 /// Reads a GeoJSON FeatureCollection (or a single Feature) of Point/MultiPoint
 /// geometries; properties give species, height, yaw and id with the CSV names.
 /// Coordinates are lon/lat unless `options.projected` or the file's `crs`
@@ -22,6 +56,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
         Some("Feature") => vec![&v],
         other => bail!("$.type is {other:?}, expected \"FeatureCollection\" or \"Feature\""),
     };
+    let attribute_names = geojson_attributes(&features, options)?;
     let mut report = Report::default();
     let mut rows = Vec::new();
     let mut points_read = Vec::new();
@@ -86,7 +121,18 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
                 }),
                 yaw_deg: num(prop(ColumnRole::Yaw)).map(|v| v as f32),
                 id: prop(ColumnRole::Id).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
-                attrs: Vec::new(),
+                attrs: attribute_names
+                    .iter()
+                    .map(|name| {
+                        let v = props.and_then(|p| p.get(name))?;
+                        match v {
+                            serde_json::Value::String(s) => Some(s.trim().to_string()).filter(|s| !s.is_empty()),
+                            serde_json::Value::Number(n) => Some(n.to_string()),
+                            serde_json::Value::Bool(b) => Some(b.to_string()),
+                            _ => None,
+                        }
+                    })
+                    .collect(),
                 row,
             };
             points_read.push(p);
@@ -128,7 +174,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
         }
     }
     report.kept = rows.len() as u64;
-    Ok(PlacementSet { kind, rows, report, declared_epsg })
+    Ok(PlacementSet { kind, rows, report, declared_epsg, attribute_names })
 }
 
 /// The EPSG code of a GeoJSON `crs` member (GeoJSON 2008, still written by

@@ -125,6 +125,8 @@ pub struct PlacementSet {
     pub report: Report,
     /// The EPSG code a GeoJSON file names in its `crs` member, if any.
     pub declared_epsg: Option<u32>,
+    /// The attribute columns' names ([`Placement::attrs`] order).
+    pub attribute_names: Vec<String>,
 }
 
 /// Text encoding of a CSV file.
@@ -664,7 +666,8 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOption
         rows.push(p);
         Ok(())
     })?;
-    Ok(PlacementSet { kind, rows, report, declared_epsg: None })
+    let attribute_names = Vec::new();
+    Ok(PlacementSet { kind, rows, report, declared_epsg: None, attribute_names })
 }
 
 /// Reads the header line (UTF-8 or Windows-1252, as the fields) and detects its columns.
@@ -835,6 +838,7 @@ impl PlacementSource {
                     std::fs::read(path).with_context(|| format!("cannot read placements {}", path.display()))?;
                 let set = read_geojson(&bytes, options).with_context(|| format!("placements {}", path.display()))?;
                 let declared_epsg = set.declared_epsg;
+                let attribute_names = set.attribute_names.clone();
                 Ok(Self {
                     path: path.to_path_buf(),
                     delimiter: b',',
@@ -843,7 +847,7 @@ impl PlacementSource {
                     parsed: Some(set),
                     declared_epsg,
                     notes: Vec::new(),
-                    attribute_names: Vec::new(),
+                    attribute_names,
                 })
             }
             _ => bail!("placements {}: unknown extension {ext:?}; use .csv or .geojson", path.display()),
@@ -860,12 +864,7 @@ impl PlacementSource {
         self.pass(true, f)
     }
 
-    /// Whether the file is GeoJSON (read whole).
-    pub fn is_geojson(&self) -> bool {
-        self.parsed.is_some()
-    }
-
-    /// The attribute columns' names (CSV; GeoJSON keeps none yet).
+    /// The attribute columns' names (CSV columns or GeoJSON properties).
     pub fn attribute_names(&self) -> Vec<String> {
         self.attribute_names.clone()
     }
