@@ -7,8 +7,8 @@ use std::collections::BTreeSet;
 
 use anyhow::{bail, Result};
 use sylva::format::attributes::{
-    null_code, parse_date, width_for, AttributeCodes, AttributeColumn, AttributeSchema, AttributeType, MAX_CATEGORIES,
-    MAX_TEXT_BYTES,
+    null_code, parse_date, width_for, AttributeCodes, AttributeColumn, AttributeSchema, AttributeType,
+    MAX_ATTRIBUTE_COLUMNS, MAX_CATEGORIES, MAX_TEXT_BYTES,
 };
 
 use crate::placements::PlacementSource;
@@ -17,15 +17,61 @@ use crate::placements::PlacementSource;
 pub struct AttributeTable {
     /// What the manifest says of the columns.
     pub schema: AttributeSchema,
-    /// Per column, the code of each row (index: the 1-based row).
-    codes: Vec<Vec<u32>>,
+    /// Per column, the code of each row (index: the 1-based row), at the
+    /// column's width.
+    codes: Vec<Codes>,
 }
 
-/// A number as an inventory writes it: `12.5`, or `12,5` (a decimal comma).
-fn parse_number(text: &str) -> Option<f64> {
-    let v = text.parse::<f64>().ok().or_else(|| {
-        (text.matches(',').count() == 1 && !text.contains('.')).then(|| text.replace(',', ".").parse().ok()).flatten()
-    })?;
+/// A column's codes by row, stored at its width (memory: 1, 2 or 4 bytes a row).
+enum Codes {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    U32(Vec<u32>),
+}
+
+impl Codes {
+    fn new(width: u8, rows: usize) -> Self {
+        match width {
+            1 => Self::U8(vec![u8::MAX; rows]),
+            2 => Self::U16(vec![u16::MAX; rows]),
+            _ => Self::U32(vec![u32::MAX; rows]),
+        }
+    }
+
+    fn set(&mut self, row: usize, code: u32) {
+        // (Codes fit their column's width: the column makes them.)
+        match self {
+            Self::U8(v) => v.get_mut(row).map(|c| *c = code as u8),
+            Self::U16(v) => v.get_mut(row).map(|c| *c = code as u16),
+            Self::U32(v) => v.get_mut(row).map(|c| *c = code),
+        };
+    }
+
+    fn get(&self, row: usize) -> Option<u32> {
+        match self {
+            Self::U8(v) => v.get(row).map(|&c| u32::from(c)),
+            Self::U16(v) => v.get(row).map(|&c| u32::from(c)),
+            Self::U32(v) => v.get(row).copied(),
+        }
+    }
+}
+
+/// Values that mean "none" in inventories: counted as no value, so one `n/a`
+/// does not turn a DBH column into text.
+const NO_VALUE: [&str; 8] = ["n/a", "na", "-", "--", "null", "none", "nan", "?"];
+
+fn is_no_value(text: &str) -> bool {
+    NO_VALUE.iter().any(|n| text.eq_ignore_ascii_case(n))
+}
+
+/// Largest whole number kept exact (the schema's bound too).
+const MAX_INTEGER: u64 = 9_000_000_000_000_000;
+
+/// A number as the inventory writes it: `12.5`, or with `decimal_comma` (a `;`
+/// or tab separated CSV) `12,5` and `1.234,5` as well, as the placements reader does.
+fn parse_number(text: &str, decimal_comma: bool) -> Option<f64> {
+    let v =
+        if decimal_comma { crate::placements::parse_decimal_comma(text) } else { crate::placements::parse_f64(text) }?;
     v.is_finite().then_some(v)
 }
 
@@ -55,11 +101,11 @@ impl Seen {
         }
     }
 
-    fn add(&mut self, text: &str) {
+    fn add(&mut self, text: &str, decimal_comma: bool) {
         self.count += 1;
-        let number = parse_number(text);
+        let number = parse_number(text, decimal_comma);
         self.numbers &= number.is_some();
-        self.integers &= text.parse::<i64>().is_ok_and(|v| v.unsigned_abs() < 1 << 53);
+        self.integers &= text.parse::<i64>().is_ok_and(|v| v.unsigned_abs() <= MAX_INTEGER);
         if let Some(v) = number {
             self.range = [self.range[0].min(v), self.range[1].max(v)];
         }
@@ -94,6 +140,9 @@ impl Seen {
             return Err("no values".into());
         }
         let [lo, hi] = self.range;
+        if !(hi - lo).is_finite() && self.numbers {
+            return Err(format!("numbers over too wide a range ({lo:e} to {hi:e})"));
+        }
         if self.integers && hi - lo < f64::from(u32::MAX - 1) {
             return Ok(base(AttributeType::Integer, width_for((hi - lo) as u64), lo, hi));
         }
@@ -118,7 +167,8 @@ impl Seen {
 
 impl AttributeTable {
     /// Types and codes the attribute columns of `source` (`None` when it has
-    /// none to keep). Logs each column, and each one left out and why.
+    /// none to keep). Logs each column, and each one left out and why (a name
+    /// repeated or over 256 bytes, past the 256th column, free text, no values).
     ///
     /// # Errors
     /// An unreadable file, or more rows than 32-bit row numbers hold.
@@ -127,13 +177,14 @@ impl AttributeTable {
         if names.is_empty() {
             return Ok(None);
         }
+        let decimal_comma = source.decimal_comma();
         let mut seen: Vec<Seen> = names.iter().map(|_| Seen::new()).collect();
         let mut rows = 0u64;
         source.for_each_with_attributes(&mut |p| {
             rows = rows.max(p.row);
             for (s, v) in seen.iter_mut().zip(&p.attrs) {
-                if let Some(v) = v {
-                    s.add(v);
+                if let Some(v) = v.as_deref().filter(|v| !is_no_value(v)) {
+                    s.add(v, decimal_comma);
                 }
             }
             Ok(())
@@ -144,6 +195,19 @@ impl AttributeTable {
         let mut kept = Vec::new();
         let mut columns = Vec::new();
         for (i, (s, name)) in seen.into_iter().zip(&names).enumerate() {
+            let why = if name.len() > MAX_TEXT_BYTES {
+                Some(format!("a name over {MAX_TEXT_BYTES} bytes"))
+            } else if names[..i].iter().any(|n| n.eq_ignore_ascii_case(name)) {
+                Some("a repeated column name (the first is kept)".into())
+            } else if columns.len() >= MAX_ATTRIBUTE_COLUMNS {
+                Some(format!("past the {MAX_ATTRIBUTE_COLUMNS}th attribute (choose with --attributes)"))
+            } else {
+                None
+            };
+            if let Some(why) = why {
+                log(&format!("  attribute {name:?} left out: {why}"));
+                continue;
+            }
             match s.column(name) {
                 Ok(c) => {
                     log(&format!("  attribute {:?}: {}", name, describe(&c)));
@@ -158,24 +222,24 @@ impl AttributeTable {
         }
         let schema = AttributeSchema { columns };
         schema.validate()?;
-        let mut codes: Vec<Vec<u32>> =
-            schema.columns.iter().map(|c| vec![null_code(c.width); rows as usize + 1]).collect();
+        let mut codes: Vec<Codes> = schema.columns.iter().map(|c| Codes::new(c.width, rows as usize + 1)).collect();
         source.for_each_with_attributes(&mut |p| {
             let row = p.row as usize;
             for ((column, codes), &i) in schema.columns.iter().zip(codes.iter_mut()).zip(&kept) {
                 let Some(Some(text)) = p.attrs.get(i) else { continue };
+                if is_no_value(text) {
+                    continue;
+                }
                 let code = match column.kind {
                     AttributeType::Category => column.code_of_category(text),
                     AttributeType::Date => {
                         parse_date(text).map_or(null_code(column.width), |d| column.code_of_number(d as f64))
                     }
                     AttributeType::Integer | AttributeType::Number => {
-                        parse_number(text).map_or(null_code(column.width), |v| column.code_of_number(v))
+                        parse_number(text, decimal_comma).map_or(null_code(column.width), |v| column.code_of_number(v))
                     }
                 };
-                if let Some(slot) = codes.get_mut(row) {
-                    *slot = code;
-                }
+                codes.set(row, code);
             }
             Ok(())
         })?;
@@ -196,9 +260,7 @@ impl AttributeTable {
                 .zip(&self.codes)
                 .map(|(c, codes)| {
                     let null = null_code(c.width);
-                    rows.iter()
-                        .map(|&r| if r == 0 { null } else { codes.get(r as usize).copied().unwrap_or(null) })
-                        .collect()
+                    rows.iter().map(|&r| if r == 0 { null } else { codes.get(r as usize).unwrap_or(null) }).collect()
                 })
                 .collect(),
         }
@@ -231,12 +293,12 @@ mod tests {
         let typed = |values: &[&str]| {
             let mut s = Seen::new();
             for v in values {
-                s.add(v);
+                s.add(v, false);
             }
             s.column("c")
         };
         assert_eq!(typed(&["1", "2", "12"]).unwrap().kind, AttributeType::Integer);
-        assert_eq!(typed(&["1", "2.5", "12,5"]).unwrap().kind, AttributeType::Number);
+        assert_eq!(typed(&["1", "2.5", "12"]).unwrap().kind, AttributeType::Number);
         assert_eq!(typed(&["2001-02-03", "1999-12-31"]).unwrap().kind, AttributeType::Date);
         let c = typed(&["good", "poor", "good", "fair"]).unwrap();
         assert_eq!(
@@ -251,8 +313,11 @@ mod tests {
         // A year column is an exact integer of one byte.
         let y = typed(&["1950", "2020"]).unwrap();
         assert_eq!((y.width, y.min, y.max), (1, 1950.0, 2020.0));
-        assert_eq!(parse_number("12,5"), Some(12.5));
-        assert_eq!(parse_number("1,234,5"), None);
-        assert_eq!(parse_number("NaN"), None);
+        assert_eq!(parse_number("12,5", true), Some(12.5));
+        assert_eq!(parse_number("12,5", false), None, "a comma CSV's \"12,5\" is no number");
+        assert_eq!(parse_number("NaN", false), None);
+        assert!(is_no_value("N/A") && is_no_value("-") && !is_no_value("0"));
+        // Whole numbers past 9e15 are numbers, not integers (the schema's bound).
+        assert_eq!(typed(&["1", "9100000000000000"]).unwrap().kind, AttributeType::Number);
     }
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use sylva::format::build_index;
-use sylva::format::manifest::{Bounds, Counts, Manifest, TileEntry, SCENE_VERSION};
+use sylva::format::manifest::{Bounds, Counts, Manifest, TileEntry};
 
 /// File-name-safe version of a species name.
 pub fn safe_name(name: &str) -> String {
@@ -53,7 +53,7 @@ pub fn finish_scene(
     };
     // The oldest version that holds what the scene has, so older viewers read it.
     base.version = match &base.terrain {
-        _ if base.attributes.is_some() => SCENE_VERSION,
+        _ if base.attributes.is_some() => 6,
         Some(t) if t.imagery.is_some() => 5,
         Some(_) => 4,
         None => 3,

@@ -854,18 +854,22 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     let csv = dir.join("trees.csv");
     let species = ["quercus robur", "tilia cordata", "acer campestre"];
     let conditions = ["good", "fair", "poor", "dead"];
-    let mut text = String::from("lon,lat,tree_id,species,height,dbh,condition,planted,note,owner,mixed\n");
+    let mut text =
+        String::from("lon,lat,tree_id,species,height,dbh,condition,planted,note,owner,mixed,Condition,girth\n");
     let rows: usize = 4200;
     for i in 0..rows {
         let (lon, lat) = (13.40 + (i % 70) as f64 * 0.0002, 52.50 + (i / 70) as f64 * 0.0002);
         let planted = if i % 9 == 0 { String::new() } else { format_date(9000 + (i as i64 * 37) % 9000) };
-        let mixed = if i.is_multiple_of(2) { format!("{}", i % 5) } else { "n/a".into() };
+        let mixed = if i.is_multiple_of(2) { format!("{}", i % 5) } else { "x".into() };
+        // "n/a" is no value: the column stays a number.
+        let girth = if i.is_multiple_of(10) { "n/a".to_string() } else { format!("{}", 50 + i % 40) };
         text.push_str(&format!(
-            "{lon:.6},{lat:.6},{},{},{:.1},{:.2},{},{planted},note {i},,{mixed}\n",
+            "{lon:.6},{lat:.6},{},{},{:.1},{:.2},{},{planted},note {i},,{mixed},{},{girth}\n",
             1000 + i,
             species[i % 3],
             8.0 + (i % 23) as f64 * 0.5,
             10.0 + (i % 97) as f64 * 0.7,
+            conditions[i % 4],
             conditions[i % 4]
         ));
     }
@@ -875,15 +879,17 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("attribute \"note\" left out: more than 4096 different texts"), "{log}");
     assert!(log.contains("attribute \"owner\" left out: no values"), "{log}");
+    assert!(log.contains("attribute \"Condition\" left out: a repeated column name"), "{log}");
     let manifest =
         sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
     assert_eq!(manifest.version, 6);
     let schema = manifest.attributes.clone().expect("attributes");
     let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
-    assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed"]);
+    assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed", "girth"]);
     let kinds: Vec<AttributeType> = schema.columns.iter().map(|c| c.kind).collect();
-    use AttributeType::{Category, Date, Number};
-    assert_eq!(kinds, [Category, Number, Number, Category, Date, Category]);
+    use AttributeType::{Category, Date, Integer, Number};
+    assert_eq!(kinds, [Category, Number, Number, Category, Date, Category, Integer]);
+    assert_eq!(schema.columns[6].count, (0..rows).filter(|i| !i.is_multiple_of(10)).count() as u64);
     assert_eq!(schema.columns[4].count, (0..rows).filter(|i| !i.is_multiple_of(9)).count() as u64);
     // Every tree, tile by tile, against its row.
     let mut seen = 0;
@@ -909,8 +915,10 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
             assert_eq!(v(3), Some(AttributeValue::Category(conditions[i % 4])), "tree {id}");
             let planted = (!i.is_multiple_of(9)).then(|| AttributeValue::Date(9000 + (i as i64 * 37) % 9000));
             assert_eq!(v(4), planted, "tree {id}");
-            let mixed = if i.is_multiple_of(2) { format!("{}", i % 5) } else { "n/a".into() };
+            let mixed = if i.is_multiple_of(2) { format!("{}", i % 5) } else { "x".into() };
             assert_eq!(v(5), Some(AttributeValue::Category(&mixed)), "tree {id}");
+            let girth = (!i.is_multiple_of(10)).then(|| AttributeValue::Integer(50 + (i % 40) as i64));
+            assert_eq!(v(6), girth, "tree {id}");
             seen += 1;
         }
     }

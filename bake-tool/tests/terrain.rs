@@ -197,13 +197,11 @@ fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() 
     // 1 m pixels over x 500050–500550, y 5299450–5299950.
     common::write_geotiff_ortho(&ortho, (500, 500), 1.0, (500_050.0, 5_299_950.0), checker);
     std::fs::write(dir.join("trees.csv"), "id,x,y,height\n1,500020,5299420,12\n2,500030,5299420,12\n").unwrap();
-    let (scene, o) = bake(&dir, &model, &dem, &["--ortho".as_ref(), ortho.as_os_str()]);
+    let (scene, o) = bake(&dir, &model, &dem, &["--ortho".as_ref(), ortho.as_os_str(), "--no-attributes".as_ref()]);
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("imagery: ") && log.contains("ortho.tif"), "{log}");
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
-    // (The height column is kept as an attribute: version 6; without, 5.)
-    assert_eq!(m.version, if m.attributes.is_some() { 6 } else { 5 }, "imagery needs manifest version 5");
-    assert!(m.version >= 5);
+    assert_eq!(m.version, 5, "imagery needs manifest version 5 (and no attributes: not 6)");
     let t = m.terrain.clone().unwrap();
     let i = t.imagery.clone().expect("an imagery entry");
     let origin = DVec3::from(m.origin_m);

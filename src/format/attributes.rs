@@ -226,7 +226,7 @@ impl AttributeSchema {
             if ![1, 2, 4].contains(&c.width) {
                 return bad(format!("width {} (1, 2 or 4)", c.width));
             }
-            if !c.min.is_finite() || !c.max.is_finite() || c.min > c.max {
+            if !c.min.is_finite() || !c.max.is_finite() || c.min > c.max || !(c.max - c.min).is_finite() {
                 return bad(format!("range {}..{}", c.min, c.max));
             }
             let null = u64::from(null_code(c.width));

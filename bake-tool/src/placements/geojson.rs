@@ -124,7 +124,9 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
                 attrs: attribute_names
                     .iter()
                     .map(|name| {
-                        let v = props.and_then(|p| p.get(name))?;
+                        let v = props.and_then(|p| {
+                            p.get(name).or_else(|| p.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v))
+                        })?;
                         match v {
                             serde_json::Value::String(s) => Some(s.trim().to_string()).filter(|s| !s.is_empty()),
                             serde_json::Value::Number(n) => Some(n.to_string()),

@@ -591,7 +591,7 @@ pub fn detect_columns(header: &[&str]) -> Result<Columns> {
     detect_columns_with(header, &ReadOptions::default())
 }
 
-fn parse_f64(s: &str) -> Option<f64> {
+pub(crate) fn parse_f64(s: &str) -> Option<f64> {
     let t = s.trim();
     if t.is_empty() {
         return None;
@@ -601,7 +601,7 @@ fn parse_f64(s: &str) -> Option<f64> {
 
 /// A number of a CSV whose separator is not a comma: `52.37`, or with a
 /// decimal comma as European spreadsheets write it, `52,37` or `1.234,5`.
-fn parse_decimal_comma(s: &str) -> Option<f64> {
+pub(crate) fn parse_decimal_comma(s: &str) -> Option<f64> {
     parse_f64(s).or_else(|| {
         let (int, frac) = s.trim().rsplit_once(',')?;
         if frac.is_empty() || !frac.bytes().all(|b| b.is_ascii_digit()) {
@@ -862,6 +862,11 @@ impl PlacementSource {
     /// [`Self::for_each`] with each row's attribute columns ([`Placement::attrs`]).
     pub fn for_each_with_attributes(&self, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
         self.pass(true, f)
+    }
+
+    /// Whether numbers may have decimal commas (a CSV separated by `;` or tabs).
+    pub fn decimal_comma(&self) -> bool {
+        self.parsed.is_none() && self.delimiter != b','
     }
 
     /// The attribute columns' names (CSV columns or GeoJSON properties).
