@@ -204,6 +204,7 @@ fn sample_manifest() -> Manifest {
             trees: 5,
             batches: 2,
             bounds: b,
+            attribute_codes: None,
         }],
         index: None,
         home: None,
@@ -700,6 +701,7 @@ fn the_home_of_a_scene_is_its_largest_group_of_touching_tiles() {
             min: [x as f32 * 100.0, y as f32 * 100.0, 0.0],
             max: [x as f32 * 100.0 + 90.0, y as f32 * 100.0 + 90.0, 20.0],
         },
+        attribute_codes: None,
     };
     // West: three tiles touching (one only by a corner), 60 trees; east: one tile of 50.
     let mut tiles = vec![tile(0, 0, 20), tile(1, 1, 20), tile(0, 1, 20), tile(40, 0, 50)];

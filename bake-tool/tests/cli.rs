@@ -950,6 +950,10 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
         assert!(!want.is_empty(), "{filter}: a case that matches something");
         assert_eq!(ids, want, "{filter}");
     }
+    // The tiles' code ranges let a search skip what cannot match.
+    assert!(manifest.tiles.iter().all(|t| t.attribute_codes.as_ref().is_some_and(|c| c.len() == schema.columns.len())));
+    let none = sylva::scene::query::query_dir(&out, &serde_json::json!({"dbh": [1000, null]}), 10).unwrap();
+    assert_eq!((none.count, none.tiles, none.skipped), (0, 0, manifest.tiles.len() as u64));
     let e = sylva::scene::query::query_dir(&out, &serde_json::json!({"hight": [1, 2]}), 10).unwrap_err();
     assert!(e.contains("\"height\""), "{e}");
     // Chosen columns only; an unknown name fails with the columns listed.

@@ -284,6 +284,24 @@ impl AttributeCodes {
         schema.columns.get(column)?.value(code)
     }
 
+    /// Per column, the smallest and largest code with a value (`None`: no
+    /// instance has one): the tile's `attribute_codes` in the manifest or index.
+    #[must_use]
+    pub fn ranges(&self, schema: &AttributeSchema) -> Vec<Option<[u32; 2]>> {
+        schema
+            .columns
+            .iter()
+            .zip(&self.columns)
+            .map(|(c, codes)| {
+                let null = null_code(c.width);
+                codes
+                    .iter()
+                    .filter(|&&k| k != null)
+                    .fold(None, |r: Option<[u32; 2]>, &k| Some(r.map_or([k, k], |[lo, hi]| [lo.min(k), hi.max(k)])))
+            })
+            .collect()
+    }
+
     /// Every value of instance `i` as a JSON object `{name: value}` (columns
     /// without a value left out).
     #[must_use]

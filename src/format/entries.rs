@@ -40,6 +40,12 @@ pub struct TileEntry {
     pub batches: u32,
     /// Bounds of every tree in the tile.
     pub bounds: Bounds,
+    /// Per attribute column (`scene.json` `attributes`), the smallest and
+    /// largest code of the tile's values (`null`: none has a value): a search
+    /// skips tiles that cannot match (manifest version 6; categories are
+    /// sorted, so a prefix's codes are a run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attribute_codes: Option<Vec<Option<[u32; 2]>>>,
 }
 
 /// The manifest's pointer to the index.
@@ -128,6 +134,12 @@ impl TileEntry {
     pub(crate) fn validate(&self, what: &str) -> Result<(), Problem> {
         check_url(&format!("{what}.url"), &self.url)?;
         check_url(&format!("{what}.ids_url"), &self.ids_url)?;
+        if let Some(codes) = &self.attribute_codes {
+            if codes.len() > super::attributes::MAX_ATTRIBUTE_COLUMNS || codes.iter().flatten().any(|[lo, hi]| lo > hi)
+            {
+                return Err(Problem::Invalid(format!("{what}.attribute_codes: more columns than allowed or lo > hi")));
+            }
+        }
         validate_bounds(&format!("{what}.bounds"), &self.bounds)
     }
 }

@@ -82,6 +82,26 @@ impl Filter {
         !self.conditions.is_empty()
     }
 
+    /// Whether a tile whose codes span `ranges` (its `attribute_codes`) may
+    /// hold a match; `None` (no summary): it may.
+    #[must_use]
+    pub fn may_match(&self, schema: Option<&AttributeSchema>, ranges: Option<&[Option<[u32; 2]>]>) -> bool {
+        let (Some(schema), Some(ranges)) = (schema, ranges) else { return true };
+        self.conditions.iter().all(|(c, condition)| {
+            let (Some(range), Some(column)) = (ranges.get(*c), schema.columns.get(*c)) else { return true };
+            // No value in the tile: nothing there can match this condition.
+            let Some([lo, hi]) = *range else { return false };
+            match condition {
+                Condition::Codes(ok) => (lo..=hi).any(|k| ok.get(k as usize).copied().unwrap_or(false)),
+                Condition::Range(a, b) => {
+                    // Codes are monotonic in value: the tile's values span value(lo)..value(hi).
+                    let (Some(vlo), Some(vhi)) = (number_of(column, lo), number_of(column, hi)) else { return true };
+                    vhi >= *a && vlo <= *b
+                }
+            }
+        })
+    }
+
     /// Whether instance `i` (id `id`, codes `codes` of its tile) matches.
     #[must_use]
     pub fn matches(&self, schema: Option<&AttributeSchema>, codes: Option<&AttributeCodes>, i: usize, id: u64) -> bool {
@@ -175,6 +195,9 @@ pub struct QueryResult {
     pub bounds: Option<([f32; 3], [f32; 3])>,
     /// Tiles read.
     pub tiles: u64,
+    /// Tiles skipped: their codes' ranges (the index's `attribute_codes`) say
+    /// nothing in them can match.
+    pub skipped: u64,
 }
 
 impl QueryResult {
@@ -191,7 +214,7 @@ impl QueryResult {
         }
     }
 
-    /// The result as JSON: `{count, ids, bounds: {min, max} | null, tiles}`.
+    /// The result as JSON: `{count, ids, bounds: {min, max} | null, tiles, skipped}`.
     #[must_use]
     pub fn to_json(&self) -> Value {
         serde_json::json!({
@@ -199,6 +222,7 @@ impl QueryResult {
             "ids": self.ids,
             "bounds": self.bounds.map(|(min, max)| serde_json::json!({"min": min, "max": max})),
             "tiles": self.tiles,
+            "skipped": self.skipped,
         })
     }
 }
@@ -220,6 +244,10 @@ pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<
     let filter = Filter::parse(schema, filter)?;
     let mut result = QueryResult::default();
     for t in crate::format::index::read_all_tiles(dir, &m)? {
+        if !filter.may_match(schema, t.attribute_codes.as_deref()) {
+            result.skipped += 1;
+            continue;
+        }
         let tile = Tile::decode(&t.url, &read(&t.url)?, m.species.len() as u32).map_err(|e| e.to_string())?;
         let ids = decode_ids(&t.ids_url, &read(&t.ids_url)?).map_err(|e| e.to_string())?;
         if ids.len() != tile.instances.len() {
@@ -317,5 +345,17 @@ mod tests {
         assert!(err(json!({"dbh": [1, 2, 3]})).contains("[min, max]"));
         assert!(err(json!([1])).contains("JSON object"));
         assert!(Filter::parse(None, &json!({"dbh": 1})).unwrap_err().contains("no attributes"));
+        // Tiles: the codes' ranges say which can match.
+        let ranges = codes.ranges(&s);
+        assert_eq!(ranges[0], Some([0, 2]));
+        assert_eq!(ranges[2].map(|r| r[0] <= r[1]), Some(true));
+        let may = |f: Value, r: &[Option<[u32; 2]>]| Filter::parse(Some(&s), &f).unwrap().may_match(Some(&s), Some(r));
+        assert!(may(json!({"dbh": [70, 90]}), &ranges));
+        assert!(!may(json!({"dbh": [90, null]}), &ranges), "all dbh below 90");
+        assert!(!may(json!({"species": "quercus*"}), &[Some([0, 0]), ranges[1], ranges[2]]), "only acer");
+        assert!(may(json!({"species": "quercus*"}), &[Some([0, 1]), ranges[1], ranges[2]]));
+        assert!(!may(json!({"planted": [null, null]}), &[ranges[0], ranges[1], None]), "no dates in the tile");
+        assert!(may(json!({"id": [5]}), &[None, None, None]), "ids are not summarised");
+        assert!(Filter::parse(Some(&s), &json!({})).unwrap().may_match(Some(&s), None));
     }
 }

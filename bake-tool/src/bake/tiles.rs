@@ -78,10 +78,14 @@ pub fn write_tiles(
                 let bytes = bt.tile.encode();
                 write_file(&dir.join(format!("{stem}.tile")), &bytes)?;
                 write_file(&dir.join(format!("{stem}.ids")), &encode_ids(&bt.ids))?;
-                if let Some(a) = attributes {
-                    let codes = a.codes_for(&bt.rows);
-                    write_file(&dir.join(format!("{stem}.attr")), &encode_attributes(&a.schema, &codes))?;
-                }
+                let attribute_codes = match attributes {
+                    Some(a) => {
+                        let codes = a.codes_for(&bt.rows);
+                        write_file(&dir.join(format!("{stem}.attr")), &encode_attributes(&a.schema, &codes))?;
+                        Some(codes.ranges(&a.schema))
+                    }
+                    None => None,
+                };
                 Ok((
                     TileEntry {
                         x: bt.tile.tile_x,
@@ -92,6 +96,7 @@ pub fn write_tiles(
                         trees: bt.tile.instances.len() as u64,
                         batches: bt.tile.batches.len() as u32,
                         bounds: Bounds { min: bt.bounds.0, max: bt.bounds.1 },
+                        attribute_codes,
                     },
                     bt.tile.instance_bytes() as u64,
                 ))
