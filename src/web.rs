@@ -132,6 +132,69 @@ fn js_err(e: impl std::fmt::Display) -> JsValue {
     JsValue::from_str(&e.to_string())
 }
 
+/// Search by attributes, for `v.query` (web/sylva.js fetches the files):
+/// parses `schema` (the manifest's `attributes` as JSON, or `null`) and
+/// `filter`, and says whether a tile whose `attribute_codes` are `ranges`
+/// (JSON, or `null`) may hold a match.
+///
+/// # Errors
+/// A filter that does not fit the scene (the message says why).
+#[wasm_bindgen(js_name = queryMayMatch)]
+pub fn query_may_match(schema: &str, filter: &str, ranges: &str) -> Result<bool, JsValue> {
+    let (schema, filter) = query_parse(schema, filter)?;
+    let ranges: Option<Vec<Option<[u32; 2]>>> = serde_json::from_str(ranges).map_err(js_err)?;
+    Ok(filter.may_match(schema.as_ref(), ranges.as_deref()))
+}
+
+/// Matches one tile (its bytes, ids and attribute sidecar, as fetched) and
+/// returns `{count, ids, bounds, tiles: 1, skipped: 0}` as JSON, at most
+/// `limit` ids.
+///
+/// # Errors
+/// A filter that does not fit the scene, or a file that does not decode.
+#[wasm_bindgen(js_name = queryTile)]
+#[allow(clippy::too_many_arguments)]
+pub fn query_tile(
+    schema: &str,
+    filter: &str,
+    species: u32,
+    tile: &[u8],
+    ids: &[u8],
+    attr: Option<Vec<u8>>,
+    url: &str,
+    limit: usize,
+) -> Result<String, JsValue> {
+    let (schema, filter) = query_parse(schema, filter)?;
+    let attr_url = crate::format::attributes::attributes_url(url);
+    let files = [url, "ids", attr_url.as_str()];
+    let mut result = crate::scene::query::QueryResult::default();
+    crate::scene::query::query_tile(
+        schema.as_ref(),
+        &filter,
+        species,
+        [tile, ids],
+        attr.as_deref(),
+        files,
+        limit,
+        &mut result,
+    )
+    .map_err(js_err)?;
+    Ok(result.to_json().to_string())
+}
+
+fn query_parse(
+    schema: &str,
+    filter: &str,
+) -> Result<(Option<crate::format::attributes::AttributeSchema>, crate::scene::query::Filter), JsValue> {
+    let schema: Option<crate::format::attributes::AttributeSchema> = serde_json::from_str(schema).map_err(js_err)?;
+    if let Some(s) = &schema {
+        s.validate().map_err(js_err)?;
+    }
+    let filter: serde_json::Value = serde_json::from_str(filter).map_err(js_err)?;
+    let filter = crate::scene::query::Filter::parse(schema.as_ref(), &filter).map_err(js_err)?;
+    Ok((schema, filter))
+}
+
 #[wasm_bindgen]
 impl Viewer {
     /// Creates a viewer on `canvas` streaming `scene` (URL of a scene directory or scene.json).

@@ -16,10 +16,12 @@
 //                                           ao: each tree's own baked ambient occlusion, true (the default) | false
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.stats()                               same keys as `sylva render --stats`
+//   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
+//                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
 
-import init, { Viewer } from './pkg/sylva.js';
+import init, { Viewer, queryMayMatch, queryTile } from './pkg/sylva.js';
 
 let wasmReady = null;
 
@@ -61,6 +63,51 @@ class SylvaViewer {
   }
 
   on(event, fn) { (this.handlers[event] ||= []).push(fn); return this; }
+
+  /** Trees matching `filter` (attributes the bake kept, and `id`), read from
+   * the tiles' id and attribute sidecars; tiles whose code ranges cannot match
+   * are skipped. Resolves to {count, ids (at most `limit`), bounds ({min, max},
+   * metres relative to the scene origin, or null), tiles, skipped}. */
+  async query(filter = {}, { limit = 10000 } = {}) {
+    const sceneUrl = new URL(this.options.scene || 'scene/scene.json', location.href);
+    const base = sceneUrl.href.endsWith('.json') ? sceneUrl : new URL('scene.json', sceneUrl.href.replace(/\/?$/, '/'));
+    const get = async (url, json) => {
+      const r = await fetch(new URL(url, base));
+      if (!r.ok) throw new Error(`${new URL(url, base)}: HTTP ${r.status}`);
+      return json ? r.json() : new Uint8Array(await r.arrayBuffer());
+    };
+    const m = await get(base.href, true);
+    const schema = JSON.stringify(m.attributes ?? null);
+    const f = JSON.stringify(filter);
+    queryMayMatch(schema, f, 'null'); // a filter that does not fit the scene throws here
+    const tiles = [...(m.tiles || [])];
+    if (m.index) {
+      const stack = [m.index.root];
+      while (stack.length) {
+        const node = await get(stack.pop(), true);
+        tiles.push(...node.tiles);
+        stack.push(...node.children.map((c) => c.url));
+      }
+    }
+    const out = { count: 0, ids: [], bounds: null, tiles: 0, skipped: 0 };
+    const needsAttributes = m.attributes && Object.keys(filter).some((k) => k !== 'id');
+    for (const t of tiles) {
+      if (!queryMayMatch(schema, f, JSON.stringify(t.attribute_codes ?? null))) { out.skipped++; continue; }
+      const attrUrl = t.url.replace(/\.tile$/, '') + '.attr';
+      const [tile, ids, attr] = await Promise.all([get(t.url), get(t.ids_url), needsAttributes ? get(attrUrl) : null]);
+      const r = JSON.parse(queryTile(schema, f, m.species.length, tile, ids, attr ?? undefined, t.url,
+        Math.max(0, limit - out.ids.length)));
+      out.count += r.count;
+      out.ids.push(...r.ids);
+      out.tiles += 1;
+      if (r.bounds) {
+        out.bounds = out.bounds
+          ? { min: out.bounds.min.map((v, k) => Math.min(v, r.bounds.min[k])), max: out.bounds.max.map((v, k) => Math.max(v, r.bounds.max[k])) }
+          : r.bounds;
+      }
+    }
+    return out;
+  }
   emit(event, data) { for (const fn of this.handlers[event] || []) { try { fn(data); } catch (e) { console.error(e); } } }
 
   resize() {
@@ -406,7 +453,7 @@ export async function create(target, options = {}) {
   await loadWasm();
   const scene = options.scene || 'scene/scene.json';
   const viewer = await Viewer.create(canvas, scene);
-  const v = new SylvaViewer(canvas, viewer, options);
+  const v = new SylvaViewer(canvas, viewer, { ...options, scene });
   if (options.camera) v.setCamera(options.camera);
   if (options.lighting) v.setLighting(options.lighting);
   if (options.refine !== undefined) {

@@ -227,6 +227,50 @@ impl QueryResult {
     }
 }
 
+/// Matches one tile: its bytes, its ids' and (when the filter needs them) its
+/// attribute sidecar's, `files` naming the three in errors; adds the matches to
+/// `result` (ids up to `limit` in all). Shared by [`query_dir`] and the
+/// browser's `query`.
+///
+/// # Errors
+/// A file that does not decode, or ids that do not match the tile.
+#[allow(clippy::too_many_arguments)]
+pub fn query_tile(
+    schema: Option<&AttributeSchema>,
+    filter: &Filter,
+    species: u32,
+    [tile, ids]: [&[u8]; 2],
+    attr: Option<&[u8]>,
+    files: [&str; 3],
+    limit: usize,
+    result: &mut QueryResult,
+) -> Result<(), String> {
+    use crate::format::attributes::decode_attributes;
+    use crate::format::{decode_ids, Tile};
+    let tile = Tile::decode(files[0], tile, species).map_err(|e| e.to_string())?;
+    let ids = decode_ids(files[1], ids).map_err(|e| e.to_string())?;
+    if ids.len() != tile.instances.len() {
+        return Err(format!("{}: {} ids for {} trees", files[1], ids.len(), tile.instances.len()));
+    }
+    let codes = match (schema.filter(|_| filter.needs_attributes()), attr) {
+        (Some(s), Some(bytes)) => {
+            Some(decode_attributes(files[2], bytes, s, tile.instances.len()).map_err(|e| e.to_string())?)
+        }
+        (Some(_), None) => return Err(format!("{}: the filter needs the attribute sidecar", files[2])),
+        _ => None,
+    };
+    result.tiles += 1;
+    for batch in &tile.batches {
+        let run = batch.instance_offset as usize..(batch.instance_offset + batch.instance_count) as usize;
+        for i in run {
+            if filter.matches(schema, codes.as_ref(), i, ids[i]) {
+                result.add(ids[i], tile.instances[i].decode(batch).position_m, limit);
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Searches a baked scene in a local folder: every tile's ids and (when the
 /// filter needs them) attributes, up to `limit` ids listed.
 ///
@@ -235,8 +279,8 @@ impl QueryResult {
 /// does not fit the scene.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<QueryResult, String> {
-    use crate::format::attributes::{attributes_url, decode_attributes};
-    use crate::format::{decode_ids, Manifest, Tile};
+    use crate::format::attributes::attributes_url;
+    use crate::format::Manifest;
     let read =
         |url: &str| std::fs::read(dir.join(url)).map_err(|e| format!("cannot read {}: {e}", dir.join(url).display()));
     let m = Manifest::decode("scene.json", &read("scene.json")?).map_err(|e| e.to_string())?;
@@ -248,27 +292,13 @@ pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<
             result.skipped += 1;
             continue;
         }
-        let tile = Tile::decode(&t.url, &read(&t.url)?, m.species.len() as u32).map_err(|e| e.to_string())?;
-        let ids = decode_ids(&t.ids_url, &read(&t.ids_url)?).map_err(|e| e.to_string())?;
-        if ids.len() != tile.instances.len() {
-            return Err(format!("{}: {} ids for {} trees", t.ids_url, ids.len(), tile.instances.len()));
-        }
-        let codes = match schema.filter(|_| filter.needs_attributes()) {
-            Some(s) => {
-                let url = attributes_url(&t.url);
-                Some(decode_attributes(&url, &read(&url)?, s, tile.instances.len()).map_err(|e| e.to_string())?)
-            }
+        let attr = match schema.filter(|_| filter.needs_attributes()) {
+            Some(_) => Some(read(&attributes_url(&t.url))?),
             None => None,
         };
-        result.tiles += 1;
-        for batch in &tile.batches {
-            let run = batch.instance_offset as usize..(batch.instance_offset + batch.instance_count) as usize;
-            for i in run {
-                if filter.matches(schema, codes.as_ref(), i, ids[i]) {
-                    result.add(ids[i], tile.instances[i].decode(batch).position_m, limit);
-                }
-            }
-        }
+        let files = [t.url.as_str(), t.ids_url.as_str(), &attributes_url(&t.url)];
+        let (tile, ids) = (read(&t.url)?, read(&t.ids_url)?);
+        query_tile(schema, &filter, m.species.len() as u32, [&tile, &ids], attr.as_deref(), files, limit, &mut result)?;
     }
     Ok(result)
 }

@@ -315,6 +315,18 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     assert.ok(drawn > 100, `trees drawn in the first view: ${drawn} (${JSON.stringify(stats.instances)})`);
     const share = await foliageShare(page, 'districts-first-view');
     assert.ok(share > 0.01, `foliage covers ${share} of the first view`);
+    // Search by attribute (issue 19): the CSV's height column, as the page,
+    // a scan of the rows and the native `sylva query` see it.
+    const q = await page.evaluate(() => window.sylva.query({ height: [12, 14] }, { limit: 1000 }));
+    const want = [...Array(500).keys()].filter((i) => [2, 3, 4].includes(i % 8));
+    assert.equal(q.count, want.length, JSON.stringify(q).slice(0, 300));
+    assert.deepEqual([...q.ids].sort((a, b) => a - b), want);
+    const native = JSON.parse(execFileSync(sylvaBin, ['query', '--scene', join(dir, 'scene'), '--filter',
+      '{"height": [12, 14]}', '--limit', '1000']).toString());
+    assert.equal(native.count, q.count);
+    assert.deepEqual(native.bounds, q.bounds);
+    const bad = await page.evaluate(() => window.sylva.query({ heigth: 1 }).then(() => 'resolved', (e) => String(e)));
+    assert.match(bad, /not an attribute.*"height"/);
     assert.deepEqual(errors, []);
   } finally {
     served.proc.kill();
