@@ -635,6 +635,19 @@ test('an iframe is driven by postMessage', async () => {
   await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'reply' && r.id === 2), null, { timeout: 20000 });
   const cam = await page.evaluate(() => window.replies.find((r) => r.id === 2).data);
   assert.ok(Math.abs(cam.y + 350) < 1 && Math.abs(cam.heading - 10) < 0.5, JSON.stringify(cam));
+  // query replies when its promise settles: by id (the fixture's ids are 0…2999), and an error for an attribute
+  // the scene does not have.
+  await page.evaluate(() => {
+    const f = document.getElementById('f').contentWindow;
+    f.postMessage({ verb: 'query', args: [{ id: [0, 7, 2999, 5000] }], id: 3 }, '*');
+    f.postMessage({ verb: 'query', args: [{ dbh: [1, 2] }], id: 4 }, '*');
+  });
+  await page.waitForFunction(() => [3, 4].every((id) => window.replies.some((r) => r.sylva === 'reply' && r.id === id)),
+    null, { timeout: 60000 });
+  const [found, refused] = await page.evaluate(() => [3, 4].map((id) => window.replies.find((r) => r.id === id)));
+  assert.equal(found.data.count, 3, JSON.stringify(found).slice(0, 300));
+  assert.deepEqual([...found.data.ids].sort((a, b) => a - b), [0, 7, 2999]);
+  assert.match(refused.error, /no attributes/);
 });
 
 test('the browser draws what the native renderer draws for the same camera', async () => {
