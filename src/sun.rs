@@ -117,7 +117,9 @@ impl SunTime {
     }
 }
 
-fn days_in_month(year: i32, month: u32) -> u32 {
+/// Days in `month` (1–12) of `year` (proleptic Gregorian); also the attribute
+/// dates' check (`format::attributes::parse_date`).
+pub(crate) fn days_in_month(year: i32, month: u32) -> u32 {
     match month {
         2 if (year % 4 == 0 && year % 100 != 0) || year % 400 == 0 => 29,
         2 => 28,
