@@ -292,11 +292,12 @@ pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<
             result.skipped += 1;
             continue;
         }
+        let attr_url = attributes_url(&t.url);
         let attr = match schema.filter(|_| filter.needs_attributes()) {
-            Some(_) => Some(read(&attributes_url(&t.url))?),
+            Some(_) => Some(read(&attr_url)?),
             None => None,
         };
-        let files = [t.url.as_str(), t.ids_url.as_str(), &attributes_url(&t.url)];
+        let files = [t.url.as_str(), t.ids_url.as_str(), attr_url.as_str()];
         let (tile, ids) = (read(&t.url)?, read(&t.ids_url)?);
         query_tile(schema, &filter, m.species.len() as u32, [&tile, &ids], attr.as_deref(), files, limit, &mut result)?;
     }
