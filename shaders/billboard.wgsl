@@ -29,6 +29,8 @@ struct VertexOut {
     @location(5) @interpolate(flat) lift: f32,
     // Forest-scale occlusion (`canopy_occlusion`), by height in the quad.
     @location(6) canopy: f32,
+    // The tree's pool instance (the id pass).
+    @location(7) @interpolate(flat) item_x: u32,
 };
 
 const PI: f32 = 3.14159265;
@@ -86,6 +88,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.layer = az * angles + k;
     out.normal_yaw = phi - f32(az) * az_step;
     out.item_y = item.y;
+    out.item_x = item.x;
     out.tint = variation_tint(tree.variation);
     out.lift = half_w * max(tree.aspect, 1.0);
     // The height in the crown of what this point of the quad shows: along the
@@ -124,4 +127,14 @@ fn fs_shadow(in: VertexOut) {
     if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
+}
+
+// Picking: the tree's pool instance + 1, alpha-tested.
+@fragment
+fn fs_id(in: VertexOut) -> @location(0) u32 {
+    let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
+    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+        discard;
+    }
+    return in.item_x + 1u;
 }

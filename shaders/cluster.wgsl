@@ -49,6 +49,8 @@ struct VertexOut {
     // and crown aspect: the hit point back into model space for `field_ao`.
     @location(7) @interpolate(flat) tree_at: vec4<f32>,
     @location(8) @interpolate(flat) tree_size: vec2<f32>,
+    // The tree's pool instance (the id pass).
+    @location(9) @interpolate(flat) item_x: u32,
 };
 
 // An eye-relative point in the tree's model space (scale 1).
@@ -262,6 +264,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         line_vertex(prim - draw.cluster.y, tree, corner, &out);
     }
     out.item_y = item.y;
+    out.item_x = item.x;
     out.tree_at = vec4<f32>(tree.pos, tree.yaw);
     out.tree_size = vec2<f32>(tree.scale, tree.aspect);
     out.cover = batch_cover(batch);
@@ -423,4 +426,15 @@ fn fs_proxy_depth(in: VertexOut) -> @location(0) vec4<f32> {
 @fragment
 fn fs_shadow(in: VertexOut) {
     _ = cluster_hit(in);
+}
+
+// Picking: the tree's pool instance + 1 where the ray meets the primitive,
+// with the exact depth.
+@fragment
+fn fs_id(in: VertexOut) -> IdOut {
+    let hit = cluster_hit(in);
+    var out: IdOut;
+    out.id = in.item_x + 1u;
+    out.depth = hit.depth;
+    return out;
 }

@@ -472,3 +472,10 @@ fn half_to_f32(h: u32) -> f32 {
 fn unpack_halves(w: u32) -> vec2<f32> {
     return vec2<f32>(half_to_f32(w & 0xffffu), half_to_f32(w >> 16u));
 }
+
+// The id pass (picking, on demand): the pool instance + 1 of the tree a pixel
+// shows, with that pixel's depth; 0 is no tree.
+struct IdOut {
+    @location(0) id: u32,
+    @builtin(frag_depth) depth: f32,
+};

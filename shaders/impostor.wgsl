@@ -34,6 +34,8 @@ struct VertexOut {
     @location(7) @interpolate(flat) tint: vec3<f32>,
     // The batch's canopy cover (`batch_cover`).
     @location(8) @interpolate(flat) cover: f32,
+    // The tree's pool instance (the id pass).
+    @location(9) @interpolate(flat) item_x: u32,
 };
 
 // Model offset from the sphere's centre → eye-relative offset, and back.
@@ -102,6 +104,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.tree_at = vec4<f32>(cw, tree.yaw);
     out.tree_size = vec2<f32>(s, aspect);
     out.item_y = item.y;
+    out.item_x = item.x;
     out.tint = variation_tint(tree.variation);
     out.cover = batch_cover(batch);
     return out;
@@ -265,4 +268,17 @@ fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
         discard;
     }
     return impostor_depth(hit.at, in);
+}
+
+// Picking: the tree's pool instance + 1, the coverage tested, the hit's depth.
+@fragment
+fn fs_id(in: VertexOut) -> IdOut {
+    let hit = impostor_hit(in);
+    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+        discard;
+    }
+    var out: IdOut;
+    out.id = in.item_x + 1u;
+    out.depth = impostor_depth(hit.at, in);
+    return out;
 }

@@ -67,6 +67,8 @@ struct VertexOut {
     @location(7) @interpolate(flat) plane: u32,
     @location(8) @interpolate(flat) frame: vec2<f32>,
     @location(9) @interpolate(flat) tint: vec3<f32>,
+    // The tree's pool instance (the id pass).
+    @location(10) @interpolate(flat) item_x: u32,
 };
 
 // The occlusion byte of a vertex (`normal_oct` byte 2, snorm8): 0 not baked
@@ -96,6 +98,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.tint = tint;
     out.material = in.position_material.w;
     out.item_y = item.y;
+    out.item_x = item.x;
     out.canopy = canopy_occlusion(batch, local.z / max(mesh.pos_min.z + mesh.pos_extent.z, 1e-3));
     out.ao = vertex_ao(in.normal_oct.z);
     return out;
@@ -308,6 +311,13 @@ fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec
 @fragment
 fn fs_shadow(in: VertexOut, @builtin(front_facing) front: bool) {
     _ = surface(in, front);
+}
+
+// Picking: the tree's pool instance + 1, alpha-tested like the colour pass.
+@fragment
+fn fs_id(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) u32 {
+    _ = surface(in, front);
+    return in.item_x + 1u;
 }
 
 struct CaptureOut {

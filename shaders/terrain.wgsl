@@ -221,3 +221,12 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     lit = mix(lit, relit, select(0.0, photo.a, has));
     return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }
+
+// Picking: the ground hides the trees behind it and is no tree (0).
+@fragment
+fn fs_id(in: VertexOut) -> @location(0) u32 {
+    if in.valid < 0.999 {
+        discard;
+    }
+    return 0u;
+}

@@ -162,3 +162,41 @@ fn a_shadow_study_renders_one_image_per_time_as_the_sun_moves() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `sylva pick` prints the tree at a pixel (its id from the tile's sidecar,
+/// species, height, place) or null where none is drawn; bad pixels are refused.
+#[test]
+fn pick_prints_the_tree_at_a_pixel_or_null() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small");
+    let pick = |at: &str, view: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+            .env_remove("XDG_RUNTIME_DIR")
+            .args(["pick", "--scene"])
+            .arg(&scene)
+            .args(["--view", view, "--size", "160x90", "--timeout", "60", "--at", at])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+    };
+    // The medium view's centre is in the forest.
+    let (ok, stdout, stderr) = pick("80,45", "medium");
+    assert!(ok, "{stderr}");
+    let tree: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(tree["id"].as_u64().is_some(), "{stdout}");
+    assert!(["spruce", "beech", "birch"].contains(&tree["species"].as_str().unwrap()), "{stdout}");
+    let height = tree["height"].as_f64().unwrap();
+    assert!((5.0..60.0).contains(&height), "{stdout}");
+    assert!(tree["lon"].as_f64().is_some_and(|l| (14.0..16.0).contains(&l)), "{stdout}");
+    assert!(stderr.contains("picked 80,45 of 160x90: tree "), "{stderr}");
+    // The medium view's top row is sky.
+    let (ok, stdout, stderr) = pick("80,0", "medium");
+    assert!(ok, "{stderr}");
+    assert_eq!(stdout.trim(), "null");
+    // Outside the image, or not a pixel.
+    let (ok, _, stderr) = pick("160,10", "top");
+    assert!(!ok && stderr.contains("outside the 160x90 image"), "{stderr}");
+    let (ok, _, stderr) = pick("a,b", "top");
+    assert!(!ok && stderr.contains("expected X,Y"), "{stderr}");
+}

@@ -904,6 +904,32 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
         let url = attributes_url(&t.url);
         let codes =
             decode_attributes(&url, &std::fs::read(out.join(&url)).unwrap(), &schema, tile.instances.len()).unwrap();
+        // What a pick says of a tree (`describe_tree`) is its row too.
+        let tile_bytes = std::fs::read(out.join(&t.url)).unwrap();
+        let ids_bytes = std::fs::read(out.join(&t.ids_url)).unwrap();
+        let attr_bytes = std::fs::read(out.join(&url)).unwrap();
+        let geo = sylva::geo::GeoFrame::new(&manifest.crs.proj4, manifest.origin_m).unwrap();
+        for k in [0, ids.len() / 2, ids.len() - 1] {
+            let files = [t.url.as_str(), t.ids_url.as_str(), url.as_str()];
+            let d = sylva::scene::query::describe_tree(
+                &manifest,
+                Some(&geo),
+                [&tile_bytes, &ids_bytes],
+                Some(&attr_bytes),
+                files,
+                k as u32,
+            )
+            .unwrap();
+            let i = (ids[k] - 1000) as usize;
+            assert_eq!(d["id"], ids[k], "{d}");
+            assert_eq!(d["attributes"]["species"], species[i % 3], "{d}");
+            assert_eq!(d["attributes"]["condition"], conditions[i % 4], "{d}");
+            let (lon, lat) = (13.40 + (i % 70) as f64 * 0.0002, 52.50 + (i / 70) as f64 * 0.0002);
+            assert!((d["lon"].as_f64().unwrap() - lon).abs() < 1e-6, "{d} lon {lon}");
+            assert!((d["lat"].as_f64().unwrap() - lat).abs() < 1e-6, "{d} lat {lat}");
+            let height = 8.0 + (i % 23) as f64 * 0.5;
+            assert!((d["height"].as_f64().unwrap() - height).abs() < 0.05 * height, "{d} height {height}");
+        }
         for (k, id) in ids.iter().enumerate() {
             let i = (*id - 1000) as usize;
             let v = |c: usize| codes.value(&schema, c, k);

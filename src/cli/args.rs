@@ -157,6 +157,15 @@ pub(crate) enum Command {
         #[arg(long, default_value_t = 1000)]
         limit: usize,
     },
+    /// Say which tree is drawn at a pixel of a view (the id pass the viewer's
+    /// click runs), as JSON: {id, species, attributes, lon, lat, height,
+    /// position} or null where no tree is drawn there.
+    #[command(after_help = "The pixel counts from the top left of an image of --size, seen from --view or --camera as
+`sylva render` sees it (same flags).
+Examples:
+  sylva pick --scene ams --view medium --at 480,300
+  sylva pick --scene ams --camera 121000,487000,60,0,-30 --size 1280x720 --at 640,360")]
+    Pick(PickArgs),
     /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
     Compare {
         /// First image (PNG).
@@ -183,6 +192,47 @@ pub(crate) enum Command {
         #[arg(long = "allow-host", value_name = "NAME")]
         allow_hosts: Vec<String>,
     },
+}
+
+/// `sylva pick`: the tree at a pixel of a view.
+#[derive(clap::Args)]
+pub(crate) struct PickArgs {
+    /// Scene directory, scene.json path or http(s) URL.
+    #[arg(long)]
+    pub(crate) scene: String,
+    /// The pixel, X,Y from the top left of the image.
+    #[arg(long, value_name = "X,Y")]
+    pub(crate) at: String,
+    /// Image size, WxH (as `sylva render --size`).
+    #[arg(long, default_value = "960x540")]
+    pub(crate) size: String,
+    /// Named scene viewpoint (ignored with --camera).
+    #[arg(long, value_enum, default_value_t = SceneView::Medium)]
+    pub(crate) view: SceneView,
+    /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
+    #[arg(long, allow_hyphen_values = true)]
+    pub(crate) camera: Option<String>,
+    /// LoD quality factor (as `sylva render --quality`).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) quality: f32,
+    /// Draw distance in metres.
+    #[arg(long, default_value_t = 6000.0)]
+    pub(crate) draw_distance: f32,
+    /// Draw only one representation family (as `sylva render --only`).
+    #[arg(long, value_enum)]
+    pub(crate) only: Option<OnlyArg>,
+    /// The far tier where a pack has both (as `sylva render --far-tier`).
+    #[arg(long, value_enum, default_value = "impostors")]
+    pub(crate) far_tier: FarTierArg,
+    /// Leave the terrain out (trees behind hills can then be picked).
+    #[arg(long)]
+    pub(crate) no_terrain: bool,
+    /// Also write the view as a PNG here, the picked pixel marked (to check a pick by eye).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+    /// Give up waiting for data after this many seconds.
+    #[arg(long, default_value_t = 120.0)]
+    pub(crate) timeout: f64,
 }
 
 /// `sylva render`: a scene or one pack to a PNG.

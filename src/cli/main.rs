@@ -112,6 +112,7 @@ mod cli {
             }
             Command::Serve { dir, port, bind, web, allow_hosts } => serve(dir, port, &bind, web, allow_hosts),
             Command::Render(args) => render(args),
+            Command::Pick(args) => pick(args),
         }
     }
 }

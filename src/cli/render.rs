@@ -45,18 +45,7 @@ pub(crate) fn render_scene(
             bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
         }
     };
-    let cam = match camera {
-        Some(text) => parse_camera(text, manifest.origin_m)?,
-        None => {
-            let named = match view {
-                SceneView::Far => NamedView::Far,
-                SceneView::Medium => NamedView::Medium,
-                SceneView::Close => NamedView::Close,
-                SceneView::Top => NamedView::Top,
-            };
-            off.named_camera(named, timeout).context("the scene manifest is not loaded")?
-        }
-    };
+    let cam = scene_camera(&mut off, &manifest, view, camera, timeout)?;
     let t = std::time::Instant::now();
     events.extend(off.load_view(&cam, timeout));
     let load_s = t.elapsed().as_secs_f64();
@@ -159,6 +148,143 @@ pub(crate) fn render_scene(
             );
         }
     }
+    Ok(())
+}
+
+/// The camera of `--camera` or `--view`.
+fn scene_camera(
+    off: &mut OffscreenScene,
+    manifest: &sylva::format::Manifest,
+    view: SceneView,
+    camera: Option<&str>,
+    timeout: f64,
+) -> Result<Camera> {
+    Ok(match camera {
+        Some(text) => parse_camera(text, manifest.origin_m)?,
+        None => {
+            let named = match view {
+                SceneView::Far => NamedView::Far,
+                SceneView::Medium => NamedView::Medium,
+                SceneView::Close => NamedView::Close,
+                SceneView::Top => NamedView::Top,
+            };
+            off.named_camera(named, timeout).context("the scene manifest is not loaded")?
+        }
+    })
+}
+
+/// The representations `--only` allows, and whether the LoD policy applies.
+fn representations(only: Option<OnlyArg>) -> (sylva::render::forest::Representations, bool) {
+    use sylva::render::forest::Representations;
+    // `--only` draws every baked level of the family (no LoD policy).
+    let r = match only {
+        None => Representations::default(),
+        Some(OnlyArg::Meshes) => Representations::MESHES,
+        Some(OnlyArg::Ellipsoids) => Representations::CLUSTERS,
+        Some(OnlyArg::Billboards) => Representations::BILLBOARDS,
+        Some(OnlyArg::Clouds) => Representations::CLOUDS,
+    };
+    (r, only.is_none())
+}
+
+fn far_tier_of(arg: FarTierArg) -> sylva::render::settings::FarTier {
+    match arg {
+        FarTierArg::Impostors => sylva::render::settings::FarTier::Impostors,
+        FarTierArg::Billboards => sylva::render::settings::FarTier::Billboards,
+    }
+}
+
+/// `sylva pick`: the tree drawn at a pixel, as JSON on stdout.
+pub(crate) fn pick(args: PickArgs) -> Result<()> {
+    let (w, h) = parse_size(&args.size)?;
+    let (x, y) = args
+        .at
+        .split_once(',')
+        .and_then(|(x, y)| Some((x.trim().parse::<u32>().ok()?, y.trim().parse::<u32>().ok()?)))
+        .with_context(|| format!("--at {:?}: expected X,Y in whole pixels, e.g. 480,300", args.at))?;
+    if x >= w || y >= h {
+        bail!("--at {x},{y} is outside the {w}x{h} image (--size)");
+    }
+    if !(args.quality > 0.0 && args.quality <= 16.0) {
+        bail!("--quality {}: must be in (0, 16]", args.quality);
+    }
+    let scene = args.scene.as_str();
+    let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
+    let (representations, lod_policy) = representations(args.only);
+    off.settings = RenderSettings {
+        quality: args.quality,
+        draw_distance_m: args.draw_distance,
+        terrain: !args.no_terrain,
+        far_tier: far_tier_of(args.far_tier),
+        representations,
+        lod_policy,
+        ..RenderSettings::default()
+    };
+    let events = off.load_view(&Camera::default(), args.timeout);
+    let Some(manifest) = off.stream.manifest().cloned() else {
+        let why = events.iter().find_map(|e| match e {
+            StreamEvent::Fatal { message } => Some(message.clone()),
+            _ => None,
+        });
+        bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
+    };
+    let cam = scene_camera(&mut off, &manifest, args.view, args.camera.as_deref(), args.timeout)?;
+    off.load_view(&cam, args.timeout);
+    if !off.stream.is_settled() {
+        eprintln!("warning: not everything the view needs arrived within --timeout {} s", args.timeout);
+    }
+    off.render(&cam, false);
+    let t = std::time::Instant::now();
+    let view = cam.view_data(w, h);
+    let instance = off.pick_blocking(&view, [x, y]);
+    let gpu_ms = t.elapsed().as_secs_f64() * 1e3;
+    let located = instance.and_then(|i| off.stream.locate_instance(i));
+    let answer = match &located {
+        None => serde_json::Value::Null,
+        Some(tree) => {
+            let read = |url: &str| sylva::scene::fetch::fetch_once(url).map_err(|e| anyhow::anyhow!("{e}"));
+            let (tile, ids) = (read(&tree.tile_url)?, read(&tree.ids_url)?);
+            let attr = match manifest.attributes {
+                Some(_) => Some(read(&tree.attributes_url)?),
+                None => None,
+            };
+            let geo = sylva::geo::GeoFrame::new(&manifest.crs.proj4, manifest.origin_m).ok();
+            let files = [tree.tile_url.as_str(), tree.ids_url.as_str(), tree.attributes_url.as_str()];
+            sylva::scene::query::describe_tree(
+                &manifest,
+                geo.as_ref(),
+                [&tile, &ids],
+                attr.as_deref(),
+                files,
+                tree.index,
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+        }
+    };
+    let total_ms = t.elapsed().as_secs_f64() * 1e3;
+    if let Some(out) = &args.out {
+        off.render(&cam, false);
+        let mut rgba = off.read_image();
+        // A red cross, 9 px, centred on the pixel.
+        for d in -4i64..=4 {
+            for (px, py) in [(i64::from(x) + d, i64::from(y)), (i64::from(x), i64::from(y) + d)] {
+                if (0..i64::from(w)).contains(&px) && (0..i64::from(h)).contains(&py) {
+                    let k = ((py as usize) * w as usize + px as usize) * 4;
+                    rgba[k..k + 4].copy_from_slice(&[255, 0, 0, 255]);
+                }
+            }
+        }
+        image::save_buffer(out, &rgba, w, h, image::ColorType::Rgba8)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    eprintln!(
+        "picked {x},{y} of {w}x{h}: {} (id pass {gpu_ms:.1} ms, with the tree's files {total_ms:.1} ms)",
+        match &located {
+            Some(t) => format!("tree {} of {}", t.index, t.tile_url),
+            None => "no tree".into(),
+        }
+    );
+    println!("{}", serde_json::to_string_pretty(&answer)?);
     Ok(())
 }
 
@@ -303,7 +429,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     };
     let sun = SunArg::parse(sun_time.as_deref(), sun.as_deref())?;
     if let Some(scene) = scene {
-        use sylva::render::forest::Representations;
+        let (representations, lod_policy) = representations(only);
         let settings = RenderSettings {
             quality,
             draw_distance_m: draw_distance,
@@ -315,19 +441,9 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             terrain: !no_terrain,
             shadows,
             ao,
-            far_tier: match far_tier {
-                FarTierArg::Impostors => sylva::render::settings::FarTier::Impostors,
-                FarTierArg::Billboards => sylva::render::settings::FarTier::Billboards,
-            },
-            // `--only` draws every baked level of the family (no LoD policy).
-            lod_policy: only.is_none(),
-            representations: match only {
-                None => Representations::default(),
-                Some(OnlyArg::Meshes) => Representations::MESHES,
-                Some(OnlyArg::Ellipsoids) => Representations::CLUSTERS,
-                Some(OnlyArg::Billboards) => Representations::BILLBOARDS,
-                Some(OnlyArg::Clouds) => Representations::CLOUDS,
-            },
+            far_tier: far_tier_of(far_tier),
+            lod_policy,
+            representations,
             ..RenderSettings::default()
         };
         return render_scene(

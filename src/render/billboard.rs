@@ -19,6 +19,8 @@ pub struct FarTierPipeline {
     pub texture_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
+    /// The id pass's (picking).
+    pub id: super::layouts::IdPipeline,
     sampler: wgpu::Sampler,
 }
 
@@ -67,6 +69,7 @@ impl FarTierPipeline {
         };
         let pipeline = super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target);
         let shadow = super::layouts::shadow_caster_pipeline(device, &format!("{label} shadow"), &module, &layout, &[]);
+        let id = super::layouts::IdPipeline::new(label, &module, &layout, &[], target.primitive);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some(label),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -76,7 +79,7 @@ impl FarTierPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { texture_layout, pipeline, shadow, sampler }
+        Self { texture_layout, pipeline, shadow, id, sampler }
     }
 
     /// The lit pipeline.

@@ -30,6 +30,8 @@ pub struct ClusterPipeline {
     pipeline: wgpu::RenderPipeline,
     proxy_depth: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
+    /// The id pass's (picking).
+    pub id: super::layouts::IdPipeline,
     sampler: wgpu::Sampler,
     noise: OnceLock<(wgpu::TextureView, wgpu::TextureView)>,
 }
@@ -67,6 +69,7 @@ impl ClusterPipeline {
         let pipeline = make("fs_main");
         let proxy_depth = make("fs_proxy_depth");
         let shadow = super::layouts::shadow_caster_pipeline(device, "cluster shadow", &module, &pipeline_layout, &[]);
+        let id = super::layouts::IdPipeline::new("cluster", &module, &pipeline_layout, &[], target.primitive);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("cluster noise"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -74,7 +77,7 @@ impl ClusterPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { layout, pipeline, proxy_depth, shadow, sampler, noise: OnceLock::new() }
+        Self { layout, pipeline, proxy_depth, shadow, id, sampler, noise: OnceLock::new() }
     }
 
     /// The pipeline: exact per-pixel depth, or (benchmarks) the proxy's depth.

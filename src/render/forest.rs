@@ -513,6 +513,49 @@ impl ForestRenderer {
         draws
     }
 
+    /// Records the id pass of a prepared frame whose cull pass ran (picking):
+    /// terrain and trees as [`Self::encode_draw`] draws them (the same
+    /// representations, alpha tests and cross-fades), each tree writing its
+    /// pool instance + 1 into `ids` ([`super::layouts::ID_FORMAT`]), only
+    /// within `rect` (x, y, width, height). Builds the id pipelines the first time.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_ids(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        ids: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        frame: &FrameData,
+        rect: [u32; 4],
+    ) -> u32 {
+        self.species.build_id_pipelines(device);
+        self.terrain.id.build(device);
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("tree ids"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: ids,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_scissor_rect(rect[0], rect[1], rect[2], rect[3]);
+        pass.set_bind_group(0, &self.view_group, &[]);
+        let draws = self.terrain.draw_ids(&mut pass);
+        draws + self.species.draw_ids(&mut pass, &self.pools, &self.reach, frame.species)
+    }
+
     /// The last frame's view uniform (for the CPU oracle and tests).
     #[must_use]
     pub fn last_view(&self) -> &ViewUniform {

@@ -49,6 +49,30 @@ pub struct Recorded {
     read_counters: bool,
 }
 
+/// A pick recorded ([`Frame::record_pick`]): its commands, and the buffer
+/// the picked pixel's id is copied into (map it once they are submitted;
+/// [`read_pick`] reads it).
+pub struct PickRecorded {
+    /// Cull pass, id pass and the copy of the pixel.
+    pub commands: wgpu::CommandBuffer,
+    /// 256 bytes, `MAP_READ`.
+    pub readback: wgpu::Buffer,
+}
+
+/// The pool instance a mapped pick readback names (None: no tree at the pixel).
+#[must_use]
+pub fn read_pick(mapped: &[u8]) -> Option<u32> {
+    let id = u32::from_le_bytes(mapped.get(..4)?.try_into().ok()?);
+    id.checked_sub(1)
+}
+
+/// The id pass's targets, kept between picks (remade when the viewport changes).
+struct PickTargets {
+    ids: wgpu::Texture,
+    depth: wgpu::Texture,
+    size: [u32; 2],
+}
+
 /// The frame shared by both hosts (see the module docs).
 pub struct Frame<F: Fetcher> {
     /// The device.
@@ -77,6 +101,7 @@ pub struct Frame<F: Fetcher> {
     draw_calls: u32,
     cpu_ms: f64,
     frames: u64,
+    pick: Option<PickTargets>,
 }
 
 impl<F: Fetcher> Frame<F> {
@@ -110,6 +135,7 @@ impl<F: Fetcher> Frame<F> {
             draw_calls: 0,
             cpu_ms: 0.0,
             frames: 0,
+            pick: None,
             device,
             queue,
         }
@@ -215,15 +241,7 @@ impl<F: Fetcher> Frame<F> {
         read_counters: bool,
     ) -> Recorded {
         let t0 = now_ms();
-        let threshold = self.stream.config().terrain_error_px;
-        let flags = if settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
-            | if settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
-        // (The threshold travels to the shader for reference only: the morph
-        // is worked out per tile by the selection.)
-        let threshold = threshold * settings.quality;
-        let terrain = if settings.terrain { self.stream.terrain_draws() } else { &[] };
-        self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
-        let data = self.renderer.prepare(&self.device, &self.queue, view, settings);
+        let data = self.prepare(view, settings);
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();
         let mut shadow = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("shadow") });
@@ -246,6 +264,92 @@ impl<F: Fetcher> Frame<F> {
         self.cpu_ms = (now_ms() - t0).max(0.0);
         let shadow = (data.cascades > 0).then(|| shadow.finish());
         Recorded { shadow, cull: Some(cull.finish()), draw: draw.finish(), refine: None, read_counters }
+    }
+
+    /// Prepares the terrain and the renderer for a frame of `view`.
+    fn prepare(&mut self, view: &ViewData, settings: &RenderSettings) -> super::forest::FrameData {
+        let threshold = self.stream.config().terrain_error_px;
+        let flags = if settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
+            | if settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
+        // (The threshold travels to the shader for reference only: the morph
+        // is worked out per tile by the selection.)
+        let threshold = threshold * settings.quality;
+        let terrain = if settings.terrain { self.stream.terrain_draws() } else { &[] };
+        self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
+        self.renderer.prepare(&self.device, &self.queue, view, settings)
+    }
+
+    /// Records a pick of the pixel `px` (from the top left) of `view`: the
+    /// cull pass and the id pass (the trees as the plain frame draws them,
+    /// alpha-tested, the ground hiding what is behind it; only that pixel is
+    /// shaded), then the pixel's id copied out. None when `px` is outside the
+    /// viewport. Nothing is drawn to the screen, and the next frame culls again.
+    pub fn record_pick(&mut self, view: &ViewData, px: [u32; 2]) -> Option<PickRecorded> {
+        let size = view.viewport;
+        if px[0] >= size[0] || px[1] >= size[1] {
+            return None;
+        }
+        // The plain frame's settings: no refinement step's dither or levels.
+        let settings = self.settings;
+        let data = self.prepare(view, &settings);
+        let targets = match self.pick.take() {
+            Some(t) if t.size == size => t,
+            _ => {
+                let ids = self.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("tree ids"),
+                    size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: super::layouts::ID_FORMAT,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                });
+                let depth = super::forest::depth_texture(&self.device, size[0], size[1]);
+                PickTargets { ids, depth, size }
+            }
+        };
+        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pick readback"),
+            size: 256,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pick") });
+        self.renderer.encode_cull(&mut encoder, &data, None);
+        let ids = targets.ids.create_view(&Default::default());
+        let depth = targets.depth.create_view(&Default::default());
+        self.renderer.encode_ids(&self.device, &mut encoder, &ids, &depth, &data, [px[0], px[1], 1, 1]);
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &targets.ids,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: px[0], y: px[1], z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &readback,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(256), rows_per_image: Some(1) },
+            },
+            wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 },
+        );
+        self.pick = Some(targets);
+        Some(PickRecorded { commands: encoder.finish(), readback })
+    }
+
+    /// Picks the pixel `px` of `view` and waits for the answer: the pool
+    /// instance of the tree drawn there (None: none, or `px` outside the
+    /// viewport). [`crate::scene::SceneStream::locate_instance`] names its tile.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn pick_blocking(&mut self, view: &ViewData, px: [u32; 2]) -> Option<u32> {
+        let recorded = self.record_pick(view, px)?;
+        self.queue.submit([recorded.commands]);
+        let slice = recorded.readback.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        self.device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
+        let id = read_pick(&slice.get_mapped_range().ok()?);
+        recorded.readback.unmap();
+        id
     }
 
     /// Submits a recorded frame. With `wait` (native, measured), each pass is

@@ -291,4 +291,6 @@ pub enum RenderMode {
     /// Depth only, alpha-tested (shadow casters; not a view's mode: cascades
     /// are drawn with [`RenderMode::Lit`] views and the shadow pipelines).
     Shadow = 2,
+    /// The tree ids of picking (the id pass; not a view's mode either).
+    Id = 3,
 }

@@ -312,3 +312,62 @@ fn render_pipeline(
         cache: None,
     })
 }
+
+/// The id pass's colour format: the pool instance + 1 of the tree a pixel
+/// shows (0: none).
+pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+
+/// A pass's id pipeline (picking): its module's `vs_main` and `fs_id` into an
+/// [`ID_FORMAT`] target with the reversed-Z depth, built the first time a
+/// pick asks for it (a viewer nobody clicks never compiles it).
+pub struct IdPipeline {
+    label: String,
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+    buffers: Vec<Option<wgpu::VertexBufferLayout<'static>>>,
+    primitive: wgpu::PrimitiveState,
+    pipeline: std::sync::OnceLock<wgpu::RenderPipeline>,
+}
+
+impl IdPipeline {
+    /// The id pipeline of `module` under `layout`, reading `buffers`; not built yet.
+    #[must_use]
+    pub fn new(
+        label: &str,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::PipelineLayout,
+        buffers: &[Option<wgpu::VertexBufferLayout<'static>>],
+        primitive: wgpu::PrimitiveState,
+    ) -> Self {
+        Self {
+            label: format!("{label} id"),
+            module: module.clone(),
+            layout: layout.clone(),
+            buffers: buffers.to_vec(),
+            primitive,
+            pipeline: std::sync::OnceLock::new(),
+        }
+    }
+
+    /// Builds the pipeline if it is not yet.
+    pub fn build(&self, device: &wgpu::Device) {
+        self.pipeline.get_or_init(|| {
+            let stages =
+                Stages { module: &self.module, layout: &self.layout, buffers: &self.buffers, fragment: "fs_id" };
+            render_pipeline(
+                device,
+                &self.label,
+                &stages,
+                self.primitive,
+                super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+                &[Some(ID_FORMAT.into())],
+            )
+        });
+    }
+
+    /// The pipeline, once [`Self::build`] has run.
+    #[must_use]
+    pub fn get(&self) -> Option<&wgpu::RenderPipeline> {
+        self.pipeline.get()
+    }
+}

@@ -41,6 +41,7 @@ pub struct MeshPipelines {
     lit: wgpu::RenderPipeline,
     capture: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
+    id: super::layouts::IdPipeline,
     sampler: wgpu::Sampler,
 }
 
@@ -138,6 +139,8 @@ impl MeshPipelines {
             &[Some(CAPTURE_ALBEDO_FORMAT.into()), Some(CAPTURE_NORMAL_FORMAT.into()), Some(CAPTURE_AO_FORMAT.into())],
         );
         let shadow = super::layouts::shadow_caster_pipeline(device, "mesh shadow", &module, &layout, &buffers);
+        let primitive = wgpu::PrimitiveState { cull_mode: None, ..Default::default() };
+        let id = super::layouts::IdPipeline::new("mesh", &module, &layout, &buffers, primitive);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("material"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -147,17 +150,23 @@ impl MeshPipelines {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { mesh_layout, lit, capture, shadow, sampler }
+        Self { mesh_layout, lit, capture, shadow, id, sampler }
     }
 
-    /// The pipeline for `mode`.
+    /// The pipeline for `mode` (the id pass's once [`Self::build_id`] ran).
     #[must_use]
-    pub fn pipeline(&self, mode: RenderMode) -> &wgpu::RenderPipeline {
+    pub fn pipeline(&self, mode: RenderMode) -> Option<&wgpu::RenderPipeline> {
         match mode {
-            RenderMode::Lit => &self.lit,
-            RenderMode::Capture => &self.capture,
-            RenderMode::Shadow => &self.shadow,
+            RenderMode::Lit => Some(&self.lit),
+            RenderMode::Capture => Some(&self.capture),
+            RenderMode::Shadow => Some(&self.shadow),
+            RenderMode::Id => self.id.get(),
         }
+    }
+
+    /// Builds the id pipeline (picking) if it is not yet.
+    pub fn build_id(&self, device: &wgpu::Device) {
+        self.id.build(device);
     }
 }
 
@@ -360,7 +369,8 @@ impl MeshGpu {
         if level.index_count == 0 {
             return 0;
         }
-        pass.set_pipeline(pipelines.pipeline(mode));
+        let Some(pipeline) = pipelines.pipeline(mode) else { return 0 };
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(1, &level.bind_group, &[]);
         pass.set_vertex_buffer(0, level.vertices.slice(..));
         pass.set_index_buffer(level.indices.slice(..), wgpu::IndexFormat::Uint32);

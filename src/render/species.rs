@@ -59,6 +59,28 @@ enum Pipeline {
     Lit(bool),
     /// The shadow casters' (depth only).
     Shadow,
+    /// The id pass's (picking).
+    Id,
+}
+
+impl Pipeline {
+    /// The mesh pipelines' mode.
+    fn mesh_mode(self) -> RenderMode {
+        match self {
+            Pipeline::Lit(_) => RenderMode::Lit,
+            Pipeline::Shadow => RenderMode::Shadow,
+            Pipeline::Id => RenderMode::Id,
+        }
+    }
+
+    /// A far tier's pipeline (the id pass's only once built).
+    fn far_tier(self, p: &super::billboard::FarTierPipeline) -> Option<&wgpu::RenderPipeline> {
+        match self {
+            Pipeline::Lit(_) => Some(p.pipeline()),
+            Pipeline::Shadow => Some(p.shadow_pipeline()),
+            Pipeline::Id => p.id.get(),
+        }
+    }
 }
 
 /// What the species draws need of a frame.
@@ -365,6 +387,42 @@ impl Species {
         reach: &Reach,
         frame: SpeciesFrame,
     ) -> u32 {
+        self.draw_with(pass, pools, reach, frame, Pipeline::Lit(frame.cluster_exact_depth))
+    }
+
+    /// Builds the id pipelines (picking) of the passes built so far.
+    pub fn build_id_pipelines(&self, device: &wgpu::Device) {
+        if let Some(m) = &self.mesh {
+            m.build_id(device);
+        }
+        if let Some(c) = &self.cluster {
+            c.id.build(device);
+        }
+        for far in [&self.billboard, &self.impostor].into_iter().flatten() {
+            far.id.build(device);
+        }
+    }
+
+    /// Records the species draws of the id pass (picking): as [`Self::draw`],
+    /// each tree writing its pool instance + 1 ([`Self::build_id_pipelines`] first).
+    pub fn draw_ids<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'p>,
+        pools: &'p Pools,
+        reach: &Reach,
+        frame: SpeciesFrame,
+    ) -> u32 {
+        self.draw_with(pass, pools, reach, frame, Pipeline::Id)
+    }
+
+    fn draw_with<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'p>,
+        pools: &'p Pools,
+        reach: &Reach,
+        frame: SpeciesFrame,
+        pipeline: Pipeline,
+    ) -> u32 {
         pass.set_bind_group(2, &pools.groups.instance, &[]);
         let mut draws = 0;
         for (i, p) in self.packs.iter().enumerate() {
@@ -382,8 +440,7 @@ impl Species {
                     continue;
                 }
                 let slot = i as u32 * REPR_COUNT + repr as u32;
-                draws +=
-                    u32::from(self.draw_slot(pass, pools, p, repr, slot, Pipeline::Lit(frame.cluster_exact_depth)));
+                draws += u32::from(self.draw_slot(pass, pools, p, repr, slot, pipeline));
             }
         }
         draws
@@ -405,7 +462,7 @@ impl Species {
         match repr {
             Repr::Mesh0 | Repr::Mesh1 => {
                 let Some(pipelines) = &self.mesh else { return false };
-                let mode = if pipeline == Pipeline::Shadow { RenderMode::Shadow } else { RenderMode::Lit };
+                let mode = pipeline.mesh_mode();
                 if p.mesh.bind_level(pass, pipelines, mode, repr as usize) == 0 {
                     return false;
                 }
@@ -413,7 +470,7 @@ impl Species {
             }
             Repr::Cloud => {
                 let Some(pipelines) = &self.mesh else { return false };
-                let mode = if pipeline == Pipeline::Shadow { RenderMode::Shadow } else { RenderMode::Lit };
+                let mode = pipeline.mesh_mode();
                 if p.mesh.bind_cloud(pass, pipelines, mode) == 0 {
                     return false;
                 }
@@ -421,28 +478,28 @@ impl Species {
             }
             Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
                 let (Some(c), Some(cluster)) = (&p.cluster, &self.cluster) else { return false };
-                pass.set_pipeline(match pipeline {
-                    Pipeline::Lit(exact_depth) => cluster.pipeline(exact_depth),
-                    Pipeline::Shadow => cluster.shadow_pipeline(),
-                });
+                let Some(pipe) = (match pipeline {
+                    Pipeline::Lit(exact_depth) => Some(cluster.pipeline(exact_depth)),
+                    Pipeline::Shadow => Some(cluster.shadow_pipeline()),
+                    Pipeline::Id => cluster.id.get(),
+                }) else {
+                    return false;
+                };
+                pass.set_pipeline(pipe);
                 pass.set_bind_group(1, &c.bind_group, &[]);
                 pass.draw_indirect(&pools.buffers.args, args_offset);
             }
             Repr::Billboard if p.far_impostor => {
                 let (Some(imp), Some(impostor)) = (&p.impostor, &self.impostor) else { return false };
-                pass.set_pipeline(match pipeline {
-                    Pipeline::Lit(_) => impostor.pipeline(),
-                    Pipeline::Shadow => impostor.shadow_pipeline(),
-                });
+                let Some(pipe) = pipeline.far_tier(impostor) else { return false };
+                pass.set_pipeline(pipe);
                 pass.set_bind_group(1, &imp.bind_group, &[]);
                 pass.draw_indirect(&pools.buffers.args, args_offset);
             }
             Repr::Billboard => {
                 let (Some(bb), Some(billboard)) = (&p.billboard, &self.billboard) else { return false };
-                pass.set_pipeline(match pipeline {
-                    Pipeline::Lit(_) => billboard.pipeline(),
-                    Pipeline::Shadow => billboard.shadow_pipeline(),
-                });
+                let Some(pipe) = pipeline.far_tier(billboard) else { return false };
+                pass.set_pipeline(pipe);
                 pass.set_bind_group(1, &bb.bind_group, &[]);
                 pass.draw_indirect(&pools.buffers.args, args_offset);
             }

@@ -181,6 +181,8 @@ struct Images {
 /// The terrain pass.
 pub struct TerrainPass {
     pipeline: wgpu::RenderPipeline,
+    /// The id pass's (picking: the ground hides trees, and is none).
+    pub id: super::layouts::IdPipeline,
     layout: wgpu::BindGroupLayout,
     image_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
@@ -262,8 +264,10 @@ impl TerrainPass {
         let _ = DEPTH_FORMAT;
         let pipeline =
             super::layouts::pulling_pipeline(device, "terrain", &module, &pipeline_layout, "fs_main", &target);
+        let id = super::layouts::IdPipeline::new("terrain", &module, &pipeline_layout, &[], target.primitive);
         Self {
             pipeline,
+            id,
             layout,
             image_layout,
             sampler,
@@ -534,11 +538,20 @@ impl TerrainPass {
 
     /// Draws the prepared tiles (view bound at group 0); returns the draw calls (0 or 1).
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
+        self.draw_with(pass, &self.pipeline)
+    }
+
+    /// Draws the prepared tiles into the id pass (its pipeline built).
+    pub fn draw_ids(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
+        self.id.get().map_or(0, |p| self.draw_with(pass, p))
+    }
+
+    fn draw_with(&self, pass: &mut wgpu::RenderPass<'_>, pipeline: &wgpu::RenderPipeline) -> u32 {
         let Some(pool) = &self.pool else { return 0 };
         if self.count == 0 {
             return 0;
         }
-        pass.set_pipeline(&self.pipeline);
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(1, &pool.group, &[]);
         pass.set_bind_group(2, self.images.as_ref().map_or(&self.no_images, |i| &i.group), &[]);
         pass.set_index_buffer(pool.indices.slice(..), wgpu::IndexFormat::Uint32);

@@ -145,6 +145,16 @@ mod native {
         }
     }
 
+    /// Fetches one whole file or URL, blocking (a one-off: a pick's tile and sidecars).
+    ///
+    /// # Errors
+    /// As a streamed request would fail.
+    pub fn fetch_once(url: &str) -> Result<Vec<u8>, FetchError> {
+        let agent: ureq::Agent =
+            ureq::Agent::config_builder().timeout_global(Some(std::time::Duration::from_secs(60))).build().into();
+        fetch_blocking(&agent, url, None)
+    }
+
     /// Most bytes one response may have (a pack with 8k² textures stays below it).
     const MAX_RESPONSE_BYTES: u64 = 1 << 30;
 
@@ -215,7 +225,7 @@ mod native {
 }
 
 #[cfg(not(target_arch = "wasm32"))]
-pub use native::ThreadFetcher;
+pub use native::{fetch_once, ThreadFetcher};
 
 #[cfg(test)]
 mod tests {

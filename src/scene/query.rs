@@ -271,6 +271,60 @@ pub fn query_tile(
     Ok(())
 }
 
+/// What a pick says of one tree, the `index`th of a tile: its bytes, its ids'
+/// and (scenes with attributes) its attribute sidecar's, `files` naming the
+/// three in errors. `{id, species, attributes, lon, lat, height, position}`:
+/// `height` the tree's (m), `position` its trunk base in the
+/// scene CRS (m), `lon`/`lat` where `geo` can say (else null).
+///
+/// # Errors
+/// A file that does not decode, ids that do not match the tile, or an index
+/// outside it.
+pub fn describe_tree(
+    manifest: &crate::format::Manifest,
+    geo: Option<&crate::geo::GeoFrame>,
+    [tile, ids]: [&[u8]; 2],
+    attr: Option<&[u8]>,
+    files: [&str; 3],
+    index: u32,
+) -> Result<Value, String> {
+    use crate::format::attributes::decode_attributes;
+    use crate::format::{decode_ids, Tile};
+    let tile = Tile::decode(files[0], tile, manifest.species.len() as u32).map_err(|e| e.to_string())?;
+    let ids = decode_ids(files[1], ids).map_err(|e| e.to_string())?;
+    let i = index as usize;
+    if ids.len() != tile.instances.len() {
+        return Err(format!("{}: {} ids for {} trees", files[1], ids.len(), tile.instances.len()));
+    }
+    let batch = tile
+        .batches
+        .iter()
+        .find(|b| (b.instance_offset..b.instance_offset + b.instance_count).contains(&index))
+        .ok_or_else(|| format!("{}: no tree {index} (the tile has {})", files[0], tile.instances.len()))?;
+    let tree = tile.instances[i].decode(batch);
+    let species = manifest.species.get(batch.species as usize);
+    let attributes = match (manifest.attributes.as_ref(), attr) {
+        (Some(schema), Some(bytes)) => {
+            let codes = decode_attributes(files[2], bytes, schema, tile.instances.len()).map_err(|e| e.to_string())?;
+            Value::Object(codes.json(schema, i))
+        }
+        _ => Value::Object(serde_json::Map::new()),
+    };
+    let local = glam::DVec3::from(tree.position_m.map(f64::from));
+    let at = geo.and_then(|g| g.to_geo(local).ok());
+    let o = manifest.origin_m;
+    let round = |v: f64, k: f64| (v * k).round() / k;
+    Ok(serde_json::json!({
+        "id": ids[i],
+        "species": species.map(|s| s.name.as_str()),
+        "attributes": attributes,
+        "lon": at.map(|a| round(a.0, 1e7)),
+        "lat": at.map(|a| round(a.1, 1e7)),
+        "height": species.map(|s| round(f64::from(tree.scale * s.height_m), 100.0)),
+        "position": [round(o[0] + local.x, 100.0), round(o[1] + local.y, 100.0), round(o[2] + local.z, 100.0)],
+    }))
+}
+
 /// Searches a baked scene in a local folder: every tile's ids and (when the
 /// filter needs them) attributes, up to `limit` ids listed.
 ///

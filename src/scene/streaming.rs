@@ -191,6 +191,19 @@ pub struct StreamStats {
     pub imagery_drawn: u64,
 }
 
+/// Where a picked tree's data is: its tile's files and its index in the tile.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LocatedTree {
+    /// The tile (absolute, or relative to the working directory for a local scene).
+    pub tile_url: String,
+    /// The tile's tree ids.
+    pub ids_url: String,
+    /// The tile's attribute sidecar (scenes with attributes).
+    pub attributes_url: String,
+    /// The tree's instance in the tile.
+    pub index: u32,
+}
+
 /// A scene being streamed into a [`Residency`] (the renderer's GPU pools).
 pub struct SceneStream<F: Fetcher> {
     base: String,
@@ -236,6 +249,25 @@ pub struct SceneStream<F: Fetcher> {
 }
 
 impl<F: Fetcher> SceneStream<F> {
+    /// The resident tile holding pool instance `instance` (what a pick's id
+    /// pass returns), with the URLs of its tile and sidecars and the
+    /// instance's index in the tile. None when no resident tile holds it.
+    #[must_use]
+    pub fn locate_instance(&self, instance: u32) -> Option<LocatedTree> {
+        self.tiles.iter().enumerate().find_map(|(t, state)| match state {
+            TileState::Resident { slot, .. } if slot.instances.contains(&instance) => {
+                let entry = self.index.tiles.get(t)?;
+                Some(LocatedTree {
+                    tile_url: join(&self.base, &entry.url),
+                    ids_url: join(&self.base, &entry.ids_url),
+                    attributes_url: join(&self.base, &crate::format::attributes::attributes_url(&entry.url)),
+                    index: instance - slot.instances.start,
+                })
+            }
+            _ => None,
+        })
+    }
+
     /// Starts streaming the scene at `scene` (directory, `scene.json` path or URL).
     pub fn new(scene: &str, fetcher: F, config: StreamConfig) -> Self {
         let (base, manifest_url) = scene_locations(scene);

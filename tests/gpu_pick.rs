@@ -1,0 +1,220 @@
+//! GPU tests of picking (issue 19) on `tests/fixtures/forest-small`: the id
+//! pass answers with the tree drawn at a pixel, through every representation,
+//! against a CPU oracle that projects each resident tree's bounds.
+//!
+//! - A tree is picked only where its projected bounds cover the pixel.
+//! - A pixel no tree's bounds cover picks nothing.
+//! - Picking passes through leaf gaps: some pixels inside a nearer tree's
+//!   bounds pick a tree behind it (the id pass is alpha-tested like the colour).
+//! - The picked pool instance maps back to its tile, its index and its id
+//!   (`SceneStream::locate_instance`, `describe_tree`), at the same position.
+
+use std::path::PathBuf;
+
+use glam::{DVec3, Vec3, Vec4Swizzles};
+use sylva::camera::Camera;
+use sylva::format::Manifest;
+use sylva::render::forest::{PoolConfig, RenderSettings, Representations};
+use sylva::render::gpu_data::{Repr, REPR_COUNT};
+use sylva::render::offscreen::OffscreenScene;
+use sylva::render::settings::FarTier;
+
+const W: u32 = 320;
+const H: u32 = 180;
+const POOLS: PoolConfig = PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
+
+fn fixture() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small")
+}
+
+fn open() -> OffscreenScene {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
+    }
+    OffscreenScene::open(fixture().to_str().unwrap(), W, H, POOLS)
+        .expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)")
+}
+
+/// A resident tree as the oracle sees it: where it stands and its projected bounds.
+struct Projected {
+    instance: u32,
+    position: Vec3,
+    /// Bounding circle on screen (px) and the distance of its centre.
+    centre_px: [f32; 2],
+    radius_px: f32,
+    /// A tight core: half the crown's horizontal half-width about the crown's
+    /// centre (px), where a nearer tree's leaves mostly hide what is behind.
+    core_px: f32,
+    depth: f32,
+}
+
+/// Every resident tree in front of the camera, its bounding sphere projected
+/// (conservatively: the sphere's radius at its centre's depth, plus 25 % and 2 px).
+fn project_all(off: &OffscreenScene, m: &Manifest, cam: &Camera) -> Vec<Projected> {
+    let (_, batches, instances, _) = off.read_selection();
+    let view = cam.view_data(W, H);
+    let eye = (view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3()).as_vec3();
+    let mut out = Vec::new();
+    for b in batches.iter().filter(|b| b.instance_count > 0) {
+        let s = &m.species[b.species as usize];
+        let lo = Vec3::from(s.bounds.min);
+        let hi = Vec3::from(s.bounds.max);
+        for i in b.instance_offset..b.instance_offset + b.instance_count {
+            let t = instances[i as usize].decode(b);
+            let half = (hi - lo) * 0.5 * t.scale * Vec3::new(t.aspect.max(1.0), t.aspect.max(1.0), 1.0);
+            let pos = Vec3::from(t.position_m);
+            let centre = pos + Vec3::new(0.0, 0.0, (lo.z + hi.z) * 0.5 * t.scale);
+            let clip = view.clip_from_eye * (centre - eye).extend(1.0);
+            if clip.w <= 0.5 {
+                continue;
+            }
+            let ndc = clip.xy() / clip.w;
+            let px = [(ndc.x * 0.5 + 0.5) * W as f32, (0.5 - ndc.y * 0.5) * H as f32];
+            let r = half.length() * view.px_per_m_at_1m / clip.w;
+            out.push(Projected {
+                instance: i,
+                position: pos,
+                centre_px: px,
+                radius_px: r * 1.25 + 2.0,
+                core_px: 0.5 * half.x.min(half.y) * view.px_per_m_at_1m / clip.w,
+                depth: clip.w,
+            });
+        }
+    }
+    out
+}
+
+fn covers(p: &Projected, x: f32, y: f32) -> bool {
+    let (dx, dy) = (x - p.centre_px[0], y - p.centre_px[1]);
+    dx * dx + dy * dy <= p.radius_px * p.radius_px
+}
+
+/// The representation families each draw slot of `instance` is in, from the
+/// last cull pass's draw items.
+fn families_of(off: &OffscreenScene, instance: u32) -> Vec<&'static str> {
+    let (slots, _, _, _) = off.read_selection();
+    let mut out = Vec::new();
+    for (slot, items) in slots.iter().enumerate() {
+        if items.iter().any(|&(x, _)| x == instance) {
+            let r = slot as u32 % REPR_COUNT;
+            out.push(match r {
+                r if r == Repr::Mesh0 as u32 || r == Repr::Mesh1 as u32 => "mesh",
+                r if r == Repr::Cloud as u32 => "cloud",
+                r if r == Repr::Billboard as u32 => "far",
+                _ => "ellipsoid",
+            });
+        }
+    }
+    out
+}
+
+/// The camera: from the south-west edge of the forest, a little above the
+/// canopy, looking across it to the sky.
+fn camera(m: &Manifest) -> Camera {
+    let lo = DVec3::from(m.bounds.min.map(f64::from));
+    let hi = DVec3::from(m.bounds.max.map(f64::from));
+    let c = (lo + hi) * 0.5;
+    Camera::look_at(DVec3::new(lo.x + 20.0, lo.y + 20.0, hi.z), DVec3::new(c.x, c.y, hi.z - 40.0))
+}
+
+#[test]
+fn picks_hit_the_tree_drawn_at_each_representation() {
+    let mut off = open();
+    off.load_view(&Camera::default(), 30.0);
+    let m = off.stream.manifest().expect("manifest").clone();
+    let cam = camera(&m);
+    let cases: [(&str, Representations, FarTier, &str); 4] = [
+        ("meshes", Representations::MESHES, FarTier::Impostors, "mesh"),
+        ("ellipsoids", Representations::CLUSTERS, FarTier::Impostors, "ellipsoid"),
+        ("impostors", Representations::BILLBOARDS, FarTier::Impostors, "far"),
+        ("billboards", Representations::BILLBOARDS, FarTier::Billboards, "far"),
+    ];
+    let mut checked_describe = false;
+    for (name, representations, far_tier, family) in cases {
+        off.settings = RenderSettings {
+            representations,
+            far_tier,
+            lod_policy: false,
+            // No thinning: a thinned billboard is scaled past its tree's bounds.
+            thin_px: 0.0,
+            ..RenderSettings::default()
+        };
+        off.load_view(&cam, 30.0);
+        off.render(&cam, false);
+        if let Some(dir) = std::env::var_os("SYLVA_PICK_PNG") {
+            let path = PathBuf::from(dir).join(format!("pick-{name}.png"));
+            image::save_buffer(path, &off.read_image(), W, H, image::ColorType::Rgba8).unwrap();
+        }
+        let view = cam.view_data(W, H);
+        let (mut hits, mut empty, mut through_gaps, mut in_family) = (0, 0, 0, 0);
+        for gy in 0..9 {
+            for gx in 0..16 {
+                let (x, y) = (gx * W / 16 + W / 32, gy * H / 9 + H / 18);
+                let picked = off.pick_blocking(&view, [x, y]);
+                // The oracle from the pools the pick's cull pass read.
+                let trees = project_all(&off, &m, &cam);
+                let (fx, fy) = (x as f32 + 0.5, y as f32 + 0.5);
+                let under: Vec<&Projected> = trees.iter().filter(|p| covers(p, fx, fy)).collect();
+                match picked {
+                    None => {
+                        if under.is_empty() {
+                            empty += 1;
+                        }
+                    }
+                    Some(i) => {
+                        let p = trees
+                            .iter()
+                            .find(|p| p.instance == i)
+                            .unwrap_or_else(|| panic!("{name}: picked instance {i} at {x},{y} is not a resident tree"));
+                        assert!(covers(p, fx, fy), "{name}: picked tree {i} at {x},{y} lies outside its bounds");
+                        hits += 1;
+                        let in_core = |q: &&&Projected| {
+                            let (dx, dy) = (fx - q.centre_px[0], fy - q.centre_px[1]);
+                            (dx * dx + dy * dy).sqrt() <= q.core_px
+                        };
+                        if under.iter().filter(in_core).any(|q| q.depth + 1.0 < p.depth && q.instance != i) {
+                            through_gaps += 1;
+                        }
+                        if families_of(&off, i).contains(&family) {
+                            in_family += 1;
+                        }
+                        if !checked_describe {
+                            checked_describe = true;
+                            describe_matches(&off, &m, i, p.position);
+                        }
+                    }
+                }
+                // Where no tree's bounds reach, nothing is picked.
+                if under.is_empty() {
+                    assert_eq!(picked, None, "{name}: {x},{y} picked a tree where no tree stands");
+                }
+            }
+        }
+        eprintln!("{name}: {hits} hits ({in_family} as {family}), {through_gaps} through a nearer tree, {empty} empty");
+        assert!(hits >= 20, "{name}: only {hits} of 144 pixels hit a tree");
+        assert_eq!(in_family, hits, "{name}: some picked trees were not drawn as {family}");
+        assert!(empty >= 5, "{name}: the view has no open ground to miss on ({empty})");
+        if name != "billboards" {
+            // Crowns are not solid: some pixels show a farther tree through a nearer one's gaps.
+            assert!(through_gaps >= 1, "{name}: no pick passed through a nearer tree's gaps");
+        }
+    }
+}
+
+/// The located tile, index and id of a picked instance name the same tree.
+fn describe_matches(off: &OffscreenScene, m: &Manifest, instance: u32, position: Vec3) {
+    let t = off.stream.locate_instance(instance).expect("a picked instance is in a resident tile");
+    let tile = std::fs::read(&t.tile_url).unwrap();
+    let ids = std::fs::read(&t.ids_url).unwrap();
+    let files = [t.tile_url.as_str(), t.ids_url.as_str(), t.attributes_url.as_str()];
+    let geo = sylva::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).ok();
+    let d = sylva::scene::query::describe_tree(m, geo.as_ref(), [&tile, &ids], None, files, t.index).unwrap();
+    let all = sylva::format::decode_ids("ids", &ids).unwrap();
+    assert_eq!(d["id"].as_u64(), Some(all[t.index as usize]));
+    let at: Vec<f64> = d["position"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    for k in 0..3 {
+        let want = m.origin_m[k] + f64::from(position[k]);
+        assert!((at[k] - want).abs() < 0.02, "position {k}: {} against {want}", at[k]);
+    }
+    assert!(d["lon"].as_f64().is_some_and(|l| (14.0..16.0).contains(&l)), "{d}");
+}
