@@ -277,6 +277,63 @@ impl Viewer {
         })
     }
 
+    /// Picks the drawing-buffer pixel (`x`, `y`) from the top left: the id
+    /// pass of the current view runs now (cull and ids, only that pixel
+    /// shaded) and the promise resolves to JSON `{tile, ids, attributes,
+    /// index}` (the files of the tree drawn there and its index in the tile,
+    /// for [`Self::describe_tree`]) or `null` where no tree is drawn.
+    pub fn pick(&mut self, x: f64, y: f64) -> js_sys::Promise {
+        let none = || js_sys::Promise::resolve(&JsValue::NULL);
+        if self.is_lost() || !(x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0) {
+            return none();
+        }
+        let view = self.camera().view_data(self.config.width, self.config.height);
+        let Some(recorded) = self.frame.record_pick(&view, [x as u32, y as u32]) else { return none() };
+        let tiles = self.frame.stream.tile_locations();
+        self.frame.queue.submit([recorded.commands]);
+        let buffer = recorded.readback;
+        js_sys::Promise::new(&mut |resolve: js_sys::Function, _reject| {
+            let mapped = buffer.clone();
+            let tiles = tiles.clone();
+            buffer.slice(..).map_async(wgpu::MapMode::Read, move |result| {
+                let instance = result.ok().and_then(|()| {
+                    let id = crate::render::frame::read_pick(&mapped.slice(..).get_mapped_range().ok()?);
+                    mapped.unmap();
+                    id
+                });
+                let answer = match instance.and_then(|i| crate::scene::streaming::locate(&tiles, i)) {
+                    Some(t) => JsValue::from_str(
+                        &serde_json::json!({
+                            "tile": t.tile_url, "ids": t.ids_url, "attributes": t.attributes_url, "index": t.index,
+                        })
+                        .to_string(),
+                    ),
+                    None => JsValue::NULL,
+                };
+                let _ = resolve.call1(&JsValue::NULL, &answer);
+            });
+        })
+    }
+
+    /// What a pick says of the `index`th tree of a tile, from the files
+    /// [`Self::pick`] named (`attr` for scenes with attributes): JSON `{id,
+    /// species, attributes, lon, lat, height, position}`, as `sylva pick`.
+    ///
+    /// # Errors
+    /// No manifest yet, or a file that does not decode.
+    pub fn describe_tree(&self, tile: &[u8], ids: &[u8], attr: Option<Vec<u8>>, index: u32) -> Result<String, JsValue> {
+        let m = self.frame.stream.manifest().ok_or_else(|| js_err("the scene is not loaded yet"))?;
+        let files = ["tile", "ids", "attributes"];
+        crate::scene::query::describe_tree(m, self.geo.as_ref(), [tile, ids], attr.as_deref(), files, index)
+            .map(|v| v.to_string())
+            .map_err(js_err)
+    }
+
+    /// Whether the scene keeps per-tree attributes (false before its manifest arrives).
+    pub fn has_attributes(&self) -> bool {
+        self.frame.stream.manifest().is_some_and(|m| m.attributes.is_some())
+    }
+
     /// Resizes the drawing buffer (device pixels).
     pub fn resize(&mut self, width: u32, height: u32) {
         let (width, height) = (width.clamp(1, 8192), height.clamp(1, 8192));

@@ -15,6 +15,9 @@
 //   v.setLighting({shadows, ao})           the sun's shadows: 'off' | 'low' | 'high' (the default);
 //                                           ao: each tree's own baked ambient occlusion, true (the default) | false
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
+//   v.on('click' | 'hover', fn)             fn({x, y, tree}): the tree under the pointer (as pick) or null
+//   await v.pick(x, y)                      the tree drawn at canvas CSS pixel (x, y), or null:
+//                                           {id, species, attributes, lon, lat, height, position}
 //   v.stats()                               same keys as `sylva render --stats`
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
@@ -63,6 +66,29 @@ class SylvaViewer {
   }
 
   on(event, fn) { (this.handlers[event] ||= []).push(fn); return this; }
+
+  /** The tree drawn at canvas CSS pixel (x, y), or null: {id, species (the
+   * model), attributes (the inventory's columns the bake kept), lon, lat,
+   * height (m), position (scene CRS metres)}. The id pass runs once, for that
+   * pixel: alpha-tested like the image, so a click through a gap in a crown
+   * hits the tree behind. */
+  async pick(x, y) {
+    if (this.destroyed) return null;
+    const c = this.canvas;
+    const sx = c.width / Math.max(1, c.clientWidth), sy = c.height / Math.max(1, c.clientHeight);
+    const hit = await this.viewer.pick(Math.floor(x * sx), Math.floor(y * sy));
+    if (!hit || this.destroyed) return null;
+    const at = JSON.parse(hit);
+    const get = async (url) => {
+      const r = await fetch(url);
+      if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
+      return new Uint8Array(await r.arrayBuffer());
+    };
+    const [tile, ids, attr] = await Promise.all([get(at.tile), get(at.ids),
+      this.viewer.has_attributes() ? get(at.attributes) : null]);
+    if (this.destroyed) return null;
+    return JSON.parse(this.viewer.describe_tree(tile, ids, attr ?? undefined, at.index));
+  }
 
   /** Trees matching `filter` (attributes the bake kept, and `id`), read from
    * the tiles' id and attribute sidecars; tiles whose code ranges cannot match
@@ -394,6 +420,31 @@ class SylvaViewer {
       }
       this.dirty = 8;
     });
+    // A click (a press and release that barely moved) picks the tree under it.
+    let press = null;
+    c.addEventListener('pointerdown', (e) => { press = { x: e.clientX, y: e.clientY, t: performance.now() }; });
+    const pointAt = (e) => { const r = c.getBoundingClientRect(); return { x: e.clientX - r.left, y: e.clientY - r.top }; };
+    c.addEventListener('pointerup', (e) => {
+      if (!press || !(this.handlers.click?.length)) return;
+      const moved = Math.hypot(e.clientX - press.x, e.clientY - press.y);
+      if (moved > 4 || performance.now() - press.t > 800) return;
+      const p = pointAt(e);
+      this.pick(p.x, p.y).then((tree) => this.emit('click', { ...p, tree }),
+        (err) => this.emit('warning', { message: `pick: ${err.message || err}` }));
+    });
+    // Hover: one pick at a time, the latest pointer position when it is done.
+    let hover = null, hovering = false;
+    const hoverPick = () => {
+      if (!hover || hovering) return;
+      const p = hover; hover = null; hovering = true;
+      this.pick(p.x, p.y).then((tree) => this.emit('hover', { ...p, tree }), () => {})
+        .finally(() => { hovering = false; setTimeout(hoverPick, 50); });
+    };
+    c.addEventListener('pointermove', (e) => {
+      if (pointers.size > 0 || !(this.handlers.hover?.length)) return;
+      hover = pointAt(e);
+      hoverPick();
+    });
     const up = (e) => { pointers.delete(e.pointerId); if (pointers.size === 0) drag = null; };
     c.addEventListener('pointerup', up);
     c.addEventListener('pointercancel', up);
@@ -434,6 +485,48 @@ class SylvaViewer {
     this.resizeObserver.disconnect();
     try { this.viewer.free(); } catch (_) { /* already freed */ }
   }
+}
+
+/** Escapes text for HTML. */
+const esc = (s) => String(s).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+
+/**
+ * A popup over `host` (positioned: relative, absolute or fixed) with the
+ * attributes of the tree clicked in viewer `v`; a click on no tree closes it.
+ * Returns the popup element (class `sylva-popup`; `data-id` the tree's id).
+ */
+export function attachTreePopup(v, host) {
+  const box = document.createElement('div');
+  box.className = 'sylva-popup';
+  box.setAttribute('role', 'dialog');
+  box.style.cssText = 'position:absolute;z-index:10;display:none;max-width:22em;max-height:60%;overflow:auto;' +
+    'background:#fffffff0;color:#1d2a22;border:1px solid #8a9a8a;border-radius:6px;padding:8px 10px;' +
+    'font:12px/1.45 system-ui,sans-serif;box-shadow:0 2px 10px #0005;pointer-events:auto';
+  host.appendChild(box);
+  const show = ({ x, y, tree }) => {
+    if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); return; }
+    const fmt = (n, d) => (n === null || n === undefined ? '—' : Number(n).toFixed(d));
+    // The inventory's own columns; the drawn species model and height where it has none.
+    const attrs = Object.entries(tree.attributes || {});
+    const has = (name) => attrs.some(([k]) => k.toLowerCase() === name);
+    const rows = [...(has('species') ? [] : [['species', tree.species]]),
+      ...(has('height') ? [] : [['height', `${fmt(tree.height, 1)} m`]]),
+      ...attrs.map(([k, val]) => [k, val === null ? '—' : val]),
+      ['lon, lat', `${fmt(tree.lon, 6)}, ${fmt(tree.lat, 6)}`]];
+    box.innerHTML = `<div style="display:flex;justify-content:space-between;gap:8px;font-weight:600">` +
+      `<span>Tree ${esc(tree.id)}</span><button aria-label="Close" style="border:none;background:none;cursor:pointer">✕</button></div>` +
+      `<table style="border-collapse:collapse">${rows.map(([k, val]) =>
+        `<tr><td style="padding-right:10px;color:#4b5d50">${esc(k)}</td><td>${esc(val)}</td></tr>`).join('')}</table>`;
+    box.querySelector('button').onclick = () => { box.style.display = 'none'; };
+    box.dataset.id = String(tree.id);
+    box.style.display = 'block';
+    // Beside the click, inside the host.
+    const w = host.clientWidth, h = host.clientHeight;
+    box.style.left = `${Math.min(x + 12, Math.max(0, w - box.offsetWidth - 4))}px`;
+    box.style.top = `${Math.min(y + 12, Math.max(0, h - box.offsetHeight - 4))}px`;
+  };
+  v.on('click', show);
+  return box;
 }
 
 /**
@@ -491,5 +584,5 @@ class SylvaElement extends HTMLElement {
 }
 if (!customElements.get('sylva-viewer')) customElements.define('sylva-viewer', SylvaElement);
 
-export const Sylva = { create, webgpuHelp };
+export const Sylva = { create, webgpuHelp, attachTreePopup };
 export default Sylva;

@@ -204,6 +204,15 @@ pub struct LocatedTree {
     pub index: u32,
 }
 
+/// The tree of pool instance `instance` in a snapshot of [`SceneStream::tile_locations`].
+#[must_use]
+pub fn locate(tiles: &[(std::ops::Range<u32>, LocatedTree)], instance: u32) -> Option<LocatedTree> {
+    tiles
+        .iter()
+        .find(|(range, _)| range.contains(&instance))
+        .map(|(range, t)| LocatedTree { index: instance - range.start, ..t.clone() })
+}
+
 /// A scene being streamed into a [`Residency`] (the renderer's GPU pools).
 pub struct SceneStream<F: Fetcher> {
     base: String,
@@ -254,18 +263,31 @@ impl<F: Fetcher> SceneStream<F> {
     /// instance's index in the tile. None when no resident tile holds it.
     #[must_use]
     pub fn locate_instance(&self, instance: u32) -> Option<LocatedTree> {
-        self.tiles.iter().enumerate().find_map(|(t, state)| match state {
-            TileState::Resident { slot, .. } if slot.instances.contains(&instance) => {
-                let entry = self.index.tiles.get(t)?;
-                Some(LocatedTree {
-                    tile_url: join(&self.base, &entry.url),
-                    ids_url: join(&self.base, &entry.ids_url),
-                    attributes_url: join(&self.base, &crate::format::attributes::attributes_url(&entry.url)),
-                    index: instance - slot.instances.start,
-                })
-            }
-            _ => None,
-        })
+        locate(&self.tile_locations(), instance)
+    }
+
+    /// Every resident tile's instance range in the pools, with its files
+    /// (index 0): a snapshot a pick answered later can be located in
+    /// ([`locate`]), whatever streamed in or out meanwhile.
+    #[must_use]
+    pub fn tile_locations(&self) -> Vec<(std::ops::Range<u32>, LocatedTree)> {
+        self.tiles
+            .iter()
+            .enumerate()
+            .filter_map(|(t, state)| match state {
+                TileState::Resident { slot, .. } => {
+                    let entry = self.index.tiles.get(t)?;
+                    let tree = LocatedTree {
+                        tile_url: join(&self.base, &entry.url),
+                        ids_url: join(&self.base, &entry.ids_url),
+                        attributes_url: join(&self.base, &crate::format::attributes::attributes_url(&entry.url)),
+                        index: 0,
+                    };
+                    Some((slot.instances.clone(), tree))
+                }
+                TileState::NotResident(_) => None,
+            })
+            .collect()
     }
 
     /// Starts streaming the scene at `scene` (directory, `scene.json` path or URL).

@@ -327,6 +327,44 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     assert.deepEqual(native.bounds, q.bounds);
     const bad = await page.evaluate(() => window.sylva.query({ heigth: 1 }).then(() => 'resolved', (e) => String(e)));
     assert.match(bad, /not an attribute.*"height"/);
+    // Picking (issue 19): find a pixel with a tree, click it, and the popup shows its row.
+    const hit = await page.evaluate(async () => {
+      for (let y = 40; y < 300; y += 24) {
+        for (let x = 20; x < 480; x += 24) {
+          const t0 = performance.now();
+          const tree = await window.sylva.pick(x, y);
+          if (tree) return { x, y, tree, ms: performance.now() - t0 };
+        }
+      }
+      return null;
+    });
+    assert.ok(hit, 'no pixel of the first view picks a tree');
+    console.log(`browser pick latency (request to answer, SwiftShader): ${hit.ms.toFixed(0)} ms`);
+    const row = (i) => ({ species: 'Tilia', height: 10 + (i % 8) });
+    assert.equal(hit.tree.attributes.species, row(hit.tree.id).species, JSON.stringify(hit.tree));
+    assert.equal(hit.tree.attributes.height, row(hit.tree.id).height, JSON.stringify(hit.tree));
+    assert.ok(Math.abs(hit.tree.height - row(hit.tree.id).height) < 0.5, JSON.stringify(hit.tree));
+    const [lat0, lon0, n] = hit.tree.id < 150 ? [52.370, 4.760, hit.tree.id] : [52.372, 4.980, hit.tree.id - 150];
+    assert.ok(Math.abs(hit.tree.lat - (lat0 + (n % 20) * 0.0002)) < 2e-6, JSON.stringify(hit.tree));
+    assert.ok(Math.abs(hit.tree.lon - (lon0 + Math.floor(n / 20) * 0.0003)) < 2e-6, JSON.stringify(hit.tree));
+    // The native id pass of the same camera and pixel names the same tree.
+    const cam = await page.evaluate(() => window.sylva.camera());
+    const m = JSON.parse(readFileSync(join(dir, 'scene', 'scene.json'), 'utf8'));
+    const camera = [cam.x + m.origin_m[0], cam.y + m.origin_m[1], cam.z + m.origin_m[2], cam.heading, cam.pitch].join(',');
+    const nativePick = JSON.parse(execFileSync(sylvaBin, ['pick', '--scene', join(dir, 'scene'), '--camera', camera,
+      '--size', '480x320', '--at', `${hit.x},${hit.y}`], { stdio: ['ignore', 'pipe', 'pipe'] }).toString());
+    assert.equal(nativePick?.id, hit.tree.id, JSON.stringify(nativePick));
+    // A click on that pixel opens the popup with the tree's attributes.
+    await page.mouse.click(hit.x + 0.5, hit.y + 0.5);
+    await page.waitForSelector('.sylva-popup[data-id]', { timeout: 60000 });
+    const popup = await page.evaluate(() => {
+      const p = document.querySelector('.sylva-popup');
+      return { id: p.dataset.id, text: p.textContent };
+    });
+    assert.equal(popup.id, String(hit.tree.id));
+    assert.match(popup.text, new RegExp(`Tree ${hit.tree.id}.*species.*Tilia`));
+    assert.match(popup.text, new RegExp(`height${row(hit.tree.id).height}`));
+    await page.screenshot({ path: join(artifacts, 'districts-popup.png') });
     assert.deepEqual(errors, []);
   } finally {
     served.proc.kill();
@@ -648,6 +686,14 @@ test('an iframe is driven by postMessage', async () => {
   assert.equal(found.data.count, 3, JSON.stringify(found).slice(0, 300));
   assert.deepEqual([...found.data.ids].sort((a, b) => a - b), [0, 7, 2999]);
   assert.match(refused.error, /no attributes/);
+  // pick replies with the tree at a pixel of the iframe's canvas (the forest fills its middle).
+  await page.evaluate(() => {
+    document.getElementById('f').contentWindow.postMessage({ verb: 'pick', args: [200, 170], id: 5 }, '*');
+  });
+  await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'reply' && r.id === 5), null, { timeout: 60000 });
+  const picked = await page.evaluate(() => window.replies.find((r) => r.id === 5));
+  assert.ok(picked.data && Number.isInteger(picked.data.id) && picked.data.id < 3000, JSON.stringify(picked));
+  assert.ok(['spruce', 'beech', 'birch'].includes(picked.data.species), JSON.stringify(picked));
 });
 
 test('the browser draws what the native renderer draws for the same camera', async () => {
