@@ -14,6 +14,8 @@
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+// The styles (common.wgsl `tree_style`).
+@group(2) @binding(3) var<storage, read> styles: array<u32>;
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
@@ -31,6 +33,8 @@ struct VertexOut {
     @location(6) canopy: f32,
     // The tree's pool instance (the id pass).
     @location(7) @interpolate(flat) item_x: u32,
+    // The tree's style byte (`tree_style`).
+    @location(8) @interpolate(flat) style: u32,
 };
 
 const PI: f32 = 3.14159265;
@@ -89,6 +93,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.normal_yaw = phi - f32(az) * az_step;
     out.item_y = item.y;
     out.item_x = item.x;
+    out.style = tree_style(styles[STYLE_FLAGS], styles[STYLE_HEADER_WORDS + item.x / 4u], item.x, batch.species);
     out.tint = variation_tint(tree.variation);
     out.lift = half_w * max(tree.aspect, 1.0);
     // The height in the crown of what this point of the quad shows: along the
@@ -111,13 +116,14 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let m = rotate_z(packed_normal.xyz * 2.0 - 1.0, in.normal_yaw);
     let n = normalize(m);
     let is_leaf = packed_normal.a > 0.75;
-    var albedo = color.rgb * in.tint;
+    var albedo = styled_albedo(color.rgb * in.tint, styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }
     let ao = own_ao(baked_ao, view);
     let sun = sun_visibility(frag_rel(in.clip, view), n, in.lift, open_sun(in.canopy));
-    return vec4<f32>(haze(shade_filtered(albedo, m, is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
+    let lit = highlighted(shade_filtered(albedo, m, is_leaf, view, sun, in.canopy, ao), in.style);
+    return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested.

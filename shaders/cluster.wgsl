@@ -26,6 +26,8 @@
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+// The styles (common.wgsl `tree_style`).
+@group(2) @binding(3) var<storage, read> styles: array<u32>;
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
@@ -51,6 +53,8 @@ struct VertexOut {
     @location(8) @interpolate(flat) tree_size: vec2<f32>,
     // The tree's pool instance (the id pass).
     @location(9) @interpolate(flat) item_x: u32,
+    // The tree's style byte (`tree_style`).
+    @location(10) @interpolate(flat) style: u32,
 };
 
 // An eye-relative point in the tree's model space (scale 1).
@@ -265,6 +269,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     }
     out.item_y = item.y;
     out.item_x = item.x;
+    out.style = tree_style(styles[STYLE_FLAGS], styles[STYLE_HEADER_WORDS + item.x / 4u], item.x, batch.species);
     out.tree_at = vec4<f32>(tree.pos, tree.yaw);
     out.tree_size = vec2<f32>(tree.scale, tree.aspect);
     out.cover = batch_cover(batch);
@@ -393,7 +398,7 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     let hit = cluster_hit(in);
     var out: FragmentOut;
     out.depth = hit.depth;
-    var albedo = in.color.rgb;
+    var albedo = styled_albedo(in.color.rgb, styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }
@@ -405,7 +410,8 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     // distance sideways and up, whatever the crown's aspect).
     let ao = own_ao(field_ao(model + rotate_z(hit.n, -in.tree_at.w) * draw.ao_field_min.w), view);
     let sun = sun_visibility(hit.p, hit.n, 0.0, open_sun(canopy));
-    out.color = vec4<f32>(haze_at(shade(albedo, hit.n, !hit.is_line, view, sun, canopy, ao), hit.p, view), 1.0);
+    let lit = highlighted(shade(albedo, hit.n, !hit.is_line, view, sun, canopy, ao), in.style);
+    out.color = vec4<f32>(haze_at(lit, hit.p, view), 1.0);
     return out;
 }
 
@@ -437,4 +443,11 @@ fn fs_id(in: VertexOut) -> IdOut {
     out.id = in.item_x + 1u;
     out.depth = hit.depth;
     return out;
+}
+
+// Picking with the proxy's depth, as `fs_proxy_depth` draws: the same tree wins a pixel.
+@fragment
+fn fs_id_proxy_depth(in: VertexOut) -> @location(0) u32 {
+    _ = cluster_hit(in);
+    return in.item_x + 1u;
 }

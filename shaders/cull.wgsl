@@ -179,8 +179,16 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     if lid == 0u {
         atomicAdd(&control[CONTROL_INSTANCES_TESTED], count);
     }
+    // A style's filter (issue 19): the trees it hides are culled here.
+    let styled = (atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_FLAGS]) & STYLE_TREES) != 0u;
     for (var i = lid; i < count; i += WORKGROUP) {
         let instance = b.instance_offset + i;
+        if styled {
+            let word = atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_HEADER_WORDS + instance / 4u]);
+            if (style_byte_of(word, instance) & STYLE_HIDDEN) != 0u {
+                continue;
+            }
+        }
         let tree = unpack_instance(instances[instance], b, view);
         let center = tree.pos + rotate_z(tree_scaled(s.sphere.xyz, tree), tree.yaw);
         let radius = s.sphere.w * tree.scale * max(tree.aspect, 1.0);

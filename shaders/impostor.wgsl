@@ -16,6 +16,8 @@
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+// The styles (common.wgsl `tree_style`).
+@group(2) @binding(3) var<storage, read> styles: array<u32>;
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
@@ -36,6 +38,8 @@ struct VertexOut {
     @location(8) @interpolate(flat) cover: f32,
     // The tree's pool instance (the id pass).
     @location(9) @interpolate(flat) item_x: u32,
+    // The tree's style byte (`tree_style`).
+    @location(10) @interpolate(flat) style: u32,
 };
 
 // Model offset from the sphere's centre → eye-relative offset, and back.
@@ -105,6 +109,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.tree_size = vec2<f32>(s, aspect);
     out.item_y = item.y;
     out.item_x = item.x;
+    out.style = tree_style(styles[STYLE_FLAGS], styles[STYLE_HEADER_WORDS + item.x / 4u], item.x, batch.species);
     out.tint = variation_tint(tree.variation);
     out.cover = batch_cover(batch);
     return out;
@@ -244,7 +249,7 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     // The texel's mean normal: shorter where it covers many leaves.
     let m = n * normal_agreement(hit.lod);
     let rel = in.tree_at.xyz + imp_to_world(hit.at - draw.bb_center.xyz, in);
-    var albedo = hit.color.rgb * in.tint;
+    var albedo = styled_albedo(hit.color.rgb * in.tint, styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * hit.color.g);
     }
@@ -255,7 +260,8 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     let lift = draw.bb_center.w * in.tree_size.x * 0.25;
     let sun = sun_visibility(rel, n, lift, open_sun(canopy));
     var out: FragmentOut;
-    out.color = vec4<f32>(haze(shade_filtered(albedo, m, is_leaf, view, sun, canopy, ao), in.clip, view), 1.0);
+    let lit = highlighted(shade_filtered(albedo, m, is_leaf, view, sun, canopy, ao), in.style);
+    out.color = vec4<f32>(haze(lit, in.clip, view), 1.0);
     out.depth = impostor_depth(hit.at, in);
     return out;
 }

@@ -40,6 +40,8 @@ struct Material {
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
+// The styles (common.wgsl `tree_style`).
+@group(2) @binding(3) var<storage, read> styles: array<u32>;
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
@@ -69,6 +71,8 @@ struct VertexOut {
     @location(9) @interpolate(flat) tint: vec3<f32>,
     // The tree's pool instance (the id pass).
     @location(10) @interpolate(flat) item_x: u32,
+    // The tree's style byte (`tree_style`).
+    @location(11) @interpolate(flat) style: u32,
 };
 
 // The occlusion byte of a vertex (`normal_oct` byte 2, snorm8): 0 not baked
@@ -99,6 +103,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.material = in.position_material.w;
     out.item_y = item.y;
     out.item_x = item.x;
+    out.style = tree_style(styles[STYLE_FLAGS], styles[STYLE_HEADER_WORDS + item.x / 4u], item.x, batch.species);
     out.canopy = canopy_occlusion(batch, local.z / max(mesh.pos_min.z + mesh.pos_extent.z, 1e-3));
     out.ao = vertex_ao(in.normal_oct.z);
     return out;
@@ -299,12 +304,14 @@ fn surface(in: VertexOut, front: bool) -> Surface {
 fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     let s = surface(in, front);
     var albedo = s.albedo.rgb;
+    albedo = styled_albedo(albedo, styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);
     }
     let ao = own_ao(s.ao, view);
     let sun = sun_visibility(frag_rel(in.clip, view), s.normal, 0.0, open_sun(in.canopy));
-    return vec4<f32>(haze(shade(albedo, s.normal, s.is_leaf, view, sun, in.canopy, ao), in.clip, view), 1.0);
+    let lit = highlighted(shade(albedo, s.normal, s.is_leaf, view, sun, in.canopy, ao), in.style);
+    return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }
 
 // Shadow cascades: depth only, alpha-tested leaves (dappled shade).

@@ -8,8 +8,14 @@
 //!   bounds pick a tree behind it (the id pass is alpha-tested like the colour).
 //! - The picked pool instance maps back to its tile, its index and its id
 //!   (`SceneStream::locate_instance`, `describe_tree`), at the same position.
+//!
+//! And styles (the same issue), on a copy of the fixture given attributes:
+//! a filter's drawn trees are the CPU oracle's with the filtered ones left
+//! out; a colouring colours exactly the trees it should (each pixel's colour
+//! against the category of the tree the id pass finds there); a selected tree
+//! is highlighted.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use glam::{DVec3, Vec3, Vec4Swizzles};
 use sylva::camera::Camera;
@@ -217,4 +223,220 @@ fn describe_matches(off: &OffscreenScene, m: &Manifest, instance: u32, position:
         assert!((at[k] - want).abs() < 0.02, "position {k}: {} against {want}", at[k]);
     }
     assert!(d["lon"].as_f64().is_some_and(|l| (14.0..16.0).contains(&l)), "{d}");
+}
+
+mod common;
+
+/// A copy of the fixture with two attributes per tree: `kind` (a category,
+/// "a", "b" or "c" by id % 3) and `girth` (an integer, id % 101).
+fn attributed_fixture() -> PathBuf {
+    use sylva::format::attributes::{
+        encode_attributes, AttributeCodes, AttributeColumn, AttributeSchema, AttributeType,
+    };
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("pick-attributes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let schema = AttributeSchema {
+        columns: vec![
+            AttributeColumn {
+                name: "kind".into(),
+                kind: AttributeType::Category,
+                width: 1,
+                min: 0.0,
+                max: 0.0,
+                categories: vec!["a".into(), "b".into(), "c".into()],
+                count: 3000,
+            },
+            AttributeColumn {
+                name: "girth".into(),
+                kind: AttributeType::Integer,
+                width: 1,
+                min: 0.0,
+                max: 100.0,
+                categories: Vec::new(),
+                count: 3000,
+            },
+        ],
+    };
+    let s = schema.clone();
+    common::rewritten_copy(
+        &fixture(),
+        &dir,
+        |m| {
+            m.version = 6;
+            m.attributes = Some(s);
+        },
+        |_, _| {},
+    );
+    let m = Manifest::decode("scene.json", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+    for t in &m.tiles {
+        let ids = sylva::format::decode_ids("ids", &std::fs::read(dir.join(&t.ids_url)).unwrap()).unwrap();
+        let codes = AttributeCodes {
+            count: ids.len(),
+            columns: vec![ids.iter().map(|i| (i % 3) as u32).collect(), ids.iter().map(|i| (i % 101) as u32).collect()],
+        };
+        let url = sylva::format::attributes::attributes_url(&t.url);
+        std::fs::write(dir.join(url), encode_attributes(&schema, &codes)).unwrap();
+    }
+    dir
+}
+
+fn open_at(scene: &Path) -> OffscreenScene {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
+    }
+    OffscreenScene::open(scene.to_str().unwrap(), W, H, POOLS).expect("a GPU adapter")
+}
+
+fn style(off: &OffscreenScene, json: serde_json::Value) -> sylva::scene::style::TreeStyle {
+    let m = off.stream.manifest().unwrap();
+    let species: Vec<String> = m.species.iter().map(|s| s.name.clone()).collect();
+    sylva::scene::style::TreeStyle::parse(m.attributes.as_ref(), &species, &json).unwrap()
+}
+
+/// Per pool instance: its tree id (from the resident tiles' sidecars, read from disk).
+fn pool_ids(off: &OffscreenScene, scene: &Path) -> Vec<Option<u64>> {
+    let mut out = vec![None; POOLS.instances as usize];
+    for (range, t) in off.stream.tile_locations() {
+        let name = Path::new(&t.ids_url).strip_prefix(scene).map_or(PathBuf::from(&t.ids_url), Path::to_path_buf);
+        let ids = sylva::format::decode_ids("ids", &std::fs::read(scene.join(name)).unwrap()).unwrap();
+        for (k, i) in range.enumerate() {
+            out[i as usize] = Some(ids[k]);
+        }
+    }
+    out
+}
+
+#[test]
+fn a_filter_culls_exactly_the_trees_it_leaves_out() {
+    use sylva::render::cull::{cpu_select_styled, unpack_item_y};
+    let scene = attributed_fixture();
+    let mut off = open_at(&scene);
+    off.load_view(&Camera::default(), 30.0);
+    let m = off.stream.manifest().unwrap().clone();
+    let cam = camera(&m);
+    off.settings.thin_px = 0.0;
+    let drawn = |off: &OffscreenScene| {
+        let (slots, _, _, _) = off.read_selection();
+        slots.iter().map(|s| s.iter().filter(|(_, y)| unpack_item_y(*y).1 == 0).count()).sum::<usize>()
+    };
+    off.load_view(&cam, 30.0);
+    off.render(&cam, false);
+    let all = drawn(&off);
+    // Kind "a" with a girth of 20 or more: about a quarter of the trees.
+    let filter = style(&off, serde_json::json!({"filter": {"kind": "a", "girth": [20, null]}}));
+    off.set_style(Some(filter));
+    off.load_view(&cam, 30.0);
+    off.render(&cam, false);
+    let ids = pool_ids(&off, &scene);
+    let styles: Vec<u8> = ids
+        .iter()
+        .map(|id| match id {
+            Some(i) if i % 3 == 0 && i % 101 >= 20 => 0,
+            _ => sylva::render::gpu_data::STYLE_HIDDEN,
+        })
+        .collect();
+    let (gpu, batches, instances, _) = off.read_selection();
+    let oracle =
+        cpu_select_styled(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), &styles);
+    let mut total = 0;
+    for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
+        let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+        let mut c: Vec<(u32, u32)> = c.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+        g.sort_unstable();
+        c.sort_unstable();
+        assert_eq!(g, c, "slot {slot}: the filtered draw items differ from the oracle's");
+        total += c.iter().filter(|(_, side)| *side == 0).count();
+    }
+    let shown = drawn(&off);
+    assert_eq!(shown, total);
+    eprintln!("filter: {shown} of {all} trees drawn");
+    assert!(all > 200 && shown > 20, "too few trees in view ({shown} of {all})");
+    assert!((shown as f64) < all as f64 * 0.4, "the filter hid too few trees ({shown} of {all})");
+    // No style again: every tree is back.
+    off.set_style(None);
+    off.render(&cam, false);
+    assert_eq!(drawn(&off), all);
+}
+
+#[test]
+fn a_style_colours_the_trees_it_names_and_a_selection_is_highlighted() {
+    let scene = attributed_fixture();
+    let mut off = open_at(&scene);
+    off.load_view(&Camera::default(), 30.0);
+    let m = off.stream.manifest().unwrap().clone();
+    let cam = camera(&m);
+    let colour =
+        style(&off, serde_json::json!({"color": {"by": "kind", "categories": {"a": "#ff0000", "b": "#0000ff"}}}));
+    for (name, representations) in [
+        ("meshes", Representations::MESHES),
+        ("ellipsoids", Representations::CLUSTERS),
+        ("far", Representations::BILLBOARDS),
+    ] {
+        off.settings = RenderSettings { representations, lod_policy: false, thin_px: 0.0, ..RenderSettings::default() };
+        off.set_style(Some(colour.clone()));
+        off.load_view(&cam, 30.0);
+        off.render(&cam, false);
+        let img = off.read_image();
+        if let Some(dir) = std::env::var_os("SYLVA_PICK_PNG") {
+            image::save_buffer(
+                PathBuf::from(dir).join(format!("style-{name}.png")),
+                &img,
+                W,
+                H,
+                image::ColorType::Rgba8,
+            )
+            .unwrap();
+        }
+        let ids = pool_ids(&off, &scene);
+        let view = cam.view_data(W, H);
+        let (mut right, mut wrong, mut seen) = (0, 0, [0; 3]);
+        for gy in 0..9 {
+            for gx in 0..16 {
+                let (x, y) = (gx * W / 16 + W / 32, gy * H / 9 + H / 18);
+                let Some(i) = off.pick_blocking(&view, [x, y]) else { continue };
+                let kind = (ids[i as usize].expect("a picked tree has an id") % 3) as usize;
+                let k = ((y * W + x) * 4) as usize;
+                let [r, g, b] = [img[k], img[k + 1], img[k + 2]].map(i32::from);
+                let ok = match kind {
+                    0 => r > g && r > b,
+                    1 => b > r && b > g,
+                    _ => g > r && g > b,
+                };
+                seen[kind] += 1;
+                if ok {
+                    right += 1;
+                } else {
+                    wrong += 1;
+                }
+            }
+        }
+        eprintln!("{name}: {right} pixels right, {wrong} wrong, kinds seen {seen:?}");
+        assert!(seen.iter().all(|&n| n >= 5), "{name}: too few trees of each kind under the grid: {seen:?}");
+        assert!(wrong * 10 <= right, "{name}: {wrong} pixels in the wrong colour against {right}");
+    }
+    // Select the tree under the middle pixel: it turns yellow there.
+    off.settings = RenderSettings { thin_px: 0.0, ..RenderSettings::default() };
+    off.set_style(None);
+    off.render(&cam, false);
+    let view = cam.view_data(W, H);
+    let ids = pool_ids(&off, &scene);
+    let (x, y) = (W / 2, H * 2 / 3);
+    let i = off.pick_blocking(&view, [x, y]).expect("a tree under the lower middle");
+    let before = off.read_image();
+    off.select([ids[i as usize].unwrap()]);
+    // The selection needs the resident tiles' ids: they stream in first.
+    off.load_view(&cam, 30.0);
+    off.render(&cam, false);
+    let after = off.read_image();
+    let k = ((y * W + x) * 4) as usize;
+    let yellow = |p: &[u8]| i32::from(p[0]) + i32::from(p[1]) - 2 * i32::from(p[2]);
+    assert!(
+        yellow(&after[k..k + 3]) > yellow(&before[k..k + 3]) + 60,
+        "the selected tree is not highlighted: {:?} → {:?}",
+        &before[k..k + 3],
+        &after[k..k + 3]
+    );
+    // Pixels of other trees keep their colour.
+    let changed = (0..(W * H) as usize).filter(|p| before[p * 4..p * 4 + 3] != after[p * 4..p * 4 + 3]).count();
+    assert!(changed < (W * H) as usize / 10, "{changed} pixels changed for one selected tree");
 }

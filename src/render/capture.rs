@@ -139,13 +139,16 @@ impl SingleTree {
         let batches = init("batch", bytemuck::bytes_of(&batch), s);
         let instances = init("instance", bytemuck::bytes_of(&instance), s);
         let items = init("item", bytemuck::cast_slice(&[0u32, 0u32]), s);
+        // No style: a zeroed control buffer (control words and styles' header).
+        let control_bytes = super::gpu_data::control_buffer_bytes(0) as usize;
+        let control = init("no styles", &vec![0u8; control_bytes], s);
         let params = init(
             "draw params",
             bytemuck::bytes_of(&DrawParams::default()),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
         Self {
-            instances: shared.instance_group(&ctx.device, &batches, &instances, &items),
+            instances: shared.instance_group(&ctx.device, &batches, &instances, &items, &control),
             draw: shared.draw_group(&ctx.device, &params),
             params,
         }

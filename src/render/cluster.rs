@@ -30,8 +30,10 @@ pub struct ClusterPipeline {
     pipeline: wgpu::RenderPipeline,
     proxy_depth: wgpu::RenderPipeline,
     shadow: wgpu::RenderPipeline,
-    /// The id pass's (picking).
+    /// The id pass's (picking), with the exact depth.
     pub id: super::layouts::IdPipeline,
+    /// The id pass's with the proxy's depth (as the lit pass draws without exact depth).
+    pub id_proxy: super::layouts::IdPipeline,
     sampler: wgpu::Sampler,
     noise: OnceLock<(wgpu::TextureView, wgpu::TextureView)>,
 }
@@ -70,6 +72,14 @@ impl ClusterPipeline {
         let proxy_depth = make("fs_proxy_depth");
         let shadow = super::layouts::shadow_caster_pipeline(device, "cluster shadow", &module, &pipeline_layout, &[]);
         let id = super::layouts::IdPipeline::new("cluster", &module, &pipeline_layout, &[], target.primitive);
+        let id_proxy = super::layouts::IdPipeline::with_fragment(
+            "cluster",
+            "fs_id_proxy_depth",
+            &module,
+            &pipeline_layout,
+            &[],
+            target.primitive,
+        );
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("cluster noise"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -77,7 +87,7 @@ impl ClusterPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { layout, pipeline, proxy_depth, shadow, id, sampler, noise: OnceLock::new() }
+        Self { layout, pipeline, proxy_depth, shadow, id, id_proxy, sampler, noise: OnceLock::new() }
     }
 
     /// The pipeline: exact per-pixel depth, or (benchmarks) the proxy's depth.

@@ -175,6 +175,19 @@ pub fn cpu_select(
     instances: &[PackedInstance],
     species: &[GpuSpecies],
 ) -> Selection {
+    cpu_select_styled(view, batches, instances, species, &[])
+}
+
+/// As [`cpu_select`], with a style byte per pool instance (`styles`; empty:
+/// no style): the trees a filter hides ([`super::gpu_data::STYLE_HIDDEN`]) are not drawn.
+#[must_use]
+pub fn cpu_select_styled(
+    view: &ViewUniform,
+    batches: &[GpuBatch],
+    instances: &[PackedInstance],
+    species: &[GpuSpecies],
+    styles: &[u8],
+) -> Selection {
     let species_count = view.params[3] as usize;
     let mut sel = Selection { slots: vec![Vec::new(); species_count * REPR_COUNT as usize], ..Default::default() };
     for (i, b) in batches.iter().enumerate().take(view.params[1] as usize) {
@@ -200,6 +213,9 @@ pub fn cpu_select(
         let count = if thinned { (kept.ceil() as u32).min(b.instance_count) } else { b.instance_count };
         for k in 0..count {
             let index = b.instance_offset + k;
+            if styles.get(index as usize).is_some_and(|s| s & super::gpu_data::STYLE_HIDDEN != 0) {
+                continue;
+            }
             let packed = instances[index as usize];
             let d = decode_eye_relative(packed, b, view);
             // As `tree_scaled` in WGSL: xy · (scale · aspect), z · scale.

@@ -131,6 +131,29 @@ impl ForestRenderer {
         }
     }
 
+    /// Room for a style byte per pool instance, or none (see [`Pools::set_styles`]).
+    /// Returns whether the buffer was re-created (its header and bytes cleared).
+    pub fn set_styles(&mut self, device: &wgpu::Device, on: bool) -> bool {
+        let layouts = PoolLayouts { shared: &self.shared, cull: &self.cull, bounds: &self.bounds.layout };
+        self.pools.set_styles(device, on, &layouts)
+    }
+
+    /// Writes the styles' header (palette and flags).
+    pub fn write_style_header(&self, queue: &wgpu::Queue, header: &[u32]) {
+        self.pools.write_style_header(queue, header);
+    }
+
+    /// Writes style bytes of pool instances from `first` (a multiple of 4).
+    pub fn write_style_bytes(&self, queue: &wgpu::Queue, first: u32, bytes: &[u8]) {
+        self.pools.write_style_bytes(queue, first, bytes);
+    }
+
+    /// Changes whenever the pools are re-created or start a scene.
+    #[must_use]
+    pub fn pools_generation(&self) -> u64 {
+        self.pools.generation()
+    }
+
     /// Whether the pools were cut down to the device's limits (reported in stats).
     #[must_use]
     pub fn pools_limited_by_device(&self) -> bool {

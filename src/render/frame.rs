@@ -66,6 +66,21 @@ pub fn read_pick(mapped: &[u8]) -> Option<u32> {
     id.checked_sub(1)
 }
 
+/// A style (issue 19) and what of it is on the GPU.
+#[derive(Default)]
+struct StyleState {
+    style: Option<crate::scene::style::TreeStyle>,
+    /// Bumped by every change of style or selection.
+    generation: u64,
+    /// (style generation, pools generation) of the header on the GPU.
+    header: Option<(u64, u64)>,
+    /// The style bytes (one per pool instance) as uploaded.
+    bytes: Vec<u8>,
+    /// Per resident tile (number, first instance): the style generation its
+    /// bytes were made with and whether its ids and attributes were in.
+    written: std::collections::HashMap<(usize, u32), (u64, bool)>,
+}
+
 /// The id pass's targets, kept between picks (remade when the viewport changes).
 struct PickTargets {
     ids: wgpu::Texture,
@@ -102,6 +117,7 @@ pub struct Frame<F: Fetcher> {
     cpu_ms: f64,
     frames: u64,
     pick: Option<PickTargets>,
+    style: StyleState,
 }
 
 impl<F: Fetcher> Frame<F> {
@@ -136,6 +152,7 @@ impl<F: Fetcher> Frame<F> {
             cpu_ms: 0.0,
             frames: 0,
             pick: None,
+            style: StyleState::default(),
             device,
             queue,
         }
@@ -169,6 +186,84 @@ impl<F: Fetcher> Frame<F> {
         if let Some(t) = self.stream.manifest().and_then(|m| m.terrain.as_ref()) {
             self.renderer.reserve_terrain(&self.device, t.grid, t.tiles, t.imagery.as_ref().map_or(0, |i| i.tiles));
         }
+        self.apply_style();
+    }
+
+    /// Sets the style (colours, filter; `None` or a plain style: none). The
+    /// selection is kept ([`Self::select`]).
+    pub fn set_style(&mut self, style: Option<crate::scene::style::TreeStyle>) {
+        let selected: Vec<u64> =
+            self.style.style.as_ref().map_or(Vec::new(), |s| s.selection().iter().copied().collect());
+        let mut style = style.unwrap_or_default();
+        style.set_selection(selected);
+        self.style.style = Some(style);
+        self.style.generation += 1;
+    }
+
+    /// Highlights the trees with these ids at every level of detail (replacing the selection).
+    pub fn select(&mut self, ids: impl IntoIterator<Item = u64>) {
+        self.style.style.get_or_insert_with(Default::default).set_selection(ids);
+        self.style.generation += 1;
+    }
+
+    /// The style in use.
+    #[must_use]
+    pub fn style(&self) -> Option<&crate::scene::style::TreeStyle> {
+        self.style.style.as_ref()
+    }
+
+    /// Brings the GPU's styles up to date: the header once per change, the
+    /// bytes of each resident tile once its ids and attributes are in (until
+    /// then its trees keep their look, or are hidden while a filter is on).
+    fn apply_style(&mut self) {
+        let pools = self.renderer.pools_generation();
+        let st = &mut self.style;
+        let Some(style) = st.style.as_ref().filter(|s| !s.is_plain()) else {
+            // None: the bytes' memory given back, the header cleared.
+            self.stream.set_tree_data(false);
+            if self.renderer.set_styles(&self.device, false) || st.header.is_some() {
+                self.renderer.write_style_header(&self.queue, &[0; 128]);
+            }
+            st.header = None;
+            st.bytes = Vec::new();
+            st.written.clear();
+            return;
+        };
+        let needs = style.needs_trees();
+        self.stream.set_tree_data(needs);
+        if self.renderer.set_styles(&self.device, needs) || st.header.is_some_and(|(_, p)| p != pools) {
+            st.header = None;
+            st.written.clear();
+        }
+        if st.header != Some((st.generation, pools)) {
+            self.renderer.write_style_header(&self.queue, &style.header());
+            st.header = Some((st.generation, pools));
+        }
+        if !needs {
+            return;
+        }
+        let n = self.renderer.config().instances as usize;
+        st.bytes.resize(n.next_multiple_of(4), 0);
+        let schema = self.stream.manifest().and_then(|m| m.attributes.clone());
+        let hidden = if style.filters() { super::gpu_data::STYLE_HIDDEN } else { 0 };
+        let mut present = std::collections::HashSet::new();
+        for (t, range, data) in self.stream.resident_tree_data() {
+            let key = (t, range.start);
+            present.insert(key);
+            let state = (st.generation, data.is_some());
+            if st.written.get(&key) == Some(&state) || range.end as usize > n {
+                continue;
+            }
+            let out = &mut st.bytes[range.start as usize..range.end as usize];
+            match data {
+                Some(d) => style.tile_bytes(schema.as_ref(), &d.ids, d.codes.as_ref(), out),
+                None => out.fill(hidden),
+            }
+            let (a, b) = (range.start & !3, (range.end.next_multiple_of(4) as usize).min(st.bytes.len()));
+            self.renderer.write_style_bytes(&self.queue, a, &st.bytes[a as usize..b]);
+            st.written.insert(key, state);
+        }
+        st.written.retain(|k, _| present.contains(k));
     }
 
     /// Prepares and records a frame of `view` into `color` and `depth`; with
@@ -241,6 +336,7 @@ impl<F: Fetcher> Frame<F> {
         read_counters: bool,
     ) -> Recorded {
         let t0 = now_ms();
+        self.apply_style();
         let data = self.prepare(view, settings);
         let queries = self.timer.as_ref().and_then(PassTimer::queries);
         let timed = queries.is_some();
@@ -291,6 +387,7 @@ impl<F: Fetcher> Frame<F> {
         }
         // The plain frame's settings: no refinement step's dither or levels.
         let settings = self.settings;
+        self.apply_style();
         let data = self.prepare(view, &settings);
         let targets = match self.pick.take() {
             Some(t) if t.size == size => t,

@@ -130,6 +130,31 @@ pub struct CullControl {
 }
 const _: () = assert!(std::mem::size_of::<CullControl>() == 32);
 
+/// Where the styles start in the cull control buffer (bytes): the draw
+/// passes bind it from here (group 2, binding 3). The control words come first.
+pub const STYLE_OFFSET_BYTES: u64 = 256;
+/// Words of the styles' header: the palette (64 packed RGBA8 colours; entry 0
+/// unused, a tree's own colour), then [`STYLE_FLAGS`], then spare words.
+pub const STYLE_HEADER_WORDS: u32 = 128;
+/// Header word: [`STYLE_TREES`] and [`STYLE_BY_SPECIES`] bits.
+pub const STYLE_FLAGS: u32 = 64;
+/// Flag: one style byte per pool instance follows the header (bits 0–5 the
+/// palette entry, 0 the tree's own colour; [`STYLE_SELECTED`]; [`STYLE_HIDDEN`]).
+pub const STYLE_TREES: u32 = 1;
+/// Flag: a tree's palette entry is its model species + 1 (no per-tree data needed).
+pub const STYLE_BY_SPECIES: u32 = 2;
+/// Style byte bit: the tree is selected (highlighted at every level of detail).
+pub const STYLE_SELECTED: u8 = 64;
+/// Style byte bit: the tree is filtered out (the cull pass skips it).
+pub const STYLE_HIDDEN: u8 = 128;
+
+/// Bytes of the cull control buffer: the control words, then the styles'
+/// header, then (with per-tree styles) a byte per pool instance.
+#[must_use]
+pub fn control_buffer_bytes(style_instances: u32) -> u64 {
+    STYLE_OFFSET_BYTES + u64::from(STYLE_HEADER_WORDS) * 4 + u64::from(style_instances).next_multiple_of(4)
+}
+
 /// One draw slot's indirect arguments, written by the cull pass: the indexed
 /// layout (`wgpu::util::DrawIndexedIndirectArgs`); non-indexed draws read the
 /// first four words. Must match the 5-word slots of `args` in `shaders/cull.wgsl`.

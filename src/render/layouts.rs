@@ -113,7 +113,12 @@ impl SharedLayouts {
         let v = wgpu::ShaderStages::VERTEX;
         let instances = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("instances"),
-            entries: &[storage(0, v, true), storage(1, v, true), storage(2, v, true)],
+            entries: &[
+                storage(0, v, true),
+                storage(1, v, true),
+                storage(2, v, true),
+                storage(3, wgpu::ShaderStages::VERTEX_FRAGMENT, true),
+            ],
         });
         let draw = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("draw params"),
@@ -180,7 +185,8 @@ impl SharedLayouts {
         })
     }
 
-    /// Group 2 over the batch, instance and draw-item buffers.
+    /// Group 2 over the batch, instance and draw-item buffers and the styles
+    /// (the cull control buffer from [`super::gpu_data::STYLE_OFFSET_BYTES`]).
     #[must_use]
     pub fn instance_group(
         &self,
@@ -188,7 +194,9 @@ impl SharedLayouts {
         batches: &wgpu::Buffer,
         instances: &wgpu::Buffer,
         items: &wgpu::Buffer,
+        control: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
+        let styles = wgpu::BufferBinding { buffer: control, offset: super::gpu_data::STYLE_OFFSET_BYTES, size: None };
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("instances"),
             layout: &self.instances,
@@ -196,6 +204,7 @@ impl SharedLayouts {
                 wgpu::BindGroupEntry { binding: 0, resource: batches.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: instances.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: items.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Buffer(styles) },
             ],
         })
     }
@@ -322,6 +331,7 @@ pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 /// pick asks for it (a viewer nobody clicks never compiles it).
 pub struct IdPipeline {
     label: String,
+    fragment: &'static str,
     module: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
     buffers: Vec<Option<wgpu::VertexBufferLayout<'static>>>,
@@ -330,7 +340,8 @@ pub struct IdPipeline {
 }
 
 impl IdPipeline {
-    /// The id pipeline of `module` under `layout`, reading `buffers`; not built yet.
+    /// The id pipeline of `module` under `layout`, reading `buffers`, fragment
+    /// entry `fs_id`; not built yet.
     #[must_use]
     pub fn new(
         label: &str,
@@ -339,8 +350,22 @@ impl IdPipeline {
         buffers: &[Option<wgpu::VertexBufferLayout<'static>>],
         primitive: wgpu::PrimitiveState,
     ) -> Self {
+        Self::with_fragment(label, "fs_id", module, layout, buffers, primitive)
+    }
+
+    /// As [`Self::new`] with another fragment entry.
+    #[must_use]
+    pub fn with_fragment(
+        label: &str,
+        fragment: &'static str,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::PipelineLayout,
+        buffers: &[Option<wgpu::VertexBufferLayout<'static>>],
+        primitive: wgpu::PrimitiveState,
+    ) -> Self {
         Self {
-            label: format!("{label} id"),
+            label: format!("{label} {fragment}"),
+            fragment,
             module: module.clone(),
             layout: layout.clone(),
             buffers: buffers.to_vec(),
@@ -353,7 +378,7 @@ impl IdPipeline {
     pub fn build(&self, device: &wgpu::Device) {
         self.pipeline.get_or_init(|| {
             let stages =
-                Stages { module: &self.module, layout: &self.layout, buffers: &self.buffers, fragment: "fs_id" };
+                Stages { module: &self.module, layout: &self.layout, buffers: &self.buffers, fragment: self.fragment };
             render_pipeline(
                 device,
                 &self.label,

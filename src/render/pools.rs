@@ -9,7 +9,10 @@ use std::ops::Range;
 use glam::Vec3;
 
 use super::cull::CullPipelines;
-use super::gpu_data::{CullControl, CullDispatch, DrawArgs, DrawParams, GpuSpecies, REPR_COUNT};
+use super::gpu_data::{
+    control_buffer_bytes, CullDispatch, DrawArgs, DrawParams, GpuSpecies, REPR_COUNT, STYLE_HEADER_WORDS,
+    STYLE_OFFSET_BYTES,
+};
 use super::layouts::SharedLayouts;
 use crate::format::tile::{GpuBatch, PackedInstance, Tile};
 use crate::scene::{PoolError, TileSlot};
@@ -181,7 +184,7 @@ pub struct PoolBuffers {
     pub items: wgpu::Buffer,
     /// Visible batch list.
     pub visible: wgpu::Buffer,
-    /// [`CullControl`].
+    /// [`super::gpu_data::CullControl`], then the styles ([`control_buffer_bytes`]).
     pub control: wgpu::Buffer,
     /// [`CullDispatch`].
     pub dispatch: wgpu::Buffer,
@@ -247,7 +250,8 @@ fn create(device: &wgpu::Device, config: PoolConfig, layouts: &PoolLayouts<'_>) 
         ),
         items: buffer(device, "draw items", u64::from(config.items) * ITEM_BYTES, U::STORAGE | U::COPY_SRC),
         visible: buffer(device, "visible batches", bytes(config.batches.into(), size_of::<u32>()), U::STORAGE),
-        control: buffer(device, "cull control", bytes(1, size_of::<CullControl>()), U::STORAGE | U::COPY_SRC),
+        // The control words, then the styles (none until a style asks: `set_styles`).
+        control: buffer(device, "cull control", control_buffer_bytes(0), U::STORAGE | U::COPY_SRC | U::COPY_DST),
         dispatch: buffer(device, "cull dispatch", bytes(1, size_of::<CullDispatch>()), U::STORAGE | U::INDIRECT),
         args: buffer(device, "draw args", bytes(slots, size_of::<DrawArgs>()), U::STORAGE | U::INDIRECT | U::COPY_SRC),
         species: buffer(
@@ -258,14 +262,20 @@ fn create(device: &wgpu::Device, config: PoolConfig, layouts: &PoolLayouts<'_>) 
         ),
         draw_params: buffer(device, "draw params", bytes(slots, size_of::<DrawParams>()), U::UNIFORM | U::COPY_DST),
     };
+    let groups = groups(device, &b, layouts);
+    (b, groups)
+}
+
+/// The bind groups over the pool buffers `b`.
+fn groups(device: &wgpu::Device, b: &PoolBuffers, layouts: &PoolLayouts<'_>) -> PoolGroups {
     fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
         wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }
     }
     let group = |label: &str, layout: &wgpu::BindGroupLayout, entries: &[wgpu::BindGroupEntry<'_>]| {
         device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
     };
-    let groups = PoolGroups {
-        instance: layouts.shared.instance_group(device, &b.batches, &b.instances, &b.items),
+    PoolGroups {
+        instance: layouts.shared.instance_group(device, &b.batches, &b.instances, &b.items, &b.control),
         draw: layouts.shared.draw_group(device, &b.draw_params),
         cull: group(
             "cull",
@@ -282,8 +292,7 @@ fn create(device: &wgpu::Device, config: PoolConfig, layouts: &PoolLayouts<'_>) 
         ),
         dispatch: group("cull dispatch", &layouts.cull.dispatch_layout, &[entry(0, &b.dispatch), entry(1, &b.control)]),
         bounds: group("bounds", layouts.bounds, &[entry(0, &b.batches), entry(1, &b.visible)]),
-    };
-    (b, groups)
+    }
 }
 
 /// The resident trees: pool buffers, their bind groups, allocators and counts.
@@ -339,6 +348,43 @@ impl Pools {
         // Caches keyed on the generation must not meet an old value again.
         self.generation = generation + 1;
         true
+    }
+
+    /// Makes room for a style byte per pool instance (`on`), or gives it back:
+    /// the control buffer is re-created (its header cleared: no style) and
+    /// the bind groups with it. Returns whether anything changed.
+    pub fn set_styles(&mut self, device: &wgpu::Device, on: bool, layouts: &PoolLayouts<'_>) -> bool {
+        let bytes = control_buffer_bytes(if on { self.config.instances } else { 0 });
+        if self.buffers.control.size() == bytes {
+            return false;
+        }
+        use wgpu::BufferUsages as U;
+        self.buffers.control = buffer(device, "cull control", bytes, U::STORAGE | U::COPY_SRC | U::COPY_DST);
+        self.groups = groups(device, &self.buffers, layouts);
+        true
+    }
+
+    /// Whether a style byte per pool instance has room.
+    #[must_use]
+    pub fn has_style_bytes(&self) -> bool {
+        self.buffers.control.size() > control_buffer_bytes(0)
+    }
+
+    /// Writes the styles' header ([`STYLE_HEADER_WORDS`] words).
+    pub fn write_style_header(&self, queue: &wgpu::Queue, header: &[u32]) {
+        queue.write_buffer(&self.buffers.control, STYLE_OFFSET_BYTES, bytemuck::cast_slice(header));
+    }
+
+    /// Writes the style bytes of pool instances from `first` on (a multiple of
+    /// 4; `bytes` padded to 4). Ignored without room for style bytes.
+    pub fn write_style_bytes(&self, queue: &wgpu::Queue, first: u32, bytes: &[u8]) {
+        if !self.has_style_bytes() || !first.is_multiple_of(4) || !bytes.len().is_multiple_of(4) || bytes.is_empty() {
+            return;
+        }
+        let at = STYLE_OFFSET_BYTES + u64::from(STYLE_HEADER_WORDS) * 4 + u64::from(first);
+        if at + bytes.len() as u64 <= self.buffers.control.size() {
+            queue.write_buffer(&self.buffers.control, at, bytes);
+        }
     }
 
     /// The configuration in use.

@@ -59,8 +59,8 @@ enum Pipeline {
     Lit(bool),
     /// The shadow casters' (depth only).
     Shadow,
-    /// The id pass's (picking).
-    Id,
+    /// The id pass's (picking; ellipsoids with their exact depth or not, as lit).
+    Id(bool),
 }
 
 impl Pipeline {
@@ -69,7 +69,7 @@ impl Pipeline {
         match self {
             Pipeline::Lit(_) => RenderMode::Lit,
             Pipeline::Shadow => RenderMode::Shadow,
-            Pipeline::Id => RenderMode::Id,
+            Pipeline::Id(_) => RenderMode::Id,
         }
     }
 
@@ -78,7 +78,7 @@ impl Pipeline {
         match self {
             Pipeline::Lit(_) => Some(p.pipeline()),
             Pipeline::Shadow => Some(p.shadow_pipeline()),
-            Pipeline::Id => p.id.get(),
+            Pipeline::Id(_) => p.id.get(),
         }
     }
 }
@@ -397,6 +397,7 @@ impl Species {
         }
         if let Some(c) = &self.cluster {
             c.id.build(device);
+            c.id_proxy.build(device);
         }
         for far in [&self.billboard, &self.impostor].into_iter().flatten() {
             far.id.build(device);
@@ -412,7 +413,7 @@ impl Species {
         reach: &Reach,
         frame: SpeciesFrame,
     ) -> u32 {
-        self.draw_with(pass, pools, reach, frame, Pipeline::Id)
+        self.draw_with(pass, pools, reach, frame, Pipeline::Id(frame.cluster_exact_depth))
     }
 
     fn draw_with<'p>(
@@ -481,7 +482,8 @@ impl Species {
                 let Some(pipe) = (match pipeline {
                     Pipeline::Lit(exact_depth) => Some(cluster.pipeline(exact_depth)),
                     Pipeline::Shadow => Some(cluster.shadow_pipeline()),
-                    Pipeline::Id => cluster.id.get(),
+                    Pipeline::Id(true) => cluster.id.get(),
+                    Pipeline::Id(false) => cluster.id_proxy.get(),
                 }) else {
                     return false;
                 };

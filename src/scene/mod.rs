@@ -7,10 +7,13 @@ pub mod index_walk;
 pub mod query;
 pub mod residency;
 pub mod streaming;
+pub mod style;
 pub mod terrain;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use fetch::ThreadFetcher;
 pub use fetch::{FetchError, Fetcher, RequestId};
 pub use residency::{PoolError, Residency, TileSlot};
-pub use streaming::{Degraded, LoadFailure, SceneStream, StreamConfig, StreamEvent, StreamStats};
+pub use streaming::{
+    Degraded, LoadFailure, LocatedTree, SceneStream, StreamConfig, StreamEvent, StreamStats, TreeData,
+};

@@ -18,6 +18,7 @@ use super::index_walk::IndexWalk;
 use super::residency::{PoolError, Residency, TileSlot};
 use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
+use crate::format::attributes::AttributeCodes;
 use crate::format::terrain::TerrainTile;
 use crate::format::{DecodeError, Manifest, Tile};
 use crate::geo::GeoFrame;
@@ -133,12 +134,39 @@ impl Load {
 enum TileState {
     NotResident(Load),
     /// In the pools; `cells` keeps each batch's cell rectangle and lowest ground
-    /// (x0, y0, x1, y1, z) for ground-height queries.
+    /// (x0, y0, x1, y1, z) for ground-height queries; `data` its trees' ids and
+    /// attributes while a style wants them ([`SceneStream::set_tree_data`]).
     Resident {
         slot: TileSlot,
         species: Vec<u32>,
         cells: Vec<[f32; 5]>,
+        data: TreeDataLoad,
     },
+}
+
+/// The ids and attribute codes of a resident tile's trees, in instance order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TreeData {
+    /// Tree ids (the `.ids` sidecar).
+    pub ids: Vec<u64>,
+    /// Attribute codes (the `.attr` sidecar; None for a scene without attributes).
+    pub codes: Option<AttributeCodes>,
+}
+
+/// Where a resident tile's [`TreeData`] is.
+#[derive(Debug, Clone, Default)]
+enum TreeDataLoad {
+    /// Not asked for.
+    #[default]
+    None,
+    /// Requested: what arrived so far (ids; codes, `Some(None)` for none to come).
+    Loading {
+        ids: Option<Vec<u64>>,
+        codes: Option<Option<AttributeCodes>>,
+    },
+    Ready(std::sync::Arc<TreeData>),
+    /// A sidecar failed (said once as an event); the tile's trees keep their own look.
+    Broken,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -156,6 +184,8 @@ enum Target {
     Image(u32, TerrainKey),
     /// A tile of an XYZ/WMTS imagery source (source generation, z/x/y).
     ImageSource(u32, (u8, u32, u32)),
+    /// A resident tile's ids (`false`) or attributes (`true`) sidecar.
+    TreeData(usize, bool),
 }
 
 /// Counters for stats.
@@ -255,6 +285,8 @@ pub struct SceneStream<F: Fetcher> {
     imagery_wanted: Vec<TerrainKey>,
     /// The scene CRS ↔ lon/lat (for imagery sources in Web Mercator), once the manifest is in.
     geo: Option<GeoFrame>,
+    /// Resident tiles' ids and attributes are fetched (a style uses them).
+    tree_data: bool,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -324,6 +356,7 @@ impl<F: Fetcher> SceneStream<F> {
             imagery: Imagery::new(),
             imagery_wanted: Vec::new(),
             geo: None,
+            tree_data: false,
         }
     }
 
@@ -485,6 +518,7 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::Terrain(key) => self.on_terrain(key, result, now_s),
                 Target::Image(generation, key) => self.on_image(generation, key, result, now_s),
                 Target::ImageSource(generation, tile) => self.on_image_source(generation, tile, result),
+                Target::TreeData(t, attributes) => self.on_tree_data(t, attributes, result),
             }
         }
         if self.manifest.is_none() {
@@ -521,6 +555,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.request_packs(residency, now_s);
                 self.request_terrain();
                 self.request_imagery();
+                self.request_tree_data();
             } else {
                 // Still decide what the view wants (for is_settled and eviction).
                 self.walk(view, draw_distance_m);
@@ -540,6 +575,118 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.terrain_drawn = self.terrain_draws.len() as u64;
         self.stats.imagery_resident = self.imagery.resident() as u64;
         self.stats.imagery_drawn = self.terrain_draws.iter().filter(|d| d.imagery.is_some()).count() as u64;
+    }
+
+    /// Fetch the ids and attributes of resident tiles' trees (`true`: a style
+    /// or filter uses them), or stop and forget them (`false`).
+    pub fn set_tree_data(&mut self, wanted: bool) {
+        if self.tree_data == wanted {
+            return;
+        }
+        self.tree_data = wanted;
+        if !wanted {
+            for t in &mut self.tiles {
+                if let TileState::Resident { data, .. } = t {
+                    *data = TreeDataLoad::None;
+                }
+            }
+        }
+    }
+
+    /// Every resident tile: its number, its range in the instance pool and its
+    /// trees' ids and attributes once they arrived (with [`Self::set_tree_data`]).
+    pub fn resident_tree_data(
+        &self,
+    ) -> impl Iterator<Item = (usize, std::ops::Range<u32>, Option<&std::sync::Arc<TreeData>>)> + '_ {
+        self.tiles.iter().enumerate().filter_map(|(t, state)| match state {
+            TileState::Resident { slot, data, .. } => {
+                let ready = match data {
+                    TreeDataLoad::Ready(d) => Some(d),
+                    _ => None,
+                };
+                Some((t, slot.instances.clone(), ready))
+            }
+            TileState::NotResident(_) => None,
+        })
+    }
+
+    /// Requests the ids and attributes of resident tiles that lack them, the
+    /// wanted (nearest) tiles first, within the in-flight budget.
+    fn request_tree_data(&mut self) {
+        if !self.tree_data {
+            return;
+        }
+        let attributes = self.manifest.as_ref().is_some_and(|m| m.attributes.is_some());
+        let order: Vec<usize> = self
+            .wanted
+            .iter()
+            .copied()
+            .chain(0..self.tiles.len())
+            .filter(|&t| matches!(&self.tiles[t], TileState::Resident { data: TreeDataLoad::None, .. }))
+            .collect();
+        for t in order {
+            if self.fetcher.in_flight() + 2 > self.config.max_in_flight.max(2) {
+                break;
+            }
+            let TileState::Resident { data, .. } = &mut self.tiles[t] else { continue };
+            if !matches!(data, TreeDataLoad::None) {
+                continue;
+            }
+            *data = TreeDataLoad::Loading { ids: None, codes: if attributes { None } else { Some(None) } };
+            let entry = &self.index.tiles[t];
+            let ids_url = join(&self.base, &entry.ids_url);
+            let attr_url = join(&self.base, &crate::format::attributes::attributes_url(&entry.url));
+            let id = self.fetcher.start(&ids_url);
+            self.requests.insert(id, Target::TreeData(t, false));
+            self.stats.requests += 1;
+            if attributes {
+                let id = self.fetcher.start(&attr_url);
+                self.requests.insert(id, Target::TreeData(t, true));
+                self.stats.requests += 1;
+            }
+        }
+    }
+
+    fn on_tree_data(&mut self, t: usize, attributes: bool, result: Result<Vec<u8>, FetchError>) {
+        let Some(m) = &self.manifest else { return };
+        let entry = &self.index.tiles[t];
+        let url = if attributes {
+            join(&self.base, &crate::format::attributes::attributes_url(&entry.url))
+        } else {
+            join(&self.base, &entry.ids_url)
+        };
+        let TileState::Resident { slot, data, .. } = &mut self.tiles[t] else { return };
+        let TreeDataLoad::Loading { ids, codes } = data else { return };
+        let count = slot.instances.len();
+        let decoded = result.map_err(|e| e.to_string()).and_then(|bytes| {
+            if attributes {
+                let schema = m.attributes.as_ref().ok_or("the scene has no attributes")?;
+                let c = crate::format::attributes::decode_attributes(&url, &bytes, schema, count)
+                    .map_err(|e| e.to_string())?;
+                *codes = Some(Some(c));
+            } else {
+                let v = crate::format::decode_ids(&url, &bytes).map_err(|e| e.to_string())?;
+                if v.len() != count {
+                    return Err(format!("{url}: {} ids for {count} trees", v.len()));
+                }
+                *ids = Some(v);
+            }
+            Ok(())
+        });
+        match decoded {
+            Err(message) => {
+                *data = TreeDataLoad::Broken;
+                self.give_up(&url, &message);
+                self.events.push(StreamEvent::Failed { url, message, retrying: false });
+            }
+            Ok(()) => {
+                if let TreeDataLoad::Loading { ids: Some(_), codes: Some(_) } = data {
+                    if let TreeDataLoad::Loading { ids: Some(ids), codes: Some(codes) } = std::mem::take(data) {
+                        *data = TreeDataLoad::Ready(std::sync::Arc::new(TreeData { ids, codes }));
+                    }
+                }
+            }
+        }
     }
 
     /// Requests the images the drawn terrain wants, within the in-flight budget.
@@ -797,7 +944,7 @@ impl<F: Fetcher> SceneStream<F> {
                         [b.origin_m[0], b.origin_m[1], b.origin_m[0] + side, b.origin_m[1] + side, b.origin_m[2]]
                     })
                     .collect();
-                self.tiles[t] = TileState::Resident { slot, species, cells };
+                self.tiles[t] = TileState::Resident { slot, species, cells, data: TreeDataLoad::None };
             }
             Err(PoolError::Full(what)) => {
                 // No room even after evicting everything unwanted: the view wants more

@@ -1,0 +1,437 @@
+//! Styles (issue 19): colour trees by an attribute or by species, hide those
+//! a filter leaves out, highlight a selection. A style compiles, against the
+//! scene's attribute columns, into what the GPU reads: a palette of 63
+//! colours and one byte per tree (its palette entry, selected, hidden; see
+//! `STYLE_*` in `render::gpu_data`), made per resident tile from its ids and
+//! attribute sidecars. The cull pass skips hidden trees; the draw passes
+//! colour and highlight at every level of detail.
+//!
+//! The style is JSON, as the browser API takes it:
+//!
+//! ```json
+//! {"color": {"by": "condition", "categories": {"good": "#2e7d32", "poor": "#c62828"}},
+//!  "filter": {"dbh": [30, null]}}
+//! {"color": {"by": "height", "ramp": ["#440154", "#21918c", "#fde725"], "domain": [5, 30]}}
+//! {"color": {"by": "species"}}
+//! ```
+//!
+//! - `color.by`: an attribute, or `species` (the attribute of that name, else
+//!   the tree's model species); categories get a palette of their own unless
+//!   `categories` maps values (globs) to colours (the rest keep their own
+//!   colour); numbers, integers and dates a `ramp` (default viridis) over
+//!   `domain` (default the column's range) in 16 steps.
+//! - `filter`: as [`super::query::Filter`] (the trees that do not match are hidden).
+//! - Colours: `#rrggbb`, `#rgb` or `[r, g, b]` (0–255).
+
+use std::collections::HashSet;
+
+use serde_json::Value;
+
+use super::query::Filter;
+use crate::format::attributes::{glob_matches, AttributeCodes, AttributeSchema, AttributeType, AttributeValue};
+
+/// Palette entries (entry 0 is a tree's own colour).
+pub const PALETTE: usize = 64;
+/// Header words ([`crate::render::gpu_data::STYLE_HEADER_WORDS`]).
+const HEADER_WORDS: usize = 128;
+/// Steps of a ramp.
+const RAMP_STEPS: usize = 16;
+/// Style byte: selected.
+const SELECTED: u8 = 64;
+/// Style byte: hidden.
+const HIDDEN: u8 = 128;
+
+/// A qualitative palette for categories and species (Tableau 10 and more).
+const QUALITATIVE: [[u8; 3]; 12] = [
+    [0x4e, 0x79, 0xa7],
+    [0xf2, 0x8e, 0x2b],
+    [0xe1, 0x57, 0x59],
+    [0x76, 0xb7, 0xb2],
+    [0x59, 0xa1, 0x4f],
+    [0xed, 0xc9, 0x48],
+    [0xb0, 0x7a, 0xa1],
+    [0xff, 0x9d, 0xa7],
+    [0x9c, 0x75, 0x5f],
+    [0xba, 0xb0, 0xac],
+    [0x1f, 0x77, 0xb4],
+    [0x8c, 0x56, 0x4b],
+];
+/// Viridis in five stops.
+const VIRIDIS: [[u8; 3]; 5] =
+    [[0x44, 0x01, 0x54], [0x3b, 0x52, 0x8b], [0x21, 0x91, 0x8c], [0x5e, 0xc9, 0x62], [0xfd, 0xe7, 0x25]];
+
+/// How trees are coloured.
+#[derive(Debug, Clone, PartialEq)]
+enum ColorBy {
+    /// By model species: entry = species + 1 (on the GPU, no per-tree data).
+    Species,
+    /// A category column: entry per code (0: own colour).
+    Codes { column: usize, entries: Vec<u8> },
+    /// A number, integer or date column: entry by value in `domain`.
+    Ramp { column: usize, domain: [f64; 2] },
+}
+
+/// One legend line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LegendEntry {
+    /// The value or range it stands for.
+    pub label: String,
+    /// sRGB.
+    pub color: [u8; 3],
+}
+
+/// A compiled style (see the module docs).
+#[derive(Debug, Clone, Default)]
+pub struct TreeStyle {
+    palette: Vec<[u8; 3]>,
+    color: Option<ColorBy>,
+    filter: Option<Filter>,
+    selected: HashSet<u64>,
+    legend_title: String,
+    legend: Vec<LegendEntry>,
+}
+
+fn parse_color(v: &Value) -> Result<[u8; 3], String> {
+    if let Some(a) = v.as_array() {
+        let c: Vec<u8> = a.iter().filter_map(|x| x.as_u64().filter(|&x| x <= 255).map(|x| x as u8)).collect();
+        return if c.len() == 3 && a.len() == 3 {
+            Ok([c[0], c[1], c[2]])
+        } else {
+            Err(format!("{v} is not [r, g, b] (0–255)"))
+        };
+    }
+    let s = v.as_str().ok_or_else(|| format!("{v} is not a colour (#rrggbb, #rgb or [r, g, b])"))?;
+    let hex = s.strip_prefix('#').unwrap_or(s);
+    let digits: Vec<u8> =
+        hex.chars().map(|c| c.to_digit(16).map(|d| d as u8)).collect::<Option<_>>().unwrap_or_default();
+    match digits.len() {
+        6 if hex.len() == 6 => Ok([digits[0] * 16 + digits[1], digits[2] * 16 + digits[3], digits[4] * 16 + digits[5]]),
+        3 if hex.len() == 3 => Ok([digits[0] * 17, digits[1] * 17, digits[2] * 17]),
+        _ => Err(format!("{s:?} is not a colour (#rrggbb, #rgb or [r, g, b])")),
+    }
+}
+
+fn hex([r, g, b]: [u8; 3]) -> String {
+    format!("#{r:02x}{g:02x}{b:02x}")
+}
+
+/// Colour at `t` (0–1) along `stops`.
+fn ramp_at(stops: &[[u8; 3]], t: f64) -> [u8; 3] {
+    let t = t.clamp(0.0, 1.0) * (stops.len() - 1) as f64;
+    let k = (t.floor() as usize).min(stops.len().saturating_sub(2));
+    let f = t - k as f64;
+    let (a, b) = (stops[k], stops[(k + 1).min(stops.len() - 1)]);
+    std::array::from_fn(|c| (f64::from(a[c]) + (f64::from(b[c]) - f64::from(a[c])) * f).round() as u8)
+}
+
+impl TreeStyle {
+    /// Compiles a JSON style (see the module docs) against `schema` (`None`:
+    /// a scene without attributes) and the scene's model `species` names.
+    ///
+    /// # Errors
+    /// Not an object, an unknown key or attribute (the message lists what
+    /// there is), or a value of the wrong kind.
+    pub fn parse(schema: Option<&AttributeSchema>, species: &[String], style: &Value) -> Result<Self, String> {
+        let Some(object) = style.as_object() else {
+            return Err(format!("a style is a JSON object with color and/or filter, not {style}"));
+        };
+        let mut out = Self { palette: vec![[0; 3]], ..Self::default() };
+        for key in object.keys() {
+            if key != "color" && key != "filter" {
+                return Err(format!("{key:?} is not part of a style: use \"color\" and \"filter\""));
+            }
+        }
+        if let Some(f) = object.get("filter").filter(|f| !f.is_null()) {
+            out.filter = Some(Filter::parse(schema, f).map_err(|e| format!("filter: {e}"))?);
+        }
+        if let Some(c) = object.get("color").filter(|c| !c.is_null()) {
+            out.compile_color(schema, species, c)?;
+        }
+        Ok(out)
+    }
+
+    fn compile_color(&mut self, schema: Option<&AttributeSchema>, species: &[String], c: &Value) -> Result<(), String> {
+        let by =
+            c.get("by").and_then(Value::as_str).ok_or("color: say what to colour by, e.g. {\"by\": \"species\"}")?;
+        let given = |key: &str| c.get(key).filter(|v| !v.is_null());
+        let column = schema.and_then(|s| s.column(by));
+        self.legend_title = by.to_string();
+        let Some((index, col)) = column else {
+            if by.eq_ignore_ascii_case("species") {
+                // The model species.
+                for (k, name) in species.iter().enumerate().take(PALETTE - 1) {
+                    let color = match given("categories").and_then(|m| m.as_object()) {
+                        Some(map) => match map.iter().find(|(p, _)| glob_matches(p, name)) {
+                            Some((_, v)) => parse_color(v).map_err(|e| format!("color.categories: {e}"))?,
+                            None => QUALITATIVE[k % QUALITATIVE.len()],
+                        },
+                        None => QUALITATIVE[k % QUALITATIVE.len()],
+                    };
+                    self.palette.push(color);
+                    self.legend.push(LegendEntry { label: name.clone(), color });
+                }
+                self.color = Some(ColorBy::Species);
+                return Ok(());
+            }
+            let names: Vec<&str> = schema.map_or(Vec::new(), |s| s.columns.iter().map(|c| c.name.as_str()).collect());
+            return Err(format!("color.by {by:?} is not an attribute of the scene; it has {names:?} and \"species\""));
+        };
+        if col.kind == AttributeType::Category {
+            let mut entries = vec![0u8; col.categories.len()];
+            match given("categories") {
+                Some(map) => {
+                    let map = map.as_object().ok_or("color.categories is {value: colour, …}")?;
+                    for (pattern, v) in map {
+                        if self.palette.len() >= PALETTE {
+                            return Err(format!("color.categories: at most {} colours", PALETTE - 1));
+                        }
+                        let color = parse_color(v).map_err(|e| format!("color.categories.{pattern}: {e}"))?;
+                        let entry = self.palette.len() as u8;
+                        let mut any = false;
+                        for (k, name) in col.categories.iter().enumerate() {
+                            if entries[k] == 0 && glob_matches(pattern, name) {
+                                entries[k] = entry;
+                                any = true;
+                            }
+                        }
+                        if any {
+                            self.palette.push(color);
+                            self.legend.push(LegendEntry { label: pattern.clone(), color });
+                        }
+                    }
+                }
+                None => {
+                    for (k, name) in col.categories.iter().enumerate().take(PALETTE - 1) {
+                        let color = QUALITATIVE[k % QUALITATIVE.len()];
+                        entries[k] = self.palette.len() as u8;
+                        self.palette.push(color);
+                        self.legend.push(LegendEntry { label: name.clone(), color });
+                    }
+                }
+            }
+            self.color = Some(ColorBy::Codes { column: index, entries });
+            return Ok(());
+        }
+        // A ramp over numbers, integers or dates.
+        let stops: Vec<[u8; 3]> = match given("ramp") {
+            Some(r) => r
+                .as_array()
+                .ok_or("color.ramp is a list of colours")?
+                .iter()
+                .map(|v| parse_color(v).map_err(|e| format!("color.ramp: {e}")))
+                .collect::<Result<_, _>>()?,
+            None => VIRIDIS.to_vec(),
+        };
+        if stops.len() < 2 {
+            return Err("color.ramp needs two colours or more".into());
+        }
+        let bound = |v: &Value| -> Result<f64, String> {
+            match v {
+                Value::String(s) if col.kind == AttributeType::Date => crate::format::attributes::parse_date(s)
+                    .map(|d| d as f64)
+                    .ok_or_else(|| format!("color.domain: {s:?} is not a date (YYYY-MM-DD)")),
+                v => v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!("color.domain: {v} is not a number")),
+            }
+        };
+        let domain = match given("domain") {
+            Some(Value::Array(a)) if a.len() == 2 => [bound(&a[0])?, bound(&a[1])?],
+            Some(_) => return Err("color.domain is [min, max]".into()),
+            None => [col.min, col.max],
+        };
+        let label = |v: f64| match col.kind {
+            AttributeType::Date => crate::format::attributes::format_date(v.round() as i64),
+            AttributeType::Integer => format!("{}", v.round()),
+            _ => format!("{}", (v * 100.0).round() / 100.0),
+        };
+        for k in 0..RAMP_STEPS {
+            let t = (k as f64 + 0.5) / RAMP_STEPS as f64;
+            let color = ramp_at(&stops, t);
+            self.palette.push(color);
+            let a = domain[0] + (domain[1] - domain[0]) * k as f64 / RAMP_STEPS as f64;
+            let b = domain[0] + (domain[1] - domain[0]) * (k + 1) as f64 / RAMP_STEPS as f64;
+            self.legend.push(LegendEntry { label: format!("{} – {}", label(a), label(b)), color });
+        }
+        self.color = Some(ColorBy::Ramp { column: index, domain });
+        Ok(())
+    }
+
+    /// Highlights the trees with these ids (replacing the selection).
+    pub fn set_selection(&mut self, ids: impl IntoIterator<Item = u64>) {
+        self.selected = ids.into_iter().collect();
+    }
+
+    /// The selected ids.
+    #[must_use]
+    pub fn selection(&self) -> &HashSet<u64> {
+        &self.selected
+    }
+
+    /// Whether the style draws anything differently from no style.
+    #[must_use]
+    pub fn is_plain(&self) -> bool {
+        self.color.is_none() && self.filter.is_none() && self.selected.is_empty()
+    }
+
+    /// Whether it needs a byte per tree (and so each tile's ids and attributes).
+    #[must_use]
+    pub fn needs_trees(&self) -> bool {
+        self.filter.is_some()
+            || !self.selected.is_empty()
+            || matches!(self.color, Some(ColorBy::Codes { .. } | ColorBy::Ramp { .. }))
+    }
+
+    /// Whether a filter hides trees (trees whose data has not arrived are hidden too).
+    #[must_use]
+    pub fn filters(&self) -> bool {
+        self.filter.is_some()
+    }
+
+    /// The GPU header: the palette (packed RGBA8, alpha 255 for a colour in
+    /// use) and the flags word.
+    #[must_use]
+    pub fn header(&self) -> Vec<u32> {
+        let mut h = vec![0u32; HEADER_WORDS];
+        for (k, c) in self.palette.iter().enumerate().skip(1).take(PALETTE - 1) {
+            h[k] = u32::from_le_bytes([c[0], c[1], c[2], 255]);
+        }
+        let flags = crate::render::gpu_data::STYLE_FLAGS as usize;
+        let mut f = 0;
+        if self.needs_trees() {
+            f |= crate::render::gpu_data::STYLE_TREES;
+        }
+        if self.color == Some(ColorBy::Species) {
+            f |= crate::render::gpu_data::STYLE_BY_SPECIES;
+        }
+        h[flags] = f;
+        h
+    }
+
+    /// The style byte of tree `i` of a tile (its id `id`, its tile's codes `codes`).
+    #[must_use]
+    pub fn tree_byte(&self, schema: Option<&AttributeSchema>, codes: Option<&AttributeCodes>, i: usize, id: u64) -> u8 {
+        let mut b = match (&self.color, schema, codes) {
+            (Some(ColorBy::Codes { column, entries }), _, Some(codes)) => codes
+                .columns
+                .get(*column)
+                .and_then(|c| c.get(i))
+                .and_then(|&code| entries.get(code as usize))
+                .copied()
+                .unwrap_or(0),
+            (Some(ColorBy::Ramp { column, domain }), Some(schema), Some(codes)) => {
+                let value = match codes.value(schema, *column, i) {
+                    Some(AttributeValue::Number(v)) => Some(v),
+                    Some(AttributeValue::Integer(v) | AttributeValue::Date(v)) => Some(v as f64),
+                    _ => None,
+                };
+                value.map_or(0, |v| {
+                    let span = (domain[1] - domain[0]).abs().max(1e-12);
+                    let t = ((v - domain[0].min(domain[1])) / span).clamp(0.0, 1.0);
+                    1 + ((t * RAMP_STEPS as f64) as usize).min(RAMP_STEPS - 1) as u8
+                })
+            }
+            _ => 0,
+        };
+        if self.selected.contains(&id) {
+            b |= SELECTED;
+        }
+        if self.filter.as_ref().is_some_and(|f| !f.matches(schema, codes, i, id)) {
+            b |= HIDDEN;
+        }
+        b
+    }
+
+    /// The style bytes of a tile's trees (`ids` in instance order).
+    pub fn tile_bytes(
+        &self,
+        schema: Option<&AttributeSchema>,
+        ids: &[u64],
+        codes: Option<&AttributeCodes>,
+        out: &mut [u8],
+    ) {
+        for (i, (b, id)) in out.iter_mut().zip(ids).enumerate() {
+            *b = self.tree_byte(schema, codes, i, *id);
+        }
+    }
+
+    /// The legend: `{title, entries: [{label, color}]}` (empty entries without a colouring).
+    #[must_use]
+    pub fn legend_json(&self) -> Value {
+        serde_json::json!({
+            "title": self.legend_title,
+            "entries": self.legend.iter().map(|e| serde_json::json!({"label": e.label, "color": hex(e.color)})).collect::<Vec<_>>(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::attributes::AttributeColumn;
+    use serde_json::json;
+
+    fn schema() -> AttributeSchema {
+        let col = |name: &str, kind, min, max, categories: &[&str]| AttributeColumn {
+            name: name.into(),
+            kind,
+            width: 1,
+            min,
+            max,
+            categories: categories.iter().map(|s| (*s).to_string()).collect(),
+            count: 0,
+        };
+        AttributeSchema {
+            columns: vec![
+                col("condition", AttributeType::Category, 0.0, 0.0, &["dead", "fair", "good", "poor"]),
+                col("height", AttributeType::Integer, 0.0, 40.0, &[]),
+            ],
+        }
+    }
+
+    fn codes() -> AttributeCodes {
+        // Trees: good/10 m, poor/30 m, no value/no value.
+        AttributeCodes { count: 3, columns: vec![vec![2, 3, 255], vec![10, 30, 255]] }
+    }
+
+    #[test]
+    fn categories_ramps_filters_and_selections_make_the_bytes() {
+        let s = schema();
+        let species = vec!["oak".to_string()];
+        let style = TreeStyle::parse(
+            Some(&s),
+            &species,
+            &json!({"color": {"by": "Condition", "categories": {"good": "#00ff00", "p*": [255, 0, 0]}}, "filter": {"height": [20, null]}}),
+        )
+        .unwrap();
+        let mut out = [0u8; 3];
+        style.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
+        // good → entry 1 but hidden (10 m); poor → entry 2 shown; no values → own colour, hidden.
+        assert_eq!(out, [1 | HIDDEN, 2, HIDDEN]);
+        let h = style.header();
+        assert_eq!(h[1], u32::from_le_bytes([0, 255, 0, 255]));
+        assert_eq!(h[2], u32::from_le_bytes([255, 0, 0, 255]));
+        assert_eq!(h[64], crate::render::gpu_data::STYLE_TREES);
+        assert_eq!(style.legend_json()["entries"][1]["color"], "#ff0000");
+
+        let mut ramp =
+            TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [0, 40]}})).unwrap();
+        ramp.set_selection([8]);
+        ramp.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
+        assert_eq!(out, [1 + 4, (1 + 12) | SELECTED, 0]);
+        assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
+
+        let by_species = TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "species"}})).unwrap();
+        assert!(!by_species.needs_trees());
+        assert_eq!(by_species.header()[64], crate::render::gpu_data::STYLE_BY_SPECIES);
+    }
+
+    #[test]
+    fn bad_styles_say_what_is_wrong() {
+        let s = schema();
+        let err = |v: Value| TreeStyle::parse(Some(&s), &[], &v).unwrap_err();
+        assert!(err(json!({"colour": {}})).contains("\"colour\" is not part of a style"));
+        assert!(err(json!({"color": {"by": "dbh"}})).contains("not an attribute of the scene"));
+        assert!(err(json!({"color": {"by": "height", "ramp": ["#zzz"]}})).contains("not a colour"));
+        assert!(err(json!({"filter": {"heigth": 3}})).starts_with("filter:"));
+        assert!(err(json!([1])).contains("JSON object"));
+    }
+}
