@@ -329,6 +329,46 @@ impl Viewer {
             .map_err(js_err)
     }
 
+    /// Sets the style (JSON, see `scene::style`; `null` or `{}`: none) and
+    /// returns its legend as JSON `{title, entries: [{label, color}]}`.
+    ///
+    /// # Errors
+    /// Before the manifest arrived, or a style that does not fit the scene (the message says why).
+    pub fn set_style(&mut self, style: &str) -> Result<String, JsValue> {
+        let value: serde_json::Value = serde_json::from_str(style).map_err(js_err)?;
+        if value.is_null() {
+            self.frame.set_style(None);
+            return Ok(r#"{"title":"","entries":[]}"#.into());
+        }
+        let m = self.frame.stream.manifest().ok_or_else(|| js_err("the scene is not loaded yet"))?;
+        let species: Vec<String> = m.species.iter().map(|s| s.name.clone()).collect();
+        let compiled =
+            crate::scene::style::TreeStyle::parse(m.attributes.as_ref(), &species, &value).map_err(js_err)?;
+        let legend = compiled.legend_json().to_string();
+        self.frame.set_style(Some(compiled));
+        Ok(legend)
+    }
+
+    /// Highlights the trees with these ids (a JSON array; `[]`: none).
+    ///
+    /// # Errors
+    /// Not a JSON array of whole numbers.
+    pub fn select(&mut self, ids: &str) -> Result<(), JsValue> {
+        let ids: Vec<u64> =
+            serde_json::from_str(ids).map_err(|e| js_err(format!("select takes a list of tree ids: {e}")))?;
+        self.frame.select(ids);
+        Ok(())
+    }
+
+    /// The scene's attribute columns as JSON (`null`: none, or no manifest yet).
+    pub fn attributes_json(&self) -> String {
+        self.frame
+            .stream
+            .manifest()
+            .and_then(|m| m.attributes.as_ref())
+            .map_or_else(|| "null".into(), |a| serde_json::json!(a).to_string())
+    }
+
     /// Whether the scene keeps per-tree attributes (false before its manifest arrives).
     pub fn has_attributes(&self) -> bool {
         self.frame.stream.manifest().is_some_and(|m| m.attributes.is_some())

@@ -21,6 +21,12 @@
 //   v.stats()                               same keys as `sylva render --stats`
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
+//   v.setStyle({color: {by, categories | ramp, domain}, filter})  colour trees by an attribute or 'species' and hide
+//                                           what the filter leaves out (culled on the GPU); null: none. Returns the legend
+//                                           {title, entries: [{label, color}]}; v.legend keeps it; 'style' event
+//   v.select(ids)                           highlight these trees at every level of detail ([]: none)
+//   await v.flyToTree(id, {seconds, distance})  select a tree and fly to look at it; resolves to its query result
+//   v.attributes()                          the scene's attribute columns [{name, type, min, max, categories}] or null
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
 
@@ -134,6 +140,41 @@ class SylvaViewer {
     }
     return out;
   }
+  /** Colours and filters the trees (see the header; null: the trees' own
+   * look). Throws on a style that does not fit the scene; returns the legend. */
+  setStyle(style) {
+    this.legend = JSON.parse(this.viewer.set_style(JSON.stringify(style ?? null)));
+    this.style = style ?? null;
+    this.dirty = 8;
+    this.emit('style', { style: this.style, legend: this.legend });
+    return this.legend;
+  }
+
+  /** Highlights the trees with these ids ([] or null: none). */
+  select(ids) {
+    this.selection = [...(ids || [])];
+    this.viewer.select(JSON.stringify(this.selection));
+    this.dirty = 8;
+  }
+
+  /** The scene's attribute columns, or null (no attributes, or not loaded yet). */
+  attributes() {
+    const a = JSON.parse(this.viewer.attributes_json());
+    return a && a.columns;
+  }
+
+  /** Selects tree `id` and flies to look at it from `distance` metres
+   * (south of it, 30° down). Rejects when the scene has no such tree. */
+  async flyToTree(id, { seconds = 1.5, distance = 40 } = {}) {
+    const q = await this.query({ id: [id] }, { limit: 1 });
+    if (!q.count) throw new Error(`no tree with id ${id} in the scene`);
+    const [x, y, z] = q.bounds.min;
+    const pitch = -30, d = distance;
+    this.select([id]);
+    this.flyTo({ x, y: y - d * Math.cos(pitch * Math.PI / 180), z: z + 8 + d * Math.sin(-pitch * Math.PI / 180), heading: 0, pitch }, seconds);
+    return q;
+  }
+
   emit(event, data) { for (const fn of this.handlers[event] || []) { try { fn(data); } catch (e) { console.error(e); } } }
 
   resize() {
@@ -504,7 +545,8 @@ export function attachTreePopup(v, host) {
     'font:12px/1.45 system-ui,sans-serif;box-shadow:0 2px 10px #0005;pointer-events:auto';
   host.appendChild(box);
   const show = ({ x, y, tree }) => {
-    if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); return; }
+    if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); v.select([]); return; }
+    v.select([tree.id]);
     const fmt = (n, d) => (n === null || n === undefined ? '—' : Number(n).toFixed(d));
     // The inventory's own columns; the drawn species model and height where it has none.
     const attrs = Object.entries(tree.attributes || {});
@@ -517,7 +559,7 @@ export function attachTreePopup(v, host) {
       `<span>Tree ${esc(tree.id)}</span><button aria-label="Close" style="border:none;background:none;cursor:pointer">✕</button></div>` +
       `<table style="border-collapse:collapse">${rows.map(([k, val]) =>
         `<tr><td style="padding-right:10px;color:#4b5d50">${esc(k)}</td><td>${esc(val)}</td></tr>`).join('')}</table>`;
-    box.querySelector('button').onclick = () => { box.style.display = 'none'; };
+    box.querySelector('button').onclick = () => { box.style.display = 'none'; v.select([]); };
     box.dataset.id = String(tree.id);
     box.style.display = 'block';
     // Beside the click, inside the host.
@@ -527,6 +569,40 @@ export function attachTreePopup(v, host) {
   };
   v.on('click', show);
   return box;
+}
+
+/**
+ * A style selector ("Colour by": the trees' own look, species, or an
+ * attribute) and the legend of the current style, appended to `container`.
+ * Returns {select, legend} (the elements).
+ */
+export function attachStyleControls(v, container) {
+  const wrap = document.createElement('div');
+  wrap.className = 'sylva-style';
+  wrap.innerHTML = '<label>Colour by <select aria-label="Colour trees by"></select></label><div class="sylva-legend" aria-live="polite"></div>';
+  container.appendChild(wrap);
+  const select = wrap.querySelector('select');
+  const legend = wrap.querySelector('.sylva-legend');
+  const fill = () => {
+    const columns = v.attributes() || [];
+    const options = [['', 'own colours'], ['species', 'species'],
+      ...columns.filter((c) => c.name.toLowerCase() !== 'species').map((c) => [c.name, c.name])];
+    select.innerHTML = options.map(([value, label]) => `<option value="${esc(value)}">${esc(label)}</option>`).join('');
+  };
+  const showLegend = ({ legend: l }) => {
+    legend.innerHTML = (l?.entries || []).map((e) =>
+      `<div><span style="display:inline-block;width:10px;height:10px;margin-right:6px;background:${esc(e.color)}"></span>${esc(e.label)}</div>`).join('');
+  };
+  select.onchange = () => {
+    const filter = v.style?.filter;
+    try {
+      v.setStyle(select.value || filter ? { ...(select.value ? { color: { by: select.value } } : {}), ...(filter ? { filter } : {}) } : null);
+    } catch (e) { v.emit('warning', { message: `style: ${e.message || e}` }); }
+  };
+  v.on('style', showLegend);
+  fill();
+  v.ready.then(fill, () => {});
+  return { select, legend };
 }
 
 /**
@@ -584,5 +660,5 @@ class SylvaElement extends HTMLElement {
 }
 if (!customElements.get('sylva-viewer')) customElements.define('sylva-viewer', SylvaElement);
 
-export const Sylva = { create, webgpuHelp, attachTreePopup };
+export const Sylva = { create, webgpuHelp, attachTreePopup, attachStyleControls };
 export default Sylva;

@@ -365,6 +365,39 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     assert.match(popup.text, new RegExp(`Tree ${hit.tree.id}.*species.*Tilia`));
     assert.match(popup.text, new RegExp(`height${row(hit.tree.id).height}`));
     await page.screenshot({ path: join(artifacts, 'districts-popup.png') });
+    // The style selector colours the trees by height (viridis: purples and blues where foliage was green).
+    const bluish = (name) => screenshotStat(page, name, `
+      let n = 0;
+      for (let i = 0; i < d.length; i += 4) if (d[i + 2] > d[i + 1] + 8 && d[i + 2] > d[i] - 20) n++;
+      return n / (d.length / 4);`);
+    await page.evaluate(() => document.querySelector('.sylva-popup button').click());
+    const before = await bluish('districts-own-colours');
+    const options = await page.evaluate(() => [...document.querySelectorAll('.sylva-style option')].map((o) => o.value));
+    assert.deepEqual(options, ['', 'species', 'height'], 'the colour-by choices are the attributes');
+    // (The page runs with ?ui=0: the controls are there, hidden.)
+    await page.evaluate(() => {
+      const s = document.querySelector('.sylva-style select');
+      s.value = 'height';
+      s.dispatchEvent(new Event('change'));
+    });
+    await page.waitForFunction(() => document.querySelectorAll('.sylva-legend > div').length === 16, null, { timeout: 20000 });
+    await page.evaluate(() => { window.sylva.dirty = 8; });
+    const after = await bluish('districts-by-height');
+    assert.ok(after > before + 0.02, `colouring by height turned ${before.toFixed(3)} → ${after.toFixed(3)} of the view blue`);
+    // A filter hides the trees it leaves out: the drawn count falls to the matching share (3 of 8 heights).
+    const drawnNow = async () => {
+      await page.evaluate(() => { window.sylva.dirty = 8; });
+      await page.waitForFunction(() => window.sylva.dirty === 0 && window.sylva.viewer.frames_in_flight() === 0, null, { timeout: 60000 });
+      await page.waitForTimeout(300);
+      const s = await page.evaluate(() => window.sylva.stats());
+      return Object.values(s.instances).reduce((a, b) => a + b, 0);
+    };
+    const all = await drawnNow();
+    await page.evaluate(() => window.sylva.setStyle({ filter: { height: [12, 14] } }));
+    const filtered = await drawnNow();
+    assert.ok(filtered > 0 && filtered < all * 0.55, `a filter keeping 3 of 8 heights drew ${filtered} of ${all}`);
+    const badStyle = await page.evaluate(() => { try { window.sylva.setStyle({ color: { by: 'dbh' } }); return 'set'; } catch (e) { return String(e); } });
+    assert.match(badStyle, /not an attribute of the scene/);
     assert.deepEqual(errors, []);
   } finally {
     served.proc.kill();
@@ -698,6 +731,18 @@ test('an iframe is driven by postMessage', async () => {
   assert.ok(picks.every((r) => !r.error), JSON.stringify(picks));
   const picked = picks.find((r) => r.data);
   assert.ok(picked && Number.isInteger(picked.data.id) && picked.data.id < 3000, JSON.stringify(picks));
+  // setStyle replies with the legend; select and flyToTree take ids.
+  await page.evaluate(() => {
+    const f = document.getElementById('f').contentWindow;
+    f.postMessage({ verb: 'setStyle', args: [{ color: { by: 'species' } }], id: 40 }, '*');
+    f.postMessage({ verb: 'select', args: [[7]], id: 41 }, '*');
+    f.postMessage({ verb: 'flyToTree', args: [7, { seconds: 0.1 }], id: 42 }, '*');
+  });
+  await page.waitForFunction(() => [40, 41, 42].every((id) => window.replies.some((r) => r.sylva === 'reply' && r.id === id)),
+    null, { timeout: 60000 });
+  const [legend, selected, flown] = await page.evaluate(() => [40, 41, 42].map((id) => window.replies.find((r) => r.id === id)));
+  assert.deepEqual(legend.data.entries.map((e) => e.label), ['spruce', 'beech', 'birch'], JSON.stringify(legend));
+  assert.ok(!selected.error && !flown.error && flown.data.count === 1, JSON.stringify([selected, flown]));
   assert.ok(['spruce', 'beech', 'birch'].includes(picked.data.species), JSON.stringify(picked));
 });
 
