@@ -229,11 +229,11 @@ mod common;
 
 /// A copy of the fixture with two attributes per tree: `kind` (a category,
 /// "a", "b" or "c" by id % 3) and `girth` (an integer, id % 101).
-fn attributed_fixture() -> PathBuf {
+fn attributed_fixture(name: &str) -> PathBuf {
     use sylva::format::attributes::{
         encode_attributes, AttributeCodes, AttributeColumn, AttributeSchema, AttributeType,
     };
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("pick-attributes-{}", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("pick-attributes-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let schema = AttributeSchema {
         columns: vec![
@@ -309,7 +309,7 @@ fn pool_ids(off: &OffscreenScene, scene: &Path) -> Vec<Option<u64>> {
 #[test]
 fn a_filter_culls_exactly_the_trees_it_leaves_out() {
     use sylva::render::cull::{cpu_select_styled, unpack_item_y};
-    let scene = attributed_fixture();
+    let scene = attributed_fixture("filter");
     let mut off = open_at(&scene);
     off.load_view(&Camera::default(), 30.0);
     let m = off.stream.manifest().unwrap().clone();
@@ -360,7 +360,7 @@ fn a_filter_culls_exactly_the_trees_it_leaves_out() {
 
 #[test]
 fn a_style_colours_the_trees_it_names_and_a_selection_is_highlighted() {
-    let scene = attributed_fixture();
+    let scene = attributed_fixture("colour");
     let mut off = open_at(&scene);
     off.load_view(&Camera::default(), 30.0);
     let m = off.stream.manifest().unwrap().clone();

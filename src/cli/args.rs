@@ -200,9 +200,10 @@ pub(crate) struct PickArgs {
     /// Scene directory, scene.json path or http(s) URL.
     #[arg(long)]
     pub(crate) scene: String,
-    /// The pixel, X,Y from the top left of the image.
-    #[arg(long, value_name = "X,Y")]
-    pub(crate) at: String,
+    /// The pixel, X,Y from the top left of the image. Repeat it to pick
+    /// several pixels of one view (a JSON array is printed then).
+    #[arg(long, value_name = "X,Y", required = true)]
+    pub(crate) at: Vec<String>,
     /// Image size, WxH (as `sylva render --size`).
     #[arg(long, default_value = "960x540")]
     pub(crate) size: String,
@@ -342,6 +343,13 @@ pub(crate) struct RenderArgs {
     /// tree in view as its full mesh).
     #[arg(long, default_value_t = 3, requires = "converge", value_parser = clap::value_parser!(u32).range(0..=4))]
     pub(crate) converge_levels: u32,
+    /// Colour and filter the trees by their attributes (JSON, as the browser's
+    /// setStyle): e.g. '{"color": {"by": "species"}}' or '{"filter": {"dbh": [30, null]}}'.
+    #[arg(long, value_name = "JSON")]
+    pub(crate) style: Option<String>,
+    /// Highlight these trees (comma-separated ids).
+    #[arg(long, value_name = "ID,…", value_delimiter = ',')]
+    pub(crate) select: Vec<u64>,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,

@@ -29,6 +29,7 @@ pub(crate) fn render_scene(
     timeout: f64,
     allow_partial: bool,
     refine: RefineConfig,
+    (style, select): (Option<&str>, &[u64]),
 ) -> Result<()> {
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     off.settings = settings;
@@ -45,6 +46,25 @@ pub(crate) fn render_scene(
             bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
         }
     };
+    if let Some(text) = style {
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| anyhow::anyhow!("--style is not JSON: {e}"))?;
+        let species: Vec<String> = manifest.species.iter().map(|s| s.name.clone()).collect();
+        let compiled = sylva::scene::style::TreeStyle::parse(manifest.attributes.as_ref(), &species, &value)
+            .map_err(|e| anyhow::anyhow!("--style: {e}"))?;
+        let legend = compiled.legend_json();
+        if let Some(entries) = legend["entries"].as_array().filter(|e| !e.is_empty()) {
+            let shown: Vec<String> = entries
+                .iter()
+                .map(|e| format!("{} {}", e["color"].as_str().unwrap_or(""), e["label"].as_str().unwrap_or("")))
+                .collect();
+            eprintln!("legend ({}): {}", legend["title"].as_str().unwrap_or(""), shown.join(", "));
+        }
+        off.set_style(Some(compiled));
+    }
+    if !select.is_empty() {
+        off.select(select.iter().copied());
+    }
     let cam = scene_camera(&mut off, &manifest, view, camera, timeout)?;
     let t = std::time::Instant::now();
     events.extend(off.load_view(&cam, timeout));
@@ -197,13 +217,16 @@ fn far_tier_of(arg: FarTierArg) -> sylva::render::settings::FarTier {
 /// `sylva pick`: the tree drawn at a pixel, as JSON on stdout.
 pub(crate) fn pick(args: PickArgs) -> Result<()> {
     let (w, h) = parse_size(&args.size)?;
-    let (x, y) = args
-        .at
-        .split_once(',')
-        .and_then(|(x, y)| Some((x.trim().parse::<u32>().ok()?, y.trim().parse::<u32>().ok()?)))
-        .with_context(|| format!("--at {:?}: expected X,Y in whole pixels, e.g. 480,300", args.at))?;
-    if x >= w || y >= h {
-        bail!("--at {x},{y} is outside the {w}x{h} image (--size)");
+    let mut pixels = Vec::new();
+    for at in &args.at {
+        let (x, y) = at
+            .split_once(',')
+            .and_then(|(x, y)| Some((x.trim().parse::<u32>().ok()?, y.trim().parse::<u32>().ok()?)))
+            .with_context(|| format!("--at {at:?}: expected X,Y in whole pixels, e.g. 480,300"))?;
+        if x >= w || y >= h {
+            bail!("--at {x},{y} is outside the {w}x{h} image (--size)");
+        }
+        pixels.push([x, y]);
     }
     if !(args.quality > 0.0 && args.quality <= 16.0) {
         bail!("--quality {}: must be in (0, 16]", args.quality);
@@ -233,58 +256,66 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
     if !off.stream.is_settled() {
         eprintln!("warning: not everything the view needs arrived within --timeout {} s", args.timeout);
     }
-    off.render(&cam, false);
-    let t = std::time::Instant::now();
+    // The frame the user would click on, finished (its GPU time is not the pick's).
+    off.render(&cam, true);
+    let geo = sylva::geo::GeoFrame::new(&manifest.crs.proj4, manifest.origin_m).ok();
     let view = cam.view_data(w, h);
-    let instance = off.pick_blocking(&view, [x, y]);
-    let gpu_ms = t.elapsed().as_secs_f64() * 1e3;
-    let located = instance.and_then(|i| off.stream.locate_instance(i));
-    let answer = match &located {
-        None => serde_json::Value::Null,
-        Some(tree) => {
-            let read = |url: &str| sylva::scene::fetch::fetch_once(url).map_err(|e| anyhow::anyhow!("{e}"));
-            let (tile, ids) = (read(&tree.tile_url)?, read(&tree.ids_url)?);
-            let attr = match manifest.attributes {
-                Some(_) => Some(read(&tree.attributes_url)?),
-                None => None,
-            };
-            let geo = sylva::geo::GeoFrame::new(&manifest.crs.proj4, manifest.origin_m).ok();
-            let files = [tree.tile_url.as_str(), tree.ids_url.as_str(), tree.attributes_url.as_str()];
-            sylva::scene::query::describe_tree(
-                &manifest,
-                geo.as_ref(),
-                [&tile, &ids],
-                attr.as_deref(),
-                files,
-                tree.index,
-            )
-            .map_err(|e| anyhow::anyhow!("{e}"))?
-        }
-    };
-    let total_ms = t.elapsed().as_secs_f64() * 1e3;
+    let mut answers = Vec::new();
+    for &[x, y] in &pixels {
+        let t = std::time::Instant::now();
+        let instance = off.pick_blocking(&view, [x, y]);
+        let gpu_ms = t.elapsed().as_secs_f64() * 1e3;
+        let located = instance.and_then(|i| off.stream.locate_instance(i));
+        let answer = match &located {
+            None => serde_json::Value::Null,
+            Some(tree) => {
+                let read = |url: &str| sylva::scene::fetch::fetch_once(url).map_err(|e| anyhow::anyhow!("{e}"));
+                let (tile, ids) = (read(&tree.tile_url)?, read(&tree.ids_url)?);
+                let attr = match manifest.attributes {
+                    Some(_) => Some(read(&tree.attributes_url)?),
+                    None => None,
+                };
+                let files = [tree.tile_url.as_str(), tree.ids_url.as_str(), tree.attributes_url.as_str()];
+                sylva::scene::query::describe_tree(
+                    &manifest,
+                    geo.as_ref(),
+                    [&tile, &ids],
+                    attr.as_deref(),
+                    files,
+                    tree.index,
+                )
+                .map_err(|e| anyhow::anyhow!("{e}"))?
+            }
+        };
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        eprintln!(
+            "picked {x},{y} of {w}x{h}: {} (cull and id pass {gpu_ms:.1} ms, with the tree's files {total_ms:.1} ms)",
+            match &located {
+                Some(t) => format!("tree {} of {}", t.index, t.tile_url),
+                None => "no tree".into(),
+            }
+        );
+        answers.push(answer);
+    }
     if let Some(out) = &args.out {
         off.render(&cam, false);
         let mut rgba = off.read_image();
-        // A red cross, 9 px, centred on the pixel.
-        for d in -4i64..=4 {
-            for (px, py) in [(i64::from(x) + d, i64::from(y)), (i64::from(x), i64::from(y) + d)] {
-                if (0..i64::from(w)).contains(&px) && (0..i64::from(h)).contains(&py) {
-                    let k = ((py as usize) * w as usize + px as usize) * 4;
-                    rgba[k..k + 4].copy_from_slice(&[255, 0, 0, 255]);
+        // A red cross, 9 px, centred on each pixel picked.
+        for &[x, y] in &pixels {
+            for d in -4i64..=4 {
+                for (px, py) in [(i64::from(x) + d, i64::from(y)), (i64::from(x), i64::from(y) + d)] {
+                    if (0..i64::from(w)).contains(&px) && (0..i64::from(h)).contains(&py) {
+                        let k = ((py as usize) * w as usize + px as usize) * 4;
+                        rgba[k..k + 4].copy_from_slice(&[255, 0, 0, 255]);
+                    }
                 }
             }
         }
         image::save_buffer(out, &rgba, w, h, image::ColorType::Rgba8)
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
-    eprintln!(
-        "picked {x},{y} of {w}x{h}: {} (id pass {gpu_ms:.1} ms, with the tree's files {total_ms:.1} ms)",
-        match &located {
-            Some(t) => format!("tree {} of {}", t.index, t.tile_url),
-            None => "no tree".into(),
-        }
-    );
-    println!("{}", serde_json::to_string_pretty(&answer)?);
+    let json = if answers.len() == 1 { answers.remove(0) } else { serde_json::Value::Array(answers) };
+    println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
 }
 
@@ -405,6 +436,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         converge,
         converge_frames,
         converge_levels,
+        style,
+        select,
         stats,
         timeout,
         allow_partial,
@@ -459,6 +492,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             timeout,
             allow_partial,
             RefineConfig { enabled: converge, jitter_frames: converge_frames, levels: converge_levels },
+            (style.as_deref(), &select),
         );
     }
     let pack = pack.expect("clap requires --scene or --pack");

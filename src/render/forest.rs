@@ -235,7 +235,9 @@ impl ForestRenderer {
     /// GPU bytes: pools plus uploaded packs, terrain and the shadow map.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
-        self.pools.config().bytes() + self.species.bytes() + self.terrain.gpu_bytes() + self.shadow_bytes()
+        // (The pools' figure counts the control buffer without styles: add what styles hold.)
+        let styles = self.pools.buffers.control.size() - super::gpu_data::control_buffer_bytes(0);
+        self.pools.config().bytes() + styles + self.species.bytes() + self.terrain.gpu_bytes() + self.shadow_bytes()
     }
 
     /// GPU bytes of the shadow map (0 until shadows are first drawn).

@@ -81,6 +81,23 @@ struct StyleState {
     written: std::collections::HashMap<(usize, u32), (u64, bool)>,
 }
 
+/// The frustum of pixel `px` of `view` (eye-relative planes, as [`ViewData::frustum`]).
+#[must_use]
+pub fn pixel_frustum(view: &ViewData, px: [u32; 2]) -> [glam::Vec4; 6] {
+    let [w, h] = view.viewport.map(|v| v.max(1) as f32);
+    // The pixel's box in normalised device coordinates (y up), mapped onto −1…1.
+    let (x0, x1) = (px[0] as f32 / w * 2.0 - 1.0, (px[0] + 1) as f32 / w * 2.0 - 1.0);
+    let (y0, y1) = (1.0 - (px[1] + 1) as f32 / h * 2.0, 1.0 - px[1] as f32 / h * 2.0);
+    let (sx, sy) = (2.0 / (x1 - x0), 2.0 / (y1 - y0));
+    let zoom = glam::Mat4::from_cols(
+        glam::Vec4::new(sx, 0.0, 0.0, 0.0),
+        glam::Vec4::new(0.0, sy, 0.0, 0.0),
+        glam::Vec4::Z,
+        glam::Vec4::new(-(x0 + x1) * 0.5 * sx, -(y0 + y1) * 0.5 * sy, 0.0, 1.0),
+    );
+    crate::camera::frustum_planes(&(zoom * view.clip_from_eye))
+}
+
 /// The id pass's targets, kept between picks (remade when the viewport changes).
 struct PickTargets {
     ids: wgpu::Texture,
@@ -388,7 +405,10 @@ impl<F: Fetcher> Frame<F> {
         // The plain frame's settings: no refinement step's dither or levels.
         let settings = self.settings;
         self.apply_style();
-        let data = self.prepare(view, &settings);
+        // Only trees whose bounds reach the pixel are culled in: its own
+        // frustum (the LoD choice is the view's, from its pixels per metre).
+        let narrow = ViewData { frustum: pixel_frustum(view, px), ..*view };
+        let data = self.prepare(&narrow, &settings);
         let targets = match self.pick.take() {
             Some(t) if t.size == size => t,
             _ => {

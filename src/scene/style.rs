@@ -41,8 +41,9 @@ const SELECTED: u8 = 64;
 /// Style byte: hidden.
 const HIDDEN: u8 = 128;
 
-/// A qualitative palette for categories and species (Tableau 10 and more).
-const QUALITATIVE: [[u8; 3]; 12] = [
+/// A qualitative palette for categories and species (Tableau 20-like: distinct
+/// hues, then lighter ones), repeated beyond 20.
+const QUALITATIVE: [[u8; 3]; 20] = [
     [0x4e, 0x79, 0xa7],
     [0xf2, 0x8e, 0x2b],
     [0xe1, 0x57, 0x59],
@@ -55,6 +56,14 @@ const QUALITATIVE: [[u8; 3]; 12] = [
     [0xba, 0xb0, 0xac],
     [0x1f, 0x77, 0xb4],
     [0x8c, 0x56, 0x4b],
+    [0xae, 0xc7, 0xe8],
+    [0xff, 0xbb, 0x78],
+    [0x98, 0xdf, 0x8a],
+    [0xff, 0x98, 0x96],
+    [0xc5, 0xb0, 0xd5],
+    [0xc4, 0x9c, 0x94],
+    [0xf7, 0xb6, 0xd2],
+    [0xdb, 0xdb, 0x8d],
 ];
 /// Viridis in five stops.
 const VIRIDIS: [[u8; 3]; 5] =
