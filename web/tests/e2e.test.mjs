@@ -647,6 +647,17 @@ test('the portal page embeds the viewer with an overview', async () => {
   const m = /pointer: ground (-?[0-9.]+) m/.exec(ground);
   assert.ok(m, `ground under the pointer: ${ground}`);
   assert.ok(Number(m[1]) >= groundLo - 0.1 && Number(m[1]) <= groundHi + 0.1, `pointer ground ${m[1]} in ${groundLo}–${groundHi}`);
+  // Find a tree by its id: listed, highlighted, and a click on it flies there.
+  await page.fill('#filter', '7');
+  await page.click('#search button');
+  await page.waitForSelector('#found button[data-id="7"]', { timeout: 60000 });
+  assert.match(await page.textContent('#found'), /^1 trees/);
+  const before = await page.evaluate(() => window.sylva.camera());
+  await page.click('#found button[data-id="7"]');
+  await page.waitForFunction((b) => { const c = window.sylva.camera(); return Math.hypot(c.x - b.x, c.y - b.y) > 1; }, before, { timeout: 30000 });
+  // The colour-by selector offers species for a scene without attributes.
+  const options = await page.evaluate(() => [...document.querySelectorAll('.sylva-style option')].map((o) => o.value));
+  assert.deepEqual(options, ['', 'species']);
   assert.deepEqual(errors, []);
 });
 
