@@ -26,8 +26,18 @@
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// The styles (common.wgsl `tree_style`).
+// The styles (`tree_style` below; common.wgsl `style_of`).
 @group(2) @binding(3) var<storage, read> styles: array<u32>;
+
+// The style byte of pool instance `instance` of model species `species` (its
+// word read only where the style has per-tree bytes).
+fn tree_style(flags: u32, instance: u32, species: u32) -> u32 {
+    var word = 0u;
+    if (flags & STYLE_TREES) != 0u {
+        word = styles[STYLE_HEADER_WORDS + instance / 4u];
+    }
+    return style_of(flags, word, instance, species);
+}
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
@@ -269,7 +279,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     }
     out.item_y = item.y;
     out.item_x = item.x;
-    out.style = tree_style(styles[STYLE_FLAGS], styles[STYLE_HEADER_WORDS + item.x / 4u], item.x, batch.species);
+    out.style = tree_style(styles[STYLE_FLAGS], item.x, batch.species);
     out.tree_at = vec4<f32>(tree.pos, tree.yaw);
     out.tree_size = vec2<f32>(tree.scale, tree.aspect);
     out.cover = batch_cover(batch);

@@ -498,9 +498,9 @@ fn style_byte_of(word: u32, instance: u32) -> u32 {
     return (word >> ((instance & 3u) * 8u)) & 0xffu;
 }
 
-// The style byte of a tree: from the header's `flags` and the `word` of style
-// bytes holding pool instance `instance` of model species `species`.
-fn tree_style(flags: u32, word: u32, instance: u32, species: u32) -> u32 {
+// The style byte of a tree: from the header's `flags` and (with STYLE_TREES)
+// the `word` of style bytes holding pool instance `instance` of model species `species`.
+fn style_of(flags: u32, word: u32, instance: u32, species: u32) -> u32 {
     var b = select(0u, style_byte_of(word, instance), (flags & STYLE_TREES) != 0u);
     if (flags & STYLE_BY_SPECIES) != 0u {
         b = (b & 0xc0u) | min(species + 1u, 63u);

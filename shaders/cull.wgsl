@@ -87,7 +87,9 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
     let center = eye_relative(b.center_m, vec3<f32>(0.0), view);
     // Sphere first (cheap), then the tighter box; skipped by the baseline modes.
     let batch_culling = view.lod.w < 0.5;
-    if batch_culling && (!sphere_visible(center, b.radius_m, view) || !box_visible(center, b.half_extent_m)) {
+    // A thinned batch draws its kept trees bigger (`coverage_boost`): its bounds grow as much.
+    let grow = (coverage_boost(thinning(b, view), b) - 1.0) * b.max_height_m;
+    if batch_culling && (!sphere_visible(center, b.radius_m + grow, view) || !box_visible(center, b.half_extent_m + vec3<f32>(grow))) {
         return;
     }
     if batch_culling && box_distance(center, b.half_extent_m) > view.lod.y {
@@ -191,7 +193,8 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         }
         let tree = unpack_instance(instances[instance], b, view);
         let center = tree.pos + rotate_z(tree_scaled(s.sphere.xyz, tree), tree.yaw);
-        let radius = s.sphere.w * tree.scale * max(tree.aspect, 1.0);
+        // A thinned batch's kept trees are drawn bigger (`coverage_boost`): so are their bounds.
+        let radius = s.sphere.w * tree.scale * max(tree.aspect, 1.0) * select(1.0, coverage_boost(thin, b), thinned);
         let dist = max(length(center), 1e-3);
         // Mode 2 (no culling) draws every tree.
         if view.lod.w < 1.5 && (!sphere_visible(center, radius, view) || dist - radius > view.lod.y) {

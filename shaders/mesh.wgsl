@@ -40,8 +40,18 @@ struct Material {
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// The styles (common.wgsl `tree_style`).
+// The styles (`tree_style` below; common.wgsl `style_of`).
 @group(2) @binding(3) var<storage, read> styles: array<u32>;
+
+// The style byte of pool instance `instance` of model species `species` (its
+// word read only where the style has per-tree bytes).
+fn tree_style(flags: u32, instance: u32, species: u32) -> u32 {
+    var word = 0u;
+    if (flags & STYLE_TREES) != 0u {
+        word = styles[STYLE_HEADER_WORDS + instance / 4u];
+    }
+    return style_of(flags, word, instance, species);
+}
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
@@ -103,7 +113,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.material = in.position_material.w;
     out.item_y = item.y;
     out.item_x = item.x;
-    out.style = tree_style(styles[STYLE_FLAGS], styles[STYLE_HEADER_WORDS + item.x / 4u], item.x, batch.species);
+    out.style = tree_style(styles[STYLE_FLAGS], item.x, batch.species);
     out.canopy = canopy_occlusion(batch, local.z / max(mesh.pos_min.z + mesh.pos_extent.z, 1e-3));
     out.ao = vertex_ao(in.normal_oct.z);
     return out;

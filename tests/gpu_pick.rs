@@ -440,3 +440,40 @@ fn a_style_colours_the_trees_it_names_and_a_selection_is_highlighted() {
     let changed = (0..(W * H) as usize).filter(|p| before[p * 4..p * 4 + 3] != after[p * 4..p * 4 + 3]).count();
     assert!(changed < (W * H) as usize / 10, "{changed} pixels changed for one selected tree");
 }
+
+/// Far away, thinned batches draw their kept trees bigger (prefix thinning):
+/// a click on any foliage pixel still picks a tree (the pick's cull grows the
+/// bounds of thinned trees as they are drawn).
+#[test]
+fn far_thinned_trees_are_picked_where_they_are_drawn() {
+    use sylva::render::offscreen::NamedView;
+    let mut off = open();
+    off.load_view(&Camera::default(), 30.0);
+    let cam = off.named_camera(NamedView::Far, 30.0).unwrap();
+    // Thinning from 200 px: the far view's trees (tens of pixels) are thinned hard.
+    off.settings = RenderSettings { thin_px: 200.0, ..RenderSettings::default() };
+    off.load_view(&cam, 30.0);
+    off.render(&cam, true);
+    let stats = off.stats_of_last_frame();
+    let drawn: u64 = stats.instances.values().sum();
+    assert!(drawn < 2000, "the far view is not thinned ({drawn} of 3,000 trees drawn)");
+    let img = off.read_image();
+    if let Some(dir) = std::env::var_os("SYLVA_PICK_PNG") {
+        image::save_buffer(PathBuf::from(dir).join("pick-far.png"), &img, W, H, image::ColorType::Rgba8).unwrap();
+    }
+    let view = cam.view_data(W, H);
+    let (mut foliage, mut picked) = (0, 0);
+    for y in (0..H).step_by(3) {
+        for x in (0..W).step_by(3) {
+            let k = ((y * W + x) * 4) as usize;
+            let [r, g, b] = [img[k], img[k + 1], img[k + 2]].map(i32::from);
+            if g > r + 8 && g > b + 8 {
+                foliage += 1;
+                picked += u32::from(off.pick_blocking(&view, [x, y]).is_some());
+            }
+        }
+    }
+    eprintln!("far: {picked} of {foliage} foliage pixels picked a tree; instances {:?}", stats.instances);
+    assert!(foliage >= 30, "the far view shows too little foliage ({foliage} pixels)");
+    assert!(picked * 100 >= foliage * 99, "{picked} of {foliage} foliage pixels picked a tree");
+}

@@ -85,10 +85,16 @@ class SylvaViewer {
     const hit = await this.viewer.pick(Math.floor(x * sx), Math.floor(y * sy));
     if (!hit || this.destroyed) return null;
     const at = JSON.parse(hit);
+    // The last few tiles' files are kept: hovering over one tile fetches them once.
+    this.fileCache ||= new Map();
     const get = async (url) => {
+      if (this.fileCache.has(url)) return this.fileCache.get(url);
       const r = await fetch(url);
       if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
-      return new Uint8Array(await r.arrayBuffer());
+      const bytes = new Uint8Array(await r.arrayBuffer());
+      this.fileCache.set(url, bytes);
+      while (this.fileCache.size > 12) this.fileCache.delete(this.fileCache.keys().next().value);
+      return bytes;
     };
     const [tile, ids, attr] = await Promise.all([get(at.tile), get(at.ids),
       this.viewer.has_attributes() ? get(at.attributes) : null]);
@@ -470,7 +476,9 @@ class SylvaViewer {
       const moved = Math.hypot(e.clientX - press.x, e.clientY - press.y);
       if (moved > 4 || performance.now() - press.t > 800) return;
       const p = pointAt(e);
-      this.pick(p.x, p.y).then((tree) => this.emit('click', { ...p, tree }),
+      // Only the latest click's answer counts (an earlier one may come later).
+      const seq = (this.clickSeq = (this.clickSeq || 0) + 1);
+      this.pick(p.x, p.y).then((tree) => { if (seq === this.clickSeq) this.emit('click', { ...p, tree }); },
         (err) => this.emit('warning', { message: `pick: ${err.message || err}` }));
     });
     // Hover: one pick at a time, the latest pointer position when it is done.
@@ -544,9 +552,16 @@ export function attachTreePopup(v, host) {
     'background:#fffffff0;color:#1d2a22;border:1px solid #8a9a8a;border-radius:6px;padding:8px 10px;' +
     'font:12px/1.45 system-ui,sans-serif;box-shadow:0 2px 10px #0005;pointer-events:auto';
   host.appendChild(box);
+  // The popup's own selection (the clicked tree); a selection made otherwise is left alone.
+  let own = null;
+  const unselect = () => {
+    if (own !== null && v.selection?.length === 1 && v.selection[0] === own) v.select([]);
+    own = null;
+  };
   const show = ({ x, y, tree }) => {
-    if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); v.select([]); return; }
+    if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); unselect(); return; }
     v.select([tree.id]);
+    own = tree.id;
     const fmt = (n, d) => (n === null || n === undefined ? '—' : Number(n).toFixed(d));
     // The inventory's own columns; the drawn species model and height where it has none.
     const attrs = Object.entries(tree.attributes || {});
@@ -559,7 +574,7 @@ export function attachTreePopup(v, host) {
       `<span>Tree ${esc(tree.id)}</span><button aria-label="Close" style="border:none;background:none;cursor:pointer">✕</button></div>` +
       `<table style="border-collapse:collapse">${rows.map(([k, val]) =>
         `<tr><td style="padding-right:10px;color:#4b5d50">${esc(k)}</td><td>${esc(val)}</td></tr>`).join('')}</table>`;
-    box.querySelector('button').onclick = () => { box.style.display = 'none'; v.select([]); };
+    box.querySelector('button').onclick = () => { box.style.display = 'none'; unselect(); };
     box.dataset.id = String(tree.id);
     box.style.display = 'block';
     // Beside the click, inside the host.

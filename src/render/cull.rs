@@ -178,6 +178,10 @@ pub fn cpu_select(
     cpu_select_styled(view, batches, instances, species, &[])
 }
 
+/// How much bigger a thinned batch's kept trees are drawn: (n / kept)^this.
+/// Must match `THIN_BOOST_EXPONENT` in `shaders/common.wgsl`.
+const THIN_BOOST_EXPONENT: f32 = 0.35;
+
 /// As [`cpu_select`], with a style byte per pool instance (`styles`; empty:
 /// no style): the trees a filter hides ([`super::gpu_data::STYLE_HIDDEN`]) are not drawn.
 #[must_use]
@@ -197,7 +201,14 @@ pub fn cpu_select_styled(
         let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
         let half = Vec3::from(b.half_extent_m);
         let batch_culling = view.lod[3] < 0.5;
-        if batch_culling && (!sphere_visible(center, b.radius_m, view) || !box_visible(center, half, view)) {
+        // A thinned batch draws its kept trees bigger (`coverage_boost`): its bounds grow as much.
+        let (kept, boost) = thinning(b, view);
+        let boosted = if kept < b.instance_count as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
+        let grow = (boosted - 1.0) * b.max_height_m;
+        if batch_culling
+            && (!sphere_visible(center, b.radius_m + grow, view)
+                || !box_visible(center, half + Vec3::splat(grow), view))
+        {
             continue;
         }
         if batch_culling && (center.abs() - half).max(Vec3::ZERO).length() > view.lod[1] {
@@ -208,7 +219,6 @@ pub fn cpu_select_styled(
             continue;
         }
         sel.visible_batches.push(i as u32);
-        let (kept, boost) = thinning(b, view);
         let thinned = boost > 1.0 && s.slot_cap[Repr::Billboard as usize] > 0;
         let count = if thinned { (kept.ceil() as u32).min(b.instance_count) } else { b.instance_count };
         for k in 0..count {
@@ -221,7 +231,9 @@ pub fn cpu_select_styled(
             // As `tree_scaled` in WGSL: xy · (scale · aspect), z · scale.
             let sa = d.2 * d.3;
             let c = d.0 + rotate_z(Vec3::new(s.sphere[0] * sa, s.sphere[1] * sa, s.sphere[2] * d.2), d.1);
-            let r = s.sphere[3] * d.2 * d.3.max(1.0);
+            // A thinned batch's kept trees are drawn bigger (`coverage_boost`): so are their bounds.
+            let grown = if thinned && kept < b.instance_count as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
+            let r = s.sphere[3] * d.2 * d.3.max(1.0) * grown;
             let dist = c.length().max(1e-3);
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
                 continue;

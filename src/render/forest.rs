@@ -75,6 +75,7 @@ pub struct ForestRenderer {
     height_span_m: f32,
     last_view: ViewUniform,
     last_cascades: Vec<ViewUniform>,
+    styles_epoch: u64,
 }
 
 impl ForestRenderer {
@@ -111,6 +112,7 @@ impl ForestRenderer {
             height_span_m: 60.0,
             last_view: bytemuck::Zeroable::zeroed(),
             last_cascades: Vec::new(),
+            styles_epoch: 0,
         }
     }
 
@@ -128,6 +130,7 @@ impl ForestRenderer {
         let layouts = PoolLayouts { shared: &self.shared, cull: &self.cull, bounds: &self.bounds.layout };
         if self.pools.fit(device, config, &layouts) {
             self.species.mark_dirty();
+            self.styles_epoch += 1;
         }
     }
 
@@ -135,7 +138,16 @@ impl ForestRenderer {
     /// Returns whether the buffer was re-created (its header and bytes cleared).
     pub fn set_styles(&mut self, device: &wgpu::Device, on: bool) -> bool {
         let layouts = PoolLayouts { shared: &self.shared, cull: &self.cull, bounds: &self.bounds.layout };
-        self.pools.set_styles(device, on, &layouts)
+        let changed = self.pools.set_styles(device, on, &layouts);
+        self.styles_epoch += u64::from(changed);
+        changed
+    }
+
+    /// Changes whenever the styles' buffer is re-created (the pools re-fitted,
+    /// or room for style bytes made or given back): its contents are gone.
+    #[must_use]
+    pub fn styles_epoch(&self) -> u64 {
+        self.styles_epoch
     }
 
     /// Writes the styles' header (palette and flags).
@@ -146,12 +158,6 @@ impl ForestRenderer {
     /// Writes style bytes of pool instances from `first` (a multiple of 4).
     pub fn write_style_bytes(&self, queue: &wgpu::Queue, first: u32, bytes: &[u8]) {
         self.pools.write_style_bytes(queue, first, bytes);
-    }
-
-    /// Changes whenever the pools are re-created or start a scene.
-    #[must_use]
-    pub fn pools_generation(&self) -> u64 {
-        self.pools.generation()
     }
 
     /// Whether the pools were cut down to the device's limits (reported in stats).

@@ -72,13 +72,13 @@ struct StyleState {
     style: Option<crate::scene::style::TreeStyle>,
     /// Bumped by every change of style or selection.
     generation: u64,
-    /// (style generation, pools generation) of the header on the GPU.
+    /// (style generation, styles epoch) of the header on the GPU.
     header: Option<(u64, u64)>,
     /// The style bytes (one per pool instance) as uploaded.
     bytes: Vec<u8>,
     /// Per resident tile (number, first instance): the style generation its
-    /// bytes were made with and whether its ids and attributes were in.
-    written: std::collections::HashMap<(usize, u32), (u64, bool)>,
+    /// bytes were made with and its data's state then (pending, ready, broken).
+    written: std::collections::HashMap<(usize, u32), (u64, u8)>,
 }
 
 /// The frustum of pixel `px` of `view` (eye-relative planes, as [`ViewData::frustum`]).
@@ -215,12 +215,15 @@ impl<F: Fetcher> Frame<F> {
         style.set_selection(selected);
         self.style.style = Some(style);
         self.style.generation += 1;
+        // A converged image shows the old style: start over.
+        self.refine.invalidate();
     }
 
     /// Highlights the trees with these ids at every level of detail (replacing the selection).
     pub fn select(&mut self, ids: impl IntoIterator<Item = u64>) {
         self.style.style.get_or_insert_with(Default::default).set_selection(ids);
         self.style.generation += 1;
+        self.refine.invalidate();
     }
 
     /// The style in use.
@@ -233,11 +236,10 @@ impl<F: Fetcher> Frame<F> {
     /// bytes of each resident tile once its ids and attributes are in (until
     /// then its trees keep their look, or are hidden while a filter is on).
     fn apply_style(&mut self) {
-        let pools = self.renderer.pools_generation();
         let st = &mut self.style;
         let Some(style) = st.style.as_ref().filter(|s| !s.is_plain()) else {
             // None: the bytes' memory given back, the header cleared.
-            self.stream.set_tree_data(false);
+            self.stream.set_tree_data(false, false);
             if self.renderer.set_styles(&self.device, false) || st.header.is_some() {
                 self.renderer.write_style_header(&self.queue, &[0; 128]);
             }
@@ -247,34 +249,47 @@ impl<F: Fetcher> Frame<F> {
             return;
         };
         let needs = style.needs_trees();
-        self.stream.set_tree_data(needs);
-        if self.renderer.set_styles(&self.device, needs) || st.header.is_some_and(|(_, p)| p != pools) {
+        self.stream.set_tree_data(needs, needs && style.needs_attributes());
+        let changed = self.renderer.set_styles(&self.device, needs);
+        let epoch = self.renderer.styles_epoch();
+        if changed || st.header.is_some_and(|(_, e)| e != epoch) {
             st.header = None;
             st.written.clear();
         }
-        if st.header != Some((st.generation, pools)) {
+        if st.header != Some((st.generation, epoch)) {
             self.renderer.write_style_header(&self.queue, &style.header());
-            st.header = Some((st.generation, pools));
+            st.header = Some((st.generation, epoch));
         }
         if !needs {
             return;
         }
         let n = self.renderer.config().instances as usize;
         st.bytes.resize(n.next_multiple_of(4), 0);
-        let schema = self.stream.manifest().and_then(|m| m.attributes.clone());
+        let schema = self.stream.manifest().and_then(|m| m.attributes.as_ref());
         let hidden = if style.filters() { super::gpu_data::STYLE_HIDDEN } else { 0 };
         let mut present = std::collections::HashSet::new();
         for (t, range, data) in self.stream.resident_tree_data() {
+            use crate::scene::streaming::TreeDataState as S;
             let key = (t, range.start);
             present.insert(key);
-            let state = (st.generation, data.is_some());
+            let state = (
+                st.generation,
+                match data {
+                    S::Pending => 0,
+                    S::Ready(_) => 1,
+                    S::Broken => 2,
+                },
+            );
             if st.written.get(&key) == Some(&state) || range.end as usize > n {
                 continue;
             }
             let out = &mut st.bytes[range.start as usize..range.end as usize];
             match data {
-                Some(d) => style.tile_bytes(schema.as_ref(), &d.ids, d.codes.as_ref(), out),
-                None => out.fill(hidden),
+                S::Ready(d) => style.tile_bytes(schema, &d.ids, d.codes.as_ref(), out),
+                // Until its ids and attributes arrive a filter hides the tile's trees;
+                // without them for good (a sidecar failed) they keep their own look.
+                S::Pending => out.fill(hidden),
+                S::Broken => out.fill(0),
             }
             let (a, b) = (range.start & !3, (range.end.next_multiple_of(4) as usize).min(st.bytes.len()));
             self.renderer.write_style_bytes(&self.queue, a, &st.bytes[a as usize..b]);

@@ -161,13 +161,30 @@ enum TreeDataLoad {
     None,
     /// Requested: what arrived so far (ids; codes, `Some(None)` for none to come).
     Loading {
+        attempt: u32,
         ids: Option<Vec<u64>>,
         codes: Option<Option<AttributeCodes>>,
     },
     Ready(std::sync::Arc<TreeData>),
-    /// A sidecar failed (said once as an event); the tile's trees keep their own look.
+    /// A sidecar failed this many times: asked for again (up to 3 attempts).
+    Failed(u32),
+    /// A sidecar failed for good (said as an event); the tile's trees keep their own look.
     Broken,
 }
+
+/// What a resident tile's [`TreeData`] is (for styles).
+#[derive(Debug, Clone, Copy)]
+pub enum TreeDataState<'a> {
+    /// Asked for or not yet.
+    Pending,
+    /// In.
+    Ready(&'a std::sync::Arc<TreeData>),
+    /// Failed for good.
+    Broken,
+}
+
+/// Attempts at a tile's sidecars before giving up.
+const TREE_DATA_ATTEMPTS: u32 = 3;
 
 #[derive(Debug, Clone, Copy)]
 enum Target {
@@ -285,8 +302,8 @@ pub struct SceneStream<F: Fetcher> {
     imagery_wanted: Vec<TerrainKey>,
     /// The scene CRS ↔ lon/lat (for imagery sources in Web Mercator), once the manifest is in.
     geo: Option<GeoFrame>,
-    /// Resident tiles' ids and attributes are fetched (a style uses them).
-    tree_data: bool,
+    /// Resident tiles' ids (and, with the second, attributes) are fetched (a style uses them).
+    tree_data: (bool, bool),
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -356,7 +373,7 @@ impl<F: Fetcher> SceneStream<F> {
             imagery: Imagery::new(),
             imagery_wanted: Vec::new(),
             geo: None,
-            tree_data: false,
+            tree_data: (false, false),
         }
     }
 
@@ -577,14 +594,18 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.imagery_drawn = self.terrain_draws.iter().filter(|d| d.imagery.is_some()).count() as u64;
     }
 
-    /// Fetch the ids and attributes of resident tiles' trees (`true`: a style
-    /// or filter uses them), or stop and forget them (`false`).
-    pub fn set_tree_data(&mut self, wanted: bool) {
+    /// Fetch the ids (`ids`) and attributes (`attributes`, for scenes with
+    /// them) of resident tiles' trees, as a style needs them; neither: stop
+    /// and forget them.
+    pub fn set_tree_data(&mut self, ids: bool, attributes: bool) {
+        let wanted = (ids || attributes, attributes);
         if self.tree_data == wanted {
             return;
         }
+        // Attributes newly wanted: tiles read without them are read again.
+        let again = !wanted.0 || (wanted.1 && !self.tree_data.1);
         self.tree_data = wanted;
-        if !wanted {
+        if again {
             for t in &mut self.tiles {
                 if let TileState::Resident { data, .. } = t {
                     *data = TreeDataLoad::None;
@@ -595,16 +616,15 @@ impl<F: Fetcher> SceneStream<F> {
 
     /// Every resident tile: its number, its range in the instance pool and its
     /// trees' ids and attributes once they arrived (with [`Self::set_tree_data`]).
-    pub fn resident_tree_data(
-        &self,
-    ) -> impl Iterator<Item = (usize, std::ops::Range<u32>, Option<&std::sync::Arc<TreeData>>)> + '_ {
+    pub fn resident_tree_data(&self) -> impl Iterator<Item = (usize, std::ops::Range<u32>, TreeDataState<'_>)> + '_ {
         self.tiles.iter().enumerate().filter_map(|(t, state)| match state {
             TileState::Resident { slot, data, .. } => {
-                let ready = match data {
-                    TreeDataLoad::Ready(d) => Some(d),
-                    _ => None,
+                let state = match data {
+                    TreeDataLoad::Ready(d) => TreeDataState::Ready(d),
+                    TreeDataLoad::Broken => TreeDataState::Broken,
+                    _ => TreeDataState::Pending,
                 };
-                Some((t, slot.instances.clone(), ready))
+                Some((t, slot.instances.clone(), state))
             }
             TileState::NotResident(_) => None,
         })
@@ -613,26 +633,29 @@ impl<F: Fetcher> SceneStream<F> {
     /// Requests the ids and attributes of resident tiles that lack them, the
     /// wanted (nearest) tiles first, within the in-flight budget.
     fn request_tree_data(&mut self) {
-        if !self.tree_data {
+        if !self.tree_data.0 {
             return;
         }
-        let attributes = self.manifest.as_ref().is_some_and(|m| m.attributes.is_some());
+        let attributes = self.tree_data.1 && self.manifest.as_ref().is_some_and(|m| m.attributes.is_some());
+        let due = |d: &TreeDataLoad| matches!(d, TreeDataLoad::None | TreeDataLoad::Failed(_));
         let order: Vec<usize> = self
             .wanted
             .iter()
             .copied()
             .chain(0..self.tiles.len())
-            .filter(|&t| matches!(&self.tiles[t], TileState::Resident { data: TreeDataLoad::None, .. }))
+            .filter(|&t| matches!(&self.tiles[t], TileState::Resident { data, .. } if due(data)))
             .collect();
         for t in order {
             if self.fetcher.in_flight() + 2 > self.config.max_in_flight.max(2) {
                 break;
             }
             let TileState::Resident { data, .. } = &mut self.tiles[t] else { continue };
-            if !matches!(data, TreeDataLoad::None) {
-                continue;
-            }
-            *data = TreeDataLoad::Loading { ids: None, codes: if attributes { None } else { Some(None) } };
+            let attempt = match data {
+                TreeDataLoad::None => 0,
+                TreeDataLoad::Failed(n) => *n,
+                _ => continue,
+            };
+            *data = TreeDataLoad::Loading { attempt, ids: None, codes: if attributes { None } else { Some(None) } };
             let entry = &self.index.tiles[t];
             let ids_url = join(&self.base, &entry.ids_url);
             let attr_url = join(&self.base, &crate::format::attributes::attributes_url(&entry.url));
@@ -656,7 +679,8 @@ impl<F: Fetcher> SceneStream<F> {
             join(&self.base, &entry.ids_url)
         };
         let TileState::Resident { slot, data, .. } = &mut self.tiles[t] else { return };
-        let TreeDataLoad::Loading { ids, codes } = data else { return };
+        let TreeDataLoad::Loading { attempt, ids, codes } = data else { return };
+        let attempt = *attempt;
         let count = slot.instances.len();
         let decoded = result.map_err(|e| e.to_string()).and_then(|bytes| {
             if attributes {
@@ -675,13 +699,17 @@ impl<F: Fetcher> SceneStream<F> {
         });
         match decoded {
             Err(message) => {
-                *data = TreeDataLoad::Broken;
-                self.give_up(&url, &message);
-                self.events.push(StreamEvent::Failed { url, message, retrying: false });
+                // (The other sidecar's answer, if still to come, finds the tile no longer loading.)
+                let retrying = attempt + 1 < TREE_DATA_ATTEMPTS;
+                *data = if retrying { TreeDataLoad::Failed(attempt + 1) } else { TreeDataLoad::Broken };
+                if !retrying {
+                    self.give_up(&url, &message);
+                }
+                self.events.push(StreamEvent::Failed { url, message, retrying });
             }
             Ok(()) => {
-                if let TreeDataLoad::Loading { ids: Some(_), codes: Some(_) } = data {
-                    if let TreeDataLoad::Loading { ids: Some(ids), codes: Some(codes) } = std::mem::take(data) {
+                if let TreeDataLoad::Loading { ids: Some(_), codes: Some(_), .. } = data {
+                    if let TreeDataLoad::Loading { ids: Some(ids), codes: Some(codes), .. } = std::mem::take(data) {
                         *data = TreeDataLoad::Ready(std::sync::Arc::new(TreeData { ids, codes }));
                     }
                 }

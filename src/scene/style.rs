@@ -289,6 +289,13 @@ impl TreeStyle {
             || matches!(self.color, Some(ColorBy::Codes { .. } | ColorBy::Ramp { .. }))
     }
 
+    /// Whether it needs the trees' attributes (not only their ids).
+    #[must_use]
+    pub fn needs_attributes(&self) -> bool {
+        self.filter.as_ref().is_some_and(Filter::needs_attributes)
+            || matches!(self.color, Some(ColorBy::Codes { .. } | ColorBy::Ramp { .. }))
+    }
+
     /// Whether a filter hides trees (trees whose data has not arrived are hidden too).
     #[must_use]
     pub fn filters(&self) -> bool {
@@ -333,8 +340,9 @@ impl TreeStyle {
                     _ => None,
                 };
                 value.map_or(0, |v| {
-                    let span = (domain[1] - domain[0]).abs().max(1e-12);
-                    let t = ((v - domain[0].min(domain[1])) / span).clamp(0.0, 1.0);
+                    // From domain[0] to domain[1], either way round (as the legend reads).
+                    let span = domain[1] - domain[0];
+                    let t = if span.abs() < 1e-12 { 0.0 } else { ((v - domain[0]) / span).clamp(0.0, 1.0) };
                     1 + ((t * RAMP_STEPS as f64) as usize).min(RAMP_STEPS - 1) as u8
                 })
             }
@@ -427,6 +435,12 @@ mod tests {
         ramp.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
         assert_eq!(out, [1 + 4, (1 + 12) | SELECTED, 0]);
         assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
+        // A reversed domain runs the ramp from its first value, as the legend reads.
+        let reversed =
+            TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [40, 0]}})).unwrap();
+        reversed.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
+        assert_eq!(out, [1 + 12, 1 + 4, 0]);
+        assert!(reversed.legend_json()["entries"][0]["label"].as_str().unwrap().starts_with("40"));
 
         let by_species = TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "species"}})).unwrap();
         assert!(!by_species.needs_trees());
