@@ -17,7 +17,8 @@
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.on('click' | 'hover', fn)             fn({x, y, tree}): the tree under the pointer (as pick) or null
 //   await v.pick(x, y)                      the tree drawn at canvas CSS pixel (x, y), or null:
-//                                           {id, species, attributes, lon, lat, height, position}
+//                                           {id, row, species, attributes, lon, lat, height, position}
+//                                           (id null and row the inventory's row for a tree without a numeric id)
 //   v.stats()                               same keys as `sylva render --stats`
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
@@ -560,8 +561,8 @@ export function attachTreePopup(v, host) {
   };
   const show = ({ x, y, tree }) => {
     if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); unselect(); return; }
-    v.select([tree.id]);
-    own = tree.id;
+    // (A tree without a numeric id in the inventory is known by its row.)
+    if (tree.id !== null) { v.select([tree.id]); own = tree.id; } else unselect();
     const fmt = (n, d) => (n === null || n === undefined ? '—' : Number(n).toFixed(d));
     // The inventory's own columns; the drawn species model and height where it has none.
     const attrs = Object.entries(tree.attributes || {});
@@ -571,11 +572,11 @@ export function attachTreePopup(v, host) {
       ...attrs.map(([k, val]) => [k, val === null ? '—' : val]),
       ['lon, lat', `${fmt(tree.lon, 6)}, ${fmt(tree.lat, 6)}`]];
     box.innerHTML = `<div style="display:flex;justify-content:space-between;gap:8px;font-weight:600">` +
-      `<span>Tree ${esc(tree.id)}</span><button aria-label="Close" style="border:none;background:none;cursor:pointer">✕</button></div>` +
+      `<span>${tree.id !== null ? `Tree ${esc(tree.id)}` : `Tree in row ${esc(tree.row)}`}</span><button aria-label="Close" style="border:none;background:none;cursor:pointer">✕</button></div>` +
       `<table style="border-collapse:collapse">${rows.map(([k, val]) =>
         `<tr><td style="padding-right:10px;color:#4b5d50">${esc(k)}</td><td>${esc(val)}</td></tr>`).join('')}</table>`;
     box.querySelector('button').onclick = () => { box.style.display = 'none'; unselect(); };
-    box.dataset.id = String(tree.id);
+    box.dataset.id = String(tree.id ?? `row ${tree.row}`);
     box.style.display = 'block';
     // Beside the click, inside the host.
     const w = host.clientWidth, h = host.clientHeight;

@@ -1058,3 +1058,52 @@ fn geojson_properties_are_attributes() {
     assert_eq!(found(serde_json::json!({"healthy": "false"})), scan(&|i| i % 3 == 0));
     assert_eq!(found(serde_json::json!({"surveyed": ["2024-01-01", null]})), scan(&|i| i % 5 == 0));
 }
+
+/// An inventory whose ids are text: the bake says so, those trees are
+/// numbered by their row, and what a pick says of one names its row.
+#[test]
+fn text_ids_are_reported_and_trees_keep_their_row() {
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("text-ids");
+    let csv = dir.join("trees.csv");
+    let mut text = String::from("lon,lat,id,height\n");
+    for i in 0..30 {
+        let id = if i % 3 == 0 { format!("BOOM-{i:04}") } else { format!("{}", 700 + i) };
+        text.push_str(&format!("{:.6},52.500000,{id},{}\n", 13.40 + f64::from(i) * 0.0003, 10 + i % 5));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let out = dir.join("scene");
+    let o = run(&mut quick_bake(&model, &csv, &out, &["--default-model", "oak"]));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("10 rows have an id that is not a whole number"), "{log}");
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    let (mut numbered, mut by_row) = (0, 0);
+    for t in &m.tiles {
+        let tile = std::fs::read(out.join(&t.url)).unwrap();
+        let ids_bytes = std::fs::read(out.join(&t.ids_url)).unwrap();
+        let ids = sylva::format::decode_ids(&t.ids_url, &ids_bytes).unwrap();
+        let attr = m
+            .attributes
+            .as_ref()
+            .map(|_| std::fs::read(out.join(sylva::format::attributes::attributes_url(&t.url))).unwrap());
+        for k in 0..ids.len() {
+            let files = [t.url.as_str(), t.ids_url.as_str(), "attr"];
+            let d = sylva::scene::query::describe_tree(&m, None, [&tile, &ids_bytes], attr.as_deref(), files, k as u32)
+                .unwrap();
+            match d["id"].as_u64() {
+                Some(id) => {
+                    assert!((700..730).contains(&id) && id % 3 != 1, "{d}");
+                    assert!(d["row"].is_null(), "{d}");
+                    numbered += 1;
+                }
+                None => {
+                    // Data rows count from 1: the text ids are on rows 1, 4, 7, …
+                    let row = d["row"].as_u64().expect("a row for a tree without a numeric id");
+                    assert_eq!(row % 3, 1, "{d}");
+                    by_row += 1;
+                }
+            }
+        }
+    }
+    assert_eq!((numbered, by_row), (20, 10));
+}

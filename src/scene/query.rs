@@ -273,7 +273,8 @@ pub fn query_tile(
 
 /// What a pick says of one tree, the `index`th of a tile: its bytes, its ids'
 /// and (scenes with attributes) its attribute sidecar's, `files` naming the
-/// three in errors. `{id, species, attributes, lon, lat, height, position}`:
+/// three in errors. `{id, row, species, attributes, lon, lat, height, position}`:
+/// `id` null and `row` the input row for a tree without a numeric id (else `row` null),
 /// `height` the tree's (m), `position` its trunk base in the
 /// scene CRS (m), `lon`/`lat` where `geo` can say (else null).
 ///
@@ -314,8 +315,12 @@ pub fn describe_tree(
     let at = geo.and_then(|g| g.to_geo(local).ok());
     let o = manifest.origin_m;
     let round = |v: f64, k: f64| (v * k).round() / k;
+    // A tree whose inventory row had no numeric id is numbered by its row
+    // (2^63 + row, past what a JS number holds exactly): say the row instead.
+    let (id, row) = if ids[i] >= 1 << 63 { (None, Some(ids[i] - (1 << 63))) } else { (Some(ids[i]), None) };
     Ok(serde_json::json!({
-        "id": ids[i],
+        "id": id,
+        "row": row,
         "species": species.map(|s| s.name.as_str()),
         "attributes": attributes,
         "lon": at.map(|a| round(a.0, 1e7)),

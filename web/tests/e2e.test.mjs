@@ -445,7 +445,9 @@ test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the 
 });
 
 test('walking mode keeps eye height above the ground', async () => {
-  const { page } = await openViewer(base);
+  // Among the trees every frame draws full meshes: shadows (3× the draw on a CPU GPU) would
+  // only slow the frames this test waits for.
+  const { page } = await openViewer(`${base}?shadows=off`);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   await page.evaluate(() => { window.sylva.setFly(true); });

@@ -71,6 +71,9 @@ pub struct Report {
     pub not_utf8: u64,
     /// Rows out of lon/lat range that would be in range with x and y swapped.
     pub swappable: u64,
+    /// Kept rows whose id is not a whole number (text, or none): such a tree's
+    /// id is its row, 2^63 + row (`describe_tree` gives it as `row`).
+    pub ids_not_numbers: (u64, Vec<u64>),
 }
 
 impl Report {
@@ -109,6 +112,13 @@ impl Report {
         }
         if self.duplicate_coordinates > 0 {
             out.push(format!("{} rows repeat the coordinates of an earlier row (kept)", self.duplicate_coordinates));
+        }
+        if self.ids_not_numbers.0 > 0 {
+            out.push(format!(
+                "{} rows have an id that is not a whole number (e.g. rows {:?}): those trees are identified by \
+                 their row (a pick says \"row\"; text ids are not kept)",
+                self.ids_not_numbers.0, self.ids_not_numbers.1
+            ));
         }
         out
     }
@@ -765,6 +775,12 @@ pub fn stream_csv<R: std::io::Read>(
         };
         if let Some(p) = accept(p, cols.kind, report) {
             report.kept += 1;
+            if cols.id.is_some() && p.id.is_none() {
+                report.ids_not_numbers.0 += 1;
+                if report.ids_not_numbers.1.len() < 5 {
+                    report.ids_not_numbers.1.push(p.row);
+                }
+            }
             f(p)?;
         }
     }
