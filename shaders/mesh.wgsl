@@ -40,18 +40,7 @@ struct Material {
 @group(2) @binding(0) var<storage, read> batches: array<Batch>;
 @group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// The styles (`tree_style` below; common.wgsl `style_of`).
-@group(2) @binding(3) var<storage, read> styles: array<u32>;
-
-// The style byte of pool instance `instance` of model species `species` (its
-// word read only where the style has per-tree bytes).
-fn tree_style(flags: u32, instance: u32, species: u32) -> u32 {
-    var word = 0u;
-    if (flags & STYLE_TREES) != 0u {
-        word = styles[STYLE_HEADER_WORDS + instance / 4u];
-    }
-    return style_of(flags, word, instance, species);
-}
+// (Group 2, binding 3: the styles, `shaders/styles.wgsl`.)
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 

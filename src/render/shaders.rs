@@ -1,10 +1,12 @@
 //! WGSL sources, composed at compile time: `shaders/common.wgsl` is prepended
-//! to each pass's file (WGSL has no includes), and `shaders/shadow.wgsl` (the
+//! to each pass's file (WGSL has no includes), `shaders/styles.wgsl` (the
+//! styles' binding) to the tree passes', and `shaders/shadow.wgsl` (the
 //! shadow map and its lookup) to the lit passes'.
 
 /// The mesh pass (and the bake's billboard capture).
 pub const MESH: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/mesh.wgsl")
 );
@@ -12,6 +14,7 @@ pub const MESH: &str = concat!(
 /// The billboard pass.
 pub const BILLBOARD: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/billboard.wgsl")
 );
@@ -19,6 +22,7 @@ pub const BILLBOARD: &str = concat!(
 /// The multi-view impostor pass.
 pub const IMPOSTOR: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/impostor_views.wgsl"),
     include_str!("../../shaders/impostor.wgsl")
@@ -27,6 +31,7 @@ pub const IMPOSTOR: &str = concat!(
 /// The cluster pass (ellipsoids and lines).
 pub const CLUSTER: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/cluster.wgsl")
 );

@@ -1,0 +1,16 @@
+// The styles of the tree passes (issue 19): the cull control buffer from
+// `STYLE_OFFSET_BYTES` (common.wgsl `style_of` and friends, the layout there).
+// Prepended after common.wgsl to the mesh, billboard, impostor and cluster
+// passes by `src/render/shaders.rs`; group 2 is their instance group.
+
+@group(2) @binding(3) var<storage, read> styles: array<u32>;
+
+// The style byte of pool instance `instance` of model species `species` (its
+// word read only where the style has per-tree bytes).
+fn tree_style(flags: u32, instance: u32, species: u32) -> u32 {
+    var word = 0u;
+    if (flags & STYLE_TREES) != 0u {
+        word = styles[STYLE_HEADER_WORDS + instance / 4u];
+    }
+    return style_of(flags, word, instance, species);
+}
