@@ -194,6 +194,36 @@ Examples:
     },
 }
 
+/// The image and the view of `render` and `pick`.
+#[derive(clap::Args)]
+pub(crate) struct ViewArgs {
+    /// Image size, WxH.
+    #[arg(long, default_value = "960x540")]
+    pub(crate) size: String,
+    /// Named scene viewpoint (ignored with --camera).
+    #[arg(long, value_enum, default_value_t = SceneView::Medium)]
+    pub(crate) view: SceneView,
+    /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
+    #[arg(long, allow_hyphen_values = true)]
+    pub(crate) camera: Option<String>,
+    /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) quality: f32,
+    /// Draw distance in metres.
+    #[arg(long, default_value_t = 6000.0)]
+    pub(crate) draw_distance: f32,
+}
+
+impl ViewArgs {
+    /// The image size, with the quality checked.
+    pub(crate) fn checked_size(&self) -> Result<(u32, u32)> {
+        if !(self.quality > 0.0 && self.quality <= 16.0) {
+            bail!("--quality {}: must be in (0, 16]", self.quality);
+        }
+        parse_size(&self.size)
+    }
+}
+
 /// `sylva pick`: the tree at a pixel of a view.
 #[derive(clap::Args)]
 pub(crate) struct PickArgs {
@@ -204,21 +234,9 @@ pub(crate) struct PickArgs {
     /// several pixels of one view (a JSON array is printed then).
     #[arg(long, value_name = "X,Y", required = true)]
     pub(crate) at: Vec<String>,
-    /// Image size, WxH (as `sylva render --size`).
-    #[arg(long, default_value = "960x540")]
-    pub(crate) size: String,
-    /// Named scene viewpoint (ignored with --camera).
-    #[arg(long, value_enum, default_value_t = SceneView::Medium)]
-    pub(crate) view: SceneView,
-    /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
-    #[arg(long, allow_hyphen_values = true)]
-    pub(crate) camera: Option<String>,
-    /// LoD quality factor (as `sylva render --quality`).
-    #[arg(long, default_value_t = 1.0)]
-    pub(crate) quality: f32,
-    /// Draw distance in metres.
-    #[arg(long, default_value_t = 6000.0)]
-    pub(crate) draw_distance: f32,
+    /// Image size, view or camera, quality, draw distance (as `sylva render`).
+    #[command(flatten)]
+    pub(crate) frame: ViewArgs,
     /// Draw only one representation family (as `sylva render --only`).
     #[arg(long, value_enum)]
     pub(crate) only: Option<OnlyArg>,
@@ -248,21 +266,9 @@ pub(crate) struct RenderArgs {
     /// Output PNG.
     #[arg(long)]
     pub(crate) out: PathBuf,
-    /// Image size, WxH.
-    #[arg(long, default_value = "960x540")]
-    pub(crate) size: String,
-    /// Named scene viewpoint (ignored with --camera).
-    #[arg(long, value_enum, default_value_t = SceneView::Medium)]
-    pub(crate) view: SceneView,
-    /// Camera in the scene CRS: EASTING,NORTHING,HEIGHT,HEADING_DEG,PITCH_DEG.
-    #[arg(long, allow_hyphen_values = true)]
-    pub(crate) camera: Option<String>,
-    /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
-    #[arg(long, default_value_t = 1.0)]
-    pub(crate) quality: f32,
-    /// Draw distance in metres.
-    #[arg(long, default_value_t = 6000.0)]
-    pub(crate) draw_distance: f32,
+    /// Image size, view or camera, quality, draw distance.
+    #[command(flatten)]
+    pub(crate) frame: ViewArgs,
     /// Colour trees by representation (red mesh0, yellow mesh1, greens ellipsoid
     /// levels, blue billboard).
     #[arg(long)]

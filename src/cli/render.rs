@@ -216,7 +216,7 @@ fn far_tier_of(arg: FarTierArg) -> sylva::render::settings::FarTier {
 
 /// `sylva pick`: the tree drawn at a pixel, as JSON on stdout.
 pub(crate) fn pick(args: PickArgs) -> Result<()> {
-    let (w, h) = parse_size(&args.size)?;
+    let (w, h) = args.frame.checked_size()?;
     let mut pixels = Vec::new();
     for at in &args.at {
         let (x, y) = at
@@ -228,15 +228,12 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
         }
         pixels.push([x, y]);
     }
-    if !(args.quality > 0.0 && args.quality <= 16.0) {
-        bail!("--quality {}: must be in (0, 16]", args.quality);
-    }
     let scene = args.scene.as_str();
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     let (representations, lod_policy) = representations(args.only);
     off.settings = RenderSettings {
-        quality: args.quality,
-        draw_distance_m: args.draw_distance,
+        quality: args.frame.quality,
+        draw_distance_m: args.frame.draw_distance,
         terrain: !args.no_terrain,
         far_tier: far_tier_of(args.far_tier),
         representations,
@@ -251,7 +248,7 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
         });
         bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
     };
-    let cam = scene_camera(&mut off, &manifest, args.view, args.camera.as_deref(), args.timeout)?;
+    let cam = scene_camera(&mut off, &manifest, args.frame.view, args.frame.camera.as_deref(), args.timeout)?;
     off.load_view(&cam, args.timeout);
     if !off.stream.is_settled() {
         eprintln!("warning: not everything the view needs arrived within --timeout {} s", args.timeout);
@@ -414,11 +411,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         scene,
         pack,
         out,
-        size,
-        view,
-        camera,
-        quality,
-        draw_distance,
+        frame,
         debug_lod,
         only,
         ellipsoid_min_px,
@@ -445,10 +438,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         level,
         repr,
     } = args;
-    let (w, h) = parse_size(&size)?;
-    if !(quality > 0.0 && quality <= 16.0) {
-        bail!("--quality {quality}: must be in (0, 16]");
-    }
+    let (w, h) = frame.checked_size()?;
+    let ViewArgs { view, camera, quality, draw_distance, .. } = frame;
     if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
         bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
     }

@@ -424,11 +424,26 @@ impl Species {
         frame: SpeciesFrame,
         pipeline: Pipeline,
     ) -> u32 {
+        self.draw_reaching(pass, pools, |i| reach.max_px(i), frame.fade_band, pipeline)
+    }
+
+    /// Per ready species × representation one indirect draw with `pipeline`,
+    /// skipped where the species' largest tree (`max_px(species)`, px or
+    /// texels) is below the representation's band (fade band `fade_band`
+    /// included; the coarsest reaches down to 0). Returns the draws recorded.
+    fn draw_reaching<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'p>,
+        pools: &'p Pools,
+        max_px: impl Fn(usize) -> f32,
+        fade_band: f32,
+        pipeline: Pipeline,
+    ) -> u32 {
         pass.set_bind_group(2, &pools.groups.instance, &[]);
         let mut draws = 0;
         for (i, p) in self.packs.iter().enumerate() {
             let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
-            let max_px = reach.max_px(i);
+            let max_px = max_px(i);
             let coarsest = Repr::ALL.iter().rposition(|r| s.slot_cap[*r as usize] > 0);
             for (k, repr) in Repr::ALL.into_iter().enumerate() {
                 if s.slot_cap[repr as usize] == 0 {
@@ -436,7 +451,7 @@ impl Species {
                 }
                 // Nothing of the species within reach, or no tree tall enough on screen
                 // for this representation (fade bands included): skip the draw.
-                let lower = if Some(k) == coarsest { 0.0 } else { s.lower_px[repr as usize] * (1.0 - frame.fade_band) };
+                let lower = if Some(k) == coarsest { 0.0 } else { s.lower_px[repr as usize] * (1.0 - fade_band) };
                 if max_px <= 0.0 || lower > max_px {
                     continue;
                 }
@@ -523,24 +538,6 @@ impl Species {
         texels_per_m: f32,
         fade_band: f32,
     ) -> u32 {
-        pass.set_bind_group(2, &pools.groups.instance, &[]);
-        let mut draws = 0;
-        for (i, p) in self.packs.iter().enumerate() {
-            let (Some(p), Some(s)) = (p, self.table.get(i)) else { continue };
-            let max_px = reach.tallest_m(i) * texels_per_m;
-            let coarsest = Repr::ALL.iter().rposition(|r| s.slot_cap[*r as usize] > 0);
-            for (k, repr) in Repr::ALL.into_iter().enumerate() {
-                if s.slot_cap[repr as usize] == 0 {
-                    continue;
-                }
-                let lower = if Some(k) == coarsest { 0.0 } else { s.lower_px[repr as usize] * (1.0 - fade_band) };
-                if max_px <= 0.0 || lower > max_px {
-                    continue;
-                }
-                let slot = i as u32 * REPR_COUNT + repr as u32;
-                draws += u32::from(self.draw_slot(pass, pools, p, repr, slot, Pipeline::Shadow));
-            }
-        }
-        draws
+        self.draw_reaching(pass, pools, |i| reach.tallest_m(i) * texels_per_m, fade_band, Pipeline::Shadow)
     }
 }
