@@ -187,28 +187,41 @@ const BATCH_DENSITY_ORDERED: u32 = 1u;
 const BATCH_CROWN_ASPECT: u32 = 2u;
 // Fewest trees a thinned batch keeps, as a fraction (the largest boost is its root).
 const THIN_MIN_FRACTION: f32 = 0.015625;
+// Batch flag (GPU pools only): the batch holds a prefix of its trees, fetched
+// by byte range; bits 8–31 of its flags are its whole count.
+// Must match `BATCH_PARTIAL` and `PARTIAL_COUNT_SHIFT` in src/format/tile.rs.
+const BATCH_PARTIAL: u32 = 4u;
+const PARTIAL_COUNT_SHIFT: u32 = 8u;
+
+// The batch's whole tree count (`instance_count` holds what is resident).
+fn whole_count(b: Batch) -> u32 {
+    return select(b.instance_count, b.flags >> PARTIAL_COUNT_SHIFT, (b.flags & BATCH_PARTIAL) != 0u);
+}
 
 // Prefix thinning (seed 004 ch. 7). A density-ordered batch whose tallest tree
 // is below view.viewport.z px tall at the batch's nearest point draws only its
 // first n·f trees, f = (h / T)² (at least 1/64, and at least one tree): about as
 // many trees per screen area as at T px. The billboard pass scales the kept
-// trees up to keep the canopy's coverage (`coverage_boost`). Returns (trees
+// trees up to keep the canopy's coverage (`coverage_boost`). A batch holding
+// a prefix of its trees (BATCH_PARTIAL: the rest not fetched yet) keeps at
+// most those, drawn as bigger as the trees they stand in for. Returns (trees
 // kept, fractional; n / kept, 1 when not thinned).
 // Must match `thinning` in src/render/cull.rs.
 fn thinning(b: Batch, view: View) -> vec2<f32> {
-    let n = f32(b.instance_count);
+    let n = f32(whole_count(b));
+    let held = max(f32(b.instance_count), 1.0);
     let t = view.viewport.z;
     if (b.flags & BATCH_DENSITY_ORDERED) == 0u || t <= 0.0 || view.lod.w > 0.5 {
-        return vec2<f32>(n, 1.0);
+        return vec2<f32>(held, n / held);
     }
     let center = eye_relative(b.center_m, vec3<f32>(0.0), view);
     let d = max(length(max(abs(center) - b.half_extent_m, vec3<f32>(0.0))), 1e-3);
     let h = b.max_height_m * view.lod.x / d;
     if h >= t {
-        return vec2<f32>(n, 1.0);
+        return vec2<f32>(held, n / held);
     }
     let f = clamp((h * h) / (t * t), THIN_MIN_FRACTION, 1.0);
-    let kept = max(n * f, 1.0);
+    let kept = min(max(n * f, 1.0), held);
     return vec2<f32>(kept, n / kept);
 }
 
@@ -221,7 +234,7 @@ fn thinning(b: Batch, view: View) -> vec2<f32> {
 const THIN_BOOST_EXPONENT: f32 = 0.35;
 
 fn coverage_boost(thin: vec2<f32>, b: Batch) -> f32 {
-    let n = f32(b.instance_count);
+    let n = f32(whole_count(b));
     if thin.x >= n {
         return 1.0;
     }

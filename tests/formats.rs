@@ -14,8 +14,8 @@ use sylva::format::pack::{
 };
 use sylva::format::terrain::{dequantise, quantise, TerrainChild, TerrainTile, TERRAIN_HOLE};
 use sylva::format::tile::{
-    decode_ids, encode_ids, variation_of, CrownRange, GpuBatch, PackedInstance, Tile, BATCH_CROWN_ASPECT,
-    BATCH_DENSITY_ORDERED,
+    decode_ids, encode_ids, level_prefix, variation_of, whole_index, CrownRange, GpuBatch, PackedInstance, Tile,
+    BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED, BATCH_PARTIAL, TILE_LEVELS,
 };
 use sylva::format::{decode_pack, encode_pack, Problem};
 
@@ -205,6 +205,7 @@ fn sample_manifest() -> Manifest {
             batches: 2,
             bounds: b,
             attribute_codes: None,
+            levels: None,
         }],
         index: None,
         home: None,
@@ -217,7 +218,7 @@ fn sample_manifest() -> Manifest {
 #[test]
 fn tile_golden_and_round_trip() {
     let tile = sample_tile();
-    let bytes = tile.encode();
+    let bytes = tile.encode_whole();
     assert_eq!(bytes.len(), 32 + 2 * 80 + 5 * 8);
     check_golden("v1.tile", &bytes);
     let decoded = Tile::decode("v1.tile", &std::fs::read(golden("v1.tile")).unwrap(), 2).unwrap();
@@ -228,6 +229,72 @@ fn tile_golden_and_round_trip() {
     assert!((d.position_m[2] - (12.5 + 2047.0 * 0.016)).abs() < 1e-3);
     assert_eq!(d.variation, 31);
     assert!((d.scale - 0.5 * (255.0f32 * 0.01).exp2()).abs() < 1e-5);
+}
+
+/// A tile of a density-ordered batch of 100 trees and a plain batch of 3.
+fn sample_level_tile() -> Tile {
+    let mut ordered = sample_batch(0, 0, 100);
+    ordered.flags = BATCH_DENSITY_ORDERED;
+    let instances = (0..103u32).map(|i| PackedInstance::new(i as u16 * 600, i as u16, i, i, i, i)).collect();
+    Tile { tile_x: 3, tile_y: -4, batches: vec![ordered, sample_batch(1, 100, 3)], instances }
+}
+
+#[test]
+fn level_tile_golden_prefixes_and_errors() {
+    let tile = sample_level_tile();
+    let bytes = tile.encode();
+    assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 3);
+    assert_eq!(bytes.len(), 32 + 2 * 80 + 4 + 4 * TILE_LEVELS as usize + 103 * 8, "levels cost 32 bytes a tile");
+    check_golden("v3.tile", &bytes);
+    assert_eq!(Tile::decode("v3.tile", &std::fs::read(golden("v3.tile")).unwrap(), 2).unwrap(), tile);
+    // Level ends: 1/64 of the ordered batch (2 trees) and the plain batch whole, then 1/32 … all.
+    let ends = tile.level_bytes();
+    let head = 32 + 160 + 32;
+    let counts: Vec<u64> = ends.iter().map(|e| (e - head) / 8).collect();
+    assert_eq!(counts, [2 + 3, 4 + 3, 7 + 3, 13 + 3, 25 + 3, 50 + 3, 100 + 3]);
+    assert_eq!(*ends.last().unwrap(), bytes.len() as u64);
+    for (l, &end) in ends.iter().enumerate() {
+        let p = Tile::decode_prefix("t", &bytes[..end as usize], 2).unwrap();
+        assert_eq!((p.levels, p.of), (l as u32 + 1, TILE_LEVELS));
+        let k = level_prefix(&tile.batches[0], l as u32, TILE_LEVELS);
+        let b = &p.tile.batches[0];
+        assert_eq!(b.instance_count, k);
+        assert_eq!(b.whole_count(), 100);
+        assert_eq!(b.flags & BATCH_PARTIAL != 0, k < 100, "level {l}");
+        assert_eq!(&p.tile.instances[..k as usize], &tile.instances[..k as usize], "each batch's first trees");
+        assert_eq!((p.tile.batches[1].instance_offset, p.tile.batches[1].instance_count), (k, 3));
+        assert_eq!(p.tile.instances[k as usize..], tile.instances[100..]);
+        // Resident instances map back to their index in the whole tile (ids, attributes).
+        let runs = p.runs();
+        assert_eq!(runs.is_empty(), k == 100);
+        for i in 0..k + 3 {
+            let w = whole_index(&runs, i) as usize;
+            assert_eq!(tile.instances[w], p.tile.instances[i as usize], "resident {i} is tile instance {w}");
+        }
+    }
+    // Not a level's end, or the whole decoder on a prefix: truncated.
+    let msg = Tile::decode_prefix("t", &bytes[..ends[0] as usize + 8], 2).unwrap_err().to_string();
+    assert!(msg.contains("truncated"), "{msg}");
+    let msg = Tile::decode("t", &bytes[..ends[3] as usize], 2).unwrap_err().to_string();
+    assert!(msg.contains("truncated"), "{msg}");
+    // The level table must say what the batches give.
+    let table = 32 + 160;
+    for (at, v, needle) in [
+        (table, 0, "levels.count"),
+        (table, 17, "levels.count"),
+        (table, 6, "trailing bytes"),
+        (table + 4, 6, "levels.counts[0] is 6"),
+        (table + 4 + 4 * 6, 102, "levels.counts[6] is 102"),
+    ] {
+        let mut b = bytes.clone();
+        put_u32(&mut b, at, v);
+        let msg = Tile::decode_prefix("t", &b, 2).unwrap_err().to_string();
+        assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
+    }
+    // The in-memory flag is refused in files.
+    let mut b = bytes.clone();
+    put_u32(&mut b, 32 + 72, BATCH_DENSITY_ORDERED | BATCH_PARTIAL);
+    assert!(Tile::decode("t", &b, 2).unwrap_err().to_string().contains("unknown flags"));
 }
 
 /// The sample tile with crown aspects in its second batch (version 2).
@@ -244,8 +311,8 @@ fn sample_crown_tile() -> Tile {
 #[test]
 fn crown_tile_golden_and_round_trip() {
     let tile = sample_crown_tile();
-    assert_eq!(tile.version(), 2);
-    let bytes = tile.encode();
+    assert_eq!(tile.whole_version(), 2);
+    let bytes = tile.encode_whole();
     assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 2, "a tile with crown aspects is version 2");
     assert_eq!(bytes.len(), 32 + 2 * 80 + 5 * 8, "crown widths cost no bytes per tree");
     check_golden("v2.tile", &bytes);
@@ -427,7 +494,7 @@ fn ids_round_trip_and_errors() {
 
 /// Decodes a tile after `mutate`, expecting an error whose message contains `needle`.
 fn tile_error(mutate: impl FnOnce(&mut Vec<u8>), needle: &str) {
-    let mut bytes = sample_tile().encode();
+    let mut bytes = sample_tile().encode_whole();
     mutate(&mut bytes);
     let e = Tile::decode("tiles/-1_2.tile", &bytes, 2).expect_err(needle);
     let msg = e.to_string();
@@ -471,15 +538,15 @@ fn tile_decoder_error_paths() {
     tile_error(|b| put_u32(b, 32 + 76, 9), "crown is 0x9 without the crown flag");
     tile_error(|b| put_u32(b, 32 + 72, BATCH_CROWN_ASPECT), "need tile version 2; this tile is version 1");
     let crown_error = |mutate: &dyn Fn(&mut Vec<u8>), needle: &str| {
-        let mut bytes = sample_crown_tile().encode();
+        let mut bytes = sample_crown_tile().encode_whole();
         mutate(&mut bytes);
         let e = Tile::decode("t", &bytes, 2).expect_err(needle).to_string();
         assert!(e.contains(needle), "expected {needle:?} in {e:?}");
     };
     crown_error(&|b| put_u32(b, 32 + 80 + 76, 0), "smallest aspect of 0");
-    crown_error(&|b| b[4] = 3, "version 3 is not supported");
+    crown_error(&|b| b[4] = 4, "version 4 is not supported");
     // A version 2 tile without crowns reads (it re-encodes as version 1).
-    let mut bytes = sample_tile().encode();
+    let mut bytes = sample_tile().encode_whole();
     bytes[4] = 2;
     assert_eq!(Tile::decode("t", &bytes, 2).unwrap(), sample_tile());
 }
@@ -655,7 +722,7 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 7.into(), "version 7");
+    manifest_error(|v| v["version"] = 8.into(), "version 8");
     manifest_error(
         |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
         "needs manifest version 2",
@@ -702,6 +769,7 @@ fn the_home_of_a_scene_is_its_largest_group_of_touching_tiles() {
             max: [x as f32 * 100.0 + 90.0, y as f32 * 100.0 + 90.0, 20.0],
         },
         attribute_codes: None,
+        levels: None,
     };
     // West: three tiles touching (one only by a corner), 60 trees; east: one tile of 50.
     let mut tiles = vec![tile(0, 0, 20), tile(1, 1, 20), tile(0, 1, 20), tile(40, 0, 50)];

@@ -179,6 +179,8 @@ fn the_cull_counter_and_argument_words_match() {
     use sylva::format::tile::{BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED};
     assert_eq!(wgsl_const("cull", "BATCH_DENSITY_ORDERED"), BATCH_DENSITY_ORDERED as usize);
     assert_eq!(wgsl_const("cull", "BATCH_CROWN_ASPECT"), BATCH_CROWN_ASPECT as usize);
+    assert_eq!(wgsl_const("cull", "BATCH_PARTIAL"), sylva::format::tile::BATCH_PARTIAL as usize);
+    assert_eq!(wgsl_const("cull", "PARTIAL_COUNT_SHIFT"), sylva::format::tile::PARTIAL_COUNT_SHIFT as usize);
 }
 
 #[test]

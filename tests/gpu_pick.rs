@@ -262,7 +262,7 @@ fn attributed_fixture(name: &str) -> PathBuf {
         &fixture(),
         &dir,
         |m| {
-            m.version = 6;
+            m.version = m.version.max(6);
             m.attributes = Some(s);
         },
         |_, _| {},

@@ -35,6 +35,12 @@ import init, { Viewer, queryMayMatch, queryTile } from './pkg/sylva.js';
 
 let wasmReady = null;
 
+// Frames drawn after a change before the viewer idles. The stream is driven by
+// the CPU from the camera, so the first frame asks for what the view needs and
+// `progress.settled` keeps the viewer drawing while it loads; the rest are
+// margin for frames the GPU was still busy with (a CPU GPU takes seconds each).
+const SETTLE_FRAMES = 3;
+
 /** Loads the wasm module once per page. */
 function loadWasm() {
   if (!wasmReady) {
@@ -56,7 +62,7 @@ class SylvaViewer {
     this.options = options;
     this.handlers = {};
     this.destroyed = false;
-    this.dirty = 8;            // frames to draw before idling (render on demand)
+    this.dirty = SETTLE_FRAMES; // frames to draw before idling (render on demand)
     this.lastCamera = '';
     this.lastStatsMs = 0;
     this.frameTimes = [];
@@ -66,7 +72,7 @@ class SylvaViewer {
     this.ready.catch(() => {}); // observed through 'error' events too
     this.resize();
     this.bindControls();
-    this.resizeObserver = new ResizeObserver(() => { this.resize(); this.dirty = 8; });
+    this.resizeObserver = new ResizeObserver(() => { this.resize(); this.dirty = SETTLE_FRAMES; });
     this.resizeObserver.observe(canvas);
     this.loop = this.loop.bind(this);
     this.raf = requestAnimationFrame(this.loop);
@@ -152,7 +158,7 @@ class SylvaViewer {
   setStyle(style) {
     this.legend = JSON.parse(this.viewer.set_style(JSON.stringify(style ?? null)));
     this.style = style ?? null;
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
     this.emit('style', { style: this.style, legend: this.legend });
     return this.legend;
   }
@@ -161,7 +167,7 @@ class SylvaViewer {
   select(ids) {
     this.selection = [...(ids || [])];
     this.viewer.select(JSON.stringify(this.selection));
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
 
   /** The scene's attribute columns, or null (no attributes, or not loaded yet). */
@@ -212,7 +218,7 @@ class SylvaViewer {
 
   /** Terrain on or off (off: neither fetched nor drawn); `errorPx` is the
    * projected geometric error in pixels up to which coarser terrain is kept. */
-  setTerrain(on, errorPx = 2) { this.viewer.set_terrain(!!on, errorPx); this.dirty = 8; }
+  setTerrain(on, errorPx = 2) { this.viewer.set_terrain(!!on, errorPx); this.dirty = SETTLE_FRAMES; }
 
   /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg, ground under the eye). */
   camera() { return JSON.parse(this.viewer.camera_json()); }
@@ -224,7 +230,7 @@ class SylvaViewer {
     } else {
       this.viewer.set_camera(c.x, c.y, c.z, c.heading ?? 0, c.pitch ?? -30);
     }
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
 
   /** Scene-relative {x, y, z} of a geographic point (null before the scene CRS is known). */
@@ -233,7 +239,7 @@ class SylvaViewer {
     return p && { x: p[0], y: p[1], z: p[2] };
   }
 
-  setFly(on) { this.viewer.set_fly(!!on); this.dirty = 8; }
+  setFly(on) { this.viewer.set_fly(!!on); this.dirty = SETTLE_FRAMES; }
   get fly() { return this.viewer.fly(); }
 
   flyTo(c, seconds = 1.5) {
@@ -265,7 +271,7 @@ class SylvaViewer {
       this.viewer.set_camera(lerp(from.x, to.x), lerp(from.y, to.y), lerp(from.z, to.z), from.heading + dh * s, lerp(from.pitch, to.pitch));
       if (t >= 1) this.flight = null;
     };
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
 
   /** The sun: `{date: '2026-06-21', time: '15:00', utcOffset: '+02:00'}` (local
@@ -284,7 +290,7 @@ class SylvaViewer {
       result = JSON.parse(this.viewer.set_sun_time(`${sun.date}T${sun.time}${sun.utcOffset ?? ''}`));
     }
     this.sun = result;
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
     return result;
   }
 
@@ -302,12 +308,12 @@ class SylvaViewer {
     if (options.shadows !== undefined) this.viewer.set_shadows(String(options.shadows));
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
     this.lighting = { ...this.lighting, ...options };
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
 
   stats() { return JSON.parse(this.viewer.stats_json()); }
-  setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = 8; }
-  setQuality(q) { this.viewer.set_quality(q); this.dirty = 8; }
+  setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = SETTLE_FRAMES; }
+  setQuality(q) { this.viewer.set_quality(q); this.dirty = SETTLE_FRAMES; }
   /**
    * Progressive refinement while the camera rests (on by default): jittered
    * frames accumulate into an anti-aliased image while the level of detail
@@ -319,7 +325,7 @@ class SylvaViewer {
   setRefine(on = true, { frames = 16, levels = 3 } = {}) {
     this.refine = { on: !!on, frames, levels };
     this.viewer.set_refine(!!on, Math.max(1, frames | 0), Math.max(0, levels | 0));
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
   /** Ground imagery on the terrain: 'scene' (the scene's baked imagery), null
    * (none: the ground material), or an XYZ/WMTS raster source in Web Mercator
@@ -328,7 +334,7 @@ class SylvaViewer {
   setImagery(source, { maxZoom = 19 } = {}) {
     const s = source === null || source === undefined || source === false ? 'off' : String(source);
     this.viewer.set_imagery(s, Math.max(0, Math.min(24, maxZoom | 0)));
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
   /**
    * Level-of-detail policy: `ellipsoidMinPx` (default 40; Infinity: no ellipsoids),
@@ -340,7 +346,7 @@ class SylvaViewer {
    */
   setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false, thinPx = 8 } = {}) {
     this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth, Number(thinPx));
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
 
   /**
@@ -351,7 +357,7 @@ class SylvaViewer {
    */
   setBudget({ gpuMB = 0, bytesPerSecond = 0, inFlight = 6 } = {}) {
     this.viewer.set_budget(Number(gpuMB), Number(bytesPerSecond), Math.max(1, inFlight | 0));
-    this.dirty = 8;
+    this.dirty = SETTLE_FRAMES;
   }
 
   /** Device lost (driver reset, GPU process crash): a new viewer on the same canvas, same camera. */
@@ -367,7 +373,7 @@ class SylvaViewer {
       this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
       if (this.lighting) this.setLighting(this.lighting);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
-      this.dirty = 8;
+      this.dirty = SETTLE_FRAMES;
       this.emit('recovered', {});
     } catch (e) {
       this.emit('error', { message: `The GPU device was lost and could not be recreated: ${e}` });
@@ -403,7 +409,7 @@ class SylvaViewer {
         if (this.frameTimes.length > 60) this.frameTimes.shift();
         if (this.dirty > 0) this.dirty--;
       }
-      if (!progress.settled) this.dirty = Math.max(this.dirty, 4);
+      if (!progress.settled) this.dirty = Math.max(this.dirty, SETTLE_FRAMES);
     }
     for (const e of JSON.parse(this.viewer.take_events_json())) {
       if (e.kind === 'error') { this.emit('error', e); this.rejectReady(new Error(e.message)); }
@@ -466,7 +472,7 @@ class SylvaViewer {
         else if (drag.pan) this.viewer.pan(-dx / h, dy / h);
         else this.viewer.orbit(dx * 0.005, -dy * 0.005);
       }
-      this.dirty = 8;
+      this.dirty = SETTLE_FRAMES;
     });
     // A click (a press and release that barely moved) picks the tree under it.
     let press = null;
@@ -502,7 +508,7 @@ class SylvaViewer {
       e.preventDefault();
       if (this.viewer.fly()) this.viewer.walk(-e.deltaY * 0.02, 0);
       else this.viewer.zoom(Math.exp(e.deltaY * 0.0015));
-      this.dirty = 8;
+      this.dirty = SETTLE_FRAMES;
     }, { passive: false });
     c.addEventListener('keydown', (e) => {
       const step = 0.05;
@@ -524,7 +530,7 @@ class SylvaViewer {
       };
       if (e.key === 'f') { this.setFly(!this.viewer.fly()); e.preventDefault(); return; }
       const fn = keys[e.key];
-      if (fn) { fn(); this.dirty = 8; e.preventDefault(); }
+      if (fn) { fn(); this.dirty = SETTLE_FRAMES; e.preventDefault(); }
     });
   }
 

@@ -531,15 +531,15 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&n| n == 1), "some tree is in no batch or in two");
-        // Both kinds of batch were made: species 0 without crowns (tile version
-        // 1 where it is alone), the others with.
+        // Both kinds of batch were made: species 0 without crowns (written as
+        // tile version 1 where it is alone, in the old layout), the others with.
         let all: Vec<&GpuBatch> = tiles.iter().flat_map(|t| &t.tile.batches).collect();
         assert!(all.iter().any(|b| b.species == 0 && b.flags & BATCH_CROWN_ASPECT == 0));
         assert!(all.iter().filter(|b| b.species != 0).all(|b| b.flags & BATCH_CROWN_ASPECT != 0));
-        assert!(tiles.iter().all(|t| t.tile.version() == 2));
+        assert!(tiles.iter().all(|t| t.tile.whole_version() == 2 && t.tile.encode()[4] == 3));
         let only_plain =
             build_tiles(&trees.iter().filter(|t| t.species == 0).copied().collect::<Vec<_>>(), &SHAPES, 128, 4);
-        assert!(only_plain.iter().all(|t| t.tile.version() == 1 && t.tile.encode()[4] == 1));
+        assert!(only_plain.iter().all(|t| t.tile.whole_version() == 1 && t.tile.encode_whole()[4] == 1));
     }
 
     #[test]

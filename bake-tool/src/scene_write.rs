@@ -52,7 +52,9 @@ pub fn finish_scene(
         tiles: tiles.len() as u64,
     };
     // The oldest version that holds what the scene has, so older viewers read it.
+    // Tiles in prefix levels (tile version 3) need version 7.
     base.version = match &base.terrain {
+        _ if tiles.iter().any(|t| t.levels.is_some()) => 7,
         _ if base.attributes.is_some() => 6,
         Some(t) if t.imagery.is_some() => 5,
         Some(_) => 4,

@@ -488,25 +488,27 @@ fn baked_heights(scene: &Path) -> Vec<f32> {
     out
 }
 
-/// (height, crown width, tile version) of every baked tree: the instance's
+/// (height, crown width, crown flag) of every baked tree: the instance's
 /// scale × the model's height, and scale × crown aspect × the model's crown
 /// width (the mean of its x and y extents).
-fn baked_trees(scene: &Path) -> Vec<(f32, f32, u16)> {
+fn baked_trees(scene: &Path) -> Vec<(f32, f32, bool)> {
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
     let tiles = sylva::format::index::read_all_tiles(scene, &m).unwrap();
     let mut out = Vec::new();
     for t in tiles {
         let bytes = std::fs::read(scene.join(&t.url)).unwrap();
-        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+        assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 3, "tiles in prefix levels");
         let tile = sylva::format::Tile::decode(&t.url, &bytes, m.species.len() as u32).unwrap();
-        assert_eq!(bytes.len(), 32 + 80 * tile.batches.len() + 8 * tile.instances.len(), "8 bytes per tree");
+        let levels = 4 + 4 * sylva::format::tile::TILE_LEVELS as usize;
+        assert_eq!(bytes.len(), 32 + 80 * tile.batches.len() + levels + 8 * tile.instances.len(), "8 bytes per tree");
         for b in &tile.batches {
             let s = &m.species[b.species as usize];
             let model_w = ((s.bounds.max[0] - s.bounds.min[0]) + (s.bounds.max[1] - s.bounds.min[1])) * 0.5;
             let range = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
             for i in &tile.instances[range] {
                 let d = i.decode(b);
-                out.push((d.scale * s.height_m, d.scale * d.aspect * model_w, version));
+                let crowns = b.flags & sylva::format::tile::BATCH_CROWN_ASPECT != 0;
+                out.push((d.scale * s.height_m, d.scale * d.aspect * model_w, crowns));
             }
         }
     }
@@ -538,7 +540,7 @@ fn crown_widths_from_a_column_or_the_dbh_scale_each_tree_apart_from_its_height()
     assert!(log.contains("warning: 3 trees have crowns more than 4× wider"), "{log}");
     let trees = baked_trees(&dir.join("memory"));
     assert_eq!(trees.len(), 300);
-    assert!(trees.iter().all(|t| t.2 == 2), "tiles with crown widths are version 2");
+    assert!(trees.iter().all(|t| t.2), "batches with crown widths carry the flag");
     let near = |a: f32, b: f32, tol: f32| (a / b - 1.0).abs() <= tol;
     let count = |crown: f32| trees.iter().filter(|t| near(t.0, 12.0, 0.02) && near(t.1, crown, 0.04)).count();
     // Heights to the 8-bit scale steps, crowns to half a step of the batch's aspect range.
@@ -557,11 +559,11 @@ fn crown_widths_from_a_column_or_the_dbh_scale_each_tree_apart_from_its_height()
     // Bucketed (larger than memory) bakes carry the crowns through their files.
     run(&mut quick_bake(&model, &path, &dir.join("buckets"), &[&crs[..], &["--bucket-trees", "100"]].concat()));
     assert_eq!(snapshot(&dir.join("memory")), snapshot(&dir.join("buckets")), "streamed = in memory");
-    // Without crown data, tiles stay version 1 (readable by older viewers).
+    // Without crown data, batches keep their variation bits (no crown flag).
     let heights_only: String = csv.lines().map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n").collect();
     std::fs::write(&path, heights_only).unwrap();
     run(&mut quick_bake(&model, &path, &dir.join("plain"), &crs));
-    assert!(baked_trees(&dir.join("plain")).iter().all(|t| t.2 == 1));
+    assert!(baked_trees(&dir.join("plain")).iter().all(|t| !t.2));
 }
 
 /// The test DEM's ground: a slope rising 0.3 m per metre east and 0.1 m per metre south.
@@ -702,15 +704,17 @@ fn trees_stand_on_the_ground_of_a_dem() {
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
     let bare = inspect_json(&dir.join("bare"));
     assert!(bare["terrain"].is_null());
-    assert_eq!(bare["version"], 3, "a scene without terrain is manifest version 3 (older viewers read it)");
-    // The fitted ground carries the procedural forest floor as imagery (version 5);
-    // --plain-ground leaves it out (version 4).
+    // Every scene is version 7 now (tiles in prefix levels), whatever its ground.
+    assert_eq!(bare["version"], 7);
+    // The fitted ground carries the procedural forest floor as imagery;
+    // --plain-ground leaves it out.
     let fitted = inspect_json(&dir.join("fitted"));
-    assert_eq!(fitted["version"], 5);
+    assert_eq!(fitted["version"], 7);
     assert!(fitted["terrain"]["imagery"]["source"].as_str().unwrap().contains("procedural forest floor"), "{fitted}");
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("plain"), &[&crs[..], &["--plain-ground"]].concat()));
     let plain = inspect_json(&dir.join("plain"));
-    assert_eq!(plain["version"], 4);
+    assert_eq!(plain["version"], 7);
+    assert!(plain["terrain"]["imagery"].is_null());
     assert!(plain["terrain"]["imagery"].is_null());
     // Bad DEM inputs are named.
     let e = fails(&mut quick_bake(
@@ -882,7 +886,7 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     assert!(log.contains("attribute \"Condition\" left out: a repeated column name"), "{log}");
     let manifest =
         sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(manifest.version, 6);
+    assert_eq!(manifest.version, 7, "tiles in prefix levels");
     let schema = manifest.attributes.clone().expect("attributes");
     let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed", "girth"]);
@@ -990,11 +994,11 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     assert_eq!(names, ["condition", "planted"]);
     let err = fails(&mut quick_bake(&model, &csv, &dir.join("bad"), &["--attributes", "condtion"]));
     assert!(err.contains("--attributes \"condtion\": no such column") && err.contains("\"condition\""), "{err}");
-    // None: no sidecars, and the oldest manifest version that holds the scene.
+    // None: no sidecars.
     let none = dir.join("none");
     run(&mut quick_bake(&model, &csv, &none, &["--default-model", "oak", "--no-attributes"]));
     let m = sylva::format::Manifest::decode("s", &std::fs::read(none.join("scene.json")).unwrap()).unwrap();
-    assert!(m.attributes.is_none() && m.version < 6);
+    assert!(m.attributes.is_none());
     assert!(!std::fs::read_dir(none.join("tiles")).unwrap().any(|e| e
         .unwrap()
         .path()

@@ -5,14 +5,18 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     // The first byte picks the species count the manifest would give.
     let species = u32::from(data.first().copied().unwrap_or(0));
-    if let Ok(tile) = sylva::format::Tile::decode("fuzz.tile", data.get(1..).unwrap_or(&[]), species) {
-        // A valid tile re-encodes to the same bytes (a version 2 tile without
-        // crown aspects as version 1), and every instance decodes to finite values.
-        let mut expected = data[1..].to_vec();
-        if tile.version() == 1 {
-            expected[4] = 1;
+    let bytes = data.get(1..).unwrap_or(&[]);
+    if let Ok(tile) = sylva::format::Tile::decode("fuzz.tile", bytes, species) {
+        // A valid tile re-encodes to the same bytes: version 3 in prefix levels;
+        // versions 1 and 2 in the old layout (a version 2 tile without crown
+        // aspects as version 1). Every instance decodes to finite values.
+        if bytes[4] == 3 {
+            assert_eq!(tile.encode(), bytes);
+        } else {
+            let mut expected = bytes.to_vec();
+            expected[4] = tile.whole_version() as u8;
+            assert_eq!(tile.encode_whole(), expected);
         }
-        assert_eq!(tile.encode(), expected);
         for b in &tile.batches {
             let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
             for i in &tile.instances[run] {
@@ -20,6 +24,17 @@ fuzz_target!(|data: &[u8]| {
                 assert!(d.position_m.iter().all(|v| v.is_finite()) || b.origin_m.iter().any(|o| o.abs() > 1e30));
                 assert!(d.aspect.is_finite() && d.aspect > 0.0);
             }
+        }
+    }
+    // A prefix: each batch's first trees, mapped back to the tile's order within it.
+    if let Ok(p) = sylva::format::Tile::decode_prefix("fuzz.tile", bytes, species) {
+        assert!(p.levels >= 1 && p.levels <= p.of);
+        let held: u32 = p.tile.batches.iter().map(|b| b.instance_count).sum();
+        assert_eq!(held as usize, p.tile.instances.len());
+        let whole: u64 = p.tile.batches.iter().map(|b| u64::from(b.whole_count())).sum();
+        let runs = p.runs();
+        for i in 0..held {
+            assert!(u64::from(sylva::format::tile::whole_index(&runs, i)) < whole);
         }
     }
 });

@@ -209,8 +209,9 @@ pub(crate) struct ViewArgs {
     /// LoD quality factor (1, 0.5, 0.25: projected sizes are scaled by it).
     #[arg(long, default_value_t = 1.0)]
     pub(crate) quality: f32,
-    /// Draw distance in metres.
-    #[arg(long, default_value_t = 6000.0)]
+    /// Draw distance in metres (default: none; far tiles are fetched and drawn
+    /// as thin prefixes, and full pools shorten the reach by themselves).
+    #[arg(long, default_value_t = f32::INFINITY, hide_default_value = true)]
     pub(crate) draw_distance: f32,
 }
 

@@ -21,7 +21,7 @@ pub(crate) fn path_cameras(scene: &str, path: &str, frames: usize) -> Result<Vec
     let mut probe = OffscreenScene::open(scene, 16, 16, PoolConfig::default())
         .map_err(|e| anyhow::anyhow!("{e}"))
         .with_context(|| format!("opening {scene}"))?;
-    for e in probe.load_view(&Camera::default(), 120.0) {
+    for e in probe.load_manifest(120.0) {
         if let StreamEvent::Fatal { message } = e {
             bail!("{scene}: {message}");
         }

@@ -35,7 +35,7 @@ pub(crate) fn render_scene(
     off.settings = settings;
     off.stream.set_imagery(imagery);
     // The manifest first: the named views are derived from its bounds.
-    let mut events = off.load_view(&Camera::default(), timeout);
+    let mut events = off.load_manifest(timeout);
     let manifest = match off.stream.manifest() {
         Some(m) => m.clone(),
         None => {
@@ -240,7 +240,7 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
         lod_policy,
         ..RenderSettings::default()
     };
-    let events = off.load_view(&Camera::default(), args.timeout);
+    let events = off.load_manifest(args.timeout);
     let Some(manifest) = off.stream.manifest().cloned() else {
         let why = events.iter().find_map(|e| match e {
             StreamEvent::Fatal { message } => Some(message.clone()),

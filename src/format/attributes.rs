@@ -652,7 +652,7 @@ mod tests {
                     assert_eq!(encode_attributes(&s, &c), b);
                     let mut out = vec![0u8; instances];
                     let ids: Vec<u64> = (0..instances as u64).collect();
-                    style.tile_bytes(Some(&s), &ids, Some(&c), &mut out);
+                    style.tile_bytes(Some(&s), &ids, Some(&c), 0, &mut out);
                     for i in 0..instances {
                         let _ = c.json(&s, i);
                         let _ = filter.matches(Some(&s), Some(&c), i, i as u64);

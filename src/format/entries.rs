@@ -46,6 +46,21 @@ pub struct TileEntry {
     /// sorted, so a prefix's codes are a run).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attribute_codes: Option<Vec<Option<[u32; 2]>>>,
+    /// The prefix levels of a version 3 tile (manifest version 7): what a view
+    /// fetches of it by byte range. Without it the tile is fetched whole.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub levels: Option<TileLevels>,
+}
+
+/// A version 3 tile's prefix levels, as its index entry lists them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TileLevels {
+    /// File bytes up to the end of each level (the last: the whole file).
+    pub bytes: Vec<u64>,
+    /// The tallest tree of the tile in metres (its batches' `max_height_m`):
+    /// with the tile's distance, how much of it a view draws.
+    pub height_m: f32,
 }
 
 /// The manifest's pointer to the index.
@@ -138,6 +153,21 @@ impl TileEntry {
             if codes.len() > super::attributes::MAX_ATTRIBUTE_COLUMNS || codes.iter().flatten().any(|[lo, hi]| lo > hi)
             {
                 return Err(Problem::Invalid(format!("{what}.attribute_codes: more columns than allowed or lo > hi")));
+            }
+        }
+        if let Some(l) = &self.levels {
+            let rising = l.bytes.windows(2).all(|w| w[0] <= w[1]);
+            if l.bytes.is_empty()
+                || l.bytes.len() > super::tile::MAX_TILE_LEVELS as usize
+                || !rising
+                || l.bytes.last() != Some(&self.bytes)
+                || !(l.height_m.is_finite() && l.height_m >= 0.0)
+            {
+                return Err(Problem::Invalid(format!(
+                    "{what}.levels: 1 to {} rising byte ends ending at the tile's {} bytes and a height ≥ 0 expected",
+                    super::tile::MAX_TILE_LEVELS,
+                    self.bytes
+                )));
             }
         }
         validate_bounds(&format!("{what}.bounds"), &self.bounds)

@@ -287,6 +287,7 @@ mod tests {
             batches: 1,
             bounds: Bounds { min: [fx, fy, 0.0], max: [fx + 100.0, fy + 100.0, 10.0 + x as f32] },
             attribute_codes: None,
+            levels: None,
         }
     }
 

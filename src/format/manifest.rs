@@ -7,19 +7,20 @@
 use serde::{Deserialize, Serialize};
 
 use super::entries::{check_url, validate_bounds};
-pub use super::entries::{densest_group, Bounds, Home, IndexRef, TileEntry};
+pub use super::entries::{densest_group, Bounds, Home, IndexRef, TileEntry, TileLevels};
 use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 6).
+/// Newest manifest version this build writes and reads (it reads 1 to 7).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
 /// ground imagery (`terrain.imagery`); version 6 per-tree attributes
-/// (`attributes`). The bake writes the oldest version that holds what a scene
-/// has (3 without terrain, 4 with terrain and no imagery, 5 with imagery), so
-/// older viewers read them.
-pub const SCENE_VERSION: u32 = 6;
+/// (`attributes`); version 7 tiles in prefix levels (tile version 3, the
+/// entries' `levels`). The bake writes the oldest version that holds what a
+/// scene has (7 for every scene with tiles since tiles are version 3; 3 to 6
+/// for older bakes), so older viewers refuse newer scenes with a clear message.
+pub const SCENE_VERSION: u32 = 7;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -173,6 +174,9 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<(), Problem> {
+        if self.version < 7 && self.tiles.iter().any(|t| t.levels.is_some()) {
+            return Err(Problem::Invalid("tiles with \"levels\" need manifest version 7".into()));
+        }
         if let Some(a) = &self.attributes {
             if self.version < 6 {
                 return Err(Problem::Invalid("\"attributes\" needs manifest version 6".into()));

@@ -5,16 +5,22 @@
 //! 8-byte instance records quantised relative to the batch origin. The batch
 //! and instance arrays are laid out exactly as the GPU reads them, so the
 //! renderer uploads them without repacking. Layout tables: `docs/FORMAT.md`.
+//!
+//! Version 3 stores the instances in prefix levels: level ℓ holds each
+//! density-ordered batch's next trees up to a prefix of `2^(ℓ+1−L)` of it, so
+//! the first bytes of the file up to a level's end are an even thinning of
+//! every batch, and a far view fetches that byte range only
+//! ([`Tile::decode_prefix`]).
 
 use super::error::{at_most, finite_all, pod_vec, DecodeError, Problem, Reader};
 
 /// First four bytes of a tile file.
 pub const TILE_MAGIC: [u8; 4] = *b"SYTL";
-/// Newest tile format version written and read by this build. A tile is
-/// written as version 1 unless a batch carries crown aspects
-/// ([`BATCH_CROWN_ASPECT`], version 2), so scenes without crown widths stay
-/// readable by older viewers.
-pub const TILE_VERSION: u16 = 2;
+/// Newest tile format version written and read by this build: 3, the
+/// instances in prefix levels ([`Tile::encode`]). Versions 1 and 2 (one run
+/// of instances per batch; 2 when a batch carries crown aspects) are still
+/// read, whole.
+pub const TILE_VERSION: u16 = 3;
 /// Oldest tile format version this build reads.
 pub const TILE_VERSION_MIN: u16 = 1;
 /// Bytes in the tile header.
@@ -23,6 +29,15 @@ pub const TILE_HEADER_BYTES: usize = 32;
 pub const MAX_TILE_BATCHES: u32 = 1 << 20;
 /// Most instances one tile may declare.
 pub const MAX_TILE_INSTANCES: u32 = 1 << 26;
+/// Prefix levels of a version 3 tile: level ℓ ends each density-ordered batch
+/// at `ceil(n · 2^(ℓ+1−L))` trees, 1/64 (the least prefix thinning keeps,
+/// `THIN_MIN_FRACTION` in `shaders/common.wgsl`), 1/32, …, ½, all.
+pub const TILE_LEVELS: u32 = 7;
+/// Most prefix levels a tile may declare.
+pub const MAX_TILE_LEVELS: u32 = 16;
+/// Largest batch split into levels: bigger ones (and batches that are not
+/// density-ordered) lie whole in level 0.
+pub const MAX_PARTIAL_BATCH: u32 = (1 << 24) - 1;
 
 /// Bits of the quantised height above the batch origin.
 pub const Z_BITS: u32 = 11;
@@ -87,8 +102,44 @@ pub const BATCH_DENSITY_ORDERED: u32 = 1;
 /// species model) instead of its variation, and the variation is a hash of
 /// its position ([`variation_of`]).
 pub const BATCH_CROWN_ASPECT: u32 = 2;
-/// Every batch flag this build knows.
+/// Every batch flag a tile file may carry.
 pub const BATCH_FLAGS: u32 = BATCH_DENSITY_ORDERED | BATCH_CROWN_ASPECT;
+/// Batch flag of a tile decoded from a prefix of its file, in memory and on
+/// the GPU only (refused in files): `instance_count` is the resident prefix
+/// and bits [`PARTIAL_COUNT_SHIFT`]–31 the batch's whole count, which prefix
+/// thinning and its coverage boost count with.
+pub const BATCH_PARTIAL: u32 = 4;
+/// Shift of a [`BATCH_PARTIAL`] batch's whole count in its flags.
+pub const PARTIAL_COUNT_SHIFT: u32 = 8;
+
+impl GpuBatch {
+    /// The batch's whole tree count: `instance_count`, or for a
+    /// [`BATCH_PARTIAL`] batch the count its flags carry.
+    #[must_use]
+    pub fn whole_count(&self) -> u32 {
+        if self.flags & BATCH_PARTIAL != 0 {
+            self.flags >> PARTIAL_COUNT_SHIFT
+        } else {
+            self.instance_count
+        }
+    }
+}
+
+/// Trees of `batch` (its whole count) in the prefix of levels `0..=level` of
+/// `levels`: `ceil(n · 2^(level+1−levels))`, all of them at the last level and
+/// for batches that are not density-ordered or bigger than [`MAX_PARTIAL_BATCH`].
+#[must_use]
+pub fn level_prefix(batch: &GpuBatch, level: u32, levels: u32) -> u32 {
+    let n = batch.instance_count;
+    if level + 1 >= levels || batch.flags & BATCH_DENSITY_ORDERED == 0 || n > MAX_PARTIAL_BATCH {
+        return n;
+    }
+    let halvings = levels - 1 - level;
+    if halvings >= 32 {
+        return n.min(1);
+    }
+    ((u64::from(n) + (1u64 << halvings) - 1) >> halvings) as u32
+}
 
 /// The crown aspects of a [`BATCH_CROWN_ASPECT`] batch: quantised aspect q
 /// (0–31) means `min · 2^(q · log2_step)`, both fixed-point in [`GpuBatch::crown`]
@@ -242,10 +293,81 @@ pub struct Tile {
     pub instances: Vec<PackedInstance>,
 }
 
+/// A tile decoded from a prefix of its file ([`Tile::decode_prefix`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TilePrefix {
+    /// The resident trees: each batch's first `instance_count`, batch after
+    /// batch; batches holding less than their whole count carry
+    /// [`BATCH_PARTIAL`]. The whole tile when `levels == of`.
+    pub tile: Tile,
+    /// Levels held.
+    pub levels: u32,
+    /// Levels in the file (1 for versions 1 and 2).
+    pub of: u32,
+}
+
+impl TilePrefix {
+    /// Per batch with fewer trees resident than it has, `[resident start,
+    /// resident count, start in the whole tile]` (instance indices): maps a
+    /// resident instance to its index in the tile's instance order (that of
+    /// `.ids` and `.attr`). Empty for a whole tile.
+    #[must_use]
+    pub fn runs(&self) -> Vec<[u32; 3]> {
+        if self.levels >= self.of {
+            return Vec::new();
+        }
+        let mut whole = 0;
+        self.tile
+            .batches
+            .iter()
+            .map(|b| {
+                let run = [b.instance_offset, b.instance_count, whole];
+                whole += b.whole_count();
+                run
+            })
+            .collect()
+    }
+}
+
+impl TilePrefix {
+    /// The batches as the file has them (whole counts, no [`BATCH_PARTIAL`];
+    /// instance offsets those of the resident trees), while levels are missing;
+    /// empty for a whole tile.
+    #[must_use]
+    pub fn whole_batches(&self) -> Vec<GpuBatch> {
+        if self.levels >= self.of {
+            return Vec::new();
+        }
+        let mask = BATCH_PARTIAL | (u32::MAX << PARTIAL_COUNT_SHIFT);
+        self.tile
+            .batches
+            .iter()
+            .map(|b| GpuBatch { instance_count: b.whole_count(), flags: b.flags & !mask, ..*b })
+            .collect()
+    }
+}
+
+/// The index in the whole tile's instance order of resident instance `i`, for
+/// a tile's [`TilePrefix::runs`] (the identity for none).
+#[must_use]
+pub fn whole_index(runs: &[[u32; 3]], i: u32) -> u32 {
+    if runs.is_empty() {
+        return i;
+    }
+    let k = runs.partition_point(|r| r[0] <= i).saturating_sub(1);
+    runs.get(k).map_or(i, |r| r[2] + (i - r[0]))
+}
+
 impl Tile {
-    /// The version this tile is written as: 2 if a batch carries crown aspects, else 1.
+    /// The version [`Tile::encode`] writes: 3.
     #[must_use]
     pub fn version(&self) -> u16 {
+        TILE_VERSION
+    }
+
+    /// The version [`Tile::encode_whole`] writes: 2 if a batch carries crown aspects, else 1.
+    #[must_use]
+    pub fn whole_version(&self) -> u16 {
         if self.batches.iter().any(|b| b.flags & BATCH_CROWN_ASPECT != 0) {
             2
         } else {
@@ -253,14 +375,63 @@ impl Tile {
         }
     }
 
-    /// Encodes the tile into its file bytes (as [`Tile::version`]).
+    /// Instances in the prefix of levels `0..=l` for each level `l` of
+    /// [`TILE_LEVELS`] (cumulative; the last is all).
+    #[must_use]
+    pub fn level_counts(&self) -> Vec<u32> {
+        (0..TILE_LEVELS).map(|l| self.batches.iter().map(|b| level_prefix(b, l, TILE_LEVELS)).sum()).collect()
+    }
+
+    /// File bytes up to the end of each level of the version 3 file
+    /// ([`Tile::encode`]): the byte ranges a viewer fetches.
+    #[must_use]
+    pub fn level_bytes(&self) -> Vec<u64> {
+        let head = (TILE_HEADER_BYTES + self.batches.len() * 80 + 4 + 4 * TILE_LEVELS as usize) as u64;
+        self.level_counts().iter().map(|&c| head + 8 * u64::from(c)).collect()
+    }
+
+    /// Encodes the tile into its version 3 file bytes: header, batches, the
+    /// level table (level count, then each level's cumulative instance count),
+    /// then the instances level after level, in each level batch after batch.
     #[must_use]
     pub fn encode(&self) -> Vec<u8> {
+        let counts = self.level_counts();
+        let mut out = self.encode_head(TILE_VERSION, 4 + 4 * counts.len());
+        out.extend_from_slice(&TILE_LEVELS.to_le_bytes());
+        for c in &counts {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+        for l in 0..TILE_LEVELS {
+            for b in &self.batches {
+                let from = if l == 0 { 0 } else { level_prefix(b, l - 1, TILE_LEVELS) };
+                let to = level_prefix(b, l, TILE_LEVELS);
+                let start = b.instance_offset as usize;
+                out.extend_from_slice(bytemuck::cast_slice(
+                    &self.instances[start + from as usize..start + to as usize],
+                ));
+            }
+        }
+        out
+    }
+
+    /// Encodes the tile as versions 1 and 2 wrote it (each batch's instances in
+    /// one run; [`Tile::whole_version`]): for tests that old scenes still read.
+    #[must_use]
+    pub fn encode_whole(&self) -> Vec<u8> {
+        let mut out = self.encode_head(self.whole_version(), 0);
+        out.extend_from_slice(bytemuck::cast_slice(&self.instances));
+        out
+    }
+
+    fn encode_head(&self, version: u16, table_bytes: usize) -> Vec<u8> {
         let mut out = Vec::with_capacity(
-            TILE_HEADER_BYTES + self.batches.len() * std::mem::size_of::<GpuBatch>() + self.instances.len() * 8,
+            TILE_HEADER_BYTES
+                + self.batches.len() * std::mem::size_of::<GpuBatch>()
+                + table_bytes
+                + self.instances.len() * 8,
         );
         out.extend_from_slice(&TILE_MAGIC);
-        out.extend_from_slice(&self.version().to_le_bytes());
+        out.extend_from_slice(&version.to_le_bytes());
         out.extend_from_slice(&(TILE_HEADER_BYTES as u16).to_le_bytes());
         out.extend_from_slice(&(self.batches.len() as u32).to_le_bytes());
         out.extend_from_slice(&(self.instances.len() as u32).to_le_bytes());
@@ -270,7 +441,6 @@ impl Tile {
         out.extend_from_slice(&(std::mem::size_of::<PackedInstance>() as u16).to_le_bytes());
         out.extend_from_slice(&0u32.to_le_bytes());
         out.extend_from_slice(bytemuck::cast_slice(&self.batches));
-        out.extend_from_slice(bytemuck::cast_slice(&self.instances));
         out
     }
 
@@ -283,7 +453,17 @@ impl Tile {
     /// negative bound, a batch whose instance run is outside the tile or out of
     /// order, or an unknown species.
     pub fn decode(file: &str, bytes: &[u8], species_count: u32) -> Result<Self, DecodeError> {
-        decode_tile(bytes, species_count).map_err(|p| DecodeError::new(file, p))
+        decode_tile(bytes, species_count, false).map(|p| p.tile).map_err(|p| DecodeError::new(file, p))
+    }
+
+    /// Decodes the first bytes of a tile file, up to the end of one of its
+    /// levels ([`Tile::level_bytes`]; all of them for versions 1 and 2): the
+    /// trees held, batches holding a prefix marked [`BATCH_PARTIAL`].
+    ///
+    /// # Errors
+    /// As [`Tile::decode`], and for a length that is not a level's end.
+    pub fn decode_prefix(file: &str, bytes: &[u8], species_count: u32) -> Result<TilePrefix, DecodeError> {
+        decode_tile(bytes, species_count, true).map_err(|p| DecodeError::new(file, p))
     }
 
     /// Bytes of the instance records (what "bytes per tree" counts).
@@ -293,7 +473,7 @@ impl Tile {
     }
 }
 
-fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
+fn decode_tile(bytes: &[u8], species_count: u32, prefix: bool) -> Result<TilePrefix, Problem> {
     let r = Reader::new(bytes);
     r.magic("Sylva tile", &TILE_MAGIC)?;
     let version = r.u16("header.version", 4)?;
@@ -321,14 +501,46 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
     let flags = r.u32("header.flags", 28)?;
     if flags != 0 {
         return Err(Problem::Invalid(format!(
-            "header.flags is {flags:#x}; tile versions 1 and 2 define no header flags (must be 0)"
+            "header.flags is {flags:#x}; tile versions 1 to 3 define no header flags (must be 0)"
         )));
     }
     let batch_start = TILE_HEADER_BYTES as u64;
     let batch_len = batch_count * 80;
-    let instance_start = batch_start + batch_len;
+    // Version 3: the level table after the batches.
+    let (levels, table_len) = if version >= 3 {
+        let at = batch_start + batch_len;
+        let levels = r.u32("levels.count", at)?;
+        if !(1..=MAX_TILE_LEVELS).contains(&levels) {
+            return Err(Problem::OutOfRange {
+                what: "levels.count".into(),
+                value: levels.into(),
+                allowed: format!("1 to {MAX_TILE_LEVELS}"),
+            });
+        }
+        (levels, 4 + 4 * u64::from(levels))
+    } else {
+        (1, 0)
+    };
+    let instance_start = batch_start + batch_len + table_len;
     let instance_len = instance_count * 8;
     let end = instance_start + instance_len;
+    let level_ends: Vec<u64> = if version >= 3 {
+        (0..levels)
+            .map(|l| {
+                let c = r.u32("levels.counts", batch_start + batch_len + 4 + 4 * u64::from(l))?;
+                Ok(instance_start + 8 * u64::from(c))
+            })
+            .collect::<Result<_, Problem>>()?
+    } else {
+        vec![end]
+    };
+    // A prefix ends where a level does (the last of the levels ending there:
+    // levels adding no trees end where the one before does).
+    let held = match level_ends.iter().rposition(|&e| e == bytes.len() as u64) {
+        Some(l) if prefix && level_ends.last() == Some(&end) => l as u32 + 1,
+        _ => levels,
+    };
+    let end = if held < levels { bytes.len() as u64 } else { end };
     // Check the whole size before allocating anything from the counts.
     if end != bytes.len() as u64 {
         return Err(if end > bytes.len() as u64 {
@@ -346,7 +558,6 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
         });
     }
     let batches: Vec<GpuBatch> = pod_vec(r.slice("batches", batch_start, batch_len)?);
-    let instances: Vec<PackedInstance> = pod_vec(r.slice("instances", instance_start, instance_len)?);
     let mut next = 0u64;
     for (i, b) in batches.iter().enumerate() {
         if version < 2 && b.flags & BATCH_CROWN_ASPECT != 0 {
@@ -368,7 +579,59 @@ fn decode_tile(bytes: &[u8], species_count: u32) -> Result<Tile, Problem> {
             "batches hold {next} instances but the header declares {instance_count}"
         )));
     }
-    Ok(Tile { tile_x, tile_y, batches, instances })
+    if version < 3 {
+        let instances = pod_vec(r.slice("instances", instance_start, instance_len)?);
+        return Ok(TilePrefix { tile: Tile { tile_x, tile_y, batches, instances }, levels: 1, of: 1 });
+    }
+    // The level table must be what the batches' counts give.
+    for (l, &e) in level_ends.iter().enumerate() {
+        let want: u64 = batches.iter().map(|b| u64::from(level_prefix(b, l as u32, levels))).sum();
+        if e != instance_start + 8 * want {
+            return Err(Problem::Invalid(format!(
+                "levels.counts[{l}] is {}, the batches' level {l} prefixes hold {want}",
+                (e - instance_start) / 8
+            )));
+        }
+    }
+    // Gather each batch's trees from the levels held, batch after batch.
+    let held_bytes = r.slice("instances", instance_start, end - instance_start)?;
+    let stored: Vec<PackedInstance> = pod_vec(held_bytes);
+    let resident: Vec<u32> = batches.iter().map(|b| level_prefix(b, held - 1, levels)).collect();
+    let mut starts = Vec::with_capacity(batches.len());
+    let mut at = 0u32;
+    for &k in &resident {
+        starts.push(at);
+        at += k;
+    }
+    let mut instances = vec![PackedInstance::default(); at as usize];
+    let mut from = 0usize;
+    for l in 0..held {
+        for (i, b) in batches.iter().enumerate() {
+            let lo = if l == 0 { 0 } else { level_prefix(b, l - 1, levels) };
+            let hi = level_prefix(b, l, levels);
+            let n = (hi - lo) as usize;
+            let dst = (starts[i] + lo) as usize;
+            instances[dst..dst + n].copy_from_slice(&stored[from..from + n]);
+            from += n;
+        }
+    }
+    let batches = batches
+        .into_iter()
+        .zip(resident.iter().zip(&starts))
+        .map(|(b, (&k, &start))| {
+            if k < b.instance_count {
+                GpuBatch {
+                    instance_offset: start,
+                    instance_count: k,
+                    flags: b.flags | BATCH_PARTIAL | (b.instance_count << PARTIAL_COUNT_SHIFT),
+                    ..b
+                }
+            } else {
+                GpuBatch { instance_offset: start, ..b }
+            }
+        })
+        .collect();
+    Ok(TilePrefix { tile: Tile { tile_x, tile_y, batches, instances }, levels: held, of: levels })
 }
 
 fn validate_batch(i: usize, b: &GpuBatch, species_count: u32) -> Result<(), Problem> {

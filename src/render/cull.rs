@@ -203,7 +203,7 @@ pub fn cpu_select_styled(
         let batch_culling = view.lod[3] < 0.5;
         // A thinned batch draws its kept trees bigger (`coverage_boost`): its bounds grow as much.
         let (kept, boost) = thinning(b, view);
-        let boosted = if kept < b.instance_count as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
+        let boosted = if kept < b.whole_count() as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
         let grow = (boosted - 1.0) * b.max_height_m;
         if batch_culling
             && (!sphere_visible(center, b.radius_m + grow, view)
@@ -232,7 +232,7 @@ pub fn cpu_select_styled(
             let sa = d.2 * d.3;
             let c = d.0 + rotate_z(Vec3::new(s.sphere[0] * sa, s.sphere[1] * sa, s.sphere[2] * d.2), d.1);
             // A thinned batch's kept trees are drawn bigger (`coverage_boost`): so are their bounds.
-            let grown = if thinned && kept < b.instance_count as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
+            let grown = if thinned && kept < b.whole_count() as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
             let r = s.sphere[3] * d.2 * d.3.max(1.0) * grown;
             let dist = c.length().max(1e-3);
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
@@ -259,19 +259,20 @@ pub fn cpu_select_styled(
 /// (trees kept, fractional; n / kept, 1 when not thinned).
 #[must_use]
 pub fn thinning(b: &GpuBatch, view: &ViewUniform) -> (f32, f32) {
-    let n = b.instance_count as f32;
+    let n = b.whole_count() as f32;
+    let held = (b.instance_count as f32).max(1.0);
     let t = view.viewport[2];
     if b.flags & crate::format::tile::BATCH_DENSITY_ORDERED == 0 || t <= 0.0 || view.lod[3] > 0.5 {
-        return (n, 1.0);
+        return (held, n / held);
     }
     let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
     let d = (center.abs() - Vec3::from(b.half_extent_m)).max(Vec3::ZERO).length().max(1e-3);
     let h = b.max_height_m * view.lod[0] / d;
     if h >= t {
-        return (n, 1.0);
+        return (held, n / held);
     }
     let f = ((h * h) / (t * t)).clamp(THIN_MIN_FRACTION, 1.0);
-    let kept = (n * f).max(1.0);
+    let kept = (n * f).max(1.0).min(held);
     (kept, n / kept)
 }
 

@@ -194,6 +194,14 @@ impl<F: Fetcher> Frame<F> {
         // A refinement's finer levels need finer parts of the packs: fetch for them.
         let settings = self.refine_plan(view).map_or(self.settings, |p| self.refine.settings(&self.settings, &p));
         self.renderer.measure_reach(view, &settings);
+        // Far tiles are fetched as far as prefix thinning draws them.
+        let thinned = settings.thin_px > 0.0 && settings.culling == super::settings::CullingMode::Batches;
+        self.stream.set_prefix_view(
+            thinned.then_some(crate::scene::streaming::PrefixView {
+                thin_px: settings.thin_px,
+                lod_scale: settings.quality,
+            }),
+        );
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);
         if let Some(m) = self.stream.manifest() {
@@ -268,7 +276,7 @@ impl<F: Fetcher> Frame<F> {
         let schema = self.stream.manifest().and_then(|m| m.attributes.as_ref());
         let hidden = if style.filters() { super::gpu_data::STYLE_HIDDEN } else { 0 };
         let mut present = std::collections::HashSet::new();
-        for (t, range, data) in self.stream.resident_tree_data() {
+        for (t, range, runs, data) in self.stream.resident_tree_data() {
             use crate::scene::streaming::TreeDataState as S;
             let key = (t, range.start);
             present.insert(key);
@@ -285,7 +293,14 @@ impl<F: Fetcher> Frame<F> {
             }
             let out = &mut st.bytes[range.start as usize..range.end as usize];
             match data {
-                S::Ready(d) => style.tile_bytes(schema, &d.ids, d.codes.as_ref(), out),
+                // A tile holding a prefix: each batch's resident trees are a run of the tile's.
+                S::Ready(d) if !runs.is_empty() => {
+                    for r in runs {
+                        let (at, n, first) = (r[0] as usize, r[1] as usize, r[2] as usize);
+                        style.tile_bytes(schema, &d.ids, d.codes.as_ref(), first, &mut out[at..at + n]);
+                    }
+                }
+                S::Ready(d) => style.tile_bytes(schema, &d.ids, d.codes.as_ref(), 0, out),
                 // Until its ids and attributes arrive a filter hides the tile's trees;
                 // without them for good (a sidecar failed) they keep their own look.
                 S::Pending => out.fill(hidden),

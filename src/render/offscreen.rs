@@ -178,6 +178,23 @@ impl<F: Fetcher> OffscreenScene<F> {
         }
     }
 
+    /// Streams until the manifest is in (or given up on, or `timeout_s` passes),
+    /// fetching nothing a view would: the camera looks down from far below the
+    /// scene. Returns the events seen.
+    pub fn load_manifest(&mut self, timeout_s: f64) -> Vec<StreamEvent> {
+        let nowhere =
+            Camera { eye_m: DVec3::new(0.0, 0.0, -1e7), pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() };
+        let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s);
+        let mut events = Vec::new();
+        loop {
+            events.extend(self.update_stream(&nowhere));
+            if self.stream.manifest().is_some() || self.stream.is_settled() || Instant::now() > deadline {
+                return events;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+    }
+
     /// The camera of a named view, placing the close view on the ground near the
     /// scene centre (loads the data around it to find the ground).
     pub fn named_camera(&mut self, view: NamedView, timeout_s: f64) -> Option<Camera> {

@@ -22,7 +22,9 @@ pub enum CullingMode {
 pub struct RenderSettings {
     /// Scales projected sizes before LoD selection (1, ½, ¼ like seed 002 Fig. 12).
     pub quality: f32,
-    /// Trees farther than this are not drawn (metres).
+    /// Trees farther than this are not drawn (metres; infinite by default: far
+    /// tiles are fetched and drawn as thin prefixes, so a view of any height
+    /// shows its forest, and pools that fill shorten the reach themselves).
     pub draw_distance_m: f32,
     /// Half width of a transition band, as a fraction of its threshold.
     pub fade_band: f32,
@@ -140,7 +142,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         Self {
             quality: 1.0,
-            draw_distance_m: 6000.0,
+            draw_distance_m: f32::INFINITY,
             fade_band: 0.12,
             debug_lod: false,
             debug_bounds: false,

@@ -37,6 +37,8 @@ pub struct FrameStats {
     pub tiles_loading: u64,
     /// Bytes fetched so far.
     pub bytes_fetched: u64,
+    /// Of them, tile bytes (whole tiles or prefix levels).
+    pub tile_bytes_fetched: u64,
     /// Requests started so far (manifest, index nodes, tiles, packs).
     pub requests: u64,
     /// Tiles known so far (flat list, or leaves of the index nodes read).
@@ -117,6 +119,7 @@ impl FrameStats {
             tiles_resident: s.tiles_resident,
             tiles_loading: s.loading,
             bytes_fetched: s.bytes_fetched,
+            tile_bytes_fetched: s.tile_bytes_fetched,
             requests: s.requests,
             tiles_known: s.tiles_known,
             tiles_total: stream.manifest().map_or(0, |m| m.counts.tiles),

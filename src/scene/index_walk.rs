@@ -239,6 +239,7 @@ mod tests {
                     batches: 1,
                     bounds: Bounds { min: [fx - 4.0, fy - 4.0, z], max: [fx + 516.0, fy + 516.0, z + 40.0] },
                     attribute_codes: None,
+                    levels: None,
                 });
             }
         }

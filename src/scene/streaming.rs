@@ -20,7 +20,8 @@ use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
 use crate::format::attributes::AttributeCodes;
 use crate::format::terrain::TerrainTile;
-use crate::format::{DecodeError, Manifest, Tile};
+use crate::format::tile::level_prefix;
+use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
 use crate::geo::GeoFrame;
 use packs::PackLoad;
 
@@ -141,7 +142,108 @@ enum TileState {
         species: Vec<u32>,
         cells: Vec<[f32; 5]>,
         data: TreeDataLoad,
+        prefix: Box<Prefix>,
     },
+}
+
+/// How much of a resident tile's file is held (its prefix levels) and the
+/// request for more.
+struct Prefix {
+    /// Levels held.
+    levels: u32,
+    /// The file's bytes so far, kept while more levels may come (appended to,
+    /// never fetched again).
+    bytes: Vec<u8>,
+    /// [`crate::format::tile::TilePrefix::runs`]: resident instance → index in the tile.
+    runs: std::sync::Arc<Vec<[u32; 3]>>,
+    /// The tile's whole batches while more levels may come (what decides them).
+    batches: Vec<GpuBatch>,
+    /// The request for the next levels.
+    more: Load,
+}
+
+/// What prefix thinning keeps of far trees (the renderer's settings), so the
+/// stream fetches only that prefix of a tile ([`SceneStream::set_prefix_view`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PrefixView {
+    /// The thinning threshold in pixels (`RenderSettings::thin_px`; > 0).
+    pub thin_px: f32,
+    /// The factor on pixels per metre the cull pass uses (the quality).
+    pub lod_scale: f32,
+}
+
+/// The first guess of the prefix levels (of `levels`, 1..=levels) a view
+/// drawing with `thin` needs of a tile, before its batches are known: the
+/// thinned fraction (`thinning` in `shaders/common.wgsl`) of its tallest tree
+/// at the nearest point of the tile the view sees (sampled). All of them
+/// without thinning. [`batch_levels_wanted`] decides once the head is in.
+#[must_use]
+pub fn first_levels_wanted(
+    view: &ViewData,
+    bounds: &crate::format::Bounds,
+    height_m: f32,
+    levels: u32,
+    thin: Option<PrefixView>,
+) -> u32 {
+    let Some(thin) = thin.filter(|t| t.thin_px > 0.0) else { return levels };
+    let eye = view.eye_hi + view.eye_lo;
+    let (lo, hi) = (Vec3::from(bounds.min) - eye, Vec3::from(bounds.max) - eye);
+    let inside = |p: Vec3| view.frustum.iter().all(|f| f.truncate().dot(p) + f.w >= 0.0);
+    let mut d = f32::INFINITY;
+    if lo.cmple(Vec3::ZERO).all() && hi.cmpge(Vec3::ZERO).all() {
+        d = 0.0;
+    }
+    for i in 0..5 {
+        for j in 0..5 {
+            for k in 0..3 {
+                let p = lo + (hi - lo) * Vec3::new(i as f32 / 4.0, j as f32 / 4.0, k as f32 / 2.0);
+                if inside(p) {
+                    d = d.min(p.length());
+                }
+            }
+        }
+    }
+    if d == f32::INFINITY {
+        d = tile_distance(bounds, eye);
+    }
+    let h = height_m * view.px_per_m_at_1m * thin.lod_scale / (d * 0.99).max(1e-3);
+    if h >= thin.thin_px || h.is_nan() {
+        return levels;
+    }
+    let f = (h * h) / (thin.thin_px * thin.thin_px);
+    (1..=levels).find(|&l| (l as f32 - levels as f32).exp2() >= f).unwrap_or(levels)
+}
+
+/// The prefix levels (of `levels`, 1..=levels) a view drawing with `thin`
+/// needs of a tile whose whole batches are `batches`: the most any batch in
+/// view keeps (`thinning` in `shaders/common.wgsl`: its tallest tree at its
+/// nearest point, 1 % nearer against float noise). All of them without thinning.
+#[must_use]
+pub fn batch_levels_wanted(view: &ViewData, batches: &[GpuBatch], levels: u32, thin: Option<PrefixView>) -> u32 {
+    let Some(thin) = thin.filter(|t| t.thin_px > 0.0) else { return levels };
+    let eye = view.eye_hi + view.eye_lo;
+    let mut want = 1;
+    for b in batches {
+        let (c, half) = (Vec3::from(b.center_m) - eye, Vec3::from(b.half_extent_m));
+        let seen = view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(half) >= 0.0);
+        if b.instance_count == 0 || !seen {
+            continue;
+        }
+        let d = ((c.abs() - half).max(Vec3::ZERO).length() * 0.99).max(1e-3);
+        let h = b.max_height_m * view.px_per_m_at_1m * thin.lod_scale / d;
+        let need = if h < thin.thin_px {
+            let f = ((h * h) / (thin.thin_px * thin.thin_px)).clamp(1.0 / 64.0, 1.0);
+            (b.instance_count as f32 * f).max(1.0).ceil() as u32
+        } else {
+            b.instance_count
+        };
+        let l = (0..levels).find(|&l| level_prefix(b, l, levels) >= need).unwrap_or(levels - 1) + 1;
+        want = want.max(l);
+        if want == levels {
+            break;
+        }
+    }
+    want
 }
 
 /// The ids and attribute codes of a resident tile's trees, in instance order.
@@ -203,6 +305,8 @@ enum Target {
     ImageSource(u32, (u8, u32, u32)),
     /// A resident tile's ids (`false`) or attributes (`true`) sidecar.
     TreeData(usize, bool),
+    /// More prefix levels of a resident tile holding this many.
+    TileMore(usize, u32),
 }
 
 /// Counters for stats.
@@ -210,6 +314,8 @@ enum Target {
 pub struct StreamStats {
     /// Bytes received.
     pub bytes_fetched: u64,
+    /// Of them, bytes of tiles (whole or prefix levels).
+    pub tile_bytes_fetched: u64,
     /// Tiles in the GPU pools.
     pub tiles_resident: u64,
     /// Requests in flight.
@@ -257,7 +363,7 @@ pub fn locate(tiles: &[(std::ops::Range<u32>, LocatedTree)], instance: u32) -> O
     tiles
         .iter()
         .find(|(range, _)| range.contains(&instance))
-        .map(|(range, t)| LocatedTree { index: instance - range.start, ..t.clone() })
+        .map(|(range, t)| LocatedTree { index: t.index + (instance - range.start), ..t.clone() })
 }
 
 /// A scene being streamed into a [`Residency`] (the renderer's GPU pools).
@@ -304,6 +410,10 @@ pub struct SceneStream<F: Fetcher> {
     geo: Option<GeoFrame>,
     /// Resident tiles' ids (and, with the second, attributes) are fetched (a style uses them).
     tree_data: (bool, bool),
+    /// Fetch tiles' prefixes only (None: whole tiles).
+    prefix_view: Option<PrefixView>,
+    /// Wanted tiles within reach holding fewer levels than the view needs.
+    levels_short: usize,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -315,16 +425,17 @@ impl<F: Fetcher> SceneStream<F> {
         locate(&self.tile_locations(), instance)
     }
 
-    /// Every resident tile's instance range in the pools, with its files
-    /// (index 0): a snapshot a pick answered later can be located in
-    /// ([`locate`]), whatever streamed in or out meanwhile.
+    /// Every resident tile's instance range in the pools, with its files and
+    /// the tile index of the range's first instance (one range per batch for a
+    /// tile holding a prefix): a snapshot a pick answered later can be located
+    /// in ([`locate`]), whatever streamed in or out meanwhile.
     #[must_use]
     pub fn tile_locations(&self) -> Vec<(std::ops::Range<u32>, LocatedTree)> {
         self.tiles
             .iter()
             .enumerate()
             .filter_map(|(t, state)| match state {
-                TileState::Resident { slot, .. } => {
+                TileState::Resident { slot, prefix, .. } => {
                     let entry = self.index.tiles.get(t)?;
                     let tree = LocatedTree {
                         tile_url: join(&self.base, &entry.url),
@@ -332,10 +443,22 @@ impl<F: Fetcher> SceneStream<F> {
                         attributes_url: join(&self.base, &crate::format::attributes::attributes_url(&entry.url)),
                         index: 0,
                     };
-                    Some((slot.instances.clone(), tree))
+                    if prefix.runs.is_empty() {
+                        return Some(vec![(slot.instances.clone(), tree)]);
+                    }
+                    let at = slot.instances.start;
+                    Some(
+                        prefix
+                            .runs
+                            .iter()
+                            .filter(|r| r[1] > 0)
+                            .map(|r| (at + r[0]..at + r[0] + r[1], LocatedTree { index: r[2], ..tree.clone() }))
+                            .collect(),
+                    )
                 }
                 TileState::NotResident(_) => None,
             })
+            .flatten()
             .collect()
     }
 
@@ -374,7 +497,15 @@ impl<F: Fetcher> SceneStream<F> {
             imagery_wanted: Vec::new(),
             geo: None,
             tree_data: (false, false),
+            prefix_view: None,
+            levels_short: 0,
         }
+    }
+
+    /// Fetch only the prefix of each tile that a view drawing with this
+    /// thinning draws (None: whole tiles, as before prefix levels).
+    pub fn set_prefix_view(&mut self, thin: Option<PrefixView>) {
+        self.prefix_view = thin;
     }
 
     /// Where ground imagery comes from (the scene's own by default).
@@ -457,7 +588,23 @@ impl<F: Fetcher> SceneStream<F> {
         let terrain_done = self.terrain_wanted.is_empty()
             && !self.terrain_attempts.values().any(|(_, due)| due.is_finite())
             && self.imagery_wanted.is_empty();
-        manifest_done && nodes_done && tiles_done && packs_done && terrain_done && self.requests.is_empty()
+        // Trees' ids and attributes a style waits for and not yet asked for (the
+        // fetcher was busy): their tiles are drawn unstyled until they come.
+        let data_done = !self.tree_data.0
+            || self.wanted[..self.within_reach].iter().all(|&t| {
+                !matches!(
+                    &self.tiles[t],
+                    TileState::Resident { data: TreeDataLoad::None | TreeDataLoad::Failed(_), .. }
+                )
+            });
+        manifest_done
+            && nodes_done
+            && tiles_done
+            && self.levels_short == 0
+            && packs_done
+            && terrain_done
+            && data_done
+            && self.requests.is_empty()
     }
 
     /// The ground height at `(x, y)` (metres relative to the scene origin): the
@@ -530,6 +677,7 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::Manifest => self.on_manifest(residency, result, now_s),
                 Target::Node(n) => self.on_node(n, result, now_s),
                 Target::Tile(t) => self.on_tile(residency, t, result, view, now_s),
+                Target::TileMore(t, have) => self.on_tile_more(residency, t, have, result, view, now_s),
                 Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
                 Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
                 Target::Terrain(key) => self.on_terrain(key, result, now_s),
@@ -616,15 +764,18 @@ impl<F: Fetcher> SceneStream<F> {
 
     /// Every resident tile: its number, its range in the instance pool and its
     /// trees' ids and attributes once they arrived (with [`Self::set_tree_data`]).
-    pub fn resident_tree_data(&self) -> impl Iterator<Item = (usize, std::ops::Range<u32>, TreeDataState<'_>)> + '_ {
+    #[allow(clippy::type_complexity)]
+    pub fn resident_tree_data(
+        &self,
+    ) -> impl Iterator<Item = (usize, std::ops::Range<u32>, &[[u32; 3]], TreeDataState<'_>)> + '_ {
         self.tiles.iter().enumerate().filter_map(|(t, state)| match state {
-            TileState::Resident { slot, data, .. } => {
+            TileState::Resident { slot, data, prefix, .. } => {
                 let state = match data {
                     TreeDataLoad::Ready(d) => TreeDataState::Ready(d),
                     TreeDataLoad::Broken => TreeDataState::Broken,
                     _ => TreeDataState::Pending,
                 };
-                Some((t, slot.instances.clone(), state))
+                Some((t, slot.instances.clone(), prefix.runs.as_slice(), state))
             }
             TileState::NotResident(_) => None,
         })
@@ -941,28 +1092,41 @@ impl<F: Fetcher> SceneStream<F> {
             _ => 0,
         };
         let species_count = m.species.len() as u32;
+        if let Ok(bytes) = &result {
+            self.stats.tile_bytes_fetched += bytes.len() as u64;
+        }
         let decoded = result
             .map_err(|e| (e.to_string(), e.retryable()))
             // A corrupt tile may be a truncated transfer: worth one more try.
-            .and_then(|bytes| Tile::decode(&url, &bytes, species_count).map_err(|e| (e.to_string(), true)));
-        let tile = match decoded {
-            Ok(tile) => tile,
+            .and_then(|bytes| {
+                Tile::decode_prefix(&url, &bytes, species_count).map(|p| (p, bytes)).map_err(|e| (e.to_string(), true))
+            });
+        let (held, bytes) = match decoded {
+            Ok(held) => held,
             Err((message, retryable)) => {
                 let load = self.fail(url, &message, attempt, retryable, now_s);
                 self.tiles[t] = TileState::NotResident(load);
                 return;
             }
         };
-        let mut result = residency.upload_tile(&tile);
+        let tile = &held.tile;
+        let mut result = residency.upload_tile(tile);
         // Full pools: evict resident tiles the view does not want, farthest first.
         while matches!(result, Err(PoolError::Full(_))) {
             if !self.evict_one(residency, view) {
                 break;
             }
-            result = residency.upload_tile(&tile);
+            result = residency.upload_tile(tile);
         }
         match result {
             Ok(slot) => {
+                let prefix = Box::new(Prefix {
+                    levels: held.levels,
+                    runs: std::sync::Arc::new(held.runs()),
+                    batches: held.whole_batches(),
+                    bytes: if held.levels < held.of { bytes } else { Vec::new() },
+                    more: Load::Idle,
+                });
                 let species = slot.species_counts.iter().map(|(s, _)| *s).collect();
                 let cells = tile
                     .batches
@@ -972,7 +1136,7 @@ impl<F: Fetcher> SceneStream<F> {
                         [b.origin_m[0], b.origin_m[1], b.origin_m[0] + side, b.origin_m[1] + side, b.origin_m[2]]
                     })
                     .collect();
-                self.tiles[t] = TileState::Resident { slot, species, cells, data: TreeDataLoad::None };
+                self.tiles[t] = TileState::Resident { slot, species, cells, data: TreeDataLoad::None, prefix };
             }
             Err(PoolError::Full(what)) => {
                 // No room even after evicting everything unwanted: the view wants more
@@ -997,6 +1161,87 @@ impl<F: Fetcher> SceneStream<F> {
                 self.give_up(&url, &e.to_string());
                 self.events.push(StreamEvent::Failed { url, message: e.to_string(), retrying: false });
                 self.tiles[t] = TileState::NotResident(Load::Broken);
+            }
+        }
+    }
+
+    /// More levels of resident tile `t` (which held `have`) arrived: the tile is
+    /// uploaded again with them and its old room given back. On failure the
+    /// tile keeps what it holds.
+    fn on_tile_more(
+        &mut self,
+        residency: &mut impl Residency,
+        t: usize,
+        have: u32,
+        result: Result<Vec<u8>, FetchError>,
+        view: &ViewData,
+        now_s: f64,
+    ) {
+        let Some(m) = &self.manifest else { return };
+        let species_count = m.species.len() as u32;
+        let url = join(&self.base, &self.index.tiles[t].url);
+        let whole = self.index.tiles[t].bytes;
+        let TileState::Resident { prefix, .. } = &mut self.tiles[t] else { return };
+        if prefix.levels != have {
+            return;
+        }
+        let attempt = prefix.more.attempt();
+        let decoded = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|more| {
+            self.stats.tile_bytes_fetched += more.len() as u64;
+            // A server that ignores ranges answers with the whole file (a range is shorter).
+            let bytes = if more.len() as u64 == whole {
+                more
+            } else {
+                let mut bytes = Vec::with_capacity(prefix.bytes.len() + more.len());
+                bytes.extend_from_slice(&prefix.bytes);
+                bytes.extend_from_slice(&more);
+                bytes
+            };
+            Tile::decode_prefix(&url, &bytes, species_count).map(|p| (p, bytes)).map_err(|e| (e.to_string(), true))
+        });
+        let decoded = decoded.and_then(|(p, bytes)| {
+            if p.levels > have {
+                Ok((p, bytes))
+            } else {
+                Err(("the bytes fetched add no level to the tile".to_string(), false))
+            }
+        });
+        let (held, bytes) = match decoded {
+            Ok(d) => d,
+            Err((message, retryable)) => {
+                let load = self.fail(url, &message, attempt, retryable, now_s);
+                if let TileState::Resident { prefix, .. } = &mut self.tiles[t] {
+                    prefix.more = load;
+                }
+                return;
+            }
+        };
+        let mut result = residency.upload_tile(&held.tile);
+        while matches!(result, Err(PoolError::Full(_))) {
+            if !self.evict_one(residency, view) {
+                break;
+            }
+            result = residency.upload_tile(&held.tile);
+        }
+        let TileState::Resident { slot, prefix, .. } = &mut self.tiles[t] else { return };
+        match result {
+            Ok(new_slot) => {
+                residency.evict_tile(std::mem::replace(slot, new_slot));
+                **prefix = Prefix {
+                    levels: held.levels,
+                    runs: std::sync::Arc::new(held.runs()),
+                    batches: held.whole_batches(),
+                    bytes: if held.levels < held.of { bytes } else { Vec::new() },
+                    more: Load::Idle,
+                };
+            }
+            // No room for the bigger tile: it keeps what it holds; asked again later.
+            Err(PoolError::Full(_)) => prefix.more = Load::Waiting { attempt, retry_at_s: now_s + 1.0 },
+            Err(e) => {
+                let message = e.to_string();
+                prefix.more = Load::Broken;
+                self.give_up(&url, &message);
+                self.events.push(StreamEvent::Failed { url, message, retrying: false });
             }
         }
     }
@@ -1053,22 +1298,68 @@ impl<F: Fetcher> SceneStream<F> {
                 self.node_loads[n] = Load::Requested { attempt };
             }
         }
+        let mut short = 0;
         for &(_, i) in &wanted[..self.within_reach] {
-            if self.fetcher.in_flight() >= self.config.max_in_flight {
-                break;
-            }
-            let due = match &self.tiles[i] {
-                TileState::NotResident(Load::Idle) => Some(0),
-                TileState::NotResident(Load::Waiting { attempt, retry_at_s }) if now_s >= *retry_at_s => Some(*attempt),
-                _ => None,
-            };
-            if let Some(attempt) = due {
-                let id = self.fetcher.start(&join(&self.base, &self.index.tiles[i].url));
-                self.stats.requests += 1;
-                self.requests.insert(id, Target::Tile(i));
-                self.tiles[i] = TileState::NotResident(Load::Requested { attempt });
+            let entry = &self.index.tiles[i];
+            // The prefix levels the view draws of a tile in levels (None: fetched whole).
+            let levels = entry.levels.as_ref().map(|l| {
+                let n = l.bytes.len() as u32;
+                let want = match &self.tiles[i] {
+                    TileState::Resident { prefix, .. } if prefix.levels < n => {
+                        batch_levels_wanted(view, &prefix.batches, n, self.prefix_view)
+                    }
+                    TileState::Resident { .. } => n,
+                    TileState::NotResident(_) => {
+                        first_levels_wanted(view, &entry.bounds, l.height_m, n, self.prefix_view)
+                    }
+                };
+                (&l.bytes, want as usize)
+            });
+            let room = self.fetcher.in_flight() < self.config.max_in_flight;
+            match &mut self.tiles[i] {
+                TileState::NotResident(load) => {
+                    let attempt = match load {
+                        Load::Idle => 0,
+                        Load::Waiting { attempt, retry_at_s } if now_s >= *retry_at_s => *attempt,
+                        _ => continue,
+                    };
+                    if !room {
+                        continue;
+                    }
+                    let range = levels.and_then(|(ends, want)| (want < ends.len()).then(|| (0, ends[want - 1])));
+                    let id = self.fetcher.start_range(&join(&self.base, &entry.url), range);
+                    self.stats.requests += 1;
+                    self.requests.insert(id, Target::Tile(i));
+                    *load = Load::Requested { attempt };
+                }
+                TileState::Resident { prefix, .. } => {
+                    let Some((ends, want)) = levels else { continue };
+                    let have = prefix.levels as usize;
+                    // A file with other levels than its entry lists cannot be fetched on by range.
+                    if want <= have
+                        || prefix.more == Load::Broken
+                        || ends.get(have - 1) != Some(&(prefix.bytes.len() as u64))
+                    {
+                        continue;
+                    }
+                    short += 1;
+                    let attempt = match prefix.more {
+                        Load::Idle => 0,
+                        Load::Waiting { attempt, retry_at_s } if now_s >= retry_at_s => attempt,
+                        _ => continue,
+                    };
+                    if !room {
+                        continue;
+                    }
+                    let range = (ends[have - 1], ends[want.min(ends.len()) - 1]);
+                    let id = self.fetcher.start_range(&join(&self.base, &entry.url), Some(range));
+                    self.stats.requests += 1;
+                    self.requests.insert(id, Target::TileMore(i, prefix.levels));
+                    prefix.more = Load::Requested { attempt };
+                }
             }
         }
+        self.levels_short = short;
         (self.walk_tiles, self.walk_nodes) = (wanted, nodes);
     }
 

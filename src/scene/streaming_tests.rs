@@ -531,3 +531,99 @@ fn ground_images_stream_retry_and_stop_with_the_terrain() {
     assert_eq!(images(&s), before, "no image is asked for with the terrain off");
     assert!(s.is_settled());
 }
+
+/// Per batch of tile `entry` (decoded whole from disk) in view: the batch and
+/// the trees the cull pass draws of it (`thinning` of the CPU oracle) for
+/// `view` with `thin`.
+fn oracle_counts(entry: &crate::format::TileEntry, view: &ViewData, thin: PrefixView) -> Vec<(GpuBatch, u32)> {
+    let bytes = std::fs::read(format!("{}/{}", fixture(), entry.url)).unwrap();
+    let tile = Tile::decode("t", &bytes, 3).unwrap();
+    let mut u: crate::render::gpu_data::ViewUniform = bytemuck::Zeroable::zeroed();
+    u.eye_hi = view.eye_hi.extend(0.0).to_array();
+    u.eye_lo = view.eye_lo.extend(0.0).to_array();
+    u.lod = [view.px_per_m_at_1m * thin.lod_scale, 1e9, 0.12, 0.0];
+    u.viewport = [view.viewport[0] as f32, view.viewport[1] as f32, thin.thin_px, 0.0];
+    let eye = eye(view);
+    tile.batches
+        .iter()
+        .filter(|b| {
+            let (c, h) = (Vec3::from(b.center_m) - eye, Vec3::from(b.half_extent_m));
+            view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(h) >= 0.0)
+        })
+        .map(|b| {
+            let (kept, _) = crate::render::cull::thinning(b, &u);
+            (*b, (kept.ceil() as u32).min(b.instance_count))
+        })
+        .collect()
+}
+
+#[test]
+fn tiles_fetch_the_prefix_the_view_draws_and_no_byte_twice() {
+    use crate::format::tile::TILE_LEVELS;
+    let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0 };
+    let mut s = stream(StreamConfig::default());
+    s.set_prefix_view(Some(thin));
+    let mut r = FakeResidency::new(1 << 20);
+    let mut t = 0.0;
+    let total: u64 = 3000;
+    let mut partial_seen = 0;
+    // From far to near along one line, stopping at each camera until settled.
+    for (k, d) in [8000.0, 4000.0, 2000.0, 1000.0, 500.0].into_iter().enumerate() {
+        let view = Camera::look_at(DVec3::new(0.0, -d, d * 0.5), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+        t = run(&mut s, &mut r, &view, 1e6, t, 0.1, 16);
+        assert!(s.is_settled(), "settles at {d} m");
+        for &i in &s.wanted[..s.within_reach] {
+            let entry = s.index.tiles[i].clone();
+            let TileState::Resident { prefix, .. } = &s.tiles[i] else { panic!("tile {i} resident at {d} m") };
+            let levels = entry.levels.as_ref().expect("the fixture's tiles are in levels");
+            let end = |l: u32| levels.bytes[l as usize - 1];
+            // The CPU oracle: every batch in view has what the cull pass draws of it.
+            let drawn = oracle_counts(&entry, &view, thin);
+            for (b, n) in &drawn {
+                let held = level_prefix(b, prefix.levels - 1, TILE_LEVELS);
+                assert!(*n <= held, "{}: a batch draws {n} of {} but {held} are held", entry.url, b.instance_count);
+            }
+            // No more than that on the first view: the levels the oracle needs,
+            // or the first guess made before the tile's batches were known.
+            if k == 0 {
+                let exact = (1..=TILE_LEVELS)
+                    .find(|&l| drawn.iter().all(|(b, n)| *n <= level_prefix(b, l - 1, TILE_LEVELS)))
+                    .unwrap();
+                let guess = first_levels_wanted(&view, &entry.bounds, levels.height_m, TILE_LEVELS, Some(thin));
+                assert_eq!(end(prefix.levels), end(exact.max(guess)), "{} at {d} m", entry.url);
+            }
+            partial_seen += usize::from(prefix.levels < TILE_LEVELS);
+        }
+        let resident = u64::from(r.used);
+        if k == 0 {
+            assert!(resident * 4 < total, "the far view holds {resident} of {total} trees");
+        }
+    }
+    assert!(partial_seen > 0, "some tile was held in part");
+    // No byte twice: each tile's ranges are disjoint, and all of them make at most the file.
+    let mut by_url: HashMap<String, Vec<(u64, u64)>> = HashMap::new();
+    for (url, range) in &s.fetcher.log {
+        if url.ends_with(".tile") {
+            let len = std::fs::metadata(url).unwrap().len();
+            by_url.entry(url.clone()).or_default().push(range.unwrap_or((0, len)));
+        }
+    }
+    assert!(by_url.len() >= 4);
+    for (url, mut ranges) in by_url {
+        ranges.sort_unstable();
+        assert!(ranges.windows(2).all(|w| w[0].1 <= w[1].0), "{url} fetched twice: {ranges:?}");
+        assert_eq!(ranges[0].0, 0, "{url} starts at its head");
+    }
+    assert!(s.requests.is_empty());
+}
+
+#[test]
+fn whole_tiles_without_prefix_thinning() {
+    let mut s = stream(StreamConfig::default());
+    let mut r = FakeResidency::new(1 << 20);
+    let view = Camera::look_at(DVec3::new(0.0, -8000.0, 4000.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+    run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 16);
+    assert!(s.is_settled());
+    assert_eq!(r.used, 3000, "every tree of the fixture");
+    assert!(s.fetcher.log.iter().filter(|(u, _)| u.ends_with(".tile")).all(|(_, range)| range.is_none()));
+}

@@ -357,16 +357,18 @@ impl TreeStyle {
         b
     }
 
-    /// The style bytes of a tile's trees (`ids` in instance order).
+    /// The style bytes of a tile's trees `first..` (`ids` and `codes` in the
+    /// tile's instance order) into `out`, one per tree.
     pub fn tile_bytes(
         &self,
         schema: Option<&AttributeSchema>,
         ids: &[u64],
         codes: Option<&AttributeCodes>,
+        first: usize,
         out: &mut [u8],
     ) {
-        for (i, (b, id)) in out.iter_mut().zip(ids).enumerate() {
-            *b = self.tree_byte(schema, codes, i, *id);
+        for (i, (b, id)) in out.iter_mut().zip(ids.iter().skip(first)).enumerate() {
+            *b = self.tree_byte(schema, codes, first + i, *id);
         }
     }
 
@@ -420,7 +422,7 @@ mod tests {
         )
         .unwrap();
         let mut out = [0u8; 3];
-        style.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
+        style.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
         // good → entry 1 but hidden (10 m); poor → entry 2 shown; no values → own colour, hidden.
         assert_eq!(out, [1 | HIDDEN, 2, HIDDEN]);
         let h = style.header();
@@ -432,13 +434,13 @@ mod tests {
         let mut ramp =
             TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [0, 40]}})).unwrap();
         ramp.set_selection([8]);
-        ramp.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
+        ramp.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
         assert_eq!(out, [1 + 4, (1 + 12) | SELECTED, 0]);
         assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
         // A reversed domain runs the ramp from its first value, as the legend reads.
         let reversed =
             TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [40, 0]}})).unwrap();
-        reversed.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), &mut out);
+        reversed.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
         assert_eq!(out, [1 + 12, 1 + 4, 0]);
         assert!(reversed.legend_json()["entries"][0]["label"].as_str().unwrap().starts_with("40"));
 

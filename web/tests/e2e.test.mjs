@@ -155,16 +155,21 @@ async function openViewer(url, size = { width: 480, height: 320 }) {
   return { page, errors };
 }
 
-/** Screenshots the page (kept as `name`.png) and reduces its RGBA pixels in the
- * page with `reduce`, the source of a function body over `d` (the pixel bytes)
- * and `o` (those of `other`, an earlier screenshot's PNG, when given). */
-async function screenshotStat(page, name, reduce, other = null) {
-  // Let a viewer finish what it is drawing first: a screenshot waits for the
-  // GPU, and a CPU GPU takes seconds per frame close to trees with shadows.
+/** Lets a viewer finish what it is drawing before a screenshot: a screenshot
+ * waits for the GPU, and a CPU GPU takes seconds per frame close to trees with
+ * shadows (on a 2-core CI machine a busy page timed an element screenshot out). */
+async function settle(page) {
   await page.waitForFunction(() => {
     const s = window.sylva;
     return !s?.viewer?.frames_in_flight || (s.dirty === 0 && s.viewer.frames_in_flight() === 0);
   }, null, { timeout: 90000, polling: 250 }).catch(() => {});
+}
+
+/** Screenshots the page (kept as `name`.png) and reduces its RGBA pixels in the
+ * page with `reduce`, the source of a function body over `d` (the pixel bytes)
+ * and `o` (those of `other`, an earlier screenshot's PNG, when given). */
+async function screenshotStat(page, name, reduce, other = null) {
+  await settle(page);
   const png = await page.screenshot({ path: join(artifacts, `${name}.png`), timeout: 60000 });
   // Decode in the page with a 2D canvas (the screenshot, not the WebGPU canvas).
   return page.evaluate(async ([b64, reduce, other]) => {
@@ -364,7 +369,7 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     assert.equal(popup.id, String(hit.tree.id));
     assert.match(popup.text, new RegExp(`Tree ${hit.tree.id}.*species.*Tilia`));
     assert.match(popup.text, new RegExp(`height${row(hit.tree.id).height}`));
-    await page.screenshot({ path: join(artifacts, 'districts-popup.png') });
+    await page.screenshot({ path: join(artifacts, 'districts-popup.png'), timeout: 60000 });
     // The style selector colours the trees by height (viridis: purples and blues where foliage was green).
     const bluish = (name) => screenshotStat(page, name, `
       let n = 0;
@@ -673,7 +678,7 @@ test('a resting camera refines its image, then the viewer idles; a move starts o
   // the plain level of detail, 4 with every tree in view a full mesh.
   await page.evaluate(() => window.sylva.setRefine(false));
   await idle();
-  const plain = await page.screenshot({ path: join(artifacts, 'refine-plain.png') });
+  const plain = await page.screenshot({ path: join(artifacts, 'refine-plain.png'), timeout: 60000 });
   await page.evaluate(() => window.sylva.setRefine(true, { frames: 4, levels: 1 }));
   await page.waitForFunction(() => window.sylva.stats().refine_converged, null, { timeout: 240000, polling: 250 });
   await idle();
@@ -766,7 +771,11 @@ test('the browser draws what the native renderer draws for the same camera', asy
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
   const browserPng = join(artifacts, 'same-camera-browser.png');
-  await page.locator('#view').screenshot({ path: browserPng });
+  await settle(page);
+  // A clip of the page, not an element screenshot: that one also waits for the
+  // element to hold still over two animation frames, which a CPU GPU may not give.
+  const box = await page.locator('#view').boundingBox();
+  await page.screenshot({ path: browserPng, clip: box, timeout: 60000 });
   const origin = (await page.evaluate(() => window.sylva.camera())).origin;
   const nativePng = join(artifacts, 'same-camera-native.png');
   execFileSync(sylvaBin, ['render', '--scene', scene, '--size', '480x320', '--out', nativePng,

@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::Result;
 use rayon::prelude::*;
 use sylva::format::attributes::encode_attributes;
-use sylva::format::manifest::{Bounds, TileEntry};
+use sylva::format::manifest::{Bounds, TileEntry, TileLevels};
 use sylva::format::tile::encode_ids;
 
 use crate::attributes::AttributeTable;
@@ -97,6 +97,10 @@ pub fn write_tiles(
                         batches: bt.tile.batches.len() as u32,
                         bounds: Bounds { min: bt.bounds.0, max: bt.bounds.1 },
                         attribute_codes,
+                        levels: Some(TileLevels {
+                            bytes: bt.tile.level_bytes(),
+                            height_m: bt.tile.batches.iter().map(|b| b.max_height_m).fold(0.0, f32::max),
+                        }),
                     },
                     bt.tile.instance_bytes() as u64,
                 ))
