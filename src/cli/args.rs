@@ -213,6 +213,10 @@ pub(crate) struct ViewArgs {
     /// as thin prefixes, and full pools shorten the reach by themselves).
     #[arg(long, default_value_t = f32::INFINITY, hide_default_value = true)]
     pub(crate) draw_distance: f32,
+    /// Fetch every tile whole instead of the prefix levels far views draw (to
+    /// compare bytes; the image is the same).
+    #[arg(long)]
+    pub(crate) whole_tiles: bool,
 }
 
 impl ViewArgs {

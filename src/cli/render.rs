@@ -234,6 +234,7 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
     off.settings = RenderSettings {
         quality: args.frame.quality,
         draw_distance_m: args.frame.draw_distance,
+        whole_tiles: args.frame.whole_tiles,
         terrain: !args.no_terrain,
         far_tier: far_tier_of(args.far_tier),
         representations,
@@ -439,7 +440,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         repr,
     } = args;
     let (w, h) = frame.checked_size()?;
-    let ViewArgs { view, camera, quality, draw_distance, .. } = frame;
+    let ViewArgs { view, camera, quality, draw_distance, whole_tiles, .. } = frame;
     if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
         bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
     }
@@ -457,6 +458,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         let settings = RenderSettings {
             quality,
             draw_distance_m: draw_distance,
+            whole_tiles,
             debug_lod,
             debug_bounds,
             cluster_min_px: ellipsoid_min_px,

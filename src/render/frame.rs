@@ -195,7 +195,9 @@ impl<F: Fetcher> Frame<F> {
         let settings = self.refine_plan(view).map_or(self.settings, |p| self.refine.settings(&self.settings, &p));
         self.renderer.measure_reach(view, &settings);
         // Far tiles are fetched as far as prefix thinning draws them.
-        let thinned = settings.thin_px > 0.0 && settings.culling == super::settings::CullingMode::Batches;
+        let thinned = settings.thin_px > 0.0
+            && settings.culling == super::settings::CullingMode::Batches
+            && !settings.whole_tiles;
         self.stream.set_prefix_view(
             thinned.then_some(crate::scene::streaming::PrefixView {
                 thin_px: settings.thin_px,

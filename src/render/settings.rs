@@ -22,6 +22,9 @@ pub enum CullingMode {
 pub struct RenderSettings {
     /// Scales projected sizes before LoD selection (1, ½, ¼ like seed 002 Fig. 12).
     pub quality: f32,
+    /// Fetch every tile whole, not the prefix levels prefix thinning draws (for
+    /// comparisons; the image is the same).
+    pub whole_tiles: bool,
     /// Trees farther than this are not drawn (metres; infinite by default: far
     /// tiles are fetched and drawn as thin prefixes, so a view of any height
     /// shows its forest, and pools that fill shorten the reach themselves).
@@ -162,6 +165,7 @@ impl Default for RenderSettings {
             adaptive_alpha: true,
             lod_policy: true,
             refine_seed: 0,
+            whole_tiles: false,
         }
     }
 }
