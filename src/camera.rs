@@ -53,6 +53,14 @@ impl Camera {
         Self { eye_m: eye, heading_rad: heading, pitch_rad: pitch, ..Self::default() }
     }
 
+    /// A camera that sees no scene: far below everything, looking down. Streams
+    /// the manifest without fetching what a view would (before the first view
+    /// is placed).
+    #[must_use]
+    pub fn nowhere() -> Self {
+        Self { eye_m: DVec3::new(0.0, 0.0, -1e7), pitch_rad: -std::f64::consts::FRAC_PI_2, ..Self::default() }
+    }
+
     /// Unit view direction.
     #[must_use]
     pub fn forward(&self) -> DVec3 {

@@ -397,7 +397,9 @@ impl Viewer {
         }
         // GPU times and counters of earlier frames, as the GPU reports them.
         self.frame.collect();
-        let view = self.camera().view_data(self.config.width, self.config.height);
+        // Until the first view is placed where the trees are, stream the manifest only.
+        let camera = if self.placed { self.camera() } else { Camera::nowhere() };
+        let view = camera.view_data(self.config.width, self.config.height);
         self.frame.stream(&view, now_ms / 1e3);
         self.events.extend(self.frame.stream.drain_events());
         if !self.placed {

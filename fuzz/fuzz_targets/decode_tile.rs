@@ -11,7 +11,11 @@ fuzz_target!(|data: &[u8]| {
         // versions 1 and 2 in the old layout (a version 2 tile without crown
         // aspects as version 1). Every instance decodes to finite values.
         if bytes[4] == 3 {
-            assert_eq!(tile.encode(), bytes);
+            // (This build writes 7 levels; other level counts read but re-encode otherwise.)
+            let at = 32 + 80 * tile.batches.len();
+            if bytes[at..at + 4] == sylva::format::tile::TILE_LEVELS.to_le_bytes() {
+                assert_eq!(tile.encode(), bytes);
+            }
         } else {
             let mut expected = bytes.to_vec();
             expected[4] = tile.whole_version() as u8;

@@ -195,8 +195,10 @@ impl<F: Fetcher> Frame<F> {
         let settings = self.refine_plan(view).map_or(self.settings, |p| self.refine.settings(&self.settings, &p));
         self.renderer.measure_reach(view, &settings);
         // Far tiles are fetched as far as prefix thinning draws them.
+        // (Thinning draws billboards: without them every tree is drawn.)
         let thinned = settings.thin_px > 0.0
             && settings.culling == super::settings::CullingMode::Batches
+            && settings.representations.billboards
             && !settings.whole_tiles;
         self.stream.set_prefix_view(
             thinned.then_some(crate::scene::streaming::PrefixView {

@@ -182,8 +182,7 @@ impl<F: Fetcher> OffscreenScene<F> {
     /// fetching nothing a view would: the camera looks down from far below the
     /// scene. Returns the events seen.
     pub fn load_manifest(&mut self, timeout_s: f64) -> Vec<StreamEvent> {
-        let nowhere =
-            Camera { eye_m: DVec3::new(0.0, 0.0, -1e7), pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() };
+        let nowhere = Camera::nowhere();
         let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s);
         let mut events = Vec::new();
         loop {

@@ -136,7 +136,7 @@ impl IndexWalk {
         }
         stack.push(0);
         // A small margin keeps float rounding from dropping a tile on a node's edge.
-        let margin = 0.01 + 1e-6 * draw_distance_m.min(1e9);
+        let margin = 0.01 + 1e-6 * draw_distance_m.min(1e6);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n];
             let Some(d) = box_distance(view, &node.bounds, draw_distance_m, margin) else { continue };

@@ -704,6 +704,10 @@ impl<F: Fetcher> SceneStream<F> {
             let (free, total) = residency.instance_room();
             if self.reach_m < draw_distance_m && free > total / 2 {
                 self.reach_m = (self.reach_m * 1.1).max(1.0);
+                // Past the farthest tile the view wants: nothing is held back any more.
+                if self.walk_tiles.last().is_none_or(|&(d, _)| d < self.reach_m) {
+                    self.reach_m = draw_distance_m;
+                }
             }
             self.reach_m = self.reach_m.min(draw_distance_m);
             while self.recent.front().is_some_and(|(t, _)| *t < now_s - 1.0) {
@@ -829,10 +833,15 @@ impl<F: Fetcher> SceneStream<F> {
         } else {
             join(&self.base, &entry.ids_url)
         };
-        let TileState::Resident { slot, data, .. } = &mut self.tiles[t] else { return };
+        let TileState::Resident { slot, data, prefix, .. } = &mut self.tiles[t] else { return };
         let TreeDataLoad::Loading { attempt, ids, codes } = data else { return };
         let attempt = *attempt;
-        let count = slot.instances.len();
+        // The sidecars hold every tree of the tile, also when only a prefix is resident.
+        let count = if prefix.batches.is_empty() {
+            slot.instances.len()
+        } else {
+            prefix.batches.iter().map(|b| b.instance_count as usize).sum()
+        };
         let decoded = result.map_err(|e| e.to_string()).and_then(|bytes| {
             if attributes {
                 let schema = m.attributes.as_ref().ok_or("the scene has no attributes")?;
@@ -1113,7 +1122,7 @@ impl<F: Fetcher> SceneStream<F> {
         let mut result = residency.upload_tile(tile);
         // Full pools: evict resident tiles the view does not want, farthest first.
         while matches!(result, Err(PoolError::Full(_))) {
-            if !self.evict_one(residency, view) {
+            if !self.evict_one(residency, view, None) {
                 break;
             }
             result = residency.upload_tile(tile);
@@ -1218,7 +1227,7 @@ impl<F: Fetcher> SceneStream<F> {
         };
         let mut result = residency.upload_tile(&held.tile);
         while matches!(result, Err(PoolError::Full(_))) {
-            if !self.evict_one(residency, view) {
+            if !self.evict_one(residency, view, Some(t)) {
                 break;
             }
             result = residency.upload_tile(&held.tile);
@@ -1235,8 +1244,23 @@ impl<F: Fetcher> SceneStream<F> {
                     more: Load::Idle,
                 };
             }
-            // No room for the bigger tile: it keeps what it holds; asked again later.
-            Err(PoolError::Full(_)) => prefix.more = Load::Waiting { attempt, retry_at_s: now_s + 1.0 },
+            // No room for the bigger tile: it keeps what it holds, and (as for a new
+            // tile) tiles are requested only up to a little less than its distance.
+            Err(PoolError::Full(what)) => {
+                prefix.more = Load::Waiting { attempt: attempt + 1, retry_at_s: now_s + 1.0 };
+                let eye = view.eye_hi + view.eye_lo;
+                let reach = (tile_distance(&self.index.tiles[t].bounds, eye) * 0.9).min(self.reach_m);
+                if reach < self.reach_m {
+                    self.events.push(StreamEvent::Failed {
+                        url,
+                        message: format!(
+                            "the GPU pools are full ({what}): tiles are requested up to {reach:.0} m instead of the draw distance"
+                        ),
+                        retrying: true,
+                    });
+                    self.reach_m = reach;
+                }
+            }
             Err(e) => {
                 let message = e.to_string();
                 prefix.more = Load::Broken;
@@ -1246,13 +1270,14 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    fn evict_one(&mut self, residency: &mut impl Residency, view: &ViewData) -> bool {
+    /// Evicts the farthest resident tile the view does not want (never `keep`).
+    fn evict_one(&mut self, residency: &mut impl Residency, view: &ViewData, keep: Option<usize>) -> bool {
         let eye = view.eye_hi + view.eye_lo;
         let victim = self
             .tiles
             .iter()
             .enumerate()
-            .filter(|(i, t)| matches!(t, TileState::Resident { .. }) && !self.wanted.contains(i))
+            .filter(|(i, t)| matches!(t, TileState::Resident { .. }) && !self.wanted.contains(i) && Some(*i) != keep)
             .max_by(|(a, _), (b, _)| {
                 let d = |i: usize| tile_distance(&self.index.tiles[i].bounds, eye);
                 d(*a).total_cmp(&d(*b))
