@@ -494,10 +494,12 @@ fn band_edges_do_not_flicker() {
     let frames: Vec<Vec<u8>> = (0..6).map(|i| render(&mut off, if i % 2 == 0 { &a } else { &b })).collect();
     // The same camera gives the same image: no state drifts between frames. Not
     // bit for bit: the cull pass appends draw items with atomics, so trees at equal
-    // depth may draw in another order and a few pixels of a depth tie can change.
+    // depth may draw in another order and a few pixels of a depth tie can change;
+    // and a tile that took more prefix levels for the nearer camera sits in
+    // another pool slot (the same trees: 3–4e-4 in `far_views_draw_the_same_…`).
     for (a, b) in [(0, 2), (1, 5)] {
         let e = multiscale_rmse(&frames[a], &frames[b], W, H);
-        assert!(e < 0.0005, "frames {a} and {b} (same camera) differ by {e:.5}");
+        assert!(e < 0.001, "frames {a} and {b} (same camera) differ by {e:.5}");
     }
     // Sylva's change between a and b is close to what the full meshes change.
     let sylva_change = multiscale_rmse(&frames[0], &frames[1], W, H);
@@ -816,7 +818,8 @@ fn budgets_and_full_pools_degrade_gracefully() {
         off.update_stream(&close);
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    assert!(off.renderer.config().instances <= 3000, "pools fitted to the scene: {:?}", off.renderer.config());
+    // (An eighth more: room for a tile growing by prefix levels to be uploaded again.)
+    assert!(off.renderer.config().instances <= 3000 + 375, "pools fitted to the scene: {:?}", off.renderer.config());
     // Room for the billboards (always fetched: the far field) and nothing finer.
     let billboards: u64 = m
         .species

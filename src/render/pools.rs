@@ -61,9 +61,11 @@ impl PoolConfig {
     #[must_use]
     pub fn for_scene(self, trees: u64, batches: u64, species: u32) -> Self {
         let clamp = |v: u64, max: u32| v.min(u64::from(max)).max(1) as u32;
+        // An eighth more than the scene holds: a tile growing by prefix levels is
+        // uploaded again before its old copy's room is given back.
         Self {
-            instances: clamp(trees, self.instances),
-            batches: clamp(batches, self.batches),
+            instances: clamp(trees.saturating_add(trees / 8), self.instances),
+            batches: clamp(batches.saturating_add(batches / 8), self.batches),
             // Each species' segments may each hold all its trees (one per representation).
             items: clamp(trees.saturating_mul(u64::from(REPR_COUNT)), self.items),
             species: species.clamp(1, self.species),
@@ -520,7 +522,7 @@ mod tests {
         let (same, cut) = PoolConfig::default().within_limits(&limits);
         assert!(!cut && same == PoolConfig::default(), "the defaults fit WebGPU's limits");
         let small = PoolConfig::default().for_scene(3000, 200, 3);
-        assert_eq!((small.instances, small.batches, small.items, small.species), (3000, 200, 24000, 3));
+        assert_eq!((small.instances, small.batches, small.items, small.species), (3375, 225, 24000, 3));
         assert!(small.bytes() < PoolConfig::default().bytes() / 100);
         assert_eq!(PoolConfig::default().for_scene(u64::MAX, 0, 0).instances, PoolConfig::default().instances);
     }

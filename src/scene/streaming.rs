@@ -1233,9 +1233,32 @@ impl<F: Fetcher> SceneStream<F> {
             result = residency.upload_tile(&held.tile);
         }
         let TileState::Resident { slot, prefix, .. } = &mut self.tiles[t] else { return };
+        // Room for one copy only: the old one's room first, and back if the new does not fit.
+        let mut replaced = false;
+        if matches!(result, Err(PoolError::Full(_))) {
+            residency.evict_tile(slot.clone());
+            result = residency.upload_tile(&held.tile);
+            replaced = true;
+            if result.is_err() {
+                let old = Tile::decode_prefix(&url, &prefix.bytes, species_count).map_err(|e| e.to_string());
+                match old.and_then(|old| residency.upload_tile(&old.tile).map_err(|e| e.to_string())) {
+                    Ok(back) => *slot = back,
+                    Err(message) => {
+                        // Not even the old copy fits again (cannot happen with one
+                        // tile's room freed): fetched anew later.
+                        self.events.push(StreamEvent::Failed { url, message, retrying: true });
+                        self.tiles[t] = TileState::NotResident(Load::Idle);
+                        return;
+                    }
+                }
+            }
+        }
         match result {
             Ok(new_slot) => {
-                residency.evict_tile(std::mem::replace(slot, new_slot));
+                let old = std::mem::replace(slot, new_slot);
+                if !replaced {
+                    residency.evict_tile(old);
+                }
                 **prefix = Prefix {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
