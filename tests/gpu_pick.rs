@@ -307,9 +307,39 @@ fn pool_ids(off: &OffscreenScene, scene: &Path) -> Vec<Option<u64>> {
     out
 }
 
+/// With the filter `{"kind": "a", "girth": [20, null]}` on the attributed fixture
+/// (ids ≡ 0 mod 3 with id mod 101 ≥ 20 pass): the GPU's draw items equal the
+/// CPU oracle's given each pool instance's style. Returns the pool's ids, those
+/// styles, and the oracle's items drawn whole (side 0) and in all.
+fn filtered_draws_match_the_oracle(off: &OffscreenScene, scene: &Path) -> (Vec<Option<u64>>, Vec<u8>, usize, usize) {
+    use sylva::render::cull::{cpu_select_styled, unpack_item_y};
+    let ids = pool_ids(off, scene);
+    let styles: Vec<u8> = ids
+        .iter()
+        .map(|id| match id {
+            Some(i) if i % 3 == 0 && i % 101 >= 20 => 0,
+            _ => sylva::render::gpu_data::STYLE_HIDDEN,
+        })
+        .collect();
+    let (gpu, batches, instances, _) = off.read_selection();
+    let oracle =
+        cpu_select_styled(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), &styles);
+    let (mut whole, mut all) = (0, 0);
+    for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
+        let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+        let mut c: Vec<(u32, u32)> = c.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+        g.sort_unstable();
+        c.sort_unstable();
+        assert_eq!(g, c, "slot {slot}: the filtered draw items differ from the oracle's");
+        whole += c.iter().filter(|(_, side)| *side == 0).count();
+        all += c.len();
+    }
+    (ids, styles, whole, all)
+}
+
 #[test]
 fn a_filter_culls_exactly_the_trees_it_leaves_out() {
-    use sylva::render::cull::{cpu_select_styled, unpack_item_y};
+    use sylva::render::cull::unpack_item_y;
     let scene = attributed_fixture("filter");
     let mut off = open_at(&scene);
     off.load_view(&Camera::default(), 30.0);
@@ -328,26 +358,7 @@ fn a_filter_culls_exactly_the_trees_it_leaves_out() {
     off.set_style(Some(filter));
     off.load_view(&cam, 30.0);
     off.render(&cam, false);
-    let ids = pool_ids(&off, &scene);
-    let styles: Vec<u8> = ids
-        .iter()
-        .map(|id| match id {
-            Some(i) if i % 3 == 0 && i % 101 >= 20 => 0,
-            _ => sylva::render::gpu_data::STYLE_HIDDEN,
-        })
-        .collect();
-    let (gpu, batches, instances, _) = off.read_selection();
-    let oracle =
-        cpu_select_styled(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), &styles);
-    let mut total = 0;
-    for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
-        let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
-        let mut c: Vec<(u32, u32)> = c.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
-        g.sort_unstable();
-        c.sort_unstable();
-        assert_eq!(g, c, "slot {slot}: the filtered draw items differ from the oracle's");
-        total += c.iter().filter(|(_, side)| *side == 0).count();
-    }
+    let (_, _, total, _) = filtered_draws_match_the_oracle(&off, &scene);
     let shown = drawn(&off);
     assert_eq!(shown, total);
     eprintln!("filter: {shown} of {all} trees drawn");
@@ -361,7 +372,6 @@ fn a_filter_culls_exactly_the_trees_it_leaves_out() {
 
 #[test]
 fn a_filter_on_tiles_held_in_part_hides_exactly_its_trees() {
-    use sylva::render::cull::{cpu_select_styled, unpack_item_y};
     let scene = attributed_fixture("filter-prefix");
     let mut off = open_at(&scene);
     off.load_manifest(30.0);
@@ -375,27 +385,9 @@ fn a_filter_on_tiles_held_in_part_hides_exactly_its_trees() {
     off.load_view(&cam, 30.0);
     off.render(&cam, false);
     off.render(&cam, false);
-    let ids = pool_ids(&off, &scene);
-    let styles: Vec<u8> = ids
-        .iter()
-        .map(|id| match id {
-            Some(i) if i % 3 == 0 && i % 101 >= 20 => 0,
-            _ => sylva::render::gpu_data::STYLE_HIDDEN,
-        })
-        .collect();
-    let (gpu, batches, instances, _) = off.read_selection();
+    let (ids, styles, _, shown) = filtered_draws_match_the_oracle(&off, &scene);
+    let (_, batches, _, _) = off.read_selection();
     assert!(batches.iter().any(|b| b.flags & sylva::format::tile::BATCH_PARTIAL != 0), "tiles held in part");
-    let oracle =
-        cpu_select_styled(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), &styles);
-    let mut shown = 0;
-    for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
-        let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
-        let mut c: Vec<(u32, u32)> = c.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
-        g.sort_unstable();
-        c.sort_unstable();
-        assert_eq!(g, c, "slot {slot}: the filtered draw items differ from the oracle's");
-        shown += c.len();
-    }
     let held = ids.iter().filter(|i| i.is_some()).count();
     let kept = styles.iter().zip(&ids).filter(|(s, i)| i.is_some() && **s == 0).count();
     eprintln!("filter on prefixes: {shown} drawn, {kept} of {held} held trees pass");

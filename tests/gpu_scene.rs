@@ -668,18 +668,35 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     assert_eq!(off.renderer.pipelines_built(), [true, true, true]);
 }
 
+/// The GPU's draw items of the last frame, per slot, are the CPU oracle's.
+fn draws_match_the_oracle(off: &OffscreenScene, name: &str) {
+    let (gpu, batches, instances, _) = off.read_selection();
+    let oracle = cpu_select(off.renderer.last_view(), &batches, &instances, off.renderer.species_table());
+    for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
+        let mut g: Vec<u32> = g.iter().map(|&(i, _)| i).collect();
+        let mut c: Vec<u32> = c.iter().map(|&(i, _)| i).collect();
+        g.sort_unstable();
+        c.sort_unstable();
+        assert_eq!(g, c, "{name}: slot {slot} differs from the oracle");
+    }
+}
+
+/// Two views of the scene's middle: straight down from `height` m, and from
+/// `offset` (metres from the middle) looking at it.
+fn top_and_oblique(m: &Manifest, height: f64, offset: DVec3) -> [(&'static str, Camera); 2] {
+    let c = (DVec3::from(m.bounds.min.map(f64::from)) + DVec3::from(m.bounds.max.map(f64::from))) * 0.5;
+    [
+        ("top", Camera { eye_m: c + DVec3::Z * height, pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() }),
+        ("oblique", Camera::look_at(c + offset, c)),
+    ]
+}
+
 #[test]
 fn prefix_thinning_keeps_canopy_coverage() {
     let mut off = open(fixture().to_str().unwrap());
     let m = manifest(&mut off);
-    let lo = DVec3::from(m.bounds.min.map(f64::from));
-    let hi = DVec3::from(m.bounds.max.map(f64::from));
-    let c = (lo + hi) * 0.5;
     // Straight down from 1.2 km and obliquely from 1.5 km: trees a few px tall.
-    let views = [
-        ("top", Camera { eye_m: c + DVec3::Z * 1200.0, pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() }),
-        ("oblique", Camera::look_at(c + DVec3::new(0.0, -1300.0, 700.0), c)),
-    ];
+    let views = top_and_oblique(&m, 1200.0, DVec3::new(0.0, -1300.0, 700.0));
     off.settings.draw_distance_m = 20_000.0;
     for (name, cam) in views {
         // Coverage: pixels the trees change (against the same view without
@@ -709,15 +726,7 @@ fn prefix_thinning_keeps_canopy_coverage() {
         let e = multiscale_rmse(&full, &thinned, W, H);
         assert!(e < 0.02, "{name}: thinning changes the image by {e:.4}");
         // The GPU thins exactly as the CPU oracle does.
-        let (gpu, batches, instances, _) = off.read_selection();
-        let oracle = cpu_select(off.renderer.last_view(), &batches, &instances, off.renderer.species_table());
-        for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
-            let mut g: Vec<u32> = g.iter().map(|&(i, _)| i).collect();
-            let mut c: Vec<u32> = c.iter().map(|&(i, _)| i).collect();
-            g.sort_unstable();
-            c.sort_unstable();
-            assert_eq!(g, c, "{name}: slot {slot} differs from the oracle");
-        }
+        draws_match_the_oracle(&off, name);
         eprintln!("{name}: {drawn} of {full_drawn} trees, coverage {b:.4} vs {a:.4}, MS-RMSE {e:.4}");
     }
 }
@@ -730,15 +739,9 @@ fn far_views_draw_the_same_from_tile_prefixes_as_from_whole_tiles() {
     prefixes.load_manifest(30.0);
     whole.load_manifest(30.0);
     let m = prefixes.stream.manifest().expect("manifest loads").clone();
-    let lo = DVec3::from(m.bounds.min.map(f64::from));
-    let hi = DVec3::from(m.bounds.max.map(f64::from));
-    let c = (lo + hi) * 0.5;
     // Trees a few pixels tall, from above and obliquely: prefix thinning draws a
     // part of each batch, and the prefix run fetches only that part.
-    let views = [
-        ("top", Camera { eye_m: c + DVec3::Z * 2500.0, pitch_rad: -std::f64::consts::FRAC_PI_2, ..Camera::default() }),
-        ("oblique", Camera::look_at(c + DVec3::new(0.0, -2400.0, 1200.0), c)),
-    ];
+    let views = top_and_oblique(&m, 2500.0, DVec3::new(0.0, -2400.0, 1200.0));
     for (name, cam) in views {
         let a = render(&mut whole, &cam);
         let b = render(&mut prefixes, &cam);
@@ -761,16 +764,9 @@ fn far_views_draw_the_same_from_tile_prefixes_as_from_whole_tiles() {
         let e = multiscale_rmse(&a, &b, W, H);
         assert!(e < 2e-3, "{name}: prefixes change the image by {e}");
         // The GPU draws of partial batches as the CPU oracle does.
-        let (gpu, batches, instances, _) = prefixes.read_selection();
+        let (_, batches, _, _) = prefixes.read_selection();
         assert!(batches.iter().any(|b| b.flags & sylva::format::tile::BATCH_PARTIAL != 0), "{name}: partial batches");
-        let oracle = cpu_select(prefixes.renderer.last_view(), &batches, &instances, prefixes.renderer.species_table());
-        for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
-            let mut g: Vec<u32> = g.iter().map(|&(i, _)| i).collect();
-            let mut c: Vec<u32> = c.iter().map(|&(i, _)| i).collect();
-            g.sort_unstable();
-            c.sort_unstable();
-            assert_eq!(g, c, "{name}: slot {slot} differs from the oracle");
-        }
+        draws_match_the_oracle(&prefixes, name);
         eprintln!(
             "{name}: {} trees drawn; tiles {} B / {} trees held with prefixes, {} B / {} whole; MS-RMSE {e}",
             sb.instances["billboard"],

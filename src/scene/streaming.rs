@@ -1149,21 +1149,8 @@ impl<F: Fetcher> SceneStream<F> {
             }
             Err(PoolError::Full(what)) => {
                 // No room even after evicting everything unwanted: the view wants more
-                // than the pools hold. Degrade: request tiles only up to a little less
-                // than this one's distance (nearer tiles came first), and say so.
-                let eye = view.eye_hi + view.eye_lo;
-                let d = tile_distance(&self.index.tiles[t].bounds, eye);
-                let reach = (d * 0.9).min(self.reach_m);
-                if reach < self.reach_m {
-                    self.events.push(StreamEvent::Failed {
-                        url,
-                        message: format!(
-                            "the GPU pools are full ({what}): tiles are requested up to {reach:.0} m instead of the draw distance"
-                        ),
-                        retrying: true,
-                    });
-                    self.reach_m = reach;
-                }
+                // than the pools hold.
+                self.shorten_reach(t, url, what, view);
                 self.tiles[t] = TileState::NotResident(Load::Waiting { attempt, retry_at_s: now_s + 1.0 });
             }
             Err(e) => {
@@ -1271,18 +1258,7 @@ impl<F: Fetcher> SceneStream<F> {
             // tile) tiles are requested only up to a little less than its distance.
             Err(PoolError::Full(what)) => {
                 prefix.more = Load::Waiting { attempt: attempt + 1, retry_at_s: now_s + 1.0 };
-                let eye = view.eye_hi + view.eye_lo;
-                let reach = (tile_distance(&self.index.tiles[t].bounds, eye) * 0.9).min(self.reach_m);
-                if reach < self.reach_m {
-                    self.events.push(StreamEvent::Failed {
-                        url,
-                        message: format!(
-                            "the GPU pools are full ({what}): tiles are requested up to {reach:.0} m instead of the draw distance"
-                        ),
-                        retrying: true,
-                    });
-                    self.reach_m = reach;
-                }
+                self.shorten_reach(t, url, what, view);
             }
             Err(e) => {
                 let message = e.to_string();
@@ -1290,6 +1266,23 @@ impl<F: Fetcher> SceneStream<F> {
                 self.give_up(&url, &message);
                 self.events.push(StreamEvent::Failed { url, message, retrying: false });
             }
+        }
+    }
+
+    /// The pools are full of what the view wants: degrade by requesting tiles only
+    /// up to a little less than tile `t`'s distance (nearer tiles came first), and say so.
+    fn shorten_reach(&mut self, t: usize, url: String, what: &str, view: &ViewData) {
+        let d = tile_distance(&self.index.tiles[t].bounds, view.eye_hi + view.eye_lo);
+        let reach = (d * 0.9).min(self.reach_m);
+        if reach < self.reach_m {
+            self.events.push(StreamEvent::Failed {
+                url,
+                message: format!(
+                    "the GPU pools are full ({what}): tiles are requested up to {reach:.0} m instead of the draw distance"
+                ),
+                retrying: true,
+            });
+            self.reach_m = reach;
         }
     }
 
