@@ -1342,20 +1342,7 @@ impl<F: Fetcher> SceneStream<F> {
         let mut short = 0;
         for &(_, i) in &wanted[..self.within_reach] {
             let entry = &self.index.tiles[i];
-            // The prefix levels the view draws of a tile in levels (None: fetched whole).
-            let levels = entry.levels.as_ref().map(|l| {
-                let n = l.bytes.len() as u32;
-                let want = match &self.tiles[i] {
-                    TileState::Resident { prefix, .. } if prefix.levels < n => {
-                        batch_levels_wanted(view, &prefix.batches, n, self.prefix_view)
-                    }
-                    TileState::Resident { .. } => n,
-                    TileState::NotResident(_) => {
-                        first_levels_wanted(view, &entry.bounds, l.height_m, n, self.prefix_view)
-                    }
-                };
-                (&l.bytes, want as usize)
-            });
+            let thin = self.prefix_view;
             let room = self.fetcher.in_flight() < self.config.max_in_flight;
             match &mut self.tiles[i] {
                 TileState::NotResident(load) => {
@@ -1367,15 +1354,23 @@ impl<F: Fetcher> SceneStream<F> {
                     if !room {
                         continue;
                     }
-                    let range = levels.and_then(|(ends, want)| (want < ends.len()).then(|| (0, ends[want - 1])));
+                    // The prefix the view draws of a tile in levels (without levels: whole).
+                    let range = entry.levels.as_ref().and_then(|l| {
+                        let want = first_levels_wanted(view, &entry.bounds, l.height_m, l.bytes.len() as u32, thin);
+                        (want < l.bytes.len() as u32).then(|| (0, l.bytes[want as usize - 1]))
+                    });
                     let id = self.fetcher.start_range(&join(&self.base, &entry.url), range);
                     self.stats.requests += 1;
                     self.requests.insert(id, Target::Tile(i));
                     *load = Load::Requested { attempt };
                 }
                 TileState::Resident { prefix, .. } => {
-                    let Some((ends, want)) = levels else { continue };
+                    let Some(ends) = entry.levels.as_ref().map(|l| &l.bytes) else { continue };
                     let have = prefix.levels as usize;
+                    if have >= ends.len() {
+                        continue;
+                    }
+                    let want = batch_levels_wanted(view, &prefix.batches, ends.len() as u32, thin) as usize;
                     // A file with other levels than its entry lists cannot be fetched on by range.
                     if want <= have
                         || prefix.more == Load::Broken
