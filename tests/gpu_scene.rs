@@ -814,8 +814,8 @@ fn budgets_and_full_pools_degrade_gracefully() {
         off.update_stream(&close);
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    // (An eighth more: room for a tile growing by prefix levels to be uploaded again.)
-    assert!(off.renderer.config().instances <= 3000 + 375, "pools fitted to the scene: {:?}", off.renderer.config());
+    // (Room for a tile growing by prefix levels to be uploaded again: a quarter more, at least 4,096.)
+    assert!(off.renderer.config().instances <= 3000 + 4096, "pools fitted to the scene: {:?}", off.renderer.config());
     // Room for the billboards (always fetched: the far field) and nothing finer.
     let billboards: u64 = m
         .species

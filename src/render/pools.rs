@@ -61,11 +61,12 @@ impl PoolConfig {
     #[must_use]
     pub fn for_scene(self, trees: u64, batches: u64, species: u32) -> Self {
         let clamp = |v: u64, max: u32| v.min(u64::from(max)).max(1) as u32;
-        // An eighth more than the scene holds: a tile growing by prefix levels is
-        // uploaded again before its old copy's room is given back.
+        // A quarter more than the scene holds (at least 4,096 trees and 256
+        // batches): a tile growing by prefix levels is uploaded again before its
+        // old copy's room is given back, and freed ranges leave holes.
         Self {
-            instances: clamp(trees.saturating_add(trees / 8), self.instances),
-            batches: clamp(batches.saturating_add(batches / 8), self.batches),
+            instances: clamp(trees.saturating_add((trees / 4).max(4096)), self.instances),
+            batches: clamp(batches.saturating_add((batches / 4).max(256)), self.batches),
             // Each species' segments may each hold all its trees (one per representation).
             items: clamp(trees.saturating_mul(u64::from(REPR_COUNT)), self.items),
             species: species.clamp(1, self.species),
@@ -522,7 +523,7 @@ mod tests {
         let (same, cut) = PoolConfig::default().within_limits(&limits);
         assert!(!cut && same == PoolConfig::default(), "the defaults fit WebGPU's limits");
         let small = PoolConfig::default().for_scene(3000, 200, 3);
-        assert_eq!((small.instances, small.batches, small.items, small.species), (3375, 225, 24000, 3));
+        assert_eq!((small.instances, small.batches, small.items, small.species), (7096, 456, 24000, 3));
         assert!(small.bytes() < PoolConfig::default().bytes() / 100);
         assert_eq!(PoolConfig::default().for_scene(u64::MAX, 0, 0).instances, PoolConfig::default().instances);
     }
