@@ -359,6 +359,10 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     const nativePick = JSON.parse(execFileSync(sylvaBin, ['pick', '--scene', join(dir, 'scene'), '--camera', camera,
       '--size', '480x320', '--at', `${hit.x},${hit.y}`], { stdio: ['ignore', 'pipe', 'pipe'] }).toString());
     assert.equal(nativePick?.id, hit.tree.id, JSON.stringify(nativePick));
+    // Hovering that pixel names the tree to 'hover' handlers.
+    await page.evaluate(() => window.sylva.on('hover', (e) => { window.hovered = e; }));
+    await page.mouse.move(hit.x + 0.5, hit.y + 0.5);
+    await page.waitForFunction((id) => window.hovered?.tree?.id === id, hit.tree.id, { timeout: 60000 });
     // A click on that pixel opens the popup with the tree's attributes.
     await page.mouse.click(hit.x + 0.5, hit.y + 0.5);
     await page.waitForSelector('.sylva-popup[data-id]', { timeout: 60000 });
@@ -737,7 +741,12 @@ test('an iframe is driven by postMessage', async () => {
   assert.equal(found.data.count, 3, JSON.stringify(found).slice(0, 300));
   assert.deepEqual([...found.data.ids].sort((a, b) => a - b), [0, 7, 2999]);
   assert.match(refused.error, /no attributes/);
-  // pick replies with the tree at a pixel of the iframe's canvas, or null (a column down its middle).
+  // pick replies with the tree at a pixel of the iframe's canvas, or null (a column down its middle),
+  // once the iframe's viewer is idle (what is drawn no longer changes as tiles stream in).
+  await page.waitForFunction(() => {
+    const s = document.getElementById('f').contentWindow.sylva;
+    return s?.viewer && s.dirty === 0 && s.viewer.frames_in_flight() === 0;
+  }, null, { timeout: 90000, polling: 250 });
   const ys = [...Array(14).keys()].map((k) => 20 + k * 20);
   await page.evaluate((ys) => {
     const f = document.getElementById('f').contentWindow;
@@ -749,6 +758,17 @@ test('an iframe is driven by postMessage', async () => {
   assert.ok(picks.every((r) => !r.error), JSON.stringify(picks));
   const picked = picks.find((r) => r.data);
   assert.ok(picked && Number.isInteger(picked.data.id) && picked.data.id < 3000, JSON.stringify(picks));
+  // A click in the iframe on that pixel sends the parent a click event naming the same tree.
+  const y = ys[picks.indexOf(picked)];
+  const at = await page.evaluate(() => {
+    const f = document.getElementById('f'), r = f.getBoundingClientRect();
+    return { x: r.left + f.clientLeft, y: r.top + f.clientTop };
+  });
+  await page.mouse.click(at.x + 200.5, at.y + y + 0.5);
+  await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'click'), null, { timeout: 60000 });
+  const click = await page.evaluate(() => window.replies.find((r) => r.sylva === 'click').data);
+  assert.equal(click.tree?.id, picked.data.id, JSON.stringify(click));
+  assert.equal(Math.floor(click.x), 200, JSON.stringify(click));
   // setStyle replies with the legend; select and flyToTree take ids.
   await page.evaluate(() => {
     const f = document.getElementById('f').contentWindow;
