@@ -42,6 +42,10 @@ struct View {
     shadow_texel: vec4<f32>,
     // x: cascades in use (0 off), y: map size, z: PCF radius (texels), w: fade-out distance (m).
     shadow: vec4<f32>,
+    // The canopy cross-fade (issue 20; `canopy_weight`): x, y: the projected
+    // tree heights (px, × quality) below which trees are all / begin to be
+    // replaced by the canopy rasters (x = 0: no canopy); zw unused.
+    canopy: vec4<f32>,
 };
 
 // One batch of the resident pool. Must match `GpuBatch` in src/format/tile.rs
@@ -279,6 +283,35 @@ fn fade_keeps(item_y: u32, frag: vec2<f32>, seed: f32) -> bool {
     let s = u32(seed);
     let d = dither8(frag + vec2<f32>(f32(s & 7u), f32((s * 5u + (s >> 3u) * 3u) & 7u)));
     return select(d >= fade, d < fade, side == 1u);
+}
+
+// How much of a tree of `h_px` projected pixels the canopy raster stands in
+// for: 1 below view.canopy.x, 0 above view.canopy.y, linear between; 0 without
+// a canopy and in orthographic views (shadow cascades draw trees). Must match
+// `canopy_weight` in src/render/cull.rs.
+fn canopy_weight(h_px: f32, view: View) -> f32 {
+    if view.canopy.x <= 0.0 || view.viewport.w > 0.5 {
+        return 0.0;
+    }
+    return clamp((view.canopy.y - h_px) / max(view.canopy.y - view.canopy.x, 1e-3), 0.0, 1.0);
+}
+
+// A tree's own uniform number in [0, 1) from its packed position (stable
+// whatever pool slot holds it). Must match `tree_hash01` in src/render/cull.rs.
+fn tree_hash01(xy: u32) -> f32 {
+    var h = xy;
+    h ^= h >> 16u;
+    h *= 0x7feb352du;
+    h ^= h >> 15u;
+    h *= 0x846ca68bu;
+    h ^= h >> 16u;
+    return f32(h >> 8u) / 16777216.0;
+}
+
+// Whether the canopy stands in for this tree (it is not drawn): a random share
+// `canopy_weight` of the trees of a size, so trees and canopy cross-fade.
+fn canopy_drops(h_px: f32, xy: u32, view: View) -> bool {
+    return tree_hash01(xy) < canopy_weight(h_px, view);
 }
 
 // Decodes an octahedral-encoded unit vector (snorm xy in [-1, 1]).

@@ -200,14 +200,18 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         if view.lod.w < 1.5 && (!sphere_visible(center, radius, view) || dist - radius > view.lod.y) {
             continue;
         }
+        // An orthographic view (a shadow cascade) sizes trees in texels, at any distance.
+        let h_px = s.select.x * tree.scale * view.lod.x / select(dist, 1.0, view.viewport.w > 0.5);
+        // Where trees are a pixel or two, the canopy raster stands in for a share of them.
+        if canopy_drops(h_px, instances[instance].x, view) {
+            continue;
+        }
         if thinned {
             // Side 0 keeps the pixels whose dither is at least the fade.
             let fade = 1.0 - clamp(thin.x - f32(i), 0.0, 1.0);
             emit(b.species, REPR_BILLBOARD, instance, batch_index, 0u, fade);
             continue;
         }
-        // An orthographic view (a shadow cascade) sizes trees in texels, at any distance.
-        let h_px = s.select.x * tree.scale * view.lod.x / select(dist, 1.0, view.viewport.w > 0.5);
         select_and_emit(b.species, h_px, instance, batch_index);
     }
 }

@@ -212,6 +212,7 @@ fn sample_manifest() -> Manifest {
         shard: None,
         terrain: None,
         attributes: None,
+        canopy: None,
     }
 }
 
@@ -722,7 +723,23 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 8.into(), "version 8");
+    manifest_error(|v| v["version"] = 9.into(), "version 9");
+    // Version 8 adds the canopy raster; its URL stays inside the scene, its size is bounded.
+    let canopy = serde_json::json!({"url": "canopy/r.cnpy", "bytes": 32808});
+    manifest_error(|v| v["canopy"] = canopy.clone(), "\"canopy\" needs manifest version 8");
+    let with = |url: &'static str, bytes: u64| {
+        move |v: &mut serde_json::Value| {
+            v["version"] = 8.into();
+            v["canopy"] = serde_json::json!({"url": url, "bytes": bytes});
+        }
+    };
+    manifest_error(with("../secret.cnpy", 32808), "canopy.url");
+    manifest_error(with("canopy/r.cnpy", 3), "canopy.bytes");
+    manifest_error(with("canopy/r.cnpy", u64::MAX), "canopy.bytes");
+    let mut m = sample_manifest();
+    m.version = 8;
+    m.canopy = Some(serde_json::from_value(canopy).unwrap());
+    assert_eq!(Manifest::decode("s", &m.encode()).unwrap().canopy, m.canopy);
     manifest_error(
         |v| v["index"] = serde_json::json!({"root": "index/r.json", "nodes": 1, "depth": 1, "node_tiles": 64}),
         "needs manifest version 2",

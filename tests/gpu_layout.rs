@@ -65,6 +65,18 @@ fn the_terrain_structs_match_their_wgsl_twins() {
 }
 
 #[test]
+fn the_canopy_raster_matches_its_wgsl_twin() {
+    use sylva::render::canopy::GpuCanopyRaster;
+    check(
+        "canopy",
+        "CanopyRaster",
+        &members!(GpuCanopyRaster: origin_m, size_m, cells, z_min, z_span, height_max, slot),
+        size_of::<GpuCanopyRaster>(),
+        None,
+    );
+}
+
+#[test]
 fn shared_structs_match_their_wgsl_twins() {
     // Every pass composes shaders/common.wgsl: check in each where the struct is used.
     for shader in ["cull", "mesh", "billboard", "cluster"] {
@@ -72,7 +84,7 @@ fn shared_structs_match_their_wgsl_twins() {
             shader,
             "View",
             &members!(ViewUniform: clip_from_eye, eye_hi, eye_lo, frustum, sun_dir, sun_color, ambient, lod, params, eye_from_clip, viewport,
-                shadow_from_eye, shadow_texel, shadow),
+                shadow_from_eye, shadow_texel, shadow, canopy),
             size_of::<ViewUniform>(),
             None,
         );

@@ -7,6 +7,7 @@ mod attributes;
 mod bake;
 mod batching;
 mod bucket;
+mod canopy;
 mod cloud;
 mod clusters;
 mod demo;

@@ -92,7 +92,7 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
         if let Some(w) = tiles.windows(2).find(|w| (w[0].x, w[0].y) == (w[1].x, w[1].y)) {
             bail!("tile ({}, {}) is in two shards: the shards come from different bakes", w[0].x, w[0].y);
         }
-        finish_scene(tmp, base, tiles, node_tiles, false)
+        finish_scene(tmp, base, tiles, node_tiles, false, log)
     })
 }
 

@@ -73,8 +73,8 @@ struct Survey {
 }
 
 /// Whether `rel` is a name of the bake's own layout: `scene.json`,
-/// `species/*.pack`, `tiles/*.tile`, `tiles/*.ids`, `tiles/*.attr`, `index/*.json`
-/// (docs/FORMAT.md). A new kind of scene file must be added here.
+/// `species/*.pack`, `tiles/*.tile`, `tiles/*.ids`, `tiles/*.attr`, `index/*.json`,
+/// `canopy/*.cnpy`, the terrain's (docs/FORMAT.md). A new kind of scene file must be added here.
 #[must_use]
 pub fn is_bake_file(rel: &str) -> bool {
     let plain = |f: &str, ext: &[&str]| !f.starts_with('.') && ext.iter().any(|e| f.len() > e.len() && f.ends_with(e));
@@ -83,6 +83,7 @@ pub fn is_bake_file(rel: &str) -> bool {
         ["species", f] => plain(f, &[".pack"]),
         ["tiles", f] => plain(f, &[".tile", ".ids", ".attr"]),
         ["index", f] => plain(f, &[".json"]),
+        ["canopy", f] => plain(f, &[".cnpy"]),
         ["terrain", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".terr"]),
         ["terrain", "img", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".jpg"]),
         _ => false,
@@ -177,7 +178,9 @@ impl OutDir {
             bail!("{}", self.foreign_message(foreign));
         }
         let in_the_way = |f: &&String| {
-            f.as_str() == "scene.json" || ["species", "tiles", "index"].contains(&f.as_str()) || is_bake_file(f)
+            f.as_str() == "scene.json"
+                || ["species", "tiles", "index", "canopy"].contains(&f.as_str())
+                || is_bake_file(f)
         };
         if let Some(taken) = foreign.iter().find(in_the_way) {
             bail!(
@@ -402,6 +405,7 @@ mod tests {
             "tiles/-1_2.tile",
             "tiles/0_0.ids",
             "index/r0.json",
+            "canopy/r0.cnpy",
             "terrain/3/5_7.terr",
             "terrain/img/2/1_3.jpg",
         ] {
@@ -414,6 +418,8 @@ mod tests {
             "species/.pack",
             "species/.hidden.pack",
             "index/r.json/x",
+            "canopy/r0.json",
+            "canopy/.cnpy",
             "../scene.json",
             "lnk/important.doc",
             "species/../thesis.txt",

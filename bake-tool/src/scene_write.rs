@@ -41,6 +41,7 @@ pub fn finish_scene(
     mut tiles: Vec<TileEntry>,
     node_tiles: u32,
     flat: bool,
+    log: &dyn Fn(&str),
 ) -> Result<Manifest> {
     tiles.sort_by_key(|t| (t.y, t.x));
     let bounds = sylva::format::index::union_bounds(tiles.iter().map(|t| &t.bounds))
@@ -61,8 +62,23 @@ pub fn finish_scene(
         None => 3,
     };
     base.home = sylva::format::manifest::densest_group(&tiles);
+    // Canopy rasters for far views (version 8): not in a shard's part (merge
+    // makes them from all the tiles), nor for a scene without trees.
+    let looks = if base.shard.is_none() && !tiles.is_empty() {
+        Some(crate::canopy::species_looks(dir, &base.species, log)?)
+    } else {
+        None
+    };
+    if looks.is_some() {
+        base.version = 8;
+    }
+    let tile_m = f64::from(base.cell_size_m) * f64::from(base.tile_cells);
     if !flat && tiles.len() > node_tiles as usize {
-        let built = build_index(&tiles, node_tiles);
+        let mut built = build_index(&tiles, node_tiles);
+        if let Some(looks) = &looks {
+            crate::canopy::write_nodes(dir, &mut built.nodes, tile_m, looks)?;
+            base.canopy = built.nodes[0].1.canopy.clone();
+        }
         create_dir(&dir.join("index"))?;
         for (url, node) in &built.nodes {
             write_file(&dir.join(url), &node.encode())?;
@@ -70,6 +86,9 @@ pub fn finish_scene(
         base.index = Some(built.reference);
         base.tiles = Vec::new();
     } else {
+        if let Some(looks) = &looks {
+            base.canopy = Some(crate::canopy::write_flat(dir, &tiles, tile_m, looks)?);
+        }
         base.index = None;
         base.tiles = tiles;
     }

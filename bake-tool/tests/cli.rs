@@ -704,16 +704,16 @@ fn trees_stand_on_the_ground_of_a_dem() {
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
     let bare = inspect_json(&dir.join("bare"));
     assert!(bare["terrain"].is_null());
-    // Every scene is version 7 now (tiles in prefix levels), whatever its ground.
-    assert_eq!(bare["version"], 7);
+    // Every scene is version 8 now (canopy rasters), whatever its ground.
+    assert_eq!(bare["version"], 8);
     // The fitted ground carries the procedural forest floor as imagery;
     // --plain-ground leaves it out.
     let fitted = inspect_json(&dir.join("fitted"));
-    assert_eq!(fitted["version"], 7);
+    assert_eq!(fitted["version"], 8);
     assert!(fitted["terrain"]["imagery"]["source"].as_str().unwrap().contains("procedural forest floor"), "{fitted}");
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("plain"), &[&crs[..], &["--plain-ground"]].concat()));
     let plain = inspect_json(&dir.join("plain"));
-    assert_eq!(plain["version"], 7);
+    assert_eq!(plain["version"], 8);
     assert!(plain["terrain"]["imagery"].is_null());
     assert!(plain["terrain"]["imagery"].is_null());
     // Bad DEM inputs are named.
@@ -886,7 +886,7 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     assert!(log.contains("attribute \"Condition\" left out: a repeated column name"), "{log}");
     let manifest =
         sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(manifest.version, 7, "tiles in prefix levels");
+    assert_eq!(manifest.version, 8, "canopy rasters");
     let schema = manifest.attributes.clone().expect("attributes");
     let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed", "girth"]);

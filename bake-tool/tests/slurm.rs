@@ -30,7 +30,10 @@ fn slurm_missing() -> Option<String> {
     let missing: Vec<&str> =
         ["munged", "slurmctld", "slurmd"].into_iter().filter(|d| !Path::new("/usr/sbin").join(d).exists()).collect();
     if !missing.is_empty() {
-        return Some(format!("{} not installed (.ci/setup installs slurmctld, slurmd, slurm-client, munge)", missing.join(", ")));
+        return Some(format!(
+            "{} not installed (.ci/setup installs slurmctld, slurmd, slurm-client, munge)",
+            missing.join(", ")
+        ));
     }
     let uid = Command::new("id").arg("-u").output().ok().map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
     (uid.as_deref() != Some("0")).then(|| "not root (slurmd starts jobs as their submitting user)".to_string())
@@ -50,8 +53,23 @@ fn an_array_job_and_a_dependent_merge_on_slurm_equal_one_process() {
     let conf = cluster.0.join("slurm.conf");
 
     let demo = [
-        "demo", "--trees", "6000", "--seed", "5", "--billboard-size", "16", "--texture-size", "16", "--cluster-tries",
-        "1", "--cell-size", "32", "--tile-cells", "2", "--index-node-tiles", "5",
+        "demo",
+        "--trees",
+        "6000",
+        "--seed",
+        "5",
+        "--billboard-size",
+        "16",
+        "--texture-size",
+        "16",
+        "--cluster-tries",
+        "1",
+        "--cell-size",
+        "32",
+        "--tile-cells",
+        "2",
+        "--index-node-tiles",
+        "5",
     ];
     run(bin().args(demo).arg("--out").arg(dir.join("single")));
 

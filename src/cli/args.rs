@@ -217,6 +217,10 @@ pub(crate) struct ViewArgs {
     /// compare bytes; the image is the same).
     #[arg(long)]
     pub(crate) whole_tiles: bool,
+    /// Draw every tree however small, instead of the scene's canopy rasters
+    /// where trees are under a pixel or two (scenes baked with canopy rasters).
+    #[arg(long)]
+    pub(crate) no_canopy: bool,
 }
 
 impl ViewArgs {

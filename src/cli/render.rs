@@ -235,6 +235,7 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
         quality: args.frame.quality,
         draw_distance_m: args.frame.draw_distance,
         whole_tiles: args.frame.whole_tiles,
+        canopy: !args.frame.no_canopy,
         terrain: !args.no_terrain,
         far_tier: far_tier_of(args.far_tier),
         representations,
@@ -440,7 +441,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         repr,
     } = args;
     let (w, h) = frame.checked_size()?;
-    let ViewArgs { view, camera, quality, draw_distance, whole_tiles, .. } = frame;
+    let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, .. } = frame;
     if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
         bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
     }
@@ -459,6 +460,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             quality,
             draw_distance_m: draw_distance,
             whole_tiles,
+            canopy: !no_canopy,
             debug_lod,
             debug_bounds,
             cluster_min_px: ellipsoid_min_px,

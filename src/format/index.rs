@@ -35,6 +35,14 @@ pub struct ChildEntry {
     pub trees: u64,
     /// Tiles below the child.
     pub tiles: u64,
+    /// The tallest tree below the child, metres (scene version 8): where it
+    /// is below a pixel, a view draws the child's canopy instead of its trees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height_m: Option<f32>,
+    /// The child's canopy raster (scene version 8), so a view can draw it
+    /// without reading the child.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canopy: Option<super::entries::CanopyRef>,
 }
 
 /// One node (`index/r….json`).
@@ -55,6 +63,9 @@ pub struct IndexNode {
     pub tiles: Vec<TileEntry>,
     /// Children (an inner node), in quadrant order.
     pub children: Vec<ChildEntry>,
+    /// The canopy raster of every tree below the node (scene version 8).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canopy: Option<super::entries::CanopyRef>,
 }
 
 impl IndexNode {
@@ -92,6 +103,9 @@ impl IndexNode {
 
     fn validate(&self) -> Result<(), Problem> {
         validate_bounds("bounds", &self.bounds)?;
+        if let Some(c) = &self.canopy {
+            c.validate("canopy")?;
+        }
         at_most("tiles count", self.tiles.len() as u64, MAX_NODE_TILES as u64)?;
         at_most("children count", self.children.len() as u64, 4)?;
         let [x0, y0, size] = self.square;
@@ -118,6 +132,15 @@ impl IndexNode {
             let what = format!("children[{i}]");
             check_url(&format!("{what}.url"), &c.url)?;
             validate_bounds(&format!("{what}.bounds"), &c.bounds)?;
+            if let Some(h) = c.height_m {
+                let h = super::error::finite(format!("{what}.height_m"), f64::from(h))?;
+                if h < 0.0 {
+                    return Err(Problem::Invalid(format!("{what}.height_m is {h}: heights are not negative")));
+                }
+            }
+            if let Some(canopy) = &c.canopy {
+                canopy.validate(&format!("{what}.canopy"))?;
+            }
             trees = trees.saturating_add(c.trees);
         }
         if trees != self.trees {
@@ -161,22 +184,28 @@ pub fn build_index(tiles: &[TileEntry], node_tiles: u32) -> BuiltIndex {
     assert!(!tiles.is_empty() && node_tiles > 0);
     let mut sorted: Vec<TileEntry> = tiles.to_vec();
     sorted.sort_by_key(|t| (t.y, t.x));
+    let mut nodes = Vec::new();
+    let depth = build_node("index/r", tile_square(&sorted), sorted, node_tiles as usize, &mut nodes);
+    BuiltIndex {
+        reference: IndexRef { root: "index/r.json".into(), nodes: nodes.len() as u64, depth, node_tiles },
+        nodes,
+    }
+}
+
+/// The index root's square `[x0, y0, size]` over `tiles` (at least one): the
+/// smallest power-of-two square of tile coordinates from their lowest corner.
+#[must_use]
+pub fn tile_square(tiles: &[TileEntry]) -> [i64; 3] {
     let (mut x0, mut y0) = (i64::MAX, i64::MAX);
     let (mut x1, mut y1) = (i64::MIN, i64::MIN);
-    for t in &sorted {
+    for t in tiles {
         x0 = x0.min(t.x.into());
         y0 = y0.min(t.y.into());
         x1 = x1.max(t.x.into());
         y1 = y1.max(t.y.into());
     }
-    let span = (x1 - x0 + 1).max(y1 - y0 + 1);
-    let size = (span as u64).next_power_of_two() as i64;
-    let mut nodes = Vec::new();
-    let depth = build_node("index/r", [x0, y0, size], sorted, node_tiles as usize, &mut nodes);
-    BuiltIndex {
-        reference: IndexRef { root: "index/r.json".into(), nodes: nodes.len() as u64, depth, node_tiles },
-        nodes,
-    }
+    let span = (x1 - x0 + 1).max(y1 - y0 + 1).max(1);
+    [x0, y0, (span as u64).next_power_of_two() as i64]
 }
 
 /// Builds the node `stem` over `tiles` (all inside `square`); returns its depth.
@@ -201,6 +230,7 @@ fn build_node(
             trees,
             tiles: Vec::new(),
             children: Vec::new(),
+            canopy: None,
         },
     ));
     if tiles.len() <= node_tiles || square[2] == 1 {
@@ -230,6 +260,8 @@ fn build_node(
             bounds: node.bounds,
             trees: node.trees,
             tiles: count_tiles(out, child_at),
+            height_m: None,
+            canopy: None,
         });
     }
     out[at].1.children = children;
@@ -343,7 +375,14 @@ mod tests {
         err(&|n| n.version = 9, "version 9");
         err(
             &|n| {
-                n.children.push(ChildEntry { url: "index/r0.json".into(), bounds: n.bounds, trees: 0, tiles: 0 });
+                n.children.push(ChildEntry {
+                    url: "index/r0.json".into(),
+                    bounds: n.bounds,
+                    trees: 0,
+                    tiles: 0,
+                    height_m: None,
+                    canopy: None,
+                });
             },
             "one or the other",
         );

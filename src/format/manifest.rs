@@ -12,15 +12,16 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 7).
+/// Newest manifest version this build writes and reads (it reads 1 to 8).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
 /// ground imagery (`terrain.imagery`); version 6 per-tree attributes
 /// (`attributes`); version 7 tiles in prefix levels (tile version 3, the
-/// entries' `levels`). The bake writes the oldest version that holds what a
-/// scene has (7 for every scene with tiles since tiles are version 3; 3 to 6
-/// for older bakes), so older viewers refuse newer scenes with a clear message.
-pub const SCENE_VERSION: u32 = 7;
+/// entries' `levels`); version 8 canopy rasters (`canopy`, and in index nodes).
+/// The bake writes the oldest version that holds what a scene has (8 for every
+/// scene with a canopy, 7 without; 3 to 6 for older bakes), so older viewers
+/// refuse newer scenes with a clear message.
+pub const SCENE_VERSION: u32 = 8;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -113,6 +114,10 @@ pub struct Manifest {
     /// ([`super::attributes::attributes_url`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attributes: Option<super::attributes::AttributeSchema>,
+    /// The whole scene's canopy raster (version 8): what its forest looks like
+    /// where trees are below a pixel (the index root's raster in an indexed scene).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canopy: Option<super::entries::CanopyRef>,
 }
 
 /// Which shard of a sharded bake wrote a directory.
@@ -174,6 +179,12 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<(), Problem> {
+        if let Some(c) = &self.canopy {
+            if self.version < 8 {
+                return Err(Problem::Invalid("\"canopy\" needs manifest version 8".into()));
+            }
+            c.validate("canopy")?;
+        }
         if self.version < 7 && self.tiles.iter().any(|t| t.levels.is_some()) {
             return Err(Problem::Invalid("tiles with \"levels\" need manifest version 7".into()));
         }

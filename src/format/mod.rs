@@ -7,6 +7,7 @@
 //! input declares. The spec is `docs/FORMAT.md`; fuzz targets live in `fuzz/`.
 
 pub mod attributes;
+pub mod canopy;
 pub mod cloud;
 pub mod cluster;
 pub mod entries;

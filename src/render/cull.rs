@@ -238,6 +238,10 @@ pub fn cpu_select_styled(
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
                 continue;
             }
+            let h_px = s.select[0] * d.2 * view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
+            if tree_hash01(packed.xy) < canopy_weight(h_px, view) {
+                continue;
+            }
             if thinned {
                 let slot = (b.species * REPR_COUNT + Repr::Billboard as u32) as usize;
                 let fade = 1.0 - (kept - k as f32).clamp(0.0, 1.0);
@@ -248,11 +252,34 @@ pub fn cpu_select_styled(
                 }
                 continue;
             }
-            let h_px = s.select[0] * d.2 * view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
             select(&mut sel, view, s, b.species, h_px, index, i as u32);
         }
     }
     sel
+}
+
+/// How much of a tree of `h_px` projected pixels the canopy stands in for,
+/// exactly as `canopy_weight` in `shaders/common.wgsl`.
+#[must_use]
+pub fn canopy_weight(h_px: f32, view: &ViewUniform) -> f32 {
+    let [lo, hi, _, _] = view.canopy;
+    if lo <= 0.0 || view.viewport[3] > 0.5 {
+        return 0.0;
+    }
+    ((hi - h_px) / (hi - lo).max(1e-3)).clamp(0.0, 1.0)
+}
+
+/// A tree's uniform number in [0, 1) from its packed position, exactly as
+/// `tree_hash01` in `shaders/common.wgsl`.
+#[must_use]
+pub fn tree_hash01(xy: u32) -> f32 {
+    let mut h = xy;
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x7feb_352d);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x846c_a68b);
+    h ^= h >> 16;
+    (h >> 8) as f32 / 16_777_216.0
 }
 
 /// Prefix thinning of a batch, exactly as `thinning` in `shaders/common.wgsl`:

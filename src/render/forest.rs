@@ -57,6 +57,9 @@ pub struct ForestRenderer {
     cull: CullPipelines,
     sky: SkyPass,
     terrain: TerrainPass,
+    canopy: super::canopy::CanopyPass,
+    /// This frame's canopy cross-fade (`ViewUniform::canopy`; zeros: off).
+    canopy_px: [f32; 2],
     bounds: BoundsPass,
     pools: Pools,
     species: Species,
@@ -87,6 +90,7 @@ impl ForestRenderer {
         let cull = CullPipelines::new(device, &shared);
         let sky = SkyPass::new(device, &shared, color_format);
         let terrain = TerrainPass::new(device, &shared, color_format);
+        let canopy = super::canopy::CanopyPass::new(device, &shared, color_format);
         let bounds = BoundsPass::new(device, &shared, color_format);
         let pools = Pools::new(device, config, &PoolLayouts { shared: &shared, cull: &cull, bounds: &bounds.layout });
         let views = VIEW_STRIDE * (1 + MAX_CASCADES as u64);
@@ -100,6 +104,8 @@ impl ForestRenderer {
             cull,
             sky,
             terrain,
+            canopy,
+            canopy_px: [0.0; 2],
             bounds,
             pools,
             species: Species::new(color_format),
@@ -243,7 +249,12 @@ impl ForestRenderer {
     pub fn gpu_bytes(&self) -> u64 {
         // (The pools' figure counts the control buffer without styles: add what styles hold.)
         let styles = self.pools.buffers.control.size() - super::gpu_data::control_buffer_bytes(0);
-        self.pools.config().bytes() + styles + self.species.bytes() + self.terrain.gpu_bytes() + self.shadow_bytes()
+        self.pools.config().bytes()
+            + styles
+            + self.species.bytes()
+            + self.terrain.gpu_bytes()
+            + self.canopy.gpu_bytes()
+            + self.shadow_bytes()
     }
 
     /// GPU bytes of the shadow map (0 until shadows are first drawn).
@@ -330,6 +341,7 @@ impl ForestRenderer {
             shadow_from_eye: [[[0.0; 4]; 4]; super::gpu_data::MAX_CASCADES],
             shadow_texel: [0.0; 4],
             shadow: [0.0; 4],
+            canopy: [self.canopy_px[0], self.canopy_px[1], 0.0, 0.0],
         };
         let mut uniform = uniform;
         self.last_cascades.clear();
@@ -468,6 +480,26 @@ impl ForestRenderer {
         self.terrain.prepare(device, queue, draws, threshold_px, flags);
     }
 
+    /// Uploads what the canopy pass draws this frame (the stream's selection)
+    /// and sets the trees' cross-fade with it (`px`: [`super::settings::CANOPY_PX`];
+    /// None: no canopy, trees at every size).
+    pub fn prepare_canopy(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        draws: &[crate::scene::canopy::CanopyDraw],
+        px: Option<[f32; 2]>,
+    ) {
+        self.canopy_px = px.unwrap_or([0.0; 2]);
+        self.canopy.prepare(device, queue, if px.is_some() { draws } else { &[] });
+    }
+
+    /// The canopy pass (rasters drawn, uploads, GPU bytes).
+    #[must_use]
+    pub fn canopy(&self) -> &super::canopy::CanopyPass {
+        &self.canopy
+    }
+
     /// Sizes the terrain pool for a scene's terrain (see [`TerrainPass::reserve`]).
     pub fn reserve_terrain(&mut self, device: &wgpu::Device, grid: u16, tiles: u64, images: u64) {
         self.terrain.reserve(device, grid, tiles);
@@ -538,6 +570,7 @@ impl ForestRenderer {
         self.sky.draw(&mut pass);
         let mut draws = self.terrain.draw(&mut pass);
         draws += self.species.draw(&mut pass, &self.pools, &self.reach, frame.species);
+        draws += self.canopy.draw(&mut pass);
         if frame.debug_bounds {
             draws += self.bounds.draw(&mut pass, &self.pools);
         }

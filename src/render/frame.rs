@@ -206,6 +206,13 @@ impl<F: Fetcher> Frame<F> {
                 lod_scale: settings.quality,
             }),
         );
+        // Far trees give way to the canopy rasters (scenes that have them).
+        self.stream.set_canopy_view(settings.canopy.then_some(crate::scene::streaming::CanopyView {
+            px_lo: super::settings::CANOPY_PX[0],
+            px_hi: super::settings::CANOPY_PX[1],
+            cell_px: super::settings::CANOPY_CELL_PX,
+            lod_scale: settings.quality,
+        }));
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
         self.stream.update(&mut residency, view, self.settings.draw_distance_m, now_s);
         if let Some(m) = self.stream.manifest() {
@@ -423,6 +430,8 @@ impl<F: Fetcher> Frame<F> {
         let threshold = threshold * settings.quality;
         let terrain = if settings.terrain { self.stream.terrain_draws() } else { &[] };
         self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
+        let canopy = self.stream.canopy_active().filter(|_| settings.canopy).map(|c| [c.px_lo, c.px_hi]);
+        self.renderer.prepare_canopy(&self.device, &self.queue, self.stream.canopy_draws(), canopy);
         self.renderer.prepare(&self.device, &self.queue, view, settings)
     }
 

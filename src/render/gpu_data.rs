@@ -42,8 +42,12 @@ pub struct ViewUniform {
     /// x: cascades in use (0: no shadows), y: shadow map size (texels), z: PCF
     /// kernel radius (texels: 0 one tap), w: distance (m) where shadows have faded out.
     pub shadow: [f32; 4],
+    /// The canopy cross-fade (`canopy_weight`): x, y the projected tree heights
+    /// (px × quality) below which trees are all / begin to be replaced by the
+    /// canopy rasters (x = 0: no canopy); zw unused.
+    pub canopy: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<ViewUniform>() == 640);
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 656);
 
 /// Most shadow cascades a view carries.
 pub const MAX_CASCADES: usize = 4;

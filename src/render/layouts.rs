@@ -260,6 +260,22 @@ pub fn pulling_pipeline(
     )
 }
 
+/// [`pulling_pipeline`] with `blend` on the colour target (`fs_main`).
+#[must_use]
+pub fn pulling_pipeline_blended(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    target: &PullingTarget,
+    blend: wgpu::BlendState,
+) -> wgpu::RenderPipeline {
+    let stages = Stages { module, layout, buffers: &[], fragment: "fs_main" };
+    let color =
+        wgpu::ColorTargetState { format: target.format, blend: Some(blend), write_mask: wgpu::ColorWrites::ALL };
+    render_pipeline(device, label, &stages, target.primitive, target.depth_stencil.clone(), &[Some(color)])
+}
+
 /// The depth-only pipeline a pass draws shadow casters with: vertex stage
 /// `vs_main` (reading `buffers`), fragment stage `fs_shadow` (alpha tests,
 /// exact depths), no colour targets, the cascade's reversed-Z depth.

@@ -3,6 +3,7 @@
 
 pub mod billboard;
 #[cfg(not(target_arch = "wasm32"))]
+pub mod canopy;
 pub mod capture;
 pub mod cluster;
 pub mod context;
@@ -140,6 +141,7 @@ impl Lighting {
             shadow_from_eye: [[[0.0; 4]; 4]; gpu_data::MAX_CASCADES],
             shadow_texel: [0.0; 4],
             shadow: [0.0; 4],
+            canopy: [0.0; 4],
         }
     }
 }

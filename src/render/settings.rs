@@ -25,6 +25,10 @@ pub struct RenderSettings {
     /// Fetch every tile whole, not the prefix levels prefix thinning draws (for
     /// comparisons; the image is the same).
     pub whole_tiles: bool,
+    /// Where trees are a pixel or two, draw the scene's canopy rasters instead,
+    /// cross-faded with them (scenes of version 8; [`CANOPY_PX`]): trees under
+    /// a pixel are then neither fetched nor drawn.
+    pub canopy: bool,
     /// Trees farther than this are not drawn (metres; infinite by default: far
     /// tiles are fetched and drawn as thin prefixes, so a view of any height
     /// shows its forest, and pools that fill shorten the reach themselves).
@@ -107,6 +111,16 @@ pub enum FarTier {
 /// Default of [`RenderSettings::thin_px`].
 pub const DEFAULT_THIN_PX: f32 = 8.0;
 
+/// The canopy cross-fade ([`RenderSettings::canopy`]): below the first
+/// projected tree height (px, × quality) the canopy rasters stand in for every
+/// tree, from the second up trees are drawn whole, between a share of them
+/// (`canopy_weight` in `shaders/common.wgsl`).
+pub const CANOPY_PX: [f32; 2] = [1.0, 2.5];
+
+/// Canopy rasters are refined (children replace their parent) while their
+/// cells project above this many pixels.
+pub const CANOPY_CELL_PX: f32 = 2.0;
+
 /// Representation families a frame may use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Representations {
@@ -166,6 +180,7 @@ impl Default for RenderSettings {
             lod_policy: true,
             refine_seed: 0,
             whole_tiles: false,
+            canopy: true,
         }
     }
 }

@@ -52,6 +52,9 @@ pub const TERRAIN: &str = concat!(
     include_str!("../../shaders/terrain.wgsl")
 );
 
+/// The canopy pass.
+pub const CANOPY: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/canopy.wgsl"));
+
 /// Progressive refinement's accumulate and resolve passes.
 pub const ACCUMULATE: &str = include_str!("../../shaders/accumulate.wgsl");
 
@@ -65,5 +68,6 @@ pub const ALL: &[(&str, &str)] = &[
     ("sky", SKY),
     ("bounds", BOUNDS),
     ("terrain", TERRAIN),
+    ("canopy", CANOPY),
     ("accumulate", ACCUMULATE),
 ];

@@ -291,6 +291,7 @@ pub fn cascade_view(main: &ViewUniform, cascade: &Cascade, size: u32) -> ViewUni
         shadow_from_eye: [[[0.0; 4]; 4]; MAX_CASCADES],
         shadow_texel: [0.0; 4],
         shadow: [0.0; 4],
+        canopy: [0.0; 4],
         ..*main
     }
 }

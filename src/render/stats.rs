@@ -53,6 +53,12 @@ pub struct FrameStats {
     pub imagery_drawn: u64,
     /// Ground images decoded and kept (CPU; those drawn are also on the GPU).
     pub imagery_resident: u64,
+    /// Canopy rasters drawn this frame (0 without a canopy, or while trees are big).
+    pub canopy_drawn: u64,
+    /// Canopy rasters decoded and kept (CPU; those drawn are also on the GPU).
+    pub canopy_resident: u64,
+    /// Of `bytes_fetched`, canopy raster bytes.
+    pub canopy_bytes_fetched: u64,
     /// Index nodes read so far (0 for a flat manifest).
     pub index_nodes_loaded: u64,
     /// Index nodes in the scene (0 for a flat manifest).
@@ -127,6 +133,9 @@ impl FrameStats {
             terrain_resident: s.terrain_resident,
             imagery_drawn: u64::from(renderer.terrain().imaged),
             imagery_resident: s.imagery_resident,
+            canopy_drawn: u64::from(renderer.canopy().drawn()),
+            canopy_resident: s.canopy_resident,
+            canopy_bytes_fetched: s.canopy_bytes_fetched,
             index_nodes_loaded: s.index_nodes_loaded,
             index_nodes_total: s.index_nodes_total,
             degraded,

@@ -5,6 +5,7 @@
 use glam::Vec3;
 
 use crate::camera::ViewData;
+use crate::format::entries::CanopyRef;
 use crate::format::index::IndexNode;
 use crate::format::{Bounds, Manifest, TileEntry};
 
@@ -28,6 +29,42 @@ pub(crate) struct NodeInfo {
     pub trees: u64,
     /// Loaded or not.
     pub content: NodeContent,
+    /// Its canopy raster (scene version 8), as its parent (or the manifest) names it.
+    pub canopy: Option<CanopyRef>,
+    /// The tallest tree below it, metres, when known (its parent's entry, or
+    /// once it is loaded).
+    pub height_m: Option<f32>,
+}
+
+/// Where far trees give way to the canopy rasters (issue 20): a node or tile
+/// whose tallest tree projects below `px_lo` pixels at its nearest point is
+/// drawn by the canopy alone, so the walk neither reads nor fetches it —
+/// unless the canopy still wants the node's children (its cells above
+/// `cell_px` pixels there).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CanopyGate {
+    /// Pixels per metre at 1 m, × quality.
+    pub px_per_m: f32,
+    /// Projected tree height (px) below which the canopy stands in for every tree.
+    pub px_lo: f32,
+    /// Canopy cells are refined while they project above this many pixels.
+    pub cell_px: f32,
+}
+
+impl CanopyGate {
+    /// Whether the canopy alone draws a node (bounds `b`, tallest tree `height`, canopy or not) at distance `d`.
+    fn covers_node(&self, info: &NodeInfo, d: f32) -> bool {
+        let (Some(_), Some(h)) = (&info.canopy, info.height_m) else { return false };
+        let d = d.max(1e-3);
+        let extent = (info.bounds.max[0] - info.bounds.min[0]).max(info.bounds.max[1] - info.bounds.min[1]);
+        let cell = extent / crate::format::canopy::CANOPY_CELLS as f32;
+        h * self.px_per_m / d < self.px_lo && cell * self.px_per_m / d <= self.cell_px
+    }
+
+    /// Whether the canopy alone draws a tile at distance `d`.
+    fn covers_tile(&self, t: &TileEntry, d: f32) -> bool {
+        t.levels.as_ref().is_some_and(|l| l.height_m * self.px_per_m / d.max(1e-3) < self.px_lo)
+    }
 }
 
 /// Ids with their distance from the eye, nearest first.
@@ -54,6 +91,11 @@ fn box_distance(view: &ViewData, b: &Bounds, reach: f32, margin: f32) -> Option<
     (visible && d <= reach + margin).then_some(d)
 }
 
+/// The tallest tree of `tiles` (`None` if any tile does not say).
+fn tallest(tiles: &[TileEntry]) -> Option<f32> {
+    tiles.iter().try_fold(0f32, |h, t| t.levels.as_ref().map(|l| h.max(l.height_m)))
+}
+
 /// Whether the view wants a tile with bounds `b` (the oracle's rule too).
 #[must_use]
 pub fn tile_wanted(view: &ViewData, b: &Bounds, draw_distance_m: f32) -> Option<f32> {
@@ -71,6 +113,8 @@ impl IndexWalk {
                     bounds: m.bounds,
                     trees: m.counts.trees,
                     content: NodeContent::Unloaded,
+                    canopy: m.canopy.clone(),
+                    height_m: None,
                 }],
                 tiles: Vec::new(),
                 declared_nodes: index.nodes,
@@ -81,6 +125,8 @@ impl IndexWalk {
                     bounds: m.bounds,
                     trees: m.counts.trees,
                     content: NodeContent::Loaded { children: Vec::new(), tiles: (0..m.tiles.len()).collect() },
+                    canopy: m.canopy.clone(),
+                    height_m: tallest(&m.tiles),
                 }],
                 tiles: m.tiles.clone(),
                 declared_nodes: 0,
@@ -114,8 +160,20 @@ impl IndexWalk {
     #[must_use]
     pub fn walk(&self, view: &ViewData, draw_distance_m: f32) -> (ByDistance, ByDistance) {
         let (mut tiles, mut fetch, mut stack) = (Vec::new(), Vec::new(), Vec::new());
-        self.walk_into(view, draw_distance_m, &mut tiles, &mut fetch, &mut stack);
+        self.walk_into(view, draw_distance_m, None, &mut tiles, &mut fetch, &mut stack);
         (tiles, fetch)
+    }
+
+    /// Node `n` as the walker knows it.
+    #[must_use]
+    pub(crate) fn node(&self, n: usize) -> &NodeInfo {
+        &self.nodes[n]
+    }
+
+    /// Nodes known (read or not).
+    #[must_use]
+    pub fn nodes_known(&self) -> usize {
+        self.nodes.len()
     }
 
     /// [`Self::walk`] into the caller's buffers (cleared first): no allocation
@@ -124,6 +182,7 @@ impl IndexWalk {
         &self,
         view: &ViewData,
         draw_distance_m: f32,
+        canopy: Option<&CanopyGate>,
         tiles: &mut ByDistance,
         fetch: &mut ByDistance,
         stack: &mut Vec<usize>,
@@ -140,13 +199,20 @@ impl IndexWalk {
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n];
             let Some(d) = box_distance(view, &node.bounds, draw_distance_m, margin) else { continue };
+            // Where the canopy alone draws the node, neither it nor its tiles are read.
+            if canopy.is_some_and(|g| g.covers_node(node, d)) {
+                continue;
+            }
             match &node.content {
                 NodeContent::Unloaded => fetch.push((d, n)),
                 NodeContent::Loaded { children, tiles: ts } => {
                     stack.extend(children);
+                    let gate = canopy.filter(|_| node.canopy.is_some());
                     for &t in ts {
                         if let Some(d) = tile_wanted(view, &self.tiles[t].bounds, draw_distance_m) {
-                            tiles.push((d, t));
+                            if !gate.is_some_and(|g| g.covers_tile(&self.tiles[t], d)) {
+                                tiles.push((d, t));
+                            }
                         }
                     }
                 }
@@ -190,9 +256,24 @@ impl IndexWalk {
         }
         let first_tile = self.tiles.len();
         let mut children = Vec::with_capacity(node.children.len());
+        let height =
+            tallest(&node.tiles).and_then(|h0| node.children.iter().try_fold(h0, |h, c| c.height_m.map(|x| h.max(x))));
+        if self.nodes[n].height_m.is_none() {
+            self.nodes[n].height_m = height;
+        }
+        if node.canopy.is_some() {
+            self.nodes[n].canopy = node.canopy.clone();
+        }
         for c in node.children {
             children.push(self.nodes.len());
-            self.nodes.push(NodeInfo { url: c.url, bounds: c.bounds, trees: c.trees, content: NodeContent::Unloaded });
+            self.nodes.push(NodeInfo {
+                url: c.url,
+                bounds: c.bounds,
+                trees: c.trees,
+                content: NodeContent::Unloaded,
+                canopy: c.canopy,
+                height_m: c.height_m,
+            });
         }
         // Tiles must lie inside the node's bounds too, or the walk could miss them.
         for t in &node.tiles {
@@ -260,6 +341,7 @@ mod tests {
             shard: None,
             terrain: None,
             attributes: None,
+            canopy: None,
         };
         (m, tiles)
     }

@@ -1,6 +1,7 @@
 //! Scenes: fetching (one abstraction for local paths, HTTP and the browser's
 //! `fetch`), streaming and residency.
 
+pub mod canopy;
 pub mod fetch;
 pub mod imagery;
 pub mod index_walk;

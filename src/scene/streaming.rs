@@ -12,13 +12,16 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
+use super::canopy::{CanopyDraw, CanopyTree};
 use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
 use super::imagery::{Imagery, ImageryChoice, ImageryFetch};
+use super::index_walk::CanopyGate;
 use super::index_walk::IndexWalk;
 use super::residency::{PoolError, Residency, TileSlot};
 use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
 use crate::format::attributes::AttributeCodes;
+use crate::format::canopy::Canopy;
 use crate::format::terrain::TerrainTile;
 use crate::format::tile::level_prefix;
 use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
@@ -307,6 +310,8 @@ enum Target {
     TreeData(usize, bool),
     /// More prefix levels of a resident tile holding this many.
     TileMore(usize, u32),
+    /// An index node's canopy raster.
+    Canopy(usize),
 }
 
 /// Counters for stats.
@@ -342,6 +347,12 @@ pub struct StreamStats {
     pub imagery_resident: u64,
     /// Terrain tiles drawn with an image this frame.
     pub imagery_drawn: u64,
+    /// Canopy rasters decoded and kept.
+    pub canopy_resident: u64,
+    /// Canopy rasters drawn by the current view.
+    pub canopy_drawn: u64,
+    /// Bytes of canopy rasters received.
+    pub canopy_bytes_fetched: u64,
 }
 
 /// Where a picked tree's data is: its tile's files and its index in the tile.
@@ -414,6 +425,28 @@ pub struct SceneStream<F: Fetcher> {
     prefix_view: Option<PrefixView>,
     /// Wanted tiles within reach holding fewer levels than the view needs.
     levels_short: usize,
+    /// Canopy rasters (scene version 8): the view's cross-fade (None: off),
+    /// the resident ones, what the view draws and waits for, failed attempts.
+    canopy_view: Option<CanopyView>,
+    canopy_gate: Option<CanopyGate>,
+    canopy: CanopyTree,
+    canopy_draws: Vec<CanopyDraw>,
+    canopy_wanted: Vec<(f32, usize)>,
+    canopy_attempts: HashMap<usize, (u32, f64)>,
+}
+
+/// Where a view hands far trees over to the canopy rasters
+/// ([`SceneStream::set_canopy_view`]; the cull pass's `canopy_weight`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CanopyView {
+    /// Projected tree height (px, × quality) below which the canopy stands in for every tree.
+    pub px_lo: f32,
+    /// … and from which trees begin to give way to it.
+    pub px_hi: f32,
+    /// Rasters are refined while their cells project above this (px).
+    pub cell_px: f32,
+    /// The factor on pixels per metre (the quality).
+    pub lod_scale: f32,
 }
 
 impl<F: Fetcher> SceneStream<F> {
@@ -499,7 +532,37 @@ impl<F: Fetcher> SceneStream<F> {
             tree_data: (false, false),
             prefix_view: None,
             levels_short: 0,
+            canopy_view: None,
+            canopy_gate: None,
+            canopy: CanopyTree::default(),
+            canopy_draws: Vec::new(),
+            canopy_wanted: Vec::new(),
+            canopy_attempts: HashMap::new(),
         }
+    }
+
+    /// Let the canopy rasters stand in for far trees (None: trees at every
+    /// size, no raster fetched).
+    pub fn set_canopy_view(&mut self, view: Option<CanopyView>) {
+        self.canopy_view = view;
+        if view.is_none() {
+            self.canopy_draws.clear();
+            self.canopy_wanted.clear();
+            self.canopy_gate = None;
+        }
+    }
+
+    /// The canopy rasters the current view draws.
+    #[must_use]
+    pub fn canopy_draws(&self) -> &[CanopyDraw] {
+        &self.canopy_draws
+    }
+
+    /// Whether the canopy stands in for far trees now: asked for, and the
+    /// scene's root raster is resident (until then trees are drawn at every size).
+    #[must_use]
+    pub fn canopy_active(&self) -> Option<CanopyView> {
+        self.canopy_view.filter(|_| self.canopy.ready())
     }
 
     /// Fetch only the prefix of each tile that a view drawing with this
@@ -588,6 +651,8 @@ impl<F: Fetcher> SceneStream<F> {
         let terrain_done = self.terrain_wanted.is_empty()
             && !self.terrain_attempts.values().any(|(_, due)| due.is_finite())
             && self.imagery_wanted.is_empty();
+        let canopy_done =
+            self.canopy_wanted.is_empty() && !self.canopy_attempts.values().any(|(_, due)| due.is_finite());
         // Trees' ids and attributes a style waits for and not yet asked for (the
         // fetcher was busy): their tiles are drawn unstyled until they come.
         let data_done = !self.tree_data.0
@@ -603,6 +668,7 @@ impl<F: Fetcher> SceneStream<F> {
             && self.levels_short == 0
             && packs_done
             && terrain_done
+            && canopy_done
             && data_done
             && self.requests.is_empty()
     }
@@ -684,6 +750,7 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::Image(generation, key) => self.on_image(generation, key, result, now_s),
                 Target::ImageSource(generation, tile) => self.on_image_source(generation, tile, result),
                 Target::TreeData(t, attributes) => self.on_tree_data(t, attributes, result),
+                Target::Canopy(n) => self.on_canopy(n, result, now_s),
             }
         }
         if self.manifest.is_none() {
@@ -717,9 +784,21 @@ impl<F: Fetcher> SceneStream<F> {
             let over_rate = self.config.max_bytes_per_s > 0.0 && rate as f64 >= self.config.max_bytes_per_s;
             self.stats.degraded.bandwidth = over_rate;
             self.retry_terrain(now_s);
+            self.retry_canopy(now_s);
             self.imagery.retry_due(now_s);
             self.select_terrain(view);
-            if !over_rate {
+            self.select_canopy(view);
+            // While the scene's root canopy raster loads, tiles wait: it decides
+            // which trees a far view needs at all.
+            let canopy_first = self.canopy_view.is_some()
+                && self.index.nodes_known() > 0
+                && self.index.node(0).canopy.is_some()
+                && self.canopy.root_loading();
+            if !over_rate && canopy_first {
+                self.request_canopy();
+                self.walk(view, draw_distance_m);
+            } else if !over_rate {
+                self.request_canopy();
                 self.request_tiles(view, draw_distance_m, now_s);
                 self.request_packs(residency, now_s);
                 self.request_terrain();
@@ -744,6 +823,91 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.terrain_drawn = self.terrain_draws.len() as u64;
         self.stats.imagery_resident = self.imagery.resident() as u64;
         self.stats.imagery_drawn = self.terrain_draws.iter().filter(|d| d.imagery.is_some()).count() as u64;
+        self.stats.canopy_resident = self.canopy.resident() as u64;
+        self.stats.canopy_drawn = self.canopy_draws.len() as u64;
+    }
+
+    /// Picks the canopy rasters the view draws and the ones it waits for, and
+    /// the index walk's gate (where the canopy alone draws the trees).
+    fn select_canopy(&mut self, view: &ViewData) {
+        self.canopy_wanted.clear();
+        let Some(cv) = self.canopy_view else {
+            self.canopy_draws.clear();
+            self.canopy_gate = None;
+            return;
+        };
+        let px_per_m = view.px_per_m_at_1m * cv.lod_scale;
+        self.canopy.select(
+            view,
+            px_per_m,
+            &self.index,
+            cv.cell_px,
+            cv.px_hi,
+            &mut self.canopy_draws,
+            &mut self.canopy_wanted,
+        );
+        self.canopy_gate = self.canopy.ready().then_some(CanopyGate { px_per_m, px_lo: cv.px_lo, cell_px: cv.cell_px });
+    }
+
+    /// Canopy rasters whose retry is due are asked for again.
+    fn retry_canopy(&mut self, now_s: f64) {
+        for (&n, (_, due)) in &mut self.canopy_attempts {
+            if *due <= now_s {
+                self.canopy.forget(n);
+                *due = f64::INFINITY;
+            }
+        }
+    }
+
+    /// Requests wanted canopy rasters, nearest first, within the in-flight budget.
+    fn request_canopy(&mut self) {
+        for &(_, n) in &self.canopy_wanted {
+            if self.fetcher.in_flight() >= self.config.max_in_flight {
+                break;
+            }
+            let Some(c) = &self.index.node(n).canopy else { continue };
+            if !self.canopy.is_unknown(n) {
+                continue;
+            }
+            let id = self.fetcher.start(&join(&self.base, &c.url));
+            self.stats.requests += 1;
+            self.requests.insert(id, Target::Canopy(n));
+            self.canopy.mark_loading(n);
+        }
+    }
+
+    /// A canopy raster arrived (or failed): kept, retried or given up on (its
+    /// parent's is drawn instead; the rest of the scene goes on).
+    fn on_canopy(&mut self, n: usize, result: Result<Vec<u8>, FetchError>, now_s: f64) {
+        let Some(c) = self.index.node(n).canopy.clone() else { return };
+        let url = join(&self.base, &c.url);
+        if let Ok(bytes) = &result {
+            self.stats.canopy_bytes_fetched += bytes.len() as u64;
+        }
+        let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
+            if bytes.len() as u64 != c.bytes {
+                return Err((format!("{url}: {} bytes where the index says {}", bytes.len(), c.bytes), false));
+            }
+            Canopy::decode(&url, &bytes).map_err(|e| (e.to_string(), false))
+        });
+        match outcome {
+            Ok(canopy) => {
+                self.canopy_attempts.remove(&n);
+                self.canopy.insert(n, canopy);
+            }
+            Err((message, retryable)) => {
+                let (attempts, due) = self.canopy_attempts.entry(n).or_insert((0, f64::INFINITY));
+                *attempts += 1;
+                let retrying = retryable && *attempts < self.config.max_attempts;
+                if retrying {
+                    *due = now_s + self.config.retry_base_s * 2f64.powi(*attempts as i32 - 1);
+                } else {
+                    self.canopy.mark_broken(n);
+                    self.give_up(&url, &message);
+                }
+                self.events.push(StreamEvent::Failed { url, message, retrying });
+            }
+        }
     }
 
     /// Fetch the ids (`ids`) and attributes (`attributes`, for scenes with
@@ -1402,7 +1566,14 @@ impl<F: Fetcher> SceneStream<F> {
     /// Walks the index for the view into the reused buffers: `walk_tiles`,
     /// `walk_nodes`, `wanted` and `within_reach`.
     fn walk(&mut self, view: &ViewData, draw_distance_m: f32) {
-        self.index.walk_into(view, draw_distance_m, &mut self.walk_tiles, &mut self.walk_nodes, &mut self.walk_stack);
+        self.index.walk_into(
+            view,
+            draw_distance_m,
+            self.canopy_gate.as_ref(),
+            &mut self.walk_tiles,
+            &mut self.walk_nodes,
+            &mut self.walk_stack,
+        );
         self.within_reach = self.walk_tiles.iter().take_while(|(d, _)| *d <= self.reach_m).count();
         self.wanted.clear();
         self.wanted.extend(self.walk_tiles.iter().map(|(_, i)| *i));

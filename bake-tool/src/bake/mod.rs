@@ -123,10 +123,11 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             shard: input.shard.map(|(index, count)| ShardStamp { index, count }),
             terrain,
             attributes: input.attributes.as_ref().map(|a| a.schema.clone()),
+            canopy: None,
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
         let flat = input.shard.is_some();
-        let manifest = crate::scene_write::finish_scene(dir, base, tiles.entries, input.index_node_tiles, flat)?;
+        let manifest = crate::scene_write::finish_scene(dir, base, tiles.entries, input.index_node_tiles, flat, log)?;
         Ok(SceneSummary {
             manifest,
             instance_bytes: tiles.instance_bytes,

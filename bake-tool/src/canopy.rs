@@ -1,0 +1,288 @@
+//! Canopy rasters at bake time (issue 20; format in `sylva::format::canopy`):
+//! for every index node (or the one flat scene), what its trees look like from
+//! far away — crown cover, albedo, height and ground per cell.
+//!
+//! Each species' look comes from its pack's top-view billboard (the capture at
+//! 90° elevation): its opaque share of the capture's square gives the crown
+//! area seen from above at scale 1, its alpha-weighted mean the albedo. A tree
+//! adds `area × scale² × aspect²` to the cells its crown disc covers; cover is
+//! `1 − exp(−Σ area / cell area)` (crowns overlapping at random).
+//!
+//! Memory is bounded whatever the tree count: nodes are visited depth first,
+//! each tile is read once (by its leaf) and adds to the rasters of the nodes on
+//! the path to it only, and a node's raster is written when its subtree is done.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use sylva::format::canopy::{canopy_url, Canopy, CanopyCell, CANOPY_CELLS, CANOPY_CELL_BYTES};
+use sylva::format::entries::CanopyRef;
+use sylva::format::index::IndexNode;
+use sylva::format::manifest::{SpeciesEntry, TileEntry};
+use sylva::format::pack::{decode_pack, kind};
+use sylva::format::Tile;
+use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
+
+use crate::scene_write::{create_dir, write_file};
+
+/// A species seen from above at scale 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeciesLook {
+    /// Mean albedo of the crown from above, linear RGB.
+    pub albedo: [f32; 3],
+    /// Crown area seen from above, m² at scale 1.
+    pub area_m2: f32,
+    /// Model height at scale 1, metres.
+    pub height_m: f32,
+}
+
+/// Albedo for a species whose pack has no billboards (a mid green, linear).
+const FALLBACK_ALBEDO: [f32; 3] = [0.06, 0.11, 0.04];
+
+/// Each species' look from its pack in `dir` (billboards' top view); a pack
+/// without billboards gets a disc of 0.7 × its bounds' half width and a mid green.
+///
+/// # Errors
+/// A pack that cannot be read or decoded.
+pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -> Result<Vec<SpeciesLook>> {
+    species
+        .iter()
+        .map(|s| {
+            let path = dir.join(&s.pack);
+            let bytes = std::fs::read(&path).with_context(|| format!("canopy: reading {}", path.display()))?;
+            let pack = decode_pack(&s.pack, &bytes)?;
+            let top = pack.meta.billboards.as_ref().and_then(|b| {
+                let size = b.texture.size as usize;
+                let layer = (b.angles.max(1) - 1) as usize; // azimuth 0, elevation 90°
+                let texels = size * size;
+                let data = pack.section(kind::BILLBOARD_COLOR, 0)?;
+                let layer_bytes = data.get(layer * texels * 4..(layer + 1) * texels * 4)?;
+                let (mut alpha, mut rgb) = (0.0f64, [0.0f64; 3]);
+                for t in layer_bytes.chunks_exact(4) {
+                    let a = f64::from(t[3]) / 255.0;
+                    alpha += a;
+                    for k in 0..3 {
+                        rgb[k] += a * f64::from(srgb_to_linear(t[k]));
+                    }
+                }
+                (alpha > 0.0).then(|| {
+                    let square = f64::from(2.0 * b.half_width) * f64::from(2.0 * b.half_height);
+                    SpeciesLook {
+                        albedo: rgb.map(|c| (c / alpha) as f32),
+                        area_m2: (alpha / texels as f64 * square) as f32,
+                        height_m: s.height_m,
+                    }
+                })
+            });
+            Ok(top.unwrap_or_else(|| {
+                log(&format!("canopy: {} has no billboards; its crowns are drawn as plain green discs", s.name));
+                let half = 0.5 * ((s.bounds.max[0] - s.bounds.min[0]) + (s.bounds.max[1] - s.bounds.min[1])) * 0.5;
+                SpeciesLook {
+                    albedo: FALLBACK_ALBEDO,
+                    area_m2: std::f32::consts::PI * (0.7 * half).powi(2),
+                    height_m: s.height_m,
+                }
+            }))
+        })
+        .collect()
+}
+
+/// One tree as the canopy sees it.
+#[derive(Debug, Clone, Copy)]
+struct CanopyTree {
+    x: f32,
+    y: f32,
+    ground: f32,
+    height: f32,
+    area: f32,
+    albedo: [f32; 3],
+}
+
+/// A raster being summed.
+struct Acc {
+    origin: [f32; 2],
+    size: f32,
+    /// Per cell: Σ area, Σ area·rgb, Σ area·height, Σ area·ground.
+    sums: Vec<[f64; 6]>,
+    z: [f32; 2],
+    height_max: f32,
+}
+
+impl Acc {
+    /// A raster over the tile square `[x0, y0, size]` of tiles of `tile_m` metres.
+    fn new(square: [i64; 3], tile_m: f64) -> Self {
+        Self {
+            origin: [(square[0] as f64 * tile_m) as f32, (square[1] as f64 * tile_m) as f32],
+            size: (square[2] as f64 * tile_m) as f32,
+            sums: vec![[0.0; 6]; (CANOPY_CELLS * CANOPY_CELLS) as usize],
+            z: [f32::INFINITY, f32::NEG_INFINITY],
+            height_max: 0.0,
+        }
+    }
+
+    fn add(&mut self, t: &CanopyTree) {
+        let n = CANOPY_CELLS as i64;
+        let cell = self.size / CANOPY_CELLS as f32;
+        let r = (t.area / std::f32::consts::PI).sqrt();
+        let at = |v: f32, o: f32| ((v - o) / cell).floor() as i64;
+        let (cx, cy) = (at(t.x, self.origin[0]), at(t.y, self.origin[1]));
+        // The cells whose centres lie inside the crown disc share its area
+        // (the trunk's cell alone when the crown is smaller than a cell).
+        let mut cells: Vec<(i64, i64)> = Vec::new();
+        if r > 0.5 * cell {
+            let (x0, x1) = (at(t.x - r, self.origin[0]), at(t.x + r, self.origin[0]));
+            let (y0, y1) = (at(t.y - r, self.origin[1]), at(t.y + r, self.origin[1]));
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let (px, py) = (self.origin[0] + (x as f32 + 0.5) * cell, self.origin[1] + (y as f32 + 0.5) * cell);
+                    if (px - t.x).hypot(py - t.y) <= r {
+                        cells.push((x, y));
+                    }
+                }
+            }
+        }
+        if cells.is_empty() {
+            cells.push((cx, cy));
+        }
+        let share = f64::from(t.area) / cells.len() as f64;
+        for (x, y) in cells {
+            let (x, y) = (x.clamp(0, n - 1), y.clamp(0, n - 1));
+            let s = &mut self.sums[(y * n + x) as usize];
+            s[0] += share;
+            for k in 0..3 {
+                s[1 + k] += share * f64::from(t.albedo[k]);
+            }
+            s[4] += share * f64::from(t.height);
+            s[5] += share * f64::from(t.ground);
+        }
+        self.z = [self.z[0].min(t.ground), self.z[1].max(t.ground)];
+        self.height_max = self.height_max.max(t.height);
+    }
+
+    fn finish(self) -> Canopy {
+        let cell_area = f64::from(self.size / CANOPY_CELLS as f32).powi(2);
+        let z = if self.z[0] <= self.z[1] { self.z } else { [0.0, 0.0] };
+        let mut c = Canopy {
+            cells: CANOPY_CELLS,
+            origin_m: self.origin,
+            size_m: self.size,
+            z_range_m: z,
+            height_max_m: self.height_max,
+            data: vec![0; self.sums.len() * CANOPY_CELL_BYTES],
+        };
+        for (i, s) in self.sums.iter().enumerate() {
+            if s[0] <= 0.0 {
+                continue;
+            }
+            let cell = CanopyCell {
+                color: [1, 2, 3].map(|k| linear_to_srgb((s[k] / s[0]) as f32)),
+                cover: (1.0 - (-s[0] / cell_area).exp()) as f32,
+                height_m: (s[4] / s[0]) as f32,
+                ground_m: (s[5] / s[0]) as f32,
+            };
+            let packed = c.pack_cell(&cell);
+            c.data[i * CANOPY_CELL_BYTES..(i + 1) * CANOPY_CELL_BYTES].copy_from_slice(&packed);
+        }
+        c
+    }
+}
+
+/// Reads tile `t` from `dir` and gives its trees.
+fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<CanopyTree>) -> Result<()> {
+    let bytes = std::fs::read(dir.join(&t.url)).with_context(|| format!("canopy: reading {}", t.url))?;
+    let tile = Tile::decode(&t.url, &bytes, looks.len() as u32)?;
+    out.clear();
+    for b in &tile.batches {
+        let look = &looks[b.species as usize];
+        let start = b.instance_offset as usize;
+        for p in &tile.instances[start..start + b.instance_count as usize] {
+            let i = p.decode(b);
+            out.push(CanopyTree {
+                x: i.position_m[0],
+                y: i.position_m[1],
+                ground: i.position_m[2],
+                height: look.height_m * i.scale,
+                area: look.area_m2 * (i.scale * i.aspect).powi(2),
+                albedo: look.albedo,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn write(dir: &Path, url: &str, canopy: &Canopy) -> Result<CanopyRef> {
+    let bytes = canopy.encode();
+    Canopy::decode(url, &bytes)?; // what the viewer will read
+    write_file(&dir.join(url), &bytes)?;
+    Ok(CanopyRef { url: url.to_string(), bytes: bytes.len() as u64 })
+}
+
+/// Writes the canopy raster of a flat scene (all `tiles`, over the smallest
+/// power-of-two square of tiles holding them, as the index's root would be)
+/// and gives its reference.
+///
+/// # Errors
+/// A tile or pack that cannot be read, or a file that cannot be written.
+pub fn write_flat(dir: &Path, tiles: &[TileEntry], tile_m: f64, looks: &[SpeciesLook]) -> Result<CanopyRef> {
+    create_dir(&dir.join("canopy"))?;
+    let mut acc = Acc::new(sylva::format::index::tile_square(tiles), tile_m);
+    let mut trees = Vec::new();
+    for t in tiles {
+        tile_trees(dir, t, looks, &mut trees)?;
+        trees.iter().for_each(|tree| acc.add(tree));
+    }
+    write(dir, &canopy_url(None), &acc.finish())
+}
+
+/// Writes one canopy raster per node of `nodes` (root first, each subtree
+/// contiguous, as `build_index` gives them) and sets each node's `canopy`, and
+/// each child entry's `canopy` and `height_m` (its tallest tree).
+///
+/// # Errors
+/// A tile or pack that cannot be read, or a file that cannot be written.
+pub fn write_nodes(dir: &Path, nodes: &mut [(String, IndexNode)], tile_m: f64, looks: &[SpeciesLook]) -> Result<()> {
+    create_dir(&dir.join("canopy"))?;
+    let at: HashMap<String, usize> = nodes.iter().enumerate().map(|(i, (u, _))| (u.clone(), i)).collect();
+    let mut walk = Walk { dir, at, tile_m, looks, stack: Vec::new(), trees: Vec::new() };
+    walk.visit(nodes, 0).map(|_| ())
+}
+
+/// The depth-first walk of [`write_nodes`]: the rasters of the nodes on the path.
+struct Walk<'a> {
+    dir: &'a Path,
+    at: HashMap<String, usize>,
+    tile_m: f64,
+    looks: &'a [SpeciesLook],
+    stack: Vec<Acc>,
+    trees: Vec<CanopyTree>,
+}
+
+impl Walk<'_> {
+    /// Writes node `i`'s raster and those below it; gives its tallest tree's height.
+    fn visit(&mut self, nodes: &mut [(String, IndexNode)], i: usize) -> Result<f32> {
+        self.stack.push(Acc::new(nodes[i].1.square, self.tile_m));
+        if nodes[i].1.children.is_empty() {
+            for t in &nodes[i].1.tiles {
+                tile_trees(self.dir, t, self.looks, &mut self.trees)?;
+                for acc in &mut self.stack {
+                    self.trees.iter().for_each(|tree| acc.add(tree));
+                }
+            }
+        } else {
+            let children: Vec<usize> = nodes[i].1.children.iter().map(|c| self.at[&c.url]).collect();
+            for (k, j) in children.into_iter().enumerate() {
+                let height = self.visit(nodes, j)?;
+                let canopy = nodes[j].1.canopy.clone();
+                let entry = &mut nodes[i].1.children[k];
+                entry.height_m = Some(height);
+                entry.canopy = canopy;
+            }
+        }
+        let acc = self.stack.pop().expect("pushed above");
+        let height = acc.height_max;
+        let url = canopy_url(Some(&nodes[i].0));
+        nodes[i].1.canopy = Some(write(self.dir, &url, &acc.finish())?);
+        Ok(height)
+    }
+}

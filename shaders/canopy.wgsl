@@ -1,0 +1,100 @@
+// Canopy pass (issue 20): where trees are a pixel or two, the forest drawn from
+// its canopy rasters (scene::canopy selects them, render/canopy.rs uploads),
+// cross-faded with the trees the cull pass keeps (`canopy_weight`). One
+// instanced draw: a quad per raster cell at the crowns' height, its alpha the
+// cell's crown cover times the canopy's share of trees of that size, so trees
+// and canopy together cover what the crowns cover (no hole, no double-dark
+// band). After the trees, blended, depth-tested, no depth written.
+// Rust side: src/render/canopy.rs.
+
+@group(0) @binding(0) var<storage, read> view: View;
+
+// Raster cells, `cells²` per slot, 2 words each: r | g << 8 | b << 16 | cover << 24,
+// height | 0 << 8 | ground << 16 (format::canopy).
+@group(1) @binding(0) var<storage, read> cells: array<vec2<u32>>;
+@group(1) @binding(1) var<storage, read> rasters: array<CanopyRaster>;
+
+// Must match `GpuCanopyRaster` in src/render/canopy.rs.
+struct CanopyRaster {
+    // Lowest corner, metres relative to the scene origin.
+    origin_m: vec2<f32>,
+    // Side, metres.
+    size_m: f32,
+    // Cells per side.
+    cells: u32,
+    // Ground heights' lowest and range.
+    z_min: f32,
+    z_span: f32,
+    // Height of quantised height 255.
+    height_max: f32,
+    // Pool slot of the cells.
+    slot: u32,
+};
+
+// Where in the crown the canopy surface lies (share of the tree height above the ground).
+const CANOPY_SURFACE: f32 = 0.75;
+// The crowns seen from above, shaded as filtered leaves (`shade_filtered`):
+// their mean normal (length: how much the leaves agree) and the sky they see.
+const CANOPY_NORMAL: vec3<f32> = vec3<f32>(0.0, 0.0, 0.55);
+const CANOPY_AO: f32 = 0.8;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) albedo: vec3<f32>,
+    @location(1) @interpolate(flat) alpha: f32,
+};
+
+fn srgb_channel(c: f32) -> f32 {
+    return select(pow((c + 0.055) / 1.055, 2.4), c / 12.92, c <= 0.04045);
+}
+
+// Quad corners of a cell: two triangles.
+const CORNERS = array<vec2<f32>, 6>(
+    vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+    vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
+);
+
+@vertex
+fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
+    var out: VertexOut;
+    let first = rasters[0];
+    let n2 = first.cells * first.cells;
+    let r = rasters[instance / n2];
+    let c = instance % n2;
+    let word = cells[r.slot * n2 + c];
+    let cover = f32(word.x >> 24u) / 255.0;
+    let height = f32(word.y & 0xffu) / 255.0 * r.height_max;
+    let ground = r.z_min + f32(word.y >> 16u) / 65535.0 * r.z_span;
+    let cell_m = r.size_m / f32(r.cells);
+    let ij = vec2<f32>(f32(c % r.cells), f32(c / r.cells));
+    let z = ground + CANOPY_SURFACE * height;
+    // The canopy's share of the cell's trees, by their size at the cell's centre.
+    let centre = eye_relative(vec3<f32>(r.origin_m, 0.0), vec3<f32>((ij + 0.5) * cell_m, z), view);
+    let h_px = height * view.lod.x / max(length(centre), 1e-3);
+    let w = canopy_weight(h_px, view);
+    // Trees keep (1 − w) of their cover; the canopy adds what makes it `cover`:
+    // (1 − w)c + (1 − (1 − w)c)·a = c.
+    let alpha = cover * w / max(1.0 - (1.0 - w) * cover, 1e-3);
+    out.alpha = alpha;
+    out.albedo = vec3<f32>(
+        srgb_channel(f32(word.x & 0xffu) / 255.0),
+        srgb_channel(f32((word.x >> 8u) & 0xffu) / 255.0),
+        srgb_channel(f32((word.x >> 16u) & 0xffu) / 255.0),
+    );
+    if alpha <= 0.0 {
+        // Nothing to draw: a degenerate triangle.
+        out.clip = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        return out;
+    }
+    let local = vec3<f32>((ij + CORNERS[vertex % 6u]) * cell_m, z);
+    let pos = eye_relative(vec3<f32>(r.origin_m, 0.0), local, view);
+    out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    let lit = shade_filtered(in.albedo, CANOPY_NORMAL, true, view, 1.0, 0.0, CANOPY_AO);
+    let color = haze(lit, in.clip, view);
+    return vec4<f32>(color * in.alpha, in.alpha);
+}

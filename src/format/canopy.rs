@@ -1,0 +1,303 @@
+//! Canopy rasters (`canopy/*.cnpy`, issue 20): what the forest below an index
+//! node looks like from far away, for views where its trees are a pixel or less.
+//!
+//! One raster per index node (and one for a flat scene), a square of
+//! `cells`×`cells` cells over the node's trees. Each cell holds the share of its
+//! ground that crowns cover seen from above (overlap counted as random:
+//! `1 − exp(−Σ crown area / cell area)`), the crowns' mean albedo (their
+//! species' top-view colour, weighted by crown area), their mean height and
+//! the mean ground height under them. Built by the bake from the tiles and the
+//! species packs' billboards (`sylva-bake`'s `canopy.rs`). A viewer draws it
+//! over the ground where trees are too small to draw, cross-faded with them.
+//!
+//! Layout (little endian): a 40-byte header, then the cells row by row (row 0 at
+//! the square's lowest y), 8 bytes each:
+//!
+//! ```text
+//! header  magic "SYCN" | version u16 | header_bytes u16 (40) | cells u32
+//!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32 | reserved u32 (0)
+//! cell    r u8 | g u8 | b u8 (sRGB albedo) | cover u8 (0–255) | height u8 (× height_max / 255)
+//!         | reserved u8 (0) | ground u16 (z_min + q / 65535 × (z_max − z_min))
+//! ```
+//!
+//! `x0`, `y0`, `size_m`: the square in metres relative to the scene origin;
+//! `z_*`: the ground heights' range; `height_max`: the tallest tree's height.
+
+use super::error::{finite, DecodeError, Problem, Reader};
+
+/// File magic.
+pub const CANOPY_MAGIC: [u8; 4] = *b"SYCN";
+/// Version written and read by this build.
+pub const CANOPY_VERSION: u16 = 1;
+/// Header bytes.
+pub const CANOPY_HEADER_BYTES: usize = 40;
+/// Bytes per cell.
+pub const CANOPY_CELL_BYTES: usize = 8;
+/// Cells per side the bake writes.
+pub const CANOPY_CELLS: u32 = 64;
+/// Most cells per side a file may have.
+pub const MAX_CANOPY_CELLS: u32 = 1024;
+
+/// One cell of a [`Canopy`], decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CanopyCell {
+    /// The crowns' mean albedo, sRGB.
+    pub color: [u8; 3],
+    /// Share of the cell's ground covered by crowns seen from above, 0–1.
+    pub cover: f32,
+    /// The crowns' mean tree height in metres (0 where none).
+    pub height_m: f32,
+    /// Mean ground height under them, metres relative to the scene origin.
+    pub ground_m: f32,
+}
+
+/// A canopy raster.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Canopy {
+    /// Cells per side.
+    pub cells: u32,
+    /// The square's lowest corner, metres relative to the scene origin.
+    pub origin_m: [f32; 2],
+    /// The square's side in metres.
+    pub size_m: f32,
+    /// Ground heights' range (metres relative to the scene origin).
+    pub z_range_m: [f32; 2],
+    /// The tallest tree's height in metres: the height quantisation's top.
+    pub height_max_m: f32,
+    /// Raw cells, `cells²` × 8 bytes, row by row.
+    pub data: Vec<u8>,
+}
+
+impl Canopy {
+    /// The cell at column `x`, row `y` (both `< cells`).
+    #[must_use]
+    pub fn cell(&self, x: u32, y: u32) -> CanopyCell {
+        let at = (y as usize * self.cells as usize + x as usize) * CANOPY_CELL_BYTES;
+        let c = &self.data[at..at + CANOPY_CELL_BYTES];
+        let q = u16::from_le_bytes([c[6], c[7]]);
+        CanopyCell {
+            color: [c[0], c[1], c[2]],
+            cover: f32::from(c[3]) / 255.0,
+            height_m: f32::from(c[4]) / 255.0 * self.height_max_m,
+            ground_m: self.z_range_m[0] + f32::from(q) / 65535.0 * (self.z_range_m[1] - self.z_range_m[0]),
+        }
+    }
+
+    /// Side of one cell in metres.
+    #[must_use]
+    pub fn cell_m(&self) -> f32 {
+        self.size_m / self.cells as f32
+    }
+
+    /// The lowest mean tree height of a cell with crowns (metres; 0 without any).
+    #[must_use]
+    pub fn min_height_m(&self) -> f32 {
+        self.data
+            .chunks_exact(CANOPY_CELL_BYTES)
+            .filter(|c| c[3] > 0)
+            .map(|c| c[4])
+            .min()
+            .map_or(0.0, |q| f32::from(q) / 255.0 * self.height_max_m)
+    }
+
+    /// Mean cover over all cells (0–1).
+    #[must_use]
+    pub fn mean_cover(&self) -> f32 {
+        let n = (self.cells * self.cells).max(1);
+        let sum: u64 = self.data.chunks_exact(CANOPY_CELL_BYTES).map(|c| u64::from(c[3])).sum();
+        sum as f32 / 255.0 / n as f32
+    }
+
+    /// Packs one cell (values clamped to what the file holds).
+    #[must_use]
+    pub fn pack_cell(&self, cell: &CanopyCell) -> [u8; CANOPY_CELL_BYTES] {
+        let unit = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let h = if self.height_max_m > 0.0 { unit(cell.height_m / self.height_max_m) } else { 0 };
+        let span = self.z_range_m[1] - self.z_range_m[0];
+        let g = if span > 0.0 {
+            ((cell.ground_m - self.z_range_m[0]) / span * 65535.0).round().clamp(0.0, 65535.0) as u16
+        } else {
+            0
+        };
+        let g = g.to_le_bytes();
+        [cell.color[0], cell.color[1], cell.color[2], unit(cell.cover), h, 0, g[0], g[1]]
+    }
+
+    /// The file bytes.
+    #[must_use]
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(CANOPY_HEADER_BYTES + self.data.len());
+        out.extend_from_slice(&CANOPY_MAGIC);
+        out.extend_from_slice(&CANOPY_VERSION.to_le_bytes());
+        out.extend_from_slice(&(CANOPY_HEADER_BYTES as u16).to_le_bytes());
+        out.extend_from_slice(&self.cells.to_le_bytes());
+        for v in
+            [self.origin_m[0], self.origin_m[1], self.size_m, self.z_range_m[0], self.z_range_m[1], self.height_max_m]
+        {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&0u32.to_le_bytes());
+        out.extend_from_slice(&self.data);
+        out
+    }
+
+    /// Decodes and validates a raster. `file` names it in errors.
+    ///
+    /// # Errors
+    /// A [`DecodeError`] for a wrong magic, version or header size, a cell count
+    /// of 0 or above [`MAX_CANOPY_CELLS`], a length that is not the header plus
+    /// `cells²` cells, non-finite or inverted ranges, a non-positive size, or
+    /// reserved bytes that are not 0.
+    pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
+        decode_canopy(bytes).map_err(|p| DecodeError::new(file, p))
+    }
+}
+
+fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
+    let r = Reader::new(bytes);
+    r.magic("Sylva canopy raster", &CANOPY_MAGIC)?;
+    let version = r.u16("header.version", 4)?;
+    if version != CANOPY_VERSION {
+        return Err(Problem::UnsupportedVersion { found: version.into(), supported: CANOPY_VERSION.into() });
+    }
+    let header = r.u16("header.header_bytes", 6)?;
+    if usize::from(header) != CANOPY_HEADER_BYTES {
+        return Err(Problem::Invalid(format!("header.header_bytes is {header}, expected {CANOPY_HEADER_BYTES}")));
+    }
+    let cells = r.u32("header.cells", 8)?;
+    if cells == 0 || cells > MAX_CANOPY_CELLS {
+        return Err(Problem::OutOfRange {
+            what: "header.cells".into(),
+            value: cells.into(),
+            allowed: format!("1–{MAX_CANOPY_CELLS} per side"),
+        });
+    }
+    let f = |what: &str, at: u64| -> Result<f32, Problem> {
+        let v = f32::from_bits(r.u32(what, at)?);
+        finite(what, f64::from(v))?;
+        Ok(v)
+    };
+    let (x0, y0, size) = (f("header.x0", 12)?, f("header.y0", 16)?, f("header.size_m", 20)?);
+    let (z_min, z_max, h_max) = (f("header.z_min", 24)?, f("header.z_max", 28)?, f("header.height_max", 32)?);
+    if size <= 0.0 {
+        return Err(Problem::Invalid(format!("header.size_m is {size}: the square needs a positive side")));
+    }
+    if z_max < z_min {
+        return Err(Problem::Invalid(format!("header.z_max {z_max} is below z_min {z_min}")));
+    }
+    if h_max < 0.0 {
+        return Err(Problem::Invalid(format!("header.height_max is {h_max}: heights are not negative")));
+    }
+    if r.u32("header.reserved", 36)? != 0 {
+        return Err(Problem::Invalid("header.reserved is not 0".into()));
+    }
+    let n = u64::from(cells) * u64::from(cells) * CANOPY_CELL_BYTES as u64;
+    let data = r.slice("cells", CANOPY_HEADER_BYTES as u64, n)?;
+    let end = CANOPY_HEADER_BYTES as u64 + n;
+    if bytes.len() as u64 != end {
+        return Err(Problem::Invalid(format!(
+            "{} bytes after the {cells}×{cells} cells end at byte {end}",
+            bytes.len() as u64 - end
+        )));
+    }
+    if let Some(i) = data.chunks_exact(CANOPY_CELL_BYTES).position(|c| c[5] != 0) {
+        return Err(Problem::Invalid(format!("cell {i}: reserved byte is not 0")));
+    }
+    Ok(Canopy {
+        cells,
+        origin_m: [x0, y0],
+        size_m: size,
+        z_range_m: [z_min, z_max],
+        height_max_m: h_max,
+        data: data.to_vec(),
+    })
+}
+
+/// The canopy raster's URL of the index node at `node_url` (`index/r01.json` →
+/// `canopy/r01.cnpy`), or of a flat scene (`None` → `canopy/r.cnpy`).
+#[must_use]
+pub fn canopy_url(node_url: Option<&str>) -> String {
+    let stem =
+        node_url.and_then(|u| u.rsplit('/').next()).map_or("r", |name| name.strip_suffix(".json").unwrap_or(name));
+    format!("canopy/{stem}.cnpy")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Canopy {
+        let mut c = Canopy {
+            cells: 4,
+            origin_m: [-100.0, 50.0],
+            size_m: 400.0,
+            z_range_m: [10.0, 90.0],
+            height_max_m: 30.0,
+            data: vec![0; 16 * CANOPY_CELL_BYTES],
+        };
+        for i in 0..16u32 {
+            let cell = CanopyCell {
+                color: [i as u8 * 10, 100, 50],
+                cover: i as f32 / 15.0,
+                height_m: i as f32 * 2.0,
+                ground_m: 10.0 + i as f32 * 5.0,
+            };
+            let packed = c.pack_cell(&cell);
+            c.data[i as usize * 8..i as usize * 8 + 8].copy_from_slice(&packed);
+        }
+        c
+    }
+
+    #[test]
+    fn round_trip_and_quantisation() {
+        let c = sample();
+        let bytes = c.encode();
+        assert_eq!(bytes.len(), CANOPY_HEADER_BYTES + 16 * 8);
+        let d = Canopy::decode("c.cnpy", &bytes).unwrap();
+        assert_eq!(d, c);
+        let cell = d.cell(3, 2); // i = 11
+        assert_eq!(cell.color, [110, 100, 50]);
+        assert!((cell.cover - 11.0 / 15.0).abs() < 0.5 / 255.0);
+        assert!((cell.height_m - 22.0).abs() <= 30.0 / 255.0);
+        assert!((cell.ground_m - 65.0).abs() <= 80.0 / 65535.0);
+        assert!((d.cell_m() - 100.0).abs() < 1e-6);
+        assert!((d.mean_cover() - 0.5).abs() < 0.01);
+        assert_eq!(canopy_url(Some("index/r013.json")), "canopy/r013.cnpy");
+        assert_eq!(canopy_url(None), "canopy/r.cnpy");
+    }
+
+    #[test]
+    fn hostile_rasters_are_refused_without_panics() {
+        let good = sample().encode();
+        for n in 0..good.len() {
+            assert!(Canopy::decode("c", &good[..n]).is_err(), "truncated at {n}");
+        }
+        let mut longer = good.clone();
+        longer.push(0);
+        assert!(Canopy::decode("c", &longer).unwrap_err().to_string().contains("after the 4×4 cells"));
+        let set = |at: usize, v: &[u8]| {
+            let mut b = good.clone();
+            b[at..at + v.len()].copy_from_slice(v);
+            Canopy::decode("c.cnpy", &b).unwrap_err().to_string()
+        };
+        assert!(set(0, b"XXXX").contains("not a Sylva canopy raster"));
+        assert!(set(4, &9u16.to_le_bytes()).contains("version 9"));
+        assert!(set(8, &0u32.to_le_bytes()).contains("header.cells"));
+        assert!(set(8, &5000u32.to_le_bytes()).contains("header.cells"));
+        assert!(set(8, &u32::MAX.to_le_bytes()).contains("header.cells"));
+        assert!(set(20, &f32::NAN.to_le_bytes()).contains("size_m"));
+        assert!(set(20, &(-1f32).to_le_bytes()).contains("positive"));
+        assert!(set(28, &0f32.to_le_bytes()).contains("below z_min"));
+        assert!(set(32, &f32::INFINITY.to_le_bytes()).contains("height_max"));
+        assert!(set(36, &[1]).contains("reserved"));
+        assert!(set(CANOPY_HEADER_BYTES + 5, &[1]).contains("cell 0: reserved"));
+        // Every single-byte change decodes or fails cleanly.
+        for at in 0..good.len() {
+            for v in [0u8, 1, 0x7f, 0xff] {
+                let mut b = good.clone();
+                b[at] = v;
+                let _ = Canopy::decode("c", &b);
+            }
+        }
+    }
+}

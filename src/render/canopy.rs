@@ -1,0 +1,234 @@
+//! The canopy pass (issue 20): the forest drawn from its canopy rasters where
+//! trees are a pixel or two (`shaders/canopy.wgsl`; selection in
+//! `crate::scene::canopy`). Rasters live in a pool of slots (uploaded once,
+//! the least recently drawn replaced); one instanced draw a frame, a quad per
+//! cell, blended over the trees.
+
+use std::collections::HashMap;
+
+use super::layouts::{storage_entry, SharedLayouts};
+use super::mesh::depth_state;
+use crate::format::canopy::{CANOPY_CELLS, CANOPY_CELL_BYTES};
+use crate::scene::canopy::CanopyDraw;
+
+/// Most rasters the pool holds (32 KB each; it starts at 8 and doubles as views need).
+pub const CANOPY_SLOTS: usize = 256;
+
+/// One drawn raster. Must match `CanopyRaster` in `shaders/canopy.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuCanopyRaster {
+    /// Lowest corner, metres relative to the scene origin.
+    pub origin_m: [f32; 2],
+    /// Side, metres.
+    pub size_m: f32,
+    /// Cells per side.
+    pub cells: u32,
+    /// Ground heights' lowest.
+    pub z_min: f32,
+    /// Ground heights' range.
+    pub z_span: f32,
+    /// Height of quantised height 255.
+    pub height_max: f32,
+    /// Pool slot of the cells.
+    pub slot: u32,
+}
+
+/// The pool's buffers (made when a scene first draws a raster).
+struct Pool {
+    cells: wgpu::Buffer,
+    rasters: wgpu::Buffer,
+    group: wgpu::BindGroup,
+}
+
+/// The canopy pass.
+pub struct CanopyPass {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    pool: Option<Pool>,
+    /// Node in each slot and the frame it was last drawn.
+    slots: Vec<Option<(usize, u64)>>,
+    by_node: HashMap<usize, u32>,
+    frame: u64,
+    count: u32,
+    records: Vec<GpuCanopyRaster>,
+    /// Rasters uploaded since the start.
+    pub uploads: u64,
+    /// Rasters selected but not drawn this frame (more than the pool holds).
+    pub dropped: u32,
+}
+
+impl CanopyPass {
+    /// The pipeline for `format` targets, and the pool.
+    #[must_use]
+    pub fn new(device: &wgpu::Device, shared: &SharedLayouts, format: wgpu::TextureFormat) -> Self {
+        let vertex = wgpu::ShaderStages::VERTEX;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("canopy"),
+            entries: &[storage_entry(0, vertex, true), storage_entry(1, vertex, true)],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("canopy"),
+            source: wgpu::ShaderSource::Wgsl(super::shaders::CANOPY.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("canopy"),
+            bind_group_layouts: &[Some(&shared.view), Some(&layout)],
+            immediate_size: 0,
+        });
+        let target = super::layouts::PullingTarget {
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: depth_state(false, wgpu::CompareFunction::Greater),
+            format,
+        };
+        let pipeline = super::layouts::pulling_pipeline_blended(
+            device,
+            "canopy",
+            &module,
+            &pipeline_layout,
+            &target,
+            wgpu::BlendState::PREMULTIPLIED_ALPHA_BLENDING,
+        );
+        Self {
+            pipeline,
+            layout,
+            pool: None,
+            slots: Vec::new(),
+            by_node: HashMap::new(),
+            frame: 0,
+            count: 0,
+            records: Vec::new(),
+            uploads: 0,
+            dropped: 0,
+        }
+    }
+
+    /// GPU bytes of the pool (none until a raster is drawn).
+    #[must_use]
+    pub fn gpu_bytes(&self) -> u64 {
+        self.pool.as_ref().map_or(0, |p| p.cells.size() + p.rasters.size())
+    }
+
+    fn make_pool(&mut self, device: &wgpu::Device, slots: usize) {
+        let slot_bytes = (CANOPY_CELLS * CANOPY_CELLS) as u64 * CANOPY_CELL_BYTES as u64;
+        let fits = (device.limits().max_storage_buffer_binding_size / slot_bytes).max(1);
+        let capacity = (slots as u64).min(fits) as usize;
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let cells = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("canopy cells"),
+            size: slot_bytes * capacity as u64,
+            usage: storage,
+            mapped_at_creation: false,
+        });
+        let rasters = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("canopy rasters"),
+            size: (std::mem::size_of::<GpuCanopyRaster>() * capacity) as u64,
+            usage: storage,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("canopy"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: cells.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: rasters.as_entire_binding() },
+            ],
+        });
+        self.pool = Some(Pool { cells, rasters, group });
+        self.slots = vec![None; capacity];
+        self.by_node.clear();
+    }
+
+    /// Rasters drawn by the last prepared frame.
+    #[must_use]
+    pub fn drawn(&self) -> u32 {
+        self.count
+    }
+
+    /// Uploads newly drawn rasters and writes this frame's records for `draws`
+    /// (the stream's selection; empty: nothing drawn).
+    pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, draws: &[CanopyDraw]) {
+        self.frame += 1;
+        self.count = 0;
+        self.dropped = 0;
+        if draws.is_empty() {
+            return;
+        }
+        // The pool grows (and is uploaded again) as a view draws more rasters.
+        let slot_bytes = (CANOPY_CELLS * CANOPY_CELLS) as u64 * CANOPY_CELL_BYTES as u64;
+        let fits = (device.limits().max_storage_buffer_binding_size / slot_bytes).max(1) as usize;
+        let want = draws.len().next_power_of_two().clamp(8, CANOPY_SLOTS).min(fits);
+        if self.slots.len() < want {
+            self.make_pool(device, want);
+        }
+        let Some(pool) = &self.pool else { return };
+        let mut records = std::mem::take(&mut self.records);
+        records.clear();
+        for d in draws {
+            let c = &d.canopy;
+            if c.cells != CANOPY_CELLS {
+                self.dropped += 1;
+                continue;
+            }
+            let slot = match self.by_node.get(&d.node) {
+                Some(&s) => s,
+                None => {
+                    // A free slot, else the one drawn longest ago (not this frame).
+                    let free = self.slots.iter().position(Option::is_none).or_else(|| {
+                        self.slots
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, s)| s.is_some_and(|(_, used)| used < self.frame))
+                            .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
+                            .map(|(i, _)| i)
+                    });
+                    let Some(free) = free else {
+                        self.dropped += 1;
+                        continue;
+                    };
+                    if let Some((old, _)) = self.slots[free] {
+                        self.by_node.remove(&old);
+                    }
+                    queue.write_buffer(&pool.cells, (c.data.len() * free) as u64, &c.data);
+                    self.uploads += 1;
+                    self.by_node.insert(d.node, free as u32);
+                    free as u32
+                }
+            };
+            self.slots[slot as usize] = Some((d.node, self.frame));
+            records.push(GpuCanopyRaster {
+                origin_m: c.origin_m,
+                size_m: c.size_m,
+                cells: c.cells,
+                z_min: c.z_range_m[0],
+                z_span: c.z_range_m[1] - c.z_range_m[0],
+                height_max: c.height_max_m,
+                slot,
+            });
+        }
+        if !records.is_empty() {
+            queue.write_buffer(&pool.rasters, 0, bytemuck::cast_slice(&records));
+        }
+        self.count = records.len() as u32;
+        self.records = records;
+    }
+
+    /// Forgets what the pool holds (a new scene: node ids mean other rasters).
+    pub fn clear(&mut self) {
+        self.slots.iter_mut().for_each(|s| *s = None);
+        self.by_node.clear();
+        self.count = 0;
+    }
+
+    /// Draws the prepared rasters (view bound at group 0); returns the draw calls (0 or 1).
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
+        let Some(pool) = &self.pool else { return 0 };
+        if self.count == 0 {
+            return 0;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(1, &pool.group, &[]);
+        pass.draw(0..6, 0..self.count * CANOPY_CELLS * CANOPY_CELLS);
+        1
+    }
+}
