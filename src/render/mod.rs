@@ -2,8 +2,8 @@
 //! from per-frame data, CPU twins of GPU structs in [`gpu_data`].
 
 pub mod billboard;
-#[cfg(not(target_arch = "wasm32"))]
 pub mod canopy;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod capture;
 pub mod cluster;
 pub mod context;
