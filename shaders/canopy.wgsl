@@ -10,7 +10,7 @@
 @group(0) @binding(0) var<storage, read> view: View;
 
 // Raster cells, `cells²` per slot, 2 words each: r | g << 8 | b << 16 | cover << 24,
-// height | 0 << 8 | ground << 16 (format::canopy).
+// height | side << 8 | ground << 16 (format::canopy).
 @group(1) @binding(0) var<storage, read> cells: array<vec2<u32>>;
 @group(1) @binding(1) var<storage, read> rasters: array<CanopyRaster>;
 
@@ -54,6 +54,16 @@ const CORNERS = array<vec2<f32>, 6>(
     vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
 );
 
+// Whether cell `n` of raster `r` holds no crowns (outside the raster: none).
+fn neighbour_empty(r: CanopyRaster, n: vec2<i32>) -> bool {
+    let size = i32(r.cells);
+    if n.x < 0 || n.y < 0 || n.x >= size || n.y >= size {
+        return true;
+    }
+    let word = cells[r.slot * r.cells * r.cells + u32(n.y) * r.cells + u32(n.x)];
+    return (word.x >> 24u) == 0u;
+}
+
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     var out: VertexOut;
@@ -62,7 +72,8 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let r = rasters[instance / n2];
     let c = instance % n2;
     let word = cells[r.slot * n2 + c];
-    let cover = f32(word.x >> 24u) / 255.0;
+    let top_cover = f32(word.x >> 24u) / 255.0;
+    let side = f32((word.y >> 8u) & 0xffu) / 32.0;
     let height = f32(word.y & 0xffu) / 255.0 * r.height_max;
     let ground = r.z_min + f32(word.y >> 16u) / 65535.0 * r.z_span;
     let cell_m = r.size_m / f32(r.cells);
@@ -71,6 +82,10 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     // The canopy's share of the cell's trees, by their size at the cell's centre.
     let centre = eye_relative(vec3<f32>(r.origin_m, 0.0), vec3<f32>((ij + 0.5) * cell_m, z), view);
     let h_px = height * view.lod.x / max(length(centre), 1e-3);
+    // Seen at elevation θ the crowns' sides cover ground too: the exponent of
+    // the cover grows by side · cot θ (format::canopy).
+    let cot = min(length(centre.xy) / max(-centre.z, 1e-3), 8.0);
+    let cover = 1.0 - exp(-min(-log(max(1.0 - top_cover, 1e-3)), 8.0) * (1.0 + side * cot));
     let w = canopy_weight(h_px, view);
     // Trees keep (1 − w) of their cover; the canopy adds what makes it `cover`:
     // (1 − w)c + (1 − (1 − w)c)·a = c.
@@ -86,7 +101,27 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
         out.clip = vec4<f32>(0.0, 0.0, 0.0, 1.0);
         return out;
     }
-    let local = vec3<f32>((ij + CORNERS[vertex % 6u]) * cell_m, z);
+    // At the forest's edges the trees stand as a wall: the side facing the eye
+    // reaches down to the ground (the front trees' trunks and lower crowns),
+    // the far side up to the tree tops. Inside a stand the cells lie flat at
+    // the crowns' height, so neighbours do not overlap.
+    let corner = CORNERS[vertex % 6u];
+    let v = centre.xy / max(length(centre.xy), 1e-3);
+    let share = abs(v) / max(abs(v.x) + abs(v.y), 1e-3);
+    let step = vec2<i32>(select(-1, 1, v.x >= 0.0), select(-1, 1, v.y >= 0.0));
+    let cell_i = vec2<i32>(ij);
+    // Per axis: the corner's side faces away from the eye (far) or towards it (near).
+    let far = (corner - 0.5) * vec2<f32>(step) > vec2<f32>(0.0);
+    var rise = 0.0;
+    for (var a = 0; a < 2; a++) {
+        var n = cell_i;
+        let toward = select(-step[a], step[a], far[a]);
+        n[a] += toward;
+        if neighbour_empty(r, n) {
+            rise += select(-CANOPY_SURFACE, 1.0 - CANOPY_SURFACE, far[a]) * share[a];
+        }
+    }
+    let local = vec3<f32>((ij + corner) * cell_m, z + rise * height);
     let pos = eye_relative(vec3<f32>(r.origin_m, 0.0), local, view);
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
     return out;

@@ -986,3 +986,84 @@ fn far_mesh_leaves_keep_their_coverage() {
     assert!(adaptive < 0.5 * plain, "adaptive transparency {adaptive:.4} vs the plain alpha test {plain:.4}");
     assert!(adaptive < 0.02, "adaptive transparency off the reference's brightness by {adaptive:.4}");
 }
+
+/// Canopy rasters (issue 20): across the cross-fade from trees to the canopy,
+/// trees and canopy together darken the ground as much as the trees alone —
+/// no hole, no double-dark band — and far away the canopy draws alone.
+#[test]
+fn the_canopy_cross_fade_keeps_the_forests_cover() {
+    // Twice the usual size: the forest is small on screen when its trees are a pixel.
+    let (w, h) = (2 * W, 2 * H);
+    let mut off = OffscreenScene::open(fixture().to_str().unwrap(), w, h, POOLS).expect("a GPU adapter");
+    let m = manifest(&mut off);
+    let c = DVec3::from(m.bounds.min.map(f64::from)).lerp(DVec3::from(m.bounds.max.map(f64::from)), 0.5);
+    let luminance = |img: &[u8]| -> f64 {
+        img.chunks_exact(4)
+            .map(|p| 0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]))
+            .sum()
+    };
+    // A narrow lens, so the small test forest covers enough pixels while its trees are a pixel or two.
+    let fov = 4f32.to_radians();
+    let px_per_m = h as f32 / (2.0 * (fov * 0.5).tan());
+    let tiles = sylva::format::index::read_all_tiles(&fixture(), &m).unwrap();
+    let tallest = tiles.iter().map(|t| t.levels.as_ref().unwrap().height_m).fold(0.0, f32::max);
+    for px in [6.0f32, 4.0, 3.0, 2.5, 2.0, 1.5, 1.1, 0.6] {
+        // The tallest tree at `px` pixels, 35° down.
+        let d = f64::from(tallest * px_per_m / px);
+        let (s, co) = 35f64.to_radians().sin_cos();
+        let cam = Camera {
+            eye_m: c + DVec3::new(0.0, -d * co, d * s),
+            pitch_rad: -35f64.to_radians(),
+            fov_y_rad: fov,
+            ..Camera::default()
+        };
+        let mut shot = |canopy: bool, trees: bool| {
+            off.settings = RenderSettings {
+                canopy,
+                representations: if trees {
+                    Representations::default()
+                } else {
+                    Representations { meshes: false, clusters: false, billboards: false, clouds: false }
+                },
+                ..RenderSettings::default()
+            };
+            let img = render(&mut off, &cam);
+            if let Some(dir) = std::env::var_os("CANOPY_SWEEP") {
+                let name = format!("{}/canopy-{px}-{}{}.png", dir.to_string_lossy(), u8::from(canopy), u8::from(trees));
+                image::save_buffer(name, &img, w, h, image::ExtendedColorType::Rgba8).unwrap();
+            }
+            let stats = off.render(&cam, true);
+            (luminance(&img), stats)
+        };
+        let (ground, _) = shot(false, false);
+        let (trees, alone) = shot(false, true);
+        let (mixed, with) = shot(true, true);
+        // The trees the canopy stands in for are the CPU oracle's too.
+        draws_match_the_oracle(&off, &format!("canopy at {px} px"));
+        if (1.0..2.5).contains(&px) {
+            assert!(off.renderer.last_view().canopy[0] > 0.0, "the cross-fade is on");
+        }
+        let ratio = (ground - mixed) / (ground - trees);
+        let drawn = |s: &sylva::render::stats::FrameStats| s.instances.values().sum::<u64>();
+        eprintln!(
+            "tallest tree {px} px: darkening with the canopy {ratio:.3}× the trees'; trees drawn {} of {}, rasters {}",
+            drawn(&with),
+            drawn(&alone),
+            with.canopy_drawn
+        );
+        assert!(ground - trees > 0.0, "the forest darkens the ground");
+        // (Under a pixel the whole test forest is some twenty pixels, and the
+        // far trees' enlarged billboards fill every one of them.)
+        let lowest = if px >= 1.0 { 0.8 } else { 0.6 };
+        if std::env::var_os("CANOPY_SWEEP").is_none() {
+            assert!((lowest..1.25).contains(&ratio), "at {px} px the canopy makes the forest {ratio:.3}× as dark");
+        }
+        if px >= 6.0 {
+            assert_eq!(drawn(&with), drawn(&alone), "trees above the band are all drawn");
+        }
+        if px < 1.0 {
+            assert_eq!(drawn(&with), 0, "under a pixel only the canopy");
+            assert!(with.canopy_drawn >= 1);
+        }
+    }
+}

@@ -33,6 +33,8 @@ pub struct SpeciesLook {
     pub albedo: [f32; 3],
     /// Crown area seen from above, m² at scale 1.
     pub area_m2: f32,
+    /// The tree's silhouette seen from the side, m² at scale 1.
+    pub side_m2: f32,
     /// Model height at scale 1, metres.
     pub height_m: f32,
 }
@@ -54,23 +56,26 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
             let pack = decode_pack(&s.pack, &bytes)?;
             let top = pack.meta.billboards.as_ref().and_then(|b| {
                 let size = b.texture.size as usize;
-                let layer = (b.angles.max(1) - 1) as usize; // azimuth 0, elevation 90°
                 let texels = size * size;
                 let data = pack.section(kind::BILLBOARD_COLOR, 0)?;
-                let layer_bytes = data.get(layer * texels * 4..(layer + 1) * texels * 4)?;
+                // Layers: azimuth 0 at elevations 0 (the side) … 90° (the top).
+                let layer = |l: usize| data.get(l * texels * 4..(l + 1) * texels * 4);
+                let (side, top) = (layer(0)?, layer((b.angles.max(1) - 1) as usize)?);
                 let (mut alpha, mut rgb) = (0.0f64, [0.0f64; 3]);
-                for t in layer_bytes.chunks_exact(4) {
+                for t in top.chunks_exact(4) {
                     let a = f64::from(t[3]) / 255.0;
                     alpha += a;
                     for k in 0..3 {
                         rgb[k] += a * f64::from(srgb_to_linear(t[k]));
                     }
                 }
+                let side_alpha: f64 = side.chunks_exact(4).map(|t| f64::from(t[3]) / 255.0).sum();
                 (alpha > 0.0).then(|| {
                     let square = f64::from(2.0 * b.half_width) * f64::from(2.0 * b.half_height);
                     SpeciesLook {
                         albedo: rgb.map(|c| (c / alpha) as f32),
                         area_m2: (alpha / texels as f64 * square) as f32,
+                        side_m2: (side_alpha / texels as f64 * square) as f32,
                         height_m: s.height_m,
                     }
                 })
@@ -81,6 +86,8 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
                 SpeciesLook {
                     albedo: FALLBACK_ALBEDO,
                     area_m2: std::f32::consts::PI * (0.7 * half).powi(2),
+                    // A crown of that width down half the tree.
+                    side_m2: 1.4 * half * 0.5 * s.height_m,
                     height_m: s.height_m,
                 }
             }))
@@ -96,6 +103,7 @@ struct CanopyTree {
     ground: f32,
     height: f32,
     area: f32,
+    side: f32,
     albedo: [f32; 3],
 }
 
@@ -103,8 +111,8 @@ struct CanopyTree {
 struct Acc {
     origin: [f32; 2],
     size: f32,
-    /// Per cell: Σ area, Σ area·rgb, Σ area·height, Σ area·ground.
-    sums: Vec<[f64; 6]>,
+    /// Per cell: Σ area, Σ area·rgb, Σ area·height, Σ area·ground, Σ side area.
+    sums: Vec<[f64; 7]>,
     z: [f32; 2],
     height_max: f32,
 }
@@ -115,7 +123,7 @@ impl Acc {
         Self {
             origin: [(square[0] as f64 * tile_m) as f32, (square[1] as f64 * tile_m) as f32],
             size: (square[2] as f64 * tile_m) as f32,
-            sums: vec![[0.0; 6]; (CANOPY_CELLS * CANOPY_CELLS) as usize],
+            sums: vec![[0.0; 7]; (CANOPY_CELLS * CANOPY_CELLS) as usize],
             z: [f32::INFINITY, f32::NEG_INFINITY],
             height_max: 0.0,
         }
@@ -146,6 +154,7 @@ impl Acc {
             cells.push((cx, cy));
         }
         let share = f64::from(t.area) / cells.len() as f64;
+        let side = f64::from(t.side) / cells.len() as f64;
         for (x, y) in cells {
             let (x, y) = (x.clamp(0, n - 1), y.clamp(0, n - 1));
             let s = &mut self.sums[(y * n + x) as usize];
@@ -155,6 +164,7 @@ impl Acc {
             }
             s[4] += share * f64::from(t.height);
             s[5] += share * f64::from(t.ground);
+            s[6] += side;
         }
         self.z = [self.z[0].min(t.ground), self.z[1].max(t.ground)];
         self.height_max = self.height_max.max(t.height);
@@ -179,6 +189,7 @@ impl Acc {
                 color: [1, 2, 3].map(|k| linear_to_srgb((s[k] / s[0]) as f32)),
                 cover: (1.0 - (-s[0] / cell_area).exp()) as f32,
                 height_m: (s[4] / s[0]) as f32,
+                side: (s[6] / s[0]) as f32,
                 ground_m: (s[5] / s[0]) as f32,
             };
             let packed = c.pack_cell(&cell);
@@ -204,6 +215,8 @@ fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<Ca
                 ground: i.position_m[2],
                 height: look.height_m * i.scale,
                 area: look.area_m2 * (i.scale * i.aspect).powi(2),
+                // Width scales by scale · aspect, height by scale.
+                side: look.side_m2 * i.scale * i.scale * i.aspect,
                 albedo: look.albedo,
             });
         }

@@ -4,9 +4,12 @@
 //! One raster per index node (and one for a flat scene), a square of
 //! `cells`×`cells` cells over the node's trees. Each cell holds the share of its
 //! ground that crowns cover seen from above (overlap counted as random:
-//! `1 − exp(−Σ crown area / cell area)`), the crowns' mean albedo (their
-//! species' top-view colour, weighted by crown area), their mean height and
-//! the mean ground height under them. Built by the bake from the tiles and the
+//! `1 − exp(−Σ crown area / cell area)`), how much more the trees cover seen
+//! from the side (their side silhouettes' area over their crowns' area from
+//! above: a view at elevation θ sees `1 − exp(−Λ (1 + side · cot θ))`, Λ the
+//! exponent above), the crowns' mean albedo (their species' top-view colour,
+//! weighted by crown area), their mean height and the mean ground height under
+//! them. Built by the bake from the tiles and the
 //! species packs' billboards (`sylva-bake`'s `canopy.rs`). A viewer draws it
 //! over the ground where trees are too small to draw, cross-faded with them.
 //!
@@ -17,7 +20,7 @@
 //! header  magic "SYCN" | version u16 | header_bytes u16 (40) | cells u32
 //!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32 | reserved u32 (0)
 //! cell    r u8 | g u8 | b u8 (sRGB albedo) | cover u8 (0–255) | height u8 (× height_max / 255)
-//!         | reserved u8 (0) | ground u16 (z_min + q / 65535 × (z_max − z_min))
+//!         | side u8 (/ 32) | ground u16 (z_min + q / 65535 × (z_max − z_min))
 //! ```
 //!
 //! `x0`, `y0`, `size_m`: the square in metres relative to the scene origin;
@@ -47,6 +50,8 @@ pub struct CanopyCell {
     pub cover: f32,
     /// The crowns' mean tree height in metres (0 where none).
     pub height_m: f32,
+    /// The trees' side silhouettes' area over their crowns' area from above (0–7.97).
+    pub side: f32,
     /// Mean ground height under them, metres relative to the scene origin.
     pub ground_m: f32,
 }
@@ -79,6 +84,7 @@ impl Canopy {
             color: [c[0], c[1], c[2]],
             cover: f32::from(c[3]) / 255.0,
             height_m: f32::from(c[4]) / 255.0 * self.height_max_m,
+            side: f32::from(c[5]) / 32.0,
             ground_m: self.z_range_m[0] + f32::from(q) / 65535.0 * (self.z_range_m[1] - self.z_range_m[0]),
         }
     }
@@ -120,7 +126,8 @@ impl Canopy {
             0
         };
         let g = g.to_le_bytes();
-        [cell.color[0], cell.color[1], cell.color[2], unit(cell.cover), h, 0, g[0], g[1]]
+        let side = (cell.side * 32.0).round().clamp(0.0, 255.0) as u8;
+        [cell.color[0], cell.color[1], cell.color[2], unit(cell.cover), h, side, g[0], g[1]]
     }
 
     /// The file bytes.
@@ -147,7 +154,7 @@ impl Canopy {
     /// A [`DecodeError`] for a wrong magic, version or header size, a cell count
     /// of 0 or above [`MAX_CANOPY_CELLS`], a length that is not the header plus
     /// `cells²` cells, non-finite or inverted ranges, a non-positive size, or
-    /// reserved bytes that are not 0.
+    /// a reserved header word that is not 0.
     pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
         decode_canopy(bytes).map_err(|p| DecodeError::new(file, p))
     }
@@ -200,9 +207,6 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
             bytes.len() as u64 - end
         )));
     }
-    if let Some(i) = data.chunks_exact(CANOPY_CELL_BYTES).position(|c| c[5] != 0) {
-        return Err(Problem::Invalid(format!("cell {i}: reserved byte is not 0")));
-    }
     Ok(Canopy {
         cells,
         origin_m: [x0, y0],
@@ -240,6 +244,7 @@ mod tests {
                 color: [i as u8 * 10, 100, 50],
                 cover: i as f32 / 15.0,
                 height_m: i as f32 * 2.0,
+                side: i as f32 * 0.25,
                 ground_m: 10.0 + i as f32 * 5.0,
             };
             let packed = c.pack_cell(&cell);
@@ -259,6 +264,7 @@ mod tests {
         assert_eq!(cell.color, [110, 100, 50]);
         assert!((cell.cover - 11.0 / 15.0).abs() < 0.5 / 255.0);
         assert!((cell.height_m - 22.0).abs() <= 30.0 / 255.0);
+        assert_eq!(cell.side, 2.75);
         assert!((cell.ground_m - 65.0).abs() <= 80.0 / 65535.0);
         assert!((d.cell_m() - 100.0).abs() < 1e-6);
         assert!((d.mean_cover() - 0.5).abs() < 0.01);
@@ -290,7 +296,6 @@ mod tests {
         assert!(set(28, &0f32.to_le_bytes()).contains("below z_min"));
         assert!(set(32, &f32::INFINITY.to_le_bytes()).contains("height_max"));
         assert!(set(36, &[1]).contains("reserved"));
-        assert!(set(CANOPY_HEADER_BYTES + 5, &[1]).contains("cell 0: reserved"));
         // Every single-byte change decodes or fails cleanly.
         for at in 0..good.len() {
             for v in [0u8, 1, 0x7f, 0xff] {

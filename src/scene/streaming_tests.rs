@@ -12,6 +12,7 @@ use crate::camera::Camera;
 use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
 use crate::scene::fetch::ByteRange;
 use crate::scene::imagery::ImageryChoice;
+use crate::scene::index_walk::tile_wanted;
 
 fn fixture() -> String {
     concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small").to_string()
@@ -626,4 +627,84 @@ fn whole_tiles_without_prefix_thinning() {
     assert!(s.is_settled());
     assert_eq!(r.used, 3000, "every tree of the fixture");
     assert!(s.fetcher.log.iter().filter(|(u, _)| u.ends_with(".tile")).all(|(_, range)| range.is_none()));
+}
+
+#[test]
+fn the_canopy_stands_in_for_trees_under_a_pixel_and_their_tiles_are_not_fetched() {
+    let canopy = CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 };
+    let mut s = stream(StreamConfig::default());
+    s.set_prefix_view(Some(PrefixView { thin_px: 8.0, lod_scale: 1.0 }));
+    s.set_canopy_view(Some(canopy));
+    let mut r = FakeResidency::new(1 << 20);
+    let mut t = 0.0;
+    let mut fetched_before = 0;
+    for (k, d) in [40_000.0f64, 5000.0, 400.0].into_iter().enumerate() {
+        let view = Camera::look_at(DVec3::new(0.0, -d, d * 0.5), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+        t = run(&mut s, &mut r, &view, 1e6, t, 0.1, 24);
+        assert!(s.is_settled(), "settles at {d} m");
+        assert!(s.canopy_active().is_some(), "the root raster is in");
+        let log = &s.fetcher.log[fetched_before..];
+        fetched_before = s.fetcher.log.len();
+        let px = |h: f32, dist: f32| h * view.px_per_m_at_1m / dist.max(1e-3);
+        // Every tile the view wants has a tree of a pixel or more; every known
+        // tile in view it does not want has none (the canopy alone draws it).
+        for (i, entry) in s.index.tiles.iter().enumerate() {
+            let Some(dist) = tile_wanted(&view, &entry.bounds, 1e6) else { continue };
+            let h = px(entry.levels.as_ref().unwrap().height_m, dist);
+            assert_eq!(s.wanted.contains(&i), h >= 1.0, "{} at {d} m: tallest tree {h:.2} px", entry.url);
+        }
+        match k {
+            0 => {
+                // 40 km away: the trees are a fifth of a pixel. The manifest, the root
+                // node, canopy rasters and the ground; no tile, no pack, no deeper node.
+                let urls: Vec<&str> = log.iter().map(|(u, _)| u.rsplit('/').next().unwrap()).collect();
+                let allowed = |u: &&str| {
+                    *u == "scene.json" || *u == "r.json" || [".cnpy", ".terr", ".jpg"].iter().any(|e| u.ends_with(e))
+                };
+                assert!(urls.iter().all(|u| allowed(u)), "{urls:?}");
+                assert!(urls.contains(&"r.cnpy"), "{urls:?}");
+                assert_eq!(r.used, 0);
+                assert_eq!(s.canopy_draws().len(), 1, "the root raster alone");
+                assert!(s.stats().canopy_bytes_fetched >= 32_808);
+            }
+            1 => {
+                // 5 km: the nearest trees are about 1.6 px: their tiles come, the far ones do not.
+                assert!(r.used > 0 && r.used < 3000, "{} trees resident", r.used);
+                assert!(!s.canopy_draws().is_empty());
+            }
+            _ => {
+                // 400 m: every tree is far above the band, so no raster is drawn.
+                assert!(s.canopy_draws().is_empty(), "{} rasters drawn close up", s.canopy_draws().len());
+            }
+        }
+    }
+    // Without the canopy the far view fetches tiles again.
+    let mut s = stream(StreamConfig::default());
+    s.set_prefix_view(Some(PrefixView { thin_px: 8.0, lod_scale: 1.0 }));
+    let mut r = FakeResidency::new(1 << 20);
+    let view = Camera::look_at(DVec3::new(0.0, -40_000.0, 20_000.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+    run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 24);
+    assert!(r.used > 0 && !s.fetcher.log.iter().any(|(u, _)| u.ends_with(".cnpy")));
+}
+
+#[test]
+fn a_lost_canopy_raster_is_retried_then_its_parent_drawn() {
+    let mut s = stream(StreamConfig { retry_base_s: 0.5, ..StreamConfig::default() });
+    s.set_canopy_view(Some(CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 }));
+    s.fetcher.fail.insert("r.cnpy".into(), VecDeque::from([FetchError::Status { url: "x".into(), status: 503 }]));
+    let mut r = FakeResidency::new(1 << 20);
+    let view = Camera::look_at(DVec3::new(0.0, -40_000.0, 20_000.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+    let t = run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 4);
+    assert!(s.canopy_active().is_none(), "not yet: the root raster failed once");
+    assert!(!s.is_settled(), "a retry is due");
+    run(&mut s, &mut r, &view, 1e6, t, 0.2, 10);
+    assert!(s.canopy_active().is_some() && s.is_settled());
+    // A raster that does not decode is given up on: its trees are drawn instead.
+    let mut s = stream(StreamConfig::default());
+    s.set_canopy_view(Some(CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 }));
+    s.fetcher.replace.insert("r.cnpy".into(), b"SYCNgarbage".to_vec());
+    run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 24);
+    assert!(s.canopy_active().is_none() && s.is_settled());
+    assert!(s.failures().iter().any(|f| f.url.ends_with("r.cnpy")), "{:?}", s.failures());
+    assert!(s.fetcher.log.iter().any(|(u, _)| u.ends_with(".tile")), "trees instead");
 }
