@@ -661,7 +661,7 @@ fn the_canopy_stands_in_for_trees_under_a_pixel_and_their_tiles_are_not_fetched(
                 let allowed = |u: &&str| {
                     *u == "scene.json" || *u == "r.json" || [".cnpy", ".terr", ".jpg"].iter().any(|e| u.ends_with(e))
                 };
-                assert!(urls.iter().all(|u| allowed(u)), "{urls:?}");
+                assert!(urls.iter().all(allowed), "{urls:?}");
                 assert!(urls.contains(&"r.cnpy"), "{urls:?}");
                 assert_eq!(r.used, 0);
                 assert_eq!(s.canopy_draws().len(), 1, "the root raster alone");
