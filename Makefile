@@ -137,7 +137,7 @@ sweep-fade: release
 # Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
 fuzz:
 	@command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz
-	cd fuzz && for s in import_gltf read_dem decode_imagery; do mkdir -p corpus/$$s && cp -r seeds/$$s/. corpus/$$s/; done && for t in decode_tile decode_pack decode_manifest decode_ids decode_attributes decode_terrain decode_imagery import_gltf read_dem; do \
+	cd fuzz && for s in import_gltf read_dem decode_imagery; do mkdir -p corpus/$$s && cp -r seeds/$$s/. corpus/$$s/; done && for t in decode_tile decode_pack decode_manifest decode_ids decode_attributes decode_canopy decode_terrain decode_imagery import_gltf read_dem; do \
 	  $(CARGO) +nightly fuzz run $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 || exit 1; done
 
 # Regenerates the small test scene (commit the result; then re-bless image tests
@@ -145,4 +145,4 @@ fuzz:
 fixtures: release
 	rm -rf tests/fixtures/forest-small
 	target/release/sylva-bake demo --trees 3000 --seed 3 --billboard-size 32 --impostor-size 32 --texture-size 64 \
-	  --cell-size 32 --tile-cells 4 --index-node-tiles 4 --out tests/fixtures/forest-small
+	  --cell-size 32 --tile-cells 4 --index-node-tiles 4 --canopy-cell 4 --out tests/fixtures/forest-small

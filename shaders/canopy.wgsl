@@ -54,11 +54,13 @@ const CORNERS = array<vec2<f32>, 6>(
     vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
 );
 
-// Whether cell `n` of raster `r` holds no crowns (outside the raster: none).
+// Whether cell `n` of raster `r` holds no crowns. Outside the raster: not
+// known (a neighbouring raster's, maybe of another level), so no wall there —
+// walls along raster edges would draw seams through stands.
 fn neighbour_empty(r: CanopyRaster, n: vec2<i32>) -> bool {
     let size = i32(r.cells);
     if n.x < 0 || n.y < 0 || n.x >= size || n.y >= size {
-        return true;
+        return false;
     }
     let word = cells[r.slot * r.cells * r.cells + u32(n.y) * r.cells + u32(n.x)];
     return (word.x >> 24u) == 0u;

@@ -654,6 +654,14 @@ impl Viewer {
         self.frame.refine.invalidate();
     }
 
+    /// The canopy rasters on (the default: where trees are a pixel or two they
+    /// give way to the scene's canopy rasters, and trees under a pixel are
+    /// neither fetched nor drawn) or off (every tree, however small).
+    pub fn set_canopy(&mut self, on: bool) {
+        self.frame.settings.canopy = on;
+        self.frame.refine.invalidate();
+    }
+
     /// Terrain on or off (off: neither fetched nor drawn), and the projected
     /// geometric error (pixels) up to which a coarser terrain level is kept.
     pub fn set_terrain(&mut self, on: bool, error_px: f32) {

@@ -724,18 +724,24 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
     manifest_error(|v| v["version"] = 9.into(), "version 9");
-    // Version 8 adds the canopy raster; its URL stays inside the scene, its size is bounded.
-    let canopy = serde_json::json!({"url": "canopy/r.cnpy", "bytes": 32808});
+    // Version 8 adds the canopy quadtree; its folder stays inside the scene, its sizes are bounded.
+    let canopy = serde_json::json!({"path": "canopy", "origin_m": [-512.0, 0.0], "root_size_m": 2048.0,
+        "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_040});
     manifest_error(|v| v["canopy"] = canopy.clone(), "\"canopy\" needs manifest version 8");
-    let with = |url: &'static str, bytes: u64| {
+    let with = |key: &'static str, value: serde_json::Value| {
+        let mut c = canopy.clone();
+        c[key] = value;
         move |v: &mut serde_json::Value| {
             v["version"] = 8.into();
-            v["canopy"] = serde_json::json!({"url": url, "bytes": bytes});
+            v["canopy"] = c.clone();
         }
     };
-    manifest_error(with("../secret.cnpy", 32808), "canopy.url");
-    manifest_error(with("canopy/r.cnpy", 3), "canopy.bytes");
-    manifest_error(with("canopy/r.cnpy", u64::MAX), "canopy.bytes");
+    manifest_error(with("path", "../secret".into()), "canopy.path");
+    manifest_error(with("root_size_m", 0.0.into()), "root_size_m");
+    manifest_error(with("levels", 0.into()), "canopy.levels");
+    manifest_error(with("levels", 40.into()), "canopy.levels");
+    manifest_error(with("cells", 5000.into()), "canopy.cells");
+    manifest_error(with("extra", 1.into()), "unknown field");
     let mut m = sample_manifest();
     m.version = 8;
     m.canopy = Some(serde_json::from_value(canopy).unwrap());

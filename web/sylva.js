@@ -9,6 +9,8 @@
 //   v.heightAt(lon, lat)                    ground height there (metres, the scene's datum), null if unknown
 //   v.heightAtLocal(x, y)                   the same at scene metres (relative to the origin, like camera().z)
 //   v.setTerrain(on, errorPx = 2)           terrain on/off; coarser terrain with a larger errorPx
+//   v.setCanopy(on)                         the canopy rasters where trees are a pixel or two (default on;
+//                                           off: every tree drawn, and fetched, however small)
 //   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
 //                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
@@ -219,6 +221,7 @@ class SylvaViewer {
   /** Terrain on or off (off: neither fetched nor drawn); `errorPx` is the
    * projected geometric error in pixels up to which coarser terrain is kept. */
   setTerrain(on, errorPx = 2) { this.viewer.set_terrain(!!on, errorPx); this.dirty = SETTLE_FRAMES; }
+  setCanopy(on) { this.viewer.set_canopy(!!on); this.dirty = SETTLE_FRAMES; }
 
   /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg, ground under the eye). */
   camera() { return JSON.parse(this.viewer.camera_json()); }

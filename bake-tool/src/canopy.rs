@@ -1,6 +1,7 @@
 //! Canopy rasters at bake time (issue 20; format in `sylva::format::canopy`):
-//! for every index node (or the one flat scene), what its trees look like from
-//! far away — crown cover, albedo, height and ground per cell.
+//! a quadtree over the scene's square of tiles, each raster what its trees look
+//! like from far away — crown cover from above and from the side, albedo,
+//! height and ground per cell.
 //!
 //! Each species' look comes from its pack's top-view billboard (the capture at
 //! 90° elevation): its opaque share of the capture's square gives the crown
@@ -8,17 +9,15 @@
 //! adds `area × scale² × aspect²` to the cells its crown disc covers; cover is
 //! `1 − exp(−Σ area / cell area)` (crowns overlapping at random).
 //!
-//! Memory is bounded whatever the tree count: nodes are visited depth first,
-//! each tile is read once (by its leaf) and adds to the rasters of the nodes on
-//! the path to it only, and a node's raster is written when its subtree is done.
+//! Memory is bounded whatever the tree count: squares are visited depth first,
+//! each tile is read once (the finest squares are whole tiles or more, aligned
+//! with them) and adds to the rasters on the path to it only, and a raster is
+//! written when its square is done.
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use sylva::format::canopy::{canopy_url, Canopy, CanopyCell, CANOPY_CELLS, CANOPY_CELL_BYTES};
-use sylva::format::entries::CanopyRef;
-use sylva::format::index::IndexNode;
+use sylva::format::canopy::{Canopy, CanopyCell, CanopyEntry, CANOPY_CELLS, CANOPY_CELL_BYTES};
 use sylva::format::manifest::{SpeciesEntry, TileEntry};
 use sylva::format::pack::{decode_pack, kind};
 use sylva::format::Tile;
@@ -118,11 +117,11 @@ struct Acc {
 }
 
 impl Acc {
-    /// A raster over the tile square `[x0, y0, size]` of tiles of `tile_m` metres.
-    fn new(square: [i64; 3], tile_m: f64) -> Self {
+    /// A raster over the square at `origin` (metres relative to the scene origin) of side `size`.
+    fn new(origin: [f64; 2], size: f64) -> Self {
         Self {
-            origin: [(square[0] as f64 * tile_m) as f32, (square[1] as f64 * tile_m) as f32],
-            size: (square[2] as f64 * tile_m) as f32,
+            origin: [origin[0] as f32, origin[1] as f32],
+            size: size as f32,
             sums: vec![[0.0; 7]; (CANOPY_CELLS * CANOPY_CELLS) as usize],
             z: [f32::INFINITY, f32::NEG_INFINITY],
             height_max: 0.0,
@@ -170,7 +169,7 @@ impl Acc {
         self.height_max = self.height_max.max(t.height);
     }
 
-    fn finish(self) -> Canopy {
+    fn finish(self, children: u8) -> Canopy {
         let cell_area = f64::from(self.size / CANOPY_CELLS as f32).powi(2);
         let z = if self.z[0] <= self.z[1] { self.z } else { [0.0, 0.0] };
         let mut c = Canopy {
@@ -179,6 +178,7 @@ impl Acc {
             size_m: self.size,
             z_range_m: z,
             height_max_m: self.height_max,
+            children,
             data: vec![0; self.sums.len() * CANOPY_CELL_BYTES],
         };
         for (i, s) in self.sums.iter().enumerate() {
@@ -224,78 +224,98 @@ fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<Ca
     Ok(())
 }
 
-fn write(dir: &Path, url: &str, canopy: &Canopy) -> Result<CanopyRef> {
-    let bytes = canopy.encode();
-    Canopy::decode(url, &bytes)?; // what the viewer will read
-    write_file(&dir.join(url), &bytes)?;
-    Ok(CanopyRef { url: url.to_string(), bytes: bytes.len() as u64 })
-}
-
-/// Writes the canopy raster of a flat scene (all `tiles`, over the smallest
-/// power-of-two square of tiles holding them, as the index's root would be)
-/// and gives its reference.
+/// Writes the canopy quadtree of `tiles` (tiles of `tile_m` metres) into
+/// `dir/canopy` and gives the manifest's entry. Its root covers the index's
+/// root square of tiles; the finest level's rasters are the smallest squares
+/// of whole tiles at least 64 cells of `finest_cell_m` wide
+/// ([`sylva::format::canopy::FINEST_CELL_M`] by default).
 ///
 /// # Errors
-/// A tile or pack that cannot be read, or a file that cannot be written.
-pub fn write_flat(dir: &Path, tiles: &[TileEntry], tile_m: f64, looks: &[SpeciesLook]) -> Result<CanopyRef> {
-    create_dir(&dir.join("canopy"))?;
-    let mut acc = Acc::new(sylva::format::index::tile_square(tiles), tile_m);
-    let mut trees = Vec::new();
-    for t in tiles {
-        tile_trees(dir, t, looks, &mut trees)?;
-        trees.iter().for_each(|tree| acc.add(tree));
+/// A tile that cannot be read, or a file that cannot be written.
+pub fn write_quadtree(
+    dir: &Path,
+    tiles: &[TileEntry],
+    tile_m: f64,
+    finest_cell_m: f64,
+    looks: &[SpeciesLook],
+) -> Result<CanopyEntry> {
+    let [x0, y0, size] = sylva::format::index::tile_square(tiles);
+    let mut levels = 1u8;
+    while (size >> levels) >= 1 && ((size >> levels) as f64) * tile_m >= f64::from(CANOPY_CELLS) * finest_cell_m {
+        levels += 1;
     }
-    write(dir, &canopy_url(None), &acc.finish())
+    let mut entry = CanopyEntry {
+        path: "canopy".into(),
+        origin_m: [x0 as f64 * tile_m, y0 as f64 * tile_m],
+        root_size_m: size as f64 * tile_m,
+        levels,
+        cells: CANOPY_CELLS,
+        rasters: 0,
+        bytes: 0,
+    };
+    let mut walk =
+        Walk { dir, entry: &mut entry, tile_square: [x0, y0, size], looks, stack: Vec::new(), trees: Vec::new() };
+    let all: Vec<&TileEntry> = tiles.iter().collect();
+    walk.visit(0, 0, 0, &all)?;
+    Ok(entry)
 }
 
-/// Writes one canopy raster per node of `nodes` (root first, each subtree
-/// contiguous, as `build_index` gives them) and sets each node's `canopy`, and
-/// each child entry's `canopy` and `height_m` (its tallest tree).
-///
-/// # Errors
-/// A tile or pack that cannot be read, or a file that cannot be written.
-pub fn write_nodes(dir: &Path, nodes: &mut [(String, IndexNode)], tile_m: f64, looks: &[SpeciesLook]) -> Result<()> {
-    create_dir(&dir.join("canopy"))?;
-    let at: HashMap<String, usize> = nodes.iter().enumerate().map(|(i, (u, _))| (u.clone(), i)).collect();
-    let mut walk = Walk { dir, at, tile_m, looks, stack: Vec::new(), trees: Vec::new() };
-    walk.visit(nodes, 0).map(|_| ())
-}
-
-/// The depth-first walk of [`write_nodes`]: the rasters of the nodes on the path.
+/// The depth-first walk of [`write_quadtree`]: the rasters on the path.
 struct Walk<'a> {
     dir: &'a Path,
-    at: HashMap<String, usize>,
-    tile_m: f64,
+    entry: &'a mut CanopyEntry,
+    tile_square: [i64; 3],
     looks: &'a [SpeciesLook],
     stack: Vec<Acc>,
     trees: Vec<CanopyTree>,
 }
 
 impl Walk<'_> {
-    /// Writes node `i`'s raster and those below it; gives its tallest tree's height.
-    fn visit(&mut self, nodes: &mut [(String, IndexNode)], i: usize) -> Result<f32> {
-        self.stack.push(Acc::new(nodes[i].1.square, self.tile_m));
-        if nodes[i].1.children.is_empty() {
-            for t in &nodes[i].1.tiles {
+    /// Writes raster `(level, x, y)` (over `tiles`, all inside its square) and those below it.
+    fn visit(&mut self, level: u8, x: u32, y: u32, tiles: &[&TileEntry]) -> Result<()> {
+        self.stack.push(Acc::new(self.entry.origin_of(level, x, y), self.entry.size_m(level)));
+        let mut children = 0u8;
+        if level + 1 >= self.entry.levels {
+            for t in tiles {
                 tile_trees(self.dir, t, self.looks, &mut self.trees)?;
                 for acc in &mut self.stack {
                     self.trees.iter().for_each(|tree| acc.add(tree));
                 }
             }
         } else {
-            let children: Vec<usize> = nodes[i].1.children.iter().map(|c| self.at[&c.url]).collect();
-            for (k, j) in children.into_iter().enumerate() {
-                let height = self.visit(nodes, j)?;
-                let canopy = nodes[j].1.canopy.clone();
-                let entry = &mut nodes[i].1.children[k];
-                entry.height_m = Some(height);
-                entry.canopy = canopy;
+            // The children's squares in tile coordinates: half this one's side.
+            let half = self.tile_square[2] >> (level + 1);
+            let (cx0, cy0) =
+                (self.tile_square[0] + i64::from(2 * x) * half, self.tile_square[1] + i64::from(2 * y) * half);
+            for i in 0..4u32 {
+                let (qx, qy) = (cx0 + i64::from(i & 1) * half, cy0 + i64::from(i >> 1) * half);
+                let part: Vec<&TileEntry> = tiles
+                    .iter()
+                    .copied()
+                    .filter(|t| (qx..qx + half).contains(&i64::from(t.x)) && (qy..qy + half).contains(&i64::from(t.y)))
+                    .collect();
+                if !part.is_empty() {
+                    children |= 1 << i;
+                    self.visit(level + 1, 2 * x + (i & 1), 2 * y + (i >> 1), &part)?;
+                }
             }
         }
         let acc = self.stack.pop().expect("pushed above");
-        let height = acc.height_max;
-        let url = canopy_url(Some(&nodes[i].0));
-        nodes[i].1.canopy = Some(write(self.dir, &url, &acc.finish())?);
-        Ok(height)
+        let url = self.entry.raster_url(level, x, y);
+        let bytes = write(self.dir, &url, &acc.finish(children))?;
+        self.entry.rasters += 1;
+        self.entry.bytes += bytes;
+        Ok(())
     }
+}
+
+fn write(dir: &Path, url: &str, canopy: &Canopy) -> Result<u64> {
+    let bytes = canopy.encode();
+    Canopy::decode(url, &bytes)?; // what the viewer will read
+    let path = dir.join(url);
+    if let Some(parent) = path.parent() {
+        create_dir(parent)?;
+    }
+    write_file(&path, &bytes)?;
+    Ok(bytes.len() as u64)
 }

@@ -27,6 +27,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use glam::DVec3;
+use sylva::format::canopy::FINEST_CELL_M;
 
 use bake::{trees, SceneInput, SceneSummary};
 use batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
@@ -87,6 +88,9 @@ enum Command {
         /// Most tiles per index node (the value the shards were baked with).
         #[arg(long, default_value_t = DEFAULT_NODE_TILES, value_parser = clap::value_parser!(u32).range(1..=4096))]
         index_node_tiles: u32,
+        /// Width of the finest canopy cells, metres (the value the shards were baked with).
+        #[arg(long, default_value_t = FINEST_CELL_M, value_parser = parse_canopy_cell)]
+        canopy_cell: f64,
     },
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
@@ -154,6 +158,11 @@ struct PackArgs {
     /// than this get one (`merge` must be given the same value).
     #[arg(long, default_value_t = DEFAULT_NODE_TILES, value_parser = clap::value_parser!(u32).range(1..=4096))]
     index_node_tiles: u32,
+    /// Width of the finest canopy raster cells, metres: what far views draw where
+    /// trees are a pixel or two (finer: sharper forest edges from afar, more
+    /// bytes; `merge` must be given the same value).
+    #[arg(long, default_value_t = FINEST_CELL_M, value_parser = parse_canopy_cell)]
+    canopy_cell: f64,
     /// Bake only shard I of N of the tile grid (0-based), e.g. 0/4, as one task of
     /// an array job; join the N outputs with `sylva-bake merge`. Shard 0 also bakes
     /// the species packs. Every shard reads the whole input.
@@ -397,12 +406,12 @@ fn main() {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
-        Command::Merge { dirs, output, index_node_tiles } => {
+        Command::Merge { dirs, output, index_node_tiles, canopy_cell } => {
             let started = Instant::now();
             let out = output.out.clone();
             let inputs: Vec<&std::path::Path> = dirs.iter().map(PathBuf::as_path).collect();
             OutDir::prepare(&output.out, &inputs, output.force, &log)
-                .and_then(|dir| merge::merge(&dirs, dir, index_node_tiles, &log))
+                .and_then(|dir| merge::merge(&dirs, dir, index_node_tiles, canopy_cell, &log))
                 .map(|m| {
                     log(&format!(
                         "wrote {}: {} trees, {} batches, {} tiles{} in {:.1} s",
@@ -443,6 +452,16 @@ fn report_summary(s: &SceneSummary, out: &std::path::Path, started: Instant) {
         s.tile_seconds,
         started.elapsed().as_secs_f64()
     ));
+}
+
+/// `--canopy-cell`: a width in metres from 1 to 10,000.
+fn parse_canopy_cell(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("{s:?} is not a number of metres"))?;
+    if (1.0..=10_000.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} m: the finest canopy cells must be 1–10,000 m wide"))
+    }
 }
 
 fn demo(args: &DemoArgs) -> Result<()> {
@@ -499,6 +518,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
         debug_dump: args.pack.debug_dump.clone(),
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
+        canopy_cell_m: args.pack.canopy_cell,
         attributes: None,
     };
     let s = bake::bake_scene(&input, out, &log)?;
@@ -715,6 +735,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
         debug_dump: args.pack.debug_dump.clone(),
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
+        canopy_cell_m: args.pack.canopy_cell,
         attributes: placed.attributes,
     };
     log(&format!("batching with {} m cells", input.cell_size_m));

@@ -11,7 +11,13 @@ use crate::scene_write::{create_dir, finish_scene};
 
 /// Reads and checks the shard manifests, copies packs (from shard 0), tiles and
 /// id sidecars into `out` and writes the index and manifest of the whole.
-pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str)) -> Result<Manifest> {
+pub fn merge(
+    dirs: &[PathBuf],
+    out: OutDir,
+    node_tiles: u32,
+    canopy_cell_m: f64,
+    log: &dyn Fn(&str),
+) -> Result<Manifest> {
     if dirs.is_empty() {
         bail!("merge: name the shard directories (DIR_0 … DIR_N-1)");
     }
@@ -92,7 +98,7 @@ pub fn merge(dirs: &[PathBuf], out: OutDir, node_tiles: u32, log: &dyn Fn(&str))
         if let Some(w) = tiles.windows(2).find(|w| (w[0].x, w[0].y) == (w[1].x, w[1].y)) {
             bail!("tile ({}, {}) is in two shards: the shards come from different bakes", w[0].x, w[0].y);
         }
-        finish_scene(tmp, base, tiles, node_tiles, false, log)
+        finish_scene(tmp, base, tiles, crate::scene_write::Layout { node_tiles, flat: false, canopy_cell_m }, log)
     })
 }
 

@@ -74,7 +74,7 @@ struct Survey {
 
 /// Whether `rel` is a name of the bake's own layout: `scene.json`,
 /// `species/*.pack`, `tiles/*.tile`, `tiles/*.ids`, `tiles/*.attr`, `index/*.json`,
-/// `canopy/*.cnpy`, the terrain's (docs/FORMAT.md). A new kind of scene file must be added here.
+/// `canopy/<level>/*.cnpy`, the terrain's (docs/FORMAT.md). A new kind of scene file must be added here.
 #[must_use]
 pub fn is_bake_file(rel: &str) -> bool {
     let plain = |f: &str, ext: &[&str]| !f.starts_with('.') && ext.iter().any(|e| f.len() > e.len() && f.ends_with(e));
@@ -83,7 +83,7 @@ pub fn is_bake_file(rel: &str) -> bool {
         ["species", f] => plain(f, &[".pack"]),
         ["tiles", f] => plain(f, &[".tile", ".ids", ".attr"]),
         ["index", f] => plain(f, &[".json"]),
-        ["canopy", f] => plain(f, &[".cnpy"]),
+        ["canopy", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".cnpy"]),
         ["terrain", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".terr"]),
         ["terrain", "img", level, f] => level.parse::<u8>().is_ok() && plain(f, &[".jpg"]),
         _ => false,
@@ -405,7 +405,7 @@ mod tests {
             "tiles/-1_2.tile",
             "tiles/0_0.ids",
             "index/r0.json",
-            "canopy/r0.cnpy",
+            "canopy/3/5_7.cnpy",
             "terrain/3/5_7.terr",
             "terrain/img/2/1_3.jpg",
         ] {
@@ -418,8 +418,9 @@ mod tests {
             "species/.pack",
             "species/.hidden.pack",
             "index/r.json/x",
-            "canopy/r0.json",
-            "canopy/.cnpy",
+            "canopy/r0.cnpy",
+            "canopy/x/1_2.cnpy",
+            "canopy/2/.cnpy",
             "../scene.json",
             "lnk/important.doc",
             "species/../thesis.txt",

@@ -32,6 +32,17 @@ pub fn create_dir(path: &Path) -> Result<()> {
     std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))
 }
 
+/// How [`finish_scene`] lays a scene out.
+#[derive(Debug, Clone, Copy)]
+pub struct Layout {
+    /// Most tiles per index node.
+    pub node_tiles: u32,
+    /// A flat tile list whatever the count (a shard's part).
+    pub flat: bool,
+    /// Width of the finest canopy raster cells (metres).
+    pub canopy_cell_m: f64,
+}
+
 /// Finishes a scene in `dir` from its species and tiles: writes the index (or a
 /// flat list) and `scene.json`. Shared by the bake and by `merge`, so both give
 /// the same bytes.
@@ -39,10 +50,10 @@ pub fn finish_scene(
     dir: &Path,
     mut base: Manifest,
     mut tiles: Vec<TileEntry>,
-    node_tiles: u32,
-    flat: bool,
+    layout: Layout,
     log: &dyn Fn(&str),
 ) -> Result<Manifest> {
+    let Layout { node_tiles, flat, canopy_cell_m } = layout;
     tiles.sort_by_key(|t| (t.y, t.x));
     let bounds = sylva::format::index::union_bounds(tiles.iter().map(|t| &t.bounds))
         .unwrap_or(Bounds { min: [0.0; 3], max: [0.0; 3] });
@@ -69,16 +80,23 @@ pub fn finish_scene(
     } else {
         None
     };
-    if looks.is_some() {
+    if let Some(looks) = &looks {
+        let tile_m = f64::from(base.cell_size_m) * f64::from(base.tile_cells);
+        let started = std::time::Instant::now();
+        let entry = crate::canopy::write_quadtree(dir, &tiles, tile_m, canopy_cell_m, looks)?;
+        log(&format!(
+            "canopy: {} rasters in {} levels, finest cells {:.1} m, {:.2} MB ({:.1} s)",
+            entry.rasters,
+            entry.levels,
+            entry.size_m(entry.levels - 1) / f64::from(entry.cells),
+            entry.bytes as f64 / 1e6,
+            started.elapsed().as_secs_f64()
+        ));
+        base.canopy = Some(entry);
         base.version = 8;
     }
-    let tile_m = f64::from(base.cell_size_m) * f64::from(base.tile_cells);
     if !flat && tiles.len() > node_tiles as usize {
-        let mut built = build_index(&tiles, node_tiles);
-        if let Some(looks) = &looks {
-            crate::canopy::write_nodes(dir, &mut built.nodes, tile_m, looks)?;
-            base.canopy = built.nodes[0].1.canopy.clone();
-        }
+        let built = build_index(&tiles, node_tiles);
         create_dir(&dir.join("index"))?;
         for (url, node) in &built.nodes {
             write_file(&dir.join(url), &node.encode())?;
@@ -86,9 +104,6 @@ pub fn finish_scene(
         base.index = Some(built.reference);
         base.tiles = Vec::new();
     } else {
-        if let Some(looks) = &looks {
-            base.canopy = Some(crate::canopy::write_flat(dir, &tiles, tile_m, looks)?);
-        }
         base.index = None;
         base.tiles = tiles;
     }

@@ -1112,16 +1112,15 @@ fn text_ids_are_reported_and_trees_keep_their_row() {
     assert_eq!((numbered, by_row), (20, 10));
 }
 
-/// Canopy rasters (issue 20): every index node has one, its cells cover what the
-/// crowns cover, and every level agrees on a uniform stand.
+/// Canopy rasters (issue 20): a quadtree of rasters whose cells cover what the
+/// crowns cover, every level agreeing on a uniform stand.
 #[test]
 fn canopy_rasters_cover_what_the_crowns_cover() {
     use sylva::format::canopy::Canopy;
-    use sylva::format::index::IndexNode;
     let Some(model) = oak_model() else { return };
     let dir = tmp("canopy");
     // A uniform stand (30 × 40 trees 8 m apart, 12 m tall) in the west, an empty
-    // band, and a sparse row of trees 230 m to the east.
+    // band, and a sparse row of trees 740 m to the east.
     let mut csv = String::from("id,x,y,z,height\n");
     let mut id = 0;
     for j in 0..40 {
@@ -1131,7 +1130,7 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
         }
     }
     for j in 0..8 {
-        csv += &format!("{id},500470,{},0,12\n", 5_300_004 + j * 40);
+        csv += &format!("{id},500980,{},0,12\n", 5_300_004 + j * 40);
         id += 1;
     }
     let path = dir.join("trees.csv");
@@ -1146,38 +1145,38 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
         .arg("--placements")
         .arg(&path)
         .args(["--no-clusters", "--billboard-size", "64", "--texture-size", "16", "--tile-cells", "2"])
-        .args(["--index-node-tiles", "4"])
+        .args(["--index-node-tiles", "4", "--canopy-cell", "8"])
         .args(flags)
         .arg("--out")
         .arg(&out));
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
     assert_eq!(m.version, 8);
-    assert!(m.index.is_some(), "an indexed scene");
-    // Every node names its raster (the root's also in the manifest); child entries carry theirs and their height.
-    let mut nodes = Vec::new();
-    let mut stack = vec![m.index.as_ref().unwrap().root.clone()];
-    while let Some(url) = stack.pop() {
-        let node = IndexNode::decode(&url, &std::fs::read(out.join(&url)).unwrap()).unwrap();
-        for c in &node.children {
-            let child = IndexNode::decode(&c.url, &std::fs::read(out.join(&c.url)).unwrap()).unwrap();
-            assert_eq!(c.canopy, child.canopy, "{}", c.url);
-            let h = c.height_m.expect("child height");
-            assert!((11.0..13.0).contains(&h), "{}: tallest tree {h} m", c.url);
-            stack.push(c.url.clone());
+    let e = m.canopy.clone().expect("a canopy entry");
+    // 1,024 m of 64 m tiles: the root's cells 16 m, the finest (512 m squares) 8 m.
+    assert_eq!((e.levels, e.cells, e.root_size_m), (2, 64, 1024.0), "{e:?}");
+    // Every raster the root's child bits name exists, with the square its key names.
+    let mut rasters: Vec<((u8, u32, u32), Canopy)> = Vec::new();
+    let mut stack = vec![(0u8, 0u32, 0u32)];
+    let mut bytes = 0;
+    while let Some((l, x, y)) = stack.pop() {
+        let url = e.raster_url(l, x, y);
+        let b = std::fs::read(out.join(&url)).unwrap_or_else(|_| panic!("{url} missing"));
+        bytes += b.len() as u64;
+        let c = Canopy::decode(&url, &b).unwrap();
+        let o = e.origin_of(l, x, y);
+        assert_eq!(
+            [f64::from(c.origin_m[0]), f64::from(c.origin_m[1]), f64::from(c.size_m)],
+            [o[0], o[1], e.size_m(l)]
+        );
+        for i in 0..4u32 {
+            if c.children & (1 << i) != 0 {
+                stack.push((l + 1, 2 * x + (i & 1), 2 * y + (i >> 1)));
+            }
         }
-        nodes.push((url, node));
+        rasters.push(((l, x, y), c));
     }
-    assert!(nodes.len() >= 3, "{} nodes", nodes.len());
-    assert_eq!(m.canopy, nodes[0].1.canopy);
-    let rasters: Vec<(bool, Canopy)> = nodes
-        .iter()
-        .map(|(url, n)| {
-            let r = n.canopy.as_ref().unwrap_or_else(|| panic!("{url} has no canopy"));
-            let bytes = std::fs::read(out.join(&r.url)).unwrap();
-            assert_eq!(bytes.len() as u64, r.bytes, "{}", r.url);
-            (n.children.is_empty(), Canopy::decode(&r.url, &bytes).unwrap())
-        })
-        .collect();
+    assert_eq!((rasters.len() as u64, bytes), (e.rasters, e.bytes));
+    assert!(rasters.len() >= 3, "the root and the squares with trees: {}", rasters.len());
     // Cells whose square lies inside the stand, or inside the empty band.
     let (ox, oy) = (m.origin_m[0], m.origin_m[1]);
     let region = |c: &Canopy, x: u32, y: u32| {
@@ -1189,7 +1188,7 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
             && inside(y0, y0 + s, 5_300_000.0 + 8.0, 5_300_320.0 - 8.0)
         {
             Some(true)
-        } else if inside(x0, x0 + s, 500_260.0, 500_440.0) {
+        } else if inside(x0, x0 + s, 500_260.0, 500_960.0) {
             Some(false)
         } else {
             None
@@ -1201,42 +1200,42 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
         (0..c.cells * c.cells).map(|i| -(1.0 - f64::from(c.cell(i % c.cells, i / c.cells).cover)).ln() * a).sum()
     };
     let whole = crown_area(&rasters[0].1);
+    let finest: f64 = rasters.iter().filter(|((l, _, _), _)| *l == e.levels - 1).map(|(_, c)| crown_area(c)).sum();
+    assert!((finest / whole - 1.0).abs() < 0.05, "crown area: finest level {finest:.0} m², root {whole:.0} m²");
     let mut stand_covers = Vec::new();
-    for (i, (_, c)) in rasters.iter().enumerate() {
+    for (key, c) in &rasters {
         let mut covers = Vec::new();
         for y in 0..c.cells {
             for x in 0..c.cells {
                 let cell = c.cell(x, y);
                 match region(c, x, y) {
-                    Some(true) if cell.cover > 0.0 => {
+                    Some(true) => {
                         covers.push(cell.cover);
-                        assert!((cell.height_m - 12.0).abs() < 0.6, "node {i} cell {x},{y}: height {}", cell.height_m);
+                        assert!((cell.height_m - 12.0).abs() < 0.6, "{key:?} cell {x},{y}: height {}", cell.height_m);
                         let [r, g, b] = cell.color.map(f32::from);
-                        assert!(g > r && g > b, "node {i}: a crown's green {:?}", cell.color);
+                        assert!(g > r && g > b, "{key:?}: a crown's green {:?}", cell.color);
+                        assert!(cell.side > 0.3 && cell.side < 4.0, "{key:?}: side over top {}", cell.side);
                     }
-                    Some(false) => assert_eq!(cell.cover, 0.0, "node {i} cell {x},{y} in the empty band"),
-                    _ => {}
+                    Some(false) => assert_eq!(cell.cover, 0.0, "{key:?} cell {x},{y} in the empty band"),
+                    None => {}
                 }
             }
         }
-        // Rasters below a node hold the crowns of its trees only, their sum the whole's.
-        if i == 0 {
-            let leaves: f64 = rasters.iter().filter(|(leaf, _)| *leaf).map(|(_, c)| crown_area(c)).sum();
-            assert!((leaves / whole - 1.0).abs() < 0.05, "crown area: leaves {leaves:.0} m², root {whole:.0} m²");
-        }
-        // Cells as wide as the trees' spacing or more see the stand as uniform
-        // (finer ones see each crown, and the gaps between).
-        if c.cell_m() < 8.0 || covers.is_empty() {
+        if covers.is_empty() {
             continue;
         }
+        // Cells as wide as the trees' spacing see the stand as uniform.
         let mean = covers.iter().sum::<f32>() / covers.len() as f32;
         let spread = covers.iter().map(|c| (c - mean).abs()).fold(0.0, f32::max);
-        assert!(spread < 0.06, "node {i}: a uniform stand's cover varies by {spread} around {mean}");
+        assert!(spread < 0.06, "{key:?}: a uniform stand's cover varies by {spread} around {mean}");
         stand_covers.push(mean);
     }
-    assert!(!stand_covers.is_empty(), "the stand is seen by a coarse level");
-    // Crowns of a 12 m oak 8 m apart: about half the ground.
+    assert!(stand_covers.len() >= 2, "the stand is seen by several levels");
+    // Crowns of a 12 m oak 8 m apart: about half the ground; the same at every level.
     let (lo, hi) = stand_covers.iter().fold((1.0f32, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
     assert!(lo > 0.2 && hi < 0.95, "stand cover {lo}–{hi}");
     assert!(hi - lo < 0.03, "levels disagree on the stand's cover: {stand_covers:?}");
+    // A bad --canopy-cell is refused.
+    let e = fails(bin().args(["demo", "--trees", "10", "--canopy-cell", "0.5"]).arg("--out").arg(dir.join("x")));
+    assert!(e.contains("--canopy-cell") && e.contains("1–10,000 m"), "{e}");
 }

@@ -13,7 +13,8 @@
 #   --sbatch ARGS extra sbatch options for both jobs (e.g. "--partition=cpu
 #                 --cpus-per-task=8 --mem=8G --time=02:00:00")
 #   ARGS…         the `sylva-bake bake` (or `demo`) arguments, without --shard and
-#                 --out; an --index-node-tiles among them is passed to merge too
+#                 --out; an --index-node-tiles or --canopy-cell among them is passed
+#                 to merge too
 #
 # SYLVA_BAKE names the binary (default: sylva-bake on PATH). Prints the two job ids.
 set -euo pipefail
@@ -47,13 +48,13 @@ out=$(realpath -m "$out")
 work=$(realpath -m "${work:-$out.parts}")
 mkdir -p "$work/logs"
 
-# merge needs the shards' --index-node-tiles.
+# merge needs the shards' --index-node-tiles and --canopy-cell.
 merge_extra=()
 args=("$@")
 for i in "${!args[@]}"; do
   case "${args[$i]}" in
-    --index-node-tiles) merge_extra=(--index-node-tiles "${args[$((i + 1))]}") ;;
-    --index-node-tiles=*) merge_extra=("${args[$i]}") ;;
+    --index-node-tiles|--canopy-cell) merge_extra+=("${args[$i]}" "${args[$((i + 1))]}") ;;
+    --index-node-tiles=*|--canopy-cell=*) merge_extra+=("${args[$i]}") ;;
   esac
 done
 

@@ -1,8 +1,12 @@
-//! Canopy rasters (`canopy/*.cnpy`, issue 20): what the forest below an index
-//! node looks like from far away, for views where its trees are a pixel or less.
+//! Canopy rasters (`canopy/<level>/<x>_<y>.cnpy`, issue 20): what the forest
+//! looks like from far away, for views where its trees are a pixel or two.
 //!
-//! One raster per index node (and one for a flat scene), a square of
-//! `cells`×`cells` cells over the node's trees. Each cell holds the share of its
+//! A quadtree like the terrain's ([`CanopyEntry`] in the manifest): the root
+//! raster covers the scene's square of tiles, each level halves the side, the
+//! finest has cells of about [`FINEST_CELL_M`] (or a tile's side / 64 where tiles
+//! are larger); only squares with trees exist, and each raster says which of
+//! its four children do. A raster is a square of `cells`×`cells` cells over its
+//! square. Each cell holds the share of its
 //! ground that crowns cover seen from above (overlap counted as random:
 //! `1 − exp(−Σ crown area / cell area)`), how much more the trees cover seen
 //! from the side (their side silhouettes' area over their crowns' area from
@@ -18,7 +22,8 @@
 //!
 //! ```text
 //! header  magic "SYCN" | version u16 | header_bytes u16 (40) | cells u32
-//!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32 | reserved u32 (0)
+//!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32
+//!         | children u32 (bit i: child (2x + (i & 1), 2y + (i >> 1)) exists; bits 4–31 0)
 //! cell    r u8 | g u8 | b u8 (sRGB albedo) | cover u8 (0–255) | height u8 (× height_max / 255)
 //!         | side u8 (/ 32) | ground u16 (z_min + q / 65535 × (z_max − z_min))
 //! ```
@@ -26,6 +31,9 @@
 //! `x0`, `y0`, `size_m`: the square in metres relative to the scene origin;
 //! `z_*`: the ground heights' range; `height_max`: the tallest tree's height.
 
+use serde::{Deserialize, Serialize};
+
+use super::entries::check_url;
 use super::error::{finite, DecodeError, Problem, Reader};
 
 /// File magic.
@@ -40,6 +48,81 @@ pub const CANOPY_CELL_BYTES: usize = 8;
 pub const CANOPY_CELLS: u32 = 64;
 /// Most cells per side a file may have.
 pub const MAX_CANOPY_CELLS: u32 = 1024;
+/// The finest level's cells are about this wide (metres), unless tiles are wider
+/// than 64 of them (then a tile's side / 64).
+pub const FINEST_CELL_M: f64 = 15.0;
+/// Most levels of the quadtree.
+pub const MAX_CANOPY_LEVELS: u8 = 24;
+
+/// The manifest's `canopy` (scene version 8): the quadtree of rasters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CanopyEntry {
+    /// Folder of the rasters, relative to the manifest.
+    pub path: String,
+    /// The root square's lowest corner, metres relative to the scene origin.
+    pub origin_m: [f64; 2],
+    /// The root square's side, metres.
+    pub root_size_m: f64,
+    /// Levels (1: the root alone).
+    pub levels: u8,
+    /// Cells per raster side.
+    pub cells: u32,
+    /// Rasters in all.
+    pub rasters: u64,
+    /// Their bytes in all.
+    pub bytes: u64,
+}
+
+/// A raster's key: (level, x, y).
+pub type CanopyKey = (u8, u32, u32);
+
+impl CanopyEntry {
+    /// URL of raster `(level, x, y)` relative to the manifest.
+    #[must_use]
+    pub fn raster_url(&self, level: u8, x: u32, y: u32) -> String {
+        format!("{}/{level}/{x}_{y}.cnpy", self.path)
+    }
+
+    /// Side of a raster of `level`, metres.
+    #[must_use]
+    pub fn size_m(&self, level: u8) -> f64 {
+        self.root_size_m / f64::from(1u32 << level.min(31))
+    }
+
+    /// Lowest corner of raster `(level, x, y)`, metres relative to the scene origin.
+    #[must_use]
+    pub fn origin_of(&self, level: u8, x: u32, y: u32) -> [f64; 2] {
+        let s = self.size_m(level);
+        [self.origin_m[0] + f64::from(x) * s, self.origin_m[1] + f64::from(y) * s]
+    }
+
+    /// Checks the entry (called by the manifest's validation).
+    pub(crate) fn validate(&self) -> Result<(), Problem> {
+        check_url("canopy.path", &self.path)?;
+        finite("canopy.origin_m[0]", self.origin_m[0])?;
+        finite("canopy.origin_m[1]", self.origin_m[1])?;
+        finite("canopy.root_size_m", self.root_size_m)?;
+        if self.root_size_m <= 0.0 {
+            return Err(Problem::Invalid(format!("canopy.root_size_m is {}: must be positive", self.root_size_m)));
+        }
+        if self.levels == 0 || self.levels > MAX_CANOPY_LEVELS {
+            return Err(Problem::OutOfRange {
+                what: "canopy.levels".into(),
+                value: self.levels.into(),
+                allowed: format!("1–{MAX_CANOPY_LEVELS}"),
+            });
+        }
+        if self.cells == 0 || self.cells > MAX_CANOPY_CELLS {
+            return Err(Problem::OutOfRange {
+                what: "canopy.cells".into(),
+                value: self.cells.into(),
+                allowed: format!("1–{MAX_CANOPY_CELLS}"),
+            });
+        }
+        Ok(())
+    }
+}
 
 /// One cell of a [`Canopy`], decoded.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -69,6 +152,8 @@ pub struct Canopy {
     pub z_range_m: [f32; 2],
     /// The tallest tree's height in metres: the height quantisation's top.
     pub height_max_m: f32,
+    /// Which children exist: bit `i` for child `(2x + (i & 1), 2y + (i >> 1))`.
+    pub children: u8,
     /// Raw cells, `cells²` × 8 bytes, row by row.
     pub data: Vec<u8>,
 }
@@ -143,7 +228,7 @@ impl Canopy {
         {
             out.extend_from_slice(&v.to_le_bytes());
         }
-        out.extend_from_slice(&0u32.to_le_bytes());
+        out.extend_from_slice(&u32::from(self.children).to_le_bytes());
         out.extend_from_slice(&self.data);
         out
     }
@@ -154,7 +239,7 @@ impl Canopy {
     /// A [`DecodeError`] for a wrong magic, version or header size, a cell count
     /// of 0 or above [`MAX_CANOPY_CELLS`], a length that is not the header plus
     /// `cells²` cells, non-finite or inverted ranges, a non-positive size, or
-    /// a reserved header word that is not 0.
+    /// child bits above bit 3.
     pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
         decode_canopy(bytes).map_err(|p| DecodeError::new(file, p))
     }
@@ -195,8 +280,9 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
     if h_max < 0.0 {
         return Err(Problem::Invalid(format!("header.height_max is {h_max}: heights are not negative")));
     }
-    if r.u32("header.reserved", 36)? != 0 {
-        return Err(Problem::Invalid("header.reserved is not 0".into()));
+    let children = r.u32("header.children", 36)?;
+    if children > 0xf {
+        return Err(Problem::Invalid(format!("header.children is {children:#x}: only bits 0–3 (four children) exist")));
     }
     let n = u64::from(cells) * u64::from(cells) * CANOPY_CELL_BYTES as u64;
     let data = r.slice("cells", CANOPY_HEADER_BYTES as u64, n)?;
@@ -213,17 +299,9 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
         size_m: size,
         z_range_m: [z_min, z_max],
         height_max_m: h_max,
+        children: children as u8,
         data: data.to_vec(),
     })
-}
-
-/// The canopy raster's URL of the index node at `node_url` (`index/r01.json` →
-/// `canopy/r01.cnpy`), or of a flat scene (`None` → `canopy/r.cnpy`).
-#[must_use]
-pub fn canopy_url(node_url: Option<&str>) -> String {
-    let stem =
-        node_url.and_then(|u| u.rsplit('/').next()).map_or("r", |name| name.strip_suffix(".json").unwrap_or(name));
-    format!("canopy/{stem}.cnpy")
 }
 
 #[cfg(test)]
@@ -237,6 +315,7 @@ mod tests {
             size_m: 400.0,
             z_range_m: [10.0, 90.0],
             height_max_m: 30.0,
+            children: 0b1010,
             data: vec![0; 16 * CANOPY_CELL_BYTES],
         };
         for i in 0..16u32 {
@@ -268,8 +347,28 @@ mod tests {
         assert!((cell.ground_m - 65.0).abs() <= 80.0 / 65535.0);
         assert!((d.cell_m() - 100.0).abs() < 1e-6);
         assert!((d.mean_cover() - 0.5).abs() < 0.01);
-        assert_eq!(canopy_url(Some("index/r013.json")), "canopy/r013.cnpy");
-        assert_eq!(canopy_url(None), "canopy/r.cnpy");
+        let e = CanopyEntry {
+            path: "canopy".into(),
+            origin_m: [-512.0, 0.0],
+            root_size_m: 2048.0,
+            levels: 3,
+            cells: 64,
+            rasters: 5,
+            bytes: 5 * 32_808,
+        };
+        assert_eq!(e.raster_url(2, 3, 1), "canopy/2/3_1.cnpy");
+        assert_eq!(e.origin_of(2, 3, 1), [-512.0 + 1536.0, 512.0]);
+        assert!(e.validate().is_ok());
+        for bad in [
+            CanopyEntry { path: "../x".into(), ..e.clone() },
+            CanopyEntry { root_size_m: 0.0, ..e.clone() },
+            CanopyEntry { levels: 0, ..e.clone() },
+            CanopyEntry { levels: 99, ..e.clone() },
+            CanopyEntry { cells: 0, ..e.clone() },
+            CanopyEntry { origin_m: [f64::NAN, 0.0], ..e.clone() },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
     }
 
     #[test]
@@ -295,7 +394,7 @@ mod tests {
         assert!(set(20, &(-1f32).to_le_bytes()).contains("positive"));
         assert!(set(28, &0f32.to_le_bytes()).contains("below z_min"));
         assert!(set(32, &f32::INFINITY.to_le_bytes()).contains("height_max"));
-        assert!(set(36, &[1]).contains("reserved"));
+        assert!(set(36, &[0x10]).contains("children"));
         // Every single-byte change decodes or fails cleanly.
         for at in 0..good.len() {
             for v in [0u8, 1, 0x7f, 0xff] {

@@ -63,34 +63,6 @@ pub struct TileLevels {
     pub height_m: f32,
 }
 
-/// Where a canopy raster is (`docs/FORMAT.md`, [`super::canopy`]): in the
-/// manifest for the whole scene, in an index node for the trees below it.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CanopyRef {
-    /// Raster URL relative to the manifest.
-    pub url: String,
-    /// File size in bytes.
-    pub bytes: u64,
-}
-
-impl CanopyRef {
-    pub(crate) fn validate(&self, what: &str) -> Result<(), Problem> {
-        check_url(&format!("{what}.url"), &self.url)?;
-        let most = (super::canopy::CANOPY_HEADER_BYTES
-            + (super::canopy::MAX_CANOPY_CELLS as usize).pow(2) * super::canopy::CANOPY_CELL_BYTES)
-            as u64;
-        if self.bytes < super::canopy::CANOPY_HEADER_BYTES as u64 || self.bytes > most {
-            return Err(Problem::OutOfRange {
-                what: format!("{what}.bytes"),
-                value: self.bytes,
-                allowed: format!("{}–{most}", super::canopy::CANOPY_HEADER_BYTES),
-            });
-        }
-        Ok(())
-    }
-}
-
 /// The manifest's pointer to the index.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

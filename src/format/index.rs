@@ -36,13 +36,10 @@ pub struct ChildEntry {
     /// Tiles below the child.
     pub tiles: u64,
     /// The tallest tree below the child, metres (scene version 8): where it
-    /// is below a pixel, a view draws the child's canopy instead of its trees.
+    /// is below a pixel, the canopy rasters draw the child's trees and a view
+    /// reads neither the child nor its tiles.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height_m: Option<f32>,
-    /// The child's canopy raster (scene version 8), so a view can draw it
-    /// without reading the child.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub canopy: Option<super::entries::CanopyRef>,
 }
 
 /// One node (`index/r….json`).
@@ -63,9 +60,6 @@ pub struct IndexNode {
     pub tiles: Vec<TileEntry>,
     /// Children (an inner node), in quadrant order.
     pub children: Vec<ChildEntry>,
-    /// The canopy raster of every tree below the node (scene version 8).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub canopy: Option<super::entries::CanopyRef>,
 }
 
 impl IndexNode {
@@ -103,9 +97,6 @@ impl IndexNode {
 
     fn validate(&self) -> Result<(), Problem> {
         validate_bounds("bounds", &self.bounds)?;
-        if let Some(c) = &self.canopy {
-            c.validate("canopy")?;
-        }
         at_most("tiles count", self.tiles.len() as u64, MAX_NODE_TILES as u64)?;
         at_most("children count", self.children.len() as u64, 4)?;
         let [x0, y0, size] = self.square;
@@ -137,9 +128,6 @@ impl IndexNode {
                 if h < 0.0 {
                     return Err(Problem::Invalid(format!("{what}.height_m is {h}: heights are not negative")));
                 }
-            }
-            if let Some(canopy) = &c.canopy {
-                canopy.validate(&format!("{what}.canopy"))?;
             }
             trees = trees.saturating_add(c.trees);
         }
@@ -230,7 +218,6 @@ fn build_node(
             trees,
             tiles: Vec::new(),
             children: Vec::new(),
-            canopy: None,
         },
     ));
     if tiles.len() <= node_tiles || square[2] == 1 {
@@ -260,12 +247,21 @@ fn build_node(
             bounds: node.bounds,
             trees: node.trees,
             tiles: count_tiles(out, child_at),
-            height_m: None,
-            canopy: None,
+            height_m: tallest_below(out, child_at),
         });
     }
     out[at].1.children = children;
     depth + 1
+}
+
+/// The tallest tree below the node at `at` in `out` (its tiles' `levels`; None
+/// when a tile has none).
+fn tallest_below(out: &[(String, IndexNode)], at: usize) -> Option<f32> {
+    let n = &out[at].1;
+    if n.children.is_empty() {
+        return n.tiles.iter().try_fold(0f32, |h, t| t.levels.as_ref().map(|l| h.max(l.height_m)));
+    }
+    n.children.iter().try_fold(0f32, |h, c| c.height_m.map(|x| h.max(x)))
 }
 
 /// Tiles below the node at `at` in `out` (its subtree follows it contiguously).
@@ -381,7 +377,6 @@ mod tests {
                     trees: 0,
                     tiles: 0,
                     height_m: None,
-                    canopy: None,
                 });
             },
             "one or the other",

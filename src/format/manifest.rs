@@ -17,7 +17,8 @@ pub const SCENE_FORMAT: &str = "sylva-scene";
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
 /// ground imagery (`terrain.imagery`); version 6 per-tree attributes
 /// (`attributes`); version 7 tiles in prefix levels (tile version 3, the
-/// entries' `levels`); version 8 canopy rasters (`canopy`, and in index nodes).
+/// entries' `levels`); version 8 canopy rasters (`canopy`, and the index's
+/// child entries' `height_m`).
 /// The bake writes the oldest version that holds what a scene has (8 for every
 /// scene with a canopy, 7 without; 3 to 6 for older bakes), so older viewers
 /// refuse newer scenes with a clear message.
@@ -114,10 +115,10 @@ pub struct Manifest {
     /// ([`super::attributes::attributes_url`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attributes: Option<super::attributes::AttributeSchema>,
-    /// The whole scene's canopy raster (version 8): what its forest looks like
-    /// where trees are below a pixel (the index root's raster in an indexed scene).
+    /// The canopy rasters (version 8): a quadtree of what the forest looks like
+    /// where trees are a pixel or two.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub canopy: Option<super::entries::CanopyRef>,
+    pub canopy: Option<super::canopy::CanopyEntry>,
 }
 
 /// Which shard of a sharded bake wrote a directory.
@@ -183,7 +184,7 @@ impl Manifest {
             if self.version < 8 {
                 return Err(Problem::Invalid("\"canopy\" needs manifest version 8".into()));
             }
-            c.validate("canopy")?;
+            c.validate()?;
         }
         if self.version < 7 && self.tiles.iter().any(|t| t.levels.is_some()) {
             return Err(Problem::Invalid("tiles with \"levels\" need manifest version 7".into()));

@@ -8,7 +8,7 @@ use std::collections::HashMap;
 
 use super::layouts::{storage_entry, SharedLayouts};
 use super::mesh::depth_state;
-use crate::format::canopy::{CANOPY_CELLS, CANOPY_CELL_BYTES};
+use crate::format::canopy::{CanopyKey, CANOPY_CELLS, CANOPY_CELL_BYTES};
 use crate::scene::canopy::CanopyDraw;
 
 /// Most rasters the pool holds (32 KB each; it starts at 8 and doubles as views need).
@@ -46,9 +46,9 @@ pub struct CanopyPass {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     pool: Option<Pool>,
-    /// Node in each slot and the frame it was last drawn.
-    slots: Vec<Option<(usize, u64)>>,
-    by_node: HashMap<usize, u32>,
+    /// Raster in each slot and the frame it was last drawn.
+    slots: Vec<Option<(CanopyKey, u64)>>,
+    by_key: HashMap<CanopyKey, u32>,
     frame: u64,
     count: u32,
     records: Vec<GpuCanopyRaster>,
@@ -94,7 +94,7 @@ impl CanopyPass {
             layout,
             pool: None,
             slots: Vec::new(),
-            by_node: HashMap::new(),
+            by_key: HashMap::new(),
             frame: 0,
             count: 0,
             records: Vec::new(),
@@ -136,7 +136,7 @@ impl CanopyPass {
         });
         self.pool = Some(Pool { cells, rasters, group });
         self.slots = vec![None; capacity];
-        self.by_node.clear();
+        self.by_key.clear();
     }
 
     /// Rasters drawn by the last prepared frame.
@@ -170,7 +170,7 @@ impl CanopyPass {
                 self.dropped += 1;
                 continue;
             }
-            let slot = match self.by_node.get(&d.node) {
+            let slot = match self.by_key.get(&d.key) {
                 Some(&s) => s,
                 None => {
                     // A free slot, else the one drawn longest ago (not this frame).
@@ -187,15 +187,15 @@ impl CanopyPass {
                         continue;
                     };
                     if let Some((old, _)) = self.slots[free] {
-                        self.by_node.remove(&old);
+                        self.by_key.remove(&old);
                     }
                     queue.write_buffer(&pool.cells, (c.data.len() * free) as u64, &c.data);
                     self.uploads += 1;
-                    self.by_node.insert(d.node, free as u32);
+                    self.by_key.insert(d.key, free as u32);
                     free as u32
                 }
             };
-            self.slots[slot as usize] = Some((d.node, self.frame));
+            self.slots[slot as usize] = Some((d.key, self.frame));
             records.push(GpuCanopyRaster {
                 origin_m: c.origin_m,
                 size_m: c.size_m,
@@ -213,10 +213,10 @@ impl CanopyPass {
         self.records = records;
     }
 
-    /// Forgets what the pool holds (a new scene: node ids mean other rasters).
+    /// Forgets what the pool holds (a new scene: keys mean other rasters).
     pub fn clear(&mut self) {
         self.slots.iter_mut().for_each(|s| *s = None);
-        self.by_node.clear();
+        self.by_key.clear();
         self.count = 0;
     }
 

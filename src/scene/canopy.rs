@@ -1,31 +1,30 @@
 //! Canopy rasters: streaming and selection (CPU; the GPU pass draws what this
 //! picks, `src/render/canopy.rs`; the format is `crate::format::canopy`).
 //!
-//! Every index node (and a flat scene) has a raster of its trees seen from
-//! far away. Each frame [`CanopyTree::select`] walks the known nodes from the
-//! root like the terrain's quadtree: a resident raster in view whose cells
-//! project above `cell_px` pixels at its nearest point is replaced by its
-//! children's once those in view are resident (and asks for the missing ones,
-//! nearest first); otherwise it is drawn. A node's children cover exactly its
-//! trees, so the cut never draws a tree's canopy twice. Memory is bounded by
-//! [`CanopyTree::max_resident`] rasters (least recently used evicted, never
-//! the root nor one drawn this frame).
+//! The rasters form a quadtree like the terrain's. Each frame
+//! [`CanopyTree::select`] walks the resident rasters from the root: a raster in
+//! view whose cells project above `cell_px` pixels at its nearest point is
+//! replaced by its children once those in view are resident (and asks for the
+//! missing ones, nearest first); otherwise it is drawn. Children cover exactly
+//! the trees of their parent's square, so the cut never draws a tree's canopy
+//! twice. A raster whose every tree projects above `px_hi` (trees drawn whole)
+//! is neither drawn nor refined. Memory is bounded by
+//! [`CanopyTree::max_resident`] rasters (least recently used evicted, never the
+//! root nor one used this frame).
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
-use super::index_walk::{IndexWalk, NodeContent};
 use crate::camera::ViewData;
-use crate::format::canopy::Canopy;
-use crate::format::Bounds;
+use crate::format::canopy::{Canopy, CanopyEntry, CanopyKey};
 
 /// One raster to draw this frame.
 #[derive(Debug, Clone)]
 pub struct CanopyDraw {
-    /// The index node it belongs to (0: the root).
-    pub node: usize,
+    /// Which raster.
+    pub key: CanopyKey,
     /// Its data.
     pub canopy: Arc<Canopy>,
 }
@@ -45,29 +44,35 @@ enum Slot {
 /// The canopy rasters of one scene: what is resident and what a view selects.
 #[derive(Debug)]
 pub struct CanopyTree {
-    slots: HashMap<usize, Slot>,
+    entry: CanopyEntry,
+    slots: HashMap<CanopyKey, Slot>,
     frame: u64,
-    stack: Vec<usize>,
+    stack: Vec<CanopyKey>,
     /// Most rasters kept decoded (32 KB each).
     pub max_resident: usize,
 }
 
-impl Default for CanopyTree {
-    fn default() -> Self {
-        Self { slots: HashMap::new(), frame: 0, stack: Vec::new(), max_resident: 1024 }
-    }
-}
-
-/// Distance from the eye to a box's nearest and farthest points, if it meets the frustum.
-fn box_distance(view: &ViewData, b: &Bounds) -> Option<(f32, f32)> {
-    let eye = view.eye_hi + view.eye_lo;
-    let (lo, hi) = (Vec3::from(b.min) - eye, Vec3::from(b.max) - eye);
+/// Distance from the eye (origin) to the eye-relative box `lo..hi` at its
+/// nearest and farthest points, if it meets the frustum.
+fn box_distance(view: &ViewData, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
     let (c, h) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
     let visible = view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(h) >= 0.0);
     visible.then(|| ((c.abs() - h).max(Vec3::ZERO).length(), (c.abs() + h).length()))
 }
 
 impl CanopyTree {
+    /// A tree for the manifest's canopy entry; nothing resident yet.
+    #[must_use]
+    pub fn new(entry: CanopyEntry) -> Self {
+        Self { entry, slots: HashMap::new(), frame: 0, stack: Vec::new(), max_resident: 1024 }
+    }
+
+    /// The manifest entry.
+    #[must_use]
+    pub fn entry(&self) -> &CanopyEntry {
+        &self.entry
+    }
+
     /// Rasters decoded and kept.
     #[must_use]
     pub fn resident(&self) -> usize {
@@ -77,110 +82,154 @@ impl CanopyTree {
     /// Whether the root's raster is resident: until then trees are drawn at every size.
     #[must_use]
     pub fn ready(&self) -> bool {
-        matches!(self.slots.get(&0), Some(Slot::Resident { .. }))
+        matches!(self.slots.get(&(0, 0, 0)), Some(Slot::Resident { .. }))
     }
 
     /// Whether the root's raster is not yet resident nor given up on.
     #[must_use]
     pub fn root_loading(&self) -> bool {
-        !matches!(self.slots.get(&0), Some(Slot::Resident { .. } | Slot::Broken))
+        !matches!(self.slots.get(&(0, 0, 0)), Some(Slot::Resident { .. } | Slot::Broken))
     }
 
-    /// Whether node `n`'s raster is neither resident, requested nor broken.
+    /// Whether raster `key` is neither resident, requested nor broken.
     #[must_use]
-    pub fn is_unknown(&self, n: usize) -> bool {
-        !self.slots.contains_key(&n)
+    pub fn is_unknown(&self, key: CanopyKey) -> bool {
+        !self.slots.contains_key(&key)
     }
 
-    /// Marks node `n`'s raster as requested.
-    pub fn mark_loading(&mut self, n: usize) {
-        self.slots.insert(n, Slot::Loading);
+    /// Marks raster `key` as requested.
+    pub fn mark_loading(&mut self, key: CanopyKey) {
+        self.slots.insert(key, Slot::Loading);
     }
 
-    /// Gives up on node `n`'s raster (its parent's is drawn instead).
-    pub fn mark_broken(&mut self, n: usize) {
-        self.slots.insert(n, Slot::Broken);
+    /// Gives up on raster `key` (its parent is drawn instead).
+    pub fn mark_broken(&mut self, key: CanopyKey) {
+        self.slots.insert(key, Slot::Broken);
     }
 
     /// Forgets a failed request so it is asked for again.
-    pub fn forget(&mut self, n: usize) {
-        self.slots.remove(&n);
+    pub fn forget(&mut self, key: CanopyKey) {
+        self.slots.remove(&key);
     }
 
-    /// Stores node `n`'s decoded raster.
-    pub fn insert(&mut self, n: usize, canopy: Canopy) {
+    /// Stores raster `key`, checked to be the square the key names.
+    ///
+    /// # Errors
+    /// The raster's square or cell count is not the key's.
+    pub fn insert(&mut self, key: CanopyKey, canopy: Canopy) -> Result<(), String> {
+        let (l, x, y) = key;
+        let [ox, oy] = self.entry.origin_of(l, x, y);
+        let size = self.entry.size_m(l);
+        let near = |a: f64, b: f32| (a - f64::from(b)).abs() <= 1e-3 * size.max(1.0);
+        if canopy.cells != self.entry.cells
+            || !near(ox, canopy.origin_m[0])
+            || !near(oy, canopy.origin_m[1])
+            || !near(size, canopy.size_m)
+            || (l + 1 >= self.entry.levels && canopy.children != 0)
+        {
+            return Err(format!(
+                "raster {l}/{x}/{y} covers {:?} + {} m in {} cells, not the {} m square at {:?} in {}",
+                canopy.origin_m,
+                canopy.size_m,
+                canopy.cells,
+                size,
+                [ox, oy],
+                self.entry.cells
+            ));
+        }
         let low = canopy.min_height_m();
-        self.slots.insert(n, Slot::Resident { canopy: Arc::new(canopy), low, used: self.frame });
+        self.slots.insert(key, Slot::Resident { canopy: Arc::new(canopy), low, used: self.frame });
         self.evict();
+        Ok(())
     }
 
-    /// Selects the rasters to draw for `view` over the nodes `walk` knows,
-    /// refining while cells project above `cell_px` pixels (`px_per_m`: pixels
-    /// per metre at 1 m), and appends the rasters to fetch (nearest first).
-    /// A node whose every tree projects above `px_hi` pixels (trees drawn
-    /// whole) is neither drawn nor refined.
+    /// Selects the rasters to draw for `view` (eye at `eye_m` relative to the
+    /// scene origin), refining while cells project above `cell_px` pixels
+    /// (`px_per_m`: pixels per metre at 1 m, × quality); appends the rasters to
+    /// fetch, nearest first.
     #[allow(clippy::too_many_arguments)]
     pub fn select(
         &mut self,
         view: &ViewData,
+        eye_m: DVec3,
         px_per_m: f32,
-        walk: &IndexWalk,
         cell_px: f32,
         px_hi: f32,
         draws: &mut Vec<CanopyDraw>,
-        wanted: &mut Vec<(f32, usize)>,
+        wanted: &mut Vec<(f32, CanopyKey)>,
     ) {
         self.frame += 1;
         draws.clear();
-        if walk.nodes_known() == 0 || walk.node(0).canopy.is_none() {
-            return;
-        }
-        if self.is_unknown(0) {
-            wanted.push((0.0, 0));
+        let root = (0u8, 0u32, 0u32);
+        if self.is_unknown(root) {
+            wanted.push((0.0, root));
         }
         let mut stack = std::mem::take(&mut self.stack);
         stack.clear();
-        stack.push(0);
-        while let Some(n) = stack.pop() {
+        stack.push(root);
+        while let Some(key) = stack.pop() {
             let frame = self.frame;
-            let Some(Slot::Resident { canopy, low, used }) = self.slots.get_mut(&n) else { continue };
-            let info = walk.node(n);
-            let Some((d, far)) = box_distance(view, &info.bounds) else { continue };
-            *used = frame;
-            if *low * px_per_m / far.max(1e-3) >= px_hi {
-                continue; // every tree below is drawn whole: no canopy there
+            let Some(Slot::Resident { canopy, low, .. }) = self.slots.get(&key) else { continue };
+            let (canopy, low) = (Arc::clone(canopy), *low);
+            let Some((d, far)) = self.raster_distance(view, eye_m, key, &canopy) else { continue };
+            if let Some(Slot::Resident { used, .. }) = self.slots.get_mut(&key) {
+                *used = frame;
             }
-            let canopy = Arc::clone(canopy);
-            let cell_on_screen = canopy.cell_m() * px_per_m / d.max(1e-3);
-            let children: &[usize] = match &info.content {
-                NodeContent::Loaded { children, .. } => children,
-                NodeContent::Unloaded => &[],
-            };
-            if cell_on_screen > cell_px && !children.is_empty() {
+            if low * px_per_m / far.max(1e-3) >= px_hi {
+                continue; // every tree here is drawn whole
+            }
+            let (l, x, y) = key;
+            // The canopy shows only where its shortest trees are below px_hi:
+            // nearer than that its cells' size does not matter.
+            let shown_from = low * px_per_m / px_hi;
+            let cell_on_screen = canopy.cell_m() * px_per_m / d.max(shown_from).max(1e-3);
+            if cell_on_screen > cell_px && canopy.children != 0 && l + 1 < self.entry.levels {
                 let mut ready = true;
-                for &c in children {
-                    let child = walk.node(c);
-                    let Some((dc, _)) = box_distance(view, &child.bounds) else { continue };
-                    match self.slots.get(&c) {
+                for i in 0..4u32 {
+                    if canopy.children & (1 << i) == 0 {
+                        continue;
+                    }
+                    let child = (l + 1, 2 * x + (i & 1), 2 * y + (i >> 1));
+                    match self.slots.get(&child) {
                         Some(Slot::Resident { .. }) => {}
-                        Some(Slot::Broken) => ready = false,
-                        Some(Slot::Loading) => ready = false,
-                        None if child.canopy.is_some() => {
-                            ready = false;
-                            wanted.push((dc, c));
+                        Some(Slot::Loading | Slot::Broken) => ready = false,
+                        None => {
+                            // Only children in view are waited for.
+                            if let Some((dc, _)) = self.square_distance(view, eye_m, child, &canopy) {
+                                ready = false;
+                                wanted.push((dc, child));
+                            }
                         }
-                        None => ready = false,
                     }
                 }
                 if ready {
-                    stack.extend(children.iter().copied());
+                    for i in 0..4u32 {
+                        if canopy.children & (1 << i) != 0 {
+                            stack.push((l + 1, 2 * x + (i & 1), 2 * y + (i >> 1)));
+                        }
+                    }
                     continue;
                 }
             }
-            draws.push(CanopyDraw { node: n, canopy });
+            draws.push(CanopyDraw { key, canopy });
         }
         wanted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         self.stack = stack;
+    }
+
+    /// Nearest and farthest distance of raster `key`'s box (its square from the
+    /// lowest ground to the highest tree top), if in view.
+    fn raster_distance(&self, view: &ViewData, eye_m: DVec3, key: CanopyKey, c: &Canopy) -> Option<(f32, f32)> {
+        let [ox, oy] = self.entry.origin_of(key.0, key.1, key.2);
+        let s = self.entry.size_m(key.0);
+        let lo = DVec3::new(ox, oy, f64::from(c.z_range_m[0]));
+        let hi = DVec3::new(ox + s, oy + s, f64::from(c.z_range_m[1] + c.height_max_m));
+        box_distance(view, (lo - eye_m).as_vec3(), (hi - eye_m).as_vec3())
+    }
+
+    /// The same for a child not yet read, with its parent's heights.
+    fn square_distance(&self, view: &ViewData, eye_m: DVec3, key: CanopyKey, parent: &Canopy) -> Option<(f32, f32)> {
+        self.raster_distance(view, eye_m, key, parent)
     }
 
     /// Drops the least recently used rasters beyond [`Self::max_resident`]
@@ -190,18 +239,18 @@ impl CanopyTree {
         if resident <= self.max_resident {
             return;
         }
-        let mut old: Vec<(u64, usize)> = self
+        let mut old: Vec<(u64, CanopyKey)> = self
             .slots
             .iter()
-            .filter_map(|(&n, s)| match s {
-                Slot::Resident { used, .. } if n > 0 && *used < self.frame => Some((*used, n)),
+            .filter_map(|(k, s)| match s {
+                Slot::Resident { used, .. } if k.0 > 0 && *used < self.frame => Some((*used, *k)),
                 _ => None,
             })
             .collect();
-        // Oldest first; of one frame the deepest (highest id: children follow parents) first.
-        old.sort_unstable_by_key(|&(used, n)| (used, std::cmp::Reverse(n)));
-        for (_, n) in old.into_iter().take(resident - self.max_resident) {
-            self.slots.remove(&n);
+        // Oldest first; of one frame the finest first (a child before its parent).
+        old.sort_unstable_by_key(|&(used, k)| (used, std::cmp::Reverse(k.0), k.1, k.2));
+        for (_, k) in old.into_iter().take(resident - self.max_resident) {
+            self.slots.remove(&k);
         }
     }
 }

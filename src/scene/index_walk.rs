@@ -5,7 +5,6 @@
 use glam::Vec3;
 
 use crate::camera::ViewData;
-use crate::format::entries::CanopyRef;
 use crate::format::index::IndexNode;
 use crate::format::{Bounds, Manifest, TileEntry};
 
@@ -29,36 +28,27 @@ pub(crate) struct NodeInfo {
     pub trees: u64,
     /// Loaded or not.
     pub content: NodeContent,
-    /// Its canopy raster (scene version 8), as its parent (or the manifest) names it.
-    pub canopy: Option<CanopyRef>,
     /// The tallest tree below it, metres, when known (its parent's entry, or
     /// once it is loaded).
     pub height_m: Option<f32>,
 }
 
-/// Where far trees give way to the canopy rasters (issue 20): a node or tile
-/// whose tallest tree projects below `px_lo` pixels at its nearest point is
-/// drawn by the canopy alone, so the walk neither reads nor fetches it —
-/// unless the canopy still wants the node's children (its cells above
-/// `cell_px` pixels there).
+/// Where far trees give way to the canopy rasters (issue 20; set only while the
+/// scene's canopy is drawn): a node or tile whose tallest tree projects below
+/// `px_lo` pixels at its nearest point is drawn by the canopy alone, so the
+/// walk neither reads nor fetches it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CanopyGate {
     /// Pixels per metre at 1 m, × quality.
     pub px_per_m: f32,
     /// Projected tree height (px) below which the canopy stands in for every tree.
     pub px_lo: f32,
-    /// Canopy cells are refined while they project above this many pixels.
-    pub cell_px: f32,
 }
 
 impl CanopyGate {
-    /// Whether the canopy alone draws a node (bounds `b`, tallest tree `height`, canopy or not) at distance `d`.
+    /// Whether the canopy alone draws a node at distance `d`.
     fn covers_node(&self, info: &NodeInfo, d: f32) -> bool {
-        let (Some(_), Some(h)) = (&info.canopy, info.height_m) else { return false };
-        let d = d.max(1e-3);
-        let extent = (info.bounds.max[0] - info.bounds.min[0]).max(info.bounds.max[1] - info.bounds.min[1]);
-        let cell = extent / crate::format::canopy::CANOPY_CELLS as f32;
-        h * self.px_per_m / d < self.px_lo && cell * self.px_per_m / d <= self.cell_px
+        info.height_m.is_some_and(|h| h * self.px_per_m / d.max(1e-3) < self.px_lo)
     }
 
     /// Whether the canopy alone draws a tile at distance `d`.
@@ -113,7 +103,6 @@ impl IndexWalk {
                     bounds: m.bounds,
                     trees: m.counts.trees,
                     content: NodeContent::Unloaded,
-                    canopy: m.canopy.clone(),
                     height_m: None,
                 }],
                 tiles: Vec::new(),
@@ -125,7 +114,6 @@ impl IndexWalk {
                     bounds: m.bounds,
                     trees: m.counts.trees,
                     content: NodeContent::Loaded { children: Vec::new(), tiles: (0..m.tiles.len()).collect() },
-                    canopy: m.canopy.clone(),
                     height_m: tallest(&m.tiles),
                 }],
                 tiles: m.tiles.clone(),
@@ -164,18 +152,6 @@ impl IndexWalk {
         (tiles, fetch)
     }
 
-    /// Node `n` as the walker knows it.
-    #[must_use]
-    pub(crate) fn node(&self, n: usize) -> &NodeInfo {
-        &self.nodes[n]
-    }
-
-    /// Nodes known (read or not).
-    #[must_use]
-    pub fn nodes_known(&self) -> usize {
-        self.nodes.len()
-    }
-
     /// [`Self::walk`] into the caller's buffers (cleared first): no allocation
     /// once they have grown to the view's size.
     pub fn walk_into(
@@ -207,10 +183,9 @@ impl IndexWalk {
                 NodeContent::Unloaded => fetch.push((d, n)),
                 NodeContent::Loaded { children, tiles: ts } => {
                     stack.extend(children);
-                    let gate = canopy.filter(|_| node.canopy.is_some());
                     for &t in ts {
                         if let Some(d) = tile_wanted(view, &self.tiles[t].bounds, draw_distance_m) {
-                            if !gate.is_some_and(|g| g.covers_tile(&self.tiles[t], d)) {
+                            if !canopy.is_some_and(|g| g.covers_tile(&self.tiles[t], d)) {
                                 tiles.push((d, t));
                             }
                         }
@@ -261,9 +236,6 @@ impl IndexWalk {
         if self.nodes[n].height_m.is_none() {
             self.nodes[n].height_m = height;
         }
-        if node.canopy.is_some() {
-            self.nodes[n].canopy = node.canopy.clone();
-        }
         for c in node.children {
             children.push(self.nodes.len());
             self.nodes.push(NodeInfo {
@@ -271,7 +243,6 @@ impl IndexWalk {
                 bounds: c.bounds,
                 trees: c.trees,
                 content: NodeContent::Unloaded,
-                canopy: c.canopy,
                 height_m: c.height_m,
             });
         }

@@ -21,7 +21,7 @@ use super::residency::{PoolError, Residency, TileSlot};
 use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
 use crate::format::attributes::AttributeCodes;
-use crate::format::canopy::Canopy;
+use crate::format::canopy::{Canopy, CanopyKey};
 use crate::format::terrain::TerrainTile;
 use crate::format::tile::level_prefix;
 use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
@@ -310,8 +310,8 @@ enum Target {
     TreeData(usize, bool),
     /// More prefix levels of a resident tile holding this many.
     TileMore(usize, u32),
-    /// An index node's canopy raster.
-    Canopy(usize),
+    /// A canopy raster.
+    Canopy(CanopyKey),
 }
 
 /// Counters for stats.
@@ -429,10 +429,10 @@ pub struct SceneStream<F: Fetcher> {
     /// the resident ones, what the view draws and waits for, failed attempts.
     canopy_view: Option<CanopyView>,
     canopy_gate: Option<CanopyGate>,
-    canopy: CanopyTree,
+    canopy: Option<CanopyTree>,
     canopy_draws: Vec<CanopyDraw>,
-    canopy_wanted: Vec<(f32, usize)>,
-    canopy_attempts: HashMap<usize, (u32, f64)>,
+    canopy_wanted: Vec<(f32, CanopyKey)>,
+    canopy_attempts: HashMap<CanopyKey, (u32, f64)>,
 }
 
 /// Where a view hands far trees over to the canopy rasters
@@ -534,7 +534,7 @@ impl<F: Fetcher> SceneStream<F> {
             levels_short: 0,
             canopy_view: None,
             canopy_gate: None,
-            canopy: CanopyTree::default(),
+            canopy: None,
             canopy_draws: Vec::new(),
             canopy_wanted: Vec::new(),
             canopy_attempts: HashMap::new(),
@@ -562,7 +562,7 @@ impl<F: Fetcher> SceneStream<F> {
     /// scene's root raster is resident (until then trees are drawn at every size).
     #[must_use]
     pub fn canopy_active(&self) -> Option<CanopyView> {
-        self.canopy_view.filter(|_| self.canopy.ready())
+        self.canopy_view.filter(|_| self.canopy.as_ref().is_some_and(CanopyTree::ready))
     }
 
     /// Fetch only the prefix of each tile that a view drawing with this
@@ -790,10 +790,7 @@ impl<F: Fetcher> SceneStream<F> {
             self.select_canopy(view);
             // While the scene's root canopy raster loads, tiles wait: it decides
             // which trees a far view needs at all.
-            let canopy_first = self.canopy_view.is_some()
-                && self.index.nodes_known() > 0
-                && self.index.node(0).canopy.is_some()
-                && self.canopy.root_loading();
+            let canopy_first = self.canopy_view.is_some() && self.canopy.as_ref().is_some_and(CanopyTree::root_loading);
             if !over_rate && canopy_first {
                 self.request_canopy();
                 self.walk(view, draw_distance_m);
@@ -823,7 +820,7 @@ impl<F: Fetcher> SceneStream<F> {
         self.stats.terrain_drawn = self.terrain_draws.len() as u64;
         self.stats.imagery_resident = self.imagery.resident() as u64;
         self.stats.imagery_drawn = self.terrain_draws.iter().filter(|d| d.imagery.is_some()).count() as u64;
-        self.stats.canopy_resident = self.canopy.resident() as u64;
+        self.stats.canopy_resident = self.canopy.as_ref().map_or(0, |c| c.resident() as u64);
         self.stats.canopy_drawn = self.canopy_draws.len() as u64;
     }
 
@@ -831,29 +828,23 @@ impl<F: Fetcher> SceneStream<F> {
     /// the index walk's gate (where the canopy alone draws the trees).
     fn select_canopy(&mut self, view: &ViewData) {
         self.canopy_wanted.clear();
-        let Some(cv) = self.canopy_view else {
+        let (Some(cv), Some(tree)) = (self.canopy_view, self.canopy.as_mut()) else {
             self.canopy_draws.clear();
             self.canopy_gate = None;
             return;
         };
         let px_per_m = view.px_per_m_at_1m * cv.lod_scale;
-        self.canopy.select(
-            view,
-            px_per_m,
-            &self.index,
-            cv.cell_px,
-            cv.px_hi,
-            &mut self.canopy_draws,
-            &mut self.canopy_wanted,
-        );
-        self.canopy_gate = self.canopy.ready().then_some(CanopyGate { px_per_m, px_lo: cv.px_lo, cell_px: cv.cell_px });
+        let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
+        tree.select(view, eye, px_per_m, cv.cell_px, cv.px_hi, &mut self.canopy_draws, &mut self.canopy_wanted);
+        self.canopy_gate = tree.ready().then_some(CanopyGate { px_per_m, px_lo: cv.px_lo });
     }
 
     /// Canopy rasters whose retry is due are asked for again.
     fn retry_canopy(&mut self, now_s: f64) {
-        for (&n, (_, due)) in &mut self.canopy_attempts {
+        let Some(tree) = &mut self.canopy else { return };
+        for (&key, (_, due)) in &mut self.canopy_attempts {
             if *due <= now_s {
-                self.canopy.forget(n);
+                tree.forget(key);
                 *due = f64::INFINITY;
             }
         }
@@ -861,48 +852,45 @@ impl<F: Fetcher> SceneStream<F> {
 
     /// Requests wanted canopy rasters, nearest first, within the in-flight budget.
     fn request_canopy(&mut self) {
-        for &(_, n) in &self.canopy_wanted {
+        let Some(tree) = &mut self.canopy else { return };
+        for &(_, key) in &self.canopy_wanted {
             if self.fetcher.in_flight() >= self.config.max_in_flight {
                 break;
             }
-            let Some(c) = &self.index.node(n).canopy else { continue };
-            if !self.canopy.is_unknown(n) {
+            if !tree.is_unknown(key) {
                 continue;
             }
-            let id = self.fetcher.start(&join(&self.base, &c.url));
+            let id = self.fetcher.start(&join(&self.base, &tree.entry().raster_url(key.0, key.1, key.2)));
             self.stats.requests += 1;
-            self.requests.insert(id, Target::Canopy(n));
-            self.canopy.mark_loading(n);
+            self.requests.insert(id, Target::Canopy(key));
+            tree.mark_loading(key);
         }
     }
 
     /// A canopy raster arrived (or failed): kept, retried or given up on (its
     /// parent's is drawn instead; the rest of the scene goes on).
-    fn on_canopy(&mut self, n: usize, result: Result<Vec<u8>, FetchError>, now_s: f64) {
-        let Some(c) = self.index.node(n).canopy.clone() else { return };
-        let url = join(&self.base, &c.url);
+    fn on_canopy(&mut self, key: CanopyKey, result: Result<Vec<u8>, FetchError>, now_s: f64) {
+        let Some(tree) = &mut self.canopy else { return };
+        let url = join(&self.base, &tree.entry().raster_url(key.0, key.1, key.2));
         if let Ok(bytes) = &result {
             self.stats.canopy_bytes_fetched += bytes.len() as u64;
         }
-        let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
-            if bytes.len() as u64 != c.bytes {
-                return Err((format!("{url}: {} bytes where the index says {}", bytes.len(), c.bytes), false));
-            }
-            Canopy::decode(&url, &bytes).map_err(|e| (e.to_string(), false))
-        });
+        let outcome = result
+            .map_err(|e| (e.to_string(), e.retryable()))
+            .and_then(|bytes| Canopy::decode(&url, &bytes).map_err(|e| (e.to_string(), false)))
+            .and_then(|canopy| tree.insert(key, canopy).map_err(|e| (format!("{url}: {e}"), false)));
         match outcome {
-            Ok(canopy) => {
-                self.canopy_attempts.remove(&n);
-                self.canopy.insert(n, canopy);
+            Ok(()) => {
+                self.canopy_attempts.remove(&key);
             }
             Err((message, retryable)) => {
-                let (attempts, due) = self.canopy_attempts.entry(n).or_insert((0, f64::INFINITY));
+                let (attempts, due) = self.canopy_attempts.entry(key).or_insert((0, f64::INFINITY));
                 *attempts += 1;
                 let retrying = retryable && *attempts < self.config.max_attempts;
                 if retrying {
                     *due = now_s + self.config.retry_base_s * 2f64.powi(*attempts as i32 - 1);
                 } else {
-                    self.canopy.mark_broken(n);
+                    tree.mark_broken(key);
                     self.give_up(&url, &message);
                 }
                 self.events.push(StreamEvent::Failed { url, message, retrying });
@@ -1224,6 +1212,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.tiles = self.index.tiles.iter().map(|_| TileState::NotResident(Load::Idle)).collect();
                 self.packs = (0..m.species.len()).map(|_| PackLoad::new()).collect();
                 self.terrain = m.terrain.clone().map(TerrainTree::new);
+                self.canopy = m.canopy.clone().map(CanopyTree::new);
                 self.geo = GeoFrame::new(&m.crs.proj4, m.origin_m).ok();
                 self.events.push(StreamEvent::ManifestLoaded { trees: m.counts.trees });
                 self.manifest = Some(m);

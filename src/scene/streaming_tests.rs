@@ -662,7 +662,7 @@ fn the_canopy_stands_in_for_trees_under_a_pixel_and_their_tiles_are_not_fetched(
                     *u == "scene.json" || *u == "r.json" || [".cnpy", ".terr", ".jpg"].iter().any(|e| u.ends_with(e))
                 };
                 assert!(urls.iter().all(allowed), "{urls:?}");
-                assert!(urls.contains(&"r.cnpy"), "{urls:?}");
+                assert!(log.iter().any(|(u, _)| u.ends_with("canopy/0/0_0.cnpy")), "{urls:?}");
                 assert_eq!(r.used, 0);
                 assert_eq!(s.canopy_draws().len(), 1, "the root raster alone");
                 assert!(s.stats().canopy_bytes_fetched >= 32_808);
@@ -691,7 +691,7 @@ fn the_canopy_stands_in_for_trees_under_a_pixel_and_their_tiles_are_not_fetched(
 fn a_lost_canopy_raster_is_retried_then_its_parent_drawn() {
     let mut s = stream(StreamConfig { retry_base_s: 0.5, ..StreamConfig::default() });
     s.set_canopy_view(Some(CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 }));
-    s.fetcher.fail.insert("r.cnpy".into(), VecDeque::from([FetchError::Status { url: "x".into(), status: 503 }]));
+    s.fetcher.fail.insert("0/0_0.cnpy".into(), VecDeque::from([FetchError::Status { url: "x".into(), status: 503 }]));
     let mut r = FakeResidency::new(1 << 20);
     let view = Camera::look_at(DVec3::new(0.0, -40_000.0, 20_000.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
     let t = run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 4);
@@ -702,9 +702,9 @@ fn a_lost_canopy_raster_is_retried_then_its_parent_drawn() {
     // A raster that does not decode is given up on: its trees are drawn instead.
     let mut s = stream(StreamConfig::default());
     s.set_canopy_view(Some(CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 }));
-    s.fetcher.replace.insert("r.cnpy".into(), b"SYCNgarbage".to_vec());
+    s.fetcher.replace.insert("0/0_0.cnpy".into(), b"SYCNgarbage".to_vec());
     run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 24);
     assert!(s.canopy_active().is_none() && s.is_settled());
-    assert!(s.failures().iter().any(|f| f.url.ends_with("r.cnpy")), "{:?}", s.failures());
+    assert!(s.failures().iter().any(|f| f.url.ends_with("canopy/0/0_0.cnpy")), "{:?}", s.failures());
     assert!(s.fetcher.log.iter().any(|(u, _)| u.ends_with(".tile")), "trees instead");
 }

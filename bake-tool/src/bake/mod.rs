@@ -58,6 +58,8 @@ pub struct SceneInput<'a> {
     pub shard: Option<(u32, u32)>,
     /// Most tiles per index node; scenes with more tiles get a hierarchical index.
     pub index_node_tiles: u32,
+    /// Width of the finest canopy raster cells (metres).
+    pub canopy_cell_m: f64,
     /// The per-tree attributes, if kept (`.attr` sidecars next to the tiles).
     pub attributes: Option<crate::attributes::AttributeTable>,
 }
@@ -127,7 +129,13 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
         let flat = input.shard.is_some();
-        let manifest = crate::scene_write::finish_scene(dir, base, tiles.entries, input.index_node_tiles, flat, log)?;
+        let manifest = crate::scene_write::finish_scene(
+            dir,
+            base,
+            tiles.entries,
+            crate::scene_write::Layout { node_tiles: input.index_node_tiles, flat, canopy_cell_m: input.canopy_cell_m },
+            log,
+        )?;
         Ok(SceneSummary {
             manifest,
             instance_bytes: tiles.instance_bytes,
