@@ -310,8 +310,15 @@ fn tree_hash01(xy: u32) -> f32 {
 
 // Whether the canopy stands in for this tree (it is not drawn): a random share
 // `canopy_weight` of the trees of a size, so trees and canopy cross-fade.
+// Written as hash · (hi − lo) < hi − h (the same as hash < weight, the hash
+// being in [0, 1)) with only multiplications and subtractions, which are
+// exactly rounded on every GPU, so the CPU oracle agrees bit for bit. Must
+// match `canopy_drops` in src/render/cull.rs.
 fn canopy_drops(h_px: f32, xy: u32, view: View) -> bool {
-    return tree_hash01(xy) < canopy_weight(h_px, view);
+    if view.canopy.x <= 0.0 || view.viewport.w > 0.5 {
+        return false;
+    }
+    return tree_hash01(xy) * max(view.canopy.y - view.canopy.x, 1e-3) < view.canopy.y - h_px;
 }
 
 // Decodes an octahedral-encoded unit vector (snorm xy in [-1, 1]).

@@ -726,7 +726,7 @@ fn manifest_decoder_error_paths() {
     manifest_error(|v| v["version"] = 9.into(), "version 9");
     // Version 8 adds the canopy quadtree; its folder stays inside the scene, its sizes are bounded.
     let canopy = serde_json::json!({"path": "canopy", "origin_m": [-512.0, 0.0], "root_size_m": 2048.0,
-        "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_040});
+        "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_060});
     manifest_error(|v| v["canopy"] = canopy.clone(), "\"canopy\" needs manifest version 8");
     let with = |key: &'static str, value: serde_json::Value| {
         let mut c = canopy.clone();

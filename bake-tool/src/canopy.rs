@@ -114,6 +114,7 @@ struct Acc {
     sums: Vec<[f64; 7]>,
     z: [f32; 2],
     height_max: f32,
+    height_min: f32,
 }
 
 impl Acc {
@@ -125,6 +126,7 @@ impl Acc {
             sums: vec![[0.0; 7]; (CANOPY_CELLS * CANOPY_CELLS) as usize],
             z: [f32::INFINITY, f32::NEG_INFINITY],
             height_max: 0.0,
+            height_min: f32::INFINITY,
         }
     }
 
@@ -167,6 +169,7 @@ impl Acc {
         }
         self.z = [self.z[0].min(t.ground), self.z[1].max(t.ground)];
         self.height_max = self.height_max.max(t.height);
+        self.height_min = self.height_min.min(t.height);
     }
 
     fn finish(self, children: u8) -> Canopy {
@@ -178,6 +181,7 @@ impl Acc {
             size_m: self.size,
             z_range_m: z,
             height_max_m: self.height_max,
+            height_min_m: self.height_min.min(self.height_max),
             children,
             data: vec![0; self.sums.len() * CANOPY_CELL_BYTES],
         };

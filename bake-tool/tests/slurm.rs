@@ -129,5 +129,5 @@ fn an_array_job_and_a_dependent_merge_on_slurm_equal_one_process() {
         .unwrap();
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && !dir.join("failed/scene.json").exists(), "{said}");
-    assert!(said.contains("did not write") && said.contains("missing"), "{said}");
+    assert!(said.contains("did not finish") && said.contains("missing"), "{said}");
 }

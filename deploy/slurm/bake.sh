@@ -53,30 +53,57 @@ merge_extra=()
 args=("$@")
 for i in "${!args[@]}"; do
   case "${args[$i]}" in
-    --index-node-tiles|--canopy-cell) merge_extra+=("${args[$i]}" "${args[$((i + 1))]}") ;;
+    --index-node-tiles|--canopy-cell)
+      [ $((i + 1)) -lt ${#args[@]} ] || { echo "bake.sh: ${args[$i]} needs a value" >&2; exit 2; }
+      merge_extra+=("${args[$i]}" "${args[$((i + 1))]}") ;;
     --index-node-tiles=*|--canopy-cell=*) merge_extra+=("${args[$i]}") ;;
   esac
 done
 
-shard_cmd="$(printf '%q ' "$bake" "$@")--shard \$SLURM_ARRAY_TASK_ID/$shards --out $(printf '%q' "$work")/part-\$SLURM_ARRAY_TASK_ID"
+# The jobs as bash scripts (quoting of any path survives; sbatch runs them as they are).
 parts=()
 for ((i = 0; i < shards; i++)); do parts+=("$work/part-$i"); done
-merge_cmd="$(printf '%q ' "$bake" merge "${parts[@]}" "${merge_extra[@]}") --out $(printf '%q' "$out")"
+rm -f "$work/merged.ok"
+{
+  echo '#!/bin/bash'
+  echo 'set -euo pipefail'
+  printf 'exec %s ' "$(printf '%q ' "$bake" "$@")"
+  printf -- '--shard "$SLURM_ARRAY_TASK_ID/%d" --out %q/part-"$SLURM_ARRAY_TASK_ID"\n' "$shards" "$work"
+} >"$work/shard.sh"
+{
+  echo '#!/bin/bash'
+  echo 'set -euo pipefail'
+  printf '%s ' "$(printf '%q ' "$bake" merge "${parts[@]}" "${merge_extra[@]}")"
+  printf -- '--out %q\n' "$out"
+  # The mark of a merge that finished (a re-run keeps an earlier scene when it fails).
+  printf 'touch %q\n' "$work/merged.ok"
+} >"$work/merge.sh"
 
 # shellcheck disable=SC2086 # $extra is a list of sbatch options
 array=$(sbatch --parsable $extra --job-name=sylva-bake-shard --array=0-$((shards - 1)) \
-  --output="$work/logs/shard-%a.log" --wrap "$shard_cmd")
+  --output="$work/logs/shard-%a.log" "$work/shard.sh")
 array=${array%%;*}
 # shellcheck disable=SC2086
 merge=$(sbatch --parsable $extra --job-name=sylva-bake-merge --dependency=afterok:"$array" \
-  --kill-on-invalid-dep=yes --output="$work/logs/merge.log" --wrap "$merge_cmd")
+  --kill-on-invalid-dep=yes --output="$work/logs/merge.log" "$work/merge.sh")
 merge=${merge%%;*}
 echo "array job $array ($shards shards, logs in $work/logs), merge job $merge -> $out"
 
 if [ "$wait" -eq 1 ]; then
-  while squeue -h -j "$array,$merge" 2>/dev/null | grep -q .; do sleep 1; done
-  if [ ! -f "$out/scene.json" ]; then
-    echo "bake.sh: the merge did not write $out/scene.json; logs:" >&2
+  # Until neither job is queued or running (squeue failing now and then is retried).
+  fails=0
+  while true; do
+    if queued=$(squeue -h -o %A 2>/dev/null); then
+      fails=0
+      grep -qxE "$array|$merge" <<<"$queued" || break
+    else
+      fails=$((fails + 1))
+      [ "$fails" -lt 60 ] || { echo "bake.sh: squeue failed for a minute; jobs $array and $merge" >&2; exit 1; }
+    fi
+    sleep 1
+  done
+  if [ ! -f "$work/merged.ok" ]; then
+    echo "bake.sh: the merge did not finish, so $out was not written; logs:" >&2
     for f in "$work"/logs/*.log; do echo "== $f" >&2; tail -n 20 "$f" >&2; done
     exit 1
   fi

@@ -91,7 +91,8 @@ CONF
   # Wait until the node takes jobs.
   for _ in $(seq 100); do
     state=$(sinfo -h -N -o %T 2>/dev/null || true)
-    case "$state" in idle*|mixed*|allocated*) echo "export SLURM_CONF=$SLURM_CONF"; return 0;; esac
+    # (A trailing * means the node does not respond yet.)
+    case "$state" in idle|mixed|allocated) echo "export SLURM_CONF=$SLURM_CONF"; return 0;; esac
     sleep 0.2
   done
   echo "local-cluster: the node did not come up (state: ${state:-none}); logs in $dir/log" >&2

@@ -13,6 +13,6 @@ fuzz_target!(|data: &[u8]| {
                 assert!(cell.cover >= 0.0 && cell.cover <= 1.0);
             }
         }
-        let _ = (c.mean_cover(), c.min_height_m());
+        let _ = (c.mean_cover(), c.cell_m());
     }
 });

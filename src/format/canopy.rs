@@ -21,8 +21,9 @@
 //! the square's lowest y), 8 bytes each:
 //!
 //! ```text
-//! header  magic "SYCN" | version u16 | header_bytes u16 (40) | cells u32
+//! header  magic "SYCN" | version u16 | header_bytes u16 (44) | cells u32
 //!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32
+//!         | height_min f32 (the shortest tree in the square)
 //!         | children u32 (bit i: child (2x + (i & 1), 2y + (i >> 1)) exists; bits 4–31 0)
 //! cell    r u8 | g u8 | b u8 (sRGB albedo) | cover u8 (0–255) | height u8 (× height_max / 255)
 //!         | side u8 (/ 32) | ground u16 (z_min + q / 65535 × (z_max − z_min))
@@ -41,7 +42,7 @@ pub const CANOPY_MAGIC: [u8; 4] = *b"SYCN";
 /// Version written and read by this build.
 pub const CANOPY_VERSION: u16 = 1;
 /// Header bytes.
-pub const CANOPY_HEADER_BYTES: usize = 40;
+pub const CANOPY_HEADER_BYTES: usize = 44;
 /// Bytes per cell.
 pub const CANOPY_CELL_BYTES: usize = 8;
 /// Cells per side the bake writes.
@@ -113,11 +114,12 @@ impl CanopyEntry {
                 allowed: format!("1–{MAX_CANOPY_LEVELS}"),
             });
         }
-        if self.cells == 0 || self.cells > MAX_CANOPY_CELLS {
+        // Viewers draw rasters of CANOPY_CELLS per side; other sizes are for later versions.
+        if self.cells != CANOPY_CELLS {
             return Err(Problem::OutOfRange {
                 what: "canopy.cells".into(),
                 value: self.cells.into(),
-                allowed: format!("1–{MAX_CANOPY_CELLS}"),
+                allowed: format!("{CANOPY_CELLS}"),
             });
         }
         Ok(())
@@ -152,6 +154,8 @@ pub struct Canopy {
     pub z_range_m: [f32; 2],
     /// The tallest tree's height in metres: the height quantisation's top.
     pub height_max_m: f32,
+    /// The shortest tree's height in metres (the whole square's, not a cell mean).
+    pub height_min_m: f32,
     /// Which children exist: bit `i` for child `(2x + (i & 1), 2y + (i >> 1))`.
     pub children: u8,
     /// Raw cells, `cells²` × 8 bytes, row by row.
@@ -178,17 +182,6 @@ impl Canopy {
     #[must_use]
     pub fn cell_m(&self) -> f32 {
         self.size_m / self.cells as f32
-    }
-
-    /// The lowest mean tree height of a cell with crowns (metres; 0 without any).
-    #[must_use]
-    pub fn min_height_m(&self) -> f32 {
-        self.data
-            .chunks_exact(CANOPY_CELL_BYTES)
-            .filter(|c| c[3] > 0)
-            .map(|c| c[4])
-            .min()
-            .map_or(0.0, |q| f32::from(q) / 255.0 * self.height_max_m)
     }
 
     /// Mean cover over all cells (0–1).
@@ -223,9 +216,15 @@ impl Canopy {
         out.extend_from_slice(&CANOPY_VERSION.to_le_bytes());
         out.extend_from_slice(&(CANOPY_HEADER_BYTES as u16).to_le_bytes());
         out.extend_from_slice(&self.cells.to_le_bytes());
-        for v in
-            [self.origin_m[0], self.origin_m[1], self.size_m, self.z_range_m[0], self.z_range_m[1], self.height_max_m]
-        {
+        for v in [
+            self.origin_m[0],
+            self.origin_m[1],
+            self.size_m,
+            self.z_range_m[0],
+            self.z_range_m[1],
+            self.height_max_m,
+            self.height_min_m,
+        ] {
             out.extend_from_slice(&v.to_le_bytes());
         }
         out.extend_from_slice(&u32::from(self.children).to_le_bytes());
@@ -238,8 +237,8 @@ impl Canopy {
     /// # Errors
     /// A [`DecodeError`] for a wrong magic, version or header size, a cell count
     /// of 0 or above [`MAX_CANOPY_CELLS`], a length that is not the header plus
-    /// `cells²` cells, non-finite or inverted ranges, a non-positive size, or
-    /// child bits above bit 3.
+    /// `cells²` cells, non-finite or inverted ranges (heights: 0 ≤ min ≤ max), a
+    /// non-positive size, or child bits above bit 3.
     pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
         decode_canopy(bytes).map_err(|p| DecodeError::new(file, p))
     }
@@ -271,16 +270,17 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
     };
     let (x0, y0, size) = (f("header.x0", 12)?, f("header.y0", 16)?, f("header.size_m", 20)?);
     let (z_min, z_max, h_max) = (f("header.z_min", 24)?, f("header.z_max", 28)?, f("header.height_max", 32)?);
+    let h_min = f("header.height_min", 36)?;
     if size <= 0.0 {
         return Err(Problem::Invalid(format!("header.size_m is {size}: the square needs a positive side")));
     }
-    if z_max < z_min {
-        return Err(Problem::Invalid(format!("header.z_max {z_max} is below z_min {z_min}")));
+    if z_max < z_min || !(z_max - z_min).is_finite() {
+        return Err(Problem::Invalid(format!("header.z_max {z_max} is below z_min {z_min}, or too far above")));
     }
-    if h_max < 0.0 {
-        return Err(Problem::Invalid(format!("header.height_max is {h_max}: heights are not negative")));
+    if !(0.0..=h_max).contains(&h_min) {
+        return Err(Problem::Invalid(format!("header heights {h_min}–{h_max} m: not 0 ≤ height_min ≤ height_max")));
     }
-    let children = r.u32("header.children", 36)?;
+    let children = r.u32("header.children", 40)?;
     if children > 0xf {
         return Err(Problem::Invalid(format!("header.children is {children:#x}: only bits 0–3 (four children) exist")));
     }
@@ -299,6 +299,7 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
         size_m: size,
         z_range_m: [z_min, z_max],
         height_max_m: h_max,
+        height_min_m: h_min,
         children: children as u8,
         data: data.to_vec(),
     })
@@ -315,6 +316,7 @@ mod tests {
             size_m: 400.0,
             z_range_m: [10.0, 90.0],
             height_max_m: 30.0,
+            height_min_m: 2.0,
             children: 0b1010,
             data: vec![0; 16 * CANOPY_CELL_BYTES],
         };
@@ -354,7 +356,7 @@ mod tests {
             levels: 3,
             cells: 64,
             rasters: 5,
-            bytes: 5 * 32_808,
+            bytes: 5 * 32_812,
         };
         assert_eq!(e.raster_url(2, 3, 1), "canopy/2/3_1.cnpy");
         assert_eq!(e.origin_of(2, 3, 1), [-512.0 + 1536.0, 512.0]);
@@ -365,6 +367,7 @@ mod tests {
             CanopyEntry { levels: 0, ..e.clone() },
             CanopyEntry { levels: 99, ..e.clone() },
             CanopyEntry { cells: 0, ..e.clone() },
+            CanopyEntry { cells: 1024, ..e.clone() },
             CanopyEntry { origin_m: [f64::NAN, 0.0], ..e.clone() },
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
@@ -394,7 +397,13 @@ mod tests {
         assert!(set(20, &(-1f32).to_le_bytes()).contains("positive"));
         assert!(set(28, &0f32.to_le_bytes()).contains("below z_min"));
         assert!(set(32, &f32::INFINITY.to_le_bytes()).contains("height_max"));
-        assert!(set(36, &[0x10]).contains("children"));
+        assert!(set(36, &40f32.to_le_bytes()).contains("height_min"));
+        assert!(set(36, &(-1f32).to_le_bytes()).contains("height_min"));
+        let mut wide = good.clone();
+        wide[24..28].copy_from_slice(&(-3e38f32).to_le_bytes());
+        wide[28..32].copy_from_slice(&3e38f32.to_le_bytes());
+        assert!(Canopy::decode("c", &wide).unwrap_err().to_string().contains("too far"));
+        assert!(set(40, &[0x10]).contains("children"));
         // Every single-byte change decodes or fails cleanly.
         for at in 0..good.len() {
             for v in [0u8, 1, 0x7f, 0xff] {

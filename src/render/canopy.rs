@@ -11,8 +11,9 @@ use super::mesh::depth_state;
 use crate::format::canopy::{CanopyKey, CANOPY_CELLS, CANOPY_CELL_BYTES};
 use crate::scene::canopy::CanopyDraw;
 
-/// Most rasters the pool holds (32 KB each; it starts at 8 and doubles as views need).
-pub const CANOPY_SLOTS: usize = 256;
+/// Most rasters the pool holds (32 KB each; it starts at 8 and doubles as views
+/// need): as many as a view draws.
+pub const CANOPY_SLOTS: usize = crate::scene::canopy::MAX_CANOPY_DRAWS;
 
 /// One drawn raster. Must match `CanopyRaster` in `shaders/canopy.wgsl`.
 #[repr(C)]

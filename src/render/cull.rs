@@ -239,7 +239,7 @@ pub fn cpu_select_styled(
                 continue;
             }
             let h_px = s.select[0] * d.2 * view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
-            if tree_hash01(packed.xy) < canopy_weight(h_px, view) {
+            if canopy_drops(h_px, packed.xy, view) {
                 continue;
             }
             if thinned {
@@ -267,6 +267,17 @@ pub fn canopy_weight(h_px: f32, view: &ViewUniform) -> f32 {
         return 0.0;
     }
     ((hi - h_px) / (hi - lo).max(1e-3)).clamp(0.0, 1.0)
+}
+
+/// Whether the canopy stands in for a tree of `h_px` projected pixels whose
+/// packed position is `xy`, exactly as `canopy_drops` in `shaders/common.wgsl`.
+#[must_use]
+pub fn canopy_drops(h_px: f32, xy: u32, view: &ViewUniform) -> bool {
+    let [lo, hi, _, _] = view.canopy;
+    if lo <= 0.0 || view.viewport[3] > 0.5 {
+        return false;
+    }
+    tree_hash01(xy) * (hi - lo).max(1e-3) < hi - h_px
 }
 
 /// A tree's uniform number in [0, 1) from its packed position, exactly as

@@ -490,8 +490,10 @@ impl ForestRenderer {
         draws: &[crate::scene::canopy::CanopyDraw],
         px: Option<[f32; 2]>,
     ) {
-        self.canopy_px = px.unwrap_or([0.0; 2]);
         self.canopy.prepare(device, queue, if px.is_some() { draws } else { &[] });
+        // A raster the pool could not hold would leave its trees drawn by nothing:
+        // then trees at every size this frame.
+        self.canopy_px = px.filter(|_| self.canopy.dropped == 0).unwrap_or([0.0; 2]);
     }
 
     /// The canopy pass (rasters drawn, uploads, GPU bytes).

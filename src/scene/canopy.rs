@@ -20,6 +20,10 @@ use glam::{DVec3, Vec3};
 use crate::camera::ViewData;
 use crate::format::canopy::{Canopy, CanopyEntry, CanopyKey};
 
+/// Most rasters a view draws (the GPU pool's size): a view that would draw
+/// more is cut coarser.
+pub const MAX_CANOPY_DRAWS: usize = 512;
+
 /// One raster to draw this frame.
 #[derive(Debug, Clone)]
 pub struct CanopyDraw {
@@ -137,7 +141,7 @@ impl CanopyTree {
                 self.entry.cells
             ));
         }
-        let low = canopy.min_height_m();
+        let low = canopy.height_min_m;
         self.slots.insert(key, Slot::Resident { canopy: Arc::new(canopy), low, used: self.frame });
         self.evict();
         Ok(())
@@ -190,8 +194,9 @@ impl CanopyTree {
                         continue;
                     }
                     let child = (l + 1, 2 * x + (i & 1), 2 * y + (i >> 1));
-                    match self.slots.get(&child) {
-                        Some(Slot::Resident { .. }) => {}
+                    match self.slots.get_mut(&child) {
+                        // Kept while its siblings load (not evicted under them).
+                        Some(Slot::Resident { used, .. }) => *used = frame,
                         Some(Slot::Loading | Slot::Broken) => ready = false,
                         None => {
                             // Only children in view are waited for.

@@ -433,7 +433,12 @@ pub struct SceneStream<F: Fetcher> {
     canopy_draws: Vec<CanopyDraw>,
     canopy_wanted: Vec<(f32, CanopyKey)>,
     canopy_attempts: HashMap<CanopyKey, (u32, f64)>,
+    /// When the stream first waited for the root canopy raster.
+    canopy_wait_from: Option<f64>,
 }
+
+/// Longest wait for the root canopy raster before tiles are fetched anyway (s).
+const CANOPY_WAIT_S: f64 = 2.0;
 
 /// Where a view hands far trees over to the canopy rasters
 /// ([`SceneStream::set_canopy_view`]; the cull pass's `canopy_weight`).
@@ -538,6 +543,7 @@ impl<F: Fetcher> SceneStream<F> {
             canopy_draws: Vec::new(),
             canopy_wanted: Vec::new(),
             canopy_attempts: HashMap::new(),
+            canopy_wait_from: None,
         }
     }
 
@@ -788,15 +794,21 @@ impl<F: Fetcher> SceneStream<F> {
             self.imagery.retry_due(now_s);
             self.select_terrain(view);
             self.select_canopy(view);
-            // While the scene's root canopy raster loads, tiles wait: it decides
-            // which trees a far view needs at all.
-            let canopy_first = self.canopy_view.is_some() && self.canopy.as_ref().is_some_and(CanopyTree::root_loading);
-            if !over_rate && canopy_first {
+            // While the scene's root canopy raster loads, index nodes and tiles
+            // wait (it decides which trees a far view needs at all) — for at most
+            // CANOPY_WAIT_S, and not after it failed once.
+            let root_loading = self.canopy_view.is_some()
+                && self.canopy.as_ref().is_some_and(CanopyTree::root_loading)
+                && !self.canopy_attempts.contains_key(&(0, 0, 0));
+            let since = *self.canopy_wait_from.get_or_insert(now_s);
+            let canopy_first = root_loading && now_s - since < CANOPY_WAIT_S;
+            if !over_rate {
                 self.request_canopy();
-                self.walk(view, draw_distance_m);
-            } else if !over_rate {
-                self.request_canopy();
-                self.request_tiles(view, draw_distance_m, now_s);
+                if canopy_first {
+                    self.walk(view, draw_distance_m);
+                } else {
+                    self.request_tiles(view, draw_distance_m, now_s);
+                }
                 self.request_packs(residency, now_s);
                 self.request_terrain();
                 self.request_imagery();
@@ -835,7 +847,16 @@ impl<F: Fetcher> SceneStream<F> {
         };
         let px_per_m = view.px_per_m_at_1m * cv.lod_scale;
         let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
-        tree.select(view, eye, px_per_m, cv.cell_px, cv.px_hi, &mut self.canopy_draws, &mut self.canopy_wanted);
+        // Cut coarser while the view would draw more rasters than the GPU pool holds.
+        let mut cell_px = cv.cell_px;
+        for _ in 0..8 {
+            self.canopy_wanted.clear();
+            tree.select(view, eye, px_per_m, cell_px, cv.px_hi, &mut self.canopy_draws, &mut self.canopy_wanted);
+            if self.canopy_draws.len() <= super::canopy::MAX_CANOPY_DRAWS {
+                break;
+            }
+            cell_px *= 2.0;
+        }
         self.canopy_gate = tree.ready().then_some(CanopyGate { px_per_m, px_lo: cv.px_lo });
     }
 
