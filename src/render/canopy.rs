@@ -174,16 +174,7 @@ impl CanopyPass {
             let slot = match self.by_key.get(&d.key) {
                 Some(&s) => s,
                 None => {
-                    // A free slot, else the one drawn longest ago (not this frame).
-                    let free = self.slots.iter().position(Option::is_none).or_else(|| {
-                        self.slots
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, s)| s.is_some_and(|(_, used)| used < self.frame))
-                            .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
-                            .map(|(i, _)| i)
-                    });
-                    let Some(free) = free else {
+                    let Some(free) = super::terrain::free_or_oldest(&self.slots, self.frame) else {
                         self.dropped += 1;
                         continue;
                     };

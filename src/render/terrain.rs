@@ -107,6 +107,20 @@ pub const TERRAIN_NO_MORPH: u32 = 2;
 /// `GpuTerrainDraw::layer` of a tile without an image.
 pub const NO_IMAGE: u32 = u32::MAX;
 
+/// A slot of a pool whose slots hold `(what, frame last drawn)`: a free one,
+/// else the one drawn longest ago (not in `frame`); None when every slot is
+/// drawn this frame. (The terrain's heights and images, the canopy's rasters.)
+pub(crate) fn free_or_oldest<K: Copy>(slots: &[Option<(K, u64)>], frame: u64) -> Option<usize> {
+    slots.iter().position(Option::is_none).or_else(|| {
+        slots
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.is_some_and(|(_, used)| used < frame))
+            .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
+            .map(|(i, _)| i)
+    })
+}
+
 /// A ground image's identity: (source generation, terrain tile it covers).
 type ImageKey = (u32, TerrainKey);
 
@@ -298,16 +312,7 @@ impl TerrainPass {
             images.layers[layer as usize] = Some((img.key, self.frame));
             return layer;
         }
-        let free = images.layers.iter().position(Option::is_none).or_else(|| {
-            images
-                .layers
-                .iter()
-                .enumerate()
-                .filter(|(_, s)| s.is_some_and(|(_, used)| used < self.frame))
-                .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
-                .map(|(i, _)| i)
-        });
-        let Some(free) = free else { return NO_IMAGE };
+        let Some(free) = free_or_oldest(&images.layers, self.frame) else { return NO_IMAGE };
         if let Some((old, _)) = images.layers[free] {
             images.by_key.remove(&old);
         }
@@ -400,16 +405,7 @@ impl TerrainPass {
             let slot = match pool.by_key.get(&d.key) {
                 Some(&s) => s,
                 None => {
-                    // A free slot, else the one drawn longest ago (not this frame).
-                    let free = pool.slots.iter().position(Option::is_none).or_else(|| {
-                        pool.slots
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, s)| s.is_some_and(|(_, used)| used < self.frame))
-                            .min_by_key(|(_, s)| s.map_or(0, |(_, used)| used))
-                            .map(|(i, _)| i)
-                    });
-                    let Some(free) = free else {
+                    let Some(free) = free_or_oldest(&pool.slots, self.frame) else {
                         self.dropped += 1;
                         continue;
                     };
