@@ -233,6 +233,13 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
                 "source": i.source,
             })),
         })),
+        "canopy": m.canopy.as_ref().map(|c| json!({
+            "extent": [c.origin_m[0], c.origin_m[1], c.origin_m[0] + c.root_size_m, c.origin_m[1] + c.root_size_m],
+            "levels": c.levels,
+            "finest_cell_m": c.size_m(c.levels - 1) / f64::from(c.cells),
+            "rasters": c.rasters,
+            "bytes": c.bytes,
+        })),
     }))
 }
 
@@ -449,6 +456,16 @@ pub fn to_text(v: &Value) -> String {
                 }
             } else {
                 out += "no terrain (bake with --dem for one)\n";
+            }
+            let c = &v["canopy"];
+            if c.is_object() {
+                out += &format!(
+                    "canopy rasters: {} in {} levels, finest cells {:.1} m, {:.2} MB\n",
+                    c["rasters"],
+                    c["levels"],
+                    c["finest_cell_m"].as_f64().unwrap_or(0.0),
+                    c["bytes"].as_f64().unwrap_or(0.0) / 1e6
+                );
             }
             for s in v["species"].as_array().into_iter().flatten() {
                 out += &pack_text(s);

@@ -1176,6 +1176,11 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
         rasters.push(((l, x, y), c));
     }
     assert_eq!((rasters.len() as u64, bytes), (e.rasters, e.bytes));
+    // inspect reports them.
+    let v = inspect_json(&out);
+    assert_eq!((v["canopy"]["rasters"].as_u64(), v["canopy"]["finest_cell_m"].as_f64()), (Some(e.rasters), Some(8.0)));
+    let text = String::from_utf8_lossy(&run(bin().arg("inspect").arg(&out)).stdout).into_owned();
+    assert!(text.contains(&format!("canopy rasters: {} in 2 levels, finest cells 8.0 m", e.rasters)), "{text}");
     assert!(rasters.len() >= 3, "the root and the squares with trees: {}", rasters.len());
     // Cells whose square lies inside the stand, or inside the empty band.
     let (ox, oy) = (m.origin_m[0], m.origin_m[1]);
