@@ -437,6 +437,25 @@ pub struct SceneStream<F: Fetcher> {
     canopy_wait_from: Option<f64>,
 }
 
+/// Counts a failed attempt at `key` (terrain tiles, canopy rasters) and, when
+/// it is retried (retryable and attempts left), when the next attempt is due
+/// (exponential backoff). Returns whether it is retried.
+fn note_failure<K: std::hash::Hash + Eq>(
+    attempts: &mut HashMap<K, (u32, f64)>,
+    key: K,
+    retryable: bool,
+    config: &StreamConfig,
+    now_s: f64,
+) -> bool {
+    let (n, due) = attempts.entry(key).or_insert((0, f64::INFINITY));
+    *n += 1;
+    let retrying = retryable && *n < config.max_attempts;
+    if retrying {
+        *due = now_s + config.retry_base_s * 2f64.powi(*n as i32 - 1);
+    }
+    retrying
+}
+
 /// Longest wait for the root canopy raster before tiles are fetched anyway (s).
 const CANOPY_WAIT_S: f64 = 2.0;
 
@@ -905,12 +924,8 @@ impl<F: Fetcher> SceneStream<F> {
                 self.canopy_attempts.remove(&key);
             }
             Err((message, retryable)) => {
-                let (attempts, due) = self.canopy_attempts.entry(key).or_insert((0, f64::INFINITY));
-                *attempts += 1;
-                let retrying = retryable && *attempts < self.config.max_attempts;
-                if retrying {
-                    *due = now_s + self.config.retry_base_s * 2f64.powi(*attempts as i32 - 1);
-                } else {
+                let retrying = note_failure(&mut self.canopy_attempts, key, retryable, &self.config, now_s);
+                if !retrying {
                     tree.mark_broken(key);
                     self.give_up(&url, &message);
                 }
@@ -1176,13 +1191,9 @@ impl<F: Fetcher> SceneStream<F> {
             .and_then(|bytes| TerrainTile::decode(&url, &bytes).map_err(|e| (e.to_string(), false)))
             .and_then(|tile| t.insert(key, tile).map_err(|e| (format!("{url}: {e}"), false)));
         if let Err((message, retryable)) = outcome {
-            let (attempts, due) = self.terrain_attempts.entry(key).or_insert((0, f64::INFINITY));
-            *attempts += 1;
-            let retrying = retryable && *attempts < self.config.max_attempts;
-            if retrying {
-                // Stays "loading" until the retry is due.
-                *due = now_s + self.config.retry_base_s * 2f64.powi(*attempts as i32 - 1);
-            } else {
+            // Stays "loading" until the retry is due.
+            let retrying = note_failure(&mut self.terrain_attempts, key, retryable, &self.config, now_s);
+            if !retrying {
                 t.mark_broken(key);
                 self.give_up(&url, &message);
             }
