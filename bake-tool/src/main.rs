@@ -10,6 +10,7 @@ mod bucket;
 mod canopy;
 mod cloud;
 mod clusters;
+mod country;
 mod demo;
 use sylva_bake::gltf_import;
 mod inspect;
@@ -391,9 +392,31 @@ struct DemoArgs {
     /// No terrain tiles (the trees still stand on the demo's hills).
     #[arg(long)]
     no_terrain: bool,
+    /// The land: `valley`, a forest valley a few km across (held in memory);
+    /// `country`, an island country of hills, lakes, farmland and woods, about
+    /// 100 km across for 10^8 trees, generated block by block and streamed
+    /// into bucket files (bounded memory, coarser ground: 16 m terrain, 8 m
+    /// imagery); `auto`, the valley up to 10^7 trees and the country above.
+    #[arg(long, value_enum, default_value_t = DemoLayout::Auto)]
+    layout: DemoLayout,
+    /// Trees held in memory at once while tiling the country; the rest wait in
+    /// bucket files inside --out (about 56 bytes per tree).
+    #[arg(long, default_value_t = 4_000_000, value_parser = clap::value_parser!(u64).range(1..))]
+    bucket_trees: u64,
     #[command(flatten)]
     pack: PackArgs,
 }
+
+/// `demo --layout`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum DemoLayout {
+    Auto,
+    Valley,
+    Country,
+}
+
+/// The tree count above which `--layout auto` makes the country.
+const COUNTRY_ABOVE: usize = 10_000_000;
 
 fn log(msg: &str) {
     eprintln!("{msg}");
@@ -470,11 +493,21 @@ fn demo(args: &DemoArgs) -> Result<()> {
         bail!("--trees must be at least 1");
     }
     let out = OutDir::prepare(&args.output.out, &[], args.output.force, &log)?;
+    let country = match args.layout {
+        DemoLayout::Auto => args.trees > COUNTRY_ABOVE,
+        DemoLayout::Valley => false,
+        DemoLayout::Country => true,
+    };
+    if country {
+        return demo_country(args, out, started);
+    }
     log(&format!("demo: {} trees, seed {}", args.trees, args.seed));
     let species = demo::demo_models(args.seed);
     let trees = demo::demo_layout(args.trees, args.seed);
     if let Some(path) = &args.write_placements {
-        write_placements_csv(path, &trees, &species, demo::DEMO_ORIGIN, demo::DEMO_EPSG)?;
+        let mut csv = PlacementsCsv::create(path, &species, demo::DEMO_EPSG)?;
+        csv.write(&trees, demo::DEMO_ORIGIN)?;
+        csv.finish()?;
         log(&format!("wrote {} placements to {}", trees.len(), path.display()));
     }
     // The demo's hills as terrain: the trees' extent and 200 m around, at 8 m.
@@ -511,6 +544,93 @@ fn demo(args: &DemoArgs) -> Result<()> {
         cell_size_m: args.pack.cell_size(&trees)?,
         species,
         trees: TreeSource::Memory(trees),
+        crs: Crs::projected(demo::DEMO_EPSG)?,
+        origin_m: demo::DEMO_ORIGIN,
+        tile_cells: args.pack.tile_cells,
+        pack: args.pack.options()?,
+        debug_dump: args.pack.debug_dump.clone(),
+        shard: args.pack.shard,
+        index_node_tiles: args.pack.index_node_tiles,
+        canopy_cell_m: args.pack.canopy_cell,
+        attributes: None,
+    };
+    let s = bake::bake_scene(&input, out, &log)?;
+    report_summary(&s, &args.output.out, started);
+    Ok(())
+}
+
+/// `demo --layout country`: the trees generated row by row of blocks into
+/// bucket files by tile, the ground from the country's fields.
+fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Result<()> {
+    let trees = args.trees as u64;
+    log(&format!("demo: a country of {trees} trees, seed {}", args.seed));
+    let land = country::Country::new(trees, args.seed);
+    let side_km = land.half_m / 500.0;
+    log(&format!("country: {side_km:.0} × {side_km:.0} km, {} blocks of {} m", land.blocks().pow(2), country::BLOCK_M));
+    let species = demo::demo_models(args.seed);
+    let cell_size_m = match args.pack.cell_size {
+        Some(_) => args.pack.cell_size(&[])?,
+        None => batching::cell_size_for(trees, land.forest_cells64(), 500.0),
+    };
+    let buckets = trees.div_ceil(args.bucket_trees).max(1) as u32;
+    let mut csv = match &args.write_placements {
+        Some(path) => Some(PlacementsCsv::create(path, &species, demo::DEMO_EPSG)?),
+        None => None,
+    };
+    let dir = out.scratch("buckets");
+    let mut writer = bucket::BucketWriter::new(&dir, buckets, cell_size_m, args.pack.tile_cells)?;
+    let t0 = Instant::now();
+    let mut made = 0u64;
+    let mut reported = 0u64;
+    for row in 0..land.blocks() {
+        let trees_of_row = land.row(row, made);
+        made += trees_of_row.len() as u64;
+        if let Some(w) = csv.as_mut() {
+            w.write(&trees_of_row, demo::DEMO_ORIGIN)?;
+        }
+        for t in &trees_of_row {
+            let mine = args.pack.shard.is_none_or(|(i, n)| {
+                let (x, y) = batching::tile_of(t.pos, cell_size_m, args.pack.tile_cells);
+                batching::shard_of_tile(x, y, n) == i
+            });
+            if mine {
+                writer.push(t)?;
+            }
+        }
+        if made >= reported + trees / 10 || row + 1 == land.blocks() {
+            reported = made;
+            log(&format!(
+                "country: {made} of {trees} trees placed ({:.0} %, {:.0} s)",
+                made as f64 * 100.0 / trees.max(1) as f64,
+                t0.elapsed().as_secs_f64()
+            ));
+        }
+    }
+    if let Some(w) = csv.take() {
+        let path = w.finish()?;
+        log(&format!("wrote {made} placements to {}", path.display()));
+    }
+    let source = writer.finish()?;
+    let ground = |x: f64, y: f64| Some(land.ground(x, y) as f32);
+    let terrain = (!args.no_terrain).then(|| bake::terrain::TerrainSource {
+        height: &ground,
+        region: land.extent(),
+        resolution_m: 16.0,
+        source: "synthetic country".into(),
+    });
+    let colour = |x: f64, y: f64| Some(land.colour(x, y));
+    let imagery = terrain.as_ref().map(|_| bake::imagery::ImagerySource {
+        colour: &colour,
+        extent_m: land.extent(),
+        resolution_m: 8.0,
+        source: "synthetic country: sea, lakes, fields, woods".into(),
+    });
+    let input = SceneInput {
+        terrain,
+        imagery,
+        cell_size_m,
+        species,
+        trees: source,
         crs: Crs::projected(demo::DEMO_EPSG)?,
         origin_m: demo::DEMO_ORIGIN,
         tile_cells: args.pack.tile_cells,
@@ -566,37 +686,58 @@ fn bench_clusters(model: Option<&std::path::Path>, leaves: Option<usize>, tries:
     Ok(())
 }
 
-/// Writes trees as a lon/lat CSV (`id,species,lat,lng,z,height`), reprojected from the scene CRS.
-fn write_placements_csv(
-    path: &std::path::Path,
-    trees: &[SceneTree],
-    species: &[(String, gltf_import::ImportedModel)],
-    origin: DVec3,
-    epsg: u32,
-) -> Result<()> {
-    use std::io::Write as _;
-    let inverse = Reprojector::new(Crs::projected(epsg)?, &Crs::from_epsg(4326)?)?;
-    let heights: Vec<f32> = species.iter().map(|(_, m)| m.height()).collect();
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        scene_write::create_dir(parent)?;
-    }
-    let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(file);
-    writeln!(w, "id,species,lat,lng,z,height")?;
-    for t in trees {
-        let (lon, lat) = inverse.apply(origin.x + t.pos.x, origin.y + t.pos.y)?;
-        let s = t.species as usize;
-        writeln!(
+/// Trees written as a lon/lat CSV (`id,species,lat,lng,z,height`),
+/// reprojected from the scene CRS, a batch at a time.
+struct PlacementsCsv {
+    path: PathBuf,
+    w: std::io::BufWriter<std::fs::File>,
+    inverse: Reprojector,
+    names: Vec<String>,
+    heights: Vec<f32>,
+}
+
+impl PlacementsCsv {
+    fn create(path: &std::path::Path, species: &[(String, gltf_import::ImportedModel)], epsg: u32) -> Result<Self> {
+        use std::io::Write as _;
+        let inverse = Reprojector::new(Crs::projected(epsg)?, &Crs::from_epsg(4326)?)?;
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            scene_write::create_dir(parent)?;
+        }
+        let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        let mut w = std::io::BufWriter::new(file);
+        writeln!(w, "id,species,lat,lng,z,height")?;
+        Ok(Self {
+            path: path.to_path_buf(),
             w,
-            "{},{},{lat:.8},{lon:.8},{:.2},{:.2}",
-            t.id,
-            species[s].0,
-            t.pos.z + origin.z,
-            t.scale * heights[s]
-        )?;
+            inverse,
+            names: species.iter().map(|(n, _)| n.clone()).collect(),
+            heights: species.iter().map(|(_, m)| m.height()).collect(),
+        })
     }
-    w.flush()?;
-    Ok(())
+
+    fn write(&mut self, trees: &[SceneTree], origin: DVec3) -> Result<()> {
+        use std::io::Write as _;
+        for t in trees {
+            let (lon, lat) = self.inverse.apply(origin.x + t.pos.x, origin.y + t.pos.y)?;
+            let s = t.species as usize;
+            writeln!(
+                self.w,
+                "{},{},{lat:.8},{lon:.8},{:.2},{:.2}",
+                t.id,
+                self.names[s],
+                t.pos.z + origin.z,
+                t.scale * self.heights[s]
+            )
+            .with_context(|| format!("cannot write {}", self.path.display()))?;
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> Result<PathBuf> {
+        use std::io::Write as _;
+        self.w.flush().with_context(|| format!("cannot write {}", self.path.display()))?;
+        Ok(self.path)
+    }
 }
 
 fn split_pair<'a>(flag: &str, s: &'a str) -> Result<(&'a str, &'a str)> {

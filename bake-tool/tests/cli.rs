@@ -1244,3 +1244,72 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
     let e = fails(bin().args(["demo", "--trees", "10", "--canopy-cell", "0.5"]).arg("--out").arg(dir.join("x")));
     assert!(e.contains("--canopy-cell") && e.contains("1–10,000 m"), "{e}");
 }
+
+/// `demo --layout country` (issue 20): trees generated block by block into
+/// bucket files give the same scene whatever the bucket count, shards merge
+/// to it, the placements CSV holds every tree, and the country reads as one
+/// from above (sea around it, forest on it) and from the medium view (over the
+/// ground it looks at, drawing trees).
+#[test]
+fn a_country_streams_through_bucket_files_and_shows_land_sea_and_forest() {
+    let dir = tmp("country");
+    let demo = |out: &str, extra: &[&str]| {
+        let mut c = bin();
+        c.args(["demo", "--layout", "country", "--trees", "60000", "--seed", "4", "--no-clusters"])
+            .args(["--billboard-size", "16", "--texture-size", "16", "--index-node-tiles", "6"])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.join(out));
+        run(&mut c)
+    };
+    demo("one", &[]);
+    let log = String::from_utf8_lossy(
+        &demo("four", &["--bucket-trees", "15000", "--write-placements", dir.join("trees.csv").to_str().unwrap()])
+            .stderr,
+    )
+    .into_owned();
+    assert!(log.contains("country: 60000 of 60000 trees placed"), "{log}");
+    assert_eq!(snapshot(&dir.join("one")), snapshot(&dir.join("four")), "4 buckets = 1");
+    let csv = std::fs::read_to_string(dir.join("trees.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 60_001, "a header and every tree");
+    demo("part-0", &["--bucket-trees", "15000", "--shard", "0/2"]);
+    demo("part-1", &["--bucket-trees", "15000", "--shard", "1/2"]);
+    run(bin()
+        .arg("merge")
+        .arg(dir.join("part-0"))
+        .arg(dir.join("part-1"))
+        .arg("--out")
+        .arg(dir.join("merged"))
+        .args(["--index-node-tiles", "6"]));
+    assert_eq!(snapshot(&dir.join("one")), snapshot(&dir.join("merged")), "sharded = single");
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(dir.join("one/scene.json")).unwrap()).unwrap();
+    assert_eq!(m.counts.trees, 60_000);
+    let t = m.terrain.as_ref().expect("terrain");
+    assert!(t.imagery.is_some() && m.canopy.is_some(), "imagery and canopy");
+
+    use sylva::render::offscreen::{NamedView, OffscreenScene};
+    let scene = dir.join("one");
+    let mut off =
+        OffscreenScene::open(scene.to_str().unwrap(), 160, 90, sylva::render::forest::PoolConfig::default()).unwrap();
+    off.load_view(&sylva::camera::Camera::default(), 60.0);
+    let top = off.named_camera(NamedView::Top, 60.0).unwrap();
+    off.load_view(&top, 60.0);
+    let s = off.render(&top, true);
+    assert!(s.canopy_drawn > 0, "the whole country from above is drawn by canopy rasters");
+    let img = off.read_image();
+    let (mut sea, mut forest) = (0, 0);
+    for p in img.chunks(4) {
+        let (r, g, b) = (i32::from(p[0]), i32::from(p[1]), i32::from(p[2]));
+        sea += usize::from(b > g + 5 && b > r + 20);
+        forest += usize::from(g > r && g > b && r + g + b < 300);
+    }
+    let n = img.len() / 4;
+    assert!(sea > n / 10 && forest > n / 20, "top view: {sea} sea and {forest} forest pixels of {n}");
+    // The medium view of an indexed scene stands over the ground it looks at.
+    let cam = off.named_camera(NamedView::Medium, 60.0).unwrap();
+    let ground = off.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32).expect("ground under the eye");
+    assert!(cam.eye_m.z > f64::from(ground) + 15.0, "eye at {:.0} m over ground at {ground:.0} m", cam.eye_m.z);
+    off.load_view(&cam, 60.0);
+    let drawn: u64 = off.render(&cam, true).instances.values().sum();
+    assert!(drawn > 100, "medium view: {drawn} trees drawn");
+}

@@ -195,9 +195,33 @@ impl<F: Fetcher> OffscreenScene<F> {
     }
 
     /// The camera of a named view, placing the close view on the ground near the
-    /// scene centre (loads the data around it to find the ground).
+    /// scene centre, and the medium view of an indexed scene (whose manifest
+    /// lists no tiles to take the ground from) over the ground it looks at
+    /// (loads the data around them to find the ground).
     pub fn named_camera(&mut self, view: NamedView, timeout_s: f64) -> Option<Camera> {
-        let mut cam = view.camera(self.stream.manifest()?);
+        let manifest = self.stream.manifest()?;
+        let mut cam = view.camera(manifest);
+        // The ground `camera` took for an indexed scene: its lowest tree.
+        let guess = manifest.tiles.is_empty().then(|| f64::from(manifest.focus().min[2]));
+        if let Some(guess) = guess.filter(|_| view == NamedView::Medium && cam.pitch_rad < -0.05) {
+            // Where the view meets that ground.
+            let f = cam.forward();
+            let target = cam.eye_m + f * ((guess - cam.eye_m.z) / f.z);
+            let (eye, mid) = (cam.eye_m, (cam.eye_m + target) * 0.5);
+            let span = (target - eye).truncate().length();
+            let down = Camera { pitch_rad: -std::f64::consts::FRAC_PI_2, eye_m: mid + DVec3::Z * (1.5 * span), ..cam };
+            self.load_view(&down, timeout_s);
+            let at = |s: &Self, p: DVec3| s.stream.ground_height_at(p.x as f32, p.y as f32).map(f64::from);
+            if let Some(g) = at(self, target) {
+                let dz = g - target.z;
+                let mut eye = eye + DVec3::Z * dz;
+                // Over a ridge between the eye and what it looks at: higher.
+                if let Some(ge) = at(self, eye) {
+                    eye.z = eye.z.max(ge + 20.0);
+                }
+                cam = Camera { fov_y_rad: cam.fov_y_rad, ..Camera::look_at(eye, DVec3::new(target.x, target.y, g)) };
+            }
+        }
         if view == NamedView::Close {
             // Look straight down at the spot first so its tile is resident.
             let down = Camera { pitch_rad: -std::f64::consts::FRAC_PI_2, eye_m: cam.eye_m + DVec3::Z * 200.0, ..cam };
