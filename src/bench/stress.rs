@@ -68,9 +68,52 @@ pub struct StressSummary {
     pub bytes_fetched: u64,
     /// Frames whose counters were not finite (must be 0).
     pub non_finite_frames: usize,
+    /// With a [`HoleCheck`]: frames of the first pass and their share of
+    /// pixels where the streamed frame is lighter than the settled one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub holes: Vec<HoleFrame>,
+    /// The largest of `holes` (0 without a check).
+    pub hole_fraction_max: f64,
     /// Whether memory stayed flat (the last pass's median resident set ≤ 1.10 ×
     /// the second pass's) and frame time did not grow (last pass's median ≤ 1.25 × the second's + 1 ms).
     pub passed: bool,
+}
+
+/// Frames to save and judge for holes: every `every`-th frame of the first
+/// pass, as streamed and as settled (everything it needs loaded), into `dir`.
+#[derive(Debug, Clone, Copy)]
+pub struct HoleCheck<'a> {
+    /// Where the PNGs go.
+    pub dir: &'a Path,
+    /// Every how many frames.
+    pub every: usize,
+}
+
+/// A judged frame of a [`HoleCheck`].
+#[derive(Debug, Clone, Serialize)]
+pub struct HoleFrame {
+    /// Frame index.
+    pub frame: usize,
+    /// Share of pixels whose luminance (sRGB 0–255) in the streamed frame
+    /// exceeds the settled frame's by more than [`HOLE_LUMA`]: ground or sky
+    /// showing where the settled frame draws the forest.
+    pub fraction: f64,
+}
+
+/// Luminance difference (sRGB 0–255) that counts a pixel as a hole: on the
+/// 10^8 country's fly-down, frames with nothing missing differ by it in ≤ 1.7 %
+/// of their pixels (a different subset of trees drawn), bare ground where the
+/// forest should be in 14–68 %.
+pub const HOLE_LUMA: f64 = 15.0;
+
+/// The share of pixels of `streamed` lighter than `settled` by [`HOLE_LUMA`] (RGBA8).
+#[must_use]
+pub fn hole_fraction(streamed: &[u8], settled: &[u8]) -> f64 {
+    let luma = |p: &[u8]| 0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]);
+    let n = streamed.len().min(settled.len()) / 4;
+    let holes =
+        streamed.chunks_exact(4).zip(settled.chunks_exact(4)).filter(|(a, b)| luma(a) > luma(b) + HOLE_LUMA).count();
+    holes as f64 / n.max(1) as f64
 }
 
 /// Resident set size of this process in bytes (Linux; 0 elsewhere).
@@ -100,7 +143,8 @@ pub fn ping_pong(cameras: &[Camera], frames: usize) -> Vec<Camera> {
 }
 
 /// Runs Sylva along `cameras` on `scene`, streaming without waiting; `period` is
-/// the length of one pass (see [`summarise`]).
+/// the length of one pass (see [`summarise`]); with `holes`, frames of the
+/// first pass are saved and judged against settled ones.
 ///
 /// # Errors
 /// A scene that does not open.
@@ -108,11 +152,19 @@ pub fn run(
     scene: &str,
     cameras: &[Camera],
     period: usize,
-    width: u32,
-    height: u32,
+    (width, height): (u32, u32),
     settings: RenderSettings,
+    holes: Option<HoleCheck<'_>>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<StressFrame>, StressSummary)> {
+    let save = |dir: &Path, name: String, img: &[u8]| -> Result<()> {
+        image::save_buffer(dir.join(&name), img, width, height, image::ColorType::Rgba8)
+            .with_context(|| format!("writing {}", dir.join(&name).display()))
+    };
+    if let Some(h) = holes {
+        std::fs::create_dir_all(h.dir).with_context(|| format!("cannot create {}", h.dir.display()))?;
+    }
+    let mut judged = Vec::new();
     let mut off = OffscreenScene::open(scene, width, height, PoolConfig::default())
         .with_context(|| format!("opening {scene}"))?;
     off.settings = settings;
@@ -142,8 +194,27 @@ pub fn run(
             drawn: s.instances.values().sum(),
             bytes_fetched: s.bytes_fetched,
         });
+        if let Some(h) = holes.filter(|h| i <= period / 2 && i % h.every.max(1) == 0) {
+            let img = off.read_image();
+            save(h.dir, format!("{i:05}-stream.png"), &img)?;
+            judged.push((i, *cam, img));
+        }
     }
-    let summary = summarise(&out, non_finite, trees_total, period);
+    let mut summary = summarise(&out, non_finite, trees_total, period);
+    if let Some(h) = holes {
+        // The same cameras with everything they need loaded, in a scene of their own.
+        let mut settled = OffscreenScene::open(scene, width, height, PoolConfig::default())
+            .with_context(|| format!("opening {scene}"))?;
+        settled.settings = off.settings;
+        for (i, cam, img) in judged {
+            settled.load_view(&cam, 120.0);
+            settled.render(&cam, false);
+            let reference = settled.read_image();
+            save(h.dir, format!("{i:05}-settled.png"), &reference)?;
+            summary.holes.push(HoleFrame { frame: i, fraction: hole_fraction(&img, &reference) });
+        }
+        summary.hole_fraction_max = summary.holes.iter().map(|f| f.fraction).fold(0.0, f64::max);
+    }
     Ok((out, summary))
 }
 
@@ -180,6 +251,8 @@ pub fn summarise(frames: &[StressFrame], non_finite_frames: usize, trees_total: 
         trees_total,
         bytes_fetched: frames.last().map_or(0, |f| f.bytes_fetched),
         non_finite_frames,
+        holes: Vec::new(),
+        hole_fraction_max: 0.0,
         passed: memory_flat && time_flat && non_finite_frames == 0,
     }
 }
@@ -215,6 +288,17 @@ pub fn write(dir: &Path, frames: &[StressFrame], summary: &StressSummary) -> Res
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn holes_are_pixels_lighter_than_the_settled_frame() {
+        let forest = [30u8, 60, 30, 255];
+        let field = [180u8, 170, 110, 255];
+        let settled = [forest, forest, forest, field].concat();
+        assert_eq!(hole_fraction(&settled, &settled), 0.0);
+        // Ground where the forest should be: a hole; forest over a field: not one.
+        let streamed = [field, forest, forest, forest].concat();
+        assert_eq!(hole_fraction(&streamed, &settled), 0.25);
+    }
 
     #[test]
     fn ping_pong_turns_at_both_ends() {

@@ -120,8 +120,12 @@ pub(crate) enum Command {
         ao: bool,
         /// Also write every method's frames as PNGs into --out/frames, and per
         /// frame a strip of them side by side in the methods' order, the
-        /// reference first (NNN-strip.png), to look at the error.
-        #[arg(long, conflicts_with_all = ["replot", "stress", "memory"])]
+        /// reference first (NNN-strip.png), to look at the error. With
+        /// --stress: every 10th frame of the first pass as streamed and as
+        /// settled (NNN-stream.png, NNN-settled.png), and the share of pixels
+        /// where the streamed frame shows ground or sky the settled one covers
+        /// (holes, in stress.json).
+        #[arg(long, conflicts_with_all = ["replot", "memory"])]
         save_frames: bool,
         /// Supersampling of the references, per axis (N² samples per pixel):
         /// 2 by default; 4 to judge `sylva-converged`, whose 16 jittered steps

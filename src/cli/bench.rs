@@ -117,7 +117,14 @@ pub(crate) fn bench(
     Ok(())
 }
 
-pub(crate) fn stress(scene: &str, path: &str, size: &str, frames: usize, out: &std::path::Path) -> Result<()> {
+pub(crate) fn stress(
+    scene: &str,
+    path: &str,
+    size: &str,
+    frames: usize,
+    out: &std::path::Path,
+    save_frames: bool,
+) -> Result<()> {
     use sylva::bench::stress;
     let (w, h) = parse_size(size)?;
     // The path once at 200 frames, then forwards and back for --frames.
@@ -126,14 +133,17 @@ pub(crate) fn stress(scene: &str, path: &str, size: &str, frames: usize, out: &s
     let cameras = stress::ping_pong(&pass, frames.max(2));
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let started = std::time::Instant::now();
-    let (records, summary) = stress::run(scene, &cameras, period, w, h, RenderSettings::default(), &mut |i, n| {
-        if i % 50 == 0 || i + 1 == n {
-            let done = (i + 1) as f64;
-            let eta = started.elapsed().as_secs_f64() / done * (n as f64 - done);
-            let bar = "#".repeat((i + 1) * 30 / n.max(1));
-            eprint!("\r[{bar:<30}] frame {}/{n}, ~{eta:.0} s left   ", i + 1);
-        }
-    })?;
+    let frames_dir = out.join("frames");
+    let holes = save_frames.then_some(stress::HoleCheck { dir: frames_dir.as_path(), every: 10 });
+    let (records, summary) =
+        stress::run(scene, &cameras, period, (w, h), RenderSettings::default(), holes, &mut |i, n| {
+            if i % 50 == 0 || i + 1 == n {
+                let done = (i + 1) as f64;
+                let eta = started.elapsed().as_secs_f64() / done * (n as f64 - done);
+                let bar = "#".repeat((i + 1) * 30 / n.max(1));
+                eprint!("\r[{bar:<30}] frame {}/{n}, ~{eta:.0} s left   ", i + 1);
+            }
+        })?;
     eprintln!();
     stress::write(out, &records, &summary)?;
     let mb = |b: u64| b as f64 / 1e6;
@@ -152,6 +162,14 @@ pub(crate) fn stress(scene: &str, path: &str, size: &str, frames: usize, out: &s
         mb(summary.bytes_fetched),
         summary.non_finite_frames
     );
+    if save_frames {
+        eprintln!(
+            "holes (streamed frame lighter than settled where the settled one is covered): at most {:.2} % of the pixels over {} frames of the first pass; frames in {}",
+            summary.hole_fraction_max * 100.0,
+            summary.holes.len(),
+            frames_dir.display()
+        );
+    }
     eprintln!("wrote stress.csv and stress.json to {}", out.display());
     if !summary.passed {
         bail!("stress run failed: the median resident set grew more than 10 % from the second pass to the last, frame time grew more than 25 %, or a frame was not finite");
