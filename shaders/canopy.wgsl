@@ -29,6 +29,10 @@ struct CanopyRaster {
     height_max: f32,
     // Pool slot of the cells.
     slot: u32,
+    // 1: trees the view wants here are not resident; the raster stands in
+    // for them at full cover.
+    stand_in: u32,
+    pad: u32,
 };
 
 // Where in the crown the canopy surface lies (share of the tree height above the ground).
@@ -88,7 +92,8 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     // the cover grows by side · cot θ (format::canopy).
     let cot = min(length(centre.xy) / max(-centre.z, 1e-3), 8.0);
     let cover = 1.0 - exp(-min(-log(max(1.0 - top_cover, 1e-3)), 8.0) * (1.0 + side * cot));
-    let w = canopy_weight(h_px, view);
+    // Standing in for trees still on their way: all of their cover.
+    let w = select(canopy_weight(h_px, view), 1.0, r.stand_in != 0u);
     // Trees keep (1 − w) of their cover; the canopy adds what makes it `cover`:
     // (1 − w)c + (1 − (1 − w)c)·a = c.
     let alpha = cover * w / max(1.0 - (1.0 - w) * cover, 1e-3);

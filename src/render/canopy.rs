@@ -33,6 +33,11 @@ pub struct GpuCanopyRaster {
     pub height_max: f32,
     /// Pool slot of the cells.
     pub slot: u32,
+    /// 1: trees the view wants here are not resident, the raster stands in
+    /// for them at full cover (`CanopyDraw::stand_in`); 0: cross-faded.
+    pub stand_in: u32,
+    /// Padding to the WGSL struct's 8-byte alignment.
+    pub pad: u32,
 }
 
 /// The pool's buffers (made when a scene first draws a raster).
@@ -196,6 +201,8 @@ impl CanopyPass {
                 z_span: c.z_range_m[1] - c.z_range_m[0],
                 height_max: c.height_max_m,
                 slot,
+                stand_in: u32::from(d.stand_in),
+                pad: 0,
             });
         }
         if !records.is_empty() {

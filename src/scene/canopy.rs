@@ -8,7 +8,11 @@
 //! missing ones, nearest first); otherwise it is drawn. Children cover exactly
 //! the trees of their parent's square, so the cut never draws a tree's canopy
 //! twice. A raster whose every tree projects above `px_hi` (trees drawn whole)
-//! is neither drawn nor refined. Memory is bounded by
+//! is neither drawn nor refined — unless trees the view wants there are not
+//! resident yet (a tile still loading, an index node not read, a tile given up
+//! on or beyond the pools' reach): then the raster *stands in* for them at full
+//! cover, refined like any other, so a view streaming in shows the forest, not
+//! bare ground. Memory is bounded by
 //! [`CanopyTree::max_resident`] rasters (least recently used evicted, never the
 //! root nor one used this frame).
 
@@ -31,6 +35,19 @@ pub struct CanopyDraw {
     pub key: CanopyKey,
     /// Its data.
     pub canopy: Arc<Canopy>,
+    /// Trees the view wants in its square are not resident: drawn at full
+    /// cover whatever the trees' size.
+    pub stand_in: bool,
+}
+
+/// Whether the square `[x0, y0] + size` meets any of `gaps` (`[x0, y0, x1, y1]`).
+fn meets_gap(o: [f64; 2], size: f64, gaps: &[[f32; 4]]) -> bool {
+    gaps.iter().any(|g| {
+        f64::from(g[0]) < o[0] + size
+            && o[0] < f64::from(g[2])
+            && f64::from(g[1]) < o[1] + size
+            && o[1] < f64::from(g[3])
+    })
 }
 
 #[derive(Debug, Clone)]
@@ -150,7 +167,8 @@ impl CanopyTree {
     /// Selects the rasters to draw for `view` (eye at `eye_m` relative to the
     /// scene origin), refining while cells project above `cell_px` pixels
     /// (`px_per_m`: pixels per metre at 1 m, × quality); appends the rasters to
-    /// fetch, nearest first.
+    /// fetch, nearest first. `gaps` (`[x0, y0, x1, y1]`, metres) are where
+    /// trees the view wants are not resident: rasters meeting one stand in.
     #[allow(clippy::too_many_arguments)]
     pub fn select(
         &mut self,
@@ -159,6 +177,7 @@ impl CanopyTree {
         px_per_m: f32,
         cell_px: f32,
         px_hi: f32,
+        gaps: &[[f32; 4]],
         draws: &mut Vec<CanopyDraw>,
         wanted: &mut Vec<(f32, CanopyKey)>,
     ) {
@@ -179,13 +198,14 @@ impl CanopyTree {
             if let Some(Slot::Resident { used, .. }) = self.slots.get_mut(&key) {
                 *used = frame;
             }
-            if low * px_per_m / far.max(1e-3) >= px_hi {
+            let (l, x, y) = key;
+            let stand_in = !gaps.is_empty() && meets_gap(self.entry.origin_of(l, x, y), self.entry.size_m(l), gaps);
+            if low * px_per_m / far.max(1e-3) >= px_hi && !stand_in {
                 continue; // every tree here is drawn whole
             }
-            let (l, x, y) = key;
             // The canopy shows only where its shortest trees are below px_hi:
-            // nearer than that its cells' size does not matter.
-            let shown_from = low * px_per_m / px_hi;
+            // nearer than that its cells' size does not matter (unless it stands in).
+            let shown_from = if stand_in { 0.0 } else { low * px_per_m / px_hi };
             let cell_on_screen = canopy.cell_m() * px_per_m / d.max(shown_from).max(1e-3);
             if cell_on_screen > cell_px && canopy.children != 0 && l + 1 < self.entry.levels {
                 let mut ready = true;
@@ -216,7 +236,7 @@ impl CanopyTree {
                     continue;
                 }
             }
-            draws.push(CanopyDraw { key, canopy });
+            draws.push(CanopyDraw { key, canopy, stand_in });
         }
         wanted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         self.stack = stack;

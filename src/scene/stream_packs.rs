@@ -153,6 +153,12 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
+    /// Whether trees of species `s` can be drawn: its billboards (or the whole
+    /// pack) are on the GPU.
+    pub(super) fn species_drawable(&self, s: usize) -> bool {
+        self.packs.get(s).is_some_and(|l| l.whole || l.have[0])
+    }
+
     pub(super) fn request_packs(&mut self, residency: &impl Residency, now_s: f64) {
         self.collect_needed_species();
         let needed = std::mem::take(&mut self.needed);

@@ -431,6 +431,9 @@ pub struct SceneStream<F: Fetcher> {
     canopy_gate: Option<CanopyGate>,
     canopy: Option<CanopyTree>,
     canopy_draws: Vec<CanopyDraw>,
+    /// Where trees the view wants are not resident (`[x0, y0, x1, y1]`): the
+    /// canopy stands in there.
+    canopy_gaps: Vec<[f32; 4]>,
     canopy_wanted: Vec<(f32, CanopyKey)>,
     canopy_attempts: HashMap<CanopyKey, (u32, f64)>,
     /// When the stream first waited for the root canopy raster.
@@ -560,6 +563,7 @@ impl<F: Fetcher> SceneStream<F> {
             canopy_gate: None,
             canopy: None,
             canopy_draws: Vec::new(),
+            canopy_gaps: Vec::new(),
             canopy_wanted: Vec::new(),
             canopy_attempts: HashMap::new(),
             canopy_wait_from: None,
@@ -859,6 +863,9 @@ impl<F: Fetcher> SceneStream<F> {
     /// the index walk's gate (where the canopy alone draws the trees).
     fn select_canopy(&mut self, view: &ViewData) {
         self.canopy_wanted.clear();
+        if self.canopy_view.is_some() && self.canopy.is_some() {
+            self.collect_canopy_gaps();
+        }
         let (Some(cv), Some(tree)) = (self.canopy_view, self.canopy.as_mut()) else {
             self.canopy_draws.clear();
             self.canopy_gate = None;
@@ -870,7 +877,16 @@ impl<F: Fetcher> SceneStream<F> {
         let mut cell_px = cv.cell_px;
         for _ in 0..8 {
             self.canopy_wanted.clear();
-            tree.select(view, eye, px_per_m, cell_px, cv.px_hi, &mut self.canopy_draws, &mut self.canopy_wanted);
+            tree.select(
+                view,
+                eye,
+                px_per_m,
+                cell_px,
+                cv.px_hi,
+                &self.canopy_gaps,
+                &mut self.canopy_draws,
+                &mut self.canopy_wanted,
+            );
             if self.canopy_draws.len() <= super::canopy::MAX_CANOPY_DRAWS {
                 break;
             }
@@ -888,6 +904,28 @@ impl<F: Fetcher> SceneStream<F> {
                 *due = f64::INFINITY;
             }
         }
+    }
+
+    /// Where trees the view wants cannot be drawn yet, into `canopy_gaps`.
+    fn collect_canopy_gaps(&mut self) {
+        // Gaps (from the last walk): wanted tiles not resident or of a species
+        // whose billboards are not on the GPU yet, index nodes in view not read.
+        let rect = |b: &crate::format::Bounds| [b.min[0], b.min[1], b.max[0], b.max[1]];
+        let mut gaps = std::mem::take(&mut self.canopy_gaps);
+        gaps.clear();
+        for &(_, t) in &self.walk_tiles {
+            let drawable = match self.tiles.get(t) {
+                Some(TileState::Resident { species, .. }) => species.iter().all(|&s| self.species_drawable(s as usize)),
+                _ => false,
+            };
+            if !drawable {
+                gaps.push(rect(&self.index.tiles[t].bounds));
+            }
+        }
+        for &(_, n) in &self.walk_nodes {
+            gaps.push(rect(&self.index.nodes[n].bounds));
+        }
+        self.canopy_gaps = gaps;
     }
 
     /// Requests wanted canopy rasters, nearest first, within the in-flight budget.

@@ -716,3 +716,62 @@ fn a_lost_canopy_raster_is_retried_then_its_parent_drawn() {
     assert!(s.failures().iter().any(|f| f.url.ends_with("canopy/0/0_0.cnpy")), "{:?}", s.failures());
     assert!(s.fetcher.log.iter().any(|(u, _)| u.ends_with(".tile")), "trees instead");
 }
+
+#[test]
+fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
+    let canopy = CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 };
+    let far = Camera::look_at(DVec3::new(0.0, -40_000.0, 20_000.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+    let near = Camera::look_at(DVec3::new(0.0, -400.0, 200.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
+    let mut s = stream(StreamConfig::default());
+    s.set_canopy_view(Some(canopy));
+    let mut r = FakeResidency::new(1 << 20);
+    // From afar the rasters come in, no tile.
+    let t = run(&mut s, &mut r, &far, 1e6, 0.0, 0.1, 24);
+    assert!(s.is_settled() && r.used == 0);
+    // Close up, with nothing answered: every tree would be drawn whole, but
+    // none is here, so the rasters over the wanted tiles stand in for them.
+    s.fetcher.hold = true;
+    let t = run(&mut s, &mut r, &near, 1e6, t, 0.1, 4);
+    assert!(!s.canopy_draws().is_empty(), "bare ground while the trees load");
+    assert!(s.canopy_draws().iter().all(|d| d.stand_in));
+    assert!(!s.canopy_gaps.is_empty(), "the index nodes in view are not read yet");
+    let covered = |s: &SceneStream<FakeFetcher>, t: usize| {
+        let b = &s.index.tiles[t].bounds;
+        let c = [f64::from(b.min[0] + b.max[0]) * 0.5, f64::from(b.min[1] + b.max[1]) * 0.5];
+        s.canopy_draws().iter().any(|d| {
+            let (o, size) = (d.canopy.origin_m, f64::from(d.canopy.size_m));
+            let o = [f64::from(o[0]), f64::from(o[1])];
+            o[0] <= c[0] && c[0] <= o[0] + size && o[1] <= c[1] && c[1] <= o[1] + size
+        })
+    };
+    // As the nodes and then the tiles come in, every wanted tile not yet
+    // resident has its stand-in; once all are in, the canopy gives way to them.
+    s.fetcher.hold = false;
+    let (mut t, mut checked) = (t, 0);
+    for _ in 0..24 {
+        t = run(&mut s, &mut r, &near, 1e6, t, 0.1, 1);
+        for &w in &s.wanted {
+            if !matches!(s.tiles[w], TileState::Resident { .. }) {
+                assert!(covered(&s, w), "wanted tile {} has no stand-in", s.index.tiles[w].url);
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 0, "no frame had a wanted tile loading");
+    assert!(s.is_settled() && r.used > 0);
+    assert!(s.canopy_draws().is_empty(), "{} rasters drawn over resident trees", s.canopy_draws().len());
+
+    // A species whose pack cannot be read: its trees are drawn by the canopy.
+    let mut s = stream(StreamConfig::default());
+    s.set_canopy_view(Some(canopy));
+    let mut r = FakeResidency::new(1 << 20);
+    run(&mut s, &mut r, &far, 1e6, 0.0, 0.1, 24);
+    let species: Vec<String> = s.manifest().unwrap().species.iter().map(|e| e.pack.clone()).collect();
+    for pack in &species {
+        let key = pack.rsplit('/').next().unwrap().to_string();
+        s.fetcher.fail.insert(key, VecDeque::from([FetchError::Status { url: pack.clone(), status: 404 }]));
+    }
+    run(&mut s, &mut r, &near, 1e6, 2.4, 0.1, 24);
+    assert!(r.used > 0, "the trees are resident");
+    assert!(!s.canopy_draws().is_empty() && s.canopy_draws().iter().all(|d| d.stand_in), "their canopy stands in");
+}
