@@ -10,9 +10,10 @@
 //! `1 − exp(−Σ area / cell area)` (crowns overlapping at random).
 //!
 //! Memory is bounded whatever the tree count: squares are visited depth first,
-//! each tile is read once (the finest squares are whole tiles or more, aligned
-//! with them) and adds to the rasters on the path to it only, and a raster is
-//! written when its square is done.
+//! each tile is read once and adds to the rasters on the path to it only, and
+//! a raster is written when its square is done. Where tiles are wider than 64
+//! finest cells (sparse inventories: 4 km tiles), the levels go on below a
+//! tile: its trees, read once, are split among the sub-squares.
 
 use std::path::Path;
 
@@ -230,9 +231,10 @@ fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<Ca
 
 /// Writes the canopy quadtree of `tiles` (tiles of `tile_m` metres) into
 /// `dir/canopy` and gives the manifest's entry. Its root covers the index's
-/// root square of tiles; the finest level's rasters are the smallest squares
-/// of whole tiles at least 64 cells of `finest_cell_m` wide
-/// ([`sylva::format::canopy::FINEST_CELL_M`] by default).
+/// root square of tiles; each level halves the square, down to the smallest
+/// squares at least 64 cells of `finest_cell_m` wide
+/// ([`sylva::format::canopy::FINEST_CELL_M`] by default) — below a tile's
+/// square where tiles are wider than that.
 ///
 /// # Errors
 /// A tile that cannot be read, or a file that cannot be written.
@@ -245,7 +247,8 @@ pub fn write_quadtree(
 ) -> Result<CanopyEntry> {
     let [x0, y0, size] = sylva::format::index::tile_square(tiles);
     let mut levels = 1u8;
-    while (size >> levels) >= 1 && ((size >> levels) as f64) * tile_m >= f64::from(CANOPY_CELLS) * finest_cell_m {
+    let root_m = size as f64 * tile_m;
+    while levels < MAX_LEVELS && root_m / f64::from(1u32 << levels) >= f64::from(CANOPY_CELLS) * finest_cell_m {
         levels += 1;
     }
     let mut entry = CanopyEntry {
@@ -286,6 +289,14 @@ impl Walk<'_> {
                     self.trees.iter().for_each(|tree| acc.add(tree));
                 }
             }
+        } else if self.tile_square[2] >> (level + 1) == 0 {
+            // One tile's square, split further: its trees among the sub-squares.
+            let mut trees = Vec::new();
+            for t in tiles {
+                tile_trees(self.dir, t, self.looks, &mut self.trees)?;
+                trees.extend_from_slice(&self.trees);
+            }
+            children = self.split(level, x, y, &trees)?;
         } else {
             // The children's squares in tile coordinates: half this one's side.
             let half = self.tile_square[2] >> (level + 1);
@@ -304,14 +315,56 @@ impl Walk<'_> {
                 }
             }
         }
-        let acc = self.stack.pop().expect("pushed above");
+        self.finish_raster(level, x, y, children)
+    }
+
+    /// Writes the raster on top of the stack.
+    fn finish_raster(&mut self, level: u8, x: u32, y: u32, children: u8) -> Result<()> {
+        let acc = self.stack.pop().expect("pushed by the caller");
         let url = self.entry.raster_url(level, x, y);
         let bytes = write(self.dir, &url, &acc.finish(children))?;
         self.entry.rasters += 1;
         self.entry.bytes += bytes;
         Ok(())
     }
+
+    /// Below a tile: the children of raster `(level, x, y)` from `trees` (all
+    /// inside its square, by trunk), written depth first; gives the child bits.
+    fn split(&mut self, level: u8, x: u32, y: u32, trees: &[CanopyTree]) -> Result<u8> {
+        let size = self.entry.size_m(level + 1);
+        let [ox, oy] = self.entry.origin_of(level, x, y);
+        let mut children = 0u8;
+        for i in 0..4u32 {
+            let (qx, qy) = (ox + f64::from(i & 1) * size, oy + f64::from(i >> 1) * size);
+            // Trunks on the middle lines go east and north; on the outer edges stay in.
+            let inside = |v: f32, lo: f64, first: bool| {
+                let v = f64::from(v);
+                (first || v >= lo) && (!first || v < lo + size)
+            };
+            let part: Vec<CanopyTree> =
+                trees.iter().copied().filter(|t| inside(t.x, qx, i & 1 == 0) && inside(t.y, qy, i >> 1 == 0)).collect();
+            if part.is_empty() {
+                continue;
+            }
+            children |= 1 << i;
+            let (cl, cx, cy) = (level + 1, 2 * x + (i & 1), 2 * y + (i >> 1));
+            self.stack.push(Acc::new(self.entry.origin_of(cl, cx, cy), size));
+            let grand = if cl + 1 >= self.entry.levels {
+                for acc in &mut self.stack {
+                    part.iter().for_each(|tree| acc.add(tree));
+                }
+                0
+            } else {
+                self.split(cl, cx, cy, &part)?
+            };
+            self.finish_raster(cl, cx, cy, grand)?;
+        }
+        Ok(children)
+    }
 }
+
+/// Most levels a canopy quadtree has (finest cells of 15 m over 7,800 km).
+const MAX_LEVELS: u8 = 16;
 
 fn write(dir: &Path, url: &str, canopy: &Canopy) -> Result<u64> {
     let bytes = canopy.encode();

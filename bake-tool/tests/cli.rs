@@ -1116,9 +1116,20 @@ fn text_ids_are_reported_and_trees_keep_their_row() {
 /// crowns cover, every level agreeing on a uniform stand.
 #[test]
 fn canopy_rasters_cover_what_the_crowns_cover() {
-    use sylva::format::canopy::Canopy;
     let Some(model) = oak_model() else { return };
     let dir = tmp("canopy");
+    // Tiles of 64 m (the finest rasters hold several), and of 1,024 m (wider
+    // than 64 finest cells: the levels go on below a tile, its trees split).
+    canopy_case(&model, &dir.join("narrow"), "2");
+    canopy_case(&model, &dir.join("wide"), "32");
+    // A bad --canopy-cell is refused.
+    let e = fails(bin().args(["demo", "--trees", "10", "--canopy-cell", "0.5"]).arg("--out").arg(dir.join("x")));
+    assert!(e.contains("--canopy-cell") && e.contains("1–10,000 m"), "{e}");
+}
+
+fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
+    use sylva::format::canopy::Canopy;
+    std::fs::create_dir_all(dir).unwrap();
     // A uniform stand (30 × 40 trees 8 m apart, 12 m tall) in the west, an empty
     // band, and a sparse row of trees 740 m to the east.
     let mut csv = String::from("id,x,y,z,height\n");
@@ -1144,7 +1155,7 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
         .arg(format!("oak={}", model.display()))
         .arg("--placements")
         .arg(&path)
-        .args(["--no-clusters", "--billboard-size", "64", "--texture-size", "16", "--tile-cells", "2"])
+        .args(["--no-clusters", "--billboard-size", "64", "--texture-size", "16", "--tile-cells", tile_cells])
         .args(["--index-node-tiles", "4", "--canopy-cell", "8"])
         .args(flags)
         .arg("--out")
@@ -1152,8 +1163,15 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
     assert_eq!(m.version, 8);
     let e = m.canopy.clone().expect("a canopy entry");
-    // 1,024 m of 64 m tiles: the root's cells 16 m, the finest (512 m squares) 8 m.
-    assert_eq!((e.levels, e.cells, e.root_size_m), (2, 64, 1024.0), "{e:?}");
+    // The finest squares 512 m (64 cells of 8 m): 1,024 m of 64 m tiles in two
+    // levels; 1,024 m tiles split once or twice below a tile.
+    let tile_m = 32.0 * tile_cells.parse::<f64>().unwrap();
+    assert_eq!((e.cells, e.size_m(e.levels - 1)), (64, 512.0), "{e:?}");
+    if tile_m < 512.0 {
+        assert_eq!((e.levels, e.root_size_m), (2, 1024.0), "{e:?}");
+    } else {
+        assert!(e.size_m(e.levels - 1) < tile_m && e.levels >= 2, "{e:?}");
+    }
     // Every raster the root's child bits name exists, with the square its key names.
     let mut rasters: Vec<((u8, u32, u32), Canopy)> = Vec::new();
     let mut stack = vec![(0u8, 0u32, 0u32)];
@@ -1180,7 +1198,10 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
     let v = inspect_json(&out);
     assert_eq!((v["canopy"]["rasters"].as_u64(), v["canopy"]["finest_cell_m"].as_f64()), (Some(e.rasters), Some(8.0)));
     let text = String::from_utf8_lossy(&run(bin().arg("inspect").arg(&out)).stdout).into_owned();
-    assert!(text.contains(&format!("canopy rasters: {} in 2 levels, finest cells 8.0 m", e.rasters)), "{text}");
+    assert!(
+        text.contains(&format!("canopy rasters: {} in {} levels, finest cells 8.0 m", e.rasters, e.levels)),
+        "{text}"
+    );
     assert!(rasters.len() >= 3, "the root and the squares with trees: {}", rasters.len());
     // Cells whose square lies inside the stand, or inside the empty band.
     let (ox, oy) = (m.origin_m[0], m.origin_m[1]);
@@ -1240,9 +1261,6 @@ fn canopy_rasters_cover_what_the_crowns_cover() {
     let (lo, hi) = stand_covers.iter().fold((1.0f32, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
     assert!(lo > 0.2 && hi < 0.95, "stand cover {lo}–{hi}");
     assert!(hi - lo < 0.03, "levels disagree on the stand's cover: {stand_covers:?}");
-    // A bad --canopy-cell is refused.
-    let e = fails(bin().args(["demo", "--trees", "10", "--canopy-cell", "0.5"]).arg("--out").arg(dir.join("x")));
-    assert!(e.contains("--canopy-cell") && e.contains("1–10,000 m"), "{e}");
 }
 
 /// `demo --layout country` (issue 20): trees generated block by block into

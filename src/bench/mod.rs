@@ -248,6 +248,8 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             ),
             "sylva" => m(base, 1),
             "sylva-plain-alpha" => m(RenderSettings { adaptive_alpha: false, ..base }, 1),
+            // Trees at every size, no canopy rasters (scenes that have them).
+            "sylva-no-canopy" => m(RenderSettings { canopy: false, ..base }, 1),
             "sylva-converged" => Method {
                 refine: Some(RefineConfig { enabled: true, ..RefineConfig::default() }),
                 ..m(base, 1)
@@ -258,7 +260,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
             other => bail!(
                 "unknown method {other:?}: use reference, mesh, mesh-plain-alpha, per-tree, billboard, impostor, billboard-cloud, ellipsoid, sylva, sylva-plain-alpha, \
-                 sylva-converged, sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
+                 sylva-no-canopy, sylva-converged, sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
             ),
         })
     };
@@ -271,6 +273,7 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "billboard-cloud",
             "ellipsoid",
             "sylva",
+            "sylva-no-canopy",
             "sylva-converged",
             "sylva-q0.5",
             "sylva-q0.25",
@@ -720,7 +723,7 @@ mod tests {
         assert!(m[1..].iter().all(|m| m.reference == Some(0)));
         // Shadowed methods are measured against the shadowed reference.
         let all = methods("all", ShadowQuality::Off).unwrap();
-        assert_eq!(all.len(), 14);
+        assert_eq!(all.len(), 15);
         // Only sylva-converged refines; the plain-alpha comparisons parse.
         let refined: Vec<&str> = all.iter().filter(|m| m.refine.is_some()).map(|m| m.name.as_str()).collect();
         assert_eq!(refined, ["sylva-converged"]);

@@ -66,7 +66,7 @@ pub(crate) enum Command {
     /// frames: writes frames.csv, summary.json and SVG plots (pareto,
     /// frame_time, temporal_noise) into --out.
     #[command(
-        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-converged (refined at rest), sylva-q0.5,\n  sylva-q0.25, sylva-shadows-low, sylva-shadows-high, or all; mesh-plain-alpha and\n  sylva-plain-alpha (without adaptive transparency) for comparison.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
+        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-no-canopy (trees at every size, no canopy\n  rasters), sylva-converged (refined at rest), sylva-q0.5,\n  sylva-q0.25, sylva-shadows-low, sylva-shadows-high, or all; mesh-plain-alpha and\n  sylva-plain-alpha (without adaptive transparency) for comparison.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
     )]
     Bench {
         /// Scene directory, scene.json path or http(s) URL.

@@ -49,8 +49,8 @@ pub const CANOPY_CELL_BYTES: usize = 8;
 pub const CANOPY_CELLS: u32 = 64;
 /// Most cells per side a file may have.
 pub const MAX_CANOPY_CELLS: u32 = 1024;
-/// The finest level's cells are about this wide (metres), unless tiles are wider
-/// than 64 of them (then a tile's side / 64).
+/// The finest level's cells are about this wide (metres); where tiles are wider
+/// than 64 of them the levels go on below a tile.
 pub const FINEST_CELL_M: f64 = 15.0;
 /// Most levels of the quadtree.
 pub const MAX_CANOPY_LEVELS: u8 = 24;
