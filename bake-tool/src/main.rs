@@ -538,12 +538,26 @@ fn demo(args: &DemoArgs) -> Result<()> {
         resolution_m: bake::ground_material::FLOOR_RESOLUTION_M,
         source: "demo forest floor, stream and meadows".into(),
     });
+    let cell_size_m = args.pack.cell_size(&trees)?;
+    bake_demo(args, out, started, (terrain, imagery), species, TreeSource::Memory(trees), cell_size_m)
+}
+
+/// Bakes a demo scene (valley or country) from its ground, species and trees.
+fn bake_demo(
+    args: &DemoArgs,
+    out: OutDir,
+    started: Instant,
+    (terrain, imagery): (Option<bake::terrain::TerrainSource<'_>>, Option<bake::imagery::ImagerySource<'_>>),
+    species: Vec<(String, gltf_import::ImportedModel)>,
+    trees: TreeSource,
+    cell_size_m: u32,
+) -> Result<()> {
     let input = SceneInput {
         terrain,
         imagery,
-        cell_size_m: args.pack.cell_size(&trees)?,
+        cell_size_m,
         species,
-        trees: TreeSource::Memory(trees),
+        trees,
         crs: Crs::projected(demo::DEMO_EPSG)?,
         origin_m: demo::DEMO_ORIGIN,
         tile_cells: args.pack.tile_cells,
@@ -625,25 +639,7 @@ fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Result<()> {
         resolution_m: 8.0,
         source: "synthetic country: sea, lakes, fields, woods".into(),
     });
-    let input = SceneInput {
-        terrain,
-        imagery,
-        cell_size_m,
-        species,
-        trees: source,
-        crs: Crs::projected(demo::DEMO_EPSG)?,
-        origin_m: demo::DEMO_ORIGIN,
-        tile_cells: args.pack.tile_cells,
-        pack: args.pack.options()?,
-        debug_dump: args.pack.debug_dump.clone(),
-        shard: args.pack.shard,
-        index_node_tiles: args.pack.index_node_tiles,
-        canopy_cell_m: args.pack.canopy_cell,
-        attributes: None,
-    };
-    let s = bake::bake_scene(&input, out, &log)?;
-    report_summary(&s, &args.output.out, started);
-    Ok(())
+    bake_demo(args, out, started, (terrain, imagery), species, source, cell_size_m)
 }
 
 fn bench_clusters(model: Option<&std::path::Path>, leaves: Option<usize>, tries: usize) -> Result<()> {

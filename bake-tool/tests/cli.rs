@@ -11,6 +11,17 @@ fn inspect_json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// `merge` of `dir/part-0` and `dir/part-1` into `dir/merged` (6 tiles a node).
+fn merge_two_parts(dir: &Path) {
+    run(bin()
+        .arg("merge")
+        .arg(dir.join("part-0"))
+        .arg(dir.join("part-1"))
+        .arg("--out")
+        .arg(dir.join("merged"))
+        .args(["--index-node-tiles", "6"]));
+}
+
 /// The shared ez-tree oak, or `None` (with a note) where `../shared/data` is absent.
 fn oak_model() -> Option<std::path::PathBuf> {
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
@@ -427,13 +438,7 @@ fn a_bake_larger_than_memory_streams_through_bucket_files_with_the_same_result()
     // Shards stream too, and merge to the same scene.
     bake("part-0", &["--bucket-trees", "3000", "--shard", "0/2"]);
     bake("part-1", &["--bucket-trees", "3000", "--shard", "1/2"]);
-    run(bin()
-        .arg("merge")
-        .arg(dir.join("part-0"))
-        .arg(dir.join("part-1"))
-        .arg("--out")
-        .arg(dir.join("merged"))
-        .args(["--index-node-tiles", "6"]));
+    merge_two_parts(&dir);
     assert_eq!(snapshot(&dir.join("memory")), snapshot(&dir.join("merged")), "sharded + streamed = single");
 }
 
@@ -1292,13 +1297,7 @@ fn a_country_streams_through_bucket_files_and_shows_land_sea_and_forest() {
     assert_eq!(csv.lines().count(), 60_001, "a header and every tree");
     demo("part-0", &["--bucket-trees", "15000", "--shard", "0/2"]);
     demo("part-1", &["--bucket-trees", "15000", "--shard", "1/2"]);
-    run(bin()
-        .arg("merge")
-        .arg(dir.join("part-0"))
-        .arg(dir.join("part-1"))
-        .arg("--out")
-        .arg(dir.join("merged"))
-        .args(["--index-node-tiles", "6"]));
+    merge_two_parts(&dir);
     assert_eq!(snapshot(&dir.join("one")), snapshot(&dir.join("merged")), "sharded = single");
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(dir.join("one/scene.json")).unwrap()).unwrap();
     assert_eq!(m.counts.trees, 60_000);
