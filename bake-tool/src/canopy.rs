@@ -363,7 +363,8 @@ impl Walk<'_> {
     }
 }
 
-/// Most levels a canopy quadtree has (finest cells of 15 m over 7,800 km).
+/// Most levels a canopy quadtree has (finest squares of 960 m, cells of 15 m,
+/// under a root of up to 31,000 km).
 const MAX_LEVELS: u8 = 16;
 
 fn write(dir: &Path, url: &str, canopy: &Canopy) -> Result<u64> {

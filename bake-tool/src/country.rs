@@ -15,7 +15,9 @@
 //! fixed first (its share of the whole, from the forest field sampled on a
 //! coarse grid, distributed so the total is exact), then its trees are drawn by
 //! rejection from the field with a generator seeded by the block, so the result
-//! does not depend on the order or the thread that makes a block.
+//! does not depend on the order or the thread that makes a block. One row of
+//! blocks is in memory at a time (about 67 MB of trees at 10^8, growing with
+//! the square root of the count).
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -71,9 +73,11 @@ pub struct Site {
 }
 
 impl Country {
-    /// A country holding exactly `trees` trees (≥ 1).
-    #[must_use]
-    pub fn new(trees: u64, seed: u64) -> Self {
+    /// A country holding `trees` trees (≥ 1).
+    ///
+    /// # Errors
+    /// The land drawn for this seed and size has no forest at all.
+    pub fn new(trees: u64, seed: u64) -> anyhow::Result<Self> {
         // The square's share covered by the forest field, measured at a first
         // guess and the size corrected (it barely changes with size).
         let mut share = 0.17;
@@ -86,8 +90,13 @@ impl Country {
             share = measured;
             country = Self::sized(trees, seed, share);
         }
+        if country.means.iter().sum::<f64>() <= 0.0 {
+            anyhow::bail!(
+                "the country drawn for seed {seed} and {trees} trees has no forest to put them in: try another --seed or more --trees"
+            );
+        }
         country.distribute(trees);
-        country
+        Ok(country)
     }
 
     fn sized(trees: u64, seed: u64, share: f64) -> Self {
@@ -130,7 +139,7 @@ impl Country {
         let mut rest: Vec<(f64, usize)> = Vec::new();
         let mut given = 0u64;
         for (b, m) in self.means.iter().enumerate() {
-            let want = if total > 0.0 { trees as f64 * m / total } else { trees as f64 / self.means.len() as f64 };
+            let want = trees as f64 * m / total;
             let n = want.floor() as u64;
             given += n;
             counts.push(n as u32);
@@ -256,17 +265,12 @@ impl Country {
     #[must_use]
     pub fn row(&self, row: usize, first_id: u64) -> Vec<SceneTree> {
         let start = row * self.blocks;
-        let mut ids = first_id;
-        let firsts: Vec<u64> = (start..start + self.blocks)
-            .map(|b| {
-                let id = ids;
-                ids += u64::from(self.counts[b]);
-                id
-            })
-            .collect();
-        let blocks: Vec<Vec<SceneTree>> =
-            (start..start + self.blocks).into_par_iter().zip(firsts).map(|(b, id)| self.block(b, id)).collect();
-        blocks.concat()
+        let blocks: Vec<Vec<SceneTree>> = (start..start + self.blocks).into_par_iter().map(|b| self.block(b)).collect();
+        let mut trees = blocks.concat();
+        for (k, t) in trees.iter_mut().enumerate() {
+            t.id = first_id + k as u64;
+        }
+        trees
     }
 
     /// Trees in block row `row`.
@@ -275,7 +279,9 @@ impl Country {
         self.counts[row * self.blocks..(row + 1) * self.blocks].iter().map(|&n| u64::from(n)).sum()
     }
 
-    fn block(&self, b: usize, first_id: u64) -> Vec<SceneTree> {
+    /// Block `b`'s trees (ids set by [`Self::row`]); fewer than its count only
+    /// where its forest is too scarce for the draws to find (reported by the caller).
+    fn block(&self, b: usize) -> Vec<SceneTree> {
         let n = self.counts[b] as usize;
         let (x0, y0) = self.corner(b);
         let peak = f64::from(self.peaks[b]).max(1e-6);
@@ -318,7 +324,7 @@ impl Country {
                 aspect: 1.0,
                 yaw_rad: rng.range(0.0, std::f32::consts::TAU),
                 variation: (rng.next_u64() % 32) as u8,
-                id: first_id + trees.len() as u64,
+                id: 0,
                 row: 0,
             });
         }
@@ -332,7 +338,7 @@ mod tests {
 
     #[test]
     fn the_country_holds_the_count_exactly_on_land_in_every_species() {
-        let c = Country::new(300_000, 3);
+        let c = Country::new(300_000, 3).unwrap();
         assert_eq!(c.trees(), 300_000);
         let mut all = Vec::new();
         for row in 0..c.blocks() {
@@ -352,12 +358,12 @@ mod tests {
         }
         assert!(species.iter().all(|&n| n > 3000), "{species:?}");
         // Same seed, same trees (rows are made by several threads).
-        assert_eq!(Country::new(300_000, 3).row(c.blocks() / 2, 0), c.row(c.blocks() / 2, 0));
+        assert_eq!(Country::new(300_000, 3).unwrap().row(c.blocks() / 2, 0), c.row(c.blocks() / 2, 0));
     }
 
     #[test]
     fn the_country_is_land_and_sea_forest_and_fields() {
-        let c = Country::new(2_000_000, 1);
+        let c = Country::new(2_000_000, 1).unwrap();
         // 10^6 trees at ~500 a hectare in closed stands: a few km across.
         assert!(c.half_m > 4_000.0 && c.half_m < 20_000.0, "{}", c.half_m);
         let n = 200;

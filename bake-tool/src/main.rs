@@ -578,7 +578,7 @@ fn bake_demo(
 fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Result<()> {
     let trees = args.trees as u64;
     log(&format!("demo: a country of {trees} trees, seed {}", args.seed));
-    let land = country::Country::new(trees, args.seed);
+    let land = country::Country::new(trees, args.seed)?;
     let side_km = land.half_m / 500.0;
     log(&format!("country: {side_km:.0} × {side_km:.0} km, {} blocks of {} m", land.blocks().pow(2), country::BLOCK_M));
     let species = demo::demo_models(args.seed);
@@ -619,6 +619,9 @@ fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Result<()> {
                 t0.elapsed().as_secs_f64()
             ));
         }
+    }
+    if made < trees {
+        log(&format!("country: {made} trees placed, not {trees}: some blocks' forest was too scarce for their share"));
     }
     if let Some(w) = csv.take() {
         let path = w.finish()?;

@@ -98,6 +98,9 @@ pub struct HoleFrame {
     /// exceeds the settled frame's by more than [`HOLE_LUMA`]: ground or sky
     /// showing where the settled frame draws the forest.
     pub fraction: f64,
+    /// The share darker by as much: forest drawn twice (trees and a canopy
+    /// standing in over them), or forest where the settled frame has none.
+    pub darker: f64,
 }
 
 /// Luminance difference (sRGB 0–255) that counts a pixel as a hole: on the
@@ -106,14 +109,16 @@ pub struct HoleFrame {
 /// forest should be in 14–68 %.
 pub const HOLE_LUMA: f64 = 15.0;
 
-/// The share of pixels of `streamed` lighter than `settled` by [`HOLE_LUMA`] (RGBA8).
+/// The shares of pixels of `streamed` lighter and darker than `settled` by
+/// [`HOLE_LUMA`] (RGBA8).
 #[must_use]
-pub fn hole_fraction(streamed: &[u8], settled: &[u8]) -> f64 {
+pub fn hole_fraction(streamed: &[u8], settled: &[u8]) -> (f64, f64) {
     let luma = |p: &[u8]| 0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]);
-    let n = streamed.len().min(settled.len()) / 4;
-    let holes =
-        streamed.chunks_exact(4).zip(settled.chunks_exact(4)).filter(|(a, b)| luma(a) > luma(b) + HOLE_LUMA).count();
-    holes as f64 / n.max(1) as f64
+    let n = (streamed.len().min(settled.len()) / 4).max(1) as f64;
+    let pairs = || streamed.chunks_exact(4).zip(settled.chunks_exact(4));
+    let lighter = pairs().filter(|(a, b)| luma(a) > luma(b) + HOLE_LUMA).count();
+    let darker = pairs().filter(|(a, b)| luma(a) + HOLE_LUMA < luma(b)).count();
+    (lighter as f64 / n, darker as f64 / n)
 }
 
 /// Resident set size of this process in bytes (Linux; 0 elsewhere).
@@ -211,7 +216,8 @@ pub fn run(
             settled.render(&cam, false);
             let reference = settled.read_image();
             save(h.dir, format!("{i:05}-settled.png"), &reference)?;
-            summary.holes.push(HoleFrame { frame: i, fraction: hole_fraction(&img, &reference) });
+            let (fraction, darker) = hole_fraction(&img, &reference);
+            summary.holes.push(HoleFrame { frame: i, fraction, darker });
         }
         summary.hole_fraction_max = summary.holes.iter().map(|f| f.fraction).fold(0.0, f64::max);
     }
@@ -294,10 +300,10 @@ mod tests {
         let forest = [30u8, 60, 30, 255];
         let field = [180u8, 170, 110, 255];
         let settled = [forest, forest, forest, field].concat();
-        assert_eq!(hole_fraction(&settled, &settled), 0.0);
-        // Ground where the forest should be: a hole; forest over a field: not one.
+        assert_eq!(hole_fraction(&settled, &settled), (0.0, 0.0));
+        // Ground where the forest should be: a hole; forest over a field: darker.
         let streamed = [field, forest, forest, forest].concat();
-        assert_eq!(hole_fraction(&streamed, &settled), 0.25);
+        assert_eq!(hole_fraction(&streamed, &settled), (0.25, 0.25));
     }
 
     #[test]

@@ -164,9 +164,10 @@ pub(crate) fn stress(
     );
     if save_frames {
         eprintln!(
-            "holes (streamed frame lighter than settled where the settled one is covered): at most {:.2} % of the pixels over {} frames of the first pass; frames in {}",
+            "holes (streamed frame lighter than settled where the settled one is covered): at most {:.2} % of the pixels over {} frames of the first pass (darker: at most {:.2} %); frames in {}",
             summary.hole_fraction_max * 100.0,
             summary.holes.len(),
+            summary.holes.iter().map(|f| f.darker * 100.0).fold(0.0, f64::max),
             frames_dir.display()
         );
     }

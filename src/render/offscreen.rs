@@ -209,7 +209,13 @@ impl<F: Fetcher> OffscreenScene<F> {
             let target = cam.eye_m + f * ((guess - cam.eye_m.z) / f.z);
             let (eye, mid) = (cam.eye_m, (cam.eye_m + target) * 0.5);
             let span = (target - eye).truncate().length();
-            let down = Camera { pitch_rad: -std::f64::consts::FRAC_PI_2, eye_m: mid + DVec3::Z * (1.5 * span), ..cam };
+            // Looking down from above the eye and the tallest tree, so the ground is in view.
+            let top = cam.eye_m.z.max(f64::from(manifest.focus().max[2]));
+            let down = Camera {
+                pitch_rad: -std::f64::consts::FRAC_PI_2,
+                eye_m: DVec3::new(mid.x, mid.y, top + 1.5 * span),
+                ..cam
+            };
             self.load_view(&down, timeout_s);
             let at = |s: &Self, p: DVec3| s.stream.ground_height_at(p.x as f32, p.y as f32).map(f64::from);
             if let Some(g) = at(self, target) {

@@ -68,7 +68,8 @@ pub struct CanopyTree {
     entry: CanopyEntry,
     slots: HashMap<CanopyKey, Slot>,
     frame: u64,
-    stack: Vec<CanopyKey>,
+    /// The walk's stack: a raster, and whether it may meet a gap (its parent did).
+    stack: Vec<(CanopyKey, bool)>,
     /// Most rasters kept decoded (32 KB each).
     pub max_resident: usize,
 }
@@ -189,8 +190,8 @@ impl CanopyTree {
         }
         let mut stack = std::mem::take(&mut self.stack);
         stack.clear();
-        stack.push(root);
-        while let Some(key) = stack.pop() {
+        stack.push((root, !gaps.is_empty()));
+        while let Some((key, may_meet)) = stack.pop() {
             let frame = self.frame;
             let Some(Slot::Resident { canopy, low, .. }) = self.slots.get(&key) else { continue };
             let (canopy, low) = (Arc::clone(canopy), *low);
@@ -199,7 +200,8 @@ impl CanopyTree {
                 *used = frame;
             }
             let (l, x, y) = key;
-            let stand_in = !gaps.is_empty() && meets_gap(self.entry.origin_of(l, x, y), self.entry.size_m(l), gaps);
+            // (A raster meets only gaps its parent meets: checked down from the root.)
+            let stand_in = may_meet && meets_gap(self.entry.origin_of(l, x, y), self.entry.size_m(l), gaps);
             if low * px_per_m / far.max(1e-3) >= px_hi && !stand_in {
                 continue; // every tree here is drawn whole
             }
@@ -230,7 +232,7 @@ impl CanopyTree {
                 if ready {
                     for i in 0..4u32 {
                         if canopy.children & (1 << i) != 0 {
-                            stack.push((l + 1, 2 * x + (i & 1), 2 * y + (i >> 1)));
+                            stack.push(((l + 1, 2 * x + (i & 1), 2 * y + (i >> 1)), stand_in));
                         }
                     }
                     continue;

@@ -153,10 +153,15 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    /// Whether trees of species `s` can be drawn: its billboards (or the whole
-    /// pack) are on the GPU.
-    pub(super) fn species_drawable(&self, s: usize) -> bool {
-        self.packs.get(s).is_some_and(|l| l.whole || l.have[0])
+    /// Whether trees of species `s` can be drawn (its billboards, or the whole
+    /// pack, are on the GPU) and, if not, whether they may still come (not
+    /// given up on).
+    pub(super) fn species_drawable(&self, s: usize) -> (bool, bool) {
+        match self.packs.get(s) {
+            Some(l) if l.whole || l.have[0] => (true, false),
+            Some(l) => (false, l.head != Load::Broken && l.parts[0] != Load::Broken),
+            None => (false, false),
+        }
     }
 
     pub(super) fn request_packs(&mut self, residency: &impl Residency, now_s: f64) {

@@ -908,22 +908,43 @@ impl<F: Fetcher> SceneStream<F> {
 
     /// Where trees the view wants cannot be drawn yet, into `canopy_gaps`.
     fn collect_canopy_gaps(&mut self) {
-        // Gaps (from the last walk): wanted tiles not resident or of a species
-        // whose billboards are not on the GPU yet, index nodes in view not read.
-        let rect = |b: &crate::format::Bounds| [b.min[0], b.min[1], b.max[0], b.max[1]];
+        // Gaps (from the last walk): wanted tiles not resident, or with a species
+        // whose billboards are still on their way, or none of whose species can
+        // be drawn (a tile with one species given up on and others drawn is not
+        // one: the canopy would darken the drawn trees twice); index nodes in
+        // view not read. As squares of the tile grid the bake sorts trunks by
+        // (the trees' bounds reach past them by the crowns, into the
+        // neighbouring rasters).
+        let Some(m) = &self.manifest else { return };
+        let tile_m = m.cell_size_m * m.tile_cells as f32;
+        let square = |x: i32, y: i32| {
+            let (x, y) = (x as f32, y as f32);
+            [x * tile_m, y * tile_m, (x + 1.0) * tile_m, (y + 1.0) * tile_m]
+        };
+        // A node's trunk squares: its bounds rounded to the grid (crowns reach
+        // less than half a tile past their trunks' squares).
+        let snap = |b: &crate::format::Bounds| {
+            let r = |v: f32| (v / tile_m).round() * tile_m;
+            [r(b.min[0]), r(b.min[1]), r(b.max[0]), r(b.max[1])]
+        };
         let mut gaps = std::mem::take(&mut self.canopy_gaps);
         gaps.clear();
         for &(_, t) in &self.walk_tiles {
-            let drawable = match self.tiles.get(t) {
-                Some(TileState::Resident { species, .. }) => species.iter().all(|&s| self.species_drawable(s as usize)),
-                _ => false,
+            let gap = match self.tiles.get(t) {
+                Some(TileState::Resident { species, .. }) => {
+                    // (No allocation: the steady-state frame allocates nothing.)
+                    let state = |k: &u32| self.species_drawable(*k as usize);
+                    species.iter().any(|k| state(k).1) || species.iter().all(|k| !state(k).0)
+                }
+                _ => true,
             };
-            if !drawable {
-                gaps.push(rect(&self.index.tiles[t].bounds));
+            if gap {
+                let e = &self.index.tiles[t];
+                gaps.push(square(e.x, e.y));
             }
         }
         for &(_, n) in &self.walk_nodes {
-            gaps.push(rect(&self.index.nodes[n].bounds));
+            gaps.push(snap(&self.index.nodes[n].bounds));
         }
         self.canopy_gaps = gaps;
     }

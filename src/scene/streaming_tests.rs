@@ -735,6 +735,13 @@ fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
     assert!(!s.canopy_draws().is_empty(), "bare ground while the trees load");
     assert!(s.canopy_draws().iter().all(|d| d.stand_in));
     assert!(!s.canopy_gaps.is_empty(), "the index nodes in view are not read yet");
+    // Gaps are squares of the tile grid (the trunks'), not the crowns' bounds,
+    // which reach into the neighbouring rasters.
+    let m = s.manifest().unwrap();
+    let tile_m = m.cell_size_m * m.tile_cells as f32;
+    for g in &s.canopy_gaps {
+        assert!(g.iter().all(|v| (v / tile_m - (v / tile_m).round()).abs() < 1e-4), "{g:?} off the {tile_m} m grid");
+    }
     let covered = |s: &SceneStream<FakeFetcher>, t: usize| {
         let b = &s.index.tiles[t].bounds;
         let c = [f64::from(b.min[0] + b.max[0]) * 0.5, f64::from(b.min[1] + b.max[1]) * 0.5];
@@ -774,4 +781,27 @@ fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
     run(&mut s, &mut r, &near, 1e6, 2.4, 0.1, 24);
     assert!(r.used > 0, "the trees are resident");
     assert!(!s.canopy_draws().is_empty() && s.canopy_draws().iter().all(|d| d.stand_in), "their canopy stands in");
+    let all_lost = s.canopy_draws().len();
+
+    // One species given up on among others drawn: tiles holding a drawn
+    // species are not stood in for (their drawn trees would darken twice).
+    let mut s = stream(StreamConfig::default());
+    s.set_canopy_view(Some(canopy));
+    let mut r = FakeResidency::new(1 << 20);
+    run(&mut s, &mut r, &far, 1e6, 0.0, 0.1, 24);
+    let pack = s.manifest().unwrap().species[0].pack.clone();
+    let key = pack.rsplit('/').next().unwrap().to_string();
+    s.fetcher.fail.insert(key, VecDeque::from([FetchError::Status { url: pack, status: 404 }]));
+    run(&mut s, &mut r, &near, 1e6, 2.4, 0.1, 24);
+    assert!(s.is_settled());
+    for &t in &s.wanted {
+        let TileState::Resident { species, .. } = &s.tiles[t] else { panic!("tile {t} resident") };
+        let e = &s.index.tiles[t];
+        let square = [e.x as f32, e.y as f32];
+        let gap = s.canopy_gaps.iter().any(|g| {
+            (g[0] / (g[2] - g[0]) - square[0]).abs() < 1e-3 && (g[1] / (g[3] - g[1]) - square[1]).abs() < 1e-3
+        });
+        assert_eq!(gap, species.iter().all(|&k| k == 0), "{}: species {species:?}", e.url);
+    }
+    assert!(s.canopy_draws().len() <= all_lost);
 }
