@@ -70,6 +70,22 @@ fn neighbour_empty(r: CanopyRaster, n: vec2<i32>) -> bool {
     return (word.x >> 24u) == 0u;
 }
 
+// The canopy surface of cell `n` of raster `r` (metres) and 1, or 0 and 0
+// where it holds no crowns or lies outside the raster.
+fn neighbour_surface(r: CanopyRaster, n: vec2<i32>) -> vec2<f32> {
+    let size = i32(r.cells);
+    if n.x < 0 || n.y < 0 || n.x >= size || n.y >= size {
+        return vec2<f32>(0.0);
+    }
+    let word = cells[r.slot * r.cells * r.cells + u32(n.y) * r.cells + u32(n.x)];
+    if (word.x >> 24u) == 0u {
+        return vec2<f32>(0.0);
+    }
+    let height = f32(word.y & 0xffu) / 255.0 * r.height_max;
+    let ground = r.z_min + f32(word.y >> 16u) / 65535.0 * r.z_span;
+    return vec2<f32>(ground + CANOPY_SURFACE * height, 1.0);
+}
+
 @vertex
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     var out: VertexOut;
@@ -120,15 +136,24 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     // Per axis: the corner's side faces away from the eye (far) or towards it (near).
     let far = (corner - 0.5) * vec2<f32>(step) > vec2<f32>(0.0);
     var rise = 0.0;
+    // Between two stands' cells of different heights the lower one's surface
+    // would show the ground through the step: a near edge above its (lower)
+    // neighbour towards the eye comes down to it.
+    var bridge = 0.0;
     for (var a = 0; a < 2; a++) {
         var n = cell_i;
         let toward = select(-step[a], step[a], far[a]);
         n[a] += toward;
         if neighbour_empty(r, n) {
             rise += select(-CANOPY_SURFACE, 1.0 - CANOPY_SURFACE, far[a]) * share[a];
+        } else if !far[a] {
+            let s = neighbour_surface(r, n);
+            if s.y > 0.5 && s.x < z {
+                bridge += (s.x - z) * share[a];
+            }
         }
     }
-    let local = vec3<f32>((ij + corner) * cell_m, z + rise * height);
+    let local = vec3<f32>((ij + corner) * cell_m, z + rise * height + bridge);
     let pos = eye_relative(vec3<f32>(r.origin_m, 0.0), local, view);
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
     return out;
