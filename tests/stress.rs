@@ -25,8 +25,16 @@ fn memory_stays_flat_along_a_long_path() {
     let pass = bench::interpolate(&bench::named_path(NamedPath::Flyover, &manifest, None), 16);
     let period = 2 * (pass.len() - 1);
     let cameras = stress::ping_pong(&pass, 4 * period);
-    let (frames, summary) =
-        stress::run(SCENE, &cameras, period, (160, 90), RenderSettings::default(), None, &mut |_, _| {}).unwrap();
+    let (frames, summary) = stress::run(
+        SCENE,
+        &cameras,
+        period,
+        (160, 90),
+        (RenderSettings::default(), PoolConfig::default()),
+        None,
+        &mut |_, _| {},
+    )
+    .unwrap();
     assert_eq!(frames.len(), 4 * period);
     assert_eq!(summary.non_finite_frames, 0);
     assert!(frames.iter().any(|f| f.drawn > 0), "nothing was drawn");

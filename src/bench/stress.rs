@@ -34,6 +34,10 @@ pub struct StressFrame {
     pub drawn: u64,
     /// Bytes fetched so far.
     pub bytes_fetched: u64,
+    /// The pools are full of wanted tiles (the reach is shortened).
+    pub pools_full: bool,
+    /// Tiles trimmed to fewer prefix levels so far (eviction by prefix).
+    pub tiles_trimmed: u64,
 }
 
 /// What a stress run found (`stress.json`).
@@ -68,6 +72,10 @@ pub struct StressSummary {
     pub bytes_fetched: u64,
     /// Frames whose counters were not finite (must be 0).
     pub non_finite_frames: usize,
+    /// Frames whose pools were full of wanted tiles (the reach shortened).
+    pub pools_full_frames: usize,
+    /// Tiles trimmed to fewer prefix levels over the run (eviction by prefix).
+    pub tiles_trimmed: u64,
     /// With a [`HoleCheck`]: frames of the first pass and their share of
     /// pixels where the streamed frame is lighter than the settled one.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -158,7 +166,7 @@ pub fn run(
     cameras: &[Camera],
     period: usize,
     (width, height): (u32, u32),
-    settings: RenderSettings,
+    (settings, pools): (RenderSettings, PoolConfig),
     holes: Option<HoleCheck<'_>>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<StressFrame>, StressSummary)> {
@@ -170,8 +178,7 @@ pub fn run(
         std::fs::create_dir_all(h.dir).with_context(|| format!("cannot create {}", h.dir.display()))?;
     }
     let mut judged = Vec::new();
-    let mut off = OffscreenScene::open(scene, width, height, PoolConfig::default())
-        .with_context(|| format!("opening {scene}"))?;
+    let mut off = OffscreenScene::open(scene, width, height, pools).with_context(|| format!("opening {scene}"))?;
     off.settings = settings;
     if let Some(first) = cameras.first() {
         off.load_view(first, 120.0);
@@ -198,6 +205,8 @@ pub fn run(
             tiles_resident: s.tiles_resident,
             drawn: s.instances.values().sum(),
             bytes_fetched: s.bytes_fetched,
+            pools_full: s.degraded.get("pools_full").is_some_and(|v| v == &serde_json::Value::Bool(true)),
+            tiles_trimmed: s.tiles_trimmed,
         });
         if let Some(h) = holes.filter(|h| i <= period / 2 && i % h.every.max(1) == 0) {
             let img = off.read_image();
@@ -257,6 +266,8 @@ pub fn summarise(frames: &[StressFrame], non_finite_frames: usize, trees_total: 
         trees_total,
         bytes_fetched: frames.last().map_or(0, |f| f.bytes_fetched),
         non_finite_frames,
+        pools_full_frames: frames.iter().filter(|f| f.pools_full).count(),
+        tiles_trimmed: frames.last().map_or(0, |f| f.tiles_trimmed),
         holes: Vec::new(),
         hole_fraction_max: 0.0,
         passed: memory_flat && time_flat && non_finite_frames == 0,
@@ -270,11 +281,11 @@ pub fn summarise(frames: &[StressFrame], non_finite_frames: usize, trees_total: 
 pub fn write(dir: &Path, frames: &[StressFrame], summary: &StressSummary) -> Result<()> {
     use std::fmt::Write as _;
     let mut s =
-        String::from("frame,gpu_ms,cpu_ms,rss_bytes,gpu_bytes,trees_resident,tiles_resident,drawn,bytes_fetched\n");
+        String::from("frame,gpu_ms,cpu_ms,rss_bytes,gpu_bytes,trees_resident,tiles_resident,drawn,bytes_fetched,pools_full,tiles_trimmed\n");
     for f in frames {
         writeln!(
             s,
-            "{},{:.3},{:.4},{},{},{},{},{},{}",
+            "{},{:.3},{:.4},{},{},{},{},{},{},{},{}",
             f.frame,
             f.gpu_ms,
             f.cpu_ms,
@@ -283,7 +294,9 @@ pub fn write(dir: &Path, frames: &[StressFrame], summary: &StressSummary) -> Res
             f.trees_resident,
             f.tiles_resident,
             f.drawn,
-            f.bytes_fetched
+            f.bytes_fetched,
+            u8::from(f.pools_full),
+            f.tiles_trimmed
         )?;
     }
     std::fs::write(dir.join("stress.csv"), s).with_context(|| format!("writing {}", dir.display()))?;

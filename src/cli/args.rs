@@ -100,6 +100,11 @@ pub(crate) enum Command {
         /// (writes stress.csv, stress.json).
         #[arg(long, conflicts_with = "replot")]
         stress: bool,
+        /// --stress: the instance pool's size in trees (default 4,194,304; the
+        /// browser viewer holds 2,097,152): a smaller device, whose pools the
+        /// path fills (eviction and trimming by prefix, shortened reach).
+        #[arg(long, value_name = "TREES", requires = "stress", value_parser = clap::value_parser!(u32).range(4096..))]
+        pool_trees: Option<u32>,
         /// Half width of the cross-fade bands for every method but the
         /// reference, as a fraction of each threshold (the fade sweep).
         #[arg(long, default_value_t = 0.12)]

@@ -124,8 +124,10 @@ pub(crate) fn stress(
     frames: usize,
     out: &std::path::Path,
     save_frames: bool,
+    pool_trees: Option<u32>,
 ) -> Result<()> {
     use sylva::bench::stress;
+    use sylva::render::forest::PoolConfig;
     let (w, h) = parse_size(size)?;
     // The path once at 200 frames, then forwards and back for --frames.
     let pass = path_cameras(scene, path, 200)?;
@@ -135,8 +137,9 @@ pub(crate) fn stress(
     let started = std::time::Instant::now();
     let frames_dir = out.join("frames");
     let holes = save_frames.then_some(stress::HoleCheck { dir: frames_dir.as_path(), every: 10 });
+    let pools = pool_trees.map_or_else(PoolConfig::default, |n| PoolConfig { instances: n, ..PoolConfig::default() });
     let (records, summary) =
-        stress::run(scene, &cameras, period, (w, h), RenderSettings::default(), holes, &mut |i, n| {
+        stress::run(scene, &cameras, period, (w, h), (RenderSettings::default(), pools), holes, &mut |i, n| {
             if i % 50 == 0 || i + 1 == n {
                 let done = (i + 1) as f64;
                 let eta = started.elapsed().as_secs_f64() / done * (n as f64 - done);
@@ -171,6 +174,10 @@ pub(crate) fn stress(
             frames_dir.display()
         );
     }
+    eprintln!(
+        "pools: full in {} frames (reach shortened), {} tile trims to fewer prefix levels",
+        summary.pools_full_frames, summary.tiles_trimmed
+    );
     eprintln!("wrote stress.csv and stress.json to {}", out.display());
     if !summary.passed {
         bail!("stress run failed: the median resident set grew more than 10 % from the second pass to the last, frame time grew more than 25 %, or a frame was not finite");

@@ -331,11 +331,12 @@ impl TilePrefix {
 
 impl TilePrefix {
     /// The batches as the file has them (whole counts, no [`BATCH_PARTIAL`];
-    /// instance offsets those of the resident trees), while levels are missing;
-    /// empty for a whole tile.
+    /// instance offsets those of the resident trees) of a file in levels (what
+    /// decides the levels a view wants, more or fewer); empty for a file
+    /// without levels.
     #[must_use]
     pub fn whole_batches(&self) -> Vec<GpuBatch> {
-        if self.levels >= self.of {
+        if self.of <= 1 {
             return Vec::new();
         }
         let mask = BATCH_PARTIAL | (u32::MAX << PARTIAL_COUNT_SHIFT);

@@ -76,9 +76,9 @@ struct StyleState {
     header: Option<(u64, u64)>,
     /// The style bytes (one per pool instance) as uploaded.
     bytes: Vec<u8>,
-    /// Per resident tile (number, first instance): the style generation its
+    /// Per resident tile (number, instance range): the style generation its
     /// bytes were made with and its data's state then (pending, ready, broken).
-    written: std::collections::HashMap<(usize, u32), (u64, u8)>,
+    written: std::collections::HashMap<(usize, u32, u32), (u64, u8)>,
 }
 
 /// The frustum of pixel `px` of `view` (eye-relative planes, as [`ViewData::frustum`]).
@@ -289,7 +289,8 @@ impl<F: Fetcher> Frame<F> {
         let mut present = std::collections::HashSet::new();
         for (t, range, runs, data) in self.stream.resident_tree_data() {
             use crate::scene::streaming::TreeDataState as S;
-            let key = (t, range.start);
+            // (A tile grown or trimmed in place holds other trees at the same start.)
+            let key = (t, range.start, range.end);
             present.insert(key);
             let state = (
                 st.generation,

@@ -39,6 +39,8 @@ pub struct FrameStats {
     pub bytes_fetched: u64,
     /// Of them, tile bytes (whole tiles or prefix levels).
     pub tile_bytes_fetched: u64,
+    /// Times a resident tile was trimmed to fewer prefix levels to make room.
+    pub tiles_trimmed: u64,
     /// Requests started so far (manifest, index nodes, tiles, packs).
     pub requests: u64,
     /// Tiles known so far (flat list, or leaves of the index nodes read).
@@ -126,6 +128,7 @@ impl FrameStats {
             tiles_loading: s.loading,
             bytes_fetched: s.bytes_fetched,
             tile_bytes_fetched: s.tile_bytes_fetched,
+            tiles_trimmed: s.tiles_trimmed,
             requests: s.requests,
             tiles_known: s.tiles_known,
             tiles_total: stream.manifest().map_or(0, |m| m.counts.tiles),

@@ -154,12 +154,14 @@ enum TileState {
 struct Prefix {
     /// Levels held.
     levels: u32,
-    /// The file's bytes so far, kept while more levels may come (appended to,
-    /// never fetched again).
+    /// The file's bytes up to the levels held, kept while the tile is resident
+    /// (a file in levels): more levels are appended (never fetched again), and
+    /// eviction by prefix decodes fewer levels from them.
     bytes: Vec<u8>,
     /// [`crate::format::tile::TilePrefix::runs`]: resident instance → index in the tile.
     runs: std::sync::Arc<Vec<[u32; 3]>>,
-    /// The tile's whole batches while more levels may come (what decides them).
+    /// The tile's whole batches (what decides the levels a view wants; empty
+    /// for a file without levels).
     batches: Vec<GpuBatch>,
     /// The request for the next levels.
     more: Load,
@@ -353,6 +355,9 @@ pub struct StreamStats {
     pub canopy_drawn: u64,
     /// Bytes of canopy rasters received.
     pub canopy_bytes_fetched: u64,
+    /// Times a resident tile was trimmed to fewer prefix levels to make room
+    /// (eviction by prefix).
+    pub tiles_trimmed: u64,
 }
 
 /// Where a picked tree's data is: its tile's files and its index in the tile.
@@ -1377,7 +1382,7 @@ impl<F: Fetcher> SceneStream<F> {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
                     batches: held.whole_batches(),
-                    bytes: if held.levels < held.of { bytes } else { Vec::new() },
+                    bytes: if held.of > 1 { bytes } else { Vec::new() },
                     more: Load::Idle,
                 });
                 let species = slot.species_counts.iter().map(|(s, _)| *s).collect();
@@ -1494,7 +1499,7 @@ impl<F: Fetcher> SceneStream<F> {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
                     batches: held.whole_batches(),
-                    bytes: if held.levels < held.of { bytes } else { Vec::new() },
+                    bytes: if held.of > 1 { bytes } else { Vec::new() },
                     more: Load::Idle,
                 };
             }
@@ -1543,12 +1548,70 @@ impl<F: Fetcher> SceneStream<F> {
                 d(*a).total_cmp(&d(*b))
             })
             .map(|(i, _)| i);
-        let Some(v) = victim else { return false };
+        let Some(v) = victim else { return self.trim_one(residency, view, keep) };
         if let TileState::Resident { slot, .. } =
             std::mem::replace(&mut self.tiles[v], TileState::NotResident(Load::Idle))
         {
             residency.evict_tile(slot);
         }
+        true
+    }
+
+    /// Eviction by prefix: trims the farthest resident tile (never `keep`) that
+    /// holds more prefix levels than the view draws of it down to the levels it
+    /// draws. Its kept bytes are decoded again up to that level's end and
+    /// uploaded in place of the old copy (whose room is given back first); the
+    /// bytes beyond are dropped, so the tile grows again by range from there.
+    /// False when no tile holds more than the view draws.
+    fn trim_one(&mut self, residency: &mut impl Residency, view: &ViewData, keep: Option<usize>) -> bool {
+        let Some(thin) = self.prefix_view else { return false };
+        let Some(m) = &self.manifest else { return false };
+        let species_count = m.species.len() as u32;
+        let eye = view.eye_hi + view.eye_lo;
+        let mut victim: Option<(f32, usize, u32)> = None;
+        for (i, state) in self.tiles.iter().enumerate() {
+            let TileState::Resident { prefix, .. } = state else { continue };
+            let Some(ends) = self.index.tiles[i].levels.as_ref().map(|l| &l.bytes) else { continue };
+            // Only a tile whose bytes are all kept (a file with other levels than its entry lists is not).
+            if Some(i) == keep
+                || prefix.levels < 2
+                || ends.get(prefix.levels as usize - 1) != Some(&(prefix.bytes.len() as u64))
+            {
+                continue;
+            }
+            // (Levels may end at the same byte: a trim must free some.)
+            let want = batch_levels_wanted(view, &prefix.batches, ends.len() as u32, Some(thin));
+            if want >= prefix.levels || ends[want as usize - 1] >= prefix.bytes.len() as u64 {
+                continue;
+            }
+            let d = tile_distance(&self.index.tiles[i].bounds, eye);
+            if victim.is_none_or(|(far, _, _)| d > far) {
+                victim = Some((d, i, want));
+            }
+        }
+        let Some((_, t, want)) = victim else { return false };
+        let url = join(&self.base, &self.index.tiles[t].url);
+        let end = self.index.tiles[t].levels.as_ref().map_or(0, |l| l.bytes[want as usize - 1]) as usize;
+        let TileState::Resident { slot, prefix, .. } = &mut self.tiles[t] else { return false };
+        residency.evict_tile(slot.clone());
+        let trimmed = Tile::decode_prefix(&url, &prefix.bytes[..end], species_count).map_err(|e| e.to_string());
+        match trimmed.and_then(|held| residency.upload_tile(&held.tile).map(|s| (held, s)).map_err(|e| e.to_string())) {
+            Ok((held, new_slot)) => {
+                *slot = new_slot;
+                prefix.bytes.truncate(end);
+                prefix.bytes.shrink_to_fit();
+                prefix.levels = held.levels;
+                prefix.runs = std::sync::Arc::new(held.runs());
+                prefix.more = Load::Idle;
+            }
+            // Cannot happen (a prefix of bytes that decoded, into the room of a
+            // bigger copy): the tile is fetched anew later.
+            Err(message) => {
+                self.events.push(StreamEvent::Failed { url, message, retrying: true });
+                self.tiles[t] = TileState::NotResident(Load::Idle);
+            }
+        }
+        self.stats.tiles_trimmed += 1;
         true
     }
 

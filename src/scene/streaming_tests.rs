@@ -618,6 +618,93 @@ fn tiles_fetch_the_prefix_the_view_draws_and_no_byte_twice() {
     assert!(s.requests.is_empty());
 }
 
+/// Tile index → prefix levels held, of every resident tile.
+fn held_levels(s: &SceneStream<FakeFetcher>) -> HashMap<usize, u32> {
+    (s.tiles.iter().enumerate())
+        .filter_map(|(i, t)| match t {
+            TileState::Resident { prefix, .. } => Some((i, prefix.levels)),
+            TileState::NotResident(_) => None,
+        })
+        .collect()
+}
+
+#[test]
+fn full_pools_trim_tiles_to_the_prefix_the_view_draws_and_they_grow_back_by_range() {
+    let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0 };
+    // A small screen, so trees thin across the fixture: the south view holds the
+    // south tiles whole and the north ones in part, the north view the other way round.
+    let near = Camera::look_at(DVec3::new(0.0, -300.0, 60.0), DVec3::new(0.0, 0.0, 20.0)).view_data(96, 54);
+    let far = Camera::look_at(DVec3::new(0.0, 300.0, 60.0), DVec3::new(0.0, 0.0, 20.0)).view_data(96, 54);
+    let held_alone = |view: &ViewData| {
+        let mut s = stream(StreamConfig::default());
+        s.set_prefix_view(Some(thin));
+        let mut r = FakeResidency::new(1 << 20);
+        run(&mut s, &mut r, view, 1e6, 0.0, 0.1, 16);
+        assert!(s.is_settled() && s.within_reach == s.wanted.len());
+        r.used
+    };
+    let (near_n, far_n) = (held_alone(&near), held_alone(&far));
+    // Room for either view alone, not for the near view's tiles whole and the far view's prefixes.
+    let cap = near_n.max(far_n) + 8;
+    let mut s = stream(StreamConfig::default());
+    s.set_prefix_view(Some(thin));
+    let mut r = FakeResidency::new(cap);
+    let mut t = run(&mut s, &mut r, &near, 1e6, 0.0, 0.1, 16);
+    assert!(s.is_settled() && s.within_reach == s.wanted.len(), "the near view fits");
+    let before = held_levels(&s);
+    s.drain_events();
+    t = run(&mut s, &mut r, &far, 1e6, t, 0.1, 24);
+    assert!(s.is_settled(), "the far view settles");
+    let events = s.drain_events();
+    let full =
+        events.iter().find(|e| matches!(e, StreamEvent::Failed { message, .. } if message.contains("pools are full")));
+    assert!(full.is_none(), "trimming made room: {full:?}");
+    assert_eq!(s.within_reach, s.wanted.len(), "every tile the far view wants is within reach");
+    assert!(r.used <= cap);
+    let after = held_levels(&s);
+    let trimmed: Vec<usize> =
+        after.iter().filter(|(i, l)| before.get(i).is_some_and(|b| *l < b)).map(|(i, _)| *i).collect();
+    assert!(!trimmed.is_empty() && s.stats().tiles_trimmed >= trimmed.len() as u64, "{before:?} -> {after:?}");
+    // What is held still covers what the cull pass draws of every wanted tile.
+    for &i in &s.wanted {
+        let entry = s.index.tiles[i].clone();
+        let TileState::Resident { prefix, .. } = &s.tiles[i] else { panic!("{} resident", entry.url) };
+        for (b, n) in oracle_counts(&entry, &far, thin) {
+            let held = level_prefix(&b, prefix.levels - 1, crate::format::tile::TILE_LEVELS);
+            assert!(
+                n <= held,
+                "{}: draws {n} of a batch, holds {held} ({} levels, wants {}, more {:?}, {}/{} used)",
+                entry.url,
+                prefix.levels,
+                batch_levels_wanted(&far, &prefix.batches, 7, Some(thin)),
+                prefix.more,
+                r.used,
+                cap
+            );
+        }
+    }
+    // Back near: the trimmed tiles grow again by range from where they were cut.
+    let logged = s.fetcher.log.len();
+    run(&mut s, &mut r, &near, 1e6, t, 0.1, 24);
+    assert!(s.is_settled() && s.within_reach == s.wanted.len(), "the near view fits again");
+    let mut grown = 0;
+    for &i in &trimmed {
+        let entry = &s.index.tiles[i];
+        let ends = &entry.levels.as_ref().unwrap().bytes;
+        let cut = ends[after[&i] as usize - 1];
+        let again: Vec<_> = s.fetcher.log[logged..].iter().filter(|(u, _)| u.ends_with(&entry.url)).collect();
+        if held_levels(&s).get(&i) > Some(&after[&i]) {
+            grown += 1;
+            assert!(
+                again.iter().all(|(_, r)| r.is_some_and(|(a, _)| a >= cut)) && !again.is_empty(),
+                "{} grew from byte {cut}: {again:?}",
+                entry.url
+            );
+        }
+    }
+    assert!(grown > 0, "some trimmed tile grew again");
+}
+
 #[test]
 fn whole_tiles_without_prefix_thinning() {
     let mut s = stream(StreamConfig::default());
