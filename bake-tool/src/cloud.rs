@@ -395,7 +395,7 @@ fn oct(n: Vec3) -> [i8; 2] {
     [(x.clamp(-1.0, 1.0) * 127.0).round() as i8, (y.clamp(-1.0, 1.0) * 127.0).round() as i8]
 }
 
-fn oct_decode(o: [i8; 2]) -> Vec3 {
+pub(crate) fn oct_decode(o: [i8; 2]) -> Vec3 {
     let (x, y) = (f32::from(o[0]) / 127.0, f32::from(o[1]) / 127.0);
     let z = 1.0 - x.abs() - y.abs();
     let t = (-z).max(0.0);

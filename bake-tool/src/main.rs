@@ -21,6 +21,7 @@ mod placements;
 mod reproject;
 mod rng;
 mod scene_write;
+mod tiles3d;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -92,6 +93,21 @@ enum Command {
         /// Width of the finest canopy cells, metres (the value the shards were baked with).
         #[arg(long, default_value_t = FINEST_CELL_M, value_parser = parse_canopy_cell)]
         canopy_cell: f64,
+    },
+    /// Export a baked scene as an OGC 3D Tiles 1.1 tileset (CesiumJS and other
+    /// 3D Tiles viewers): tileset.json with the scene's index as its hierarchy,
+    /// per tile a GLB of coarse meshes refined by one of full meshes, every tree
+    /// an instance (EXT_mesh_gpu_instancing) placed through WGS84.
+    #[command(
+        name = "export-3dtiles",
+        after_help = "Example:\n  sylva-bake export-3dtiles scene/ --out scene-3dtiles/\n  sylva serve scene-3dtiles/   # then load tileset.json in CesiumJS"
+    )]
+    Export3dTiles {
+        /// The baked scene folder (with scene.json).
+        scene: PathBuf,
+        /// A new or empty folder for the tileset (nothing is overwritten).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
     },
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
@@ -429,6 +445,27 @@ fn main() {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
+        Command::Export3dTiles { scene, out } => {
+            let started = Instant::now();
+            let mut last = Instant::now();
+            tiles3d::export(&scene, &out, &mut |r| {
+                if last.elapsed().as_secs_f64() > 2.0 {
+                    log(&format!("exported {} tiles, {} trees…", r.tiles, r.trees));
+                    last = Instant::now();
+                }
+            })
+            .map(|r| {
+                log(&format!(
+                    "wrote {}: tileset.json, {} tiles ({} GLBs), {} trees, {:.2} MB in {:.1} s",
+                    out.display(),
+                    r.tiles,
+                    r.glbs,
+                    r.trees,
+                    r.bytes as f64 / 1e6,
+                    started.elapsed().as_secs_f64()
+                ));
+            })
+        }
         Command::Merge { dirs, output, index_node_tiles, canopy_cell } => {
             let started = Instant::now();
             let out = output.out.clone();

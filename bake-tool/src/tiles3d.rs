@@ -1,0 +1,808 @@
+//! `sylva-bake export-3dtiles`: a baked scene as an OGC 3D Tiles 1.1 tileset
+//! that CesiumJS (or any 3D Tiles viewer) draws (issue 21; `docs/FORMAT.md`,
+//! "3D Tiles export").
+//!
+//! - `tileset.json`: the hierarchy of the scene's index (its nodes, then its
+//!   tiles), each with a `region` bounding volume from its trees' crowns.
+//! - Per Sylva tile, a local east-north-up frame at the tile's centre (its
+//!   `transform`, to Earth-centred Earth-fixed metres on WGS84) and two GLBs in
+//!   it: `tiles/X_Y_coarse.glb` with each species' coarsest mesh level and,
+//!   refining it (`REPLACE`), `tiles/X_Y.glb` with the full meshes. Every tree
+//!   is an instance of its species' mesh (`EXT_mesh_gpu_instancing`:
+//!   translation, rotation about the up axis, scale; the crown aspect widens
+//!   the horizontal axes). Each tree's position goes through the scene CRS to
+//!   WGS84 on its own, so grid convergence and scale factor are exact.
+//! - `meshes/`: each species' mesh levels (one `.bin` per level) and material
+//!   textures (PNG), shared by every GLB that uses them (external URIs).
+//!
+//! Heights are the scene's heights (the bake's terrain or the placements'),
+//! taken as heights over the WGS84 ellipsoid.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use glam::{DVec3, Vec3};
+use image::ImageEncoder as _;
+use serde_json::{json, Value};
+use sylva::format::index::IndexNode;
+use sylva::format::pack::{MeshVertex, PackMeta};
+use sylva::format::{decode_pack, Bounds, Manifest, Tile, TileEntry};
+use sylva::geo::GeoFrame;
+
+/// WGS84 semi-major axis, metres.
+const WGS84_A: f64 = 6_378_137.0;
+/// WGS84 flattening.
+const WGS84_F: f64 = 1.0 / 298.257_223_563;
+/// Cesium's default maximum screen-space error (px): what the geometric errors are scaled for.
+const SSE_PX: f64 = 16.0;
+/// Projected height (px) of a node's tallest tree from which its tiles are shown at all
+/// (there is no far tier of billboards or canopy in the tileset).
+const SHOWN_FROM_PX: f64 = 2.0;
+
+/// What an export wrote.
+#[derive(Debug, Clone, Default)]
+pub struct ExportReport {
+    /// Sylva tiles exported (each one or two GLBs).
+    pub tiles: usize,
+    /// GLB files written.
+    pub glbs: usize,
+    /// Trees exported (instances in the full GLBs).
+    pub trees: u64,
+    /// Bytes written in all.
+    pub bytes: u64,
+}
+
+/// Earth-centred, Earth-fixed metres of a WGS84 point (degrees, metres).
+#[must_use]
+pub fn geodetic_to_ecef(lon_deg: f64, lat_deg: f64, h: f64) -> DVec3 {
+    let e2 = WGS84_F * (2.0 - WGS84_F);
+    let (sl, cl) = lat_deg.to_radians().sin_cos();
+    let (so, co) = lon_deg.to_radians().sin_cos();
+    let n = WGS84_A / (1.0 - e2 * sl * sl).sqrt();
+    DVec3::new((n + h) * cl * co, (n + h) * cl * so, (n * (1.0 - e2) + h) * sl)
+}
+
+/// (lon, lat in degrees, height in metres) of an Earth-centred, Earth-fixed point.
+#[cfg(test)]
+fn ecef_to_geodetic(p: DVec3) -> (f64, f64, f64) {
+    let e2 = WGS84_F * (2.0 - WGS84_F);
+    let lon = p.y.atan2(p.x);
+    let r = p.x.hypot(p.y);
+    let mut lat = p.z.atan2(r * (1.0 - e2));
+    let mut h = 0.0;
+    for _ in 0..8 {
+        let s = lat.sin();
+        let n = WGS84_A / (1.0 - e2 * s * s).sqrt();
+        h = r / lat.cos() - n;
+        lat = p.z.atan2(r * (1.0 - e2 * n / (n + h)));
+    }
+    (lon.to_degrees(), lat.to_degrees(), h)
+}
+
+/// The east-north-up frame at a WGS84 point: (origin, east, north, up) in ECEF.
+#[must_use]
+pub fn enu_frame(lon_deg: f64, lat_deg: f64, h: f64) -> [DVec3; 4] {
+    let (sl, cl) = lat_deg.to_radians().sin_cos();
+    let (so, co) = lon_deg.to_radians().sin_cos();
+    [
+        geodetic_to_ecef(lon_deg, lat_deg, h),
+        DVec3::new(-so, co, 0.0),
+        DVec3::new(-sl * co, -sl * so, cl),
+        DVec3::new(cl * co, cl * so, sl),
+    ]
+}
+
+/// The frame as a 3D Tiles `transform` (column-major 4×4, ENU → ECEF).
+fn transform_json(f: &[DVec3; 4]) -> Value {
+    let [o, e, n, u] = f;
+    json!([e.x, e.y, e.z, 0.0, n.x, n.y, n.z, 0.0, u.x, u.y, u.z, 0.0, o.x, o.y, o.z, 1.0])
+}
+
+/// A tree in its tile's frame, as glTF (y up): translation, rotation about +y, scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExportedTree {
+    /// glTF translation (x east, y up, z south), metres.
+    pub translation: [f32; 3],
+    /// Quaternion `[x, y, z, w]` about +y.
+    pub rotation: [f32; 4],
+    /// Scale `[horizontal, vertical, horizontal]`.
+    pub scale: [f32; 3],
+}
+
+/// Places a tree (`local`: trunk base relative to the scene origin; yaw in the
+/// scene's grid) in the frame `f` through WGS84.
+fn place(geo: &GeoFrame, f: &[DVec3; 4], local: DVec3, yaw: f64, scale: f32, aspect: f32) -> Result<ExportedTree> {
+    let enu = |p: DVec3| -> Result<DVec3> {
+        let (lon, lat, h) = geo.to_geo(p).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let d = geodetic_to_ecef(lon, lat, h) - f[0];
+        Ok(DVec3::new(d.dot(f[1]), d.dot(f[2]), d.dot(f[3])))
+    };
+    let t = enu(local)?;
+    // The model's x axis, one metre along the grid's yaw, as the frame sees it (grid convergence).
+    let ahead = enu(local + DVec3::new(yaw.cos(), yaw.sin(), 0.0))? - t;
+    let theta = ahead.y.atan2(ahead.x);
+    let (s, c) = (theta * 0.5).sin_cos();
+    Ok(ExportedTree {
+        translation: [t.x as f32, t.z as f32, -t.y as f32],
+        rotation: [0.0, s as f32, 0.0, c as f32],
+        scale: [scale * aspect, scale, scale * aspect],
+    })
+}
+
+/// The scene-relative trunk position a glTF translation in frame `f` maps back to.
+///
+/// # Errors
+/// Points the scene's projection cannot take.
+#[cfg(test)]
+fn unplace(geo: &GeoFrame, f: &[DVec3; 4], translation: [f32; 3]) -> Result<DVec3> {
+    let t = DVec3::new(f64::from(translation[0]), -f64::from(translation[2]), f64::from(translation[1]));
+    let p = f[0] + f[1] * t.x + f[2] * t.y + f[3] * t.z;
+    let (lon, lat, h) = ecef_to_geodetic(p);
+    geo.to_local(lon, lat, h).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// One species' mesh level as glTF pieces in its shared `.bin` (y up).
+struct MeshBin {
+    /// `meshes/<file>.bin`, relative to the tileset.
+    uri: String,
+    bytes: u64,
+    vertices: u32,
+    /// (offset, length) of positions, normals, uvs, colours, indices.
+    views: [(u64, u64); 5],
+    pos_min: [f32; 3],
+    pos_max: [f32; 3],
+    /// (material index, first index, index count).
+    draws: Vec<(usize, u32, u32)>,
+}
+
+/// Everything shared of one species.
+struct SpeciesOut {
+    meta: PackMeta,
+    /// Mesh levels by level number (0 and the coarsest).
+    levels: BTreeMap<u32, MeshBin>,
+    /// PNG of each material texture layer used, relative to the tileset.
+    layers: BTreeMap<u32, String>,
+}
+
+fn write_file(path: &Path, bytes: &[u8], report: &mut ExportReport) -> Result<()> {
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
+    report.bytes += bytes.len() as u64;
+    Ok(())
+}
+
+fn mesh_bin(
+    pack: &sylva::format::pack::Pack<'_>,
+    level: u32,
+    file: &str,
+    out: &Path,
+    report: &mut ExportReport,
+) -> Result<MeshBin> {
+    let m = &pack.meta.mesh_levels[level as usize];
+    let verts: Vec<MeshVertex> = pack.mesh_vertices(level);
+    let indices = pack.mesh_indices(level);
+    if verts.len() != m.vertex_count as usize || indices.len() != m.index_count as usize {
+        bail!("{file}: mesh level {level} is missing from its pack");
+    }
+    let (lo, hi) = (Vec3::from(m.pos_min), Vec3::from(m.pos_max));
+    let (ulo, uhi) = (glam::Vec2::from(m.uv_min), glam::Vec2::from(m.uv_max));
+    let mut bin = Vec::with_capacity(verts.len() * 36 + indices.len() * 4);
+    let (mut pmin, mut pmax) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for v in &verts {
+        let q = Vec3::new(v.position[0].into(), v.position[1].into(), v.position[2].into()) / 65535.0;
+        let p = lo + (hi - lo) * q;
+        let y_up = [p.x, p.z, -p.y];
+        for k in 0..3 {
+            pmin[k] = pmin[k].min(y_up[k]);
+            pmax[k] = pmax[k].max(y_up[k]);
+        }
+        bin.extend_from_slice(bytemuck::cast_slice(&y_up));
+    }
+    for v in &verts {
+        let n = crate::cloud::oct_decode([v.normal_oct[0], v.normal_oct[1]]);
+        let n = if n == Vec3::ZERO { Vec3::Z } else { n };
+        bin.extend_from_slice(bytemuck::cast_slice(&[n.x, n.z, -n.y]));
+    }
+    for v in &verts {
+        let uv = ulo + (uhi - ulo) * glam::Vec2::new(v.uv[0].into(), v.uv[1].into()) / 65535.0;
+        bin.extend_from_slice(bytemuck::cast_slice(&[uv.x, uv.y]));
+    }
+    for v in &verts {
+        bin.extend_from_slice(&v.color);
+    }
+    bin.extend_from_slice(bytemuck::cast_slice(&indices));
+    let n = verts.len() as u64;
+    let views = [(0, 12 * n), (12 * n, 12 * n), (24 * n, 8 * n), (32 * n, 4 * n), (36 * n, 4 * indices.len() as u64)];
+    let uri = format!("meshes/{file}.bin");
+    write_file(&out.join(&uri), &bin, report)?;
+    Ok(MeshBin {
+        uri,
+        bytes: bin.len() as u64,
+        vertices: verts.len() as u32,
+        views,
+        pos_min: pmin,
+        pos_max: pmax,
+        draws: m.draws.iter().map(|d| (d.material as usize, d.first_index, d.index_count)).collect(),
+    })
+}
+
+/// Reads species `s`'s pack and writes its meshes (level 0 and the coarsest) and textures.
+fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut ExportReport) -> Result<SpeciesOut> {
+    let entry = &m.species[s];
+    let path = dir.join(&entry.pack);
+    let bytes = std::fs::read(&path).with_context(|| format!("cannot read pack {}", path.display()))?;
+    let pack = decode_pack(&path.display().to_string(), &bytes)?;
+    let meta = pack.meta.clone();
+    if meta.mesh_levels.is_empty() {
+        bail!("{}: the pack has no mesh level to export", path.display());
+    }
+    let stem: String = format!("{s}_{}", entry.name)
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '-' })
+        .collect();
+    let mut levels = BTreeMap::new();
+    let coarsest = meta.mesh_levels.len() as u32 - 1;
+    for level in [0, coarsest] {
+        if !levels.contains_key(&level) {
+            levels.insert(level, mesh_bin(&pack, level, &format!("{stem}_mesh{level}"), out, report)?);
+        }
+    }
+    let mut layers = BTreeMap::new();
+    if let (Some(t), Some(data)) = (&meta.material_texture, pack.section(*b"MTEX", 0)) {
+        let layer_bytes = (t.size * t.size * 4) as usize;
+        for layer in meta.materials.iter().filter_map(|mat| mat.texture_layer) {
+            if layers.contains_key(&layer) {
+                continue;
+            }
+            let at = layer as usize * layer_bytes;
+            let Some(pixels) = data.get(at..at + layer_bytes) else {
+                bail!("{}: texture layer {layer} is missing", path.display())
+            };
+            let mut png = Vec::new();
+            image::codecs::png::PngEncoder::new(&mut png)
+                .write_image(pixels, t.size, t.size, image::ExtendedColorType::Rgba8)
+                .with_context(|| format!("encoding {}'s texture layer {layer}", entry.name))?;
+            let uri = format!("meshes/{stem}_layer{layer}.png");
+            write_file(&out.join(&uri), &png, report)?;
+            layers.insert(layer, uri);
+        }
+    }
+    Ok(SpeciesOut { meta, levels, layers })
+}
+
+/// A glTF document being built: arrays by name, and the GLB's own binary chunk.
+#[derive(Default)]
+struct Gltf {
+    arrays: BTreeMap<&'static str, Vec<Value>>,
+    bin: Vec<u8>,
+}
+
+impl Gltf {
+    fn push(&mut self, array: &'static str, v: Value) -> usize {
+        let a = self.arrays.entry(array).or_default();
+        a.push(v);
+        a.len() - 1
+    }
+
+    /// Appends `data` to the GLB's chunk as a buffer view (4-byte aligned).
+    fn own_view(&mut self, data: &[u8]) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(data);
+        self.push("bufferViews", json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len()}))
+    }
+
+    /// The GLB: header, JSON chunk (space-padded), binary chunk (zero-padded).
+    fn glb(mut self, extensions: &[&str]) -> Vec<u8> {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let mut doc = json!({
+            "asset": {"version": "2.0", "generator": "sylva-bake export-3dtiles"},
+            "scene": 0,
+            "extensionsUsed": extensions,
+            "extensionsRequired": extensions,
+        });
+        let mut buffers = vec![json!({"byteLength": self.bin.len()})];
+        buffers.extend(self.arrays.remove("buffers").unwrap_or_default());
+        doc["buffers"] = Value::Array(buffers);
+        for (k, v) in self.arrays {
+            doc[k] = Value::Array(v);
+        }
+        let mut js = serde_json::to_vec(&doc).expect("JSON");
+        while js.len() % 4 != 0 {
+            js.push(b' ');
+        }
+        let total = 12 + 8 + js.len() + 8 + self.bin.len();
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(js.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&js);
+        out.extend_from_slice(&(self.bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&self.bin);
+        out
+    }
+}
+
+/// Adds species `sp`'s mesh level `level` (its shared buffer, materials,
+/// textures) to `g`; returns the mesh index.
+fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
+    let mb = &sp.levels[&level];
+    let buffer = g.push("buffers", json!({"uri": format!("../{}", mb.uri), "byteLength": mb.bytes})) + 1;
+    let view = |g: &mut Gltf, k: usize, target: u32| {
+        let (o, l) = mb.views[k];
+        g.push("bufferViews", json!({"buffer": buffer, "byteOffset": o, "byteLength": l, "target": target}))
+    };
+    let (vp, vn, vu, vc, vi) =
+        (view(g, 0, 34962), view(g, 1, 34962), view(g, 2, 34962), view(g, 3, 34962), view(g, 4, 34963));
+    let n = mb.vertices;
+    let pos = g.push(
+        "accessors",
+        json!({"bufferView": vp, "componentType": 5126, "count": n, "type": "VEC3", "min": mb.pos_min, "max": mb.pos_max}),
+    );
+    let nrm = g.push("accessors", json!({"bufferView": vn, "componentType": 5126, "count": n, "type": "VEC3"}));
+    let uv = g.push("accessors", json!({"bufferView": vu, "componentType": 5126, "count": n, "type": "VEC2"}));
+    let col = g.push(
+        "accessors",
+        json!({"bufferView": vc, "componentType": 5121, "normalized": true, "count": n, "type": "VEC4"}),
+    );
+    let mut materials: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut primitives = Vec::new();
+    for &(mat, first, count) in &mb.draws {
+        if count == 0 {
+            continue;
+        }
+        let material = *materials.entry(mat).or_insert_with(|| {
+            let m = &sp.meta.materials[mat];
+            let mut pbr = json!({"baseColorFactor": m.base_color, "metallicFactor": 0.0, "roughnessFactor": 1.0});
+            if let Some(uri) = m.texture_layer.and_then(|l| sp.layers.get(&l)) {
+                let image = g.push("images", json!({"uri": format!("../{uri}")}));
+                if !g.arrays.contains_key("samplers") {
+                    g.push("samplers", json!({"magFilter": 9729, "minFilter": 9987}));
+                }
+                let texture = g.push("textures", json!({"source": image, "sampler": 0}));
+                pbr["baseColorTexture"] = json!({"index": texture});
+            }
+            let mut v = json!({"name": m.name, "pbrMetallicRoughness": pbr, "doubleSided": m.double_sided});
+            if m.alpha_cutoff > 0.0 {
+                v["alphaMode"] = json!("MASK");
+                v["alphaCutoff"] = json!(m.alpha_cutoff);
+            }
+            g.push("materials", v)
+        });
+        let idx = g.push(
+            "accessors",
+            json!({"bufferView": vi, "byteOffset": u64::from(first) * 4, "componentType": 5125, "count": count, "type": "SCALAR"}),
+        );
+        primitives.push(json!({
+            "attributes": {"POSITION": pos, "NORMAL": nrm, "TEXCOORD_0": uv, "COLOR_0": col},
+            "indices": idx,
+            "material": material,
+        }));
+    }
+    g.push("meshes", json!({"name": sp.meta.name, "primitives": primitives}))
+}
+
+/// A tile's trees by species, placed in the tile's frame.
+type Placed = BTreeMap<u32, Vec<ExportedTree>>;
+
+/// The GLB of a tile's trees with each species' mesh level `level_of(species)`.
+fn tile_glb(species: &[SpeciesOut], placed: &Placed, level_of: impl Fn(&SpeciesOut) -> u32) -> Vec<u8> {
+    let mut g = Gltf::default();
+    let mut nodes = Vec::new();
+    for (&s, trees) in placed {
+        let sp = &species[s as usize];
+        let mesh = add_mesh(&mut g, sp, level_of(sp));
+        let t: Vec<[f32; 3]> = trees.iter().map(|t| t.translation).collect();
+        let r: Vec<[f32; 4]> = trees.iter().map(|t| t.rotation).collect();
+        let sc: Vec<[f32; 3]> = trees.iter().map(|t| t.scale).collect();
+        let n = trees.len();
+        let vt = g.own_view(bytemuck::cast_slice(&t));
+        let vr = g.own_view(bytemuck::cast_slice(&r));
+        let vs = g.own_view(bytemuck::cast_slice(&sc));
+        let at = g.push("accessors", json!({"bufferView": vt, "componentType": 5126, "count": n, "type": "VEC3"}));
+        let ar = g.push("accessors", json!({"bufferView": vr, "componentType": 5126, "count": n, "type": "VEC4"}));
+        let asc = g.push("accessors", json!({"bufferView": vs, "componentType": 5126, "count": n, "type": "VEC3"}));
+        nodes.push(g.push(
+            "nodes",
+            json!({
+                "name": sp.meta.name,
+                "mesh": mesh,
+                "extensions": {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": at, "ROTATION": ar, "SCALE": asc}}},
+            }),
+        ));
+    }
+    g.push("scenes", json!({"nodes": nodes}));
+    g.glb(&["EXT_mesh_gpu_instancing"])
+}
+
+/// A `region` (radians, metres) around scene-relative bounds.
+fn region(geo: &GeoFrame, b: &Bounds) -> Result<Value> {
+    let (mut w, mut s, mut e, mut n) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for (i, j) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)] {
+        let x = f64::from(b.min[0]) + (f64::from(b.max[0]) - f64::from(b.min[0])) * i;
+        let y = f64::from(b.min[1]) + (f64::from(b.max[1]) - f64::from(b.min[1])) * j;
+        let (lon, lat, _) = geo.to_geo(DVec3::new(x, y, 0.0)).map_err(|e| anyhow::anyhow!("{e}"))?;
+        (w, s, e, n) = (w.min(lon), s.min(lat), e.max(lon), n.max(lat));
+    }
+    // A metre's margin for the projection's curvature between the corners.
+    let m = 1.0 / 111_000.0;
+    Ok(json!([
+        (w - m).to_radians(),
+        (s - m).to_radians(),
+        (e + m).to_radians(),
+        (n + m).to_radians(),
+        f64::from(b.min[2]) - 1.0,
+        f64::from(b.max[2]) + 1.0
+    ]))
+}
+
+/// What a tile of the tileset needs from one Sylva tile.
+struct TileNode {
+    json: Value,
+    bounds: Bounds,
+    tallest_m: f64,
+}
+
+/// Exports tile `entry`: its GLBs and its tileset node.
+fn export_tile(
+    dir: &Path,
+    m: &Manifest,
+    geo: &GeoFrame,
+    species: &[SpeciesOut],
+    entry: &TileEntry,
+    out: &Path,
+    report: &mut ExportReport,
+) -> Result<TileNode> {
+    let path = dir.join(&entry.url);
+    let bytes = std::fs::read(&path).with_context(|| format!("cannot read tile {}", path.display()))?;
+    let tile = Tile::decode(&path.display().to_string(), &bytes, m.species.len() as u32)?;
+    let mid = DVec3::new(
+        (f64::from(entry.bounds.min[0]) + f64::from(entry.bounds.max[0])) * 0.5,
+        (f64::from(entry.bounds.min[1]) + f64::from(entry.bounds.max[1])) * 0.5,
+        f64::from(entry.bounds.min[2]),
+    );
+    let (lon, lat, h) = geo.to_geo(mid).map_err(|e| anyhow::anyhow!("{}: {e}", entry.url))?;
+    let frame = enu_frame(lon, lat, h);
+    let mut placed = Placed::new();
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    let mut tallest = 0.0f64;
+    let mut at = 0usize;
+    for b in &tile.batches {
+        let sp = &species[b.species as usize];
+        let half = Vec3::from(sp.meta.bounds_max).max(-Vec3::from(sp.meta.bounds_min));
+        for p in &tile.instances[at..at + b.instance_count as usize] {
+            let i = p.decode(b);
+            let local = DVec3::new(i.position_m[0].into(), i.position_m[1].into(), i.position_m[2].into());
+            let t = place(geo, &frame, local, f64::from(i.yaw_rad), i.scale, i.aspect)
+                .with_context(|| format!("{}: a tree at {local}", entry.url))?;
+            placed.entry(b.species).or_default().push(t);
+            let r = half.x.max(half.y) * i.scale * i.aspect;
+            let top = sp.meta.bounds_max[2] * i.scale;
+            tallest = tallest.max(f64::from(top));
+            for k in 0..2 {
+                lo[k] = lo[k].min(i.position_m[k] - r);
+                hi[k] = hi[k].max(i.position_m[k] + r);
+            }
+            lo[2] = lo[2].min(i.position_m[2] + sp.meta.bounds_min[2] * i.scale);
+            hi[2] = hi[2].max(i.position_m[2] + top);
+        }
+        at += b.instance_count as usize;
+    }
+    if placed.is_empty() {
+        bail!("{}: a tile without trees", entry.url);
+    }
+    let bounds = Bounds { min: lo, max: hi };
+    let name = format!("{}_{}", entry.x, entry.y);
+    let full = tile_glb(species, &placed, |_| 0);
+    write_file(&out.join(format!("tiles/{name}.glb")), &full, report)?;
+    report.glbs += 1;
+    report.trees += placed.values().map(|v| v.len() as u64).sum::<u64>();
+    let region = region(geo, &bounds)?;
+    let coarse_levels = placed.keys().any(|&s| species[s as usize].meta.mesh_levels.len() > 1);
+    let json = if coarse_levels {
+        let coarse = tile_glb(species, &placed, |sp| sp.meta.mesh_levels.len() as u32 - 1);
+        write_file(&out.join(format!("tiles/{name}_coarse.glb")), &coarse, report)?;
+        report.glbs += 1;
+        // Coarse meshes until the tallest tree reaches the full mesh's threshold.
+        let full_px = placed
+            .keys()
+            .map(|&s| f64::from(species[s as usize].meta.mesh_levels[0].select_px))
+            .fold(f64::MAX, f64::min)
+            .max(1.0);
+        json!({
+            "boundingVolume": {"region": region},
+            "geometricError": SSE_PX * tallest / full_px,
+            "refine": "REPLACE",
+            "transform": transform_json(&frame),
+            "content": {"uri": format!("tiles/{name}_coarse.glb")},
+            "children": [{
+                "boundingVolume": {"region": region},
+                "geometricError": 0.0,
+                "content": {"uri": format!("tiles/{name}.glb")},
+            }],
+        })
+    } else {
+        json!({
+            "boundingVolume": {"region": region},
+            "geometricError": 0.0,
+            "transform": transform_json(&frame),
+            "content": {"uri": format!("tiles/{name}.glb")},
+        })
+    };
+    report.tiles += 1;
+    Ok(TileNode { json, bounds, tallest_m: tallest })
+}
+
+/// A content-less tileset node over `children`: shown from where its tallest
+/// tree is [`SHOWN_FROM_PX`] tall.
+fn group(children: Vec<TileNode>) -> Option<TileNode> {
+    let bounds = sylva::format::index::union_bounds(children.iter().map(|c| &c.bounds))?;
+    let tallest = children.iter().map(|c| c.tallest_m).fold(0.0, f64::max);
+    Some(TileNode {
+        json: json!({
+            "geometricError": SSE_PX * tallest / SHOWN_FROM_PX,
+            "refine": "REPLACE",
+            "children": children.into_iter().map(|c| c.json).collect::<Vec<_>>(),
+        }),
+        bounds,
+        tallest_m: tallest,
+    })
+}
+
+/// Exports the index node at `url` (and everything below it).
+#[allow(clippy::too_many_arguments)]
+fn export_node(
+    dir: &Path,
+    m: &Manifest,
+    geo: &GeoFrame,
+    species: &[SpeciesOut],
+    url: &str,
+    depth: u32,
+    out: &Path,
+    report: &mut ExportReport,
+    progress: &mut dyn FnMut(&ExportReport),
+) -> Result<Option<TileNode>> {
+    if depth > 64 {
+        bail!("{}: the index is deeper than 64 levels", dir.join(url).display());
+    }
+    let path = dir.join(url);
+    let bytes = std::fs::read(&path).with_context(|| format!("cannot read index node {}", path.display()))?;
+    let node = IndexNode::decode(&path.display().to_string(), &bytes)?;
+    let mut children = Vec::new();
+    for c in &node.children {
+        children.extend(export_node(dir, m, geo, species, &c.url, depth + 1, out, report, progress)?);
+    }
+    for t in &node.tiles {
+        children.push(export_tile(dir, m, geo, species, t, out, report)?);
+        progress(report);
+    }
+    Ok(group(children))
+}
+
+/// Exports the scene in `dir` as a 3D Tiles 1.1 tileset into `out` (a new or
+/// empty folder).
+///
+/// # Errors
+/// An unreadable or invalid scene, a CRS the projection library cannot take,
+/// an `out` that holds files, I/O errors.
+pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -> Result<ExportReport> {
+    let manifest = dir.join("scene.json");
+    let bytes = std::fs::read(&manifest).with_context(|| format!("cannot read {}", manifest.display()))?;
+    let m = Manifest::decode(&manifest.display().to_string(), &bytes)?;
+    if m.counts.trees == 0 {
+        bail!("{}: the scene has no trees to export", manifest.display());
+    }
+    if out.exists()
+        && std::fs::read_dir(out).with_context(|| format!("cannot read {}", out.display()))?.next().is_some()
+    {
+        bail!("{}: not empty; export into a new or empty folder (nothing is overwritten)", out.display());
+    }
+    for sub in ["tiles", "meshes"] {
+        std::fs::create_dir_all(out.join(sub)).with_context(|| format!("cannot create {}", out.join(sub).display()))?;
+    }
+    let geo = GeoFrame::new(&m.crs.proj4, m.origin_m)
+        .map_err(|e| anyhow::anyhow!("{}: the scene's CRS: {e}", manifest.display()))?;
+    let mut report = ExportReport::default();
+    let species: Vec<SpeciesOut> =
+        (0..m.species.len()).map(|s| species_out(dir, &m, s, out, &mut report)).collect::<Result<_>>()?;
+    let root = if let Some(index) = &m.index {
+        export_node(dir, &m, &geo, &species, &index.root, 0, out, &mut report, progress)?
+    } else {
+        let mut children = Vec::new();
+        for t in &m.tiles {
+            children.push(export_tile(dir, &m, &geo, &species, t, out, &mut report)?);
+            progress(&report);
+        }
+        group(children)
+    };
+    let Some(mut root) = root else { bail!("{}: the scene lists no tiles", manifest.display()) };
+    fill_regions(&mut root.json);
+    let tileset = json!({
+        "asset": {"version": "1.1", "generator": "sylva-bake export-3dtiles", "tilesetVersion": m.counts.trees.to_string()},
+        "geometricError": root.json["geometricError"],
+        "root": root.json,
+    });
+    let text = serde_json::to_vec_pretty(&tileset)?;
+    write_file(&out.join("tileset.json"), &text, &mut report)?;
+    Ok(report)
+}
+
+/// Gives every content-less node a region around its children's (the tiles have theirs).
+fn fill_regions(node: &mut Value) -> [f64; 6] {
+    let mut r = [f64::MAX, f64::MAX, f64::MIN, f64::MIN, f64::MAX, f64::MIN];
+    if let Some(children) = node.get_mut("children").and_then(Value::as_array_mut) {
+        for c in children {
+            let cr = fill_regions(c);
+            for k in [0, 1, 4] {
+                r[k] = r[k].min(cr[k]);
+            }
+            for k in [2, 3, 5] {
+                r[k] = r[k].max(cr[k]);
+            }
+        }
+    }
+    if let Some(own) = node.pointer("/boundingVolume/region").and_then(Value::as_array) {
+        let own: Vec<f64> = own.iter().filter_map(Value::as_f64).collect();
+        if own.len() == 6 && node.get("content").is_some() {
+            return [own[0], own[1], own[2], own[3], own[4], own[5]];
+        }
+    }
+    node["boundingVolume"] = json!({"region": r});
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fixture() -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/forest-small")
+    }
+
+    /// The JSON chunk and binary chunk of a GLB.
+    fn glb_parts(bytes: &[u8]) -> (Value, Vec<u8>) {
+        assert_eq!(&bytes[0..4], b"glTF");
+        assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize, bytes.len());
+        let jlen = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        assert_eq!(&bytes[16..20], b"JSON");
+        let doc: Value = serde_json::from_slice(&bytes[20..20 + jlen]).unwrap();
+        let at = 20 + jlen;
+        let blen = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+        assert_eq!(&bytes[at + 4..at + 8], b"BIN\0");
+        (doc, bytes[at + 8..at + 8 + blen].to_vec())
+    }
+
+    /// The floats of accessor `a` (in the GLB's own chunk).
+    fn floats(doc: &Value, bin: &[u8], a: u64) -> Vec<f32> {
+        let acc = &doc["accessors"][a as usize];
+        let view = &doc["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
+        assert_eq!(view["buffer"], 0, "instance data lies in the GLB");
+        let per = match acc["type"].as_str().unwrap() {
+            "VEC3" => 3,
+            "VEC4" => 4,
+            t => panic!("{t}"),
+        };
+        let start = view["byteOffset"].as_u64().unwrap() as usize;
+        let n = acc["count"].as_u64().unwrap() as usize * per;
+        bytemuck::pod_collect_to_vec(&bin[start..start + n * 4])
+    }
+
+    #[test]
+    fn wgs84_round_trips() {
+        for (lon, lat, h) in [(15.0, 52.0, 100.0), (-120.5, 37.1, 2000.0), (4.9, 52.37, -3.0), (170.0, -45.0, 0.0)] {
+            let (lo, la, hh) = ecef_to_geodetic(geodetic_to_ecef(lon, lat, h));
+            assert!((lo - lon).abs() < 1e-9 && (la - lat).abs() < 1e-9 && (hh - h).abs() < 1e-4, "{lon} {lat} {h}");
+        }
+        // The frame is orthonormal and up is away from the centre.
+        let [o, e, n, u] = enu_frame(15.0, 52.0, 0.0);
+        assert!(e.dot(n).abs() < 1e-12 && e.dot(u).abs() < 1e-12 && n.dot(u).abs() < 1e-12);
+        assert!((e.cross(n) - u).length() < 1e-12 && u.dot(o) > 0.0);
+    }
+
+    /// Every exported instance maps back to its tree within a centimetre, with
+    /// its yaw and scale; the tileset's hierarchy holds every tile once.
+    #[test]
+    fn every_exported_tree_maps_back_to_its_tree_within_a_centimetre() {
+        let dir = fixture();
+        let out = std::env::temp_dir().join(format!("sylva-3dtiles-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let report = export(&dir, &out, &mut |_| {}).unwrap();
+        let m = Manifest::decode("m", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+        let geo = GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
+        assert_eq!(report.trees, m.counts.trees);
+        assert_eq!(report.tiles as u64, m.counts.tiles);
+        let tileset: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+        assert_eq!(tileset["asset"]["version"], "1.1");
+        // Walk the tileset: each tile's transform and its full GLB.
+        let mut stack = vec![tileset["root"].clone()];
+        let (mut worst, mut checked, mut tiles) = (0.0f64, 0u64, 0);
+        while let Some(node) = stack.pop() {
+            let r: Vec<f64> =
+                node["boundingVolume"]["region"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+            assert!(r[0] < r[2] && r[1] < r[3] && r[4] < r[5], "a region: {r:?}");
+            if let Some(c) = node["children"].as_array() {
+                stack.extend(c.iter().cloned());
+            }
+            let Some(t) = node["transform"].as_array() else { continue };
+            tiles += 1;
+            let t: Vec<f64> = t.iter().map(|v| v.as_f64().unwrap()).collect();
+            let frame = [
+                DVec3::new(t[12], t[13], t[14]),
+                DVec3::new(t[0], t[1], t[2]),
+                DVec3::new(t[4], t[5], t[6]),
+                DVec3::new(t[8], t[9], t[10]),
+            ];
+            // The full meshes: the coarse tile's child (or the tile itself).
+            let full = node["children"][0]["content"]["uri"].as_str().or(node["content"]["uri"].as_str()).unwrap();
+            assert!(!full.contains("coarse"));
+            let name = full.trim_start_matches("tiles/").trim_end_matches(".glb");
+            let tile_path = dir.join(format!("tiles/{name}.tile"));
+            let tile = Tile::decode("t", &std::fs::read(&tile_path).unwrap(), 3).unwrap();
+            let (doc, bin) = glb_parts(&std::fs::read(out.join(full)).unwrap());
+            assert_eq!(doc["extensionsRequired"][0], "EXT_mesh_gpu_instancing");
+            let mut exported: Vec<(String, DVec3, f32, f32)> = Vec::new();
+            for n in doc["nodes"].as_array().unwrap() {
+                let a = &n["extensions"]["EXT_mesh_gpu_instancing"]["attributes"];
+                let tr = floats(&doc, &bin, a["TRANSLATION"].as_u64().unwrap());
+                let ro = floats(&doc, &bin, a["ROTATION"].as_u64().unwrap());
+                let sc = floats(&doc, &bin, a["SCALE"].as_u64().unwrap());
+                for k in 0..tr.len() / 3 {
+                    let p = unplace(&geo, &frame, [tr[3 * k], tr[3 * k + 1], tr[3 * k + 2]]).unwrap();
+                    let yaw = 2.0 * ro[4 * k + 1].atan2(ro[4 * k + 3]);
+                    exported.push((n["name"].as_str().unwrap().to_string(), p, yaw, sc[3 * k + 1]));
+                }
+            }
+            let mut at = 0;
+            let mut k = 0;
+            // Trees come species after species in the GLB, batch order within each.
+            let mut by_species: BTreeMap<u32, Vec<sylva::format::tile::Instance>> = BTreeMap::new();
+            for b in &tile.batches {
+                for p in &tile.instances[at..at + b.instance_count as usize] {
+                    by_species.entry(b.species).or_default().push(p.decode(b));
+                }
+                at += b.instance_count as usize;
+            }
+            for (s, trees) in &by_species {
+                for i in trees {
+                    let (name, p, _yaw, scale) = &exported[k];
+                    assert_eq!(name, &m.species[*s as usize].name);
+                    let want = DVec3::new(i.position_m[0].into(), i.position_m[1].into(), i.position_m[2].into());
+                    worst = worst.max((*p - want).length());
+                    assert!((scale - i.scale).abs() < 1e-5);
+                    k += 1;
+                    checked += 1;
+                }
+            }
+            assert_eq!(k, exported.len());
+        }
+        assert_eq!(tiles, m.counts.tiles);
+        assert_eq!(checked, m.counts.trees);
+        assert!(worst < 0.01, "an exported tree is {worst} m from its tree");
+        // Nothing is overwritten: a second export into the same folder is refused.
+        let again = export(&dir, &out, &mut |_| {}).unwrap_err().to_string();
+        assert!(again.contains("not empty"), "{again}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    /// The tree's yaw survives (grid convergence corrected, so within a degree of the grid's here).
+    #[test]
+    fn yaw_follows_the_grid_through_the_frame() {
+        let geo =
+            GeoFrame::new("+proj=utm +zone=33 +datum=WGS84 +units=m +no_defs", [500_000.0, 5_800_000.0, 0.0]).unwrap();
+        let (lon, lat, h) = geo.to_geo(DVec3::ZERO).unwrap();
+        let f = enu_frame(lon, lat, h);
+        for yaw in [0.0f64, 0.7, 2.0, 4.5] {
+            let t = place(&geo, &f, DVec3::new(30.0, -20.0, 5.0), yaw, 1.0, 1.0).unwrap();
+            let got = 2.0 * f64::from(t.rotation[1]).atan2(f64::from(t.rotation[3]));
+            let d = (got - yaw).rem_euclid(std::f64::consts::TAU);
+            assert!(d.min(std::f64::consts::TAU - d) < 0.01, "yaw {yaw} -> {got}");
+        }
+    }
+}
