@@ -182,7 +182,8 @@ Examples:
         /// Second image (PNG).
         b: PathBuf,
     },
-    /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/).
+    /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/). DIR may
+    /// also be a 3D Tiles export (`sylva-bake export-3dtiles`): CesiumJS shows it at /cesium.html.
     Serve {
         /// Scene directory.
         dir: PathBuf,

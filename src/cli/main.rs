@@ -41,8 +41,13 @@ mod cli {
 
     /// `sylva serve`: the viewer and a scene over HTTP until the process ends.
     fn serve(dir: PathBuf, port: u16, bind: &str, web: Option<PathBuf>, allow_hosts: Vec<String>) -> Result<()> {
-        if !dir.join("scene.json").is_file() {
-            bail!("{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake)", dir.display());
+        // A scene, or a 3D Tiles export of one (`sylva-bake export-3dtiles`) for web/cesium.html.
+        let tileset = dir.join("tileset.json").is_file();
+        if !dir.join("scene.json").is_file() && !tileset {
+            bail!(
+                "{} has no scene.json: not a Sylva scene directory (bake one with sylva-bake), nor a 3D Tiles export (no tileset.json)",
+                dir.display()
+            );
         }
         let web = web.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("web"));
         if !web.join("pkg").join("sylva_bg.wasm").is_file() {
@@ -51,6 +56,9 @@ mod cli {
         let config =
             sylva::serve::ServeConfig { allowed_hosts: allow_hosts, ..sylva::serve::ServeConfig::new(web, dir) };
         sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
+            if tileset {
+                println!("serving the 3D Tiles export in CesiumJS on http://{addr}/cesium.html (tileset at /scene/tileset.json)");
+            }
             println!("serving the Sylva viewer on http://{addr}/");
             use std::io::Write as _;
             let _ = std::io::stdout().flush();
