@@ -108,6 +108,8 @@ pub struct ExportedTree {
     pub rotation: [f32; 4],
     /// Scale `[horizontal, vertical, horizontal]`.
     pub scale: [f32; 3],
+    /// The tree's index in its tile (the order of `.ids` and `.attr`).
+    pub index: u32,
 }
 
 /// Places a tree (`local`: trunk base relative to the scene origin; yaw in the
@@ -127,6 +129,7 @@ fn place(geo: &GeoFrame, f: &[DVec3; 4], local: DVec3, yaw: f64, scale: f32, asp
         translation: [t.x as f32, t.z as f32, -t.y as f32],
         rotation: [0.0, s as f32, 0.0, c as f32],
         scale: [scale * aspect, scale, scale * aspect],
+        index: 0,
     })
 }
 
@@ -275,6 +278,8 @@ fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut Expo
 struct Gltf {
     arrays: BTreeMap<&'static str, Vec<Value>>,
     bin: Vec<u8>,
+    /// Top-level extensions (`EXT_structural_metadata`).
+    extensions: serde_json::Map<String, Value>,
 }
 
 impl Gltf {
@@ -284,9 +289,10 @@ impl Gltf {
         a.len() - 1
     }
 
-    /// Appends `data` to the GLB's chunk as a buffer view (4-byte aligned).
+    /// Appends `data` to the GLB's chunk as a buffer view (8-byte aligned, as
+    /// 64-bit metadata values need).
     fn own_view(&mut self, data: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while self.bin.len() % 8 != 0 {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -295,16 +301,19 @@ impl Gltf {
     }
 
     /// The GLB: header, JSON chunk (space-padded), binary chunk (zero-padded).
-    fn glb(mut self, extensions: &[&str]) -> Vec<u8> {
+    fn glb(mut self, used: &[&str], required: &[&str]) -> Vec<u8> {
         while self.bin.len() % 4 != 0 {
             self.bin.push(0);
         }
         let mut doc = json!({
             "asset": {"version": "2.0", "generator": "sylva-bake export-3dtiles"},
             "scene": 0,
-            "extensionsUsed": extensions,
-            "extensionsRequired": extensions,
+            "extensionsUsed": used,
+            "extensionsRequired": required,
         });
+        if !self.extensions.is_empty() {
+            doc["extensions"] = Value::Object(std::mem::take(&mut self.extensions));
+        }
         let mut buffers = vec![json!({"byteLength": self.bin.len()})];
         buffers.extend(self.arrays.remove("buffers").unwrap_or_default());
         doc["buffers"] = Value::Array(buffers);
@@ -392,34 +401,173 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
 /// A tile's trees by species, placed in the tile's frame.
 type Placed = BTreeMap<u32, Vec<ExportedTree>>;
 
-/// The GLB of a tile's trees with each species' mesh level `level_of(species)`.
-fn tile_glb(species: &[SpeciesOut], placed: &Placed, level_of: impl Fn(&SpeciesOut) -> u32) -> Vec<u8> {
+/// What the property table says of a tile's trees: ids, and the inventory's
+/// attributes where the scene has them.
+struct TreeData<'a> {
+    ids: Vec<u64>,
+    codes: Option<(&'a sylva::format::attributes::AttributeSchema, sylva::format::attributes::AttributeCodes)>,
+    /// Species model names (the `model` property).
+    models: Vec<&'a str>,
+    /// Property names of the attribute columns (identifiers, unique).
+    names: &'a [String],
+}
+
+/// Property identifiers for the attribute columns: `[A-Za-z_][A-Za-z0-9_]*`,
+/// unique, none of them `id` or `model`.
+fn property_names(schema: Option<&sylva::format::attributes::AttributeSchema>) -> Vec<String> {
+    let mut taken: std::collections::BTreeSet<String> = ["id".to_string(), "model".to_string()].into();
+    let mut out = Vec::new();
+    for c in schema.map_or(&[][..], |s| &s.columns[..]) {
+        let mut base: String = c.name.chars().map(|ch| if ch.is_ascii_alphanumeric() { ch } else { '_' }).collect();
+        if base.is_empty() || base.starts_with(|ch: char| ch.is_ascii_digit()) {
+            base.insert(0, '_');
+        }
+        let mut name = base.clone();
+        let mut k = 2;
+        while !taken.insert(name.clone()) {
+            name = format!("{base}_{k}");
+            k += 1;
+        }
+        out.push(name);
+    }
+    out
+}
+
+/// `EXT_structural_metadata`'s schema: one class, `tree`.
+fn metadata_schema(schema: Option<&sylva::format::attributes::AttributeSchema>, names: &[String]) -> Value {
+    use sylva::format::attributes::AttributeType;
+    let mut props = serde_json::Map::new();
+    props.insert("id".into(), json!({"type": "SCALAR", "componentType": "UINT64", "description": "the tree's id"}));
+    props.insert("model".into(), json!({"type": "STRING", "description": "the species model it is drawn with"}));
+    for (c, name) in schema.map_or(&[][..], |s| &s.columns[..]).iter().zip(names) {
+        let p = match c.kind {
+            AttributeType::Number => json!({"type": "SCALAR", "componentType": "FLOAT64", "noData": NO_NUMBER}),
+            AttributeType::Integer => json!({"type": "SCALAR", "componentType": "INT64", "noData": i64::MIN}),
+            AttributeType::Category | AttributeType::Date => json!({"type": "STRING", "noData": ""}),
+        };
+        let mut p = p;
+        p["name"] = json!(c.name);
+        props.insert(name.clone(), p);
+    }
+    json!({"id": "sylva", "classes": {"tree": {"name": "Tree", "properties": props}}})
+}
+
+/// The `noData` of number attributes (a tree without a value).
+const NO_NUMBER: f64 = -1.0e300;
+
+/// A property table of `rows` (tile indices, GLB order) in `g`.
+fn property_table(g: &mut Gltf, data: &TreeData<'_>, placed: &Placed, rows: &[u32]) -> Value {
+    use sylva::format::attributes::AttributeValue;
+    let mut props = serde_json::Map::new();
+    let ids: Vec<u64> = rows.iter().map(|&i| data.ids.get(i as usize).copied().unwrap_or(0)).collect();
+    let v = g.own_view(bytemuck::cast_slice(&ids));
+    props.insert("id".into(), json!({"values": v}));
+    let strings = |g: &mut Gltf, texts: &mut dyn Iterator<Item = String>| {
+        let (mut bytes, mut offsets) = (Vec::new(), vec![0u32]);
+        for t in texts {
+            bytes.extend_from_slice(t.as_bytes());
+            offsets.push(bytes.len() as u32);
+        }
+        let values = g.own_view(&bytes);
+        let offsets = g.own_view(bytemuck::cast_slice(&offsets));
+        json!({"values": values, "stringOffsets": offsets, "stringOffsetType": "UINT32"})
+    };
+    let models: Vec<String> = placed
+        .iter()
+        .flat_map(|(&s, trees)| std::iter::repeat_n(data.models[s as usize].to_string(), trees.len()))
+        .collect();
+    props.insert("model".into(), strings(g, &mut models.into_iter()));
+    if let Some((schema, codes)) = &data.codes {
+        for (c, name) in data.names.iter().enumerate() {
+            let value = |i: u32| codes.value(schema, c, i as usize);
+            let p = match schema.columns[c].kind {
+                sylva::format::attributes::AttributeType::Number => {
+                    let vals: Vec<f64> = rows
+                        .iter()
+                        .map(|&i| match value(i) {
+                            Some(AttributeValue::Number(x)) => x,
+                            _ => NO_NUMBER,
+                        })
+                        .collect();
+                    json!({"values": g.own_view(bytemuck::cast_slice(&vals))})
+                }
+                sylva::format::attributes::AttributeType::Integer => {
+                    let vals: Vec<i64> = rows
+                        .iter()
+                        .map(|&i| match value(i) {
+                            Some(AttributeValue::Integer(x)) => x,
+                            _ => i64::MIN,
+                        })
+                        .collect();
+                    json!({"values": g.own_view(bytemuck::cast_slice(&vals))})
+                }
+                _ => strings(
+                    g,
+                    &mut rows.iter().map(|&i| {
+                        value(i).map_or(String::new(), |v| v.to_json().as_str().map_or(String::new(), str::to_string))
+                    }),
+                ),
+            };
+            props.insert(name.clone(), p);
+        }
+    }
+    json!({"class": "tree", "count": rows.len(), "properties": props})
+}
+
+/// The GLB of a tile's trees with each species' mesh level `level_of(species)`:
+/// one node per species, its trees instances of its mesh, each a feature of
+/// one property table (`EXT_instance_features`, `EXT_structural_metadata`).
+fn tile_glb(
+    species: &[SpeciesOut],
+    placed: &Placed,
+    data: &TreeData<'_>,
+    meta_schema: &Value,
+    level_of: impl Fn(&SpeciesOut) -> u32,
+) -> Vec<u8> {
     let mut g = Gltf::default();
     let mut nodes = Vec::new();
+    let mut rows: Vec<u32> = Vec::new();
     for (&s, trees) in placed {
         let sp = &species[s as usize];
         let mesh = add_mesh(&mut g, sp, level_of(sp));
         let t: Vec<[f32; 3]> = trees.iter().map(|t| t.translation).collect();
         let r: Vec<[f32; 4]> = trees.iter().map(|t| t.rotation).collect();
         let sc: Vec<[f32; 3]> = trees.iter().map(|t| t.scale).collect();
+        // Feature ids: rows of the property table (exact in f32 below 2^24).
+        let f: Vec<f32> = (rows.len()..rows.len() + trees.len()).map(|i| i as f32).collect();
+        rows.extend(trees.iter().map(|t| t.index));
         let n = trees.len();
         let vt = g.own_view(bytemuck::cast_slice(&t));
         let vr = g.own_view(bytemuck::cast_slice(&r));
         let vs = g.own_view(bytemuck::cast_slice(&sc));
+        let vf = g.own_view(bytemuck::cast_slice(&f));
         let at = g.push("accessors", json!({"bufferView": vt, "componentType": 5126, "count": n, "type": "VEC3"}));
         let ar = g.push("accessors", json!({"bufferView": vr, "componentType": 5126, "count": n, "type": "VEC4"}));
         let asc = g.push("accessors", json!({"bufferView": vs, "componentType": 5126, "count": n, "type": "VEC3"}));
+        let af = g.push("accessors", json!({"bufferView": vf, "componentType": 5126, "count": n, "type": "SCALAR"}));
         nodes.push(g.push(
             "nodes",
             json!({
                 "name": sp.meta.name,
                 "mesh": mesh,
-                "extensions": {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": at, "ROTATION": ar, "SCALE": asc}}},
+                "extensions": {
+                    "EXT_mesh_gpu_instancing": {
+                        "attributes": {"TRANSLATION": at, "ROTATION": ar, "SCALE": asc, "_FEATURE_ID_0": af},
+                    },
+                    "EXT_instance_features": {
+                        "featureIds": [{"featureCount": n, "attribute": 0, "propertyTable": 0, "label": "tree"}],
+                    },
+                },
             }),
         ));
     }
+    let table = property_table(&mut g, data, placed, &rows);
+    g.extensions.insert("EXT_structural_metadata".into(), json!({"schema": meta_schema, "propertyTables": [table]}));
     g.push("scenes", json!({"nodes": nodes}));
-    g.glb(&["EXT_mesh_gpu_instancing"])
+    g.glb(
+        &["EXT_mesh_gpu_instancing", "EXT_instance_features", "EXT_structural_metadata"],
+        &["EXT_mesh_gpu_instancing"],
+    )
 }
 
 /// A `region` (radians, metres) around scene-relative bounds.
@@ -450,16 +598,22 @@ struct TileNode {
     tallest_m: f64,
 }
 
+/// What every tile's export reads.
+struct Ctx<'a> {
+    dir: &'a Path,
+    m: &'a Manifest,
+    geo: GeoFrame,
+    species: Vec<SpeciesOut>,
+    out: &'a Path,
+    /// Property names of the attribute columns.
+    names: Vec<String>,
+    meta_schema: Value,
+}
+
 /// Exports tile `entry`: its GLBs and its tileset node.
-fn export_tile(
-    dir: &Path,
-    m: &Manifest,
-    geo: &GeoFrame,
-    species: &[SpeciesOut],
-    entry: &TileEntry,
-    out: &Path,
-    report: &mut ExportReport,
-) -> Result<TileNode> {
+fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> Result<TileNode> {
+    let Ctx { dir, m, geo, species, out, .. } = ctx;
+    let (geo, species) = (geo, &species[..]);
     let path = dir.join(&entry.url);
     let bytes = std::fs::read(&path).with_context(|| format!("cannot read tile {}", path.display()))?;
     let tile = Tile::decode(&path.display().to_string(), &bytes, m.species.len() as u32)?;
@@ -473,16 +627,41 @@ fn export_tile(
     let mut placed = Placed::new();
     let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
     let mut tallest = 0.0f64;
+    let ids_path = dir.join(&entry.ids_url);
+    let ids = sylva::format::decode_ids(
+        &ids_path.display().to_string(),
+        &std::fs::read(&ids_path).with_context(|| format!("cannot read tree ids {}", ids_path.display()))?,
+    )?;
+    if ids.len() != tile.instances.len() {
+        bail!("{}: {} ids for {} trees", ids_path.display(), ids.len(), tile.instances.len());
+    }
+    let codes = match &m.attributes {
+        Some(schema) => {
+            let url = sylva::format::attributes::attributes_url(&entry.url);
+            let p = dir.join(&url);
+            let bytes = std::fs::read(&p).with_context(|| format!("cannot read attributes {}", p.display()))?;
+            let codes = sylva::format::attributes::decode_attributes(
+                &p.display().to_string(),
+                &bytes,
+                schema,
+                tile.instances.len(),
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+            Some((schema, codes))
+        }
+        None => None,
+    };
+    let data = TreeData { ids, codes, models: m.species.iter().map(|s| s.name.as_str()).collect(), names: &ctx.names };
     let mut at = 0usize;
     for b in &tile.batches {
         let sp = &species[b.species as usize];
         let half = Vec3::from(sp.meta.bounds_max).max(-Vec3::from(sp.meta.bounds_min));
-        for p in &tile.instances[at..at + b.instance_count as usize] {
+        for (k, p) in tile.instances[at..at + b.instance_count as usize].iter().enumerate() {
             let i = p.decode(b);
             let local = DVec3::new(i.position_m[0].into(), i.position_m[1].into(), i.position_m[2].into());
             let t = place(geo, &frame, local, f64::from(i.yaw_rad), i.scale, i.aspect)
                 .with_context(|| format!("{}: a tree at {local}", entry.url))?;
-            placed.entry(b.species).or_default().push(t);
+            placed.entry(b.species).or_default().push(ExportedTree { index: (at + k) as u32, ..t });
             let r = half.x.max(half.y) * i.scale * i.aspect;
             let top = sp.meta.bounds_max[2] * i.scale;
             tallest = tallest.max(f64::from(top));
@@ -500,14 +679,14 @@ fn export_tile(
     }
     let bounds = Bounds { min: lo, max: hi };
     let name = format!("{}_{}", entry.x, entry.y);
-    let full = tile_glb(species, &placed, |_| 0);
+    let full = tile_glb(species, &placed, &data, &ctx.meta_schema, |_| 0);
     write_file(&out.join(format!("tiles/{name}.glb")), &full, report)?;
     report.glbs += 1;
     report.trees += placed.values().map(|v| v.len() as u64).sum::<u64>();
     let region = region(geo, &bounds)?;
     let coarse_levels = placed.keys().any(|&s| species[s as usize].meta.mesh_levels.len() > 1);
     let json = if coarse_levels {
-        let coarse = tile_glb(species, &placed, |sp| sp.meta.mesh_levels.len() as u32 - 1);
+        let coarse = tile_glb(species, &placed, &data, &ctx.meta_schema, |sp| sp.meta.mesh_levels.len() as u32 - 1);
         write_file(&out.join(format!("tiles/{name}_coarse.glb")), &coarse, report)?;
         report.glbs += 1;
         // Coarse meshes until the tallest tree reaches the full mesh's threshold.
@@ -557,30 +736,25 @@ fn group(children: Vec<TileNode>) -> Option<TileNode> {
 }
 
 /// Exports the index node at `url` (and everything below it).
-#[allow(clippy::too_many_arguments)]
 fn export_node(
-    dir: &Path,
-    m: &Manifest,
-    geo: &GeoFrame,
-    species: &[SpeciesOut],
+    ctx: &Ctx<'_>,
     url: &str,
     depth: u32,
-    out: &Path,
     report: &mut ExportReport,
     progress: &mut dyn FnMut(&ExportReport),
 ) -> Result<Option<TileNode>> {
     if depth > 64 {
-        bail!("{}: the index is deeper than 64 levels", dir.join(url).display());
+        bail!("{}: the index is deeper than 64 levels", ctx.dir.join(url).display());
     }
-    let path = dir.join(url);
+    let path = ctx.dir.join(url);
     let bytes = std::fs::read(&path).with_context(|| format!("cannot read index node {}", path.display()))?;
     let node = IndexNode::decode(&path.display().to_string(), &bytes)?;
     let mut children = Vec::new();
     for c in &node.children {
-        children.extend(export_node(dir, m, geo, species, &c.url, depth + 1, out, report, progress)?);
+        children.extend(export_node(ctx, &c.url, depth + 1, report, progress)?);
     }
     for t in &node.tiles {
-        children.push(export_tile(dir, m, geo, species, t, out, report)?);
+        children.push(export_tile(ctx, t, report)?);
         progress(report);
     }
     Ok(group(children))
@@ -612,12 +786,15 @@ pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -
     let mut report = ExportReport::default();
     let species: Vec<SpeciesOut> =
         (0..m.species.len()).map(|s| species_out(dir, &m, s, out, &mut report)).collect::<Result<_>>()?;
+    let names = property_names(m.attributes.as_ref());
+    let meta_schema = metadata_schema(m.attributes.as_ref(), &names);
+    let ctx = Ctx { dir, m: &m, geo, species, out, names, meta_schema };
     let root = if let Some(index) = &m.index {
-        export_node(dir, &m, &geo, &species, &index.root, 0, out, &mut report, progress)?
+        export_node(&ctx, &index.root, 0, &mut report, progress)?
     } else {
         let mut children = Vec::new();
         for t in &m.tiles {
-            children.push(export_tile(dir, &m, &geo, &species, t, out, &mut report)?);
+            children.push(export_tile(&ctx, t, &mut report)?);
             progress(&report);
         }
         group(children)
@@ -745,8 +922,17 @@ mod tests {
             let name = full.trim_start_matches("tiles/").trim_end_matches(".glb");
             let tile_path = dir.join(format!("tiles/{name}.tile"));
             let tile = Tile::decode("t", &std::fs::read(&tile_path).unwrap(), 3).unwrap();
+            let ids_path = dir.join(format!("tiles/{name}.ids"));
+            let ids = sylva::format::decode_ids("i", &std::fs::read(&ids_path).unwrap()).unwrap();
             let (doc, bin) = glb_parts(&std::fs::read(out.join(full)).unwrap());
             assert_eq!(doc["extensionsRequired"][0], "EXT_mesh_gpu_instancing");
+            // The property table: a row per tree in GLB order, its id the tree's.
+            let table = &doc["extensions"]["EXT_structural_metadata"]["propertyTables"][0];
+            let view = &doc["bufferViews"][table["properties"]["id"]["values"].as_u64().unwrap() as usize];
+            let start = view["byteOffset"].as_u64().unwrap() as usize;
+            assert_eq!(start % 8, 0, "64-bit values aligned");
+            let table_ids: Vec<u64> = bytemuck::pod_collect_to_vec(&bin[start..start + 8 * ids.len()]);
+            assert_eq!(table["count"].as_u64().unwrap() as usize, ids.len());
             let mut exported: Vec<(String, DVec3, f32, f32)> = Vec::new();
             for n in doc["nodes"].as_array().unwrap() {
                 let a = &n["extensions"]["EXT_mesh_gpu_instancing"]["attributes"];
@@ -762,15 +948,16 @@ mod tests {
             let mut at = 0;
             let mut k = 0;
             // Trees come species after species in the GLB, batch order within each.
-            let mut by_species: BTreeMap<u32, Vec<sylva::format::tile::Instance>> = BTreeMap::new();
+            let mut by_species: BTreeMap<u32, Vec<(usize, sylva::format::tile::Instance)>> = BTreeMap::new();
             for b in &tile.batches {
-                for p in &tile.instances[at..at + b.instance_count as usize] {
-                    by_species.entry(b.species).or_default().push(p.decode(b));
+                for (j, p) in tile.instances[at..at + b.instance_count as usize].iter().enumerate() {
+                    by_species.entry(b.species).or_default().push((at + j, p.decode(b)));
                 }
                 at += b.instance_count as usize;
             }
             for (s, trees) in &by_species {
-                for i in trees {
+                for (index, i) in trees {
+                    assert_eq!(table_ids[k], ids[*index], "row {k} is tree {index}");
                     let (name, p, _yaw, scale) = &exported[k];
                     assert_eq!(name, &m.species[*s as usize].name);
                     let want = DVec3::new(i.position_m[0].into(), i.position_m[1].into(), i.position_m[2].into());

@@ -59,7 +59,11 @@ function treePoint(glb, transform, n, k, upShare) {
   const height = doc.accessors[doc.meshes[node.mesh].primitives[0].attributes.POSITION].max[1];
   const enu = [x, -z, yUp + height * scale * upShare];
   const m = transform;
-  return [0, 1, 2].map((r) => m[12 + r] + m[r] * enu[0] + m[4 + r] * enu[1] + m[8 + r] * enu[2]);
+  // Its row in the property table (node 0's trees come first): the tree's id.
+  const table = doc.extensions.EXT_structural_metadata.propertyTables[0];
+  const ids = doc.bufferViews[table.properties.id.values];
+  const id = bin.readBigUInt64LE(ids.byteOffset + k * 8).toString();
+  return { at: [0, 1, 2].map((r) => m[12 + r] + m[r] * enu[0] + m[4 + r] * enu[1] + m[8 + r] * enu[2]), id, model: node.name };
 }
 
 test('CesiumJS loads the exported tileset from sylva serve and draws the trees where they belong', async (t) => {
@@ -118,7 +122,7 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
     if (node.transform) {
       const uri = node.children?.[0]?.content?.uri ?? node.content.uri;
       const glb = readFileSync(join(out, uri));
-      for (let k = 0; k < 3; k++) points.push(treePoint(glb, node.transform, 0, k, 0.6));
+      for (let k = 0; k < 8; k++) points.push(treePoint(glb, node.transform, 0, k, 0.6));
     }
     for (const c of node.children ?? []) walk(c);
   };
@@ -129,22 +133,29 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
       || p.tileset === tileset);
     const hits = [];
     const misses = [];
-    for (const [x, y, z] of points) {
+    const same = [];
+    for (const { at: [x, y, z], id, model } of points) {
       const p = new Cesium.Cartesian3(x, y, z);
       const w = Cesium.SceneTransforms.worldToWindowCoordinates(viewer.scene, p);
       if (!w || w.x < 2 || w.y < 2 || w.x > viewer.canvas.clientWidth - 2 || w.y > viewer.canvas.clientHeight - 2) continue;
-      hits.push(ours(viewer.scene.pick(w)));
+      const picked = viewer.scene.pick(w);
+      hits.push(ours(picked));
       // How far the surface drawn at that pixel is from the crown point (a tree in
       // front of it, or a tree drawn elsewhere, is metres away).
       const drawn = viewer.scene.pickPosition(w);
-      misses.push(drawn ? Cesium.Cartesian3.distance(drawn, p) : Infinity);
+      const miss = drawn ? Cesium.Cartesian3.distance(drawn, p) : Infinity;
+      misses.push(miss);
+      // Where that tree's own crown is drawn there, the pick is that tree: its id and model.
+      if (miss < 0.5 && picked instanceof Cesium.Cesium3DTileFeature) {
+        same.push(String(picked.getProperty('id')) === id && picked.getProperty('model') === model);
+      }
     }
     const sky = viewer.scene.pick(new Cesium.Cartesian2(3, 3));
-    return { hits, misses, sky: ours(sky) };
+    return { hits, misses, same, sky: ours(sky) };
   }, points);
   const inView = picks.hits.length;
   const hit = picks.hits.filter(Boolean).length;
-  assert.ok(inView >= 24, `trees projected into the view: ${inView} of ${points.length}`);
+  assert.ok(inView >= 64, `trees projected into the view: ${inView} of ${points.length}`);
   assert.ok(hit >= inView * 0.8, `picked as the tileset's: ${hit} of ${inView}`);
   assert.equal(picks.sky, false, 'the corner above the forest is not a tree');
   // Trees in front hide some crowns (tens of metres away); most crowns are drawn
@@ -152,4 +163,8 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
   const misses = picks.misses.sort((a, b) => a - b);
   const quartile = misses[Math.floor(misses.length / 4)];
   assert.ok(quartile < 3, `a quarter of the crowns' pixels lie within ${quartile} m of their crown points`);
+  // A pick returns the tree's attributes (EXT_instance_features + EXT_structural_metadata).
+  const same = picks.same.filter(Boolean).length;
+  assert.ok(picks.same.length >= 5 && same >= picks.same.length * 0.8,
+    `picks that name the tree drawn there: ${same} of ${picks.same.length}`);
 });
