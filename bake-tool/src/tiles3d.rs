@@ -246,8 +246,8 @@ fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut Expo
     let mut levels = BTreeMap::new();
     let coarsest = meta.mesh_levels.len() as u32 - 1;
     for level in [0, coarsest] {
-        if !levels.contains_key(&level) {
-            levels.insert(level, mesh_bin(&pack, level, &format!("{stem}_mesh{level}"), out, report)?);
+        if let std::collections::btree_map::Entry::Vacant(e) = levels.entry(level) {
+            e.insert(mesh_bin(&pack, level, &format!("{stem}_mesh{level}"), out, report)?);
         }
     }
     let mut layers = BTreeMap::new();
@@ -292,7 +292,7 @@ impl Gltf {
     /// Appends `data` to the GLB's chunk as a buffer view (8-byte aligned, as
     /// 64-bit metadata values need).
     fn own_view(&mut self, data: &[u8]) -> usize {
-        while self.bin.len() % 8 != 0 {
+        while !self.bin.len().is_multiple_of(8) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -302,7 +302,7 @@ impl Gltf {
 
     /// The GLB: header, JSON chunk (space-padded), binary chunk (zero-padded).
     fn glb(mut self, used: &[&str], required: &[&str]) -> Vec<u8> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let mut doc = json!({
@@ -321,7 +321,7 @@ impl Gltf {
             doc[k] = Value::Array(v);
         }
         let mut js = serde_json::to_vec(&doc).expect("JSON");
-        while js.len() % 4 != 0 {
+        while !js.len().is_multiple_of(4) {
             js.push(b' ');
         }
         let total = 12 + 8 + js.len() + 8 + self.bin.len();
