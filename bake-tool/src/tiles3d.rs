@@ -570,8 +570,9 @@ fn tile_glb(
     )
 }
 
-/// A `region` (radians, metres) around scene-relative bounds.
-fn region(geo: &GeoFrame, b: &Bounds) -> Result<Value> {
+/// A `region` (radians, metres) around scene-relative bounds (`origin_z`: the
+/// scene origin's height, which the content's heights include).
+fn region(geo: &GeoFrame, b: &Bounds, origin_z: f64) -> Result<Value> {
     let (mut w, mut s, mut e, mut n) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     for (i, j) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)] {
         let x = f64::from(b.min[0]) + (f64::from(b.max[0]) - f64::from(b.min[0])) * i;
@@ -586,8 +587,8 @@ fn region(geo: &GeoFrame, b: &Bounds) -> Result<Value> {
         (s - m).to_radians(),
         (e + m).to_radians(),
         (n + m).to_radians(),
-        f64::from(b.min[2]) - 1.0,
-        f64::from(b.max[2]) + 1.0
+        origin_z + f64::from(b.min[2]) - 1.0,
+        origin_z + f64::from(b.max[2]) + 1.0
     ]))
 }
 
@@ -600,6 +601,9 @@ struct TileNode {
 
 /// What every tile's export reads.
 struct Ctx<'a> {
+    /// Index nodes read and tiles exported so far: a node or tile listed
+    /// twice (a corrupt or hostile index) is refused, not read again.
+    seen: std::cell::RefCell<(std::collections::HashSet<String>, std::collections::HashSet<(i32, i32)>)>,
     dir: &'a Path,
     m: &'a Manifest,
     geo: GeoFrame,
@@ -614,6 +618,9 @@ struct Ctx<'a> {
 fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> Result<TileNode> {
     let Ctx { dir, m, geo, species, out, .. } = ctx;
     let (geo, species) = (geo, &species[..]);
+    if !ctx.seen.borrow_mut().1.insert((entry.x, entry.y)) {
+        bail!("{}: tile {},{} is listed twice", dir.join("scene.json").display(), entry.x, entry.y);
+    }
     let path = dir.join(&entry.url);
     let bytes = std::fs::read(&path).with_context(|| format!("cannot read tile {}", path.display()))?;
     let tile = Tile::decode(&path.display().to_string(), &bytes, m.species.len() as u32)?;
@@ -662,7 +669,8 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
             let t = place(geo, &frame, local, f64::from(i.yaw_rad), i.scale, i.aspect)
                 .with_context(|| format!("{}: a tree at {local}", entry.url))?;
             placed.entry(b.species).or_default().push(ExportedTree { index: (at + k) as u32, ..t });
-            let r = half.x.max(half.y) * i.scale * i.aspect;
+            // (The crown turns with the yaw: the model box's corner radius.)
+            let r = half.x.hypot(half.y) * i.scale * i.aspect;
             let top = sp.meta.bounds_max[2] * i.scale;
             tallest = tallest.max(f64::from(top));
             for k in 0..2 {
@@ -683,7 +691,7 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
     write_file(&out.join(format!("tiles/{name}.glb")), &full, report)?;
     report.glbs += 1;
     report.trees += placed.values().map(|v| v.len() as u64).sum::<u64>();
-    let region = region(geo, &bounds)?;
+    let region = region(geo, &bounds, m.origin_m[2])?;
     let coarse_levels = placed.keys().any(|&s| species[s as usize].meta.mesh_levels.len() > 1);
     let json = if coarse_levels {
         let coarse = tile_glb(species, &placed, &data, &ctx.meta_schema, |sp| sp.meta.mesh_levels.len() as u32 - 1);
@@ -694,7 +702,8 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
             .keys()
             .map(|&s| f64::from(species[s as usize].meta.mesh_levels[0].select_px))
             .fold(f64::MAX, f64::min)
-            .max(1.0);
+            // (At least the group's threshold: a child's error never exceeds its parent's.)
+            .max(SHOWN_FROM_PX);
         json!({
             "boundingVolume": {"region": region},
             "geometricError": SSE_PX * tallest / full_px,
@@ -743,8 +752,12 @@ fn export_node(
     report: &mut ExportReport,
     progress: &mut dyn FnMut(&ExportReport),
 ) -> Result<Option<TileNode>> {
-    if depth > 64 {
-        bail!("{}: the index is deeper than 64 levels", ctx.dir.join(url).display());
+    let most = ctx.m.index.as_ref().map_or(0, |i| i.depth);
+    if depth >= most.max(1) {
+        bail!("{}: deeper than the {most} levels the index declares", ctx.dir.join(url).display());
+    }
+    if !ctx.seen.borrow_mut().0.insert(url.to_string()) {
+        bail!("{}: an index node listed twice", ctx.dir.join(url).display());
     }
     let path = ctx.dir.join(url);
     let bytes = std::fs::read(&path).with_context(|| format!("cannot read index node {}", path.display()))?;
@@ -788,7 +801,7 @@ pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -
         (0..m.species.len()).map(|s| species_out(dir, &m, s, out, &mut report)).collect::<Result<_>>()?;
     let names = property_names(m.attributes.as_ref());
     let meta_schema = metadata_schema(m.attributes.as_ref(), &names);
-    let ctx = Ctx { dir, m: &m, geo, species, out, names, meta_schema };
+    let ctx = Ctx { seen: Default::default(), dir, m: &m, geo, species, out, names, meta_schema };
     let root = if let Some(index) = &m.index {
         export_node(&ctx, &index.root, 0, &mut report, progress)?
     } else {
@@ -976,6 +989,36 @@ mod tests {
         let again = export(&dir, &out, &mut |_| {}).unwrap_err().to_string();
         assert!(again.contains("not empty"), "{again}");
         std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    /// An index node listed twice (a hostile or corrupt index) is refused, not
+    /// read (and written) again.
+    #[test]
+    fn a_node_listed_twice_is_refused() {
+        let dir = std::env::temp_dir().join(format!("sylva-3dtiles-twice-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        copy_dir(&fixture(), &dir.join("scene"));
+        let root_path = dir.join("scene/index/r.json");
+        let mut root: Value = serde_json::from_slice(&std::fs::read(&root_path).unwrap()).unwrap();
+        root["children"][1] = root["children"][0].clone();
+        let trees: u64 = root["children"].as_array().unwrap().iter().map(|c| c["trees"].as_u64().unwrap()).sum();
+        root["trees"] = json!(trees);
+        std::fs::write(&root_path, serde_json::to_vec(&root).unwrap()).unwrap();
+        let e = export(&dir.join("scene"), &dir.join("out"), &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains("listed twice"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    fn copy_dir(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            if e.file_type().unwrap().is_dir() {
+                copy_dir(&e.path(), &to.join(e.file_name()));
+            } else {
+                std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+            }
+        }
     }
 
     /// The tree's yaw survives (grid convergence corrected, so within a degree of the grid's here).

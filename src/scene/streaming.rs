@@ -1370,19 +1370,21 @@ impl<F: Fetcher> SceneStream<F> {
         let tile = &held.tile;
         let mut result = residency.upload_tile(tile);
         // Full pools: evict resident tiles the view does not want, farthest first.
-        while matches!(result, Err(PoolError::Full(_))) {
-            if !self.evict_one(residency, view, None) {
+        while let Err(PoolError::Full(what)) = result {
+            if !self.evict_one(residency, view, None, what == "instances") {
                 break;
             }
             result = residency.upload_tile(tile);
         }
+        // Bytes kept for more or fewer levels (a tile whose entry lists its levels).
+        let keep_bytes = held.of > 1 && self.index.tiles[t].levels.is_some();
         match result {
             Ok(slot) => {
                 let prefix = Box::new(Prefix {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
                     batches: held.whole_batches(),
-                    bytes: if held.of > 1 { bytes } else { Vec::new() },
+                    bytes: if keep_bytes { bytes } else { Vec::new() },
                     more: Load::Idle,
                 });
                 let species = slot.species_counts.iter().map(|(s, _)| *s).collect();
@@ -1462,12 +1464,13 @@ impl<F: Fetcher> SceneStream<F> {
             }
         };
         let mut result = residency.upload_tile(&held.tile);
-        while matches!(result, Err(PoolError::Full(_))) {
-            if !self.evict_one(residency, view, Some(t)) {
+        while let Err(PoolError::Full(what)) = result {
+            if !self.evict_one(residency, view, Some(t), what == "instances") {
                 break;
             }
             result = residency.upload_tile(&held.tile);
         }
+        let keep_bytes = held.of > 1 && self.index.tiles[t].levels.is_some();
         let TileState::Resident { slot, prefix, .. } = &mut self.tiles[t] else { return };
         // Room for one copy only: the old one's room first, and back if the new does not fit.
         let mut replaced = false;
@@ -1499,7 +1502,7 @@ impl<F: Fetcher> SceneStream<F> {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
                     batches: held.whole_batches(),
-                    bytes: if held.of > 1 { bytes } else { Vec::new() },
+                    bytes: if keep_bytes { bytes } else { Vec::new() },
                     more: Load::Idle,
                 };
             }
@@ -1535,8 +1538,10 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    /// Evicts the farthest resident tile the view does not want (never `keep`).
-    fn evict_one(&mut self, residency: &mut impl Residency, view: &ViewData, keep: Option<usize>) -> bool {
+    /// Evicts the farthest resident tile the view does not want (never `keep`);
+    /// with none left and `trim` (the instance pool is what is full), trims a
+    /// wanted one to the levels the view draws ([`Self::trim_one`]).
+    fn evict_one(&mut self, residency: &mut impl Residency, view: &ViewData, keep: Option<usize>, trim: bool) -> bool {
         let eye = view.eye_hi + view.eye_lo;
         let victim = self
             .tiles
@@ -1548,7 +1553,8 @@ impl<F: Fetcher> SceneStream<F> {
                 d(*a).total_cmp(&d(*b))
             })
             .map(|(i, _)| i);
-        let Some(v) = victim else { return self.trim_one(residency, view, keep) };
+        // (A trim keeps every batch: it makes room for instances only.)
+        let Some(v) = victim else { return trim && self.trim_one(residency, view, keep) };
         if let TileState::Resident { slot, .. } =
             std::mem::replace(&mut self.tiles[v], TileState::NotResident(Load::Idle))
         {
@@ -1602,7 +1608,9 @@ impl<F: Fetcher> SceneStream<F> {
                 prefix.bytes.shrink_to_fit();
                 prefix.levels = held.levels;
                 prefix.runs = std::sync::Arc::new(held.runs());
-                prefix.more = Load::Idle;
+                if prefix.more != Load::Broken {
+                    prefix.more = Load::Idle;
+                }
             }
             // Cannot happen (a prefix of bytes that decoded, into the room of a
             // bigger copy): the tile is fetched anew later.
