@@ -603,7 +603,8 @@ struct TileNode {
 struct Ctx<'a> {
     /// Index nodes read and tiles exported so far: a node or tile listed
     /// twice (a corrupt or hostile index) is refused, not read again.
-    seen: std::cell::RefCell<(std::collections::HashSet<String>, std::collections::HashSet<(i32, i32)>)>,
+    seen_nodes: std::cell::RefCell<std::collections::HashSet<String>>,
+    seen_tiles: std::cell::RefCell<std::collections::HashSet<(i32, i32)>>,
     dir: &'a Path,
     m: &'a Manifest,
     geo: GeoFrame,
@@ -618,7 +619,7 @@ struct Ctx<'a> {
 fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> Result<TileNode> {
     let Ctx { dir, m, geo, species, out, .. } = ctx;
     let (geo, species) = (geo, &species[..]);
-    if !ctx.seen.borrow_mut().1.insert((entry.x, entry.y)) {
+    if !ctx.seen_tiles.borrow_mut().insert((entry.x, entry.y)) {
         bail!("{}: tile {},{} is listed twice", dir.join("scene.json").display(), entry.x, entry.y);
     }
     let path = dir.join(&entry.url);
@@ -756,7 +757,7 @@ fn export_node(
     if depth >= most.max(1) {
         bail!("{}: deeper than the {most} levels the index declares", ctx.dir.join(url).display());
     }
-    if !ctx.seen.borrow_mut().0.insert(url.to_string()) {
+    if !ctx.seen_nodes.borrow_mut().insert(url.to_string()) {
         bail!("{}: an index node listed twice", ctx.dir.join(url).display());
     }
     let path = ctx.dir.join(url);
@@ -801,7 +802,17 @@ pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -
         (0..m.species.len()).map(|s| species_out(dir, &m, s, out, &mut report)).collect::<Result<_>>()?;
     let names = property_names(m.attributes.as_ref());
     let meta_schema = metadata_schema(m.attributes.as_ref(), &names);
-    let ctx = Ctx { seen: Default::default(), dir, m: &m, geo, species, out, names, meta_schema };
+    let ctx = Ctx {
+        seen_nodes: Default::default(),
+        seen_tiles: Default::default(),
+        dir,
+        m: &m,
+        geo,
+        species,
+        out,
+        names,
+        meta_schema,
+    };
     let root = if let Some(index) = &m.index {
         export_node(&ctx, &index.root, 0, &mut report, progress)?
     } else {
