@@ -46,7 +46,7 @@ web:
 
 # Browser end-to-end tests in headless Chromium.
 test-web: release web
-	cd web && node --test tests/
+	cd web && node --test --test-concurrency=1 tests/
 
 PORT ?= 8080
 demo: setup release web

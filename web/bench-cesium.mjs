@@ -91,7 +91,7 @@ const results = {};
   const base = await s.url;
   const { page, bytes } = await countingPage(browser);
   const t0 = Date.now();
-  await page.goto(`${base}cesium.html?camera=${[c.lon, c.lat, c.height, c.heading, c.pitch].join(',')}&fov_y=50`);
+  await page.goto(`${base}cesium.html?render=continuous&camera=${[c.lon, c.lat, c.height, c.heading, c.pitch].join(',')}&fov_y=50`);
   await page.waitForFunction(() => window.cesiumTilesLoaded !== undefined || window.cesiumError, null,
     { timeout: 600000, polling: 100 });
   const error = await page.evaluate(() => window.cesiumError);

@@ -103,7 +103,7 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
   assert.ok(loaded >= 16, `tiles loaded: ${loaded}`);
   assert.deepEqual(errors, []);
   // Foliage on the screen: green-dominant pixels (the globe is beige, the sky blue or black).
-  const shot = (await page.screenshot()).toString('base64');
+  const shot = (await page.screenshot({ timeout: 180000 })).toString('base64');
   const green = await page.evaluate(async (b64) => {
     const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
     const c = new OffscreenCanvas(img.width, img.height).getContext('2d');
