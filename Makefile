@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-serve bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-serve bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -83,6 +83,18 @@ bench-render: release
 	@for n in 10k:10000 100k:100000 1m:1000000; do name=$${n%%:*}; count=$${n##*:}; \
 	  test -f target/bench/demo-$$name/scene.json || target/release/sylva-bake demo --trees $$count --out target/bench/demo-$$name; done
 	$(CARGO) bench --locked --bench frame -- target/bench/demo-10k target/bench/demo-100k target/bench/demo-1m
+
+# Sylva's viewer beside CesiumJS with the scene's 3D Tiles export (issue 21;
+# docs/BENCHMARKS.md "Sylva beside CesiumJS"): the 100k demo and the Amsterdam
+# street trees, same camera, one headless Chromium.
+bench-cesium: release web
+	@test -f target/bench/demo-100k/scene.json || target/release/sylva-bake demo --trees 100000 --out target/bench/demo-100k
+	@test -f target/bench/amsterdam/scene.json || target/release/sylva-bake bake \
+	  --model oak=$(SHARED)/models/eztree_oak_medium.glb --model pine=$(SHARED)/models/eztree_pine_medium.glb \
+	  --placements $(SHARED)/placements/amsterdam_trees.csv --default-model oak --out target/bench/amsterdam
+	@for s in demo-100k amsterdam; do rm -rf target/bench/$$s-3dtiles target/bench/cesium-$$s; \
+	  target/release/sylva-bake export-3dtiles target/bench/$$s --out target/bench/$$s-3dtiles && \
+	  node web/bench-cesium.mjs target/bench/$$s target/bench/$$s-3dtiles target/bench/cesium-$$s || exit 1; done
 
 # Load test of `sylva serve` on 127.0.0.1 (bounded: 16 clients × 250 requests
 # and 8 idle connections over the test scene; stops by itself).

@@ -82,16 +82,40 @@ impl GeoFrame {
     /// # Errors
     /// [`GeoError::Point`] for points the projection cannot take.
     pub fn sun_direction(&self, local: DVec3, azimuth_deg: f64, elevation_deg: f64) -> Result<DVec3, GeoError> {
+        let north = self.true_north(local)?;
+        let east = glam::DVec2::new(north.y, -north.x);
+        let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+        let flat = east * az.sin() * el.cos() + north * az.cos() * el.cos();
+        Ok(DVec3::new(flat.x, flat.y, el.sin()).normalize())
+    }
+}
+
+impl GeoFrame {
+    /// Unit vector (scene x, y) towards true north at the scene-relative
+    /// point `local`: grid north turned by the projection's convergence.
+    ///
+    /// # Errors
+    /// [`GeoError::Point`] for points the projection cannot take or where
+    /// north has no direction (a pole).
+    pub fn true_north(&self, local: DVec3) -> Result<glam::DVec2, GeoError> {
         let (lon, lat, _) = self.to_geo(local)?;
         let ahead = self.to_local(lon, (lat + 1e-3).min(90.0), local.z)?;
         let north = (ahead - local).truncate().normalize_or_zero();
         if north == glam::DVec2::ZERO {
             return Err(GeoError::Point(format!("no north at {lon}, {lat}")));
         }
-        let east = glam::DVec2::new(north.y, -north.x);
-        let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
-        let flat = east * az.sin() * el.cos() + north * az.cos() * el.cos();
-        Ok(DVec3::new(flat.x, flat.y, el.sin()).normalize())
+        Ok(north)
+    }
+
+    /// The scene's heading (radians clockwise from grid north, as
+    /// [`crate::camera::Camera`] takes it) of a bearing `true_deg` degrees
+    /// clockwise from true north at `local`, as maps and globes give it.
+    ///
+    /// # Errors
+    /// As [`Self::true_north`].
+    pub fn grid_heading(&self, local: DVec3, true_deg: f64) -> Result<f64, GeoError> {
+        let north = self.true_north(local)?;
+        Ok(north.x.atan2(north.y) + true_deg.to_radians())
     }
 }
 
@@ -109,5 +133,24 @@ mod tests {
         let (lon, lat, h) = f.to_geo(local).unwrap();
         assert!((lon - 15.4).abs() < 1e-9 && (lat - 48.4).abs() < 1e-9 && (h - 300.0).abs() < 1e-9);
         assert!(GeoFrame::new("+proj=nonsense", [0.0; 3]).is_err());
+    }
+
+    #[test]
+    fn grid_heading_turns_true_bearings_by_the_convergence() {
+        let f =
+            GeoFrame::new("+proj=utm +zone=33 +datum=WGS84 +units=m +no_defs", [540_000.0, 5_360_000.0, 0.0]).unwrap();
+        // West of the central meridian (15° E) the meridian runs towards it
+        // going north, so true north lies clockwise of grid north by
+        // atan(tan Δλ · sin φ) = 2.243° (PROJ's meridian convergence there is
+        // −2.243°: grid north seen from true north), and a true bearing of 0°
+        // is a grid heading of +2.243°.
+        let local = f.to_local(12.0, 48.4, 0.0).unwrap();
+        let h = f.grid_heading(local, 0.0).unwrap().to_degrees();
+        assert!((h - 2.243).abs() < 0.01, "{h}");
+        let h90 = f.grid_heading(local, 90.0).unwrap().to_degrees();
+        assert!((h90 - h - 90.0).abs() < 1e-9, "{h90}");
+        // On the central meridian grid and true north agree.
+        let on = f.to_local(15.0, 48.4, 0.0).unwrap();
+        assert!((f.grid_heading(on, 30.0).unwrap().to_degrees() - 30.0).abs() < 1e-6);
     }
 }

@@ -115,12 +115,23 @@ pub struct Viewer {
     /// The first frame drawn with the stream settled since the last change.
     settled_frame: Option<u64>,
     /// A geographic camera asked for before the manifest (and so the CRS) arrived.
-    pending_geo: Option<[f64; 5]>,
+    pending_geo: Option<PendingGeo>,
+    /// Vertical field of view (radians; `set_fov`).
+    fov_y_rad: f32,
     /// Walking mode: the eye stays at eye height above the ground and looks around itself.
     fly: bool,
     lost: Arc<AtomicBool>,
     /// Frames submitted whose GPU work has not finished (the queue says when).
     frames_ahead: Arc<AtomicU32>,
+}
+
+/// A geographic camera asked for before the scene's CRS was known.
+#[derive(Debug, Clone, Copy)]
+enum PendingGeo {
+    /// `set_camera_geo`: lon, lat, height, heading, pitch.
+    Pose([f64; 5]),
+    /// `set_camera_look_geo`: eye lon, lat, height, target lon, lat, height, bearing.
+    Look([f64; 7]),
 }
 
 /// At most this many frames queued on the GPU: on a slow GPU (a CPU one, a
@@ -271,6 +282,7 @@ impl Viewer {
             geo: None,
             settled_frame: None,
             pending_geo: None,
+            fov_y_rad: Camera::default().fov_y_rad,
             fly: false,
             lost,
             frames_ahead: Default::default(),
@@ -420,8 +432,14 @@ impl Viewer {
                     Ok(g) => self.geo = Some(g),
                     Err(e) => web_sys::console::warn_1(&JsValue::from_str(&format!("sylva: {e}"))),
                 }
-                if let Some([lon, lat, h, heading, pitch]) = self.pending_geo.take() {
-                    self.set_camera_geo(lon, lat, h, heading, pitch);
+                match self.pending_geo.take() {
+                    Some(PendingGeo::Pose([lon, lat, h, heading, pitch])) => {
+                        self.set_camera_geo(lon, lat, h, heading, pitch);
+                    }
+                    Some(PendingGeo::Look([lon, lat, h, at_lon, at_lat, at_h, bearing])) => {
+                        self.set_camera_look_geo(lon, lat, h, at_lon, at_lat, at_h, bearing);
+                    }
+                    None => {}
                 }
             }
         }
@@ -460,7 +478,7 @@ impl Viewer {
     }
 
     fn camera(&self) -> Camera {
-        let mut cam = self.orbit.camera();
+        let mut cam = Camera { fov_y_rad: self.fov_y_rad, ..self.orbit.camera() };
         // No tunnelling: keep the eye above the ground near it; walking keeps eye height.
         if let Some(z) = self.frame.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
             let ground = f64::from(z);
@@ -505,7 +523,7 @@ impl Viewer {
     /// CRS is known if the manifest has not arrived yet.
     pub fn set_camera_geo(&mut self, lon: f64, lat: f64, height: f64, heading_deg: f64, pitch_deg: f64) {
         let Some(geo) = &self.geo else {
-            self.pending_geo = Some([lon, lat, height, heading_deg, pitch_deg]);
+            self.pending_geo = Some(PendingGeo::Pose([lon, lat, height, heading_deg, pitch_deg]));
             self.placed = true;
             return;
         };
@@ -515,6 +533,113 @@ impl Viewer {
                 self.events.push(StreamEvent::Failed { url: String::new(), message: e.to_string(), retrying: false })
             }
         }
+    }
+
+    /// Sets the camera as a map or a globe gives it: the eye at WGS 84 `lon`,
+    /// `lat`, `height` looking at the point `at_lon`, `at_lat`, `at_height`
+    /// (heights in metres, the scene's vertical datum). `bearing_deg`
+    /// (clockwise from true north) turns the view when it looks straight
+    /// down; otherwise the two points alone set it, so the scene's grid
+    /// convergence is taken in. Pitch is not limited: a map looking straight
+    /// down is drawn straight down.
+    #[allow(clippy::too_many_arguments)]
+    pub fn set_camera_look_geo(
+        &mut self,
+        lon: f64,
+        lat: f64,
+        height: f64,
+        at_lon: f64,
+        at_lat: f64,
+        at_height: f64,
+        bearing_deg: f64,
+    ) {
+        let Some(geo) = &self.geo else {
+            self.pending_geo = Some(PendingGeo::Look([lon, lat, height, at_lon, at_lat, at_height, bearing_deg]));
+            self.placed = true;
+            return;
+        };
+        let (eye, at) = match (geo.to_local(lon, lat, height), geo.to_local(at_lon, at_lat, at_height)) {
+            (Ok(eye), Ok(at)) => (eye, at),
+            (Err(e), _) | (_, Err(e)) => {
+                let message = e.to_string();
+                self.events.push(StreamEvent::Failed { url: String::new(), message, retrying: false });
+                return;
+            }
+        };
+        let d = at - eye;
+        let distance = d.length();
+        if !(distance.is_finite() && distance > 1e-6) {
+            return;
+        }
+        let horizontal = d.truncate().length();
+        let heading = if horizontal > 1e-7 * distance {
+            d.x.atan2(d.y)
+        } else {
+            geo.grid_heading(eye, bearing_deg).unwrap_or(bearing_deg.to_radians())
+        };
+        self.orbit = Orbit { target: at, distance, heading, pitch: d.z.atan2(horizontal) };
+        self.placed = true;
+    }
+
+    /// Where the current camera draws the WGS 84 point `lon`, `lat`,
+    /// `height` (the scene's datum): JSON `[x, y]` in drawing-buffer pixels
+    /// from the top left, or `null` behind the eye or before the scene's CRS
+    /// is known (a map layer's tests compare it with the map's projection).
+    pub fn project_geo(&self, lon: f64, lat: f64, height: f64) -> String {
+        let Some(Ok(p)) = self.geo.as_ref().map(|g| g.to_local(lon, lat, height)) else { return "null".into() };
+        let cam = self.camera();
+        let view = cam.view_data(self.config.width, self.config.height);
+        let clip = view.clip_from_eye * (p - cam.eye_m).as_vec3().extend(1.0);
+        if clip.w <= 1e-6 {
+            return "null".into();
+        }
+        let (w, h) = (f64::from(self.config.width), f64::from(self.config.height));
+        let x = (f64::from(clip.x / clip.w) * 0.5 + 0.5) * w;
+        let y = (0.5 - f64::from(clip.y / clip.w) * 0.5) * h;
+        serde_json::json!([x, y]).to_string()
+    }
+
+    /// The WGS 84 box `[west, south, east, north]` (degrees) around where the
+    /// scene's views aim first (its home, else its densest group of trees) as
+    /// JSON, or `null` before the manifest and its CRS arrived: a map fits
+    /// its view to it.
+    pub fn focus_geo_json(&self) -> String {
+        let (Some(geo), Some(m)) = (&self.geo, self.frame.stream.manifest()) else { return "null".into() };
+        let b = m.focus();
+        let corners = [[b.min[0], b.min[1]], [b.max[0], b.min[1]], [b.min[0], b.max[1]], [b.max[0], b.max[1]]];
+        let mut bbox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for [x, y] in corners {
+            let Ok((lon, lat, _)) = geo.to_geo(DVec3::new(f64::from(x), f64::from(y), 0.0)) else {
+                return "null".into();
+            };
+            bbox = [bbox[0].min(lon), bbox[1].min(lat), bbox[2].max(lon), bbox[3].max(lat)];
+        }
+        serde_json::json!(bbox).to_string()
+    }
+
+    /// Vertical field of view in degrees (default 50; clamped to 1–150).
+    pub fn set_fov(&mut self, fov_y_deg: f64) {
+        if fov_y_deg.is_finite() {
+            self.fov_y_rad = (fov_y_deg.clamp(1.0, 150.0) as f32).to_radians();
+        }
+    }
+
+    /// A layer over a map (on) or a viewer of its own (off): on, neither
+    /// sky nor clear colour is drawn (the canvas is transparent where the
+    /// scene draws nothing, composited premultiplied over what lies beneath
+    /// it); the terrain stays as `set_terrain` has it.
+    pub fn set_overlay(&mut self, on: bool) {
+        self.frame.settings.sky = !on;
+        self.frame.settings.clear =
+            if on { [0.0; 4] } else { crate::render::settings::RenderSettings::default().clear };
+        // Every WebGPU canvas takes "premultiplied" (the spec's two modes),
+        // though wgpu's capabilities on the web list "opaque" only.
+        let alpha = if on { wgpu::CompositeAlphaMode::PreMultiplied } else { wgpu::CompositeAlphaMode::Opaque };
+        if alpha != self.config.alpha_mode {
+            self.config.alpha_mode = alpha;
+            self.surface.configure(&self.frame.device, &self.config);
+        }
+        self.frame.refine.invalidate();
     }
 
     /// Scene-relative `[x, y, z]` of a geographic point as JSON, or `null` before the

@@ -1,7 +1,7 @@
 // Sylva's viewer against CesiumJS with the scene's 3D Tiles export (issue 21), side
 // by side in one headless Chromium (SwiftShader: WebGPU for Sylva, WebGL for
 // Cesium, both CPU rasterisers; compare the two, not GPUs): the same camera (Sylva's
-// first view of the scene), 960x540. Per viewer: time to the first complete frame
+// first view of the scene), 640x360, progressive refinement off. Per viewer: time to the first complete frame
 // (Sylva: `ready`; Cesium: every tile the view needs loaded, then one frame drawn),
 // bytes fetched (the scene's or tileset's files; and everything, the viewers' own
 // code included), frame time over 20 redraws of the settled view, and the image
@@ -23,7 +23,7 @@ if (!scene || !tileset || !out) {
 }
 mkdirSync(out, { recursive: true });
 const sylva = join(root, 'target/release/sylva');
-const size = { width: 960, height: 540 };
+const size = { width: 640, height: 360 };
 const flags = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
   '--use-webgpu-adapter=swiftshader', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--disable-quic',
   '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'];
@@ -59,14 +59,23 @@ const results = {};
   const base = await s.url;
   const { page, bytes } = await countingPage(browser);
   const t0 = Date.now();
-  await page.goto(`${base}?ui=0`);
+  await page.goto(`${base}?ui=0&refine=off`);
   await page.waitForFunction(() => window.sylva, null, { timeout: 600000 });
   await page.evaluate(() => window.sylva.ready);
   const first = Date.now() - t0;
   // (A resting view refines progressively: it may not go idle soon; 60 s at most.)
   await page.waitForFunction(() => window.sylva.dirty === 0 && window.sylva.viewer.frames_in_flight() === 0,
     null, { timeout: 60000, polling: 100 }).catch(() => {});
-  const camera = await page.evaluate(() => window.sylva.camera());
+  const camera = await page.evaluate(() => {
+    const s = window.sylva;
+    const c = s.camera();
+    // Sylva's heading is from the scene's grid north; Cesium's from true north.
+    const eye = s.toLocal(c.lon, c.lat, c.z);
+    const north = s.toLocal(c.lon, c.lat + 1e-3, c.z);
+    c.convergence = Math.atan2(north.x - eye.x, north.y - eye.y) * 180 / Math.PI;
+    c.true_heading = c.heading - c.convergence;
+    return c;
+  });
   const frameMs = await page.evaluate(async () => {
     const s = window.sylva;
     const cam = s.camera();
@@ -91,7 +100,7 @@ const results = {};
   const base = await s.url;
   const { page, bytes } = await countingPage(browser);
   const t0 = Date.now();
-  await page.goto(`${base}cesium.html?render=continuous&camera=${[c.lon, c.lat, c.height, c.heading, c.pitch].join(',')}&fov_y=50`);
+  await page.goto(`${base}cesium.html?render=continuous&camera=${[c.lon, c.lat, c.height, c.true_heading, c.pitch].join(',')}&fov_y=50`);
   await page.waitForFunction(() => window.cesiumTilesLoaded !== undefined || window.cesiumError, null,
     { timeout: 600000, polling: 100 });
   const error = await page.evaluate(() => window.cesiumError);

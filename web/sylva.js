@@ -32,6 +32,15 @@
 //   v.attributes()                          the scene's attribute columns [{name, type, min, max, categories}] or null
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
+//
+// As a layer over a map (web/sylva-maplibre.js): create(canvas, {overlay: true, controls: false})
+// draws no sky (the canvas is transparent where no tree is) and leaves pointer events to the page;
+//   v.lookAt(eye, target, bearing)          eye and target {lon, lat, height}; bearing (degrees from true
+//                                           north) turns a view straight down
+//   v.setFov(degrees)                       vertical field of view (50 by default)
+//   v.project(lon, lat, height)             where the current camera draws that point: {x, y} canvas CSS px, or null
+//   await v.focusBounds()                   [west, south, east, north] around where the scene's views aim first
+//   v.tick(now)                             draw now if anything changed (a map's render callback calls it)
 
 import init, { Viewer, queryMayMatch, queryTile } from './pkg/sylva.js';
 
@@ -73,7 +82,7 @@ class SylvaViewer {
     this.ready = new Promise((resolve, reject) => { this.resolveReady = resolve; this.rejectReady = reject; });
     this.ready.catch(() => {}); // observed through 'error' events too
     this.resize();
-    this.bindControls();
+    if (options.controls !== false) this.bindControls();
     this.resizeObserver = new ResizeObserver(() => { this.resize(); this.dirty = SETTLE_FRAMES; });
     this.resizeObserver.observe(canvas);
     this.loop = this.loop.bind(this);
@@ -220,7 +229,11 @@ class SylvaViewer {
 
   /** Terrain on or off (off: neither fetched nor drawn); `errorPx` is the
    * projected geometric error in pixels up to which coarser terrain is kept. */
-  setTerrain(on, errorPx = 2) { this.viewer.set_terrain(!!on, errorPx); this.dirty = SETTLE_FRAMES; }
+  setTerrain(on, errorPx = 2) {
+    this.terrain = [!!on, errorPx];
+    this.viewer.set_terrain(!!on, errorPx);
+    this.dirty = SETTLE_FRAMES;
+  }
   setCanopy(on) { this.viewer.set_canopy(!!on); this.dirty = SETTLE_FRAMES; }
 
   /** Camera: {x, y, z, heading, pitch} relative to the scene origin (+ origin, epsg, ground under the eye). */
@@ -234,6 +247,49 @@ class SylvaViewer {
       this.viewer.set_camera(c.x, c.y, c.z, c.heading ?? 0, c.pitch ?? -30);
     }
     this.dirty = SETTLE_FRAMES;
+  }
+
+  /** Looks from `eye` at `target` (both {lon, lat, height}: WGS 84 degrees,
+   * metres in the scene's datum), as a map or a globe poses its camera;
+   * `bearing` (degrees clockwise from true north) turns a view straight
+   * down. Redraws only when the pose changed. */
+  lookAt(eye, target, bearing = 0) {
+    const key = `${eye.lon},${eye.lat},${eye.height},${target.lon},${target.lat},${target.height},${bearing}`;
+    if (key === this.lookKey) return;
+    this.lookKey = key;
+    this.flight = null;
+    this.viewer.set_camera_look_geo(eye.lon, eye.lat, eye.height, target.lon, target.lat, target.height, bearing);
+    this.dirty = SETTLE_FRAMES;
+  }
+
+  /** The WGS 84 box [west, south, east, north] around where the scene's
+   * views aim first (its home, else its densest trees): resolves once the
+   * scene's manifest has arrived. */
+  async focusBounds() {
+    for (;;) {
+      if (this.destroyed) return null;
+      const b = JSON.parse(this.viewer.focus_geo_json());
+      if (b) return b;
+      await new Promise((r) => setTimeout(r, 50));
+    }
+  }
+
+  /** Vertical field of view in degrees. */
+  setFov(degrees) {
+    if (degrees === this.fov) return;
+    this.fov = degrees;
+    this.viewer.set_fov(degrees);
+    this.dirty = SETTLE_FRAMES;
+  }
+
+  /** Where the current camera draws WGS 84 `lon`, `lat` at `height` metres:
+   * {x, y} in canvas CSS pixels from the top left, or null (behind the eye,
+   * or before the scene's CRS is known). */
+  project(lon, lat, height) {
+    const p = JSON.parse(this.viewer.project_geo(lon, lat, height));
+    if (!p) return null;
+    const c = this.canvas;
+    return { x: p[0] * c.clientWidth / Math.max(1, c.width), y: p[1] * c.clientHeight / Math.max(1, c.height) };
   }
 
   /** Scene-relative {x, y, z} of a geographic point (null before the scene CRS is known). */
@@ -373,8 +429,12 @@ class SylvaViewer {
     try {
       this.viewer = await Viewer.create(this.canvas, this.options.scene || 'scene/scene.json');
       this.resize();
+      if (this.options.overlay) this.viewer.set_overlay(true);
+      if (this.fov ?? this.options.fov) this.viewer.set_fov(this.fov ?? this.options.fov);
+      this.lookKey = undefined; // a map layer poses the new viewer again on its next render
       this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
       if (this.lighting) this.setLighting(this.lighting);
+      if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
       this.dirty = SETTLE_FRAMES;
       this.emit('recovered', {});
@@ -387,7 +447,14 @@ class SylvaViewer {
   loop(now) {
     if (this.destroyed) return;
     this.raf = requestAnimationFrame(this.loop);
-    if (this.recovering) return;
+    this.tick(now);
+  }
+
+  /** Draws a frame now when anything asks for one (loading, moving, a change,
+   * refinement), then hands out events: the render loop calls it every
+   * animation frame; a map layer calls it in the map's own render. */
+  tick(now = performance.now()) {
+    if (this.destroyed || this.recovering) return;
     if (this.viewer.is_lost()) { this.recover(); return; }
     if (this.flight) this.flight(now);
     const progress = JSON.parse(this.viewer.progress_json());
@@ -647,6 +714,8 @@ export async function create(target, options = {}) {
   await loadWasm();
   const scene = options.scene || 'scene/scene.json';
   const viewer = await Viewer.create(canvas, scene);
+  if (options.overlay) viewer.set_overlay(true);
+  if (options.fov) viewer.set_fov(options.fov);
   const v = new SylvaViewer(canvas, viewer, { ...options, scene });
   if (options.camera) v.setCamera(options.camera);
   if (options.lighting) v.setLighting(options.lighting);

@@ -46,6 +46,8 @@ pub struct FrameData {
     debug_bounds: bool,
     /// Clear colour (linear RGBA).
     clear: [f64; 4],
+    /// Draw the sky first.
+    sky: bool,
     /// Shadow cascades drawn this frame (0: no shadows).
     pub cascades: u32,
 }
@@ -375,6 +377,7 @@ impl ForestRenderer {
             species: SpeciesFrame { fade_band: settings.fade_band, cluster_exact_depth: settings.cluster_exact_depth },
             debug_bounds: settings.debug_bounds,
             clear: settings.clear,
+            sky: settings.sky,
             cascades: self.last_cascades.len() as u32,
         }
     }
@@ -569,7 +572,9 @@ impl ForestRenderer {
             multiview_mask: None,
         });
         pass.set_bind_group(0, &self.view_group, &[]);
-        self.sky.draw(&mut pass);
+        if frame.sky {
+            self.sky.draw(&mut pass);
+        }
         let mut draws = self.terrain.draw(&mut pass);
         draws += self.species.draw(&mut pass, &self.pools, &self.reach, frame.species);
         draws += self.canopy.draw(&mut pass);

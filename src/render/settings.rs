@@ -43,6 +43,10 @@ pub struct RenderSettings {
     pub lighting: Lighting,
     /// Clear colour (linear RGBA).
     pub clear: [f64; 4],
+    /// Draw the sky and the ground's haze behind the scene. Off for a layer
+    /// over a map (with a transparent `clear`): only what the scene draws
+    /// covers the map.
+    pub sky: bool,
     /// Culling (benchmark baselines).
     pub culling: CullingMode,
     /// Trees drawn at least this tall (px) but below the simplified mesh's
@@ -165,6 +169,7 @@ impl Default for RenderSettings {
             debug_bounds: false,
             lighting: Lighting::default(),
             clear: [0.55, 0.68, 0.82, 1.0],
+            sky: true,
             culling: CullingMode::Batches,
             cluster_min_px: DEFAULT_CLUSTER_MIN_PX,
             representations: Representations::ALL,
