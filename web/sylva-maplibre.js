@@ -2,7 +2,7 @@
 //
 //   import { SylvaLayer } from './sylva-maplibre.js';
 //   const layer = new SylvaLayer({ scene: 'scene/scene.json' });
-//   map.addLayer(layer);                 // any maplibregl.Map (the portal's own maplibre-gl, 4 or later)
+//   map.addLayer(layer);                 // any maplibregl.Map (the portal's own maplibre-gl, 5 or later; tested with 6.20)
 //   await layer.ready;                   // the first complete frame; rejects with what to do when WebGPU is missing
 //   map.on('click', async (e) => console.log(await layer.pick(e.point.x, e.point.y)));
 //
@@ -42,13 +42,16 @@ const latOf = (y) => Math.atan(Math.exp((180 - y * 360) * rad)) * 2 / rad - 90;
  * The camera of a MapLibre map as Sylva takes it: {eye, target ({lon, lat, height}, heights
  * in metres above the map's ground datum), bearing, fov (vertical, degrees)}. The camera
  * looks at the map's centre from the distance at which the map's field of view spans its
- * height in pixels at this zoom (MapLibre's own camera model).
+ * height in pixels at this zoom (MapLibre's own camera model). `scale`: the scene's metres
+ * per metre of MapLibre's sphere at the centre — the eye's height over the centre is scaled
+ * by it, so the scene (on the ellipsoid, in its CRS's metres) is seen at the map's scale.
  */
-export function mapCamera(map) {
+export function mapCamera(map, scale = 1) {
   const centre = map.getCenter();
   const bearing = map.getBearing();
   const pitch = map.getPitch() * rad;
-  const fov = map.getVerticalFieldOfView();
+  // (MapLibre 5+; its default, 36.87°, before.)
+  const fov = map.getVerticalFieldOfView?.() ?? map.transform?.fov ?? 36.87;
   const height = map.getCanvas().clientHeight;
   // Metres on the ground at the centre's latitude per world pixel, and the camera distance.
   const circumference = 2 * Math.PI * EARTH_RADIUS_M * Math.cos(centre.lat * rad);
@@ -60,7 +63,7 @@ export function mapCamera(map) {
   const y = mercatorY(centre.lat) + Math.cos(bearing * rad) * back;
   const ground = map.getCenterElevation?.() ?? 0;
   return {
-    eye: { lon: lngOf(x), lat: latOf(y), height: ground + distance * Math.cos(pitch) },
+    eye: { lon: lngOf(x), lat: latOf(y), height: ground + scale * distance * Math.cos(pitch) },
     target: { lon: centre.lng, lat: centre.lat, height: ground },
     bearing,
     fov,
@@ -87,11 +90,18 @@ export class SylvaLayer {
     Object.assign(canvas.style, {
       position: 'absolute', left: '0', top: '0', width: '100%', height: '100%', pointerEvents: 'none',
     });
-    // After the map's canvas in its container: over the map, under its controls.
-    map.getCanvasContainer().appendChild(canvas);
+    // Right after the map's canvas: over the map, under its markers, popups and controls.
+    map.getCanvas().after(canvas);
     this.canvas = canvas;
     this.onMoveEnd = () => { this.readOffset(); map.triggerRepaint(); };
     map.on('moveend', this.onMoveEnd);
+    map.on('terrain', this.onMoveEnd);
+    // Hidden (visibility none): MapLibre stops calling render, so hide the canvas too.
+    this.onRender = () => {
+      const hidden = map.getLayoutProperty(this.id, 'visibility') === 'none';
+      canvas.style.display = hidden ? 'none' : '';
+    };
+    map.on('render', this.onRender);
     const o = this.options;
     this.created = create(canvas, { scene: o.scene, overlay: true, controls: false, refine: o.refine,
       lighting: o.lighting });
@@ -104,6 +114,7 @@ export class SylvaLayer {
         // Ground heights arrive with the first tiles: the offset is read then.
         v.on('progress', () => { if (this.offset === null) this.readOffset(); });
         v.on('error', (e) => console.error(`sylva: ${e.message}`));
+        v.on('recovered', () => map.triggerRepaint());
         this.pose();
         map.triggerRepaint();
         return v.ready;
@@ -121,6 +132,8 @@ export class SylvaLayer {
 
   onRemove(map) {
     map.off('moveend', this.onMoveEnd);
+    map.off('terrain', this.onMoveEnd);
+    map.off('render', this.onRender);
     this.viewer?.destroy();
     this.viewer = null;
     this.canvas?.remove();
@@ -156,21 +169,45 @@ export class SylvaLayer {
 
   pose() {
     const v = this.viewer;
-    if (!v || !this.map) return;
-    const c = mapCamera(this.map);
-    const up = this.offset ?? this.originHeight();
-    v.setFov(c.fov);
-    v.lookAt({ ...c.eye, height: c.eye.height + up }, { ...c.target, height: c.target.height + up }, c.bearing);
-    v.tick();
+    if (!v?.live || !this.map) return;
+    try {
+      const c = mapCamera(this.map, this.groundScale());
+      const up = this.offset ?? this.originHeight();
+      v.setFov(c.fov);
+      v.lookAt({ ...c.eye, height: c.eye.height + up }, { ...c.target, height: c.target.height + up }, c.bearing);
+      v.tick();
+    } catch (e) {
+      // Never into the map's render loop: the map goes on without the forest.
+      console.error(`sylva: ${e.message || e}`);
+    }
+  }
+
+  /** The scene's metres per metre of MapLibre's sphere at the map's centre (the mean of
+   * east and north; the ellipsoid and the CRS's scale factor make it differ from 1 by a few
+   * parts in a thousand), read again when the centre moved by more than a kilometre. */
+  groundScale() {
+    const c = this.map.getCenter();
+    if (this.scaleAt && Math.abs(this.scaleAt[0] - c.lng) + Math.abs(this.scaleAt[1] - c.lat) < 0.01) return this.scale;
+    const d = 1e-4;
+    const at = this.viewer.toLocal(c.lng, c.lat, 0);
+    const east = this.viewer.toLocal(c.lng + d, c.lat, 0);
+    const north = this.viewer.toLocal(c.lng, c.lat + d, 0);
+    if (!at || !east || !north) return 1; // before the scene's CRS is known
+    const sphere = EARTH_RADIUS_M * d * rad;
+    const sx = Math.hypot(east.x - at.x, east.y - at.y) / (sphere * Math.cos(c.lat * rad));
+    const sy = Math.hypot(north.x - at.x, north.y - at.y) / sphere;
+    this.scaleAt = [c.lng, c.lat];
+    this.scale = (sx + sy) / 2;
+    return this.scale;
   }
 
   /** Before the ground is known: the scene origin's height. */
   originHeight() {
-    return this.viewer?.camera().origin?.[2] ?? 0;
+    return this.viewer?.live ? this.viewer.camera().origin?.[2] ?? 0 : 0;
   }
 
   readOffset() {
-    if (!this.viewer || typeof this.options.heightOffset === 'number') return;
+    if (!this.viewer?.live || typeof this.options.heightOffset === 'number') return;
     let h = null;
     if (this.map.getTerrain?.()) h = 0;
     else {

@@ -199,6 +199,9 @@ class SylvaViewer {
     return q;
   }
 
+  /** Whether the wasm viewer can be called now: not destroyed, not being recreated after a device loss. */
+  get live() { return !this.destroyed && !this.recovering; }
+
   emit(event, data) { for (const fn of this.handlers[event] || []) { try { fn(data); } catch (e) { console.error(e); } } }
 
   resize() {
@@ -215,6 +218,7 @@ class SylvaViewer {
   /** Ground height (metres, the scene's vertical datum) at WGS 84 lon/lat: the
    * terrain's where loaded, else the trees' bases nearby; null where unknown. */
   heightAt(lon, lat) {
+    if (!this.live) return null;
     const h = this.viewer.height_at(lon, lat);
     return Number.isFinite(h) ? h : null;
   }
@@ -254,6 +258,8 @@ class SylvaViewer {
    * `bearing` (degrees clockwise from true north) turns a view straight
    * down. Redraws only when the pose changed. */
   lookAt(eye, target, bearing = 0) {
+    if (!this.live) return;
+    this.look = [eye, target, bearing];
     const key = `${eye.lon},${eye.lat},${eye.height},${target.lon},${target.lat},${target.height},${bearing}`;
     if (key === this.lookKey) return;
     this.lookKey = key;
@@ -265,18 +271,24 @@ class SylvaViewer {
   /** The WGS 84 box [west, south, east, north] around where the scene's
    * views aim first (its home, else its densest trees): resolves once the
    * scene's manifest has arrived. */
-  async focusBounds() {
+  async focusBounds({ timeoutMs = 120000 } = {}) {
+    let failed = null;
+    this.on('error', (e) => { failed = e.message; });
+    const t0 = performance.now();
     for (;;) {
-      if (this.destroyed) return null;
-      const b = JSON.parse(this.viewer.focus_geo_json());
+      if (this.destroyed) throw new Error('the viewer was destroyed');
+      const b = this.live && JSON.parse(this.viewer.focus_geo_json());
       if (b) return b;
+      if (performance.now() - t0 > timeoutMs) {
+        throw new Error(`the scene's manifest did not arrive in ${timeoutMs / 1000} s${failed ? `: ${failed}` : ''}`);
+      }
       await new Promise((r) => setTimeout(r, 50));
     }
   }
 
   /** Vertical field of view in degrees. */
   setFov(degrees) {
-    if (degrees === this.fov) return;
+    if (degrees === this.fov || !this.live) return;
     this.fov = degrees;
     this.viewer.set_fov(degrees);
     this.dirty = SETTLE_FRAMES;
@@ -286,6 +298,7 @@ class SylvaViewer {
    * {x, y} in canvas CSS pixels from the top left, or null (behind the eye,
    * or before the scene's CRS is known). */
   project(lon, lat, height) {
+    if (!this.live) return null;
     const p = JSON.parse(this.viewer.project_geo(lon, lat, height));
     if (!p) return null;
     const c = this.canvas;
@@ -427,12 +440,19 @@ class SylvaViewer {
     this.emit('warning', { message: 'The GPU device was lost; recreating the viewer.' });
     try { this.viewer.free(); } catch (_) { /* gone with the device */ }
     try {
-      this.viewer = await Viewer.create(this.canvas, this.options.scene || 'scene/scene.json');
+      const viewer = await Viewer.create(this.canvas, this.options.scene || 'scene/scene.json');
+      if (this.destroyed) { viewer.free(); return; }
+      this.viewer = viewer;
       this.resize();
       if (this.options.overlay) this.viewer.set_overlay(true);
       if (this.fov ?? this.options.fov) this.viewer.set_fov(this.fov ?? this.options.fov);
       this.lookKey = undefined; // a map layer poses the new viewer again on its next render
-      this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
+      if (this.look) {
+        const [eye, target, bearing] = this.look;
+        this.viewer.set_camera_look_geo(eye.lon, eye.lat, eye.height, target.lon, target.lat, target.height, bearing);
+      } else {
+        this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
+      }
       if (this.lighting) this.setLighting(this.lighting);
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
@@ -447,13 +467,20 @@ class SylvaViewer {
   loop(now) {
     if (this.destroyed) return;
     this.raf = requestAnimationFrame(this.loop);
+    // A map layer's tick may have run in this animation frame already (its
+    // render runs in the map's callback): once a frame is enough.
+    if (this.tickedOutsideAt >= now) return;
     this.tick(now);
   }
 
   /** Draws a frame now when anything asks for one (loading, moving, a change,
    * refinement), then hands out events: the render loop calls it every
-   * animation frame; a map layer calls it in the map's own render. */
-  tick(now = performance.now()) {
+   * animation frame; a map layer calls it (without `now`) in the map's own render. */
+  tick(now) {
+    if (now === undefined) {
+      now = performance.now();
+      this.tickedOutsideAt = now;
+    }
     if (this.destroyed || this.recovering) return;
     if (this.viewer.is_lost()) { this.recover(); return; }
     if (this.flight) this.flight(now);

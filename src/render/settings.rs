@@ -43,9 +43,9 @@ pub struct RenderSettings {
     pub lighting: Lighting,
     /// Clear colour (linear RGBA).
     pub clear: [f64; 4],
-    /// Draw the sky and the ground's haze behind the scene. Off for a layer
-    /// over a map (with a transparent `clear`): only what the scene draws
-    /// covers the map.
+    /// Draw the sky (and the ground beyond the terrain) behind the scene. Off
+    /// for a layer over a map (with a transparent `clear`): only what the
+    /// scene draws covers the map. Far trees keep their haze either way.
     pub sky: bool,
     /// Culling (benchmark baselines).
     pub culling: CullingMode,
