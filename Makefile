@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-rust test-web web demo release bench-bake bench-render bench-serve bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-rust test-web bins web demo release bench-bake bench-render bench-serve bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -44,8 +44,13 @@ web:
 	    --enable-mutable-globals -o web/pkg/sylva_bg.wasm web/pkg/sylva_bg.wasm; fi
 	@echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$(gzip -9c web/pkg/sylva_bg.wasm | wc -c) gzipped"
 
-# Browser end-to-end tests in headless Chromium.
-test-web: release web
+# Browser end-to-end tests in headless Chromium. They run the debug binaries
+# (`sylva serve`, `render`, `sylva-bake`), which `make test` has built with the
+# Rust tests already (a release build would add minutes to CI).
+bins:
+	$(CARGO) build --locked -p sylva -p sylva-bake
+
+test-web: bins web
 	cd web && node --test --test-concurrency=1 tests/
 
 PORT ?= 8080

@@ -754,12 +754,22 @@ export async function create(target, options = {}) {
   return v;
 }
 
-/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off">`
- * (refine: progressive refinement at rest, on unless "off"). */
+/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off" shadows="low">`
+ * (refine: progressive refinement at rest, on unless "off"; shadows: the sun's
+ * shadows, off | low | high, high unless given). */
 class SylvaElement extends HTMLElement {
-  static get observedAttributes() { return ['refine']; }
+  static get observedAttributes() { return ['refine', 'shadows']; }
   attributeChangedCallback(name) {
-    if (name === 'refine' && this.viewer) this.viewer.setRefine(this.getAttribute('refine') !== 'off');
+    if (!this.viewer) return;
+    if (name === 'refine') this.viewer.setRefine(this.getAttribute('refine') !== 'off');
+    if (name === 'shadows') this.applyShadows();
+  }
+  applyShadows() {
+    const shadows = this.getAttribute('shadows');
+    if (shadows === null) return;
+    try { this.viewer.setLighting({ shadows }); } catch (e) {
+      this.dispatchEvent(new CustomEvent('sylva-error', { detail: { message: `shadows="${shadows}": ${e.message || e}` } }));
+    }
   }
   async connectedCallback() {
     if (this.viewer || this.starting) return;
@@ -771,6 +781,7 @@ class SylvaElement extends HTMLElement {
     try {
       this.viewer = await create(this, { scene: this.getAttribute('src') || undefined, camera });
       if (this.getAttribute('refine') === 'off') this.viewer.setRefine(false);
+      this.applyShadows();
       this.dispatchEvent(new CustomEvent('sylva-ready', { detail: this.viewer }));
     } catch (e) {
       this.textContent = String(e.message || e);

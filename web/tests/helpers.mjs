@@ -3,11 +3,21 @@
 import { spawn } from 'node:child_process';
 import { createServer } from 'node:http';
 import { deflateSync } from 'node:zlib';
+import { existsSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 export const root = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
-export const sylvaBin = process.env.SYLVA_BIN || join(root, 'target', 'release', 'sylva');
+/** A binary of the workspace: `$env` if set, else the debug build (`make test`
+ * builds it with the Rust tests: no separate release build for the browser
+ * tests), else the release build. */
+function workspaceBin(name, env) {
+  if (process.env[env]) return process.env[env];
+  const built = ['debug', 'release'].map((p) => join(root, 'target', p, name));
+  return built.find((f) => existsSync(f)) || built[0];
+}
+export const sylvaBin = workspaceBin('sylva', 'SYLVA_BIN');
+export const sylvaBakeBin = workspaceBin('sylva-bake', 'SYLVA_BAKE_BIN');
 export const WEBGPU_FLAGS = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
   '--use-webgpu-adapter=swiftshader', '--use-angle=swiftshader', '--disable-quic', '--no-first-run',
   '--disable-background-networking', '--disable-component-update', '--disable-sync'];

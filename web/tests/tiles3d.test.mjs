@@ -7,15 +7,12 @@ import { execFileSync } from 'node:child_process';
 import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
-import { fileURLToPath } from 'node:url';
 import validator from 'gltf-validator';
-
-const root = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
-const bake = process.env.SYLVA_BAKE_BIN || join(root, 'target', 'release', 'sylva-bake');
+import { root, sylvaBin, sylvaBakeBin } from './helpers.mjs';
 
 test('every exported GLB passes the Khronos glTF validator', async () => {
   const out = join(mkdtempSync(join(tmpdir(), 'sylva-3dtiles-')), 'tileset');
-  execFileSync(bake, ['export-3dtiles', join(root, 'tests', 'fixtures', 'forest-small'), '--out', out],
+  execFileSync(sylvaBakeBin, ['export-3dtiles', join(root, 'tests', 'fixtures', 'forest-small'), '--out', out],
     { stdio: ['ignore', 'ignore', 'pipe'] });
   const tileset = JSON.parse(readFileSync(join(out, 'tileset.json')));
   assert.equal(tileset.asset.version, '1.1');
@@ -67,11 +64,10 @@ function treePoint(glb, transform, n, k, upShare) {
 }
 
 test('CesiumJS loads the exported tileset from sylva serve and draws the trees where they belong', async (t) => {
-  const sylvaBin = process.env.SYLVA_BIN || join(root, 'target', 'release', 'sylva');
   const { chromium } = await import('playwright-core');
   const { spawn } = await import('node:child_process');
   const out = join(mkdtempSync(join(tmpdir(), 'sylva-cesium-')), 'tileset');
-  execFileSync(bake, ['export-3dtiles', join(root, 'tests', 'fixtures', 'forest-small'), '--out', out],
+  execFileSync(sylvaBakeBin, ['export-3dtiles', join(root, 'tests', 'fixtures', 'forest-small'), '--out', out],
     { stdio: ['ignore', 'ignore', 'pipe'] });
   const proc = spawn(sylvaBin, ['serve', out, '--port', '0'], { stdio: ['ignore', 'pipe', 'inherit'] });
   const base = await new Promise((resolve, reject) => {
