@@ -15,7 +15,11 @@
 ///
 /// # Panics
 /// If either image is not `width · height · 4` bytes.
+// (`#[inline]` here and below: the bake calls these thousands of times; inline
+// functions are compiled in the calling crate, so a debug build of the
+// optimised bake tool runs them optimised too.)
 #[must_use]
+#[inline]
 pub fn multiscale_rmse(a: &[u8], b: &[u8], width: u32, height: u32) -> f64 {
     let n = (width as usize) * (height as usize);
     assert_eq!(a.len(), n * 4, "image a has the wrong size");
@@ -26,6 +30,7 @@ pub fn multiscale_rmse(a: &[u8], b: &[u8], width: u32, height: u32) -> f64 {
 }
 
 /// Spreads the low 16 bits of `v` to the even bits.
+#[inline]
 fn part1by1(v: u32) -> u32 {
     let mut x = v & 0xffff;
     x = (x | (x << 8)) & 0x00ff_00ff;
@@ -35,6 +40,7 @@ fn part1by1(v: u32) -> u32 {
 }
 
 /// Inverse of [`part1by1`].
+#[inline]
 fn compact1by1(v: u32) -> u32 {
     let mut x = v & 0x5555_5555;
     x = (x | (x >> 1)) & 0x3333_3333;
@@ -45,6 +51,7 @@ fn compact1by1(v: u32) -> u32 {
 
 /// Morton (z-curve) index of pixel (x, y).
 #[must_use]
+#[inline]
 pub fn morton(x: u32, y: u32) -> u32 {
     part1by1(x) | (part1by1(y) << 1)
 }

@@ -201,9 +201,13 @@ export class SylvaLayer {
     return this.scale;
   }
 
-  /** Before the ground is known: the scene origin's height. */
+  /** Before the ground is known: the scene origin's height (read once the manifest gave it). */
   originHeight() {
-    return this.viewer?.live ? this.viewer.camera().origin?.[2] ?? 0 : 0;
+    if (this.origin === undefined && this.viewer?.live) {
+      const o = this.viewer.camera().origin;
+      if (o) this.origin = o[2];
+    }
+    return this.origin ?? 0;
   }
 
   readOffset() {

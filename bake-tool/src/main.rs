@@ -573,6 +573,7 @@ fn demo(args: &DemoArgs) -> Result<()> {
         colour: &colour,
         extent_m: region,
         resolution_m: bake::ground_material::FLOOR_RESOLUTION_M,
+        supersample: 2,
         source: "demo forest floor, stream and meadows".into(),
     });
     let cell_size_m = args.pack.cell_size(&trees)?;
@@ -677,6 +678,7 @@ fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Result<()> {
         colour: &colour,
         extent_m: land.extent(),
         resolution_m: 8.0,
+        supersample: 2,
         source: "synthetic country: sea, lakes, fields, woods".into(),
     });
     bake_demo(args, out, started, (terrain, imagery), species, source, cell_size_m)
@@ -884,6 +886,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
                 colour,
                 extent_m: t.region,
                 resolution_m: bake::ground_material::FLOOR_RESOLUTION_M,
+                supersample: 2,
                 source: "procedural forest floor (canopy cover and slope)".into(),
             })
         }
@@ -894,6 +897,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
                 colour,
                 extent_m: [e[0] - ox, e[1] - oy, e[2] - ox, e[3] - oy],
                 resolution_m: o.resolution_m(),
+                supersample: 4,
                 source: o.names(),
             })
         }

@@ -5,15 +5,19 @@
 //! - `tileset.json`: the hierarchy of the scene's index (its nodes, then its
 //!   tiles), each with a `region` bounding volume from its trees' crowns.
 //! - Per Sylva tile, a local east-north-up frame at the tile's centre (its
-//!   `transform`, to Earth-centred Earth-fixed metres on WGS84) and two GLBs in
-//!   it: `tiles/X_Y_coarse.glb` with each species' coarsest mesh level and,
-//!   refining it (`REPLACE`), `tiles/X_Y.glb` with the full meshes. Every tree
+//!   `transform`, to Earth-centred Earth-fixed metres on WGS84) and up to three
+//!   GLBs in it, each refining the one before (`REPLACE`): `tiles/X_Y_far.glb`,
+//!   the far tier (two crossed quads a tree with its species' side-view
+//!   billboard: 4 triangles where a mesh has thousands) while the trees are a
+//!   few pixels tall, `tiles/X_Y_coarse.glb` with each species' coarsest mesh
+//!   level, and `tiles/X_Y.glb` with the full meshes. Every tree
 //!   is an instance of its species' mesh (`EXT_mesh_gpu_instancing`:
 //!   translation, rotation about the up axis, scale; the crown aspect widens
 //!   the horizontal axes). Each tree's position goes through the scene CRS to
 //!   WGS84 on its own, so grid convergence and scale factor are exact.
-//! - `meshes/`: each species' mesh levels (one `.bin` per level) and material
-//!   textures (PNG), shared by every GLB that uses them (external URIs).
+//! - `meshes/`: each species' mesh levels and far quads (one `.bin` each),
+//!   material textures and billboard (PNG), shared by every GLB that uses them
+//!   (external URIs).
 //!
 //! Heights are the scene's heights (the bake's terrain or the placements'),
 //! taken as heights over the WGS84 ellipsoid.
@@ -26,7 +30,7 @@ use glam::{DVec3, Vec3};
 use image::ImageEncoder as _;
 use serde_json::{json, Value};
 use sylva::format::index::IndexNode;
-use sylva::format::pack::{MeshVertex, PackMeta};
+use sylva::format::pack::{kind, MeshVertex, PackMeta};
 use sylva::format::{decode_pack, Bounds, Manifest, Tile, TileEntry};
 use sylva::geo::GeoFrame;
 
@@ -37,13 +41,15 @@ const WGS84_F: f64 = 1.0 / 298.257_223_563;
 /// Cesium's default maximum screen-space error (px): what the geometric errors are scaled for.
 const SSE_PX: f64 = 16.0;
 /// Projected height (px) of a node's tallest tree from which its tiles are shown at all
-/// (there is no far tier of billboards or canopy in the tileset).
+/// (there is no canopy raster in the tileset).
 const SHOWN_FROM_PX: f64 = 2.0;
+/// The key of a species' far quads in [`SpeciesOut::levels`] (mesh levels are small numbers).
+const FAR: u32 = u32::MAX;
 
 /// What an export wrote.
 #[derive(Debug, Clone, Default)]
 pub struct ExportReport {
-    /// Sylva tiles exported (each one or two GLBs).
+    /// Sylva tiles exported (each two or three GLBs).
     pub tiles: usize,
     /// GLB files written.
     pub glbs: usize,
@@ -155,7 +161,8 @@ struct MeshBin {
     views: [(u64, u64); 5],
     pos_min: [f32; 3],
     pos_max: [f32; 3],
-    /// (material index, first index, index count).
+    /// (material index, first index, index count); the far quads' material is
+    /// their billboard, not one of the pack's.
     draws: Vec<(usize, u32, u32)>,
 }
 
@@ -166,6 +173,28 @@ struct SpeciesOut {
     levels: BTreeMap<u32, MeshBin>,
     /// PNG of each material texture layer used, relative to the tileset.
     layers: BTreeMap<u32, String>,
+    /// PNG of the side-view billboard the far quads show (where the pack has billboards).
+    billboard: Option<String>,
+}
+
+impl SpeciesOut {
+    /// The level a GLB of the far tier draws: the crossed quads, else (a pack
+    /// without billboards) the coarsest mesh level.
+    fn far_level(&self) -> u32 {
+        if self.levels.contains_key(&FAR) {
+            FAR
+        } else {
+            self.meta.mesh_levels.len() as u32 - 1
+        }
+    }
+
+    /// The projected tree height (px) from which Sylva's viewer draws meshes
+    /// instead of the far tier: the coarsest mesh level's threshold (the
+    /// bake's policy's where it has one).
+    fn mesh_from_px(&self) -> f64 {
+        let last = self.meta.mesh_levels.last().expect("a pack with mesh levels");
+        f64::from(last.policy_px.unwrap_or(last.select_px))
+    }
 }
 
 fn write_file(path: &Path, bytes: &[u8], report: &mut ExportReport) -> Result<()> {
@@ -214,19 +243,69 @@ fn mesh_bin(
         bin.extend_from_slice(&v.color);
     }
     bin.extend_from_slice(bytemuck::cast_slice(&indices));
-    let n = verts.len() as u64;
-    let views = [(0, 12 * n), (12 * n, 12 * n), (24 * n, 8 * n), (32 * n, 4 * n), (36 * n, 4 * indices.len() as u64)];
+    let draws = m.draws.iter().map(|d| (d.material as usize, d.first_index, d.index_count)).collect();
+    write_mesh_bin(bin, verts.len(), indices.len(), [pmin, pmax], draws, file, out, report)
+}
+
+/// Writes `meshes/<file>.bin`: `bin` holds `vertices` positions (FLOAT VEC3,
+/// y up), normals, uvs (FLOAT VEC2), colours (RGBA8), then `indices` u32.
+#[allow(clippy::too_many_arguments)]
+fn write_mesh_bin(
+    bin: Vec<u8>,
+    vertices: usize,
+    indices: usize,
+    [pos_min, pos_max]: [[f32; 3]; 2],
+    draws: Vec<(usize, u32, u32)>,
+    file: &str,
+    out: &Path,
+    report: &mut ExportReport,
+) -> Result<MeshBin> {
+    let n = vertices as u64;
+    let views = [(0, 12 * n), (12 * n, 12 * n), (24 * n, 8 * n), (32 * n, 4 * n), (36 * n, 4 * indices as u64)];
     let uri = format!("meshes/{file}.bin");
     write_file(&out.join(&uri), &bin, report)?;
-    Ok(MeshBin {
-        uri,
-        bytes: bin.len() as u64,
-        vertices: verts.len() as u32,
-        views,
-        pos_min: pmin,
-        pos_max: pmax,
-        draws: m.draws.iter().map(|d| (d.material as usize, d.first_index, d.index_count)).collect(),
-    })
+    Ok(MeshBin { uri, bytes: bin.len() as u64, vertices: vertices as u32, views, pos_min, pos_max, draws })
+}
+
+/// The far tier's mesh of a species (`meshes/<file>.bin`): two quads crossed
+/// on the trunk's axis, each as wide and tall as the pack's billboard (its
+/// centre's height, half width, half height), showing its side view (u along
+/// model +x on one, +y on the other; v down). Normals point up: both quads and
+/// every view of them are lit alike, as a crown seen from afar.
+fn far_bin(
+    bb: &sylva::format::pack::BillboardMeta,
+    file: &str,
+    out: &Path,
+    report: &mut ExportReport,
+) -> Result<MeshBin> {
+    let (hw, hh, cz) = (bb.half_width, bb.half_height, bb.center[2]);
+    // (model x or y along the quad, model z, u, v) per corner; model (x, y, z) is glTF (x, z, -y).
+    let corners =
+        [(-hw, cz - hh, 0.0, 1.0), (hw, cz - hh, 1.0, 1.0), (hw, cz + hh, 1.0, 0.0), (-hw, cz + hh, 0.0, 0.0)];
+    let mut pos: Vec<[f32; 3]> = corners.iter().map(|&(a, z, _, _)| [a, z, 0.0]).collect();
+    pos.extend(corners.iter().map(|&(a, z, _, _)| [0.0, z, -a]));
+    let uv: Vec<[f32; 2]> = corners.iter().chain(corners.iter()).map(|&(_, _, u, v)| [u, v]).collect();
+    let indices: [u32; 12] = [0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7];
+    let mut bin = Vec::with_capacity(8 * 36 + 48);
+    bin.extend_from_slice(bytemuck::cast_slice(&pos));
+    bin.extend_from_slice(bytemuck::cast_slice(&[[0.0f32, 1.0, 0.0]; 8]));
+    bin.extend_from_slice(bytemuck::cast_slice(&uv));
+    bin.extend_from_slice(&[255u8; 32]);
+    bin.extend_from_slice(bytemuck::cast_slice(&indices));
+    let bounds = [[-hw, cz - hh, -hw], [hw, cz + hh, hw]];
+    write_mesh_bin(bin, 8, indices.len(), bounds, vec![(0, 0, 12)], file, out, report)
+}
+
+/// PNG of layer `layer` (mip 0) of an RGBA8 texture array stored mip-major.
+fn layer_png(data: &[u8], size: u32, layer: u32, what: &str) -> Result<Vec<u8>> {
+    let layer_bytes = (size * size * 4) as usize;
+    let at = layer as usize * layer_bytes;
+    let Some(pixels) = data.get(at..at + layer_bytes) else { bail!("{what}: texture layer {layer} is missing") };
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(pixels, size, size, image::ExtendedColorType::Rgba8)
+        .with_context(|| format!("encoding {what}'s texture layer {layer}"))?;
+    Ok(png)
 }
 
 /// Reads species `s`'s pack and writes its meshes (level 0 and the coarsest) and textures.
@@ -251,26 +330,27 @@ fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut Expo
         }
     }
     let mut layers = BTreeMap::new();
-    if let (Some(t), Some(data)) = (&meta.material_texture, pack.section(*b"MTEX", 0)) {
-        let layer_bytes = (t.size * t.size * 4) as usize;
+    if let (Some(t), Some(data)) = (&meta.material_texture, pack.section(kind::MATERIAL_TEXTURES, 0)) {
         for layer in meta.materials.iter().filter_map(|mat| mat.texture_layer) {
             if layers.contains_key(&layer) {
                 continue;
             }
-            let at = layer as usize * layer_bytes;
-            let Some(pixels) = data.get(at..at + layer_bytes) else {
-                bail!("{}: texture layer {layer} is missing", path.display())
-            };
-            let mut png = Vec::new();
-            image::codecs::png::PngEncoder::new(&mut png)
-                .write_image(pixels, t.size, t.size, image::ExtendedColorType::Rgba8)
-                .with_context(|| format!("encoding {}'s texture layer {layer}", entry.name))?;
+            let png = layer_png(data, t.size, layer, &path.display().to_string())?;
             let uri = format!("meshes/{stem}_layer{layer}.png");
             write_file(&out.join(&uri), &png, report)?;
             layers.insert(layer, uri);
         }
     }
-    Ok(SpeciesOut { meta, levels, layers })
+    // The far quads show the billboard seen level (elevation 0, azimuth 0: layer 0).
+    let mut billboard = None;
+    if let (Some(bb), Some(data)) = (&meta.billboards, pack.section(kind::BILLBOARD_COLOR, 0)) {
+        let png = layer_png(data, bb.texture.size, 0, &format!("{}'s billboards", path.display()))?;
+        let uri = format!("meshes/{stem}_billboard.png");
+        write_file(&out.join(&uri), &png, report)?;
+        billboard = Some(uri);
+        levels.insert(FAR, far_bin(bb, &format!("{stem}_far"), out, report)?);
+    }
+    Ok(SpeciesOut { meta, levels, layers, billboard })
 }
 
 /// A glTF document being built: arrays by name, and the GLB's own binary chunk.
@@ -287,6 +367,16 @@ impl Gltf {
         let a = self.arrays.entry(array).or_default();
         a.push(v);
         a.len() - 1
+    }
+
+    /// A texture of the shared image `uri` (relative to the tileset), with the
+    /// GLB's one sampler (linear, trilinear mips).
+    fn texture(&mut self, uri: &str) -> usize {
+        let image = self.push("images", json!({"uri": format!("../{uri}")}));
+        if !self.arrays.contains_key("samplers") {
+            self.push("samplers", json!({"magFilter": 9729, "minFilter": 9987}));
+        }
+        self.push("textures", json!({"source": image, "sampler": 0}))
     }
 
     /// Appends `data` to the GLB's chunk as a buffer view (8-byte aligned, as
@@ -368,15 +458,13 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
             continue;
         }
         let material = *materials.entry(mat).or_insert_with(|| {
+            if level == FAR {
+                return far_material(g, sp);
+            }
             let m = &sp.meta.materials[mat];
             let mut pbr = json!({"baseColorFactor": m.base_color, "metallicFactor": 0.0, "roughnessFactor": 1.0});
             if let Some(uri) = m.texture_layer.and_then(|l| sp.layers.get(&l)) {
-                let image = g.push("images", json!({"uri": format!("../{uri}")}));
-                if !g.arrays.contains_key("samplers") {
-                    g.push("samplers", json!({"magFilter": 9729, "minFilter": 9987}));
-                }
-                let texture = g.push("textures", json!({"source": image, "sampler": 0}));
-                pbr["baseColorTexture"] = json!({"index": texture});
+                pbr["baseColorTexture"] = json!({"index": g.texture(uri)});
             }
             let mut v = json!({"name": m.name, "pbrMetallicRoughness": pbr, "doubleSided": m.double_sided});
             if m.alpha_cutoff > 0.0 {
@@ -396,6 +484,25 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
         }));
     }
     g.push("meshes", json!({"name": sp.meta.name, "primitives": primitives}))
+}
+
+/// The far quads' material: the species' billboard, alpha-tested at ½ as
+/// Sylva's viewer tests it, both faces, unlit colour × the sun's light.
+fn far_material(g: &mut Gltf, sp: &SpeciesOut) -> usize {
+    let mut pbr = json!({"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0});
+    if let Some(uri) = &sp.billboard {
+        pbr["baseColorTexture"] = json!({"index": g.texture(uri)});
+    }
+    g.push(
+        "materials",
+        json!({
+            "name": format!("{} far", sp.meta.name),
+            "pbrMetallicRoughness": pbr,
+            "doubleSided": true,
+            "alphaMode": "MASK",
+            "alphaCutoff": 0.5,
+        }),
+    )
 }
 
 /// A tile's trees by species, placed in the tile's frame.
@@ -522,7 +629,7 @@ fn tile_glb(
     placed: &Placed,
     data: &TreeData<'_>,
     meta_schema: &Value,
-    level_of: impl Fn(&SpeciesOut) -> u32,
+    level_of: &dyn Fn(&SpeciesOut) -> u32,
 ) -> Vec<u8> {
     let mut g = Gltf::default();
     let mut nodes = Vec::new();
@@ -688,43 +795,46 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
     }
     let bounds = Bounds { min: lo, max: hi };
     let name = format!("{}_{}", entry.x, entry.y);
-    let full = tile_glb(species, &placed, &data, &ctx.meta_schema, |_| 0);
-    write_file(&out.join(format!("tiles/{name}.glb")), &full, report)?;
-    report.glbs += 1;
+    let glb = |suffix: &str, level_of: &dyn Fn(&SpeciesOut) -> u32, report: &mut ExportReport| {
+        let bytes = tile_glb(species, &placed, &data, &ctx.meta_schema, level_of);
+        let uri = format!("tiles/{name}{suffix}.glb");
+        write_file(&out.join(&uri), &bytes, report)?;
+        report.glbs += 1;
+        anyhow::Ok(uri)
+    };
+    let full = glb("", &|_| 0, report)?;
     report.trees += placed.values().map(|v| v.len() as u64).sum::<u64>();
     let region = region(geo, &bounds, m.origin_m[2])?;
+    // Tiers, as Sylva's viewer picks them by the tallest tree's projected
+    // height: the full meshes from the finest level's threshold, the coarsest
+    // mesh level from where meshes start, the far quads below. (Each at least
+    // the group's threshold: a child's error never exceeds its parent's.)
+    let threshold = |px: &dyn Fn(&SpeciesOut) -> f64| {
+        placed.keys().map(|&s| px(&species[s as usize])).fold(f64::MAX, f64::min).max(SHOWN_FROM_PX)
+    };
+    let full_px = threshold(&|sp| f64::from(sp.meta.mesh_levels[0].select_px));
+    let mesh_px = threshold(&|sp| sp.mesh_from_px()).min(full_px);
+    let mut below_far = json!({"boundingVolume": {"region": region}, "geometricError": 0.0, "content": {"uri": full}});
     let coarse_levels = placed.keys().any(|&s| species[s as usize].meta.mesh_levels.len() > 1);
-    let json = if coarse_levels {
-        let coarse = tile_glb(species, &placed, &data, &ctx.meta_schema, |sp| sp.meta.mesh_levels.len() as u32 - 1);
-        write_file(&out.join(format!("tiles/{name}_coarse.glb")), &coarse, report)?;
-        report.glbs += 1;
-        // Coarse meshes until the tallest tree reaches the full mesh's threshold.
-        let full_px = placed
-            .keys()
-            .map(|&s| f64::from(species[s as usize].meta.mesh_levels[0].select_px))
-            .fold(f64::MAX, f64::min)
-            // (At least the group's threshold: a child's error never exceeds its parent's.)
-            .max(SHOWN_FROM_PX);
-        json!({
+    if coarse_levels && mesh_px < full_px {
+        let coarse = glb("_coarse", &|sp| sp.meta.mesh_levels.len() as u32 - 1, report)?;
+        below_far = json!({
             "boundingVolume": {"region": region},
             "geometricError": SSE_PX * tallest / full_px,
             "refine": "REPLACE",
-            "transform": transform_json(&frame),
-            "content": {"uri": format!("tiles/{name}_coarse.glb")},
-            "children": [{
-                "boundingVolume": {"region": region},
-                "geometricError": 0.0,
-                "content": {"uri": format!("tiles/{name}.glb")},
-            }],
-        })
-    } else {
-        json!({
-            "boundingVolume": {"region": region},
-            "geometricError": 0.0,
-            "transform": transform_json(&frame),
-            "content": {"uri": format!("tiles/{name}.glb")},
-        })
-    };
+            "content": {"uri": coarse},
+            "children": [below_far],
+        });
+    }
+    let far = glb("_far", &|sp| sp.far_level(), report)?;
+    let json = json!({
+        "boundingVolume": {"region": region},
+        "geometricError": SSE_PX * tallest / mesh_px,
+        "refine": "REPLACE",
+        "transform": transform_json(&frame),
+        "content": {"uri": far},
+        "children": [below_far],
+    });
     report.tiles += 1;
     Ok(TileNode { json, bounds, tallest_m: tallest })
 }
@@ -940,14 +1050,47 @@ mod tests {
                 DVec3::new(t[4], t[5], t[6]),
                 DVec3::new(t[8], t[9], t[10]),
             ];
-            // The full meshes: the coarse tile's child (or the tile itself).
-            let full = node["children"][0]["content"]["uri"].as_str().or(node["content"]["uri"].as_str()).unwrap();
-            assert!(!full.contains("coarse"));
+            // The tiers: far quads, (coarse meshes,) full meshes, each refining the one before.
+            let mut tiers = vec![node.clone()];
+            while let Some(c) = tiers.last().unwrap()["children"].get(0).cloned() {
+                tiers.push(c);
+            }
+            let uris: Vec<&str> = tiers.iter().map(|t| t["content"]["uri"].as_str().unwrap()).collect();
+            assert!(uris.len() >= 2 && uris[0].ends_with("_far.glb"), "{uris:?}");
+            assert!(uris.len() == 2 || uris[1].ends_with("_coarse.glb"), "{uris:?}");
+            let errors: Vec<f64> = tiers.iter().map(|t| t["geometricError"].as_f64().unwrap()).collect();
+            assert!(errors.windows(2).all(|e| e[0] > e[1]) && errors[errors.len() - 1] == 0.0, "{errors:?}");
+            let full = *uris.last().unwrap();
             let name = full.trim_start_matches("tiles/").trim_end_matches(".glb");
             let tile_path = dir.join(format!("tiles/{name}.tile"));
             let tile = Tile::decode("t", &std::fs::read(&tile_path).unwrap(), 3).unwrap();
             let ids_path = dir.join(format!("tiles/{name}.ids"));
             let ids = sylva::format::decode_ids("i", &std::fs::read(&ids_path).unwrap()).unwrap();
+            // The far tier: the same trees in the same rows, each two crossed
+            // quads with its species' billboard, alpha-tested, both faces.
+            let (far, far_bin) = glb_parts(&std::fs::read(out.join(uris[0])).unwrap());
+            let far_rows = &far["extensions"]["EXT_structural_metadata"]["propertyTables"][0]["count"];
+            assert_eq!(far_rows.as_u64().unwrap() as usize, tile.instances.len());
+            for mesh in far["meshes"].as_array().unwrap() {
+                let prim = &mesh["primitives"][0];
+                assert_eq!(far["accessors"][prim["attributes"]["POSITION"].as_u64().unwrap() as usize]["count"], 8);
+                assert_eq!(far["accessors"][prim["indices"].as_u64().unwrap() as usize]["count"], 12);
+                let mat = &far["materials"][prim["material"].as_u64().unwrap() as usize];
+                assert_eq!((mat["alphaMode"].as_str(), mat["doubleSided"].as_bool()), (Some("MASK"), Some(true)));
+                let tex = mat["pbrMetallicRoughness"]["baseColorTexture"]["index"].as_u64().unwrap() as usize;
+                let img =
+                    far["images"][far["textures"][tex]["source"].as_u64().unwrap() as usize]["uri"].as_str().unwrap();
+                let png = image::open(out.join("tiles").join(img)).unwrap().to_rgba8();
+                let covered =
+                    png.pixels().filter(|p| p[3] >= 128).count() as f64 / f64::from(png.width() * png.height());
+                assert!(covered > 0.1 && covered < 0.95, "{img}: {covered} of the billboard is the tree");
+            }
+            let far_ids: Vec<u64> = {
+                let t = &far["extensions"]["EXT_structural_metadata"]["propertyTables"][0];
+                let view = &far["bufferViews"][t["properties"]["id"]["values"].as_u64().unwrap() as usize];
+                let start = view["byteOffset"].as_u64().unwrap() as usize;
+                bytemuck::pod_collect_to_vec(&far_bin[start..start + 8 * tile.instances.len()])
+            };
             let (doc, bin) = glb_parts(&std::fs::read(out.join(full)).unwrap());
             assert_eq!(doc["extensionsRequired"][0], "EXT_mesh_gpu_instancing");
             // The property table: a row per tree in GLB order, its id the tree's.
@@ -956,6 +1099,7 @@ mod tests {
             let start = view["byteOffset"].as_u64().unwrap() as usize;
             assert_eq!(start % 8, 0, "64-bit values aligned");
             let table_ids: Vec<u64> = bytemuck::pod_collect_to_vec(&bin[start..start + 8 * ids.len()]);
+            assert_eq!(far_ids, table_ids, "the far tier's rows are the full tier's");
             assert_eq!(table["count"].as_u64().unwrap() as usize, ids.len());
             let mut exported: Vec<(String, DVec3, f32, f32)> = Vec::new();
             for n in doc["nodes"].as_array().unwrap() {

@@ -85,3 +85,17 @@ export function startServer(dir) {
   });
   return { proc, url };
 }
+
+/** Decodes `png` (a screenshot's bytes) in the page and returns
+ * `reduce(d, width, height, arg)` run there, `d` the RGBA bytes: `reduce` is a
+ * function (its source goes to the page; it sees only its arguments). */
+export function pagePixels(page, png, reduce, arg = null) {
+  return page.evaluate(async ({ b64, src, arg }) => {
+    const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
+    const c = new OffscreenCanvas(img.width, img.height).getContext('2d');
+    c.drawImage(img, 0, 0);
+    const d = c.getImageData(0, 0, img.width, img.height).data;
+    // eslint-disable-next-line no-new-func
+    return new Function(`return (${src})`)()(d, img.width, img.height, arg);
+  }, { b64: Buffer.from(png).toString('base64'), src: reduce.toString(), arg });
+}

@@ -9,7 +9,7 @@ import assert from 'node:assert/strict';
 import { writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { chromium } from 'playwright-core';
-import { WEBGPU_FLAGS, root, tileServer, startServer } from './helpers.mjs';
+import { WEBGPU_FLAGS, root, tileServer, startServer, pagePixels } from './helpers.mjs';
 
 const scene = join(root, 'tests', 'fixtures', 'forest-small');
 
@@ -101,12 +101,7 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
   // The basemap shows between the trees, and the trees are drawn over it.
   const png = await page.screenshot({ timeout: 180000 });
   if (process.env.SYLVA_E2E_OUT) writeFileSync(join(process.env.SYLVA_E2E_OUT, 'maplibre.png'), png);
-  const shot = png.toString('base64');
-  const share = await page.evaluate(async (b64) => {
-    const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
-    const c = new OffscreenCanvas(img.width, img.height).getContext('2d');
-    c.drawImage(img, 0, 0);
-    const d = c.getImageData(0, 0, img.width, img.height).data;
+  const share = await pagePixels(page, png, (d) => {
     let basemap = 0;
     let foliage = 0;
     for (let i = 0; i < d.length; i += 4) {
@@ -116,7 +111,7 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
       else if (g > r + 8 && g > b + 8) foliage += 1;
     }
     return { basemap: basemap / (d.length / 4), foliage: foliage / (d.length / 4) };
-  }, shot);
+  });
   assert.ok(share.basemap > 0.1, `the basemap shows through: ${share.basemap}`);
   assert.ok(share.foliage > 0.03, `foliage drawn over it: ${share.foliage}`);
 
@@ -167,17 +162,12 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
     worsts.push(worst);
     const { misses, points } = await crownPicks(page, trees);
     // What is shown there (not only what the pick pass draws): trees, not the basemap.
-    const shown = await page.evaluate(async ({ b64, points }) => {
-      const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
-      const c = new OffscreenCanvas(img.width, img.height).getContext('2d');
-      c.drawImage(img, 0, 0);
-      const d = c.getImageData(0, 0, img.width, img.height).data;
-      return points.filter(({ x, y }) => {
-        const i = (Math.floor(y) * img.width + Math.floor(x)) * 4;
+    const shown = await pagePixels(page, await page.screenshot({ timeout: 180000 }), (d, width, _h, points) =>
+      points.filter(({ x, y }) => {
+        const i = (Math.floor(y) * width + Math.floor(x)) * 4;
         const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
         return !((r > 180 && g < 80 && b > 180) || (r < 80 && g > 170 && b > 180));
-      }).length;
-    }, { b64: (await page.screenshot({ timeout: 180000 })).toString('base64'), points });
+      }).length, points);
     assert.ok(shown >= points.length * 0.9, `${name}: trees shown at ${shown} of ${points.length} projected crowns`);
     assert.ok(misses.length >= 4, `${name}: aimed-at trees in view: ${misses.length}`);
     // Trees in front hide a few crowns; the rest are the tree aimed at (about 85 %).

@@ -8,7 +8,7 @@ import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import validator from 'gltf-validator';
-import { root, sylvaBin, sylvaBakeBin } from './helpers.mjs';
+import { root, sylvaBin, sylvaBakeBin, pagePixels } from './helpers.mjs';
 
 test('every exported GLB passes the Khronos glTF validator', async () => {
   const out = join(mkdtempSync(join(tmpdir(), 'sylva-3dtiles-')), 'tileset');
@@ -17,7 +17,16 @@ test('every exported GLB passes the Khronos glTF validator', async () => {
   const tileset = JSON.parse(readFileSync(join(out, 'tileset.json')));
   assert.equal(tileset.asset.version, '1.1');
   const glbs = readdirSync(join(out, 'tiles')).filter((f) => f.endsWith('.glb'));
-  assert.equal(glbs.length, 32, 'a coarse and a full GLB for each of the 16 tiles');
+  // Each of the 16 tiles: far quads, (coarse meshes,) full meshes; every GLB is some tile's content.
+  const contents = [];
+  const walk = (node) => {
+    if (node.content) contents.push(node.content.uri.replace('tiles/', ''));
+    for (const c of node.children ?? []) walk(c);
+  };
+  walk(tileset.root);
+  assert.deepEqual([...contents].sort(), [...glbs].sort());
+  assert.equal(glbs.filter((f) => f.endsWith('_far.glb')).length, 16, 'a far tier for each of the 16 tiles');
+  assert.ok(glbs.length >= 32, `GLBs: ${glbs.length}`);
   let read = 0;
   for (const f of glbs) {
     const report = await validator.validateBytes(new Uint8Array(readFileSync(join(out, 'tiles', f))), {
@@ -99,16 +108,11 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
   assert.ok(loaded >= 16, `tiles loaded: ${loaded}`);
   assert.deepEqual(errors, []);
   // Foliage on the screen: green-dominant pixels (the globe is beige, the sky blue or black).
-  const shot = (await page.screenshot({ timeout: 180000 })).toString('base64');
-  const green = await page.evaluate(async (b64) => {
-    const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
-    const c = new OffscreenCanvas(img.width, img.height).getContext('2d');
-    c.drawImage(img, 0, 0);
-    const d = c.getImageData(0, 0, img.width, img.height).data;
+  const green = await pagePixels(page, await page.screenshot({ timeout: 180000 }), (d) => {
     let n = 0;
     for (let i = 0; i < d.length; i += 4) if (d[i + 1] > d[i] + 8 && d[i + 1] > d[i + 2] + 8) n += 1;
     return n / (d.length / 4);
-  }, shot);
+  });
   assert.ok(green > 0.05, `foliage covers ${green} of the view`);
   // Trees where they belong: the crowns of trees read back from the GLBs, projected
   // by Cesium, are picked as the tileset's; the sky corner is not.
@@ -116,7 +120,10 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
   const points = [];
   const walk = (node) => {
     if (node.transform) {
-      const uri = node.children?.[0]?.content?.uri ?? node.content.uri;
+      // The full meshes: the last tier (far quads, coarse meshes, full meshes).
+      let leaf = node;
+      while (leaf.children?.length) leaf = leaf.children[0];
+      const uri = leaf.content.uri;
       const glb = readFileSync(join(out, uri));
       for (let k = 0; k < 8; k++) points.push(treePoint(glb, node.transform, 0, k, 0.6));
     }

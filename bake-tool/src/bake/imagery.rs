@@ -173,6 +173,12 @@ pub struct ImagerySource<'a> {
     pub extent_m: [f64; 4],
     /// Pixel size of the source, metres.
     pub resolution_m: f64,
+    /// Most samples along a side of an image pixel coarser than the source
+    /// (at most 4): photos 4, each texel the mean of what it covers; a
+    /// procedural colour fewer (its fine detail averages out anyway, and each
+    /// sample costs a dozen noise lookups: 16 a pixel made a few hundred
+    /// trees spread over a city take seconds of a bake).
+    pub supersample: usize,
     /// Where it came from, for reports.
     pub source: String,
 }
@@ -274,7 +280,7 @@ impl Ctx<'_> {
         let size = t.tile_size_m(level);
         let [ox, oy] = t.tile_origin_m(level, x, y);
         let texel = size / n as f64;
-        let k_ss = (texel / self.src.resolution_m).ceil().clamp(1.0, 4.0) as usize;
+        let k_ss = ((texel / self.src.resolution_m).ceil() as usize).clamp(1, self.src.supersample.clamp(1, 4));
         for (q, kid) in kids.iter().enumerate() {
             // Quadrant q (south-west, south-east, north-west, north-east) in image rows (0: north).
             let (qi, qj) = ((q & 1) * n / 2, (1 - (q >> 1)) * n / 2);
