@@ -369,14 +369,19 @@ impl Gltf {
         a.len() - 1
     }
 
-    /// A texture of the shared image `uri` (relative to the tileset), with the
-    /// GLB's one sampler (linear, trilinear mips).
-    fn texture(&mut self, uri: &str) -> usize {
+    /// A texture of the shared image `uri` (relative to the tileset): sampled
+    /// linearly with trilinear mips, or (`mips` false) without mips — an
+    /// alpha-tested billboard's mips average its sparse leaves' coverage below
+    /// the cutoff, and a far tree would vanish.
+    fn texture(&mut self, uri: &str, mips: bool) -> usize {
         let image = self.push("images", json!({"uri": format!("../{uri}")}));
-        if !self.arrays.contains_key("samplers") {
-            self.push("samplers", json!({"magFilter": 9729, "minFilter": 9987}));
-        }
-        self.push("textures", json!({"source": image, "sampler": 0}))
+        let min_filter = if mips { 9987 } else { 9729 };
+        let samplers = self.arrays.get("samplers").map_or(&[][..], |v| &v[..]);
+        let sampler = match samplers.iter().position(|v| v["minFilter"] == min_filter) {
+            Some(i) => i,
+            None => self.push("samplers", json!({"magFilter": 9729, "minFilter": min_filter})),
+        };
+        self.push("textures", json!({"source": image, "sampler": sampler}))
     }
 
     /// Appends `data` to the GLB's chunk as a buffer view (8-byte aligned, as
@@ -464,7 +469,7 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
             let m = &sp.meta.materials[mat];
             let mut pbr = json!({"baseColorFactor": m.base_color, "metallicFactor": 0.0, "roughnessFactor": 1.0});
             if let Some(uri) = m.texture_layer.and_then(|l| sp.layers.get(&l)) {
-                pbr["baseColorTexture"] = json!({"index": g.texture(uri)});
+                pbr["baseColorTexture"] = json!({"index": g.texture(uri, true)});
             }
             let mut v = json!({"name": m.name, "pbrMetallicRoughness": pbr, "doubleSided": m.double_sided});
             if m.alpha_cutoff > 0.0 {
@@ -491,7 +496,7 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
 fn far_material(g: &mut Gltf, sp: &SpeciesOut) -> usize {
     let mut pbr = json!({"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0});
     if let Some(uri) = &sp.billboard {
-        pbr["baseColorTexture"] = json!({"index": g.texture(uri)});
+        pbr["baseColorTexture"] = json!({"index": g.texture(uri, false)});
     }
     g.push(
         "materials",
