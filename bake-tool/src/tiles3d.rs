@@ -1083,6 +1083,9 @@ mod tests {
                 let mat = &far["materials"][prim["material"].as_u64().unwrap() as usize];
                 assert_eq!((mat["alphaMode"].as_str(), mat["doubleSided"].as_bool()), (Some("MASK"), Some(true)));
                 let tex = mat["pbrMetallicRoughness"]["baseColorTexture"]["index"].as_u64().unwrap() as usize;
+                // Sampled without mips (mips of sparse leaves fall under the cutoff).
+                let sampler = &far["samplers"][far["textures"][tex]["sampler"].as_u64().unwrap() as usize];
+                assert_eq!(sampler["minFilter"], 9729);
                 let img =
                     far["images"][far["textures"][tex]["source"].as_u64().unwrap() as usize]["uri"].as_str().unwrap();
                 let png = image::open(out.join("tiles").join(img)).unwrap().to_rgba8();
