@@ -96,8 +96,9 @@ enum Command {
     },
     /// Export a baked scene as an OGC 3D Tiles 1.1 tileset (CesiumJS and other
     /// 3D Tiles viewers): tileset.json with the scene's index as its hierarchy,
-    /// per tile a GLB of coarse meshes refined by one of full meshes, every tree
-    /// an instance (EXT_mesh_gpu_instancing) placed through WGS84.
+    /// per tile a GLB of crossed billboard quads (the far tier) refined by GLBs of
+    /// coarse and full meshes, every tree an instance (EXT_mesh_gpu_instancing)
+    /// placed through WGS84.
     #[command(
         name = "export-3dtiles",
         after_help = "Example:\n  sylva-bake export-3dtiles scene/ --out scene-3dtiles/\n  sylva serve scene-3dtiles/   # then load tileset.json in CesiumJS"
