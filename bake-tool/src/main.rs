@@ -109,6 +109,17 @@ enum Command {
         /// A new or empty folder for the tileset (nothing is overwritten).
         #[arg(long, value_name = "DIR")]
         out: PathBuf,
+        /// Leave the ground out (the scene's terrain and imagery, exported
+        /// by default): for a portal that shows its own terrain.
+        #[arg(long)]
+        no_ground: bool,
+        /// Metres added to every height, trees and ground: the geoid's
+        /// undulation at the scene (e.g. from GeographicLib's GeoidEval) when
+        /// its heights are above the geoid, as most DEMs and inventories give
+        /// them, and the portal's terrain is ellipsoidal (Cesium World
+        /// Terrain). 0 takes the heights as ellipsoidal.
+        #[arg(long, value_name = "METRES", default_value_t = 0.0, allow_negative_numbers = true)]
+        height_offset: f64,
     },
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
@@ -446,10 +457,11 @@ fn main() {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
-        Command::Export3dTiles { scene, out } => {
+        Command::Export3dTiles { scene, out, no_ground, height_offset } => {
             let started = Instant::now();
             let mut last = Instant::now();
-            tiles3d::export(&scene, &out, &mut |r| {
+            let options = tiles3d::ExportOptions { ground: !no_ground, height_offset_m: height_offset };
+            tiles3d::export(&scene, &out, options, &mut |r| {
                 if last.elapsed().as_secs_f64() > 2.0 {
                     log(&format!("exported {} tiles, {} trees…", r.tiles, r.trees));
                     last = Instant::now();
@@ -457,11 +469,12 @@ fn main() {
             })
             .map(|r| {
                 log(&format!(
-                    "wrote {}: tileset.json, {} tiles ({} GLBs), {} trees, {:.2} MB in {:.1} s",
+                    "wrote {}: tileset.json, {} tiles ({} GLBs), {} trees, {} ground tiles, {:.2} MB in {:.1} s",
                     out.display(),
                     r.tiles,
                     r.glbs,
                     r.trees,
+                    r.ground_tiles,
                     r.bytes as f64 / 1e6,
                     started.elapsed().as_secs_f64()
                 ));

@@ -16,24 +16,29 @@ test('every exported GLB passes the Khronos glTF validator', async () => {
     { stdio: ['ignore', 'ignore', 'pipe'] });
   const tileset = JSON.parse(readFileSync(join(out, 'tileset.json')));
   assert.equal(tileset.asset.version, '1.1');
-  const glbs = readdirSync(join(out, 'tiles')).filter((f) => f.endsWith('.glb'));
-  // Each of the 16 tiles: far quads, (coarse meshes,) full meshes; every GLB is some tile's content.
+  const list = (dir) => readdirSync(join(out, dir)).filter((f) => f.endsWith('.glb')).map((f) => `${dir}/${f}`);
+  const trees = list('tiles');
+  const ground = list('ground');
+  const glbs = [...trees, ...ground];
+  // Each of the 16 tiles: far quads, (coarse meshes,) full meshes; each of the
+  // 21 terrain tiles a ground GLB; every GLB is some tile's content.
   const contents = [];
   const walk = (node) => {
-    if (node.content) contents.push(node.content.uri.replace('tiles/', ''));
+    if (node.content) contents.push(node.content.uri);
     for (const c of node.children ?? []) walk(c);
   };
   walk(tileset.root);
   assert.deepEqual([...contents].sort(), [...glbs].sort());
-  assert.equal(glbs.filter((f) => f.endsWith('_far.glb')).length, 16, 'a far tier for each of the 16 tiles');
-  assert.ok(glbs.length >= 32, `GLBs: ${glbs.length}`);
+  assert.equal(trees.filter((f) => f.endsWith('_far.glb')).length, 16, 'a far tier for each of the 16 tiles');
+  assert.ok(trees.length >= 32, `GLBs: ${trees.length}`);
+  assert.equal(ground.length, 21, 'a ground GLB for each of the 21 terrain tiles');
   let read = 0;
   for (const f of glbs) {
-    const report = await validator.validateBytes(new Uint8Array(readFileSync(join(out, 'tiles', f))), {
+    const report = await validator.validateBytes(new Uint8Array(readFileSync(join(out, f))), {
       uri: f,
       externalResourceFunction: async (uri) => {
         read += 1;
-        return new Uint8Array(readFileSync(join(out, 'tiles', decodeURIComponent(uri))));
+        return new Uint8Array(readFileSync(join(out, dirname(f), decodeURIComponent(uri))));
       },
     });
     const errors = report.issues.messages.filter((m) => m.severity === 0);
@@ -41,9 +46,10 @@ test('every exported GLB passes the Khronos glTF validator', async () => {
     assert.equal(report.issues.numWarnings, 0, `${f}: ${JSON.stringify(report.issues.messages.slice(0, 5))}`);
     // The trees are there: instanced meshes with vertices.
     assert.ok(report.info.totalVertexCount > 0, `${f}: no vertices`);
-    assert.ok(report.info.extensionsUsed.includes('EXT_mesh_gpu_instancing'));
+    const ext = f.startsWith('ground/') ? 'KHR_materials_unlit' : 'EXT_mesh_gpu_instancing';
+    assert.ok(report.info.extensionsUsed.includes(ext), `${f}: ${report.info.extensionsUsed}`);
   }
-  assert.ok(read >= glbs.length * 2, `external buffers and textures were read: ${read}`);
+  assert.ok(read >= trees.length * 2, `external buffers and textures were read: ${read}`);
   rmSync(dirname(out), { recursive: true, force: true });
 });
 
@@ -119,7 +125,7 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
   const tileset = JSON.parse(readFileSync(join(out, 'tileset.json')));
   const points = [];
   const walk = (node) => {
-    if (node.transform) {
+    if (node.transform && node.content.uri.startsWith('tiles/')) {
       // The full meshes: the last tier (far quads, coarse meshes, full meshes).
       let leaf = node;
       while (leaf.children?.length) leaf = leaf.children[0];
@@ -154,13 +160,24 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
       }
     }
     const sky = viewer.scene.pick(new Cesium.Cartesian2(3, 3));
-    return { hits, misses, same, sky: ours(sky) };
+    // The ground: picks over the lower half of the view that are the tileset's
+    // but no tree (the terrain's GLBs carry no features).
+    let ground = 0;
+    for (let i = 0; i < 8; i++) {
+      for (let j = 0; j < 4; j++) {
+        const p = viewer.scene.pick(new Cesium.Cartesian2((i + 0.5) * viewer.canvas.clientWidth / 8,
+          (0.5 + (j + 0.5) / 8) * viewer.canvas.clientHeight));
+        if (ours(p) && !(p instanceof Cesium.Cesium3DTileFeature)) ground += 1;
+      }
+    }
+    return { hits, misses, same, sky: ours(sky), ground };
   }, points);
   const inView = picks.hits.length;
   const hit = picks.hits.filter(Boolean).length;
   assert.ok(inView >= 64, `trees projected into the view: ${inView} of ${points.length}`);
   assert.ok(hit >= inView * 0.8, `picked as the tileset's: ${hit} of ${inView}`);
   assert.equal(picks.sky, false, 'the corner above the forest is not a tree');
+  assert.ok(picks.ground >= 3, `picks of the exported ground among 32 over the lower half: ${picks.ground}`);
   // Trees in front hide some crowns (tens of metres away); most crowns are drawn
   // where they are: a quarter within 3 m (about 1 m here; trees moved 60 m east: 12 m).
   const misses = picks.misses.sort((a, b) => a - b);

@@ -34,6 +34,8 @@ use sylva::format::pack::{kind, MeshVertex, PackMeta};
 use sylva::format::{decode_pack, Bounds, Manifest, Tile, TileEntry};
 use sylva::geo::GeoFrame;
 
+mod ground;
+
 /// WGS84 semi-major axis, metres.
 const WGS84_A: f64 = 6_378_137.0;
 /// WGS84 flattening.
@@ -46,6 +48,22 @@ const SHOWN_FROM_PX: f64 = 2.0;
 /// The key of a species' far quads in [`SpeciesOut::levels`] (mesh levels are small numbers).
 const FAR: u32 = u32::MAX;
 
+/// How to export.
+#[derive(Debug, Clone, Copy)]
+pub struct ExportOptions {
+    /// Export the scene's terrain (and its imagery) as ground tiles.
+    pub ground: bool,
+    /// Metres added to every height: the geoid's undulation at the scene, for
+    /// heights above the geoid shown on an ellipsoidal terrain.
+    pub height_offset_m: f64,
+}
+
+impl Default for ExportOptions {
+    fn default() -> Self {
+        Self { ground: true, height_offset_m: 0.0 }
+    }
+}
+
 /// What an export wrote.
 #[derive(Debug, Clone, Default)]
 pub struct ExportReport {
@@ -55,6 +73,8 @@ pub struct ExportReport {
     pub glbs: usize,
     /// Trees exported (instances in the full GLBs).
     pub trees: u64,
+    /// Ground tiles exported (a GLB each).
+    pub ground_tiles: usize,
     /// Bytes written in all.
     pub bytes: u64,
 }
@@ -404,8 +424,10 @@ impl Gltf {
             "asset": {"version": "2.0", "generator": "sylva-bake export-3dtiles"},
             "scene": 0,
             "extensionsUsed": used,
-            "extensionsRequired": required,
         });
+        if !required.is_empty() {
+            doc["extensionsRequired"] = json!(required);
+        }
         if !self.extensions.is_empty() {
             doc["extensions"] = Value::Object(std::mem::take(&mut self.extensions));
         }
@@ -725,6 +747,8 @@ struct Ctx<'a> {
     /// Property names of the attribute columns.
     names: Vec<String>,
     meta_schema: Value,
+    /// Metres added to every height.
+    height_offset_m: f64,
 }
 
 /// Exports tile `entry`: its GLBs and its tileset node.
@@ -740,7 +764,7 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
     let mid = DVec3::new(
         (f64::from(entry.bounds.min[0]) + f64::from(entry.bounds.max[0])) * 0.5,
         (f64::from(entry.bounds.min[1]) + f64::from(entry.bounds.max[1])) * 0.5,
-        f64::from(entry.bounds.min[2]),
+        f64::from(entry.bounds.min[2]) + ctx.height_offset_m,
     );
     let (lon, lat, h) = geo.to_geo(mid).map_err(|e| anyhow::anyhow!("{}: {e}", entry.url))?;
     let frame = enu_frame(lon, lat, h);
@@ -778,7 +802,11 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         let half = Vec3::from(sp.meta.bounds_max).max(-Vec3::from(sp.meta.bounds_min));
         for (k, p) in tile.instances[at..at + b.instance_count as usize].iter().enumerate() {
             let i = p.decode(b);
-            let local = DVec3::new(i.position_m[0].into(), i.position_m[1].into(), i.position_m[2].into());
+            let local = DVec3::new(
+                i.position_m[0].into(),
+                i.position_m[1].into(),
+                f64::from(i.position_m[2]) + ctx.height_offset_m,
+            );
             let t = place(geo, &frame, local, f64::from(i.yaw_rad), i.scale, i.aspect)
                 .with_context(|| format!("{}: a tree at {local}", entry.url))?;
             placed.entry(b.species).or_default().push(ExportedTree { index: (at + k) as u32, ..t });
@@ -809,7 +837,7 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
     };
     let full = glb("", &|_| 0, report)?;
     report.trees += placed.values().map(|v| v.len() as u64).sum::<u64>();
-    let region = region(geo, &bounds, m.origin_m[2])?;
+    let region = region(geo, &bounds, m.origin_m[2] + ctx.height_offset_m)?;
     // Tiers, as Sylva's viewer picks them by the tallest tree's projected
     // height: the full meshes from the finest level's threshold, the coarsest
     // mesh level from where meshes start, the far quads below. (Each at least
@@ -894,8 +922,19 @@ fn export_node(
 ///
 /// # Errors
 /// An unreadable or invalid scene, a CRS the projection library cannot take,
-/// an `out` that holds files, I/O errors.
-pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -> Result<ExportReport> {
+/// an `out` that holds files, a non-finite height offset, I/O errors.
+pub fn export(
+    dir: &Path,
+    out: &Path,
+    options: ExportOptions,
+    progress: &mut dyn FnMut(&ExportReport),
+) -> Result<ExportReport> {
+    if !options.height_offset_m.is_finite() || options.height_offset_m.abs() > 1000.0 {
+        bail!(
+            "--height-offset {} m: give the geoid's undulation at the scene, within ±1000 m",
+            options.height_offset_m
+        );
+    }
     let manifest = dir.join("scene.json");
     let bytes = std::fs::read(&manifest).with_context(|| format!("cannot read {}", manifest.display()))?;
     let m = Manifest::decode(&manifest.display().to_string(), &bytes)?;
@@ -907,7 +946,9 @@ pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -
     {
         bail!("{}: not empty; export into a new or empty folder (nothing is overwritten)", out.display());
     }
-    for sub in ["tiles", "meshes"] {
+    let ground = options.ground && m.terrain.is_some();
+    let subs: &[&str] = if ground { &["tiles", "meshes", "ground/img"] } else { &["tiles", "meshes"] };
+    for sub in subs {
         std::fs::create_dir_all(out.join(sub)).with_context(|| format!("cannot create {}", out.join(sub).display()))?;
     }
     let geo = GeoFrame::new(&m.crs.proj4, m.origin_m)
@@ -927,6 +968,7 @@ pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -
         out,
         names,
         meta_schema,
+        height_offset_m: options.height_offset_m,
     };
     let root = if let Some(index) = &m.index {
         export_node(&ctx, &index.root, 0, &mut report, progress)?
@@ -938,12 +980,32 @@ pub fn export(dir: &Path, out: &Path, progress: &mut dyn FnMut(&ExportReport)) -
         }
         group(children)
     };
-    let Some(mut root) = root else { bail!("{}: the scene lists no tiles", manifest.display()) };
-    fill_regions(&mut root.json);
+    let Some(forest) = root else { bail!("{}: the scene lists no tiles", manifest.display()) };
+    let ground = if ground {
+        let g = ground::Ground { dir, m: &m, geo: &ctx.geo, out, height_offset_m: options.height_offset_m };
+        g.export(&mut report)?
+    } else {
+        None
+    };
+    // With ground: a node adding the forest to it, refined (both shown) while
+    // the terrain's square is more than Cesium's 16 px across.
+    let mut root = match ground {
+        Some(ground) => {
+            let size = m.terrain.as_ref().map_or(0.0, |t| t.root_size_m);
+            let error =
+                [&ground, &forest.json].iter().filter_map(|n| n["geometricError"].as_f64()).fold(size, f64::max);
+            let (mut ground, mut forest) = (ground, forest.json);
+            ground["extras"] = json!({"sylva": "ground"});
+            forest["extras"] = json!({"sylva": "forest"});
+            json!({"geometricError": error, "refine": "ADD", "children": [ground, forest]})
+        }
+        None => forest.json,
+    };
+    fill_regions(&mut root);
     let tileset = json!({
         "asset": {"version": "1.1", "generator": "sylva-bake export-3dtiles", "tilesetVersion": m.counts.trees.to_string()},
-        "geometricError": root.json["geometricError"],
-        "root": root.json,
+        "geometricError": root["geometricError"],
+        "root": root,
     });
     let text = serde_json::to_vec_pretty(&tileset)?;
     write_file(&out.join("tileset.json"), &text, &mut report)?;
@@ -1001,6 +1063,8 @@ mod tests {
         let view = &doc["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
         assert_eq!(view["buffer"], 0, "instance data lies in the GLB");
         let per = match acc["type"].as_str().unwrap() {
+            "SCALAR" => 1,
+            "VEC2" => 2,
             "VEC3" => 3,
             "VEC4" => 4,
             t => panic!("{t}"),
@@ -1029,7 +1093,9 @@ mod tests {
         let dir = fixture();
         let out = std::env::temp_dir().join(format!("sylva-3dtiles-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&out);
-        let report = export(&dir, &out, &mut |_| {}).unwrap();
+        // (Heights 30 m up: the geoid's undulation a portal would add.)
+        let options = ExportOptions { height_offset_m: 30.0, ..ExportOptions::default() };
+        let report = export(&dir, &out, options, &mut |_| {}).unwrap();
         let m = Manifest::decode("m", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
         let geo = GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
         assert_eq!(report.trees, m.counts.trees);
@@ -1047,6 +1113,9 @@ mod tests {
                 stack.extend(c.iter().cloned());
             }
             let Some(t) = node["transform"].as_array() else { continue };
+            if node["content"]["uri"].as_str().is_some_and(|u| u.starts_with("ground/")) {
+                continue;
+            }
             tiles += 1;
             let t: Vec<f64> = t.iter().map(|v| v.as_f64().unwrap()).collect();
             let frame = [
@@ -1136,7 +1205,8 @@ mod tests {
                     assert_eq!(table_ids[k], ids[*index], "row {k} is tree {index}");
                     let (name, p, _yaw, scale) = &exported[k];
                     assert_eq!(name, &m.species[*s as usize].name);
-                    let want = DVec3::new(i.position_m[0].into(), i.position_m[1].into(), i.position_m[2].into());
+                    let want =
+                        DVec3::new(i.position_m[0].into(), i.position_m[1].into(), f64::from(i.position_m[2]) + 30.0);
                     worst = worst.max((*p - want).length());
                     assert!((scale - i.scale).abs() < 1e-5);
                     k += 1;
@@ -1149,8 +1219,144 @@ mod tests {
         assert_eq!(checked, m.counts.trees);
         assert!(worst < 0.01, "an exported tree is {worst} m from its tree");
         // Nothing is overwritten: a second export into the same folder is refused.
-        let again = export(&dir, &out, &mut |_| {}).unwrap_err().to_string();
+        let again = export(&dir, &out, ExportOptions::default(), &mut |_| {}).unwrap_err().to_string();
         assert!(again.contains("not empty"), "{again}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    /// The ground: every terrain tile a GLB in the quadtree's hierarchy, each
+    /// vertex on its grid point at the terrain's height (skirts below it) within
+    /// a centimetre through the chained transforms, facing up, draped with its
+    /// image's part; none with `ground: false`.
+    #[test]
+    fn the_ground_is_the_terrain_draped_with_its_images() {
+        let dir = fixture();
+        let out = std::env::temp_dir().join(format!("sylva-3dtiles-ground-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let options = ExportOptions { height_offset_m: 30.0, ..ExportOptions::default() };
+        let report = export(&dir, &out, options, &mut |_| {}).unwrap();
+        let m = Manifest::decode("m", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+        let e = m.terrain.as_ref().unwrap();
+        let geo = GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
+        assert_eq!(report.ground_tiles as u64, e.tiles);
+        let images = std::fs::read_dir(out.join("ground/img")).unwrap().count() as u64;
+        assert_eq!(images, e.imagery.as_ref().unwrap().tiles);
+        let tileset: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+        let root = &tileset["root"];
+        assert_eq!(root["refine"], "ADD", "the forest is added to the ground");
+        let mat = |t: &Value| glam::DMat4::from_cols_array(&std::array::from_fn(|k| t[k].as_f64().unwrap()));
+        let mut stack = vec![(root["children"][0].clone(), glam::DMat4::IDENTITY, f64::INFINITY)];
+        let (mut worst, mut vertices, mut tiles, mut up, mut textured) = (0.0f64, 0, 0, 0, 0);
+        let (mut want_vertices, mut want_up) = (0, 0);
+        while let Some((node, parent, parent_error)) = stack.pop() {
+            let abs = parent * mat(&node["transform"]);
+            let error = node["geometricError"].as_f64().unwrap();
+            assert!(error <= parent_error, "a ground tile's error exceeds its parent's");
+            for c in node["children"].as_array().into_iter().flatten() {
+                stack.push((c.clone(), abs, error));
+            }
+            let uri = node["content"]["uri"].as_str().unwrap();
+            let (l, x, y) = {
+                let k: Vec<u32> = uri
+                    .trim_start_matches("ground/")
+                    .trim_end_matches(".glb")
+                    .split('_')
+                    .map(|v| v.parse().unwrap())
+                    .collect();
+                (k[0] as u8, k[1], k[2])
+            };
+            tiles += 1;
+            let tile = sylva::format::terrain::TerrainTile::decode(
+                "t",
+                &std::fs::read(dir.join(e.tile_url(l, x, y))).unwrap(),
+            )
+            .unwrap();
+            let (o, size) = (e.tile_origin_m(l, x, y), e.tile_size_m(l));
+            let step = size / f64::from(tile.grid);
+            let (doc, bin) = glb_parts(&std::fs::read(out.join(uri)).unwrap());
+            assert_eq!(doc["extensionsUsed"][0], "KHR_materials_unlit");
+            let prim = &doc["meshes"][0]["primitives"][0];
+            let pos = floats(&doc, &bin, prim["attributes"]["POSITION"].as_u64().unwrap());
+            let uv = floats(&doc, &bin, prim["attributes"]["TEXCOORD_0"].as_u64().unwrap());
+            let idx: Vec<u32> = {
+                let acc = &doc["accessors"][prim["indices"].as_u64().unwrap() as usize];
+                let view = &doc["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
+                let start = view["byteOffset"].as_u64().unwrap() as usize;
+                bytemuck::pod_collect_to_vec(&bin[start..start + 4 * acc["count"].as_u64().unwrap() as usize])
+            };
+            let material = &doc["materials"][prim["material"].as_u64().unwrap() as usize];
+            let image = material["pbrMetallicRoughness"]["baseColorTexture"]["index"].as_u64().map(|t| {
+                let src = doc["textures"][t as usize]["source"].as_u64().unwrap() as usize;
+                doc["images"][src]["uri"].as_str().unwrap().to_string()
+            });
+            // The scene point of each vertex, through the chain of transforms and WGS84.
+            let scene: Vec<DVec3> = (0..pos.len() / 3)
+                .map(|k| {
+                    let enu = glam::DVec4::new(pos[3 * k].into(), (-pos[3 * k + 2]).into(), pos[3 * k + 1].into(), 1.0);
+                    let (lon, lat, h) = ecef_to_geodetic((abs * enu).truncate());
+                    geo.to_local(lon, lat, h).unwrap()
+                })
+                .collect();
+            for (k, p) in scene.iter().enumerate() {
+                let (fi, fj) = ((p.x - o[0]) / step, (p.y - o[1]) / step);
+                let (i, j) = (fi.round() as usize, fj.round() as usize);
+                worst = worst.max((fi - i as f64).abs().max((fj - j as f64).abs()) * step);
+                let Some(h) = tile.height(i, j) else { continue };
+                let h = f64::from(h) + 30.0;
+                // On the terrain, or a skirt below it.
+                let dz = p.z - h;
+                assert!(dz.abs() < 0.01 || dz < -0.5, "{uri}: a vertex {dz} m off the terrain");
+                if dz.abs() < 0.01 {
+                    worst = worst.max(dz.abs());
+                    vertices += 1;
+                }
+                if let Some(img) = &image {
+                    let k2: Vec<u32> = img
+                        .trim_start_matches("../ground/img/")
+                        .trim_end_matches(".jpg")
+                        .split('_')
+                        .map(|v| v.parse().unwrap())
+                        .collect();
+                    let (io, is) = (e.tile_origin_m(k2[0] as u8, k2[1], k2[2]), e.tile_size_m(k2[0] as u8));
+                    assert!(k2[0] as u8 <= l, "an image from a finer level");
+                    let want = [(p.x - io[0]) / is, 1.0 - (p.y - io[1]) / is];
+                    assert!((f64::from(uv[2 * k]) - want[0]).abs() < 1e-4, "{uri}: u");
+                    assert!((f64::from(uv[2 * k + 1]) - want[1]).abs() < 1e-4, "{uri}: v");
+                }
+            }
+            textured += usize::from(image.is_some());
+            // What the tile should give: its vertices with data, two triangles a cell of them.
+            let n = tile.side();
+            want_vertices += tile.heights.iter().filter(|&&q| q != sylva::format::terrain::TERRAIN_HOLE).count();
+            for j in 0..n - 1 {
+                for i in 0..n - 1 {
+                    let cell = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)];
+                    want_up += 2 * usize::from(cell.iter().all(|&(i, j)| tile.height(i, j).is_some()));
+                }
+            }
+            // Every triangle that is not a skirt faces up.
+            for t in idx.chunks(3) {
+                let [a, b, c] = [scene[t[0] as usize], scene[t[1] as usize], scene[t[2] as usize]];
+                let n = (b - a).cross(c - a);
+                if n.z.abs() > 0.1 * n.length() {
+                    assert!(n.z > 0.0, "{uri}: a triangle faces down");
+                    up += 1;
+                }
+            }
+        }
+        assert_eq!(tiles, e.tiles);
+        assert!(want_vertices > 20_000 && want_up > 20_000, "a fixture without ground: {want_vertices}");
+        assert_eq!(vertices, want_vertices, "the vertices on the terrain");
+        assert_eq!(up, want_up, "the triangles facing up");
+        assert!(textured > 0, "no ground tile draped with an image");
+        assert!(worst < 0.01, "a ground vertex {worst} m off its grid point");
+        std::fs::remove_dir_all(&out).unwrap();
+        // Without the ground: the forest alone, no ground files.
+        let report = export(&dir, &out, ExportOptions { ground: false, ..options }, &mut |_| {}).unwrap();
+        assert_eq!(report.ground_tiles, 0);
+        assert!(!out.join("ground").exists());
+        let tileset: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
+        assert_eq!(tileset["root"]["refine"], "REPLACE");
         std::fs::remove_dir_all(&out).unwrap();
     }
 
@@ -1167,7 +1373,9 @@ mod tests {
         let trees: u64 = root["children"].as_array().unwrap().iter().map(|c| c["trees"].as_u64().unwrap()).sum();
         root["trees"] = json!(trees);
         std::fs::write(&root_path, serde_json::to_vec(&root).unwrap()).unwrap();
-        let e = export(&dir.join("scene"), &dir.join("out"), &mut |_| {}).unwrap_err().to_string();
+        let e = export(&dir.join("scene"), &dir.join("out"), ExportOptions::default(), &mut |_| {})
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("listed twice"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
