@@ -98,10 +98,11 @@ enum Command {
     /// 3D Tiles viewers): tileset.json with the scene's index as its hierarchy,
     /// per tile a GLB of crossed billboard quads (the far tier) refined by GLBs of
     /// coarse and full meshes, every tree an instance (EXT_mesh_gpu_instancing)
-    /// placed through WGS84.
+    /// placed through WGS84; the scene's terrain as ground tiles draped with
+    /// its ground images.
     #[command(
         name = "export-3dtiles",
-        after_help = "Example:\n  sylva-bake export-3dtiles scene/ --out scene-3dtiles/\n  sylva serve scene-3dtiles/   # then load tileset.json in CesiumJS"
+        after_help = "Examples:\n  sylva-bake export-3dtiles scene/ --out scene-3dtiles/\n  sylva serve scene-3dtiles/   # then http://127.0.0.1:8080/cesium.html\n\n  # On Cesium World Terrain (ellipsoidal) with DEM heights over the geoid, N = 47.3 m there:\n  sylva-bake export-3dtiles scene/ --out scene-3dtiles/ --no-ground --height-offset 47.3"
     )]
     Export3dTiles {
         /// The baked scene folder (with scene.json).
