@@ -99,7 +99,7 @@ bench-cesium: release web
 	  --placements $(SHARED)/placements/amsterdam_trees.csv --default-model oak --out target/bench/amsterdam
 	@for s in demo-100k amsterdam; do rm -rf target/bench/$$s-3dtiles target/bench/cesium-$$s; \
 	  target/release/sylva-bake export-3dtiles target/bench/$$s --out target/bench/$$s-3dtiles && \
-	  node web/bench-cesium.mjs target/bench/$$s target/bench/$$s-3dtiles target/bench/cesium-$$s || exit 1; done
+	  node web/bench-cesium.mjs target/bench/$$s target/bench/$$s-3dtiles target/bench/cesium-$$s medium || exit 1; done
 
 # Load test of `sylva serve` on 127.0.0.1 (bounded: 16 clients × 250 requests
 # and 8 idle connections over the test scene; stops by itself).

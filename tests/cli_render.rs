@@ -71,6 +71,16 @@ fn broken_packs_and_tiles_make_render_fail_unless_partial_is_allowed() {
     assert_eq!(stats["failed"], serde_json::json!([]), "a whole scene fails nothing");
     let whole = drawn(&stats);
     assert!(whole > 1000, "{whole} trees drawn");
+    // The stats say the camera rendered, as --camera takes it: the same view again.
+    let camera = stats["camera"].as_str().unwrap().to_string();
+    let (ok, again, stderr) = render(&scene, "far", &["--camera", &camera]);
+    assert!(ok, "{stderr}");
+    let numbers = |s: &serde_json::Value| -> Vec<f64> {
+        s["camera"].as_str().unwrap().split(',').map(|v| v.parse().unwrap()).collect()
+    };
+    let (a, b) = (numbers(&stats), numbers(&again));
+    assert!(a.len() == 5 && a.iter().zip(&b).all(|(a, b)| (a - b).abs() < 1e-6), "{a:?} then {b:?}");
+    assert_eq!(drawn(&again), whole);
     // A pack of random bytes: the other species are drawn, the render fails.
     let mut noise = 0x1234_5678_9abc_def0u64;
     let random: Vec<u8> = (0..20_000)

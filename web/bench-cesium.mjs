@@ -7,23 +7,34 @@
 // code included), frame time over 20 redraws of the settled view (or 4 minutes' worth), and the image
 // error (multi-scale RMSE, `sylva compare`) against Sylva's native render of the
 // same camera (`sylva render`: full meshes where trees are big, lavapipe).
-// Usage: node web/bench-cesium.mjs SCENE_DIR TILESET_DIR OUT_DIR
-//   (after `make release`, `make web`, and `sylva-bake export-3dtiles SCENE_DIR --out TILESET_DIR`)
+// Usage: node web/bench-cesium.mjs SCENE_DIR TILESET_DIR OUT_DIR [VIEW]
+//   (after `make release`, `make web`, and `sylva-bake export-3dtiles SCENE_DIR --out TILESET_DIR`);
+//   VIEW: a named view of `sylva render` (far, medium, close, top) instead of the viewer's first view.
+//   `make bench-cesium` runs the medium view.
 import { spawn, execFileSync } from 'node:child_process';
-import { mkdirSync, writeFileSync } from 'node:fs';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { chromium } from 'playwright-core';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '..');
-const [scene, tileset, out] = process.argv.slice(2);
+const [scene, tileset, out, view] = process.argv.slice(2);
 if (!scene || !tileset || !out) {
-  console.error('usage: node web/bench-cesium.mjs SCENE_DIR TILESET_DIR OUT_DIR');
+  console.error('usage: node web/bench-cesium.mjs SCENE_DIR TILESET_DIR OUT_DIR [far|medium|close|top]');
   process.exit(2);
 }
 mkdirSync(out, { recursive: true });
 const sylva = join(root, 'target/release/sylva');
 const size = { width: 640, height: 360 };
+// A named view: its camera from `sylva render --stats` (scene CRS), as metres from the scene origin.
+let hash = '';
+if (view) {
+  execFileSync(sylva, ['render', '--scene', scene, '--view', view, '--size', '64x36', '--shadows', 'off',
+    '--out', join(out, 'view.png'), '--stats', join(out, 'view.json')], { stdio: ['ignore', 'ignore', 'inherit'] });
+  const abs = JSON.parse(readFileSync(join(out, 'view.json'))).camera.split(',').map(Number);
+  const origin = JSON.parse(readFileSync(join(scene, 'scene.json'))).origin_m;
+  hash = `#local=${[abs[0] - origin[0], abs[1] - origin[1], abs[2] - origin[2], abs[3], abs[4]].join(',')}`;
+}
 const flags = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
   '--use-webgpu-adapter=swiftshader', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--disable-quic',
   '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'];
@@ -59,7 +70,7 @@ const results = {};
   const base = await s.url;
   const { page, bytes } = await countingPage(browser);
   const t0 = Date.now();
-  await page.goto(`${base}?ui=0&refine=off&shadows=off`);
+  await page.goto(`${base}?ui=0&refine=off&shadows=off${hash}`);
   await page.waitForFunction(() => window.sylva, null, { timeout: 600000 });
   // Progress every 15 s while the first complete frame is awaited.
   const progress = setInterval(async () => {
@@ -152,7 +163,7 @@ for (const v of ['sylva', 'cesium']) {
   results[v].ms_rmse = Number(execFileSync(sylva, ['compare', join(out, 'native.png'), join(out, `${v}.png`)]).toString());
 }
 writeFileSync(join(out, 'side-by-side.json'), JSON.stringify(results, null, 2));
-console.log(`scene ${scene}, tileset ${tileset}, ${size.width}x${size.height}, camera ${eye}`);
+console.log(`scene ${scene}, tileset ${tileset}, ${size.width}x${size.height}, ${view ?? 'first'} view, camera ${eye}`);
 console.log('| viewer | first complete frame | scene bytes | all bytes | frame time | ms-rmse vs native |');
 for (const v of ['sylva', 'cesium']) {
   const r = results[v];

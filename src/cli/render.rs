@@ -118,7 +118,19 @@ pub(crate) fn render_scene(
         if several || !label.is_empty() {
             eprintln!("{}: {label}", path.display());
         }
-        let json = serde_json::to_string_pretty(&s)?;
+        // The stats with the camera rendered, as `--camera` takes it (a named
+        // view's camera, to render it again or elsewhere: web/bench-cesium.mjs).
+        let mut value = serde_json::to_value(&s)?;
+        let o = manifest.origin_m;
+        value["camera"] = serde_json::Value::String(format!(
+            "{},{},{},{},{}",
+            cam.eye_m.x + o[0],
+            cam.eye_m.y + o[1],
+            cam.eye_m.z + o[2],
+            cam.heading_rad.to_degrees(),
+            cam.pitch_rad.to_degrees()
+        ));
+        let json = serde_json::to_string_pretty(&value)?;
         if let Some(p) = stats_path {
             let p = if several { suffixed(p, &label) } else { p.clone() };
             std::fs::write(&p, format!("{json}\n")).with_context(|| format!("cannot write {}", p.display()))?;

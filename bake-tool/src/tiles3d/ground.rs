@@ -172,14 +172,17 @@ impl Ground<'_> {
             None => (o, s),
         };
         let mut pos: Vec<[f32; 3]> = Vec::with_capacity(n * n * 2);
-        let mut uv: Vec<[f32; 2]> = Vec::with_capacity(n * n * 2);
+        // (UVs as normalized u16, which core glTF allows: 1/65535 of an image
+        // is 0.004 of its pixels.)
+        let mut uv: Vec<[u16; 2]> = Vec::with_capacity(n * n * 2);
+        let unorm = |v: f64| (v.clamp(0.0, 1.0) * 65535.0).round() as u16;
         let mut put = |i: usize, j: usize, h: f64| -> Result<u32> {
             let p = DVec3::new(o[0] + i as f64 * step, o[1] + j as f64 * step, h + self.height_offset_m);
             let (lon, lat, hh) = self.geo.to_geo(p).map_err(|err| anyhow::anyhow!("terrain tile: {err}"))?;
             let d = geodetic_to_ecef(lon, lat, hh) - f[0];
             let (x, y, z) = (d.dot(f[1]), d.dot(f[2]), d.dot(f[3]));
             pos.push([x as f32, z as f32, -y as f32]);
-            uv.push([((p.x - io[0]) / is) as f32, (1.0 - (p.y - io[1]) / is) as f32]);
+            uv.push([unorm((p.x - io[0]) / is), unorm(1.0 - (p.y - io[1]) / is)]);
             Ok(pos.len() as u32 - 1)
         };
         // The surface: a vertex per grid point (holes as the tile's centre, unused).
@@ -237,7 +240,14 @@ impl Ground<'_> {
         let count = pos.len();
         let vp = g.own_view(bytemuck::cast_slice(&pos));
         let vu = g.own_view(bytemuck::cast_slice(&uv));
-        let vi = g.own_view(bytemuck::cast_slice(&idx));
+        // (Indices as u16 where the vertices allow: a 64-cell tile has 4,485.)
+        let short = pos.len() <= usize::from(u16::MAX);
+        let vi = if short {
+            let idx16: Vec<u16> = idx.iter().map(|&i| i as u16).collect();
+            g.own_view(bytemuck::cast_slice(&idx16))
+        } else {
+            g.own_view(bytemuck::cast_slice(&idx))
+        };
         for (v, target) in [(vp, 34962), (vu, 34962), (vi, 34963)] {
             g.arrays.get_mut("bufferViews").expect("views")[v]["target"] = json!(target);
         }
@@ -245,10 +255,15 @@ impl Ground<'_> {
             "accessors",
             json!({"bufferView": vp, "componentType": 5126, "count": count, "type": "VEC3", "min": lo, "max": hi}),
         );
-        let a_uv =
-            g.push("accessors", json!({"bufferView": vu, "componentType": 5126, "count": count, "type": "VEC2"}));
-        let a_idx =
-            g.push("accessors", json!({"bufferView": vi, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}));
+        let a_uv = g.push(
+            "accessors",
+            json!({"bufferView": vu, "componentType": 5123, "normalized": true, "count": count, "type": "VEC2"}),
+        );
+        let index_type = if short { 5123 } else { 5125 };
+        let a_idx = g.push(
+            "accessors",
+            json!({"bufferView": vi, "componentType": index_type, "count": idx.len(), "type": "SCALAR"}),
+        );
         let mut pbr = json!({"baseColorFactor": LITTER, "metallicFactor": 0.0, "roughnessFactor": 1.0});
         if let Some((l, x, y)) = image {
             pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);

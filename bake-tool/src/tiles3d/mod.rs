@@ -1277,13 +1277,20 @@ mod tests {
             assert_eq!(doc["extensionsUsed"][0], "KHR_materials_unlit");
             let prim = &doc["meshes"][0]["primitives"][0];
             let pos = floats(&doc, &bin, prim["attributes"]["POSITION"].as_u64().unwrap());
-            let uv = floats(&doc, &bin, prim["attributes"]["TEXCOORD_0"].as_u64().unwrap());
-            let idx: Vec<u32> = {
-                let acc = &doc["accessors"][prim["indices"].as_u64().unwrap() as usize];
+            // (UVs normalized u16, indices u16: a tile has fewer than 65,536 vertices.)
+            let shorts = |a: u64| -> Vec<u16> {
+                let acc = &doc["accessors"][a as usize];
+                assert_eq!(acc["componentType"], 5123);
                 let view = &doc["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
                 let start = view["byteOffset"].as_u64().unwrap() as usize;
-                bytemuck::pod_collect_to_vec(&bin[start..start + 4 * acc["count"].as_u64().unwrap() as usize])
+                let per = if acc["type"] == "VEC2" { 2 } else { 1 };
+                bytemuck::pod_collect_to_vec(&bin[start..start + 2 * per * acc["count"].as_u64().unwrap() as usize])
             };
+            let uv: Vec<f32> = shorts(prim["attributes"]["TEXCOORD_0"].as_u64().unwrap())
+                .iter()
+                .map(|&v| f32::from(v) / 65535.0)
+                .collect();
+            let idx: Vec<u32> = shorts(prim["indices"].as_u64().unwrap()).iter().map(|&i| u32::from(i)).collect();
             let material = &doc["materials"][prim["material"].as_u64().unwrap() as usize];
             let image = material["pbrMetallicRoughness"]["baseColorTexture"]["index"].as_u64().map(|t| {
                 let src = doc["textures"][t as usize]["source"].as_u64().unwrap() as usize;
