@@ -354,6 +354,15 @@ impl TerrainEntry {
         level < i.levels && ox < x1 && ox + s > x0 && oy < y1 && oy + s > y0
     }
 
+    /// Whether a child of terrain tile `(level, x, y)` has an image of its own
+    /// (finer than the tile's): a viewer refines the tile while a texel of its
+    /// image projects above its threshold (`docs/FORMAT.md`, "Terrain tiles").
+    #[must_use]
+    pub fn has_finer_imagery_below(&self, level: u8, x: u32, y: u32) -> bool {
+        self.imagery.as_ref().is_some_and(|i| level.saturating_add(1) < i.levels)
+            && (0..4u32).any(|k| self.has_imagery(level + 1, 2 * x + (k & 1), 2 * y + (k >> 1)))
+    }
+
     pub(crate) fn validate(&self) -> Result<(), Problem> {
         check_url("terrain.path", &self.path)?;
         let finite = [self.origin_m[0], self.origin_m[1], self.root_size_m, self.resolution_m];

@@ -7,7 +7,10 @@
 //! resident tiles: a tile inside the view frustum whose geometric error,
 //! projected at its nearest point, exceeds the threshold (pixels) is replaced
 //! by its children once all of them are resident (and asks for the missing
-//! ones, nearest first); otherwise it is drawn. The cut is a complete cover of
+//! ones, nearest first); otherwise it is drawn. A tile whose children have
+//! baked ground images of their own is also replaced while a texel of its
+//! image projects above the threshold: on flat ground (height errors of 0) the
+//! images still sharpen as the camera comes down. The cut is a complete cover of
 //! the terrain with data: no tile and its ancestor are both drawn. Work per
 //! frame is O(tiles drawn); memory is bounded by [`TerrainTree::max_resident`]
 //! tiles (least recently used evicted, never the root or a tile in use).
@@ -180,6 +183,12 @@ impl TerrainTree {
             }
             let distance = box_distance(lo - eye_m, hi - eye_m).max(1e-3) as f32;
             let error_px = tile.error_m * view.px_per_m_at_1m / distance;
+            // A texel of its image, where its children have finer images.
+            let texel_px = if self.entry.has_finer_imagery_below(key.0, key.1, key.2) {
+                (size / f64::from(crate::format::terrain::IMAGERY_PX)) as f32 * view.px_per_m_at_1m / distance
+            } else {
+                0.0
+            };
             // The existing children (at most four, no allocation).
             let mut kids = [((0u8, 0u32, 0u32), 0usize); 4];
             let mut n = 0;
@@ -190,7 +199,7 @@ impl TerrainTree {
                 }
             }
             let children = &kids[..n];
-            let refine = error_px > threshold_px && !children.is_empty();
+            let refine = error_px.max(texel_px) > threshold_px && !children.is_empty();
             let ready =
                 children.iter().all(|(c, _)| matches!(self.slots.get(c), Some(Slot::Resident { .. } | Slot::Broken)));
             let any_broken = children.iter().any(|(c, _)| matches!(self.slots.get(c), Some(Slot::Broken)));
@@ -322,6 +331,21 @@ mod tests {
     /// A full quadtree of `levels` over a 1024 m root at the origin, heights
     /// 0–10 m, errors halving per level (the finest 0).
     fn tree(levels: u8) -> TerrainTree {
+        tree_with(levels, &|l| if l + 1 == levels { 0.0 } else { 8.0 / f32::from(1u8 << l) }, None)
+    }
+
+    /// The same with errors `error(level)` and baked imagery of `imagery` levels over the whole square.
+    fn tree_with(levels: u8, error: &dyn Fn(u8) -> f32, imagery: Option<u8>) -> TerrainTree {
+        let imagery = imagery.map(|levels| crate::format::terrain::ImageryEntry {
+            path: "terrain/img".into(),
+            tile_px: crate::format::terrain::IMAGERY_PX,
+            levels,
+            extent_m: [0.0, 0.0, 1024.0, 1024.0],
+            resolution_m: 0.5,
+            tiles: 0,
+            bytes: 0,
+            source: "test".into(),
+        });
         let entry = TerrainEntry {
             path: "terrain".into(),
             origin_m: [0.0, 0.0],
@@ -333,10 +357,9 @@ mod tests {
             tiles: 0,
             bytes: 0,
             source: "test".into(),
-            imagery: None,
+            imagery,
         };
         let mut t = TerrainTree::new(entry);
-        let error = |l: u8| if l + 1 == levels { 0.0 } else { 8.0 / f32::from(1u8 << l) };
         for l in 0..levels {
             for x in 0..(1u32 << l) {
                 for y in 0..(1u32 << l) {
@@ -438,6 +461,28 @@ mod tests {
         let (away, eye) = view_from(DVec3::new(-50.0, -50.0, 200.0), DVec3::new(-500.0, -500.0, 150.0));
         t.select(&away, eye, 2.0, &mut draws, &mut wanted);
         assert!(draws.is_empty(), "{} tiles behind the camera", draws.len());
+    }
+
+    /// Flat ground (every error 0) with images of 3 levels: the images still
+    /// sharpen near the eye (their texels project above the threshold), and
+    /// the selection stops at the finest image level (nothing finer to show).
+    #[test]
+    fn flat_ground_refines_while_finer_images_sharpen_it() {
+        let mut t = tree_with(5, &|_| 0.0, Some(3));
+        let (mut draws, mut wanted) = (Vec::new(), Vec::new());
+        // High above: a texel of the root's image (4 m) is under 2 px.
+        let (high, eye) = view_from(DVec3::new(512.0, 512.0, 20_000.0), DVec3::new(512.0, 513.0, 0.0));
+        t.select(&high, eye, 2.0, &mut draws, &mut wanted);
+        assert_eq!(draws.iter().map(|d| d.key).collect::<Vec<_>>(), vec![(0, 0, 0)]);
+        // Low over the ground: level 2 (the finest images) under the eye, nothing finer.
+        let (low, eye) = view_from(DVec3::new(100.0, 100.0, 15.0), DVec3::new(300.0, 300.0, 0.0));
+        t.select(&low, eye, 2.0, &mut draws, &mut wanted);
+        let levels: Vec<u8> = draws.iter().map(|d| d.key.0).collect();
+        assert!(levels.contains(&2) && levels.iter().all(|&l| l <= 2), "{levels:?}");
+        // Without imagery the same flat ground is one tile wherever the eye is.
+        let mut bare = tree_with(5, &|_| 0.0, None);
+        bare.select(&low, eye, 2.0, &mut draws, &mut wanted);
+        assert_eq!(draws.iter().map(|d| d.key).collect::<Vec<_>>(), vec![(0, 0, 0)]);
     }
 
     #[test]

@@ -125,7 +125,7 @@ test('CesiumJS loads the exported tileset from sylva serve and draws the trees w
   const tileset = JSON.parse(readFileSync(join(out, 'tileset.json')));
   const points = [];
   const walk = (node) => {
-    if (node.transform && node.content.uri.startsWith('tiles/')) {
+    if (node.transform && node.content?.uri.startsWith('tiles/')) {
       // The full meshes: the last tier (far quads, coarse meshes, full meshes).
       let leaf = node;
       while (leaf.children?.length) leaf = leaf.children[0];

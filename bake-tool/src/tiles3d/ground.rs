@@ -41,7 +41,7 @@ impl Ground<'_> {
 
     /// The ground as a tileset node (the terrain's root tile and everything
     /// below it), or None for a scene without terrain.
-    pub fn export(&self, report: &mut ExportReport) -> Result<Option<Value>> {
+    pub fn export(&self, report: &mut ExportReport, progress: &mut dyn FnMut(&ExportReport)) -> Result<Option<Value>> {
         if self.m.terrain.is_none() {
             return Ok(None);
         }
@@ -49,7 +49,7 @@ impl Ground<'_> {
         // Skirts as deep as the largest error anywhere: the gap at an edge
         // between tiles of any two levels is at most the coarser one's error.
         let skirt_m = f64::from(root.error_m) + 1.0;
-        self.tile(&root, None, skirt_m, report).map(Some)
+        self.tile(&root, None, skirt_m, report, progress)
     }
 
     fn read(&self, (level, x, y): Key) -> Result<TerrainTile> {
@@ -101,8 +101,16 @@ impl Ground<'_> {
 
     /// Exports `t` (its GLB, then its children's) as a tileset node whose
     /// transform is relative to `parent` (the absolute frame of the parent
-    /// tile; None at the root).
-    fn tile(&self, t: &TerrainTile, parent: Option<&DMat4>, skirt_m: f64, report: &mut ExportReport) -> Result<Value> {
+    /// tile and its error in metres; None at the root); None for a tile
+    /// with nothing to draw (every cell touches a hole) and no children.
+    fn tile(
+        &self,
+        t: &TerrainTile,
+        parent: Option<(&DMat4, f64)>,
+        skirt_m: f64,
+        report: &mut ExportReport,
+        progress: &mut dyn FnMut(&ExportReport),
+    ) -> Result<Option<Value>> {
         let e = self.entry();
         let key = (t.level, t.x, t.y);
         let (o, s) = (e.tile_origin_m(t.level, t.x, t.y), e.tile_size_m(t.level));
@@ -110,7 +118,7 @@ impl Ground<'_> {
         let (lon, lat, h) = self.geo.to_geo(mid).map_err(|err| anyhow::anyhow!("terrain tile {key:?}: {err}"))?;
         let f = enu_frame(lon, lat, h);
         let abs = DMat4::from_cols(f[1].extend(0.0), f[2].extend(0.0), f[3].extend(0.0), f[0].extend(1.0));
-        let rel = parent.map_or(abs, |p| p.inverse() * abs);
+        let rel = parent.map_or(abs, |(p, _)| p.inverse() * abs);
         if e.has_imagery(t.level, t.x, t.y) {
             self.copy_image(key, report)?;
         }
@@ -125,26 +133,35 @@ impl Ground<'_> {
             report.glbs += 1;
             report.ground_tiles += 1;
             node["content"] = json!({"uri": uri});
+            progress(report);
         }
-        // Refined while its height error, or (where the next level has finer
-        // images) a texel of its image, is above the viewer's pixels.
-        let finer_images = e.imagery.as_ref().is_some_and(|i| t.level + 1 < i.levels);
-        let texel_m = if finer_images { s / f64::from(IMAGERY_PX) } else { 0.0 };
+        // Refined, as the viewer refines, while its height error or (where its
+        // children have images of their own) a texel of its image is above the
+        // viewer's pixels; never more than its parent's (errors fall along
+        // every path, whatever a corrupt tile says).
+        let texel_m = if e.has_finer_imagery_below(t.level, t.x, t.y) { s / f64::from(IMAGERY_PX) } else { 0.0 };
+        let error_m = f64::from(t.error_m).max(texel_m).min(parent.map_or(f64::INFINITY, |(_, e)| e));
         let mut children = Vec::new();
-        for (k, c) in t.children.iter().enumerate() {
-            if c.exists && t.level + 1 < e.levels {
-                let ck = (t.level + 1, 2 * t.x + (k as u32 & 1), 2 * t.y + (k as u32 >> 1));
-                let child = self.read(ck)?;
-                children.push(self.tile(&child, Some(&abs), skirt_m, report)?);
+        // (An error of 0 is never refined: nothing below it would be shown.)
+        if error_m > 0.0 {
+            for (k, c) in t.children.iter().enumerate() {
+                if c.exists && t.level + 1 < e.levels {
+                    let ck = (t.level + 1, 2 * t.x + (k as u32 & 1), 2 * t.y + (k as u32 >> 1));
+                    let child = self.read(ck)?;
+                    children.extend(self.tile(&child, Some((&abs, error_m)), skirt_m, report, progress)?);
+                }
             }
         }
-        let error_m = if children.is_empty() { 0.0 } else { f64::from(t.error_m).max(texel_m) };
+        if node.get("content").is_none() && children.is_empty() {
+            return Ok(None);
+        }
+        let error_m = if children.is_empty() { 0.0 } else { error_m };
         node["geometricError"] = json!(SSE_PX / TERRAIN_PX * error_m);
         if !children.is_empty() {
             node["refine"] = json!("REPLACE");
             node["children"] = Value::Array(children);
         }
-        Ok(node)
+        Ok(Some(node))
     }
 
     /// The tile's region: its square, its heights (and skirts).
@@ -185,7 +202,7 @@ impl Ground<'_> {
             uv.push([unorm((p.x - io[0]) / is), unorm(1.0 - (p.y - io[1]) / is)]);
             Ok(pos.len() as u32 - 1)
         };
-        // The surface: a vertex per grid point (holes as the tile's centre, unused).
+        // The surface: a vertex per grid point with data (none for a hole).
         let mut at = vec![None; n * n];
         for j in 0..n {
             for i in 0..n {
@@ -267,7 +284,7 @@ impl Ground<'_> {
         let mut pbr = json!({"baseColorFactor": LITTER, "metallicFactor": 0.0, "roughnessFactor": 1.0});
         if let Some((l, x, y)) = image {
             pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
-            pbr["baseColorTexture"] = json!({"index": g.texture(&format!("ground/img/{l}_{x}_{y}.jpg"), true)});
+            pbr["baseColorTexture"] = json!({"index": g.texture(&format!("ground/img/{l}_{x}_{y}.jpg"), true, true)});
         }
         // Unlit, as imagery draped on a globe is (the photo has its own light).
         let material = g.push(

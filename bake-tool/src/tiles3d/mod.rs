@@ -19,8 +19,11 @@
 //!   material textures and billboard (PNG), shared by every GLB that uses them
 //!   (external URIs).
 //!
+//! - `ground/`: the scene's terrain quadtree as draped meshes ([`ground`]).
+//!
 //! Heights are the scene's heights (the bake's terrain or the placements'),
-//! taken as heights over the WGS84 ellipsoid.
+//! taken as heights over the WGS84 ellipsoid, plus `--height-offset` (the
+//! geoid's undulation, for heights over the geoid).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -392,14 +395,18 @@ impl Gltf {
     /// A texture of the shared image `uri` (relative to the tileset): sampled
     /// linearly with trilinear mips, or (`mips` false) without mips — an
     /// alpha-tested billboard's mips average its sparse leaves' coverage below
-    /// the cutoff, and a far tree would vanish.
-    fn texture(&mut self, uri: &str, mips: bool) -> usize {
+    /// the cutoff, and a far tree would vanish; repeated, or (`clamp`) clamped
+    /// to its edges (a ground image: its edge must not blend with the opposite one).
+    fn texture(&mut self, uri: &str, mips: bool, clamp: bool) -> usize {
         let image = self.push("images", json!({"uri": format!("../{uri}")}));
         let min_filter = if mips { 9987 } else { 9729 };
+        let wrap = if clamp { 33071 } else { 10497 };
         let samplers = self.arrays.get("samplers").map_or(&[][..], |v| &v[..]);
-        let sampler = match samplers.iter().position(|v| v["minFilter"] == min_filter) {
+        let sampler = match samplers.iter().position(|v| v["minFilter"] == min_filter && v["wrapS"] == wrap) {
             Some(i) => i,
-            None => self.push("samplers", json!({"magFilter": 9729, "minFilter": min_filter})),
+            None => {
+                self.push("samplers", json!({"magFilter": 9729, "minFilter": min_filter, "wrapS": wrap, "wrapT": wrap}))
+            }
         };
         self.push("textures", json!({"source": image, "sampler": sampler}))
     }
@@ -491,7 +498,7 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
             let m = &sp.meta.materials[mat];
             let mut pbr = json!({"baseColorFactor": m.base_color, "metallicFactor": 0.0, "roughnessFactor": 1.0});
             if let Some(uri) = m.texture_layer.and_then(|l| sp.layers.get(&l)) {
-                pbr["baseColorTexture"] = json!({"index": g.texture(uri, true)});
+                pbr["baseColorTexture"] = json!({"index": g.texture(uri, true, false)});
             }
             let mut v = json!({"name": m.name, "pbrMetallicRoughness": pbr, "doubleSided": m.double_sided});
             if m.alpha_cutoff > 0.0 {
@@ -518,7 +525,7 @@ fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
 fn far_material(g: &mut Gltf, sp: &SpeciesOut) -> usize {
     let mut pbr = json!({"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0});
     if let Some(uri) = &sp.billboard {
-        pbr["baseColorTexture"] = json!({"index": g.texture(uri, false)});
+        pbr["baseColorTexture"] = json!({"index": g.texture(uri, false, false)});
     }
     g.push(
         "materials",
@@ -983,7 +990,7 @@ pub fn export(
     let Some(forest) = root else { bail!("{}: the scene lists no tiles", manifest.display()) };
     let ground = if ground {
         let g = ground::Ground { dir, m: &m, geo: &ctx.geo, out, height_offset_m: options.height_offset_m };
-        g.export(&mut report)?
+        g.export(&mut report, progress)?
     } else {
         None
     };
@@ -1332,6 +1339,20 @@ mod tests {
                 }
             }
             textured += usize::from(image.is_some());
+            // Its own image where it has one, else its nearest ancestor's.
+            let mut want = (l, x, y);
+            while !e.has_imagery(want.0, want.1, want.2) && want.0 > 0 {
+                want = (want.0 - 1, want.1 / 2, want.2 / 2);
+            }
+            let want = e
+                .has_imagery(want.0, want.1, want.2)
+                .then(|| format!("../ground/img/{}_{}_{}.jpg", want.0, want.1, want.2));
+            assert_eq!(image, want, "{uri}: the image it drapes");
+            // Clamped to its edges (a repeated image blends each edge with the opposite one).
+            if let Some(t) = material["pbrMetallicRoughness"]["baseColorTexture"]["index"].as_u64() {
+                let sampler = &doc["samplers"][doc["textures"][t as usize]["sampler"].as_u64().unwrap() as usize];
+                assert_eq!((sampler["wrapS"].as_u64(), sampler["wrapT"].as_u64()), (Some(33071), Some(33071)));
+            }
             // What the tile should give: its vertices with data, two triangles a cell of them.
             let n = tile.side();
             want_vertices += tile.heights.iter().filter(|&&q| q != sylva::format::terrain::TERRAIN_HOLE).count();
@@ -1365,6 +1386,29 @@ mod tests {
         let tileset: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
         assert_eq!(tileset["root"]["refine"], "REPLACE");
         std::fs::remove_dir_all(&out).unwrap();
+        // A terrain tile that is all holes (a DEM touching it along an edge): left
+        // out, and every region stays a region.
+        let scene = std::env::temp_dir().join(format!("sylva-3dtiles-holes-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&scene);
+        copy_dir(&dir, &scene);
+        let path = scene.join(e.tile_url(2, 0, 0));
+        let mut holes = sylva::format::terrain::TerrainTile::decode("t", &std::fs::read(&path).unwrap()).unwrap();
+        holes.heights.fill(sylva::format::terrain::TERRAIN_HOLE);
+        std::fs::write(&path, holes.encode()).unwrap();
+        let report = export(&scene, &out, options, &mut |_| {}).unwrap();
+        assert_eq!(report.ground_tiles as u64, e.tiles - 1);
+        let text = std::fs::read_to_string(out.join("tileset.json")).unwrap();
+        assert!(!text.contains("ground/2_0_0.glb"), "a tile without ground is exported");
+        let tileset: Value = serde_json::from_str(&text).unwrap();
+        let mut stack = vec![tileset["root"].clone()];
+        while let Some(n) = stack.pop() {
+            let r: Vec<f64> =
+                n["boundingVolume"]["region"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+            assert!(r[0] < r[2] && r[1] < r[3] && r[4] < r[5] && r[2] - r[0] < 0.1, "a region: {r:?}");
+            stack.extend(n["children"].as_array().into_iter().flatten().cloned());
+        }
+        std::fs::remove_dir_all(&out).unwrap();
+        std::fs::remove_dir_all(&scene).unwrap();
     }
 
     /// An index node listed twice (a hostile or corrupt index) is refused, not
