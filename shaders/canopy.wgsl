@@ -110,9 +110,11 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let cover = 1.0 - exp(-min(-log(max(1.0 - top_cover, 1e-3)), 8.0) * (1.0 + side * cot));
     // Standing in for trees still on their way: all of their cover.
     let w = select(canopy_weight(h_px, view), 1.0, r.stand_in != 0u);
-    // Trees keep (1 − w) of their cover; the canopy adds what makes it `cover`:
-    // (1 − w)c + (1 − (1 − w)c)·a = c.
-    let alpha = cover * w / max(1.0 - (1.0 - w) * cover, 1e-3);
+    // The trees kept, a share 1 − w of them, cover t = 1 − (1 − c)^(1 − w) (as
+    // a random share of trees with cover c would: more than (1 − w)c, as
+    // crowns overlap); the canopy adds what makes it `cover`: t + (1 − t)·a = c.
+    let kept_cover = 1.0 - pow(max(1.0 - cover, 1e-3), 1.0 - w);
+    let alpha = max(cover - kept_cover, 0.0) / max(1.0 - kept_cover, 1e-3);
     out.alpha = alpha;
     out.albedo = vec3<f32>(
         srgb_channel(f32(word.x & 0xffu) / 255.0),

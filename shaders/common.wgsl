@@ -209,24 +209,26 @@ fn whole_count(b: Batch) -> u32 {
 // trees up to keep the canopy's coverage (`coverage_boost`). A batch holding
 // a prefix of its trees (BATCH_PARTIAL: the rest not fetched yet) keeps at
 // most those, drawn as bigger as the trees they stand in for. Returns (trees
-// kept, fractional; n / kept, 1 when not thinned).
+// kept, fractional; n / kept, 1 when not thinned; trees kept were the whole
+// batch held, fractional: n when not thinned).
 // Must match `thinning` in src/render/cull.rs.
-fn thinning(b: Batch, view: View) -> vec2<f32> {
+fn thinning(b: Batch, view: View) -> vec3<f32> {
     let n = f32(whole_count(b));
     let held = max(f32(b.instance_count), 1.0);
     let t = view.viewport.z;
     if (b.flags & BATCH_DENSITY_ORDERED) == 0u || t <= 0.0 || view.lod.w > 0.5 {
-        return vec2<f32>(held, n / held);
+        return vec3<f32>(held, n / held, n);
     }
     let center = eye_relative(b.center_m, vec3<f32>(0.0), view);
     let d = max(length(max(abs(center) - b.half_extent_m, vec3<f32>(0.0))), 1e-3);
     let h = b.max_height_m * view.lod.x / d;
     if h >= t {
-        return vec2<f32>(held, n / held);
+        return vec3<f32>(held, n / held, n);
     }
     let f = clamp((h * h) / (t * t), THIN_MIN_FRACTION, 1.0);
-    let kept = min(max(n * f, 1.0), held);
-    return vec2<f32>(kept, n / kept);
+    let wanted = max(n * f, 1.0);
+    let kept = min(wanted, held);
+    return vec3<f32>(kept, n / kept, wanted);
 }
 
 // Scale of a thinned batch's kept trees so the canopy covers about what all its
@@ -237,7 +239,7 @@ fn thinning(b: Batch, view: View) -> vec2<f32> {
 // by up to 50 %; 0.35 keeps coverage within ±6 % (docs/BENCHMARKS.md).
 const THIN_BOOST_EXPONENT: f32 = 0.35;
 
-fn coverage_boost(thin: vec2<f32>, b: Batch) -> f32 {
+fn coverage_boost(thin: vec3<f32>, b: Batch) -> f32 {
     let n = f32(whole_count(b));
     if thin.x >= n {
         return 1.0;
@@ -296,29 +298,20 @@ fn canopy_weight(h_px: f32, view: View) -> f32 {
     return clamp((view.canopy.y - h_px) / max(view.canopy.y - view.canopy.x, 1e-3), 0.0, 1.0);
 }
 
-// A tree's own uniform number in [0, 1) from its packed position (stable
-// whatever pool slot holds it). Must match `tree_hash01` in src/render/cull.rs.
-fn tree_hash01(xy: u32) -> f32 {
-    var h = xy;
-    h ^= h >> 16u;
-    h *= 0x7feb352du;
-    h ^= h >> 15u;
-    h *= 0x846ca68bu;
-    h ^= h >> 16u;
-    return f32(h >> 8u) / 16777216.0;
-}
-
-// Whether the canopy stands in for this tree (it is not drawn): a random share
-// `canopy_weight` of the trees of a size, so trees and canopy cross-fade.
-// Written as hash · (hi − lo) < hi − h (the same as hash < weight, the hash
-// being in [0, 1)) with only multiplications and subtractions, which are
-// exactly rounded on every GPU, so the CPU oracle agrees bit for bit. Must
-// match `canopy_drops` in src/render/cull.rs.
-fn canopy_drops(h_px: f32, xy: u32, view: View) -> bool {
+// Whether the canopy stands in for tree `i` of the `count` the cull considers
+// of its batch (it is not drawn): a share `canopy_weight` of the trees of a
+// size, taken from the tail of the batch's density order — tree i is kept
+// while i + ½ < count · (1 − w(h)), count · (1 − w) trees rounded — so a
+// batch whose tallest tree projects to h needs only its first
+// count · (1 − w(h)) trees (the stream fetches no more: issue 20). Written as
+// (count − i − ½) · (hi − lo) ≤ count · (hi − h) with only multiplications
+// and subtractions, which are exactly rounded on every GPU, so the CPU oracle
+// agrees bit for bit. Must match `canopy_drops` in src/render/cull.rs.
+fn canopy_drops(h_px: f32, i: u32, count: u32, view: View) -> bool {
     if view.canopy.x <= 0.0 || view.viewport.w > 0.5 {
         return false;
     }
-    return tree_hash01(xy) * max(view.canopy.y - view.canopy.x, 1e-3) < view.canopy.y - h_px;
+    return (f32(count - i) - 0.5) * max(view.canopy.y - view.canopy.x, 1e-3) <= f32(count) * (view.canopy.y - h_px);
 }
 
 // Decodes an octahedral-encoded unit vector (snorm xy in [-1, 1]).

@@ -177,7 +177,10 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     // as billboards (bigger, see `thinning`); the last one fades by its fraction.
     let thin = thinning(b, view);
     let thinned = thin.y > 1.0 && species_cap(s, REPR_BILLBOARD) > 0u;
-    let count = select(b.instance_count, min(u32(ceil(thin.x)), b.instance_count), thinned);
+    // The trees the view keeps (the canopy cross-fade takes its share of
+    // these), and of them those held.
+    let intended = select(whole_count(b), u32(ceil(thin.z)), thinned);
+    let count = min(intended, b.instance_count);
     if lid == 0u {
         atomicAdd(&control[CONTROL_INSTANCES_TESTED], count);
     }
@@ -203,7 +206,7 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         // An orthographic view (a shadow cascade) sizes trees in texels, at any distance.
         let h_px = s.select.x * tree.scale * view.lod.x / select(dist, 1.0, view.viewport.w > 0.5);
         // Where trees are a pixel or two, the canopy raster stands in for a share of them.
-        if canopy_drops(h_px, instances[instance].x, view) {
+        if canopy_drops(h_px, i, intended, view) {
             continue;
         }
         if thinned {

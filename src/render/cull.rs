@@ -202,7 +202,7 @@ pub fn cpu_select_styled(
         let half = Vec3::from(b.half_extent_m);
         let batch_culling = view.lod[3] < 0.5;
         // A thinned batch draws its kept trees bigger (`coverage_boost`): its bounds grow as much.
-        let (kept, boost) = thinning(b, view);
+        let (kept, boost, all) = thinning(b, view);
         let boosted = if kept < b.whole_count() as f32 { boost.powf(THIN_BOOST_EXPONENT) } else { 1.0 };
         let grow = (boosted - 1.0) * b.max_height_m;
         if batch_culling
@@ -220,7 +220,9 @@ pub fn cpu_select_styled(
         }
         sel.visible_batches.push(i as u32);
         let thinned = boost > 1.0 && s.slot_cap[Repr::Billboard as usize] > 0;
-        let count = if thinned { (kept.ceil() as u32).min(b.instance_count) } else { b.instance_count };
+        // The trees the view keeps (the canopy cross-fade takes its share of these), and of them those held.
+        let intended = if thinned { all.ceil() as u32 } else { b.whole_count() };
+        let count = intended.min(b.instance_count);
         for k in 0..count {
             let index = b.instance_offset + k;
             if styles.get(index as usize).is_some_and(|s| s & super::gpu_data::STYLE_HIDDEN != 0) {
@@ -239,7 +241,7 @@ pub fn cpu_select_styled(
                 continue;
             }
             let h_px = s.select[0] * d.2 * view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
-            if canopy_drops(h_px, packed.xy, view) {
+            if canopy_drops(h_px, k, intended, view) {
                 continue;
             }
             if thinned {
@@ -269,49 +271,59 @@ pub fn canopy_weight(h_px: f32, view: &ViewUniform) -> f32 {
     ((hi - h_px) / (hi - lo).max(1e-3)).clamp(0.0, 1.0)
 }
 
-/// Whether the canopy stands in for a tree of `h_px` projected pixels whose
-/// packed position is `xy`, exactly as `canopy_drops` in `shaders/common.wgsl`.
+/// Whether the canopy stands in for tree `i` (of projected height `h_px`) of
+/// the `count` the cull considers of its batch — the tail of the density
+/// order: kept while `i + ½ < count · (1 − w(h))` — exactly as `canopy_drops`
+/// in `shaders/common.wgsl`.
 #[must_use]
-pub fn canopy_drops(h_px: f32, xy: u32, view: &ViewUniform) -> bool {
+pub fn canopy_drops(h_px: f32, i: u32, count: u32, view: &ViewUniform) -> bool {
     let [lo, hi, _, _] = view.canopy;
     if lo <= 0.0 || view.viewport[3] > 0.5 {
         return false;
     }
-    tree_hash01(xy) * (hi - lo).max(1e-3) < hi - h_px
+    ((count - i) as f32 - 0.5) * (hi - lo).max(1e-3) <= count as f32 * (hi - h_px)
 }
 
-/// A tree's uniform number in [0, 1) from its packed position, exactly as
-/// `tree_hash01` in `shaders/common.wgsl`.
+/// The trees of a batch's first `count` that the canopy cross-fade can keep
+/// when its tallest tree projects to `h_px` (at most): the prefix a view
+/// needs (`canopy_drops` keeps tree `i` only while `i + ½ < count · (1 − w)`).
 #[must_use]
-pub fn tree_hash01(xy: u32) -> f32 {
-    let mut h = xy;
-    h ^= h >> 16;
-    h = h.wrapping_mul(0x7feb_352d);
-    h ^= h >> 15;
-    h = h.wrapping_mul(0x846c_a68b);
-    h ^= h >> 16;
-    (h >> 8) as f32 / 16_777_216.0
+pub fn canopy_keeps(h_px: f32, count: u32, canopy: [f32; 2]) -> u32 {
+    ((count as f32 * canopy_share(h_px, canopy)).ceil() as u32).min(count)
+}
+
+/// The share `1 − w(h)` of the trees of `h_px` projected pixels that the
+/// canopy cross-fade keeps (band `canopy`, px).
+#[must_use]
+pub fn canopy_share(h_px: f32, canopy: [f32; 2]) -> f32 {
+    let [lo, hi] = canopy;
+    if lo <= 0.0 {
+        return 1.0;
+    }
+    ((h_px - lo) / (hi - lo).max(1e-3)).clamp(0.0, 1.0)
 }
 
 /// Prefix thinning of a batch, exactly as `thinning` in `shaders/common.wgsl`:
-/// (trees kept, fractional; n / kept, 1 when not thinned).
+/// (trees kept, fractional; n / kept, 1 when not thinned; trees kept were the
+/// whole batch held, fractional: n when not thinned).
 #[must_use]
-pub fn thinning(b: &GpuBatch, view: &ViewUniform) -> (f32, f32) {
+pub fn thinning(b: &GpuBatch, view: &ViewUniform) -> (f32, f32, f32) {
     let n = b.whole_count() as f32;
     let held = (b.instance_count as f32).max(1.0);
     let t = view.viewport[2];
     if b.flags & crate::format::tile::BATCH_DENSITY_ORDERED == 0 || t <= 0.0 || view.lod[3] > 0.5 {
-        return (held, n / held);
+        return (held, n / held, n);
     }
     let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
     let d = (center.abs() - Vec3::from(b.half_extent_m)).max(Vec3::ZERO).length().max(1e-3);
     let h = b.max_height_m * view.lod[0] / d;
     if h >= t {
-        return (held, n / held);
+        return (held, n / held, n);
     }
     let f = ((h * h) / (t * t)).clamp(THIN_MIN_FRACTION, 1.0);
-    let kept = (n * f).max(1.0).min(held);
-    (kept, n / kept)
+    let all = (n * f).max(1.0);
+    let kept = all.min(held);
+    (kept, n / kept, all)
 }
 
 /// Fewest trees a thinned batch keeps, as a fraction (`THIN_MIN_FRACTION` in WGSL).

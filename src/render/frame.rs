@@ -200,12 +200,11 @@ impl<F: Fetcher> Frame<F> {
             && settings.culling == super::settings::CullingMode::Batches
             && settings.representations.billboards
             && !settings.whole_tiles;
-        self.stream.set_prefix_view(
-            thinned.then_some(crate::scene::streaming::PrefixView {
-                thin_px: settings.thin_px,
-                lod_scale: settings.quality,
-            }),
-        );
+        self.stream.set_prefix_view(thinned.then_some(crate::scene::streaming::PrefixView {
+            thin_px: settings.thin_px,
+            lod_scale: settings.quality,
+            canopy: None,
+        }));
         // Far trees give way to the canopy rasters (scenes that have them).
         self.stream.set_canopy_view(settings.canopy.then_some(crate::scene::streaming::CanopyView {
             px_lo: super::settings::CANOPY_PX[0],

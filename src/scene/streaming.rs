@@ -26,6 +26,7 @@ use crate::format::terrain::TerrainTile;
 use crate::format::tile::level_prefix;
 use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
 use crate::geo::GeoFrame;
+use crate::render::cull::{canopy_keeps, canopy_share};
 use packs::PackLoad;
 
 /// Limits of the streamer: the budgets a viewer degrades gracefully within.
@@ -175,6 +176,11 @@ pub struct PrefixView {
     pub thin_px: f32,
     /// The factor on pixels per metre the cull pass uses (the quality).
     pub lod_scale: f32,
+    /// The canopy cross-fade's band (px: `CANOPY_PX`) while the canopy stands
+    /// in for trees: the cull keeps only the head `1 − w(h)` of each batch's
+    /// kept trees (`canopy_drops`). Filled in by the stream from
+    /// [`SceneStream::canopy_active`]; callers give None.
+    pub canopy: Option<[f32; 2]>,
 }
 
 /// The first guess of the prefix levels (of `levels`, 1..=levels) a view
@@ -215,7 +221,11 @@ pub fn first_levels_wanted(
     if h >= thin.thin_px || h.is_nan() {
         return levels;
     }
-    let f = (h * h) / (thin.thin_px * thin.thin_px);
+    let mut f = (h * h) / (thin.thin_px * thin.thin_px);
+    // The canopy's share comes off the tail of those.
+    if let Some(band) = thin.canopy {
+        f *= canopy_share(h, band);
+    }
     (1..=levels).find(|&l| (l as f32 - levels as f32).exp2() >= f).unwrap_or(levels)
 }
 
@@ -236,12 +246,16 @@ pub fn batch_levels_wanted(view: &ViewData, batches: &[GpuBatch], levels: u32, t
         }
         let d = ((c.abs() - half).max(Vec3::ZERO).length() * 0.99).max(1e-3);
         let h = b.max_height_m * view.px_per_m_at_1m * thin.lod_scale / d;
-        let need = if h < thin.thin_px {
+        let mut need = if h < thin.thin_px {
             let f = ((h * h) / (thin.thin_px * thin.thin_px)).clamp(1.0 / 64.0, 1.0);
             (b.instance_count as f32 * f).max(1.0).ceil() as u32
         } else {
             b.instance_count
         };
+        // The canopy's share comes off the tail of those (its tallest tree's share: the most kept).
+        if let Some(band) = thin.canopy {
+            need = canopy_keeps(h, need, band);
+        }
         let l = (0..levels).find(|&l| level_prefix(b, l, levels) >= need).unwrap_or(levels - 1) + 1;
         want = want.max(l);
         if want == levels {
@@ -597,6 +611,11 @@ impl<F: Fetcher> SceneStream<F> {
     #[must_use]
     pub fn canopy_active(&self) -> Option<CanopyView> {
         self.canopy_view.filter(|_| self.canopy.as_ref().is_some_and(CanopyTree::ready))
+    }
+
+    /// The canopy's cross-fade band (px) while it stands in for trees.
+    fn canopy_band(&self) -> Option<[f32; 2]> {
+        self.canopy_active().map(|c| [c.px_lo, c.px_hi])
     }
 
     /// Fetch only the prefix of each tile that a view drawing with this
@@ -1571,6 +1590,7 @@ impl<F: Fetcher> SceneStream<F> {
     /// False when no tile holds more than the view draws.
     fn trim_one(&mut self, residency: &mut impl Residency, view: &ViewData, keep: Option<usize>) -> bool {
         let Some(thin) = self.prefix_view else { return false };
+        let thin = PrefixView { canopy: self.canopy_band(), ..thin };
         let Some(m) = &self.manifest else { return false };
         let species_count = m.species.len() as u32;
         let eye = view.eye_hi + view.eye_lo;
@@ -1655,9 +1675,10 @@ impl<F: Fetcher> SceneStream<F> {
             }
         }
         let mut short = 0;
+        let canopy = self.canopy_band();
         for &(_, i) in &wanted[..self.within_reach] {
             let entry = &self.index.tiles[i];
-            let thin = self.prefix_view;
+            let thin = self.prefix_view.map(|t| PrefixView { canopy, ..t });
             let room = self.fetcher.in_flight() < self.config.max_in_flight;
             match &mut self.tiles[i] {
                 TileState::NotResident(load) => {

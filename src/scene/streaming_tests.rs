@@ -552,7 +552,7 @@ fn oracle_counts(entry: &crate::format::TileEntry, view: &ViewData, thin: Prefix
             view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(h) >= 0.0)
         })
         .map(|b| {
-            let (kept, _) = crate::render::cull::thinning(b, &u);
+            let (kept, _, _) = crate::render::cull::thinning(b, &u);
             (*b, (kept.ceil() as u32).min(b.instance_count))
         })
         .collect()
@@ -561,7 +561,7 @@ fn oracle_counts(entry: &crate::format::TileEntry, view: &ViewData, thin: Prefix
 #[test]
 fn tiles_fetch_the_prefix_the_view_draws_and_no_byte_twice() {
     use crate::format::tile::TILE_LEVELS;
-    let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0 };
+    let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0, canopy: None };
     let mut s = stream(StreamConfig::default());
     s.set_prefix_view(Some(thin));
     let mut r = FakeResidency::new(1 << 20);
@@ -630,7 +630,7 @@ fn held_levels(s: &SceneStream<FakeFetcher>) -> HashMap<usize, u32> {
 
 #[test]
 fn full_pools_trim_tiles_to_the_prefix_the_view_draws_and_they_grow_back_by_range() {
-    let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0 };
+    let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0, canopy: None };
     // A small screen, so trees thin across the fixture: the south view holds the
     // south tiles whole and the north ones in part, the north view the other way round.
     let near = Camera::look_at(DVec3::new(0.0, -300.0, 60.0), DVec3::new(0.0, 0.0, 20.0)).view_data(96, 54);
@@ -720,7 +720,7 @@ fn whole_tiles_without_prefix_thinning() {
 fn the_canopy_stands_in_for_trees_under_a_pixel_and_their_tiles_are_not_fetched() {
     let canopy = CanopyView { px_lo: 1.0, px_hi: 2.5, cell_px: 2.0, lod_scale: 1.0 };
     let mut s = stream(StreamConfig::default());
-    s.set_prefix_view(Some(PrefixView { thin_px: 8.0, lod_scale: 1.0 }));
+    s.set_prefix_view(Some(PrefixView { thin_px: 8.0, lod_scale: 1.0, canopy: None }));
     s.set_canopy_view(Some(canopy));
     let mut r = FakeResidency::new(1 << 20);
     let mut t = 0.0;
@@ -767,7 +767,7 @@ fn the_canopy_stands_in_for_trees_under_a_pixel_and_their_tiles_are_not_fetched(
     }
     // Without the canopy the far view fetches tiles again.
     let mut s = stream(StreamConfig::default());
-    s.set_prefix_view(Some(PrefixView { thin_px: 8.0, lod_scale: 1.0 }));
+    s.set_prefix_view(Some(PrefixView { thin_px: 8.0, lod_scale: 1.0, canopy: None }));
     let mut r = FakeResidency::new(1 << 20);
     let view = Camera::look_at(DVec3::new(0.0, -40_000.0, 20_000.0), DVec3::new(0.0, 0.0, 20.0)).view_data(W, H);
     run(&mut s, &mut r, &view, 1e6, 0.0, 0.1, 24);
