@@ -756,7 +756,9 @@ fn far_views_draw_the_same_from_tile_prefixes_as_from_whole_tiles() {
             sa.tile_bytes_fetched,
             sa.trees_resident
         );
-        // …the same trees drawn, the same image.
+        // …the same trees drawn, the same image (the canopy cross-fade on: it
+        // takes its share off the tail of the prefixes the view fetches).
+        assert!(prefixes.renderer.last_view().canopy[0] > 0.0, "{name}: the canopy cross-fade is on");
         assert_eq!(sa.instances, sb.instances, "{name}");
         assert!(sa.instances["billboard"] > 100, "{name}: the view shows the forest");
         // (Not bit-identical: the same trees sit in other pool slots and are
