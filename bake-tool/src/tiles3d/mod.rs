@@ -1095,16 +1095,24 @@ mod tests {
 
     /// Every exported instance maps back to its tree within a centimetre, with
     /// its yaw and scale; the tileset's hierarchy holds every tile once.
+    /// The fixture exported with heights 30 m up (the geoid's undulation a
+    /// portal would add) into a fresh temporary folder named after `name`:
+    /// (the folder, the report, the fixture's manifest and geographic frame).
+    fn export_fixture(name: &str) -> (std::path::PathBuf, ExportReport, Manifest, GeoFrame) {
+        let out = std::env::temp_dir().join(format!("sylva-3dtiles-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let report = export(&fixture(), &out, OFFSET_30, &mut |_| {}).unwrap();
+        let m = Manifest::decode("m", &std::fs::read(fixture().join("scene.json")).unwrap()).unwrap();
+        let geo = GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
+        (out, report, m, geo)
+    }
+
+    const OFFSET_30: ExportOptions = ExportOptions { ground: true, height_offset_m: 30.0 };
+
     #[test]
     fn every_exported_tree_maps_back_to_its_tree_within_a_centimetre() {
         let dir = fixture();
-        let out = std::env::temp_dir().join(format!("sylva-3dtiles-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&out);
-        // (Heights 30 m up: the geoid's undulation a portal would add.)
-        let options = ExportOptions { height_offset_m: 30.0, ..ExportOptions::default() };
-        let report = export(&dir, &out, options, &mut |_| {}).unwrap();
-        let m = Manifest::decode("m", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
-        let geo = GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
+        let (out, report, m, geo) = export_fixture("trees");
         assert_eq!(report.trees, m.counts.trees);
         assert_eq!(report.tiles as u64, m.counts.tiles);
         let tileset: Value = serde_json::from_slice(&std::fs::read(out.join("tileset.json")).unwrap()).unwrap();
@@ -1238,13 +1246,9 @@ mod tests {
     #[test]
     fn the_ground_is_the_terrain_draped_with_its_images() {
         let dir = fixture();
-        let out = std::env::temp_dir().join(format!("sylva-3dtiles-ground-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&out);
-        let options = ExportOptions { height_offset_m: 30.0, ..ExportOptions::default() };
-        let report = export(&dir, &out, options, &mut |_| {}).unwrap();
-        let m = Manifest::decode("m", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+        let (out, report, m, geo) = export_fixture("ground");
         let e = m.terrain.as_ref().unwrap();
-        let geo = GeoFrame::new(&m.crs.proj4, m.origin_m).unwrap();
+        let options = OFFSET_30;
         assert_eq!(report.ground_tiles as u64, e.tiles);
         let images = std::fs::read_dir(out.join("ground/img")).unwrap().count() as u64;
         assert_eq!(images, e.imagery.as_ref().unwrap().tiles);
