@@ -699,12 +699,15 @@ fn prefix_thinning_keeps_canopy_coverage() {
     let views = top_and_oblique(&m, 1200.0, DVec3::new(0.0, -1300.0, 700.0));
     off.settings.draw_distance_m = 20_000.0;
     for (name, cam) in views {
-        // Coverage: pixels the trees change (against the same view without
-        // trees), whatever their shade.
+        // Coverage: pixels the forest changes (against the same view without
+        // trees and without the canopy rasters that stand in for them),
+        // whatever their shade.
         off.settings.representations =
             Representations { meshes: false, clusters: false, billboards: false, clouds: false };
+        off.settings.canopy = false;
         let bare = render(&mut off, &cam);
         off.settings.representations = Representations::ALL;
+        off.settings.canopy = true;
         let covered = |img: &[u8]| {
             let n =
                 img.chunks_exact(4).zip(bare.chunks_exact(4)).filter(|(a, b)| (0..3).any(|k| a[k].abs_diff(b[k]) > 6));
@@ -915,6 +918,7 @@ fn far_ground_fades_towards_the_horizon_haze() {
     let m = manifest(&mut off);
     off.stream.set_imagery(sylva::scene::imagery::ImageryChoice::Off);
     off.settings.draw_distance_m = 1.0;
+    off.settings.canopy = false;
     let lo = DVec3::from(m.bounds.min.map(f64::from));
     let hi = DVec3::from(m.bounds.max.map(f64::from));
     let c = lo.lerp(hi, 0.5);
