@@ -14,8 +14,8 @@ use sylva::format::pack::{
 };
 use sylva::format::terrain::{dequantise, quantise, TerrainChild, TerrainTile, TERRAIN_HOLE};
 use sylva::format::tile::{
-    decode_ids, encode_ids, level_prefix, variation_of, whole_index, CrownRange, GpuBatch, PackedInstance, Tile,
-    BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED, BATCH_PARTIAL, TILE_LEVELS,
+    decode_ids, encode_ids, variation_of, whole_index, CrownRange, GpuBatch, Levels, PackedInstance, Tile,
+    BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED, BATCH_PARTIAL, TILE_LEVELS, TILE_LEVELS_V3,
 };
 use sylva::format::{decode_pack, encode_pack, Problem};
 
@@ -242,22 +242,24 @@ fn sample_level_tile() -> Tile {
 
 #[test]
 fn level_tile_golden_prefixes_and_errors() {
+    // Version 3 (what scenes baked before version 4 hold): still read by range.
     let tile = sample_level_tile();
-    let bytes = tile.encode();
+    let bytes = tile.encode_v3();
     assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 3);
-    assert_eq!(bytes.len(), 32 + 2 * 80 + 4 + 4 * TILE_LEVELS as usize + 103 * 8, "levels cost 32 bytes a tile");
+    assert_eq!(bytes.len(), 32 + 2 * 80 + 4 + 4 * TILE_LEVELS_V3 as usize + 103 * 8, "levels cost 32 bytes a tile");
     check_golden("v3.tile", &bytes);
     assert_eq!(Tile::decode("v3.tile", &std::fs::read(golden("v3.tile")).unwrap(), 2).unwrap(), tile);
     // Level ends: 1/64 of the ordered batch (2 trees) and the plain batch whole, then 1/32 … all.
-    let ends = tile.level_bytes();
+    let scheme = Levels::new(3, TILE_LEVELS_V3, &tile.batches);
     let head = 32 + 160 + 32;
-    let counts: Vec<u64> = ends.iter().map(|e| (e - head) / 8).collect();
+    let counts = tile.level_counts(&scheme);
     assert_eq!(counts, [2 + 3, 4 + 3, 7 + 3, 13 + 3, 25 + 3, 50 + 3, 100 + 3]);
+    let ends: Vec<u64> = counts.iter().map(|&c| head + 8 * u64::from(c)).collect();
     assert_eq!(*ends.last().unwrap(), bytes.len() as u64);
     for (l, &end) in ends.iter().enumerate() {
         let p = Tile::decode_prefix("t", &bytes[..end as usize], 2).unwrap();
-        assert_eq!((p.levels, p.of), (l as u32 + 1, TILE_LEVELS));
-        let k = level_prefix(&tile.batches[0], l as u32, TILE_LEVELS);
+        assert_eq!((p.levels, p.of, p.scheme), (l as u32 + 1, TILE_LEVELS_V3, scheme));
+        let k = scheme.prefix(&tile.batches[0], l as u32);
         let b = &p.tile.batches[0];
         assert_eq!(b.instance_count, k);
         assert_eq!(b.whole_count(), 100);
@@ -296,6 +298,64 @@ fn level_tile_golden_prefixes_and_errors() {
     let mut b = bytes.clone();
     put_u32(&mut b, 32 + 72, BATCH_DENSITY_ORDERED | BATCH_PARTIAL);
     assert!(Tile::decode("t", &b, 2).unwrap_err().to_string().contains("unknown flags"));
+}
+
+/// Version 4: levels of √2 steps, a batch half as tall as the tallest holding
+/// a quarter of its share (but never less than 1/64 where the tallest holds that).
+#[test]
+fn level_tile_v4_golden_steps_and_heights() {
+    let mut tile = sample_level_tile();
+    let mut short = sample_batch(1, 100, 60);
+    short.flags = BATCH_DENSITY_ORDERED;
+    short.max_height_m = tile.batches[0].max_height_m / 2.0;
+    let mut plain = tile.batches[1];
+    plain.instance_offset = 160;
+    tile.batches = vec![tile.batches[0], short, plain];
+    tile.instances = (0..163u32).map(|i| PackedInstance::new(i as u16 * 400, i as u16, i, i, i, i)).collect();
+    let bytes = tile.encode();
+    assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), 4);
+    assert_eq!(TILE_LEVELS, 15);
+    assert_eq!(bytes.len(), 32 + 3 * 80 + 4 + 4 * 15 + 163 * 8);
+    check_golden("v4.tile", &bytes);
+    assert_eq!(Tile::decode("v4.tile", &std::fs::read(golden("v4.tile")).unwrap(), 2).unwrap(), tile);
+    let scheme = tile.levels();
+    assert_eq!((scheme.version, scheme.count, scheme.tallest_m), (4, 15, 30.0));
+    // The tallest: 1/128, 1/91, 1/64, … 1/√2, all of 100; the short one r² = ¼ of
+    // that from 1/64 up; the plain batch whole from level 0.
+    let per_batch = |b: usize| (0..15).map(|l| scheme.prefix(&tile.batches[b], l)).collect::<Vec<_>>();
+    assert_eq!(per_batch(0), [1, 2, 2, 3, 4, 5, 7, 9, 13, 18, 25, 36, 50, 71, 100]);
+    assert_eq!(per_batch(1), [1, 1, 1, 1, 1, 1, 1, 2, 2, 3, 4, 6, 8, 11, 60]);
+    assert_eq!(per_batch(2), [3; 15]);
+    let counts = tile.level_counts(&scheme);
+    assert_eq!(counts, [5, 6, 6, 7, 8, 9, 11, 14, 18, 24, 32, 45, 61, 85, 163]);
+    // Levels adding no trees end where the one before does: a prefix ending
+    // there holds the later of them.
+    let head = (32 + 3 * 80 + 4 + 60) as u64;
+    assert_eq!(tile.level_bytes(), counts.iter().map(|&c| head + 8 * u64::from(c)).collect::<Vec<_>>());
+    for (l, &end) in tile.level_bytes().iter().enumerate() {
+        let p = Tile::decode_prefix("t", &bytes[..end as usize], 2).unwrap();
+        let l = if l == 1 { 2 } else { l };
+        assert_eq!((p.levels, p.of, p.scheme), (l as u32 + 1, 15, scheme));
+        for (b, held) in p.tile.batches.iter().enumerate() {
+            let k = scheme.prefix(&tile.batches[b], l as u32);
+            assert_eq!((held.instance_count, held.whole_count()), (k, tile.batches[b].instance_count));
+            let whole = tile.batches[b].instance_offset as usize;
+            let at = held.instance_offset as usize;
+            assert_eq!(p.tile.instances[at..at + k as usize], tile.instances[whole..whole + k as usize]);
+        }
+    }
+    // The same tile as version 3 holds more of the short batch at every level.
+    let v3 = Levels::new(3, TILE_LEVELS_V3, &tile.batches);
+    assert_eq!(v3.prefix(&tile.batches[1], 0), 1);
+    assert_eq!(v3.prefix(&tile.batches[1], 5), 30);
+    assert_eq!(scheme.covering(1.0 / 64.0), 3);
+    assert_eq!(scheme.covering(0.2), 11);
+    assert_eq!(scheme.covering(f32::NAN), 15);
+    // The level table must say what the batches give (a version 3 table is not).
+    let mut b = bytes.clone();
+    b[4] = 3;
+    let msg = Tile::decode("t", &b, 2).unwrap_err().to_string();
+    assert!(msg.contains("levels.counts"), "{msg}");
 }
 
 /// The sample tile with crown aspects in its second batch (version 2).
@@ -545,7 +605,7 @@ fn tile_decoder_error_paths() {
         assert!(e.contains(needle), "expected {needle:?} in {e:?}");
     };
     crown_error(&|b| put_u32(b, 32 + 80 + 76, 0), "smallest aspect of 0");
-    crown_error(&|b| b[4] = 4, "version 4 is not supported");
+    crown_error(&|b| b[4] = 5, "version 5 is not supported");
     // A version 2 tile without crowns reads (it re-encodes as version 1).
     let mut bytes = sample_tile().encode_whole();
     bytes[4] = 2;
@@ -723,7 +783,7 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 9.into(), "version 9");
+    manifest_error(|v| v["version"] = 10.into(), "version 10");
     // Version 8 adds the canopy quadtree; its folder stays inside the scene, its sizes are bounded.
     let canopy = serde_json::json!({"path": "canopy", "origin_m": [-512.0, 0.0], "root_size_m": 2048.0,
         "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_060});

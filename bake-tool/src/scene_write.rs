@@ -64,9 +64,12 @@ pub fn finish_scene(
         tiles: tiles.len() as u64,
     };
     // The oldest version that holds what the scene has, so older viewers read it.
-    // Tiles in prefix levels (tile version 3) need version 7.
+    // Tiles in prefix levels need version 7 (tile version 3), 9 (version 4:
+    // the levels' steps differ, so older viewers must refuse the scene).
+    let levels = tiles.iter().filter_map(|t| t.levels.as_ref()).map(|l| l.version).max();
     base.version = match &base.terrain {
-        _ if tiles.iter().any(|t| t.levels.is_some()) => 7,
+        _ if levels.is_some_and(|v| v >= 4) => 9,
+        _ if levels.is_some() => 7,
         _ if base.attributes.is_some() => 6,
         Some(t) if t.imagery.is_some() => 5,
         Some(_) => 4,
@@ -93,7 +96,7 @@ pub fn finish_scene(
             started.elapsed().as_secs_f64()
         ));
         base.canopy = Some(entry);
-        base.version = 8;
+        base.version = base.version.max(8);
     }
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);

@@ -7,14 +7,18 @@ fuzz_target!(|data: &[u8]| {
     let species = u32::from(data.first().copied().unwrap_or(0));
     let bytes = data.get(1..).unwrap_or(&[]);
     if let Ok(tile) = sylva::format::Tile::decode("fuzz.tile", bytes, species) {
-        // A valid tile re-encodes to the same bytes: version 3 in prefix levels;
-        // versions 1 and 2 in the old layout (a version 2 tile without crown
-        // aspects as version 1). Every instance decodes to finite values.
-        if bytes[4] == 3 {
-            // (This build writes 7 levels; other level counts read but re-encode otherwise.)
+        // A valid tile re-encodes to the same bytes: versions 3 and 4 in prefix
+        // levels; versions 1 and 2 in the old layout (a version 2 tile without
+        // crown aspects as version 1). Every instance decodes to finite values.
+        if bytes[4] >= 3 {
+            // (This build writes 15 levels of version 4, 7 of version 3; other
+            // level counts read but re-encode otherwise.)
             let at = 32 + 80 * tile.batches.len();
-            if bytes[at..at + 4] == sylva::format::tile::TILE_LEVELS.to_le_bytes() {
+            let levels = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+            if bytes[4] == 4 && levels == sylva::format::tile::TILE_LEVELS {
                 assert_eq!(tile.encode(), bytes);
+            } else if bytes[4] == 3 && levels == sylva::format::tile::TILE_LEVELS_V3 {
+                assert_eq!(tile.encode_v3(), bytes);
             }
         } else {
             let mut expected = bytes.to_vec();

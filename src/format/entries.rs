@@ -52,7 +52,7 @@ pub struct TileEntry {
     pub levels: Option<TileLevels>,
 }
 
-/// A version 3 tile's prefix levels, as its index entry lists them.
+/// A tile's prefix levels (tile versions 3 and 4), as its index entry lists them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TileLevels {
@@ -61,6 +61,23 @@ pub struct TileLevels {
     /// The tallest tree of the tile in metres (its batches' `max_height_m`):
     /// with the tile's distance, how much of it a view draws.
     pub height_m: f32,
+    /// The tile file's version, which says how its levels step (scene
+    /// version 9: 4, √2 steps; absent in scenes before: 3, 2× steps).
+    #[serde(default = "tile_version_3")]
+    pub version: u16,
+}
+
+fn tile_version_3() -> u16 {
+    3
+}
+
+impl TileLevels {
+    /// How the tile's levels split its tallest batch (what a view decides
+    /// before the tile's batches are in).
+    #[must_use]
+    pub fn scheme(&self) -> super::tile::Levels {
+        super::tile::Levels { version: self.version, count: self.bytes.len() as u32, tallest_m: self.height_m }
+    }
 }
 
 /// The manifest's pointer to the index.
@@ -162,11 +179,13 @@ impl TileEntry {
                 || !rising
                 || l.bytes.last() != Some(&self.bytes)
                 || !(l.height_m.is_finite() && l.height_m >= 0.0)
+                || !(3..=super::tile::TILE_VERSION).contains(&l.version)
             {
                 return Err(Problem::Invalid(format!(
-                    "{what}.levels: 1 to {} rising byte ends ending at the tile's {} bytes and a height ≥ 0 expected",
+                    "{what}.levels: 1 to {} rising byte ends ending at the tile's {} bytes, a height ≥ 0 and a tile version 3 to {} expected",
                     super::tile::MAX_TILE_LEVELS,
-                    self.bytes
+                    self.bytes,
+                    super::tile::TILE_VERSION
                 )));
             }
         }

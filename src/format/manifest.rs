@@ -12,17 +12,18 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 8).
+/// Newest manifest version this build writes and reads (it reads 1 to 9).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
 /// ground imagery (`terrain.imagery`); version 6 per-tree attributes
 /// (`attributes`); version 7 tiles in prefix levels (tile version 3, the
 /// entries' `levels`); version 8 canopy rasters (`canopy`, and the index's
-/// child entries' `height_m`).
-/// The bake writes the oldest version that holds what a scene has (8 for every
-/// scene with a canopy, 7 without; 3 to 6 for older bakes), so older viewers
-/// refuse newer scenes with a clear message.
-pub const SCENE_VERSION: u32 = 8;
+/// child entries' `height_m`); version 9 tiles in levels of √2 steps (tile
+/// version 4, the entries' `levels.version`).
+/// The bake writes the oldest version that holds what a scene has (9 for every
+/// scene with trees; 3 to 8 for older bakes), so older viewers refuse newer
+/// scenes with a clear message.
+pub const SCENE_VERSION: u32 = 9;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -188,6 +189,9 @@ impl Manifest {
         }
         if self.version < 7 && self.tiles.iter().any(|t| t.levels.is_some()) {
             return Err(Problem::Invalid("tiles with \"levels\" need manifest version 7".into()));
+        }
+        if self.version < 9 && self.tiles.iter().any(|t| t.levels.as_ref().is_some_and(|l| l.version >= 4)) {
+            return Err(Problem::Invalid("tiles with \"levels\" of tile version 4 need manifest version 9".into()));
         }
         if let Some(a) = &self.attributes {
             if self.version < 6 {

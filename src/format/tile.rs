@@ -6,21 +6,24 @@
 //! and instance arrays are laid out exactly as the GPU reads them, so the
 //! renderer uploads them without repacking. Layout tables: `docs/FORMAT.md`.
 //!
-//! Version 3 stores the instances in prefix levels: level ℓ holds each
-//! density-ordered batch's next trees up to a prefix of `2^(ℓ+1−L)` of it, so
+//! Versions 3 and 4 store the instances in prefix levels: level ℓ holds each
+//! density-ordered batch's next trees up to a share of it ([`Levels`]), so
 //! the first bytes of the file up to a level's end are an even thinning of
 //! every batch, and a far view fetches that byte range only
-//! ([`Tile::decode_prefix`]).
+//! ([`Tile::decode_prefix`]). Version 3 steps the shares by 2 for every
+//! batch; version 4 by √2, scaled for batches shorter than the tile's tallest
+//! (a view needs fewer of them at the same distance).
 
 use super::error::{at_most, finite_all, pod_vec, DecodeError, Problem, Reader};
 
 /// First four bytes of a tile file.
 pub const TILE_MAGIC: [u8; 4] = *b"SYTL";
-/// Newest tile format version written and read by this build: 3, the
-/// instances in prefix levels ([`Tile::encode`]). Versions 1 and 2 (one run
-/// of instances per batch; 2 when a batch carries crown aspects) are still
-/// read, whole.
-pub const TILE_VERSION: u16 = 3;
+/// Newest tile format version written and read by this build: 4, the
+/// instances in prefix levels of √2 steps scaled by each batch's height
+/// ([`Tile::encode`], [`Levels`]). Version 3 (levels of 2× steps) is still
+/// read by range; versions 1 and 2 (one run of instances per batch; 2 when a
+/// batch carries crown aspects) whole.
+pub const TILE_VERSION: u16 = 4;
 /// Oldest tile format version this build reads.
 pub const TILE_VERSION_MIN: u16 = 1;
 /// Bytes in the tile header.
@@ -29,10 +32,14 @@ pub const TILE_HEADER_BYTES: usize = 32;
 pub const MAX_TILE_BATCHES: u32 = 1 << 20;
 /// Most instances one tile may declare.
 pub const MAX_TILE_INSTANCES: u32 = 1 << 26;
-/// Prefix levels of a version 3 tile: level ℓ ends each density-ordered batch
-/// at `ceil(n · 2^(ℓ+1−L))` trees, 1/64 (the least prefix thinning keeps,
-/// `THIN_MIN_FRACTION` in `shaders/common.wgsl`), 1/32, …, ½, all.
-pub const TILE_LEVELS: u32 = 7;
+/// Prefix levels this build writes (version 4, [`Levels`]): the tile's
+/// tallest batch ends at `2^((ℓ+1−L)/2)` of its trees at level ℓ: 1/128,
+/// 1/91, 1/64 (the least prefix thinning keeps, `THIN_MIN_FRACTION` in
+/// `shaders/common.wgsl`), …, 1/√2, all — the canopy cross-fade keeps fewer
+/// than 1/64 where trees are about a pixel tall.
+pub const TILE_LEVELS: u32 = 15;
+/// Prefix levels version 3 tiles were written with: 1/64, 1/32, …, ½, all.
+pub const TILE_LEVELS_V3: u32 = 7;
 /// Most prefix levels a tile may declare.
 pub const MAX_TILE_LEVELS: u32 = 16;
 /// Largest batch split into levels: bigger ones (and batches that are not
@@ -125,20 +132,89 @@ impl GpuBatch {
     }
 }
 
-/// Trees of `batch` (its whole count) in the prefix of levels `0..=level` of
-/// `levels`: `ceil(n · 2^(level+1−levels))`, all of them at the last level and
-/// for batches that are not density-ordered or bigger than [`MAX_PARTIAL_BATCH`].
-#[must_use]
-pub fn level_prefix(batch: &GpuBatch, level: u32, levels: u32) -> u32 {
-    let n = batch.instance_count;
-    if level + 1 >= levels || batch.flags & BATCH_DENSITY_ORDERED == 0 || n > MAX_PARTIAL_BATCH {
-        return n;
+/// How a tile file's prefix levels split its batches: which trees of each
+/// batch the first `level + 1` levels hold ([`Levels::prefix`]). Computed from
+/// the file's version, level count and batch records alone (no bytes stored),
+/// with only exactly rounded arithmetic, so every reader splits alike.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Levels {
+    /// The tile's version: 3 (2× steps, every batch alike) or 4 (√2 steps,
+    /// scaled by each batch's height).
+    pub version: u16,
+    /// Levels in the file (1–[`MAX_TILE_LEVELS`]).
+    pub count: u32,
+    /// The tile's tallest tree in metres (the most of its batches'
+    /// `max_height_m`): version 4 scales the other batches' shares by their
+    /// height to it.
+    pub tallest_m: f32,
+}
+
+impl Levels {
+    /// The levels of a tile of `version` with `count` levels and these batches
+    /// (whole or resident: their heights are the same).
+    #[must_use]
+    pub fn new(version: u16, count: u32, batches: &[GpuBatch]) -> Self {
+        let tallest_m = batches.iter().map(|b| b.max_height_m).fold(0.0f32, f32::max);
+        Self { version, count, tallest_m }
     }
-    let halvings = levels - 1 - level;
-    if halvings >= 32 {
-        return n.min(1);
+
+    /// The share of the tile's tallest batch that levels `0..=level` hold:
+    /// `2^(level+1−count)` (version 3) or `2^((level+1−count)/2)` (version 4);
+    /// 1 from the last level on.
+    #[must_use]
+    pub fn share(&self, level: u32) -> f64 {
+        if level + 1 >= self.count {
+            return 1.0;
+        }
+        let steps = self.count - 1 - level;
+        let (halvings, root) = if self.version >= 4 { (steps / 2, steps % 2 == 1) } else { (steps, false) };
+        // Powers of two (built from their bits) and one factor 1/√2: exact, or
+        // one correctly rounded product.
+        let base = if halvings >= 1000 { 0.0 } else { f64::from_bits(u64::from(1023 - halvings) << 52) };
+        if root {
+            base * std::f64::consts::FRAC_1_SQRT_2
+        } else {
+            base
+        }
     }
-    ((u64::from(n) + (1u64 << halvings) - 1) >> halvings) as u32
+
+    /// Trees of `batch` (its whole count `n`) in the prefix of levels
+    /// `0..=level`: all of them at the last level and for batches that are not
+    /// density-ordered or bigger than [`MAX_PARTIAL_BATCH`]; else version 3
+    /// `ceil(n · share)`, version 4 `ceil(n · max(share · r², min(share, 1/64)))`
+    /// (at least 1) with `r` the batch's `max_height_m` over the tile's
+    /// tallest — a view needs `r²` as many of a shorter batch's trees at the
+    /// same distance, and never fewer than 1/64 where it needs that many of
+    /// the tallest (prefix thinning keeps at least 1/64 of a batch in view).
+    #[must_use]
+    pub fn prefix(&self, batch: &GpuBatch, level: u32) -> u32 {
+        let n = batch.instance_count;
+        if level + 1 >= self.count || batch.flags & BATCH_DENSITY_ORDERED == 0 || n > MAX_PARTIAL_BATCH {
+            return n;
+        }
+        if self.version < 4 {
+            let halvings = self.count - 1 - level;
+            if halvings >= 32 {
+                return n.min(1);
+            }
+            return ((u64::from(n) + (1u64 << halvings) - 1) >> halvings) as u32;
+        }
+        let share = self.share(level);
+        let r = if self.tallest_m > 0.0 {
+            (f64::from(batch.max_height_m) / f64::from(self.tallest_m)).min(1.0)
+        } else {
+            1.0
+        };
+        let f = (share * r * r).max(share.min(1.0 / 64.0));
+        ((f64::from(n) * f).ceil() as u32).clamp(1, n)
+    }
+
+    /// The fewest levels (1..=count) whose share of the tallest batch is at
+    /// least `f` (all of them for `f` above the last but one, or NaN).
+    #[must_use]
+    pub fn covering(&self, f: f32) -> u32 {
+        (0..self.count).find(|&l| self.share(l) >= f64::from(f)).map_or(self.count, |l| l + 1)
+    }
 }
 
 /// The crown aspects of a [`BATCH_CROWN_ASPECT`] batch: quantised aspect q
@@ -304,6 +380,8 @@ pub struct TilePrefix {
     pub levels: u32,
     /// Levels in the file (1 for versions 1 and 2).
     pub of: u32,
+    /// How the file's levels split its batches.
+    pub scheme: Levels,
 }
 
 impl TilePrefix {
@@ -376,36 +454,55 @@ impl Tile {
         }
     }
 
-    /// Instances in the prefix of levels `0..=l` for each level `l` of
-    /// [`TILE_LEVELS`] (cumulative; the last is all).
+    /// The levels [`Tile::encode`] writes ([`TILE_LEVELS`] of version 4).
     #[must_use]
-    pub fn level_counts(&self) -> Vec<u32> {
-        (0..TILE_LEVELS).map(|l| self.batches.iter().map(|b| level_prefix(b, l, TILE_LEVELS)).sum()).collect()
+    pub fn levels(&self) -> Levels {
+        Levels::new(TILE_VERSION, TILE_LEVELS, &self.batches)
     }
 
-    /// File bytes up to the end of each level of the version 3 file
-    /// ([`Tile::encode`]): the byte ranges a viewer fetches.
+    /// Instances in the prefix of levels `0..=l` for each level `l` of
+    /// `levels` (cumulative; the last is all).
+    #[must_use]
+    pub fn level_counts(&self, levels: &Levels) -> Vec<u32> {
+        (0..levels.count).map(|l| self.batches.iter().map(|b| levels.prefix(b, l)).sum()).collect()
+    }
+
+    /// File bytes up to the end of each level of the file [`Tile::encode`]
+    /// writes: the byte ranges a viewer fetches.
     #[must_use]
     pub fn level_bytes(&self) -> Vec<u64> {
-        let head = (TILE_HEADER_BYTES + self.batches.len() * 80 + 4 + 4 * TILE_LEVELS as usize) as u64;
-        self.level_counts().iter().map(|&c| head + 8 * u64::from(c)).collect()
+        let levels = self.levels();
+        let head = (TILE_HEADER_BYTES + self.batches.len() * 80 + 4 + 4 * levels.count as usize) as u64;
+        self.level_counts(&levels).iter().map(|&c| head + 8 * u64::from(c)).collect()
     }
 
-    /// Encodes the tile into its version 3 file bytes: header, batches, the
-    /// level table (level count, then each level's cumulative instance count),
-    /// then the instances level after level, in each level batch after batch.
+    /// Encodes the tile into its version 4 file bytes ([`Tile::levels`]):
+    /// header, batches, the level table (level count, then each level's
+    /// cumulative instance count), then the instances level after level, in
+    /// each level batch after batch.
     #[must_use]
     pub fn encode(&self) -> Vec<u8> {
-        let counts = self.level_counts();
-        let mut out = self.encode_head(TILE_VERSION, 4 + 4 * counts.len());
-        out.extend_from_slice(&TILE_LEVELS.to_le_bytes());
+        self.encode_levels(&self.levels())
+    }
+
+    /// Encodes the tile as version 3 wrote it ([`TILE_LEVELS_V3`] levels of 2×
+    /// steps): for tests that scenes baked before still read.
+    #[must_use]
+    pub fn encode_v3(&self) -> Vec<u8> {
+        self.encode_levels(&Levels::new(3, TILE_LEVELS_V3, &self.batches))
+    }
+
+    fn encode_levels(&self, levels: &Levels) -> Vec<u8> {
+        let counts = self.level_counts(levels);
+        let mut out = self.encode_head(levels.version, 4 + 4 * counts.len());
+        out.extend_from_slice(&levels.count.to_le_bytes());
         for c in &counts {
             out.extend_from_slice(&c.to_le_bytes());
         }
-        for l in 0..TILE_LEVELS {
+        for l in 0..levels.count {
             for b in &self.batches {
-                let from = if l == 0 { 0 } else { level_prefix(b, l - 1, TILE_LEVELS) };
-                let to = level_prefix(b, l, TILE_LEVELS);
+                let from = if l == 0 { 0 } else { levels.prefix(b, l - 1) };
+                let to = levels.prefix(b, l);
                 let start = b.instance_offset as usize;
                 out.extend_from_slice(bytemuck::cast_slice(
                     &self.instances[start + from as usize..start + to as usize],
@@ -502,7 +599,7 @@ fn decode_tile(bytes: &[u8], species_count: u32, prefix: bool) -> Result<TilePre
     let flags = r.u32("header.flags", 28)?;
     if flags != 0 {
         return Err(Problem::Invalid(format!(
-            "header.flags is {flags:#x}; tile versions 1 to 3 define no header flags (must be 0)"
+            "header.flags is {flags:#x}; tile versions 1 to 4 define no header flags (must be 0)"
         )));
     }
     let batch_start = TILE_HEADER_BYTES as u64;
@@ -580,13 +677,14 @@ fn decode_tile(bytes: &[u8], species_count: u32, prefix: bool) -> Result<TilePre
             "batches hold {next} instances but the header declares {instance_count}"
         )));
     }
+    let scheme = Levels::new(version, levels, &batches);
     if version < 3 {
         let instances = pod_vec(r.slice("instances", instance_start, instance_len)?);
-        return Ok(TilePrefix { tile: Tile { tile_x, tile_y, batches, instances }, levels: 1, of: 1 });
+        return Ok(TilePrefix { tile: Tile { tile_x, tile_y, batches, instances }, levels: 1, of: 1, scheme });
     }
     // The level table must be what the batches' counts give.
     for (l, &e) in level_ends.iter().enumerate() {
-        let want: u64 = batches.iter().map(|b| u64::from(level_prefix(b, l as u32, levels))).sum();
+        let want: u64 = batches.iter().map(|b| u64::from(scheme.prefix(b, l as u32))).sum();
         if e != instance_start + 8 * want {
             return Err(Problem::Invalid(format!(
                 "levels.counts[{l}] is {}, the batches' level {l} prefixes hold {want}",
@@ -597,7 +695,7 @@ fn decode_tile(bytes: &[u8], species_count: u32, prefix: bool) -> Result<TilePre
     // Gather each batch's trees from the levels held, batch after batch.
     let held_bytes = r.slice("instances", instance_start, end - instance_start)?;
     let stored: Vec<PackedInstance> = pod_vec(held_bytes);
-    let resident: Vec<u32> = batches.iter().map(|b| level_prefix(b, held - 1, levels)).collect();
+    let resident: Vec<u32> = batches.iter().map(|b| scheme.prefix(b, held - 1)).collect();
     let mut starts = Vec::with_capacity(batches.len());
     let mut at = 0u32;
     for &k in &resident {
@@ -608,8 +706,8 @@ fn decode_tile(bytes: &[u8], species_count: u32, prefix: bool) -> Result<TilePre
     let mut from = 0usize;
     for l in 0..held {
         for (i, b) in batches.iter().enumerate() {
-            let lo = if l == 0 { 0 } else { level_prefix(b, l - 1, levels) };
-            let hi = level_prefix(b, l, levels);
+            let lo = if l == 0 { 0 } else { scheme.prefix(b, l - 1) };
+            let hi = scheme.prefix(b, l);
             let n = (hi - lo) as usize;
             let dst = (starts[i] + lo) as usize;
             instances[dst..dst + n].copy_from_slice(&stored[from..from + n]);
@@ -632,7 +730,7 @@ fn decode_tile(bytes: &[u8], species_count: u32, prefix: bool) -> Result<TilePre
             }
         })
         .collect();
-    Ok(TilePrefix { tile: Tile { tile_x, tile_y, batches, instances }, levels: held, of: levels })
+    Ok(TilePrefix { tile: Tile { tile_x, tile_y, batches, instances }, levels: held, of: levels, scheme })
 }
 
 fn validate_batch(i: usize, b: &GpuBatch, species_count: u32) -> Result<(), Problem> {

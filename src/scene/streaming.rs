@@ -23,7 +23,7 @@ use crate::camera::ViewData;
 use crate::format::attributes::AttributeCodes;
 use crate::format::canopy::{Canopy, CanopyKey};
 use crate::format::terrain::TerrainTile;
-use crate::format::tile::level_prefix;
+use crate::format::tile::Levels;
 use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
 use crate::geo::GeoFrame;
 use crate::render::cull::{canopy_keeps, canopy_share};
@@ -164,6 +164,8 @@ struct Prefix {
     /// The tile's whole batches (what decides the levels a view wants; empty
     /// for a file without levels).
     batches: Vec<GpuBatch>,
+    /// How the file's levels split them.
+    scheme: Levels,
     /// The request for the next levels.
     more: Load,
 }
@@ -183,20 +185,21 @@ pub struct PrefixView {
     pub canopy: Option<[f32; 2]>,
 }
 
-/// The first guess of the prefix levels (of `levels`, 1..=levels) a view
-/// drawing with `thin` needs of a tile, before its batches are known: the
-/// thinned fraction (`thinning` in `shaders/common.wgsl`) of its tallest tree
-/// at the nearest point of the tile the view sees (sampled). All of them
-/// without thinning. [`batch_levels_wanted`] decides once the head is in.
+/// The first guess of the prefix levels (of `levels.count`, 1..=count) a
+/// view drawing with `thin` needs of a tile, before its batches are known:
+/// the thinned fraction (`thinning` in `shaders/common.wgsl`) of its tallest
+/// tree (`levels.tallest_m`) at the nearest point of the tile the view sees
+/// (sampled). All of them without thinning. [`batch_levels_wanted`] decides
+/// once the head is in.
 #[must_use]
 pub fn first_levels_wanted(
     view: &ViewData,
     bounds: &crate::format::Bounds,
-    height_m: f32,
-    levels: u32,
+    levels: &Levels,
     thin: Option<PrefixView>,
 ) -> u32 {
-    let Some(thin) = thin.filter(|t| t.thin_px > 0.0) else { return levels };
+    let (height_m, levels_count) = (levels.tallest_m, levels.count);
+    let Some(thin) = thin.filter(|t| t.thin_px > 0.0) else { return levels_count };
     let eye = view.eye_hi + view.eye_lo;
     let (lo, hi) = (Vec3::from(bounds.min) - eye, Vec3::from(bounds.max) - eye);
     let inside = |p: Vec3| view.frustum.iter().all(|f| f.truncate().dot(p) + f.w >= 0.0);
@@ -219,22 +222,24 @@ pub fn first_levels_wanted(
     }
     let h = height_m * view.px_per_m_at_1m * thin.lod_scale / (d * 0.99).max(1e-3);
     if h >= thin.thin_px || h.is_nan() {
-        return levels;
+        return levels_count;
     }
     let mut f = (h * h) / (thin.thin_px * thin.thin_px);
     // The canopy's share comes off the tail of those.
     if let Some(band) = thin.canopy {
         f *= canopy_share(h, band);
     }
-    (1..=levels).find(|&l| (l as f32 - levels as f32).exp2() >= f).unwrap_or(levels)
+    levels.covering(f)
 }
 
-/// The prefix levels (of `levels`, 1..=levels) a view drawing with `thin`
-/// needs of a tile whose whole batches are `batches`: the most any batch in
-/// view keeps (`thinning` in `shaders/common.wgsl`: its tallest tree at its
-/// nearest point, 1 % nearer against float noise). All of them without thinning.
+/// The prefix levels (of `scheme.count`, 1..=count) a view drawing with
+/// `thin` needs of a tile whose whole batches are `batches`: the fewest that
+/// hold what every batch in view keeps (`thinning` in `shaders/common.wgsl`:
+/// its tallest tree at its nearest point, 1 % nearer against float noise).
+/// All of them without thinning.
 #[must_use]
-pub fn batch_levels_wanted(view: &ViewData, batches: &[GpuBatch], levels: u32, thin: Option<PrefixView>) -> u32 {
+pub fn batch_levels_wanted(view: &ViewData, batches: &[GpuBatch], scheme: &Levels, thin: Option<PrefixView>) -> u32 {
+    let levels = scheme.count;
     let Some(thin) = thin.filter(|t| t.thin_px > 0.0) else { return levels };
     let eye = view.eye_hi + view.eye_lo;
     let mut want = 1;
@@ -256,7 +261,7 @@ pub fn batch_levels_wanted(view: &ViewData, batches: &[GpuBatch], levels: u32, t
         if let Some(band) = thin.canopy {
             need = canopy_keeps(h, need, band);
         }
-        let l = (0..levels).find(|&l| level_prefix(b, l, levels) >= need).unwrap_or(levels - 1) + 1;
+        let l = (0..levels).find(|&l| scheme.prefix(b, l) >= need).unwrap_or(levels - 1) + 1;
         want = want.max(l);
         if want == levels {
             break;
@@ -1403,6 +1408,7 @@ impl<F: Fetcher> SceneStream<F> {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
                     batches: held.whole_batches(),
+                    scheme: held.scheme,
                     bytes: if keep_bytes { bytes } else { Vec::new() },
                     more: Load::Idle,
                 });
@@ -1521,6 +1527,7 @@ impl<F: Fetcher> SceneStream<F> {
                     levels: held.levels,
                     runs: std::sync::Arc::new(held.runs()),
                     batches: held.whole_batches(),
+                    scheme: held.scheme,
                     bytes: if keep_bytes { bytes } else { Vec::new() },
                     more: Load::Idle,
                 };
@@ -1606,7 +1613,7 @@ impl<F: Fetcher> SceneStream<F> {
                 continue;
             }
             // (Levels may end at the same byte: a trim must free some.)
-            let want = batch_levels_wanted(view, &prefix.batches, ends.len() as u32, Some(thin));
+            let want = batch_levels_wanted(view, &prefix.batches, &prefix.scheme, Some(thin));
             if want >= prefix.levels || ends[want as usize - 1] >= prefix.bytes.len() as u64 {
                 continue;
             }
@@ -1692,7 +1699,7 @@ impl<F: Fetcher> SceneStream<F> {
                     }
                     // The prefix the view draws of a tile in levels (without levels: whole).
                     let range = entry.levels.as_ref().and_then(|l| {
-                        let want = first_levels_wanted(view, &entry.bounds, l.height_m, l.bytes.len() as u32, thin);
+                        let want = first_levels_wanted(view, &entry.bounds, &l.scheme(), thin);
                         (want < l.bytes.len() as u32).then(|| (0, l.bytes[want as usize - 1]))
                     });
                     let id = self.fetcher.start_range(&join(&self.base, &entry.url), range);
@@ -1706,7 +1713,7 @@ impl<F: Fetcher> SceneStream<F> {
                     if have >= ends.len() {
                         continue;
                     }
-                    let want = batch_levels_wanted(view, &prefix.batches, ends.len() as u32, thin) as usize;
+                    let want = batch_levels_wanted(view, &prefix.batches, &prefix.scheme, thin) as usize;
                     // A file with other levels than its entry lists cannot be fetched on by range.
                     if want <= have
                         || prefix.more == Load::Broken

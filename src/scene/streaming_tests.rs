@@ -560,7 +560,6 @@ fn oracle_counts(entry: &crate::format::TileEntry, view: &ViewData, thin: Prefix
 
 #[test]
 fn tiles_fetch_the_prefix_the_view_draws_and_no_byte_twice() {
-    use crate::format::tile::TILE_LEVELS;
     let thin = PrefixView { thin_px: 8.0, lod_scale: 1.0, canopy: None };
     let mut s = stream(StreamConfig::default());
     s.set_prefix_view(Some(thin));
@@ -578,22 +577,23 @@ fn tiles_fetch_the_prefix_the_view_draws_and_no_byte_twice() {
             let TileState::Resident { prefix, .. } = &s.tiles[i] else { panic!("tile {i} resident at {d} m") };
             let levels = entry.levels.as_ref().expect("the fixture's tiles are in levels");
             let end = |l: u32| levels.bytes[l as usize - 1];
+            let scheme = prefix.scheme;
+            assert_eq!((scheme.version, scheme.count), (4, levels.bytes.len() as u32), "{}", entry.url);
             // The CPU oracle: every batch in view has what the cull pass draws of it.
             let drawn = oracle_counts(&entry, &view, thin);
             for (b, n) in &drawn {
-                let held = level_prefix(b, prefix.levels - 1, TILE_LEVELS);
+                let held = scheme.prefix(b, prefix.levels - 1);
                 assert!(*n <= held, "{}: a batch draws {n} of {} but {held} are held", entry.url, b.instance_count);
             }
             // No more than that on the first view: the levels the oracle needs,
             // or the first guess made before the tile's batches were known.
             if k == 0 {
-                let exact = (1..=TILE_LEVELS)
-                    .find(|&l| drawn.iter().all(|(b, n)| *n <= level_prefix(b, l - 1, TILE_LEVELS)))
-                    .unwrap();
-                let guess = first_levels_wanted(&view, &entry.bounds, levels.height_m, TILE_LEVELS, Some(thin));
+                let exact =
+                    (1..=scheme.count).find(|&l| drawn.iter().all(|(b, n)| *n <= scheme.prefix(b, l - 1))).unwrap();
+                let guess = first_levels_wanted(&view, &entry.bounds, &levels.scheme(), Some(thin));
                 assert_eq!(end(prefix.levels), end(exact.max(guess)), "{} at {d} m", entry.url);
             }
-            partial_seen += usize::from(prefix.levels < TILE_LEVELS);
+            partial_seen += usize::from(prefix.levels < scheme.count);
         }
         let resident = u64::from(r.used);
         if k == 0 {
@@ -670,13 +670,13 @@ fn full_pools_trim_tiles_to_the_prefix_the_view_draws_and_they_grow_back_by_rang
         let entry = s.index.tiles[i].clone();
         let TileState::Resident { prefix, .. } = &s.tiles[i] else { panic!("{} resident", entry.url) };
         for (b, n) in oracle_counts(&entry, &far, thin) {
-            let held = level_prefix(&b, prefix.levels - 1, crate::format::tile::TILE_LEVELS);
+            let held = prefix.scheme.prefix(&b, prefix.levels - 1);
             assert!(
                 n <= held,
                 "{}: draws {n} of a batch, holds {held} ({} levels, wants {}, more {:?}, {}/{} used)",
                 entry.url,
                 prefix.levels,
-                batch_levels_wanted(&far, &prefix.batches, 7, Some(thin)),
+                batch_levels_wanted(&far, &prefix.batches, &prefix.scheme, Some(thin)),
                 prefix.more,
                 r.used,
                 cap

@@ -99,7 +99,8 @@ pub fn write_tiles(
                         attribute_codes,
                         levels: Some(TileLevels {
                             bytes: bt.tile.level_bytes(),
-                            height_m: bt.tile.batches.iter().map(|b| b.max_height_m).fold(0.0, f32::max),
+                            height_m: bt.tile.levels().tallest_m,
+                            version: bt.tile.version(),
                         }),
                     },
                     bt.tile.instance_bytes() as u64,
