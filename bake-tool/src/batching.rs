@@ -536,7 +536,12 @@ mod tests {
         let all: Vec<&GpuBatch> = tiles.iter().flat_map(|t| &t.tile.batches).collect();
         assert!(all.iter().any(|b| b.species == 0 && b.flags & BATCH_CROWN_ASPECT == 0));
         assert!(all.iter().filter(|b| b.species != 0).all(|b| b.flags & BATCH_CROWN_ASPECT != 0));
-        assert!(tiles.iter().all(|t| t.tile.whole_version() == 2 && u16::from(t.tile.encode()[4]) == sylva::format::tile::TILE_VERSION));
+        assert!(
+            tiles
+                .iter()
+                .all(|t| t.tile.whole_version() == 2
+                    && u16::from(t.tile.encode()[4]) == sylva::format::tile::TILE_VERSION)
+        );
         let only_plain =
             build_tiles(&trees.iter().filter(|t| t.species == 0).copied().collect::<Vec<_>>(), &SHAPES, 128, 4);
         assert!(only_plain.iter().all(|t| t.tile.whole_version() == 1 && t.tile.encode_whole()[4] == 1));
