@@ -32,7 +32,8 @@ struct CanopyRaster {
     // 1: trees the view wants here are not resident; the raster stands in
     // for them at full cover.
     stand_in: u32,
-    pad: u32,
+    // The crowns' batches' tallest trees over their own heights (format::canopy).
+    tallest_ratio: f32,
 };
 
 // Where in the crown the canopy surface lies (share of the tree height above the ground).
@@ -101,9 +102,11 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let cell_m = r.size_m / f32(r.cells);
     let ij = vec2<f32>(f32(c % r.cells), f32(c / r.cells));
     let z = ground + CANOPY_SURFACE * height;
-    // The canopy's share of the cell's trees, by their size at the cell's centre.
+    // The canopy's share of the cell's trees at the cell's centre: the cull
+    // drops a share of each batch by its tallest tree's size (`canopy_drops`),
+    // so the cell's trees are sized by their batches' tallest.
     let centre = eye_relative(vec3<f32>(r.origin_m, 0.0), vec3<f32>((ij + 0.5) * cell_m, z), view);
-    let h_px = height * view.lod.x / max(length(centre), 1e-3);
+    let h_px = height * r.tallest_ratio * view.lod.x / max(length(centre), 1e-3);
     // Seen at elevation θ the crowns' sides cover ground too: the exponent of
     // the cover grows by side · cot θ (format::canopy).
     let cot = min(length(centre.xy) / max(-centre.z, 1e-3), 8.0);

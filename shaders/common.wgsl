@@ -299,11 +299,12 @@ fn canopy_weight(h_px: f32, view: View) -> f32 {
 }
 
 // Whether the canopy stands in for tree `i` of the `count` the cull considers
-// of its batch (it is not drawn): a share `canopy_weight` of the trees of a
-// size, taken from the tail of the batch's density order — tree i is kept
-// while i + ½ < count · (1 − w(h)), count · (1 − w) trees rounded — so a
-// batch whose tallest tree projects to h needs only its first
-// count · (1 − w(h)) trees (the stream fetches no more: issue 20). Written as
+// of its batch (it is not drawn): a share `canopy_weight(h)` of the batch's
+// trees, with `h` its tallest tree projected at tree i's distance, taken from
+// the tail of the batch's density order — tree i is kept while
+// i + ½ < count · (1 − w(h)), count · (1 − w) trees rounded — so a batch needs
+// only its first count · (1 − w(h)) trees at its nearest point, and the
+// stream fetches no more (issue 20). Written as
 // (count − i − ½) · (hi − lo) ≤ count · (hi − h) with only multiplications
 // and subtractions, which are exactly rounded on every GPU, so the CPU oracle
 // agrees bit for bit. Must match `canopy_drops` in src/render/cull.rs.

@@ -204,9 +204,14 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
             continue;
         }
         // An orthographic view (a shadow cascade) sizes trees in texels, at any distance.
-        let h_px = s.select.x * tree.scale * view.lod.x / select(dist, 1.0, view.viewport.w > 0.5);
-        // Where trees are a pixel or two, the canopy raster stands in for a share of them.
-        if canopy_drops(h_px, i, intended, view) {
+        let px_per_m = view.lod.x / select(dist, 1.0, view.viewport.w > 0.5);
+        let h_px = s.select.x * tree.scale * px_per_m;
+        // Where trees are a pixel or two, the canopy raster stands in for a share of them:
+        // the share of the batch's tallest tree at this tree's distance (the stream
+        // fetches each batch up to that share of its tallest, and the canopy raster
+        // sizes its cells' trees by their batches' tallest), so the trees held are
+        // the trees drawn.
+        if canopy_drops(b.max_height_m * px_per_m, i, intended, view) {
             continue;
         }
         if thinned {

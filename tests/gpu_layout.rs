@@ -70,7 +70,7 @@ fn the_canopy_raster_matches_its_wgsl_twin() {
     check(
         "canopy",
         "CanopyRaster",
-        &members!(GpuCanopyRaster: origin_m, size_m, cells, z_min, z_span, height_max, slot, stand_in, pad),
+        &members!(GpuCanopyRaster: origin_m, size_m, cells, z_min, z_span, height_max, slot, stand_in, tallest_ratio),
         size_of::<GpuCanopyRaster>(),
         None,
     );

@@ -1061,8 +1061,10 @@ fn the_canopy_cross_fade_keeps_the_forests_cover() {
         // (Under a pixel the whole test forest is some twenty pixels, and the
         // far trees' enlarged billboards fill every one of them.)
         let lowest = if px >= 1.0 { 0.8 } else { 0.6 };
+        // (At 2 px: 1.20 with the rasters' `tallest_ratio`; 1.25 without it,
+        // the raster sizing its trees below the cull's batch-tallest size.)
         if std::env::var_os("CANOPY_SWEEP").is_none() {
-            assert!((lowest..1.25).contains(&ratio), "at {px} px the canopy makes the forest {ratio:.3}× as dark");
+            assert!((lowest..1.22).contains(&ratio), "at {px} px the canopy makes the forest {ratio:.3}× as dark");
         }
         if px >= 6.0 {
             assert_eq!(drawn(&with), drawn(&alone), "trees above the band are all drawn");

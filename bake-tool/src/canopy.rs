@@ -18,7 +18,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use sylva::format::canopy::{Canopy, CanopyCell, CanopyEntry, CANOPY_CELLS, CANOPY_CELL_BYTES};
+use sylva::format::canopy::{Canopy, CanopyCell, CanopyEntry, CANOPY_CELLS, CANOPY_CELL_BYTES, MAX_TALLEST_RATIO};
 use sylva::format::manifest::{SpeciesEntry, TileEntry};
 use sylva::format::pack::{decode_pack, kind};
 use sylva::format::Tile;
@@ -102,6 +102,8 @@ struct CanopyTree {
     y: f32,
     ground: f32,
     height: f32,
+    /// Its batch's tallest tree (the cull's cross-fade sizes the batch by it).
+    tallest: f32,
     area: f32,
     side: f32,
     albedo: [f32; 3],
@@ -116,6 +118,8 @@ struct Acc {
     z: [f32; 2],
     height_max: f32,
     height_min: f32,
+    /// Σ area · batch tallest and Σ area · height over the raster.
+    tallest: [f64; 2],
 }
 
 impl Acc {
@@ -128,6 +132,7 @@ impl Acc {
             z: [f32::INFINITY, f32::NEG_INFINITY],
             height_max: 0.0,
             height_min: f32::INFINITY,
+            tallest: [0.0; 2],
         }
     }
 
@@ -171,6 +176,8 @@ impl Acc {
         self.z = [self.z[0].min(t.ground), self.z[1].max(t.ground)];
         self.height_max = self.height_max.max(t.height);
         self.height_min = self.height_min.min(t.height);
+        self.tallest[0] += f64::from(t.area) * f64::from(t.tallest.max(t.height));
+        self.tallest[1] += f64::from(t.area) * f64::from(t.height);
     }
 
     fn finish(self, children: u8) -> Canopy {
@@ -184,6 +191,11 @@ impl Acc {
             height_max_m: self.height_max,
             height_min_m: self.height_min.min(self.height_max),
             children,
+            tallest_ratio: if self.tallest[1] > 0.0 {
+                ((self.tallest[0] / self.tallest[1]) as f32).clamp(1.0, MAX_TALLEST_RATIO)
+            } else {
+                1.0
+            },
             data: vec![0; self.sums.len() * CANOPY_CELL_BYTES],
         };
         for (i, s) in self.sums.iter().enumerate() {
@@ -219,6 +231,7 @@ fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<Ca
                 y: i.position_m[1],
                 ground: i.position_m[2],
                 height: look.height_m * i.scale,
+                tallest: b.max_height_m,
                 area: look.area_m2 * (i.scale * i.aspect).powi(2),
                 // Width scales by scale · aspect, height by scale.
                 side: look.side_m2 * i.scale * i.scale * i.aspect,
@@ -376,4 +389,34 @@ fn write(dir: &Path, url: &str, canopy: &Canopy) -> Result<u64> {
     }
     write_file(&path, &bytes)?;
     Ok(bytes.len() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tree(x: f32, height: f32, tallest: f32, area: f32) -> CanopyTree {
+        CanopyTree { x, y: 10.0, ground: 0.0, height, tallest, area, side: 1.0, albedo: [0.1, 0.2, 0.05] }
+    }
+
+    #[test]
+    fn the_tallest_ratio_weighs_each_trees_batch_by_its_crown() {
+        let mut acc = Acc::new([0.0, 0.0], 64.0);
+        // A 10 m tree of a batch whose tallest is 20 m, and that tallest tree;
+        // a third crown twice as large, of a batch of 30 m trees.
+        acc.add(&tree(5.0, 10.0, 20.0, 4.0));
+        acc.add(&tree(20.0, 20.0, 20.0, 4.0));
+        acc.add(&tree(40.0, 30.0, 30.0, 8.0));
+        let c = acc.finish(0);
+        let want = (4.0 * 20.0 + 4.0 * 20.0 + 8.0 * 30.0) / (4.0 * 10.0 + 4.0 * 20.0 + 8.0 * 30.0);
+        assert!((c.tallest_ratio - want).abs() < 1e-6, "{} against {want}", c.tallest_ratio);
+        let back = Canopy::decode("c.cnpy", &c.encode()).unwrap();
+        assert_eq!(back.tallest_ratio, c.tallest_ratio);
+        // No trees: 1. A batch record below its own tree (not written by the
+        // bake) counts the tree's height: never below 1.
+        assert_eq!(Acc::new([0.0, 0.0], 64.0).finish(0).tallest_ratio, 1.0);
+        let mut low = Acc::new([0.0, 0.0], 64.0);
+        low.add(&tree(5.0, 10.0, 5.0, 4.0));
+        assert_eq!(low.finish(0).tallest_ratio, 1.0);
+    }
 }

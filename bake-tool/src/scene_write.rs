@@ -76,7 +76,7 @@ pub fn finish_scene(
         None => 3,
     };
     base.home = sylva::format::manifest::densest_group(&tiles);
-    // Canopy rasters for far views (version 8): not in a shard's part (merge
+    // Canopy rasters for far views (version 8; 10 for canopy version 2): not in a shard's part (merge
     // makes them from all the tiles), nor for a scene without trees.
     let looks = if base.shard.is_none() && !tiles.is_empty() {
         Some(crate::canopy::species_looks(dir, &base.species, log)?)
@@ -96,7 +96,8 @@ pub fn finish_scene(
             started.elapsed().as_secs_f64()
         ));
         base.canopy = Some(entry);
-        base.version = base.version.max(8);
+        // Canopy rasters of version 2 (`tallest_ratio`): version 10.
+        base.version = base.version.max(10);
     }
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);

@@ -709,16 +709,16 @@ fn trees_stand_on_the_ground_of_a_dem() {
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
     let bare = inspect_json(&dir.join("bare"));
     assert!(bare["terrain"].is_null());
-    // Every scene is version 9 now (tile version 4 levels), whatever its ground.
-    assert_eq!(bare["version"], 9);
+    // Every scene is version 10 now (canopy version 2 rasters), whatever its ground.
+    assert_eq!(bare["version"], 10);
     // The fitted ground carries the procedural forest floor as imagery;
     // --plain-ground leaves it out.
     let fitted = inspect_json(&dir.join("fitted"));
-    assert_eq!(fitted["version"], 9);
+    assert_eq!(fitted["version"], 10);
     assert!(fitted["terrain"]["imagery"]["source"].as_str().unwrap().contains("procedural forest floor"), "{fitted}");
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("plain"), &[&crs[..], &["--plain-ground"]].concat()));
     let plain = inspect_json(&dir.join("plain"));
-    assert_eq!(plain["version"], 9);
+    assert_eq!(plain["version"], 10);
     assert!(plain["terrain"]["imagery"].is_null());
     assert!(plain["terrain"]["imagery"].is_null());
     // Bad DEM inputs are named.
@@ -891,7 +891,7 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     assert!(log.contains("attribute \"Condition\" left out: a repeated column name"), "{log}");
     let manifest =
         sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(manifest.version, 9, "canopy rasters, tiles in √2 levels");
+    assert_eq!(manifest.version, 10, "canopy rasters of version 2, tiles in √2 levels");
     let schema = manifest.attributes.clone().expect("attributes");
     let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed", "girth"]);
@@ -1166,7 +1166,7 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
         .arg("--out")
         .arg(&out));
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(m.version, 9);
+    assert_eq!(m.version, 10);
     let e = m.canopy.clone().expect("a canopy entry");
     // The finest squares 512 m (64 cells of 8 m): 1,024 m of 64 m tiles in two
     // levels; 1,024 m tiles split once or twice below a tile.

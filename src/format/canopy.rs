@@ -17,20 +17,27 @@
 //! species packs' billboards (`sylva-bake`'s `canopy.rs`). A viewer draws it
 //! over the ground where trees are too small to draw, cross-faded with them.
 //!
-//! Layout (little endian): a 40-byte header, then the cells row by row (row 0 at
-//! the square's lowest y), 8 bytes each:
+//! Layout (little endian): a 48-byte header (version 2; version 1: 44 bytes,
+//! without `tallest_ratio`, read as 1), then the cells row by row (row 0 at the
+//! square's lowest y), 8 bytes each:
 //!
 //! ```text
-//! header  magic "SYCN" | version u16 | header_bytes u16 (44) | cells u32
+//! header  magic "SYCN" | version u16 | header_bytes u16 (48) | cells u32
 //!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32
 //!         | height_min f32 (the shortest tree in the square)
 //!         | children u32 (bit i: child (2x + (i & 1), 2y + (i >> 1)) exists; bits 4–31 0)
+//!         | tallest_ratio f32 (1–64)
 //! cell    r u8 | g u8 | b u8 (sRGB albedo) | cover u8 (0–255) | height u8 (× height_max / 255)
 //!         | side u8 (/ 32) | ground u16 (z_min + q / 65535 × (z_max − z_min))
 //! ```
 //!
 //! `x0`, `y0`, `size_m`: the square in metres relative to the scene origin;
-//! `z_*`: the ground heights' range; `height_max`: the tallest tree's height.
+//! `z_*`: the ground heights' range; `height_max`: the tallest tree's height;
+//! `tallest_ratio`: the crowns' batches' tallest trees over the crowns' own
+//! heights, both weighted by crown area (Σ area · batch tallest / Σ area ·
+//! height, ≥ 1): the cull's cross-fade drops a share of each batch by its
+//! tallest tree, so a viewer sizes a cell's trees as `height × tallest_ratio`
+//! to know what share of them the canopy stands in for.
 
 use serde::{Deserialize, Serialize};
 
@@ -39,10 +46,14 @@ use super::error::{finite, DecodeError, Problem, Reader};
 
 /// File magic.
 pub const CANOPY_MAGIC: [u8; 4] = *b"SYCN";
-/// Version written and read by this build.
-pub const CANOPY_VERSION: u16 = 1;
-/// Header bytes.
-pub const CANOPY_HEADER_BYTES: usize = 44;
+/// Version written by this build (it reads 1 and 2).
+pub const CANOPY_VERSION: u16 = 2;
+/// Header bytes (version 2).
+pub const CANOPY_HEADER_BYTES: usize = 48;
+/// Header bytes of version 1 (no `tallest_ratio`).
+pub const CANOPY_HEADER_BYTES_V1: usize = 44;
+/// Largest `tallest_ratio` a raster may carry.
+pub const MAX_TALLEST_RATIO: f32 = 64.0;
 /// Bytes per cell.
 pub const CANOPY_CELL_BYTES: usize = 8;
 /// Cells per side the bake writes.
@@ -158,6 +169,11 @@ pub struct Canopy {
     pub height_min_m: f32,
     /// Which children exist: bit `i` for child `(2x + (i & 1), 2y + (i >> 1))`.
     pub children: u8,
+    /// The crowns' batches' tallest trees over their own heights (Σ area ·
+    /// batch tallest / Σ area · height; 1 in version 1 rasters): a cell's
+    /// trees are sized `height_m × tallest_ratio` for the cross-fade, as the
+    /// cull sizes each batch by its tallest tree.
+    pub tallest_ratio: f32,
     /// Raw cells, `cells²` × 8 bytes, row by row.
     pub data: Vec<u8>,
 }
@@ -228,6 +244,7 @@ impl Canopy {
             out.extend_from_slice(&v.to_le_bytes());
         }
         out.extend_from_slice(&u32::from(self.children).to_le_bytes());
+        out.extend_from_slice(&self.tallest_ratio.to_le_bytes());
         out.extend_from_slice(&self.data);
         out
     }
@@ -238,7 +255,8 @@ impl Canopy {
     /// A [`DecodeError`] for a wrong magic, version or header size, a cell count
     /// of 0 or above [`MAX_CANOPY_CELLS`], a length that is not the header plus
     /// `cells²` cells, non-finite or inverted ranges (heights: 0 ≤ min ≤ max), a
-    /// non-positive size, or child bits above bit 3.
+    /// non-positive size, child bits above bit 3, or a `tallest_ratio` outside
+    /// 1–[`MAX_TALLEST_RATIO`].
     pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
         decode_canopy(bytes).map_err(|p| DecodeError::new(file, p))
     }
@@ -248,12 +266,16 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
     let r = Reader::new(bytes);
     r.magic("Sylva canopy raster", &CANOPY_MAGIC)?;
     let version = r.u16("header.version", 4)?;
-    if version != CANOPY_VERSION {
-        return Err(Problem::UnsupportedVersion { found: version.into(), supported: CANOPY_VERSION.into() });
-    }
+    let expected = match version {
+        1 => CANOPY_HEADER_BYTES_V1,
+        CANOPY_VERSION => CANOPY_HEADER_BYTES,
+        _ => return Err(Problem::UnsupportedVersion { found: version.into(), supported: CANOPY_VERSION.into() }),
+    };
     let header = r.u16("header.header_bytes", 6)?;
-    if usize::from(header) != CANOPY_HEADER_BYTES {
-        return Err(Problem::Invalid(format!("header.header_bytes is {header}, expected {CANOPY_HEADER_BYTES}")));
+    if usize::from(header) != expected {
+        return Err(Problem::Invalid(format!(
+            "header.header_bytes is {header}, expected {expected} for version {version}"
+        )));
     }
     let cells = r.u32("header.cells", 8)?;
     if cells == 0 || cells > MAX_CANOPY_CELLS {
@@ -284,9 +306,16 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
     if children > 0xf {
         return Err(Problem::Invalid(format!("header.children is {children:#x}: only bits 0–3 (four children) exist")));
     }
+    let tallest_ratio = if version == 1 { 1.0 } else { f("header.tallest_ratio", 44)? };
+    if !(1.0..=MAX_TALLEST_RATIO).contains(&tallest_ratio) {
+        return Err(Problem::Invalid(format!(
+            "header.tallest_ratio is {tallest_ratio}: must be 1–{MAX_TALLEST_RATIO} \
+             (a batch's tallest tree is at least as tall as each of its trees)"
+        )));
+    }
     let n = u64::from(cells) * u64::from(cells) * CANOPY_CELL_BYTES as u64;
-    let data = r.slice("cells", CANOPY_HEADER_BYTES as u64, n)?;
-    let end = CANOPY_HEADER_BYTES as u64 + n;
+    let data = r.slice("cells", expected as u64, n)?;
+    let end = expected as u64 + n;
     if bytes.len() as u64 != end {
         return Err(Problem::Invalid(format!(
             "{} bytes after the {cells}×{cells} cells end at byte {end}",
@@ -301,6 +330,7 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
         height_max_m: h_max,
         height_min_m: h_min,
         children: children as u8,
+        tallest_ratio,
         data: data.to_vec(),
     })
 }
@@ -318,6 +348,7 @@ mod tests {
             height_max_m: 30.0,
             height_min_m: 2.0,
             children: 0b1010,
+            tallest_ratio: 1.25,
             data: vec![0; 16 * CANOPY_CELL_BYTES],
         };
         for i in 0..16u32 {
@@ -356,7 +387,7 @@ mod tests {
             levels: 3,
             cells: 64,
             rasters: 5,
-            bytes: 5 * 32_812,
+            bytes: 5 * 32_816,
         };
         assert_eq!(e.raster_url(2, 3, 1), "canopy/2/3_1.cnpy");
         assert_eq!(e.origin_of(2, 3, 1), [-512.0 + 1536.0, 512.0]);
@@ -372,6 +403,21 @@ mod tests {
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
         }
+    }
+
+    #[test]
+    fn version_1_rasters_read_with_a_tallest_ratio_of_1() {
+        let c = sample();
+        let v2 = c.encode();
+        // Version 1: the 44-byte header without `tallest_ratio`.
+        let mut v1 = v2[..CANOPY_HEADER_BYTES_V1].to_vec();
+        v1[4..6].copy_from_slice(&1u16.to_le_bytes());
+        v1[6..8].copy_from_slice(&(CANOPY_HEADER_BYTES_V1 as u16).to_le_bytes());
+        v1.extend_from_slice(&v2[CANOPY_HEADER_BYTES..]);
+        let d = Canopy::decode("old.cnpy", &v1).unwrap();
+        assert_eq!(d, Canopy { tallest_ratio: 1.0, ..c });
+        v1[6..8].copy_from_slice(&48u16.to_le_bytes());
+        assert!(Canopy::decode("old.cnpy", &v1).unwrap_err().to_string().contains("expected 44 for version 1"));
     }
 
     #[test]
@@ -404,6 +450,10 @@ mod tests {
         wide[28..32].copy_from_slice(&3e38f32.to_le_bytes());
         assert!(Canopy::decode("c", &wide).unwrap_err().to_string().contains("too far"));
         assert!(set(40, &[0x10]).contains("children"));
+        assert!(set(44, &0.5f32.to_le_bytes()).contains("tallest_ratio"));
+        assert!(set(44, &f32::NAN.to_le_bytes()).contains("tallest_ratio"));
+        assert!(set(44, &100f32.to_le_bytes()).contains("tallest_ratio"));
+        assert!(set(6, &44u16.to_le_bytes()).contains("expected 48 for version 2"));
         // Every single-byte change decodes or fails cleanly.
         for at in 0..good.len() {
             for v in [0u8, 1, 0x7f, 0xff] {

@@ -36,8 +36,9 @@ pub struct GpuCanopyRaster {
     /// 1: trees the view wants here are not resident, the raster stands in
     /// for them at full cover (`CanopyDraw::stand_in`); 0: cross-faded.
     pub stand_in: u32,
-    /// Padding to the WGSL struct's 8-byte alignment.
-    pub pad: u32,
+    /// The crowns' batches' tallest trees over their own heights
+    /// (`Canopy::tallest_ratio`): the cross-fade sizes a cell's trees as the cull does.
+    pub tallest_ratio: f32,
 }
 
 /// The pool's buffers (made when a scene first draws a raster).
@@ -202,7 +203,7 @@ impl CanopyPass {
                 height_max: c.height_max_m,
                 slot,
                 stand_in: u32::from(d.stand_in),
-                pad: 0,
+                tallest_ratio: c.tallest_ratio,
             });
         }
         if !records.is_empty() {

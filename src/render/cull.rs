@@ -240,8 +240,10 @@ pub fn cpu_select_styled(
             if view.lod[3] < 1.5 && (!sphere_visible(c, r, view) || dist - r > view.lod[1]) {
                 continue;
             }
-            let h_px = s.select[0] * d.2 * view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
-            if canopy_drops(h_px, k, intended, view) {
+            let px_per_m = view.lod[0] / if view.viewport[3] > 0.5 { 1.0 } else { dist };
+            let h_px = s.select[0] * d.2 * px_per_m;
+            // The canopy's share by the batch's tallest tree at this distance (as in WGSL).
+            if canopy_drops(b.max_height_m * px_per_m, k, intended, view) {
                 continue;
             }
             if thinned {
@@ -271,10 +273,11 @@ pub fn canopy_weight(h_px: f32, view: &ViewUniform) -> f32 {
     ((hi - h_px) / (hi - lo).max(1e-3)).clamp(0.0, 1.0)
 }
 
-/// Whether the canopy stands in for tree `i` (of projected height `h_px`) of
-/// the `count` the cull considers of its batch — the tail of the density
-/// order: kept while `i + ½ < count · (1 − w(h))` — exactly as `canopy_drops`
-/// in `shaders/common.wgsl`.
+/// Whether the canopy stands in for tree `i` of the `count` the cull
+/// considers of its batch (`h_px`: the batch's tallest tree projected at tree
+/// i's distance) — the tail of the density order: kept while
+/// `i + ½ < count · (1 − w(h))` — exactly as `canopy_drops` in
+/// `shaders/common.wgsl`.
 #[must_use]
 pub fn canopy_drops(h_px: f32, i: u32, count: u32, view: &ViewUniform) -> bool {
     let [lo, hi, _, _] = view.canopy;
