@@ -43,7 +43,7 @@ struct View {
     // x: cascades in use (0 off), y: map size, z: PCF radius (texels), w: fade-out distance (m).
     shadow: vec4<f32>,
     // The canopy cross-fade (issue 20; `canopy_weight`): x, y: the projected
-    // tree heights (px, × quality) below which trees are all / begin to be
+    // heights of a batch's tallest tree (px, × quality) below which its trees are all / begin to be
     // replaced by the canopy rasters (x = 0: no canopy); zw unused.
     canopy: vec4<f32>,
 };

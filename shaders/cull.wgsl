@@ -208,9 +208,9 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         let h_px = s.select.x * tree.scale * px_per_m;
         // Where trees are a pixel or two, the canopy raster stands in for a share of them:
         // the share of the batch's tallest tree at this tree's distance (the stream
-        // fetches each batch up to that share of its tallest, and the canopy raster
-        // sizes its cells' trees by their batches' tallest), so the trees held are
-        // the trees drawn.
+        // fetches each batch up to that share of its tallest at the batch's nearest
+        // point, and the canopy raster sizes its cells' trees by their batches'
+        // tallest), so the stream holds what the cull draws and little more.
         if canopy_drops(b.max_height_m * px_per_m, i, intended, view) {
             continue;
         }

@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use sylva::format::manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry};
+use sylva::format::manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry, SCENE_VERSION};
 use sylva::format::pack::{
     kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section,
     TextureArrayMeta,
@@ -783,10 +783,10 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"{not json").unwrap_err().to_string().contains("invalid JSON"));
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
-    manifest_error(|v| v["version"] = 10.into(), "version 10");
+    manifest_error(|v| v["version"] = (SCENE_VERSION + 1).into(), &format!("version {}", SCENE_VERSION + 1));
     // Version 8 adds the canopy quadtree; its folder stays inside the scene, its sizes are bounded.
     let canopy = serde_json::json!({"path": "canopy", "origin_m": [-512.0, 0.0], "root_size_m": 2048.0,
-        "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_060});
+        "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_080});
     manifest_error(|v| v["canopy"] = canopy.clone(), "\"canopy\" needs manifest version 8");
     let with = |key: &'static str, value: serde_json::Value| {
         let mut c = canopy.clone();

@@ -417,6 +417,8 @@ mod tests {
         assert_eq!(Acc::new([0.0, 0.0], 64.0).finish(0).tallest_ratio, 1.0);
         let mut low = Acc::new([0.0, 0.0], 64.0);
         low.add(&tree(5.0, 10.0, 5.0, 4.0));
-        assert_eq!(low.finish(0).tallest_ratio, 1.0);
+        low.add(&tree(20.0, 10.0, 20.0, 4.0));
+        let want = (4.0 * 10.0 + 4.0 * 20.0) / (4.0 * 10.0 + 4.0 * 10.0);
+        assert!((low.finish(0).tallest_ratio - want).abs() < 1e-6);
     }
 }

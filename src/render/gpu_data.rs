@@ -42,8 +42,8 @@ pub struct ViewUniform {
     /// x: cascades in use (0: no shadows), y: shadow map size (texels), z: PCF
     /// kernel radius (texels: 0 one tap), w: distance (m) where shadows have faded out.
     pub shadow: [f32; 4],
-    /// The canopy cross-fade (`canopy_weight`): x, y the projected tree heights
-    /// (px × quality) below which trees are all / begin to be replaced by the
+    /// The canopy cross-fade (`canopy_weight`): x, y the projected heights of a
+    /// batch's tallest tree (px × quality) below which its trees are all / begin to be replaced by the
     /// canopy rasters (x = 0: no canopy); zw unused.
     pub canopy: [f32; 4],
 }

@@ -115,10 +115,11 @@ pub enum FarTier {
 /// Default of [`RenderSettings::thin_px`].
 pub const DEFAULT_THIN_PX: f32 = 8.0;
 
-/// The canopy cross-fade ([`RenderSettings::canopy`]): below the first
-/// projected tree height (px, × quality) the canopy rasters stand in for every
-/// tree, from the second up trees are drawn whole, between a share of them
-/// (`canopy_weight` in `shaders/common.wgsl`).
+/// The canopy cross-fade ([`RenderSettings::canopy`]): where a batch's
+/// tallest tree projects (px, × quality) below the first height the canopy
+/// rasters stand in for all of the batch's trees, from the second up they are
+/// drawn whole, between a share of them (`canopy_weight` and `canopy_drops`
+/// in `shaders/common.wgsl`).
 pub const CANOPY_PX: [f32; 2] = [1.0, 2.5];
 
 /// Canopy rasters are refined (children replace their parent) while their
