@@ -178,6 +178,12 @@ struct PackArgs {
     /// Write billboard layers as PNG strips into this directory.
     #[arg(long, value_name = "DIR")]
     debug_dump: Option<PathBuf>,
+    /// Keep the species packs built in this folder, and take a pack from it when
+    /// the same model is baked again with the same pack options by the same
+    /// sylva-bake: re-bakes of an inventory then skip the packs (seconds to
+    /// minutes a species). Delete the folder to free its space.
+    #[arg(long, value_name = "DIR", env = "SYLVA_BAKE_PACK_CACHE")]
+    pack_cache: Option<PathBuf>,
     /// Batch grid cell size in metres (default: from the data's density; at most 655).
     #[arg(long)]
     cell_size: Option<u32>,
@@ -616,6 +622,7 @@ fn bake_demo(
         tile_cells: args.pack.tile_cells,
         pack: args.pack.options()?,
         debug_dump: args.pack.debug_dump.clone(),
+        pack_cache: args.pack.pack_cache.clone(),
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
         canopy_cell_m: args.pack.canopy_cell,
@@ -929,6 +936,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
         tile_cells: args.pack.tile_cells,
         pack: pack_opts,
         debug_dump: args.pack.debug_dump.clone(),
+        pack_cache: args.pack.pack_cache.clone(),
         shard: args.pack.shard,
         index_node_tiles: args.pack.index_node_tiles,
         canopy_cell_m: args.pack.canopy_cell,

@@ -643,6 +643,9 @@ pub enum PackRepr {
 /// Renders one tree of `pack` lit, with a perspective camera framing the whole
 /// tree, into a `width`×`height` sRGB RGBA8 image, with the tree's own baked
 /// occlusion when `ao`. `None` if the pack lacks the representation.
+///
+/// Sets up a [`TreeRenderer`] (every pipeline) for the one image: to render
+/// several, make one and call [`TreeRenderer::render_pack`].
 #[must_use]
 #[allow(clippy::too_many_arguments)]
 pub fn render_pack_repr(
@@ -657,30 +660,55 @@ pub fn render_pack_repr(
 ) -> Option<Vec<u8>> {
     let mut r = TreeRenderer::new(ctx);
     r.ao = ao;
-    let (clip, eye) =
-        preview_camera(Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max), view, width, height);
-    match repr {
-        PackRepr::Mesh(level) => {
-            let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
-            mesh.has_level(level)
-                .then(|| r.render(ctx, &TreeDraw::Mesh(&mesh, level), clip, eye, width, height, background))
-        }
-        PackRepr::Cluster(level) => {
-            let c = ClusterGpu::upload(&ctx.device, &ctx.queue, &r.cluster, pack)?;
-            (level < c.levels.len())
-                .then(|| r.render(ctx, &TreeDraw::Cluster(&c, level), clip, eye, width, height, background))
-        }
-        PackRepr::Billboard => {
-            let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, pack)?;
-            Some(r.render(ctx, &TreeDraw::Billboard(&bb), clip, eye, width, height, background))
-        }
-        PackRepr::Impostor => {
-            let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, pack)?;
-            Some(r.render(ctx, &TreeDraw::Impostor(&imp), clip, eye, width, height, background))
-        }
-        PackRepr::Cloud => {
-            let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
-            mesh.cloud.is_some().then(|| r.render(ctx, &TreeDraw::Cloud(&mesh), clip, eye, width, height, background))
+    r.render_pack(ctx, pack, repr, view, width, height, background)
+}
+
+impl TreeRenderer {
+    /// Renders one tree of `pack` lit, with a perspective camera framing the
+    /// whole tree, into a `width`×`height` sRGB RGBA8 image (with the tree's
+    /// own occlusion when [`Self::ao`]). `None` if the pack lacks the
+    /// representation. The pack is uploaded for the call; the pipelines are
+    /// this renderer's (compiling them is most of a one-off image's time).
+    #[must_use]
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_pack(
+        &self,
+        ctx: &GpuContext,
+        pack: &Pack<'_>,
+        repr: PackRepr,
+        view: PackView,
+        width: u32,
+        height: u32,
+        background: [f64; 4],
+    ) -> Option<Vec<u8>> {
+        let r = self;
+        let (clip, eye) =
+            preview_camera(Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max), view, width, height);
+        match repr {
+            PackRepr::Mesh(level) => {
+                let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
+                mesh.has_level(level)
+                    .then(|| r.render(ctx, &TreeDraw::Mesh(&mesh, level), clip, eye, width, height, background))
+            }
+            PackRepr::Cluster(level) => {
+                let c = ClusterGpu::upload(&ctx.device, &ctx.queue, &r.cluster, pack)?;
+                (level < c.levels.len())
+                    .then(|| r.render(ctx, &TreeDraw::Cluster(&c, level), clip, eye, width, height, background))
+            }
+            PackRepr::Billboard => {
+                let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, pack)?;
+                Some(r.render(ctx, &TreeDraw::Billboard(&bb), clip, eye, width, height, background))
+            }
+            PackRepr::Impostor => {
+                let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, pack)?;
+                Some(r.render(ctx, &TreeDraw::Impostor(&imp), clip, eye, width, height, background))
+            }
+            PackRepr::Cloud => {
+                let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
+                mesh.cloud
+                    .is_some()
+                    .then(|| r.render(ctx, &TreeDraw::Cloud(&mesh), clip, eye, width, height, background))
+            }
         }
     }
 }

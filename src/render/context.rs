@@ -31,7 +31,16 @@ impl GpuContext {
     /// # Errors
     /// [`ContextError`] when there is no adapter or the device request fails.
     pub async fn new_headless() -> Result<Self, ContextError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        // Debug builds ask for shader debug info by default: naga then writes
+        // every expression's source line into the SPIR-V, finding each line
+        // by a scan of the source (quadratic in a shader's length), which was
+        // 60 % of a GPU test's time (docs/BENCHMARKS.md, "The test suite's
+        // time"). Only where asked for (WGPU_DEBUG=1, e.g. for RenderDoc).
+        if std::env::var_os("WGPU_DEBUG").is_none() {
+            descriptor.flags.remove(wgpu::InstanceFlags::DEBUG);
+        }
+        let instance = wgpu::Instance::new(descriptor);
         let mut last_err = String::new();
         let mut adapter = None;
         for power in [wgpu::PowerPreference::HighPerformance, wgpu::PowerPreference::None] {

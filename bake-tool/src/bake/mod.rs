@@ -15,6 +15,7 @@
 pub mod ground;
 pub mod ground_material;
 pub mod imagery;
+pub mod pack_cache;
 pub mod packs;
 pub mod terrain;
 pub mod tiles;
@@ -54,6 +55,8 @@ pub struct SceneInput<'a> {
     pub pack: PackOptions,
     /// Where to write billboard PNGs, if anywhere.
     pub debug_dump: Option<PathBuf>,
+    /// The pack cache folder, if any ([`pack_cache`]).
+    pub pack_cache: Option<PathBuf>,
     /// Bake only shard `.0` of `.1` of the tile grid (packs only in shard 0).
     pub shard: Option<(u32, u32)>,
     /// Most tiles per index node; scenes with more tiles get a hierarchical index.
@@ -86,7 +89,15 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
     out.write(|dir| {
         // Packs are baked by shard 0 only; the other shards write tiles.
         let bake_packs = input.shard.is_none_or(|(index, _)| index == 0);
-        let packs = packs::bake_packs(&input.species, &input.pack, bake_packs, input.debug_dump.as_deref(), dir, log)?;
+        let packs = packs::bake_packs(
+            &input.species,
+            &input.pack,
+            bake_packs,
+            input.pack_cache.as_deref(),
+            input.debug_dump.as_deref(),
+            dir,
+            log,
+        )?;
         let tiles = tiles::write_tiles(
             &input.trees,
             &packs.shapes,

@@ -1,6 +1,7 @@
 //! Stage 2 of the bake: a LoD pack per species (mesh levels, billboards rendered
 //! on the GPU, clusters; [`crate::pack_build`]), written to `species/`, with the
 //! manifest's species entries and the shapes the tiles bound batches with.
+//! Packs found in the `--pack-cache` ([`super::pack_cache`]) are taken from it.
 
 use std::path::Path;
 use std::time::Instant;
@@ -10,6 +11,7 @@ use sylva::format::manifest::{Bounds, SpeciesEntry};
 use sylva::render::capture::CapturePipelines;
 use sylva::render::GpuContext;
 
+use super::pack_cache::PackCache;
 use crate::batching::SpeciesShape;
 use crate::gltf_import::ImportedModel;
 use crate::pack_build::{build_pack, BuiltPack, PackOptions};
@@ -26,33 +28,36 @@ pub struct Packs {
 }
 
 /// Builds and writes every species' pack into `dir/species/` (with `bake` false,
-/// as a shard other than 0 does, only the entries and shapes).
+/// as a shard other than 0 does, only the entries and shapes). Packs in `cache`
+/// are taken from it; packs built are added to it (not with `debug_dump`,
+/// which needs the billboards as they are rendered).
 pub fn bake_packs(
     species: &[(String, ImportedModel)],
     options: &PackOptions,
     bake: bool,
+    cache: Option<&Path>,
     debug_dump: Option<&Path>,
     dir: &Path,
     log: &dyn Fn(&str),
 ) -> Result<Packs> {
     let t0 = Instant::now();
     create_dir(&dir.join("species"))?;
-    let gpu_and_pipelines = if bake {
-        let gpu =
-            GpuContext::new_headless_blocking().context("the billboard bake renders with the GPU (or lavapipe)")?;
-        log(&format!("rendering billboards on {}", gpu.adapter_summary()));
-        let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
-        Some((gpu, pipelines))
-    } else {
+    if !bake {
         log("packs are baked by shard 0; this shard writes tiles only");
-        None
+    }
+    let cache = match cache {
+        Some(c) if bake && debug_dump.is_none() => Some(PackCache::open(c)?),
+        _ => None,
     };
+    // The GPU is set up when the first pack is built (not at all when every
+    // pack comes from the cache).
+    let mut gpu_and_pipelines: Option<(GpuContext, CapturePipelines)> = None;
     let mut entries = Vec::new();
     let mut shapes = Vec::new();
     for (name, model) in species {
         shapes.push(shape_of(model));
         let file = format!("species/{}.pack", safe_name(name));
-        let Some((gpu, pipelines)) = &gpu_and_pipelines else {
+        if !bake {
             let (lo, hi) = model.bounds();
             entries.push(SpeciesEntry {
                 name: name.clone(),
@@ -64,27 +69,74 @@ pub fn bake_packs(
                 head_bytes: None,
             });
             continue;
-        };
-        let built = build_pack(name, model, options, gpu, pipelines).with_context(|| format!("species {name:?}"))?;
-        write_file(&dir.join(&file), &built.bytes)?;
-        if let Some(dump) = debug_dump {
-            dump_billboards(dump, name, &built)?;
         }
-        log(&format!(
-            "  pack {name}: {} triangles in level 0, {} mesh levels, {} billboard angles, {:.2} MB",
-            built.meta.mesh_levels[0].index_count / 3,
-            built.meta.mesh_levels.len(),
-            built.meta.billboards.as_ref().map_or(0, |b| b.angles),
-            built.bytes.len() as f64 / 1e6
-        ));
+        // (Held until the pack is written: another bake of it waits, then takes it.)
+        let cached = match &cache {
+            Some(c) => {
+                let key = c.key(name, model, options);
+                let lock = c.lock(&key)?;
+                Some((c, key, lock))
+            }
+            None => None,
+        };
+        let mut from_cache = None;
+        if let Some((c, key, _)) = &cached {
+            if let Some(bytes) = c.get(key) {
+                let meta = match sylva::format::decode_pack(&file, &bytes) {
+                    Ok(pack) => Some(pack.meta),
+                    Err(e) => {
+                        log(&format!("  pack {name}: the cached copy does not decode ({e}): building it again"));
+                        None
+                    }
+                };
+                from_cache = meta.map(|meta| (bytes, meta));
+            }
+        }
+        let (bytes, meta) = match from_cache {
+            Some(hit) => {
+                log(&format!("  pack {name}: from the pack cache ({:.2} MB)", hit.0.len() as f64 / 1e6));
+                hit
+            }
+            None => {
+                if gpu_and_pipelines.is_none() {
+                    let gpu = GpuContext::new_headless_blocking()
+                        .context("the billboard bake renders with the GPU (or lavapipe)")?;
+                    log(&format!("rendering billboards on {}", gpu.adapter_summary()));
+                    let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+                    gpu_and_pipelines = Some((gpu, pipelines));
+                }
+                let (gpu, pipelines) = gpu_and_pipelines.as_ref().expect("set up above");
+                let built =
+                    build_pack(name, model, options, gpu, pipelines).with_context(|| format!("species {name:?}"))?;
+                if let Some(dump) = debug_dump {
+                    dump_billboards(dump, name, &built)?;
+                }
+                log(&format!(
+                    "  pack {name}: {} triangles in level 0, {} mesh levels, {} billboard angles, {:.2} MB",
+                    built.meta.mesh_levels[0].index_count / 3,
+                    built.meta.mesh_levels.len(),
+                    built.meta.billboards.as_ref().map_or(0, |b| b.angles),
+                    built.bytes.len() as f64 / 1e6
+                ));
+                if let Some((c, key, _)) = &cached {
+                    // A cache that cannot be written costs the next bake time, not this one its scene.
+                    if let Err(e) = c.put(key, &built.bytes) {
+                        log(&format!("  warning: {e:#}"));
+                    }
+                }
+                (built.bytes, built.meta)
+            }
+        };
+        drop(cached);
+        write_file(&dir.join(&file), &bytes)?;
         entries.push(SpeciesEntry {
             name: name.clone(),
             pack: file,
-            bytes: built.bytes.len() as u64,
-            height_m: built.meta.height_m,
-            bounds: Bounds { min: built.meta.bounds_min, max: built.meta.bounds_max },
+            bytes: bytes.len() as u64,
+            height_m: meta.height_m,
+            bounds: Bounds { min: meta.bounds_min, max: meta.bounds_max },
             trees: 0,
-            head_bytes: Some(pack_head_bytes(&built.bytes)),
+            head_bytes: Some(pack_head_bytes(&bytes)),
         });
     }
     Ok(Packs { entries, shapes, seconds: t0.elapsed().as_secs_f64() })
