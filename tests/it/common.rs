@@ -1,5 +1,4 @@
-//! Helpers shared by the GPU test binaries: scene copies with edits.
-#![allow(dead_code)] // each test binary uses some of them
+//! Helpers shared by the GPU tests: scene copies with edits.
 
 use std::path::Path;
 

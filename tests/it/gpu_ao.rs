@@ -7,7 +7,7 @@
 use sylva::format::decode_pack;
 use sylva::format::pack::{ao_from_snorm8, kind};
 use sylva::metrics::multiscale_rmse;
-use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
+use sylva::render::capture::{PackRepr, PackView, TreeRenderer};
 use sylva::render::GpuContext;
 
 const SPECIES: [&str; 3] = ["beech", "birch", "spruce"];
@@ -28,6 +28,10 @@ fn tree_brightness(img: &[u8], mask: &[bool]) -> (f64, usize) {
 #[test]
 fn occlusion_darkens_every_level_alike() {
     let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    // One renderer with the trees' own occlusion and one without, for every image.
+    let with_ao = TreeRenderer::new(&ctx);
+    let mut without_ao = TreeRenderer::new(&ctx);
+    without_ao.ao = false;
     let mut rows = Vec::new();
     let mut failures = Vec::new();
     for species in SPECIES {
@@ -49,8 +53,10 @@ fn occlusion_darkens_every_level_alike() {
             ("billboard", PackRepr::Billboard),
         ];
         for view in [PackView::Side, PackView::Oblique] {
-            let render =
-                |repr, ao| render_pack_repr(&ctx, &pack, repr, view, SIZE, SIZE, BG, ao).expect("representation");
+            let render = |repr, ao| {
+                let r = if ao { &with_ao } else { &without_ao };
+                r.render_pack(&ctx, &pack, repr, view, SIZE, SIZE, BG).expect("representation")
+            };
             let background = render(PackRepr::Mesh(0), false)[..4].to_vec();
             let mask_of = |img: &[u8]| -> Vec<bool> {
                 img.chunks(4).map(|p| p.iter().zip(&background).take(3).any(|(a, b)| a.abs_diff(*b) > 2)).collect()

@@ -6,7 +6,7 @@ use glam::{DVec3, Mat4, Quat, Vec3};
 use sylva::format::cluster::{Ellipsoid, Line, PackedEllipsoid, PackedLine};
 use sylva::format::decode_pack;
 use sylva::metrics::multiscale_rmse;
-use sylva::render::capture::{render_pack_repr, BillboardFrame, PackRepr, PackView, TreeDraw, TreeRenderer};
+use sylva::render::capture::{BillboardFrame, PackRepr, PackView, TreeDraw, TreeRenderer};
 use sylva::render::cluster::ClusterGpu;
 use sylva::render::GpuContext;
 
@@ -248,8 +248,9 @@ fn three_representations_of_one_tree_side_by_side() {
         .expect("a level below mesh 1");
     let size = 128;
     let bg = [0.62, 0.74, 0.86, 1.0];
+    let renderer = TreeRenderer::new(&ctx);
     let render =
-        |repr| render_pack_repr(&ctx, &pack, repr, PackView::Side, size, size, bg, true).expect("representation");
+        |repr| renderer.render_pack(&ctx, &pack, repr, PackView::Side, size, size, bg).expect("representation");
     let mesh = render(PackRepr::Mesh(0));
     let cluster = render(PackRepr::Cluster(level));
     let billboard = render(PackRepr::Billboard);

@@ -45,7 +45,7 @@ fn shader_view_selection_matches_the_cpu_oracle() {
                out[id.x * 2u] = vec4<f32>(vec3<f32>(v.layers), 0.0);\n\
                out[id.x * 2u + 1u] = vec4<f32>(v.weights, 0.0);\n\
              }}",
-            include_str!("../shaders/impostor_views.wgsl")
+            include_str!("../../shaders/impostor_views.wgsl")
         );
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("impostor views test"),

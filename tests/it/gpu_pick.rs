@@ -225,8 +225,6 @@ fn describe_matches(off: &OffscreenScene, m: &Manifest, instance: u32, position:
     assert!(d["lon"].as_f64().is_some_and(|l| (14.0..16.0).contains(&l)), "{d}");
 }
 
-mod common;
-
 /// A copy of the fixture with two attributes per tree: `kind` (a category,
 /// "a", "b" or "c" by id % 3) and `girth` (an integer, id % 101).
 fn attributed_fixture(name: &str) -> PathBuf {
@@ -258,7 +256,7 @@ fn attributed_fixture(name: &str) -> PathBuf {
         ],
     };
     let s = schema.clone();
-    common::rewritten_copy(
+    crate::common::rewritten_copy(
         &fixture(),
         &dir,
         |m| {

@@ -13,8 +13,7 @@ use sylva::render::forest::{PoolConfig, RenderSettings, Representations};
 use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::render::refine::{RefineConfig, FULL_MESH_QUALITY};
 
-mod common;
-use common::foliage_share;
+use crate::common::foliage_share;
 
 const W: u32 = 192;
 const H: u32 = 108;

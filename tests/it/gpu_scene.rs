@@ -20,8 +20,7 @@ use sylva::render::forest::{CullingMode, PoolConfig, RenderSettings, Representat
 use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::scene::StreamEvent;
 
-mod common;
-use common::{foliage_share, rewritten_copy};
+use crate::common::{foliage_share, rewritten_copy};
 
 const W: u32 = 320;
 const H: u32 = 180;

@@ -16,8 +16,6 @@ use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::render::shadow::ShadowQuality;
 use sylva::render::Lighting;
 
-mod common;
-
 const W: u32 = 320;
 const H: u32 = 240;
 
@@ -116,7 +114,7 @@ fn single_tree_copy(dst: &Path, copies: u32) {
         tile.batches[index].species as usize
     };
     let keep = url.clone();
-    common::rewritten_copy(
+    crate::common::rewritten_copy(
         &src,
         dst,
         |m| {

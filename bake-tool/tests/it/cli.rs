@@ -3,8 +3,7 @@
 
 use std::path::Path;
 
-mod common;
-use common::{bin, fails, run, snapshot, tmp, write_geotiff_dem, SMALL};
+use crate::common::{bin, bin_building_packs, fails, run, snapshot, tmp, write_geotiff_dem, SMALL};
 
 fn inspect_json(path: &Path) -> serde_json::Value {
     let out = run(bin().args(["inspect", "--json"]).arg(path));
@@ -52,11 +51,41 @@ fn quick_bake(model: &Path, csv: &Path, out: &Path, extra: &[&str]) -> std::proc
 #[test]
 fn demo_scene_is_complete_valid_and_deterministic() {
     let dir = tmp("demo");
-    let (a, b) = (dir.join("a"), dir.join("b"));
-    for out in [&a, &b] {
-        run(bin().args(["demo", "--trees", "3000", "--seed", "7"]).args(SMALL).arg("--out").arg(out));
-    }
+    let (a, b, c, d) = (dir.join("a"), dir.join("b"), dir.join("c"), dir.join("d"));
+    let cache = dir.join("pack-cache");
+    let demo = |out: &Path, cached: bool| {
+        let mut cmd = bin_building_packs();
+        cmd.args(["demo", "--trees", "3000", "--seed", "7"]).args(SMALL).arg("--out").arg(out);
+        if cached {
+            cmd.arg("--pack-cache").arg(&cache);
+        }
+        String::from_utf8_lossy(&run(&mut cmd).stderr).into_owned()
+    };
+    // Two bakes that build every pack (the second also fills a new pack cache).
+    demo(&a, false);
+    let log = demo(&b, true);
+    assert!(!log.contains("from the pack cache"), "an empty cache holds no pack: {log}");
     assert_eq!(snapshot(&a), snapshot(&b), "same seed must give the same bytes");
+    // The pack cache: every pack taken from it, the same bytes; a corrupt entry
+    // is built again (and replaced), the same bytes again.
+    let log = demo(&c, true);
+    assert_eq!(log.matches("from the pack cache").count(), 3, "{log}");
+    assert!(!log.contains("rendering billboards"), "no GPU set up when every pack is cached: {log}");
+    assert_eq!(snapshot(&a), snapshot(&c), "packs from the cache give the same scene");
+    let entries: Vec<_> = std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "pack"))
+        .collect();
+    assert_eq!(entries.len(), 3, "one entry a species: {entries:?}");
+    std::fs::write(&entries[0], b"SYLVAPAK but not really").unwrap();
+    let log = demo(&d, true);
+    assert!(
+        log.contains("the cached copy does not decode") && log.matches("from the pack cache").count() == 2,
+        "{log}"
+    );
+    assert_eq!(snapshot(&a), snapshot(&d), "a corrupt cache entry is built again");
+    assert!(std::fs::read(&entries[0]).unwrap().len() > 1000, "and replaced");
     let v = inspect_json(&a);
     assert_eq!(v["trees_total"], 3000);
     assert_eq!(v["species_count"], 3);
@@ -191,10 +220,13 @@ fn bakes_the_shared_real_data() {
         }
         // …and the simplified mesh's threshold (at or above the full mesh's: left out).
         assert!(pack.meta.mesh_levels[1].policy_px.is_some_and(|px| px >= pack.meta.mesh_levels[1].select_px));
-        use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
+        use sylva::render::capture::{PackRepr, PackView, TreeRenderer};
         let bg = [0.62, 0.74, 0.86, 1.0];
         let size = 128;
-        let render = |r| render_pack_repr(&ctx, &pack, r, PackView::Side, size, size, bg, true).unwrap();
+        // One renderer with each tree's own occlusion and one without, for every image.
+        let (with_ao, mut without_ao) = (TreeRenderer::new(&ctx), TreeRenderer::new(&ctx));
+        without_ao.ao = false;
+        let render = |r| with_ao.render_pack(&ctx, &pack, r, PackView::Side, size, size, bg).unwrap();
         let mesh = render(PackRepr::Mesh(0));
         let errors: Vec<f64> =
             (0..n).map(|l| sylva::metrics::multiscale_rmse(&render(PackRepr::Cluster(l)), &mesh, size, size)).collect();
@@ -205,7 +237,7 @@ fn bakes_the_shared_real_data() {
         assert!(errors[0] + 0.01 < errors[n - 1], "{species}: the finest beats the coarsest: {errors:?}");
         // The tree's own occlusion darkens each level about as much as the full mesh
         // (mean brightness of the tree's pixels with it over without it).
-        let plain = |r| render_pack_repr(&ctx, &pack, r, PackView::Side, size, size, bg, false).unwrap();
+        let plain = |r| without_ao.render_pack(&ctx, &pack, r, PackView::Side, size, size, bg).unwrap();
         let darkening = |r| {
             let (on, off) = (render(r), plain(r));
             let bgpx = &off[..4];
@@ -229,7 +261,7 @@ fn bakes_the_shared_real_data() {
             img.chunks(4).filter(|p| p.iter().zip(&bgpx).take(3).any(|(x, y)| x.abs_diff(*y) > 2)).count()
         };
         for view in [PackView::Side, PackView::Oblique, PackView::Top] {
-            let at = |r| render_pack_repr(&ctx, &pack, r, view, size, size, bg, true).unwrap();
+            let at = |r| with_ao.render_pack(&ctx, &pack, r, view, size, size, bg).unwrap();
             let mesh = at(PackRepr::Mesh(0));
             let (cloud, billboard) = (at(PackRepr::Cloud), at(PackRepr::Billboard));
             let err = |img: &[u8]| sylva::metrics::multiscale_rmse(img, &mesh, size, size);
@@ -257,11 +289,11 @@ fn bakes_the_shared_real_data() {
             }
             sum / n.max(1) as f64
         };
-        let big = render_pack_repr(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, 192, 192, bg, true).unwrap();
+        let big = with_ao.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, 192, 192, bg).unwrap();
         let bgpx = [big[0], big[1], big[2]];
         let truth = mean_rgb(&big, bgpx);
         for r in [PackRepr::Impostor, PackRepr::Billboard] {
-            let small = render_pack_repr(&ctx, &pack, r, PackView::Side, 48, 48, bg, true).unwrap();
+            let small = with_ao.render_pack(&ctx, &pack, r, PackView::Side, 48, 48, bg).unwrap();
             let ratio = mean_rgb(&small, bgpx) / truth;
             eprintln!("{species}: {r:?} at 48 px is {ratio:.3}× the mesh's brightness");
             assert!((ratio - 1.0).abs() < 0.08, "{species}: {r:?} at 48 px is {ratio:.3}× the mesh's brightness");

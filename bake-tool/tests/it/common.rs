@@ -1,14 +1,32 @@
 //! Helpers shared by the `sylva-bake` binary tests.
-#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// The binary, without a runtime folder as on a headless machine (it makes its own).
+/// The binary, without a runtime folder as on a headless machine (it makes its
+/// own), with the tests' shared pack cache: a pack of the same model and
+/// options is built once for all tests (each a process of its own under
+/// nextest), which is most of a small bake's time. Tests of the packs
+/// themselves (what they hold, that building is deterministic) use
+/// [`bin_building_packs`].
 pub fn bin() -> Command {
+    let mut c = bin_building_packs();
+    c.env("SYLVA_BAKE_PACK_CACHE", pack_cache());
+    c
+}
+
+/// The binary as [`bin`], but building every pack (no pack cache).
+pub fn bin_building_packs() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_sylva-bake"));
     c.env_remove("XDG_RUNTIME_DIR");
+    c.env_remove("SYLVA_BAKE_PACK_CACHE");
     c
+}
+
+/// The pack cache the tests share (keyed by the bake tool's build among the
+/// rest, so a rebuilt tool never takes an older one's packs).
+pub fn pack_cache() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("pack-cache")
 }
 
 pub fn tmp(name: &str) -> PathBuf {

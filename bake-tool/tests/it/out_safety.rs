@@ -7,8 +7,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
-mod common;
-use common::{bin, fails, run, snapshot, tmp};
+use crate::common::{bin, fails, run, snapshot, tmp};
 
 /// A quick demo bake (few trees, small textures, no cluster levels).
 fn demo(out: &Path, trees: u32, seed: u32) -> Command {

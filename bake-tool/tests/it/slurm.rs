@@ -10,8 +10,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-mod common;
-use common::{bin, run, snapshot, tmp};
+use crate::common::{bin, run, snapshot, tmp};
 
 fn deploy(script: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/slurm").join(script)

@@ -4,11 +4,9 @@
 //! through seams between levels, the levels follow the view, the stream's
 //! ground heights match the DEM, and the trees stand on it.
 
-mod common;
-
 use std::path::Path;
 
-use common::{run, tmp, write_geotiff_dem};
+use crate::common::{run, tmp, write_geotiff_dem};
 use glam::DVec3;
 use sylva::camera::Camera;
 use sylva::render::forest::PoolConfig;
@@ -32,7 +30,7 @@ fn bake(
     extra: &[&std::ffi::OsStr],
 ) -> (std::path::PathBuf, std::process::Output) {
     let scene = dir.join("scene");
-    let o = run(common::bin()
+    let o = run(crate::common::bin()
         .arg("bake")
         .arg("--model")
         .arg(format!("oak={}", model.display()))
@@ -195,7 +193,7 @@ fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() 
     write_geotiff_dem(&dem, 300, 2.0, hills); // x 500000–500600, y 5299400–5300000
     let ortho = dir.join("ortho.tif");
     // 1 m pixels over x 500050–500550, y 5299450–5299950.
-    common::write_geotiff_ortho(&ortho, (500, 500), 1.0, (500_050.0, 5_299_950.0), checker);
+    crate::common::write_geotiff_ortho(&ortho, (500, 500), 1.0, (500_050.0, 5_299_950.0), checker);
     std::fs::write(dir.join("trees.csv"), "id,x,y,height\n1,500020,5299420,12\n2,500030,5299420,12\n").unwrap();
     let (scene, o) = bake(&dir, &model, &dem, &["--ortho".as_ref(), ortho.as_os_str(), "--no-attributes".as_ref()]);
     let log = String::from_utf8_lossy(&o.stderr);
@@ -269,7 +267,7 @@ fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() 
 
     // An XYZ source on a local server replaces it, reprojected from Web
     // Mercator onto the scene's UTM terrain.
-    let (template, served) = common::xyz_server(lonlat_checker);
+    let (template, served) = crate::common::xyz_server(lonlat_checker);
     let src = sylva::scene::imagery::XyzSource::new(&template, 19).unwrap();
     off.stream.set_imagery(sylva::scene::imagery::ImageryChoice::Xyz(src));
     let img = render(&mut off, &cam);
