@@ -73,8 +73,13 @@ web:
 bins:
 	$(CARGO) build --locked -p sylva -p sylva-bake
 
+# One file at a time (each drives one headless Chromium; two would share the
+# CPU GPU); the spec reporter on the terminal, JUnit (per-test times) for
+# .ci/test-times.
 test-web: bins web
-	cd web && node --test --test-concurrency=1 tests/
+	@mkdir -p target/test-times
+	cd web && node --test --test-concurrency=1 --test-reporter=spec --test-reporter-destination=stdout \
+	  --test-reporter=junit --test-reporter-destination=../target/test-times/web-junit.xml tests/
 
 PORT ?= 8080
 demo: setup release web
@@ -181,7 +186,7 @@ fuzz:
 	  $(CARGO) +nightly fuzz run $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 || exit 1; done
 
 # Regenerates the small test scene (commit the result; then re-bless image tests
-# with SYLVA_BLESS=1 cargo test --test gpu_scene).
+# with SYLVA_BLESS=1 cargo test --test it gpu_scene::).
 fixtures: release
 	rm -rf tests/fixtures/forest-small
 	target/release/sylva-bake demo --trees 3000 --seed 3 --billboard-size 32 --impostor-size 32 --texture-size 64 \

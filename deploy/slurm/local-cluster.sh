@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A single-node Slurm cluster on this machine, for testing array-job bakes
-# (bake-tool/tests/slurm.rs) and for trying the Slurm workflow of docs/DEPLOY.md
+# (bake-tool/tests/it/slurm.rs) and for trying the Slurm workflow of docs/DEPLOY.md
 # without a real cluster. Everything lives under DIR: its own munge daemon and
 # key, slurm.conf, state and logs; nothing in /etc is touched.
 #

@@ -3,7 +3,7 @@
 //! Golden files in `tests/golden/` pin the bytes of format version 1: the
 //! encoders must reproduce them and the decoders must read them. After an
 //! intended format change, bump the version and re-bless with
-//! `SYLVA_BLESS=1 cargo test --test formats`.
+//! `SYLVA_BLESS=1 cargo test --test it formats::`.
 
 use std::path::PathBuf;
 

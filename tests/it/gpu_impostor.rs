@@ -256,7 +256,7 @@ fn work_counts_are_exact_and_scale_with_size() {
 }
 
 /// Not a test: the far tiers' error against a supersampled full-resolution
-/// mesh at several sizes (`cargo test --release --test gpu_impostor -- --ignored --nocapture`).
+/// mesh at several sizes (`cargo test --release --test it gpu_impostor:: -- --ignored --nocapture`).
 #[test]
 #[ignore = "a measurement"]
 fn far_tier_error_by_size() {
