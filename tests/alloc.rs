@@ -32,8 +32,9 @@ fn steady_state_frames_allocate_nothing_in_streaming() {
         std::env::set_var("XDG_RUNTIME_DIR", "/tmp");
     }
     let fixture = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small");
+    // (The smallest image: what is counted is streaming, not the frame.)
     let pools = sylva::render::forest::PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
-    let mut off = sylva::render::offscreen::OffscreenScene::open(fixture.to_str().unwrap(), 320, 180, pools).unwrap();
+    let mut off = sylva::render::offscreen::OffscreenScene::open(fixture.to_str().unwrap(), 80, 45, pools).unwrap();
     let cam = {
         off.load_view(&sylva::camera::Camera::default(), 30.0);
         off.named_camera(sylva::render::offscreen::NamedView::Medium, 30.0).unwrap()

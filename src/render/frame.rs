@@ -512,6 +512,34 @@ impl<F: Fetcher> Frame<F> {
         id
     }
 
+    /// [`Self::pick_blocking`] for many pixels of one view, waiting once: each
+    /// pick is submitted in turn (its uniforms written before its own submit,
+    /// so each sees its own pixel's frustum) and all are read back together.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn pick_many_blocking(&mut self, view: &ViewData, pixels: &[[u32; 2]]) -> Vec<Option<u32>> {
+        let readbacks: Vec<Option<wgpu::Buffer>> = pixels
+            .iter()
+            .map(|&px| {
+                let recorded = self.record_pick(view, px)?;
+                self.queue.submit([recorded.commands]);
+                recorded.readback.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+                Some(recorded.readback)
+            })
+            .collect();
+        if self.device.poll(wgpu::PollType::wait_indefinitely()).is_err() {
+            return vec![None; pixels.len()];
+        }
+        readbacks
+            .into_iter()
+            .map(|buffer| {
+                let buffer = buffer?;
+                let id = read_pick(&buffer.slice(..).get_mapped_range().ok()?);
+                buffer.unmap();
+                id
+            })
+            .collect()
+    }
+
     /// Submits a recorded frame. With `wait` (native, measured), each pass is
     /// waited for and timed by the wall clock, and the counters are read before
     /// this returns; without, counters and timestamps (where the device has them)
