@@ -53,13 +53,17 @@ release:
 # -Oz for what is served (1.77 MB; 63 s here), `make test` takes -O1 (the same
 # step and flags, 2.5 % larger, 14 s), WASM_OPT= skips it.
 WASM := target/wasm32-unknown-unknown/release/sylva.wasm
+# (The test build makes it too, with the workspace's features: web/bindgen/tests.)
+BINDGEN := target/debug/sylva-bindgen
 WASM_OPT ?= -Oz
 web:
 	$(CARGO) rustc --release --locked -p sylva --lib --crate-type cdylib --target wasm32-unknown-unknown
 	@if [ web/pkg/sylva_bg.wasm -nt $(WASM) ] && [ "$$(cat web/pkg/.wasm-opt 2>/dev/null)" = "$(WASM_OPT)" ]; then \
 	  echo "web/pkg: up to date (wasm-opt '$(WASM_OPT)')"; else \
 	  rm -f web/pkg/.wasm-opt && \
-	  $(CARGO) run --locked --quiet -p sylva-bindgen -- $(WASM) web/pkg && \
+	  if [ ! -x $(BINDGEN) ] || [ web/bindgen/src/main.rs -nt $(BINDGEN) ] || [ Cargo.lock -nt $(BINDGEN) ]; then \
+	    $(CARGO) build --locked -p sylva-bindgen; fi && \
+	  $(BINDGEN) $(WASM) web/pkg && \
 	  if [ -n "$(WASM_OPT)" ] && [ -x web/node_modules/.bin/wasm-opt ]; then \
 	    echo "wasm-opt $(WASM_OPT)" && \
 	    web/node_modules/.bin/wasm-opt $(WASM_OPT) --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
@@ -68,14 +72,12 @@ web:
 	@echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$(gzip -9c web/pkg/sylva_bg.wasm | wc -c) gzipped"
 
 # Browser end-to-end tests in headless Chromium. They run the debug binaries
-# (`sylva serve`, `render`, `sylva-bake`), which `make test` has built with the
-# Rust tests already (a release build would add minutes to CI).
-bins:
-	$(CARGO) build --locked -p sylva -p sylva-bake
+# (`sylva serve`, `render`, `sylva-bake`) that the test build makes for the
+# integration tests (target/debug/): `cargo build -p sylva -p sylva-bake`
+# would resolve the dependencies' features for those two packages alone and
+# rebuild the whole tree (131 s on the CI machine); a release build, minutes.
+bins: test-build
 
-# One file at a time (each drives one headless Chromium; two would share the
-# CPU GPU); the spec reporter on the terminal, JUnit (per-test times) for
-# .ci/test-times.
 test-web: bins web
 	@mkdir -p target/test-times
 	cd web && node --test --test-concurrency=1 --test-reporter=spec --test-reporter-destination=stdout \

@@ -1,7 +1,7 @@
 // End-to-end tests of the viewer in headless Chromium (Debian's, with
 // SwiftShader WebGPU; flags from ../shared/design/platform.md). They start
 // `sylva serve` on the small fixture scene and drive the page through
-// `window.sylva`. Run by `make test` (or `cd web && npm test` after `make bins web`).
+// `window.sylva`. Run by `make test` (or `cd web && npm test` after `make test-build web`).
 
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
@@ -346,8 +346,13 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     csv += `${i},Tilia,${(lat0 + (n % 20) * 0.0002).toFixed(6)},${(lon0 + Math.floor(n / 20) * 0.0003).toFixed(6)},${10 + (i % 8)}\n`;
   }
   writeFileSync(join(dir, 'districts.csv'), csv);
+  // The oak's packs as the bake tool's tests bake it (bake-tool/tests/it/cli.rs,
+  // `quick_bake`): from their pack cache when `make test` ran those first.
   execFileSync(sylvaBakeBin, ['bake', '--model', `oak=${model}`, '--placements', join(dir, 'districts.csv'), '--no-clusters',
-    '--billboard-size', '32', '--texture-size', '32', '--out', join(dir, 'scene')], { stdio: ['ignore', 'ignore', 'pipe'] });
+    '--billboard-size', '16', '--texture-size', '16', '--out', join(dir, 'scene')], {
+    stdio: ['ignore', 'ignore', 'pipe'],
+    env: { ...process.env, SYLVA_BAKE_PACK_CACHE: process.env.SYLVA_BAKE_PACK_CACHE || join(root, 'target', 'tmp', 'pack-cache') },
+  });
   const served = startServer(join(dir, 'scene'));
   try {
     const url = await served.url;
