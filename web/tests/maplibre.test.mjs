@@ -85,7 +85,11 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
   const base = await server.url;
   const browser = await chromium.launch({ executablePath: process.env.CHROMIUM || '/usr/bin/chromium', args: [...WEBGPU_FLAGS, '--enable-unsafe-swiftshader'] });
   t.after(() => browser.close());
-  const page = await browser.newPage({ viewport: { width: 480, height: 320 } });
+  // 360×240: SwiftShader's frame time grows with the pixels (480×320 took 72 s on
+  // the CI machine). The ground's tolerance is 1.5 px at 480 px wide, scaled with
+  // the width: the same angle.
+  const page = await browser.newPage({ viewport: { width: 360, height: 240 } });
+  const tolerancePx = 1.5 * 360 / 480;
   const errors = [];
   page.on('pageerror', (e) => errors.push(String(e)));
   page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
@@ -140,9 +144,9 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
     ['dragged', async () => {
       // Pointer events pass through the forest's canvas to the map.
       const before = await page.evaluate(() => window.map.getCenter().toArray());
-      await page.mouse.move(240, 200);
+      await page.mouse.move(180, 150);
       await page.mouse.down();
-      for (let k = 1; k <= 6; k++) await page.mouse.move(240 - k * 12, 200 - k * 6);
+      for (let k = 1; k <= 6; k++) await page.mouse.move(180 - k * 12, 150 - k * 6);
       await page.mouse.up();
       const after = await page.evaluate(() => window.map.getCenter().toArray());
       assert.notDeepEqual(after, before, 'the drag panned the map');
@@ -159,7 +163,7 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
     await settle(page);
     const { worst, n } = await projectionError(page);
     assert.equal(n, 16, `${name}: every grid point projected`);
-    assert.ok(worst < 1.5, `${name}: the forest's camera projects the ground ${worst} px from the map`);
+    assert.ok(worst < tolerancePx, `${name}: the forest's camera projects the ground ${worst} px from the map`);
     worsts.push(worst);
     const { misses, points } = await crownPicks(page, trees);
     // What is shown there (not only what the pick pass draws): trees, not the basemap.
@@ -189,7 +193,7 @@ test('the forest on a MapLibre map stays on it through pan, zoom, rotate and til
   });
   await settle(page);
   const off = await projectionError(page);
-  assert.ok(off.worst > 1.5, `a 1° error in the pose moves the ground by ${off.worst} px`);
+  assert.ok(off.worst > tolerancePx, `a 1° error in the pose moves the ground by ${off.worst} px`);
   console.log(`ground projected by the forest vs the map, worst per pose: ${worsts.map((w) => w.toFixed(2)).join(', ')} px; with a 1° error: ${off.worst.toFixed(1)} px; crowns hit per pose: ${picked.map(([h, n]) => `${h}/${n}`).join(', ')}`);
   assert.deepEqual(errors, []);
 });
