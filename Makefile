@@ -18,7 +18,7 @@ setup:
 # The phases below in order, each timed; at the end the phase times and the
 # ten slowest tests (.ci/test, .ci/test-times). A test over 120 s fails.
 test:
-	@.ci/test
+	+@.ci/test
 
 fmt:
 	$(CARGO) fmt --all -- --check
@@ -58,17 +58,20 @@ BINDGEN := target/debug/sylva-bindgen
 WASM_OPT ?= -Oz
 web:
 	$(CARGO) rustc --release --locked -p sylva --lib --crate-type cdylib --target wasm32-unknown-unknown
-	@if [ web/pkg/sylva_bg.wasm -nt $(WASM) ] && [ "$$(cat web/pkg/.wasm-opt 2>/dev/null)" = "$(WASM_OPT)" ]; then \
+	@if [ web/pkg/sylva_bg.wasm -nt $(WASM) ] && [ web/pkg/sylva.js -nt $(WASM) ] && [ web/pkg/sylva.js -nt $(BINDGEN) ] \
+	  && [ "$$(cat web/pkg/.wasm-opt 2>/dev/null)" = "$(WASM_OPT)" ]; then \
 	  echo "web/pkg: up to date (wasm-opt '$(WASM_OPT)')"; else \
 	  rm -f web/pkg/.wasm-opt && \
 	  if [ ! -x $(BINDGEN) ] || [ web/bindgen/src/main.rs -nt $(BINDGEN) ] || [ Cargo.lock -nt $(BINDGEN) ]; then \
 	    $(CARGO) build --locked -p sylva-bindgen; fi && \
 	  $(BINDGEN) $(WASM) web/pkg && \
-	  if [ -n "$(WASM_OPT)" ] && [ -x web/node_modules/.bin/wasm-opt ]; then \
+	  if [ -z "$(WASM_OPT)" ]; then echo "" > web/pkg/.wasm-opt; \
+	  elif [ -x web/node_modules/.bin/wasm-opt ]; then \
 	    echo "wasm-opt $(WASM_OPT)" && \
 	    web/node_modules/.bin/wasm-opt $(WASM_OPT) --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
-	      --enable-mutable-globals -o web/pkg/sylva_bg.wasm web/pkg/sylva_bg.wasm; fi && \
-	  echo "$(WASM_OPT)" > web/pkg/.wasm-opt; fi
+	      --enable-mutable-globals -o web/pkg/sylva_bg.wasm web/pkg/sylva_bg.wasm && \
+	    echo "$(WASM_OPT)" > web/pkg/.wasm-opt; \
+	  else echo "web/pkg: wasm-opt is not installed (make setup): the wasm is not optimised"; fi; fi
 	@echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$(gzip -9c web/pkg/sylva_bg.wasm | wc -c) gzipped"
 
 # Browser end-to-end tests in headless Chromium. They run the debug binaries

@@ -9,7 +9,7 @@
 @group(1) @binding(1) var<storage, read> instances: array<vec2<u32>>;
 @group(1) @binding(2) var<storage, read> species: array<Species>;
 @group(1) @binding(3) var<storage, read_write> visible: array<u32>;
-// Words of `CullControl` (src/render/gpu_data.rs; tests/gpu_layout.rs checks them).
+// Words of `CullControl` (src/render/gpu_data.rs; tests/it/gpu_layout.rs checks them).
 @group(1) @binding(4) var<storage, read_write> control: array<atomic<u32>>;
 @group(1) @binding(5) var<storage, read_write> items: array<vec2<u32>>;
 // Indirect draw args, ARGS_WORDS per slot (`DrawArgs`: count, instances, first,
@@ -25,7 +25,7 @@
 @group(2) @binding(1) var<storage, read_write> dispatch_control: array<atomic<u32>>;
 
 // Word indices shared with the Rust twins `CullControl`, `DrawArgs` and
-// `CullDispatch` (tests/gpu_layout.rs compares them with offset_of!).
+// `CullDispatch` (tests/it/gpu_layout.rs compares them with offset_of!).
 const CONTROL_WORDS: u32 = 8u;
 const CONTROL_BATCHES_VISIBLE: u32 = 0u;
 const CONTROL_INSTANCES_TESTED: u32 = 4u;

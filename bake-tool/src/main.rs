@@ -180,7 +180,7 @@ struct PackArgs {
     debug_dump: Option<PathBuf>,
     /// Keep the species packs built in this folder, and take a pack from it when
     /// the same model is baked again with the same pack options by the same
-    /// sylva-bake: re-bakes of an inventory then skip the packs (seconds to
+    /// sylva-bake on the same GPU and driver: re-bakes of an inventory then skip the packs (seconds to
     /// minutes a species). Delete the folder to free its space.
     #[arg(long, value_name = "DIR", env = "SYLVA_BAKE_PACK_CACHE")]
     pack_cache: Option<PathBuf>,

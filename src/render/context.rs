@@ -31,6 +31,18 @@ impl GpuContext {
     /// # Errors
     /// [`ContextError`] when there is no adapter or the device request fails.
     pub async fn new_headless() -> Result<Self, ContextError> {
+        let (instance, adapter) = Self::headless_adapter().await?;
+        let (device, queue) = request_device(&adapter).await?;
+        Ok(Self { instance, adapter, device, queue })
+    }
+
+    /// The instance and adapter [`Self::new_headless`] takes, without a device:
+    /// what a result computed on the GPU depends on (the bake's pack cache
+    /// keys its packs by it).
+    ///
+    /// # Errors
+    /// [`ContextError::NoAdapter`] when there is none.
+    pub async fn headless_adapter() -> Result<(wgpu::Instance, wgpu::Adapter), ContextError> {
         let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
         // Debug builds ask for shader debug info by default: naga then writes
         // every expression's source line into the SPIR-V, finding each line
@@ -56,8 +68,7 @@ impl GpuContext {
             }
         }
         let adapter = adapter.ok_or(ContextError::NoAdapter(last_err))?;
-        let (device, queue) = request_device(&adapter).await?;
-        Ok(Self { instance, adapter, device, queue })
+        Ok((instance, adapter))
     }
 
     /// Blocking [`Self::new_headless`] for native code.

@@ -1,21 +1,25 @@
-//! The pack cache (`--pack-cache DIR`): a species pack is a pure function of
-//! its name, its model, the pack options and the bake tool that builds it, so a
-//! bake that finds a pack made from the same four in `DIR` takes it instead of
-//! building it again. Building is most of a small bake's time (billboards and
+//! The pack cache (`--pack-cache DIR`): a species pack is a function of its
+//! name, its model, the pack options, the bake tool that builds it and the GPU
+//! that renders its billboards, impostors and error measures, so a bake that
+//! finds a pack made from the same five in `DIR` takes it instead of building
+//! it again. Building is most of a small bake's time (billboards and
 //! impostors rendered on the GPU, ambient occlusion, cluster levels: seconds to
 //! minutes a species); a forester re-baking an inventory with the same models
 //! waits for the tiles only, and the test suite builds each pack once
 //! (docs/ARCHITECTURE.md, "Tests").
 //!
 //! - **Key**: 128 bits of hash over the bake tool's executable (its bytes: any
-//!   other build is another key), the species name, every field of the model
-//!   and every field of [`PackOptions`]. The structs are destructured field by
+//!   other build is another key), the GPU adapter the bake would render on
+//!   (name, vendor, device, backend, driver and its version: another machine
+//!   or a driver upgrade is another key), the species name, every field of the
+//!   model and every field of [`PackOptions`]. The structs are destructured field by
 //!   field below, so a field added to them fails to compile here until it is
 //!   hashed (or said to leave packs alone).
 //! - **Entries**: `DIR/<key>.pack`, the pack's bytes, written to a temporary
 //!   file and renamed (a reader never sees half a pack). A cached pack is
 //!   decoded and validated like any pack before it is used; one that does not
-//!   decode is built again and replaced.
+//!   decode is built again and replaced. Temporary files of a bake killed
+//!   while writing are removed by the next writer of that key.
 //! - **Concurrent bakes** (shards, parallel tests): `DIR/<key>.lock` is held
 //!   while a pack is looked up and built, so a second bake of the same pack
 //!   waits for the first and takes its result.
@@ -53,7 +57,21 @@ impl PackCache {
         std::fs::create_dir_all(dir).with_context(|| format!("--pack-cache {}: cannot create it", dir.display()))?;
         let exe = std::env::current_exe().context("--pack-cache: cannot find the running executable")?;
         let bytes = std::fs::read(&exe).with_context(|| format!("--pack-cache: cannot read {}", exe.display()))?;
-        Ok(Self { dir: dir.to_path_buf(), tool: hash128(|h| bytes.hash(h)) })
+        // (No adapter: nothing can be built either; the bake says so when it tries.)
+        let adapter = pollster::block_on(sylva::render::GpuContext::headless_adapter()).ok().map(|(_, a)| a.get_info());
+        let adapter = adapter.map(|i| {
+            format!(
+                "{}|{:x}|{:x}|{:?}|{:?}|{}|{}",
+                i.name, i.vendor, i.device, i.device_type, i.backend, i.driver, i.driver_info
+            )
+        });
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            tool: hash128(|h| {
+                bytes.hash(h);
+                adapter.hash(h);
+            }),
+        })
     }
 
     /// The key of the pack of species `name` built from `model` with `options`.
@@ -97,6 +115,16 @@ impl PackCache {
     /// When the entry cannot be written.
     pub fn put(&self, key: &str, bytes: &[u8]) -> Result<()> {
         let path = self.entry(key);
+        // A bake killed while writing this key left its temporary file: the
+        // caller holds the key's lock, so no live writer owns one.
+        let stale = format!("{key}.tmp-");
+        if let Ok(entries) = std::fs::read_dir(&self.dir) {
+            for e in entries.flatten() {
+                if e.file_name().to_str().is_some_and(|n| n.starts_with(&stale)) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
         let tmp = self.dir.join(format!("{key}.tmp-{}", std::process::id()));
         let write = || -> std::io::Result<()> {
             let mut f = File::create(&tmp)?;
@@ -240,10 +268,15 @@ mod tests {
         // Another build of the tool: another key.
         let other_tool = PackCache { dir: dir.clone(), tool: [1, 2] };
         assert_ne!(other_tool.key("oak", &m, &o), key);
-        // Entries: none, then the bytes written; the lock is exclusive but reentrant across keys.
+        // Entries: none, then the bytes written. The lock is exclusive (a second
+        // handle on the same key would block) and held per key.
         assert_eq!(cache.get(&key), None);
         let _held = cache.lock(&key).unwrap();
         let _other = cache.lock(&keys[0]).unwrap();
+        let second = File::options().write(true).open(dir.join(format!("{key}.lock"))).unwrap();
+        assert!(matches!(second.try_lock(), Err(std::fs::TryLockError::WouldBlock)), "the key's lock is exclusive");
+        // A killed writer's temporary file is removed by the next write of its key.
+        std::fs::write(dir.join(format!("{key}.tmp-999999")), b"half a pack").unwrap();
         cache.put(&key, b"pack bytes").unwrap();
         assert_eq!(cache.get(&key).as_deref(), Some(&b"pack bytes"[..]));
         assert!(std::fs::read_dir(&dir).unwrap().all(|e| !e.unwrap().file_name().to_string_lossy().contains(".tmp-")));

@@ -171,7 +171,8 @@ fn bakes_the_shared_real_data() {
     }
     let dir = tmp("real");
     let out = dir.join("ams");
-    let o = run(bin()
+    // (Building the packs: the log lines below are the pack builder's.)
+    let o = run(bin_building_packs()
         .arg("bake")
         .arg("--model")
         .arg(format!("oak={}", data.join("models/eztree_oak_medium.glb").display()))

@@ -213,7 +213,9 @@ fn an_interrupted_bake_leaves_nothing_that_the_next_bake_keeps() {
     run(&mut demo(&scene, 60, 1));
     let before = snapshot(&scene);
     // kill -9 in the middle of a bake: its working folder stays behind...
-    let mut child = demo(&scene, 3000, 2).stderr(std::process::Stdio::null()).spawn().unwrap();
+    // (Its packs built, not taken from the cache: the bake must still be running.)
+    let mut child =
+        demo(&scene, 3000, 2).env_remove("SYLVA_BAKE_PACK_CACHE").stderr(std::process::Stdio::null()).spawn().unwrap();
     let working = scene.join(format!(".sylva-tmp-{}", child.id()));
     let started = std::time::Instant::now();
     while !working.exists() && started.elapsed().as_secs() < 120 {

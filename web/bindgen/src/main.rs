@@ -31,7 +31,7 @@ fn run() -> Result<()> {
     let (wasm, out) = (PathBuf::from(wasm), PathBuf::from(out));
     if !wasm.is_file() {
         bail!(
-            "{}: no such file (build it first: cargo build --release -p sylva --lib --target wasm32-unknown-unknown)",
+            "{}: no such file (build it first: make web, or cargo rustc --release -p sylva --lib --crate-type cdylib --target wasm32-unknown-unknown)",
             wasm.display()
         );
     }
