@@ -502,14 +502,7 @@ impl<F: Fetcher> Frame<F> {
     /// viewport). [`crate::scene::SceneStream::locate_instance`] names its tile.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn pick_blocking(&mut self, view: &ViewData, px: [u32; 2]) -> Option<u32> {
-        let recorded = self.record_pick(view, px)?;
-        self.queue.submit([recorded.commands]);
-        let slice = recorded.readback.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        self.device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
-        let id = read_pick(&slice.get_mapped_range().ok()?);
-        recorded.readback.unmap();
-        id
+        self.pick_many_blocking(view, &[px]).pop().flatten()
     }
 
     /// [`Self::pick_blocking`] for many pixels of one view, waiting once: each
