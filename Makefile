@@ -52,25 +52,27 @@ release:
 # web/pkg, then binaryen's wasm-opt (web/node_modules/.bin) at WASM_OPT:
 # -Oz for what is served (1.77 MB; 63 s here), `make test` takes -O1 (the same
 # step and flags, 2.5 % larger, 14 s), WASM_OPT= skips it.
-WASM := target/wasm32-unknown-unknown/release/sylva.wasm
+# WASM_PROFILE=web-test (`make test`): the profile of that name in Cargo.toml.
+WASM_PROFILE ?= release
+WASM := target/wasm32-unknown-unknown/$(WASM_PROFILE)/sylva.wasm
 # (The test build makes it too, with the workspace's features: web/bindgen/tests.)
 BINDGEN := target/debug/sylva-bindgen
 WASM_OPT ?= -Oz
 web:
-	$(CARGO) rustc --release --locked -p sylva --lib --crate-type cdylib --target wasm32-unknown-unknown
+	$(CARGO) rustc --profile $(WASM_PROFILE) --locked -p sylva --lib --crate-type cdylib --target wasm32-unknown-unknown
 	@if [ web/pkg/sylva_bg.wasm -nt $(WASM) ] && [ web/pkg/sylva.js -nt $(WASM) ] && [ web/pkg/sylva.js -nt $(BINDGEN) ] \
-	  && [ "$$(cat web/pkg/.wasm-opt 2>/dev/null)" = "$(WASM_OPT)" ]; then \
+	  && [ "$$(cat web/pkg/.wasm-opt 2>/dev/null)" = "$(WASM_PROFILE) $(WASM_OPT)" ]; then \
 	  echo "web/pkg: up to date (wasm-opt '$(WASM_OPT)')"; else \
 	  rm -f web/pkg/.wasm-opt && \
 	  if [ ! -x $(BINDGEN) ] || [ web/bindgen/src/main.rs -nt $(BINDGEN) ] || [ Cargo.lock -nt $(BINDGEN) ]; then \
 	    $(CARGO) build --locked -p sylva-bindgen; fi && \
 	  $(BINDGEN) $(WASM) web/pkg && \
-	  if [ -z "$(WASM_OPT)" ]; then echo "" > web/pkg/.wasm-opt; \
+	  if [ -z "$(WASM_OPT)" ]; then echo "$(WASM_PROFILE) " > web/pkg/.wasm-opt; \
 	  elif [ -x web/node_modules/.bin/wasm-opt ]; then \
 	    echo "wasm-opt $(WASM_OPT)" && \
 	    web/node_modules/.bin/wasm-opt $(WASM_OPT) --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
 	      --enable-mutable-globals -o web/pkg/sylva_bg.wasm web/pkg/sylva_bg.wasm && \
-	    echo "$(WASM_OPT)" > web/pkg/.wasm-opt; \
+	    echo "$(WASM_PROFILE) $(WASM_OPT)" > web/pkg/.wasm-opt; \
 	  else echo "web/pkg: wasm-opt is not installed (make setup): the wasm is not optimised"; fi; fi
 	@echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$(gzip -9c web/pkg/sylva_bg.wasm | wc -c) gzipped"
 

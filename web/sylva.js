@@ -417,6 +417,8 @@ class SylvaViewer {
    * pixels tall draw an even subset of them, scaled up to keep canopy coverage.
    */
   setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false, thinPx = 8 } = {}) {
+    const families = ['all', 'meshes', 'ellipsoids', 'billboards', 'clouds'];
+    if (!families.includes(only)) throw new Error(`setLod: only '${only}' is not one of ${families.join(', ')}`);
     this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth, Number(thinPx));
     this.dirty = SETTLE_FRAMES;
   }

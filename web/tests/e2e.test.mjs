@@ -202,6 +202,9 @@ test('the viewer page', async (t) => {
     assert.ok(share > 0.05, `ellipsoids cover ${share} of the page`);
     await drawnWith('billboards');
     await drawnWith('all');
+    // A family the viewer does not have is refused, not taken for 'all'.
+    const refused = await page.evaluate(() => { try { window.sylva.setLod({ only: 'elipsoids' }); return null; } catch (e) { return String(e); } });
+    assert.match(refused ?? '', /'elipsoids' is not one of all, meshes, ellipsoids, billboards, clouds/);
     assert.deepEqual(errors, []);
   });
   await t.test('the sun follows a date and time at the scene and the time-of-day control', async () => {
@@ -272,6 +275,67 @@ test('the viewer page', async (t) => {
     await page.waitForTimeout(1500);
     const share = await foliageShare(page, 'recovered');
     assert.ok(share > 0.05, `after recovery foliage covers ${share}`);
+  });
+  // The next subtests look at the scene alone: the page's overlays hidden, as
+  // ?ui=0 hides them (the time-of-day slider's accent is cyan-ish; the tools
+  // cover the middle of a small page).
+  await page.evaluate(() => { for (const id of ['bar', 'status', 'tools']) document.getElementById(id).classList.add('hidden'); });
+  await t.test('ground imagery: the baked forest floor is draped, and an XYZ source on a local server replaces it', async () => {
+    const tiles = await tileServer();
+    try {
+      // The fixture's procedural forest floor, baked as imagery (the first view's counters).
+      assert.ok(readyStats.imagery_drawn >= 1 && readyStats.imagery_resident >= 1, `baked imagery ${JSON.stringify(readyStats)}`);
+      const shot = (name) => screenshotStat(page, name, `
+        let magenta = 0, cyan = 0;
+        for (let i = 0; i < d.length; i += 4) {
+          if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
+          if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
+        }
+        return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };`);
+      const plain = await shot('imagery-baked');
+      assert.equal(plain.magenta + plain.cyan, 0, 'the forest floor has neither colour');
+      // A template without placeholders is refused with a message.
+      const refused = await page.evaluate(() => { try { window.sylva.setImagery('http://x/tiles.png'); return null; } catch (e) { return String(e); } });
+      assert.ok(refused && refused.includes('{z}'), `bad template: ${refused}`);
+      await page.evaluate((url) => window.sylva.setImagery(url, { maxZoom: 18 }), tiles.url);
+      await page.waitForFunction(() => {
+        const s = window.sylva.stats();
+        return s.terrain_drawn > 0 && s.imagery_drawn === s.terrain_drawn && window.sylva.viewer.settled();
+      }, null, { timeout: 120000 });
+      await page.waitForTimeout(500);
+      const xyz = await shot('imagery-xyz');
+      assert.ok(tiles.requests() > 0, 'the tile server was asked');
+      assert.ok(xyz.magenta + xyz.cyan > 0.05, `the source's tiles drape the ground: ${JSON.stringify(xyz)}`);
+      // None: the terrain's own material.
+      await page.evaluate(() => window.sylva.setImagery(null));
+      await page.waitForFunction(() => window.sylva.stats().imagery_drawn === 0, null, { timeout: 60000 });
+      assert.deepEqual(errors, []);
+    } finally {
+      tiles.close();
+    }
+  });
+  await t.test('drag, wheel and keys move the camera', async () => {
+    const cam = () => page.evaluate(() => window.sylva.camera());
+    const c0 = await cam();
+    await page.mouse.move(PAGE.width / 2, PAGE.height / 2);
+    await page.mouse.down();
+    await page.mouse.move(PAGE.width / 2 + 60, PAGE.height / 2, { steps: 5 });
+    await page.mouse.up();
+    const c1 = await cam();
+    assert.ok(Math.abs(c1.heading - c0.heading) > 5, `drag orbits: heading ${c0.heading} → ${c1.heading}`);
+    await page.mouse.wheel(0, -400);
+    await page.waitForTimeout(100);
+    const c2 = await cam();
+    const dist = (c) => Math.hypot(c.x, c.y, c.z);
+    assert.ok(Math.abs(dist(c2) - dist(c1)) > 1, 'wheel zooms');
+    await page.focus('#view');
+    await page.keyboard.press('ArrowUp');
+    await page.keyboard.press('ArrowUp');
+    const c3 = await cam();
+    assert.ok(Math.hypot(c3.x - c2.x, c3.y - c2.y) > 1, 'arrow keys pan');
+    await page.keyboard.press('-');
+    const c4 = await cam();
+    assert.ok(dist(c4) !== dist(c3), '+/- zoom');
   });
 });
 
@@ -499,46 +563,6 @@ test('walking mode keeps eye height above the ground', async () => {
   assert.ok(share > 0.15, `foliage covers ${share} of the walking view`);
 });
 
-test('ground imagery: the baked forest floor is draped, and an XYZ source on a local server replaces it', async () => {
-  const tiles = await tileServer();
-  try {
-    // Without the overlays (?ui=0): the colour counts are of the scene only
-    // (the time-of-day slider's accent is cyan-ish).
-    const { page, errors } = await openViewer(`${base}?ui=0`);
-    await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
-    const stats = await ready(page);
-    // The fixture's procedural forest floor, baked as imagery.
-    assert.ok(stats.imagery_drawn >= 1 && stats.imagery_resident >= 1, `baked imagery ${JSON.stringify(stats)}`);
-    const shot = (name) => screenshotStat(page, name, `
-      let magenta = 0, cyan = 0;
-      for (let i = 0; i < d.length; i += 4) {
-        if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
-        if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
-      }
-      return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };`);
-    const plain = await shot('imagery-baked');
-    assert.equal(plain.magenta + plain.cyan, 0, 'the forest floor has neither colour');
-    // A template without placeholders is refused with a message.
-    const refused = await page.evaluate(() => { try { window.sylva.setImagery('http://x/tiles.png'); return null; } catch (e) { return String(e); } });
-    assert.ok(refused && refused.includes('{z}'), `bad template: ${refused}`);
-    await page.evaluate((url) => window.sylva.setImagery(url, { maxZoom: 18 }), tiles.url);
-    await page.waitForFunction(() => {
-      const s = window.sylva.stats();
-      return s.terrain_drawn > 0 && s.imagery_drawn === s.terrain_drawn && window.sylva.viewer.settled();
-    }, null, { timeout: 120000 });
-    await page.waitForTimeout(500);
-    const xyz = await shot('imagery-xyz');
-    assert.ok(tiles.requests() > 0, 'the tile server was asked');
-    assert.ok(xyz.magenta + xyz.cyan > 0.05, `the source's tiles drape the ground: ${JSON.stringify(xyz)}`);
-    // None: the terrain's own material.
-    await page.evaluate(() => window.sylva.setImagery(null));
-    await page.waitForFunction(() => window.sylva.stats().imagery_drawn === 0, null, { timeout: 60000 });
-    assert.deepEqual(errors, []);
-  } finally {
-    tiles.close();
-  }
-});
-
 test('the sun casts shadows and crowns are occluded by default; setLighting turns both off', async () => {
   // 'low' (two cascades of 512²–1024²), 'high' (three of 1024²–2048²; the default,
   // checked by the hash test's page) and off. Under SwiftShader a lit frame's cost
@@ -606,42 +630,66 @@ test('without WebGPU the page says what to do', async () => {
   }
 });
 
-test('the portal page embeds the viewer with an overview', async () => {
+// The portal page (embed.html): one page load for its two tests, in order.
+test('the portal page', async (t) => {
   const { page, errors } = await openViewer(`${base}embed.html`, { size: PORTAL });
   await page.addStyleTag({ content: SMALL_EMBED });
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
-  const share = await foliageShare(page, 'embed');
-  assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
-  assert.match(await page.textContent('#facts'), /3,000 trees/);
-  // ?shadows=off reached the viewer through the element's shadows attribute.
-  assert.equal((await page.evaluate(() => window.sylva.stats())).shadow_cascades, 0);
-  // The overview reports the ground: under the camera, and under the pointer (the forest's middle).
-  await page.waitForFunction(() => /Camera: ground -?[0-9.]+ m, eye [0-9.]+ m above it/.test(document.getElementById('ground').textContent), null, { timeout: 60000 });
-  const box = await page.locator('#overview').boundingBox();
-  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
-  const ground = await page.textContent('#ground');
-  const m = /pointer: ground (-?[0-9.]+) m/.exec(ground);
-  assert.ok(m, `ground under the pointer: ${ground}`);
-  assert.ok(Number(m[1]) >= groundLo - 0.1 && Number(m[1]) <= groundHi + 0.1, `pointer ground ${m[1]} in ${groundLo}–${groundHi}`);
-  // Find a tree by its id: listed, highlighted, and a click on it flies there.
-  await page.fill('#filter', '7');
-  await page.click('#search button');
-  await page.waitForSelector('#found button[data-id="7"]', { timeout: 60000 });
-  assert.match(await page.textContent('#found'), /^1 trees/);
-  const before = await page.evaluate(() => window.sylva.camera());
-  // (The click waits for the button to hold still over two animation frames:
-  // let the viewer finish drawing what the search fetched first.)
-  await settle(page);
-  await page.click('#found button[data-id="7"]', { timeout: 60000 });
-  await page.waitForFunction((b) => { const c = window.sylva.camera(); return Math.hypot(c.x - b.x, c.y - b.y) > 1; }, before, { timeout: 30000 });
-  // The colour-by selector offers species for a scene without attributes, and colours by it (a legend of
-  // three). (The popup a click opens is the viewer page's, tested there.)
-  const options = await page.evaluate(() => [...document.querySelectorAll('.sylva-style option')].map((o) => o.value));
-  assert.deepEqual(options, ['', 'species']);
-  await page.selectOption('.sylva-style select', 'species');
-  await page.waitForFunction(() => document.querySelectorAll('.sylva-legend > div').length === 3, null, { timeout: 20000 });
-  assert.deepEqual(errors, []);
+  await t.test('embeds the viewer with an overview', async () => {
+    const share = await foliageShare(page, 'embed');
+    assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
+    assert.match(await page.textContent('#facts'), /3,000 trees/);
+    // ?shadows=off reached the viewer through the element's shadows attribute.
+    assert.equal((await page.evaluate(() => window.sylva.stats())).shadow_cascades, 0);
+    // The overview reports the ground: under the camera, and under the pointer (the forest's middle).
+    await page.waitForFunction(() => /Camera: ground -?[0-9.]+ m, eye [0-9.]+ m above it/.test(document.getElementById('ground').textContent), null, { timeout: 60000 });
+    const box = await page.locator('#overview').boundingBox();
+    await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+    const ground = await page.textContent('#ground');
+    const m = /pointer: ground (-?[0-9.]+) m/.exec(ground);
+    assert.ok(m, `ground under the pointer: ${ground}`);
+    assert.ok(Number(m[1]) >= groundLo - 0.1 && Number(m[1]) <= groundHi + 0.1, `pointer ground ${m[1]} in ${groundLo}–${groundHi}`);
+    // Find a tree by its id: listed, highlighted, and a click on it flies there.
+    await page.fill('#filter', '7');
+    await page.click('#search button');
+    await page.waitForSelector('#found button[data-id="7"]', { timeout: 60000 });
+    assert.match(await page.textContent('#found'), /^1 trees/);
+    const before = await page.evaluate(() => window.sylva.camera());
+    // (The click waits for the button to hold still over two animation frames:
+    // let the viewer finish drawing what the search fetched first.)
+    await settle(page);
+    await page.click('#found button[data-id="7"]', { timeout: 60000 });
+    await page.waitForFunction((b) => { const c = window.sylva.camera(); return Math.hypot(c.x - b.x, c.y - b.y) > 1; }, before, { timeout: 30000 });
+    // The colour-by selector offers species for a scene without attributes, and colours by it (a legend of
+    // three). (The popup a click opens is the viewer page's, tested there.)
+    const options = await page.evaluate(() => [...document.querySelectorAll('.sylva-style option')].map((o) => o.value));
+    assert.deepEqual(options, ['', 'species']);
+    await page.selectOption('.sylva-style select', 'species');
+    await page.waitForFunction(() => document.querySelectorAll('.sylva-legend > div').length === 3, null, { timeout: 20000 });
+    assert.deepEqual(errors, []);
+  });
+  await t.test('two viewers on one page, and destroy() releases one', async () => {
+    const second = await page.evaluate(async () => {
+      const { create } = await import('./sylva.js');
+      const div = document.createElement('div');
+      div.style.cssText = 'width:200px;height:130px';
+      document.body.appendChild(div);
+      const v = await create(div, { scene: 'scene/scene.json', refine: false });
+      window.second = v;
+      const stats = await v.ready;
+      return stats.trees_total;
+    });
+    assert.equal(second, 3000);
+    await page.evaluate(() => { window.second.destroy(); });
+    await page.waitForTimeout(500);
+    // The first viewer keeps working after the second is gone.
+    await page.evaluate(() => window.sylva.setCamera({ x: 0, y: -300, z: 120, heading: 10, pitch: -20 }));
+    await page.waitForTimeout(500);
+    assert.ok((await page.evaluate(() => window.sylva.stats())).tiles_resident > 0);
+    assert.equal(await page.evaluate(() => window.second.destroyed), true);
+    assert.deepEqual(errors, []);
+  });
 });
 
 test('a resting camera refines its image, then the viewer idles; a move starts over', async () => {
@@ -779,59 +827,6 @@ test('the browser draws what the native renderer draws for the same camera', asy
   // in heading measures 0.022, 1° in pitch 0.028, 3 m to the side 0.019 (at 480×320 a
   // wrong camera, a missing species or a wrong LoD band measured 0.03 and more).
   assert.ok(error < 0.01, `multi-scale RMSE browser vs native ${error} (see ${artifacts})`);
-  assert.deepEqual(errors, []);
-});
-
-test('drag, wheel and keys move the camera', async () => {
-  const { page } = await openViewer(`${base}?ui=0`);
-  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
-  await ready(page);
-  const cam = () => page.evaluate(() => window.sylva.camera());
-  const c0 = await cam();
-  await page.mouse.move(PAGE.width / 2, PAGE.height / 2);
-  await page.mouse.down();
-  await page.mouse.move(PAGE.width / 2 + 60, PAGE.height / 2, { steps: 5 });
-  await page.mouse.up();
-  const c1 = await cam();
-  assert.ok(Math.abs(c1.heading - c0.heading) > 5, `drag orbits: heading ${c0.heading} → ${c1.heading}`);
-  await page.mouse.wheel(0, -400);
-  await page.waitForTimeout(100);
-  const c2 = await cam();
-  const dist = (c) => Math.hypot(c.x, c.y, c.z);
-  assert.ok(Math.abs(dist(c2) - dist(c1)) > 1, 'wheel zooms');
-  await page.focus('#view');
-  await page.keyboard.press('ArrowUp');
-  await page.keyboard.press('ArrowUp');
-  const c3 = await cam();
-  assert.ok(Math.hypot(c3.x - c2.x, c3.y - c2.y) > 1, 'arrow keys pan');
-  await page.keyboard.press('-');
-  const c4 = await cam();
-  assert.ok(dist(c4) !== dist(c3), '+/- zoom');
-});
-
-test('two viewers on one page, and destroy() releases one', async () => {
-  const { page, errors } = await openViewer(`${base}embed.html`, { size: PORTAL });
-  await page.addStyleTag({ content: SMALL_EMBED });
-  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
-  await ready(page);
-  const second = await page.evaluate(async () => {
-    const { create } = await import('./sylva.js');
-    const div = document.createElement('div');
-    div.style.cssText = 'width:200px;height:130px';
-    document.body.appendChild(div);
-    const v = await create(div, { scene: 'scene/scene.json', refine: false });
-    window.second = v;
-    const stats = await v.ready;
-    return stats.trees_total;
-  });
-  assert.equal(second, 3000);
-  await page.evaluate(() => { window.second.destroy(); });
-  await page.waitForTimeout(500);
-  // The first viewer keeps working after the second is gone.
-  await page.evaluate(() => window.sylva.setCamera({ x: 0, y: -300, z: 120, heading: 10, pitch: -20 }));
-  await page.waitForTimeout(500);
-  assert.ok((await page.evaluate(() => window.sylva.stats())).tiles_resident > 0);
-  assert.equal(await page.evaluate(() => window.second.destroyed), true);
   assert.deepEqual(errors, []);
 });
 
