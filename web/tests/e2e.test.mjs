@@ -630,66 +630,42 @@ test('without WebGPU the page says what to do', async () => {
   }
 });
 
-// The portal page (embed.html): one page load for its two tests, in order.
-test('the portal page', async (t) => {
+test('the portal page embeds the viewer with an overview', async () => {
   const { page, errors } = await openViewer(`${base}embed.html`, { size: PORTAL });
   await page.addStyleTag({ content: SMALL_EMBED });
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
   await ready(page);
-  await t.test('embeds the viewer with an overview', async () => {
-    const share = await foliageShare(page, 'embed');
-    assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
-    assert.match(await page.textContent('#facts'), /3,000 trees/);
-    // ?shadows=off reached the viewer through the element's shadows attribute.
-    assert.equal((await page.evaluate(() => window.sylva.stats())).shadow_cascades, 0);
-    // The overview reports the ground: under the camera, and under the pointer (the forest's middle).
-    await page.waitForFunction(() => /Camera: ground -?[0-9.]+ m, eye [0-9.]+ m above it/.test(document.getElementById('ground').textContent), null, { timeout: 60000 });
-    const box = await page.locator('#overview').boundingBox();
-    await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
-    const ground = await page.textContent('#ground');
-    const m = /pointer: ground (-?[0-9.]+) m/.exec(ground);
-    assert.ok(m, `ground under the pointer: ${ground}`);
-    assert.ok(Number(m[1]) >= groundLo - 0.1 && Number(m[1]) <= groundHi + 0.1, `pointer ground ${m[1]} in ${groundLo}–${groundHi}`);
-    // Find a tree by its id: listed, highlighted, and a click on it flies there.
-    await page.fill('#filter', '7');
-    await page.click('#search button');
-    await page.waitForSelector('#found button[data-id="7"]', { timeout: 60000 });
-    assert.match(await page.textContent('#found'), /^1 trees/);
-    const before = await page.evaluate(() => window.sylva.camera());
-    // (The click waits for the button to hold still over two animation frames:
-    // let the viewer finish drawing what the search fetched first.)
-    await settle(page);
-    await page.click('#found button[data-id="7"]', { timeout: 60000 });
-    await page.waitForFunction((b) => { const c = window.sylva.camera(); return Math.hypot(c.x - b.x, c.y - b.y) > 1; }, before, { timeout: 30000 });
-    // The colour-by selector offers species for a scene without attributes, and colours by it (a legend of
-    // three). (The popup a click opens is the viewer page's, tested there.)
-    const options = await page.evaluate(() => [...document.querySelectorAll('.sylva-style option')].map((o) => o.value));
-    assert.deepEqual(options, ['', 'species']);
-    await page.selectOption('.sylva-style select', 'species');
-    await page.waitForFunction(() => document.querySelectorAll('.sylva-legend > div').length === 3, null, { timeout: 20000 });
-    assert.deepEqual(errors, []);
-  });
-  await t.test('two viewers on one page, and destroy() releases one', async () => {
-    const second = await page.evaluate(async () => {
-      const { create } = await import('./sylva.js');
-      const div = document.createElement('div');
-      div.style.cssText = 'width:200px;height:130px';
-      document.body.appendChild(div);
-      const v = await create(div, { scene: 'scene/scene.json', refine: false });
-      window.second = v;
-      const stats = await v.ready;
-      return stats.trees_total;
-    });
-    assert.equal(second, 3000);
-    await page.evaluate(() => { window.second.destroy(); });
-    await page.waitForTimeout(500);
-    // The first viewer keeps working after the second is gone.
-    await page.evaluate(() => window.sylva.setCamera({ x: 0, y: -300, z: 120, heading: 10, pitch: -20 }));
-    await page.waitForTimeout(500);
-    assert.ok((await page.evaluate(() => window.sylva.stats())).tiles_resident > 0);
-    assert.equal(await page.evaluate(() => window.second.destroyed), true);
-    assert.deepEqual(errors, []);
-  });
+  const share = await foliageShare(page, 'embed');
+  assert.ok(share > 0.03, `foliage covers ${share} of the portal page`);
+  assert.match(await page.textContent('#facts'), /3,000 trees/);
+  // ?shadows=off reached the viewer through the element's shadows attribute.
+  assert.equal((await page.evaluate(() => window.sylva.stats())).shadow_cascades, 0);
+  // The overview reports the ground: under the camera, and under the pointer (the forest's middle).
+  await page.waitForFunction(() => /Camera: ground -?[0-9.]+ m, eye [0-9.]+ m above it/.test(document.getElementById('ground').textContent), null, { timeout: 60000 });
+  const box = await page.locator('#overview').boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  const ground = await page.textContent('#ground');
+  const m = /pointer: ground (-?[0-9.]+) m/.exec(ground);
+  assert.ok(m, `ground under the pointer: ${ground}`);
+  assert.ok(Number(m[1]) >= groundLo - 0.1 && Number(m[1]) <= groundHi + 0.1, `pointer ground ${m[1]} in ${groundLo}–${groundHi}`);
+  // Find a tree by its id: listed, highlighted, and a click on it flies there.
+  await page.fill('#filter', '7');
+  await page.click('#search button');
+  await page.waitForSelector('#found button[data-id="7"]', { timeout: 60000 });
+  assert.match(await page.textContent('#found'), /^1 trees/);
+  const before = await page.evaluate(() => window.sylva.camera());
+  // (The click waits for the button to hold still over two animation frames:
+  // let the viewer finish drawing what the search fetched first.)
+  await settle(page);
+  await page.click('#found button[data-id="7"]', { timeout: 60000 });
+  await page.waitForFunction((b) => { const c = window.sylva.camera(); return Math.hypot(c.x - b.x, c.y - b.y) > 1; }, before, { timeout: 30000 });
+  // The colour-by selector offers species for a scene without attributes, and colours by it (a legend of
+  // three). (The popup a click opens is the viewer page's, tested there.)
+  const options = await page.evaluate(() => [...document.querySelectorAll('.sylva-style option')].map((o) => o.value));
+  assert.deepEqual(options, ['', 'species']);
+  await page.selectOption('.sylva-style select', 'species');
+  await page.waitForFunction(() => document.querySelectorAll('.sylva-legend > div').length === 3, null, { timeout: 20000 });
+  assert.deepEqual(errors, []);
 });
 
 test('a resting camera refines its image, then the viewer idles; a move starts over', async () => {
@@ -827,6 +803,32 @@ test('the browser draws what the native renderer draws for the same camera', asy
   // in heading measures 0.022, 1° in pitch 0.028, 3 m to the side 0.019 (at 480×320 a
   // wrong camera, a missing species or a wrong LoD band measured 0.03 and more).
   assert.ok(error < 0.01, `multi-scale RMSE browser vs native ${error} (see ${artifacts})`);
+  assert.deepEqual(errors, []);
+});
+
+test('two viewers on one page, and destroy() releases one', async () => {
+  const { page, errors } = await openViewer(`${base}embed.html`, { size: PORTAL });
+  await page.addStyleTag({ content: SMALL_EMBED });
+  await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
+  await ready(page);
+  const second = await page.evaluate(async () => {
+    const { create } = await import('./sylva.js');
+    const div = document.createElement('div');
+    div.style.cssText = 'width:200px;height:130px';
+    document.body.appendChild(div);
+    const v = await create(div, { scene: 'scene/scene.json', refine: false });
+    window.second = v;
+    const stats = await v.ready;
+    return stats.trees_total;
+  });
+  assert.equal(second, 3000);
+  await page.evaluate(() => { window.second.destroy(); });
+  await page.waitForTimeout(500);
+  // The first viewer keeps working after the second is gone.
+  await page.evaluate(() => window.sylva.setCamera({ x: 0, y: -300, z: 120, heading: 10, pitch: -20 }));
+  await page.waitForTimeout(500);
+  assert.ok((await page.evaluate(() => window.sylva.stats())).tiles_resident > 0);
+  assert.equal(await page.evaluate(() => window.second.destroyed), true);
   assert.deepEqual(errors, []);
 });
 
