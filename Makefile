@@ -52,7 +52,8 @@ release:
 # web/pkg, then binaryen's wasm-opt (web/node_modules/.bin) at WASM_OPT:
 # -Oz for what is served (1.77 MB; 63 s here), `make test` takes -O1 (the same
 # step and flags, 2.5 % larger, 14 s), WASM_OPT= skips it.
-# WASM_PROFILE=web-test (`make test`): the profile of that name in Cargo.toml.
+# WASM_PROFILE: release (the default) or a custom profile of Cargo.toml, e.g.
+# web-test (`make test`; not dev, test or bench, which cargo maps to other folders).
 WASM_PROFILE ?= release
 WASM := target/wasm32-unknown-unknown/$(WASM_PROFILE)/sylva.wasm
 # (The test build makes it too, with the workspace's features: web/bindgen/tests.)
@@ -62,7 +63,7 @@ web:
 	$(CARGO) rustc --profile $(WASM_PROFILE) --locked -p sylva --lib --crate-type cdylib --target wasm32-unknown-unknown
 	@if [ web/pkg/sylva_bg.wasm -nt $(WASM) ] && [ web/pkg/sylva.js -nt $(WASM) ] && [ web/pkg/sylva.js -nt $(BINDGEN) ] \
 	  && [ "$$(cat web/pkg/.wasm-opt 2>/dev/null)" = "$(WASM_PROFILE) $(WASM_OPT)" ]; then \
-	  echo "web/pkg: up to date (wasm-opt '$(WASM_OPT)')"; else \
+	  echo "web/pkg: up to date (profile $(WASM_PROFILE), wasm-opt '$(WASM_OPT)')"; else \
 	  rm -f web/pkg/.wasm-opt && \
 	  if [ ! -x $(BINDGEN) ] || [ web/bindgen/src/main.rs -nt $(BINDGEN) ] || [ Cargo.lock -nt $(BINDGEN) ]; then \
 	    $(CARGO) build --locked -p sylva-bindgen; fi && \

@@ -415,6 +415,7 @@ class SylvaViewer {
    * which keeps early depth tests; true writes the exact ray-cast depth, slower),
    * `thinPx` (default 8; 0 off): far batches whose trees are below this many
    * pixels tall draw an even subset of them, scaled up to keep canopy coverage.
+   * Throws on an `only` that is none of these.
    */
   setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false, thinPx = 8 } = {}) {
     const families = ['all', 'meshes', 'ellipsoids', 'billboards', 'clouds'];

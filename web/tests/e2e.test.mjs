@@ -276,67 +276,6 @@ test('the viewer page', async (t) => {
     const share = await foliageShare(page, 'recovered');
     assert.ok(share > 0.05, `after recovery foliage covers ${share}`);
   });
-  // The next subtests look at the scene alone: the page's overlays hidden, as
-  // ?ui=0 hides them (the time-of-day slider's accent is cyan-ish; the tools
-  // cover the middle of a small page).
-  await page.evaluate(() => { for (const id of ['bar', 'status', 'tools']) document.getElementById(id).classList.add('hidden'); });
-  await t.test('ground imagery: the baked forest floor is draped, and an XYZ source on a local server replaces it', async () => {
-    const tiles = await tileServer();
-    try {
-      // The fixture's procedural forest floor, baked as imagery (the first view's counters).
-      assert.ok(readyStats.imagery_drawn >= 1 && readyStats.imagery_resident >= 1, `baked imagery ${JSON.stringify(readyStats)}`);
-      const shot = (name) => screenshotStat(page, name, `
-        let magenta = 0, cyan = 0;
-        for (let i = 0; i < d.length; i += 4) {
-          if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
-          if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
-        }
-        return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };`);
-      const plain = await shot('imagery-baked');
-      assert.equal(plain.magenta + plain.cyan, 0, 'the forest floor has neither colour');
-      // A template without placeholders is refused with a message.
-      const refused = await page.evaluate(() => { try { window.sylva.setImagery('http://x/tiles.png'); return null; } catch (e) { return String(e); } });
-      assert.ok(refused && refused.includes('{z}'), `bad template: ${refused}`);
-      await page.evaluate((url) => window.sylva.setImagery(url, { maxZoom: 18 }), tiles.url);
-      await page.waitForFunction(() => {
-        const s = window.sylva.stats();
-        return s.terrain_drawn > 0 && s.imagery_drawn === s.terrain_drawn && window.sylva.viewer.settled();
-      }, null, { timeout: 120000 });
-      await page.waitForTimeout(500);
-      const xyz = await shot('imagery-xyz');
-      assert.ok(tiles.requests() > 0, 'the tile server was asked');
-      assert.ok(xyz.magenta + xyz.cyan > 0.05, `the source's tiles drape the ground: ${JSON.stringify(xyz)}`);
-      // None: the terrain's own material.
-      await page.evaluate(() => window.sylva.setImagery(null));
-      await page.waitForFunction(() => window.sylva.stats().imagery_drawn === 0, null, { timeout: 60000 });
-      assert.deepEqual(errors, []);
-    } finally {
-      tiles.close();
-    }
-  });
-  await t.test('drag, wheel and keys move the camera', async () => {
-    const cam = () => page.evaluate(() => window.sylva.camera());
-    const c0 = await cam();
-    await page.mouse.move(PAGE.width / 2, PAGE.height / 2);
-    await page.mouse.down();
-    await page.mouse.move(PAGE.width / 2 + 60, PAGE.height / 2, { steps: 5 });
-    await page.mouse.up();
-    const c1 = await cam();
-    assert.ok(Math.abs(c1.heading - c0.heading) > 5, `drag orbits: heading ${c0.heading} → ${c1.heading}`);
-    await page.mouse.wheel(0, -400);
-    await page.waitForTimeout(100);
-    const c2 = await cam();
-    const dist = (c) => Math.hypot(c.x, c.y, c.z);
-    assert.ok(Math.abs(dist(c2) - dist(c1)) > 1, 'wheel zooms');
-    await page.focus('#view');
-    await page.keyboard.press('ArrowUp');
-    await page.keyboard.press('ArrowUp');
-    const c3 = await cam();
-    assert.ok(Math.hypot(c3.x - c2.x, c3.y - c2.y) > 1, 'arrow keys pan');
-    await page.keyboard.press('-');
-    const c4 = await cam();
-    assert.ok(dist(c4) !== dist(c3), '+/- zoom');
-  });
 });
 
 test('the browser and `sylva render --stats` report one set of keys and agree on the same view', async () => {
@@ -543,24 +482,98 @@ test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the 
   assert.ok(Math.abs(cam2.x - 10) < 0.5 && Math.abs(cam2.y + 300) < 0.5, JSON.stringify(cam2));
 });
 
-test('walking mode keeps eye height above the ground', async () => {
+// A page at the first view, driven: ground imagery, the mouse and keys, then
+// walking (one page load; the overlays hidden for the first two, as ?ui=0 does).
+test('the first view, driven', async (t) => {
   // Among the trees every frame draws full meshes: shadows (3× the draw on a CPU GPU) would
-  // only slow the frames this test waits for.
-  const { page } = await openViewer(`${base}?shadows=off`);
+  // only slow the frames the walking test waits for.
+  const { page, errors } = await openViewer(`${base}?shadows=off`);
   await page.waitForFunction(() => window.sylva, null, { timeout: 120000 });
-  await ready(page);
-  await page.evaluate(() => { window.sylva.setFly(true); });
-  await page.focus('#view');
-  for (let i = 0; i < 5; i++) await page.keyboard.press('w');
-  await page.waitForTimeout(300);
-  const cam = await page.evaluate(() => window.sylva.camera());
-  assert.equal(cam.fly, true);
-  // On the fixture's terrain; the eye stays 1.7 m above it.
-  assert.ok(cam.ground >= groundLo - 0.1 && cam.ground <= groundHi + 0.1, `ground under the eye ${cam.ground}`);
-  assert.ok(Math.abs(cam.z - cam.ground - 1.7) < 0.05, `eye height ${cam.z} over ground ${cam.ground}`);
-  // Among the trees: their crowns fill much of the view.
-  const share = await foliageShare(page, 'walking');
-  assert.ok(share > 0.15, `foliage covers ${share} of the walking view`);
+  const readyStats = await ready(page);
+  const home = await page.evaluate(() => window.sylva.camera());
+  // The next subtests look at the scene alone: the page's overlays hidden, as
+  // ?ui=0 hides them (the time-of-day slider's accent is cyan-ish; the tools
+  // cover the middle of a small page).
+  await page.evaluate(() => { for (const id of ['bar', 'status', 'tools']) document.getElementById(id).classList.add('hidden'); });
+  await t.test('ground imagery: the baked forest floor is draped, and an XYZ source on a local server replaces it', async () => {
+    const tiles = await tileServer();
+    try {
+      // The fixture's procedural forest floor, baked as imagery (the first view's counters).
+      assert.ok(readyStats.imagery_drawn >= 1 && readyStats.imagery_resident >= 1, `baked imagery ${JSON.stringify(readyStats)}`);
+      const shot = (name) => screenshotStat(page, name, `
+        let magenta = 0, cyan = 0;
+        for (let i = 0; i < d.length; i += 4) {
+          if (d[i] > 120 && d[i + 2] > 120 && d[i + 1] < 80) magenta++;
+          if (d[i + 1] > 120 && d[i + 2] > 120 && d[i] < 80) cyan++;
+        }
+        return { magenta: magenta / (d.length / 4), cyan: cyan / (d.length / 4) };`);
+      await page.waitForFunction(() => window.sylva.stats().imagery_drawn >= 1, null, { timeout: 60000 });
+      const plain = await shot('imagery-baked');
+      assert.equal(plain.magenta + plain.cyan, 0, 'the forest floor has neither colour');
+      // A template without placeholders is refused with a message.
+      const refused = await page.evaluate(() => { try { window.sylva.setImagery('http://x/tiles.png'); return null; } catch (e) { return String(e); } });
+      assert.ok(refused && refused.includes('{z}'), `bad template: ${refused}`);
+      await page.evaluate((url) => window.sylva.setImagery(url, { maxZoom: 18 }), tiles.url);
+      await page.waitForFunction(() => {
+        const s = window.sylva.stats();
+        return s.terrain_drawn > 0 && s.imagery_drawn === s.terrain_drawn && window.sylva.viewer.settled();
+      }, null, { timeout: 120000 });
+      await page.waitForTimeout(500);
+      const xyz = await shot('imagery-xyz');
+      assert.ok(tiles.requests() > 0, 'the tile server was asked');
+      assert.ok(xyz.magenta + xyz.cyan > 0.05, `the source's tiles drape the ground: ${JSON.stringify(xyz)}`);
+      // None: the terrain's own material.
+      await page.evaluate(() => window.sylva.setImagery(null));
+      await page.waitForFunction(() => window.sylva.stats().imagery_drawn === 0, null, { timeout: 60000 });
+      assert.deepEqual(errors, []);
+    } finally {
+      tiles.close();
+    }
+  });
+  await t.test('drag, wheel and keys move the camera', async () => {
+    const cam = () => page.evaluate(() => window.sylva.camera());
+    const c0 = await cam();
+    await page.mouse.move(PAGE.width / 2, PAGE.height / 2);
+    await page.mouse.down();
+    await page.mouse.move(PAGE.width / 2 + 60, PAGE.height / 2, { steps: 5 });
+    await page.mouse.up();
+    const c1 = await cam();
+    assert.ok(Math.abs(c1.heading - c0.heading) > 5, `drag orbits: heading ${c0.heading} → ${c1.heading}`);
+    await page.mouse.wheel(0, -400);
+    await page.waitForTimeout(100);
+    const c2 = await cam();
+    const dist = (c) => Math.hypot(c.x, c.y, c.z);
+    assert.ok(Math.abs(dist(c2) - dist(c1)) > 1, 'wheel zooms');
+    await page.focus('#view');
+    await page.keyboard.press('ArrowUp');
+    await page.keyboard.press('ArrowUp');
+    const c3 = await cam();
+    assert.ok(Math.hypot(c3.x - c2.x, c3.y - c2.y) > 1, 'arrow keys pan');
+    await page.keyboard.press('-');
+    const c4 = await cam();
+    assert.ok(dist(c4) !== dist(c3), '+/- zoom');
+  });
+  // Back to the first view, its imagery and overlays, for the walk.
+  await page.evaluate((c) => {
+    for (const id of ['bar', 'status', 'tools']) document.getElementById(id).classList.remove('hidden');
+    window.sylva.setImagery('scene');
+    window.sylva.setCamera({ x: c.x, y: c.y, z: c.z, heading: c.heading, pitch: c.pitch });
+  }, home);
+  await settle(page);
+  await t.test('walking mode keeps eye height above the ground', async () => {
+    await page.evaluate(() => { window.sylva.setFly(true); });
+    await page.focus('#view');
+    for (let i = 0; i < 5; i++) await page.keyboard.press('w');
+    await page.waitForTimeout(300);
+    const cam = await page.evaluate(() => window.sylva.camera());
+    assert.equal(cam.fly, true);
+    // On the fixture's terrain; the eye stays 1.7 m above it.
+    assert.ok(cam.ground >= groundLo - 0.1 && cam.ground <= groundHi + 0.1, `ground under the eye ${cam.ground}`);
+    assert.ok(Math.abs(cam.z - cam.ground - 1.7) < 0.05, `eye height ${cam.z} over ground ${cam.ground}`);
+    // Among the trees: their crowns fill much of the view.
+    const share = await foliageShare(page, 'walking');
+    assert.ok(share > 0.15, `foliage covers ${share} of the walking view`);
+  });
 });
 
 test('the sun casts shadows and crowns are occluded by default; setLighting turns both off', async () => {
