@@ -746,25 +746,40 @@ impl Viewer {
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
     /// the simplified mesh) use clustered ellipsoids (infinity: none); `only`
     /// restricts drawing to one family (`"meshes"`, `"ellipsoids"`, `"billboards"`,
-    /// `clouds`: every baked level of that family; anything else, e.g. `all`:
-    /// the default mix by size, the bake's LoD policy); `exact_depth` writes the ellipsoids' exact ray-cast depth;
+    /// `"clouds"`: every baked level of that family; `"all"`: the default mix by
+    /// size, the bake's LoD policy); `exact_depth` writes the ellipsoids' exact ray-cast depth;
     /// far batches whose trees are below `thin_px` pixels draw an even, scaled-up
     /// subset of them (0: off).
-    pub fn set_lod(&mut self, ellipsoid_min_px: f32, only: &str, exact_depth: bool, thin_px: f32) {
+    ///
+    /// # Errors
+    /// An `only` that is none of these (nothing is changed).
+    pub fn set_lod(
+        &mut self,
+        ellipsoid_min_px: f32,
+        only: &str,
+        exact_depth: bool,
+        thin_px: f32,
+    ) -> Result<(), JsValue> {
         use crate::render::forest::Representations;
-        self.frame.settings.cluster_min_px =
-            if ellipsoid_min_px.is_nan() { f32::INFINITY } else { ellipsoid_min_px.max(0.0) };
         self.frame.settings.representations = match only {
+            "all" => Representations::default(),
             "meshes" => Representations::MESHES,
             "ellipsoids" => Representations::CLUSTERS,
             "billboards" => Representations::BILLBOARDS,
             "clouds" => Representations::CLOUDS,
-            _ => Representations::default(),
+            other => {
+                return Err(JsValue::from_str(&format!(
+                    "setLod: only '{other}' is not one of all, meshes, ellipsoids, billboards, clouds"
+                )))
+            }
         };
         // A family asked for by name draws every baked level (no LoD policy).
-        self.frame.settings.lod_policy = !matches!(only, "meshes" | "ellipsoids" | "billboards" | "clouds");
+        self.frame.settings.lod_policy = only == "all";
+        self.frame.settings.cluster_min_px =
+            if ellipsoid_min_px.is_nan() { f32::INFINITY } else { ellipsoid_min_px.max(0.0) };
         self.frame.settings.cluster_exact_depth = exact_depth;
         self.frame.settings.thin_px = if thin_px.is_finite() { thin_px.clamp(0.0, 64.0) } else { 0.0 };
+        Ok(())
     }
 
     /// Budgets: GPU memory for pools and packs in MB (0: none), download bytes per

@@ -418,8 +418,6 @@ class SylvaViewer {
    * Throws on an `only` that is none of these.
    */
   setLod({ ellipsoidMinPx = 40, only = 'all', exactDepth = false, thinPx = 8 } = {}) {
-    const families = ['all', 'meshes', 'ellipsoids', 'billboards', 'clouds'];
-    if (!families.includes(only)) throw new Error(`setLod: only '${only}' is not one of ${families.join(', ')}`);
     this.viewer.set_lod(ellipsoidMinPx, only, !!exactDepth, Number(thinPx));
     this.dirty = SETTLE_FRAMES;
   }
