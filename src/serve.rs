@@ -13,6 +13,13 @@
 //! with `--allow-host`), so a web page cannot read the scene through DNS
 //! rebinding although responses carry `Access-Control-Allow-Origin: *`.
 //!
+//! Who may frame the viewer (docs/SECURITY.md, "The viewer in a frame"): HTML
+//! carries `Content-Security-Policy: frame-ancestors 'self'` plus the origins
+//! given with `--allow-embed`, and `/sylva-embed.json` (the viewer's policy,
+//! `web/embed-policy.js`) lists them and the `--allow-source` origins; without
+//! either flag a `sylva-embed.json` in the viewer's folder is served as it is,
+//! and without that the policy of no other origin.
+//!
 //! Why hand-written and not hyper + tower-http's `ServeDir`: the rules above are
 //! most of the code; the HTTP part is one request per connection, which a
 //! viewer's few dozen parallel fetches do not notice (`make bench-serve`).
@@ -32,6 +39,12 @@ pub struct ServeConfig {
     pub log: Option<std::sync::Arc<std::sync::Mutex<Vec<String>>>>,
     /// Host names answered on a loopback address besides the loopback ones.
     pub allowed_hosts: Vec<String>,
+    /// Origins (see [`parse_origin`]) whose pages may frame the viewer and
+    /// drive it by postMessage, besides its own; `*` any.
+    pub embed_parents: Vec<String>,
+    /// Origins besides the viewer's own that `?scene=`, `?imagery=` and the
+    /// `setImagery` message may load from; `*` any.
+    pub embed_sources: Vec<String>,
 }
 
 impl ServeConfig {
@@ -41,8 +54,41 @@ impl ServeConfig {
     #[must_use]
     pub fn new(web_dir: PathBuf, scene_dir: PathBuf) -> Self {
         let real = |p: PathBuf| std::fs::canonicalize(&p).unwrap_or(p);
-        Self { web_dir: real(web_dir), scene_dir: real(scene_dir), log: None, allowed_hosts: Vec::new() }
+        Self {
+            web_dir: real(web_dir),
+            scene_dir: real(scene_dir),
+            log: None,
+            allowed_hosts: Vec::new(),
+            embed_parents: Vec::new(),
+            embed_sources: Vec::new(),
+        }
     }
+
+    /// The `frame-ancestors` directive for the viewer's pages: `'self'` and the
+    /// listed parents, or `*`.
+    #[must_use]
+    pub fn frame_ancestors(&self) -> String {
+        if self.embed_parents.iter().any(|o| o == "*") {
+            return "frame-ancestors *".into();
+        }
+        std::iter::once("frame-ancestors 'self'")
+            .chain(self.embed_parents.iter().map(String::as_str))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+
+    /// `/sylva-embed.json` from the flags, or None without them (the file in
+    /// the viewer's folder is served instead, or [`Self::DEFAULT_EMBED_POLICY`]).
+    #[must_use]
+    pub fn embed_policy_json(&self) -> Option<String> {
+        (!self.embed_parents.is_empty() || !self.embed_sources.is_empty()).then(|| {
+            serde_json::json!({"parents": self.embed_parents, "sources": self.embed_sources}).to_string() + "\n"
+        })
+    }
+
+    /// The policy without flags or a file: the viewer's own origin only (what
+    /// the viewer assumes on a 404, answered so a browser logs no failed request).
+    pub const DEFAULT_EMBED_POLICY: &'static str = "{\"parents\": [], \"sources\": []}\n";
 
     /// Whether a request with this `Host` header is answered by a server bound
     /// to `bound` (bound to a non-loopback address, any host is).
@@ -70,6 +116,47 @@ fn host_name(host: &str) -> String {
         None => host.rsplit_once(':').map_or(host, |(h, _)| h),
     };
     name.trim_end_matches('.').to_ascii_lowercase()
+}
+
+/// An origin as browsers write it (`location.origin`): `http(s)://host[:port]`,
+/// lower case, the scheme's default port dropped, no path (a final `/` is
+/// allowed); or `*`. Anything else is refused with what was expected: the
+/// value goes into a response header and the viewer's policy.
+pub fn parse_origin(s: &str) -> Result<String, String> {
+    let s = s.trim();
+    if s == "*" {
+        return Ok(s.into());
+    }
+    let expected = || format!("{s:?} is no origin: expected http(s)://host[:port] (no path), or *");
+    let lower = s.to_ascii_lowercase();
+    let (scheme, rest) = lower.split_once("://").ok_or_else(expected)?;
+    let default_port = match scheme {
+        "https" => "443",
+        "http" => "80",
+        _ => return Err(expected()),
+    };
+    let rest = rest.strip_suffix('/').unwrap_or(rest);
+    let (host, port) = match rest.rsplit_once(':') {
+        Some((h, p)) if !h.is_empty() && (!h.contains(':') || h.ends_with(']')) => (h, Some(p)),
+        _ => (rest, None),
+    };
+    let host_ok = if let Some(v6) = host.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
+        v6.parse::<std::net::Ipv6Addr>().is_ok()
+    } else {
+        !host.is_empty()
+            && host.len() <= 253
+            && host
+                .split('.')
+                .all(|l| !l.is_empty() && l.len() <= 63 && l.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-'))
+    };
+    let port_ok = port.is_none_or(|p| !p.is_empty() && p.len() <= 5 && p.parse::<u16>().is_ok_and(|n| n > 0));
+    if !host_ok || !port_ok {
+        return Err(expected());
+    }
+    Ok(match port {
+        Some(p) if p != default_port => format!("{scheme}://{host}:{}", p.parse::<u16>().unwrap_or(0)),
+        _ => format!("{scheme}://{host}"),
+    })
 }
 
 /// MIME type by extension.
@@ -269,6 +356,15 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
     if method != "GET" && !head_only {
         return respond(&mut stream, "405 Method Not Allowed", &[("Allow", "GET, HEAD".into())], b"", false);
     }
+    if path.split(['?', '#']).next() == Some("/sylva-embed.json") {
+        let json = config
+            .embed_policy_json()
+            .or_else(|| resolve(config, path).is_none().then(|| ServeConfig::DEFAULT_EMBED_POLICY.to_string()));
+        if let Some(json) = json {
+            let headers = [("Content-Type", "application/json".to_string()), ("Cache-Control", "no-cache".into())];
+            return respond(&mut stream, "200 OK", &headers, json.as_bytes(), head_only);
+        }
+    }
     let Some(file) = resolve(config, path) else {
         return respond(
             &mut stream,
@@ -286,6 +382,9 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
         if path.starts_with("/scene/") && !path.ends_with(".json") { "public, max-age=3600" } else { "no-cache" };
     let mut headers =
         vec![("Content-Type", mime.to_string()), ("Cache-Control", cache.into()), ("Accept-Ranges", "bytes".into())];
+    if mime.starts_with("text/html") {
+        headers.push(("Content-Security-Policy", config.frame_ancestors()));
+    }
     match range.map_or(RangeAsk::Ignore, |r| parse_range(&r, len)) {
         RangeAsk::Bytes(a, b) => {
             // Read only the range: a viewer fetches parts of large packs.
@@ -438,6 +537,54 @@ mod tests {
         assert_eq!(mime_type(Path::new("a/sylva_bg.wasm")), "application/wasm");
         assert_eq!(mime_type(Path::new("scene.json")), "application/json");
     }
+
+    #[test]
+    fn origins_are_written_as_browsers_write_them_and_nothing_else_passes() {
+        for (given, origin) in [
+            ("https://Portal.Example.org", "https://portal.example.org"),
+            ("https://portal.example.org/", "https://portal.example.org"),
+            ("https://portal.example.org:443", "https://portal.example.org"),
+            ("http://127.0.0.1:8080", "http://127.0.0.1:8080"),
+            ("http://localhost:80", "http://localhost"),
+            ("http://[::1]:3000", "http://[::1]:3000"),
+            ("*", "*"),
+        ] {
+            assert_eq!(parse_origin(given).as_deref(), Ok(origin), "{given}");
+        }
+        // Paths, other schemes, credentials and anything a header or JSON could be bent by.
+        for bad in [
+            "portal.example.org",
+            "https://portal.example.org/app",
+            "ftp://portal.example.org",
+            "javascript://x",
+            "https://user@portal.example.org",
+            "https://a.org\r\nSet-Cookie: x=1",
+            "https://a.org; script-src *",
+            "https://a.org 'unsafe-inline'",
+            "https://a.org:0",
+            "https://a.org:99999",
+            "https://a.org:",
+            "https://",
+            "https://a..org",
+            "https://[::1",
+            "https://a.org?x=1",
+            "https://a.org#x",
+            "\"https://a.org\"",
+        ] {
+            let e = parse_origin(bad).unwrap_err();
+            assert!(e.contains("is no origin"), "{bad}: {e}");
+        }
+        let mut c = ServeConfig::new("web".into(), "scene".into());
+        assert_eq!(c.frame_ancestors(), "frame-ancestors 'self'");
+        assert_eq!(c.embed_policy_json(), None);
+        c.embed_parents = vec!["https://portal.example.org".into(), "http://127.0.0.1:9000".into()];
+        assert_eq!(c.frame_ancestors(), "frame-ancestors 'self' https://portal.example.org http://127.0.0.1:9000");
+        let policy: serde_json::Value = serde_json::from_str(&c.embed_policy_json().unwrap()).unwrap();
+        assert_eq!(policy["parents"][1], "http://127.0.0.1:9000");
+        assert_eq!(policy["sources"].as_array().map(Vec::len), Some(0));
+        c.embed_parents.push("*".into());
+        assert_eq!(c.frame_ancestors(), "frame-ancestors *");
+    }
 }
 
 #[cfg(test)]
@@ -488,6 +635,50 @@ mod live_tests {
         assert_eq!(get("/scene/../web/index.html", &[]).status(), 404);
         assert_eq!(get("/scene/%2e%2e/web/index.html", &[]).status(), 404);
         assert_eq!(get("/scene/tiles/0_0.tile", &[("Range", "bytes=300-")]).status(), 416);
+        // Only pages served here may frame the viewer, and its policy says the same.
+        assert_eq!(get("/", &[]).headers()["content-security-policy"], "frame-ancestors 'self'");
+        assert!(get("/scene/tiles/0_0.tile", &[]).headers().get("content-security-policy").is_none());
+        let mut policy = get("/sylva-embed.json", &[]);
+        assert_eq!(policy.status(), 200);
+        let policy: serde_json::Value = serde_json::from_str(&policy.body_mut().read_to_string().unwrap()).unwrap();
+        assert_eq!(policy, serde_json::json!({"parents": [], "sources": []}));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_embedding_flags_become_the_header_and_the_viewers_policy() {
+        let dir = std::env::temp_dir().join(format!("sylva-serve-embed-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("web")).unwrap();
+        std::fs::create_dir_all(dir.join("scene")).unwrap();
+        std::fs::write(dir.join("web/index.html"), "<!doctype html>").unwrap();
+        // A policy file in the viewer's folder is what the flags replace.
+        std::fs::write(dir.join("web/sylva-embed.json"), r#"{"parents": ["https://old.example.org"]}"#).unwrap();
+        let config = ServeConfig {
+            embed_parents: vec!["https://portal.example.org".into()],
+            embed_sources: vec!["https://tiles.example.org".into()],
+            ..ServeConfig::new(dir.join("web"), dir.join("scene"))
+        };
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
+        let base = format!("http://{}", rx.recv().unwrap());
+        let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
+        let mut page = agent.get(&format!("{base}/index.html")).call().unwrap();
+        assert_eq!(page.headers()["content-security-policy"], "frame-ancestors 'self' https://portal.example.org");
+        assert_eq!(page.body_mut().read_to_string().unwrap(), "<!doctype html>");
+        let mut policy = agent.get(&format!("{base}/sylva-embed.json")).call().unwrap();
+        assert_eq!(policy.status(), 200);
+        let policy: serde_json::Value = serde_json::from_str(&policy.body_mut().read_to_string().unwrap()).unwrap();
+        assert_eq!(
+            policy,
+            serde_json::json!({"parents": ["https://portal.example.org"], "sources": ["https://tiles.example.org"]})
+        );
+        // Without flags, the folder's own file.
+        let config = ServeConfig::new(dir.join("web"), dir.join("scene"));
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
+        let base = format!("http://{}", rx.recv().unwrap());
+        let mut policy = agent.get(&format!("{base}/sylva-embed.json")).call().unwrap();
+        assert!(policy.body_mut().read_to_string().unwrap().contains("old.example.org"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -201,6 +201,17 @@ Examples:
         /// server through DNS rebinding.
         #[arg(long = "allow-host", value_name = "NAME")]
         allow_hosts: Vec<String>,
+        /// Pages of this origin (https://portal.example.org; repeatable; * for
+        /// any) may show the viewer in a frame and drive it by postMessage.
+        /// Without it only pages served here may (frame-ancestors 'self'; the
+        /// viewer ignores other pages' messages). See docs/SECURITY.md.
+        #[arg(long = "allow-embed", value_name = "ORIGIN", value_parser = sylva::serve::parse_origin)]
+        allow_embed: Vec<String>,
+        /// The viewer may load scenes (?scene=) and imagery (?imagery=, the
+        /// setImagery message) from this origin too (repeatable; * for any).
+        /// Without it only from this server.
+        #[arg(long = "allow-source", value_name = "ORIGIN", value_parser = sylva::serve::parse_origin)]
+        allow_source: Vec<String>,
     },
 }
 

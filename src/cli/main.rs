@@ -40,7 +40,13 @@ mod cli {
     }
 
     /// `sylva serve`: the viewer and a scene over HTTP until the process ends.
-    fn serve(dir: PathBuf, port: u16, bind: &str, web: Option<PathBuf>, allow_hosts: Vec<String>) -> Result<()> {
+    fn serve(
+        dir: PathBuf,
+        port: u16,
+        bind: &str,
+        web: Option<PathBuf>,
+        config: impl FnOnce(PathBuf, PathBuf) -> sylva::serve::ServeConfig,
+    ) -> Result<()> {
         // A scene, or a 3D Tiles export of one (`sylva-bake export-3dtiles`) for web/cesium.html.
         let tileset = dir.join("tileset.json").is_file();
         if !dir.join("scene.json").is_file() && !tileset {
@@ -53,13 +59,18 @@ mod cli {
         if !web.join("pkg").join("sylva_bg.wasm").is_file() {
             bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
         }
-        let config =
-            sylva::serve::ServeConfig { allowed_hosts: allow_hosts, ..sylva::serve::ServeConfig::new(web, dir) };
+        let config = config(web, dir);
+        let embedding = if config.embed_parents.is_empty() {
+            "only pages served here may show it in a frame (--allow-embed ORIGIN adds a portal)".to_string()
+        } else {
+            format!("pages of {} may show it in a frame and drive it", config.embed_parents.join(", "))
+        };
         sylva::serve::serve(config, &format!("{bind}:{port}"), |addr| {
             if tileset {
                 println!("serving the 3D Tiles export in CesiumJS on http://{addr}/cesium.html (tileset at /scene/tileset.json)");
             }
             println!("serving the Sylva viewer on http://{addr}/");
+            println!("{embedding}");
             use std::io::Write as _;
             let _ = std::io::stdout().flush();
         })
@@ -118,7 +129,15 @@ mod cli {
                 println!("{}", serde_json::to_string_pretty(&found.to_json())?);
                 Ok(())
             }
-            Command::Serve { dir, port, bind, web, allow_hosts } => serve(dir, port, &bind, web, allow_hosts),
+            Command::Serve { dir, port, bind, web, allow_hosts, allow_embed, allow_source } => {
+                let config = |web, dir| sylva::serve::ServeConfig {
+                    allowed_hosts: allow_hosts,
+                    embed_parents: allow_embed,
+                    embed_sources: allow_source,
+                    ..sylva::serve::ServeConfig::new(web, dir)
+                };
+                serve(dir, port, &bind, web, config)
+            }
             Command::Render(args) => render(args),
             Command::Pick(args) => pick(args),
         }

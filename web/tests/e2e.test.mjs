@@ -10,12 +10,14 @@ import { mkdtempSync, cpSync, readFileSync, readdirSync, writeFileSync } from 'n
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { chromium } from 'playwright-core';
-import { WEBGPU_FLAGS, root, sylvaBin, sylvaBakeBin, tileServer, startServer } from './helpers.mjs';
+import { WEBGPU_FLAGS, root, sylvaBin, sylvaBakeBin, tileServer, startServer, pageServer, staticHost } from './helpers.mjs';
 
 const scene = join(root, 'tests', 'fixtures', 'forest-small');
 const artifacts = process.env.SYLVA_E2E_OUT || mkdtempSync(join(tmpdir(), 'sylva-e2e-'));
 
 let server, base, browser, corruptServer, corruptBase;
+// A page on another origin, and a viewer whose host lets that origin embed it.
+let foreign, embedServer, embedBase;
 
 // The fixture's ground heights (the scene's datum): the terrain's range from its manifest.
 const fixtureManifest = JSON.parse(readFileSync(join(scene, 'scene.json'), 'utf8'));
@@ -37,6 +39,10 @@ before(async () => {
   const second = startServer(broken);
   corruptServer = second.proc;
   corruptBase = await second.url;
+  foreign = await pageServer();
+  const listing = startServer(scene, ['--allow-embed', foreign.origin]);
+  embedServer = listing.proc;
+  embedBase = await listing.url;
   browser = await chromium.launch({
     executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
     // launch() gives every browser a fresh temporary profile.
@@ -48,6 +54,8 @@ after(async () => {
   await browser?.close();
   server?.kill();
   corruptServer?.kill();
+  embedServer?.kill();
+  foreign?.close();
 });
 
 /** Awaits `window.sylva.ready` in the page, failing after `ms`. */
@@ -720,15 +728,19 @@ test('a resting camera refines its image, then the viewer idles; a move starts o
   assert.deepEqual(errors, []);
 });
 
-test('an iframe is driven by postMessage', async () => {
+test('an iframe on a page of another origin that the host lists is driven by postMessage', async () => {
   const { page } = await openViewer('about:blank', { size: { width: PAGE.width + 40, height: PAGE.height + 40 } });
-  await page.goto(`${base}embed.html`); // same origin as the viewer, to host the iframe
+  // A portal on another origin (`sylva serve --allow-embed` names it) hosts the iframe.
+  await page.goto(`${foreign.origin}/portal`);
   await page.evaluate(([url, size]) => {
     document.body.innerHTML = `<iframe id="f" src="${url}" style="width:${size.width}px;height:${size.height}px"></iframe>`;
     window.replies = [];
-    window.addEventListener('message', (e) => { if (e.data && e.data.sylva) window.replies.push(e.data); });
-  }, [plainFrames(`${base}?ui=0`), PAGE]);
+    window.addEventListener('message', (e) => { if (e.data && e.data.sylva) window.replies.push({ ...e.data, from: e.origin }); });
+  }, [plainFrames(`${embedBase}?ui=0`), PAGE]);
   await page.waitForFunction(() => window.replies.some((r) => r.sylva === 'ready'), null, { timeout: 90000 });
+  const viewerFrame = page.frames().find((f) => f.url().startsWith(embedBase));
+  assert.ok(viewerFrame, page.frames().map((f) => f.url()).join(', '));
+  assert.ok((await page.evaluate(() => window.replies)).every((r) => r.from === new URL(embedBase).origin));
   await page.evaluate(() => {
     const f = document.getElementById('f').contentWindow;
     f.postMessage({ verb: 'setCamera', args: [{ x: 5, y: -350, z: 90, heading: 10, pitch: -20 }], id: 1 }, '*');
@@ -752,8 +764,8 @@ test('an iframe is driven by postMessage', async () => {
   assert.match(refused.error, /no attributes/);
   // pick replies with the tree at a pixel of the iframe's canvas, or null (a column down its middle),
   // once the iframe's viewer is idle (what is drawn no longer changes as tiles stream in).
-  await page.waitForFunction(() => {
-    const s = document.getElementById('f').contentWindow.sylva;
+  await viewerFrame.waitForFunction(() => {
+    const s = window.sylva;
     return s?.viewer && s.dirty === 0 && s.viewer.frames_in_flight() === 0;
   }, null, { timeout: 90000, polling: 250 });
   const px = PAGE.width / 2;
@@ -792,6 +804,53 @@ test('an iframe is driven by postMessage', async () => {
   assert.deepEqual(legend.data.entries.map((e) => e.label), ['spruce', 'beech', 'birch'], JSON.stringify(legend));
   assert.ok(!selected.error && !flown.error && flown.data.count === 1, JSON.stringify([selected, flown]));
   assert.ok(['spruce', 'beech', 'birch'].includes(picked.data.species), JSON.stringify(picked));
+  // Imagery from an origin the host does not list is refused; the scene's own is not.
+  await page.evaluate((tiles) => {
+    const f = document.getElementById('f').contentWindow;
+    f.postMessage({ verb: 'setImagery', args: [tiles], id: 50 }, '*');
+    f.postMessage({ verb: 'setImagery', args: ['scene'], id: 51 }, '*');
+  }, `${foreign.origin}/{z}/{x}/{y}.png`);
+  await page.waitForFunction(() => [50, 51].every((id) => window.replies.some((r) => r.sylva === 'reply' && r.id === id)),
+    null, { timeout: 60000 });
+  const [foreignImagery, ownImagery] = await page.evaluate(() => [50, 51].map((id) => window.replies.find((r) => r.id === id)));
+  assert.match(foreignImagery.error || '', /sylva-embed\.json/, JSON.stringify(foreignImagery));
+  assert.ok(!ownImagery.error, JSON.stringify(ownImagery));
+});
+
+test('a page on another origin can neither frame the viewer nor talk to it unless the host lists it', async () => {
+  const host = await staticHost(scene);
+  try {
+    const { page } = await openViewer('about:blank', { size: { width: 300, height: 120 } });
+    await page.goto(`${foreign.origin}/portal`);
+    await page.evaluate((urls) => {
+      window.replies = [];
+      window.addEventListener('message', (e) => { if (e.data && e.data.sylva) window.replies.push(e.data); });
+      document.body.innerHTML = urls.map(([id, url]) => `<iframe id="${id}" src="${url}" style="width:120px;height:80px"></iframe>`).join('');
+    }, [
+      // sylva serve without --allow-embed: frame-ancestors 'self', the browser shows nothing.
+      ['served', plainFrames(`${base}?ui=0`)],
+      // A static host that sends no header: the viewer sees who frames it and does not start.
+      ['static', plainFrames(`${host.url}?ui=0`)],
+    ]);
+    const frameOf = async (id) => (await page.$(`#${id}`)).contentFrame();
+    const stat = await frameOf('static');
+    await stat.waitForFunction(() => /may not be shown inside a page of/.test(document.getElementById('error')?.textContent),
+      null, { timeout: 60000 });
+    assert.match(await stat.evaluate(() => document.getElementById('error').textContent), new RegExp(foreign.origin));
+    assert.equal(await stat.evaluate(() => window.sylva), undefined, 'the viewer did not start');
+    // Talking to it anyway: no answer, no event (the protocol's own cases: web/tests/embed-policy.test.mjs).
+    await page.evaluate(() => document.getElementById('static').contentWindow.postMessage({ verb: 'camera', id: 1 }, '*'));
+    await page.waitForTimeout(500);
+    const served = await frameOf('served');
+    assert.ok(!served || !served.url().startsWith(base), `frame-ancestors did not keep the viewer out: ${served?.url()}`);
+    assert.deepEqual(await page.evaluate(() => window.replies), [], 'nothing reached the page');
+    // Top level, a ?scene= from another origin is refused before anything is fetched from it.
+    await page.goto(`${host.url}?ui=0&scene=${encodeURIComponent(`${foreign.origin}/forest/scene.json`)}`);
+    await page.waitForFunction(() => /\?scene=/.test(document.getElementById('error')?.textContent), null, { timeout: 60000 });
+    assert.match(await page.evaluate(() => document.getElementById('error').textContent), /sylva-embed\.json/);
+  } finally {
+    host.close();
+  }
 });
 
 test('the browser draws what the native renderer draws for the same camera', async () => {

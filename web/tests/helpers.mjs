@@ -3,8 +3,8 @@
 import { spawn } from 'node:child_process';
 import { createServer } from 'node:http';
 import { deflateSync } from 'node:zlib';
-import { existsSync } from 'node:fs';
-import { join, dirname } from 'node:path';
+import { existsSync, readFileSync, statSync } from 'node:fs';
+import { join, dirname, normalize, extname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 export const root = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
@@ -72,9 +72,9 @@ export function tileServer() {
   })));
 }
 
-/** Starts `sylva serve DIR --port 0` and resolves with its base URL. */
-export function startServer(dir) {
-  const proc = spawn(sylvaBin, ['serve', dir, '--port', '0'], { stdio: ['ignore', 'pipe', 'inherit'] });
+/** Starts `sylva serve DIR --port 0 ...flags` and resolves with its base URL. */
+export function startServer(dir, flags = []) {
+  const proc = spawn(sylvaBin, ['serve', dir, '--port', '0', ...flags], { stdio: ['ignore', 'pipe', 'inherit'] });
   const url = new Promise((resolve, reject) => {
     proc.on('error', reject);
     proc.on('exit', (code) => reject(new Error(`sylva serve exited with ${code}`)));
@@ -98,4 +98,35 @@ export function pagePixels(page, png, reduce, arg = null) {
     // eslint-disable-next-line no-new-func
     return new Function(`return (${src})`)()(d, img.width, img.height, arg);
   }, { b64: Buffer.from(png).toString('base64'), src: reduce.toString(), arg });
+}
+
+/** A page on another origin: any path answers `html` (an empty page by
+ * default). Resolves with {origin, close()}. */
+export function pageServer(html = '<!doctype html><title>another site</title><body></body>') {
+  const srv = createServer((req, res) => {
+    res.writeHead(200, { 'Content-Type': 'text/html; charset=utf-8' });
+    res.end(html);
+  });
+  return new Promise((resolve) => srv.listen(0, '127.0.0.1', () => resolve({
+    origin: `http://127.0.0.1:${srv.address().port}`, close: () => srv.close(),
+  })));
+}
+
+/** A static host that sends no Content-Security-Policy (as a plain bucket or
+ * file server does): web/ at / and `sceneDir` at /scene/. Resolves with
+ * {url, close()}. */
+export function staticHost(sceneDir) {
+  const types = { '.html': 'text/html', '.js': 'text/javascript', '.wasm': 'application/wasm', '.json': 'application/json' };
+  const webDir = join(root, 'web');
+  const srv = createServer((req, res) => {
+    const path = normalize(decodeURIComponent(new URL(req.url, 'http://x').pathname));
+    const [base, rest] = path.startsWith('/scene/') ? [sceneDir, path.slice(7)] : [webDir, path.slice(1) || 'index.html'];
+    const file = join(base, rest);
+    if (path.includes('..') || !existsSync(file) || !statSync(file).isFile()) { res.writeHead(404); res.end(); return; }
+    res.writeHead(200, { 'Content-Type': types[extname(file)] || 'application/octet-stream' });
+    res.end(readFileSync(file));
+  });
+  return new Promise((resolve) => srv.listen(0, '127.0.0.1', () => resolve({
+    url: `http://127.0.0.1:${srv.address().port}/`, close: () => srv.close(),
+  })));
 }
