@@ -39,9 +39,100 @@ pub fn is_plain_relative(text: &str, dotfiles: bool) -> bool {
     })
 }
 
+/// Most bytes one scene file may have, read from a local folder as over HTTP
+/// (a pack with 8k² textures stays below it).
+pub const MAX_SCENE_FILE_BYTES: u64 = 1 << 30;
+
+/// Reads a scene file from a local path — all of it, or the bytes `range`
+/// (start, end exclusive) — at most `cap` bytes: a regular file only, also at
+/// the end of a link. A FIFO, device, socket or folder is refused before it is
+/// opened, so a read neither waits for a writer nor runs on for ever
+/// (`/dev/zero`); a file over `cap` is refused before it is read. The error
+/// says what the path is, not the path: the caller names it.
+///
+/// # Errors
+/// `NotFound` for a missing file; `InvalidInput` for what is no regular file or
+/// too large; other I/O errors as they come.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn read_regular(path: &Path, range: Option<(u64, u64)>, cap: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error, ErrorKind, Read, Seek};
+    let refuse = |what: &str| Error::new(ErrorKind::InvalidInput, format!("it is {what}, not a regular file"));
+    let kind = |m: &std::fs::Metadata| -> Option<&'static str> {
+        use std::os::unix::fs::FileTypeExt;
+        let t = m.file_type();
+        if t.is_file() {
+            None
+        } else if t.is_dir() {
+            Some("a folder")
+        } else if t.is_fifo() {
+            Some("a FIFO")
+        } else if t.is_char_device() || t.is_block_device() {
+            Some("a device")
+        } else if t.is_socket() {
+            Some("a socket")
+        } else {
+            Some("something else")
+        }
+    };
+    if let Some(what) = kind(&std::fs::metadata(path)?) {
+        return Err(refuse(what));
+    }
+    let mut f = std::fs::File::open(path)?;
+    // The path may have been swapped between the look and the open.
+    let meta = f.metadata()?;
+    if let Some(what) = kind(&meta) {
+        return Err(refuse(what));
+    }
+    let (start, want) = match range {
+        Some((a, b)) => (a, b.saturating_sub(a)),
+        None => (0, meta.len()),
+    };
+    if want > cap {
+        return Err(Error::new(
+            ErrorKind::InvalidInput,
+            format!("{want} bytes asked, over the limit of {cap} for one scene file"),
+        ));
+    }
+    if start > 0 {
+        f.seek(std::io::SeekFrom::Start(start))?;
+    }
+    let mut out = Vec::with_capacity(usize::try_from(want.min(meta.len().saturating_sub(start))).unwrap_or(0));
+    // A file that grows while it is read stops at what was asked.
+    f.take(want).read_to_end(&mut out)?;
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scene_files_are_read_only_when_regular_and_within_the_cap() {
+        let dir = std::env::temp_dir().join(format!("sylva-read-regular-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("a.tile");
+        std::fs::write(&file, (0..100u8).collect::<Vec<_>>()).unwrap();
+        assert_eq!(read_regular(&file, None, 100).unwrap().len(), 100);
+        assert_eq!(read_regular(&file, Some((10, 20)), 100).unwrap(), (10..20u8).collect::<Vec<_>>());
+        assert_eq!(read_regular(&file, Some((90, 200)), 1000).unwrap().len(), 10, "a range past the end stops at it");
+        let e = read_regular(&file, None, 99).unwrap_err();
+        assert!(e.to_string().contains("over the limit of 99"), "{e}");
+        assert_eq!(read_regular(&dir.join("missing"), None, 100).unwrap_err().kind(), std::io::ErrorKind::NotFound);
+        // A link to a regular file is read; to a device, a FIFO or a folder, refused at once.
+        let link = dir.join("link.tile");
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        assert_eq!(read_regular(&link, None, 100).unwrap().len(), 100);
+        let zero = dir.join("zero.attr");
+        std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+        let e = read_regular(&zero, None, MAX_SCENE_FILE_BYTES).unwrap_err();
+        assert!(e.to_string().contains("is a device, not a regular file"), "{e}");
+        assert!(read_regular(&dir, None, 100).unwrap_err().to_string().contains("a folder"));
+        let fifo = dir.join("fifo.cnpy");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()), "mkfifo");
+        let e = read_regular(&fifo, None, 100).unwrap_err();
+        assert!(e.to_string().contains("is a FIFO"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn plain_relative_paths_only() {

@@ -21,7 +21,8 @@ pub fn inspect(path: &Path) -> Result<Value> {
         return inspect_dem(&path);
     }
     let name = path.display().to_string();
-    let bytes = std::fs::read(&path).with_context(|| format!("cannot read {name}"))?;
+    let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read {name}"))?;
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
     match (is_scene, ext) {
         (true, _) | (_, "json") => inspect_scene(&path, &bytes),
@@ -137,7 +138,8 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
     let tiles = sylva::format::index::read_all_tiles(dir, &m).map_err(anyhow::Error::msg)?;
     for t in &tiles {
         let p = dir.join(&t.url);
-        let b = std::fs::read(&p).with_context(|| format!("cannot read tile {}", p.display()))?;
+        let b = sylva::paths::read_regular(&p, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read tile {}", p.display()))?;
         let tile = Tile::decode(&p.display().to_string(), &b, m.species.len() as u32)?;
         if tile.instances.len() as u64 != t.trees {
             bail!("{}: holds {} trees, the manifest says {}", p.display(), tile.instances.len(), t.trees);
@@ -147,7 +149,8 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         if let Some(schema) = &m.attributes {
             let url = sylva::format::attributes::attributes_url(&t.url);
             let p = dir.join(&url);
-            let b = std::fs::read(&p).with_context(|| format!("cannot read attributes {}", p.display()))?;
+            let b = sylva::paths::read_regular(&p, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+                .with_context(|| format!("cannot read attributes {}", p.display()))?;
             sylva::format::attributes::decode_attributes(&p.display().to_string(), &b, schema, tile.instances.len())?;
             attribute_bytes += b.len() as u64;
         }
@@ -155,7 +158,8 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
     let mut species = Vec::new();
     for s in &m.species {
         let p = dir.join(&s.pack);
-        let b = std::fs::read(&p).with_context(|| format!("cannot read pack {}", p.display()))?;
+        let b = sylva::paths::read_regular(&p, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read pack {}", p.display()))?;
         let pack = decode_pack(&p.display().to_string(), &b)?;
         let mut j = pack_json(&pack.meta, b.len() as u64, &pack);
         j["trees"] = json!(s.trees);

@@ -12,13 +12,11 @@ mod cloud;
 mod clusters;
 mod country;
 mod demo;
-use sylva_bake::gltf_import;
+use sylva_bake::{gltf_import, placements, reproject};
 mod inspect;
 mod merge;
 mod out_dir;
 mod pack_build;
-mod placements;
-mod reproject;
 mod rng;
 mod scene_write;
 mod tiles3d;
@@ -491,7 +489,8 @@ fn main() {
             let started = Instant::now();
             let out = output.out.clone();
             let inputs: Vec<&std::path::Path> = dirs.iter().map(PathBuf::as_path).collect();
-            OutDir::prepare(&output.out, &inputs, output.force, &log)
+            merge::refuse_output_among_inputs(&output.out, &dirs)
+                .and_then(|()| OutDir::prepare(&output.out, &inputs, output.force, &log))
                 .and_then(|dir| merge::merge(&dirs, dir, index_node_tiles, canopy_cell, &log))
                 .map(|m| {
                     log(&format!(

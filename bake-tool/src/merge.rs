@@ -24,7 +24,8 @@ pub fn merge(
     let mut shards: Vec<(PathBuf, Manifest)> = Vec::new();
     for dir in dirs {
         let path = dir.join("scene.json");
-        let bytes = std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read {}", path.display()))?;
         let m = Manifest::decode(&path.display().to_string(), &bytes)?;
         if m.shard.is_none() {
             bail!("{}: not the output of `sylva-bake bake --shard` (no \"shard\" stamp)", path.display());
@@ -39,8 +40,9 @@ pub fn merge(
             bail!("{}: shard {} of {}, but {} is of {count}", dir.display(), s.index, s.count, shards[0].0.display());
         }
         if s.index as usize != i {
-            let what = if (s.index as usize) < i { "given twice" } else { "missing" };
-            bail!("shard {i} of {count} is {what} (have: {})", list_indices(&shards));
+            // Sorted by index: a smaller one here repeats the one before; a larger one skipped `i`.
+            let (shard, what) = if (s.index as usize) < i { (s.index as usize, "given twice") } else { (i, "missing") };
+            bail!("shard {shard} of {count} is {what} (have: {})", list_indices(&shards));
         }
     }
     if shards.len() != count as usize {
@@ -76,19 +78,39 @@ pub fn merge(
         create_dir(&tmp.join("species"))?;
         create_dir(&tmp.join("tiles"))?;
         for sp in &first.species {
-            copy(&shards[0].0, tmp, &sp.pack)?;
+            copy_checked(&shards[0].0, tmp, &sp.pack, |b| {
+                sylva::format::decode_pack(&sp.pack, b)?;
+                Ok(())
+            })?;
         }
         // Terrain: written by shard 0 only, copied whole.
         if let Some(t) = &first.terrain {
             copy_terrain(&shards[0].0, tmp, t)?;
         }
         let mut tiles: Vec<TileEntry> = Vec::new();
+        let species = u32::try_from(first.species.len()).unwrap_or(u32::MAX);
         for (dir, m) in &shards {
             for t in &m.tiles {
-                copy(dir, tmp, &t.url)?;
-                copy(dir, tmp, &t.ids_url)?;
-                if m.attributes.is_some() {
-                    copy(dir, tmp, &sylva::format::attributes::attributes_url(&t.url))?;
+                // Each file decoded before it is copied, the sidecars against their tile.
+                let mut instances = 0usize;
+                copy_checked(dir, tmp, &t.url, |b| {
+                    instances = sylva::format::Tile::decode(&t.url, b, species)?.instances.len();
+                    Ok(())
+                })?;
+                copy_checked(dir, tmp, &t.ids_url, |b| {
+                    let ids = sylva::format::decode_ids(&t.ids_url, b)?;
+                    if ids.len() != instances {
+                        bail!("{}: {} ids for the tile's {instances} trees", t.ids_url, ids.len());
+                    }
+                    Ok(())
+                })?;
+                if let Some(schema) = &m.attributes {
+                    let url = sylva::format::attributes::attributes_url(&t.url);
+                    copy_checked(dir, tmp, &url, |b| {
+                        sylva::format::attributes::decode_attributes(&url, b, schema, instances)
+                            .map_err(|e| anyhow::anyhow!("{e}"))?;
+                        Ok(())
+                    })?;
                 }
             }
             tiles.extend(m.tiles.iter().cloned());
@@ -102,6 +124,26 @@ pub fn merge(
     })
 }
 
+/// Refuses an `--out` that is one of the shard folders (also through a link),
+/// whatever the flags: merging would replace that shard's files with the whole.
+///
+/// # Errors
+/// Names the shard.
+pub fn refuse_output_among_inputs(out: &Path, dirs: &[PathBuf]) -> Result<()> {
+    let Ok(real_out) = std::fs::canonicalize(out) else { return Ok(()) };
+    for dir in dirs {
+        if std::fs::canonicalize(dir).is_ok_and(|d| d == real_out) {
+            bail!(
+                "--out {} is the shard {}: merge never writes into a shard it reads (also not with --force); \
+                 name a new folder",
+                out.display(),
+                dir.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 fn list_indices(shards: &[(PathBuf, Manifest)]) -> String {
     let v: Vec<String> = shards.iter().filter_map(|(_, m)| m.shard.map(|s| s.index.to_string())).collect();
     v.join(", ")
@@ -113,19 +155,24 @@ fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Resu
     let mut stack = vec![(0u8, 0u32, 0u32)];
     while let Some((level, x, y)) = stack.pop() {
         let rel = t.tile_url(level, x, y);
-        let bytes =
-            std::fs::read(from.join(&rel)).with_context(|| format!("cannot read {}", from.join(&rel).display()))?;
-        let tile = sylva::format::TerrainTile::decode(&rel, &bytes)?;
         if let Some(parent) = to.join(&rel).parent() {
             create_dir(parent)?;
         }
-        std::fs::write(to.join(&rel), &bytes).with_context(|| format!("cannot write {}", to.join(&rel).display()))?;
+        let mut tile = None;
+        copy_checked(from, to, &rel, |b| {
+            tile = Some(sylva::format::TerrainTile::decode(&rel, b)?);
+            Ok(())
+        })?;
+        let tile = tile.expect("set by the check");
         if let Some(i) = t.imagery.as_ref().filter(|_| t.has_imagery(level, x, y)) {
             let img = i.tile_url(level, x, y);
             if let Some(parent) = to.join(&img).parent() {
                 create_dir(parent)?;
             }
-            copy(from, to, &img)?;
+            copy_checked(from, to, &img, |b| {
+                sylva::format::imagery::decode_image(&img, b, sylva::format::terrain::IMAGERY_PX)?;
+                Ok(())
+            })?;
         }
         for (k, c) in tile.children.iter().enumerate() {
             if c.exists && level + 1 < t.levels {
@@ -136,9 +183,29 @@ fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Resu
     Ok(())
 }
 
-/// Copies `rel` from `from` to `to` (a URL the manifest decoder has checked stays inside).
-fn copy(from: &Path, to: &Path, rel: &str) -> Result<()> {
+/// Copies `rel` (a URL the manifest decoder has checked is a plain relative
+/// path) from the shard `from` to `to` after `check` accepted its bytes: the
+/// shard's own regular file only — no link, also not a linked folder on the
+/// way, no FIFO or device — and at most [`sylva::paths::MAX_SCENE_FILE_BYTES`]
+/// (docs/SECURITY.md).
+fn copy_checked(from: &Path, to: &Path, rel: &str, check: impl FnOnce(&[u8]) -> Result<()>) -> Result<()> {
     let (src, dst) = (from.join(rel), to.join(rel));
-    std::fs::copy(&src, &dst).with_context(|| format!("cannot copy {} to {}", src.display(), dst.display()))?;
+    if std::fs::symlink_metadata(&src).is_ok_and(|m| m.file_type().is_symlink()) {
+        bail!("{} is a symbolic link: merge copies only a shard's own files (bake the shard again)", src.display());
+    }
+    let inside = std::fs::canonicalize(&src)
+        .and_then(|real| Ok(real.starts_with(std::fs::canonicalize(from)?)))
+        .with_context(|| format!("cannot read {}", src.display()))?;
+    if !inside {
+        bail!(
+            "{} lies outside its shard {} (a linked folder): merge copies only a shard's own files",
+            src.display(),
+            from.display()
+        );
+    }
+    let bytes = sylva::paths::read_regular(&src, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read {}", src.display()))?;
+    check(&bytes).with_context(|| format!("{} is not what the shard's scene.json says it is", src.display()))?;
+    std::fs::write(&dst, &bytes).with_context(|| format!("cannot write {}", dst.display()))?;
     Ok(())
 }

@@ -25,6 +25,15 @@ pub enum FetchError {
         /// The status code.
         status: u16,
     },
+    /// A local path that is no regular file (a folder, FIFO, device, a link
+    /// loop) or a file over the size limit: retrying will not help.
+    #[error("{url}: {message}")]
+    Refused {
+        /// What was fetched.
+        url: String,
+        /// Why.
+        message: String,
+    },
     /// Connection, I/O or protocol trouble.
     #[error("{url}: {message}")]
     Transport {
@@ -40,7 +49,7 @@ impl FetchError {
     #[must_use]
     pub fn retryable(&self) -> bool {
         match self {
-            FetchError::NotFound { .. } => false,
+            FetchError::NotFound { .. } | FetchError::Refused { .. } => false,
             FetchError::Status { status, .. } => *status >= 500 || *status == 408 || *status == 429,
             FetchError::Transport { .. } => true,
         }
@@ -155,8 +164,8 @@ mod native {
         fetch_blocking(&agent, url, None)
     }
 
-    /// Most bytes one response may have (a pack with 8k² textures stays below it).
-    const MAX_RESPONSE_BYTES: u64 = 1 << 30;
+    /// Most bytes one response may have, as one local file.
+    const MAX_RESPONSE_BYTES: u64 = crate::paths::MAX_SCENE_FILE_BYTES;
 
     fn fetch_blocking(agent: &ureq::Agent, url: &str, range: Option<super::ByteRange>) -> Result<Vec<u8>, FetchError> {
         if let Some((a, b)) = range {
@@ -182,18 +191,18 @@ mod native {
             }
         } else {
             let path = url.strip_prefix("file://").unwrap_or(url);
-            let read = || -> std::io::Result<Vec<u8>> {
-                let Some((a, b)) = range else { return std::fs::read(path) };
-                use std::io::{Read, Seek};
-                let mut f = std::fs::File::open(path)?;
-                f.seek(std::io::SeekFrom::Start(a))?;
-                let mut out = Vec::new();
-                f.take(b - a).read_to_end(&mut out)?;
-                Ok(out)
-            };
-            read().map_err(|e| match e.kind() {
-                std::io::ErrorKind::NotFound => FetchError::NotFound { url: url.into() },
-                _ => FetchError::Transport { url: url.into(), message: e.to_string() },
+            // Regular files only, bounded as over HTTP (docs/SECURITY.md).
+            crate::paths::read_regular(std::path::Path::new(path), range, MAX_RESPONSE_BYTES).map_err(|e| {
+                match e.kind() {
+                    std::io::ErrorKind::NotFound => FetchError::NotFound { url: url.into() },
+                    // Not a regular file, too large, a folder, a link loop: a retry reads the same.
+                    // (ELOOP is 40 on Linux; io::ErrorKind::FilesystemLoop is not stable yet.)
+                    std::io::ErrorKind::InvalidInput => FetchError::Refused { url: url.into(), message: e.to_string() },
+                    _ if e.raw_os_error() == Some(40) => {
+                        FetchError::Refused { url: url.into(), message: e.to_string() }
+                    }
+                    _ => FetchError::Transport { url: url.into(), message: e.to_string() },
+                }
             })
         }
     }
@@ -243,5 +252,25 @@ mod tests {
         assert!(!FetchError::NotFound { url: "x".into() }.retryable());
         assert!(FetchError::Status { url: "x".into(), status: 503 }.retryable());
         assert!(!FetchError::Status { url: "x".into(), status: 403 }.retryable());
+    }
+
+    #[test]
+    fn local_files_that_are_no_regular_files_are_refused_for_good() {
+        // Issue 42: a FIFO waited for a writer; a folder or a link loop was
+        // retried as if the network had failed. Refused, named, not retried.
+        let dir = std::env::temp_dir().join(format!("sylva-fetch-refused-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("folder.jpg")).unwrap();
+        let fifo = dir.join("a.cnpy");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()), "mkfifo");
+        let looped = dir.join("a.terr");
+        std::os::unix::fs::symlink("a.terr", &looped).unwrap();
+        for (name, says) in [("a.cnpy", "a FIFO"), ("folder.jpg", "a folder"), ("a.terr", "symbolic links")] {
+            let url = dir.join(name).display().to_string();
+            let e = fetch_once(&url).unwrap_err();
+            assert!(matches!(e, FetchError::Refused { .. }) && !e.retryable(), "{name}: {e:?}");
+            assert!(e.to_string().starts_with(&url) && e.to_string().contains(says), "{e}");
+        }
+        assert!(matches!(fetch_once(&dir.join("none.tile").display().to_string()), Err(FetchError::NotFound { .. })));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -340,8 +340,10 @@ pub fn describe_tree(
 pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<QueryResult, String> {
     use crate::format::attributes::attributes_url;
     use crate::format::Manifest;
-    let read =
-        |url: &str| std::fs::read(dir.join(url)).map_err(|e| format!("cannot read {}: {e}", dir.join(url).display()));
+    let read = |url: &str| {
+        crate::paths::read_regular(&dir.join(url), None, crate::paths::MAX_SCENE_FILE_BYTES)
+            .map_err(|e| format!("cannot read {}: {e}", dir.join(url).display()))
+    };
     let m = Manifest::decode("scene.json", &read("scene.json")?).map_err(|e| e.to_string())?;
     let schema = m.attributes.as_ref();
     let filter = Filter::parse(schema, filter)?;

@@ -212,3 +212,66 @@ fn pick_prints_the_tree_at_a_pixel_or_null() {
     let (ok, _, stderr) = pick("a,b", "top");
     assert!(!ok && stderr.contains("expected X,Y"), "{stderr}");
 }
+
+#[test]
+fn scene_files_that_are_no_regular_files_fail_at_once_and_are_listed() {
+    // Issue 42: a FIFO waited for a writer (render never exited), a link to
+    // /dev/zero read gigabytes, a folder or a link loop as a ground image
+    // rendered grey with nothing listed. Every local scene file is read as a
+    // regular file only: the rest draws, the render lists them and fails.
+    // (Link loops: scene::fetch's unit test.)
+    let dir = tmp("irregular");
+    let scene = scene_copy(&dir);
+    let files = |sub: &str, ext: &str| -> Vec<PathBuf> {
+        let mut out = Vec::new();
+        let mut stack = vec![scene.join(sub)];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else if p.extension().is_some_and(|x| x == ext) {
+                    out.push(p);
+                }
+            }
+        }
+        assert!(!out.is_empty(), "the fixture has {sub}/**/*.{ext}");
+        out
+    };
+    for p in files("canopy", "cnpy") {
+        std::fs::remove_file(&p).unwrap();
+        assert!(Command::new("mkfifo").arg(&p).status().unwrap().success());
+    }
+    for p in files("terrain/img", "jpg") {
+        std::fs::remove_file(&p).unwrap();
+        std::fs::create_dir(&p).unwrap();
+    }
+    let (ok, stats, stderr) = render(&scene, "top", &["--shadows", "off"]);
+    assert!(!ok && stderr.contains("incomplete"), "{stderr}");
+    let failed: Vec<(String, String)> = stats["failed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| (f["url"].as_str().unwrap().to_string(), f["message"].as_str().unwrap().to_string()))
+        .collect();
+    for (ext, says) in [(".cnpy", "is a FIFO"), (".jpg", "is a folder")] {
+        assert!(
+            failed.iter().any(|(u, m)| u.ends_with(ext) && m.contains(says)),
+            "no {ext} failure ({says}) among {failed:?}"
+        );
+    }
+    assert!(drawn(&stats) > 1000, "the trees are drawn");
+    // query: a tile's ids linked to /dev/zero are refused, not read (2 GB before).
+    let ids = std::fs::read_dir(scene.join("tiles"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "ids"))
+        .unwrap();
+    std::fs::remove_file(&ids).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &ids).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva")).args(["query", "--scene"]).arg(&scene).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("is a device, not a regular file"), "{stderr}");
+    assert!(stderr.contains(ids.file_name().unwrap().to_str().unwrap()), "names the file: {stderr}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

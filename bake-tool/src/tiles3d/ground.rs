@@ -55,7 +55,8 @@ impl Ground<'_> {
     fn read(&self, (level, x, y): Key) -> Result<TerrainTile> {
         let e = self.entry();
         let path = self.dir.join(e.tile_url(level, x, y));
-        let bytes = std::fs::read(&path).with_context(|| format!("cannot read terrain tile {}", path.display()))?;
+        let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read terrain tile {}", path.display()))?;
         let t = TerrainTile::decode(&path.display().to_string(), &bytes)?;
         if (t.level, t.x, t.y) != (level, x, y) || t.grid != e.grid {
             bail!(
@@ -91,7 +92,8 @@ impl Ground<'_> {
     fn copy_image(&self, (level, x, y): Key, report: &mut ExportReport) -> Result<()> {
         let imagery = self.entry().imagery.as_ref().expect("an image without imagery");
         let path = self.dir.join(imagery.tile_url(level, x, y));
-        let bytes = std::fs::read(&path).with_context(|| format!("cannot read ground image {}", path.display()))?;
+        let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read ground image {}", path.display()))?;
         let img = sylva::format::imagery::decode_image(&path.display().to_string(), &bytes, IMAGERY_PX)?;
         if (img.width, img.height) != (IMAGERY_PX, IMAGERY_PX) {
             bail!("{}: {}×{} pixels, not {IMAGERY_PX}²", path.display(), img.width, img.height);

@@ -335,7 +335,8 @@ fn layer_png(data: &[u8], size: u32, layer: u32, what: &str) -> Result<Vec<u8>> 
 fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut ExportReport) -> Result<SpeciesOut> {
     let entry = &m.species[s];
     let path = dir.join(&entry.pack);
-    let bytes = std::fs::read(&path).with_context(|| format!("cannot read pack {}", path.display()))?;
+    let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read pack {}", path.display()))?;
     let pack = decode_pack(&path.display().to_string(), &bytes)?;
     let meta = pack.meta.clone();
     if meta.mesh_levels.is_empty() {
@@ -766,7 +767,8 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         bail!("{}: tile {},{} is listed twice", dir.join("scene.json").display(), entry.x, entry.y);
     }
     let path = dir.join(&entry.url);
-    let bytes = std::fs::read(&path).with_context(|| format!("cannot read tile {}", path.display()))?;
+    let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read tile {}", path.display()))?;
     let tile = Tile::decode(&path.display().to_string(), &bytes, m.species.len() as u32)?;
     let mid = DVec3::new(
         (f64::from(entry.bounds.min[0]) + f64::from(entry.bounds.max[0])) * 0.5,
@@ -781,7 +783,8 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
     let ids_path = dir.join(&entry.ids_url);
     let ids = sylva::format::decode_ids(
         &ids_path.display().to_string(),
-        &std::fs::read(&ids_path).with_context(|| format!("cannot read tree ids {}", ids_path.display()))?,
+        &sylva::paths::read_regular(&ids_path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read tree ids {}", ids_path.display()))?,
     )?;
     if ids.len() != tile.instances.len() {
         bail!("{}: {} ids for {} trees", ids_path.display(), ids.len(), tile.instances.len());
@@ -790,7 +793,8 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         Some(schema) => {
             let url = sylva::format::attributes::attributes_url(&entry.url);
             let p = dir.join(&url);
-            let bytes = std::fs::read(&p).with_context(|| format!("cannot read attributes {}", p.display()))?;
+            let bytes = sylva::paths::read_regular(&p, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+                .with_context(|| format!("cannot read attributes {}", p.display()))?;
             let codes = sylva::format::attributes::decode_attributes(
                 &p.display().to_string(),
                 &bytes,
@@ -911,7 +915,8 @@ fn export_node(
         bail!("{}: an index node listed twice", ctx.dir.join(url).display());
     }
     let path = ctx.dir.join(url);
-    let bytes = std::fs::read(&path).with_context(|| format!("cannot read index node {}", path.display()))?;
+    let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read index node {}", path.display()))?;
     let node = IndexNode::decode(&path.display().to_string(), &bytes)?;
     let mut children = Vec::new();
     for c in &node.children {
@@ -943,16 +948,57 @@ pub fn export(
         );
     }
     let manifest = dir.join("scene.json");
-    let bytes = std::fs::read(&manifest).with_context(|| format!("cannot read {}", manifest.display()))?;
+    let bytes = sylva::paths::read_regular(&manifest, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read {}", manifest.display()))?;
     let m = Manifest::decode(&manifest.display().to_string(), &bytes)?;
     if m.counts.trees == 0 {
         bail!("{}: the scene has no trees to export", manifest.display());
+    }
+    let dangling = std::fs::symlink_metadata(out).is_ok_and(|l| l.file_type().is_symlink()) && !out.exists();
+    if dangling {
+        bail!("--out {} is a symbolic link to a folder that does not exist", out.display());
+    }
+    if out.exists() && !out.is_dir() {
+        bail!("--out {} exists and is not a folder", out.display());
     }
     if out.exists()
         && std::fs::read_dir(out).with_context(|| format!("cannot read {}", out.display()))?.next().is_some()
     {
         bail!("{}: not empty; export into a new or empty folder (nothing is overwritten)", out.display());
     }
+    // What a failed export wrote goes again (the folder was new or empty), so a
+    // retry after the cause is fixed finds it as it was.
+    let created = !out.exists();
+    let result = export_into(dir, out, &m, options, progress);
+    if result.is_err() {
+        let _ = if created {
+            std::fs::remove_dir_all(out)
+        } else {
+            std::fs::read_dir(out).and_then(|entries| {
+                for e in entries.flatten() {
+                    let p = e.path();
+                    if e.file_type().is_ok_and(|t| t.is_dir()) {
+                        std::fs::remove_dir_all(&p)?;
+                    } else {
+                        std::fs::remove_file(&p)?;
+                    }
+                }
+                Ok(())
+            })
+        };
+    }
+    result
+}
+
+/// [`export`] after its checks: writes the tileset into the new or empty `out`.
+fn export_into(
+    dir: &Path,
+    out: &Path,
+    m: &Manifest,
+    options: ExportOptions,
+    progress: &mut dyn FnMut(&ExportReport),
+) -> Result<ExportReport> {
+    let manifest = dir.join("scene.json");
     let ground = options.ground && m.terrain.is_some();
     let subs: &[&str] = if ground { &["tiles", "meshes", "ground/img"] } else { &["tiles", "meshes"] };
     for sub in subs {
@@ -962,14 +1008,14 @@ pub fn export(
         .map_err(|e| anyhow::anyhow!("{}: the scene's CRS: {e}", manifest.display()))?;
     let mut report = ExportReport::default();
     let species: Vec<SpeciesOut> =
-        (0..m.species.len()).map(|s| species_out(dir, &m, s, out, &mut report)).collect::<Result<_>>()?;
+        (0..m.species.len()).map(|s| species_out(dir, m, s, out, &mut report)).collect::<Result<_>>()?;
     let names = property_names(m.attributes.as_ref());
     let meta_schema = metadata_schema(m.attributes.as_ref(), &names);
     let ctx = Ctx {
         seen_nodes: Default::default(),
         seen_tiles: Default::default(),
         dir,
-        m: &m,
+        m,
         geo,
         species,
         out,
@@ -989,7 +1035,7 @@ pub fn export(
     };
     let Some(forest) = root else { bail!("{}: the scene lists no tiles", manifest.display()) };
     let ground = if ground {
-        let g = ground::Ground { dir, m: &m, geo: &ctx.geo, out, height_offset_m: options.height_offset_m };
+        let g = ground::Ground { dir, m, geo: &ctx.geo, out, height_offset_m: options.height_offset_m };
         g.export(&mut report, progress)?
     } else {
         None
@@ -1237,6 +1283,44 @@ mod tests {
         let again = export(&dir, &out, ExportOptions::default(), &mut |_| {}).unwrap_err().to_string();
         assert!(again.contains("not empty"), "{again}");
         std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    #[test]
+    fn a_failed_export_leaves_nothing_behind_and_the_retry_works() {
+        let base = std::env::temp_dir().join(format!("sylva-3dtiles-failed-{}", std::process::id()));
+        let scene = base.join("scene");
+        std::fs::create_dir_all(&base).unwrap();
+        assert!(std::process::Command::new("cp").arg("-r").arg(fixture()).arg(&scene).status().unwrap().success());
+        // The last tile in the index's order corrupt: the export fails after writing others.
+        let m = Manifest::decode("m", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
+        let tiles = sylva::format::index::read_all_tiles(&scene, &m).unwrap();
+        let last = scene.join(&tiles.last().unwrap().url);
+        let good = std::fs::read(&last).unwrap();
+        std::fs::write(&last, b"not a tile").unwrap();
+        for existed in [false, true] {
+            let out = base.join(format!("out-{existed}"));
+            if existed {
+                std::fs::create_dir_all(&out).unwrap();
+            }
+            let e = export(&scene, &out, ExportOptions::default(), &mut |_| {}).unwrap_err();
+            assert!(format!("{e:#}").contains(last.file_name().unwrap().to_str().unwrap()), "{e:#}");
+            assert_eq!(out.exists(), existed, "a new folder goes, an empty one stays");
+            if existed {
+                assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0, "the empty folder is empty again");
+            }
+        }
+        std::fs::write(&last, good).unwrap();
+        export(&scene, &base.join("out-true"), ExportOptions::default(), &mut |_| {}).unwrap();
+        // A dangling link, or a file, as --out: said so.
+        let link = base.join("dangling");
+        std::os::unix::fs::symlink(base.join("nowhere"), &link).unwrap();
+        let e = export(&scene, &link, ExportOptions::default(), &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains("symbolic link to a folder that does not exist"), "{e}");
+        let file = base.join("file");
+        std::fs::write(&file, "x").unwrap();
+        let e = export(&scene, &file, ExportOptions::default(), &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains("is not a folder"), "{e}");
+        std::fs::remove_dir_all(&base).unwrap();
     }
 
     /// The ground: every terrain tile a GLB in the quadtree's hierarchy, each

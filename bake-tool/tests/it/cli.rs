@@ -422,12 +422,101 @@ fn sharded_bake_and_merge_equal_a_single_bake() {
     let err = fails(
         bin().arg("merge").args(["part-0", "part-1", "part-1"].map(|p| dir.join(p))).arg("--out").arg(dir.join("bad")),
     );
-    assert!(err.contains("given twice"), "{err}");
+    assert!(err.contains("shard 1 of 3 is given twice"), "{err}");
+    let err = fails(
+        bin().arg("merge").args(["part-0", "part-0", "part-2"].map(|p| dir.join(p))).arg("--out").arg(dir.join("bad")),
+    );
+    assert!(err.contains("shard 0 of 3 is given twice"), "the repeated shard is named: {err}");
     let err = fails(bin().arg("merge").arg(dir.join("single")).arg("--out").arg(dir.join("bad")));
     assert!(err.contains("no \"shard\" stamp"), "{err}");
     let err = fails(args(&dir.join("bad")).args(["--shard", "3/3"]));
     assert!(err.contains("0 ≤ I < N"), "{err}");
     assert!(!dir.join("bad").exists(), "nothing is left behind");
+    merge_copies_only_the_shards_own_files(&dir);
+}
+
+/// Hostile shard folders (issue 42): `merge` copies only each shard's own
+/// regular files, decoded first, and never writes into a shard.
+fn merge_copies_only_the_shards_own_files(dir: &Path) {
+    let parts = ["part-0", "part-1", "part-2"];
+    // --out one of the shards: refused whatever the flags, the shard untouched.
+    let before = snapshot(&dir.join("part-0"));
+    for force in [false, true] {
+        let mut c = bin();
+        c.arg("merge").args(parts.map(|p| dir.join(p))).arg("--out").arg(dir.join("part-0"));
+        if force {
+            c.arg("--force");
+        }
+        let err = fails(&mut c);
+        assert!(err.contains("is the shard") && err.contains("never writes into a shard"), "{err}");
+    }
+    assert_eq!(snapshot(&dir.join("part-0")), before, "the shard was written to");
+    let secret = dir.join("secret.txt");
+    std::fs::write(&secret, "the keys to the kingdom").unwrap();
+    // A copy of the shards with one file made hostile, merged: the error names the file and why.
+    let hostile = |case: &str, shard: usize, pick: &dyn Fn(&str) -> bool, harm: &dyn Fn(&Path)| -> String {
+        let h = dir.join(format!("hostile-{case}"));
+        std::fs::create_dir_all(&h).unwrap();
+        for p in parts {
+            assert!(std::process::Command::new("cp")
+                .arg("-r")
+                .arg(dir.join(p))
+                .arg(h.join(p))
+                .status()
+                .unwrap()
+                .success());
+        }
+        let shard = h.join(parts[shard]);
+        let file = snapshot(&shard)
+            .into_iter()
+            .map(|(f, _)| f)
+            .find(|f| pick(f))
+            .unwrap_or_else(|| panic!("{case}: no such file"));
+        let path = shard.join(&file);
+        std::fs::remove_file(&path).unwrap();
+        harm(&path);
+        let err = fails(bin().arg("merge").args(parts.map(|p| h.join(p))).arg("--out").arg(h.join("merged")));
+        let named = if case == "linked-folder" { "tiles" } else { file.rsplit('/').next().unwrap() };
+        assert!(err.contains(named), "{case}: the error names {named}: {err}");
+        // (Only the output is read back: the hostile shard may hold a FIFO.)
+        let merged = h.join("merged");
+        let leaked = if merged.exists() {
+            snapshot(&merged).iter().filter(|(_, b)| b.as_slice() == b"the keys to the kingdom").count()
+        } else {
+            0
+        };
+        assert_eq!(leaked, 0, "{case}: the secret was copied");
+        std::fs::remove_dir_all(&h).unwrap();
+        err
+    };
+    let link_to_secret = |p: &Path| std::os::unix::fs::symlink(&secret, p).unwrap();
+    let is = |suffix: &'static str| move |f: &str| f.ends_with(suffix);
+    for (case, shard, suffix) in [("ids", 1, ".ids"), ("tile", 2, ".tile"), ("pack", 0, ".pack")] {
+        let err = hostile(&format!("link-{case}"), shard, &is(suffix), &link_to_secret);
+        assert!(err.contains("is a symbolic link"), "{case}: {err}");
+    }
+    if snapshot(&dir.join("part-1")).iter().any(|(f, _)| f.ends_with(".attr")) {
+        let err = hostile("link-attr", 1, &is(".attr"), &link_to_secret);
+        assert!(err.contains("is a symbolic link"), "{err}");
+    }
+    // A FIFO fails at once (no wait for a writer); a file that is not what it says is decoded and refused.
+    let err = hostile("fifo", 1, &is(".tile"), &|p| {
+        assert!(std::process::Command::new("mkfifo").arg(p).status().unwrap().success());
+    });
+    assert!(err.contains("is a FIFO"), "{err}");
+    let err = hostile("garbage-ids", 2, &is(".ids"), &|p| std::fs::write(p, b"SYID but not really").unwrap());
+    assert!(err.contains("is not what the shard's scene.json says"), "{err}");
+    let err = hostile("foreign-pack", 0, &is(".pack"), &|p| std::fs::copy(&secret, p).map(|_| ()).unwrap());
+    assert!(err.contains("is not what the shard's scene.json says"), "{err}");
+    // A linked folder on the way (tiles/ pointing elsewhere) is refused like a linked file.
+    let err = hostile("linked-folder", 1, &is(".ids"), &|p| {
+        let tiles = p.parent().unwrap();
+        let elsewhere = tiles.parent().unwrap().parent().unwrap().join("elsewhere-tiles");
+        std::fs::rename(tiles, &elsewhere).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, tiles).unwrap();
+        std::fs::write(elsewhere.join(p.file_name().unwrap()), b"x").unwrap();
+    });
+    assert!(err.contains("outside its shard"), "{err}");
 }
 
 #[test]
@@ -842,16 +931,18 @@ fn inventories_with_their_own_column_names_and_dbh_instead_of_heights() {
 fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
     let Some(model) = oak_model() else { return };
     let dir = tmp("districts");
-    // Two districts of Amsterdam-like street trees, about 15 km apart; the east one larger.
+    // Two districts of Amsterdam-like street trees, about 15 km apart; the east one
+    // larger: two streets in an L (west and north of an empty park, 450 × 360 m).
     let mut csv = String::from("id,species,lat,lon,height\n");
     for i in 0..500 {
-        let (lat0, lon0, n) = if i < 150 { (52.370, 4.760, i) } else { (52.372, 4.980, i - 150) };
-        csv += &format!(
-            "{i},Tilia,{:.6},{:.6},{}\n",
-            lat0 + f64::from(n % 20) * 0.0002,
-            lon0 + f64::from(n / 20) * 0.0003,
-            10 + i % 8
-        );
+        let (lat, lon) = if i < 150 {
+            (52.370 + f64::from(i % 20) * 0.0002, 4.760 + f64::from(i / 20) * 0.0003)
+        } else if i < 325 {
+            (52.372 + f64::from(i - 150) * 0.004 / 174.0, 4.980)
+        } else {
+            (52.376, 4.980 + f64::from(i - 325) * 0.00525 / 174.0)
+        };
+        csv += &format!("{i},Tilia,{lat:.6},{lon:.6},{}\n", 10 + i % 8);
     }
     let path = dir.join("districts.csv");
     std::fs::write(&path, &csv).unwrap();
@@ -876,6 +967,14 @@ fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
         let drawn: u64 = off.render(&cam, true).instances.values().sum();
         assert!(drawn > 100, "{view:?}: {drawn} trees drawn");
     }
+    // The close view stands among trees at eye height (issue 42: in the park it
+    // saw only far streets): near trees are drawn as meshes.
+    let cam = off.named_camera(NamedView::Close, 60.0).unwrap();
+    off.load_view(&cam, 60.0);
+    let stats = off.render(&cam, true);
+    let meshes =
+        stats.instances.get("mesh0").copied().unwrap_or(0) + stats.instances.get("mesh1").copied().unwrap_or(0);
+    assert!(meshes > 0, "close: no tree near enough for a mesh: {:?} at {:?}", stats.instances, cam.eye_m);
     let mut middle = m.clone();
     middle.home = Some(sylva::format::Home { bounds: m.bounds, trees: 0 });
     let cam = NamedView::Medium.camera(&middle);
