@@ -193,6 +193,80 @@ pub fn query_tile(
     Ok(result.to_json().to_string())
 }
 
+/// The walk over a scene's tiles for `v.query` (web/sylva.js fetches each node
+/// it names): the same walker and checks as `sylva query`
+/// ([`crate::format::index::TileWalk`]).
+#[wasm_bindgen(js_name = TileWalk)]
+pub struct WebTileWalk {
+    walk: Option<crate::format::index::TileWalk>,
+    schema: String,
+    species: u32,
+}
+
+#[wasm_bindgen(js_class = TileWalk)]
+impl WebTileWalk {
+    /// Starts a walk from the manifest's bytes (`scene.json` as fetched).
+    ///
+    /// # Errors
+    /// A manifest that does not decode (the decoder checks every URL in it).
+    #[wasm_bindgen(constructor)]
+    pub fn new(manifest: &[u8]) -> Result<WebTileWalk, JsValue> {
+        let m = crate::format::Manifest::decode("scene.json", manifest).map_err(js_err)?;
+        Ok(Self {
+            schema: serde_json::to_string(&m.attributes).map_err(js_err)?,
+            species: u32::try_from(m.species.len()).unwrap_or(u32::MAX),
+            walk: Some(crate::format::index::TileWalk::new(&m)),
+        })
+    }
+
+    /// The manifest's attribute schema as JSON (`null` without), for `queryMayMatch` and `queryTile`.
+    #[must_use]
+    pub fn schema(&self) -> String {
+        self.schema.clone()
+    }
+
+    /// Species in the scene, for `queryTile`.
+    #[must_use]
+    pub fn species(&self) -> u32 {
+        self.species
+    }
+
+    /// The index node to fetch next (relative to `scene.json`), or undefined when done.
+    #[must_use]
+    pub fn next(&self) -> Option<String> {
+        self.walk.as_ref().and_then(|w| w.next_url().map(str::to_string))
+    }
+
+    /// Takes the bytes of the node `next` named.
+    ///
+    /// # Errors
+    /// A node that does not decode, is reached twice, or is more than the manifest declares.
+    pub fn feed(&mut self, bytes: &[u8]) -> Result<(), JsValue> {
+        self.walk.as_mut().ok_or_else(|| js_err("the walk is finished"))?.feed(bytes).map_err(js_err)
+    }
+
+    /// Every tile as JSON `[{url, ids_url, attr_url, attribute_codes}]`, row order; ends the walk.
+    ///
+    /// # Errors
+    /// Called twice.
+    pub fn tiles(&mut self) -> Result<String, JsValue> {
+        let walk = self.walk.take().ok_or_else(|| js_err("the walk is finished"))?;
+        let tiles: Vec<serde_json::Value> = walk
+            .finish()
+            .iter()
+            .map(|t| {
+                serde_json::json!({
+                    "url": t.url,
+                    "ids_url": t.ids_url,
+                    "attr_url": crate::format::attributes::attributes_url(&t.url),
+                    "attribute_codes": t.attribute_codes,
+                })
+            })
+            .collect();
+        Ok(serde_json::Value::Array(tiles).to_string())
+    }
+}
+
 fn query_parse(
     schema: &str,
     filter: &str,

@@ -42,7 +42,7 @@
 //   await v.focusBounds()                   [west, south, east, north] around where the scene's views aim first
 //   v.tick(now)                             draw now if anything changed (a map's render callback calls it)
 
-import init, { Viewer, queryMayMatch, queryTile } from './pkg/sylva.js';
+import init, { Viewer, TileWalk, queryMayMatch, queryTile } from './pkg/sylva.js';
 
 let wasmReady = null;
 
@@ -127,31 +127,31 @@ class SylvaViewer {
   async query(filter = {}, { limit = 10000 } = {}) {
     const sceneUrl = new URL(this.options.scene || 'scene/scene.json', location.href);
     const base = sceneUrl.href.endsWith('.json') ? sceneUrl : new URL('scene.json', sceneUrl.href.replace(/\/?$/, '/'));
-    const get = async (url, json) => {
+    const get = async (url) => {
       const r = await fetch(new URL(url, base));
       if (!r.ok) throw new Error(`${new URL(url, base)}: HTTP ${r.status}`);
-      return json ? r.json() : new Uint8Array(await r.arrayBuffer());
+      return new Uint8Array(await r.arrayBuffer());
     };
-    const m = await get(base.href, true);
-    const schema = JSON.stringify(m.attributes ?? null);
+    // The manifest and index nodes go through the wasm walker: the decoders'
+    // URL checks, no node twice, no more nodes than declared (as `sylva query`).
+    const walk = new TileWalk(await get(base.href));
+    let tiles, schema, species;
     const f = JSON.stringify(filter);
-    queryMayMatch(schema, f, 'null'); // a filter that does not fit the scene throws here
-    const tiles = [...(m.tiles || [])];
-    if (m.index) {
-      const stack = [m.index.root];
-      while (stack.length) {
-        const node = await get(stack.pop(), true);
-        tiles.push(...node.tiles);
-        stack.push(...node.children.map((c) => c.url));
-      }
+    try {
+      schema = walk.schema();
+      species = walk.species();
+      queryMayMatch(schema, f, 'null'); // a filter that does not fit the scene throws here
+      for (let url = walk.next(); url !== undefined; url = walk.next()) walk.feed(await get(url));
+      tiles = JSON.parse(walk.tiles());
+    } finally {
+      walk.free();
     }
     const out = { count: 0, ids: [], bounds: null, tiles: 0, skipped: 0 };
-    const needsAttributes = m.attributes && Object.keys(filter).some((k) => k !== 'id');
+    const needsAttributes = schema !== 'null' && Object.keys(filter).some((k) => k !== 'id');
     for (const t of tiles) {
       if (!queryMayMatch(schema, f, JSON.stringify(t.attribute_codes ?? null))) { out.skipped++; continue; }
-      const attrUrl = t.url.replace(/\.tile$/, '') + '.attr';
-      const [tile, ids, attr] = await Promise.all([get(t.url), get(t.ids_url), needsAttributes ? get(attrUrl) : null]);
-      const r = JSON.parse(queryTile(schema, f, m.species.length, tile, ids, attr ?? undefined, t.url,
+      const [tile, ids, attr] = await Promise.all([get(t.url), get(t.ids_url), needsAttributes ? get(t.attr_url) : null]);
+      const r = JSON.parse(queryTile(schema, f, species, tile, ids, attr ?? undefined, t.url,
         Math.max(0, limit - out.ids.length)));
       out.count += r.count;
       out.ids.push(...r.ids);

@@ -273,30 +273,87 @@ fn count_tiles(out: &[(String, IndexNode)], at: usize) -> u64 {
     n.children.iter().map(|c| c.tiles).sum()
 }
 
+/// A walk of every tile of a scene — the manifest's flat list, or the leaves of
+/// its index — fed node by node by whoever fetches them (a local folder:
+/// [`read_all_tiles`]; the browser's `query`: the wasm `TileWalk`), so both
+/// take the same checks: URLs as the decoders check them, no node twice (a
+/// node that is its own child, or a cycle, stops the walk at once), and no
+/// more nodes than the manifest declares.
+#[derive(Debug, Clone)]
+pub struct TileWalk {
+    declared: u64,
+    visited: u64,
+    stack: Vec<String>,
+    seen: std::collections::HashSet<String>,
+    tiles: Vec<TileEntry>,
+}
+
+impl TileWalk {
+    /// Starts at the manifest's root node, or with its flat list of tiles.
+    #[must_use]
+    pub fn new(m: &super::Manifest) -> Self {
+        let (stack, tiles) = match &m.index {
+            Some(index) => (vec![index.root.clone()], Vec::new()),
+            None => (Vec::new(), m.tiles.clone()),
+        };
+        Self {
+            declared: m.index.as_ref().map_or(0, |i| i.nodes.max(1)),
+            visited: 0,
+            stack,
+            seen: std::collections::HashSet::new(),
+            tiles,
+        }
+    }
+
+    /// The node to fetch next (relative to the scene), or None when done.
+    #[must_use]
+    pub fn next_url(&self) -> Option<&str> {
+        self.stack.last().map(String::as_str)
+    }
+
+    /// Takes the bytes of the node [`Self::next_url`] named.
+    ///
+    /// # Errors
+    /// A node that does not decode, is met twice, or is one more than the
+    /// manifest declares; the message names it.
+    pub fn feed(&mut self, bytes: &[u8]) -> Result<(), String> {
+        let Some(url) = self.stack.pop() else { return Err("the index walk is complete".into()) };
+        self.visited += 1;
+        if self.visited > self.declared {
+            return Err(format!("{url}: the index has more nodes than the {} it declares", self.declared));
+        }
+        if !self.seen.insert(url.clone()) {
+            return Err(format!("{url}: the index reaches this node twice (a node is its own descendant)"));
+        }
+        let node = IndexNode::decode(&url, bytes).map_err(|e| e.to_string())?;
+        self.tiles.extend(node.tiles);
+        self.stack.extend(node.children.into_iter().rev().map(|c| c.url));
+        Ok(())
+    }
+
+    /// The tiles, in row order (y, then x).
+    #[must_use]
+    pub fn finish(mut self) -> Vec<TileEntry> {
+        self.tiles.sort_by_key(|t| (t.y, t.x));
+        self.tiles
+    }
+}
+
 /// Every tile of a local scene directory: the manifest's flat list, or the
-/// leaves of its index read from `dir`.
+/// leaves of its index read from `dir` ([`TileWalk`]).
 ///
 /// # Errors
 /// A message naming the node that cannot be read or decoded.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_all_tiles(dir: &std::path::Path, m: &super::Manifest) -> Result<Vec<TileEntry>, String> {
-    let Some(index) = &m.index else { return Ok(m.tiles.clone()) };
-    let mut out = Vec::new();
-    let mut stack = vec![index.root.clone()];
-    let mut visited = 0u64;
-    while let Some(url) = stack.pop() {
-        visited += 1;
-        if visited > index.nodes.max(1) {
-            return Err(format!("{}: the index has more nodes than the {} it declares", dir.display(), index.nodes));
-        }
-        let path = dir.join(&url);
-        let bytes = std::fs::read(&path).map_err(|e| format!("cannot read index node {}: {e}", path.display()))?;
-        let node = IndexNode::decode(&path.display().to_string(), &bytes).map_err(|e| e.to_string())?;
-        out.extend(node.tiles);
-        stack.extend(node.children.into_iter().rev().map(|c| c.url));
+    let mut walk = TileWalk::new(m);
+    while let Some(url) = walk.next_url() {
+        let path = dir.join(url);
+        let bytes = crate::paths::read_regular(&path, None, crate::paths::MAX_SCENE_FILE_BYTES)
+            .map_err(|e| format!("cannot read index node {}: {e}", path.display()))?;
+        walk.feed(&bytes).map_err(|e| format!("{}: {e}", dir.display()))?;
     }
-    out.sort_by_key(|t| (t.y, t.x));
-    Ok(out)
+    Ok(walk.finish())
 }
 
 #[cfg(test)]
@@ -352,6 +409,65 @@ mod tests {
         let mut shuffled = tiles.clone();
         shuffled.reverse();
         assert_eq!(build_index(&shuffled, 7), built);
+    }
+
+    /// Walks `nodes` (url → bytes) from the manifest's root as the browser's `query` does.
+    fn walk(
+        m: &super::super::Manifest,
+        nodes: &std::collections::HashMap<String, Vec<u8>>,
+    ) -> Result<Vec<TileEntry>, String> {
+        let mut w = TileWalk::new(m);
+        let mut fetched = 0;
+        while let Some(url) = w.next_url() {
+            fetched += 1;
+            assert!(fetched <= 1000, "the walk does not end");
+            let bytes = nodes.get(url).cloned().unwrap_or_default();
+            w.feed(&bytes)?;
+        }
+        Ok(w.finish())
+    }
+
+    #[test]
+    fn the_tile_walk_visits_each_node_once_and_stops_at_a_cycle() {
+        let fixture = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small/scene.json");
+        let mut m = super::super::Manifest::decode("scene.json", &std::fs::read(fixture).unwrap()).unwrap();
+        let tiles: Vec<TileEntry> = (0..6).flat_map(|y| (0..6).map(move |x| tile(x, y))).collect();
+        let built = build_index(&tiles, 4);
+        assert!(built.nodes.len() > 3);
+        m.tiles.clear();
+        m.index = Some(built.reference.clone());
+        let mut nodes: std::collections::HashMap<String, Vec<u8>> =
+            built.nodes.iter().map(|(u, n)| (u.clone(), n.encode())).collect();
+        let mut all = walk(&m, &nodes).unwrap();
+        all.sort_by_key(|t| (t.y, t.x));
+        assert_eq!(all, tiles, "every tile once, in row order");
+        // A node that is its own child, and a child that points back at the root: stopped at once.
+        let (root_url, root) = built.nodes[0].clone();
+        let mut own = root.clone();
+        own.children[0].url.clone_from(&root_url);
+        nodes.insert(root_url.clone(), own.encode());
+        let e = walk(&m, &nodes).unwrap_err();
+        assert!(e.contains("reaches this node twice"), "{e}");
+        nodes.insert(root_url.clone(), root.encode());
+        let (child_url, child) =
+            built.nodes.iter().find(|(_, n)| !n.children.is_empty() && n.square != root.square).cloned().unwrap();
+        let mut back = child.clone();
+        back.children[0].url.clone_from(&root_url);
+        nodes.insert(child_url.clone(), back.encode());
+        assert!(walk(&m, &nodes).unwrap_err().contains("twice"));
+        nodes.insert(child_url, child.encode());
+        // More nodes than the manifest declares; a node that is missing or does not decode.
+        m.index.as_mut().unwrap().nodes = 2;
+        assert!(walk(&m, &nodes).unwrap_err().contains("more nodes than the 2 it declares"));
+        m.index.as_mut().unwrap().nodes = built.reference.nodes;
+        nodes.insert(root_url.clone(), b"{\"format\": \"sylva-index\"".to_vec());
+        assert!(walk(&m, &nodes).unwrap_err().contains(&root_url));
+        // A child URL that leaves the scene never reaches a fetch: the node's decoder refuses it.
+        let mut out = root.clone();
+        out.children[0].url = "../../etc/passwd".into();
+        nodes.insert(root_url.clone(), out.encode());
+        let e = walk(&m, &nodes).unwrap_err();
+        assert!(e.contains("etc/passwd"), "{e}");
     }
 
     #[test]

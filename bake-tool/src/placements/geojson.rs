@@ -16,7 +16,8 @@ fn geojson_attributes(features: &[&serde_json::Value], options: &ReadOptions) ->
     let mut names: Vec<String> = Vec::new();
     for f in features {
         if let Some(p) = f.get("properties").and_then(|p| p.as_object()) {
-            for k in p.keys() {
+            // A property without a name is no column (as an empty CSV header cell).
+            for k in p.keys().filter(|k| !k.trim().is_empty()) {
                 if !names.iter().any(|n| n.eq_ignore_ascii_case(k)) {
                     names.push(k.clone());
                 }

@@ -601,7 +601,7 @@ pub fn detect_columns(header: &[&str]) -> Result<Columns> {
     detect_columns_with(header, &ReadOptions::default())
 }
 
-pub(crate) fn parse_f64(s: &str) -> Option<f64> {
+pub fn parse_f64(s: &str) -> Option<f64> {
     let t = s.trim();
     if t.is_empty() {
         return None;
@@ -611,7 +611,7 @@ pub(crate) fn parse_f64(s: &str) -> Option<f64> {
 
 /// A number of a CSV whose separator is not a comma: `52.37`, or with a
 /// decimal comma as European spreadsheets write it, `52,37` or `1.234,5`.
-pub(crate) fn parse_decimal_comma(s: &str) -> Option<f64> {
+pub fn parse_decimal_comma(s: &str) -> Option<f64> {
     parse_f64(s).or_else(|| {
         let (int, frac) = s.trim().rsplit_once(',')?;
         if frac.is_empty() || !frac.bytes().all(|b| b.is_ascii_digit()) {
@@ -680,6 +680,53 @@ pub fn read_csv<R: std::io::Read>(reader: R, delimiter: u8, options: &ReadOption
     Ok(PlacementSet { kind, rows, report, declared_epsg: None, attribute_names })
 }
 
+/// The CSV reader of every pass over an inventory (the header's and the rows'),
+/// so both see the same columns.
+fn csv_reader<R: std::io::Read>(reader: R, delimiter: u8) -> csv::Reader<R> {
+    csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).trim(csv::Trim::All).from_reader(reader)
+}
+
+/// Most bytes of a CSV header record.
+pub const MAX_HEADER_BYTES: usize = 1 << 20;
+
+/// The first record of a CSV file, up to its line break outside quotes (a
+/// header cell may hold one: what a spreadsheet writes for Alt+Enter).
+///
+/// # Errors
+/// A header over `limit` bytes, or a read error.
+pub fn header_record(reader: impl std::io::Read, limit: usize) -> Result<Vec<u8>> {
+    use std::io::BufRead;
+    let mut r = std::io::BufReader::new(reader.take(limit as u64 + 1));
+    let mut out = Vec::new();
+    let mut quoted = false;
+    loop {
+        let buf = r.fill_buf()?;
+        if buf.is_empty() {
+            break;
+        }
+        let mut used = buf.len();
+        let mut done = false;
+        for (i, &b) in buf.iter().enumerate() {
+            if b == b'"' {
+                quoted = !quoted;
+            } else if b == b'\n' && !quoted {
+                used = i + 1;
+                done = true;
+                break;
+            }
+        }
+        out.extend_from_slice(&buf[..used]);
+        r.consume(used);
+        if out.len() > limit {
+            bail!("the header (the first line) is over {} KiB without its end: is this a CSV file?", limit / 1024);
+        }
+        if done {
+            break;
+        }
+    }
+    Ok(out)
+}
+
 /// Reads the header line (UTF-8 or Windows-1252, as the fields) and detects its columns.
 fn header_columns<R: std::io::Read>(rdr: &mut csv::Reader<R>, options: &ReadOptions) -> Result<Columns> {
     let mut fell_back = false;
@@ -704,8 +751,7 @@ pub fn stream_csv<R: std::io::Read>(
     report: &mut Report,
     f: &mut dyn FnMut(Placement) -> Result<()>,
 ) -> Result<CoordKind> {
-    let mut rdr =
-        csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).trim(csv::Trim::All).from_reader(reader);
+    let mut rdr = csv_reader(reader, delimiter);
     let mut cols = header_columns(&mut rdr, options)?;
     if options.swap_xy {
         std::mem::swap(&mut cols.x, &mut cols.y);
@@ -815,10 +861,7 @@ impl PlacementSource {
             "csv" | "txt" | "tsv" => {
                 let file =
                     std::fs::File::open(path).with_context(|| format!("cannot open placements {}", path.display()))?;
-                let mut first_line = Vec::new();
-                use std::io::{BufRead, Read};
-                std::io::BufReader::new(file.take(1 << 20))
-                    .read_until(b'\n', &mut first_line)
+                let first_line = header_record(file, MAX_HEADER_BYTES)
                     .with_context(|| format!("cannot read placements {}", path.display()))?;
                 let delimiter =
                     options.delimiter.unwrap_or(if ext == "tsv" { b'\t' } else { detect_delimiter(&first_line) });
@@ -833,8 +876,8 @@ impl PlacementSource {
                         if delimiter == b';' { " (decimal commas accepted)" } else { "" }
                     ));
                 }
-                let mut rdr =
-                    csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_reader(&first_line[..]);
+                // The header as the rows' pass reads it (stream_csv): the same reader and settings.
+                let mut rdr = csv_reader(&first_line[..], delimiter);
                 let cols =
                     header_columns(&mut rdr, options).with_context(|| format!("placements {}", path.display()))?;
                 notes.push(format!("columns: {}", cols.describe()));

@@ -48,7 +48,7 @@ fn bad_rows_are_counted_not_fatal() {
 #[test]
 fn geojson_points_and_properties() {
     let gj = br#"{"type":"FeatureCollection","features":[
-        {"type":"Feature","geometry":{"type":"Point","coordinates":[15.4,48.4,210.5]},"properties":{"species":"pine","height":"21.5","id":42}},
+        {"type":"Feature","geometry":{"type":"Point","coordinates":[15.4,48.4,210.5]},"properties":{"species":"pine","height":"21.5","id":42,"":"unnamed","girth":3}},
         {"type":"Feature","geometry":{"type":"MultiPoint","coordinates":[[15.41,48.41],[15.42,48.42]]},"properties":{"Species":"oak"}},
         {"type":"Feature","geometry":{"type":"LineString","coordinates":[[0,0],[1,1]]},"properties":{}},
         {"type":"Feature","geometry":null,"properties":{}}
@@ -60,6 +60,9 @@ fn geojson_points_and_properties() {
     assert_eq!(set.rows[0].id, Some(42));
     assert_eq!(set.rows[2].species.as_deref(), Some("oak"));
     assert_eq!(set.report.skipped_total(), 2);
+    // A property without a name is no attribute (it stopped the bake late, issue 42).
+    assert!(set.attribute_names.iter().all(|n| !n.is_empty()), "{:?}", set.attribute_names);
+    assert!(set.attribute_names.iter().any(|n| n == "girth"), "{:?}", set.attribute_names);
     assert!(read_geojson(b"{\"type\":\"Topology\"}", &ReadOptions::default()).is_err());
     assert!(read_geojson(b"not json", &ReadOptions::default()).is_err());
 }
@@ -234,4 +237,39 @@ fn named_columns_decide_over_detected_ones() {
     assert_eq!(detect_columns(&["lat", "lon", "diameter"]).unwrap().dbh, None);
     let c = detect_columns(&["lat", "lon", "dbh_m"]).unwrap();
     assert_eq!(c.dbh_unit, DbhUnit::M);
+}
+
+#[test]
+fn a_header_cell_with_a_line_break_keeps_every_name_with_its_values() {
+    // What a spreadsheet writes for Alt+Enter in a header cell (issue 42): the
+    // names after it must stay with their columns.
+    let dir = std::env::temp_dir().join(format!("sylva-header-break-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("trees.csv");
+    std::fs::write(
+        &path,
+        "id,x,y,\"crown\nwidth (m)\",condition,owner\n7,500000,5300000,4.5,good,city\n8,500010,5300000,3,poor,park\n",
+    )
+    .unwrap();
+    let src = PlacementSource::open(&path, &ReadOptions::default()).unwrap();
+    assert_eq!(src.attribute_names(), ["crown\nwidth (m)", "condition", "owner"]);
+    let mut rows = Vec::new();
+    src.for_each_with_attributes(&mut |p| {
+        rows.push(p);
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(rows.len(), 2);
+    let attrs: Vec<Vec<Option<String>>> = rows.iter().map(|p| p.attrs.clone()).collect();
+    assert_eq!(attrs[0], [Some("4.5".into()), Some("good".into()), Some("city".into())]);
+    assert_eq!(attrs[1][1].as_deref(), Some("poor"));
+    // A header with no end within 1 MiB (an unclosed quote, or no CSV at all) is refused, saying so.
+    let huge = dir.join("huge.csv");
+    std::fs::write(&huge, format!("x,y,\"{}\n1,2,3\n", "a".repeat(MAX_HEADER_BYTES + 10))).unwrap();
+    let e = PlacementSource::open(&huge, &ReadOptions::default()).err().unwrap();
+    assert!(format!("{e:#}").contains("over 1024 KiB"), "{e:#}");
+    // The record reader stops at the first line break outside quotes.
+    assert_eq!(header_record(&b"a,\"b\nc\",d\r\n1,2,3\n"[..], 100).unwrap(), b"a,\"b\nc\",d\r\n");
+    assert_eq!(header_record(&b"a,b"[..], 100).unwrap(), b"a,b");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
