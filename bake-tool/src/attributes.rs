@@ -146,6 +146,21 @@ impl Seen {
         if self.integers && hi - lo < f64::from(u32::MAX - 1) {
             return Ok(base(AttributeType::Integer, width_for((hi - lo) as u64), lo, hi));
         }
+        // Whole numbers too far apart for exact codes (10-digit ids or codes):
+        // never quantised (a range query would match values outside it); kept
+        // as categories when few enough, else left out.
+        if self.integers {
+            if self.too_many {
+                return Err(format!(
+                    "whole numbers from {lo} to {hi}, too far apart to keep exactly, and more than \
+                     {MAX_CATEGORIES} different ones to keep as categories"
+                ));
+            }
+            let categories: Vec<String> = self.categories.into_iter().collect();
+            let mut c = base(AttributeType::Category, width_for(categories.len() as u64), 0.0, 0.0);
+            c.categories = categories;
+            return Ok(c);
+        }
         if self.numbers {
             return Ok(base(AttributeType::Number, 2, lo, hi));
         }
@@ -310,6 +325,17 @@ mod tests {
         let many: Vec<String> = (0..=MAX_CATEGORIES).map(|i| format!("note {i}")).collect();
         assert!(typed(&many.iter().map(String::as_str).collect::<Vec<_>>()).is_err());
         assert!(typed(&[]).is_err());
+        // 10-digit codes are too far apart for exact integer codes: kept as
+        // categories (exact), never quantised; too many of them, left out.
+        let codes = typed(&["1000000001", "9876543210", "1000000001"]).unwrap();
+        assert_eq!(
+            (codes.kind, codes.categories.clone()),
+            (AttributeType::Category, vec!["1000000001".into(), "9876543210".into()])
+        );
+        let many: Vec<String> =
+            (0..=MAX_CATEGORIES as u64).map(|i| (1_000_000_000 + i * 2_000_000).to_string()).collect();
+        let e = typed(&many.iter().map(String::as_str).collect::<Vec<_>>()).unwrap_err();
+        assert!(e.contains("too far apart to keep exactly"), "{e}");
         // A year column is an exact integer of one byte.
         let y = typed(&["1950", "2020"]).unwrap();
         assert_eq!((y.width, y.min, y.max), (1, 1950.0, 2020.0));

@@ -128,7 +128,7 @@ impl Dem {
         if values.len() as u64 != u64::from(width) * u64::from(height) {
             bail!("decoded {} heights for a {width}×{height} grid", values.len());
         }
-        let heights = values
+        let heights: Vec<f32> = values
             .into_iter()
             .map(|h| {
                 if !h.is_finite() || nodata.is_some_and(|n| f64::from(h) == n || h == n as f32) {
@@ -138,6 +138,17 @@ impl Dem {
                 }
             })
             .collect();
+        // No ground lies 100 km above or below the datum: such a value is a
+        // no-data marker the file does not declare (3.4e38, -1e10, …).
+        if let Some(i) = heights.iter().position(|h| h.abs() > MAX_HEIGHT_M) {
+            let h = heights[i];
+            bail!(
+                "a height of {h} m at pixel (column {}, row {}): no ground lies so high or low. If it marks \
+                 missing data, declare it in the file (GDAL_NODATA; `gdal_edit.py -a_nodata {h} DEM.tif`)",
+                i % width as usize,
+                i / width as usize
+            );
+        }
         Ok(Self {
             width,
             height,
@@ -207,6 +218,32 @@ impl Dem {
         h.is_finite().then_some(h)
     }
 
+    /// The height of the valid pixel nearest to a map point within `reach`
+    /// pixels of it (centre to point, inside the grid or beyond its edge), for
+    /// a point that [`Self::sample`] has no height for: a tree at the edge of
+    /// a DEM's data. `None` farther out.
+    #[must_use]
+    pub fn nearest_within(&self, x: f64, y: f64, reach: f64) -> Option<f32> {
+        let (c, r) = self.pixel(x, y);
+        if !c.is_finite() || !r.is_finite() {
+            return None;
+        }
+        let n = reach.ceil() as i64;
+        let (c0, r0) = (c.round() as i64, r.round() as i64);
+        let mut best: Option<(f64, f32)> = None;
+        for dr in -n..=n {
+            for dc in -n..=n {
+                let (pc, pr) = (c0 + dc, r0 + dr);
+                let h = self.at(pc, pr);
+                let d2 = (pc as f64 - c).powi(2) + (pr as f64 - r).powi(2);
+                if h.is_finite() && d2 <= reach * reach && best.is_none_or(|(b, _)| d2 < b) {
+                    best = Some((d2, h));
+                }
+            }
+        }
+        best.map(|(_, h)| h)
+    }
+
     /// Map bounds of the pixel areas (min x, min y, max x, max y), without
     /// reading the heights.
     #[must_use]
@@ -259,6 +296,9 @@ pub(crate) struct Grid {
     pub epsg: Option<u32>,
     pub nodata: Option<f64>,
 }
+
+/// The largest height a DEM may hold, metres from its datum (either way).
+pub const MAX_HEIGHT_M: f32 = 100_000.0;
 
 /// The [`Grid`] of a GeoTIFF from its model tags, GeoKeys and `GDAL_NODATA`.
 pub(crate) fn grid_of<R: Read + Seek>(d: &mut Decoder<R>) -> Result<Grid> {
@@ -569,6 +609,31 @@ mod tests {
         assert_eq!(dem.sample(500_002.5 + 1.5 * 5.0, 5_299_997.5 - 1.5 * 5.0), Some(10.0));
         // Inside the hole.
         assert_eq!(dem.sample(500_002.5 + 2.5 * 5.0, 5_299_997.5 - 2.5 * 5.0), None);
+    }
+
+    #[test]
+    fn a_point_at_the_edge_of_the_data_takes_the_nearest_valid_height_within_reach() {
+        // Valid on the left half (10 m), holes on the right.
+        let bytes = geotiff(8, 4, |c, _| if c < 4 { 10.0 + c as f32 } else { -9999.0 }, Some("-9999"));
+        let dem = Dem::read(Cursor::new(bytes)).unwrap();
+        let x = |col: f64| 500_002.5 + col * 5.0;
+        let y = 5_299_997.5 - 1.0 * 5.0;
+        assert_eq!(dem.sample(x(5.0), y), None, "in the holes");
+        assert_eq!(dem.nearest_within(x(4.6), y, 2.0), Some(13.0), "column 3 is 1.6 pixels away");
+        assert_eq!(dem.nearest_within(x(6.5), y, 2.0), None, "3.5 pixels from data");
+        // Beyond the grid's edge too.
+        assert_eq!(dem.nearest_within(x(-1.5), y, 2.0), Some(10.0));
+        assert_eq!(dem.nearest_within(x(-3.0), y, 2.0), None);
+    }
+
+    #[test]
+    fn a_height_no_ground_has_is_refused_naming_the_pixel_and_the_fix() {
+        let bytes = geotiff(4, 4, |c, r| if (c, r) == (3, 1) { 3.0e38 } else { 10.0 }, None);
+        let e = format!("{:#}", Dem::read(Cursor::new(bytes)).unwrap_err());
+        assert!(e.contains("column 3, row 1") && e.contains("GDAL_NODATA"), "{e}");
+        // Declared, the same value is a hole.
+        let bytes = geotiff(4, 4, |c, r| if (c, r) == (3, 1) { -1.0e10 } else { 10.0 }, Some("-1e10"));
+        assert_eq!(Dem::read(Cursor::new(bytes)).unwrap().summary().holes, 1);
     }
 
     #[test]

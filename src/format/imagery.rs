@@ -72,13 +72,44 @@ fn decode_png(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
     Ok(Rgba8 { width: w, height: h, pixels })
 }
 
+/// Whether the JPEG's image data is followed by its end marker (EOI, `FF D9`).
+///
+/// The segments before the first scan are skipped by their lengths (an Exif
+/// thumbnail's own EOI is inside one); within entropy-coded data a literal
+/// `FF` is always followed by `00` or a restart marker, so the first `FF D9`
+/// after the first scan is the image's end.
+fn jpeg_is_whole(bytes: &[u8]) -> bool {
+    let mut at = 2;
+    while at + 4 <= bytes.len() {
+        if bytes[at] != 0xff {
+            return false;
+        }
+        let marker = bytes[at + 1];
+        if marker == 0xff {
+            at += 1; // fill byte
+            continue;
+        }
+        let len = usize::from(u16::from_be_bytes([bytes[at + 2], bytes[at + 3]]));
+        at += 2 + len;
+        if marker == 0xda {
+            return bytes.get(at..).is_some_and(|rest| rest.windows(2).any(|w| w == [0xff, 0xd9]));
+        }
+    }
+    false
+}
+
 fn decode_jpeg(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
+    if !jpeg_is_whole(bytes) {
+        return Err("the file ends before the image does (no end marker after the image data)".into());
+    }
     use zune_jpeg::zune_core::colorspace::ColorSpace;
     use zune_jpeg::zune_core::options::DecoderOptions;
     let options = DecoderOptions::default()
         .set_max_width(max_px as usize)
         .set_max_height(max_px as usize)
-        .jpeg_set_out_colorspace(ColorSpace::RGBA);
+        .jpeg_set_out_colorspace(ColorSpace::RGBA)
+        // A truncated JPEG is an error, not an image filled with grey.
+        .set_strict_mode(true);
     let mut decoder = zune_jpeg::JpegDecoder::new_with_options(std::io::Cursor::new(bytes), options);
     let pixels = decoder.decode().map_err(|e| e.to_string())?;
     let info = decoder.info().ok_or("no image header")?;
@@ -114,6 +145,11 @@ mod tests {
         assert_eq!((img.width, img.height), (32, 16));
         assert!((i32::from(img.pixels[4 * 20 + 1]) - 100).abs() < 8);
         assert!(decode_image("big.jpg", jpg.get_ref(), 16).is_err());
+        // A JPEG cut short (a broken download, a full disk) is refused, not grey.
+        for keep in [jpg.get_ref().len() * 2 / 3, jpg.get_ref().len() - 2] {
+            let e = decode_image("cut.jpg", &jpg.get_ref()[..keep], 256).unwrap_err().to_string();
+            assert!(e.contains("cut.jpg") && e.contains("JPEG"), "{keep}: {e}");
+        }
         let mut cut = png(16, 8);
         cut.truncate(cut.len() / 2);
         assert!(decode_image("cut.png", &cut, 256).is_err());

@@ -33,6 +33,12 @@ pub enum NamedView {
     Top,
 }
 
+/// How far south of the first trees the close view stands (metres).
+const CLOSE_STANDOFF_M: f64 = 6.0;
+/// With no tree this near the close view's spot (metres), it moves to the
+/// nearest tree: the view's near trees are meshes within about this distance.
+const CLOSE_EMPTY_M: f64 = 25.0;
+
 impl NamedView {
     /// The camera for this view of `m`.
     #[must_use]
@@ -232,11 +238,48 @@ impl<F: Fetcher> OffscreenScene<F> {
             // Look straight down at the spot first so its tile is resident.
             let down = Camera { pitch_rad: -std::f64::consts::FRAC_PI_2, eye_m: cam.eye_m + DVec3::Z * 200.0, ..cam };
             self.load_view(&down, timeout_s);
+            // Among trees: the spot (the forest's southern edge, looking in) may
+            // hold none in a sparse inventory (street trees around an empty
+            // park). Then stand a few metres south of the nearest tree.
+            let ahead = cam.eye_m + DVec3::Y * CLOSE_STANDOFF_M;
+            if let Some(tree) = self.nearest_resident_tree(ahead) {
+                if (tree - ahead).truncate().length() > CLOSE_EMPTY_M {
+                    cam.eye_m = DVec3::new(tree.x, tree.y - CLOSE_STANDOFF_M, tree.z + 1.7);
+                    let down = Camera { eye_m: cam.eye_m + DVec3::Z * 200.0, ..down };
+                    self.load_view(&down, timeout_s);
+                }
+            }
             if let Some(z) = self.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
                 cam.eye_m.z = f64::from(z) + 1.7;
             }
         }
         Some(cam)
+    }
+
+    /// The trunk base of the resident tree nearest to `at` (horizontally),
+    /// read from the resident tiles' files: a one-off for a named view.
+    fn nearest_resident_tree(&self, at: DVec3) -> Option<DVec3> {
+        let species = u32::try_from(self.stream.manifest()?.species.len()).ok()?;
+        let mut urls: Vec<String> = self.stream.tile_locations().into_iter().map(|(_, t)| t.tile_url).collect();
+        urls.sort_unstable();
+        urls.dedup();
+        let mut best: Option<(f64, DVec3)> = None;
+        for url in &urls {
+            let Ok(bytes) = crate::scene::fetch::fetch_once(url) else { continue };
+            let Ok(tile) = crate::format::tile::Tile::decode(url, &bytes, species) else { continue };
+            for b in &tile.batches {
+                let first = b.instance_offset as usize;
+                for i in tile.instances.get(first..first + b.instance_count as usize).unwrap_or_default() {
+                    let p = i.decode(b).position_m.map(f64::from);
+                    let p = DVec3::from(p);
+                    let d = (p - at).truncate().length();
+                    if best.is_none_or(|(bd, _)| d < bd) {
+                        best = Some((d, p));
+                    }
+                }
+            }
+        }
+        best.map(|(_, p)| p)
     }
 
     /// Renders one frame from `camera`; with `measure`, waits for the GPU after each

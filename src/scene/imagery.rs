@@ -183,6 +183,9 @@ pub struct Imagery {
     targets: HashMap<TerrainKey, Option<TerrainKey>>,
     /// Most images kept decoded (256 KB each).
     pub max_resident: usize,
+    /// A drawn tile's image (or the root image it starts with) waits for a
+    /// retry: set by [`Self::attach`].
+    waiting_needed: bool,
 }
 
 impl Imagery {
@@ -271,12 +274,14 @@ impl Imagery {
         wanted: &mut Vec<TerrainKey>,
     ) {
         self.frame += 1;
+        self.waiting_needed = false;
         for d in draws.iter_mut() {
             d.imagery = None;
             let Some(target) = self.target(entry, geo, d.key) else { continue };
             if self.askable(target) && !wanted.contains(&target) {
                 wanted.push(target);
             }
+            self.waiting_needed |= matches!(self.slots.get(&target), Some(Slot::Waiting { .. }));
             let mut k = target;
             loop {
                 if let Some(Slot::Resident { tile, used }) = self.slots.get_mut(&k) {
@@ -402,6 +407,14 @@ impl Imagery {
         }
         self.slots.insert(key, Slot::Waiting { attempts, due_s: now_s + base_s * 2f64.powi(attempts as i32 - 1) });
         true
+    }
+
+    /// Whether an image the drawn terrain needs waits for its retry: the view
+    /// is not settled before it arrived or was given up on (then listed among
+    /// the failures, as tiles and terrain are). Images no longer drawn do not count.
+    #[must_use]
+    pub fn retries_pending(&self) -> bool {
+        self.waiting_needed
     }
 
     /// Failed images whose retry is due become wanted again.

@@ -708,7 +708,8 @@ impl<F: Fetcher> SceneStream<F> {
         let packs_done = self.needed.iter().all(|&s| self.packs[s].done());
         let terrain_done = self.terrain_wanted.is_empty()
             && !self.terrain_attempts.values().any(|(_, due)| due.is_finite())
-            && self.imagery_wanted.is_empty();
+            && self.imagery_wanted.is_empty()
+            && !self.imagery.retries_pending();
         let canopy_done =
             self.canopy_wanted.is_empty() && !self.canopy_attempts.values().any(|(_, due)| due.is_finite());
         // Trees' ids and attributes a style waits for and not yet asked for (the

@@ -239,9 +239,15 @@ impl TreeStyle {
                 Value::String(s) if col.kind == AttributeType::Date => crate::format::attributes::parse_date(s)
                     .map(|d| d as f64)
                     .ok_or_else(|| format!("color.domain: {s:?} is not a date (YYYY-MM-DD)")),
-                v => v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| format!("color.domain: {v} is not a number")),
+                v => match v.as_f64() {
+                    // Beyond ±1e15 the legend's steps would read "inf" or the same number twice.
+                    Some(x) if x.is_finite() && x.abs() <= MAX_DOMAIN => Ok(x),
+                    Some(_) => Err(format!("color.domain: {v} is beyond ±{MAX_DOMAIN:e}")),
+                    None => Err(format!("color.domain: {v} is not a number")),
+                },
             }
         };
+        const MAX_DOMAIN: f64 = 1e15;
         let domain = match given("domain") {
             Some(Value::Array(a)) if a.len() == 2 => [bound(&a[0])?, bound(&a[1])?],
             Some(_) => return Err("color.domain is [min, max]".into()),
@@ -437,6 +443,10 @@ mod tests {
         ramp.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
         assert_eq!(out, [1 + 4, (1 + 12) | SELECTED, 0]);
         assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
+        // A domain no legend can print is refused, saying why.
+        let e = TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [-1e308, 1e308]}}))
+            .unwrap_err();
+        assert!(e.contains("beyond ±1e15"), "{e}");
         // A reversed domain runs the ramp from its first value, as the legend reads.
         let reversed =
             TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [40, 0]}})).unwrap();

@@ -18,6 +18,10 @@ pub enum ZMode {
     Relative,
 }
 
+/// How far from a DEM's valid data (pixels) a tree still takes the nearest
+/// valid height (counted and reported) instead of stopping the bake.
+pub const NEAR_EDGE_PIXELS: f64 = 2.0;
+
 /// What to do with trees outside every DEM.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum OutsideDem {
@@ -126,6 +130,19 @@ impl Ground {
                 None => (x, y),
             };
             g.dem.sample(dx, dy)
+        })
+    }
+
+    /// For a point [`Self::height_at`] has no height for: the nearest valid
+    /// pixel's height of the first DEM with one within [`NEAR_EDGE_PIXELS`]
+    /// pixels (a tree at the edge of the DEM's data, or of a hole).
+    pub fn height_near(&self, x: f64, y: f64) -> Option<f32> {
+        self.dems.iter().find_map(|g| {
+            let (dx, dy) = match &g.to_dem {
+                Some(r) => r.apply(x, y).ok()?,
+                None => (x, y),
+            };
+            g.dem.nearest_within(dx, dy, NEAR_EDGE_PIXELS)
         })
     }
 

@@ -101,6 +101,8 @@ struct Facts {
     aspect: f32,
     /// The aspect was clamped to [`MAX_CROWN_ASPECT`].
     aspect_clamped: bool,
+    /// The tree lies just off the DEM's data: its ground is the nearest valid pixel's.
+    ground_near: bool,
 }
 
 /// Per species label: the model used and the ranges a forester can check.
@@ -115,6 +117,8 @@ struct SpeciesSummary {
     aspect: Option<(f32, f32)>,
     /// Trees whose aspect was clamped.
     aspect_clamped: u64,
+    /// Trees just off the DEM's data, on the nearest valid height.
+    ground_near: u64,
     from_dbh: u64,
     /// Rows with a DBH, and of them over 150 cm and under 3 cm (unit checks).
     dbh_rows: u64,
@@ -310,14 +314,22 @@ pub fn place_trees(
             crown_m.filter(|c| c.is_finite() && *c > 0.0 && model_w > 0.0).map(|c| (c / model_w) / (target / model_h));
         let aspect = raw.map_or(1.0, |a| a.clamp(1.0 / MAX_CROWN_ASPECT, MAX_CROWN_ASPECT));
         let aspect_clamped = raw.is_some_and(|a| a != aspect);
-        let facts = Facts { height_m: target, from, dbh_cm: p.dbh_cm, crown_m, aspect, aspect_clamped };
+        let mut facts =
+            Facts { height_m: target, from, dbh_cm: p.dbh_cm, crown_m, aspect, aspect_clamped, ground_near: false };
         // Ground: a given absolute z, else the DEM (plus a relative z), else 0.
+        // Just off the DEM's data (within NEAR_EDGE_PIXELS): its nearest valid height.
         let z = match (&ground, p.z, opts.z_mode) {
             (None, z, _) => z.unwrap_or(0.0),
             (Some(_), Some(z), ZMode::Absolute) => z,
             (Some(g), z, _) => match g.height_at(x, y) {
                 Some(h) => f64::from(h) + z.unwrap_or(0.0),
-                None => return Err(OUTSIDE_DEM),
+                None => match g.height_near(x, y) {
+                    Some(h) => {
+                        facts.ground_near = true;
+                        f64::from(h) + z.unwrap_or(0.0)
+                    }
+                    None => return Err(OUTSIDE_DEM),
+                },
             },
         };
         let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
@@ -551,6 +563,7 @@ fn tree_pass(
                 crown: None,
                 aspect: None,
                 aspect_clamped: 0,
+                ground_near: 0,
                 from_dbh: 0,
                 dbh_rows: 0,
                 dbh_big: 0,
@@ -573,6 +586,7 @@ fn tree_pass(
             s.aspect_clamped += u64::from(f.aspect_clamped);
         }
         s.from_dbh += u64::from(f.from == HeightFrom::Dbh);
+        s.ground_near += u64::from(f.ground_near);
     };
     let mut ours = placements::Report::default();
     let mut outside = Outside { bounds: [f64::MAX, f64::MAX, f64::MIN, f64::MIN], ..Outside::default() };
@@ -710,6 +724,14 @@ fn log_summary(summary: &BTreeMap<String, SpeciesSummary>, species: &SpeciesMap,
         ));
     }
     log("  (crown × model: each tree's crown width over height against its model's; 1 keeps the model's shape)");
+    let near: u64 = rows.iter().map(|(_, s)| s.ground_near).sum();
+    if near > 0 {
+        log(&format!(
+            "placements: {near} trees lie just off the DEM's data (within {} pixels of it: at its edge or a hole's); \
+             they stand on the nearest valid height",
+            super::ground::NEAR_EDGE_PIXELS
+        ));
+    }
     let clamped: u64 = rows.iter().map(|(_, s)| s.aspect_clamped).sum();
     if clamped > 0 {
         log(&format!(
