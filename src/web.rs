@@ -231,10 +231,15 @@ impl WebTileWalk {
         self.species
     }
 
-    /// The index node to fetch next (relative to `scene.json`), or undefined when done.
-    #[must_use]
-    pub fn next(&self) -> Option<String> {
-        self.walk.as_ref().and_then(|w| w.next_url().map(str::to_string))
+    /// The index node to fetch next (relative to `scene.json`), or undefined
+    /// when done; throws for a node that must not be fetched (met before, one
+    /// more than declared, deeper than declared).
+    ///
+    /// # Errors
+    /// That node, named.
+    pub fn next(&self) -> Result<Option<String>, JsValue> {
+        let Some(w) = self.walk.as_ref() else { return Ok(None) };
+        w.next_url().map(|u| u.map(str::to_string)).map_err(js_err)
     }
 
     /// Takes the bytes of the node `next` named.
@@ -435,13 +440,14 @@ impl Viewer {
         Ok(legend)
     }
 
-    /// Highlights the trees with these ids (a JSON array; `[]`: none).
+    /// Highlights the trees with these ids (a JSON array of numbers and text
+    /// ids; `[]`: none).
     ///
     /// # Errors
-    /// Not a JSON array of whole numbers.
+    /// Not a JSON array of whole numbers and texts.
     pub fn select(&mut self, ids: &str) -> Result<(), JsValue> {
-        let ids: Vec<u64> =
-            serde_json::from_str(ids).map_err(|e| js_err(format!("select takes a list of tree ids: {e}")))?;
+        let ids: Vec<crate::scene::style::TreeId> = serde_json::from_str(ids)
+            .map_err(|e| js_err(format!("select takes a list of tree ids (whole numbers or texts): {e}")))?;
         self.frame.select(ids);
         Ok(())
     }

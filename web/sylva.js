@@ -20,14 +20,16 @@
 //   v.on('click' | 'hover', fn)             fn({x, y, tree}): the tree under the pointer (as pick) or null
 //   await v.pick(x, y)                      the tree drawn at canvas CSS pixel (x, y), or null:
 //                                           {id, row, species, attributes, lon, lat, height, position}
-//                                           (id null and row the inventory's row for a tree without a numeric id)
+//                                           (id: a number, or the inventory's text id such as 'EY17080' with row
+//                                           its input row; null with row for a tree without an id)
 //   v.stats()                               same keys as `sylva render --stats`
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
 //   v.setStyle({color: {by, categories | ramp, domain}, filter})  colour trees by an attribute or 'species' and hide
 //                                           what the filter leaves out (culled on the GPU); null: none. Returns the legend
 //                                           {title, entries: [{label, color}]}; v.legend keeps it; 'style' event
-//   v.select(ids)                           highlight these trees at every level of detail ([]: none)
+//   v.select(ids)                           highlight these trees at every level of detail ([]: none); ids are
+//                                           numbers or an inventory's text ids
 //   await v.flyToTree(id, {seconds, distance})  select a tree and fly to look at it; resolves to its query result
 //   v.attributes()                          the scene's attribute columns [{name, type, min, max, categories}] or null
 //   v.ready                                 resolves after the first frame with everything the view needs
@@ -665,7 +667,7 @@ export function attachTreePopup(v, host) {
   };
   const show = ({ x, y, tree }) => {
     if (!tree) { box.style.display = 'none'; box.removeAttribute('data-id'); unselect(); return; }
-    // (A tree without a numeric id in the inventory is known by its row.)
+    // (A tree without an id in the inventory is known by its row.)
     if (tree.id !== null) { v.select([tree.id]); own = tree.id; } else unselect();
     const fmt = (n, d) => (n === null || n === undefined ? '—' : Number(n).toFixed(d));
     // The inventory's own columns; the drawn species model and height where it has none.

@@ -626,6 +626,7 @@ fn bake_demo(
         index_node_tiles: args.pack.index_node_tiles,
         canopy_cell_m: args.pack.canopy_cell,
         attributes: None,
+        text_ids: None,
     };
     let s = bake::bake_scene(&input, out, &log)?;
     report_summary(&s, &args.output.out, started);
@@ -940,6 +941,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
         index_node_tiles: args.pack.index_node_tiles,
         canopy_cell_m: args.pack.canopy_cell,
         attributes: placed.attributes,
+        text_ids: placed.text_ids,
     };
     log(&format!("batching with {} m cells", input.cell_size_m));
     let s = bake::bake_scene(&input, out, &log)?;

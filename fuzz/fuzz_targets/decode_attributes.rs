@@ -23,7 +23,7 @@ fuzz_target!(|data: &[u8]| {
             schema.columns.iter().map(|c| (c.name.clone(), serde_json::json!([null, null]))).collect();
         if let Ok(f) = sylva::scene::query::Filter::parse(Some(&schema), &filter) {
             for i in 0..count {
-                let _ = f.matches(Some(&schema), Some(&codes), i, 0);
+                let _ = f.matches(Some(&schema), Some(&codes), i, 0, None);
             }
         }
     }

@@ -651,11 +651,11 @@ mod tests {
                     ok += 1;
                     assert_eq!(encode_attributes(&s, &c), b);
                     let mut out = vec![0u8; instances];
-                    let ids: Vec<u64> = (0..instances as u64).collect();
+                    let ids = crate::format::TreeIds { numbers: (0..instances as u64).collect(), texts: Vec::new() };
                     style.tile_bytes(Some(&s), &ids, Some(&c), 0, &mut out);
                     for i in 0..instances {
                         let _ = c.json(&s, i);
-                        let _ = filter.matches(Some(&s), Some(&c), i, i as u64);
+                        let _ = filter.matches(Some(&s), Some(&c), i, i as u64, None);
                     }
                 }
                 Err(_) => refused += 1,

@@ -25,4 +25,6 @@ pub use index::{build_index, IndexNode, IndexRef};
 pub use manifest::{Bounds, Counts, Crs, Home, Manifest, ShardStamp, SpeciesEntry, TileEntry};
 pub use pack::{decode_pack, encode_pack, Pack, PackMeta, Section};
 pub use terrain::{TerrainEntry, TerrainTile};
-pub use tile::{decode_ids, encode_ids, GpuBatch, Instance, PackedInstance, Tile};
+pub use tile::{
+    decode_ids, decode_tree_ids, encode_ids, encode_tree_ids, GpuBatch, Instance, PackedInstance, Tile, TreeIds,
+};

@@ -227,8 +227,7 @@ impl<F: Fetcher> Frame<F> {
     /// Sets the style (colours, filter; `None` or a plain style: none). The
     /// selection is kept ([`Self::select`]).
     pub fn set_style(&mut self, style: Option<crate::scene::style::TreeStyle>) {
-        let selected: Vec<u64> =
-            self.style.style.as_ref().map_or(Vec::new(), |s| s.selection().iter().copied().collect());
+        let selected = self.style.style.as_ref().map_or(Vec::new(), crate::scene::style::TreeStyle::selection);
         let mut style = style.unwrap_or_default();
         style.set_selection(selected);
         self.style.style = Some(style);
@@ -238,7 +237,7 @@ impl<F: Fetcher> Frame<F> {
     }
 
     /// Highlights the trees with these ids at every level of detail (replacing the selection).
-    pub fn select(&mut self, ids: impl IntoIterator<Item = u64>) {
+    pub fn select<I: Into<crate::scene::style::TreeId>>(&mut self, ids: impl IntoIterator<Item = I>) {
         self.style.style.get_or_insert_with(Default::default).set_selection(ids);
         self.style.generation += 1;
         self.refine.invalidate();

@@ -12,7 +12,8 @@
 //! - a number, integer or date column: `[min, max]` (either `null`: open;
 //!   dates as `YYYY-MM-DD`), or one value (a number's within half its
 //!   quantisation step);
-//! - `id`: an id or a list of ids.
+//! - `id`: an id or a list of ids: numbers, or the texts of an inventory
+//!   whose ids are text (`"EY17080"`).
 //!
 //! Every condition must hold; a tree without a value in a column never
 //! matches a condition on it.
@@ -38,7 +39,8 @@ enum Condition {
 #[derive(Debug, Clone, Default)]
 pub struct Filter {
     conditions: Vec<(usize, Condition)>,
-    ids: Option<HashSet<u64>>,
+    /// `id`: the numbers and texts asked for.
+    ids: Option<(HashSet<u64>, HashSet<String>)>,
 }
 
 impl Filter {
@@ -55,11 +57,21 @@ impl Filter {
         let mut out = Self::default();
         for (name, want) in object {
             if name == "id" {
-                let ids = as_list(want)
-                    .iter()
-                    .map(|v| v.as_u64().ok_or_else(|| format!("id: {v} is not a tree id (a whole number)")))
-                    .collect::<Result<HashSet<u64>, String>>()?;
-                out.ids = Some(ids);
+                let (mut numbers, mut texts) = (HashSet::new(), HashSet::new());
+                for v in as_list(want) {
+                    match v {
+                        Value::Number(n) => {
+                            numbers.insert(
+                                n.as_u64().ok_or_else(|| format!("id: {v} is not a tree id (a whole number)"))?,
+                            );
+                        }
+                        Value::String(t) => {
+                            texts.insert(t.trim().to_string());
+                        }
+                        _ => return Err(format!("id: {v} is not a tree id (a whole number or a text)")),
+                    }
+                }
+                out.ids = Some((numbers, texts));
                 continue;
             }
             let Some((index, column)) = schema.and_then(|s| s.column(name)) else {
@@ -102,11 +114,25 @@ impl Filter {
         })
     }
 
-    /// Whether instance `i` (id `id`, codes `codes` of its tile) matches.
+    /// Whether instance `i` (id `id`, text id `text`, codes `codes` of its tile) matches.
     #[must_use]
-    pub fn matches(&self, schema: Option<&AttributeSchema>, codes: Option<&AttributeCodes>, i: usize, id: u64) -> bool {
-        if self.ids.as_ref().is_some_and(|ids| !ids.contains(&id)) {
-            return false;
+    pub fn matches(
+        &self,
+        schema: Option<&AttributeSchema>,
+        codes: Option<&AttributeCodes>,
+        i: usize,
+        id: u64,
+        text: Option<&str>,
+    ) -> bool {
+        if let Some((numbers, texts)) = &self.ids {
+            // A text id is matched as text; a number also as its digits ("113001").
+            let named = match text {
+                Some(t) => texts.contains(t),
+                None => numbers.contains(&id) || (!texts.is_empty() && texts.contains(&id.to_string())),
+            };
+            if !named {
+                return false;
+            }
         }
         self.conditions.iter().all(|(c, condition)| {
             let (Some(schema), Some(codes)) = (schema, codes) else { return false };
@@ -188,8 +214,9 @@ fn compile(column: &AttributeColumn, want: &Value) -> Result<Condition, String> 
 pub struct QueryResult {
     /// Trees that match.
     pub count: u64,
-    /// Their ids, in tile and instance order, up to the limit asked for.
-    pub ids: Vec<u64>,
+    /// Their ids, in tile and instance order, up to the limit asked for: a
+    /// number, or the text id of a tree that has one.
+    pub ids: Vec<Value>,
     /// Bounds of their trunk bases, metres relative to the scene origin
     /// (`None`: no match).
     pub bounds: Option<([f32; 3], [f32; 3])>,
@@ -202,10 +229,10 @@ pub struct QueryResult {
 
 impl QueryResult {
     /// Adds a matching tree.
-    pub fn add(&mut self, id: u64, position_m: [f32; 3], limit: usize) {
+    pub fn add(&mut self, id: u64, text: Option<&str>, position_m: [f32; 3], limit: usize) {
         self.count += 1;
         if self.ids.len() < limit {
-            self.ids.push(id);
+            self.ids.push(text.map_or_else(|| Value::from(id), Value::from));
         }
         let (lo, hi) = self.bounds.get_or_insert((position_m, position_m));
         for k in 0..3 {
@@ -246,9 +273,10 @@ pub fn query_tile(
     result: &mut QueryResult,
 ) -> Result<(), String> {
     use crate::format::attributes::decode_attributes;
-    use crate::format::{decode_ids, Tile};
+    use crate::format::{decode_tree_ids, Tile};
     let tile = Tile::decode(files[0], tile, species).map_err(|e| e.to_string())?;
-    let ids = decode_ids(files[1], ids).map_err(|e| e.to_string())?;
+    let tree_ids = decode_tree_ids(files[1], ids).map_err(|e| e.to_string())?;
+    let ids = &tree_ids.numbers;
     if ids.len() != tile.instances.len() {
         return Err(format!("{}: {} ids for {} trees", files[1], ids.len(), tile.instances.len()));
     }
@@ -263,8 +291,9 @@ pub fn query_tile(
     for batch in &tile.batches {
         let run = batch.instance_offset as usize..(batch.instance_offset + batch.instance_count) as usize;
         for i in run {
-            if filter.matches(schema, codes.as_ref(), i, ids[i]) {
-                result.add(ids[i], tile.instances[i].decode(batch).position_m, limit);
+            let text = tree_ids.text(i as u32);
+            if filter.matches(schema, codes.as_ref(), i, ids[i], text) {
+                result.add(ids[i], text, tile.instances[i].decode(batch).position_m, limit);
             }
         }
     }
@@ -274,7 +303,8 @@ pub fn query_tile(
 /// What a pick says of one tree, the `index`th of a tile: its bytes, its ids'
 /// and (scenes with attributes) its attribute sidecar's, `files` naming the
 /// three in errors. `{id, row, species, attributes, lon, lat, height, position}`:
-/// `id` null and `row` the input row for a tree without a numeric id (else `row` null),
+/// `id` the tree's number, or its text id (with `row`, the input row), or null
+/// with `row` for a tree without an id (else `row` null),
 /// `height` the tree's (m), `position` its trunk base in the
 /// scene CRS (m), `lon`/`lat` where `geo` can say (else null).
 ///
@@ -290,9 +320,10 @@ pub fn describe_tree(
     index: u32,
 ) -> Result<Value, String> {
     use crate::format::attributes::decode_attributes;
-    use crate::format::{decode_ids, Tile};
+    use crate::format::{decode_tree_ids, Tile};
     let tile = Tile::decode(files[0], tile, manifest.species.len() as u32).map_err(|e| e.to_string())?;
-    let ids = decode_ids(files[1], ids).map_err(|e| e.to_string())?;
+    let tree_ids = decode_tree_ids(files[1], ids).map_err(|e| e.to_string())?;
+    let ids = &tree_ids.numbers;
     let i = index as usize;
     if ids.len() != tile.instances.len() {
         return Err(format!("{}: {} ids for {} trees", files[1], ids.len(), tile.instances.len()));
@@ -317,7 +348,12 @@ pub fn describe_tree(
     let round = |v: f64, k: f64| (v * k).round() / k;
     // A tree whose inventory row had no numeric id is numbered by its row
     // (2^63 + row, past what a JS number holds exactly): say the row instead.
-    let (id, row) = if ids[i] >= 1 << 63 { (None, Some(ids[i] - (1 << 63))) } else { (Some(ids[i]), None) };
+    // A text id (the inventory's own key) is the id, as text, and the row is said too.
+    let (id, row) = match (ids[i] >= 1 << 63, tree_ids.text(index)) {
+        (true, Some(text)) => (Value::from(text), Some(ids[i] - (1 << 63))),
+        (true, None) => (Value::Null, Some(ids[i] - (1 << 63))),
+        (false, _) => (Value::from(ids[i]), None),
+    };
     Ok(serde_json::json!({
         "id": id,
         "row": row,
@@ -416,7 +452,7 @@ mod tests {
         };
         let hits = |f: Value| -> Vec<usize> {
             let f = Filter::parse(Some(&s), &f).unwrap();
-            (0..3).filter(|&i| f.matches(Some(&s), Some(&codes), i, 100 + i as u64)).collect()
+            (0..3).filter(|&i| f.matches(Some(&s), Some(&codes), i, 100 + i as u64, None)).collect()
         };
         assert_eq!(hits(json!({"species": "Quercus*"})), [0, 2]);
         assert_eq!(hits(json!({"species": "quercus robur"})), [0]);

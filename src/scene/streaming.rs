@@ -273,8 +273,8 @@ pub fn batch_levels_wanted(view: &ViewData, batches: &[GpuBatch], scheme: &Level
 /// The ids and attribute codes of a resident tile's trees, in instance order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TreeData {
-    /// Tree ids (the `.ids` sidecar).
-    pub ids: Vec<u64>,
+    /// Tree ids (the `.ids` sidecar: numbers, and text ids where given).
+    pub ids: crate::format::TreeIds,
     /// Attribute codes (the `.attr` sidecar; None for a scene without attributes).
     pub codes: Option<AttributeCodes>,
 }
@@ -288,7 +288,7 @@ enum TreeDataLoad {
     /// Requested: what arrived so far (ids; codes, `Some(None)` for none to come).
     Loading {
         attempt: u32,
-        ids: Option<Vec<u64>>,
+        ids: Option<crate::format::TreeIds>,
         codes: Option<Option<AttributeCodes>>,
     },
     Ready(std::sync::Arc<TreeData>),
@@ -1126,9 +1126,9 @@ impl<F: Fetcher> SceneStream<F> {
                     .map_err(|e| e.to_string())?;
                 *codes = Some(Some(c));
             } else {
-                let v = crate::format::decode_ids(&url, &bytes).map_err(|e| e.to_string())?;
-                if v.len() != count {
-                    return Err(format!("{url}: {} ids for {count} trees", v.len()));
+                let v = crate::format::decode_tree_ids(&url, &bytes).map_err(|e| e.to_string())?;
+                if v.numbers.len() != count {
+                    return Err(format!("{url}: {} ids for {count} trees", v.numbers.len()));
                 }
                 *ids = Some(v);
             }

@@ -89,6 +89,23 @@ pub struct LegendEntry {
     pub color: [u8; 3],
 }
 
+/// A tree's id as the API takes it: its number, or the text id an inventory
+/// gave it (`"EY17080"`; `.ids` version 2).
+#[derive(Debug, Clone, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
+#[serde(untagged)]
+pub enum TreeId {
+    /// A whole-number id.
+    Number(u64),
+    /// A text id.
+    Text(String),
+}
+
+impl From<u64> for TreeId {
+    fn from(id: u64) -> Self {
+        Self::Number(id)
+    }
+}
+
 /// A compiled style (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct TreeStyle {
@@ -96,6 +113,7 @@ pub struct TreeStyle {
     color: Option<ColorBy>,
     filter: Option<Filter>,
     selected: HashSet<u64>,
+    selected_texts: HashSet<String>,
     legend_title: String,
     legend: Vec<LegendEntry>,
 }
@@ -271,20 +289,33 @@ impl TreeStyle {
     }
 
     /// Highlights the trees with these ids (replacing the selection).
-    pub fn set_selection(&mut self, ids: impl IntoIterator<Item = u64>) {
-        self.selected = ids.into_iter().collect();
+    pub fn set_selection<I: Into<TreeId>>(&mut self, ids: impl IntoIterator<Item = I>) {
+        self.selected.clear();
+        self.selected_texts.clear();
+        for id in ids {
+            match id.into() {
+                TreeId::Number(n) => {
+                    self.selected.insert(n);
+                }
+                TreeId::Text(t) => {
+                    self.selected_texts.insert(t);
+                }
+            }
+        }
     }
 
     /// The selected ids.
     #[must_use]
-    pub fn selection(&self) -> &HashSet<u64> {
-        &self.selected
+    pub fn selection(&self) -> Vec<TreeId> {
+        let mut out: Vec<TreeId> = self.selected.iter().map(|&n| TreeId::Number(n)).collect();
+        out.extend(self.selected_texts.iter().cloned().map(TreeId::Text));
+        out
     }
 
     /// Whether the style draws anything differently from no style.
     #[must_use]
     pub fn is_plain(&self) -> bool {
-        self.color.is_none() && self.filter.is_none() && self.selected.is_empty()
+        self.color.is_none() && self.filter.is_none() && self.selected.is_empty() && self.selected_texts.is_empty()
     }
 
     /// Whether it needs a byte per tree (and so each tile's ids and attributes).
@@ -292,6 +323,7 @@ impl TreeStyle {
     pub fn needs_trees(&self) -> bool {
         self.filter.is_some()
             || !self.selected.is_empty()
+            || !self.selected_texts.is_empty()
             || matches!(self.color, Some(ColorBy::Codes { .. } | ColorBy::Ramp { .. }))
     }
 
@@ -330,7 +362,14 @@ impl TreeStyle {
 
     /// The style byte of tree `i` of a tile (its id `id`, its tile's codes `codes`).
     #[must_use]
-    pub fn tree_byte(&self, schema: Option<&AttributeSchema>, codes: Option<&AttributeCodes>, i: usize, id: u64) -> u8 {
+    pub fn tree_byte(
+        &self,
+        schema: Option<&AttributeSchema>,
+        codes: Option<&AttributeCodes>,
+        i: usize,
+        id: u64,
+        text: Option<&str>,
+    ) -> u8 {
         let mut b = match (&self.color, schema, codes) {
             (Some(ColorBy::Codes { column, entries }), _, Some(codes)) => codes
                 .columns
@@ -354,10 +393,14 @@ impl TreeStyle {
             }
             _ => 0,
         };
-        if self.selected.contains(&id) {
+        let selected = match text {
+            Some(t) => self.selected_texts.contains(t),
+            None => self.selected.contains(&id),
+        };
+        if selected {
             b |= SELECTED;
         }
-        if self.filter.as_ref().is_some_and(|f| !f.matches(schema, codes, i, id)) {
+        if self.filter.as_ref().is_some_and(|f| !f.matches(schema, codes, i, id, text)) {
             b |= HIDDEN;
         }
         b
@@ -368,13 +411,15 @@ impl TreeStyle {
     pub fn tile_bytes(
         &self,
         schema: Option<&AttributeSchema>,
-        ids: &[u64],
+        ids: &crate::format::TreeIds,
         codes: Option<&AttributeCodes>,
         first: usize,
         out: &mut [u8],
     ) {
-        for (i, (b, id)) in out.iter_mut().zip(ids.iter().skip(first)).enumerate() {
-            *b = self.tree_byte(schema, codes, first + i, *id);
+        for (i, (b, id)) in out.iter_mut().zip(ids.numbers.iter().skip(first)).enumerate() {
+            let k = first + i;
+            let text = if ids.texts.is_empty() { None } else { ids.text(k as u32) };
+            *b = self.tree_byte(schema, codes, k, *id, text);
         }
     }
 
@@ -428,7 +473,13 @@ mod tests {
         )
         .unwrap();
         let mut out = [0u8; 3];
-        style.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
+        style.tile_bytes(
+            Some(&s),
+            &crate::format::TreeIds { numbers: vec![7, 8, 9], texts: Vec::new() },
+            Some(&codes()),
+            0,
+            &mut out,
+        );
         // good → entry 1 but hidden (10 m); poor → entry 2 shown; no values → own colour, hidden.
         assert_eq!(out, [1 | HIDDEN, 2, HIDDEN]);
         let h = style.header();
@@ -440,8 +491,23 @@ mod tests {
         let mut ramp =
             TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [0, 40]}})).unwrap();
         ramp.set_selection([8]);
-        ramp.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
+        ramp.tile_bytes(
+            Some(&s),
+            &crate::format::TreeIds { numbers: vec![7, 8, 9], texts: Vec::new() },
+            Some(&codes()),
+            0,
+            &mut out,
+        );
         assert_eq!(out, [1 + 4, (1 + 12) | SELECTED, 0]);
+        // Text ids (issue 42): selected by their text; a number by its number only.
+        let texts = crate::format::TreeIds {
+            numbers: vec![7, (1 << 63) + 2, (1 << 63) + 3],
+            texts: vec![(1, "EY17080".into()), (2, "EY17081".into())],
+        };
+        ramp.set_selection([TreeId::Text("EY17081".into()), TreeId::Number(7)]);
+        ramp.tile_bytes(Some(&s), &texts, Some(&codes()), 0, &mut out);
+        assert_eq!(out.map(|b| b & SELECTED), [SELECTED, 0, SELECTED]);
+        assert_eq!(ramp.selection().len(), 2);
         assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
         // A domain no legend can print is refused, saying why.
         let e = TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [-1e308, 1e308]}}))
@@ -450,7 +516,13 @@ mod tests {
         // A reversed domain runs the ramp from its first value, as the legend reads.
         let reversed =
             TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [40, 0]}})).unwrap();
-        reversed.tile_bytes(Some(&s), &[7, 8, 9], Some(&codes()), 0, &mut out);
+        reversed.tile_bytes(
+            Some(&s),
+            &crate::format::TreeIds { numbers: vec![7, 8, 9], texts: Vec::new() },
+            Some(&codes()),
+            0,
+            &mut out,
+        );
         assert_eq!(out, [1 + 12, 1 + 4, 0]);
         assert!(reversed.legend_json()["entries"][0]["label"].as_str().unwrap().starts_with("40"));
 

@@ -551,6 +551,36 @@ fn ids_round_trip_and_errors() {
     hostile[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
     let e = decode_ids("x.ids", &hostile).unwrap_err();
     assert!(matches!(e.problem, Problem::OutOfRange { .. }), "{e}");
+    // Version 2: text ids of some instances (issue 42: an inventory's own keys).
+    let with_text = sylva::format::TreeIds {
+        numbers: vec![7, (1 << 63) + 2, 9, (1 << 63) + 4],
+        texts: vec![(1, "EY17080".into()), (3, "Baum Nr. 7 — Süd".into())],
+    };
+    let bytes = sylva::format::encode_tree_ids(&with_text);
+    assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
+    let back = sylva::format::decode_tree_ids("x.ids", &bytes).unwrap();
+    assert_eq!(back, with_text);
+    assert_eq!((back.text(1), back.text(2), back.text(3)), (Some("EY17080"), None, Some("Baum Nr. 7 — Süd")));
+    assert_eq!(decode_ids("x.ids", &bytes).unwrap(), with_text.numbers, "numbers as before");
+    // Without text ids: version 1, as before.
+    let plain = sylva::format::TreeIds { numbers: ids.to_vec(), texts: Vec::new() };
+    assert_eq!(sylva::format::encode_tree_ids(&plain), encode_ids(&ids));
+    // Hostile text sections: each refused, named.
+    let at = 16 + 4 * 8; // the text count
+    let text_error = |mutate: &dyn Fn(&mut Vec<u8>), needle: &str| {
+        let mut b = bytes.clone();
+        mutate(&mut b);
+        let e = sylva::format::decode_tree_ids("t.ids", &b).unwrap_err().to_string();
+        assert!(e.starts_with("t.ids: ") && e.contains(needle), "{needle}: {e}");
+    };
+    text_error(&|b| b.truncate(b.len() - 1), "end at byte");
+    text_error(&|b| b.push(b'x'), "end at byte");
+    text_error(&|b| b[at..at + 4].copy_from_slice(&99u32.to_le_bytes()), "at most 4");
+    text_error(&|b| b[at..at + 4].copy_from_slice(&0u32.to_le_bytes()), "without text ids");
+    text_error(&|b| b[at + 4..at + 8].copy_from_slice(&3u32.to_le_bytes()), "instances rise");
+    text_error(&|b| b[at + 8..at + 12].copy_from_slice(&4u32.to_le_bytes()), "below 4");
+    text_error(&|b| b[at + 12..at + 16].copy_from_slice(&0u32.to_le_bytes()), "bytes 0–0");
+    text_error(&|b| b[at + 20] = 0xff, "not UTF-8");
 }
 
 /// Decodes a tile after `mutate`, expecting an error whose message contains `needle`.

@@ -65,6 +65,8 @@ pub struct SceneInput<'a> {
     pub canopy_cell_m: f64,
     /// The per-tree attributes, if kept (`.attr` sidecars next to the tiles).
     pub attributes: Option<crate::attributes::AttributeTable>,
+    /// The text ids of the trees whose id is no whole number (`.ids` version 2).
+    pub text_ids: Option<trees::TextIds>,
 }
 
 /// What was written.
@@ -105,6 +107,7 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             input.tile_cells,
             input.shard,
             input.attributes.as_ref(),
+            input.text_ids.as_ref(),
             dir,
             log,
         )?;

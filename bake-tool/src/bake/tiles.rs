@@ -10,7 +10,7 @@ use anyhow::Result;
 use rayon::prelude::*;
 use sylva::format::attributes::encode_attributes;
 use sylva::format::manifest::{Bounds, TileEntry, TileLevels};
-use sylva::format::tile::encode_ids;
+use sylva::format::tile::{encode_tree_ids, TreeIds};
 
 use crate::attributes::AttributeTable;
 
@@ -41,6 +41,7 @@ pub fn write_tiles(
     tile_cells: u32,
     shard: Option<(u32, u32)>,
     attributes: Option<&AttributeTable>,
+    text_ids: Option<&super::trees::TextIds>,
     dir: &Path,
     log: &dyn Fn(&str),
 ) -> Result<Tiles> {
@@ -77,7 +78,20 @@ pub fn write_tiles(
                 let stem = format!("tiles/{}_{}", bt.tile.tile_x, bt.tile.tile_y);
                 let bytes = bt.tile.encode();
                 write_file(&dir.join(format!("{stem}.tile")), &bytes)?;
-                write_file(&dir.join(format!("{stem}.ids")), &encode_ids(&bt.ids))?;
+                let texts: Vec<(u32, String)> = match text_ids {
+                    Some(table) => bt
+                        .rows
+                        .iter()
+                        .enumerate()
+                        .filter(|(i, _)| bt.ids[*i] >= 1 << 63)
+                        .filter_map(|(i, &row)| table.get(row).map(|t| (i as u32, t.to_string())))
+                        .collect(),
+                    None => Vec::new(),
+                };
+                write_file(
+                    &dir.join(format!("{stem}.ids")),
+                    &encode_tree_ids(&TreeIds { numbers: bt.ids.clone(), texts }),
+                )?;
                 let attribute_codes = match attributes {
                     Some(a) => {
                         let codes = a.codes_for(&bt.rows);

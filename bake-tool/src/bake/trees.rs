@@ -179,6 +179,72 @@ pub struct PlacedTrees {
     pub canopy: super::ground_material::CanopyCover,
     /// The placements' other columns as per-tree attributes, if any are kept.
     pub attributes: Option<crate::attributes::AttributeTable>,
+    /// The text ids of the rows that have one (none: every id is a number).
+    pub text_ids: Option<TextIds>,
+}
+
+/// The text ids of an inventory (`EY17080`), by input row: what a tree whose
+/// id is no whole number is called in its owner's system. Held for every row
+/// (all shards), 8 bytes a row with one plus its text.
+#[derive(Debug, Clone, Default)]
+pub struct TextIds {
+    /// Rows with a text id, rising.
+    rows: Vec<u32>,
+    /// The byte end of each row's text in `text`.
+    ends: Vec<u32>,
+    text: String,
+}
+
+impl TextIds {
+    /// Reads the text ids of `source` (one pass).
+    ///
+    /// # Errors
+    /// An unreadable placements file, or more than 4 GiB of text ids.
+    pub fn read(source: &PlacementSource) -> Result<Self> {
+        let mut out = Self::default();
+        let mut unordered = false;
+        source.for_each(&mut |p| {
+            if let (None, Some(t), Ok(row)) = (p.id, p.id_text.as_deref(), u32::try_from(p.row)) {
+                unordered |= out.rows.last().is_some_and(|&r| r >= row);
+                out.text.push_str(t);
+                out.rows.push(row);
+                out.ends.push(u32::try_from(out.text.len()).map_err(|_| anyhow::anyhow!("over 4 GiB of text ids"))?);
+            }
+            Ok(())
+        })?;
+        if unordered {
+            // (Rows are read in order; kept general.)
+            let mut by_row: Vec<(u32, String)> =
+                (0..out.rows.len()).map(|k| (out.rows[k], out.get_at(k).to_string())).collect();
+            by_row.sort_by_key(|(r, _)| *r);
+            by_row.dedup_by_key(|(r, _)| *r);
+            out = Self::default();
+            for (r, t) in by_row {
+                out.text.push_str(&t);
+                out.rows.push(r);
+                out.ends.push(out.text.len() as u32);
+            }
+        }
+        Ok(out)
+    }
+
+    fn get_at(&self, k: usize) -> &str {
+        let start = if k == 0 { 0 } else { self.ends[k - 1] as usize };
+        &self.text[start..self.ends[k] as usize]
+    }
+
+    /// The text id of input row `row`, if it has one.
+    #[must_use]
+    pub fn get(&self, row: u32) -> Option<&str> {
+        self.rows.binary_search(&row).ok().map(|k| self.get_at(k))
+    }
+
+    /// The rows with a text id.
+    #[must_use]
+    #[allow(clippy::len_without_is_empty)] // (never empty: made only when a row has one)
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
 }
 
 /// What pass 1 learns.
@@ -414,7 +480,14 @@ pub fn place_trees(
         log(&format!("  ({:.1} s)", started.elapsed().as_secs_f64()));
         table
     };
-    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy, attributes })
+    let text_ids = if sample.report.text_ids.0 > 0 {
+        let ids = TextIds::read(&source)?;
+        log(&format!("ids: {} trees have a text id, kept as their id", ids.len()));
+        Some(ids)
+    } else {
+        None
+    };
+    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy, attributes, text_ids })
 }
 
 /// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.

@@ -121,7 +121,13 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
                     _ => None,
                 }),
                 yaw_deg: num(prop(ColumnRole::Yaw)).map(|v| v as f32),
-                id: prop(ColumnRole::Id).and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.parse().ok()))),
+                id: prop(ColumnRole::Id)
+                    .and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.trim().parse().ok()))),
+                id_text: prop(ColumnRole::Id).and_then(|v| match v {
+                    serde_json::Value::String(s) => super::text_id(s),
+                    serde_json::Value::Number(n) if n.as_u64().is_none() => super::text_id(&n.to_string()),
+                    _ => None,
+                }),
                 attrs: attribute_names
                     .iter()
                     .map(|name| {
@@ -173,6 +179,9 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
     };
     for p in points_read {
         if let Some(p) = accept(p, kind, &mut report) {
+            if p.id.is_none() && p.id_text.is_some() {
+                report.count_text_id(p.row, true, false);
+            }
             rows.push(p);
         }
     }

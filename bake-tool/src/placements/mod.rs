@@ -47,6 +47,9 @@ pub struct Placement {
     pub yaw_deg: Option<f32>,
     /// Numeric tree id, if given.
     pub id: Option<u64>,
+    /// The id as given when it is not a whole number ([`text_id`]): an
+    /// inventory's own key (`EY17080`), kept as text.
+    pub id_text: Option<String>,
     /// The attribute columns' text ([`Columns::attrs`] order; empty when not
     /// asked for: [`PlacementSource::for_each_with_attributes`]).
     pub attrs: Vec<Option<String>>,
@@ -72,12 +75,27 @@ pub struct Report {
     /// Rows out of lon/lat range that would be in range with x and y swapped.
     pub swappable: u64,
     /// Kept rows whose id is not a whole number (text, or none): such a tree's
-    /// id is its row, 2^63 + row (`describe_tree` gives it as `row`).
+    /// number is its row, 2^63 + row (`describe_tree` gives it as `row`), and
+    /// a text id is kept as text.
     pub ids_not_numbers: (u64, Vec<u64>),
+    /// Of those, rows with a text id (kept, 1–256 bytes) and rows with an id
+    /// longer than 256 bytes (not kept).
+    pub text_ids: (u64, u64),
 }
 
 impl Report {
     /// Records a skipped row.
+    /// Counts a kept row whose id is no whole number: `text` kept, or
+    /// `too_long` to keep.
+    pub fn count_text_id(&mut self, row: u64, text: bool, too_long: bool) {
+        self.ids_not_numbers.0 += 1;
+        if self.ids_not_numbers.1.len() < 5 {
+            self.ids_not_numbers.1.push(row);
+        }
+        self.text_ids.0 += u64::from(text);
+        self.text_ids.1 += u64::from(too_long);
+    }
+
     pub fn skip(&mut self, reason: &str, row: u64) {
         let e = self.skipped.entry(reason.to_string()).or_insert((0, Vec::new()));
         e.0 += 1;
@@ -114,10 +132,25 @@ impl Report {
             out.push(format!("{} rows repeat the coordinates of an earlier row (kept)", self.duplicate_coordinates));
         }
         if self.ids_not_numbers.0 > 0 {
+            let (text, long) = self.text_ids;
+            let none = self.ids_not_numbers.0 - text - long;
+            let mut parts = Vec::new();
+            if text > 0 {
+                parts.push(format!("{text} are text, kept as the trees' ids"));
+            }
+            if long > 0 {
+                parts.push(format!(
+                    "{long} are longer than {MAX_TEXT_ID_BYTES} bytes, not kept: those trees are named by their row"
+                ));
+            }
+            if none > 0 {
+                parts.push(format!("{none} are empty: those trees are named by their row (a pick says \"row\")"));
+            }
             out.push(format!(
-                "{} rows have an id that is not a whole number (e.g. rows {:?}): those trees are identified by \
-                 their row (a pick says \"row\"; text ids are not kept)",
-                self.ids_not_numbers.0, self.ids_not_numbers.1
+                "{} rows have an id that is not a whole number (e.g. rows {:?}): {}",
+                self.ids_not_numbers.0,
+                self.ids_not_numbers.1,
+                parts.join("; ")
             ));
         }
         out
@@ -690,15 +723,26 @@ fn csv_reader<R: std::io::Read>(reader: R, delimiter: u8) -> csv::Reader<R> {
 pub const MAX_HEADER_BYTES: usize = 1 << 20;
 
 /// The first record of a CSV file, up to its line break outside quotes (a
-/// header cell may hold one: what a spreadsheet writes for Alt+Enter).
+/// header cell may hold one: what a spreadsheet writes for Alt+Enter). Quotes
+/// as the CSV reader reads them: a `"` opens a quoted field only at the start
+/// of a field (after `,`, `;`, a tab or `|`: the separator is not known yet),
+/// `""` inside one is a quote, and elsewhere `"` is a character (`dbh (")`).
 ///
 /// # Errors
 /// A header over `limit` bytes, or a read error.
 pub fn header_record(reader: impl std::io::Read, limit: usize) -> Result<Vec<u8>> {
     use std::io::BufRead;
+    #[derive(Clone, Copy, PartialEq)]
+    enum State {
+        FieldStart,
+        Unquoted,
+        Quoted,
+        QuoteInQuoted,
+    }
+    let is_separator = |b: u8| matches!(b, b',' | b';' | b'\t' | b'|');
     let mut r = std::io::BufReader::new(reader.take(limit as u64 + 1));
     let mut out = Vec::new();
-    let mut quoted = false;
+    let mut state = State::FieldStart;
     loop {
         let buf = r.fill_buf()?;
         if buf.is_empty() {
@@ -707,13 +751,22 @@ pub fn header_record(reader: impl std::io::Read, limit: usize) -> Result<Vec<u8>
         let mut used = buf.len();
         let mut done = false;
         for (i, &b) in buf.iter().enumerate() {
-            if b == b'"' {
-                quoted = !quoted;
-            } else if b == b'\n' && !quoted {
-                used = i + 1;
-                done = true;
-                break;
+            // A UTF-8 byte-order mark is no part of the first field.
+            if out.len() + i < 3 && b == [0xef, 0xbb, 0xbf][out.len() + i] && state == State::FieldStart {
+                continue;
             }
+            state = match (state, b) {
+                (State::Quoted, b'"') => State::QuoteInQuoted,
+                (State::Quoted, _) => State::Quoted,
+                (State::FieldStart, b'"') | (State::QuoteInQuoted, b'"') => State::Quoted,
+                (_, b'\n') => {
+                    used = i + 1;
+                    done = true;
+                    break;
+                }
+                (_, b) if is_separator(b) => State::FieldStart,
+                _ => State::Unquoted,
+            };
         }
         out.extend_from_slice(&buf[..used]);
         r.consume(used);
@@ -816,21 +869,35 @@ pub fn stream_csv<R: std::io::Read>(
             species: species.as_deref().map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
             yaw_deg: yaw.as_deref().and_then(number).map(|v| v as f32),
             id: id.as_deref().and_then(|s| s.trim().parse::<u64>().ok()),
+            id_text: id.as_deref().and_then(text_id),
             attrs,
             row,
         };
         if let Some(p) = accept(p, cols.kind, report) {
             report.kept += 1;
             if cols.id.is_some() && p.id.is_none() {
-                report.ids_not_numbers.0 += 1;
-                if report.ids_not_numbers.1.len() < 5 {
-                    report.ids_not_numbers.1.push(p.row);
-                }
+                report.count_text_id(p.row, p.id_text.is_some(), id.as_deref().is_some_and(id_too_long));
             }
             f(p)?;
         }
     }
     Ok(cols.kind)
+}
+
+pub use sylva::format::tile::MAX_TEXT_ID_BYTES;
+
+/// An id cell that is not a whole number, trimmed, if it holds 1–256 bytes:
+/// the tree's id as text.
+#[must_use]
+pub fn text_id(cell: &str) -> Option<String> {
+    let t = cell.trim();
+    (!t.is_empty() && t.len() <= MAX_TEXT_ID_BYTES && t.parse::<u64>().is_err()).then(|| t.to_string())
+}
+
+/// Whether an id cell is text too long to keep.
+#[must_use]
+pub fn id_too_long(cell: &str) -> bool {
+    cell.trim().len() > MAX_TEXT_ID_BYTES
 }
 
 /// A placements file that can be read more than once: CSV is streamed from disk

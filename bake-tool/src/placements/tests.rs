@@ -271,5 +271,16 @@ fn a_header_cell_with_a_line_break_keeps_every_name_with_its_values() {
     // The record reader stops at the first line break outside quotes.
     assert_eq!(header_record(&b"a,\"b\nc\",d\r\n1,2,3\n"[..], 100).unwrap(), b"a,\"b\nc\",d\r\n");
     assert_eq!(header_record(&b"a,b"[..], 100).unwrap(), b"a,b");
+    // A quote inside a field is a character, as the CSV reader reads it (an inch mark):
+    // the header ends at its line break, not at the next quote in the data.
+    assert_eq!(header_record(&b"id,x,y,dbh (\")\n1,2,3,\"4\"\n"[..], 100).unwrap(), b"id,x,y,dbh (\")\n");
+    assert_eq!(header_record(&b"a;\"b \"\"c\"\"\nd\";e\n1;2;3\n"[..], 100).unwrap(), b"a;\"b \"\"c\"\"\nd\";e\n");
+    assert_eq!(header_record(&b"\xef\xbb\xbf\"a\nb\",c\n1,2\n"[..], 100).unwrap(), b"\xef\xbb\xbf\"a\nb\",c\n");
+    let inch = dir.join("inch.csv");
+    std::fs::write(&inch, format!("x,y,height_ft\"\n{}", "1,2,3\n".repeat(200_000))).unwrap();
+    let src = PlacementSource::open(&inch, &ReadOptions::default()).unwrap();
+    // (Read, not refused for a header "over 1 MiB"; the name as the CSV reader gives it.)
+    assert_eq!(src.attribute_names().len(), 1);
+    assert!(src.attribute_names()[0].starts_with("height_ft"), "{:?}", src.attribute_names());
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -547,6 +547,8 @@ type Placed = BTreeMap<u32, Vec<ExportedTree>>;
 /// attributes where the scene has them.
 struct TreeData<'a> {
     ids: Vec<u64>,
+    /// Text ids of the trees that have one (`.ids` version 2), by tile index.
+    texts: Vec<(u32, String)>,
     codes: Option<(&'a sylva::format::attributes::AttributeSchema, sylva::format::attributes::AttributeCodes)>,
     /// Species model names (the `model` property).
     models: Vec<&'a str>,
@@ -555,9 +557,10 @@ struct TreeData<'a> {
 }
 
 /// Property identifiers for the attribute columns: `[A-Za-z_][A-Za-z0-9_]*`,
-/// unique, none of them `id` or `model`.
+/// unique, none of them `id`, `id_text` or `model`.
 fn property_names(schema: Option<&sylva::format::attributes::AttributeSchema>) -> Vec<String> {
-    let mut taken: std::collections::BTreeSet<String> = ["id".to_string(), "model".to_string()].into();
+    let mut taken: std::collections::BTreeSet<String> =
+        ["id".to_string(), "id_text".to_string(), "model".to_string()].into();
     let mut out = Vec::new();
     for c in schema.map_or(&[][..], |s| &s.columns[..]) {
         let mut base: String = c.name.chars().map(|ch| if ch.is_ascii_alphanumeric() { ch } else { '_' }).collect();
@@ -580,6 +583,10 @@ fn metadata_schema(schema: Option<&sylva::format::attributes::AttributeSchema>, 
     use sylva::format::attributes::AttributeType;
     let mut props = serde_json::Map::new();
     props.insert("id".into(), json!({"type": "SCALAR", "componentType": "UINT64", "description": "the tree's id"}));
+    props.insert(
+        "id_text".into(),
+        json!({"type": "STRING", "noData": "", "description": "the tree's id as its inventory wrote it, where that is text (then `id` is 2^63 + its row); in the tiles that have such trees"}),
+    );
     props.insert("model".into(), json!({"type": "STRING", "description": "the species model it is drawn with"}));
     for (c, name) in schema.map_or(&[][..], |s| &s.columns[..]).iter().zip(names) {
         let p = match c.kind {
@@ -619,6 +626,10 @@ fn property_table(g: &mut Gltf, data: &TreeData<'_>, placed: &Placed, rows: &[u3
         .flat_map(|(&s, trees)| std::iter::repeat_n(data.models[s as usize].to_string(), trees.len()))
         .collect();
     props.insert("model".into(), strings(g, &mut models.into_iter()));
+    if !data.texts.is_empty() {
+        let text = |i: u32| data.texts.binary_search_by_key(&i, |(k, _)| *k).map_or("", |k| data.texts[k].1.as_str());
+        props.insert("id_text".into(), strings(g, &mut rows.iter().map(|&i| text(i).to_string())));
+    }
     if let Some((schema, codes)) = &data.codes {
         for (c, name) in data.names.iter().enumerate() {
             let value = |i: u32| codes.value(schema, c, i as usize);
@@ -781,7 +792,7 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
     let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
     let mut tallest = 0.0f64;
     let ids_path = dir.join(&entry.ids_url);
-    let ids = sylva::format::decode_ids(
+    let sylva::format::TreeIds { numbers: ids, texts } = sylva::format::decode_tree_ids(
         &ids_path.display().to_string(),
         &sylva::paths::read_regular(&ids_path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
             .with_context(|| format!("cannot read tree ids {}", ids_path.display()))?,
@@ -806,7 +817,8 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         }
         None => None,
     };
-    let data = TreeData { ids, codes, models: m.species.iter().map(|s| s.name.as_str()).collect(), names: &ctx.names };
+    let data =
+        TreeData { ids, texts, codes, models: m.species.iter().map(|s| s.name.as_str()).collect(), names: &ctx.names };
     let mut at = 0usize;
     for b in &tile.batches {
         let sp = &species[b.species as usize];

@@ -438,8 +438,9 @@ fn sharded_bake_and_merge_equal_a_single_bake() {
 /// Issue 42, item 11: every value a bake writes is independent of how its
 /// tiles are split into shards. A generated inventory (three stands of two
 /// species in lon/lat at odd coordinates, ground fitted to given base
-/// heights, heights from the DBH for a third of the trees, text and number
-/// attributes) baked whole, and in 2, 3, 4 and 5 shards merged: byte-identical.
+/// heights, heights from the DBH for a third of the trees, text ids for a
+/// seventh, text and number attributes) baked whole, and in 2, 3, 4 and 5
+/// shards merged: byte-identical.
 #[test]
 fn any_shard_count_merges_byte_identical_to_one_bake() {
     let Some(model) = oak_model() else { return };
@@ -460,8 +461,9 @@ fn any_shard_count_merges_byte_identical_to_one_bake() {
         let height = if i % 3 == 0 { String::new() } else { format!("{:.2}", 5.0 + next() * 25.0) };
         let species = if next() < 0.5 { "oak" } else { "linden" };
         let condition = ["good", "fair", "poor"][(next() * 3.0) as usize % 3];
+        let id = if i % 7 == 0 { format!("T-{i:04}") } else { i.to_string() };
         csv += &format!(
-            "{i},{species},{lat:.7},{lon:.7},{z:.3},{:.1},{height},{condition},{}\n",
+            "{id},{species},{lat:.7},{lon:.7},{z:.3},{:.1},{height},{condition},{}\n",
             10.0 + next() * 70.0,
             1950 + (next() * 70.0) as u32
         );
@@ -478,6 +480,7 @@ fn any_shard_count_merges_byte_identical_to_one_bake() {
     };
     bake("single", None);
     let single = snapshot(&dir.join("single"));
+    assert!(single.iter().any(|(f, b)| f.ends_with(".ids") && b[4] == 2), "text ids are written (.ids version 2)");
     for n in 2..=5u32 {
         let parts: Vec<PathBuf> = (0..n).map(|i| dir.join(format!("part-{n}-{i}"))).collect();
         for i in 0..n {
@@ -541,7 +544,7 @@ fn merge_copies_only_the_shards_own_files(dir: &Path) {
         std::fs::remove_file(&path).unwrap();
         harm(&path);
         let err = fails(bin().arg("merge").args(parts.map(|p| h.join(p))).arg("--out").arg(h.join("merged")));
-        let named = if case == "linked-folder" { "tiles" } else { file.rsplit('/').next().unwrap() };
+        let named = if case.starts_with("linked-") { "tiles" } else { file.rsplit('/').next().unwrap() };
         assert!(err.contains(named), "{case}: the error names {named}: {err}");
         // (Only the output is read back: the hostile shard may hold a FIFO.)
         let merged = h.join("merged");
@@ -582,6 +585,25 @@ fn merge_copies_only_the_shards_own_files(dir: &Path) {
         std::fs::write(elsewhere.join(p.file_name().unwrap()), b"x").unwrap();
     });
     assert!(err.contains("outside its shard"), "{err}");
+    // …also a linked folder that stays inside the shard.
+    let err = hostile("linked-inside", 1, &is(".ids"), &|p| {
+        let tiles = p.parent().unwrap();
+        let moved = tiles.with_file_name("tiles-moved");
+        std::fs::rename(tiles, &moved).unwrap();
+        std::os::unix::fs::symlink("tiles-moved", tiles).unwrap();
+        std::fs::write(moved.join(p.file_name().unwrap()), b"x").unwrap();
+    });
+    assert!(err.contains("linked folder") && err.contains("inside its shard"), "{err}");
+    // A shard manifest naming one file for two tiles: refused, not overwritten.
+    let err = hostile("same-url", 2, &|f| f == "scene.json", &|p| {
+        let original = std::fs::read(dir.join(parts[2]).join("scene.json")).unwrap();
+        let mut m: serde_json::Value = serde_json::from_slice(&original).unwrap();
+        let tiles = m["tiles"].as_array_mut().expect("a shard lists its tiles");
+        assert!(tiles.len() >= 2, "the shard has two tiles");
+        tiles[1]["url"] = tiles[0]["url"].clone();
+        std::fs::write(p, serde_json::to_vec(&m).unwrap()).unwrap();
+    });
+    assert!(err.contains("named twice"), "{err}");
 }
 
 #[test]
@@ -1176,7 +1198,7 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     ];
     for (filter, want) in cases {
         let found = sylva::scene::query::query_dir(&out, &filter, usize::MAX).unwrap();
-        let mut ids = found.ids.clone();
+        let mut ids: Vec<u64> = found.ids.iter().map(|v| v.as_u64().expect("numeric ids")).collect();
         ids.sort_unstable();
         assert_eq!(found.count as usize, want.len(), "{filter}");
         assert!(!want.is_empty(), "{filter}: a case that matches something");
@@ -1252,7 +1274,8 @@ fn geojson_properties_are_attributes() {
         "the id (fid) and the list-valued tags are no attributes"
     );
     let found = |f: serde_json::Value| {
-        let mut ids = sylva::scene::query::query_dir(&out, &f, usize::MAX).unwrap().ids;
+        let found = sylva::scene::query::query_dir(&out, &f, usize::MAX).unwrap().ids;
+        let mut ids: Vec<u64> = found.iter().map(|v| v.as_u64().expect("numeric ids")).collect();
         ids.sort_unstable();
         ids
     };
@@ -1267,23 +1290,31 @@ fn geojson_properties_are_attributes() {
 
 /// An inventory whose ids are text: the bake says so, those trees are
 /// numbered by their row, and what a pick says of one names its row.
+/// Text ids (issue 42, item 8): an inventory whose ids are its own text keys
+/// (Toronto's `STRUCTID` = `EY17080`) keeps them: pick (`describe_tree`),
+/// query by id, and the 3D Tiles export say the text; the row stays known.
 #[test]
-fn text_ids_are_reported_and_trees_keep_their_row() {
+fn text_ids_are_kept_and_found_by_pick_query_and_export() {
     let Some(model) = oak_model() else { return };
     let dir = tmp("text-ids");
     let csv = dir.join("trees.csv");
     let mut text = String::from("lon,lat,id,height\n");
     for i in 0..30 {
-        let id = if i % 3 == 0 { format!("BOOM-{i:04}") } else { format!("{}", 700 + i) };
+        let id = match i % 3 {
+            0 => format!("EY{:05}", 17080 + i),
+            1 if i == 4 => String::new(), // no id at all: named by its row
+            _ => format!("{}", 700 + i),
+        };
         text.push_str(&format!("{:.6},52.500000,{id},{}\n", 13.40 + f64::from(i) * 0.0003, 10 + i % 5));
     }
     std::fs::write(&csv, text).unwrap();
     let out = dir.join("scene");
     let o = run(&mut quick_bake(&model, &csv, &out, &["--default-model", "oak"]));
     let log = String::from_utf8_lossy(&o.stderr);
-    assert!(log.contains("10 rows have an id that is not a whole number"), "{log}");
+    assert!(log.contains("11 rows have an id that is not a whole number"), "{log}");
+    assert!(log.contains("10 are text, kept as the trees' ids") && log.contains("1 are empty"), "{log}");
     let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    let (mut numbered, mut by_row) = (0, 0);
+    let (mut numbered, mut texts, mut by_row) = (0, 0, 0);
     for t in &m.tiles {
         let tile = std::fs::read(out.join(&t.url)).unwrap();
         let ids_bytes = std::fs::read(out.join(&t.ids_url)).unwrap();
@@ -1296,22 +1327,59 @@ fn text_ids_are_reported_and_trees_keep_their_row() {
             let files = [t.url.as_str(), t.ids_url.as_str(), "attr"];
             let d = sylva::scene::query::describe_tree(&m, None, [&tile, &ids_bytes], attr.as_deref(), files, k as u32)
                 .unwrap();
-            match d["id"].as_u64() {
-                Some(id) => {
-                    assert!((700..730).contains(&id) && id % 3 != 1, "{d}");
-                    assert!(d["row"].is_null(), "{d}");
+            // Data rows count from 1: the text ids are on rows 1, 4, 7, …
+            match (&d["id"], d["row"].as_u64()) {
+                (serde_json::Value::Number(id), None) => {
+                    let id = id.as_u64().unwrap();
+                    assert!((700..730).contains(&id) && (id - 700) % 3 != 0, "{d}");
                     numbered += 1;
                 }
-                None => {
-                    // Data rows count from 1: the text ids are on rows 1, 4, 7, …
-                    let row = d["row"].as_u64().expect("a row for a tree without a numeric id");
+                (serde_json::Value::String(id), Some(row)) => {
                     assert_eq!(row % 3, 1, "{d}");
+                    assert_eq!(*id, format!("EY{:05}", 17080 + row - 1), "the row's own id: {d}");
+                    texts += 1;
+                }
+                (serde_json::Value::Null, Some(row)) => {
+                    assert_eq!(row, 5, "{d}");
                     by_row += 1;
                 }
+                _ => panic!("{d}"),
             }
         }
     }
-    assert_eq!((numbered, by_row), (20, 10));
+    assert_eq!((numbered, texts, by_row), (19, 10, 1));
+    // Found by its text id (and a number by its digits), listed by it.
+    let q = sylva::scene::query::query_dir(&out, &serde_json::json!({"id": ["EY17083", "702", 705]}), 10).unwrap();
+    assert_eq!(q.count, 3, "{:?}", q.ids);
+    let mut found: Vec<String> = q.ids.iter().map(ToString::to_string).collect();
+    found.sort();
+    assert_eq!(found, ["\"EY17083\"", "702", "705"]);
+    // The export: each tree's text id in the property table, where it has one.
+    let tiles = dir.join("3dtiles");
+    run(bin().arg("export-3dtiles").arg(&out).arg("--out").arg(&tiles));
+    let mut glb_texts = 0;
+    let mut stack = vec![tiles.clone()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            if p.extension().is_none_or(|x| x != "glb") {
+                continue;
+            }
+            let bytes = std::fs::read(&p).unwrap();
+            glb_texts += (0..30)
+                .filter(|i| i % 3 == 0)
+                .filter(|i| {
+                    let needle = format!("EY{:05}", 17080 + i);
+                    bytes.windows(needle.len()).any(|w| w == needle.as_bytes())
+                })
+                .count();
+        }
+    }
+    assert!(glb_texts >= 10, "the text ids are in the exported GLBs: {glb_texts}");
 }
 
 /// Canopy rasters (issue 20): a quadtree of rasters whose cells cover what the
