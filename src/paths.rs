@@ -58,26 +58,42 @@ pub fn read_regular(path: &Path, range: Option<(u64, u64)>, cap: u64) -> std::io
     use std::io::{Error, ErrorKind, Read, Seek};
     let refuse = |what: &str| Error::new(ErrorKind::InvalidInput, format!("it is {what}, not a regular file"));
     let kind = |m: &std::fs::Metadata| -> Option<&'static str> {
-        use std::os::unix::fs::FileTypeExt;
         let t = m.file_type();
         if t.is_file() {
-            None
-        } else if t.is_dir() {
-            Some("a folder")
-        } else if t.is_fifo() {
-            Some("a FIFO")
-        } else if t.is_char_device() || t.is_block_device() {
-            Some("a device")
-        } else if t.is_socket() {
-            Some("a socket")
-        } else {
-            Some("something else")
+            return None;
         }
+        if t.is_dir() {
+            return Some("a folder");
+        }
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::FileTypeExt;
+            if t.is_fifo() {
+                return Some("a FIFO");
+            }
+            if t.is_char_device() || t.is_block_device() {
+                return Some("a device");
+            }
+            if t.is_socket() {
+                return Some("a socket");
+            }
+        }
+        Some("something else")
     };
     if let Some(what) = kind(&std::fs::metadata(path)?) {
         return Err(refuse(what));
     }
-    let mut f = std::fs::File::open(path)?;
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    // Opened without waiting: a FIFO swapped in between the look and the open
+    // does not block the open (it is then refused below); a regular file reads
+    // as ever.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY);
+    }
+    let mut f = options.open(path)?;
     // The path may have been swapped between the look and the open.
     let meta = f.metadata()?;
     if let Some(what) = kind(&meta) {

@@ -77,6 +77,41 @@ impl ServeConfig {
             .join(" ")
     }
 
+    /// Without `--allow-embed`/`--allow-source`, takes the origins of a
+    /// `sylva-embed.json` in the viewer's folder, so the `frame-ancestors`
+    /// header and the policy the viewer reads are one (a portal the file lists
+    /// is not blocked by the header). Returns whether a file was adopted.
+    ///
+    /// # Errors
+    /// A file that is no policy (not JSON, unknown keys, no origin), named.
+    pub fn adopt_policy_file(&mut self) -> Result<bool, String> {
+        if !self.embed_parents.is_empty() || !self.embed_sources.is_empty() {
+            return Ok(false);
+        }
+        let Some(path) = resolve(self, "/sylva-embed.json") else { return Ok(false) };
+        let name = path.display();
+        let text = crate::paths::read_regular(&path, None, 1 << 16).map_err(|e| format!("{name}: {e}"))?;
+        let v: serde_json::Value = serde_json::from_slice(&text).map_err(|e| format!("{name}: not JSON ({e})"))?;
+        let object =
+            v.as_object().ok_or_else(|| format!("{name}: expected {{\"parents\": [...], \"sources\": [...]}}"))?;
+        let mut lists = [Vec::new(), Vec::new()];
+        for (key, value) in object {
+            let k = match key.as_str() {
+                "parents" => 0,
+                "sources" => 1,
+                _ => return Err(format!("{name}: unknown key {key:?} (parents, sources)")),
+            };
+            for o in value.as_array().ok_or_else(|| format!("{name}: {key:?} must be a list of origins"))? {
+                let o = o.as_str().ok_or_else(|| format!("{name}: {o} in {key:?} is no origin"))?;
+                lists[k].push(parse_origin(o).map_err(|e| format!("{name}: {e}"))?);
+            }
+        }
+        let [parents, sources] = lists;
+        self.embed_parents = parents;
+        self.embed_sources = sources;
+        Ok(true)
+    }
+
     /// `/sylva-embed.json` from the flags, or None without them (the file in
     /// the viewer's folder is served instead, or [`Self::DEFAULT_EMBED_POLICY`]).
     #[must_use]
@@ -130,9 +165,9 @@ pub fn parse_origin(s: &str) -> Result<String, String> {
     let expected = || format!("{s:?} is no origin: expected http(s)://host[:port] (no path), or *");
     let lower = s.to_ascii_lowercase();
     let (scheme, rest) = lower.split_once("://").ok_or_else(expected)?;
-    let default_port = match scheme {
-        "https" => "443",
-        "http" => "80",
+    let default_port: u16 = match scheme {
+        "https" => 443,
+        "http" => 80,
         _ => return Err(expected()),
     };
     let rest = rest.strip_suffix('/').unwrap_or(rest);
@@ -140,21 +175,31 @@ pub fn parse_origin(s: &str) -> Result<String, String> {
         Some((h, p)) if !h.is_empty() && (!h.contains(':') || h.ends_with(']')) => (h, Some(p)),
         _ => (rest, None),
     };
-    let host_ok = if let Some(v6) = host.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
-        v6.parse::<std::net::Ipv6Addr>().is_ok()
-    } else {
-        !host.is_empty()
-            && host.len() <= 253
-            && host
-                .split('.')
-                .all(|l| !l.is_empty() && l.len() <= 63 && l.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-'))
+    if host.starts_with('[') {
+        return Err(format!(
+            "{s:?} is no origin here: an IPv6 address cannot be named in a frame-ancestors header; use a host name"
+        ));
+    }
+    // A host whose last label is a number is an IPv4 address to a browser: a valid one only.
+    let numeric = host.rsplit('.').next().is_some_and(|l| !l.is_empty() && l.bytes().all(|b| b.is_ascii_digit()));
+    let host_ok = !host.is_empty()
+        && host.len() <= 253
+        && host
+            .split('.')
+            .all(|l| !l.is_empty() && l.len() <= 63 && l.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-'))
+        && (!numeric || host.parse::<std::net::Ipv4Addr>().is_ok());
+    let port = match port {
+        None => None,
+        Some(p) if !p.is_empty() && p.len() <= 5 && p.bytes().all(|b| b.is_ascii_digit()) => {
+            Some(p.parse::<u16>().ok().filter(|&n| n > 0).ok_or_else(expected)?)
+        }
+        Some(_) => return Err(expected()),
     };
-    let port_ok = port.is_none_or(|p| !p.is_empty() && p.len() <= 5 && p.parse::<u16>().is_ok_and(|n| n > 0));
-    if !host_ok || !port_ok {
+    if !host_ok {
         return Err(expected());
     }
     Ok(match port {
-        Some(p) if p != default_port => format!("{scheme}://{host}:{}", p.parse::<u16>().unwrap_or(0)),
+        Some(p) if p != default_port => format!("{scheme}://{host}:{p}"),
         _ => format!("{scheme}://{host}"),
     })
 }
@@ -356,7 +401,13 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
     if method != "GET" && !head_only {
         return respond(&mut stream, "405 Method Not Allowed", &[("Allow", "GET, HEAD".into())], b"", false);
     }
-    if path.split(['?', '#']).next() == Some("/sylva-embed.json") {
+    // The policy by any spelling of its path (`//sylva-embed.json`, `%2D`): the one the flags say.
+    let policy_path = path
+        .split(['?', '#'])
+        .next()
+        .and_then(crate::paths::percent_decode)
+        .is_some_and(|p| p.trim_start_matches('/') == "sylva-embed.json");
+    if policy_path {
         let json = config
             .embed_policy_json()
             .or_else(|| resolve(config, path).is_none().then(|| ServeConfig::DEFAULT_EMBED_POLICY.to_string()));
@@ -546,7 +597,7 @@ mod tests {
             ("https://portal.example.org:443", "https://portal.example.org"),
             ("http://127.0.0.1:8080", "http://127.0.0.1:8080"),
             ("http://localhost:80", "http://localhost"),
-            ("http://[::1]:3000", "http://[::1]:3000"),
+            ("https://a.org:0443", "https://a.org"),
             ("*", "*"),
         ] {
             assert_eq!(parse_origin(given).as_deref(), Ok(origin), "{given}");
@@ -570,10 +621,16 @@ mod tests {
             "https://a.org?x=1",
             "https://a.org#x",
             "\"https://a.org\"",
+            "http://a.org:+80",
+            "http://256.1.1.1",
+            "http://1.2.3.4.5",
+            "http://1.2.3",
         ] {
             let e = parse_origin(bad).unwrap_err();
             assert!(e.contains("is no origin"), "{bad}: {e}");
         }
+        // A browser cannot be told an IPv6 host in frame-ancestors: said so.
+        assert!(parse_origin("http://[::1]:3000").unwrap_err().contains("IPv6"));
         let mut c = ServeConfig::new("web".into(), "scene".into());
         assert_eq!(c.frame_ancestors(), "frame-ancestors 'self'");
         assert_eq!(c.embed_policy_json(), None);
@@ -672,13 +729,26 @@ mod live_tests {
             policy,
             serde_json::json!({"parents": ["https://portal.example.org"], "sources": ["https://tiles.example.org"]})
         );
-        // Without flags, the folder's own file.
-        let config = ServeConfig::new(dir.join("web"), dir.join("scene"));
+        // Any spelling of the policy's path is the flags' policy.
+        for other in ["//sylva-embed.json", "/sylva%2Dembed.json"] {
+            let mut p = agent.get(&format!("{base}{other}")).call().unwrap();
+            assert!(p.body_mut().read_to_string().unwrap().contains("portal.example.org"), "{other}");
+        }
+        // Without flags, the folder's own file: its origins are the header's too.
+        let mut config = ServeConfig::new(dir.join("web"), dir.join("scene"));
+        assert_eq!(config.adopt_policy_file(), Ok(true));
+        assert_eq!(config.frame_ancestors(), "frame-ancestors 'self' https://old.example.org");
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || serve(config, "127.0.0.1:0", |a| tx.send(a).unwrap()));
         let base = format!("http://{}", rx.recv().unwrap());
         let mut policy = agent.get(&format!("{base}/sylva-embed.json")).call().unwrap();
         assert!(policy.body_mut().read_to_string().unwrap().contains("old.example.org"));
+        let page = agent.get(&format!("{base}/index.html")).call().unwrap();
+        assert_eq!(page.headers()["content-security-policy"], "frame-ancestors 'self' https://old.example.org");
+        // A broken file stops the server before it starts, saying what is wrong.
+        std::fs::write(dir.join("web/sylva-embed.json"), r#"{"parents": ["https://a.org/app"]}"#).unwrap();
+        let e = ServeConfig::new(dir.join("web"), dir.join("scene")).adopt_policy_file().unwrap_err();
+        assert!(e.contains("sylva-embed.json") && e.contains("is no origin"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -78,16 +78,29 @@ export class EmbedPolicy {
     }
   }
 
-  /** Whether a page of `origin` may frame this one and talk to it. */
+  /** Whether a page of `origin` may frame this one and talk to it. An opaque
+   * origin ("null": a sandboxed frame, a file:// page, a data: URL) never may. */
   mayTalk(origin) {
+    if (typeof origin !== 'string' || origin === 'null') return false;
     return origin === this.own || this.parents.includes('*') || this.parents.includes(origin);
   }
 
   /** Whether the viewer may load `url` (a scene URL or an imagery template,
-   * relative to `base`): its origin is the page's own or a listed source. */
+   * relative to `base`): its origin is the page's own or a listed source.
+   * The URL is checked as it will be fetched: only the placeholders the
+   * viewer fills in ({z} {x} {y} {-y} {TileMatrix} {TileCol} {TileRow}) are
+   * replaced, any other brace is refused, as are credentials and any origin
+   * that is not http(s) (data:, javascript:, blob: — opaque: "null"). */
   mayLoad(url, base) {
-    let origin;
-    try { origin = new URL(String(url).replace(/\{[^}]*\}/g, '0'), base).origin; } catch { return false; }
+    let u;
+    try {
+      const filled = String(url).replace(/\{(z|x|y|-y|TileMatrix|TileCol|TileRow)\}/g, '0');
+      if (/[{}]/.test(filled)) return false;
+      u = new URL(filled, base);
+    } catch { return false; }
+    if ((u.protocol !== 'https:' && u.protocol !== 'http:') || u.username || u.password) return false;
+    const origin = u.origin;
+    if (origin === 'null') return false;
     return origin === this.own || this.sources.includes('*') || this.sources.includes(origin);
   }
 

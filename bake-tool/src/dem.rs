@@ -225,7 +225,10 @@ impl Dem {
     #[must_use]
     pub fn nearest_within(&self, x: f64, y: f64, reach: f64) -> Option<f32> {
         let (c, r) = self.pixel(x, y);
-        if !c.is_finite() || !r.is_finite() {
+        // Farther than `reach` from the grid (or not a number): nothing near.
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let near = c > -1.0 - reach && r > -1.0 - reach && c < w + reach && r < h + reach;
+        if !(near && (0.0..=64.0).contains(&reach)) {
             return None;
         }
         let n = reach.ceil() as i64;
@@ -624,6 +627,11 @@ mod tests {
         // Beyond the grid's edge too.
         assert_eq!(dem.nearest_within(x(-1.5), y, 2.0), Some(10.0));
         assert_eq!(dem.nearest_within(x(-3.0), y, 2.0), None);
+        // Far off the grid (a hostile pixel size, a stray tree): no overflow, nothing near.
+        for far in [1e300, -1e300, f64::NAN, f64::INFINITY, 9.3e18] {
+            assert_eq!(dem.nearest_within(far, y, 2.0), None, "{far}");
+            assert_eq!(dem.nearest_within(x(0.0), far, 2.0), None, "{far}");
+        }
     }
 
     #[test]

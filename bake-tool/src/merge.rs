@@ -1,6 +1,7 @@
 //! `sylva-bake merge`: joins the outputs of a sharded bake (`bake --shard I/N`)
 //! into one scene, byte-identical to a single-process bake of the same input.
 
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
@@ -77,15 +78,27 @@ pub fn merge(
     out.write(|tmp| {
         create_dir(&tmp.join("species"))?;
         create_dir(&tmp.join("tiles"))?;
+        // Every file is written once: two manifest entries naming one file (or
+        // the manifest itself) would overwrite what was checked.
+        let mut written: HashSet<String> = ["scene.json", FILE_LIST].into_iter().map(String::from).collect();
+        let mut copy_checked = |from: &Path, rel: &str, check: &mut dyn FnMut(&[u8]) -> Result<()>| -> Result<()> {
+            if !written.insert(plain_key(rel)) {
+                bail!(
+                    "{}: {rel} is named twice (or is the manifest): the shards come from different bakes",
+                    from.join("scene.json").display()
+                );
+            }
+            copy_checked(from, tmp, rel, check)
+        };
         for sp in &first.species {
-            copy_checked(&shards[0].0, tmp, &sp.pack, |b| {
+            copy_checked(&shards[0].0, &sp.pack, &mut |b| {
                 sylva::format::decode_pack(&sp.pack, b)?;
                 Ok(())
             })?;
         }
         // Terrain: written by shard 0 only, copied whole.
         if let Some(t) = &first.terrain {
-            copy_terrain(&shards[0].0, tmp, t)?;
+            copy_terrain(&shards[0].0, tmp, t, &mut copy_checked)?;
         }
         let mut tiles: Vec<TileEntry> = Vec::new();
         let species = u32::try_from(first.species.len()).unwrap_or(u32::MAX);
@@ -93,11 +106,11 @@ pub fn merge(
             for t in &m.tiles {
                 // Each file decoded before it is copied, the sidecars against their tile.
                 let mut instances = 0usize;
-                copy_checked(dir, tmp, &t.url, |b| {
+                copy_checked(dir, &t.url, &mut |b| {
                     instances = sylva::format::Tile::decode(&t.url, b, species)?.instances.len();
                     Ok(())
                 })?;
-                copy_checked(dir, tmp, &t.ids_url, |b| {
+                copy_checked(dir, &t.ids_url, &mut |b| {
                     let ids = sylva::format::decode_ids(&t.ids_url, b)?;
                     if ids.len() != instances {
                         bail!("{}: {} ids for the tile's {instances} trees", t.ids_url, ids.len());
@@ -106,7 +119,7 @@ pub fn merge(
                 })?;
                 if let Some(schema) = &m.attributes {
                     let url = sylva::format::attributes::attributes_url(&t.url);
-                    copy_checked(dir, tmp, &url, |b| {
+                    copy_checked(dir, &url, &mut |b| {
                         sylva::format::attributes::decode_attributes(&url, b, schema, instances)
                             .map_err(|e| anyhow::anyhow!("{e}"))?;
                         Ok(())
@@ -132,10 +145,10 @@ pub fn merge(
 pub fn refuse_output_among_inputs(out: &Path, dirs: &[PathBuf]) -> Result<()> {
     let Ok(real_out) = std::fs::canonicalize(out) else { return Ok(()) };
     for dir in dirs {
-        if std::fs::canonicalize(dir).is_ok_and(|d| d == real_out) {
+        if std::fs::canonicalize(dir).is_ok_and(|d| real_out.starts_with(&d)) {
             bail!(
-                "--out {} is the shard {}: merge never writes into a shard it reads (also not with --force); \
-                 name a new folder",
+                "--out {} is the shard {} or inside it: merge never writes into a shard it reads (also not \
+                 with --force); name a new folder",
                 out.display(),
                 dir.display()
             );
@@ -144,6 +157,14 @@ pub fn refuse_output_among_inputs(out: &Path, dirs: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
+/// A relative URL as one spelling (`./tiles//a.tile` → `tiles/a.tile`).
+fn plain_key(rel: &str) -> String {
+    rel.split('/').filter(|p| !p.is_empty() && *p != ".").collect::<Vec<_>>().join("/")
+}
+
+/// The bake's list of the files it wrote (docs/FORMAT.md), never copied.
+const FILE_LIST: &str = ".sylva-bake-files.json";
+
 fn list_indices(shards: &[(PathBuf, Manifest)]) -> String {
     let v: Vec<String> = shards.iter().filter_map(|(_, m)| m.shard.map(|s| s.index.to_string())).collect();
     v.join(", ")
@@ -151,7 +172,10 @@ fn list_indices(shards: &[(PathBuf, Manifest)]) -> String {
 
 /// Copies the terrain quadtree of `t` from `from` to `to`, walking it from the
 /// root by the child masks (so only tiles of the tree are copied).
-fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Result<()> {
+/// The copy of one checked file: shard folder, relative URL, check.
+type CopyChecked<'c> = dyn FnMut(&Path, &str, &mut dyn FnMut(&[u8]) -> Result<()>) -> Result<()> + 'c;
+
+fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry, copy: &mut CopyChecked<'_>) -> Result<()> {
     let mut stack = vec![(0u8, 0u32, 0u32)];
     while let Some((level, x, y)) = stack.pop() {
         let rel = t.tile_url(level, x, y);
@@ -159,7 +183,7 @@ fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Resu
             create_dir(parent)?;
         }
         let mut tile = None;
-        copy_checked(from, to, &rel, |b| {
+        copy(from, &rel, &mut |b| {
             tile = Some(sylva::format::TerrainTile::decode(&rel, b)?);
             Ok(())
         })?;
@@ -169,7 +193,7 @@ fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Resu
             if let Some(parent) = to.join(&img).parent() {
                 create_dir(parent)?;
             }
-            copy_checked(from, to, &img, |b| {
+            copy(from, &img, &mut |b| {
                 sylva::format::imagery::decode_image(&img, b, sylva::format::terrain::IMAGERY_PX)?;
                 Ok(())
             })?;
@@ -188,19 +212,24 @@ fn copy_terrain(from: &Path, to: &Path, t: &sylva::format::TerrainEntry) -> Resu
 /// shard's own regular file only — no link, also not a linked folder on the
 /// way, no FIFO or device — and at most [`sylva::paths::MAX_SCENE_FILE_BYTES`]
 /// (docs/SECURITY.md).
-fn copy_checked(from: &Path, to: &Path, rel: &str, check: impl FnOnce(&[u8]) -> Result<()>) -> Result<()> {
+fn copy_checked(from: &Path, to: &Path, rel: &str, check: &mut dyn FnMut(&[u8]) -> Result<()>) -> Result<()> {
     let (src, dst) = (from.join(rel), to.join(rel));
     if std::fs::symlink_metadata(&src).is_ok_and(|m| m.file_type().is_symlink()) {
         bail!("{} is a symbolic link: merge copies only a shard's own files (bake the shard again)", src.display());
     }
-    let inside = std::fs::canonicalize(&src)
-        .and_then(|real| Ok(real.starts_with(std::fs::canonicalize(from)?)))
+    // No link on the way either (a linked `tiles/`, inside the shard or out of it).
+    let (real, expected) = std::fs::canonicalize(&src)
+        .and_then(|real| Ok((real, std::fs::canonicalize(from)?.join(plain_key(rel)))))
         .with_context(|| format!("cannot read {}", src.display()))?;
-    if !inside {
+    if real != expected {
         bail!(
-            "{} lies outside its shard {} (a linked folder): merge copies only a shard's own files",
+            "{} is reached through a linked folder ({}): merge copies only a shard's own files, not linked ones",
             src.display(),
-            from.display()
+            if real.starts_with(std::fs::canonicalize(from).unwrap_or_default()) {
+                "inside its shard".to_string()
+            } else {
+                format!("outside its shard {}", from.display())
+            }
         );
     }
     let bytes = sylva::paths::read_regular(&src, None, sylva::paths::MAX_SCENE_FILE_BYTES)

@@ -119,7 +119,8 @@ pub fn seed004_eq41(n: u64, t: u64, m: u64, a: u64, r: u64, l: u64) -> u64 {
 pub fn measure(dir: &Path) -> Result<MemoryModel> {
     let read = |rel: &str| -> Result<Vec<u8>> {
         let p = dir.join(rel);
-        std::fs::read(&p).with_context(|| format!("cannot read {}", p.display()))
+        crate::paths::read_regular(&p, None, crate::paths::MAX_SCENE_FILE_BYTES)
+            .with_context(|| format!("cannot read {}", p.display()))
     };
     let manifest_bytes = read("scene.json")?;
     let m = Manifest::decode("scene.json", &manifest_bytes).map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -200,7 +200,7 @@ pub(crate) fn bench_table(dirs: &[PathBuf], method: &str) -> Result<()> {
         let med = |k: &str| m[k]["median"].as_f64().unwrap_or(f64::NAN);
         // The scene's batches and pack bytes, where it is a local directory.
         let scene = std::path::PathBuf::from(v["scene"].as_str().unwrap_or_default());
-        let (batches, packs) = std::fs::read(scene.join("scene.json"))
+        let (batches, packs) = sylva::paths::read_regular(&scene.join("scene.json"), None, 1 << 26)
             .ok()
             .and_then(|b| sylva::format::Manifest::decode("scene.json", &b).ok())
             .map_or((String::from("?"), String::from("?")), |man| {

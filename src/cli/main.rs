@@ -59,7 +59,13 @@ mod cli {
         if !web.join("pkg").join("sylva_bg.wasm").is_file() {
             bail!("{} has no built viewer (pkg/sylva_bg.wasm): run `make web` first", web.display());
         }
-        let config = config(web, dir);
+        let mut config = config(web, dir);
+        if config
+            .adopt_policy_file()
+            .map_err(|e| anyhow::anyhow!("{e}: fix it, or give --allow-embed/--allow-source"))?
+        {
+            println!("embedding as the viewer folder's sylva-embed.json says");
+        }
         let embedding = if config.embed_parents.is_empty() {
             "only pages served here may show it in a frame (--allow-embed ORIGIN adds a portal)".to_string()
         } else {

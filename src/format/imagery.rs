@@ -89,7 +89,15 @@ fn jpeg_is_whole(bytes: &[u8]) -> bool {
             at += 1; // fill byte
             continue;
         }
+        // Markers without a length (TEM, RSTn).
+        if marker == 0x01 || (0xd0..=0xd7).contains(&marker) {
+            at += 2;
+            continue;
+        }
         let len = usize::from(u16::from_be_bytes([bytes[at + 2], bytes[at + 3]]));
+        if len < 2 {
+            return false; // a segment's length counts its own two bytes
+        }
         at += 2 + len;
         if marker == 0xda {
             return bytes.get(at..).is_some_and(|rest| rest.windows(2).any(|w| w == [0xff, 0xd9]));

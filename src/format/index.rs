@@ -282,10 +282,20 @@ fn count_tiles(out: &[(String, IndexNode)], at: usize) -> u64 {
 #[derive(Debug, Clone)]
 pub struct TileWalk {
     declared: u64,
+    depth: u32,
     visited: u64,
-    stack: Vec<String>,
+    /// Nodes to fetch: (URL, level; the root is level 1).
+    stack: Vec<(String, u32)>,
     seen: std::collections::HashSet<String>,
     tiles: Vec<TileEntry>,
+}
+
+/// The most index nodes a walk fetches, whatever a manifest declares.
+pub const MAX_WALK_NODES: u64 = 1 << 22;
+
+/// A node URL as one spelling: `./a/./b.json` and `a/b.json` are one node.
+fn node_key(url: &str) -> String {
+    url.split('/').filter(|p| !p.is_empty() && *p != ".").collect::<Vec<_>>().join("/")
 }
 
 impl TileWalk {
@@ -293,11 +303,12 @@ impl TileWalk {
     #[must_use]
     pub fn new(m: &super::Manifest) -> Self {
         let (stack, tiles) = match &m.index {
-            Some(index) => (vec![index.root.clone()], Vec::new()),
+            Some(index) => (vec![(index.root.clone(), 1)], Vec::new()),
             None => (Vec::new(), m.tiles.clone()),
         };
         Self {
-            declared: m.index.as_ref().map_or(0, |i| i.nodes.max(1)),
+            declared: m.index.as_ref().map_or(0, |i| i.nodes.clamp(1, MAX_WALK_NODES)),
+            depth: m.index.as_ref().map_or(0, |i| i.depth.max(1)),
             visited: 0,
             stack,
             seen: std::collections::HashSet::new(),
@@ -305,29 +316,41 @@ impl TileWalk {
         }
     }
 
-    /// The node to fetch next (relative to the scene), or None when done.
-    #[must_use]
-    pub fn next_url(&self) -> Option<&str> {
-        self.stack.last().map(String::as_str)
+    /// The node to fetch next (relative to the scene), or None when done;
+    /// checked before it is fetched: a node met before, one more than the
+    /// manifest declares, or one deeper than its declared depth is an error.
+    ///
+    /// # Errors
+    /// That node, named, and why it is not fetched.
+    pub fn next_url(&self) -> Result<Option<&str>, String> {
+        let Some((url, level)) = self.stack.last() else { return Ok(None) };
+        if self.visited >= self.declared {
+            return Err(format!("{url}: the index has more nodes than the {} it declares", self.declared));
+        }
+        if *level > self.depth {
+            return Err(format!("{url}: deeper than the {} levels the index declares", self.depth));
+        }
+        if self.seen.contains(&node_key(url)) {
+            return Err(format!("{url}: the index reaches this node twice (a node is its own descendant)"));
+        }
+        Ok(Some(url))
     }
 
     /// Takes the bytes of the node [`Self::next_url`] named.
     ///
     /// # Errors
-    /// A node that does not decode, is met twice, or is one more than the
-    /// manifest declares; the message names it.
+    /// A node that does not decode, or a walk [`Self::next_url`] refuses; the
+    /// message names the node.
     pub fn feed(&mut self, bytes: &[u8]) -> Result<(), String> {
-        let Some(url) = self.stack.pop() else { return Err("the index walk is complete".into()) };
+        if self.next_url()?.is_none() {
+            return Err("the index walk is complete".into());
+        }
+        let Some((url, level)) = self.stack.pop() else { return Err("the index walk is complete".into()) };
         self.visited += 1;
-        if self.visited > self.declared {
-            return Err(format!("{url}: the index has more nodes than the {} it declares", self.declared));
-        }
-        if !self.seen.insert(url.clone()) {
-            return Err(format!("{url}: the index reaches this node twice (a node is its own descendant)"));
-        }
+        self.seen.insert(node_key(&url));
         let node = IndexNode::decode(&url, bytes).map_err(|e| e.to_string())?;
         self.tiles.extend(node.tiles);
-        self.stack.extend(node.children.into_iter().rev().map(|c| c.url));
+        self.stack.extend(node.children.into_iter().rev().map(|c| (c.url, level + 1)));
         Ok(())
     }
 
@@ -347,7 +370,7 @@ impl TileWalk {
 #[cfg(not(target_arch = "wasm32"))]
 pub fn read_all_tiles(dir: &std::path::Path, m: &super::Manifest) -> Result<Vec<TileEntry>, String> {
     let mut walk = TileWalk::new(m);
-    while let Some(url) = walk.next_url() {
+    while let Some(url) = walk.next_url().map_err(|e| format!("{}: {e}", dir.display()))? {
         let path = dir.join(url);
         let bytes = crate::paths::read_regular(&path, None, crate::paths::MAX_SCENE_FILE_BYTES)
             .map_err(|e| format!("cannot read index node {}: {e}", path.display()))?;
@@ -417,10 +440,12 @@ mod tests {
         nodes: &std::collections::HashMap<String, Vec<u8>>,
     ) -> Result<Vec<TileEntry>, String> {
         let mut w = TileWalk::new(m);
+        let declared = m.index.as_ref().map_or(0, |i| i.nodes);
         let mut fetched = 0;
-        while let Some(url) = w.next_url() {
+        while let Some(url) = w.next_url()? {
+            // Every check comes before the fetch: never more fetches than declared nodes.
             fetched += 1;
-            assert!(fetched <= 1000, "the walk does not end");
+            assert!(fetched <= declared, "fetch {fetched} of {declared} declared nodes");
             let bytes = nodes.get(url).cloned().unwrap_or_default();
             w.feed(&bytes)?;
         }
@@ -455,7 +480,16 @@ mod tests {
         back.children[0].url.clone_from(&root_url);
         nodes.insert(child_url.clone(), back.encode());
         assert!(walk(&m, &nodes).unwrap_err().contains("twice"));
+        // The same node spelt another way ("./" before it) is the same node.
+        back.children[0].url = format!("./{root_url}");
+        nodes.insert(child_url.clone(), back.encode());
+        let e = walk(&m, &nodes).unwrap_err();
+        assert!(e.contains("twice") || e.contains("./"), "{e}");
         nodes.insert(child_url, child.encode());
+        // Deeper than the manifest declares: refused before the fetch.
+        m.index.as_mut().unwrap().depth = 1;
+        assert!(walk(&m, &nodes).unwrap_err().contains("deeper than the 1 levels"));
+        m.index.as_mut().unwrap().depth = built.reference.depth;
         // More nodes than the manifest declares; a node that is missing or does not decode.
         m.index.as_mut().unwrap().nodes = 2;
         assert!(walk(&m, &nodes).unwrap_err().contains("more nodes than the 2 it declares"));

@@ -815,6 +815,25 @@ test('an iframe on a page of another origin that the host lists is driven by pos
   const [foreignImagery, ownImagery] = await page.evaluate(() => [50, 51].map((id) => window.replies.find((r) => r.id === id)));
   assert.match(foreignImagery.error || '', /sylva-embed\.json/, JSON.stringify(foreignImagery));
   assert.ok(!ownImagery.error, JSON.stringify(ownImagery));
+  // A frame of a third origin beside the viewer, in the listed portal, drives it: not heard
+  // (only the parent is). Were it heard, the reply would come to the portal, as id 60's does.
+  const sibling = await pageServer('<!doctype html><script>' +
+    'parent.frames[0].postMessage({ verb: "camera", id: 61 }, "*");</script>');
+  try {
+    await page.evaluate((url) => {
+      const s = document.createElement('iframe');
+      s.src = url;
+      document.body.appendChild(s);
+      document.getElementById('f').contentWindow.postMessage({ verb: 'camera', id: 60 }, '*');
+    }, `${sibling.origin}/sibling`);
+    await page.waitForFunction(() => window.replies.some((r) => r.id === 60), null, { timeout: 20000 });
+    for (let t = 0; sibling.requests.length === 0 && t < 200; t++) await page.waitForTimeout(100);
+    assert.ok(sibling.requests.length > 0, 'the sibling frame loaded');
+    await page.waitForTimeout(1500);
+    assert.ok(!(await page.evaluate(() => window.replies.some((r) => r.id === 61))), 'a sibling frame was answered');
+  } finally {
+    sibling.close();
+  }
 });
 
 test('a page on another origin can neither frame the viewer nor talk to it unless the host lists it', async () => {
@@ -843,11 +862,15 @@ test('a page on another origin can neither frame the viewer nor talk to it unles
     await page.waitForTimeout(500);
     const served = await frameOf('served');
     assert.ok(!served || !served.url().startsWith(base), `frame-ancestors did not keep the viewer out: ${served?.url()}`);
+    // (The static frame did not start, so nothing could answer: the protocol's own
+    // refusals are the listed-portal test's sibling frame and web/tests/embed-policy.test.mjs.)
     assert.deepEqual(await page.evaluate(() => window.replies), [], 'nothing reached the page');
     // Top level, a ?scene= from another origin is refused before anything is fetched from it.
+    const asked = foreign.requests.length;
     await page.goto(`${host.url}?ui=0&scene=${encodeURIComponent(`${foreign.origin}/forest/scene.json`)}`);
     await page.waitForFunction(() => /\?scene=/.test(document.getElementById('error')?.textContent), null, { timeout: 60000 });
     assert.match(await page.evaluate(() => document.getElementById('error').textContent), /sylva-embed\.json/);
+    assert.deepEqual(foreign.requests.slice(asked), [], 'nothing was fetched from the foreign origin');
   } finally {
     host.close();
   }

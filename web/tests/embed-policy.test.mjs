@@ -51,6 +51,15 @@ test('who may talk to the viewer and what it may load', () => {
   assert.ok(listed.mayTalk('https://portal.example.org'));
   assert.ok(!listed.mayTalk('https://portal.example.org.evil.com'));
   assert.ok(listed.mayLoad('https://tiles.example.org/{z}/{x}/{y}.png', PAGE));
+  assert.ok(listed.mayLoad('https://tiles.example.org/wmts/{TileMatrix}/{TileRow}/{TileCol}.jpg', PAGE));
+  // Checked as it is fetched: an unknown placeholder that hides another host, credentials,
+  // opaque origins (a file:// page's "null" matches no data: or javascript: URL).
+  assert.ok(!listed.mayLoad('https://{@evil.example/}@tiles.example.org/{z}/{x}/{y}.png', PAGE));
+  assert.ok(!listed.mayLoad('https://user:pw@tiles.example.org/{z}/{x}/{y}.png', PAGE));
+  const fileOwn = new EmbedPolicy('null');
+  assert.ok(!fileOwn.mayLoad('data:text/plain,hello', 'file:///viewer/index.html'));
+  assert.ok(!fileOwn.mayLoad('javascript:alert(1)', 'file:///viewer/index.html'));
+  assert.ok(!fileOwn.mayTalk('null'), 'an opaque origin never talks, even to an opaque page');
   assert.ok(!listed.mayLoad('https://tiles.example.org.evil.com/{z}/{x}/{y}.png', PAGE));
   assert.match(listed.refusal('?scene=', 'https://x.org/s.json'), /sylva-embed\.json/);
   const open = EmbedPolicy.parse(OWN, '{"parents": ["*"], "sources": ["*"]}');

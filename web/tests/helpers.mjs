@@ -103,12 +103,15 @@ export function pagePixels(page, png, reduce, arg = null) {
 /** A page on another origin: any path answers `html` (an empty page by
  * default). Resolves with {origin, close()}. */
 export function pageServer(html = '<!doctype html><title>another site</title><body></body>') {
+  const requests = [];
   const srv = createServer((req, res) => {
+    requests.push(req.url);
     res.writeHead(200, { 'Content-Type': 'text/html; charset=utf-8' });
     res.end(html);
   });
+  // (Another port on 127.0.0.1 is another origin; `requests`: the paths asked for.)
   return new Promise((resolve) => srv.listen(0, '127.0.0.1', () => resolve({
-    origin: `http://127.0.0.1:${srv.address().port}`, close: () => srv.close(),
+    origin: `http://127.0.0.1:${srv.address().port}`, requests, close: () => srv.close(),
   })));
 }
 
