@@ -406,7 +406,7 @@ fn handle(mut stream: TcpStream, config: &ServeConfig, bound: std::net::IpAddr) 
         .split(['?', '#'])
         .next()
         .and_then(crate::paths::percent_decode)
-        .is_some_and(|p| p.trim_start_matches('/') == "sylva-embed.json");
+        .is_some_and(|p| p.split('/').filter(|c| !c.is_empty() && *c != ".").eq(["sylva-embed.json"]));
     if policy_path {
         let json = config
             .embed_policy_json()
@@ -730,7 +730,7 @@ mod live_tests {
             serde_json::json!({"parents": ["https://portal.example.org"], "sources": ["https://tiles.example.org"]})
         );
         // Any spelling of the policy's path is the flags' policy.
-        for other in ["//sylva-embed.json", "/sylva%2Dembed.json"] {
+        for other in ["//sylva-embed.json", "/sylva%2Dembed.json", "/./sylva-embed.json"] {
             let mut p = agent.get(&format!("{base}{other}")).call().unwrap();
             assert!(p.body_mut().read_to_string().unwrap().contains("portal.example.org"), "{other}");
         }

@@ -92,15 +92,21 @@ export class EmbedPolicy {
    * replaced, any other brace is refused, as are credentials and any origin
    * that is not http(s) (data:, javascript:, blob: — opaque: "null"). */
   mayLoad(url, base) {
-    let u;
-    try {
-      const filled = String(url).replace(/\{(z|x|y|-y|TileMatrix|TileCol|TileRow)\}/g, '0');
-      if (/[{}]/.test(filled)) return false;
-      u = new URL(filled, base);
-    } catch { return false; }
-    if ((u.protocol !== 'https:' && u.protocol !== 'http:') || u.username || u.password) return false;
-    const origin = u.origin;
-    if (origin === 'null') return false;
+    // Filled twice with different numbers: a placeholder inside the host or port
+    // (`:{z}443`) gives two origins and is refused.
+    const origins = [];
+    for (const n of ['0', '17']) {
+      let u;
+      try {
+        const filled = String(url).replace(/\{(z|x|y|-y|TileMatrix|TileCol|TileRow)\}/g, n);
+        if (/[{}]/.test(filled)) return false;
+        u = new URL(filled, base);
+      } catch { return false; }
+      if ((u.protocol !== 'https:' && u.protocol !== 'http:') || u.username || u.password) return false;
+      origins.push(u.origin);
+    }
+    const origin = origins[0];
+    if (origin === 'null' || origins[1] !== origin) return false;
     return origin === this.own || this.sources.includes('*') || this.sources.includes(origin);
   }
 

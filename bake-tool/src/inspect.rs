@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
 use sylva::format::pack::PackMeta;
-use sylva::format::{decode_ids, decode_pack, Manifest, Tile};
+use sylva::format::{decode_pack, Manifest, Tile};
 
 /// Inspects `path` and returns the summary as JSON.
 pub fn inspect(path: &Path) -> Result<Value> {
@@ -36,8 +36,10 @@ pub fn inspect(path: &Path) -> Result<Value> {
             Ok(tile_json(&tile, bytes.len() as u64))
         }
         (_, "ids") => {
-            let ids = decode_ids(&name, &bytes)?;
-            Ok(json!({"kind": "ids", "count": ids.len(), "bytes": bytes.len()}))
+            let ids = sylva::format::decode_tree_ids(&name, &bytes)?;
+            let version = if ids.texts.is_empty() { 1 } else { 2 };
+            Ok(json!({"kind": "ids", "version": version, "count": ids.numbers.len(), "text_ids": ids.texts.len(),
+                "bytes": bytes.len()}))
         }
         _ => bail!(
             "{name}: not a scene directory, scene.json, .pack, .tile, .ids, placements (.csv, .geojson) or DEM (.tif) file"

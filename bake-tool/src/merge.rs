@@ -143,7 +143,22 @@ pub fn merge(
 /// # Errors
 /// Names the shard.
 pub fn refuse_output_among_inputs(out: &Path, dirs: &[PathBuf]) -> Result<()> {
-    let Ok(real_out) = std::fs::canonicalize(out) else { return Ok(()) };
+    // Where --out will be: its nearest existing folder, real, and the rest of its path.
+    let absolute = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
+    let mut existing = absolute.as_path();
+    let mut rest = Vec::new();
+    let real_out = loop {
+        if let Ok(real) = std::fs::canonicalize(existing) {
+            break rest.iter().rev().fold(real, |p: PathBuf, c: &&std::ffi::OsStr| p.join(c));
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name);
+                existing = parent;
+            }
+            _ => return Ok(()),
+        }
+    };
     for dir in dirs {
         if std::fs::canonicalize(dir).is_ok_and(|d| real_out.starts_with(&d)) {
             bail!(

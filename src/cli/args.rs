@@ -383,9 +383,10 @@ pub(crate) struct RenderArgs {
     /// setStyle): e.g. '{"color": {"by": "species"}}' or '{"filter": {"dbh": [30, null]}}'.
     #[arg(long, value_name = "JSON")]
     pub(crate) style: Option<String>,
-    /// Highlight these trees (comma-separated ids).
+    /// Highlight these trees (comma-separated ids: numbers, or an inventory's
+    /// text ids such as EY17080).
     #[arg(long, value_name = "ID,…", value_delimiter = ',')]
-    pub(crate) select: Vec<u64>,
+    pub(crate) select: Vec<String>,
     /// Write frame statistics as JSON here.
     #[arg(long)]
     pub(crate) stats: Option<PathBuf>,

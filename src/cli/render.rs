@@ -29,7 +29,7 @@ pub(crate) fn render_scene(
     timeout: f64,
     allow_partial: bool,
     refine: RefineConfig,
-    (style, select): (Option<&str>, &[u64]),
+    (style, select): (Option<&str>, &[String]),
 ) -> Result<()> {
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     off.settings = settings;
@@ -63,7 +63,8 @@ pub(crate) fn render_scene(
         off.set_style(Some(compiled));
     }
     if !select.is_empty() {
-        off.select(select.iter().copied());
+        // (A text that is a number as a bake writes it selects that number: `set_selection`.)
+        off.select(select.iter().map(|s| sylva::scene::style::TreeId::Text(s.clone())));
     }
     let cam = scene_camera(&mut off, &manifest, view, camera, timeout)?;
     let t = std::time::Instant::now();

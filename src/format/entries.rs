@@ -208,9 +208,13 @@ pub(crate) fn check_url(what: &str, url: &str) -> Result<(), Problem> {
         || url.starts_with('/')
         || url.contains('\\')
         || url.contains(':')
+        // A browser reads %2e%2e as "..", and ? or # as no part of the path.
+        || url.contains(['%', '?', '#'])
         || url.split('/').any(|seg| seg == ".." || seg.is_empty());
     if bad {
-        return Err(Problem::Invalid(format!("{what} {url:?} must be a relative path inside the scene directory")));
+        return Err(Problem::Invalid(format!(
+            "{what} {url:?} must be a relative path inside the scene directory (no %, ? or #)"
+        )));
     }
     Ok(())
 }

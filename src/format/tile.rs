@@ -787,6 +787,14 @@ pub const IDS_TEXT_VERSION: u32 = 2;
 /// Longest text id kept, in bytes (UTF-8).
 pub const MAX_TEXT_ID_BYTES: usize = 256;
 
+/// The number of an id cell as a bake keeps it: a whole number below 2^63
+/// written as that number writes itself (`"702"`; not `"0702"`, `"+702"` or
+/// `"702.0"`, which stay text: an inventory's key, kept as given).
+#[must_use]
+pub fn numeric_id(cell: &str) -> Option<u64> {
+    cell.parse::<u64>().ok().filter(|n| *n < 1 << 63 && n.to_string() == cell)
+}
+
 /// A tile's tree ids: a number per instance (as in version 1) and the text id
 /// of the instances whose input id was text (their number is their row,
 /// `2^63 + row`).
@@ -820,26 +828,40 @@ pub fn encode_ids(ids: &[u64]) -> Vec<u8> {
 /// Encodes a tile's ids with the text ids of some instances (`texts` by
 /// instance, each 1–[`MAX_TEXT_ID_BYTES`] bytes): version 2, or version 1
 /// when there are none (a scene without text ids is as before).
-#[must_use]
-pub fn encode_tree_ids(ids: &TreeIds) -> Vec<u8> {
+///
+/// # Errors
+/// Texts that break the format's rules (out of order, past the instances,
+/// empty or over 256 bytes, on an instance whose number is no row): what
+/// [`decode_tree_ids`] would refuse is never written.
+pub fn encode_tree_ids(ids: &TreeIds) -> Result<Vec<u8>, String> {
     if ids.texts.is_empty() {
-        return encode_ids(&ids.numbers);
+        return Ok(encode_ids(&ids.numbers));
     }
     let mut out = encode_ids(&ids.numbers);
     out[4..8].copy_from_slice(&IDS_TEXT_VERSION.to_le_bytes());
     out.extend_from_slice(&(ids.texts.len() as u32).to_le_bytes());
-    for (i, _) in &ids.texts {
+    let mut last = None;
+    for (i, t) in &ids.texts {
+        let number = ids.numbers.get(*i as usize).copied();
+        let bad = last.is_some_and(|l| *i <= l)
+            || number.is_none_or(|n| n < 1 << 63)
+            || t.is_empty()
+            || t.len() > MAX_TEXT_ID_BYTES;
+        if bad {
+            return Err(format!("text id {t:?} of instance {i}: not a text id this format holds"));
+        }
+        last = Some(*i);
         out.extend_from_slice(&i.to_le_bytes());
     }
     let mut end = 0u32;
     for (_, t) in &ids.texts {
-        end += t.len() as u32;
+        end = end.checked_add(t.len() as u32).ok_or("over 4 GiB of text ids in one tile")?;
         out.extend_from_slice(&end.to_le_bytes());
     }
     for (_, t) in &ids.texts {
         out.extend_from_slice(t.as_bytes());
     }
-    out
+    Ok(out)
 }
 
 /// Decodes an `.ids` sidecar's numbers (either version).
@@ -897,6 +919,12 @@ pub fn decode_tree_ids(file: &str, bytes: &[u8]) -> Result<TreeIds, DecodeError>
             let end = end as usize;
             if u64::from(i) >= count || k > 0 && i <= instances[k - 1] {
                 return Err(Problem::Invalid(format!("text id {k}: instance {i} (instances rise, below {count})")));
+            }
+            if numbers[i as usize] < 1 << 63 {
+                return Err(Problem::Invalid(format!(
+                    "text id {k}: instance {i} has the number {} (a text id's number is 2^63 + its row)",
+                    numbers[i as usize]
+                )));
             }
             if end <= start || end - start > MAX_TEXT_ID_BYTES || end > blob.len() {
                 return Err(Problem::Invalid(format!(

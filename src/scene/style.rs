@@ -297,9 +297,15 @@ impl TreeStyle {
                 TreeId::Number(n) => {
                     self.selected.insert(n);
                 }
-                TreeId::Text(t) => {
-                    self.selected_texts.insert(t);
-                }
+                // A text that is a whole number as a bake keeps it ("702") is that number.
+                TreeId::Text(t) => match crate::format::tile::numeric_id(t.trim()) {
+                    Some(n) => {
+                        self.selected.insert(n);
+                    }
+                    None => {
+                        self.selected_texts.insert(t.trim().to_string());
+                    }
+                },
             }
         }
     }
@@ -504,10 +510,15 @@ mod tests {
             numbers: vec![7, (1 << 63) + 2, (1 << 63) + 3],
             texts: vec![(1, "EY17080".into()), (2, "EY17081".into())],
         };
-        ramp.set_selection([TreeId::Text("EY17081".into()), TreeId::Number(7)]);
+        ramp.set_selection([TreeId::Text(" EY17081".into()), TreeId::Number(7)]);
         ramp.tile_bytes(Some(&s), &texts, Some(&codes()), 0, &mut out);
         assert_eq!(out.map(|b| b & SELECTED), [SELECTED, 0, SELECTED]);
         assert_eq!(ramp.selection().len(), 2);
+        // A number given as text ("7", as a popup's data-id or a URL has it) is that number.
+        ramp.set_selection([TreeId::Text("7".into())]);
+        ramp.tile_bytes(Some(&s), &texts, Some(&codes()), 0, &mut out);
+        assert_eq!(out.map(|b| b & SELECTED), [SELECTED, 0, 0]);
+        assert_eq!(ramp.selection(), [TreeId::Number(7)]);
         assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
         // A domain no legend can print is refused, saying why.
         let e = TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "height", "domain": [-1e308, 1e308]}}))

@@ -556,7 +556,7 @@ fn ids_round_trip_and_errors() {
         numbers: vec![7, (1 << 63) + 2, 9, (1 << 63) + 4],
         texts: vec![(1, "EY17080".into()), (3, "Baum Nr. 7 — Süd".into())],
     };
-    let bytes = sylva::format::encode_tree_ids(&with_text);
+    let bytes = sylva::format::encode_tree_ids(&with_text).unwrap();
     assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
     let back = sylva::format::decode_tree_ids("x.ids", &bytes).unwrap();
     assert_eq!(back, with_text);
@@ -564,7 +564,14 @@ fn ids_round_trip_and_errors() {
     assert_eq!(decode_ids("x.ids", &bytes).unwrap(), with_text.numbers, "numbers as before");
     // Without text ids: version 1, as before.
     let plain = sylva::format::TreeIds { numbers: ids.to_vec(), texts: Vec::new() };
-    assert_eq!(sylva::format::encode_tree_ids(&plain), encode_ids(&ids));
+    assert_eq!(sylva::format::encode_tree_ids(&plain).unwrap(), encode_ids(&ids));
+    // What the decoder refuses is never written: a text on a numbered tree, out of order.
+    let mut numbered = with_text.clone();
+    numbered.texts[0].0 = 0;
+    assert!(sylva::format::encode_tree_ids(&numbered).is_err());
+    let mut unordered = with_text.clone();
+    unordered.texts.reverse();
+    assert!(sylva::format::encode_tree_ids(&unordered).is_err());
     // Hostile text sections: each refused, named.
     let at = 16 + 4 * 8; // the text count
     let text_error = |mutate: &dyn Fn(&mut Vec<u8>), needle: &str| {
@@ -581,6 +588,7 @@ fn ids_round_trip_and_errors() {
     text_error(&|b| b[at + 8..at + 12].copy_from_slice(&4u32.to_le_bytes()), "below 4");
     text_error(&|b| b[at + 12..at + 16].copy_from_slice(&0u32.to_le_bytes()), "bytes 0–0");
     text_error(&|b| b[at + 20] = 0xff, "not UTF-8");
+    text_error(&|b| b[16 + 8..16 + 16].copy_from_slice(&5u64.to_le_bytes()), "has the number 5");
 }
 
 /// Decodes a tile after `mutate`, expecting an error whose message contains `needle`.

@@ -56,6 +56,7 @@ test('who may talk to the viewer and what it may load', () => {
   // opaque origins (a file:// page's "null" matches no data: or javascript: URL).
   assert.ok(!listed.mayLoad('https://{@evil.example/}@tiles.example.org/{z}/{x}/{y}.png', PAGE));
   assert.ok(!listed.mayLoad('https://user:pw@tiles.example.org/{z}/{x}/{y}.png', PAGE));
+  assert.ok(!listed.mayLoad('https://tiles.example.org:{z}443/{x}/{y}.png', PAGE), 'a placeholder in the port');
   const fileOwn = new EmbedPolicy('null');
   assert.ok(!fileOwn.mayLoad('data:text/plain,hello', 'file:///viewer/index.html'));
   assert.ok(!fileOwn.mayLoad('javascript:alert(1)', 'file:///viewer/index.html'));

@@ -90,7 +90,8 @@ pub fn write_tiles(
                 };
                 write_file(
                     &dir.join(format!("{stem}.ids")),
-                    &encode_tree_ids(&TreeIds { numbers: bt.ids.clone(), texts }),
+                    &encode_tree_ids(&TreeIds { numbers: bt.ids.clone(), texts })
+                        .map_err(|e| anyhow::anyhow!("{stem}.ids: {e}"))?,
                 )?;
                 let attribute_codes = match attributes {
                     Some(a) => {

@@ -121,11 +121,16 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
                     _ => None,
                 }),
                 yaw_deg: num(prop(ColumnRole::Yaw)).map(|v| v as f32),
-                id: prop(ColumnRole::Id)
-                    .and_then(|v| v.as_u64().or_else(|| v.as_str().and_then(|s| s.trim().parse().ok()))),
+                id: prop(ColumnRole::Id).and_then(|v| match v {
+                    serde_json::Value::Number(n) => n.as_u64().filter(|n| *n < 1 << 63),
+                    serde_json::Value::String(s) => super::number_id(s),
+                    _ => None,
+                }),
                 id_text: prop(ColumnRole::Id).and_then(|v| match v {
                     serde_json::Value::String(s) => super::text_id(s),
-                    serde_json::Value::Number(n) if n.as_u64().is_none() => super::text_id(&n.to_string()),
+                    serde_json::Value::Number(n) if n.as_u64().is_none_or(|n| n >= 1 << 63) => {
+                        super::text_id(&n.to_string())
+                    }
                     _ => None,
                 }),
                 attrs: attribute_names

@@ -84,7 +84,6 @@ pub struct Report {
 }
 
 impl Report {
-    /// Records a skipped row.
     /// Counts a kept row whose id is no whole number: `text` kept, or
     /// `too_long` to keep.
     pub fn count_text_id(&mut self, row: u64, text: bool, too_long: bool) {
@@ -96,6 +95,7 @@ impl Report {
         self.text_ids.1 += u64::from(too_long);
     }
 
+    /// Records a skipped row.
     pub fn skip(&mut self, reason: &str, row: u64) {
         let e = self.skipped.entry(reason.to_string()).or_insert((0, Vec::new()));
         e.0 += 1;
@@ -723,14 +723,25 @@ fn csv_reader<R: std::io::Read>(reader: R, delimiter: u8) -> csv::Reader<R> {
 pub const MAX_HEADER_BYTES: usize = 1 << 20;
 
 /// The first record of a CSV file, up to its line break outside quotes (a
-/// header cell may hold one: what a spreadsheet writes for Alt+Enter). Quotes
-/// as the CSV reader reads them: a `"` opens a quoted field only at the start
-/// of a field (after `,`, `;`, a tab or `|`: the separator is not known yet),
-/// `""` inside one is a quote, and elsewhere `"` is a character (`dbh (")`).
+/// header cell may hold one: what a spreadsheet writes for Alt+Enter), as
+/// [`header_record_with`] with the separator not known yet.
 ///
 /// # Errors
 /// A header over `limit` bytes, or a read error.
 pub fn header_record(reader: impl std::io::Read, limit: usize) -> Result<Vec<u8>> {
+    header_record_with(reader, limit, None)
+}
+
+/// The first record of a CSV file with quotes as the CSV reader reads them:
+/// a `"` opens a quoted field only at the start of a field (after the
+/// `separator`, or any of `,`, `;`, a tab or `|` when it is not known yet),
+/// `""` inside one is a quote, and elsewhere `"` is a character (`dbh (")`).
+/// The record ends at a line feed, a carriage return (with the line feed
+/// after it) outside quotes; blank lines before it are skipped.
+///
+/// # Errors
+/// A header over `limit` bytes, or a read error.
+pub fn header_record_with(reader: impl std::io::Read, limit: usize, separator: Option<u8>) -> Result<Vec<u8>> {
     use std::io::BufRead;
     #[derive(Clone, Copy, PartialEq)]
     enum State {
@@ -738,11 +749,17 @@ pub fn header_record(reader: impl std::io::Read, limit: usize) -> Result<Vec<u8>
         Unquoted,
         Quoted,
         QuoteInQuoted,
+        /// After a carriage return that ended the record: a line feed may follow.
+        Ended,
     }
-    let is_separator = |b: u8| matches!(b, b',' | b';' | b'\t' | b'|');
+    let is_separator = |b: u8| match separator {
+        Some(d) => b == d,
+        None => matches!(b, b',' | b';' | b'\t' | b'|'),
+    };
     let mut r = std::io::BufReader::new(reader.take(limit as u64 + 1));
     let mut out = Vec::new();
     let mut state = State::FieldStart;
+    let mut content = false;
     loop {
         let buf = r.fill_buf()?;
         if buf.is_empty() {
@@ -751,19 +768,31 @@ pub fn header_record(reader: impl std::io::Read, limit: usize) -> Result<Vec<u8>
         let mut used = buf.len();
         let mut done = false;
         for (i, &b) in buf.iter().enumerate() {
+            let at = out.len() + i;
+            if state == State::Ended {
+                used = i + usize::from(b == b'\n');
+                done = true;
+                break;
+            }
             // A UTF-8 byte-order mark is no part of the first field.
-            if out.len() + i < 3 && b == [0xef, 0xbb, 0xbf][out.len() + i] && state == State::FieldStart {
+            if at < 3 && b == [0xef, 0xbb, 0xbf][at] && !content {
                 continue;
             }
+            let terminator = b == b'\n' || b == b'\r';
+            if terminator && !content && state == State::FieldStart {
+                continue; // a blank line before the header
+            }
+            content = true;
             state = match (state, b) {
                 (State::Quoted, b'"') => State::QuoteInQuoted,
                 (State::Quoted, _) => State::Quoted,
-                (State::FieldStart, b'"') | (State::QuoteInQuoted, b'"') => State::Quoted,
+                (State::FieldStart | State::QuoteInQuoted, b'"') => State::Quoted,
                 (_, b'\n') => {
                     used = i + 1;
                     done = true;
                     break;
                 }
+                (_, b'\r') => State::Ended,
                 (_, b) if is_separator(b) => State::FieldStart,
                 _ => State::Unquoted,
             };
@@ -868,7 +897,7 @@ pub fn stream_csv<R: std::io::Read>(
                 .map(|c| if cols.crown.is_some_and(|c| c.1) { 2.0 * c } else { c } as f32),
             species: species.as_deref().map(str::trim).filter(|s| !s.is_empty()).map(str::to_string),
             yaw_deg: yaw.as_deref().and_then(number).map(|v| v as f32),
-            id: id.as_deref().and_then(|s| s.trim().parse::<u64>().ok()),
+            id: id.as_deref().and_then(number_id),
             id_text: id.as_deref().and_then(text_id),
             attrs,
             row,
@@ -886,12 +915,19 @@ pub fn stream_csv<R: std::io::Read>(
 
 pub use sylva::format::tile::MAX_TEXT_ID_BYTES;
 
-/// An id cell that is not a whole number, trimmed, if it holds 1–256 bytes:
-/// the tree's id as text.
+/// An id cell's number: a whole number below 2^63 written as that number
+/// writes itself ([`sylva::format::tile::numeric_id`]; `0702` is a key, text).
+#[must_use]
+pub fn number_id(cell: &str) -> Option<u64> {
+    sylva::format::tile::numeric_id(cell.trim())
+}
+
+/// An id cell that is no such number, trimmed, if it holds 1–256 bytes: the
+/// tree's id as text (`EY17080`, a zero-padded `00123`, kept as given).
 #[must_use]
 pub fn text_id(cell: &str) -> Option<String> {
     let t = cell.trim();
-    (!t.is_empty() && t.len() <= MAX_TEXT_ID_BYTES && t.parse::<u64>().is_err()).then(|| t.to_string())
+    (!t.is_empty() && t.len() <= MAX_TEXT_ID_BYTES && number_id(t).is_none()).then(|| t.to_string())
 }
 
 /// Whether an id cell is text too long to keep.
@@ -928,7 +964,8 @@ impl PlacementSource {
             "csv" | "txt" | "tsv" => {
                 let file =
                     std::fs::File::open(path).with_context(|| format!("cannot open placements {}", path.display()))?;
-                let first_line = header_record(file, MAX_HEADER_BYTES)
+                let known = options.delimiter.or((ext == "tsv").then_some(b'\t'));
+                let first_line = header_record_with(file, MAX_HEADER_BYTES, known)
                     .with_context(|| format!("cannot read placements {}", path.display()))?;
                 let delimiter =
                     options.delimiter.unwrap_or(if ext == "tsv" { b'\t' } else { detect_delimiter(&first_line) });

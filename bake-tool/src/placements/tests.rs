@@ -276,6 +276,12 @@ fn a_header_cell_with_a_line_break_keeps_every_name_with_its_values() {
     assert_eq!(header_record(&b"id,x,y,dbh (\")\n1,2,3,\"4\"\n"[..], 100).unwrap(), b"id,x,y,dbh (\")\n");
     assert_eq!(header_record(&b"a;\"b \"\"c\"\"\nd\";e\n1;2;3\n"[..], 100).unwrap(), b"a;\"b \"\"c\"\"\nd\";e\n");
     assert_eq!(header_record(&b"\xef\xbb\xbf\"a\nb\",c\n1,2\n"[..], 100).unwrap(), b"\xef\xbb\xbf\"a\nb\",c\n");
+    // Carriage returns end a record (old Mac files); blank lines before the header are skipped.
+    assert_eq!(header_record(&b"x,y,id\r1,2,3\r"[..], 100).unwrap(), b"x,y,id\r");
+    assert_eq!(header_record(&b"\r\n\nx,y\r\n1,2\r\n"[..], 100).unwrap(), b"\r\n\nx,y\r\n");
+    // With the separator known (--delimiter ':'), a quote after another character is no quote.
+    assert_eq!(header_record_with(&b"a:\"b\nc\":d\n1:2:3\n"[..], 100, Some(b':')).unwrap(), b"a:\"b\nc\":d\n");
+    assert_eq!(header_record_with(&b"a;\"b\n1;2\n"[..], 100, Some(b',')).unwrap(), b"a;\"b\n");
     let inch = dir.join("inch.csv");
     std::fs::write(&inch, format!("x,y,height_ft\"\n{}", "1,2,3\n".repeat(200_000))).unwrap();
     let src = PlacementSource::open(&inch, &ReadOptions::default()).unwrap();
@@ -283,4 +289,17 @@ fn a_header_cell_with_a_line_break_keeps_every_name_with_its_values() {
     assert_eq!(src.attribute_names().len(), 1);
     assert!(src.attribute_names()[0].starts_with("height_ft"), "{:?}", src.attribute_names());
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn ids_are_numbers_only_as_numbers_write_themselves_and_text_otherwise() {
+    // Issue 42: an inventory's key is kept as given — a zero-padded "00123" is a key, not 123.
+    assert_eq!((number_id("702"), text_id("702")), (Some(702), None));
+    assert_eq!((number_id(" 702 "), text_id(" 702 ")), (Some(702), None));
+    for key in ["00123", "+702", "702.0", "EY17080", "9223372036854775808", "18446744073709551616"] {
+        assert_eq!((number_id(key), text_id(key).as_deref()), (None, Some(key)), "{key}");
+    }
+    assert_eq!((number_id(""), text_id("  ")), (None, None));
+    assert_eq!(text_id(&"x".repeat(MAX_TEXT_ID_BYTES + 1)), None, "too long to keep");
+    assert!(id_too_long(&"x".repeat(MAX_TEXT_ID_BYTES + 1)));
 }
