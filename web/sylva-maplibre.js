@@ -19,8 +19,9 @@
 // ground; true draws the scene's own terrain, hiding the basemap under it)}.
 // heightOffset: the scene height drawn at the map's ground. 'auto' (the default): 0 on a map
 // with terrain (its heights are absolute), else the scene's ground at the map's centre, read
-// again whenever the map comes to rest — a flat map cannot hold a hilly forest, so the trees
-// around the centre stand on it. A number fixes it.
+// again whenever the map comes to rest and as finer ground arrives until the view settles —
+// a flat map cannot hold a hilly forest, so the trees around the centre stand on it. A
+// number fixes it.
 //
 // Limits: trees are drawn over the whole map, its labels included (two canvases share no
 // depth); the map's padding and roll are not followed; a globe projection is not (mercator only).
@@ -93,7 +94,7 @@ export class SylvaLayer {
     // Right after the map's canvas: over the map, under its markers, popups and controls.
     map.getCanvas().after(canvas);
     this.canvas = canvas;
-    this.onMoveEnd = () => { this.readOffset(); map.triggerRepaint(); };
+    this.onMoveEnd = () => { this.offsetSettled = false; this.readOffset(); map.triggerRepaint(); };
     map.on('moveend', this.onMoveEnd);
     map.on('terrain', this.onMoveEnd);
     // Hidden (visibility none): MapLibre stops calling render, so hide the canvas too.
@@ -111,8 +112,13 @@ export class SylvaLayer {
         if (!this.map) { v.destroy(); return; }
         this.viewer = v;
         if (!o.terrain) v.setTerrain(false);
-        // Ground heights arrive with the first tiles: the offset is read then.
-        v.on('progress', () => { if (this.offset === null) this.readOffset(); });
+        // Ground heights arrive with the first tiles, finer ones after: the offset is read
+        // as they come until the view settles (then it holds still until the map moves;
+        // a first coarse tile's height alone left the trees metres off the map's ground).
+        v.on('progress', (p) => {
+          if (this.offset === null || !this.offsetSettled) this.readOffset();
+          if (p.settled && this.offset !== null) this.offsetSettled = true;
+        });
         v.on('error', (e) => console.error(`sylva: ${e.message}`));
         v.on('recovered', () => map.triggerRepaint());
         this.pose();

@@ -511,7 +511,8 @@ fn band_edges_do_not_flicker() {
 }
 
 /// A one-thread HTTP server over the fixture: `/tiles/<bad404>` answers 404,
-/// `<bad500>` 500, `<truncated>` half of its bytes with the full Content-Length.
+/// `<bad500>` 500, `<truncated>` half of its bytes with the full Content-Length,
+/// and every ground image (`terrain/img/…`) 503.
 fn serve(root: PathBuf, bad404: String, bad500: String, truncated: String) -> u16 {
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = listener.local_addr().unwrap().port();
@@ -531,6 +532,8 @@ fn serve(root: PathBuf, bad404: String, bad500: String, truncated: String) -> u1
                 reply(&mut s, "404 Not Found", b"", 0);
             } else if path == bad500 {
                 reply(&mut s, "500 Internal Server Error", b"", 0);
+            } else if path.starts_with("terrain/img/") {
+                reply(&mut s, "503 Service Unavailable", b"", 0);
             } else if let Ok(body) = std::fs::read(root.join(&path)) {
                 if path == truncated {
                     reply(&mut s, "200 OK", &body[..body.len() / 2], body.len());
@@ -552,6 +555,8 @@ fn streaming_over_http_survives_failing_tiles() {
         sylva::format::index::read_all_tiles(&fixture(), &m).unwrap().iter().map(|t| t.url.clone()).collect();
     let port = serve(fixture(), urls[0].clone(), urls[1].clone(), urls[2].clone());
     let mut off = open(&format!("http://127.0.0.1:{port}/scene.json"));
+    // The scene's ground images, as `sylva render` draws them (each answers 503).
+    off.stream.set_imagery(sylva::scene::imagery::ImageryChoice::Scene);
     off.load_view(&Camera::default(), 30.0);
     let cam = off.named_camera(NamedView::Top, 30.0).unwrap();
     let events = off.load_view(&cam, 30.0);
@@ -573,6 +578,9 @@ fn streaming_over_http_survives_failing_tiles() {
     assert_eq!(stats.tiles_resident as usize, urls.len() - 3, "the other tiles are resident");
     assert!(off.stream.is_settled());
     assert!(foliage_share(&img) > 0.1, "the rest of the scene renders");
+    // Ground images that answer 503 (issue 42): retried, given up on, listed — not grey and silent.
+    let listed: Vec<&str> = off.stream.failures().iter().map(|f| f.url.as_str()).collect();
+    assert!(listed.iter().any(|u| u.contains("terrain/img/")), "a 503 image is given up on and listed: {listed:?}");
 }
 
 /// Byte ranges `(first, last)` (inclusive) of the pack requests in a server log.
