@@ -1379,23 +1379,11 @@ fn text_ids_are_kept_and_found_by_pick_query_and_export() {
     let tiles = dir.join("3dtiles");
     run(bin().arg("export-3dtiles").arg(&out).arg("--out").arg(&tiles));
     let mut glb_texts = std::collections::BTreeSet::new();
-    let mut stack = vec![tiles.clone()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-                continue;
-            }
-            if p.extension().is_none_or(|x| x != "glb") {
-                continue;
-            }
-            let bytes = std::fs::read(&p).unwrap();
-            for i in (0..30).filter(|i| i % 3 == 0) {
-                let needle = format!("EY{:05}", 17080 + i);
-                if bytes.windows(needle.len()).any(|w| w == needle.as_bytes()) {
-                    glb_texts.insert(needle);
-                }
+    for (_, bytes) in snapshot(&tiles).iter().filter(|(f, _)| f.ends_with(".glb")) {
+        for i in (0..30).filter(|i| i % 3 == 0) {
+            let needle = format!("EY{:05}", 17080 + i);
+            if bytes.windows(needle.len()).any(|w| w == needle.as_bytes()) {
+                glb_texts.insert(needle);
             }
         }
     }
