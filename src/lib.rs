@@ -13,9 +13,11 @@
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod bench;
+pub mod calendar;
 pub mod camera;
 pub mod format;
 pub mod geo;
+pub mod lod;
 pub mod metrics;
 pub mod paths;
 pub mod render;

@@ -82,7 +82,7 @@ impl SunTime {
         let hour: u32 = hour.parse().map_err(|_| bad("the hour is not a number"))?;
         let minute: u32 = minute.parse().map_err(|_| bad("the minute is not a number"))?;
         let second: f64 = second.parse().map_err(|_| bad("the seconds are not a number"))?;
-        if !(1..=12).contains(&month) || day == 0 || day > days_in_month(year, month) {
+        if !(1..=12).contains(&month) || day == 0 || day > crate::calendar::days_in_month(year, month) {
             return Err(bad("no such date"));
         }
         if hour > 24 || minute > 59 || !(0.0..61.0).contains(&second) || (hour == 24 && (minute > 0 || second > 0.0)) {
@@ -114,17 +114,6 @@ impl SunTime {
         let jd0 = (365.25 * (y + 4716.0)).floor() + (30.6001 * (m + 1.0)).floor() + f64::from(self.day) + b - 1524.5;
         let local_min = f64::from(self.hour) * 60.0 + f64::from(self.minute) + self.second / 60.0;
         jd0 + (local_min - f64::from(self.offset_min(lon_deg))) / 1440.0
-    }
-}
-
-/// Days in `month` (1–12) of `year` (proleptic Gregorian); also the attribute
-/// dates' check (`format::attributes::parse_date`).
-pub(crate) fn days_in_month(year: i32, month: u32) -> u32 {
-    match month {
-        2 if (year % 4 == 0 && year % 100 != 0) || year % 400 == 0 => 29,
-        2 => 28,
-        4 | 6 | 9 | 11 => 30,
-        _ => 31,
     }
 }
 

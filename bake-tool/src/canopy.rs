@@ -24,7 +24,7 @@ use sylva::format::pack::{decode_pack, kind};
 use sylva::format::Tile;
 use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
 
-use crate::scene_write::{create_dir, write_file};
+use crate::out_dir::{create_dir, write_file};
 
 /// A species seen from above at scale 1.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -23,7 +23,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::batching::SceneTree;
-use crate::demo::{fbm, hash64, Rng};
+use crate::rng::{fbm, hash64, Rng};
 
 /// Trees per hectare where the forest field is 1 (a closed, mature stand).
 pub const STAND_DENSITY_HA: f64 = 500.0;

@@ -20,39 +20,7 @@ pub const DEMO_EPSG: u32 = 32633;
 
 pub use crate::rng::Rng;
 
-/// A 64-bit mix of a value, for per-tree attributes derived from ids.
-pub fn hash64(x: u64) -> u64 {
-    Rng::new(x).next_u64()
-}
-
-/// Smooth value noise in [0, 1] with integer lattice at `1/scale`.
-fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
-    let (xi, yi) = (x.floor(), y.floor());
-    let (fx, fy) = (x - xi, y - yi);
-    let h = |i: f64, j: f64| {
-        (hash64(seed ^ ((i as i64 as u64).wrapping_mul(0x1F1F_1F1F) ^ (j as i64 as u64).wrapping_mul(0x007A_3D5B)))
-            >> 11) as f64
-            / (1u64 << 53) as f64
-    };
-    let s = |t: f64| t * t * (3.0 - 2.0 * t);
-    let (sx, sy) = (s(fx), s(fy));
-    let a = h(xi, yi) + (h(xi + 1.0, yi) - h(xi, yi)) * sx;
-    let b = h(xi, yi + 1.0) + (h(xi + 1.0, yi + 1.0) - h(xi, yi + 1.0)) * sx;
-    a + (b - a) * sy
-}
-
-/// Fractal noise, three octaves, period ~`scale` metres.
-pub(crate) fn fbm(seed: u64, x: f64, y: f64, scale: f64) -> f64 {
-    let mut sum = 0.0;
-    let mut amp = 0.5;
-    let mut f = 1.0 / scale;
-    for o in 0..3 {
-        sum += amp * value_noise(seed + o, x * f, y * f);
-        amp *= 0.5;
-        f *= 2.0;
-    }
-    sum / 0.875
-}
+use crate::rng::{fbm, value_noise};
 
 /// Crown radius (metres) of a demo tree of species `species` at `scale`.
 pub fn crown_radius_m(species: u32, scale: f32) -> f64 {

@@ -761,7 +761,7 @@ impl PlacementsCsv {
         use std::io::Write as _;
         let inverse = Reprojector::new(Crs::projected(epsg)?, &Crs::from_epsg(4326)?)?;
         if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            scene_write::create_dir(parent)?;
+            crate::out_dir::create_dir(parent)?;
         }
         let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
         let mut w = std::io::BufWriter::new(file);

@@ -393,6 +393,16 @@ fn list_files(root: &Path) -> Result<BTreeSet<String>> {
     Ok(out)
 }
 
+/// Writes a file; the error names it (a full disk, a read-only folder).
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Creates a folder and its parents; the error names it.
+pub fn create_dir(path: &Path) -> Result<()> {
+    std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

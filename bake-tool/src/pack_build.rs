@@ -386,7 +386,7 @@ fn records<T: bytemuck::Pod>(kind: [u8; 4], index: u32, items: &[T]) -> Section 
     }
 }
 
-/// One measurement of the LoD policy (`sylva::format::policy`): a
+/// One measurement of the LoD policy (`sylva::lod::policy`): a
 /// representation's and the far tier's error and modelled time per tree.
 #[derive(Debug, Clone, Copy)]
 struct Measured {
@@ -412,7 +412,7 @@ impl std::fmt::Display for Measured {
 
 impl Measured {
     fn keeps(m: Option<Self>, unmeasured: bool) -> bool {
-        sylva::format::policy::policy_keeps(m.map(|m| m.error), m.and_then(|m| m.cost), unmeasured)
+        sylva::lod::policy::policy_keeps(m.map(|m| m.error), m.and_then(|m| m.cost), unmeasured)
     }
 }
 
@@ -430,7 +430,7 @@ fn measure_policy(
     gpu: &GpuContext,
     pack: &sylva::format::Pack<'_>,
 ) -> (Vec<Option<Measured>>, Option<Measured>, Vec<Option<f32>>) {
-    use sylva::format::policy::{modelled_us, CostKind};
+    use sylva::lod::policy::{modelled_us, CostKind};
     use sylva::render::billboard::BillboardGpu;
     use sylva::render::capture::{preview_camera, PackView, TreeDraw, TreeRenderer};
     use sylva::render::cluster::ClusterGpu;
@@ -463,7 +463,7 @@ fn measure_policy(
         TreeDraw::Impostor(..) => CostKind::Impostor,
     };
     // With SYLVA_POLICY_CALIBRATE set, each draw's work counts and wall time
-    // are printed (for fitting `sylva::format::policy::COSTS`).
+    // are printed (for fitting `sylva::lod::policy::COSTS`).
     let calibrate = std::env::var_os("SYLVA_POLICY_CALIBRATE").is_some();
     // `own` and the far tier with the tree `px` tall.
     let mut measure = |own: &TreeDraw<'_>, px: f32| -> Measured {

@@ -5,9 +5,11 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use sylva::format::build_index;
 use sylva::format::manifest::{Bounds, Counts, Manifest, TileEntry};
+
+use crate::out_dir::{create_dir, write_file};
 
 /// File-name-safe version of a species name.
 pub fn safe_name(name: &str) -> String {
@@ -20,16 +22,6 @@ pub fn safe_name(name: &str) -> String {
     } else {
         s
     }
-}
-
-/// Writes a file; the error names it (a full disk, a read-only folder).
-pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
-}
-
-/// Creates a folder and its parents; the error names it.
-pub fn create_dir(path: &Path) -> Result<()> {
-    std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))
 }
 
 /// How [`finish_scene`] lays a scene out.

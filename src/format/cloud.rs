@@ -18,7 +18,7 @@ use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::error::{finite, finite_all, Problem};
-use super::pack::MeshLevelMeta;
+use super::mesh::MeshLevelMeta;
 
 /// Words per plane record.
 pub const PLANE_WORDS: usize = 16;
@@ -53,13 +53,13 @@ pub struct CloudMeta {
     /// The cloud's geometry: the coarsest mesh level's wood and one quad per
     /// plane (`CLVX`, `CLIX`; `select_px` as above).
     pub mesh: MeshLevelMeta,
-    /// The bake's LoD policy measurement (`crate::format::policy::policy_keeps`):
+    /// The bake's LoD policy measurement (`crate::lod::policy::policy_keeps`):
     /// the cloud's and the far tier's error against the full mesh at
     /// `select_px`. Without it the cloud is not a default tier.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pareto_error: Option<[f32; 2]>,
     /// The same draws' modelled GPU time per tree (µs), the cloud's and the far
-    /// tier's (`crate::format::policy`).
+    /// tier's (`crate::lod::policy`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pareto_cost: Option<[f32; 2]>,
 }

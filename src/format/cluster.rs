@@ -11,8 +11,6 @@ use glam::{Quat, Vec3};
 use half::f16;
 use serde::{Deserialize, Serialize};
 
-use super::policy::policy_keeps;
-
 /// One level of ellipsoids or lines.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -30,36 +28,17 @@ pub struct ClusterLevelMeta {
     /// Blend of the surface normal towards the noise normal (0–1).
     #[serde(default)]
     pub normal_blend: f32,
-    /// The bake's LoD policy measurement ([`policy_keeps`]): this level's
+    /// The bake's LoD policy measurement (`crate::lod::policy::policy_keeps`): this level's
     /// multi-scale RMSE and the far tier's against the full mesh, both rendered
     /// by the viewer's pipelines at `select_px` from two views. Absent in older
     /// packs (the level is then drawn).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pareto_error: Option<[f32; 2]>,
     /// The same draws' modelled GPU time per tree (µs), this level's and the far
-    /// tier's (`crate::format::policy`). Absent: the far tier is taken as half
+    /// tier's (`crate::lod::policy`). Absent: the far tier is taken as half
     /// the cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pareto_cost: Option<[f32; 2]>,
-}
-
-/// The smallest projected height (px) from which the policy keeps cluster
-/// levels below `mesh_floor`: levels are walked finest first, and the band
-/// ends above the first level it drops (the far tier takes over there).
-/// `mesh_floor` when it keeps none.
-#[must_use]
-pub fn policy_floor<'a>(levels: impl Iterator<Item = &'a ClusterLevelMeta>, mesh_floor: f32) -> f32 {
-    let mut floor = mesh_floor;
-    for l in levels {
-        if l.select_px >= mesh_floor {
-            continue;
-        }
-        if !policy_keeps(l.pareto_error, l.pareto_cost, true) {
-            break;
-        }
-        floor = l.select_px;
-    }
-    floor
 }
 
 /// The cluster levels of a pack.
@@ -264,40 +243,6 @@ impl PackedLine {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_lod_policy_keeps_levels_only_where_they_beat_the_far_tier() {
-        let level = |select_px: f32, e: Option<[f32; 2]>| ClusterLevelMeta {
-            count: 1,
-            select_px,
-            error: 0.0,
-            noise_threshold: 0.0,
-            normal_blend: 0.0,
-            pareto_error: e,
-            pareto_cost: None,
-        };
-        // Finest first: 400 px is above the mesh floor (ignored), 100 and 60
-        // beat the far tier, 30 does not: clusters from 60 px; below, the far tier.
-        let levels = [
-            level(400.0, Some([0.05, 0.01])),
-            level(100.0, Some([0.01, 0.02])),
-            level(60.0, Some([0.02, 0.03])),
-            level(30.0, Some([0.04, 0.03])),
-            level(15.0, Some([0.01, 0.03])),
-        ];
-        assert_eq!(policy_floor(levels.iter(), 120.0), 60.0);
-        // The first level in the band dropped: none (the floor stays the mesh's).
-        assert_eq!(policy_floor(levels[3..].iter(), 120.0), 120.0);
-        // Unmeasured (older packs): every level.
-        let old = [level(100.0, None), level(30.0, None)];
-        assert_eq!(policy_floor(old.iter(), 120.0), 30.0);
-        // Time counts: 20 % less error is not worth 10× the time (27 % is needed).
-        let mut costly = level(60.0, Some([0.024, 0.03]));
-        costly.pareto_cost = Some([10.0, 1.0]);
-        assert_eq!(policy_floor([costly.clone()].iter(), 120.0), 120.0);
-        costly.pareto_cost = Some([1.0, 1.0]);
-        assert_eq!(policy_floor([costly].iter(), 120.0), 60.0);
-    }
 
     #[test]
     fn ellipsoid_round_trip_within_quantisation() {

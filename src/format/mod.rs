@@ -15,8 +15,8 @@ mod error;
 pub mod imagery;
 pub mod index;
 pub mod manifest;
+pub mod mesh;
 pub mod pack;
-pub mod policy;
 pub mod terrain;
 pub mod tile;
 

@@ -64,7 +64,7 @@ impl FarTierPipeline {
         });
         let target = super::layouts::PullingTarget {
             primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+            depth_stencil: super::layouts::depth_state(true, wgpu::CompareFunction::Greater),
             format: color_format,
         };
         let pipeline = super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target);

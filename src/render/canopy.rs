@@ -6,8 +6,8 @@
 
 use std::collections::HashMap;
 
+use super::layouts::depth_state;
 use super::layouts::{storage_entry, SharedLayouts};
-use super::mesh::depth_state;
 use crate::format::canopy::{CanopyKey, CANOPY_CELLS, CANOPY_CELL_BYTES};
 use crate::scene::canopy::CanopyDraw;
 

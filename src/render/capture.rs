@@ -11,9 +11,8 @@ use super::context::{read_texture_rgba8, GpuContext};
 use super::gpu_data::{DrawParams, RenderMode, Repr, ViewUniform};
 use super::impostor::{ImpostorGpu, ImpostorPipeline, IMPOSTOR_VERTICES};
 use super::layouts::SharedLayouts;
-use super::mesh::{
-    MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_AO_FORMAT, CAPTURE_NORMAL_FORMAT, DEPTH_FORMAT,
-};
+use super::layouts::DEPTH_FORMAT;
+use super::mesh::{MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_AO_FORMAT, CAPTURE_NORMAL_FORMAT};
 use super::Lighting;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Pack;

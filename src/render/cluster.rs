@@ -63,7 +63,7 @@ impl ClusterPipeline {
         });
         let target = super::layouts::PullingTarget {
             primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+            depth_stencil: super::layouts::depth_state(true, wgpu::CompareFunction::Greater),
             format: color_format,
         };
         let make =

@@ -17,10 +17,11 @@
 //! dispatches and at most `species × REPR_COUNT` draws. Tiles are uploaded once
 //! when they arrive; nothing per tree is touched by the CPU after that.
 
+use super::counters::CullCounters;
 use super::cull::CullPipelines;
 use super::gpu_data::{CullControl, DrawArgs, GpuSpecies, ViewUniform, REPR_COUNT, VIEW_STRIDE};
 use super::layouts::SharedLayouts;
-use super::mesh::DEPTH_FORMAT;
+use super::layouts::DEPTH_FORMAT;
 use super::overlay::{BoundsPass, SkyPass};
 pub use super::pools::PoolConfig;
 use super::pools::{buffer, PoolLayouts, Pools};
@@ -28,7 +29,6 @@ use super::reach::Reach;
 pub use super::settings::{CullingMode, RenderSettings, Representations, DEFAULT_CLUSTER_MIN_PX, DEFAULT_THIN_PX};
 use super::shadow::{ShadowMaps, MAX_CASCADES};
 use super::species::{Species, SpeciesFrame};
-use super::stats::CullCounters;
 use super::terrain::TerrainPass;
 use crate::camera::ViewData;
 use crate::format::pack::PACK_PARTS;
@@ -94,7 +94,16 @@ impl ForestRenderer {
         let terrain = TerrainPass::new(device, &shared, color_format);
         let canopy = super::canopy::CanopyPass::new(device, &shared, color_format);
         let bounds = BoundsPass::new(device, &shared, color_format);
-        let pools = Pools::new(device, config, &PoolLayouts { shared: &shared, cull: &cull, bounds: &bounds.layout });
+        let pools = Pools::new(
+            device,
+            config,
+            &PoolLayouts {
+                shared: &shared,
+                cull: &cull.layout,
+                cull_dispatch: &cull.dispatch_layout,
+                bounds: &bounds.layout,
+            },
+        );
         let views = VIEW_STRIDE * (1 + MAX_CASCADES as u64);
         let view_buffer = buffer(device, "views", views, U::STORAGE | U::COPY_DST);
         let view_group = shared.view_group(device, &view_buffer);
@@ -135,7 +144,12 @@ impl ForestRenderer {
     /// when a scene's manifest arrives, with [`PoolConfig::for_scene`], so a small
     /// scene does not hold memory for millions of trees.
     pub fn fit_pools(&mut self, device: &wgpu::Device, config: PoolConfig) {
-        let layouts = PoolLayouts { shared: &self.shared, cull: &self.cull, bounds: &self.bounds.layout };
+        let layouts = PoolLayouts {
+            shared: &self.shared,
+            cull: &self.cull.layout,
+            cull_dispatch: &self.cull.dispatch_layout,
+            bounds: &self.bounds.layout,
+        };
         if self.pools.fit(device, config, &layouts) {
             self.species.mark_dirty();
             self.styles_epoch += 1;
@@ -145,7 +159,12 @@ impl ForestRenderer {
     /// Room for a style byte per pool instance, or none (see [`Pools::set_styles`]).
     /// Returns whether the buffer was re-created (its header and bytes cleared).
     pub fn set_styles(&mut self, device: &wgpu::Device, on: bool) -> bool {
-        let layouts = PoolLayouts { shared: &self.shared, cull: &self.cull, bounds: &self.bounds.layout };
+        let layouts = PoolLayouts {
+            shared: &self.shared,
+            cull: &self.cull.layout,
+            cull_dispatch: &self.cull.dispatch_layout,
+            bounds: &self.bounds.layout,
+        };
         let changed = self.pools.set_styles(device, on, &layouts);
         self.styles_epoch += u64::from(changed);
         changed
@@ -646,7 +665,7 @@ impl ForestRenderer {
     }
 
     /// Copies the cull counters and draw arguments into `readback` (laid out as
-    /// [`super::stats::CullCounters`] reads them): the camera's, then those of
+    /// [`super::counters::CullCounters`] reads them): the camera's, then those of
     /// the frame's `cascades` shadow cascades.
     pub fn copy_counters(&self, encoder: &mut wgpu::CommandEncoder, readback: &wgpu::Buffer, cascades: u32) {
         let control = size_of::<CullControl>() as u64;

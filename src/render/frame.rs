@@ -283,7 +283,7 @@ impl<F: Fetcher> Frame<F> {
         let n = self.renderer.config().instances as usize;
         st.bytes.resize(n.next_multiple_of(4), 0);
         let schema = self.stream.manifest().and_then(|m| m.attributes.as_ref());
-        let hidden = if style.filters() { super::gpu_data::STYLE_HIDDEN } else { 0 };
+        let hidden = if style.filters() { crate::scene::style::STYLE_HIDDEN } else { 0 };
         let mut present = std::collections::HashSet::new();
         for (t, range, runs, data) in self.stream.resident_tree_data() {
             use crate::scene::streaming::TreeDataState as S;

@@ -4,6 +4,36 @@
 
 use super::gpu_data::{DrawParams, ViewUniform};
 
+/// Depth format of every Sylva pass (reversed Z: clear to 0, keep greater).
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// The depth state of every Sylva pipeline: reversed Z, so nearer is greater.
+/// Overlays pass `write = false` and `CompareFunction::Always`.
+#[must_use]
+pub fn depth_state(write: bool, compare: wgpu::CompareFunction) -> Option<wgpu::DepthStencilState> {
+    Some(wgpu::DepthStencilState {
+        format: DEPTH_FORMAT,
+        depth_write_enabled: Some(write),
+        depth_compare: Some(compare),
+        stencil: Default::default(),
+        bias: Default::default(),
+    })
+}
+
+/// Creates a shadow map: `layers` square depth layers of `size` texels.
+#[must_use]
+pub fn shadow_map(device: &wgpu::Device, size: u32, layers: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("shadow map"),
+        size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: layers },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: DEPTH_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    })
+}
+
 /// The shared layouts, created once per device.
 pub struct SharedLayouts {
     /// Group 0: `View`, a read-only storage buffer rather than a uniform: Mesa 22.3's
@@ -133,7 +163,7 @@ impl SharedLayouts {
                 count: None,
             }],
         });
-        let no_shadow_map = super::shadow::shadow_map(device, 1, 1).create_view(&wgpu::TextureViewDescriptor {
+        let no_shadow_map = shadow_map(device, 1, 1).create_view(&wgpu::TextureViewDescriptor {
             label: Some("no shadow map"),
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
@@ -289,14 +319,7 @@ pub fn shadow_caster_pipeline(
 ) -> wgpu::RenderPipeline {
     let stages = Stages { module, layout, buffers, fragment: "fs_shadow" };
     let primitive = wgpu::PrimitiveState { cull_mode: None, ..Default::default() };
-    render_pipeline(
-        device,
-        label,
-        &stages,
-        primitive,
-        super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
-        &[],
-    )
+    render_pipeline(device, label, &stages, primitive, depth_state(true, wgpu::CompareFunction::Greater), &[])
 }
 
 /// A module's `vs_main` (reading `buffers`) and `fragment` entry points under `layout`.
@@ -400,7 +423,7 @@ impl IdPipeline {
                 &self.label,
                 &stages,
                 self.primitive,
-                super::mesh::depth_state(true, wgpu::CompareFunction::Greater),
+                depth_state(true, wgpu::CompareFunction::Greater),
                 &[Some(ID_FORMAT.into())],
             )
         });

@@ -7,32 +7,17 @@
 use wgpu::util::DeviceExt;
 
 use super::gpu_data::{GpuMaterial, MeshUniform, RenderMode};
-use super::layouts::{sampler_entry, texture_array_entry, SharedLayouts};
+use super::layouts::{depth_state, sampler_entry, texture_array_entry, SharedLayouts};
 use super::shaders;
 use crate::format::pack::{kind, MaterialKind, MeshLevelMeta, TextureArrayMeta};
 use crate::format::Pack;
 
-/// Depth format of every Sylva pass (reversed Z: clear to 0, keep greater).
-pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Albedo target of the capture mode (sRGB-encoded, alpha = coverage).
 pub const CAPTURE_ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 /// Normal target of the capture mode (n * 0.5 + 0.5, alpha = leaf flag).
 pub const CAPTURE_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 /// Occlusion target of the capture mode (the baked sky visibility in r, g, b).
 pub const CAPTURE_AO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-
-/// The depth state of every Sylva pipeline: reversed Z, so nearer is greater.
-/// Overlays pass `write = false` and `CompareFunction::Always`.
-#[must_use]
-pub fn depth_state(write: bool, compare: wgpu::CompareFunction) -> Option<wgpu::DepthStencilState> {
-    Some(wgpu::DepthStencilState {
-        format: DEPTH_FORMAT,
-        depth_write_enabled: Some(write),
-        depth_compare: Some(compare),
-        stencil: Default::default(),
-        bias: Default::default(),
-    })
-}
 
 /// Layouts, pipelines and the sampler of the mesh pass.
 pub struct MeshPipelines {

@@ -7,6 +7,7 @@ pub mod canopy;
 pub mod capture;
 pub mod cluster;
 pub mod context;
+pub mod counters;
 pub mod cull;
 pub mod forest;
 pub mod frame;

@@ -7,7 +7,6 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::context::{read_texture_rgba8, GpuContext};
-use super::cull::DrawItem;
 use super::forest::{depth_texture, PoolConfig};
 use super::frame::Frame;
 use super::gpu_data::{CullControl, DrawArgs, REPR_COUNT};
@@ -15,6 +14,7 @@ pub use super::stats::FrameStats;
 use crate::camera::Camera;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Manifest;
+use crate::lod::select::DrawItem;
 use crate::scene::{Fetcher, StreamEvent, ThreadFetcher};
 
 /// Colour format of offscreen targets (sRGB, like the browser canvas view).
@@ -330,7 +330,7 @@ impl<F: Fetcher> OffscreenScene<F> {
 
     /// Runs the cull pass of the last frame's shadow cascade `i` again, alone,
     /// so [`Self::read_selection`] reads the casters it chose (tests against
-    /// [`super::cull::cpu_select`] with the cascade's view).
+    /// [`crate::lod::select::cpu_select`] with the cascade's view).
     ///
     /// # Panics
     /// If the last frame had no cascade `i`.
@@ -343,7 +343,7 @@ impl<F: Fetcher> OffscreenScene<F> {
 
     /// Reads back what the last cull pass selected, with the pools it selected
     /// from: (per-slot draw items, batches, instances, visible batch count).
-    /// For tests against [`super::cull::cpu_select`].
+    /// For tests against [`crate::lod::select::cpu_select`].
     #[must_use]
     pub fn read_selection(&self) -> (Vec<Vec<DrawItem>>, Vec<GpuBatch>, Vec<PackedInstance>, u32) {
         let (control, args, items) = self.renderer.readback_buffers();

@@ -92,7 +92,7 @@ fn overlay_pipeline(
     let target = super::layouts::PullingTarget {
         primitive: wgpu::PrimitiveState { topology, ..Default::default() },
         // The sky is at depth 0, the far end under reversed Z; overlays ignore depth.
-        depth_stencil: super::mesh::depth_state(false, wgpu::CompareFunction::Always),
+        depth_stencil: super::layouts::depth_state(false, wgpu::CompareFunction::Always),
         format,
     };
     super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target)

@@ -8,7 +8,6 @@ use std::ops::Range;
 
 use glam::Vec3;
 
-use super::cull::CullPipelines;
 use super::gpu_data::{
     control_buffer_bytes, CullDispatch, DrawArgs, DrawParams, GpuSpecies, REPR_COUNT, STYLE_HEADER_WORDS,
     STYLE_OFFSET_BYTES,
@@ -217,8 +216,10 @@ pub struct PoolGroups {
 pub struct PoolLayouts<'a> {
     /// Shared draw layouts.
     pub shared: &'a SharedLayouts,
-    /// The cull pipelines' layouts.
-    pub cull: &'a CullPipelines,
+    /// The cull pass's group 1 (`CullPipelines::layout`).
+    pub cull: &'a wgpu::BindGroupLayout,
+    /// The cull pass's dispatch group (`CullPipelines::dispatch_layout`).
+    pub cull_dispatch: &'a wgpu::BindGroupLayout,
     /// The bounds overlay's group 1.
     pub bounds: &'a wgpu::BindGroupLayout,
 }
@@ -282,7 +283,7 @@ fn groups(device: &wgpu::Device, b: &PoolBuffers, layouts: &PoolLayouts<'_>) -> 
         draw: layouts.shared.draw_group(device, &b.draw_params),
         cull: group(
             "cull",
-            &layouts.cull.layout,
+            layouts.cull,
             &[
                 entry(0, &b.batches),
                 entry(1, &b.instances),
@@ -293,7 +294,7 @@ fn groups(device: &wgpu::Device, b: &PoolBuffers, layouts: &PoolLayouts<'_>) -> 
                 entry(6, &b.args),
             ],
         ),
-        dispatch: group("cull dispatch", &layouts.cull.dispatch_layout, &[entry(0, &b.dispatch), entry(1, &b.control)]),
+        dispatch: group("cull dispatch", layouts.cull_dispatch, &[entry(0, &b.dispatch), entry(1, &b.control)]),
         bounds: group("bounds", layouts.bounds, &[entry(0, &b.batches), entry(1, &b.visible)]),
     }
 }

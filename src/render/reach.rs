@@ -166,7 +166,7 @@ impl Reach {
             .cloud
             .as_ref()
             .filter(|c| {
-                allow.clouds && (!policy || crate::format::policy::policy_keeps(c.pareto_error, c.pareto_cost, false))
+                allow.clouds && (!policy || crate::lod::policy::policy_keeps(c.pareto_error, c.pareto_cost, false))
             })
             .map(|c| c.select_px);
         let coarsest_is_mesh = !has_bb && !has_cl && cloud_floor.is_none();
@@ -178,9 +178,7 @@ impl Reach {
         // the species table draws them.
         let floor = cloud_floor.unwrap_or(mesh_floor);
         let cluster_floor = match (&meta.clusters, policy && has_bb) {
-            (Some(c), true) => {
-                cluster_floor.max(crate::format::cluster::policy_floor(c.ellipsoid_levels.iter(), floor))
-            }
+            (Some(c), true) => cluster_floor.max(crate::lod::policy::policy_floor(c.ellipsoid_levels.iter(), floor)),
             _ => cluster_floor,
         };
         let clusters = has_cl && cluster_floor < floor && max_px >= cluster_floor * slack;

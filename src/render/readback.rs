@@ -7,7 +7,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::stats::CullCounters;
+use super::counters::CullCounters;
 
 /// A mapping's state, shared with its callback.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

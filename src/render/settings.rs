@@ -90,10 +90,10 @@ pub struct RenderSettings {
     /// (a hashed test) instead of the mip's all-or-nothing alpha. Off: the
     /// plain alpha test (comparisons).
     pub adaptive_alpha: bool,
-    /// The bake's LoD policy (`crate::format::policy::policy_keeps`): a cluster
+    /// The bake's LoD policy (`crate::lod::policy::policy_keeps`): a cluster
     /// level, the simplified mesh or the billboard cloud is drawn only where the
     /// bake measured it worth its time against the far tier
-    /// ([`crate::format::policy`]).
+    /// ([`crate::lod::policy`]).
     /// Off: every baked level within `representations` (benchmark baselines).
     pub lod_policy: bool,
     /// Shifts the cross-fade dither pattern (the progressive-refinement step,

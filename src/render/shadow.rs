@@ -21,7 +21,7 @@ use glam::{DVec3, Mat4, Vec3, Vec4};
 
 use super::gpu_data::ViewUniform;
 pub use super::gpu_data::MAX_CASCADES;
-use super::mesh::DEPTH_FORMAT;
+use super::layouts::shadow_map;
 
 /// How the sun's shadows are drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -304,21 +304,6 @@ pub fn apply_to_view(view: &mut ViewUniform, cascades: &[Cascade], config: &Shad
     }
     let fade_m = cascades.last().map_or(0.0, |c| c.far_m);
     view.shadow = [cascades.len() as f32, config.size as f32, config.pcf_radius as f32, fade_m];
-}
-
-/// Creates a shadow map: `layers` square depth layers of `size` texels.
-#[must_use]
-pub fn shadow_map(device: &wgpu::Device, size: u32, layers: u32) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("shadow map"),
-        size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: layers },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: DEPTH_FORMAT,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        view_formats: &[],
-    })
 }
 
 /// The shadow map of the current quality and its views.

@@ -16,9 +16,9 @@ use super::mesh::{MeshGpu, MeshPipelines};
 use super::pools::Pools;
 use super::reach::Reach;
 use super::settings::{FarTier, RenderSettings, Representations};
-use crate::format::cluster::policy_floor;
-use crate::format::policy::policy_keeps;
 use crate::format::Pack;
+use crate::lod::policy::policy_floor;
+use crate::lod::policy::policy_keeps;
 
 /// Segment capacity of the full mesh level per species: only trees hundreds of
 /// pixels tall use it, a few hundred at most on any screen.

@@ -9,8 +9,8 @@
 
 use std::collections::HashMap;
 
+use super::layouts::{depth_state, DEPTH_FORMAT};
 use super::layouts::{sampler_entry, storage_entry, texture_array_entry, SharedLayouts};
-use super::mesh::{depth_state, DEPTH_FORMAT};
 use crate::scene::imagery::IMAGE_PX;
 use crate::scene::terrain::{TerrainDraw, TerrainKey};
 

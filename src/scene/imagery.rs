@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::terrain::{TerrainDraw, TerrainKey};
+use super::quadtree::{ancestor, uv_in, QuadKey as TerrainKey};
 use crate::format::imagery::{decode_image, Rgba8};
 use crate::format::terrain::TerrainEntry;
 use crate::geo::GeoFrame;
@@ -264,20 +264,21 @@ impl Imagery {
         }
     }
 
-    /// Attaches to each drawn tile the finest resident image at or above it,
-    /// and appends the images to fetch to `wanted` (in draw order, no repeats).
-    pub fn attach(
+    /// Attaches to each drawn tile (its key and its image slot) the finest
+    /// resident image at or above it, and appends the images to fetch to
+    /// `wanted` (in draw order, no repeats).
+    pub fn attach<'a>(
         &mut self,
         entry: &TerrainEntry,
         geo: Option<&GeoFrame>,
-        draws: &mut [TerrainDraw],
+        draws: impl IntoIterator<Item = (TerrainKey, &'a mut Option<DrawImagery>)>,
         wanted: &mut Vec<TerrainKey>,
     ) {
         self.frame += 1;
         self.waiting_needed = false;
-        for d in draws.iter_mut() {
-            d.imagery = None;
-            let Some(target) = self.target(entry, geo, d.key) else { continue };
+        for (key, imagery) in draws {
+            *imagery = None;
+            let Some(target) = self.target(entry, geo, key) else { continue };
             if self.askable(target) && !wanted.contains(&target) {
                 wanted.push(target);
             }
@@ -286,8 +287,8 @@ impl Imagery {
             loop {
                 if let Some(Slot::Resident { tile, used }) = self.slots.get_mut(&k) {
                     *used = self.frame;
-                    d.imagery =
-                        Some(DrawImagery { key: (self.generation, k), tile: Arc::clone(tile), uv: uv_in(k, d.key) });
+                    *imagery =
+                        Some(DrawImagery { key: (self.generation, k), tile: Arc::clone(tile), uv: uv_in(k, key) });
                     break;
                 }
                 if k.0 == 0 {
@@ -296,7 +297,7 @@ impl Imagery {
                 k = ancestor(k, k.0 - 1);
             }
             // Nothing yet: the coarsest image first, so the ground shows something soon.
-            if d.imagery.is_none() {
+            if imagery.is_none() {
                 let root = ancestor(target, 0);
                 if root != target && self.askable(root) && !wanted.contains(&root) {
                     wanted.insert(0, root);
@@ -502,20 +503,6 @@ impl Imagery {
             }
         }
     }
-}
-
-/// The ancestor of `key` at `level` (≤ its own).
-fn ancestor(key: TerrainKey, level: u8) -> TerrainKey {
-    let d = key.0 - level.min(key.0);
-    (key.0 - d, key.1 >> d, key.2 >> d)
-}
-
-/// Where tile `inner` lies in the uv square of its ancestor `outer`.
-fn uv_in(outer: TerrainKey, inner: TerrainKey) -> [f32; 4] {
-    let d = inner.0 - outer.0;
-    let scale = 1.0 / f64::from(1u32 << d);
-    let (ox, oy) = (inner.1 - (outer.1 << d), inner.2 - (outer.2 << d));
-    [(f64::from(ox) * scale) as f32, (f64::from(oy) * scale) as f32, scale as f32, scale as f32]
 }
 
 /// Web Mercator world coordinates (0–1 east, 0–1 south) of lon/lat degrees.

@@ -5,6 +5,7 @@ pub mod canopy;
 pub mod fetch;
 pub mod imagery;
 pub mod index_walk;
+pub mod quadtree;
 pub mod query;
 pub mod residency;
 pub mod streaming;

@@ -26,7 +26,7 @@ use crate::format::terrain::TerrainTile;
 use crate::format::tile::Levels;
 use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
 use crate::geo::GeoFrame;
-use crate::render::cull::{canopy_keeps, canopy_share};
+use crate::lod::select::{canopy_keeps, canopy_share};
 use packs::PackLoad;
 
 /// Limits of the streamer: the budgets a viewer degrades gracefully within.
@@ -1250,7 +1250,8 @@ impl<F: Fetcher> SceneStream<F> {
         let Some(t) = &mut self.terrain else { return };
         let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
         t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws, &mut self.terrain_wanted);
-        self.imagery.attach(t.entry(), self.geo.as_ref(), &mut self.terrain_draws, &mut self.imagery_wanted);
+        let draws = self.terrain_draws.iter_mut().map(|d| (d.key, &mut d.imagery));
+        self.imagery.attach(t.entry(), self.geo.as_ref(), draws, &mut self.imagery_wanted);
     }
 
     /// Requests wanted terrain tiles, nearest first, within the in-flight budget.

@@ -539,7 +539,7 @@ fn ground_images_stream_retry_and_stop_with_the_terrain() {
 fn oracle_counts(entry: &crate::format::TileEntry, view: &ViewData, thin: PrefixView) -> Vec<(GpuBatch, u32)> {
     let bytes = std::fs::read(format!("{}/{}", fixture(), entry.url)).unwrap();
     let tile = Tile::decode("t", &bytes, 3).unwrap();
-    let mut u: crate::render::gpu_data::ViewUniform = bytemuck::Zeroable::zeroed();
+    let mut u: crate::lod::shared::ViewUniform = bytemuck::Zeroable::zeroed();
     u.eye_hi = view.eye_hi.extend(0.0).to_array();
     u.eye_lo = view.eye_lo.extend(0.0).to_array();
     u.lod = [view.px_per_m_at_1m * thin.lod_scale, 1e9, 0.12, 0.0];
@@ -552,7 +552,7 @@ fn oracle_counts(entry: &crate::format::TileEntry, view: &ViewData, thin: Prefix
             view.frustum.iter().all(|p| p.truncate().dot(c) + p.w + p.truncate().abs().dot(h) >= 0.0)
         })
         .map(|b| {
-            let (kept, _, _) = crate::render::cull::thinning(b, &u);
+            let (kept, _, _) = crate::lod::select::thinning(b, &u);
             (*b, (kept.ceil() as u32).min(b.instance_count))
         })
         .collect()

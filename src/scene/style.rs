@@ -1,8 +1,8 @@
 //! Styles (issue 19): colour trees by an attribute or by species, hide those
 //! a filter leaves out, highlight a selection. A style compiles, against the
 //! scene's attribute columns, into what the GPU reads: a palette of 63
-//! colours and one byte per tree (its palette entry, selected, hidden; see
-//! `STYLE_*` in `render::gpu_data`), made per resident tile from its ids and
+//! colours and one byte per tree (its palette entry, selected, hidden: the
+//! layout is `STYLE_*` here), made per resident tile from its ids and
 //! attribute sidecars. The cull pass skips hidden trees; the draw passes
 //! colour and highlight at every level of detail.
 //!
@@ -32,14 +32,25 @@ use crate::format::attributes::{glob_matches, AttributeCodes, AttributeSchema, A
 
 /// Palette entries (entry 0 is a tree's own colour).
 pub const PALETTE: usize = 64;
-/// Header words ([`crate::render::gpu_data::STYLE_HEADER_WORDS`]).
-const HEADER_WORDS: usize = 128;
+/// Words of the styles' header: the palette ([`PALETTE`] packed RGBA8
+/// colours; entry 0 unused, a tree's own colour), then [`STYLE_FLAGS`], then
+/// spare words. The GPU reads it from `render::gpu_data::STYLE_OFFSET_BYTES`
+/// in the cull control buffer (`styles.wgsl`).
+pub const STYLE_HEADER_WORDS: u32 = 128;
+const HEADER_WORDS: usize = STYLE_HEADER_WORDS as usize;
+/// Header word: [`STYLE_TREES`] and [`STYLE_BY_SPECIES`] bits.
+pub const STYLE_FLAGS: u32 = 64;
+/// Flag: one style byte per pool instance follows the header (bits 0–5 the
+/// palette entry, 0 the tree's own colour; [`STYLE_SELECTED`]; [`STYLE_HIDDEN`]).
+pub const STYLE_TREES: u32 = 1;
+/// Flag: a tree's palette entry is its model species + 1 (no per-tree data needed).
+pub const STYLE_BY_SPECIES: u32 = 2;
+/// Style byte bit: the tree is selected (highlighted at every level of detail).
+pub const STYLE_SELECTED: u8 = 64;
+/// Style byte bit: the tree is filtered out (the cull pass skips it).
+pub const STYLE_HIDDEN: u8 = 128;
 /// Steps of a ramp.
 const RAMP_STEPS: usize = 16;
-/// Style byte: selected.
-const SELECTED: u8 = 64;
-/// Style byte: hidden.
-const HIDDEN: u8 = 128;
 
 /// A qualitative palette for categories and species (Tableau 20-like: distinct
 /// hues, then lighter ones), repeated beyond 20.
@@ -354,13 +365,13 @@ impl TreeStyle {
         for (k, c) in self.palette.iter().enumerate().skip(1).take(PALETTE - 1) {
             h[k] = u32::from_le_bytes([c[0], c[1], c[2], 255]);
         }
-        let flags = crate::render::gpu_data::STYLE_FLAGS as usize;
+        let flags = STYLE_FLAGS as usize;
         let mut f = 0;
         if self.needs_trees() {
-            f |= crate::render::gpu_data::STYLE_TREES;
+            f |= STYLE_TREES;
         }
         if self.color == Some(ColorBy::Species) {
-            f |= crate::render::gpu_data::STYLE_BY_SPECIES;
+            f |= STYLE_BY_SPECIES;
         }
         h[flags] = f;
         h
@@ -404,10 +415,10 @@ impl TreeStyle {
             None => self.selected.contains(&id),
         };
         if selected {
-            b |= SELECTED;
+            b |= STYLE_SELECTED;
         }
         if self.filter.as_ref().is_some_and(|f| !f.matches(schema, codes, i, id, text)) {
-            b |= HIDDEN;
+            b |= STYLE_HIDDEN;
         }
         b
     }
@@ -442,7 +453,8 @@ impl TreeStyle {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::format::attributes::AttributeColumn;
+    use crate::format::attributes::tests::schema as every_kind_schema;
+    use crate::format::attributes::{decode_attributes, encode_attributes, AttributeColumn};
     use serde_json::json;
 
     fn schema() -> AttributeSchema {
@@ -487,11 +499,11 @@ mod tests {
             &mut out,
         );
         // good → entry 1 but hidden (10 m); poor → entry 2 shown; no values → own colour, hidden.
-        assert_eq!(out, [1 | HIDDEN, 2, HIDDEN]);
+        assert_eq!(out, [1 | STYLE_HIDDEN, 2, STYLE_HIDDEN]);
         let h = style.header();
         assert_eq!(h[1], u32::from_le_bytes([0, 255, 0, 255]));
         assert_eq!(h[2], u32::from_le_bytes([255, 0, 0, 255]));
-        assert_eq!(h[64], crate::render::gpu_data::STYLE_TREES);
+        assert_eq!(h[64], STYLE_TREES);
         assert_eq!(style.legend_json()["entries"][1]["color"], "#ff0000");
 
         let mut ramp =
@@ -504,7 +516,7 @@ mod tests {
             0,
             &mut out,
         );
-        assert_eq!(out, [1 + 4, (1 + 12) | SELECTED, 0]);
+        assert_eq!(out, [1 + 4, (1 + 12) | STYLE_SELECTED, 0]);
         // Text ids (issue 42): selected by their text; a number by its number only.
         let texts = crate::format::TreeIds {
             numbers: vec![7, (1 << 63) + 2, (1 << 63) + 3],
@@ -512,12 +524,12 @@ mod tests {
         };
         ramp.set_selection([TreeId::Text(" EY17081".into()), TreeId::Number(7)]);
         ramp.tile_bytes(Some(&s), &texts, Some(&codes()), 0, &mut out);
-        assert_eq!(out.map(|b| b & SELECTED), [SELECTED, 0, SELECTED]);
+        assert_eq!(out.map(|b| b & STYLE_SELECTED), [STYLE_SELECTED, 0, STYLE_SELECTED]);
         assert_eq!(ramp.selection().len(), 2);
         // A number given as text ("7", as a popup's data-id or a URL has it) is that number.
         ramp.set_selection([TreeId::Text("7".into())]);
         ramp.tile_bytes(Some(&s), &texts, Some(&codes()), 0, &mut out);
-        assert_eq!(out.map(|b| b & SELECTED), [SELECTED, 0, 0]);
+        assert_eq!(out.map(|b| b & STYLE_SELECTED), [STYLE_SELECTED, 0, 0]);
         assert_eq!(ramp.selection(), [TreeId::Number(7)]);
         assert_eq!(ramp.legend_json()["entries"].as_array().unwrap().len(), RAMP_STEPS);
         // A domain no legend can print is refused, saying why.
@@ -539,7 +551,7 @@ mod tests {
 
         let by_species = TreeStyle::parse(Some(&s), &species, &json!({"color": {"by": "species"}})).unwrap();
         assert!(!by_species.needs_trees());
-        assert_eq!(by_species.header()[64], crate::render::gpu_data::STYLE_BY_SPECIES);
+        assert_eq!(by_species.header()[64], STYLE_BY_SPECIES);
     }
 
     #[test]
@@ -551,5 +563,61 @@ mod tests {
         assert!(err(json!({"color": {"by": "height", "ramp": ["#zzz"]}})).contains("not a colour"));
         assert!(err(json!({"filter": {"heigth": 3}})).starts_with("filter:"));
         assert!(err(json!([1])).contains("JSON object"));
+    }
+
+    /// A fuzz run in the test suite (the libFuzzer target `decode_attributes`
+    /// needs nightly): random multi-byte mutations of a valid sidecar decode to
+    /// an error or to codes that re-encode to the same bytes and that values,
+    /// filters and styles read without a panic.
+    #[test]
+    fn random_mutations_never_panic() {
+        let s = every_kind_schema();
+        let codes =
+            AttributeCodes { count: 3, columns: vec![vec![0, 1, 255], vec![0, 2, 1], vec![0, 1, 255], vec![1, 0, 2]] };
+        let good = encode_attributes(&s, &codes);
+        let any = |c: &AttributeColumn| match c.kind {
+            AttributeType::Category => serde_json::json!("*"),
+            _ => serde_json::json!([null, null]),
+        };
+        let filter: serde_json::Value = s.columns.iter().map(|c| (c.name.clone(), any(c))).collect();
+        let parsed = crate::scene::query::Filter::parse(Some(&s), &filter).unwrap();
+        let style =
+            TreeStyle::parse(Some(&s), &[], &serde_json::json!({"color": {"by": s.columns[0].name}, "filter": filter}))
+                .unwrap();
+        let filter = parsed;
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let (mut ok, mut refused) = (0, 0);
+        for _ in 0..20_000 {
+            let mut b = good.clone();
+            for _ in 0..1 + next() % 4 {
+                let at = (next() % b.len() as u64) as usize;
+                b[at] = next() as u8;
+            }
+            if next() % 8 == 0 {
+                b.truncate((next() % b.len() as u64) as usize);
+            }
+            let instances = if next() % 4 == 0 { (next() % 5) as usize } else { 3 };
+            match decode_attributes("fuzz.attr", &b, &s, instances) {
+                Ok(c) => {
+                    ok += 1;
+                    assert_eq!(encode_attributes(&s, &c), b);
+                    let mut out = vec![0u8; instances];
+                    let ids = crate::format::TreeIds { numbers: (0..instances as u64).collect(), texts: Vec::new() };
+                    style.tile_bytes(Some(&s), &ids, Some(&c), 0, &mut out);
+                    for i in 0..instances {
+                        let _ = c.json(&s, i);
+                        let _ = filter.matches(Some(&s), Some(&c), i, i as u64, None);
+                    }
+                }
+                Err(_) => refused += 1,
+            }
+        }
+        assert!(ok > 100 && refused > 100, "{ok} decoded, {refused} refused");
     }
 }

@@ -24,7 +24,7 @@ use crate::camera::ViewData;
 use crate::format::terrain::{TerrainEntry, TerrainTile};
 
 /// A tile's key: (level, x, y).
-pub type TerrainKey = (u8, u32, u32);
+pub type TerrainKey = super::quadtree::QuadKey;
 
 /// One tile to draw this frame.
 #[derive(Debug, Clone)]

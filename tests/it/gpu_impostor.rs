@@ -212,7 +212,7 @@ fn a_tree_seen_all_round_keeps_its_silhouette() {
 /// the modelled time puts the mesh above the impostor above the billboard.
 #[test]
 fn work_counts_are_exact_and_scale_with_size() {
-    use sylva::format::policy::{modelled_us, CostKind};
+    use sylva::lod::policy::{modelled_us, CostKind};
     let ctx = ctx();
     if !ctx.device.features().contains(wgpu::Features::PIPELINE_STATISTICS_QUERY) {
         eprintln!("skipped: {} has no pipeline statistics", ctx.adapter_summary());

@@ -310,18 +310,19 @@ fn pool_ids(off: &OffscreenScene, scene: &Path) -> Vec<Option<u64>> {
 /// CPU oracle's given each pool instance's style. Returns the pool's ids, those
 /// styles, and the oracle's items drawn whole (side 0) and in all.
 fn filtered_draws_match_the_oracle(off: &OffscreenScene, scene: &Path) -> (Vec<Option<u64>>, Vec<u8>, usize, usize) {
-    use sylva::render::cull::{cpu_select_styled, unpack_item_y};
+    use sylva::lod::select::{cpu_select_styled, unpack_item_y};
     let ids = pool_ids(off, scene);
     let styles: Vec<u8> = ids
         .iter()
         .map(|id| match id {
             Some(i) if i % 3 == 0 && i % 101 >= 20 => 0,
-            _ => sylva::render::gpu_data::STYLE_HIDDEN,
+            _ => sylva::scene::style::STYLE_HIDDEN,
         })
         .collect();
     let (gpu, batches, instances, _) = off.read_selection();
-    let oracle =
-        cpu_select_styled(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), &styles);
+    let oracle = cpu_select_styled(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), |i| {
+        styles.get(i as usize).is_some_and(|s| s & sylva::scene::style::STYLE_HIDDEN != 0)
+    });
     let (mut whole, mut all) = (0, 0);
     for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
         let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
@@ -337,7 +338,7 @@ fn filtered_draws_match_the_oracle(off: &OffscreenScene, scene: &Path) -> (Vec<O
 
 #[test]
 fn a_filter_culls_exactly_the_trees_it_leaves_out() {
-    use sylva::render::cull::unpack_item_y;
+    use sylva::lod::select::unpack_item_y;
     let scene = attributed_fixture("filter");
     let mut off = open_at(&scene);
     off.load_view(&Camera::default(), 30.0);

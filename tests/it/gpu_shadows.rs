@@ -9,7 +9,7 @@ use glam::{DVec3, Vec3};
 use sylva::camera::Camera;
 use sylva::format::pack::decode_pack;
 use sylva::format::Manifest;
-use sylva::render::cull::{cpu_select, unpack_item_y};
+use sylva::lod::select::{cpu_select, unpack_item_y};
 use sylva::render::forest::{PoolConfig, Representations};
 use sylva::render::gpu_data::{Repr, REPR_COUNT};
 use sylva::render::offscreen::{NamedView, OffscreenScene};

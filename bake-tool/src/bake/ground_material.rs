@@ -11,7 +11,7 @@
 //! Colours never let green dominate (grass is dry and olive), so image tests
 //! that count green pixels count foliage only.
 
-use crate::demo::fbm;
+use crate::rng::fbm;
 
 /// Pixel size the procedural floor is baked at, metres (its finest images).
 pub const FLOOR_RESOLUTION_M: f64 = 2.0;

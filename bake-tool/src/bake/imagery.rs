@@ -19,7 +19,6 @@ use sylva::format::terrain::{ImageryEntry, TerrainEntry, TerrainTile};
 use sylva_bake::ortho::Ortho;
 
 use crate::reproject::{Crs, Reprojector};
-use crate::scene_write;
 
 /// Pixels per imagery side.
 pub const IMAGERY_PX: u32 = sylva::format::terrain::IMAGERY_PX;
@@ -334,9 +333,9 @@ impl Ctx<'_> {
         let encoded = encode_jpeg(&img, IMAGERY_PX)?;
         let out = self.dir.join(t.imagery.as_ref().map_or(String::new(), |i| i.tile_url(level, x, y)));
         if let Some(parent) = out.parent() {
-            scene_write::create_dir(parent)?;
+            crate::out_dir::create_dir(parent)?;
         }
-        scene_write::write_file(&out, &encoded)?;
+        crate::out_dir::write_file(&out, &encoded)?;
         self.tiles.fetch_add(1, Ordering::Relaxed);
         self.bytes.fetch_add(encoded.len() as u64, Ordering::Relaxed);
         Ok(Some(img))

@@ -14,8 +14,9 @@ use sylva::render::GpuContext;
 use super::pack_cache::PackCache;
 use crate::batching::SpeciesShape;
 use crate::gltf_import::ImportedModel;
+use crate::out_dir::{create_dir, write_file};
 use crate::pack_build::{build_pack, BuiltPack, PackOptions};
-use crate::scene_write::{create_dir, safe_name, write_file};
+use crate::scene_write::safe_name;
 
 /// What the packs stage made.
 pub struct Packs {

@@ -17,8 +17,6 @@ use anyhow::Result;
 use rayon::prelude::*;
 use sylva::format::terrain::{quantise, TerrainChild, TerrainEntry, TerrainTile, TERRAIN_HOLE};
 
-use crate::scene_write;
-
 /// Cells per terrain tile side (65 × 65 vertices, 8.5 KB a tile).
 pub const TERRAIN_GRID: u16 = 64;
 /// Most finest-level tiles per side of the root: coarser than the DEM beyond
@@ -209,9 +207,9 @@ impl Ctx<'_> {
         let bytes = tile.encode();
         let path = self.dir.join(e.tile_url(level, x, y));
         if let Some(parent) = path.parent() {
-            scene_write::create_dir(parent)?;
+            crate::out_dir::create_dir(parent)?;
         }
-        scene_write::write_file(&path, &bytes)?;
+        crate::out_dir::write_file(&path, &bytes)?;
         self.tiles.fetch_add(1, Ordering::Relaxed);
         self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
         let info = TerrainChild { exists: true, min_m: min_q, max_m: max_q, error_m: error };

@@ -16,7 +16,7 @@ use crate::attributes::AttributeTable;
 
 use crate::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
 use crate::bucket::TreeSource;
-use crate::scene_write::{create_dir, write_file};
+use crate::out_dir::{create_dir, write_file};
 
 /// What the tiles stage wrote.
 pub struct Tiles {

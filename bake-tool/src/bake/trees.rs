@@ -21,7 +21,7 @@ use crate::bucket::{BucketWriter, TreeSource};
 use crate::out_dir::OutDir;
 use crate::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
 use crate::reproject::{Crs, Reprojector};
-use crate::{demo, rng};
+use crate::rng;
 use sylva_bake::patterns::pattern_matches;
 
 /// Tallest tree height accepted (the tallest known tree is 116 m); placement
@@ -398,7 +398,7 @@ pub fn place_trees(
                 },
             },
         };
-        let h = demo::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
+        let h = rng::hash64(p.row ^ x.to_bits().rotate_left(17) ^ y.to_bits());
         let tree = SceneTree {
             pos: DVec3::new(x - origin.x, y - origin.y, z - origin.z),
             species: idx as u32,

@@ -20,6 +20,8 @@
 //! time was measured (a device without pipeline statistics, older packs), the
 //! far tier is taken as half the cost.
 
+use crate::format::cluster::ClusterLevelMeta;
+
 /// Exponent of time in the policy's score `error × time^ALPHA`: `log2(1.1)`.
 pub const ALPHA: f32 = 0.137_503_52;
 
@@ -74,6 +76,25 @@ pub fn policy_keeps(error: Option<[f32; 2]>, cost: Option<[f32; 2]>, unmeasured:
     own * ratio.powf(ALPHA) < far
 }
 
+/// The smallest projected height (px) from which the policy keeps cluster
+/// levels below `mesh_floor`: levels are walked finest first, and the band
+/// ends above the first level it drops (the far tier takes over there).
+/// `mesh_floor` when it keeps none.
+#[must_use]
+pub fn policy_floor<'a>(levels: impl Iterator<Item = &'a ClusterLevelMeta>, mesh_floor: f32) -> f32 {
+    let mut floor = mesh_floor;
+    for l in levels {
+        if l.select_px >= mesh_floor {
+            continue;
+        }
+        if !policy_keeps(l.pareto_error, l.pareto_cost, true) {
+            break;
+        }
+        floor = l.select_px;
+    }
+    floor
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -105,5 +126,39 @@ mod tests {
         // Vertices count for meshes and clusters.
         assert!(modelled_us(CostKind::Mesh, 10_000, 0) > 0.9);
         assert!((modelled_us(CostKind::Mesh, 0, 1000) - 35.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_lod_policy_keeps_levels_only_where_they_beat_the_far_tier() {
+        let level = |select_px: f32, e: Option<[f32; 2]>| ClusterLevelMeta {
+            count: 1,
+            select_px,
+            error: 0.0,
+            noise_threshold: 0.0,
+            normal_blend: 0.0,
+            pareto_error: e,
+            pareto_cost: None,
+        };
+        // Finest first: 400 px is above the mesh floor (ignored), 100 and 60
+        // beat the far tier, 30 does not: clusters from 60 px; below, the far tier.
+        let levels = [
+            level(400.0, Some([0.05, 0.01])),
+            level(100.0, Some([0.01, 0.02])),
+            level(60.0, Some([0.02, 0.03])),
+            level(30.0, Some([0.04, 0.03])),
+            level(15.0, Some([0.01, 0.03])),
+        ];
+        assert_eq!(policy_floor(levels.iter(), 120.0), 60.0);
+        // The first level in the band dropped: none (the floor stays the mesh's).
+        assert_eq!(policy_floor(levels[3..].iter(), 120.0), 120.0);
+        // Unmeasured (older packs): every level.
+        let old = [level(100.0, None), level(30.0, None)];
+        assert_eq!(policy_floor(old.iter(), 120.0), 30.0);
+        // Time counts: 20 % less error is not worth 10× the time (27 % is needed).
+        let mut costly = level(60.0, Some([0.024, 0.03]));
+        costly.pareto_cost = Some([10.0, 1.0]);
+        assert_eq!(policy_floor([costly.clone()].iter(), 120.0), 120.0);
+        costly.pareto_cost = Some([1.0, 1.0]);
+        assert_eq!(policy_floor([costly].iter(), 120.0), 60.0);
     }
 }
