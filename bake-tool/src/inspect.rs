@@ -49,7 +49,7 @@ pub fn inspect(path: &Path) -> Result<Value> {
 
 /// A GeoTIFF DEM as `bake --dem` reads it.
 fn inspect_dem(path: &Path) -> Result<Value> {
-    let dem = sylva_bake::dem::Dem::open(path)?;
+    let dem = crate::dem::Dem::open(path)?;
     let s = dem.summary();
     Ok(json!({
         "kind": "dem",

@@ -4,8 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::dem::Dem;
 use anyhow::{bail, Context, Result};
-use sylva_bake::dem::Dem;
 
 use crate::reproject::{Crs, Reprojector};
 

@@ -13,10 +13,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::ortho::Ortho;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use sylva::format::terrain::{ImageryEntry, TerrainEntry, TerrainTile};
-use sylva_bake::ortho::Ortho;
 
 use crate::reproject::{Crs, Reprojector};
 

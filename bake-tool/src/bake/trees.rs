@@ -19,10 +19,10 @@ use crate::allometry::Allometry;
 use crate::batching::{self, SceneTree};
 use crate::bucket::{BucketWriter, TreeSource};
 use crate::out_dir::OutDir;
+use crate::patterns::pattern_matches;
 use crate::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
 use crate::reproject::{Crs, Reprojector};
 use crate::rng;
-use sylva_bake::patterns::pattern_matches;
 
 /// Tallest tree height accepted (the tallest known tree is 116 m); placement
 /// heights outside (0, this) count as missing.

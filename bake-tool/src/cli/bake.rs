@@ -1,0 +1,389 @@
+//! `sylva-bake bake`: real models and placements into a scene.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use glam::DVec3;
+use sylva_bake::bake::{trees, SceneInput};
+use sylva_bake::batching::SceneTree;
+use sylva_bake::gltf_import::Classifier;
+use sylva_bake::out_dir::OutDir;
+use sylva_bake::reproject::{Crs, Reprojector};
+
+use super::*;
+
+#[derive(Args)]
+pub(crate) struct BakeArgs {
+    /// A species model: NAME=PATH.glb (repeat for each species).
+    #[arg(long = "model", value_name = "NAME=PATH", required = true)]
+    pub(crate) models: Vec<String>,
+    /// Tree placements: .csv (columns auto-detected) or .geojson points.
+    #[arg(long, value_name = "PATH")]
+    pub(crate) placements: PathBuf,
+    /// Map species labels to models: PATTERN=NAME (case-insensitive; * is a wildcard,
+    /// otherwise a substring). Labels equal to a model name map to it without a pattern.
+    #[arg(long = "map", value_name = "PATTERN=NAME")]
+    pub(crate) maps: Vec<String>,
+    /// Model for rows whose species maps to no model. Without it such rows are
+    /// skipped and reported, except with a single --model, which every row uses.
+    #[arg(long, value_name = "NAME")]
+    pub(crate) default_model: Option<String>,
+    /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
+    #[arg(long)]
+    pub(crate) crs: Option<String>,
+    /// CRS of x/y placement columns (required for projected input).
+    #[arg(long)]
+    pub(crate) input_crs: Option<String>,
+    /// Height in metres for rows with neither a height nor a DBH (default: the
+    /// median of the given heights).
+    #[arg(long)]
+    pub(crate) default_height: Option<f32>,
+    /// Text encoding of a CSV: auto reads each field as UTF-8 where it is valid
+    /// and as Windows-1252/Latin-1 otherwise (counted in the report).
+    #[arg(long, value_enum, default_value_t = sylva_bake::placements::Encoding::Auto)]
+    pub(crate) encoding: sylva_bake::placements::Encoding,
+    /// CSV field separator (default: detected from the header line: , ; tab |).
+    /// With ; or tab, decimal commas (52,37) are read too.
+    #[arg(long, value_name = "CHAR", value_parser = parse_delimiter)]
+    pub(crate) delimiter: Option<u8>,
+    /// The x/longitude and y/latitude columns hold each other's values: swap them.
+    #[arg(long)]
+    pub(crate) swap_xy: bool,
+    /// Use column NAME for ROLE (repeatable), before the names detected by
+    /// default. Roles: lon, lat, x, y, z, height, species, dbh, crown_diameter,
+    /// crown_radius, yaw, id. E.g. --column species=species_code --column dbh=dbh_mm.
+    #[arg(long = "column", value_name = "ROLE=NAME", value_parser = sylva_bake::placements::ColumnRole::parse_mapping)]
+    pub(crate) columns: Vec<(sylva_bake::placements::ColumnRole, String)>,
+    /// Unit of a DBH column whose name does not say it (dbh_mm, dbh_cm, dbh_in and dbh_m do).
+    #[arg(long, value_enum, value_name = "UNIT")]
+    pub(crate) dbh_unit: Option<sylva_bake::placements::DbhUnit>,
+    /// Keep only these columns as per-tree attributes (comma-separated names;
+    /// default: every column but the coordinates and the id). Numbers,
+    /// integers, dates (YYYY-MM-DD) and categories are typed from the values;
+    /// free text (over 4,096 different values) is left out. Stored per tile in
+    /// `.attr` sidecars for picking, styling and search.
+    #[arg(long, value_name = "A,B,C", value_delimiter = ',', conflicts_with = "no_attributes")]
+    pub(crate) attributes: Option<Vec<String>>,
+    /// Keep no per-tree attributes.
+    #[arg(long)]
+    pub(crate) no_attributes: bool,
+    /// Height and crown equations from DBH to use over the built-in ones
+    /// (CSV: genus,h_p2,h_p3,h_p4,cw_b0,cw_b1,cw_b2; docs/ALLOMETRY.md). Rows
+    /// without a height get one from their DBH; with neither, --default-height.
+    #[arg(long, value_name = "FILE.csv")]
+    pub(crate) allometry: Option<PathBuf>,
+    /// Rows farther than this from the median position are outliers and skipped.
+    #[arg(long, default_value_t = 100.0)]
+    pub(crate) max_extent_km: f64,
+    /// Material/mesh/node name pattern forced to leaves (repeatable; case-insensitive,
+    /// `*` is a wildcard like --map's, otherwise a substring; '*' is every name).
+    #[arg(long = "leaf-material", value_name = "PATTERN")]
+    pub(crate) leaf_materials: Vec<String>,
+    /// Material/mesh/node name pattern forced to branches (repeatable, as --leaf-material).
+    #[arg(long = "branch-material", value_name = "PATTERN")]
+    pub(crate) branch_materials: Vec<String>,
+    /// Elevation model, a GeoTIFF (repeat for several tiles; float32, int16 or
+    /// uint16 heights, strips or tiles, deflate/LZW, GDAL nodata): every tree
+    /// stands on its ground, sampled bilinearly, unless the row has a z (see --z).
+    #[arg(long = "dem", value_name = "FILE.tif")]
+    pub(crate) dems: Vec<PathBuf>,
+    /// CRS of the --dem files, when their GeoKeys name none (or name the wrong one).
+    #[arg(long, value_name = "EPSG:xxxx")]
+    pub(crate) dem_crs: Option<String>,
+    /// How a z column is meant with --dem: absolute (a ground elevation: the DEM
+    /// is not used for that row) or relative (height above the DEM's ground).
+    #[arg(long, value_enum, default_value_t = sylva_bake::bake::ground::ZMode::Absolute)]
+    pub(crate) z: sylva_bake::bake::ground::ZMode,
+    /// No terrain tiles (trees still stand on --dem heights). Without it, a
+    /// scene without a DEM gets a ground fitted to its trees' bases.
+    #[arg(long)]
+    pub(crate) no_terrain: bool,
+    /// Vertex spacing of the finest terrain level in metres (default: the
+    /// DEM's pixel size; coarser spacing: fewer bytes, smoother ground).
+    #[arg(long, value_name = "M")]
+    pub(crate) terrain_resolution: Option<f64>,
+    /// Trees outside every --dem (or on its nodata pixels): error stops the bake
+    /// and says how many and where; skip leaves them out (reported).
+    #[arg(long, value_enum, default_value_t = sylva_bake::bake::ground::OutsideDem::Error)]
+    pub(crate) outside_dem: sylva_bake::bake::ground::OutsideDem,
+    /// Orthophoto, an RGB(A) GeoTIFF (repeat for several; 8- or 16-bit grey,
+    /// RGB or RGBA, strips or tiles, deflate/LZW, GDAL nodata): draped on the
+    /// terrain as ground imagery, baked into one 256² JPEG per terrain tile
+    /// down to the photo's resolution. Needs terrain (--dem, or a fitted ground).
+    #[arg(long = "ortho", value_name = "FILE.tif")]
+    pub(crate) orthos: Vec<PathBuf>,
+    /// CRS of the --ortho files, when their GeoKeys name none (or name the wrong one).
+    #[arg(long, value_name = "EPSG:xxxx")]
+    pub(crate) ortho_crs: Option<String>,
+    /// Without --ortho the terrain gets a procedural forest floor as its
+    /// imagery (litter under the canopy, dry grass in clearings, soil on steep
+    /// slopes, from the trees' crowns); this leaves it out (fewer bytes: the
+    /// viewer's plain ground material by slope).
+    #[arg(long, conflicts_with = "orthos")]
+    pub(crate) plain_ground: bool,
+    #[command(flatten)]
+    pub(crate) pack: PackArgs,
+    /// Trees held in memory at once while tiling; larger inputs are partitioned
+    /// by tile into temporary bucket files inside --out (about 56 bytes per tree).
+    #[arg(long, default_value_t = 4_000_000, value_parser = clap::value_parser!(u64).range(1..))]
+    pub(crate) bucket_trees: u64,
+    #[command(flatten)]
+    pub(crate) output: OutArgs,
+}
+
+/// Trees written as a lon/lat CSV (`id,species,lat,lng,z,height`),
+/// reprojected from the scene CRS, a batch at a time.
+pub(crate) struct PlacementsCsv {
+    pub(crate) path: PathBuf,
+    pub(crate) w: std::io::BufWriter<std::fs::File>,
+    pub(crate) inverse: Reprojector,
+    pub(crate) names: Vec<String>,
+    pub(crate) heights: Vec<f32>,
+}
+
+impl PlacementsCsv {
+    pub(crate) fn create(
+        path: &std::path::Path,
+        species: &[(String, sylva_bake::gltf_import::ImportedModel)],
+        epsg: u32,
+    ) -> Result<Self> {
+        use std::io::Write as _;
+        let inverse = Reprojector::new(Crs::projected(epsg)?, &Crs::from_epsg(4326)?)?;
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            sylva_bake::out_dir::create_dir(parent)?;
+        }
+        let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        let mut w = std::io::BufWriter::new(file);
+        writeln!(w, "id,species,lat,lng,z,height")?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            w,
+            inverse,
+            names: species.iter().map(|(n, _)| n.clone()).collect(),
+            heights: species.iter().map(|(_, m)| m.height()).collect(),
+        })
+    }
+
+    pub(crate) fn write(&mut self, trees: &[SceneTree], origin: DVec3) -> Result<()> {
+        use std::io::Write as _;
+        for t in trees {
+            let (lon, lat) = self.inverse.apply(origin.x + t.pos.x, origin.y + t.pos.y)?;
+            let s = t.species as usize;
+            writeln!(
+                self.w,
+                "{},{},{lat:.8},{lon:.8},{:.2},{:.2}",
+                t.id,
+                self.names[s],
+                t.pos.z + origin.z,
+                t.scale * self.heights[s]
+            )
+            .with_context(|| format!("cannot write {}", self.path.display()))?;
+        }
+        Ok(())
+    }
+
+    pub(crate) fn finish(mut self) -> Result<PathBuf> {
+        use std::io::Write as _;
+        self.w.flush().with_context(|| format!("cannot write {}", self.path.display()))?;
+        Ok(self.path)
+    }
+}
+
+pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
+    if let Some(r) = args.terrain_resolution {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--terrain-resolution {r}: must be a positive number of metres");
+        }
+        if args.dems.is_empty() {
+            bail!("--terrain-resolution needs a --dem");
+        }
+    }
+    let started = Instant::now();
+    let pack_opts = args.pack.options()?;
+    let fixed_cell_size = args.pack.cell_size.map(|_| args.pack.cell_size(&[])).transpose()?;
+    // The output folder is checked before any long work.
+    let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
+    inputs.extend(args.allometry.as_deref());
+    inputs.extend(args.dems.iter().map(PathBuf::as_path));
+    inputs.extend(args.orthos.iter().map(PathBuf::as_path));
+    if !args.orthos.is_empty() && args.no_terrain {
+        bail!("--ortho drapes imagery on the terrain: it cannot be used with --no-terrain");
+    }
+    let orthos = sylva_bake::bake::imagery::Orthos::open(&args.orthos, args.ortho_crs.as_deref(), &log)?;
+    for m in &args.models {
+        inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
+    }
+    let allometry = match &args.allometry {
+        Some(path) => sylva_bake::allometry::Allometry::with_overrides(path)?,
+        None => sylva_bake::allometry::Allometry::built_in(),
+    };
+    let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
+    let species = import_models(args)?;
+    let map = species_map(args, &species)?;
+    // Placements, streamed: the file is read from disk on every pass, so inputs
+    // larger than memory bake in bounded memory.
+    let input_crs = args.input_crs.as_deref().map(Crs::parse).transpose()?;
+    let options = trees::TreeOptions {
+        placements: &args.placements,
+        read: sylva_bake::placements::ReadOptions {
+            encoding: args.encoding,
+            delimiter: args.delimiter,
+            swap_xy: args.swap_xy,
+            projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
+            columns: args.columns.clone(),
+            dbh_unit: args.dbh_unit,
+            attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
+        },
+        crs: args.crs.as_deref(),
+        input_crs: args.input_crs.as_deref(),
+        max_extent_km: args.max_extent_km,
+        default_height: args.default_height,
+        cell_size_m: fixed_cell_size,
+        bucket_trees: args.bucket_trees,
+        tile_cells: args.pack.tile_cells,
+        shard: args.pack.shard,
+        allometry: &allometry,
+        dems: &args.dems,
+        dem_crs: args.dem_crs.as_deref(),
+        z_mode: args.z,
+        outside_dem: args.outside_dem,
+        fit_ground: !args.no_terrain,
+    };
+    let placed = trees::place_trees(&options, &map, &out, &log)?;
+    let ground_height = placed.ground.as_ref().map(|(g, _)| {
+        let (ox, oy, oz) = (placed.origin_m.x, placed.origin_m.y, placed.origin_m.z);
+        move |x: f64, y: f64| g.height_at(x + ox, y + oy).map(|h| h - oz as f32)
+    });
+    let fitted_height = placed.fitted.as_ref().map(|(f, _)| move |x: f64, y: f64| Some(f.height(x, y)));
+    let fitted = placed.fitted.as_ref().zip(fitted_height.as_ref()).map(|((f, region), height)| {
+        sylva_bake::bake::terrain::TerrainSource {
+            height,
+            region: *region,
+            resolution_m: f.cell_m(),
+            source: "fitted to the trees' bases (no --dem)".into(),
+        }
+    });
+    let terrain = placed.ground.as_ref().zip(ground_height.as_ref()).map(|((g, region), height)| {
+        sylva_bake::bake::terrain::TerrainSource {
+            height,
+            region: *region,
+            resolution_m: args.terrain_resolution.unwrap_or_else(|| g.resolution_m()),
+            source: g.names(),
+        }
+    });
+    let terrain = if args.no_terrain { None } else { terrain.or(fitted) };
+    let orthos = if orthos.is_empty() { None } else { Some(orthos.in_scene(&placed.crs)?) };
+    let ortho_colour = orthos.as_ref().map(|o| {
+        let (ox, oy) = (placed.origin_m.x, placed.origin_m.y);
+        move |x: f64, y: f64| o.colour_at(x + ox, y + oy)
+    });
+    // Without an orthophoto: the forest floor by canopy and slope.
+    let height_fn: Option<&(dyn Fn(f64, f64) -> Option<f32> + Sync)> = terrain.as_ref().map(|t| t.height);
+    let floor_colour = height_fn.map(|height| {
+        let canopy = &placed.canopy;
+        move |x: f64, y: f64| {
+            let slope = sylva_bake::bake::ground_material::slope_of(height, x, y, 1.0);
+            height(x, y).map(|_| sylva_bake::bake::ground_material::forest_floor(x, y, canopy.at(x, y), slope))
+        }
+    });
+    let imagery = match (&orthos, &ortho_colour) {
+        (None, _) if !args.plain_ground => {
+            terrain.as_ref().zip(floor_colour.as_ref()).map(|(t, colour)| sylva_bake::bake::imagery::ImagerySource {
+                colour,
+                extent_m: t.region,
+                resolution_m: sylva_bake::bake::ground_material::FLOOR_RESOLUTION_M,
+                supersample: 2,
+                source: "procedural forest floor (canopy cover and slope)".into(),
+            })
+        }
+        (Some(o), Some(colour)) => {
+            let e = o.scene_extent().context("the --ortho extent cannot be projected into the scene CRS")?;
+            let (ox, oy) = (placed.origin_m.x, placed.origin_m.y);
+            Some(sylva_bake::bake::imagery::ImagerySource {
+                colour,
+                extent_m: [e[0] - ox, e[1] - oy, e[2] - ox, e[3] - oy],
+                resolution_m: o.resolution_m(),
+                supersample: 4,
+                source: o.names(),
+            })
+        }
+        _ => None,
+    };
+    let input = SceneInput {
+        terrain,
+        imagery,
+        cell_size_m: placed.cell_size_m,
+        species,
+        trees: placed.trees,
+        crs: placed.crs,
+        origin_m: placed.origin_m,
+        tile_cells: args.pack.tile_cells,
+        pack: pack_opts,
+        debug_dump: args.pack.debug_dump.clone(),
+        pack_cache: args.pack.pack_cache.clone(),
+        shard: args.pack.shard,
+        index_node_tiles: args.pack.index_node_tiles,
+        canopy_cell_m: args.pack.canopy_cell,
+        attributes: placed.attributes,
+        text_ids: placed.text_ids,
+    };
+    log(&format!("batching with {} m cells", input.cell_size_m));
+    let s = sylva_bake::bake::bake_scene(&input, out, &log)?;
+    report_summary(&s, &args.output.out, started);
+    Ok(())
+}
+
+/// The `--model` files, imported (names unique).
+pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::gltf_import::ImportedModel)>> {
+    let classifier =
+        Classifier { leaf_patterns: args.leaf_materials.clone(), branch_patterns: args.branch_materials.clone() };
+    let mut species: Vec<(String, sylva_bake::gltf_import::ImportedModel)> = Vec::new();
+    for m in &args.models {
+        let (name, path) = split_pair("--model", m)?;
+        if species.iter().any(|(n, _)| n.eq_ignore_ascii_case(name)) {
+            bail!("--model {name} is given twice");
+        }
+        let model = sylva_bake::gltf_import::import(std::path::Path::new(path), &classifier)?;
+        let (leaf, wood) = model.triangle_counts();
+        log(&format!(
+            "model {name}: {} materials, {leaf} leaf + {wood} branch triangles, height {:.2} (model units)",
+            model.materials.len(),
+            model.height()
+        ));
+        for note in &model.notes {
+            log(&format!("model {name}: {note}"));
+        }
+        species.push((name.to_string(), model));
+    }
+    Ok(species)
+}
+
+/// Which model each species label uses, from `--map` and `--default-model`.
+pub(crate) fn species_map(
+    args: &BakeArgs,
+    species: &[(String, sylva_bake::gltf_import::ImportedModel)],
+) -> Result<trees::SpeciesMap> {
+    let mut map = trees::SpeciesMap {
+        names: species.iter().map(|(n, _)| n.clone()).collect(),
+        heights: species.iter().map(|(_, m)| m.height()).collect(),
+        crown_widths: species.iter().map(|(_, m)| m.crown_width()).collect(),
+        maps: Vec::new(),
+        default: None,
+    };
+    for m in &args.maps {
+        let (pattern, name) = split_pair("--map", m)?;
+        let idx = map.model(name).with_context(|| format!("--map {m}: no --model named {name:?}"))?;
+        map.maps.push((pattern.to_string(), idx));
+    }
+    map.default = match &args.default_model {
+        Some(n) => Some(map.model(n).with_context(|| format!("--default-model {n}: no --model with that name"))?),
+        None if species.len() == 1 => {
+            log(&format!("one --model: every tree uses {} whatever its species label", species[0].0));
+            Some(0)
+        }
+        None => None,
+    };
+    Ok(map)
+}
