@@ -1,4 +1,4 @@
-// View-angle billboards (seed 004 §3.3): one quad per tree, facing the eye
+// View-angle billboards (Eichner 2024, §3.3): one quad per tree, facing the eye
 // horizontally and snapped to the baked elevation of the array layer chosen by
 // eq. 3.1; alpha-tested colour, relit with the baked normals under the same sun
 // and ambient as the meshes. Rust side: src/render/billboard.rs.
@@ -67,7 +67,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let az_step = 2.0 * PI / f32(azimuths);
     let rel = phi - tree.yaw;
     let az = u32(round(rel / az_step + f32(azimuths) * 4.0)) % azimuths;
-    // The quad is snapped to the baked elevation (seed 004 §3.3), so a layer switch
+    // The quad is snapped to the baked elevation (Eichner 2024, §3.3), so a layer switch
     // is masked by the matching perspective.
     let elevation = f32(k) * (PI * 0.5) / f32(angles - 1u);
     let dir = vec3<f32>(cos(elevation) * cos(phi), cos(elevation) * sin(phi), sin(elevation));

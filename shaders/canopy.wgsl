@@ -1,4 +1,4 @@
-// Canopy pass (issue 20): where trees are a pixel or two, the forest drawn from
+// Canopy pass: where trees are a pixel or two, the forest drawn from
 // its canopy rasters (scene::canopy selects them, render/canopy.rs uploads),
 // cross-faded with the trees the cull pass keeps (`canopy_weight`). One
 // instanced draw: a quad per raster cell at the crowns' height, its alpha the

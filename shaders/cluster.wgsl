@@ -1,4 +1,4 @@
-// Cluster pass (seed 002 §5): the ellipsoids and lines of one cluster level, one
+// Cluster pass (Clasen et al. 2010, §5): the ellipsoids and lines of one cluster level, one
 // indirect draw per (species × cluster tier). Six vertices per primitive: the
 // first `draw.cluster.y` primitives are ellipsoids, the next `draw.cluster.w`
 // lines. Both are ray-cast per pixel on a tight screen-space proxy and write
@@ -217,7 +217,7 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
     } else {
         v = pixel_ray(vec2<f32>(0.0))[1];
     }
-    // At least half a pixel wide, so thin lines do not break up (seed 002 §2).
+    // At least half a pixel wide, so thin lines do not break up (Clasen et al. 2010, §2).
     let px_m = select(1.0, length(mid), is_perspective()) / max(view.lod.x, 1e-6);
     let r = max(0.5 * (radii.x + radii.y) * tree.scale, 0.5 * px_m);
     let axis = b - a;

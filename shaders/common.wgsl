@@ -42,7 +42,7 @@ struct View {
     shadow_texel: vec4<f32>,
     // x: cascades in use (0 off), y: map size, z: PCF radius (texels), w: fade-out distance (m).
     shadow: vec4<f32>,
-    // The canopy cross-fade (issue 20; `canopy_weight`): x, y: the projected
+    // The canopy cross-fade (`canopy_weight`): x, y: the projected
     // heights of a batch's tallest tree (px, × quality) below which its trees are all / begin to be
     // replaced by the canopy rasters (x = 0: no canopy); zw unused.
     canopy: vec4<f32>,
@@ -93,8 +93,8 @@ fn species_cap(s: Species, r: u32) -> u32 { return s.slot_cap[r >> 2u][r & 3u]; 
 fn species_indices(s: Species, r: u32) -> u32 { return s.index_count[r >> 2u][r & 3u]; }
 
 // Representations, in order of detail. A slot is species * REPR_COUNT + repr.
-// 2 is the billboard cloud (seed 001), 3–6 the cluster tiers (ellipsoids +
-// lines of one level each, seed 002), 7 the far tier.
+// 2 is the billboard cloud (García et al. 2007), 3–6 the cluster tiers (ellipsoids +
+// lines of one level each, Clasen et al. 2010), 7 the far tier.
 const REPR_MESH0: u32 = 0u;
 const REPR_MESH1: u32 = 1u;
 const REPR_CLOUD: u32 = 2u;
@@ -202,7 +202,7 @@ fn whole_count(b: Batch) -> u32 {
     return select(b.instance_count, b.flags >> PARTIAL_COUNT_SHIFT, (b.flags & BATCH_PARTIAL) != 0u);
 }
 
-// Prefix thinning (seed 004 ch. 7). A density-ordered batch whose tallest tree
+// Prefix thinning (Eichner 2024, ch. 7). A density-ordered batch whose tallest tree
 // is below view.viewport.z px tall at the batch's nearest point draws only its
 // first n·f trees, f = (h / T)² (at least 1/64, and at least one tree): about as
 // many trees per screen area as at T px. The billboard pass scales the kept
@@ -304,7 +304,7 @@ fn canopy_weight(h_px: f32, view: View) -> f32 {
 // the tail of the batch's density order — tree i is kept while
 // i + ½ < count · (1 − w(h)), count · (1 − w) trees rounded — so a batch needs
 // only its first count · (1 − w(h)) trees at its nearest point, and the
-// stream fetches no more (issue 20). Written as
+// stream fetches no more. Written as
 // (count − i − ½) · (hi − lo) ≤ count · (hi − h) with only multiplications
 // and subtractions, which are exactly rounded on every GPU, so the CPU oracle
 // agrees bit for bit. Must match `canopy_drops` in src/render/cull.rs.
@@ -487,7 +487,7 @@ fn variation_tint(variation: f32) -> vec3<f32> {
     return vec3<f32>(1.0 + 0.12 * v, 1.0 + 0.08 * v, 1.0 - 0.05 * v);
 }
 
-// Debug colour of a representation (seed 004 Fig. 3.1 style).
+// Debug colour of a representation (Eichner 2024, Fig. 3.1 style).
 fn repr_color(repr: u32) -> vec3<f32> {
     switch repr {
         case 0u: { return vec3<f32>(0.9, 0.2, 0.2); }
@@ -527,7 +527,7 @@ struct IdOut {
     @builtin(frag_depth) depth: f32,
 };
 
-// Styles (issue 19), in the cull control buffer from byte 256 (the draw passes
+// Styles, in the cull control buffer from byte 256 (the draw passes
 // bind them from there): a header, the palette (64 packed RGBA8 colours,
 // entry 0 unused) and the flags at word 64, then, with STYLE_TREES, a byte per
 // pool instance: bits 0–5 its palette entry (0: its own colour), bit 6

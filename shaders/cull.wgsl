@@ -1,4 +1,4 @@
-// GPU culling and LoD selection over grouped batches (seed 004 §3.5, ch. 4).
+// GPU culling and LoD selection over grouped batches (Eichner 2024, §3.5, ch. 4).
 // Per frame: reset → cull_batches → prepare_dispatch → cull_instances → finalize.
 // The CPU oracle of the same logic is `cpu_select` in src/render/cull.rs.
 // Rust side: src/render/cull.rs.
@@ -184,7 +184,7 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     if lid == 0u {
         atomicAdd(&control[CONTROL_INSTANCES_TESTED], count);
     }
-    // A style's filter (issue 19): the trees it hides are culled here.
+    // A style's filter: the trees it hides are culled here.
     let styled = (atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_FLAGS]) & STYLE_TREES) != 0u;
     for (var i = lid; i < count; i += WORKGROUP) {
         let instance = b.instance_offset + i;

@@ -116,7 +116,7 @@ struct Surface {
     ao: f32,
 };
 
-// Shader-level LoD of the billboard cloud (seed 001 §5.1): list entries
+// Shader-level LoD of the billboard cloud (García et al. 2007, §5.1): list entries
 // evaluated per pixel a cell spans on screen; the rest come from the cell's
 // average (the low-resolution texture).
 const CLOUD_ENTRIES_PER_PX: f32 = 2.0;
@@ -129,7 +129,7 @@ struct CloudHit {
     ao: f32,
 };
 
-// A billboard cloud plane at plane coordinates `in.uv` (seed 001 §5): the
+// A billboard cloud plane at plane coordinates `in.uv` (García et al. 2007, §5): the
 // cell's list of leaves, front to back (back to front from behind), each
 // mapped to its own texture coordinates and alpha-tested like the mesh's
 // leaves; the first that passes is the pixel. Entries beyond the shader LoD

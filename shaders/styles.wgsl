@@ -1,4 +1,4 @@
-// The styles of the tree passes (issue 19): the cull control buffer from
+// The styles of the tree passes: the cull control buffer from
 // `STYLE_OFFSET_BYTES` (common.wgsl `style_of` and friends, the layout there).
 // Prepended after common.wgsl to the mesh, billboard, impostor and cluster
 // passes by `src/render/shaders.rs`; group 2 is their instance group.

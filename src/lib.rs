@@ -4,7 +4,7 @@
 //! * [`geo`] — lon/lat ↔ scene-relative metres through the scene CRS.
 //! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
 //! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
-//! * [`metrics`] — image error (multi-scale RMSE, seed 002 §4).
+//! * [`metrics`] — image error (multi-scale RMSE, Clasen et al. 2010, §4).
 //! * [`bench`] — `sylva bench`: run time against image error on camera paths (native).
 //! * [`scene`] — fetching, streaming and residency of scenes.
 //! * [`paths`] — relative paths from untrusted text (URIs, request paths).

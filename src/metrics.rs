@@ -1,4 +1,4 @@
-//! Image error: multi-scale RMSE (seed 002 §4).
+//! Image error: multi-scale RMSE (Clasen et al. 2010, §4).
 //!
 //! RMSE of the difference image at every power-of-two resolution (full, ½, ¼, …
 //! down to 1 pixel), averaged over the levels: single-pixel noise counts at the

@@ -1,4 +1,4 @@
-// Sylva's viewer against CesiumJS with the scene's 3D Tiles export (issue 21), side
+// Sylva's viewer against CesiumJS with the scene's 3D Tiles export, side
 // by side in one headless Chromium (SwiftShader: WebGPU for Sylva, WebGL for
 // Cesium, both CPU rasterisers; compare the two, not GPUs): the same camera (Sylva's
 // first view of the scene), 640x360, progressive refinement off, Sylva's shadows off (Cesium draws none by default). Per viewer: time to the first complete frame

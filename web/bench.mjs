@@ -1,4 +1,4 @@
-// Browser benchmark (issue 4): time to first complete frame and bytes fetched for a
+// Browser benchmark: time to first complete frame and bytes fetched for a
 // scene's default view, served by `sylva serve` on 127.0.0.1, in headless Chromium
 // (SwiftShader WebGPU: a CPU rasteriser ~13x slower than lavapipe; compare runs, not GPUs).
 // Usage: node web/bench.mjs SCENE_DIR [runs]    (after `make web` and `make release`)

@@ -1,4 +1,4 @@
-// Sylva as a layer of a MapLibre GL JS map (issue 21; docs/DEPLOY.md "In a MapLibre portal").
+// Sylva as a layer of a MapLibre GL JS map (docs/DEPLOY.md "In a MapLibre portal").
 //
 //   import { SylvaLayer } from './sylva-maplibre.js';
 //   const layer = new SylvaLayer({ scene: 'scene/scene.json' });

@@ -1,4 +1,4 @@
-//! Per-tree attributes (issue 19): the inventory's columns typed and coded for
+//! Per-tree attributes: the inventory's columns typed and coded for
 //! the tiles' `.attr` sidecars (`sylva::format::attributes`), in two streamed
 //! passes over the placements: the types, ranges and category lists, then
 //! every row's codes (held in memory, 4 bytes per column and row).

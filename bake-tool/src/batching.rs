@@ -1,4 +1,4 @@
-//! Grouped batches and tiles (seed 004 §3.4).
+//! Grouped batches and tiles (Eichner 2024, §3.4).
 //!
 //! Trees are grouped per species into square grid cells by spatial hashing
 //! (only occupied cells exist); each group is a batch with bounds for culling
@@ -202,7 +202,7 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
 }
 
 /// Orders the trees of a batch so that every prefix is an even thinning of the
-/// whole (seed 004 ch. 7): level by level, the not yet chosen tree nearest the
+/// whole (Eichner 2024, ch. 7): level by level, the not yet chosen tree nearest the
 /// centre of each square of a grid twice as fine as the level before; squares
 /// of one level in a scrambled order, so a prefix that ends inside a level is
 /// still spread over the cell. Deterministic.

@@ -1,4 +1,4 @@
-//! Canopy rasters at bake time (issue 20; format in `sylva::format::canopy`):
+//! Canopy rasters at bake time (format in `sylva::format::canopy`):
 //! a quadtree over the scene's square of tiles, each raster what its trees look
 //! like from far away — crown cover from above and from the side, albedo,
 //! height and ground per cell.

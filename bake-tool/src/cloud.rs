@@ -1,5 +1,6 @@
-//! Billboard clouds with multi-layer indirect texturing (seed 001, García,
-//! Patow, Szirmay-Kalos, Sbert): the leaves of a tree grouped into a few dozen
+//! Billboard clouds with multi-layer indirect texturing (García, Patow,
+//! Szirmay-Kalos, Sbert 2007, "Multi-layered indirect texturing for tree
+//! rendering"): the leaves of a tree grouped into a few dozen
 //! planes; each plane a grid of cells listing the leaves projected onto it,
 //! front to back, each list entry the affine map from the plane to the leaf's
 //! own texture (so leaves stay exact), and per cell the average of its leaves

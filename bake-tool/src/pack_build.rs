@@ -31,7 +31,7 @@ pub struct PackOptions {
     pub billboard_size: u32,
     /// Whether to add a simplified mesh level.
     pub simplified_level: bool,
-    /// Whether to add clustered-ellipsoid and line levels (seed 002).
+    /// Whether to add clustered-ellipsoid and line levels (Clasen et al. 2010).
     pub clusters: bool,
     /// EM starts per cluster level.
     pub cluster_tries: usize,
@@ -43,7 +43,7 @@ pub struct PackOptions {
     pub impostor_grid: u32,
     /// Impostor view side (power of two).
     pub impostor_size: u32,
-    /// Planes of the billboard cloud (seed 001); 0: no cloud.
+    /// Planes of the billboard cloud (García et al. 2007); 0: no cloud.
     pub cloud_planes: u32,
 }
 
@@ -52,7 +52,7 @@ pub struct PackOptions {
 pub enum FarBake {
     /// Multi-view impostors only.
     Impostors,
-    /// View-angle billboards only (seed 004).
+    /// View-angle billboards only (Eichner 2024).
     Billboards,
     /// Both (the viewer draws the impostors; benchmarks compare them).
     Both,

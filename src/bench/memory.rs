@@ -1,6 +1,6 @@
 //! `sylva bench --memory`: bytes per tree on disk, over the wire (gzip and
 //! brotli, as a static host serves pre-compressed files) and on the GPU, per
-//! species pack, against seed 004's eq. 4.1 for the same parameters.
+//! species pack, against Eichner 2024's eq. 4.1 for the same parameters.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -217,7 +217,7 @@ pub fn report(m: &MemoryModel) -> String {
     );
     let _ = writeln!(
         s,
-        "seed 004 eq. 4.1 for these n, t, m, a, r, l: {:.2} MB ({:.2} MB with its 64 B matrix per tree); Sylva's counterpart {:.2} MB",
+        "Eichner 2024, eq. 4.1 for these n, t, m, a, r, l: {:.2} MB ({:.2} MB with its 64 B matrix per tree); Sylva's counterpart {:.2} MB",
         mb(m.seed004_eq41_bytes),
         mb(m.seed004_with_transforms_bytes),
         mb(m.sylva_comparable_bytes)

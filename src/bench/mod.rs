@@ -1,9 +1,9 @@
 //! `sylva bench`: run time against image error on camera paths, every method on
-//! the same scene and the same frames (issue 6). Native only.
+//! the same scene and the same frames. Native only.
 //!
-//! Paths: `flyover` (seed 002 Fig. 10: overview, descent to eye height inside
+//! Paths: `flyover` (Clasen et al. 2010, Fig. 10: overview, descent to eye height inside
 //! the forest, towards a smaller group, turn back), `far` / `medium` / `close`
-//! (360° horizontal sweeps, seed 004 ch. 5) or a JSON file of keyframes.
+//! (360° horizontal sweeps, Eichner 2024, ch. 5) or a JSON file of keyframes.
 //! Methods: `reference` (every tree full mesh, no LoD, 2× supersampled),
 //! `mesh` (full mesh, per-tree culling), `per-tree` (Sylva's LoD, trees culled one
 //! by one), `billboard` (meshes near, billboards beyond), `ellipsoid` (meshes

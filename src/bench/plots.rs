@@ -63,7 +63,7 @@ where
 }
 
 /// Writes the plots as SVG into `dir`: `pareto.svg` (median error vs median GPU
-/// time per method), `frame_time.svg` (GPU ms along the path, like seed 002
+/// time per method), `frame_time.svg` (GPU ms along the path, like Clasen et al. 2010
 /// Fig. 11) and `temporal_noise.svg` (like Fig. 13).
 ///
 /// # Errors

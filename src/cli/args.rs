@@ -26,7 +26,7 @@ pub(crate) enum OnlyArg {
     Meshes,
     Ellipsoids,
     Billboards,
-    /// Billboard clouds (seed 001).
+    /// Billboard clouds (García et al. 2007).
     Clouds,
 }
 
@@ -37,7 +37,7 @@ pub(crate) enum PackReprArg {
     Billboard,
     /// Multi-view impostors.
     Impostor,
-    /// The billboard cloud (seed 001).
+    /// The billboard cloud (García et al. 2007).
     Cloud,
 }
 
@@ -91,7 +91,7 @@ pub(crate) enum Command {
         #[arg(long)]
         replot: bool,
         /// The memory model instead: bytes per tree on disk, gzip/brotli and GPU,
-        /// per pack, against seed 004 eq. 4.1 (writes memory.json; --scene a directory).
+        /// per pack, against Eichner 2024, eq. 4.1 (writes memory.json; --scene a directory).
         #[arg(long, conflicts_with_all = ["replot", "stress"])]
         memory: bool,
         /// The stress run instead: Sylva alone along --path, forwards and back,
@@ -175,7 +175,7 @@ Examples:
   sylva pick --scene ams --view medium --at 480,300
   sylva pick --scene ams --camera 121000,487000,60,0,-30 --size 1280x720 --at 640,360")]
     Pick(PickArgs),
-    /// Print the multi-scale RMSE (seed 002 §4, 0–1) between two images of the same size.
+    /// Print the multi-scale RMSE (Clasen et al. 2010, §4, 0–1) between two images of the same size.
     Compare {
         /// First image (PNG).
         a: PathBuf,

@@ -1,4 +1,4 @@
-//! Per-tree attributes (issue 19): the columns of the input inventory kept as
+//! Per-tree attributes: the columns of the input inventory kept as
 //! typed values, described once in the manifest ([`AttributeSchema`]) and
 //! stored per tile in a columnar sidecar (`tiles/<x>_<y>.attr`) in the tile's
 //! instance order, like the ids (`.ids`).

@@ -1,4 +1,4 @@
-//! Canopy rasters (`canopy/<level>/<x>_<y>.cnpy`, issue 20): what the forest
+//! Canopy rasters (`canopy/<level>/<x>_<y>.cnpy`): what the forest
 //! looks like from far away, for views where its trees are a pixel or two.
 //!
 //! A quadtree like the terrain's ([`CanopyEntry`] in the manifest): the root

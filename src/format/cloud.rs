@@ -1,4 +1,4 @@
-//! Billboard clouds with multi-layer indirect texturing (seed 001): the `CLDA`
+//! Billboard clouds with multi-layer indirect texturing (García et al. 2007): the `CLDA`
 //! section's records and the cloud's metadata.
 //!
 //! A cloud replaces a tree's leaves by a few dozen planes fitted to the

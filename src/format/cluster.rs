@@ -1,4 +1,4 @@
-//! Clustered-ellipsoid and line levels of a LoD pack (seed 002): the records of
+//! Clustered-ellipsoid and line levels of a LoD pack (Clasen et al. 2010): the records of
 //! the `ELPS` and `LINE` sections and their metadata.
 //!
 //! Records are uploaded to the GPU as they are: 24 bytes per ellipsoid (the
@@ -18,7 +18,7 @@ pub struct ClusterLevelMeta {
     /// Primitives in the level (records in the section with this level's index).
     pub count: u32,
     /// Projected tree height (px) from which this level is the right one: its
-    /// median primitive is then ~5 px wide (ellipsoids) or ~1 px (lines), seed 002 §6.
+    /// median primitive is then ~5 px wide (ellipsoids) or ~1 px (lines), Clasen et al. 2010, §6.
     pub select_px: f32,
     /// Multi-scale RMSE (0–1) against the full mesh, measured at bake time at `select_px`.
     pub error: f32,
@@ -65,7 +65,7 @@ pub struct Ellipsoid {
     pub radii: Vec3,
     /// Linear RGB albedo.
     pub color: Vec3,
-    /// Noise mip level `l_j = 0.5 (1 + log2 Σ_i w_ij)` (seed 002 §3.1).
+    /// Noise mip level `l_j = 0.5 (1 + log2 Σ_i w_ij)` (Clasen et al. 2010, §3.1).
     pub noise_level: f32,
 }
 

@@ -52,7 +52,7 @@ pub enum MaterialKind {
     Leaf,
     /// Trunk and branches.
     Branch,
-    /// The planes of a billboard cloud (seed 001): their fragments draw the
+    /// The planes of a billboard cloud (García et al. 2007): their fragments draw the
     /// leaves listed in the cloud's cells (`META.cloud`).
     Cloud,
 }

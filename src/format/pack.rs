@@ -67,7 +67,7 @@ pub mod kind {
     /// Line records of one cluster level (`index` = level), 16 bytes each.
     pub const LINES: [u8; 4] = *b"LINE";
     /// Billboard cloud geometry ([`super::MeshVertex`]): the coarsest mesh
-    /// level's wood and one quad per plane (seed 001). Optional.
+    /// level's wood and one quad per plane (García et al. 2007). Optional.
     pub const CLOUD_VERTICES: [u8; 4] = *b"CLVX";
     /// Billboard cloud indices (u32).
     pub const CLOUD_INDICES: [u8; 4] = *b"CLIX";
@@ -196,7 +196,7 @@ impl TextureArrayMeta {
     }
 }
 
-/// The view-angle billboard array (seed 004 §3.3, alg. 3.1).
+/// The view-angle billboard array (Eichner 2024, §3.3, alg. 3.1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BillboardMeta {
@@ -260,14 +260,14 @@ pub struct PackMeta {
     pub mesh_levels: Vec<MeshLevelMeta>,
     /// Billboard array, if baked.
     pub billboards: Option<BillboardMeta>,
-    /// Clustered-ellipsoid and line levels (seed 002), if baked.
+    /// Clustered-ellipsoid and line levels (Clasen et al. 2010), if baked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clusters: Option<super::cluster::ClusterMeta>,
     /// Multi-view impostors of the far field, if baked (drawn instead of the
     /// billboards where both are present, unless a viewer asks for billboards).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub impostors: Option<ImpostorMeta>,
-    /// The billboard cloud (seed 001), if baked.
+    /// The billboard cloud (García et al. 2007), if baked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cloud: Option<super::cloud::CloudMeta>,
 }

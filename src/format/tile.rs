@@ -1,6 +1,6 @@
 //! Tile files (`tiles/<x>_<y>.tile`): grouped batches of tree instances.
 //!
-//! A tile holds the batches (grid cell × species, seed 004 §3.4) of a square
+//! A tile holds the batches (grid cell × species, Eichner 2024, §3.4) of a square
 //! group of grid cells. Each batch has bounds for culling and a run of
 //! 8-byte instance records quantised relative to the batch origin. The batch
 //! and instance arrays are laid out exactly as the GPU reads them, so the
@@ -63,7 +63,7 @@ pub const MAX_XY_STEP_M: f32 = 0.01;
 /// horizontal error the 3D position error stays ≤ 1 cm.
 pub const MAX_Z_STEP_M: f32 = 0.016;
 
-/// One batch: the trees of one species in one grid cell (seed 004 §3.4).
+/// One batch: the trees of one species in one grid cell (Eichner 2024, §3.4).
 ///
 /// Must match `Batch` in `shaders/common.wgsl`.
 #[repr(C)]

@@ -1,4 +1,4 @@
-//! The bake's LoD policy (issue 18): which representation of a species is the
+//! The bake's LoD policy: which representation of a species is the
 //! default at a size, chosen from the measured front of error against time.
 //!
 //! At bake time each candidate (a cluster level, the billboard cloud, a

@@ -86,10 +86,10 @@ pub enum Repr {
     Mesh0 = 0,
     /// Mesh level 1 (simplified).
     Mesh1 = 1,
-    /// The billboard cloud (seed 001): the coarsest level's wood and the
+    /// The billboard cloud (García et al. 2007): the coarsest level's wood and the
     /// leaves on planes.
     Cloud = 2,
-    /// The finest cluster level in use (ellipsoids + lines, seed 002).
+    /// The finest cluster level in use (ellipsoids + lines, Clasen et al. 2010).
     Cluster0 = 3,
     /// The next cluster level.
     Cluster1 = 4,

@@ -1,4 +1,4 @@
-//! Billboard pass: view-angle billboards (seed 004 §3.3, eq. 3.1), one quad per
+//! Billboard pass: view-angle billboards (Eichner 2024, §3.3, eq. 3.1), one quad per
 //! tree, drawn with one indirect draw per species. Shader: `shaders/billboard.wgsl`.
 
 use super::layouts::{sampler_entry, texture_array_entry, SharedLayouts};

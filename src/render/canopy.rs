@@ -1,4 +1,4 @@
-//! The canopy pass (issue 20): the forest drawn from its canopy rasters where
+//! The canopy pass: the forest drawn from its canopy rasters where
 //! trees are a pixel or two (`shaders/canopy.wgsl`; selection in
 //! `crate::scene::canopy`). Rasters live in a pool of slots (uploaded once,
 //! the least recently drawn replaced); one instanced draw a frame, a quad per

@@ -1,5 +1,5 @@
 //! Headless renders of one species pack: the bake's view-angle billboard
-//! capture (seed 004 §3.3, alg. 3.1) and `sylva render --pack` previews.
+//! capture (Eichner 2024, §3.3, alg. 3.1) and `sylva render --pack` previews.
 //! Native only: both block on the GPU.
 
 use glam::{Mat4, Vec3};
@@ -315,7 +315,7 @@ pub enum TreeDraw<'a> {
     Billboard(&'a BillboardGpu),
     /// The multi-view impostors.
     Impostor(&'a ImpostorGpu),
-    /// The billboard cloud (seed 001).
+    /// The billboard cloud (García et al. 2007).
     Cloud(&'a MeshGpu),
 }
 

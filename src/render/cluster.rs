@@ -1,4 +1,4 @@
-//! Cluster pass: clustered ellipsoids and lines (seed 002 §5), ray-cast per
+//! Cluster pass: clustered ellipsoids and lines (Clasen et al. 2010, §5), ray-cast per
 //! pixel with correct depth, one indirect draw per species × cluster tier.
 //! Shader: `shaders/cluster.wgsl`. The noise cube maps are made here.
 

@@ -1,4 +1,4 @@
-//! Cull pass: GPU culling and LoD selection over grouped batches (seed 004
+//! Cull pass: GPU culling and LoD selection over grouped batches (Eichner 2024
 //! §3.5): batches (sphere, box, draw distance) → visible list → instances (fine
 //! sphere test, projected-size LoD with cross-fade bands) → compacted draw items
 //! and indirect draw arguments per (species × representation).

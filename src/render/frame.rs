@@ -66,7 +66,7 @@ pub fn read_pick(mapped: &[u8]) -> Option<u32> {
     id.checked_sub(1)
 }
 
-/// A style (issue 19) and what of it is on the GPU.
+/// A style and what of it is on the GPU.
 #[derive(Default)]
 struct StyleState {
     style: Option<crate::scene::style::TreeStyle>,

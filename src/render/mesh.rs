@@ -167,7 +167,7 @@ pub struct MeshLevelGpu {
 pub struct MeshGpu {
     /// Levels, finest first; `None` for a level not (yet) fetched.
     pub levels: Vec<Option<MeshLevelGpu>>,
-    /// The billboard cloud (seed 001), when the pack has one and it is fetched.
+    /// The billboard cloud (García et al. 2007), when the pack has one and it is fetched.
     pub cloud: Option<MeshLevelGpu>,
 }
 

@@ -1,4 +1,4 @@
-//! Alpha-aware mipmaps with alpha equalisation (seed 004 §3.3.2, alg. 3.2).
+//! Alpha-aware mipmaps with alpha equalisation (Eichner 2024, §3.3.2, alg. 3.2).
 //!
 //! Colours are averaged weighted by alpha, so transparent texels (whose colour
 //! is meaningless) do not darken edges; each level's alpha range is then mapped

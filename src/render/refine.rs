@@ -1,4 +1,4 @@
-//! Progressive refinement while the camera rests (seed 003): frames jittered
+//! Progressive refinement while the camera rests (Dietrich et al. 2005): frames jittered
 //! by sub-pixel offsets accumulate into an anti-aliased image, and the
 //! level-of-detail quality rises step by step (projected sizes ×2, ×4, …,
 //! leaves alpha-tested at full resolution) up to full meshes for what is in

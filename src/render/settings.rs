@@ -8,7 +8,7 @@ use super::Lighting;
 /// Which culling the cull pass does: Sylva's, or a baseline to compare with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum CullingMode {
-    /// Batches first (sphere, box, distance), then trees (seed 004).
+    /// Batches first (sphere, box, distance), then trees (Eichner 2024).
     #[default]
     Batches,
     /// Every resident tree tested on its own (the batch step skipped).
@@ -20,7 +20,7 @@ pub enum CullingMode {
 /// How to draw: quality, draw distance, transitions, debug colouring.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
-    /// Scales projected sizes before LoD selection (1, ½, ¼ like seed 002 Fig. 12).
+    /// Scales projected sizes before LoD selection (1, ½, ¼ like Clasen et al. 2010, Fig. 12).
     pub quality: f32,
     /// Fetch every tile whole, not the prefix levels prefix thinning draws (for
     /// comparisons; the image is the same).
@@ -50,7 +50,7 @@ pub struct RenderSettings {
     /// Culling (benchmark baselines).
     pub culling: CullingMode,
     /// Trees drawn at least this tall (px) but below the simplified mesh's
-    /// threshold use the clustered ellipsoids and lines of their pack (seed 002);
+    /// threshold use the clustered ellipsoids and lines of their pack (Clasen et al. 2010);
     /// smaller ones billboards. Infinity: no ellipsoids; 0: no billboards.
     pub cluster_min_px: f32,
     /// Which representation families may be drawn (benchmark baselines); the
@@ -61,7 +61,7 @@ pub struct RenderSettings {
     /// stay on — 2.2–2.5× cheaper cluster draws for +0.001 multi-scale RMSE
     /// (docs/BENCHMARKS.md); only interpenetrating primitives can sort wrongly.
     pub cluster_exact_depth: bool,
-    /// Prefix thinning (seed 004 ch. 7): a density-ordered batch whose trees are
+    /// Prefix thinning (Eichner 2024, ch. 7): a density-ordered batch whose trees are
     /// below this many pixels tall draws a prefix of them, scaled up to keep the
     /// canopy's coverage. 0: off.
     pub thin_px: f32,
@@ -135,7 +135,7 @@ pub struct Representations {
     pub clusters: bool,
     /// Billboards.
     pub billboards: bool,
-    /// Billboard clouds (seed 001).
+    /// Billboard clouds (García et al. 2007).
     pub clouds: bool,
 }
 

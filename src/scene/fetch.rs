@@ -262,7 +262,7 @@ mod tests {
 
     #[test]
     fn local_files_that_are_no_regular_files_are_refused_for_good() {
-        // Issue 42: a FIFO waited for a writer; a folder or a link loop was
+        // A FIFO waited for a writer; a folder or a link loop was
         // retried as if the network had failed. Refused, named, not retried.
         let dir = std::env::temp_dir().join(format!("sylva-fetch-refused-{}", std::process::id()));
         std::fs::create_dir_all(dir.join("folder.jpg")).unwrap();

@@ -33,7 +33,7 @@ pub(crate) struct NodeInfo {
     pub height_m: Option<f32>,
 }
 
-/// Where far trees give way to the canopy rasters (issue 20; set only while the
+/// Where far trees give way to the canopy rasters (set only while the
 /// scene's canopy is drawn): a node or tile whose tallest tree projects below
 /// `px_lo` pixels at its nearest point is drawn by the canopy alone, so the
 /// walk neither reads nor fetches it.

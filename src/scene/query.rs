@@ -1,4 +1,4 @@
-//! Search by attributes (issue 19): a filter over the per-tree attribute
+//! Search by attributes: a filter over the per-tree attribute
 //! columns (`format::attributes`) and the tree ids, matched tile by tile
 //! against the sidecars. The filter is JSON, as the browser API takes it:
 //!

@@ -1,4 +1,4 @@
-//! Styles (issue 19): colour trees by an attribute or by species, hide those
+//! Styles: colour trees by an attribute or by species, hide those
 //! a filter leaves out, highlight a selection. A style compiles, against the
 //! scene's attribute columns, into what the GPU reads: a palette of 63
 //! colours and one byte per tree (its palette entry, selected, hidden: the
@@ -517,7 +517,7 @@ mod tests {
             &mut out,
         );
         assert_eq!(out, [1 + 4, (1 + 12) | STYLE_SELECTED, 0]);
-        // Text ids (issue 42): selected by their text; a number by its number only.
+        // Text ids: selected by their text; a number by its number only.
         let texts = crate::format::TreeIds {
             numbers: vec![7, (1 << 63) + 2, (1 << 63) + 3],
             texts: vec![(1, "EY17080".into()), (2, "EY17081".into())],

@@ -1,4 +1,4 @@
-//! `sylva render` on broken scenes (issue 13): what can be drawn is drawn, the
+//! `sylva render` on broken scenes: what can be drawn is drawn, the
 //! stats list what failed, and the exit status says the render is incomplete
 //! unless `--allow-partial` accepts it. No false "error:" lines from the
 //! Vulkan loader on a headless machine.
@@ -215,7 +215,7 @@ fn pick_prints_the_tree_at_a_pixel_or_null() {
 
 #[test]
 fn scene_files_that_are_no_regular_files_fail_at_once_and_are_listed() {
-    // Issue 42: a FIFO waited for a writer (render never exited), a link to
+    // A FIFO waited for a writer (render never exited), a link to
     // /dev/zero read gigabytes, a folder or a link loop as a ground image
     // rendered grey with nothing listed. Every local scene file is read as a
     // regular file only: the rest draws, the render lists them and fails.

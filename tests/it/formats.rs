@@ -551,7 +551,7 @@ fn ids_round_trip_and_errors() {
     hostile[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
     let e = decode_ids("x.ids", &hostile).unwrap_err();
     assert!(matches!(e.problem, Problem::OutOfRange { .. }), "{e}");
-    // Version 2: text ids of some instances (issue 42: an inventory's own keys).
+    // Version 2: text ids of some instances (an inventory's own keys).
     let with_text = sylva::format::TreeIds {
         numbers: vec![7, (1 << 63) + 2, 9, (1 << 63) + 4],
         texts: vec![(1, "EY17080".into()), (3, "Baum Nr. 7 — Süd".into())],

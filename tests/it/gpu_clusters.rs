@@ -1,4 +1,4 @@
-//! GPU tests of the cluster pass (seed 002 §5): ray-cast ellipsoids and capsule
+//! GPU tests of the cluster pass (Clasen et al. 2010, §5): ray-cast ellipsoids and capsule
 //! lines against CPU ray casts of the same records, depth between intersecting
 //! primitives, and the three representations of one tree side by side.
 

@@ -1,4 +1,4 @@
-//! GPU tests of picking (issue 19) on `tests/fixtures/forest-small`: the id
+//! GPU tests of picking on `tests/fixtures/forest-small`: the id
 //! pass answers with the tree drawn at a pixel, through every representation,
 //! against a CPU oracle that projects each resident tree's bounds.
 //!

@@ -578,7 +578,7 @@ fn streaming_over_http_survives_failing_tiles() {
     assert_eq!(stats.tiles_resident as usize, urls.len() - 3, "the other tiles are resident");
     assert!(off.stream.is_settled());
     assert!(foliage_share(&img) > 0.1, "the rest of the scene renders");
-    // Ground images that answer 503 (issue 42): retried, given up on, listed — not grey and silent.
+    // Ground images that answer 503: retried, given up on, listed — not grey and silent.
     let listed: Vec<&str> = off.stream.failures().iter().map(|f| f.url.as_str()).collect();
     assert!(listed.iter().any(|u| u.contains("terrain/img/")), "a 503 image is given up on and listed: {listed:?}");
 }
@@ -1000,7 +1000,7 @@ fn far_mesh_leaves_keep_their_coverage() {
     assert!(adaptive < 0.02, "adaptive transparency off the reference's brightness by {adaptive:.4}");
 }
 
-/// Canopy rasters (issue 20): across the cross-fade from trees to the canopy,
+/// Canopy rasters: across the cross-fade from trees to the canopy,
 /// trees and canopy together darken the ground as much as the trees alone —
 /// no hole, no double-dark band — and far away the canopy draws alone.
 #[test]

@@ -1,4 +1,4 @@
-//! Alpha-aware mipmaps with equalisation (seed 004 alg. 3.2): coverage and colour
+//! Alpha-aware mipmaps with equalisation (Eichner 2024, alg. 3.2): coverage and colour
 //! must survive down-sampling, where naive box filtering loses both.
 
 use sylva::render::mips::{alpha_aware_mips, alpha_coverage, naive_mips, srgb_to_linear, ColorEncoding};

@@ -375,7 +375,7 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     assert.ok(drawn > 100, `trees drawn in the first view: ${drawn} (${JSON.stringify(stats.instances)})`);
     const share = await foliageShare(page, 'districts-first-view');
     assert.ok(share > 0.01, `foliage covers ${share} of the first view`);
-    // Search by attribute (issue 19): the CSV's height column, as the page,
+    // Search by attribute: the CSV's height column, as the page,
     // a scan of the rows and the native `sylva query` see it.
     const q = await page.evaluate(() => window.sylva.query({ height: [12, 14] }, { limit: 1000 }));
     const want = [...Array(500).keys()].filter((i) => [2, 3, 4].includes(i % 8));
@@ -387,7 +387,7 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     assert.deepEqual(native.bounds, q.bounds);
     const bad = await page.evaluate(() => window.sylva.query({ heigth: 1 }).then(() => 'resolved', (e) => String(e)));
     assert.match(bad, /not an attribute.*"height"/);
-    // Picking (issue 19): find a pixel with a tree, click it, and the popup shows its row.
+    // Picking: find a pixel with a tree, click it, and the popup shows its row.
     const hit = await page.evaluate(async () => {
       for (let y = 20; y < innerHeight - 10; y += 12) {
         for (let x = 10; x < innerWidth; x += 12) {

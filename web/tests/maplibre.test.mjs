@@ -1,4 +1,4 @@
-// Sylva as a MapLibre layer (issue 21): web/maplibre.html with a local basemap (never the
+// Sylva as a MapLibre layer: web/maplibre.html with a local basemap (never the
 // internet) and the fixture scene from `sylva serve`, in headless Chromium (SwiftShader
 // WebGPU and WebGL). After a drag (pointer events reach the map through the forest's
 // canvas), a zoom, a rotation and tilts, the forest's camera projects ground points where

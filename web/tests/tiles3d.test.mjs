@@ -1,4 +1,4 @@
-// The 3D Tiles export (issue 21): every GLB that `sylva-bake export-3dtiles`
+// The 3D Tiles export: every GLB that `sylva-bake export-3dtiles`
 // writes passes the Khronos glTF validator (npm gltf-validator) with no error,
 // its external mesh buffers and textures read through the validator too.
 import { test } from 'node:test';

@@ -44,7 +44,7 @@ pub(crate) enum Command {
     Bake(Box<BakeArgs>),
     /// Make a complete procedural demo scene (three species, UTM 33N, no input files).
     Demo(DemoArgs),
-    /// Benchmark the cluster-level bake (seed 002) of one model: timing and,
+    /// Benchmark the cluster-level bake (Clasen et al. 2010) of one model: timing and,
     /// per level, primitives, bytes, select_px and image error, as JSON.
     #[command(
         after_help = "Examples:\n  sylva-bake bench-clusters --model oak.glb\n  sylva-bake bench-clusters --leaves 27000"

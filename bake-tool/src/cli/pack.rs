@@ -13,7 +13,7 @@ use super::*;
 
 #[derive(Args, Clone)]
 pub(crate) struct PackArgs {
-    /// Billboard elevation angles over 0–90° (seed 004 alg. 3.1).
+    /// Billboard elevation angles over 0–90° (Eichner 2024, alg. 3.1).
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(2..=64))]
     pub(crate) billboard_angles: u32,
     /// Billboard azimuths around the tree.
@@ -23,7 +23,7 @@ pub(crate) struct PackArgs {
     #[arg(long, default_value_t = 128)]
     pub(crate) billboard_size: u32,
     /// Far-field representations to bake: multi-view impostors (blended views
-    /// over the hemisphere, the tree keeps its shape all round), seed 004's
+    /// over the hemisphere, the tree keeps its shape all round), Eichner 2024's
     /// view-angle billboards, or both (the viewer draws the impostors).
     #[arg(long, value_enum, default_value_t = FarBake::Both)]
     pub(crate) far_tier: FarBake,
@@ -33,7 +33,7 @@ pub(crate) struct PackArgs {
     /// Impostor resolution per view (power of two).
     #[arg(long, default_value_t = sylva_bake::pack_build::DEFAULT_IMPOSTOR_SIZE)]
     pub(crate) impostor_size: u32,
-    /// Planes of the billboard cloud (seed 001: leaves kept exact on planes
+    /// Planes of the billboard cloud (García et al. 2007: leaves kept exact on planes
     /// fitted to the foliage; e.g. 64). 0 bakes none. The viewer draws it only
     /// when asked (`sylva render --only clouds`, bench method `billboard-cloud`).
     #[arg(long, default_value_t = sylva_bake::pack_build::DEFAULT_CLOUD_PLANES, value_parser = clap::value_parser!(u32).range(0..=1024))]
@@ -44,7 +44,7 @@ pub(crate) struct PackArgs {
     /// Do not add the simplified mesh level.
     #[arg(long)]
     pub(crate) no_simplified_level: bool,
-    /// Do not add clustered-ellipsoid and line levels (seed 002).
+    /// Do not add clustered-ellipsoid and line levels (Clasen et al. 2010).
     #[arg(long)]
     pub(crate) no_clusters: bool,
     /// Do not bake each tree's own ambient occlusion (darker inside the crown,

@@ -1,4 +1,4 @@
-//! Expectation–maximisation of a Gaussian mixture over 3D points (seed 002 §3.1),
+//! Expectation–maximisation of a Gaussian mixture over 3D points (Clasen et al. 2010, §3.1),
 //! built to be fast and robust: responsibilities are truncated spatially (each
 //! point only sees its `neighbours` nearest components, found with a uniform
 //! grid over the means), the E step works in the log domain, covariances are

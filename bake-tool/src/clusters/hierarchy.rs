@@ -1,4 +1,4 @@
-//! The ellipsoid cluster hierarchy (seed 002 §3.1, alg. 1): for n = leaves/4,
+//! The ellipsoid cluster hierarchy (Clasen et al. 2010, §3.1, alg. 1): for n = leaves/4,
 //! leaves/16, … down to 1 cluster, run EM from several random starts, turn each
 //! result's fuzzy assignments into ellipsoids by weighted PCA, drop the tiny
 //! ones, calibrate their size, and keep the start whose image error against the
@@ -11,7 +11,7 @@ use super::em::{self, outer, EmOptions};
 use super::leaves::Leaf;
 use super::Rng;
 
-/// Projected width (px) of a level's median ellipsoid when the level is selected (seed 002 §6).
+/// Projected width (px) of a level's median ellipsoid when the level is selected (Clasen et al. 2010, §6).
 pub const ELLIPSOID_TARGET_PX: f32 = 5.0;
 
 /// Something that measures how a cluster level looks against the full tree.

@@ -1,4 +1,4 @@
-//! Leaves of an imported model as single ellipsoids (seed 002 §3.1, first step):
+//! Leaves of an imported model as single ellipsoids (Clasen et al. 2010, §3.1, first step):
 //! leaf triangles are grouped into leaves (triangles sharing welded vertices,
 //! then groups with the same centre, e.g. crossed cards), sampled uniformly over
 //! their surface with the leaf texture's alpha test applied, and summarised by

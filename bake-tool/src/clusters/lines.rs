@@ -1,4 +1,4 @@
-//! Branch lines (seed 002 §3.2): a line skeleton from the branch mesh and its
+//! Branch lines (Clasen et al. 2010, §3.2): a line skeleton from the branch mesh and its
 //! agglomerative simplification.
 //!
 //! Skeleton: every connected branch part (a tube in generated trees) is cut

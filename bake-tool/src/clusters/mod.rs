@@ -1,4 +1,5 @@
-//! Clustered-ellipsoid and line levels of detail (seed 002, Clasen, Paar, Prohaska).
+//! Clustered-ellipsoid and line levels of detail (Clasen, Paar, Prohaska 2010,
+//! "Level of Detail for Trees using Clustered Ellipsoids").
 //!
 //! - [`leaves`]: every leaf → one ellipsoid (uniform surface samples, alpha-tested
 //!   against the leaf texture, then PCA).

@@ -60,7 +60,7 @@ fn geojson_points_and_properties() {
     assert_eq!(set.rows[0].id, Some(42));
     assert_eq!(set.rows[2].species.as_deref(), Some("oak"));
     assert_eq!(set.report.skipped_total(), 2);
-    // A property without a name is no attribute (it stopped the bake late, issue 42).
+    // A property without a name is no attribute (it stopped the bake late).
     assert!(set.attribute_names.iter().all(|n| !n.is_empty()), "{:?}", set.attribute_names);
     assert!(set.attribute_names.iter().any(|n| n == "girth"), "{:?}", set.attribute_names);
     assert!(read_geojson(b"{\"type\":\"Topology\"}", &ReadOptions::default()).is_err());
@@ -241,7 +241,7 @@ fn named_columns_decide_over_detected_ones() {
 
 #[test]
 fn a_header_cell_with_a_line_break_keeps_every_name_with_its_values() {
-    // What a spreadsheet writes for Alt+Enter in a header cell (issue 42): the
+    // What a spreadsheet writes for Alt+Enter in a header cell: the
     // names after it must stay with their columns.
     let dir = std::env::temp_dir().join(format!("sylva-header-break-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -293,7 +293,7 @@ fn a_header_cell_with_a_line_break_keeps_every_name_with_its_values() {
 
 #[test]
 fn ids_are_numbers_only_as_numbers_write_themselves_and_text_otherwise() {
-    // Issue 42: an inventory's key is kept as given — a zero-padded "00123" is a key, not 123.
+    // An inventory's key is kept as given — a zero-padded "00123" is a key, not 123.
     assert_eq!((number_id("702"), text_id("702")), (Some(702), None));
     assert_eq!((number_id(" 702 "), text_id(" 702 ")), (Some(702), None));
     for key in ["00123", "+702", "702.0", "EY17080", "9223372036854775808", "18446744073709551616"] {

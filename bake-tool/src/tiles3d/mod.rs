@@ -1,5 +1,5 @@
 //! `sylva-bake export-3dtiles`: a baked scene as an OGC 3D Tiles 1.1 tileset
-//! that CesiumJS (or any 3D Tiles viewer) draws (issue 21; `docs/FORMAT.md`,
+//! that CesiumJS (or any 3D Tiles viewer) draws (`docs/FORMAT.md`,
 //! "3D Tiles export").
 //!
 //! - `tileset.json`: the hierarchy of the scene's index (its nodes, then its

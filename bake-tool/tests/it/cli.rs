@@ -197,7 +197,7 @@ fn bakes_the_shared_real_data() {
     // Heights 6–24 m on 51-unit models: scales well below 1.
     assert!(v["species"][1]["height_m"].as_f64().unwrap() > 50.0);
     // Cluster levels of the real trees: at one size, each finer level is closer to
-    // the full mesh than the coarser ones (seed 002 Fig. 1 / §3.1).
+    // the full mesh than the coarser ones (Clasen et al. 2010, Fig. 1 / §3.1).
     let ctx = sylva::render::GpuContext::new_headless_blocking().expect("a GPU adapter");
     for species in ["oak", "pine"] {
         let path = out.join(format!("species/{species}.pack"));
@@ -253,7 +253,7 @@ fn bakes_the_shared_real_data() {
         };
         let full = darkening(PackRepr::Mesh(0));
         assert!(full < 0.95, "{species}: occlusion darkens the full mesh to {full:.3}");
-        // The billboard cloud (seed 001) through the viewer's mesh pass: from the
+        // The billboard cloud (García et al. 2007) through the viewer's mesh pass: from the
         // side, obliquely and from above (the lists walked from the back), it
         // covers about the full mesh's pixels and is closer to it than the
         // billboards are.
@@ -435,7 +435,7 @@ fn sharded_bake_and_merge_equal_a_single_bake() {
     merge_copies_only_the_shards_own_files(&dir);
 }
 
-/// Issue 42, item 11: every value a bake writes is independent of how its
+/// Every value a bake writes is independent of how its
 /// tiles are split into shards. A generated inventory (three stands of two
 /// species in lon/lat at odd coordinates, ground fitted to given base
 /// heights, heights from the DBH for a third of the trees, text ids for a
@@ -503,7 +503,7 @@ fn any_shard_count_merges_byte_identical_to_one_bake() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Hostile shard folders (issue 42): `merge` copies only each shard's own
+/// Hostile shard folders: `merge` copies only each shard's own
 /// regular files, decoded first, and never writes into a shard.
 fn merge_copies_only_the_shards_own_files(dir: &Path) {
     let parts = ["part-0", "part-1", "part-2"];
@@ -1075,7 +1075,7 @@ fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
         let drawn: u64 = off.render(&cam, true).instances.values().sum();
         assert!(drawn > 100, "{view:?}: {drawn} trees drawn");
     }
-    // The close view stands among trees at eye height (issue 42: in the park it
+    // The close view stands among trees at eye height (in the park it
     // saw only far streets): near trees are drawn as meshes.
     let cam = off.named_camera(NamedView::Close, 60.0).unwrap();
     off.load_view(&cam, 60.0);
@@ -1091,7 +1091,7 @@ fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
     assert_eq!(drawn, 0, "the middle of the extent is empty: the test would catch a view aimed there");
 }
 
-/// Per-tree attributes (issue 19): the other columns of an inventory are typed,
+/// Per-tree attributes: the other columns of an inventory are typed,
 /// coded per tile in instance order (`.attr`), and every tree's values read
 /// back equal its row's; free text and empty columns are left out; the choice
 /// of columns and `--no-attributes` are honoured; a wrong name fails clearly.
@@ -1311,7 +1311,7 @@ fn geojson_properties_are_attributes() {
 
 /// An inventory whose ids are text: the bake says so, those trees are
 /// numbered by their row, and what a pick says of one names its row.
-/// Text ids (issue 42, item 8): an inventory whose ids are its own text keys
+/// Text ids: an inventory whose ids are its own text keys
 /// (Toronto's `STRUCTID` = `EY17080`) keeps them: pick (`describe_tree`),
 /// query by id, and the 3D Tiles export say the text; the row stays known.
 #[test]
@@ -1390,7 +1390,7 @@ fn text_ids_are_kept_and_found_by_pick_query_and_export() {
     assert_eq!(glb_texts.len(), 10, "every text id is in the exported GLBs: {glb_texts:?}");
 }
 
-/// Canopy rasters (issue 20): a quadtree of rasters whose cells cover what the
+/// Canopy rasters: a quadtree of rasters whose cells cover what the
 /// crowns cover, every level agreeing on a uniform stand.
 #[test]
 fn canopy_rasters_cover_what_the_crowns_cover() {
@@ -1541,7 +1541,7 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
     assert!(hi - lo < 0.03, "levels disagree on the stand's cover: {stand_covers:?}");
 }
 
-/// `demo --layout country` (issue 20): trees generated block by block into
+/// `demo --layout country`: trees generated block by block into
 /// bucket files give the same scene whatever the bucket count, shards merge
 /// to it, the placements CSV holds every tree, and the country reads as one
 /// from above (sea around it, forest on it) and from the medium view (over the
