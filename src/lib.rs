@@ -19,6 +19,7 @@ pub mod format;
 pub mod geo;
 pub mod lod;
 pub mod metrics;
+pub mod orbit;
 pub mod paths;
 pub mod render;
 pub mod scene;

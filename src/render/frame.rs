@@ -1,7 +1,7 @@
 //! One frame, the same in both hosts: [`Frame`] owns the renderer, the stream
 //! and the settings and runs stream step → prepare → cull pass → draw pass →
 //! counter readback → [`FrameStats`]. The hosts keep only their target (an
-//! offscreen texture in [`super::offscreen`], the canvas in `web.rs`) and how
+//! offscreen texture in [`super::offscreen`], the canvas in `web/`) and how
 //! they wait: natively a measured frame blocks until the GPU is done; the
 //! browser never blocks, so its GPU times and counters arrive a few frames late.
 

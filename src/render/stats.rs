@@ -1,5 +1,5 @@
 //! Frame statistics, gathered once for both hosts by [`super::frame::Frame`]:
-//! `sylva render --stats` (native) and `stats()` in the browser (`web.rs`) report
+//! `sylva render --stats` (native) and `stats()` in the browser (`web/`) report
 //! the same keys from the same code (docs/FORMAT.md §frame stats).
 
 use serde::Serialize;

@@ -3,8 +3,6 @@
 //! in the public JS API). Same renderer and streamer as natively; only the fetch
 //! (`fetch`) and the surface (a canvas) differ.
 
-use std::cell::{Cell, RefCell};
-use std::rc::Rc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 
@@ -15,89 +13,16 @@ use wasm_bindgen_futures::JsFuture;
 
 use crate::camera::Camera;
 use crate::geo::GeoFrame;
+use crate::orbit::Orbit;
 use crate::render::forest::{depth_texture, PoolConfig};
 use crate::render::frame::Frame;
-use crate::scene::{FetchError, Fetcher, RequestId, StreamEvent};
+use crate::scene::StreamEvent;
 
-type Done = Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
+mod fetch;
+mod query;
 
-/// Fetches with the browser's `fetch`; completions queue up until polled.
-#[derive(Default)]
-pub struct WebFetcher {
-    next: RequestId,
-    pending: Rc<Cell<usize>>,
-    done: Rc<RefCell<Done>>,
-}
-
-async fn fetch_bytes(url: &str, range: Option<crate::scene::fetch::ByteRange>) -> Result<Vec<u8>, FetchError> {
-    let transport = |e: JsValue| FetchError::Transport {
-        url: url.to_string(),
-        message: e.as_string().unwrap_or_else(|| format!("{e:?}")),
-    };
-    let window = web_sys::window().ok_or_else(|| transport(JsValue::from_str("no window")))?;
-    let promise = match range {
-        Some((a, b)) => {
-            // A single range is a CORS-safelisted header: no preflight on a static host.
-            let headers = web_sys::Headers::new().map_err(transport)?;
-            headers.set("Range", &format!("bytes={a}-{}", b.max(a + 1) - 1)).map_err(transport)?;
-            let init = web_sys::RequestInit::new();
-            init.set_headers(&headers);
-            window.fetch_with_str_and_init(url, &init)
-        }
-        None => window.fetch_with_str(url),
-    };
-    let resp: web_sys::Response = JsFuture::from(promise).await.map_err(transport)?.dyn_into().map_err(transport)?;
-    match resp.status() {
-        404 => return Err(FetchError::NotFound { url: url.to_string() }),
-        s if !(200..300).contains(&s) => return Err(FetchError::Status { url: url.to_string(), status: s }),
-        _ => {}
-    }
-    let buffer = JsFuture::from(resp.array_buffer().map_err(transport)?).await.map_err(transport)?;
-    Ok(js_sys::Uint8Array::new(&buffer).to_vec())
-}
-
-impl Fetcher for WebFetcher {
-    fn start_range(&mut self, url: &str, range: Option<crate::scene::fetch::ByteRange>) -> RequestId {
-        let id = self.next;
-        self.next += 1;
-        self.pending.set(self.pending.get() + 1);
-        let (pending, done, url) = (self.pending.clone(), self.done.clone(), url.to_string());
-        wasm_bindgen_futures::spawn_local(async move {
-            let result = fetch_bytes(&url, range).await;
-            done.borrow_mut().push((id, result));
-            pending.set(pending.get() - 1);
-        });
-        id
-    }
-
-    fn poll(&mut self) -> Done {
-        std::mem::take(&mut *self.done.borrow_mut())
-    }
-
-    fn in_flight(&self) -> usize {
-        self.pending.get() + self.done.borrow().len()
-    }
-}
-
-/// An orbit camera: a target on the ground, a distance, a heading and a pitch.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Orbit {
-    target: DVec3,
-    distance: f64,
-    heading: f64,
-    pitch: f64,
-}
-
-impl Orbit {
-    fn camera(&self) -> Camera {
-        let c = Camera { heading_rad: self.heading, pitch_rad: self.pitch, ..Camera::default() };
-        Camera {
-            eye_m: self.target - c.forward() * self.distance,
-            near_m: (self.distance * 0.002).clamp(0.05, 5.0) as f32,
-            ..c
-        }
-    }
-}
+pub use fetch::WebFetcher;
+pub use query::{query_may_match, query_tile, WebTileWalk};
 
 /// The browser viewer.
 #[wasm_bindgen]
@@ -139,150 +64,8 @@ enum PendingGeo {
 /// at a frame or two instead of growing with every animation frame.
 const MAX_FRAMES_AHEAD: u32 = 2;
 
-fn js_err(e: impl std::fmt::Display) -> JsValue {
+pub(crate) fn js_err(e: impl std::fmt::Display) -> JsValue {
     JsValue::from_str(&e.to_string())
-}
-
-/// Search by attributes, for `v.query` (web/sylva.js fetches the files):
-/// parses `schema` (the manifest's `attributes` as JSON, or `null`) and
-/// `filter`, and says whether a tile whose `attribute_codes` are `ranges`
-/// (JSON, or `null`) may hold a match.
-///
-/// # Errors
-/// A filter that does not fit the scene (the message says why).
-#[wasm_bindgen(js_name = queryMayMatch)]
-pub fn query_may_match(schema: &str, filter: &str, ranges: &str) -> Result<bool, JsValue> {
-    let (schema, filter) = query_parse(schema, filter)?;
-    let ranges: Option<Vec<Option<[u32; 2]>>> = serde_json::from_str(ranges).map_err(js_err)?;
-    Ok(filter.may_match(schema.as_ref(), ranges.as_deref()))
-}
-
-/// Matches one tile (its bytes, ids and attribute sidecar, as fetched) and
-/// returns `{count, ids, bounds, tiles: 1, skipped: 0}` as JSON, at most
-/// `limit` ids.
-///
-/// # Errors
-/// A filter that does not fit the scene, or a file that does not decode.
-#[wasm_bindgen(js_name = queryTile)]
-#[allow(clippy::too_many_arguments)]
-pub fn query_tile(
-    schema: &str,
-    filter: &str,
-    species: u32,
-    tile: &[u8],
-    ids: &[u8],
-    attr: Option<Vec<u8>>,
-    url: &str,
-    limit: usize,
-) -> Result<String, JsValue> {
-    let (schema, filter) = query_parse(schema, filter)?;
-    let attr_url = crate::format::attributes::attributes_url(url);
-    let files = [url, "ids", attr_url.as_str()];
-    let mut result = crate::scene::query::QueryResult::default();
-    crate::scene::query::query_tile(
-        schema.as_ref(),
-        &filter,
-        species,
-        [tile, ids],
-        attr.as_deref(),
-        files,
-        limit,
-        &mut result,
-    )
-    .map_err(js_err)?;
-    Ok(result.to_json().to_string())
-}
-
-/// The walk over a scene's tiles for `v.query` (web/sylva.js fetches each node
-/// it names): the same walker and checks as `sylva query`
-/// ([`crate::format::index::TileWalk`]).
-#[wasm_bindgen(js_name = TileWalk)]
-pub struct WebTileWalk {
-    walk: Option<crate::format::index::TileWalk>,
-    schema: String,
-    species: u32,
-}
-
-#[wasm_bindgen(js_class = TileWalk)]
-impl WebTileWalk {
-    /// Starts a walk from the manifest's bytes (`scene.json` as fetched).
-    ///
-    /// # Errors
-    /// A manifest that does not decode (the decoder checks every URL in it).
-    #[wasm_bindgen(constructor)]
-    pub fn new(manifest: &[u8]) -> Result<WebTileWalk, JsValue> {
-        let m = crate::format::Manifest::decode("scene.json", manifest).map_err(js_err)?;
-        Ok(Self {
-            schema: serde_json::to_string(&m.attributes).map_err(js_err)?,
-            species: u32::try_from(m.species.len()).unwrap_or(u32::MAX),
-            walk: Some(crate::format::index::TileWalk::new(&m)),
-        })
-    }
-
-    /// The manifest's attribute schema as JSON (`null` without), for `queryMayMatch` and `queryTile`.
-    #[must_use]
-    pub fn schema(&self) -> String {
-        self.schema.clone()
-    }
-
-    /// Species in the scene, for `queryTile`.
-    #[must_use]
-    pub fn species(&self) -> u32 {
-        self.species
-    }
-
-    /// The index node to fetch next (relative to `scene.json`), or undefined
-    /// when done; throws for a node that must not be fetched (met before, one
-    /// more than declared, deeper than declared).
-    ///
-    /// # Errors
-    /// That node, named.
-    pub fn next(&self) -> Result<Option<String>, JsValue> {
-        let Some(w) = self.walk.as_ref() else { return Ok(None) };
-        w.next_url().map(|u| u.map(str::to_string)).map_err(js_err)
-    }
-
-    /// Takes the bytes of the node `next` named.
-    ///
-    /// # Errors
-    /// A node that does not decode, is reached twice, or is more than the manifest declares.
-    pub fn feed(&mut self, bytes: &[u8]) -> Result<(), JsValue> {
-        self.walk.as_mut().ok_or_else(|| js_err("the walk is finished"))?.feed(bytes).map_err(js_err)
-    }
-
-    /// Every tile as JSON `[{url, ids_url, attr_url, attribute_codes}]`, row order; ends the walk.
-    ///
-    /// # Errors
-    /// Called twice.
-    pub fn tiles(&mut self) -> Result<String, JsValue> {
-        let walk = self.walk.take().ok_or_else(|| js_err("the walk is finished"))?;
-        let tiles: Vec<serde_json::Value> = walk
-            .finish()
-            .iter()
-            .map(|t| {
-                serde_json::json!({
-                    "url": t.url,
-                    "ids_url": t.ids_url,
-                    "attr_url": crate::format::attributes::attributes_url(&t.url),
-                    "attribute_codes": t.attribute_codes,
-                })
-            })
-            .collect();
-        Ok(serde_json::Value::Array(tiles).to_string())
-    }
-}
-
-fn query_parse(
-    schema: &str,
-    filter: &str,
-) -> Result<(Option<crate::format::attributes::AttributeSchema>, crate::scene::query::Filter), JsValue> {
-    let schema: Option<crate::format::attributes::AttributeSchema> = serde_json::from_str(schema).map_err(js_err)?;
-    if let Some(s) = &schema {
-        s.validate().map_err(js_err)?;
-    }
-    let filter: serde_json::Value = serde_json::from_str(filter).map_err(js_err)?;
-    let filter = crate::scene::query::Filter::parse(schema.as_ref(), &filter).map_err(js_err)?;
-    Ok((schema, filter))
 }
 
 #[wasm_bindgen]
@@ -558,21 +341,17 @@ impl Viewer {
     }
 
     fn camera(&self) -> Camera {
-        let mut cam = Camera { fov_y_rad: self.fov_y_rad, ..self.orbit.camera() };
         // No tunnelling: keep the eye above the ground near it; walking keeps eye height.
-        if let Some(z) = self.frame.stream.ground_height_at(cam.eye_m.x as f32, cam.eye_m.y as f32) {
-            let ground = f64::from(z);
-            cam.eye_m.z = if self.fly { ground + 1.7 } else { cam.eye_m.z.max(ground + 1.5) };
-        }
-        cam
+        let eye = self.orbit.camera().eye_m;
+        let ground = self.frame.stream.ground_height_at(eye.x as f32, eye.y as f32).map(f64::from);
+        Camera { fov_y_rad: self.fov_y_rad, ..self.orbit.camera_over(ground, self.fly) }
     }
 
     /// Walking mode on or off. In walking mode `look` turns the head and `walk` moves.
     pub fn set_fly(&mut self, on: bool) {
         if on && !self.fly {
             // Stand where the camera is looking, facing the same way, nearly level.
-            let target = self.orbit.target;
-            self.orbit = Orbit { target, distance: 3.0, heading: self.orbit.heading, pitch: 0.05 };
+            self.orbit = self.orbit.standing();
         }
         self.fly = on;
     }
@@ -584,18 +363,12 @@ impl Viewer {
 
     /// Turns the view around the eye by `d_heading`, `d_pitch` radians.
     pub fn look(&mut self, d_heading: f64, d_pitch: f64) {
-        let eye = self.orbit.camera().eye_m;
-        self.orbit.heading += d_heading;
-        self.orbit.pitch = (self.orbit.pitch + d_pitch).clamp(-1.5, 1.2);
-        let forward =
-            Camera { heading_rad: self.orbit.heading, pitch_rad: self.orbit.pitch, ..Camera::default() }.forward();
-        self.orbit.target = eye + forward * self.orbit.distance;
+        self.orbit.look(d_heading, d_pitch);
     }
 
     /// Moves the eye `forward_m` along the heading and `right_m` to the side.
     pub fn walk(&mut self, forward_m: f64, right_m: f64) {
-        let (s, c) = self.orbit.heading.sin_cos();
-        self.orbit.target += DVec3::new(s * forward_m + c * right_m, c * forward_m - s * right_m, 0.0);
+        self.orbit.walk(forward_m, right_m);
     }
 
     /// Sets a geographic camera: WGS 84 lon/lat (degrees), height (metres, in the
@@ -646,18 +419,9 @@ impl Viewer {
                 return;
             }
         };
-        let d = at - eye;
-        let distance = d.length();
-        if !(distance.is_finite() && distance > 1e-6) {
-            return;
-        }
-        let horizontal = d.truncate().length();
-        let heading = if horizontal > 1e-7 * distance {
-            d.x.atan2(d.y)
-        } else {
-            geo.grid_heading(eye, bearing_deg).unwrap_or(bearing_deg.to_radians())
-        };
-        self.orbit = Orbit { target: at, distance, heading, pitch: d.z.atan2(horizontal) };
+        let straight_down = || geo.grid_heading(eye, bearing_deg).unwrap_or(bearing_deg.to_radians());
+        let Some(orbit) = Orbit::looking_at(eye, at, straight_down) else { return };
+        self.orbit = orbit;
         self.placed = true;
     }
 
@@ -667,16 +431,10 @@ impl Viewer {
     /// is known (a map layer's tests compare it with the map's projection).
     pub fn project_geo(&self, lon: f64, lat: f64, height: f64) -> String {
         let Some(Ok(p)) = self.geo.as_ref().map(|g| g.to_local(lon, lat, height)) else { return "null".into() };
-        let cam = self.camera();
-        let view = cam.view_data(self.config.width, self.config.height);
-        let clip = view.clip_from_eye * (p - cam.eye_m).as_vec3().extend(1.0);
-        if clip.w <= 1e-6 {
-            return "null".into();
+        match crate::orbit::project(&self.camera(), self.config.width, self.config.height, p) {
+            Some(xy) => serde_json::json!(xy).to_string(),
+            None => "null".into(),
         }
-        let (w, h) = (f64::from(self.config.width), f64::from(self.config.height));
-        let x = (f64::from(clip.x / clip.w) * 0.5 + 0.5) * w;
-        let y = (0.5 - f64::from(clip.y / clip.w) * 0.5) * h;
-        serde_json::json!([x, y]).to_string()
     }
 
     /// The WGS 84 box `[west, south, east, north]` (degrees) around where the
@@ -748,35 +506,23 @@ impl Viewer {
 
     /// Orbits around the target: `dx`, `dy` in radians of heading and pitch.
     pub fn orbit(&mut self, d_heading: f64, d_pitch: f64) {
-        self.orbit.heading += d_heading;
-        self.orbit.pitch = (self.orbit.pitch + d_pitch).clamp(-1.55, 0.6);
+        self.orbit.orbit(d_heading, d_pitch);
     }
 
     /// Moves the target in the view's ground plane by screen fractions of the distance.
     pub fn pan(&mut self, right: f64, forward: f64) {
-        let (s, c) = self.orbit.heading.sin_cos();
-        let d = self.orbit.distance;
-        self.orbit.target += DVec3::new(c * right * d + s * forward * d, -s * right * d + c * forward * d, 0.0);
+        self.orbit.pan(right, forward);
     }
 
     /// Multiplies the distance to the target (< 1 zooms in).
     pub fn zoom(&mut self, factor: f64) {
-        self.orbit.distance = (self.orbit.distance * factor.clamp(0.2, 5.0)).clamp(2.0, 200_000.0);
+        self.orbit.zoom(factor);
     }
 
     /// Sets the camera: eye position relative to the scene origin (metres) and
     /// heading/pitch in degrees. The orbit target is placed ahead of the eye.
     pub fn set_camera(&mut self, x: f64, y: f64, z: f64, heading_deg: f64, pitch_deg: f64) {
-        let cam = Camera {
-            heading_rad: heading_deg.to_radians(),
-            pitch_rad: pitch_deg.clamp(-89.0, 34.0).to_radians(),
-            ..Camera::default()
-        };
-        let distance =
-            if pitch_deg < -5.0 { (z - self.orbit.target.z).abs().max(10.0) / (-cam.pitch_rad).sin() } else { 100.0 };
-        let eye = DVec3::new(x, y, z);
-        self.orbit =
-            Orbit { target: eye + cam.forward() * distance, distance, heading: cam.heading_rad, pitch: cam.pitch_rad };
+        self.orbit = Orbit::posed(DVec3::new(x, y, z), heading_deg, pitch_deg, self.orbit.target.z);
         self.placed = true;
     }
 
