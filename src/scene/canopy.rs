@@ -12,15 +12,15 @@
 //! resident yet (a tile still loading, an index node not read, a tile given up
 //! on or beyond the pools' reach): then the raster *stands in* for them at full
 //! cover, refined like any other, so a view streaming in shows the forest, not
-//! bare ground. Memory is bounded by
-//! [`CanopyTree::max_resident`] rasters (least recently used evicted, never the
+//! bare ground. Memory is bounded by its residency's budget (1,024 rasters;
+//! [`super::quadtree::QuadResidency`]: least recently used evicted, never the
 //! root nor one used this frame).
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
+use super::quadtree::{QuadKey, QuadLayer, QuadResidency};
 use crate::camera::ViewData;
 use crate::format::canopy::{Canopy, CanopyEntry, CanopyKey};
 
@@ -50,28 +50,14 @@ fn meets_gap(o: [f64; 2], size: f64, gaps: &[[f32; 4]]) -> bool {
     })
 }
 
-#[derive(Debug, Clone)]
-enum Slot {
-    Loading,
-    Broken,
-    /// `low`: its cells' lowest mean tree height (m).
-    Resident {
-        canopy: Arc<Canopy>,
-        low: f32,
-        used: u64,
-    },
-}
-
 /// The canopy rasters of one scene: what is resident and what a view selects.
 #[derive(Debug)]
 pub struct CanopyTree {
     entry: CanopyEntry,
-    slots: HashMap<CanopyKey, Slot>,
-    frame: u64,
+    /// The rasters resident, asked for and waited for (at most 1,024 kept, 32 KB each).
+    pub res: QuadResidency<Canopy>,
     /// The walk's stack: a raster, and whether it may meet a gap (its parent did).
     stack: Vec<(CanopyKey, bool)>,
-    /// Most rasters kept decoded (32 KB each).
-    pub max_resident: usize,
 }
 
 /// Distance from the eye (origin) to the eye-relative box `lo..hi` at its
@@ -86,7 +72,7 @@ impl CanopyTree {
     /// A tree for the manifest's canopy entry; nothing resident yet.
     #[must_use]
     pub fn new(entry: CanopyEntry) -> Self {
-        Self { entry, slots: HashMap::new(), frame: 0, stack: Vec::new(), max_resident: 1024 }
+        Self { entry, res: QuadResidency::new(1024), stack: Vec::new() }
     }
 
     /// The manifest entry.
@@ -98,40 +84,19 @@ impl CanopyTree {
     /// Rasters decoded and kept.
     #[must_use]
     pub fn resident(&self) -> usize {
-        self.slots.values().filter(|s| matches!(s, Slot::Resident { .. })).count()
+        self.res.resident()
     }
 
     /// Whether the root's raster is resident: until then trees are drawn at every size.
     #[must_use]
     pub fn ready(&self) -> bool {
-        matches!(self.slots.get(&(0, 0, 0)), Some(Slot::Resident { .. }))
+        self.res.get((0, 0, 0)).is_some()
     }
 
     /// Whether the root's raster is not yet resident nor given up on.
     #[must_use]
     pub fn root_loading(&self) -> bool {
-        !matches!(self.slots.get(&(0, 0, 0)), Some(Slot::Resident { .. } | Slot::Broken))
-    }
-
-    /// Whether raster `key` is neither resident, requested nor broken.
-    #[must_use]
-    pub fn is_unknown(&self, key: CanopyKey) -> bool {
-        !self.slots.contains_key(&key)
-    }
-
-    /// Marks raster `key` as requested.
-    pub fn mark_loading(&mut self, key: CanopyKey) {
-        self.slots.insert(key, Slot::Loading);
-    }
-
-    /// Gives up on raster `key` (its parent is drawn instead).
-    pub fn mark_broken(&mut self, key: CanopyKey) {
-        self.slots.insert(key, Slot::Broken);
-    }
-
-    /// Forgets a failed request so it is asked for again.
-    pub fn forget(&mut self, key: CanopyKey) {
-        self.slots.remove(&key);
+        !self.res.is_done((0, 0, 0))
     }
 
     /// Stores raster `key`, checked to be the square the key names.
@@ -139,36 +104,15 @@ impl CanopyTree {
     /// # Errors
     /// The raster's square or cell count is not the key's.
     pub fn insert(&mut self, key: CanopyKey, canopy: Canopy) -> Result<(), String> {
-        let (l, x, y) = key;
-        let [ox, oy] = self.entry.origin_of(l, x, y);
-        let size = self.entry.size_m(l);
-        let near = |a: f64, b: f32| (a - f64::from(b)).abs() <= 1e-3 * size.max(1.0);
-        if canopy.cells != self.entry.cells
-            || !near(ox, canopy.origin_m[0])
-            || !near(oy, canopy.origin_m[1])
-            || !near(size, canopy.size_m)
-            || (l + 1 >= self.entry.levels && canopy.children != 0)
-        {
-            return Err(format!(
-                "raster {l}/{x}/{y} covers {:?} + {} m in {} cells, not the {} m square at {:?} in {}",
-                canopy.origin_m,
-                canopy.size_m,
-                canopy.cells,
-                size,
-                [ox, oy],
-                self.entry.cells
-            ));
-        }
-        let low = canopy.height_min_m;
-        self.slots.insert(key, Slot::Resident { canopy: Arc::new(canopy), low, used: self.frame });
-        self.evict();
+        check(&self.entry, key, &canopy)?;
+        self.res.insert(key, canopy);
         Ok(())
     }
 
     /// Selects the rasters to draw for `view` (eye at `eye_m` relative to the
     /// scene origin), refining while cells project above `cell_px` pixels
-    /// (`px_per_m`: pixels per metre at 1 m, × quality); appends the rasters to
-    /// fetch, nearest first. `gaps` (`[x0, y0, x1, y1]`, metres) are where
+    /// (`px_per_m`: pixels per metre at 1 m, × quality); the rasters to fetch,
+    /// nearest first, into `res.wanted`. `gaps` (`[x0, y0, x1, y1]`, metres) are where
     /// trees the view wants are not resident: rasters meeting one stand in.
     #[allow(clippy::too_many_arguments)]
     pub fn select(
@@ -180,25 +124,23 @@ impl CanopyTree {
         px_hi: f32,
         gaps: &[[f32; 4]],
         draws: &mut Vec<CanopyDraw>,
-        wanted: &mut Vec<(f32, CanopyKey)>,
     ) {
-        self.frame += 1;
+        self.res.next_frame();
         draws.clear();
+        let mut wanted = std::mem::take(&mut self.res.wanted);
+        wanted.clear();
         let root = (0u8, 0u32, 0u32);
-        if self.is_unknown(root) {
+        if self.res.is_unknown(root) {
             wanted.push((0.0, root));
         }
         let mut stack = std::mem::take(&mut self.stack);
         stack.clear();
         stack.push((root, !gaps.is_empty()));
         while let Some((key, may_meet)) = stack.pop() {
-            let frame = self.frame;
-            let Some(Slot::Resident { canopy, low, .. }) = self.slots.get(&key) else { continue };
-            let (canopy, low) = (Arc::clone(canopy), *low);
+            let Some(canopy) = self.res.get(key).cloned() else { continue };
+            let low = canopy.height_min_m;
             let Some((d, far)) = self.raster_distance(view, eye_m, key, &canopy) else { continue };
-            if let Some(Slot::Resident { used, .. }) = self.slots.get_mut(&key) {
-                *used = frame;
-            }
+            self.res.use_now(key);
             let (l, x, y) = key;
             // (A raster meets only gaps its parent meets: checked down from the root.)
             let stand_in = may_meet && meets_gap(self.entry.origin_of(l, x, y), self.entry.size_m(l), gaps);
@@ -216,17 +158,14 @@ impl CanopyTree {
                         continue;
                     }
                     let child = (l + 1, 2 * x + (i & 1), 2 * y + (i >> 1));
-                    match self.slots.get_mut(&child) {
+                    if self.res.use_now(child).is_some() {
                         // Kept while its siblings load (not evicted under them).
-                        Some(Slot::Resident { used, .. }) => *used = frame,
-                        Some(Slot::Loading | Slot::Broken) => ready = false,
-                        None => {
-                            // Only children in view are waited for.
-                            if let Some((dc, _)) = self.square_distance(view, eye_m, child, &canopy) {
-                                ready = false;
-                                wanted.push((dc, child));
-                            }
-                        }
+                    } else if !self.res.is_unknown(child) {
+                        ready = false; // asked for, or given up on
+                    } else if let Some((dc, _)) = self.square_distance(view, eye_m, child, &canopy) {
+                        // Only children in view are waited for.
+                        ready = false;
+                        wanted.push((dc, child));
                     }
                 }
                 if ready {
@@ -241,6 +180,7 @@ impl CanopyTree {
             draws.push(CanopyDraw { key, canopy, stand_in });
         }
         wanted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        self.res.wanted = wanted;
         self.stack = stack;
     }
 
@@ -258,26 +198,51 @@ impl CanopyTree {
     fn square_distance(&self, view: &ViewData, eye_m: DVec3, key: CanopyKey, parent: &Canopy) -> Option<(f32, f32)> {
         self.raster_distance(view, eye_m, key, parent)
     }
+}
 
-    /// Drops the least recently used rasters beyond [`Self::max_resident`]
-    /// (never the root, never one used this frame).
-    fn evict(&mut self) {
-        let resident = self.resident();
-        if resident <= self.max_resident {
-            return;
-        }
-        let mut old: Vec<(u64, CanopyKey)> = self
-            .slots
-            .iter()
-            .filter_map(|(k, s)| match s {
-                Slot::Resident { used, .. } if k.0 > 0 && *used < self.frame => Some((*used, *k)),
-                _ => None,
-            })
-            .collect();
-        // Oldest first; of one frame the finest first (a child before its parent).
-        old.sort_unstable_by_key(|&(used, k)| (used, std::cmp::Reverse(k.0), k.1, k.2));
-        for (_, k) in old.into_iter().take(resident - self.max_resident) {
-            self.slots.remove(&k);
-        }
+/// Whether `canopy` is the raster of the square `key` names, of the entry's cells.
+fn check(entry: &CanopyEntry, key: CanopyKey, canopy: &Canopy) -> Result<(), String> {
+    let (l, x, y) = key;
+    let [ox, oy] = entry.origin_of(l, x, y);
+    let size = entry.size_m(l);
+    let near = |a: f64, b: f32| (a - f64::from(b)).abs() <= 1e-3 * size.max(1.0);
+    if canopy.cells != entry.cells
+        || !near(ox, canopy.origin_m[0])
+        || !near(oy, canopy.origin_m[1])
+        || !near(size, canopy.size_m)
+        || (l + 1 >= entry.levels && canopy.children != 0)
+    {
+        return Err(format!(
+            "raster {l}/{x}/{y} covers {:?} + {} m in {} cells, not the {} m square at {:?} in {}",
+            canopy.origin_m,
+            canopy.size_m,
+            canopy.cells,
+            size,
+            [ox, oy],
+            entry.cells
+        ));
+    }
+    Ok(())
+}
+
+impl QuadLayer for CanopyTree {
+    type Tile = Canopy;
+
+    fn residency(&self) -> &QuadResidency<Canopy> {
+        &self.res
+    }
+
+    fn residency_mut(&mut self) -> &mut QuadResidency<Canopy> {
+        &mut self.res
+    }
+
+    fn url(&self, key: QuadKey) -> String {
+        self.entry.raster_url(key.0, key.1, key.2)
+    }
+
+    fn decode(&self, url: &str, key: QuadKey, bytes: &[u8]) -> Result<Canopy, String> {
+        let canopy = Canopy::decode(url, bytes).map_err(|e| e.to_string())?;
+        check(&self.entry, key, &canopy).map_err(|e| format!("{url}: {e}"))?;
+        Ok(canopy)
     }
 }

@@ -14,7 +14,7 @@
 //! Each frame [`Imagery::attach`] gives every drawn terrain tile the image of
 //! the finest tile at or above it that is resident (finer tiles drape a part
 //! of it: an offset and scale in the tile's uv), and asks for the image the
-//! tile should have. At most [`Imagery::max_resident`] images are kept (least
+//! tile should have. At most 96 images are kept (least
 //! recently used dropped; images drawn this frame and the root's are kept
 //! even beyond it). One image of an XYZ source may start several source
 //! fetches at once (up to 16, usually 1–4), beyond the stream's in-flight
@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::quadtree::{ancestor, uv_in, QuadKey as TerrainKey};
+use super::quadtree::{ancestor, uv_in, QuadKey as TerrainKey, QuadResidency, RetryPolicy};
 use crate::format::imagery::{decode_image, Rgba8};
 use crate::format::terrain::TerrainEntry;
 use crate::geo::GeoFrame;
@@ -126,28 +126,6 @@ pub enum ImageryFetch {
 }
 
 #[derive(Debug)]
-enum Slot {
-    /// Asked for, after `attempts` failed attempts.
-    Loading {
-        attempts: u32,
-    },
-    /// A failed fetch (the attempts so far) waiting for its retry at `due_s`.
-    Waiting {
-        attempts: u32,
-        due_s: f64,
-    },
-    /// Asked again after `attempts` failures.
-    Retrying {
-        attempts: u32,
-    },
-    Broken,
-    Resident {
-        tile: Arc<ImageryTile>,
-        used: u64,
-    },
-}
-
-#[derive(Debug)]
 enum SourceSlot {
     Loading,
     Failed,
@@ -170,29 +148,41 @@ struct Compose {
 }
 
 /// The imagery of one scene: what is resident and which images the drawn tiles drape.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Imagery {
     choice: ImageryChoice,
     generation: u32,
-    slots: HashMap<TerrainKey, Slot>,
+    /// The images resident, asked for and waited for (at most 96 kept, 256 KB each).
+    res: QuadResidency<ImageryTile>,
     pending: HashMap<TerrainKey, Compose>,
     source: HashMap<(u8, u32, u32), SourceSlot>,
-    frame: u64,
     /// The image each drawn tile should drape (for an XYZ source: worked out
     /// once per tile, as it takes projections).
     targets: HashMap<TerrainKey, Option<TerrainKey>>,
-    /// Most images kept decoded (256 KB each).
-    pub max_resident: usize,
     /// A drawn tile's image (or the root image it starts with) waits for a
     /// retry: set by [`Self::attach`].
     waiting_needed: bool,
+}
+
+impl Default for Imagery {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl Imagery {
     /// No imagery yet, the scene's own as the source.
     #[must_use]
     pub fn new() -> Self {
-        Self { max_resident: 96, ..Self::default() }
+        Self {
+            choice: ImageryChoice::default(),
+            generation: 0,
+            res: QuadResidency::new(96),
+            pending: HashMap::new(),
+            source: HashMap::new(),
+            targets: HashMap::new(),
+            waiting_needed: false,
+        }
     }
 
     /// The source.
@@ -207,7 +197,7 @@ impl Imagery {
         if choice != self.choice {
             self.choice = choice;
             self.generation = self.generation.wrapping_add(1);
-            self.slots.clear();
+            self.res.clear();
             self.pending.clear();
             self.source.clear();
             self.targets.clear();
@@ -223,16 +213,13 @@ impl Imagery {
     /// Images decoded and kept.
     #[must_use]
     pub fn resident(&self) -> usize {
-        self.slots.values().filter(|s| matches!(s, Slot::Resident { .. })).count()
+        self.res.resident()
     }
 
     /// The resident image of `key`, if any (for tests and tools).
     #[must_use]
     pub fn image(&self, key: TerrainKey) -> Option<Arc<ImageryTile>> {
-        match self.slots.get(&key) {
-            Some(Slot::Resident { tile, .. }) => Some(Arc::clone(tile)),
-            _ => None,
-        }
+        self.res.get(key).cloned()
     }
 
     /// The tile whose image `key` should drape: itself, or the ancestor at the
@@ -274,7 +261,7 @@ impl Imagery {
         draws: impl IntoIterator<Item = (TerrainKey, &'a mut Option<DrawImagery>)>,
         wanted: &mut Vec<TerrainKey>,
     ) {
-        self.frame += 1;
+        self.res.next_frame();
         self.waiting_needed = false;
         for (key, imagery) in draws {
             *imagery = None;
@@ -282,13 +269,11 @@ impl Imagery {
             if self.askable(target) && !wanted.contains(&target) {
                 wanted.push(target);
             }
-            self.waiting_needed |= matches!(self.slots.get(&target), Some(Slot::Waiting { .. }));
+            self.waiting_needed |= self.res.waiting(target);
             let mut k = target;
             loop {
-                if let Some(Slot::Resident { tile, used }) = self.slots.get_mut(&k) {
-                    *used = self.frame;
-                    *imagery =
-                        Some(DrawImagery { key: (self.generation, k), tile: Arc::clone(tile), uv: uv_in(k, key) });
+                if let Some(tile) = self.res.use_now(k) {
+                    *imagery = Some(DrawImagery { key: (self.generation, k), tile, uv: uv_in(k, key) });
                     break;
                 }
                 if k.0 == 0 {
@@ -317,19 +302,15 @@ impl Imagery {
             ImageryChoice::Off => {}
             ImageryChoice::Scene => {
                 if let Some(i) = &entry.imagery {
-                    // A retry keeps its attempt count.
-                    let attempts = match self.slots.get(&key) {
-                        Some(Slot::Retrying { attempts }) => *attempts,
-                        _ => 0,
-                    };
-                    self.slots.insert(key, Slot::Loading { attempts });
+                    // (A retry keeps its attempt count.)
+                    self.res.mark_loading(key);
                     out.push(ImageryFetch::Baked(key, i.tile_url(key.0, key.1, key.2)));
                 }
             }
             ImageryChoice::Xyz(src) => {
                 let Some(geo) = geo else { return out };
                 let Some(c) = plan(entry, geo, key, src.max_zoom) else {
-                    self.slots.insert(key, Slot::Broken);
+                    self.res.mark_broken(key);
                     return out;
                 };
                 for &t in &c.tiles {
@@ -338,7 +319,7 @@ impl Imagery {
                         out.push(ImageryFetch::Source(t, src.url(t.0, t.1, t.2)));
                     }
                 }
-                self.slots.insert(key, Slot::Loading { attempts: 0 });
+                self.res.mark_loading(key);
                 self.pending.insert(key, c);
             }
         }
@@ -357,7 +338,7 @@ impl Imagery {
         bytes: Option<&[u8]>,
     ) -> Result<(), String> {
         let Some(bytes) = bytes else {
-            self.slots.insert(key, Slot::Broken);
+            self.res.mark_broken(key);
             return Ok(());
         };
         let decoded = decode_image(url, bytes, IMAGE_PX).map_err(|e| e.to_string()).and_then(|img| {
@@ -388,7 +369,7 @@ impl Imagery {
                 Ok(())
             }
             Err(e) => {
-                self.slots.insert(key, Slot::Broken);
+                self.res.mark_broken(key);
                 Err(e)
             }
         }
@@ -397,17 +378,8 @@ impl Imagery {
     /// A baked image failed in a way a retry may mend: it waits `base_s ·
     /// 2^(attempts − 1)` seconds and is asked for again, up to `max_attempts`
     /// attempts. Returns whether it will be retried (else it is given up on).
-    pub fn retry_later(&mut self, key: TerrainKey, now_s: f64, base_s: f64, max_attempts: u32) -> bool {
-        let attempts = match self.slots.get(&key) {
-            Some(Slot::Loading { attempts }) => attempts + 1,
-            _ => 1,
-        };
-        if attempts >= max_attempts {
-            self.slots.insert(key, Slot::Broken);
-            return false;
-        }
-        self.slots.insert(key, Slot::Waiting { attempts, due_s: now_s + base_s * 2f64.powi(attempts as i32 - 1) });
-        true
+    pub fn retry_later(&mut self, key: TerrainKey, now_s: f64, policy: RetryPolicy) -> bool {
+        self.res.failed(key, true, policy, now_s)
     }
 
     /// Whether an image the drawn terrain needs waits for its retry: the view
@@ -420,18 +392,12 @@ impl Imagery {
 
     /// Failed images whose retry is due become wanted again.
     pub fn retry_due(&mut self, now_s: f64) {
-        for slot in self.slots.values_mut() {
-            if let Slot::Waiting { attempts, due_s } = *slot {
-                if due_s <= now_s {
-                    *slot = Slot::Retrying { attempts };
-                }
-            }
-        }
+        self.res.retry_due(now_s);
     }
 
     /// Whether the image of `key` is to be asked for (never asked, or a retry is due).
     fn askable(&self, key: TerrainKey) -> bool {
-        matches!(self.slots.get(&key), None | Some(Slot::Retrying { .. }))
+        self.res.is_unknown(key)
     }
 
     /// A source tile arrived (`None`: failed; its part of the images stays
@@ -486,22 +452,7 @@ impl Imagery {
     }
 
     fn insert(&mut self, key: TerrainKey, tile: ImageryTile) {
-        self.slots.insert(key, Slot::Resident { tile: Arc::new(tile), used: self.frame });
-        let resident = self.resident();
-        if resident > self.max_resident {
-            let mut old: Vec<(u64, TerrainKey)> = self
-                .slots
-                .iter()
-                .filter_map(|(k, s)| match s {
-                    Slot::Resident { used, .. } if *used < self.frame && k.0 > 0 => Some((*used, *k)),
-                    _ => None,
-                })
-                .collect();
-            old.sort_unstable_by_key(|(used, k)| (*used, std::cmp::Reverse(k.0), k.1, k.2));
-            for (_, k) in old.into_iter().take(resident - self.max_resident) {
-                self.slots.remove(&k);
-            }
-        }
+        self.res.insert(key, tile);
     }
 }
 

@@ -17,12 +17,12 @@ use super::fetch::{join, scene_locations, FetchError, Fetcher, RequestId};
 use super::imagery::{Imagery, ImageryChoice, ImageryFetch};
 use super::index_walk::CanopyGate;
 use super::index_walk::IndexWalk;
+use super::quadtree::{QuadKey, QuadLayer, RetryPolicy};
 use super::residency::{PoolError, Residency, TileSlot};
 use super::terrain::{TerrainDraw, TerrainKey, TerrainTree};
 use crate::camera::ViewData;
 use crate::format::attributes::AttributeCodes;
-use crate::format::canopy::{Canopy, CanopyKey};
-use crate::format::terrain::TerrainTile;
+use crate::format::canopy::CanopyKey;
 use crate::format::tile::Levels;
 use crate::format::{DecodeError, GpuBatch, Manifest, Tile};
 use crate::geo::GeoFrame;
@@ -48,6 +48,14 @@ pub struct StreamConfig {
     pub terrain_error_px: f32,
     /// Stream (and select) the terrain at all; off, no terrain tile is fetched.
     pub terrain: bool,
+}
+
+impl StreamConfig {
+    /// The retries of failed files: `retry_base_s` doubling, `max_attempts` in all.
+    #[must_use]
+    pub fn retry(&self) -> RetryPolicy {
+        RetryPolicy { base_s: self.retry_base_s, max_attempts: self.max_attempts }
+    }
 }
 
 impl Default for StreamConfig {
@@ -435,9 +443,6 @@ pub struct SceneStream<F: Fetcher> {
     /// tiles it waits for (and their failed attempts).
     terrain: Option<TerrainTree>,
     terrain_draws: Vec<TerrainDraw>,
-    terrain_wanted: Vec<(f32, TerrainKey)>,
-    /// Failed attempts per terrain tile and when the next one is due (∞: asked for).
-    terrain_attempts: HashMap<TerrainKey, (u32, f64)>,
     /// Ground imagery for the terrain and the images the view waits for.
     imagery: Imagery,
     imagery_wanted: Vec<TerrainKey>,
@@ -458,29 +463,62 @@ pub struct SceneStream<F: Fetcher> {
     /// Where trees the view wants are not resident (`[x0, y0, x1, y1]`): the
     /// canopy stands in there.
     canopy_gaps: Vec<[f32; 4]>,
-    canopy_wanted: Vec<(f32, CanopyKey)>,
-    canopy_attempts: HashMap<CanopyKey, (u32, f64)>,
     /// When the stream first waited for the root canopy raster.
     canopy_wait_from: Option<f64>,
 }
 
-/// Counts a failed attempt at `key` (terrain tiles, canopy rasters) and, when
-/// it is retried (retryable and attempts left), when the next attempt is due
-/// (exponential backoff). Returns whether it is retried.
-fn note_failure<K: std::hash::Hash + Eq>(
-    attempts: &mut HashMap<K, (u32, f64)>,
-    key: K,
-    retryable: bool,
-    config: &StreamConfig,
-    now_s: f64,
-) -> bool {
-    let (n, due) = attempts.entry(key).or_insert((0, f64::INFINITY));
-    *n += 1;
-    let retrying = retryable && *n < config.max_attempts;
-    if retrying {
-        *due = now_s + config.retry_base_s * 2f64.powi(*n as i32 - 1);
+/// Asks for the tiles a quadtree layer waits for, nearest first, within the
+/// in-flight budget (the same for every layer: terrain, canopy rasters).
+fn request_layer<L: QuadLayer, F: Fetcher>(
+    layer: &mut L,
+    fetcher: &mut F,
+    base: &str,
+    max_in_flight: usize,
+    requests: &mut HashMap<RequestId, Target>,
+    stats: &mut StreamStats,
+    target: fn(QuadKey) -> Target,
+) {
+    let wanted = std::mem::take(&mut layer.residency_mut().wanted);
+    for &(_, key) in &wanted {
+        if fetcher.in_flight() >= max_in_flight {
+            break;
+        }
+        if !layer.residency().is_unknown(key) {
+            continue;
+        }
+        let id = fetcher.start(&join(base, &layer.url(key)));
+        stats.requests += 1;
+        requests.insert(id, target(key));
+        layer.residency_mut().mark_loading(key);
     }
-    retrying
+    layer.residency_mut().wanted = wanted;
+}
+
+/// A tile of a quadtree layer arrived or failed: kept, retried with backoff
+/// (a failure a retry may mend; it stays asked for until then) or given up on
+/// (its parent stands in). Returns the failure to tell: (url, message, retried).
+fn layer_arrived<L: QuadLayer>(
+    layer: &mut L,
+    base: &str,
+    key: QuadKey,
+    result: Result<Vec<u8>, FetchError>,
+    policy: RetryPolicy,
+    now_s: f64,
+) -> Option<(String, String, bool)> {
+    let url = join(base, &layer.url(key));
+    let outcome = result
+        .map_err(|e| (e.to_string(), e.retryable()))
+        .and_then(|bytes| layer.decode(&url, key, &bytes).map_err(|e| (e, false)));
+    match outcome {
+        Ok(tile) => {
+            layer.residency_mut().insert(key, tile);
+            None
+        }
+        Err((message, retryable)) => {
+            let retrying = layer.residency_mut().failed(key, retryable, policy, now_s);
+            Some((url, message, retrying))
+        }
+    }
 }
 
 /// Longest wait for the root canopy raster before tiles are fetched anyway (s).
@@ -575,8 +613,6 @@ impl<F: Fetcher> SceneStream<F> {
             recent: std::collections::VecDeque::new(),
             terrain: None,
             terrain_draws: Vec::new(),
-            terrain_wanted: Vec::new(),
-            terrain_attempts: HashMap::new(),
             imagery: Imagery::new(),
             imagery_wanted: Vec::new(),
             geo: None,
@@ -588,8 +624,6 @@ impl<F: Fetcher> SceneStream<F> {
             canopy: None,
             canopy_draws: Vec::new(),
             canopy_gaps: Vec::new(),
-            canopy_wanted: Vec::new(),
-            canopy_attempts: HashMap::new(),
             canopy_wait_from: None,
         }
     }
@@ -600,7 +634,9 @@ impl<F: Fetcher> SceneStream<F> {
         self.canopy_view = view;
         if view.is_none() {
             self.canopy_draws.clear();
-            self.canopy_wanted.clear();
+            if let Some(c) = &mut self.canopy {
+                c.res.wanted.clear();
+            }
             self.canopy_gate = None;
         }
     }
@@ -706,12 +742,10 @@ impl<F: Fetcher> SceneStream<F> {
             TileState::NotResident(l) => *l == Load::Broken,
         });
         let packs_done = self.needed.iter().all(|&s| self.packs[s].done());
-        let terrain_done = self.terrain_wanted.is_empty()
-            && !self.terrain_attempts.values().any(|(_, due)| due.is_finite())
+        let terrain_done = self.terrain.as_ref().is_none_or(|t| t.res.settled())
             && self.imagery_wanted.is_empty()
             && !self.imagery.retries_pending();
-        let canopy_done =
-            self.canopy_wanted.is_empty() && !self.canopy_attempts.values().any(|(_, due)| due.is_finite());
+        let canopy_done = self.canopy.as_ref().is_none_or(|c| c.res.settled());
         // Trees' ids and attributes a style waits for and not yet asked for (the
         // fetcher was busy): their tiles are drawn unstyled until they come.
         let data_done = !self.tree_data.0
@@ -842,8 +876,12 @@ impl<F: Fetcher> SceneStream<F> {
             let rate: u64 = self.recent.iter().map(|(_, b)| b).sum();
             let over_rate = self.config.max_bytes_per_s > 0.0 && rate as f64 >= self.config.max_bytes_per_s;
             self.stats.degraded.bandwidth = over_rate;
-            self.retry_terrain(now_s);
-            self.retry_canopy(now_s);
+            if let Some(t) = &mut self.terrain {
+                t.res.retry_due(now_s);
+            }
+            if let Some(c) = &mut self.canopy {
+                c.res.retry_due(now_s);
+            }
             self.imagery.retry_due(now_s);
             self.select_terrain(view);
             self.select_canopy(view);
@@ -851,19 +889,24 @@ impl<F: Fetcher> SceneStream<F> {
             // wait (it decides which trees a far view needs at all) — for at most
             // CANOPY_WAIT_S, and not after it failed once.
             let root_loading = self.canopy_view.is_some()
-                && self.canopy.as_ref().is_some_and(CanopyTree::root_loading)
-                && !self.canopy_attempts.contains_key(&(0, 0, 0));
+                && self.canopy.as_ref().is_some_and(|c| c.root_loading() && !c.res.has_failed((0, 0, 0)));
             let since = *self.canopy_wait_from.get_or_insert(now_s);
             let canopy_first = root_loading && now_s - since < CANOPY_WAIT_S;
             if !over_rate {
-                self.request_canopy();
+                if let Some(c) = &mut self.canopy {
+                    let (fetcher, requests, stats) = (&mut self.fetcher, &mut self.requests, &mut self.stats);
+                    request_layer(c, fetcher, &self.base, self.config.max_in_flight, requests, stats, Target::Canopy);
+                }
                 if canopy_first {
                     self.walk(view, draw_distance_m);
                 } else {
                     self.request_tiles(view, draw_distance_m, now_s);
                 }
                 self.request_packs(residency, now_s);
-                self.request_terrain();
+                if let Some(t) = &mut self.terrain {
+                    let (fetcher, requests, stats) = (&mut self.fetcher, &mut self.requests, &mut self.stats);
+                    request_layer(t, fetcher, &self.base, self.config.max_in_flight, requests, stats, Target::Terrain);
+                }
                 self.request_imagery();
                 self.request_tree_data();
             } else {
@@ -892,7 +935,9 @@ impl<F: Fetcher> SceneStream<F> {
     /// Picks the canopy rasters the view draws and the ones it waits for, and
     /// the index walk's gate (where the canopy alone draws the trees).
     fn select_canopy(&mut self, view: &ViewData) {
-        self.canopy_wanted.clear();
+        if let Some(c) = &mut self.canopy {
+            c.res.wanted.clear();
+        }
         if self.canopy_view.is_some() && self.canopy.is_some() {
             self.collect_canopy_gaps();
         }
@@ -906,34 +951,13 @@ impl<F: Fetcher> SceneStream<F> {
         // Cut coarser while the view would draw more rasters than the GPU pool holds.
         let mut cell_px = cv.cell_px;
         for _ in 0..8 {
-            self.canopy_wanted.clear();
-            tree.select(
-                view,
-                eye,
-                px_per_m,
-                cell_px,
-                cv.px_hi,
-                &self.canopy_gaps,
-                &mut self.canopy_draws,
-                &mut self.canopy_wanted,
-            );
+            tree.select(view, eye, px_per_m, cell_px, cv.px_hi, &self.canopy_gaps, &mut self.canopy_draws);
             if self.canopy_draws.len() <= super::canopy::MAX_CANOPY_DRAWS {
                 break;
             }
             cell_px *= 2.0;
         }
         self.canopy_gate = tree.ready().then_some(CanopyGate { px_per_m, px_lo: cv.px_lo });
-    }
-
-    /// Canopy rasters whose retry is due are asked for again.
-    fn retry_canopy(&mut self, now_s: f64) {
-        let Some(tree) = &mut self.canopy else { return };
-        for (&key, (_, due)) in &mut self.canopy_attempts {
-            if *due <= now_s {
-                tree.forget(key);
-                *due = f64::INFINITY;
-            }
-        }
     }
 
     /// Where trees the view wants cannot be drawn yet, into `canopy_gaps`.
@@ -979,47 +1003,25 @@ impl<F: Fetcher> SceneStream<F> {
         self.canopy_gaps = gaps;
     }
 
-    /// Requests wanted canopy rasters, nearest first, within the in-flight budget.
-    fn request_canopy(&mut self) {
-        let Some(tree) = &mut self.canopy else { return };
-        for &(_, key) in &self.canopy_wanted {
-            if self.fetcher.in_flight() >= self.config.max_in_flight {
-                break;
-            }
-            if !tree.is_unknown(key) {
-                continue;
-            }
-            let id = self.fetcher.start(&join(&self.base, &tree.entry().raster_url(key.0, key.1, key.2)));
-            self.stats.requests += 1;
-            self.requests.insert(id, Target::Canopy(key));
-            tree.mark_loading(key);
-        }
-    }
-
     /// A canopy raster arrived (or failed): kept, retried or given up on (its
     /// parent's is drawn instead; the rest of the scene goes on).
     fn on_canopy(&mut self, key: CanopyKey, result: Result<Vec<u8>, FetchError>, now_s: f64) {
         let Some(tree) = &mut self.canopy else { return };
-        let url = join(&self.base, &tree.entry().raster_url(key.0, key.1, key.2));
         if let Ok(bytes) = &result {
             self.stats.canopy_bytes_fetched += bytes.len() as u64;
         }
-        let outcome = result
-            .map_err(|e| (e.to_string(), e.retryable()))
-            .and_then(|bytes| Canopy::decode(&url, &bytes).map_err(|e| (e.to_string(), false)))
-            .and_then(|canopy| tree.insert(key, canopy).map_err(|e| (format!("{url}: {e}"), false)));
-        match outcome {
-            Ok(()) => {
-                self.canopy_attempts.remove(&key);
+        let failed = layer_arrived(tree, &self.base, key, result, self.config.retry(), now_s);
+        self.report(failed);
+    }
+
+    /// A failed file of a quadtree layer: given up on (listed) unless it is
+    /// retried, and told as an event either way.
+    fn report(&mut self, failed: Option<(String, String, bool)>) {
+        if let Some((url, message, retrying)) = failed {
+            if !retrying {
+                self.give_up(&url, &message);
             }
-            Err((message, retryable)) => {
-                let retrying = note_failure(&mut self.canopy_attempts, key, retryable, &self.config, now_s);
-                if !retrying {
-                    tree.mark_broken(key);
-                    self.give_up(&url, &message);
-                }
-                self.events.push(StreamEvent::Failed { url, message, retrying });
-            }
+            self.events.push(StreamEvent::Failed { url, message, retrying });
         }
     }
 
@@ -1190,8 +1192,7 @@ impl<F: Fetcher> SceneStream<F> {
         let (outcome, retrying) = match &result {
             Ok(bytes) => (self.imagery.on_baked(t.entry(), key, &url, Some(bytes)), false),
             Err(e) if e.retryable() => {
-                let retry = self.config.retry_base_s;
-                let retrying = self.imagery.retry_later(key, now_s, retry, self.config.max_attempts);
+                let retrying = self.imagery.retry_later(key, now_s, self.config.retry());
                 (Err(e.to_string()), retrying)
             }
             Err(e) => {
@@ -1228,69 +1229,27 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
-    /// Terrain tiles whose retry is due are asked for again (with backoff, as tiles).
-    fn retry_terrain(&mut self, now_s: f64) {
-        let Some(t) = &mut self.terrain else { return };
-        for (key, (_, due)) in &mut self.terrain_attempts {
-            if *due <= now_s {
-                t.forget(*key);
-                *due = f64::INFINITY;
-            }
-        }
-    }
-
     /// Picks the terrain tiles the view draws and the ones it waits for.
     fn select_terrain(&mut self, view: &ViewData) {
-        self.terrain_wanted.clear();
         self.imagery_wanted.clear();
+        let Some(t) = &mut self.terrain else { return };
         if !self.config.terrain {
+            t.res.wanted.clear();
             self.terrain_draws.clear();
             return;
         }
-        let Some(t) = &mut self.terrain else { return };
         let eye = view.eye_hi.as_dvec3() + view.eye_lo.as_dvec3();
-        t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws, &mut self.terrain_wanted);
+        t.select(view, eye, self.config.terrain_error_px, &mut self.terrain_draws);
         let draws = self.terrain_draws.iter_mut().map(|d| (d.key, &mut d.imagery));
         self.imagery.attach(t.entry(), self.geo.as_ref(), draws, &mut self.imagery_wanted);
-    }
-
-    /// Requests wanted terrain tiles, nearest first, within the in-flight budget.
-    fn request_terrain(&mut self) {
-        let Some(t) = &mut self.terrain else { return };
-        for &(_, key) in &self.terrain_wanted {
-            if self.fetcher.in_flight() >= self.config.max_in_flight {
-                break;
-            }
-            if !t.is_unknown(key) {
-                continue;
-            }
-            let id = self.fetcher.start(&join(&self.base, &t.entry().tile_url(key.0, key.1, key.2)));
-            self.stats.requests += 1;
-            self.requests.insert(id, Target::Terrain(key));
-            t.mark_loading(key);
-        }
     }
 
     /// A terrain tile arrived (or failed): kept, retried or given up on (its
     /// parent is drawn instead; the rest of the scene goes on).
     fn on_terrain(&mut self, key: TerrainKey, result: Result<Vec<u8>, FetchError>, now_s: f64) {
         let Some(t) = &mut self.terrain else { return };
-        let url = join(&self.base, &t.entry().tile_url(key.0, key.1, key.2));
-        let outcome = result
-            .map_err(|e| (e.to_string(), e.retryable()))
-            .and_then(|bytes| TerrainTile::decode(&url, &bytes).map_err(|e| (e.to_string(), false)))
-            .and_then(|tile| t.insert(key, tile).map_err(|e| (format!("{url}: {e}"), false)));
-        if let Err((message, retryable)) = outcome {
-            // Stays "loading" until the retry is due.
-            let retrying = note_failure(&mut self.terrain_attempts, key, retryable, &self.config, now_s);
-            if !retrying {
-                t.mark_broken(key);
-                self.give_up(&url, &message);
-            }
-            self.events.push(StreamEvent::Failed { url, message, retrying });
-        } else {
-            self.terrain_attempts.remove(&key);
-        }
+        let failed = layer_arrived(t, &self.base, key, result, self.config.retry(), now_s);
+        self.report(failed);
     }
 
     fn on_node(&mut self, n: usize, result: Result<Vec<u8>, FetchError>, now_s: f64) {

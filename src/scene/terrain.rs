@@ -12,14 +12,14 @@
 //! image projects above the threshold: on flat ground (height errors of 0) the
 //! images still sharpen as the camera comes down. The cut is a complete cover of
 //! the terrain with data: no tile and its ancestor are both drawn. Work per
-//! frame is O(tiles drawn); memory is bounded by [`TerrainTree::max_resident`]
+//! frame is O(tiles drawn); memory is bounded by its residency's budget (`res.max_resident`)
 //! tiles (least recently used evicted, never the root or a tile in use).
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
+use super::quadtree::{QuadKey, QuadLayer, QuadResidency};
 use crate::camera::ViewData;
 use crate::format::terrain::{TerrainEntry, TerrainTile};
 
@@ -46,34 +46,21 @@ pub struct TerrainDraw {
     pub imagery: Option<super::imagery::DrawImagery>,
 }
 
-/// Where a tile stands.
-#[derive(Debug, Clone)]
-enum Slot {
-    /// Requested, or waiting for a retry (the stream keeps the attempts).
-    Loading,
-    /// Failed for good: drawn as its parent.
-    Broken,
-    /// Decoded and kept.
-    Resident { tile: Arc<TerrainTile>, used: u64 },
-}
-
 /// The terrain of one scene: what is resident and what a view selects.
 #[derive(Debug)]
 pub struct TerrainTree {
     entry: TerrainEntry,
-    slots: HashMap<TerrainKey, Slot>,
-    frame: u64,
+    /// The tiles resident, asked for and waited for (at most 2,048 kept).
+    pub res: QuadResidency<TerrainTile>,
     /// The selection walk's stack, kept between frames (no allocation in steady state).
     stack: Vec<(TerrainKey, f32)>,
-    /// Most tiles kept decoded.
-    pub max_resident: usize,
 }
 
 impl TerrainTree {
     /// A tree for the manifest's terrain entry; nothing resident yet.
     #[must_use]
     pub fn new(entry: TerrainEntry) -> Self {
-        Self { entry, slots: HashMap::new(), frame: 0, stack: Vec::new(), max_resident: 2048 }
+        Self { entry, res: QuadResidency::new(2048), stack: Vec::new() }
     }
 
     /// The manifest entry.
@@ -85,18 +72,7 @@ impl TerrainTree {
     /// Tiles decoded and kept.
     #[must_use]
     pub fn resident(&self) -> usize {
-        self.slots.values().filter(|s| matches!(s, Slot::Resident { .. })).count()
-    }
-
-    /// Marks `key` as requested.
-    pub fn mark_loading(&mut self, key: TerrainKey) {
-        self.slots.insert(key, Slot::Loading);
-    }
-
-    /// Whether `key` is neither resident, requested nor broken.
-    #[must_use]
-    pub fn is_unknown(&self, key: TerrainKey) -> bool {
-        !self.slots.contains_key(&key)
+        self.res.resident()
     }
 
     /// Stores a decoded tile (checked to be the tile asked for).
@@ -104,25 +80,9 @@ impl TerrainTree {
     /// # Errors
     /// The tile's level or position is not `key`'s.
     pub fn insert(&mut self, key: TerrainKey, tile: TerrainTile) -> Result<(), String> {
-        if (tile.level, tile.x, tile.y) != key || tile.grid != self.entry.grid {
-            return Err(format!(
-                "terrain tile {}/{}/{} (grid {}) where {}/{}/{} (grid {}) was asked for",
-                tile.level, tile.x, tile.y, tile.grid, key.0, key.1, key.2, self.entry.grid
-            ));
-        }
-        self.slots.insert(key, Slot::Resident { tile: Arc::new(tile), used: self.frame });
-        self.evict();
+        check(&self.entry, key, &tile)?;
+        self.res.insert(key, tile);
         Ok(())
-    }
-
-    /// Gives up on `key` (its parent is drawn instead).
-    pub fn mark_broken(&mut self, key: TerrainKey) {
-        self.slots.insert(key, Slot::Broken);
-    }
-
-    /// Forgets a failed request so it is asked for again.
-    pub fn forget(&mut self, key: TerrainKey) {
-        self.slots.remove(&key);
     }
 
     /// The ground height at a point (metres relative to the scene origin) from
@@ -131,7 +91,7 @@ impl TerrainTree {
     pub fn height_at(&self, x: f64, y: f64) -> Option<f32> {
         let mut key = (0u8, 0u32, 0u32);
         let mut best = None;
-        while let Some(Slot::Resident { tile, .. }) = self.slots.get(&key) {
+        while let Some(tile) = self.res.get(key) {
             let [ox, oy] = self.entry.tile_origin_m(key.0, key.1, key.2);
             let size = self.entry.tile_size_m(key.0);
             let (u, v) = ((x - ox) / size, (y - oy) / size);
@@ -151,30 +111,22 @@ impl TerrainTree {
     }
 
     /// Selects the tiles to draw for `view` (eye at `eye_m`, relative to the
-    /// scene origin) at `threshold_px` pixels of geometric error, and appends
-    /// the tiles to fetch (nearest first) to `wanted`.
-    pub fn select(
-        &mut self,
-        view: &ViewData,
-        eye_m: DVec3,
-        threshold_px: f32,
-        draws: &mut Vec<TerrainDraw>,
-        wanted: &mut Vec<(f32, TerrainKey)>,
-    ) {
-        self.frame += 1;
+    /// scene origin) at `threshold_px` pixels of geometric error; the tiles
+    /// to fetch, nearest first, into `res.wanted`.
+    pub fn select(&mut self, view: &ViewData, eye_m: DVec3, threshold_px: f32, draws: &mut Vec<TerrainDraw>) {
+        self.res.next_frame();
         draws.clear();
+        let mut wanted = std::mem::take(&mut self.res.wanted);
+        wanted.clear();
         let root = (0u8, 0u32, 0u32);
-        if self.is_unknown(root) {
+        if self.res.is_unknown(root) {
             wanted.push((0.0, root));
         }
         let mut stack = std::mem::take(&mut self.stack);
         stack.clear();
         stack.push((root, f32::INFINITY));
         while let Some((key, parent_error)) = stack.pop() {
-            let frame = self.frame;
-            let Some(Slot::Resident { tile, used }) = self.slots.get_mut(&key) else { continue };
-            *used = frame;
-            let tile = Arc::clone(tile);
+            let Some(tile) = self.res.use_now(key) else { continue };
             let (origin, size) = (self.entry.tile_origin_m(key.0, key.1, key.2), self.entry.tile_size_m(key.0));
             let lo = DVec3::new(origin[0], origin[1], f64::from(tile.min_m));
             let hi = DVec3::new(origin[0] + size, origin[1] + size, f64::from(tile.max_m));
@@ -200,9 +152,8 @@ impl TerrainTree {
             }
             let children = &kids[..n];
             let refine = error_px.max(texel_px) > threshold_px && !children.is_empty();
-            let ready =
-                children.iter().all(|(c, _)| matches!(self.slots.get(c), Some(Slot::Resident { .. } | Slot::Broken)));
-            let any_broken = children.iter().any(|(c, _)| matches!(self.slots.get(c), Some(Slot::Broken)));
+            let ready = children.iter().all(|&(c, _)| self.res.is_done(c));
+            let any_broken = children.iter().any(|&(c, _)| self.res.is_broken(c));
             if refine && ready && !any_broken {
                 for &(c, _) in children {
                     stack.push((c, tile.error_m));
@@ -211,7 +162,7 @@ impl TerrainTree {
             }
             if refine {
                 for &(c, k) in children {
-                    if self.is_unknown(c) {
+                    if self.res.is_unknown(c) {
                         let s = self.entry.tile_size_m(c.0);
                         let o = self.entry.tile_origin_m(c.0, c.1, c.2);
                         let info = tile.children[k];
@@ -233,30 +184,41 @@ impl TerrainTree {
             });
         }
         wanted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        self.res.wanted = wanted;
         self.stack = stack;
     }
+}
 
-    /// Drops the least recently used tiles beyond [`Self::max_resident`]
-    /// (never the root, never one used this frame).
-    fn evict(&mut self) {
-        let resident = self.resident();
-        if resident <= self.max_resident {
-            return;
-        }
-        let mut old: Vec<(u64, TerrainKey)> = self
-            .slots
-            .iter()
-            .filter_map(|(k, s)| match s {
-                Slot::Resident { used, .. } if k.0 > 0 && *used < self.frame => Some((*used, *k)),
-                _ => None,
-            })
-            .collect();
-        // Oldest first, and of the same frame the finest first (a child before
-        // its parent: a tile is only reached through its ancestors).
-        old.sort_unstable_by_key(|(used, k)| (*used, std::cmp::Reverse(k.0), k.1, k.2));
-        for (_, k) in old.into_iter().take(resident - self.max_resident) {
-            self.slots.remove(&k);
-        }
+/// Whether `tile` is the tile `key` names, of the entry's grid.
+fn check(entry: &TerrainEntry, key: TerrainKey, tile: &TerrainTile) -> Result<(), String> {
+    if (tile.level, tile.x, tile.y) != key || tile.grid != entry.grid {
+        return Err(format!(
+            "terrain tile {}/{}/{} (grid {}) where {}/{}/{} (grid {}) was asked for",
+            tile.level, tile.x, tile.y, tile.grid, key.0, key.1, key.2, entry.grid
+        ));
+    }
+    Ok(())
+}
+
+impl QuadLayer for TerrainTree {
+    type Tile = TerrainTile;
+
+    fn residency(&self) -> &QuadResidency<TerrainTile> {
+        &self.res
+    }
+
+    fn residency_mut(&mut self) -> &mut QuadResidency<TerrainTile> {
+        &mut self.res
+    }
+
+    fn url(&self, key: QuadKey) -> String {
+        self.entry.tile_url(key.0, key.1, key.2)
+    }
+
+    fn decode(&self, url: &str, key: QuadKey, bytes: &[u8]) -> Result<TerrainTile, String> {
+        let tile = TerrainTile::decode(url, bytes).map_err(|e| e.to_string())?;
+        check(&self.entry, key, &tile).map_err(|e| format!("{url}: {e}"))?;
+        Ok(tile)
     }
 }
 
@@ -412,9 +374,9 @@ mod tests {
         let (view, eye) = view_from(DVec3::new(512.0, -1500.0, 1200.0), DVec3::new(512.0, 512.0, 0.0));
         let (near_d, far_d) = (1500f32.hypot(1190.0), 2524f32.hypot(1190.0));
         let threshold = 2.0 * view.px_per_m_at_1m / (near_d * far_d).sqrt();
-        let (mut draws, mut wanted) = (Vec::new(), Vec::new());
-        t.select(&view, eye, threshold, &mut draws, &mut wanted);
-        assert!(wanted.is_empty(), "everything is resident");
+        let mut draws = Vec::new();
+        t.select(&view, eye, threshold, &mut draws);
+        assert!(t.res.wanted.is_empty(), "everything is resident");
         // No tile drawn with one of its ancestors, and the drawn squares cover
         // the root exactly (areas add up; the whole square is in view).
         let area: f64 = draws.iter().map(|d| d.size_m * d.size_m).sum();
@@ -455,11 +417,11 @@ mod tests {
         }
         // Close to the ground the tile under the eye is the finest level.
         let (low, eye_low) = view_from(DVec3::new(100.0, 100.0, 15.0), DVec3::new(300.0, 300.0, 0.0));
-        t.select(&low, eye_low, 2.0, &mut draws, &mut wanted);
+        t.select(&low, eye_low, 2.0, &mut draws);
         assert!(draws.iter().any(|d| d.key.0 == 4), "{:?}", draws.iter().map(|d| d.key).collect::<Vec<_>>());
         // Looking away from the square, nothing is drawn.
         let (away, eye) = view_from(DVec3::new(-50.0, -50.0, 200.0), DVec3::new(-500.0, -500.0, 150.0));
-        t.select(&away, eye, 2.0, &mut draws, &mut wanted);
+        t.select(&away, eye, 2.0, &mut draws);
         assert!(draws.is_empty(), "{} tiles behind the camera", draws.len());
     }
 
@@ -469,19 +431,19 @@ mod tests {
     #[test]
     fn flat_ground_refines_while_finer_images_sharpen_it() {
         let mut t = tree_with(5, &|_| 0.0, Some(3));
-        let (mut draws, mut wanted) = (Vec::new(), Vec::new());
+        let mut draws = Vec::new();
         // High above: a texel of the root's image (4 m) is under 2 px.
         let (high, eye) = view_from(DVec3::new(512.0, 512.0, 20_000.0), DVec3::new(512.0, 513.0, 0.0));
-        t.select(&high, eye, 2.0, &mut draws, &mut wanted);
+        t.select(&high, eye, 2.0, &mut draws);
         assert_eq!(draws.iter().map(|d| d.key).collect::<Vec<_>>(), vec![(0, 0, 0)]);
         // Low over the ground: level 2 (the finest images) under the eye, nothing finer.
         let (low, eye) = view_from(DVec3::new(100.0, 100.0, 15.0), DVec3::new(300.0, 300.0, 0.0));
-        t.select(&low, eye, 2.0, &mut draws, &mut wanted);
+        t.select(&low, eye, 2.0, &mut draws);
         let levels: Vec<u8> = draws.iter().map(|d| d.key.0).collect();
         assert!(levels.contains(&2) && levels.iter().all(|&l| l <= 2), "{levels:?}");
         // Without imagery the same flat ground is one tile wherever the eye is.
         let mut bare = tree_with(5, &|_| 0.0, None);
-        bare.select(&low, eye, 2.0, &mut draws, &mut wanted);
+        bare.select(&low, eye, 2.0, &mut draws);
         assert_eq!(draws.iter().map(|d| d.key).collect::<Vec<_>>(), vec![(0, 0, 0)]);
     }
 
@@ -489,22 +451,24 @@ mod tests {
     fn missing_children_are_wanted_nearest_first_and_their_parent_drawn() {
         let full = tree(3);
         let mut t = TerrainTree::new(full.entry.clone());
-        for (k, s) in &full.slots {
-            if k.0 < 2 {
-                t.slots.insert(*k, s.clone());
+        for l in 0..2u8 {
+            for x in 0..1u32 << l {
+                for y in 0..1u32 << l {
+                    t.insert((l, x, y), (**full.res.get((l, x, y)).unwrap()).clone()).unwrap();
+                }
             }
         }
         let (view, eye) = view_from(DVec3::new(10.0, 10.0, 30.0), DVec3::new(300.0, 300.0, 0.0));
-        let (mut draws, mut wanted) = (Vec::new(), Vec::new());
-        t.select(&view, eye, 2.0, &mut draws, &mut wanted);
+        let mut draws = Vec::new();
+        t.select(&view, eye, 2.0, &mut draws);
         assert!(draws.iter().all(|d| d.key.0 <= 1), "only resident levels are drawn");
+        let wanted = &t.res.wanted;
         assert!(!wanted.is_empty() && wanted.iter().all(|w| w.1 .0 == 2));
         assert!(wanted.windows(2).all(|w| w[0].0 <= w[1].0), "nearest first");
         assert_eq!(wanted[0].1, (2, 0, 0), "the tile under the eye first");
         // A broken child keeps its parent drawn.
-        t.mark_broken((2, 0, 0));
-        wanted.clear();
-        t.select(&view, eye, 2.0, &mut draws, &mut wanted);
+        t.res.mark_broken((2, 0, 0));
+        t.select(&view, eye, 2.0, &mut draws);
         assert!(draws.iter().any(|d| d.key == (1, 0, 0)));
     }
 
@@ -518,18 +482,16 @@ mod tests {
         let h = t.height_at(size, 0.0).unwrap();
         assert!((h - 0.4).abs() < 1e-3, "{h}");
         assert_eq!(t.height_at(-1.0, 5.0), None);
-        t.max_resident = 3;
-        t.frame += 1;
-        t.evict();
+        // Over a budget of 3 (a tile stored triggers the eviction), the root stays.
+        t.res.max_resident = 3;
+        t.res.next_frame();
+        t.insert((0, 0, 0), (*full_root(&t)).clone()).unwrap();
         assert_eq!(t.resident(), 3);
-        assert!(matches!(t.slots.get(&(0, 0, 0)), Some(Slot::Resident { .. })));
+        assert!(t.res.get((0, 0, 0)).is_some());
         let _ = t.insert((0, 0, 0), TerrainTile { level: 1, ..(*full_root(&t)).clone() }).unwrap_err();
     }
 
     fn full_root(t: &TerrainTree) -> Arc<TerrainTile> {
-        match t.slots.get(&(0, 0, 0)) {
-            Some(Slot::Resident { tile, .. }) => Arc::clone(tile),
-            _ => panic!("no root"),
-        }
+        Arc::clone(t.res.get((0, 0, 0)).expect("no root"))
     }
 }
