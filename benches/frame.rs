@@ -14,8 +14,8 @@ use std::time::Instant;
 use glam::DVec3;
 use sylva::camera::Camera;
 use sylva::format::Manifest;
+use sylva::offscreen::{FrameStats, NamedView, OffscreenScene};
 use sylva::render::forest::{CullingMode, PoolConfig, Representations};
-use sylva::render::offscreen::{FrameStats, NamedView, OffscreenScene};
 
 const W: u32 = 960;
 const H: u32 = 540;

@@ -3,7 +3,7 @@
 // eq. 3.1; alpha-tested colour, relit with the baked normals under the same sun
 // and ambient as the meshes. Rust side: src/render/billboard.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 @group(1) @binding(0) var bb_color: texture_2d_array<f32>;
 @group(1) @binding(1) var bb_normal: texture_2d_array<f32>;
@@ -11,12 +11,9 @@
 // The tree's own baked sky visibility (r; one white texel where not baked).
 @group(1) @binding(3) var bb_ao: texture_2d_array<f32>;
 
-@group(2) @binding(0) var<storage, read> batches: array<Batch>;
-@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
-@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// (Group 2, binding 3: the styles, `shaders/styles.wgsl`.)
+// (Group 2: batches, instances, draw items and styles; group 3: the draw's
+// params. Declared once in `shaders/trees.wgsl`.)
 
-@group(3) @binding(0) var<uniform> draw: DrawParams;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

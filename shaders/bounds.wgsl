@@ -2,7 +2,7 @@
 // (24 vertices per box, one instance per visible batch, one indirect draw).
 // Rust side: src/render/forest.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 @group(1) @binding(0) var<storage, read> batches: array<Batch>;
 @group(1) @binding(1) var<storage, read> visible: array<u32>;
 

@@ -7,7 +7,7 @@
 // band). After the trees, blended, depth-tested, no depth written.
 // Rust side: src/render/canopy.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 // Raster cells, `cells²` per slot, 2 words each: r | g << 8 | b << 16 | cover << 24,
 // height | side << 8 | ground << 16 (format::canopy).

@@ -12,7 +12,7 @@
 // - Lines: capsules on a quad around the projected segment.
 // Rust side: src/render/cluster.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 @group(1) @binding(0) var<storage, read> records: array<u32>;
 @group(1) @binding(1) var noise_alpha: texture_cube<f32>;
@@ -23,12 +23,9 @@
 // the pack has none.
 @group(1) @binding(4) var ao_field: texture_3d<f32>;
 
-@group(2) @binding(0) var<storage, read> batches: array<Batch>;
-@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
-@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// (Group 2, binding 3: the styles, `shaders/styles.wgsl`.)
+// (Group 2: batches, instances, draw items and styles; group 3: the draw's
+// params. Declared once in `shaders/trees.wgsl`.)
 
-@group(3) @binding(0) var<uniform> draw: DrawParams;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

@@ -3,7 +3,7 @@
 // The CPU oracle of the same logic is `cpu_select` in src/render/cull.rs.
 // Rust side: src/render/cull.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 @group(1) @binding(0) var<storage, read> batches: array<Batch>;
 @group(1) @binding(1) var<storage, read> instances: array<vec2<u32>>;

@@ -7,18 +7,15 @@
 // interleave with their neighbours'. Lit like every other representation.
 // Rust side: src/render/impostor.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 @group(1) @binding(0) var imp_color: texture_2d_array<f32>;
 @group(1) @binding(1) var imp_surface: texture_2d_array<f32>;
 @group(1) @binding(2) var imp_sampler: sampler;
 
-@group(2) @binding(0) var<storage, read> batches: array<Batch>;
-@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
-@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// (Group 2, binding 3: the styles, `shaders/styles.wgsl`.)
+// (Group 2: batches, instances, draw items and styles; group 3: the draw's
+// params. Declared once in `shaders/trees.wgsl`.)
 
-@group(3) @binding(0) var<uniform> draw: DrawParams;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

@@ -4,7 +4,7 @@
 // bake's billboards.
 // Rust side: src/render/mesh.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 // Must match `MeshUniform` in src/render/gpu_data.rs.
 struct MeshParams {
@@ -37,12 +37,9 @@ struct Material {
 // a placeholder word for mesh levels).
 @group(1) @binding(4) var<storage, read> cloud: array<u32>;
 
-@group(2) @binding(0) var<storage, read> batches: array<Batch>;
-@group(2) @binding(1) var<storage, read> instances: array<vec2<u32>>;
-@group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
-// (Group 2, binding 3: the styles, `shaders/styles.wgsl`.)
+// (Group 2: batches, instances, draw items and styles; group 3: the draw's
+// params. Declared once in `shaders/trees.wgsl`.)
 
-@group(3) @binding(0) var<uniform> draw: DrawParams;
 
 // Must match `MeshVertex` in src/format/pack.rs and the layout in src/render/mesh.rs.
 struct VertexIn {

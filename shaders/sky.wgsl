@@ -2,7 +2,7 @@
 // pixel, so clearings and gaps between trees do not show a flat clear colour.
 // Drawn first in the forest pass, without depth. Rust side: src/render/forest.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,

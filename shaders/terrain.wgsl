@@ -7,7 +7,7 @@
 // scene::terrain::morph).
 // Rust side: src/render/terrain.rs; selection: src/scene/terrain.rs.
 
-@group(0) @binding(0) var<storage, read> view: View;
+// (Group 0, binding 0: the view, `shaders/view.wgsl`.)
 
 // Quantised heights, two u16 per word, `words` words per pool slot.
 @group(1) @binding(0) var<storage, read> heights: array<u32>;

@@ -16,9 +16,12 @@ pub mod bench;
 pub mod calendar;
 pub mod camera;
 pub mod format;
+pub mod frame;
 pub mod geo;
 pub mod lod;
 pub mod metrics;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod offscreen;
 pub mod orbit;
 pub mod paths;
 pub mod render;

@@ -35,7 +35,7 @@ fn steady_state_frames_allocate_nothing_in_streaming() {
     // (Half the size it was, a quarter of the pixels: what is counted is streaming,
     // whose choices follow the view's pixels per metre, not the frame.)
     let pools = sylva::render::forest::PoolConfig { instances: 1 << 16, batches: 1 << 12, items: 1 << 17, species: 8 };
-    let mut off = sylva::render::offscreen::OffscreenScene::open(fixture.to_str().unwrap(), 160, 90, pools).unwrap();
+    let mut off = sylva::offscreen::OffscreenScene::open(fixture.to_str().unwrap(), 160, 90, pools).unwrap();
     off.load_view(&sylva::camera::Camera::default(), 30.0);
     let count = |f: &mut dyn FnMut()| {
         let before = ALLOCATIONS.load(Ordering::Relaxed);
@@ -44,7 +44,7 @@ fn steady_state_frames_allocate_nothing_in_streaming() {
     };
     // The medium view (billboards and impostors at this size) and the close view
     // (mesh levels streamed): every representation's streaming path in steady state.
-    use sylva::render::offscreen::NamedView;
+    use sylva::offscreen::NamedView;
     for view in [NamedView::Medium, NamedView::Close] {
         let cam = off.named_camera(view, 30.0).unwrap();
         off.load_view(&cam, 30.0);

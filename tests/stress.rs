@@ -11,8 +11,8 @@
 
 use sylva::bench::{self, stress, NamedPath};
 use sylva::camera::Camera;
+use sylva::offscreen::OffscreenScene;
 use sylva::render::forest::{PoolConfig, RenderSettings};
-use sylva::render::offscreen::OffscreenScene;
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small");
 

@@ -25,8 +25,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
 use crate::format::Manifest;
+use crate::offscreen::{NamedView, OffscreenScene};
 use crate::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
-use crate::render::offscreen::{NamedView, OffscreenScene};
 use crate::render::refine::RefineConfig;
 use crate::render::settings::FarTier;
 use crate::render::shadow::ShadowQuality;

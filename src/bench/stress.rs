@@ -10,8 +10,8 @@ use serde::Serialize;
 
 use super::Stat;
 use crate::camera::Camera;
+use crate::offscreen::OffscreenScene;
 use crate::render::forest::{PoolConfig, RenderSettings};
-use crate::render::offscreen::OffscreenScene;
 
 /// One frame of a stress run.
 #[derive(Debug, Clone, Default, Serialize)]

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use sylva::camera::Camera;
+use sylva::offscreen::OffscreenScene;
 use sylva::render::forest::{PoolConfig, RenderSettings};
-use sylva::render::offscreen::OffscreenScene;
 use sylva::scene::StreamEvent;
 
 use super::args::*;

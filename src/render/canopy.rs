@@ -232,3 +232,13 @@ impl CanopyPass {
         1
     }
 }
+
+impl super::pass::DrawPass for CanopyPass {
+    fn draw<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, _cx: &super::pass::PassContext<'p>) -> u32 {
+        CanopyPass::draw(self, pass)
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        CanopyPass::gpu_bytes(self)
+    }
+}

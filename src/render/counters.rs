@@ -1,5 +1,5 @@
 //! The cull pass's counters as read back after a frame (the renderer copies
-//! them out; [`super::stats::FrameStats`] reports them).
+//! them out; [`crate::frame::stats::FrameStats`] reports them).
 
 use super::gpu_data::{CullControl, DrawArgs};
 

@@ -23,34 +23,19 @@ use super::gpu_data::{CullControl, DrawArgs, GpuSpecies, ViewUniform, REPR_COUNT
 use super::layouts::SharedLayouts;
 use super::layouts::DEPTH_FORMAT;
 use super::overlay::{BoundsPass, SkyPass};
+pub use super::pass::FrameData;
+use super::pass::{DrawPass, PassContext, SpeciesFrame};
 pub use super::pools::PoolConfig;
 use super::pools::{buffer, PoolLayouts, Pools};
 use super::reach::Reach;
 pub use super::settings::{CullingMode, RenderSettings, Representations, DEFAULT_CLUSTER_MIN_PX, DEFAULT_THIN_PX};
 use super::shadow::{ShadowMaps, MAX_CASCADES};
-use super::species::{Species, SpeciesFrame};
+use super::species::Species;
 use super::terrain::TerrainPass;
 use crate::camera::ViewData;
 use crate::format::pack::PACK_PARTS;
 use crate::format::{Pack, PackMeta, Tile};
 use crate::scene::{PoolError, Residency, TileSlot};
-
-/// One frame's data, prepared on the CPU and consumed by the passes.
-#[derive(Debug, Clone, Copy)]
-pub struct FrameData {
-    /// The view uniform as written.
-    pub view: ViewUniform,
-    /// What the species draws need.
-    species: SpeciesFrame,
-    /// Draw the batch-bounds overlay.
-    debug_bounds: bool,
-    /// Clear colour (linear RGBA).
-    clear: [f64; 4],
-    /// Draw the sky first.
-    sky: bool,
-    /// Shadow cascades drawn this frame (0: no shadows).
-    pub cascades: u32,
-}
 
 /// The GPU-driven forest renderer (see the module docs).
 pub struct ForestRenderer {
@@ -270,12 +255,8 @@ impl ForestRenderer {
     pub fn gpu_bytes(&self) -> u64 {
         // (The pools' figure counts the control buffer without styles: add what styles hold.)
         let styles = self.pools.buffers.control.size() - super::gpu_data::control_buffer_bytes(0);
-        self.pools.config().bytes()
-            + styles
-            + self.species.bytes()
-            + self.terrain.gpu_bytes()
-            + self.canopy.gpu_bytes()
-            + self.shadow_bytes()
+        let passes: u64 = self.passes().iter().map(|p| p.gpu_bytes()).sum();
+        self.pools.config().bytes() + styles + passes + self.shadow_bytes()
     }
 
     /// GPU bytes of the shadow map (0 until shadows are first drawn).
@@ -591,16 +572,20 @@ impl ForestRenderer {
             multiview_mask: None,
         });
         pass.set_bind_group(0, &self.view_group, &[]);
-        if frame.sky {
-            self.sky.draw(&mut pass);
-        }
-        let mut draws = self.terrain.draw(&mut pass);
-        draws += self.species.draw(&mut pass, &self.pools, &self.reach, frame.species);
-        draws += self.canopy.draw(&mut pass);
-        if frame.debug_bounds {
-            draws += self.bounds.draw(&mut pass, &self.pools);
+        let cx = PassContext { pools: &self.pools, reach: &self.reach, frame };
+        let mut draws = 0;
+        for p in self.passes() {
+            if p.enabled(frame) {
+                draws += p.draw(&mut pass, &cx);
+            }
         }
         draws
+    }
+
+    /// The draw passes in the order the frame records them: sky, terrain,
+    /// trees, canopy rasters (blended over the trees), the bounds overlay.
+    fn passes(&self) -> [&dyn DrawPass; 5] {
+        [&self.sky, &self.terrain, &self.species, &self.canopy, &self.bounds]
     }
 
     /// Records the id pass of a prepared frame whose cull pass ran (picking):
@@ -618,8 +603,9 @@ impl ForestRenderer {
         frame: &FrameData,
         rect: [u32; 4],
     ) -> u32 {
-        self.species.build_id_pipelines(device);
-        self.terrain.id.build(device);
+        for p in self.passes() {
+            p.build_ids(device);
+        }
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("tree ids"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -642,8 +628,8 @@ impl ForestRenderer {
         });
         pass.set_scissor_rect(rect[0], rect[1], rect[2], rect[3]);
         pass.set_bind_group(0, &self.view_group, &[]);
-        let draws = self.terrain.draw_ids(&mut pass);
-        draws + self.species.draw_ids(&mut pass, &self.pools, &self.reach, frame.species)
+        let cx = PassContext { pools: &self.pools, reach: &self.reach, frame };
+        self.passes().iter().map(|p| p.draw_ids(&mut pass, &cx)).sum()
     }
 
     /// The last frame's view uniform (for the CPU oracle and tests).

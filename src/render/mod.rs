@@ -10,15 +10,13 @@ pub mod context;
 pub mod counters;
 pub mod cull;
 pub mod forest;
-pub mod frame;
 pub mod gpu_data;
 pub mod impostor;
 pub mod layouts;
 pub mod mesh;
 pub mod mips;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod offscreen;
 pub mod overlay;
+pub mod pass;
 pub mod pools;
 pub mod reach;
 pub mod readback;
@@ -27,7 +25,6 @@ pub mod settings;
 pub mod shaders;
 pub mod shadow;
 pub mod species;
-pub mod stats;
 pub mod terrain;
 
 use glam::{Mat4, Vec3};

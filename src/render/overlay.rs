@@ -97,3 +97,25 @@ fn overlay_pipeline(
     };
     super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target)
 }
+
+impl super::pass::DrawPass for SkyPass {
+    fn enabled(&self, frame: &super::pass::FrameData) -> bool {
+        frame.sky
+    }
+
+    /// The sky is not counted among the draw calls.
+    fn draw<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, _cx: &super::pass::PassContext<'p>) -> u32 {
+        SkyPass::draw(self, pass);
+        0
+    }
+}
+
+impl super::pass::DrawPass for BoundsPass {
+    fn enabled(&self, frame: &super::pass::FrameData) -> bool {
+        frame.debug_bounds
+    }
+
+    fn draw<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, cx: &super::pass::PassContext<'p>) -> u32 {
+        BoundsPass::draw(self, pass, cx.pools)
+    }
+}

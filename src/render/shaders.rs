@@ -1,11 +1,16 @@
-//! WGSL sources, composed at compile time: `shaders/common.wgsl` is prepended
-//! to each pass's file (WGSL has no includes), `shaders/styles.wgsl` (the
-//! styles' binding) to the tree passes', and `shaders/shadow.wgsl` (the
-//! shadow map and its lookup) to the lit passes'.
+//! WGSL sources, composed at compile time (WGSL has no includes): each pass's
+//! file (`shaders/<pass>.wgsl`, named like its constant here and its Rust file
+//! in `src/render/`) after the modules it uses, each binding declared once:
+//! `common.wgsl` (structs and functions), `view.wgsl` (the view, group 0),
+//! `trees.wgsl` (the tree passes' pools and draw params, groups 2 and 3),
+//! `styles.wgsl` (the styles' binding and colours), `shadow.wgsl` (the shadow
+//! map and its lookup, for the lit passes).
 
 /// The mesh pass (and the bake's billboard capture).
 pub const MESH: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/mesh.wgsl")
@@ -14,6 +19,8 @@ pub const MESH: &str = concat!(
 /// The billboard pass.
 pub const BILLBOARD: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/billboard.wgsl")
@@ -22,6 +29,8 @@ pub const BILLBOARD: &str = concat!(
 /// The multi-view impostor pass.
 pub const IMPOSTOR: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/impostor_views.wgsl"),
@@ -31,29 +40,48 @@ pub const IMPOSTOR: &str = concat!(
 /// The cluster pass (ellipsoids and lines).
 pub const CLUSTER: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/cluster.wgsl")
 );
 
 /// The cull and LoD-selection compute passes.
-pub const CULL: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/cull.wgsl"));
+pub const CULL: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/cull.wgsl")
+);
 
 /// The sky/ground background.
-pub const SKY: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/sky.wgsl"));
+pub const SKY: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/sky.wgsl")
+);
 
 /// The batch-bounds debug view.
-pub const BOUNDS: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/bounds.wgsl"));
+pub const BOUNDS: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/bounds.wgsl")
+);
 
 /// The terrain pass.
 pub const TERRAIN: &str = concat!(
     include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/terrain.wgsl")
 );
 
 /// The canopy pass.
-pub const CANOPY: &str = concat!(include_str!("../../shaders/common.wgsl"), include_str!("../../shaders/canopy.wgsl"));
+pub const CANOPY: &str = concat!(
+    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/view.wgsl"),
+    include_str!("../../shaders/canopy.wgsl")
+);
 
 /// Progressive refinement's accumulate and resolve passes.
 pub const ACCUMULATE: &str = include_str!("../../shaders/accumulate.wgsl");

@@ -83,14 +83,7 @@ impl Pipeline {
     }
 }
 
-/// What the species draws need of a frame.
-#[derive(Debug, Clone, Copy)]
-pub struct SpeciesFrame {
-    /// Half width of the transition bands.
-    pub fade_band: f32,
-    /// Ellipsoids write their exact depth.
-    pub cluster_exact_depth: bool,
-}
+pub use super::pass::SpeciesFrame;
 
 /// Every species of the scene on the GPU, and the table over them.
 pub struct Species {
@@ -539,5 +532,23 @@ impl Species {
         fade_band: f32,
     ) -> u32 {
         self.draw_reaching(pass, pools, |i| reach.tallest_m(i) * texels_per_m, fade_band, Pipeline::Shadow)
+    }
+}
+
+impl super::pass::DrawPass for Species {
+    fn draw<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, cx: &super::pass::PassContext<'p>) -> u32 {
+        Species::draw(self, pass, cx.pools, cx.reach, cx.frame.species)
+    }
+
+    fn draw_ids<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, cx: &super::pass::PassContext<'p>) -> u32 {
+        Species::draw_ids(self, pass, cx.pools, cx.reach, cx.frame.species)
+    }
+
+    fn build_ids(&self, device: &wgpu::Device) {
+        self.build_id_pipelines(device);
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.bytes()
     }
 }

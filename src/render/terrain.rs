@@ -555,3 +555,21 @@ impl TerrainPass {
         1
     }
 }
+
+impl super::pass::DrawPass for TerrainPass {
+    fn draw<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, _cx: &super::pass::PassContext<'p>) -> u32 {
+        TerrainPass::draw(self, pass)
+    }
+
+    fn draw_ids<'p>(&'p self, pass: &mut wgpu::RenderPass<'p>, _cx: &super::pass::PassContext<'p>) -> u32 {
+        TerrainPass::draw_ids(self, pass)
+    }
+
+    fn build_ids(&self, device: &wgpu::Device) {
+        self.id.build(device);
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        TerrainPass::gpu_bytes(self)
+    }
+}

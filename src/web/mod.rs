@@ -12,10 +12,10 @@ use wasm_bindgen::JsCast;
 use wasm_bindgen_futures::JsFuture;
 
 use crate::camera::Camera;
+use crate::frame::Frame;
 use crate::geo::GeoFrame;
 use crate::orbit::Orbit;
 use crate::render::forest::{depth_texture, PoolConfig};
-use crate::render::frame::Frame;
 use crate::scene::StreamEvent;
 
 mod fetch;
@@ -171,7 +171,7 @@ impl Viewer {
             let tiles = tiles.clone();
             buffer.slice(..).map_async(wgpu::MapMode::Read, move |result| {
                 let instance = result.ok().and_then(|()| {
-                    let id = crate::render::frame::read_pick(&mapped.slice(..).get_mapped_range().ok()?);
+                    let id = crate::frame::read_pick(&mapped.slice(..).get_mapped_range().ok()?);
                     mapped.unmap();
                     id
                 });

@@ -3,8 +3,8 @@
 
 use sylva::bench::{self, NamedPath};
 use sylva::camera::Camera;
+use sylva::offscreen::OffscreenScene;
 use sylva::render::forest::PoolConfig;
-use sylva::render::offscreen::OffscreenScene;
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small");
 

@@ -20,9 +20,9 @@ use std::path::{Path, PathBuf};
 use glam::{DVec3, Vec3, Vec4Swizzles};
 use sylva::camera::Camera;
 use sylva::format::Manifest;
+use sylva::offscreen::OffscreenScene;
 use sylva::render::forest::{PoolConfig, RenderSettings, Representations};
 use sylva::render::gpu_data::{Repr, REPR_COUNT};
-use sylva::render::offscreen::OffscreenScene;
 use sylva::render::settings::FarTier;
 
 const W: u32 = 320;
@@ -481,7 +481,7 @@ fn a_style_colours_the_trees_it_names_and_a_selection_is_highlighted() {
 /// bounds of thinned trees as they are drawn).
 #[test]
 fn far_thinned_trees_are_picked_where_they_are_drawn() {
-    use sylva::render::offscreen::NamedView;
+    use sylva::offscreen::NamedView;
     let mut off = open();
     off.load_view(&Camera::default(), 30.0);
     let cam = off.named_camera(NamedView::Far, 30.0).unwrap();

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use sylva::bench::downsample;
 use sylva::camera::Camera;
 use sylva::metrics::multiscale_rmse;
+use sylva::offscreen::{NamedView, OffscreenScene};
 use sylva::render::forest::{PoolConfig, RenderSettings, Representations};
-use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::render::refine::{RefineConfig, FULL_MESH_QUALITY};
 
 use crate::common::foliage_share;

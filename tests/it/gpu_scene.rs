@@ -16,8 +16,8 @@ use sylva::format::tile::{CrownRange, BATCH_CROWN_ASPECT};
 use sylva::format::Manifest;
 use sylva::lod::select::{cpu_select, unpack_item_y};
 use sylva::metrics::multiscale_rmse;
+use sylva::offscreen::{NamedView, OffscreenScene};
 use sylva::render::forest::{CullingMode, PoolConfig, RenderSettings, Representations};
-use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::scene::StreamEvent;
 
 use crate::common::{foliage_share, rewritten_copy};
@@ -1057,7 +1057,7 @@ fn the_canopy_cross_fade_keeps_the_forests_cover() {
             assert!(off.renderer.last_view().canopy[0] > 0.0, "the cross-fade is on");
         }
         let ratio = (ground - mixed) / (ground - trees);
-        let drawn = |s: &sylva::render::stats::FrameStats| s.instances.values().sum::<u64>();
+        let drawn = |s: &sylva::frame::stats::FrameStats| s.instances.values().sum::<u64>();
         eprintln!(
             "tallest tree {px} px: darkening with the canopy {ratio:.3}× the trees'; trees drawn {} of {}, rasters {}",
             drawn(&with),

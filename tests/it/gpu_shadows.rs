@@ -10,9 +10,9 @@ use sylva::camera::Camera;
 use sylva::format::pack::decode_pack;
 use sylva::format::Manifest;
 use sylva::lod::select::{cpu_select, unpack_item_y};
+use sylva::offscreen::{NamedView, OffscreenScene};
 use sylva::render::forest::{PoolConfig, Representations};
 use sylva::render::gpu_data::{Repr, REPR_COUNT};
-use sylva::render::offscreen::{NamedView, OffscreenScene};
 use sylva::render::shadow::ShadowQuality;
 use sylva::render::Lighting;
 

@@ -1064,7 +1064,7 @@ fn the_first_views_frame_the_trees_of_two_districts_far_apart() {
     assert!(text.contains("several places; the largest group: 350 of them"), "{text}");
     // The named views aim there and draw trees; aimed at the middle of the whole
     // extent (as before), the same view draws none.
-    use sylva::render::offscreen::{NamedView, OffscreenScene};
+    use sylva::offscreen::{NamedView, OffscreenScene};
     let mut off =
         OffscreenScene::open(out.to_str().unwrap(), 320, 180, sylva::render::forest::PoolConfig::default()).unwrap();
     off.load_view(&sylva::camera::Camera::default(), 60.0);
@@ -1577,7 +1577,7 @@ fn a_country_streams_through_bucket_files_and_shows_land_sea_and_forest() {
     let t = m.terrain.as_ref().expect("terrain");
     assert!(t.imagery.is_some() && m.canopy.is_some(), "imagery and canopy");
 
-    use sylva::render::offscreen::{NamedView, OffscreenScene};
+    use sylva::offscreen::{NamedView, OffscreenScene};
     let scene = dir.join("one");
     let mut off =
         OffscreenScene::open(scene.to_str().unwrap(), 160, 90, sylva::render::forest::PoolConfig::default()).unwrap();

@@ -9,8 +9,8 @@ use std::path::Path;
 use crate::common::{run, tmp, write_geotiff_dem};
 use glam::DVec3;
 use sylva::camera::Camera;
+use sylva::offscreen::OffscreenScene;
 use sylva::render::forest::PoolConfig;
-use sylva::render::offscreen::OffscreenScene;
 
 const W: u32 = 256;
 const H: u32 = 160;

@@ -1,12 +1,12 @@
-//! Frame statistics, gathered once for both hosts by [`super::frame::Frame`]:
+//! Frame statistics, gathered once for both hosts by [`super::Frame`]:
 //! `sylva render --stats` (native) and `stats()` in the browser (`web/`) report
 //! the same keys from the same code (docs/FORMAT.md §frame stats).
 
 use serde::Serialize;
 
-use super::counters::CullCounters;
-use super::forest::ForestRenderer;
-use super::gpu_data::{DrawArgs, Repr, REPR_COUNT};
+use crate::render::counters::CullCounters;
+use crate::render::forest::ForestRenderer;
+use crate::render::gpu_data::{DrawArgs, Repr, REPR_COUNT};
 use crate::scene::{Fetcher, SceneStream};
 
 /// Per-frame statistics; the keys are stable and documented (docs/FORMAT.md §stats),
@@ -88,7 +88,7 @@ pub struct FrameStats {
     pub gpu_ms: std::collections::BTreeMap<String, f64>,
     /// The GPU adapter: name (backend, type), or the browser's vendor and architecture.
     pub adapter: String,
-    /// Progressive refinement ([`super::refine`]): steps done since the camera
+    /// Progressive refinement ([`crate::render::refine`]): steps done since the camera
     /// came to rest (1 on a moving camera's frames, its plain first step; 0
     /// while data is loading or when not refining).
     pub refine_step: u32,

@@ -6,15 +6,15 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use super::context::{read_texture_rgba8, GpuContext};
-use super::forest::{depth_texture, PoolConfig};
-use super::frame::Frame;
-use super::gpu_data::{CullControl, DrawArgs, REPR_COUNT};
-pub use super::stats::FrameStats;
 use crate::camera::Camera;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Manifest;
+pub use crate::frame::stats::FrameStats;
+use crate::frame::Frame;
 use crate::lod::select::DrawItem;
+use crate::render::context::{read_texture_rgba8, GpuContext};
+use crate::render::forest::{depth_texture, PoolConfig};
+use crate::render::gpu_data::{CullControl, DrawArgs, REPR_COUNT};
 use crate::scene::{Fetcher, StreamEvent, ThreadFetcher};
 
 /// Colour format of offscreen targets (sRGB, like the browser canvas view).
@@ -127,7 +127,7 @@ impl OffscreenScene<ThreadFetcher> {
     ///
     /// # Errors
     /// When no GPU adapter can be created.
-    pub fn open(scene: &str, width: u32, height: u32, pools: PoolConfig) -> Result<Self, super::ContextError> {
+    pub fn open(scene: &str, width: u32, height: u32, pools: PoolConfig) -> Result<Self, crate::render::ContextError> {
         let ctx = GpuContext::new_headless_blocking()?;
         Ok(Self::with_fetcher(ctx, scene, ThreadFetcher::new(6), width, height, pools))
     }
@@ -294,7 +294,7 @@ impl<F: Fetcher> OffscreenScene<F> {
         self.frame.stats_of_last_frame()
     }
 
-    /// Refines the image of `camera` while it rests ([`super::refine`], with
+    /// Refines the image of `camera` while it rests ([`crate::render::refine`], with
     /// `config`, enabled here and off again after) from the plain frame until
     /// it has converged, `max_steps` frames were drawn or `timeout_s` passed,
     /// streaming what the finer levels need between steps. Each step is
@@ -304,11 +304,12 @@ impl<F: Fetcher> OffscreenScene<F> {
     pub fn render_converged(
         &mut self,
         camera: &Camera,
-        config: super::refine::RefineConfig,
+        config: crate::render::refine::RefineConfig,
         max_steps: u32,
         timeout_s: f64,
     ) -> (FrameStats, std::collections::BTreeMap<String, f64>) {
-        self.frame.refine = super::refine::Refinement::new(super::refine::RefineConfig { enabled: true, ..config });
+        self.frame.refine =
+            crate::render::refine::Refinement::new(crate::render::refine::RefineConfig { enabled: true, ..config });
         let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s.max(0.0));
         let mut total = std::collections::BTreeMap::new();
         let mut stats = FrameStats::default();

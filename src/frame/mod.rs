@@ -1,17 +1,19 @@
 //! One frame, the same in both hosts: [`Frame`] owns the renderer, the stream
 //! and the settings and runs stream step → prepare → cull pass → draw pass →
 //! counter readback → [`FrameStats`]. The hosts keep only their target (an
-//! offscreen texture in [`super::offscreen`], the canvas in `web/`) and how
+//! offscreen texture in [`crate::offscreen`], the canvas in `web/`) and how
 //! they wait: natively a measured frame blocks until the GPU is done; the
 //! browser never blocks, so its GPU times and counters arrive a few frames late.
 
-use super::forest::{ForestRenderer, GpuResidency, PoolConfig, RenderSettings};
-use super::gpu_data::REPR_COUNT;
-use super::readback::{CounterReadback, PassTimer};
-use super::refine::{Accumulator, Plan, Refinement};
-use super::stats::FrameStats;
+pub mod stats;
+
 use crate::camera::ViewData;
+use crate::render::forest::{ForestRenderer, GpuResidency, PoolConfig, RenderSettings};
+use crate::render::gpu_data::REPR_COUNT;
+use crate::render::readback::{CounterReadback, PassTimer};
+use crate::render::refine::{Accumulator, Plan, Refinement};
 use crate::scene::{Fetcher, SceneStream, StreamConfig};
+use stats::FrameStats;
 
 /// Milliseconds on a monotonic clock: `performance.now()` in the browser, a
 /// process-wide [`std::time::Instant`] natively.
@@ -118,7 +120,7 @@ pub struct Frame<F: Fetcher> {
     /// How to draw.
     pub settings: RenderSettings,
     /// Progressive refinement while the camera rests (off unless its
-    /// `config.enabled`; [`super::refine`]).
+    /// `config.enabled`; [`crate::render::refine`]).
     pub refine: Refinement,
     accumulator: Option<Accumulator>,
     color_format: wgpu::TextureFormat,
@@ -197,7 +199,7 @@ impl<F: Fetcher> Frame<F> {
         // Far tiles are fetched as far as prefix thinning draws them.
         // (Thinning draws billboards: without them every tree is drawn.)
         let thinned = settings.thin_px > 0.0
-            && settings.culling == super::settings::CullingMode::Batches
+            && settings.culling == crate::render::settings::CullingMode::Batches
             && settings.representations.billboards
             && !settings.whole_tiles;
         self.stream.set_prefix_view(thinned.then_some(crate::scene::streaming::PrefixView {
@@ -207,9 +209,9 @@ impl<F: Fetcher> Frame<F> {
         }));
         // Far trees give way to the canopy rasters (scenes that have them).
         self.stream.set_canopy_view(settings.canopy.then_some(crate::scene::streaming::CanopyView {
-            px_lo: super::settings::CANOPY_PX[0],
-            px_hi: super::settings::CANOPY_PX[1],
-            cell_px: super::settings::CANOPY_CELL_PX,
+            px_lo: crate::render::settings::CANOPY_PX[0],
+            px_hi: crate::render::settings::CANOPY_PX[1],
+            cell_px: crate::render::settings::CANOPY_CELL_PX,
             lod_scale: settings.quality,
         }));
         let mut residency = GpuResidency { renderer: &mut self.renderer, device: &self.device, queue: &self.queue };
@@ -348,7 +350,7 @@ impl<F: Fetcher> Frame<F> {
         let scene = accumulator.scene_target(&self.device, view.viewport);
         let mut recorded = if plan.render {
             let settings = self.refine.settings(&self.settings, &plan);
-            let jittered = super::refine::jittered(view, plan.jitter_px);
+            let jittered = crate::render::refine::jittered(view, plan.jitter_px);
             self.record_scene(&jittered, &settings, &scene, depth, read_counters)
         } else {
             // Converged: only the image is shown again.
@@ -420,10 +422,10 @@ impl<F: Fetcher> Frame<F> {
     }
 
     /// Prepares the terrain and the renderer for a frame of `view`.
-    fn prepare(&mut self, view: &ViewData, settings: &RenderSettings) -> super::forest::FrameData {
+    fn prepare(&mut self, view: &ViewData, settings: &RenderSettings) -> crate::render::forest::FrameData {
         let threshold = self.stream.config().terrain_error_px;
-        let flags = if settings.debug_lod { super::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
-            | if settings.terrain_morph { 0 } else { super::terrain::TERRAIN_NO_MORPH };
+        let flags = if settings.debug_lod { crate::render::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
+            | if settings.terrain_morph { 0 } else { crate::render::terrain::TERRAIN_NO_MORPH };
         // (The threshold travels to the shader for reference only: the morph
         // is worked out per tile by the selection.)
         let threshold = threshold * settings.quality;
@@ -460,11 +462,11 @@ impl<F: Fetcher> Frame<F> {
                     mip_level_count: 1,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    format: super::layouts::ID_FORMAT,
+                    format: crate::render::layouts::ID_FORMAT,
                     usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
                     view_formats: &[],
                 });
-                let depth = super::forest::depth_texture(&self.device, size[0], size[1]);
+                let depth = crate::render::forest::depth_texture(&self.device, size[0], size[1]);
                 PickTargets { ids, depth, size }
             }
         };
