@@ -7,6 +7,7 @@ use std::collections::{HashMap, VecDeque};
 
 use glam::DVec3;
 
+use super::tiles::tile_distance;
 use super::*;
 use crate::camera::Camera;
 use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
