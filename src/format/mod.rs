@@ -12,6 +12,7 @@ pub mod cloud;
 pub mod cluster;
 pub mod entries;
 mod error;
+pub mod ids;
 pub mod imagery;
 pub mod index;
 pub mod manifest;
@@ -21,10 +22,9 @@ pub mod terrain;
 pub mod tile;
 
 pub use error::{DecodeError, Problem};
+pub use ids::{decode_ids, decode_tree_ids, encode_ids, encode_tree_ids, TreeIds};
 pub use index::{build_index, IndexNode, IndexRef};
 pub use manifest::{Bounds, Counts, Crs, Home, Manifest, ShardStamp, SpeciesEntry, TileEntry};
 pub use pack::{decode_pack, encode_pack, Pack, PackMeta, Section};
 pub use terrain::{TerrainEntry, TerrainTile};
-pub use tile::{
-    decode_ids, decode_tree_ids, encode_ids, encode_tree_ids, GpuBatch, Instance, PackedInstance, Tile, TreeIds,
-};
+pub use tile::{GpuBatch, Instance, PackedInstance, Tile};

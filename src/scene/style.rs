@@ -309,7 +309,7 @@ impl TreeStyle {
                     self.selected.insert(n);
                 }
                 // A text that is a whole number as a bake keeps it ("702") is that number.
-                TreeId::Text(t) => match crate::format::tile::numeric_id(t.trim()) {
+                TreeId::Text(t) => match crate::format::ids::numeric_id(t.trim()) {
                     Some(n) => {
                         self.selected.insert(n);
                     }

@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use sylva::format::ids::{decode_ids, encode_ids};
 use sylva::format::manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry, SCENE_VERSION};
 use sylva::format::pack::{
     kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section,
@@ -14,8 +15,8 @@ use sylva::format::pack::{
 };
 use sylva::format::terrain::{dequantise, quantise, TerrainChild, TerrainTile, TERRAIN_HOLE};
 use sylva::format::tile::{
-    decode_ids, encode_ids, variation_of, whole_index, CrownRange, GpuBatch, Levels, PackedInstance, Tile,
-    BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED, BATCH_PARTIAL, TILE_LEVELS, TILE_LEVELS_V3,
+    variation_of, whole_index, CrownRange, GpuBatch, Levels, PackedInstance, Tile, BATCH_CROWN_ASPECT,
+    BATCH_DENSITY_ORDERED, BATCH_PARTIAL, TILE_LEVELS, TILE_LEVELS_V3,
 };
 use sylva::format::{decode_pack, encode_pack, Problem};
 

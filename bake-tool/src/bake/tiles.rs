@@ -9,8 +9,8 @@ use std::time::Instant;
 use anyhow::Result;
 use rayon::prelude::*;
 use sylva::format::attributes::encode_attributes;
+use sylva::format::ids::{encode_tree_ids, TreeIds};
 use sylva::format::manifest::{Bounds, TileEntry, TileLevels};
-use sylva::format::tile::{encode_tree_ids, TreeIds};
 
 use crate::attributes::AttributeTable;
 

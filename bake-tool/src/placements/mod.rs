@@ -913,13 +913,13 @@ pub fn stream_csv<R: std::io::Read>(
     Ok(cols.kind)
 }
 
-pub use sylva::format::tile::MAX_TEXT_ID_BYTES;
+pub use sylva::format::ids::MAX_TEXT_ID_BYTES;
 
 /// An id cell's number: a whole number below 2^63 written as that number
-/// writes itself ([`sylva::format::tile::numeric_id`]; `0702` is a key, text).
+/// writes itself ([`sylva::format::ids::numeric_id`]; `0702` is a key, text).
 #[must_use]
 pub fn number_id(cell: &str) -> Option<u64> {
-    sylva::format::tile::numeric_id(cell.trim())
+    sylva::format::ids::numeric_id(cell.trim())
 }
 
 /// An id cell that is no such number, trimmed, if it holds 1–256 bytes: the

@@ -84,10 +84,6 @@ impl Default for StreamConfig {
     }
 }
 
-
-
-
-
 #[derive(Debug, Clone, PartialEq)]
 enum Load {
     Idle,
@@ -219,7 +215,6 @@ enum Target {
     /// A canopy raster.
     Canopy(CanopyKey),
 }
-
 
 /// Where a picked tree's data is: its tile's files and its index in the tile.
 #[derive(Debug, Clone, PartialEq, Eq)]
