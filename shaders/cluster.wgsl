@@ -18,7 +18,7 @@
 @group(1) @binding(1) var noise_alpha: texture_cube<f32>;
 @group(1) @binding(2) var noise_normal: texture_cube<f32>;
 @group(1) @binding(3) var noise_sampler: sampler;
-// The tree's own sky visibility (bake-tool/src/ao.rs) over the box
+// The tree's own sky visibility (bake-tool/src/pack/ao.rs) over the box
 // draw.ao_field_min .. + ao_field_size in model space; one white texel where
 // the pack has none.
 @group(1) @binding(4) var ao_field: texture_3d<f32>;

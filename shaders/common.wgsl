@@ -426,7 +426,7 @@ fn shade_filtered(albedo: vec3<f32>, m: vec3<f32>, is_leaf: bool, view: View, su
     return albedo * (sky + view.sun_color.rgb * (max(diffuse, 0.0) * sun));
 }
 
-// A tree's own ambient occlusion, baked per species (bake-tool/src/ao.rs): the
+// A tree's own ambient occlusion, baked per species (bake-tool/src/pack/ao.rs): the
 // sky a point inside its crown sees through the tree's leaves and wood, the
 // same field sampled by every level of detail (mesh vertices, the billboard
 // capture, ellipsoids, lines). `baked` is 1 where a pack has none; the view's

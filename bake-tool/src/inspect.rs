@@ -49,7 +49,7 @@ pub fn inspect(path: &Path) -> Result<Value> {
 
 /// A GeoTIFF DEM as `bake --dem` reads it.
 fn inspect_dem(path: &Path) -> Result<Value> {
-    let dem = crate::dem::Dem::open(path)?;
+    let dem = crate::input::dem::Dem::open(path)?;
     let s = dem.summary();
     Ok(json!({
         "kind": "dem",
@@ -67,9 +67,9 @@ fn inspect_dem(path: &Path) -> Result<Value> {
 
 /// A placements file as the bake would read it (default options).
 fn inspect_placements(path: &Path) -> Result<Value> {
-    use crate::placements::{PlacementSource, ReadOptions};
+    use crate::input::placements::{PlacementSource, ReadOptions};
     let source = PlacementSource::open(path, &ReadOptions::default())?;
-    let allometry = crate::allometry::Allometry::built_in();
+    let allometry = crate::input::allometry::Allometry::built_in();
     let mut species: std::collections::BTreeMap<String, [Option<(f32, f32)>; 3]> = Default::default();
     let mut counts: std::collections::BTreeMap<String, u64> = Default::default();
     let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
@@ -119,7 +119,7 @@ fn inspect_placements(path: &Path) -> Result<Value> {
     rows.sort_by(|a, b| b["trees"].as_u64().cmp(&a["trees"].as_u64()));
     Ok(json!({
         "kind": "placements",
-        "coordinates": if source.kind == crate::placements::CoordKind::LonLat { "lon/lat" } else { "projected" },
+        "coordinates": if source.kind == crate::input::placements::CoordKind::LonLat { "lon/lat" } else { "projected" },
         "notes": source.notes,
         "rows": report.rows,
         "kept": report.kept,
@@ -174,8 +174,8 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         m.origin_m[0] + f64::from(focus.min[0] + focus.max[0]) * 0.5,
         m.origin_m[1] + f64::from(focus.min[1] + focus.max[1]) * 0.5,
     ];
-    let lonlat = crate::reproject::Crs::from_epsg(m.crs.epsg)
-        .and_then(|src| crate::reproject::Reprojector::new(src, &crate::reproject::Crs::from_epsg(4326)?))
+    let lonlat = crate::input::reproject::Crs::from_epsg(m.crs.epsg)
+        .and_then(|src| crate::input::reproject::Reprojector::new(src, &crate::input::reproject::Crs::from_epsg(4326)?))
         .and_then(|r| r.apply(centre[0], centre[1]))
         .ok();
     let home_trees =

@@ -9,7 +9,7 @@ use sylva::format::{Manifest, TileEntry};
 
 use crate::out_dir::create_dir;
 use crate::out_dir::OutDir;
-use crate::scene_write::finish_scene;
+use crate::bake::scene_write::finish_scene;
 
 /// Reads and checks the shard manifests, copies packs (from shard 0), tiles and
 /// id sidecars into `out` and writes the index and manifest of the whole.
@@ -134,7 +134,7 @@ pub fn merge(
         if let Some(w) = tiles.windows(2).find(|w| (w[0].x, w[0].y) == (w[1].x, w[1].y)) {
             bail!("tile ({}, {}) is in two shards: the shards come from different bakes", w[0].x, w[0].y);
         }
-        finish_scene(tmp, base, tiles, crate::scene_write::Layout { node_tiles, flat: false, canopy_cell_m }, log)
+        finish_scene(tmp, base, tiles, crate::bake::scene_write::Layout { node_tiles, flat: false, canopy_cell_m }, log)
     })
 }
 

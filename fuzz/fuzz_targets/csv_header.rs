@@ -5,7 +5,7 @@
 //! as the header's attribute names.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use sylva_bake::placements::{detect_delimiter, header_record, stream_csv, ReadOptions, Report, MAX_HEADER_BYTES};
+use sylva_bake::input::placements::{detect_delimiter, header_record, stream_csv, ReadOptions, Report, MAX_HEADER_BYTES};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(header) = header_record(data, MAX_HEADER_BYTES) else { return };

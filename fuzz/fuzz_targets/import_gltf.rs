@@ -3,7 +3,7 @@
 //! reuse), accessors, views and buffers are the surface (docs/SECURITY.md).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use sylva_bake::gltf_import::{import_slice, Classifier};
+use sylva_bake::input::gltf_import::{import_slice, Classifier};
 
 fuzz_target!(|data: &[u8]| {
     // No base folder: external URIs are refused, as for a model read from memory.

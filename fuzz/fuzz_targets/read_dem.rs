@@ -3,7 +3,7 @@
 //! reads samples to finite heights or none.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use sylva_bake::dem::Dem;
+use sylva_bake::input::dem::Dem;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(dem) = Dem::read(std::io::Cursor::new(data)) {

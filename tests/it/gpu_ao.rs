@@ -1,4 +1,4 @@
-//! Each tree's own ambient occlusion, baked into its pack (`bake-tool/src/ao.rs`)
+//! Each tree's own ambient occlusion, baked into its pack (`bake-tool/src/pack/ao.rs`)
 //! and sampled by every level of detail: with it on, the tree is darker inside its
 //! crown by about as much at every level (mesh, simplified mesh, ellipsoids and
 //! lines, billboards), and the image metric between a level and the full mesh is

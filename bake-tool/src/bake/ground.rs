@@ -4,10 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::dem::Dem;
+use crate::input::dem::Dem;
 use anyhow::{bail, Context, Result};
 
-use crate::reproject::{Crs, Reprojector};
+use crate::input::reproject::{Crs, Reprojector};
 
 /// How a given `z` column is meant when there is a DEM.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -13,12 +13,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::ortho::Ortho;
+use crate::input::ortho::Ortho;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use sylva::format::terrain::{ImageryEntry, TerrainEntry, TerrainTile};
 
-use crate::reproject::{Crs, Reprojector};
+use crate::input::reproject::{Crs, Reprojector};
 
 /// Pixels per imagery side.
 pub const IMAGERY_PX: u32 = sylva::format::terrain::IMAGERY_PX;

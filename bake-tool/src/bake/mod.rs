@@ -7,16 +7,20 @@
 //! 3. batches and tiles ([`tiles`]: grid cells into batches, tiles and id sidecars);
 //! 4. terrain ([`terrain`]: a quadtree of height grids from the `--dem`
 //!    GeoTIFFs or the demo's hills);
-//! 5. write: the tile index and `scene.json` ([`crate::scene_write`]).
+//! 5. write: the tile index and `scene.json` ([`crate::bake::scene_write`]).
 //!
 //! Each stage is a module that takes what the earlier ones made and calls no
 //! other stage; the folder is written atomically ([`OutDir::write`]).
 
+pub mod batching;
+pub mod bucket;
+pub mod canopy;
 pub mod ground;
 pub mod ground_material;
 pub mod imagery;
 pub mod pack_cache;
 pub mod packs;
+pub mod scene_write;
 pub mod terrain;
 pub mod tiles;
 pub mod trees;
@@ -27,11 +31,11 @@ use anyhow::{bail, Result};
 use glam::DVec3;
 use sylva::format::manifest::{Bounds, Counts, Crs as CrsEntry, Manifest, ShardStamp, SCENE_FORMAT, SCENE_VERSION};
 
-use crate::bucket::TreeSource;
-use crate::gltf_import::ImportedModel;
+use crate::bake::bucket::TreeSource;
+use crate::input::gltf_import::ImportedModel;
 use crate::out_dir::OutDir;
-use crate::pack_build::PackOptions;
-use crate::reproject::Crs;
+use crate::pack::PackOptions;
+use crate::input::reproject::Crs;
 
 /// Everything a scene is made from.
 pub struct SceneInput<'a> {
@@ -64,7 +68,7 @@ pub struct SceneInput<'a> {
     /// Width of the finest canopy raster cells (metres).
     pub canopy_cell_m: f64,
     /// The per-tree attributes, if kept (`.attr` sidecars next to the tiles).
-    pub attributes: Option<crate::attributes::AttributeTable>,
+    pub attributes: Option<crate::input::attributes::AttributeTable>,
     /// The text ids of the trees whose id is no whole number (`.ids` version 2).
     pub text_ids: Option<trees::TextIds>,
 }
@@ -143,11 +147,11 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
         let flat = input.shard.is_some();
-        let manifest = crate::scene_write::finish_scene(
+        let manifest = crate::bake::scene_write::finish_scene(
             dir,
             base,
             tiles.entries,
-            crate::scene_write::Layout { node_tiles: input.index_node_tiles, flat, canopy_cell_m: input.canopy_cell_m },
+            crate::bake::scene_write::Layout { node_tiles: input.index_node_tiles, flat, canopy_cell_m: input.canopy_cell_m },
             log,
         )?;
         Ok(SceneSummary {

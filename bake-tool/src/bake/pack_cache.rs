@@ -33,8 +33,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
-use crate::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
-use crate::pack_build::PackOptions;
+use crate::input::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
+use crate::pack::PackOptions;
 
 /// A folder of packs keyed by what they are built from.
 pub struct PackCache {

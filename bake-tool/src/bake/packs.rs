@@ -1,5 +1,5 @@
 //! Stage 2 of the bake: a LoD pack per species (mesh levels, billboards rendered
-//! on the GPU, clusters; [`crate::pack_build`]), written to `species/`, with the
+//! on the GPU, clusters; [`crate::pack`]), written to `species/`, with the
 //! manifest's species entries and the shapes the tiles bound batches with.
 //! Packs found in the `--pack-cache` ([`super::pack_cache`]) are taken from it.
 
@@ -12,11 +12,11 @@ use sylva::render::capture::CapturePipelines;
 use sylva::render::GpuContext;
 
 use super::pack_cache::PackCache;
-use crate::batching::SpeciesShape;
-use crate::gltf_import::ImportedModel;
+use crate::bake::batching::SpeciesShape;
+use crate::input::gltf_import::ImportedModel;
 use crate::out_dir::{create_dir, write_file};
-use crate::pack_build::{build_pack, BuiltPack, PackOptions};
-use crate::scene_write::safe_name;
+use crate::pack::{build_pack, BuiltPack, PackOptions};
+use crate::bake::scene_write::safe_name;
 
 /// What the packs stage made.
 pub struct Packs {

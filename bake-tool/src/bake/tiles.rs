@@ -1,5 +1,5 @@
 //! Stage 3 of the bake: the trees into grid-cell batches and tiles
-//! ([`crate::batching`]), written to `tiles/` with their id and attribute sidecars, one group
+//! ([`crate::bake::batching`]), written to `tiles/` with their id and attribute sidecars, one group
 //! of whole tiles in memory at a time (all trees, or one bucket of a bake larger
 //! than memory). A shard keeps the trees of its own tiles.
 
@@ -12,10 +12,10 @@ use sylva::format::attributes::encode_attributes;
 use sylva::format::ids::{encode_tree_ids, TreeIds};
 use sylva::format::manifest::{Bounds, TileEntry, TileLevels};
 
-use crate::attributes::AttributeTable;
+use crate::input::attributes::AttributeTable;
 
-use crate::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
-use crate::bucket::TreeSource;
+use crate::bake::batching::{build_tiles, shard_of_tile, tile_of, SceneTree, SpeciesShape};
+use crate::bake::bucket::TreeSource;
 use crate::out_dir::{create_dir, write_file};
 
 /// What the tiles stage wrote.

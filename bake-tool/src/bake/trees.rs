@@ -15,13 +15,13 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 
 use super::ground::{Dems, OutsideDem, ZMode};
-use crate::allometry::Allometry;
-use crate::batching::{self, SceneTree};
-use crate::bucket::{BucketWriter, TreeSource};
+use crate::input::allometry::Allometry;
+use crate::bake::batching::{self, SceneTree};
+use crate::bake::bucket::{BucketWriter, TreeSource};
 use crate::out_dir::OutDir;
 use crate::patterns::pattern_matches;
-use crate::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
-use crate::reproject::{Crs, Reprojector};
+use crate::input::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
+use crate::input::reproject::{Crs, Reprojector};
 use crate::rng;
 
 /// Tallest tree height accepted (the tallest known tree is 116 m); placement
@@ -136,7 +136,7 @@ pub struct SpeciesMap {
     pub names: Vec<String>,
     /// Model heights at scale 1.
     pub heights: Vec<f32>,
-    /// Model crown widths at scale 1 ([`crate::gltf_import::ImportedModel::crown_width`]).
+    /// Model crown widths at scale 1 ([`crate::input::gltf_import::ImportedModel::crown_width`]).
     pub crown_widths: Vec<f32>,
     /// `--map` patterns and their model.
     pub maps: Vec<(String, usize)>,
@@ -178,7 +178,7 @@ pub struct PlacedTrees {
     /// The crown cover of every tree (of every shard), for the procedural ground material.
     pub canopy: super::ground_material::CanopyCover,
     /// The placements' other columns as per-tree attributes, if any are kept.
-    pub attributes: Option<crate::attributes::AttributeTable>,
+    pub attributes: Option<crate::input::attributes::AttributeTable>,
     /// The text ids of the rows that have one (none: every id is a number).
     pub text_ids: Option<TextIds>,
 }
@@ -342,7 +342,7 @@ pub fn place_trees(
     drop(projected);
     let origin = DVec3::new((mx / 1000.0).round() * 1000.0, (my / 1000.0).round() * 1000.0, 0.0);
     // The equations of each species label, looked up once per label.
-    let equations_of: std::cell::RefCell<std::collections::HashMap<String, &crate::allometry::Equations>> =
+    let equations_of: std::cell::RefCell<std::collections::HashMap<String, &crate::input::allometry::Equations>> =
         std::cell::RefCell::default();
     let equations_for = |label: &str| {
         let mut cache = equations_of.borrow_mut();
@@ -476,7 +476,7 @@ pub fn place_trees(
     } else {
         let started = Instant::now();
         log("attributes: typing and coding the other columns (2 passes)");
-        let table = crate::attributes::AttributeTable::build(&source, log)?;
+        let table = crate::input::attributes::AttributeTable::build(&source, log)?;
         log(&format!("  ({:.1} s)", started.elapsed().as_secs_f64()));
         table
     };

@@ -7,10 +7,10 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
 use sylva_bake::bake::{trees, SceneInput};
-use sylva_bake::batching::SceneTree;
-use sylva_bake::gltf_import::Classifier;
+use sylva_bake::bake::batching::SceneTree;
+use sylva_bake::input::gltf_import::Classifier;
 use sylva_bake::out_dir::OutDir;
-use sylva_bake::reproject::{Crs, Reprojector};
+use sylva_bake::input::reproject::{Crs, Reprojector};
 
 use super::*;
 
@@ -42,8 +42,8 @@ pub(crate) struct BakeArgs {
     pub(crate) default_height: Option<f32>,
     /// Text encoding of a CSV: auto reads each field as UTF-8 where it is valid
     /// and as Windows-1252/Latin-1 otherwise (counted in the report).
-    #[arg(long, value_enum, default_value_t = sylva_bake::placements::Encoding::Auto)]
-    pub(crate) encoding: sylva_bake::placements::Encoding,
+    #[arg(long, value_enum, default_value_t = sylva_bake::input::placements::Encoding::Auto)]
+    pub(crate) encoding: sylva_bake::input::placements::Encoding,
     /// CSV field separator (default: detected from the header line: , ; tab |).
     /// With ; or tab, decimal commas (52,37) are read too.
     #[arg(long, value_name = "CHAR", value_parser = parse_delimiter)]
@@ -54,11 +54,11 @@ pub(crate) struct BakeArgs {
     /// Use column NAME for ROLE (repeatable), before the names detected by
     /// default. Roles: lon, lat, x, y, z, height, species, dbh, crown_diameter,
     /// crown_radius, yaw, id. E.g. --column species=species_code --column dbh=dbh_mm.
-    #[arg(long = "column", value_name = "ROLE=NAME", value_parser = sylva_bake::placements::ColumnRole::parse_mapping)]
-    pub(crate) columns: Vec<(sylva_bake::placements::ColumnRole, String)>,
+    #[arg(long = "column", value_name = "ROLE=NAME", value_parser = sylva_bake::input::placements::ColumnRole::parse_mapping)]
+    pub(crate) columns: Vec<(sylva_bake::input::placements::ColumnRole, String)>,
     /// Unit of a DBH column whose name does not say it (dbh_mm, dbh_cm, dbh_in and dbh_m do).
     #[arg(long, value_enum, value_name = "UNIT")]
-    pub(crate) dbh_unit: Option<sylva_bake::placements::DbhUnit>,
+    pub(crate) dbh_unit: Option<sylva_bake::input::placements::DbhUnit>,
     /// Keep only these columns as per-tree attributes (comma-separated names;
     /// default: every column but the coordinates and the id). Numbers,
     /// integers, dates (YYYY-MM-DD) and categories are typed from the values;
@@ -146,7 +146,7 @@ pub(crate) struct PlacementsCsv {
 impl PlacementsCsv {
     pub(crate) fn create(
         path: &std::path::Path,
-        species: &[(String, sylva_bake::gltf_import::ImportedModel)],
+        species: &[(String, sylva_bake::input::gltf_import::ImportedModel)],
         epsg: u32,
     ) -> Result<Self> {
         use std::io::Write as _;
@@ -216,8 +216,8 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
     }
     let allometry = match &args.allometry {
-        Some(path) => sylva_bake::allometry::Allometry::with_overrides(path)?,
-        None => sylva_bake::allometry::Allometry::built_in(),
+        Some(path) => sylva_bake::input::allometry::Allometry::with_overrides(path)?,
+        None => sylva_bake::input::allometry::Allometry::built_in(),
     };
     let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
     let species = import_models(args)?;
@@ -227,7 +227,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     let input_crs = args.input_crs.as_deref().map(Crs::parse).transpose()?;
     let options = trees::TreeOptions {
         placements: &args.placements,
-        read: sylva_bake::placements::ReadOptions {
+        read: sylva_bake::input::placements::ReadOptions {
             encoding: args.encoding,
             delimiter: args.delimiter,
             swap_xy: args.swap_xy,
@@ -336,16 +336,16 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
 }
 
 /// The `--model` files, imported (names unique).
-pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::gltf_import::ImportedModel)>> {
+pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::input::gltf_import::ImportedModel)>> {
     let classifier =
         Classifier { leaf_patterns: args.leaf_materials.clone(), branch_patterns: args.branch_materials.clone() };
-    let mut species: Vec<(String, sylva_bake::gltf_import::ImportedModel)> = Vec::new();
+    let mut species: Vec<(String, sylva_bake::input::gltf_import::ImportedModel)> = Vec::new();
     for m in &args.models {
         let (name, path) = split_pair("--model", m)?;
         if species.iter().any(|(n, _)| n.eq_ignore_ascii_case(name)) {
             bail!("--model {name} is given twice");
         }
-        let model = sylva_bake::gltf_import::import(std::path::Path::new(path), &classifier)?;
+        let model = sylva_bake::input::gltf_import::import(std::path::Path::new(path), &classifier)?;
         let (leaf, wood) = model.triangle_counts();
         log(&format!(
             "model {name}: {} materials, {leaf} leaf + {wood} branch triangles, height {:.2} (model units)",
@@ -363,7 +363,7 @@ pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::
 /// Which model each species label uses, from `--map` and `--default-model`.
 pub(crate) fn species_map(
     args: &BakeArgs,
-    species: &[(String, sylva_bake::gltf_import::ImportedModel)],
+    species: &[(String, sylva_bake::input::gltf_import::ImportedModel)],
 ) -> Result<trees::SpeciesMap> {
     let mut map = trees::SpeciesMap {
         names: species.iter().map(|(n, _)| n.clone()).collect(),

@@ -3,14 +3,14 @@
 use std::time::Instant;
 
 use anyhow::{bail, Result};
-use sylva_bake::gltf_import::Classifier;
-use sylva_bake::pack_build::PackOptions;
+use sylva_bake::input::gltf_import::Classifier;
+use sylva_bake::pack::PackOptions;
 
 use super::*;
 
 pub(crate) fn bench_clusters(model: Option<&std::path::Path>, leaves: Option<usize>, tries: usize) -> Result<()> {
     let model = match (model, leaves) {
-        (Some(p), _) => sylva_bake::gltf_import::import(p, &Classifier::default())?,
+        (Some(p), _) => sylva_bake::input::gltf_import::import(p, &Classifier::default())?,
         (None, Some(n)) => sylva_bake::demo::tree_with_leaves(n, 1),
         (None, None) => bail!("give --model or --leaves"),
     };
@@ -21,10 +21,10 @@ pub(crate) fn bench_clusters(model: Option<&std::path::Path>, leaves: Option<usi
     let opts = PackOptions { cluster_tries: tries, ..PackOptions::default() };
     let no_clusters = PackOptions { clusters: false, ..opts.clone() };
     let t0 = Instant::now();
-    sylva_bake::pack_build::build_pack("bench", &model, &no_clusters, &gpu, &pipelines)?;
+    sylva_bake::pack::build_pack("bench", &model, &no_clusters, &gpu, &pipelines)?;
     let without = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let built = sylva_bake::pack_build::build_pack("bench", &model, &opts, &gpu, &pipelines)?;
+    let built = sylva_bake::pack::build_pack("bench", &model, &opts, &gpu, &pipelines)?;
     let with = t1.elapsed().as_secs_f64();
     let decoded = sylva::format::decode_pack("bench", &built.bytes)?;
     let summary = sylva_bake::inspect::pack_summary(&decoded, built.bytes.len() as u64);

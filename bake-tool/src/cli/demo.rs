@@ -6,9 +6,9 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use clap::Args;
 use sylva_bake::bake::SceneInput;
-use sylva_bake::bucket::TreeSource;
+use sylva_bake::bake::bucket::TreeSource;
 use sylva_bake::out_dir::OutDir;
-use sylva_bake::reproject::Crs;
+use sylva_bake::input::reproject::Crs;
 
 use super::*;
 
@@ -119,7 +119,7 @@ pub(crate) fn bake_demo(
         Option<sylva_bake::bake::terrain::TerrainSource<'_>>,
         Option<sylva_bake::bake::imagery::ImagerySource<'_>>,
     ),
-    species: Vec<(String, sylva_bake::gltf_import::ImportedModel)>,
+    species: Vec<(String, sylva_bake::input::gltf_import::ImportedModel)>,
     trees: TreeSource,
     cell_size_m: u32,
 ) -> Result<()> {
@@ -151,17 +151,17 @@ pub(crate) fn bake_demo(
 pub(crate) fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Result<()> {
     let trees = args.trees as u64;
     log(&format!("demo: a country of {trees} trees, seed {}", args.seed));
-    let land = sylva_bake::country::Country::new(trees, args.seed)?;
+    let land = sylva_bake::demo::country::Country::new(trees, args.seed)?;
     let side_km = land.half_m / 500.0;
     log(&format!(
         "country: {side_km:.0} × {side_km:.0} km, {} blocks of {} m",
         land.blocks().pow(2),
-        sylva_bake::country::BLOCK_M
+        sylva_bake::demo::country::BLOCK_M
     ));
     let species = sylva_bake::demo::demo_models(args.seed);
     let cell_size_m = match args.pack.cell_size {
         Some(_) => args.pack.cell_size(&[])?,
-        None => sylva_bake::batching::cell_size_for(trees, land.forest_cells64(), 500.0),
+        None => sylva_bake::bake::batching::cell_size_for(trees, land.forest_cells64(), 500.0),
     };
     let buckets = trees.div_ceil(args.bucket_trees).max(1) as u32;
     let mut csv = match &args.write_placements {
@@ -169,7 +169,7 @@ pub(crate) fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Re
         None => None,
     };
     let dir = out.scratch("buckets");
-    let mut writer = sylva_bake::bucket::BucketWriter::new(&dir, buckets, cell_size_m, args.pack.tile_cells)?;
+    let mut writer = sylva_bake::bake::bucket::BucketWriter::new(&dir, buckets, cell_size_m, args.pack.tile_cells)?;
     let t0 = Instant::now();
     let mut made = 0u64;
     let mut reported = 0u64;
@@ -181,8 +181,8 @@ pub(crate) fn demo_country(args: &DemoArgs, out: OutDir, started: Instant) -> Re
         }
         for t in &trees_of_row {
             let mine = args.pack.shard.is_none_or(|(i, n)| {
-                let (x, y) = sylva_bake::batching::tile_of(t.pos, cell_size_m, args.pack.tile_cells);
-                sylva_bake::batching::shard_of_tile(x, y, n) == i
+                let (x, y) = sylva_bake::bake::batching::tile_of(t.pos, cell_size_m, args.pack.tile_cells);
+                sylva_bake::bake::batching::shard_of_tile(x, y, n) == i
             });
             if mine {
                 writer.push(t)?;

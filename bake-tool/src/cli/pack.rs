@@ -6,8 +6,8 @@ use anyhow::{bail, Result};
 use clap::Args;
 use sylva::format::canopy::FINEST_CELL_M;
 use sylva::format::index::DEFAULT_NODE_TILES;
-use sylva_bake::batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
-use sylva_bake::pack_build::{FarBake, PackOptions};
+use sylva_bake::bake::batching::{default_cell_size, SceneTree, MAX_CELL_SIZE_M};
+use sylva_bake::pack::{FarBake, PackOptions};
 
 use super::*;
 
@@ -28,15 +28,15 @@ pub(crate) struct PackArgs {
     #[arg(long, value_enum, default_value_t = FarBake::Both)]
     pub(crate) far_tier: FarBake,
     /// Impostor views per side of the hemi-octahedral grid (grid² views).
-    #[arg(long, default_value_t = sylva_bake::pack_build::DEFAULT_IMPOSTOR_GRID, value_parser = clap::value_parser!(u32).range(2..=16))]
+    #[arg(long, default_value_t = sylva_bake::pack::DEFAULT_IMPOSTOR_GRID, value_parser = clap::value_parser!(u32).range(2..=16))]
     pub(crate) impostor_grid: u32,
     /// Impostor resolution per view (power of two).
-    #[arg(long, default_value_t = sylva_bake::pack_build::DEFAULT_IMPOSTOR_SIZE)]
+    #[arg(long, default_value_t = sylva_bake::pack::DEFAULT_IMPOSTOR_SIZE)]
     pub(crate) impostor_size: u32,
     /// Planes of the billboard cloud (García et al. 2007: leaves kept exact on planes
     /// fitted to the foliage; e.g. 64). 0 bakes none. The viewer draws it only
     /// when asked (`sylva render --only clouds`, bench method `billboard-cloud`).
-    #[arg(long, default_value_t = sylva_bake::pack_build::DEFAULT_CLOUD_PLANES, value_parser = clap::value_parser!(u32).range(0..=1024))]
+    #[arg(long, default_value_t = sylva_bake::pack::DEFAULT_CLOUD_PLANES, value_parser = clap::value_parser!(u32).range(0..=1024))]
     pub(crate) cloud_planes: u32,
     /// Material texture size (power of two).
     #[arg(long, default_value_t = 512)]

@@ -71,14 +71,14 @@ pub fn finish_scene(
     // Canopy rasters for far views (version 8; 10 for canopy version 2): not in a shard's part (merge
     // makes them from all the tiles), nor for a scene without trees.
     let looks = if base.shard.is_none() && !tiles.is_empty() {
-        Some(crate::canopy::species_looks(dir, &base.species, log)?)
+        Some(crate::bake::canopy::species_looks(dir, &base.species, log)?)
     } else {
         None
     };
     if let Some(looks) = &looks {
         let tile_m = f64::from(base.cell_size_m) * f64::from(base.tile_cells);
         let started = std::time::Instant::now();
-        let entry = crate::canopy::write_quadtree(dir, &tiles, tile_m, canopy_cell_m, looks)?;
+        let entry = crate::bake::canopy::write_quadtree(dir, &tiles, tile_m, canopy_cell_m, looks)?;
         log(&format!(
             "canopy: {} rasters in {} levels, finest cells {:.1} m, {:.2} MB ({:.1} s)",
             entry.rasters,

@@ -11,7 +11,7 @@ use sylva::format::cluster::srgb_to_linear;
 use sylva::format::pack::MaterialKind;
 
 use super::em::outer;
-use crate::gltf_import::ImportedModel;
+use crate::input::gltf_import::ImportedModel;
 
 /// One leaf: its visible surface's moments.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -188,7 +188,7 @@ pub fn merge(a: &Leaf, b: &Leaf) -> Leaf {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gltf_import::{ImportedMaterial, ImportedVertex};
+    use crate::input::gltf_import::{ImportedMaterial, ImportedVertex};
 
     fn quad(model: &mut ImportedModel, center: Vec3, u: Vec3, v: Vec3) {
         let base = model.vertices.len() as u32;

@@ -20,7 +20,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use sylva::format::pack::MaterialKind;
 
-use crate::gltf_import::ImportedModel;
+use crate::input::gltf_import::ImportedModel;
 
 /// Cells along the tree's longest side.
 pub const AO_GRID_CELLS: usize = 32;
@@ -114,7 +114,7 @@ impl AoField {
 /// The fraction of a material that stops light: its texture's texels that
 /// survive the alpha test (or its mean alpha when it is not alpha-tested),
 /// times the base colour's alpha.
-fn opacity(m: &crate::gltf_import::ImportedMaterial) -> f32 {
+fn opacity(m: &crate::input::gltf_import::ImportedMaterial) -> f32 {
     let base = m.base_color[3].clamp(0.0, 1.0);
     let Some(tex) = &m.texture else {
         return if m.alpha_cutoff > 0.0 { f32::from(u8::from(base >= m.alpha_cutoff)) } else { base };
@@ -203,7 +203,7 @@ fn hemisphere_directions(n: usize) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gltf_import::{ImportedMaterial, ImportedVertex};
+    use crate::input::gltf_import::{ImportedMaterial, ImportedVertex};
 
     fn material(kind: MaterialKind) -> ImportedMaterial {
         ImportedMaterial {

@@ -21,7 +21,7 @@ use sylva::format::pack::MaterialKind;
 use super::em::{outer, symmetric_eigen};
 use super::leaves::connected_parts;
 use super::Rng;
-use crate::gltf_import::ImportedModel;
+use crate::input::gltf_import::ImportedModel;
 
 /// A line of the skeleton being simplified.
 #[derive(Debug, Clone, Copy, PartialEq)]

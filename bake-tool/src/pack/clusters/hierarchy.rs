@@ -306,7 +306,7 @@ fn calibration_size(height_m: f32, width: f32, opts: &HierarchyOptions) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::clusters::Rng;
+    use crate::pack::clusters::Rng;
 
     #[test]
     fn level_sizes_quarter_down_to_one() {

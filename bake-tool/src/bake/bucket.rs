@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use glam::DVec3;
 
-use crate::batching::{tile_of, SceneTree};
+use crate::bake::batching::{tile_of, SceneTree};
 
 /// A tree as stored in a bucket file (56 bytes, native endian: the file never
 /// leaves the machine that wrote it).
@@ -60,7 +60,7 @@ impl From<&TreeRecord> for SceneTree {
 /// The bucket (of `count`) of tile `(x, y)`: a hash unrelated to the shard hash.
 #[must_use]
 pub fn bucket_of_tile(x: i64, y: i64, count: u32) -> u32 {
-    crate::batching::tile_hash(x, y, 0xD6E8_FEB8_6659_FD93, 0xA076_1D64_78BD_642F, count)
+    crate::bake::batching::tile_hash(x, y, 0xD6E8_FEB8_6659_FD93, 0xA076_1D64_78BD_642F, count)
 }
 
 /// Trees of a scene: in memory, or partitioned by tile into bucket files.

@@ -155,7 +155,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
     let declared_epsg = geojson_crs(&v);
     // A declared geographic CRS (ETRS89, NAD83) is lon/lat too.
     let declared_projected =
-        declared_epsg.is_some_and(|e| crate::reproject::Crs::from_epsg(e).map_or(true, |c| !c.is_geographic()));
+        declared_epsg.is_some_and(|e| crate::input::reproject::Crs::from_epsg(e).map_or(true, |c| !c.is_geographic()));
     let kind = if options.projected || declared_projected {
         CoordKind::Projected
     } else {

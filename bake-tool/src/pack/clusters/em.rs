@@ -372,7 +372,7 @@ pub fn symmetric_eigen(m: DMat3) -> (DVec3, DMat3) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::clusters::Rng;
+    use crate::pack::clusters::Rng;
 
     fn gaussian(rng: &mut Rng) -> f64 {
         // Box–Muller.

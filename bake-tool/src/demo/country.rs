@@ -22,7 +22,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::batching::SceneTree;
+use crate::bake::batching::SceneTree;
 use crate::rng::{fbm, hash64, Rng};
 
 /// Trees per hectare where the forest field is 1 (a closed, mature stand).
@@ -165,7 +165,7 @@ impl Country {
     }
 
     /// 64 m cells the forest fills, as if it were closed stands (for the
-    /// batch cell size, like [`crate::batching::default_cell_size`]).
+    /// batch cell size, like [`crate::bake::batching::default_cell_size`]).
     #[must_use]
     pub fn forest_cells64(&self) -> u64 {
         let area: f64 = self.means.iter().sum::<f64>() * BLOCK_M * BLOCK_M;

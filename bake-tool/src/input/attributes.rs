@@ -11,7 +11,7 @@ use sylva::format::attributes::{
     MAX_ATTRIBUTE_COLUMNS, MAX_CATEGORIES, MAX_TEXT_BYTES,
 };
 
-use crate::placements::PlacementSource;
+use crate::input::placements::PlacementSource;
 
 /// The attribute columns and every input row's codes.
 pub struct AttributeTable {
@@ -71,7 +71,7 @@ const MAX_INTEGER: u64 = 9_000_000_000_000_000;
 /// or tab separated CSV) `12,5` and `1.234,5` as well, as the placements reader does.
 fn parse_number(text: &str, decimal_comma: bool) -> Option<f64> {
     let v =
-        if decimal_comma { crate::placements::parse_decimal_comma(text) } else { crate::placements::parse_f64(text) }?;
+        if decimal_comma { crate::input::placements::parse_decimal_comma(text) } else { crate::input::placements::parse_f64(text) }?;
     v.is_finite().then_some(v)
 }
 

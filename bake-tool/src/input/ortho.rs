@@ -1,6 +1,6 @@
 //! Orthophotos (`--ortho FILE.tif`): georeferenced RGB(A) GeoTIFFs read with
 //! the `tiff` crate (the same layouts, georeferencing and CRS rules as the
-//! DEMs, [`crate::dem`]), sampled bilinearly between pixel centres. Samples
+//! DEMs, [`crate::input::dem`]), sampled bilinearly between pixel centres. Samples
 //! are 8- or 16-bit grey, RGB or RGBA (16-bit is scaled to 8); a pixel whose
 //! alpha is 0, or whose value equals `GDAL_NODATA` in every band, has no data.
 
@@ -11,7 +11,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use tiff::decoder::DecodingResult;
 use tiff::tags::Tag;
 
-use crate::dem::{bounded_decoder, grid_of, Grid};
+use crate::input::dem::{bounded_decoder, grid_of, Grid};
 
 /// RGBA pixels of `n`-sample values (grey, RGB or RGBA): alpha 0 where every
 /// colour sample equals `nodata`.
@@ -62,7 +62,7 @@ impl Ortho {
     /// # Errors
     /// A file that cannot be opened or is no TIFF, a sample layout other than
     /// grey, RGB or RGBA of 8 or 16 bits, no georeferencing, a rotated grid, or
-    /// more than [`crate::dem::MAX_DEM_PIXELS`] pixels; the message names the file.
+    /// more than [`crate::input::dem::MAX_DEM_PIXELS`] pixels; the message names the file.
     pub fn open(path: &Path) -> Result<Self> {
         let file = std::fs::File::open(path).with_context(|| format!("ortho {}: cannot open", path.display()))?;
         Self::read(std::io::BufReader::new(file)).with_context(|| format!("ortho {}", path.display()))

@@ -7,11 +7,13 @@
 //! UTM 33N (EPSG:32633) around the Wachau (E ≈ 540 000, N ≈ 5 360 000), far from
 //! the origin so every run exercises the precision path.
 
+pub mod country;
+
 use glam::{DVec3, Quat, Vec2, Vec3};
 use sylva::format::pack::MaterialKind;
 
-use crate::batching::SceneTree;
-use crate::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
+use crate::bake::batching::SceneTree;
+use crate::input::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
 
 /// Demo scene origin in EPSG:32633.
 pub const DEMO_ORIGIN: DVec3 = DVec3::new(540_000.0, 5_360_000.0, 0.0);

@@ -254,7 +254,7 @@ fn mesh_bin(
         bin.extend_from_slice(bytemuck::cast_slice(&y_up));
     }
     for v in &verts {
-        let n = crate::cloud::oct_decode([v.normal_oct[0], v.normal_oct[1]]);
+        let n = crate::pack::cloud::oct_decode([v.normal_oct[0], v.normal_oct[1]]);
         let n = if n == Vec3::ZERO { Vec3::Z } else { n };
         bin.extend_from_slice(bytemuck::cast_slice(&[n.x, n.z, -n.y]));
     }

@@ -2,6 +2,10 @@
 //! optimised with meshoptimizer, quantised), material textures with alpha-aware
 //! mips, and the view-angle billboard array rendered by Sylva's own mesh pass.
 
+pub mod ao;
+pub mod cloud;
+pub mod clusters;
+
 use anyhow::{Context, Result};
 use glam::{Vec2, Vec3};
 use sylva::format::cloud::{encode_cloud, CloudMeta};
@@ -15,8 +19,8 @@ use sylva::render::impostor;
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 use sylva::render::GpuContext;
 
-use crate::ao::AoField;
-use crate::gltf_import::{ImportedModel, ImportedVertex};
+use crate::pack::ao::AoField;
+use crate::input::gltf_import::{ImportedModel, ImportedVertex};
 
 /// Knobs of the pack bake.
 #[derive(Debug, Clone)]
@@ -35,7 +39,7 @@ pub struct PackOptions {
     pub clusters: bool,
     /// EM starts per cluster level.
     pub cluster_tries: usize,
-    /// Whether to bake the tree's own ambient occlusion ([`crate::ao`]).
+    /// Whether to bake the tree's own ambient occlusion ([`crate::pack::ao`]).
     pub ao: bool,
     /// Which far-field representations to bake.
     pub far_tier: FarBake,
@@ -170,7 +174,7 @@ pub fn build_pack(
         .then(|| {
             let started = std::time::Instant::now();
             let (wood, wood_ao) = coarsest.as_ref().map_or((model, &vertex_ao[..]), |(m, a)| (m, &a[..]));
-            let built = crate::cloud::build_cloud(model, &vertex_ao, wood, wood_ao, opts.cloud_planes as usize)?;
+            let built = crate::pack::cloud::build_cloud(model, &vertex_ao, wood, wood_ao, opts.cloud_planes as usize)?;
             let (mut level, vtx, idx) =
                 build_mesh_level(&built.model, SELECT_PX_CLOUD, opts.ao.then_some(&built.model_ao[..]));
             level.select_px = SELECT_PX_CLOUD;
@@ -185,13 +189,13 @@ pub fn build_pack(
                 texture_layer: None,
             });
             let words = encode_cloud(&built.planes, &built.cells, &built.fragments);
-            // Its coverage of the leaves, seen from the side (tested in crate::cloud).
-            let check = crate::cloud::Cloud {
+            // Its coverage of the leaves, seen from the side (tested in crate::pack::cloud).
+            let check = crate::pack::cloud::Cloud {
                 planes: built.planes.clone(),
                 cells: built.cells.clone(),
                 fragments: built.fragments.clone(),
             };
-            let (leaf_px, cloud_px, _) = crate::cloud::view_coverage(model, &check, Vec3::X, 64);
+            let (leaf_px, cloud_px, _) = crate::pack::cloud::view_coverage(model, &check, Vec3::X, 64);
             eprintln!(
                 "    billboard cloud: {} planes, {} cells, {} list entries of {}/{} leaves, {:.2}× the leaves' \
                  coverage from the side ({} KiB, {:.1} s)",
@@ -311,9 +315,9 @@ pub fn build_pack(
         meta.impostors = Some(m);
     }
     if opts.clusters {
-        let hopts = crate::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
+        let hopts = crate::pack::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
         let mut log = |m: &str| eprintln!("{m}");
-        if let Some(c) = crate::clusters::bake::build_clusters(model, &decoded, gpu, &hopts, &ao, &mut log)? {
+        if let Some(c) = crate::pack::clusters::bake::build_clusters(model, &decoded, gpu, &hopts, &ao, &mut log)? {
             sections.extend(c.sections);
             meta.clusters = Some(c.meta);
         }

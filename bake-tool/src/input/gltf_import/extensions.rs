@@ -208,7 +208,7 @@ pub fn decode_meshopt(root: &Value, buffers: &mut [Vec<u8>]) -> Result<usize> {
             .and_then(|b| b.get(src_offset..src_offset.checked_add(len)?))
             .ok_or_else(|| anyhow::anyhow!("{what}: bytes {src_offset}..+{len} lie outside buffer {src_buffer}"))?
             .to_vec();
-        let size = count.checked_mul(stride).filter(|s| *s <= crate::gltf_import::sources::MAX_BUFFER_BYTES);
+        let size = count.checked_mul(stride).filter(|s| *s <= crate::input::gltf_import::sources::MAX_BUFFER_BYTES);
         let Some(size) = size else { bail!("{what}: {count} elements of {stride} bytes are too many") };
         let mode = m.get("mode").and_then(Value::as_str).unwrap_or("");
         let filter = m.get("filter").and_then(Value::as_str).unwrap_or("NONE");

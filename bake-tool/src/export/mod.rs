@@ -1,0 +1,3 @@
+//! Scenes exported to other formats.
+
+pub mod tiles3d;

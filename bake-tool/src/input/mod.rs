@@ -1,0 +1,10 @@
+//! The readers of untrusted input: every byte is bounded and checked before
+//! it is used, and an error names the file (and row, or node) it is about.
+
+pub mod allometry;
+pub mod attributes;
+pub mod dem;
+pub mod gltf_import;
+pub mod ortho;
+pub mod placements;
+pub mod reproject;
