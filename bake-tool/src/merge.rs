@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use sylva::format::{Manifest, TileEntry};
 
+use crate::bake::scene_write::finish_scene;
 use crate::out_dir::create_dir;
 use crate::out_dir::OutDir;
-use crate::bake::scene_write::finish_scene;
 
 /// Reads and checks the shard manifests, copies packs (from shard 0), tiles and
 /// id sidecars into `out` and writes the index and manifest of the whole.

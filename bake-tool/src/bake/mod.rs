@@ -33,9 +33,9 @@ use sylva::format::manifest::{Bounds, Counts, Crs as CrsEntry, Manifest, ShardSt
 
 use crate::bake::bucket::TreeSource;
 use crate::input::gltf_import::ImportedModel;
+use crate::input::reproject::Crs;
 use crate::out_dir::OutDir;
 use crate::pack::PackOptions;
-use crate::input::reproject::Crs;
 
 /// Everything a scene is made from.
 pub struct SceneInput<'a> {
@@ -151,7 +151,11 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             dir,
             base,
             tiles.entries,
-            crate::bake::scene_write::Layout { node_tiles: input.index_node_tiles, flat, canopy_cell_m: input.canopy_cell_m },
+            crate::bake::scene_write::Layout {
+                node_tiles: input.index_node_tiles,
+                flat,
+                canopy_cell_m: input.canopy_cell_m,
+            },
             log,
         )?;
         Ok(SceneSummary {

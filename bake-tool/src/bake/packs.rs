@@ -13,10 +13,10 @@ use sylva::render::GpuContext;
 
 use super::pack_cache::PackCache;
 use crate::bake::batching::SpeciesShape;
+use crate::bake::scene_write::safe_name;
 use crate::input::gltf_import::ImportedModel;
 use crate::out_dir::{create_dir, write_file};
 use crate::pack::{build_pack, BuiltPack, PackOptions};
-use crate::bake::scene_write::safe_name;
 
 /// What the packs stage made.
 pub struct Packs {

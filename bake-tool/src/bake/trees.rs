@@ -15,13 +15,13 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 
 use super::ground::{Dems, OutsideDem, ZMode};
-use crate::input::allometry::Allometry;
 use crate::bake::batching::{self, SceneTree};
 use crate::bake::bucket::{BucketWriter, TreeSource};
-use crate::out_dir::OutDir;
-use crate::patterns::pattern_matches;
+use crate::input::allometry::Allometry;
 use crate::input::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
 use crate::input::reproject::{Crs, Reprojector};
+use crate::out_dir::OutDir;
+use crate::patterns::pattern_matches;
 use crate::rng;
 
 /// Tallest tree height accepted (the tallest known tree is 116 m); placement

@@ -6,11 +6,11 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
-use sylva_bake::bake::{trees, SceneInput};
 use sylva_bake::bake::batching::SceneTree;
+use sylva_bake::bake::{trees, SceneInput};
 use sylva_bake::input::gltf_import::Classifier;
-use sylva_bake::out_dir::OutDir;
 use sylva_bake::input::reproject::{Crs, Reprojector};
+use sylva_bake::out_dir::OutDir;
 
 use super::*;
 

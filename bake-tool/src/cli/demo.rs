@@ -5,10 +5,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use clap::Args;
-use sylva_bake::bake::SceneInput;
 use sylva_bake::bake::bucket::TreeSource;
-use sylva_bake::out_dir::OutDir;
+use sylva_bake::bake::SceneInput;
 use sylva_bake::input::reproject::Crs;
+use sylva_bake::out_dir::OutDir;
 
 use super::*;
 

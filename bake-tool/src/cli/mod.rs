@@ -178,7 +178,8 @@ pub(crate) fn main() {
         Command::Export3dTiles { scene, out, no_ground, height_offset } => {
             let started = Instant::now();
             let mut last = Instant::now();
-            let options = sylva_bake::export::tiles3d::ExportOptions { ground: !no_ground, height_offset_m: height_offset };
+            let options =
+                sylva_bake::export::tiles3d::ExportOptions { ground: !no_ground, height_offset_m: height_offset };
             sylva_bake::export::tiles3d::export(&scene, &out, options, &mut |r| {
                 if last.elapsed().as_secs_f64() > 2.0 {
                     log(&format!("exported {} tiles, {} trees…", r.tiles, r.trees));

@@ -70,8 +70,11 @@ const MAX_INTEGER: u64 = 9_000_000_000_000_000;
 /// A number as the inventory writes it: `12.5`, or with `decimal_comma` (a `;`
 /// or tab separated CSV) `12,5` and `1.234,5` as well, as the placements reader does.
 fn parse_number(text: &str, decimal_comma: bool) -> Option<f64> {
-    let v =
-        if decimal_comma { crate::input::placements::parse_decimal_comma(text) } else { crate::input::placements::parse_f64(text) }?;
+    let v = if decimal_comma {
+        crate::input::placements::parse_decimal_comma(text)
+    } else {
+        crate::input::placements::parse_f64(text)
+    }?;
     v.is_finite().then_some(v)
 }
 

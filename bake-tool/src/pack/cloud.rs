@@ -19,9 +19,9 @@ use glam::{DMat3, DVec3, Vec2, Vec3};
 use sylva::format::cloud::{CloudCell, CloudFragment, CloudPlane, MAX_CELL_FRAGMENTS};
 use sylva::format::pack::MaterialKind;
 
+use crate::input::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
 use crate::pack::clusters::em::symmetric_eigen;
 use crate::pack::clusters::leaves::{connected_parts, texel};
-use crate::input::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
 use crate::rng::Rng;
 
 /// Most cells per plane side.
@@ -641,7 +641,8 @@ mod tests {
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/models/eztree_oak_medium.glb");
         path.exists().then(|| {
-            crate::input::gltf_import::import(&path, &crate::input::gltf_import::Classifier::default()).expect("the oak imports")
+            crate::input::gltf_import::import(&path, &crate::input::gltf_import::Classifier::default())
+                .expect("the oak imports")
         })
     }
 

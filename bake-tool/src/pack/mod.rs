@@ -19,8 +19,8 @@ use sylva::render::impostor;
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 use sylva::render::GpuContext;
 
-use crate::pack::ao::AoField;
 use crate::input::gltf_import::{ImportedModel, ImportedVertex};
+use crate::pack::ao::AoField;
 
 /// Knobs of the pack bake.
 #[derive(Debug, Clone)]
@@ -315,7 +315,8 @@ pub fn build_pack(
         meta.impostors = Some(m);
     }
     if opts.clusters {
-        let hopts = crate::pack::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
+        let hopts =
+            crate::pack::clusters::hierarchy::HierarchyOptions { tries: opts.cluster_tries, ..Default::default() };
         let mut log = |m: &str| eprintln!("{m}");
         if let Some(c) = crate::pack::clusters::bake::build_clusters(model, &decoded, gpu, &hopts, &ao, &mut log)? {
             sections.extend(c.sections);

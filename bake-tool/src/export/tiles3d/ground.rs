@@ -3,6 +3,8 @@
 //! image (or its nearest ancestor's), refining as Sylva's viewer refines its
 //! terrain (`docs/FORMAT.md`, "3D Tiles export").
 
+use gltf::json::accessor::{FLOAT, UNSIGNED_INT, UNSIGNED_SHORT};
+use gltf::json::buffer::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER};
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -267,18 +269,18 @@ impl Ground<'_> {
         } else {
             g.own_view(bytemuck::cast_slice(&idx))
         };
-        for (v, target) in [(vp, 34962), (vu, 34962), (vi, 34963)] {
+        for (v, target) in [(vp, ARRAY_BUFFER), (vu, ARRAY_BUFFER), (vi, ELEMENT_ARRAY_BUFFER)] {
             g.arrays.get_mut("bufferViews").expect("views")[v]["target"] = json!(target);
         }
         let a_pos = g.push(
             "accessors",
-            json!({"bufferView": vp, "componentType": 5126, "count": count, "type": "VEC3", "min": lo, "max": hi}),
+            json!({"bufferView": vp, "componentType": FLOAT, "count": count, "type": "VEC3", "min": lo, "max": hi}),
         );
         let a_uv = g.push(
             "accessors",
-            json!({"bufferView": vu, "componentType": 5123, "normalized": true, "count": count, "type": "VEC2"}),
+            json!({"bufferView": vu, "componentType": UNSIGNED_SHORT, "normalized": true, "count": count, "type": "VEC2"}),
         );
-        let index_type = if short { 5123 } else { 5125 };
+        let index_type = if short { UNSIGNED_SHORT } else { UNSIGNED_INT };
         let a_idx = g.push(
             "accessors",
             json!({"bufferView": vi, "componentType": index_type, "count": idx.len(), "type": "SCALAR"}),

@@ -17,8 +17,8 @@ use sylva::render::GpuContext;
 use super::hierarchy::{build_levels, level_sizes, Candidate, HierarchyOptions, Judge};
 use super::leaves::extract_leaves;
 use super::lines::{simplify, skeleton, LineOptions};
-use crate::pack::ao::AoField;
 use crate::input::gltf_import::ImportedModel;
+use crate::pack::ao::AoField;
 
 /// Background of the judging renders (the viewer's sky).
 const BACKGROUND: [f64; 4] = [0.55, 0.68, 0.82, 1.0];
