@@ -107,8 +107,8 @@ pub fn bake_packs(
                     gpu_and_pipelines = Some((gpu, pipelines));
                 }
                 let (gpu, pipelines) = gpu_and_pipelines.as_ref().expect("set up above");
-                let built =
-                    build_pack(name, model, options, gpu, pipelines).with_context(|| format!("species {name:?}"))?;
+                let built = build_pack(name, model, options, gpu, pipelines, log)
+                    .with_context(|| format!("species {name:?}"))?;
                 if let Some(dump) = debug_dump {
                     dump_billboards(dump, name, &built)?;
                 }

@@ -21,10 +21,10 @@ pub(crate) fn bench_clusters(model: Option<&std::path::Path>, leaves: Option<usi
     let opts = PackOptions { cluster_tries: tries, ..PackOptions::default() };
     let no_clusters = PackOptions { clusters: false, ..opts.clone() };
     let t0 = Instant::now();
-    sylva_bake::pack::build_pack("bench", &model, &no_clusters, &gpu, &pipelines)?;
+    sylva_bake::pack::build_pack("bench", &model, &no_clusters, &gpu, &pipelines, &log)?;
     let without = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let built = sylva_bake::pack::build_pack("bench", &model, &opts, &gpu, &pipelines)?;
+    let built = sylva_bake::pack::build_pack("bench", &model, &opts, &gpu, &pipelines, &log)?;
     let with = t1.elapsed().as_secs_f64();
     let decoded = sylva::format::decode_pack("bench", &built.bytes)?;
     let summary = sylva_bake::inspect::pack_summary(&decoded, built.bytes.len() as u64);
