@@ -142,7 +142,7 @@ bench-cesium: release web
 bench-serve:
 	$(CARGO) bench --locked --bench serve
 
-# Cluster-level bake (seed 002) of the sample trees and a 27,000-leaf tree: time,
+# Cluster-level bake (Clasen et al. 2010) of the sample trees and a 27,000-leaf tree: time,
 # peak memory, and per level primitives, bytes, select_px and image error.
 bench-clusters: release
 	@for m in oak pine; do echo "== $$m"; /usr/bin/time -f "%e s wall, %M KB peak" \
@@ -161,7 +161,7 @@ bench-stress: release
 	target/release/sylva bench --stress --scene target/bench/demo-10m --path flyover \
 	  --frames 1000 --size 320x180 --out target/bench/stress-10m-trees
 
-# Parameter sweeps (seed 004 ch. 5): a demo forest of SWEEP_TREES baked per value
+# Parameter sweeps (Eichner 2024, ch. 5): a demo forest of SWEEP_TREES baked per value
 # (once; kept under target/sweep/), Sylva against the full-mesh reference on the
 # same path, one table row per value. The fade sweep reuses one bake.
 SWEEP_TREES ?= 20000

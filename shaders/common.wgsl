@@ -211,7 +211,7 @@ fn whole_count(b: Batch) -> u32 {
 // most those, drawn as bigger as the trees they stand in for. Returns (trees
 // kept, fractional; n / kept, 1 when not thinned; trees kept were the whole
 // batch held, fractional: n when not thinned).
-// Must match `thinning` in src/render/cull.rs.
+// Must match `thinning` in src/lod/select.rs.
 fn thinning(b: Batch, view: View) -> vec3<f32> {
     let n = f32(whole_count(b));
     let held = max(f32(b.instance_count), 1.0);
@@ -290,7 +290,7 @@ fn fade_keeps(item_y: u32, frag: vec2<f32>, seed: f32) -> bool {
 // How much of a tree of `h_px` projected pixels the canopy raster stands in
 // for: 1 below view.canopy.x, 0 above view.canopy.y, linear between; 0 without
 // a canopy and in orthographic views (shadow cascades draw trees). Must match
-// `canopy_weight` in src/render/cull.rs.
+// `canopy_weight` in src/lod/select.rs.
 fn canopy_weight(h_px: f32, view: View) -> f32 {
     if view.canopy.x <= 0.0 || view.viewport.w > 0.5 {
         return 0.0;
@@ -307,7 +307,7 @@ fn canopy_weight(h_px: f32, view: View) -> f32 {
 // stream fetches no more. Written as
 // (count − i − ½) · (hi − lo) ≤ count · (hi − h) with only multiplications
 // and subtractions, which are exactly rounded on every GPU, so the CPU oracle
-// agrees bit for bit. Must match `canopy_drops` in src/render/cull.rs.
+// agrees bit for bit. Must match `canopy_drops` in src/lod/select.rs.
 fn canopy_drops(h_px: f32, i: u32, count: u32, view: View) -> bool {
     if view.canopy.x <= 0.0 || view.viewport.w > 0.5 {
         return false;

@@ -1,6 +1,6 @@
 // GPU culling and LoD selection over grouped batches (Eichner 2024, §3.5, ch. 4).
 // Per frame: reset → cull_batches → prepare_dispatch → cull_instances → finalize.
-// The CPU oracle of the same logic is `cpu_select` in src/render/cull.rs.
+// The CPU oracle of the same logic is `cpu_select` in src/lod/select.rs.
 // Rust side: src/render/cull.rs.
 
 // (Group 0, binding 0: the view, `shaders/view.wgsl`.)

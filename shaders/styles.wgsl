@@ -1,7 +1,8 @@
 // The styles of the tree passes: the cull control buffer from
 // `STYLE_OFFSET_BYTES` (common.wgsl `style_of` and friends, the layout there).
-// Prepended after common.wgsl to the mesh, billboard, impostor and cluster
-// passes by `src/render/shaders.rs`; group 2 is their instance group.
+// Composed after common.wgsl, view.wgsl and trees.wgsl into the mesh,
+// billboard, impostor and cluster passes by `src/render/shaders.rs`; group 2
+// is their instance group (`trees.wgsl`).
 
 @group(2) @binding(3) var<storage, read> styles: array<u32>;
 

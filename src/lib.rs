@@ -1,13 +1,15 @@
 //! Sylva: a GPU-driven forest renderer for whole forests in the browser and headless.
+//! The modules by layer, top first (`docs/ARCHITECTURE.md`, checked by `tests/it/layers.rs`):
 //!
-//! * [`camera`] — the camera and the view maths every layer shares (ground floor).
-//! * [`geo`] — lon/lat ↔ scene-relative metres through the scene CRS.
-//! * [`format`] — the scene manifest, LoD packs and tiles (on disk and over the wire).
-//! * [`render`] — wgpu context and passes (mesh; the billboard capture used by the bake).
-//! * [`metrics`] — image error (multi-scale RMSE, Clasen et al. 2010, §4).
-//! * [`bench`] — `sylva bench`: run time against image error on camera paths (native).
-//! * [`scene`] — fetching, streaming and residency of scenes.
-//! * [`paths`] — relative paths from untrusted text (URIs, request paths).
+//! * hosts: `cli/` (the binary), [`offscreen`] (native), `web` (wasm), [`bench`], [`serve`].
+//! * [`frame`] — one frame of renderer + stream + settings for both hosts, and its stats.
+//! * [`render`] — wgpu context and passes (and the billboard capture the bake uses).
+//! * [`scene`] — fetching, streaming and residency of scenes; styles and search.
+//! * [`lod`] — the level-of-detail rules on the CPU, each the twin of its WGSL.
+//! * [`camera`], [`orbit`], [`geo`], [`sun`], [`metrics`] — view maths, the viewer's camera
+//!   controls, lon/lat ↔ scene metres, the sun, image error (Clasen et al. 2010, §4).
+//! * [`format`] — the scene manifest, LoD packs, tiles and sidecars (on disk and over the wire).
+//! * [`paths`], [`calendar`] — reading untrusted paths and files; calendar days.
 //!
 //! The bake tool (`bake-tool/`, crate `sylva-bake`) writes what this crate reads.
 

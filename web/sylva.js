@@ -1,5 +1,5 @@
 // Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`.
-// Wraps the wasm Viewer (src/web.rs) with a render loop, camera controls
+// Wraps the wasm Viewer (src/web/) with a render loop, camera controls
 // (mouse, touch, keyboard), events and the camera in the URL hash.
 //
 //   v.setCamera({lon, lat, height, heading, pitch})   WGS 84 degrees, metres, degrees

@@ -629,7 +629,7 @@ impl ForestRenderer {
         pass.set_scissor_rect(rect[0], rect[1], rect[2], rect[3]);
         pass.set_bind_group(0, &self.view_group, &[]);
         let cx = PassContext { pools: &self.pools, reach: &self.reach, frame };
-        self.passes().iter().map(|p| p.draw_ids(&mut pass, &cx)).sum()
+        self.passes().iter().filter(|p| p.enabled(frame)).map(|p| p.draw_ids(&mut pass, &cx)).sum()
     }
 
     /// The last frame's view uniform (for the CPU oracle and tests).

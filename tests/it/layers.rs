@@ -107,7 +107,10 @@ fn code_only(text: &str) -> String {
                     i += 1;
                 }
             }
-        } else if c == b'r' && matches!(b.get(i + 1), Some(b'"' | b'#')) && (i == 0 || !is_ident(b[i - 1])) {
+        } else if c == b'r'
+            && matches!(b.get(i + 1), Some(b'"' | b'#'))
+            && (i == 0 || !is_ident(b[i - 1]) || (b[i - 1] == b'b' && (i == 1 || !is_ident(b[i - 2]))))
+        {
             // A raw string: r"…", r#"…"#.
             let mut j = i + 1;
             while b.get(j) == Some(&b'#') {
@@ -148,7 +151,8 @@ fn code_only(text: &str) -> String {
         } else if c == b'\'' {
             // A char literal ('x', '\n', '\''), not a lifetime ('a).
             let close = if b.get(i + 1) == Some(&b'\\') {
-                b[i + 2..].iter().position(|&x| x == b'\'').map(|p| i + 2 + p)
+                // The escaped character, then the closing quote ('\'', '\n', '\u{…}').
+                b.get(i + 3..).and_then(|r| r.iter().position(|&x| x == b'\'')).map(|p| i + 3 + p)
             } else if b.get(i + 2) == Some(&b'\'') {
                 Some(i + 2)
             } else {
@@ -217,10 +221,18 @@ fn expand_use(tree: &str) -> Vec<String> {
         .collect()
 }
 
+/// A path a file writes: where (byte offset), the path, and whether it is a
+/// `use` of a child module by its bare name (`use columns::X`).
+struct Written {
+    at: usize,
+    path: String,
+    relative: bool,
+}
+
 /// Every path a file writes that starts at `crate`, `super`, `self` or one of
-/// `externs` (other crates of the workspace), with its line.
-fn paths_in(code: &str, externs: &[&str]) -> Vec<(usize, String)> {
-    let line_of = |at: usize| code[..at].bytes().filter(|&c| c == b'\n').count() + 1;
+/// `externs` (other crates of the workspace), and every `use` whose first
+/// segment may name a child module (resolved only if it does).
+fn paths_in(code: &str, externs: &[&str]) -> Vec<Written> {
     let mut out = Vec::new();
     let b = code.as_bytes();
     // `use` statements (their groups expanded), then every other path.
@@ -237,15 +249,14 @@ fn paths_in(code: &str, externs: &[&str]) -> Vec<(usize, String)> {
         let tree = tree.trim_start_matches("::").to_string();
         let starts = |p: &str| {
             ["crate::", "super::", "self::"].iter().any(|s| p.starts_with(s))
-                || p.starts_with("crate::{")
                 || externs.iter().any(|e| p.starts_with(&format!("{e}::")))
         };
-        if starts(&tree) || tree.starts_with('{') {
-            for p in expand_use(&tree) {
-                let p = p.split('@').next().unwrap_or(&p).to_string();
-                if starts(&p) {
-                    out.push((line_of(at), p));
-                }
+        for p in expand_use(&tree) {
+            let p = p.split('@').next().unwrap_or(&p).to_string();
+            if starts(&p) {
+                out.push(Written { at, path: p, relative: false });
+            } else if p.contains("::") && p.bytes().next().is_some_and(|c| c.is_ascii_lowercase()) {
+                out.push(Written { at, path: p, relative: true });
             }
         }
         used[at..end].iter_mut().for_each(|u| *u = true);
@@ -270,8 +281,45 @@ fn paths_in(code: &str, externs: &[&str]) -> Vec<(usize, String)> {
             }
             j += 2 + seg;
         }
-        out.push((line_of(i), code[i..j].to_string()));
+        out.push(Written { at: i, path: code[i..j].to_string(), relative: false });
         i = j;
+    }
+    out
+}
+
+/// The inline modules of a file (`mod tests { … }`): their byte ranges and names.
+fn inline_mods(code: &str) -> Vec<(usize, usize, String)> {
+    let b = code.as_bytes();
+    let mut out = Vec::new();
+    let mut from = 0;
+    while let Some(k) = code[from..].find("mod ") {
+        let at = from + k;
+        from = at + 4;
+        if at > 0 && is_ident(b[at - 1]) {
+            continue;
+        }
+        let name: String = code[at + 4..].chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        let after = code[at + 4 + name.len()..].trim_start();
+        if name.is_empty() || !after.starts_with('{') {
+            continue;
+        }
+        let open = code.len() - after.len();
+        let mut depth = 0;
+        let mut end = code.len();
+        for (k, c) in code[open..].char_indices() {
+            match c {
+                '{' => depth += 1,
+                '}' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        end = open + k;
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        out.push((open, end, name));
     }
     out
 }
@@ -346,10 +394,14 @@ impl Crate {
 
     /// Resolves a written path to the file it names (`None`: outside this
     /// crate, or a name the resolution cannot place).
-    fn resolve(&self, file: &str, path: &str) -> Option<String> {
+    fn resolve(&self, file: &str, path: &str, inline: &[String], relative: bool) -> Option<String> {
         let segs: Vec<&str> = path.split("::").filter(|s| !s.is_empty()).collect();
         let mut m = self.module_of(file);
+        m.extend(inline.iter().cloned());
         let mut rest = &segs[..];
+        // The crate's own name reaches its library root, from the binary too.
+        let lib = format!("{}/lib.rs", self.dir);
+        let file = if rest.first() == Some(&self.name) { lib.as_str() } else { file };
         match rest.first()? {
             &"crate" => {
                 m.clear();
@@ -365,6 +417,12 @@ impl Crate {
             h if *h == self.name => {
                 m.clear();
                 rest = &rest[1..];
+            }
+            // A bare first segment: a child module, or nothing of this crate.
+            h if relative => {
+                let mut child = m.clone();
+                child.push((*h).to_string());
+                self.file_of(file, &child)?;
             }
             _ => return None,
         }
@@ -398,17 +456,22 @@ impl Crate {
     /// `externs`, to `sylva`'s files: those edges are returned with `to`
     /// prefixed by `sylva:`).
     fn edges(&self, other: Option<&Crate>) -> Vec<Edge> {
-        let externs: Vec<&str> = other.map(|o| o.name).into_iter().collect();
+        let externs: Vec<&str> = other.map(|o| o.name).into_iter().chain([self.name]).collect();
         let mut out = BTreeSet::new();
         for (file, text) in &self.files {
             let code = code_only(text);
-            for (line, path) in paths_in(&code, &externs) {
+            let mods = inline_mods(&code);
+            let line_of = |at: usize| code[..at].bytes().filter(|&c| c == b'\n').count() + 1;
+            for Written { at, path, relative } in paths_in(&code, &externs) {
+                let line = line_of(at);
+                let inline: Vec<String> =
+                    mods.iter().filter(|(a, e, _)| *a <= at && at < *e).map(|(_, _, n)| n.clone()).collect();
                 let to = match other {
                     Some(o) if path.starts_with(&format!("{}::", o.name)) => {
                         let lib = format!("{}/lib.rs", o.dir);
-                        o.resolve(&lib, &path.replacen(o.name, "crate", 1))
+                        o.resolve(&lib, &path.replacen(o.name, "crate", 1), &[], false)
                     }
-                    _ => self.resolve(file, &path),
+                    _ => self.resolve(file, &path, &inline, relative),
                 };
                 if let Some(to) = to {
                     if &to != file && !is_ancestor_root(&to, file) {
@@ -426,7 +489,8 @@ impl Crate {
 /// resolution above already went on into the sibling where it could.
 fn is_ancestor_root(to: &str, file: &str) -> bool {
     let dir = to.rsplit_once('/').map_or("", |(d, _)| d);
-    (to.ends_with("/mod.rs") || to.ends_with("/lib.rs") || to.ends_with("/main.rs")) && file.starts_with(dir)
+    (to.ends_with("/mod.rs") || to.ends_with("/lib.rs") || to.ends_with("/main.rs"))
+        && file.starts_with(&format!("{dir}/"))
 }
 
 /// Upward imports: an edge from a file to a file of a higher layer.
@@ -579,6 +643,11 @@ fn findings(layers: &Layers, sylva: &Crate, bake: &Crate) -> Vec<String> {
     let mut out = Vec::new();
     let files: Vec<&String> = sylva.files.keys().chain(bake.files.keys()).collect();
     out.extend(unplaced(layers, &files));
+    for (name, entries) in &layers.layers {
+        for e in entries.iter().filter(|e| !workspace().join(e).exists()) {
+            out.push(format!("layer {name} lists {e}, which does not exist"));
+        }
+    }
     out.extend(upward(layers, &own));
     out.extend(upward(layers, &bake_edges));
     out.extend(upward(layers, &into_sylva));
@@ -631,8 +700,32 @@ fn use_trees_and_literals() {
     let mut p = expand_use(&squeeze("crate::{format::{pack::Pack, tile}, scene::Stream}"));
     p.sort();
     assert_eq!(p, ["crate::format::pack::Pack", "crate::format::tile", "crate::scene::Stream"]);
-    let code =
-        code_only("let s = \"crate::render::x\"; // crate::render::y\nlet c = '\"'; crate::geo::f();\n/* crate::a */");
-    let found = paths_in(&code, &[]);
-    assert_eq!(found, [(2, "crate::geo::f".to_string())]);
+    let code = code_only(concat!(
+        "let s = \"crate::render::x\"; // crate::render::y\n",
+        "let c = '\"'; let q = '\\''; crate::geo::f();\n",
+        "let r = br#\"crate::render::z \" \"#; /* crate::a */ crate::sun::g();\n",
+    ));
+    let found: Vec<String> = paths_in(&code, &[]).into_iter().map(|w| w.path).collect();
+    assert_eq!(found, ["crate::geo::f", "crate::sun::g"]);
+}
+
+/// Paths inside an inline module (`mod tests { use super::… }`) and a `use`
+/// of a child module by its bare name resolve to the files they name.
+#[test]
+fn inline_modules_and_child_modules_resolve() {
+    let (mut sylva, _) = read_workspace();
+    let planted = "src/scene/streaming/tiles.rs".to_string();
+    sylva.files.insert(
+        planted.clone(),
+        "pub fn f() {}\n#[cfg(test)]\nmod tests {\n    use super::super::report::StreamStats;\n}\n".to_string(),
+    );
+    let parent = "src/scene/streaming/mod.rs".to_string();
+    let text = format!("{}\nuse tree_data::X;\n", sylva.files[&parent]);
+    sylva.files.insert(parent.clone(), text);
+    let edges = sylva.edges(None);
+    assert!(
+        edges.iter().any(|e| e.from == planted && e.to == "src/scene/streaming/report.rs"),
+        "super inside `mod tests` is the file's own module: {edges:#?}"
+    );
+    assert!(edges.iter().any(|e| e.from == parent && e.to == "src/scene/streaming/tree_data.rs"));
 }

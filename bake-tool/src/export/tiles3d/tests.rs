@@ -2,8 +2,6 @@
 //! tileset's structure and every GLB's content.
 
 use super::*;
-use gltf::json::accessor::UNSIGNED_SHORT;
-use gltf::json::texture::{CLAMP_TO_EDGE, LINEAR};
 
 fn fixture() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/forest-small")
@@ -127,7 +125,7 @@ fn every_exported_tree_maps_back_to_its_tree_within_a_centimetre() {
             let tex = mat["pbrMetallicRoughness"]["baseColorTexture"]["index"].as_u64().unwrap() as usize;
             // Sampled without mips (mips of sparse leaves fall under the cutoff).
             let sampler = &far["samplers"][far["textures"][tex]["sampler"].as_u64().unwrap() as usize];
-            assert_eq!(sampler["minFilter"], LINEAR);
+            assert_eq!(sampler["minFilter"], 9729, "LINEAR (the spec's number)");
             let img = far["images"][far["textures"][tex]["source"].as_u64().unwrap() as usize]["uri"].as_str().unwrap();
             let png = image::open(out.join("tiles").join(img)).unwrap().to_rgba8();
             let covered = png.pixels().filter(|p| p[3] >= 128).count() as f64 / f64::from(png.width() * png.height());
@@ -283,7 +281,7 @@ fn the_ground_is_the_terrain_draped_with_its_images() {
         // (UVs normalized u16, indices u16: a tile has fewer than 65,536 vertices.)
         let shorts = |a: u64| -> Vec<u16> {
             let acc = &doc["accessors"][a as usize];
-            assert_eq!(acc["componentType"], UNSIGNED_SHORT);
+            assert_eq!(acc["componentType"], 5123, "UNSIGNED_SHORT (the spec's number)");
             let view = &doc["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
             let start = view["byteOffset"].as_u64().unwrap() as usize;
             let per = if acc["type"] == "VEC2" { 2 } else { 1 };
@@ -349,7 +347,8 @@ fn the_ground_is_the_terrain_draped_with_its_images() {
             let sampler = &doc["samplers"][doc["textures"][t as usize]["sampler"].as_u64().unwrap() as usize];
             assert_eq!(
                 (sampler["wrapS"].as_u64(), sampler["wrapT"].as_u64()),
-                (Some(u64::from(CLAMP_TO_EDGE)), Some(u64::from(CLAMP_TO_EDGE)))
+                (Some(33071), Some(33071)),
+                "CLAMP_TO_EDGE (the spec's number)"
             );
         }
         // What the tile should give: its vertices with data, two triangles a cell of them.
