@@ -136,6 +136,21 @@ struct Prefix {
     more: Load,
 }
 
+impl Prefix {
+    /// What a decoded prefix holds, with the file's `bytes` kept (or none), no
+    /// request for more yet.
+    fn held(held: &crate::format::tile::TilePrefix, bytes: Vec<u8>) -> Self {
+        Self {
+            levels: held.levels,
+            runs: std::sync::Arc::new(held.runs()),
+            batches: held.whole_batches(),
+            scheme: held.scheme,
+            bytes,
+            more: Load::Idle,
+        }
+    }
+}
+
 /// What prefix thinning keeps of far trees (the renderer's settings), so the
 /// stream fetches only that prefix of a tile ([`SceneStream::set_prefix_view`]).
 #[derive(Debug, Clone, Copy, PartialEq)]

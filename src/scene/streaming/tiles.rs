@@ -160,14 +160,7 @@ impl<F: Fetcher> SceneStream<F> {
         let keep_bytes = held.of > 1 && self.index.tiles[t].levels.is_some();
         match result {
             Ok(slot) => {
-                let prefix = Box::new(Prefix {
-                    levels: held.levels,
-                    runs: std::sync::Arc::new(held.runs()),
-                    batches: held.whole_batches(),
-                    scheme: held.scheme,
-                    bytes: if keep_bytes { bytes } else { Vec::new() },
-                    more: Load::Idle,
-                });
+                let prefix = Box::new(Prefix::held(&held, if keep_bytes { bytes } else { Vec::new() }));
                 let species = slot.species_counts.iter().map(|(s, _)| *s).collect();
                 let cells = tile
                     .batches
@@ -279,14 +272,7 @@ impl<F: Fetcher> SceneStream<F> {
                 if !replaced {
                     residency.evict_tile(old);
                 }
-                **prefix = Prefix {
-                    levels: held.levels,
-                    runs: std::sync::Arc::new(held.runs()),
-                    batches: held.whole_batches(),
-                    scheme: held.scheme,
-                    bytes: if keep_bytes { bytes } else { Vec::new() },
-                    more: Load::Idle,
-                };
+                **prefix = Prefix::held(&held, if keep_bytes { bytes } else { Vec::new() });
             }
             // No room for the bigger tile: it keeps what it holds, and (as for a new
             // tile) tiles are requested only up to a little less than its distance.
