@@ -546,7 +546,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         View::Oblique => PackView::Oblique,
         View::Top => PackView::Top,
     };
-    let rgba = render_pack_repr(&gpu, &decoded, repr, view, w, h, [0.62, 0.74, 0.86, 1.0], ao)
+    let rgba = render_pack_repr(&gpu, &decoded, repr, view, [w, h], [0.62, 0.74, 0.86, 1.0], ao)
         .context("the pack lacks that representation")?;
     image::save_buffer(&out, &rgba, w, h, image::ColorType::Rgba8)
         .with_context(|| format!("cannot write {}", out.display()))?;

@@ -342,6 +342,26 @@ pub struct TreeRenderer {
     pub full_res_alpha: bool,
 }
 
+/// What one capture sees: a camera (`clip_from_eye` at `eye`, model space)
+/// and the image size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shot {
+    /// Clip transform of eye-relative positions.
+    pub clip_from_eye: Mat4,
+    /// The eye (model space).
+    pub eye: Vec3,
+    /// Image width and height (px).
+    pub size: [u32; 2],
+}
+
+impl Shot {
+    /// A `size`×`size` image from `eye`.
+    #[must_use]
+    pub fn square(clip_from_eye: Mat4, eye: Vec3, size: u32) -> Self {
+        Self { clip_from_eye, eye, size: [size, size] }
+    }
+}
+
 impl TreeRenderer {
     /// Pipelines for sRGB RGBA8 targets.
     #[must_use]
@@ -374,20 +394,9 @@ impl TreeRenderer {
         }
     }
 
-    /// Renders `what` with the camera `clip_from_eye` at `eye` (model space) into
-    /// a `width`×`height` sRGB RGBA8 image over `background`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn render(
-        &self,
-        ctx: &GpuContext,
-        what: &TreeDraw<'_>,
-        clip_from_eye: Mat4,
-        eye: Vec3,
-        width: u32,
-        height: u32,
-        background: [f64; 4],
-    ) -> Vec<u8> {
-        let (encoder, color) = self.encode(ctx, what, clip_from_eye, eye, width, height, background, None, 1);
+    /// Renders `what` as `shot` sees it into an sRGB RGBA8 image over `background`.
+    pub fn render(&self, ctx: &GpuContext, what: &TreeDraw<'_>, shot: &Shot, background: [f64; 4]) -> Vec<u8> {
+        let (encoder, color) = self.encode(ctx, what, shot, background, None, 1);
         ctx.queue.submit([encoder.finish()]);
         read_texture_rgba8(ctx, &color, 0, 0)
     }
@@ -397,17 +406,8 @@ impl TreeRenderer {
     /// (deterministic, unlike a timer: the bake's LoD policy models time from
     /// it). `None` where the device lacks `PIPELINE_STATISTICS_QUERY`.
     #[cfg(not(target_arch = "wasm32"))]
-    #[allow(clippy::too_many_arguments)]
     #[must_use]
-    pub fn work(
-        &self,
-        ctx: &GpuContext,
-        what: &TreeDraw<'_>,
-        clip_from_eye: Mat4,
-        eye: Vec3,
-        width: u32,
-        height: u32,
-    ) -> Option<Work> {
+    pub fn work(&self, ctx: &GpuContext, what: &TreeDraw<'_>, shot: &Shot) -> Option<Work> {
         if !ctx.device.features().contains(wgpu::Features::PIPELINE_STATISTICS_QUERY) {
             return None;
         }
@@ -431,8 +431,7 @@ impl TreeRenderer {
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
-        let (mut encoder, _color) =
-            self.encode(ctx, what, clip_from_eye, eye, width, height, [0.0; 4], Some(&query), 1);
+        let (mut encoder, _color) = self.encode(ctx, what, shot, [0.0; 4], Some(&query), 1);
         encoder.resolve_query_set(&query, 0..1, &resolve, 0);
         encoder.copy_buffer_to_buffer(&resolve, 0, &read, 0, 16);
         ctx.queue.submit([encoder.finish()]);
@@ -448,25 +447,14 @@ impl TreeRenderer {
     /// calibrating the LoD policy's cost model ([`Work`]); a timer, so not
     /// deterministic.
     #[cfg(not(target_arch = "wasm32"))]
-    #[allow(clippy::too_many_arguments)]
     #[must_use]
-    pub fn wall_ms(
-        &self,
-        ctx: &GpuContext,
-        what: &TreeDraw<'_>,
-        clip_from_eye: Mat4,
-        eye: Vec3,
-        width: u32,
-        height: u32,
-        runs: usize,
-    ) -> f64 {
+    pub fn wall_ms(&self, ctx: &GpuContext, what: &TreeDraw<'_>, shot: &Shot, runs: usize) -> f64 {
         const PASSES: u32 = 8;
         let time = |draws: u32| {
             let mut samples: Vec<f64> = (0..runs.max(1))
                 .map(|_| {
-                    let encoders: Vec<_> = (0..PASSES)
-                        .map(|_| self.encode(ctx, what, clip_from_eye, eye, width, height, [0.0; 4], None, draws))
-                        .collect();
+                    let encoders: Vec<_> =
+                        (0..PASSES).map(|_| self.encode(ctx, what, shot, [0.0; 4], None, draws)).collect();
                     let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
                     let start = std::time::Instant::now();
                     ctx.queue.submit(encoders.into_iter().map(|(e, _)| e.finish()));
@@ -483,19 +471,16 @@ impl TreeRenderer {
     /// Draws `what` `draws` times into fresh targets: the encoder (not
     /// submitted) and the colour target. With `query`, the draws are inside a
     /// pipeline-statistics query at index 0.
-    #[allow(clippy::too_many_arguments)]
     fn encode(
         &self,
         ctx: &GpuContext,
         what: &TreeDraw<'_>,
-        clip_from_eye: Mat4,
-        eye: Vec3,
-        width: u32,
-        height: u32,
+        shot: &Shot,
         background: [f64; 4],
         query: Option<&wgpu::QuerySet>,
         draws: u32,
     ) -> (wgpu::CommandEncoder, wgpu::Texture) {
+        let Shot { clip_from_eye, eye, size: [width, height] } = *shot;
         let mut uniform = Lighting::default().view_uniform(clip_from_eye, eye, [width, height]);
         uniform.ambient[3] = f32::from(u8::from(self.ao));
         uniform.eye_hi[3] = f32::from(u8::from(self.full_res_alpha));
@@ -602,9 +587,10 @@ pub struct Work {
 }
 
 /// A perspective camera framing a whole tree with bounds `min..max` from
-/// `view`, for a `width`×`height` image: (clip_from_eye, eye).
+/// `view`, for an image of `size` (width, height).
 #[must_use]
-pub fn preview_camera(min: Vec3, max: Vec3, view: PackView, width: u32, height: u32) -> (Mat4, Vec3) {
+pub fn preview_camera(min: Vec3, max: Vec3, view: PackView, size: [u32; 2]) -> Shot {
+    let [width, height] = size;
     let center = (min + max) * 0.5;
     let radius = ((max - min) * 0.5).length().max(1e-3);
     let elevation: f32 = match view {
@@ -621,7 +607,7 @@ pub fn preview_camera(min: Vec3, max: Vec3, view: PackView, width: u32, height: 
     // Camera-relative: rotation-only view matrix, the tree placed at (origin − eye).
     let eye_from_world = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, -dir, Vec3::Z);
     let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(fov_y, aspect, distance * 0.01);
-    (proj * eye_from_world, eye)
+    Shot { clip_from_eye: proj * eye_from_world, eye, size }
 }
 
 /// Which representation of a pack [`render_pack_preview`] draws.
@@ -640,90 +626,80 @@ pub enum PackRepr {
 }
 
 /// Renders one tree of `pack` lit, with a perspective camera framing the whole
-/// tree, into a `width`×`height` sRGB RGBA8 image, with the tree's own baked
-/// occlusion when `ao`. `None` if the pack lacks the representation.
+/// tree, into an sRGB RGBA8 image of `size` (width, height), with the tree's
+/// own baked occlusion when `ao`. `None` if the pack lacks the representation.
 ///
 /// Sets up a [`TreeRenderer`] (every pipeline) for the one image: to render
 /// several, make one and call [`TreeRenderer::render_pack`].
 #[must_use]
-#[allow(clippy::too_many_arguments)]
 pub fn render_pack_repr(
     ctx: &GpuContext,
     pack: &Pack<'_>,
     repr: PackRepr,
     view: PackView,
-    width: u32,
-    height: u32,
+    size: [u32; 2],
     background: [f64; 4],
     ao: bool,
 ) -> Option<Vec<u8>> {
     let mut r = TreeRenderer::new(ctx);
     r.ao = ao;
-    r.render_pack(ctx, pack, repr, view, width, height, background)
+    r.render_pack(ctx, pack, repr, view, size, background)
 }
 
 impl TreeRenderer {
     /// Renders one tree of `pack` lit, with a perspective camera framing the
-    /// whole tree, into a `width`×`height` sRGB RGBA8 image (with the tree's
+    /// whole tree, into an sRGB RGBA8 image of `size` (with the tree's
     /// own occlusion when [`Self::ao`]). `None` if the pack lacks the
     /// representation. The pack is uploaded for the call; the pipelines are
     /// this renderer's (compiling them is most of a one-off image's time).
     #[must_use]
-    #[allow(clippy::too_many_arguments)]
     pub fn render_pack(
         &self,
         ctx: &GpuContext,
         pack: &Pack<'_>,
         repr: PackRepr,
         view: PackView,
-        width: u32,
-        height: u32,
+        size: [u32; 2],
         background: [f64; 4],
     ) -> Option<Vec<u8>> {
         let r = self;
-        let (clip, eye) =
-            preview_camera(Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max), view, width, height);
+        let shot = preview_camera(Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max), view, size);
         match repr {
             PackRepr::Mesh(level) => {
                 let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
-                mesh.has_level(level)
-                    .then(|| r.render(ctx, &TreeDraw::Mesh(&mesh, level), clip, eye, width, height, background))
+                mesh.has_level(level).then(|| r.render(ctx, &TreeDraw::Mesh(&mesh, level), &shot, background))
             }
             PackRepr::Cluster(level) => {
                 let c = ClusterGpu::upload(&ctx.device, &ctx.queue, &r.cluster, pack)?;
-                (level < c.levels.len())
-                    .then(|| r.render(ctx, &TreeDraw::Cluster(&c, level), clip, eye, width, height, background))
+                (level < c.levels.len()).then(|| r.render(ctx, &TreeDraw::Cluster(&c, level), &shot, background))
             }
             PackRepr::Billboard => {
                 let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, pack)?;
-                Some(r.render(ctx, &TreeDraw::Billboard(&bb), clip, eye, width, height, background))
+                Some(r.render(ctx, &TreeDraw::Billboard(&bb), &shot, background))
             }
             PackRepr::Impostor => {
                 let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, pack)?;
-                Some(r.render(ctx, &TreeDraw::Impostor(&imp), clip, eye, width, height, background))
+                Some(r.render(ctx, &TreeDraw::Impostor(&imp), &shot, background))
             }
             PackRepr::Cloud => {
                 let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, pack);
-                mesh.cloud
-                    .is_some()
-                    .then(|| r.render(ctx, &TreeDraw::Cloud(&mesh), clip, eye, width, height, background))
+                mesh.cloud.is_some().then(|| r.render(ctx, &TreeDraw::Cloud(&mesh), &shot, background))
             }
         }
     }
 }
 
 /// Renders one tree of `pack` (mesh level `level`) lit, with a perspective camera
-/// framing the whole tree, into a `width`×`height` sRGB RGBA8 image.
+/// framing the whole tree, into an sRGB RGBA8 image of `size` (width, height).
 #[must_use]
 pub fn render_pack_preview(
     ctx: &GpuContext,
     pack: &Pack<'_>,
     level: usize,
     view: PackView,
-    width: u32,
-    height: u32,
+    size: [u32; 2],
     background: [f64; 4],
 ) -> Vec<u8> {
-    render_pack_repr(ctx, pack, PackRepr::Mesh(level), view, width, height, background, true)
-        .unwrap_or_else(|| vec![0; (width * height * 4) as usize])
+    render_pack_repr(ctx, pack, PackRepr::Mesh(level), view, size, background, true)
+        .unwrap_or_else(|| vec![0; (size[0] * size[1] * 4) as usize])
 }

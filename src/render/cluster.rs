@@ -387,64 +387,9 @@ impl ClusterGpu {
     }
 }
 
-/// The cluster levels a species draws at once, as (level, lower threshold px):
-/// the finest [`super::gpu_data::CLUSTER_TIERS`] levels whose size band
-/// `[select_px, finer level's select_px)` meets `[min_px, below_px)`; the last
-/// reaches down to `min_px`.
-#[must_use]
-pub fn cluster_tiers(levels: &[ClusterLevelGpu], min_px: f32, below_px: f32) -> Vec<(usize, f32)> {
-    let mut out: Vec<(usize, f32)> = Vec::new();
-    if min_px.partial_cmp(&below_px) != Some(std::cmp::Ordering::Less) {
-        return out;
-    }
-    let mut upper = f32::INFINITY;
-    for (i, l) in levels.iter().enumerate() {
-        let lower = l.meta.select_px;
-        if upper > min_px && lower < below_px && out.len() < super::gpu_data::CLUSTER_TIERS {
-            out.push((i, lower.max(min_px)));
-        }
-        upper = lower;
-    }
-    if let Some(last) = out.last_mut() {
-        last.1 = min_px;
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn level(select_px: f32) -> ClusterLevelGpu {
-        ClusterLevelGpu {
-            ellipsoid_word: 0,
-            ellipsoids: 1,
-            line_word: 0,
-            lines: 0,
-            meta: ClusterLevelMeta {
-                count: 1,
-                select_px,
-                error: 0.0,
-                noise_threshold: 0.0,
-                normal_blend: 0.0,
-                pareto_error: None,
-                pareto_cost: None,
-            },
-        }
-    }
-
-    #[test]
-    fn tiers_cover_the_cluster_band() {
-        let levels: Vec<_> = [2000.0, 900.0, 400.0, 180.0, 80.0, 35.0, 15.0].map(level).into();
-        // Band [30, 120): levels 3 (180..) no — its band is [180, 400); level 4 [80, 180),
-        // level 5 [35, 80), level 6 [15, 35).
-        let t = cluster_tiers(&levels, 30.0, 120.0);
-        assert_eq!(t, vec![(4, 80.0), (5, 35.0), (6, 30.0)]);
-        assert!(cluster_tiers(&levels, 200.0, 120.0).is_empty());
-        // More usable levels than tiers: the finest four, the last reaching down.
-        let t = cluster_tiers(&levels, 1.0, 5000.0);
-        assert_eq!(t, vec![(0, 2000.0), (1, 900.0), (2, 400.0), (3, 1.0)]);
-    }
 
     #[test]
     fn noise_mips_are_white_at_every_level() {

@@ -10,6 +10,8 @@ use super::settings::{CullingMode, RenderSettings, Representations};
 use crate::camera::ViewData;
 use crate::format::pack::PACK_PARTS;
 use crate::format::PackMeta;
+use crate::lod::bands::{bands, MeshOffer, Offer};
+use crate::lod::policy::policy_keeps;
 
 /// Projected tree height from which a tile's batches are bounded one by one.
 const REFINE_PX: f32 = 40.0;
@@ -140,49 +142,29 @@ impl Reach {
     pub fn parts_needed(&self, s: usize, meta: &PackMeta) -> [bool; PACK_PARTS] {
         let max_px = self.species_max_px.get(s).copied().unwrap_or(0.0);
         let Some(m) = self.measured else { return [false; PACK_PARTS] };
-        let allow = m.representations;
-        // The far tier: billboards or impostors (one part holds both).
-        let has_bb = allow.billboards && (meta.billboards.is_some() || meta.impostors.is_some());
-        let has_cl = allow.clusters && meta.clusters.as_ref().is_some_and(|c| !c.ellipsoid_levels.is_empty());
-        let has_mesh = allow.meshes && !meta.mesh_levels.is_empty();
+        // The bands the species table will draw, from what the pack holds.
+        let mesh =
+            |l: usize| meta.mesh_levels.get(l).map(|m| MeshOffer { select_px: m.select_px, policy_px: m.policy_px });
+        let last = meta.mesh_levels.len().saturating_sub(1);
+        let offer = Offer {
+            meshes: [mesh(0), mesh(last).filter(|_| last > 0)],
+            cloud: meta.cloud.as_ref().map(|c| (c.select_px, policy_keeps(c.pareto_error, c.pareto_cost, false))),
+            clusters: meta.clusters.as_ref().is_some_and(|c| !c.ellipsoid_levels.is_empty()),
+            far: meta.billboards.is_some() || meta.impostors.is_some(),
+        };
+        let levels = meta.clusters.iter().flat_map(|c| c.ellipsoid_levels.iter());
+        let b = bands(&offer, m.representations, m.lod_policy, m.cluster_min_px, levels);
+        let has_mesh = b.mesh_floor.is_finite();
         // Cross-fades start below a threshold: fetch a little early.
         let slack = 1.0 - m.fade_band;
-        let select = |l: usize| meta.mesh_levels.get(l).map_or(f32::INFINITY, |m| m.select_px);
-        // The coarsest mesh level's threshold, as the LoD policy moves it (with a
-        // far tier to take over); a level it leaves out leaves the finer one's.
-        let policy = m.lod_policy;
-        let mesh_floor = if has_mesh {
-            let last = meta.mesh_levels.len() - 1;
-            match meta.mesh_levels[last].policy_px {
-                Some(px) if policy && has_bb && last > 0 => px.max(select(last)).min(select(last - 1)),
-                _ => select(last),
-            }
-        } else {
-            f32::INFINITY
-        };
-        let cluster_floor = if has_bb { m.cluster_min_px } else { 0.0 };
-        // The billboard cloud (in the coarse meshes' part) takes over below the meshes.
-        let cloud_floor = meta
-            .cloud
-            .as_ref()
-            .filter(|c| {
-                allow.clouds && (!policy || crate::lod::policy::policy_keeps(c.pareto_error, c.pareto_cost, false))
-            })
-            .map(|c| c.select_px);
-        let coarsest_is_mesh = !has_bb && !has_cl && cloud_floor.is_none();
-        let meshes = has_mesh && (max_px >= mesh_floor * slack || coarsest_is_mesh);
-        let cloud = cloud_floor.is_some_and(|f| max_px >= f * slack || (!has_bb && !has_cl));
+        let has_cl = b.clusters.is_some();
+        let coarsest_is_mesh = !b.far && !has_cl && b.cloud.is_none();
+        let meshes = has_mesh && (max_px >= b.mesh_floor * slack || coarsest_is_mesh);
+        let cloud = b.cloud.is_some_and(|f| max_px >= f * slack || (!b.far && !has_cl));
         // The full mesh only where a tree can reach its threshold (one level: always).
-        let full = meshes && (meta.mesh_levels.len() == 1 || max_px >= select(0) * slack);
-        // The policy's band of cluster levels (with a far tier to take over), as
-        // the species table draws them.
-        let floor = cloud_floor.unwrap_or(mesh_floor);
-        let cluster_floor = match (&meta.clusters, policy && has_bb) {
-            (Some(c), true) => cluster_floor.max(crate::lod::policy::policy_floor(c.ellipsoid_levels.iter(), floor)),
-            _ => cluster_floor,
-        };
-        let clusters = has_cl && cluster_floor < floor && max_px >= cluster_floor * slack;
-        [has_bb, clusters, meshes || cloud, full]
+        let full = meshes && (last == 0 || b.mesh[0].is_some_and(|px| max_px >= px * slack));
+        let clusters = b.clusters.is_some_and(|min| min < b.floor && max_px >= min * slack);
+        [b.far, clusters, meshes || cloud, full]
     }
 }
 

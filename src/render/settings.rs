@@ -119,46 +119,14 @@ pub const DEFAULT_THIN_PX: f32 = 8.0;
 /// tallest tree projects (px, × quality) below the first height the canopy
 /// rasters stand in for all of the batch's trees, from the second up they are
 /// drawn whole, between a share of them (`canopy_weight` and `canopy_drops`
-/// in `shaders/common.wgsl`).
+/// in `shaders/select.wgsl`).
 pub const CANOPY_PX: [f32; 2] = [1.0, 2.5];
 
 /// Canopy rasters are refined (children replace their parent) while their
 /// cells project above this many pixels.
 pub const CANOPY_CELL_PX: f32 = 2.0;
 
-/// Representation families a frame may use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Representations {
-    /// Mesh levels.
-    pub meshes: bool,
-    /// Clustered ellipsoids and lines.
-    pub clusters: bool,
-    /// Billboards.
-    pub billboards: bool,
-    /// Billboard clouds (García et al. 2007).
-    pub clouds: bool,
-}
-
-impl Representations {
-    /// Everything (Sylva's mixed pipeline).
-    pub const ALL: Self = Self { meshes: true, clusters: true, billboards: true, clouds: true };
-    /// Meshes only.
-    pub const MESHES: Self = Self { meshes: true, clusters: false, billboards: false, clouds: false };
-    /// Ellipsoids and lines only.
-    pub const CLUSTERS: Self = Self { meshes: false, clusters: true, billboards: false, clouds: false };
-    /// Billboards only.
-    pub const BILLBOARDS: Self = Self { meshes: false, clusters: false, billboards: true, clouds: false };
-    /// Billboard clouds only.
-    pub const CLOUDS: Self = Self { meshes: false, clusters: false, billboards: false, clouds: true };
-}
-
-impl Default for Representations {
-    /// Everything: which cluster levels and clouds a species draws by default
-    /// is the bake's LoD policy ([`RenderSettings::lod_policy`]).
-    fn default() -> Self {
-        Self::ALL
-    }
-}
+pub use crate::lod::bands::Representations;
 
 impl Default for RenderSettings {
     fn default() -> Self {

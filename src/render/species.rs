@@ -8,7 +8,7 @@
 use glam::Vec3;
 
 use super::billboard::{BillboardGpu, BillboardPipeline, BILLBOARD_VERTICES};
-use super::cluster::{cluster_tiers, ClusterGpu, ClusterPipeline};
+use super::cluster::{ClusterGpu, ClusterPipeline};
 use super::gpu_data::{DrawArgs, DrawParams, GpuSpecies, RenderMode, Repr, REPR_COUNT};
 use super::impostor::{ImpostorGpu, ImpostorPipeline, IMPOSTOR_VERTICES};
 use super::layouts::SharedLayouts;
@@ -17,7 +17,7 @@ use super::pools::Pools;
 use super::reach::Reach;
 use super::settings::{FarTier, RenderSettings, Representations};
 use crate::format::Pack;
-use crate::lod::policy::policy_floor;
+use crate::lod::bands::{bands, cluster_tiers, MeshOffer, Offer};
 use crate::lod::policy::policy_keeps;
 
 /// Segment capacity of the full mesh level per species: only trees hundreds of
@@ -242,9 +242,6 @@ impl Species {
         let mut params = Vec::with_capacity(count * REPR_COUNT as usize);
         let budget = pools.config().items;
         let allow = self.representations;
-        let policy = self.lod_policy;
-        // Without billboards the coarsest cluster level reaches down to 0 px.
-        let cluster_min_px = if allow.billboards { self.cluster_min_px } else { 0.0 };
         for (i, pack) in self.packs.iter_mut().enumerate() {
             let resident = pools.resident(i).min(u64::from(u32::MAX)) as u32;
             let mut s = GpuSpecies::default();
@@ -257,50 +254,38 @@ impl Species {
                 s.select = [p.height_m, 0.0, 0.0, 0.0];
                 let mut want = [0u32; REPR_COUNT as usize];
                 let mut lower = [0f32; REPR_COUNT as usize];
-                if p.has_level[0] && allow.meshes {
-                    want[Repr::Mesh0 as usize] = resident.min(MESH0_CAPACITY);
-                    lower[Repr::Mesh0 as usize] = p.select_px[0];
-                    s.index_count[Repr::Mesh0 as usize] = p.index_counts[0];
-                }
-                // With a far tier to take over, the bake's LoD policy may start the
-                // simplified mesh higher, or leave it out.
-                let has_far = allow.billboards && (p.impostor.is_some() || p.billboard.is_some());
-                let mesh1_lower = match p.policy_px[1] {
-                    Some(px) if policy && has_far => px.max(p.select_px[1]),
-                    _ => p.select_px[1],
+                // What is resident, banded by the shared rule.
+                let mesh = |l: usize| {
+                    p.has_level[l].then_some(MeshOffer { select_px: p.select_px[l], policy_px: p.policy_px[l] })
                 };
-                let mesh1 = p.has_level[1] && allow.meshes && (!p.has_level[0] || mesh1_lower < p.select_px[0]);
-                if mesh1 {
-                    want[Repr::Mesh1 as usize] = resident.min(MESH1_CAPACITY);
-                    lower[Repr::Mesh1 as usize] = mesh1_lower;
-                    s.index_count[Repr::Mesh1 as usize] = p.index_counts[1];
+                let offer = Offer {
+                    meshes: [mesh(0), mesh(1)],
+                    cloud: p.cloud.map(|(px, _)| (px, p.cloud_kept)),
+                    clusters: p.cluster.is_some(),
+                    far: p.impostor.is_some() || p.billboard.is_some(),
+                };
+                let levels = p.cluster.iter().flat_map(|c| c.levels.iter().map(|l| &l.meta));
+                let b = bands(&offer, allow, self.lod_policy, self.cluster_min_px, levels);
+                for (l, (repr, capacity)) in
+                    [(Repr::Mesh0, MESH0_CAPACITY), (Repr::Mesh1, MESH1_CAPACITY)].into_iter().enumerate()
+                {
+                    if let Some(px) = b.mesh[l] {
+                        want[repr as usize] = resident.min(capacity);
+                        lower[repr as usize] = px;
+                        s.index_count[repr as usize] = p.index_counts[l];
+                    }
                 }
                 // The billboard cloud, below the meshes.
-                if let Some((select_px, indices)) = p.cloud.filter(|_| allow.clouds && (!policy || p.cloud_kept)) {
+                if let (Some(px), Some((_, indices))) = (b.cloud, p.cloud) {
                     want[Repr::Cloud as usize] = resident.min(MESH1_CAPACITY);
-                    lower[Repr::Cloud as usize] = select_px;
+                    lower[Repr::Cloud as usize] = px;
                     s.index_count[Repr::Cloud as usize] = indices;
                 }
-                // Cluster tiers: the levels whose size band meets [cluster_min_px, the
-                // coarsest mesh level's (or the cloud's) threshold).
-                let mesh_floor = if allow.clouds && p.cloud.is_some() && (!policy || p.cloud_kept) {
-                    p.cloud.map_or(f32::INFINITY, |c| c.0)
-                } else if allow.meshes && mesh1 {
-                    mesh1_lower
-                } else if allow.meshes && p.has_level[0] {
-                    p.select_px[0]
-                } else {
-                    f32::INFINITY
-                };
+                // Cluster tiers: the levels whose size band meets the cluster band.
                 p.tiers.clear();
-                if let Some(c) = p.cluster.as_ref().filter(|_| allow.clusters) {
-                    // With a far tier to take over, the policy's band only.
-                    let min_px = if policy && has_far {
-                        cluster_min_px.max(policy_floor(c.levels.iter().map(|l| &l.meta), mesh_floor))
-                    } else {
-                        cluster_min_px
-                    };
-                    for (tier, (level, lo)) in cluster_tiers(&c.levels, min_px, mesh_floor).into_iter().enumerate() {
+                if let (Some(c), Some(min_px)) = (p.cluster.as_ref(), b.clusters) {
+                    let tiers = cluster_tiers(c.levels.iter().map(|l| &l.meta), min_px, b.floor);
+                    for (tier, (level, lo)) in tiers.into_iter().enumerate() {
                         let r = Repr::CLUSTERS[tier] as usize;
                         want[r] = resident.min(CLUSTER_CAPACITY);
                         lower[r] = lo;
@@ -313,12 +298,12 @@ impl Species {
                 p.far_impostor = p.impostor.is_some() && (self.far_tier == FarTier::Impostors || p.billboard.is_none());
                 let r = Repr::Billboard as usize;
                 match (&p.impostor, &p.billboard) {
-                    (Some(imp), _) if p.far_impostor && allow.billboards => {
+                    (Some(imp), _) if p.far_impostor && b.far => {
                         want[r] = resident;
                         s.index_count[r] = IMPOSTOR_VERTICES;
                         imp.draw_params(&mut draw[r]);
                     }
-                    (_, Some(bb)) if allow.billboards => {
+                    (_, Some(bb)) if b.far => {
                         want[r] = resident;
                         s.index_count[r] = BILLBOARD_VERTICES;
                         draw[r].ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);

@@ -55,7 +55,7 @@ fn occlusion_darkens_every_level_alike() {
         for view in [PackView::Side, PackView::Oblique] {
             let render = |repr, ao| {
                 let r = if ao { &with_ao } else { &without_ao };
-                r.render_pack(&ctx, &pack, repr, view, SIZE, SIZE, BG).expect("representation")
+                r.render_pack(&ctx, &pack, repr, view, [SIZE, SIZE], BG).expect("representation")
             };
             let background = render(PackRepr::Mesh(0), false)[..4].to_vec();
             let mask_of = |img: &[u8]| -> Vec<bool> {

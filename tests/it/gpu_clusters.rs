@@ -6,7 +6,7 @@ use glam::{DVec3, Mat4, Quat, Vec3};
 use sylva::format::cluster::{Ellipsoid, Line, PackedEllipsoid, PackedLine};
 use sylva::format::decode_pack;
 use sylva::metrics::multiscale_rmse;
-use sylva::render::capture::{BillboardFrame, PackRepr, PackView, TreeDraw, TreeRenderer};
+use sylva::render::capture::{BillboardFrame, PackRepr, PackView, Shot, TreeDraw, TreeRenderer};
 use sylva::render::cluster::ClusterGpu;
 use sylva::render::GpuContext;
 
@@ -136,7 +136,8 @@ fn ray_cast_ellipsoids_match_the_cpu_reference() {
         let c = upload(&ctx, &r, &[e], &[]);
         for (elev, az) in [(0.0, 0.0), (35.0, 70.0), (89.0, 10.0)] {
             let (clip, inv) = camera(elev, az);
-            let img = r.render(&ctx, &TreeDraw::Cluster(&c, 0), clip, Vec3::ZERO, SIZE, SIZE, [0.0, 0.0, 0.0, 1.0]);
+            let img =
+                r.render(&ctx, &TreeDraw::Cluster(&c, 0), &Shot::square(clip, Vec3::ZERO, SIZE), [0.0, 0.0, 0.0, 1.0]);
             let got: Vec<bool> = img.chunks(4).map(|p| p[0].max(p[1]).max(p[2]) > 6).collect();
             let want: Vec<bool> = (0..SIZE * SIZE)
                 .map(|i| {
@@ -181,7 +182,8 @@ fn intersecting_ellipsoids_and_lines_keep_correct_depth() {
     let dl = PackedLine::encode(&line, LO, HI).decode(LO, HI);
     for (elev, az) in [(0.0, 0.0), (30.0, 200.0), (60.0, 95.0)] {
         let (clip, inv) = camera(elev, az);
-        let img = r.render(&ctx, &TreeDraw::Cluster(&c, 0), clip, Vec3::ZERO, SIZE, SIZE, [0.0, 0.0, 0.0, 1.0]);
+        let img =
+            r.render(&ctx, &TreeDraw::Cluster(&c, 0), &Shot::square(clip, Vec3::ZERO, SIZE), [0.0, 0.0, 0.0, 1.0]);
         // Per pixel: which primitive is nearest (0 none, 1 red, 2 blue, 3 line).
         let want: Vec<u8> = (0..SIZE * SIZE)
             .map(|i| {
@@ -250,7 +252,7 @@ fn three_representations_of_one_tree_side_by_side() {
     let bg = [0.62, 0.74, 0.86, 1.0];
     let renderer = TreeRenderer::new(&ctx);
     let render =
-        |repr| renderer.render_pack(&ctx, &pack, repr, PackView::Side, size, size, bg).expect("representation");
+        |repr| renderer.render_pack(&ctx, &pack, repr, PackView::Side, [size, size], bg).expect("representation");
     let mesh = render(PackRepr::Mesh(0));
     let cluster = render(PackRepr::Cluster(level));
     let billboard = render(PackRepr::Billboard);

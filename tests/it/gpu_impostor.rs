@@ -7,7 +7,7 @@ use glam::{Mat4, Vec3};
 use sylva::format::decode_pack;
 use sylva::metrics::multiscale_rmse;
 use sylva::render::billboard::BillboardGpu;
-use sylva::render::capture::{PackView, TreeDraw, TreeRenderer};
+use sylva::render::capture::{PackView, Shot, TreeDraw, TreeRenderer};
 use sylva::render::impostor::{blend_views, ImpostorGpu};
 use sylva::render::mesh::MeshGpu;
 use sylva::render::GpuContext;
@@ -170,7 +170,7 @@ fn a_tree_seen_all_round_keeps_its_silhouette() {
         let distance = (hi.z - lo.z) / (100.0 / SIZE as f32) / (15f32.to_radians().tan() * 2.0);
         for (azimuth, elevation) in [(0.0, 5.0), (55.0, 5.0), (130.0, 20.0), (215.0, 5.0), (300.0, 35.0)] {
             let (clip, eye) = camera(center, distance, azimuth, elevation);
-            let draw = |what: &TreeDraw<'_>| r.render(&ctx, what, clip, eye, SIZE, SIZE, bg);
+            let draw = |what: &TreeDraw<'_>| r.render(&ctx, what, &Shot::square(clip, eye, SIZE), bg);
             let m = draw(&TreeDraw::Mesh(&mesh, 0));
             let i = draw(&TreeDraw::Impostor(&imp));
             let b = draw(&TreeDraw::Billboard(&bb));
@@ -227,8 +227,8 @@ fn work_counts_are_exact_and_scale_with_size() {
     let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, &pack).expect("billboards");
     let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
     let work = |what: &TreeDraw<'_>, size: u32| {
-        let (clip, eye) = sylva::render::capture::preview_camera(lo, hi, PackView::Side, size, size);
-        r.work(&ctx, what, clip, eye, size, size).expect("pipeline statistics")
+        let shot = sylva::render::capture::preview_camera(lo, hi, PackView::Side, [size, size]);
+        r.work(&ctx, what, &shot).expect("pipeline statistics")
     };
     for (what, kind) in [
         (TreeDraw::Mesh(&mesh, 0), CostKind::Mesh),
@@ -279,7 +279,7 @@ fn far_tier_error_by_size() {
         for (azimuth, elevation) in [(0.0, 5.0), (55.0, 10.0), (130.0, 20.0), (215.0, 5.0), (300.0, 30.0)] {
             let (clip, eye) = camera(center, distance, azimuth, elevation);
             r.full_res_alpha = true;
-            let big = r.render(&ctx, &TreeDraw::Mesh(&mesh, 0), clip, eye, SIZE * 4, SIZE * 4, bg);
+            let big = r.render(&ctx, &TreeDraw::Mesh(&mesh, 0), &Shot::square(clip, eye, SIZE * 4), bg);
             r.full_res_alpha = false;
             let mut reference = vec![0u8; (SIZE * SIZE * 4) as usize];
             for y in 0..SIZE as usize {
@@ -298,7 +298,7 @@ fn far_tier_error_by_size() {
                     }
                 }
             }
-            let draw = |what: &TreeDraw<'_>| r.render(&ctx, what, clip, eye, SIZE, SIZE, bg);
+            let draw = |what: &TreeDraw<'_>| r.render(&ctx, what, &Shot::square(clip, eye, SIZE), bg);
             e_m += multiscale_rmse(&draw(&TreeDraw::Mesh(&mesh, 0)), &reference, SIZE, SIZE);
             e_i += multiscale_rmse(&draw(&TreeDraw::Impostor(&imp)), &reference, SIZE, SIZE);
             e_b += multiscale_rmse(&draw(&TreeDraw::Billboard(&bb)), &reference, SIZE, SIZE);

@@ -142,7 +142,7 @@ fn preview_draws_trunk_and_alpha_tested_leaves() {
     let pack = decode_pack("toy", &bytes).unwrap();
     let (w, h) = (128, 128);
     let bg = [0.0, 0.0, 1.0, 1.0];
-    let img = render_pack_preview(&ctx, &pack, 0, PackView::Side, w, h, bg);
+    let img = render_pack_preview(&ctx, &pack, 0, PackView::Side, [w, h], bg);
     let saved = write_actual("preview", &img, w, h);
     // Classify pixels: background blue, leaf green, trunk brown.
     let (mut leaf, mut trunk, mut background) = (0, 0, 0);

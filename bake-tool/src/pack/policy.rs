@@ -91,21 +91,21 @@ pub(super) fn measure_policy(
         let mut sum = [0.0f64; 2];
         let mut cost = Some([0.0f32; 2]);
         for view in [PackView::Side, PackView::Oblique] {
-            let (clip, eye) = preview_camera(lo, hi, view, size, size);
+            let shot = preview_camera(lo, hi, view, [size, size]);
             r.full_res_alpha = true;
-            let reference = r.render(gpu, &TreeDraw::Mesh(&mesh, 0), clip, eye, size, size, BACKGROUND);
+            let reference = r.render(gpu, &TreeDraw::Mesh(&mesh, 0), &shot, BACKGROUND);
             r.full_res_alpha = false;
             for (k, what) in [own, &far].into_iter().enumerate() {
-                let img = r.render(gpu, what, clip, eye, size, size, BACKGROUND);
+                let img = r.render(gpu, what, &shot, BACKGROUND);
                 sum[k] += sylva::metrics::multiscale_rmse(&img, &reference, size, size) / 2.0;
-                let work = r.work(gpu, what, clip, eye, size, size);
+                let work = r.work(gpu, what, &shot);
                 if let (Some(c), Some(w)) = (cost.as_mut(), work) {
                     c[k] += modelled_us(kind(what), w.vertices, w.fragments) / 2.0;
                 } else {
                     cost = None;
                 }
                 if calibrate && view == PackView::Side {
-                    let ms = r.wall_ms(gpu, what, clip, eye, size, size, 7);
+                    let ms = r.wall_ms(gpu, what, &shot, 7);
                     let (v, f) = work.map_or((0, 0), |w| (w.vertices, w.fragments));
                     log(&format!(
                         "CALIBRATE {} {:?} px {px:.0} size {size} vertices {v} fragments {f} ms {ms:.4}",

@@ -227,7 +227,7 @@ fn bakes_the_shared_real_data() {
         // One renderer with each tree's own occlusion and one without, for every image.
         let (with_ao, mut without_ao) = (TreeRenderer::new(&ctx), TreeRenderer::new(&ctx));
         without_ao.ao = false;
-        let render = |r| with_ao.render_pack(&ctx, &pack, r, PackView::Side, size, size, bg).unwrap();
+        let render = |r| with_ao.render_pack(&ctx, &pack, r, PackView::Side, [size, size], bg).unwrap();
         let mesh = render(PackRepr::Mesh(0));
         let errors: Vec<f64> =
             (0..n).map(|l| sylva::metrics::multiscale_rmse(&render(PackRepr::Cluster(l)), &mesh, size, size)).collect();
@@ -238,7 +238,7 @@ fn bakes_the_shared_real_data() {
         assert!(errors[0] + 0.01 < errors[n - 1], "{species}: the finest beats the coarsest: {errors:?}");
         // The tree's own occlusion darkens each level about as much as the full mesh
         // (mean brightness of the tree's pixels with it over without it).
-        let plain = |r| without_ao.render_pack(&ctx, &pack, r, PackView::Side, size, size, bg).unwrap();
+        let plain = |r| without_ao.render_pack(&ctx, &pack, r, PackView::Side, [size, size], bg).unwrap();
         let darkening = |r| {
             let (on, off) = (render(r), plain(r));
             let bgpx = &off[..4];
@@ -262,7 +262,7 @@ fn bakes_the_shared_real_data() {
             img.chunks(4).filter(|p| p.iter().zip(&bgpx).take(3).any(|(x, y)| x.abs_diff(*y) > 2)).count()
         };
         for view in [PackView::Side, PackView::Oblique, PackView::Top] {
-            let at = |r| with_ao.render_pack(&ctx, &pack, r, view, size, size, bg).unwrap();
+            let at = |r| with_ao.render_pack(&ctx, &pack, r, view, [size, size], bg).unwrap();
             let mesh = at(PackRepr::Mesh(0));
             let (cloud, billboard) = (at(PackRepr::Cloud), at(PackRepr::Billboard));
             let err = |img: &[u8]| sylva::metrics::multiscale_rmse(img, &mesh, size, size);
@@ -290,11 +290,11 @@ fn bakes_the_shared_real_data() {
             }
             sum / n.max(1) as f64
         };
-        let big = with_ao.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, 192, 192, bg).unwrap();
+        let big = with_ao.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, [192, 192], bg).unwrap();
         let bgpx = [big[0], big[1], big[2]];
         let truth = mean_rgb(&big, bgpx);
         for r in [PackRepr::Impostor, PackRepr::Billboard] {
-            let small = with_ao.render_pack(&ctx, &pack, r, PackView::Side, 48, 48, bg).unwrap();
+            let small = with_ao.render_pack(&ctx, &pack, r, PackView::Side, [48, 48], bg).unwrap();
             let ratio = mean_rgb(&small, bgpx) / truth;
             eprintln!("{species}: {r:?} at 48 px is {ratio:.3}× the mesh's brightness");
             assert!((ratio - 1.0).abs() < 0.08, "{species}: {r:?} at 48 px is {ratio:.3}× the mesh's brightness");

@@ -9,7 +9,7 @@ use sylva::format::cluster::{ClusterLevelMeta, ClusterMeta, Line, PackedEllipsoi
 use sylva::format::pack::{kind, AoFieldRef, MaterialKind, Section};
 use sylva::format::Pack;
 use sylva::metrics::multiscale_rmse;
-use sylva::render::capture::{BillboardFrame, TreeDraw, TreeRenderer};
+use sylva::render::capture::{BillboardFrame, Shot, TreeDraw, TreeRenderer};
 use sylva::render::cluster::ClusterGpu;
 use sylva::render::mesh::MeshGpu;
 use sylva::render::GpuContext;
@@ -74,7 +74,7 @@ impl<'a> GpuJudge<'a> {
             .iter()
             .map(|(e, a)| {
                 let clip = self.frame.clip_from_model(e.to_radians(), a.to_radians());
-                self.renderer.render(self.ctx, what, clip, Vec3::ZERO, size, size, BACKGROUND)
+                self.renderer.render(self.ctx, what, &Shot::square(clip, Vec3::ZERO, size), BACKGROUND)
             })
             .collect()
     }
