@@ -1,30 +1,126 @@
-//! The GLBs of the export: a glTF document built up (buffers, views,
-//! accessors named by `gltf::json`'s constants), a species' mesh levels and far
-//! tier as meshes, and a tile's trees as EXT_mesh_gpu_instancing instances
-//! with EXT_structural_metadata features.
+//! The GLBs of the export: a typed `gltf::json` document built up (buffers,
+//! views, accessors, materials), a species' mesh levels and far tier as
+//! meshes, and a tile's trees as EXT_mesh_gpu_instancing instances with
+//! EXT_structural_metadata features (extensions `gltf::json` does not model:
+//! their JSON goes into its `others` maps).
 
-use gltf::json::accessor::{FLOAT, UNSIGNED_BYTE, UNSIGNED_INT};
-use gltf::json::buffer::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER};
-use gltf::json::texture::{CLAMP_TO_EDGE, LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT};
+use gltf::json::accessor::{ComponentType, GenericComponentType, Type};
+use gltf::json::buffer::Target;
+use gltf::json::material::{AlphaCutoff, AlphaMode, PbrBaseColorFactor, PbrMetallicRoughness, StrengthFactor};
+use gltf::json::mesh::{Primitive, Semantic};
+use gltf::json::texture::{MagFilter, MinFilter, WrappingMode};
+use gltf::json::validation::{Checked::Valid, USize64};
+use gltf::json::{self, Index};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 
 use super::*;
 
-/// A glTF document being built: arrays by name, and the GLB's own binary chunk.
-#[derive(Default)]
+/// A glTF document being built and the GLB's own binary chunk (buffer 0).
 pub(super) struct Gltf {
-    pub(super) arrays: BTreeMap<&'static str, Vec<Value>>,
+    pub(super) root: json::Root,
     pub(super) bin: Vec<u8>,
-    /// Top-level extensions (`EXT_structural_metadata`).
-    pub(super) extensions: serde_json::Map<String, Value>,
+}
+
+impl Default for Gltf {
+    fn default() -> Self {
+        let mut root = json::Root::default();
+        root.asset.generator = Some("sylva-bake export-3dtiles".into());
+        // Buffer 0: the GLB's binary chunk (its length is set by `glb`).
+        root.push(json::Buffer {
+            byte_length: USize64(0),
+            name: None,
+            uri: None,
+            extensions: None,
+            extras: Default::default(),
+        });
+        Self { root, bin: Vec::new() }
+    }
+}
+
+/// An attribute or index accessor: `count` elements of `type_` made of
+/// `component`s, from `offset` bytes into `view`.
+pub(super) struct Elements {
+    pub(super) view: Index<json::buffer::View>,
+    pub(super) offset: u64,
+    pub(super) component: ComponentType,
+    pub(super) normalized: bool,
+    pub(super) count: usize,
+    pub(super) type_: Type,
+}
+
+impl Elements {
+    /// `count` floats (`type_`) from the start of `view`.
+    pub(super) fn floats(view: Index<json::buffer::View>, count: usize, type_: Type) -> Self {
+        Self { view, offset: 0, component: ComponentType::F32, normalized: false, count, type_ }
+    }
+}
+
+/// A triangle list: (attributes, indices, material).
+pub(super) type Part = (Vec<(Semantic, Index<json::Accessor>)>, Index<json::Accessor>, Index<json::Material>);
+
+/// A material as the export draws it: a base colour (and texture), metallic 0,
+/// roughness 1.
+pub(super) struct Look {
+    pub(super) name: String,
+    pub(super) base_color: [f32; 4],
+    pub(super) texture: Option<Index<json::Texture>>,
+    pub(super) double_sided: bool,
+    /// Alpha-tested at this cutoff (`None`: opaque).
+    pub(super) alpha_cutoff: Option<f32>,
+    /// Unlit (`KHR_materials_unlit`).
+    pub(super) unlit: bool,
 }
 
 impl Gltf {
-    pub(super) fn push(&mut self, array: &'static str, v: Value) -> usize {
-        let a = self.arrays.entry(array).or_default();
-        a.push(v);
-        a.len() - 1
+    /// A buffer beside the GLB (a species' shared mesh buffer, by `uri`).
+    pub(super) fn buffer(&mut self, uri: String, bytes: u64) -> Index<json::Buffer> {
+        self.root.push(json::Buffer {
+            byte_length: USize64(bytes),
+            name: None,
+            uri: Some(uri),
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
+    /// A view of `length` bytes at `offset` in `buffer`, bound as `target`.
+    pub(super) fn view(
+        &mut self,
+        buffer: Index<json::Buffer>,
+        offset: u64,
+        length: u64,
+        target: Option<Target>,
+    ) -> Index<json::buffer::View> {
+        self.root.push(json::buffer::View {
+            buffer,
+            byte_length: USize64(length),
+            byte_offset: Some(USize64(offset)),
+            byte_stride: None,
+            name: None,
+            target: target.map(Valid),
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
+    /// An accessor of `e`, with the bounds `min..max` where given (positions
+    /// must have them).
+    pub(super) fn accessor(&mut self, e: Elements, bounds: Option<([f32; 3], [f32; 3])>) -> Index<json::Accessor> {
+        self.root.push(json::Accessor {
+            buffer_view: Some(e.view),
+            byte_offset: (e.offset > 0).then_some(USize64(e.offset)),
+            count: USize64(e.count as u64),
+            component_type: Valid(GenericComponentType(e.component)),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(e.type_),
+            min: bounds.map(|(lo, _)| json!(lo)),
+            max: bounds.map(|(_, hi)| json!(hi)),
+            name: None,
+            normalized: e.normalized,
+            sparse: None,
+        })
     }
 
     /// A texture of the shared image `uri` (relative to the tileset): sampled
@@ -32,28 +128,124 @@ impl Gltf {
     /// alpha-tested billboard's mips average its sparse leaves' coverage below
     /// the cutoff, and a far tree would vanish; repeated, or (`clamp`) clamped
     /// to its edges (a ground image: its edge must not blend with the opposite one).
-    pub(super) fn texture(&mut self, uri: &str, mips: bool, clamp: bool) -> usize {
-        let image = self.push("images", json!({"uri": format!("../{uri}")}));
-        let min_filter = if mips { LINEAR_MIPMAP_LINEAR } else { LINEAR };
-        let wrap = if clamp { CLAMP_TO_EDGE } else { REPEAT };
-        let samplers = self.arrays.get("samplers").map_or(&[][..], |v| &v[..]);
-        let sampler = match samplers.iter().position(|v| v["minFilter"] == min_filter && v["wrapS"] == wrap) {
-            Some(i) => i,
-            None => self
-                .push("samplers", json!({"magFilter": LINEAR, "minFilter": min_filter, "wrapS": wrap, "wrapT": wrap})),
+    pub(super) fn texture(&mut self, uri: &str, mips: bool, clamp: bool) -> Index<json::Texture> {
+        let source = self.root.push(json::Image {
+            buffer_view: None,
+            mime_type: None,
+            name: None,
+            uri: Some(format!("../{uri}")),
+            extensions: None,
+            extras: Default::default(),
+        });
+        let min_filter = Valid(if mips { MinFilter::LinearMipmapLinear } else { MinFilter::Linear });
+        let wrap = Valid(if clamp { WrappingMode::ClampToEdge } else { WrappingMode::Repeat });
+        let sampler = match self.root.samplers.iter().position(|s| s.min_filter == Some(min_filter) && s.wrap_s == wrap)
+        {
+            Some(i) => Index::new(i as u32),
+            None => self.root.push(json::texture::Sampler {
+                mag_filter: Some(Valid(MagFilter::Linear)),
+                min_filter: Some(min_filter),
+                wrap_s: wrap,
+                wrap_t: wrap,
+                ..Default::default()
+            }),
         };
-        self.push("textures", json!({"source": image, "sampler": sampler}))
+        self.root.push(json::Texture {
+            name: None,
+            sampler: Some(sampler),
+            source,
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
+    /// The material `look`.
+    pub(super) fn material(&mut self, look: Look) -> Index<json::Material> {
+        let base_color_texture = look.texture.map(|index| json::texture::Info {
+            index,
+            tex_coord: 0,
+            extensions: None,
+            extras: Default::default(),
+        });
+        let extensions = look.unlit.then(|| json::extensions::material::Material {
+            others: [("KHR_materials_unlit".to_string(), json!({}))].into_iter().collect(),
+        });
+        self.root.push(json::Material {
+            name: Some(look.name),
+            pbr_metallic_roughness: PbrMetallicRoughness {
+                base_color_factor: PbrBaseColorFactor(look.base_color),
+                base_color_texture,
+                metallic_factor: StrengthFactor(0.0),
+                roughness_factor: StrengthFactor(1.0),
+                ..Default::default()
+            },
+            double_sided: look.double_sided,
+            alpha_mode: Valid(if look.alpha_cutoff.is_some() { AlphaMode::Mask } else { AlphaMode::Opaque }),
+            alpha_cutoff: look.alpha_cutoff.map(AlphaCutoff),
+            extensions,
+            ..Default::default()
+        })
+    }
+
+    /// A mesh of `primitives`.
+    pub(super) fn mesh(&mut self, name: &str, primitives: Vec<Part>) -> Index<json::Mesh> {
+        let primitives = primitives
+            .into_iter()
+            .map(|(attributes, indices, material)| Primitive {
+                attributes: attributes.into_iter().map(|(k, v)| (Valid(k), v)).collect(),
+                extensions: None,
+                extras: Default::default(),
+                indices: Some(indices),
+                material: Some(material),
+                mode: Valid(json::mesh::Mode::Triangles),
+                targets: None,
+            })
+            .collect();
+        self.root.push(json::Mesh {
+            extensions: None,
+            extras: Default::default(),
+            name: Some(name.to_string()),
+            primitives,
+            weights: None,
+        })
+    }
+
+    /// The scene: `nodes`, each a named mesh with the extensions `others`.
+    pub(super) fn scene(&mut self, nodes: Vec<(String, Index<json::Mesh>, serde_json::Map<String, Value>)>) {
+        let nodes = nodes
+            .into_iter()
+            .map(|(name, mesh, others)| {
+                self.root.push(json::Node {
+                    name: Some(name),
+                    mesh: Some(mesh),
+                    extensions: (!others.is_empty()).then_some(json::extensions::scene::Node { others }),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let scene = self.root.push(json::Scene { extensions: None, extras: Default::default(), name: None, nodes });
+        self.root.scene = Some(scene);
     }
 
     /// Appends `data` to the GLB's chunk as a buffer view (8-byte aligned, as
     /// 64-bit metadata values need).
-    pub(super) fn own_view(&mut self, data: &[u8]) -> usize {
+    pub(super) fn own_view(&mut self, data: &[u8]) -> Index<json::buffer::View> {
+        self.own_view_for(data, None)
+    }
+
+    /// As [`Self::own_view`], bound as `target` (vertex or index data).
+    pub(super) fn own_view_for(&mut self, data: &[u8], target: Option<Target>) -> Index<json::buffer::View> {
         while !self.bin.len().is_multiple_of(8) {
             self.bin.push(0);
         }
-        let offset = self.bin.len();
+        let offset = self.bin.len() as u64;
         self.bin.extend_from_slice(data);
-        self.push("bufferViews", json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len()}))
+        self.view(Index::new(0), offset, data.len() as u64, target)
+    }
+
+    /// Sets a top-level extension (`EXT_structural_metadata`).
+    pub(super) fn extension(&mut self, name: &str, value: Value) {
+        self.root.extensions.get_or_insert_with(Default::default).others.insert(name.to_string(), value);
     }
 
     /// The GLB: header, JSON chunk (space-padded), binary chunk (zero-padded).
@@ -61,24 +253,10 @@ impl Gltf {
         while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
-        let mut doc = json!({
-            "asset": {"version": "2.0", "generator": "sylva-bake export-3dtiles"},
-            "scene": 0,
-            "extensionsUsed": used,
-        });
-        if !required.is_empty() {
-            doc["extensionsRequired"] = json!(required);
-        }
-        if !self.extensions.is_empty() {
-            doc["extensions"] = Value::Object(std::mem::take(&mut self.extensions));
-        }
-        let mut buffers = vec![json!({"byteLength": self.bin.len()})];
-        buffers.extend(self.arrays.remove("buffers").unwrap_or_default());
-        doc["buffers"] = Value::Array(buffers);
-        for (k, v) in self.arrays {
-            doc[k] = Value::Array(v);
-        }
-        let mut js = serde_json::to_vec(&doc).expect("JSON");
+        self.root.buffers[0].byte_length = USize64(self.bin.len() as u64);
+        self.root.extensions_used = used.iter().map(|s| s.to_string()).collect();
+        self.root.extensions_required = required.iter().map(|s| s.to_string()).collect();
+        let mut js = self.root.to_vec().expect("JSON");
         while !js.len().is_multiple_of(4) {
             js.push(b' ');
         }
@@ -99,32 +277,27 @@ impl Gltf {
 
 /// Adds species `sp`'s mesh level `level` (its shared buffer, materials,
 /// textures) to `g`; returns the mesh index.
-pub(super) fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
+pub(super) fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> Index<json::Mesh> {
     let mb = &sp.levels[&level];
-    let buffer = g.push("buffers", json!({"uri": format!("../{}", mb.uri), "byteLength": mb.bytes})) + 1;
-    let view = |g: &mut Gltf, k: usize, target: u32| {
+    let buffer = g.buffer(format!("../{}", mb.uri), mb.bytes);
+    let mut view = |k: usize, target: Target| {
         let (o, l) = mb.views[k];
-        g.push("bufferViews", json!({"buffer": buffer, "byteOffset": o, "byteLength": l, "target": target}))
+        g.view(buffer, o, l, Some(target))
     };
     let (vp, vn, vu, vc, vi) = (
-        view(g, 0, ARRAY_BUFFER),
-        view(g, 1, ARRAY_BUFFER),
-        view(g, 2, ARRAY_BUFFER),
-        view(g, 3, ARRAY_BUFFER),
-        view(g, 4, ELEMENT_ARRAY_BUFFER),
+        view(0, Target::ArrayBuffer),
+        view(1, Target::ArrayBuffer),
+        view(2, Target::ArrayBuffer),
+        view(3, Target::ArrayBuffer),
+        view(4, Target::ElementArrayBuffer),
     );
-    let n = mb.vertices;
-    let pos = g.push(
-        "accessors",
-        json!({"bufferView": vp, "componentType": FLOAT, "count": n, "type": "VEC3", "min": mb.pos_min, "max": mb.pos_max}),
-    );
-    let nrm = g.push("accessors", json!({"bufferView": vn, "componentType": FLOAT, "count": n, "type": "VEC3"}));
-    let uv = g.push("accessors", json!({"bufferView": vu, "componentType": FLOAT, "count": n, "type": "VEC2"}));
-    let col = g.push(
-        "accessors",
-        json!({"bufferView": vc, "componentType": UNSIGNED_BYTE, "normalized": true, "count": n, "type": "VEC4"}),
-    );
-    let mut materials: BTreeMap<usize, usize> = BTreeMap::new();
+    let n = mb.vertices as usize;
+    let pos = g.accessor(Elements::floats(vp, n, Type::Vec3), Some((mb.pos_min, mb.pos_max)));
+    let nrm = g.accessor(Elements::floats(vn, n, Type::Vec3), None);
+    let uv = g.accessor(Elements::floats(vu, n, Type::Vec2), None);
+    let colors = Elements { component: ComponentType::U8, normalized: true, ..Elements::floats(vc, n, Type::Vec4) };
+    let col = g.accessor(colors, None);
+    let mut materials: BTreeMap<usize, Index<json::Material>> = BTreeMap::new();
     let mut primitives = Vec::new();
     for &(mat, first, count) in &mb.draws {
         if count == 0 {
@@ -135,47 +308,45 @@ pub(super) fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> usize {
                 return far_material(g, sp);
             }
             let m = &sp.meta.materials[mat];
-            let mut pbr = json!({"baseColorFactor": m.base_color, "metallicFactor": 0.0, "roughnessFactor": 1.0});
-            if let Some(uri) = m.texture_layer.and_then(|l| sp.layers.get(&l)) {
-                pbr["baseColorTexture"] = json!({"index": g.texture(uri, true, false)});
-            }
-            let mut v = json!({"name": m.name, "pbrMetallicRoughness": pbr, "doubleSided": m.double_sided});
-            if m.alpha_cutoff > 0.0 {
-                v["alphaMode"] = json!("MASK");
-                v["alphaCutoff"] = json!(m.alpha_cutoff);
-            }
-            g.push("materials", v)
+            let texture = m.texture_layer.and_then(|l| sp.layers.get(&l)).map(|uri| g.texture(uri, true, false));
+            g.material(Look {
+                name: m.name.clone(),
+                base_color: m.base_color,
+                texture,
+                double_sided: m.double_sided,
+                alpha_cutoff: (m.alpha_cutoff > 0.0).then_some(m.alpha_cutoff),
+                unlit: false,
+            })
         });
-        let idx = g.push(
-            "accessors",
-            json!({"bufferView": vi, "byteOffset": u64::from(first) * 4, "componentType": UNSIGNED_INT, "count": count, "type": "SCALAR"}),
-        );
-        primitives.push(json!({
-            "attributes": {"POSITION": pos, "NORMAL": nrm, "TEXCOORD_0": uv, "COLOR_0": col},
-            "indices": idx,
-            "material": material,
-        }));
+        let indices = Elements {
+            offset: u64::from(first) * 4,
+            component: ComponentType::U32,
+            ..Elements::floats(vi, count as usize, Type::Scalar)
+        };
+        let idx = g.accessor(indices, None);
+        let attributes = vec![
+            (Semantic::Positions, pos),
+            (Semantic::Normals, nrm),
+            (Semantic::TexCoords(0), uv),
+            (Semantic::Colors(0), col),
+        ];
+        primitives.push((attributes, idx, material));
     }
-    g.push("meshes", json!({"name": sp.meta.name, "primitives": primitives}))
+    g.mesh(&sp.meta.name, primitives)
 }
 
 /// The far quads' material: the species' billboard, alpha-tested at ½ as
 /// Sylva's viewer tests it, both faces, unlit colour × the sun's light.
-pub(super) fn far_material(g: &mut Gltf, sp: &SpeciesOut) -> usize {
-    let mut pbr = json!({"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0});
-    if let Some(uri) = &sp.billboard {
-        pbr["baseColorTexture"] = json!({"index": g.texture(uri, false, false)});
-    }
-    g.push(
-        "materials",
-        json!({
-            "name": format!("{} far", sp.meta.name),
-            "pbrMetallicRoughness": pbr,
-            "doubleSided": true,
-            "alphaMode": "MASK",
-            "alphaCutoff": 0.5,
-        }),
-    )
+pub(super) fn far_material(g: &mut Gltf, sp: &SpeciesOut) -> Index<json::Material> {
+    let texture = sp.billboard.as_ref().map(|uri| g.texture(uri, false, false));
+    g.material(Look {
+        name: format!("{} far", sp.meta.name),
+        base_color: [1.0; 4],
+        texture,
+        double_sided: true,
+        alpha_cutoff: Some(0.5),
+        unlit: false,
+    })
 }
 
 /// A tile's trees by species, placed in the tile's frame.
@@ -333,29 +504,24 @@ pub(super) fn tile_glb(
         let vr = g.own_view(bytemuck::cast_slice(&r));
         let vs = g.own_view(bytemuck::cast_slice(&sc));
         let vf = g.own_view(bytemuck::cast_slice(&f));
-        let at = g.push("accessors", json!({"bufferView": vt, "componentType": FLOAT, "count": n, "type": "VEC3"}));
-        let ar = g.push("accessors", json!({"bufferView": vr, "componentType": FLOAT, "count": n, "type": "VEC4"}));
-        let asc = g.push("accessors", json!({"bufferView": vs, "componentType": FLOAT, "count": n, "type": "VEC3"}));
-        let af = g.push("accessors", json!({"bufferView": vf, "componentType": FLOAT, "count": n, "type": "SCALAR"}));
-        nodes.push(g.push(
-            "nodes",
-            json!({
-                "name": sp.meta.name,
-                "mesh": mesh,
-                "extensions": {
-                    "EXT_mesh_gpu_instancing": {
-                        "attributes": {"TRANSLATION": at, "ROTATION": ar, "SCALE": asc, "_FEATURE_ID_0": af},
-                    },
-                    "EXT_instance_features": {
-                        "featureIds": [{"featureCount": n, "attribute": 0, "propertyTable": 0, "label": "tree"}],
-                    },
-                },
-            }),
-        ));
+        let at = g.accessor(Elements::floats(vt, n, Type::Vec3), None);
+        let ar = g.accessor(Elements::floats(vr, n, Type::Vec4), None);
+        let asc = g.accessor(Elements::floats(vs, n, Type::Vec3), None);
+        let af = g.accessor(Elements::floats(vf, n, Type::Scalar), None);
+        let extensions = json!({
+            "EXT_mesh_gpu_instancing": {
+                "attributes": {"TRANSLATION": at, "ROTATION": ar, "SCALE": asc, "_FEATURE_ID_0": af},
+            },
+            "EXT_instance_features": {
+                "featureIds": [{"featureCount": n, "attribute": 0, "propertyTable": 0, "label": "tree"}],
+            },
+        });
+        let Value::Object(others) = extensions else { unreachable!("an object") };
+        nodes.push((sp.meta.name.clone(), mesh, others));
     }
     let table = property_table(&mut g, data, placed, &rows);
-    g.extensions.insert("EXT_structural_metadata".into(), json!({"schema": meta_schema, "propertyTables": [table]}));
-    g.push("scenes", json!({"nodes": nodes}));
+    g.extension("EXT_structural_metadata", json!({"schema": meta_schema, "propertyTables": [table]}));
+    g.scene(nodes);
     g.glb(
         &["EXT_mesh_gpu_instancing", "EXT_instance_features", "EXT_structural_metadata"],
         &["EXT_mesh_gpu_instancing"],

@@ -3,8 +3,9 @@
 //! image (or its nearest ancestor's), refining as Sylva's viewer refines its
 //! terrain (`docs/FORMAT.md`, "3D Tiles export").
 
-use gltf::json::accessor::{FLOAT, UNSIGNED_INT, UNSIGNED_SHORT};
-use gltf::json::buffer::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER};
+use gltf::json::accessor::{ComponentType, Type};
+use gltf::json::buffer::Target;
+use gltf::json::mesh::Semantic;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -14,14 +15,14 @@ use sylva::format::terrain::{TerrainEntry, TerrainTile, IMAGERY_PX};
 use sylva::format::{Bounds, Manifest};
 use sylva::geo::GeoFrame;
 
-use super::{enu_frame, geodetic_to_ecef, region, write_file, ExportReport, Gltf, SSE_PX};
+use super::{enu_frame, geodetic_to_ecef, region, write_file, Elements, ExportReport, Gltf, Look, SSE_PX};
 
 /// Pixels of height error (or of a ground image's texel) at which Sylva's
 /// viewer refines its terrain (`StreamConfig::terrain_error_px`): a tile's
 /// geometric error is scaled from its metres by [`SSE_PX`] / this.
 const TERRAIN_PX: f64 = 2.0;
 /// The colour of ground without imagery (linear RGB): the viewer's forest-floor litter.
-const LITTER: [f64; 4] = [0.17, 0.155, 0.09, 1.0];
+const LITTER: [f32; 4] = [0.17, 0.155, 0.09, 1.0];
 
 /// What the ground's export reads.
 pub(super) struct Ground<'a> {
@@ -259,50 +260,36 @@ impl Ground<'_> {
             }
         }
         let count = pos.len();
-        let vp = g.own_view(bytemuck::cast_slice(&pos));
-        let vu = g.own_view(bytemuck::cast_slice(&uv));
+        let vp = g.own_view_for(bytemuck::cast_slice(&pos), Some(Target::ArrayBuffer));
+        let vu = g.own_view_for(bytemuck::cast_slice(&uv), Some(Target::ArrayBuffer));
         // (Indices as u16 where the vertices allow: a 64-cell tile has 4,485.)
         let short = pos.len() <= usize::from(u16::MAX);
         let vi = if short {
             let idx16: Vec<u16> = idx.iter().map(|&i| i as u16).collect();
-            g.own_view(bytemuck::cast_slice(&idx16))
+            g.own_view_for(bytemuck::cast_slice(&idx16), Some(Target::ElementArrayBuffer))
         } else {
-            g.own_view(bytemuck::cast_slice(&idx))
+            g.own_view_for(bytemuck::cast_slice(&idx), Some(Target::ElementArrayBuffer))
         };
-        for (v, target) in [(vp, ARRAY_BUFFER), (vu, ARRAY_BUFFER), (vi, ELEMENT_ARRAY_BUFFER)] {
-            g.arrays.get_mut("bufferViews").expect("views")[v]["target"] = json!(target);
-        }
-        let a_pos = g.push(
-            "accessors",
-            json!({"bufferView": vp, "componentType": FLOAT, "count": count, "type": "VEC3", "min": lo, "max": hi}),
-        );
-        let a_uv = g.push(
-            "accessors",
-            json!({"bufferView": vu, "componentType": UNSIGNED_SHORT, "normalized": true, "count": count, "type": "VEC2"}),
-        );
-        let index_type = if short { UNSIGNED_SHORT } else { UNSIGNED_INT };
-        let a_idx = g.push(
-            "accessors",
-            json!({"bufferView": vi, "componentType": index_type, "count": idx.len(), "type": "SCALAR"}),
-        );
-        let mut pbr = json!({"baseColorFactor": LITTER, "metallicFactor": 0.0, "roughnessFactor": 1.0});
-        if let Some((l, x, y)) = image {
-            pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
-            pbr["baseColorTexture"] = json!({"index": g.texture(&format!("ground/img/{l}_{x}_{y}.jpg"), true, true)});
-        }
+        let a_pos = g.accessor(Elements::floats(vp, count, Type::Vec3), Some((lo, hi)));
+        let uvs =
+            Elements { component: ComponentType::U16, normalized: true, ..Elements::floats(vu, count, Type::Vec2) };
+        let a_uv = g.accessor(uvs, None);
+        let index_type = if short { ComponentType::U16 } else { ComponentType::U32 };
+        let a_idx =
+            g.accessor(Elements { component: index_type, ..Elements::floats(vi, idx.len(), Type::Scalar) }, None);
+        let texture = image.map(|(l, x, y)| g.texture(&format!("ground/img/{l}_{x}_{y}.jpg"), true, true));
         // Unlit, as imagery draped on a globe is (the photo has its own light).
-        let material = g.push(
-            "materials",
-            json!({"name": "ground", "pbrMetallicRoughness": pbr, "doubleSided": true,
-                   "extensions": {"KHR_materials_unlit": {}}}),
-        );
-        let mesh = g.push(
-            "meshes",
-            json!({"name": "ground", "primitives": [{
-                "attributes": {"POSITION": a_pos, "TEXCOORD_0": a_uv}, "indices": a_idx, "material": material}]}),
-        );
-        let node = g.push("nodes", json!({"name": format!("ground {}_{}_{}", t.level, t.x, t.y), "mesh": mesh}));
-        g.push("scenes", json!({"nodes": [node]}));
+        let material = g.material(Look {
+            name: "ground".into(),
+            base_color: if texture.is_some() { [1.0; 4] } else { LITTER },
+            texture,
+            double_sided: true,
+            alpha_cutoff: None,
+            unlit: true,
+        });
+        let attributes = vec![(Semantic::Positions, a_pos), (Semantic::TexCoords(0), a_uv)];
+        let mesh = g.mesh("ground", vec![(attributes, a_idx, material)]);
+        g.scene(vec![(format!("ground {}_{}_{}", t.level, t.x, t.y), mesh, serde_json::Map::new())]);
         Ok(Some(g.glb(&["KHR_materials_unlit"], &[])))
     }
 }
