@@ -1,6 +1,6 @@
 // Sun shadows in the lit passes (mesh, billboard, cluster, terrain): the
 // cascaded shadow map drawn by src/render/shadow.rs. Composed after
-// common.wgsl; each pass declares `view` at group 0 binding 0.
+// layout.wgsl and light.wgsl; each pass declares `view` at group 0 binding 0.
 
 // One depth layer per cascade, reversed Z (nearer the sun is greater).
 @group(0) @binding(1) var shadow_map: texture_depth_2d_array;

@@ -1,6 +1,6 @@
 // The styles of the tree passes: the cull control buffer from
-// `STYLE_OFFSET_BYTES` (common.wgsl `style_of` and friends, the layout there).
-// Composed after common.wgsl, view.wgsl and trees.wgsl into the mesh,
+// `STYLE_OFFSET_BYTES` (style_bits.wgsl `style_of` and friends, the layout there).
+// Composed after style_bits.wgsl, view.wgsl and trees.wgsl into the mesh,
 // billboard, impostor and cluster passes by `src/render/shaders.rs`; group 2
 // is their instance group (`trees.wgsl`).
 

@@ -35,7 +35,7 @@ pub const MAX_TILE_INSTANCES: u32 = 1 << 26;
 /// Prefix levels this build writes (version 4, [`Levels`]): the tile's
 /// tallest batch ends at `2^((ℓ+1−L)/2)` of its trees at level ℓ: 1/128,
 /// 1/91, 1/64 (the least prefix thinning keeps, `THIN_MIN_FRACTION` in
-/// `shaders/common.wgsl`), …, 1/√2, all — the canopy cross-fade keeps fewer
+/// `shaders/layout.wgsl`), …, 1/√2, all — the canopy cross-fade keeps fewer
 /// than 1/64 where trees are about a pixel tall.
 pub const TILE_LEVELS: u32 = 15;
 /// Prefix levels version 3 tiles were written with: 1/64, 1/32, …, ½, all.
@@ -65,7 +65,7 @@ pub const MAX_Z_STEP_M: f32 = 0.016;
 
 /// One batch: the trees of one species in one grid cell (Eichner 2024, §3.4).
 ///
-/// Must match `Batch` in `shaders/common.wgsl`.
+/// Must match `Batch` in `shaders/layout.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuBatch {
@@ -287,7 +287,7 @@ const _: () = assert!(std::mem::size_of::<GpuBatch>() == 80);
 /// Word 1: z (bits 0–10) in `z_step_m` steps, yaw (11–18) in 1/256 turns,
 /// scale (19–26) in `scale_log2_step` steps above `scale_min`, variation (27–31)
 /// — or, in a [`BATCH_CROWN_ASPECT`] batch, the crown aspect (27–31) of the batch's [`CrownRange`].
-/// Must match `unpack_instance` in `shaders/common.wgsl`.
+/// Must match `unpack_instance` in `shaders/instance.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct PackedInstance {

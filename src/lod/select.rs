@@ -1,5 +1,5 @@
 //! The cull pass's selection on the CPU, exactly as `shaders/cull.wgsl` and
-//! the rules it shares in `shaders/common.wgsl` (each function names its WGSL
+//! the rules it shares in `shaders/select.wgsl` (each function names its WGSL
 //! twin): which batches and trees a view draws, with which representation,
 //! how far thinning and the canopy cross-fade reach. The streamer uses the
 //! canopy's share to fetch only the prefix a view draws; tests compare the GPU's
@@ -71,7 +71,7 @@ pub fn cpu_select(
 }
 
 /// How much bigger a thinned batch's kept trees are drawn: (n / kept)^this.
-/// Must match `THIN_BOOST_EXPONENT` in `shaders/common.wgsl`.
+/// Must match `THIN_BOOST_EXPONENT` in `shaders/select.wgsl`.
 const THIN_BOOST_EXPONENT: f32 = 0.35;
 
 /// As [`cpu_select`], leaving out the pool instances `hidden` names (the
@@ -156,7 +156,7 @@ pub fn cpu_select_styled(
 }
 
 /// How much of a tree of `h_px` projected pixels the canopy stands in for,
-/// exactly as `canopy_weight` in `shaders/common.wgsl`.
+/// exactly as `canopy_weight` in `shaders/select.wgsl`.
 #[must_use]
 pub fn canopy_weight(h_px: f32, view: &ViewUniform) -> f32 {
     let [lo, hi, _, _] = view.canopy;
@@ -170,7 +170,7 @@ pub fn canopy_weight(h_px: f32, view: &ViewUniform) -> f32 {
 /// considers of its batch (`h_px`: the batch's tallest tree projected at tree
 /// i's distance) — the tail of the density order: kept while
 /// `i + ½ < count · (1 − w(h))` — exactly as `canopy_drops` in
-/// `shaders/common.wgsl`.
+/// `shaders/select.wgsl`.
 #[must_use]
 pub fn canopy_drops(h_px: f32, i: u32, count: u32, view: &ViewUniform) -> bool {
     let [lo, hi, _, _] = view.canopy;
@@ -199,7 +199,7 @@ pub fn canopy_share(h_px: f32, canopy: [f32; 2]) -> f32 {
     ((h_px - lo) / (hi - lo).max(1e-3)).clamp(0.0, 1.0)
 }
 
-/// Prefix thinning of a batch, exactly as `thinning` in `shaders/common.wgsl`:
+/// Prefix thinning of a batch, exactly as `thinning` in `shaders/select.wgsl`:
 /// (trees kept, fractional; n / kept, 1 when not thinned; trees kept were the
 /// whole batch held, fractional: n when not thinned).
 #[must_use]

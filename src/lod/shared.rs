@@ -1,10 +1,10 @@
-//! The layouts that the cull shader (`shaders/cull.wgsl`, `shaders/common.wgsl`)
+//! The layouts that the cull shader (`shaders/cull.wgsl`, `shaders/layout.wgsl`)
 //! and its CPU twin ([`super::select`]) both read: the view, the species
 //! table, the representations. Each names its WGSL twin.
 
 use bytemuck::{Pod, Zeroable};
 
-/// Per-view constants. Must match `View` in `shaders/common.wgsl`.
+/// Per-view constants. Must match `View` in `shaders/layout.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct ViewUniform {
@@ -54,7 +54,7 @@ const _: () = assert!(std::mem::size_of::<ViewUniform>() == 656);
 /// Most shadow cascades a view carries.
 pub const MAX_CASCADES: usize = 4;
 
-/// Per-species selection data. Must match `Species` in `shaders/common.wgsl`.
+/// Per-species selection data. Must match `Species` in `shaders/layout.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable)]
 pub struct GpuSpecies {
@@ -78,7 +78,7 @@ const _: () = assert!(std::mem::size_of::<GpuSpecies>() == 160);
 pub const SLOTS_PER_SPECIES: usize = 8;
 
 /// Representations a tree can be drawn with, finest first. A draw slot is
-/// `species * REPR_COUNT + repr`. Must match `REPR_*` in `shaders/common.wgsl`.
+/// `species * REPR_COUNT + repr`. Must match `REPR_*` in `shaders/layout.wgsl`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 #[repr(u32)]
 pub enum Repr {

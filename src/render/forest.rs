@@ -320,12 +320,12 @@ impl ForestRenderer {
                     0.0
                 })
                 .to_array(),
-            // w: the cross-fade dither's shift (`fade_keeps` in common.wgsl).
+            // w: the cross-fade dither's shift (`fade_keeps` in select.wgsl).
             eye_lo: view.eye_lo.extend(settings.refine_seed as f32).to_array(),
             frustum: view.frustum.map(|p| p.to_array()),
             sun_dir: l.sun_dir.extend(0.0).to_array(),
             sun_color: l.sun_color.extend(0.0).to_array(),
-            // w: the trees' own baked occlusion on (1) or off (0), `own_ao` in common.wgsl.
+            // w: the trees' own baked occlusion on (1) or off (0), `own_ao` in light.wgsl.
             ambient: l.ambient.extend(f32::from(u8::from(settings.ao))).to_array(),
             lod: [
                 view.px_per_m_at_1m * settings.quality,

@@ -16,7 +16,7 @@ pub const VIEW_STRIDE: u64 = 768;
 const _: () = assert!(std::mem::size_of::<ViewUniform>() as u64 <= VIEW_STRIDE);
 
 /// Per-draw constants, bound with a dynamic offset. Must match `DrawParams` in
-/// `shaders/common.wgsl`.
+/// `shaders/layout.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct DrawParams {

@@ -130,7 +130,7 @@ impl Lighting {
             frustum: [[0.0, 0.0, 0.0, 1.0]; 6],
             sun_dir: self.sun_dir.extend(0.0).to_array(),
             sun_color: self.sun_color.extend(0.0).to_array(),
-            // w: the trees' own baked occlusion on (`own_ao` in common.wgsl).
+            // w: the trees' own baked occlusion on (`own_ao` in light.wgsl).
             ambient: self.ambient.extend(1.0).to_array(),
             lod: [0.0; 4],
             params: [RenderMode::Lit as u32, 0, 0, 0],

@@ -1,14 +1,21 @@
 //! WGSL sources, composed at compile time (WGSL has no includes): each pass's
 //! file (`shaders/<pass>.wgsl`, named like its constant here and its Rust file
 //! in `src/render/`) after the modules it uses, each binding declared once:
-//! `common.wgsl` (structs and functions), `view.wgsl` (the view, group 0),
+//! `layout.wgsl` (the structs every pass reads), `instance.wgsl` (a tree
+//! decoded), `select.wgsl` (the selection rules the passes share; twin
+//! `src/lod/select.rs`), `light.wgsl` (the lighting model), `style_bits.wgsl`
+//! (the styles' bit layout), `view.wgsl` (the view, group 0),
 //! `trees.wgsl` (the tree passes' pools and draw params, groups 2 and 3),
 //! `styles.wgsl` (the styles' binding and colours), `shadow.wgsl` (the shadow
 //! map and its lookup, for the lit passes).
 
 /// The mesh pass (and the bake's billboard capture).
 pub const MESH: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/select.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
+    include_str!("../../shaders/style_bits.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
@@ -18,7 +25,11 @@ pub const MESH: &str = concat!(
 
 /// The billboard pass.
 pub const BILLBOARD: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/select.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
+    include_str!("../../shaders/style_bits.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
@@ -28,7 +39,11 @@ pub const BILLBOARD: &str = concat!(
 
 /// The multi-view impostor pass.
 pub const IMPOSTOR: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/select.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
+    include_str!("../../shaders/style_bits.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
@@ -39,7 +54,11 @@ pub const IMPOSTOR: &str = concat!(
 
 /// The cluster pass (ellipsoids and lines).
 pub const CLUSTER: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/select.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
+    include_str!("../../shaders/style_bits.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/trees.wgsl"),
     include_str!("../../shaders/styles.wgsl"),
@@ -49,28 +68,35 @@ pub const CLUSTER: &str = concat!(
 
 /// The cull and LoD-selection compute passes.
 pub const CULL: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/select.wgsl"),
+    include_str!("../../shaders/style_bits.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/cull.wgsl")
 );
 
 /// The sky/ground background.
 pub const SKY: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/sky.wgsl")
 );
 
 /// The batch-bounds debug view.
 pub const BOUNDS: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/bounds.wgsl")
 );
 
 /// The terrain pass.
 pub const TERRAIN: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/shadow.wgsl"),
     include_str!("../../shaders/terrain.wgsl")
@@ -78,7 +104,10 @@ pub const TERRAIN: &str = concat!(
 
 /// The canopy pass.
 pub const CANOPY: &str = concat!(
-    include_str!("../../shaders/common.wgsl"),
+    include_str!("../../shaders/layout.wgsl"),
+    include_str!("../../shaders/instance.wgsl"),
+    include_str!("../../shaders/select.wgsl"),
+    include_str!("../../shaders/light.wgsl"),
     include_str!("../../shaders/view.wgsl"),
     include_str!("../../shaders/canopy.wgsl")
 );

@@ -78,7 +78,7 @@ fn the_canopy_raster_matches_its_wgsl_twin() {
 
 #[test]
 fn shared_structs_match_their_wgsl_twins() {
-    // Every pass composes shaders/common.wgsl: check in each where the struct is used.
+    // Every pass composes shaders/layout.wgsl: check in each where the struct is used.
     for shader in ["cull", "mesh", "billboard", "cluster"] {
         check(
             shader,

@@ -6,7 +6,7 @@ use super::*;
 
 /// The first guess of the prefix levels (of `levels.count`, 1..=count) a
 /// view drawing with `thin` needs of a tile, before its batches are known:
-/// the thinned fraction (`thinning` in `shaders/common.wgsl`) of its tallest
+/// the thinned fraction (`thinning` in `shaders/select.wgsl`) of its tallest
 /// tree (`levels.tallest_m`) at the nearest point of the tile the view sees
 /// (sampled). All of them without thinning. [`batch_levels_wanted`] decides
 /// once the head is in.
@@ -53,7 +53,7 @@ pub fn first_levels_wanted(
 
 /// The prefix levels (of `scheme.count`, 1..=count) a view drawing with
 /// `thin` needs of a tile whose whole batches are `batches`: the fewest that
-/// hold what every batch in view keeps (`thinning` in `shaders/common.wgsl`:
+/// hold what every batch in view keeps (`thinning` in `shaders/select.wgsl`:
 /// its tallest tree at its nearest point, 1 % nearer against float noise).
 /// All of them without thinning.
 #[must_use]
