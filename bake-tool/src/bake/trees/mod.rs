@@ -7,22 +7,29 @@
 //! 2. the tree density, for the cell size (unless given);
 //! 3. the trees, in memory or partitioned by tile into bucket files.
 
-use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use glam::DVec3;
 
 use super::ground::{Dems, OutsideDem, ZMode};
-use crate::bake::batching::{self, SceneTree};
-use crate::bake::bucket::{BucketWriter, TreeSource};
+use crate::bake::batching::SceneTree;
+use crate::bake::bucket::TreeSource;
 use crate::input::allometry::Allometry;
-use crate::input::placements::{self, CoordKind, Placement, PlacementSource, ReadOptions};
+use crate::input::placements::{CoordKind, Placement, PlacementSource, ReadOptions};
 use crate::input::reproject::{Crs, Reprojector};
 use crate::out_dir::OutDir;
 use crate::patterns::pattern_matches;
 use crate::rng;
+
+mod passes;
+mod sample;
+mod summary;
+
+use passes::*;
+use sample::*;
+use summary::*;
 
 /// Tallest tree height accepted (the tallest known tree is 116 m); placement
 /// heights outside (0, this) count as missing.
@@ -103,31 +110,6 @@ struct Facts {
     aspect_clamped: bool,
     /// The tree lies just off the DEM's data: its ground is the nearest valid pixel's.
     ground_near: bool,
-}
-
-/// Per species label: the model used and the ranges a forester can check.
-#[derive(Debug, Clone)]
-struct SpeciesSummary {
-    model: usize,
-    trees: u64,
-    height: (f32, f32),
-    dbh: Option<(f32, f32)>,
-    crown: Option<(f32, f32)>,
-    /// Range of the crown aspects (trees with a crown width only).
-    aspect: Option<(f32, f32)>,
-    /// Trees whose aspect was clamped.
-    aspect_clamped: u64,
-    /// Trees just off the DEM's data, on the nearest valid height.
-    ground_near: u64,
-    from_dbh: u64,
-    /// Rows with a DBH, and of them over 150 cm and under 3 cm (unit checks).
-    dbh_rows: u64,
-    dbh_big: u64,
-    dbh_small: u64,
-}
-
-fn widen(r: Option<(f32, f32)>, v: f32) -> (f32, f32) {
-    r.map_or((v, v), |(a, b)| (a.min(v), b.max(v)))
 }
 
 /// Which model each species label uses.
@@ -245,22 +227,6 @@ impl TextIds {
     pub fn len(&self) -> usize {
         self.rows.len()
     }
-}
-
-/// What pass 1 learns.
-struct Sample {
-    /// (x, y, height, row) of up to [`SAMPLE_ROWS`] rows.
-    rows: Vec<(f64, f64, Option<f32>, u64)>,
-    /// Rows seen.
-    seen: u64,
-    /// Rows repeating an earlier row's coordinates (among the first [`DUPLICATE_CHECK_ROWS`]).
-    duplicates: u64,
-    report: placements::Report,
-    /// Without a DEM: the region (relative metres) over which pass 3 fits a
-    /// ground surface to the trees' bases (every shard fits the same one).
-    ground_region: Option<[f64; 4]>,
-    /// The region (relative metres) of the canopy cover grid: the trees and 50 m around.
-    canopy_region: [f64; 4],
 }
 
 /// Reads, checks and places the trees (see the module docs).
@@ -490,351 +456,5 @@ pub fn place_trees(
     Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy, attributes, text_ids })
 }
 
-/// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.
-fn sample_pass(source: &PlacementSource) -> Result<Sample> {
-    let mut rows: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
-    let mut rng = rng::Rng::new(0x5EED_5A3F_1E00_0001);
-    let mut seen = 0u64;
-    let mut coords = HashSet::new();
-    let mut duplicates = 0u64;
-    let report = source.for_each(&mut |p| {
-        seen += 1;
-        if coords.len() < DUPLICATE_CHECK_ROWS && !coords.insert((p.x.to_bits(), p.y.to_bits())) {
-            duplicates += 1;
-        }
-        let item = (p.x, p.y, p.height_m, p.row);
-        if rows.len() < SAMPLE_ROWS {
-            rows.push(item);
-        } else {
-            // Reservoir sampling: every row ends up in the sample with equal odds.
-            let j = rng.next_u64() % seen;
-            if j < SAMPLE_ROWS as u64 {
-                rows[j as usize] = item;
-            }
-        }
-        Ok(())
-    })?;
-    Ok(Sample { rows, seen, duplicates, report, ground_region: None, canopy_region: [0.0; 4] })
-}
-
-/// Longitude and latitude the other way round: most rows' "latitude" beyond
-/// ±90° whose "longitude" would be a latitude.
-fn check_swapped(opts: &TreeOptions<'_>, report: &placements::Report) -> Result<()> {
-    if report.swappable > 0 && report.swappable * 2 >= report.rows {
-        bail!(
-            "placements {}: the x/longitude and y/latitude columns look swapped: {} of {} rows have a latitude \
-             beyond ±90° and a longitude that would be a valid latitude; {}",
-            opts.placements.display(),
-            report.swappable,
-            report.rows,
-            if opts.read.swap_xy {
-                "they are so with --swap-xy: leave it out"
-            } else {
-                "pass --swap-xy (or rename the columns)"
-            }
-        );
-    }
-    Ok(())
-}
-
-/// The placements' CRS and the scene's.
-fn choose_crs(
-    opts: &TreeOptions<'_>,
-    source: &PlacementSource,
-    sample: &Sample,
-    log: &dyn Fn(&str),
-) -> Result<(Crs, Crs)> {
-    let (src, dst) = match source.kind {
-        CoordKind::LonLat => {
-            let dst = match opts.crs {
-                Some(c) => Crs::parse(c)?,
-                None => {
-                    let mut lons: Vec<f64> = sample.rows.iter().map(|p| p.0).collect();
-                    let mut lats: Vec<f64> = sample.rows.iter().map(|p| p.1).collect();
-                    if lons.is_empty() {
-                        bail!(
-                            "placements {}: no usable rows ({})",
-                            opts.placements.display(),
-                            sample.report.lines().join("; ")
-                        );
-                    }
-                    Crs::utm_for(median(&mut lons), median(&mut lats))?
-                }
-            };
-            // A GeoJSON may name a geographic CRS of its own (ETRS89, NAD83).
-            (Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?, dst)
-        }
-        CoordKind::Projected => {
-            let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
-            let input = opts.input_crs.or(declared.as_deref()).or(opts.crs).context(
-                "the placements have projected x/y coordinates: say which CRS they are in with --input-crs EPSG:xxxx",
-            )?;
-            if opts.input_crs.is_none() && declared.is_some() {
-                log(&format!("placements: the GeoJSON names its CRS: {input}"));
-            }
-            let src = Crs::parse(input)?;
-            let dst = Crs::parse(opts.crs.unwrap_or(input))?;
-            (src, dst)
-        }
-    };
-    if dst.is_geographic() {
-        bail!("--crs EPSG:{} is geographic; a scene needs a projected CRS in metres (e.g. a UTM zone)", dst.epsg);
-    }
-    log(&format!("scene CRS EPSG:{}", dst.epsg));
-    Ok((src, dst))
-}
-
-/// Pass 2: the cell size from the density of the trees.
-fn density_pass(source: &PlacementSource, to_tree: &TreeOf<'_>) -> Result<u32> {
-    let mut cells = HashSet::new();
-    let mut trees = 0u64;
-    source.for_each(&mut |p| {
-        if let Ok((t, _)) = to_tree(&p) {
-            trees += 1;
-            cells.insert(batching::cell64(t.pos));
-        }
-        Ok(())
-    })?;
-    Ok(batching::cell_size_for(trees, cells.len() as u64, 500.0))
-}
-
 /// A usable row as a tree and what it said, or why not.
 type TreeOf<'a> = dyn Fn(&Placement) -> Result<(SceneTree, Facts), &'static str> + 'a;
-
-/// Pass 3: the trees, in memory or partitioned by tile into bucket files; the
-/// report of every row skipped and why, and the summary per species label.
-#[allow(clippy::too_many_arguments)] // the pass's inputs, each used once
-fn tree_pass(
-    opts: &TreeOptions<'_>,
-    source: &PlacementSource,
-    sample: &Sample,
-    cell_size_m: u32,
-    to_tree: &TreeOf<'_>,
-    crown_radius: &dyn Fn(&SceneTree) -> f64,
-    out: &OutDir,
-    log: &dyn Fn(&str),
-) -> Result<Pass3> {
-    let buckets = sample.report.kept.div_ceil(opts.bucket_trees.max(1)).max(1);
-    log(&format!(
-        "pass 3/3: trees{}",
-        if buckets > 1 {
-            format!(" into {buckets} bucket files by tile (--bucket-trees {})", opts.bucket_trees)
-        } else {
-            String::new()
-        }
-    ));
-    let mut unmapped: BTreeMap<String, u64> = BTreeMap::new();
-    let mut summary: BTreeMap<String, SpeciesSummary> = BTreeMap::new();
-    let mut note = |p: &Placement, t: &SceneTree, f: &Facts| {
-        let label = p.species.as_deref().unwrap_or("(no species)");
-        if !summary.contains_key(label) {
-            let first = SpeciesSummary {
-                model: t.species as usize,
-                trees: 0,
-                height: (f.height_m, f.height_m),
-                dbh: None,
-                crown: None,
-                aspect: None,
-                aspect_clamped: 0,
-                ground_near: 0,
-                from_dbh: 0,
-                dbh_rows: 0,
-                dbh_big: 0,
-                dbh_small: 0,
-            };
-            summary.insert(label.to_string(), first);
-        }
-        let Some(s) = summary.get_mut(label) else { return };
-        s.trees += 1;
-        s.height = widen(Some(s.height), f.height_m);
-        if let Some(d) = f.dbh_cm {
-            s.dbh = Some(widen(s.dbh, d));
-            s.dbh_rows += 1;
-            s.dbh_big += u64::from(d > 150.0);
-            s.dbh_small += u64::from(d < 3.0);
-        }
-        if let Some(c) = f.crown_m {
-            s.crown = Some(widen(s.crown, c));
-            s.aspect = Some(widen(s.aspect, f.aspect));
-            s.aspect_clamped += u64::from(f.aspect_clamped);
-        }
-        s.from_dbh += u64::from(f.from == HeightFrom::Dbh);
-        s.ground_near += u64::from(f.ground_near);
-    };
-    let mut ours = placements::Report::default();
-    let mut outside = Outside { bounds: [f64::MAX, f64::MAX, f64::MIN, f64::MIN], ..Outside::default() };
-    // Every tree of every shard goes into the fitted ground, so shards agree on it.
-    let mut fit = sample.ground_region.map(super::ground::GroundFit::new);
-    // Likewise the canopy cover (2 m cells).
-    let mut canopy = super::ground_material::CanopyCover::new(sample.canopy_region, 2.0);
-    let mut fit_add = |t: &SceneTree| {
-        if let Some(f) = fit.as_mut() {
-            f.add(t.pos.x, t.pos.y, t.pos.z);
-        }
-        canopy.add(t.pos.x, t.pos.y, crown_radius(t));
-    };
-    let mut skip = |p: &Placement, why: &str| match why {
-        OUTSIDE_DEM => {
-            outside.trees += 1;
-            let b = &mut outside.bounds;
-            *b = [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)];
-            if outside.rows.len() < 5 {
-                outside.rows.push(p.row);
-            }
-            ours.skip(why, p.row);
-        }
-        "outlier" => {
-            ours.skip(&format!("farther than {} km from the median position (outlier)", opts.max_extent_km), p.row)
-        }
-        "unmapped" => {
-            let label = p.species.as_deref().unwrap_or("");
-            *unmapped.entry(if label.is_empty() { "(no species)".into() } else { label.to_string() }).or_default() += 1;
-        }
-        other => ours.skip(other, p.row),
-    };
-    let (mut report, trees) = if buckets > 1 {
-        let dir = out.scratch("buckets");
-        let mut writer = BucketWriter::new(&dir, buckets as u32, cell_size_m, opts.tile_cells)?;
-        let report = source.for_each(&mut |p| {
-            let placed = to_tree(&p);
-            if let Ok((t, _)) = &placed {
-                fit_add(t);
-            }
-            match placed {
-                Ok((t, f))
-                    if opts.shard.is_none_or(|(i, n)| {
-                        let (x, y) = batching::tile_of(t.pos, cell_size_m, opts.tile_cells);
-                        batching::shard_of_tile(x, y, n) == i
-                    }) =>
-                {
-                    note(&p, &t, &f);
-                    writer.push(&t)?
-                }
-                Ok(_) => {}
-                Err(why) => skip(&p, why),
-            }
-            Ok(())
-        })?;
-        (report, writer.finish()?)
-    } else {
-        let mut trees = Vec::with_capacity(sample.report.kept as usize);
-        let report = source.for_each(&mut |p| {
-            match to_tree(&p) {
-                Ok((t, f)) => {
-                    fit_add(&t);
-                    note(&p, &t, &f);
-                    trees.push(t);
-                }
-                Err(why) => skip(&p, why),
-            }
-            Ok(())
-        })?;
-        (report, TreeSource::Memory(trees))
-    };
-    for (reason, (n, rows)) in ours.skipped {
-        let e = report.skipped.entry(reason).or_insert((0, Vec::new()));
-        e.0 += n;
-        e.1.extend(rows);
-        e.1.truncate(5);
-    }
-    report.duplicate_coordinates = sample.duplicates;
-    for line in report.lines() {
-        log(&format!("placements: {line}"));
-    }
-    if sample.duplicates > 0 && sample.seen as usize > DUPLICATE_CHECK_ROWS {
-        log(&format!("placements: (duplicates counted among the first {DUPLICATE_CHECK_ROWS} rows)"));
-    }
-    for (label, n) in &unmapped {
-        log(&format!(
-            "placements: skipped {n} rows of species {label:?}: no --map pattern matches and no --default-model"
-        ));
-    }
-    outside.rows_read = report.rows;
-    Ok(Pass3 { trees, summary, outside, fit, canopy })
-}
-
-/// What pass 3 makes: the trees, the summary per species label, the trees
-/// outside every DEM and the ground fitted to the trees (without a DEM).
-struct Pass3 {
-    trees: TreeSource,
-    summary: BTreeMap<String, SpeciesSummary>,
-    outside: Outside,
-    fit: Option<super::ground::GroundFit>,
-    canopy: super::ground_material::CanopyCover,
-}
-
-/// Trees outside every DEM: how many, where (placement coordinates) and which rows.
-#[derive(Debug, Default)]
-struct Outside {
-    trees: u64,
-    bounds: [f64; 4],
-    rows: Vec<u64>,
-    /// Rows read in all.
-    rows_read: u64,
-}
-
-/// Logs, per species label, the model used, the count and the height, DBH and
-/// crown ranges — what a forester checks first — and a warning when the DBH
-/// values look like another unit.
-fn log_summary(summary: &BTreeMap<String, SpeciesSummary>, species: &SpeciesMap, log: &dyn Fn(&str)) {
-    let mut rows: Vec<(&String, &SpeciesSummary)> = summary.iter().collect();
-    rows.sort_by(|a, b| b.1.trees.cmp(&a.1.trees).then(a.0.cmp(b.0)));
-    let range = |r: Option<(f32, f32)>| r.map_or("-".to_string(), |(a, b)| format!("{a:.1}–{b:.1}"));
-    log(&format!("species summary ({} labels):", rows.len()));
-    log("  label | model | trees | height m | DBH cm | crown m | crown × model | heights from DBH");
-    const SHOWN: usize = 40;
-    let ratio = |r: Option<(f32, f32)>| r.map_or("-".to_string(), |(a, b)| format!("{a:.2}–{b:.2}"));
-    for (label, s) in rows.iter().take(SHOWN) {
-        log(&format!(
-            "  {label} | {} | {} | {} | {} | {} | {} | {}",
-            species.names[s.model],
-            s.trees,
-            range(Some(s.height)),
-            range(s.dbh),
-            range(s.crown),
-            ratio(s.aspect),
-            s.from_dbh
-        ));
-    }
-    log("  (crown × model: each tree's crown width over height against its model's; 1 keeps the model's shape)");
-    let near: u64 = rows.iter().map(|(_, s)| s.ground_near).sum();
-    if near > 0 {
-        log(&format!(
-            "placements: {near} trees lie just off the DEM's data (within {} pixels of it: at its edge or a hole's); \
-             they stand on the nearest valid height",
-            super::ground::NEAR_EDGE_PIXELS
-        ));
-    }
-    let clamped: u64 = rows.iter().map(|(_, s)| s.aspect_clamped).sum();
-    if clamped > 0 {
-        log(&format!(
-            "placements: warning: {clamped} trees have crowns more than {MAX_CROWN_ASPECT}× wider or narrower for \
-             their height than their model's; they were drawn at {MAX_CROWN_ASPECT}× (or 1/{MAX_CROWN_ASPECT}) (check the crown column's unit: \
-             a diameter read as a radius, or centimetres as metres)"
-        ));
-    }
-    if rows.len() > SHOWN {
-        let rest: u64 = rows[SHOWN..].iter().map(|(_, s)| s.trees).sum();
-        log(&format!("  … {} more labels with {rest} trees", rows.len() - SHOWN));
-    }
-    let count = |f: fn(&SpeciesSummary) -> u64| rows.iter().map(|(_, s)| f(s)).sum::<u64>();
-    let (with_dbh, big, small) = (count(|s| s.dbh_rows), count(|s| s.dbh_big), count(|s| s.dbh_small));
-    if with_dbh > 0 && big * 2 > with_dbh {
-        log(&format!(
-            "placements: warning: {big} of {with_dbh} DBH values are over 150 cm: if the column is in millimetres, \
-             pass --dbh-unit mm (or name it dbh_mm)"
-        ));
-    }
-    if with_dbh > 0 && small * 2 > with_dbh {
-        log(&format!(
-            "placements: warning: {small} of {with_dbh} DBH values are under 3 cm: if the column is in metres, pass \
-             --dbh-unit m (or name it dbh_m)"
-        ));
-    }
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    let n = v.len();
-    v.select_nth_unstable_by(n / 2, f64::total_cmp);
-    v[n / 2]
-}

@@ -1,0 +1,128 @@
+//! Pass 1 of the placements: a deterministic sample (row count, swapped
+//! columns, the scene CRS, the medians, the default height).
+
+use std::collections::HashSet;
+
+use anyhow::{bail, Context, Result};
+
+use crate::input::placements::{self, CoordKind, PlacementSource};
+use crate::input::reproject::Crs;
+use crate::rng;
+
+use super::*;
+
+/// What pass 1 learns.
+pub(super) struct Sample {
+    /// (x, y, height, row) of up to [`SAMPLE_ROWS`] rows.
+    pub(super) rows: Vec<(f64, f64, Option<f32>, u64)>,
+    /// Rows seen.
+    pub(super) seen: u64,
+    /// Rows repeating an earlier row's coordinates (among the first [`DUPLICATE_CHECK_ROWS`]).
+    pub(super) duplicates: u64,
+    pub(super) report: placements::Report,
+    /// Without a DEM: the region (relative metres) over which pass 3 fits a
+    /// ground surface to the trees' bases (every shard fits the same one).
+    pub(super) ground_region: Option<[f64; 4]>,
+    /// The region (relative metres) of the canopy cover grid: the trees and 50 m around.
+    pub(super) canopy_region: [f64; 4],
+}
+
+/// Pass 1: a deterministic reservoir sample, the row count and repeated coordinates.
+pub(super) fn sample_pass(source: &PlacementSource) -> Result<Sample> {
+    let mut rows: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
+    let mut rng = rng::Rng::new(0x5EED_5A3F_1E00_0001);
+    let mut seen = 0u64;
+    let mut coords = HashSet::new();
+    let mut duplicates = 0u64;
+    let report = source.for_each(&mut |p| {
+        seen += 1;
+        if coords.len() < DUPLICATE_CHECK_ROWS && !coords.insert((p.x.to_bits(), p.y.to_bits())) {
+            duplicates += 1;
+        }
+        let item = (p.x, p.y, p.height_m, p.row);
+        if rows.len() < SAMPLE_ROWS {
+            rows.push(item);
+        } else {
+            // Reservoir sampling: every row ends up in the sample with equal odds.
+            let j = rng.next_u64() % seen;
+            if j < SAMPLE_ROWS as u64 {
+                rows[j as usize] = item;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(Sample { rows, seen, duplicates, report, ground_region: None, canopy_region: [0.0; 4] })
+}
+
+/// Longitude and latitude the other way round: most rows' "latitude" beyond
+/// ±90° whose "longitude" would be a latitude.
+pub(super) fn check_swapped(opts: &TreeOptions<'_>, report: &placements::Report) -> Result<()> {
+    if report.swappable > 0 && report.swappable * 2 >= report.rows {
+        bail!(
+            "placements {}: the x/longitude and y/latitude columns look swapped: {} of {} rows have a latitude \
+             beyond ±90° and a longitude that would be a valid latitude; {}",
+            opts.placements.display(),
+            report.swappable,
+            report.rows,
+            if opts.read.swap_xy {
+                "they are so with --swap-xy: leave it out"
+            } else {
+                "pass --swap-xy (or rename the columns)"
+            }
+        );
+    }
+    Ok(())
+}
+
+/// The placements' CRS and the scene's.
+pub(super) fn choose_crs(
+    opts: &TreeOptions<'_>,
+    source: &PlacementSource,
+    sample: &Sample,
+    log: &dyn Fn(&str),
+) -> Result<(Crs, Crs)> {
+    let (src, dst) = match source.kind {
+        CoordKind::LonLat => {
+            let dst = match opts.crs {
+                Some(c) => Crs::parse(c)?,
+                None => {
+                    let mut lons: Vec<f64> = sample.rows.iter().map(|p| p.0).collect();
+                    let mut lats: Vec<f64> = sample.rows.iter().map(|p| p.1).collect();
+                    if lons.is_empty() {
+                        bail!(
+                            "placements {}: no usable rows ({})",
+                            opts.placements.display(),
+                            sample.report.lines().join("; ")
+                        );
+                    }
+                    Crs::utm_for(median(&mut lons), median(&mut lats))?
+                }
+            };
+            // A GeoJSON may name a geographic CRS of its own (ETRS89, NAD83).
+            (Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?, dst)
+        }
+        CoordKind::Projected => {
+            let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
+            let input = opts.input_crs.or(declared.as_deref()).or(opts.crs).context(
+                "the placements have projected x/y coordinates: say which CRS they are in with --input-crs EPSG:xxxx",
+            )?;
+            if opts.input_crs.is_none() && declared.is_some() {
+                log(&format!("placements: the GeoJSON names its CRS: {input}"));
+            }
+            let src = Crs::parse(input)?;
+            let dst = Crs::parse(opts.crs.unwrap_or(input))?;
+            (src, dst)
+        }
+    };
+    if dst.is_geographic() {
+        bail!("--crs EPSG:{} is geographic; a scene needs a projected CRS in metres (e.g. a UTM zone)", dst.epsg);
+    }
+    log(&format!("scene CRS EPSG:{}", dst.epsg));
+    Ok((src, dst))
+}
+
+pub(super) fn median(v: &mut [f64]) -> f64 {
+    let n = v.len();
+    v.select_nth_unstable_by(n / 2, f64::total_cmp);
+    v[n / 2]
+}
