@@ -1422,6 +1422,17 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
         csv += &format!("{id},500980,{},0,12\n", 5_300_004 + j * 40);
         id += 1;
     }
+    // A dense clump past the row's end (crowns closed: seen from below, its
+    // cover is 1 to within rounding) with a seedling in it: its raster's shortest
+    // tree is 0.5 m, so the canopy is drawn even near the eye. (Outside the
+    // cells checked below.)
+    for j in 0..5 {
+        for i in 0..5 {
+            csv += &format!("{id},{},{},0,12\n", 500_988 + i * 3, 5_300_330 + j * 3);
+            id += 1;
+        }
+    }
+    csv += &format!("{id},500994,5300336,0,0.5\n");
     let path = dir.join("trees.csv");
     std::fs::write(&path, csv).unwrap();
     let out = dir.join("scene");
@@ -1539,6 +1550,44 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
     let (lo, hi) = stand_covers.iter().fold((1.0f32, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
     assert!(lo > 0.2 && hi < 0.95, "stand cover {lo}–{hi}");
     assert!(hi - lo < 0.03, "levels disagree on the stand's cover: {stand_covers:?}");
+    if tile_cells == "2" {
+        under_the_crowns_the_canopy_adds_nothing(&out);
+    }
+}
+
+/// An eye under the clump's crowns, looking up: every tree there projects far
+/// above the canopy's band, so the canopy adds nothing to the image (it once
+/// drew an opaque ceiling there: near a cover of 1, seen from below, its alpha
+/// was rounding divided by almost 0).
+fn under_the_crowns_the_canopy_adds_nothing(scene: &Path) {
+    use sylva::offscreen::OffscreenScene;
+    let mut off =
+        OffscreenScene::open(scene.to_str().unwrap(), 160, 90, sylva::render::forest::PoolConfig::default()).unwrap();
+    off.load_view(&sylva::camera::Camera::default(), 60.0);
+    let m = off.stream.manifest().unwrap().clone();
+    let [ox, oy, oz] = m.origin_m;
+    let cam = sylva::camera::Camera {
+        eye_m: glam::DVec3::new(500_993.0 - ox, 5_300_335.0 - oy, 2.0 - oz),
+        heading_rad: 30f64.to_radians(),
+        pitch_rad: 50f64.to_radians(),
+        ..Default::default()
+    };
+    off.load_view(&cam, 60.0);
+    let image = |off: &mut OffscreenScene, canopy: bool| {
+        off.settings.canopy = canopy;
+        let stats = off.render(&cam, true);
+        (off.read_image(), stats)
+    };
+    let (with, stats) = image(&mut off, true);
+    let (without, _) = image(&mut off, false);
+    let drawn: u64 = stats.instances.values().sum();
+    assert!(drawn >= 10 && stats.canopy_drawn > 0, "trees {drawn} and rasters {} in view", stats.canopy_drawn);
+    let differ = with.chunks(4).zip(without.chunks(4)).filter(|(a, b)| a != b).count();
+    assert!(
+        differ * 1000 < with.len() / 4,
+        "the canopy changes {differ} of {} pixels under the crowns",
+        with.len() / 4
+    );
 }
 
 /// `demo --layout country`: trees generated block by block into
