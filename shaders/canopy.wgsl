@@ -115,11 +115,18 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let w = select(canopy_weight(h_px, view), 1.0, r.stand_in != 0u);
     // The trees kept, a share 1 − w of them, cover t = 1 − (1 − c)^(1 − w) (as
     // a random share of trees with cover c would: more than (1 − w)c, as
-    // crowns overlap); the canopy adds what makes it `cover`: t + (1 − t)·a = c,
-    // a = 1 − (1 − c)^w. (Written so, not as (c − t)/(1 − t): near a cover of 1,
-    // seen from below the crowns, that quotient turned rounding into an opaque
-    // ceiling where w = 0; here w = 0 is exactly 0.)
-    let alpha = 1.0 - pow(max(1.0 - cover, 1e-3), w);
+    // crowns overlap); the canopy adds what makes it `cover`: t + (1 − t)·a = c.
+    let kept_cover = 1.0 - pow(max(1.0 - cover, 1e-3), 1.0 - w);
+    var alpha = max(cover - kept_cover, 0.0) / max(1.0 - kept_cover, 1e-3);
+    // Seen from below (an eye under the crowns) c passes 0.999, and with 1 − c
+    // held at 1e-3 that quotient reaches 1 even where w = 0: an opaque ceiling
+    // over trees drawn whole. There the canopy stands in for none of them and
+    // adds nothing. (Elsewhere the quotient's excess over the exact
+    // 1 − (1 − c)^w is kept: from above at grazing views it measured closer to
+    // the full forest, docs/BENCHMARKS.md "The canopy seen from below".)
+    if centre.z > 0.0 && w <= 0.0 {
+        alpha = 0.0;
+    }
     out.alpha = alpha;
     out.albedo = vec3<f32>(
         srgb_channel(f32(word.x & 0xffu) / 255.0),

@@ -1,7 +1,7 @@
 // The cull's selection rules that the draw passes share: prefix thinning and
 // its coverage boost, the frustum test, draw items and their cross-fade, the
 // canopy cross-fade. Twin: src/lod/select.rs (each function names its WGSL
-// twin). Needs layout.wgsl.
+// twin). Needs layout.wgsl and instance.wgsl.
 
 // The batch's whole tree count (`instance_count` holds what is resident).
 fn whole_count(b: Batch) -> u32 {

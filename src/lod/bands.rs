@@ -71,7 +71,9 @@ pub struct Offer {
     pub cloud: Option<(f32, bool)>,
     /// Cluster levels (their metadata is passed to [`bands`] beside).
     pub clusters: bool,
-    /// A far tier: impostors or billboards.
+    /// A far tier (impostors or billboards) in the pack, resident or not:
+    /// while it loads, trees below the cluster band wait for it (the stream
+    /// fetches it before anything finer).
     pub far: bool,
 }
 
@@ -88,8 +90,9 @@ pub struct Bands {
     /// Where the representations above the clusters end: the cloud's lower
     /// bound, else `mesh_floor`.
     pub floor: f32,
-    /// The cluster band `[min, floor)`: `min` (the policy's floor where a far
-    /// tier takes over, 0 without one); `None` without clusters.
+    /// The cluster band `[min, floor)`, `None` without clusters. `min`: with a
+    /// far tier `cluster_min_px`, raised to the policy's floor where the policy
+    /// is on; without one 0.
     pub clusters: Option<f32>,
     /// The far tier, below everything.
     pub far: bool,
@@ -104,9 +107,9 @@ impl Bands {
 }
 
 /// The representation choice of a species offering `offer` under the frame's
-/// `allow`, with the bake's policy on or off, cluster levels from
-/// `cluster_min_px` down to (with a far tier) and `levels` the cluster levels'
-/// metadata, finest first.
+/// `allow`, with the bake's policy on or off. With a far tier the cluster band
+/// ends at `cluster_min_px` (or the policy's floor); `levels` are the cluster
+/// levels' metadata, finest first.
 #[must_use]
 pub fn bands<'a>(
     offer: &Offer,

@@ -145,9 +145,9 @@ impl Reach {
         // The bands the species table will draw, from what the pack holds.
         let mesh =
             |l: usize| meta.mesh_levels.get(l).map(|m| MeshOffer { select_px: m.select_px, policy_px: m.policy_px });
-        let last = meta.mesh_levels.len().saturating_sub(1);
+        // (The species table draws levels 0 and 1; a pack may hold more.)
         let offer = Offer {
-            meshes: [mesh(0), mesh(last).filter(|_| last > 0)],
+            meshes: [mesh(0), mesh(1)],
             cloud: meta.cloud.as_ref().map(|c| (c.select_px, policy_keeps(c.pareto_error, c.pareto_cost, false))),
             clusters: meta.clusters.as_ref().is_some_and(|c| !c.ellipsoid_levels.is_empty()),
             far: meta.billboards.is_some() || meta.impostors.is_some(),
@@ -162,8 +162,8 @@ impl Reach {
         let meshes = has_mesh && (max_px >= b.mesh_floor * slack || coarsest_is_mesh);
         let cloud = b.cloud.is_some_and(|f| max_px >= f * slack || (!b.far && !has_cl));
         // The full mesh only where a tree can reach its threshold (one level: always).
-        let full = meshes && (last == 0 || b.mesh[0].is_some_and(|px| max_px >= px * slack));
-        let clusters = b.clusters.is_some_and(|min| min < b.floor && max_px >= min * slack);
+        let full = meshes && (meta.mesh_levels.len() == 1 || b.mesh[0].is_some_and(|px| max_px >= px * slack));
+        let clusters = b.has_clusters() && b.clusters.is_some_and(|min| max_px >= min * slack);
         [b.far, clusters, meshes || cloud, full]
     }
 }

@@ -49,6 +49,8 @@ struct SpeciesGpu {
     cloud: Option<(f32, u32)>,
     /// The bake's LoD policy keeps the cloud as a default tier.
     cloud_kept: bool,
+    /// The pack has a far tier (impostors or billboards), resident or not.
+    has_far: bool,
     bytes: u64,
 }
 
@@ -205,6 +207,7 @@ impl Species {
             policy_px: [level(0).and_then(|l| l.policy_px), level(1).and_then(|l| l.policy_px)],
             cloud: m.cloud.as_ref().filter(|_| mesh.cloud.is_some()).map(|c| (c.select_px, c.mesh.index_count)),
             cloud_kept: m.cloud.as_ref().is_some_and(|c| policy_keeps(c.pareto_error, c.pareto_cost, false)),
+            has_far: m.billboards.is_some() || m.impostors.is_some(),
             mesh,
             billboard,
             impostor,
@@ -262,7 +265,7 @@ impl Species {
                     meshes: [mesh(0), mesh(1)],
                     cloud: p.cloud.map(|(px, _)| (px, p.cloud_kept)),
                     clusters: p.cluster.is_some(),
-                    far: p.impostor.is_some() || p.billboard.is_some(),
+                    far: p.has_far,
                 };
                 let levels = p.cluster.iter().flat_map(|c| c.levels.iter().map(|l| &l.meta));
                 let b = bands(&offer, allow, self.lod_policy, self.cluster_min_px, levels);

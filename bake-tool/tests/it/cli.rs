@@ -1512,7 +1512,11 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
     // Crown area seen from above, from a raster's cover (1 − exp(−area / cell area)).
     let crown_area = |c: &Canopy| -> f64 {
         let a = f64::from(c.cell_m()).powi(2);
-        (0..c.cells * c.cells).map(|i| -(1.0 - f64::from(c.cell(i % c.cells, i / c.cells).cover)).ln() * a).sum()
+        // (A cell covered whole, 255 of 255, counts as 1 − 1/255: one such cell
+        // would make the sum infinite.)
+        (0..c.cells * c.cells)
+            .map(|i| -(1.0 - f64::from(c.cell(i % c.cells, i / c.cells).cover)).max(1.0 / 255.0).ln() * a)
+            .sum()
     };
     let whole = crown_area(&rasters[0].1);
     let finest: f64 = rasters.iter().filter(|((l, _, _), _)| *l == e.levels - 1).map(|(_, c)| crown_area(c)).sum();
@@ -1557,8 +1561,8 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
 
 /// An eye under the clump's crowns, looking up: every tree there projects far
 /// above the canopy's band, so the canopy adds nothing to the image (it once
-/// drew an opaque ceiling there: near a cover of 1, seen from below, its alpha
-/// was rounding divided by almost 0).
+/// drew an opaque ceiling there: seen from below, the cover passes 0.999, and
+/// its alpha, a quotient with `1 − cover` held at 1e-3, reached 1).
 fn under_the_crowns_the_canopy_adds_nothing(scene: &Path) {
     use sylva::offscreen::OffscreenScene;
     let mut off =

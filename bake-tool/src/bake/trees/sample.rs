@@ -1,5 +1,7 @@
-//! Pass 1 of the placements: a deterministic sample (row count, swapped
-//! columns, the scene CRS, the medians, the default height).
+//! Pass 1 of the placements: a deterministic sample of the rows (row count,
+//! duplicates), the checks it allows (swapped columns) and the scene CRS it
+//! chooses; `median` for the stage's medians (origin, outliers, default height,
+//! which `place_trees` takes from the sample).
 
 use std::collections::HashSet;
 

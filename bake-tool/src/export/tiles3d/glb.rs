@@ -50,8 +50,9 @@ pub(super) struct Elements {
 }
 
 impl Elements {
-    /// `count` floats (`type_`) from the start of `view`.
-    pub(super) fn floats(view: Index<json::buffer::View>, count: usize, type_: Type) -> Self {
+    /// `count` elements of `type_` from the start of `view`, f32 components
+    /// (change `component` and `normalized` for others).
+    pub(super) fn of(view: Index<json::buffer::View>, count: usize, type_: Type) -> Self {
         Self { view, offset: 0, component: ComponentType::F32, normalized: false, count, type_ }
     }
 }
@@ -167,8 +168,11 @@ impl Gltf {
             extensions: None,
             extras: Default::default(),
         });
+        // (`..Default::default()`: gltf features that name extensions add fields.)
+        #[allow(clippy::needless_update)]
         let extensions = look.unlit.then(|| json::extensions::material::Material {
             others: [("KHR_materials_unlit".to_string(), json!({}))].into_iter().collect(),
+            ..Default::default()
         });
         self.root.push(json::Material {
             name: Some(look.name),
@@ -218,7 +222,9 @@ impl Gltf {
                 self.root.push(json::Node {
                     name: Some(name),
                     mesh: Some(mesh),
-                    extensions: (!others.is_empty()).then_some(json::extensions::scene::Node { others }),
+                    #[allow(clippy::needless_update)] // (gltf features that name extensions add fields)
+                    extensions: (!others.is_empty())
+                        .then_some(json::extensions::scene::Node { others, ..Default::default() }),
                     ..Default::default()
                 })
             })
@@ -292,10 +298,10 @@ pub(super) fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> Index<json:
         view(4, Target::ElementArrayBuffer),
     );
     let n = mb.vertices as usize;
-    let pos = g.accessor(Elements::floats(vp, n, Type::Vec3), Some((mb.pos_min, mb.pos_max)));
-    let nrm = g.accessor(Elements::floats(vn, n, Type::Vec3), None);
-    let uv = g.accessor(Elements::floats(vu, n, Type::Vec2), None);
-    let colors = Elements { component: ComponentType::U8, normalized: true, ..Elements::floats(vc, n, Type::Vec4) };
+    let pos = g.accessor(Elements::of(vp, n, Type::Vec3), Some((mb.pos_min, mb.pos_max)));
+    let nrm = g.accessor(Elements::of(vn, n, Type::Vec3), None);
+    let uv = g.accessor(Elements::of(vu, n, Type::Vec2), None);
+    let colors = Elements { component: ComponentType::U8, normalized: true, ..Elements::of(vc, n, Type::Vec4) };
     let col = g.accessor(colors, None);
     let mut materials: BTreeMap<usize, Index<json::Material>> = BTreeMap::new();
     let mut primitives = Vec::new();
@@ -321,7 +327,7 @@ pub(super) fn add_mesh(g: &mut Gltf, sp: &SpeciesOut, level: u32) -> Index<json:
         let indices = Elements {
             offset: u64::from(first) * 4,
             component: ComponentType::U32,
-            ..Elements::floats(vi, count as usize, Type::Scalar)
+            ..Elements::of(vi, count as usize, Type::Scalar)
         };
         let idx = g.accessor(indices, None);
         let attributes = vec![
@@ -504,10 +510,10 @@ pub(super) fn tile_glb(
         let vr = g.own_view(bytemuck::cast_slice(&r));
         let vs = g.own_view(bytemuck::cast_slice(&sc));
         let vf = g.own_view(bytemuck::cast_slice(&f));
-        let at = g.accessor(Elements::floats(vt, n, Type::Vec3), None);
-        let ar = g.accessor(Elements::floats(vr, n, Type::Vec4), None);
-        let asc = g.accessor(Elements::floats(vs, n, Type::Vec3), None);
-        let af = g.accessor(Elements::floats(vf, n, Type::Scalar), None);
+        let at = g.accessor(Elements::of(vt, n, Type::Vec3), None);
+        let ar = g.accessor(Elements::of(vr, n, Type::Vec4), None);
+        let asc = g.accessor(Elements::of(vs, n, Type::Vec3), None);
+        let af = g.accessor(Elements::of(vf, n, Type::Scalar), None);
         let extensions = json!({
             "EXT_mesh_gpu_instancing": {
                 "attributes": {"TRANSLATION": at, "ROTATION": ar, "SCALE": asc, "_FEATURE_ID_0": af},

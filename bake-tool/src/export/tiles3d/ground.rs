@@ -270,13 +270,11 @@ impl Ground<'_> {
         } else {
             g.own_view_for(bytemuck::cast_slice(&idx), Some(Target::ElementArrayBuffer))
         };
-        let a_pos = g.accessor(Elements::floats(vp, count, Type::Vec3), Some((lo, hi)));
-        let uvs =
-            Elements { component: ComponentType::U16, normalized: true, ..Elements::floats(vu, count, Type::Vec2) };
+        let a_pos = g.accessor(Elements::of(vp, count, Type::Vec3), Some((lo, hi)));
+        let uvs = Elements { component: ComponentType::U16, normalized: true, ..Elements::of(vu, count, Type::Vec2) };
         let a_uv = g.accessor(uvs, None);
         let index_type = if short { ComponentType::U16 } else { ComponentType::U32 };
-        let a_idx =
-            g.accessor(Elements { component: index_type, ..Elements::floats(vi, idx.len(), Type::Scalar) }, None);
+        let a_idx = g.accessor(Elements { component: index_type, ..Elements::of(vi, idx.len(), Type::Scalar) }, None);
         let texture = image.map(|(l, x, y)| g.texture(&format!("ground/img/{l}_{x}_{y}.jpg"), true, true));
         // Unlit, as imagery draped on a globe is (the photo has its own light).
         let material = g.material(Look {
