@@ -108,25 +108,19 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let centre = eye_relative(vec3<f32>(r.origin_m, 0.0), vec3<f32>((ij + 0.5) * cell_m, z), view);
     let h_px = height * r.tallest_ratio * view.lod.x / max(length(centre), 1e-3);
     // Seen at elevation θ the crowns' sides cover ground too: the exponent of
-    // the cover grows by side · cot θ (format::canopy).
+    // the cover grows by side · cot θ (format::canopy): cover = 1 − e^(−lambda).
     let cot = min(length(centre.xy) / max(-centre.z, 1e-3), 8.0);
-    let cover = 1.0 - exp(-min(-log(max(1.0 - top_cover, 1e-3)), 8.0) * (1.0 + side * cot));
+    let lambda = min(-log(max(1.0 - top_cover, 1e-3)), 8.0) * (1.0 + side * cot);
     // Standing in for trees still on their way: all of their cover.
     let w = select(canopy_weight(h_px, view), 1.0, r.stand_in != 0u);
     // The trees kept, a share 1 − w of them, cover t = 1 − (1 − c)^(1 − w) (as
     // a random share of trees with cover c would: more than (1 − w)c, as
-    // crowns overlap); the canopy adds what makes it `cover`: t + (1 − t)·a = c.
-    let kept_cover = 1.0 - pow(max(1.0 - cover, 1e-3), 1.0 - w);
-    var alpha = max(cover - kept_cover, 0.0) / max(1.0 - kept_cover, 1e-3);
-    // Seen from below (an eye under the crowns) c passes 0.999, and with 1 − c
-    // held at 1e-3 that quotient reaches 1 even where w = 0: an opaque ceiling
-    // over trees drawn whole. There the canopy stands in for none of them and
-    // adds nothing. (Elsewhere the quotient's excess over the exact
-    // 1 − (1 − c)^w is kept: from above at grazing views it measured closer to
-    // the full forest, docs/BENCHMARKS.md "The canopy seen from below".)
-    if centre.z > 0.0 && w <= 0.0 {
-        alpha = 0.0;
-    }
+    // crowns overlap); the canopy adds what makes it c: t + (1 − t)·a = c,
+    // a = 1 − (1 − c)^w = 1 − e^(−w·lambda). (Not computed as (c − t)/(1 − t)
+    // with 1 − c held at 1e-3: where c passed 0.999 — under closed crowns, or
+    // at grazing views — that reached 1 even at w = 0, a flat opaque polygon
+    // over trees drawn whole.)
+    let alpha = 1.0 - exp(-w * lambda);
     out.alpha = alpha;
     out.albedo = vec3<f32>(
         srgb_channel(f32(word.x & 0xffu) / 255.0),
