@@ -20,6 +20,7 @@ pub mod demo;
 pub mod export;
 pub mod input;
 pub mod inspect;
+pub mod library;
 pub mod merge;
 pub mod out_dir;
 pub mod pack;

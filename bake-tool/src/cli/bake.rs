@@ -16,7 +16,9 @@ use super::*;
 
 #[derive(Args)]
 pub(crate) struct BakeArgs {
-    /// A species model: NAME=PATH.glb (repeat for each species).
+    /// A species model: NAME=PATH.glb, or NAME=library:GENUS[:VARIANT] for a tree of the
+    /// built-in library (Quercus, Fagus, Acer, Tilia, Platanus, Betula, Populus, Salix,
+    /// Picea, Abies, Pinus, Larix; variants 0, 1, 2, …) (repeat for each species).
     #[arg(long = "model", value_name = "NAME=PATH", required = true)]
     pub(crate) models: Vec<String>,
     /// Tree placements: .csv (columns auto-detected) or .geojson points.
@@ -213,7 +215,10 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     }
     let orthos = sylva_bake::bake::imagery::Orthos::open(&args.orthos, args.ortho_crs.as_deref(), &log)?;
     for m in &args.models {
-        inputs.push(std::path::Path::new(split_pair("--model", m)?.1));
+        let path = split_pair("--model", m)?.1;
+        if sylva_bake::library::spec(path).is_none() {
+            inputs.push(std::path::Path::new(path));
+        }
     }
     let allometry = match &args.allometry {
         Some(path) => sylva_bake::input::allometry::Allometry::with_overrides(path)?,
@@ -345,7 +350,10 @@ pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::
         if species.iter().any(|(n, _)| n.eq_ignore_ascii_case(name)) {
             bail!("--model {name} is given twice");
         }
-        let model = sylva_bake::input::gltf_import::import(std::path::Path::new(path), &classifier)?;
+        let model = match sylva_bake::library::spec(path) {
+            Some(genus) => sylva_bake::library::model_named(genus)?,
+            None => sylva_bake::input::gltf_import::import(std::path::Path::new(path), &classifier)?,
+        };
         let (leaf, wood) = model.triangle_counts();
         log(&format!(
             "model {name}: {} materials, {leaf} leaf + {wood} branch triangles, height {:.2} (model units)",

@@ -1656,3 +1656,39 @@ fn a_country_streams_through_bucket_files_and_shows_land_sea_and_forest() {
     let drawn: u64 = off.render(&cam, true).instances.values().sum();
     assert!(drawn > 100, "medium view: {drawn} trees drawn");
 }
+
+/// `--model NAME=library:GENUS`: a species from the built-in library (Weber &
+/// Penn 1995 trees drawn per genus), no glTF needed; its variant by
+/// `library:GENUS:N`; an unknown genus fails naming the library's genera.
+#[test]
+fn library_models_bake_without_a_gltf() {
+    let dir = tmp("library");
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("trees.csv");
+    std::fs::write(&csv, "id,x,y,species,height\n1,500000,5300000,Betula,14\n2,500010,5300000,Picea,25\n").unwrap();
+    let out = dir.join("scene");
+    run(bin()
+        .arg("bake")
+        .args(["--model", "birch=library:Betula", "--model", "spruce=library:picea:2", "--map", "Picea=spruce"])
+        .args(["--map", "Betula=birch"])
+        .arg("--placements")
+        .arg(&csv)
+        .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--billboard-size", "16"])
+        .args(["--texture-size", "16"])
+        .arg("--out")
+        .arg(&out));
+    let v = inspect_json(&out);
+    let names: Vec<&str> = v["species"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["birch", "spruce"]);
+    assert_eq!(v["trees_total"], 2);
+    let e = fails(
+        bin()
+            .arg("bake")
+            .args(["--model", "x=library:Nothofagus"])
+            .arg("--placements")
+            .arg(&csv)
+            .arg("--out")
+            .arg(dir.join("bad")),
+    );
+    assert!(e.contains("Nothofagus") && e.contains("Quercus") && e.contains("Picea"), "{e}");
+}

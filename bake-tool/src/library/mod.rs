@@ -1,0 +1,196 @@
+//! The built-in species library: trees generated per genus from botanical
+//! form (Weber & Penn 1995, [`weber_penn`]), with their own procedurally drawn
+//! leaf and bark textures, as an [`ImportedModel`] like a glTF's — so every
+//! tier the bake makes works on them unchanged.
+//!
+//! `--model NAME=library:GENUS` takes one (`sylva-bake library list` names
+//! them). The genera's parameters are in [`genera`]; each says its crown form,
+//! leaf shape and colours.
+
+pub mod genera;
+mod textures;
+pub mod weber_penn;
+
+use glam::{Vec2, Vec3};
+
+use crate::input::gltf_import::{ImportedMaterial, ImportedModel, ImportedVertex};
+pub use genera::{Genus, LeafShape, GENERA};
+use sylva::format::pack::MaterialKind;
+use weber_penn::Skeleton;
+
+/// Sides of a stem's tube per level (trunk first); deeper levels take the last.
+const SIDES: [u32; 4] = [10, 6, 4, 3];
+
+/// The genus a `--model` path names as `library:GENUS` (or `library:GENUS:VARIANT`).
+#[must_use]
+pub fn spec(path: &str) -> Option<&str> {
+    path.strip_prefix("library:")
+}
+
+/// The model a `library:` spec names: `GENUS` or `GENUS:VARIANT` (a number, 0 by default).
+///
+/// # Errors
+/// An unknown genus (the error lists the library's) or variant.
+pub fn model_named(spec: &str) -> anyhow::Result<ImportedModel> {
+    let (name, variant) = match spec.split_once(':') {
+        Some((n, v)) => {
+            let v: u64 =
+                v.trim().parse().map_err(|_| anyhow::anyhow!("library:{spec}: the variant {v:?} is no number"))?;
+            (n, v)
+        }
+        None => (spec, 0),
+    };
+    let Some(g) = genus(name) else {
+        let names: Vec<&str> = GENERA.iter().map(|g| g.name).collect();
+        anyhow::bail!("library:{spec}: no genus {name:?} in the library (it has {})", names.join(", "));
+    };
+    Ok(model(g, variant_seed(g, variant)))
+}
+
+/// The seed of a genus's variant.
+#[must_use]
+pub fn variant_seed(g: &Genus, variant: u64) -> u64 {
+    crate::rng::hash64(
+        g.name.bytes().fold(variant.wrapping_mul(0x9e37_79b9), |h, b| h.wrapping_mul(31).wrapping_add(u64::from(b))),
+    )
+}
+
+/// The genus named `name` (case-insensitive, Latin), if the library has it.
+#[must_use]
+pub fn genus(name: &str) -> Option<&'static Genus> {
+    let n = name.trim();
+    GENERA.iter().find(|g| g.name.eq_ignore_ascii_case(n))
+}
+
+/// The tree of `genus` for `seed` (its variant): stems as tubes, leaves as
+/// alpha-tested cards, with the genus's textures. Metres, Z up, the trunk's
+/// base at the origin.
+#[must_use]
+pub fn model(genus: &Genus, seed: u64) -> ImportedModel {
+    let skeleton = weber_penn::grow(&genus.params, seed);
+    build(genus, &skeleton, seed)
+}
+
+/// The model of a grown skeleton.
+fn build(genus: &Genus, t: &Skeleton, seed: u64) -> ImportedModel {
+    let mut m = ImportedModel {
+        materials: vec![
+            ImportedMaterial {
+                name: format!("{}_bark", genus.name.to_lowercase()),
+                kind: MaterialKind::Branch,
+                base_color: [1.0; 4],
+                alpha_cutoff: 0.0,
+                double_sided: false,
+                texture: Some(textures::bark(genus, seed)),
+                blended: false,
+            },
+            ImportedMaterial {
+                name: format!("{}_leaves", genus.name.to_lowercase()),
+                kind: MaterialKind::Leaf,
+                base_color: [1.0; 4],
+                alpha_cutoff: 0.5,
+                double_sided: true,
+                texture: Some(textures::leaf(genus, seed)),
+                blended: false,
+            },
+        ],
+        ..Default::default()
+    };
+    for stem in &t.stems {
+        tube(&mut m, &stem.points, SIDES[usize::from(stem.level).min(SIDES.len() - 1)]);
+    }
+    for leaf in &t.leaves {
+        card(&mut m, leaf);
+    }
+    m
+}
+
+fn vertex(m: &mut ImportedModel, position: Vec3, normal: Vec3, uv: Vec2, material: u16) -> u32 {
+    m.vertices.push(ImportedVertex { position, normal: normal.normalize_or(Vec3::Z), uv, color: [1.0; 4], material });
+    (m.vertices.len() - 1) as u32
+}
+
+/// A tube along `points` (position, radius) with `sides` sides, closed at the
+/// tip; the bark's v runs along it by its circumference (square texels).
+fn tube(m: &mut ImportedModel, points: &[(Vec3, f32)], sides: u32) {
+    if points.len() < 2 {
+        return;
+    }
+    let base = m.vertices.len() as u32;
+    let mut along = 0.0;
+    // A frame carried along the stem (parallel transport: no twist).
+    let first_axis = (points[1].0 - points[0].0).normalize_or(Vec3::Z);
+    let mut side = first_axis.any_orthonormal_vector();
+    for (k, &(c, r)) in points.iter().enumerate() {
+        let axis = if k + 1 < points.len() { points[k + 1].0 - c } else { c - points[k - 1].0 }.normalize_or(Vec3::Z);
+        side = (side - axis * side.dot(axis)).normalize_or(axis.any_orthonormal_vector());
+        let other = axis.cross(side);
+        if k > 0 {
+            along += (c - points[k - 1].0).length();
+        }
+        let circumference = (std::f32::consts::TAU * points[0].1).max(1e-3);
+        for s in 0..=sides {
+            let a = s as f32 / sides as f32 * std::f32::consts::TAU;
+            let n = side * a.cos() + other * a.sin();
+            vertex(m, c + n * r, n, Vec2::new(s as f32 / sides as f32, along / circumference), 0);
+        }
+    }
+    let ring = sides + 1;
+    for k in 0..points.len() as u32 - 1 {
+        for s in 0..sides {
+            let i0 = base + k * ring + s;
+            let (i1, j0, j1) = (i0 + 1, i0 + ring, i0 + ring + 1);
+            m.triangles.push([i0, i1, j1]);
+            m.triangles.push([i0, j1, j0]);
+        }
+    }
+}
+
+/// A leaf card: its stalk at one end, its tip at the other.
+fn card(m: &mut ImportedModel, leaf: &weber_penn::Leaf) {
+    let right = leaf.normal.cross(leaf.tip).normalize_or(Vec3::X) * (leaf.size.y * 0.5);
+    let up = leaf.tip * (leaf.size.x * 0.5);
+    let base = m.vertices.len() as u32;
+    for (x, y) in [(-1.0f32, -1.0f32), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+        let p = leaf.centre + right * x + up * y;
+        vertex(m, p, leaf.normal, Vec2::new((x + 1.0) * 0.5, (1.0 - y) * 0.5), 1);
+    }
+    m.triangles.push([base, base + 1, base + 2]);
+    m.triangles.push([base, base + 2, base + 3]);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_genus_grows_a_tree_of_its_form() {
+        for g in GENERA.iter() {
+            let m = model(g, 1);
+            let (leaf, wood) = m.triangle_counts();
+            assert!(wood > 200 && leaf > 200, "{}: {wood} wood, {leaf} leaf triangles", g.name);
+            assert!(wood + leaf < 150_000, "{}: {} triangles", g.name, wood + leaf);
+            let h = m.height();
+            let ratio = m.crown_width() / h;
+            assert!(
+                (g.crown_ratio[0]..=g.crown_ratio[1]).contains(&ratio),
+                "{}: crown width / height {ratio:.2} outside {:?} (height {h:.1} m)",
+                g.name,
+                g.crown_ratio
+            );
+            assert!(m.vertices.iter().all(|v| v.position.is_finite() && v.normal.is_finite()), "{}", g.name);
+        }
+    }
+
+    #[test]
+    fn genera_are_found_by_name_and_differ_by_seed() {
+        assert_eq!(genus("quercus").map(|g| g.name), Some("Quercus"));
+        assert_eq!(genus(" PICEA ").map(|g| g.name), Some("Picea"));
+        assert!(genus("Nothofagus").is_none());
+        let g = genus("Acer").unwrap();
+        let (a, b) = (model(g, 1), model(g, 2));
+        assert_ne!(a.vertices.len(), 0);
+        assert_ne!(a.vertices, b.vertices);
+        assert_eq!(a.vertices, model(g, 1).vertices);
+    }
+}
