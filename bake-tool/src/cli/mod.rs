@@ -1,11 +1,12 @@
 //! The command line of `sylva-bake`: the subcommands (clap), each run by
-//! its own file (`bake.rs`, `demo.rs`, `bench.rs`; `pack.rs` the options
+//! its own file (`bake.rs`, `demo.rs`, `bench.rs`, `library.rs`; `pack.rs` the options
 //! every bake of packs takes); `merge`, `inspect` and `export-3dtiles` call
 //! the library directly.
 
 mod bake;
 mod bench;
 mod demo;
+mod library;
 mod pack;
 
 use std::path::PathBuf;
@@ -21,6 +22,7 @@ use sylva_bake::out_dir::OutDir;
 use bake::{bake, BakeArgs, PlacementsCsv};
 use bench::bench_clusters;
 use demo::{demo, DemoArgs};
+use library::{library, LibraryCommand};
 use pack::parse_delimiter;
 use pack::PackArgs;
 
@@ -106,6 +108,10 @@ pub(crate) enum Command {
         #[arg(long, value_name = "METRES", default_value_t = 0.0, allow_negative_numbers = true)]
         height_offset: f64,
     },
+    /// The built-in species library: trees generated per genus (Weber & Penn 1995),
+    /// usable as `--model NAME=library:GENUS[:VARIANT]`.
+    #[command(subcommand, after_help = "Example:\n  sylva-bake library list")]
+    Library(LibraryCommand),
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
         /// Scene directory or file.
@@ -174,6 +180,7 @@ pub(crate) fn main() {
     let result = match cli.command {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
+        Command::Library(command) => library(&command),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
         Command::Export3dTiles { scene, out, no_ground, height_offset } => {
             let started = Instant::now();

@@ -1691,4 +1691,11 @@ fn library_models_bake_without_a_gltf() {
             .arg(dir.join("bad")),
     );
     assert!(e.contains("Nothofagus") && e.contains("Quercus") && e.contains("Picea"), "{e}");
+    // `library list` names them, as text and JSON.
+    let text = String::from_utf8_lossy(&run(bin().args(["library", "list"])).stdout).into_owned();
+    assert!(text.contains("Quercus") && text.contains("library:GENUS"), "{text}");
+    let v: serde_json::Value = serde_json::from_slice(&run(bin().args(["library", "list", "--json"])).stdout).unwrap();
+    let rows = v.as_array().unwrap();
+    assert!(rows.len() >= 12, "{v}");
+    assert!(rows.iter().any(|r| r["genus"] == "Picea" && r["conifer"] == true && r["model"] == "library:Picea"));
 }
