@@ -19,7 +19,7 @@ pub(crate) struct BakeArgs {
     /// A species model: NAME=PATH.glb, or NAME=library:GENUS[:VARIANT] for a tree of the
     /// built-in library (Quercus, Fagus, Acer, Tilia, Platanus, Betula, Populus, Salix,
     /// Picea, Abies, Pinus, Larix; variants 0, 1, 2, …) (repeat for each species).
-    #[arg(long = "model", value_name = "NAME=PATH", required = true)]
+    #[arg(long = "model", value_name = "NAME=PATH")]
     pub(crate) models: Vec<String>,
     /// Tree placements: .csv (columns auto-detected) or .geojson points.
     #[arg(long, value_name = "PATH")]
@@ -28,10 +28,17 @@ pub(crate) struct BakeArgs {
     /// otherwise a substring). Labels equal to a model name map to it without a pattern.
     #[arg(long = "map", value_name = "PATTERN=NAME")]
     pub(crate) maps: Vec<String>,
-    /// Model for rows whose species maps to no model. Without it such rows are
-    /// skipped and reported, except with a single --model, which every row uses.
+    /// Model for rows whose species maps to no model. Without it such rows take a
+    /// tree of the built-in library (unless --library off: then they are skipped and
+    /// reported), except with a single --model, which every row uses.
     #[arg(long, value_name = "NAME")]
     pub(crate) default_model: Option<String>,
+    /// The built-in species library: `on` (default) gives every species label that no
+    /// --model, --map or --default-model takes a tree of its genus (its Latin name,
+    /// else a common name, else a conifer or broadleaf default; reported); `off` skips
+    /// such rows. Without any --model every species comes from the library.
+    #[arg(long, value_name = "on|off", default_value = "on", value_parser = ["on", "off"])]
+    pub(crate) library: String,
     /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
     #[arg(long)]
     pub(crate) crs: Option<String>,
@@ -225,22 +232,28 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         None => sylva_bake::input::allometry::Allometry::built_in(),
     };
     let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
-    let species = import_models(args)?;
-    let map = species_map(args, &species)?;
+    let mut species = import_models(args)?;
+    let mut map = species_map(args, &species)?;
     // Placements, streamed: the file is read from disk on every pass, so inputs
     // larger than memory bake in bounded memory.
     let input_crs = args.input_crs.as_deref().map(Crs::parse).transpose()?;
+    let read = sylva_bake::input::placements::ReadOptions {
+        encoding: args.encoding,
+        delimiter: args.delimiter,
+        swap_xy: args.swap_xy,
+        projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
+        columns: args.columns.clone(),
+        dbh_unit: args.dbh_unit,
+        attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
+    };
+    if args.library == "on" {
+        library_fill(&args.placements, &read, &allometry, &mut species, &mut map)?;
+    } else if species.is_empty() {
+        bail!("no --model and --library off: no tree to draw (give --model NAME=PATH.glb, or leave the library on)");
+    }
     let options = trees::TreeOptions {
         placements: &args.placements,
-        read: sylva_bake::input::placements::ReadOptions {
-            encoding: args.encoding,
-            delimiter: args.delimiter,
-            swap_xy: args.swap_xy,
-            projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
-            columns: args.columns.clone(),
-            dbh_unit: args.dbh_unit,
-            attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
-        },
+        read,
         crs: args.crs.as_deref(),
         input_crs: args.input_crs.as_deref(),
         max_extent_km: args.max_extent_km,
@@ -368,6 +381,66 @@ pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::
     Ok(species)
 }
 
+/// Gives every species label of the placements that `map` takes to no model
+/// a tree of the built-in library (one model per genus, named after it), and
+/// says which label got which and why.
+fn library_fill(
+    placements: &std::path::Path,
+    read: &sylva_bake::input::placements::ReadOptions,
+    allometry: &sylva_bake::input::allometry::Allometry,
+    species: &mut Vec<(String, sylva_bake::input::gltf_import::ImportedModel)>,
+    map: &mut trees::SpeciesMap,
+) -> Result<()> {
+    use sylva_bake::library;
+    /// Most distinct labels read (an inventory with more is no species list).
+    const MAX_LABELS: usize = 100_000;
+    let source = sylva_bake::input::placements::PlacementSource::open(placements, read)?;
+    let mut labels: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
+    let mut unmapped = 0u64;
+    source.for_each(&mut |p| {
+        let label = p.species.as_deref().unwrap_or("").trim();
+        if map.of(label).is_none() {
+            unmapped += 1;
+            if let Some(n) = labels.get_mut(label) {
+                *n += 1;
+            } else if labels.len() < MAX_LABELS {
+                labels.insert(label.to_string(), 1);
+            }
+        }
+        Ok(())
+    })?;
+    if labels.is_empty() {
+        return Ok(());
+    }
+    let chosen = library::choose::choose_all(&labels, allometry);
+    log(&format!(
+        "library: {unmapped} trees under {} species labels no --model takes, drawn as {} library genera:",
+        labels.len(),
+        chosen.len()
+    ));
+    for (genus, rows) in &chosen {
+        let g = library::genus(genus).expect("chosen from the library");
+        let mut name = genus.to_lowercase();
+        if map.model(&name).is_some() {
+            name = format!("library-{name}");
+        }
+        let model = library::model(g, library::variant_seed(g, 0));
+        let idx = species.len();
+        map.names.push(name.clone());
+        map.heights.push(model.height());
+        map.crown_widths.push(model.crown_width());
+        let (leaf, wood) = model.triangle_counts();
+        log(&format!("  {name} (library:{genus}, {leaf} leaf + {wood} branch triangles):"));
+        for (label, why, n) in rows {
+            let shown = if label.is_empty() { "(no species)" } else { label };
+            log(&format!("    {shown:?}: {n} trees, by {why}"));
+            map.library.push(((*label).to_string(), idx));
+        }
+        species.push((name, model));
+    }
+    Ok(())
+}
+
 /// Which model each species label uses, from `--map` and `--default-model`.
 pub(crate) fn species_map(
     args: &BakeArgs,
@@ -379,6 +452,7 @@ pub(crate) fn species_map(
         crown_widths: species.iter().map(|(_, m)| m.crown_width()).collect(),
         maps: Vec::new(),
         default: None,
+        library: Vec::new(),
     };
     for m in &args.maps {
         let (pattern, name) = split_pair("--map", m)?;

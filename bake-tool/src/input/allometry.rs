@@ -88,6 +88,12 @@ pub struct Equations {
     pub source: String,
 }
 
+/// Whether `genus` (lowercase) is one of the conifers the table knows.
+#[must_use]
+pub fn is_conifer(genus: &str) -> bool {
+    CONIFERS.contains(&genus)
+}
+
 /// Genera treated as conifers when they have no equations of their own.
 const CONIFERS: &[&str] = &[
     "pinus",

@@ -7,6 +7,7 @@
 //! them). The genera's parameters are in [`genera`]; each says its crown form,
 //! leaf shape and colours.
 
+pub mod choose;
 pub mod genera;
 mod textures;
 pub mod weber_penn;

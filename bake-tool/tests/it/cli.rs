@@ -181,6 +181,7 @@ fn bakes_the_shared_real_data() {
         .arg("--placements")
         .arg(data.join("placements/amsterdam_trees.csv"))
         .args(["--map", "pinus*=pine", "--map", "thuja*=pine", "--map", "juniperus*=pine"])
+        .args(["--library", "off"])
         .args(SMALL)
         .args(["--cloud-planes", "48"])
         .arg("--out")
@@ -190,7 +191,8 @@ fn bakes_the_shared_real_data() {
     assert!(log.contains("billboard cloud: 48 planes"), "{log}");
     // The LoD policy measured every ellipsoid level and the cloud of each species.
     assert_eq!(log.matches("LoD policy (error / far tier's, in modelled µs per tree)").count(), 2, "{log}");
-    // No --default-model: broadleaf species are reported and skipped, not fatal.
+    // No --default-model and the library off: broadleaf species are reported and
+    // skipped, not fatal.
     assert!(log.contains("skipped") && log.contains("quercus robur"), "{log}");
     let v = inspect_json(&out);
     assert_eq!(v["trees_total"], 55 + 38 + 38, "pine-mapped rows only");
@@ -1691,6 +1693,45 @@ fn library_models_bake_without_a_gltf() {
             .arg(dir.join("bad")),
     );
     assert!(e.contains("Nothofagus") && e.contains("Quercus") && e.contains("Picea"), "{e}");
+    // No --model: every species from the library, by genus, else a default by
+    // leaf type; said in the log. `--library off` without a model fails clearly.
+    let inventory = dir.join("inventory.csv");
+    std::fs::write(
+        &inventory,
+        "id,x,y,species,height\n1,500000,5300000,Quercus robur,20\n2,500010,5300000,Pinus sylvestris,22\n\
+         3,500020,5300000,Taxus baccata,8\n4,500030,5300000,Ceanothus integerrimus,3\n5,500040,5300000,quercus,18\n\
+         6,500050,5300000,,12\n",
+    )
+    .unwrap();
+    let all = dir.join("all-library");
+    let o = run(bin()
+        .arg("bake")
+        .arg("--placements")
+        .arg(&inventory)
+        .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--billboard-size", "16"])
+        .args(["--texture-size", "16"])
+        .arg("--out")
+        .arg(&all));
+    let log = String::from_utf8_lossy(&o.stderr).into_owned();
+    let v = inspect_json(&all);
+    let mut names: Vec<&str> = v["species"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+    names.sort_unstable();
+    assert_eq!(names, ["abies", "acer", "pinus", "quercus"], "{log}");
+    assert_eq!(v["trees_total"], 6, "{log}");
+    assert!(log.contains("6 trees under 6 species labels"), "{log}");
+    assert!(log.contains("\"Taxus baccata\": 1 trees, by conifer default (no taxus in the library)"), "{log}");
+    assert!(log.contains("\"Quercus robur\": 1 trees, by genus"), "{log}");
+    assert!(log.contains("\"(no species)\": 1 trees, by broadleaf default"), "{log}");
+    let e = fails(
+        bin()
+            .arg("bake")
+            .arg("--placements")
+            .arg(&inventory)
+            .args(["--library", "off"])
+            .arg("--out")
+            .arg(dir.join("none")),
+    );
+    assert!(e.contains("--library off") && e.contains("--model"), "{e}");
     // `library list` names them, as text and JSON.
     let text = String::from_utf8_lossy(&run(bin().args(["library", "list"])).stdout).into_owned();
     assert!(text.contains("Quercus") && text.contains("library:GENUS"), "{text}");

@@ -124,6 +124,9 @@ pub struct SpeciesMap {
     pub maps: Vec<(String, usize)>,
     /// The model of labels nothing maps.
     pub default: Option<usize>,
+    /// Labels the library chose a model for (exact, case-insensitive), after
+    /// everything above.
+    pub library: Vec<(String, usize)>,
 }
 
 impl SpeciesMap {
@@ -139,6 +142,7 @@ impl SpeciesMap {
         self.model(label)
             .or_else(|| self.maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))
             .or(self.default)
+            .or_else(|| self.library.iter().find(|(l, _)| l.eq_ignore_ascii_case(label.trim())).map(|(_, i)| *i))
     }
 }
 
