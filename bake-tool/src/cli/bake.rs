@@ -231,6 +231,9 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         Some(path) => sylva_bake::input::allometry::Allometry::with_overrides(path)?,
         None => sylva_bake::input::allometry::Allometry::built_in(),
     };
+    if args.library == "off" && args.models.is_empty() {
+        bail!("no --model and --library off: no tree to draw (give --model NAME=PATH.glb, or leave the library on)");
+    }
     let out = OutDir::prepare(&args.output.out, &inputs, args.output.force, &log)?;
     let mut species = import_models(args)?;
     let mut map = species_map(args, &species)?;
@@ -246,10 +249,8 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         dbh_unit: args.dbh_unit,
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
     };
-    if args.library == "on" {
+    if args.library == "on" && map.default.is_none() {
         library_fill(&args.placements, &read, &allometry, &mut species, &mut map)?;
-    } else if species.is_empty() {
-        bail!("no --model and --library off: no tree to draw (give --model NAME=PATH.glb, or leave the library on)");
     }
     let options = trees::TreeOptions {
         placements: &args.placements,
@@ -394,21 +395,32 @@ fn library_fill(
     use sylva_bake::library;
     /// Most distinct labels read (an inventory with more is no species list).
     const MAX_LABELS: usize = 100_000;
+    /// Most labels listed per genus in the log.
+    const LISTED: usize = 20;
+    log("library: reading the species labels no --model takes…");
     let source = sylva_bake::input::placements::PlacementSource::open(placements, read)?;
     let mut labels: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
-    let mut unmapped = 0u64;
+    let (mut unmapped, mut beyond) = (0u64, 0u64);
     source.for_each(&mut |p| {
         let label = p.species.as_deref().unwrap_or("").trim();
         if map.of(label).is_none() {
-            unmapped += 1;
             if let Some(n) = labels.get_mut(label) {
                 *n += 1;
+                unmapped += 1;
             } else if labels.len() < MAX_LABELS {
                 labels.insert(label.to_string(), 1);
+                unmapped += 1;
+            } else {
+                beyond += 1;
             }
         }
         Ok(())
     })?;
+    if beyond > 0 {
+        log(&format!(
+            "library: more than {MAX_LABELS} distinct species labels: {beyond} trees under the others get no tree (give --default-model)"
+        ));
+    }
     if labels.is_empty() {
         return Ok(());
     }
@@ -431,10 +443,14 @@ fn library_fill(
         map.crown_widths.push(model.crown_width());
         let (leaf, wood) = model.triangle_counts();
         log(&format!("  {name} (library:{genus}, {leaf} leaf + {wood} branch triangles):"));
-        for (label, why, n) in rows {
+        for (k, (label, why, n)) in rows.iter().enumerate() {
             let shown = if label.is_empty() { "(no species)" } else { label };
-            log(&format!("    {shown:?}: {n} trees, by {why}"));
-            map.library.push(((*label).to_string(), idx));
+            if k < LISTED {
+                log(&format!("    {shown:?}: {n} {}, by {why}", if *n == 1 { "tree" } else { "trees" }));
+            } else if k == LISTED {
+                log(&format!("    … and {} more labels", rows.len() - LISTED));
+            }
+            map.library.insert(label.to_lowercase(), idx);
         }
         species.push((name, model));
     }
@@ -452,7 +468,8 @@ pub(crate) fn species_map(
         crown_widths: species.iter().map(|(_, m)| m.crown_width()).collect(),
         maps: Vec::new(),
         default: None,
-        library: Vec::new(),
+        library: std::collections::HashMap::new(),
+        given: species.len(),
     };
     for m in &args.maps {
         let (pattern, name) = split_pair("--map", m)?;

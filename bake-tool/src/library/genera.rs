@@ -1,9 +1,9 @@
-//! The library's genera: each a Weber & Penn 1995 parameter set (§4, Table 1's
-//! names) read off the genus's botanical form — crown shape, branch angles,
+//! The library's genera: each a Weber & Penn 1995 parameter set (the paper's
+//! parameter names) read off the genus's botanical form — crown shape, branch angles,
 //! how many orders of branching show, leaf size and shape — with its colours.
 //!
 //! `crown_ratio` is the range of crown width over height the genus's trees
-//! take (a test holds every variant inside it). Open-grown, as a model is; the
+//! take (a test holds variants 0–2 inside it). Open-grown, as a model is; the
 //! bake scales each tree to its inventory's crown anyway. (Still to check: that
 //! each range holds docs/ALLOMETRY.md's crown equation at a typical DBH.)
 
@@ -148,7 +148,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Furrowed,
             leaf_color: [66, 98, 40],
             bark_color: [96, 86, 74],
-            crown_ratio: [0.60, 0.94],
+            crown_ratio: [0.59, 1.00],
             params: broadleaf(
                 Shape::Hemispherical,
                 0.22,
@@ -166,7 +166,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Smooth,
             leaf_color: [70, 112, 42],
             bark_color: [140, 138, 130],
-            crown_ratio: [0.45, 0.71],
+            crown_ratio: [0.45, 0.80],
             params: broadleaf(
                 Shape::Spherical,
                 0.25,
@@ -184,7 +184,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Smooth,
             leaf_color: [72, 116, 44],
             bark_color: [118, 110, 98],
-            crown_ratio: [0.40, 0.62],
+            crown_ratio: [0.41, 0.71],
             params: broadleaf(
                 Shape::Spherical,
                 0.2,
@@ -202,7 +202,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Furrowed,
             leaf_color: [74, 118, 46],
             bark_color: [104, 96, 84],
-            crown_ratio: [0.38, 0.59],
+            crown_ratio: [0.35, 0.70],
             params: broadleaf(
                 Shape::TendFlame,
                 0.2,
@@ -220,7 +220,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Patchy,
             leaf_color: [80, 116, 48],
             bark_color: [150, 142, 118],
-            crown_ratio: [0.46, 0.71],
+            crown_ratio: [0.44, 0.81],
             params: broadleaf(
                 Shape::Spherical,
                 0.25,
@@ -238,7 +238,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Banded,
             leaf_color: [96, 132, 52],
             bark_color: [226, 222, 210],
-            crown_ratio: [0.42, 0.66],
+            crown_ratio: [0.44, 0.78],
             params: Params {
                 attraction_up: -0.4,
                 ..broadleaf(
@@ -259,7 +259,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Furrowed,
             leaf_color: [82, 120, 48],
             bark_color: [120, 116, 104],
-            crown_ratio: [0.21, 0.33],
+            crown_ratio: [0.23, 0.43],
             params: broadleaf(
                 Shape::TendFlame,
                 0.2,
@@ -277,7 +277,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Furrowed,
             leaf_color: [110, 140, 66],
             bark_color: [112, 100, 80],
-            crown_ratio: [0.54, 0.84],
+            crown_ratio: [0.42, 0.70],
             params: Params {
                 attraction_up: -2.5,
                 leaves: 22,
@@ -299,7 +299,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Scaly,
             leaf_color: [36, 70, 40],
             bark_color: [96, 70, 52],
-            crown_ratio: [0.48, 0.76],
+            crown_ratio: [0.44, 0.76],
             params: conifer(
                 Shape::Conical,
                 0.08,
@@ -317,7 +317,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Smooth,
             leaf_color: [32, 72, 46],
             bark_color: [122, 118, 108],
-            crown_ratio: [0.46, 0.72],
+            crown_ratio: [0.42, 0.74],
             params: conifer(
                 Shape::Conical,
                 0.1,
@@ -335,7 +335,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Patchy,
             leaf_color: [52, 84, 46],
             bark_color: [150, 96, 64],
-            crown_ratio: [0.44, 0.69],
+            crown_ratio: [0.41, 0.78],
             params: Params {
                 attraction_up: 0.8,
                 leaves: 12,
@@ -357,7 +357,7 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
             bark: Bark::Scaly,
             leaf_color: [88, 124, 56],
             bark_color: [110, 80, 62],
-            crown_ratio: [0.49, 0.76],
+            crown_ratio: [0.48, 0.86],
             params: conifer(
                 Shape::Conical,
                 0.15,

@@ -111,8 +111,8 @@ fn vertex(m: &mut ImportedModel, position: Vec3, normal: Vec3, uv: Vec2, materia
     (m.vertices.len() - 1) as u32
 }
 
-/// A tube along `points` (position, radius) with `sides` sides, closed at the
-/// tip; the bark's v runs along it by its circumference (square texels).
+/// A tube along `points` (position, radius) with `sides` sides (open: its tip
+/// is 2 % of its base); the bark's v runs along it by its circumference.
 fn tube(m: &mut ImportedModel, points: &[(Vec3, f32)], sides: u32) {
     if points.len() < 2 {
         return;
@@ -149,7 +149,9 @@ fn tube(m: &mut ImportedModel, points: &[(Vec3, f32)], sides: u32) {
 
 /// A leaf card: its stalk at one end, its tip at the other.
 fn card(m: &mut ImportedModel, leaf: &weber_penn::Leaf) {
-    let right = leaf.normal.cross(leaf.tip).normalize_or(Vec3::X) * (leaf.size.y * 0.5);
+    // (right, tip, normal) right-handed: the quad winds counter-clockwise seen
+    // from its normal's side, its front face.
+    let right = leaf.tip.cross(leaf.normal).normalize_or(Vec3::X) * (leaf.size.y * 0.5);
     let up = leaf.tip * (leaf.size.x * 0.5);
     let base = m.vertices.len() as u32;
     for (x, y) in [(-1.0f32, -1.0f32), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
@@ -166,8 +168,8 @@ mod tests {
 
     #[test]
     fn every_genus_grows_a_tree_of_its_form() {
-        for g in GENERA.iter() {
-            let m = model(g, 1);
+        for (g, v) in GENERA.iter().flat_map(|g| (0..3).map(move |v| (g, v))) {
+            let m = model(g, variant_seed(g, v));
             let (leaf, wood) = m.triangle_counts();
             assert!(wood > 200 && leaf > 200, "{}: {wood} wood, {leaf} leaf triangles", g.name);
             assert!(wood + leaf < 150_000, "{}: {} triangles", g.name, wood + leaf);

@@ -1,24 +1,24 @@
 //! The parametric tree of Weber & Penn 1995 ("Creation and Rendering of
 //! Realistic Trees", SIGGRAPH '95), written from the paper: a trunk and up to
 //! three levels of stems grown recursively, each stem a chain of `curve_res`
-//! segments bent by `curve` (an S-curve with `curve_back`) and randomly by
-//! `curve_v` (§4.1), optionally split into clones (§4.2), tapered (§4.3, with
-//! the trunk's flare), carrying children spaced along it whose length follows
-//! the crown's shape (§4.4, `shape_ratio`), leaning away from their parent by
-//! the down angle and turning around it by the rotate angle (§4.5), with
-//! leaves on the last level (§4.6) and the stems bending up towards the light
-//! (`attraction_up`, §4.7). Pruning to an envelope (§4.8) is left out.
+//! segments bent by `curve` (an S-curve with `curve_back`) and at random by
+//! `curve_v`, optionally split into clones, tapered (the trunk flared at the
+//! ground), carrying children spaced along it whose length follows the
+//! crown's shape (`shape_ratio`), leaning away from their parent by the down
+//! angle and turning around it by the rotate angle, with leaves on the last
+//! level and the stems bending up towards the light (`attraction_up`).
+//! Pruning to an envelope is left out.
 //!
-//! Units: metres, Z up. Deterministic for a seed: the same parameters and seed
-//! grow the same tree on every machine (no floating-point reductions whose
-//! order could vary; one sequential random stream).
+//! Units: metres, Z up. Deterministic for a seed on one platform (one
+//! sequential random stream, no parallel reductions; the platform's `sin`,
+//! `cos`, `powf` may round differently elsewhere).
 
 use glam::{Quat, Vec2, Vec3};
 
 use crate::rng::Rng;
 
-/// The crown's shape (§4.4, Table 1): how a child's length varies with its
-/// height along the trunk.
+/// The crown's shape: how a child's length varies with its height along the
+/// trunk.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Shape {
     /// Longest at the base: spruce, fir.
@@ -29,9 +29,9 @@ pub enum Shape {
     Hemispherical,
     /// Even lengths: columnar trees.
     Cylindrical,
-    /// Lengths from half at the base to whole at the top.
+    /// Lengths from whole at the crown's base to half at its top.
     TaperedCylindrical,
-    /// Longest at 70 % of the height.
+    /// Longest 30 % up the crown.
     Flame,
     /// Longest at the top: umbrella crowns.
     InverseConical,
@@ -39,8 +39,7 @@ pub enum Shape {
     TendFlame,
 }
 
-/// The shape ratio (§4.4): `ratio` 0 at the top of the branched trunk, 1 at its
-/// base.
+/// The shape ratio: `ratio` 0 at the top of the branched trunk, 1 at its base.
 #[must_use]
 pub fn shape_ratio(shape: Shape, ratio: f32) -> f32 {
     let r = ratio.clamp(0.0, 1.0);
@@ -79,7 +78,7 @@ pub struct Level {
     pub curve_back: f32,
     /// Random bend per stem.
     pub curve_v: f32,
-    /// Clones per segment (fractions carried over).
+    /// Clones per segment (fractions carried over; at most 4).
     pub seg_splits: f32,
     /// Angle between clones.
     pub split_angle: f32,
@@ -91,8 +90,8 @@ pub struct Level {
     pub down_angle: f32,
     /// Its variation (negative: varies with the position along the parent).
     pub down_angle_v: f32,
-    /// Turn around the parent from one child to the next (negative: opposite
-    /// pairs, `180 + rotate`).
+    /// Turn around the parent from one child to the next (negative: children
+    /// alternate sides by `±(180 + rotate)`, in one plane).
     pub rotate: f32,
     /// Its variation.
     pub rotate_v: f32,
@@ -100,7 +99,7 @@ pub struct Level {
     pub length: f32,
     /// Its variation.
     pub length_v: f32,
-    /// Taper: 0 a cylinder, 1 a cone to a point.
+    /// Taper: 0 a cylinder, 1 a cone (to 2 % of the base radius).
     pub taper: f32,
 }
 
@@ -163,7 +162,7 @@ pub struct Leaf {
 /// A grown tree.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Skeleton {
-    /// Every stem, trunk first.
+    /// Every stem (a stem after its clones and children).
     pub stems: Vec<Stem>,
     /// Every leaf.
     pub leaves: Vec<Leaf>,
@@ -172,6 +171,12 @@ pub struct Skeleton {
 /// Most stems one tree may grow (a parameter set that would grow more is cut
 /// short: children past it are not grown).
 pub const MAX_STEMS: usize = 20_000;
+
+/// Most clones one segment splits into.
+const MAX_CLONES: f32 = 4.0;
+
+/// Most leaves one tree may carry.
+pub const MAX_LEAVES: usize = 200_000;
 
 /// Grows the tree of `p` for `seed`.
 #[must_use]
@@ -217,7 +222,7 @@ struct StemStart {
     offset: f32,
     /// Its parent's length (the trunk's own for the trunk).
     parent_length: f32,
-    /// Whether it may split into clones (§4.2).
+    /// Whether it may split into clones.
     splits: bool,
 }
 
@@ -225,7 +230,7 @@ struct Grower<'a> {
     p: &'a Params,
     rng: Rng,
     out: Skeleton,
-    /// Fractions of clones carried from segment to segment, per level (§4.2).
+    /// Fractions of clones carried from segment to segment, per level.
     split_error: Vec<f32>,
 }
 
@@ -251,7 +256,7 @@ impl Grower<'_> {
         let mut frame = s.frame;
         let mut pos = s.origin;
         let radius_at = |z: f32| {
-            // §4.3: taper from the base radius towards the tip; the trunk flares.
+            // taper from the base radius towards the tip; the trunk flares.
             let mut r = s.radius * (1.0 - l.taper.clamp(0.0, 1.0) * z).max(0.02);
             if s.level == 0 {
                 let y = (1.0 - 8.0 * z).max(0.0);
@@ -263,7 +268,8 @@ impl Grower<'_> {
         // Frames at each point (children take their parent's there).
         let mut frames = vec![frame];
         for i in 0..segs {
-            // §4.1: the bend of this segment.
+            // The bend of this segment (an S-curve: `curve` over the first half,
+            // `curve_back` over the second).
             let bend = if l.curve_back == 0.0 {
                 l.curve / segs as f32
             } else if i < segs.div_ceil(2) {
@@ -271,35 +277,37 @@ impl Grower<'_> {
             } else {
                 l.curve_back / (segs as f32 / 2.0)
             };
-            if i > 0 {
-                frame *= Quat::from_rotation_x((bend + curve_v).to_radians());
-            }
-            // §4.7: stems bend towards the light (the trunk stays as bent).
+            frame *= Quat::from_rotation_x((bend + curve_v).to_radians());
+            // Stems bend towards the light (the trunk stays as bent); a negative
+            // attraction droops them, at most to straight down.
             if s.level > 0 && p.attraction_up != 0.0 {
                 let dir = frame * Vec3::Z;
                 let declination = dir.z.clamp(-1.0, 1.0).acos();
                 let axis = dir.cross(Vec3::Z);
                 if axis.length_squared() > 1e-8 {
                     let turn = p.attraction_up * declination / segs as f32;
-                    frame = Quat::from_axis_angle(axis.normalize(), turn.clamp(-declination, declination)) * frame;
+                    let turn = turn.clamp(-(std::f32::consts::PI - declination), declination);
+                    frame = Quat::from_axis_angle(axis.normalize(), turn) * frame;
                 }
             }
-            // §4.2: clones split off here (not at the last segment).
+            pos += frame * Vec3::Z * seg_len;
+            let z = (i + 1) as f32 / segs as f32;
+            points.push((pos, radius_at(z)));
+            frames.push(frame);
+            // Clones split off at this segment's end (not the stem's tip); the
+            // stem leans away from them from the next segment on.
             if l.seg_splits > 0.0 && s.splits && i + 1 < segs {
                 let want = l.seg_splits + self.split_error[s.level];
-                let clones = want.floor().max(0.0);
+                let clones = want.floor().clamp(0.0, MAX_CLONES);
                 self.split_error[s.level] = want - clones;
                 for _ in 0..clones as u32 {
                     let angle = (l.split_angle + self.var(l.split_angle_v)).to_radians();
                     let around = self.rng.range(0.0, std::f32::consts::TAU);
-                    let clone_frame = frame * Quat::from_rotation_z(around) * Quat::from_rotation_x(angle);
-                    let left = s.length - (i as f32 + 1.0) * seg_len;
-                    let z = (i as f32 + 1.0) / segs as f32;
                     let clone = StemStart {
                         level: s.level,
-                        origin: pos + frame * Vec3::Z * seg_len,
-                        frame: clone_frame,
-                        length: left,
+                        origin: pos,
+                        frame: frame * Quat::from_rotation_z(around) * Quat::from_rotation_x(angle),
+                        length: s.length - (i + 1) as f32 * seg_len,
                         radius: radius_at(z) * 0.8,
                         offset: s.offset,
                         parent_length: s.parent_length,
@@ -307,19 +315,15 @@ impl Grower<'_> {
                         splits: false,
                     };
                     self.stem(clone);
-                    // The stem itself leans the other way.
                     frame = frame
                         * Quat::from_rotation_z(around)
                         * Quat::from_rotation_x(-angle * 0.5)
                         * Quat::from_rotation_z(-around);
                 }
             }
-            pos += frame * Vec3::Z * seg_len;
-            points.push((pos, radius_at((i + 1) as f32 / segs as f32)));
-            frames.push(frame);
         }
-        self.out.stems.push(Stem { level: s.level as u8, points: points.clone() });
         self.children(&s, &points, &frames);
+        self.out.stems.push(Stem { level: s.level as u8, points });
     }
 
     /// The children (or leaves) of stem `s` along `points`.
@@ -328,7 +332,7 @@ impl Grower<'_> {
         let child_level = s.level + 1;
         let leaves = child_level >= p.levels.len();
         let (count, from) = if leaves {
-            // §4.6: leaves on the last level's stems, more where the stem sits
+            // leaves on the last level's stems, more where the stem sits
             // farther out along its parent.
             let n = p.leaves as f32 * shape_ratio(Shape::TaperedCylindrical, s.offset / s.parent_length.max(1e-3));
             (n.round() as u32, 0.0)
@@ -342,7 +346,7 @@ impl Grower<'_> {
             return;
         }
         let lc = if leaves { p.levels[s.level] } else { p.levels[child_level] };
-        let mut turn = self.rng.range(0.0, 360.0);
+        let mut turn_acc = self.rng.range(0.0, 360.0);
         let segs = points.len() - 1;
         for k in 0..count {
             let offset = from + (s.length - from) * (k as f32 + 0.5 + self.var(0.3)) / count as f32;
@@ -354,13 +358,21 @@ impl Grower<'_> {
             let at = points[i].0.lerp(points[i + 1].0, f);
             let parent_r = points[i].1 + (points[i + 1].1 - points[i].1) * f;
             let frame = frames[i + 1];
-            // §4.5: the rotate and down angles.
-            turn += if lc.rotate >= 0.0 {
-                lc.rotate + self.var(lc.rotate_v)
+            // the rotate and down angles.
+            // A negative rotate alternates sides by ±(180 + rotate) around a base:
+            // children in one plane (flat sprays, opposite pairs at −180... 0).
+            let step = lc.rotate + self.var(lc.rotate_v);
+            let turn = if lc.rotate >= 0.0 {
+                turn_acc += step;
+                turn_acc
             } else {
-                180.0 + lc.rotate + self.var(lc.rotate_v)
+                let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+                turn_acc + side * (180.0 + step)
             };
             if leaves {
+                if self.out.leaves.len() >= MAX_LEAVES {
+                    return;
+                }
                 let down = (p.leaf_down_angle + self.var(15.0)).to_radians();
                 let leaf_frame = frame * Quat::from_rotation_z(turn.to_radians()) * Quat::from_rotation_x(down);
                 let tip = (leaf_frame * Vec3::Z).normalize();
@@ -466,7 +478,8 @@ mod tests {
         assert!(a.stems.iter().filter(|s| s.level == 2).count() > 100);
         assert!(a.leaves.len() > 500, "{} leaves", a.leaves.len());
         // The trunk is about 20 m tall; the crown starts above its base share.
-        let top = a.stems[0].points.last().unwrap().0;
+        let trunk = a.stems.iter().find(|s| s.level == 0).unwrap();
+        let top = trunk.points.last().unwrap().0;
         assert!((top.z - 20.0).abs() < 2.0, "trunk top {top}");
         let lowest_branch = a.stems.iter().filter(|s| s.level == 1).map(|s| s.points[0].0.z).fold(f32::MAX, f32::min);
         assert!(lowest_branch > 0.25 * 20.0, "lowest branch at {lowest_branch}");

@@ -1719,9 +1719,9 @@ fn library_models_bake_without_a_gltf() {
     assert_eq!(names, ["abies", "acer", "pinus", "quercus"], "{log}");
     assert_eq!(v["trees_total"], 6, "{log}");
     assert!(log.contains("6 trees under 6 species labels"), "{log}");
-    assert!(log.contains("\"Taxus baccata\": 1 trees, by conifer default (no taxus in the library)"), "{log}");
-    assert!(log.contains("\"Quercus robur\": 1 trees, by genus"), "{log}");
-    assert!(log.contains("\"(no species)\": 1 trees, by broadleaf default"), "{log}");
+    assert!(log.contains("\"Taxus baccata\": 1 tree, by conifer default (no taxus in the library)"), "{log}");
+    assert!(log.contains("\"Quercus robur\": 1 tree, by genus"), "{log}");
+    assert!(log.contains("\"(no species)\": 1 tree, by broadleaf default"), "{log}");
     let e = fails(
         bin()
             .arg("bake")
@@ -1732,6 +1732,27 @@ fn library_models_bake_without_a_gltf() {
             .arg(dir.join("none")),
     );
     assert!(e.contains("--library off") && e.contains("--model"), "{e}");
+    // A library model named after a genus does not take that label from a --map.
+    let mapped = dir.join("mapped.csv");
+    std::fs::write(&mapped, "id,x,y,species\n1,500000,5300000,Acer\n2,500010,5300000,Mystery tree\n").unwrap();
+    let m = dir.join("mapped");
+    run(bin()
+        .arg("bake")
+        .args(["--model", "maple=library:Tilia", "--model", "pine=library:Pinus", "--map", "Acer=maple"])
+        .arg("--placements")
+        .arg(&mapped)
+        .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--billboard-size", "16"])
+        .args(["--texture-size", "16", "--default-height", "10"])
+        .arg("--out")
+        .arg(&m));
+    let v = inspect_json(&m);
+    let trees: Vec<(&str, u64)> = v["species"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s["name"].as_str().unwrap(), s["trees"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(trees, [("maple", 1), ("pine", 0), ("acer", 1)], "{v}");
     // `library list` names them, as text and JSON.
     let text = String::from_utf8_lossy(&run(bin().args(["library", "list"])).stdout).into_owned();
     assert!(text.contains("Quercus") && text.contains("library:GENUS"), "{text}");

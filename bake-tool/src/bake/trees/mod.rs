@@ -124,9 +124,13 @@ pub struct SpeciesMap {
     pub maps: Vec<(String, usize)>,
     /// The model of labels nothing maps.
     pub default: Option<usize>,
-    /// Labels the library chose a model for (exact, case-insensitive), after
+    /// Labels the library chose a model for (lowercase, exact), after
     /// everything above.
-    pub library: Vec<(String, usize)>,
+    pub library: std::collections::HashMap<String, usize>,
+    /// How many of `names` the user gave (`--model`): only they take a label
+    /// by name (a library model named `acer` must not take the label `Acer`
+    /// from a `--map`).
+    pub given: usize,
 }
 
 impl SpeciesMap {
@@ -136,13 +140,22 @@ impl SpeciesMap {
         self.names.iter().position(|n| n.eq_ignore_ascii_case(name))
     }
 
-    /// The model of a species label: by name, else by pattern, else the default.
+    /// The model of a species label: a given model of that name, else a
+    /// `--map` pattern, else the default, else the library's choice.
     #[must_use]
     pub fn of(&self, label: &str) -> Option<usize> {
-        self.model(label)
+        self.names[..self.given.min(self.names.len())]
+            .iter()
+            .position(|n| n.eq_ignore_ascii_case(label))
             .or_else(|| self.maps.iter().find(|(pat, _)| pattern_matches(pat, label)).map(|(_, i)| *i))
             .or(self.default)
-            .or_else(|| self.library.iter().find(|(l, _)| l.eq_ignore_ascii_case(label.trim())).map(|(_, i)| *i))
+            .or_else(|| {
+                if self.library.is_empty() {
+                    None
+                } else {
+                    self.library.get(&label.trim().to_lowercase()).copied()
+                }
+            })
     }
 }
 
