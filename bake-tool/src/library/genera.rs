@@ -70,7 +70,7 @@ pub struct Genus {
 
 /// A level with the common defaults: `branches` children leaning `down`
 /// degrees, `length` of their parent, `curve_res` segments.
-const fn level(branches: u32, down: f32, length: f32, curve_res: u32) -> Level {
+pub(super) const fn level(branches: u32, down: f32, length: f32, curve_res: u32) -> Level {
     Level {
         curve_res,
         curve: 0.0,

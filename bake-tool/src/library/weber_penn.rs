@@ -422,22 +422,12 @@ mod tests {
     use super::*;
 
     fn params(shape: Shape) -> Params {
+        // The library's level, with this test's variations.
         let level = |branches, down, length| Level {
-            curve_res: 4,
-            curve: 0.0,
-            curve_back: 0.0,
             curve_v: 20.0,
-            seg_splits: 0.0,
-            split_angle: 0.0,
-            split_angle_v: 0.0,
-            branches,
-            down_angle: down,
-            down_angle_v: 10.0,
-            rotate: 140.0,
             rotate_v: 20.0,
-            length,
             length_v: 0.05,
-            taper: 1.0,
+            ..super::super::genera::level(branches, down, length, 4)
         };
         Params {
             shape,
