@@ -68,31 +68,9 @@ pub struct Genus {
     pub params: Params,
 }
 
-/// A level with the common defaults: `branches` children leaning `down`
-/// degrees, `length` of their parent, `curve_res` segments.
-pub(super) const fn level(branches: u32, down: f32, length: f32, curve_res: u32) -> Level {
-    Level {
-        curve_res,
-        curve: 0.0,
-        curve_back: 0.0,
-        curve_v: 30.0,
-        seg_splits: 0.0,
-        split_angle: 0.0,
-        split_angle_v: 0.0,
-        branches,
-        down_angle: down,
-        down_angle_v: 10.0,
-        rotate: 140.0,
-        rotate_v: 30.0,
-        length,
-        length_v: 0.08,
-        taper: 1.0,
-    }
-}
-
 /// A trunk of `curve_res` segments, bending at random by `curve_v`.
 const fn trunk(curve_res: u32, curve_v: f32) -> Level {
-    Level { curve_v, length_v: 0.0, ..level(0, 0.0, 1.0, curve_res) }
+    Level { curve_v, length_v: 0.0, ..Level::new(0, 0.0, 1.0, curve_res) }
 }
 
 /// A broadleaf's parameters: crown `shape`, bare trunk share `base_size`,
@@ -153,8 +131,14 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Hemispherical,
                 0.22,
                 20.0,
-                Level { curve: -25.0, curve_v: 70.0, seg_splits: 0.15, split_angle: 30.0, ..level(26, 62.0, 0.5, 6) },
-                Level { curve_v: 60.0, ..level(11, 45.0, 0.45, 3) },
+                Level {
+                    curve: -25.0,
+                    curve_v: 70.0,
+                    seg_splits: 0.15,
+                    split_angle: 30.0,
+                    ..Level::new(26, 62.0, 0.5, 6)
+                },
+                Level { curve_v: 60.0, ..Level::new(11, 45.0, 0.45, 3) },
                 0.56,
             ),
         },
@@ -171,8 +155,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Spherical,
                 0.25,
                 24.0,
-                Level { curve: -15.0, ..level(32, 55.0, 0.52, 5) },
-                Level { rotate: -90.0, ..level(12, 50.0, 0.45, 3) },
+                Level { curve: -15.0, ..Level::new(32, 55.0, 0.52, 5) },
+                Level { rotate: -90.0, ..Level::new(12, 50.0, 0.45, 3) },
                 0.60,
             ),
         },
@@ -189,8 +173,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Spherical,
                 0.2,
                 18.0,
-                Level { curve: -10.0, seg_splits: 0.1, split_angle: 25.0, ..level(24, 48.0, 0.48, 5) },
-                Level { rotate: -90.0, ..level(10, 45.0, 0.45, 3) },
+                Level { curve: -10.0, seg_splits: 0.1, split_angle: 25.0, ..Level::new(24, 48.0, 0.48, 5) },
+                Level { rotate: -90.0, ..Level::new(10, 45.0, 0.45, 3) },
                 0.60,
             ),
         },
@@ -207,8 +191,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::TendFlame,
                 0.2,
                 22.0,
-                Level { curve: -10.0, ..level(34, 55.0, 0.38, 5) },
-                Level { ..level(12, 45.0, 0.45, 3) },
+                Level { curve: -10.0, ..Level::new(34, 55.0, 0.38, 5) },
+                Level { ..Level::new(12, 45.0, 0.45, 3) },
                 0.62,
             ),
         },
@@ -225,8 +209,14 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Spherical,
                 0.25,
                 25.0,
-                Level { curve: -20.0, curve_v: 60.0, seg_splits: 0.2, split_angle: 35.0, ..level(22, 58.0, 0.5, 6) },
-                Level { curve_v: 50.0, ..level(10, 45.0, 0.45, 3) },
+                Level {
+                    curve: -20.0,
+                    curve_v: 60.0,
+                    seg_splits: 0.2,
+                    split_angle: 35.0,
+                    ..Level::new(22, 58.0, 0.5, 6)
+                },
+                Level { curve_v: 50.0, ..Level::new(10, 45.0, 0.45, 3) },
                 0.70,
             ),
         },
@@ -245,8 +235,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                     Shape::Flame,
                     0.3,
                     18.0,
-                    Level { curve: 20.0, ..level(30, 38.0, 0.34, 5) },
-                    Level { curve: 30.0, ..level(10, 40.0, 0.5, 4) },
+                    Level { curve: 20.0, ..Level::new(30, 38.0, 0.34, 5) },
+                    Level { curve: 30.0, ..Level::new(10, 40.0, 0.5, 4) },
                     0.45,
                 )
             },
@@ -264,8 +254,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::TendFlame,
                 0.2,
                 26.0,
-                Level { curve: -5.0, ..level(30, 35.0, 0.3, 5) },
-                Level { ..level(10, 40.0, 0.45, 3) },
+                Level { curve: -5.0, ..Level::new(30, 35.0, 0.3, 5) },
+                Level { ..Level::new(10, 40.0, 0.45, 3) },
                 0.58,
             ),
         },
@@ -285,8 +275,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                     Shape::Spherical,
                     0.25,
                     15.0,
-                    Level { curve: -20.0, seg_splits: 0.2, split_angle: 30.0, ..level(22, 55.0, 0.55, 6) },
-                    Level { curve_v: 20.0, ..level(9, 30.0, 0.8, 5) },
+                    Level { curve: -20.0, seg_splits: 0.2, split_angle: 30.0, ..Level::new(22, 55.0, 0.55, 6) },
+                    Level { curve_v: 20.0, ..Level::new(9, 30.0, 0.8, 5) },
                     0.42,
                 )
             },
@@ -304,8 +294,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Conical,
                 0.08,
                 28.0,
-                Level { curve: -8.0, curve_back: 20.0, down_angle_v: -10.0, ..level(70, 78.0, 0.26, 4) },
-                Level { rotate: -90.0, curve_v: 10.0, ..level(10, 55.0, 0.4, 2) },
+                Level { curve: -8.0, curve_back: 20.0, down_angle_v: -10.0, ..Level::new(70, 78.0, 0.26, 4) },
+                Level { rotate: -90.0, curve_v: 10.0, ..Level::new(10, 55.0, 0.4, 2) },
                 1.12,
             ),
         },
@@ -322,8 +312,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Conical,
                 0.1,
                 26.0,
-                Level { curve: 8.0, curve_v: 10.0, ..level(64, 86.0, 0.25, 4) },
-                Level { rotate: -90.0, curve_v: 8.0, ..level(9, 60.0, 0.4, 2) },
+                Level { curve: 8.0, curve_v: 10.0, ..Level::new(64, 86.0, 0.25, 4) },
+                Level { rotate: -90.0, curve_v: 8.0, ..Level::new(9, 60.0, 0.4, 2) },
                 1.12,
             ),
         },
@@ -343,8 +333,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                     Shape::Hemispherical,
                     0.5,
                     22.0,
-                    Level { curve: 25.0, curve_v: 40.0, ..level(26, 65.0, 0.36, 5) },
-                    Level { curve_v: 30.0, ..level(8, 45.0, 0.45, 3) },
+                    Level { curve: 25.0, curve_v: 40.0, ..Level::new(26, 65.0, 0.36, 5) },
+                    Level { curve_v: 30.0, ..Level::new(8, 45.0, 0.45, 3) },
                     1.26,
                 )
             },
@@ -362,8 +352,8 @@ pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
                 Shape::Conical,
                 0.15,
                 26.0,
-                Level { curve: 15.0, curve_v: 25.0, ..level(48, 75.0, 0.28, 4) },
-                Level { curve: -20.0, curve_v: 20.0, ..level(9, 50.0, 0.45, 3) },
+                Level { curve: 15.0, curve_v: 25.0, ..Level::new(48, 75.0, 0.28, 4) },
+                Level { curve: -20.0, curve_v: 20.0, ..Level::new(9, 50.0, 0.45, 3) },
                 1.05,
             ),
         },

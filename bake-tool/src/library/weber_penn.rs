@@ -103,6 +103,31 @@ pub struct Level {
     pub taper: f32,
 }
 
+impl Level {
+    /// A level with the common defaults: `branches` children leaning `down`
+    /// degrees, `length` of their parent, `curve_res` segments.
+    #[must_use]
+    pub const fn new(branches: u32, down: f32, length: f32, curve_res: u32) -> Self {
+        Self {
+            curve_res,
+            curve: 0.0,
+            curve_back: 0.0,
+            curve_v: 30.0,
+            seg_splits: 0.0,
+            split_angle: 0.0,
+            split_angle_v: 0.0,
+            branches,
+            down_angle: down,
+            down_angle_v: 10.0,
+            rotate: 140.0,
+            rotate_v: 30.0,
+            length,
+            length_v: 0.08,
+            taper: 1.0,
+        }
+    }
+}
+
 /// A whole tree's parameters.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
@@ -427,7 +452,7 @@ mod tests {
             curve_v: 20.0,
             rotate_v: 20.0,
             length_v: 0.05,
-            ..super::super::genera::level(branches, down, length, 4)
+            ..Level::new(branches, down, length, 4)
         };
         Params {
             shape,
