@@ -106,6 +106,9 @@ fn inspect_placements(path: &Path) -> Result<Value> {
         .iter()
         .map(|(label, r)| {
             let e = allometry.for_label(label);
+            // The built-in library's tree for the label (a bake without --model draws it).
+            let (tree, why) =
+                crate::library::choose::choose(if label == "(no species)" { "" } else { label }, &allometry);
             json!({
                 "label": label,
                 "trees": counts[label],
@@ -113,6 +116,8 @@ fn inspect_placements(path: &Path) -> Result<Value> {
                 "dbh_cm": range(r[1]),
                 "crown_m": range(r[2]),
                 "genus": e.genus,
+                "library": format!("library:{}", tree.name),
+                "library_why": why.to_string(),
             })
         })
         .collect();
@@ -518,7 +523,7 @@ pub fn to_text(v: &Value) -> String {
                 f(&v["bounds"]["max"]),
                 f(&v["median"])
             );
-            out += "label | trees | height m | DBH cm | crown m | allometry genus\n";
+            out += "label | trees | height m | DBH cm | crown m | allometry genus | library tree (why)\n";
             let r = |x: &Value| {
                 x.as_array().map_or("-".to_string(), |a| {
                     format!("{:.1}–{:.1}", a[0].as_f64().unwrap_or(0.0), a[1].as_f64().unwrap_or(0.0))
@@ -526,13 +531,15 @@ pub fn to_text(v: &Value) -> String {
             };
             for s in v["species"].as_array().into_iter().flatten().take(60) {
                 out += &format!(
-                    "{} | {} | {} | {} | {} | {}\n",
+                    "{} | {} | {} | {} | {} | {} | {} ({})\n",
                     s["label"].as_str().unwrap_or("?"),
                     s["trees"],
                     r(&s["height_m"]),
                     r(&s["dbh_cm"]),
                     r(&s["crown_m"]),
-                    s["genus"].as_str().unwrap_or("?")
+                    s["genus"].as_str().unwrap_or("?"),
+                    s["library"].as_str().unwrap_or("?"),
+                    s["library_why"].as_str().unwrap_or("?")
                 );
             }
         }

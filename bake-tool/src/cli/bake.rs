@@ -17,8 +17,8 @@ use super::*;
 #[derive(Args)]
 pub(crate) struct BakeArgs {
     /// A species model: NAME=PATH.glb, or NAME=library:GENUS[:VARIANT] for a tree of the
-    /// built-in library (Quercus, Fagus, Acer, Tilia, Platanus, Betula, Populus, Salix,
-    /// Picea, Abies, Pinus, Larix; variants 0, 1, 2, …) (repeat for each species).
+    /// built-in library (a genus or archetype that `sylva-bake library list` names:
+    /// library:Quercus, library:conifer-spire; variants 0, 1, 2, …) (repeat for each species).
     #[arg(long = "model", value_name = "NAME=PATH")]
     pub(crate) models: Vec<String>,
     /// Tree placements: .csv (columns auto-detected) or .geojson points.
@@ -35,8 +35,9 @@ pub(crate) struct BakeArgs {
     pub(crate) default_model: Option<String>,
     /// The built-in species library: `on` (default) gives every species label that no
     /// --model, --map or --default-model takes a tree of its genus (its Latin name,
-    /// else a common name, else a conifer or broadleaf default; reported); `off` skips
-    /// such rows. Without any --model every species comes from the library.
+    /// else a common name in English, Dutch, German, French or Spanish, else its
+    /// family's, else a conifer or broadleaf archetype; reported); `off` skips such
+    /// rows. Without any --model every species comes from the library.
     #[arg(long, value_name = "on|off", default_value = "on", value_parser = ["on", "off"])]
     pub(crate) library: String,
     /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
@@ -83,6 +84,13 @@ pub(crate) struct BakeArgs {
     /// without a height get one from their DBH; with neither, --default-height.
     #[arg(long, value_name = "FILE.csv")]
     pub(crate) allometry: Option<PathBuf>,
+    /// Species codes to Latin names (CSV, columns found by name: a code column —
+    /// sp, spcode, code, SPCD, … — and Latin, SCIENTIFIC_NAME, … or Genus and
+    /// Species; optionally Family): a ForestGEO spptable, the US FIA REF_SPECIES
+    /// table, any code,latin list. Labels it lists choose their library tree and
+    /// allometry by the name.
+    #[arg(long, value_name = "FILE.csv")]
+    pub(crate) species_table: Option<PathBuf>,
     /// Rows farther than this from the median position are outliers and skipped.
     #[arg(long, default_value_t = 100.0)]
     pub(crate) max_extent_km: f64,
@@ -215,6 +223,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     // The output folder is checked before any long work.
     let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
     inputs.extend(args.allometry.as_deref());
+    inputs.extend(args.species_table.as_deref());
     inputs.extend(args.dems.iter().map(PathBuf::as_path));
     inputs.extend(args.orthos.iter().map(PathBuf::as_path));
     if !args.orthos.is_empty() && args.no_terrain {
@@ -227,10 +236,15 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
             inputs.push(std::path::Path::new(path));
         }
     }
-    let allometry = match &args.allometry {
+    let mut allometry = match &args.allometry {
         Some(path) => sylva_bake::input::allometry::Allometry::with_overrides(path)?,
         None => sylva_bake::input::allometry::Allometry::built_in(),
     };
+    if let Some(path) = &args.species_table {
+        let table = sylva_bake::input::names::SpeciesTable::read(path)?;
+        log(&format!("species table {}: {} codes", path.display(), table.len()));
+        allometry.species_table = Some(table);
+    }
     if args.library == "off" && args.models.is_empty() {
         bail!("no --model and --library off: no tree to draw (give --model NAME=PATH.glb, or leave the library on)");
     }
@@ -431,7 +445,7 @@ fn library_fill(
         chosen.len()
     ));
     for (genus, rows) in &chosen {
-        let g = library::genus(genus).expect("chosen from the library");
+        let g = library::entry(genus).expect("chosen from the library");
         let mut name = genus.to_lowercase();
         if map.model(&name).is_some() {
             name = format!("library-{name}");

@@ -19,6 +19,8 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 
+use super::names::{self, SpeciesTable};
+
 const FT: f64 = 0.3048;
 const IN_CM: f64 = 2.54;
 
@@ -116,78 +118,6 @@ const CONIFERS: &[&str] = &[
     "cryptomeria",
 ];
 
-/// Common names (English, Dutch, German) → genus; longer names first.
-const COMMON_NAMES: &[(&str, &str)] = &[
-    ("horse chestnut", "aesculus"),
-    ("horsechestnut", "aesculus"),
-    ("paardenkastanje", "aesculus"),
-    ("rosskastanie", "aesculus"),
-    ("honey locust", "gleditsia"),
-    ("honeylocust", "gleditsia"),
-    ("valse christusdoorn", "gleditsia"),
-    ("douglas", "pseudotsuga"),
-    ("hornbeam", "carpinus"),
-    ("haagbeuk", "carpinus"),
-    ("hainbuche", "carpinus"),
-    ("chestnut", "castanea"),
-    ("kastanje", "castanea"),
-    ("kastanie", "castanea"),
-    ("sycamore", "platanus"),
-    ("plane", "platanus"),
-    ("plataan", "platanus"),
-    ("platane", "platanus"),
-    ("linden", "tilia"),
-    ("lime", "tilia"),
-    ("linde", "tilia"),
-    ("basswood", "tilia"),
-    ("oak", "quercus"),
-    ("eik", "quercus"),
-    ("eiche", "quercus"),
-    ("beech", "fagus"),
-    ("beuk", "fagus"),
-    ("buche", "fagus"),
-    ("maple", "acer"),
-    ("esdoorn", "acer"),
-    ("ahorn", "acer"),
-    ("birch", "betula"),
-    ("berk", "betula"),
-    ("birke", "betula"),
-    ("ash", "fraxinus"),
-    ("esche", "fraxinus"),
-    ("pine", "pinus"),
-    ("kiefer", "pinus"),
-    ("spruce", "picea"),
-    ("fichte", "picea"),
-    ("larch", "larix"),
-    ("lariks", "larix"),
-    ("lärche", "larix"),
-    ("fir", "abies"),
-    ("tanne", "abies"),
-    ("poplar", "populus"),
-    ("populier", "populus"),
-    ("pappel", "populus"),
-    ("aspen", "populus"),
-    ("willow", "salix"),
-    ("wilg", "salix"),
-    ("weide", "salix"),
-    ("elm", "ulmus"),
-    ("iep", "ulmus"),
-    ("ulme", "ulmus"),
-    ("cherry", "prunus"),
-    ("kers", "prunus"),
-    ("kirsche", "prunus"),
-    ("plum", "prunus"),
-    ("locust", "robinia"),
-    ("acacia", "robinia"),
-    ("alder", "alnus"),
-    ("els", "alnus"),
-    ("erle", "alnus"),
-    ("rowan", "sorbus"),
-    ("whitebeam", "sorbus"),
-    ("lijsterbes", "sorbus"),
-    ("eberesche", "sorbus"),
-];
-
 const FVS: &str = "height: USDA FVS Southern variant sn/htdbh.f";
 const BECHTOLD: &str = "crown: Bechtold 2003 via FIAstemmap cw_coef";
 
@@ -272,6 +202,8 @@ pub struct Allometry {
     genera: Vec<Equations>,
     broadleaf: Equations,
     conifer: Equations,
+    /// Codes → Latin names (`--species-table`), read before any other name.
+    pub species_table: Option<SpeciesTable>,
 }
 
 fn mean_crown(rows: &[&Equations]) -> Crown {
@@ -333,7 +265,7 @@ impl Allometry {
             crown: mean_crown(&broadleaves),
             source: format!("{FVS} (other hardwoods); crown: mean of the built-in broadleaf genera"),
         };
-        Self { genera, broadleaf, conifer }
+        Self { genera, broadleaf, conifer, species_table: None }
     }
 
     /// The built-in table with the rows of `path` over it (docs/ALLOMETRY.md:
@@ -416,23 +348,24 @@ impl Allometry {
         Ok(a)
     }
 
-    /// The genus a species label names: the first word of a botanical name, or a
-    /// common name (English, Dutch, German) that the table knows.
+    /// The Latin name a label stands for: the species table's where it lists
+    /// the label as a code, else the label itself.
+    #[must_use]
+    pub fn latin<'a>(&'a self, label: &'a str) -> &'a str {
+        self.species_table.as_ref().and_then(|t| t.latin(label)).map_or(label, |(name, _)| name)
+    }
+
+    /// The genus a species label names (lowercase): through the species
+    /// table, the first word of a botanical name that the table knows, or a
+    /// common name (`input::names`).
     #[must_use]
     pub fn genus_of(&self, label: &str) -> Option<String> {
-        let l = label.trim().to_lowercase();
-        let first = l.split(|c: char| !c.is_alphabetic()).next().unwrap_or("");
-        if self.genera.iter().any(|g| g.genus == first) || CONIFERS.contains(&first) {
-            return Some(first.to_string());
+        let label = self.latin(label);
+        let first = names::first_word(label);
+        if self.genera.iter().any(|g| g.genus == first) || CONIFERS.contains(&first.as_str()) {
+            return Some(first);
         }
-        let words: Vec<&str> = l.split(|c: char| !c.is_alphabetic()).filter(|w| !w.is_empty()).collect();
-        COMMON_NAMES
-            .iter()
-            .find(|(name, _)| {
-                let parts: Vec<&str> = name.split(' ').collect();
-                words.windows(parts.len()).any(|w| w == parts.as_slice())
-            })
-            .map(|(_, g)| (*g).to_string())
+        names::common_genus(label).map(str::to_string)
     }
 
     /// The equations for `genus` (lowercase): its own, else the conifer or
@@ -498,7 +431,8 @@ mod tests {
             ("Horse Chestnut", Some("aesculus")),
             ("Sweet chestnut", Some("castanea")),
             ("Gewone paardenkastanje", Some("aesculus")),
-            ("Winterlinde", None),
+            ("Winterlinde", Some("tilia")),
+            ("Chêne vert", Some("quercus")),
             ("Sequoiadendron giganteum", Some("sequoiadendron")),
             ("QURO", None),
         ] {

@@ -5,6 +5,7 @@ pub mod allometry;
 pub mod attributes;
 pub mod dem;
 pub mod gltf_import;
+pub mod names;
 pub mod ortho;
 pub mod placements;
 pub mod reproject;

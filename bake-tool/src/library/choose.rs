@@ -1,31 +1,40 @@
-//! Which library tree each species label of an inventory gets: its Latin
-//! genus (the label's first word: `Quercus robur`, `Platanus x hispanica`,
-//! `Acer platanoides 'Crimson King'`), else the genus a common name names
-//! (English, Dutch, German: `input::allometry`'s table), else a default by leaf
-//! type — a conifer default for known conifer genera, the broadleaf default for
-//! everything else — counted and reported.
+//! Which library tree each species label of an inventory gets, in order:
+//! a code the species table (`--species-table`) lists stands for its Latin
+//! name; its Latin genus (the label's first word: `Quercus robur`, `Platanus
+//! x hispanica`, `Acer platanoides 'Crimson King'`, `Tilia :: Linde`); a common
+//! name in English, Dutch, German, French or Spanish (`input::names`); the
+//! family of a genus the library lacks (its family's tree, or the archetype of
+//! the family's habit); else an archetype by leaf type — `conifer-spire` for a
+//! conifer genus, `broadleaf-round` for everything else — counted and reported.
 
 use std::collections::BTreeMap;
 
-use super::{genus, Genus};
+use super::{entry, genus, Genus, GENERA};
 use crate::input::allometry::{is_conifer, Allometry};
+use crate::input::names;
 
-/// The library's default for an unknown conifer genus.
-pub const CONIFER_DEFAULT: &str = "Abies";
-/// The library's default for every other unknown label.
-pub const BROADLEAF_DEFAULT: &str = "Acer";
+/// The archetype for an unknown conifer genus.
+pub const CONIFER_DEFAULT: &str = "conifer-spire";
+/// The archetype for every other label the library cannot place.
+pub const BROADLEAF_DEFAULT: &str = "broadleaf-round";
 
-/// Why a label got its genus.
+/// Why a label got its tree.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Why {
     /// Its Latin genus is in the library.
     Genus,
     /// A common name of a genus in the library.
     CommonName,
+    /// A genus the library lacks (named), of a family it has a tree of.
+    Family(String, String),
+    /// A genus the library lacks (named), of a family (named) whose habit an archetype draws.
+    FamilyArchetype(String, String),
     /// A conifer genus the library lacks (named).
     ConiferDefault(String),
     /// A genus the library lacks, or no genus found (the label's first word).
     BroadleafDefault(String),
+    /// A code of the species table, standing for a Latin name; then why that got its tree.
+    Code(String, Box<Why>),
 }
 
 impl std::fmt::Display for Why {
@@ -33,34 +42,74 @@ impl std::fmt::Display for Why {
         match self {
             Why::Genus => write!(f, "genus"),
             Why::CommonName => write!(f, "common name"),
+            Why::Family(g, fam) => write!(f, "family {fam} (no {g} in the library)"),
+            Why::FamilyArchetype(g, fam) => write!(f, "archetype of family {fam} (no {g} in the library)"),
             Why::ConiferDefault(g) => write!(f, "conifer default (no {g} in the library)"),
             Why::BroadleafDefault(g) if g.is_empty() => write!(f, "broadleaf default (no genus in the label)"),
-            Why::BroadleafDefault(g) => write!(f, "broadleaf default (no {g} in the library)"),
+            Why::BroadleafDefault(g) => write!(f, "broadleaf default (nothing known of {g:?})"),
+            Why::Code(latin, then) => write!(f, "species table: {latin}, then {then}"),
         }
     }
 }
 
-/// The library genus of one species label, and why.
-#[must_use]
-pub fn choose(label: &str, allometry: &Allometry) -> (&'static Genus, Why) {
-    let l = label.trim().to_lowercase();
-    let first = l.split(|c: char| !c.is_alphabetic()).find(|w| !w.is_empty()).unwrap_or("");
-    if let Some(g) = genus(first) {
-        return (g, Why::Genus);
-    }
-    match allometry.genus_of(label) {
-        Some(g) if g != first => match genus(&g) {
-            Some(lib) => (lib, Why::CommonName),
-            None if is_conifer(&g) => (default(CONIFER_DEFAULT), Why::ConiferDefault(g)),
-            None => (default(BROADLEAF_DEFAULT), Why::BroadleafDefault(g)),
-        },
-        _ if is_conifer(first) => (default(CONIFER_DEFAULT), Why::ConiferDefault(first.to_string())),
-        _ => (default(BROADLEAF_DEFAULT), Why::BroadleafDefault(first.to_string())),
+impl Why {
+    /// Whether the label's tree is a default (nothing in it was recognised).
+    #[must_use]
+    pub fn is_default(&self) -> bool {
+        match self {
+            Why::ConiferDefault(_) | Why::BroadleafDefault(_) => true,
+            Why::Code(_, then) => then.is_default(),
+            _ => false,
+        }
     }
 }
 
+/// The library tree (a genus or an archetype) of one species label, and why.
+#[must_use]
+pub fn choose(label: &str, allometry: &Allometry) -> (&'static Genus, Why) {
+    match allometry.species_table.as_ref().and_then(|t| t.latin(label)) {
+        Some((latin, family)) => {
+            let (g, why) = by_name(latin, family);
+            (g, Why::Code(latin.to_string(), Box::new(why)))
+        }
+        None => by_name(label, None),
+    }
+}
+
+/// The library tree of a name (Latin or common), with the family a species table gave.
+fn by_name(label: &str, family: Option<&str>) -> (&'static Genus, Why) {
+    let first = names::first_word(label);
+    if let Some(g) = genus(&first) {
+        return (g, Why::Genus);
+    }
+    if let Some(g) = names::common_genus(label).and_then(genus) {
+        return (g, Why::CommonName);
+    }
+    let family = family
+        .map(str::to_string)
+        .or_else(|| names::family_of(&first).map(str::to_string))
+        .or_else(|| first.ends_with("aceae").then(|| capitalised(&first)));
+    if let Some(fam) = family {
+        if let Some(g) = GENERA.iter().find(|g| g.family.eq_ignore_ascii_case(&fam)) {
+            return (g, Why::Family(first, g.family.to_string()));
+        }
+        if let Some((f, a)) = names::FAMILY_ARCHETYPES.iter().find(|(f, _)| f.eq_ignore_ascii_case(&fam)) {
+            return (default(a), Why::FamilyArchetype(first, (*f).to_string()));
+        }
+    }
+    if is_conifer(&first) {
+        return (default(CONIFER_DEFAULT), Why::ConiferDefault(first));
+    }
+    (default(BROADLEAF_DEFAULT), Why::BroadleafDefault(first))
+}
+
+fn capitalised(w: &str) -> String {
+    let mut c = w.chars();
+    c.next().map(|f| f.to_uppercase().chain(c).collect()).unwrap_or_default()
+}
+
 fn default(name: &str) -> &'static Genus {
-    genus(name).expect("the library's defaults are genera of it")
+    entry(name).expect("the library's defaults are archetypes of it")
 }
 
 /// The library genus of each label of `labels` (label → trees), by genus: the
@@ -98,14 +147,40 @@ mod tests {
             ("Larix decidua", "Larix"),
             ("Salix alba 'Tristis'", "Salix"),
             ("Populus nigra 'Italica'", "Populus"),
+            ("Fraxinus excelsior", "Fraxinus"),
+            ("Ulmus x hollandica 'Lobel'", "Ulmus"),
+            ("Gleditsia triacanthos f. inermis", "Gleditsia"),
+            ("Taxus baccata", "Taxus"),
+            ("Pseudotsuga menziesii var. glauca", "Pseudotsuga"),
+            ("Washingtonia robusta", "Washingtonia"),
         ] {
             assert_eq!(name(label), want, "{label}");
             assert_eq!(choose(label, &a).1, Why::Genus, "{label}");
         }
-        // A conifer genus the library lacks; an unknown broadleaf; a code.
-        assert_eq!(choose("Taxus baccata", &a), (genus(CONIFER_DEFAULT).unwrap(), Why::ConiferDefault("taxus".into())));
-        assert_eq!(choose("Ceanothus integerrimus", &a).0.name, BROADLEAF_DEFAULT);
-        assert_eq!(choose("QURO", &a).1, Why::BroadleafDefault("quro".into()));
+    }
+
+    #[test]
+    fn families_archetypes_and_defaults() {
+        let a = Allometry::built_in();
+        // An unknown genus of a family the library has: the family's tree.
+        assert_eq!(
+            choose("Ostrya carpinifolia", &a),
+            (genus("Betula").unwrap(), Why::Family("ostrya".into(), "Betulaceae".into()))
+        );
+        assert_eq!(choose("x Cupressocyparis leylandii", &a).0.name, "Thuja");
+        assert_eq!(choose("Amelanchier lamarckii", &a).0.family, "Rosaceae");
+        assert_eq!(choose("Chamaerops humilis", &a).0.name, "Phoenix");
+        // A family named outright.
+        assert_eq!(choose("Rosaceae", &a).0.family, "Rosaceae");
+        // A family without a tree of its own: its habit's archetype.
+        let (g, why) = choose("Cornus mas", &a);
+        assert_eq!((g.name, why), ("multi-stem", Why::FamilyArchetype("cornus".into(), "Cornaceae".into())));
+        assert_eq!(choose("Araucaria araucana", &a).0.name, "conifer-spire");
+        // A conifer of a family the library has; a shrub family; unknown: the default, said so.
+        assert_eq!(choose("Cryptomeria japonica", &a).0.name, "Thuja");
+        assert_eq!(choose("Ceanothus integerrimus", &a).0.name, "shrub");
+        let (g, why) = choose("QURO", &a);
+        assert_eq!((g.name, why.is_default()), (BROADLEAF_DEFAULT, true));
         assert_eq!(choose("", &a).1, Why::BroadleafDefault(String::new()));
     }
 
@@ -113,7 +188,28 @@ mod tests {
     fn common_names_find_their_genus() {
         let a = Allometry::built_in();
         assert_eq!(choose("Red Oak", &a), (genus("Quercus").unwrap(), Why::CommonName));
-        // A common name of a genus the library lacks: the default, naming it.
-        assert_eq!(choose("Rosskastanie", &a).1, Why::BroadleafDefault("aesculus".into()));
+        assert_eq!(choose("Rosskastanie", &a).0.name, "Aesculus");
+        assert_eq!(choose("Marronnier d'Inde", &a).0.name, "Aesculus");
+        assert_eq!(choose("Olmo común", &a).0.name, "Ulmus");
+        assert_eq!(choose("Zomereik", &a).0.name, "Quercus");
+    }
+
+    #[test]
+    fn codes_go_through_the_species_table() {
+        let dir = std::env::temp_dir().join(format!("sylva-choose-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("spp.csv");
+        std::fs::write(&path, "code,latin,family\nQURO,Quercus robur,Fagaceae\nOSCA,Ostrya carpinifolia,Betulaceae\nXYZ,Nothing knownia,Nonaceae\n").unwrap();
+        let mut a = Allometry::built_in();
+        a.species_table = Some(crate::input::names::SpeciesTable::read(&path).unwrap());
+        assert_eq!(
+            choose("QURO", &a),
+            (genus("Quercus").unwrap(), Why::Code("Quercus robur".into(), Box::new(Why::Genus)))
+        );
+        assert_eq!(choose("osca", &a).0.name, "Betula");
+        assert!(choose("XYZ", &a).1.is_default());
+        // The allometry reads the code too.
+        assert_eq!(a.genus_of("QURO").as_deref(), Some("quercus"));
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -43,6 +43,25 @@ fn blade(shape: LeafShape, p: Vec2, rng_lobes: f32) -> Option<f32> {
             let w = 0.28 * (std::f32::consts::PI * v).sin();
             (u.abs() < w && v > 0.02).then(|| vein(0.5))
         }
+        LeafShape::Pinnate => {
+            // Leaflets in pairs along a stalk, one at the tip.
+            let rib = u.abs() < 0.05;
+            let k = (v * 4.0).floor().min(3.0);
+            let centre = Vec2::new(0.5 * u.signum(), (k + 0.55) / 4.0);
+            let q = Vec2::new((u.abs() - centre.x.abs()) / 0.42, (v - centre.y - 0.12 * (u.abs() - 0.5)) / 0.1);
+            let tip = Vec2::new(u / 0.18, (v - 0.88) / 0.12);
+            let leaflet = (q.length_squared() < 1.0 && v < 0.8) || tip.length_squared() < 1.0;
+            ((rib && v < 0.9) || leaflet).then(|| if rib { 0.85 } else { 1.0 - 0.2 * q.x.abs().min(1.0) })
+        }
+        LeafShape::Fan => {
+            // A fan from the stalk: ginkgo's notched, a fan palm's split into ribs.
+            let d = p - Vec2::new(0.0, -0.9);
+            let a = d.x.atan2(d.y);
+            let ribs = ((a * 9.0).fract().abs() - 0.5).abs() > 0.08;
+            let stalk = d.length() < 0.45 && u.abs() < 0.05;
+            (stalk || (a.abs() < 1.2 && d.length() < 1.75 && d.length() > 0.4 && ribs))
+                .then(|| 1.0 - 0.25 * (a.abs() / 1.2))
+        }
         LeafShape::Needles => {
             // A spray: needles from a twig along the card's middle, leaning forward.
             let twig = u.abs() < 0.04;
@@ -79,7 +98,7 @@ pub fn leaf(g: &Genus, seed: u64) -> image::RgbaImage {
     let jitter = rng.range(-1.0, 1.0);
     let [r, gr, b] = g.leaf_color;
     // Each blade: centre, direction (unit, stalk to tip), half length, shade.
-    let spray = matches!(g.leaf, LeafShape::Needles | LeafShape::Scales | LeafShape::Frond);
+    let spray = matches!(g.leaf, LeafShape::Needles | LeafShape::Scales | LeafShape::Frond) || g.family == "Arecaceae";
     let blades: Vec<(Vec2, Vec2, f32, f32)> = if spray {
         vec![(Vec2::ZERO, Vec2::Y, 1.0, 1.0)]
     } else {
@@ -157,6 +176,16 @@ pub fn bark(g: &Genus, seed: u64) -> image::RgbaImage {
             }
             // Scaly plates.
             Bark::Scaly => 0.7 + 0.45 * (((fy / 7.0 + n as f64 * 2.0).fract() as f32) * 0.8 + 0.2 * n),
+            // Long strips (redwood, arborvitae): noise stretched along the stem.
+            Bark::Fibrous => 0.55 + 0.7 * (value_noise(s + 4, cx * 3.0, cy * 3.0 + fy / 40.0) as f32).powf(1.5),
+            // Rings of old leaf bases (palms).
+            Bark::Ringed => {
+                if (fy / 8.0 + 0.3 * n as f64).fract() < 0.22 {
+                    0.6
+                } else {
+                    0.95 + 0.15 * n
+                }
+            }
         };
         let c = [r, gr, b].map(|ch| (f32::from(ch) * k).clamp(0.0, 255.0) as u8);
         image::Rgba([c[0], c[1], c[2], 255])

@@ -1693,21 +1693,26 @@ fn library_models_bake_without_a_gltf() {
             .arg(dir.join("bad")),
     );
     assert!(e.contains("Nothofagus") && e.contains("Quercus") && e.contains("Picea"), "{e}");
-    // No --model: every species from the library, by genus, else a default by
-    // leaf type; said in the log. `--library off` without a model fails clearly.
+    // No --model: every species from the library, by genus, common name (any of
+    // five languages), a code through --species-table, family, else an archetype;
+    // said in the log. `--library off` without a model fails clearly.
     let inventory = dir.join("inventory.csv");
     std::fs::write(
         &inventory,
         "id,x,y,species,height\n1,500000,5300000,Quercus robur,20\n2,500010,5300000,Pinus sylvestris,22\n\
          3,500020,5300000,Taxus baccata,8\n4,500030,5300000,Ceanothus integerrimus,3\n5,500040,5300000,quercus,18\n\
-         6,500050,5300000,,12\n",
+         6,500050,5300000,,12\n7,500060,5300000,ABAL,25\n8,500070,5300000,Tilleul,15\n",
     )
     .unwrap();
+    let table = dir.join("spptable.csv");
+    std::fs::write(&table, "sp;Genus;Species;Family\nABAL;Abies;alba;Pinaceae\n").unwrap();
     let all = dir.join("all-library");
     let o = run(bin()
         .arg("bake")
         .arg("--placements")
         .arg(&inventory)
+        .arg("--species-table")
+        .arg(&table)
         .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--billboard-size", "16"])
         .args(["--texture-size", "16"])
         .arg("--out")
@@ -1716,11 +1721,14 @@ fn library_models_bake_without_a_gltf() {
     let v = inspect_json(&all);
     let mut names: Vec<&str> = v["species"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
     names.sort_unstable();
-    assert_eq!(names, ["abies", "acer", "pinus", "quercus"], "{log}");
-    assert_eq!(v["trees_total"], 6, "{log}");
-    assert!(log.contains("6 trees under 6 species labels"), "{log}");
-    assert!(log.contains("\"Taxus baccata\": 1 tree, by conifer default (no taxus in the library)"), "{log}");
+    assert_eq!(names, ["abies", "broadleaf-round", "pinus", "quercus", "shrub", "taxus", "tilia"], "{log}");
+    assert_eq!(v["trees_total"], 8, "{log}");
+    assert!(log.contains("8 trees under 8 species labels"), "{log}");
+    assert!(log.contains("\"Taxus baccata\": 1 tree, by genus"), "{log}");
     assert!(log.contains("\"Quercus robur\": 1 tree, by genus"), "{log}");
+    assert!(log.contains("\"Tilleul\": 1 tree, by common name"), "{log}");
+    assert!(log.contains("\"ABAL\": 1 tree, by species table: Abies alba, then genus"), "{log}");
+    assert!(log.contains("\"Ceanothus integerrimus\": 1 tree, by archetype of family Rhamnaceae"), "{log}");
     assert!(log.contains("\"(no species)\": 1 tree, by broadleaf default"), "{log}");
     let e = fails(
         bin()
@@ -1752,12 +1760,13 @@ fn library_models_bake_without_a_gltf() {
         .iter()
         .map(|s| (s["name"].as_str().unwrap(), s["trees"].as_u64().unwrap()))
         .collect();
-    assert_eq!(trees, [("maple", 1), ("pine", 0), ("acer", 1)], "{v}");
+    assert_eq!(trees, [("maple", 1), ("pine", 0), ("broadleaf-round", 1)], "{v}");
     // `library list` names them, as text and JSON.
     let text = String::from_utf8_lossy(&run(bin().args(["library", "list"])).stdout).into_owned();
     assert!(text.contains("Quercus") && text.contains("library:GENUS"), "{text}");
     let v: serde_json::Value = serde_json::from_slice(&run(bin().args(["library", "list", "--json"])).stdout).unwrap();
     let rows = v.as_array().unwrap();
-    assert!(rows.len() >= 12, "{v}");
+    assert!(rows.iter().filter(|r| r["archetype"] == false).count() >= 40, "{v}");
+    assert!(rows.iter().any(|r| r["genus"] == "conifer-spire" && r["archetype"] == true), "{v}");
     assert!(rows.iter().any(|r| r["genus"] == "Picea" && r["conifer"] == true && r["model"] == "library:Picea"));
 }
