@@ -450,7 +450,7 @@ fn library_fill(
         if map.model(&name).is_some() {
             name = format!("library-{name}");
         }
-        let model = library::model(g, library::variant_seed(g, 0));
+        let model = library::model(g, 0);
         let idx = species.len();
         map.names.push(name.clone());
         map.heights.push(model.height());

@@ -95,7 +95,7 @@ fn render_sheet(names: &[String], out: &PathBuf, variants: u64, size: u32, per_r
     for (row, g) in list.iter().enumerate() {
         eprintln!("library render: {} ({}/{})", g.name, row + 1, list.len());
         for v in 0..variants {
-            let model = sylva_bake::library::model(g, sylva_bake::library::variant_seed(g, v));
+            let model = sylva_bake::library::model(g, v);
             let built = build_pack(g.name, &model, &opts, &gpu, &pipelines, &quiet)?;
             let pack = sylva::format::pack::decode_pack(g.name, &built.bytes)?;
             for (k, view) in [PackView::Side, PackView::Top].into_iter().enumerate() {

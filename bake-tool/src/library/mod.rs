@@ -50,7 +50,7 @@ pub fn model_named(spec: &str) -> anyhow::Result<ImportedModel> {
             forms.join(", ")
         );
     };
-    Ok(model(g, variant_seed(g, variant)))
+    Ok(model(g, variant))
 }
 
 /// The seed of a genus's variant.
@@ -75,38 +75,56 @@ pub fn entry(name: &str) -> Option<&'static Genus> {
     genus(n).or_else(|| ARCHETYPES.iter().find(|g| g.name.eq_ignore_ascii_case(n)))
 }
 
-/// The tree of `genus` for `seed` (its variant): stems as tubes, leaves as
+/// Variant `variant` of the tree of `genus`: stems as tubes, leaves as
 /// alpha-tested cards, with the genus's textures. Metres, Z up, the trunk's
-/// base at the origin.
+/// base at the origin. Every variant of a genus has variant 0's structure
+/// ([`weber_penn::grow_variant`]) and textures: the same vertices and
+/// triangles in the same order, only where they are differs.
 #[must_use]
-pub fn model(genus: &Genus, seed: u64) -> ImportedModel {
-    let skeleton = weber_penn::grow(&fitted(genus), seed);
-    build(genus, &skeleton, seed)
+pub fn model(genus: &Genus, variant: u64) -> ImportedModel {
+    let structure = variant_seed(genus, 0);
+    let skeleton = weber_penn::grow_variant(&fitted(genus), structure, variant_seed(genus, variant));
+    build(genus, &skeleton, structure)
 }
 
-/// The genus's parameters fitted so that its first variant stands as tall
-/// as the genus's typical height (`params.scale`, the trunk's length) and
-/// its crown width over height is the genus's `crown_ratio`: the branches'
-/// length (level 1, which the deeper levels follow) and the trunk's scaled a
-/// few times each, as the crown's width is nearly proportional to the one and
-/// the tree's height to the other.
+/// Variants the library fits its genera over (and the bake draws).
+pub const VARIANTS: u64 = 3;
+
+/// The genus's parameters fitted so that its variants stand, on average, as
+/// tall as the genus's typical height (`params.scale`, the trunk's length)
+/// with the genus's `crown_ratio`: the branches' length (level 1, which the
+/// deeper levels follow) and the trunk's scaled a few times each, as the
+/// crown's width is nearly proportional to the one and the tree's height to
+/// the other. Fitted once per genus.
 #[must_use]
 pub fn fitted(genus: &Genus) -> Params {
-    let mut p = genus.params.clone();
-    if p.levels.len() < 2 || genus.crown_ratio <= 0.0 {
+    static FITTED: std::sync::LazyLock<std::sync::Mutex<std::collections::HashMap<&'static str, Params>>> =
+        std::sync::LazyLock::new(Default::default);
+    if let Some(p) = FITTED.lock().ok().and_then(|m| m.get(genus.name).cloned()) {
         return p;
     }
-    let seed = variant_seed(genus, 0);
-    let height = genus.params.scale;
-    for _ in 0..8 {
-        let (w, h) = extent(&weber_penn::grow(&p, seed));
-        let (kh, kr) = (height / h, genus.crown_ratio / (w / h));
-        if !(kh.is_finite() && kr.is_finite()) || ((kh - 1.0).abs() < 0.01 && (kr - 1.0).abs() < 0.01) {
-            break;
+    let mut p = genus.params.clone();
+    if p.levels.len() >= 2 && genus.crown_ratio > 0.0 {
+        let structure = variant_seed(genus, 0);
+        let height = genus.params.scale;
+        for _ in 0..8 {
+            let (mut w, mut h) = (0.0, 0.0);
+            for v in 0..VARIANTS {
+                let (vw, vh) = extent(&weber_penn::grow_variant(&p, structure, variant_seed(genus, v)));
+                w += vw / VARIANTS as f32;
+                h += vh / VARIANTS as f32;
+            }
+            let (kh, kr) = (height / h, genus.crown_ratio / (w / h));
+            if !(kh.is_finite() && kr.is_finite()) || ((kh - 1.0).abs() < 0.01 && (kr - 1.0).abs() < 0.01) {
+                break;
+            }
+            p.scale *= kh.clamp(0.33, 3.0);
+            p.scale_v *= kh.clamp(0.33, 3.0);
+            p.levels[1].length *= kr.clamp(0.33, 3.0);
         }
-        p.scale *= kh.clamp(0.33, 3.0);
-        p.scale_v *= kh.clamp(0.33, 3.0);
-        p.levels[1].length *= kr.clamp(0.33, 3.0);
+    }
+    if let Ok(mut m) = FITTED.lock() {
+        m.insert(genus.name, p.clone());
     }
     p
 }
@@ -162,7 +180,7 @@ fn build(genus: &Genus, t: &Skeleton, seed: u64) -> ImportedModel {
         ..Default::default()
     };
     for stem in &t.stems {
-        tube(&mut m, &stem.points, SIDES[usize::from(stem.level).min(SIDES.len() - 1)]);
+        tube(&mut m, &stem.points, stem.bark_repeats, SIDES[usize::from(stem.level).min(SIDES.len() - 1)]);
     }
     for leaf in &t.leaves {
         card(&mut m, leaf);
@@ -176,13 +194,12 @@ fn vertex(m: &mut ImportedModel, position: Vec3, normal: Vec3, uv: Vec2, materia
 }
 
 /// A tube along `points` (position, radius) with `sides` sides (open: its tip
-/// is 2 % of its base); the bark's v runs along it by its circumference.
-fn tube(m: &mut ImportedModel, points: &[(Vec3, f32)], sides: u32) {
+/// is 2 % of its base); the bark's v runs along it `repeats` times.
+fn tube(m: &mut ImportedModel, points: &[(Vec3, f32)], repeats: f32, sides: u32) {
     if points.len() < 2 {
         return;
     }
     let base = m.vertices.len() as u32;
-    let mut along = 0.0;
     // A frame carried along the stem (parallel transport: no twist).
     let first_axis = (points[1].0 - points[0].0).normalize_or(Vec3::Z);
     let mut side = first_axis.any_orthonormal_vector();
@@ -190,14 +207,11 @@ fn tube(m: &mut ImportedModel, points: &[(Vec3, f32)], sides: u32) {
         let axis = if k + 1 < points.len() { points[k + 1].0 - c } else { c - points[k - 1].0 }.normalize_or(Vec3::Z);
         side = (side - axis * side.dot(axis)).normalize_or(axis.any_orthonormal_vector());
         let other = axis.cross(side);
-        if k > 0 {
-            along += (c - points[k - 1].0).length();
-        }
-        let circumference = (std::f32::consts::TAU * points[0].1).max(1e-3);
+        let v = k as f32 / (points.len() - 1) as f32 * repeats;
         for s in 0..=sides {
             let a = s as f32 / sides as f32 * std::f32::consts::TAU;
             let n = side * a.cos() + other * a.sin();
-            vertex(m, c + n * r, n, Vec2::new(s as f32 / sides as f32, along / circumference), 0);
+            vertex(m, c + n * r, n, Vec2::new(s as f32 / sides as f32, v), 0);
         }
     }
     let ring = sides + 1;
@@ -233,32 +247,36 @@ mod tests {
     #[test]
     fn every_genus_grows_a_tree_of_its_form() {
         let mut wrong = Vec::new();
-        for (g, v) in GENERA.iter().chain(ARCHETYPES.iter()).flat_map(|g| (0..3).map(move |v| (g, v))) {
-            let m = model(g, variant_seed(g, v));
-            let (leaf, wood) = m.triangle_counts();
-            let h = m.height();
-            let ratio = m.crown_width() / h;
-            eprintln!(
-                "{:<20} v{v} {ratio:.2} (genus {:.2}) {h:5.1} m, {wood:6} wood {leaf:6} leaf",
-                g.name, g.crown_ratio
-            );
-            if wood < 200 || leaf < 100 || wood + leaf > 150_000 {
-                wrong.push(format!("{} variant {v}: {wood} wood, {leaf} leaf triangles", g.name));
+        for g in GENERA.iter().chain(ARCHETYPES.iter()) {
+            let (mut mean_ratio, mut mean_height) = (0.0, 0.0);
+            for v in 0..VARIANTS {
+                let m = model(g, v);
+                let (leaf, wood) = m.triangle_counts();
+                let h = m.height();
+                let ratio = m.crown_width() / h;
+                eprintln!("{:<20} v{v} {ratio:.2} (genus {:.2}) {h:5.1} m, {wood:6} wood {leaf:6} leaf", g.name, g.crown_ratio);
+                mean_ratio += ratio / VARIANTS as f32;
+                mean_height += h / VARIANTS as f32;
+                if wood < 200 || leaf < 100 || wood + leaf > 150_000 {
+                    wrong.push(format!("{} variant {v}: {wood} wood, {leaf} leaf triangles", g.name));
+                }
+                // Each variant near the genus's form, as trees of a stand vary.
+                if (ratio / g.crown_ratio - 1.0).abs() > 0.35 || (h / g.params.scale - 1.0).abs() > 0.3 {
+                    wrong.push(format!(
+                        "{} variant {v}: {h:.1} m tall, crown width / height {ratio:.2}; the genus's {:.1} m, {:.2}",
+                        g.name, g.params.scale, g.crown_ratio
+                    ));
+                }
+                if !m.vertices.iter().all(|v| v.position.is_finite() && v.normal.is_finite()) {
+                    wrong.push(format!("{} variant {v}: a vertex not finite", g.name));
+                }
             }
-            // Variant 0 is fitted to the ratio and height; the others vary around them.
-            let typical = g.params.scale;
-            if (h / typical - 1.0).abs() > if v == 0 { 0.06 } else { 0.3 } {
-                wrong.push(format!("{} variant {v}: {h:.1} m tall, the genus's {typical:.1} m", g.name));
-            }
-            let tolerance = if v == 0 { 0.06 } else { 0.3 };
-            if (ratio / g.crown_ratio - 1.0).abs() > tolerance {
+            // Fitted on average to the genus's crown ratio and height.
+            if (mean_ratio / g.crown_ratio - 1.0).abs() > 0.06 || (mean_height / g.params.scale - 1.0).abs() > 0.06 {
                 wrong.push(format!(
-                    "{} variant {v}: crown width / height {ratio:.2}, the genus's {:.2} (height {h:.1} m)",
-                    g.name, g.crown_ratio
+                    "{}: variants {mean_height:.1} m tall, crown width / height {mean_ratio:.2} on average; the genus's {:.1} m, {:.2}",
+                    g.name, g.params.scale, g.crown_ratio
                 ));
-            }
-            if !m.vertices.iter().all(|v| v.position.is_finite() && v.normal.is_finite()) {
-                wrong.push(format!("{} variant {v}: a vertex not finite", g.name));
             }
         }
         assert!(wrong.is_empty(), "{}", wrong.join("\n"));
@@ -274,5 +292,74 @@ mod tests {
         assert_ne!(a.vertices.len(), 0);
         assert_ne!(a.vertices, b.vertices);
         assert_eq!(a.vertices, model(g, 1).vertices);
+    }
+
+    /// The side-view silhouette of a model on a `n`² grid over `lo..hi` (x, z),
+    /// leaf cards whole.
+    fn silhouette(m: &ImportedModel, lo: Vec2, hi: Vec2, n: usize) -> Vec<bool> {
+        let mut grid = vec![false; n * n];
+        let cell = (hi - lo) / n as f32;
+        for t in &m.triangles {
+            let p = t.map(|i| {
+                let v = m.vertices[i as usize].position;
+                (Vec2::new(v.x, v.z) - lo) / cell
+            });
+            let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            let edge = |a: Vec2, b: Vec2, c: Vec2| (b - a).perp_dot(c - a);
+            let area = edge(p[0], p[1], p[2]);
+            for y in (a.y.floor().max(0.0) as usize)..=(b.y.ceil() as usize).min(n - 1) {
+                for x in (a.x.floor().max(0.0) as usize)..=(b.x.ceil() as usize).min(n - 1) {
+                    let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    let w = [edge(p[1], p[2], c), edge(p[2], p[0], c), edge(p[0], p[1], c)];
+                    let inside = if area >= 0.0 { w.iter().all(|&w| w >= 0.0) } else { w.iter().all(|&w| w <= 0.0) };
+                    // (Thin triangles that cover no centre still mark their cell.)
+                    if inside || (b - a).max_element() < 1.0 {
+                        grid[y * n + x] = true;
+                    }
+                }
+            }
+        }
+        grid
+    }
+
+    #[test]
+    fn variants_share_their_structure_and_differ_in_shape() {
+        // Every variant: variant 0's triangles, uvs and materials, elsewhere;
+        // side silhouettes (metres, one frame) overlapping less than 90 %.
+        let mut wrong = Vec::new();
+        for g in GENERA.iter().chain(ARCHETYPES.iter()) {
+            let models: Vec<ImportedModel> = (0..3).map(|v| model(g, v)).collect();
+            let first = &models[0];
+            for (v, m) in models.iter().enumerate().skip(1) {
+                let same = m.triangles == first.triangles
+                    && m.vertices.len() == first.vertices.len()
+                    && m.vertices.iter().zip(&first.vertices).all(|(a, b)| a.uv == b.uv && a.material == b.material);
+                if !same {
+                    let uv = m.vertices.iter().zip(&first.vertices).position(|(a, b)| a.uv != b.uv);
+                    wrong.push(format!(
+                        "{} variant {v}: not variant 0's topology ({} vs {} vertices, {} vs {} triangles, first uv apart at {uv:?})",
+                        g.name,
+                        m.vertices.len(),
+                        first.vertices.len(),
+                        m.triangles.len(),
+                        first.triangles.len()
+                    ));
+                    continue;
+                }
+                let (lo0, hi0) = first.bounds();
+                let (lo1, hi1) = m.bounds();
+                let (lo, hi) = (lo0.min(lo1), hi0.max(hi1));
+                let (lo, hi) = (Vec2::new(lo.x, lo.z), Vec2::new(hi.x, hi.z));
+                let (a, b) = (silhouette(first, lo, hi, 96), silhouette(m, lo, hi, 96));
+                let both = a.iter().zip(&b).filter(|(a, b)| **a && **b).count();
+                let either = a.iter().zip(&b).filter(|(a, b)| **a || **b).count();
+                let iou = both as f32 / either.max(1) as f32;
+                eprintln!("{:<20} variant {v}: silhouette IoU with variant 0 {iou:.2}", g.name);
+                if iou >= 0.9 {
+                    wrong.push(format!("{} variant {v}: silhouette IoU with variant 0 {iou:.2}", g.name));
+                }
+            }
+        }
+        assert!(wrong.is_empty(), "{}", wrong.join("\n"));
     }
 }

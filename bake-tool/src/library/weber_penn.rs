@@ -168,6 +168,10 @@ pub struct Stem {
     pub level: u8,
     /// Positions and radii along the stem.
     pub points: Vec<(Vec3, f32)>,
+    /// How many times a bark tile as wide as the stem's circumference
+    /// repeats along it (of its length and radius without the variations: the
+    /// same in every variant).
+    pub bark_repeats: f32,
 }
 
 /// A leaf: its centre, the normal of its blade, the direction of its tip and
@@ -206,7 +210,23 @@ pub const MAX_LEAVES: usize = 200_000;
 /// Grows the tree of `p` for `seed`.
 #[must_use]
 pub fn grow(p: &Params, seed: u64) -> Skeleton {
-    let mut g = Grower { p, rng: Rng::new(seed), out: Skeleton::default(), split_error: vec![0.0; p.levels.len()] };
+    grow_variant(p, seed, seed)
+}
+
+/// Grows a variant of the tree of `p`: where its stems and leaves sit along
+/// their parents, and so how many there are, from `structure`; their angles,
+/// bends and lengths from `shape`. Variants of one structure have the same
+/// stems with the same points and the same leaves, in the same order — the
+/// same mesh topology, different shapes.
+#[must_use]
+pub fn grow_variant(p: &Params, structure: u64, shape: u64) -> Skeleton {
+    let mut g = Grower {
+        p,
+        rng: Rng::new(shape),
+        structure: Rng::new(structure ^ 0x5_7c0c),
+        out: Skeleton::default(),
+        split_error: vec![0.0; p.levels.len()],
+    };
     let Some(trunk) = p.levels.first() else { return g.out };
     let scale = (p.scale + g.var(p.scale_v)).max(0.1);
     let length = scale * (trunk.length + g.var(trunk.length_v)).max(0.05);
@@ -227,7 +247,10 @@ pub fn grow(p: &Params, seed: u64) -> Skeleton {
             length,
             radius,
             offset: 0.0,
+            along: 0.0,
             parent_length: length,
+            nominal: p.scale * trunk.length,
+            nominal_radius: p.scale * trunk.length * p.ratio,
             splits: true,
         });
     }
@@ -245,15 +268,24 @@ struct StemStart {
     radius: f32,
     /// How far along its parent it starts (m; 0 for the trunk).
     offset: f32,
+    /// The same as a share of its parent's length (the same in every variant).
+    along: f32,
     /// Its parent's length (the trunk's own for the trunk).
     parent_length: f32,
+    /// Its length without the variations (m): what decides whether it grows.
+    nominal: f32,
+    /// Its base radius without the variations (m).
+    nominal_radius: f32,
     /// Whether it may split into clones.
     splits: bool,
 }
 
 struct Grower<'a> {
     p: &'a Params,
+    /// The shape's stream: angles, bends, lengths.
     rng: Rng,
+    /// The structure's stream: where children sit along their parents.
+    structure: Rng,
     out: Skeleton,
     /// Fractions of clones carried from segment to segment, per level.
     split_error: Vec<f32>,
@@ -335,7 +367,10 @@ impl Grower<'_> {
                         length: s.length - (i + 1) as f32 * seg_len,
                         radius: radius_at(z) * 0.8,
                         offset: s.offset,
+                        along: s.along,
                         parent_length: s.parent_length,
+                        nominal: s.nominal * (1.0 - (i + 1) as f32 / segs as f32),
+                        nominal_radius: s.nominal_radius * (1.0 - l.taper.clamp(0.0, 1.0) * z).max(0.02) * 0.8,
                         // (A clone does not split again.)
                         splits: false,
                     };
@@ -348,7 +383,8 @@ impl Grower<'_> {
             }
         }
         self.children(&s, &points, &frames);
-        self.out.stems.push(Stem { level: s.level as u8, points });
+        let bark_repeats = s.nominal / (std::f32::consts::TAU * s.nominal_radius).max(1e-3);
+        self.out.stems.push(Stem { level: s.level as u8, points, bark_repeats });
     }
 
     /// The children (or leaves) of stem `s` along `points`.
@@ -359,12 +395,12 @@ impl Grower<'_> {
         let (count, from) = if leaves {
             // leaves on the last level's stems, more where the stem sits
             // farther out along its parent.
-            let n = p.leaves as f32 * shape_ratio(Shape::TaperedCylindrical, s.offset / s.parent_length.max(1e-3));
+            let n = p.leaves as f32 * shape_ratio(Shape::TaperedCylindrical, s.along);
             (n.round() as u32, 0.0)
         } else if s.level == 0 {
-            (p.levels[child_level].branches, p.base_size.clamp(0.0, 0.95) * s.length)
+            (p.levels[child_level].branches, p.base_size.clamp(0.0, 0.95))
         } else {
-            let n = p.levels[child_level].branches as f32 * (1.0 - 0.5 * s.offset / s.parent_length.max(1e-3));
+            let n = p.levels[child_level].branches as f32 * (1.0 - 0.5 * s.along);
             (n.round().max(0.0) as u32, 0.0)
         };
         if count == 0 || s.length <= 0.0 {
@@ -374,12 +410,16 @@ impl Grower<'_> {
         let mut turn_acc = self.rng.range(0.0, 360.0);
         let segs = points.len() - 1;
         for k in 0..count {
-            let offset = from + (s.length - from) * (k as f32 + 0.5 + self.var(0.3)) / count as f32;
-            let offset = offset.clamp(from, s.length);
+            // Where a child sits, as shares of its parent (`from` the bare
+            // share below the first): the same in every variant.
+            let jitter = self.structure.range(-0.3, 0.3);
+            let t = ((k as f32 + 0.5 + jitter) / count as f32).clamp(0.0, 1.0);
+            let along = from + (1.0 - from) * t;
+            let offset = s.length * along;
             // The point and frame of the parent there.
-            let t = offset / s.length * segs as f32;
-            let i = (t.floor() as usize).min(segs - 1);
-            let f = t - i as f32;
+            let at_seg = along * segs as f32;
+            let i = (at_seg.floor() as usize).min(segs - 1);
+            let f = at_seg - i as f32;
             let at = points[i].0.lerp(points[i + 1].0, f);
             let parent_r = points[i].1 + (points[i + 1].1 - points[i].1) * f;
             let frame = frames[i + 1];
@@ -409,22 +449,27 @@ impl Grower<'_> {
                 self.out.leaves.push(Leaf { centre: at + tip * (parent_r + len * 0.5), normal, tip, size });
                 continue;
             }
+            // How far from the top of the branched part (1 at its base).
+            let r = 1.0 - t;
             let down = if lc.down_angle_v >= 0.0 {
                 lc.down_angle + self.var(lc.down_angle_v)
             } else {
-                let r = (s.length - offset) / (s.length - from).max(1e-3);
                 lc.down_angle + lc.down_angle_v * (1.0 - 2.0 * shape_ratio(Shape::Conical, r))
             };
             let length_max = (lc.length + self.var(lc.length_v)).max(0.0);
-            let length = if s.level == 0 {
-                let r = (s.length - offset) / (s.length - from).max(1e-3);
-                s.length * length_max * shape_ratio(p.shape, r)
+            let (length, nominal) = if s.level == 0 {
+                let shape = shape_ratio(p.shape, r);
+                (s.length * length_max * shape, s.nominal * lc.length * shape)
             } else {
-                length_max * (s.length - 0.6 * offset)
+                let share = 1.0 - 0.6 * along;
+                (length_max * s.length * share, lc.length * s.nominal * share)
             };
-            if length <= 0.01 {
+            // Whether it grows is the structure's (its length without the
+            // variations); a variant's grows at least a centimetre.
+            if nominal <= 0.01 {
                 continue;
             }
+            let length = length.max(0.01);
             let radius = (s.radius * (length / s.length).powf(p.ratio_power)).min(parent_r * 0.9);
             let child_frame =
                 frame * Quat::from_rotation_z(turn.to_radians()) * Quat::from_rotation_x(down.to_radians());
@@ -435,7 +480,10 @@ impl Grower<'_> {
                 length,
                 radius,
                 offset,
+                along,
                 parent_length: s.length,
+                nominal,
+                nominal_radius: s.nominal_radius * (nominal / s.nominal.max(1e-6)).powf(p.ratio_power),
                 splits: true,
             });
         }
