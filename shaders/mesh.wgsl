@@ -36,6 +36,16 @@ struct Material {
 // The billboard cloud's planes, cells and list entries (src/format/cloud.rs;
 // a placeholder word for mesh levels).
 @group(1) @binding(4) var<storage, read> cloud: array<u32>;
+// The level's other variants (`MVAR`, src/format/mesh.rs `VariantVertex`):
+// position xy (u16 × 2), z (u16) and the octahedral normal (snorm8 × 2), per
+// vertex, variant 1 first; `mesh.cloud.z` of them, `mesh.cloud.w` vertices each.
+@group(1) @binding(5) var<storage, read> variants: array<vec2<u32>>;
+
+// The variant a tree of `variation` (0–31) draws of a level with `extra` other
+// variants. Must match `variant_of` in src/format/mesh.rs.
+fn variant_of(variation: u32, extra: u32) -> u32 {
+    return ((variation + 17u) & 31u) % (extra + 1u);
+}
 
 // (Group 2: batches, instances, draw items and styles; group 3: the draw's
 // params. Declared once in `shaders/trees.wgsl`.)
@@ -79,17 +89,26 @@ fn vertex_ao(z: f32) -> f32 {
 }
 
 @vertex
-fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
+fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32, @builtin(vertex_index) vertex: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
     let tree = unpack_instance(instances[item.x], batch, view);
-    let local = mesh.pos_min.xyz + vec3<f32>(in.position_material.xyz) / 65535.0 * mesh.pos_extent.xyz;
+    // The tree's variant: its own position and normal, else the level's.
+    var position = vec3<f32>(in.position_material.xyz);
+    var normal_oct = in.normal_oct.xy;
+    let variant = variant_of(u32(tree.variation), mesh.cloud.z);
+    if variant > 0u {
+        let w = variants[(variant - 1u) * mesh.cloud.w + vertex];
+        position = vec3<f32>(f32(w.x & 0xffffu), f32(w.x >> 16u), f32(w.y & 0xffffu));
+        normal_oct = unpack4x8snorm(w.y).zw;
+    }
+    let local = mesh.pos_min.xyz + position / 65535.0 * mesh.pos_extent.xyz;
     let eye_rel = rotate_z(tree_scaled(local, tree), tree.yaw) + tree.pos;
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(eye_rel, 1.0);
     out.uv = mesh.uv_min + in.uv * mesh.uv_extent;
     // Normals of a horizontally stretched crown: the inverse transpose, xy / aspect.
-    let n = oct_decode(in.normal_oct.xy);
+    let n = oct_decode(normal_oct);
     out.normal = rotate_z(normalize(vec3<f32>(n.xy / tree.aspect, n.z)), tree.yaw);
     let tint = variation_tint(tree.variation);
     out.color = vec4<f32>(in.color.rgb * tint, in.color.a);

@@ -265,12 +265,15 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
     for (i, l) in meta.mesh_levels.iter().enumerate() {
         let b = pack.section(kind::MESH_VERTICES, i as u32).map_or(0, <[u8]>::len)
             + pack.section(kind::MESH_INDICES, i as u32).map_or(0, <[u8]>::len);
+        let variant_bytes = pack.section(kind::MESH_VARIANTS, i as u32).map_or(0, <[u8]>::len);
         levels.push(json!({
             "kind": "mesh",
             "level": i,
             "count": l.index_count / 3,
             "vertices": l.vertex_count,
-            "bytes": b,
+            "bytes": b + variant_bytes,
+            "variants": l.variants + 1,
+            "variant_bytes": variant_bytes,
             "select_px": l.select_px,
         }));
     }
@@ -559,12 +562,21 @@ fn pack_text(s: &Value) -> String {
     for l in s["levels"].as_array().into_iter().flatten() {
         match l["kind"].as_str() {
             Some("mesh") => {
+                let variants = l["variants"].as_u64().unwrap_or(1);
                 out += &format!(
-                    "  mesh level {}: {} triangles, {} vertices, {:.1} KB, from {} px\n",
+                    "  mesh level {}: {} triangles, {} vertices, {:.1} KB{}, from {} px\n",
                     l["level"],
                     l["count"],
                     l["vertices"],
                     l["bytes"].as_f64().unwrap_or(0.0) / 1e3,
+                    if variants > 1 {
+                        format!(
+                            " ({variants} variants, {:.1} KB of them)",
+                            l["variant_bytes"].as_f64().unwrap_or(0.0) / 1e3
+                        )
+                    } else {
+                        String::new()
+                    },
                     l["select_px"]
                 )
             }

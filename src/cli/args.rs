@@ -408,6 +408,9 @@ pub(crate) struct RenderArgs {
     /// Mesh or cluster level (with --pack).
     #[arg(long, default_value_t = 0)]
     pub(crate) level: usize,
+    /// Mesh variant (with --pack; a library tree's are 0–2, see `sylva-bake inspect`).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) variant: u32,
 }
 
 /// `--thin-px` of `render` and `bench`.

@@ -6,7 +6,7 @@ use anyhow::{bail, Context, Result};
 use sylva::camera::Camera;
 use sylva::format::decode_pack;
 use sylva::offscreen::{NamedView, OffscreenScene};
-use sylva::render::capture::{render_pack_repr, PackRepr, PackView};
+use sylva::render::capture::{PackRepr, PackView, TreeRenderer};
 use sylva::render::forest::{PoolConfig, RenderSettings};
 use sylva::render::refine::RefineConfig;
 use sylva::render::GpuContext;
@@ -452,6 +452,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         pack_view,
         level,
         repr,
+        variant,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, .. } = frame;
@@ -512,6 +513,10 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             if level >= decoded.meta.mesh_levels.len() {
                 bail!("--level {level}: the pack has {} mesh levels", decoded.meta.mesh_levels.len());
             }
+            let variants = decoded.meta.mesh_levels[level].variants + 1;
+            if variant >= variants {
+                bail!("--variant {variant}: mesh level {level} has {variants} variant(s), 0–{}", variants - 1);
+            }
             PackRepr::Mesh(level)
         }
         PackReprArg::Ellipsoids => {
@@ -546,7 +551,13 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         View::Oblique => PackView::Oblique,
         View::Top => PackView::Top,
     };
-    let rgba = render_pack_repr(&gpu, &decoded, repr, view, [w, h], [0.62, 0.74, 0.86, 1.0], ao)
+    let mut renderer = TreeRenderer::new(&gpu);
+    renderer.ao = ao;
+    if variant > 0 {
+        renderer.set_variant(&gpu, variant);
+    }
+    let rgba = renderer
+        .render_pack(&gpu, &decoded, repr, view, [w, h], [0.62, 0.74, 0.86, 1.0])
         .context("the pack lacks that representation")?;
     image::save_buffer(&out, &rgba, w, h, image::ColorType::Rgba8)
         .with_context(|| format!("cannot write {}", out.display()))?;

@@ -350,6 +350,7 @@ mod tests {
                 draws: Vec::new(),
                 select_px: 40.0,
                 policy_px: None,
+                variants: 0,
             },
             pareto_error: None,
             pareto_cost: None,

@@ -113,7 +113,43 @@ pub struct MeshLevelMeta {
     /// the level is not a default tier. Absent: `select_px`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub policy_px: Option<f32>,
+    /// Other shapes of the level (the library's variants of a tree), in its
+    /// `MVAR` section: [`VariantVertex`] × `vertex_count` per variant, variant 1
+    /// first. A tree draws variant `variation % (variants + 1)` (0: the `MVTX`
+    /// vertices). At most [`MAX_VARIANTS`]; absent: none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub variants: u32,
 }
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
+}
+
+/// The variant a tree of `variation` (0–31, its tint's) draws of a level with
+/// `extra` other variants: variation 15, the neutral one a single tree is
+/// captured with, draws variant 0. Must match `variant_of` in `shaders/mesh.wgsl`.
+#[must_use]
+pub fn variant_of(variation: u32, extra: u32) -> u32 {
+    ((variation + 17) & 31) % (extra + 1)
+}
+
+/// Most extra shapes a mesh level may carry.
+pub const MAX_VARIANTS: u32 = 7;
+
+/// A vertex of another variant of a mesh level, 8 bytes: its position in the
+/// level's quantisation and its octahedral normal; the rest (material, uv,
+/// colour, occlusion) is the `MVTX` vertex's.
+///
+/// Must match the `variants` reads of `shaders/mesh.wgsl` (`vs_main`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct VariantVertex {
+    /// Position in 1/65535 steps of the level's `pos_min..pos_max`.
+    pub position: [u16; 3],
+    /// Octahedral-encoded normal (snorm8 x, y).
+    pub normal_oct: [i8; 2],
+}
+const _: () = assert!(std::mem::size_of::<VariantVertex>() == 8);
 
 /// A mesh level's floats are finite (checked whether its sections are held or not).
 pub(super) fn mesh_meta_finite(what: &str, level: &MeshLevelMeta) -> Result<(), Problem> {
@@ -125,7 +161,30 @@ pub(super) fn mesh_meta_finite(what: &str, level: &MeshLevelMeta) -> Result<(), 
     if let Some(p) = level.policy_px {
         finite(format!("{what}.policy_px"), p.into())?;
     }
+    if level.variants > MAX_VARIANTS {
+        return Err(Problem::OutOfRange {
+            what: format!("{what}.variants"),
+            value: level.variants.into(),
+            allowed: format!("at most {MAX_VARIANTS}"),
+        });
+    }
     Ok(())
+}
+
+/// Checks a mesh level's `MVAR` section: exactly its variants' vertices.
+pub(super) fn validate_variants(what: &str, level: &MeshLevelMeta, var: Option<&[u8]>) -> Result<(), Problem> {
+    let want = u64::from(level.variants) * u64::from(level.vertex_count) * 8;
+    match var {
+        None if level.variants == 0 => Ok(()),
+        None => Err(Problem::Invalid(format!("{what} declares {} variants but has no MVAR section", level.variants))),
+        Some(v) if v.len() as u64 != want => Err(Problem::Invalid(format!(
+            "{what} declares {} variants of {} vertices ({want} bytes), its MVAR section holds {} bytes",
+            level.variants,
+            level.vertex_count,
+            v.len()
+        ))),
+        Some(_) => Ok(()),
+    }
 }
 
 /// Checks one mesh level's sections against its metadata (`sections` names

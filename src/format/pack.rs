@@ -15,8 +15,11 @@
 use serde::{Deserialize, Serialize};
 
 use super::error::{at_most, finite, finite_all, DecodeError, Problem, Reader};
-pub use super::mesh::{ao_from_snorm8, ao_to_snorm8, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex};
-use super::mesh::{mesh_meta_finite, validate_mesh};
+pub use super::mesh::{
+    ao_from_snorm8, ao_to_snorm8, variant_of, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex,
+    VariantVertex, MAX_VARIANTS,
+};
+use super::mesh::{mesh_meta_finite, validate_mesh, validate_variants};
 
 /// First four bytes of a pack file.
 pub const PACK_MAGIC: [u8; 4] = *b"SYPK";
@@ -43,6 +46,9 @@ pub mod kind {
     pub const MESH_VERTICES: [u8; 4] = *b"MVTX";
     /// Mesh indices (u32) of level `index`.
     pub const MESH_INDICES: [u8; 4] = *b"MIDX";
+    /// The other variants' vertices ([`super::VariantVertex`]) of mesh level
+    /// `index` (`META.mesh_levels[index].variants` of them). Optional.
+    pub const MESH_VARIANTS: [u8; 4] = *b"MVAR";
     /// Material texture array, RGBA8, mip-major.
     pub const MATERIAL_TEXTURES: [u8; 4] = *b"MTEX";
     /// Billboard colour+alpha array, RGBA8 (sRGB), mip-major.
@@ -520,9 +526,10 @@ impl PackPart {
             | kind::IMPOSTOR_COLOR
             | kind::IMPOSTOR_SURFACE => Some(PackPart::Billboards),
             kind::ELLIPSOIDS | kind::LINES | kind::AO_FIELD => Some(PackPart::Clusters),
-            kind::MESH_VERTICES | kind::MESH_INDICES if index == 0 => Some(PackPart::MeshFull),
+            kind::MESH_VERTICES | kind::MESH_INDICES | kind::MESH_VARIANTS if index == 0 => Some(PackPart::MeshFull),
             kind::MESH_VERTICES
             | kind::MESH_INDICES
+            | kind::MESH_VARIANTS
             | kind::MATERIAL_TEXTURES
             | kind::CLOUD_VERTICES
             | kind::CLOUD_INDICES
@@ -627,6 +634,7 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         }
         let sections = format!("MVTX/MIDX section with index {l}");
         validate_mesh(&format!("META.mesh_levels[{l}]"), level, vtx, idx, m.materials.len(), &sections)?;
+        validate_variants(&format!("META.mesh_levels[{l}]"), level, pack.section(kind::MESH_VARIANTS, l as u32))?;
     }
     if let Some(c) = &m.cloud {
         mesh_meta_finite("META.cloud.mesh", &c.mesh)?;

@@ -108,6 +108,8 @@ struct SingleTree {
     instances: wgpu::BindGroup,
     draw: wgpu::BindGroup,
     params: wgpu::Buffer,
+    /// The one instance (its variation chooses the mesh variant).
+    instance: wgpu::Buffer,
 }
 
 impl SingleTree {
@@ -136,7 +138,7 @@ impl SingleTree {
         };
         let s = wgpu::BufferUsages::STORAGE;
         let batches = init("batch", bytemuck::bytes_of(&batch), s);
-        let instances = init("instance", bytemuck::bytes_of(&instance), s);
+        let instances = init("instance", bytemuck::bytes_of(&instance), s | wgpu::BufferUsages::COPY_DST);
         let items = init("item", bytemuck::cast_slice(&[0u32, 0u32]), s);
         // No style: a zeroed control buffer (control words and styles' header).
         let control_bytes = super::gpu_data::control_buffer_bytes(0) as usize;
@@ -150,7 +152,16 @@ impl SingleTree {
             instances: shared.instance_group(&ctx.device, &batches, &instances, &items, &control),
             draw: shared.draw_group(&ctx.device, &params),
             params,
+            instance: instances,
         }
+    }
+
+    /// Draws mesh variant `variant` of a pack that has it (variant 0 otherwise,
+    /// as levels with fewer variants draw `variant % (variants + 1)`): the
+    /// variation whose [`crate::format::pack::variant_of`] is `variant`.
+    fn set_variant(&self, ctx: &GpuContext, variant: u32) {
+        let instance = PackedInstance::new(0, 0, 0, 0, 0, (variant + 15) & 31);
+        ctx.queue.write_buffer(&self.instance, 0, bytemuck::bytes_of(&instance));
     }
 
     fn bind(&self, pass: &mut wgpu::RenderPass<'_>) {
@@ -392,6 +403,13 @@ impl TreeRenderer {
             ao: true,
             full_res_alpha: false,
         }
+    }
+
+    /// Draws mesh variant `variant` from now on (0 by default; a level with
+    /// fewer variants draws `variant` modulo their number): its one tree takes
+    /// the variation that chooses it, tinted as that variation is.
+    pub fn set_variant(&self, ctx: &GpuContext, variant: u32) {
+        self.tree.set_variant(ctx, variant);
     }
 
     /// Renders `what` as `shot` sees it into an sRGB RGBA8 image over `background`.

@@ -133,7 +133,9 @@ pub struct MeshUniform {
     /// Texture coordinate span.
     pub uv_extent: [f32; 2],
     /// Billboard cloud: x the first cell word, y the first fragment word of
-    /// its `CLDA` buffer (x = 16 × planes); zw unused. Zero for mesh levels.
+    /// its `CLDA` buffer (x = 16 × planes), zero for mesh levels. Mesh levels:
+    /// z the other variants in the level's `variants` buffer (0: none), w its
+    /// vertex count.
     pub cloud: [u32; 4],
 }
 const _: () = assert!(std::mem::size_of::<MeshUniform>() == 64);

@@ -77,6 +77,17 @@ impl MeshPipelines {
                     },
                     count: None,
                 },
+                // The level's other variants (`MVAR`), 8 bytes a vertex.
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(8),
+                    },
+                    count: None,
+                },
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -244,9 +255,28 @@ impl MeshGpu {
             contents: &[0; 4],
             usage: wgpu::BufferUsages::STORAGE,
         });
+        let no_variants = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("no variants"),
+            contents: &[0; 8],
+            usage: wgpu::BufferUsages::STORAGE,
+        });
         // One level: its dequantisation (and the cloud's record offsets), buffers, bind group.
-        let make = |level: &MeshLevelMeta, vtx: &[u8], idx: &[u8], cloud: Option<(&wgpu::Buffer, [u32; 2])>| {
+        let make = |level: &MeshLevelMeta,
+                    vtx: &[u8],
+                    idx: &[u8],
+                    var: Option<&[u8]>,
+                    cloud: Option<(&wgpu::Buffer, [u32; 2])>| {
             let offsets = cloud.map_or([0, 0], |(_, o)| o);
+            // Variants larger than the device's storage binding limit are left out.
+            let var =
+                var.filter(|v| !v.is_empty() && (v.len() as u64) <= device.limits().max_storage_buffer_binding_size);
+            let variants = var.map(|v| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("mesh variants"),
+                    contents: v,
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+            });
             let uniform = MeshUniform {
                 pos_min: [level.pos_min[0], level.pos_min[1], level.pos_min[2], 0.0],
                 pos_extent: [
@@ -257,7 +287,12 @@ impl MeshGpu {
                 ],
                 uv_min: level.uv_min,
                 uv_extent: [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]],
-                cloud: [offsets[0], offsets[1], 0, 0],
+                cloud: [
+                    offsets[0],
+                    offsets[1],
+                    if variants.is_some() { level.variants } else { 0 },
+                    level.vertex_count,
+                ],
             };
             let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("mesh level"),
@@ -285,6 +320,10 @@ impl MeshGpu {
                     wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&texture_view) },
                     wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&pipelines.sampler) },
                     wgpu::BindGroupEntry { binding: 4, resource: records.as_entire_binding() },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: variants.as_ref().unwrap_or(&no_variants).as_entire_binding(),
+                    },
                 ],
             });
             MeshLevelGpu { vertices, indices, index_count: level.index_count, bind_group }
@@ -299,7 +338,8 @@ impl MeshGpu {
                 }
                 let vtx = pack.section(kind::MESH_VERTICES, l as u32).unwrap_or_default();
                 let idx = pack.section(kind::MESH_INDICES, l as u32).unwrap_or_default();
-                Some(make(level, vtx, idx, None))
+                let var = pack.section(kind::MESH_VARIANTS, l as u32);
+                Some(make(level, vtx, idx, var, None))
             })
             .collect();
         // A cloud larger than the device's storage binding limit is left out.
@@ -316,7 +356,7 @@ impl MeshGpu {
             let fragments_at = cells_at + c.cells * crate::format::cloud::CELL_WORDS as u32;
             let vtx = pack.section(kind::CLOUD_VERTICES, 0).unwrap_or_default();
             let idx = pack.section(kind::CLOUD_INDICES, 0).unwrap_or_default();
-            make(&c.mesh, vtx, idx, Some((&records, [cells_at, fragments_at])))
+            make(&c.mesh, vtx, idx, None, Some((&records, [cells_at, fragments_at])))
         });
         Self { levels, cloud }
     }

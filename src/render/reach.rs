@@ -208,6 +208,7 @@ mod tests {
                 draws: Vec::new(),
                 select_px: 120.0,
                 policy_px: None,
+                variants: 0,
             }],
             billboards: None,
             clusters: None,

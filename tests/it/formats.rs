@@ -128,6 +128,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
             ],
             select_px: 360.0,
             policy_px: None,
+            variants: 0,
         }],
         billboards: Some(BillboardMeta {
             angles: 2,
@@ -910,4 +911,44 @@ fn the_home_of_a_scene_is_its_largest_group_of_touching_tiles() {
     assert_eq!(m.focus(), m.tiles[0].bounds);
     m.tiles.clear();
     assert_eq!(m.focus(), m.bounds);
+}
+
+#[test]
+fn pack_mesh_variants_are_checked() {
+    use sylva::format::pack::{variant_of, VariantVertex, MAX_VARIANTS};
+    // Two other shapes of the sample's 3 vertices: read back as written.
+    let (mut meta, mut sections) = sample_pack();
+    meta.mesh_levels[0].variants = 2;
+    let shapes: Vec<VariantVertex> =
+        (0..6u16).map(|i| VariantVertex { position: [i, 2 * i, 3 * i], normal_oct: [0, 127] }).collect();
+    sections.push(Section {
+        kind: kind::MESH_VARIANTS,
+        index: 0,
+        count: 6,
+        stride: 8,
+        data: bytemuck::cast_slice(&shapes).to_vec(),
+    });
+    let bytes = encode_pack(&meta, &sections);
+    let pack = decode_pack("p", &bytes).unwrap();
+    assert_eq!(pack.meta.mesh_levels[0].variants, 2);
+    assert_eq!(pack.section(kind::MESH_VARIANTS, 0).unwrap(), bytemuck::cast_slice::<_, u8>(&shapes));
+    // A section of the wrong length, none, or too many variants: refused, saying what.
+    let mut short = sections.clone();
+    let last = short.last_mut().unwrap();
+    last.data.truncate(40);
+    last.count = 5;
+    let e = decode_pack("p", &encode_pack(&meta, &short)).unwrap_err().to_string();
+    assert!(e.contains("2 variants of 3 vertices (48 bytes)") && e.contains("40 bytes"), "{e}");
+    let none: Vec<Section> = sections.iter().filter(|s| s.kind != kind::MESH_VARIANTS).cloned().collect();
+    let e = decode_pack("p", &encode_pack(&meta, &none)).unwrap_err().to_string();
+    assert!(e.contains("no MVAR section"), "{e}");
+    meta.mesh_levels[0].variants = MAX_VARIANTS + 1;
+    let e = decode_pack("p", &encode_pack(&meta, &sections)).unwrap_err().to_string();
+    assert!(e.contains("variants"), "{e}");
+    // A single tree is captured with variation 15: variant 0 whatever the count.
+    for extra in 0..=MAX_VARIANTS {
+        assert_eq!(variant_of(15, extra), 0);
+        let used: std::collections::BTreeSet<u32> = (0..32).map(|v| variant_of(v, extra)).collect();
+        assert_eq!(used.len() as u32, extra + 1, "every variant is drawn by some variation");
+    }
 }

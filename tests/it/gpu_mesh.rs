@@ -3,9 +3,12 @@
 
 use sylva::format::pack::{
     kind, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section, TextureArrayMeta,
+    VariantVertex,
 };
 use sylva::format::{decode_pack, encode_pack};
-use sylva::render::capture::{capture_billboards, render_pack_preview, BillboardFrame, CapturePipelines, PackView};
+use sylva::render::capture::{
+    capture_billboards, render_pack_preview, BillboardFrame, CapturePipelines, PackRepr, PackView, TreeRenderer,
+};
 use sylva::render::GpuContext;
 
 const TEX: u32 = 16;
@@ -14,6 +17,12 @@ const TEX: u32 = 16;
 /// 4–10 m), both vertical and facing (1, 1, 0)/√2, so the side views from −y
 /// (preview) and +x (capture azimuth 0) both see them and the top view sees them edge-on.
 fn toy_pack() -> Vec<u8> {
+    toy_pack_with(false)
+}
+
+/// The toy tree; with `variant`, a second shape of it (`MVAR`) whose leaf card
+/// is half as wide and tall (the trunk the same).
+fn toy_pack_with(variant: bool) -> Vec<u8> {
     let q = |v: f32, lo: f32, hi: f32| (((v - lo) / (hi - lo)).clamp(0.0, 1.0) * 65535.0).round() as u16;
     let (lo, hi) = ([-3.0f32, -3.0, 0.0], [3.0f32, 3.0, 10.0]);
     // `t` runs along the card's horizontal direction (1, −1, 0)/√2.
@@ -41,6 +50,20 @@ fn toy_pack() -> Vec<u8> {
         vtx(-3.0, 10.0, 0.0, 0.0, 1),
     ];
     let indices: [u32; 12] = [0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7];
+    let small = [
+        vtx(-0.3, 0.0, 0.0, 1.0, 0),
+        vtx(0.3, 0.0, 1.0, 1.0, 0),
+        vtx(0.3, 6.0, 1.0, 0.0, 0),
+        vtx(-0.3, 6.0, 0.0, 0.0, 0),
+        vtx(-1.5, 7.0, 0.0, 1.0, 1),
+        vtx(1.5, 7.0, 1.0, 1.0, 1),
+        vtx(1.5, 10.0, 1.0, 0.0, 1),
+        vtx(-1.5, 10.0, 0.0, 0.0, 1),
+    ];
+    let variant_vertices: Vec<VariantVertex> = small
+        .iter()
+        .map(|v| VariantVertex { position: v.position, normal_oct: [v.normal_oct[0], v.normal_oct[1]] })
+        .collect();
     // Leaf texture: green disc, transparent outside; mips by the alpha-aware builder.
     let disc: Vec<u8> = (0..TEX * TEX)
         .flat_map(|i| {
@@ -92,6 +115,7 @@ fn toy_pack() -> Vec<u8> {
             ],
             select_px: 0.0,
             policy_px: None,
+            variants: u32::from(variant),
         }],
         billboards: None,
         clusters: None,
@@ -115,6 +139,16 @@ fn toy_pack() -> Vec<u8> {
         },
         Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: chain.concat() },
     ];
+    let mut sections = sections;
+    if variant {
+        sections.push(Section {
+            kind: kind::MESH_VARIANTS,
+            index: 0,
+            count: 8,
+            stride: 8,
+            data: bytemuck::cast_slice(&variant_vertices).to_vec(),
+        });
+    }
     encode_pack(&meta, &sections)
 }
 
@@ -191,4 +225,38 @@ fn billboard_capture_sees_the_tree_from_every_angle() {
     assert!(cap.color[0][i + 3] > 0, "no texel at the crown centre");
     assert!((i32::from(n[0]) - 128).abs() > 60, "normal x should be ±0.7, got {n:?}");
     assert!(n[2].abs_diff(128) < 20, "normal z should be 0, got {n:?}");
+}
+
+#[test]
+fn a_tree_draws_its_variant() {
+    // The same level, two shapes: a tree of variant 1 draws the smaller card,
+    // the trunk unchanged; variant 0 and a variant the level lacks (modulo)
+    // draw the level's own.
+    let ctx = gpu();
+    let bytes = toy_pack_with(true);
+    let pack = decode_pack("toy", &bytes).unwrap();
+    let (w, h) = (96, 96);
+    let bg = [0.0, 0.0, 1.0, 1.0];
+    let r = TreeRenderer::new(&ctx);
+    let count = |variant: u32| {
+        r.set_variant(&ctx, variant);
+        let img = r.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, [w, h], bg).unwrap();
+        let (mut leaf, mut trunk) = (0usize, 0usize);
+        for p in img.chunks_exact(4) {
+            match p {
+                [r, g, b, _] if g > r && g > b => leaf += 1,
+                [r, g, b, _] if r > g && r > b => trunk += 1,
+                _ => {}
+            }
+        }
+        (leaf, trunk, write_actual(&format!("variant{variant}"), &img, w, h))
+    };
+    let (leaf0, trunk0, saved0) = count(0);
+    let (leaf1, trunk1, saved1) = count(1);
+    let (leaf2, _, _) = count(2);
+    assert!(leaf0 > 200, "variant 0 drew {leaf0} leaf px; see {saved0}");
+    assert!(leaf1 > 20 && leaf1 * 3 < leaf0, "variant 1 drew {leaf1} leaf px, variant 0 {leaf0}; see {saved1}");
+    // (The smaller card hides less of the trunk.)
+    assert!(trunk0 > 0 && trunk1 > trunk0, "trunk {trunk0} vs {trunk1} px; see {saved1}");
+    assert_eq!(leaf2, leaf0, "variant 2 of a level with two is variant 0");
 }

@@ -163,7 +163,7 @@ fn hash_f32s(values: &[f32], h: &mut DefaultHasher) {
 
 fn hash_model(model: &ImportedModel, h: &mut DefaultHasher) {
     // Every field: a new one must be added here (or to the ignored ones).
-    let ImportedModel { materials, vertices, triangles, notes: _ } = model;
+    let ImportedModel { materials, vertices, triangles, notes: _, variants } = model;
     materials.len().hash(h);
     for m in materials {
         let ImportedMaterial { name, kind, base_color, alpha_cutoff, double_sided, texture, blended } = m;
@@ -191,6 +191,11 @@ fn hash_model(model: &ImportedModel, h: &mut DefaultHasher) {
         material.hash(h);
     }
     triangles.hash(h);
+    variants.len().hash(h);
+    for [position, normal] in variants.iter().flatten() {
+        hash_f32s(&position.to_array(), h);
+        hash_f32s(&normal.to_array(), h);
+    }
 }
 
 fn hash_options(options: &PackOptions, h: &mut DefaultHasher) {
@@ -238,6 +243,7 @@ mod tests {
             vertices: vec![vertex(0.0), vertex(1.0), vertex(2.0)],
             triangles: vec![[0, 1, 2]],
             notes: Vec::new(),
+            variants: Vec::new(),
         }
     }
 

@@ -450,13 +450,16 @@ fn library_fill(
         if map.model(&name).is_some() {
             name = format!("library-{name}");
         }
-        let model = library::model(g, 0);
+        let model = library::model_variants(g, library::VARIANTS);
         let idx = species.len();
         map.names.push(name.clone());
         map.heights.push(model.height());
         map.crown_widths.push(model.crown_width());
         let (leaf, wood) = model.triangle_counts();
-        log(&format!("  {name} (library:{genus}, {leaf} leaf + {wood} branch triangles):"));
+        log(&format!(
+            "  {name} (library:{genus}, {leaf} leaf + {wood} branch triangles, {} variants):",
+            model.variants.len() + 1
+        ));
         for (k, (label, why, n)) in rows.iter().enumerate() {
             let shown = if label.is_empty() { "(no species)" } else { label };
             if k < LISTED {

@@ -28,7 +28,8 @@ pub fn spec(path: &str) -> Option<&str> {
     path.strip_prefix("library:")
 }
 
-/// The model a `library:` spec names: `GENUS` or `GENUS:VARIANT` (a number, 0 by default).
+/// The model a `library:` spec names: `GENUS` (with its [`VARIANTS`]
+/// variants, trees assigned one each) or `GENUS:VARIANT` (that one alone).
 ///
 /// # Errors
 /// An unknown genus (the error lists the library's) or variant.
@@ -37,9 +38,9 @@ pub fn model_named(spec: &str) -> anyhow::Result<ImportedModel> {
         Some((n, v)) => {
             let v: u64 =
                 v.trim().parse().map_err(|_| anyhow::anyhow!("library:{spec}: the variant {v:?} is no number"))?;
-            (n, v)
+            (n, Some(v))
         }
-        None => (spec, 0),
+        None => (spec, None),
     };
     let Some(g) = entry(name) else {
         let names: Vec<&str> = GENERA.iter().map(|g| g.name).collect();
@@ -50,7 +51,10 @@ pub fn model_named(spec: &str) -> anyhow::Result<ImportedModel> {
             forms.join(", ")
         );
     };
-    Ok(model(g, variant))
+    Ok(match variant {
+        Some(v) => model(g, v),
+        None => model_variants(g, VARIANTS),
+    })
 }
 
 /// The seed of a genus's variant.
@@ -85,6 +89,36 @@ pub fn model(genus: &Genus, variant: u64) -> ImportedModel {
     let structure = variant_seed(genus, 0);
     let skeleton = weber_penn::grow_variant(&fitted(genus), structure, variant_seed(genus, variant));
     build(genus, &skeleton, structure)
+}
+
+/// The tree of `genus` with its `count` variants (at least 1): variant 0 as
+/// the model, the others as its [`ImportedModel::variants`], each stretched
+/// to variant 0's height and crown width — its stems' axes and its leaves'
+/// places, not their girth or size — so that every variant of a tree stands
+/// as tall and as wide as the inventory says.
+#[must_use]
+pub fn model_variants(genus: &Genus, count: u64) -> ImportedModel {
+    let params = fitted(genus);
+    let structure = variant_seed(genus, 0);
+    let first = weber_penn::grow_variant(&params, structure, structure);
+    let (w0, h0) = extent(&first);
+    let mut m = build(genus, &first, structure);
+    for v in 1..count.max(1) {
+        let mut t = weber_penn::grow_variant(&params, structure, variant_seed(genus, v));
+        let (w, h) = extent(&t);
+        let s = Vec3::new(w0 / w, w0 / w, h0 / h);
+        for stem in &mut t.stems {
+            for (p, _) in &mut stem.points {
+                *p *= s;
+            }
+        }
+        for leaf in &mut t.leaves {
+            leaf.centre *= s;
+        }
+        let other = build(genus, &t, structure);
+        m.variants.push(other.vertices.iter().map(|x| [x.position, x.normal]).collect());
+    }
+    m
 }
 
 /// Variants the library fits its genera over (and the bake draws).
@@ -254,7 +288,10 @@ mod tests {
                 let (leaf, wood) = m.triangle_counts();
                 let h = m.height();
                 let ratio = m.crown_width() / h;
-                eprintln!("{:<20} v{v} {ratio:.2} (genus {:.2}) {h:5.1} m, {wood:6} wood {leaf:6} leaf", g.name, g.crown_ratio);
+                eprintln!(
+                    "{:<20} v{v} {ratio:.2} (genus {:.2}) {h:5.1} m, {wood:6} wood {leaf:6} leaf",
+                    g.name, g.crown_ratio
+                );
                 mean_ratio += ratio / VARIANTS as f32;
                 mean_height += h / VARIANTS as f32;
                 if wood < 200 || leaf < 100 || wood + leaf > 150_000 {

@@ -4,7 +4,7 @@
 use crate::input::gltf_import::{ImportedModel, ImportedVertex};
 use glam::{Vec2, Vec3};
 use sylva::format::pack::{
-    ao_to_snorm8, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, TextureArrayMeta,
+    ao_to_snorm8, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, TextureArrayMeta, VariantVertex,
 };
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 
@@ -109,7 +109,7 @@ pub(super) fn build_mesh_level(
     model: &ImportedModel,
     select_px: f32,
     ao: Option<&[f32]>,
-) -> (MeshLevelMeta, Vec<MeshVertex>, Vec<u32>) {
+) -> (MeshLevelMeta, Vec<MeshVertex>, Vec<u32>, Vec<VariantVertex>) {
     // Group triangles by material: one draw range per material.
     let mut order: Vec<usize> = (0..model.triangles.len()).collect();
     order.sort_by_key(|&t| model.vertices[model.triangles[t][0] as usize].material);
@@ -123,7 +123,8 @@ pub(super) fn build_mesh_level(
         }
         indices.extend_from_slice(&model.triangles[t]);
     }
-    // Vertex cache order within each material's range, then fetch order for all.
+    // Vertex cache order within each material's range, then fetch order for all
+    // (the variants' shapes reordered alike).
     for d in &draws {
         let range = d.first_index as usize..(d.first_index + d.index_count) as usize;
         let optimised = meshopt::optimize_vertex_cache(&indices[range.clone()], model.vertices.len());
@@ -135,7 +136,23 @@ pub(super) fn build_mesh_level(
         .enumerate()
         .map(|(i, v)| ImportedVertexPod { ao: ao.map_or(-1.0, |a| a[i]), ..ImportedVertexPod::from(v) })
         .collect();
-    let vertices = meshopt::optimize_vertex_fetch(&mut indices, &vertices);
+    let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertices.len());
+    let used = remap.iter().filter(|&&r| r != u32::MAX).count();
+    let indices = meshopt::remap_index_buffer(Some(&indices), vertices.len(), &remap);
+    let vertices = meshopt::remap_vertex_buffer(&vertices, used, &remap);
+    let shapes: Vec<Vec<[Vec3; 2]>> = model
+        .variants
+        .iter()
+        .map(|shape| {
+            let mut out = vec![[Vec3::ZERO; 2]; used];
+            for (i, &r) in remap.iter().enumerate() {
+                if r != u32::MAX {
+                    out[r as usize] = shape[i];
+                }
+            }
+            out
+        })
+        .collect();
     let (mut pmin, mut pmax) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
     let (mut umin, mut umax) = (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN));
     for v in &vertices {
@@ -144,26 +161,38 @@ pub(super) fn build_mesh_level(
         umin = umin.min(Vec2::from(v.uv));
         umax = umax.max(Vec2::from(v.uv));
     }
+    for [p, _] in shapes.iter().flatten() {
+        pmin = pmin.min(*p);
+        pmax = pmax.max(*p);
+    }
     if vertices.is_empty() {
         (pmin, pmax, umin, umax) = (Vec3::ZERO, Vec3::ONE, Vec2::ZERO, Vec2::ONE);
     }
     let pext = (pmax - pmin).max(Vec3::splat(1e-6));
     let uext = (umax - umin).max(Vec2::splat(1e-6));
     let q16 = |v: f32| (v.clamp(0.0, 1.0) * 65535.0).round() as u16;
+    let quantise = |p: Vec3| {
+        let p = (p - pmin) / pext;
+        [q16(p.x), q16(p.y), q16(p.z)]
+    };
     let packed: Vec<MeshVertex> = vertices
         .iter()
         .map(|v| {
-            let p = (Vec3::from(v.position) - pmin) / pext;
             let uv = (Vec2::from(v.uv) - umin) / uext;
             let [ox, oy] = oct_encode(Vec3::from(v.normal));
             MeshVertex {
-                position: [q16(p.x), q16(p.y), q16(p.z)],
+                position: quantise(Vec3::from(v.position)),
                 material: v.material as u16,
                 normal_oct: [ox, oy, if v.ao < 0.0 { 0 } else { ao_to_snorm8(v.ao) }, 0],
                 uv: [q16(uv.x), q16(uv.y)],
                 color: v.color.map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8),
             }
         })
+        .collect();
+    let variant_vertices: Vec<VariantVertex> = shapes
+        .iter()
+        .flatten()
+        .map(|&[p, n]| VariantVertex { position: quantise(p), normal_oct: oct_encode(n) })
         .collect();
     let meta = MeshLevelMeta {
         vertex_count: packed.len() as u32,
@@ -175,8 +204,9 @@ pub(super) fn build_mesh_level(
         draws,
         select_px,
         policy_px: None,
+        variants: shapes.len() as u32,
     };
-    (meta, packed, indices)
+    (meta, packed, indices, variant_vertices)
 }
 
 /// `ImportedVertex` as plain data for meshopt's vertex fetch reordering.
@@ -219,7 +249,10 @@ pub fn simplify_model(model: &ImportedModel) -> (ImportedModel, Vec<u32>) {
         vertices: model.vertices.clone(),
         triangles: Vec::new(),
         notes: Vec::new(),
+        variants: Vec::new(),
     };
+    // The variants' shapes, enlarged as the model's (the same cards: the same topology).
+    let mut shapes: Vec<Vec<[Vec3; 2]>> = model.variants.clone();
     if !branch_idx.is_empty() {
         let adapter =
             meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&positions), 12, 0).expect("12-byte positions");
@@ -267,6 +300,13 @@ pub fn simplify_model(model: &ImportedModel) -> (ImportedModel, Vec<u32>) {
             let p = &mut out.vertices[v as usize].position;
             *p = centre + (*p - centre) * grow;
         }
+        for shape in &mut shapes {
+            let centre = verts.iter().map(|&v| shape[v as usize][0]).sum::<Vec3>() / verts.len() as f32;
+            for &v in &verts {
+                let p = &mut shape[v as usize][0];
+                *p = centre + (*p - centre) * grow;
+            }
+        }
         out.triangles.extend_from_slice(card);
     }
     // Drop unused vertices.
@@ -284,5 +324,6 @@ pub fn simplify_model(model: &ImportedModel) -> (ImportedModel, Vec<u32>) {
         }
     }
     out.vertices = vertices;
+    out.variants = shapes.iter().map(|shape| source.iter().map(|&i| shape[i as usize]).collect()).collect();
     (out, source)
 }

@@ -169,9 +169,12 @@ pub fn build_pack(
         }
     }
     let mut sections = Vec::new();
-    for (i, (_, vtx, idx)) in levels.iter().enumerate() {
+    for (i, (_, vtx, idx, variants)) in levels.iter().enumerate() {
         sections.push(records(kind::MESH_VERTICES, i as u32, vtx));
         sections.push(records(kind::MESH_INDICES, i as u32, idx));
+        if !variants.is_empty() {
+            sections.push(records(kind::MESH_VARIANTS, i as u32, variants));
+        }
     }
     if let Some(bytes) = texture_bytes {
         sections.push(Section { kind: kind::MATERIAL_TEXTURES, index: 0, count: 0, stride: 0, data: bytes });
@@ -182,7 +185,7 @@ pub fn build_pack(
             let started = std::time::Instant::now();
             let (wood, wood_ao) = coarsest.as_ref().map_or((model, &vertex_ao[..]), |(m, a)| (m, &a[..]));
             let built = crate::pack::cloud::build_cloud(model, &vertex_ao, wood, wood_ao, opts.cloud_planes as usize)?;
-            let (mut level, vtx, idx) =
+            let (mut level, vtx, idx, _) =
                 build_mesh_level(&built.model, SELECT_PX_CLOUD, opts.ao.then_some(&built.model_ao[..]));
             level.select_px = SELECT_PX_CLOUD;
             let material = materials.len() as u32;
@@ -237,7 +240,7 @@ pub fn build_pack(
         bounds_max: hi.to_array(),
         materials,
         material_texture: texture_meta,
-        mesh_levels: levels.iter().map(|(m, _, _)| m.clone()).collect(),
+        mesh_levels: levels.iter().map(|(m, _, _, _)| m.clone()).collect(),
         billboards: None,
         clusters: None,
         impostors: None,

@@ -66,14 +66,19 @@ pub struct ImportedModel {
     /// What the import changed or left out, for the bake's log (line and point
     /// primitives skipped, blended materials cut out, instances expanded).
     pub notes: Vec<String>,
+    /// Other shapes of the same tree (the library's variants): for each, a
+    /// position and normal per vertex of `vertices`; the triangles, uvs,
+    /// colours and materials are the model's. Empty for a glTF model.
+    pub variants: Vec<Vec<[Vec3; 2]>>,
 }
 
 impl ImportedModel {
-    /// Bounds (min, max) of all vertices.
+    /// Bounds (min, max) of all vertices, of every variant.
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        self.vertices.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
+        let own = self.vertices.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
             (lo.min(v.position), hi.max(v.position))
-        })
+        });
+        self.variants.iter().flatten().fold(own, |(lo, hi), [p, _]| (lo.min(*p), hi.max(*p)))
     }
 
     /// Height (z extent).
