@@ -1770,3 +1770,143 @@ fn library_models_bake_without_a_gltf() {
     assert!(rows.iter().any(|r| r["genus"] == "conifer-spire" && r["archetype"] == true), "{v}");
     assert!(rows.iter().any(|r| r["genus"] == "Picea" && r["conifer"] == true && r["model"] == "library:Picea"));
 }
+
+#[test]
+fn twenty_genera_from_an_inventory_without_models() {
+    // A generated inventory naming 20 genera — Latin (cultivar, hybrid), common
+    // names in four languages, 4 codes through a species table — and 2 labels
+    // nothing knows: 20 library genera and the broadleaf archetype, each label's
+    // choice reported.
+    let dir = tmp("twenty-genera");
+    let labels = [
+        "Quercus robur",
+        "Fagus sylvatica",
+        "Acer platanoides 'Crimson King'",
+        "Tilia x europaea",
+        "Betula pendula",
+        "Picea abies",
+        "Pinus sylvestris",
+        "Larix decidua",
+        "Gewone es",
+        "Rosskastanie",
+        "Platane commun",
+        "Álamo blanco",
+        "Weeping willow",
+        "Hainbuche",
+        "Hawthorn",
+        "Cèdre de l'Atlas",
+        "ABAL",
+        "PSME",
+        "ULGL",
+        "ROPS",
+        "Mystery tree",
+        "Spec. 17",
+    ];
+    let mut csv = String::from("id,x,y,species,height\n");
+    for (i, l) in labels.iter().enumerate() {
+        csv += &format!("{i},{},5300000,\"{l}\",18\n", 500000 + 15 * i);
+    }
+    std::fs::write(dir.join("trees.csv"), csv).unwrap();
+    std::fs::write(
+        dir.join("codes.csv"),
+        "SPCD,SCIENTIFIC_NAME\nABAL,Abies alba\nPSME,Pseudotsuga menziesii\nULGL,Ulmus glabra\nROPS,Robinia pseudoacacia\n",
+    )
+    .unwrap();
+    let out = dir.join("scene");
+    let o = run(bin()
+        .arg("bake")
+        .arg("--placements")
+        .arg(dir.join("trees.csv"))
+        .arg("--species-table")
+        .arg(dir.join("codes.csv"))
+        .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--no-ao", "--no-simplified-level"])
+        .args(["--far-tier", "billboards", "--billboard-size", "16", "--texture-size", "16"])
+        .arg("--out")
+        .arg(&out));
+    let log = String::from_utf8_lossy(&o.stderr).into_owned();
+    let v = inspect_json(&out);
+    let mut names: Vec<&str> = v["species"].as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect();
+    names.sort_unstable();
+    let want = [
+        "abies",
+        "acer",
+        "aesculus",
+        "betula",
+        "broadleaf-round",
+        "carpinus",
+        "cedrus",
+        "crataegus",
+        "fagus",
+        "fraxinus",
+        "larix",
+        "picea",
+        "pinus",
+        "platanus",
+        "populus",
+        "pseudotsuga",
+        "quercus",
+        "robinia",
+        "salix",
+        "tilia",
+        "ulmus",
+    ];
+    assert_eq!(names, want, "{log}");
+    assert_eq!(v["trees_total"], 22, "{log}");
+    assert!(log.contains("22 trees under 22 species labels no --model takes, drawn as 21 library genera"), "{log}");
+    for line in [
+        "\"Hainbuche\": 1 tree, by common name",
+        "\"Álamo blanco\": 1 tree, by common name",
+        "\"PSME\": 1 tree, by species table: Pseudotsuga menziesii, then genus",
+        "\"Mystery tree\": 1 tree, by broadleaf default",
+        "\"Spec. 17\": 1 tree, by broadleaf default",
+    ] {
+        assert!(log.contains(line), "{line}\n{log}");
+    }
+    // Each library species carries its three variants in its mesh.
+    for s in v["species"].as_array().unwrap() {
+        let level = &s["levels"][0];
+        assert_eq!(level["variants"], 3, "{}: {level}", s["name"]);
+    }
+    // A conifer is narrower than a broadleaf of the same height, seen from the
+    // side: the contact sheet's silhouettes (non-sky pixels per row).
+    let sheet = dir.join("sheet.png");
+    run(bin().args(["library", "render", "Picea", "Fagus", "--variants", "1", "--size", "96", "--out"]).arg(&sheet));
+    let img = image::open(&sheet).unwrap().to_rgba8();
+    let width_over_height = |row: u32| {
+        let (mut x0, mut x1, mut y0, mut y1) = (u32::MAX, 0, u32::MAX, 0);
+        for y in 0..96 {
+            for x in 0..96 {
+                let p = img.get_pixel(x, row * 96 + y).0;
+                // The sky background is (0.62, 0.74, 0.86): blue over red by far.
+                if !(p[2] > 180 && p[0] > 130) {
+                    (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+                }
+            }
+        }
+        assert!(x1 > x0 && y1 > y0, "row {row}: nothing drawn");
+        (x1 - x0 + 1) as f32 / (y1 - y0 + 1) as f32
+    };
+    let (conifer, broadleaf) = (width_over_height(0), width_over_height(1));
+    assert!(conifer < broadleaf * 0.85, "Picea {conifer:.2} vs Fagus {broadleaf:.2} wide over tall");
+}
+
+#[test]
+fn library_packs_are_the_same_on_every_bake() {
+    // Byte-identical packs for the same inventory, built twice without the cache.
+    let dir = tmp("library-twice");
+    std::fs::write(dir.join("t.csv"), "id,x,y,species,height\n1,500000,5300000,Betula pendula,14\n").unwrap();
+    let bake = |out: &Path| {
+        run(bin_building_packs()
+            .arg("bake")
+            .arg("--placements")
+            .arg(dir.join("t.csv"))
+            .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--no-ao"])
+            .args(["--far-tier", "billboards", "--billboard-size", "16", "--texture-size", "16"])
+            .arg("--out")
+            .arg(out));
+        std::fs::read(out.join("species/betula.pack")).unwrap()
+    };
+    let (a, b) = (bake(&dir.join("a")), bake(&dir.join("b")));
+    assert!(a.len() > 100_000, "{} bytes", a.len());
+    assert!(a == b, "two bakes of the same library species differ");
+}

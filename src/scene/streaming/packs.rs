@@ -154,11 +154,15 @@ impl<F: Fetcher> SceneStream<F> {
     }
 
     /// Whether trees of species `s` can be drawn (its billboards, or the whole
-    /// pack, are on the GPU) and, if not, whether they may still come (not
+    /// pack, are on the GPU; for a view without a far tier, any part it wants)
+    /// and, if not, whether they may still come (not
     /// given up on).
     pub(super) fn species_drawable(&self, s: usize) -> (bool, bool) {
         match self.packs.get(s) {
             Some(l) if l.whole || l.have[0] => (true, false),
+            // A view that draws no far tier (meshes only): drawable with the
+            // parts it wants that have come.
+            Some(l) if !l.wants[0] && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) => (true, false),
             Some(l) => (false, l.head != Load::Broken && l.parts[0] != Load::Broken),
             None => (false, false),
         }

@@ -77,6 +77,8 @@ impl Fetcher for FakeFetcher {
 
 /// Holds up to `capacity` instances; records uploads, evictions and packs.
 struct FakeResidency {
+    /// The pack parts it asks for (every one by default).
+    parts: [bool; PACK_PARTS],
     capacity: u32,
     used: u32,
     next: u32,
@@ -92,6 +94,7 @@ struct FakeResidency {
 impl FakeResidency {
     fn new(capacity: u32) -> Self {
         Self {
+            parts: [true; PACK_PARTS],
             capacity,
             used: 0,
             next: 0,
@@ -142,7 +145,7 @@ impl Residency for FakeResidency {
             (0..self.species).filter_map(|s| self.packs.iter().rev().find(|p| p.0 == s).map(|p| p.1)).sum();
     }
     fn parts_needed(&self, _species: usize, _meta: &crate::format::PackMeta) -> [bool; PACK_PARTS] {
-        [true; PACK_PARTS]
+        self.parts
     }
     fn instance_room(&self) -> (u32, u32) {
         (self.capacity - self.used, self.capacity)
@@ -855,6 +858,18 @@ fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
     assert!(checked > 0, "no frame had a wanted tile loading");
     assert!(s.is_settled() && r.used > 0);
     assert!(s.canopy_draws().is_empty(), "{} rasters drawn over resident trees", s.canopy_draws().len());
+
+    // A view that draws meshes only (no far tier, as `--only meshes` and the
+    // benchmark's references): once its trees and their meshes are in, the
+    // canopy gives way to them too, though no billboards ever come.
+    let mut s = stream(StreamConfig::default());
+    s.set_canopy_view(Some(canopy));
+    let mut r = FakeResidency::new(1 << 20);
+    r.parts = PackPart::ALL.map(|p| p != PackPart::Billboards);
+    let t = run(&mut s, &mut r, &far, 1e6, 0.0, 0.1, 24);
+    run(&mut s, &mut r, &near, 1e6, t, 0.1, 24);
+    assert!(s.is_settled() && r.used > 0, "the trees are resident");
+    assert!(s.canopy_draws().iter().all(|d| !d.stand_in), "stand-ins over resident trees drawn as meshes");
 
     // A species whose pack cannot be read: its trees are drawn by the canopy.
     let mut s = stream(StreamConfig::default());
