@@ -140,7 +140,10 @@ pub fn build_pack(
     pipelines: &CapturePipelines,
     log: &dyn Fn(&str),
 ) -> Result<BuiltPack> {
-    let (lo, hi) = model.bounds();
+    // Variant 0's bounds: the captures (billboards, impostors) show it, and the
+    // other variants are stretched to its height and crown width (their
+    // bounding spheres, which culling uses, are within its own).
+    let (lo, hi) = model.own_bounds();
     let height = (hi.z - lo.z).max(1e-3);
     let (materials, texture_meta, texture_bytes) = build_materials(model, opts.texture_size);
     // The tree's own occlusion, one field for every level (mesh vertices, the

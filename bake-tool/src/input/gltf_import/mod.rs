@@ -75,22 +75,26 @@ pub struct ImportedModel {
 impl ImportedModel {
     /// Bounds (min, max) of all vertices, of every variant.
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        let own = self.vertices.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
-            (lo.min(v.position), hi.max(v.position))
-        });
-        self.variants.iter().flatten().fold(own, |(lo, hi), [p, _]| (lo.min(*p), hi.max(*p)))
+        self.variants.iter().flatten().fold(self.own_bounds(), |(lo, hi), [p, _]| (lo.min(*p), hi.max(*p)))
     }
 
-    /// Height (z extent).
+    /// Bounds (min, max) of the model's own vertices (variant 0).
+    pub fn own_bounds(&self) -> (Vec3, Vec3) {
+        self.vertices.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
+            (lo.min(v.position), hi.max(v.position))
+        })
+    }
+
+    /// Height (z extent; variant 0's, which the other variants are stretched to).
     pub fn height(&self) -> f32 {
-        let (lo, hi) = self.bounds();
+        let (lo, hi) = self.own_bounds();
         hi.z - lo.z
     }
 
     /// Crown width: the mean of the x and y extents (as foresters average two
     /// perpendicular crown widths).
     pub fn crown_width(&self) -> f32 {
-        let (lo, hi) = self.bounds();
+        let (lo, hi) = self.own_bounds();
         ((hi.x - lo.x) + (hi.y - lo.y)) * 0.5
     }
 
