@@ -115,8 +115,8 @@ pub struct MeshLevelMeta {
     pub policy_px: Option<f32>,
     /// Other shapes of the level (the library's variants of a tree), in its
     /// `MVAR` section: [`VariantVertex`] × `vertex_count` per variant, variant 1
-    /// first. A tree draws variant `variation % (variants + 1)` (0: the `MVTX`
-    /// vertices). At most [`MAX_VARIANTS`]; absent: none.
+    /// first. A tree draws variant [`variant_of`]`(variation, variants)` (0: the
+    /// `MVTX` vertices). At most [`MAX_VARIANTS`]; absent: none.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub variants: u32,
 }

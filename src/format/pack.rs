@@ -244,6 +244,11 @@ pub struct ImpostorMeta {
     /// viewer shades filtered normals with it. Empty in older packs (1).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub normal_length: Vec<f32>,
+    /// Half extents of the box about `center` the views show (the captured
+    /// tree's: variant 0's of a pack with variants, whose `bounds_*` hold them
+    /// all). Absent: the box of `bounds_*` about `center`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub half_extent: Option<[f32; 3]>,
 }
 
 /// The `META` section of a pack.
@@ -700,6 +705,15 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     if let Some(i) = &m.impostors {
         finite_all("META.impostors.center", &i.center)?;
         finite("META.impostors.radius", f64::from(i.radius))?;
+        if let Some(h) = &i.half_extent {
+            finite_all("META.impostors.half_extent", h)?;
+            if h.iter().any(|v| *v < 0.0 || *v > i.radius * 1.01) {
+                return Err(Problem::Invalid(format!(
+                    "META.impostors.half_extent {h:?} is not within the radius {}",
+                    i.radius
+                )));
+            }
+        }
         if !(2..=16).contains(&i.grid) || i.grid * i.grid != i.texture.layers || i.radius <= 0.0 {
             return Err(Problem::Invalid(format!(
                 "META.impostors has a {0}×{0} grid (2–16 per side), {1} layers (need grid²) and radius {2} (need > 0)",

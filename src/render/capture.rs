@@ -156,11 +156,11 @@ impl SingleTree {
         }
     }
 
-    /// Draws mesh variant `variant` of a pack that has it (variant 0 otherwise,
-    /// as levels with fewer variants draw `variant % (variants + 1)`): the
-    /// variation whose [`crate::format::pack::variant_of`] is `variant`.
+    /// Draws mesh variant `variant` (0–31) of a pack that has it — a level
+    /// with fewer draws `variant % (variants + 1)` — through the variation
+    /// whose [`crate::format::pack::variant_of`] is `variant`.
     fn set_variant(&self, ctx: &GpuContext, variant: u32) {
-        let instance = PackedInstance::new(0, 0, 0, 0, 0, (variant + 15) & 31);
+        let instance = PackedInstance::new(0, 0, 0, 0, 0, variant.wrapping_add(15) & 31);
         ctx.queue.write_buffer(&self.instance, 0, bytemuck::bytes_of(&instance));
     }
 
@@ -405,9 +405,9 @@ impl TreeRenderer {
         }
     }
 
-    /// Draws mesh variant `variant` from now on (0 by default; a level with
-    /// fewer variants draws `variant` modulo their number): its one tree takes
-    /// the variation that chooses it, tinted as that variation is.
+    /// Draws mesh variant `variant` (0–31) from now on (0 by default; a level
+    /// with fewer variants draws `variant` modulo their number): its one tree
+    /// takes the variation that chooses it, tinted as that variation is.
     pub fn set_variant(&self, ctx: &GpuContext, variant: u32) {
         self.tree.set_variant(ctx, variant);
     }

@@ -151,7 +151,10 @@ impl ImpostorGpu {
         let bind_group = pipeline.bind_group(device, "impostor textures", &[&color_tex, &surface_tex]);
         // The box about the sphere's centre (the centre is the box's own).
         let c = glam::Vec3::from(meta.center);
-        let half = (glam::Vec3::from(pack.meta.bounds_max) - c).max(c - glam::Vec3::from(pack.meta.bounds_min));
+        let half = meta.half_extent.map_or_else(
+            || (glam::Vec3::from(pack.meta.bounds_max) - c).max(c - glam::Vec3::from(pack.meta.bounds_min)),
+            glam::Vec3::from,
+        );
         Some(Self { bind_group, bytes: (color.len() + surface.len()) as u64, meta, half_extent: half.to_array() })
     }
 

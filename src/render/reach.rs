@@ -218,6 +218,7 @@ mod tests {
                 center: [0.0, 0.0, 10.0],
                 radius: 12.0,
                 normal_length: Vec::new(),
+                half_extent: None,
             }),
             cloud: None,
         };

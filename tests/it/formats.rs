@@ -757,6 +757,7 @@ fn pack_decoder_error_paths() {
                 center: [0.0; 3],
                 radius,
                 normal_length: Vec::new(),
+                half_extent: None,
             });
             s.push(Section { kind: kind::IMPOSTOR_COLOR, index: 0, count: 0, stride: 0, data: vec![0; 80] });
             if surface {

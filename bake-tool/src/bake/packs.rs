@@ -146,7 +146,14 @@ pub fn bake_packs(
 /// Horizontal radius and z range of a model, for batch bounds.
 fn shape_of(model: &ImportedModel) -> SpeciesShape {
     let (lo, hi) = model.bounds();
-    let radius_xy = model.vertices.iter().map(|v| v.position.truncate().length()).fold(0.0f32, f32::max);
+    // (Every variant's vertices: a tree may draw any.)
+    let radius_xy = model
+        .vertices
+        .iter()
+        .map(|v| v.position)
+        .chain(model.variants.iter().flatten().map(|[p, _]| *p))
+        .map(|p| p.truncate().length())
+        .fold(0.0f32, f32::max);
     SpeciesShape { radius_xy, z_min: lo.z, z_max: hi.z }
 }
 

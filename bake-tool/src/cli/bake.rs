@@ -36,8 +36,10 @@ pub(crate) struct BakeArgs {
     /// The built-in species library: `on` (default) gives every species label that no
     /// --model, --map or --default-model takes a tree of its genus (its Latin name,
     /// else a common name in English, Dutch, German, French or Spanish, else its
-    /// family's, else a conifer or broadleaf archetype; reported); `off` skips such
-    /// rows. Without any --model every species comes from the library.
+    /// family's, else the archetype of a leaf-type column's value (leaf_type,
+    /// foliage, Blatttyp, …: conifer, broadleaf, palm, shrub), else a conifer or
+    /// broadleaf archetype; reported); `off` skips such rows. Without any --model
+    /// every species comes from the library.
     #[arg(long, value_name = "on|off", default_value = "on", value_parser = ["on", "off"])]
     pub(crate) library: String,
     /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
@@ -413,9 +415,18 @@ fn library_fill(
     const LISTED: usize = 20;
     log("library: reading the species labels no --model takes…");
     let source = sylva_bake::input::placements::PlacementSource::open(placements, read)?;
+    // A leaf-type column (conifer / broadleaf / palm / shrub) places labels nothing else does.
+    let attribute_names = source.attribute_names();
+    let leaf_column = attribute_names.iter().position(|n| {
+        library::choose::LEAF_TYPE_COLUMNS.contains(&sylva_bake::input::names::fold(n).replace(' ', "_").as_str())
+    });
+    if let Some(c) = leaf_column {
+        log(&format!("library: leaf types from the column {:?}", attribute_names[c]));
+    }
     let mut labels: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
+    let mut leaf_types: std::collections::BTreeMap<String, String> = std::collections::BTreeMap::new();
     let (mut unmapped, mut beyond) = (0u64, 0u64);
-    source.for_each(&mut |p| {
+    let mut visit = |p: sylva_bake::input::placements::Placement| {
         let label = p.species.as_deref().unwrap_or("").trim();
         if map.of(label).is_none() {
             if let Some(n) = labels.get_mut(label) {
@@ -426,10 +437,21 @@ fn library_fill(
                 unmapped += 1;
             } else {
                 beyond += 1;
+                return Ok(());
+            }
+            if let Some(Some(t)) = leaf_column.and_then(|c| p.attrs.get(c)) {
+                if !t.trim().is_empty() && !leaf_types.contains_key(label) {
+                    leaf_types.insert(label.to_string(), t.trim().to_string());
+                }
             }
         }
         Ok(())
-    })?;
+    };
+    if leaf_column.is_some() {
+        source.for_each_with_attributes(&mut visit)?;
+    } else {
+        source.for_each(&mut visit)?;
+    }
     if beyond > 0 {
         log(&format!(
             "library: more than {MAX_LABELS} distinct species labels: {beyond} trees under the others get no tree (give --default-model)"
@@ -438,7 +460,7 @@ fn library_fill(
     if labels.is_empty() {
         return Ok(());
     }
-    let chosen = library::choose::choose_all(&labels, allometry);
+    let chosen = library::choose::choose_all(&labels, &leaf_types, allometry);
     log(&format!(
         "library: {unmapped} trees under {} species labels no --model takes, drawn as {} library genera:",
         labels.len(),

@@ -20,7 +20,7 @@ pub(crate) enum LibraryCommand {
         json: bool,
     },
     /// A contact sheet of library trees: one row per genus, its variants side
-    /// on then from above (the same trees the bake makes, drawn by the
+    /// on then from above (the pack the bake makes, each variant drawn by the
     /// viewer's own mesh pass).
     #[command(
         after_help = "Examples:\n  sylva-bake library render Quercus Picea --out sheet.png\n  sylva-bake library render all --variants 1 --out genera.png"
@@ -72,8 +72,8 @@ fn entries(names: &[String]) -> Result<Vec<&'static Genus>> {
 /// Renders the sheet: rows of genera, columns of variants × (side, top).
 fn render_sheet(names: &[String], out: &PathBuf, variants: u64, size: u32, per_row: u32) -> Result<()> {
     let list = entries(names)?;
-    if variants == 0 || !(32..=1024).contains(&size) || per_row == 0 {
-        bail!("--variants and --per-row must be at least 1 and --size 32–1024 px");
+    if !(1..=8).contains(&variants) || !(32..=1024).contains(&size) || !(1..=64).contains(&per_row) {
+        bail!("--variants must be 1–8, --per-row 1–64 and --size 32–1024 px");
     }
     let gpu = GpuContext::new_headless_blocking()?;
     let pipelines = CapturePipelines::new(&gpu.device, wgpu::TextureFormat::Rgba8UnormSrgb);
@@ -94,10 +94,13 @@ fn render_sheet(names: &[String], out: &PathBuf, variants: u64, size: u32, per_r
     let quiet = |_: &str| {};
     for (row, g) in list.iter().enumerate() {
         eprintln!("library render: {} ({}/{})", g.name, row + 1, list.len());
+        // One pack with the variants, as the bake makes it; each drawn as the
+        // viewer draws a tree of that variant.
+        let model = sylva_bake::library::model_variants(g, variants);
+        let built = build_pack(g.name, &model, &opts, &gpu, &pipelines, &quiet)?;
+        let pack = sylva::format::pack::decode_pack(g.name, &built.bytes)?;
         for v in 0..variants {
-            let model = sylva_bake::library::model(g, v);
-            let built = build_pack(g.name, &model, &opts, &gpu, &pipelines, &quiet)?;
-            let pack = sylva::format::pack::decode_pack(g.name, &built.bytes)?;
+            renderer.set_variant(&gpu, v as u32);
             for (k, view) in [PackView::Side, PackView::Top].into_iter().enumerate() {
                 let rgba = renderer
                     .render_pack(&gpu, &pack, PackRepr::Mesh(0), view, [size, size], [0.62, 0.74, 0.86, 1.0])

@@ -50,8 +50,9 @@ pub fn first_word(label: &str) -> String {
     if first == "x" { w.next().unwrap_or("") } else { first }.to_string()
 }
 
-/// Common names → genus, whole words (several words: all, in order). The
-/// longest name a label holds wins (`horse chestnut` over `chestnut`).
+/// Common names → genus (the library's, or one whose family it knows), whole
+/// words (several words: all, in order). The longest name a label holds wins
+/// (`horse chestnut` over `chestnut`).
 const COMMON_NAMES: &[(&str, &str)] = &[
     // Quercus
     ("oak", "quercus"),
@@ -272,6 +273,10 @@ const COMMON_NAMES: &[(&str, &str)] = &[
     ("japanse notenboom", "ginkgo"),
     ("facherblattbaum", "ginkgo"),
     ("arbre aux quarante ecus", "ginkgo"),
+    ("kornelkirsche", "cornus"),
+    ("cornelian cherry", "cornus"),
+    ("dogwood", "cornus"),
+    ("kornoelje", "cornus"),
     ("tree of heaven", "ailanthus"),
     ("hemelboom", "ailanthus"),
     ("gotterbaum", "ailanthus"),
@@ -333,6 +338,8 @@ const COMMON_NAMES: &[(&str, &str)] = &[
     ("douglas fir", "pseudotsuga"),
     ("douglasspar", "pseudotsuga"),
     ("douglasie", "pseudotsuga"),
+    ("douglastanne", "pseudotsuga"),
+    ("schierlingstanne", "tsuga"),
     ("sapin de douglas", "pseudotsuga"),
     ("abeto de douglas", "pseudotsuga"),
     ("hemlock", "tsuga"),
@@ -430,7 +437,6 @@ const COMPOUND_ENDS: &[(&str, &str)] = &[
     ("peer", "pyrus"),
     ("birne", "pyrus"),
     ("meidoorn", "crataegus"),
-    ("beere", "sorbus"),
     ("kastanje", "castanea"),
     ("kastanie", "castanea"),
     ("walnoot", "juglans"),
@@ -650,6 +656,13 @@ impl SpeciesTable {
     /// # Errors
     /// An unreadable file, or no code or name columns (the error lists what it looked for).
     pub fn read(path: &Path) -> Result<Self> {
+        /// Largest table read (FIA's REF_SPECIES is under 1 MB).
+        const MAX_BYTES: u64 = 64 << 20;
+        let len =
+            std::fs::metadata(path).with_context(|| format!("cannot read --species-table {}", path.display()))?.len();
+        if len > MAX_BYTES {
+            bail!("--species-table {}: {len} bytes, more than a species table's {MAX_BYTES}", path.display());
+        }
         let bytes = std::fs::read(path).with_context(|| format!("cannot read --species-table {}", path.display()))?;
         let text = String::from_utf8_lossy(&bytes);
         let first = text.lines().next().unwrap_or("");

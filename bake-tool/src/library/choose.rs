@@ -35,6 +35,8 @@ pub enum Why {
     BroadleafDefault(String),
     /// A code of the species table, standing for a Latin name; then why that got its tree.
     Code(String, Box<Why>),
+    /// Nothing in the label known; the inventory's leaf-type column says this.
+    LeafType(String),
 }
 
 impl std::fmt::Display for Why {
@@ -48,6 +50,7 @@ impl std::fmt::Display for Why {
             Why::BroadleafDefault(g) if g.is_empty() => write!(f, "broadleaf default (no genus in the label)"),
             Why::BroadleafDefault(g) => write!(f, "broadleaf default (nothing known of {g:?})"),
             Why::Code(latin, then) => write!(f, "species table: {latin}, then {then}"),
+            Why::LeafType(t) => write!(f, "archetype of its leaf type {t:?} (nothing known of the name)"),
         }
     }
 }
@@ -78,12 +81,20 @@ pub fn choose(label: &str, allometry: &Allometry) -> (&'static Genus, Why) {
 
 /// The library tree of a name (Latin or common), with the family a species table gave.
 fn by_name(label: &str, family: Option<&str>) -> (&'static Genus, Why) {
-    let first = names::first_word(label);
+    let mut first = names::first_word(label);
     if let Some(g) = genus(&first) {
         return (g, Why::Genus);
     }
-    if let Some(g) = names::common_genus(label).and_then(genus) {
-        return (g, Why::CommonName);
+    // A Latin genus the library lacks is its genus before any common name its
+    // words might make (`Acacia dealbata` is no "acacia" = locust).
+    if names::family_of(&first).is_none() {
+        if let Some(g) = names::common_genus(label) {
+            match genus(g) {
+                Some(lib) => return (lib, Why::CommonName),
+                // A common name of a genus the library places by its family.
+                None => first = g.to_string(),
+            }
+        }
     }
     let family = family
         .map(str::to_string)
@@ -112,16 +123,61 @@ fn default(name: &str) -> &'static Genus {
     entry(name).expect("the library's defaults are archetypes of it")
 }
 
+/// Header names of a leaf-type column (compared folded, spaces as `_`).
+pub const LEAF_TYPE_COLUMNS: &[&str] = &[
+    "leaf_type",
+    "leaftype",
+    "leaf_habit",
+    "foliage",
+    "foliage_type",
+    "tree_type",
+    "blatttyp",
+    "blattart",
+    "bladtype",
+    "type_feuillage",
+    "tipo_hoja",
+];
+
+/// The archetype a leaf-type value names (`conifer`, `needle`, `softwood`,
+/// `Nadelbaum`, `naaldboom`, `résineux`, `conífera` …; `broadleaf`,
+/// `deciduous`, `hardwood`, `Laubbaum`, `loofboom`, `feuillu`, `frondosa` …;
+/// `palm`; `shrub`), if any.
+#[must_use]
+pub fn leaf_type_archetype(value: &str) -> Option<&'static Genus> {
+    let v = names::fold(value);
+    let has = |words: &[&str]| words.iter().any(|w| v.contains(w));
+    let name = if has(&["palm"]) {
+        "palm"
+    } else if has(&["shrub", "bush", "strauch", "struik", "arbust", "arbusto"]) {
+        "shrub"
+    } else if has(&["conif", "needle", "softwood", "nadel", "naald", "resineux", "conifer", "evergreen conifer"]) {
+        CONIFER_DEFAULT
+    } else if has(&["broad", "decid", "hardwood", "laub", "loof", "feuillu", "frondos", "latifol"]) {
+        BROADLEAF_DEFAULT
+    } else {
+        return None;
+    };
+    entry(name)
+}
+
 /// The library genus of each label of `labels` (label → trees), by genus: the
-/// genera used (alphabetical), each with its labels, why and tree counts.
+/// genera used (alphabetical), each with its labels, why and tree counts. A
+/// label nothing is known of takes the archetype of its leaf type where
+/// `leaf_types` (label → the inventory's leaf-type value) gives one.
 #[must_use]
 pub fn choose_all<'a>(
     labels: &'a BTreeMap<String, u64>,
+    leaf_types: &BTreeMap<String, String>,
     allometry: &Allometry,
 ) -> BTreeMap<&'static str, Vec<(&'a str, Why, u64)>> {
     let mut out: BTreeMap<&'static str, Vec<(&'a str, Why, u64)>> = BTreeMap::new();
     for (label, &n) in labels {
-        let (g, why) = choose(label, allometry);
+        let (mut g, mut why) = choose(label, allometry);
+        if why.is_default() {
+            if let Some((t, a)) = leaf_types.get(label).and_then(|t| leaf_type_archetype(t).map(|a| (t, a))) {
+                (g, why) = (a, Why::LeafType(t.clone()));
+            }
+        }
         out.entry(g.name).or_default().push((label.as_str(), why, n));
     }
     out
@@ -169,6 +225,10 @@ mod tests {
         );
         assert_eq!(choose("x Cupressocyparis leylandii", &a).0.name, "Thuja");
         assert_eq!(choose("Amelanchier lamarckii", &a).0.family, "Rosaceae");
+        // A Latin genus the library lacks is no common name ("acacia"); a common
+        // name of such a genus goes by its family.
+        assert_eq!(choose("Acacia dealbata", &a).1, Why::Family("acacia".into(), "Fabaceae".into()));
+        assert_eq!(choose("Kornelkirsche", &a).1, Why::FamilyArchetype("cornus".into(), "Cornaceae".into()));
         assert_eq!(choose("Chamaerops humilis", &a).0.name, "Phoenix");
         // A family named outright.
         assert_eq!(choose("Rosaceae", &a).0.family, "Rosaceae");
@@ -192,6 +252,32 @@ mod tests {
         assert_eq!(choose("Marronnier d'Inde", &a).0.name, "Aesculus");
         assert_eq!(choose("Olmo común", &a).0.name, "Ulmus");
         assert_eq!(choose("Zomereik", &a).0.name, "Quercus");
+    }
+
+    #[test]
+    fn unknown_labels_take_their_leaf_type() {
+        let a = Allometry::built_in();
+        let labels: BTreeMap<String, u64> = [("Mystery conifer", 3), ("XY 12", 2), ("Quercus robur", 1), ("Zzz", 1)]
+            .map(|(l, n)| (l.to_string(), n))
+            .into();
+        let types: BTreeMap<String, String> =
+            [("Mystery conifer", "Nadelbaum"), ("XY 12", "palm"), ("Quercus robur", "conifer"), ("Zzz", "unbekannt")]
+                .map(|(l, t)| (l.to_string(), t.to_string()))
+                .into();
+        let chosen = choose_all(&labels, &types, &a);
+        let of = |label: &str| {
+            chosen
+                .iter()
+                .find(|(_, rows)| rows.iter().any(|r| r.0 == label))
+                .map(|(g, rows)| (*g, rows.iter().find(|r| r.0 == label).unwrap().1.clone()))
+        };
+        assert_eq!(of("Mystery conifer"), Some((CONIFER_DEFAULT, Why::LeafType("Nadelbaum".into()))));
+        assert_eq!(of("XY 12"), Some(("palm", Why::LeafType("palm".into()))));
+        // A known genus keeps its tree whatever the column says; an unknown value changes nothing.
+        assert_eq!(of("Quercus robur"), Some(("Quercus", Why::Genus)));
+        assert_eq!(of("Zzz").map(|x| x.0), Some(BROADLEAF_DEFAULT));
+        assert_eq!(leaf_type_archetype("Résineux").map(|g| g.name), Some(CONIFER_DEFAULT));
+        assert_eq!(leaf_type_archetype("loofboom").map(|g| g.name), Some(BROADLEAF_DEFAULT));
     }
 
     #[test]

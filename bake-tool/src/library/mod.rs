@@ -367,6 +367,8 @@ mod tests {
         for g in GENERA.iter().chain(ARCHETYPES.iter()) {
             let models: Vec<ImportedModel> = (0..3).map(|v| model(g, v)).collect();
             let first = &models[0];
+            let stretched = model_variants(g, 3);
+            assert_eq!(stretched.vertices, first.vertices, "{}: variant 0 is the model", g.name);
             for (v, m) in models.iter().enumerate().skip(1) {
                 let same = m.triangles == first.triangles
                     && m.vertices.len() == first.vertices.len()
@@ -383,11 +385,17 @@ mod tests {
                     ));
                     continue;
                 }
+                // As the bake draws them: stretched to variant 0's height and crown.
+                let mut shown = stretched.clone();
+                shown.variants.clear();
+                for (x, [p, _]) in shown.vertices.iter_mut().zip(&stretched.variants[v - 1]) {
+                    x.position = *p;
+                }
                 let (lo0, hi0) = first.bounds();
-                let (lo1, hi1) = m.bounds();
+                let (lo1, hi1) = shown.bounds();
                 let (lo, hi) = (lo0.min(lo1), hi0.max(hi1));
                 let (lo, hi) = (Vec2::new(lo.x, lo.z), Vec2::new(hi.x, hi.z));
-                let (a, b) = (silhouette(first, lo, hi, 96), silhouette(m, lo, hi, 96));
+                let (a, b) = (silhouette(first, lo, hi, 96), silhouette(&shown, lo, hi, 96));
                 let both = a.iter().zip(&b).filter(|(a, b)| **a && **b).count();
                 let either = a.iter().zip(&b).filter(|(a, b)| **a || **b).count();
                 let iou = both as f32 / either.max(1) as f32;

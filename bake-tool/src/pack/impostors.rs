@@ -101,5 +101,6 @@ pub(super) fn build_impostors(
             data: mip_major(&surface_chains, texture.mips),
         },
     ];
-    (ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length }, sections)
+    let half_extent = Some((hi - center).max(center - lo).to_array());
+    (ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length, half_extent }, sections)
 }

@@ -136,10 +136,26 @@ pub(super) fn build_mesh_level(
         .enumerate()
         .map(|(i, v)| ImportedVertexPod { ao: ao.map_or(-1.0, |a| a[i]), ..ImportedVertexPod::from(v) })
         .collect();
-    let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertices.len());
-    let used = remap.iter().filter(|&&r| r != u32::MAX).count();
-    let indices = meshopt::remap_index_buffer(Some(&indices), vertices.len(), &remap);
-    let vertices = meshopt::remap_vertex_buffer(&vertices, used, &remap);
+    // Vertices in the order the indices first use them (meshoptimizer's vertex
+    // fetch order), unused ones dropped; one table for the vertices and shapes.
+    let mut remap = vec![u32::MAX; vertices.len()];
+    let mut used = 0usize;
+    for &i in &indices {
+        if remap[i as usize] == u32::MAX {
+            remap[i as usize] = used as u32;
+            used += 1;
+        }
+    }
+    let indices: Vec<u32> = indices.iter().map(|&i| remap[i as usize]).collect();
+    let vertices = {
+        let mut out = vec![ImportedVertexPod::default(); used];
+        for (i, &r) in remap.iter().enumerate() {
+            if r != u32::MAX {
+                out[r as usize] = vertices[i];
+            }
+        }
+        out
+    };
     let shapes: Vec<Vec<[Vec3; 2]>> = model
         .variants
         .iter()

@@ -140,10 +140,11 @@ pub fn build_pack(
     pipelines: &CapturePipelines,
     log: &dyn Fn(&str),
 ) -> Result<BuiltPack> {
-    // Variant 0's bounds: the captures (billboards, impostors) show it, and the
-    // other variants are stretched to its height and crown width (their
-    // bounding spheres, which culling uses, are within its own).
+    // Variant 0's bounds frame the captures (billboards, impostors, which show
+    // it; the others are stretched to its height and crown width); every
+    // variant's bound the tree (culling, the occlusion field, the clusters).
     let (lo, hi) = model.own_bounds();
+    let (all_lo, all_hi) = model.bounds();
     let height = (hi.z - lo.z).max(1e-3);
     let (materials, texture_meta, texture_bytes) = build_materials(model, opts.texture_size);
     // The tree's own occlusion, one field for every level (mesh vertices, the
@@ -239,8 +240,8 @@ pub fn build_pack(
     let mut meta = PackMeta {
         name: name.to_string(),
         height_m: height,
-        bounds_min: lo.to_array(),
-        bounds_max: hi.to_array(),
+        bounds_min: all_lo.to_array(),
+        bounds_max: all_hi.to_array(),
         materials,
         material_texture: texture_meta,
         mesh_levels: levels.iter().map(|(m, _, _, _)| m.clone()).collect(),

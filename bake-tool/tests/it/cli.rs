@@ -1775,8 +1775,8 @@ fn library_models_bake_without_a_gltf() {
 fn twenty_genera_from_an_inventory_without_models() {
     // A generated inventory naming 20 genera — Latin (cultivar, hybrid), common
     // names in four languages, 4 codes through a species table — and 2 labels
-    // nothing knows: 20 library genera and the broadleaf archetype, each label's
-    // choice reported.
+    // nothing knows, one with a leaf type: 20 library genera, the broadleaf and
+    // conifer archetypes, each label's choice reported.
     let dir = tmp("twenty-genera");
     let labels = [
         "Quercus robur",
@@ -1802,9 +1802,11 @@ fn twenty_genera_from_an_inventory_without_models() {
         "Mystery tree",
         "Spec. 17",
     ];
-    let mut csv = String::from("id,x,y,species,height\n");
+    // (A leaf-type column places the last label, which nothing else does.)
+    let mut csv = String::from("id,x,y,species,height,Leaf type\n");
     for (i, l) in labels.iter().enumerate() {
-        csv += &format!("{i},{},5300000,\"{l}\",18\n", 500000 + 15 * i);
+        let leaf = if *l == "Spec. 17" { "Nadelbaum" } else { "" };
+        csv += &format!("{i},{},5300000,\"{l}\",18,{leaf}\n", 500000 + 15 * i);
     }
     std::fs::write(dir.join("trees.csv"), csv).unwrap();
     std::fs::write(
@@ -1835,6 +1837,7 @@ fn twenty_genera_from_an_inventory_without_models() {
         "broadleaf-round",
         "carpinus",
         "cedrus",
+        "conifer-spire",
         "crataegus",
         "fagus",
         "fraxinus",
@@ -1852,13 +1855,14 @@ fn twenty_genera_from_an_inventory_without_models() {
     ];
     assert_eq!(names, want, "{log}");
     assert_eq!(v["trees_total"], 22, "{log}");
-    assert!(log.contains("22 trees under 22 species labels no --model takes, drawn as 21 library genera"), "{log}");
+    assert!(log.contains("22 trees under 22 species labels no --model takes, drawn as 22 library genera"), "{log}");
+    assert!(log.contains("leaf types from the column \"Leaf type\""), "{log}");
     for line in [
         "\"Hainbuche\": 1 tree, by common name",
         "\"Álamo blanco\": 1 tree, by common name",
         "\"PSME\": 1 tree, by species table: Pseudotsuga menziesii, then genus",
         "\"Mystery tree\": 1 tree, by broadleaf default",
-        "\"Spec. 17\": 1 tree, by broadleaf default",
+        "\"Spec. 17\": 1 tree, by archetype of its leaf type \"Nadelbaum\"",
     ] {
         assert!(log.contains(line), "{line}\n{log}");
     }

@@ -163,6 +163,12 @@ impl<F: Fetcher> SceneStream<F> {
             // A view that draws no far tier (meshes only): drawable with the
             // parts it wants that have come.
             Some(l) if !l.wants[0] && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) => (true, false),
+            // Not yet: it may come while its head and a part the view wants
+            // (the billboards, or else any) are not given up on.
+            Some(l) if !l.wants[0] && l.wants.contains(&true) => {
+                let coming = l.wants.iter().zip(&l.parts).any(|(w, p)| *w && *p != Load::Broken);
+                (false, l.head != Load::Broken && coming)
+            }
             Some(l) => (false, l.head != Load::Broken && l.parts[0] != Load::Broken),
             None => (false, false),
         }

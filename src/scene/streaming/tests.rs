@@ -869,7 +869,7 @@ fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
     let t = run(&mut s, &mut r, &far, 1e6, 0.0, 0.1, 24);
     run(&mut s, &mut r, &near, 1e6, t, 0.1, 24);
     assert!(s.is_settled() && r.used > 0, "the trees are resident");
-    assert!(s.canopy_draws().iter().all(|d| !d.stand_in), "stand-ins over resident trees drawn as meshes");
+    assert!(s.canopy_draws().is_empty(), "{} rasters over resident trees drawn as meshes", s.canopy_draws().len());
 
     // A species whose pack cannot be read: its trees are drawn by the canopy.
     let mut s = stream(StreamConfig::default());
