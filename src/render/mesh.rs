@@ -7,7 +7,7 @@
 use wgpu::util::DeviceExt;
 
 use super::gpu_data::{GpuMaterial, MeshUniform, RenderMode};
-use super::layouts::{depth_state, sampler_entry, texture_array_entry, SharedLayouts};
+use super::layouts::{depth_state, sampler_entry, storage_entry, texture_array_entry, SharedLayouts};
 use super::shaders;
 use crate::format::pack::{kind, MaterialKind, MeshLevelMeta, TextureArrayMeta};
 use crate::format::Pack;
@@ -78,16 +78,7 @@ impl MeshPipelines {
                     count: None,
                 },
                 // The level's other variants (`MVAR`), 8 bytes a vertex.
-                wgpu::BindGroupLayoutEntry {
-                    binding: 5,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(8),
-                    },
-                    count: None,
-                },
+                storage_entry(5, wgpu::ShaderStages::VERTEX, true),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -37,29 +37,24 @@ fn toy_pack_with(variant: bool) -> Vec<u8> {
         uv: [q(u, 0.0, 1.0), q(v, 0.0, 1.0)],
         color: [255; 4],
     };
-    let vertices = [
-        // Trunk: 0.6 m wide, 6 m tall.
-        vtx(-0.3, 0.0, 0.0, 1.0, 0),
-        vtx(0.3, 0.0, 1.0, 1.0, 0),
-        vtx(0.3, 6.0, 1.0, 0.0, 0),
-        vtx(-0.3, 6.0, 0.0, 0.0, 0),
-        // Leaf card: 6 m square from 4 to 10 m.
-        vtx(-3.0, 4.0, 0.0, 1.0, 1),
-        vtx(3.0, 4.0, 1.0, 1.0, 1),
-        vtx(3.0, 10.0, 1.0, 0.0, 1),
-        vtx(-3.0, 10.0, 0.0, 0.0, 1),
-    ];
+    // Trunk: 0.6 m wide, 6 m tall; a square leaf card `half` m to each side,
+    // from `low` m to 10 m.
+    let tree = |half: f32, low: f32| {
+        [
+            vtx(-0.3, 0.0, 0.0, 1.0, 0),
+            vtx(0.3, 0.0, 1.0, 1.0, 0),
+            vtx(0.3, 6.0, 1.0, 0.0, 0),
+            vtx(-0.3, 6.0, 0.0, 0.0, 0),
+            vtx(-half, low, 0.0, 1.0, 1),
+            vtx(half, low, 1.0, 1.0, 1),
+            vtx(half, 10.0, 1.0, 0.0, 1),
+            vtx(-half, 10.0, 0.0, 0.0, 1),
+        ]
+    };
+    // The leaf card: 6 m square from 4 to 10 m; the variant's half as wide and tall.
+    let vertices = tree(3.0, 4.0);
     let indices: [u32; 12] = [0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7];
-    let small = [
-        vtx(-0.3, 0.0, 0.0, 1.0, 0),
-        vtx(0.3, 0.0, 1.0, 1.0, 0),
-        vtx(0.3, 6.0, 1.0, 0.0, 0),
-        vtx(-0.3, 6.0, 0.0, 0.0, 0),
-        vtx(-1.5, 7.0, 0.0, 1.0, 1),
-        vtx(1.5, 7.0, 1.0, 1.0, 1),
-        vtx(1.5, 10.0, 1.0, 0.0, 1),
-        vtx(-1.5, 10.0, 0.0, 0.0, 1),
-    ];
+    let small = tree(1.5, 7.0);
     let variant_vertices: Vec<VariantVertex> = small
         .iter()
         .map(|v| VariantVertex { position: v.position, normal_oct: [v.normal_oct[0], v.normal_oct[1]] })

@@ -150,7 +150,7 @@ pub fn leaf_type_archetype(value: &str) -> Option<&'static Genus> {
         "palm"
     } else if has(&["shrub", "bush", "strauch", "struik", "arbust", "arbusto"]) {
         "shrub"
-    } else if has(&["conif", "needle", "softwood", "nadel", "naald", "resineux", "conifer", "evergreen conifer"]) {
+    } else if has(&["conif", "needle", "softwood", "nadel", "naald", "resineux"]) {
         CONIFER_DEFAULT
     } else if has(&["broad", "decid", "hardwood", "laub", "loof", "feuillu", "frondos", "latifol"]) {
         BROADLEAF_DEFAULT

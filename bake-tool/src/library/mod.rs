@@ -190,26 +190,19 @@ pub fn extent(t: &Skeleton) -> (f32, f32) {
 
 /// The model of a grown skeleton.
 fn build(genus: &Genus, t: &Skeleton, seed: u64) -> ImportedModel {
+    let material = |part: &str, kind, alpha_cutoff, double_sided, texture| ImportedMaterial {
+        name: format!("{}_{part}", genus.name.to_lowercase()),
+        kind,
+        base_color: [1.0; 4],
+        alpha_cutoff,
+        double_sided,
+        texture: Some(texture),
+        blended: false,
+    };
     let mut m = ImportedModel {
         materials: vec![
-            ImportedMaterial {
-                name: format!("{}_bark", genus.name.to_lowercase()),
-                kind: MaterialKind::Branch,
-                base_color: [1.0; 4],
-                alpha_cutoff: 0.0,
-                double_sided: false,
-                texture: Some(textures::bark(genus, seed)),
-                blended: false,
-            },
-            ImportedMaterial {
-                name: format!("{}_leaves", genus.name.to_lowercase()),
-                kind: MaterialKind::Leaf,
-                base_color: [1.0; 4],
-                alpha_cutoff: 0.5,
-                double_sided: true,
-                texture: Some(textures::leaf(genus, seed)),
-                blended: false,
-            },
+            material("bark", MaterialKind::Branch, 0.0, false, textures::bark(genus, seed)),
+            material("leaves", MaterialKind::Leaf, 0.5, true, textures::leaf(genus, seed)),
         ],
         ..Default::default()
     };
