@@ -112,7 +112,12 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let m = rotate_z(packed_normal.xyz * 2.0 - 1.0, in.normal_yaw);
     let n = normalize(m);
     let is_leaf = packed_normal.a > 0.75;
-    var albedo = styled_albedo(color.rgb * in.tint, styles[in.style & 63u]);
+    // Leaf-off before the bare capture has come: the wood the leaves let through.
+    if is_leaf && leaves_off() {
+        discard;
+    }
+    let own = color.rgb * in.tint;
+    var albedo = styled_albedo(select(own, seasonal_leaf(own), is_leaf), styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }
@@ -126,7 +131,8 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 @fragment
 fn fs_shadow(in: VertexOut) {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    let leaf_off = leaves_off() && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    if color.a < 0.5 || leaf_off || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
 }
@@ -135,7 +141,8 @@ fn fs_shadow(in: VertexOut) {
 @fragment
 fn fs_id(in: VertexOut) -> @location(0) u32 {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    if color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    let leaf_off = leaves_off() && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    if color.a < 0.5 || leaf_off || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     return in.item_x + 1u;

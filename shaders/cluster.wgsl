@@ -258,7 +258,10 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let prim = vertex / 6u;
     let corner = CORNERS[vertex % 6u];
     var out: VertexOut;
-    if prim < draw.cluster.y {
+    if prim < draw.cluster.y && leaves_off() {
+        // Leaf-off: the foliage's ellipsoids go, the branches' lines stay.
+        out.clip = vec4<f32>(2.0, 2.0, 0.5, 1.0);
+    } else if prim < draw.cluster.y {
         ellipsoid_vertex(unpack_ellipsoid(prim), tree, corner, &out);
     } else {
         line_vertex(prim - draw.cluster.y, tree, corner, &out);
@@ -394,7 +397,7 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     let hit = cluster_hit(in);
     var out: FragmentOut;
     out.depth = hit.depth;
-    var albedo = styled_albedo(in.color.rgb, styles[in.style & 63u]);
+    var albedo = styled_albedo(select(seasonal_leaf(in.color.rgb), in.color.rgb, hit.is_line), styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }

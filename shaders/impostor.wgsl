@@ -238,6 +238,10 @@ fn fs_main(in: VertexOut) -> FragmentOut {
         discard;
     }
     let is_leaf = hit.packed >= 0.5;
+    // Leaf-off before the bare capture has come: the wood the leaves let through.
+    if is_leaf && leaves_off() {
+        discard;
+    }
     let baked_ao = clamp((hit.packed - select(0.0, 128.0 / 255.0, is_leaf)) * (255.0 / 127.0), 0.0, 1.0);
     // Normals follow the crown's stretch (inverse transpose of the scaling).
     let nm = hit.normal;
@@ -245,7 +249,8 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     // The texel's mean normal: shorter where it covers many leaves.
     let m = n * normal_agreement(hit.lod);
     let rel = in.tree_at.xyz + imp_to_world(hit.at - draw.bb_center.xyz, in);
-    var albedo = styled_albedo(hit.color.rgb * in.tint, styles[in.style & 63u]);
+    let own = hit.color.rgb * in.tint;
+    var albedo = styled_albedo(select(own, seasonal_leaf(own), is_leaf), styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * hit.color.g);
     }
@@ -266,7 +271,7 @@ fn fs_main(in: VertexOut) -> FragmentOut {
 @fragment
 fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    if hit.color.a < 0.5 || (leaves_off() && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     return impostor_depth(hit.at, in);
@@ -276,7 +281,7 @@ fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
 @fragment
 fn fs_id(in: VertexOut) -> IdOut {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    if hit.color.a < 0.5 || (leaves_off() && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     var out: IdOut;

@@ -125,6 +125,9 @@ struct DrawParams {
     // (xyz); w how far out along the normal clusters look it up.
     ao_field_min: vec4<f32>,
     ao_field_size: vec4<f32>,
+    // The species' season: xyz its leaves' autumn colour (linear), w the
+    // state (0 leaf-on or evergreen, 1 autumn, 2 leaf-off; `trees.wgsl`).
+    season: vec4<f32>,
 };
 
 

@@ -93,6 +93,12 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32, @builtin(vertex
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
     let tree = unpack_instance(instances[item.x], batch, view);
+    var out: VertexOut;
+    // Leaf-off: leaf cards and cloud planes (all but wood) collapse outside the frustum.
+    if leaves_off() && materials[in.position_material.w].kind != 1u {
+        out.clip = vec4<f32>(2.0, 2.0, 0.5, 1.0);
+        return out;
+    }
     // The tree's variant: its own position and normal, else the level's.
     var position = vec3<f32>(in.position_material.xyz);
     var normal_oct = in.normal_oct.xy;
@@ -104,7 +110,6 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32, @builtin(vertex
     }
     let local = mesh.pos_min.xyz + position / 65535.0 * mesh.pos_extent.xyz;
     let eye_rel = rotate_z(tree_scaled(local, tree), tree.yaw) + tree.pos;
-    var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(eye_rel, 1.0);
     out.uv = mesh.uv_min + in.uv * mesh.uv_extent;
     // Normals of a horizontally stretched crown: the inverse transpose, xy / aspect.
@@ -318,7 +323,7 @@ fn surface(in: VertexOut, front: bool) -> Surface {
 @fragment
 fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     let s = surface(in, front);
-    var albedo = s.albedo.rgb;
+    var albedo = select(s.albedo.rgb, seasonal_leaf(s.albedo.rgb), s.is_leaf);
     albedo = styled_albedo(albedo, styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);

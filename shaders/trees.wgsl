@@ -9,3 +9,22 @@
 @group(2) @binding(2) var<storage, read> items: array<vec2<u32>>;
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
+
+// Seasons (`draw.season`, a deciduous species'; evergreens draw leaf-on).
+// Leaf-off: the passes drop their leaves (mesh leaf cards and cloud planes in
+// the vertex stage, ellipsoids, the leaf texels of a far tier whose bare
+// capture has not come).
+fn leaves_off() -> bool {
+    return draw.season.w > 1.5;
+}
+
+// A leaf's albedo in the season drawn: in autumn the species' autumn colour,
+// keeping the light and dark of the leaf (its luminance against a typical
+// leaf's) and the tree's own variation.
+fn seasonal_leaf(albedo: vec3<f32>) -> vec3<f32> {
+    if draw.season.w < 0.5 || draw.season.w > 1.5 {
+        return albedo;
+    }
+    let l = dot(albedo, vec3<f32>(0.2126, 0.7152, 0.0722));
+    return draw.season.rgb * clamp(l / 0.07, 0.3, 2.0);
+}

@@ -16,6 +16,8 @@
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
 //   v.setLighting({shadows, ao})           the sun's shadows: 'off' | 'low' | 'high' (the default);
 //                                           ao: each tree's own baked ambient occlusion, true (the default) | false
+//   v.setSeason(season)                     deciduous species in 'leaf-on' (the default) | 'autumn' | 'leaf-off'
+//                                           (bare wood; their bare far tiers are fetched then); evergreens alike in all
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.on('click' | 'hover', fn)             fn({x, y, tree}): the tree under the pointer (as pick) or null
 //   await v.pick(x, y)                      the tree drawn at canvas CSS pixel (x, y), or null:
@@ -385,6 +387,16 @@ class SylvaViewer {
     this.dirty = SETTLE_FRAMES;
   }
 
+  /** The season deciduous species are drawn in: 'leaf-on' (the default),
+   * 'autumn' (their leaves in their genus's autumn colour) or 'leaf-off' (bare
+   * wood). Evergreens, and packs baked without seasons, look the same in all.
+   * Throws for any other value. */
+  setSeason(season) {
+    this.viewer.set_season(String(season));
+    this.season = String(season);
+    this.dirty = SETTLE_FRAMES;
+  }
+
   stats() { return JSON.parse(this.viewer.stats_json()); }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = SETTLE_FRAMES; }
   setQuality(q) { this.viewer.set_quality(q); this.dirty = SETTLE_FRAMES; }
@@ -457,6 +469,7 @@ class SylvaViewer {
         this.viewer.set_camera(cam.x, cam.y, cam.z, cam.heading, cam.pitch);
       }
       if (this.lighting) this.setLighting(this.lighting);
+      if (this.season) this.setSeason(this.season);
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
       this.dirty = SETTLE_FRAMES;
@@ -757,15 +770,24 @@ export async function create(target, options = {}) {
   return v;
 }
 
-/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off" shadows="low">`
+/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off" shadows="low" season="autumn">`
  * (refine: progressive refinement at rest, on unless "off"; shadows: the sun's
- * shadows, off | low | high, high unless given). */
+ * shadows, off | low | high, high unless given; season: leaf-on | autumn |
+ * leaf-off for deciduous species, leaf-on unless given). */
 class SylvaElement extends HTMLElement {
-  static get observedAttributes() { return ['refine', 'shadows']; }
+  static get observedAttributes() { return ['refine', 'shadows', 'season']; }
   attributeChangedCallback(name) {
     if (!this.viewer) return;
     if (name === 'refine') this.viewer.setRefine(this.getAttribute('refine') !== 'off');
     if (name === 'shadows') this.applyShadows();
+    if (name === 'season') this.applySeason();
+  }
+  applySeason() {
+    const season = this.getAttribute('season');
+    if (season === null) return;
+    try { this.viewer.setSeason(season); } catch (e) {
+      this.dispatchEvent(new CustomEvent('sylva-error', { detail: { message: `season="${season}": ${e.message || e}` } }));
+    }
   }
   applyShadows() {
     const shadows = this.getAttribute('shadows');
@@ -785,6 +807,7 @@ class SylvaElement extends HTMLElement {
       this.viewer = await create(this, { scene: this.getAttribute('src') || undefined, camera });
       if (this.getAttribute('refine') === 'off') this.viewer.setRefine(false);
       this.applyShadows();
+      this.applySeason();
       this.dispatchEvent(new CustomEvent('sylva-ready', { detail: this.viewer }));
     } catch (e) {
       this.textContent = String(e.message || e);

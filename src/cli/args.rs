@@ -411,6 +411,11 @@ pub(crate) struct RenderArgs {
     /// Mesh variant (with --pack; a library tree's are 0–2, see `sylva-bake inspect`).
     #[arg(long, default_value_t = 0)]
     pub(crate) variant: u32,
+    /// The season deciduous species are drawn in: leaf-on, autumn (their
+    /// leaves in their autumn colour) or leaf-off (bare wood). Evergreens, and
+    /// packs baked without seasons, look the same in every one.
+    #[arg(long, value_name = "leaf-on|autumn|leaf-off", default_value = "leaf-on")]
+    pub(crate) season: sylva::render::settings::Season,
 }
 
 /// `--thin-px` of `render` and `bench`.

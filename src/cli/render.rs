@@ -453,6 +453,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         level,
         repr,
         variant,
+        season,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, .. } = frame;
@@ -486,6 +487,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             far_tier: far_tier_of(far_tier),
             lod_policy,
             representations,
+            season,
             ..RenderSettings::default()
         };
         return render_scene(
@@ -556,6 +558,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     if variant > 0 {
         renderer.set_variant(&gpu, variant);
     }
+    renderer.set_season(decoded.meta.season.as_ref(), season);
     let rgba = renderer
         .render_pack(&gpu, &decoded, repr, view, [w, h], [0.62, 0.74, 0.86, 1.0])
         .context("the pack lacks that representation")?;

@@ -281,6 +281,29 @@ pub struct PackMeta {
     /// The billboard cloud (García et al. 2007), if baked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cloud: Option<super::cloud::CloudMeta>,
+    /// A deciduous species' seasons (leaf-on, autumn, leaf-off); absent for
+    /// an evergreen, which looks the same all year.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub season: Option<SeasonMeta>,
+}
+
+/// The seasons of a deciduous species. Leaf-on is what every tier holds;
+/// autumn recolours the leaves (every tier marks its leaf texels); leaf-off
+/// drops them where the tier has them apart (mesh leaves, cloud planes,
+/// ellipsoids) and, for the far tiers, draws captures of the bare wood: the
+/// billboard and impostor sections with index 1, the same layout as index 0's,
+/// in a fetch part of their own ([`PackPart::BareFar`]) that only a leaf-off
+/// view fetches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SeasonMeta {
+    /// The leaves' autumn colour (sRGB).
+    pub autumn: [u8; 3],
+    /// The far tiers' bare captures are in the pack (sections with index 1).
+    pub bare_far: bool,
+    /// The bare tree's cover seen from above over the leafy tree's (0–1):
+    /// what canopy rasters keep of a leaf-off crown.
+    pub bare_cover: f32,
 }
 
 /// A section-table entry.
@@ -511,20 +534,39 @@ pub enum PackPart {
     MeshCoarse,
     /// Mesh level 0, the full mesh (needed only close up; always with `MeshCoarse`).
     MeshFull,
+    /// The bare tree's billboards and impostors (a deciduous species' far
+    /// field in leaf-off, [`SeasonMeta`]): fetched instead of `Billboards` then.
+    BareFar,
 }
 
 /// Number of [`PackPart`]s.
-pub const PACK_PARTS: usize = 4;
+pub const PACK_PARTS: usize = 5;
 
 impl PackPart {
     /// Every part, in fetch order.
     pub const ALL: [PackPart; PACK_PARTS] =
-        [PackPart::Billboards, PackPart::Clusters, PackPart::MeshCoarse, PackPart::MeshFull];
+        [PackPart::Billboards, PackPart::Clusters, PackPart::MeshCoarse, PackPart::MeshFull, PackPart::BareFar];
+
+    /// A far field (the billboards and impostors of one season): fetched
+    /// whatever the GPU budget, before anything finer.
+    #[must_use]
+    pub fn is_far(self) -> bool {
+        matches!(self, PackPart::Billboards | PackPart::BareFar)
+    }
 
     /// The part a section belongs to (`None` for `META` and unknown kinds).
     #[must_use]
     pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
         match k {
+            kind::BILLBOARD_COLOR
+            | kind::BILLBOARD_NORMAL
+            | kind::BILLBOARD_AO
+            | kind::IMPOSTOR_COLOR
+            | kind::IMPOSTOR_SURFACE
+                if index == 1 =>
+            {
+                Some(PackPart::BareFar)
+            }
             kind::BILLBOARD_COLOR
             | kind::BILLBOARD_NORMAL
             | kind::BILLBOARD_AO
@@ -681,6 +723,33 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
             }
         }
     }
+    // The far tiers' states: leaf-on (index 0), and the bare wood (index 1)
+    // of a deciduous species that has it; no other index.
+    let states = if m.season.as_ref().is_some_and(|s| s.bare_far) { 2 } else { 1 };
+    if let Some(s) = &m.season {
+        finite("META.season.bare_cover", s.bare_cover.into())?;
+        if !(0.0..=1.0).contains(&s.bare_cover) {
+            return Err(Problem::Invalid(format!("META.season.bare_cover is {}, must be 0–1", s.bare_cover)));
+        }
+    }
+    for (e, _) in &pack.sections {
+        let far = [
+            kind::BILLBOARD_COLOR,
+            kind::BILLBOARD_NORMAL,
+            kind::BILLBOARD_AO,
+            kind::IMPOSTOR_COLOR,
+            kind::IMPOSTOR_SURFACE,
+        ];
+        if far.contains(&e.kind) && e.index >= states {
+            return Err(Problem::Invalid(format!(
+                "section {} with index {}: the far tiers have {states} state{} here (index 1 is a \
+                 deciduous species' bare wood, with META.season.bare_far)",
+                String::from_utf8_lossy(&e.kind),
+                e.index,
+                if states == 1 { "" } else { "s" }
+            )));
+        }
+    }
     if let Some(b) = &m.billboards {
         finite_all("META.billboards.center", &b.center)?;
         finite_all("META.billboards", &[b.half_width, b.half_height, b.select_px])?;
@@ -691,15 +760,17 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                 b.angles, b.azimuths, b.texture.layers
             )));
         }
-        for k in [kind::BILLBOARD_COLOR, kind::BILLBOARD_NORMAL] {
-            let data = pack.section(k, 0);
-            if !(partial && data.is_none()) {
-                validate_texture("META.billboards.texture", &b.texture, data, 4)?;
+        for state in 0..states {
+            for k in [kind::BILLBOARD_COLOR, kind::BILLBOARD_NORMAL] {
+                let data = pack.section(k, state);
+                if !(partial && data.is_none()) {
+                    validate_texture(&format!("META.billboards.texture (state {state})"), &b.texture, data, 4)?;
+                }
             }
-        }
-        // Optional at any time: older packs have no occlusion.
-        if let Some(data) = pack.section(kind::BILLBOARD_AO, 0) {
-            validate_texture("META.billboards.texture (BBAO)", &b.texture, Some(data), 1)?;
+            // Optional at any time: older packs have no occlusion.
+            if let Some(data) = pack.section(kind::BILLBOARD_AO, state) {
+                validate_texture("META.billboards.texture (BBAO)", &b.texture, Some(data), 1)?;
+            }
         }
     }
     if let Some(i) = &m.impostors {
@@ -728,10 +799,12 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                 i.texture.mips
             )));
         }
-        for k in [kind::IMPOSTOR_COLOR, kind::IMPOSTOR_SURFACE] {
-            let data = pack.section(k, 0);
-            if !(partial && data.is_none()) {
-                validate_texture("META.impostors.texture", &i.texture, data, 4)?;
+        for state in 0..states {
+            for k in [kind::IMPOSTOR_COLOR, kind::IMPOSTOR_SURFACE] {
+                let data = pack.section(k, state);
+                if !(partial && data.is_none()) {
+                    validate_texture(&format!("META.impostors.texture (state {state})"), &i.texture, data, 4)?;
+                }
             }
         }
     }

@@ -135,17 +135,19 @@ pub struct BillboardGpu {
 }
 
 impl BillboardGpu {
-    /// Uploads the billboard arrays of `pack`, if it has them.
+    /// Uploads the billboard arrays of `pack` of far-tier state `state` (0
+    /// leaf-on, 1 a deciduous species' bare wood), if it has them.
     #[must_use]
     pub fn upload(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        state: u32,
         pipeline: &BillboardPipeline,
         pack: &Pack<'_>,
     ) -> Option<Self> {
         let meta = pack.meta.billboards.clone()?;
-        let color = pack.section(kind::BILLBOARD_COLOR, 0)?;
-        let normal = pack.section(kind::BILLBOARD_NORMAL, 0)?;
+        let color = pack.section(kind::BILLBOARD_COLOR, state)?;
+        let normal = pack.section(kind::BILLBOARD_NORMAL, state)?;
         let color_tex = upload_texture_array(
             device,
             queue,
@@ -164,7 +166,7 @@ impl BillboardGpu {
         );
         // The tree's own occlusion (`BBAO`, R8); a pack without it gets one
         // open (white) texel per layer.
-        let ao = pack.section(kind::BILLBOARD_AO, 0);
+        let ao = pack.section(kind::BILLBOARD_AO, state);
         let ao_tex = match ao {
             Some(bytes) => upload_texture_array(
                 device,

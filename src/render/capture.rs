@@ -13,6 +13,7 @@ use super::impostor::{ImpostorGpu, ImpostorPipeline, IMPOSTOR_VERTICES};
 use super::layouts::SharedLayouts;
 use super::layouts::DEPTH_FORMAT;
 use super::mesh::{MeshGpu, MeshPipelines, CAPTURE_ALBEDO_FORMAT, CAPTURE_AO_FORMAT, CAPTURE_NORMAL_FORMAT};
+use super::settings::Season;
 use super::Lighting;
 use crate::format::tile::{GpuBatch, PackedInstance};
 use crate::format::Pack;
@@ -164,6 +165,12 @@ impl SingleTree {
         ctx.queue.write_buffer(&self.instance, 0, bytemuck::bytes_of(&instance));
     }
 
+    /// Draws leaves (false: the bare wood, as a leaf-off capture).
+    fn set_leaves(&self, ctx: &GpuContext, leaves: bool) {
+        let params = DrawParams { season: [0.0, 0.0, 0.0, if leaves { 0.0 } else { 2.0 }], ..Default::default() };
+        ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+    }
+
     fn bind(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(2, &self.instances, &[]);
         pass.set_bind_group(3, &self.draw, &[0]);
@@ -189,7 +196,9 @@ impl CapturePipelines {
 /// Renders mesh level 0 of `pack` orthographically from `angles` elevations evenly
 /// spaced over 0–90° (alg. 3.1: angle k = 90°/(K−1)·k) times `azimuths` azimuths,
 /// into `size`² albedo + normal layers. Layer = azimuth · angles + elevation.
+/// `leaves` false: the bare wood (a deciduous tree's leaf-off state).
 #[must_use]
+#[allow(clippy::too_many_arguments)]
 pub fn capture_billboards(
     ctx: &GpuContext,
     pipelines: &CapturePipelines,
@@ -198,6 +207,7 @@ pub fn capture_billboards(
     angles: u32,
     azimuths: u32,
     size: u32,
+    leaves: bool,
 ) -> CapturedBillboards {
     let mut views = Vec::new();
     for a in 0..azimuths {
@@ -207,12 +217,12 @@ pub fn capture_billboards(
             views.push(frame.clip_from_model(elevation, azimuth));
         }
     }
-    capture_views(ctx, pipelines, pack, &views, size)
+    capture_views(ctx, pipelines, pack, &views, size, leaves)
 }
 
 /// Renders mesh level 0 of `pack` with each orthographic `views` transform
 /// (clip from model, reversed Z) into `size`² layers: albedo, normal, occlusion
-/// and depth, one layer per view.
+/// and depth, one layer per view; `leaves` false: the bare wood.
 #[must_use]
 pub fn capture_views(
     ctx: &GpuContext,
@@ -220,6 +230,7 @@ pub fn capture_views(
     pack: &Pack<'_>,
     views: &[Mat4],
     size: u32,
+    leaves: bool,
 ) -> CapturedBillboards {
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
     let albedo = target(ctx, size, size, CAPTURE_ALBEDO_FORMAT);
@@ -241,6 +252,7 @@ pub fn capture_views(
     let view_group = pipelines.shared.view_group(&ctx.device, &view_buffer);
     // The capture works in model space: the eye is the model origin.
     let tree = SingleTree::new(ctx, &pipelines.shared);
+    tree.set_leaves(ctx, leaves);
     let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new(), ao: Vec::new(), depth: Vec::new() };
     for clip_from_model in views {
         let uniform = ViewUniform {
@@ -351,6 +363,8 @@ pub struct TreeRenderer {
     /// Alpha-test mesh leaves at their textures' full resolution (the accuracy
     /// reference's [`super::settings::RenderSettings::full_res_alpha`]).
     pub full_res_alpha: bool,
+    /// The season drawn ([`Self::set_season`]) and its draw params.
+    season: std::cell::Cell<(Season, [f32; 4])>,
 }
 
 /// What one capture sees: a camera (`clip_from_eye` at `eye`, model space)
@@ -402,7 +416,22 @@ impl TreeRenderer {
             format,
             ao: true,
             full_res_alpha: false,
+            season: std::cell::Cell::new((Season::LeafOn, [0.0; 4])),
         }
+    }
+
+    /// Draws from now on a tree with `meta`'s seasons (a pack's `season`;
+    /// none: evergreen) in `season`. [`Self::render_pack`] then uploads the
+    /// bare far tiers in leaf-off where the pack has them.
+    pub fn set_season(&self, meta: Option<&crate::format::pack::SeasonMeta>, season: Season) {
+        self.season.set((season, super::settings::season_params(meta, season)));
+    }
+
+    /// The far-tier state [`Self::render_pack`] uploads of `pack`: 1 (the
+    /// bare wood) in leaf-off where the pack has it, else 0.
+    fn far_state(&self, pack: &Pack<'_>) -> u32 {
+        let bare = pack.meta.season.as_ref().is_some_and(|s| s.bare_far);
+        u32::from(bare && self.season.get().0 == Season::LeafOff)
     }
 
     /// Draws mesh variant `variant` (0–31) from now on (0 by default; a level
@@ -506,7 +535,7 @@ impl TreeRenderer {
         let row1 = Vec3::new(clip_from_eye.x_axis.y, clip_from_eye.y_axis.y, clip_from_eye.z_axis.y);
         uniform.lod[0] = 0.5 * height as f32 * row1.length();
         ctx.queue.write_buffer(&self.view_buffer, 0, bytemuck::bytes_of(&uniform));
-        let mut params = DrawParams::default();
+        let mut params = DrawParams { season: self.season.get().1, ..Default::default() };
         match what {
             TreeDraw::Mesh(_, level) => params.ids[1] = (*level).min(1) as u32,
             TreeDraw::Cloud(_) => params.ids[1] = Repr::Cloud as u32,
@@ -692,11 +721,11 @@ impl TreeRenderer {
                 (level < c.levels.len()).then(|| r.render(ctx, &TreeDraw::Cluster(&c, level), &shot, background))
             }
             PackRepr::Billboard => {
-                let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, pack)?;
+                let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, self.far_state(pack), &r.billboard, pack)?;
                 Some(r.render(ctx, &TreeDraw::Billboard(&bb), &shot, background))
             }
             PackRepr::Impostor => {
-                let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, pack)?;
+                let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, self.far_state(pack), &r.impostor, pack)?;
                 Some(r.render(ctx, &TreeDraw::Impostor(&imp), &shot, background))
             }
             PackRepr::Cloud => {

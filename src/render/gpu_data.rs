@@ -41,8 +41,12 @@ pub struct DrawParams {
     pub ao_field_min: [f32; 4],
     /// Its size xyz.
     pub ao_field_size: [f32; 4],
+    /// The species' season (`trees.wgsl`): xyz its leaves' autumn colour
+    /// (linear RGB), w the state drawn ([`super::settings::Season::code`]:
+    /// 0 leaf-on or evergreen, 1 autumn, 2 leaf-off).
+    pub season: [f32; 4],
     /// Padding to the 256-byte dynamic-offset alignment.
-    pub pad: [u32; 24],
+    pub pad: [u32; 20],
 }
 const _: () = assert!(std::mem::size_of::<DrawParams>() == 256);
 

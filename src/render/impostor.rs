@@ -121,17 +121,19 @@ pub struct ImpostorGpu {
 }
 
 impl ImpostorGpu {
-    /// Uploads the impostor arrays of `pack`, if it has them.
+    /// Uploads the impostor arrays of `pack` of far-tier state `state` (0
+    /// leaf-on, 1 a deciduous species' bare wood), if it has them.
     #[must_use]
     pub fn upload(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        state: u32,
         pipeline: &ImpostorPipeline,
         pack: &Pack<'_>,
     ) -> Option<Self> {
         let meta = pack.meta.impostors.clone()?;
-        let color = pack.section(kind::IMPOSTOR_COLOR, 0)?;
-        let surface = pack.section(kind::IMPOSTOR_SURFACE, 0)?;
+        let color = pack.section(kind::IMPOSTOR_COLOR, state)?;
+        let surface = pack.section(kind::IMPOSTOR_SURFACE, state)?;
         let color_tex = upload_texture_array(
             device,
             queue,

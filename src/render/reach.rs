@@ -27,6 +27,8 @@ struct Measured {
     fade_band: f32,
     representations: Representations,
     lod_policy: bool,
+    /// Leaf-off: deciduous species want their bare far tiers.
+    leaf_off: bool,
     residency: u64,
 }
 
@@ -61,6 +63,7 @@ impl Reach {
             fade_band: settings.fade_band,
             representations: settings.representations,
             lod_policy: settings.lod_policy,
+            leaf_off: settings.season == super::settings::Season::LeafOff,
             residency: generation,
         };
         if self.measured == Some(key) && self.species_max_px.len() == species {
@@ -134,10 +137,11 @@ impl Reach {
     }
 
     /// Which parts of species `s`'s pack ([`crate::format::pack::PackPart::ALL`]
-    /// order: billboards, clusters, coarse mesh levels, full mesh) the resident
-    /// trees within reach can need, from the measured heights and the
-    /// representations allowed: a far view needs neither meshes nor clusters, a
-    /// medium one not the full mesh.
+    /// order: billboards, clusters, coarse mesh levels, full mesh, bare far
+    /// tiers) the resident trees within reach can need, from the measured
+    /// heights and the representations allowed: a far view needs neither
+    /// meshes nor clusters, a medium one not the full mesh; a leaf-off view the
+    /// bare far tiers of a deciduous species that has them, not its leafy ones.
     #[must_use]
     pub fn parts_needed(&self, s: usize, meta: &PackMeta) -> [bool; PACK_PARTS] {
         let max_px = self.species_max_px.get(s).copied().unwrap_or(0.0);
@@ -164,7 +168,8 @@ impl Reach {
         // The full mesh only where a tree can reach its threshold (one level: always).
         let full = meshes && (meta.mesh_levels.len() == 1 || b.mesh[0].is_some_and(|px| max_px >= px * slack));
         let clusters = b.has_clusters() && b.clusters.is_some_and(|min| max_px >= min * slack);
-        [b.far, clusters, meshes || cloud, full]
+        let bare = m.leaf_off && meta.season.as_ref().is_some_and(|s| s.bare_far);
+        [b.far && !bare, clusters, meshes || cloud, full, b.far && bare]
     }
 }
 
@@ -188,6 +193,7 @@ mod tests {
                 fade_band: 0.12,
                 representations: Representations::ALL,
                 lod_policy: false,
+                leaf_off: false,
                 residency: 0,
             }),
         };
@@ -221,8 +227,20 @@ mod tests {
                 half_extent: None,
             }),
             cloud: None,
+            season: None,
         };
-        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
+        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
+        // Leaf-off: a deciduous species with bare far tiers wants them instead;
+        // an evergreen (no season) or one without them its leafy ones.
+        let mut bare = reach.clone();
+        if let Some(m) = bare.measured.as_mut() {
+            m.leaf_off = true;
+        }
+        assert_eq!(bare.parts_needed(0, &meta), [true, false, false, false, false]);
+        meta.season = Some(crate::format::pack::SeasonMeta { autumn: [200, 90, 30], bare_far: true, bare_cover: 0.2 });
+        assert_eq!(bare.parts_needed(0, &meta), [false, false, false, false, true]);
+        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
+        meta.season = None;
         // A billboard cloud from 40 px: not for 5 px trees; for 45 px ones the
         // coarse part (which holds it), not the full mesh.
         meta.cloud = Some(crate::format::cloud::CloudMeta {
@@ -235,10 +253,10 @@ mod tests {
             pareto_error: None,
             pareto_cost: None,
         });
-        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false]);
+        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
         let mut closer = reach.clone();
         closer.species_max_px = vec![45.0];
-        assert_eq!(closer.parts_needed(0, &meta), [true, false, true, false]);
+        assert_eq!(closer.parts_needed(0, &meta), [true, false, true, false, false]);
         // The LoD policy: a cloud the bake found no better than the far tier is
         // not fetched; one it kept is.
         let mut policy = closer.clone();
@@ -246,12 +264,12 @@ mod tests {
             m.lod_policy = true;
         }
         meta.cloud.as_mut().unwrap().pareto_error = Some([0.03, 0.031]);
-        assert_eq!(policy.parts_needed(0, &meta), [true, false, false, false]);
+        assert_eq!(policy.parts_needed(0, &meta), [true, false, false, false, false]);
         meta.cloud.as_mut().unwrap().pareto_error = Some([0.02, 0.031]);
-        assert_eq!(policy.parts_needed(0, &meta), [true, false, true, false]);
+        assert_eq!(policy.parts_needed(0, &meta), [true, false, true, false, false]);
         meta.cloud = None;
         // Without any far tier the mesh is the coarsest and is fetched.
         meta.impostors = None;
-        assert_eq!(reach.parts_needed(0, &meta), [false, false, true, true]);
+        assert_eq!(reach.parts_needed(0, &meta), [false, false, true, true, false]);
     }
 }

@@ -100,6 +100,77 @@ pub struct RenderSettings {
     /// [`super::refine`]): accumulated steps then blend both sides of a
     /// transition. 0: the fixed pattern.
     pub refine_seed: u32,
+    /// The season deciduous species are drawn in (their packs' `season`;
+    /// evergreens look the same all year).
+    pub season: Season,
+}
+
+/// A deciduous tree's seasons (a pack's [`crate::format::pack::SeasonMeta`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+pub enum Season {
+    /// In leaf (what every tier is baked in).
+    #[default]
+    LeafOn,
+    /// The leaves in their autumn colour.
+    Autumn,
+    /// Bare wood: no leaves, the far tiers' bare captures.
+    LeafOff,
+}
+
+impl Season {
+    /// Every season, in the year's order from spring.
+    pub const ALL: [Season; 3] = [Season::LeafOn, Season::Autumn, Season::LeafOff];
+
+    /// Its name (`leaf-on`, `autumn`, `leaf-off`), as `--season` and `setSeason` take it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Season::LeafOn => "leaf-on",
+            Season::Autumn => "autumn",
+            Season::LeafOff => "leaf-off",
+        }
+    }
+
+    /// The state code the tree passes read (`DrawParams.season.w`).
+    #[must_use]
+    pub fn code(self) -> f32 {
+        match self {
+            Season::LeafOn => 0.0,
+            Season::Autumn => 1.0,
+            Season::LeafOff => 2.0,
+        }
+    }
+}
+
+/// The tree passes' `DrawParams.season` for a species with `meta`'s seasons
+/// (none: an evergreen, drawn leaf-on) drawn in `season`: its autumn colour
+/// (linear RGB) and the state code.
+#[must_use]
+pub fn season_params(meta: Option<&crate::format::pack::SeasonMeta>, season: Season) -> [f32; 4] {
+    let Some(m) = meta else { return [0.0; 4] };
+    let linear = |c: u8| {
+        let c = f32::from(c) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    [linear(m.autumn[0]), linear(m.autumn[1]), linear(m.autumn[2]), season.code()]
+}
+
+impl std::str::FromStr for Season {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let folded = s.trim().to_ascii_lowercase().replace(['_', ' '], "-");
+        match folded.as_str() {
+            "leaf-on" | "leafon" | "summer" | "spring" | "on" => Ok(Season::LeafOn),
+            "autumn" | "fall" => Ok(Season::Autumn),
+            "leaf-off" | "leafoff" | "winter" | "bare" | "off" => Ok(Season::LeafOff),
+            _ => Err(format!("unknown season {s:?}: expected leaf-on, autumn or leaf-off")),
+        }
+    }
 }
 
 /// Which far-field representation a species draws where its pack has both.
@@ -153,6 +224,7 @@ impl Default for RenderSettings {
             adaptive_alpha: true,
             lod_policy: true,
             refine_seed: 0,
+            season: Season::LeafOn,
             whole_tiles: false,
             canopy: true,
         }

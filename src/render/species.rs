@@ -15,7 +15,7 @@ use super::layouts::SharedLayouts;
 use super::mesh::{MeshGpu, MeshPipelines};
 use super::pools::Pools;
 use super::reach::Reach;
-use super::settings::{FarTier, RenderSettings, Representations};
+use super::settings::{season_params, FarTier, RenderSettings, Representations, Season};
 use crate::format::Pack;
 use crate::lod::bands::{bands, cluster_tiers, MeshOffer, Offer};
 use crate::lod::policy::policy_keeps;
@@ -32,8 +32,16 @@ struct SpeciesGpu {
     mesh: MeshGpu,
     billboard: Option<BillboardGpu>,
     impostor: Option<ImpostorGpu>,
+    /// The bare wood's billboards and impostors (a deciduous species' leaf-off
+    /// far tiers), when on the GPU.
+    billboard_bare: Option<BillboardGpu>,
+    impostor_bare: Option<ImpostorGpu>,
     /// The far-tier slot draws the impostors (set by `rebuild_table`).
     far_impostor: bool,
+    /// The far-tier slot draws the bare captures (set by `rebuild_table`).
+    far_bare: bool,
+    /// The pack's seasons (none: evergreen).
+    season: Option<crate::format::pack::SeasonMeta>,
     cluster: Option<ClusterGpu>,
     /// Cluster level of each cluster tier in use (set by `rebuild_table`).
     tiers: Vec<usize>,
@@ -103,6 +111,7 @@ pub struct Species {
     representations: Representations,
     far_tier: FarTier,
     lod_policy: bool,
+    season: Season,
 }
 
 impl Species {
@@ -122,6 +131,7 @@ impl Species {
             representations: Representations::default(),
             far_tier: FarTier::Impostors,
             lod_policy: true,
+            season: Season::LeafOn,
         }
     }
 
@@ -171,19 +181,25 @@ impl Species {
         } else {
             MeshGpu { levels: Vec::new(), cloud: None }
         };
-        let billboard = if m.billboards.is_some() && pack.section(kind::BILLBOARD_COLOR, 0).is_some() {
-            let pipeline = self.billboard.get_or_insert_with(|| BillboardPipeline::billboard(device, shared, format));
-            BillboardGpu::upload(device, queue, pipeline, pack)
-        } else {
-            None
-        };
-        let impostor = if m.impostors.is_some() && pack.section(kind::IMPOSTOR_COLOR, 0).is_some() {
-            let pipeline =
-                self.impostor.get_or_insert_with(|| super::impostor::impostor_pipeline(device, shared, format));
-            ImpostorGpu::upload(device, queue, pipeline, pack)
-        } else {
-            None
-        };
+        // Far tiers of each state held: leaf-on (0) and a deciduous species' bare wood (1).
+        let mut billboards = [0, 1].map(|state| {
+            if m.billboards.is_some() && pack.section(kind::BILLBOARD_COLOR, state).is_some() {
+                let pipeline =
+                    self.billboard.get_or_insert_with(|| BillboardPipeline::billboard(device, shared, format));
+                BillboardGpu::upload(device, queue, state, pipeline, pack)
+            } else {
+                None
+            }
+        });
+        let mut impostors = [0, 1].map(|state| {
+            if m.impostors.is_some() && pack.section(kind::IMPOSTOR_COLOR, state).is_some() {
+                let pipeline =
+                    self.impostor.get_or_insert_with(|| super::impostor::impostor_pipeline(device, shared, format));
+                ImpostorGpu::upload(device, queue, state, pipeline, pack)
+            } else {
+                None
+            }
+        });
         let cluster = if m.clusters.is_some() && pack.section(kind::ELLIPSOIDS, 0).is_some() {
             let pipeline = self.cluster.get_or_insert_with(|| ClusterPipeline::new(device, shared, format));
             ClusterGpu::upload(device, queue, pipeline, pack)
@@ -209,9 +225,13 @@ impl Species {
             cloud_kept: m.cloud.as_ref().is_some_and(|c| policy_keeps(c.pareto_error, c.pareto_cost, false)),
             has_far: m.billboards.is_some() || m.impostors.is_some(),
             mesh,
-            billboard,
-            impostor,
+            billboard: billboards[0].take(),
+            impostor: impostors[0].take(),
+            billboard_bare: billboards[1].take(),
+            impostor_bare: impostors[1].take(),
             far_impostor: false,
+            far_bare: false,
+            season: m.season.clone(),
             cluster,
             tiers: Vec::new(),
             bytes,
@@ -226,7 +246,9 @@ impl Species {
             || settings.representations != self.representations
             || settings.far_tier != self.far_tier
             || settings.lod_policy != self.lod_policy
+            || settings.season != self.season
         {
+            self.season = settings.season;
             self.cluster_min_px = settings.cluster_min_px;
             self.representations = settings.representations;
             self.far_tier = settings.far_tier;
@@ -253,6 +275,10 @@ impl Species {
                 .map(|r| DrawParams { ids: [0, *r as u32, i as u32, 0], ..Default::default() })
                 .collect();
             if let Some(p) = pack {
+                let season = season_params(p.season.as_ref(), self.season);
+                for d in &mut draw {
+                    d.season = season;
+                }
                 s.sphere = p.sphere;
                 s.select = [p.height_m, 0.0, 0.0, 0.0];
                 let mut want = [0u32; REPR_COUNT as usize];
@@ -298,9 +324,16 @@ impl Species {
                     }
                 }
                 // The far tier: impostors or billboards (settings.far_tier where both).
-                p.far_impostor = p.impostor.is_some() && (self.far_tier == FarTier::Impostors || p.billboard.is_none());
+                // In leaf-off, a deciduous species' bare captures where they have
+                // come (until then the leafy ones, their leaf texels dropped).
+                p.far_bare = self.season == Season::LeafOff
+                    && p.season.is_some()
+                    && (p.impostor_bare.is_some() || p.billboard_bare.is_some());
+                let (impostor, billboard) =
+                    if p.far_bare { (&p.impostor_bare, &p.billboard_bare) } else { (&p.impostor, &p.billboard) };
+                p.far_impostor = impostor.is_some() && (self.far_tier == FarTier::Impostors || billboard.is_none());
                 let r = Repr::Billboard as usize;
-                match (&p.impostor, &p.billboard) {
+                match (impostor, billboard) {
                     (Some(imp), _) if p.far_impostor && b.far => {
                         want[r] = resident;
                         s.index_count[r] = IMPOSTOR_VERTICES;
@@ -488,14 +521,16 @@ impl Species {
                 pass.draw_indirect(&pools.buffers.args, args_offset);
             }
             Repr::Billboard if p.far_impostor => {
-                let (Some(imp), Some(impostor)) = (&p.impostor, &self.impostor) else { return false };
+                let imp = if p.far_bare { &p.impostor_bare } else { &p.impostor };
+                let (Some(imp), Some(impostor)) = (imp, &self.impostor) else { return false };
                 let Some(pipe) = pipeline.far_tier(impostor) else { return false };
                 pass.set_pipeline(pipe);
                 pass.set_bind_group(1, &imp.bind_group, &[]);
                 pass.draw_indirect(&pools.buffers.args, args_offset);
             }
             Repr::Billboard => {
-                let (Some(bb), Some(billboard)) = (&p.billboard, &self.billboard) else { return false };
+                let bb = if p.far_bare { &p.billboard_bare } else { &p.billboard };
+                let (Some(bb), Some(billboard)) = (bb, &self.billboard) else { return false };
                 let Some(pipe) = pipeline.far_tier(billboard) else { return false };
                 pass.set_pipeline(pipe);
                 pass.set_bind_group(1, &bb.bind_group, &[]);

@@ -152,6 +152,17 @@ impl Viewer {
         Ok(())
     }
 
+    /// The season deciduous species are drawn in: `"leaf-on"`, `"autumn"` or
+    /// `"leaf-off"` (a leaf-off view fetches their bare far tiers).
+    ///
+    /// # Errors
+    /// Any other season (the message names the three).
+    pub fn set_season(&mut self, season: &str) -> Result<(), JsValue> {
+        self.frame.settings.season =
+            season.parse().map_err(|e: String| JsValue::from_str(&format!("setSeason: {e}")))?;
+        Ok(())
+    }
+
     /// Each tree's own baked ambient occlusion on or off.
     pub fn set_ao(&mut self, on: bool) {
         self.frame.settings.ao = on;

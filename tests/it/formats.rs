@@ -10,8 +10,8 @@ use std::path::PathBuf;
 use sylva::format::ids::{decode_ids, encode_ids};
 use sylva::format::manifest::{Bounds, Counts, Crs, Manifest, SpeciesEntry, TileEntry, SCENE_VERSION};
 use sylva::format::pack::{
-    kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section,
-    TextureArrayMeta,
+    kind, BillboardMeta, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackHead, PackMeta,
+    PackPart, SeasonMeta, Section, TextureArrayMeta,
 };
 use sylva::format::terrain::{dequantise, quantise, TerrainChild, TerrainTile, TERRAIN_HOLE};
 use sylva::format::tile::{
@@ -142,6 +142,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
         clusters: None,
         impostors: None,
         cloud: None,
+        season: None,
     };
     let fill = |n: u64, v: u8| vec![v; n as usize];
     let sections = vec![
@@ -768,12 +769,46 @@ fn pack_decoder_error_paths() {
     pack_error(with_impostors(3, 1.0, true), "a 3×3 grid");
     pack_error(with_impostors(2, 0.0, true), "radius 0");
     pack_error(with_impostors(2, f32::INFINITY, true), "expected f32");
-    pack_error(with_impostors(2, 1.0, false), "META.impostors.texture has no texture section");
+    pack_error(with_impostors(2, 1.0, false), "META.impostors.texture (state 0) has no texture section");
     let (mut meta, mut sections) = sample_pack();
     with_impostors(2, 1.0, true)(&mut meta, &mut sections);
     let bytes = encode_pack(&meta, &sections);
     let pack = decode_pack("x", &bytes).expect("a valid impostor pack");
     assert_eq!(pack.meta.impostors.as_ref().map(|i| i.grid), Some(2));
+    // Seasons: the bare wood's far tiers (index 1) only with META.season.bare_far,
+    // of the same layout as index 0's, in their own fetch part; bare_cover 0–1.
+    let bare = |season: Option<SeasonMeta>, bytes: usize| {
+        move |m: &mut PackMeta, s: &mut Vec<Section>| {
+            with_impostors(2, 1.0, true)(m, s);
+            m.season = season;
+            for k in [kind::IMPOSTOR_COLOR, kind::IMPOSTOR_SURFACE] {
+                s.push(Section { kind: k, index: 1, count: 0, stride: 0, data: vec![0; bytes] });
+            }
+            // The billboards' bare state: as their leafy one.
+            let billboards: Vec<Section> = s
+                .iter()
+                .filter(|x| [kind::BILLBOARD_COLOR, kind::BILLBOARD_NORMAL, kind::BILLBOARD_AO].contains(&x.kind))
+                .map(|x| Section { index: 1, ..x.clone() })
+                .collect();
+            s.extend(billboards);
+        }
+    };
+    let season = |bare_far, bare_cover| Some(SeasonMeta { autumn: [200, 80, 30], bare_far, bare_cover });
+    pack_error(bare(None, 80), "section IMCO with index 1: the far tiers have 1 state here");
+    pack_error(bare(season(false, 0.2), 80), "index 1");
+    pack_error(bare(season(true, 0.2), 79), "META.impostors.texture (state 1) needs 80 bytes");
+    pack_error(bare(season(true, 1.5), 80), "META.season.bare_cover is 1.5");
+    let (mut meta, mut sections) = sample_pack();
+    bare(season(true, 0.2), 80)(&mut meta, &mut sections);
+    let bytes = encode_pack(&meta, &sections);
+    let head = PackHead::decode("x", &bytes).unwrap();
+    let (leafy, bare_part) =
+        (head.part_range(PackPart::Billboards).unwrap(), head.part_range(PackPart::BareFar).unwrap());
+    assert!(leafy.1 <= bare_part.0 || bare_part.1 <= leafy.0, "the parts overlap: {leafy:?} {bare_part:?}");
+    // A leaf-off viewer holding the head and the bare part alone assembles a valid pack.
+    let held = vec![(bare_part.0, bytes[bare_part.0 as usize..bare_part.1 as usize].to_vec())];
+    let pack = head.assemble("x", &held).expect("the bare part alone");
+    assert!(pack.section(kind::IMPOSTOR_COLOR, 1).is_some() && pack.section(kind::IMPOSTOR_COLOR, 0).is_none());
     // Unknown section kinds are skipped (forward compatibility).
     let (meta, mut sections) = sample_pack();
     sections.push(Section { kind: *b"ELPS", index: 0, count: 2, stride: 32, data: vec![0; 64] });

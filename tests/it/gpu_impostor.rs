@@ -162,8 +162,9 @@ fn a_tree_seen_all_round_keeps_its_silhouette() {
         let bytes = std::fs::read(&path).expect("fixture pack (make fixtures)");
         let pack = decode_pack(&path, &bytes).expect("fixture pack decodes");
         let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, &pack);
-        let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, &pack).expect("impostors (make fixtures)");
-        let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, &pack).expect("billboards");
+        let imp =
+            ImpostorGpu::upload(&ctx.device, &ctx.queue, 0, &r.impostor, &pack).expect("impostors (make fixtures)");
+        let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, 0, &r.billboard, &pack).expect("billboards");
         let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
         let center = (lo + hi) * 0.5;
         // About 100 px tall: the impostors' band.
@@ -223,8 +224,8 @@ fn work_counts_are_exact_and_scale_with_size() {
     let bytes = std::fs::read(&path).expect("fixture pack (make fixtures)");
     let pack = decode_pack(&path, &bytes).expect("fixture pack decodes");
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, &pack);
-    let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, &pack).expect("impostors");
-    let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, &pack).expect("billboards");
+    let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, 0, &r.impostor, &pack).expect("impostors");
+    let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, 0, &r.billboard, &pack).expect("billboards");
     let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
     let work = |what: &TreeDraw<'_>, size: u32| {
         let shot = sylva::render::capture::preview_camera(lo, hi, PackView::Side, [size, size]);
@@ -268,8 +269,8 @@ fn far_tier_error_by_size() {
     let bytes = std::fs::read(&path).expect("pack");
     let pack = decode_pack(&path, &bytes).expect("pack decodes");
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &r.mesh, &pack);
-    let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, &r.impostor, &pack).expect("impostors");
-    let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, &r.billboard, &pack).expect("billboards");
+    let imp = ImpostorGpu::upload(&ctx.device, &ctx.queue, 0, &r.impostor, &pack).expect("impostors");
+    let bb = BillboardGpu::upload(&ctx.device, &ctx.queue, 0, &r.billboard, &pack).expect("billboards");
     let (lo, hi) = (Vec3::from(pack.meta.bounds_min), Vec3::from(pack.meta.bounds_max));
     let center = (lo + hi) * 0.5;
     const SIZE: u32 = 64;

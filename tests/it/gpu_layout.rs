@@ -108,7 +108,7 @@ fn shared_structs_match_their_wgsl_twins() {
         check(
             shader,
             "DrawParams",
-            &members!(DrawParams: ids, bb_center, bb_size, cluster, cluster_noise, bounds_min, bounds_extent, line_color, ao_field_min, ao_field_size),
+            &members!(DrawParams: ids, bb_center, bb_size, cluster, cluster_noise, bounds_min, bounds_extent, line_color, ao_field_min, ao_field_size, season),
             size_of::<DrawParams>(),
             Some(256),
         );
@@ -131,7 +131,7 @@ fn mesh_pass_structs_and_indirect_args_match() {
         size_of::<GpuMaterial>(),
         None,
     );
-    assert_eq!(offset_of!(DrawParams, pad), 160, "DrawParams: the padding follows the WGSL members");
+    assert_eq!(offset_of!(DrawParams, pad), 176, "DrawParams: the padding follows the WGSL members");
     // The cull pass writes indirect arguments as atomic words (no WGSL struct to
     // reflect): the Rust twin must have wgpu's layout.
     use wgpu::util::DrawIndexedIndirectArgs as W;

@@ -2,13 +2,14 @@
 //! They look at pixels: a test that passed on a black image would be no test.
 
 use sylva::format::pack::{
-    kind, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, Section, TextureArrayMeta,
-    VariantVertex,
+    kind, DrawRange, MaterialKind, MaterialMeta, MeshLevelMeta, MeshVertex, PackMeta, SeasonMeta, Section,
+    TextureArrayMeta, VariantVertex,
 };
 use sylva::format::{decode_pack, encode_pack};
 use sylva::render::capture::{
     capture_billboards, render_pack_preview, BillboardFrame, CapturePipelines, PackRepr, PackView, TreeRenderer,
 };
+use sylva::render::settings::Season;
 use sylva::render::GpuContext;
 
 const TEX: u32 = 16;
@@ -116,6 +117,7 @@ fn toy_pack_with(variant: bool) -> Vec<u8> {
         clusters: None,
         impostors: None,
         cloud: None,
+        season: None,
     };
     let sections = vec![
         Section {
@@ -201,7 +203,7 @@ fn billboard_capture_sees_the_tree_from_every_angle() {
     let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
     let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
     let size = 64;
-    let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size);
+    let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size, true);
     assert_eq!(cap.color.len(), 4);
     let coverage: Vec<f64> = cap.color.iter().map(|l| sylva::render::mips::alpha_coverage(l, 0.5)).collect();
     for (k, c) in coverage.iter().enumerate().take(3) {
@@ -220,6 +222,67 @@ fn billboard_capture_sees_the_tree_from_every_angle() {
     assert!(cap.color[0][i + 3] > 0, "no texel at the crown centre");
     assert!((i32::from(n[0]) - 128).abs() > 60, "normal x should be ±0.7, got {n:?}");
     assert!(n[2].abs_diff(128) < 20, "normal z should be 0, got {n:?}");
+}
+
+#[test]
+fn a_leaf_off_capture_and_draw_keep_the_wood_alone() {
+    // The bare tree (a deciduous species' leaf-off far tiers): captured with
+    // the leaves left out, only wood texels remain, far fewer of them.
+    let ctx = gpu();
+    let bytes = toy_pack();
+    let pack = decode_pack("toy", &bytes).unwrap();
+    let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
+    let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
+    let size = 64;
+    let leafy = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, true);
+    let bare = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, false);
+    let covered =
+        |c: &sylva::render::capture::CapturedBillboards| c.color[0].chunks_exact(4).filter(|t| t[3] > 0).count();
+    let leaves = |c: &sylva::render::capture::CapturedBillboards| {
+        c.normal[0].chunks_exact(4).zip(c.color[0].chunks_exact(4)).filter(|(n, t)| t[3] > 0 && n[3] > 191).count()
+    };
+    assert!(leaves(&leafy) > 100, "the leafy capture has leaf texels ({})", leaves(&leafy));
+    assert_eq!(leaves(&bare), 0, "the bare capture has leaf texels");
+    assert!(covered(&bare) > 0, "the bare capture has its trunk");
+    assert!(covered(&bare) * 3 < covered(&leafy), "bare {} vs leafy {} texels", covered(&bare), covered(&leafy));
+    // Drawn: leaf-off drops the leaf card (the trunk stays); autumn recolours
+    // it; an evergreen (no season in its pack) is the same in every season.
+    let (w, h) = (96, 96);
+    let bg = [0.0, 0.0, 1.0, 1.0];
+    let r = TreeRenderer::new(&ctx);
+    let deciduous = SeasonMeta { autumn: [220, 60, 20], bare_far: false, bare_cover: 0.2 };
+    let count = |meta: Option<&SeasonMeta>, season: Season| {
+        r.set_season(meta, season);
+        let img = r.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, [w, h], bg).unwrap();
+        let (mut green, mut red, mut drawn) = (0usize, 0usize, 0usize);
+        for p in img.chunks_exact(4) {
+            if p[..3] != [0, 0, 255] {
+                drawn += 1;
+            }
+            match p {
+                [r, g, b, _] if g > r && g > b => green += 1,
+                [r, g, b, _] if r > g && r > b => red += 1,
+                _ => {}
+            }
+        }
+        (green, red, drawn, write_actual(&format!("season-{}", season.name()), &img, w, h))
+    };
+    let (green_on, red_on, drawn_on, saved_on) = count(Some(&deciduous), Season::LeafOn);
+    let (green_autumn, red_autumn, drawn_autumn, saved_autumn) = count(Some(&deciduous), Season::Autumn);
+    let (_, _, drawn_off, saved_off) = count(Some(&deciduous), Season::LeafOff);
+    assert!(green_on > 200, "leaf-on has its green card ({green_on} px); see {saved_on}");
+    assert!(
+        green_autumn * 10 < green_on && red_autumn > red_on + green_on / 2,
+        "autumn turns the leaves red ({green_autumn} green, {red_autumn} red px); see {saved_autumn}"
+    );
+    assert_eq!(drawn_autumn, drawn_on, "autumn recolours, it does not change the silhouette");
+    assert!(
+        drawn_off * 10 <= drawn_on * 3 && drawn_off > 0,
+        "leaf-off keeps the trunk only ({drawn_off} of {drawn_on} px); see {saved_off}"
+    );
+    let (green_ever, _, drawn_ever, _) = count(None, Season::LeafOff);
+    assert_eq!((green_ever, drawn_ever), (green_on, drawn_on), "an evergreen keeps its leaves");
+    r.set_season(None, Season::LeafOn);
 }
 
 #[test]

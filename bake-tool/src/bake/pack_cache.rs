@@ -163,7 +163,8 @@ fn hash_f32s(values: &[f32], h: &mut DefaultHasher) {
 
 fn hash_model(model: &ImportedModel, h: &mut DefaultHasher) {
     // Every field: a new one must be added here (or to the ignored ones).
-    let ImportedModel { materials, vertices, triangles, notes: _, variants } = model;
+    let ImportedModel { materials, vertices, triangles, notes: _, variants, autumn } = model;
+    autumn.hash(h);
     materials.len().hash(h);
     for m in materials {
         let ImportedMaterial { name, kind, base_color, alpha_cutoff, double_sided, texture, blended } = m;
@@ -212,7 +213,9 @@ fn hash_options(options: &PackOptions, h: &mut DefaultHasher) {
         impostor_grid,
         impostor_size,
         cloud_planes,
+        seasons,
     } = options;
+    seasons.hash(h);
     (texture_size, billboard_angles, billboard_azimuths, billboard_size).hash(h);
     (simplified_level, clusters, cluster_tries, ao).hash(h);
     (*far_tier as u8, impostor_grid, impostor_size, cloud_planes).hash(h);

@@ -380,10 +380,17 @@ pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::
         if species.iter().any(|(n, _)| n.eq_ignore_ascii_case(name)) {
             bail!("--model {name} is given twice");
         }
-        let model = match sylva_bake::library::spec(path) {
+        let mut model = match sylva_bake::library::spec(path) {
             Some(genus) => sylva_bake::library::model_named(genus)?,
             None => sylva_bake::input::gltf_import::import(std::path::Path::new(path), &classifier)?,
         };
+        if sylva_bake::library::spec(path).is_none() {
+            // A model of a deciduous genus (by its name) gets the genus's seasons.
+            model.autumn = sylva_bake::library::choose::autumn_of(name);
+            if model.autumn.is_some() {
+                log(&format!("model {name}: deciduous by its name: baked in leaf-on, autumn and leaf-off"));
+            }
+        }
         let (leaf, wood) = model.triangle_counts();
         log(&format!(
             "model {name}: {} materials, {leaf} leaf + {wood} branch triangles, height {:.2} (model units)",

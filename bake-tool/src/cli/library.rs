@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use sylva::render::capture::{CapturePipelines, PackRepr, PackView, TreeRenderer};
+use sylva::render::settings::Season;
 use sylva::render::GpuContext;
 use sylva_bake::library::{Genus, ARCHETYPES, GENERA};
 use sylva_bake::pack::{build_pack, FarBake, PackOptions};
@@ -41,6 +42,10 @@ pub(crate) enum LibraryCommand {
         /// Genera side by side in a row of the sheet.
         #[arg(long, default_value_t = 1)]
         per_row: u32,
+        /// Each variant in every season (leaf-on, autumn, leaf-off; evergreens
+        /// alike in all three), not leaf-on only.
+        #[arg(long)]
+        seasons: bool,
     },
 }
 
@@ -69,8 +74,15 @@ fn entries(names: &[String]) -> Result<Vec<&'static Genus>> {
     Ok(out)
 }
 
-/// Renders the sheet: rows of genera, columns of variants × (side, top).
-fn render_sheet(names: &[String], out: &PathBuf, variants: u64, size: u32, per_row: u32) -> Result<()> {
+/// Renders the sheet: rows of genera, columns of variants × seasons × (side, top).
+fn render_sheet(
+    names: &[String],
+    out: &PathBuf,
+    variants: u64,
+    size: u32,
+    per_row: u32,
+    seasons: &[Season],
+) -> Result<()> {
     let list = entries(names)?;
     if !(1..=8).contains(&variants) || !(32..=1024).contains(&size) || !(1..=64).contains(&per_row) {
         bail!("--variants must be 1–8, --per-row 1–64 and --size 32–1024 px");
@@ -87,7 +99,7 @@ fn render_sheet(names: &[String], out: &PathBuf, variants: u64, size: u32, per_r
         billboard_size: 32,
         ..PackOptions::default()
     };
-    let columns = variants as u32 * 2;
+    let columns = variants as u32 * seasons.len() as u32 * 2;
     let per_row = per_row.min(list.len() as u32);
     let rows = (list.len() as u32).div_ceil(per_row);
     let mut sheet = image::RgbaImage::from_pixel(columns * per_row * size, rows * size, image::Rgba([255; 4]));
@@ -101,25 +113,30 @@ fn render_sheet(names: &[String], out: &PathBuf, variants: u64, size: u32, per_r
         let pack = sylva::format::pack::decode_pack(g.name, &built.bytes)?;
         for v in 0..variants {
             renderer.set_variant(&gpu, v as u32);
-            for (k, view) in [PackView::Side, PackView::Top].into_iter().enumerate() {
-                let rgba = renderer
-                    .render_pack(&gpu, &pack, PackRepr::Mesh(0), view, [size, size], [0.62, 0.74, 0.86, 1.0])
-                    .context("the library pack has no mesh")?;
-                let tile = image::RgbaImage::from_raw(size, size, rgba).context("a view of the wrong size")?;
-                let (block, line) = (row as u32 % per_row, row as u32 / per_row);
-                let x = ((block * columns) + v as u32 * 2 + k as u32) * size;
-                image::imageops::replace(&mut sheet, &tile, i64::from(x), i64::from(line * size));
+            for (j, season) in seasons.iter().enumerate() {
+                renderer.set_season(pack.meta.season.as_ref(), *season);
+                for (k, view) in [PackView::Side, PackView::Top].into_iter().enumerate() {
+                    let rgba = renderer
+                        .render_pack(&gpu, &pack, PackRepr::Mesh(0), view, [size, size], [0.62, 0.74, 0.86, 1.0])
+                        .context("the library pack has no mesh")?;
+                    let tile = image::RgbaImage::from_raw(size, size, rgba).context("a view of the wrong size")?;
+                    let (block, line) = (row as u32 % per_row, row as u32 / per_row);
+                    let column = (v as u32 * seasons.len() as u32 + j as u32) * 2 + k as u32;
+                    let x = (block * columns + column) * size;
+                    image::imageops::replace(&mut sheet, &tile, i64::from(x), i64::from(line * size));
+                }
             }
         }
     }
     sheet.save(out).with_context(|| format!("cannot write {}", out.display()))?;
     let rows: Vec<&str> = list.iter().map(|g| g.name).collect();
     eprintln!(
-        "wrote {} ({} genera, {per_row} a row: {}; each variants 0–{} side, top)",
+        "wrote {} ({} genera, {per_row} a row: {}; each variants 0–{}{} side, top)",
         out.display(),
         list.len(),
         rows.join(", "),
-        variants - 1
+        variants - 1,
+        if seasons.len() > 1 { " × leaf-on, autumn, leaf-off," } else { "" }
     );
     Ok(())
 }
@@ -177,8 +194,9 @@ pub(crate) fn library(command: &LibraryCommand) -> Result<()> {
             }
             Ok(())
         }
-        LibraryCommand::Render { names, out, variants, size, per_row } => {
-            render_sheet(names, out, *variants, *size, *per_row)
+        LibraryCommand::Render { names, out, variants, size, per_row, seasons } => {
+            let seasons: &[Season] = if *seasons { &Season::ALL } else { &[Season::LeafOn] };
+            render_sheet(names, out, *variants, *size, *per_row, seasons)
         }
     }
 }

@@ -38,6 +38,12 @@ pub(crate) struct PackArgs {
     /// when asked (`sylva render --only clouds`, bench method `billboard-cloud`).
     #[arg(long, default_value_t = sylva_bake::pack::DEFAULT_CLOUD_PLANES, value_parser = clap::value_parser!(u32).range(0..=1024))]
     pub(crate) cloud_planes: u32,
+    /// Bake deciduous species in one state (leaf-on) only: no autumn colour, no
+    /// bare far tiers (smaller packs). By default a species whose name places a
+    /// deciduous genus (a library tree, or `--model oak=…`) gets leaf-on,
+    /// autumn and leaf-off (`sylva render --season`, the viewer's `setSeason`).
+    #[arg(long)]
+    pub(crate) no_seasons: bool,
     /// Material texture size (power of two).
     #[arg(long, default_value_t = 512)]
     pub(crate) texture_size: u32,
@@ -142,6 +148,7 @@ impl PackArgs {
             impostor_grid: self.impostor_grid,
             impostor_size: self.impostor_size,
             cloud_planes: self.cloud_planes,
+            seasons: !self.no_seasons,
         })
     }
 

@@ -110,7 +110,12 @@ pub fn demo_models(seed: u64) -> Vec<(String, ImportedModel)> {
     STYLES
         .iter()
         .enumerate()
-        .map(|(i, s)| (s.name.to_string(), make_tree(s, seed.wrapping_add(i as u64 * 7919))))
+        .map(|(i, s)| {
+            let mut tree = make_tree(s, seed.wrapping_add(i as u64 * 7919));
+            // Beech and birch are deciduous: their seasons, as their genera's.
+            tree.autumn = crate::library::choose::autumn_of(s.name);
+            (s.name.to_string(), tree)
+        })
         .collect()
 }
 

@@ -79,6 +79,19 @@ pub fn choose(label: &str, allometry: &Allometry) -> (&'static Genus, Why) {
     }
 }
 
+/// The autumn colour of a deciduous species a model of its own is given for
+/// (`--model NAME=FILE`): from the genus its name places (Latin, common name,
+/// family) — `None` for an evergreen, and for a name placed by no more than a
+/// default (one state, as before seasons).
+#[must_use]
+pub fn autumn_of(label: &str) -> Option<[u8; 3]> {
+    let (g, why) = by_name(label, None);
+    if why.is_default() {
+        return None;
+    }
+    g.autumn()
+}
+
 /// The library tree of a name (Latin or common), with the family a species table gave.
 fn by_name(label: &str, family: Option<&str>) -> (&'static Genus, Why) {
     let mut first = names::first_word(label);

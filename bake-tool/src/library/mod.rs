@@ -204,6 +204,7 @@ fn build(genus: &Genus, t: &Skeleton, seed: u64) -> ImportedModel {
             material("bark", MaterialKind::Branch, 0.0, false, textures::bark(genus, seed)),
             material("leaves", MaterialKind::Leaf, 0.5, true, textures::leaf(genus, seed)),
         ],
+        autumn: genus.autumn(),
         ..Default::default()
     };
     for stem in &t.stems {

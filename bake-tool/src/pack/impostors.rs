@@ -16,7 +16,10 @@ use super::*;
 /// framing the bounding sphere, rendered at twice the stored size through the
 /// viewer's own mesh pass. Colour mips as the billboards' (alpha-aware, coverage
 /// kept); the surface layer (normal, depth, occlusion and leaf flag) averaged
-/// weighted by coverage.
+/// weighted by coverage. Sections with `index` (the far-tier state: 0
+/// leaf-on, 1 the bare wood, captured without `leaves`); with them the texels
+/// covered over every view at the capture's resolution.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn build_impostors(
     gpu: &GpuContext,
     pipelines: &CapturePipelines,
@@ -24,13 +27,16 @@ pub(super) fn build_impostors(
     lo: Vec3,
     hi: Vec3,
     opts: &PackOptions,
-) -> (ImpostorMeta, Vec<Section>) {
+    index: u32,
+    leaves: bool,
+) -> (ImpostorMeta, Vec<Section>, u64) {
     let grid = opts.impostor_grid;
     let center = (lo + hi) * 0.5;
     let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.01;
     let views: Vec<_> = (0..grid * grid).map(|l| impostor::capture_clip_from_model(center, radius, l, grid)).collect();
     let capture_size = opts.impostor_size * 2;
-    let captured = capture_views(gpu, pipelines, decoded, &views, capture_size);
+    let captured = capture_views(gpu, pipelines, decoded, &views, capture_size, leaves);
+    let covered = captured.color.iter().flat_map(|c| c.chunks_exact(4)).filter(|t| t[3] > 0).count() as u64;
     let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut surface_chains = Vec::new();
     // Per stored mip: Σ coverage × |mean normal| and Σ coverage over all views.
@@ -88,19 +94,19 @@ pub(super) fn build_impostors(
     let sections = vec![
         Section {
             kind: kind::IMPOSTOR_COLOR,
-            index: 0,
+            index,
             count: 0,
             stride: 0,
             data: mip_major(&color_chains, texture.mips),
         },
         Section {
             kind: kind::IMPOSTOR_SURFACE,
-            index: 0,
+            index,
             count: 0,
             stride: 0,
             data: mip_major(&surface_chains, texture.mips),
         },
     ];
     let half_extent = Some((hi - center).max(center - lo).to_array());
-    (ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length, half_extent }, sections)
+    (ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length, half_extent }, sections, covered)
 }

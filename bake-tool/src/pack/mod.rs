@@ -18,7 +18,7 @@ use anyhow::{Context, Result};
 use glam::Vec3;
 use sylva::format::cloud::{encode_cloud, CloudMeta};
 use sylva::format::pack::{
-    encode_pack, kind, BillboardMeta, MaterialKind, MaterialMeta, PackMeta, Section, TextureArrayMeta,
+    encode_pack, kind, BillboardMeta, MaterialKind, MaterialMeta, PackMeta, SeasonMeta, Section, TextureArrayMeta,
 };
 use sylva::render::capture::CapturePipelines;
 use sylva::render::capture::{capture_billboards, BillboardFrame};
@@ -55,6 +55,9 @@ pub struct PackOptions {
     pub impostor_size: u32,
     /// Planes of the billboard cloud (García et al. 2007); 0: no cloud.
     pub cloud_planes: u32,
+    /// Deciduous species get their seasons (autumn colour, the bare wood's
+    /// far tiers); off: every species one state, leaf-on.
+    pub seasons: bool,
 }
 
 /// The far-field representations a pack gets.
@@ -92,6 +95,7 @@ impl Default for PackOptions {
             impostor_grid: DEFAULT_IMPOSTOR_GRID,
             impostor_size: DEFAULT_IMPOSTOR_SIZE,
             cloud_planes: DEFAULT_CLOUD_PLANES,
+            seasons: true,
         }
     }
 }
@@ -249,6 +253,7 @@ pub fn build_pack(
         clusters: None,
         impostors: None,
         cloud,
+        season: None,
     };
     // Capture the billboards from the mesh-only pack, through the same decoder the viewer uses.
     let mesh_only = encode_pack(&meta, &sections);
@@ -261,72 +266,54 @@ pub fn build_pack(
         layers: opts.billboard_angles * opts.billboard_azimuths,
         mips: opts.billboard_size.trailing_zeros() + 1,
     };
-    if opts.far_tier.billboards() {
-        let capture_size = opts.billboard_size * 2;
-        let captured = capture_billboards(
-            gpu,
-            pipelines,
-            &decoded,
-            &frame,
-            opts.billboard_angles,
-            opts.billboard_azimuths,
-            capture_size,
-        );
-        // Supersampled 2× capture: mip 1 of the alpha-aware chain is the stored mip 0,
-        // so stored alpha is real coverage rather than a hard alpha test.
-        color_chains = captured
-            .color
-            .iter()
-            .map(|c| {
-                alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..].to_vec()
-            })
-            .collect();
-        normal_chains = captured
-            .normal
-            .iter()
-            .zip(&captured.color)
-            .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear, None)[1..].to_vec())
-            .collect();
-        sections.push(Section {
-            kind: kind::BILLBOARD_COLOR,
-            index: 0,
-            count: 0,
-            stride: 0,
-            data: mip_major(&color_chains, tex.mips),
-        });
-        sections.push(Section {
-            kind: kind::BILLBOARD_NORMAL,
-            index: 0,
-            count: 0,
-            stride: 0,
-            data: mip_major(&normal_chains, tex.mips),
-        });
-        if opts.ao {
-            // One byte per texel (the red channel), mips weighted by coverage like the normals'.
-            let ao_chains: Vec<Vec<Vec<u8>>> = captured
-                .ao
-                .iter()
-                .zip(&captured.color)
-                .map(|(a, c)| {
-                    alpha_aware_mips(a, c, capture_size, ColorEncoding::Linear, None)[1..]
-                        .iter()
-                        .map(|mip| mip.chunks_exact(4).map(|t| t[0]).collect())
-                        .collect()
-                })
-                .collect();
-            sections.push(Section {
-                kind: kind::BILLBOARD_AO,
-                index: 0,
-                count: 0,
-                stride: 0,
-                data: mip_major(&ao_chains, tex.mips),
-            });
+    // The far tiers' states: leaf-on, and a deciduous tree's bare wood
+    // (section index 1), captured the same way with the leaves left out.
+    let autumn = model.autumn.filter(|_| opts.seasons);
+    let states: &[bool] = if autumn.is_some() { &[true, false] } else { &[true] };
+    // Texels covered over every captured view, per state.
+    let mut covered = [0u64; 2];
+    for (state, &leaves) in states.iter().enumerate() {
+        let index = state as u32;
+        if opts.far_tier.billboards() {
+            let capture_size = opts.billboard_size * 2;
+            let captured = capture_billboards(
+                gpu,
+                pipelines,
+                &decoded,
+                &frame,
+                opts.billboard_angles,
+                opts.billboard_azimuths,
+                capture_size,
+                leaves,
+            );
+            covered[state] += captured.color.iter().flat_map(|c| c.chunks_exact(4)).filter(|t| t[3] > 0).count() as u64;
+            let (color, normal, built) = billboard_sections(&captured, capture_size, tex.mips, index, opts.ao);
+            sections.extend(built);
+            if leaves {
+                (color_chains, normal_chains) = (color, normal);
+            }
+        }
+        if opts.far_tier.impostors() {
+            let (m, imp_sections, cover) = build_impostors(gpu, pipelines, &decoded, lo, hi, opts, index, leaves);
+            sections.extend(imp_sections);
+            if !opts.far_tier.billboards() {
+                covered[state] += cover;
+            }
+            if leaves {
+                meta.impostors = Some(m);
+            }
         }
     }
-    if opts.far_tier.impostors() {
-        let (m, imp_sections) = build_impostors(gpu, pipelines, &decoded, lo, hi, opts);
-        sections.extend(imp_sections);
-        meta.impostors = Some(m);
+    if let Some(autumn) = autumn {
+        let bare_far = opts.far_tier.billboards() || opts.far_tier.impostors();
+        let bare_cover = if covered[0] > 0 { (covered[1] as f64 / covered[0] as f64).min(1.0) as f32 } else { 0.0 };
+        if bare_far {
+            log(&format!(
+                "    seasons: leaf-on, autumn, leaf-off (the bare wood covers {:.0} % of the leafy crown's far views)",
+                bare_cover * 100.0
+            ));
+        }
+        meta.season = Some(SeasonMeta { autumn, bare_far, bare_cover });
     }
     if opts.clusters {
         let hopts =
@@ -394,6 +381,53 @@ pub fn build_pack(
         billboard_color: color_chains.iter().map(|c| c[0].clone()).collect(),
         billboard_normal: normal_chains.iter().map(|c| c[0].clone()).collect(),
     })
+}
+
+/// The billboard sections of far-tier state `index` (0 leaf-on, 1 the bare
+/// wood) from a capture at `capture_size` (twice the stored size): colour,
+/// normal and (with `ao`) occlusion, and the colour and normal mip chains.
+#[allow(clippy::type_complexity)]
+fn billboard_sections(
+    captured: &sylva::render::capture::CapturedBillboards,
+    capture_size: u32,
+    mips: u32,
+    index: u32,
+    ao: bool,
+) -> (Vec<Vec<Vec<u8>>>, Vec<Vec<Vec<u8>>>, Vec<Section>) {
+    // Supersampled 2× capture: mip 1 of the alpha-aware chain is the stored mip 0,
+    // so stored alpha is real coverage rather than a hard alpha test.
+    let color_chains: Vec<Vec<Vec<u8>>> = captured
+        .color
+        .iter()
+        .map(|c| alpha_aware_mips(c, c, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..].to_vec())
+        .collect();
+    let normal_chains: Vec<Vec<Vec<u8>>> = captured
+        .normal
+        .iter()
+        .zip(&captured.color)
+        .map(|(n, c)| alpha_aware_mips(n, c, capture_size, ColorEncoding::Linear, None)[1..].to_vec())
+        .collect();
+    let texture = |kind, data| Section { kind, index, count: 0, stride: 0, data };
+    let mut sections = vec![
+        texture(kind::BILLBOARD_COLOR, mip_major(&color_chains, mips)),
+        texture(kind::BILLBOARD_NORMAL, mip_major(&normal_chains, mips)),
+    ];
+    if ao {
+        // One byte per texel (the red channel), mips weighted by coverage like the normals'.
+        let ao_chains: Vec<Vec<Vec<u8>>> = captured
+            .ao
+            .iter()
+            .zip(&captured.color)
+            .map(|(a, c)| {
+                alpha_aware_mips(a, c, capture_size, ColorEncoding::Linear, None)[1..]
+                    .iter()
+                    .map(|mip| mip.chunks_exact(4).map(|t| t[0]).collect())
+                    .collect()
+            })
+            .collect();
+        sections.push(texture(kind::BILLBOARD_AO, mip_major(&ao_chains, mips)));
+    }
+    (color_chains, normal_chains, sections)
 }
 
 /// A section of fixed-size records (`count` and `stride` from `items`).

@@ -60,8 +60,8 @@ pub(super) fn measure_policy(
     let levels = pack.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len());
     let mut r = TreeRenderer::new(gpu);
     let (dev, q) = (&gpu.device, &gpu.queue);
-    let impostor = ImpostorGpu::upload(dev, q, &r.impostor, pack);
-    let billboard = if impostor.is_none() { BillboardGpu::upload(dev, q, &r.billboard, pack) } else { None };
+    let impostor = ImpostorGpu::upload(dev, q, 0, &r.impostor, pack);
+    let billboard = if impostor.is_none() { BillboardGpu::upload(dev, q, 0, &r.billboard, pack) } else { None };
     let far = match (&impostor, &billboard) {
         (Some(i), _) => TreeDraw::Impostor(i),
         (None, Some(b)) => TreeDraw::Billboard(b),

@@ -33,7 +33,7 @@ impl PackLoad {
         Self {
             head: Load::Idle,
             parsed: None,
-            parts: [Load::Idle, Load::Idle, Load::Idle, Load::Idle],
+            parts: std::array::from_fn(|_| Load::Idle),
             held: Vec::new(),
             have: [false; PACK_PARTS],
             wants: [false; PACK_PARTS],
@@ -158,18 +158,29 @@ impl<F: Fetcher> SceneStream<F> {
     /// and, if not, whether they may still come (not
     /// given up on).
     pub(super) fn species_drawable(&self, s: usize) -> (bool, bool) {
+        // The far parts: leaf-on billboards (0) and the bare ones (4). A far
+        // tier of either state draws (leaf-off draws the leafy one's wood).
+        const FAR: usize = 0;
+        const BARE: usize = 4;
         match self.packs.get(s) {
-            Some(l) if l.whole || l.have[0] => (true, false),
+            Some(l) if l.whole || l.have[FAR] || l.have[BARE] => (true, false),
             // A view that draws no far tier (meshes only): drawable with the
             // parts it wants that have come.
-            Some(l) if !l.wants[0] && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) => (true, false),
+            Some(l) if !l.wants[FAR] && !l.wants[BARE] && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) => {
+                (true, false)
+            }
             // Not yet: it may come while its head and a part the view wants
-            // (the billboards, or else any) are not given up on.
-            Some(l) if !l.wants[0] && l.wants.contains(&true) => {
-                let coming = l.wants.iter().zip(&l.parts).any(|(w, p)| *w && *p != Load::Broken);
+            // (the far tier, or else any) are not given up on.
+            Some(l) if l.wants.contains(&true) => {
+                let far = [FAR, BARE].into_iter().filter(|&i| l.wants[i]).collect::<Vec<_>>();
+                let coming = if far.is_empty() {
+                    l.wants.iter().zip(&l.parts).any(|(w, p)| *w && *p != Load::Broken)
+                } else {
+                    far.iter().any(|&i| l.parts[i] != Load::Broken)
+                };
                 (false, l.head != Load::Broken && coming)
             }
-            Some(l) => (false, l.head != Load::Broken && l.parts[0] != Load::Broken),
+            Some(l) => (false, l.head != Load::Broken && l.parts[FAR] != Load::Broken),
             None => (false, false),
         }
     }
@@ -183,9 +194,11 @@ impl<F: Fetcher> SceneStream<F> {
         for (s, load) in self.packs.iter().enumerate() {
             let Some(head) = &load.parsed else { continue };
             for (i, part) in PackPart::ALL.iter().enumerate() {
-                // Billboards of needed species are fetched whatever the budget:
+                // Far tiers of needed species are fetched whatever the budget:
                 // reserve them before anything finer.
-                let due_billboards = i == 0 && !load.have[0] && needed.contains(&s);
+                // (The leaf-on ones unless the view wants the bare ones instead.)
+                let this_state = if *part == PackPart::BareFar { load.wants[i] } else { !load.wants[4] };
+                let due_billboards = part.is_far() && this_state && !load.have[i] && needed.contains(&s);
                 if matches!(load.parts[i], Load::Requested { .. }) || due_billboards {
                     committed += head.part_range(*part).map_or(0, |(a, b)| b - a);
                 }
@@ -209,6 +222,11 @@ impl<F: Fetcher> SceneStream<F> {
             let load = &mut self.packs[s];
             if let Some(head) = &load.parsed {
                 load.wants = residency.parts_needed(s, &head.meta);
+                // Bare far tiers a pack lacks: its leafy ones (drawn without their leaves).
+                if load.wants[4] && head.part_range(PackPart::BareFar).is_none() {
+                    load.wants[4] = false;
+                    load.wants[0] = true;
+                }
             }
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
@@ -228,22 +246,22 @@ impl<F: Fetcher> SceneStream<F> {
                 if !load.wants[i] || load.have[i] || self.fetcher.in_flight() >= self.config.max_in_flight {
                     continue;
                 }
-                if heads_pending && *part != PackPart::Billboards {
+                if heads_pending && !part.is_far() {
                     continue;
                 }
                 let (Some(range), Some(attempt)) = (head.part_range(*part), due(&load.parts[i])) else { continue };
                 // The GPU budget: finer parts wait (trees draw with coarser ones);
                 // billboards, the far field, are always fetched.
                 let budget = self.config.gpu_budget_bytes;
-                let blocked = budget > 0 && *part != PackPart::Billboards && committed + (range.1 - range.0) > budget;
+                let blocked = budget > 0 && !part.is_far() && committed + (range.1 - range.0) > budget;
                 load.blocked[i] = blocked;
                 if blocked {
                     over_budget = true;
                     continue;
                 }
                 let id = self.fetcher.start_range(&url(), Some(range));
-                if *part != PackPart::Billboards {
-                    committed += range.1 - range.0; // billboards are reserved above
+                if !part.is_far() {
+                    committed += range.1 - range.0; // far tiers are reserved above
                 }
                 self.stats.requests += 1;
                 self.requests.insert(id, Target::PackPart(s, i));

@@ -407,6 +407,36 @@ fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
 }
 
 #[test]
+fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
+    // The fixture's beech and birch are deciduous (their packs hold the bare
+    // wood's far tiers); the spruce is evergreen.
+    let heads: Vec<PackHead> = ["spruce", "beech", "birch"]
+        .iter()
+        .map(|n| PackHead::decode(n, &std::fs::read(format!("{}/species/{n}.pack", fixture())).unwrap()).unwrap())
+        .collect();
+    assert!(heads[0].part_range(PackPart::BareFar).is_none(), "an evergreen has one state");
+    let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+    // A far view in leaf-off: what `Reach::parts_needed` asks of a deciduous pack.
+    r.parts = PackPart::ALL.map(|p| p == PackPart::BareFar);
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
+    assert!(s.is_settled());
+    let parts: Vec<(String, ByteRange)> =
+        s.fetcher.log.iter().filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r))).collect();
+    for (name, h) in ["spruce", "beech", "birch"].iter().zip(&heads) {
+        let fetched = |p: PackPart| parts.iter().any(|(u, x)| u.contains(name) && Some(*x) == h.part_range(p));
+        if *name == "spruce" {
+            // No bare state: its leafy far tiers.
+            assert!(fetched(PackPart::Billboards), "{name}'s far tier fetched: {parts:?}");
+        } else {
+            assert!(fetched(PackPart::BareFar), "{name}'s bare far tier fetched: {parts:?}");
+            assert!(!fetched(PackPart::Billboards), "{name}'s leafy far tier fetched too: {parts:?}");
+        }
+    }
+    // Every species drawable from what came.
+    assert!((0..3).all(|i| s.species_drawable(i).0));
+}
+
+#[test]
 fn a_missing_manifest_is_fatal_and_named() {
     let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
     s.fetcher.fail.insert("scene.json".into(), VecDeque::from([FetchError::NotFound { url: "scene.json".into() }]));
@@ -865,7 +895,7 @@ fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
     let mut s = stream(StreamConfig::default());
     s.set_canopy_view(Some(canopy));
     let mut r = FakeResidency::new(1 << 20);
-    r.parts = PackPart::ALL.map(|p| p != PackPart::Billboards);
+    r.parts = PackPart::ALL.map(|p| !p.is_far());
     let t = run(&mut s, &mut r, &far, 1e6, 0.0, 0.1, 24);
     run(&mut s, &mut r, &near, 1e6, t, 0.1, 24);
     assert!(s.is_settled() && r.used > 0, "the trees are resident");

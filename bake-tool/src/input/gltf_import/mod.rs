@@ -70,6 +70,9 @@ pub struct ImportedModel {
     /// position and normal per vertex of `vertices`; the triangles, uvs,
     /// colours and materials are the model's. Empty for a glTF model.
     pub variants: Vec<Vec<[Vec3; 2]>>,
+    /// A deciduous tree's leaves' autumn colour (sRGB): the pack then holds
+    /// its seasons (leaf-on, autumn, leaf-off). `None`: evergreen, one state.
+    pub autumn: Option<[u8; 3]>,
 }
 
 impl ImportedModel {

@@ -89,6 +89,33 @@ pub struct Genus {
     pub params: Params,
 }
 
+impl Genus {
+    /// A deciduous genus's autumn leaf colour (sRGB), as field guides describe
+    /// it: the maples' and sweetgum's reds, the birches', poplars', limes' and
+    /// ginkgo's yellows, the oaks' and beech's russet and copper, the larches'
+    /// and swamp cypresses' gold to rust; the yellow-brown most genera turn
+    /// otherwise. `None` for an evergreen.
+    #[must_use]
+    pub fn autumn(&self) -> Option<[u8; 3]> {
+        if !self.deciduous {
+            return None;
+        }
+        Some(match self.name {
+            "Acer" => [196, 70, 34],
+            "Liquidambar" => [150, 34, 44],
+            "Prunus" | "Sorbus" | "Crataegus" | "Malus" | "Pyrus" => [186, 78, 40],
+            "Quercus" => [150, 92, 44],
+            "Fagus" | "Carpinus" => [176, 104, 42],
+            "Betula" | "Populus" | "Ginkgo" | "Liriodendron" | "Fraxinus" | "Ulmus" | "Tilia" | "Salix" | "Celtis"
+            | "Morus" | "Gleditsia" | "Robinia" | "Zelkova" | "Corylus" | "Catalpa" | "Ailanthus" => [214, 172, 48],
+            "Larix" => [206, 150, 46],
+            "Metasequoia" | "Taxodium" => [176, 88, 40],
+            "Castanea" | "Aesculus" | "Juglans" | "Platanus" | "Alnus" | "Magnolia" => [168, 120, 50],
+            _ => [190, 140, 50],
+        })
+    }
+}
+
 /// Every genus of the library: the hand-tuned, then those from their forms.
 pub static GENERA: LazyLock<Vec<Genus>> = LazyLock::new(|| {
     let mut all = tuned::genera();
