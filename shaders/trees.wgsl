@@ -20,11 +20,13 @@ fn leaves_off() -> bool {
 
 // A leaf's albedo in the season drawn: in autumn the species' autumn colour,
 // keeping the light and dark of the leaf (its luminance against a typical
-// leaf's) and the tree's own variation.
+// leaf's) and the tree's own variation. Twin of `autumn_albedo` in
+// src/render/settings.rs (the canopy rasters' autumn).
+const AUTUMN_LEAF_LUMINANCE: f32 = 0.08;
 fn seasonal_leaf(albedo: vec3<f32>) -> vec3<f32> {
     if draw.season.w < 0.5 || draw.season.w > 1.5 {
         return albedo;
     }
     let l = dot(albedo, vec3<f32>(0.2126, 0.7152, 0.0722));
-    return draw.season.rgb * clamp(l / 0.07, 0.3, 2.0);
+    return draw.season.rgb * clamp(l / AUTUMN_LEAF_LUMINANCE, 0.3, 2.0);
 }

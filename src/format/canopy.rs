@@ -17,19 +17,28 @@
 //! species packs' billboards (`sylva-bake`'s `canopy.rs`). A viewer draws it
 //! over the ground where trees are too small to draw, cross-faded with them.
 //!
-//! Layout (little endian): a 48-byte header (version 2; version 1: 44 bytes,
-//! without `tallest_ratio`, read as 1), then the cells row by row (row 0 at the
-//! square's lowest y), 8 bytes each:
+//! Layout (little endian): a 52-byte header (version 3; version 2: 48 bytes,
+//! without `flags`; version 1: 44 bytes, without `tallest_ratio` either, read
+//! as 1), then the cells row by row (row 0 at the square's lowest y), 8 bytes
+//! each, then — with flag bit 0 — the cells' seasons, 8 bytes each, in the same order:
 //!
 //! ```text
-//! header  magic "SYCN" | version u16 | header_bytes u16 (48) | cells u32
+//! header  magic "SYCN" | version u16 | header_bytes u16 (52) | cells u32
 //!         | x0 f32 | y0 f32 | size_m f32 | z_min f32 | z_max f32 | height_max f32
 //!         | height_min f32 (the shortest tree in the square)
 //!         | children u32 (bit i: child (2x + (i & 1), 2y + (i >> 1)) exists; bits 4–31 0)
-//!         | tallest_ratio f32 (1–64)
+//!         | tallest_ratio f32 (1–64) | flags u32 (bit 0: seasons follow; bits 1–31 0)
 //! cell    r u8 | g u8 | b u8 (sRGB albedo) | cover u8 (0–255) | height u8 (× height_max / 255)
 //!         | side u8 (/ 32) | ground u16 (z_min + q / 65535 × (z_max − z_min))
+//! season  autumn r u8 | g u8 | b u8 (sRGB albedo in autumn) | bare cover u8 (leaf-off)
+//!         | bare r u8 | g u8 | b u8 (sRGB albedo in leaf-off) | bare side u8 (/ 32)
 //! ```
+//!
+//! The seasons (a scene with deciduous species, their packs' `season`): the
+//! cells as the crowns look in autumn (their leaves in their autumn colour)
+//! and in leaf-off (the bare wood's cover, albedo and side from its far-tier
+//! captures; evergreens as in leaf-on). Without them a cell is the same in
+//! every season.
 //!
 //! `x0`, `y0`, `size_m`: the square in metres relative to the scene origin;
 //! `z_*`: the ground heights' range; `height_max`: the tallest tree's height;
@@ -46,10 +55,14 @@ use super::error::{finite, DecodeError, Problem, Reader};
 
 /// File magic.
 pub const CANOPY_MAGIC: [u8; 4] = *b"SYCN";
-/// Version written by this build (it reads 1 and 2).
-pub const CANOPY_VERSION: u16 = 2;
-/// Header bytes (version 2).
-pub const CANOPY_HEADER_BYTES: usize = 48;
+/// Version written by this build (it reads 1, 2 and 3).
+pub const CANOPY_VERSION: u16 = 3;
+/// Header bytes (version 3).
+pub const CANOPY_HEADER_BYTES: usize = 52;
+/// Header bytes of version 2 (no `flags`).
+pub const CANOPY_HEADER_BYTES_V2: usize = 48;
+/// Header flag: the cells' seasons follow the cells.
+pub const CANOPY_FLAG_SEASONS: u32 = 1;
 /// Header bytes of version 1 (no `tallest_ratio`).
 pub const CANOPY_HEADER_BYTES_V1: usize = 44;
 /// Largest `tallest_ratio` a raster may carry.
@@ -176,6 +189,9 @@ pub struct Canopy {
     pub tallest_ratio: f32,
     /// Raw cells, `cells²` × 8 bytes, row by row.
     pub data: Vec<u8>,
+    /// The cells' seasons (autumn, leaf-off), `cells²` × 8 bytes in the same
+    /// order; `None`: every season alike (no deciduous trees, or an older raster).
+    pub seasons: Option<Vec<u8>>,
 }
 
 impl Canopy {
@@ -192,6 +208,29 @@ impl Canopy {
             side: f32::from(c[5]) / 32.0,
             ground_m: self.z_range_m[0] + f32::from(q) / 65535.0 * (self.z_range_m[1] - self.z_range_m[0]),
         }
+    }
+
+    /// The raw cells as they look in `season` (`cells²` × 8 bytes, the
+    /// layout of [`Self::data`]): autumn's albedo, leaf-off's cover, albedo
+    /// and side where the raster has its seasons; else the cells themselves.
+    #[must_use]
+    pub fn cells_in(&self, season: crate::format::pack::Season) -> std::borrow::Cow<'_, [u8]> {
+        use crate::format::pack::Season;
+        let Some(seasons) = &self.seasons else { return std::borrow::Cow::Borrowed(&self.data) };
+        if season == Season::LeafOn {
+            return std::borrow::Cow::Borrowed(&self.data);
+        }
+        let mut out = self.data.clone();
+        for (c, s) in out.chunks_exact_mut(CANOPY_CELL_BYTES).zip(seasons.chunks_exact(CANOPY_CELL_BYTES)) {
+            if season == Season::Autumn {
+                c[..3].copy_from_slice(&s[..3]);
+            } else {
+                c[3] = s[3];
+                c[..3].copy_from_slice(&s[4..7]);
+                c[5] = s[7];
+            }
+        }
+        std::borrow::Cow::Owned(out)
     }
 
     /// Side of one cell in metres.
@@ -245,7 +284,12 @@ impl Canopy {
         }
         out.extend_from_slice(&u32::from(self.children).to_le_bytes());
         out.extend_from_slice(&self.tallest_ratio.to_le_bytes());
+        let flags = if self.seasons.is_some() { CANOPY_FLAG_SEASONS } else { 0 };
+        out.extend_from_slice(&flags.to_le_bytes());
         out.extend_from_slice(&self.data);
+        if let Some(seasons) = &self.seasons {
+            out.extend_from_slice(seasons);
+        }
         out
     }
 
@@ -268,6 +312,7 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
     let version = r.u16("header.version", 4)?;
     let expected = match version {
         1 => CANOPY_HEADER_BYTES_V1,
+        2 => CANOPY_HEADER_BYTES_V2,
         CANOPY_VERSION => CANOPY_HEADER_BYTES,
         _ => return Err(Problem::UnsupportedVersion { found: version.into(), supported: CANOPY_VERSION.into() }),
     };
@@ -313,13 +358,23 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
              (a batch's tallest tree is at least as tall as each of its trees)"
         )));
     }
+    let flags = if version >= 3 { r.u32("header.flags", 48)? } else { 0 };
+    if flags & !CANOPY_FLAG_SEASONS != 0 {
+        return Err(Problem::Invalid(format!("header.flags is {flags:#x}: only bit 0 (seasons) exists")));
+    }
     let n = u64::from(cells) * u64::from(cells) * CANOPY_CELL_BYTES as u64;
     let data = r.slice("cells", expected as u64, n)?;
-    let end = expected as u64 + n;
+    let seasons = if flags & CANOPY_FLAG_SEASONS != 0 {
+        Some(r.slice("seasons", expected as u64 + n, n)?.to_vec())
+    } else {
+        None
+    };
+    let end = expected as u64 + n * if seasons.is_some() { 2 } else { 1 };
     if bytes.len() as u64 != end {
         return Err(Problem::Invalid(format!(
-            "{} bytes after the {cells}×{cells} cells end at byte {end}",
-            bytes.len() as u64 - end
+            "{} bytes after the {cells}×{cells} cells{} end at byte {end}",
+            bytes.len() as u64 - end.min(bytes.len() as u64),
+            if seasons.is_some() { " and their seasons" } else { "" }
         )));
     }
     Ok(Canopy {
@@ -332,6 +387,7 @@ fn decode_canopy(bytes: &[u8]) -> Result<Canopy, Problem> {
         children: children as u8,
         tallest_ratio,
         data: data.to_vec(),
+        seasons,
     })
 }
 
@@ -350,6 +406,7 @@ mod tests {
             children: 0b1010,
             tallest_ratio: 1.25,
             data: vec![0; 16 * CANOPY_CELL_BYTES],
+            seasons: None,
         };
         for i in 0..16u32 {
             let cell = CanopyCell {
@@ -406,18 +463,54 @@ mod tests {
     }
 
     #[test]
-    fn version_1_rasters_read_with_a_tallest_ratio_of_1() {
+    fn versions_1_and_2_read_without_seasons() {
         let c = sample();
-        let v2 = c.encode();
-        // Version 1: the 44-byte header without `tallest_ratio`.
-        let mut v1 = v2[..CANOPY_HEADER_BYTES_V1].to_vec();
+        let v3 = c.encode();
+        // Version 2: the 48-byte header without `flags`.
+        let mut v2 = v3[..CANOPY_HEADER_BYTES_V2].to_vec();
+        v2[4..6].copy_from_slice(&2u16.to_le_bytes());
+        v2[6..8].copy_from_slice(&(CANOPY_HEADER_BYTES_V2 as u16).to_le_bytes());
+        v2.extend_from_slice(&v3[CANOPY_HEADER_BYTES..]);
+        assert_eq!(Canopy::decode("v2.cnpy", &v2).unwrap(), c);
+        // Version 1: the 44-byte header without `tallest_ratio` either.
+        let mut v1 = v3[..CANOPY_HEADER_BYTES_V1].to_vec();
         v1[4..6].copy_from_slice(&1u16.to_le_bytes());
         v1[6..8].copy_from_slice(&(CANOPY_HEADER_BYTES_V1 as u16).to_le_bytes());
-        v1.extend_from_slice(&v2[CANOPY_HEADER_BYTES..]);
+        v1.extend_from_slice(&v3[CANOPY_HEADER_BYTES..]);
         let d = Canopy::decode("old.cnpy", &v1).unwrap();
         assert_eq!(d, Canopy { tallest_ratio: 1.0, ..c });
         v1[6..8].copy_from_slice(&48u16.to_le_bytes());
         assert!(Canopy::decode("old.cnpy", &v1).unwrap_err().to_string().contains("expected 44 for version 1"));
+    }
+
+    #[test]
+    fn seasons_round_trip_and_replace_the_cells_they_change() {
+        use crate::format::pack::Season;
+        let mut c = sample();
+        let mut seasons = vec![0u8; 16 * CANOPY_CELL_BYTES];
+        for (i, s) in seasons.chunks_exact_mut(CANOPY_CELL_BYTES).enumerate() {
+            s.copy_from_slice(&[200, 90, i as u8, 30, 90, 80, 70, 8]);
+        }
+        c.seasons = Some(seasons);
+        let bytes = c.encode();
+        assert_eq!(bytes.len(), CANOPY_HEADER_BYTES + 2 * 16 * 8);
+        let d = Canopy::decode("s.cnpy", &bytes).unwrap();
+        assert_eq!(d, c);
+        assert_eq!(&*d.cells_in(Season::LeafOn), &d.data[..]);
+        let autumn = d.cells_in(Season::Autumn);
+        let off = d.cells_in(Season::LeafOff);
+        let i = 11 * CANOPY_CELL_BYTES;
+        assert_eq!(autumn[i..i + 8], [200, 90, 11, d.data[i + 3], d.data[i + 4], d.data[i + 5], d.data[i + 6], d.data[i + 7]]);
+        assert_eq!(off[i..i + 8], [90, 80, 70, 30, d.data[i + 4], 8, d.data[i + 6], d.data[i + 7]]);
+        // Without seasons every season is the leaf-on cells.
+        assert_eq!(&*sample().cells_in(Season::LeafOff), &sample().data[..]);
+        // A seasons flag without the block, or unknown flags: refused.
+        let mut short = bytes.clone();
+        short.truncate(bytes.len() - 1);
+        assert!(Canopy::decode("s", &short).is_err());
+        let mut flags = bytes.clone();
+        flags[48] = 3;
+        assert!(Canopy::decode("s", &flags).unwrap_err().to_string().contains("header.flags"));
     }
 
     #[test]
@@ -453,7 +546,7 @@ mod tests {
         assert!(set(44, &0.5f32.to_le_bytes()).contains("tallest_ratio"));
         assert!(set(44, &f32::NAN.to_le_bytes()).contains("tallest_ratio"));
         assert!(set(44, &100f32.to_le_bytes()).contains("tallest_ratio"));
-        assert!(set(6, &44u16.to_le_bytes()).contains("expected 48 for version 2"));
+        assert!(set(6, &48u16.to_le_bytes()).contains("expected 52 for version 3"));
         // Every single-byte change decodes or fails cleanly.
         for at in 0..good.len() {
             for v in [0u8, 1, 0x7f, 0xff] {

@@ -287,6 +287,57 @@ pub struct PackMeta {
     pub season: Option<SeasonMeta>,
 }
 
+/// A deciduous tree's seasons (a pack's [`SeasonMeta`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+pub enum Season {
+    /// In leaf (what every tier is baked in).
+    #[default]
+    LeafOn,
+    /// The leaves in their autumn colour.
+    Autumn,
+    /// Bare wood: no leaves, the far tiers' bare captures.
+    LeafOff,
+}
+
+impl Season {
+    /// Every season, in the year's order from spring.
+    pub const ALL: [Season; 3] = [Season::LeafOn, Season::Autumn, Season::LeafOff];
+
+    /// Its name (`leaf-on`, `autumn`, `leaf-off`), as `--season` and `setSeason` take it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Season::LeafOn => "leaf-on",
+            Season::Autumn => "autumn",
+            Season::LeafOff => "leaf-off",
+        }
+    }
+
+    /// The state code the tree passes read (`DrawParams.season.w`).
+    #[must_use]
+    pub fn code(self) -> f32 {
+        match self {
+            Season::LeafOn => 0.0,
+            Season::Autumn => 1.0,
+            Season::LeafOff => 2.0,
+        }
+    }
+}
+
+impl std::str::FromStr for Season {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let folded = s.trim().to_ascii_lowercase().replace(['_', ' '], "-");
+        match folded.as_str() {
+            "leaf-on" | "leafon" | "summer" | "spring" | "on" => Ok(Season::LeafOn),
+            "autumn" | "fall" => Ok(Season::Autumn),
+            "leaf-off" | "leafoff" | "winter" | "bare" | "off" => Ok(Season::LeafOff),
+            _ => Err(format!("unknown season {s:?}: expected leaf-on, autumn or leaf-off")),
+        }
+    }
+}
+
 /// The seasons of a deciduous species. Leaf-on is what every tier holds;
 /// autumn recolours the leaves (every tier marks its leaf texels); leaf-off
 /// drops them where the tier has them apart (mesh leaves, cloud planes,

@@ -9,6 +9,7 @@ use std::collections::HashMap;
 use super::layouts::depth_state;
 use super::layouts::{storage_entry, SharedLayouts};
 use crate::format::canopy::{CanopyKey, CANOPY_CELLS, CANOPY_CELL_BYTES};
+use crate::format::pack::Season;
 use crate::scene::canopy::CanopyDraw;
 
 /// Most rasters the pool holds (32 KB each; it starts at 8 and doubles as views
@@ -63,6 +64,8 @@ pub struct CanopyPass {
     pub uploads: u64,
     /// Rasters selected but not drawn this frame (more than the pool holds).
     pub dropped: u32,
+    /// The season the pool's cells show (a change uploads them again).
+    season: Season,
 }
 
 impl CanopyPass {
@@ -106,6 +109,7 @@ impl CanopyPass {
             count: 0,
             records: Vec::new(),
             uploads: 0,
+            season: Season::LeafOn,
             dropped: 0,
         }
     }
@@ -153,8 +157,13 @@ impl CanopyPass {
     }
 
     /// Uploads newly drawn rasters and writes this frame's records for `draws`
-    /// (the stream's selection; empty: nothing drawn).
-    pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, draws: &[CanopyDraw]) {
+    /// (the stream's selection; empty: nothing drawn), their cells as they
+    /// look in `season` (rasters with seasons; a new season uploads them again).
+    pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, draws: &[CanopyDraw], season: Season) {
+        if season != self.season {
+            self.clear();
+            self.season = season;
+        }
         self.frame += 1;
         self.count = 0;
         self.dropped = 0;
@@ -187,7 +196,7 @@ impl CanopyPass {
                     if let Some((old, _)) = self.slots[free] {
                         self.by_key.remove(&old);
                     }
-                    queue.write_buffer(&pool.cells, (c.data.len() * free) as u64, &c.data);
+                    queue.write_buffer(&pool.cells, (c.data.len() * free) as u64, &c.cells_in(season));
                     self.uploads += 1;
                     self.by_key.insert(d.key, free as u32);
                     free as u32

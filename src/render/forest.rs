@@ -484,16 +484,17 @@ impl ForestRenderer {
     }
 
     /// Uploads what the canopy pass draws this frame (the stream's selection)
-    /// and sets the trees' cross-fade with it (`px`: [`super::settings::CANOPY_PX`];
-    /// None: no canopy, trees at every size).
+    /// in `season` and sets the trees' cross-fade with it (`px`:
+    /// [`super::settings::CANOPY_PX`]; None: no canopy, trees at every size).
     pub fn prepare_canopy(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         draws: &[crate::scene::canopy::CanopyDraw],
         px: Option<[f32; 2]>,
+        season: super::settings::Season,
     ) {
-        self.canopy.prepare(device, queue, if px.is_some() { draws } else { &[] });
+        self.canopy.prepare(device, queue, if px.is_some() { draws } else { &[] }, season);
         // A raster the pool could not hold would leave its trees drawn by nothing:
         // then trees at every size this frame.
         self.canopy_px = px.filter(|_| self.canopy.dropped == 0).unwrap_or([0.0; 2]);

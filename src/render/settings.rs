@@ -105,41 +105,20 @@ pub struct RenderSettings {
     pub season: Season,
 }
 
-/// A deciduous tree's seasons (a pack's [`crate::format::pack::SeasonMeta`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
-pub enum Season {
-    /// In leaf (what every tier is baked in).
-    #[default]
-    LeafOn,
-    /// The leaves in their autumn colour.
-    Autumn,
-    /// Bare wood: no leaves, the far tiers' bare captures.
-    LeafOff,
-}
+pub use crate::format::pack::Season;
 
-impl Season {
-    /// Every season, in the year's order from spring.
-    pub const ALL: [Season; 3] = [Season::LeafOn, Season::Autumn, Season::LeafOff];
+/// A typical leaf's luminance (linear): an autumn leaf keeps its light and
+/// dark against it. Twin of the constant in `seasonal_leaf` (`shaders/trees.wgsl`).
+pub const AUTUMN_LEAF_LUMINANCE: f32 = 0.08;
 
-    /// Its name (`leaf-on`, `autumn`, `leaf-off`), as `--season` and `setSeason` take it.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Season::LeafOn => "leaf-on",
-            Season::Autumn => "autumn",
-            Season::LeafOff => "leaf-off",
-        }
-    }
-
-    /// The state code the tree passes read (`DrawParams.season.w`).
-    #[must_use]
-    pub fn code(self) -> f32 {
-        match self {
-            Season::LeafOn => 0.0,
-            Season::Autumn => 1.0,
-            Season::LeafOff => 2.0,
-        }
-    }
+/// A leaf texel's albedo (linear) in autumn, for a species whose autumn colour
+/// is `autumn` (linear): the colour, scaled by the texel's luminance against
+/// a typical leaf's. Twin of `seasonal_leaf` in `shaders/trees.wgsl`.
+#[must_use]
+pub fn autumn_albedo(albedo: [f32; 3], autumn: [f32; 3]) -> [f32; 3] {
+    let l = 0.2126 * albedo[0] + 0.7152 * albedo[1] + 0.0722 * albedo[2];
+    let shade = (l / AUTUMN_LEAF_LUMINANCE).clamp(0.3, 2.0);
+    autumn.map(|c| c * shade)
 }
 
 /// The tree passes' `DrawParams.season` for a species with `meta`'s seasons
@@ -159,19 +138,6 @@ pub fn season_params(meta: Option<&crate::format::pack::SeasonMeta>, season: Sea
     [linear(m.autumn[0]), linear(m.autumn[1]), linear(m.autumn[2]), season.code()]
 }
 
-impl std::str::FromStr for Season {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let folded = s.trim().to_ascii_lowercase().replace(['_', ' '], "-");
-        match folded.as_str() {
-            "leaf-on" | "leafon" | "summer" | "spring" | "on" => Ok(Season::LeafOn),
-            "autumn" | "fall" => Ok(Season::Autumn),
-            "leaf-off" | "leafoff" | "winter" | "bare" | "off" => Ok(Season::LeafOff),
-            _ => Err(format!("unknown season {s:?}: expected leaf-on, autumn or leaf-off")),
-        }
-    }
-}
 
 /// Which far-field representation a species draws where its pack has both.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

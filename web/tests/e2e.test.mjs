@@ -215,6 +215,27 @@ test('the viewer page', async (t) => {
     assert.match(refused ?? '', /'elipsoids' is not one of all, meshes, ellipsoids, billboards, clouds/);
     assert.deepEqual(errors, []);
   });
+  await t.test('setSeason: deciduous crowns turn in autumn and are bare in leaf-off, the spruce stays', async () => {
+    // The fixture's beech and birch are deciduous (their packs hold the bare
+    // wood's far tiers, fetched once leaf-off asks for them); the spruce is evergreen.
+    const reddish = (name) => screenshotStat(page, name, `
+      let n = 0;
+      for (let i = 0; i < d.length; i += 4) if (d[i] > d[i + 1] + 8 && d[i] > d[i + 2] + 8) n++;
+      return n / (d.length / 4);`);
+    const green = await foliageShare(page, 'season-leaf-on');
+    const red = await reddish('season-leaf-on-red');
+    await page.evaluate(() => window.sylva.setSeason('autumn'));
+    const autumnRed = await reddish('season-autumn');
+    assert.ok(autumnRed > red + 0.02, `autumn reddens the crowns: ${red.toFixed(3)} → ${autumnRed.toFixed(3)} of the page`);
+    await page.evaluate(() => window.sylva.setSeason('leaf-off'));
+    await page.waitForTimeout(1500);
+    const bare = await foliageShare(page, 'season-leaf-off');
+    assert.ok(bare < green * 0.8 && bare > 0.005, `leaf-off: foliage ${green.toFixed(3)} → ${bare.toFixed(3)} (the spruce stays)`);
+    const refused = await page.evaluate(() => { try { window.sylva.setSeason('monsoon'); return null; } catch (e) { return String(e); } });
+    assert.ok(refused && refused.includes('leaf-on, autumn or leaf-off'), refused);
+    await page.evaluate(() => window.sylva.setSeason('leaf-on'));
+    assert.deepEqual(errors, []);
+  });
   await t.test('the sun follows a date and time at the scene and the time-of-day control', async () => {
     const meanBrightness = (name) => meanBrightnessOf(page, name);
     // The fixture's place (48.4° N, 15.5° E) at 13:15 summer time on the solstice: due south, about 65° up.

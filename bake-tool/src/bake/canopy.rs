@@ -37,7 +37,27 @@ pub struct SpeciesLook {
     pub side_m2: f32,
     /// Model height at scale 1, metres.
     pub height_m: f32,
+    /// A deciduous species' autumn and leaf-off looks (its pack's `season`);
+    /// `None`: the same all year.
+    pub seasons: Option<SeasonLooks>,
 }
+
+/// A deciduous species seen from above in autumn and leaf-off, at scale 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeasonLooks {
+    /// Mean albedo from above in autumn (its leaf texels recoloured as the
+    /// viewer recolours them), linear RGB.
+    pub autumn: [f32; 3],
+    /// The bare wood's albedo from above, linear RGB.
+    pub bare: [f32; 3],
+    /// The bare wood's area seen from above, m².
+    pub bare_area_m2: f32,
+    /// Its side silhouette, m².
+    pub bare_side_m2: f32,
+}
+
+/// Twigs and bark seen from far away, for a bare tree without its own captures (linear).
+const BARE_ALBEDO: [f32; 3] = [0.09, 0.075, 0.06];
 
 /// Albedo for a species whose pack has no billboards (a mid green, linear).
 const FALLBACK_ALBEDO: [f32; 3] = [0.06, 0.11, 0.04];
@@ -54,41 +74,77 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
             let path = dir.join(&s.pack);
             let bytes = std::fs::read(&path).with_context(|| format!("canopy: reading {}", path.display()))?;
             let pack = decode_pack(&s.pack, &bytes)?;
-            let top = pack.meta.billboards.as_ref().and_then(|b| {
+            let autumn_linear = pack.meta.season.as_ref().map(|m| {
+                let p = sylva::render::settings::season_params(Some(m), sylva::render::settings::Season::Autumn);
+                [p[0], p[1], p[2]]
+            });
+            // The top (and side) view of far-tier state `state`: Σ alpha, Σ
+            // alpha·albedo, Σ alpha·autumn albedo, the side's Σ alpha, per texel.
+            let view = |state: u32| {
+                let b = pack.meta.billboards.as_ref()?;
                 let size = b.texture.size as usize;
                 let texels = size * size;
-                let data = pack.section(kind::BILLBOARD_COLOR, 0)?;
+                let data = pack.section(kind::BILLBOARD_COLOR, state)?;
+                let normals = pack.section(kind::BILLBOARD_NORMAL, state)?;
                 // Layers: azimuth 0 at elevations 0 (the side) … 90° (the top).
-                let layer = |l: usize| data.get(l * texels * 4..(l + 1) * texels * 4);
-                let (side, top) = (layer(0)?, layer((b.angles.max(1) - 1) as usize)?);
-                let (mut alpha, mut rgb) = (0.0f64, [0.0f64; 3]);
-                for t in top.chunks_exact(4) {
+                let layer = |l: usize| l * texels * 4..(l + 1) * texels * 4;
+                let top_layer = (b.angles.max(1) - 1) as usize;
+                let (side, top, top_n) =
+                    (data.get(layer(0))?, data.get(layer(top_layer))?, normals.get(layer(top_layer))?);
+                let (mut alpha, mut rgb, mut autumn) = (0.0f64, [0.0f64; 3], [0.0f64; 3]);
+                for (t, n) in top.chunks_exact(4).zip(top_n.chunks_exact(4)) {
                     let a = f64::from(t[3]) / 255.0;
                     alpha += a;
+                    let lin = [0, 1, 2].map(|k| srgb_to_linear(t[k]));
+                    let fall = match autumn_linear {
+                        Some(c) if n[3] > 191 => sylva::render::settings::autumn_albedo(lin, c),
+                        _ => lin,
+                    };
                     for k in 0..3 {
-                        rgb[k] += a * f64::from(srgb_to_linear(t[k]));
+                        rgb[k] += a * f64::from(lin[k]);
+                        autumn[k] += a * f64::from(fall[k]);
                     }
                 }
                 let side_alpha: f64 = side.chunks_exact(4).map(|t| f64::from(t[3]) / 255.0).sum();
-                (alpha > 0.0).then(|| {
-                    let square = f64::from(2.0 * b.half_width) * f64::from(2.0 * b.half_height);
-                    SpeciesLook {
-                        albedo: rgb.map(|c| (c / alpha) as f32),
-                        area_m2: (alpha / texels as f64 * square) as f32,
-                        side_m2: (side_alpha / texels as f64 * square) as f32,
-                        height_m: s.height_m,
-                    }
-                })
+                let square = f64::from(2.0 * b.half_width) * f64::from(2.0 * b.half_height);
+                let to_m2 = |a: f64| (a / texels as f64 * square) as f32;
+                let mean = |v: [f64; 3]| v.map(|c| if alpha > 0.0 { (c / alpha) as f32 } else { 0.0 });
+                Some((mean(rgb), mean(autumn), to_m2(alpha), to_m2(side_alpha)))
+            };
+            let top = view(0).filter(|v| v.2 > 0.0).map(|(albedo, autumn, area_m2, side_m2)| {
+                let seasons = pack.meta.season.as_ref().map(|m| {
+                    // The bare wood's own top view where the pack has it; else
+                    // the leafy crown thinned to the bare cover.
+                    let (bare, bare_area_m2, bare_side_m2) = match view(1).filter(|v| v.2 > 0.0) {
+                        Some((bare, _, area, side)) => (bare, area, side),
+                        None => (BARE_ALBEDO, area_m2 * m.bare_cover, side_m2 * m.bare_cover),
+                    };
+                    SeasonLooks { autumn, bare, bare_area_m2, bare_side_m2 }
+                });
+                SpeciesLook { albedo, area_m2, side_m2, height_m: s.height_m, seasons }
             });
             Ok(top.unwrap_or_else(|| {
                 log(&format!("canopy: {} has no billboards; its crowns are drawn as plain green discs", s.name));
                 let half = 0.5 * ((s.bounds.max[0] - s.bounds.min[0]) + (s.bounds.max[1] - s.bounds.min[1])) * 0.5;
+                let (area_m2, side_m2) = (
+                    std::f32::consts::PI * (0.7 * half).powi(2),
+                    // A crown of that width down half the tree.
+                    1.4 * half * 0.5 * s.height_m,
+                );
                 SpeciesLook {
                     albedo: FALLBACK_ALBEDO,
-                    area_m2: std::f32::consts::PI * (0.7 * half).powi(2),
-                    // A crown of that width down half the tree.
-                    side_m2: 1.4 * half * 0.5 * s.height_m,
+                    area_m2,
+                    side_m2,
                     height_m: s.height_m,
+                    seasons: pack.meta.season.as_ref().map(|m| SeasonLooks {
+                        autumn: sylva::render::settings::autumn_albedo(
+                            FALLBACK_ALBEDO,
+                            autumn_linear.unwrap_or(FALLBACK_ALBEDO),
+                        ),
+                        bare: BARE_ALBEDO,
+                        bare_area_m2: area_m2 * m.bare_cover,
+                        bare_side_m2: side_m2 * m.bare_cover,
+                    }),
                 }
             }))
         })
@@ -107,6 +163,11 @@ struct CanopyTree {
     area: f32,
     side: f32,
     albedo: [f32; 3],
+    /// Autumn albedo; bare area, side and albedo (leaf-off; as leaf-on for an evergreen).
+    autumn: [f32; 3],
+    bare_area: f32,
+    bare_side: f32,
+    bare: [f32; 3],
 }
 
 /// A raster being summed.
@@ -115,6 +176,8 @@ struct Acc {
     size: f32,
     /// Per cell: Σ area, Σ area·rgb, Σ area·height, Σ area·ground, Σ side area.
     sums: Vec<[f64; 7]>,
+    /// Per cell, with seasons: Σ area·autumn rgb, Σ bare area, Σ bare area·rgb, Σ bare side.
+    season_sums: Option<Vec<[f64; 8]>>,
     z: [f32; 2],
     height_max: f32,
     height_min: f32,
@@ -123,12 +186,21 @@ struct Acc {
 }
 
 impl Acc {
+    /// The same, with the cells' seasons.
+    fn with_seasons(mut self, seasons: bool) -> Self {
+        if seasons {
+            self.season_sums = Some(vec![[0.0; 8]; self.sums.len()]);
+        }
+        self
+    }
+
     /// A raster over the square at `origin` (metres relative to the scene origin) of side `size`.
     fn new(origin: [f64; 2], size: f64) -> Self {
         Self {
             origin: [origin[0] as f32, origin[1] as f32],
             size: size as f32,
             sums: vec![[0.0; 7]; (CANOPY_CELLS * CANOPY_CELLS) as usize],
+            season_sums: None,
             z: [f32::INFINITY, f32::NEG_INFINITY],
             height_max: 0.0,
             height_min: f32::INFINITY,
@@ -172,6 +244,16 @@ impl Acc {
             s[4] += share * f64::from(t.height);
             s[5] += share * f64::from(t.ground);
             s[6] += side;
+            if let Some(seasons) = self.season_sums.as_mut() {
+                let q = &mut seasons[(y * n + x) as usize];
+                let bare = share * f64::from(t.bare_area / t.area.max(1e-9));
+                for k in 0..3 {
+                    q[k] += share * f64::from(t.autumn[k]);
+                    q[4 + k] += bare * f64::from(t.bare[k]);
+                }
+                q[3] += bare;
+                q[7] += side * f64::from(t.bare_side / t.side.max(1e-9));
+            }
         }
         self.z = [self.z[0].min(t.ground), self.z[1].max(t.ground)];
         self.height_max = self.height_max.max(t.height);
@@ -197,6 +279,7 @@ impl Acc {
                 1.0
             },
             data: vec![0; self.sums.len() * CANOPY_CELL_BYTES],
+            seasons: self.season_sums.as_ref().map(|q| vec![0; q.len() * CANOPY_CELL_BYTES]),
         };
         for (i, s) in self.sums.iter().enumerate() {
             if s[0] <= 0.0 {
@@ -211,6 +294,21 @@ impl Acc {
             };
             let packed = c.pack_cell(&cell);
             c.data[i * CANOPY_CELL_BYTES..(i + 1) * CANOPY_CELL_BYTES].copy_from_slice(&packed);
+            if let (Some(q), Some(out)) = (self.season_sums.as_ref().map(|q| q[i]), c.seasons.as_mut()) {
+                // Autumn: the albedo; leaf-off: the bare wood's cover, albedo and side.
+                let bare = if q[3] > 0.0 { [4, 5, 6].map(|k| linear_to_srgb((q[k] / q[3]) as f32)) } else { [0; 3] };
+                let side = if q[3] > 0.0 { q[7] / q[3] } else { 0.0 };
+                out[i * CANOPY_CELL_BYTES..(i + 1) * CANOPY_CELL_BYTES].copy_from_slice(&[
+                    linear_to_srgb((q[0] / s[0]) as f32),
+                    linear_to_srgb((q[1] / s[0]) as f32),
+                    linear_to_srgb((q[2] / s[0]) as f32),
+                    ((1.0 - (-q[3] / cell_area).exp()).clamp(0.0, 1.0) * 255.0).round() as u8,
+                    bare[0],
+                    bare[1],
+                    bare[2],
+                    (side * 32.0).round().clamp(0.0, 255.0) as u8,
+                ]);
+            }
         }
         c
     }
@@ -236,6 +334,10 @@ fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<Ca
                 // Width scales by scale · aspect, height by scale.
                 side: look.side_m2 * i.scale * i.scale * i.aspect,
                 albedo: look.albedo,
+                autumn: look.seasons.map_or(look.albedo, |l| l.autumn),
+                bare_area: look.seasons.map_or(look.area_m2, |l| l.bare_area_m2) * (i.scale * i.aspect).powi(2),
+                bare_side: look.seasons.map_or(look.side_m2, |l| l.bare_side_m2) * i.scale * i.scale * i.aspect,
+                bare: look.seasons.map_or(look.albedo, |l| l.bare),
             });
         }
     }
@@ -293,7 +395,8 @@ struct Walk<'a> {
 impl Walk<'_> {
     /// Writes raster `(level, x, y)` (over `tiles`, all inside its square) and those below it.
     fn visit(&mut self, level: u8, x: u32, y: u32, tiles: &[&TileEntry]) -> Result<()> {
-        self.stack.push(Acc::new(self.entry.origin_of(level, x, y), self.entry.size_m(level)));
+        let seasons = self.looks.iter().any(|l| l.seasons.is_some());
+        self.stack.push(Acc::new(self.entry.origin_of(level, x, y), self.entry.size_m(level)).with_seasons(seasons));
         let mut children = 0u8;
         if level + 1 >= self.entry.levels {
             for t in tiles {
@@ -361,7 +464,8 @@ impl Walk<'_> {
             }
             children |= 1 << i;
             let (cl, cx, cy) = (level + 1, 2 * x + (i & 1), 2 * y + (i >> 1));
-            self.stack.push(Acc::new(self.entry.origin_of(cl, cx, cy), size));
+            let seasons = self.looks.iter().any(|l| l.seasons.is_some());
+            self.stack.push(Acc::new(self.entry.origin_of(cl, cx, cy), size).with_seasons(seasons));
             let grand = if cl + 1 >= self.entry.levels {
                 for acc in &mut self.stack {
                     part.iter().for_each(|tree| acc.add(tree));
@@ -396,7 +500,50 @@ mod tests {
     use super::*;
 
     fn tree(x: f32, height: f32, tallest: f32, area: f32) -> CanopyTree {
-        CanopyTree { x, y: 10.0, ground: 0.0, height, tallest, area, side: 1.0, albedo: [0.1, 0.2, 0.05] }
+        let albedo = [0.1, 0.2, 0.05];
+        CanopyTree {
+            x,
+            y: 10.0,
+            ground: 0.0,
+            height,
+            tallest,
+            area,
+            side: 1.0,
+            albedo,
+            autumn: albedo,
+            bare_area: area,
+            bare_side: 1.0,
+            bare: albedo,
+        }
+    }
+
+    #[test]
+    fn deciduous_crowns_turn_in_autumn_and_thin_in_leaf_off() {
+        // Two crowns in one cell: an evergreen and a deciduous one, whose bare
+        // wood covers a fifth of its crown and is brown.
+        let mut acc = Acc::new([0.0, 0.0], 64.0).with_seasons(true);
+        acc.add(&tree(10.0, 20.0, 20.0, 1.0));
+        let autumn = [0.5, 0.1, 0.02];
+        let bare = [0.1, 0.08, 0.06];
+        acc.add(&CanopyTree { autumn, bare_area: 0.2, bare_side: 0.3, bare, ..tree(10.2, 20.0, 20.0, 1.0) });
+        let c = Canopy::decode("c", &acc.finish(0).encode()).unwrap();
+        let at = |season| {
+            let cells = c.cells_in(season);
+            let cell = Canopy { data: cells.to_vec(), seasons: None, ..c.clone() };
+            cell.cell(10, 10)
+        };
+        use sylva::format::pack::Season;
+        let (on, fall, off) = (at(Season::LeafOn), at(Season::Autumn), at(Season::LeafOff));
+        assert!(on.cover > 0.0);
+        assert_eq!((fall.cover, fall.height_m), (on.cover, on.height_m), "autumn only recolours");
+        assert!(fall.color[0] > on.color[0] + 40, "autumn reddens: {:?} → {:?}", on.color, fall.color);
+        // (1 − e^−2 → 1 − e^−1.2: the evergreen keeps its crown.)
+        assert!(off.cover < on.cover - 0.1 && off.cover > 0.0, "leaf-off thins: {} → {}", on.cover, off.cover);
+        // Seen from the side (Λ (1 + side), Λ = −ln(1 − cover)) it thins too.
+        let from_side = |c: CanopyCell| -(1.0 - c.cover).ln() * (1.0 + c.side);
+        assert!(from_side(off) < from_side(on) * 0.8, "from the side: {} → {}", from_side(on), from_side(off));
+        // Without seasons the raster holds none.
+        assert!(Acc::new([0.0, 0.0], 64.0).finish(0).seasons.is_none());
     }
 
     #[test]

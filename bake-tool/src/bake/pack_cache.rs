@@ -247,6 +247,7 @@ mod tests {
             triangles: vec![[0, 1, 2]],
             notes: Vec::new(),
             variants: Vec::new(),
+            autumn: None,
         }
     }
 
@@ -270,6 +271,8 @@ mod tests {
             cache.key("oak", &texture, &o),
             cache.key("oak", &m, &options),
             cache.key("oak", &m, &PackOptions { ao: false, ..PackOptions::default() }),
+            cache.key("oak", &m, &PackOptions { seasons: false, ..PackOptions::default() }),
+            cache.key("oak", &ImportedModel { autumn: Some([200, 90, 30]), ..m.clone() }, &o),
         ];
         for k in &keys {
             assert_ne!(*k, key);
