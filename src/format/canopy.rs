@@ -500,7 +500,10 @@ mod tests {
         let autumn = d.cells_in(Season::Autumn);
         let off = d.cells_in(Season::LeafOff);
         let i = 11 * CANOPY_CELL_BYTES;
-        assert_eq!(autumn[i..i + 8], [200, 90, 11, d.data[i + 3], d.data[i + 4], d.data[i + 5], d.data[i + 6], d.data[i + 7]]);
+        assert_eq!(
+            autumn[i..i + 8],
+            [200, 90, 11, d.data[i + 3], d.data[i + 4], d.data[i + 5], d.data[i + 6], d.data[i + 7]]
+        );
         assert_eq!(off[i..i + 8], [90, 80, 70, 30, d.data[i + 4], 8, d.data[i + 6], d.data[i + 7]]);
         // Without seasons every season is the leaf-on cells.
         assert_eq!(&*sample().cells_in(Season::LeafOff), &sample().data[..]);

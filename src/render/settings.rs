@@ -138,7 +138,6 @@ pub fn season_params(meta: Option<&crate::format::pack::SeasonMeta>, season: Sea
     [linear(m.autumn[0]), linear(m.autumn[1]), linear(m.autumn[2]), season.code()]
 }
 
-
 /// Which far-field representation a species draws where its pack has both.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum FarTier {

@@ -107,6 +107,11 @@ pub(crate) enum Command {
         /// Terrain). 0 takes the heights as ellipsoidal.
         #[arg(long, value_name = "METRES", default_value_t = 0.0, allow_negative_numbers = true)]
         height_offset: f64,
+        /// The season deciduous species are exported in: leaf-on, autumn (leaf
+        /// textures in their autumn colour) or leaf-off (no leaves, the bare
+        /// wood's far quads). Export one tileset per season to offer them all.
+        #[arg(long, value_name = "leaf-on|autumn|leaf-off", default_value = "leaf-on")]
+        season: sylva::format::pack::Season,
     },
     /// The built-in species library: trees generated per genus (Weber & Penn 1995),
     /// usable as `--model NAME=library:GENUS[:VARIANT]`.
@@ -182,11 +187,14 @@ pub(crate) fn main() {
         Command::Demo(args) => demo(&args),
         Command::Library(command) => library(&command),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
-        Command::Export3dTiles { scene, out, no_ground, height_offset } => {
+        Command::Export3dTiles { scene, out, no_ground, height_offset, season } => {
             let started = Instant::now();
             let mut last = Instant::now();
-            let options =
-                sylva_bake::export::tiles3d::ExportOptions { ground: !no_ground, height_offset_m: height_offset };
+            let options = sylva_bake::export::tiles3d::ExportOptions {
+                ground: !no_ground,
+                height_offset_m: height_offset,
+                season,
+            };
             sylva_bake::export::tiles3d::export(&scene, &out, options, &mut |r| {
                 if last.elapsed().as_secs_f64() > 2.0 {
                     log(&format!("exported {} tiles, {} trees…", r.tiles, r.trees));

@@ -1874,8 +1874,12 @@ fn twenty_genera_from_an_inventory_without_models() {
     // A conifer is narrower than a broadleaf of the same height, seen from the
     // side: the contact sheet's silhouettes (non-sky pixels per row).
     let sheet = dir.join("sheet.png");
-    run(bin().args(["library", "render", "Picea", "Fagus", "--variants", "1", "--size", "96", "--out"]).arg(&sheet));
+    // (In their seasons: each row leaf-on, autumn, leaf-off, each side and top.)
+    run(bin()
+        .args(["library", "render", "Picea", "Fagus", "--variants", "1", "--seasons", "--size", "96", "--out"])
+        .arg(&sheet));
     let img = image::open(&sheet).unwrap().to_rgba8();
+    assert_eq!(img.dimensions(), (6 * 96, 2 * 96));
     let width_over_height = |row: u32| {
         let (mut x0, mut x1, mut y0, mut y1) = (u32::MAX, 0, u32::MAX, 0);
         for y in 0..96 {
@@ -1892,6 +1896,31 @@ fn twenty_genera_from_an_inventory_without_models() {
     };
     let (conifer, broadleaf) = (width_over_height(0), width_over_height(1));
     assert!(conifer < broadleaf * 0.85, "Picea {conifer:.2} vs Fagus {broadleaf:.2} wide over tall");
+    // Seasons: the beech's foliage cover seen from above in leaf-off is at
+    // most 30 % of leaf-on's (its bare wood); in autumn it is as wide and no
+    // longer green. The spruce is the same in every season.
+    let view = |row: u32, column: u32| {
+        let (mut drawn, mut green) = (0u32, 0u32);
+        for y in 0..96 {
+            for x in 0..96 {
+                let p = img.get_pixel(column * 96 + x, row * 96 + y).0;
+                if !(p[2] > 180 && p[0] > 130) {
+                    drawn += 1;
+                    green += u32::from(p[1] > p[0] + 8 && p[1] > p[2] + 8);
+                }
+            }
+        }
+        (drawn, green)
+    };
+    let (top_on, green_on) = view(1, 1);
+    let (top_autumn, green_autumn) = view(1, 3);
+    let (top_off, _) = view(1, 5);
+    assert!(top_on > 500 && green_on * 2 > top_on, "Fagus from above: {top_on} px, {green_on} green");
+    assert!(top_off * 10 <= top_on * 3, "Fagus leaf-off covers {top_off} px of leaf-on's {top_on} from above");
+    assert!(top_autumn == top_on && green_autumn * 10 < green_on, "Fagus in autumn: {green_autumn} px green");
+    for column in [2, 4] {
+        assert_eq!(view(0, column), view(0, 0), "Picea looks the same in every season");
+    }
 }
 
 #[test]
@@ -1913,4 +1942,11 @@ fn library_packs_are_the_same_on_every_bake() {
     let (a, b) = (bake(&dir.join("a")), bake(&dir.join("b")));
     assert!(a.len() > 100_000, "{} bytes", a.len());
     assert!(a == b, "two bakes of the same library species differ");
+    // A birch is deciduous: its pack holds its seasons, the bare wood's billboards included.
+    let pack = sylva::format::decode_pack("betula", &a).unwrap();
+    let season = pack.meta.season.as_ref().expect("a deciduous pack's seasons");
+    assert!(season.bare_far && pack.section(sylva::format::pack::kind::BILLBOARD_COLOR, 1).is_some());
+    // (Its bare cover is measured at the captures' resolution: at these 32²
+    // captures the leaf cards' coarse mips are as thin as the twigs.)
+    assert!(season.bare_cover > 0.0 && season.bare_cover <= 1.0, "bare cover {}", season.bare_cover);
 }

@@ -33,7 +33,7 @@ use glam::{DVec3, Vec3};
 use image::ImageEncoder as _;
 use serde_json::{json, Value};
 use sylva::format::index::IndexNode;
-use sylva::format::pack::{kind, MeshVertex, PackMeta};
+use sylva::format::pack::{kind, MaterialKind, MeshVertex, PackMeta, Season};
 use sylva::format::{decode_pack, Bounds, Manifest, Tile, TileEntry};
 use sylva::geo::GeoFrame;
 
@@ -60,11 +60,15 @@ pub struct ExportOptions {
     /// Metres added to every height: the geoid's undulation at the scene, for
     /// heights above the geoid shown on an ellipsoidal terrain.
     pub height_offset_m: f64,
+    /// The season deciduous species are exported in (one tileset per season:
+    /// autumn recolours their leaf textures and far quads, leaf-off leaves
+    /// their leaves out and shows the bare wood's billboard).
+    pub season: Season,
 }
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        Self { ground: true, height_offset_m: 0.0 }
+        Self { ground: true, height_offset_m: 0.0, season: Season::LeafOn }
     }
 }
 
@@ -135,9 +139,12 @@ fn write_file(path: &Path, bytes: &[u8], report: &mut ExportReport) -> Result<()
     Ok(())
 }
 
+/// `meshes/<file>.bin` of mesh level `level`; `leaves` false: its leaf
+/// materials' draws left out (a deciduous tree in leaf-off).
 fn mesh_bin(
     pack: &sylva::format::pack::Pack<'_>,
     level: u32,
+    leaves: bool,
     file: &str,
     out: &Path,
     report: &mut ExportReport,
@@ -175,7 +182,14 @@ fn mesh_bin(
         bin.extend_from_slice(&v.color);
     }
     bin.extend_from_slice(bytemuck::cast_slice(&indices));
-    let draws = m.draws.iter().map(|d| (d.material as usize, d.first_index, d.index_count)).collect();
+    let draws = m
+        .draws
+        .iter()
+        .filter(|d| {
+            leaves || pack.meta.materials.get(d.material as usize).is_some_and(|x| x.kind == MaterialKind::Branch)
+        })
+        .map(|d| (d.material as usize, d.first_index, d.index_count))
+        .collect();
     write_mesh_bin(bin, verts.len(), indices.len(), [pmin, pmax], draws, file, out, report)
 }
 
@@ -228,20 +242,44 @@ fn far_bin(
     write_mesh_bin(bin, 8, indices.len(), bounds, vec![(0, 0, 12)], file, out, report)
 }
 
-/// PNG of layer `layer` (mip 0) of an RGBA8 texture array stored mip-major.
-fn layer_png(data: &[u8], size: u32, layer: u32, what: &str) -> Result<Vec<u8>> {
+/// A species' autumn colour (linear RGB) and which texels (by index) are leaves.
+type Recolour<'a> = ([f32; 3], &'a dyn Fn(usize) -> bool);
+
+/// PNG of layer `layer` (mip 0) of an RGBA8 texture array stored mip-major;
+/// with `autumn` (linear RGB), its texels recoloured as autumn leaves where
+/// `leaf` says a texel is one (given its index).
+fn layer_png(data: &[u8], size: u32, layer: u32, what: &str, autumn: Option<Recolour<'_>>) -> Result<Vec<u8>> {
     let layer_bytes = (size * size * 4) as usize;
     let at = layer as usize * layer_bytes;
     let Some(pixels) = data.get(at..at + layer_bytes) else { bail!("{what}: texture layer {layer} is missing") };
+    let mut pixels = std::borrow::Cow::Borrowed(pixels);
+    if let Some((colour, leaf)) = autumn {
+        use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
+        for (i, t) in pixels.to_mut().chunks_exact_mut(4).enumerate() {
+            if leaf(i) {
+                let fall = sylva::render::settings::autumn_albedo([0, 1, 2].map(|k| srgb_to_linear(t[k])), colour);
+                t[..3].copy_from_slice(&fall.map(linear_to_srgb));
+            }
+        }
+    }
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(pixels, size, size, image::ExtendedColorType::Rgba8)
+        .write_image(&pixels, size, size, image::ExtendedColorType::Rgba8)
         .with_context(|| format!("encoding {what}'s texture layer {layer}"))?;
     Ok(png)
 }
 
-/// Reads species `s`'s pack and writes its meshes (level 0 and the coarsest) and textures.
-fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut ExportReport) -> Result<SpeciesOut> {
+/// Reads species `s`'s pack and writes its meshes (level 0 and the coarsest)
+/// and textures, as they look in `season` (a deciduous species'; an evergreen
+/// looks the same in every one).
+fn species_out(
+    dir: &Path,
+    m: &Manifest,
+    s: usize,
+    out: &Path,
+    season: Season,
+    report: &mut ExportReport,
+) -> Result<SpeciesOut> {
     let entry = &m.species[s];
     let path = dir.join(&entry.pack);
     let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
@@ -255,29 +293,45 @@ fn species_out(dir: &Path, m: &Manifest, s: usize, out: &Path, report: &mut Expo
         .chars()
         .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '-' })
         .collect();
+    // The season's state: a deciduous species' autumn colour, or its leaves off.
+    let autumn = meta
+        .season
+        .as_ref()
+        .filter(|_| season == Season::Autumn)
+        .map(|x| sylva::render::settings::season_params(Some(x), season))
+        .map(|p| [p[0], p[1], p[2]]);
+    let leaves = !(season == Season::LeafOff && meta.season.is_some());
     let mut levels = BTreeMap::new();
     let coarsest = meta.mesh_levels.len() as u32 - 1;
     for level in [0, coarsest] {
         if let std::collections::btree_map::Entry::Vacant(e) = levels.entry(level) {
-            e.insert(mesh_bin(&pack, level, &format!("{stem}_mesh{level}"), out, report)?);
+            e.insert(mesh_bin(&pack, level, leaves, &format!("{stem}_mesh{level}"), out, report)?);
         }
     }
     let mut layers = BTreeMap::new();
     if let (Some(t), Some(data)) = (&meta.material_texture, pack.section(kind::MATERIAL_TEXTURES, 0)) {
-        for layer in meta.materials.iter().filter_map(|mat| mat.texture_layer) {
+        for (layer, kind) in meta.materials.iter().filter_map(|mat| mat.texture_layer.map(|l| (l, mat.kind))) {
             if layers.contains_key(&layer) {
                 continue;
             }
-            let png = layer_png(data, t.size, layer, &path.display().to_string())?;
+            let every = |_: usize| true;
+            let recolour = autumn.filter(|_| kind == MaterialKind::Leaf).map(|c| (c, &every as &dyn Fn(usize) -> bool));
+            let png = layer_png(data, t.size, layer, &path.display().to_string(), recolour)?;
             let uri = format!("meshes/{stem}_layer{layer}.png");
             write_file(&out.join(&uri), &png, report)?;
             layers.insert(layer, uri);
         }
     }
-    // The far quads show the billboard seen level (elevation 0, azimuth 0: layer 0).
+    // The far quads show the billboard seen level (elevation 0, azimuth 0:
+    // layer 0), of the bare wood in leaf-off where the pack has it; in autumn
+    // its leaf texels recoloured.
     let mut billboard = None;
-    if let (Some(bb), Some(data)) = (&meta.billboards, pack.section(kind::BILLBOARD_COLOR, 0)) {
-        let png = layer_png(data, bb.texture.size, 0, &format!("{}'s billboards", path.display()))?;
+    let state = u32::from(!leaves && meta.season.as_ref().is_some_and(|x| x.bare_far));
+    if let (Some(bb), Some(data)) = (&meta.billboards, pack.section(kind::BILLBOARD_COLOR, state)) {
+        let normals = pack.section(kind::BILLBOARD_NORMAL, state).unwrap_or_default();
+        let leaf = |i: usize| normals.get(i * 4 + 3).is_some_and(|a| *a > 191);
+        let recolour = autumn.map(|c| (c, &leaf as &dyn Fn(usize) -> bool));
+        let png = layer_png(data, bb.texture.size, 0, &format!("{}'s billboards", path.display()), recolour)?;
         let uri = format!("meshes/{stem}_billboard.png");
         write_file(&out.join(&uri), &png, report)?;
         billboard = Some(uri);
@@ -582,8 +636,9 @@ fn export_into(
     let geo = GeoFrame::new(&m.crs.proj4, m.origin_m)
         .map_err(|e| anyhow::anyhow!("{}: the scene's CRS: {e}", manifest.display()))?;
     let mut report = ExportReport::default();
-    let species: Vec<SpeciesOut> =
-        (0..m.species.len()).map(|s| species_out(dir, m, s, out, &mut report)).collect::<Result<_>>()?;
+    let species: Vec<SpeciesOut> = (0..m.species.len())
+        .map(|s| species_out(dir, m, s, out, options.season, &mut report))
+        .collect::<Result<_>>()?;
     let names = property_names(m.attributes.as_ref());
     let meta_schema = metadata_schema(m.attributes.as_ref(), &names);
     let ctx = Ctx {

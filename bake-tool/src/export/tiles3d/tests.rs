@@ -63,7 +63,7 @@ fn export_fixture(name: &str) -> (std::path::PathBuf, ExportReport, Manifest, Ge
     (out, report, m, geo)
 }
 
-const OFFSET_30: ExportOptions = ExportOptions { ground: true, height_offset_m: 30.0 };
+const OFFSET_30: ExportOptions = ExportOptions { ground: true, height_offset_m: 30.0, season: Season::LeafOn };
 
 #[test]
 fn every_exported_tree_maps_back_to_its_tree_within_a_centimetre() {
@@ -452,5 +452,77 @@ fn yaw_follows_the_grid_through_the_frame() {
         let got = 2.0 * f64::from(t.rotation[1]).atan2(f64::from(t.rotation[3]));
         let d = (got - yaw).rem_euclid(std::f64::consts::TAU);
         assert!(d.min(std::f64::consts::TAU - d) < 0.01, "yaw {yaw} -> {got}");
+    }
+}
+
+#[test]
+fn each_season_exports_its_own_look_of_the_deciduous_species() {
+    // The fixture's beech and birch are deciduous, the spruce evergreen.
+    let export_in = |season: Season| {
+        let out = std::env::temp_dir().join(format!("sylva-3dtiles-season-{}-{}", season.name(), std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let options = ExportOptions { ground: false, height_offset_m: 0.0, season };
+        export(&fixture(), &out, options, &mut |_| {}).unwrap();
+        out
+    };
+    let dirs: Vec<std::path::PathBuf> = Season::ALL.iter().map(|s| export_in(*s)).collect();
+    let file = |d: &Path, name: &str| std::fs::read(d.join("meshes").join(name)).unwrap();
+    let names: Vec<String> = std::fs::read_dir(dirs[0].join("meshes"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    let png = |species: &str, what: &str| {
+        names.iter().find(|n| n.contains(species) && n.contains(what) && n.ends_with(".png")).unwrap().clone()
+    };
+    for n in &names {
+        // Geometry is shared by every season; the evergreen's textures too.
+        if n.ends_with(".bin") || n.contains("spruce") {
+            for d in &dirs[1..] {
+                assert!(file(&dirs[0], n) == file(d, n), "{n} differs in {}", d.display());
+            }
+        }
+    }
+    for species in ["beech", "birch"] {
+        let bb = png(species, "billboard");
+        let layer = png(species, "layer");
+        let (on, autumn, off) = (file(&dirs[0], &bb), file(&dirs[1], &bb), file(&dirs[2], &bb));
+        assert!(autumn != on && off != on && off != autumn, "{species}'s far quads show each season");
+        // Autumn recolours a leaf texture layer (the bark's stays).
+        let layers: Vec<&String> = names.iter().filter(|n| n.contains(species) && n.contains("layer")).collect();
+        assert!(layers.iter().any(|l| file(&dirs[1], l) != file(&dirs[0], l)), "{species}: no layer recoloured");
+        assert!(file(&dirs[2], &layer) == file(&dirs[0], &layer), "leaf-off keeps the textures");
+    }
+    // Leaf-off: the full meshes of the deciduous species lose their leaf
+    // primitives; the spruce keeps all of its.
+    // (Summed over every tile's full GLB: name → primitives.)
+    let primitives = |d: &Path| {
+        let mut by_species: BTreeMap<String, usize> = BTreeMap::new();
+        for e in std::fs::read_dir(d.join("tiles")).unwrap() {
+            let p = e.unwrap().path();
+            let n = p.file_name().unwrap().to_string_lossy().into_owned();
+            if !n.ends_with(".glb") || n.ends_with("_far.glb") || n.ends_with("_coarse.glb") {
+                continue;
+            }
+            let (doc, _) = glb_parts(&std::fs::read(&p).unwrap());
+            for node in doc["nodes"].as_array().unwrap() {
+                let mesh = &doc["meshes"][node["mesh"].as_u64().unwrap() as usize];
+                *by_species.entry(node["name"].as_str().unwrap().to_string()).or_default() +=
+                    mesh["primitives"].as_array().unwrap().len();
+            }
+        }
+        by_species
+    };
+    let (on, off) = (primitives(&dirs[0]), primitives(&dirs[2]));
+    assert_eq!(on.keys().collect::<Vec<_>>(), ["beech", "birch", "spruce"]);
+    for (species, n) in &on {
+        let bare = off[species];
+        if species == "spruce" {
+            assert_eq!(bare, *n, "the spruce keeps its leaves");
+        } else {
+            assert!(bare < *n && bare > 0, "{species}: {n} primitives leaf-on, {bare} leaf-off");
+        }
+    }
+    for d in dirs {
+        let _ = std::fs::remove_dir_all(d);
     }
 }
