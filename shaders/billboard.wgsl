@@ -31,6 +31,8 @@ struct VertexOut {
     @location(7) @interpolate(flat) item_x: u32,
     // The tree's style byte (`tree_style`).
     @location(8) @interpolate(flat) style: u32,
+    // The tree's variation (0–31: its autumn progress).
+    @location(9) @interpolate(flat) variation: f32,
 };
 
 const PI: f32 = 3.14159265;
@@ -91,6 +93,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.item_x = item.x;
     out.style = tree_style(styles[STYLE_FLAGS], item.x, batch.species);
     out.tint = variation_tint(tree.variation);
+    out.variation = tree.variation;
     out.lift = half_w * max(tree.aspect, 1.0);
     // The height in the crown of what this point of the quad shows: along the
     // quad's up seen from the side, the crown's top seen from above.
@@ -117,7 +120,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         discard;
     }
     let own = color.rgb * in.tint;
-    var albedo = styled_albedo(select(own, seasonal_leaf(own), is_leaf), styles[in.style & 63u]);
+    var albedo = styled_albedo(select(own, seasonal_leaf(own, in.variation), is_leaf), styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * color.g);
     }

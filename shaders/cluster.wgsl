@@ -44,9 +44,10 @@ struct VertexOut {
     // per pixel at the hit's height like the meshes' per vertex.
     @location(6) @interpolate(flat) cover: f32,
     // The tree's eye-relative position (xyz) and yaw (w), and its height scale
-    // and crown aspect: the hit point back into model space for `field_ao`.
+    // and crown aspect: the hit point back into model space for `field_ao`;
+    // its variation (0–31: its autumn progress).
     @location(7) @interpolate(flat) tree_at: vec4<f32>,
-    @location(8) @interpolate(flat) tree_size: vec2<f32>,
+    @location(8) @interpolate(flat) tree_size: vec3<f32>,
     // The tree's pool instance (the id pass).
     @location(9) @interpolate(flat) item_x: u32,
     // The tree's style byte (`tree_style`).
@@ -270,7 +271,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.item_x = item.x;
     out.style = tree_style(styles[STYLE_FLAGS], item.x, batch.species);
     out.tree_at = vec4<f32>(tree.pos, tree.yaw);
-    out.tree_size = vec2<f32>(tree.scale, tree.aspect);
+    out.tree_size = vec3<f32>(tree.scale, tree.aspect, tree.variation);
     out.cover = batch_cover(batch);
     return out;
 }
@@ -397,7 +398,7 @@ fn cluster_fragment(in: VertexOut) -> FragmentOut {
     let hit = cluster_hit(in);
     var out: FragmentOut;
     out.depth = hit.depth;
-    var albedo = styled_albedo(select(seasonal_leaf(in.color.rgb), in.color.rgb, hit.is_line), styles[in.style & 63u]);
+    var albedo = styled_albedo(select(seasonal_leaf(in.color.rgb, in.tree_size.z), in.color.rgb, hit.is_line), styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y);
     }

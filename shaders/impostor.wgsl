@@ -26,8 +26,8 @@ struct VertexOut {
     @location(3) @interpolate(flat) weights: vec3<f32>,
     // The sphere's centre (eye-relative) and the yaw.
     @location(4) @interpolate(flat) tree_at: vec4<f32>,
-    // Scale (with the thinning boost) and crown aspect.
-    @location(5) @interpolate(flat) tree_size: vec2<f32>,
+    // Scale (with the thinning boost), crown aspect and variation (0–31).
+    @location(5) @interpolate(flat) tree_size: vec3<f32>,
     @location(6) @interpolate(flat) item_y: u32,
     @location(7) @interpolate(flat) tint: vec3<f32>,
     // The batch's canopy cover (`batch_cover`).
@@ -102,7 +102,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.layers = views.layers;
     out.weights = views.weights;
     out.tree_at = vec4<f32>(cw, tree.yaw);
-    out.tree_size = vec2<f32>(s, aspect);
+    out.tree_size = vec3<f32>(s, aspect, tree.variation);
     out.item_y = item.y;
     out.item_x = item.x;
     out.style = tree_style(styles[STYLE_FLAGS], item.x, batch.species);
@@ -250,7 +250,7 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     let m = n * normal_agreement(hit.lod);
     let rel = in.tree_at.xyz + imp_to_world(hit.at - draw.bb_center.xyz, in);
     let own = hit.color.rgb * in.tint;
-    var albedo = styled_albedo(select(own, seasonal_leaf(own), is_leaf), styles[in.style & 63u]);
+    var albedo = styled_albedo(select(own, seasonal_leaf(own, in.tree_size.z), is_leaf), styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(REPR_BILLBOARD) * (0.6 + 0.4 * hit.color.g);
     }

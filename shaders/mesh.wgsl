@@ -79,6 +79,8 @@ struct VertexOut {
     @location(10) @interpolate(flat) item_x: u32,
     // The tree's style byte (`tree_style`).
     @location(11) @interpolate(flat) style: u32,
+    // The tree's variation (0–31: its autumn progress).
+    @location(12) @interpolate(flat) variation: f32,
 };
 
 // The occlusion byte of a vertex (`normal_oct` byte 2, snorm8): 0 not baked
@@ -120,6 +122,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32, @builtin(vertex
     out.plane = u32(round(in.color.r * 255.0)) + u32(round(in.color.g * 255.0)) * 256u;
     out.frame = vec2<f32>(tree.yaw, tree.aspect);
     out.tint = tint;
+    out.variation = tree.variation;
     out.material = in.position_material.w;
     out.item_y = item.y;
     out.item_x = item.x;
@@ -323,7 +326,7 @@ fn surface(in: VertexOut, front: bool) -> Surface {
 @fragment
 fn fs_lit(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     let s = surface(in, front);
-    var albedo = select(s.albedo.rgb, seasonal_leaf(s.albedo.rgb), s.is_leaf);
+    var albedo = select(s.albedo.rgb, seasonal_leaf(s.albedo.rgb, in.variation), s.is_leaf);
     albedo = styled_albedo(albedo, styles[in.style & 63u]);
     if view.params.z == 1u {
         albedo = repr_color(draw.ids.y) * (0.6 + 0.4 * s.albedo.g);

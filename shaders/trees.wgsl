@@ -18,15 +18,22 @@ fn leaves_off() -> bool {
     return draw.season.w > 1.5;
 }
 
-// A leaf's albedo in the season drawn: in autumn the species' autumn colour,
-// keeping the light and dark of the leaf (its luminance against a typical
-// leaf's) and the tree's own variation. Twin of `autumn_albedo` in
-// src/render/settings.rs (the canopy rasters' autumn).
+// How far a tree of `variation` (0–31) has turned in autumn, 0.4–1: the trees
+// of a stand turn at their own pace. Twin of `autumn_progress` in src/render/settings.rs.
+fn autumn_progress(variation: f32) -> f32 {
+    return 0.4 + 0.6 * fract(variation * 0.618034 + 0.3);
+}
+
+// A leaf's albedo in the season drawn: in autumn towards the species' autumn
+// colour, keeping the light and dark of the leaf (its luminance against a
+// typical leaf's), as far as the tree (`variation`) has turned. Twin of
+// `autumn_albedo` in src/render/settings.rs (the canopy rasters' autumn).
 const AUTUMN_LEAF_LUMINANCE: f32 = 0.08;
-fn seasonal_leaf(albedo: vec3<f32>) -> vec3<f32> {
+fn seasonal_leaf(albedo: vec3<f32>, variation: f32) -> vec3<f32> {
     if draw.season.w < 0.5 || draw.season.w > 1.5 {
         return albedo;
     }
     let l = dot(albedo, vec3<f32>(0.2126, 0.7152, 0.0722));
-    return draw.season.rgb * clamp(l / AUTUMN_LEAF_LUMINANCE, 0.3, 2.0);
+    let fall = draw.season.rgb * clamp(l / AUTUMN_LEAF_LUMINANCE, 0.3, 2.0);
+    return mix(albedo, fall, autumn_progress(variation));
 }

@@ -343,11 +343,29 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
             json!([vertex_ao.iter().copied().fold(1.0f32, f32::min), vertex_ao.iter().copied().fold(0.0f32, f32::max)])
         }),
     });
+    // A deciduous species' seasons: its autumn colour and the bare far tiers' bytes.
+    let far = [
+        kind::BILLBOARD_COLOR,
+        kind::BILLBOARD_NORMAL,
+        kind::BILLBOARD_AO,
+        kind::IMPOSTOR_COLOR,
+        kind::IMPOSTOR_SURFACE,
+    ];
+    let bare_bytes: usize = far.iter().map(|k| pack.section(*k, 1).map_or(0, <[u8]>::len)).sum();
+    let seasons = meta.season.as_ref().map(|x| {
+        json!({
+            "autumn": format!("#{:02x}{:02x}{:02x}", x.autumn[0], x.autumn[1], x.autumn[2]),
+            "bare_far": x.bare_far,
+            "bare_far_bytes": bare_bytes,
+            "bare_cover": x.bare_cover,
+        })
+    });
     json!({
         "kind": "pack",
         "name": meta.name,
         "bytes": bytes,
         "height_m": meta.height_m,
+        "seasons": seasons,
         "bounds": {"min": meta.bounds_min, "max": meta.bounds_max},
         "materials": meta.materials.iter().map(|m| json!({"name": m.name, "kind": m.kind, "alpha_cutoff": m.alpha_cutoff, "textured": m.texture_layer.is_some()})).collect::<Vec<_>>(),
         "material_texture": meta.material_texture.map(|t| json!({"size": t.size, "layers": t.layers, "mips": t.mips, "bytes": t.byte_len()})),
@@ -611,6 +629,24 @@ fn pack_text(s: &Value) -> String {
             }
             _ => {}
         }
+    }
+    match s["seasons"].as_object() {
+        Some(x) => {
+            out += &format!(
+                "  seasons: deciduous — leaf-on, autumn ({}), leaf-off{}\n",
+                x["autumn"].as_str().unwrap_or("?"),
+                if x["bare_far"].as_bool() == Some(true) {
+                    format!(
+                        " (the bare wood's far tiers {:.1} KB, fetched in leaf-off only; it covers {:.0} % of the crown's far views)",
+                        x["bare_far_bytes"].as_f64().unwrap_or(0.0) / 1e3,
+                        x["bare_cover"].as_f64().unwrap_or(0.0) * 100.0
+                    )
+                } else {
+                    String::new()
+                }
+            );
+        }
+        None => out += "  seasons: one state (evergreen, or baked without seasons)\n",
     }
     let ao = &s["ambient_occlusion"];
     let baked: Vec<&str> =

@@ -123,6 +123,10 @@ pub(crate) enum Command {
         /// ambient occlusion (on) or without (off).
         #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
         ao: bool,
+        /// Draw every method (the references too) with deciduous species in
+        /// this season: leaf-on, autumn or leaf-off.
+        #[arg(long, value_name = "leaf-on|autumn|leaf-off", default_value = "leaf-on")]
+        season: sylva::render::settings::Season,
         /// Also write every method's frames as PNGs into --out/frames, and per
         /// frame a strip of them side by side in the methods' order, the
         /// reference first (NNN-strip.png), to look at the error. With

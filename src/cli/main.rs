@@ -103,6 +103,7 @@ mod cli {
                 thin_px,
                 shadows,
                 ao,
+                season,
                 save_frames,
                 reference_supersample,
                 ..
@@ -114,6 +115,7 @@ mod cli {
                 let mut methods = sylva::bench::methods(&methods, shadows)?;
                 for m in &mut methods {
                     m.settings.ao = ao;
+                    m.settings.season = season;
                 }
                 for m in methods.iter_mut() {
                     if m.reference.is_some() {

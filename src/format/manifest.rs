@@ -12,7 +12,7 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 10).
+/// Newest manifest version this build writes and reads (it reads 1 to 11).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
 /// ground imagery (`terrain.imagery`); version 6 per-tree attributes
@@ -20,11 +20,13 @@ pub const SCENE_FORMAT: &str = "sylva-scene";
 /// entries' `levels`); version 8 canopy rasters (`canopy`, and the index's
 /// child entries' `height_m`); version 9 tiles in levels of √2 steps (tile
 /// version 4, the entries' `levels.version`); version 10 canopy rasters of
-/// version 2 (`tallest_ratio` in their header).
-/// The bake writes the oldest version that holds what a scene has (10 for
+/// version 2 (`tallest_ratio` in their header); version 11 canopy rasters of
+/// version 3 (the cells' seasons) and packs that may hold a deciduous
+/// species' seasons (`META.season`, the bare far tiers).
+/// The bake writes the oldest version that holds what a scene has (11 for
 /// every scene with trees, 9 for a shard's part, which has no canopy; 3 to 8
 /// for older bakes), so older viewers refuse newer scenes with a clear message.
-pub const SCENE_VERSION: u32 = 10;
+pub const SCENE_VERSION: u32 = 11;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.

@@ -111,14 +111,26 @@ pub use crate::format::pack::Season;
 /// dark against it. Twin of the constant in `seasonal_leaf` (`shaders/trees.wgsl`).
 pub const AUTUMN_LEAF_LUMINANCE: f32 = 0.08;
 
-/// A leaf texel's albedo (linear) in autumn, for a species whose autumn colour
-/// is `autumn` (linear): the colour, scaled by the texel's luminance against
-/// a typical leaf's. Twin of `seasonal_leaf` in `shaders/trees.wgsl`.
+/// How far a tree of `variation` (0–31) has turned in autumn (0.4–1): the
+/// trees of a stand turn at their own pace. Twin of `autumn_progress` in `shaders/trees.wgsl`.
 #[must_use]
-pub fn autumn_albedo(albedo: [f32; 3], autumn: [f32; 3]) -> [f32; 3] {
+pub fn autumn_progress(variation: u32) -> f32 {
+    let x = variation as f32 * 0.618_034 + 0.3;
+    0.4 + 0.6 * (x - x.floor())
+}
+
+/// The mean of [`autumn_progress`] over the 32 variations (a stand's; tested).
+pub const AUTUMN_MEAN_PROGRESS: f32 = 0.7;
+
+/// A leaf texel's albedo (linear) in autumn, for a species whose autumn colour
+/// is `autumn` (linear), on a tree `progress` (0–1) turned: towards the colour,
+/// scaled by the texel's luminance against a typical leaf's. Twin of
+/// `seasonal_leaf` in `shaders/trees.wgsl`.
+#[must_use]
+pub fn autumn_albedo(albedo: [f32; 3], autumn: [f32; 3], progress: f32) -> [f32; 3] {
     let l = 0.2126 * albedo[0] + 0.7152 * albedo[1] + 0.0722 * albedo[2];
     let shade = (l / AUTUMN_LEAF_LUMINANCE).clamp(0.3, 2.0);
-    autumn.map(|c| c * shade)
+    [0, 1, 2].map(|k| albedo[k] + (autumn[k] * shade - albedo[k]) * progress)
 }
 
 /// The tree passes' `DrawParams.season` for a species with `meta`'s seasons
@@ -198,3 +210,22 @@ impl Default for RenderSettings {
 
 /// Default of [`RenderSettings::cluster_min_px`].
 pub const DEFAULT_CLUSTER_MIN_PX: f32 = 40.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stand_turns_at_its_trees_own_pace() {
+        let p: Vec<f32> = (0..32).map(autumn_progress).collect();
+        assert!(p.iter().all(|v| (0.4..=1.0).contains(v)), "{p:?}");
+        let mean = p.iter().sum::<f32>() / 32.0;
+        assert!((mean - AUTUMN_MEAN_PROGRESS).abs() < 0.02, "mean {mean}");
+        assert!(p.iter().any(|v| *v < 0.5) && p.iter().any(|v| *v > 0.9), "a spread: {p:?}");
+        // Fully turned, a leaf takes the autumn colour at its own luminance; not at all, its own.
+        let green = [0.05, 0.12, 0.03];
+        assert_eq!(autumn_albedo(green, [0.5, 0.1, 0.02], 0.0), green);
+        let red = autumn_albedo(green, [0.5, 0.1, 0.02], 1.0);
+        assert!(red[0] > red[1] && red[0] > green[0] * 3.0, "{red:?}");
+    }
+}

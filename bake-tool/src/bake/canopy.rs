@@ -23,6 +23,7 @@ use sylva::format::manifest::{SpeciesEntry, TileEntry};
 use sylva::format::pack::{decode_pack, kind};
 use sylva::format::Tile;
 use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
+use sylva::render::settings::AUTUMN_MEAN_PROGRESS;
 
 use crate::out_dir::{create_dir, write_file};
 
@@ -97,7 +98,7 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
                     alpha += a;
                     let lin = [0, 1, 2].map(|k| srgb_to_linear(t[k]));
                     let fall = match autumn_linear {
-                        Some(c) if n[3] > 191 => sylva::render::settings::autumn_albedo(lin, c),
+                        Some(c) if n[3] > 191 => sylva::render::settings::autumn_albedo(lin, c, AUTUMN_MEAN_PROGRESS),
                         _ => lin,
                     };
                     for k in 0..3 {
@@ -140,6 +141,7 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
                         autumn: sylva::render::settings::autumn_albedo(
                             FALLBACK_ALBEDO,
                             autumn_linear.unwrap_or(FALLBACK_ALBEDO),
+                            AUTUMN_MEAN_PROGRESS,
                         ),
                         bare: BARE_ALBEDO,
                         bare_area_m2: area_m2 * m.bare_cover,

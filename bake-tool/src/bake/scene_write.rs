@@ -68,7 +68,7 @@ pub fn finish_scene(
         None => 3,
     };
     base.home = sylva::format::manifest::densest_group(&tiles);
-    // Canopy rasters for far views (version 8; 10 for canopy version 2): not in a shard's part (merge
+    // Canopy rasters for far views (version 8; 10 for canopy version 2, 11 for 3): not in a shard's part (merge
     // makes them from all the tiles), nor for a scene without trees.
     let looks = if base.shard.is_none() && !tiles.is_empty() {
         Some(crate::bake::canopy::species_looks(dir, &base.species, log)?)
@@ -88,8 +88,8 @@ pub fn finish_scene(
             started.elapsed().as_secs_f64()
         ));
         base.canopy = Some(entry);
-        // Canopy rasters of version 2 (`tallest_ratio`): version 10.
-        base.version = base.version.max(10);
+        // Canopy rasters of version 3 (the cells' seasons): version 11.
+        base.version = base.version.max(11);
     }
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);

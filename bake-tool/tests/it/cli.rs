@@ -1133,7 +1133,7 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     assert!(log.contains("attribute \"Condition\" left out: a repeated column name"), "{log}");
     let manifest =
         sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(manifest.version, 10, "canopy rasters of version 2, tiles in √2 levels");
+    assert_eq!(manifest.version, 11, "canopy rasters of version 3, tiles in √2 levels");
     let schema = manifest.attributes.clone().expect("attributes");
     let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed", "girth"]);
@@ -1452,7 +1452,7 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
         .arg("--out")
         .arg(&out));
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(m.version, 10);
+    assert_eq!(m.version, 11);
     let e = m.canopy.clone().expect("a canopy entry");
     // The finest squares 512 m (64 cells of 8 m): 1,024 m of 64 m tiles in two
     // levels; 1,024 m tiles split once or twice below a tile.

@@ -255,9 +255,12 @@ fn layer_png(data: &[u8], size: u32, layer: u32, what: &str, autumn: Option<Reco
     let mut pixels = std::borrow::Cow::Borrowed(pixels);
     if let Some((colour, leaf)) = autumn {
         use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
+        use sylva::render::settings::AUTUMN_MEAN_PROGRESS;
         for (i, t) in pixels.to_mut().chunks_exact_mut(4).enumerate() {
             if leaf(i) {
-                let fall = sylva::render::settings::autumn_albedo([0, 1, 2].map(|k| srgb_to_linear(t[k])), colour);
+                // (A stand's mean progress: a tileset has one texture per species.)
+                let lin = [0, 1, 2].map(|k| srgb_to_linear(t[k]));
+                let fall = sylva::render::settings::autumn_albedo(lin, colour, AUTUMN_MEAN_PROGRESS);
                 t[..3].copy_from_slice(&fall.map(linear_to_srgb));
             }
         }
