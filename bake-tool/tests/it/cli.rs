@@ -941,16 +941,16 @@ fn trees_stand_on_the_ground_of_a_dem() {
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
     let bare = inspect_json(&dir.join("bare"));
     assert!(bare["terrain"].is_null());
-    // Every scene is version 10 now (canopy version 2 rasters), whatever its ground.
-    assert_eq!(bare["version"], 10);
+    // Every scene is version 11 now (canopy version 3 rasters), whatever its ground.
+    assert_eq!(bare["version"], 11);
     // The fitted ground carries the procedural forest floor as imagery;
     // --plain-ground leaves it out.
     let fitted = inspect_json(&dir.join("fitted"));
-    assert_eq!(fitted["version"], 10);
+    assert_eq!(fitted["version"], 11);
     assert!(fitted["terrain"]["imagery"]["source"].as_str().unwrap().contains("procedural forest floor"), "{fitted}");
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("plain"), &[&crs[..], &["--plain-ground"]].concat()));
     let plain = inspect_json(&dir.join("plain"));
-    assert_eq!(plain["version"], 10);
+    assert_eq!(plain["version"], 11);
     assert!(plain["terrain"]["imagery"].is_null());
     assert!(plain["terrain"]["imagery"].is_null());
     // Bad DEM inputs are named.

@@ -222,10 +222,12 @@ impl<F: Fetcher> SceneStream<F> {
             let load = &mut self.packs[s];
             if let Some(head) = &load.parsed {
                 load.wants = residency.parts_needed(s, &head.meta);
-                // Bare far tiers a pack lacks: its leafy ones (drawn without their leaves).
-                if load.wants[4] && head.part_range(PackPart::BareFar).is_none() {
-                    load.wants[4] = false;
-                    load.wants[0] = true;
+                // One far state: the bare one where asked for and the pack has it;
+                // else its leafy one (drawn without its leaf texels in leaf-off).
+                if load.wants[4] {
+                    let bare = head.part_range(PackPart::BareFar).is_some();
+                    load.wants[4] = bare;
+                    load.wants[0] = !bare;
                 }
             }
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {

@@ -77,7 +77,7 @@ impl Fetcher for FakeFetcher {
 
 /// Holds up to `capacity` instances; records uploads, evictions and packs.
 struct FakeResidency {
-    /// The pack parts it asks for (every one by default).
+    /// The pack parts it asks for (every one a leaf-on view can by default).
     parts: [bool; PACK_PARTS],
     capacity: u32,
     used: u32,
@@ -94,7 +94,8 @@ struct FakeResidency {
 impl FakeResidency {
     fn new(capacity: u32) -> Self {
         Self {
-            parts: [true; PACK_PARTS],
+            // Every part of a leaf-on view.
+            parts: PackPart::ALL.map(|p| p != PackPart::BareFar),
             capacity,
             used: 0,
             next: 0,
@@ -381,7 +382,9 @@ fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
         .collect();
     let size = |h: &PackHead, p: PackPart| h.part_range(p).map_or(0, |(a, b)| b - a);
     let billboards: u64 = heads.iter().map(|h| size(h, PackPart::Billboards)).sum();
-    let everything: u64 = heads.iter().map(|h| PackPart::ALL.iter().map(|p| size(h, *p)).sum::<u64>()).sum();
+    // (A leaf-on view: never the bare far tiers.)
+    let leaf_on = PackPart::ALL.iter().filter(|p| **p != PackPart::BareFar);
+    let everything: u64 = heads.iter().map(|h| leaf_on.clone().map(|p| size(h, *p)).sum::<u64>()).sum();
     // Room for the billboards and about half of the rest.
     let budget = billboards + (everything - billboards) / 2;
     let config = StreamConfig { gpu_budget_bytes: budget, ..StreamConfig::default() };
