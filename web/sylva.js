@@ -1,4 +1,5 @@
-// Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`.
+// Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`
+// (also {camera, lighting, season, refine}: as the setters below take them).
 // Wraps the wasm Viewer (src/web/) with a render loop, camera controls
 // (mouse, touch, keyboard), events and the camera in the URL hash.
 //
@@ -762,6 +763,7 @@ export async function create(target, options = {}) {
   const v = new SylvaViewer(canvas, viewer, { ...options, scene });
   if (options.camera) v.setCamera(options.camera);
   if (options.lighting) v.setLighting(options.lighting);
+  if (options.season) v.setSeason(options.season);
   if (options.refine !== undefined) {
     const r = options.refine;
     if (typeof r === 'object' && r !== null) v.setRefine(r.on !== false, r);
@@ -783,8 +785,8 @@ class SylvaElement extends HTMLElement {
     if (name === 'season') this.applySeason();
   }
   applySeason() {
-    const season = this.getAttribute('season');
-    if (season === null) return;
+    // (No attribute: leaf-on, the default.)
+    const season = this.getAttribute('season') ?? 'leaf-on';
     try { this.viewer.setSeason(season); } catch (e) {
       this.dispatchEvent(new CustomEvent('sylva-error', { detail: { message: `season="${season}": ${e.message || e}` } }));
     }

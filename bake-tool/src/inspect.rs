@@ -344,14 +344,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
         }),
     });
     // A deciduous species' seasons: its autumn colour and the bare far tiers' bytes.
-    let far = [
-        kind::BILLBOARD_COLOR,
-        kind::BILLBOARD_NORMAL,
-        kind::BILLBOARD_AO,
-        kind::IMPOSTOR_COLOR,
-        kind::IMPOSTOR_SURFACE,
-    ];
-    let bare_bytes: usize = far.iter().map(|k| pack.section(*k, 1).map_or(0, <[u8]>::len)).sum();
+    let bare_bytes: usize = kind::FAR_TIERS.iter().map(|k| pack.section(*k, 1).map_or(0, <[u8]>::len)).sum();
     let seasons = meta.season.as_ref().map(|x| {
         json!({
             "autumn": format!("#{:02x}{:02x}{:02x}", x.autumn[0], x.autumn[1], x.autumn[2]),

@@ -80,7 +80,14 @@ pub mod kind {
     /// Billboard cloud planes, cells and list entries (u32 words,
     /// [`crate::format::cloud`]).
     pub const CLOUD_DATA: [u8; 4] = *b"CLDA";
+    /// The far tiers' kinds: the sections a deciduous species has a second
+    /// state of (index 1, the bare wood; `META.season.bare_far`).
+    pub const FAR_TIERS: [[u8; 4]; 5] =
+        [BILLBOARD_COLOR, BILLBOARD_NORMAL, BILLBOARD_AO, IMPOSTOR_COLOR, IMPOSTOR_SURFACE];
 }
+
+/// A far-tier texel (billboard normal alpha, impostor surface flag, 0–255) is a leaf above this.
+pub const LEAF_FLAG_MIN: u8 = 191;
 
 /// Bytes of the `AOFD` section's header.
 pub const AO_FIELD_HEADER_BYTES: usize = 32;
@@ -352,8 +359,9 @@ pub struct SeasonMeta {
     pub autumn: [u8; 3],
     /// The far tiers' bare captures are in the pack (sections with index 1).
     pub bare_far: bool,
-    /// The bare tree's cover seen from above over the leafy tree's (0–1):
-    /// what canopy rasters keep of a leaf-off crown.
+    /// The bare wood's covered texels over the leafy tree's (0–1), over the
+    /// far tiers' captured views at their resolution: what canopy rasters keep
+    /// of a leaf-off crown when the pack has no bare billboards.
     pub bare_cover: f32,
 }
 
@@ -590,13 +598,22 @@ pub enum PackPart {
     BareFar,
 }
 
+/// Index of [`PackPart::Billboards`] in [`PackPart::ALL`].
+pub const PART_FAR: usize = 0;
+/// Index of [`PackPart::BareFar`] in [`PackPart::ALL`].
+pub const PART_BARE_FAR: usize = 4;
+
 /// Number of [`PackPart`]s.
 pub const PACK_PARTS: usize = 5;
 
 impl PackPart {
-    /// Every part, in fetch order.
+    /// Every part (indices of the per-part arrays a viewer keeps).
     pub const ALL: [PackPart; PACK_PARTS] =
         [PackPart::Billboards, PackPart::Clusters, PackPart::MeshCoarse, PackPart::MeshFull, PackPart::BareFar];
+
+    /// Indices into [`Self::ALL`] in fetch order: the far tiers (either
+    /// state) first, then coarse to fine.
+    pub const FETCH_ORDER: [usize; PACK_PARTS] = [PART_FAR, PART_BARE_FAR, 1, 2, 3];
 
     /// A far field (the billboards and impostors of one season): fetched
     /// whatever the GPU budget, before anything finer.
@@ -609,20 +626,8 @@ impl PackPart {
     #[must_use]
     pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
         match k {
-            kind::BILLBOARD_COLOR
-            | kind::BILLBOARD_NORMAL
-            | kind::BILLBOARD_AO
-            | kind::IMPOSTOR_COLOR
-            | kind::IMPOSTOR_SURFACE
-                if index == 1 =>
-            {
-                Some(PackPart::BareFar)
-            }
-            kind::BILLBOARD_COLOR
-            | kind::BILLBOARD_NORMAL
-            | kind::BILLBOARD_AO
-            | kind::IMPOSTOR_COLOR
-            | kind::IMPOSTOR_SURFACE => Some(PackPart::Billboards),
+            k if kind::FAR_TIERS.contains(&k) && index == 1 => Some(PackPart::BareFar),
+            k if kind::FAR_TIERS.contains(&k) => Some(PackPart::Billboards),
             kind::ELLIPSOIDS | kind::LINES | kind::AO_FIELD => Some(PackPart::Clusters),
             kind::MESH_VERTICES | kind::MESH_INDICES | kind::MESH_VARIANTS if index == 0 => Some(PackPart::MeshFull),
             kind::MESH_VERTICES
@@ -784,14 +789,7 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         }
     }
     for (e, _) in &pack.sections {
-        let far = [
-            kind::BILLBOARD_COLOR,
-            kind::BILLBOARD_NORMAL,
-            kind::BILLBOARD_AO,
-            kind::IMPOSTOR_COLOR,
-            kind::IMPOSTOR_SURFACE,
-        ];
-        if far.contains(&e.kind) && e.index >= states {
+        if kind::FAR_TIERS.contains(&e.kind) && e.index >= states {
             return Err(Problem::Invalid(format!(
                 "section {} with index {}: the far tiers have {states} state{} here (index 1 is a \
                  deciduous species' bare wood, with META.season.bare_far)",

@@ -167,7 +167,8 @@ impl SingleTree {
 
     /// Draws leaves (false: the bare wood, as a leaf-off capture).
     fn set_leaves(&self, ctx: &GpuContext, leaves: bool) {
-        let params = DrawParams { season: [0.0, 0.0, 0.0, if leaves { 0.0 } else { 2.0 }], ..Default::default() };
+        let state = if leaves { Season::LeafOn } else { Season::LeafOff };
+        let params = DrawParams { season: [0.0, 0.0, 0.0, state.code()], ..Default::default() };
         ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
 

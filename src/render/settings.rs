@@ -139,15 +139,14 @@ pub fn autumn_albedo(albedo: [f32; 3], autumn: [f32; 3], progress: f32) -> [f32;
 #[must_use]
 pub fn season_params(meta: Option<&crate::format::pack::SeasonMeta>, season: Season) -> [f32; 4] {
     let Some(m) = meta else { return [0.0; 4] };
-    let linear = |c: u8| {
-        let c = f32::from(c) / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    [linear(m.autumn[0]), linear(m.autumn[1]), linear(m.autumn[2]), season.code()]
+    let [r, g, b] = autumn_linear(m);
+    [r, g, b, season.code()]
+}
+
+/// A deciduous species' autumn colour (its pack's `season.autumn`), linear RGB.
+#[must_use]
+pub fn autumn_linear(meta: &crate::format::pack::SeasonMeta) -> [f32; 3] {
+    meta.autumn.map(super::mips::srgb_to_linear)
 }
 
 /// Which far-field representation a species draws where its pack has both.

@@ -207,13 +207,49 @@ impl Species {
             None
         };
         let Some(slot) = self.packs.get_mut(index as usize) else { return };
+        // A part that comes after the stream dropped its copies of the others
+        // (the other season's far tier) is uploaded alone: what the pack held
+        // before stays on the GPU beside it.
+        let mut mesh = mesh;
+        let mut cluster = cluster;
+        // (Its bytes then count too: the new pack holds only its own sections.)
+        let mut carried = 0u64;
+        if let Some(old) = slot.take() {
+            let mut kept = false;
+            let empty = |m: &MeshGpu| m.levels.iter().all(Option::is_none) && m.cloud.is_none();
+            if empty(&mesh) && !empty(&old.mesh) {
+                mesh = old.mesh;
+                kept = true;
+            }
+            for (new, old) in billboards.iter_mut().zip([old.billboard, old.billboard_bare]) {
+                if new.is_none() && old.is_some() {
+                    (*new, kept) = (old, true);
+                }
+            }
+            for (new, old) in impostors.iter_mut().zip([old.impostor, old.impostor_bare]) {
+                if new.is_none() && old.is_some() {
+                    (*new, kept) = (old, true);
+                }
+            }
+            if cluster.is_none() && old.cluster.is_some() {
+                (cluster, kept) = (old.cluster, true);
+            }
+            if kept {
+                carried = old.bytes;
+            }
+        }
         let lo = Vec3::from(m.bounds_min);
         let hi = Vec3::from(m.bounds_max);
         let c = (lo + hi) * 0.5;
         let level = |l: usize| m.mesh_levels.get(l);
         // What goes to the GPU: every section but the JSON metadata.
-        let bytes =
-            pack.sections.iter().filter(|(e, _)| e.kind != crate::format::pack::kind::META).map(|(e, _)| e.bytes).sum();
+        let bytes = carried
+            + pack
+                .sections
+                .iter()
+                .filter(|(e, _)| e.kind != crate::format::pack::kind::META)
+                .map(|(e, _)| e.bytes)
+                .sum::<u64>();
         *slot = Some(SpeciesGpu {
             sphere: [c.x, c.y, c.z, ((hi - lo) * 0.5).length()],
             height_m: m.height_m,
@@ -325,10 +361,12 @@ impl Species {
                 }
                 // The far tier: impostors or billboards (settings.far_tier where both).
                 // In leaf-off, a deciduous species' bare captures where they have
-                // come (until then the leafy ones, their leaf texels dropped).
-                p.far_bare = self.season == Season::LeafOff
-                    && p.season.is_some()
-                    && (p.impostor_bare.is_some() || p.billboard_bare.is_some());
+                // come (until then the leafy ones, their leaf texels dropped);
+                // in the other seasons the leafy ones, or the bare ones until
+                // those come (after a leaf-off view: bare trees rather than none).
+                let bare = p.impostor_bare.is_some() || p.billboard_bare.is_some();
+                let leafy = p.impostor.is_some() || p.billboard.is_some();
+                p.far_bare = bare && p.season.is_some() && (self.season == Season::LeafOff || !leafy);
                 let (impostor, billboard) =
                     if p.far_bare { (&p.impostor_bare, &p.billboard_bare) } else { (&p.impostor, &p.billboard) };
                 p.far_impostor = impostor.is_some() && (self.far_tier == FarTier::Impostors || billboard.is_none());

@@ -54,7 +54,8 @@ fn meets_gap(o: [f64; 2], size: f64, gaps: &[[f32; 4]]) -> bool {
 #[derive(Debug)]
 pub struct CanopyTree {
     entry: CanopyEntry,
-    /// The rasters resident, asked for and waited for (at most 1,024 kept, 32 KB each).
+    /// The rasters resident, asked for and waited for (at most 1,024 kept, 32 KB
+    /// each, 64 KB with their seasons).
     pub res: QuadResidency<Canopy>,
     /// The walk's stack: a raster, and whether it may meet a gap (its parent did).
     stack: Vec<(CanopyKey, bool)>,

@@ -227,8 +227,10 @@ test('the viewer page', async (t) => {
     await page.evaluate(() => window.sylva.setSeason('autumn'));
     const autumnRed = await reddish('season-autumn');
     assert.ok(autumnRed > red + 0.02, `autumn reddens the crowns: ${red.toFixed(3)} → ${autumnRed.toFixed(3)} of the page`);
+    const fetchedBefore = await page.evaluate(() => window.sylva.stats().bytes_fetched);
     await page.evaluate(() => window.sylva.setSeason('leaf-off'));
-    await page.waitForTimeout(1500);
+    // The bare far tiers are fetched now (the leafy ones are already in).
+    await page.waitForFunction((before) => window.sylva.stats().bytes_fetched > before, fetchedBefore, { timeout: 60000 });
     const bare = await foliageShare(page, 'season-leaf-off');
     assert.ok(bare < green * 0.8 && bare > 0.005, `leaf-off: foliage ${green.toFixed(3)} → ${bare.toFixed(3)} (the spruce stays)`);
     const refused = await page.evaluate(() => { try { window.sylva.setSeason('monsoon'); return null; } catch (e) { return String(e); } });

@@ -75,10 +75,7 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
             let path = dir.join(&s.pack);
             let bytes = std::fs::read(&path).with_context(|| format!("canopy: reading {}", path.display()))?;
             let pack = decode_pack(&s.pack, &bytes)?;
-            let autumn_linear = pack.meta.season.as_ref().map(|m| {
-                let p = sylva::render::settings::season_params(Some(m), sylva::render::settings::Season::Autumn);
-                [p[0], p[1], p[2]]
-            });
+            let autumn_linear = pack.meta.season.as_ref().map(sylva::render::settings::autumn_linear);
             // The top (and side) view of far-tier state `state`: Σ alpha, Σ
             // alpha·albedo, Σ alpha·autumn albedo, the side's Σ alpha, per texel.
             let view = |state: u32| {
@@ -98,7 +95,9 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
                     alpha += a;
                     let lin = [0, 1, 2].map(|k| srgb_to_linear(t[k]));
                     let fall = match autumn_linear {
-                        Some(c) if n[3] > 191 => sylva::render::settings::autumn_albedo(lin, c, AUTUMN_MEAN_PROGRESS),
+                        Some(c) if n[3] > sylva::format::pack::LEAF_FLAG_MIN => {
+                            sylva::render::settings::autumn_albedo(lin, c, AUTUMN_MEAN_PROGRESS)
+                        }
                         _ => lin,
                     };
                     for k in 0..3 {
@@ -377,8 +376,15 @@ pub fn write_quadtree(
         rasters: 0,
         bytes: 0,
     };
-    let mut walk =
-        Walk { dir, entry: &mut entry, tile_square: [x0, y0, size], looks, stack: Vec::new(), trees: Vec::new() };
+    let mut walk = Walk {
+        dir,
+        entry: &mut entry,
+        tile_square: [x0, y0, size],
+        looks,
+        seasons: looks.iter().any(|l| l.seasons.is_some()),
+        stack: Vec::new(),
+        trees: Vec::new(),
+    };
     let all: Vec<&TileEntry> = tiles.iter().collect();
     walk.visit(0, 0, 0, &all)?;
     Ok(entry)
@@ -390,6 +396,8 @@ struct Walk<'a> {
     entry: &'a mut CanopyEntry,
     tile_square: [i64; 3],
     looks: &'a [SpeciesLook],
+    /// A species has seasons: every raster holds the cells' seasons.
+    seasons: bool,
     stack: Vec<Acc>,
     trees: Vec<CanopyTree>,
 }
@@ -397,8 +405,8 @@ struct Walk<'a> {
 impl Walk<'_> {
     /// Writes raster `(level, x, y)` (over `tiles`, all inside its square) and those below it.
     fn visit(&mut self, level: u8, x: u32, y: u32, tiles: &[&TileEntry]) -> Result<()> {
-        let seasons = self.looks.iter().any(|l| l.seasons.is_some());
-        self.stack.push(Acc::new(self.entry.origin_of(level, x, y), self.entry.size_m(level)).with_seasons(seasons));
+        self.stack
+            .push(Acc::new(self.entry.origin_of(level, x, y), self.entry.size_m(level)).with_seasons(self.seasons));
         let mut children = 0u8;
         if level + 1 >= self.entry.levels {
             for t in tiles {
@@ -466,8 +474,7 @@ impl Walk<'_> {
             }
             children |= 1 << i;
             let (cl, cx, cy) = (level + 1, 2 * x + (i & 1), 2 * y + (i >> 1));
-            let seasons = self.looks.iter().any(|l| l.seasons.is_some());
-            self.stack.push(Acc::new(self.entry.origin_of(cl, cx, cy), size).with_seasons(seasons));
+            self.stack.push(Acc::new(self.entry.origin_of(cl, cx, cy), size).with_seasons(self.seasons));
             let grand = if cl + 1 >= self.entry.levels {
                 for acc in &mut self.stack {
                     part.iter().for_each(|tree| acc.add(tree));

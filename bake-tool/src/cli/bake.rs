@@ -380,15 +380,25 @@ pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::
         if species.iter().any(|(n, _)| n.eq_ignore_ascii_case(name)) {
             bail!("--model {name} is given twice");
         }
-        let mut model = match sylva_bake::library::spec(path) {
+        let library = sylva_bake::library::spec(path);
+        let mut model = match library {
             Some(genus) => sylva_bake::library::model_named(genus)?,
             None => sylva_bake::input::gltf_import::import(std::path::Path::new(path), &classifier)?,
         };
-        if sylva_bake::library::spec(path).is_none() {
-            // A model of a deciduous genus (by its name) gets the genus's seasons.
-            model.autumn = sylva_bake::library::choose::autumn_of(name);
-            if model.autumn.is_some() {
-                log(&format!("model {name}: deciduous by its name: baked in leaf-on, autumn and leaf-off"));
+        if library.is_none() {
+            // A model of a deciduous genus (by its name) gets the genus's
+            // seasons, where its leaves and wood are apart (leaf-off keeps the wood).
+            if let Some(autumn) = sylva_bake::library::choose::autumn_of(name) {
+                match model.triangle_counts() {
+                    (leaf, wood) if leaf > 0 && wood > 0 => {
+                        model.autumn = Some(autumn);
+                        log(&format!("model {name}: deciduous by its name: baked in leaf-on, autumn and leaf-off"));
+                    }
+                    _ => log(&format!(
+                        "model {name}: deciduous by its name, but its leaves and wood are not apart \
+                         (--leaf-materials, --branch-materials): one state, leaf-on"
+                    )),
+                }
             }
         }
         let (leaf, wood) = model.triangle_counts();

@@ -305,7 +305,11 @@ pub fn build_pack(
         }
     }
     if let Some(autumn) = autumn {
-        let bare_far = opts.far_tier.billboards() || opts.far_tier.impostors();
+        // (A capture without any wood: no bare far tier, leaf-off draws nothing far.)
+        if covered[1] == 0 {
+            sections.retain(|s| !(kind::FAR_TIERS.contains(&s.kind) && s.index == 1));
+        }
+        let bare_far = (opts.far_tier.billboards() || opts.far_tier.impostors()) && covered[1] > 0;
         let bare_cover = if covered[0] > 0 { (covered[1] as f64 / covered[0] as f64).min(1.0) as f32 } else { 0.0 };
         if bare_far {
             log(&format!(

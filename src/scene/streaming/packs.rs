@@ -1,11 +1,12 @@
 //! Species packs in the stream: a pack is fetched whole, or as a head (header,
 //! section table, metadata) and then by byte range only the parts the view
-//! needs ([`PackPart`]: billboards, clusters, coarse meshes, the full mesh),
-//! within the GPU budget. Part of [`super::SceneStream`]'s update.
+//! needs ([`PackPart`]: billboards, clusters, coarse meshes, the full mesh, a
+//! deciduous species' bare far tiers in leaf-off), within the GPU budget. Part
+//! of [`super::SceneStream`]'s update.
 
 use super::{join, Load, SceneStream, Target};
 use crate::format::decode_pack;
-use crate::format::pack::{PackHead, PackPart, PACK_PARTS};
+use crate::format::pack::{PackHead, PackPart, PACK_PARTS, PART_BARE_FAR, PART_FAR};
 use crate::scene::fetch::{FetchError, Fetcher};
 use crate::scene::residency::Residency;
 
@@ -138,12 +139,19 @@ impl<F: Fetcher> SceneStream<F> {
                 load.parts[part] = Load::Idle;
                 load.have[part] = true;
                 load.whole |= whole;
-                // Every part on the GPU: the CPU copies kept for re-assembly can go.
-                let complete = load.parsed.as_ref().is_some_and(|h| {
-                    PackPart::ALL.iter().enumerate().all(|(i, p)| load.have[i] || h.part_range(*p).is_none())
+                let held_or_absent = |h: &PackHead, i: usize| load.have[i] || h.part_range(PackPart::ALL[i]).is_none();
+                // Every part on the GPU: nothing more to fetch.
+                let complete = load.parsed.as_ref().is_some_and(|h| (0..PACK_PARTS).all(|i| held_or_absent(h, i)));
+                // Every part but the other season's far tier: the CPU copies kept
+                // for re-assembly can go (that far tier, should it come, uploads
+                // alone and joins what is on the GPU: `Species::upload_pack`).
+                let all_but_a_far_state = load.parsed.as_ref().is_some_and(|h| {
+                    let far =
+                        load.have[PART_FAR] || load.have[PART_BARE_FAR] || h.part_range(PackPart::Billboards).is_none();
+                    far && (0..PACK_PARTS).filter(|i| !PackPart::ALL[*i].is_far()).all(|i| held_or_absent(h, i))
                 });
-                if complete || load.whole {
-                    load.whole = true;
+                load.whole |= complete;
+                if load.whole || all_but_a_far_state {
                     load.held = Vec::new();
                 }
             }
@@ -158,10 +166,11 @@ impl<F: Fetcher> SceneStream<F> {
     /// and, if not, whether they may still come (not
     /// given up on).
     pub(super) fn species_drawable(&self, s: usize) -> (bool, bool) {
-        // The far parts: leaf-on billboards (0) and the bare ones (4). A far
-        // tier of either state draws (leaf-off draws the leafy one's wood).
-        const FAR: usize = 0;
-        const BARE: usize = 4;
+        // The far parts: leaf-on billboards and the bare ones. A far tier of
+        // either state draws (`Species` draws the other where the season's is
+        // missing; leaf-off draws the leafy one's wood).
+        const FAR: usize = PART_FAR;
+        const BARE: usize = PART_BARE_FAR;
         match self.packs.get(s) {
             Some(l) if l.whole || l.have[FAR] || l.have[BARE] => (true, false),
             // A view that draws no far tier (meshes only): drawable with the
@@ -197,7 +206,7 @@ impl<F: Fetcher> SceneStream<F> {
                 // Far tiers of needed species are fetched whatever the budget:
                 // reserve them before anything finer.
                 // (The leaf-on ones unless the view wants the bare ones instead.)
-                let this_state = if *part == PackPart::BareFar { load.wants[i] } else { !load.wants[4] };
+                let this_state = if *part == PackPart::BareFar { load.wants[i] } else { !load.wants[PART_BARE_FAR] };
                 let due_billboards = part.is_far() && this_state && !load.have[i] && needed.contains(&s);
                 if matches!(load.parts[i], Load::Requested { .. }) || due_billboards {
                     committed += head.part_range(*part).map_or(0, |(a, b)| b - a);
@@ -222,12 +231,14 @@ impl<F: Fetcher> SceneStream<F> {
             let load = &mut self.packs[s];
             if let Some(head) = &load.parsed {
                 load.wants = residency.parts_needed(s, &head.meta);
-                // One far state: the bare one where asked for and the pack has it;
-                // else its leafy one (drawn without its leaf texels in leaf-off).
-                if load.wants[4] {
-                    let bare = head.part_range(PackPart::BareFar).is_some();
-                    load.wants[4] = bare;
-                    load.wants[0] = !bare;
+                // One far state: the bare one where asked for, the pack has it and
+                // it is not given up on; else its leafy one (drawn without its leaf
+                // texels in leaf-off).
+                if load.wants[PART_BARE_FAR] {
+                    let bare =
+                        head.part_range(PackPart::BareFar).is_some() && load.parts[PART_BARE_FAR] != Load::Broken;
+                    load.wants[PART_BARE_FAR] = bare;
+                    load.wants[PART_FAR] = !bare;
                 }
             }
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
@@ -244,7 +255,8 @@ impl<F: Fetcher> SceneStream<F> {
                 }
                 continue;
             };
-            for (i, part) in PackPart::ALL.iter().enumerate() {
+            for i in PackPart::FETCH_ORDER {
+                let part = &PackPart::ALL[i];
                 if !load.wants[i] || load.have[i] || self.fetcher.in_flight() >= self.config.max_in_flight {
                     continue;
                 }

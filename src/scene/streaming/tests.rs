@@ -437,6 +437,23 @@ fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
     }
     // Every species drawable from what came.
     assert!((0..3).all(|i| s.species_drawable(i).0));
+    // Back to leaf-on: the leafy far tiers come too, and the species stay drawable throughout.
+    let fetched_before = s.fetcher.log.len();
+    r.parts = PackPart::ALL.map(|p| p == PackPart::Billboards);
+    let mut t = 10.0;
+    for _ in 0..20 {
+        t = run(&mut s, &mut r, &south_view(), 6000.0, t, 0.01, 10);
+        assert!((0..3).all(|i| s.species_drawable(i).0), "a species undrawable while its leafy far tier comes");
+    }
+    let parts: Vec<(String, ByteRange)> = s.fetcher.log[fetched_before..]
+        .iter()
+        .filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r)))
+        .collect();
+    for (name, h) in ["beech", "birch"].iter().zip(&heads[1..]) {
+        let leafy = h.part_range(PackPart::Billboards);
+        assert!(parts.iter().any(|(u, x)| u.contains(name) && Some(*x) == leafy), "{name}'s leafy far tier: {parts:?}");
+    }
+    assert!(s.is_settled());
 }
 
 #[test]

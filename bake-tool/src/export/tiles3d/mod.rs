@@ -242,27 +242,19 @@ fn far_bin(
     write_mesh_bin(bin, 8, indices.len(), bounds, vec![(0, 0, 12)], file, out, report)
 }
 
-/// A species' autumn colour (linear RGB) and which texels (by index) are leaves.
-type Recolour<'a> = ([f32; 3], &'a dyn Fn(usize) -> bool);
+/// A change to each RGBA8 texel (by index) of a texture layer.
+type TexelEdit<'a> = &'a dyn Fn(usize, &mut [u8]);
 
-/// PNG of layer `layer` (mip 0) of an RGBA8 texture array stored mip-major;
-/// with `autumn` (linear RGB), its texels recoloured as autumn leaves where
-/// `leaf` says a texel is one (given its index).
-fn layer_png(data: &[u8], size: u32, layer: u32, what: &str, autumn: Option<Recolour<'_>>) -> Result<Vec<u8>> {
+/// PNG of layer `layer` (mip 0) of an RGBA8 texture array stored mip-major,
+/// each texel (by index) first changed by `edit` where given.
+fn layer_png(data: &[u8], size: u32, layer: u32, what: &str, edit: Option<TexelEdit<'_>>) -> Result<Vec<u8>> {
     let layer_bytes = (size * size * 4) as usize;
     let at = layer as usize * layer_bytes;
     let Some(pixels) = data.get(at..at + layer_bytes) else { bail!("{what}: texture layer {layer} is missing") };
     let mut pixels = std::borrow::Cow::Borrowed(pixels);
-    if let Some((colour, leaf)) = autumn {
-        use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
-        use sylva::render::settings::AUTUMN_MEAN_PROGRESS;
+    if let Some(edit) = edit {
         for (i, t) in pixels.to_mut().chunks_exact_mut(4).enumerate() {
-            if leaf(i) {
-                // (A stand's mean progress: a tileset has one texture per species.)
-                let lin = [0, 1, 2].map(|k| srgb_to_linear(t[k]));
-                let fall = sylva::render::settings::autumn_albedo(lin, colour, AUTUMN_MEAN_PROGRESS);
-                t[..3].copy_from_slice(&fall.map(linear_to_srgb));
-            }
+            edit(i, t);
         }
     }
     let mut png = Vec::new();
@@ -270,6 +262,16 @@ fn layer_png(data: &[u8], size: u32, layer: u32, what: &str, autumn: Option<Reco
         .write_image(&pixels, size, size, image::ExtendedColorType::Rgba8)
         .with_context(|| format!("encoding {what}'s texture layer {layer}"))?;
     Ok(png)
+}
+
+/// An sRGB RGBA8 leaf texel in autumn (`autumn`: the species' colour, linear),
+/// at a stand's mean progress (a tileset has one texture per species), as the
+/// viewer recolours leaves.
+fn autumn_texel(t: &mut [u8], autumn: [f32; 3]) {
+    use sylva::render::mips::{linear_to_srgb, srgb_to_linear};
+    use sylva::render::settings::{autumn_albedo, AUTUMN_MEAN_PROGRESS};
+    let fall = autumn_albedo([0, 1, 2].map(|k| srgb_to_linear(t[k])), autumn, AUTUMN_MEAN_PROGRESS);
+    t[..3].copy_from_slice(&fall.map(linear_to_srgb));
 }
 
 /// Reads species `s`'s pack and writes its meshes (level 0 and the coarsest)
@@ -297,12 +299,7 @@ fn species_out(
         .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '-' })
         .collect();
     // The season's state: a deciduous species' autumn colour, or its leaves off.
-    let autumn = meta
-        .season
-        .as_ref()
-        .filter(|_| season == Season::Autumn)
-        .map(|x| sylva::render::settings::season_params(Some(x), season))
-        .map(|p| [p[0], p[1], p[2]]);
+    let autumn = meta.season.as_ref().filter(|_| season == Season::Autumn).map(sylva::render::settings::autumn_linear);
     let leaves = !(season == Season::LeafOff && meta.season.is_some());
     let mut levels = BTreeMap::new();
     let coarsest = meta.mesh_levels.len() as u32 - 1;
@@ -317,24 +314,36 @@ fn species_out(
             if layers.contains_key(&layer) {
                 continue;
             }
-            let every = |_: usize| true;
-            let recolour = autumn.filter(|_| kind == MaterialKind::Leaf).map(|c| (c, &every as &dyn Fn(usize) -> bool));
-            let png = layer_png(data, t.size, layer, &path.display().to_string(), recolour)?;
+            let recolour =
+                autumn.filter(|_| kind == MaterialKind::Leaf).map(|c| move |_: usize, t: &mut [u8]| autumn_texel(t, c));
+            let edit = recolour.as_ref().map(|f| f as TexelEdit<'_>);
+            let png = layer_png(data, t.size, layer, &path.display().to_string(), edit)?;
             let uri = format!("meshes/{stem}_layer{layer}.png");
             write_file(&out.join(&uri), &png, report)?;
             layers.insert(layer, uri);
         }
     }
     // The far quads show the billboard seen level (elevation 0, azimuth 0:
-    // layer 0), of the bare wood in leaf-off where the pack has it; in autumn
-    // its leaf texels recoloured.
+    // layer 0), of the bare wood in leaf-off where the pack has it (else its
+    // leaf texels left out, as the viewer draws it); in autumn its leaf texels
+    // recoloured.
     let mut billboard = None;
     let state = u32::from(!leaves && meta.season.as_ref().is_some_and(|x| x.bare_far));
     if let (Some(bb), Some(data)) = (&meta.billboards, pack.section(kind::BILLBOARD_COLOR, state)) {
         let normals = pack.section(kind::BILLBOARD_NORMAL, state).unwrap_or_default();
-        let leaf = |i: usize| normals.get(i * 4 + 3).is_some_and(|a| *a > 191);
-        let recolour = autumn.map(|c| (c, &leaf as &dyn Fn(usize) -> bool));
-        let png = layer_png(data, bb.texture.size, 0, &format!("{}'s billboards", path.display()), recolour)?;
+        let leaf = |i: usize| normals.get(i * 4 + 3).is_some_and(|a| *a > sylva::format::pack::LEAF_FLAG_MIN);
+        let edit = |i: usize, t: &mut [u8]| {
+            if leaf(i) {
+                match autumn {
+                    Some(c) => autumn_texel(t, c),
+                    None if !leaves => t[3] = 0,
+                    None => {}
+                }
+            }
+        };
+        let changes = autumn.is_some() || (!leaves && state == 0);
+        let what = format!("{}'s billboards", path.display());
+        let png = layer_png(data, bb.texture.size, 0, &what, changes.then_some(&edit as TexelEdit<'_>))?;
         let uri = format!("meshes/{stem}_billboard.png");
         write_file(&out.join(&uri), &png, report)?;
         billboard = Some(uri);
