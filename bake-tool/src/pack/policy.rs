@@ -38,8 +38,7 @@ impl Measured {
 /// The LoD policy's measurements: per ellipsoid cluster level (finest first)
 /// and for the billboard cloud, its multi-scale RMSE and the far tier's
 /// (impostors, or billboards) against the full mesh (alpha-tested at full
-/// resolution; a pack with mesh variants: the mean over the variants' full
-/// meshes), all drawn by the viewer's pipelines with the tree `select_px`
+/// resolution), all drawn by the viewer's pipelines with the tree `select_px`
 /// tall (a cluster level or the cloud: also at the top of its band, up to the
 /// meshes, and the measurement where it loses decides),
 /// from the side and from 35° up (averaged), and the draws' modelled GPU time
@@ -86,32 +85,19 @@ pub(super) fn measure_policy(
     // With SYLVA_POLICY_CALIBRATE set, each draw's work counts and wall time
     // are printed (for fitting `sylva::lod::policy::COSTS`).
     let calibrate = std::env::var_os("SYLVA_POLICY_CALIBRATE").is_some();
-    // A pack with mesh variants (the library's): the trees a scene draws are
-    // every variant, the far tier, clusters and cloud show variant 0. So each
-    // measurement's error is the mean over the variants' full meshes as the
-    // reference (the mesh levels drawing the same variant): the policy judges
-    // the far tier against the trees it stands in for.
-    let variants = pack.meta.mesh_levels.first().map_or(1, |l| l.variants + 1);
     // `own` and the far tier with the tree `px` tall.
     let mut measure = |own: &TreeDraw<'_>, px: f32| -> Measured {
         let size = ((px * 2.0 * radius * 1.05 / height).round() as u32).clamp(16, 1024);
         let mut sum = [0.0f64; 2];
         let mut cost = Some([0.0f32; 2]);
-        for (view, v) in
-            [PackView::Side, PackView::Oblique].into_iter().flat_map(|w| (0..variants).map(move |v| (w, v)))
-        {
+        for view in [PackView::Side, PackView::Oblique] {
             let shot = preview_camera(lo, hi, view, [size, size]);
-            r.set_variant(gpu, v);
             r.full_res_alpha = true;
             let reference = r.render(gpu, &TreeDraw::Mesh(&mesh, 0), &shot, BACKGROUND);
             r.full_res_alpha = false;
             for (k, what) in [own, &far].into_iter().enumerate() {
                 let img = r.render(gpu, what, &shot, BACKGROUND);
-                sum[k] += sylva::metrics::multiscale_rmse(&img, &reference, size, size) / (2.0 * f64::from(variants));
-                // (The work is the same whatever the variant.)
-                if v > 0 {
-                    continue;
-                }
+                sum[k] += sylva::metrics::multiscale_rmse(&img, &reference, size, size) / 2.0;
                 let work = r.work(gpu, what, &shot);
                 if let (Some(c), Some(w)) = (cost.as_mut(), work) {
                     c[k] += modelled_us(kind(what), w.vertices, w.fragments) / 2.0;
@@ -129,7 +115,6 @@ pub(super) fn measure_policy(
                 }
             }
         }
-        r.set_variant(gpu, 0);
         // The size actually drawn (the image is clamped).
         Measured { error: sum.map(|e| e as f32), cost, px: size as f32 * height / (2.0 * radius * 1.05) }
     };
