@@ -664,7 +664,17 @@ impl SpeciesTable {
             bail!("--species-table {}: {len} bytes, more than a species table's {MAX_BYTES}", path.display());
         }
         let bytes = std::fs::read(path).with_context(|| format!("cannot read --species-table {}", path.display()))?;
-        let text = String::from_utf8_lossy(&bytes);
+        Self::parse(&bytes, &path.display().to_string())
+    }
+
+    /// Reads a species table from its bytes (as [`Self::read`] does a file's);
+    /// `source` names it in errors.
+    ///
+    /// # Errors
+    /// No code column, no Latin name column, a row the CSV reader refuses, or no
+    /// row with both a code and a name.
+    pub fn parse(bytes: &[u8], source: &str) -> Result<Self> {
+        let text = String::from_utf8_lossy(bytes);
         let first = text.lines().next().unwrap_or("");
         let delimiter = crate::input::placements::detect_delimiter(first.as_bytes());
         let mut rdr = csv::ReaderBuilder::new()
@@ -674,7 +684,7 @@ impl SpeciesTable {
             .from_reader(text.as_bytes());
         let header: Vec<String> = rdr
             .headers()
-            .with_context(|| format!("--species-table {}", path.display()))?
+            .with_context(|| format!("--species-table {source}"))?
             .iter()
             .map(|h| fold(h).replace(' ', "_"))
             .collect();
@@ -684,23 +694,21 @@ impl SpeciesTable {
         let (genus, species, family) = (find(&["genus"]), find(&["species"]), find(&["family"]));
         let Some(code) = code else {
             bail!(
-                "--species-table {}: no code column (looked for {}; it has {})",
-                path.display(),
+                "--species-table {source}: no code column (looked for {}; it has {})",
                 CODE_COLUMNS.join(", "),
                 header.join(", ")
             );
         };
         if latin.is_none() && genus.is_none() {
             bail!(
-                "--species-table {}: no Latin name column (looked for {}, or genus and species; it has {})",
-                path.display(),
+                "--species-table {source}: no Latin name column (looked for {}, or genus and species; it has {})",
                 LATIN_COLUMNS.join(", "),
                 header.join(", ")
             );
         }
         let mut codes = HashMap::new();
         for (i, rec) in rdr.records().enumerate() {
-            let rec = rec.with_context(|| format!("--species-table {}: row {}", path.display(), i + 2))?;
+            let rec = rec.with_context(|| format!("--species-table {source}: row {}", i + 2))?;
             let cell = |c: Option<usize>| c.and_then(|c| rec.get(c)).unwrap_or("").trim().to_string();
             let key = fold(&cell(Some(code)));
             let name = match latin.map(|c| cell(Some(c))).filter(|n| !n.is_empty()) {
@@ -714,9 +722,9 @@ impl SpeciesTable {
             codes.entry(key).or_insert((name, fam));
         }
         if codes.is_empty() {
-            bail!("--species-table {}: no rows with both a code and a name", path.display());
+            bail!("--species-table {source}: no rows with both a code and a name");
         }
-        Ok(Self { codes, source: path.display().to_string() })
+        Ok(Self { codes, source: source.to_string() })
     }
 
     /// The Latin name (and family) a code stands for.
