@@ -87,7 +87,10 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     var out: VertexOut;
     out.clip = view.clip_from_eye * vec4<f32>(pos, 1.0);
     out.uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
-    out.layer = az * angles + k;
+    // The tree's mesh variant's billboards where the pack has them (bb_size.y variants).
+    let variants = max(u32(draw.bb_size.y), 1u);
+    let variant = variant_of(u32(tree.variation), variants - 1u);
+    out.layer = (variant * azimuths + az) * angles + k;
     out.normal_yaw = phi - f32(az) * az_step;
     out.item_y = item.y;
     out.item_x = item.x;

@@ -36,6 +36,9 @@ struct VertexOut {
     @location(9) @interpolate(flat) item_x: u32,
     // The tree's style byte (`tree_style`).
     @location(10) @interpolate(flat) style: u32,
+    // The first layer of the tree's mesh variant's views (0 where the pack
+    // has variant 0's alone; bb_size.w variants).
+    @location(11) @interpolate(flat) variant_base: u32,
 };
 
 // Model offset from the sphere's centre → eye-relative offset, and back.
@@ -100,6 +103,8 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     out.ray_at = center + imp_to_model_dir(pos - cw, tree.yaw, s, aspect);
     out.ray_dir = imp_to_model_dir(dir, tree.yaw, s, aspect);
     out.layers = views.layers;
+    let variants = max(u32(draw.bb_size.w), 1u);
+    out.variant_base = variant_of(u32(tree.variation), variants - 1u) * grid * grid;
     out.weights = views.weights;
     out.tree_at = vec4<f32>(cw, tree.yaw);
     out.tree_size = vec3<f32>(s, aspect, tree.variation);
@@ -184,8 +189,10 @@ fn impostor_hit(in: VertexOut) -> ImpostorHit {
         if w <= 0.0 {
             continue;
         }
-        let layer = in.layers[k];
-        let vd = impostor_view_dir(layer, grid);
+        let view_index = in.layers[k];
+        // The view's layer of the tree's variant.
+        let layer = view_index + in.variant_base;
+        let vd = impostor_view_dir(view_index, grid);
         let vr = impostor_view_right(vd);
         let vu = cross(vd, vr);
         // Rays run against the view's direction; grazing ones are clamped.

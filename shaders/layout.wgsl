@@ -110,7 +110,8 @@ struct DrawParams {
     // Billboard quad: centre (xyz, model space at scale 1), w: half width;
     // impostors: the bounding sphere (centre, radius).
     bb_center: vec4<f32>,
-    // x: billboard half height, yzw unused; impostors: xyz the model box's half extents.
+    // x: billboard half height, y: the billboards' variants, zw unused;
+    // impostors: xyz the model box's half extents, w the impostors' variants.
     bb_size: vec4<f32>,
     // Cluster level: x first ellipsoid word, y ellipsoids, z first line word, w lines.
     cluster: vec4<u32>,

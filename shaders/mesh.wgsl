@@ -41,11 +41,7 @@ struct Material {
 // vertex, variant 1 first; `mesh.cloud.z` of them, `mesh.cloud.w` vertices each.
 @group(1) @binding(5) var<storage, read> variants: array<vec2<u32>>;
 
-// The variant a tree of `variation` (0–31) draws of a level with `extra` other
-// variants. Must match `variant_of` in src/format/mesh.rs.
-fn variant_of(variation: u32, extra: u32) -> u32 {
-    return ((variation + 17u) & 31u) % (extra + 1u);
-}
+// (`variant_of`: shaders/trees.wgsl.)
 
 // (Group 2: batches, instances, draw items and styles; group 3: the draw's
 // params. Declared once in `shaders/trees.wgsl`.)

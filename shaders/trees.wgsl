@@ -10,6 +10,12 @@
 
 @group(3) @binding(0) var<uniform> draw: DrawParams;
 
+// The variant a tree of `variation` (0–31) draws of a level (or far tier) with
+// `extra` other variants. Must match `variant_of` in src/format/mesh.rs.
+fn variant_of(variation: u32, extra: u32) -> u32 {
+    return ((variation + 17u) & 31u) % (extra + 1u);
+}
+
 // Seasons (`draw.season`, a deciduous species'; evergreens draw leaf-on).
 // Leaf-off: the passes drop their leaves (mesh leaf cards and cloud planes in
 // the vertex stage, ellipsoids, the leaf texels of a far tier whose bare

@@ -228,6 +228,11 @@ pub struct BillboardMeta {
     /// Billboards are drawn while the projected tree height is below the finest
     /// mesh level's `select_px` and at least this (0: to the draw distance).
     pub select_px: f32,
+    /// The mesh variants captured (absent: 1, variant 0's): the layers of
+    /// variant v are `v × angles × azimuths` on, and a tree draws its mesh
+    /// variant's (`variant_of`). Either 1 or mesh level 0's variants + 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variants: Option<u32>,
 }
 
 /// Multi-view impostors: the tree rendered orthographically from the vertices
@@ -256,6 +261,11 @@ pub struct ImpostorMeta {
     /// all). Absent: the box of `bounds_*` about `center`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub half_extent: Option<[f32; 3]>,
+    /// The mesh variants captured (absent: 1, variant 0's): the views of
+    /// variant v are layers `v × grid²` on, and a tree draws its mesh
+    /// variant's (`variant_of`). Either 1 or mesh level 0's variants + 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variants: Option<u32>,
 }
 
 /// The `META` section of a pack.
@@ -802,10 +812,13 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     if let Some(b) = &m.billboards {
         finite_all("META.billboards.center", &b.center)?;
         finite_all("META.billboards", &[b.half_width, b.half_height, b.select_px])?;
-        if b.angles < 2 || b.azimuths == 0 || u64::from(b.angles) * u64::from(b.azimuths) != u64::from(b.texture.layers)
+        let variants = far_variants("META.billboards.variants", b.variants, m)?;
+        if b.angles < 2
+            || b.azimuths == 0
+            || u64::from(b.angles) * u64::from(b.azimuths) * u64::from(variants) != u64::from(b.texture.layers)
         {
             return Err(Problem::Invalid(format!(
-                "META.billboards has {} angles × {} azimuths but {} layers (need ≥ 2 angles)",
+                "META.billboards has {} angles × {} azimuths × {variants} variants but {} layers (need ≥ 2 angles)",
                 b.angles, b.azimuths, b.texture.layers
             )));
         }
@@ -834,10 +847,12 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                 )));
             }
         }
-        if !(2..=16).contains(&i.grid) || i.grid * i.grid != i.texture.layers || i.radius <= 0.0 {
+        let variants = far_variants("META.impostors.variants", i.variants, m)?;
+        if !(2..=16).contains(&i.grid) || i.grid * i.grid * variants != i.texture.layers || i.radius <= 0.0 {
             return Err(Problem::Invalid(format!(
-                "META.impostors has a {0}×{0} grid (2–16 per side), {1} layers (need grid²) and radius {2} (need > 0)",
-                i.grid, i.texture.layers, i.radius
+                "META.impostors has a {0}×{0} grid (2–16 per side) of {3} variants, {1} layers (need grid² × \
+                 variants) and radius {2} (need > 0)",
+                i.grid, i.texture.layers, i.radius, variants
             )));
         }
         finite_all("META.impostors.normal_length", &i.normal_length)?;
@@ -892,6 +907,20 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         AoFieldRef::parse(data)?;
     }
     Ok(())
+}
+
+/// A far tier's variants (`None`: 1): 1, or mesh level 0's variants + 1 (a
+/// tree's far tier shows its mesh variant).
+fn far_variants(what: &str, variants: Option<u32>, m: &PackMeta) -> Result<u32, Problem> {
+    let meshes = m.mesh_levels.first().map_or(1, |l| l.variants.saturating_add(1));
+    match variants.unwrap_or(1) {
+        v if v == 1 || v == meshes => Ok(v),
+        v => Err(Problem::OutOfRange {
+            what: what.into(),
+            value: v.into(),
+            allowed: format!("1, or mesh level 0's {meshes} variants"),
+        }),
+    }
 }
 
 fn validate_texture(what: &str, t: &TextureArrayMeta, data: Option<&[u8]>, texel_bytes: u64) -> Result<(), Problem> {

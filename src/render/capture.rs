@@ -76,6 +76,7 @@ impl BillboardFrame {
 }
 
 /// Raw billboard layers as rendered (before mips): per layer `size²` RGBA8 texels.
+#[derive(Default)]
 pub struct CapturedBillboards {
     /// Albedo (sRGB) + coverage alpha, one `Vec` per layer.
     pub color: Vec<Vec<u8>>,
@@ -86,6 +87,16 @@ pub struct CapturedBillboards {
     pub ao: Vec<Vec<u8>>,
     /// Reversed-Z depth (1 near … 0 far; 0 on the background), one `Vec` per layer.
     pub depth: Vec<Vec<f32>>,
+}
+
+impl CapturedBillboards {
+    /// Adds `other`'s layers after these (another mesh variant's).
+    pub fn append(&mut self, other: CapturedBillboards) {
+        self.color.extend(other.color);
+        self.normal.extend(other.normal);
+        self.ao.extend(other.ao);
+        self.depth.extend(other.depth);
+    }
 }
 
 /// A render target that can be read back.
@@ -197,7 +208,8 @@ impl CapturePipelines {
 /// Renders mesh level 0 of `pack` orthographically from `angles` elevations evenly
 /// spaced over 0–90° (alg. 3.1: angle k = 90°/(K−1)·k) times `azimuths` azimuths,
 /// into `size`² albedo + normal layers. Layer = azimuth · angles + elevation.
-/// `leaves` false: the bare wood (a deciduous tree's leaf-off state).
+/// `leaves` false: the bare wood (a deciduous tree's leaf-off state);
+/// `variant`: the mesh variant captured (0–31, modulo the pack's).
 #[must_use]
 #[allow(clippy::too_many_arguments)]
 pub fn capture_billboards(
@@ -209,6 +221,7 @@ pub fn capture_billboards(
     azimuths: u32,
     size: u32,
     leaves: bool,
+    variant: u32,
 ) -> CapturedBillboards {
     let mut views = Vec::new();
     for a in 0..azimuths {
@@ -218,12 +231,13 @@ pub fn capture_billboards(
             views.push(frame.clip_from_model(elevation, azimuth));
         }
     }
-    capture_views(ctx, pipelines, pack, &views, size, leaves)
+    capture_views(ctx, pipelines, pack, &views, size, leaves, variant)
 }
 
 /// Renders mesh level 0 of `pack` with each orthographic `views` transform
 /// (clip from model, reversed Z) into `size`² layers: albedo, normal, occlusion
-/// and depth, one layer per view; `leaves` false: the bare wood.
+/// and depth, one layer per view; `leaves` false: the bare wood; `variant`:
+/// the mesh variant captured (0–31, modulo the pack's).
 #[must_use]
 pub fn capture_views(
     ctx: &GpuContext,
@@ -232,6 +246,7 @@ pub fn capture_views(
     views: &[Mat4],
     size: u32,
     leaves: bool,
+    variant: u32,
 ) -> CapturedBillboards {
     let mesh = MeshGpu::upload(&ctx.device, &ctx.queue, &pipelines.mesh, pack);
     let albedo = target(ctx, size, size, CAPTURE_ALBEDO_FORMAT);
@@ -254,6 +269,9 @@ pub fn capture_views(
     // The capture works in model space: the eye is the model origin.
     let tree = SingleTree::new(ctx, &pipelines.shared);
     tree.set_leaves(ctx, leaves);
+    if variant > 0 {
+        tree.set_variant(ctx, variant);
+    }
     let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new(), ao: Vec::new(), depth: Vec::new() };
     for clip_from_model in views {
         let uniform = ViewUniform {
@@ -548,7 +566,7 @@ impl TreeRenderer {
                 params.ids[1] = Repr::Billboard as u32;
                 params.ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
                 params.bb_center = [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
-                params.bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                params.bb_size = [bb.meta.half_height, bb.meta.variants.unwrap_or(1) as f32, 0.0, 0.0];
             }
             TreeDraw::Impostor(imp) => {
                 params.ids[1] = Repr::Billboard as u32;

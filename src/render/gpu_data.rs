@@ -24,7 +24,8 @@ pub struct DrawParams {
     pub ids: [u32; 4],
     /// Billboard centre (model space, scale 1) and half width.
     pub bb_center: [f32; 4],
-    /// x: billboard half height.
+    /// x: billboard half height, y: the billboards' variants; impostors: xyz
+    /// the box's half extents, w the impostors' variants.
     pub bb_size: [f32; 4],
     /// Cluster levels: x first ellipsoid word, y ellipsoids, z first line word, w lines.
     pub cluster: [u32; 4],

@@ -161,11 +161,13 @@ impl ImpostorGpu {
     }
 
     /// Fills the draw params of the far-tier slot: ids.w the grid, bb_center
-    /// the sphere (centre, radius), bb_size the box's half extents.
+    /// the sphere (centre, radius), bb_size the box's half extents (xyz) and
+    /// the variants captured (w).
     pub fn draw_params(&self, params: &mut super::gpu_data::DrawParams) {
         params.ids[3] = self.meta.grid;
         params.bb_center = [self.meta.center[0], self.meta.center[1], self.meta.center[2], self.meta.radius];
-        params.bb_size = [self.half_extent[0], self.half_extent[1], self.half_extent[2], 0.0];
+        let variants = self.meta.variants.unwrap_or(1) as f32;
+        params.bb_size = [self.half_extent[0], self.half_extent[1], self.half_extent[2], variants];
         // The normals' agreement per mip (1 where the pack has none).
         let r = |m: usize| self.meta.normal_length.get(m).copied().unwrap_or(1.0);
         params.bounds_min = [r(0), r(1), r(2), r(3)];

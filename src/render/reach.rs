@@ -225,6 +225,7 @@ mod tests {
                 radius: 12.0,
                 normal_length: Vec::new(),
                 half_extent: None,
+                variants: None,
             }),
             cloud: None,
             season: None,

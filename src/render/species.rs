@@ -383,7 +383,7 @@ impl Species {
                         draw[r].ids[3] = bb.meta.angles | (bb.meta.azimuths << 16);
                         draw[r].bb_center =
                             [bb.meta.center[0], bb.meta.center[1], bb.meta.center[2], bb.meta.half_width];
-                        draw[r].bb_size = [bb.meta.half_height, 0.0, 0.0, 0.0];
+                        draw[r].bb_size = [bb.meta.half_height, bb.meta.variants.unwrap_or(1) as f32, 0.0, 0.0];
                     }
                     _ => {}
                 }

@@ -138,6 +138,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
             half_width: 2.0,
             half_height: 5.5,
             select_px: 0.0,
+            variants: None,
         }),
         clusters: None,
         impostors: None,
@@ -759,6 +760,7 @@ fn pack_decoder_error_paths() {
                 radius,
                 normal_length: Vec::new(),
                 half_extent: None,
+                variants: None,
             });
             s.push(Section { kind: kind::IMPOSTOR_COLOR, index: 0, count: 0, stride: 0, data: vec![0; 80] });
             if surface {
@@ -809,6 +811,26 @@ fn pack_decoder_error_paths() {
     let held = vec![(bare_part.0, bytes[bare_part.0 as usize..bare_part.1 as usize].to_vec())];
     let pack = head.assemble("x", &held).expect("the bare part alone");
     assert!(pack.section(kind::IMPOSTOR_COLOR, 1).is_some() && pack.section(kind::IMPOSTOR_COLOR, 0).is_none());
+    // Far tiers of every mesh variant: variants must be 1 or the mesh's, and
+    // the layers grid² (or angles × azimuths) × variants.
+    pack_error(
+        |m: &mut PackMeta, s: &mut Vec<Section>| {
+            with_impostors(2, 1.0, true)(m, s);
+            m.impostors.as_mut().unwrap().variants = Some(2);
+        },
+        "META.impostors.variants",
+    );
+    pack_error(
+        |m: &mut PackMeta, s: &mut Vec<Section>| {
+            // A second mesh variant (all at the box's corner), and billboards
+            // that say they hold both but have one's layers.
+            m.mesh_levels[0].variants = 1;
+            let n = m.mesh_levels[0].vertex_count;
+            s.push(Section { kind: kind::MESH_VARIANTS, index: 0, count: n, stride: 8, data: vec![0; n as usize * 8] });
+            m.billboards.as_mut().unwrap().variants = Some(2);
+        },
+        "2 variants but",
+    );
     // Unknown section kinds are skipped (forward compatibility).
     let (meta, mut sections) = sample_pack();
     sections.push(Section { kind: *b"ELPS", index: 0, count: 2, stride: 32, data: vec![0; 64] });

@@ -203,7 +203,7 @@ fn billboard_capture_sees_the_tree_from_every_angle() {
     let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
     let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
     let size = 64;
-    let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size, true);
+    let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size, true, 0);
     assert_eq!(cap.color.len(), 4);
     let coverage: Vec<f64> = cap.color.iter().map(|l| sylva::render::mips::alpha_coverage(l, 0.5)).collect();
     for (k, c) in coverage.iter().enumerate().take(3) {
@@ -234,8 +234,8 @@ fn a_leaf_off_capture_and_draw_keep_the_wood_alone() {
     let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
     let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
     let size = 64;
-    let leafy = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, true);
-    let bare = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, false);
+    let leafy = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, true, 0);
+    let bare = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, false, 0);
     let covered =
         |c: &sylva::render::capture::CapturedBillboards| c.color[0].chunks_exact(4).filter(|t| t[3] > 0).count();
     let leaves = |c: &sylva::render::capture::CapturedBillboards| {
@@ -317,4 +317,60 @@ fn a_tree_draws_its_variant() {
     // (The smaller card hides less of the trunk.)
     assert!(trunk0 > 0 && trunk1 > trunk0, "trunk {trunk0} vs {trunk1} px; see {saved1}");
     assert_eq!(leaf2, leaf0, "variant 2 of a level with two is variant 0");
+}
+
+#[test]
+fn a_tree_shades_with_its_variants_normals() {
+    // Two variants with the level's own positions: variant 1 also its normals
+    // (drawn exactly as variant 0: a read of the wrong bytes would change it),
+    // variant 2 every normal turned straight up (its leaves lit otherwise).
+    let ctx = gpu();
+    let bytes = toy_pack_with(false);
+    let pack = decode_pack("toy", &bytes).unwrap();
+    let mut meta = pack.meta.clone();
+    meta.mesh_levels[0].variants = 2;
+    let own = pack.mesh_vertices(0);
+    let same: Vec<VariantVertex> = own
+        .iter()
+        .map(|v| VariantVertex { position: v.position, normal_oct: [v.normal_oct[0], v.normal_oct[1]] })
+        .collect();
+    let up: Vec<VariantVertex> =
+        own.iter().map(|v| VariantVertex { position: v.position, normal_oct: [0, 0] }).collect();
+    let mut sections: Vec<Section> = pack
+        .sections
+        .iter()
+        .filter(|(e, _)| e.kind != kind::META)
+        .map(|(e, d)| Section { kind: e.kind, index: e.index, count: e.count, stride: e.stride, data: d.to_vec() })
+        .collect();
+    let variants: Vec<VariantVertex> = same.into_iter().chain(up).collect();
+    sections.push(Section {
+        kind: kind::MESH_VARIANTS,
+        index: 0,
+        count: variants.len() as u32,
+        stride: 8,
+        data: bytemuck::cast_slice(&variants).to_vec(),
+    });
+    let bytes = encode_pack(&meta, &sections);
+    let pack = decode_pack("toy-normals", &bytes).unwrap();
+    let (w, h) = (96, 96);
+    let bg = [0.0, 0.0, 1.0, 1.0];
+    let r = TreeRenderer::new(&ctx);
+    let draw = |variant: u32| {
+        r.set_variant(&ctx, variant);
+        let img = r.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, [w, h], bg).unwrap();
+        let green: Vec<u32> =
+            img.chunks_exact(4).filter(|p| p[1] > p[0] && p[1] > p[2]).map(|p| u32::from(p[1])).collect();
+        let mean = green.iter().sum::<u32>() as f64 / green.len().max(1) as f64;
+        (img.clone(), green.len(), mean, write_actual(&format!("normals{variant}"), &img, w, h))
+    };
+    let (img0, n0, mean0, saved0) = draw(0);
+    let (img1, _, _, saved1) = draw(1);
+    let (_, n2, mean2, saved2) = draw(2);
+    r.set_variant(&ctx, 0);
+    assert!(n0 > 200, "variant 0 drew {n0} leaf px; see {saved0}");
+    // (Variation 15 and 16 tint alike to within a level: compare loosely.)
+    let differ = img0.iter().zip(&img1).filter(|(a, b)| a.abs_diff(**b) > 3).count();
+    assert!(differ < 20, "variant 1 (the level's own normals) differs in {differ} bytes; see {saved0}, {saved1}");
+    assert_eq!(n2, n0, "the same silhouette");
+    assert!((mean2 - mean0).abs() > 8.0, "leaf green {mean0:.1} vs {mean2:.1} with normals up; see {saved2}");
 }

@@ -214,8 +214,9 @@ fn hash_options(options: &PackOptions, h: &mut DefaultHasher) {
         impostor_size,
         cloud_planes,
         seasons,
+        far_variants,
     } = options;
-    seasons.hash(h);
+    (seasons, far_variants).hash(h);
     (texture_size, billboard_angles, billboard_azimuths, billboard_size).hash(h);
     (simplified_level, clusters, cluster_tries, ao).hash(h);
     (*far_tier as u8, impostor_grid, impostor_size, cloud_planes).hash(h);

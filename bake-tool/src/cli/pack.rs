@@ -44,6 +44,11 @@ pub(crate) struct PackArgs {
     /// autumn and leaf-off (`sylva render --season`, the viewer's `setSeason`).
     #[arg(long)]
     pub(crate) no_seasons: bool,
+    /// Capture the far tiers (impostors, billboards) of each of a library
+    /// tree's mesh variants, not variant 0's alone: far trees keep their own
+    /// shapes (closer to their meshes) for 3× the far tiers' bytes.
+    #[arg(long)]
+    pub(crate) far_tier_variants: bool,
     /// Material texture size (power of two).
     #[arg(long, default_value_t = 512)]
     pub(crate) texture_size: u32,
@@ -149,6 +154,7 @@ impl PackArgs {
             impostor_size: self.impostor_size,
             cloud_planes: self.cloud_planes,
             seasons: !self.no_seasons,
+            far_variants: self.far_tier_variants,
         })
     }
 

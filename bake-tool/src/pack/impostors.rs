@@ -18,24 +18,30 @@ use super::*;
 /// kept); the surface layer (normal, depth, occlusion and leaf flag) averaged
 /// weighted by coverage. Sections with `index` (the far-tier state: 0
 /// leaf-on, 1 the bare wood, captured without `leaves`); with them the texels
-/// covered over every view at the capture's resolution.
+/// covered over every view at the capture's resolution. `variants`: the
+/// mesh variants captured, each's grid² views after the previous one's.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn build_impostors(
     gpu: &GpuContext,
     pipelines: &CapturePipelines,
     decoded: &sylva::format::Pack<'_>,
-    lo: Vec3,
-    hi: Vec3,
+    (lo, hi): (Vec3, Vec3),
     opts: &PackOptions,
     index: u32,
     leaves: bool,
+    variants: u32,
 ) -> (ImpostorMeta, Vec<Section>, u64) {
     let grid = opts.impostor_grid;
     let center = (lo + hi) * 0.5;
     let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.01;
-    let views: Vec<_> = (0..grid * grid).map(|l| impostor::capture_clip_from_model(center, radius, l, grid)).collect();
+    let grid_views: Vec<_> =
+        (0..grid * grid).map(|l| impostor::capture_clip_from_model(center, radius, l, grid)).collect();
     let capture_size = opts.impostor_size * 2;
-    let captured = capture_views(gpu, pipelines, decoded, &views, capture_size, leaves);
+    let mut captured = sylva::render::capture::CapturedBillboards::default();
+    for variant in 0..variants {
+        captured.append(capture_views(gpu, pipelines, decoded, &grid_views, capture_size, leaves, variant));
+    }
+    let views: Vec<_> = (0..variants).flat_map(|_| grid_views.iter().copied()).collect();
     let covered = captured.color.iter().flat_map(|c| c.chunks_exact(4)).filter(|t| t[3] > 0).count() as u64;
     let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut surface_chains = Vec::new();
@@ -88,7 +94,7 @@ pub(super) fn build_impostors(
         spread.iter().map(|(w, n)| if *n > 0.0 { (w / n).clamp(0.0, 1.0) as f32 } else { 1.0 }).collect();
     let texture = TextureArrayMeta {
         size: opts.impostor_size,
-        layers: grid * grid,
+        layers: grid * grid * variants,
         mips: opts.impostor_size.trailing_zeros() + 1,
     };
     let sections = vec![
@@ -108,5 +114,10 @@ pub(super) fn build_impostors(
         },
     ];
     let half_extent = Some((hi - center).max(center - lo).to_array());
-    (ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length, half_extent }, sections, covered)
+    let variants = (variants > 1).then_some(variants);
+    (
+        ImpostorMeta { grid, texture, center: center.to_array(), radius, normal_length, half_extent, variants },
+        sections,
+        covered,
+    )
 }

@@ -21,7 +21,7 @@ use sylva::format::pack::{
     encode_pack, kind, BillboardMeta, MaterialKind, MaterialMeta, PackMeta, SeasonMeta, Section, TextureArrayMeta,
 };
 use sylva::render::capture::CapturePipelines;
-use sylva::render::capture::{capture_billboards, BillboardFrame};
+use sylva::render::capture::{capture_billboards, BillboardFrame, CapturedBillboards};
 use sylva::render::mips::{alpha_aware_mips, ColorEncoding};
 use sylva::render::GpuContext;
 
@@ -58,6 +58,10 @@ pub struct PackOptions {
     /// Deciduous species get their seasons (autumn colour, the bare wood's
     /// far tiers); off: every species one state, leaf-on.
     pub seasons: bool,
+    /// Capture the far tiers (billboards, impostors) of every mesh variant,
+    /// not variant 0's alone: a tree's far tier then shows its own shape (the
+    /// far tiers' bytes × the variants).
+    pub far_variants: bool,
 }
 
 /// The far-field representations a pack gets.
@@ -96,6 +100,7 @@ impl Default for PackOptions {
             impostor_size: DEFAULT_IMPOSTOR_SIZE,
             cloud_planes: DEFAULT_CLOUD_PLANES,
             seasons: true,
+            far_variants: false,
         }
     }
 }
@@ -261,9 +266,11 @@ pub fn build_pack(
     let frame = BillboardFrame::from_bounds(lo, hi);
     let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut normal_chains: Vec<Vec<Vec<u8>>> = Vec::new();
+    // The far tiers of every mesh variant (`--far-tier-variants`), else variant 0's.
+    let far_variants = if opts.far_variants { model.variants.len() as u32 + 1 } else { 1 };
     let tex = TextureArrayMeta {
         size: opts.billboard_size,
-        layers: opts.billboard_angles * opts.billboard_azimuths,
+        layers: opts.billboard_angles * opts.billboard_azimuths * far_variants,
         mips: opts.billboard_size.trailing_zeros() + 1,
     };
     // The far tiers' states: leaf-on, and a deciduous tree's bare wood
@@ -276,16 +283,22 @@ pub fn build_pack(
         let index = state as u32;
         if opts.far_tier.billboards() {
             let capture_size = opts.billboard_size * 2;
-            let captured = capture_billboards(
-                gpu,
-                pipelines,
-                &decoded,
-                &frame,
-                opts.billboard_angles,
-                opts.billboard_azimuths,
-                capture_size,
-                leaves,
-            );
+            // Each variant's layers after the previous one's (variant 0's alone by default).
+            let mut captured = CapturedBillboards::default();
+            for variant in 0..far_variants {
+                let c = capture_billboards(
+                    gpu,
+                    pipelines,
+                    &decoded,
+                    &frame,
+                    opts.billboard_angles,
+                    opts.billboard_azimuths,
+                    capture_size,
+                    leaves,
+                    variant,
+                );
+                captured.append(c);
+            }
             covered[state] += captured.color.iter().flat_map(|c| c.chunks_exact(4)).filter(|t| t[3] > 0).count() as u64;
             let (color, normal, built) = billboard_sections(&captured, capture_size, tex.mips, index, opts.ao);
             sections.extend(built);
@@ -294,7 +307,8 @@ pub fn build_pack(
             }
         }
         if opts.far_tier.impostors() {
-            let (m, imp_sections, cover) = build_impostors(gpu, pipelines, &decoded, lo, hi, opts, index, leaves);
+            let (m, imp_sections, cover) =
+                build_impostors(gpu, pipelines, &decoded, (lo, hi), opts, index, leaves, far_variants);
             sections.extend(imp_sections);
             if !opts.far_tier.billboards() {
                 covered[state] += cover;
@@ -338,6 +352,7 @@ pub fn build_pack(
         half_width: frame.half_width,
         half_height: frame.half_height,
         select_px: 0.0,
+        variants: (far_variants > 1).then_some(far_variants),
     });
     let mut bytes = encode_pack(&meta, &sections);
     // The LoD policy: which cluster levels and whether the cloud are default

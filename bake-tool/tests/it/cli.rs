@@ -1950,3 +1950,67 @@ fn library_packs_are_the_same_on_every_bake() {
     // captures the leaf cards' coarse mips are as thin as the twigs.)
     assert!(season.bare_cover > 0.0 && season.bare_cover <= 1.0, "bare cover {}", season.bare_cover);
 }
+
+#[test]
+fn far_tiers_per_variant_show_each_tree_its_own_shape() {
+    // `--far-tier-variants`: the impostors of each of a library tree's three
+    // variants, variant 0's first (the same bytes as without the option), and a
+    // tree of variant 1 draws its own views.
+    let dir = tmp("far-variants");
+    std::fs::write(dir.join("t.csv"), "id,x,y,species,height\n1,500000,5300000,Quercus robur,14\n").unwrap();
+    let bake = |out: &Path, extra: &[&str]| {
+        run(bin_building_packs()
+            .arg("bake")
+            .arg("--placements")
+            .arg(dir.join("t.csv"))
+            .args(["--input-crs", "EPSG:32633", "--no-terrain", "--no-clusters", "--no-ao", "--no-seasons"])
+            .args(["--far-tier", "impostors", "--impostor-size", "32", "--texture-size", "64"])
+            .args(extra)
+            .arg("--out")
+            .arg(out));
+        std::fs::read(out.join("species/quercus.pack")).unwrap()
+    };
+    let (one, each) = (bake(&dir.join("one"), &[]), bake(&dir.join("each"), &["--far-tier-variants"]));
+    let (one, each) =
+        (sylva::format::decode_pack("one", &one).unwrap(), sylva::format::decode_pack("each", &each).unwrap());
+    let (a, b) = (one.meta.impostors.as_ref().unwrap(), each.meta.impostors.as_ref().unwrap());
+    assert_eq!((a.variants, b.variants), (None, Some(3)));
+    assert_eq!(b.texture.layers, 3 * a.texture.layers);
+    // Mip 0 of variant 0's views: the same bytes; variant 1's: another tree.
+    use sylva::format::pack::kind;
+    let layer = (a.texture.size * a.texture.size * 4) as usize;
+    let views = a.texture.layers as usize * layer;
+    let (ca, cb) = (one.section(kind::IMPOSTOR_COLOR, 0).unwrap(), each.section(kind::IMPOSTOR_COLOR, 0).unwrap());
+    assert!(ca[..views] == cb[..views], "variant 0's views differ from the one-variant pack's");
+    assert!(cb[views..2 * views] != cb[..views], "variant 1's views are variant 0's");
+    // Drawn: a tree of variant 1 shows its own views, of variant 0 the same as before.
+    let gpu = sylva::render::GpuContext::new_headless_blocking().unwrap();
+    let r = sylva::render::capture::TreeRenderer::new(&gpu);
+    let draw = |pack: &sylva::format::Pack<'_>, variant: u32| {
+        r.set_variant(&gpu, variant);
+        r.render_pack(
+            &gpu,
+            pack,
+            sylva::render::capture::PackRepr::Impostor,
+            sylva::render::capture::PackView::Side,
+            [128, 128],
+            [0.0, 0.0, 1.0, 1.0],
+        )
+        .unwrap()
+    };
+    let drawn = |img: &[u8]| img.chunks_exact(4).filter(|p| p[..3] != [0, 0, 255]).count();
+    let (one0, each0, each1) = (draw(&one, 0), draw(&each, 0), draw(&each, 1));
+    assert!(drawn(&each0) > 100, "the impostor drew {} px", drawn(&each0));
+    // (Shaded alike but for the normals' agreement, `normal_length`, taken over
+    // every variant's views: a level or two.)
+    let differ = |a: &[u8], b: &[u8]| {
+        a.chunks_exact(4)
+            .zip(b.chunks_exact(4))
+            .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > 12))
+            .count()
+    };
+    let (same, other) = (differ(&one0, &each0), differ(&each0, &each1));
+    assert!(same * 50 < drawn(&each0), "variant 0 drawn differently with the other variants in the pack ({same} px)");
+    assert!(other > 50 && other > 10 * same, "variant 1 draws variant 0's views ({other} px differ)");
+    r.set_variant(&gpu, 0);
+}
