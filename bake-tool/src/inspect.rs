@@ -307,6 +307,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
         levels.push(json!({
             "kind": "billboards",
             "count": bb.angles * bb.azimuths,
+            "variants": bb.variants.unwrap_or(1),
             "angles": bb.angles,
             "azimuths": bb.azimuths,
             "resolution": bb.texture.size,
@@ -321,6 +322,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
         levels.push(json!({
             "kind": "impostors",
             "count": imp.grid * imp.grid,
+            "variants": imp.variants.unwrap_or(1),
             "grid": imp.grid,
             "resolution": imp.texture.size,
             "mips": imp.texture.mips,

@@ -412,7 +412,8 @@ pub(crate) struct RenderArgs {
     /// Mesh or cluster level (with --pack).
     #[arg(long, default_value_t = 0)]
     pub(crate) level: usize,
-    /// Mesh variant (with --pack; a library tree's are 0–2, see `sylva-bake inspect`).
+    /// Mesh variant (with --pack; a library tree's are 0–2, see `sylva-bake inspect`);
+    /// the far tiers' too where the pack has them per variant (`--far-tier-variants`).
     #[arg(long, default_value_t = 0)]
     pub(crate) variant: u32,
     /// The season deciduous species are drawn in: leaf-on, autumn (their

@@ -127,7 +127,7 @@ fn is_zero(v: &u32) -> bool {
 
 /// The variant a tree of `variation` (0–31, its tint's) draws of a level with
 /// `extra` other variants: variation 15, the neutral one a single tree is
-/// captured with, draws variant 0. Must match `variant_of` in `shaders/mesh.wgsl`.
+/// captured with, draws variant 0. Must match `variant_of` in `shaders/trees.wgsl`.
 #[must_use]
 pub fn variant_of(variation: u32, extra: u32) -> u32 {
     ((variation + 17) & 31) % (extra + 1)

@@ -273,6 +273,7 @@ mod tests {
             cache.key("oak", &m, &options),
             cache.key("oak", &m, &PackOptions { ao: false, ..PackOptions::default() }),
             cache.key("oak", &m, &PackOptions { seasons: false, ..PackOptions::default() }),
+            cache.key("oak", &m, &PackOptions { far_variants: true, ..PackOptions::default() }),
             cache.key("oak", &ImportedModel { autumn: Some([200, 90, 30]), ..m.clone() }, &o),
         ];
         for k in &keys {

@@ -125,20 +125,28 @@ impl PackArgs {
                 bail!("{name} {v}: must be a power of two between 4 and {max}");
             }
         }
+        // With --far-tier-variants a library tree's far tiers hold each variant's layers.
+        let variants = if self.far_tier_variants { sylva_bake::library::VARIANTS } else { 1 };
         // The capture holds every view at twice the size (colour, normal,
         // occlusion, depth: 16 bytes a texel) until the mips are built.
-        let capture_bytes = u64::from(self.impostor_grid).pow(2) * (2 * u64::from(self.impostor_size)).pow(2) * 16;
+        let capture_bytes =
+            u64::from(self.impostor_grid).pow(2) * (2 * u64::from(self.impostor_size)).pow(2) * 16 * variants;
         if capture_bytes > 1 << 30 {
             bail!(
-                "--impostor-grid {} with --impostor-size {} needs {:.1} GiB while baking: at most 1 GiB \
+                "--impostor-grid {} with --impostor-size {}{} needs {:.1} GiB while baking: at most 1 GiB \
                  (e.g. --impostor-grid 8 --impostor-size 256)",
                 self.impostor_grid,
                 self.impostor_size,
+                if variants > 1 { " and --far-tier-variants" } else { "" },
                 capture_bytes as f64 / f64::from(1u32 << 30)
             );
         }
-        if u64::from(self.billboard_angles) * u64::from(self.billboard_azimuths) > 256 {
-            bail!("--billboard-angles × --billboard-azimuths must be at most 256 (WebGPU's array layer limit)");
+        let per = if variants > 1 { format!(" × {variants} variants (--far-tier-variants)") } else { String::new() };
+        if u64::from(self.billboard_angles) * u64::from(self.billboard_azimuths) * variants > 256 {
+            bail!("--billboard-angles × --billboard-azimuths{per} must be at most 256 (WebGPU's array layer limit)");
+        }
+        if u64::from(self.impostor_grid).pow(2) * variants > 256 {
+            bail!("--impostor-grid squared{per} must be at most 256 (WebGPU's array layer limit)");
         }
         Ok(PackOptions {
             texture_size: self.texture_size,

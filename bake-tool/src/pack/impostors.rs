@@ -41,13 +41,13 @@ pub(super) fn build_impostors(
     for variant in 0..variants {
         captured.append(capture_views(gpu, pipelines, decoded, &grid_views, capture_size, leaves, variant));
     }
-    let views: Vec<_> = (0..variants).flat_map(|_| grid_views.iter().copied()).collect();
+
     let covered = captured.color.iter().flat_map(|c| c.chunks_exact(4)).filter(|t| t[3] > 0).count() as u64;
     let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut surface_chains = Vec::new();
     // Per stored mip: Σ coverage × |mean normal| and Σ coverage over all views.
     let mut spread = vec![(0.0f64, 0.0f64); opts.impostor_size.trailing_zeros() as usize + 1];
-    for layer in 0..views.len() {
+    for layer in 0..captured.color.len() {
         let color = &captured.color[layer];
         color_chains.push(
             alpha_aware_mips(color, color, capture_size, ColorEncoding::Srgb, Some(BILLBOARD_ALPHA_CUTOFF))[1..]

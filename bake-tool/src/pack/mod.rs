@@ -263,11 +263,15 @@ pub fn build_pack(
     // Capture the billboards from the mesh-only pack, through the same decoder the viewer uses.
     let mesh_only = encode_pack(&meta, &sections);
     let decoded = sylva::format::decode_pack(name, &mesh_only).context("the mesh-only pack does not validate")?;
+    // The far tiers of every mesh variant (`--far-tier-variants`), else variant 0's.
+    let far_variants = if opts.far_variants { model.variants.len() as u32 + 1 } else { 1 };
+    // Framed on variant 0's bounds, also when every variant is captured: the
+    // others are stretched to its height and crown width (a crown reaching past
+    // its box on one axis is cut there; framing on every variant's bounds made
+    // no difference to the stands' error and cost 50 % more time, BENCHMARKS).
     let frame = BillboardFrame::from_bounds(lo, hi);
     let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut normal_chains: Vec<Vec<Vec<u8>>> = Vec::new();
-    // The far tiers of every mesh variant (`--far-tier-variants`), else variant 0's.
-    let far_variants = if opts.far_variants { model.variants.len() as u32 + 1 } else { 1 };
     let tex = TextureArrayMeta {
         size: opts.billboard_size,
         layers: opts.billboard_angles * opts.billboard_azimuths * far_variants,
