@@ -137,8 +137,13 @@ pub fn measure(dir: &Path) -> Result<MemoryModel> {
         let bytes = read(&s.pack)?;
         let pack = decode_pack(&s.pack, &bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
         let gpu = pack.sections.iter().filter(|(e, _)| &e.kind != b"META").map(|(e, _)| e.bytes).sum();
-        let billboard_gpu =
-            pack.sections.iter().filter(|(e, _)| &e.kind == b"BBCO" || &e.kind == b"BBNO").map(|(e, _)| e.bytes).sum();
+        // (One season's billboards: a viewer holds the state it draws.)
+        let billboard_gpu = pack
+            .sections
+            .iter()
+            .filter(|(e, _)| (&e.kind == b"BBCO" || &e.kind == b"BBNO") && e.index == 0)
+            .map(|(e, _)| e.bytes)
+            .sum();
         let bb = pack.meta.billboards.as_ref();
         let cluster_levels = pack.meta.clusters.as_ref().map_or(0, |c| c.ellipsoid_levels.len() as u32);
         packs.push(PackMemory {
@@ -146,7 +151,8 @@ pub fn measure(dir: &Path) -> Result<MemoryModel> {
             file: Sizes::of(&bytes)?,
             gpu,
             billboard_gpu,
-            billboard_views: bb.map_or(0, |b| b.angles * b.azimuths),
+            // (Every mesh variant's views where the pack has them per variant.)
+            billboard_views: bb.map_or(0, |b| b.angles * b.azimuths * b.variants.unwrap_or(1)),
             billboard_size: bb.map_or(0, |b| b.texture.size),
             levels: pack.meta.mesh_levels.len() as u32 + cluster_levels.min(4) + u32::from(bb.is_some()),
         });
