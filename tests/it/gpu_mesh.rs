@@ -195,15 +195,21 @@ fn preview_draws_trunk_and_alpha_tested_leaves() {
     assert!(centre[1] > centre[2] && centre[1] > centre[0], "crown centre is not green: {centre:?}; see {saved}");
 }
 
-#[test]
-fn billboard_capture_sees_the_tree_from_every_angle() {
-    let ctx = gpu();
+/// The toy tree's billboards (variant 0) from `angles` elevations at `size`²,
+/// with its leaves or (`leaves` false) its wood alone.
+fn capture_toy(ctx: &GpuContext, angles: u32, size: u32, leaves: bool) -> sylva::render::capture::CapturedBillboards {
     let bytes = toy_pack();
     let pack = decode_pack("toy", &bytes).unwrap();
     let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
     let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
+    capture_billboards(ctx, &pipelines, &pack, &frame, angles, 1, size, leaves, 0)
+}
+
+#[test]
+fn billboard_capture_sees_the_tree_from_every_angle() {
+    let ctx = gpu();
     let size = 64;
-    let cap = capture_billboards(&ctx, &pipelines, &pack, &frame, 4, 1, size, true, 0);
+    let cap = capture_toy(&ctx, 4, size, true);
     assert_eq!(cap.color.len(), 4);
     let coverage: Vec<f64> = cap.color.iter().map(|l| sylva::render::mips::alpha_coverage(l, 0.5)).collect();
     for (k, c) in coverage.iter().enumerate().take(3) {
@@ -231,11 +237,9 @@ fn a_leaf_off_capture_and_draw_keep_the_wood_alone() {
     let ctx = gpu();
     let bytes = toy_pack();
     let pack = decode_pack("toy", &bytes).unwrap();
-    let pipelines = CapturePipelines::new(&ctx.device, wgpu::TextureFormat::Rgba8UnormSrgb);
-    let frame = BillboardFrame::from_bounds(pack.meta.bounds_min.into(), pack.meta.bounds_max.into());
     let size = 64;
-    let leafy = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, true, 0);
-    let bare = capture_billboards(&ctx, &pipelines, &pack, &frame, 2, 1, size, false, 0);
+    let leafy = capture_toy(&ctx, 2, size, true);
+    let bare = capture_toy(&ctx, 2, size, false);
     let covered =
         |c: &sylva::render::capture::CapturedBillboards| c.color[0].chunks_exact(4).filter(|t| t[3] > 0).count();
     let leaves = |c: &sylva::render::capture::CapturedBillboards| {

@@ -169,19 +169,21 @@ impl<F: Fetcher> SceneStream<F> {
         // The far parts: leaf-on billboards and the bare ones. A far tier of
         // either state draws (`Species` draws the other where the season's is
         // missing; leaf-off draws the leafy one's wood).
-        const FAR: usize = PART_FAR;
-        const BARE: usize = PART_BARE_FAR;
         match self.packs.get(s) {
-            Some(l) if l.whole || l.have[FAR] || l.have[BARE] => (true, false),
+            Some(l) if l.whole || l.have[PART_FAR] || l.have[PART_BARE_FAR] => (true, false),
             // A view that draws no far tier (meshes only): drawable with the
             // parts it wants that have come.
-            Some(l) if !l.wants[FAR] && !l.wants[BARE] && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) => {
+            Some(l)
+                if !l.wants[PART_FAR]
+                    && !l.wants[PART_BARE_FAR]
+                    && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) =>
+            {
                 (true, false)
             }
             // Not yet: it may come while its head and a part the view wants
             // (the far tier, or else any) are not given up on.
             Some(l) if l.wants.contains(&true) => {
-                let far = [FAR, BARE].into_iter().filter(|&i| l.wants[i]).collect::<Vec<_>>();
+                let far = [PART_FAR, PART_BARE_FAR].into_iter().filter(|&i| l.wants[i]).collect::<Vec<_>>();
                 let coming = if far.is_empty() {
                     l.wants.iter().zip(&l.parts).any(|(w, p)| *w && *p != Load::Broken)
                 } else {
@@ -189,7 +191,7 @@ impl<F: Fetcher> SceneStream<F> {
                 };
                 (false, l.head != Load::Broken && coming)
             }
-            Some(l) => (false, l.head != Load::Broken && l.parts[FAR] != Load::Broken),
+            Some(l) => (false, l.head != Load::Broken && l.parts[PART_FAR] != Load::Broken),
             None => (false, false),
         }
     }

@@ -19,6 +19,19 @@ fn fixture() -> String {
     concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small").to_string()
 }
 
+/// The heads of the fixture's packs: spruce, beech, birch.
+fn fixture_heads() -> Vec<PackHead> {
+    ["spruce", "beech", "birch"]
+        .iter()
+        .map(|n| PackHead::decode(n, &std::fs::read(format!("{}/species/{n}.pack", fixture())).unwrap()).unwrap())
+        .collect()
+}
+
+/// The byte ranges fetched after a pack's head, from the `from`th request on: (url, range).
+fn part_fetches(s: &SceneStream<FakeFetcher>, from: usize) -> Vec<(String, ByteRange)> {
+    s.fetcher.log[from..].iter().filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r))).collect()
+}
+
 /// Serves files from disk; requests can be held back and failures scripted per
 /// URL ending.
 #[derive(Default)]
@@ -376,10 +389,7 @@ fn pools_full_of_wanted_tiles_shorten_the_reach_and_say_so() {
 
 #[test]
 fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
-    let heads: Vec<PackHead> = ["spruce", "beech", "birch"]
-        .iter()
-        .map(|n| PackHead::decode(n, &std::fs::read(format!("{}/species/{n}.pack", fixture())).unwrap()).unwrap())
-        .collect();
+    let heads = fixture_heads();
     let size = |h: &PackHead, p: PackPart| h.part_range(p).map_or(0, |(a, b)| b - a);
     let billboards: u64 = heads.iter().map(|h| size(h, PackPart::Billboards)).sum();
     // (A leaf-on view: never the bare far tiers.)
@@ -392,8 +402,7 @@ fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
     run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
     assert!(s.stats().degraded.gpu_budget, "{:?}", s.stats().degraded);
     assert!(s.is_settled(), "held-back parts do not keep the stream busy");
-    let parts: Vec<(String, ByteRange)> =
-        s.fetcher.log.iter().filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r))).collect();
+    let parts = part_fetches(&s, 0);
     let fetched: u64 = parts.iter().map(|(_, (a, b))| b - a).sum();
     assert!(fetched <= budget, "{fetched} bytes of parts fetched for a {budget} budget");
     assert!(fetched < everything, "something was held back");
@@ -413,18 +422,14 @@ fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
 fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
     // The fixture's beech and birch are deciduous (their packs hold the bare
     // wood's far tiers); the spruce is evergreen.
-    let heads: Vec<PackHead> = ["spruce", "beech", "birch"]
-        .iter()
-        .map(|n| PackHead::decode(n, &std::fs::read(format!("{}/species/{n}.pack", fixture())).unwrap()).unwrap())
-        .collect();
+    let heads = fixture_heads();
     assert!(heads[0].part_range(PackPart::BareFar).is_none(), "an evergreen has one state");
     let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
     // A far view in leaf-off: what `Reach::parts_needed` asks of a deciduous pack.
     r.parts = PackPart::ALL.map(|p| p == PackPart::BareFar);
     run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
     assert!(s.is_settled());
-    let parts: Vec<(String, ByteRange)> =
-        s.fetcher.log.iter().filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r))).collect();
+    let parts = part_fetches(&s, 0);
     for (name, h) in ["spruce", "beech", "birch"].iter().zip(&heads) {
         let fetched = |p: PackPart| parts.iter().any(|(u, x)| u.contains(name) && Some(*x) == h.part_range(p));
         if *name == "spruce" {
@@ -445,10 +450,7 @@ fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
         t = run(&mut s, &mut r, &south_view(), 6000.0, t, 0.01, 10);
         assert!((0..3).all(|i| s.species_drawable(i).0), "a species undrawable while its leafy far tier comes");
     }
-    let parts: Vec<(String, ByteRange)> = s.fetcher.log[fetched_before..]
-        .iter()
-        .filter_map(|(u, r)| r.filter(|r| r.0 > 0).map(|r| (u.clone(), r)))
-        .collect();
+    let parts = part_fetches(&s, fetched_before);
     for (name, h) in ["beech", "birch"].iter().zip(&heads[1..]) {
         let leafy = h.part_range(PackPart::Billboards);
         assert!(parts.iter().any(|(u, x)| u.contains(name) && Some(*x) == leafy), "{name}'s leafy far tier: {parts:?}");
