@@ -190,7 +190,7 @@ sweep-fade: release
 # Runs every decoder fuzz target for FUZZ_SECONDS each (needs cargo-fuzz and nightly).
 fuzz:
 	@command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz
-	cd fuzz && for s in import_gltf read_dem decode_imagery; do mkdir -p corpus/$$s && cp -r seeds/$$s/. corpus/$$s/; done && for t in decode_tile decode_pack decode_manifest decode_ids decode_attributes decode_canopy decode_terrain decode_imagery tile_walk csv_header species_names import_gltf read_dem; do \
+	cd fuzz && for s in import_gltf read_dem decode_imagery; do mkdir -p corpus/$$s && cp -r seeds/$$s/. corpus/$$s/; done && for t in decode_tile decode_pack decode_manifest decode_ids decode_attributes decode_canopy decode_terrain decode_imagery tile_walk csv_header species_names import_gltf read_dem read_gis; do \
 	  $(CARGO) +nightly fuzz run $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 || exit 1; done
 
 # Regenerates the small test scene (commit the result; then re-bless image tests

@@ -14,7 +14,7 @@ use sylva::format::{decode_pack, Manifest, Tile};
 pub fn inspect(path: &Path) -> Result<Value> {
     let (path, is_scene) = if path.is_dir() { (path.join("scene.json"), true) } else { (path.to_path_buf(), false) };
     let lower = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
-    if matches!(lower.as_str(), "csv" | "tsv" | "txt" | "geojson") {
+    if matches!(lower.as_str(), "csv" | "tsv" | "txt" | "geojson" | "shp" | "gpkg" | "fgb") {
         return inspect_placements(&path);
     }
     if matches!(lower.as_str(), "tif" | "tiff") {
@@ -125,6 +125,8 @@ fn inspect_placements(path: &Path) -> Result<Value> {
     Ok(json!({
         "kind": "placements",
         "coordinates": if source.kind == crate::input::placements::CoordKind::LonLat { "lon/lat" } else { "projected" },
+        "crs": source.declared_epsg.map(|c| format!("EPSG:{c}"))
+            .or_else(|| source.declared_proj4.as_ref().map(|(name, proj4)| format!("{name} ({proj4})"))),
         "notes": source.notes,
         "rows": report.rows,
         "kept": report.kept,

@@ -21,9 +21,16 @@ pub(crate) struct BakeArgs {
     /// library:Quercus, library:conifer-spire; variants 0, 1, 2, …) (repeat for each species).
     #[arg(long = "model", value_name = "NAME=PATH")]
     pub(crate) models: Vec<String>,
-    /// Tree placements: .csv (columns auto-detected) or .geojson points.
+    /// Tree placements, one point per tree: .csv (columns auto-detected), .geojson,
+    /// or a GIS layer of points: Shapefile (.shp with its .dbf; the CRS from its .prj),
+    /// GeoPackage (.gpkg; --layer picks a table) or FlatGeobuf (.fgb). Fields are
+    /// found by the CSV's names (a .dbf's 10-byte names too: species_co).
     #[arg(long, value_name = "PATH")]
     pub(crate) placements: PathBuf,
+    /// The GeoPackage table to read (default: its only features table, or its only
+    /// table of points).
+    #[arg(long, value_name = "NAME")]
+    pub(crate) layer: Option<String>,
     /// Map species labels to models: PATTERN=NAME (case-insensitive; * is a wildcard,
     /// otherwise a substring). Labels equal to a model name map to it without a pattern.
     #[arg(long = "map", value_name = "PATTERN=NAME")]
@@ -45,7 +52,9 @@ pub(crate) struct BakeArgs {
     /// Scene CRS (projected, e.g. EPSG:32631). Default: the UTM zone of lon/lat data, or --input-crs.
     #[arg(long)]
     pub(crate) crs: Option<String>,
-    /// CRS of x/y placement columns (required for projected input).
+    /// CRS of x/y placement columns (required for projected input, unless the file
+    /// names its own: a GeoJSON's crs, a .prj, a GeoPackage's or FlatGeobuf's CRS;
+    /// this wins over it).
     #[arg(long)]
     pub(crate) input_crs: Option<String>,
     /// Height in metres for rows with neither a height nor a DBH (default: the
@@ -264,6 +273,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         columns: args.columns.clone(),
         dbh_unit: args.dbh_unit,
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
+        layer: args.layer.clone(),
     };
     if args.library == "on" && map.default.is_none() {
         library_fill(&args.placements, &read, &allometry, &mut species, &mut map)?;

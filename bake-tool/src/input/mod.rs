@@ -4,6 +4,7 @@
 pub mod allometry;
 pub mod attributes;
 pub mod dem;
+pub mod gis;
 pub mod gltf_import;
 pub mod names;
 pub mod ortho;

@@ -31,6 +31,14 @@ impl Crs {
         Ok(Self { epsg, proj4: def.proj4.to_string(), proj })
     }
 
+    /// A CRS a file declares without an EPSG code (a `.prj` WKT turned into a
+    /// proj string): `epsg` is 0; for reading placements, not for scenes.
+    pub fn from_proj4(name: &str, proj4: &str) -> Result<Self> {
+        let proj = Proj::from_proj_string(proj4)
+            .map_err(|e| anyhow!("CRS {name:?} ({proj4}) cannot be used by proj4rs: {e}"))?;
+        Ok(Self { epsg: 0, proj4: proj4.to_string(), proj })
+    }
+
     /// Parses `EPSG:32633` or `32633`.
     pub fn parse(text: &str) -> Result<Self> {
         let code = text.trim().trim_start_matches("EPSG:").trim_start_matches("epsg:");

@@ -2014,3 +2014,77 @@ fn far_tiers_per_variant_show_each_tree_its_own_shape() {
     assert!(other > 50 && other > 10 * same, "variant 1 draws variant 0's views ({other} px differ)");
     r.set_variant(&gpu, 0);
 }
+
+/// GIS layers of points bake as CSVs do (issue 45): a Shapefile whose ESRI
+/// `.prj` names RD New without a code, fields cut to 10 bytes; a GeoPackage
+/// in lon/lat (EPSG:4326 in `gpkg_spatial_ref_sys`) baked into its UTM zone.
+#[test]
+fn shapefiles_and_geopackages_bake_as_placements() {
+    use dbase::{FieldName, FieldValue, Record, TableWriterBuilder};
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("gis-placements");
+    let shp = dir.join("bomen.shp");
+    let table = TableWriterBuilder::new()
+        .add_character_field(FieldName::try_from("species_co").unwrap(), 40)
+        .add_numeric_field(FieldName::try_from("hoogte").unwrap(), 8, 1)
+        .add_character_field(FieldName::try_from("buurt").unwrap(), 20);
+    let mut w = shapefile::Writer::from_path(&shp, table).unwrap();
+    for i in 0..30 {
+        let mut r = Record::default();
+        r.insert("species_co".into(), FieldValue::Character(Some("Quercus robur".into())));
+        r.insert("hoogte".into(), FieldValue::Numeric(Some(10.0 + f64::from(i % 5))));
+        r.insert("buurt".into(), FieldValue::Character(Some(if i < 10 { "Jordaan" } else { "De Pijp" }.into())));
+        let p = shapefile::Point::new(121_000.0 + f64::from(i % 6) * 8.0, 487_000.0 + f64::from(i / 6) * 8.0);
+        w.write_shape_and_record(&p, &r).unwrap();
+    }
+    drop(w);
+    std::fs::write(
+        shp.with_extension("prj"),
+        r#"PROJCS["RD_New",GEOGCS["GCS_Amersfoort",DATUM["D_Amersfoort",SPHEROID["Bessel_1841",6377397.155,299.1528128]],PRIMEM["Greenwich",0.0],UNIT["Degree",0.0174532925199433]],PROJECTION["Double_Stereographic"],PARAMETER["False_Easting",155000.0],PARAMETER["False_Northing",463000.0],PARAMETER["Central_Meridian",5.38763888888889],PARAMETER["Scale_Factor",0.9999079],PARAMETER["Latitude_Of_Origin",52.15616055555555],UNIT["Meter",1.0]]"#,
+    )
+    .unwrap();
+    let out = dir.join("shp-scene");
+    let o = run(&mut quick_bake(&model, &shp, &out, &["--default-model", "oak"]));
+    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    assert!(log.contains("EPSG:28992"), "the .prj's CRS is named: {log}");
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    assert_eq!((m.crs.epsg, m.counts.trees), (28992, 30));
+    let heights = baked_heights(&out);
+    assert!(heights.iter().all(|h| (9.9..14.1).contains(h)), "heights from `hoogte`: {heights:?}");
+    let found = sylva::scene::query::query_dir(&out, &serde_json::json!({"buurt": "Jordaan"}), usize::MAX).unwrap();
+    assert_eq!(found.ids.len(), 10, "the .dbf's fields are attributes");
+
+    // A GeoPackage of points in lon/lat, beside a table of polygons.
+    let gpkg = dir.join("inventur.gpkg");
+    let c = rusqlite::Connection::open(&gpkg).unwrap();
+    c.execute_batch(
+        "CREATE TABLE gpkg_spatial_ref_sys (srs_name TEXT, srs_id INTEGER PRIMARY KEY, organization TEXT, \
+           organization_coordsys_id INTEGER, definition TEXT, description TEXT);
+         INSERT INTO gpkg_spatial_ref_sys VALUES ('WGS 84', 4326, 'EPSG', 4326, 'GEOGCS[\"WGS 84\"]', NULL);
+         CREATE TABLE gpkg_contents (table_name TEXT PRIMARY KEY, data_type TEXT, srs_id INTEGER);
+         CREATE TABLE gpkg_geometry_columns (table_name TEXT, column_name TEXT, geometry_type_name TEXT, \
+           srs_id INTEGER, z INTEGER, m INTEGER);
+         CREATE TABLE baeume (fid INTEGER PRIMARY KEY, geom BLOB, Baumart TEXT, Hoehe_m REAL);
+         CREATE TABLE bestaende (fid INTEGER PRIMARY KEY, geom BLOB);
+         INSERT INTO gpkg_contents VALUES ('baeume', 'features', 4326), ('bestaende', 'features', 4326);
+         INSERT INTO gpkg_geometry_columns VALUES ('baeume', 'geom', 'POINT', 4326, 0, 0), \
+           ('bestaende', 'geom', 'POLYGON', 4326, 0, 0);",
+    )
+    .unwrap();
+    for i in 0..20 {
+        let mut blob = b"GP\x00\x01".to_vec();
+        blob.extend(4326i32.to_le_bytes());
+        blob.push(1);
+        blob.extend(1u32.to_le_bytes());
+        blob.extend((11.57 + f64::from(i) * 0.0001).to_le_bytes());
+        blob.extend(48.14f64.to_le_bytes());
+        c.execute("INSERT INTO baeume (geom, Baumart, Hoehe_m) VALUES (?1, 'Stieleiche', 22.0)", [blob]).unwrap();
+    }
+    drop(c);
+    let out = dir.join("gpkg-scene");
+    run(&mut quick_bake(&model, &gpkg, &out, &["--default-model", "oak"]));
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    assert_eq!((m.crs.epsg, m.counts.trees), (32632, 20), "lon/lat 11.57° E → UTM zone 32N");
+    assert!(baked_heights(&out).iter().all(|h| (h - 22.0).abs() < 0.2));
+    std::fs::remove_dir_all(dir).ok();
+}

@@ -100,8 +100,42 @@ pub(super) fn choose_crs(
                     Crs::utm_for(median(&mut lons), median(&mut lats))?
                 }
             };
-            // A GeoJSON may name a geographic CRS of its own (ETRS89, NAD83).
-            (Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?, dst)
+            // A file may name a geographic CRS of its own (ETRS89, NAD83).
+            let src = match &source.declared_proj4 {
+                Some((name, proj4)) => Crs::from_proj4(name, proj4)?,
+                None => Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?,
+            };
+            (src, dst)
+        }
+        CoordKind::Projected if opts.input_crs.is_none() && source.declared_proj4.is_some() => {
+            // A .prj without an EPSG code: read with its own definition; the
+            // scene in --crs, else in the UTM zone of the placements.
+            let (name, proj4) = source.declared_proj4.as_ref().expect("checked");
+            log(&format!("placements: the file names its CRS {name:?}, no EPSG code: {proj4}"));
+            let src = Crs::from_proj4(name, proj4)?;
+            let dst = match opts.crs {
+                Some(c) => Crs::parse(c)?,
+                None => {
+                    let mut xs: Vec<f64> = sample.rows.iter().map(|p| p.0).collect();
+                    let mut ys: Vec<f64> = sample.rows.iter().map(|p| p.1).collect();
+                    if xs.is_empty() {
+                        bail!(
+                            "placements {}: no usable rows ({})",
+                            opts.placements.display(),
+                            sample.report.lines().join("; ")
+                        );
+                    }
+                    let to_lonlat = Reprojector::new(Crs::from_proj4(name, proj4)?, &Crs::from_epsg(4326)?)?;
+                    let (lon, lat) = to_lonlat.apply(median(&mut xs), median(&mut ys)).with_context(|| {
+                        format!(
+                            "placements {}: the middle of the trees is outside CRS {name:?}",
+                            opts.placements.display()
+                        )
+                    })?;
+                    Crs::utm_for(lon, lat)?
+                }
+            };
+            (src, dst)
         }
         CoordKind::Projected => {
             let declared = source.declared_epsg.map(|e| format!("EPSG:{e}"));
@@ -109,7 +143,7 @@ pub(super) fn choose_crs(
                 "the placements have projected x/y coordinates: say which CRS they are in with --input-crs EPSG:xxxx",
             )?;
             if opts.input_crs.is_none() && declared.is_some() {
-                log(&format!("placements: the GeoJSON names its CRS: {input}"));
+                log(&format!("placements: the file names its CRS: {input}"));
             }
             let src = Crs::parse(input)?;
             let dst = Crs::parse(opts.crs.unwrap_or(input))?;

@@ -188,7 +188,9 @@ pub(super) const HEIGHT: &[&str] = &[
     "treeheight",
     "total_height",
     "hoehe",
+    "hoehe_m",
     "höhe",
+    "höhe_m",
     "baumhöhe",
     "boomhoogte",
     "hoogte",
@@ -233,6 +235,8 @@ pub(super) const DBH: &[&str] = &[
     "d130",
     "d13",
     "bhd",
+    "bhd_cm",
+    "bhd_mm",
     "stammdurchmesser",
     "stamdiameter",
 ];

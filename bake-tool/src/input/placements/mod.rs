@@ -204,6 +204,9 @@ pub struct ReadOptions {
     /// The columns kept as per-tree attributes (`--attributes`): `None` every
     /// column but the coordinates and the id, `Some` these (none if empty).
     pub attributes: Option<Vec<String>>,
+    /// The GeoPackage table to read (`--layer`; default: the only one, or
+    /// the only one of points).
+    pub layer: Option<String>,
 }
 
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
@@ -273,15 +276,21 @@ pub struct PlacementSource {
     parsed: Option<PlacementSet>,
     /// Degrees or metres.
     pub kind: CoordKind,
-    /// The EPSG code a GeoJSON file names in its `crs` member, if any.
+    /// The EPSG code the file names (a GeoJSON's `crs` member, a `.prj`, a
+    /// GeoPackage's or FlatGeobuf's CRS), if any.
     pub declared_epsg: Option<u32>,
+    /// A CRS the file declares without an EPSG code (a `.prj` whose name is
+    /// no EPSG name): its name and proj string.
+    pub declared_proj4: Option<(String, String)>,
     /// What was detected, for the log (separator, encoding).
     pub notes: Vec<String>,
     attribute_names: Vec<String>,
+    gis: Option<(crate::input::gis::Layer, gis::GisColumns)>,
 }
 
 impl PlacementSource {
-    /// Opens `path` (`.csv`, `.tsv`, `.txt`, `.geojson`, `.json`) and reads its header.
+    /// Opens `path` (`.csv`, `.tsv`, `.txt`, `.geojson`, `.json`, `.shp`,
+    /// `.gpkg`, `.fgb`) and reads its header.
     pub fn open(path: &Path, options: &ReadOptions) -> Result<Self> {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
         let meta = std::fs::metadata(path).with_context(|| format!("cannot open placements {}", path.display()))?;
@@ -320,8 +329,10 @@ impl PlacementSource {
                     parsed: None,
                     kind: cols.kind,
                     declared_epsg: None,
+                    declared_proj4: None,
                     notes,
                     attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
+                    gis: None,
                 })
             }
             "geojson" | "json" => {
@@ -337,11 +348,45 @@ impl PlacementSource {
                     kind: set.kind,
                     parsed: Some(set),
                     declared_epsg,
+                    declared_proj4: None,
                     notes: Vec::new(),
                     attribute_names,
+                    gis: None,
                 })
             }
-            _ => bail!("placements {}: unknown extension {ext:?}; use .csv or .geojson", path.display()),
+            "shp" | "gpkg" | "fgb" => {
+                use crate::input::gis::{DeclaredCrs, Layer, Wanted};
+                let layer = Layer::open(path, options.layer.as_deref(), Wanted::Points)
+                    .with_context(|| format!("placements {}", path.display()))?;
+                let context = || format!("placements {} ({})", path.display(), layer.format.name());
+                gis::check_points(&layer).with_context(context)?;
+                let (kind, kind_note) = gis::gis_kind(&layer, options).with_context(context)?;
+                let cols = gis::gis_columns(&layer, options).with_context(context)?;
+                let mut notes = layer.notes.clone();
+                notes.extend(kind_note);
+                notes.push(format!("fields: {}", cols.describe()));
+                let (declared_epsg, declared_proj4) = match &layer.crs {
+                    Some(DeclaredCrs::Epsg(c)) => (Some(*c), None),
+                    Some(DeclaredCrs::Proj4 { name, proj4 }) => (None, Some((name.clone(), proj4.clone()))),
+                    None => (None, None),
+                };
+                Ok(Self {
+                    path: path.to_path_buf(),
+                    delimiter: b',',
+                    options: options.clone(),
+                    parsed: None,
+                    kind,
+                    declared_epsg,
+                    declared_proj4,
+                    notes,
+                    attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
+                    gis: Some((layer, cols)),
+                })
+            }
+            _ => bail!(
+                "placements {}: unknown extension {ext:?}; use .csv, .geojson, .shp, .gpkg or .fgb",
+                path.display()
+            ),
         }
     }
 
@@ -371,6 +416,13 @@ impl PlacementSource {
                 f(p.clone())?;
             }
             return Ok(set.report.clone());
+        }
+        if let Some((layer, cols)) = &self.gis {
+            let mut report = Report::default();
+            layer.for_each(&mut |feature| {
+                gis::gis_placements(&feature, cols, self.kind, &self.options, with_attributes, &mut report, f)
+            })?;
+            return Ok(report);
         }
         let file = std::fs::File::open(&self.path)
             .with_context(|| format!("cannot open placements {}", self.path.display()))?;
@@ -422,6 +474,7 @@ pub use columns::*;
 pub use delimited::*;
 
 mod geojson;
+mod gis;
 #[cfg(test)]
 use geojson::geojson_crs;
 pub use geojson::read_geojson;
