@@ -270,6 +270,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         delimiter: args.delimiter,
         swap_xy: args.swap_xy,
         projected: input_crs.as_ref().is_some_and(|c| !c.is_geographic()),
+        geographic_input: input_crs.as_ref().is_some_and(Crs::is_geographic),
         columns: args.columns.clone(),
         dbh_unit: args.dbh_unit,
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },

@@ -101,9 +101,12 @@ pub(super) fn choose_crs(
                 }
             };
             // A file may name a geographic CRS of its own (ETRS89, NAD83).
-            let src = match &source.declared_proj4 {
-                Some((name, proj4)) => Crs::from_proj4(name, proj4)?,
-                None => Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?,
+            // A geographic --input-crs wins over the file's.
+            let given = opts.input_crs.map(Crs::parse).transpose()?.filter(Crs::is_geographic);
+            let src = match (given, &source.declared_proj4) {
+                (Some(given), _) => given,
+                (None, Some((name, proj4))) => Crs::from_proj4(name, proj4)?,
+                (None, None) => Crs::from_epsg(source.declared_epsg.unwrap_or(4326))?,
             };
             (src, dst)
         }

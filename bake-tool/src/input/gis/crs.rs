@@ -15,6 +15,10 @@ use anyhow::{anyhow, Result};
 pub enum DeclaredCrs {
     /// An EPSG code.
     Epsg(u32),
+    /// A CRS the file names that cannot be used (no EPSG code, no EPSG name,
+    /// no projection proj4rs knows): why, for the error a bake without
+    /// `--input-crs` gives.
+    Unusable(String),
     /// A CRS with no EPSG code: its WKT name and proj string.
     Proj4 {
         /// The WKT's name (`PROJCS["…"`).
@@ -31,6 +35,7 @@ impl DeclaredCrs {
         match self {
             DeclaredCrs::Epsg(c) => format!("EPSG:{c}"),
             DeclaredCrs::Proj4 { name, proj4 } => format!("{name:?} ({proj4})"),
+            DeclaredCrs::Unusable(why) => format!("an unusable one ({why})"),
         }
     }
 
@@ -40,15 +45,46 @@ impl DeclaredCrs {
         match self {
             DeclaredCrs::Epsg(c) => crate::input::reproject::Crs::from_epsg(*c).ok().map(|c| c.is_geographic()),
             DeclaredCrs::Proj4 { proj4, .. } => proj4rs::Proj::from_proj_string(proj4).ok().map(|p| p.is_latlong()),
+            DeclaredCrs::Unusable(_) => None,
         }
     }
 
-    /// Reads a WKT (WKT1 as `.prj` files hold it, or WKT2).
+    /// Reads a WKT (WKT1 as `.prj` files hold it, or WKT2); one that cannot
+    /// be used is [`DeclaredCrs::Unusable`] (`--input-crs` may stand in).
+    #[must_use]
+    pub fn read_wkt(wkt: &str) -> Self {
+        Self::from_wkt(wkt).unwrap_or_else(|e| DeclaredCrs::Unusable(e.to_string()))
+    }
+
+    /// Reads a WKT (WKT1 as `.prj` files hold it, or WKT2). A compound CRS
+    /// (`COMPD_CS`, `COMPOUNDCRS`) is read as its horizontal part.
     ///
     /// # Errors
     /// A WKT with no EPSG code, no EPSG name and no projection proj4wkt knows.
     pub fn from_wkt(wkt: &str) -> Result<Self> {
-        if let Some(code) = epsg_of_wkt(wkt) {
+        let trimmed = wkt.trim_start();
+        let upper = trimmed.get(..12).unwrap_or(trimmed).to_ascii_uppercase();
+        if upper.starts_with("COMPD_CS[") || upper.starts_with("COMPOUNDCRS[") {
+            // The first member after the name: the horizontal CRS.
+            let inner = trimmed.find('[').map_or("", |i| &trimmed[i + 1..]);
+            let after_name = inner.find(',').map_or("", |i| &inner[i + 1..]);
+            let mut depth = 0i32;
+            let end = after_name
+                .char_indices()
+                .find(|&(_, c)| {
+                    match c {
+                        '[' | '(' => depth += 1,
+                        ']' | ')' => depth -= 1,
+                        _ => {}
+                    }
+                    depth == 0 && (c == ']' || c == ')')
+                })
+                .map_or(after_name.len(), |(i, _)| i + 1);
+            return Self::from_wkt(after_name[..end].trim());
+        }
+        if let Some(code) =
+            epsg_of_wkt(wkt).filter(|&c| u16::try_from(c).ok().and_then(crs_definitions::from_code).is_some())
+        {
             return Ok(DeclaredCrs::Epsg(code));
         }
         let name = wkt_name(wkt).unwrap_or_default();

@@ -25,7 +25,7 @@ pub(super) fn open(path: &Path) -> Result<Layer> {
             Some(DeclaredCrs::Epsg(crs.code() as u32))
         }
         Some(crs) => match crs.wkt() {
-            Some(wkt) if !wkt.trim().is_empty() => Some(DeclaredCrs::from_wkt(wkt)?),
+            Some(wkt) if !wkt.trim().is_empty() => Some(DeclaredCrs::read_wkt(wkt)),
             _ => None,
         },
         None => None,
@@ -50,6 +50,8 @@ pub(super) fn open(path: &Path) -> Result<Layer> {
         count,
         notes,
         geometry_column: None,
+        parsed: None,
+        text_encoding: None,
     })
 }
 
@@ -197,11 +199,16 @@ fn index_bytes(features: u64, node_size: u16) -> Option<u64> {
     if node_size == 0 || features == 0 {
         return Some(0);
     }
+    // As the specification's packed Hilbert R-tree: levels up to and with a
+    // single root (one feature has a leaf and a root).
     let node = u64::from(node_size.max(2));
     let (mut n, mut nodes) = (features, features);
-    while n > 1 {
+    loop {
         n = n.div_ceil(node);
         nodes = nodes.checked_add(n)?;
+        if n == 1 {
+            break;
+        }
     }
     nodes.checked_mul(40)
 }

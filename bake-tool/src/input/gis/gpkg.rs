@@ -12,11 +12,13 @@ use rusqlite::{types::ValueRef, Connection, OpenFlags};
 use super::{Collect, DeclaredCrs, Feature, Format, Layer, Value, Wanted};
 
 fn connect(path: &Path) -> Result<Connection> {
-    let conn = Connection::open_with_flags(
-        path,
-        OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX | OpenFlags::SQLITE_OPEN_URI,
-    )
-    .map_err(|e| anyhow!("cannot open as SQLite ({e})"))?;
+    let conn = Connection::open_with_flags(path, OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX)
+        .map_err(|e| anyhow!("cannot open as SQLite ({e})"))?;
+    // No value past 64 MiB (a hostile row cannot make SQLite allocate 1 GB);
+    // the schema's functions and views are not trusted.
+    conn.set_limit(rusqlite::limits::Limit::SQLITE_LIMIT_LENGTH, 64 << 20)
+        .map_err(|e| anyhow!("cannot limit SQLite ({e})"))?;
+    conn.execute_batch("PRAGMA trusted_schema = OFF").map_err(|e| anyhow!("cannot set up SQLite ({e})"))?;
     Ok(conn)
 }
 
@@ -85,7 +87,10 @@ fn srs(conn: &Connection, srs_id: i64) -> Result<Option<DeclaredCrs>> {
     }
     match definition {
         Some(wkt) if !wkt.trim().is_empty() && wkt.trim() != "undefined" => {
-            Ok(Some(DeclaredCrs::from_wkt(&wkt).with_context(|| format!("srs_id {srs_id}"))?))
+            Ok(Some(match DeclaredCrs::read_wkt(&wkt) {
+                DeclaredCrs::Unusable(why) => DeclaredCrs::Unusable(format!("srs_id {srs_id}: {why}")),
+                crs => crs,
+            }))
         }
         _ => Ok(None),
     }
@@ -143,6 +148,8 @@ pub(super) fn open(path: &Path, layer: Option<&str>, wanted: Wanted) -> Result<L
         count: count.and_then(|c| u64::try_from(c).ok()),
         notes,
         geometry_column: Some(table.column.clone()),
+        parsed: None,
+        text_encoding: None,
     })
 }
 
@@ -164,11 +171,11 @@ pub(super) fn pass(layer: &Layer, f: &mut dyn FnMut(Feature) -> Result<()>) -> R
         index += 1;
         let mut collect = Collect::default();
         let geometry = match row.get_ref(0) {
-            Ok(ValueRef::Blob(blob)) => {
-                geozero::wkb::process_gpkg_geom(&mut &blob[..], &mut collect)
-                    .map_err(|e| anyhow!("feature {index}: unreadable geometry ({e})"))?;
-                collect.finish()
-            }
+            // A geometry that cannot be read is this feature's, counted; the rest go on.
+            Ok(ValueRef::Blob(blob)) => match geozero::wkb::process_gpkg_geom(&mut &blob[..], &mut collect) {
+                Ok(()) => collect.finish(),
+                Err(_) => super::Geometry::Other("unreadable geometry (GeoPackage binary)"),
+            },
             _ => super::Geometry::Empty,
         };
         let mut values = Vec::with_capacity(layer.fields.len());

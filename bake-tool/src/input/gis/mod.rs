@@ -17,6 +17,7 @@ use anyhow::{bail, Context, Result};
 
 mod crs;
 mod fgb;
+mod geojson;
 mod gpkg;
 mod shp;
 
@@ -103,6 +104,8 @@ pub enum Format {
     GeoPackage,
     /// FlatGeobuf.
     FlatGeobuf,
+    /// GeoJSON (parsed whole).
+    GeoJson,
 }
 
 impl Format {
@@ -113,6 +116,7 @@ impl Format {
             "shp" => Some(Format::Shapefile),
             "gpkg" => Some(Format::GeoPackage),
             "fgb" => Some(Format::FlatGeobuf),
+            "geojson" | "json" => Some(Format::GeoJson),
             _ => None,
         }
     }
@@ -124,6 +128,7 @@ impl Format {
             Format::Shapefile => "Shapefile",
             Format::GeoPackage => "GeoPackage",
             Format::FlatGeobuf => "FlatGeobuf",
+            Format::GeoJson => "GeoJSON",
         }
     }
 }
@@ -149,6 +154,10 @@ pub struct Layer {
     pub notes: Vec<String>,
     /// GeoPackage: the geometry column.
     geometry_column: Option<String>,
+    /// GeoJSON: the features, parsed once.
+    parsed: Option<std::sync::Arc<Vec<Feature>>>,
+    /// The `.dbf`'s text encoding where no `.cpg` says (`--encoding`).
+    pub text_encoding: Option<String>,
 }
 
 impl Layer {
@@ -156,7 +165,8 @@ impl Layer {
     /// (default: the only features table, else the only one whose geometry
     /// `wanted` accepts).
     pub fn open(path: &Path, layer: Option<&str>, wanted: Wanted) -> Result<Self> {
-        let format = Format::of(path).with_context(|| format!("{}: not a .shp, .gpkg or .fgb", path.display()))?;
+        let format =
+            Format::of(path).with_context(|| format!("{}: not a .shp, .gpkg, .fgb or .geojson", path.display()))?;
         let meta = std::fs::metadata(path).with_context(|| format!("cannot open {}", path.display()))?;
         if !meta.is_file() {
             bail!("{} is not a regular file", path.display());
@@ -165,6 +175,7 @@ impl Layer {
             Format::Shapefile => shp::open(path),
             Format::GeoPackage => gpkg::open(path, layer, wanted),
             Format::FlatGeobuf => fgb::open(path),
+            Format::GeoJson => geojson::open(path),
         }
         .with_context(|| format!("{} {}", format.name(), path.display()))?;
         if layer.is_some() && format != Format::GeoPackage {
@@ -179,6 +190,13 @@ impl Layer {
             Format::Shapefile => shp::pass(self, f),
             Format::GeoPackage => gpkg::pass(self, f),
             Format::FlatGeobuf => fgb::pass(self, f),
+            Format::GeoJson => {
+                let features = self.parsed.as_deref().map_or(&[][..], |v| &v[..]);
+                for feature in features {
+                    f(feature.clone())?;
+                }
+                Ok(features.len() as u64)
+            }
         }
         .with_context(|| format!("{} {}", self.format.name(), self.path.display()))
     }
@@ -206,6 +224,53 @@ impl Layer {
         }
     }
 
+    /// Whether the coordinates are lon/lat: as its CRS says, projected where
+    /// `--input-crs` names a projected CRS, else as its first thousand
+    /// vertices look (lon/lat where they can be, said in the note); an error
+    /// where they cannot be lon/lat and nothing says what they are.
+    pub fn lon_lat(&self, input_crs: Option<bool>) -> Result<(bool, Option<String>)> {
+        // --input-crs wins over the file's (it is there for files whose CRS is wrong or unusable).
+        if let Some(geographic) = input_crs {
+            return Ok((geographic, None));
+        }
+        if let Some(crs) = &self.crs {
+            return match crs.is_geographic() {
+                Some(g) => Ok((g, None)),
+                None => bail!("its CRS is {}: say which CRS it is with --input-crs EPSG:xxxx", crs.describe()),
+            };
+        }
+        let (mut seen, mut beyond, mut beyond_count) = (0usize, None::<(u64, [f64; 2])>, 0usize);
+        let mut look = |index: u64, x: f64, y: f64| {
+            if seen < 1000 {
+                seen += 1;
+                if x.abs() > 180.0 || y.abs() > 90.0 {
+                    beyond_count += 1;
+                    beyond.get_or_insert((index, [x, y]));
+                }
+            }
+        };
+        self.first(1000, &mut |feature| match &feature.geometry {
+            Geometry::Points(points) => points.iter().for_each(|p| look(feature.index, p[0], p[1])),
+            Geometry::Polygons(polygons) => {
+                polygons.iter().flatten().flatten().for_each(|p| look(feature.index, p[0], p[1]));
+            }
+            _ => {}
+        })?;
+        let what = match self.format {
+            Format::Shapefile => "no .prj beside it",
+            _ => "no CRS in it",
+        };
+        match beyond {
+            Some((index, p)) if beyond_count * 2 >= seen.max(1) => bail!(
+                "{what}, and its coordinates are no lon/lat (e.g. feature {index}: [{}, {}]): say which CRS they \
+                 are in with --input-crs EPSG:xxxx",
+                p[0],
+                p[1]
+            ),
+            _ => Ok((true, Some(format!("{what}: coordinates read as lon/lat (WGS 84)")))),
+        }
+    }
+
     /// The index of a field by name (case-insensitive), or of a name the
     /// format cut: a dBase field `species_co` answers to `species_code`.
     #[must_use]
@@ -217,6 +282,20 @@ impl Layer {
                 .then(|| self.fields.iter().position(|f| f.to_lowercase() == cut))?
         })
     }
+}
+
+/// Whether a ring holds a point (even-odd).
+#[must_use]
+pub fn ring_holds(ring: &[[f64; 2]], p: [f64; 2]) -> bool {
+    let n = ring.len();
+    let mut inside = false;
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0] {
+            inside = !inside;
+        }
+    }
+    inside
 }
 
 /// A name as dBase keeps it: its first 10 bytes (at a character boundary).
@@ -347,7 +426,9 @@ impl geozero::GeomProcessor for Collect {
         self.other("MultiSurface")
     }
     fn geometrycollection_begin(&mut self, _size: usize, _idx: usize) -> geozero::error::Result<()> {
-        self.other("GeometryCollection")
+        // An error, not a note: collections nest, and the WKB reader recurses
+        // once a level (a deep one would overflow the stack).
+        Err(geozero::error::GeozeroError::Geometry("a GeometryCollection".into()))
     }
     fn triangle_begin(&mut self, _tagged: bool, _size: usize, _idx: usize) -> geozero::error::Result<()> {
         self.other("Triangle")

@@ -86,7 +86,10 @@ pub(super) fn open(path: &Path) -> Result<Layer> {
                 bail!("{}: a .prj of {} bytes is no CRS", prj.display(), wkt.len());
             }
             let wkt = String::from_utf8_lossy(&wkt);
-            let crs = DeclaredCrs::from_wkt(&wkt).with_context(|| format!("{}", prj.display()))?;
+            let crs = match DeclaredCrs::read_wkt(&wkt) {
+                DeclaredCrs::Unusable(why) => DeclaredCrs::Unusable(format!("{}: {why}", prj.display())),
+                crs => crs,
+            };
             notes.push(format!("CRS {} (.prj)", crs.describe()));
             Some(crs)
         }
@@ -107,6 +110,8 @@ pub(super) fn open(path: &Path) -> Result<Layer> {
         count,
         notes,
         geometry_column: None,
+        parsed: None,
+        text_encoding: None,
     })
 }
 
@@ -120,7 +125,101 @@ pub(super) fn pass(layer: &Layer, f: &mut dyn FnMut(Feature) -> Result<()>) -> R
         Some(p) => Some(BufReader::new(File::open(&p).with_context(|| format!("cannot open {}", p.display()))?)),
         None => None,
     };
-    for_each_shp_feature(BufReader::new(file), dbf, cpg_text(&layer.path).as_deref(), f)
+    let text = cpg_text(&layer.path).or_else(|| layer.text_encoding.clone());
+    for_each_shp_feature(BufReader::new(file), dbf, text.as_deref(), f)
+}
+
+/// Checks every record's header before the shapefile crate reads it: the
+/// crate sizes a record's points from its counts with wrapping arithmetic,
+/// so a 150-byte record could make it reserve 4 GiB. A record must hold
+/// what its counts say, and lie within the file.
+fn check_records<S: Read + Seek>(shp: &mut S) -> Result<()> {
+    use std::io::SeekFrom;
+    let len = shp.seek(SeekFrom::End(0))?;
+    shp.seek(SeekFrom::Start(100))?;
+    let mut at = 100u64;
+    let mut index = 0u64;
+    while at + 8 <= len {
+        index += 1;
+        let mut head = [0u8; 12];
+        if shp.read_exact(&mut head).is_err() {
+            break; // a cut record: the crate's read says where
+        }
+        let content = u64::from(u32::from_be_bytes(head[4..8].try_into().expect("4 bytes"))) * 2;
+        if content > len - at - 8 {
+            bail!("feature {index}: a record of {content} bytes, past the end of the file");
+        }
+        let kind = i32::from_le_bytes(head[8..12].try_into().expect("4 bytes"));
+        let mut counts = [0u8; 40];
+        // The least a record of its counts holds (Z ranges are required, M ranges optional).
+        let need = |parts: u64, points: u64, per_part: u64, z: bool| -> u64 {
+            let base = 4 + 32 + 8 + per_part * parts + 16 * points;
+            base + if z { 16 + 8 * points } else { 0 }
+        };
+        let required = match kind {
+            3 | 5 | 13 | 15 | 23 | 25 | 31 | 8 | 18 | 28 => {
+                let n = if matches!(kind, 8 | 18 | 28) { 36 } else { 40 };
+                shp.read_exact(&mut counts[..n.min(content.saturating_sub(4) as usize)]).ok();
+                let word = |i: usize| u64::from(u32::from_le_bytes(counts[i..i + 4].try_into().expect("4 bytes")));
+                match kind {
+                    8 | 28 => 4 + 32 + 4 + 16 * word(32),
+                    18 => 4 + 32 + 4 + 16 * word(32) + 16 + 8 * word(32),
+                    31 => need(word(32), word(36), 8, true),
+                    _ => need(word(32), word(36), 4, matches!(kind, 13 | 15)),
+                }
+            }
+            _ => 4,
+        };
+        if required > content {
+            bail!("feature {index}: its counts need {required} bytes, its record holds {content}");
+        }
+        at += 8 + content;
+        shp.seek(SeekFrom::Start(at))?;
+    }
+    shp.seek(SeekFrom::Start(0))?;
+    Ok(())
+}
+
+/// The records a `.dbf` marks deleted (`*`), which dBase readers skip: their
+/// shapes are skipped with them, so the rows stay paired with their shapes.
+fn deleted_rows<D: Read + Seek>(dbf: &mut D) -> Result<Vec<u64>> {
+    use std::io::SeekFrom;
+    let mut head = [0u8; 32];
+    dbf.seek(SeekFrom::Start(0))?;
+    if dbf.read_exact(&mut head).is_err() {
+        dbf.seek(SeekFrom::Start(0))?;
+        return Ok(Vec::new());
+    }
+    let records = u64::from(u32::from_le_bytes(head[4..8].try_into().expect("4 bytes")));
+    let header = u64::from(u16::from_le_bytes(head[8..10].try_into().expect("2 bytes")));
+    let record = u64::from(u16::from_le_bytes(head[10..12].try_into().expect("2 bytes")));
+    let mut deleted = Vec::new();
+    let len = dbf.seek(SeekFrom::End(0))?;
+    if let Some(fit) = len.saturating_sub(header).checked_div(record) {
+        for i in 0..records.min(fit) {
+            dbf.seek(SeekFrom::Start(header + i * record))?;
+            let mut flag = [0u8; 1];
+            if dbf.read_exact(&mut flag).is_err() {
+                break;
+            }
+            if flag[0] == b'*' {
+                deleted.push(i);
+            }
+        }
+    }
+    dbf.seek(SeekFrom::Start(0))?;
+    Ok(deleted)
+}
+
+/// The `.dbf`'s language driver byte: 0 is "not said" (then read as
+/// Windows-1252, as GDAL reads it, unless a `.cpg` or `--encoding` says).
+fn language_driver<D: Read + Seek>(dbf: &mut D) -> Option<u8> {
+    use std::io::SeekFrom;
+    let mut head = [0u8; 30];
+    dbf.seek(SeekFrom::Start(0)).ok()?;
+    let ok = dbf.read_exact(&mut head).is_ok();
+    dbf.seek(SeekFrom::Start(0)).ok()?;
+    ok.then_some(head[29])
 }
 
 /// Streams a Shapefile's features from its `.shp` and `.dbf` bytes (the
@@ -134,16 +233,29 @@ pub fn for_each_shp_feature<S: Read + Seek, D: Read + Seek>(
     cpg: Option<&str>,
     f: &mut dyn FnMut(Feature) -> Result<()>,
 ) -> Result<u64> {
+    let mut shp = shp;
+    check_records(&mut shp).map_err(|e| anyhow!("not a readable Shapefile: {e}"))?;
     let mut shapes = ShapeReader::new(shp).map_err(|e| anyhow!("not a readable Shapefile ({e})"))?;
+    let mut deleted = Vec::new();
     let mut rows = match dbf {
-        Some(d) => Some(dbf_reader(d, cpg)?),
+        Some(mut d) => {
+            deleted = deleted_rows(&mut d)?;
+            // No .cpg and no code page in the .dbf: Windows-1252, as GDAL reads it.
+            let text = cpg.or_else(|| (language_driver(&mut d) == Some(0)).then_some("1252"));
+            Some(dbf_reader(d, text)?)
+        }
         None => None,
     };
     let mut records = rows.as_mut().map(|r| r.iter_records_as::<Row>());
+    let mut deleted = deleted.into_iter().peekable();
     let mut index = 0u64;
     for shape in shapes.iter_shapes() {
         index += 1;
         let shape = shape.map_err(|e| anyhow!("feature {index}: unreadable shape ({e})"))?;
+        if deleted.next_if_eq(&(index - 1)).is_some() {
+            f(Feature { index, geometry: Geometry::Other("a record deleted in the .dbf"), values: Vec::new() })?;
+            continue;
+        }
         let values = match records.as_mut().map(Iterator::next) {
             None => Vec::new(),
             Some(None) => bail!("feature {index}: the .dbf has fewer rows than the .shp has shapes"),
@@ -165,17 +277,23 @@ fn rings<P>(rings: &[shapefile::PolygonRing<P>], xy: impl Fn(&P) -> [f64; 2]) ->
     if rings.iter().map(|r| r.len()).sum::<usize>() > MAX_VERTICES {
         return Geometry::Other("a geometry of more than 4 million vertices");
     }
-    // Shapefile polygons are rings: each outer ring (clockwise) starts a
-    // polygon, its inner rings (holes) follow it.
+    // Shapefile polygons are rings, outer (clockwise) and inner (holes) in
+    // any order: each hole goes to the outer ring that holds its first vertex.
     let mut polygons: Vec<Vec<Vec<[f64; 2]>>> = Vec::new();
+    let mut holes: Vec<Vec<[f64; 2]>> = Vec::new();
     for ring in rings {
         let pts: Vec<[f64; 2]> = ring.points().iter().map(&xy).collect();
         match ring {
             shapefile::PolygonRing::Outer(_) => polygons.push(vec![pts]),
-            shapefile::PolygonRing::Inner(_) => match polygons.last_mut() {
-                Some(p) => p.push(pts),
-                None => polygons.push(vec![pts]),
-            },
+            shapefile::PolygonRing::Inner(_) => holes.push(pts),
+        }
+    }
+    for hole in holes {
+        let first = hole.first().copied().unwrap_or([f64::NAN; 2]);
+        let home = polygons.iter().position(|p| super::ring_holds(&p[0], first));
+        match home.or(polygons.len().checked_sub(1)) {
+            Some(i) => polygons[i].push(hole),
+            None => polygons.push(vec![hole]),
         }
     }
     Geometry::Polygons(polygons)

@@ -346,3 +346,70 @@ fn mutated_gis_files_never_panic() {
     assert!(ok.iter().all(|&n| n > 0), "{ok:?}");
     std::fs::remove_dir_all(d).ok();
 }
+
+/// What the second read found: a FlatGeobuf of one feature (its index has a
+/// leaf and a root), a `.dbf` row marked deleted, a PointZ of Z = 0, text in
+/// Windows-1252 without a `.cpg`, a polygon record whose counts exceed it.
+#[test]
+fn one_feature_files_deleted_rows_zero_z_and_latin1_text() {
+    let d = dir("second-read");
+    let fgb = d.join("one.fgb");
+    write_flatgeobuf(&fgb, &[(500_000.0, 5_300_000.0, "Picea abies", 31.0)]);
+    let (_, rows, _) = read_all(&fgb, &ReadOptions::default());
+    assert_eq!(rows.len(), 1, "one indexed feature");
+
+    let shp = d.join("bomen.shp");
+    write_tree_shapefile(&shp, Some(RD_NEW_ESRI));
+    let dbf = shp.with_extension("dbf");
+    let mut bytes = std::fs::read(&dbf).unwrap();
+    let header = usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
+    let record = usize::from(u16::from_le_bytes([bytes[10], bytes[11]]));
+    bytes[header + record] = b'*'; // the second row deleted
+    std::fs::write(&dbf, &bytes).unwrap();
+    let (_, rows, report) = read_all(&shp, &ReadOptions::default());
+    let species: Vec<_> = rows.iter().map(|r| r.species.clone().unwrap_or_default()).collect();
+    assert_eq!(species, ["Tilia × europaea 'Pallida'", "Gewone es"], "rows stay with their shapes");
+    assert_eq!(rows[1].id, Some(3));
+    assert_eq!(report.skipped.get("not a point: a record deleted in the .dbf").map(|s| s.0), Some(1));
+
+    // Windows-1252 bytes, no .cpg, no code page mark: read as Windows-1252.
+    bytes[header + record] = b' ';
+    let at = bytes.windows(5).position(|w| w == b"Gewon").unwrap();
+    bytes[at + 1] = 0xE9; // é
+    bytes[29] = 0;
+    std::fs::write(&dbf, &bytes).unwrap();
+    std::fs::remove_file(shp.with_extension("cpg")).unwrap();
+    let (_, rows, _) = read_all(&shp, &ReadOptions::default());
+    assert_eq!(rows[2].species.as_deref(), Some("Géwone es"));
+
+    // PointZ with Z = 0 (no ground height) and Z = 12.5 (one).
+    let zshp = d.join("z.shp");
+    let mut w = shapefile::ShapeWriter::from_path(&zshp).unwrap();
+    w.write_shape(&shapefile::PointZ::new(121_000.0, 487_000.0, 0.0, 0.0)).unwrap();
+    w.write_shape(&shapefile::PointZ::new(121_010.0, 487_000.0, 12.5, 0.0)).unwrap();
+    drop(w);
+    std::fs::write(zshp.with_extension("prj"), RD_NEW_ESRI).unwrap();
+    let (_, rows, _) = read_all(&zshp, &ReadOptions::default());
+    assert_eq!(rows.iter().map(|r| r.z).collect::<Vec<_>>(), [None, Some(12.5)]);
+
+    // A polygon record whose point count would need gigabytes.
+    let pshp = d.join("poly.shp");
+    let ring = vec![
+        shapefile::Point::new(0.0, 0.0),
+        shapefile::Point::new(0.0, 10.0),
+        shapefile::Point::new(10.0, 10.0),
+        shapefile::Point::new(0.0, 0.0),
+    ];
+    let mut w = shapefile::ShapeWriter::from_path(&pshp).unwrap();
+    w.write_shape(&shapefile::Polygon::new(shapefile::PolygonRing::Outer(ring))).unwrap();
+    drop(w);
+    let mut b = std::fs::read(&pshp).unwrap();
+    b[148..152].copy_from_slice(&0x1000_0000u32.to_le_bytes()); // num_points
+    std::fs::write(&pshp, &b).unwrap();
+    let mut none = |_| Ok(());
+    let e = super::for_each_shp_feature(std::io::Cursor::new(b), None::<std::io::Cursor<Vec<u8>>>, None, &mut none)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("feature 1") && e.contains("counts need"), "{e}");
+    std::fs::remove_dir_all(d).ok();
+}

@@ -197,7 +197,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
 /// The EPSG code of a GeoJSON `crs` member (GeoJSON 2008, still written by
 /// GIS exports): `"EPSG:28992"`, `"urn:ogc:def:crs:EPSG::28992"`; CRS84 and
 /// EPSG:4326 are none (the GeoJSON default).
-pub(super) fn geojson_crs(v: &serde_json::Value) -> Option<u32> {
+pub fn geojson_crs(v: &serde_json::Value) -> Option<u32> {
     let name = v.get("crs")?.get("properties")?.get("name")?.as_str()?;
     let code = name.rsplit(':').next()?;
     code.parse().ok().filter(|&c| c != 4326)

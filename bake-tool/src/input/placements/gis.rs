@@ -33,7 +33,14 @@ impl GisColumns {
 pub(super) fn gis_columns(layer: &Layer, options: &ReadOptions) -> Result<GisColumns> {
     let mut chosen: BTreeMap<ColumnRole, usize> = BTreeMap::new();
     let coordinate = |r: ColumnRole| matches!(r, ColumnRole::Lon | ColumnRole::Lat | ColumnRole::X | ColumnRole::Y);
-    for (role, name) in options.columns.iter().filter(|(r, _)| !coordinate(*r)) {
+    if let Some((role, name)) = options.columns.iter().find(|(r, _)| coordinate(*r)) {
+        bail!(
+            "--column {}={name}: a GIS layer's coordinates are its points' geometry, not a field (leave it out; \
+             --swap-xy swaps them)",
+            role.name()
+        );
+    }
+    for (role, name) in &options.columns {
         let Some(i) = layer.field(name) else {
             bail!(
                 "--column {}={name}: the layer has no field {name:?}; its fields are {:?}",
@@ -113,45 +120,11 @@ pub(super) fn gis_columns(layer: &Layer, options: &ReadOptions) -> Result<GisCol
     })
 }
 
-/// The coordinate kind of a layer: its CRS's, `--input-crs`'s (projected),
-/// else what its first points look like (lon/lat where they can be).
+/// The coordinate kind of a layer ([`Layer::lon_lat`]).
 pub(super) fn gis_kind(layer: &Layer, options: &ReadOptions) -> Result<(CoordKind, Option<String>)> {
-    if options.projected {
-        return Ok((CoordKind::Projected, None));
-    }
-    if let Some(crs) = &layer.crs {
-        return match crs.is_geographic() {
-            Some(true) => Ok((CoordKind::LonLat, None)),
-            Some(false) => Ok((CoordKind::Projected, None)),
-            None => bail!("its CRS {} cannot be used: say which CRS it is with --input-crs EPSG:xxxx", crs.describe()),
-        };
-    }
-    // No CRS: look at the first thousand points.
-    let (mut seen, mut beyond, mut beyond_count) = (0usize, None::<(u64, [f64; 3])>, 0usize);
-    layer.first(1000, &mut |feature| {
-        if let Geometry::Points(points) = &feature.geometry {
-            for p in points {
-                seen += 1;
-                if p[0].abs() > 180.0 || p[1].abs() > 90.0 {
-                    beyond_count += 1;
-                    beyond.get_or_insert((feature.index, *p));
-                }
-            }
-        }
-    })?;
-    let what = match layer.format {
-        crate::input::gis::Format::Shapefile => "no .prj beside it",
-        _ => "no CRS in it",
-    };
-    match beyond {
-        Some((index, p)) if beyond_count * 2 >= seen.max(1) => bail!(
-            "{what}, and its coordinates are no lon/lat (e.g. feature {index}: [{}, {}]): say which CRS they are in \
-             with --input-crs EPSG:xxxx",
-            p[0],
-            p[1]
-        ),
-        _ => Ok((CoordKind::LonLat, Some(format!("{what}: coordinates read as lon/lat (WGS 84)")))),
-    }
+    let given = if options.projected { Some(false) } else { options.geographic_input.then_some(true) };
+    let (lon_lat, note) = layer.lon_lat(given)?;
+    Ok((if lon_lat { CoordKind::LonLat } else { CoordKind::Projected }, note))
 }
 
 /// Whether a layer holds points: an error naming what it holds otherwise.
@@ -202,7 +175,7 @@ pub(super) fn gis_placements(
             return Ok(());
         }
         Geometry::Other(o) => {
-            report.skip(&format!("geometry is a {o}, not a point"), row);
+            report.skip(&format!("not a point: {o}"), row);
             return Ok(());
         }
     };
@@ -222,7 +195,9 @@ pub(super) fn gis_placements(
         let placement = Placement {
             x,
             y,
-            z: Some(p[2]).filter(|z| !z.is_nan()).or_else(|| num(cols.z)),
+            // A z field wins; a geometry's Z only where it is not 0 (PointZ
+            // exports fill 0 for "none", which would put trees at sea level).
+            z: num(cols.z).or_else(|| Some(p[2]).filter(|z| z.is_finite() && *z != 0.0)),
             height_m: num(cols.height).map(|h| h as f32),
             dbh_cm: cols.dbh.and_then(|(i, unit)| num(Some(i)).map(|d| (d * unit.to_cm()) as f32)),
             crown_m: cols.crown.and_then(|(i, radius)| num(Some(i)).map(|c| if radius { 2.0 * c } else { c } as f32)),

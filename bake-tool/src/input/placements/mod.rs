@@ -204,6 +204,9 @@ pub struct ReadOptions {
     /// The columns kept as per-tree attributes (`--attributes`): `None` every
     /// column but the coordinates and the id, `Some` these (none if empty).
     pub attributes: Option<Vec<String>>,
+    /// `--input-crs` names a geographic CRS (a GIS layer is read as lon/lat
+    /// whatever its own CRS says).
+    pub geographic_input: bool,
     /// The GeoPackage table to read (`--layer`; default: the only one, or
     /// the only one of points).
     pub layer: Option<String>,
@@ -356,8 +359,13 @@ impl PlacementSource {
             }
             "shp" | "gpkg" | "fgb" => {
                 use crate::input::gis::{DeclaredCrs, Layer, Wanted};
-                let layer = Layer::open(path, options.layer.as_deref(), Wanted::Points)
+                let mut layer = Layer::open(path, options.layer.as_deref(), Wanted::Points)
                     .with_context(|| format!("placements {}", path.display()))?;
+                layer.text_encoding = match options.encoding {
+                    Encoding::Auto => None,
+                    Encoding::Utf8 => Some("UTF-8".into()),
+                    Encoding::Latin1 => Some("1252".into()),
+                };
                 let context = || format!("placements {} ({})", path.display(), layer.format.name());
                 gis::check_points(&layer).with_context(context)?;
                 let (kind, kind_note) = gis::gis_kind(&layer, options).with_context(context)?;
@@ -368,7 +376,7 @@ impl PlacementSource {
                 let (declared_epsg, declared_proj4) = match &layer.crs {
                     Some(DeclaredCrs::Epsg(c)) => (Some(*c), None),
                     Some(DeclaredCrs::Proj4 { name, proj4 }) => (None, Some((name.clone(), proj4.clone()))),
-                    None => (None, None),
+                    Some(DeclaredCrs::Unusable(_)) | None => (None, None),
                 };
                 Ok(Self {
                     path: path.to_path_buf(),
@@ -475,9 +483,7 @@ pub use delimited::*;
 
 mod geojson;
 mod gis;
-#[cfg(test)]
-use geojson::geojson_crs;
-pub use geojson::read_geojson;
+pub use geojson::{geojson_crs, read_geojson};
 
 #[cfg(test)]
 mod tests;
