@@ -28,7 +28,6 @@ impl Rng {
     }
 
     /// Uniform in [0, 1), double precision.
-    #[cfg(test)]
     pub fn f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }

@@ -25,8 +25,33 @@ pub(crate) struct BakeArgs {
     /// or a GIS layer of points: Shapefile (.shp with its .dbf; the CRS from its .prj),
     /// GeoPackage (.gpkg; --layer picks a table) or FlatGeobuf (.fgb). Fields are
     /// found by the CSV's names (a .dbf's 10-byte names too: species_co).
+    #[arg(long, value_name = "PATH", required_unless_present = "stands", conflicts_with = "stands")]
+    pub(crate) placements: Option<PathBuf>,
+    /// A stand map instead of trees: polygons (GeoJSON, Shapefile, GeoPackage,
+    /// FlatGeobuf) whose fields give each stand's species mix (one name, or shares:
+    /// `Picea abies:60;Fagus sylvatica:40`, or share_<species> fields), stems/ha (or
+    /// basal area with a mean DBH), mean or top height, mean DBH, and optionally a
+    /// Weibull shape, an age and a pattern (regular, clustered, random). Each stand
+    /// becomes one tree per stem, spread by its pattern, the same on every bake
+    /// (seeded by its id); each tree's `stand` attribute is its stand's id. A
+    /// report per stand says what it makes and what was assumed.
     #[arg(long, value_name = "PATH")]
-    pub(crate) placements: PathBuf,
+    pub(crate) stands: Option<PathBuf>,
+    /// Use stand field NAME for ROLE (repeatable). Roles: id, species, stems_ha,
+    /// basal_area, height, top_height, dbh, weibull_shape, age, pattern.
+    #[arg(long = "stand-column", value_name = "ROLE=NAME", value_parser = sylva_bake::input::stands::StandRole::parse_mapping)]
+    pub(crate) stand_columns: Vec<(sylva_bake::input::stands::StandRole, String)>,
+    /// Stems a hectare for stands that give neither stems/ha nor basal area.
+    #[arg(long, value_name = "N", default_value_t = 400.0)]
+    pub(crate) stand_density: f64,
+    /// The pattern of stands that name none: regular (managed: evenly spaced),
+    /// clustered (natural regeneration: groups), random.
+    #[arg(long, value_enum, default_value_t = sylva_bake::input::stands::Pattern::Regular)]
+    pub(crate) stand_pattern: sylva_bake::input::stands::Pattern,
+    /// The Weibull shape of stands' DBH distributions where a stand names none
+    /// (3.6: the unimodal distribution of an even-aged stand; lower is wider).
+    #[arg(long, value_name = "C", default_value_t = 3.6)]
+    pub(crate) weibull_shape: f64,
     /// The GeoPackage table to read (default: its only features table, or its only
     /// table of points).
     #[arg(long, value_name = "NAME")]
@@ -232,7 +257,19 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     let pack_opts = args.pack.options()?;
     let fixed_cell_size = args.pack.cell_size.map(|_| args.pack.cell_size(&[])).transpose()?;
     // The output folder is checked before any long work.
-    let mut inputs: Vec<&std::path::Path> = vec![args.placements.as_path()];
+    let placements: &std::path::Path =
+        args.placements.as_deref().or(args.stands.as_deref()).context("give --placements or --stands")?;
+    if !(args.stand_density > 0.0 && args.stand_density <= sylva_bake::input::stands::MAX_STEMS_HA) {
+        bail!(
+            "--stand-density {}: stems a hectare, more than 0 and at most {}",
+            args.stand_density,
+            sylva_bake::input::stands::MAX_STEMS_HA
+        );
+    }
+    if !(0.5..20.0).contains(&args.weibull_shape) {
+        bail!("--weibull-shape {}: a shape between 0.5 and 20", args.weibull_shape);
+    }
+    let mut inputs: Vec<&std::path::Path> = vec![placements];
     inputs.extend(args.allometry.as_deref());
     inputs.extend(args.species_table.as_deref());
     inputs.extend(args.dems.iter().map(PathBuf::as_path));
@@ -275,12 +312,21 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         dbh_unit: args.dbh_unit,
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
         layer: args.layer.clone(),
+        stands: args.stands.as_ref().map(|_| {
+            std::sync::Arc::new(sylva_bake::input::stands::StandOptions {
+                columns: args.stand_columns.clone(),
+                default_stems_ha: args.stand_density,
+                pattern: args.stand_pattern,
+                weibull_shape: args.weibull_shape,
+                allometry: Some(std::sync::Arc::new(allometry.clone())),
+            })
+        }),
     };
     if args.library == "on" && map.default.is_none() {
-        library_fill(&args.placements, &read, &allometry, &mut species, &mut map)?;
+        library_fill(placements, &read, &allometry, &mut species, &mut map)?;
     }
     let options = trees::TreeOptions {
-        placements: &args.placements,
+        placements,
         read,
         crs: args.crs.as_deref(),
         input_crs: args.input_crs.as_deref(),

@@ -10,3 +10,4 @@ pub mod names;
 pub mod ortho;
 pub mod placements;
 pub mod reproject;
+pub mod stands;

@@ -2088,3 +2088,71 @@ fn shapefiles_and_geopackages_bake_as_placements() {
     assert!(baked_heights(&out).iter().all(|h| (h - 22.0).abs() < 0.2));
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// A stand map becomes trees (issue 45): two stands of a GeoJSON in UTM (its
+/// `crs` member), one with a hole; every stand's stems inside it, its count
+/// from stems/ha or basal area, its trees queryable by `stand`, the same
+/// scene on every bake.
+#[test]
+fn stand_polygons_become_trees() {
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("stands");
+    let square = |x0: f64, y0: f64, side: f64| {
+        serde_json::json!([[x0, y0], [x0 + side, y0], [x0 + side, y0 + side], [x0, y0 + side], [x0, y0]])
+    };
+    let (x, y) = (500_000.0, 5_300_000.0);
+    let stands = serde_json::json!({
+        "type": "FeatureCollection",
+        "crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::32632"}},
+        "features": [
+            {"type": "Feature", "properties": {"stand_id": "12a", "species": "oak", "stems_ha": 400, "mean_height": 20},
+             "geometry": {"type": "Polygon", "coordinates": [square(x, y, 100.0)]}},
+            {"type": "Feature", "properties": {"stand_id": "12b", "species": "oak", "basal_area": 20, "mean_dbh": 40,
+               "pattern": "clustered"},
+             "geometry": {"type": "Polygon", "coordinates": [square(x + 100.0, y, 100.0), square(x + 125.0, y + 25.0, 50.0)]}},
+            {"type": "Feature", "properties": {"stand_id": "bad", "species": "oak", "stems_ha": 1e7},
+             "geometry": {"type": "Polygon", "coordinates": [square(x, y + 200.0, 10.0)]}},
+        ]
+    });
+    let path = dir.join("stands.geojson");
+    std::fs::write(&path, stands.to_string()).unwrap();
+    let bake = |out: &Path| {
+        let mut c = bin();
+        c.arg("bake")
+            .arg("--model")
+            .arg(format!("oak={}", model.display()))
+            .arg("--stands")
+            .arg(&path)
+            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16", "--no-terrain"])
+            .arg("--out")
+            .arg(out);
+        run(&mut c)
+    };
+    let out = dir.join("scene");
+    let o = bake(&out);
+    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    assert!(log.contains("stand 12a: 1.00 ha, 400 stems/ha → 400 trees"), "{log}");
+    assert!(log.contains("stems from basal area 20 m²/ha at mean DBH 40 cm"), "{log}");
+    assert!(log.contains("1 stands make no trees: 10000000 stems/ha is past"), "{log}");
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    // 12b: 20 / (π 0.2²) = 159.2 stems/ha on 0.75 ha = 119.4 trees.
+    assert_eq!(m.crs.epsg, 32632);
+    assert!((519..=520).contains(&m.counts.trees), "{}", m.counts.trees);
+    let count = |stand: &str| {
+        sylva::scene::query::query_dir(&out, &serde_json::json!({"stand": stand}), usize::MAX).unwrap().ids.len()
+    };
+    assert_eq!(count("12a"), 400);
+    assert!((119..=120).contains(&count("12b")));
+    // Every stem in its stand, none in the hole.
+    let origin = m.origin_m;
+    for [bx, by, _] in baked_bases(&out) {
+        let (ex, ny) = (bx - x, by - y);
+        assert!((0.0..=200.0).contains(&ex) && (0.0..=100.0).contains(&ny), "{ex},{ny} (origin {origin:?})");
+        assert!(!(ex > 125.0 && ex < 175.0 && ny > 25.0 && ny < 75.0), "a stem in the hole at {ex},{ny}");
+    }
+    // The same trees on every bake.
+    let again = dir.join("again");
+    bake(&again);
+    assert_eq!(baked_bases(&out), baked_bases(&again));
+    std::fs::remove_dir_all(dir).ok();
+}

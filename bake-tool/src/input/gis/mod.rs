@@ -70,6 +70,9 @@ impl Value {
     }
 }
 
+/// Polygons: each its rings (the first the outer), each ring its vertices.
+pub type Polygons = Vec<Vec<Vec<[f64; 2]>>>;
+
 /// A feature's geometry.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Geometry {
@@ -268,6 +271,25 @@ impl Layer {
                 p[1]
             ),
             _ => Ok((true, Some(format!("{what}: coordinates read as lon/lat (WGS 84)")))),
+        }
+    }
+
+    /// A layer of these fields and nothing else (tests of field roles).
+    #[cfg(test)]
+    #[must_use]
+    pub fn for_tests(fields: &[&str]) -> Self {
+        Self {
+            path: PathBuf::new(),
+            format: Format::GeoJson,
+            name: "test".into(),
+            fields: fields.iter().map(|f| (*f).to_string()).collect(),
+            names_cut: false,
+            crs: None,
+            count: None,
+            notes: Vec::new(),
+            geometry_column: None,
+            parsed: None,
+            text_encoding: None,
         }
     }
 

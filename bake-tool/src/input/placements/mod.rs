@@ -210,6 +210,8 @@ pub struct ReadOptions {
     /// The GeoPackage table to read (`--layer`; default: the only one, or
     /// the only one of points).
     pub layer: Option<String>,
+    /// The file is a stand map whose polygons become trees (`--stands`).
+    pub stands: Option<std::sync::Arc<crate::input::stands::StandOptions>>,
 }
 
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
@@ -289,6 +291,7 @@ pub struct PlacementSource {
     pub notes: Vec<String>,
     attribute_names: Vec<String>,
     gis: Option<(crate::input::gis::Layer, gis::GisColumns)>,
+    stands: Option<(crate::input::gis::Layer, crate::input::stands::StandFields)>,
 }
 
 impl PlacementSource {
@@ -299,6 +302,9 @@ impl PlacementSource {
         let meta = std::fs::metadata(path).with_context(|| format!("cannot open placements {}", path.display()))?;
         if !meta.is_file() {
             bail!("placements {} is not a regular file", path.display());
+        }
+        if let Some(stand_options) = &options.stands {
+            return Self::open_stands(path, options, stand_options);
         }
         match ext.as_str() {
             "csv" | "txt" | "tsv" => {
@@ -336,6 +342,7 @@ impl PlacementSource {
                     notes,
                     attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
                     gis: None,
+                    stands: None,
                 })
             }
             "geojson" | "json" => {
@@ -355,6 +362,7 @@ impl PlacementSource {
                     notes: Vec::new(),
                     attribute_names,
                     gis: None,
+                    stands: None,
                 })
             }
             "shp" | "gpkg" | "fgb" => {
@@ -389,6 +397,7 @@ impl PlacementSource {
                     notes,
                     attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
                     gis: Some((layer, cols)),
+                    stands: None,
                 })
             }
             _ => bail!(
@@ -396,6 +405,109 @@ impl PlacementSource {
                 path.display()
             ),
         }
+    }
+
+    /// A stand map (`--stands`): its polygons and fields, and a report of
+    /// what each stand will make (read now, without making a tree).
+    fn open_stands(
+        path: &Path,
+        options: &ReadOptions,
+        stand_options: &crate::input::stands::StandOptions,
+    ) -> Result<Self> {
+        use crate::input::gis::{Layer, Wanted};
+        use crate::input::stands::{read_stand, StandFields};
+        let context = || format!("stands {}", path.display());
+        let layer = Layer::open(path, options.layer.as_deref(), Wanted::Polygons).with_context(context)?;
+        let given = if options.projected { Some(false) } else { options.geographic_input.then_some(true) };
+        let (lon_lat, kind_note) = layer.lon_lat(given).with_context(context)?;
+        let fields = StandFields::find(&layer, stand_options).with_context(context)?;
+        let mut notes = layer.notes.clone();
+        notes.extend(kind_note);
+        notes.push(format!("stand fields: {}", fields.describe(&layer)));
+        let (mut stands, mut trees, mut area) = (0u64, 0f64, 0f64);
+        let mut skipped: BTreeMap<String, (u64, Vec<u64>)> = BTreeMap::new();
+        let mut assumed: BTreeMap<String, u64> = BTreeMap::new();
+        layer
+            .for_each(&mut |feature| {
+                match read_stand(&feature, &fields, stand_options, lon_lat) {
+                    Ok((stand, _)) => {
+                        stands += 1;
+                        let n = stand.stems_ha * stand.area_m2 / 1e4;
+                        trees += n;
+                        area += stand.area_m2;
+                        if stands <= 12 {
+                            let mix: Vec<String> =
+                                stand.mix.iter().map(|(s, p)| format!("{s} {:.0} %", p * 100.0)).collect();
+                            notes.push(format!(
+                                "stand {}: {:.2} ha, {:.0} stems/ha → {n:.0} trees ({}), {}{}",
+                                stand.id,
+                                stand.area_m2 / 1e4,
+                                stand.stems_ha,
+                                mix.join(", "),
+                                format!("{:?}", stand.pattern).to_lowercase(),
+                                if stand.assumed.is_empty() {
+                                    String::new()
+                                } else {
+                                    let words: Vec<&str> = stand.assumed.iter().map(|a| a.1.as_str()).collect();
+                                    format!("; assumed: {}", words.join("; "))
+                                }
+                            ));
+                        }
+                        for (kind, _) in stand.assumed {
+                            *assumed.entry(kind.to_string()).or_default() += 1;
+                        }
+                    }
+                    Err(reason) => {
+                        let e = skipped.entry(reason).or_default();
+                        e.0 += 1;
+                        if e.1.len() < 5 {
+                            e.1.push(feature.index);
+                        }
+                    }
+                }
+                Ok(())
+            })
+            .with_context(context)?;
+        if stands > 12 {
+            notes.push(format!("… and {} more stands", stands - 12));
+        }
+        notes.push(format!(
+            "{stands} stands, {:.1} ha: about {trees:.0} trees to make{}",
+            area / 1e4,
+            if skipped.is_empty() {
+                String::new()
+            } else {
+                format!("; {} stands make none", skipped.values().map(|s| s.0).sum::<u64>())
+            }
+        ));
+        for (reason, (n, which)) in &skipped {
+            notes.push(format!("{n} stands make no trees: {reason} (e.g. features {which:?})"));
+        }
+        for (kind, n) in &assumed {
+            notes.push(format!("{n} stands assumed: {kind}"));
+        }
+        if stands == 0 {
+            bail!("stands {}: no stand makes trees ({})", path.display(), notes.join("; "));
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            delimiter: b',',
+            options: options.clone(),
+            parsed: None,
+            kind: if lon_lat { CoordKind::LonLat } else { CoordKind::Projected },
+            declared_epsg: match &layer.crs {
+                Some(crate::input::gis::DeclaredCrs::Epsg(c)) => Some(*c),
+                _ => None,
+            },
+            declared_proj4: match &layer.crs {
+                Some(crate::input::gis::DeclaredCrs::Proj4 { name, proj4 }) => Some((name.clone(), proj4.clone())),
+                _ => None,
+            },
+            notes,
+            attribute_names: vec!["stand".into()],
+            gis: None,
+            stands: Some((layer, fields)),
+        })
     }
 
     /// One pass over the usable rows, in file order; returns what was read and skipped.
@@ -424,6 +536,45 @@ impl PlacementSource {
                 f(p.clone())?;
             }
             return Ok(set.report.clone());
+        }
+        if let (Some((layer, fields)), Some(stand_options)) = (&self.stands, &self.options.stands) {
+            use crate::input::stands::{grow_stand, read_stand};
+            let mut report = Report::default();
+            let lon_lat = self.kind == CoordKind::LonLat;
+            let mut row = 0u64;
+            layer.for_each(&mut |feature| {
+                let Ok((stand, metric)) = read_stand(&feature, fields, stand_options, lon_lat) else {
+                    return Ok(()); // said when opened
+                };
+                let lon_lat_polygons = match (&feature.geometry, lon_lat) {
+                    (crate::input::gis::Geometry::Polygons(p), true) => Some(&p[..]),
+                    _ => None,
+                };
+                for stem in grow_stand(&stand, &metric, lon_lat_polygons, stand_options) {
+                    row += 1;
+                    report.rows += 1;
+                    let p = Placement {
+                        x: stem.xy[0],
+                        y: stem.xy[1],
+                        z: None,
+                        height_m: stem.height_m,
+                        dbh_cm: stem.dbh_cm,
+                        crown_m: None,
+                        species: Some(stand.mix[stem.species].0.clone()),
+                        yaw_deg: None,
+                        id: None,
+                        id_text: None,
+                        attrs: if with_attributes { vec![Some(stand.id.clone())] } else { Vec::new() },
+                        row,
+                    };
+                    if let Some(p) = accept(p, self.kind, &mut report) {
+                        report.kept += 1;
+                        f(p)?;
+                    }
+                }
+                Ok(())
+            })?;
+            return Ok(report);
         }
         if let Some((layer, cols)) = &self.gis {
             let mut report = Report::default();

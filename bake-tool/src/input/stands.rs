@@ -1,0 +1,734 @@
+//! Stand polygons → trees (issue 45): a forest district's stand map (species
+//! shares, stems/ha or basal area, mean or top height, mean DBH, a pattern)
+//! becomes one tree per stem, made again identically on every pass (seeded
+//! by the stand's id), so a region of 10^8 trees streams through the bake in
+//! the memory of one stand.
+//!
+//! - **Where stems stand.** Managed stands (`regular`, the default): simple
+//!   sequential inhibition (Diggle 2003, *Statistical Analysis of Spatial
+//!   Point Patterns*: uniform candidates, each refused within a hard-core
+//!   distance of a stem already placed) with the distance 0.7 of the mean
+//!   spacing `1/√λ` — a packing fraction of 0.38, under the process's jamming
+//!   limit (0.547), so crowns overlap only as much as the density makes them.
+//!   Natural regeneration (`clustered`): a Thomas process (Thomas 1949; a
+//!   Neyman–Scott process: parents uniform, six stems a parent on average,
+//!   offspring displaced by a Gaussian of σ = 0.2 of the parents' spacing),
+//!   with a hard core of 0.25 of the mean spacing so stems do not stand in
+//!   one another; each cluster one species (mixtures in groups). `random`:
+//!   uniform (a binomial process).
+//! - **Species**: shares by stems, counts by largest remainder (exact), the
+//!   trees in random order (regular, random) or by cluster (clustered).
+//! - **DBH**: Weibull with the stand's mean (`b = mean / Γ(1 + 1/c)`, shape
+//!   `c` 3.6 by default — the unimodal distributions of even-aged stands),
+//!   clipped to 0.3–3× the mean.
+//! - **Heights**: the stand's mean height at its mean DBH (or its top height
+//!   at the DBH of its 100 largest stems a hectare), each stem's along its
+//!   genus's height curve (docs/ALLOMETRY.md) through that point, flattened
+//!   (the ratio to the power 0.6: within a stand heights vary less than
+//!   across a region's trees);
+//!   without a DBH ±8 % about the mean; without a height the bake's DBH
+//!   allometry gives it; without both, the default height.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use anyhow::{bail, Result};
+
+use super::allometry::Allometry;
+use super::gis::{ring_holds, Feature, Geometry, Layer, Polygons, Value};
+use crate::rng::{hash64, Rng};
+
+/// How a stand's stems are spread.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Pattern {
+    /// Inhibition: evenly spaced, as planted and thinned.
+    #[default]
+    Regular,
+    /// Clustered: groups, as natural regeneration.
+    Clustered,
+    /// Uniform at random.
+    Random,
+}
+
+impl Pattern {
+    fn parse(text: &str) -> Option<Self> {
+        let t = text.trim().to_lowercase();
+        match t.as_str() {
+            "regular" | "managed" | "planted" | "plantation" | "inhibition" | "even" | "regelmäßig"
+            | "regelmaessig" => Some(Pattern::Regular),
+            "clustered" | "cluster" | "natural" | "regeneration" | "group" | "groups" | "geklumpt" | "gruppen" => {
+                Some(Pattern::Clustered)
+            }
+            "random" | "poisson" | "uniform" | "zufällig" => Some(Pattern::Random),
+            _ => None,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Pattern::Regular => "regular",
+            Pattern::Clustered => "clustered",
+            Pattern::Random => "random",
+        }
+    }
+}
+
+/// What a stand field holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum StandRole {
+    /// The stand's id (names its trees' `stand` attribute, seeds its stems).
+    Id,
+    /// Species: one name, or shares (`Picea abies:60;Fagus sylvatica:40`).
+    Species,
+    /// Stems per hectare.
+    StemsHa,
+    /// Basal area, m² per hectare (stems from it and the mean DBH).
+    BasalArea,
+    /// Mean height, m.
+    Height,
+    /// Top (dominant) height, m: the mean of the 100 largest stems a hectare.
+    TopHeight,
+    /// Mean (quadratic) DBH, cm.
+    Dbh,
+    /// The Weibull shape of the DBH distribution.
+    WeibullShape,
+    /// Age, years (kept as an attribute).
+    Age,
+    /// The pattern: regular, clustered or random.
+    Pattern,
+}
+
+impl StandRole {
+    /// Every role, in the order they are reported.
+    pub const ALL: [StandRole; 10] = [
+        StandRole::Id,
+        StandRole::Species,
+        StandRole::StemsHa,
+        StandRole::BasalArea,
+        StandRole::Height,
+        StandRole::TopHeight,
+        StandRole::Dbh,
+        StandRole::WeibullShape,
+        StandRole::Age,
+        StandRole::Pattern,
+    ];
+
+    /// The role's name in `--stand-column ROLE=NAME`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            StandRole::Id => "id",
+            StandRole::Species => "species",
+            StandRole::StemsHa => "stems_ha",
+            StandRole::BasalArea => "basal_area",
+            StandRole::Height => "height",
+            StandRole::TopHeight => "top_height",
+            StandRole::Dbh => "dbh",
+            StandRole::WeibullShape => "weibull_shape",
+            StandRole::Age => "age",
+            StandRole::Pattern => "pattern",
+        }
+    }
+
+    /// Field names recognised for the role (case-insensitive), most specific first.
+    #[must_use]
+    pub fn aliases(self) -> &'static [&'static str] {
+        match self {
+            StandRole::Id => &["stand_id", "standid", "stand", "bestand", "abteilung", "abt", "afdeling", "id", "fid"],
+            StandRole::Species => &[
+                "species",
+                "species_mix",
+                "mix",
+                "composition",
+                "baumarten",
+                "baumart",
+                "soorten",
+                "soort",
+                "essences",
+                "especies",
+            ],
+            StandRole::StemsHa => &[
+                "stems_ha",
+                "stems_per_ha",
+                "stemsha",
+                "n_ha",
+                "nha",
+                "tph",
+                "trees_ha",
+                "trees_per_ha",
+                "density",
+                "stammzahl",
+                "stammzahl_ha",
+                "stems",
+            ],
+            StandRole::BasalArea => &["basal_area", "basalarea", "ba_ha", "ba", "g_ha", "grundflaeche", "grundfläche"],
+            StandRole::Height => &["mean_height", "height", "height_m", "hg", "hm", "h_mean", "mittelhoehe", "hoehe"],
+            StandRole::TopHeight => &["top_height", "dominant_height", "h100", "hdom", "h_dom", "oberhoehe", "ho"],
+            StandRole::Dbh => &["mean_dbh", "dbh", "dbh_cm", "dg", "qmd", "d_mean", "bhd", "bhd_cm"],
+            StandRole::WeibullShape => &["weibull_shape", "weibull_c", "shape"],
+            StandRole::Age => &["age", "alter", "leeftijd", "age_years", "stand_age"],
+            StandRole::Pattern => &["pattern", "spatial_pattern", "structure"],
+        }
+    }
+
+    /// Parses `ROLE=NAME` (`--stand-column`).
+    ///
+    /// # Errors
+    /// An unknown role, or no `=`.
+    pub fn parse_mapping(s: &str) -> Result<(StandRole, String), String> {
+        let (role, name) =
+            s.split_once('=').ok_or_else(|| format!("{s:?}: expected ROLE=FIELD, e.g. stems_ha=N_HA"))?;
+        let role = role.trim().to_lowercase().replace('-', "_");
+        match (StandRole::ALL.iter().find(|r| r.name() == role), name.trim()) {
+            (Some(r), n) if !n.is_empty() => Ok((*r, n.to_string())),
+            (Some(_), _) => Err(format!("{s:?}: the field name is empty")),
+            (None, _) => Err(format!(
+                "{s:?}: unknown role {role:?}; roles are {}",
+                StandRole::ALL.map(StandRole::name).join(", ")
+            )),
+        }
+    }
+}
+
+/// How stands become trees.
+#[derive(Debug, Clone)]
+pub struct StandOptions {
+    /// Fields named by the user (`--stand-column ROLE=NAME`).
+    pub columns: Vec<(StandRole, String)>,
+    /// Stems a hectare where a stand says neither stems nor basal area.
+    pub default_stems_ha: f64,
+    /// The pattern where a stand names none.
+    pub pattern: Pattern,
+    /// The Weibull shape where a stand names none.
+    pub weibull_shape: f64,
+    /// Height curves per genus (heights along the stand's curve).
+    pub allometry: Option<Arc<Allometry>>,
+}
+
+impl Default for StandOptions {
+    fn default() -> Self {
+        Self {
+            columns: Vec::new(),
+            default_stems_ha: 400.0,
+            pattern: Pattern::Regular,
+            weibull_shape: 3.6,
+            allometry: None,
+        }
+    }
+}
+
+/// The densest stand made (stems a hectare): dense regeneration has ~20,000.
+pub const MAX_STEMS_HA: f64 = 50_000.0;
+/// The most stems one stand may make (split larger stands).
+pub const MAX_STAND_TREES: u64 = 5_000_000;
+
+/// The layer's fields by role.
+#[derive(Debug, Clone, Default)]
+pub struct StandFields {
+    by_role: Vec<(StandRole, usize)>,
+    /// `share_<species>` fields: the species and the field.
+    share_fields: Vec<(String, usize)>,
+}
+
+impl StandFields {
+    /// Finds the roles' fields: `--stand-column` first, then the aliases.
+    ///
+    /// # Errors
+    /// A `--stand-column` naming a field the layer lacks.
+    pub fn find(layer: &Layer, options: &StandOptions) -> Result<Self> {
+        let mut by_role: Vec<(StandRole, usize)> = Vec::new();
+        for (role, name) in &options.columns {
+            let Some(i) = layer.field(name) else {
+                bail!(
+                    "--stand-column {}={name}: the layer has no field {name:?}; its fields are {:?}",
+                    role.name(),
+                    layer.fields
+                );
+            };
+            by_role.push((*role, i));
+        }
+        for role in StandRole::ALL {
+            if by_role.iter().any(|(r, _)| *r == role) {
+                continue;
+            }
+            let free =
+                role.aliases().iter().find_map(|a| layer.field(a).filter(|i| !by_role.iter().any(|(_, c)| c == i)));
+            if let Some(i) = free {
+                by_role.push((role, i));
+            }
+        }
+        let share_fields = layer
+            .fields
+            .iter()
+            .enumerate()
+            .filter_map(|(i, f)| {
+                let l = f.to_lowercase();
+                ["share_", "pct_", "anteil_", "aandeel_"]
+                    .iter()
+                    .find_map(|p| l.strip_prefix(p))
+                    .map(|_| (f[f.find('_').map_or(0, |u| u + 1)..].replace('_', " "), i))
+            })
+            .collect();
+        Ok(Self { by_role, share_fields })
+    }
+
+    fn get<'a>(&self, f: &'a Feature, role: StandRole) -> Option<&'a Value> {
+        self.by_role.iter().find(|(r, _)| *r == role).and_then(|(_, i)| f.values.get(*i))
+    }
+
+    /// For the log: `species ← "BA_MIX", stems_ha ← "N_HA", …`.
+    #[must_use]
+    pub fn describe(&self, layer: &Layer) -> String {
+        let mut parts: Vec<String> =
+            self.by_role.iter().map(|(r, i)| format!("{} ← {:?}", r.name(), layer.fields[*i])).collect();
+        if !self.share_fields.is_empty() {
+            parts.push(format!("shares ← {} share_ fields", self.share_fields.len()));
+        }
+        parts.join(", ")
+    }
+}
+
+/// One stand, read from its feature.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stand {
+    /// Its id (the id field's text, else its feature number).
+    pub id: String,
+    /// Species and their shares of the stems (summing to 1).
+    pub mix: Vec<(String, f64)>,
+    /// Stems a hectare.
+    pub stems_ha: f64,
+    /// Mean height, m, and whether it is a top height.
+    pub height: Option<(f64, bool)>,
+    /// Mean DBH, cm.
+    pub dbh_cm: Option<f64>,
+    /// Weibull shape.
+    pub shape: f64,
+    /// The pattern.
+    pub pattern: Pattern,
+    /// What was assumed, for the report: the kind (counted over stands) and
+    /// this stand's words.
+    pub assumed: Vec<(&'static str, String)>,
+    /// Area, m² (holes left out).
+    pub area_m2: f64,
+}
+
+/// A species mix as written: `Picea abies:60;Fagus sylvatica:40`,
+/// `Picea abies 60%, Fagus 40%`, `Pinus sylvestris` (all of it), shares
+/// normalised; entries without a share split what the others leave.
+#[must_use]
+pub fn parse_mix(text: &str) -> Vec<(String, f64)> {
+    let sep: &[char] = if text.contains(';') { &[';'] } else { &[',', '|', '+'] };
+    let mut entries: Vec<(String, Option<f64>)> = Vec::new();
+    for part in text.split(sep).map(str::trim).filter(|p| !p.is_empty()) {
+        let part = part.trim_end_matches('%').trim();
+        let (name, share) = match part.rfind([':', '=']) {
+            Some(i) => {
+                (part[..i].trim(), part[i + 1..].trim().trim_end_matches('%').trim().replace(',', ".").parse().ok())
+            }
+            None => match part.rsplit_once(' ') {
+                Some((n, s)) if s.trim_end_matches('%').replace(',', ".").parse::<f64>().is_ok() => {
+                    (n.trim(), s.trim_end_matches('%').replace(',', ".").parse().ok())
+                }
+                _ => (part, None),
+            },
+        };
+        if !name.is_empty() {
+            entries.push((name.to_string(), share.filter(|s: &f64| s.is_finite() && *s >= 0.0)));
+        }
+    }
+    let given: f64 = entries.iter().filter_map(|e| e.1).sum();
+    let scale = if given > 1.5 { 100.0 } else { 1.0 };
+    let without = entries.iter().filter(|e| e.1.is_none()).count();
+    let left = (1.0 - given / scale).max(0.0);
+    let mut mix: Vec<(String, f64)> = entries
+        .into_iter()
+        .map(|(n, s)| (n, s.map_or(if without > 0 { left / without as f64 } else { 0.0 }, |s| s / scale)))
+        .filter(|(_, s)| *s > 0.0)
+        .collect();
+    let total: f64 = mix.iter().map(|m| m.1).sum();
+    if total > 0.0 {
+        mix.iter_mut().for_each(|m| m.1 /= total);
+    }
+    mix
+}
+
+/// The area of polygons (rings after the first are holes), m² where the
+/// coordinates are metres.
+fn area(polygons: &[Vec<Vec<[f64; 2]>>]) -> f64 {
+    let ring = |r: &Vec<[f64; 2]>| -> f64 {
+        let n = r.len();
+        (0..n).map(|i| r[i][0] * r[(i + 1) % n][1] - r[(i + 1) % n][0] * r[i][1]).sum::<f64>().abs() * 0.5
+    };
+    polygons.iter().map(|p| p.first().map_or(0.0, ring) - p.iter().skip(1).map(ring).sum::<f64>()).sum::<f64>().max(0.0)
+}
+
+/// Whether a point lies in the polygons: in an outer ring and in none of its holes.
+fn inside(polygons: &[Vec<Vec<[f64; 2]>>], x: f64, y: f64) -> bool {
+    polygons.iter().any(|p| {
+        p.first().is_some_and(|outer| ring_holds(outer, [x, y])) && !p.iter().skip(1).any(|h| ring_holds(h, [x, y]))
+    })
+}
+
+/// Local metres about a lon/lat centre, and back (a stand is small enough
+/// for an equirectangular frame).
+#[derive(Clone, Copy)]
+struct Frame {
+    lon_lat: bool,
+    x0: f64,
+    y0: f64,
+    kx: f64,
+    ky: f64,
+}
+
+impl Frame {
+    fn new(polygons: &[Vec<Vec<[f64; 2]>>], lon_lat: bool) -> Self {
+        let first = polygons.iter().flatten().flatten().next().copied().unwrap_or([0.0, 0.0]);
+        if lon_lat {
+            Self { lon_lat, x0: first[0], y0: first[1], kx: 111_320.0 * first[1].to_radians().cos(), ky: 110_574.0 }
+        } else {
+            Self { lon_lat, x0: 0.0, y0: 0.0, kx: 1.0, ky: 1.0 }
+        }
+    }
+    fn to_m(self, p: [f64; 2]) -> [f64; 2] {
+        if self.lon_lat {
+            [(p[0] - self.x0) * self.kx, (p[1] - self.y0) * self.ky]
+        } else {
+            p
+        }
+    }
+    fn back(self, p: [f64; 2]) -> [f64; 2] {
+        if self.lon_lat {
+            [self.x0 + p[0] / self.kx, self.y0 + p[1] / self.ky]
+        } else {
+            p
+        }
+    }
+}
+
+/// Γ(x) for x in [1, 2] and beyond (Lanczos, g = 7).
+fn gamma(x: f64) -> f64 {
+    const G: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    let x = x - 1.0;
+    let t = x + 7.5;
+    let s: f64 = G[0] + (1..9).map(|i| G[i] / (x + i as f64)).sum::<f64>();
+    (2.0 * std::f64::consts::PI).sqrt() * t.powf(x + 0.5) * (-t).exp() * s
+}
+
+/// Reads a stand from its feature: its mix, density, sizes and what was
+/// assumed; `Err` is why it makes no trees.
+///
+/// # Errors
+/// No polygon, no species, a density past [`MAX_STEMS_HA`], too many trees.
+pub fn read_stand(
+    feature: &Feature,
+    fields: &StandFields,
+    options: &StandOptions,
+    lon_lat: bool,
+) -> Result<(Stand, Polygons), String> {
+    let Geometry::Polygons(polygons) = &feature.geometry else {
+        return Err(match &feature.geometry {
+            Geometry::Empty => "no geometry".into(),
+            Geometry::Points(_) => "a point, not a polygon".into(),
+            Geometry::Other(o) => format!("a {o}, not a polygon"),
+            Geometry::Polygons(_) => unreachable!(),
+        });
+    };
+    if polygons.iter().flatten().flatten().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
+        return Err("non-finite coordinates".into());
+    }
+    let frame = Frame::new(polygons, lon_lat);
+    let metric: Vec<Vec<Vec<[f64; 2]>>> =
+        polygons.iter().map(|p| p.iter().map(|r| r.iter().map(|q| frame.to_m(*q)).collect()).collect()).collect();
+    let area_m2 = area(&metric);
+    if area_m2.is_nan() || area_m2 <= 0.0 {
+        return Err("a polygon of no area (degenerate)".into());
+    }
+    let num = |role| fields.get(feature, role).and_then(Value::as_f64).filter(|v| v.is_finite() && *v > 0.0);
+    let text = |role| fields.get(feature, role).and_then(Value::to_text);
+    let id = text(StandRole::Id).unwrap_or_else(|| feature.index.to_string());
+    let mut assumed = Vec::new();
+    let mut mix = text(StandRole::Species).map(|s| parse_mix(&s)).unwrap_or_default();
+    if mix.is_empty() && !fields.share_fields.is_empty() {
+        let shares: Vec<(String, f64)> = fields
+            .share_fields
+            .iter()
+            .filter_map(|(name, i)| {
+                feature.values.get(*i).and_then(Value::as_f64).filter(|s| *s > 0.0).map(|s| (name.clone(), s))
+            })
+            .collect();
+        let total: f64 = shares.iter().map(|s| s.1).sum();
+        mix = shares.into_iter().map(|(n, s)| (n, s / total)).collect();
+    }
+    if mix.is_empty() {
+        return Err("no species (name a field with --stand-column species=FIELD)".into());
+    }
+    let dbh_cm = num(StandRole::Dbh).filter(|d| *d < 500.0);
+    let stems_ha = match (num(StandRole::StemsHa), num(StandRole::BasalArea), dbh_cm) {
+        (Some(n), _, _) => n,
+        (None, Some(ba), Some(d)) => {
+            assumed.push((
+                "stems from basal area and mean DBH",
+                format!("stems from basal area {ba} m²/ha at mean DBH {d} cm"),
+            ));
+            ba / (std::f64::consts::PI * (d / 200.0).powi(2))
+        }
+        _ => {
+            assumed.push((
+                "the default stems/ha (no stems/ha, or basal area with a DBH)",
+                format!("{} stems/ha (no stems/ha, or basal area with a DBH)", options.default_stems_ha),
+            ));
+            options.default_stems_ha
+        }
+    };
+    if stems_ha > MAX_STEMS_HA {
+        return Err(format!("{stems_ha:.0} stems/ha is past {MAX_STEMS_HA:.0}"));
+    }
+    let expected = stems_ha * area_m2 / 1e4;
+    if expected > MAX_STAND_TREES as f64 {
+        return Err(format!("{expected:.0} trees in one stand, past {MAX_STAND_TREES}: split it"));
+    }
+    let height = match (num(StandRole::Height), num(StandRole::TopHeight)) {
+        (Some(h), _) if h < 120.0 => Some((h, false)),
+        (_, Some(h)) if h < 120.0 => Some((h, true)),
+        _ => None,
+    };
+    if height.is_none() && dbh_cm.is_none() {
+        assumed.push(("no height or DBH: the default height", "no height or DBH: the default height".into()));
+    } else if height.is_none() {
+        assumed.push(("heights from the DBH allometry", "heights from the DBH allometry".into()));
+    } else if dbh_cm.is_none() {
+        assumed.push(("no DBH: heights ±8 % about the stand's", "no DBH: heights ±8 % about the stand's".into()));
+    }
+    let shape = num(StandRole::WeibullShape).filter(|c| (0.5..20.0).contains(c)).unwrap_or(options.weibull_shape);
+    let pattern = match text(StandRole::Pattern) {
+        Some(p) => Pattern::parse(&p).unwrap_or_else(|| {
+            assumed.push((
+                "an unknown pattern: the default",
+                format!("pattern {p:?} unknown: {}", options.pattern.name()),
+            ));
+            options.pattern
+        }),
+        None => options.pattern,
+    };
+    Ok((Stand { id, mix, stems_ha, height, dbh_cm, shape, pattern, assumed, area_m2 }, metric))
+}
+
+/// One generated stem.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stem {
+    /// x/lon, y/lat in the layer's coordinates.
+    pub xy: [f64; 2],
+    /// Index into the stand's mix.
+    pub species: usize,
+    /// DBH, cm.
+    pub dbh_cm: Option<f32>,
+    /// Height, m.
+    pub height_m: Option<f32>,
+}
+
+/// A grid of placed stems for hard-core tests.
+struct Grid {
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<[f64; 2]>>,
+}
+
+impl Grid {
+    fn new(cell: f64) -> Self {
+        Self { cell: cell.max(1e-3), cells: HashMap::new() }
+    }
+    fn key(&self, p: [f64; 2]) -> (i64, i64) {
+        ((p[0] / self.cell).floor() as i64, (p[1] / self.cell).floor() as i64)
+    }
+    fn free(&self, p: [f64; 2], r: f64) -> bool {
+        let (i, j) = self.key(p);
+        let reach = (r / self.cell).ceil() as i64;
+        for di in -reach..=reach {
+            for dj in -reach..=reach {
+                if let Some(v) = self.cells.get(&(i + di, j + dj)) {
+                    if v.iter().any(|q| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) < r * r) {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+    fn add(&mut self, p: [f64; 2]) {
+        let k = self.key(p);
+        self.cells.entry(k).or_default().push(p);
+    }
+}
+
+/// The stand's stems, the same on every call (seeded by its id).
+#[must_use]
+pub fn grow_stand(
+    stand: &Stand,
+    metric: &[Vec<Vec<[f64; 2]>>],
+    lon_lat_polygons: Option<&[Vec<Vec<[f64; 2]>>]>,
+    options: &StandOptions,
+) -> Vec<Stem> {
+    let mut rng = Rng::new(hash64(
+        stand.id.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01B3)),
+    ));
+    let expected = stand.stems_ha * stand.area_m2 / 1e4;
+    let n = (expected.floor() + f64::from(u8::from(rng.f64() < expected.fract()))) as usize;
+    if n == 0 {
+        return Vec::new();
+    }
+    let frame =
+        lon_lat_polygons.map_or(Frame { lon_lat: false, x0: 0.0, y0: 0.0, kx: 1.0, ky: 1.0 }, |p| Frame::new(p, true));
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for p in metric.iter().flatten().flatten() {
+        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+    }
+    let spacing = (stand.area_m2 / n as f64).sqrt();
+    let uniform = |rng: &mut Rng| [lo[0] + rng.f64() * (hi[0] - lo[0]), lo[1] + rng.f64() * (hi[1] - lo[1])];
+    let mut points: Vec<[f64; 2]> = Vec::with_capacity(n);
+    let mut cluster_of: Vec<usize> = Vec::with_capacity(n);
+    let budget = 60 * n + 10_000;
+    match stand.pattern {
+        Pattern::Regular | Pattern::Random => {
+            let mut r = if stand.pattern == Pattern::Regular { 0.7 * spacing } else { 0.0 };
+            let mut grid = Grid::new(r.max(spacing * 0.5));
+            let (mut tries, mut since) = (0usize, 0usize);
+            while points.len() < n && tries < budget {
+                tries += 1;
+                since += 1;
+                if since > 300 {
+                    r *= 0.9; // jammed: pack tighter
+                    since = 0;
+                }
+                let p = uniform(&mut rng);
+                if inside(metric, p[0], p[1]) && (r == 0.0 || grid.free(p, r)) {
+                    grid.add(p);
+                    points.push(p);
+                    cluster_of.push(0);
+                    since = 0;
+                }
+            }
+        }
+        Pattern::Clustered => {
+            let parents_n = (n / 6).max(1);
+            let parent_spacing = (stand.area_m2 / parents_n as f64).sqrt();
+            let sigma = 0.2 * parent_spacing;
+            let parents: Vec<[f64; 2]> = (0..parents_n)
+                .map(|_| loop {
+                    let p = uniform(&mut rng);
+                    if inside(metric, p[0], p[1]) {
+                        break p;
+                    }
+                })
+                .take(parents_n)
+                .collect();
+            let r = 0.25 * spacing;
+            let mut grid = Grid::new(r.max(spacing * 0.25));
+            let mut tries = 0usize;
+            while points.len() < n && tries < budget {
+                tries += 1;
+                let k = rng.below(parents.len());
+                // Box–Muller.
+                let (u1, u2) = (rng.f64().max(1e-12), rng.f64());
+                let g = (-2.0 * u1.ln()).sqrt();
+                let a = std::f64::consts::TAU * u2;
+                let p = [parents[k][0] + sigma * g * a.cos(), parents[k][1] + sigma * g * a.sin()];
+                if inside(metric, p[0], p[1]) && grid.free(p, r) {
+                    grid.add(p);
+                    points.push(p);
+                    cluster_of.push(k);
+                }
+            }
+        }
+    }
+    // Species: exact counts by largest remainder, in random order (by cluster
+    // where clustered: a cluster is a group of one species).
+    let m = points.len();
+    let mut counts: Vec<usize> = stand.mix.iter().map(|(_, s)| (s * m as f64).floor() as usize).collect();
+    let mut order: Vec<usize> = (0..stand.mix.len()).collect();
+    order.sort_by(|&a, &b| {
+        let frac = |i: usize| stand.mix[i].1 * m as f64 - counts[i] as f64;
+        frac(b).total_cmp(&frac(a))
+    });
+    let mut left = m - counts.iter().sum::<usize>();
+    for &i in order.iter().cycle().take(stand.mix.len() * 2) {
+        if left == 0 {
+            break;
+        }
+        counts[i] += 1;
+        left -= 1;
+    }
+    let mut labels: Vec<usize> = counts.iter().enumerate().flat_map(|(i, &c)| std::iter::repeat_n(i, c)).collect();
+    let mut idx: Vec<usize> = (0..m).collect();
+    if stand.pattern == Pattern::Clustered {
+        // Clusters in a random order, each cluster's stems together.
+        let mut cluster_rank: Vec<u64> =
+            (0..=cluster_of.iter().copied().max().unwrap_or(0)).map(|_| rng.next_u64()).collect();
+        cluster_rank.shrink_to_fit();
+        idx.sort_by_key(|&i| (cluster_rank[cluster_of[i]], i));
+    } else {
+        for i in (1..m).rev() {
+            let j = rng.below(i + 1);
+            idx.swap(i, j);
+        }
+    }
+    // Assign labels along idx (a shuffle of labels is unnecessary: idx is random).
+    let mut species = vec![0usize; m];
+    for (k, &i) in idx.iter().enumerate() {
+        species[i] = labels[k];
+    }
+    labels.clear();
+    // Sizes.
+    let curve = |label: &str, d: f64| -> f64 {
+        match &options.allometry {
+            Some(a) => a.for_label(label).height.metres(d).max(1.3),
+            None => d.sqrt(),
+        }
+    };
+    let scale_b = stand.dbh_cm.map(|d| d / gamma(1.0 + 1.0 / stand.shape));
+    let d_ref = stand.dbh_cm.zip(stand.height).map(|(d, (_, top))| {
+        if top && stand.stems_ha > 100.0 {
+            // The DBH at which the 100 largest stems a hectare begin, and their mean above it (≈ the quantile at half their share).
+            let q = 1.0 - 50.0 / stand.stems_ha;
+            scale_b.unwrap_or(d) * (-(1.0 - q).ln()).powf(1.0 / stand.shape)
+        } else {
+            d
+        }
+    });
+    points
+        .iter()
+        .zip(&species)
+        .map(|(p, &s)| {
+            let label = &stand.mix[s].0;
+            let dbh = scale_b.map(|b| {
+                let u = rng.f64().min(1.0 - 1e-12);
+                (b * (-(1.0 - u).ln()).powf(1.0 / stand.shape))
+                    .clamp(0.3 * stand.dbh_cm.unwrap_or(1.0), 3.0 * stand.dbh_cm.unwrap_or(1.0))
+            });
+            let height = match (stand.height, dbh, d_ref) {
+                // Flattened (exponent 0.6): a stand's height curve is flatter
+                // than the regional height–DBH curves across sizes.
+                (Some((h, _)), Some(d), Some(dr)) => Some(h * (curve(label, d) / curve(label, dr)).powf(0.6)),
+                (Some((h, _)), _, _) => {
+                    let (u1, u2) = (rng.f64().max(1e-12), rng.f64());
+                    let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                    Some(h * (1.0 + 0.08 * g.clamp(-2.5, 2.5)))
+                }
+                _ => None,
+            };
+            Stem { xy: frame.back(*p), species: s, dbh_cm: dbh.map(|d| d as f32), height_m: height.map(|h| h as f32) }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests;
