@@ -37,21 +37,8 @@ pub(crate) struct BakeArgs {
     /// report per stand says what it makes and what was assumed.
     #[arg(long, value_name = "PATH")]
     pub(crate) stands: Option<PathBuf>,
-    /// Use stand field NAME for ROLE (repeatable). Roles: id, species, stems_ha,
-    /// basal_area, height, top_height, dbh, weibull_shape, age, pattern.
-    #[arg(long = "stand-column", value_name = "ROLE=NAME", value_parser = sylva_bake::input::stands::StandRole::parse_mapping)]
-    pub(crate) stand_columns: Vec<(sylva_bake::input::stands::StandRole, String)>,
-    /// Stems a hectare for stands that give neither stems/ha nor basal area.
-    #[arg(long, value_name = "N", default_value_t = 400.0)]
-    pub(crate) stand_density: f64,
-    /// The pattern of stands that name none: regular (managed: evenly spaced),
-    /// clustered (natural regeneration: groups), random.
-    #[arg(long, value_enum, default_value_t = sylva_bake::input::stands::Pattern::Regular)]
-    pub(crate) stand_pattern: sylva_bake::input::stands::Pattern,
-    /// The Weibull shape of stands' DBH distributions where a stand names none
-    /// (3.6: the unimodal distribution of an even-aged stand; lower is wider).
-    #[arg(long, value_name = "C", default_value_t = 3.6)]
-    pub(crate) weibull_shape: f64,
+    #[command(flatten)]
+    pub(crate) stand: super::stands::StandArgs,
     /// The GeoPackage table to read (default: its only features table, or its only
     /// table of points).
     #[arg(long, value_name = "NAME")]
@@ -259,16 +246,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     // The output folder is checked before any long work.
     let placements: &std::path::Path =
         args.placements.as_deref().or(args.stands.as_deref()).context("give --placements or --stands")?;
-    if !(args.stand_density > 0.0 && args.stand_density <= sylva_bake::input::stands::MAX_STEMS_HA) {
-        bail!(
-            "--stand-density {}: stems a hectare, more than 0 and at most {}",
-            args.stand_density,
-            sylva_bake::input::stands::MAX_STEMS_HA
-        );
-    }
-    if !(0.5..20.0).contains(&args.weibull_shape) {
-        bail!("--weibull-shape {}: a shape between 0.5 and 20", args.weibull_shape);
-    }
+    args.stand.check()?;
     let mut inputs: Vec<&std::path::Path> = vec![placements];
     inputs.extend(args.allometry.as_deref());
     inputs.extend(args.species_table.as_deref());
@@ -312,15 +290,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         dbh_unit: args.dbh_unit,
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
         layer: args.layer.clone(),
-        stands: args.stands.as_ref().map(|_| {
-            std::sync::Arc::new(sylva_bake::input::stands::StandOptions {
-                columns: args.stand_columns.clone(),
-                default_stems_ha: args.stand_density,
-                pattern: args.stand_pattern,
-                weibull_shape: args.weibull_shape,
-                allometry: Some(std::sync::Arc::new(allometry.clone())),
-            })
-        }),
+        stands: args.stands.as_ref().map(|_| std::sync::Arc::new(args.stand.options(&allometry))),
     };
     if args.library == "on" && map.default.is_none() {
         library_fill(placements, &read, &allometry, &mut species, &mut map)?;

@@ -8,6 +8,7 @@ mod bench;
 mod demo;
 mod library;
 mod pack;
+mod stands;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -25,6 +26,7 @@ use demo::{demo, DemoArgs};
 use library::{library, LibraryCommand};
 use pack::parse_delimiter;
 use pack::PackArgs;
+use stands::{stands, StandsArgs};
 
 #[derive(Parser)]
 #[command(
@@ -117,6 +119,13 @@ pub(crate) enum Command {
     /// usable as `--model NAME=library:GENUS[:VARIANT]`.
     #[command(subcommand, after_help = "Example:\n  sylva-bake library list")]
     Library(LibraryCommand),
+    /// The trees a stand map makes (as `bake --stands` makes them), written as a
+    /// CSV, with a report per stand: to look at in a GIS before a bake, or to
+    /// compare with an inventory.
+    #[command(
+        after_help = "Example:\n  sylva-bake stands district.gpkg --layer bestaende --out trees.csv\n  sylva-bake bake --stands district.gpkg --layer bestaende --out scene/"
+    )]
+    Stands(StandsArgs),
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
         /// Scene directory or file.
@@ -186,6 +195,7 @@ pub(crate) fn main() {
         Command::Bake(args) => bake(&args),
         Command::Demo(args) => demo(&args),
         Command::Library(command) => library(&command),
+        Command::Stands(args) => stands(&args),
         Command::BenchClusters { model, leaves, tries } => bench_clusters(model.as_deref(), leaves, tries),
         Command::Export3dTiles { scene, out, no_ground, height_offset, season } => {
             let started = Instant::now();

@@ -20,12 +20,12 @@
 //!   trees in random order (regular, random) or by cluster (clustered).
 //! - **DBH**: Weibull with the stand's mean (`b = mean / Γ(1 + 1/c)`, shape
 //!   `c` 3.6 by default — the unimodal distributions of even-aged stands),
-//!   clipped to 0.3–3× the mean.
-//! - **Heights**: the stand's mean height at its mean DBH (or its top height
-//!   at the DBH of its 100 largest stems a hectare), each stem's along its
-//!   genus's height curve (docs/ALLOMETRY.md) through that point, flattened
-//!   (the ratio to the power 0.6: within a stand heights vary less than
-//!   across a region's trees);
+//!   clipped to 1 cm (or 0.3 of a smaller mean) … (3 + 3/c)× the mean.
+//! - **Heights**: each stem's along its genus's height curve
+//!   (docs/ALLOMETRY.md) flattened (to the power 0.6: within a stand heights
+//!   vary less than across a region's trees), scaled so the mean of the
+//!   stand's stems is its mean height (or the mean of its 100 tallest a
+//!   hectare its top height);
 //!   without a DBH ±8 % about the mean; without a height the bake's DBH
 //!   allometry gives it; without both, the default height.
 
@@ -695,39 +695,49 @@ pub fn grow_stand(
         }
     };
     let scale_b = stand.dbh_cm.map(|d| d / gamma(1.0 + 1.0 / stand.shape));
-    let d_ref = stand.dbh_cm.zip(stand.height).map(|(d, (_, top))| {
-        if top && stand.stems_ha > 100.0 {
-            // The DBH at which the 100 largest stems a hectare begin, and their mean above it (≈ the quantile at half their share).
-            let q = 1.0 - 50.0 / stand.stems_ha;
-            scale_b.unwrap_or(d) * (-(1.0 - q).ln()).powf(1.0 / stand.shape)
-        } else {
-            d
-        }
-    });
-    points
+    // Clipped to 1 cm (saplings; or 0.3 of a smaller mean) … (3 + 3/c)× the
+    // mean (a wide, reverse-J distribution keeps its long tail).
+    let (d_lo, d_hi) = stand.dbh_cm.map_or((0.0, 0.0), |d| ((0.3 * d).min(1.0), (3.0 + 3.0 / stand.shape) * d));
+    let mut stems: Vec<Stem> = points
         .iter()
         .zip(&species)
         .map(|(p, &s)| {
             let label = &stand.mix[s].0;
             let dbh = scale_b.map(|b| {
                 let u = rng.f64().min(1.0 - 1e-12);
-                (b * (-(1.0 - u).ln()).powf(1.0 / stand.shape))
-                    .clamp(0.3 * stand.dbh_cm.unwrap_or(1.0), 3.0 * stand.dbh_cm.unwrap_or(1.0))
+                (b * (-(1.0 - u).ln()).powf(1.0 / stand.shape)).clamp(d_lo, d_hi)
             });
-            let height = match (stand.height, dbh, d_ref) {
-                // Flattened (exponent 0.6): a stand's height curve is flatter
-                // than the regional height–DBH curves across sizes.
-                (Some((h, _)), Some(d), Some(dr)) => Some(h * (curve(label, d) / curve(label, dr)).powf(0.6)),
-                (Some((h, _)), _, _) => {
+            // Relative heights: along the genus's curve, flattened (exponent
+            // 0.6: a stand's height curve is flatter than a region's across
+            // sizes); without a DBH, ±8 % (a normal deviate, clipped).
+            let relative = match (stand.height, dbh) {
+                (Some(_), Some(d)) => Some(curve(label, d).powf(0.6)),
+                (Some(_), None) => {
                     let (u1, u2) = (rng.f64().max(1e-12), rng.f64());
                     let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-                    Some(h * (1.0 + 0.08 * g.clamp(-2.5, 2.5)))
+                    Some(1.0 + 0.08 * g.clamp(-2.5, 2.5))
                 }
                 _ => None,
             };
-            Stem { xy: frame.back(*p), species: s, dbh_cm: dbh.map(|d| d as f32), height_m: height.map(|h| h as f32) }
+            Stem { xy: frame.back(*p), species: s, dbh_cm: dbh.map(|d| d as f32), height_m: relative.map(|h| h as f32) }
         })
-        .collect()
+        .collect();
+    // Scaled so the stand's height is what the map says: the mean of all its
+    // stems (a mean height), or of its 100 tallest a hectare (a top height).
+    if let Some((h, top)) = stand.height {
+        let mut rel: Vec<f64> = stems.iter().filter_map(|t| t.height_m.map(f64::from)).collect();
+        let k =
+            if top { ((stand.area_m2 / 1e4 * 100.0).round() as usize).clamp(1, rel.len().max(1)) } else { rel.len() };
+        if k > 0 && !rel.is_empty() {
+            rel.sort_by(|a, b| b.total_cmp(a));
+            let reference = rel[..k].iter().sum::<f64>() / k as f64;
+            let scale = h / reference.max(1e-9);
+            for t in &mut stems {
+                t.height_m = t.height_m.map(|r| (f64::from(r) * scale) as f32);
+            }
+        }
+    }
+    stems
 }
 
 #[cfg(test)]

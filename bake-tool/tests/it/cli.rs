@@ -2154,5 +2154,17 @@ fn stand_polygons_become_trees() {
     let again = dir.join("again");
     bake(&again);
     assert_eq!(baked_bases(&out), baked_bases(&again));
+    // `sylva-bake stands` writes the trees a bake makes, as CSV.
+    let csv = dir.join("trees.csv");
+    run(bin().arg("stands").arg(&path).arg("--out").arg(&csv));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("x,y,species,dbh_cm,height_m,crown_m,stand"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len() as u64, m.counts.trees);
+    assert_eq!(rows.iter().filter(|r| r[6] == "12a").count(), 400);
+    let h12a: Vec<f64> = rows.iter().filter(|r| r[6] == "12a").map(|r| r[4].parse().unwrap()).collect();
+    let mean = h12a.iter().sum::<f64>() / h12a.len() as f64;
+    assert!((mean - 20.0).abs() < 0.05, "12a's mean height is its map's: {mean}");
     std::fs::remove_dir_all(dir).ok();
 }
