@@ -47,11 +47,20 @@ pub fn inspect(path: &Path) -> Result<Value> {
     }
 }
 
-/// A GeoTIFF DEM as `bake --dem` reads it.
+/// A GeoTIFF DEM as `bake --dem` reads it; one that looks like a canopy
+/// height model (heights above ground: −2 … 130 m, a tenth or more of it
+/// under 2 m) also says how many trees `bake --chm` would find in it.
 fn inspect_dem(path: &Path) -> Result<Value> {
     let dem = crate::input::dem::Dem::open(path)?;
     let s = dem.summary();
+    let low = dem.heights.iter().filter(|h| h.is_finite() && **h < 2.0).count();
+    let looks_chm = s.range.is_some_and(|(a, b)| a >= -2.0 && b <= 130.0) && low * 10 >= dem.heights.len();
+    let chm_trees = (looks_chm && u64::from(dem.width) * u64::from(dem.height) <= 25_000_000)
+        .then(|| crate::input::chm::find_trees(&dem, &crate::input::chm::ChmOptions::default()).ok().map(|t| t.len()))
+        .flatten();
     Ok(json!({
+        "looks_like_chm": looks_chm,
+        "chm_trees": chm_trees,
         "kind": "dem",
         "width": dem.width,
         "height": dem.height,
@@ -524,6 +533,14 @@ pub fn to_text(v: &Value) -> String {
                 ),
                 None => "no heights: every pixel is nodata\n".to_string(),
             };
+            if v["looks_like_chm"].as_bool() == Some(true) {
+                out += &match v["chm_trees"].as_u64() {
+                    Some(n) => format!(
+                        "heights above ground: a canopy height model? `bake --chm` finds {n} trees in it (tops ≥ 2 m)\n"
+                    ),
+                    None => "heights above ground: a canopy height model? (too large to count its trees here)\n".into(),
+                };
+            }
         }
         Some("placements") => {
             out += &format!(

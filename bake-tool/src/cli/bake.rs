@@ -25,8 +25,24 @@ pub(crate) struct BakeArgs {
     /// or a GIS layer of points: Shapefile (.shp with its .dbf; the CRS from its .prj),
     /// GeoPackage (.gpkg; --layer picks a table) or FlatGeobuf (.fgb). Fields are
     /// found by the CSV's names (a .dbf's 10-byte names too: species_co).
-    #[arg(long, value_name = "PATH", required_unless_present = "stands", conflicts_with = "stands")]
+    #[arg(long, value_name = "PATH", required_unless_present_any = ["stands", "chm"], conflicts_with_all = ["stands", "chm"])]
     pub(crate) placements: Option<PathBuf>,
+    /// A canopy height model instead of trees (a GeoTIFF of heights above ground,
+    /// e.g. from airborne lidar): each crown found becomes a tree of its height and
+    /// crown width (tops by a local-maximum filter whose window grows with height,
+    /// Popescu & Wynne 2004; crowns by watershed). Trees under the canopy are not
+    /// seen. With --dem the trees stand on it.
+    #[arg(long, value_name = "FILE.tif", conflicts_with = "stands")]
+    pub(crate) chm: Option<PathBuf>,
+    /// The species label of the trees a CHM gives (the library's tree for it).
+    #[arg(long, value_name = "NAME", default_value = "broadleaf")]
+    pub(crate) chm_species: String,
+    /// The lowest tree top in a CHM, metres.
+    #[arg(long, value_name = "M", default_value_t = 2.0)]
+    pub(crate) chm_min_height: f64,
+    /// The CHM's search window, A + B·height metres across (default 1.0,0.12).
+    #[arg(long, value_name = "A,B", default_value = "1.0,0.12")]
+    pub(crate) chm_window: String,
     /// A stand map instead of trees: polygons (GeoJSON, Shapefile, GeoPackage,
     /// FlatGeobuf) whose fields give each stand's species mix (one name, or shares:
     /// `Picea abies:60;Fagus sylvatica:40`, or share_<species> fields), stems/ha (or
@@ -244,8 +260,12 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     let pack_opts = args.pack.options()?;
     let fixed_cell_size = args.pack.cell_size.map(|_| args.pack.cell_size(&[])).transpose()?;
     // The output folder is checked before any long work.
-    let placements: &std::path::Path =
-        args.placements.as_deref().or(args.stands.as_deref()).context("give --placements or --stands")?;
+    let placements: &std::path::Path = args
+        .placements
+        .as_deref()
+        .or(args.stands.as_deref())
+        .or(args.chm.as_deref())
+        .context("give --placements, --stands or --chm")?;
     args.stand.check()?;
     let mut inputs: Vec<&std::path::Path> = vec![placements];
     inputs.extend(args.allometry.as_deref());
@@ -291,6 +311,26 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
         layer: args.layer.clone(),
         stands: args.stands.as_ref().map(|_| std::sync::Arc::new(args.stand.options(&allometry))),
+        chm: match &args.chm {
+            Some(_) => {
+                let (a, b) = args
+                    .chm_window
+                    .split_once(',')
+                    .and_then(|(a, b)| Some((a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?)))
+                    .filter(|(a, b)| (0.0..50.0).contains(a) && (0.0..2.0).contains(b) && a + b > 0.0)
+                    .with_context(|| format!("--chm-window {}: expected A,B (e.g. 1.0,0.12)", args.chm_window))?;
+                if !(0.0..100.0).contains(&args.chm_min_height) {
+                    bail!("--chm-min-height {}: metres, 0–100", args.chm_min_height);
+                }
+                Some(std::sync::Arc::new(sylva_bake::input::chm::ChmOptions {
+                    min_height: args.chm_min_height,
+                    window_a: a,
+                    window_b: b,
+                    species: args.chm_species.clone(),
+                }))
+            }
+            None => None,
+        },
     };
     if args.library == "on" && map.default.is_none() {
         library_fill(placements, &read, &allometry, &mut species, &mut map)?;

@@ -3,6 +3,7 @@
 
 pub mod allometry;
 pub mod attributes;
+pub mod chm;
 pub mod dem;
 pub mod gis;
 pub mod gltf_import;

@@ -2168,3 +2168,71 @@ fn stand_polygons_become_trees() {
     assert!((mean - 20.0).abs() < 0.05, "12a's mean height is its map's: {mean}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// A canopy height model becomes trees (issue 45): a CHM drawn from nine
+/// known crowns (heights 12–28 m) bakes into nine trees at their stems, of
+/// their heights; the log says what was found and what a CHM cannot see.
+#[test]
+fn a_canopy_height_model_becomes_trees() {
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("chm");
+    let crowns: Vec<([f64; 2], f64, f64)> = (0..9)
+        .map(|k| {
+            let (i, j) = (f64::from(k % 3), f64::from(k / 3));
+            let h = 12.0 + 2.0 * f64::from(k);
+            ([500_010.0 + 15.0 * i, 5_299_990.0 - 15.0 * j], h, 0.2 * h)
+        })
+        .collect();
+    let chm = dir.join("chm.tif");
+    write_geotiff_dem(&chm, 100, 0.5, |x, y| {
+        crowns
+            .iter()
+            .filter_map(|([cx, cy], h, r)| {
+                let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() / r;
+                (d <= 1.0).then(|| h * (1.0 - 0.4 * d * d))
+            })
+            .fold(0.0, f64::max)
+    });
+    let out = dir.join("scene");
+    let mut c = bin();
+    c.arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--chm")
+        .arg(&chm)
+        .args([
+            "--chm-species",
+            "oak",
+            "--no-clusters",
+            "--billboard-size",
+            "16",
+            "--texture-size",
+            "16",
+            "--no-terrain",
+        ])
+        .arg("--out")
+        .arg(&out);
+    let o = run(&mut c);
+    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    assert!(log.contains("9 trees found") && log.contains("trees under the canopy are not seen"), "{log}");
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    assert_eq!((m.crs.epsg, m.counts.trees), (32633, 9));
+    let mut bases = baked_bases(&out);
+    bases.sort_by(|a, b| b[1].total_cmp(&a[1]).then(a[0].total_cmp(&b[0])));
+    for ([cx, cy], _, _) in &crowns {
+        assert!(
+            bases.iter().any(|b| (b[0] - cx).abs() < 0.6 && (b[1] - cy).abs() < 0.6),
+            "a tree at {cx},{cy}: {bases:?}"
+        );
+    }
+    // `inspect` tells a CHM from a DEM and counts its trees.
+    let o = run(bin().arg("inspect").arg(&chm));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("a canopy height model? `bake --chm` finds 9 trees"), "{text}");
+    let mut heights = baked_heights(&out);
+    heights.sort_by(f32::total_cmp);
+    for (h, (_, want, _)) in heights.iter().zip(&crowns) {
+        assert!((f64::from(*h) - want).abs() < 0.6, "{h} vs {want}");
+    }
+    std::fs::remove_dir_all(dir).ok();
+}

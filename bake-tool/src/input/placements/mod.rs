@@ -212,6 +212,8 @@ pub struct ReadOptions {
     pub layer: Option<String>,
     /// The file is a stand map whose polygons become trees (`--stands`).
     pub stands: Option<std::sync::Arc<crate::input::stands::StandOptions>>,
+    /// The file is a canopy height model whose crowns become trees (`--chm`).
+    pub chm: Option<std::sync::Arc<crate::input::chm::ChmOptions>>,
 }
 
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
@@ -305,6 +307,9 @@ impl PlacementSource {
         }
         if let Some(stand_options) = &options.stands {
             return Self::open_stands(path, options, stand_options);
+        }
+        if let Some(chm) = &options.chm {
+            return Self::open_chm(path, options, chm);
         }
         match ext.as_str() {
             "csv" | "txt" | "tsv" => {
@@ -405,6 +410,81 @@ impl PlacementSource {
                 path.display()
             ),
         }
+    }
+
+    /// A canopy height model (`--chm`): its trees found once (tops, heights,
+    /// crowns) and kept.
+    fn open_chm(path: &Path, options: &ReadOptions, chm_options: &crate::input::chm::ChmOptions) -> Result<Self> {
+        let chm = crate::input::dem::Dem::open(path).with_context(|| format!("CHM {}", path.display()))?;
+        let started = std::time::Instant::now();
+        let trees =
+            crate::input::chm::find_trees(&chm, chm_options).with_context(|| format!("CHM {}", path.display()))?;
+        let mut report = Report::default();
+        let mut rows = Vec::with_capacity(trees.len());
+        for (i, t) in trees.iter().enumerate() {
+            report.rows += 1;
+            let p = Placement {
+                x: t.xy[0],
+                y: t.xy[1],
+                z: None,
+                height_m: Some(t.height_m),
+                dbh_cm: None,
+                crown_m: Some(t.crown_m),
+                species: Some(chm_options.species.clone()),
+                yaw_deg: None,
+                id: None,
+                id_text: None,
+                attrs: Vec::new(),
+                row: i as u64 + 1,
+            };
+            if let Some(p) = accept(p, CoordKind::Projected, &mut report) {
+                rows.push(p);
+            }
+        }
+        report.kept = rows.len() as u64;
+        let s = chm.summary();
+        let notes = vec![
+            format!(
+                "CHM {} × {} pixels of {:.2} m ({}), heights {}",
+                chm.width,
+                chm.height,
+                chm.dx.abs(),
+                chm.layout,
+                s.range.map_or("none".into(), |(a, b)| format!("{a:.1}–{b:.1} m"))
+            ),
+            format!(
+                "{} trees found (tops of at least {} m, window {} + {}·h m; crowns by watershed) in {:.1} s, each a {:?}; \
+                 trees under the canopy are not seen",
+                rows.len(),
+                chm_options.min_height,
+                chm_options.window_a,
+                chm_options.window_b,
+                started.elapsed().as_secs_f64(),
+                chm_options.species
+            ),
+        ];
+        if chm.epsg.is_none() && !options.projected {
+            bail!("CHM {}: its GeoKeys name no CRS: say which with --input-crs EPSG:xxxx", path.display());
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            delimiter: b',',
+            options: options.clone(),
+            kind: CoordKind::Projected,
+            declared_epsg: chm.epsg,
+            declared_proj4: None,
+            parsed: Some(PlacementSet {
+                kind: CoordKind::Projected,
+                rows,
+                report,
+                declared_epsg: chm.epsg,
+                attribute_names: Vec::new(),
+            }),
+            notes,
+            attribute_names: Vec::new(),
+            gis: None,
+            stands: None,
+        })
     }
 
     /// A stand map (`--stands`): its polygons and fields, and a report of
