@@ -2,7 +2,7 @@
 """A stand map made from a real plot, regenerated, compared with the plot (issue 45).
 
 Summarises the shared SOAP plot (../shared/data/terrain/soap_trees.csv) into the
-attributes a stand map carries (species shares by stems, stems/ha, mean DBH, mean
+attributes a stand map carries (species shares by stems, stems/ha, quadratic mean DBH, mean
 height, a Weibull shape fitted by its coefficient of variation, a pattern by its
 Clark-Evans index), writes that stand ten times side by side under ten ids (ten
 realisations), runs `sylva-bake stands` on it, and compares each realisation with the
@@ -29,6 +29,7 @@ area = w * h
 dbh = [float(r["dbh_cm"]) for r in rows if r["dbh_cm"]]
 hts = [float(r["height_m"]) for r in rows if r["height_m"]]
 mean_d, sd_d = statistics.mean(dbh), statistics.stdev(dbh)
+dg = math.sqrt(statistics.mean(d * d for d in dbh))  # quadratic mean: what stand maps give
 
 def gamma(x):
     return math.gamma(x)
@@ -75,7 +76,7 @@ for r in rows:
 stand = {
     "species": ";".join(f"{s}:{c}" for s, c in species.items()),
     "stems_ha": n / area * 1e4,
-    "mean_dbh": mean_d,
+    "mean_dbh": dg,
     "mean_height": statistics.mean(hts),
     "weibull_shape": shape,
     "pattern": pattern,
@@ -98,6 +99,7 @@ real = {
     "stems_ha": n / area * 1e4,
     "shares": shares,
     "dbh_mean": mean_d,
+    "dbh_quadratic_mean": dg,
     "dbh_quartiles": statistics.quantiles(dbh, n=4),
     "height_mean": statistics.mean(hts),
     "nn_mean": real_nn,
@@ -114,6 +116,7 @@ for k in range(10):
         "stems_ha": len(g) / area * 1e4,
         "shares": {s: sum(1 for t in g if t["species"] == s) / len(g) for s in species},
         "dbh_mean": statistics.mean(d),
+        "dbh_quadratic_mean": math.sqrt(statistics.mean(x * x for x in d)),
         "dbh_quartiles": statistics.quantiles(d, n=4),
         "height_mean": statistics.mean(float(t["height_m"]) for t in g),
         "nn_mean": nn(pts),
@@ -124,6 +127,7 @@ print(json.dumps({"stand": stand, "plot_area_m2": area, "real": real, "generated
     "stems_ha": mean("stems_ha"),
     "shares": {s: statistics.mean(r["shares"][s] for r in results) for s in species},
     "dbh_mean": mean("dbh_mean"),
+    "dbh_quadratic_mean": mean("dbh_quadratic_mean"),
     "dbh_quartiles": [statistics.mean(r["dbh_quartiles"][i] for r in results) for i in range(3)],
     "height_mean": mean("height_mean"),
     "nn_mean": mean("nn_mean"),

@@ -109,7 +109,7 @@ pub(crate) fn stands(args: &StandsArgs) -> Result<()> {
             |s: &str| if s.contains([',', '"']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() };
         writeln!(
             w,
-            "{:.3},{:.3},{},{},{},{},{}",
+            "{},{},{},{},{},{},{}",
             p.x,
             p.y,
             quote(&species),

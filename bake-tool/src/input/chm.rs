@@ -78,6 +78,20 @@ pub fn find_trees(chm: &Dem, options: &ChmOptions) -> Result<Vec<ChmTree>> {
             chm.dy
         );
     }
+    // Heights above ground: a DEM, centimetres or an undeclared nodata would
+    // make windows hundreds of metres wide (and no trees).
+    let mut sample: Vec<f32> =
+        chm.heights.iter().step_by((chm.heights.len() / 100_000).max(1)).copied().filter(|h| h.is_finite()).collect();
+    if !sample.is_empty() {
+        let k = (sample.len() * 99 / 100).min(sample.len() - 1);
+        let p99 = *sample.select_nth_unstable_by(k, f32::total_cmp).1;
+        if p99 > 130.0 {
+            bail!(
+                "1 % of its heights are above {p99:.0} m: not heights above ground in metres (a DEM? centimetres? an \
+                 undeclared nodata value?)"
+            );
+        }
+    }
     let raw = |i: usize| -> f64 {
         let v = f64::from(chm.heights[i]);
         if v.is_finite() {
@@ -179,7 +193,8 @@ pub fn find_trees(chm: &Dem, options: &ChmOptions) -> Result<Vec<ChmTree>> {
             let (r, c) = (i / w, i % w);
             ChmTree {
                 xy: [chm.x0 + c as f64 * chm.dx, chm.y0 + r as f64 * chm.dy],
-                height_m: raw(i) as f32,
+                // The CHM at the top; the smoothed value where it is a hole.
+                height_m: if chm.heights[i].is_finite() { raw(i) as f32 } else { smooth[i] },
                 crown_m: (2.0 * (a as f64 * pixel * pixel / std::f64::consts::PI).sqrt()) as f32,
             }
         })

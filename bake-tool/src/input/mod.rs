@@ -12,3 +12,4 @@ pub mod ortho;
 pub mod placements;
 pub mod reproject;
 pub mod stands;
+pub mod text;

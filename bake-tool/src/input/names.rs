@@ -676,7 +676,7 @@ impl SpeciesTable {
     pub fn parse(bytes: &[u8], source: &str) -> Result<Self> {
         let text = String::from_utf8_lossy(bytes);
         let first = text.lines().next().unwrap_or("");
-        let delimiter = crate::input::placements::detect_delimiter(first.as_bytes());
+        let delimiter = crate::input::text::detect_delimiter(first.as_bytes());
         let mut rdr = csv::ReaderBuilder::new()
             .delimiter(delimiter)
             .trim(csv::Trim::All)

@@ -18,8 +18,9 @@
 //!   uniform (a binomial process).
 //! - **Species**: shares by stems, counts by largest remainder (exact), the
 //!   trees in random order (regular, random) or by cluster (clustered).
-//! - **DBH**: Weibull with the stand's mean (`b = mean / Γ(1 + 1/c)`, shape
-//!   `c` 3.6 by default — the unimodal distributions of even-aged stands),
+//! - **DBH**: Weibull with the stand's quadratic mean DBH `dg` (the stem of
+//!   mean basal area: `b = dg / √Γ(1 + 2/c)`), shape `c` 3.6 by default — the
+//!   unimodal distributions of even-aged stands —
 //!   clipped to 1 cm (or 0.3 of a smaller mean) … (3 + 3/c)× the mean.
 //! - **Heights**: each stem's along its genus's height curve
 //!   (docs/ALLOMETRY.md) flattened (to the power 0.6: within a stand heights
@@ -463,16 +464,27 @@ pub fn read_stand(
             .share_fields
             .iter()
             .filter_map(|(name, i)| {
-                feature.values.get(*i).and_then(Value::as_f64).filter(|s| *s > 0.0).map(|s| (name.clone(), s))
+                feature
+                    .values
+                    .get(*i)
+                    .and_then(Value::as_f64)
+                    .filter(|s| s.is_finite() && *s > 0.0)
+                    .map(|s| (name.clone(), s))
             })
             .collect();
         let total: f64 = shares.iter().map(|s| s.1).sum();
-        mix = shares.into_iter().map(|(n, s)| (n, s / total)).collect();
+        if total.is_finite() && total > 0.0 {
+            mix = shares.into_iter().map(|(n, s)| (n, s / total)).collect();
+        }
     }
     if mix.is_empty() {
         return Err("no species (name a field with --stand-column species=FIELD)".into());
     }
     let dbh_cm = num(StandRole::Dbh).filter(|d| *d < 500.0);
+    let zero = |role| fields.get(feature, role).and_then(Value::as_f64).is_some_and(|v| v == 0.0);
+    if zero(StandRole::StemsHa) || (num(StandRole::StemsHa).is_none() && zero(StandRole::BasalArea)) {
+        return Err("unstocked (0 stems/ha or no basal area)".into());
+    }
     let stems_ha = match (num(StandRole::StemsHa), num(StandRole::BasalArea), dbh_cm) {
         (Some(n), _, _) => n,
         (None, Some(ba), Some(d)) => {
@@ -577,9 +589,10 @@ pub fn grow_stand(
     lon_lat_polygons: Option<&[Vec<Vec<[f64; 2]>>]>,
     options: &StandOptions,
 ) -> Vec<Stem> {
-    let mut rng = Rng::new(hash64(
-        stand.id.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01B3)),
-    ));
+    // Seeded by the id and the stand's area (stands that share an id — a
+    // compartment's subcompartments — still differ).
+    let key = stand.id.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01B3));
+    let mut rng = Rng::new(hash64(key ^ stand.area_m2.to_bits()));
     let expected = stand.stems_ha * stand.area_m2 / 1e4;
     let n = (expected.floor() + f64::from(u8::from(rng.f64() < expected.fract()))) as usize;
     if n == 0 {
@@ -593,7 +606,32 @@ pub fn grow_stand(
         hi = [hi[0].max(p[0]), hi[1].max(p[1])];
     }
     let spacing = (stand.area_m2 / n as f64).sqrt();
-    let uniform = |rng: &mut Rng| [lo[0] + rng.f64() * (hi[0] - lo[0]), lo[1] + rng.f64() * (hi[1] - lo[1])];
+    let _ = (lo, hi);
+    // Candidates: a part chosen by its area, a point in that part's own box
+    // (a multipart stand's parts kilometres apart waste no tries).
+    let parts: Vec<([f64; 2], [f64; 2], f64)> = metric
+        .iter()
+        .map(|p| {
+            let (mut a, mut b) = ([f64::MAX; 2], [f64::MIN; 2]);
+            for q in p.iter().flatten() {
+                a = [a[0].min(q[0]), a[1].min(q[1])];
+                b = [b[0].max(q[0]), b[1].max(q[1])];
+            }
+            (a, b, area(std::slice::from_ref(p)))
+        })
+        .collect();
+    let total: f64 = parts.iter().map(|p| p.2).sum();
+    let uniform = |rng: &mut Rng| {
+        let mut pick = rng.f64() * total;
+        let (a, b, _) = parts
+            .iter()
+            .find(|p| {
+                pick -= p.2;
+                pick <= 0.0
+            })
+            .unwrap_or(&parts[parts.len() - 1]);
+        [a[0] + rng.f64() * (b[0] - a[0]), a[1] + rng.f64() * (b[1] - a[1])]
+    };
     let mut points: Vec<[f64; 2]> = Vec::with_capacity(n);
     let mut cluster_of: Vec<usize> = Vec::with_capacity(n);
     let budget = 60 * n + 10_000;
@@ -604,13 +642,17 @@ pub fn grow_stand(
             let (mut tries, mut since) = (0usize, 0usize);
             while points.len() < n && tries < budget {
                 tries += 1;
+                let p = uniform(&mut rng);
+                if !inside(metric, p[0], p[1]) {
+                    continue;
+                }
+                // Jammed (300 refusals inside the stand in a row): pack tighter.
                 since += 1;
                 if since > 300 {
-                    r *= 0.9; // jammed: pack tighter
+                    r *= 0.9;
                     since = 0;
                 }
-                let p = uniform(&mut rng);
-                if inside(metric, p[0], p[1]) && (r == 0.0 || grid.free(p, r)) {
+                if r == 0.0 || grid.free(p, r) {
                     grid.add(p);
                     points.push(p);
                     cluster_of.push(0);
@@ -622,15 +664,18 @@ pub fn grow_stand(
             let parents_n = (n / 6).max(1);
             let parent_spacing = (stand.area_m2 / parents_n as f64).sqrt();
             let sigma = 0.2 * parent_spacing;
-            let parents: Vec<[f64; 2]> = (0..parents_n)
-                .map(|_| loop {
-                    let p = uniform(&mut rng);
-                    if inside(metric, p[0], p[1]) {
-                        break p;
-                    }
-                })
-                .take(parents_n)
-                .collect();
+            let mut parents: Vec<[f64; 2]> = Vec::with_capacity(parents_n);
+            let mut tries = 0usize;
+            while parents.len() < parents_n && tries < budget {
+                tries += 1;
+                let p = uniform(&mut rng);
+                if inside(metric, p[0], p[1]) {
+                    parents.push(p);
+                }
+            }
+            if parents.is_empty() {
+                return Vec::new();
+            }
             let r = 0.25 * spacing;
             let mut grid = Grid::new(r.max(spacing * 0.25));
             let mut tries = 0usize;
@@ -659,13 +704,9 @@ pub fn grow_stand(
         let frac = |i: usize| stand.mix[i].1 * m as f64 - counts[i] as f64;
         frac(b).total_cmp(&frac(a))
     });
-    let mut left = m - counts.iter().sum::<usize>();
-    for &i in order.iter().cycle().take(stand.mix.len() * 2) {
-        if left == 0 {
-            break;
-        }
+    let left = m.saturating_sub(counts.iter().sum::<usize>());
+    for &i in order.iter().cycle().take(left) {
         counts[i] += 1;
-        left -= 1;
     }
     let mut labels: Vec<usize> = counts.iter().enumerate().flat_map(|(i, &c)| std::iter::repeat_n(i, c)).collect();
     let mut idx: Vec<usize> = (0..m).collect();
@@ -694,7 +735,10 @@ pub fn grow_stand(
             None => d.sqrt(),
         }
     };
-    let scale_b = stand.dbh_cm.map(|d| d / gamma(1.0 + 1.0 / stand.shape));
+    // The map's mean DBH is the quadratic mean (dg: the stem of mean basal
+    // area, as stand tables give it and as basal area ÷ stems implies):
+    // E[D²] = b² Γ(1 + 2/c).
+    let scale_b = stand.dbh_cm.map(|d| d / gamma(1.0 + 2.0 / stand.shape).sqrt());
     // Clipped to 1 cm (saplings; or 0.3 of a smaller mean) … (3 + 3/c)× the
     // mean (a wide, reverse-J distribution keeps its long tail).
     let (d_lo, d_hi) = stand.dbh_cm.map_or((0.0, 0.0), |d| ((0.3 * d).min(1.0), (3.0 + 3.0 / stand.shape) * d));

@@ -90,7 +90,7 @@ pub(super) fn open(path: &Path) -> Result<Layer> {
             }
         })
         .collect();
-    let crs = crate::input::placements::geojson_crs(&v).map(DeclaredCrs::Epsg);
+    let crs = super::geojson_crs(&v).map(DeclaredCrs::Epsg);
     let mut notes = vec![format!("{} features", parsed.len())];
     if let Some(c) = &crs {
         notes.push(format!("CRS {} (crs member)", c.describe()));

@@ -21,7 +21,7 @@ mod geojson;
 mod gpkg;
 mod shp;
 
-pub use crs::{epsg_of_wkt, DeclaredCrs};
+pub use crs::{epsg_of_wkt, geojson_crs, DeclaredCrs};
 pub use fgb::for_each_fgb_feature;
 pub use shp::for_each_shp_feature;
 
@@ -51,7 +51,7 @@ impl Value {
         match self {
             Value::Int(i) => Some(*i as f64),
             Value::Float(f) => Some(*f).filter(|f| f.is_finite()),
-            Value::Text(t) => crate::input::placements::parse_f64(t),
+            Value::Text(t) => crate::input::text::parse_f64(t),
             Value::Null | Value::Bool(_) => None,
         }
     }

@@ -415,30 +415,3 @@ pub fn detect_columns_with(header: &[&str], options: &ReadOptions) -> Result<Col
 pub fn detect_columns(header: &[&str]) -> Result<Columns> {
     detect_columns_with(header, &ReadOptions::default())
 }
-
-pub fn parse_f64(s: &str) -> Option<f64> {
-    let t = s.trim();
-    if t.is_empty() {
-        return None;
-    }
-    t.parse::<f64>().ok()
-}
-
-/// A number of a CSV whose separator is not a comma: `52.37`, or with a
-/// decimal comma as European spreadsheets write it, `52,37` or `1.234,5`.
-pub fn parse_decimal_comma(s: &str) -> Option<f64> {
-    parse_f64(s).or_else(|| {
-        let (int, frac) = s.trim().rsplit_once(',')?;
-        if frac.is_empty() || !frac.bytes().all(|b| b.is_ascii_digit()) {
-            return None;
-        }
-        // Thousands separators: groups of three digits after the first.
-        let mut groups = int.split('.');
-        let first = groups.next()?;
-        let rest: Vec<&str> = groups.collect();
-        if !rest.iter().all(|g| g.len() == 3 && g.bytes().all(|b| b.is_ascii_digit())) {
-            return None;
-        }
-        format!("{first}{}.{frac}", rest.concat()).parse().ok()
-    })
-}

@@ -6,31 +6,6 @@ use anyhow::{anyhow, bail, Result};
 
 use super::*;
 
-/// The field separator of a header line: the most frequent of `,` `;` tab `|`
-/// outside quotes (a comma when none occurs).
-#[must_use]
-pub fn detect_delimiter(header_line: &[u8]) -> u8 {
-    let mut counts = [0usize; 4];
-    let mut quoted = false;
-    for &b in header_line {
-        match b {
-            b'"' => quoted = !quoted,
-            _ if quoted => {}
-            b',' => counts[0] += 1,
-            b';' => counts[1] += 1,
-            b'\t' => counts[2] += 1,
-            b'|' => counts[3] += 1,
-            _ => {}
-        }
-    }
-    let best = (0..4).max_by_key(|&i| (counts[i], usize::from(i == 0))).unwrap_or(0);
-    if counts[best] == 0 {
-        b','
-    } else {
-        [b',', b';', b'\t', b'|'][best]
-    }
-}
-
 /// One CSV field as text: UTF-8, or Windows-1252 where the options allow it.
 /// `None` when the bytes are no UTF-8 and only UTF-8 is accepted.
 pub(super) fn decode_field<'a>(

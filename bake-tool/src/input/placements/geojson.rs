@@ -193,12 +193,3 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
     report.kept = rows.len() as u64;
     Ok(PlacementSet { kind, rows, report, declared_epsg, attribute_names })
 }
-
-/// The EPSG code of a GeoJSON `crs` member (GeoJSON 2008, still written by
-/// GIS exports): `"EPSG:28992"`, `"urn:ogc:def:crs:EPSG::28992"`; CRS84 and
-/// EPSG:4326 are none (the GeoJSON default).
-pub fn geojson_crs(v: &serde_json::Value) -> Option<u32> {
-    let name = v.get("crs")?.get("properties")?.get("name")?.as_str()?;
-    let code = name.rsplit(':').next()?;
-    code.parse().ok().filter(|&c| c != 4326)
-}

@@ -416,6 +416,9 @@ impl PlacementSource {
     /// crowns) and kept.
     fn open_chm(path: &Path, options: &ReadOptions, chm_options: &crate::input::chm::ChmOptions) -> Result<Self> {
         let chm = crate::input::dem::Dem::open(path).with_context(|| format!("CHM {}", path.display()))?;
+        if chm.epsg.is_none() && !options.projected {
+            bail!("CHM {}: its GeoKeys name no CRS: say which with --input-crs EPSG:xxxx", path.display());
+        }
         let started = std::time::Instant::now();
         let trees =
             crate::input::chm::find_trees(&chm, chm_options).with_context(|| format!("CHM {}", path.display()))?;
@@ -463,9 +466,6 @@ impl PlacementSource {
                 chm_options.species
             ),
         ];
-        if chm.epsg.is_none() && !options.projected {
-            bail!("CHM {}: its GeoKeys name no CRS: say which with --input-crs EPSG:xxxx", path.display());
-        }
         Ok(Self {
             path: path.to_path_buf(),
             delimiter: b',',
@@ -507,11 +507,14 @@ impl PlacementSource {
         let (mut stands, mut trees, mut area) = (0u64, 0f64, 0f64);
         let mut skipped: BTreeMap<String, (u64, Vec<u64>)> = BTreeMap::new();
         let mut assumed: BTreeMap<String, u64> = BTreeMap::new();
+        let mut ids: std::collections::HashSet<String> = std::collections::HashSet::new();
+        let mut shared_ids = 0u64;
         layer
             .for_each(&mut |feature| {
                 match read_stand(&feature, &fields, stand_options, lon_lat) {
                     Ok((stand, _)) => {
                         stands += 1;
+                        shared_ids += u64::from(!ids.insert(stand.id.clone()));
                         let n = stand.stems_ha * stand.area_m2 / 1e4;
                         trees += n;
                         area += stand.area_m2;
@@ -562,6 +565,12 @@ impl PlacementSource {
         ));
         for (reason, (n, which)) in &skipped {
             notes.push(format!("{n} stands make no trees: {reason} (e.g. features {which:?})"));
+        }
+        if shared_ids > 0 {
+            notes.push(format!(
+                "{shared_ids} stands share their id with an earlier one: their trees' `stand` attribute does not tell them \
+                 apart (name a unique field with --stand-column id=FIELD)"
+            ));
         }
         for (kind, n) in &assumed {
             notes.push(format!("{n} stands assumed: {kind}"));
@@ -709,12 +718,14 @@ pub(super) fn accept(mut p: Placement, kind: CoordKind, report: &mut Report) -> 
 mod columns;
 mod delimited;
 
+pub use crate::input::text::{detect_delimiter, parse_decimal_comma, parse_f64};
 pub use columns::*;
 pub use delimited::*;
 
 mod geojson;
 mod gis;
-pub use geojson::{geojson_crs, read_geojson};
+pub use crate::input::gis::geojson_crs;
+pub use geojson::read_geojson;
 
 #[cfg(test)]
 mod tests;
