@@ -40,17 +40,19 @@ pub(crate) struct BakeArgs {
     /// The lowest tree top in a CHM, metres.
     #[arg(long, value_name = "M", default_value_t = 2.0)]
     pub(crate) chm_min_height: f64,
-    /// The CHM's search window, A + B·height metres across (default 1.0,0.12).
+    /// The CHM's search window for tree tops: A + B·height metres across.
     #[arg(long, value_name = "A,B", default_value = "1.0,0.12")]
     pub(crate) chm_window: String,
     /// A stand map instead of trees: polygons (GeoJSON, Shapefile, GeoPackage,
     /// FlatGeobuf) whose fields give each stand's species mix (one name, or shares:
     /// `Picea abies:60;Fagus sylvatica:40`, or share_<species> fields), stems/ha (or
-    /// basal area with a mean DBH), mean or top height, mean DBH, and optionally a
-    /// Weibull shape, an age and a pattern (regular, clustered, random). Each stand
+    /// basal area with a mean DBH), mean or top height, the quadratic mean DBH (dg),
+    /// and optionally a Weibull shape, an age and a pattern (regular, clustered,
+    /// random). Each stand
     /// becomes one tree per stem, spread by its pattern, the same on every bake
-    /// (seeded by its id); each tree's `stand` attribute is its stand's id. A
-    /// report per stand says what it makes and what was assumed.
+    /// (seeded by its id); each tree's `stand` attribute is its stand's id. The
+    /// report gives the first stands one line each (trees, what was assumed), then
+    /// counts, and which stands make none and why.
     #[arg(long, value_name = "PATH")]
     pub(crate) stands: Option<PathBuf>,
     #[command(flatten)]
