@@ -31,8 +31,9 @@ pub(crate) struct BakeArgs {
     /// e.g. from airborne lidar): each crown found becomes a tree of its height and
     /// crown width (tops by a local-maximum filter whose window grows with height,
     /// Popescu & Wynne 2004; crowns by watershed). Trees under the canopy are not
-    /// seen. With --dem the trees stand on it.
-    #[arg(long, value_name = "FILE.tif", conflicts_with = "stands")]
+    /// seen. With --dem the trees stand on it. With --stands (in the CHM's CRS) each
+    /// tree's species is drawn by the shares of the stand it stands in.
+    #[arg(long, value_name = "FILE.tif")]
     pub(crate) chm: Option<PathBuf>,
     /// The species label of the trees a CHM gives (the library's tree for it).
     #[arg(long, value_name = "NAME", default_value = "broadleaf")]
@@ -265,11 +266,12 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     let placements: &std::path::Path = args
         .placements
         .as_deref()
-        .or(args.stands.as_deref())
         .or(args.chm.as_deref())
+        .or(args.stands.as_deref())
         .context("give --placements, --stands or --chm")?;
     args.stand.check()?;
     let mut inputs: Vec<&std::path::Path> = vec![placements];
+    inputs.extend(args.stands.as_deref().filter(|s| *s != placements));
     inputs.extend(args.allometry.as_deref());
     inputs.extend(args.species_table.as_deref());
     inputs.extend(args.dems.iter().map(PathBuf::as_path));
@@ -312,7 +314,12 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         dbh_unit: args.dbh_unit,
         attributes: if args.no_attributes { Some(Vec::new()) } else { args.attributes.clone() },
         layer: args.layer.clone(),
-        stands: args.stands.as_ref().map(|_| std::sync::Arc::new(args.stand.options(&allometry))),
+        // With --chm the stands give the CHM's trees their species (below).
+        stands: args
+            .stands
+            .as_ref()
+            .filter(|_| args.chm.is_none())
+            .map(|_| std::sync::Arc::new(args.stand.options(&allometry))),
         chm: match &args.chm {
             Some(_) => {
                 let (a, b) = args
@@ -329,6 +336,10 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
                     window_a: a,
                     window_b: b,
                     species: args.chm_species.clone(),
+                    species_stands: args
+                        .stands
+                        .clone()
+                        .map(|p| (p, std::sync::Arc::new(args.stand.options(&allometry)))),
                 }))
             }
             None => None,

@@ -27,7 +27,7 @@ use std::collections::BinaryHeap;
 use super::dem::Dem;
 
 /// How trees are found.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct ChmOptions {
     /// Lowest tree top, m.
     pub min_height: f64,
@@ -35,13 +35,17 @@ pub struct ChmOptions {
     pub window_a: f64,
     /// The window's growth per metre of height.
     pub window_b: f64,
-    /// The species label of every tree found (the library's tree for it).
+    /// The species label of every tree found (the library's tree for it)
+    /// outside the stands of `species_stands`.
     pub species: String,
+    /// A stand map in the CHM's CRS whose stands give the species of the
+    /// trees found in them (drawn by their shares) and their `stand` attribute.
+    pub species_stands: Option<(std::path::PathBuf, std::sync::Arc<super::stands::StandOptions>)>,
 }
 
 impl Default for ChmOptions {
     fn default() -> Self {
-        Self { min_height: 2.0, window_a: 1.0, window_b: 0.12, species: "broadleaf".into() }
+        Self { min_height: 2.0, window_a: 1.0, window_b: 0.12, species: "broadleaf".into(), species_stands: None }
     }
 }
 

@@ -364,7 +364,8 @@ fn area(polygons: &[Vec<Vec<[f64; 2]>>]) -> f64 {
 }
 
 /// Whether a point lies in the polygons: in an outer ring and in none of its holes.
-fn inside(polygons: &[Vec<Vec<[f64; 2]>>], x: f64, y: f64) -> bool {
+#[must_use]
+pub fn inside(polygons: &[Vec<Vec<[f64; 2]>>], x: f64, y: f64) -> bool {
     polygons.iter().any(|p| {
         p.first().is_some_and(|outer| ring_holds(outer, [x, y])) && !p.iter().skip(1).any(|h| ring_holds(h, [x, y]))
     })

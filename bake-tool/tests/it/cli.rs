@@ -2225,6 +2225,47 @@ fn a_canopy_height_model_becomes_trees() {
             "a tree at {cx},{cy}: {bases:?}"
         );
     }
+    // With a stand map in the CHM's CRS, the trees in a stand take its species
+    // and its id (the top row of crowns stands in stand "A").
+    let stands = dir.join("stands.geojson");
+    std::fs::write(
+        &stands,
+        serde_json::json!({
+            "type": "FeatureCollection",
+            "crs": {"type": "name", "properties": {"name": "EPSG:32633"}},
+            "features": [{"type": "Feature", "properties": {"stand_id": "A", "species": "Quercus robur:70;Fagus sylvatica:30"},
+                "geometry": {"type": "Polygon", "coordinates": [[[500_000.0, 5_299_980.0], [500_050.0, 5_299_980.0],
+                    [500_050.0, 5_300_000.0], [500_000.0, 5_300_000.0], [500_000.0, 5_299_980.0]]]}}]
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let with_stands = dir.join("with-stands");
+    let mut c = bin();
+    c.arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--chm")
+        .arg(&chm)
+        .arg("--stands")
+        .arg(&stands)
+        .args([
+            "--chm-species",
+            "oak",
+            "--no-clusters",
+            "--billboard-size",
+            "16",
+            "--texture-size",
+            "16",
+            "--no-terrain",
+        ])
+        .arg("--out")
+        .arg(&with_stands);
+    let o = run(&mut c);
+    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    assert!(log.contains("3 trees in stands") && log.contains("6 outside every stand"), "{log}");
+    let found = sylva::scene::query::query_dir(&with_stands, &serde_json::json!({"stand": "A"}), usize::MAX).unwrap();
+    assert_eq!(found.ids.len(), 3);
     // `inspect` tells a CHM from a DEM and counts its trees.
     let o = run(bin().arg("inspect").arg(&chm));
     let text = String::from_utf8_lossy(&o.stdout);

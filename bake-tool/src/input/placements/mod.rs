@@ -424,8 +424,43 @@ impl PlacementSource {
             crate::input::chm::find_trees(&chm, chm_options).with_context(|| format!("CHM {}", path.display()))?;
         let mut report = Report::default();
         let mut rows = Vec::with_capacity(trees.len());
+        let stands = match &chm_options.species_stands {
+            Some((stand_path, stand_options)) => Some(Self::species_stands(stand_path, stand_options, chm.epsg)?),
+            None => None,
+        };
+        let (mut in_stands, mut outside) = (0u64, 0u64);
         for (i, t) in trees.iter().enumerate() {
             report.rows += 1;
+            // The stand a tree stands in gives its species, drawn by the
+            // stand's shares from the tree's position (the same on every bake).
+            let stand = stands.as_ref().and_then(|s| {
+                s.iter().find(|(_, polygons, lo, hi)| {
+                    (lo[0]..=hi[0]).contains(&t.xy[0])
+                        && (lo[1]..=hi[1]).contains(&t.xy[1])
+                        && crate::input::stands::inside(polygons, t.xy[0], t.xy[1])
+                })
+            });
+            let species = match stand {
+                Some((stand, _, _, _)) => {
+                    in_stands += 1;
+                    let u = (crate::rng::hash64(t.xy[0].to_bits() ^ t.xy[1].to_bits().rotate_left(17)) >> 11) as f64
+                        / (1u64 << 53) as f64;
+                    let mut acc = 0.0;
+                    stand
+                        .mix
+                        .iter()
+                        .find(|(_, share)| {
+                            acc += share;
+                            u < acc
+                        })
+                        .or(stand.mix.last())
+                        .map_or(chm_options.species.clone(), |(name, _)| name.clone())
+                }
+                None => {
+                    outside += 1;
+                    chm_options.species.clone()
+                }
+            };
             let p = Placement {
                 x: t.xy[0],
                 y: t.xy[1],
@@ -433,11 +468,11 @@ impl PlacementSource {
                 height_m: Some(t.height_m),
                 dbh_cm: None,
                 crown_m: Some(t.crown_m),
-                species: Some(chm_options.species.clone()),
+                species: Some(species),
                 yaw_deg: None,
                 id: None,
                 id_text: None,
-                attrs: Vec::new(),
+                attrs: if stands.is_some() { vec![stand.map(|s| s.0.id.clone())] } else { Vec::new() },
                 row: i as u64 + 1,
             };
             if let Some(p) = accept(p, CoordKind::Projected, &mut report) {
@@ -446,7 +481,7 @@ impl PlacementSource {
         }
         report.kept = rows.len() as u64;
         let s = chm.summary();
-        let notes = vec![
+        let mut notes = vec![
             format!(
                 "CHM {} × {} pixels of {:.2} m ({}), heights {}",
                 chm.width,
@@ -466,6 +501,13 @@ impl PlacementSource {
                 chm_options.species
             ),
         ];
+        if stands.is_some() {
+            notes.push(format!(
+                "{in_stands} trees in stands (species drawn by each stand's shares), {outside} outside every stand ({:?})",
+                chm_options.species
+            ));
+        }
+        let attribute_names = if stands.is_some() { vec!["stand".to_string()] } else { Vec::new() };
         Ok(Self {
             path: path.to_path_buf(),
             delimiter: b',',
@@ -478,13 +520,50 @@ impl PlacementSource {
                 rows,
                 report,
                 declared_epsg: chm.epsg,
-                attribute_names: Vec::new(),
+                attribute_names: attribute_names.clone(),
             }),
             notes,
-            attribute_names: Vec::new(),
+            attribute_names,
             gis: None,
             stands: None,
         })
+    }
+
+    /// The stands of a stand map in a CHM's CRS (`--chm` with `--stands`):
+    /// each stand, its polygons and their box.
+    #[allow(clippy::type_complexity)]
+    fn species_stands(
+        path: &Path,
+        stand_options: &crate::input::stands::StandOptions,
+        chm_epsg: Option<u32>,
+    ) -> Result<Vec<(crate::input::stands::Stand, crate::input::gis::Polygons, [f64; 2], [f64; 2])>> {
+        use crate::input::gis::{DeclaredCrs, Geometry, Layer, Wanted};
+        let context = || format!("stands {} (the CHM's species)", path.display());
+        let layer = Layer::open(path, None, Wanted::Polygons).with_context(context)?;
+        match (&layer.crs, chm_epsg) {
+            (Some(DeclaredCrs::Epsg(a)), Some(b)) if *a != b => {
+                bail!("stands {}: in EPSG:{a}, the CHM in EPSG:{b}: give both in one CRS", path.display())
+            }
+            _ => {}
+        }
+        let fields = crate::input::stands::StandFields::find(&layer, stand_options).with_context(context)?;
+        let mut out = Vec::new();
+        layer
+            .for_each(&mut |feature| {
+                if let (Ok((stand, _)), Geometry::Polygons(p)) =
+                    (crate::input::stands::read_stand(&feature, &fields, stand_options, false), &feature.geometry)
+                {
+                    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+                    for q in p.iter().flatten().flatten() {
+                        lo = [lo[0].min(q[0]), lo[1].min(q[1])];
+                        hi = [hi[0].max(q[0]), hi[1].max(q[1])];
+                    }
+                    out.push((stand, p.clone(), lo, hi));
+                }
+                Ok(())
+            })
+            .with_context(context)?;
+        Ok(out)
     }
 
     /// A stand map (`--stands`): its polygons and fields, and a report of
