@@ -523,28 +523,40 @@ fn library_fill(
     let mut labels: std::collections::BTreeMap<String, u64> = std::collections::BTreeMap::new();
     let mut leaf_types: std::collections::BTreeMap<String, String> = std::collections::BTreeMap::new();
     let (mut unmapped, mut beyond) = (0u64, 0u64);
-    let mut visit = |p: sylva_bake::input::placements::Placement| {
-        let label = p.species.as_deref().unwrap_or("").trim();
+    // A label's trees (`n` of them), with its leaf type if a column gives one.
+    let mut count = |label: &str, leaf: Option<&str>, n: u64| {
+        let label = label.trim();
         if map.of(label).is_none() {
-            if let Some(n) = labels.get_mut(label) {
-                *n += 1;
-                unmapped += 1;
+            if let Some(c) = labels.get_mut(label) {
+                *c += n;
+                unmapped += n;
             } else if labels.len() < MAX_LABELS {
-                labels.insert(label.to_string(), 1);
-                unmapped += 1;
+                labels.insert(label.to_string(), n);
+                unmapped += n;
             } else {
-                beyond += 1;
-                return Ok(());
+                beyond += n;
+                return;
             }
-            if let Some(Some(t)) = leaf_column.and_then(|c| p.attrs.get(c)) {
-                if !t.trim().is_empty() && !leaf_types.contains_key(label) {
-                    leaf_types.insert(label.to_string(), t.trim().to_string());
+            if let Some(t) = leaf.map(str::trim).filter(|t| !t.is_empty()) {
+                if !leaf_types.contains_key(label) {
+                    leaf_types.insert(label.to_string(), t.to_string());
                 }
             }
         }
+    };
+    let mut visit = |p: sylva_bake::input::placements::Placement| {
+        let leaf = leaf_column.and_then(|c| p.attrs.get(c)).and_then(Option::as_deref);
+        count(p.species.as_deref().unwrap_or(""), leaf, 1);
         Ok(())
     };
-    if leaf_column.is_some() {
+    if !source.stand_plans().is_empty() {
+        // A stand map: its mixes name every label (no tree grown).
+        for plan in source.stand_plans() {
+            for (label, share) in &plan.mix {
+                count(label, None, (plan.expected * share).round().max(1.0) as u64);
+            }
+        }
+    } else if leaf_column.is_some() {
         source.for_each_with_attributes(&mut visit)?;
     } else {
         source.for_each(&mut visit)?;

@@ -27,6 +27,13 @@ enum Codes {
     U8(Vec<u8>),
     U16(Vec<u16>),
     U32(Vec<u32>),
+    /// One code over each run of rows (a stand map's stands): `starts` rising,
+    /// run `k` the rows `starts[k]..=ends[k]` (memory: a stand's, not a tree's).
+    Runs {
+        starts: Vec<u64>,
+        ends: Vec<u64>,
+        codes: Vec<u32>,
+    },
 }
 
 impl Codes {
@@ -44,6 +51,7 @@ impl Codes {
             Self::U8(v) => v.get_mut(row).map(|c| *c = code as u8),
             Self::U16(v) => v.get_mut(row).map(|c| *c = code as u16),
             Self::U32(v) => v.get_mut(row).map(|c| *c = code),
+            Self::Runs { .. } => None,
         };
     }
 
@@ -52,6 +60,10 @@ impl Codes {
             Self::U8(v) => v.get(row).map(|&c| u32::from(c)),
             Self::U16(v) => v.get(row).map(|&c| u32::from(c)),
             Self::U32(v) => v.get(row).copied(),
+            Self::Runs { starts, ends, codes } => {
+                let k = starts.partition_point(|&s| s <= row as u64).checked_sub(1)?;
+                (row as u64 <= ends[k]).then(|| codes[k])
+            }
         }
     }
 }
@@ -195,6 +207,14 @@ impl AttributeTable {
         if names.is_empty() {
             return Ok(None);
         }
+        let plans = source.stand_plans();
+        if !plans.is_empty() {
+            let rows: u64 = plans.last().map_or(0, |p| p.first_row + p.cap);
+            if rows >= u64::from(u32::MAX) {
+                bail!("{rows} rows: per-tree attributes hold up to {} rows; bake with --no-attributes", u32::MAX - 1);
+            }
+            return Ok(Self::from_stands(plans, log));
+        }
         let decimal_comma = source.decimal_comma();
         let mut seen: Vec<Seen> = names.iter().map(|_| Seen::new()).collect();
         let mut rows = 0u64;
@@ -248,22 +268,42 @@ impl AttributeTable {
                 if is_no_value(text) {
                     continue;
                 }
-                let code = match column.kind {
-                    AttributeType::Category => column.code_of_category(text),
-                    AttributeType::Date => {
-                        parse_date(text).map_or(null_code(column.width), |d| column.code_of_number(d as f64))
-                    }
-                    AttributeType::Integer | AttributeType::Number => {
-                        parse_number(text, decimal_comma).map_or(null_code(column.width), |v| column.code_of_number(v))
-                    }
-                };
-                codes.set(row, code);
+                codes.set(row, code_of(column, text, decimal_comma));
             }
             Ok(())
         })?;
         let bytes: usize = schema.columns.iter().map(|c| usize::from(c.width)).sum();
         log(&format!("attributes: {} columns, {bytes} bytes per tree", schema.columns.len()));
         Ok(Some(Self { schema, codes }))
+    }
+
+    /// The `stand` attribute of a stand map's trees: each stand's id over
+    /// its rows (no tree grown; memory per stand). `None` when the ids make
+    /// no column (logged).
+    #[must_use]
+    pub fn from_stands(plans: &[crate::input::stands::StandPlan], log: &dyn Fn(&str)) -> Option<Self> {
+        let mut seen = Seen::new();
+        for plan in plans {
+            seen.add(&plan.id, false);
+        }
+        let mut column = match seen.column("stand") {
+            Ok(c) => c,
+            Err(why) => {
+                log(&format!("  attribute \"stand\" left out: {why}"));
+                return None;
+            }
+        };
+        column.count = plans.iter().map(|p| p.expected).sum::<f64>().round() as u64;
+        log(&format!("  attribute \"stand\": {} (the stand of each tree)", describe(&column)));
+        let codes = Codes::Runs {
+            starts: plans.iter().map(|p| p.first_row + 1).collect(),
+            ends: plans.iter().map(|p| p.first_row + p.cap).collect(),
+            codes: plans.iter().map(|p| code_of(&column, &p.id, false)).collect(),
+        };
+        let schema = AttributeSchema { columns: vec![column] };
+        schema.validate().ok()?;
+        log(&format!("attributes: 1 column, {} bytes per tree", schema.columns[0].width));
+        Some(Self { schema, codes: vec![codes] })
     }
 
     /// The codes of the trees of input rows `rows` (0: no row, no values).
@@ -281,6 +321,17 @@ impl AttributeTable {
                     rows.iter().map(|&r| if r == 0 { null } else { codes.get(r as usize).unwrap_or(null) }).collect()
                 })
                 .collect(),
+        }
+    }
+}
+
+/// The code of `text` in `column` (its null code when it is no value of the column's kind).
+fn code_of(column: &AttributeColumn, text: &str, decimal_comma: bool) -> u32 {
+    match column.kind {
+        AttributeType::Category => column.code_of_category(text),
+        AttributeType::Date => parse_date(text).map_or(null_code(column.width), |d| column.code_of_number(d as f64)),
+        AttributeType::Integer | AttributeType::Number => {
+            parse_number(text, decimal_comma).map_or(null_code(column.width), |v| column.code_of_number(v))
         }
     }
 }

@@ -536,6 +536,89 @@ pub fn read_stand(
     Ok((Stand { id, mix, stems_ha, height, dbh_cm, shape, pattern, assumed, area_m2 }, metric))
 }
 
+/// What a stand will make, known when the map is opened without making a
+/// tree: the rows its stems take, its box, and what the bake's cheap passes
+/// stand in for its trees with (the sample, the density, the ground's cover,
+/// the per-tree attribute). A sharded bake grows only the stands whose box
+/// touches one of its tiles; every pass numbers a stand's stems from
+/// `first_row + 1`, so every shard and every pass agree on each tree's row.
+#[derive(Debug, Clone)]
+pub struct StandPlan {
+    /// The row before the stand's first stem.
+    pub first_row: u64,
+    /// Most stems it makes (its expected count rounded up; a jammed pattern makes fewer).
+    pub cap: u64,
+    /// Its expected stems (stems/ha × area).
+    pub expected: f64,
+    /// Its polygons' box in the layer's coordinates: min x, min y, max x, max y.
+    pub bbox: [f64; 4],
+    /// Area, m².
+    pub area_m2: f64,
+    /// Its id (the `stand` attribute).
+    pub id: String,
+    /// Species and their shares of the stems.
+    pub mix: Vec<(String, f64)>,
+    /// Mean (or top) height, m, if the map gives one.
+    pub height_m: Option<f32>,
+    /// Quadratic mean DBH, cm, if the map gives one.
+    pub dbh_cm: Option<f32>,
+}
+
+impl StandPlan {
+    /// The plan of `stand` (read from polygons in the layer's coordinates),
+    /// its rows after `first_row`.
+    #[must_use]
+    pub fn new(stand: &Stand, polygons: &[Vec<Vec<[f64; 2]>>], first_row: u64) -> Self {
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in polygons.iter().flatten().flatten() {
+            lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+            hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+        }
+        let expected = stand.stems_ha * stand.area_m2 / 1e4;
+        Self {
+            first_row,
+            cap: expected.ceil() as u64,
+            expected,
+            bbox: [lo[0], lo[1], hi[0], hi[1]],
+            area_m2: stand.area_m2,
+            id: stand.id.clone(),
+            mix: stand.mix.clone(),
+            height_m: stand.height.map(|(h, _)| h as f32),
+            dbh_cm: stand.dbh_cm.map(|d| d as f32),
+        }
+    }
+
+    /// `count` points spread uniformly over the stand's polygons (in the
+    /// layer's coordinates), each with a species drawn by the shares: the
+    /// stand's trees as the cheap passes see them (the same on every call).
+    #[must_use]
+    pub fn preview(&self, polygons: &[Vec<Vec<[f64; 2]>>], count: usize) -> Vec<([f64; 2], usize)> {
+        let mut rng = Rng::new(hash64(self.first_row ^ 0x5EED_0F57_A4D0_0001));
+        let [x0, y0, x1, y1] = self.bbox;
+        let mut out = Vec::with_capacity(count);
+        // Rejection within the box; bounded for slivers (a stand that is
+        // mostly box-corner gets fewer points, not an endless loop).
+        let mut tries = 0usize;
+        while out.len() < count && tries < 50 * count + 1_000 {
+            tries += 1;
+            let (x, y) = (x0 + rng.f64() * (x1 - x0), y0 + rng.f64() * (y1 - y0));
+            if inside(polygons, x, y) {
+                let mut pick = rng.f64();
+                let species = self
+                    .mix
+                    .iter()
+                    .position(|(_, share)| {
+                        pick -= share;
+                        pick <= 0.0
+                    })
+                    .unwrap_or(self.mix.len().saturating_sub(1));
+                out.push(([x, y], species));
+            }
+        }
+        out
+    }
+}
+
 /// One generated stem.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Stem {

@@ -2169,6 +2169,84 @@ fn stand_polygons_become_trees() {
     std::fs::remove_dir_all(dir).ok();
 }
 
+/// A stand map bakes in shards (issue 45): each shard grows only the stands
+/// whose box touches one of its tiles, yet the shards merge byte-identical
+/// to one bake (rows, ground, cover and the `stand` attribute agree without
+/// growing the others' stands), bucketed or not.
+#[test]
+fn a_stand_map_bakes_in_shards_that_grow_only_their_own_stands() {
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("stand-shards");
+    // 24 stands of about a hectare in lon/lat, 300 m apart, two patterns.
+    let (lon0, lat0) = (8.2, 47.3);
+    let (dlon, dlat) = (100.0 / 75_500.0, 100.0 / 111_200.0);
+    let features: Vec<serde_json::Value> = (0..24)
+        .map(|k| {
+            let (x, y) = (lon0 + f64::from(k % 6) * 3.0 * dlon, lat0 + f64::from(k / 6) * 3.0 * dlat);
+            let ring = serde_json::json!([[x, y], [x + dlon, y], [x + dlon, y + dlat], [x, y + dlat], [x, y]]);
+            serde_json::json!({"type": "Feature",
+                "properties": {"stand_id": format!("S{k:02}"), "species": "oak", "stems_ha": 150 + 10 * k,
+                               "mean_height": 12 + k % 9, "pattern": if k % 2 == 0 { "regular" } else { "clustered" }},
+                "geometry": {"type": "Polygon", "coordinates": [ring]}})
+        })
+        .collect();
+    let path = dir.join("stands.geojson");
+    std::fs::write(&path, serde_json::json!({"type": "FeatureCollection", "features": features}).to_string()).unwrap();
+    let bake = |out: &str, shard: Option<(u32, u32)>, buckets: bool| -> String {
+        let mut c = bin();
+        c.arg("bake")
+            .arg("--model")
+            .arg(format!("oak={}", model.display()))
+            .arg("--stands")
+            .arg(&path)
+            .args(["--no-clusters", "--billboard-size", "16", "--texture-size", "16", "--cell-size", "32"])
+            .arg("--out")
+            .arg(dir.join(out));
+        if buckets {
+            c.args(["--bucket-trees", "700"]);
+        }
+        if let Some((i, n)) = shard {
+            c.arg("--shard").arg(format!("{i}/{n}"));
+        }
+        let o = run(&mut c);
+        String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout)
+    };
+    let grown = |log: &str| -> u32 {
+        let at = log.find("stands: ").and_then(|i| log[i..].find(" of 24 grown").map(|j| i + j)).expect(log);
+        log[log[..at].rfind(' ').unwrap() + 1..at].parse().unwrap()
+    };
+    for buckets in [false, true] {
+        let log = bake("single", None, buckets);
+        assert_eq!(grown(&log), 24, "{log}");
+        let single = snapshot(&dir.join("single"));
+        assert!(single.iter().any(|(f, _)| f.ends_with(".terr")), "a fitted ground is baked");
+        let n = 3;
+        let mut total = 0;
+        for i in 0..n {
+            let log = bake(&format!("part-{i}"), Some((i, n)), buckets);
+            let k = grown(&log);
+            assert!(k < 24, "shard {i} grows only the stands on its tiles: {k} of 24\n{log}");
+            total += k;
+        }
+        assert!(total >= 24, "every stand is grown by a shard: {total}");
+        let parts: Vec<PathBuf> = (0..n).map(|i| dir.join(format!("part-{i}"))).collect();
+        let merged = dir.join("merged");
+        run(bin().arg("merge").args(&parts).arg("--out").arg(&merged));
+        let got = snapshot(&merged);
+        let differ: Vec<&String> = single.iter().zip(&got).filter(|(a, b)| a != b).map(|((name, _), _)| name).collect();
+        assert!(
+            single.len() == got.len() && differ.is_empty(),
+            "buckets {buckets}: {} vs {} files; differ: {differ:?}",
+            single.len(),
+            got.len()
+        );
+        for p in parts.iter().chain([&merged, &dir.join("single")]) {
+            std::fs::remove_dir_all(p).unwrap();
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// A canopy height model becomes trees (issue 45): a CHM drawn from nine
 /// known crowns (heights 12–28 m) bakes into nine trees at their stems, of
 /// their heights; the log says what was found and what a CHM cannot see.

@@ -263,8 +263,14 @@ pub fn place_trees(
         log(&format!("placements: {note}"));
     }
     let started = Instant::now();
-    log("pass 1/3: sampling placements");
-    let mut sample = sample_pass(&source)?;
+    let stands = !source.stand_plans().is_empty();
+    let mut sample = if stands {
+        log("pass 1/3: sampling the stands (points spread over them; no tree grown)");
+        sample_stands(&source)?
+    } else {
+        log("pass 1/3: sampling placements");
+        sample_pass(&source)?
+    };
     log(&format!(
         "  {} rows read, {} usable ({:.1} s){}",
         sample.report.rows,
@@ -398,7 +404,11 @@ pub fn place_trees(
         Some(c) => c,
         None => {
             log("pass 2/3: tree density for the cell size");
-            density_pass(&source, &to_tree)?
+            if stands {
+                density_stands(&source, &to_tree)?
+            } else {
+                density_pass(&source, &to_tree)?
+            }
         }
     };
     if ground.is_none() && opts.fit_ground {
@@ -421,8 +431,25 @@ pub fn place_trees(
         let r = if w > 0.0 { 0.5 * w * t.aspect } else { 0.2 * h };
         f64::from(r * t.scale)
     };
+    // A sharded bake grows the stands whose box touches one of its tiles.
+    let grown = std::cell::Cell::new(0u64);
+    let keep = |plan: &crate::input::stands::StandPlan| {
+        let keep = opts
+            .shard
+            .is_none_or(|(i, n)| stand_in_shard(plan, &reproject, origin, cell_size_m, opts.tile_cells, i, n));
+        grown.set(grown.get() + u64::from(keep));
+        keep
+    };
     let Pass3 { trees, summary, outside, fit, canopy } =
-        tree_pass(opts, &source, &sample, cell_size_m, &to_tree, &crown_radius, out, log)?;
+        tree_pass(opts, &source, &sample, cell_size_m, &to_tree, &crown_radius, &keep, out, log)?;
+    if stands {
+        log(&format!(
+            "stands: {} of {} grown{}",
+            grown.get(),
+            source.stand_plans().len(),
+            opts.shard.map_or(String::new(), |(i, n)| format!(" (those touching shard {i}/{n}'s tiles)"))
+        ));
+    }
     if outside.trees > 0 && opts.outside_dem == OutsideDem::Error {
         let b = outside.bounds;
         bail!(
@@ -440,7 +467,11 @@ pub fn place_trees(
         );
     }
     log_summary(&summary, species, log);
-    log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
+    if stands {
+        log(&format!("grew the stands once in {:.1} s", started.elapsed().as_secs_f64()));
+    } else {
+        log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
+    }
     // The terrain: the trees' extent (outliers left out) and a margin of a
     // quarter of it (at least 500 m: the hills around a plot) around, within the DEMs.
     let ground = ground.map(|g| {
@@ -458,7 +489,11 @@ pub fn place_trees(
         None
     } else {
         let started = Instant::now();
-        log("attributes: typing and coding the other columns (2 passes)");
+        log(if stands {
+            "attributes: each tree's stand (from the stand map, no tree grown)"
+        } else {
+            "attributes: typing and coding the other columns (2 passes)"
+        });
         let table = crate::input::attributes::AttributeTable::build(&source, log)?;
         log(&format!("  ({:.1} s)", started.elapsed().as_secs_f64()));
         table
@@ -471,6 +506,38 @@ pub fn place_trees(
         None
     };
     Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy, attributes, text_ids })
+}
+
+/// Whether a stand's box (its corners and edge midpoints projected, a metre
+/// around) touches a tile of shard `index` of `count`; a box that cannot be
+/// projected, or spans over a million tiles, is kept.
+fn stand_in_shard(
+    plan: &crate::input::stands::StandPlan,
+    reproject: &Reprojector,
+    origin: DVec3,
+    cell_size_m: u32,
+    tile_cells: u32,
+    index: u32,
+    count: u32,
+) -> bool {
+    let [x0, y0, x1, y1] = plan.bbox;
+    let (xm, ym) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1), (xm, y0), (xm, y1), (x0, ym), (x1, ym)] {
+        let Ok((x, y)) = reproject.apply(x, y) else { return true };
+        lo = [lo[0].min(x), lo[1].min(y)];
+        hi = [hi[0].max(x), hi[1].max(y)];
+    }
+    let tile = |x: f64, y: f64| {
+        crate::bake::batching::tile_of(DVec3::new(x - origin.x, y - origin.y, 0.0), cell_size_m, tile_cells)
+    };
+    // A metre and a thousandth around: a lon/lat box's edges bow a little once projected.
+    let m = 1.0 + 1e-3 * (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    let ((tx0, ty0), (tx1, ty1)) = (tile(lo[0] - m, lo[1] - m), tile(hi[0] + m, hi[1] + m));
+    if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > 1_000_000 {
+        return true;
+    }
+    (ty0..=ty1).any(|ty| (tx0..=tx1).any(|tx| crate::bake::batching::shard_of_tile(tx, ty, count) == index))
 }
 
 /// A usable row as a tree and what it said, or why not.

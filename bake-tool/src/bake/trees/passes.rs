@@ -26,6 +26,20 @@ pub(super) fn density_pass(source: &PlacementSource, to_tree: &TreeOf<'_>) -> Re
     Ok(batching::cell_size_for(trees, cells.len() as u64, 500.0))
 }
 
+/// Pass 2 of a stand map: the cells its stands cover (points 32 m apart on
+/// average, no tree grown) and their expected stems.
+pub(super) fn density_stands(source: &PlacementSource, to_tree: &TreeOf<'_>) -> Result<u32> {
+    let mut cells = HashSet::new();
+    source.for_each_preview(0.0, 1.0 / 1024.0, &mut |p| {
+        if let Ok((t, _)) = to_tree(&p) {
+            cells.insert(batching::cell64(t.pos));
+        }
+        Ok(())
+    })?;
+    let trees: f64 = source.stand_plans().iter().map(|p| p.expected).sum();
+    Ok(batching::cell_size_for(trees.round() as u64, cells.len().max(1) as u64, 500.0))
+}
+
 /// Pass 3: the trees, in memory or partitioned by tile into bucket files; the
 /// report of every row skipped and why, and the summary per species label.
 #[allow(clippy::too_many_arguments)] // the pass's inputs, each used once
@@ -36,6 +50,7 @@ pub(super) fn tree_pass(
     cell_size_m: u32,
     to_tree: &TreeOf<'_>,
     crown_radius: &dyn Fn(&SceneTree) -> f64,
+    keep: &dyn Fn(&crate::input::stands::StandPlan) -> bool,
     out: &OutDir,
     log: &dyn Fn(&str),
 ) -> Result<Pass3> {
@@ -98,6 +113,23 @@ pub(super) fn tree_pass(
         }
         canopy.add(t.pos.x, t.pos.y, crown_radius(t));
     };
+    // A stand map's ground and cover come from every stand's trees as uniform
+    // points (as many as its stems, none grown), so a shard that grows only
+    // its own stands agrees on them.
+    let stands = !source.stand_plans().is_empty();
+    if stands {
+        source.for_each_preview(1.0, 0.0, &mut |p| {
+            if let Ok((t, _)) = to_tree(&p) {
+                fit_add(&t);
+            }
+            Ok(())
+        })?;
+    }
+    let mut fit_add = |t: &SceneTree| {
+        if !stands {
+            fit_add(t);
+        }
+    };
     let mut skip = |p: &Placement, why: &str| match why {
         OUTSIDE_DEM => {
             outside.trees += 1;
@@ -120,7 +152,7 @@ pub(super) fn tree_pass(
     let (mut report, trees) = if buckets > 1 {
         let dir = out.scratch("buckets");
         let mut writer = BucketWriter::new(&dir, buckets as u32, cell_size_m, opts.tile_cells)?;
-        let report = source.for_each(&mut |p| {
+        let report = source.for_each_in(keep, &mut |p| {
             let placed = to_tree(&p);
             if let Ok((t, _)) = &placed {
                 fit_add(t);
@@ -143,7 +175,7 @@ pub(super) fn tree_pass(
         (report, writer.finish()?)
     } else {
         let mut trees = Vec::with_capacity(sample.report.kept as usize);
-        let report = source.for_each(&mut |p| {
+        let report = source.for_each_in(keep, &mut |p| {
             match to_tree(&p) {
                 Ok((t, f)) => {
                     fit_add(&t);

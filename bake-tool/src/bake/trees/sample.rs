@@ -56,6 +56,23 @@ pub(super) fn sample_pass(source: &PlacementSource) -> Result<Sample> {
     Ok(Sample { rows, seen, duplicates, report, ground_region: None, canopy_region: [0.0; 4] })
 }
 
+/// Pass 1 of a stand map: its stands' trees as uniform points (up to
+/// [`SAMPLE_ROWS`] in all, no tree grown); the counts are the stands' expected stems.
+pub(super) fn sample_stands(source: &PlacementSource) -> Result<Sample> {
+    let total: f64 = source.stand_plans().iter().map(|p| p.expected).sum();
+    let rate = (SAMPLE_ROWS as f64 / total.max(1.0)).min(1.0);
+    let mut rows: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
+    source.for_each_preview(rate, 0.0, &mut |p| {
+        if rows.len() < SAMPLE_ROWS {
+            rows.push((p.x, p.y, p.height_m, p.row));
+        }
+        Ok(())
+    })?;
+    let made = total.round() as u64;
+    let report = placements::Report { rows: made, kept: made, ..placements::Report::default() };
+    Ok(Sample { rows, seen: made, duplicates: 0, report, ground_region: None, canopy_region: [0.0; 4] })
+}
+
 /// Longitude and latitude the other way round: most rows' "latitude" beyond
 /// ±90° whose "longitude" would be a latitude.
 pub(super) fn check_swapped(opts: &TreeOptions<'_>, report: &placements::Report) -> Result<()> {

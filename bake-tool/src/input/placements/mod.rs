@@ -294,6 +294,8 @@ pub struct PlacementSource {
     attribute_names: Vec<String>,
     gis: Option<(crate::input::gis::Layer, gis::GisColumns)>,
     stands: Option<(crate::input::gis::Layer, crate::input::stands::StandFields)>,
+    /// A stand map's stands, in the order every pass reads them.
+    stand_plans: Vec<crate::input::stands::StandPlan>,
 }
 
 impl PlacementSource {
@@ -348,6 +350,7 @@ impl PlacementSource {
                     attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
                     gis: None,
                     stands: None,
+                    stand_plans: Vec::new(),
                 })
             }
             "geojson" | "json" => {
@@ -368,6 +371,7 @@ impl PlacementSource {
                     attribute_names,
                     gis: None,
                     stands: None,
+                    stand_plans: Vec::new(),
                 })
             }
             "shp" | "gpkg" | "fgb" => {
@@ -403,6 +407,7 @@ impl PlacementSource {
                     attribute_names: cols.attrs.iter().map(|(_, n)| n.clone()).collect(),
                     gis: Some((layer, cols)),
                     stands: None,
+                    stand_plans: Vec::new(),
                 })
             }
             _ => bail!(
@@ -526,6 +531,7 @@ impl PlacementSource {
             attribute_names,
             gis: None,
             stands: None,
+            stand_plans: Vec::new(),
         })
     }
 
@@ -588,10 +594,17 @@ impl PlacementSource {
         let mut assumed: BTreeMap<String, u64> = BTreeMap::new();
         let mut ids: std::collections::HashSet<String> = std::collections::HashSet::new();
         let mut shared_ids = 0u64;
+        let mut plans: Vec<crate::input::stands::StandPlan> = Vec::new();
+        let mut next_row = 0u64;
         layer
             .for_each(&mut |feature| {
                 match read_stand(&feature, &fields, stand_options, lon_lat) {
                     Ok((stand, _)) => {
+                        if let crate::input::gis::Geometry::Polygons(p) = &feature.geometry {
+                            let plan = crate::input::stands::StandPlan::new(&stand, p, next_row);
+                            next_row += plan.cap;
+                            plans.push(plan);
+                        }
                         stands += 1;
                         shared_ids += u64::from(!ids.insert(stand.id.clone()));
                         let n = stand.stems_ha * stand.area_m2 / 1e4;
@@ -672,20 +685,97 @@ impl PlacementSource {
                 _ => None,
             },
             notes,
-            attribute_names: vec!["stand".into()],
+            // Each tree's stand, unless --attributes leaves it out (or --no-attributes).
+            attribute_names: match &options.attributes {
+                Some(kept) if !kept.iter().any(|a| a.eq_ignore_ascii_case("stand")) => Vec::new(),
+                _ => vec!["stand".into()],
+            },
             gis: None,
             stands: Some((layer, fields)),
+            stand_plans: plans,
         })
     }
 
     /// One pass over the usable rows, in file order; returns what was read and skipped.
     pub fn for_each(&self, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
-        self.pass(false, f)
+        self.pass(false, None, f)
     }
 
     /// [`Self::for_each`] with each row's attribute columns ([`Placement::attrs`]).
     pub fn for_each_with_attributes(&self, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
-        self.pass(true, f)
+        self.pass(true, None, f)
+    }
+
+    /// [`Self::for_each`], growing only the stands of a stand map that `keep`
+    /// keeps (a shard's); any other file gives every row.
+    pub fn for_each_in(
+        &self,
+        keep: &dyn Fn(&crate::input::stands::StandPlan) -> bool,
+        f: &mut dyn FnMut(Placement) -> Result<()>,
+    ) -> Result<Report> {
+        self.pass(false, Some(keep), f)
+    }
+
+    /// A stand map's stands (empty for any other file), in the order passes read them.
+    pub fn stand_plans(&self) -> &[crate::input::stands::StandPlan] {
+        &self.stand_plans
+    }
+
+    /// A stand map's trees as the cheap passes see them, without growing one:
+    /// per stand `max(per_tree × expected stems, per_m2 × area)` points
+    /// uniform over its polygons, each with the stand's height, DBH and a
+    /// species drawn by its shares (rows within the stand's). Nothing for any
+    /// other file.
+    ///
+    /// # Errors
+    /// The layer cannot be read again, or `f` fails.
+    pub fn for_each_preview(
+        &self,
+        per_tree: f64,
+        per_m2: f64,
+        f: &mut dyn FnMut(Placement) -> Result<()>,
+    ) -> Result<()> {
+        let (Some((layer, fields)), Some(stand_options)) = (&self.stands, &self.options.stands) else {
+            return Ok(());
+        };
+        let lon_lat = self.kind == CoordKind::LonLat;
+        let mut k = 0usize;
+        let mut report = Report::default();
+        layer.for_each(&mut |feature| {
+            if crate::input::stands::read_stand(&feature, fields, stand_options, lon_lat).is_err() {
+                return Ok(());
+            }
+            let (Some(plan), crate::input::gis::Geometry::Polygons(polygons)) =
+                (self.stand_plans.get(k), &feature.geometry)
+            else {
+                return Ok(());
+            };
+            k += 1;
+            let count = (per_tree * plan.expected).max(per_m2 * plan.area_m2).round() as usize;
+            // (A stand smaller than the spacing still covers its cell.)
+            let count = if per_m2 > 0.0 { count.max(1) } else { count };
+            for (j, (xy, species)) in plan.preview(polygons, count).into_iter().enumerate() {
+                let p = Placement {
+                    x: xy[0],
+                    y: xy[1],
+                    z: None,
+                    height_m: plan.height_m,
+                    dbh_cm: plan.dbh_cm,
+                    crown_m: None,
+                    species: Some(plan.mix[species].0.clone()),
+                    yaw_deg: None,
+                    id: None,
+                    id_text: None,
+                    attrs: Vec::new(),
+                    row: plan.first_row + 1 + (j as u64 % plan.cap.max(1)),
+                };
+                if let Some(p) = accept(p, self.kind, &mut report) {
+                    f(p)?;
+                }
+            }
+            Ok(())
+        })?;
+        Ok(())
     }
 
     /// Whether numbers may have decimal commas (a CSV separated by `;` or tabs).
@@ -698,7 +788,12 @@ impl PlacementSource {
         self.attribute_names.clone()
     }
 
-    fn pass(&self, with_attributes: bool, f: &mut dyn FnMut(Placement) -> Result<()>) -> Result<Report> {
+    fn pass(
+        &self,
+        with_attributes: bool,
+        keep: Option<&dyn Fn(&crate::input::stands::StandPlan) -> bool>,
+        f: &mut dyn FnMut(Placement) -> Result<()>,
+    ) -> Result<Report> {
         if let Some(set) = &self.parsed {
             for p in &set.rows {
                 f(p.clone())?;
@@ -709,17 +804,23 @@ impl PlacementSource {
             use crate::input::stands::{grow_stand, read_stand};
             let mut report = Report::default();
             let lon_lat = self.kind == CoordKind::LonLat;
-            let mut row = 0u64;
+            let mut k = 0usize;
             layer.for_each(&mut |feature| {
                 let Ok((stand, metric)) = read_stand(&feature, fields, stand_options, lon_lat) else {
                     return Ok(()); // said when opened
                 };
+                // (Plans were made from the same features in the same order.)
+                let Some(plan) = self.stand_plans.get(k) else { return Ok(()) };
+                k += 1;
+                if keep.is_some_and(|keep| !keep(plan)) {
+                    return Ok(());
+                }
                 let lon_lat_polygons = match (&feature.geometry, lon_lat) {
                     (crate::input::gis::Geometry::Polygons(p), true) => Some(&p[..]),
                     _ => None,
                 };
-                for stem in grow_stand(&stand, &metric, lon_lat_polygons, stand_options) {
-                    row += 1;
+                let stems = grow_stand(&stand, &metric, lon_lat_polygons, stand_options);
+                for (j, stem) in stems.into_iter().take(plan.cap as usize).enumerate() {
                     report.rows += 1;
                     let p = Placement {
                         x: stem.xy[0],
@@ -733,7 +834,7 @@ impl PlacementSource {
                         id: None,
                         id_text: None,
                         attrs: if with_attributes { vec![Some(stand.id.clone())] } else { Vec::new() },
-                        row,
+                        row: plan.first_row + 1 + j as u64,
                     };
                     if let Some(p) = accept(p, self.kind, &mut report) {
                         report.kept += 1;
