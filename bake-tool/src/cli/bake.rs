@@ -25,7 +25,7 @@ pub(crate) struct BakeArgs {
     /// or a GIS layer of points: Shapefile (.shp with its .dbf; the CRS from its .prj),
     /// GeoPackage (.gpkg; --layer picks a table) or FlatGeobuf (.fgb). Fields are
     /// found by the CSV's names (a .dbf's 10-byte names too: species_co).
-    #[arg(long, value_name = "PATH", required_unless_present_any = ["stands", "chm"], conflicts_with_all = ["stands", "chm"])]
+    #[arg(long, value_name = "PATH", required_unless_present_any = ["stands", "chm", "dsm"], conflicts_with_all = ["stands", "chm", "dsm"])]
     pub(crate) placements: Option<PathBuf>,
     /// A canopy height model instead of trees (a GeoTIFF of heights above ground,
     /// e.g. from airborne lidar): each crown found becomes a tree of its height and
@@ -35,12 +35,23 @@ pub(crate) struct BakeArgs {
     /// tree's species is drawn by the shares of the stand it stands in.
     #[arg(long, value_name = "FILE.tif")]
     pub(crate) chm: Option<PathBuf>,
+    /// A digital surface model instead of a CHM (first returns: the canopy's top,
+    /// the ground between crowns), with --dem: the CHM is the DSM minus the DEM
+    /// (in one CRS), then found as with --chm (its options apply).
+    #[arg(long, value_name = "FILE.tif", conflicts_with = "chm", requires = "dems")]
+    pub(crate) dsm: Option<PathBuf>,
     /// The species label of the trees a CHM gives (the library's tree for it).
     #[arg(long, value_name = "NAME", default_value = "broadleaf")]
     pub(crate) chm_species: String,
     /// The lowest tree top in a CHM, metres.
     #[arg(long, value_name = "M", default_value_t = 2.0)]
     pub(crate) chm_min_height: f64,
+    /// A leaf-type raster for a CHM's trees (GeoTIFF in the CHM's CRS with the
+    /// Copernicus HRL Dominant Leaf Type codes: 1 broadleaved → `broadleaf`,
+    /// 2 coniferous → `conifer`; other values: --chm-species). Stands, where
+    /// given, come first.
+    #[arg(long, value_name = "FILE.tif")]
+    pub(crate) chm_leaf_type: Option<PathBuf>,
     /// The CHM's search window for tree tops: A + B·height metres across.
     #[arg(long, value_name = "A,B", default_value = "1.0,0.12")]
     pub(crate) chm_window: String,
@@ -267,11 +278,13 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         .placements
         .as_deref()
         .or(args.chm.as_deref())
+        .or(args.dsm.as_deref())
         .or(args.stands.as_deref())
-        .context("give --placements, --stands or --chm")?;
+        .context("give --placements, --stands, --chm or --dsm")?;
     args.stand.check()?;
     let mut inputs: Vec<&std::path::Path> = vec![placements];
     inputs.extend(args.stands.as_deref().filter(|s| *s != placements));
+    inputs.extend(args.chm_leaf_type.as_deref());
     inputs.extend(args.allometry.as_deref());
     inputs.extend(args.species_table.as_deref());
     inputs.extend(args.dems.iter().map(PathBuf::as_path));
@@ -318,9 +331,9 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         stands: args
             .stands
             .as_ref()
-            .filter(|_| args.chm.is_none())
+            .filter(|_| args.chm.is_none() && args.dsm.is_none())
             .map(|_| std::sync::Arc::new(args.stand.options(&allometry))),
-        chm: match &args.chm {
+        chm: match args.chm.as_ref().or(args.dsm.as_ref()) {
             Some(_) => {
                 let (a, b) = args
                     .chm_window
@@ -340,6 +353,8 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
                         .stands
                         .clone()
                         .map(|p| (p, std::sync::Arc::new(args.stand.options(&allometry)))),
+                    ground: if args.dsm.is_some() { args.dems.clone() } else { Vec::new() },
+                    leaf_type: args.chm_leaf_type.clone(),
                 }))
             }
             None => None,

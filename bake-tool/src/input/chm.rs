@@ -41,11 +41,24 @@ pub struct ChmOptions {
     /// A stand map in the CHM's CRS whose stands give the species of the
     /// trees found in them (drawn by their shares) and their `stand` attribute.
     pub species_stands: Option<(std::path::PathBuf, std::sync::Arc<super::stands::StandOptions>)>,
+    /// The raster is a surface model (`--dsm`): the CHM is it minus these DEMs.
+    pub ground: Vec<std::path::PathBuf>,
+    /// A leaf-type raster in the CHM's CRS (Copernicus HRL Dominant Leaf Type
+    /// codes: 1 broadleaved, 2 coniferous) for the trees outside every stand.
+    pub leaf_type: Option<std::path::PathBuf>,
 }
 
 impl Default for ChmOptions {
     fn default() -> Self {
-        Self { min_height: 2.0, window_a: 1.0, window_b: 0.12, species: "broadleaf".into(), species_stands: None }
+        Self {
+            min_height: 2.0,
+            window_a: 1.0,
+            window_b: 0.12,
+            species: "broadleaf".into(),
+            species_stands: None,
+            ground: Vec::new(),
+            leaf_type: None,
+        }
     }
 }
 
@@ -62,6 +75,45 @@ pub struct ChmTree {
 
 /// The most pixels a CHM may have (a 1 m CHM of 400 km²).
 pub const MAX_CHM_PIXELS: u64 = 400_000_000;
+
+/// Turns a digital surface model (the canopy's top where there are trees, the
+/// ground elsewhere) into a CHM: at each pixel's centre the first of `dems`
+/// with data there (bilinear) is taken off, heights under the ground (noise)
+/// become 0, pixels without ground no data. Returns how many pixels had no ground.
+///
+/// # Errors
+/// A DEM in another CRS than the DSM's (by their GeoKeys), or one that covers
+/// none of the DSM.
+pub fn subtract_ground(dsm: &mut Dem, dems: &[(std::path::PathBuf, Dem)]) -> Result<u64> {
+    for (path, dem) in dems {
+        if let (Some(a), Some(b)) = (dsm.epsg, dem.epsg) {
+            if a != b {
+                bail!("DEM {} is in EPSG:{b}, the DSM in EPSG:{a}: give them in one CRS", path.display());
+            }
+        }
+    }
+    let (w, h) = (dsm.width as usize, dsm.height as usize);
+    let mut missing = 0u64;
+    for r in 0..h {
+        let y = dsm.y0 + r as f64 * dsm.dy;
+        for c in 0..w {
+            let x = dsm.x0 + c as f64 * dsm.dx;
+            let v = &mut dsm.heights[r * w + c];
+            match dems.iter().find_map(|(_, d)| d.sample(x, y)) {
+                Some(g) if v.is_finite() => *v = (*v - g).max(0.0),
+                Some(_) => {}
+                None => {
+                    missing += 1;
+                    *v = f32::NAN;
+                }
+            }
+        }
+    }
+    if missing == (w * h) as u64 {
+        bail!("no --dem has ground under any of the DSM's pixels (do they cover the same place, in the same CRS?)");
+    }
+    Ok(missing)
+}
 
 /// Finds the trees of a CHM.
 ///
@@ -338,5 +390,58 @@ mod tests {
         let mut flat = draw(&[], 10.0, 0.5);
         flat.heights.iter_mut().for_each(|h| *h = f32::NAN);
         assert!(find_trees(&flat, &ChmOptions::default()).unwrap().is_empty(), "holes are no trees");
+    }
+
+    /// A DSM less its DEM is the CHM: heights over sloping ground, noise under
+    /// the ground clamped to 0, pixels without ground left out; a DEM in
+    /// another CRS, or beside the DSM, refused.
+    #[test]
+    fn a_surface_model_less_the_ground_is_a_chm() {
+        let chm = draw(&[([10.0, 10.0], 20.0, 3.0)], 20.0, 0.5);
+        let slope = |x: f64, y: f64| 100.0 + 0.5 * x - 0.25 * y;
+        let mut dsm = chm.clone();
+        for r in 0..dsm.height as usize {
+            for c in 0..dsm.width as usize {
+                let (x, y) = (dsm.x0 + c as f64 * dsm.dx, dsm.y0 + r as f64 * dsm.dy);
+                dsm.heights[r * dsm.width as usize + c] += slope(x, y) as f32 - 0.05;
+            }
+        }
+        // The DEM: 1 m pixels over the west three quarters only.
+        let mut dem = draw(&[], 15.0, 1.0);
+        dem.y0 = 20.0;
+        for r in 0..dem.height as usize {
+            for c in 0..dem.width as usize {
+                dem.heights[r * dem.width as usize + c] = slope(dem.x0 + c as f64, dem.y0 - r as f64) as f32;
+            }
+        }
+        let dems = vec![(std::path::PathBuf::from("dem.tif"), dem.clone())];
+        let missing = subtract_ground(&mut dsm, &dems).unwrap();
+        assert!(missing > 0 && missing < u64::from(dsm.width * dsm.height) / 2, "{missing}");
+        let (mut compared, mut holes) = (0, 0);
+        for (k, (a, b)) in dsm.heights.iter().zip(&chm.heights).enumerate() {
+            let (c, r) = (k % dsm.width as usize, k / dsm.width as usize);
+            let (x, y) = (dsm.x0 + c as f64 * dsm.dx, dsm.y0 + r as f64 * dsm.dy);
+            if a.is_nan() {
+                holes += 1;
+            } else if x < 13.5 && y > 6.5 {
+                // (Within the DEM's outer pixel centres: bilinear is exact on a plane.)
+                assert!(*a >= 0.0 && (a - b.max(0.05) + 0.05).abs() < 0.01, "{a} vs {b}");
+                compared += 1;
+            }
+        }
+        assert_eq!(holes, missing);
+        assert!(compared > 500, "{compared}");
+        let trees = find_trees(&dsm, &ChmOptions::default()).unwrap();
+        assert_eq!(trees.len(), 1);
+        assert!((trees[0].height_m - 20.0).abs() < 0.5, "{:?}", trees[0]);
+        // Another CRS, or no ground under any pixel: refused.
+        let mut other = dem.clone();
+        other.epsg = Some(25833);
+        let err = subtract_ground(&mut chm.clone(), &[(std::path::PathBuf::from("b.tif"), other)]).unwrap_err();
+        assert!(err.to_string().contains("EPSG:25833"), "{err}");
+        let mut away = dem;
+        away.x0 = 5_000.0;
+        let err = subtract_ground(&mut chm.clone(), &[(std::path::PathBuf::from("c.tif"), away)]).unwrap_err();
+        assert!(err.to_string().contains("no --dem has ground"), "{err}");
     }
 }

@@ -2353,5 +2353,58 @@ fn a_canopy_height_model_becomes_trees() {
     for (h, (_, want, _)) in heights.iter().zip(&crowns) {
         assert!((f64::from(*h) - want).abs() < 0.6, "{h} vs {want}");
     }
+    // A surface model on sloping ground (--dsm with --dem): the same nine
+    // trees, of the same heights, standing on the DEM.
+    let ground = |x: f64, y: f64| 300.0 + 0.2 * (x - 500_000.0) - 0.1 * (y - 5_300_000.0);
+    let dem = dir.join("dem.tif");
+    write_geotiff_dem(&dem, 60, 1.0, ground);
+    let dsm = dir.join("dsm.tif");
+    write_geotiff_dem(&dsm, 100, 0.5, |x, y| {
+        ground(x, y)
+            + crowns
+                .iter()
+                .filter_map(|([cx, cy], h, r)| {
+                    let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() / r;
+                    (d <= 1.0).then(|| h * (1.0 - 0.4 * d * d))
+                })
+                .fold(0.0, f64::max)
+    });
+    // And a leaf-type raster (Copernicus codes): broadleaved west of x 500 020, coniferous east.
+    let leaf_type = dir.join("leaf-type.tif");
+    write_geotiff_dem(&leaf_type, 10, 10.0, |x, _| if x < 500_020.0 { 1.0 } else { 2.0 });
+    let from_dsm = dir.join("from-dsm");
+    let mut c = bin();
+    c.arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .arg("--dsm")
+        .arg(&dsm)
+        .arg("--dem")
+        .arg(&dem)
+        .arg("--chm-leaf-type")
+        .arg(&leaf_type)
+        .args(["--map", "broadleaf=oak", "--map", "conifer=oak"])
+        .args(["--chm-species", "oak", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+        .arg("--out")
+        .arg(&from_dsm);
+    let o = run(&mut c);
+    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    assert!(log.contains("minus the --dem ground") && log.contains("9 trees found"), "{log}");
+    assert!(log.contains("3 broadleaved (code 1), 6 coniferous (code 2), 0 other"), "{log}");
+    let mut from_dsm_heights = baked_heights(&from_dsm);
+    from_dsm_heights.sort_by(f32::total_cmp);
+    for (a, b) in from_dsm_heights.iter().zip(&heights) {
+        assert!((a - b).abs() < 0.3, "heights from the DSM {from_dsm_heights:?} vs the CHM {heights:?}");
+    }
+    for [bx, by, bz] in baked_bases(&from_dsm) {
+        assert!(
+            (bz - ground(bx, by)).abs() < 0.5,
+            "a tree at {bx},{by} stands at {bz}, the ground at {}",
+            ground(bx, by)
+        );
+    }
+    // Without a DEM, --dsm is refused (clap: --dem is required).
+    let err = fails(bin().arg("bake").arg("--dsm").arg(&dsm).arg("--out").arg(dir.join("no-dem")));
+    assert!(err.contains("--dem"), "{err}");
     std::fs::remove_dir_all(dir).ok();
 }

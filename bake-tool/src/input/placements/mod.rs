@@ -420,7 +420,25 @@ impl PlacementSource {
     /// A canopy height model (`--chm`): its trees found once (tops, heights,
     /// crowns) and kept.
     fn open_chm(path: &Path, options: &ReadOptions, chm_options: &crate::input::chm::ChmOptions) -> Result<Self> {
-        let chm = crate::input::dem::Dem::open(path).with_context(|| format!("CHM {}", path.display()))?;
+        let mut chm = crate::input::dem::Dem::open(path).with_context(|| format!("CHM {}", path.display()))?;
+        let mut ground_note = None;
+        if !chm_options.ground.is_empty() {
+            // A surface model (--dsm): the CHM is it minus the ground.
+            let dems = chm_options
+                .ground
+                .iter()
+                .map(|p| {
+                    Ok((p.clone(), crate::input::dem::Dem::open(p).with_context(|| format!("DEM {}", p.display()))?))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let missing = crate::input::chm::subtract_ground(&mut chm, &dems)
+                .with_context(|| format!("DSM {}", path.display()))?;
+            ground_note = Some(format!(
+                "DSM {} minus the --dem ground: a CHM{}",
+                path.display(),
+                if missing > 0 { format!(" ({missing} pixels without ground left out)") } else { String::new() }
+            ));
+        }
         if chm.epsg.is_none() && !options.projected {
             bail!("CHM {}: its GeoKeys name no CRS: say which with --input-crs EPSG:xxxx", path.display());
         }
@@ -433,6 +451,25 @@ impl PlacementSource {
             Some((stand_path, stand_options)) => Some(Self::species_stands(stand_path, stand_options, chm.epsg)?),
             None => None,
         };
+        // A leaf-type raster (Copernicus HRL Dominant Leaf Type codes: 1
+        // broadleaved, 2 coniferous) gives the trees outside every stand theirs.
+        let leaf_type = match &chm_options.leaf_type {
+            Some(lt) => {
+                let raster =
+                    crate::input::dem::Dem::open(lt).with_context(|| format!("leaf-type raster {}", lt.display()))?;
+                if let (Some(a), Some(b)) = (raster.epsg, chm.epsg) {
+                    if a != b {
+                        bail!(
+                            "leaf-type raster {} is in EPSG:{a}, the CHM in EPSG:{b}: give both in one CRS",
+                            lt.display()
+                        );
+                    }
+                }
+                Some(raster)
+            }
+            None => None,
+        };
+        let mut by_leaf = [0u64; 2];
         let (mut in_stands, mut outside) = (0u64, 0u64);
         for (i, t) in trees.iter().enumerate() {
             report.rows += 1;
@@ -463,7 +500,22 @@ impl PlacementSource {
                 }
                 None => {
                     outside += 1;
-                    chm_options.species.clone()
+                    // (The pixel the top falls in: codes are not interpolated.)
+                    let code = leaf_type.as_ref().map(|r| {
+                        let (c, row) = r.pixel(t.xy[0], t.xy[1]);
+                        r.at(c.round() as i64, row.round() as i64)
+                    });
+                    match code {
+                        Some(v) if v == 1.0 => {
+                            by_leaf[0] += 1;
+                            "broadleaf".to_string()
+                        }
+                        Some(v) if v == 2.0 => {
+                            by_leaf[1] += 1;
+                            "conifer".to_string()
+                        }
+                        _ => chm_options.species.clone(),
+                    }
                 }
             };
             let p = Placement {
@@ -506,6 +558,17 @@ impl PlacementSource {
                 chm_options.species
             ),
         ];
+        notes.splice(0..0, ground_note);
+        if let Some(lt) = &chm_options.leaf_type {
+            notes.push(format!(
+                "leaf types from {}: {} broadleaved (code 1), {} coniferous (code 2), {} other ({:?})",
+                lt.display(),
+                by_leaf[0],
+                by_leaf[1],
+                outside - by_leaf[0] - by_leaf[1],
+                chm_options.species
+            ));
+        }
         if stands.is_some() {
             notes.push(format!(
                 "{in_stands} trees in stands (species drawn by each stand's shares), {outside} outside every stand ({:?})",
