@@ -506,11 +506,11 @@ impl PlacementSource {
                         r.at(c.round() as i64, row.round() as i64)
                     });
                     match code {
-                        Some(v) if v == 1.0 => {
+                        Some(1.0) => {
                             by_leaf[0] += 1;
                             "broadleaf".to_string()
                         }
-                        Some(v) if v == 2.0 => {
+                        Some(2.0) => {
                             by_leaf[1] += 1;
                             "conifer".to_string()
                         }
