@@ -282,6 +282,9 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         .or(args.stands.as_deref())
         .context("give --placements, --stands, --chm or --dsm")?;
     args.stand.check()?;
+    if args.chm_leaf_type.is_some() && args.chm.is_none() && args.dsm.is_none() {
+        bail!("--chm-leaf-type gives species to the trees of a --chm or --dsm: give one");
+    }
     let mut inputs: Vec<&std::path::Path> = vec![placements];
     inputs.extend(args.stands.as_deref().filter(|s| *s != placements));
     inputs.extend(args.chm_leaf_type.as_deref());

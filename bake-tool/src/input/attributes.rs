@@ -283,7 +283,7 @@ impl AttributeTable {
     #[must_use]
     pub fn from_stands(plans: &[crate::input::stands::StandPlan], log: &dyn Fn(&str)) -> Option<Self> {
         let mut seen = Seen::new();
-        for plan in plans {
+        for plan in plans.iter().filter(|p| !is_no_value(&p.id)) {
             seen.add(&plan.id, false);
         }
         let mut column = match seen.column("stand") {
@@ -293,15 +293,22 @@ impl AttributeTable {
                 return None;
             }
         };
-        column.count = plans.iter().map(|p| p.expected).sum::<f64>().round() as u64;
+        // (Expected stems: the trees are not grown here.)
+        column.count = plans.iter().filter(|p| !is_no_value(&p.id)).map(|p| p.expected).sum::<f64>().round() as u64;
         log(&format!("  attribute \"stand\": {} (the stand of each tree)", describe(&column)));
         let codes = Codes::Runs {
             starts: plans.iter().map(|p| p.first_row + 1).collect(),
             ends: plans.iter().map(|p| p.first_row + p.cap).collect(),
-            codes: plans.iter().map(|p| code_of(&column, &p.id, false)).collect(),
+            codes: plans
+                .iter()
+                .map(|p| if is_no_value(&p.id) { null_code(column.width) } else { code_of(&column, &p.id, false) })
+                .collect(),
         };
         let schema = AttributeSchema { columns: vec![column] };
-        schema.validate().ok()?;
+        if let Err(e) = schema.validate() {
+            log(&format!("  attribute \"stand\" left out: {e}"));
+            return None;
+        }
         log(&format!("attributes: 1 column, {} bytes per tree", schema.columns[0].width));
         Some(Self { schema, codes: vec![codes] })
     }
@@ -399,5 +406,32 @@ mod tests {
         assert!(is_no_value("N/A") && is_no_value("-") && !is_no_value("0"));
         // Whole numbers past 9e15 are numbers, not integers (the schema's bound).
         assert_eq!(typed(&["1", "9100000000000000"]).unwrap().kind, AttributeType::Number);
+    }
+
+    /// A stand map's `stand` attribute: each stand's id over exactly its rows
+    /// (first_row + 1 ..= first_row + cap), none between or beyond, a no-value
+    /// id (`NA`) null.
+    #[test]
+    fn each_stand_codes_exactly_its_rows() {
+        let plan = |id: &str, first_row: u64, cap: u64| crate::input::stands::StandPlan {
+            first_row,
+            cap,
+            expected: cap as f64,
+            bbox: [0.0; 4],
+            area_m2: 1.0,
+            id: id.into(),
+            mix: vec![("oak".into(), 1.0)],
+            height_m: None,
+            dbh_cm: None,
+        };
+        let plans = [plan("A", 0, 3), plan("NA", 3, 2), plan("B", 5, 0), plan("C", 5, 4)];
+        let t = AttributeTable::from_stands(&plans, &|_| {}).unwrap();
+        let c = &t.schema.columns[0];
+        assert_eq!((c.name.as_str(), c.kind), ("stand", AttributeType::Category));
+        let codes = t.codes_for(&[0, 1, 3, 4, 5, 6, 9, 10]).columns.remove(0);
+        let name = |code: u32| c.categories.get(code as usize).map(String::as_str);
+        let names: Vec<Option<&str>> = codes.iter().map(|&k| name(k)).collect();
+        assert_eq!(names, [None, Some("A"), Some("A"), None, None, Some("C"), Some("C"), None]);
+        assert!(!c.categories.iter().any(|k| k == "NA"), "no value is no category");
     }
 }

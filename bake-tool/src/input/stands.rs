@@ -448,6 +448,9 @@ pub fn read_stand(
     if polygons.iter().flatten().flatten().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
         return Err("non-finite coordinates".into());
     }
+    if polygons.iter().flatten().flatten().any(|p| p[0].abs() > 1e8 || p[1].abs() > 1e8) {
+        return Err("coordinates beyond ±100 000 km".into());
+    }
     let frame = Frame::new(polygons, lon_lat);
     let metric: Vec<Vec<Vec<[f64; 2]>>> =
         polygons.iter().map(|p| p.iter().map(|r| r.iter().map(|q| frame.to_m(*q)).collect()).collect()).collect();
@@ -589,19 +592,41 @@ impl StandPlan {
     }
 
     /// `count` points spread uniformly over the stand's polygons (in the
-    /// layer's coordinates), each with a species drawn by the shares: the
-    /// stand's trees as the cheap passes see them (the same on every call).
-    #[must_use]
-    pub fn preview(&self, polygons: &[Vec<Vec<[f64; 2]>>], count: usize) -> Vec<([f64; 2], usize)> {
+    /// layer's coordinates), each with a species drawn by the shares, given to
+    /// `f` one at a time: the stand's trees as the cheap passes see them (the
+    /// same on every call). A part is chosen by its area, the point drawn in
+    /// that part's own box (parts kilometres apart waste no tries); tries are
+    /// bounded, so a sliver gets fewer points, never an endless loop.
+    pub fn preview(&self, polygons: &[Vec<Vec<[f64; 2]>>], count: u64, f: &mut dyn FnMut([f64; 2], usize)) {
         let mut rng = Rng::new(hash64(self.first_row ^ 0x5EED_0F57_A4D0_0001));
-        let [x0, y0, x1, y1] = self.bbox;
-        let mut out = Vec::with_capacity(count);
-        // Rejection within the box; bounded for slivers (a stand that is
-        // mostly box-corner gets fewer points, not an endless loop).
-        let mut tries = 0usize;
-        while out.len() < count && tries < 50 * count + 1_000 {
+        let parts: Vec<([f64; 2], [f64; 2], f64)> = polygons
+            .iter()
+            .map(|p| {
+                let (mut a, mut b) = ([f64::MAX; 2], [f64::MIN; 2]);
+                for q in p.iter().flatten() {
+                    a = [a[0].min(q[0]), a[1].min(q[1])];
+                    b = [b[0].max(q[0]), b[1].max(q[1])];
+                }
+                (a, b, area(std::slice::from_ref(p)))
+            })
+            .collect();
+        let total: f64 = parts.iter().map(|p| p.2).sum();
+        if parts.is_empty() || total.is_nan() || total <= 0.0 {
+            return;
+        }
+        let (mut made, mut tries) = (0u64, 0u64);
+        let budget = count.saturating_mul(50).saturating_add(1_000);
+        while made < count && tries < budget {
             tries += 1;
-            let (x, y) = (x0 + rng.f64() * (x1 - x0), y0 + rng.f64() * (y1 - y0));
+            let mut pick = rng.f64() * total;
+            let (a, b, _) = parts
+                .iter()
+                .find(|p| {
+                    pick -= p.2;
+                    pick <= 0.0
+                })
+                .unwrap_or(&parts[parts.len() - 1]);
+            let (x, y) = (a[0] + rng.f64() * (b[0] - a[0]), a[1] + rng.f64() * (b[1] - a[1]));
             if inside(polygons, x, y) {
                 let mut pick = rng.f64();
                 let species = self
@@ -612,10 +637,10 @@ impl StandPlan {
                         pick <= 0.0
                     })
                     .unwrap_or(self.mix.len().saturating_sub(1));
-                out.push(([x, y], species));
+                made += 1;
+                f([x, y], species);
             }
         }
-        out
     }
 }
 

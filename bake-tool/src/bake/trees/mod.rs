@@ -1,5 +1,7 @@
 //! Stage 1 of `sylva-bake bake`: tree placements (any CRS, larger than memory)
-//! into scene trees, in three streamed passes over the file:
+//! into scene trees, in three streamed passes over the file (a stand map's
+//! first two, and its ground's, over points spread over its stands: its trees
+//! are grown once, in pass 3):
 //!
 //! 1. a deterministic sample (every row up to [`SAMPLE_ROWS`]): row count,
 //!    swapped columns, the scene CRS, the medians (origin, outliers) and the
@@ -271,17 +273,27 @@ pub fn place_trees(
         log("pass 1/3: sampling placements");
         sample_pass(&source)?
     };
-    log(&format!(
-        "  {} rows read, {} usable ({:.1} s){}",
-        sample.report.rows,
-        sample.report.kept,
-        started.elapsed().as_secs_f64(),
-        if sample.seen as usize > SAMPLE_ROWS {
-            format!("; medians from a sample of {SAMPLE_ROWS}")
-        } else {
-            String::new()
-        }
-    ));
+    if stands {
+        log(&format!(
+            "  about {} trees in {} stands ({} points spread over them, {:.1} s)",
+            sample.report.rows,
+            source.stand_plans().len(),
+            sample.rows.len(),
+            started.elapsed().as_secs_f64()
+        ));
+    } else {
+        log(&format!(
+            "  {} rows read, {} usable ({:.1} s){}",
+            sample.report.rows,
+            sample.report.kept,
+            started.elapsed().as_secs_f64(),
+            if sample.seen as usize > SAMPLE_ROWS {
+                format!("; medians from a sample of {SAMPLE_ROWS}")
+            } else {
+                String::new()
+            }
+        ));
+    }
     check_swapped(opts, &sample.report)?;
     if source.kind == CoordKind::LonLat && !sample.rows.is_empty() {
         let mut lons: Vec<f64> = sample.rows.iter().map(|p| p.0).collect();
@@ -468,7 +480,7 @@ pub fn place_trees(
     }
     log_summary(&summary, species, log);
     if stands {
-        log(&format!("grew the stands once in {:.1} s", started.elapsed().as_secs_f64()));
+        log(&format!("grew {} stands once in {:.1} s", grown.get(), started.elapsed().as_secs_f64()));
     } else {
         log(&format!("read the placements 3 times in {:.1} s", started.elapsed().as_secs_f64()));
     }
@@ -534,7 +546,9 @@ fn stand_in_shard(
     // A metre and a thousandth around: a lon/lat box's edges bow a little once projected.
     let m = 1.0 + 1e-3 * (hi[0] - lo[0]).max(hi[1] - lo[1]);
     let ((tx0, ty0), (tx1, ty1)) = (tile(lo[0] - m, lo[1] - m), tile(hi[0] + m, hi[1] + m));
-    if (tx1 - tx0 + 1) * (ty1 - ty0 + 1) > 1_000_000 {
+    if !(lo[0].is_finite() && lo[1].is_finite() && hi[0].is_finite() && hi[1].is_finite())
+        || (i128::from(tx1) - i128::from(tx0) + 1) * (i128::from(ty1) - i128::from(ty0) + 1) > 1_000_000
+    {
         return true;
     }
     (ty0..=ty1).any(|ty| (tx0..=tx1).any(|tx| crate::bake::batching::shard_of_tile(tx, ty, count) == index))

@@ -115,9 +115,10 @@ pub(super) fn tree_pass(
     };
     // A stand map's ground and cover come from every stand's trees as uniform
     // points (as many as its stems, none grown), so a shard that grows only
-    // its own stands agrees on them.
+    // its own stands agrees on them; only the terrain uses them, which shard
+    // 0 writes (the other shards skip them).
     let stands = !source.stand_plans().is_empty();
-    if stands {
+    if stands && opts.shard.is_none_or(|(i, _)| i == 0) {
         source.for_each_preview(1.0, 0.0, &mut |p| {
             if let Ok((t, _)) = to_tree(&p) {
                 fit_add(&t);
@@ -174,7 +175,7 @@ pub(super) fn tree_pass(
         })?;
         (report, writer.finish()?)
     } else {
-        let mut trees = Vec::with_capacity(sample.report.kept as usize);
+        let mut trees = Vec::with_capacity(sample.report.kept as usize / opts.shard.map_or(1, |(_, n)| n as usize));
         let report = source.for_each_in(keep, &mut |p| {
             match to_tree(&p) {
                 Ok((t, f)) => {

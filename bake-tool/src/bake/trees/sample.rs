@@ -62,14 +62,17 @@ pub(super) fn sample_stands(source: &PlacementSource) -> Result<Sample> {
     let total: f64 = source.stand_plans().iter().map(|p| p.expected).sum();
     let rate = (SAMPLE_ROWS as f64 / total.max(1.0)).min(1.0);
     let mut rows: Vec<(f64, f64, Option<f32>, u64)> = Vec::new();
-    source.for_each_preview(rate, 0.0, &mut |p| {
+    let points = source.for_each_preview(rate, 0.0, &mut |p| {
         if rows.len() < SAMPLE_ROWS {
             rows.push((p.x, p.y, p.height_m, p.row));
         }
         Ok(())
     })?;
     let made = total.round() as u64;
-    let report = placements::Report { rows: made, kept: made, ..placements::Report::default() };
+    // The stands' expected stems stand for the rows; the points' skips (e.g.
+    // lon/lat out of range) are said as they are.
+    let report =
+        placements::Report { rows: made, kept: made, skipped: points.skipped, ..placements::Report::default() };
     Ok(Sample { rows, seen: made, duplicates: 0, report, ground_region: None, canopy_region: [0.0; 4] })
 }
 

@@ -422,6 +422,9 @@ impl PlacementSource {
     fn open_chm(path: &Path, options: &ReadOptions, chm_options: &crate::input::chm::ChmOptions) -> Result<Self> {
         let mut chm = crate::input::dem::Dem::open(path).with_context(|| format!("CHM {}", path.display()))?;
         let mut ground_note = None;
+        if chm.epsg.is_none() && !options.projected {
+            bail!("CHM {}: its GeoKeys name no CRS: say which with --input-crs EPSG:xxxx", path.display());
+        }
         if !chm_options.ground.is_empty() {
             // A surface model (--dsm): the CHM is it minus the ground.
             let dems = chm_options
@@ -439,18 +442,6 @@ impl PlacementSource {
                 if missing > 0 { format!(" ({missing} pixels without ground left out)") } else { String::new() }
             ));
         }
-        if chm.epsg.is_none() && !options.projected {
-            bail!("CHM {}: its GeoKeys name no CRS: say which with --input-crs EPSG:xxxx", path.display());
-        }
-        let started = std::time::Instant::now();
-        let trees =
-            crate::input::chm::find_trees(&chm, chm_options).with_context(|| format!("CHM {}", path.display()))?;
-        let mut report = Report::default();
-        let mut rows = Vec::with_capacity(trees.len());
-        let stands = match &chm_options.species_stands {
-            Some((stand_path, stand_options)) => Some(Self::species_stands(stand_path, stand_options, chm.epsg)?),
-            None => None,
-        };
         // A leaf-type raster (Copernicus HRL Dominant Leaf Type codes: 1
         // broadleaved, 2 coniferous) gives the trees outside every stand theirs.
         let leaf_type = match &chm_options.leaf_type {
@@ -467,6 +458,15 @@ impl PlacementSource {
                 }
                 Some(raster)
             }
+            None => None,
+        };
+        let started = std::time::Instant::now();
+        let trees =
+            crate::input::chm::find_trees(&chm, chm_options).with_context(|| format!("CHM {}", path.display()))?;
+        let mut report = Report::default();
+        let mut rows = Vec::with_capacity(trees.len());
+        let stands = match &chm_options.species_stands {
+            Some((stand_path, stand_options)) => Some(Self::species_stands(stand_path, stand_options, chm.epsg)?),
             None => None,
         };
         let mut by_leaf = [0u64; 2];
@@ -548,8 +548,8 @@ impl PlacementSource {
                 s.range.map_or("none".into(), |(a, b)| format!("{a:.1}–{b:.1} m"))
             ),
             format!(
-                "{} trees found (tops of at least {} m, window {} + {}·h m; crowns by watershed) in {:.1} s, each a {:?}; \
-                 trees under the canopy are not seen",
+                "{} trees found (tops of at least {} m, window {} + {}·h m; crowns by watershed) in {:.1} s, {:?} unless \
+                 said below; trees under the canopy are not seen",
                 rows.len(),
                 chm_options.min_height,
                 chm_options.window_a,
@@ -571,8 +571,8 @@ impl PlacementSource {
         }
         if stands.is_some() {
             notes.push(format!(
-                "{in_stands} trees in stands (species drawn by each stand's shares), {outside} outside every stand ({:?})",
-                chm_options.species
+                "{in_stands} trees in stands (species drawn by each stand's shares), {outside} outside every stand ({})",
+                if chm_options.leaf_type.is_some() { "by leaf type".to_string() } else { format!("{:?}", chm_options.species) }
             ));
         }
         let attribute_names = if stands.is_some() { vec!["stand".to_string()] } else { Vec::new() };
@@ -785,10 +785,11 @@ impl PlacementSource {
     }
 
     /// A stand map's trees as the cheap passes see them, without growing one:
-    /// per stand `max(per_tree × expected stems, per_m2 × area)` points
-    /// uniform over its polygons, each with the stand's height, DBH and a
-    /// species drawn by its shares (rows within the stand's). Nothing for any
-    /// other file.
+    /// per stand its share of `per_tree × expected stems` (the fraction carried
+    /// to the next stand) or, if more, `per_m2 × area` (at most four a stem)
+    /// points uniform over its polygons, each with the stand's height, DBH and
+    /// a species drawn by its shares. Nothing for any other file. The report
+    /// counts the points and why any were skipped.
     ///
     /// # Errors
     /// The layer cannot be read again, or `f` fails.
@@ -797,13 +798,17 @@ impl PlacementSource {
         per_tree: f64,
         per_m2: f64,
         f: &mut dyn FnMut(Placement) -> Result<()>,
-    ) -> Result<()> {
+    ) -> Result<Report> {
+        let mut report = Report::default();
         let (Some((layer, fields)), Some(stand_options)) = (&self.stands, &self.options.stands) else {
-            return Ok(());
+            return Ok(report);
         };
         let lon_lat = self.kind == CoordKind::LonLat;
         let mut k = 0usize;
-        let mut report = Report::default();
+        // The stems' share carried from stand to stand, so a small stand is
+        // in the sample as often as its stems make it (not rounded away).
+        let mut carried = 0.0f64;
+        let mut failed = None;
         layer.for_each(&mut |feature| {
             if crate::input::stands::read_stand(&feature, fields, stand_options, lon_lat).is_err() {
                 return Ok(());
@@ -814,10 +819,20 @@ impl PlacementSource {
                 return Ok(());
             };
             k += 1;
-            let count = (per_tree * plan.expected).max(per_m2 * plan.area_m2).round() as usize;
-            // (A stand smaller than the spacing still covers its cell.)
-            let count = if per_m2 > 0.0 { count.max(1) } else { count };
-            for (j, (xy, species)) in plan.preview(polygons, count).into_iter().enumerate() {
+            let before = carried.floor();
+            carried += per_tree * plan.expected;
+            let by_trees = (carried.floor() - before) as u64;
+            // Points spread by area (the cells a stand covers) need be no more
+            // than its stems (a stand covers no more cells than it has trees).
+            let by_area = if per_m2 > 0.0 {
+                (per_m2 * plan.area_m2).ceil().min(4.0 * plan.expected + 16.0).max(1.0) as u64
+            } else {
+                0
+            };
+            plan.preview(polygons, by_trees.max(by_area), &mut |xy, species| {
+                if failed.is_some() {
+                    return;
+                }
                 let p = Placement {
                     x: xy[0],
                     y: xy[1],
@@ -830,15 +845,19 @@ impl PlacementSource {
                     id: None,
                     id_text: None,
                     attrs: Vec::new(),
-                    row: plan.first_row + 1 + (j as u64 % plan.cap.max(1)),
+                    row: plan.first_row + 1,
                 };
+                report.rows += 1;
                 if let Some(p) = accept(p, self.kind, &mut report) {
-                    f(p)?;
+                    report.kept += 1;
+                    if let Err(e) = f(p) {
+                        failed = Some(e);
+                    }
                 }
-            }
-            Ok(())
+            });
+            failed.take().map_or(Ok(()), Err)
         })?;
-        Ok(())
+        Ok(report)
     }
 
     /// Whether numbers may have decimal commas (a CSV separated by `;` or tabs).
