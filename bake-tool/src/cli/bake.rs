@@ -52,6 +52,12 @@ pub(crate) struct BakeArgs {
     /// given, come first.
     #[arg(long, value_name = "FILE.tif")]
     pub(crate) chm_leaf_type: Option<PathBuf>,
+    /// Points with a species for a CHM's trees (any placements file: a stem map,
+    /// plot centres, a street-tree register; lon/lat or another CRS projected into
+    /// the CHM's): a tree takes the species of the nearest point within its crown
+    /// (+1 m), before stands and leaf types.
+    #[arg(long, value_name = "PATH")]
+    pub(crate) chm_species_points: Option<PathBuf>,
     /// The CHM's search window for tree tops: A + B·height metres across.
     #[arg(long, value_name = "A,B", default_value = "1.0,0.12")]
     pub(crate) chm_window: String,
@@ -282,12 +288,13 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         .or(args.stands.as_deref())
         .context("give --placements, --stands, --chm or --dsm")?;
     args.stand.check()?;
-    if args.chm_leaf_type.is_some() && args.chm.is_none() && args.dsm.is_none() {
-        bail!("--chm-leaf-type gives species to the trees of a --chm or --dsm: give one");
+    if (args.chm_leaf_type.is_some() || args.chm_species_points.is_some()) && args.chm.is_none() && args.dsm.is_none() {
+        bail!("--chm-leaf-type and --chm-species-points give species to the trees of a --chm or --dsm: give one");
     }
     let mut inputs: Vec<&std::path::Path> = vec![placements];
     inputs.extend(args.stands.as_deref().filter(|s| *s != placements));
     inputs.extend(args.chm_leaf_type.as_deref());
+    inputs.extend(args.chm_species_points.as_deref());
     inputs.extend(args.allometry.as_deref());
     inputs.extend(args.species_table.as_deref());
     inputs.extend(args.dems.iter().map(PathBuf::as_path));
@@ -358,6 +365,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
                         .map(|p| (p, std::sync::Arc::new(args.stand.options(&allometry)))),
                     ground: if args.dsm.is_some() { args.dems.clone() } else { Vec::new() },
                     leaf_type: args.chm_leaf_type.clone(),
+                    species_points: args.chm_species_points.clone(),
                 }))
             }
             None => None,

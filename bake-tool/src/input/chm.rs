@@ -46,6 +46,9 @@ pub struct ChmOptions {
     /// A leaf-type raster in the CHM's CRS (Copernicus HRL Dominant Leaf Type
     /// codes: 1 broadleaved, 2 coniferous) for the trees outside every stand.
     pub leaf_type: Option<std::path::PathBuf>,
+    /// Points with a species (any placements file) naming the trees found
+    /// within their crown, before stands and leaf types.
+    pub species_points: Option<std::path::PathBuf>,
 }
 
 impl Default for ChmOptions {
@@ -58,6 +61,7 @@ impl Default for ChmOptions {
             species_stands: None,
             ground: Vec::new(),
             leaf_type: None,
+            species_points: None,
         }
     }
 }

@@ -2322,6 +2322,9 @@ fn a_canopy_height_model_becomes_trees() {
         .to_string(),
     )
     .unwrap();
+    // And a stem map's point within one of those crowns names that tree (before its stand); one far from any names none.
+    let points = dir.join("points.csv");
+    std::fs::write(&points, "x,y,species\n500025.5,5299990.5,oak\n500070,5299950,oak\n").unwrap();
     let with_stands = dir.join("with-stands");
     let mut c = bin();
     c.arg("bake")
@@ -2331,6 +2334,8 @@ fn a_canopy_height_model_becomes_trees() {
         .arg(&chm)
         .arg("--stands")
         .arg(&stands)
+        .arg("--chm-species-points")
+        .arg(&points)
         .args([
             "--chm-species",
             "oak",
@@ -2345,7 +2350,8 @@ fn a_canopy_height_model_becomes_trees() {
         .arg(&with_stands);
     let o = run(&mut c);
     let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
-    assert!(log.contains("3 trees in stands") && log.contains("6 outside every stand"), "{log}");
+    assert!(log.contains("2 points; 1 trees named by the nearest within their crown"), "{log}");
+    assert!(log.contains("2 trees in stands") && log.contains("6 outside every stand"), "{log}");
     let found = sylva::scene::query::query_dir(&with_stands, &serde_json::json!({"stand": "A"}), usize::MAX).unwrap();
     assert_eq!(found.ids.len(), 3);
     // `inspect` tells a CHM from a DEM and counts its trees.

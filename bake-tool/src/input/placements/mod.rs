@@ -469,6 +469,11 @@ impl PlacementSource {
             Some((stand_path, stand_options)) => Some(Self::species_stands(stand_path, stand_options, chm.epsg)?),
             None => None,
         };
+        let points = match &chm_options.species_points {
+            Some(p) => Some(Self::species_points(p, chm.epsg)?),
+            None => None,
+        };
+        let mut by_point = 0u64;
         let mut by_leaf = [0u64; 2];
         let (mut in_stands, mut outside) = (0u64, 0u64);
         for (i, t) in trees.iter().enumerate() {
@@ -482,7 +487,11 @@ impl PlacementSource {
                         && crate::input::stands::inside(polygons, t.xy[0], t.xy[1])
                 })
             });
+            // A point of a stem map within the crown names it, before all else.
+            let from_point = points.as_ref().and_then(|g| g.nearest(t.xy, 0.5 * f64::from(t.crown_m) + 1.0));
+            by_point += u64::from(from_point.is_some());
             let species = match stand {
+                _ if from_point.is_some() => from_point.unwrap_or_default().to_string(),
                 Some((stand, _, _, _)) => {
                     in_stands += 1;
                     let u = (crate::rng::hash64(t.xy[0].to_bits() ^ t.xy[1].to_bits().rotate_left(17)) >> 11) as f64
@@ -559,6 +568,13 @@ impl PlacementSource {
             ),
         ];
         notes.splice(0..0, ground_note);
+        if let (Some(p), Some(g)) = (&chm_options.species_points, &points) {
+            notes.push(format!(
+                "species points {}: {} points; {by_point} trees named by the nearest within their crown (+1 m)",
+                p.display(),
+                g.len
+            ));
+        }
         if let Some(lt) = &chm_options.leaf_type {
             notes.push(format!(
                 "leaf types from {}: {} broadleaved (code 1), {} coniferous (code 2), {} other ({:?})",
@@ -596,6 +612,55 @@ impl PlacementSource {
             stands: None,
             stand_plans: Vec::new(),
         })
+    }
+
+    /// Points with a species (any placements file: a stem map, plot centres,
+    /// a street-tree register) in a CHM's CRS, gridded by 10 m for the
+    /// nearest-point lookup (`--chm-species-points`). Lon/lat points, or points
+    /// in another declared CRS, are projected into the CHM's.
+    fn species_points(path: &Path, chm_epsg: Option<u32>) -> Result<SpeciesPoints> {
+        use crate::input::reproject::{Crs, Reprojector};
+        let context = || format!("species points {} (the CHM's species)", path.display());
+        let source = Self::open(path, &ReadOptions::default()).with_context(context)?;
+        let to_chm = match (source.kind, source.declared_epsg, chm_epsg) {
+            (CoordKind::LonLat, declared, Some(chm)) => {
+                Some(Reprojector::new(Crs::from_epsg(declared.unwrap_or(4326))?, &Crs::from_epsg(chm)?)?)
+            }
+            (CoordKind::LonLat, _, None) => {
+                bail!("species points {}: lon/lat, and the CHM names no CRS to project them into", path.display())
+            }
+            (CoordKind::Projected, Some(a), Some(b)) if a != b => {
+                Some(Reprojector::new(Crs::from_epsg(a)?, &Crs::from_epsg(b)?)?)
+            }
+            _ => None,
+        };
+        let mut grid = SpeciesPoints::default();
+        let mut unlabelled = 0u64;
+        source
+            .for_each(&mut |p| {
+                let Some(label) = p.species.filter(|l| !l.trim().is_empty()) else {
+                    unlabelled += 1;
+                    return Ok(());
+                };
+                let (x, y) = match &to_chm {
+                    Some(r) => match r.apply(p.x, p.y) {
+                        Ok(xy) => xy,
+                        Err(_) => return Ok(()),
+                    },
+                    None => (p.x, p.y),
+                };
+                grid.add([x, y], label);
+                Ok(())
+            })
+            .with_context(context)?;
+        if grid.len == 0 {
+            bail!(
+                "species points {}: no point with a species ({unlabelled} without; name the column with --column species=NAME \
+                 on a placements file of its own)",
+                path.display()
+            );
+        }
+        Ok(grid)
     }
 
     /// The stands of a stand map in a CHM's CRS (`--chm` with `--stands`):
@@ -941,6 +1006,42 @@ impl PlacementSource {
         stream_csv(reader, self.delimiter, &self.options, with_attributes, &mut report, f)
             .with_context(|| format!("placements {}", self.path.display()))?;
         Ok(report)
+    }
+}
+
+/// Points with a species gridded by 10 m cells (`--chm-species-points`).
+#[derive(Default)]
+struct SpeciesPoints {
+    cells: std::collections::HashMap<(i64, i64), Vec<([f64; 2], String)>>,
+    len: u64,
+}
+
+impl SpeciesPoints {
+    const CELL_M: f64 = 10.0;
+
+    fn add(&mut self, xy: [f64; 2], label: String) {
+        let key = ((xy[0] / Self::CELL_M).floor() as i64, (xy[1] / Self::CELL_M).floor() as i64);
+        self.cells.entry(key).or_default().push((xy, label));
+        self.len += 1;
+    }
+
+    /// The label of the nearest point within `reach` metres of `xy`, if any.
+    fn nearest(&self, xy: [f64; 2], reach: f64) -> Option<&str> {
+        let reach = reach.clamp(0.0, 50.0);
+        let (cx, cy) = ((xy[0] / Self::CELL_M).floor() as i64, (xy[1] / Self::CELL_M).floor() as i64);
+        let k = (reach / Self::CELL_M).ceil() as i64;
+        let mut best: Option<(f64, &str)> = None;
+        for j in cy - k..=cy + k {
+            for i in cx - k..=cx + k {
+                for (p, label) in self.cells.get(&(i, j)).into_iter().flatten() {
+                    let d = (p[0] - xy[0]).hypot(p[1] - xy[1]);
+                    if d <= reach && best.is_none_or(|(b, _)| d < b) {
+                        best = Some((d, label));
+                    }
+                }
+            }
+        }
+        best.map(|(_, l)| l)
     }
 }
 
