@@ -1009,10 +1009,13 @@ impl PlacementSource {
     }
 }
 
+/// A point and its species label.
+type LabelledPoint = ([f64; 2], String);
+
 /// Points with a species gridded by 10 m cells (`--chm-species-points`).
 #[derive(Default)]
 struct SpeciesPoints {
-    cells: std::collections::HashMap<(i64, i64), Vec<([f64; 2], String)>>,
+    cells: std::collections::HashMap<(i64, i64), Vec<LabelledPoint>>,
     len: u64,
 }
 
