@@ -26,6 +26,7 @@ pub mod metrics;
 pub mod offscreen;
 pub mod orbit;
 pub mod paths;
+pub mod phenology;
 pub mod render;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]

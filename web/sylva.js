@@ -19,6 +19,8 @@
 //                                           ao: each tree's own baked ambient occlusion, true (the default) | false
 //   v.setSeason(season)                     deciduous species in 'leaf-on' (the default) | 'autumn' | 'leaf-off'
 //                                           (bare wood; their bare far tiers are fetched then); evergreens alike in all
+//   v.setDate('2026-10-20')                 each deciduous species as its genus's leaf calendar has it there then,
+//                                           and the sun at that date (null: no date)
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.on('click' | 'hover', fn)             fn({x, y, tree}): the tree under the pointer (as pick) or null
 //   await v.pick(x, y)                      the tree drawn at canvas CSS pixel (x, y), or null:
@@ -365,6 +367,7 @@ class SylvaViewer {
       result = { azimuth: Number(sun.azimuth), elevation: Number(sun.elevation) };
     } else {
       result = JSON.parse(this.viewer.set_sun_time(`${sun.date}T${sun.time}${sun.utcOffset ?? ''}`));
+      this.sunTime = { time: sun.time, utcOffset: sun.utcOffset };
     }
     this.sun = result;
     this.dirty = SETTLE_FRAMES;
@@ -396,6 +399,26 @@ class SylvaViewer {
     this.viewer.set_season(String(season));
     this.season = String(season);
     this.dirty = SETTLE_FRAMES;
+  }
+
+  /** The date ('2026-10-20'): each deciduous species in the state its genus's
+   * leaf calendar gives at the scene's latitude and elevation then (over
+   * setSeason), and the sun at that date (at the time of day setSun last gave,
+   * else noon). null: no date (setSeason's season again; the sun as it is).
+   * Returns the state of a typical deciduous tree then ('leaf-on', 'autumn',
+   * 'leaf-off'). Throws for a bad date or before the scene is loaded. */
+  setDate(date) {
+    if (date === null || date === undefined || date === '') {
+      this.viewer.set_date('');
+      this.date = undefined;
+      this.dirty = SETTLE_FRAMES;
+      return null;
+    }
+    const state = this.viewer.set_date(String(date));
+    this.date = String(date);
+    const sun = this.sunTime ?? { time: '12:00' };
+    this.setSun({ ...sun, date: this.date });
+    return state;
   }
 
   stats() { return JSON.parse(this.viewer.stats_json()); }
@@ -471,6 +494,7 @@ class SylvaViewer {
       }
       if (this.lighting) this.setLighting(this.lighting);
       if (this.season) this.setSeason(this.season);
+      if (this.date) this.viewer.set_date(this.date);
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
       this.dirty = SETTLE_FRAMES;

@@ -61,7 +61,7 @@ pub(crate) enum Command {
     #[command(
         after_help = "Examples:\n  sylva render --scene demo-scene --view medium --out medium.png --stats medium.json\n  sylva render --scene http://127.0.0.1:8080/scene.json --camera 540000,5359700,300,0,-20 --out a.png\n  sylva render --pack demo-scene/species/beech.pack --view side --out beech.png"
     )]
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Run time against image error on a camera path, every method on the same
     /// frames: writes frames.csv, summary.json and SVG plots (pareto,
     /// frame_time, temporal_noise) into --out.
@@ -421,6 +421,13 @@ pub(crate) struct RenderArgs {
     /// packs baked without seasons, look the same in every one.
     #[arg(long, value_name = "leaf-on|autumn|leaf-off", default_value = "leaf-on")]
     pub(crate) season: sylva::render::settings::Season,
+    /// A date (YYYY-MM-DD): each deciduous species in the state its genus's leaf
+    /// calendar gives there and then (latitude and elevation of the scene's
+    /// middle; Hopkins 1918, Čufar et al. 2012 — docs/ARCHITECTURE.md
+    /// "Phenology"), over --season; the sun at that date too, at noon, unless
+    /// --sun-time or --sun says otherwise.
+    #[arg(long, value_name = "YYYY-MM-DD")]
+    pub(crate) date: Option<String>,
 }
 
 /// `--thin-px` of `render` and `bench`.

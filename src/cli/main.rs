@@ -146,7 +146,7 @@ mod cli {
                 };
                 serve(dir, port, &bind, web, config)
             }
-            Command::Render(args) => render(args),
+            Command::Render(args) => render(*args),
             Command::Pick(args) => pick(args),
         }
     }

@@ -30,6 +30,7 @@ pub(crate) fn render_scene(
     allow_partial: bool,
     refine: RefineConfig,
     (style, select): (Option<&str>, &[String]),
+    date: Option<&str>,
 ) -> Result<()> {
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     off.settings = settings;
@@ -46,6 +47,11 @@ pub(crate) fn render_scene(
             bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
         }
     };
+    if let Some(text) = date {
+        let (d, _) = sylva::render::settings::SeasonDate::at_scene(&manifest, text)
+            .map_err(|e| anyhow::anyhow!("--date: {e}"))?;
+        off.settings.date = Some(d);
+    }
     if let Some(text) = style {
         let value: serde_json::Value =
             serde_json::from_str(text).map_err(|e| anyhow::anyhow!("--style is not JSON: {e}"))?;
@@ -454,6 +460,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         repr,
         variant,
         season,
+        date,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, .. } = frame;
@@ -467,6 +474,15 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             ImageryChoice::Xyz(XyzSource::new(&t, imagery_max_zoom).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?)
         }
         (None, false) => ImageryChoice::Scene,
+    };
+    if let Some(d) = &date {
+        sylva::sun::SunTime::parse(&format!("{}T12:00", d.trim()))
+            .map_err(|_| anyhow::anyhow!("--date {d:?}: expected a date YYYY-MM-DD, e.g. 2026-10-20"))?;
+    }
+    // One control: a date moves the sun to it too (at noon) unless told otherwise.
+    let sun_time = match (&date, sun_time, &sun) {
+        (Some(d), None, None) => Some(format!("{}T12:00", d.trim())),
+        (_, t, _) => t,
     };
     let sun = SunArg::parse(sun_time.as_deref(), sun.as_deref())?;
     if let Some(scene) = scene {
@@ -504,6 +520,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             allow_partial,
             RefineConfig { enabled: converge, jitter_frames: converge_frames, levels: converge_levels },
             (style.as_deref(), &select),
+            date.as_deref(),
         );
     }
     let pack = pack.expect("clap requires --scene or --pack");

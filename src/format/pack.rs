@@ -373,6 +373,11 @@ pub struct SeasonMeta {
     /// far tiers' captured views at their resolution: what canopy rasters keep
     /// of a leaf-off crown when the pack has no bare billboards.
     pub bare_cover: f32,
+    /// The genus whose leaf calendar the species keeps (Latin, `Fagus`;
+    /// [`crate::phenology`]) when the view has a date; absent: the default
+    /// deciduous calendar.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub genus: Option<String>,
 }
 
 /// A section-table entry.
@@ -796,6 +801,14 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         finite("META.season.bare_cover", s.bare_cover.into())?;
         if !(0.0..=1.0).contains(&s.bare_cover) {
             return Err(Problem::Invalid(format!("META.season.bare_cover is {}, must be 0–1", s.bare_cover)));
+        }
+        if let Some(g) = &s.genus {
+            if g.is_empty() || g.len() > 64 || !g.bytes().all(|b| b.is_ascii_alphabetic() || b == b'-') {
+                return Err(Problem::Invalid(format!(
+                    "META.season.genus {:?}: a Latin genus of 1–64 letters",
+                    g.chars().take(80).collect::<String>()
+                )));
+            }
         }
     }
     for (e, _) in &pack.sections {

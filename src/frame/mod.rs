@@ -432,7 +432,13 @@ impl<F: Fetcher> Frame<F> {
         let terrain = if settings.terrain { self.stream.terrain_draws() } else { &[] };
         self.renderer.prepare_terrain(&self.device, &self.queue, terrain, threshold, flags);
         let canopy = self.stream.canopy_active().filter(|_| settings.canopy).map(|c| [c.px_lo, c.px_hi]);
-        self.renderer.prepare_canopy(&self.device, &self.queue, self.stream.canopy_draws(), canopy, settings.season);
+        self.renderer.prepare_canopy(
+            &self.device,
+            &self.queue,
+            self.stream.canopy_draws(),
+            canopy,
+            settings.canopy_season(),
+        );
         self.renderer.prepare(&self.device, &self.queue, view, settings)
     }
 

@@ -27,8 +27,10 @@ struct Measured {
     fade_band: f32,
     representations: Representations,
     lod_policy: bool,
-    /// Leaf-off: deciduous species want their bare far tiers.
-    leaf_off: bool,
+    /// The season drawn, and the date the species' own seasons follow (which
+    /// deciduous species want their bare far tiers).
+    season: super::settings::Season,
+    date: Option<super::settings::SeasonDate>,
     residency: u64,
 }
 
@@ -63,7 +65,8 @@ impl Reach {
             fade_band: settings.fade_band,
             representations: settings.representations,
             lod_policy: settings.lod_policy,
-            leaf_off: settings.season == super::settings::Season::LeafOff,
+            season: settings.season,
+            date: settings.date,
             residency: generation,
         };
         if self.measured == Some(key) && self.species_max_px.len() == species {
@@ -168,7 +171,9 @@ impl Reach {
         // The full mesh only where a tree can reach its threshold (one level: always).
         let full = meshes && (meta.mesh_levels.len() == 1 || b.mesh[0].is_some_and(|px| max_px >= px * slack));
         let clusters = b.has_clusters() && b.clusters.is_some_and(|min| max_px >= min * slack);
-        let bare = m.leaf_off && meta.season.as_ref().is_some_and(|s| s.bare_far);
+        let bare = meta.season.as_ref().is_some_and(|s| {
+            s.bare_far && super::settings::season_at(Some(s), m.season, m.date) == super::settings::Season::LeafOff
+        });
         [b.far && !bare, clusters, meshes || cloud, full, b.far && bare]
     }
 }
@@ -193,7 +198,8 @@ mod tests {
                 fade_band: 0.12,
                 representations: Representations::ALL,
                 lod_policy: false,
-                leaf_off: false,
+                season: crate::format::pack::Season::LeafOn,
+                date: None,
                 residency: 0,
             }),
         };
@@ -235,12 +241,26 @@ mod tests {
         // an evergreen (no season) or one without them its leafy ones.
         let mut bare = reach.clone();
         if let Some(m) = bare.measured.as_mut() {
-            m.leaf_off = true;
+            m.season = crate::format::pack::Season::LeafOff;
         }
         assert_eq!(bare.parts_needed(0, &meta), [true, false, false, false, false]);
-        meta.season = Some(crate::format::pack::SeasonMeta { autumn: [200, 90, 30], bare_far: true, bare_cover: 0.2 });
+        meta.season = Some(crate::format::pack::SeasonMeta {
+            autumn: [200, 90, 30],
+            bare_far: true,
+            bare_cover: 0.2,
+            genus: None,
+        });
         assert_eq!(bare.parts_needed(0, &meta), [false, false, false, false, true]);
         assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
+        // At a date: a January view at 50° N wants the bare far tiers of a
+        // deciduous species, a July view the leafy ones, whatever the season set.
+        for (day, bare_wanted) in [(15.0, true), (196.0, false)] {
+            let mut dated = reach.clone();
+            if let Some(m) = dated.measured.as_mut() {
+                m.date = Some(super::super::settings::SeasonDate { day, latitude: 50.0, elevation_m: 0.0 });
+            }
+            assert_eq!(dated.parts_needed(0, &meta), [!bare_wanted, false, false, false, bare_wanted], "day {day}");
+        }
         meta.season = None;
         // A billboard cloud from 40 px: not for 5 px trees; for 45 px ones the
         // coarse part (which holds it), not the full mesh.

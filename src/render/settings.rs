@@ -101,8 +101,79 @@ pub struct RenderSettings {
     /// transition. 0: the fixed pattern.
     pub refine_seed: u32,
     /// The season deciduous species are drawn in (their packs' `season`;
-    /// evergreens look the same all year).
+    /// evergreens look the same all year), unless `date` is given.
     pub season: Season,
+    /// A date and place for the seasons (`--date`, `setDate`): each deciduous
+    /// species in the state its genus's leaf calendar gives there
+    /// ([`crate::phenology`]); `None`: `season` for every one.
+    pub date: Option<SeasonDate>,
+}
+
+/// A day of the year at a place, for the species' leaf calendars.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeasonDate {
+    /// Day of the year (1 = 1 January).
+    pub day: f32,
+    /// Latitude, degrees (south negative).
+    pub latitude: f64,
+    /// Elevation, metres.
+    pub elevation_m: f64,
+}
+
+impl RenderSettings {
+    /// The season a deciduous species with `meta`'s seasons is drawn in: at
+    /// the date where one is set (its genus's calendar, the default one for
+    /// a pack that names none), else `season`. Evergreens (no `meta`): leaf-on.
+    #[must_use]
+    pub fn season_of(&self, meta: Option<&crate::format::pack::SeasonMeta>) -> Season {
+        season_at(meta, self.season, self.date)
+    }
+
+    /// The season a stand of mixed deciduous species is drawn in where one
+    /// state stands for all (the canopy rasters): the default calendar's at the date.
+    #[must_use]
+    pub fn canopy_season(&self) -> Season {
+        match self.date {
+            Some(d) => crate::phenology::DEFAULT.at(d.latitude, d.elevation_m).phase(d.day).season(),
+            None => self.season,
+        }
+    }
+}
+
+impl SeasonDate {
+    /// The date `text` (`YYYY-MM-DD`, as `--date` and `setDate` take it) at the
+    /// middle of `m`'s trees (its latitude and ground's elevation); with the
+    /// date's year, month and day.
+    ///
+    /// # Errors
+    /// Not a date, or a scene whose CRS cannot place it.
+    pub fn at_scene(m: &crate::format::Manifest, text: &str) -> Result<(Self, (i32, u32, u32)), String> {
+        let t = crate::sun::SunTime::parse(&format!("{}T12:00", text.trim()))
+            .map_err(|_| format!("date {text:?}: expected YYYY-MM-DD, e.g. 2026-10-20"))?;
+        let geo = crate::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).map_err(|e| format!("date {text:?}: {e}"))?;
+        let (_, latitude, elevation_m) =
+            geo.to_geo(super::Lighting::sun_point(m)).map_err(|e| format!("date {text:?}: {e}"))?;
+        // (Midday of the day: a day's state.)
+        let day = crate::phenology::day_of_year(t.year, t.month, t.day) as f32 + 0.5;
+        Ok((Self { day, latitude, elevation_m }, (t.year, t.month, t.day)))
+    }
+}
+
+/// [`RenderSettings::season_of`] from its parts: `meta`'s species drawn with
+/// `season`, or at `date` where one is set.
+#[must_use]
+pub fn season_at(meta: Option<&crate::format::pack::SeasonMeta>, season: Season, date: Option<SeasonDate>) -> Season {
+    match (meta, date) {
+        (None, _) => Season::LeafOn,
+        (Some(m), Some(d)) => m
+            .genus
+            .as_deref()
+            .map_or(crate::phenology::DEFAULT, crate::phenology::of_genus)
+            .at(d.latitude, d.elevation_m)
+            .phase(d.day)
+            .season(),
+        (Some(_), None) => season,
+    }
 }
 
 pub use crate::format::pack::Season;
@@ -201,6 +272,7 @@ impl Default for RenderSettings {
             lod_policy: true,
             refine_seed: 0,
             season: Season::LeafOn,
+            date: None,
             whole_tiles: false,
             canopy: true,
         }

@@ -112,6 +112,8 @@ pub struct Species {
     far_tier: FarTier,
     lod_policy: bool,
     season: Season,
+    /// The date the seasons follow, if any (`RenderSettings::date`).
+    date: Option<super::settings::SeasonDate>,
 }
 
 impl Species {
@@ -132,6 +134,7 @@ impl Species {
             far_tier: FarTier::Impostors,
             lod_policy: true,
             season: Season::LeafOn,
+            date: None,
         }
     }
 
@@ -283,8 +286,10 @@ impl Species {
             || settings.far_tier != self.far_tier
             || settings.lod_policy != self.lod_policy
             || settings.season != self.season
+            || settings.date != self.date
         {
             self.season = settings.season;
+            self.date = settings.date;
             self.cluster_min_px = settings.cluster_min_px;
             self.representations = settings.representations;
             self.far_tier = settings.far_tier;
@@ -311,7 +316,8 @@ impl Species {
                 .map(|r| DrawParams { ids: [0, *r as u32, i as u32, 0], ..Default::default() })
                 .collect();
             if let Some(p) = pack {
-                let season = season_params(p.season.as_ref(), self.season);
+                let species_season = super::settings::season_at(p.season.as_ref(), self.season, self.date);
+                let season = season_params(p.season.as_ref(), species_season);
                 for d in &mut draw {
                     d.season = season;
                 }
@@ -366,7 +372,7 @@ impl Species {
                 // those come (after a leaf-off view: bare trees rather than none).
                 let bare = p.impostor_bare.is_some() || p.billboard_bare.is_some();
                 let leafy = p.impostor.is_some() || p.billboard.is_some();
-                p.far_bare = bare && p.season.is_some() && (self.season == Season::LeafOff || !leafy);
+                p.far_bare = bare && p.season.is_some() && (species_season == Season::LeafOff || !leafy);
                 let (impostor, billboard) =
                     if p.far_bare { (&p.impostor_bare, &p.billboard_bare) } else { (&p.impostor, &p.billboard) };
                 p.far_impostor = impostor.is_some() && (self.far_tier == FarTier::Impostors || billboard.is_none());

@@ -163,6 +163,28 @@ impl Viewer {
         Ok(())
     }
 
+    /// The date the seasons follow (`"2026-10-20"`): each deciduous species in
+    /// the state its genus's leaf calendar gives at the scene's latitude and
+    /// elevation then (over `set_season`); `""`: no date (`set_season` again).
+    /// Returns the date's state of the default deciduous calendar
+    /// (`"leaf-on"`, `"autumn"`, `"leaf-off"`).
+    ///
+    /// # Errors
+    /// Not a date, or the scene not loaded yet.
+    pub fn set_date(&mut self, date: &str) -> Result<String, JsValue> {
+        if date.trim().is_empty() {
+            self.frame.settings.date = None;
+            return Ok(String::new());
+        }
+        let Some(m) = self.frame.stream.manifest() else {
+            return Err(JsValue::from_str("setDate: the scene is not loaded yet"));
+        };
+        let (d, _) = crate::render::settings::SeasonDate::at_scene(m, date)
+            .map_err(|e| JsValue::from_str(&format!("setDate: {e}")))?;
+        self.frame.settings.date = Some(d);
+        Ok(self.frame.settings.canopy_season().name().to_string())
+    }
+
     /// Each tree's own baked ambient occlusion on or off.
     pub fn set_ao(&mut self, on: bool) {
         self.frame.settings.ao = on;

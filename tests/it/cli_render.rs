@@ -175,6 +175,49 @@ fn a_shadow_study_renders_one_image_per_time_as_the_sun_moves() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `--date` (issue 46): each deciduous species in its calendar's state at the
+/// scene's place then, and the sun at that date: a January view of the
+/// fixture (48.4° N) is the leaf-off view under the January noon sun, a July
+/// view the leaf-on one under July's; the two differ; a bad date is named.
+#[test]
+fn a_date_sets_the_seasons_and_the_sun() {
+    let dir = tmp("date");
+    let scene = scene_copy(&dir);
+    let run = |name: &str, extra: &[&str]| -> Vec<u8> {
+        let out = dir.join(format!("{name}.png"));
+        let o = Command::new(env!("CARGO_BIN_EXE_sylva"))
+            .env_remove("XDG_RUNTIME_DIR")
+            .args(["render", "--scene"])
+            .arg(&scene)
+            .args(["--view", "medium", "--size", "160x90", "--timeout", "60", "--out"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        image::open(&out).unwrap().to_rgb8().into_raw()
+    };
+    let january = run("january", &["--date", "2026-01-15"]);
+    assert!(january == run("leaf-off", &["--season", "leaf-off", "--sun-time", "2026-01-15T12:00"]));
+    let july = run("july", &["--date", "2026-07-15"]);
+    assert!(july == run("leaf-on", &["--sun-time", "2026-07-15T12:00"]));
+    let differ = january.chunks(3).zip(july.chunks(3)).filter(|(a, b)| a != b).count();
+    assert!(differ > 100, "January and July differ in {differ} pixels");
+    // The date's season wins over --season; a date is checked.
+    assert!(july == run("july-over-season", &["--date", "2026-07-15", "--season", "leaf-off"]));
+    let o = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .env_remove("XDG_RUNTIME_DIR")
+        .args(["render", "--scene"])
+        .arg(&scene)
+        .args(["--size", "16x16", "--date", "2026-13-01", "--out"])
+        .arg(dir.join("bad.png"))
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("2026-13-01") && !e.contains("panicked"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `sylva pick` prints the tree at a pixel (its id from the tile's sidecar,
 /// species, height, place) or null where none is drawn; bad pixels are refused.
 #[test]

@@ -795,11 +795,15 @@ fn pack_decoder_error_paths() {
             s.extend(billboards);
         }
     };
-    let season = |bare_far, bare_cover| Some(SeasonMeta { autumn: [200, 80, 30], bare_far, bare_cover });
+    let season = |bare_far, bare_cover| Some(SeasonMeta { autumn: [200, 80, 30], bare_far, bare_cover, genus: None });
     pack_error(bare(None, 80), "section IMCO with index 1: the far tiers have 1 state here");
     pack_error(bare(season(false, 0.2), 80), "index 1");
     pack_error(bare(season(true, 0.2), 79), "META.impostors.texture (state 1) needs 80 bytes");
     pack_error(bare(season(true, 1.5), 80), "META.season.bare_cover is 1.5");
+    let named =
+        |g: &str| Some(SeasonMeta { autumn: [200, 80, 30], bare_far: true, bare_cover: 0.2, genus: Some(g.into()) });
+    pack_error(bare(named("Fa gus\u{0}"), 80), "META.season.genus");
+    pack_error(bare(named(""), 80), "META.season.genus");
     let (mut meta, mut sections) = sample_pack();
     bare(season(true, 0.2), 80)(&mut meta, &mut sections);
     let bytes = encode_pack(&meta, &sections);

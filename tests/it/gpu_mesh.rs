@@ -254,7 +254,7 @@ fn a_leaf_off_capture_and_draw_keep_the_wood_alone() {
     let (w, h) = (96, 96);
     let bg = [0.0, 0.0, 1.0, 1.0];
     let r = TreeRenderer::new(&ctx);
-    let deciduous = SeasonMeta { autumn: [220, 60, 20], bare_far: false, bare_cover: 0.2 };
+    let deciduous = SeasonMeta { autumn: [220, 60, 20], bare_far: false, bare_cover: 0.2, genus: None };
     let count = |meta: Option<&SeasonMeta>, season: Season| {
         r.set_season(meta, season);
         let img = r.render_pack(&ctx, &pack, PackRepr::Mesh(0), PackView::Side, [w, h], bg).unwrap();

@@ -238,6 +238,20 @@ test('the viewer page', async (t) => {
     await page.evaluate(() => window.sylva.setSeason('leaf-on'));
     assert.deepEqual(errors, []);
   });
+  await t.test('setDate: the leaf calendar sets each species\' season there and then, and the sun follows', async () => {
+    // The fixture (48.4° N, a few metres up): in January its deciduous species are bare, in July in leaf.
+    const january = await page.evaluate(() => window.sylva.setDate('2026-01-15'));
+    assert.equal(january, 'leaf-off');
+    const winter = await foliageShare(page, 'date-january');
+    const july = await page.evaluate(() => window.sylva.setDate('2026-07-15'));
+    assert.equal(july, 'leaf-on');
+    const summer = await foliageShare(page, 'date-july');
+    assert.ok(winter < summer * 0.8 && winter > 0.005, `foliage in January ${winter.toFixed(3)}, July ${summer.toFixed(3)} (the spruce stays)`);
+    const refused = await page.evaluate(() => { try { window.sylva.setDate('2026-13-01'); return null; } catch (e) { return String(e); } });
+    assert.ok(refused && refused.includes('YYYY-MM-DD'), refused);
+    await page.evaluate(() => { window.sylva.setDate(null); window.sylva.setSun(null); });
+    assert.deepEqual(errors, []);
+  });
   await t.test('the sun follows a date and time at the scene and the time-of-day control', async () => {
     const meanBrightness = (name) => meanBrightnessOf(page, name);
     // The fixture's place (48.4° N, 15.5° E) at 13:15 summer time on the solstice: due south, about 65° up.

@@ -163,8 +163,9 @@ fn hash_f32s(values: &[f32], h: &mut DefaultHasher) {
 
 fn hash_model(model: &ImportedModel, h: &mut DefaultHasher) {
     // Every field: a new one must be added here (or to the ignored ones).
-    let ImportedModel { materials, vertices, triangles, notes: _, variants, autumn } = model;
+    let ImportedModel { materials, vertices, triangles, notes: _, variants, autumn, genus } = model;
     autumn.hash(h);
+    genus.hash(h);
     materials.len().hash(h);
     for m in materials {
         let ImportedMaterial { name, kind, base_color, alpha_cutoff, double_sided, texture, blended } = m;
@@ -249,6 +250,7 @@ mod tests {
             notes: Vec::new(),
             variants: Vec::new(),
             autumn: None,
+            genus: None,
         }
     }
 

@@ -62,6 +62,11 @@ pub fn write_terrain(src: &TerrainSource<'_>, dir: &Path, log: &dyn Fn(&str)) ->
         ));
         resolution = coarser;
     }
+    // On a 1/64 m step: the root's size (64 × resolution × 2^levels) and corner
+    // are then short decimals that any JSON reader reads back to the bit
+    // (`merge` copies shard 0's entry through a reader that is off by an ulp
+    // on long ones).
+    let resolution = (resolution * 64.0).ceil() / 64.0;
     let depth = (extent / (grid * resolution)).log2().ceil().max(0.0) as u8;
     let root_size = grid * resolution * f64::from(1u32 << depth);
     // The root square is centred on the region, its corner on the resolution grid.

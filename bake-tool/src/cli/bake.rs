@@ -498,6 +498,7 @@ pub(crate) fn import_models(args: &BakeArgs) -> Result<Vec<(String, sylva_bake::
                 match model.triangle_counts() {
                     (leaf, wood) if leaf > 0 && wood > 0 => {
                         model.autumn = Some(autumn);
+                        model.genus = sylva_bake::library::choose::deciduous_genus_of(name).map(str::to_string);
                         log(&format!("model {name}: deciduous by its name: baked in leaf-on, autumn and leaf-off"));
                     }
                     _ => log(&format!(

@@ -114,6 +114,7 @@ pub fn demo_models(seed: u64) -> Vec<(String, ImportedModel)> {
             let mut tree = make_tree(s, seed.wrapping_add(i as u64 * 7919));
             // Beech and birch are deciduous: their seasons, as their genera's.
             tree.autumn = crate::library::choose::autumn_of(s.name);
+            tree.genus = crate::library::choose::deciduous_genus_of(s.name).map(str::to_string);
             (s.name.to_string(), tree)
         })
         .collect()

@@ -92,6 +92,14 @@ pub fn autumn_of(label: &str) -> Option<[u8; 3]> {
     g.autumn()
 }
 
+/// The Latin genus of a deciduous tree named `label` (its leaf calendar), if
+/// the name places one (as [`autumn_of`] does).
+#[must_use]
+pub fn deciduous_genus_of(label: &str) -> Option<&'static str> {
+    let (g, why) = by_name(label, None);
+    (!why.is_default() && g.autumn().is_some()).then_some(g.name)
+}
+
 /// The library tree of a name (Latin or common), with the family a species table gave.
 fn by_name(label: &str, family: Option<&str>) -> (&'static Genus, Why) {
     let mut first = names::first_word(label);

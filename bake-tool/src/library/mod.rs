@@ -205,6 +205,7 @@ fn build(genus: &Genus, t: &Skeleton, seed: u64) -> ImportedModel {
             material("leaves", MaterialKind::Leaf, 0.5, true, textures::leaf(genus, seed)),
         ],
         autumn: genus.autumn(),
+        genus: genus.autumn().map(|_| genus.name.to_string()),
         ..Default::default()
     };
     for stem in &t.stems {

@@ -267,6 +267,7 @@ pub fn simplify_model(model: &ImportedModel) -> (ImportedModel, Vec<u32>) {
         notes: Vec::new(),
         variants: Vec::new(),
         autumn: model.autumn,
+        genus: model.genus.clone(),
     };
     // The variants' shapes, enlarged as the model's (the same cards: the same topology).
     let mut shapes: Vec<Vec<[Vec3; 2]>> = model.variants.clone();

@@ -335,7 +335,7 @@ pub fn build_pack(
                 bare_cover * 100.0
             ));
         }
-        meta.season = Some(SeasonMeta { autumn, bare_far, bare_cover });
+        meta.season = Some(SeasonMeta { autumn, bare_far, bare_cover, genus: model.genus.clone() });
     }
     if opts.clusters {
         let hopts =

@@ -73,6 +73,10 @@ pub struct ImportedModel {
     /// A deciduous tree's leaves' autumn colour (sRGB): the pack then holds
     /// its seasons (leaf-on, autumn, leaf-off). `None`: evergreen, one state.
     pub autumn: Option<[u8; 3]>,
+    /// The genus whose leaf calendar a deciduous tree keeps (Latin, e.g.
+    /// `Fagus`; the viewer's phenology at a date): the library's, or the one
+    /// its model's name places. `None`: the default deciduous calendar.
+    pub genus: Option<String>,
 }
 
 impl ImportedModel {
