@@ -119,7 +119,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let n = normalize(m);
     let is_leaf = packed_normal.a > 0.75;
     // Leaf-off before the bare capture has come: the wood the leaves let through.
-    if is_leaf && leaves_off() {
+    if is_leaf && leaves_off(in.variation) {
         discard;
     }
     let own = color.rgb * in.tint;
@@ -137,7 +137,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 @fragment
 fn fs_shadow(in: VertexOut) {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    let leaf_off = leaves_off() && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    let leaf_off = leaves_off(in.variation) && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
     if color.a < 0.5 || leaf_off || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
@@ -147,7 +147,7 @@ fn fs_shadow(in: VertexOut) {
 @fragment
 fn fs_id(in: VertexOut) -> @location(0) u32 {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    let leaf_off = leaves_off() && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    let leaf_off = leaves_off(in.variation) && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
     if color.a < 0.5 || leaf_off || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }

@@ -259,7 +259,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let prim = vertex / 6u;
     let corner = CORNERS[vertex % 6u];
     var out: VertexOut;
-    if prim < draw.cluster.y && leaves_off() {
+    if prim < draw.cluster.y && leaves_off(tree.variation) {
         // Leaf-off: the foliage's ellipsoids go, the branches' lines stay.
         out.clip = vec4<f32>(2.0, 2.0, 0.5, 1.0);
     } else if prim < draw.cluster.y {

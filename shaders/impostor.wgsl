@@ -246,7 +246,7 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     }
     let is_leaf = hit.packed >= 0.5;
     // Leaf-off before the bare capture has come: the wood the leaves let through.
-    if is_leaf && leaves_off() {
+    if is_leaf && leaves_off(in.tree_size.z) {
         discard;
     }
     let baked_ao = clamp((hit.packed - select(0.0, 128.0 / 255.0, is_leaf)) * (255.0 / 127.0), 0.0, 1.0);
@@ -278,7 +278,7 @@ fn fs_main(in: VertexOut) -> FragmentOut {
 @fragment
 fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || (leaves_off() && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    if hit.color.a < 0.5 || (leaves_off(in.tree_size.z) && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     return impostor_depth(hit.at, in);
@@ -288,7 +288,7 @@ fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
 @fragment
 fn fs_id(in: VertexOut) -> IdOut {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || (leaves_off() && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    if hit.color.a < 0.5 || (leaves_off(in.tree_size.z) && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
     var out: IdOut;

@@ -93,7 +93,7 @@ fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32, @builtin(vertex
     let tree = unpack_instance(instances[item.x], batch, view);
     var out: VertexOut;
     // Leaf-off: leaf cards and cloud planes (all but wood) collapse outside the frustum.
-    if leaves_off() && materials[in.position_material.w].kind != 1u {
+    if leaves_off(tree.variation) && materials[in.position_material.w].kind != 1u {
         out.clip = vec4<f32>(2.0, 2.0, 0.5, 1.0);
         return out;
     }

@@ -165,13 +165,7 @@ impl SeasonDate {
 pub fn season_at(meta: Option<&crate::format::pack::SeasonMeta>, season: Season, date: Option<SeasonDate>) -> Season {
     match (meta, date) {
         (None, _) => Season::LeafOn,
-        (Some(m), Some(d)) => m
-            .genus
-            .as_deref()
-            .map_or(crate::phenology::DEFAULT, crate::phenology::of_genus)
-            .at(d.latitude, d.elevation_m)
-            .phase(d.day)
-            .season(),
+        (Some(m), Some(d)) => phenology_of(m).at(d.latitude, d.elevation_m).phase(d.day).season(),
         (Some(_), None) => season,
     }
 }
@@ -212,6 +206,47 @@ pub fn season_params(meta: Option<&crate::format::pack::SeasonMeta>, season: Sea
     let Some(m) = meta else { return [0.0; 4] };
     let [r, g, b] = autumn_linear(m);
     [r, g, b, season.code()]
+}
+
+/// [`season_params`] at `date` where one is set: the state code is then 3 +
+/// the species' phase in its leaf calendar (0–3), which the passes move per
+/// tree by [`PHASE_SPREAD`] (`tree_phase` in `shaders/trees.wgsl`); else
+/// `season`'s code.
+#[must_use]
+pub fn season_params_at(
+    meta: Option<&crate::format::pack::SeasonMeta>,
+    season: Season,
+    date: Option<SeasonDate>,
+) -> [f32; 4] {
+    let Some(m) = meta else { return [0.0; 4] };
+    let [r, g, b] = autumn_linear(m);
+    match date {
+        Some(d) => [r, g, b, 3.0 + phenology_of(m).at(d.latitude, d.elevation_m).phase(d.day).0],
+        None => [r, g, b, season.code()],
+    }
+}
+
+/// How far apart a stand's trees start a change of its leaf calendar
+/// (unfolding, colouring, fall), as a share of the stand's change: a tree
+/// starts after a delay of up to this by its variation and goes through the
+/// change in the rest (a 21-day leaf-out: trees start over 13 days, each
+/// takes 8). Twin of `PHASE_SPREAD` in `shaders/trees.wgsl`.
+pub const PHASE_SPREAD: f32 = 0.6;
+
+/// A tree's own phase at a date where the stand's is `stand` (0–3), by its
+/// `variation` (0–31): between changes the stand's, within one delayed and
+/// quicker, done when the stand is. Twin of `tree_phase` in `shaders/trees.wgsl`.
+#[must_use]
+pub fn tree_phase(stand: f32, variation: u32) -> f32 {
+    let p = stand.clamp(0.0, 3.0);
+    let k = p.floor().min(2.0);
+    let x = variation as f32 * 0.618_034 + 0.3;
+    let delay = PHASE_SPREAD * (x - x.floor());
+    k + ((p - k - delay) / (1.0 - PHASE_SPREAD)).clamp(0.0, 1.0)
+}
+
+fn phenology_of(m: &crate::format::pack::SeasonMeta) -> crate::phenology::Phenology {
+    m.genus.as_deref().map_or(crate::phenology::DEFAULT, crate::phenology::of_genus)
 }
 
 /// A deciduous species' autumn colour (its pack's `season.autumn`), linear RGB.
@@ -285,6 +320,38 @@ pub const DEFAULT_CLUSTER_MIN_PX: f32 = 40.0;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// At a date each tree goes through a change at its own time: half the
+    /// stand bare half through its fall, the mean near the stand's; between
+    /// changes (in leaf, in full colour, bare) every tree as the stand.
+    #[test]
+    fn a_stand_goes_through_a_change_at_its_trees_own_pace() {
+        let phases: Vec<f32> = (0..32).map(|v| tree_phase(2.5, v)).collect();
+        let mean = phases.iter().sum::<f32>() / 32.0;
+        assert!((mean - 2.5).abs() < 0.05, "{mean}");
+        assert!(phases.iter().all(|p| (2.0..=3.0).contains(p)));
+        let bare = phases.iter().filter(|&&p| p >= 2.5).count();
+        assert!((12..=20).contains(&bare), "half the stand bare half through its fall: {bare}");
+        for stand in [0.0, 1.0, 2.0, 3.0] {
+            assert!((0..32).all(|v| tree_phase(stand, v) == stand), "every tree at {stand}");
+        }
+        // Each tree moves forward with the stand.
+        for v in 0..32 {
+            let steps: Vec<f32> = (0..=300).map(|i| tree_phase(i as f32 * 0.01, v)).collect();
+            assert!(steps.windows(2).all(|w| w[1] >= w[0]), "variation {v}");
+        }
+        // The code the passes read: 3 + the species' phase at a date, the season's code without.
+        let meta = crate::format::pack::SeasonMeta {
+            autumn: [200, 90, 30],
+            bare_far: true,
+            bare_cover: 0.2,
+            genus: Some("Fagus".into()),
+        };
+        let july = SeasonDate { day: 196.5, latitude: 50.0, elevation_m: 0.0 };
+        assert_eq!(season_params_at(Some(&meta), Season::LeafOff, Some(july))[3], 4.0);
+        assert_eq!(season_params_at(Some(&meta), Season::Autumn, None)[3], Season::Autumn.code());
+        assert_eq!(season_params_at(None, Season::Autumn, Some(july)), [0.0; 4]);
+    }
 
     #[test]
     fn a_stand_turns_at_its_trees_own_pace() {

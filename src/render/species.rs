@@ -15,7 +15,7 @@ use super::layouts::SharedLayouts;
 use super::mesh::{MeshGpu, MeshPipelines};
 use super::pools::Pools;
 use super::reach::Reach;
-use super::settings::{season_params, FarTier, RenderSettings, Representations, Season};
+use super::settings::{FarTier, RenderSettings, Representations, Season};
 use crate::format::Pack;
 use crate::lod::bands::{bands, cluster_tiers, MeshOffer, Offer};
 use crate::lod::policy::policy_keeps;
@@ -317,7 +317,7 @@ impl Species {
                 .collect();
             if let Some(p) = pack {
                 let species_season = super::settings::season_at(p.season.as_ref(), self.season, self.date);
-                let season = season_params(p.season.as_ref(), species_season);
+                let season = super::settings::season_params_at(p.season.as_ref(), self.season, self.date);
                 for d in &mut draw {
                     d.season = season;
                 }

@@ -203,6 +203,19 @@ fn a_date_sets_the_seasons_and_the_sun() {
     assert!(july == run("leaf-on", &["--sun-time", "2026-07-15T12:00"]));
     let differ = january.chunks(3).zip(july.chunks(3)).filter(|(a, b)| a != b).count();
     assert!(differ > 100, "January and July differ in {differ} pixels");
+    // The trees go through a change at their own pace: on 2 November (the
+    // default calendar half through its leaf fall here) about half the crowns
+    // are bare, between 29 October (all in colour) and 15 November (all bare);
+    // the same sun for the three.
+    let sun = ["--sun", "180,25"];
+    let on = |d: &str| run(&format!("fall-{d}"), &["--date", d, sun[0], sun[1]]);
+    let (coloured, half, bare) = (on("2026-10-29"), on("2026-11-02"), on("2026-11-15"));
+    let differ = |a: &[u8], b: &[u8]| a.chunks(3).zip(b.chunks(3)).filter(|(x, y)| x != y).count() as f64;
+    // (Against 29 October: 15 November also changes the far tiers and the
+    // canopy to their bare state; 2 November only drops some crowns' leaves.)
+    let (all, some) = (differ(&bare, &coloured), differ(&half, &coloured));
+    eprintln!("changed since 29 October: by 2 November {some} pixels, by 15 November {all}");
+    assert!(all > 100.0 && some > 0.15 * all && some < 0.85 * all, "by 2 November {some}, by 15 November {all} pixels");
     // The date's season wins over --season; a date is checked.
     assert!(july == run("july-over-season", &["--date", "2026-07-15", "--season", "leaf-off"]));
     let o = Command::new(env!("CARGO_BIN_EXE_sylva"))
