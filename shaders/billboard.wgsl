@@ -137,7 +137,9 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 @fragment
 fn fs_shadow(in: VertexOut) {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    let leaf_off = leaves_off(in.variation) && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    // (Sampled first: a texture sample under a per-tree condition breaks WGSL's uniformity rule.)
+    let leafy = textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    let leaf_off = leafy && leaves_off(in.variation);
     if color.a < 0.5 || leaf_off || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
@@ -147,7 +149,9 @@ fn fs_shadow(in: VertexOut) {
 @fragment
 fn fs_id(in: VertexOut) -> @location(0) u32 {
     let color = textureSample(bb_color, bb_sampler, in.uv, in.layer);
-    let leaf_off = leaves_off(in.variation) && textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    // (Sampled first: a texture sample under a per-tree condition breaks WGSL's uniformity rule.)
+    let leafy = textureSample(bb_normal, bb_sampler, in.uv, in.layer).a > 0.75;
+    let leaf_off = leafy && leaves_off(in.variation);
     if color.a < 0.5 || leaf_off || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }

@@ -127,7 +127,8 @@ struct DrawParams {
     ao_field_min: vec4<f32>,
     ao_field_size: vec4<f32>,
     // The species' season: xyz its leaves' autumn colour (linear), w the
-    // state (0 leaf-on or evergreen, 1 autumn, 2 leaf-off; `trees.wgsl`).
+    // state (0 leaf-on or evergreen, 1 autumn, 2 leaf-off; at a date 3 + its
+    // phase in its leaf calendar, 3–6; `trees.wgsl`).
     season: vec4<f32>,
 };
 

@@ -8,8 +8,10 @@
 //! - **Latitude**: Hopkins' bioclimatic law (Hopkins 1918, *Periodical events
 //!   and natural law as guides to agricultural research and practice*, Monthly
 //!   Weather Review Supplement 9): spring events come about 4 days later per
-//!   degree poleward, autumn ones correspondingly earlier. South of the equator
-//!   the year is turned by half (the same latitude's season six months apart).
+//!   degree poleward, autumn ones correspondingly earlier, between 35° and 70°
+//!   (nearer the equator the 35° calendar: carried further the rate would
+//!   leave no winter). South of the equator the year is turned by half (the
+//!   same latitude's season six months apart).
 //! - **Elevation**: Čufar et al. 2012 (*Temporal shifts in leaf phenology of
 //!   beech (Fagus sylvatica) depend on elevation*, Trees 26: 1091–1100, over 47
 //!   Slovenian sites 1955–2007): leaf unfolding 2.6 days later and leaf
@@ -67,7 +69,7 @@ pub fn of_genus(genus: &str) -> Phenology {
 pub const DEFAULT: Phenology = row(113.0, 282.0, 305.0);
 
 /// The table: genus → leaf unfolding, colouring and bare days at 50° N, sea level.
-pub const GENERA: [(&str, Phenology); 34] = [
+pub const GENERA: [(&str, Phenology); 35] = [
     ("Fagus", row(113.0, 282.0, 305.0)),
     ("Quercus", row(120.0, 288.0, 315.0)),
     ("Betula", row(105.0, 272.0, 298.0)),
@@ -102,6 +104,7 @@ pub const GENERA: [(&str, Phenology); 34] = [
     ("Celtis", row(118.0, 288.0, 310.0)),
     ("Zelkova", row(115.0, 290.0, 312.0)),
     ("Taxodium", row(118.0, 295.0, 320.0)),
+    ("Metasequoia", row(112.0, 292.0, 318.0)),
 ];
 
 /// Where a genus is in its year: 0 bare (winter), 0–1 leaves unfolding, 1 in
@@ -133,7 +136,10 @@ impl Phenology {
     /// days are those of the same northern latitude half a year on.
     #[must_use]
     pub fn at(self, latitude: f64, elevation_m: f64) -> Self {
-        let lat = latitude.abs().clamp(0.0, 70.0);
+        // (Below 35° the 35° calendar: Hopkins' rate carried further would
+        // leave no winter at all; above 70° the 70° one. NaN: the reference.)
+        let lat = if latitude.is_nan() { REFERENCE_LATITUDE } else { latitude.abs().clamp(35.0, 70.0) };
+        let elevation_m = if elevation_m.is_nan() { 0.0 } else { elevation_m };
         let elevation = elevation_m.clamp(-500.0, 4_000.0);
         let spring = ((lat - REFERENCE_LATITUDE) * DAYS_PER_DEGREE + elevation / 100.0 * SPRING_DAYS_PER_100_M) as f32;
         let autumn = ((lat - REFERENCE_LATITUDE) * DAYS_PER_DEGREE + elevation / 100.0 * AUTUMN_DAYS_PER_100_M) as f32;
@@ -220,6 +226,11 @@ mod tests {
         let arctic = of_genus("Quercus").at(70.0, 2000.0);
         assert!(arctic.colour >= arctic.full_leaf + 60.0);
         assert_eq!(arctic.phase(arctic.full_leaf + 30.0).season(), Season::LeafOn);
+        // Near the equator the 35° calendar (a winter still); NaN places the reference.
+        let south = of_genus("Platanus").at(20.0, 0.0);
+        assert_eq!(south, of_genus("Platanus").at(35.0, 0.0));
+        assert_eq!(south.phase(day_of_year(2026, 1, 15) as f32).season(), Season::LeafOff);
+        assert_eq!(of_genus("Fagus").at(f64::NAN, f64::NAN), of_genus("Fagus").at(50.0, 0.0));
         // A genus the table lacks takes the default; the table has no repeats.
         assert_eq!(of_genus("Nothofagus"), DEFAULT);
         for (i, (g, p)) in GENERA.iter().enumerate() {

@@ -362,12 +362,17 @@ class SylvaViewer {
     let result = null;
     if (!sun) {
       this.viewer.set_sun_time('');
+      this.sunTime = undefined;
+      this.sunAngles = false;
     } else if (sun.azimuth !== undefined) {
       this.viewer.set_sun_angles(Number(sun.azimuth), Number(sun.elevation));
       result = { azimuth: Number(sun.azimuth), elevation: Number(sun.elevation) };
+      this.sunTime = undefined;
+      this.sunAngles = true;
     } else {
       result = JSON.parse(this.viewer.set_sun_time(`${sun.date}T${sun.time}${sun.utcOffset ?? ''}`));
       this.sunTime = { time: sun.time, utcOffset: sun.utcOffset };
+      this.sunAngles = false;
     }
     this.sun = result;
     this.dirty = SETTLE_FRAMES;
@@ -416,8 +421,9 @@ class SylvaViewer {
     }
     const state = this.viewer.set_date(String(date));
     this.date = String(date);
-    const sun = this.sunTime ?? { time: '12:00' };
-    this.setSun({ ...sun, date: this.date });
+    // One control: the sun moves to the date (at the time of day setSun last
+    // gave, else noon) unless it was set by angles.
+    if (!this.sunAngles) this.setSun({ ...(this.sunTime ?? { time: '12:00' }), date: this.date });
     return state;
   }
 
@@ -494,7 +500,7 @@ class SylvaViewer {
       }
       if (this.lighting) this.setLighting(this.lighting);
       if (this.season) this.setSeason(this.season);
-      if (this.date) this.viewer.set_date(this.date);
+      if (this.date) this.pendingDate = this.date; // placed when the new viewer has the manifest
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
       this.dirty = SETTLE_FRAMES;
@@ -552,7 +558,11 @@ class SylvaViewer {
     for (const e of JSON.parse(this.viewer.take_events_json())) {
       if (e.kind === 'error') { this.emit('error', e); this.rejectReady(new Error(e.message)); }
       else if (e.kind === 'warning') this.emit('warning', e);
-      else if (e.kind === 'manifest') this.emit('manifest', e);
+      else if (e.kind === 'manifest') {
+        // A date set before the scene came (a recovered viewer): now it can be placed.
+        if (this.pendingDate) { const d = this.pendingDate; this.pendingDate = undefined; try { this.viewer.set_date(d); } catch (err) { this.emit('warning', { message: String(err) }); } }
+        this.emit('manifest', e);
+      }
     }
     this.emit('progress', progress);
     const cam = this.viewer.camera_json();

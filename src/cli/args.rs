@@ -426,7 +426,7 @@ pub(crate) struct RenderArgs {
     /// middle; Hopkins 1918, Čufar et al. 2012 — docs/ARCHITECTURE.md
     /// "Phenology"), over --season; the sun at that date too, at noon, unless
     /// --sun-time or --sun says otherwise.
-    #[arg(long, value_name = "YYYY-MM-DD")]
+    #[arg(long, value_name = "YYYY-MM-DD", conflicts_with = "pack")]
     pub(crate) date: Option<String>,
 }
 

@@ -476,8 +476,12 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         (None, false) => ImageryChoice::Scene,
     };
     if let Some(d) = &date {
-        sylva::sun::SunTime::parse(&format!("{}T12:00", d.trim()))
-            .map_err(|_| anyhow::anyhow!("--date {d:?}: expected a date YYYY-MM-DD, e.g. 2026-10-20"))?;
+        sylva::sun::SunTime::parse(&format!("{}T12:00", d.trim())).map_err(|e| {
+            anyhow::anyhow!(
+                "--date {d:?}: expected a date YYYY-MM-DD, e.g. 2026-10-20 ({})",
+                e.split_once(": ").map_or(e.as_str(), |(_, why)| why.split(" (expected").next().unwrap_or(why))
+            )
+        })?;
     }
     // One control: a date moves the sun to it too (at noon) unless told otherwise.
     let sun_time = match (&date, sun_time, &sun) {

@@ -805,7 +805,7 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
         if let Some(g) = &s.genus {
             if g.is_empty() || g.len() > 64 || !g.bytes().all(|b| b.is_ascii_alphabetic() || b == b'-') {
                 return Err(Problem::Invalid(format!(
-                    "META.season.genus {:?}: a Latin genus of 1–64 letters",
+                    "META.season.genus {:?}: a Latin genus, 1–64 letters (or `-`)",
                     g.chars().take(80).collect::<String>()
                 )));
             }

@@ -44,7 +44,8 @@ pub struct DrawParams {
     pub ao_field_size: [f32; 4],
     /// The species' season (`trees.wgsl`): xyz its leaves' autumn colour
     /// (linear RGB), w the state drawn ([`super::settings::Season::code`]:
-    /// 0 leaf-on or evergreen, 1 autumn, 2 leaf-off).
+    /// 0 leaf-on or evergreen, 1 autumn, 2 leaf-off; at a date 3 + the
+    /// species' phase, [`super::settings::season_params_at`]).
     pub season: [f32; 4],
     /// Padding to the 256-byte dynamic-offset alignment.
     pub pad: [u32; 20],

@@ -148,11 +148,18 @@ impl SeasonDate {
     /// # Errors
     /// Not a date, or a scene whose CRS cannot place it.
     pub fn at_scene(m: &crate::format::Manifest, text: &str) -> Result<(Self, (i32, u32, u32)), String> {
-        let t = crate::sun::SunTime::parse(&format!("{}T12:00", text.trim()))
-            .map_err(|_| format!("date {text:?}: expected YYYY-MM-DD, e.g. 2026-10-20"))?;
+        let t = crate::sun::SunTime::parse(&format!("{}T12:00", text.trim())).map_err(|e| {
+            format!(
+                "date {text:?}: expected YYYY-MM-DD, e.g. 2026-10-20 ({})",
+                e.split_once(": ").map_or(e.as_str(), |(_, why)| why.split(" (expected").next().unwrap_or(why))
+            )
+        })?;
         let geo = crate::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).map_err(|e| format!("date {text:?}: {e}"))?;
         let (_, latitude, elevation_m) =
             geo.to_geo(super::Lighting::sun_point(m)).map_err(|e| format!("date {text:?}: {e}"))?;
+        if !(latitude.is_finite() && elevation_m.is_finite()) {
+            return Err(format!("date {text:?}: the scene's middle has no latitude or elevation"));
+        }
         // (Midday of the day: a day's state.)
         let day = crate::phenology::day_of_year(t.year, t.month, t.day) as f32 + 0.5;
         Ok((Self { day, latitude, elevation_m }, (t.year, t.month, t.day)))

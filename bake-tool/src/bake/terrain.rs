@@ -66,7 +66,8 @@ pub fn write_terrain(src: &TerrainSource<'_>, dir: &Path, log: &dyn Fn(&str)) ->
     // are then short decimals that any JSON reader reads back to the bit
     // (`merge` copies shard 0's entry through a reader that is off by an ulp
     // on long ones).
-    let resolution = (resolution * 64.0).ceil() / 64.0;
+    // (A pixel size a hair over a step, 1.0000001 m, stays 1 m.)
+    let resolution = ((resolution * 64.0 - 1e-6).ceil() / 64.0).max(1.0 / 64.0);
     let depth = (extent / (grid * resolution)).log2().ceil().max(0.0) as u8;
     let root_size = grid * resolution * f64::from(1u32 << depth);
     // The root square is centred on the region, its corner on the resolution grid.

@@ -205,7 +205,8 @@ fn build(genus: &Genus, t: &Skeleton, seed: u64) -> ImportedModel {
             material("leaves", MaterialKind::Leaf, 0.5, true, textures::leaf(genus, seed)),
         ],
         autumn: genus.autumn(),
-        genus: genus.autumn().map(|_| genus.name.to_string()),
+        // (An archetype is no genus: the default calendar.)
+        genus: genus.autumn().filter(|_| !genus.archetype).map(|_| genus.name.to_string()),
         ..Default::default()
     };
     for stem in &t.stems {
