@@ -159,6 +159,7 @@ export function attachFrameProtocol(viewer, { policy, hint = null, win = globalT
     setSun: (sun) => viewer.setSun(sun),
     setLighting: (o) => viewer.setLighting(o),
     setSeason: (season) => viewer.setSeason(season),
+    setDate: (date) => viewer.setDate(date),
     heightAt: (lon, lat) => viewer.heightAt(lon, lat),
     stats: () => viewer.stats(), camera: () => viewer.camera(), setFly: (on) => viewer.setFly(on),
     query: (filter, o) => viewer.query(filter, o), pick: (x, y) => viewer.pick(x, y),

@@ -1,5 +1,5 @@
 // Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`
-// (also {camera, lighting, season, refine}: as the setters below take them).
+// (also {camera, lighting, season, date, refine}: as the setters below take them).
 // Wraps the wasm Viewer (src/web/) with a render loop, camera controls
 // (mouse, touch, keyboard), events and the camera in the URL hash.
 //
@@ -416,7 +416,16 @@ class SylvaViewer {
     if (date === null || date === undefined || date === '') {
       this.viewer.set_date('');
       this.date = undefined;
+      this.pendingDate = undefined;
       this.dirty = SETTLE_FRAMES;
+      return null;
+    }
+    if (!this.manifestSeen) {
+      // Before the scene's manifest (a page's ?date=, an element's date=""):
+      // kept, and placed when the manifest comes (the place is the scene's).
+      if (!/^\d{4}-\d{2}-\d{2}$/.test(String(date))) throw new Error(`setDate: date "${date}": expected YYYY-MM-DD, e.g. 2026-10-20`);
+      this.pendingDate = String(date);
+      this.date = String(date);
       return null;
     }
     const state = this.viewer.set_date(String(date));
@@ -500,6 +509,7 @@ class SylvaViewer {
       }
       if (this.lighting) this.setLighting(this.lighting);
       if (this.season) this.setSeason(this.season);
+      this.manifestSeen = false;
       if (this.date) this.pendingDate = this.date; // placed when the new viewer has the manifest
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
@@ -559,8 +569,9 @@ class SylvaViewer {
       if (e.kind === 'error') { this.emit('error', e); this.rejectReady(new Error(e.message)); }
       else if (e.kind === 'warning') this.emit('warning', e);
       else if (e.kind === 'manifest') {
-        // A date set before the scene came (a recovered viewer): now it can be placed.
-        if (this.pendingDate) { const d = this.pendingDate; this.pendingDate = undefined; try { this.viewer.set_date(d); } catch (err) { this.emit('warning', { message: String(err) }); } }
+        this.manifestSeen = true;
+        // A date set before the scene came (a page's, a recovered viewer's): now it can be placed.
+        if (this.pendingDate) { const d = this.pendingDate; this.pendingDate = undefined; try { this.setDate(d); } catch (err) { this.emit('error', { message: String(err.message || err) }); } }
         this.emit('manifest', e);
       }
     }
@@ -798,6 +809,7 @@ export async function create(target, options = {}) {
   if (options.camera) v.setCamera(options.camera);
   if (options.lighting) v.setLighting(options.lighting);
   if (options.season) v.setSeason(options.season);
+  if (options.date) v.setDate(options.date);
   if (options.refine !== undefined) {
     const r = options.refine;
     if (typeof r === 'object' && r !== null) v.setRefine(r.on !== false, r);
@@ -806,17 +818,25 @@ export async function create(target, options = {}) {
   return v;
 }
 
-/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off" shadows="low" season="autumn">`
+/** `<sylva-viewer src="…/scene.json" camera="lon,lat,height,heading,pitch" refine="off" shadows="low" season="autumn" date="2026-10-20">`
  * (refine: progressive refinement at rest, on unless "off"; shadows: the sun's
  * shadows, off | low | high, high unless given; season: leaf-on | autumn |
- * leaf-off for deciduous species, leaf-on unless given). */
+ * leaf-off for deciduous species, leaf-on unless given; date: YYYY-MM-DD, each
+ * deciduous species as its leaf calendar has it there then, and the sun at that date). */
 class SylvaElement extends HTMLElement {
-  static get observedAttributes() { return ['refine', 'shadows', 'season']; }
+  static get observedAttributes() { return ['refine', 'shadows', 'season', 'date']; }
   attributeChangedCallback(name) {
     if (!this.viewer) return;
     if (name === 'refine') this.viewer.setRefine(this.getAttribute('refine') !== 'off');
     if (name === 'shadows') this.applyShadows();
     if (name === 'season') this.applySeason();
+    if (name === 'date') this.applyDate();
+  }
+  applyDate() {
+    const date = this.getAttribute('date');
+    try { this.viewer.setDate(date); } catch (e) {
+      this.dispatchEvent(new CustomEvent('sylva-error', { detail: { message: `date="${date}": ${e.message || e}` } }));
+    }
   }
   applySeason() {
     // (No attribute: leaf-on, the default.)
@@ -844,6 +864,7 @@ class SylvaElement extends HTMLElement {
       if (this.getAttribute('refine') === 'off') this.viewer.setRefine(false);
       this.applyShadows();
       this.applySeason();
+      if (this.getAttribute('date') !== null) this.applyDate();
       this.dispatchEvent(new CustomEvent('sylva-ready', { detail: this.viewer }));
     } catch (e) {
       this.textContent = String(e.message || e);
