@@ -599,34 +599,12 @@ impl StandPlan {
     /// bounded, so a sliver gets fewer points, never an endless loop.
     pub fn preview(&self, polygons: &[Vec<Vec<[f64; 2]>>], count: u64, f: &mut dyn FnMut([f64; 2], usize)) {
         let mut rng = Rng::new(hash64(self.first_row ^ 0x5EED_0F57_A4D0_0001));
-        let parts: Vec<([f64; 2], [f64; 2], f64)> = polygons
-            .iter()
-            .map(|p| {
-                let (mut a, mut b) = ([f64::MAX; 2], [f64::MIN; 2]);
-                for q in p.iter().flatten() {
-                    a = [a[0].min(q[0]), a[1].min(q[1])];
-                    b = [b[0].max(q[0]), b[1].max(q[1])];
-                }
-                (a, b, area(std::slice::from_ref(p)))
-            })
-            .collect();
-        let total: f64 = parts.iter().map(|p| p.2).sum();
-        if parts.is_empty() || total.is_nan() || total <= 0.0 {
-            return;
-        }
+        let Some(parts) = Parts::new(polygons) else { return };
         let (mut made, mut tries) = (0u64, 0u64);
         let budget = count.saturating_mul(50).saturating_add(1_000);
         while made < count && tries < budget {
             tries += 1;
-            let mut pick = rng.f64() * total;
-            let (a, b, _) = parts
-                .iter()
-                .find(|p| {
-                    pick -= p.2;
-                    pick <= 0.0
-                })
-                .unwrap_or(&parts[parts.len() - 1]);
-            let (x, y) = (a[0] + rng.f64() * (b[0] - a[0]), a[1] + rng.f64() * (b[1] - a[1]));
+            let [x, y] = parts.uniform(&mut rng);
             if inside(polygons, x, y) {
                 let mut pick = rng.f64();
                 let species = self
@@ -641,6 +619,47 @@ impl StandPlan {
                 f([x, y], species);
             }
         }
+    }
+}
+
+/// A stand's parts (outer rings with their holes) for uniform candidates: a
+/// part chosen by its area, a point in that part's own box (a multipart
+/// stand's parts kilometres apart waste no tries).
+struct Parts {
+    boxes: Vec<([f64; 2], [f64; 2], f64)>,
+    total: f64,
+}
+
+impl Parts {
+    /// `None` for no part of any area.
+    fn new(polygons: &[Vec<Vec<[f64; 2]>>]) -> Option<Self> {
+        let boxes: Vec<([f64; 2], [f64; 2], f64)> = polygons
+            .iter()
+            .map(|p| {
+                let (mut a, mut b) = ([f64::MAX; 2], [f64::MIN; 2]);
+                for q in p.iter().flatten() {
+                    a = [a[0].min(q[0]), a[1].min(q[1])];
+                    b = [b[0].max(q[0]), b[1].max(q[1])];
+                }
+                (a, b, area(std::slice::from_ref(p)))
+            })
+            .collect();
+        let total: f64 = boxes.iter().map(|p| p.2).sum();
+        (!boxes.is_empty() && total > 0.0).then_some(Self { boxes, total })
+    }
+
+    /// A candidate: uniform in a part's box, the part chosen by its area.
+    fn uniform(&self, rng: &mut Rng) -> [f64; 2] {
+        let mut pick = rng.f64() * self.total;
+        let (a, b, _) = self
+            .boxes
+            .iter()
+            .find(|p| {
+                pick -= p.2;
+                pick <= 0.0
+            })
+            .unwrap_or(&self.boxes[self.boxes.len() - 1]);
+        [a[0] + rng.f64() * (b[0] - a[0]), a[1] + rng.f64() * (b[1] - a[1])]
     }
 }
 
@@ -709,38 +728,9 @@ pub fn grow_stand(
     }
     let frame =
         lon_lat_polygons.map_or(Frame { lon_lat: false, x0: 0.0, y0: 0.0, kx: 1.0, ky: 1.0 }, |p| Frame::new(p, true));
-    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-    for p in metric.iter().flatten().flatten() {
-        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
-        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
-    }
     let spacing = (stand.area_m2 / n as f64).sqrt();
-    let _ = (lo, hi);
-    // Candidates: a part chosen by its area, a point in that part's own box
-    // (a multipart stand's parts kilometres apart waste no tries).
-    let parts: Vec<([f64; 2], [f64; 2], f64)> = metric
-        .iter()
-        .map(|p| {
-            let (mut a, mut b) = ([f64::MAX; 2], [f64::MIN; 2]);
-            for q in p.iter().flatten() {
-                a = [a[0].min(q[0]), a[1].min(q[1])];
-                b = [b[0].max(q[0]), b[1].max(q[1])];
-            }
-            (a, b, area(std::slice::from_ref(p)))
-        })
-        .collect();
-    let total: f64 = parts.iter().map(|p| p.2).sum();
-    let uniform = |rng: &mut Rng| {
-        let mut pick = rng.f64() * total;
-        let (a, b, _) = parts
-            .iter()
-            .find(|p| {
-                pick -= p.2;
-                pick <= 0.0
-            })
-            .unwrap_or(&parts[parts.len() - 1]);
-        [a[0] + rng.f64() * (b[0] - a[0]), a[1] + rng.f64() * (b[1] - a[1])]
-    };
+    let Some(parts) = Parts::new(metric) else { return Vec::new() };
+    let uniform = |rng: &mut Rng| parts.uniform(rng);
     let mut points: Vec<[f64; 2]> = Vec::with_capacity(n);
     let mut cluster_of: Vec<usize> = Vec::with_capacity(n);
     let budget = 60 * n + 10_000;

@@ -2265,8 +2265,8 @@ fn a_canopy_height_model_becomes_trees() {
             ([500_010.0 + 15.0 * i, 5_299_990.0 - 15.0 * j], h, 0.2 * h)
         })
         .collect();
-    let chm = dir.join("chm.tif");
-    write_geotiff_dem(&chm, 100, 0.5, |x, y| {
+    // The canopy's height above ground: each crown a cap falling to 60 % at its edge.
+    let canopy = |x: f64, y: f64| {
         crowns
             .iter()
             .filter_map(|([cx, cy], h, r)| {
@@ -2274,28 +2274,19 @@ fn a_canopy_height_model_becomes_trees() {
                 (d <= 1.0).then(|| h * (1.0 - 0.4 * d * d))
             })
             .fold(0.0, f64::max)
-    });
+    };
+    let chm = dir.join("chm.tif");
+    write_geotiff_dem(&chm, 100, 0.5, canopy);
+    // A bake of the CHM's trees as oaks into `out` with `args`; its log.
+    let bake = |out: &Path, args: &[&std::ffi::OsStr]| -> String {
+        let mut c = bin();
+        c.arg("bake").arg("--model").arg(format!("oak={}", model.display())).args(args);
+        c.args(["--chm-species", "oak", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"]);
+        let o = run(c.arg("--out").arg(out));
+        String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout)
+    };
     let out = dir.join("scene");
-    let mut c = bin();
-    c.arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--chm")
-        .arg(&chm)
-        .args([
-            "--chm-species",
-            "oak",
-            "--no-clusters",
-            "--billboard-size",
-            "16",
-            "--texture-size",
-            "16",
-            "--no-terrain",
-        ])
-        .arg("--out")
-        .arg(&out);
-    let o = run(&mut c);
-    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    let log = bake(&out, &["--chm".as_ref(), chm.as_os_str(), "--no-terrain".as_ref()]);
     assert!(log.contains("9 trees found") && log.contains("trees under the canopy are not seen"), "{log}");
     let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
     assert_eq!((m.crs.epsg, m.counts.trees), (32633, 9));
@@ -2326,30 +2317,18 @@ fn a_canopy_height_model_becomes_trees() {
     let points = dir.join("points.csv");
     std::fs::write(&points, "x,y,species\n500025.5,5299990.5,oak\n500070,5299950,oak\n").unwrap();
     let with_stands = dir.join("with-stands");
-    let mut c = bin();
-    c.arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--chm")
-        .arg(&chm)
-        .arg("--stands")
-        .arg(&stands)
-        .arg("--chm-species-points")
-        .arg(&points)
-        .args([
-            "--chm-species",
-            "oak",
-            "--no-clusters",
-            "--billboard-size",
-            "16",
-            "--texture-size",
-            "16",
-            "--no-terrain",
-        ])
-        .arg("--out")
-        .arg(&with_stands);
-    let o = run(&mut c);
-    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    let log = bake(
+        &with_stands,
+        &[
+            "--chm".as_ref(),
+            chm.as_os_str(),
+            "--stands".as_ref(),
+            stands.as_os_str(),
+            "--chm-species-points".as_ref(),
+            points.as_os_str(),
+            "--no-terrain".as_ref(),
+        ],
+    );
     assert!(log.contains("2 points; 1 trees named by the nearest within their crown"), "{log}");
     assert!(log.contains("2 trees in stands") && log.contains("6 outside every stand"), "{log}");
     let found = sylva::scene::query::query_dir(&with_stands, &serde_json::json!({"stand": "A"}), usize::MAX).unwrap();
@@ -2369,36 +2348,26 @@ fn a_canopy_height_model_becomes_trees() {
     let dem = dir.join("dem.tif");
     write_geotiff_dem(&dem, 60, 1.0, ground);
     let dsm = dir.join("dsm.tif");
-    write_geotiff_dem(&dsm, 100, 0.5, |x, y| {
-        ground(x, y)
-            + crowns
-                .iter()
-                .filter_map(|([cx, cy], h, r)| {
-                    let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() / r;
-                    (d <= 1.0).then(|| h * (1.0 - 0.4 * d * d))
-                })
-                .fold(0.0, f64::max)
-    });
+    write_geotiff_dem(&dsm, 100, 0.5, |x, y| ground(x, y) + canopy(x, y));
     // And a leaf-type raster (Copernicus codes): broadleaved west of x 500 020, coniferous east.
     let leaf_type = dir.join("leaf-type.tif");
     write_geotiff_dem(&leaf_type, 10, 10.0, |x, _| if x < 500_020.0 { 1.0 } else { 2.0 });
     let from_dsm = dir.join("from-dsm");
-    let mut c = bin();
-    c.arg("bake")
-        .arg("--model")
-        .arg(format!("oak={}", model.display()))
-        .arg("--dsm")
-        .arg(&dsm)
-        .arg("--dem")
-        .arg(&dem)
-        .arg("--chm-leaf-type")
-        .arg(&leaf_type)
-        .args(["--map", "broadleaf=oak", "--map", "conifer=oak"])
-        .args(["--chm-species", "oak", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
-        .arg("--out")
-        .arg(&from_dsm);
-    let o = run(&mut c);
-    let log = String::from_utf8_lossy(&o.stderr).to_string() + &String::from_utf8_lossy(&o.stdout);
+    let log = bake(
+        &from_dsm,
+        &[
+            "--dsm".as_ref(),
+            dsm.as_os_str(),
+            "--dem".as_ref(),
+            dem.as_os_str(),
+            "--chm-leaf-type".as_ref(),
+            leaf_type.as_os_str(),
+            "--map".as_ref(),
+            "broadleaf=oak".as_ref(),
+            "--map".as_ref(),
+            "conifer=oak".as_ref(),
+        ],
+    );
     assert!(log.contains("minus the --dem ground") && log.contains("9 trees found"), "{log}");
     assert!(log.contains("3 broadleaved (code 1), 6 coniferous (code 2), 0 other"), "{log}");
     let mut from_dsm_heights = baked_heights(&from_dsm);
