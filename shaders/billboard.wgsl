@@ -50,7 +50,8 @@ fn billboard_layer(to_eye: vec3<f32>, angles: u32) -> u32 {
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
-    let tree = unpack_instance(instances[item.x], batch, view);
+    var tree = unpack_instance(instances[item.x], batch, view);
+    tree.scale *= tree_growth(styles[STYLE_FLAGS], item.x);
     // A thinned batch's kept trees stand in for the others: bigger, about the
     // crown's centre (so a far canopy's top line barely rises).
     let thin = thinning(batch, view);

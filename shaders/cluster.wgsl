@@ -255,7 +255,8 @@ fn line_vertex(i: u32, tree: Tree, corner: vec2<f32>, out: ptr<function, VertexO
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
-    let tree = unpack_instance(instances[item.x], batch, view);
+    var tree = unpack_instance(instances[item.x], batch, view);
+    tree.scale *= tree_growth(styles[STYLE_FLAGS], item.x);
     let prim = vertex / 6u;
     let corner = CORNERS[vertex % 6u];
     var out: VertexOut;

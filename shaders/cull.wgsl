@@ -95,6 +95,11 @@ fn cull_batches(@builtin(global_invocation_id) gid: vec3<u32>) {
     if batch_culling && box_distance(center, b.half_extent_m) > view.lod.y {
         return;
     }
+    // Trees not standing at the latest date: only at a date.
+    let style_flags = atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_FLAGS]);
+    if (b.flags & BATCH_DATED) != 0u && (style_flags & STYLE_DATED) == 0u {
+        return;
+    }
     let s = species[b.species];
     if dot(s.slot_cap[0], vec4<u32>(1u)) + dot(s.slot_cap[1], vec4<u32>(1u)) == 0u {
         return; // nothing of this species can be drawn yet (pack not loaded)
@@ -185,7 +190,10 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         atomicAdd(&control[CONTROL_INSTANCES_TESTED], count);
     }
     // A style's filter: the trees it hides are culled here.
-    let styled = (atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_FLAGS]) & STYLE_TREES) != 0u;
+    let style_flags = atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_FLAGS]);
+    let styled = (style_flags & STYLE_TREES) != 0u;
+    let dated = (style_flags & STYLE_DATED) != 0u;
+    let growth_at = atomicLoad(&control[STYLE_CONTROL_WORD + STYLE_GROWTH_AT]);
     for (var i = lid; i < count; i += WORKGROUP) {
         let instance = b.instance_offset + i;
         if styled {
@@ -194,7 +202,12 @@ fn cull_instances(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
                 continue;
             }
         }
-        let tree = unpack_instance(instances[instance], b, view);
+        var tree = unpack_instance(instances[instance], b, view);
+        // At a date: drawn at its size then (`tree_growth` in the draw passes).
+        if dated {
+            let word = atomicLoad(&control[STYLE_CONTROL_WORD + growth_at + instance / 4u]);
+            tree.scale *= f32(style_byte_of(word, instance)) / 128.0;
+        }
         let center = tree.pos + rotate_z(tree_scaled(s.sphere.xyz, tree), tree.yaw);
         // A thinned batch's kept trees are drawn bigger (`coverage_boost`): so are their bounds.
         let radius = s.sphere.w * tree.scale * max(tree.aspect, 1.0) * select(1.0, coverage_boost(thin, b), thinned);

@@ -56,7 +56,8 @@ fn imp_to_model_dir(w: vec3<f32>, yaw: f32, s: f32, aspect: f32) -> vec3<f32> {
 fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
-    let tree = unpack_instance(instances[item.x], batch, view);
+    var tree = unpack_instance(instances[item.x], batch, view);
+    tree.scale *= tree_growth(styles[STYLE_FLAGS], item.x);
     let grid = max(draw.ids.w, 2u);
     let center = draw.bb_center.xyz;
     let radius = draw.bb_center.w;

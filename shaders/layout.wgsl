@@ -138,6 +138,9 @@ const BATCH_DENSITY_ORDERED: u32 = 1u;
 // Batch flag: the top 5 bits of word 1 are the crown aspect, not the variation.
 // Must match `BATCH_CROWN_ASPECT` in src/format/tile.rs.
 const BATCH_CROWN_ASPECT: u32 = 2u;
+// Must match `BATCH_DATED` in src/format/tile.rs: trees not standing at the
+// scene's latest date, drawn only at a date (STYLE_DATED).
+const BATCH_DATED: u32 = 8u;
 // Fewest trees a thinned batch keeps, as a fraction (the largest boost is its root).
 const THIN_MIN_FRACTION: f32 = 0.015625;
 // Batch flag (GPU pools only): the batch holds a prefix of its trees, fetched

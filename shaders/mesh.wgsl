@@ -90,7 +90,8 @@ fn vertex_ao(z: f32) -> f32 {
 fn vs_main(in: VertexIn, @builtin(instance_index) instance: u32, @builtin(vertex_index) vertex: u32) -> VertexOut {
     let item = items[draw.ids.x + instance];
     let batch = batches[item.y & 0x7fffffu];
-    let tree = unpack_instance(instances[item.x], batch, view);
+    var tree = unpack_instance(instances[item.x], batch, view);
+    tree.scale *= tree_growth(styles[STYLE_FLAGS], item.x);
     var out: VertexOut;
     // Leaf-off: leaf cards and cloud planes (all but wood) collapse outside the frustum.
     if leaves_off(tree.variation) && materials[in.position_material.w].kind != 1u {

@@ -6,12 +6,19 @@
 // bind them from there): a header, the palette (64 packed RGBA8 colours,
 // entry 0 unused) and the flags at word 64, then, with STYLE_TREES, a byte per
 // pool instance: bits 0–5 its palette entry (0: its own colour), bit 6
-// selected, bit 7 filtered out. Must match src/render/gpu_data.rs.
+// selected, bit 7 filtered out (or not standing at the view's date); with
+// STYLE_DATED the growth bytes after them (STYLE_GROWTH_AT). Must match
+// src/render/gpu_data.rs.
 const STYLE_CONTROL_WORD: u32 = 64u;
 const STYLE_HEADER_WORDS: u32 = 128u;
 const STYLE_FLAGS: u32 = 64u;
 const STYLE_TREES: u32 = 1u;
 const STYLE_BY_SPECIES: u32 = 2u;
+const STYLE_DATED: u32 = 4u;
+// Header word: where the growth bytes start (words from the styles' start);
+// with STYLE_DATED a byte per pool instance there: the tree's scale at the
+// view's date over its own, in 1/128 (src/format/timeline.rs `growth_byte`).
+const STYLE_GROWTH_AT: u32 = 65u;
 const STYLE_SELECTED: u32 = 64u;
 const STYLE_HIDDEN: u32 = 128u;
 

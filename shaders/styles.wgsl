@@ -15,3 +15,14 @@ fn tree_style(flags: u32, instance: u32, species: u32) -> u32 {
     }
     return style_of(flags, word, instance, species);
 }
+
+// The scale pool instance `instance` is drawn at over its own: at a date
+// (STYLE_DATED) its growth byte, else 1. Twin: `growth_of_byte` in
+// src/format/timeline.rs.
+fn tree_growth(flags: u32, instance: u32) -> f32 {
+    if (flags & STYLE_DATED) == 0u {
+        return 1.0;
+    }
+    let word = styles[styles[STYLE_GROWTH_AT] + instance / 4u];
+    return f32(style_byte_of(word, instance)) / 128.0;
+}

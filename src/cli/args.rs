@@ -157,7 +157,7 @@ pub(crate) enum Command {
     /// Find trees by their attributes (the inventory's columns the bake kept)
     /// and ids; prints {count, ids, bounds, tiles} as JSON.
     #[command(
-        after_help = "Filter (JSON): per attribute a text or list (categories; * is a wildcard), [min, max] with\n  null for an open end, or one value (numbers, integers, dates as YYYY-MM-DD); \"id\": ids.\nExamples:\n  sylva query --scene ams --filter '{\"species\": \"quercus*\", \"dbh\": [30, null]}'\n  sylva query --scene ams --filter '{\"condition\": [\"poor\", \"dead\"]}' --limit 0"
+        after_help = "Filter (JSON): per attribute a text or list (categories; * is a wildcard), [min, max] with\n  null for an open end, or one value (numbers, integers, dates as YYYY-MM-DD); \"id\": ids.\nExamples:\n  sylva query --scene ams --filter '{\"species\": \"quercus*\", \"dbh\": [30, null]}'\n  sylva query --scene ams --filter '{\"condition\": [\"poor\", \"dead\"]}' --limit 0\n  sylva query --scene plot --date 2019-06-01 --limit 0"
     )]
     Query {
         /// Scene directory (a baked scene with attributes).
@@ -169,6 +169,10 @@ pub(crate) enum Command {
         /// Most ids listed (the count is always whole).
         #[arg(long, default_value_t = 1000)]
         limit: usize,
+        /// The trees standing on this date (YYYY-MM-DD) by the scene's censuses or
+        /// planting and removal dates (default: those standing at the latest date).
+        #[arg(long, value_name = "YYYY-MM-DD")]
+        date: Option<String>,
     },
     /// Say which tree is drawn at a pixel of a view (the id pass the viewer's
     /// click runs), as JSON: {id, species, attributes, lon, lat, height,
@@ -286,6 +290,10 @@ pub(crate) struct PickArgs {
     /// Give up waiting for data after this many seconds.
     #[arg(long, default_value_t = 120.0)]
     pub(crate) timeout: f64,
+    /// The view at a date (YYYY-MM-DD), as `sylva render --date`: the seasons,
+    /// the sun (noon) and, in a scene with censuses, the trees standing then.
+    #[arg(long, value_name = "YYYY-MM-DD")]
+    pub(crate) date: Option<String>,
 }
 
 /// `sylva render`: a scene or one pack to a PNG.

@@ -129,10 +129,10 @@ mod cli {
             }
             Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
             Command::Compare { a, b } => compare(&a, &b),
-            Command::Query { scene, filter, limit } => {
+            Command::Query { scene, filter, limit, date } => {
                 let filter: serde_json::Value =
                     serde_json::from_str(&filter).map_err(|e| anyhow::anyhow!("--filter is not JSON: {e}"))?;
-                let found = sylva::scene::query::query_dir(&scene, &filter, limit)
+                let found = sylva::scene::query::query_dir_at(&scene, &filter, limit, date.as_deref())
                     .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
                 println!("{}", serde_json::to_string_pretty(&found.to_json())?);
                 Ok(())

@@ -51,6 +51,8 @@ pub(crate) fn render_scene(
         let (d, _) = sylva::render::settings::SeasonDate::at_scene(&manifest, text)
             .map_err(|e| anyhow::anyhow!("--date: {e}"))?;
         off.settings.date = Some(d);
+        // A scene with a timeline: the trees standing then, at their size then.
+        off.set_day(sylva::format::attributes::parse_date(text));
     }
     if let Some(text) = style {
         let value: serde_json::Value =
@@ -269,6 +271,13 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
         });
         bail!("cannot load the scene {scene}: {}", why.unwrap_or_else(|| "timed out".into()));
     };
+    if let Some(text) = &args.date {
+        let (d, _) = sylva::render::settings::SeasonDate::at_scene(&manifest, text)
+            .map_err(|e| anyhow::anyhow!("--date: {e}"))?;
+        off.settings.date = Some(d);
+        // A scene with a timeline: the trees standing then, at their size then.
+        off.set_day(sylva::format::attributes::parse_date(text));
+    }
     let cam = scene_camera(&mut off, &manifest, args.frame.view, args.frame.camera.as_deref(), args.timeout)?;
     off.load_view(&cam, args.timeout);
     if !off.stream.is_settled() {

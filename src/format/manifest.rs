@@ -123,6 +123,10 @@ pub struct Manifest {
     /// where trees are a pixel or two.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub canopy: Option<super::canopy::CanopyEntry>,
+    /// The trees at a date (censuses, planting and removal dates): which
+    /// attribute columns hold each tree's timeline ([`super::timeline`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeline: Option<super::timeline::Timeline>,
 }
 
 /// Which shard of a sharded bake wrote a directory.
@@ -184,6 +188,9 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<(), Problem> {
+        if let Some(t) = &self.timeline {
+            t.resolve(self.attributes.as_ref())?;
+        }
         if let Some(c) = &self.canopy {
             if self.version < 8 {
                 return Err(Problem::Invalid("\"canopy\" needs manifest version 8".into()));

@@ -20,6 +20,7 @@ pub mod mesh;
 pub mod pack;
 pub mod terrain;
 pub mod tile;
+pub mod timeline;
 
 pub use error::{DecodeError, Problem};
 pub use ids::{decode_ids, decode_tree_ids, encode_ids, encode_tree_ids, TreeIds};

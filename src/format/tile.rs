@@ -109,8 +109,12 @@ pub const BATCH_DENSITY_ORDERED: u32 = 1;
 /// species model) instead of its variation, and the variation is a hash of
 /// its position ([`variation_of`]).
 pub const BATCH_CROWN_ASPECT: u32 = 2;
+/// Batch flag (in `flags`): the trees are not standing at the scene's latest
+/// date (a census's dead or removed trees, trees planted later): drawn,
+/// picked and counted only at a date ([`crate::format::timeline`]).
+pub const BATCH_DATED: u32 = 8;
 /// Every batch flag a tile file may carry.
-pub const BATCH_FLAGS: u32 = BATCH_DENSITY_ORDERED | BATCH_CROWN_ASPECT;
+pub const BATCH_FLAGS: u32 = BATCH_DENSITY_ORDERED | BATCH_CROWN_ASPECT | BATCH_DATED;
 /// Batch flag of a tile decoded from a prefix of its file, in memory and on
 /// the GPU only (refused in files): `instance_count` is the resident prefix
 /// and bits [`PARTIAL_COUNT_SHIFT`]–31 the batch's whole count, which prefix

@@ -81,6 +81,12 @@ struct StyleState {
     /// Per resident tile (number, instance range): the style generation its
     /// bytes were made with and its data's state then (pending, ready, broken).
     written: std::collections::HashMap<(usize, u32, u32), (u64, u8)>,
+    /// The growth bytes (one per pool instance) as uploaded, at a date.
+    growth: Vec<u8>,
+    /// The view's date (days since 1970-01-01) for a scene with a timeline.
+    day: Option<i64>,
+    /// The scene's timeline, resolved once its manifest is in (`None` inside: none).
+    timeline: Option<Option<crate::format::timeline::TimelineColumns>>,
 }
 
 /// The frustum of pixel `px` of `view` (eye-relative planes, as [`ViewData::frustum`]).
@@ -245,6 +251,23 @@ impl<F: Fetcher> Frame<F> {
         self.refine.invalidate();
     }
 
+    /// Shows the trees standing on `day` (days since 1970-01-01; `None`: the
+    /// latest date), for a scene with a timeline (censuses, planting and
+    /// removal dates); other scenes are unchanged.
+    pub fn set_day(&mut self, day: Option<i64>) {
+        if self.style.day != day {
+            self.style.day = day;
+            self.style.generation += 1;
+            self.refine.invalidate();
+        }
+    }
+
+    /// The date the trees are shown at (`None`: the latest).
+    #[must_use]
+    pub fn day(&self) -> Option<i64> {
+        self.style.day
+    }
+
     /// The style in use.
     #[must_use]
     pub fn style(&self) -> Option<&crate::scene::style::TreeStyle> {
@@ -256,6 +279,19 @@ impl<F: Fetcher> Frame<F> {
     /// then its trees keep their look, or are hidden while a filter is on).
     fn apply_style(&mut self) {
         let st = &mut self.style;
+        // The date's part of the style: once the manifest says whether there is a timeline.
+        if st.timeline.is_none() {
+            if let Some(m) = self.stream.manifest() {
+                st.timeline = Some(m.timeline.as_ref().and_then(|t| t.resolve(m.attributes.as_ref()).ok()));
+                st.generation += 1;
+            }
+        }
+        let timeline = st.timeline.as_ref().and_then(Option::as_ref);
+        let wanted = st.day.filter(|d| timeline.is_some_and(|t| t.needs_trees(*d)));
+        if st.style.as_ref().and_then(crate::scene::style::TreeStyle::date) != wanted {
+            st.style.get_or_insert_with(Default::default).set_date(timeline, wanted);
+            st.generation += 1;
+        }
         let Some(style) = st.style.as_ref().filter(|s| !s.is_plain()) else {
             // None: the bytes' memory given back, the header cleared.
             self.stream.set_tree_data(false, false);
@@ -264,6 +300,7 @@ impl<F: Fetcher> Frame<F> {
             }
             st.header = None;
             st.bytes = Vec::new();
+            st.growth = Vec::new();
             st.written.clear();
             return;
         };
@@ -275,15 +312,19 @@ impl<F: Fetcher> Frame<F> {
             st.header = None;
             st.written.clear();
         }
+        let n = self.renderer.config().instances as usize;
         if st.header != Some((st.generation, epoch)) {
-            self.renderer.write_style_header(&self.queue, &style.header());
+            let mut header = style.header();
+            header[crate::scene::style::STYLE_GROWTH_AT as usize] = crate::render::gpu_data::growth_words_at(n as u32);
+            self.renderer.write_style_header(&self.queue, &header);
             st.header = Some((st.generation, epoch));
         }
         if !needs {
             return;
         }
-        let n = self.renderer.config().instances as usize;
+        let dated = style.date().is_some();
         st.bytes.resize(n.next_multiple_of(4), 0);
+        st.growth.resize(if dated { n.next_multiple_of(4) } else { 0 }, 128);
         let schema = self.stream.manifest().and_then(|m| m.attributes.as_ref());
         let hidden = if style.filters() { crate::scene::style::STYLE_HIDDEN } else { 0 };
         let mut present = std::collections::HashSet::new();
@@ -310,16 +351,32 @@ impl<F: Fetcher> Frame<F> {
                     for r in runs {
                         let (at, n, first) = (r[0] as usize, r[1] as usize, r[2] as usize);
                         style.tile_bytes(schema, &d.ids, d.codes.as_ref(), first, &mut out[at..at + n]);
+                        if dated {
+                            let start = range.start as usize + at;
+                            style.tile_growth(schema, d.codes.as_ref(), first, &mut st.growth[start..start + n]);
+                        }
                     }
                 }
-                S::Ready(d) => style.tile_bytes(schema, &d.ids, d.codes.as_ref(), 0, out),
+                S::Ready(d) => {
+                    style.tile_bytes(schema, &d.ids, d.codes.as_ref(), 0, out);
+                    if dated {
+                        let g = &mut st.growth[range.start as usize..range.end as usize];
+                        style.tile_growth(schema, d.codes.as_ref(), 0, g);
+                    }
+                }
                 // Until its ids and attributes arrive a filter hides the tile's trees;
                 // without them for good (a sidecar failed) they keep their own look.
                 S::Pending => out.fill(hidden),
                 S::Broken => out.fill(0),
             }
+            if dated && !matches!(data, S::Ready(_)) {
+                st.growth[range.start as usize..range.end as usize].fill(128);
+            }
             let (a, b) = (range.start & !3, (range.end.next_multiple_of(4) as usize).min(st.bytes.len()));
             self.renderer.write_style_bytes(&self.queue, a, &st.bytes[a as usize..b]);
+            if dated {
+                self.renderer.write_growth_bytes(&self.queue, a, &st.growth[a as usize..b]);
+            }
             st.written.insert(key, state);
         }
         st.written.retain(|k, _| present.contains(k));

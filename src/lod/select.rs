@@ -85,10 +85,31 @@ pub fn cpu_select_styled(
     species: &[GpuSpecies],
     hidden: impl Fn(u32) -> bool,
 ) -> Selection {
+    cpu_select_at(view, batches, instances, species, false, |i| (!hidden(i)).then_some(1.0))
+}
+
+/// As [`cpu_select_styled`], at a date (`dated`: the batches flagged
+/// [`crate::format::tile::BATCH_DATED`] are drawn too) with each pool
+/// instance's look: `None` hidden (filtered out, or not standing then), else
+/// the scale it is drawn at over its own (its growth byte's,
+/// [`crate::format::timeline::growth_of_byte`]). As `cull_instances` in
+/// `shaders/cull.wgsl` with `STYLE_DATED`.
+#[must_use]
+pub fn cpu_select_at(
+    view: &ViewUniform,
+    batches: &[GpuBatch],
+    instances: &[PackedInstance],
+    species: &[GpuSpecies],
+    dated: bool,
+    look: impl Fn(u32) -> Option<f32>,
+) -> Selection {
     let species_count = view.params[3] as usize;
     let mut sel = Selection { slots: vec![Vec::new(); species_count * REPR_COUNT as usize], ..Default::default() };
     for (i, b) in batches.iter().enumerate().take(view.params[1] as usize) {
         if b.instance_count == 0 || b.species as usize >= species_count {
+            continue;
+        }
+        if !dated && b.flags & crate::format::tile::BATCH_DATED != 0 {
             continue;
         }
         let center = eye_relative(Vec3::from(b.center_m), Vec3::ZERO, view);
@@ -118,11 +139,10 @@ pub fn cpu_select_styled(
         let count = intended.min(b.instance_count);
         for k in 0..count {
             let index = b.instance_offset + k;
-            if hidden(index) {
-                continue;
-            }
+            let Some(growth) = look(index) else { continue };
             let packed = instances[index as usize];
-            let d = decode_eye_relative(packed, b, view);
+            let mut d = decode_eye_relative(packed, b, view);
+            d.2 *= growth;
             // As `tree_scaled` in WGSL: xy · (scale · aspect), z · scale.
             let sa = d.2 * d.3;
             let c = d.0 + rotate_z(Vec3::new(s.sphere[0] * sa, s.sphere[1] * sa, s.sphere[2] * d.2), d.1);

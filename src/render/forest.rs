@@ -172,6 +172,11 @@ impl ForestRenderer {
         self.pools.write_style_bytes(queue, first, bytes);
     }
 
+    /// Writes growth bytes of pool instances from `first` (a multiple of 4).
+    pub fn write_growth_bytes(&self, queue: &wgpu::Queue, first: u32, bytes: &[u8]) {
+        self.pools.write_growth_bytes(queue, first, bytes);
+    }
+
     /// Whether the pools were cut down to the device's limits (reported in stats).
     #[must_use]
     pub fn pools_limited_by_device(&self) -> bool {

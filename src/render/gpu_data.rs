@@ -79,10 +79,18 @@ const _: () = assert!(std::mem::size_of::<CullControl>() == 32);
 /// passes bind it from here (group 2, binding 3). The control words come first.
 pub const STYLE_OFFSET_BYTES: u64 = 256;
 /// Bytes of the cull control buffer: the control words, then the styles'
-/// header, then (with per-tree styles) a byte per pool instance.
+/// header, then (with per-tree styles) a style byte per pool instance, then
+/// a growth byte per pool instance (read at a date: `STYLE_DATED`).
 #[must_use]
 pub fn control_buffer_bytes(style_instances: u32) -> u64 {
-    STYLE_OFFSET_BYTES + u64::from(STYLE_HEADER_WORDS) * 4 + u64::from(style_instances).next_multiple_of(4)
+    STYLE_OFFSET_BYTES + u64::from(STYLE_HEADER_WORDS) * 4 + 2 * u64::from(style_instances).next_multiple_of(4)
+}
+
+/// Where the growth bytes start, in words from the styles' start (the
+/// header's `STYLE_GROWTH_AT` word), for pools of `style_instances`.
+#[must_use]
+pub fn growth_words_at(style_instances: u32) -> u32 {
+    STYLE_HEADER_WORDS + style_instances.div_ceil(4)
 }
 
 /// One draw slot's indirect arguments, written by the cull pass: the indexed

@@ -391,6 +391,20 @@ impl Pools {
         }
     }
 
+    /// Writes the growth bytes of pool instances from `first` on (as
+    /// [`Self::write_style_bytes`]).
+    pub fn write_growth_bytes(&self, queue: &wgpu::Queue, first: u32, bytes: &[u8]) {
+        if !self.has_style_bytes() || !first.is_multiple_of(4) || !bytes.len().is_multiple_of(4) || bytes.is_empty() {
+            return;
+        }
+        let at = STYLE_OFFSET_BYTES
+            + u64::from(super::gpu_data::growth_words_at(self.config.instances)) * 4
+            + u64::from(first);
+        if at + bytes.len() as u64 <= self.buffers.control.size() {
+            queue.write_buffer(&self.buffers.control, at, bytes);
+        }
+    }
+
     /// The configuration in use.
     #[must_use]
     pub fn config(&self) -> PoolConfig {

@@ -313,6 +313,7 @@ mod tests {
             terrain: None,
             attributes: None,
             canopy: None,
+            timeline: None,
         };
         (m, tiles)
     }

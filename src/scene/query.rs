@@ -41,6 +41,8 @@ pub struct Filter {
     conditions: Vec<(usize, Condition)>,
     /// `id`: the numbers and texts asked for.
     ids: Option<(HashSet<u64>, HashSet<String>)>,
+    /// The trees standing on a day (a scene's timeline, [`Self::at_date`]).
+    at: Option<(crate::format::timeline::TimelineColumns, i64)>,
 }
 
 impl Filter {
@@ -91,7 +93,20 @@ impl Filter {
     /// Whether the filter needs the attribute sidecars (not only the ids).
     #[must_use]
     pub fn needs_attributes(&self) -> bool {
-        !self.conditions.is_empty()
+        !self.conditions.is_empty() || self.at.is_some()
+    }
+
+    /// Matches only the trees standing on `day` (days since 1970-01-01) by
+    /// the scene's `timeline`; `None` (or its latest day): those standing at
+    /// the latest date, as a view without a date shows them.
+    pub fn at_date(&mut self, timeline: Option<&crate::format::timeline::TimelineColumns>, day: Option<i64>) {
+        self.at = timeline.zip(day).filter(|(t, d)| t.needs_trees(*d)).map(|(t, d)| (t.clone(), d));
+    }
+
+    /// Whether it matches at a date (the trees not standing at the latest one included).
+    #[must_use]
+    pub fn dated(&self) -> bool {
+        self.at.is_some()
     }
 
     /// Whether a tile whose codes span `ranges` (its `attribute_codes`) may
@@ -124,6 +139,11 @@ impl Filter {
         id: u64,
         text: Option<&str>,
     ) -> bool {
+        if let Some((timeline, day)) = &self.at {
+            if !schema.zip(codes).is_some_and(|(s, c)| timeline.tree(s, c, i).stands(*day)) {
+                return false;
+            }
+        }
         if let Some((numbers, texts)) = &self.ids {
             // A text id is matched as text; a number also as its digits ("113001").
             let named = match text {
@@ -288,7 +308,8 @@ pub fn query_tile(
         _ => None,
     };
     result.tiles += 1;
-    for batch in &tile.batches {
+    // The trees not standing at the latest date are seen only at a date.
+    for batch in tile.batches.iter().filter(|b| filter.dated() || b.flags & crate::format::tile::BATCH_DATED == 0) {
         let run = batch.instance_offset as usize..(batch.instance_offset + batch.instance_count) as usize;
         for i in run {
             let text = tree_ids.text(i as u32);
@@ -335,12 +356,19 @@ pub fn describe_tree(
         .ok_or_else(|| format!("{}: no tree {index} (the tile has {})", files[0], tile.instances.len()))?;
     let tree = tile.instances[i].decode(batch);
     let species = manifest.species.get(batch.species as usize);
-    let attributes = match (manifest.attributes.as_ref(), attr) {
+    let codes = match (manifest.attributes.as_ref(), attr) {
         (Some(schema), Some(bytes)) => {
-            let codes = decode_attributes(files[2], bytes, schema, tile.instances.len()).map_err(|e| e.to_string())?;
-            Value::Object(codes.json(schema, i))
+            Some(decode_attributes(files[2], bytes, schema, tile.instances.len()).map_err(|e| e.to_string())?)
         }
+        _ => None,
+    };
+    let attributes = match (manifest.attributes.as_ref(), &codes) {
+        (Some(schema), Some(codes)) => Value::Object(codes.json(schema, i)),
         _ => Value::Object(serde_json::Map::new()),
+    };
+    let timeline = match (manifest.timeline.as_ref(), manifest.attributes.as_ref(), &codes) {
+        (Some(t), Some(schema), Some(codes)) => timeline_json(t, schema, codes, i),
+        _ => Value::Null,
     };
     let local = glam::DVec3::from(tree.position_m.map(f64::from));
     let at = geo.and_then(|g| g.to_geo(local).ok());
@@ -363,7 +391,41 @@ pub fn describe_tree(
         "lat": at.map(|a| round(a.1, 1e7)),
         "height": species.map(|s| round(f64::from(tree.scale * s.height_m), 100.0)),
         "position": [round(o[0] + local.x, 100.0), round(o[1] + local.y, 100.0), round(o[2] + local.z, 100.0)],
+        "timeline": timeline,
     }))
+}
+
+/// A tree's timeline for a pick: `{from, until, censuses: [{date, height, dbh}]}`
+/// (dates `YYYY-MM-DD`, `from`/`until` null where open; a census's height and
+/// DBH null where it was not recorded alive then); null where the block does
+/// not fit the columns.
+fn timeline_json(
+    t: &crate::format::timeline::Timeline,
+    schema: &AttributeSchema,
+    codes: &AttributeCodes,
+    i: usize,
+) -> Value {
+    use crate::format::attributes::{format_date, AttributeValue};
+    let Ok(columns) = t.resolve(Some(schema)) else { return Value::Null };
+    let tree = columns.tree(schema, codes, i);
+    let number = |name: &str| match schema.column(name).and_then(|(c, _)| codes.value(schema, c, i)) {
+        Some(AttributeValue::Number(v)) => Some((v * 100.0).round() / 100.0),
+        Some(AttributeValue::Integer(v)) => Some(v as f64),
+        _ => None,
+    };
+    let censuses: Vec<Value> = t
+        .censuses
+        .iter()
+        .zip(&t.heights)
+        .map(|(date, height)| {
+            serde_json::json!({"date": date, "height": number(height), "dbh": number(&format!("dbh_{date}"))})
+        })
+        .collect();
+    serde_json::json!({
+        "from": tree.from.map(format_date),
+        "until": tree.until.map(format_date),
+        "censuses": censuses,
+    })
 }
 
 /// Searches a baked scene in a local folder: every tile's ids and (when the
@@ -374,6 +436,21 @@ pub fn describe_tree(
 /// does not fit the scene.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<QueryResult, String> {
+    query_dir_at(dir, filter, limit, None)
+}
+
+/// [`query_dir`] at a date (`YYYY-MM-DD`): the trees standing then, by the
+/// scene's timeline (a scene without one: the date changes nothing).
+///
+/// # Errors
+/// As [`query_dir`], or a date that is no date.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn query_dir_at(
+    dir: &std::path::Path,
+    filter: &Value,
+    limit: usize,
+    date: Option<&str>,
+) -> Result<QueryResult, String> {
     use crate::format::attributes::attributes_url;
     use crate::format::Manifest;
     let read = |url: &str| {
@@ -382,7 +459,12 @@ pub fn query_dir(dir: &std::path::Path, filter: &Value, limit: usize) -> Result<
     };
     let m = Manifest::decode("scene.json", &read("scene.json")?).map_err(|e| e.to_string())?;
     let schema = m.attributes.as_ref();
-    let filter = Filter::parse(schema, filter)?;
+    let mut filter = Filter::parse(schema, filter)?;
+    if let Some(text) = date {
+        let day = parse_date(text).ok_or_else(|| format!("date {text:?}: expected YYYY-MM-DD, e.g. 2019-06-01"))?;
+        let timeline = m.timeline.as_ref().map(|t| t.resolve(schema)).transpose().map_err(|e| e.to_string())?;
+        filter.at_date(timeline.as_ref(), Some(day));
+    }
     let mut result = QueryResult::default();
     for t in crate::format::index::read_all_tiles(dir, &m)? {
         if !filter.may_match(schema, t.attribute_codes.as_deref()) {

@@ -45,6 +45,14 @@ pub const STYLE_FLAGS: u32 = 64;
 pub const STYLE_TREES: u32 = 1;
 /// Flag: a tree's palette entry is its model species + 1 (no per-tree data needed).
 pub const STYLE_BY_SPECIES: u32 = 2;
+/// Flag: the view has a date (`crate::format::timeline`): the batches of
+/// trees not standing at the latest date are drawn too, the style bytes hide
+/// the trees not standing at the view's, and a growth byte per pool instance
+/// (from header word [`STYLE_GROWTH_AT`]) sizes each tree.
+pub const STYLE_DATED: u32 = 4;
+/// Header word: where the growth bytes start, in words from the styles' start
+/// (`crate::render::gpu_data::growth_words_at`).
+pub const STYLE_GROWTH_AT: u32 = 65;
 /// Style byte bit: the tree is selected (highlighted at every level of detail).
 pub const STYLE_SELECTED: u8 = 64;
 /// Style byte bit: the tree is filtered out (the cull pass skips it).
@@ -127,6 +135,8 @@ pub struct TreeStyle {
     selected_texts: HashSet<String>,
     legend_title: String,
     legend: Vec<LegendEntry>,
+    /// The view's date, where the scene has a timeline and the date is not its latest.
+    at: Option<(crate::format::timeline::TimelineColumns, i64)>,
 }
 
 fn parse_color(v: &Value) -> Result<[u8; 3], String> {
@@ -321,6 +331,19 @@ impl TreeStyle {
         }
     }
 
+    /// Shows the trees standing on `day` (days since 1970-01-01), sized as
+    /// they were then, by the scene's `timeline`; `None` (or the timeline's
+    /// latest day): the trees standing at the latest date, as the tiles hold them.
+    pub fn set_date(&mut self, timeline: Option<&crate::format::timeline::TimelineColumns>, day: Option<i64>) {
+        self.at = timeline.zip(day).filter(|(t, d)| t.needs_trees(*d)).map(|(t, d)| (t.clone(), d));
+    }
+
+    /// The day the trees are shown at, if not the latest.
+    #[must_use]
+    pub fn date(&self) -> Option<i64> {
+        self.at.as_ref().map(|a| a.1)
+    }
+
     /// The selected ids.
     #[must_use]
     pub fn selection(&self) -> Vec<TreeId> {
@@ -332,13 +355,18 @@ impl TreeStyle {
     /// Whether the style draws anything differently from no style.
     #[must_use]
     pub fn is_plain(&self) -> bool {
-        self.color.is_none() && self.filter.is_none() && self.selected.is_empty() && self.selected_texts.is_empty()
+        self.color.is_none()
+            && self.filter.is_none()
+            && self.selected.is_empty()
+            && self.selected_texts.is_empty()
+            && self.at.is_none()
     }
 
     /// Whether it needs a byte per tree (and so each tile's ids and attributes).
     #[must_use]
     pub fn needs_trees(&self) -> bool {
         self.filter.is_some()
+            || self.at.is_some()
             || !self.selected.is_empty()
             || !self.selected_texts.is_empty()
             || matches!(self.color, Some(ColorBy::Codes { .. } | ColorBy::Ramp { .. }))
@@ -348,13 +376,14 @@ impl TreeStyle {
     #[must_use]
     pub fn needs_attributes(&self) -> bool {
         self.filter.as_ref().is_some_and(Filter::needs_attributes)
+            || self.at.is_some()
             || matches!(self.color, Some(ColorBy::Codes { .. } | ColorBy::Ramp { .. }))
     }
 
     /// Whether a filter hides trees (trees whose data has not arrived are hidden too).
     #[must_use]
     pub fn filters(&self) -> bool {
-        self.filter.is_some()
+        self.filter.is_some() || self.at.is_some()
     }
 
     /// The GPU header: the palette (packed RGBA8, alpha 255 for a colour in
@@ -372,6 +401,9 @@ impl TreeStyle {
         }
         if self.color == Some(ColorBy::Species) {
             f |= STYLE_BY_SPECIES;
+        }
+        if self.at.is_some() {
+            f |= STYLE_DATED;
         }
         h[flags] = f;
         h
@@ -420,7 +452,32 @@ impl TreeStyle {
         if self.filter.as_ref().is_some_and(|f| !f.matches(schema, codes, i, id, text)) {
             b |= STYLE_HIDDEN;
         }
+        if let Some((timeline, day)) = &self.at {
+            let stands = schema.zip(codes).is_some_and(|(s, c)| timeline.tree(s, c, i).stands(*day));
+            if !stands {
+                b |= STYLE_HIDDEN;
+            }
+        }
         b
+    }
+
+    /// The growth bytes of a tile's trees `first..` into `out` (at a date: each
+    /// tree's size then over its own, `crate::format::timeline::growth_byte`;
+    /// else 128, its own size).
+    pub fn tile_growth(
+        &self,
+        schema: Option<&AttributeSchema>,
+        codes: Option<&AttributeCodes>,
+        first: usize,
+        out: &mut [u8],
+    ) {
+        use crate::format::timeline::growth_byte;
+        for (k, g) in out.iter_mut().enumerate() {
+            *g = match (&self.at, schema, codes) {
+                (Some((timeline, day)), Some(s), Some(c)) => growth_byte(timeline.tree(s, c, first + k).growth(*day)),
+                _ => 128,
+            };
+        }
     }
 
     /// The style bytes of a tile's trees `first..` (`ids` and `codes` in the

@@ -174,6 +174,7 @@ impl Viewer {
     pub fn set_date(&mut self, date: &str) -> Result<String, JsValue> {
         if date.trim().is_empty() {
             self.frame.settings.date = None;
+            self.frame.set_day(None);
             return Ok(String::new());
         }
         let Some(m) = self.frame.stream.manifest() else {
@@ -182,6 +183,8 @@ impl Viewer {
         let (d, _) = crate::render::settings::SeasonDate::at_scene(m, date)
             .map_err(|e| JsValue::from_str(&format!("setDate: {e}")))?;
         self.frame.settings.date = Some(d);
+        // A scene with a timeline: the trees standing then, at their size then.
+        self.frame.set_day(crate::format::attributes::parse_date(date));
         Ok(self.frame.settings.canopy_season().name().to_string())
     }
 

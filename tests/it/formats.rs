@@ -217,6 +217,7 @@ fn sample_manifest() -> Manifest {
         terrain: None,
         attributes: None,
         canopy: None,
+        timeline: None,
     }
 }
 

@@ -10,8 +10,8 @@
 use glam::DVec3;
 use rayon::prelude::*;
 use sylva::format::tile::{
-    CrownRange, GpuBatch, PackedInstance, Tile, BATCH_CROWN_ASPECT, BATCH_DENSITY_ORDERED, MAX_XY_STEP_M, MAX_Z_STEP_M,
-    SCALE_BITS, YAW_BITS, Z_BITS,
+    CrownRange, GpuBatch, PackedInstance, Tile, BATCH_CROWN_ASPECT, BATCH_DATED, BATCH_DENSITY_ORDERED, MAX_XY_STEP_M,
+    MAX_Z_STEP_M, SCALE_BITS, YAW_BITS, Z_BITS,
 };
 
 /// One tree in scene coordinates.
@@ -34,6 +34,9 @@ pub struct SceneTree {
     pub id: u64,
     /// 1-based input row, for the attribute sidecars (0: none, e.g. the demo).
     pub row: u32,
+    /// Not standing at the scene's latest date: in batches of its own,
+    /// flagged `BATCH_DATED` (drawn only at a date).
+    pub dated: bool,
 }
 
 /// A species model's extent at scale 1, for batch bounds.
@@ -127,15 +130,15 @@ pub fn build_tiles(trees: &[SceneTree], shapes: &[SpeciesShape], cell_size_m: u3
     assert!(cell_size_m > 0 && cell_size_m <= MAX_CELL_SIZE_M, "cell size {cell_size_m} m");
     assert!(tile_cells > 0);
     let cell = f64::from(cell_size_m);
-    // Key: tile, cell, species. Sorting keys with the tree index makes the order deterministic.
-    let mut keyed: Vec<([i64; 5], usize)> = trees
+    // Key: tile, cell, species, dated. Sorting keys with the tree index makes the order deterministic.
+    let mut keyed: Vec<([i64; 6], usize)> = trees
         .par_iter()
         .enumerate()
         .map(|(i, t)| {
             let cx = (t.pos.x / cell).floor() as i64;
             let cy = (t.pos.y / cell).floor() as i64;
             let tc = i64::from(tile_cells);
-            ([cy.div_euclid(tc), cx.div_euclid(tc), cy, cx, i64::from(t.species)], i)
+            ([cy.div_euclid(tc), cx.div_euclid(tc), cy, cx, i64::from(t.species), i64::from(t.dated)], i)
         })
         .collect();
     keyed.par_sort_unstable_by(|a, b| {
@@ -341,7 +344,9 @@ fn make_batch(
         scale_min: s_min,
         scale_log2_step,
         max_height_m: 0.0,
-        flags: BATCH_DENSITY_ORDERED | if crown.is_some() { BATCH_CROWN_ASPECT } else { 0 },
+        flags: BATCH_DENSITY_ORDERED
+            | if crown.is_some() { BATCH_CROWN_ASPECT } else { 0 }
+            | if members[0].dated { BATCH_DATED } else { 0 },
         crown: crown.map_or(0, CrownRange::pack),
     };
     let xy_step = cell / 65535.0;
@@ -410,6 +415,7 @@ mod tests {
                 variation: (lcg(&mut s) * 32.0) as u8,
                 id: i as u64,
                 row: 0,
+                dated: false,
             })
             .collect()
     }
@@ -454,6 +460,7 @@ mod tests {
                 variation: 0,
                 id: i,
                 row: 0,
+                dated: false,
             })
             .collect();
         let members: Vec<&SceneTree> = trees.iter().collect();
@@ -568,6 +575,7 @@ mod tests {
                         variation: (i * 7 + j) as u8 % 32,
                         id: id as u64,
                         row: 0,
+                        dated: false,
                     });
                 }
             }

@@ -35,7 +35,7 @@ impl From<&SceneTree> for TreeRecord {
             scale: t.scale,
             yaw_rad: t.yaw_rad,
             species: t.species,
-            variation: u32::from(t.variation),
+            variation: u32::from(t.variation) | u32::from(t.dated) << 8,
             aspect: t.aspect,
             row: t.row,
         }
@@ -50,9 +50,10 @@ impl From<&TreeRecord> for SceneTree {
             scale: r.scale,
             aspect: r.aspect,
             yaw_rad: r.yaw_rad,
-            variation: r.variation as u8,
+            variation: (r.variation & 0xff) as u8,
             id: r.id,
             row: r.row,
+            dated: r.variation & 0x100 != 0,
         }
     }
 }

@@ -71,6 +71,8 @@ pub struct SceneInput<'a> {
     pub attributes: Option<crate::input::attributes::AttributeTable>,
     /// The text ids of the trees whose id is no whole number (`.ids` version 2).
     pub text_ids: Option<trees::TextIds>,
+    /// The trees' timeline (censuses, planting and removal dates), if any.
+    pub timeline: Option<sylva::format::timeline::Timeline>,
 }
 
 /// What was written.
@@ -144,6 +146,7 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
             terrain,
             attributes: input.attributes.as_ref().map(|a| a.schema.clone()),
             canopy: None,
+            timeline: input.timeline.clone(),
         };
         // A shard lists its tiles flat; `merge` builds the index of the whole.
         let flat = input.shard.is_some();

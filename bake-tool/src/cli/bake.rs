@@ -25,8 +25,22 @@ pub(crate) struct BakeArgs {
     /// or a GIS layer of points: Shapefile (.shp with its .dbf; the CRS from its .prj),
     /// GeoPackage (.gpkg; --layer picks a table) or FlatGeobuf (.fgb). Fields are
     /// found by the CSV's names (a .dbf's 10-byte names too: species_co).
+    /// Repeat for censuses of the same trees (with --census-date, one per file,
+    /// or a census date column), matched by id: the viewer shows the forest at a
+    /// date. One file with planting/removal date columns (planted, removed) does too.
     #[arg(long, value_name = "PATH", required_unless_present_any = ["stands", "chm", "dsm"], conflicts_with_all = ["stands", "chm", "dsm"])]
-    pub(crate) placements: Option<PathBuf>,
+    pub(crate) placements: Vec<PathBuf>,
+    /// The date of each --placements census (YYYY-MM-DD), in the files' order:
+    /// --placements 2008.csv --placements 2013.csv --census-date 2008-11-07
+    /// --census-date 2013-07-01. A tree stands from its first census (trees new at
+    /// a later census grow in from the one before) until the first census that
+    /// records it dead (a status column: dead, removed, felled…) or lists it no more.
+    #[arg(long = "census-date", value_name = "YYYY-MM-DD")]
+    pub(crate) census_dates: Vec<String>,
+    /// The column holding each row's census date (one file with every census's
+    /// rows; default: a column named census_date, census, survey_date or date).
+    #[arg(long, value_name = "NAME")]
+    pub(crate) census_date_column: Option<String>,
     /// A canopy height model instead of trees (a GeoTIFF of heights above ground,
     /// e.g. from airborne lidar): each crown found becomes a tree of its height and
     /// crown width (tops by a local-maximum filter whose window grows with height,
@@ -282,7 +296,8 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
     // The output folder is checked before any long work.
     let placements: &std::path::Path = args
         .placements
-        .as_deref()
+        .first()
+        .map(PathBuf::as_path)
         .or(args.chm.as_deref())
         .or(args.dsm.as_deref())
         .or(args.stands.as_deref())
@@ -292,6 +307,7 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         bail!("--chm-leaf-type and --chm-species-points give species to the trees of a --chm or --dsm: give one");
     }
     let mut inputs: Vec<&std::path::Path> = vec![placements];
+    inputs.extend(args.placements.iter().skip(1).map(PathBuf::as_path));
     inputs.extend(args.stands.as_deref().filter(|s| *s != placements));
     inputs.extend(args.chm_leaf_type.as_deref());
     inputs.extend(args.chm_species_points.as_deref());
@@ -370,7 +386,10 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
             }
             None => None,
         },
+        census: None,
     };
+    let mut read = read;
+    read.census = census_options(args, &read, &allometry)?;
     if args.library == "on" && map.default.is_none() {
         library_fill(placements, &read, &allometry, &mut species, &mut map)?;
     }
@@ -469,11 +488,47 @@ pub(crate) fn bake(args: &BakeArgs) -> Result<()> {
         canopy_cell_m: args.pack.canopy_cell,
         attributes: placed.attributes,
         text_ids: placed.text_ids,
+        timeline: placed.timeline,
     };
     log(&format!("batching with {} m cells", input.cell_size_m));
     let s = sylva_bake::bake::bake_scene(&input, out, &log)?;
     report_summary(&s, &args.output.out, started);
     Ok(())
+}
+
+/// Censuses (several --placements, --census-date, a census date column) or
+/// one inventory with planting and removal dates: how to merge them, or `None`.
+fn census_options(
+    args: &BakeArgs,
+    read: &sylva_bake::input::placements::ReadOptions,
+    allometry: &sylva_bake::input::allometry::Allometry,
+) -> Result<Option<std::sync::Arc<sylva_bake::input::census::CensusOptions>>> {
+    use sylva_bake::input::census::{has_timeline_columns, CensusOptions};
+    let dates = CensusOptions::parse_dates(args.placements.len(), &args.census_dates)?;
+    let asked = args.placements.len() > 1 || !dates.is_empty() || args.census_date_column.is_some();
+    let asked = asked
+        || match args.placements.first() {
+            Some(p) => {
+                let source = sylva_bake::input::placements::PlacementSource::open(p, read)?;
+                has_timeline_columns(&source.attribute_names(), None)
+            }
+            None => false,
+        };
+    if !asked {
+        return Ok(None);
+    }
+    if args.pack.shard.is_some() {
+        bail!("censuses (several --placements, --census-date, planting or removal dates) cannot be baked in shards yet: bake them whole");
+    }
+    let today =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| (d.as_secs() / 86_400) as i64);
+    Ok(Some(std::sync::Arc::new(CensusOptions {
+        files: args.placements.clone(),
+        dates,
+        date_column: args.census_date_column.clone(),
+        allometry: Some(std::sync::Arc::new(allometry.clone())),
+        today,
+    })))
 }
 
 /// The `--model` files, imported (names unique).

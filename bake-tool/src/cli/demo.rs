@@ -140,6 +140,7 @@ pub(crate) fn bake_demo(
         canopy_cell_m: args.pack.canopy_cell,
         attributes: None,
         text_ids: None,
+        timeline: None,
     };
     let s = sylva_bake::bake::bake_scene(&input, out, &log)?;
     report_summary(&s, &args.output.out, started);

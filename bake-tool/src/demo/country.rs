@@ -326,6 +326,7 @@ impl Country {
                 variation: (rng.next_u64() % 32) as u8,
                 id: 0,
                 row: 0,
+                dated: false,
             });
         }
         trees

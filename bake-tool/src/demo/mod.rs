@@ -354,6 +354,7 @@ pub fn demo_layout(count: usize, seed: u64) -> Vec<SceneTree> {
             variation: (rng.next_u64() % 32) as u8,
             id,
             row: 0,
+            dated: false,
         });
     }
     trees

@@ -182,6 +182,8 @@ pub struct PlacedTrees {
     pub attributes: Option<crate::input::attributes::AttributeTable>,
     /// The text ids of the rows that have one (none: every id is a number).
     pub text_ids: Option<TextIds>,
+    /// The trees' timeline (censuses, planting and removal dates), if any.
+    pub timeline: Option<sylva::format::timeline::Timeline>,
 }
 
 /// The text ids of an inventory (`EY17080`), by input row: what a tree whose
@@ -409,6 +411,7 @@ pub fn place_trees(
             variation: ((h >> 20) % 32) as u8,
             id: p.id.unwrap_or(p.row | 1 << 63),
             row: u32::try_from(p.row).unwrap_or(0),
+            dated: p.dated,
         };
         Ok((tree, facts))
     };
@@ -517,7 +520,19 @@ pub fn place_trees(
     } else {
         None
     };
-    Ok(PlacedTrees { trees, crs: dst, origin_m: origin, cell_size_m, ground, fitted, canopy, attributes, text_ids })
+    let timeline = source.timeline.clone();
+    Ok(PlacedTrees {
+        trees,
+        crs: dst,
+        origin_m: origin,
+        cell_size_m,
+        ground,
+        fitted,
+        canopy,
+        attributes,
+        text_ids,
+        timeline,
+    })
 }
 
 /// Whether a stand's box (its corners and edge midpoints projected, a metre

@@ -225,6 +225,7 @@ pub fn stream_csv<R: std::io::Read>(
             id_text: id.as_deref().and_then(text_id),
             attrs,
             row,
+            dated: false,
         };
         if let Some(p) = accept(p, cols.kind, report) {
             report.kept += 1;

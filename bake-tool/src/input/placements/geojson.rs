@@ -148,6 +148,7 @@ pub fn read_geojson(bytes: &[u8], options: &ReadOptions) -> Result<PlacementSet>
                     })
                     .collect(),
                 row,
+                dated: false,
             };
             points_read.push(p);
         }

@@ -211,6 +211,7 @@ pub(super) fn gis_placements(
                 Vec::new()
             },
             row,
+            dated: false,
         };
         if let Some(p) = accept(placement, kind, report) {
             if cols.id.is_some() && p.id.is_none() {

@@ -55,6 +55,9 @@ pub struct Placement {
     pub attrs: Vec<Option<String>>,
     /// 1-based data row (CSV line minus the header) or feature index.
     pub row: u64,
+    /// Not standing at the scene's latest date (a census's dead or removed
+    /// tree, one planted later): drawn only at a date ([`crate::input::census`]).
+    pub dated: bool,
 }
 
 /// What was read and what was skipped.
@@ -214,6 +217,9 @@ pub struct ReadOptions {
     pub stands: Option<std::sync::Arc<crate::input::stands::StandOptions>>,
     /// The file is a canopy height model whose crowns become trees (`--chm`).
     pub chm: Option<std::sync::Arc<crate::input::chm::ChmOptions>>,
+    /// The files are censuses of the same trees, or one inventory with
+    /// planting and removal dates (`--census-date`, `--census-date-column`).
+    pub census: Option<std::sync::Arc<crate::input::census::CensusOptions>>,
 }
 
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
@@ -296,6 +302,8 @@ pub struct PlacementSource {
     stands: Option<(crate::input::gis::Layer, crate::input::stands::StandFields)>,
     /// A stand map's stands, in the order every pass reads them.
     stand_plans: Vec<crate::input::stands::StandPlan>,
+    /// The trees' timeline, for censuses (and planting and removal dates).
+    pub timeline: Option<sylva::format::timeline::Timeline>,
 }
 
 impl PlacementSource {
@@ -312,6 +320,24 @@ impl PlacementSource {
         }
         if let Some(chm) = &options.chm {
             return Self::open_chm(path, options, chm);
+        }
+        if let Some(census) = &options.census {
+            let merged = crate::input::census::merge(options, census)?;
+            return Ok(Self {
+                path: path.to_path_buf(),
+                delimiter: b',',
+                options: options.clone(),
+                kind: merged.set.kind,
+                declared_epsg: merged.declared_epsg,
+                declared_proj4: merged.declared_proj4,
+                notes: merged.notes,
+                attribute_names: merged.set.attribute_names.clone(),
+                parsed: Some(merged.set),
+                gis: None,
+                stands: None,
+                stand_plans: Vec::new(),
+                timeline: Some(merged.timeline),
+            });
         }
         match ext.as_str() {
             "csv" | "txt" | "tsv" => {
@@ -351,6 +377,7 @@ impl PlacementSource {
                     gis: None,
                     stands: None,
                     stand_plans: Vec::new(),
+                    timeline: None,
                 })
             }
             "geojson" | "json" => {
@@ -372,6 +399,7 @@ impl PlacementSource {
                     gis: None,
                     stands: None,
                     stand_plans: Vec::new(),
+                    timeline: None,
                 })
             }
             "shp" | "gpkg" | "fgb" => {
@@ -408,6 +436,7 @@ impl PlacementSource {
                     gis: Some((layer, cols)),
                     stands: None,
                     stand_plans: Vec::new(),
+                    timeline: None,
                 })
             }
             _ => bail!(
@@ -540,6 +569,7 @@ impl PlacementSource {
                 id_text: None,
                 attrs: if stands.is_some() { vec![stand.map(|s| s.0.id.clone())] } else { Vec::new() },
                 row: i as u64 + 1,
+                dated: false,
             };
             if let Some(p) = accept(p, CoordKind::Projected, &mut report) {
                 rows.push(p);
@@ -611,6 +641,7 @@ impl PlacementSource {
             gis: None,
             stands: None,
             stand_plans: Vec::new(),
+            timeline: None,
         })
     }
 
@@ -821,6 +852,7 @@ impl PlacementSource {
             gis: None,
             stands: Some((layer, fields)),
             stand_plans: plans,
+            timeline: None,
         })
     }
 
@@ -911,6 +943,7 @@ impl PlacementSource {
                     id_text: None,
                     attrs: Vec::new(),
                     row: plan.first_row + 1,
+                    dated: false,
                 };
                 report.rows += 1;
                 if let Some(p) = accept(p, self.kind, &mut report) {
@@ -982,6 +1015,7 @@ impl PlacementSource {
                         id_text: None,
                         attrs: if with_attributes { vec![Some(stand.id.clone())] } else { Vec::new() },
                         row: plan.first_row + 1 + j as u64,
+                        dated: false,
                     };
                     if let Some(p) = accept(p, self.kind, &mut report) {
                         report.kept += 1;

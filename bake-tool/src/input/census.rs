@@ -1,0 +1,401 @@
+//! Censuses: several inventories of the same trees (one file per census date,
+//! `--placements 2008.csv --census-date 2008-11-07 …`, or one file with a date
+//! column per row), or one inventory with planting and removal dates, made
+//! into one row per tree with its timeline (`sylva::format::timeline`).
+//!
+//! Trees are matched by id across censuses. A tree is drawn where and as its
+//! last record alive has it; it stands from its planting date, or for a tree
+//! first recorded at a later census (ingrowth) from the census before, and
+//! until its removal date, or the first census that records it dead or no
+//! longer lists it. Its height at each census it was recorded alive at (given,
+//! or from its DBH by the allometry) goes into `height_<date>`, its DBH into
+//! `dbh_<date>`: the viewer sizes the tree between them and shows them in a
+//! pick's popup. Trees not standing at the latest date are marked
+//! [`Placement::dated`]: only a view at a date draws them.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use sylva::format::attributes::{format_date, parse_date};
+use sylva::format::timeline::{Timeline, MAX_CENSUSES};
+
+use super::allometry::Allometry;
+use super::placements::{CoordKind, Placement, PlacementSet, PlacementSource, ReadOptions, Report};
+
+/// The attribute a tree stands from.
+pub const FROM_COLUMN: &str = "standing_from";
+/// The attribute a tree stands until.
+pub const UNTIL_COLUMN: &str = "standing_until";
+
+/// Column names read as a row's census date, planting date and removal date
+/// (lower case, compared without case), unless named with the options.
+const DATE_NAMES: &[&str] = &["census_date", "census", "survey_date", "inventory_date", "measured", "date"];
+const PLANTED_NAMES: &[&str] =
+    &["planted", "planting_date", "plant_date", "date_planted", "plantdatum", "pflanzdatum", "plantation"];
+const REMOVED_NAMES: &[&str] =
+    &["removed", "removal_date", "date_removed", "felled", "rooidatum", "faelldatum", "fälldatum", "abattage"];
+/// A status column, and the words (in any case, anywhere in it) of a tree
+/// recorded dead or gone.
+const STATUS_NAMES: &[&str] = &["status", "stemstatus", "tree_status", "plantstatus", "state", "vitality"];
+const DEAD_WORDS: &[&str] = &[
+    "dead",
+    "died",
+    "removed",
+    "felled",
+    "stump",
+    "snag",
+    "cut",
+    "dood",
+    "gerooid",
+    "tot",
+    "abgestorben",
+    "gefällt",
+    "mort",
+    "abattu",
+    "muerto",
+];
+
+/// How the censuses come.
+#[derive(Debug, Clone, Default)]
+pub struct CensusOptions {
+    /// Every placements file, in the order given.
+    pub files: Vec<PathBuf>,
+    /// One census date per file (days since 1970-01-01), or none: the date column.
+    pub dates: Vec<i64>,
+    /// A date column per row (`--census-date-column`; default a column named so).
+    pub date_column: Option<String>,
+    /// Heights from DBH where a census gives no height.
+    pub allometry: Option<Arc<Allometry>>,
+    /// The date a view without one shows when there are no censuses (planting
+    /// and removal dates alone): the day of the bake.
+    pub today: i64,
+}
+
+impl CensusOptions {
+    /// Parses `--census-date` values, one per file.
+    ///
+    /// # Errors
+    /// A date that is no `YYYY-MM-DD`, or a count that does not match the files.
+    pub fn parse_dates(files: usize, dates: &[String]) -> Result<Vec<i64>> {
+        let parsed = dates
+            .iter()
+            .map(|d| {
+                parse_date(d)
+                    .filter(|_| d.trim().len() == 10)
+                    .with_context(|| format!("--census-date {d:?}: expected a date as YYYY-MM-DD (e.g. 2013-07-01)"))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        if !parsed.is_empty() && parsed.len() != files {
+            bail!(
+                "{} --census-date for {} --placements: give one date per file, in the files' order",
+                parsed.len(),
+                files
+            );
+        }
+        Ok(parsed)
+    }
+}
+
+/// Whether one file's columns make it a timeline: planting or removal dates
+/// (a census date column only when named, or with several files: many
+/// inventories have a survey date).
+#[must_use]
+pub fn has_timeline_columns(names: &[String], date_column: Option<&str>) -> bool {
+    let found = |list: &[&str]| names.iter().any(|n| list.contains(&n.trim().to_lowercase().as_str()));
+    date_column.is_some_and(|c| names.iter().any(|n| n.eq_ignore_ascii_case(c)))
+        || found(PLANTED_NAMES)
+        || found(REMOVED_NAMES)
+}
+
+/// The merged rows: one per tree, its attributes, its timeline.
+pub struct Merged {
+    /// The rows, with the timeline columns last among their attributes.
+    pub set: PlacementSet,
+    /// The timeline block of the manifest.
+    pub timeline: Timeline,
+    /// The CRS the files declare (the first file's).
+    pub declared_epsg: Option<u32>,
+    /// A declared CRS without an EPSG code.
+    pub declared_proj4: Option<(String, String)>,
+    /// For the log.
+    pub notes: Vec<String>,
+}
+
+/// A tree's record at one census.
+struct Record {
+    day: i64,
+    alive: bool,
+    placement: Placement,
+}
+
+fn column_index(names: &[String], wanted: Option<&str>, defaults: &[&str]) -> Option<usize> {
+    match wanted {
+        Some(w) => names.iter().position(|n| n.eq_ignore_ascii_case(w)),
+        None => names.iter().position(|n| defaults.contains(&n.trim().to_lowercase().as_str())),
+    }
+}
+
+fn is_dead(status: &str) -> bool {
+    let s = status.trim().to_lowercase();
+    DEAD_WORDS.iter().any(|w| s.split(|c: char| !c.is_alphanumeric()).any(|part| part == *w))
+}
+
+/// Reads every census file and merges their rows by tree id.
+///
+/// # Errors
+/// A file that cannot be read, files in different coordinate kinds, a
+/// census date column with no date, rows of several censuses without ids.
+pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
+    let mut options = read.clone();
+    options.census = None;
+    // Every column is read (the timeline's among them); those kept as
+    // attributes are chosen below.
+    let kept_names = options.attributes.take();
+    let several = census.files.len() > 1;
+    let mut kind = None;
+    let mut declared = (None, None);
+    let mut notes = Vec::new();
+    let mut report = Report::default();
+    // Per tree (by id, or by file and row without one), its records.
+    let mut order: Vec<String> = Vec::new();
+    let mut trees: HashMap<String, Vec<Record>> = HashMap::new();
+    let mut attribute_names: Vec<String> = Vec::new();
+    let mut planted: HashMap<String, i64> = HashMap::new();
+    let mut removed: HashMap<String, i64> = HashMap::new();
+    let mut days_seen = std::collections::BTreeSet::new();
+    for (f, path) in census.files.iter().enumerate() {
+        let source = PlacementSource::open(path, &options)?;
+        match kind {
+            None => {
+                kind = Some(source.kind);
+                declared = (source.declared_epsg, source.declared_proj4.clone());
+            }
+            Some(k) if k != source.kind => bail!(
+                "census {} ({}) has {} coordinates, the first has {}: give every census in one CRS",
+                f + 1,
+                path.display(),
+                if source.kind == CoordKind::LonLat { "lon/lat" } else { "projected" },
+                if k == CoordKind::LonLat { "lon/lat" } else { "projected" }
+            ),
+            Some(_) => {}
+        }
+        for n in &source.notes {
+            notes.push(format!("census {} ({}): {n}", f + 1, path.display()));
+        }
+        let names = source.attribute_names();
+        // A date column per row where named, or found among several files without --census-date.
+        let date_at = match &census.date_column {
+            Some(c) => column_index(&names, Some(c), DATE_NAMES),
+            None if census.dates.is_empty() && several => column_index(&names, None, DATE_NAMES),
+            None => None,
+        };
+        if census.dates.is_empty() && several && date_at.is_none() {
+            bail!("census {} ({}) has no date column: give --census-date, one per file", f + 1, path.display());
+        }
+        if let Some(c) = &census.date_column {
+            if date_at.is_none() {
+                bail!("{}: no column {c:?} (--census-date-column); its columns: {}", path.display(), names.join(", "));
+            }
+        }
+        let planted_at = column_index(&names, None, PLANTED_NAMES);
+        let removed_at = column_index(&names, None, REMOVED_NAMES);
+        let status_at = column_index(&names, None, STATUS_NAMES);
+        let timeline_columns = [date_at, planted_at, removed_at];
+        // Attribute columns of this file, by name, into the union.
+        let mut slot = Vec::with_capacity(names.len());
+        for (i, n) in names.iter().enumerate() {
+            let kept = kept_names.as_ref().is_none_or(|k| k.iter().any(|k| k.eq_ignore_ascii_case(n)));
+            if timeline_columns.contains(&Some(i)) || !kept {
+                slot.push(None);
+                continue;
+            }
+            let at = attribute_names.iter().position(|a| a == n).unwrap_or_else(|| {
+                attribute_names.push(n.clone());
+                attribute_names.len() - 1
+            });
+            slot.push(Some(at));
+        }
+        let file_day = census.dates.get(f).copied();
+        let file_report = source.for_each_with_attributes(&mut |mut p: Placement| {
+            let cell = |i: Option<usize>| i.and_then(|i| p.attrs.get(i).cloned().flatten());
+            let day = match (date_at.and_then(|i| p.attrs.get(i).cloned().flatten()), file_day) {
+                (Some(text), _) => match parse_date(&text) {
+                    Some(d) => Some(d),
+                    None => {
+                        report.skip(&format!("census {}: census date is no date (YYYY-MM-DD)", f + 1), p.row);
+                        return Ok(());
+                    }
+                },
+                (None, Some(d)) => Some(d),
+                (None, None) if date_at.is_some() => {
+                    report.skip(&format!("census {}: no census date", f + 1), p.row);
+                    return Ok(());
+                }
+                (None, None) => None,
+            };
+            let key = match (&p.id, &p.id_text) {
+                (Some(id), _) => id.to_string(),
+                (None, Some(t)) => t.clone(),
+                (None, None) if several || date_at.is_some() => {
+                    report.skip(&format!("census {}: no id to match the tree across censuses", f + 1), p.row);
+                    return Ok(());
+                }
+                (None, None) => format!("\u{0}{f}:{}", p.row),
+            };
+            let alive = !cell(status_at).is_some_and(|s| is_dead(&s));
+            for (at, target) in [(planted_at, &mut planted), (removed_at, &mut removed)] {
+                if let Some(text) = cell(at).filter(|t| !t.trim().is_empty()) {
+                    match parse_date(&text).or_else(|| year_only(&text)) {
+                        Some(d) => {
+                            target.insert(key.clone(), d);
+                        }
+                        None => report.skip(
+                            &format!("census {}: a planting or removal date is no date (kept without it)", f + 1),
+                            p.row,
+                        ),
+                    }
+                }
+            }
+            let mut attrs = vec![None; attribute_names.len()];
+            for (i, v) in p.attrs.drain(..).enumerate() {
+                if let Some(Some(at)) = slot.get(i) {
+                    if let Some(a) = attrs.get_mut(*at) {
+                        *a = v;
+                    }
+                }
+            }
+            p.attrs = attrs;
+            let day = day.unwrap_or(i64::MIN);
+            if day != i64::MIN {
+                days_seen.insert(day);
+            }
+            let records = trees.entry(key.clone()).or_insert_with(|| {
+                order.push(key);
+                Vec::new()
+            });
+            records.push(Record { day, alive, placement: p });
+            Ok(())
+        })?;
+        report.rows += file_report.rows;
+        report.missing_height += file_report.missing_height;
+        report.not_utf8 += file_report.not_utf8;
+        for (reason, (n, rows)) in file_report.skipped {
+            let e = report.skipped.entry(format!("census {}: {reason}", f + 1)).or_insert((0, Vec::new()));
+            e.0 += n;
+            e.1.extend(rows.into_iter().take(5 - e.1.len().min(5)));
+        }
+    }
+    let censuses: Vec<i64> = days_seen.into_iter().collect();
+    if censuses.len() > MAX_CENSUSES {
+        bail!("{} census dates: at most {MAX_CENSUSES}", censuses.len());
+    }
+    let latest = censuses.last().copied().unwrap_or(census.today);
+    let heights: Vec<String> = censuses.iter().map(|&d| format!("height_{}", format_date(d))).collect();
+    let dbhs: Vec<String> = censuses.iter().map(|&d| format!("dbh_{}", format_date(d))).collect();
+    let base = attribute_names.len();
+    let mut names = attribute_names;
+    names.push(FROM_COLUMN.into());
+    names.push(UNTIL_COLUMN.into());
+    names.extend(heights.iter().cloned());
+    names.extend(dbhs.iter().cloned());
+    let mut rows = Vec::with_capacity(order.len());
+    let (mut never_alive, mut dated) = (0u64, 0u64);
+    for key in order {
+        let mut records = trees.remove(&key).unwrap_or_default();
+        // In census order; a census listing a tree twice keeps the later row.
+        records.sort_by_key(|r| r.day);
+        records.dedup_by(|later, earlier| {
+            let same = later.day == earlier.day;
+            if same {
+                std::mem::swap(later, earlier);
+            }
+            same
+        });
+        let Some(last_alive) = records.iter().rposition(|r| r.alive) else {
+            never_alive += 1;
+            if let Some(r) = records.first() {
+                report.skip("recorded dead at every census (no size to draw)", r.placement.row);
+            }
+            continue;
+        };
+        let first_alive = records.iter().position(|r| r.alive).unwrap_or(last_alive);
+        let at = |day: i64| censuses.binary_search(&day).ok();
+        let first_day = records[first_alive].day;
+        let last_day = records[last_alive].day;
+        // Ingrowth: first recorded alive at a later census grows in from the one before.
+        let from = planted.get(&key).copied().or_else(|| at(first_day).filter(|&c| c > 0).map(|c| censuses[c - 1]));
+        // Gone at the first census after its last record alive (dead there, or not listed).
+        let until = removed.get(&key).copied().or_else(|| at(last_day).and_then(|c| censuses.get(c + 1).copied()));
+        let mut cells: Vec<Option<String>> = vec![None; 2 + 2 * censuses.len()];
+        cells[0] = from.map(format_date);
+        cells[1] = until.map(format_date);
+        for r in records.iter().filter(|r| r.alive) {
+            let Some(c) = at(r.day) else { continue };
+            let p = &r.placement;
+            let from_dbh = || {
+                let (a, d) = (census.allometry.as_ref()?, p.dbh_cm?);
+                let h = a.for_label(p.species.as_deref().unwrap_or("")).height.metres(f64::from(d));
+                (h.is_finite() && h > 0.0).then_some(h as f32)
+            };
+            cells[2 + c] = p.height_m.or_else(from_dbh).map(|h| format!("{h:.2}"));
+            cells[2 + censuses.len() + c] = p.dbh_cm.map(|d| format!("{d:.1}"));
+        }
+        let mut p = records.swap_remove(last_alive).placement;
+        p.attrs.resize(base, None);
+        p.attrs.extend(cells);
+        p.dated = !(from.is_none_or(|f| f <= latest) && until.is_none_or(|u| latest < u));
+        dated += u64::from(p.dated);
+        p.row = rows.len() as u64 + 1;
+        rows.push(p);
+    }
+    report.kept = rows.len() as u64;
+    notes.push(format!(
+        "censuses: {} trees from {} rows of {} file(s){}; {} not standing at {} (drawn at a date){}",
+        rows.len(),
+        report.rows,
+        census.files.len(),
+        if censuses.is_empty() {
+            String::new()
+        } else {
+            format!(", census dates {}", censuses.iter().map(|&d| format_date(d)).collect::<Vec<_>>().join(", "))
+        },
+        dated,
+        format_date(latest),
+        if never_alive > 0 { format!("; {never_alive} only ever recorded dead, left out") } else { String::new() }
+    ));
+    if rows.is_empty() {
+        bail!("the censuses hold no tree recorded alive");
+    }
+    Ok(Merged {
+        set: PlacementSet {
+            kind: kind.unwrap_or(CoordKind::Projected),
+            rows,
+            report,
+            declared_epsg: declared.0,
+            attribute_names: names,
+        },
+        timeline: Timeline {
+            censuses: censuses.iter().map(|&d| format_date(d)).collect(),
+            latest: format_date(latest),
+            from: FROM_COLUMN.into(),
+            until: UNTIL_COLUMN.into(),
+            heights,
+        },
+        declared_epsg: declared.0,
+        declared_proj4: declared.1,
+        notes,
+    })
+}
+
+/// A planting year alone (`1987`, as many registers keep it): its 1 January.
+fn year_only(text: &str) -> Option<i64> {
+    let t = text.trim();
+    let t = t.strip_suffix(".0").unwrap_or(t);
+    (t.len() == 4 && t.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| t.parse::<i64>().ok())
+        .flatten()
+        .filter(|y| (1000..=2999).contains(y))
+        .map(|y| sylva::calendar::days_from_civil(y, 1, 1))
+}
