@@ -9,8 +9,8 @@
 //! attribute sidecar, streamed only then):
 //!
 //! - `from` (a date): when the tree starts standing (planted, or for a tree
-//!   first recorded at a later census, the census before); null: before the
-//!   first census.
+//!   first recorded at a later census, the day after the census before);
+//!   null: before the first census.
 //! - `until` (a date): when it stands no more (removed, or the first census
 //!   that found it dead or missing); null: standing at the latest census.
 //! - `heights[c]` (a number, metres): its height at census `c` (null: not

@@ -516,3 +516,198 @@ fn far_thinned_trees_are_picked_where_they_are_drawn() {
     assert!(foliage >= 30, "the far view shows too little foliage ({foliage} pixels)");
     assert!(picked * 100 >= foliage * 99, "{picked} of {foliage} foliage pixels picked a tree");
 }
+
+/// A copy of the fixture with a timeline (censuses 2008-11-07, 2013-07-01,
+/// 2018-07-25): every other batch of each tile is flagged `BATCH_DATED` and its
+/// trees died before 2013-07-01 (10 m in 2008); of the other batches' trees,
+/// even ids stand throughout (8, 10, 12 m), odd ids grow in from 2013-07-01
+/// (6 m in 2018). Returns the scene and the day of each census.
+fn timeline_fixture(name: &str) -> (PathBuf, [i64; 3]) {
+    use sylva::format::attributes::{
+        encode_attributes, null_code, parse_date, AttributeCodes, AttributeColumn, AttributeSchema, AttributeType,
+    };
+    use sylva::format::tile::BATCH_DATED;
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("timeline-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let days = ["2008-11-07", "2013-07-01", "2018-07-25"].map(|d| parse_date(d).unwrap());
+    let column = |name: &str, kind, min: f64, max: f64| AttributeColumn {
+        name: name.into(),
+        kind,
+        width: 2,
+        min,
+        max,
+        categories: Vec::new(),
+        count: 1000,
+    };
+    let heights: Vec<String> = ["2008-11-07", "2013-07-01", "2018-07-25"].iter().map(|d| format!("height_{d}")).collect();
+    let mut columns = vec![
+        column("standing_from", AttributeType::Date, days[1] as f64, days[1] as f64),
+        column("standing_until", AttributeType::Date, days[1] as f64, days[1] as f64),
+    ];
+    columns.extend(heights.iter().map(|h| column(h, AttributeType::Number, 0.0, 20.0)));
+    let schema = AttributeSchema { columns };
+    let s = schema.clone();
+    let mut dated: std::collections::HashMap<String, Vec<bool>> = std::collections::HashMap::new();
+    crate::common::rewritten_copy(
+        &fixture(),
+        &dir,
+        |m| {
+            m.version = m.version.max(6);
+            m.attributes = Some(s);
+            m.timeline = Some(sylva::format::timeline::Timeline {
+                censuses: vec!["2008-11-07".into(), "2013-07-01".into(), "2018-07-25".into()],
+                latest: "2018-07-25".into(),
+                from: "standing_from".into(),
+                until: "standing_until".into(),
+                heights: heights.clone(),
+            });
+        },
+        |tile, entry| {
+            let mut flags = vec![false; tile.instances.len()];
+            for (k, b) in tile.batches.iter_mut().enumerate() {
+                if k % 2 == 0 {
+                    b.flags |= BATCH_DATED;
+                    let at = b.instance_offset as usize;
+                    flags[at..at + b.instance_count as usize].fill(true);
+                }
+            }
+            dated.insert(entry.url.clone(), flags);
+        },
+    );
+    let m = Manifest::decode("scene.json", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+    let c = &schema.columns;
+    let null = null_code(2);
+    for t in &m.tiles {
+        let ids = sylva::format::decode_ids("ids", &std::fs::read(dir.join(&t.ids_url)).unwrap()).unwrap();
+        let flags = &dated[&t.url];
+        let mut cols = vec![Vec::with_capacity(ids.len()); 5];
+        for (id, &d) in ids.iter().zip(flags) {
+            let h = |v: f64| c[2].code_of_number(v);
+            let row = if d {
+                [null, c[1].code_of_number(days[1] as f64), h(10.0), null, null]
+            } else if id % 2 == 0 {
+                [null, null, h(8.0), h(10.0), h(12.0)]
+            } else {
+                [c[0].code_of_number(days[1] as f64), null, null, null, h(6.0)]
+            };
+            for (col, v) in cols.iter_mut().zip(row) {
+                col.push(v);
+            }
+        }
+        let codes = AttributeCodes { count: ids.len(), columns: cols };
+        let url = sylva::format::attributes::attributes_url(&t.url);
+        std::fs::write(dir.join(url), encode_attributes(&schema, &codes)).unwrap();
+    }
+    (dir, days)
+}
+
+/// The forest at a date (issue 46): a view without one draws no tree of a
+/// `BATCH_DATED` batch; at 2010-01-01 the GPU draws exactly the trees standing
+/// then (the dated batches' and the even ids'), at 2016-01-01 the others'
+/// (the odd ids grown in), each at its size then: its draw items equal the
+/// CPU oracle's (`cpu_select_at`) given each tree's standing and growth byte.
+#[test]
+fn a_date_draws_the_trees_standing_then_at_their_size_then() {
+    use sylva::format::timeline::{growth_byte, growth_of_byte};
+    use sylva::lod::select::{cpu_select_at, unpack_item_y};
+    let (scene, days) = timeline_fixture("dates");
+    let mut off = open_at(&scene);
+    off.load_view(&Camera::default(), 30.0);
+    let m = off.stream.manifest().unwrap().clone();
+    assert!(m.timeline.as_ref().unwrap().resolve(m.attributes.as_ref()).is_ok());
+    let cam = camera(&m);
+    off.settings.thin_px = 0.0;
+    // Per pool instance: (id, in a dated batch).
+    let pool = |off: &OffscreenScene| -> Vec<Option<(u64, bool)>> {
+        let ids = pool_ids(off, &scene);
+        let (_, batches, _, _) = off.read_selection();
+        let mut dated = vec![false; ids.len()];
+        for b in &batches {
+            if b.flags & sylva::format::tile::BATCH_DATED != 0 {
+                let at = b.instance_offset as usize;
+                dated[at..at + b.instance_count as usize].fill(true);
+            }
+        }
+        ids.iter().zip(dated).map(|(id, d)| id.map(|id| (id, d))).collect()
+    };
+    // The trees of the whole-drawn items, checked against the oracle given `look`.
+    let drawn = |off: &OffscreenScene, dated: bool, look: &dyn Fn(u32) -> Option<f32>| -> Vec<u32> {
+        let (gpu, batches, instances, _) = off.read_selection();
+        let oracle = cpu_select_at(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), dated, look);
+        let mut trees = Vec::new();
+        for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
+            let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+            let mut c: Vec<(u32, u32)> = c.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
+            g.sort_unstable();
+            c.sort_unstable();
+            assert_eq!(g, c, "slot {slot}: the draw items at a date differ from the oracle's");
+            trees.extend(g.iter().map(|&(i, _)| i));
+        }
+        trees.sort_unstable();
+        trees.dedup();
+        trees
+    };
+    off.load_view(&cam, 30.0);
+    off.render(&cam, false);
+    let now = drawn(&off, false, &|_| Some(1.0));
+    let p = pool(&off);
+    assert!(now.len() > 100, "{} trees drawn", now.len());
+    assert!(now.iter().all(|&i| p[i as usize].is_some_and(|(_, d)| !d)), "a view without a date drew a dated batch's tree");
+    // The rule, from the fixture's own numbers (not the timeline's code).
+    let rule = |id: u64, dated: bool, day: i64| -> Option<f64> {
+        let lerp = |d0: i64, h0: f64, d1: i64, h1: f64| h0 + (h1 - h0) * (day - d0) as f64 / (d1 - d0) as f64;
+        match (dated, id % 2 == 0) {
+            (true, _) => (day < days[1]).then_some(1.0),
+            (false, true) if day < days[1] => Some(lerp(days[0], 8.0, days[1], 10.0).clamp(8.0, 10.0) / 12.0),
+            (false, true) => Some(lerp(days[1], 10.0, days[2], 12.0).min(12.0) / 12.0),
+            (false, false) => (day >= days[1]).then(|| lerp(days[1], 1.3, days[2], 6.0).min(6.0) / 6.0),
+        }
+    };
+    for date in ["2010-01-01", "2016-01-01"] {
+        let day = sylva::format::attributes::parse_date(date).unwrap();
+        off.set_day(Some(day));
+        off.load_view(&cam, 30.0);
+        off.render(&cam, false);
+        off.render(&cam, false);
+        let p = pool(&off);
+        // Each tree's growth byte by the rule (the timeline's interpolation agrees within a step).
+        let look = |i: u32| -> Option<f32> {
+            let (id, d) = p.get(i as usize).copied().flatten()?;
+            rule(id, d, day).map(|g| growth_of_byte(growth_byte(g)))
+        };
+        let trees = drawn(&off, true, &look);
+        let standing: Vec<(u64, bool)> = trees.iter().filter_map(|&i| p[i as usize]).collect();
+        let (dated, even, odd) = (
+            standing.iter().filter(|(_, d)| *d).count(),
+            standing.iter().filter(|(id, d)| !d && id % 2 == 0).count(),
+            standing.iter().filter(|(id, d)| !d && id % 2 == 1).count(),
+        );
+        eprintln!("{date}: {} trees drawn: {dated} of dated batches, {even} even, {odd} odd", trees.len());
+        assert!(trees.iter().all(|&i| look(i).is_some()), "{date}: a tree not standing then was drawn");
+        if day < days[1] {
+            assert!(dated > 20 && even > 20 && odd == 0, "{date}: {dated} dated, {even} even, {odd} odd");
+        } else {
+            assert!(dated == 0 && even > 20 && odd > 20, "{date}: {dated} dated, {even} even, {odd} odd");
+        }
+        // Picks at the date name trees standing then (in 2010 some of the dated batches').
+        let picked = picks(&mut off, &cam);
+        assert!(picked.len() >= 20, "{date}: {} picks hit a tree", picked.len());
+        assert!(picked.iter().all(|&i| look(i).is_some()), "{date}: a pick named a tree not standing then");
+        let of_dated = picked.iter().filter(|&&i| p[i as usize].is_some_and(|(_, d)| d)).count();
+        assert_eq!(of_dated > 0, day < days[1], "{date}: {of_dated} picks of the dated batches' trees");
+    }
+    // No date again: the latest trees, as before.
+    off.set_day(None);
+    off.render(&cam, false);
+    assert_eq!(drawn(&off, false, &|_| Some(1.0)), now);
+    let p = pool(&off);
+    assert!(picks(&mut off, &cam).iter().all(|&i| p[i as usize].is_some_and(|(_, d)| !d)));
+}
+
+/// The pool instances picked on a 16 × 9 grid of pixels of `cam`'s view.
+fn picks(off: &mut OffscreenScene, cam: &Camera) -> Vec<u32> {
+    let view = cam.view_data(W, H);
+    let pixels: Vec<[u32; 2]> =
+        (0..9).flat_map(|gy| (0..16).map(move |gx| [gx * W / 16 + W / 32, gy * H / 9 + H / 18])).collect();
+    off.pick_many_blocking(&view, &pixels).into_iter().flatten().collect()
+}

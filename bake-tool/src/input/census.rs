@@ -5,7 +5,8 @@
 //!
 //! Trees are matched by id across censuses. A tree is drawn where and as its
 //! last record alive has it; it stands from its planting date, or for a tree
-//! first recorded at a later census (ingrowth) from the census before, and
+//! first recorded at a later census (ingrowth) from the day after the census
+//! before (so on each census date the trees standing are that census's), and
 //! until its removal date, or the first census that records it dead or no
 //! longer lists it. Its height at each census it was recorded alive at (given,
 //! or from its DBH by the allometry) goes into `height_<date>`, its DBH into
@@ -324,8 +325,10 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
         let at = |day: i64| censuses.binary_search(&day).ok();
         let first_day = records[first_alive].day;
         let last_day = records[last_alive].day;
-        // Ingrowth: first recorded alive at a later census grows in from the one before.
-        let from = planted.get(&key).copied().or_else(|| at(first_day).filter(|&c| c > 0).map(|c| censuses[c - 1]));
+        // Ingrowth: first recorded alive at a later census grows in from the
+        // day after the one before (which did not record it).
+        let from =
+            planted.get(&key).copied().or_else(|| at(first_day).filter(|&c| c > 0).map(|c| censuses[c - 1] + 1));
         // Gone at the first census after its last record alive (dead there, or not listed).
         let until = removed.get(&key).copied().or_else(|| at(last_day).and_then(|c| censuses.get(c + 1).copied()));
         let mut cells: Vec<Option<String>> = vec![None; 2 + 2 * censuses.len()];
@@ -398,4 +401,152 @@ fn year_only(text: &str) -> Option<i64> {
         .flatten()
         .filter(|y| (1000..=2999).contains(y))
         .map(|y| sylva::calendar::days_from_civil(y, 1, 1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("sylva-census-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn day(s: &str) -> i64 {
+        parse_date(s).unwrap()
+    }
+
+    /// A row's attribute by name.
+    fn cell<'a>(set: &'a PlacementSet, p: &'a Placement, name: &str) -> Option<&'a str> {
+        let i = set.attribute_names.iter().position(|n| n == name)?;
+        p.attrs.get(i)?.as_deref()
+    }
+
+    #[test]
+    fn three_censuses_become_one_tree_each_with_its_timeline() {
+        let dir = tmp("three");
+        // 1: in all three, growing; 2: dead at the second; 3: not listed at the third;
+        // 4: new at the second (ingrowth); 5: only ever dead; 6: a DBH and no height.
+        let files = [
+            ("2008.csv", "id,x,y,species,height,dbh,status\n1,500000,5700000,oak,10,,alive\n2,500010,5700000,oak,12,,alive\n3,500020,5700000,pine,8,,\n5,500040,5700000,oak,3,,dead\n6,500050,5700000,oak,,30,\n"),
+            ("2013.csv", "id,x,y,species,height,dbh,status\n1,500000,5700000,oak,11,,alive\n2,500010,5700000,oak,12,,Dead (standing)\n3,500020,5700000,pine,9,,\n4,500030,5700000,oak,4,,\n6,500050,5700000,oak,,32,\n"),
+            ("2018.csv", "id,x,y,species,height,dbh,status\n1,500001,5700000,oak,13,,alive\n4,500030,5700000,oak,6,,\n6,500050,5700000,oak,,35,\n"),
+        ];
+        for (name, text) in files {
+            std::fs::write(dir.join(name), text).unwrap();
+        }
+        let census = CensusOptions {
+            files: files.iter().map(|(n, _)| dir.join(n)).collect(),
+            dates: ["2008-11-07", "2013-07-01", "2018-07-25"].iter().map(|d| day(d)).collect(),
+            date_column: None,
+            allometry: Some(Arc::new(Allometry::built_in())),
+            today: day("2026-12-06"),
+        };
+        let m = merge(&ReadOptions::default(), &census).unwrap();
+        let set = &m.set;
+        let ids: Vec<u64> = set.rows.iter().map(|p| p.id.unwrap()).collect();
+        assert_eq!(ids, [1, 2, 3, 6, 4], "in order of first appearance; 5 only ever dead");
+        assert_eq!(m.timeline.censuses, ["2008-11-07", "2013-07-01", "2018-07-25"]);
+        assert_eq!(m.timeline.latest, "2018-07-25");
+        assert_eq!(set.report.skipped.len(), 1, "{:?}", set.report.skipped);
+        let row = |id: u64| set.rows.iter().find(|p| p.id == Some(id)).unwrap();
+        let get = |id: u64, name: &str| cell(set, row(id), name).map(str::to_string);
+        // 1: always there, drawn where and as its last census has it.
+        assert_eq!((get(1, FROM_COLUMN), get(1, UNTIL_COLUMN)), (None, None));
+        assert_eq!(row(1).x, 500_001.0);
+        assert_eq!(row(1).height_m, Some(13.0));
+        assert!(!row(1).dated);
+        let heights: Vec<Option<String>> =
+            m.timeline.heights.iter().map(|h| get(1, h)).collect();
+        assert_eq!(heights, [Some("10.00".into()), Some("11.00".into()), Some("13.00".into())]);
+        // 2: recorded dead at the second census: gone from then, at its 2008 size.
+        assert_eq!(get(2, UNTIL_COLUMN).as_deref(), Some("2013-07-01"));
+        assert!(row(2).dated);
+        assert_eq!(get(2, "height_2013-07-01"), None);
+        // 3: not listed at the third.
+        assert_eq!(get(3, UNTIL_COLUMN).as_deref(), Some("2018-07-25"));
+        assert!(row(3).dated);
+        // 4: grows in from the day after the first census.
+        assert_eq!(get(4, FROM_COLUMN).as_deref(), Some("2008-11-08"));
+        assert_eq!(get(4, UNTIL_COLUMN), None);
+        assert!(!row(4).dated);
+        // 6: heights from its DBH by the allometry, its DBH kept per census.
+        assert_eq!(get(6, "dbh_2013-07-01").as_deref(), Some("32.0"));
+        let h: Vec<f64> =
+            m.timeline.heights.iter().map(|c| get(6, c).unwrap().parse().unwrap()).collect();
+        assert!(h[0] > 5.0 && h[0] < h[1] && h[1] < h[2], "{h:?}");
+        // The attributes: the files' columns (the status too), then the timeline's.
+        assert!(set.attribute_names.starts_with(&["species".into(), "height".into(), "dbh".into(), "status".into()]));
+        assert!(m.notes.iter().any(|n| n.contains("5 trees from 13 rows of 3 file(s)") && n.contains("2 not standing")));
+    }
+
+    #[test]
+    fn one_file_with_a_date_column_or_planting_dates_makes_a_timeline() {
+        let dir = tmp("columns");
+        // Every census's rows in one file, a date per row.
+        let path = dir.join("all.csv");
+        std::fs::write(
+            &path,
+            "tree,x,y,height,surveyed\nA,0,0,5,2010-05-01\nA,0,0,7,2015-05-01\nB,5,0,4,2015-05-01\nC,9,0,4,2010-05-01\n,1,1,3,2010-05-01\nD,2,2,3,2010-13-01\n",
+        )
+        .unwrap();
+        let census = CensusOptions {
+            files: vec![path.clone()],
+            date_column: Some("surveyed".into()),
+            today: day("2026-12-06"),
+            ..CensusOptions::default()
+        };
+        let read = ReadOptions { columns: vec![(super::super::placements::ColumnRole::Id, "tree".into())], ..Default::default() };
+        let m = merge(&read, &census).unwrap();
+        assert_eq!(m.timeline.censuses, ["2010-05-01", "2015-05-01"]);
+        let texts: Vec<&str> = m.set.rows.iter().map(|p| p.id_text.as_deref().unwrap()).collect();
+        assert_eq!(texts, ["A", "B", "C"]);
+        let reasons: Vec<&String> = m.set.report.skipped.keys().collect();
+        assert!(reasons.iter().any(|r| r.contains("no id to match")), "{reasons:?}");
+        assert!(reasons.iter().any(|r| r.contains("census date is no date")), "{reasons:?}");
+        assert!(!m.set.attribute_names.iter().any(|n| n == "surveyed"), "the census date is no attribute");
+        // C: not at the second census.
+        let c = &m.set.rows[2];
+        assert_eq!(cell(&m.set, c, UNTIL_COLUMN), Some("2015-05-01"));
+        assert!(c.dated);
+
+        // A street-tree register: planting years and removal dates, no censuses, no ids needed.
+        let path = dir.join("register.csv");
+        std::fs::write(&path, "x,y,height,planted,removed\n0,0,8,1987,\n5,0,9,2001-03-15,2019-02-01\n9,0,3,2031,\n1,1,3,soon,\n").unwrap();
+        let census = CensusOptions { files: vec![path], today: day("2026-12-06"), ..CensusOptions::default() };
+        let m = merge(&ReadOptions::default(), &census).unwrap();
+        assert!(m.timeline.censuses.is_empty());
+        assert_eq!(m.timeline.latest, "2026-12-06");
+        let from: Vec<Option<&str>> = m.set.rows.iter().map(|p| cell(&m.set, p, FROM_COLUMN)).collect();
+        assert_eq!(from, [Some("1987-01-01"), Some("2001-03-15"), Some("2031-01-01"), None]);
+        let dated: Vec<bool> = m.set.rows.iter().map(|p| p.dated).collect();
+        assert_eq!(dated, [false, true, true, false], "removed in 2019; planted in 2031");
+        assert!(m.set.report.skipped.keys().any(|r| r.contains("planting or removal date is no date")));
+        assert!(has_timeline_columns(&["x".into(), "Planted".into()], None));
+        assert!(!has_timeline_columns(&["x".into(), "date".into()], None), "a survey date alone is no timeline");
+    }
+
+    #[test]
+    fn census_options_that_do_not_fit_are_refused() {
+        let e = CensusOptions::parse_dates(3, &["2008-11-07".into(), "2013-07-01".into()]).unwrap_err().to_string();
+        assert!(e.contains("2 --census-date for 3 --placements"), "{e}");
+        let e = CensusOptions::parse_dates(1, &["2008-11-7".into()]).unwrap_err().to_string();
+        assert!(e.contains("YYYY-MM-DD"), "{e}");
+        let dir = tmp("refused");
+        std::fs::write(dir.join("a.csv"), "x,y\n0,0\n").unwrap();
+        std::fs::write(dir.join("b.csv"), "lon,lat\n5,52\n").unwrap();
+        let census = CensusOptions {
+            files: vec![dir.join("a.csv"), dir.join("b.csv")],
+            dates: vec![day("2008-01-01"), day("2009-01-01")],
+            ..CensusOptions::default()
+        };
+        // No ids to match: every row skipped, then nothing to draw.
+        let e = merge(&ReadOptions::default(), &census).err().unwrap().to_string();
+        assert!(e.contains("lon/lat") || e.contains("no tree"), "{e}");
+        let census = CensusOptions { dates: Vec::new(), ..census };
+        let e = merge(&ReadOptions::default(), &census).err().unwrap().to_string();
+        assert!(e.contains("no date column: give --census-date"), "{e}");
+    }
 }

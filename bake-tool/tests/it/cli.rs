@@ -2387,3 +2387,113 @@ fn a_canopy_height_model_becomes_trees() {
     assert!(err.contains("--dem"), "{err}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// Issue 46: three censuses of one plot (`--placements` ×3 with
+/// `--census-date` ×3), trees matched by id: on every census date (and
+/// before, between, after) the trees a query counts equal a scan of the
+/// inputs, trees not standing at the last census are in dated batches, and
+/// each tree's heights are those its censuses give (the viewer interpolates).
+#[test]
+fn three_censuses_bake_into_the_forest_at_each_date() {
+    use sylva::format::attributes::parse_date;
+    let Some(model) = oak_model() else { return };
+    let dir = tmp("censuses");
+    // 2008: trees 1–100. 2013: those, every tenth dead, and 101–130 new.
+    // 2018: the 2013 trees alive but every seventh gone, and 131–150 new.
+    let height = |id: u64, k: u64| 5.0 + (id % 13) as f64 + 2.0 * k as f64;
+    let xy = |id: u64| (500_000.0 + (id % 15) as f64 * 6.0, 5_300_000.0 + (id / 15) as f64 * 6.0);
+    let mut alive: Vec<Vec<u64>> = Vec::new();
+    let mut rows = 0;
+    for (k, name) in ["2008.csv", "2013.csv", "2018.csv"].iter().enumerate() {
+        let mut csv = String::from("id,x,y,species,height,status\n");
+        let mut live = Vec::new();
+        for id in 1..=150u64 {
+            let (listed, dead) = match k {
+                0 => (id <= 100, false),
+                1 => (id <= 130, id <= 100 && id % 10 == 0),
+                _ => (id <= 150 && !(id <= 100 && id % 10 == 0) && (id > 130 || id % 7 != 0), false),
+            };
+            if listed {
+                rows += 1;
+                let (x, y) = xy(id);
+                let status = if dead { "dead" } else { "alive" };
+                csv += &format!("{id},{x},{y},oak,{:.1},{status}\n", height(id, k as u64));
+                if !dead {
+                    live.push(id);
+                }
+            }
+        }
+        std::fs::write(dir.join(name), csv).unwrap();
+        alive.push(live);
+    }
+    let out = dir.join("scene");
+    let o = run(bin()
+        .arg("bake")
+        .arg("--model")
+        .arg(format!("oak={}", model.display()))
+        .args(["--placements", "2008.csv", "--placements", "2013.csv", "--placements", "2018.csv"])
+        .args(["--census-date", "2008-11-07", "--census-date", "2013-07-01", "--census-date", "2018-07-25"])
+        .args(["--input-crs", "EPSG:32632", "--no-clusters", "--billboard-size", "16", "--texture-size", "16"])
+        .arg("--no-terrain")
+        .arg("--out")
+        .arg(&out)
+        .current_dir(&dir));
+    let log = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(log.contains(&format!("censuses: 150 trees from {rows} rows of 3 file(s)")), "{log}");
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    let t = m.timeline.clone().expect("a timeline");
+    assert_eq!(t.censuses, ["2008-11-07", "2013-07-01", "2018-07-25"]);
+    let columns = t.resolve(m.attributes.as_ref()).unwrap();
+    // The trees standing on a day by a scan of the inputs: recorded alive at the
+    // last census on or before it, plus those first recorded at the next one
+    // (growing in), or the first census's before it.
+    let days = ["2008-11-07", "2013-07-01", "2018-07-25"].map(|d| parse_date(d).unwrap());
+    let scan = |day: i64| -> usize {
+        let k = days.iter().rposition(|&d| d <= day);
+        let Some(k) = k else { return alive[0].len() };
+        let next_new = alive.get(k + 1).map_or(0, |n| {
+            n.iter().filter(|id| !alive[..=k].iter().any(|a| a.contains(id))).count()
+        });
+        alive[k].len() + if day > days[k] { next_new } else { 0 }
+    };
+    let count = |date: Option<&str>| {
+        sylva::scene::query::query_dir_at(&out, &serde_json::json!({}), 0, date).unwrap().count as usize
+    };
+    assert_eq!(count(None), alive[2].len(), "a view without a date: the last census's live trees");
+    for date in ["2000-01-01", "2008-11-07", "2010-06-01", "2013-07-01", "2013-07-02", "2016-01-01", "2018-07-25", "2030-01-01"] {
+        let day = parse_date(date).unwrap();
+        assert_eq!(count(Some(date)), scan(day), "{date}");
+    }
+    // (Some trees die, some are gone, some are new at each census.)
+    assert!(alive[0].len() == 100 && alive[1].len() == 120 && alive[2].len() > 100, "{:?}", alive.iter().map(Vec::len).collect::<Vec<_>>());
+    // Every tree's heights per census, as given; the size between them interpolated.
+    let mut checked = 0;
+    for entry in sylva::format::index::read_all_tiles(&out, &m).unwrap() {
+        let ids = sylva::format::decode_ids("ids", &std::fs::read(out.join(&entry.ids_url)).unwrap()).unwrap();
+        let url = sylva::format::attributes::attributes_url(&entry.url);
+        let schema = m.attributes.as_ref().unwrap();
+        let codes =
+            sylva::format::attributes::decode_attributes("a", &std::fs::read(out.join(url)).unwrap(), schema, ids.len())
+                .unwrap();
+        let tile = sylva::format::Tile::decode("t", &std::fs::read(out.join(&entry.url)).unwrap(), 1).unwrap();
+        for b in &tile.batches {
+            for i in b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize {
+                let (id, tree) = (ids[i], columns.tree(schema, &codes, i));
+                let gone = !alive[2].contains(&id);
+                assert_eq!(b.flags & sylva::format::tile::BATCH_DATED != 0, gone, "tree {id}");
+                for (k, &(d, h)) in tree.heights.iter().enumerate() {
+                    let census = days.iter().position(|&x| x == d).unwrap();
+                    assert!(alive[census].contains(&id), "tree {id} has a height where it was not alive");
+                    assert!((h - height(id, census as u64)).abs() < 0.05, "tree {id} census {k}: {h}");
+                }
+                if tree.heights.len() >= 2 {
+                    let ((d0, h0), (d1, h1)) = (tree.heights[0], tree.heights[1]);
+                    let mid = tree.height((d0 + d1) / 2).unwrap();
+                    assert!((mid - (h0 + h1) / 2.0).abs() < 0.05, "tree {id}: {mid} between {h0} and {h1}");
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 50, "{checked} trees with two censuses");
+}
