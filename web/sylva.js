@@ -20,7 +20,8 @@
 //   v.setSeason(season)                     deciduous species in 'leaf-on' (the default) | 'autumn' | 'leaf-off'
 //                                           (bare wood; their bare far tiers are fetched then); evergreens alike in all
 //   v.setDate('2026-10-20')                 each deciduous species as its genus's leaf calendar has it there then,
-//                                           and the sun at that date (null: no date)
+//                                           the sun at that date, and in a scene with censuses the trees
+//                                           standing then at their size then (null: no date)
 //   v.on('progress' | 'stats' | 'error' | 'warning' | 'camerachange' | 'ready', fn)
 //   v.on('click' | 'hover', fn)             fn({x, y, tree}): the tree under the pointer (as pick) or null
 //   await v.pick(x, y)                      the tree drawn at canvas CSS pixel (x, y), or null:
@@ -37,6 +38,7 @@
 //                                           numbers or an inventory's text ids
 //   await v.flyToTree(id, {seconds, distance})  select a tree and fly to look at it; resolves to its query result
 //   v.attributes()                          the scene's attribute columns [{name, type, min, max, categories}] or null
+//   v.timeline()                            a scene's censuses: {censuses, latest, first, last} (setDate across them) or null
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
 //
@@ -186,6 +188,13 @@ class SylvaViewer {
     this.selection = [...(ids || [])];
     this.viewer.select(JSON.stringify(this.selection));
     this.dirty = SETTLE_FRAMES;
+  }
+
+  /** The scene's timeline (censuses, planting and removal dates): `{censuses,
+   * latest, first, last}` (YYYY-MM-DD; setDate across first–last shows the
+   * trees standing then), or null (none, or not loaded yet). */
+  timeline() {
+    return JSON.parse(this.viewer.timeline_json());
   }
 
   /** The scene's attribute columns, or null (no attributes, or not loaded yet). */
@@ -408,8 +417,11 @@ class SylvaViewer {
 
   /** The date ('2026-10-20'): each deciduous species in the state its genus's
    * leaf calendar gives at the scene's latitude and elevation then (over
-   * setSeason), and the sun at that date (at the time of day setSun last gave,
-   * else noon). null: no date (setSeason's season again; the sun as it is).
+   * setSeason), the sun at that date (at the time of day setSun last gave,
+   * else noon), and in a scene with a timeline (censuses, planting and
+   * removal dates: `timeline()`) the trees standing then, each at its size
+   * then. null: no date (setSeason's season again; the sun as it is; the
+   * trees of the latest census).
    * Returns the state of a typical deciduous tree then ('leaf-on', 'autumn',
    * 'leaf-off'). Throws for a bad date or before the scene is loaded. */
   setDate(date) {
@@ -730,11 +742,19 @@ export function attachTreePopup(v, host) {
     if (tree.id !== null) { v.select([tree.id]); own = tree.id; } else unselect();
     const fmt = (n, d) => (n === null || n === undefined ? '—' : Number(n).toFixed(d));
     // The inventory's own columns; the drawn species model and height where it has none.
-    const attrs = Object.entries(tree.attributes || {});
+    // A scene with censuses: the tree's timeline in place of its per-census columns.
+    const t = tree.timeline;
+    const timelineColumn = (k) => t && (k === 'standing_from' || k === 'standing_until' ||
+      t.censuses.some((c) => k === `height_${c.date}` || k === `dbh_${c.date}`));
+    const attrs = Object.entries(tree.attributes || {}).filter(([k]) => !timelineColumn(k));
     const has = (name) => attrs.some(([k]) => k.toLowerCase() === name);
+    const timeline = t ? [['standing', `${t.from ?? 'before the first census'} – ${t.until ?? 'now'}`],
+      ...t.censuses.filter((c) => c.height !== null || c.dbh !== null).map((c) =>
+        [c.date, [c.height !== null ? `${fmt(c.height, 1)} m` : null, c.dbh !== null ? `${fmt(c.dbh, 0)} cm` : null].filter(Boolean).join(', ')])] : [];
     const rows = [...(has('species') ? [] : [['species', tree.species]]),
       ...(has('height') ? [] : [['height', `${fmt(tree.height, 1)} m`]]),
       ...attrs.map(([k, val]) => [k, val === null ? '—' : val]),
+      ...timeline,
       ['lon, lat', `${fmt(tree.lon, 6)}, ${fmt(tree.lat, 6)}`]];
     box.innerHTML = `<div style="display:flex;justify-content:space-between;gap:8px;font-weight:600">` +
       `<span>${tree.id !== null ? `Tree ${esc(tree.id)}` : `Tree in row ${esc(tree.row)}`}</span><button aria-label="Close" style="border:none;background:none;cursor:pointer">✕</button></div>` +

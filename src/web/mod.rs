@@ -246,6 +246,31 @@ impl Viewer {
             .map_or_else(|| "null".into(), |a| serde_json::json!(a).to_string())
     }
 
+    /// The scene's timeline as JSON: `{censuses, latest, first, last}` (dates
+    /// `YYYY-MM-DD`; `first`–`last` the span its trees start and stop
+    /// standing in, the censuses' within it), or `null` (none, or not loaded yet).
+    pub fn timeline_json(&self) -> String {
+        use crate::format::attributes::format_date;
+        let Some(m) = self.frame.stream.manifest() else { return "null".into() };
+        let (Some(t), Ok(columns)) = (
+            m.timeline.as_ref(),
+            m.timeline.as_ref().map_or(Err(()), |t| t.resolve(m.attributes.as_ref()).map_err(|_| ())),
+        ) else {
+            return "null".into();
+        };
+        let starts = m.attributes.as_ref().and_then(|a| a.column(&t.from)).filter(|(_, c)| c.count > 0);
+        let first = columns.censuses.first().copied().unwrap_or(columns.latest);
+        let first = starts.map_or(first, |(_, c)| first.min(c.min as i64));
+        let last = columns.latest.max(columns.last_change);
+        serde_json::json!({
+            "censuses": t.censuses,
+            "latest": t.latest,
+            "first": format_date(first),
+            "last": format_date(last),
+        })
+        .to_string()
+    }
+
     /// Whether the scene keeps per-tree attributes (false before its manifest arrives).
     pub fn has_attributes(&self) -> bool {
         self.frame.stream.manifest().is_some_and(|m| m.attributes.is_some())

@@ -539,7 +539,8 @@ fn timeline_fixture(name: &str) -> (PathBuf, [i64; 3]) {
         categories: Vec::new(),
         count: 1000,
     };
-    let heights: Vec<String> = ["2008-11-07", "2013-07-01", "2018-07-25"].iter().map(|d| format!("height_{d}")).collect();
+    let heights: Vec<String> =
+        ["2008-11-07", "2013-07-01", "2018-07-25"].iter().map(|d| format!("height_{d}")).collect();
     let mut columns = vec![
         column("standing_from", AttributeType::Date, days[1] as f64, days[1] as f64),
         column("standing_until", AttributeType::Date, days[1] as f64, days[1] as f64),
@@ -580,7 +581,7 @@ fn timeline_fixture(name: &str) -> (PathBuf, [i64; 3]) {
     for t in &m.tiles {
         let ids = sylva::format::decode_ids("ids", &std::fs::read(dir.join(&t.ids_url)).unwrap()).unwrap();
         let flags = &dated[&t.url];
-        let mut cols = vec![Vec::with_capacity(ids.len()); 5];
+        let mut cols: Vec<Vec<u32>> = (0..5).map(|_| Vec::with_capacity(ids.len())).collect();
         for (id, &d) in ids.iter().zip(flags) {
             let h = |v: f64| c[2].code_of_number(v);
             let row = if d {
@@ -633,7 +634,8 @@ fn a_date_draws_the_trees_standing_then_at_their_size_then() {
     // The trees of the whole-drawn items, checked against the oracle given `look`.
     let drawn = |off: &OffscreenScene, dated: bool, look: &dyn Fn(u32) -> Option<f32>| -> Vec<u32> {
         let (gpu, batches, instances, _) = off.read_selection();
-        let oracle = cpu_select_at(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), dated, look);
+        let oracle =
+            cpu_select_at(off.renderer.last_view(), &batches, &instances, off.renderer.species_table(), dated, look);
         let mut trees = Vec::new();
         for (slot, (g, c)) in gpu.iter().zip(&oracle.slots).enumerate() {
             let mut g: Vec<(u32, u32)> = g.iter().map(|&(i, y)| (i, unpack_item_y(y).1)).collect();
@@ -652,11 +654,14 @@ fn a_date_draws_the_trees_standing_then_at_their_size_then() {
     let now = drawn(&off, false, &|_| Some(1.0));
     let p = pool(&off);
     assert!(now.len() > 100, "{} trees drawn", now.len());
-    assert!(now.iter().all(|&i| p[i as usize].is_some_and(|(_, d)| !d)), "a view without a date drew a dated batch's tree");
+    assert!(
+        now.iter().all(|&i| p[i as usize].is_some_and(|(_, d)| !d)),
+        "a view without a date drew a dated batch's tree"
+    );
     // The rule, from the fixture's own numbers (not the timeline's code).
     let rule = |id: u64, dated: bool, day: i64| -> Option<f64> {
         let lerp = |d0: i64, h0: f64, d1: i64, h1: f64| h0 + (h1 - h0) * (day - d0) as f64 / (d1 - d0) as f64;
-        match (dated, id % 2 == 0) {
+        match (dated, id.is_multiple_of(2)) {
             (true, _) => (day < days[1]).then_some(1.0),
             (false, true) if day < days[1] => Some(lerp(days[0], 8.0, days[1], 10.0).clamp(8.0, 10.0) / 12.0),
             (false, true) => Some(lerp(days[1], 10.0, days[2], 12.0).min(12.0) / 12.0),

@@ -505,6 +505,78 @@ test('the first view frames the trees of two districts far apart', async (t) => 
   }
 });
 
+test('censuses: the year slider, setDate and ?date= draw the trees standing then', async (t) => {
+  const model = join(root, '..', 'shared', 'data', 'models', 'eztree_oak_medium.glb');
+  try { readFileSync(model); } catch { t.skip(`${model} not present`); return; }
+  // Three censuses of one plot: 100 trees in 2008, 60 more in 2013, only the first 60 left in 2018.
+  const dir = mkdtempSync(join(tmpdir(), 'sylva-censuses-'));
+  const files = [['2008.csv', 100, 0], ['2013.csv', 160, 1], ['2018.csv', 60, 2]];
+  for (const [name, n, k] of files) {
+    let csv = 'id,species,lat,lon,height\n';
+    for (let id = 1; id <= n; id++) {
+      csv += `${id},Quercus,${(52.37 + (id % 16) * 0.00008).toFixed(6)},${(4.90 + Math.floor(id / 16) * 0.00012).toFixed(6)},${8 + (id % 5) + 2 * k}\n`;
+    }
+    writeFileSync(join(dir, name), csv);
+  }
+  execFileSync(sylvaBakeBin, ['bake', '--model', `oak=${model}`,
+    '--placements', join(dir, '2008.csv'), '--placements', join(dir, '2013.csv'), '--placements', join(dir, '2018.csv'),
+    '--census-date', '2008-11-07', '--census-date', '2013-07-01', '--census-date', '2018-07-25',
+    '--no-clusters', '--billboard-size', '16', '--texture-size', '16', '--out', join(dir, 'scene')], {
+    stdio: ['ignore', 'ignore', 'pipe'],
+    env: { ...process.env, SYLVA_BAKE_PACK_CACHE: process.env.SYLVA_BAKE_PACK_CACHE || join(root, 'target', 'tmp', 'pack-cache') },
+  });
+  const native = (date) => JSON.parse(execFileSync(sylvaBin, ['query', '--scene', join(dir, 'scene'), '--limit', '0',
+    ...(date ? ['--date', date] : [])]).toString()).count;
+  assert.deepEqual([native(null), native('2008-11-07'), native('2010-01-01'), native('2013-07-01')], [60, 100, 160, 160]);
+  const served = startServer(join(dir, 'scene'));
+  try {
+    const url = await served.url;
+    const drawnNow = async (page) => {
+      await page.evaluate(() => { window.sylva.dirty = 8; });
+      await page.waitForFunction(() => window.sylva.dirty === 0 && window.sylva.viewer.frames_in_flight() === 0
+        && window.sylva.viewer.is_ready(), null, { timeout: 120000 });
+      await page.waitForTimeout(300);
+      const s = await page.evaluate(() => window.sylva.stats());
+      return Object.values(s.instances).reduce((a, b) => a + b, 0);
+    };
+    const { page, errors } = await openViewer(`${url}?ui=0`);
+    await page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 120000 });
+    assert.equal(await page.evaluate(() => window.sylvaError), undefined);
+    await ready(page);
+    const timeline = await page.evaluate(() => window.sylva.timeline());
+    assert.deepEqual(timeline.censuses, ['2008-11-07', '2013-07-01', '2018-07-25']);
+    assert.equal(timeline.latest, '2018-07-25');
+    const latest = await drawnNow(page);
+    assert.ok(latest > 20, `trees drawn at the latest census: ${latest}`);
+    // The page's year slider (shown for a scene with a timeline) to the second census.
+    assert.equal(await page.evaluate(() => document.getElementById('years').hidden), false);
+    await page.evaluate(() => {
+      const y = document.getElementById('year');
+      y.value = String(Math.round(Date.parse('2013-07-01T00:00:00Z') / 86400000));
+      y.dispatchEvent(new Event('input'));
+    });
+    assert.equal(await page.evaluate(() => window.sylva.date), '2013-07-01');
+    const in2013 = await drawnNow(page);
+    assert.ok(in2013 > latest * 1.8, `2013 drew ${in2013} trees, the latest census ${latest} (160 against 60 standing)`);
+    await page.screenshot({ path: join(artifacts, 'censuses-2013.png'), timeout: 60000 });
+    // setDate back to the latest census: the same trees as without a date.
+    await page.evaluate(() => window.sylva.setDate('2018-07-25'));
+    assert.equal(await drawnNow(page), latest);
+    await page.screenshot({ path: join(artifacts, 'censuses-2018.png'), timeout: 60000 });
+    assert.deepEqual(errors, []);
+    await page.close();
+    // ?date= given before the scene's manifest arrives: kept and placed when it does.
+    const second = await openViewer(`${url}?ui=0&date=2013-07-01`);
+    await second.page.waitForFunction(() => window.sylva || window.sylvaError, null, { timeout: 120000 });
+    await ready(second.page);
+    assert.equal(await second.page.evaluate(() => window.sylva.date), '2013-07-01');
+    assert.equal(await drawnNow(second.page), in2013);
+    assert.deepEqual(second.errors, []);
+  } finally {
+    served.proc.kill();
+  }
+});
+
 test('the camera follows the URL hash (lon/lat) and setCamera, and lands in the hash', async () => {
   // 15.4° E 48.4° N is E 529 606.8, N 5 360 837.4 in UTM 33N (PROJ), i.e. x −10 393.2, y 837.4 from the origin.
   // With the default light (the view is 10 km from the trees: its frames are cheap).

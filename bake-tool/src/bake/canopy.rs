@@ -320,7 +320,9 @@ fn tile_trees(dir: &Path, t: &TileEntry, looks: &[SpeciesLook], out: &mut Vec<Ca
     let bytes = std::fs::read(dir.join(&t.url)).with_context(|| format!("canopy: reading {}", t.url))?;
     let tile = Tile::decode(&t.url, &bytes, looks.len() as u32)?;
     out.clear();
-    for b in &tile.batches {
+    // The canopy rasters show the trees standing at the latest date (far views
+    // at another date show those too; only nearer trees follow the date).
+    for b in tile.batches.iter().filter(|b| b.flags & sylva::format::tile::BATCH_DATED == 0) {
         let look = &looks[b.species as usize];
         let start = b.instance_offset as usize;
         for p in &tile.instances[start..start + b.instance_count as usize] {

@@ -327,8 +327,7 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
         let last_day = records[last_alive].day;
         // Ingrowth: first recorded alive at a later census grows in from the
         // day after the one before (which did not record it).
-        let from =
-            planted.get(&key).copied().or_else(|| at(first_day).filter(|&c| c > 0).map(|c| censuses[c - 1] + 1));
+        let from = planted.get(&key).copied().or_else(|| at(first_day).filter(|&c| c > 0).map(|c| censuses[c - 1] + 1));
         // Gone at the first census after its last record alive (dead there, or not listed).
         let until = removed.get(&key).copied().or_else(|| at(last_day).and_then(|c| censuses.get(c + 1).copied()));
         let mut cells: Vec<Option<String>> = vec![None; 2 + 2 * censuses.len()];
@@ -458,8 +457,7 @@ mod tests {
         assert_eq!(row(1).x, 500_001.0);
         assert_eq!(row(1).height_m, Some(13.0));
         assert!(!row(1).dated);
-        let heights: Vec<Option<String>> =
-            m.timeline.heights.iter().map(|h| get(1, h)).collect();
+        let heights: Vec<Option<String>> = m.timeline.heights.iter().map(|h| get(1, h)).collect();
         assert_eq!(heights, [Some("10.00".into()), Some("11.00".into()), Some("13.00".into())]);
         // 2: recorded dead at the second census: gone from then, at its 2008 size.
         assert_eq!(get(2, UNTIL_COLUMN).as_deref(), Some("2013-07-01"));
@@ -474,12 +472,14 @@ mod tests {
         assert!(!row(4).dated);
         // 6: heights from its DBH by the allometry, its DBH kept per census.
         assert_eq!(get(6, "dbh_2013-07-01").as_deref(), Some("32.0"));
-        let h: Vec<f64> =
-            m.timeline.heights.iter().map(|c| get(6, c).unwrap().parse().unwrap()).collect();
+        let h: Vec<f64> = m.timeline.heights.iter().map(|c| get(6, c).unwrap().parse().unwrap()).collect();
         assert!(h[0] > 5.0 && h[0] < h[1] && h[1] < h[2], "{h:?}");
         // The attributes: the files' columns (the status too), then the timeline's.
         assert!(set.attribute_names.starts_with(&["species".into(), "height".into(), "dbh".into(), "status".into()]));
-        assert!(m.notes.iter().any(|n| n.contains("5 trees from 13 rows of 3 file(s)") && n.contains("2 not standing")));
+        assert!(m
+            .notes
+            .iter()
+            .any(|n| n.contains("5 trees from 13 rows of 3 file(s)") && n.contains("2 not standing")));
     }
 
     #[test]
@@ -498,7 +498,10 @@ mod tests {
             today: day("2026-12-06"),
             ..CensusOptions::default()
         };
-        let read = ReadOptions { columns: vec![(super::super::placements::ColumnRole::Id, "tree".into())], ..Default::default() };
+        let read = ReadOptions {
+            columns: vec![(super::super::placements::ColumnRole::Id, "tree".into())],
+            ..Default::default()
+        };
         let m = merge(&read, &census).unwrap();
         assert_eq!(m.timeline.censuses, ["2010-05-01", "2015-05-01"]);
         let texts: Vec<&str> = m.set.rows.iter().map(|p| p.id_text.as_deref().unwrap()).collect();
@@ -514,7 +517,11 @@ mod tests {
 
         // A street-tree register: planting years and removal dates, no censuses, no ids needed.
         let path = dir.join("register.csv");
-        std::fs::write(&path, "x,y,height,planted,removed\n0,0,8,1987,\n5,0,9,2001-03-15,2019-02-01\n9,0,3,2031,\n1,1,3,soon,\n").unwrap();
+        std::fs::write(
+            &path,
+            "x,y,height,planted,removed\n0,0,8,1987,\n5,0,9,2001-03-15,2019-02-01\n9,0,3,2031,\n1,1,3,soon,\n",
+        )
+        .unwrap();
         let census = CensusOptions { files: vec![path], today: day("2026-12-06"), ..CensusOptions::default() };
         let m = merge(&ReadOptions::default(), &census).unwrap();
         assert!(m.timeline.censuses.is_empty());

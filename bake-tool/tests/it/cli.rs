@@ -2451,34 +2451,44 @@ fn three_censuses_bake_into_the_forest_at_each_date() {
     let scan = |day: i64| -> usize {
         let k = days.iter().rposition(|&d| d <= day);
         let Some(k) = k else { return alive[0].len() };
-        let next_new = alive.get(k + 1).map_or(0, |n| {
-            n.iter().filter(|id| !alive[..=k].iter().any(|a| a.contains(id))).count()
-        });
+        let next_new =
+            alive.get(k + 1).map_or(0, |n| n.iter().filter(|id| !alive[..=k].iter().any(|a| a.contains(id))).count());
         alive[k].len() + if day > days[k] { next_new } else { 0 }
     };
     let count = |date: Option<&str>| {
         sylva::scene::query::query_dir_at(&out, &serde_json::json!({}), 0, date).unwrap().count as usize
     };
     assert_eq!(count(None), alive[2].len(), "a view without a date: the last census's live trees");
-    for date in ["2000-01-01", "2008-11-07", "2010-06-01", "2013-07-01", "2013-07-02", "2016-01-01", "2018-07-25", "2030-01-01"] {
+    for date in
+        ["2000-01-01", "2008-11-07", "2010-06-01", "2013-07-01", "2013-07-02", "2016-01-01", "2018-07-25", "2030-01-01"]
+    {
         let day = parse_date(date).unwrap();
         assert_eq!(count(Some(date)), scan(day), "{date}");
     }
     // (Some trees die, some are gone, some are new at each census.)
-    assert!(alive[0].len() == 100 && alive[1].len() == 120 && alive[2].len() > 100, "{:?}", alive.iter().map(Vec::len).collect::<Vec<_>>());
+    assert!(
+        alive[0].len() == 100 && alive[1].len() == 120 && alive[2].len() > 100,
+        "{:?}",
+        alive.iter().map(Vec::len).collect::<Vec<_>>()
+    );
     // Every tree's heights per census, as given; the size between them interpolated.
     let mut checked = 0;
     for entry in sylva::format::index::read_all_tiles(&out, &m).unwrap() {
         let ids = sylva::format::decode_ids("ids", &std::fs::read(out.join(&entry.ids_url)).unwrap()).unwrap();
         let url = sylva::format::attributes::attributes_url(&entry.url);
         let schema = m.attributes.as_ref().unwrap();
-        let codes =
-            sylva::format::attributes::decode_attributes("a", &std::fs::read(out.join(url)).unwrap(), schema, ids.len())
-                .unwrap();
+        let codes = sylva::format::attributes::decode_attributes(
+            "a",
+            &std::fs::read(out.join(url)).unwrap(),
+            schema,
+            ids.len(),
+        )
+        .unwrap();
         let tile = sylva::format::Tile::decode("t", &std::fs::read(out.join(&entry.url)).unwrap(), 1).unwrap();
         for b in &tile.batches {
-            for i in b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize {
-                let (id, tree) = (ids[i], columns.tree(schema, &codes, i));
+            let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+            for (i, &id) in ids.iter().enumerate().take(run.end).skip(run.start) {
+                let tree = columns.tree(schema, &codes, i);
                 let gone = !alive[2].contains(&id);
                 assert_eq!(b.flags & sylva::format::tile::BATCH_DATED != 0, gone, "tree {id}");
                 for (k, &(d, h)) in tree.heights.iter().enumerate() {

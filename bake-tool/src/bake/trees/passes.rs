@@ -111,7 +111,10 @@ pub(super) fn tree_pass(
         if let Some(f) = fit.as_mut() {
             f.add(t.pos.x, t.pos.y, t.pos.z);
         }
-        canopy.add(t.pos.x, t.pos.y, crown_radius(t));
+        // (The ground under the crowns of the latest date: a tree gone by then left none.)
+        if !t.dated {
+            canopy.add(t.pos.x, t.pos.y, crown_radius(t));
+        }
     };
     // A stand map's ground and cover come from every stand's trees as uniform
     // points (as many as its stems, none grown), so a shard that grows only

@@ -400,7 +400,7 @@ struct Ctx<'a> {
 }
 
 /// Exports tile `entry`: its GLBs and its tileset node.
-fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> Result<TileNode> {
+fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> Result<Option<TileNode>> {
     let Ctx { dir, m, geo, species, out, .. } = ctx;
     let (geo, species) = (geo, &species[..]);
     if !ctx.seen_tiles.borrow_mut().insert((entry.x, entry.y)) {
@@ -450,6 +450,11 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         TreeData { ids, texts, codes, models: m.species.iter().map(|s| s.name.as_str()).collect(), names: &ctx.names };
     let mut at = 0usize;
     for b in &tile.batches {
+        // The trees standing at the scene's latest date only (3D Tiles has no date).
+        if b.flags & sylva::format::tile::BATCH_DATED != 0 {
+            at += b.instance_count as usize;
+            continue;
+        }
         let sp = &species[b.species as usize];
         let half = Vec3::from(sp.meta.bounds_max).max(-Vec3::from(sp.meta.bounds_min));
         for (k, p) in tile.instances[at..at + b.instance_count as usize].iter().enumerate() {
@@ -476,6 +481,10 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         at += b.instance_count as usize;
     }
     if placed.is_empty() {
+        // Every tree of the tile gone by the latest date.
+        if tile.batches.iter().any(|b| b.flags & sylva::format::tile::BATCH_DATED != 0) {
+            return Ok(None);
+        }
         bail!("{}: a tile without trees", entry.url);
     }
     let bounds = Bounds { min: lo, max: hi };
@@ -521,7 +530,7 @@ fn export_tile(ctx: &Ctx<'_>, entry: &TileEntry, report: &mut ExportReport) -> R
         "children": [below_far],
     });
     report.tiles += 1;
-    Ok(TileNode { json, bounds, tallest_m: tallest })
+    Ok(Some(TileNode { json, bounds, tallest_m: tallest }))
 }
 
 /// A content-less tileset node over `children`: shown from where its tallest
@@ -564,7 +573,7 @@ fn export_node(
         children.extend(export_node(ctx, &c.url, depth + 1, report, progress)?);
     }
     for t in &node.tiles {
-        children.push(export_tile(ctx, t, report)?);
+        children.extend(export_tile(ctx, t, report)?);
         progress(report);
     }
     Ok(group(children))
@@ -670,7 +679,7 @@ fn export_into(
     } else {
         let mut children = Vec::new();
         for t in &m.tiles {
-            children.push(export_tile(&ctx, t, &mut report)?);
+            children.extend(export_tile(&ctx, t, &mut report)?);
             progress(&report);
         }
         group(children)
