@@ -745,12 +745,13 @@ export function attachTreePopup(v, host) {
     // A scene with censuses: the tree's timeline in place of its per-census columns.
     const t = tree.timeline;
     const timelineColumn = (k) => t && (k === 'standing_from' || k === 'standing_until' ||
-      t.censuses.some((c) => k === `height_${c.date}` || k === `dbh_${c.date}`));
+      t.censuses.some((c) => [`height_${c.date}`, `dbh_${c.date}`, `crown_${c.date}`].includes(k)));
     const attrs = Object.entries(tree.attributes || {}).filter(([k]) => !timelineColumn(k));
     const has = (name) => attrs.some(([k]) => k.toLowerCase() === name);
     const timeline = t ? [['standing', `${t.from ?? 'before the first census'} – ${t.until ?? 'now'}`],
       ...t.censuses.filter((c) => c.height !== null || c.dbh !== null).map((c) =>
-        [c.date, [c.height !== null ? `${fmt(c.height, 1)} m` : null, c.dbh !== null ? `${fmt(c.dbh, 0)} cm` : null].filter(Boolean).join(', ')])] : [];
+        [c.date, [c.height !== null ? `${fmt(c.height, 1)} m` : null, c.dbh !== null ? `DBH ${fmt(c.dbh, 0)} cm` : null,
+          c.crown ? `crown ${fmt(c.crown, 1)} m` : null].filter(Boolean).join(', ')])] : [];
     const rows = [...(has('species') ? [] : [['species', tree.species]]),
       ...(has('height') ? [] : [['height', `${fmt(tree.height, 1)} m`]]),
       ...attrs.map(([k, val]) => [k, val === null ? '—' : val]),

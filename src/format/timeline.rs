@@ -60,9 +60,11 @@ pub struct TimelineColumns {
     pub latest: i64,
     /// The last day a tree starts or stops standing (planned plantings and removals may be after `latest`).
     pub last_change: i64,
-    from: usize,
-    until: usize,
-    heights: Vec<usize>,
+    /// Each column's index (`None`: absent, as the bake leaves out a column
+    /// without values: no tree starts, stops, or was measured then).
+    from: Option<usize>,
+    until: Option<usize>,
+    heights: Vec<Option<usize>>,
 }
 
 impl Timeline {
@@ -93,18 +95,19 @@ impl Timeline {
         if self.heights.len() != censuses.len() {
             return Err(bad(format!("{} heights for {} censuses", self.heights.len(), censuses.len())));
         }
-        let schema = schema.ok_or_else(|| bad("the scene has no attribute columns".into()))?;
-        let column =
-            |name: &str, kinds: &[AttributeType]| {
-                schema.column(name).filter(|(_, c)| kinds.contains(&c.kind)).map(|(i, _)| i).ok_or_else(|| {
-                    bad(format!("no {} column {name:?}", if kinds.len() == 1 { "date" } else { "number" }))
-                })
-            };
+        let empty = AttributeSchema::default();
+        let schema = schema.unwrap_or(&empty);
+        // A column that is there must be of its kind; one that is not has no values.
+        let column = |name: &str, kinds: &[AttributeType]| match schema.column(name) {
+            Some((i, c)) if kinds.contains(&c.kind) => Ok(Some(i)),
+            Some(_) => Err(bad(format!("{name:?} is no {} column", if kinds.len() == 1 { "date" } else { "number" }))),
+            None => Ok(None),
+        };
         let numbers = [AttributeType::Number, AttributeType::Integer];
         let (from, until) = (column(&self.from, &[AttributeType::Date])?, column(&self.until, &[AttributeType::Date])?);
         // (A column without values has no range.)
-        let last = |c: usize| {
-            let c = &schema.columns[c];
+        let last = |c: Option<usize>| {
+            let Some(c) = c.map(|c| &schema.columns[c]) else { return i64::MIN };
             if c.count > 0 && c.max.is_finite() {
                 c.max as i64
             } else {
@@ -175,11 +178,11 @@ impl TimelineColumns {
     /// Tree `i`'s timeline from a tile's attribute codes.
     #[must_use]
     pub fn tree(&self, schema: &AttributeSchema, codes: &AttributeCodes, i: usize) -> TreeTimeline {
-        let date = |c: usize| match codes.value(schema, c, i) {
+        let date = |c: Option<usize>| match codes.value(schema, c?, i) {
             Some(AttributeValue::Date(d)) => Some(d),
             _ => None,
         };
-        let number = |c: usize| match codes.value(schema, c, i) {
+        let number = |c: Option<usize>| match codes.value(schema, c?, i) {
             Some(AttributeValue::Number(v)) => Some(v),
             Some(AttributeValue::Integer(v)) => Some(v as f64),
             _ => None,
@@ -301,8 +304,13 @@ mod tests {
         };
         refused(Timeline { latest: "2009-01-01".into(), ..good.clone() }, "last census");
         refused(Timeline { censuses: vec!["2008-13-07".into()], ..good.clone() }, "no date");
-        refused(Timeline { from: "height_2008-11-07".into(), ..good.clone() }, "no date column");
-        refused(Timeline { heights: vec!["standing_from".into()], ..good.clone() }, "no number column");
+        refused(Timeline { from: "height_2008-11-07".into(), ..good.clone() }, "is no date column");
+        refused(Timeline { heights: vec!["standing_from".into()], ..good.clone() }, "is no number column");
+        // A column the bake left out (no values): nobody starts, stops or was measured then.
+        let absent = Timeline { until: "gone".into(), heights: vec!["h".into()], ..good.clone() };
+        let r = absent.resolve(Some(&schema)).unwrap();
+        assert_eq!(r.last_change, 20_000, "standing_from's largest date");
+        assert!(absent.resolve(None).is_ok());
         refused(Timeline { heights: Vec::new(), ..good.clone() }, "0 heights");
         refused(
             Timeline {
@@ -312,6 +320,5 @@ mod tests {
             },
             "rise",
         );
-        assert!(good.resolve(None).is_err());
     }
 }

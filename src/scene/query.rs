@@ -395,10 +395,10 @@ pub fn describe_tree(
     }))
 }
 
-/// A tree's timeline for a pick: `{from, until, censuses: [{date, height, dbh}]}`
-/// (dates `YYYY-MM-DD`, `from`/`until` null where open; a census's height and
-/// DBH null where it was not recorded alive then); null where the block does
-/// not fit the columns.
+/// A tree's timeline for a pick: `{from, until, censuses: [{date, height, dbh,
+/// crown}]}` (dates `YYYY-MM-DD`, `from`/`until` null where open; a census's
+/// height, DBH and crown width null where it was not recorded alive then, or
+/// not given); null where the block does not fit the columns.
 fn timeline_json(
     t: &crate::format::timeline::Timeline,
     schema: &AttributeSchema,
@@ -418,7 +418,12 @@ fn timeline_json(
         .iter()
         .zip(&t.heights)
         .map(|(date, height)| {
-            serde_json::json!({"date": date, "height": number(height), "dbh": number(&format!("dbh_{date}"))})
+            serde_json::json!({
+                "date": date,
+                "height": number(height),
+                "dbh": number(&format!("dbh_{date}")),
+                "crown": number(&format!("crown_{date}")),
+            })
         })
         .collect();
     serde_json::json!({

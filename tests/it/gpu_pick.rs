@@ -716,3 +716,51 @@ fn picks(off: &mut OffscreenScene, cam: &Camera) -> Vec<u32> {
         (0..9).flat_map(|gy| (0..16).map(move |gx| [gx * W / 16 + W / 32, gy * H / 9 + H / 18])).collect();
     off.pick_many_blocking(&view, &pixels).into_iter().flatten().collect()
 }
+
+/// Issue 46, phenology: on 15 January and 15 July the fixture's beech stand
+/// (deciduous) covers very different shares of the view, its spruce stand
+/// (a conifer) exactly the same. Each stand is drawn alone (a style keeping its
+/// trees' ids); its cover is the pixels that differ from the view without trees.
+#[test]
+fn january_and_july_differ_for_a_deciduous_stand_and_not_for_a_conifer() {
+    use sylva::render::settings::SeasonDate;
+    let mut off = open_at(&fixture());
+    off.load_view(&Camera::default(), 30.0);
+    let m = off.stream.manifest().unwrap().clone();
+    let cam = camera(&m);
+    off.settings.thin_px = 0.0;
+    // Each species' tree ids.
+    let mut ids_of = vec![Vec::new(); m.species.len()];
+    for t in sylva::format::index::read_all_tiles(&fixture(), &m).unwrap() {
+        let tile = std::fs::read(fixture().join(&t.url)).unwrap();
+        let tile = sylva::format::Tile::decode("t", &tile, m.species.len() as u32).unwrap();
+        let ids = sylva::format::decode_ids("ids", &std::fs::read(fixture().join(&t.ids_url)).unwrap()).unwrap();
+        for b in &tile.batches {
+            let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
+            ids_of[b.species as usize].extend_from_slice(&ids[run]);
+        }
+    }
+    let mut image = |ids: &[u64], date: &str| {
+        off.settings.date = Some(SeasonDate::at_scene(&m, date).unwrap().0);
+        let keep = style(&off, serde_json::json!({"filter": {"id": ids}}));
+        off.set_style(Some(keep));
+        off.load_view(&cam, 30.0);
+        off.render(&cam, false);
+        off.render(&cam, false);
+        off.read_image()
+    };
+    let bare = image(&[u64::MAX - 1], "2026-07-15");
+    let cover = |img: &[u8]| {
+        img.chunks(4).zip(bare.chunks(4)).filter(|(a, b)| (0..3).any(|c| a[c].abs_diff(b[c]) > 12)).count()
+    };
+    let species = |name: &str| m.species.iter().position(|s| s.name == name).unwrap();
+    let (beech, spruce) = (&ids_of[species("beech")], &ids_of[species("spruce")]);
+    assert!(beech.len() > 100 && spruce.len() > 100);
+    let (beech_jan, beech_jul) = (image(beech, "2026-01-15"), image(beech, "2026-07-15"));
+    let (spruce_jan, spruce_jul) = (image(spruce, "2026-01-15"), image(spruce, "2026-07-15"));
+    let (bj, bl, sj, sl) = (cover(&beech_jan), cover(&beech_jul), cover(&spruce_jan), cover(&spruce_jul));
+    eprintln!("cover in pixels: beech January {bj}, July {bl}; spruce January {sj}, July {sl}");
+    assert!(bl > 500 && sl > 500, "too little of either stand in view ({bl}, {sl})");
+    assert!((bj as f64) < 0.7 * bl as f64, "the beech stand covers {bj} pixels in January, {bl} in July");
+    assert_eq!(spruce_jan, spruce_jul, "the spruce stand looks the same in January and July");
+}

@@ -9,10 +9,11 @@
 //! before (so on each census date the trees standing are that census's), and
 //! until its removal date, or the first census that records it dead or no
 //! longer lists it. Its height at each census it was recorded alive at (given,
-//! or from its DBH by the allometry) goes into `height_<date>`, its DBH into
-//! `dbh_<date>`: the viewer sizes the tree between them and shows them in a
-//! pick's popup. Trees not standing at the latest date are marked
-//! [`Placement::dated`]: only a view at a date draws them.
+//! or from its DBH by the allometry) goes into `height_<date>`, its DBH and
+//! crown width (where given) into `dbh_<date>` and `crown_<date>`: the viewer
+//! sizes the tree between its heights and shows them all in a pick's popup.
+//! Trees not standing at the latest date are marked [`Placement::dated`]:
+//! only a view at a date draws them.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -295,12 +296,14 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
     let latest = censuses.last().copied().unwrap_or(census.today);
     let heights: Vec<String> = censuses.iter().map(|&d| format!("height_{}", format_date(d))).collect();
     let dbhs: Vec<String> = censuses.iter().map(|&d| format!("dbh_{}", format_date(d))).collect();
+    let crowns: Vec<String> = censuses.iter().map(|&d| format!("crown_{}", format_date(d))).collect();
     let base = attribute_names.len();
     let mut names = attribute_names;
     names.push(FROM_COLUMN.into());
     names.push(UNTIL_COLUMN.into());
     names.extend(heights.iter().cloned());
     names.extend(dbhs.iter().cloned());
+    names.extend(crowns.iter().cloned());
     let mut rows = Vec::with_capacity(order.len());
     let (mut never_alive, mut dated) = (0u64, 0u64);
     for key in order {
@@ -330,7 +333,7 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
         let from = planted.get(&key).copied().or_else(|| at(first_day).filter(|&c| c > 0).map(|c| censuses[c - 1] + 1));
         // Gone at the first census after its last record alive (dead there, or not listed).
         let until = removed.get(&key).copied().or_else(|| at(last_day).and_then(|c| censuses.get(c + 1).copied()));
-        let mut cells: Vec<Option<String>> = vec![None; 2 + 2 * censuses.len()];
+        let mut cells: Vec<Option<String>> = vec![None; 2 + 3 * censuses.len()];
         cells[0] = from.map(format_date);
         cells[1] = until.map(format_date);
         for r in records.iter().filter(|r| r.alive) {
@@ -343,6 +346,7 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
             };
             cells[2 + c] = p.height_m.or_else(from_dbh).map(|h| format!("{h:.2}"));
             cells[2 + censuses.len() + c] = p.dbh_cm.map(|d| format!("{d:.1}"));
+            cells[2 + 2 * censuses.len() + c] = p.crown_m.map(|w| format!("{w:.1}"));
         }
         let mut p = records.swap_remove(last_alive).placement;
         p.attrs.resize(base, None);
