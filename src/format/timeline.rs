@@ -163,12 +163,13 @@ impl TreeTimeline {
         })
     }
 
-    /// Its height on `day` over its latest (the size its tile holds); 1
-    /// without recorded heights.
+    /// Its height on `day` over its latest (the size its tile holds), at
+    /// most 1 (a tree once taller, its top broken since, is drawn at its
+    /// latest: the tile's bounds hold that); 1 without recorded heights.
     #[must_use]
     pub fn growth(&self, day: i64) -> f64 {
         match (self.height(day), self.heights.last()) {
-            (Some(h), Some(&(_, last))) if last > 0.0 => h / last,
+            (Some(h), Some(&(_, last))) if last > 0.0 => (h / last).min(1.0),
             _ => 1.0,
         }
     }

@@ -295,7 +295,7 @@ impl<F: Fetcher> Frame<F> {
         let Some(style) = st.style.as_ref().filter(|s| !s.is_plain()) else {
             // None: the bytes' memory given back, the header cleared.
             self.stream.set_tree_data(false, false);
-            if self.renderer.set_styles(&self.device, false) || st.header.is_some() {
+            if self.renderer.set_styles(&self.device, false, false) || st.header.is_some() {
                 self.renderer.write_style_header(&self.queue, &[0; 128]);
             }
             st.header = None;
@@ -306,7 +306,8 @@ impl<F: Fetcher> Frame<F> {
         };
         let needs = style.needs_trees();
         self.stream.set_tree_data(needs, needs && style.needs_attributes());
-        let changed = self.renderer.set_styles(&self.device, needs);
+        // (Growth bytes only for a scene with a timeline.)
+        let changed = self.renderer.set_styles(&self.device, needs, timeline.is_some());
         let epoch = self.renderer.styles_epoch();
         if changed || st.header.is_some_and(|(_, e)| e != epoch) {
             st.header = None;

@@ -153,7 +153,7 @@ impl SingleTree {
         let instances = init("instance", bytemuck::bytes_of(&instance), s | wgpu::BufferUsages::COPY_DST);
         let items = init("item", bytemuck::cast_slice(&[0u32, 0u32]), s);
         // No style: a zeroed control buffer (control words and styles' header).
-        let control_bytes = super::gpu_data::control_buffer_bytes(0) as usize;
+        let control_bytes = super::gpu_data::control_buffer_bytes(0, false) as usize;
         let control = init("no styles", &vec![0u8; control_bytes], s);
         let params = init(
             "draw params",

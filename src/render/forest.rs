@@ -143,14 +143,14 @@ impl ForestRenderer {
 
     /// Room for a style byte per pool instance, or none (see [`Pools::set_styles`]).
     /// Returns whether the buffer was re-created (its header and bytes cleared).
-    pub fn set_styles(&mut self, device: &wgpu::Device, on: bool) -> bool {
+    pub fn set_styles(&mut self, device: &wgpu::Device, on: bool, growth: bool) -> bool {
         let layouts = PoolLayouts {
             shared: &self.shared,
             cull: &self.cull.layout,
             cull_dispatch: &self.cull.dispatch_layout,
             bounds: &self.bounds.layout,
         };
-        let changed = self.pools.set_styles(device, on, &layouts);
+        let changed = self.pools.set_styles(device, on, growth, &layouts);
         self.styles_epoch += u64::from(changed);
         changed
     }
@@ -259,7 +259,7 @@ impl ForestRenderer {
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
         // (The pools' figure counts the control buffer without styles: add what styles hold.)
-        let styles = self.pools.buffers.control.size() - super::gpu_data::control_buffer_bytes(0);
+        let styles = self.pools.buffers.control.size() - super::gpu_data::control_buffer_bytes(0, false);
         let passes: u64 = self.passes().iter().map(|p| p.gpu_bytes()).sum();
         self.pools.config().bytes() + styles + passes + self.shadow_bytes()
     }

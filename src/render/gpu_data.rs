@@ -80,10 +80,12 @@ const _: () = assert!(std::mem::size_of::<CullControl>() == 32);
 pub const STYLE_OFFSET_BYTES: u64 = 256;
 /// Bytes of the cull control buffer: the control words, then the styles'
 /// header, then (with per-tree styles) a style byte per pool instance, then
-/// a growth byte per pool instance (read at a date: `STYLE_DATED`).
+/// (`growth`: a scene with a timeline) a growth byte per pool instance (read
+/// at a date: `STYLE_DATED`).
 #[must_use]
-pub fn control_buffer_bytes(style_instances: u32) -> u64 {
-    STYLE_OFFSET_BYTES + u64::from(STYLE_HEADER_WORDS) * 4 + 2 * u64::from(style_instances).next_multiple_of(4)
+pub fn control_buffer_bytes(style_instances: u32, growth: bool) -> u64 {
+    let per = if growth { 2 } else { 1 };
+    STYLE_OFFSET_BYTES + u64::from(STYLE_HEADER_WORDS) * 4 + per * u64::from(style_instances).next_multiple_of(4)
 }
 
 /// Where the growth bytes start, in words from the styles' start (the

@@ -255,7 +255,7 @@ fn create(device: &wgpu::Device, config: PoolConfig, layouts: &PoolLayouts<'_>) 
         items: buffer(device, "draw items", u64::from(config.items) * ITEM_BYTES, U::STORAGE | U::COPY_SRC),
         visible: buffer(device, "visible batches", bytes(config.batches.into(), size_of::<u32>()), U::STORAGE),
         // The control words, then the styles (none until a style asks: `set_styles`).
-        control: buffer(device, "cull control", control_buffer_bytes(0), U::STORAGE | U::COPY_SRC | U::COPY_DST),
+        control: buffer(device, "cull control", control_buffer_bytes(0, false), U::STORAGE | U::COPY_SRC | U::COPY_DST),
         dispatch: buffer(device, "cull dispatch", bytes(1, size_of::<CullDispatch>()), U::STORAGE | U::INDIRECT),
         args: buffer(device, "draw args", bytes(slots, size_of::<DrawArgs>()), U::STORAGE | U::INDIRECT | U::COPY_SRC),
         species: buffer(
@@ -357,8 +357,8 @@ impl Pools {
     /// Makes room for a style byte per pool instance (`on`), or gives it back:
     /// the control buffer is re-created (its header cleared: no style) and
     /// the bind groups with it. Returns whether anything changed.
-    pub fn set_styles(&mut self, device: &wgpu::Device, on: bool, layouts: &PoolLayouts<'_>) -> bool {
-        let bytes = control_buffer_bytes(if on { self.config.instances } else { 0 });
+    pub fn set_styles(&mut self, device: &wgpu::Device, on: bool, growth: bool, layouts: &PoolLayouts<'_>) -> bool {
+        let bytes = control_buffer_bytes(if on { self.config.instances } else { 0 }, growth);
         if self.buffers.control.size() == bytes {
             return false;
         }
@@ -371,7 +371,7 @@ impl Pools {
     /// Whether a style byte per pool instance has room.
     #[must_use]
     pub fn has_style_bytes(&self) -> bool {
-        self.buffers.control.size() > control_buffer_bytes(0)
+        self.buffers.control.size() > control_buffer_bytes(0, false)
     }
 
     /// Writes the styles' header ([`STYLE_HEADER_WORDS`] words).
@@ -400,6 +400,7 @@ impl Pools {
         let at = STYLE_OFFSET_BYTES
             + u64::from(super::gpu_data::growth_words_at(self.config.instances)) * 4
             + u64::from(first);
+        // (Without room for growth bytes, a scene without a timeline: nothing to write.)
         if at + bytes.len() as u64 <= self.buffers.control.size() {
             queue.write_buffer(&self.buffers.control, at, bytes);
         }

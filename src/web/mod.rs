@@ -258,9 +258,16 @@ impl Viewer {
         ) else {
             return "null".into();
         };
-        let starts = m.attributes.as_ref().and_then(|a| a.column(&t.from)).filter(|(_, c)| c.count > 0);
+        // From the first census, planting or removal (the day before: the tree still stands).
+        let earliest = |name: &str, less: i64| {
+            m.attributes
+                .as_ref()
+                .and_then(|a| a.column(name))
+                .filter(|(_, c)| c.count > 0)
+                .map(|(_, c)| c.min as i64 - less)
+        };
         let first = columns.censuses.first().copied().unwrap_or(columns.latest);
-        let first = starts.map_or(first, |(_, c)| first.min(c.min as i64));
+        let first = first.min(earliest(&t.from, 0).unwrap_or(first)).min(earliest(&t.until, 1).unwrap_or(first));
         let last = columns.latest.max(columns.last_change);
         serde_json::json!({
             "censuses": t.censuses,

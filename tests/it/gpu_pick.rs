@@ -615,7 +615,19 @@ fn a_date_draws_the_trees_standing_then_at_their_size_then() {
     let mut off = open_at(&scene);
     off.load_view(&Camera::default(), 30.0);
     let m = off.stream.manifest().unwrap().clone();
-    assert!(m.timeline.as_ref().unwrap().resolve(m.attributes.as_ref()).is_ok());
+    let columns = m.timeline.as_ref().unwrap().resolve(m.attributes.as_ref()).unwrap();
+    // Every tree's timeline, by id, from the sidecars.
+    let mut timelines = std::collections::HashMap::new();
+    let schema = m.attributes.as_ref().unwrap();
+    for t in &m.tiles {
+        let ids = sylva::format::decode_ids("ids", &std::fs::read(scene.join(&t.ids_url)).unwrap()).unwrap();
+        let url = sylva::format::attributes::attributes_url(&t.url);
+        let bytes = std::fs::read(scene.join(url)).unwrap();
+        let codes = sylva::format::attributes::decode_attributes("attr", &bytes, schema, ids.len()).unwrap();
+        for (i, id) in ids.iter().enumerate() {
+            timelines.insert(*id, columns.tree(schema, &codes, i));
+        }
+    }
     let cam = camera(&m);
     off.settings.thin_px = 0.0;
     // Per pool instance: (id, in a dated batch).
@@ -675,10 +687,21 @@ fn a_date_draws_the_trees_standing_then_at_their_size_then() {
         off.render(&cam, false);
         off.render(&cam, false);
         let p = pool(&off);
-        // Each tree's growth byte by the rule (the timeline's interpolation agrees within a step).
+        // Each tree as the timeline has it (what the style gave the GPU), and as the rule has it.
+        for (id, d) in p.iter().flatten() {
+            let t = &timelines[id];
+            match (rule(*id, *d, day), t.stands(day)) {
+                (Some(g), true) => {
+                    assert!((g - t.growth(day)).abs() < 0.002, "tree {id}: {g} against {}", t.growth(day))
+                }
+                (None, false) => {}
+                (g, s) => panic!("tree {id} on {date}: the rule says {g:?}, the timeline standing {s}"),
+            }
+        }
         let look = |i: u32| -> Option<f32> {
-            let (id, d) = p.get(i as usize).copied().flatten()?;
-            rule(id, d, day).map(|g| growth_of_byte(growth_byte(g)))
+            let (id, _) = p.get(i as usize).copied().flatten()?;
+            let t = &timelines[&id];
+            t.stands(day).then(|| growth_of_byte(growth_byte(t.growth(day))))
         };
         let trees = drawn(&off, true, &look);
         let standing: Vec<(u64, bool)> = trees.iter().filter_map(|&i| p[i as usize]).collect();

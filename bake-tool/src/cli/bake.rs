@@ -502,14 +502,16 @@ fn census_options(
     args: &BakeArgs,
     read: &sylva_bake::input::placements::ReadOptions,
     allometry: &sylva_bake::input::allometry::Allometry,
-) -> Result<Option<std::sync::Arc<sylva_bake::input::census::CensusOptions>>> {
-    use sylva_bake::input::census::{has_timeline_columns, CensusOptions};
+) -> Result<Option<std::sync::Arc<sylva_bake::input::placements::census::CensusOptions>>> {
+    use sylva_bake::input::placements::census::{has_timeline_columns, CensusOptions};
     let dates = CensusOptions::parse_dates(args.placements.len(), &args.census_dates)?;
     let asked = args.placements.len() > 1 || !dates.is_empty() || args.census_date_column.is_some();
     let asked = asked
         || match args.placements.first() {
             Some(p) => {
-                let source = sylva_bake::input::placements::PlacementSource::open(p, read)?;
+                // (Every column: --attributes chooses what is kept, not what is read.)
+                let all = sylva_bake::input::placements::ReadOptions { attributes: None, ..read.clone() };
+                let source = sylva_bake::input::placements::PlacementSource::open(p, &all)?;
                 has_timeline_columns(&source.attribute_names(), None)
             }
             None => false,

@@ -3,7 +3,6 @@
 
 pub mod allometry;
 pub mod attributes;
-pub mod census;
 pub mod chm;
 pub mod dem;
 pub mod gis;

@@ -513,6 +513,12 @@ pub fn place_trees(
         log(&format!("  ({:.1} s)", started.elapsed().as_secs_f64()));
         table
     };
+    // A timeline whose columns were not all kept would draw the gone trees at every date.
+    for name in &source.timeline_filled {
+        if attributes.as_ref().is_none_or(|a| a.schema.column(name).is_none()) {
+            bail!("the censuses' column {name:?} was not kept as an attribute (see the attributes' log above)");
+        }
+    }
     let text_ids = if sample.report.text_ids.0 > 0 {
         let ids = TextIds::read(&source)?;
         log(&format!("ids: {} trees have a text id, kept as their id", ids.len()));

@@ -56,7 +56,7 @@ pub struct Placement {
     /// 1-based data row (CSV line minus the header) or feature index.
     pub row: u64,
     /// Not standing at the scene's latest date (a census's dead or removed
-    /// tree, one planted later): drawn only at a date ([`crate::input::census`]).
+    /// tree, one planted later): drawn only at a date ([`census`]).
     pub dated: bool,
 }
 
@@ -219,7 +219,7 @@ pub struct ReadOptions {
     pub chm: Option<std::sync::Arc<crate::input::chm::ChmOptions>>,
     /// The files are censuses of the same trees, or one inventory with
     /// planting and removal dates (`--census-date`, `--census-date-column`).
-    pub census: Option<std::sync::Arc<crate::input::census::CensusOptions>>,
+    pub census: Option<std::sync::Arc<census::CensusOptions>>,
 }
 
 /// Reads a `.csv` or `.geojson`/`.json` file whole (tests; the bake streams
@@ -304,6 +304,8 @@ pub struct PlacementSource {
     stand_plans: Vec<crate::input::stands::StandPlan>,
     /// The trees' timeline, for censuses (and planting and removal dates).
     pub timeline: Option<sylva::format::timeline::Timeline>,
+    /// The timeline's attribute columns that hold values.
+    pub timeline_filled: Vec<String>,
 }
 
 impl PlacementSource {
@@ -322,7 +324,7 @@ impl PlacementSource {
             return Self::open_chm(path, options, chm);
         }
         if let Some(census) = &options.census {
-            let merged = crate::input::census::merge(options, census)?;
+            let merged = census::merge(options, census)?;
             return Ok(Self {
                 path: path.to_path_buf(),
                 delimiter: b',',
@@ -337,6 +339,7 @@ impl PlacementSource {
                 stands: None,
                 stand_plans: Vec::new(),
                 timeline: Some(merged.timeline),
+                timeline_filled: merged.filled,
             });
         }
         match ext.as_str() {
@@ -378,6 +381,7 @@ impl PlacementSource {
                     stands: None,
                     stand_plans: Vec::new(),
                     timeline: None,
+                    timeline_filled: Vec::new(),
                 })
             }
             "geojson" | "json" => {
@@ -400,6 +404,7 @@ impl PlacementSource {
                     stands: None,
                     stand_plans: Vec::new(),
                     timeline: None,
+                    timeline_filled: Vec::new(),
                 })
             }
             "shp" | "gpkg" | "fgb" => {
@@ -437,6 +442,7 @@ impl PlacementSource {
                     stands: None,
                     stand_plans: Vec::new(),
                     timeline: None,
+                    timeline_filled: Vec::new(),
                 })
             }
             _ => bail!(
@@ -642,6 +648,7 @@ impl PlacementSource {
             stands: None,
             stand_plans: Vec::new(),
             timeline: None,
+            timeline_filled: Vec::new(),
         })
     }
 
@@ -853,6 +860,7 @@ impl PlacementSource {
             stands: Some((layer, fields)),
             stand_plans: plans,
             timeline: None,
+            timeline_filled: Vec::new(),
         })
     }
 
@@ -1115,6 +1123,7 @@ pub(super) fn accept(mut p: Placement, kind: CoordKind, report: &mut Report) -> 
     Some(p)
 }
 
+pub mod census;
 mod columns;
 mod delimited;
 

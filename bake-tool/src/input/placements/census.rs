@@ -23,8 +23,8 @@ use anyhow::{bail, Context, Result};
 use sylva::format::attributes::{format_date, parse_date};
 use sylva::format::timeline::{Timeline, MAX_CENSUSES};
 
-use super::allometry::Allometry;
-use super::placements::{CoordKind, Placement, PlacementSet, PlacementSource, ReadOptions, Report};
+use super::{CoordKind, Placement, PlacementSet, PlacementSource, ReadOptions, Report};
+use crate::input::allometry::Allometry;
 
 /// The attribute a tree stands from.
 pub const FROM_COLUMN: &str = "standing_from";
@@ -117,6 +117,8 @@ pub struct Merged {
     pub set: PlacementSet,
     /// The timeline block of the manifest.
     pub timeline: Timeline,
+    /// The timeline's columns that hold values (the bake checks they are kept).
+    pub filled: Vec<String>,
     /// The CRS the files declare (the first file's).
     pub declared_epsg: Option<u32>,
     /// A declared CRS without an EPSG code.
@@ -139,9 +141,25 @@ fn column_index(names: &[String], wanted: Option<&str>, defaults: &[&str]) -> Op
     }
 }
 
+/// Whether a status records the tree dead or gone: a word for it (not of a
+/// part: "dead top", "dead branch" are a live tree's), or ForestGEO's codes
+/// `D` (dead), `M` (missing) and `P` (prior: not yet recruited).
 fn is_dead(status: &str) -> bool {
     let s = status.trim().to_lowercase();
-    DEAD_WORDS.iter().any(|w| s.split(|c: char| !c.is_alphanumeric()).any(|part| part == *w))
+    if matches!(s.as_str(), "d" | "m" | "p") {
+        return true;
+    }
+    let words: Vec<&str> = s.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    let part = words.iter().any(|w| matches!(*w, "top" | "branch" | "branches" | "limb" | "limbs" | "wood" | "crown"));
+    !part && DEAD_WORDS.iter().any(|w| words.contains(w))
+}
+
+/// Whether an input column's name is one the timeline writes (it would shadow it).
+fn is_timeline_name(name: &str) -> bool {
+    let n = name.trim().to_lowercase();
+    n == FROM_COLUMN
+        || n == UNTIL_COLUMN
+        || ["height_", "dbh_", "crown_"].iter().any(|p| n.strip_prefix(p).is_some_and(|d| parse_date(d).is_some()))
 }
 
 /// Reads every census file and merges their rows by tree id.
@@ -167,12 +185,30 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
     let mut planted: HashMap<String, i64> = HashMap::new();
     let mut removed: HashMap<String, i64> = HashMap::new();
     let mut days_seen = std::collections::BTreeSet::new();
+    let mut too_many_dates = false;
     for (f, path) in census.files.iter().enumerate() {
         let source = PlacementSource::open(path, &options)?;
+        let this = (source.declared_epsg, source.declared_proj4.clone());
+        if f > 0 && this != declared && (this.0.is_some() || this.1.is_some()) {
+            let name = |d: &(Option<u32>, Option<(String, String)>)| match d {
+                (Some(e), _) => format!("EPSG:{e}"),
+                (None, Some((n, _))) => n.clone(),
+                (None, None) => "none".into(),
+            };
+            bail!(
+                "census {} ({}) declares the CRS {}, the first {}: give every census in one CRS",
+                f + 1,
+                path.display(),
+                name(&this),
+                name(&declared)
+            );
+        }
+        // Numbers with decimal commas (a `;`-separated file's) are written with points.
+        let decimal_comma = source.decimal_comma();
         match kind {
             None => {
                 kind = Some(source.kind);
-                declared = (source.declared_epsg, source.declared_proj4.clone());
+                declared = this;
             }
             Some(k) if k != source.kind => bail!(
                 "census {} ({}) has {} coordinates, the first has {}: give every census in one CRS",
@@ -213,6 +249,15 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
                 slot.push(None);
                 continue;
             }
+            if is_timeline_name(n) {
+                notes.push(format!(
+                    "census {} ({}): column {n:?} left out: the timeline writes a column of that name",
+                    f + 1,
+                    path.display()
+                ));
+                slot.push(None);
+                continue;
+            }
             let at = attribute_names.iter().position(|a| a == n).unwrap_or_else(|| {
                 attribute_names.push(n.clone());
                 attribute_names.len() - 1
@@ -246,7 +291,9 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
                 }
                 (None, None) => format!("\u{0}{f}:{}", p.row),
             };
-            let alive = !cell(status_at).is_some_and(|s| is_dead(&s));
+            // A status says who died at a census; a register's (no census dates)
+            // says nothing of when: its removal date does.
+            let alive = day.is_none() || !cell(status_at).is_some_and(|s| is_dead(&s));
             for (at, target) in [(planted_at, &mut planted), (removed_at, &mut removed)] {
                 if let Some(text) = cell(at).filter(|t| !t.trim().is_empty()) {
                     match parse_date(&text).or_else(|| year_only(&text)) {
@@ -264,14 +311,23 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
             for (i, v) in p.attrs.drain(..).enumerate() {
                 if let Some(Some(at)) = slot.get(i) {
                     if let Some(a) = attrs.get_mut(*at) {
-                        *a = v;
+                        *a = match v {
+                            Some(text) if decimal_comma && text.contains(',') => {
+                                Some(match crate::input::text::parse_decimal_comma(&text) {
+                                    Some(n) => n.to_string(),
+                                    None => text,
+                                })
+                            }
+                            v => v,
+                        };
                     }
                 }
             }
             p.attrs = attrs;
             let day = day.unwrap_or(i64::MIN);
-            if day != i64::MIN {
-                days_seen.insert(day);
+            if day != i64::MIN && days_seen.insert(day) && days_seen.len() > MAX_CENSUSES {
+                too_many_dates = true;
+                return Err(anyhow::anyhow!("more than {MAX_CENSUSES} census dates"));
             }
             let records = trees.entry(key.clone()).or_insert_with(|| {
                 order.push(key);
@@ -279,7 +335,14 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
             });
             records.push(Record { day, alive, placement: p });
             Ok(())
-        })?;
+        });
+        let file_report = match file_report {
+            Err(_) if too_many_dates => bail!(
+                "{}: more than {MAX_CENSUSES} different census dates (a census is one date: is the date column right?)",
+                path.display()
+            ),
+            r => r?,
+        };
         report.rows += file_report.rows;
         report.missing_height += file_report.missing_height;
         report.not_utf8 += file_report.not_utf8;
@@ -298,12 +361,16 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
     let dbhs: Vec<String> = censuses.iter().map(|&d| format!("dbh_{}", format_date(d))).collect();
     let crowns: Vec<String> = censuses.iter().map(|&d| format!("crown_{}", format_date(d))).collect();
     let base = attribute_names.len();
-    let mut names = attribute_names;
-    names.push(FROM_COLUMN.into());
-    names.push(UNTIL_COLUMN.into());
+    // The timeline's columns first (within the attribute columns' cap whatever the files hold).
+    let mut names: Vec<String> = vec![FROM_COLUMN.into(), UNTIL_COLUMN.into()];
     names.extend(heights.iter().cloned());
     names.extend(dbhs.iter().cloned());
     names.extend(crowns.iter().cloned());
+    let timeline_count = names.len();
+    names.extend(attribute_names);
+    let mut filled = vec![false; timeline_count];
+    // Rows are renumbered where a tree is made of several records; a register keeps its own.
+    let renumber = !censuses.is_empty();
     let mut rows = Vec::with_capacity(order.len());
     let (mut never_alive, mut dated) = (0u64, 0u64);
     for key in order {
@@ -349,11 +416,18 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
             cells[2 + 2 * censuses.len() + c] = p.crown_m.map(|w| format!("{w:.1}"));
         }
         let mut p = records.swap_remove(last_alive).placement;
-        p.attrs.resize(base, None);
-        p.attrs.extend(cells);
+        for (f, c) in filled.iter_mut().zip(&cells) {
+            *f |= c.is_some();
+        }
+        let mut own = std::mem::take(&mut p.attrs);
+        own.resize(base, None);
+        p.attrs = cells;
+        p.attrs.extend(own);
         p.dated = !(from.is_none_or(|f| f <= latest) && until.is_none_or(|u| latest < u));
         dated += u64::from(p.dated);
-        p.row = rows.len() as u64 + 1;
+        if renumber {
+            p.row = rows.len() as u64 + 1;
+        }
         rows.push(p);
     }
     report.kept = rows.len() as u64;
@@ -374,7 +448,9 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
     if rows.is_empty() {
         bail!("the censuses hold no tree recorded alive");
     }
+    let filled: Vec<String> = names.iter().zip(&filled).filter(|(_, f)| **f).map(|(n, _)| n.clone()).collect();
     Ok(Merged {
+        filled,
         set: PlacementSet {
             kind: kind.unwrap_or(CoordKind::Projected),
             rows,
@@ -478,8 +554,11 @@ mod tests {
         assert_eq!(get(6, "dbh_2013-07-01").as_deref(), Some("32.0"));
         let h: Vec<f64> = m.timeline.heights.iter().map(|c| get(6, c).unwrap().parse().unwrap()).collect();
         assert!(h[0] > 5.0 && h[0] < h[1] && h[1] < h[2], "{h:?}");
-        // The attributes: the files' columns (the status too), then the timeline's.
-        assert!(set.attribute_names.starts_with(&["species".into(), "height".into(), "dbh".into(), "status".into()]));
+        // The attributes: the timeline's columns, then the files' (the status too).
+        assert_eq!(set.attribute_names[..2], [FROM_COLUMN.to_string(), UNTIL_COLUMN.to_string()]);
+        assert!(set.attribute_names.ends_with(&["species".into(), "height".into(), "dbh".into(), "status".into()]));
+        assert!(m.filled.contains(&UNTIL_COLUMN.to_string()) && m.filled.contains(&"dbh_2013-07-01".to_string()));
+        assert!(!m.filled.contains(&"crown_2013-07-01".to_string()), "no crown widths given");
         assert!(m
             .notes
             .iter()
@@ -502,10 +581,7 @@ mod tests {
             today: day("2026-12-06"),
             ..CensusOptions::default()
         };
-        let read = ReadOptions {
-            columns: vec![(super::super::placements::ColumnRole::Id, "tree".into())],
-            ..Default::default()
-        };
+        let read = ReadOptions { columns: vec![(super::super::ColumnRole::Id, "tree".into())], ..Default::default() };
         let m = merge(&read, &census).unwrap();
         assert_eq!(m.timeline.censuses, ["2010-05-01", "2015-05-01"]);
         let texts: Vec<&str> = m.set.rows.iter().map(|p| p.id_text.as_deref().unwrap()).collect();
@@ -553,11 +629,58 @@ mod tests {
             dates: vec![day("2008-01-01"), day("2009-01-01")],
             ..CensusOptions::default()
         };
-        // No ids to match: every row skipped, then nothing to draw.
+        // Projected and lon/lat censuses.
         let e = merge(&ReadOptions::default(), &census).err().unwrap().to_string();
-        assert!(e.contains("lon/lat") || e.contains("no tree"), "{e}");
+        assert!(e.contains("census 2 (") && e.contains("lon/lat coordinates, the first has projected"), "{e}");
+        // No ids to match: every row skipped, then nothing to draw.
+        std::fs::write(dir.join("b.csv"), "x,y\n1,1\n").unwrap();
+        let e = merge(&ReadOptions::default(), &census).err().unwrap().to_string();
+        assert!(e.contains("no tree recorded alive"), "{e}");
         let census = CensusOptions { dates: Vec::new(), ..census };
         let e = merge(&ReadOptions::default(), &census).err().unwrap().to_string();
         assert!(e.contains("no date column: give --census-date"), "{e}");
+        // A date column with more dates than censuses can be.
+        let mut csv = String::from("id,x,y,date\n");
+        for k in 0..70 {
+            csv += &format!("{k},0,0,{}\n", format_date(day("2000-01-01") + k));
+        }
+        std::fs::write(dir.join("c.csv"), csv).unwrap();
+        let census = CensusOptions {
+            files: vec![dir.join("c.csv")],
+            date_column: Some("date".into()),
+            ..CensusOptions::default()
+        };
+        let e = merge(&ReadOptions::default(), &census).err().unwrap().to_string();
+        assert!(e.contains("more than 64 different census dates"), "{e}");
+    }
+
+    #[test]
+    fn statuses_decimal_commas_and_clashing_names_are_read_as_meant() {
+        assert!(is_dead("dead") && is_dead("Dead (standing)") && is_dead("D") && is_dead("gefällt") && is_dead("M"));
+        assert!(
+            !is_dead("alive") && !is_dead("dead top") && !is_dead("Dead branches") && !is_dead("A") && !is_dead("")
+        );
+        let dir = tmp("commas");
+        std::fs::write(dir.join("a.csv"), "id;x;y;height;girth;standing_from\n1;0;0;10,5;101,5;x\n").unwrap();
+        std::fs::write(dir.join("b.csv"), "id;x;y;height;girth\n1;0;0;11,5;120,25\n").unwrap();
+        let census = CensusOptions {
+            files: vec![dir.join("a.csv"), dir.join("b.csv")],
+            dates: vec![day("2010-01-01"), day("2015-01-01")],
+            ..CensusOptions::default()
+        };
+        let m = merge(&ReadOptions::default(), &census).unwrap();
+        let p = &m.set.rows[0];
+        assert_eq!(cell(&m.set, p, "girth"), Some("120.25"), "decimal commas written with points");
+        assert_eq!(cell(&m.set, p, "height_2010-01-01"), Some("10.50"));
+        assert_eq!(m.set.attribute_names.iter().filter(|n| *n == FROM_COLUMN).count(), 1);
+        assert!(m.notes.iter().any(|n| n.contains("\"standing_from\" left out")), "{:?}", m.notes);
+        // A register's dead status says nothing of when: its removal date does.
+        std::fs::write(dir.join("r.csv"), "x,y,status,removed\n0,0,gefällt,2019-02-01\n1,1,dead,\n").unwrap();
+        let census =
+            CensusOptions { files: vec![dir.join("r.csv")], today: day("2026-12-06"), ..CensusOptions::default() };
+        let m = merge(&ReadOptions::default(), &census).unwrap();
+        assert_eq!(m.set.rows.len(), 2);
+        assert_eq!(m.set.rows.iter().map(|p| p.row).collect::<Vec<_>>(), [1, 2], "a register keeps its rows");
+        assert!(m.set.rows[0].dated && !m.set.rows[1].dated);
     }
 }
