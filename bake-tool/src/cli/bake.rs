@@ -41,6 +41,13 @@ pub(crate) struct BakeArgs {
     /// rows; default: a column named census_date, census, survey_date or date).
     #[arg(long, value_name = "NAME")]
     pub(crate) census_date_column: Option<String>,
+    /// Make the forest at a date from one register's planting and removal date
+    /// columns (planted, planting_date, plantdatum, pflanzdatum, …; removed,
+    /// removal_date, felled, rooidatum, …; a year alone is its 1 January): a tree
+    /// stands from its planting until its removal, planned ones included (the
+    /// view without a date shows the day of the bake).
+    #[arg(long)]
+    pub(crate) timeline: bool,
     /// A canopy height model instead of trees (a GeoTIFF of heights above ground,
     /// e.g. from airborne lidar): each crown found becomes a tree of its height and
     /// crown width (tops by a local-maximum filter whose window grows with height,
@@ -505,18 +512,21 @@ fn census_options(
 ) -> Result<Option<std::sync::Arc<sylva_bake::input::placements::census::CensusOptions>>> {
     use sylva_bake::input::placements::census::{has_timeline_columns, CensusOptions};
     let dates = CensusOptions::parse_dates(args.placements.len(), &args.census_dates)?;
-    let asked = args.placements.len() > 1 || !dates.is_empty() || args.census_date_column.is_some();
-    let asked = asked
-        || match args.placements.first() {
-            Some(p) => {
-                // (Every column: --attributes chooses what is kept, not what is read.)
-                let all = sylva_bake::input::placements::ReadOptions { attributes: None, ..read.clone() };
-                let source = sylva_bake::input::placements::PlacementSource::open(p, &all)?;
-                has_timeline_columns(&source.attribute_names(), None)
-            }
-            None => false,
-        };
+    let asked = args.placements.len() > 1 || !dates.is_empty() || args.census_date_column.is_some() || args.timeline;
     if !asked {
+        // A register with planting or removal dates: say what --timeline would do.
+        if let Some(p) = args.placements.first().filter(|_| args.stands.is_none()) {
+            // (Every column: --attributes chooses what is kept, not what is read.)
+            let all = sylva_bake::input::placements::ReadOptions { attributes: None, ..read.clone() };
+            if let Ok(source) = sylva_bake::input::placements::PlacementSource::open(p, &all) {
+                if has_timeline_columns(&source.attribute_names(), None) {
+                    eprintln!(
+                        "note: {} has planting or removal dates: --timeline shows the trees standing at a date (setDate, the page's year slider)",
+                        p.display()
+                    );
+                }
+            }
+        }
         return Ok(None);
     }
     if args.pack.shard.is_some() {

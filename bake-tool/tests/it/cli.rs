@@ -2506,4 +2506,54 @@ fn three_censuses_bake_into_the_forest_at_each_date() {
         }
     }
     assert!(checked > 50, "{checked} trees with two censuses");
+
+    // A street-tree register with planting and removal dates, with --timeline (without it,
+    // those columns are attributes and the bake notes what --timeline would do).
+    let mut csv = String::from("id,x,y,species,height,planted,removed\n");
+    for id in 1..=60u64 {
+        let (x, y) = xy(id);
+        let planted = if id <= 40 { "1990".to_string() } else { format!("20{}-04-01", 10 + id % 10) };
+        let removed = if id % 6 == 0 { "2015-03-01" } else { "" };
+        csv += &format!("{id},{x},{y},oak,12,{planted},{removed}\n");
+    }
+    std::fs::write(dir.join("register.csv"), csv).unwrap();
+    let bake = |out: &Path, timeline: bool| {
+        let mut c = bin();
+        c.arg("bake")
+            .arg("--model")
+            .arg(format!("oak={}", model.display()))
+            .args(["--placements", "register.csv", "--input-crs", "EPSG:32632", "--no-clusters"])
+            .args(["--billboard-size", "16", "--texture-size", "16", "--no-terrain", "--out"])
+            .arg(out)
+            .current_dir(&dir);
+        if timeline {
+            c.arg("--timeline");
+        }
+        run(&mut c)
+    };
+    let plain = bake(&dir.join("plain"), false);
+    assert!(String::from_utf8_lossy(&plain.stderr).contains("--timeline shows the trees standing at a date"));
+    let m = sylva::format::Manifest::decode("s", &std::fs::read(dir.join("plain/scene.json")).unwrap()).unwrap();
+    assert!(m.timeline.is_none() && m.attributes.unwrap().column("planted").is_some());
+    bake(&dir.join("register"), true);
+    let register = dir.join("register");
+    let count = |date: Option<&str>| {
+        sylva::scene::query::query_dir_at(&register, &serde_json::json!({}), 0, date).unwrap().count as usize
+    };
+    // 1990: the first 40; 2014-06-01: those and the 20 planted 2010–2014 (ids 41–60 with id % 10 < 5),
+    // less none; today: all but the removed (every sixth).
+    let scan = |day: &str| {
+        (1..=60u64)
+            .filter(|id| {
+                let planted = if *id <= 40 { "1990-01-01".to_string() } else { format!("20{}-04-01", 10 + id % 10) };
+                planted.as_str() <= day && (id % 6 != 0 || day < "2015-03-01")
+            })
+            .count()
+    };
+    for date in ["1989-12-31", "1990-01-01", "2014-06-01", "2016-01-01", "2019-05-01"] {
+        assert_eq!(count(Some(date)), scan(date), "{date}");
+    }
+    assert_eq!(count(None), 50, "standing at the bake's day: all but the ten removed");
+    let by_planting = sylva::scene::query::query_dir(&register, &serde_json::json!({"planted": "1990"}), 0);
+    assert_eq!(by_planting.unwrap().count, 34, "planting dates stay attributes (40 planted in 1990, 6 removed)");
 }

@@ -100,9 +100,10 @@ impl CensusOptions {
     }
 }
 
-/// Whether one file's columns make it a timeline: planting or removal dates
-/// (a census date column only when named, or with several files: many
-/// inventories have a survey date).
+/// Whether one file's columns could make a timeline: planting or removal
+/// dates (a census date column only when named, or with several files: many
+/// inventories have a survey date). The bake makes one only when asked
+/// (`--timeline`); it says so where it could.
 #[must_use]
 pub fn has_timeline_columns(names: &[String], date_column: Option<&str>) -> bool {
     let found = |list: &[&str]| names.iter().any(|n| list.contains(&n.trim().to_lowercase().as_str()));
@@ -186,6 +187,7 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
     let mut removed: HashMap<String, i64> = HashMap::new();
     let mut days_seen = std::collections::BTreeSet::new();
     let mut too_many_dates = false;
+    let mut dated_columns = false;
     for (f, path) in census.files.iter().enumerate() {
         let source = PlacementSource::open(path, &options)?;
         let this = (source.declared_epsg, source.declared_proj4.clone());
@@ -239,8 +241,10 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
         }
         let planted_at = column_index(&names, None, PLANTED_NAMES);
         let removed_at = column_index(&names, None, REMOVED_NAMES);
+        dated_columns |= planted_at.is_some() || removed_at.is_some();
         let status_at = column_index(&names, None, STATUS_NAMES);
-        let timeline_columns = [date_at, planted_at, removed_at];
+        // (Planting and removal dates stay attributes too: a search by them.)
+        let timeline_columns = [date_at];
         // Attribute columns of this file, by name, into the union.
         let mut slot = Vec::with_capacity(names.len());
         for (i, n) in names.iter().enumerate() {
@@ -265,6 +269,7 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
             slot.push(Some(at));
         }
         let file_day = census.dates.get(f).copied();
+        days_seen.extend(file_day);
         let file_report = source.for_each_with_attributes(&mut |mut p: Placement| {
             let cell = |i: Option<usize>| i.and_then(|i| p.attrs.get(i).cloned().flatten());
             let day = match (date_at.and_then(|i| p.attrs.get(i).cloned().flatten()), file_day) {
@@ -346,6 +351,15 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
         report.rows += file_report.rows;
         report.missing_height += file_report.missing_height;
         report.not_utf8 += file_report.not_utf8;
+        report.swappable += file_report.swappable;
+        report.ids_not_numbers.0 += file_report.ids_not_numbers.0;
+        for r in file_report.ids_not_numbers.1 {
+            if report.ids_not_numbers.1.len() < 5 {
+                report.ids_not_numbers.1.push(r);
+            }
+        }
+        report.text_ids.0 += file_report.text_ids.0;
+        report.text_ids.1 += file_report.text_ids.1;
         for (reason, (n, rows)) in file_report.skipped {
             let e = report.skipped.entry(format!("census {}: {reason}", f + 1)).or_insert((0, Vec::new()));
             e.0 += n;
@@ -353,6 +367,13 @@ pub fn merge(read: &ReadOptions, census: &CensusOptions) -> Result<Merged> {
         }
     }
     let censuses: Vec<i64> = days_seen.into_iter().collect();
+    if censuses.is_empty() && !dated_columns {
+        bail!(
+            "no census dates and no planting or removal date column ({} or {}): nothing says when a tree stands",
+            PLANTED_NAMES.join(", "),
+            REMOVED_NAMES.join(", ")
+        );
+    }
     if censuses.len() > MAX_CENSUSES {
         bail!("{} census dates: at most {MAX_CENSUSES}", censuses.len());
     }
