@@ -50,11 +50,16 @@ release:
 # The browser viewer: the library as a wasm32 cdylib, its JS glue by
 # `sylva-bindgen` (wasm-bindgen's library, built with the workspace) into
 # web/pkg, then binaryen's wasm-opt (web/node_modules/.bin) at WASM_OPT:
-# -Oz for what is served (1.77 MB; 63 s here), `make test` takes -O1 (the same
-# step and flags, 2.5 % larger, 14 s), WASM_OPT= skips it.
-# WASM_PROFILE: release (the default) or a custom profile of Cargo.toml, e.g.
-# web-test (`make test`; not dev, test or bench, which cargo maps to other folders).
-WASM_PROFILE ?= release
+# -Oz for what is served (1.24 MB, 527 KB gzipped at the web profile; 56 s
+# here), `make test` takes -O1 (the same step and flags), WASM_OPT= skips it.
+# WASM_PROFILE: web (the default: sized, Cargo.toml) or another profile of
+# Cargo.toml, e.g. release or web-test (`make test`; not dev, test or bench,
+# which cargo maps to other folders).
+WASM_PROFILE ?= web
+# The served wasm's budget, gzipped (-9) after wasm-opt: `make web` fails over
+# it at the `web` profile (issue 47's goal is 400 KB; this is where it stands,
+# lowered as cuts land).
+WASM_GZ_BUDGET ?= 540000
 WASM := target/wasm32-unknown-unknown/$(WASM_PROFILE)/sylva.wasm
 # (The test build makes it too, with the workspace's features: web/bindgen/tests.)
 BINDGEN := target/debug/sylva-bindgen
@@ -75,7 +80,10 @@ web:
 	      --enable-mutable-globals -o web/pkg/sylva_bg.wasm web/pkg/sylva_bg.wasm && \
 	    echo "$(WASM_PROFILE) $(WASM_OPT)" > web/pkg/.wasm-opt; \
 	  else echo "web/pkg: wasm-opt is not installed (make setup): the wasm is not optimised"; fi; fi
-	@echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$(gzip -9c web/pkg/sylva_bg.wasm | wc -c) gzipped"
+	@gz=$$(gzip -9c web/pkg/sylva_bg.wasm | wc -c); \
+	  echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$gz gzipped"; \
+	  if [ "$(WASM_PROFILE)" = web ] && [ -n "$(WASM_OPT)" ] && [ $$gz -gt $(WASM_GZ_BUDGET) ]; then \
+	    echo "web/pkg/sylva_bg.wasm: $$gz bytes gzipped is over the budget of $(WASM_GZ_BUDGET) (Makefile WASM_GZ_BUDGET)"; exit 1; fi
 
 # Browser end-to-end tests in headless Chromium. They run the debug binaries
 # (`sylva serve`, `render`, `sylva-bake`) that the test build makes for the

@@ -31,7 +31,7 @@ impl FarTierPipeline {
     /// The billboards' pipelines for `color_format` targets.
     #[must_use]
     pub fn billboard(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
-        Self::new(device, shared, color_format, "billboard", shaders::BILLBOARD, 3)
+        Self::new(device, shared, color_format, "billboard", &shaders::BILLBOARD.source(), 3)
     }
 
     /// A far tier's pipelines from WGSL `source` with `arrays` texture arrays.

@@ -79,7 +79,7 @@ impl CanopyPass {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("canopy"),
-            source: wgpu::ShaderSource::Wgsl(super::shaders::CANOPY.into()),
+            source: wgpu::ShaderSource::Wgsl(super::shaders::CANOPY.source().into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("canopy"),

@@ -44,7 +44,7 @@ impl ClusterPipeline {
     pub fn new(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cluster.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::CLUSTER.into()),
+            source: wgpu::ShaderSource::Wgsl(shaders::CLUSTER.source().into()),
         });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cluster level"),

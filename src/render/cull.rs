@@ -29,7 +29,7 @@ impl CullPipelines {
     pub fn new(device: &wgpu::Device, shared: &SharedLayouts) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cull.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::CULL.into()),
+            source: wgpu::ShaderSource::Wgsl(shaders::CULL.source().into()),
         });
         let c = wgpu::ShaderStages::COMPUTE;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

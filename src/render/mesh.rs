@@ -40,7 +40,7 @@ impl MeshPipelines {
     pub fn new(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("mesh.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::MESH.into()),
+            source: wgpu::ShaderSource::Wgsl(shaders::MESH.source().into()),
         });
         let mesh_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("mesh level"),

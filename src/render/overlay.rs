@@ -19,7 +19,7 @@ impl SkyPass {
         let pipeline = overlay_pipeline(
             device,
             "sky",
-            super::shaders::SKY,
+            &super::shaders::SKY.source(),
             &[Some(&shared.view)],
             wgpu::PrimitiveTopology::TriangleList,
             format,
@@ -53,7 +53,7 @@ impl BoundsPass {
         let pipeline = overlay_pipeline(
             device,
             "bounds",
-            super::shaders::BOUNDS,
+            &super::shaders::BOUNDS.source(),
             &[Some(&shared.view), Some(&layout)],
             wgpu::PrimitiveTopology::LineList,
             format,
@@ -75,7 +75,7 @@ impl BoundsPass {
 fn overlay_pipeline(
     device: &wgpu::Device,
     label: &str,
-    source: &'static str,
+    source: &str,
     groups: &[Option<&wgpu::BindGroupLayout>],
     topology: wgpu::PrimitiveTopology,
     format: wgpu::TextureFormat,

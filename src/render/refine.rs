@@ -335,7 +335,7 @@ impl Accumulator {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("accumulate"),
-            source: wgpu::ShaderSource::Wgsl(super::shaders::ACCUMULATE.into()),
+            source: wgpu::ShaderSource::Wgsl(super::shaders::ACCUMULATE.source().into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("accumulate"),

@@ -1,4 +1,4 @@
-//! WGSL sources, composed at compile time (WGSL has no includes): each pass's
+//! WGSL sources, composed when a pipeline is made (WGSL has no includes): each pass's
 //! file (`shaders/<pass>.wgsl`, named like its constant here and its Rust file
 //! in `src/render/`) after the modules it uses, each binding declared once:
 //! `layout.wgsl` (the structs every pass reads), `instance.wgsl` (a tree
@@ -8,115 +8,120 @@
 //! `trees.wgsl` (the tree passes' pools and draw params, groups 2 and 3),
 //! `styles.wgsl` (the styles' binding and colours), `shadow.wgsl` (the shadow
 //! map and its lookup, for the lit passes).
+//! Each module is in the binary once, composed into a pass's source when its
+//! pipeline is made (composed at compile time with `concat!`, the shared
+//! modules were in the wasm once per pass).
+
+/// A pass's WGSL: its modules in order, joined by [`Shader::source`].
+#[derive(Debug, Clone, Copy)]
+pub struct Shader(pub &'static [&'static str]);
+
+impl Shader {
+    /// The composed source.
+    #[must_use]
+    pub fn source(&self) -> String {
+        self.0.concat()
+    }
+}
+
+static LAYOUT_WGSL: &str = include_str!("../../shaders/layout.wgsl");
+static INSTANCE_WGSL: &str = include_str!("../../shaders/instance.wgsl");
+static SELECT_WGSL: &str = include_str!("../../shaders/select.wgsl");
+static LIGHT_WGSL: &str = include_str!("../../shaders/light.wgsl");
+static STYLE_BITS_WGSL: &str = include_str!("../../shaders/style_bits.wgsl");
+static VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+static TREES_WGSL: &str = include_str!("../../shaders/trees.wgsl");
+static STYLES_WGSL: &str = include_str!("../../shaders/styles.wgsl");
+static SHADOW_WGSL: &str = include_str!("../../shaders/shadow.wgsl");
+static MESH_WGSL: &str = include_str!("../../shaders/mesh.wgsl");
+static BILLBOARD_WGSL: &str = include_str!("../../shaders/billboard.wgsl");
+static IMPOSTOR_VIEWS_WGSL: &str = include_str!("../../shaders/impostor_views.wgsl");
+static IMPOSTOR_WGSL: &str = include_str!("../../shaders/impostor.wgsl");
+static CLUSTER_WGSL: &str = include_str!("../../shaders/cluster.wgsl");
+static CULL_WGSL: &str = include_str!("../../shaders/cull.wgsl");
+static SKY_WGSL: &str = include_str!("../../shaders/sky.wgsl");
+static BOUNDS_WGSL: &str = include_str!("../../shaders/bounds.wgsl");
+static TERRAIN_WGSL: &str = include_str!("../../shaders/terrain.wgsl");
+static CANOPY_WGSL: &str = include_str!("../../shaders/canopy.wgsl");
+static ACCUMULATE_WGSL: &str = include_str!("../../shaders/accumulate.wgsl");
 
 /// The mesh pass (and the bake's billboard capture).
-pub const MESH: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/select.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/style_bits.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/trees.wgsl"),
-    include_str!("../../shaders/styles.wgsl"),
-    include_str!("../../shaders/shadow.wgsl"),
-    include_str!("../../shaders/mesh.wgsl")
-);
+pub static MESH: Shader = Shader(&[
+    LAYOUT_WGSL,
+    INSTANCE_WGSL,
+    SELECT_WGSL,
+    LIGHT_WGSL,
+    STYLE_BITS_WGSL,
+    VIEW_WGSL,
+    TREES_WGSL,
+    STYLES_WGSL,
+    SHADOW_WGSL,
+    MESH_WGSL,
+]);
 
 /// The billboard pass.
-pub const BILLBOARD: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/select.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/style_bits.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/trees.wgsl"),
-    include_str!("../../shaders/styles.wgsl"),
-    include_str!("../../shaders/shadow.wgsl"),
-    include_str!("../../shaders/billboard.wgsl")
-);
+pub static BILLBOARD: Shader = Shader(&[
+    LAYOUT_WGSL,
+    INSTANCE_WGSL,
+    SELECT_WGSL,
+    LIGHT_WGSL,
+    STYLE_BITS_WGSL,
+    VIEW_WGSL,
+    TREES_WGSL,
+    STYLES_WGSL,
+    SHADOW_WGSL,
+    BILLBOARD_WGSL,
+]);
 
 /// The multi-view impostor pass.
-pub const IMPOSTOR: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/select.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/style_bits.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/trees.wgsl"),
-    include_str!("../../shaders/styles.wgsl"),
-    include_str!("../../shaders/shadow.wgsl"),
-    include_str!("../../shaders/impostor_views.wgsl"),
-    include_str!("../../shaders/impostor.wgsl")
-);
+pub static IMPOSTOR: Shader = Shader(&[
+    LAYOUT_WGSL,
+    INSTANCE_WGSL,
+    SELECT_WGSL,
+    LIGHT_WGSL,
+    STYLE_BITS_WGSL,
+    VIEW_WGSL,
+    TREES_WGSL,
+    STYLES_WGSL,
+    SHADOW_WGSL,
+    IMPOSTOR_VIEWS_WGSL,
+    IMPOSTOR_WGSL,
+]);
 
 /// The cluster pass (ellipsoids and lines).
-pub const CLUSTER: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/select.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/style_bits.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/trees.wgsl"),
-    include_str!("../../shaders/styles.wgsl"),
-    include_str!("../../shaders/shadow.wgsl"),
-    include_str!("../../shaders/cluster.wgsl")
-);
+pub static CLUSTER: Shader = Shader(&[
+    LAYOUT_WGSL,
+    INSTANCE_WGSL,
+    SELECT_WGSL,
+    LIGHT_WGSL,
+    STYLE_BITS_WGSL,
+    VIEW_WGSL,
+    TREES_WGSL,
+    STYLES_WGSL,
+    SHADOW_WGSL,
+    CLUSTER_WGSL,
+]);
 
 /// The cull and LoD-selection compute passes.
-pub const CULL: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/select.wgsl"),
-    include_str!("../../shaders/style_bits.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/cull.wgsl")
-);
+pub static CULL: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, STYLE_BITS_WGSL, VIEW_WGSL, CULL_WGSL]);
 
 /// The sky/ground background.
-pub const SKY: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/sky.wgsl")
-);
+pub static SKY: Shader = Shader(&[LAYOUT_WGSL, LIGHT_WGSL, VIEW_WGSL, SKY_WGSL]);
 
 /// The batch-bounds debug view.
-pub const BOUNDS: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/bounds.wgsl")
-);
+pub static BOUNDS: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, VIEW_WGSL, BOUNDS_WGSL]);
 
 /// The terrain pass.
-pub const TERRAIN: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/shadow.wgsl"),
-    include_str!("../../shaders/terrain.wgsl")
-);
+pub static TERRAIN: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, LIGHT_WGSL, VIEW_WGSL, SHADOW_WGSL, TERRAIN_WGSL]);
 
 /// The canopy pass.
-pub const CANOPY: &str = concat!(
-    include_str!("../../shaders/layout.wgsl"),
-    include_str!("../../shaders/instance.wgsl"),
-    include_str!("../../shaders/select.wgsl"),
-    include_str!("../../shaders/light.wgsl"),
-    include_str!("../../shaders/view.wgsl"),
-    include_str!("../../shaders/canopy.wgsl")
-);
+pub static CANOPY: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, LIGHT_WGSL, VIEW_WGSL, CANOPY_WGSL]);
 
 /// Progressive refinement's accumulate and resolve passes.
-pub const ACCUMULATE: &str = include_str!("../../shaders/accumulate.wgsl");
+pub static ACCUMULATE: Shader = Shader(&[ACCUMULATE_WGSL]);
 
 /// Every composed shader with its name, for validation tests.
-pub const ALL: &[(&str, &str)] = &[
+pub static ALL: &[(&str, Shader)] = &[
     ("mesh", MESH),
     ("billboard", BILLBOARD),
     ("impostor", IMPOSTOR),

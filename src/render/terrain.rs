@@ -263,7 +263,7 @@ impl TerrainPass {
         let no_images = image_group(device, &image_layout, &blank, &sampler);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("terrain"),
-            source: wgpu::ShaderSource::Wgsl(super::shaders::TERRAIN.into()),
+            source: wgpu::ShaderSource::Wgsl(super::shaders::TERRAIN.source().into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("terrain"),

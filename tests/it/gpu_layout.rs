@@ -10,8 +10,8 @@ use sylva::render::gpu_data::{CullDispatch, DrawArgs, DrawParams, GpuMaterial, G
 
 /// The composed `shader` (`shaders::ALL`), parsed by naga.
 fn parse(shader: &str) -> naga::Module {
-    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1;
-    naga::front::wgsl::parse_str(source).expect("valid WGSL")
+    let source = sylva::render::shaders::ALL.iter().find(|(n, _)| *n == shader).expect("shader").1.source();
+    naga::front::wgsl::parse_str(&source).expect("valid WGSL")
 }
 
 /// A WGSL struct of the composed `shader`: its members (name, byte offset) and size.

@@ -3,9 +3,10 @@
 
 #[test]
 fn all_shaders_validate() {
-    for (name, source) in sylva::render::shaders::ALL {
-        let module = naga::front::wgsl::parse_str(source)
-            .unwrap_or_else(|e| panic!("{name}.wgsl: {}", e.emit_to_string(source)));
+    for (name, shader) in sylva::render::shaders::ALL {
+        let source = shader.source();
+        let module = naga::front::wgsl::parse_str(&source)
+            .unwrap_or_else(|e| panic!("{name}.wgsl: {}", e.emit_to_string(&source)));
         let mut validator =
             naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::default());
         validator.validate(&module).unwrap_or_else(|e| panic!("{name}.wgsl: {e:?}"));
