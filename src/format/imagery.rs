@@ -1,8 +1,10 @@
 //! Ground imagery images: the baked JPEGs of `terrain.imagery`
 //! ([`super::terrain::ImageryEntry`]) and the PNG or JPEG tiles of an XYZ or
-//! WMTS raster source, decoded into RGBA8 (sRGB) with the `png` and
-//! `zune-jpeg` crates (the decoders `image` uses, without its weight in the
-//! wasm module).
+//! WMTS raster source, decoded into RGBA8 (sRGB): natively with the `png` and
+//! `zune-jpeg` crates (the decoders `image` uses); in the browser by the
+//! browser itself (`createImageBitmap`, `src/web/fetch.rs`), which hands the
+//! pixels over in a [`DECODED_MAGIC`] container, so the wasm module carries no
+//! image decoder.
 //!
 //! The decoder bounds what it allocates: the image's side may not exceed
 //! `max_px` (checked from the header before the pixels are decoded) and the
@@ -22,19 +24,37 @@ pub struct Rgba8 {
     pub pixels: Vec<u8>,
 }
 
-/// Decodes a PNG or JPEG image of at most `max_px` pixels a side.
+/// The first bytes of an image the browser decoded: then the width and the
+/// height (u32, little endian) and `width · height · 4` bytes of RGBA8.
+pub const DECODED_MAGIC: &[u8; 8] = b"SYRGBA01";
+
+/// An image's pixels in a [`DECODED_MAGIC`] container.
+#[must_use]
+pub fn encode_decoded(width: u32, height: u32, pixels: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(16 + pixels.len());
+    out.extend_from_slice(DECODED_MAGIC);
+    out.extend_from_slice(&width.to_le_bytes());
+    out.extend_from_slice(&height.to_le_bytes());
+    out.extend_from_slice(pixels);
+    out
+}
+
+/// Decodes a PNG or JPEG image (natively; in the browser an image it
+/// decoded, [`DECODED_MAGIC`]) of at most `max_px` pixels a side.
 ///
 /// # Errors
 /// A [`DecodeError`] naming `file` for bytes that are no such image, a
 /// corrupt image, or one larger than `max_px` a side.
 pub fn decode_image(file: &str, bytes: &[u8], max_px: u32) -> Result<Rgba8, DecodeError> {
     let bad = |m: String| DecodeError::new(file, Problem::Invalid(m));
-    let img = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        decode_png(bytes, max_px).map_err(|e| bad(format!("cannot decode the PNG image: {e}")))?
-    } else if bytes.starts_with(&[0xff, 0xd8]) {
-        decode_jpeg(bytes, max_px).map_err(|e| bad(format!("cannot decode the JPEG image: {e}")))?
+    let img = if let Some(rest) = bytes.strip_prefix(DECODED_MAGIC) {
+        let word = |k: usize| rest.get(4 * k..4 * k + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        let (Some(width), Some(height)) = (word(0), word(1)) else {
+            return Err(bad("a decoded image without its size".into()));
+        };
+        Rgba8 { width, height, pixels: rest[8..].to_vec() }
     } else {
-        return Err(bad("not a PNG or JPEG image".into()));
+        decode_encoded(bytes, max_px).map_err(bad)?
     };
     if img.width == 0 || img.height == 0 || img.width > max_px || img.height > max_px {
         return Err(bad(format!("a {}×{} image: sides of 1–{max_px} pixels are read", img.width, img.height)));
@@ -45,6 +65,30 @@ pub fn decode_image(file: &str, bytes: &[u8], max_px: u32) -> Result<Rgba8, Deco
     Ok(img)
 }
 
+/// A PNG or JPEG in the browser: its own decoder gave none (the fetcher
+/// decodes every response that starts as one).
+#[cfg(target_arch = "wasm32")]
+fn decode_encoded(bytes: &[u8], _max_px: u32) -> Result<Rgba8, String> {
+    Err(if bytes.starts_with(b"\x89PNG\r\n\x1a\n") || bytes.starts_with(&[0xff, 0xd8]) {
+        "the browser could not decode the image".into()
+    } else {
+        "not a PNG or JPEG image".into()
+    })
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+fn decode_encoded(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
+    let img = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        decode_png(bytes, max_px).map_err(|e| format!("cannot decode the PNG image: {e}"))?
+    } else if bytes.starts_with(&[0xff, 0xd8]) {
+        decode_jpeg(bytes, max_px).map_err(|e| format!("cannot decode the JPEG image: {e}"))?
+    } else {
+        return Err("not a PNG or JPEG image".into());
+    };
+    Ok(img)
+}
+
+#[cfg(not(target_arch = "wasm32"))]
 fn decode_png(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
     let limits = png::Limits { bytes: (max_px as usize).pow(2) * 8 + (1 << 16) };
     let mut decoder = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), limits);
@@ -78,6 +122,7 @@ fn decode_png(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
 /// thumbnail's own EOI is inside one); within entropy-coded data a literal
 /// `FF` is always followed by `00` or a restart marker, so the first `FF D9`
 /// after the first scan is the image's end.
+#[cfg(not(target_arch = "wasm32"))]
 fn jpeg_is_whole(bytes: &[u8]) -> bool {
     let mut at = 2;
     while at + 4 <= bytes.len() {
@@ -106,6 +151,7 @@ fn jpeg_is_whole(bytes: &[u8]) -> bool {
     false
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 fn decode_jpeg(bytes: &[u8], max_px: u32) -> Result<Rgba8, String> {
     if !jpeg_is_whole(bytes) {
         return Err("the file ends before the image does (no end marker after the image data)".into());
@@ -161,5 +207,13 @@ mod tests {
         let mut cut = png(16, 8);
         cut.truncate(cut.len() / 2);
         assert!(decode_image("cut.png", &cut, 256).is_err());
+        // What the browser decoded: taken as it is, within the same limits.
+        let pixels: Vec<u8> = (0..2 * 3 * 4).map(|k| k as u8).collect();
+        let img = decode_image("b.jpg", &encode_decoded(2, 3, &pixels), 256).unwrap();
+        assert_eq!((img.width, img.height, img.pixels), (2, 3, pixels.clone()));
+        assert!(decode_image("b.jpg", &encode_decoded(2, 3, &pixels[1..]), 256).is_err(), "short");
+        assert!(decode_image("b.jpg", &encode_decoded(300, 1, &vec![0; 1200]), 256).is_err(), "too wide");
+        assert!(decode_image("b.jpg", &DECODED_MAGIC[..], 256).is_err(), "no size");
+        assert!(decode_image("b.jpg", &encode_decoded(0, 0, &[]), 256).is_err(), "empty");
     }
 }

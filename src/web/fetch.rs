@@ -44,7 +44,42 @@ async fn fetch_bytes(url: &str, range: Option<crate::scene::fetch::ByteRange>) -
         _ => {}
     }
     let buffer = JsFuture::from(resp.array_buffer().map_err(transport)?).await.map_err(transport)?;
-    Ok(js_sys::Uint8Array::new(&buffer).to_vec())
+    let bytes = js_sys::Uint8Array::new(&buffer);
+    // A PNG or JPEG (ground imagery) is decoded by the browser: the wasm module has no decoder.
+    let head = bytes.subarray(0, 8.min(bytes.length())).to_vec();
+    if range.is_none() && (head.starts_with(b"\x89PNG\r\n\x1a\n") || head.starts_with(&[0xff, 0xd8, 0xff])) {
+        return Ok(decode_in_browser(&bytes).await.unwrap_or_else(|_| bytes.to_vec()));
+    }
+    Ok(bytes.to_vec())
+}
+
+/// Most pixels a side an image is decoded at (more than any imagery tile the
+/// streamer reads: `crate::format::imagery::decode_image` refuses it then).
+const MAX_DECODE_PX: u32 = 8192;
+
+/// The image in `bytes` decoded by the browser (`createImageBitmap`, drawn on an
+/// `OffscreenCanvas`, its pixels read back), in a
+/// [`crate::format::imagery::DECODED_MAGIC`] container; an error where the
+/// browser cannot (then its bytes go on as they came, and the streamer says
+/// it cannot decode them).
+async fn decode_in_browser(bytes: &js_sys::Uint8Array) -> Result<Vec<u8>, JsValue> {
+    let window = web_sys::window().ok_or("no window")?;
+    let parts = js_sys::Array::of1(bytes);
+    let blob = web_sys::Blob::new_with_u8_array_sequence(&parts)?;
+    let bitmap: web_sys::ImageBitmap =
+        JsFuture::from(window.create_image_bitmap_with_blob(&blob)?).await?.dyn_into()?;
+    let (w, h) = (bitmap.width(), bitmap.height());
+    if w == 0 || h == 0 || w > MAX_DECODE_PX || h > MAX_DECODE_PX {
+        bitmap.close();
+        return Err(JsValue::from_str("image too large"));
+    }
+    let canvas = web_sys::OffscreenCanvas::new(w, h)?;
+    let context: web_sys::OffscreenCanvasRenderingContext2d =
+        canvas.get_context("2d")?.ok_or("no 2d context")?.dyn_into()?;
+    context.draw_image_with_image_bitmap(&bitmap, 0.0, 0.0)?;
+    bitmap.close();
+    let data = context.get_image_data(0.0, 0.0, f64::from(w), f64::from(h))?;
+    Ok(crate::format::imagery::encode_decoded(w, h, &data.data()))
 }
 
 impl Fetcher for WebFetcher {
