@@ -10,7 +10,9 @@
 //! map and its lookup, for the lit passes).
 //! Each module is in the binary once, composed into a pass's source when its
 //! pipeline is made (composed at compile time with `concat!`, the shared
-//! modules were in the wasm once per pass).
+//! modules were in the wasm once per pass), and without its comments and
+//! indentation (`build.rs` minifies `shaders/` into `OUT_DIR`: naga's errors
+//! count lines of the minified text).
 
 /// A pass's WGSL: its modules in order, joined by [`Shader::source`].
 #[derive(Debug, Clone, Copy)]
@@ -24,26 +26,26 @@ impl Shader {
     }
 }
 
-static LAYOUT_WGSL: &str = include_str!("../../shaders/layout.wgsl");
-static INSTANCE_WGSL: &str = include_str!("../../shaders/instance.wgsl");
-static SELECT_WGSL: &str = include_str!("../../shaders/select.wgsl");
-static LIGHT_WGSL: &str = include_str!("../../shaders/light.wgsl");
-static STYLE_BITS_WGSL: &str = include_str!("../../shaders/style_bits.wgsl");
-static VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
-static TREES_WGSL: &str = include_str!("../../shaders/trees.wgsl");
-static STYLES_WGSL: &str = include_str!("../../shaders/styles.wgsl");
-static SHADOW_WGSL: &str = include_str!("../../shaders/shadow.wgsl");
-static MESH_WGSL: &str = include_str!("../../shaders/mesh.wgsl");
-static BILLBOARD_WGSL: &str = include_str!("../../shaders/billboard.wgsl");
-static IMPOSTOR_VIEWS_WGSL: &str = include_str!("../../shaders/impostor_views.wgsl");
-static IMPOSTOR_WGSL: &str = include_str!("../../shaders/impostor.wgsl");
-static CLUSTER_WGSL: &str = include_str!("../../shaders/cluster.wgsl");
-static CULL_WGSL: &str = include_str!("../../shaders/cull.wgsl");
-static SKY_WGSL: &str = include_str!("../../shaders/sky.wgsl");
-static BOUNDS_WGSL: &str = include_str!("../../shaders/bounds.wgsl");
-static TERRAIN_WGSL: &str = include_str!("../../shaders/terrain.wgsl");
-static CANOPY_WGSL: &str = include_str!("../../shaders/canopy.wgsl");
-static ACCUMULATE_WGSL: &str = include_str!("../../shaders/accumulate.wgsl");
+static LAYOUT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/layout.wgsl"));
+static INSTANCE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/instance.wgsl"));
+static SELECT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/select.wgsl"));
+static LIGHT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/light.wgsl"));
+static STYLE_BITS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/style_bits.wgsl"));
+static VIEW_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/view.wgsl"));
+static TREES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trees.wgsl"));
+static STYLES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/styles.wgsl"));
+static SHADOW_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/shadow.wgsl"));
+static MESH_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/mesh.wgsl"));
+static BILLBOARD_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/billboard.wgsl"));
+static IMPOSTOR_VIEWS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/impostor_views.wgsl"));
+static IMPOSTOR_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/impostor.wgsl"));
+static CLUSTER_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/cluster.wgsl"));
+static CULL_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/cull.wgsl"));
+static SKY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/sky.wgsl"));
+static BOUNDS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/bounds.wgsl"));
+static TERRAIN_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/terrain.wgsl"));
+static CANOPY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/canopy.wgsl"));
+static ACCUMULATE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/accumulate.wgsl"));
 
 /// The mesh pass (and the bake's billboard capture).
 pub static MESH: Shader = Shader(&[
