@@ -60,6 +60,9 @@ WASM_PROFILE ?= web
 # it at the `web` profile (issue 47's goal is 400 KB; this is where it stands,
 # lowered as cuts land).
 WASM_GZ_BUDGET ?= 430000
+# What going over it does: fail (`make web`), or warn (`make demo`: a new
+# user's first command does not stop on a compiler that packs a little worse).
+WASM_OVER_BUDGET ?= fail
 WASM := target/wasm32-unknown-unknown/$(WASM_PROFILE)/sylva.wasm
 # (The test build makes it too, with the workspace's features: web/bindgen/tests.)
 BINDGEN := target/debug/sylva-bindgen
@@ -83,7 +86,8 @@ web:
 	@gz=$$(gzip -9c web/pkg/sylva_bg.wasm | wc -c); \
 	  echo "web/pkg/sylva_bg.wasm: $$(stat -c %s web/pkg/sylva_bg.wasm) bytes, $$gz gzipped"; \
 	  if [ "$(WASM_PROFILE)" = web ] && [ -n "$(WASM_OPT)" ] && [ $$gz -gt $(WASM_GZ_BUDGET) ]; then \
-	    echo "web/pkg/sylva_bg.wasm: $$gz bytes gzipped is over the budget of $(WASM_GZ_BUDGET) (Makefile WASM_GZ_BUDGET)"; exit 1; fi
+	    echo "web/pkg/sylva_bg.wasm: $$gz bytes gzipped is over the budget of $(WASM_GZ_BUDGET) (Makefile WASM_GZ_BUDGET)"; \
+	    [ "$(WASM_OVER_BUDGET)" != fail ] || exit 1; fi
 
 # Browser end-to-end tests in headless Chromium. They run the debug binaries
 # (`sylva serve`, `render`, `sylva-bake`) that the test build makes for the
@@ -98,6 +102,7 @@ test-web: bins web
 	  --test-reporter=junit --test-reporter-destination=../target/test-times/web-junit.xml tests/
 
 PORT ?= 8080
+demo: WASM_OVER_BUDGET = warn
 demo: setup release web
 	@if [ ! -f $(DEMO_DIR)/scene.json ]; then \
 	  echo "baking the demo forest ($(DEMO_TREES) trees) into $(DEMO_DIR)/"; \
