@@ -24,7 +24,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::attributes::{format_date, parse_date, AttributeCodes, AttributeSchema, AttributeType, AttributeValue};
+use super::attributes::{parse_date, AttributeCodes, AttributeSchema, AttributeType, AttributeValue};
 use super::Problem;
 
 /// A tree that grows in (planted, or first recorded at a later census) starts
@@ -200,6 +200,14 @@ impl TimelineColumns {
         }
     }
 
+    /// The timeline and `day` where a view of that day needs it (see
+    /// [`Self::needs_trees`]); `None` otherwise. The style and the query's
+    /// filter hold this.
+    #[must_use]
+    pub fn at(timeline: Option<&Self>, day: Option<i64>) -> Option<(Self, i64)> {
+        timeline.zip(day).filter(|(t, d)| t.needs_trees(*d)).map(|(t, d)| (t.clone(), d))
+    }
+
     /// Whether a view of `day` needs the timeline: a day before the latest,
     /// or after it where a tree is planted or removed later.
     #[must_use]
@@ -219,12 +227,6 @@ pub fn growth_byte(growth: f64) -> u8 {
 #[must_use]
 pub fn growth_of_byte(b: u8) -> f32 {
     f32::from(b) / 128.0
-}
-
-/// `YYYY-MM-DD` of days since 1970-01-01 (re-exported for the timeline's writers).
-#[must_use]
-pub fn date_text(days: i64) -> String {
-    format_date(days)
 }
 
 #[cfg(test)]

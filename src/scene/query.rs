@@ -100,7 +100,7 @@ impl Filter {
     /// the scene's `timeline`; `None` (or its latest day): those standing at
     /// the latest date, as a view without a date shows them.
     pub fn at_date(&mut self, timeline: Option<&crate::format::timeline::TimelineColumns>, day: Option<i64>) {
-        self.at = timeline.zip(day).filter(|(t, d)| t.needs_trees(*d)).map(|(t, d)| (t.clone(), d));
+        self.at = crate::format::timeline::TimelineColumns::at(timeline, day);
     }
 
     /// Whether it matches at a date (the trees not standing at the latest one included).

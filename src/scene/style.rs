@@ -335,7 +335,7 @@ impl TreeStyle {
     /// they were then, by the scene's `timeline`; `None` (or the timeline's
     /// latest day): the trees standing at the latest date, as the tiles hold them.
     pub fn set_date(&mut self, timeline: Option<&crate::format::timeline::TimelineColumns>, day: Option<i64>) {
-        self.at = timeline.zip(day).filter(|(t, d)| t.needs_trees(*d)).map(|(t, d)| (t.clone(), d));
+        self.at = crate::format::timeline::TimelineColumns::at(timeline, day);
     }
 
     /// The day the trees are shown at, if not the latest.

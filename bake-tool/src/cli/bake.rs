@@ -519,7 +519,7 @@ fn census_options(
             // (Every column: --attributes chooses what is kept, not what is read.)
             let all = sylva_bake::input::placements::ReadOptions { attributes: None, ..read.clone() };
             if let Ok(source) = sylva_bake::input::placements::PlacementSource::open(p, &all) {
-                if has_timeline_columns(&source.attribute_names(), None) {
+                if has_timeline_columns(&source.attribute_names()) {
                     eprintln!(
                         "note: {} has planting or removal dates: --timeline shows the trees standing at a date (setDate, the page's year slider)",
                         p.display()

@@ -101,15 +101,13 @@ impl CensusOptions {
 }
 
 /// Whether one file's columns could make a timeline: planting or removal
-/// dates (a census date column only when named, or with several files: many
-/// inventories have a survey date). The bake makes one only when asked
-/// (`--timeline`); it says so where it could.
+/// dates (not a census date column alone: many inventories have a survey
+/// date). The bake makes one only when asked (`--timeline`); it says so
+/// where it could.
 #[must_use]
-pub fn has_timeline_columns(names: &[String], date_column: Option<&str>) -> bool {
+pub fn has_timeline_columns(names: &[String]) -> bool {
     let found = |list: &[&str]| names.iter().any(|n| list.contains(&n.trim().to_lowercase().as_str()));
-    date_column.is_some_and(|c| names.iter().any(|n| n.eq_ignore_ascii_case(c)))
-        || found(PLANTED_NAMES)
-        || found(REMOVED_NAMES)
+    found(PLANTED_NAMES) || found(REMOVED_NAMES)
 }
 
 /// The merged rows: one per tree, its attributes, its timeline.
@@ -632,8 +630,8 @@ mod tests {
         let dated: Vec<bool> = m.set.rows.iter().map(|p| p.dated).collect();
         assert_eq!(dated, [false, true, true, false], "removed in 2019; planted in 2031");
         assert!(m.set.report.skipped.keys().any(|r| r.contains("planting or removal date is no date")));
-        assert!(has_timeline_columns(&["x".into(), "Planted".into()], None));
-        assert!(!has_timeline_columns(&["x".into(), "date".into()], None), "a survey date alone is no timeline");
+        assert!(has_timeline_columns(&["x".into(), "Planted".into()]));
+        assert!(!has_timeline_columns(&["x".into(), "date".into()]), "a survey date alone is no timeline");
     }
 
     #[test]
