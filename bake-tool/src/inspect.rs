@@ -27,8 +27,13 @@ pub fn inspect(path: &Path) -> Result<Value> {
     match (is_scene, ext) {
         (true, _) | (_, "json") => inspect_scene(&path, &bytes),
         (_, "pack") => {
+            let file_bytes = bytes.len() as u64;
+            let parts = parts_json(&name, &bytes)?;
+            let bytes = sylva::format::stored::unstore(&name, bytes)?;
             let pack = decode_pack(&name, &bytes)?;
-            Ok(pack_json(&pack.meta, bytes.len() as u64, &pack))
+            let mut j = pack_json(&pack.meta, file_bytes, &pack);
+            j["parts"] = parts;
+            Ok(j)
         }
         (_, "tile") => {
             // Without the manifest, accept any species index.
@@ -178,8 +183,12 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         let p = dir.join(&s.pack);
         let b = sylva::paths::read_regular(&p, None, sylva::paths::MAX_SCENE_FILE_BYTES)
             .with_context(|| format!("cannot read pack {}", p.display()))?;
+        let file_bytes = b.len() as u64;
+        let parts = parts_json(&p.display().to_string(), &b)?;
+        let b = sylva::format::stored::unstore(&p.display().to_string(), b)?;
         let pack = decode_pack(&p.display().to_string(), &b)?;
-        let mut j = pack_json(&pack.meta, b.len() as u64, &pack);
+        let mut j = pack_json(&pack.meta, file_bytes, &pack);
+        j["parts"] = parts;
         j["trees"] = json!(s.trees);
         species.push(j);
     }
@@ -268,6 +277,22 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
 /// The `inspect --json` object of a decoded pack of `bytes` bytes.
 pub fn pack_summary(pack: &sylva::format::Pack<'_>, bytes: u64) -> Value {
     pack_json(&pack.meta, bytes, pack)
+}
+
+/// Each part a viewer fetches on its own: its bytes in memory and as fetched
+/// (deflated in a stored pack).
+fn parts_json(name: &str, file: &[u8]) -> Result<Value> {
+    use sylva::format::pack::{PackHead, PackPart};
+    let head = PackHead::decode(name, file)?;
+    let names =
+        ["billboards", "impostors", "clusters", "coarse meshes", "full mesh", "bare billboards", "bare impostors"];
+    let parts: Vec<Value> = PackPart::ALL
+        .iter()
+        .zip(names)
+        .filter(|(p, _)| head.part_range(**p).is_some())
+        .map(|(p, n)| json!({ "part": n, "bytes": head.part_bytes(*p), "fetched": head.fetch_bytes(*p) }))
+        .collect();
+    Ok(json!({ "stored": !head.stored.is_empty(), "list": parts }))
 }
 
 fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Value {
@@ -661,6 +686,17 @@ fn pack_text(s: &Value) -> String {
             );
         }
         None => out += "  seasons: one state (evergreen, or baked without seasons)\n",
+    }
+    if let Some(list) = s["parts"]["list"].as_array() {
+        let mb = |v: &Value| v.as_f64().unwrap_or(0.0) / 1e6;
+        let each: Vec<String> = list
+            .iter()
+            .map(|p| {
+                format!("{} {:.2} of {:.2}", p["part"].as_str().unwrap_or("?"), mb(&p["fetched"]), mb(&p["bytes"]))
+            })
+            .collect();
+        let how = if s["parts"]["stored"].as_bool() == Some(true) { "deflated" } else { "as they are" };
+        out += &format!("  fetched by part ({how}, MB): {}\n", each.join(", "));
     }
     let ao = &s["ambient_occlusion"];
     let baked: Vec<&str> =

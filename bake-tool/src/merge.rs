@@ -93,7 +93,7 @@ pub fn merge(
         };
         for sp in &first.species {
             copy_checked(&shards[0].0, &sp.pack, &mut |b| {
-                sylva::format::decode_pack(&sp.pack, b)?;
+                sylva::format::decode_pack(&sp.pack, &sylva::format::stored::unstore(&sp.pack, b.to_vec())?)?;
                 Ok(())
             })?;
         }

@@ -135,6 +135,7 @@ pub fn measure(dir: &Path) -> Result<MemoryModel> {
     let mut packs = Vec::new();
     for s in &m.species {
         let bytes = read(&s.pack)?;
+        let bytes = crate::format::stored::unstore(&s.pack, bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
         let pack = decode_pack(&s.pack, &bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
         let gpu = pack.sections.iter().filter(|(e, _)| &e.kind != b"META").map(|(e, _)| e.bytes).sum();
         // (One season's billboards: a viewer holds the state it draws.)

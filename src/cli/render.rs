@@ -539,6 +539,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     let pack = pack.expect("clap requires --scene or --pack");
     let bytes = sylva::paths::read_regular(&pack, None, sylva::paths::MAX_SCENE_FILE_BYTES)
         .with_context(|| format!("cannot read {}", pack.display()))?;
+    let bytes = sylva::format::stored::unstore(&pack.display().to_string(), bytes)?;
     let decoded = decode_pack(&pack.display().to_string(), &bytes)?;
     let repr = match repr {
         PackReprArg::Mesh => {

@@ -28,15 +28,28 @@ pub struct Rgba8 {
 /// height (u32, little endian) and `width · height · 4` bytes of RGBA8.
 pub const DECODED_MAGIC: &[u8; 8] = b"SYRGBA01";
 
-/// An image's pixels in a [`DECODED_MAGIC`] container.
+/// An image's pixels in a [`DECODED_MAGIC`] container (magic, width, height,
+/// the encoded image's bytes as fetched, each u32; then the pixels): what the
+/// browser hands the streamer for a PNG or JPEG it decoded.
 #[must_use]
-pub fn encode_decoded(width: u32, height: u32, pixels: &[u8]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(16 + pixels.len());
+pub fn encode_decoded(width: u32, height: u32, fetched_bytes: u32, pixels: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(20 + pixels.len());
     out.extend_from_slice(DECODED_MAGIC);
     out.extend_from_slice(&width.to_le_bytes());
     out.extend_from_slice(&height.to_le_bytes());
+    out.extend_from_slice(&fetched_bytes.to_le_bytes());
     out.extend_from_slice(pixels);
     out
+}
+
+/// Bytes that came over the network for a response `body`: its length, or
+/// for an image the browser decoded the encoded image's.
+#[must_use]
+pub fn fetched_bytes(body: &[u8]) -> u64 {
+    match body.strip_prefix(DECODED_MAGIC).and_then(|rest| rest.get(8..12)) {
+        Some(b) => u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        None => body.len() as u64,
+    }
 }
 
 /// Decodes a PNG or JPEG image (natively; in the browser an image it
@@ -49,10 +62,10 @@ pub fn decode_image(file: &str, bytes: &[u8], max_px: u32) -> Result<Rgba8, Deco
     let bad = |m: String| DecodeError::new(file, Problem::Invalid(m));
     let img = if let Some(rest) = bytes.strip_prefix(DECODED_MAGIC) {
         let word = |k: usize| rest.get(4 * k..4 * k + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-        let (Some(width), Some(height)) = (word(0), word(1)) else {
+        let (Some(width), Some(height), Some(_)) = (word(0), word(1), word(2)) else {
             return Err(bad("a decoded image without its size".into()));
         };
-        Rgba8 { width, height, pixels: rest[8..].to_vec() }
+        Rgba8 { width, height, pixels: rest[12..].to_vec() }
     } else {
         decode_encoded(bytes, max_px).map_err(bad)?
     };
@@ -209,11 +222,14 @@ mod tests {
         assert!(decode_image("cut.png", &cut, 256).is_err());
         // What the browser decoded: taken as it is, within the same limits.
         let pixels: Vec<u8> = (0..2 * 3 * 4).map(|k| k as u8).collect();
-        let img = decode_image("b.jpg", &encode_decoded(2, 3, &pixels), 256).unwrap();
+        let img = decode_image("b.jpg", &encode_decoded(2, 3, 99, &pixels), 256).unwrap();
         assert_eq!((img.width, img.height, img.pixels), (2, 3, pixels.clone()));
-        assert!(decode_image("b.jpg", &encode_decoded(2, 3, &pixels[1..]), 256).is_err(), "short");
-        assert!(decode_image("b.jpg", &encode_decoded(300, 1, &vec![0; 1200]), 256).is_err(), "too wide");
+        assert!(decode_image("b.jpg", &encode_decoded(2, 3, 99, &pixels[1..]), 256).is_err(), "short");
+        assert!(decode_image("b.jpg", &encode_decoded(300, 1, 99, &vec![0; 1200]), 256).is_err(), "too wide");
         assert!(decode_image("b.jpg", &DECODED_MAGIC[..], 256).is_err(), "no size");
-        assert!(decode_image("b.jpg", &encode_decoded(0, 0, &[]), 256).is_err(), "empty");
+        assert!(decode_image("b.jpg", &encode_decoded(0, 0, 0, &[]), 256).is_err(), "empty");
+        // What came over the network: the encoded image's bytes, not its pixels'.
+        assert_eq!(fetched_bytes(&encode_decoded(2, 3, 99, &pixels)), 99);
+        assert_eq!(fetched_bytes(b"\xff\xd8\xff\xe0 a jpeg"), 11);
     }
 }

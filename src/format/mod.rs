@@ -18,6 +18,7 @@ pub mod index;
 pub mod manifest;
 pub mod mesh;
 pub mod pack;
+pub mod stored;
 pub mod terrain;
 pub mod tile;
 pub mod timeline;

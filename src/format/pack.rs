@@ -23,8 +23,15 @@ use super::mesh::{mesh_meta_finite, validate_mesh, validate_variants};
 
 /// First four bytes of a pack file.
 pub const PACK_MAGIC: [u8; 4] = *b"SYPK";
-/// Pack format version written and read by this build.
+/// Pack format version of a pack whose sections lie in the file as they are
+/// (what [`encode_pack`] writes; read by this build).
 pub const PACK_VERSION: u16 = 1;
+/// Pack format version of a *stored* pack: the same head, then each
+/// [`PackPart`] deflated as one block ([`StoredBlock`], the `STOR` section);
+/// what a bake writes to a scene (read by this build; `crate::format::stored`).
+pub const PACK_VERSION_STORED: u16 = 2;
+/// Bytes per `STOR` entry.
+pub const STORED_BLOCK_BYTES: u64 = 32;
 /// Bytes in the pack header.
 pub const PACK_HEADER_BYTES: usize = 32;
 /// Bytes per section-table entry.
@@ -42,6 +49,9 @@ pub const MAX_TEXTURE_LAYERS: u32 = 256;
 pub mod kind {
     /// JSON metadata ([`super::PackMeta`]).
     pub const META: [u8; 4] = *b"META";
+    /// A stored pack's blocks ([`super::StoredBlock`] × count, stride 32),
+    /// the second section, right after `META`: part of the head.
+    pub const STORED: [u8; 4] = *b"STOR";
     /// Mesh vertices ([`super::MeshVertex`]) of level `index`.
     pub const MESH_VERTICES: [u8; 4] = *b"MVTX";
     /// Mesh indices (u32) of level `index`.
@@ -360,7 +370,7 @@ impl std::str::FromStr for Season {
 /// drops them where the tier has them apart (mesh leaves, cloud planes,
 /// ellipsoids) and, for the far tiers, draws captures of the bare wood: the
 /// billboard and impostor sections with index 1, the same layout as index 0's,
-/// in a fetch part of their own ([`PackPart::BareFar`]) that only a leaf-off
+/// in a fetch part of their own ([`PackPart::BareBillboards`], [`PackPart::BareImpostors`]) that only a leaf-off
 /// view fetches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -502,8 +512,8 @@ fn read_table(bytes: &[u8], full: bool) -> Result<(Vec<SectionEntry>, u64), Prob
     let r = Reader::new(bytes);
     r.magic("Sylva LoD pack", &PACK_MAGIC)?;
     let version = r.u16("header.version", 4)?;
-    if version != PACK_VERSION {
-        return Err(Problem::UnsupportedVersion { found: version.into(), supported: PACK_VERSION.into() });
+    if version != PACK_VERSION && version != PACK_VERSION_STORED {
+        return Err(Problem::UnsupportedVersion { found: version.into(), supported: PACK_VERSION_STORED.into() });
     }
     let header_bytes = r.u16("header.header_bytes", 6)?;
     if usize::from(header_bytes) != PACK_HEADER_BYTES {
@@ -516,7 +526,8 @@ fn read_table(bytes: &[u8], full: bool) -> Result<(Vec<SectionEntry>, u64), Prob
     }
     let file_bytes = r.u64("header.file_bytes", 16)?;
     let len = bytes.len() as u64;
-    if file_bytes < len || (full && file_bytes != len) {
+    // (A stored pack's file may be larger than its parts inflated, file_bytes.)
+    if (file_bytes < len && version != PACK_VERSION_STORED) || (full && file_bytes != len) {
         return Err(if file_bytes > len {
             Problem::Truncated { what: "pack (header.file_bytes)".into(), start: 0, end: file_bytes, len }
         } else {
@@ -569,10 +580,23 @@ fn read_table(bytes: &[u8], full: bool) -> Result<(Vec<SectionEntry>, u64), Prob
     if sections.first().is_none_or(|e| e.kind != kind::META) {
         return Err(Problem::Invalid("the first section is not META".into()));
     }
+    // A stored pack's blocks follow META; no other pack has them.
+    let stored_at = sections.iter().position(|e| e.kind == kind::STORED);
+    match (version == PACK_VERSION_STORED, stored_at) {
+        (true, Some(1)) | (false, None) => {}
+        (true, _) => return Err(Problem::Invalid("a stored pack (version 2) whose second section is not STOR".into())),
+        (false, Some(_)) => return Err(Problem::Invalid("a STOR section in a version 1 pack".into())),
+    }
     Ok((sections, file_bytes))
 }
 
 fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
+    let (entries, file_bytes) = read_table(bytes, false)?;
+    if file_bytes != bytes.len() as u64 && entries.get(1).is_some_and(|e| e.kind == kind::STORED) {
+        return Err(Problem::Invalid(
+            "a stored pack (its parts deflated): read it through format::stored::unstore, or by parts".into(),
+        ));
+    }
     let (entries, _) = read_table(bytes, true)?;
     let sections: Vec<(SectionEntry, &[u8])> =
         entries.into_iter().map(|e| (e, &bytes[e.offset as usize..(e.offset + e.bytes) as usize])).collect();
@@ -582,25 +606,59 @@ fn decode_pack_inner(bytes: &[u8]) -> Result<Pack<'_>, Problem> {
     Ok(pack)
 }
 
-/// The head of a pack (header, section table, `META`): what a viewer reads
-/// first, to fetch only the sections its views need by byte range.
+/// The head of a pack (header, section table, `META`, and a stored pack's
+/// `STOR`): what a viewer reads first, to fetch only the sections its views
+/// need by byte range.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PackHead {
     /// The metadata.
     pub meta: PackMeta,
     /// The section table (`META` first).
     pub entries: Vec<SectionEntry>,
-    /// Size of the whole pack file.
+    /// Size of the whole pack (a stored pack's: as if its parts were not
+    /// deflated; the offsets of `entries` are in that layout).
     pub file_bytes: u64,
-    /// The head bytes themselves (header, table, `META`).
+    /// A stored pack's blocks, one per part it holds, in file order (empty
+    /// for a version 1 pack).
+    pub stored: Vec<StoredBlock>,
+    /// The head bytes themselves (header, table, `META`, `STOR`).
     pub bytes: Vec<u8>,
 }
 
-/// The parts of a pack a viewer fetches separately, each one byte range.
+/// One part of a stored pack: the bytes `logical` (start, end exclusive; as
+/// the section table places them, alignment padding included) are in the file
+/// at `stored`, deflated (RFC 1951, raw: no zlib or gzip wrapper).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StoredBlock {
+    /// The part's range in the pack as the section table places it.
+    pub logical: (u64, u64),
+    /// Where its deflated bytes are in the file.
+    pub stored: (u64, u64),
+}
+
+/// How to fetch one part: the file's bytes `range` (start, end exclusive),
+/// and, for a stored pack, the part's size once inflated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PartFetch {
+    /// Bytes of the file to fetch.
+    pub range: (u64, u64),
+    /// `Some(n)`: the bytes are deflated; inflated they are exactly `n` bytes,
+    /// the part's range in the section table's layout ([`PackHead::part_range`]).
+    pub inflated: Option<u64>,
+}
+
+/// Deflate expands no more than about 1032:1; a block claiming more is refused
+/// before anything is inflated.
+pub const MAX_INFLATE_RATIO: u64 = 1100;
+
+/// The parts of a pack a viewer fetches separately, each one byte range (in a
+/// stored pack one deflated block).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PackPart {
-    /// Billboard colour and normal arrays (the far field).
+    /// Billboard colour, normal and occlusion arrays (a far tier).
     Billboards,
+    /// Multi-view impostor colour and surface arrays (the other far tier).
+    Impostors,
     /// Ellipsoid and line levels.
     Clusters,
     /// The coarser mesh levels (1 and up) and the material textures every mesh
@@ -608,41 +666,80 @@ pub enum PackPart {
     MeshCoarse,
     /// Mesh level 0, the full mesh (needed only close up; always with `MeshCoarse`).
     MeshFull,
-    /// The bare tree's billboards and impostors (a deciduous species' far
-    /// field in leaf-off, [`SeasonMeta`]): fetched instead of `Billboards` then.
-    BareFar,
+    /// The bare tree's billboards (a deciduous species' far field in
+    /// leaf-off, [`SeasonMeta`]): fetched instead of `Billboards` then.
+    BareBillboards,
+    /// The bare tree's impostors: fetched instead of `Impostors` in leaf-off.
+    BareImpostors,
 }
 
 /// Index of [`PackPart::Billboards`] in [`PackPart::ALL`].
-pub const PART_FAR: usize = 0;
-/// Index of [`PackPart::BareFar`] in [`PackPart::ALL`].
-pub const PART_BARE_FAR: usize = 4;
+pub const PART_BILLBOARDS: usize = 0;
+/// Index of [`PackPart::Impostors`] in [`PackPart::ALL`].
+pub const PART_IMPOSTORS: usize = 1;
+/// Index of [`PackPart::BareBillboards`] in [`PackPart::ALL`].
+pub const PART_BARE_BILLBOARDS: usize = 5;
+/// Index of [`PackPart::BareImpostors`] in [`PackPart::ALL`].
+pub const PART_BARE_IMPOSTORS: usize = 6;
+/// The far tiers' parts (indices into [`PackPart::ALL`]).
+pub const FAR_PARTS: [usize; 4] = [PART_BILLBOARDS, PART_IMPOSTORS, PART_BARE_BILLBOARDS, PART_BARE_IMPOSTORS];
 
 /// Number of [`PackPart`]s.
-pub const PACK_PARTS: usize = 5;
+pub const PACK_PARTS: usize = 7;
 
 impl PackPart {
     /// Every part (indices of the per-part arrays a viewer keeps).
-    pub const ALL: [PackPart; PACK_PARTS] =
-        [PackPart::Billboards, PackPart::Clusters, PackPart::MeshCoarse, PackPart::MeshFull, PackPart::BareFar];
+    pub const ALL: [PackPart; PACK_PARTS] = [
+        PackPart::Billboards,
+        PackPart::Impostors,
+        PackPart::Clusters,
+        PackPart::MeshCoarse,
+        PackPart::MeshFull,
+        PackPart::BareBillboards,
+        PackPart::BareImpostors,
+    ];
 
     /// Indices into [`Self::ALL`] in fetch order: the far tiers (either
-    /// state) first, then coarse to fine.
-    pub const FETCH_ORDER: [usize; PACK_PARTS] = [PART_FAR, PART_BARE_FAR, 1, 2, 3];
+    /// state, either kind) first, then coarse to fine.
+    pub const FETCH_ORDER: [usize; PACK_PARTS] =
+        [PART_IMPOSTORS, PART_BILLBOARDS, PART_BARE_IMPOSTORS, PART_BARE_BILLBOARDS, 2, 3, 4];
 
-    /// A far field (the billboards and impostors of one season): fetched
-    /// whatever the GPU budget, before anything finer.
+    /// A far field (billboards or impostors, of one season): fetched whatever
+    /// the GPU budget, before anything finer.
     #[must_use]
     pub fn is_far(self) -> bool {
-        matches!(self, PackPart::Billboards | PackPart::BareFar)
+        matches!(self, PackPart::Billboards | PackPart::Impostors | PackPart::BareBillboards | PackPart::BareImpostors)
     }
 
-    /// The part a section belongs to (`None` for `META` and unknown kinds).
+    /// The bare wood's far tier (state 1) in place of this leafy one, and back.
+    #[must_use]
+    pub fn other_state(self) -> Option<Self> {
+        match self {
+            PackPart::Billboards => Some(PackPart::BareBillboards),
+            PackPart::Impostors => Some(PackPart::BareImpostors),
+            PackPart::BareBillboards => Some(PackPart::Billboards),
+            PackPart::BareImpostors => Some(PackPart::Impostors),
+            _ => None,
+        }
+    }
+
+    /// Index of this part in [`Self::ALL`].
+    #[must_use]
+    pub fn index(self) -> usize {
+        Self::ALL.iter().position(|p| *p == self).expect("every part is in ALL")
+    }
+
+    /// The part a section belongs to (`None` for `META`, `STOR` and unknown kinds).
     #[must_use]
     pub fn of(k: [u8; 4], index: u32) -> Option<Self> {
+        let bare = index == 1;
         match k {
-            k if kind::FAR_TIERS.contains(&k) && index == 1 => Some(PackPart::BareFar),
-            k if kind::FAR_TIERS.contains(&k) => Some(PackPart::Billboards),
+            kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL | kind::BILLBOARD_AO if bare => {
+                Some(PackPart::BareBillboards)
+            }
+            kind::BILLBOARD_COLOR | kind::BILLBOARD_NORMAL | kind::BILLBOARD_AO => Some(PackPart::Billboards),
+            kind::IMPOSTOR_COLOR | kind::IMPOSTOR_SURFACE if bare => Some(PackPart::BareImpostors),
+            kind::IMPOSTOR_COLOR | kind::IMPOSTOR_SURFACE => Some(PackPart::Impostors),
             kind::ELLIPSOIDS | kind::LINES | kind::AO_FIELD => Some(PackPart::Clusters),
             kind::MESH_VERTICES | kind::MESH_INDICES | kind::MESH_VARIANTS if index == 0 => Some(PackPart::MeshFull),
             kind::MESH_VERTICES
@@ -661,7 +758,8 @@ impl PackHead {
     /// Decodes the first bytes of a pack (at least its head; a whole pack works too).
     ///
     /// # Errors
-    /// A [`DecodeError`] as for [`decode_pack`], for the header, table and `META`.
+    /// A [`DecodeError`] as for [`decode_pack`], for the header, table, `META`
+    /// and a stored pack's blocks.
     pub fn decode(file: &str, bytes: &[u8]) -> Result<Self, DecodeError> {
         let inner = || -> Result<Self, Problem> {
             let (entries, file_bytes) = read_table(bytes, false)?;
@@ -669,14 +767,22 @@ impl PackHead {
             let r = Reader::new(bytes);
             let meta_bytes = r.slice("META section", m.offset, m.bytes)?;
             let meta: PackMeta = serde_json::from_slice(meta_bytes).map_err(|e| Problem::Json(format!("META: {e}")))?;
-            let head_end = (m.offset + m.bytes) as usize;
-            Ok(Self { meta, entries, file_bytes, bytes: bytes[..head_end].to_vec() })
+            let mut head_end = m.offset + m.bytes;
+            let mut head = Self { meta, entries, file_bytes, stored: Vec::new(), bytes: Vec::new() };
+            if let Some(s) = head.entries.get(1).copied().filter(|e| e.kind == kind::STORED) {
+                let table = r.slice("STOR section", s.offset, s.bytes)?;
+                head.stored = read_blocks(&head, s, table)?;
+                head_end = s.offset + s.bytes;
+            }
+            head.bytes = bytes[..head_end as usize].to_vec();
+            Ok(head)
         };
         inner().map_err(|p| DecodeError::new(file, p))
     }
 
-    /// The byte range (start, end exclusive) covering every section of `part`,
-    /// or `None` when the pack has none.
+    /// The byte range (start, end exclusive) covering every section of `part`
+    /// as the section table places them, or `None` when the pack has none.
+    /// (A stored pack's file holds it deflated elsewhere: [`Self::fetch_of`].)
     #[must_use]
     pub fn part_range(&self, part: PackPart) -> Option<(u64, u64)> {
         let mut it = self.entries.iter().filter(|e| PackPart::of(e.kind, e.index) == Some(part));
@@ -687,6 +793,30 @@ impl PackHead {
             hi = hi.max(e.offset + e.bytes);
         }
         Some((lo, hi))
+    }
+
+    /// What to fetch for `part`: its range, or in a stored pack its block
+    /// (validated on decode: every part held is exactly one block).
+    #[must_use]
+    pub fn fetch_of(&self, part: PackPart) -> Option<PartFetch> {
+        let range = self.part_range(part)?;
+        if self.stored.is_empty() {
+            return Some(PartFetch { range, inflated: None });
+        }
+        let b = self.stored.iter().find(|b| b.logical == range)?;
+        Some(PartFetch { range: b.stored, inflated: Some(range.1 - range.0) })
+    }
+
+    /// Bytes of `part` in the file (deflated in a stored pack), 0 when absent.
+    #[must_use]
+    pub fn fetch_bytes(&self, part: PackPart) -> u64 {
+        self.fetch_of(part).map_or(0, |f| f.range.1 - f.range.0)
+    }
+
+    /// Bytes of `part` once fetched (and inflated): what it holds in memory, 0 when absent.
+    #[must_use]
+    pub fn part_bytes(&self, part: PackPart) -> u64 {
+        self.part_range(part).map_or(0, |(a, b)| b - a)
     }
 
     /// A pack of the sections held in `parts` (each `(file offset, bytes)`),
@@ -711,6 +841,65 @@ impl PackHead {
         validate_meta(&pack, true).map_err(|p| DecodeError::new(file, p))?;
         Ok(pack)
     }
+}
+
+/// Reads and checks a stored pack's `STOR` table against its section table:
+/// blocks in file order right after the head, one per part the pack holds,
+/// each exactly that part's range.
+fn read_blocks(head: &PackHead, s: SectionEntry, table: &[u8]) -> Result<Vec<StoredBlock>, Problem> {
+    if s.index != 0 || s.stride as u64 != STORED_BLOCK_BYTES || s.count as usize > PACK_PARTS {
+        return Err(Problem::Invalid(format!(
+            "the STOR section declares {} blocks of {} bytes (index {}): at most {PACK_PARTS} of 32",
+            s.count, s.stride, s.index
+        )));
+    }
+    let r = Reader::new(table);
+    let head_end = s.offset + s.bytes;
+    let mut blocks = Vec::with_capacity(s.count as usize);
+    let mut stored_end = head_end;
+    for i in 0..u64::from(s.count) {
+        let what = format!("STOR block[{i}]");
+        let at = i * STORED_BLOCK_BYTES;
+        let word = |o: u64| r.u64(&what, at + o);
+        let (lo, len, so, slen) = (word(0)?, word(8)?, word(16)?, word(24)?);
+        let logical = (lo, lo.checked_add(len).filter(|e| *e <= head.file_bytes).unwrap_or(u64::MAX));
+        if logical.1 == u64::MAX || len == 0 || lo < head_end {
+            return Err(Problem::Invalid(format!(
+                "{what}: bytes {lo} + {len} are not a part after the head ({head_end}) within the pack's {} bytes",
+                head.file_bytes
+            )));
+        }
+        if so != stored_end || slen == 0 || len > slen.saturating_mul(MAX_INFLATE_RATIO) {
+            return Err(Problem::Invalid(format!(
+                "{what}: stored at {so} + {slen} bytes for {len} (blocks follow the head and each other, \
+                 inflating at most {MAX_INFLATE_RATIO}:1)"
+            )));
+        }
+        stored_end = so + slen;
+        blocks.push(StoredBlock { logical, stored: (so, stored_end) });
+    }
+    // Each part held is one block, and each block one part.
+    let parts: Vec<(u64, u64)> = PackPart::ALL.iter().filter_map(|p| head.part_range(*p)).collect();
+    let unplaced = head.entries.iter().skip(2).find(|e| PackPart::of(e.kind, e.index).is_none());
+    if let Some(e) = unplaced {
+        return Err(Problem::Invalid(format!(
+            "section {} in a stored pack belongs to no part",
+            String::from_utf8_lossy(&e.kind)
+        )));
+    }
+    if parts.len() != blocks.len() || !parts.iter().all(|p| blocks.iter().any(|b| b.logical == *p)) {
+        return Err(Problem::Invalid(format!(
+            "the STOR section's {} blocks are not the pack's {} parts",
+            blocks.len(),
+            parts.len()
+        )));
+    }
+    let mut ranges: Vec<(u64, u64)> = blocks.iter().map(|b| b.logical).collect();
+    ranges.sort_unstable();
+    if ranges.windows(2).any(|w| w[1].0 < w[0].1) {
+        return Err(Problem::Invalid("the STOR section's parts overlap".into()));
+    }
+    Ok(blocks)
 }
 
 /// Checks the metadata against the sections. `partial`: sections may be

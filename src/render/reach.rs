@@ -27,6 +27,8 @@ struct Measured {
     fade_band: f32,
     representations: Representations,
     lod_policy: bool,
+    /// Which far tier a species with both draws (and so fetches).
+    far_tier: super::settings::FarTier,
     /// The season drawn, and the date the species' own seasons follow (which
     /// deciduous species want their bare far tiers).
     season: super::settings::Season,
@@ -65,6 +67,7 @@ impl Reach {
             fade_band: settings.fade_band,
             representations: settings.representations,
             lod_policy: settings.lod_policy,
+            far_tier: settings.far_tier,
             season: settings.season,
             date: settings.date,
             residency: generation,
@@ -174,7 +177,21 @@ impl Reach {
         let bare = meta.season.as_ref().is_some_and(|s| {
             s.bare_far && super::settings::season_at(Some(s), m.season, m.date) == super::settings::Season::LeafOff
         });
-        [b.far && !bare, clusters, meshes || cloud, full, b.far && bare]
+        // One far tier fetched: the one `Species` draws (impostors where set and
+        // held, else billboards).
+        let impostors = meta.impostors.is_some()
+            && (m.far_tier == super::settings::FarTier::Impostors || meta.billboards.is_none());
+        let billboards = !impostors && meta.billboards.is_some();
+        let (leafy, bare) = (b.far && !bare, b.far && bare);
+        [
+            leafy && billboards,
+            leafy && impostors,
+            clusters,
+            meshes || cloud,
+            full,
+            bare && billboards,
+            bare && impostors,
+        ]
     }
 }
 
@@ -198,6 +215,7 @@ mod tests {
                 fade_band: 0.12,
                 representations: Representations::ALL,
                 lod_policy: false,
+                far_tier: super::super::settings::FarTier::Impostors,
                 season: crate::format::pack::Season::LeafOn,
                 date: None,
                 residency: 0,
@@ -236,22 +254,22 @@ mod tests {
             cloud: None,
             season: None,
         };
-        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
+        assert_eq!(reach.parts_needed(0, &meta), [false, true, false, false, false, false, false]);
         // Leaf-off: a deciduous species with bare far tiers wants them instead;
         // an evergreen (no season) or one without them its leafy ones.
         let mut bare = reach.clone();
         if let Some(m) = bare.measured.as_mut() {
             m.season = crate::format::pack::Season::LeafOff;
         }
-        assert_eq!(bare.parts_needed(0, &meta), [true, false, false, false, false]);
+        assert_eq!(bare.parts_needed(0, &meta), [false, true, false, false, false, false, false]);
         meta.season = Some(crate::format::pack::SeasonMeta {
             autumn: [200, 90, 30],
             bare_far: true,
             bare_cover: 0.2,
             genus: None,
         });
-        assert_eq!(bare.parts_needed(0, &meta), [false, false, false, false, true]);
-        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
+        assert_eq!(bare.parts_needed(0, &meta), [false, false, false, false, false, false, true]);
+        assert_eq!(reach.parts_needed(0, &meta), [false, true, false, false, false, false, false]);
         // At a date: a January view at 50° N wants the bare far tiers of a
         // deciduous species, a July view the leafy ones, whatever the season set.
         for (day, bare_wanted) in [(15.0, true), (196.0, false)] {
@@ -259,7 +277,11 @@ mod tests {
             if let Some(m) = dated.measured.as_mut() {
                 m.date = Some(super::super::settings::SeasonDate { day, latitude: 50.0, elevation_m: 0.0 });
             }
-            assert_eq!(dated.parts_needed(0, &meta), [!bare_wanted, false, false, false, bare_wanted], "day {day}");
+            assert_eq!(
+                dated.parts_needed(0, &meta),
+                [false, !bare_wanted, false, false, false, false, bare_wanted],
+                "day {day}"
+            );
         }
         meta.season = None;
         // A billboard cloud from 40 px: not for 5 px trees; for 45 px ones the
@@ -274,10 +296,10 @@ mod tests {
             pareto_error: None,
             pareto_cost: None,
         });
-        assert_eq!(reach.parts_needed(0, &meta), [true, false, false, false, false]);
+        assert_eq!(reach.parts_needed(0, &meta), [false, true, false, false, false, false, false]);
         let mut closer = reach.clone();
         closer.species_max_px = vec![45.0];
-        assert_eq!(closer.parts_needed(0, &meta), [true, false, true, false, false]);
+        assert_eq!(closer.parts_needed(0, &meta), [false, true, false, true, false, false, false]);
         // The LoD policy: a cloud the bake found no better than the far tier is
         // not fetched; one it kept is.
         let mut policy = closer.clone();
@@ -285,12 +307,48 @@ mod tests {
             m.lod_policy = true;
         }
         meta.cloud.as_mut().unwrap().pareto_error = Some([0.03, 0.031]);
-        assert_eq!(policy.parts_needed(0, &meta), [true, false, false, false, false]);
+        assert_eq!(policy.parts_needed(0, &meta), [false, true, false, false, false, false, false]);
         meta.cloud.as_mut().unwrap().pareto_error = Some([0.02, 0.031]);
-        assert_eq!(policy.parts_needed(0, &meta), [true, false, true, false, false]);
+        assert_eq!(policy.parts_needed(0, &meta), [false, true, false, true, false, false, false]);
         meta.cloud = None;
         // Without any far tier the mesh is the coarsest and is fetched.
         meta.impostors = None;
-        assert_eq!(reach.parts_needed(0, &meta), [false, false, true, true, false]);
+        assert_eq!(reach.parts_needed(0, &meta), [false, false, false, true, true, false, false]);
     }
+
+    /// A pack with both far tiers: the one the settings draw is fetched, the
+    /// other not; a pack with one tier: that one, whatever the setting.
+    #[test]
+    fn one_far_tier_is_fetched() {
+        use super::super::settings::FarTier;
+        let mut reach = Reach { species_max_px: vec![5.0], species_tallest_m: vec![20.0], measured: None };
+        let base = RenderSettings::default();
+        let view =
+            crate::camera::Camera::look_at(glam::DVec3::new(0.0, -100.0, 20.0), glam::DVec3::ZERO).view_data(64, 64);
+        let meta = |billboards: bool, impostors: bool| {
+            let mut m: PackMeta = serde_json::from_str(FAR_META).unwrap();
+            if !billboards {
+                m.billboards = None;
+            }
+            if !impostors {
+                m.impostors = None;
+            }
+            m
+        };
+        for (tier, both) in [(FarTier::Impostors, [false, true]), (FarTier::Billboards, [true, false])] {
+            let settings = RenderSettings { far_tier: tier, ..base };
+            reach.measure(&[], 0, 1, &view, &settings);
+            reach.species_max_px = vec![5.0];
+            assert_eq!(reach.parts_needed(0, &meta(true, true))[..2], both, "{tier:?}");
+            assert_eq!(reach.parts_needed(0, &meta(true, false))[..2], [true, false], "{tier:?}");
+            assert_eq!(reach.parts_needed(0, &meta(false, true))[..2], [false, true], "{tier:?}");
+        }
+    }
+
+    const FAR_META: &str = r#"{"name":"t","height_m":10,"bounds_min":[-1,-1,0],"bounds_max":[1,1,10],
+        "materials":[],"material_texture":null,"mesh_levels":[],"clusters":null,"cloud":null,
+        "billboards":{"angles":8,"azimuths":1,"texture":{"size":4,"layers":8,"mips":1},"center":[0,0,5],
+            "half_width":1,"half_height":5,"select_px":0},
+        "impostors":{"grid":2,"texture":{"size":4,"layers":4,"mips":1},"center":[0,0,5],"radius":6,
+            "normal_length":[]}}"#;
 }

@@ -68,6 +68,11 @@ pub trait Fetcher {
     /// Starts fetching bytes `range` of `url` (all of it for `None`). A server
     /// that ignores ranges may answer with the whole file: callers check the length.
     fn start_range(&mut self, url: &str, range: Option<ByteRange>) -> RequestId;
+    /// Starts inflating `deflated` (raw deflate: a stored pack's part, fetched
+    /// from `url`) to exactly `bytes` bytes, off the caller's thread; the result
+    /// comes back from `poll` as a fetch's does (an error when the stream is
+    /// corrupt or does not inflate to exactly that). No request goes out.
+    fn start_inflate(&mut self, url: &str, deflated: Vec<u8>, bytes: u64) -> RequestId;
     /// Finished requests since the last poll.
     fn poll(&mut self) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)>;
     /// Requests started and not yet returned by `poll`.
@@ -106,7 +111,12 @@ mod native {
     use std::collections::HashMap;
     use std::sync::mpsc;
 
-    type Job = (RequestId, String, Option<super::ByteRange>);
+    /// A fetch of a range (or the whole file), or an inflation of fetched bytes.
+    enum Work {
+        Fetch(Option<super::ByteRange>),
+        Inflate(Vec<u8>, u64),
+    }
+    type Job = (RequestId, String, Work);
     type Done = (RequestId, Result<Vec<u8>, FetchError>);
 
     /// Worker threads serving local files and HTTP(S).
@@ -134,8 +144,12 @@ mod native {
                     let agent = agent.clone();
                     std::thread::spawn(move || loop {
                         let job = rx.lock().map(|r| r.recv());
-                        let Ok(Ok((id, url, range))) = job else { return };
-                        if tx.send((id, fetch_blocking(&agent, &url, range))).is_err() {
+                        let Ok(Ok((id, url, work))) = job else { return };
+                        let result = match work {
+                            Work::Fetch(range) => fetch_blocking(&agent, &url, range),
+                            Work::Inflate(bytes, len) => inflate(&url, &bytes, len),
+                        };
+                        if tx.send((id, result)).is_err() {
                             return;
                         }
                     })
@@ -205,6 +219,12 @@ mod native {
         }
     }
 
+    /// A stored pack's part inflated, or why not (corrupt: worth a fresh fetch).
+    pub(crate) fn inflate(url: &str, bytes: &[u8], len: u64) -> Result<Vec<u8>, FetchError> {
+        crate::format::stored::inflate_exact(bytes, len)
+            .map_err(|m| FetchError::Transport { url: url.into(), message: format!("the stored part {m}") })
+    }
+
     /// Whether `e` says a path's links loop (ELOOP).
     fn is_link_loop(e: &std::io::Error) -> bool {
         #[cfg(unix)]
@@ -219,7 +239,17 @@ mod native {
             self.next += 1;
             self.pending.insert(id, url.to_string());
             if let Some(jobs) = &self.jobs {
-                let _ = jobs.send((id, url.to_string(), range));
+                let _ = jobs.send((id, url.to_string(), Work::Fetch(range)));
+            }
+            id
+        }
+
+        fn start_inflate(&mut self, url: &str, deflated: Vec<u8>, bytes: u64) -> RequestId {
+            let id = self.next;
+            self.next += 1;
+            self.pending.insert(id, url.to_string());
+            if let Some(jobs) = &self.jobs {
+                let _ = jobs.send((id, url.to_string(), Work::Inflate(deflated, bytes)));
             }
             id
         }

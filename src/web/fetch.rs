@@ -79,7 +79,54 @@ async fn decode_in_browser(bytes: &js_sys::Uint8Array) -> Result<Vec<u8>, JsValu
     context.draw_image_with_image_bitmap(&bitmap, 0.0, 0.0)?;
     bitmap.close();
     let data = context.get_image_data(0.0, 0.0, f64::from(w), f64::from(h))?;
-    Ok(crate::format::imagery::encode_decoded(w, h, &data.data()))
+    Ok(crate::format::imagery::encode_decoded(w, h, bytes.length(), &data.data()))
+}
+
+#[wasm_bindgen]
+extern "C" {
+    /// The Compression Streams API's inflater (web-sys has it only among its
+    /// unstable APIs).
+    type DecompressionStream;
+    #[wasm_bindgen(constructor, catch)]
+    fn new(format: &str) -> Result<DecompressionStream, JsValue>;
+}
+
+/// A stored pack's part inflated by the browser (`DecompressionStream`,
+/// deflate-raw: no inflater in the wasm module), read chunk by chunk and
+/// stopped past `len` bytes; an error unless it is exactly `len` bytes.
+async fn inflate_in_browser(url: &str, deflated: &[u8], len: u64) -> Result<Vec<u8>, FetchError> {
+    let fail = |m: String| FetchError::Transport { url: url.to_string(), message: format!("the stored part {m}") };
+    let js = |e: JsValue| fail(format!("does not inflate ({})", e.as_string().unwrap_or_else(|| format!("{e:?}"))));
+    let inflater = DecompressionStream::new("deflate-raw").map_err(js)?;
+    let blob = web_sys::Blob::new_with_u8_array_sequence(&js_sys::Array::of1(&js_sys::Uint8Array::from(deflated)))
+        .map_err(js)?;
+    // (A DecompressionStream is a readable/writable pair.)
+    let reader: web_sys::ReadableStreamDefaultReader = blob
+        .stream()
+        .pipe_through(inflater.unchecked_ref())
+        .get_reader()
+        .dyn_into()
+        .map_err(|o: js_sys::Object| js(o.into()))?;
+    let mut out = Vec::with_capacity(len as usize);
+    loop {
+        let chunk = JsFuture::from(reader.read()).await.map_err(js)?;
+        if js_sys::Reflect::get(&chunk, &"done".into()).map_err(js)?.is_truthy() {
+            break;
+        }
+        let value: js_sys::Uint8Array =
+            js_sys::Reflect::get(&chunk, &"value".into()).map_err(js)?.dyn_into().map_err(js)?;
+        let at = out.len();
+        if (at + value.length() as usize) as u64 > len {
+            let _ = reader.cancel();
+            return Err(fail(format!("inflates to more than {len} bytes")));
+        }
+        out.resize(at + value.length() as usize, 0);
+        value.copy_to(&mut out[at..]);
+    }
+    if out.len() as u64 != len {
+        return Err(fail(format!("inflates to only {} bytes, expected {len}", out.len())));
+    }
+    Ok(out)
 }
 
 impl Fetcher for WebFetcher {
@@ -90,6 +137,19 @@ impl Fetcher for WebFetcher {
         let (pending, done, url) = (self.pending.clone(), self.done.clone(), url.to_string());
         wasm_bindgen_futures::spawn_local(async move {
             let result = fetch_bytes(&url, range).await;
+            done.borrow_mut().push((id, result));
+            pending.set(pending.get() - 1);
+        });
+        id
+    }
+
+    fn start_inflate(&mut self, url: &str, deflated: Vec<u8>, bytes: u64) -> RequestId {
+        let id = self.next;
+        self.next += 1;
+        self.pending.set(self.pending.get() + 1);
+        let (pending, done, url) = (self.pending.clone(), self.done.clone(), url.to_string());
+        wasm_bindgen_futures::spawn_local(async move {
+            let result = inflate_in_browser(&url, &deflated, bytes).await;
             done.borrow_mut().push((id, result));
             pending.set(pending.get() - 1);
         });

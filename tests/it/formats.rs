@@ -810,7 +810,7 @@ fn pack_decoder_error_paths() {
     let bytes = encode_pack(&meta, &sections);
     let head = PackHead::decode("x", &bytes).unwrap();
     let (leafy, bare_part) =
-        (head.part_range(PackPart::Billboards).unwrap(), head.part_range(PackPart::BareFar).unwrap());
+        (head.part_range(PackPart::Impostors).unwrap(), head.part_range(PackPart::BareImpostors).unwrap());
     assert!(leafy.1 <= bare_part.0 || bare_part.1 <= leafy.0, "the parts overlap: {leafy:?} {bare_part:?}");
     // A leaf-off viewer holding the head and the bare part alone assembles a valid pack.
     let held = vec![(bare_part.0, bytes[bare_part.0 as usize..bare_part.1 as usize].to_vec())];

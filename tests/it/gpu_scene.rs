@@ -634,7 +634,7 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     let overlaps = |r: (u64, u64), (a, b): (u64, u64)| r.0 < b && a <= r.1;
     for s in &m.species {
         let ranges = pack_ranges(&far_log, &s.pack);
-        assert!(!ranges.is_empty() && ranges.len() <= 2, "{}: head and billboards only: {ranges:?}", s.pack);
+        assert!(!ranges.is_empty() && ranges.len() <= 2, "{}: head and far tier only: {ranges:?}", s.pack);
         for r in &ranges {
             let r = r.unwrap_or_else(|| panic!("{}: the whole pack was fetched: {far_log:?}", s.pack));
             for p in [PackPart::MeshCoarse, PackPart::MeshFull] {
@@ -642,8 +642,11 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
             }
             assert!(!overlaps(r, part(&s.pack, PackPart::Clusters)), "{}: the far view fetched clusters {r:?}", s.pack);
         }
+        // One far tier: the impostors drawn, not the billboards too.
+        let far = part(&s.pack, PackPart::Impostors);
+        assert!(ranges.iter().flatten().any(|r| overlaps(*r, far)), "{}: impostors fetched", s.pack);
         let bb = part(&s.pack, PackPart::Billboards);
-        assert!(ranges.iter().flatten().any(|r| overlaps(*r, bb)), "{}: billboards fetched", s.pack);
+        assert!(!ranges.iter().flatten().any(|r| overlaps(*r, bb)), "{}: billboards fetched too", s.pack);
     }
     // Nothing compiled for what the view does not use: billboard pipelines only.
     assert_eq!(off.renderer.pipelines_built(), [false, false, true], "meshes, clusters, billboards");
@@ -828,7 +831,7 @@ fn budgets_and_full_pools_degrade_gracefully() {
     }
     // (Room for a tile growing by prefix levels to be uploaded again: a quarter more, at least 4,096.)
     assert!(off.renderer.config().instances <= 3000 + 4096, "pools fitted to the scene: {:?}", off.renderer.config());
-    // Room for the billboards (always fetched: the far field) and nothing finer.
+    // Room for the far tier (always fetched: the far field) and nothing finer.
     let billboards: u64 = m
         .species
         .iter()
@@ -836,7 +839,7 @@ fn budgets_and_full_pools_degrade_gracefully() {
             let bytes = std::fs::read(fixture().join(&sp.pack)).unwrap();
             let (a, b) = sylva::format::pack::PackHead::decode(&sp.pack, &bytes)
                 .unwrap()
-                .part_range(sylva::format::pack::PackPart::Billboards)
+                .part_range(sylva::format::pack::PackPart::Impostors)
                 .unwrap();
             b - a
         })

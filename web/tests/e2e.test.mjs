@@ -410,6 +410,10 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     const stats = await ready(page);
     const drawn = Object.values(stats.instances).reduce((a, b) => a + b, 0);
     assert.ok(drawn > 100, `trees drawn in the first view: ${drawn} (${JSON.stringify(stats.instances)})`);
+    // The bake stores its packs with each part deflated (pack version 2): the
+    // browser fetched the far tier's block and inflated it to draw these trees.
+    assert.equal(readFileSync(join(dir, 'scene', 'species', 'oak.pack')).readUInt16LE(4), 2, 'a stored pack');
+    assert.deepEqual(stats.failed, [], 'nothing failed');
     const share = await foliageShare(page, 'districts-first-view');
     assert.ok(share > 0.01, `foliage covers ${share} of the first view`);
     // Search by attribute: the CSV's height column, as the page,

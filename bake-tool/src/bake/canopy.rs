@@ -74,6 +74,7 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
         .map(|s| {
             let path = dir.join(&s.pack);
             let bytes = std::fs::read(&path).with_context(|| format!("canopy: reading {}", path.display()))?;
+            let bytes = sylva::format::stored::unstore(&s.pack, bytes)?;
             let pack = decode_pack(&s.pack, &bytes)?;
             let autumn_linear = pack.meta.season.as_ref().map(sylva::render::settings::autumn_linear);
             // The top (and side) view of far-tier state `state`: Σ alpha, Σ

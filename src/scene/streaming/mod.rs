@@ -217,6 +217,9 @@ enum Target {
     PackHead(usize),
     /// One part of a pack, by byte range.
     PackPart(usize, usize),
+    /// One part of a stored pack being inflated (not a request: its bytes
+    /// were counted when fetched).
+    PackInflate(usize, usize),
     /// A terrain tile.
     Terrain(TerrainKey),
     /// A baked imagery image (source generation, terrain tile).
@@ -616,10 +619,13 @@ impl<F: Fetcher> SceneStream<F> {
     pub fn update(&mut self, residency: &mut impl Residency, view: &ViewData, draw_distance_m: f32, now_s: f64) {
         for (id, result) in self.fetcher.poll() {
             let Some(target) = self.requests.remove(&id) else { continue };
-            if let Ok(bytes) = &result {
-                self.stats.bytes_fetched += bytes.len() as u64;
+            let fetched = !matches!(target, Target::PackInflate(..));
+            if let (Ok(bytes), true) = (&result, fetched) {
+                // (An image the browser decoded counts its encoded bytes.)
+                let n = crate::format::imagery::fetched_bytes(bytes);
+                self.stats.bytes_fetched += n;
                 if self.config.max_bytes_per_s > 0.0 {
-                    self.recent.push_back((now_s, bytes.len() as u64));
+                    self.recent.push_back((now_s, n));
                 }
             }
             match target {
@@ -628,7 +634,8 @@ impl<F: Fetcher> SceneStream<F> {
                 Target::Tile(t) => self.on_tile(residency, t, result, view, now_s),
                 Target::TileMore(t, have) => self.on_tile_more(residency, t, have, result, view, now_s),
                 Target::PackHead(s) => self.on_pack_head(residency, s, result, now_s),
-                Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, now_s),
+                Target::PackPart(s, part) => self.on_pack_part(residency, s, part, result, false, now_s),
+                Target::PackInflate(s, part) => self.on_pack_part(residency, s, part, result, true, now_s),
                 Target::Terrain(key) => self.on_terrain(key, result, now_s),
                 Target::Image(generation, key) => self.on_image(generation, key, result, now_s),
                 Target::ImageSource(generation, tile) => self.on_image_source(generation, tile, result),

@@ -1,12 +1,15 @@
 //! Species packs in the stream: a pack is fetched whole, or as a head (header,
 //! section table, metadata) and then by byte range only the parts the view
-//! needs ([`PackPart`]: billboards, clusters, coarse meshes, the full mesh, a
-//! deciduous species' bare far tiers in leaf-off), within the GPU budget. Part
+//! needs ([`PackPart`]: the far tier drawn (billboards or impostors), clusters,
+//! coarse meshes, the full mesh, a deciduous species' bare far tier in
+//! leaf-off), within the GPU budget. A stored pack's part comes deflated and
+//! is inflated off the frame ([`crate::scene::Fetcher::start_inflate`]). Part
 //! of [`super::SceneStream`]'s update.
 
 use super::{join, Load, SceneStream, Target};
 use crate::format::decode_pack;
-use crate::format::pack::{PackHead, PackPart, PACK_PARTS, PART_BARE_FAR, PART_FAR};
+use crate::format::pack::{PackHead, PackPart, FAR_PARTS, PACK_PARTS};
+use crate::format::stored::unstore;
 use crate::scene::fetch::{FetchError, Fetcher};
 use crate::scene::residency::Residency;
 
@@ -76,6 +79,7 @@ impl<F: Fetcher> SceneStream<F> {
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             // No head size in the manifest, or a server that ignores ranges: the whole pack.
             if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
+                let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), true))?;
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
                 residency.upload_pack(s as u32, &pack);
                 Ok(None)
@@ -97,30 +101,44 @@ impl<F: Fetcher> SceneStream<F> {
         }
     }
 
+    /// A part's bytes: as fetched (`inflated` false; a stored pack's block
+    /// then goes on to be inflated) or inflated.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn on_pack_part(
         &mut self,
         residency: &mut impl Residency,
         s: usize,
         part: usize,
         result: Result<Vec<u8>, FetchError>,
+        inflated: bool,
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
         let url = join(&self.base, &m.species[s].pack);
+        let file_bytes = m.species[s].bytes;
         let load = &mut self.packs[s];
         let attempt = load.parts[part].attempt();
         let Some(head) = &load.parsed else { return };
         let Some((start, end)) = head.part_range(PackPart::ALL[part]) else { return };
+        let Some(fetch) = head.fetch_of(PackPart::ALL[part]) else { return };
+        let mut inflate = None;
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             let len = bytes.len() as u64;
-            if len == head.file_bytes && len != end - start {
+            let (a, b) = fetch.range;
+            if !inflated && len == file_bytes && len != b - a {
                 // The server sent the whole file instead of the range.
+                let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), true))?;
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
                 residency.upload_pack(s as u32, &pack);
                 return Ok(true);
             }
-            if len != end - start {
-                return Err((format!("{url}: asked for bytes {start}..{end}, got {len} bytes"), true));
+            let expected = if inflated { end - start } else { b - a };
+            if len != expected {
+                return Err((format!("{url}: asked for bytes {a}..{b}, got {len} bytes"), true));
+            }
+            if let (false, Some(n)) = (inflated, fetch.inflated) {
+                inflate = Some((bytes, n));
+                return Ok(false);
             }
             load.held.push((start, bytes));
             match head.assemble(&url, &load.held) {
@@ -134,6 +152,12 @@ impl<F: Fetcher> SceneStream<F> {
                 }
             }
         });
+        if let (Some((deflated, n)), Ok(_)) = (inflate, &outcome) {
+            // Still requested until inflated.
+            let id = self.fetcher.start_inflate(&url, deflated, n);
+            self.requests.insert(id, Target::PackInflate(s, part));
+            return;
+        }
         match outcome {
             Ok(whole) => {
                 load.parts[part] = Load::Idle;
@@ -142,12 +166,12 @@ impl<F: Fetcher> SceneStream<F> {
                 let held_or_absent = |h: &PackHead, i: usize| load.have[i] || h.part_range(PackPart::ALL[i]).is_none();
                 // Every part on the GPU: nothing more to fetch.
                 let complete = load.parsed.as_ref().is_some_and(|h| (0..PACK_PARTS).all(|i| held_or_absent(h, i)));
-                // Every part but the other season's far tier: the CPU copies kept
-                // for re-assembly can go (that far tier, should it come, uploads
+                // A far tier and every finer part: the CPU copies kept for
+                // re-assembly can go (another far tier, should it come, uploads
                 // alone and joins what is on the GPU: `Species::upload_pack`).
                 let all_but_a_far_state = load.parsed.as_ref().is_some_and(|h| {
                     let far =
-                        load.have[PART_FAR] || load.have[PART_BARE_FAR] || h.part_range(PackPart::Billboards).is_none();
+                        FAR_PARTS.iter().any(|&i| load.have[i]) || FAR_PARTS.iter().all(|&i| held_or_absent(h, i));
                     far && (0..PACK_PARTS).filter(|i| !PackPart::ALL[*i].is_far()).all(|i| held_or_absent(h, i))
                 });
                 load.whole |= complete;
@@ -166,32 +190,26 @@ impl<F: Fetcher> SceneStream<F> {
     /// and, if not, whether they may still come (not
     /// given up on).
     pub(super) fn species_drawable(&self, s: usize) -> (bool, bool) {
-        // The far parts: leaf-on billboards and the bare ones. A far tier of
-        // either state draws (`Species` draws the other where the season's is
-        // missing; leaf-off draws the leafy one's wood).
+        // The far parts: either tier, leaf-on or bare. Any far tier draws
+        // (`Species` draws the other where the wanted one is missing; leaf-off
+        // draws the leafy one's wood).
+        let far_wanted = |l: &PackLoad| FAR_PARTS.iter().any(|&i| l.wants[i]);
         match self.packs.get(s) {
-            Some(l) if l.whole || l.have[PART_FAR] || l.have[PART_BARE_FAR] => (true, false),
+            Some(l) if l.whole || FAR_PARTS.iter().any(|&i| l.have[i]) => (true, false),
             // A view that draws no far tier (meshes only): drawable with the
             // parts it wants that have come.
-            Some(l)
-                if !l.wants[PART_FAR]
-                    && !l.wants[PART_BARE_FAR]
-                    && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) =>
-            {
-                (true, false)
-            }
+            Some(l) if !far_wanted(l) && l.wants.iter().zip(&l.have).any(|(w, h)| *w && *h) => (true, false),
             // Not yet: it may come while its head and a part the view wants
-            // (the far tier, or else any) are not given up on.
+            // (a far tier, or else any) are not given up on.
             Some(l) if l.wants.contains(&true) => {
-                let far = [PART_FAR, PART_BARE_FAR].into_iter().filter(|&i| l.wants[i]).collect::<Vec<_>>();
-                let coming = if far.is_empty() {
-                    l.wants.iter().zip(&l.parts).any(|(w, p)| *w && *p != Load::Broken)
+                let coming = if far_wanted(l) {
+                    FAR_PARTS.iter().any(|&i| l.wants[i] && l.parts[i] != Load::Broken)
                 } else {
-                    far.iter().any(|&i| l.parts[i] != Load::Broken)
+                    l.wants.iter().zip(&l.parts).any(|(w, p)| *w && *p != Load::Broken)
                 };
                 (false, l.head != Load::Broken && coming)
             }
-            Some(l) => (false, l.head != Load::Broken && l.parts[PART_FAR] != Load::Broken),
+            Some(l) => (false, l.head != Load::Broken && FAR_PARTS.iter().any(|&i| l.parts[i] != Load::Broken)),
             None => (false, false),
         }
     }
@@ -200,6 +218,34 @@ impl<F: Fetcher> SceneStream<F> {
         self.collect_needed_species();
         let needed = std::mem::take(&mut self.needed);
         let mut over_budget = false;
+        // What each needed species' view wants, from its head.
+        for &s in &needed {
+            let load = &mut self.packs[s];
+            let Some(head) = &load.parsed else { continue };
+            let asked = residency.parts_needed(s, &head.meta);
+            let mut wants = asked;
+            let usable = |j: usize| head.part_range(PackPart::ALL[j]).is_some() && load.parts[j] != Load::Broken;
+            // The bare state where asked for and the pack has it (and it is not
+            // given up on); else its leafy one (drawn without its leaf texels in
+            // leaf-off).
+            for i in [PackPart::BareBillboards, PackPart::BareImpostors].map(PackPart::index) {
+                let leafy = PackPart::ALL[i].other_state().map_or(i, PackPart::index);
+                if wants[i] && !usable(i) {
+                    (wants[i], wants[leafy]) = (false, true);
+                }
+            }
+            // A far tier the pack lacks or that was given up on: another one.
+            let far = |w: &[bool; PACK_PARTS]| FAR_PARTS.iter().any(|&i| w[i] && usable(i));
+            if FAR_PARTS.iter().any(|&i| asked[i]) && !far(&wants) {
+                for i in FAR_PARTS {
+                    wants[i] = false;
+                }
+                if let Some(&j) = FAR_PARTS.iter().find(|&&j| usable(j)) {
+                    wants[j] = true;
+                }
+            }
+            load.wants = wants;
+        }
         // GPU bytes held plus parts on their way.
         let mut committed = residency.bytes();
         for (s, load) in self.packs.iter().enumerate() {
@@ -207,17 +253,15 @@ impl<F: Fetcher> SceneStream<F> {
             for (i, part) in PackPart::ALL.iter().enumerate() {
                 // Far tiers of needed species are fetched whatever the budget:
                 // reserve them before anything finer.
-                // (The leaf-on ones unless the view wants the bare ones instead.)
-                let this_state = if *part == PackPart::BareFar { load.wants[i] } else { !load.wants[PART_BARE_FAR] };
-                let due_billboards = part.is_far() && this_state && !load.have[i] && needed.contains(&s);
-                if matches!(load.parts[i], Load::Requested { .. }) || due_billboards {
-                    committed += head.part_range(*part).map_or(0, |(a, b)| b - a);
+                let due_far = part.is_far() && load.wants[i] && !load.have[i] && needed.contains(&s);
+                if matches!(load.parts[i], Load::Requested { .. }) || due_far {
+                    committed += head.part_bytes(*part);
                 }
             }
         }
-        // Billboards are reserved only once a head tells their size: finer parts
+        // Far tiers are reserved only once a head tells their size: finer parts
         // wait until every needed species' head is known, or a late head's
-        // billboards would push the total over the budget.
+        // far tier would push the total over the budget.
         let heads_pending = self.config.gpu_budget_bytes > 0
             && needed.iter().any(|&s| {
                 let l = &self.packs[s];
@@ -231,18 +275,6 @@ impl<F: Fetcher> SceneStream<F> {
         };
         for &s in &needed {
             let load = &mut self.packs[s];
-            if let Some(head) = &load.parsed {
-                load.wants = residency.parts_needed(s, &head.meta);
-                // One far state: the bare one where asked for, the pack has it and
-                // it is not given up on; else its leafy one (drawn without its leaf
-                // texels in leaf-off).
-                if load.wants[PART_BARE_FAR] {
-                    let bare =
-                        head.part_range(PackPart::BareFar).is_some() && load.parts[PART_BARE_FAR] != Load::Broken;
-                    load.wants[PART_BARE_FAR] = bare;
-                    load.wants[PART_FAR] = !bare;
-                }
-            }
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
             }
@@ -265,19 +297,20 @@ impl<F: Fetcher> SceneStream<F> {
                 if heads_pending && !part.is_far() {
                     continue;
                 }
-                let (Some(range), Some(attempt)) = (head.part_range(*part), due(&load.parts[i])) else { continue };
+                let (Some(fetch), Some(attempt)) = (head.fetch_of(*part), due(&load.parts[i])) else { continue };
                 // The GPU budget: finer parts wait (trees draw with coarser ones);
-                // billboards, the far field, are always fetched.
+                // the far field is always fetched.
                 let budget = self.config.gpu_budget_bytes;
-                let blocked = budget > 0 && !part.is_far() && committed + (range.1 - range.0) > budget;
+                let gpu_bytes = head.part_bytes(*part);
+                let blocked = budget > 0 && !part.is_far() && committed + gpu_bytes > budget;
                 load.blocked[i] = blocked;
                 if blocked {
                     over_budget = true;
                     continue;
                 }
-                let id = self.fetcher.start_range(&url(), Some(range));
+                let id = self.fetcher.start_range(&url(), Some(fetch.range));
                 if !part.is_far() {
-                    committed += range.1 - range.0; // far tiers are reserved above
+                    committed += gpu_bytes; // far tiers are reserved above
                 }
                 self.stats.requests += 1;
                 self.requests.insert(id, Target::PackPart(s, i));

@@ -38,6 +38,8 @@ fn part_fetches(s: &SceneStream<FakeFetcher>, from: usize) -> Vec<(String, ByteR
 struct FakeFetcher {
     /// Started and not yet answered.
     queue: VecDeque<(RequestId, String, Option<ByteRange>)>,
+    /// Inflations started and not yet answered (inflated at once).
+    inflating: Vec<(RequestId, Result<Vec<u8>, FetchError>)>,
     /// Every request started, in order: (url, range).
     log: Vec<(String, Option<ByteRange>)>,
     /// While true, nothing is answered.
@@ -57,11 +59,34 @@ impl Fetcher for FakeFetcher {
         self.next
     }
 
+    fn start_inflate(&mut self, url: &str, deflated: Vec<u8>, bytes: u64) -> RequestId {
+        self.next += 1;
+        let result = crate::format::stored::inflate_exact(&deflated, bytes)
+            .map_err(|message| FetchError::Transport { url: url.into(), message });
+        self.inflating.push((self.next, result));
+        self.next
+    }
+
     fn poll(&mut self) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)> {
         if self.hold {
             return Vec::new();
         }
         let answers: Vec<_> = self.queue.drain(..).collect();
+        let mut out = std::mem::take(&mut self.inflating);
+        out.extend(self.answer(answers));
+        out
+    }
+
+    fn in_flight(&self) -> usize {
+        self.queue.len() + self.inflating.len()
+    }
+}
+
+impl FakeFetcher {
+    fn answer(
+        &mut self,
+        answers: Vec<(RequestId, String, Option<ByteRange>)>,
+    ) -> Vec<(RequestId, Result<Vec<u8>, FetchError>)> {
         answers
             .into_iter()
             .map(|(id, url, range)| {
@@ -81,10 +106,6 @@ impl Fetcher for FakeFetcher {
                 (id, sliced)
             })
             .collect()
-    }
-
-    fn in_flight(&self) -> usize {
-        self.queue.len()
     }
 }
 
@@ -107,8 +128,9 @@ struct FakeResidency {
 impl FakeResidency {
     fn new(capacity: u32) -> Self {
         Self {
-            // Every part of a leaf-on view.
-            parts: PackPart::ALL.map(|p| p != PackPart::BareFar),
+            // Every part of a leaf-on view whose far tier is impostors (the default).
+            parts: PackPart::ALL
+                .map(|p| !matches!(p, PackPart::Billboards | PackPart::BareBillboards | PackPart::BareImpostors)),
             capacity,
             used: 0,
             next: 0,
@@ -388,12 +410,14 @@ fn pools_full_of_wanted_tiles_shorten_the_reach_and_say_so() {
 }
 
 #[test]
-fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
+fn the_gpu_budget_holds_back_finer_parts_but_never_the_far_tier() {
     let heads = fixture_heads();
     let size = |h: &PackHead, p: PackPart| h.part_range(p).map_or(0, |(a, b)| b - a);
-    let billboards: u64 = heads.iter().map(|h| size(h, PackPart::Billboards)).sum();
-    // (A leaf-on view: never the bare far tiers.)
-    let leaf_on = PackPart::ALL.iter().filter(|p| **p != PackPart::BareFar);
+    let billboards: u64 = heads.iter().map(|h| size(h, PackPart::Impostors)).sum();
+    // (A leaf-on view drawing impostors: never the billboards or the bare far tiers.)
+    let leaf_on = PackPart::ALL
+        .iter()
+        .filter(|p| !matches!(p, PackPart::Billboards | PackPart::BareBillboards | PackPart::BareImpostors));
     let everything: u64 = heads.iter().map(|h| leaf_on.clone().map(|p| size(h, *p)).sum::<u64>()).sum();
     // Room for the billboards and about half of the rest.
     let budget = billboards + (everything - billboards) / 2;
@@ -407,8 +431,8 @@ fn the_gpu_budget_holds_back_finer_parts_but_never_billboards() {
     assert!(fetched <= budget, "{fetched} bytes of parts fetched for a {budget} budget");
     assert!(fetched < everything, "something was held back");
     for (name, h) in ["spruce", "beech", "birch"].iter().zip(&heads) {
-        let bb = h.part_range(PackPart::Billboards).unwrap();
-        assert!(parts.iter().any(|(u, r)| u.contains(name) && *r == bb), "{name}'s billboards fetched");
+        let far = h.part_range(PackPart::Impostors).unwrap();
+        assert!(parts.iter().any(|(u, r)| u.contains(name) && *r == far), "{name}'s far tier fetched");
     }
     // Without a budget, everything the view needs arrives.
     let held_back = r.pack_bytes;
@@ -423,10 +447,10 @@ fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
     // The fixture's beech and birch are deciduous (their packs hold the bare
     // wood's far tiers); the spruce is evergreen.
     let heads = fixture_heads();
-    assert!(heads[0].part_range(PackPart::BareFar).is_none(), "an evergreen has one state");
+    assert!(heads[0].part_range(PackPart::BareImpostors).is_none(), "an evergreen has one state");
     let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
     // A far view in leaf-off: what `Reach::parts_needed` asks of a deciduous pack.
-    r.parts = PackPart::ALL.map(|p| p == PackPart::BareFar);
+    r.parts = PackPart::ALL.map(|p| p == PackPart::BareImpostors);
     run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
     assert!(s.is_settled());
     let parts = part_fetches(&s, 0);
@@ -434,17 +458,19 @@ fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
         let fetched = |p: PackPart| parts.iter().any(|(u, x)| u.contains(name) && Some(*x) == h.part_range(p));
         if *name == "spruce" {
             // No bare state: its leafy far tiers.
-            assert!(fetched(PackPart::Billboards), "{name}'s far tier fetched: {parts:?}");
+            assert!(fetched(PackPart::Impostors), "{name}'s far tier fetched: {parts:?}");
         } else {
-            assert!(fetched(PackPart::BareFar), "{name}'s bare far tier fetched: {parts:?}");
-            assert!(!fetched(PackPart::Billboards), "{name}'s leafy far tier fetched too: {parts:?}");
+            assert!(fetched(PackPart::BareImpostors), "{name}'s bare far tier fetched: {parts:?}");
+            assert!(!fetched(PackPart::Impostors), "{name}'s leafy far tier fetched too: {parts:?}");
         }
+        // One far tier: never the billboards.
+        assert!(!fetched(PackPart::Billboards) && !fetched(PackPart::BareBillboards), "{name}: {parts:?}");
     }
     // Every species drawable from what came.
     assert!((0..3).all(|i| s.species_drawable(i).0));
     // Back to leaf-on: the leafy far tiers come too, and the species stay drawable throughout.
     let fetched_before = s.fetcher.log.len();
-    r.parts = PackPart::ALL.map(|p| p == PackPart::Billboards);
+    r.parts = PackPart::ALL.map(|p| p == PackPart::Impostors);
     let mut t = 10.0;
     for _ in 0..20 {
         t = run(&mut s, &mut r, &south_view(), 6000.0, t, 0.01, 10);
@@ -452,7 +478,7 @@ fn a_leaf_off_view_fetches_the_bare_far_tiers_instead() {
     }
     let parts = part_fetches(&s, fetched_before);
     for (name, h) in ["beech", "birch"].iter().zip(&heads[1..]) {
-        let leafy = h.part_range(PackPart::Billboards);
+        let leafy = h.part_range(PackPart::Impostors);
         assert!(parts.iter().any(|(u, x)| u.contains(name) && Some(*x) == leafy), "{name}'s leafy far tier: {parts:?}");
     }
     assert!(s.is_settled());
@@ -959,4 +985,64 @@ fn the_canopy_stands_in_where_wanted_trees_cannot_be_drawn_yet() {
         assert_eq!(gap, species.iter().all(|&k| k == 0), "{}: species {species:?}", e.url);
     }
     assert!(s.canopy_draws().len() <= all_lost);
+}
+
+/// The fixture's packs stored (each part deflated, `format::stored`): the
+/// stream fetches each wanted part's block, counts the bytes sent, inflates
+/// them and assembles the same sections a raw pack gives; a corrupt block is
+/// retried, then given up on with its URL.
+#[test]
+fn stored_packs_stream_deflated_parts() {
+    let dir = fixture();
+    let raw_stream = {
+        let (mut s, mut r) = (stream(StreamConfig::default()), FakeResidency::new(1 << 20));
+        run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
+        assert!(s.is_settled());
+        (s.stats().bytes_fetched, r.pack_bytes)
+    };
+    let mut manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(format!("{dir}/scene.json")).unwrap()).unwrap();
+    let mut s = stream(StreamConfig::default());
+    let mut heads = Vec::new();
+    for sp in manifest["species"].as_array_mut().unwrap() {
+        let path = sp["pack"].as_str().unwrap().to_string();
+        let raw = std::fs::read(format!("{dir}/{path}")).unwrap();
+        let stored = crate::format::stored::store_pack(&path, &raw).unwrap();
+        let head = PackHead::decode(&path, &stored).unwrap();
+        sp["bytes"] = stored.len().into();
+        sp["head_bytes"] = head.bytes.len().into();
+        s.fetcher.replace.insert(path.clone(), stored);
+        heads.push((path, head));
+    }
+    s.fetcher.replace.insert("scene.json".into(), serde_json::to_vec(&manifest).unwrap());
+    let mut r = FakeResidency::new(1 << 20);
+    run(&mut s, &mut r, &south_view(), 6000.0, 0.0, 0.01, 200);
+    assert!(s.is_settled());
+    assert!(s.failures().is_empty(), "{:?}", s.failures());
+    assert!((0..3).all(|i| s.species_drawable(i).0));
+    // The same sections on the "GPU", for fewer bytes fetched.
+    assert_eq!(r.pack_bytes, raw_stream.1);
+    let saved = raw_stream.0 - s.stats().bytes_fetched;
+    assert!(saved > raw_stream.0 / 4, "{} bytes fetched stored, {} raw", s.stats().bytes_fetched, raw_stream.0);
+    // Every pack request after the head is one block, as stored.
+    for (u, range) in part_fetches(&s, 0).iter().filter(|(u, _)| u.ends_with(".pack")) {
+        let (_, head) = heads.iter().find(|(p, _)| u.ends_with(p.as_str())).unwrap();
+        assert!(head.stored.iter().any(|b| b.stored == *range), "{u} {range:?} is no stored block");
+    }
+    // A corrupt block: retried, then given up on, named; the other species draw.
+    let (path, head) = &heads[1];
+    let mut bad = s.fetcher.replace[path].clone();
+    let far = head.fetch_of(PackPart::Impostors).unwrap().range;
+    for x in &mut bad[far.0 as usize..far.0 as usize + 16] {
+        *x = 0xff;
+    }
+    let mut s2 = stream(StreamConfig { retry_base_s: 0.01, ..StreamConfig::default() });
+    s2.fetcher.replace = s.fetcher.replace.clone();
+    s2.fetcher.replace.insert(path.clone(), bad);
+    let mut r = FakeResidency::new(1 << 20);
+    run(&mut s2, &mut r, &south_view(), 6000.0, 0.0, 0.05, 400);
+    assert!(s2.is_settled());
+    let failed = s2.failures();
+    assert!(failed.iter().any(|f| f.url.ends_with(path.as_str()) && f.message.contains("inflate")), "{failed:?}");
+    assert!(s2.species_drawable(0).0 && s2.species_drawable(2).0);
 }

@@ -289,6 +289,7 @@ fn species_out(
     let path = dir.join(&entry.pack);
     let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
         .with_context(|| format!("cannot read pack {}", path.display()))?;
+    let bytes = sylva::format::stored::unstore(&path.display().to_string(), bytes)?;
     let pack = decode_pack(&path.display().to_string(), &bytes)?;
     let meta = pack.meta.clone();
     if meta.mesh_levels.is_empty() {
