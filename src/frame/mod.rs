@@ -5,6 +5,7 @@
 //! they wait: natively a measured frame blocks until the GPU is done; the
 //! browser never blocks, so its GPU times and counters arrive a few frames late.
 
+pub mod pacing;
 pub mod stats;
 
 use crate::camera::ViewData;

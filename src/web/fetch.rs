@@ -74,8 +74,12 @@ async fn decode_in_browser(bytes: &js_sys::Uint8Array) -> Result<Vec<u8>, JsValu
         return Err(JsValue::from_str("image too large"));
     }
     let canvas = web_sys::OffscreenCanvas::new(w, h)?;
+    // (Read back at once: a canvas in memory, not one the GPU process draws,
+    // which a slow GPU busy with a frame would make wait.)
+    let options = js_sys::Object::new();
+    js_sys::Reflect::set(&options, &"willReadFrequently".into(), &JsValue::TRUE)?;
     let context: web_sys::OffscreenCanvasRenderingContext2d =
-        canvas.get_context("2d")?.ok_or("no 2d context")?.dyn_into()?;
+        canvas.get_context_with_context_options("2d", &options)?.ok_or("no 2d context")?.dyn_into()?;
     context.draw_image_with_image_bitmap(&bitmap, 0.0, 0.0)?;
     bitmap.close();
     let data = context.get_image_data(0.0, 0.0, f64::from(w), f64::from(h))?;

@@ -3,7 +3,7 @@
 //! in the public JS API). Same renderer and streamer as natively; only the fetch
 //! (`fetch`) and the surface (a canvas) differ.
 
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 
 use glam::DVec3;
@@ -50,6 +50,12 @@ pub struct Viewer {
     lost: Arc<AtomicBool>,
     /// Frames submitted whose GPU work has not finished (the queue says when).
     frames_ahead: Arc<AtomicU32>,
+    /// The last finished frame's time, submitted to done (ms as f64 bits; 0: none new).
+    frame_done_ms: Arc<AtomicU64>,
+    /// Whether to draw while loading (a slow GPU waits for the stream).
+    pacer: crate::frame::pacing::LoadPacer,
+    /// The camera of the last frame drawn.
+    drawn_camera: Option<Camera>,
 }
 
 /// A geographic camera asked for before the scene's CRS was known.
@@ -150,6 +156,9 @@ impl Viewer {
             fly: false,
             lost,
             frames_ahead: Default::default(),
+            frame_done_ms: Default::default(),
+            pacer: Default::default(),
+            drawn_camera: None,
         })
     }
 
@@ -343,6 +352,18 @@ impl Viewer {
         if self.frames_ahead.load(Ordering::Relaxed) >= MAX_FRAMES_AHEAD {
             return Ok(false);
         }
+        // A slow GPU loading draws when the stream settles or goes quiet, not
+        // for every arrival (`crate::frame::pacing`); a moved camera draws.
+        let done = f64::from_bits(self.frame_done_ms.swap(0, Ordering::Relaxed));
+        if done > 0.0 {
+            self.pacer.frame_done(done);
+        }
+        let s = self.frame.stream.stats();
+        let settled = self.frame.stream.is_settled() && self.frame.stream.manifest().is_some();
+        let moved = self.drawn_camera != Some(self.camera());
+        if !self.pacer.should_draw(now_ms, settled, s.bytes_fetched + s.requests) && !moved {
+            return Ok(false);
+        }
         let target = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
             wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(false),
@@ -362,10 +383,14 @@ impl Viewer {
         self.frame.submit(recorded, false);
         self.frame.queue.present(target);
         self.frames_ahead.fetch_add(1, Ordering::Relaxed);
-        let ahead = self.frames_ahead.clone();
+        let (ahead, done_ms) = (self.frames_ahead.clone(), self.frame_done_ms.clone());
+        let submitted = js_sys::Date::now();
         self.frame.queue.on_submitted_work_done(move || {
             ahead.fetch_sub(1, Ordering::Relaxed);
+            done_ms.store((js_sys::Date::now() - submitted).max(0.001).to_bits(), Ordering::Relaxed);
         });
+        self.pacer.drew(now_ms);
+        self.drawn_camera = Some(self.camera());
         if self.frame.stream.is_settled() && self.frame.stream.manifest().is_some() {
             self.settled_frame.get_or_insert(self.frame.frames());
         } else {
@@ -419,7 +444,9 @@ impl Viewer {
         serde_json::to_string(&self.frame.stats()).unwrap_or_default()
     }
 
-    /// Loading progress: `{manifest, tiles_wanted, tiles_resident, loading, bytes_fetched, settled}`.
+    /// Loading progress: `{manifest, tiles_wanted, tiles_resident, loading,
+    /// bytes_fetched, settled, frames_held}` (`frames_held`: animation frames a
+    /// slow GPU did not draw while files arrived, `crate::frame::pacing`).
     pub fn progress_json(&self) -> String {
         let s = self.frame.stream.stats();
         serde_json::json!({
@@ -429,6 +456,7 @@ impl Viewer {
             "loading": s.loading,
             "bytes_fetched": s.bytes_fetched,
             "settled": self.frame.stream.is_settled(),
+            "frames_held": self.pacer.held(),
         })
         .to_string()
     }
