@@ -275,14 +275,49 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     return out;
 }
 
-// Shadow cascades: depth only, the blended coverage tested, the hit's depth.
+// A shadow caster's coverage and depth, cheaply: the nearest of the three
+// views alone, one surface sample for the depth and the coverage at the same
+// texel (a shadow is a silhouette the PCF softens: the blend and the parallax
+// steps of `impostor_hit` buy little there, at five times the samples).
+// Returns the model-space point hit (xyz) and its coverage (w; 0 for a leaf
+// texel in leaf-off).
+fn impostor_cover(in: VertexOut) -> vec4<f32> {
+    let grid = max(draw.ids.w, 2u);
+    let center = draw.bb_center.xyz;
+    let radius = draw.bb_center.w;
+    let d = normalize(in.ray_dir);
+    let o = in.ray_at;
+    var k = 0u;
+    if in.weights[1] > in.weights[k] {
+        k = 1u;
+    }
+    if in.weights[2] > in.weights[k] {
+        k = 2u;
+    }
+    let view_index = in.layers[k];
+    let layer = view_index + in.variant_base;
+    let vd = impostor_view_dir(view_index, grid);
+    let vr = impostor_view_right(vd);
+    let denom = min(dot(d, vd), -1e-3);
+    let to_plane = dot(center - o, vd);
+    let uv = impostor_texcoord(o + d * (to_plane / denom) - center, vr, cross(vd, vr), radius);
+    let size = f32(textureDimensions(imp_color).x);
+    let footprint = max(length(dpdx(uv)), length(dpdy(uv))) * size;
+    let lod = clamp(log2(max(footprint, 1e-6)), 0.0, max(log2(size) - 3.0, 0.0));
+    let cover = textureSampleLevel(imp_color, imp_sampler, uv, layer, lod).a;
+    let surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, lod);
+    let at = o + d * ((to_plane + (surface.b * 2.0 - 1.0) * radius) / denom);
+    return vec4<f32>(at, select(cover, 0.0, leaves_off(in.tree_size.z) && surface.a >= 0.5));
+}
+
+// Shadow cascades: depth only, the nearest view's coverage tested, its depth.
 @fragment
 fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
-    let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || (leaves_off(in.tree_size.z) && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    let hit = impostor_cover(in);
+    if hit.w < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
         discard;
     }
-    return impostor_depth(hit.at, in);
+    return impostor_depth(hit.xyz, in);
 }
 
 // Picking: the tree's pool instance + 1, the coverage tested, the hit's depth.

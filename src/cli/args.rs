@@ -365,7 +365,7 @@ pub(crate) struct RenderArgs {
     pub(crate) sun: Option<String>,
     /// The sun's shadows: off, low (2 cascades over 300 m, maps of 0.8 texels
     /// per image pixel, 512²–1024²) or high (3 over 600 m, 1.6 texels per
-    /// pixel, 1024²–2048², softer edges). Trees shade the
+    /// pixel, 512²–2048², softer edges). Trees shade the
     /// ground and each other; casters are picked on the GPU like the view's.
     #[arg(long, value_name = "off|low|high", default_value = "high")]
     pub(crate) shadows: sylva::render::shadow::ShadowQuality,

@@ -32,7 +32,7 @@ pub enum ShadowQuality {
     /// Two cascades over 300 m (maps of 0.8 texels per screen pixel, 512²–1024²),
     /// one bilinear tap.
     Low,
-    /// Three cascades over 600 m (1.6 texels per screen pixel, 1024²–2048²),
+    /// Three cascades over 600 m (1.6 texels per screen pixel, 512²–2048²),
     /// 3×3 bilinear taps.
     High,
     /// The benchmarks' reference (not offered to users): four 3072² cascades
@@ -62,7 +62,7 @@ impl ShadowQuality {
         let c = ShadowConfig {
             cascades: 3,
             size: 2048,
-            min_size: 1024,
+            min_size: 512,
             texels_per_px: 1.6,
             distance_m: 600.0,
             pcf_radius: 1,
