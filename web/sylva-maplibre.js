@@ -104,7 +104,7 @@ export class SylvaLayer {
     };
     map.on('render', this.onRender);
     const o = this.options;
-    this.created = create(canvas, { scene: o.scene, overlay: true, controls: false, refine: o.refine,
+    this.created = create(canvas, { scene: o.scene, overlay: true, controls: false, quality: { enabled: false }, refine: o.refine,
       lighting: o.lighting });
     this.created.catch(() => {});
     this.created

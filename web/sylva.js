@@ -28,7 +28,10 @@
 //                                           {id, row, species, attributes, lon, lat, height, position}
 //                                           (id: a number, or the inventory's text id such as 'EY17080' with row
 //                                           its input row; null with row for a tree without an id)
-//   v.stats()                               same keys as `sylva render --stats`
+//   v.stats()                               same keys as `sylva render --stats` (`governor`: the governor's level and why)
+//   v.setQuality({target_ms = 33, min_scale = 0.35, enabled})  the frame-time governor: while the camera moves,
+//                                           render scale, shadows, then LoD step down to hold target_ms, and back
+//                                           up; at rest full quality ('off': none; a number: the LoD factor)
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
 //   v.setStyle({color: {by, categories | ramp, domain}, filter})  colour trees by an attribute or 'species' and hide
@@ -52,6 +55,7 @@
 //   v.tick(now)                             draw now if anything changed (a map's render callback calls it)
 
 import init, { Viewer, TileWalk, queryMayMatch, queryTile } from './pkg/sylva.js';
+import { Governor } from './governor.js';
 
 let wasmReady = null;
 
@@ -87,6 +91,12 @@ class SylvaViewer {
     this.lastStatsMs = 0;
     this.frameTimes = [];
     this.flight = null;
+    // The frame-time governor (web/governor.js): while the camera moves, the
+    // render scale, shadows and LoD step down to hold the target; at rest, all back.
+    this.governor = new Governor(options.quality || {});
+    this.userShadows = 'high';
+    this.userLod = 1;
+    this.applied = { scale: 1, shadows: 'high', lod: 1 };
     this.readySettled = false;
     this.ready = new Promise((resolve, reject) => { this.resolveReady = resolve; this.rejectReady = reject; });
     this.ready.catch(() => {}); // observed through 'error' events too
@@ -221,7 +231,8 @@ class SylvaViewer {
   emit(event, data) { for (const fn of this.handlers[event] || []) { try { fn(data); } catch (e) { console.error(e); } } }
 
   resize() {
-    const dpr = window.devicePixelRatio || 1;
+    // The governor's render scale: fewer pixels drawn, the browser upscales.
+    const dpr = (window.devicePixelRatio || 1) * this.applied.scale;
     const w = Math.max(1, Math.round(this.canvas.clientWidth * dpr));
     const h = Math.max(1, Math.round(this.canvas.clientHeight * dpr));
     if (this.canvas.width !== w || this.canvas.height !== h) {
@@ -399,7 +410,11 @@ class SylvaViewer {
     if (options.ao !== undefined && typeof options.ao !== 'boolean') {
       throw new Error(`setLighting: ao must be true or false, not ${JSON.stringify(options.ao)}`);
     }
-    if (options.shadows !== undefined) this.viewer.set_shadows(String(options.shadows));
+    if (options.shadows !== undefined) {
+      this.viewer.set_shadows(String(options.shadows));
+      this.userShadows = String(options.shadows);
+      this.applied.shadows = this.userShadows;
+    }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
     this.lighting = { ...this.lighting, ...options };
     this.dirty = SETTLE_FRAMES;
@@ -448,9 +463,56 @@ class SylvaViewer {
     return state;
   }
 
-  stats() { return JSON.parse(this.viewer.stats_json()); }
+  stats() { return { ...JSON.parse(this.viewer.stats_json()), governor: this.governor.report() }; }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = SETTLE_FRAMES; }
-  setQuality(q) { this.viewer.set_quality(q); this.dirty = SETTLE_FRAMES; }
+  /** A number: the LoD quality factor (1, 0.5, 0.25: projected sizes are
+   * scaled by it). An object `{target_ms, min_scale, enabled}`: the frame-time
+   * governor — while the camera moves, quality steps down (render scale, then
+   * shadows, then LoD) until frames take `target_ms` (default 33), never below
+   * `min_scale` (0.25–1, default 0.35), and back up; at rest all is restored.
+   * `'off'` turns the governor off. `stats().governor` says its level and why. */
+  setQuality(q) {
+    if (typeof q === 'number') {
+      this.viewer.set_quality(q);
+      this.userLod = q;
+      this.applied.lod = q;
+    } else if (q === 'off') {
+      this.governor.set({ enabled: false });
+      this.applyGovernor();
+    } else if (typeof q === 'object' && q !== null) {
+      for (const key of Object.keys(q)) {
+        if (!['target_ms', 'min_scale', 'enabled'].includes(key)) throw new Error(`setQuality: unknown setting ${key} (known: target_ms, min_scale, enabled)`);
+      }
+      this.governor.set(q);
+      this.applyGovernor();
+    } else {
+      throw new Error(`setQuality: a LoD factor, {target_ms, min_scale, enabled} or 'off', not ${JSON.stringify(q)}`);
+    }
+    this.dirty = SETTLE_FRAMES;
+  }
+
+  /** Applies the governor's level: render scale, shadows, LoD quality. */
+  applyGovernor() {
+    const a = this.governor.apply(this.userShadows, this.userLod);
+    if (a.scale !== this.applied.scale) {
+      // A canvas sized by its pixels alone keeps its CSS size while scaled.
+      if (a.scale !== 1 && !this.canvas.style.width) {
+        this.lockedSize = true;
+        this.canvas.style.width = `${this.canvas.clientWidth}px`;
+        this.canvas.style.height = `${this.canvas.clientHeight}px`;
+      }
+      this.applied.scale = a.scale;
+      this.resize();
+      if (a.scale === 1 && this.lockedSize) {
+        this.lockedSize = false;
+        this.canvas.style.width = '';
+        this.canvas.style.height = '';
+      }
+    }
+    if (a.shadows !== this.applied.shadows) { this.viewer.set_shadows(a.shadows); this.applied.shadows = a.shadows; }
+    if (a.lod !== this.applied.lod) { this.viewer.set_quality(a.lod); this.applied.lod = a.lod; }
+    this.dirty = SETTLE_FRAMES;
+  }
   /**
    * Progressive refinement while the camera rests (on by default): jittered
    * frames accumulate into an anti-aliased image while the level of detail
@@ -589,10 +651,14 @@ class SylvaViewer {
     }
     this.emit('progress', progress);
     const cam = this.viewer.camera_json();
-    if (cam !== this.lastCamera) {
+    const moved = cam !== this.lastCamera;
+    if (moved) {
       this.lastCamera = cam;
       this.emit('camerachange', JSON.parse(cam));
     }
+    // The governor: each finished frame's GPU time while moving; at rest, full quality.
+    const frameMs = this.viewer.take_frame_ms();
+    if (this.governor.frame(now, frameMs > 0 ? frameMs : undefined, moved || !!this.flight)) this.applyGovernor();
     // Ready after a frame drawn with everything settled, once its counters are read back.
     if (!this.readySettled && this.viewer.is_ready()) {
       this.readySettled = true;

@@ -97,6 +97,32 @@ pub struct FrameStats {
     /// Refinement done: the image is final and the host stops drawing. Always
     /// false when refinement is off.
     pub refine_converged: bool,
+    /// The browser's frame-time governor (`web/governor.js`, which fills it in):
+    /// its level and why. Off here, natively and in tests: full quality.
+    pub governor: GovernorReport,
+}
+
+/// A frame-time governor's state, as `stats().governor` reports it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GovernorReport {
+    /// Whether it governs (never natively).
+    pub enabled: bool,
+    /// Its level: 0 full quality, each step cheaper (render scale, shadows, LoD).
+    pub level: u32,
+    /// The render scale of its level (the canvas's pixels per CSS pixel × DPR).
+    pub scale: f32,
+    /// The frame time it holds while the camera moves (ms).
+    pub target_ms: f32,
+    /// The smallest render scale it uses.
+    pub min_scale: f32,
+    /// Why it is at its level, in words.
+    pub reason: String,
+}
+
+impl Default for GovernorReport {
+    fn default() -> Self {
+        Self { enabled: false, level: 0, scale: 1.0, target_ms: 33.0, min_scale: 0.35, reason: "off".into() }
+    }
 }
 
 impl FrameStats {

@@ -50,8 +50,14 @@ pub struct Viewer {
     lost: Arc<AtomicBool>,
     /// Frames submitted whose GPU work has not finished (the queue says when).
     frames_ahead: Arc<AtomicU32>,
-    /// The last finished frame's time, submitted to done (ms as f64 bits; 0: none new).
+    /// The last finished frame's GPU time (ms as f64 bits; 0: none new): from
+    /// when it was submitted or the frame before it finished, whichever was
+    /// later, to when it finished.
     frame_done_ms: Arc<AtomicU64>,
+    /// The same for the page's governor (`take_frame_ms`), and when the last
+    /// frame finished (`js_sys::Date::now()`, f64 bits).
+    governor_ms: Arc<AtomicU64>,
+    last_done: Arc<AtomicU64>,
     /// Whether to draw while loading (a slow GPU waits for the stream).
     pacer: crate::frame::pacing::LoadPacer,
     /// The camera of the last frame drawn.
@@ -157,6 +163,8 @@ impl Viewer {
             lost,
             frames_ahead: Default::default(),
             frame_done_ms: Default::default(),
+            governor_ms: Default::default(),
+            last_done: Default::default(),
             pacer: Default::default(),
             drawn_camera: None,
         })
@@ -384,10 +392,17 @@ impl Viewer {
         self.frame.queue.present(target);
         self.frames_ahead.fetch_add(1, Ordering::Relaxed);
         let (ahead, done_ms) = (self.frames_ahead.clone(), self.frame_done_ms.clone());
+        let (governor_ms, last_done) = (self.governor_ms.clone(), self.last_done.clone());
         let submitted = js_sys::Date::now();
         self.frame.queue.on_submitted_work_done(move || {
             ahead.fetch_sub(1, Ordering::Relaxed);
-            done_ms.store((js_sys::Date::now() - submitted).max(0.001).to_bits(), Ordering::Relaxed);
+            // (Frames queue behind each other: this one's GPU time began when
+            // the one before finished, if that was after its submission.)
+            let now = js_sys::Date::now();
+            let began = submitted.max(f64::from_bits(last_done.swap(now.to_bits(), Ordering::Relaxed)));
+            let ms = (now - began).max(0.001).to_bits();
+            done_ms.store(ms, Ordering::Relaxed);
+            governor_ms.store(ms, Ordering::Relaxed);
         });
         self.pacer.drew(now_ms);
         self.drawn_camera = Some(self.camera());
@@ -404,6 +419,13 @@ impl Viewer {
         let eye = self.orbit.camera().eye_m;
         let ground = self.frame.stream.ground_height_at(eye.x as f32, eye.y as f32).map(f64::from);
         Camera { fov_y_rad: self.fov_y_rad, ..self.orbit.camera_over(ground, self.fly) }
+    }
+
+    /// The GPU time (ms) of the last frame finished since the last call, or 0
+    /// when none finished: what the page's frame-time governor holds to its
+    /// target (`web/governor.js`).
+    pub fn take_frame_ms(&self) -> f64 {
+        f64::from_bits(self.governor_ms.swap(0, Ordering::Relaxed))
     }
 
     /// Whether the GPU device was lost (the page then creates a new viewer).

@@ -304,6 +304,44 @@ test('the viewer page', async (t) => {
     assert.ok(Math.abs(cam.z - cam.ground - 50) < 1, `flew to ${JSON.stringify(cam)} from ${JSON.stringify(before)}`);
     assert.deepEqual(errors, []);
   });
+  await t.test('the frame-time governor steps down while the camera moves and restores all at rest', async () => {
+    const full = await page.evaluate(() => window.sylva.canvas.width);
+    assert.equal(await page.evaluate(() => window.sylva.stats().governor.level), 0);
+    // Orbits for up to `ms` (a move every animation frame); the deepest level and smallest canvas seen.
+    const orbit = (ms) => page.evaluate(async (ms) => {
+      const v = window.sylva;
+      const c = v.camera();
+      let deepest = 0, smallest = v.canvas.width;
+      const t0 = performance.now();
+      while (performance.now() - t0 < ms && deepest < 2) {
+        v.setCamera({ x: c.x, y: c.y, z: c.z, pitch: c.pitch, heading: c.heading + (performance.now() - t0) / 100 });
+        await new Promise((r) => requestAnimationFrame(r));
+        deepest = Math.max(deepest, v.stats().governor.level);
+        smallest = Math.min(smallest, v.canvas.width);
+      }
+      v.setCamera({ x: c.x, y: c.y, z: c.z, heading: c.heading, pitch: c.pitch });
+      return { deepest, smallest, report: v.stats().governor };
+    }, ms);
+    // A target no software GPU meets: the render scale steps down while moving…
+    await page.evaluate(() => window.sylva.setQuality({ target_ms: 1, min_scale: 0.5 }));
+    const moving = await orbit(30000);
+    assert.ok(moving.deepest >= 2 && moving.smallest < full, `governed while moving: ${JSON.stringify(moving)} (full ${full} px)`);
+    assert.match(moving.report.reason, /target/);
+    // …and at rest everything comes back.
+    await page.waitForFunction((full) => {
+      const v = window.sylva;
+      return v.stats().governor.level === 0 && v.canvas.width === full;
+    }, full, { timeout: 60000 });
+    assert.equal(await page.evaluate(() => window.sylva.stats().governor.reason), 'at rest');
+    // Off: nothing changes while moving.
+    await page.evaluate(() => window.sylva.setQuality('off'));
+    const off = await orbit(3000);
+    assert.equal(off.deepest, 0);
+    assert.equal(off.smallest, full);
+    assert.match(await page.evaluate(() => { try { window.sylva.setQuality({ target_ms: -1 }); return 'no error'; } catch (e) { return String(e); } }), /target_ms/);
+    await page.evaluate(() => window.sylva.setQuality({ enabled: true, target_ms: 33, min_scale: 0.35 }));
+    await page.waitForFunction(() => window.sylva.stats().tiles_resident > 0, null, { timeout: 60000 });
+  });
   await t.test('a lost GPU device is recreated and rendering continues', async () => {
     // Back to the first view, the default light and terrain.
     await page.evaluate((c) => {

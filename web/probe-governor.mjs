@@ -1,0 +1,45 @@
+// Frames while moving the camera, with the frame-time governor and without:
+// loads a scene's first view in headless Chromium (SwiftShader), waits for it,
+// then orbits for `seconds` (a move every animation frame) and counts the
+// frames drawn. Usage: node web/probe-governor.mjs SCENE_DIR [seconds] [target_ms]
+import { spawn } from 'node:child_process';
+import { join, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+
+const root = join(dirname(fileURLToPath(import.meta.url)), '..');
+const scene = process.argv[2] || join(root, 'demo-scene');
+const seconds = Number(process.argv[3] || 30);
+const target = process.argv[4] || '33';
+const flags = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
+  '--use-webgpu-adapter=swiftshader', '--use-angle=swiftshader', '--disable-quic', '--no-first-run'];
+const server = spawn(join(root, 'target/release/sylva'), ['serve', scene, '--port', '0'], { stdio: ['ignore', 'pipe', 'inherit'] });
+const base = await new Promise((resolve) => server.stdout.on('data', (d) => {
+  const m = /http:\/\/[0-9.:]+\//.exec(String(d)); if (m) resolve(m[0]);
+}));
+const browser = await chromium.launch({ executablePath: process.env.CHROMIUM || '/usr/bin/chromium', args: flags });
+for (const quality of ['off', target]) {
+  const page = await browser.newPage({ viewport: { width: 960, height: 540 } });
+  await page.goto(`${base}?ui=0&quality=${quality}`);
+  await page.waitForFunction(() => window.sylva, null, { timeout: 600000 });
+  await page.evaluate(() => window.sylva.ready);
+  const r = await page.evaluate(async (ms) => {
+    const v = window.sylva;
+    const c = v.camera();
+    const f0 = v.viewer.frames_drawn();
+    const t0 = performance.now();
+    const levels = {};
+    while (performance.now() - t0 < ms) {
+      v.setCamera({ x: c.x, y: c.y, z: c.z, pitch: c.pitch, heading: c.heading + (performance.now() - t0) / 200 });
+      await new Promise((res) => requestAnimationFrame(res));
+      const g = v.stats().governor;
+      levels[g.level] = (levels[g.level] || 0) + 1;
+    }
+    const frames = v.viewer.frames_drawn() - f0;
+    return { frames, seconds: (performance.now() - t0) / 1000, levels, governor: v.stats().governor };
+  }, seconds * 1000);
+  console.log(`quality=${quality}: ${r.frames} frames in ${r.seconds.toFixed(1)} s while moving (${(1000 * r.seconds / Math.max(1, r.frames)).toFixed(0)} ms a frame); animation frames per level ${JSON.stringify(r.levels)}; ${JSON.stringify(r.governor)}`);
+  await page.close();
+}
+await browser.close();
+server.kill();
