@@ -207,8 +207,10 @@ fuzz:
 	  $(CARGO) +nightly fuzz run $$t -- -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 || exit 1; done
 
 # Regenerates the small test scene (commit the result; then re-bless image tests
-# with SYLVA_BLESS=1 cargo test --test it gpu_scene::).
+# with SYLVA_BLESS=1 cargo test --test it gpu_scene::). Its packs stay version 1
+# (--raw-packs): the tests read them whole, and every GPU test then keeps the
+# older packs' path working; bakes in tests write stored packs.
 fixtures: release
 	rm -rf tests/fixtures/forest-small
-	target/release/sylva-bake demo --trees 3000 --seed 3 --billboard-size 32 --impostor-size 32 --texture-size 64 \
+	target/release/sylva-bake demo --trees 3000 --seed 3 --raw-packs --billboard-size 32 --impostor-size 32 --texture-size 64 \
 	  --cell-size 32 --tile-cells 4 --index-node-tiles 4 --canopy-cell 4 --out tests/fixtures/forest-small

@@ -301,8 +301,13 @@ fn impostor_cover(in: VertexOut) -> vec4<f32> {
     let denom = min(dot(d, vd), -1e-3);
     let to_plane = dot(center - o, vd);
     let uv = impostor_texcoord(o + d * (to_plane / denom) - center, vr, cross(vd, vr), radius);
+    // The mip from the first view's footprint, as `impostor_hit` takes it: the
+    // nearest view may differ between a quad's pixels, the first does not.
+    let d0 = impostor_view_dir(in.layers.x, grid);
+    let r0 = impostor_view_right(d0);
+    let uv0 = impostor_texcoord(o + d * (dot(center - o, d0) / min(dot(d, d0), -1e-3)) - center, r0, cross(d0, r0), radius);
     let size = f32(textureDimensions(imp_color).x);
-    let footprint = max(length(dpdx(uv)), length(dpdy(uv))) * size;
+    let footprint = max(length(dpdx(uv0)), length(dpdy(uv0))) * size;
     let lod = clamp(log2(max(footprint, 1e-6)), 0.0, max(log2(size) - 3.0, 0.0));
     let cover = textureSampleLevel(imp_color, imp_sampler, uv, layer, lod).a;
     let surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, lod);

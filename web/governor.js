@@ -79,18 +79,25 @@ export class Governor {
     if (!this.enabled) return false;
     const before = this.level;
     if (moving) this.lastMoveMs = now;
-    if (now - this.lastMoveMs >= REST_MS) {
+    // At rest: no move for REST_MS, or for two frames' time on a GPU whose
+    // frames take longer (its animation frames come that far apart).
+    const rest = Math.max(REST_MS, 2 * (this.lastFrameMs || 0));
+    if (frameMs !== undefined) this.lastFrameMs = frameMs;
+    if (now - this.lastMoveMs >= rest) {
       this.level = 0;
-      this.over = this.under = 0;
+      this.over = this.under = this.skip = 0;
       this.reason = 'at rest';
-    } else if (frameMs !== undefined && this.skip > 0) {
+      return this.level !== before;
+    }
+    if (frameMs === undefined) return false;
+    if (frameMs > this.target_ms * FAR_OVER && this.level < this.maxLevel()) {
+      this.level = this.maxLevel();
+      this.over = this.under = 0;
+      this.reason = `frames of ${frameMs.toFixed(0)} ms, far over the ${this.target_ms} ms target`;
+    } else if (this.skip > 0) {
       this.skip--;
-    } else if (frameMs !== undefined) {
-      if (frameMs > this.target_ms * FAR_OVER && this.level < this.maxLevel()) {
-        this.level = this.maxLevel();
-        this.over = this.under = 0;
-        this.reason = `frames of ${frameMs.toFixed(0)} ms, far over the ${this.target_ms} ms target`;
-      } else if (frameMs > this.target_ms * DOWN_OVER) { this.over++; this.under = 0; }
+    } else {
+      if (frameMs > this.target_ms * DOWN_OVER) { this.over++; this.under = 0; }
       else if (frameMs < this.target_ms * UP_UNDER) { this.under++; this.over = 0; }
       else { this.over = this.under = 0; }
       if (this.over >= DOWN_FRAMES && this.level < this.maxLevel()) {

@@ -29,15 +29,23 @@ for (const quality of ['off', target]) {
     const f0 = v.viewer.frames_drawn();
     const t0 = performance.now();
     const levels = {};
+    const trace = [];
+    let lastTrace = -1e9;
     while (performance.now() - t0 < ms) {
+      if (performance.now() - lastTrace > 3000) {
+        lastTrace = performance.now();
+        const s = v.stats();
+        trace.push(`${((lastTrace - t0) / 1000).toFixed(1)}s L${s.governor.level} f${v.viewer.frames_drawn() - f0} w${v.canvas.width} draw ${Math.round(s.gpu_ms.draw)} trees ${s.instances.billboard}`);
+      }
       v.setCamera({ x: c.x, y: c.y, z: c.z, pitch: c.pitch, heading: c.heading + (performance.now() - t0) / 200 });
       await new Promise((res) => requestAnimationFrame(res));
       const g = v.stats().governor;
       levels[g.level] = (levels[g.level] || 0) + 1;
     }
     const frames = v.viewer.frames_drawn() - f0;
-    return { frames, seconds: (performance.now() - t0) / 1000, levels, governor: v.stats().governor };
+    return { frames, seconds: (performance.now() - t0) / 1000, levels, governor: v.stats().governor, trace };
   }, seconds * 1000);
+  if (process.env.TRACE) console.log(r.trace.join('\n'));
   console.log(`quality=${quality}: ${r.frames} frames in ${r.seconds.toFixed(1)} s while moving (${(1000 * r.seconds / Math.max(1, r.frames)).toFixed(0)} ms a frame); animation frames per level ${JSON.stringify(r.levels)}; ${JSON.stringify(r.governor)}`);
   await page.close();
 }

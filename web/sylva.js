@@ -93,7 +93,7 @@ class SylvaViewer {
     this.flight = null;
     // The frame-time governor (web/governor.js): while the camera moves, the
     // render scale, shadows and LoD step down to hold the target; at rest, all back.
-    this.governor = new Governor(options.quality || {});
+    this.governor = new Governor();
     this.userShadows = 'high';
     this.userLod = 1;
     this.applied = { scale: 1, shadows: 'high', lod: 1 };
@@ -101,6 +101,7 @@ class SylvaViewer {
     this.ready = new Promise((resolve, reject) => { this.resolveReady = resolve; this.rejectReady = reject; });
     this.ready.catch(() => {}); // observed through 'error' events too
     this.resize();
+    if (options.quality !== undefined) this.setQuality(options.quality);
     if (options.controls !== false) this.bindControls();
     this.resizeObserver = new ResizeObserver(() => { this.resize(); this.dirty = SETTLE_FRAMES; });
     this.resizeObserver.observe(canvas);
@@ -411,9 +412,11 @@ class SylvaViewer {
       throw new Error(`setLighting: ao must be true or false, not ${JSON.stringify(options.ao)}`);
     }
     if (options.shadows !== undefined) {
-      this.viewer.set_shadows(String(options.shadows));
-      this.userShadows = String(options.shadows);
-      this.applied.shadows = this.userShadows;
+      const shadows = String(options.shadows).trim().toLowerCase();
+      this.viewer.set_shadows(shadows); // (throws for an unknown quality)
+      this.userShadows = shadows;
+      this.applied.shadows = shadows;
+      this.applyGovernor(); // (while governed, at most the governor's level)
     }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
     this.lighting = { ...this.lighting, ...options };
@@ -476,6 +479,7 @@ class SylvaViewer {
       this.viewer.set_quality(q);
       this.userLod = q;
       this.applied.lod = q;
+      this.applyGovernor();
     } else if (q === 'off') {
       this.governor.set({ enabled: false });
       this.applyGovernor();
@@ -495,19 +499,21 @@ class SylvaViewer {
   applyGovernor() {
     const a = this.governor.apply(this.userShadows, this.userLod);
     if (a.scale !== this.applied.scale) {
-      // A canvas sized by its pixels alone keeps its CSS size while scaled.
-      if (a.scale !== 1 && !this.canvas.style.width) {
-        this.lockedSize = true;
-        this.canvas.style.width = `${this.canvas.clientWidth}px`;
-        this.canvas.style.height = `${this.canvas.clientHeight}px`;
+      // The canvas keeps its CSS size while its pixels are scaled (one sized by
+      // its pixels alone would shrink): held in px, given back at full scale.
+      const st = this.canvas.style;
+      if (a.scale !== 1 && !this.savedSize) {
+        this.savedSize = { width: st.width, height: st.height };
+        st.width = `${this.canvas.clientWidth}px`;
+        st.height = `${this.canvas.clientHeight}px`;
       }
       this.applied.scale = a.scale;
-      this.resize();
-      if (a.scale === 1 && this.lockedSize) {
-        this.lockedSize = false;
-        this.canvas.style.width = '';
-        this.canvas.style.height = '';
+      if (a.scale === 1 && this.savedSize) {
+        st.width = this.savedSize.width;
+        st.height = this.savedSize.height;
+        this.savedSize = null;
       }
+      this.resize();
     }
     if (a.shadows !== this.applied.shadows) { this.viewer.set_shadows(a.shadows); this.applied.shadows = a.shadows; }
     if (a.lod !== this.applied.lod) { this.viewer.set_quality(a.lod); this.applied.lod = a.lod; }
@@ -651,10 +657,15 @@ class SylvaViewer {
     }
     this.emit('progress', progress);
     const cam = this.viewer.camera_json();
-    const moved = cam !== this.lastCamera;
-    if (moved) {
+    let moved = false;
+    if (cam !== this.lastCamera) {
       this.lastCamera = cam;
-      this.emit('camerachange', JSON.parse(cam));
+      const c = JSON.parse(cam);
+      this.emit('camerachange', c);
+      // (The pose, not the ground height under it, which changes as terrain arrives.)
+      const pose = [c.x, c.y, c.z, c.heading, c.pitch].join();
+      moved = pose !== this.lastPose;
+      this.lastPose = pose;
     }
     // The governor: each finished frame's GPU time while moving; at rest, full quality.
     const frameMs = this.viewer.take_frame_ms();
@@ -776,6 +787,7 @@ class SylvaViewer {
     this.destroyed = true;
     cancelAnimationFrame(this.raf);
     this.resizeObserver.disconnect();
+    if (this.savedSize) { this.canvas.style.width = this.savedSize.width; this.canvas.style.height = this.savedSize.height; }
     try { this.viewer.free(); } catch (_) { /* already freed */ }
   }
 }

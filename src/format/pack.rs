@@ -4,9 +4,11 @@
 //! [`PACK_SECTION_ALIGN`] bytes, so each section can be handed to
 //! `queue.write_buffer` / `queue.write_texture` as it is. The `META` section is
 //! JSON ([`PackMeta`]) describing the levels; binary sections hold vertices,
-//! indices and texture arrays. Readers skip section kinds they do not know,
-//! which is how later levels (ellipsoids, lines) are added without breaking
-//! older readers. Layout tables: `docs/FORMAT.md`.
+//! indices and texture arrays. Readers skip section kinds they do not know in
+//! a version 1 pack, which is how later levels (ellipsoids, lines) were added
+//! without breaking older readers; a stored pack (version 2, each part
+//! deflated: [`crate::format::stored`]) places every section in a part.
+//! Layout tables: `docs/FORMAT.md`.
 //!
 //! One file for one format (about 670 lines): the header, section table, metadata,
 //! the head/parts split a viewer fetches by range and the encoder and decoder
@@ -857,26 +859,37 @@ fn read_blocks(head: &PackHead, s: SectionEntry, table: &[u8]) -> Result<Vec<Sto
     let head_end = s.offset + s.bytes;
     let mut blocks = Vec::with_capacity(s.count as usize);
     let mut stored_end = head_end;
+    // Parts follow the head and each other in the section table's layout (at
+    // most the alignment's padding apart), and the last one ends the pack: so
+    // what a reader allocates is what the blocks hold.
+    let mut logical_end = head_end;
     for i in 0..u64::from(s.count) {
         let what = format!("STOR block[{i}]");
         let at = i * STORED_BLOCK_BYTES;
         let word = |o: u64| r.u64(&what, at + o);
         let (lo, len, so, slen) = (word(0)?, word(8)?, word(16)?, word(24)?);
-        let logical = (lo, lo.checked_add(len).filter(|e| *e <= head.file_bytes).unwrap_or(u64::MAX));
-        if logical.1 == u64::MAX || len == 0 || lo < head_end {
+        let end = lo.checked_add(len).filter(|e| *e <= head.file_bytes);
+        let (Some(end), true) = (end, len > 0 && lo >= logical_end && lo - logical_end < PACK_SECTION_ALIGN) else {
             return Err(Problem::Invalid(format!(
-                "{what}: bytes {lo} + {len} are not a part after the head ({head_end}) within the pack's {} bytes",
+                "{what}: bytes {lo} + {len} are not the next part after byte {logical_end} within the pack's {} bytes",
                 head.file_bytes
             )));
-        }
-        if so != stored_end || slen == 0 || len > slen.saturating_mul(MAX_INFLATE_RATIO) {
+        };
+        let stored = so.checked_add(slen).filter(|_| so == stored_end && slen > 0);
+        let (Some(stored), true) = (stored, len <= slen.saturating_mul(MAX_INFLATE_RATIO)) else {
             return Err(Problem::Invalid(format!(
                 "{what}: stored at {so} + {slen} bytes for {len} (blocks follow the head and each other, \
                  inflating at most {MAX_INFLATE_RATIO}:1)"
             )));
-        }
-        stored_end = so + slen;
-        blocks.push(StoredBlock { logical, stored: (so, stored_end) });
+        };
+        (logical_end, stored_end) = (end, stored);
+        blocks.push(StoredBlock { logical: (lo, end), stored: (so, stored) });
+    }
+    if logical_end != head.file_bytes {
+        return Err(Problem::Invalid(format!(
+            "the STOR section's parts end at byte {logical_end}, the pack's header says {}",
+            head.file_bytes
+        )));
     }
     // Each part held is one block, and each block one part.
     let parts: Vec<(u64, u64)> = PackPart::ALL.iter().filter_map(|p| head.part_range(*p)).collect();
@@ -893,11 +906,6 @@ fn read_blocks(head: &PackHead, s: SectionEntry, table: &[u8]) -> Result<Vec<Sto
             blocks.len(),
             parts.len()
         )));
-    }
-    let mut ranges: Vec<(u64, u64)> = blocks.iter().map(|b| b.logical).collect();
-    ranges.sort_unstable();
-    if ranges.windows(2).any(|w| w[1].0 < w[0].1) {
-        return Err(Problem::Invalid("the STOR section's parts overlap".into()));
     }
     Ok(blocks)
 }

@@ -116,13 +116,14 @@ pub fn unstore(name: &str, file: Vec<u8>) -> Result<Vec<u8>, DecodeError> {
         return Ok(file);
     }
     let len = file.len() as u64;
-    // (Grown as the blocks inflate: no more than what they truly hold.)
+    if let Some(b) = head.stored.iter().find(|b| b.stored.1 > len) {
+        let what = format!("stored part at bytes {}..{}", b.stored.0, b.stored.1);
+        return Err(DecodeError::new(name, Problem::Truncated { what, start: b.stored.0, end: b.stored.1, len }));
+    }
+    // (Grown as the blocks inflate, in order, each after at most the alignment's
+    // padding: no more than what they truly hold, `read_blocks` checked.)
     let mut out = head.bytes.clone();
     for b in &head.stored {
-        if b.stored.1 > len {
-            let what = format!("stored part at bytes {}..{}", b.stored.0, b.stored.1);
-            return Err(DecodeError::new(name, Problem::Truncated { what, start: b.stored.0, end: b.stored.1, len }));
-        }
         out.resize(b.logical.0 as usize, 0);
         let part =
             inflate(&file[b.stored.0 as usize..b.stored.1 as usize], b.logical.1 - b.logical.0).map_err(|e| {
@@ -240,6 +241,10 @@ mod tests {
             ("a gap between stored blocks", Box::new(move |b| word(b, 0, 2, b0.stored.0 + 1))),
             ("an empty stored block", Box::new(|b| word(b, 0, 3, 0))),
             ("an inflation beyond deflate's", Box::new(|b| word(b, 0, 3, 1))),
+            ("a stored size that overflows", Box::new(|b| word(b, 0, 3, u64::MAX))),
+            ("blocks out of order", Box::new(move |b| word(b, 0, 0, b0.logical.0 + (1 << 20)))),
+            // A tiny file claiming a terabyte: refused before anything is allocated.
+            ("a huge pack size", Box::new(|b| b[16..24].copy_from_slice(&(1u64 << 40).to_le_bytes()))),
         ];
         for (what, break_it) in cases {
             let mut bad = stored.clone();

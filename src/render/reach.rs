@@ -143,8 +143,9 @@ impl Reach {
     }
 
     /// Which parts of species `s`'s pack ([`crate::format::pack::PackPart::ALL`]
-    /// order: billboards, clusters, coarse mesh levels, full mesh, bare far
-    /// tiers) the resident trees within reach can need, from the measured
+    /// order: billboards, impostors, clusters, coarse mesh levels, full mesh,
+    /// bare billboards, bare impostors; one far tier, the one drawn) the
+    /// resident trees within reach can need, from the measured
     /// heights and the representations allowed: a far view needs neither
     /// meshes nor clusters, a medium one not the full mesh; a leaf-off view the
     /// bare far tiers of a deciduous species that has them, not its leafy ones.

@@ -111,7 +111,11 @@ async fn inflate_in_browser(url: &str, deflated: &[u8], len: u64) -> Result<Vec<
         .get_reader()
         .dyn_into()
         .map_err(|o: js_sys::Object| js(o.into()))?;
-    let mut out = Vec::with_capacity(len as usize);
+    // (Grown as it inflates: the size the head gives is a bound, not a promise.)
+    if len > u64::from(u32::MAX / 2) {
+        return Err(fail(format!("of {len} bytes is over what a browser viewer holds")));
+    }
+    let mut out = Vec::with_capacity(len.min(deflated.len() as u64 * 8) as usize);
     loop {
         let chunk = JsFuture::from(reader.read()).await.map_err(js)?;
         if js_sys::Reflect::get(&chunk, &"done".into()).map_err(js)?.is_truthy() {

@@ -130,7 +130,11 @@ pub fn bake_packs(
         };
         drop(cached);
         // Each part deflated: a far view fetches a tenth of the bytes (docs/FORMAT.md, "Stored packs").
-        let stored = sylva::format::stored::store_pack(&file, &bytes).with_context(|| format!("storing {file}"))?;
+        let stored = if options.raw_packs {
+            bytes
+        } else {
+            sylva::format::stored::store_pack(&file, &bytes).with_context(|| format!("storing {file}"))?
+        };
         let head = sylva::format::pack::PackHead::decode(&file, &stored)?;
         write_file(&dir.join(&file), &stored)?;
         entries.push(SpeciesEntry {

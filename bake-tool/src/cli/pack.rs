@@ -44,6 +44,11 @@ pub(crate) struct PackArgs {
     /// autumn and leaf-off (`sylva render --season`, the viewer's `setSeason`).
     #[arg(long)]
     pub(crate) no_seasons: bool,
+    /// Write the species packs as they are (pack version 1), not stored with
+    /// each part deflated: for viewers older than stored packs (the default
+    /// fetches about a seventh of the bytes; docs/FORMAT.md "Stored packs").
+    #[arg(long)]
+    pub(crate) raw_packs: bool,
     /// Capture the far tiers (impostors, billboards) of each of a library
     /// tree's mesh variants, not variant 0's alone: far trees keep their own
     /// shapes (closer to their meshes) for 3× the far tiers' bytes.
@@ -162,6 +167,7 @@ impl PackArgs {
             impostor_size: self.impostor_size,
             cloud_planes: self.cloud_planes,
             seasons: !self.no_seasons,
+            raw_packs: self.raw_packs,
             far_variants: self.far_tier_variants,
         })
     }

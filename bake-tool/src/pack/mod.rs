@@ -58,6 +58,11 @@ pub struct PackOptions {
     /// Deciduous species get their seasons (autumn colour, the bare wood's
     /// far tiers); off: every species one state, leaf-on.
     pub seasons: bool,
+    /// Write the packs as they are (version 1) instead of stored, each part
+    /// deflated (version 2, `sylva::format::stored`): for viewers before
+    /// issue 47 and the test fixture. Not a property of the pack's content
+    /// (the pack cache keeps packs as they are, whichever is written).
+    pub raw_packs: bool,
     /// Capture the far tiers (billboards, impostors) of every mesh variant,
     /// not variant 0's alone: a tree's far tier then shows its own shape (the
     /// far tiers' bytes × the variants).
@@ -100,6 +105,7 @@ impl Default for PackOptions {
             impostor_size: DEFAULT_IMPOSTOR_SIZE,
             cloud_planes: DEFAULT_CLOUD_PLANES,
             seasons: true,
+            raw_packs: false,
             far_variants: false,
         }
     }

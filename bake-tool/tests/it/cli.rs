@@ -695,6 +695,20 @@ fn european_and_swapped_inventories_bake_whole_or_fail_clearly() {
     assert!(log.contains("50 rows are not UTF-8: read as Windows-1252"), "{log}");
     assert!(log.contains("48.20") && log.contains("16.37") && log.contains("every tree uses oak"), "{log}");
     assert_eq!(inspect_json(&dir.join("vienna"))["trees_total"], 300);
+    // Packs are stored (each part deflated, version 2) unless `--raw-packs`
+    // asks for version 1; both hold the same pack.
+    run(&mut bake(&path, &dir.join("vienna-raw"), &["--raw-packs"]));
+    let pack = |scene: &str| std::fs::read(dir.join(scene).join("species/oak.pack")).unwrap();
+    let (stored, raw) = (pack("vienna"), pack("vienna-raw"));
+    assert_eq!((u16::from_le_bytes([stored[4], stored[5]]), u16::from_le_bytes([raw[4], raw[5]])), (2, 1));
+    assert!(stored.len() * 2 < raw.len(), "stored {} bytes, raw {}", stored.len(), raw.len());
+    let logical = sylva::format::stored::unstore("oak", stored).unwrap();
+    let (a, b) =
+        (sylva::format::decode_pack("stored", &logical).unwrap(), sylva::format::decode_pack("raw", &raw).unwrap());
+    assert_eq!(a.meta, b.meta);
+    for (e, bytes) in b.sections.iter().skip(1) {
+        assert_eq!(a.section(e.kind, e.index), Some(*bytes), "the same sections");
+    }
     // A default height no tree has would scale trees to the stratosphere: refused up front.
     let e = fails(&mut bake(&path, &dir.join("tall"), &["--default-height", "1e30"]));
     assert!(e.contains("--default-height") && e.contains("below 200"), "{e}");

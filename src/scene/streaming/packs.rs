@@ -79,7 +79,8 @@ impl<F: Fetcher> SceneStream<F> {
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             // No head size in the manifest, or a server that ignores ranges: the whole pack.
             if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
-                let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), true))?;
+                // (A stored pack that does not inflate whole will not next time either.)
+                let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), false))?;
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
                 residency.upload_pack(s as u32, &pack);
                 Ok(None)
@@ -127,7 +128,7 @@ impl<F: Fetcher> SceneStream<F> {
             let (a, b) = fetch.range;
             if !inflated && len == file_bytes && len != b - a {
                 // The server sent the whole file instead of the range.
-                let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), true))?;
+                let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), false))?;
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
                 residency.upload_pack(s as u32, &pack);
                 return Ok(true);
@@ -209,7 +210,11 @@ impl<F: Fetcher> SceneStream<F> {
                 };
                 (false, l.head != Load::Broken && coming)
             }
-            Some(l) => (false, l.head != Load::Broken && FAR_PARTS.iter().any(|&i| l.parts[i] != Load::Broken)),
+            // (Only the far parts the pack has: an evergreen has no bare ones.)
+            Some(l) => {
+                let has = |i: usize| l.parsed.as_ref().is_none_or(|h| h.part_range(PackPart::ALL[i]).is_some());
+                (false, l.head != Load::Broken && FAR_PARTS.iter().any(|&i| has(i) && l.parts[i] != Load::Broken))
+            }
             None => (false, false),
         }
     }
@@ -240,7 +245,12 @@ impl<F: Fetcher> SceneStream<F> {
                 for i in FAR_PARTS {
                     wants[i] = false;
                 }
-                if let Some(&j) = FAR_PARTS.iter().find(|&&j| usable(j)) {
+                // (The season asked for first: bare billboards before leafy impostors in leaf-off.)
+                let bare_asked = asked[PackPart::BareBillboards.index()] || asked[PackPart::BareImpostors.index()];
+                let bare = |j: usize| matches!(PackPart::ALL[j], PackPart::BareBillboards | PackPart::BareImpostors);
+                let mut order = FAR_PARTS;
+                order.sort_by_key(|&j| bare(j) != bare_asked);
+                if let Some(&j) = order.iter().find(|&&j| usable(j)) {
                     wants[j] = true;
                 }
             }
