@@ -667,7 +667,9 @@ class SylvaViewer {
       moved = pose !== this.lastPose;
       this.lastPose = pose;
     }
-    // The governor: each finished frame's GPU time while moving; at rest, full quality.
+    // The governor: each finished frame's GPU time while moving; at rest, full
+    // quality. (The first view placing itself while loading is no motion.)
+    if (!this.readySettled && !this.flight) moved = false;
     const frameMs = this.viewer.take_frame_ms();
     if (this.governor.frame(now, frameMs > 0 ? frameMs : undefined, moved || !!this.flight)) this.applyGovernor();
     // Ready after a frame drawn with everything settled, once its counters are read back.

@@ -83,6 +83,8 @@ function plainFrames(url, { lit = false } = {}) {
   const add = [];
   if (!/[?&]refine=/.test(path)) add.push('refine=0');
   if (!lit && !/[?&]shadows=/.test(path)) add.push('shadows=off');
+  // (No frame-time governor: what a test measures is drawn at full quality; its own test turns it on.)
+  if (!/[?&]quality=/.test(path)) add.push('quality=off');
   if (!add.length) return url;
   return `${path}${path.includes('?') ? '&' : '?'}${add.join('&')}${hash === undefined ? '' : `#${hash}`}`;
 }
@@ -323,7 +325,7 @@ test('the viewer page', async (t) => {
       return { deepest, smallest, report: v.stats().governor };
     }, ms);
     // A target no software GPU meets: the render scale steps down while moving…
-    await page.evaluate(() => window.sylva.setQuality({ target_ms: 1, min_scale: 0.5 }));
+    await page.evaluate(() => window.sylva.setQuality({ enabled: true, target_ms: 1, min_scale: 0.5 }));
     const moving = await orbit(30000);
     assert.ok(moving.deepest >= 2 && moving.smallest < full, `governed while moving: ${JSON.stringify(moving)} (full ${full} px)`);
     assert.match(moving.report.reason, /target/);
@@ -339,7 +341,6 @@ test('the viewer page', async (t) => {
     assert.equal(off.deepest, 0);
     assert.equal(off.smallest, full);
     assert.match(await page.evaluate(() => { try { window.sylva.setQuality({ target_ms: -1 }); return 'no error'; } catch (e) { return String(e); } }), /target_ms/);
-    await page.evaluate(() => window.sylva.setQuality({ enabled: true, target_ms: 33, min_scale: 0.35 }));
     await page.waitForFunction(() => window.sylva.stats().tiles_resident > 0, null, { timeout: 60000 });
   });
   await t.test('a lost GPU device is recreated and rendering continues', async () => {
@@ -764,7 +765,9 @@ test('the sun casts shadows and crowns are occluded by default; setLighting turn
   await page.waitForFunction(() => window.sylva.stats().shadow_cascades === 0, null, { timeout: 60000 });
   const unshaded = await meanBrightness('shadows-off');
   assert.ok(unshaded > high + 2, `shadows darken the view: off ${unshaded.toFixed(1)} vs high ${high.toFixed(1)}`);
-  assert.ok(unshaded > low + 2, `shadows darken the view: off ${unshaded.toFixed(1)} vs low ${low.toFixed(1)}`);
+  // (Impostors cast through their nearest view alone since issue 47: on the
+  // fixture's 32 px impostors 'low' darkens this view by about 1.8, 2.2 before.)
+  assert.ok(unshaded > low + 1.2, `shadows darken the view: off ${unshaded.toFixed(1)} vs low ${low.toFixed(1)}`);
   const refused = await page.evaluate(() => { try { window.sylva.setLighting({ shadows: 'ultra' }); return null; } catch (e) { return String(e); } });
   assert.ok(refused && refused.includes('off, low or high'), refused);
   // Each tree's own occlusion (on by default) darkens the crowns; off brightens them.
