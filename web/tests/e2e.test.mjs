@@ -335,6 +335,8 @@ test('the viewer page', async (t) => {
       return v.stats().governor.level === 0 && v.canvas.width === full;
     }, full, { timeout: 60000 });
     assert.equal(await page.evaluate(() => window.sylva.stats().governor.reason), 'at rest');
+    // (Full quality again draws the trees, not only the canopy a low level may leave.)
+    await page.waitForFunction(() => Object.values(window.sylva.stats().instances).reduce((a, b) => a + b, 0) > 100, null, { timeout: 60000 });
     // Off: nothing changes while moving.
     await page.evaluate(() => window.sylva.setQuality('off'));
     const off = await orbit(3000);
