@@ -2,22 +2,13 @@
 // loads a scene's first view in headless Chromium (SwiftShader), waits for it,
 // then orbits for `seconds` (a move every animation frame) and counts the
 // frames drawn. Usage: node web/probe-governor.mjs SCENE_DIR [seconds] [target_ms]
-import { spawn } from 'node:child_process';
-import { join, dirname } from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { join } from 'node:path';
+import { root, serveAndLaunch } from './headless.mjs';
 
-const root = join(dirname(fileURLToPath(import.meta.url)), '..');
 const scene = process.argv[2] || join(root, 'demo-scene');
 const seconds = Number(process.argv[3] || 30);
 const target = process.argv[4] || '33';
-const flags = ['--no-sandbox', '--enable-unsafe-webgpu', '--enable-features=Vulkan', '--use-vulkan=swiftshader',
-  '--use-webgpu-adapter=swiftshader', '--use-angle=swiftshader', '--disable-quic', '--no-first-run'];
-const server = spawn(join(root, 'target/release/sylva'), ['serve', scene, '--port', '0'], { stdio: ['ignore', 'pipe', 'inherit'] });
-const base = await new Promise((resolve) => server.stdout.on('data', (d) => {
-  const m = /http:\/\/[0-9.:]+\//.exec(String(d)); if (m) resolve(m[0]);
-}));
-const browser = await chromium.launch({ executablePath: process.env.CHROMIUM || '/usr/bin/chromium', args: flags });
+const { base, browser, close } = await serveAndLaunch(scene);
 for (const quality of ['off', target]) {
   const page = await browser.newPage({ viewport: { width: 960, height: 540 } });
   await page.goto(`${base}?ui=0&quality=${quality}`);
@@ -49,5 +40,4 @@ for (const quality of ['off', target]) {
   console.log(`quality=${quality}: ${r.frames} frames in ${r.seconds.toFixed(1)} s while moving (${(1000 * r.seconds / Math.max(1, r.frames)).toFixed(0)} ms a frame); animation frames per level ${JSON.stringify(r.levels)}; ${JSON.stringify(r.governor)}`);
   await page.close();
 }
-await browser.close();
-server.kill();
+await close();

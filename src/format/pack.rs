@@ -510,7 +510,7 @@ pub fn decode_pack<'a>(file: &str, bytes: &'a [u8]) -> Result<Pack<'a>, DecodeEr
 /// Reads the header and section table from `bytes` (the whole file, or when
 /// `full` is false only its first bytes). Checks every entry against the file
 /// size the header declares.
-fn read_table(bytes: &[u8], full: bool) -> Result<(Vec<SectionEntry>, u64), Problem> {
+pub(super) fn read_table(bytes: &[u8], full: bool) -> Result<(Vec<SectionEntry>, u64), Problem> {
     let r = Reader::new(bytes);
     r.magic("Sylva LoD pack", &PACK_MAGIC)?;
     let version = r.u16("header.version", 4)?;
@@ -725,6 +725,12 @@ impl PackPart {
         }
     }
 
+    /// The bare wood's far tier (a deciduous species' state 1).
+    #[must_use]
+    pub fn is_bare(self) -> bool {
+        matches!(self, PackPart::BareBillboards | PackPart::BareImpostors)
+    }
+
     /// Index of this part in [`Self::ALL`].
     #[must_use]
     pub fn index(self) -> usize {
@@ -787,14 +793,7 @@ impl PackHead {
     /// (A stored pack's file holds it deflated elsewhere: [`Self::fetch_of`].)
     #[must_use]
     pub fn part_range(&self, part: PackPart) -> Option<(u64, u64)> {
-        let mut it = self.entries.iter().filter(|e| PackPart::of(e.kind, e.index) == Some(part));
-        let first = it.next()?;
-        let (mut lo, mut hi) = (first.offset, first.offset + first.bytes);
-        for e in it {
-            lo = lo.min(e.offset);
-            hi = hi.max(e.offset + e.bytes);
-        }
-        Some((lo, hi))
+        part_range_in(&self.entries, part)
     }
 
     /// What to fetch for `part`: its range, or in a stored pack its block
@@ -843,6 +842,18 @@ impl PackHead {
         validate_meta(&pack, true).map_err(|p| DecodeError::new(file, p))?;
         Ok(pack)
     }
+}
+
+/// The byte range covering every section of `part` in a section table.
+pub(super) fn part_range_in(entries: &[SectionEntry], part: PackPart) -> Option<(u64, u64)> {
+    let mut it = entries.iter().filter(|e| PackPart::of(e.kind, e.index) == Some(part));
+    let first = it.next()?;
+    let (mut lo, mut hi) = (first.offset, first.offset + first.bytes);
+    for e in it {
+        lo = lo.min(e.offset);
+        hi = hi.max(e.offset + e.bytes);
+    }
+    Some((lo, hi))
 }
 
 /// Reads and checks a stored pack's `STOR` table against its section table:

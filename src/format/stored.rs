@@ -13,7 +13,8 @@ use super::error::{DecodeError, Problem};
 use super::pack::PackHead;
 #[cfg(not(target_arch = "wasm32"))]
 use super::pack::{
-    decode_pack, encode_pack, kind, PackPart, Section, PACK_HEADER_BYTES, PACK_VERSION_STORED, STORED_BLOCK_BYTES,
+    decode_pack, encode_pack, kind, part_range_in, read_table, PackPart, Section, PACK_VERSION_STORED,
+    STORED_BLOCK_BYTES,
 };
 
 /// A pack (as [`encode_pack`] writes it, or a stored one) stored: its sections
@@ -59,17 +60,11 @@ pub fn store_pack(name: &str, pack: &[u8]) -> Result<Vec<u8>, DecodeError> {
     let sections: Vec<Section> = std::iter::once(table).chain(by_part.into_iter().map(|(_, s)| s)).collect();
     let mut out = encode_pack(&decoded.meta, &sections);
     out[4..6].copy_from_slice(&PACK_VERSION_STORED.to_le_bytes());
-    // The layout as encoded: the table entry of STOR, then each part's range.
-    let entry = |i: usize| {
-        let at = PACK_HEADER_BYTES + i * super::pack::PACK_SECTION_ENTRY_BYTES;
-        let word = |o: usize| u64::from_le_bytes(out[at + o..at + o + 8].try_into().expect("8 bytes"));
-        (word(8), word(16))
-    };
-    let (stor_at, stor_len) = entry(1);
-    let head_end = (stor_at + stor_len) as usize;
-    // (The STOR table is still zeros: read the part ranges from the table alone.)
-    let h = ranges_without_blocks(name, &out[..head_end])?;
-    let ranges: Vec<(u64, u64)> = parts.iter().filter_map(|p| h.part_range(PackPart::ALL[*p])).collect();
+    // The layout as encoded: STOR's place (its table still zeros), each part's range.
+    let (entries, _) = read_table(&out, false).map_err(|p| DecodeError::new(name, p))?;
+    let stor = entries[1];
+    let (stor_at, head_end) = (stor.offset, (stor.offset + stor.bytes) as usize);
+    let ranges: Vec<(u64, u64)> = parts.iter().filter_map(|p| part_range_in(&entries, PackPart::ALL[*p])).collect();
     let mut blocks = Vec::with_capacity(ranges.len());
     let mut table = Vec::with_capacity(ranges.len() * STORED_BLOCK_BYTES as usize);
     let mut at = head_end as u64;
@@ -89,18 +84,6 @@ pub fn store_pack(name: &str, pack: &[u8]) -> Result<Vec<u8>, DecodeError> {
     // What a viewer will read, read back.
     PackHead::decode(name, &out)?;
     Ok(out)
-}
-
-/// The head of a pack being stored, its `STOR` table not yet filled: read as a
-/// version 1 pack without it (only its section ranges are used).
-#[cfg(not(target_arch = "wasm32"))]
-fn ranges_without_blocks(name: &str, head: &[u8]) -> Result<PackHead, DecodeError> {
-    let mut copy = head.to_vec();
-    copy[4..6].copy_from_slice(&super::pack::PACK_VERSION.to_le_bytes());
-    // Rename STOR to an unknown kind for this read: readers skip unknown kinds.
-    let at = PACK_HEADER_BYTES + super::pack::PACK_SECTION_ENTRY_BYTES;
-    copy[at..at + 4].copy_from_slice(b"stor");
-    PackHead::decode(name, &copy)
 }
 
 /// The pack in `file` with its parts inflated in place: the bytes the section

@@ -99,22 +99,20 @@ mod tests {
         p.frame_done(10_000.0);
         let mut t = 100.0;
         let mut drawn = 0;
-        for i in 0..200 {
-            if p.should_draw(t, false, 3 + i) {
-                p.drew(t);
-                drawn += 1;
+        // `n` arrivals 100 ms apart, counted from `first`.
+        let mut arrivals = |p: &mut LoadPacer, n: u64, first: u64| {
+            for i in 0..n {
+                if p.should_draw(t, false, first + i) {
+                    p.drew(t);
+                    drawn += 1;
+                }
+                t += 100.0;
             }
-            t += 100.0;
-        }
+            (drawn, t)
+        };
+        assert_eq!(arrivals(&mut p, 200, 3).0, 0, "20 s of arrivals, no frame yet");
         // …but a progress frame comes every 30 s (3 × the frame's time).
-        assert_eq!(drawn, 0, "20 s of arrivals, no frame yet");
-        for i in 0..110 {
-            if p.should_draw(t, false, 1000 + i) {
-                p.drew(t);
-                drawn += 1;
-            }
-            t += 100.0;
-        }
+        let (drawn, t) = arrivals(&mut p, 110, 1000);
         assert_eq!(drawn, 1, "a progress frame after 30 s");
         assert!(p.held() > 300);
         // Settled: drawn at once.

@@ -14,15 +14,15 @@
 //! indentation (`build.rs` minifies `shaders/` into `OUT_DIR`: naga's errors
 //! count lines of the minified text).
 
-/// A pass's WGSL: its modules in order, joined by [`Shader::source`].
+/// A pass's WGSL: runs of modules in order, joined by [`Shader::source`].
 #[derive(Debug, Clone, Copy)]
-pub struct Shader(pub &'static [&'static str]);
+pub struct Shader(pub &'static [&'static [&'static str]]);
 
 impl Shader {
     /// The composed source.
     #[must_use]
     pub fn source(&self) -> String {
-        self.0.concat()
+        self.0.concat().concat()
     }
 }
 
@@ -47,8 +47,9 @@ static TERRAIN_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/terrain.wgsl
 static CANOPY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/canopy.wgsl"));
 static ACCUMULATE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/accumulate.wgsl"));
 
-/// The mesh pass (and the bake's billboard capture).
-pub static MESH: Shader = Shader(&[
+/// The modules every tree pass (mesh, billboard, impostor, cluster) reads,
+/// before its own.
+static TREE_PASS: &[&str] = &[
     LAYOUT_WGSL,
     INSTANCE_WGSL,
     SELECT_WGSL,
@@ -58,69 +59,37 @@ pub static MESH: Shader = Shader(&[
     TREES_WGSL,
     STYLES_WGSL,
     SHADOW_WGSL,
-    MESH_WGSL,
-]);
+];
+
+/// The mesh pass (and the bake's billboard capture).
+pub static MESH: Shader = Shader(&[TREE_PASS, &[MESH_WGSL]]);
 
 /// The billboard pass.
-pub static BILLBOARD: Shader = Shader(&[
-    LAYOUT_WGSL,
-    INSTANCE_WGSL,
-    SELECT_WGSL,
-    LIGHT_WGSL,
-    STYLE_BITS_WGSL,
-    VIEW_WGSL,
-    TREES_WGSL,
-    STYLES_WGSL,
-    SHADOW_WGSL,
-    BILLBOARD_WGSL,
-]);
+pub static BILLBOARD: Shader = Shader(&[TREE_PASS, &[BILLBOARD_WGSL]]);
 
 /// The multi-view impostor pass.
-pub static IMPOSTOR: Shader = Shader(&[
-    LAYOUT_WGSL,
-    INSTANCE_WGSL,
-    SELECT_WGSL,
-    LIGHT_WGSL,
-    STYLE_BITS_WGSL,
-    VIEW_WGSL,
-    TREES_WGSL,
-    STYLES_WGSL,
-    SHADOW_WGSL,
-    IMPOSTOR_VIEWS_WGSL,
-    IMPOSTOR_WGSL,
-]);
+pub static IMPOSTOR: Shader = Shader(&[TREE_PASS, &[IMPOSTOR_VIEWS_WGSL, IMPOSTOR_WGSL]]);
 
 /// The cluster pass (ellipsoids and lines).
-pub static CLUSTER: Shader = Shader(&[
-    LAYOUT_WGSL,
-    INSTANCE_WGSL,
-    SELECT_WGSL,
-    LIGHT_WGSL,
-    STYLE_BITS_WGSL,
-    VIEW_WGSL,
-    TREES_WGSL,
-    STYLES_WGSL,
-    SHADOW_WGSL,
-    CLUSTER_WGSL,
-]);
+pub static CLUSTER: Shader = Shader(&[TREE_PASS, &[CLUSTER_WGSL]]);
 
 /// The cull and LoD-selection compute passes.
-pub static CULL: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, STYLE_BITS_WGSL, VIEW_WGSL, CULL_WGSL]);
+pub static CULL: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, STYLE_BITS_WGSL, VIEW_WGSL, CULL_WGSL]]);
 
 /// The sky/ground background.
-pub static SKY: Shader = Shader(&[LAYOUT_WGSL, LIGHT_WGSL, VIEW_WGSL, SKY_WGSL]);
+pub static SKY: Shader = Shader(&[&[LAYOUT_WGSL, LIGHT_WGSL, VIEW_WGSL, SKY_WGSL]]);
 
 /// The batch-bounds debug view.
-pub static BOUNDS: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, VIEW_WGSL, BOUNDS_WGSL]);
+pub static BOUNDS: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, VIEW_WGSL, BOUNDS_WGSL]]);
 
 /// The terrain pass.
-pub static TERRAIN: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, LIGHT_WGSL, VIEW_WGSL, SHADOW_WGSL, TERRAIN_WGSL]);
+pub static TERRAIN: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, LIGHT_WGSL, VIEW_WGSL, SHADOW_WGSL, TERRAIN_WGSL]]);
 
 /// The canopy pass.
-pub static CANOPY: Shader = Shader(&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, LIGHT_WGSL, VIEW_WGSL, CANOPY_WGSL]);
+pub static CANOPY: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, LIGHT_WGSL, VIEW_WGSL, CANOPY_WGSL]]);
 
 /// Progressive refinement's accumulate and resolve passes.
-pub static ACCUMULATE: Shader = Shader(&[ACCUMULATE_WGSL]);
+pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
 
 /// Every composed shader with its name, for validation tests.
 pub static ALL: &[(&str, Shader)] = &[

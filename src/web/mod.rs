@@ -368,7 +368,9 @@ impl Viewer {
         }
         let s = self.frame.stream.stats();
         let settled = self.frame.stream.is_settled() && self.frame.stream.manifest().is_some();
-        let moved = self.drawn_camera != Some(self.camera());
+        // The camera again: placing it, or the ground under it, may have moved it.
+        let camera = self.camera();
+        let moved = self.drawn_camera != Some(camera);
         if !self.pacer.should_draw(now_ms, settled, s.bytes_fetched + s.requests) && !moved {
             return Ok(false);
         }
@@ -381,8 +383,7 @@ impl Viewer {
             }
             other => return Err(js_err(format!("the canvas surface failed: {other:?}"))),
         };
-        // The camera again: placing it, or the ground under it, may have moved it.
-        let view = self.camera().view_data(self.config.width, self.config.height);
+        let view = camera.view_data(self.config.width, self.config.height);
         let color = target
             .texture
             .create_view(&wgpu::TextureViewDescriptor { format: Some(self.view_format), ..Default::default() });
@@ -405,7 +406,7 @@ impl Viewer {
             governor_ms.store(ms, Ordering::Relaxed);
         });
         self.pacer.drew(now_ms);
-        self.drawn_camera = Some(self.camera());
+        self.drawn_camera = Some(camera);
         if self.frame.stream.is_settled() && self.frame.stream.manifest().is_some() {
             self.settled_frame.get_or_insert(self.frame.frames());
         } else {

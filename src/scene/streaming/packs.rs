@@ -233,7 +233,7 @@ impl<F: Fetcher> SceneStream<F> {
             // The bare state where asked for and the pack has it (and it is not
             // given up on); else its leafy one (drawn without its leaf texels in
             // leaf-off).
-            for i in [PackPart::BareBillboards, PackPart::BareImpostors].map(PackPart::index) {
+            for i in FAR_PARTS.into_iter().filter(|&i| PackPart::ALL[i].is_bare()) {
                 let leafy = PackPart::ALL[i].other_state().map_or(i, PackPart::index);
                 if wants[i] && !usable(i) {
                     (wants[i], wants[leafy]) = (false, true);
@@ -246,10 +246,9 @@ impl<F: Fetcher> SceneStream<F> {
                     wants[i] = false;
                 }
                 // (The season asked for first: bare billboards before leafy impostors in leaf-off.)
-                let bare_asked = asked[PackPart::BareBillboards.index()] || asked[PackPart::BareImpostors.index()];
-                let bare = |j: usize| matches!(PackPart::ALL[j], PackPart::BareBillboards | PackPart::BareImpostors);
+                let bare_asked = FAR_PARTS.iter().any(|&i| asked[i] && PackPart::ALL[i].is_bare());
                 let mut order = FAR_PARTS;
-                order.sort_by_key(|&j| bare(j) != bare_asked);
+                order.sort_by_key(|&j| PackPart::ALL[j].is_bare() != bare_asked);
                 if let Some(&j) = order.iter().find(|&&j| usable(j)) {
                     wants[j] = true;
                 }
