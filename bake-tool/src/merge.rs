@@ -56,7 +56,7 @@ pub fn merge(
     }
     let first = &shards[0].1;
     for (dir, m) in &shards[1..] {
-        let same = m.crs == first.crs
+        let same = (m.crs.epsg, &m.crs.proj4) == (first.crs.epsg, &first.crs.proj4)
             && m.origin_m == first.origin_m
             && m.cell_size_m == first.cell_size_m
             && m.tile_cells == first.tile_cells

@@ -285,7 +285,7 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
     }
     // The frame the user would click on, finished (its GPU time is not the pick's).
     off.render(&cam, true);
-    let geo = sylva::geo::GeoFrame::new(&manifest.crs.proj4, manifest.origin_m).ok();
+    let geo = sylva::geo::GeoFrame::for_scene(&manifest.crs, manifest.origin_m).ok();
     let view = cam.view_data(w, h);
     let mut answers = Vec::new();
     for &[x, y] in &pixels {
@@ -393,7 +393,7 @@ fn sun_lighting(
         return Ok(vec![(String::new(), default)]);
     }
     let geo =
-        sylva::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).map_err(|e| anyhow::anyhow!("--sun-time/--sun: {e}"))?;
+        sylva::geo::GeoFrame::for_scene(&m.crs, m.origin_m).map_err(|e| anyhow::anyhow!("--sun-time/--sun: {e}"))?;
     let centre = sylva::render::Lighting::sun_point(m);
     if let Some((az, el)) = sun.angles {
         let l = sylva::render::Lighting::at_angles(&geo, centre, az, el).map_err(|e| anyhow::anyhow!("--sun: {e}"))?;

@@ -12,7 +12,7 @@ use super::error::{finite, DecodeError, Problem};
 
 /// Value of the manifest's `format` field.
 pub const SCENE_FORMAT: &str = "sylva-scene";
-/// Newest manifest version this build writes and reads (it reads 1 to 11).
+/// Newest manifest version this build writes and reads (it reads 1 to 12).
 /// Version 2 added the hierarchical index, pack head sizes and shard stamps;
 /// version 3 where the trees are (`home`); version 4 the terrain; version 5
 /// ground imagery (`terrain.imagery`); version 6 per-tree attributes
@@ -22,11 +22,12 @@ pub const SCENE_FORMAT: &str = "sylva-scene";
 /// version 4, the entries' `levels.version`); version 10 canopy rasters of
 /// version 2 (`tallest_ratio` in their header); version 11 canopy rasters of
 /// version 3 (the cells' seasons) and packs that may hold a deciduous
-/// species' seasons (`META.season`, the bare far tiers).
+/// species' seasons (`META.season`, the bare far tiers); version 12 the
+/// geographic fit (`crs.fit`).
 /// The bake writes the oldest version that holds what a scene has (11 for
-/// every scene with trees, 9 for a shard's part, which has no canopy; 3 to 8
+/// every scene with trees, 12 with a geographic fit, 9 for a shard's part, which has no canopy; 3 to 8
 /// for older bakes), so older viewers refuse newer scenes with a clear message.
-pub const SCENE_VERSION: u32 = 11;
+pub const SCENE_VERSION: u32 = 12;
 /// Most species a scene may list.
 pub const MAX_SPECIES: usize = 65_536;
 /// Most tiles a flat tile index may list.
@@ -40,6 +41,10 @@ pub struct Crs {
     pub epsg: u32,
     /// The proj4 definition used by the bake.
     pub proj4: String,
+    /// lon/lat ↔ scene metres fitted by the bake (version 12): what the
+    /// browser uses for geographic coordinates, without a projection library.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<super::geofit::GeoFit>,
 }
 
 /// One species and its LoD pack.
@@ -188,6 +193,12 @@ impl Manifest {
     }
 
     fn validate(&self) -> Result<(), Problem> {
+        if let Some(fit) = &self.crs.fit {
+            if self.version < 12 {
+                return Err(Problem::Invalid("\"crs.fit\" needs manifest version 12".into()));
+            }
+            fit.validate()?;
+        }
         if let Some(t) = &self.timeline {
             t.resolve(self.attributes.as_ref())?;
         }

@@ -12,6 +12,7 @@ pub mod cloud;
 pub mod cluster;
 pub mod entries;
 mod error;
+pub mod geofit;
 pub mod ids;
 pub mod imagery;
 pub mod index;

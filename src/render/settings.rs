@@ -154,7 +154,7 @@ impl SeasonDate {
                 e.split_once(": ").map_or(e.as_str(), |(_, why)| why.split(" (expected").next().unwrap_or(why))
             )
         })?;
-        let geo = crate::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).map_err(|e| format!("date {text:?}: {e}"))?;
+        let geo = crate::geo::GeoFrame::for_scene(&m.crs, m.origin_m).map_err(|e| format!("date {text:?}: {e}"))?;
         let (_, latitude, elevation_m) =
             geo.to_geo(super::Lighting::sun_point(m)).map_err(|e| format!("date {text:?}: {e}"))?;
         if !(latitude.is_finite() && elevation_m.is_finite()) {

@@ -8,7 +8,7 @@
 //!   per terrain tile of its imagery levels;
 //! - an XYZ or WMTS raster source in Web Mercator (a URL template): the tiles
 //!   of the zoom whose pixels match the image's are fetched and resampled into
-//!   the terrain tile's square, through the scene CRS (proj4rs: a 9 × 9 grid of
+//!   the terrain tile's square, through the scene CRS (the [`GeoFrame`]: a 9 × 9 grid of
 //!   exactly projected points, bilinear between them).
 //!
 //! Each frame [`Imagery::attach`] gives every drawn terrain tile the image of

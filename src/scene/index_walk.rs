@@ -299,7 +299,7 @@ mod tests {
         let m = Manifest {
             format: "sylva-scene".into(),
             version: 2,
-            crs: Crs { epsg: 32633, proj4: String::new() },
+            crs: Crs { epsg: 32633, proj4: String::new(), fit: None },
             origin_m: [0.0; 3],
             bounds: crate::format::index::union_bounds(tiles.iter().map(|t| &t.bounds)).unwrap(),
             cell_size_m: 64.0,

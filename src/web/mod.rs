@@ -342,7 +342,7 @@ impl Viewer {
         }
         if self.geo.is_none() {
             if let Some(m) = self.frame.stream.manifest() {
-                match GeoFrame::new(&m.crs.proj4, m.origin_m) {
+                match GeoFrame::for_scene(&m.crs, m.origin_m) {
                     Ok(g) => self.geo = Some(g),
                     Err(e) => web_sys::console::warn_1(&JsValue::from_str(&format!("sylva: {e}"))),
                 }

@@ -173,7 +173,7 @@ fn sample_manifest() -> Manifest {
     Manifest {
         format: "sylva-scene".into(),
         version: 1,
-        crs: Crs { epsg: 32633, proj4: "+proj=utm +zone=33 +datum=WGS84 +units=m +no_defs".into() },
+        crs: Crs { epsg: 32633, proj4: "+proj=utm +zone=33 +datum=WGS84 +units=m +no_defs".into(), fit: None },
         origin_m: [540_000.0, 5_360_000.0, 0.0],
         bounds: b,
         cell_size_m: 64.0,

@@ -132,7 +132,7 @@ pub fn bake_scene(input: &SceneInput<'_>, out: OutDir, log: &dyn Fn(&str)) -> Re
         let base = Manifest {
             format: SCENE_FORMAT.into(),
             version: SCENE_VERSION, // finish_scene writes 3 without terrain
-            crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone() },
+            crs: CrsEntry { epsg: input.crs.epsg, proj4: input.crs.proj4.clone(), fit: None },
             origin_m: input.origin_m.to_array(),
             bounds: Bounds { min: [0.0; 3], max: [0.0; 3] },
             cell_size_m: input.cell_size_m as f32,

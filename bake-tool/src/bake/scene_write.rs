@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use sylva::format::build_index;
 use sylva::format::manifest::{Bounds, Counts, Manifest, TileEntry};
 
@@ -91,6 +91,12 @@ pub fn finish_scene(
         // Canopy rasters of version 3 (the cells' seasons): version 11.
         base.version = base.version.max(11);
     }
+    // The geographic fit the browser converts lon/lat with (version 12): not
+    // in a shard's part (merge fits the whole scene; the parts' CRS must agree).
+    base.crs.fit = if base.shard.is_none() { geo_fit(&base, log) } else { None };
+    if base.crs.fit.is_some() {
+        base.version = base.version.max(12);
+    }
     if !flat && tiles.len() > node_tiles as usize {
         let built = build_index(&tiles, node_tiles);
         create_dir(&dir.join("index"))?;
@@ -108,4 +114,73 @@ pub fn finish_scene(
     Manifest::decode("scene.json", &bytes)?;
     write_file(&dir.join("scene.json"), &bytes)?;
     Ok(base)
+}
+
+/// Least margin of the geographic fit's box around a scene, metres.
+const GEO_FIT_MARGIN_M: f64 = 25_000.0;
+
+/// The scene's geographic fit ([`sylva::format::geofit`]) over its trees and
+/// terrain and a margin of twice their size, at least 25 km, on each side
+/// (cameras and links well beyond the forest stay within a millimetre; further
+/// out the fit goes on linearly); `None`, with a warning, where the projection
+/// cannot be fitted there.
+pub fn geo_fit(m: &Manifest, log: &dyn Fn(&str)) -> Option<sylva::format::geofit::GeoFit> {
+    let b = &m.bounds;
+    let mut bx = [f64::from(b.min[0]), f64::from(b.min[1]), f64::from(b.max[0]), f64::from(b.max[1])];
+    if let Some(t) = &m.terrain {
+        let [x, y] = t.origin_m;
+        bx = [bx[0].min(x), bx[1].min(y), bx[2].max(x + t.root_size_m), bx[3].max(y + t.root_size_m)];
+    }
+    let margin = (2.0 * (bx[2] - bx[0]).max(bx[3] - bx[1])).max(GEO_FIT_MARGIN_M);
+    let bx = [bx[0] - margin, bx[1] - margin, bx[2] + margin, bx[3] + margin];
+    let fitted = sylva::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).and_then(|g| g.fit(bx));
+    match fitted {
+        Ok(fit) => {
+            log(&format!(
+                "geographic fit: degree {}, within {:.2} mm over {:.1} × {:.1} km",
+                fit.degree,
+                fit.error_m * 1000.0,
+                (bx[2] - bx[0]) / 1000.0,
+                (bx[3] - bx[1]) / 1000.0
+            ));
+            Some(fit)
+        }
+        Err(e) => {
+            log(&format!("warning: no geographic fit ({e}): browsers will not convert lon/lat for this scene"));
+            None
+        }
+    }
+}
+
+/// Adds the geographic fit to a scene baked before it (or refits it) and
+/// rewrites its `scene.json` in place (a temporary file renamed: a reader
+/// sees the old or the new manifest). Nothing else of the scene changes.
+///
+/// # Errors
+/// A scene folder without a readable, valid `scene.json`, a projection that
+/// cannot be fitted, or a manifest that cannot be written.
+pub fn add_geo_fit(dir: &Path, log: &dyn Fn(&str)) -> Result<Manifest> {
+    let path = dir.join("scene.json");
+    let name = path.display().to_string();
+    let bytes = sylva::paths::read_regular(&path, None, sylva::paths::MAX_SCENE_FILE_BYTES)
+        .with_context(|| format!("cannot read {name} (is {} a baked scene folder?)", dir.display()))?;
+    let mut m = Manifest::decode(&name, &bytes)?;
+    let had = m.crs.fit.is_some();
+    m.crs.fit = None;
+    let fit =
+        geo_fit(&m, log).ok_or_else(|| anyhow::anyhow!("{name}: the scene CRS {:?} cannot be fitted", m.crs.proj4))?;
+    m.crs.fit = Some(fit);
+    m.version = m.version.max(12);
+    let out = m.encode();
+    Manifest::decode(&name, &out)?;
+    let tmp = dir.join(".scene.json.geo-fit");
+    write_file(&tmp, &out)?;
+    std::fs::rename(&tmp, &path).with_context(|| format!("cannot replace {name}"))?;
+    log(&format!(
+        "{}: {} the geographic fit (manifest version {})",
+        name,
+        if had { "refitted" } else { "added" },
+        m.version
+    ));
+    Ok(m)
 }

@@ -126,6 +126,14 @@ pub(crate) enum Command {
         after_help = "Example:\n  sylva-bake stands district.gpkg --layer bestaende --out trees.csv\n  sylva-bake bake --stands district.gpkg --layer bestaende --out scene/"
     )]
     Stands(StandsArgs),
+    /// Add the geographic fit (lon/lat ↔ scene metres, `crs.fit`) to a scene
+    /// baked before bakes wrote it: browsers need it for geographic cameras,
+    /// links, the sun at a date and XYZ imagery. Rewrites only scene.json.
+    #[command(after_help = "Example:\n  sylva-bake geo-fit scene/")]
+    GeoFit {
+        /// The baked scene folder (with scene.json).
+        scene: PathBuf,
+    },
     /// Summarise a scene directory, scene.json, .pack, .tile or .ids file.
     Inspect {
         /// Scene directory or file.
@@ -243,6 +251,7 @@ pub(crate) fn main() {
                     ));
                 })
         }
+        Command::GeoFit { scene } => sylva_bake::bake::scene_write::add_geo_fit(&scene, &log).map(|_| ()),
         Command::Inspect { path, json } => sylva_bake::inspect::inspect(&path).map(|v| {
             if json {
                 println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());

@@ -955,17 +955,31 @@ fn trees_stand_on_the_ground_of_a_dem() {
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("bare"), &[&crs[..], &["--no-terrain"]].concat()));
     let bare = inspect_json(&dir.join("bare"));
     assert!(bare["terrain"].is_null());
-    // Every scene is version 11 now (canopy version 3 rasters), whatever its ground.
-    assert_eq!(bare["version"], 11);
+    // Every scene is version 12 now (its geographic fit), whatever its ground.
+    assert_eq!(bare["version"], 12);
+    // A scene baked before the fit gets it from `geo-fit`, the same as a bake's;
+    // a folder without a scene is refused by name.
+    let scene_json = dir.join("bare").join("scene.json");
+    let baked: serde_json::Value = serde_json::from_slice(&std::fs::read(&scene_json).unwrap()).unwrap();
+    assert!(baked["crs"]["fit"]["degree"].as_u64().is_some_and(|d| d >= 3), "{}", baked["crs"]);
+    let mut old = baked.clone();
+    old["version"] = 11.into();
+    old["crs"].as_object_mut().unwrap().remove("fit");
+    std::fs::write(&scene_json, serde_json::to_vec_pretty(&old).unwrap()).unwrap();
+    let o = run(bin().arg("geo-fit").arg(dir.join("bare")));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("added the geographic fit"), "{o:?}");
+    let refit: serde_json::Value = serde_json::from_slice(&std::fs::read(&scene_json).unwrap()).unwrap();
+    assert_eq!((&refit["version"], &refit["crs"]), (&baked["version"], &baked["crs"]));
+    let e = fails(bin().arg("geo-fit").arg(dir.join("nowhere")));
+    assert!(e.contains("nowhere/scene.json") && e.contains("a baked scene folder"), "{e}");
     // The fitted ground carries the procedural forest floor as imagery;
     // --plain-ground leaves it out.
     let fitted = inspect_json(&dir.join("fitted"));
-    assert_eq!(fitted["version"], 11);
+    assert_eq!(fitted["version"], 12);
     assert!(fitted["terrain"]["imagery"]["source"].as_str().unwrap().contains("procedural forest floor"), "{fitted}");
     run(&mut quick_bake(&model, &sloped_csv, &dir.join("plain"), &[&crs[..], &["--plain-ground"]].concat()));
     let plain = inspect_json(&dir.join("plain"));
-    assert_eq!(plain["version"], 11);
-    assert!(plain["terrain"]["imagery"].is_null());
+    assert_eq!(plain["version"], 12);
     assert!(plain["terrain"]["imagery"].is_null());
     // Bad DEM inputs are named.
     let e = fails(&mut quick_bake(
@@ -1147,7 +1161,7 @@ fn attributes_are_kept_per_tree_and_read_back_as_the_inventory_says() {
     assert!(log.contains("attribute \"Condition\" left out: a repeated column name"), "{log}");
     let manifest =
         sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(manifest.version, 11, "canopy rasters of version 3, tiles in √2 levels");
+    assert_eq!(manifest.version, 12, "a geographic fit (and canopy rasters of version 3, tiles in √2 levels)");
     let schema = manifest.attributes.clone().expect("attributes");
     let names: Vec<&str> = schema.columns.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["species", "height", "dbh", "condition", "planted", "mixed", "girth"]);
@@ -1466,7 +1480,7 @@ fn canopy_case(model: &Path, dir: &Path, tile_cells: &str) {
         .arg("--out")
         .arg(&out));
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(m.version, 11);
+    assert_eq!(m.version, 12, "a geographic fit");
     let e = m.canopy.clone().expect("a canopy entry");
     // The finest squares 512 m (64 cells of 8 m): 1,024 m of 64 m tiles in two
     // levels; 1,024 m tiles split once or twice below a tile.

@@ -199,7 +199,7 @@ fn ground_imagery_is_baked_from_an_ortho_and_an_xyz_source_drapes_the_terrain() 
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("imagery: ") && log.contains("ortho.tif"), "{log}");
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(scene.join("scene.json")).unwrap()).unwrap();
-    assert_eq!(m.version, 11, "canopy rasters of version 3 and tiles in √2 levels need manifest version 11");
+    assert_eq!(m.version, 12, "the geographic fit needs manifest version 12");
     let t = m.terrain.clone().unwrap();
     let i = t.imagery.clone().expect("an imagery entry");
     let origin = DVec3::from(m.origin_m);

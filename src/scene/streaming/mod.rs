@@ -754,7 +754,7 @@ impl<F: Fetcher> SceneStream<F> {
                 self.packs = (0..m.species.len()).map(|_| PackLoad::new()).collect();
                 self.terrain = m.terrain.clone().map(TerrainTree::new);
                 self.canopy = m.canopy.clone().map(CanopyTree::new);
-                self.geo = GeoFrame::new(&m.crs.proj4, m.origin_m).ok();
+                self.geo = GeoFrame::for_scene(&m.crs, m.origin_m).ok();
                 self.events.push(StreamEvent::ManifestLoaded { trees: m.counts.trees });
                 self.manifest = Some(m);
             }
