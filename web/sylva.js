@@ -1,5 +1,6 @@
 // Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`
-// (also {camera, lighting, season, date, refine}: as the setters below take them).
+// (also {camera, lighting, season, date, refine}: as the setters below take them;
+// {textures: 'plain'}: RGBA8 packs where the GPU would take the BC7 variants).
 // Wraps the wasm Viewer (src/web/) with a render loop, camera controls
 // (mouse, touch, keyboard), events and the camera in the URL hash.
 //
@@ -904,6 +905,8 @@ export async function create(target, options = {}) {
   await loadWasm();
   const scene = options.scene || 'scene/scene.json';
   const viewer = await Viewer.create(canvas, scene);
+  // textures: 'plain' fetches RGBA8 packs where the GPU would take BC7 ones (to compare).
+  if (options.textures === 'plain') viewer.set_plain_textures(true);
   if (options.overlay) viewer.set_overlay(true);
   if (options.fov) viewer.set_fov(options.fov);
   const v = new SylvaViewer(canvas, viewer, { ...options, scene });

@@ -231,6 +231,7 @@ fn inspect_scene(path: &Path, bytes: &[u8]) -> Result<Value> {
         "tile_bytes_per_tree": tile_bytes as f64 / trees,
         "tile_bytes": tile_bytes,
         "pack_bytes": m.species.iter().map(|s| s.bytes).sum::<u64>(),
+        "variant_pack_bytes": m.species.iter().flat_map(|s| &s.variants).map(|v| v.bytes).sum::<u64>(),
         "species": species,
         "attributes": m.attributes.as_ref().map(|a| json!({
             "columns": a.columns.iter().map(|c| json!({
@@ -348,6 +349,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
             "azimuths": bb.azimuths,
             "resolution": bb.texture.size,
             "mips": bb.texture.mips,
+            "texels": bb.texture.encoding.map_or("rgba8", |e| e.name()),
             "bytes": b,
             "select_px": bb.select_px,
         }));
@@ -362,6 +364,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
             "grid": imp.grid,
             "resolution": imp.texture.size,
             "mips": imp.texture.mips,
+            "texels": imp.texture.encoding.map_or("rgba8", |e| e.name()),
             "radius": imp.radius,
             "bytes": b,
         }));
@@ -399,7 +402,7 @@ fn pack_json(meta: &PackMeta, bytes: u64, pack: &sylva::format::Pack<'_>) -> Val
         "seasons": seasons,
         "bounds": {"min": meta.bounds_min, "max": meta.bounds_max},
         "materials": meta.materials.iter().map(|m| json!({"name": m.name, "kind": m.kind, "alpha_cutoff": m.alpha_cutoff, "textured": m.texture_layer.is_some()})).collect::<Vec<_>>(),
-        "material_texture": meta.material_texture.map(|t| json!({"size": t.size, "layers": t.layers, "mips": t.mips, "bytes": t.byte_len()})),
+        "material_texture": meta.material_texture.map(|t| json!({"size": t.size, "layers": t.layers, "mips": t.mips, "texels": t.encoding.map_or("rgba8", |e| e.name()), "bytes": t.byte_len()})),
         "levels": levels,
         "ambient_occlusion": ao,
     })
@@ -458,12 +461,18 @@ pub fn to_text(v: &Value) -> String {
             if v["index_nodes"].as_u64().unwrap_or(0) > 0 {
                 out += &format!("hierarchical tile index: {} nodes, depth {}\n", v["index_nodes"], v["index_depth"]);
             }
+            let variants = v["variant_pack_bytes"].as_f64().unwrap_or(0.0);
             out += &format!(
-                "instance bytes per tree {:.2} (tile files incl. batch records: {:.2}); tiles {:.2} MB, packs {:.2} MB\n",
+                "instance bytes per tree {:.2} (tile files incl. batch records: {:.2}); tiles {:.2} MB, packs {:.2} MB{}\n",
                 v["bytes_per_tree"].as_f64().unwrap_or(0.0),
                 v["tile_bytes_per_tree"].as_f64().unwrap_or(0.0),
                 v["tile_bytes"].as_f64().unwrap_or(0.0) / 1e6,
-                v["pack_bytes"].as_f64().unwrap_or(0.0) / 1e6
+                v["pack_bytes"].as_f64().unwrap_or(0.0) / 1e6,
+                if variants > 0.0 {
+                    format!(" (and {:.2} MB of BC7 variants, what a desktop GPU fetches instead)", variants / 1e6)
+                } else {
+                    String::new()
+                }
             );
             let a = &v["attributes"];
             if let Some(columns) = a["columns"].as_array() {
@@ -649,20 +658,22 @@ fn pack_text(s: &Value) -> String {
             }
             Some("billboards") => {
                 out += &format!(
-                    "  billboards: {} angles × {} azimuths at {}², {} mips, {:.1} KB\n",
+                    "  billboards: {} angles × {} azimuths at {}², {} mips, {}, {:.1} KB\n",
                     l["angles"],
                     l["azimuths"],
                     l["resolution"],
                     l["mips"],
+                    l["texels"].as_str().unwrap_or("rgba8").to_uppercase(),
                     l["bytes"].as_f64().unwrap_or(0.0) / 1e3
                 )
             }
             Some("impostors") => {
                 out += &format!(
-                    "  impostors: {0}×{0} hemi-octahedral views at {1}², {2} mips, {3:.1} KB\n",
+                    "  impostors: {0}×{0} hemi-octahedral views at {1}², {2} mips, {3}, {4:.1} KB\n",
                     l["grid"],
                     l["resolution"],
                     l["mips"],
+                    l["texels"].as_str().unwrap_or("rgba8").to_uppercase(),
                     l["bytes"].as_f64().unwrap_or(0.0) / 1e3
                 )
             }

@@ -92,10 +92,13 @@ pub fn merge(
             copy_checked(from, tmp, rel, check)
         };
         for sp in &first.species {
-            copy_checked(&shards[0].0, &sp.pack, &mut |b| {
-                sylva::format::decode_pack(&sp.pack, &sylva::format::stored::unstore(&sp.pack, b.to_vec())?)?;
-                Ok(())
-            })?;
+            // The pack and its block-compressed variants, each decoded first.
+            for pack in std::iter::once(&sp.pack).chain(sp.variants.iter().map(|v| &v.pack)) {
+                copy_checked(&shards[0].0, pack, &mut |b| {
+                    sylva::format::decode_pack(pack, &sylva::format::stored::unstore(pack, b.to_vec())?)?;
+                    Ok(())
+                })?;
+            }
         }
         // Terrain: written by shard 0 only, copied whole.
         if let Some(t) = &first.terrain {

@@ -250,6 +250,19 @@ pub(crate) struct ViewArgs {
     /// where trees are under a pixel or two (scenes baked with canopy rasters).
     #[arg(long)]
     pub(crate) no_canopy: bool,
+    /// Textures as the GPU takes them best (`auto`: a pack's BC7 variant where
+    /// the GPU samples BC textures) or `plain` (RGBA8 packs, to compare).
+    #[arg(long, value_enum, default_value_t = TexturesArg::Auto)]
+    pub(crate) textures: TexturesArg,
+}
+
+/// `--textures`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum TexturesArg {
+    /// Block-compressed variants where the GPU samples them.
+    Auto,
+    /// Plain RGBA8 packs.
+    Plain,
 }
 
 impl ViewArgs {

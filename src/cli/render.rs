@@ -256,6 +256,7 @@ pub(crate) fn pick(args: PickArgs) -> Result<()> {
         quality: args.frame.quality,
         draw_distance_m: args.frame.draw_distance,
         whole_tiles: args.frame.whole_tiles,
+        plain_textures: args.frame.textures == TexturesArg::Plain,
         canopy: !args.frame.no_canopy,
         terrain: !args.no_terrain,
         far_tier: far_tier_of(args.far_tier),
@@ -472,7 +473,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         date,
     } = args;
     let (w, h) = frame.checked_size()?;
-    let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, .. } = frame;
+    let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, textures, .. } = frame;
     if ellipsoid_min_px.is_nan() || ellipsoid_min_px < 0.0 {
         bail!("--ellipsoid-min-px {ellipsoid_min_px}: must be ≥ 0 (inf turns ellipsoids off)");
     }
@@ -504,6 +505,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             quality,
             draw_distance_m: draw_distance,
             whole_tiles,
+            plain_textures: textures == TexturesArg::Plain,
             canopy: !no_canopy,
             debug_lod,
             debug_bounds,
@@ -579,6 +581,15 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         }
     };
     let gpu = GpuContext::new_headless_blocking()?;
+    let sampled = sylva::render::mesh::block_formats(&gpu.device);
+    if let Some(e) = decoded.meta.encodings().into_iter().find(|e| !sampled.contains(e)) {
+        bail!(
+            "{}: its textures are {} blocks, which this GPU ({}) does not sample; render the plain pack beside it",
+            pack.display(),
+            e.name(),
+            gpu.adapter_summary()
+        );
+    }
     let view = match pack_view {
         View::Side => PackView::Side,
         View::Oblique => PackView::Oblique,

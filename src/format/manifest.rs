@@ -23,9 +23,11 @@ pub const SCENE_FORMAT: &str = "sylva-scene";
 /// version 2 (`tallest_ratio` in their header); version 11 canopy rasters of
 /// version 3 (the cells' seasons) and packs that may hold a deciduous
 /// species' seasons (`META.season`, the bare far tiers); version 12 the
-/// geographic fit (`crs.fit`).
+/// geographic fit (`crs.fit`) and packs' block-compressed variants
+/// (`species[].variants`).
 /// The bake writes the oldest version that holds what a scene has (11 for
-/// every scene with trees, 12 with a geographic fit, 9 for a shard's part, which has no canopy; 3 to 8
+/// every scene with trees, 12 with a geographic fit or packs' BC7 variants, 9 for a
+/// shard's part, which has no canopy (12 for shard 0's, with the variants); 3 to 8
 /// for older bakes), so older viewers refuse newer scenes with a clear message.
 pub const SCENE_VERSION: u32 = 12;
 /// Most species a scene may list.
@@ -67,7 +69,58 @@ pub struct SpeciesEntry {
     /// fetches this range first and then only the sections its views need.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub head_bytes: Option<u64>,
+    /// The same pack with its textures block-encoded for GPUs that sample
+    /// them (version 12): a viewer whose device can takes one instead.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variants: Vec<PackVariant>,
 }
+
+/// A species pack's block-compressed variant (`species[].variants[]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PackVariant {
+    /// The block encoding of its texture arrays (`"bc7"`); viewers skip
+    /// names they do not know.
+    pub textures: String,
+    /// Pack URL relative to the manifest.
+    pub pack: String,
+    /// Pack size in bytes.
+    pub bytes: u64,
+    /// Bytes of its head (as [`SpeciesEntry::head_bytes`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head_bytes: Option<u64>,
+}
+
+/// The pack a viewer fetches for a species: its URL, sizes and the
+/// textures' block encoding (`None`: plain texels).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PackChoice<'a> {
+    /// URL relative to the manifest.
+    pub pack: &'a str,
+    /// File bytes.
+    pub bytes: u64,
+    /// Head bytes, if known.
+    pub head_bytes: Option<u64>,
+    /// The block encoding of its textures.
+    pub encoding: Option<super::pack::TexelEncoding>,
+}
+
+impl SpeciesEntry {
+    /// The first variant whose encoding is in `encodings` (what the device
+    /// samples, best first), else the plain pack.
+    #[must_use]
+    pub fn pack_for(&self, encodings: &[super::pack::TexelEncoding]) -> PackChoice<'_> {
+        for e in encodings {
+            if let Some(v) = self.variants.iter().find(|v| v.textures == e.name()) {
+                return PackChoice { pack: &v.pack, bytes: v.bytes, head_bytes: v.head_bytes, encoding: Some(*e) };
+            }
+        }
+        PackChoice { pack: &self.pack, bytes: self.bytes, head_bytes: self.head_bytes, encoding: None }
+    }
+}
+
+/// Most variants a species may list.
+pub const MAX_PACK_VARIANTS: usize = 8;
 
 /// Scene-wide counts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -247,6 +300,24 @@ impl Manifest {
         for (i, s) in self.species.iter().enumerate() {
             let what = format!("species[{i}]");
             check_url(&format!("{what}.pack"), &s.pack)?;
+            if !s.variants.is_empty() && self.version < 12 {
+                return Err(Problem::Invalid(format!("{what}.variants needs manifest version 12")));
+            }
+            if s.variants.len() > MAX_PACK_VARIANTS {
+                return Err(Problem::Invalid(format!(
+                    "{what}.variants: {} variants exceed {MAX_PACK_VARIANTS}",
+                    s.variants.len()
+                )));
+            }
+            for (k, v) in s.variants.iter().enumerate() {
+                check_url(&format!("{what}.variants[{k}].pack"), &v.pack)?;
+                if v.textures.is_empty() || v.textures.len() > 16 {
+                    return Err(Problem::Invalid(format!(
+                        "{what}.variants[{k}].textures {:?} is no encoding name",
+                        v.textures
+                    )));
+                }
+            }
             finite(format!("{what}.height_m"), s.height_m.into())?;
             validate_bounds(&format!("{what}.bounds"), &s.bounds)?;
         }

@@ -73,6 +73,11 @@ pub struct MaterialMeta {
     pub double_sided: bool,
     /// Layer of the material texture array, if textured.
     pub texture_layer: Option<u32>,
+    /// Share of the layer's mip-0 texels the alpha test keeps, 0–1, where the
+    /// texels are block-encoded (a BC7 variant: the viewer cannot count them);
+    /// absent: the viewer counts them itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<f32>,
 }
 
 /// An indexed draw range of one material within a mesh level.

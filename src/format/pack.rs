@@ -193,24 +193,76 @@ pub struct TextureArrayMeta {
     pub layers: u32,
     /// Mip levels stored (mip 0 included).
     pub mips: u32,
+    /// How the texels are stored when not one RGBA8 (or R8) texel after
+    /// another: `"bc7"`, 4 × 4 texel blocks of 16 bytes (a pack's
+    /// block-compressed variant, [`TexelEncoding`]). Absent: plain texels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoding: Option<TexelEncoding>,
+}
+
+/// A GPU block encoding of an RGBA texture array.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TexelEncoding {
+    /// BC7 (BPTC): 16 bytes per 4 × 4 block, RGBA, sampled by GPUs with
+    /// `texture-compression-bc` (desktop adapters).
+    Bc7,
+}
+
+impl PackMeta {
+    /// The block encodings of its texture arrays (none for a plain pack).
+    #[must_use]
+    pub fn encodings(&self) -> Vec<TexelEncoding> {
+        let arrays = [
+            self.material_texture,
+            self.billboards.as_ref().map(|b| b.texture),
+            self.impostors.as_ref().map(|i| i.texture),
+        ];
+        let mut out: Vec<TexelEncoding> = arrays.iter().flatten().filter_map(|t| t.encoding).collect();
+        out.dedup();
+        out
+    }
+}
+
+impl TexelEncoding {
+    /// The name in the manifest's and `META`'s JSON.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            TexelEncoding::Bc7 => "bc7",
+        }
+    }
 }
 
 impl TextureArrayMeta {
+    /// Plain texels (no block encoding).
+    #[must_use]
+    pub fn plain(size: u32, layers: u32, mips: u32) -> Self {
+        Self { size, layers, mips, encoding: None }
+    }
+
     /// Bytes of the whole RGBA8 array with all its mips.
     #[must_use]
     pub fn byte_len(&self) -> u64 {
         self.byte_len_of(4)
     }
 
-    /// Bytes of the whole array with all its mips at `texel_bytes` per texel.
+    /// Bytes of the whole array with all its mips at `texel_bytes` per texel
+    /// (or, block-encoded, at its blocks' bytes).
     #[must_use]
     pub fn byte_len_of(&self, texel_bytes: u64) -> u64 {
-        (0..self.mips)
-            .map(|m| {
-                let s = u64::from((self.size >> m).max(1));
-                s * s * texel_bytes * u64::from(self.layers)
-            })
-            .sum()
+        (0..self.mips).map(|m| self.mip_bytes(m, texel_bytes) * u64::from(self.layers)).sum()
+    }
+
+    /// Bytes of one layer of mip `m`: its texels, or its 4 × 4 blocks (a
+    /// mip smaller than a block takes a whole one).
+    #[must_use]
+    pub fn mip_bytes(&self, m: u32, texel_bytes: u64) -> u64 {
+        let s = u64::from((self.size >> m).max(1));
+        match self.encoding {
+            None => s * s * texel_bytes,
+            Some(TexelEncoding::Bc7) => s.div_ceil(4).pow(2) * 16,
+        }
     }
 
     /// Byte offset of mip `m` within the section (mips are stored one after another,
@@ -935,6 +987,11 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
     for (i, mat) in m.materials.iter().enumerate() {
         finite_all(&format!("META.materials[{i}].base_color"), &mat.base_color)?;
         finite(format!("META.materials[{i}].alpha_cutoff"), mat.alpha_cutoff.into())?;
+        if let Some(c) = mat.coverage {
+            if !(0.0..=1.0).contains(&c) {
+                return Err(Problem::Invalid(format!("META.materials[{i}].coverage is {c}, must be 0–1")));
+            }
+        }
         if let Some(layer) = mat.texture_layer {
             if layer >= layers {
                 return Err(Problem::OutOfRange {
@@ -1050,9 +1107,11 @@ fn validate_meta(pack: &Pack<'_>, partial: bool) -> Result<(), Problem> {
                     validate_texture(&format!("META.billboards.texture (state {state})"), &b.texture, data, 4)?;
                 }
             }
-            // Optional at any time: older packs have no occlusion.
+            // Optional at any time: older packs have no occlusion. One R8
+            // texel after another even where the colours are block-encoded.
             if let Some(data) = pack.section(kind::BILLBOARD_AO, state) {
-                validate_texture("META.billboards.texture (BBAO)", &b.texture, Some(data), 1)?;
+                let plain = TextureArrayMeta { encoding: None, ..b.texture };
+                validate_texture("META.billboards.texture (BBAO)", &plain, Some(data), 1)?;
             }
         }
     }
@@ -1151,6 +1210,16 @@ fn validate_texture(what: &str, t: &TextureArrayMeta, data: Option<&[u8]>, texel
     at_most(format!("{what}.mips"), t.mips.into(), full_chain.into())?;
     if t.size == 0 || t.layers == 0 || t.mips == 0 {
         return Err(Problem::Invalid(format!("{what} has a zero size, layer count or mip count")));
+    }
+    if let Some(e) = t.encoding {
+        // Blocks of RGBA textures only, and whole blocks at mip 0 (WebGPU's rule).
+        if texel_bytes != 4 || !t.size.is_multiple_of(4) {
+            return Err(Problem::Invalid(format!(
+                "{what} is {} encoded but {}",
+                e.name(),
+                if texel_bytes != 4 { "not an RGBA texture" } else { "its size is no multiple of 4" }
+            )));
+        }
     }
     let Some(data) = data else {
         return Err(Problem::Invalid(format!("{what} has no texture section")));

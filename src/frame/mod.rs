@@ -139,6 +139,8 @@ pub struct Frame<F: Fetcher> {
     waited: Option<(u64, [f64; 3])>,
     /// Shadow cascades of the last frame recorded.
     cascades: u32,
+    /// The stream's packs are the plain ones (the settings' choice, applied).
+    plain_textures: bool,
     draw_calls: u32,
     cpu_ms: f64,
     frames: u64,
@@ -162,9 +164,12 @@ impl<F: Fetcher> Frame<F> {
     ) -> Self {
         let renderer = ForestRenderer::new(&device, color_format, pools);
         let readback = CounterReadback::new(&device, pools.species * REPR_COUNT);
+        let mut stream = SceneStream::new(scene, fetcher, StreamConfig::default());
+        // Packs with block-compressed textures where the GPU samples them.
+        stream.set_texture_encodings(crate::render::mesh::block_formats(&device));
         Self {
             renderer,
-            stream: SceneStream::new(scene, fetcher, StreamConfig::default()),
+            stream,
             settings: RenderSettings::default(),
             refine: Refinement::default(),
             accumulator: None,
@@ -174,6 +179,7 @@ impl<F: Fetcher> Frame<F> {
             timer: None,
             waited: None,
             cascades: 0,
+            plain_textures: false,
             draw_calls: 0,
             cpu_ms: 0.0,
             frames: 0,
@@ -195,6 +201,14 @@ impl<F: Fetcher> Frame<F> {
     /// seconds, for retry backoff). Events wait in the stream
     /// ([`SceneStream::drain_events`]).
     pub fn stream(&mut self, view: &ViewData, now_s: f64) {
+        // Plain packs even where the GPU samples block-compressed ones
+        // (`RenderSettings::plain_textures`): for packs not yet fetched.
+        if self.settings.plain_textures != self.plain_textures {
+            self.plain_textures = self.settings.plain_textures;
+            let encodings =
+                if self.plain_textures { Vec::new() } else { crate::render::mesh::block_formats(&self.device) };
+            self.stream.set_texture_encodings(encodings);
+        }
         // The terrain setting decides what is fetched too, not only what is drawn.
         if self.stream.config().terrain != self.settings.terrain {
             let config = crate::scene::StreamConfig { terrain: self.settings.terrain, ..self.stream.config() };

@@ -97,6 +97,10 @@ pub struct FrameStats {
     /// Refinement done: the image is final and the host stops drawing. Always
     /// false when refinement is off.
     pub refine_converged: bool,
+    /// How the scene's textures are fetched and held on the GPU: `bc7` (the
+    /// packs' block-compressed variants, where the GPU samples them) or
+    /// `plain` (RGBA8).
+    pub textures: String,
     /// The browser's frame-time governor (`web/governor.js`, which fills it in):
     /// its level and why. Off here, natively and in tests: full quality.
     pub governor: GovernorReport,
@@ -174,6 +178,7 @@ impl FrameStats {
             trees_resident: renderer.resident_instances(),
             gpu_bytes: renderer.gpu_bytes(),
             frame_cpu_ms,
+            textures: stream.textures_in_use().map_or("plain", |e| e.name()).into(),
             ..Default::default()
         }
     }

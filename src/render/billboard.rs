@@ -172,7 +172,8 @@ impl BillboardGpu {
                 device,
                 queue,
                 "billboard occlusion",
-                &meta.texture,
+                // R8 texels even where the colours are block-encoded.
+                &crate::format::pack::TextureArrayMeta { encoding: None, ..meta.texture },
                 bytes,
                 wgpu::TextureFormat::R8Unorm,
             ),
@@ -180,7 +181,7 @@ impl BillboardGpu {
                 device,
                 queue,
                 "billboard occlusion (none)",
-                &crate::format::pack::TextureArrayMeta { size: 1, layers: meta.texture.layers, mips: 1 },
+                &crate::format::pack::TextureArrayMeta::plain(1, meta.texture.layers, 1),
                 &vec![255; meta.texture.layers as usize],
                 wgpu::TextureFormat::R8Unorm,
             ),

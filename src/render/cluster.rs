@@ -109,7 +109,7 @@ impl ClusterPipeline {
     fn noise(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> &(wgpu::TextureView, wgpu::TextureView) {
         self.noise.get_or_init(|| {
             let (alpha, normal) = noise_cubes(NOISE_SIZE_LOG2);
-            let meta = TextureArrayMeta { size: 1 << NOISE_SIZE_LOG2, layers: 6, mips: NOISE_SIZE_LOG2 + 1 };
+            let meta = TextureArrayMeta::plain(1 << NOISE_SIZE_LOG2, 6, NOISE_SIZE_LOG2 + 1);
             let view = |t: wgpu::Texture| {
                 t.create_view(&wgpu::TextureViewDescriptor {
                     dimension: Some(wgpu::TextureViewDimension::Cube),

@@ -9,7 +9,7 @@ use wgpu::util::DeviceExt;
 use super::gpu_data::{GpuMaterial, MeshUniform, RenderMode};
 use super::layouts::{depth_state, sampler_entry, storage_entry, texture_array_entry, SharedLayouts};
 use super::shaders;
-use crate::format::pack::{kind, MaterialKind, MeshLevelMeta, TextureArrayMeta};
+use crate::format::pack::{kind, MaterialKind, MeshLevelMeta, TexelEncoding, TextureArrayMeta};
 use crate::format::Pack;
 
 /// Albedo target of the capture mode (sRGB-encoded, alpha = coverage).
@@ -204,7 +204,7 @@ impl MeshGpu {
                 device,
                 queue,
                 "no material texture",
-                &TextureArrayMeta { size: 1, layers: 1, mips: 1 },
+                &TextureArrayMeta::plain(1, 1, 1),
                 &[255; 4],
                 wgpu::TextureFormat::Rgba8UnormSrgb,
             ),
@@ -226,10 +226,11 @@ impl MeshGpu {
                     MaterialKind::Branch => 1,
                     MaterialKind::Cloud => 2,
                 },
-                coverage: match (m.texture_layer, texels) {
+                // Block-encoded texels carry the bake's count (the viewer cannot count blocks).
+                coverage: m.coverage.unwrap_or_else(|| match (m.texture_layer, texels) {
                     (Some(l), Some((t, data))) => layer_coverage(&t, data, l, m.alpha_cutoff),
                     _ => 0.0,
-                },
+                }),
             })
             .collect();
         if materials.is_empty() {
@@ -401,6 +402,10 @@ impl MeshGpu {
 /// cutoff or when the layer is not in `data`.
 #[must_use]
 pub fn layer_coverage(meta: &TextureArrayMeta, data: &[u8], layer: u32, cutoff: f32) -> f32 {
+    if meta.encoding.is_some() {
+        // Blocks, not texels (the bake writes a variant's coverage in META).
+        return 0.0;
+    }
     let texels = (meta.size as usize).pow(2);
     let start = meta.mip_offset(0, 4) as usize + layer as usize * texels * 4;
     match data.get(start..start + texels * 4) {
@@ -427,7 +432,10 @@ fn pad4(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
     }
 }
 
-/// Uploads a mip-major RGBA8 texture array (the pack layout) as it is.
+/// Uploads a mip-major texture array (the pack layout) as it is: plain
+/// texels of `format`, or a block-encoded array ([`TextureArrayMeta::encoding`])
+/// in the block format of `format`'s kind (BC7 for RGBA8, sRGB kept), which the
+/// device must support ([`block_formats`]).
 #[must_use]
 pub fn upload_texture_array(
     device: &wgpu::Device,
@@ -437,7 +445,15 @@ pub fn upload_texture_array(
     data: &[u8],
     format: wgpu::TextureFormat,
 ) -> wgpu::Texture {
+    // (A pack in an encoding the device does not sample is refused before
+    // it gets here: `SceneStream` checks what it fetched, `sylva render --pack` the device.)
+    let format = match (meta.encoding, format) {
+        (Some(TexelEncoding::Bc7), wgpu::TextureFormat::Rgba8UnormSrgb) => wgpu::TextureFormat::Bc7RgbaUnormSrgb,
+        (Some(TexelEncoding::Bc7), _) => wgpu::TextureFormat::Bc7RgbaUnorm,
+        (None, f) => f,
+    };
     let texel_bytes = format.block_copy_size(None).unwrap_or(4);
+    let (block, _) = format.block_dimensions();
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
         size: wgpu::Extent3d { width: meta.size, height: meta.size, depth_or_array_layers: meta.layers },
@@ -449,9 +465,10 @@ pub fn upload_texture_array(
         view_formats: &[],
     });
     for mip in 0..meta.mips {
-        let size = (meta.size >> mip).max(1);
+        // A mip smaller than a block is copied as the whole block it sits in.
+        let size = (meta.size >> mip).max(1).next_multiple_of(block);
         let start = meta.mip_offset(mip, texel_bytes.into()) as usize;
-        let len = (size * size * texel_bytes * meta.layers) as usize;
+        let len = (meta.mip_bytes(mip, texel_bytes.into()) * u64::from(meta.layers)) as usize;
         let Some(bytes) = data.get(start..start + len) else { break };
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
@@ -463,11 +480,22 @@ pub fn upload_texture_array(
             bytes,
             wgpu::TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(size * texel_bytes),
-                rows_per_image: Some(size),
+                bytes_per_row: Some(size / block * texel_bytes),
+                rows_per_image: Some(size / block),
             },
             wgpu::Extent3d { width: size, height: size, depth_or_array_layers: meta.layers },
         );
     }
     texture
+}
+
+/// The block encodings of texture arrays `device` samples (its features):
+/// what a viewer may ask of a pack's block-compressed variants.
+#[must_use]
+pub fn block_formats(device: &wgpu::Device) -> Vec<TexelEncoding> {
+    if device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC) {
+        vec![TexelEncoding::Bc7]
+    } else {
+        Vec::new()
+    }
 }

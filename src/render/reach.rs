@@ -245,7 +245,7 @@ mod tests {
             clusters: None,
             impostors: Some(ImpostorMeta {
                 grid: 2,
-                texture: TextureArrayMeta { size: 4, layers: 4, mips: 3 },
+                texture: TextureArrayMeta::plain(4, 4, 3),
                 center: [0.0, 0.0, 10.0],
                 radius: 12.0,
                 normal_length: Vec::new(),

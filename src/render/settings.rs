@@ -25,6 +25,9 @@ pub struct RenderSettings {
     /// Fetch every tile whole, not the prefix levels prefix thinning draws (for
     /// comparisons; the image is the same).
     pub whole_tiles: bool,
+    /// Fetch the plain (RGBA8) packs even where the GPU samples the scene's
+    /// block-compressed variants (for comparisons; applies to packs not yet fetched).
+    pub plain_textures: bool,
     /// Where trees are a pixel or two, draw the scene's canopy rasters instead,
     /// cross-faded with them (scenes of version 8; [`CANOPY_PX`]): trees under
     /// a pixel are then neither fetched nor drawn.
@@ -292,6 +295,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         Self {
             quality: 1.0,
+            plain_textures: false,
             draw_distance_m: f32::INFINITY,
             fade_band: 0.12,
             debug_lod: false,

@@ -14,6 +14,13 @@ impl Viewer {
         self.frame.settings.debug_bounds = bounds;
     }
 
+    /// Plain (RGBA8) packs even where the GPU samples the scene's
+    /// block-compressed (BC7) variants: `create(…, {textures: 'plain'})`,
+    /// `?textures=plain`. Applies to packs not yet fetched (call it at once).
+    pub fn set_plain_textures(&mut self, plain: bool) {
+        self.frame.settings.plain_textures = plain;
+    }
+
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below
     /// the simplified mesh) use clustered ellipsoids (infinity: none); `only`
     /// restricts drawing to one family (`"meshes"`, `"ellipsoids"`, `"billboards"`,

@@ -89,8 +89,8 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
         },
     ];
     let indices: [u32; 6] = [0, 1, 2, 2, 1, 0];
-    let tex = TextureArrayMeta { size: 4, layers: 1, mips: 3 };
-    let bb_tex = TextureArrayMeta { size: 2, layers: 2, mips: 2 };
+    let tex = TextureArrayMeta::plain(4, 1, 3);
+    let bb_tex = TextureArrayMeta::plain(2, 2, 2);
     let meta = PackMeta {
         name: "sample".into(),
         height_m: 10.0,
@@ -104,6 +104,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
                 alpha_cutoff: 0.0,
                 double_sided: false,
                 texture_layer: None,
+                coverage: None,
             },
             MaterialMeta {
                 name: "leaves".into(),
@@ -112,6 +113,7 @@ fn sample_pack() -> (PackMeta, Vec<Section>) {
                 alpha_cutoff: 0.5,
                 double_sided: true,
                 texture_layer: Some(0),
+                coverage: None,
             },
         ],
         material_texture: Some(tex),
@@ -188,6 +190,7 @@ fn sample_manifest() -> Manifest {
                 bounds: b,
                 trees: 3,
                 head_bytes: None,
+                variants: Vec::new(),
             },
             SpeciesEntry {
                 name: "b".into(),
@@ -197,6 +200,7 @@ fn sample_manifest() -> Manifest {
                 bounds: b,
                 trees: 2,
                 head_bytes: None,
+                variants: Vec::new(),
             },
         ],
         tiles: vec![TileEntry {
@@ -718,12 +722,25 @@ fn pack_decoder_error_paths() {
     pack_error(|m, _| m.mesh_levels.push(m.mesh_levels[0].clone()), "no MVTX/MIDX section with index 1");
     pack_error(|_, s| s[1].data[8..12].copy_from_slice(&3u32.to_le_bytes()), "index[2] = 3 is out of range");
     pack_error(|_, s| s[0].data[6] = 5, "vertex[0].material = 5");
-    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta { size: 8, layers: 1, mips: 3 }), "needs 336 bytes");
-    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta { size: 4, layers: 1, mips: 9 }), "mips = 9");
+    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta::plain(8, 1, 3)), "needs 336 bytes");
+    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta::plain(4, 1, 9)), "mips = 9");
+    // Block-encoded (BC7) arrays: 16 bytes a 4 × 4 block, a whole block for
+    // mips under it; RGBA arrays of sides that are multiples of 4 only.
+    let bc7 = |t: TextureArrayMeta| TextureArrayMeta { encoding: Some(sylva::format::pack::TexelEncoding::Bc7), ..t };
+    assert_eq!(bc7(TextureArrayMeta::plain(8, 2, 4)).byte_len(), (4 + 1 + 1 + 1) * 16 * 2);
+    pack_error(|m, _| m.material_texture = Some(bc7(TextureArrayMeta::plain(4, 1, 3))), "needs 48 bytes");
     pack_error(
-        |m, _| m.material_texture = Some(TextureArrayMeta { size: 1 << 20, layers: 1, mips: 1 }),
-        "size = 1048576",
+        |m, _| m.billboards.as_mut().unwrap().texture.encoding = bc7(m.billboards.as_ref().unwrap().texture).encoding,
+        "bc7 encoded but its size is no multiple of 4",
     );
+    {
+        let (mut meta, mut sections) = sample_pack();
+        meta.material_texture = Some(bc7(TextureArrayMeta::plain(4, 1, 3)));
+        let mtex = sections.iter_mut().find(|s| s.kind == sylva::format::pack::kind::MATERIAL_TEXTURES).unwrap();
+        mtex.data = vec![0; 48];
+        decode_pack("species/x.pack", &encode_pack(&meta, &sections)).expect("three BC7 blocks");
+    }
+    pack_error(|m, _| m.material_texture = Some(TextureArrayMeta::plain(1 << 20, 1, 1)), "size = 1048576");
     pack_error(|_, s| drop(s.remove(2)), "has no texture section");
     pack_error(|m, _| m.billboards.as_mut().unwrap().angles = 3, "3 angles");
     // The optional occlusion: a billboard array of one byte per texel, a field
@@ -751,7 +768,7 @@ fn pack_decoder_error_paths() {
     let pack = decode_pack("x", &bytes).unwrap();
     assert_eq!(pack.ao_field().map(|f| (f.dims, f.cell, f.cells.len())), Some(([2, 2, 3], 0.5, 12)));
     // Impostors: grid² layers, both arrays, the right byte counts, a positive radius.
-    let imp_tex = TextureArrayMeta { size: 2, layers: 4, mips: 2 };
+    let imp_tex = TextureArrayMeta::plain(2, 4, 2);
     let with_impostors = |grid: u32, radius: f32, surface: bool| {
         move |m: &mut PackMeta, s: &mut Vec<Section>| {
             m.impostors = Some(sylva::format::pack::ImpostorMeta {
@@ -887,6 +904,52 @@ fn manifest_decoder_error_paths() {
     assert!(Manifest::decode("s", b"<html>404</html>").unwrap_err().to_string().contains("invalid JSON"));
     manifest_error(|v| v["format"] = "other".into(), "not a Sylva scene manifest");
     manifest_error(|v| v["version"] = (SCENE_VERSION + 1).into(), &format!("version {}", SCENE_VERSION + 1));
+    // A species' block-compressed pack variants: version 12, URLs inside the
+    // scene, a handful, named.
+    let variant = serde_json::json!({"textures": "bc7", "pack": "species/a.bc7.pack", "bytes": 50});
+    manifest_error(
+        |v| {
+            v["version"] = 11.into();
+            v["species"][0]["variants"] = serde_json::json!([variant.clone()]);
+        },
+        "species[0].variants needs manifest version 12",
+    );
+    manifest_error(
+        |v| {
+            v["version"] = 12.into();
+            v["species"][0]["variants"] = serde_json::json!([{"textures": "bc7", "pack": "../x.pack", "bytes": 1}]);
+        },
+        "species[0].variants[0].pack",
+    );
+    manifest_error(
+        |v| {
+            v["version"] = 12.into();
+            v["species"][0]["variants"] = serde_json::json!(vec![variant.clone(); 9]);
+        },
+        "9 variants exceed 8",
+    );
+    manifest_error(
+        |v| {
+            v["version"] = 12.into();
+            v["species"][0]["variants"] =
+                serde_json::json!([{"textures": "", "pack": "species/a.bc7.pack", "bytes": 1}]);
+        },
+        "is no encoding name",
+    );
+    {
+        let mut v: serde_json::Value = serde_json::from_slice(&sample_manifest().encode()).unwrap();
+        v["version"] = 12.into();
+        v["species"][0]["variants"] =
+            serde_json::json!([{"textures": "astc4x4", "pack": "species/a.astc.pack", "bytes": 40}, variant]);
+        let m = Manifest::decode("scene.json", &serde_json::to_vec(&v).unwrap()).unwrap();
+        use sylva::format::pack::TexelEncoding::Bc7;
+        // The first encoding the device samples that the species has; names it does not know are skipped.
+        let c = m.species[0].pack_for(&[Bc7]);
+        assert_eq!((c.pack, c.bytes, c.encoding), ("species/a.bc7.pack", 50, Some(Bc7)));
+        let c = m.species[0].pack_for(&[]);
+        assert_eq!((c.pack, c.encoding), (m.species[0].pack.as_str(), None));
+        assert_eq!(m.species[1].pack_for(&[Bc7]).encoding, None, "no variant: the plain pack");
+    }
     // Version 8 adds the canopy quadtree; its folder stays inside the scene, its sizes are bounded.
     let canopy = serde_json::json!({"path": "canopy", "origin_m": [-512.0, 0.0], "root_size_m": 2048.0,
         "levels": 3, "cells": 64, "rasters": 5, "bytes": 164_080});

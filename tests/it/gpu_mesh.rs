@@ -73,7 +73,7 @@ fn toy_pack_with(variant: bool) -> Vec<u8> {
         .collect();
     let chain =
         sylva::render::mips::alpha_aware_mips(&disc, &disc, TEX, sylva::render::mips::ColorEncoding::Srgb, Some(0.5));
-    let tex = TextureArrayMeta { size: TEX, layers: 1, mips: chain.len() as u32 };
+    let tex = TextureArrayMeta::plain(TEX, 1, chain.len() as u32);
     let meta = PackMeta {
         name: "toy".into(),
         height_m: 10.0,
@@ -87,6 +87,7 @@ fn toy_pack_with(variant: bool) -> Vec<u8> {
                 alpha_cutoff: 0.0,
                 double_sided: true,
                 texture_layer: None,
+                coverage: None,
             },
             MaterialMeta {
                 name: "leaves".into(),
@@ -95,6 +96,7 @@ fn toy_pack_with(variant: bool) -> Vec<u8> {
                 alpha_cutoff: 0.5,
                 double_sided: true,
                 texture_layer: Some(0),
+                coverage: None,
             },
         ],
         material_texture: Some(tex),

@@ -454,6 +454,11 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     // The bake stores its packs with each part deflated (pack version 2): the
     // browser fetched the far tier's block and inflated it to draw these trees.
     assert.equal(readFileSync(join(dir, 'scene', 'species', 'oak.pack')).readUInt16LE(4), 2, 'a stored pack');
+    // Where the GPU samples BC textures (SwiftShader does) the pack's BC7 variant
+    // was fetched, uploaded as blocks and drew these trees (the foliage counted below).
+    const bc = await page.evaluate(async () => (await navigator.gpu.requestAdapter()).features.has('texture-compression-bc'));
+    assert.equal(stats.textures, bc ? 'bc7' : 'plain', `adapter with BC textures: ${bc}`);
+    assert.equal(readFileSync(join(dir, 'scene', 'species', 'oak.bc7.pack')).readUInt16LE(4), 2, 'a stored BC7 variant');
     assert.deepEqual(stats.failed, [], 'nothing failed');
     const share = await foliageShare(page, 'districts-first-view');
     assert.ok(share > 0.01, `foliage covers ${share} of the first view`);

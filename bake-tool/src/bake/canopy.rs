@@ -76,6 +76,9 @@ pub fn species_looks(dir: &Path, species: &[SpeciesEntry], log: &dyn Fn(&str)) -
             let bytes = std::fs::read(&path).with_context(|| format!("canopy: reading {}", path.display()))?;
             let bytes = sylva::format::stored::unstore(&s.pack, bytes)?;
             let pack = decode_pack(&s.pack, &bytes)?;
+            if let Some(e) = pack.meta.encodings().first() {
+                anyhow::bail!("canopy: {} holds {} blocks, not the plain texels it reads", s.pack, e.name());
+            }
             let autumn_linear = pack.meta.season.as_ref().map(sylva::render::settings::autumn_linear);
             // The top (and side) view of far-tier state `state`: Σ alpha, Σ
             // alpha·albedo, Σ alpha·autumn albedo, the side's Σ alpha, per texel.

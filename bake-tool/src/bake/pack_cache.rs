@@ -218,6 +218,7 @@ fn hash_options(options: &PackOptions, h: &mut DefaultHasher) {
         far_variants,
         // (How the pack is written, not what it holds: the cache keeps it as it is.)
         raw_packs: _,
+        gpu_textures: _,
     } = options;
     (seasons, far_variants).hash(h);
     (texture_size, billboard_angles, billboard_azimuths, billboard_size).hash(h);

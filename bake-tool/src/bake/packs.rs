@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use sylva::format::manifest::{Bounds, SpeciesEntry};
+use sylva::format::manifest::{Bounds, PackVariant, SpeciesEntry};
 use sylva::render::capture::CapturePipelines;
 use sylva::render::GpuContext;
 
@@ -68,6 +68,7 @@ pub fn bake_packs(
                 bounds: Bounds { min: lo.to_array(), max: hi.to_array() },
                 trees: 0,
                 head_bytes: None,
+                variants: Vec::new(),
             });
             continue;
         }
@@ -128,15 +129,60 @@ pub fn bake_packs(
                 (built.bytes, built.meta)
             }
         };
+        // The block-compressed variants, from the cache where it has them
+        // (under the pack's key and the encoding's name).
+        let mut variants = Vec::new();
+        for encoding in &options.gpu_textures {
+            let started = Instant::now();
+            let vkey = cached.as_ref().map(|(_, key, _)| format!("{key}-{}", encoding.name()));
+            let hit = cached.as_ref().zip(vkey.as_ref()).and_then(|((c, _, _), k)| c.get(k));
+            let hit = hit.filter(|b| sylva::format::decode_pack(&file, b).is_ok());
+            let vbytes = match hit {
+                Some(b) => b,
+                None => {
+                    let b = crate::pack::textures::block_encoded(&file, &bytes, *encoding)
+                        .with_context(|| format!("the {} textures of species {name:?}", encoding.name()))?;
+                    if let (Some((c, _, _)), Some(k)) = (&cached, &vkey) {
+                        if let Err(e) = c.put(k, &b) {
+                            log(&format!("  warning: {e:#}"));
+                        }
+                    }
+                    b
+                }
+            };
+            log(&format!(
+                "  pack {name}: {} textures, {:.2} MB ({:.1} s)",
+                encoding.name(),
+                vbytes.len() as f64 / 1e6,
+                started.elapsed().as_secs_f64()
+            ));
+            let vfile = format!("species/{}.{}.pack", safe_name(name), encoding.name());
+            variants.push((encoding.name(), vfile, vbytes));
+        }
         drop(cached);
         // Each part deflated: a far view fetches a tenth of the bytes (docs/FORMAT.md, "Stored packs").
-        let stored = if options.raw_packs {
-            bytes
-        } else {
-            sylva::format::stored::store_pack(&file, &bytes).with_context(|| format!("storing {file}"))?
+        let store = |file: &str, bytes: Vec<u8>| -> Result<Vec<u8>> {
+            if options.raw_packs {
+                Ok(bytes)
+            } else {
+                sylva::format::stored::store_pack(file, &bytes).with_context(|| format!("storing {file}"))
+            }
         };
+        let stored = store(&file, bytes)?;
         let head = sylva::format::pack::PackHead::decode(&file, &stored)?;
         write_file(&dir.join(&file), &stored)?;
+        let mut entry_variants = Vec::new();
+        for (textures, vfile, vbytes) in variants {
+            let vstored = store(&vfile, vbytes)?;
+            let vhead = sylva::format::pack::PackHead::decode(&vfile, &vstored)?;
+            write_file(&dir.join(&vfile), &vstored)?;
+            entry_variants.push(PackVariant {
+                textures: textures.into(),
+                pack: vfile,
+                bytes: vstored.len() as u64,
+                head_bytes: Some(vhead.bytes.len() as u64),
+            });
+        }
         entries.push(SpeciesEntry {
             name: name.clone(),
             pack: file,
@@ -145,6 +191,7 @@ pub fn bake_packs(
             bounds: Bounds { min: meta.bounds_min, max: meta.bounds_max },
             trees: 0,
             head_bytes: Some(head.bytes.len() as u64),
+            variants: entry_variants,
         });
     }
     Ok(Packs { entries, shapes, seconds: t0.elapsed().as_secs_f64() })

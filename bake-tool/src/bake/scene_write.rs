@@ -94,7 +94,8 @@ pub fn finish_scene(
     // The geographic fit the browser converts lon/lat with (version 12): not
     // in a shard's part (merge fits the whole scene; the parts' CRS must agree).
     base.crs.fit = if base.shard.is_none() { geo_fit(&base, log) } else { None };
-    if base.crs.fit.is_some() {
+    // So are packs' block-compressed variants.
+    if base.crs.fit.is_some() || base.species.iter().any(|s| !s.variants.is_empty()) {
         base.version = base.version.max(12);
     }
     if !flat && tiles.len() > node_tiles as usize {
@@ -136,6 +137,13 @@ pub fn geo_fit(m: &Manifest, log: &dyn Fn(&str)) -> Option<sylva::format::geofit
     let fitted = sylva::geo::GeoFrame::new(&m.crs.proj4, m.origin_m).and_then(|g| g.fit(bx));
     match fitted {
         Ok(fit) => {
+            if fit.error_m > sylva::format::geofit::FIT_TOLERANCE_M {
+                log(&format!(
+                    "warning: the geographic fit is {:.1} mm from the projection at worst (the goal: 1 mm): lon/lat in \
+                     browsers are that far off",
+                    fit.error_m * 1000.0
+                ));
+            }
             log(&format!(
                 "geographic fit: degree {}, within {:.2} mm over {:.1} × {:.1} km",
                 fit.degree,
@@ -175,7 +183,11 @@ pub fn add_geo_fit(dir: &Path, log: &dyn Fn(&str)) -> Result<Manifest> {
     Manifest::decode(&name, &out)?;
     let tmp = dir.join(".scene.json.geo-fit");
     write_file(&tmp, &out)?;
-    std::fs::rename(&tmp, &path).with_context(|| format!("cannot replace {name}"))?;
+    if let Err(e) = std::fs::rename(&tmp, &path) {
+        // (Nothing left behind that a later bake would take for a foreign file.)
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("cannot replace {name}"));
+    }
     log(&format!(
         "{}: {} the geographic fit (manifest version {})",
         name,

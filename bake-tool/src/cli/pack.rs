@@ -49,6 +49,12 @@ pub(crate) struct PackArgs {
     /// fetches about a seventh of the bytes; docs/FORMAT.md "Stored packs").
     #[arg(long)]
     pub(crate) raw_packs: bool,
+    /// GPU block-compressed variants of every pack to write beside it:
+    /// `bc7` (the default; desktop GPUs sample it: a quarter of the texture
+    /// memory, fewer bytes to fetch) or `none`. A viewer whose GPU cannot
+    /// sample a variant fetches the plain pack.
+    #[arg(long, value_enum, default_value_t = GpuTextures::Bc7)]
+    pub(crate) gpu_textures: GpuTextures,
     /// Capture the far tiers (impostors, billboards) of each of a library
     /// tree's mesh variants, not variant 0's alone: far trees keep their own
     /// shapes (closer to their meshes) for 3× the far tiers' bytes.
@@ -168,6 +174,10 @@ impl PackArgs {
             cloud_planes: self.cloud_planes,
             seasons: !self.no_seasons,
             raw_packs: self.raw_packs,
+            gpu_textures: match self.gpu_textures {
+                GpuTextures::Bc7 => vec![sylva::format::pack::TexelEncoding::Bc7],
+                GpuTextures::None => Vec::new(),
+            },
             far_variants: self.far_tier_variants,
         })
     }
@@ -181,4 +191,13 @@ impl PackArgs {
             None => Ok(default_cell_size(trees, 500.0)),
         }
     }
+}
+
+/// `--gpu-textures`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum GpuTextures {
+    /// BC7 variants (desktop GPUs).
+    Bc7,
+    /// Plain packs only.
+    None,
 }

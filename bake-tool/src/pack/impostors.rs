@@ -92,11 +92,8 @@ pub(super) fn build_impostors(
     // filtered normal with it (`shade_filtered`).
     let normal_length: Vec<f32> =
         spread.iter().map(|(w, n)| if *n > 0.0 { (w / n).clamp(0.0, 1.0) as f32 } else { 1.0 }).collect();
-    let texture = TextureArrayMeta {
-        size: opts.impostor_size,
-        layers: grid * grid * variants,
-        mips: opts.impostor_size.trailing_zeros() + 1,
-    };
+    let texture =
+        TextureArrayMeta::plain(opts.impostor_size, grid * grid * variants, opts.impostor_size.trailing_zeros() + 1);
     let sections = vec![
         Section {
             kind: kind::IMPOSTOR_COLOR,

@@ -84,13 +84,14 @@ pub(super) fn build_materials(
                 alpha_cutoff: m.alpha_cutoff,
                 double_sided: m.double_sided,
                 texture_layer: layer,
+                coverage: None,
             }
         })
         .collect();
     if chains.is_empty() {
         return (metas, None, None);
     }
-    let meta = TextureArrayMeta { size, layers: chains.len() as u32, mips: size.trailing_zeros() + 1 };
+    let meta = TextureArrayMeta::plain(size, chains.len() as u32, size.trailing_zeros() + 1);
     let bytes = mip_major(&chains, meta.mips);
     (metas, Some(meta), Some(bytes))
 }

@@ -13,6 +13,7 @@ use policy::*;
 pub mod ao;
 pub mod cloud;
 pub mod clusters;
+pub mod textures;
 
 use anyhow::{Context, Result};
 use glam::Vec3;
@@ -63,6 +64,9 @@ pub struct PackOptions {
     /// issue 47 and the test fixture. Not a property of the pack's content
     /// (the pack cache keeps packs as they are, whichever is written).
     pub raw_packs: bool,
+    /// Block-compressed variants written beside each pack ([`textures`]):
+    /// BC7 by default. Not a property of the pack's content either.
+    pub gpu_textures: Vec<sylva::format::pack::TexelEncoding>,
     /// Capture the far tiers (billboards, impostors) of every mesh variant,
     /// not variant 0's alone: a tree's far tier then shows its own shape (the
     /// far tiers' bytes × the variants).
@@ -106,6 +110,7 @@ impl Default for PackOptions {
             cloud_planes: DEFAULT_CLOUD_PLANES,
             seasons: true,
             raw_packs: false,
+            gpu_textures: vec![sylva::format::pack::TexelEncoding::Bc7],
             far_variants: false,
         }
     }
@@ -216,6 +221,7 @@ pub fn build_pack(
                 alpha_cutoff: 0.0,
                 double_sided: true,
                 texture_layer: None,
+                coverage: None,
             });
             let words = encode_cloud(&built.planes, &built.cells, &built.fragments);
             // Its coverage of the leaves, seen from the side (tested in crate::pack::cloud).
@@ -278,11 +284,11 @@ pub fn build_pack(
     let frame = BillboardFrame::from_bounds(lo, hi);
     let mut color_chains: Vec<Vec<Vec<u8>>> = Vec::new();
     let mut normal_chains: Vec<Vec<Vec<u8>>> = Vec::new();
-    let tex = TextureArrayMeta {
-        size: opts.billboard_size,
-        layers: opts.billboard_angles * opts.billboard_azimuths * far_variants,
-        mips: opts.billboard_size.trailing_zeros() + 1,
-    };
+    let tex = TextureArrayMeta::plain(
+        opts.billboard_size,
+        opts.billboard_angles * opts.billboard_azimuths * far_variants,
+        opts.billboard_size.trailing_zeros() + 1,
+    );
     // The far tiers' states: leaf-on, and a deciduous tree's bare wood
     // (section index 1), captured the same way with the leaves left out.
     let autumn = model.autumn.filter(|_| opts.seasons);

@@ -72,12 +72,13 @@ fn demo_scene_is_complete_valid_and_deterministic() {
     assert_eq!(log.matches("from the pack cache").count(), 3, "{log}");
     assert!(!log.contains("rendering billboards"), "no GPU set up when every pack is cached: {log}");
     assert_eq!(snapshot(&a), snapshot(&c), "packs from the cache give the same scene");
-    let entries: Vec<_> = std::fs::read_dir(&cache)
+    let (variants, entries): (Vec<_>, Vec<_>) = std::fs::read_dir(&cache)
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|x| x == "pack"))
-        .collect();
+        .partition(|p| p.to_string_lossy().ends_with("-bc7.pack"));
     assert_eq!(entries.len(), 3, "one entry a species: {entries:?}");
+    assert_eq!(variants.len(), 3, "and one for its BC7 variant: {variants:?}");
     std::fs::write(&entries[0], b"SYLVAPAK but not really").unwrap();
     let log = demo(&d, true);
     assert!(
@@ -86,6 +87,47 @@ fn demo_scene_is_complete_valid_and_deterministic() {
     );
     assert_eq!(snapshot(&a), snapshot(&d), "a corrupt cache entry is built again");
     assert!(std::fs::read(&entries[0]).unwrap().len() > 1000, "and replaced");
+    // Each pack has its BC7 variant beside it (manifest version 12): the same
+    // pack but for its RGBA texture arrays, a quarter of their bytes.
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(a.join("scene.json")).unwrap()).unwrap();
+    for s in &m.species {
+        assert_eq!(s.variants.len(), 1, "{}", s.name);
+        let v = &s.variants[0];
+        assert_eq!((v.textures.as_str(), v.pack.as_str()), ("bc7", s.pack.replace(".pack", ".bc7.pack").as_str()));
+        let read = |rel: &str| {
+            let b = sylva::format::stored::unstore(rel, std::fs::read(a.join(rel)).unwrap()).unwrap();
+            let meta = sylva::format::decode_pack(rel, &b).unwrap().meta;
+            (b.len(), meta)
+        };
+        let ((plain_len, plain), (bc7_len, bc7)) = (read(&s.pack), read(&v.pack));
+        assert_eq!(std::fs::metadata(a.join(&v.pack)).unwrap().len(), v.bytes);
+        let enc = Some(sylva::format::pack::TexelEncoding::Bc7);
+        let (pi, bi) = (plain.impostors.unwrap().texture, bc7.impostors.unwrap().texture);
+        assert_eq!((pi.encoding, bi.encoding), (None, enc));
+        // 4:1 but the 2² and 1² mips, a whole 16-byte block each (4 × 16 − 16 and 4 × 16 − 4 more).
+        assert_eq!(bi.byte_len() * 4, pi.byte_len() + (48 + 60) * u64::from(pi.layers), "{pi:?}");
+        assert_eq!(bc7.billboards.unwrap().texture.encoding, enc);
+        assert_eq!(bc7.material_texture.unwrap().encoding, enc);
+        // The viewer cannot count covered texels in blocks: the bake counted them.
+        for (p, b) in plain.materials.iter().zip(&bc7.materials) {
+            assert_eq!(p.coverage, None);
+            if p.texture_layer.is_some() && p.alpha_cutoff > 0.0 {
+                assert!(b.coverage.is_some_and(|c| c > 0.0 && c <= 1.0), "{}: {:?}", s.name, b.coverage);
+            }
+        }
+        assert_eq!(bc7.mesh_levels, plain.mesh_levels);
+        assert!(bc7_len < plain_len / 2, "{}: {bc7_len} vs {plain_len}", s.name);
+    }
+    // --gpu-textures none: plain packs alone.
+    let none = dir.join("none");
+    run(bin().args(["demo", "--trees", "30", "--gpu-textures", "none"]).args(SMALL).arg("--out").arg(&none));
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(none.join("scene.json")).unwrap()).unwrap();
+    assert!(m.species.iter().all(|s| s.variants.is_empty()));
+    assert!(!std::fs::read_dir(none.join("species")).unwrap().any(|e| e
+        .unwrap()
+        .path()
+        .to_string_lossy()
+        .contains(".bc7.")));
     let v = inspect_json(&a);
     assert_eq!(v["trees_total"], 3000);
     assert_eq!(v["species_count"], 3);
@@ -965,6 +1007,9 @@ fn trees_stand_on_the_ground_of_a_dem() {
     let mut old = baked.clone();
     old["version"] = 11.into();
     old["crs"].as_object_mut().unwrap().remove("fit");
+    for sp in old["species"].as_array_mut().unwrap() {
+        sp.as_object_mut().unwrap().remove("variants");
+    }
     std::fs::write(&scene_json, serde_json::to_vec_pretty(&old).unwrap()).unwrap();
     let o = run(bin().arg("geo-fit").arg(dir.join("bare")));
     assert!(String::from_utf8_lossy(&o.stderr).contains("added the geographic fit"), "{o:?}");
@@ -2585,4 +2630,59 @@ fn three_censuses_bake_into_the_forest_at_each_date() {
     assert_eq!(count(None), 50, "standing at the bake's day: all but the ten removed");
     let by_planting = sylva::scene::query::query_dir(&register, &serde_json::json!({"planted": "1990"}), 0);
     assert_eq!(by_planting.unwrap().count, 34, "planting dates stay attributes (40 planted in 1990, 6 removed)");
+}
+
+/// A scene's BC7 pack variants on the GPU: where the device samples BC
+/// textures (lavapipe does) the viewer fetches them, holds a quarter of the
+/// texture bytes and draws the same trees within a small image error of the
+/// plain packs; `plain_textures` (`--textures plain`) keeps the RGBA8 packs.
+#[test]
+fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() {
+    use sylva::offscreen::{NamedView, OffscreenScene};
+    let dir = tmp("bc7-draw");
+    let out = dir.join("scene");
+    run(bin().args(["demo", "--trees", "2000", "--seed", "3", "--no-clusters"]).args(SMALL).arg("--out").arg(&out));
+    let draw = |plain: bool| {
+        let mut off =
+            OffscreenScene::open(out.to_str().unwrap(), 320, 180, sylva::render::forest::PoolConfig::default())
+                .unwrap();
+        off.settings.plain_textures = plain;
+        off.load_manifest(60.0);
+        let cam = off.named_camera(NamedView::Medium, 60.0).expect("the manifest");
+        off.load_view(&cam, 60.0);
+        let stats = off.render(&cam, true);
+        (stats, off.read_image(), off.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC))
+    };
+    let (plain, plain_img, _) = draw(true);
+    let (bc7, bc7_img, has_bc) = draw(false);
+    assert_eq!(plain.textures, "plain");
+    assert!(plain.failed.is_empty() && bc7.failed.is_empty(), "{:?} {:?}", plain.failed, bc7.failed);
+    let drawn: u64 = plain.instances.values().sum();
+    assert!(drawn > 500, "{:?}", plain.instances);
+    assert_eq!(plain.instances, bc7.instances, "the same trees either way");
+    if !has_bc {
+        // A device without BC textures takes the plain packs.
+        assert_eq!(bc7.textures, "plain");
+        return;
+    }
+    assert_eq!(bc7.textures, "bc7");
+    assert!(bc7.gpu_bytes < plain.gpu_bytes, "{} vs {}", bc7.gpu_bytes, plain.gpu_bytes);
+    assert!(bc7.bytes_fetched < plain.bytes_fetched, "{} vs {}", bc7.bytes_fetched, plain.bytes_fetched);
+    let e = sylva::metrics::multiscale_rmse(&plain_img, &bc7_img, 320, 180);
+    assert!(e > 0.0 && e < 0.01, "BC7 vs RGBA8: {e}");
+    // A viewer told to take plain packs refuses a BC7 pack listed as one, by
+    // name, and draws the rest.
+    let path = out.join("scene.json");
+    let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let sp = &mut m["species"][0];
+    let v = sp["variants"][0].clone();
+    for k in ["pack", "bytes", "head_bytes"] {
+        sp[k] = v[k].clone();
+    }
+    sp.as_object_mut().unwrap().remove("variants");
+    std::fs::write(&path, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+    let (refused, _, _) = draw(true);
+    let why = format!("{:?}", refused.failed);
+    assert!(why.contains(".bc7.pack") && why.contains("bc7 blocks, which this GPU does not sample"), "{why}");
+    assert!(refused.instances.values().sum::<u64>() > 0, "the other species drawn: {:?}", refused.instances);
 }

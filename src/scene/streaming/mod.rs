@@ -295,6 +295,9 @@ pub struct SceneStream<F: Fetcher> {
     imagery_wanted: Vec<TerrainKey>,
     /// The scene CRS ↔ lon/lat (for imagery sources in Web Mercator), once the manifest is in.
     geo: Option<GeoFrame>,
+    /// Block encodings the device samples, best first: a species' pack
+    /// variant of one of them is fetched instead of its pack.
+    texture_encodings: Vec<crate::format::pack::TexelEncoding>,
     /// Resident tiles' ids (and, with the second, attributes) are fetched (a style uses them).
     tree_data: (bool, bool),
     /// Fetch tiles' prefixes only (None: whole tiles).
@@ -377,6 +380,34 @@ impl<F: Fetcher> SceneStream<F> {
             .collect()
     }
 
+    /// The block encodings of texture arrays the device samples, best first
+    /// (`render::mesh::block_formats`; empty: plain packs only). Each
+    /// species' pack is chosen by it, so it holds from the manifest's arrival
+    /// on: a later call changes nothing (set it before streaming starts).
+    pub fn set_texture_encodings(&mut self, encodings: Vec<crate::format::pack::TexelEncoding>) {
+        if self.manifest.is_none() {
+            self.texture_encodings = encodings;
+        }
+    }
+
+    /// The pack species `s` is fetched from: its variant in an encoding the
+    /// device samples, else its plain pack.
+    pub(crate) fn pack_choice<'a>(
+        m: &'a Manifest,
+        encodings: &[crate::format::pack::TexelEncoding],
+        s: usize,
+    ) -> crate::format::manifest::PackChoice<'a> {
+        m.species[s].pack_for(encodings)
+    }
+
+    /// The block encoding the scene's textures are fetched in (`None`: plain
+    /// texels): the first the device samples that a species has a variant of.
+    #[must_use]
+    pub fn textures_in_use(&self) -> Option<crate::format::pack::TexelEncoding> {
+        let m = self.manifest.as_ref()?;
+        m.species.iter().find_map(|s| s.pack_for(&self.texture_encodings).encoding)
+    }
+
     /// Starts streaming the scene at `scene` (directory, `scene.json` path or URL).
     pub fn new(scene: &str, fetcher: F, config: StreamConfig) -> Self {
         let (base, manifest_url) = scene_locations(scene);
@@ -409,6 +440,7 @@ impl<F: Fetcher> SceneStream<F> {
             imagery: Imagery::new(),
             imagery_wanted: Vec::new(),
             geo: None,
+            texture_encodings: Vec::new(),
             tree_data: (false, false),
             prefix_view: None,
             levels_short: 0,

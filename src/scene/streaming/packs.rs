@@ -71,21 +71,37 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let entry = &m.species[s];
-        let url = join(&self.base, &entry.pack);
+        let entry = Self::pack_choice(m, &self.texture_encodings, s);
+        let url = join(&self.base, entry.pack);
         let attempt = self.packs[s].head.attempt();
         let pack_bytes = entry.bytes;
         let ranged = entry.head_bytes.is_some();
+        // Textures in a block encoding the device does not sample (a plain
+        // pack that is not plain, a variant listed under another name): refused.
+        let encodings = &self.texture_encodings;
+        let sampled = |meta: &crate::format::pack::PackMeta| match meta
+            .encodings()
+            .into_iter()
+            .find(|e| !encodings.contains(e))
+        {
+            Some(e) => {
+                Err((format!("{url}: its textures are {} blocks, which this GPU does not sample", e.name()), false))
+            }
+            None => Ok(()),
+        };
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             // No head size in the manifest, or a server that ignores ranges: the whole pack.
             if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
                 // (A stored pack that does not inflate whole will not next time either.)
                 let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), false))?;
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
+                sampled(&pack.meta)?;
                 residency.upload_pack(s as u32, &pack);
                 Ok(None)
             } else {
-                PackHead::decode(&url, &bytes).map(Some).map_err(|e| (e.to_string(), true))
+                let head = PackHead::decode(&url, &bytes).map_err(|e| (e.to_string(), true))?;
+                sampled(&head.meta)?;
+                Ok(Some(head))
             }
         });
         let load = &mut self.packs[s];
@@ -115,8 +131,9 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let url = join(&self.base, &m.species[s].pack);
-        let file_bytes = m.species[s].bytes;
+        let choice = Self::pack_choice(m, &self.texture_encodings, s);
+        let url = join(&self.base, choice.pack);
+        let file_bytes = choice.bytes;
         let load = &mut self.packs[s];
         let attempt = load.parts[part].attempt();
         let Some(head) = &load.parsed else { return };
@@ -287,10 +304,11 @@ impl<F: Fetcher> SceneStream<F> {
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
             }
-            let url = || join(&self.base, &m.species[s].pack);
+            let choice = Self::pack_choice(m, &self.texture_encodings, s);
+            let url = || join(&self.base, choice.pack);
             let Some(head) = &load.parsed else {
                 if let Some(attempt) = due(&load.head) {
-                    let range = m.species[s].head_bytes.map(|h| (0, h));
+                    let range = choice.head_bytes.map(|h| (0, h));
                     let id = self.fetcher.start_range(&url(), range);
                     self.stats.requests += 1;
                     self.requests.insert(id, Target::PackHead(s));

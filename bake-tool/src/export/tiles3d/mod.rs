@@ -291,6 +291,13 @@ fn species_out(
         .with_context(|| format!("cannot read pack {}", path.display()))?;
     let bytes = sylva::format::stored::unstore(&path.display().to_string(), bytes)?;
     let pack = decode_pack(&path.display().to_string(), &bytes)?;
+    if let Some(e) = pack.meta.encodings().first() {
+        anyhow::bail!(
+            "{}: its textures are {} blocks; the export reads the plain pack's texels",
+            path.display(),
+            e.name()
+        );
+    }
     let meta = pack.meta.clone();
     if meta.mesh_levels.is_empty() {
         bail!("{}: the pack has no mesh level to export", path.display());
