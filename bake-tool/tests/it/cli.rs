@@ -2670,6 +2670,13 @@ fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() 
     assert!(bc7.bytes_fetched < plain.bytes_fetched, "{} vs {}", bc7.bytes_fetched, plain.bytes_fetched);
     let e = sylva::metrics::multiscale_rmse(&plain_img, &bc7_img, 320, 180);
     assert!(e > 0.0 && e < 0.01, "BC7 vs RGBA8: {e}");
+    // A variant missing (a partial upload): that species' plain pack instead,
+    // the same trees, nothing listed as failed.
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
+    std::fs::remove_file(out.join(&m.species[1].variants[0].pack)).unwrap();
+    let (fallback, _, _) = draw(false);
+    assert!(fallback.failed.is_empty(), "{:?}", fallback.failed);
+    assert_eq!((fallback.textures.as_str(), &fallback.instances), ("bc7", &plain.instances));
     // A viewer told to take plain packs refuses a BC7 pack listed as one, by
     // name, and draws the rest.
     let path = out.join("scene.json");

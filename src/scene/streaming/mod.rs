@@ -400,12 +400,22 @@ impl<F: Fetcher> SceneStream<F> {
         m.species[s].pack_for(encodings)
     }
 
+    /// The encodings species `s` may be fetched in: none once its variant
+    /// failed for good (the plain pack then).
+    fn encodings_for(&self, s: usize) -> &[crate::format::pack::TexelEncoding] {
+        if self.packs.get(s).is_some_and(|p| p.plain) {
+            &[]
+        } else {
+            &self.texture_encodings
+        }
+    }
+
     /// The block encoding the scene's textures are fetched in (`None`: plain
     /// texels): the first the device samples that a species has a variant of.
     #[must_use]
     pub fn textures_in_use(&self) -> Option<crate::format::pack::TexelEncoding> {
         let m = self.manifest.as_ref()?;
-        m.species.iter().find_map(|s| s.pack_for(&self.texture_encodings).encoding)
+        (0..m.species.len()).find_map(|s| m.species[s].pack_for(self.encodings_for(s)).encoding)
     }
 
     /// Starts streaming the scene at `scene` (directory, `scene.json` path or URL).

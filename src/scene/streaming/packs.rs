@@ -30,6 +30,8 @@ pub(super) struct PackLoad {
     blocked: [bool; PACK_PARTS],
     /// The whole pack is uploaded: nothing more to fetch.
     whole: bool,
+    /// Its block-compressed variant failed for good: the plain pack instead.
+    pub(super) plain: bool,
 }
 
 impl PackLoad {
@@ -43,6 +45,7 @@ impl PackLoad {
             wants: [false; PACK_PARTS],
             blocked: [false; PACK_PARTS],
             whole: false,
+            plain: false,
         }
     }
 
@@ -71,7 +74,8 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let entry = Self::pack_choice(m, &self.texture_encodings, s);
+        let entry = Self::pack_choice(m, self.encodings_for(s), s);
+        let variant = entry.encoding.is_some();
         let url = join(&self.base, entry.pack);
         let attempt = self.packs[s].head.attempt();
         let pack_bytes = entry.bytes;
@@ -114,7 +118,20 @@ impl<F: Fetcher> SceneStream<F> {
                 load.head = Load::Idle;
                 load.parsed = Some(head);
             }
-            Err((message, retryable)) => self.packs[s].head = self.fail(url, &message, attempt, retryable, now_s),
+            Err((message, retryable)) => {
+                let given_up = self.fail(url.clone(), &message, attempt, retryable, now_s);
+                if variant && given_up == Load::Broken {
+                    // A variant missing or broken: the plain pack draws the
+                    // species instead, so the image lacks nothing (the event
+                    // said what failed).
+                    self.packs[s].plain = true;
+                    self.packs[s].head = Load::Idle;
+                    self.failures.retain(|f| f.url != url);
+                    self.stats.broken = self.stats.broken.saturating_sub(1);
+                } else {
+                    self.packs[s].head = given_up;
+                }
+            }
         }
     }
 
@@ -131,7 +148,7 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let choice = Self::pack_choice(m, &self.texture_encodings, s);
+        let choice = Self::pack_choice(m, self.encodings_for(s), s);
         let url = join(&self.base, choice.pack);
         let file_bytes = choice.bytes;
         let load = &mut self.packs[s];
@@ -300,11 +317,11 @@ impl<F: Fetcher> SceneStream<F> {
             _ => None,
         };
         for &s in &needed {
+            let choice = Self::pack_choice(m, self.encodings_for(s), s);
             let load = &mut self.packs[s];
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
             }
-            let choice = Self::pack_choice(m, &self.texture_encodings, s);
             let url = || join(&self.base, choice.pack);
             let Some(head) = &load.parsed else {
                 if let Some(attempt) = due(&load.head) {
