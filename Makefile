@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-build test-rust test-web bins web demo release bench-bake bench-render bench-serve bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-build test-rust test-web bins web demo release bench-bake bench-render bench-serve bench-governor bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -137,6 +137,14 @@ bench-render: release
 	@for n in 10k:10000 100k:100000 1m:1000000; do name=$${n%%:*}; count=$${n##*:}; \
 	  test -f target/bench/demo-$$name/scene.json || target/release/sylva-bake demo --trees $$count --out target/bench/demo-$$name; done
 	$(CARGO) bench --locked --bench frame -- target/bench/demo-10k target/bench/demo-100k target/bench/demo-1m
+
+# What each level of the browser's frame-time governor costs and buys, natively
+# (issue 47; docs/BENCHMARKS.md "The frame-time governor's levels, natively"):
+# one render a level, a minute or more each on lavapipe at 480x270.
+GOVERNOR_SIZE ?= 480x270
+bench-governor: release
+	@test -f target/bench/demo-100k/scene.json || target/release/sylva-bake demo --trees 100000 --out target/bench/demo-100k
+	python3 bench/governor.py target/bench/demo-100k medium $(GOVERNOR_SIZE)
 
 # Sylva's viewer beside CesiumJS with the scene's 3D Tiles export (issue 21;
 # docs/BENCHMARKS.md "Sylva beside CesiumJS"): the 100k demo and the Amsterdam

@@ -189,6 +189,11 @@ Examples:
         a: PathBuf,
         /// Second image (PNG).
         b: PathBuf,
+        /// Stretch the second image to the first's size first (bilinear, as a
+        /// browser stretches a canvas drawn at a lower render scale): the error
+        /// of a frame the frame-time governor drew smaller.
+        #[arg(long)]
+        stretch: bool,
     },
     /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/). DIR may
     /// also be a 3D Tiles export (`sylva-bake export-3dtiles`): CesiumJS shows it at /cesium.html.

@@ -21,10 +21,14 @@ mod cli {
     use super::render::*;
 
     /// `sylva compare`: the multi-scale RMSE of two PNGs.
-    fn compare(a: &PathBuf, b: &PathBuf) -> Result<()> {
+    fn compare(a: &PathBuf, b: &PathBuf, stretch: bool) -> Result<()> {
         let load =
             |p: &PathBuf| image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8());
-        let (ia, ib) = (load(a)?, load(b)?);
+        let (ia, mut ib) = (load(a)?, load(b)?);
+        if stretch && ia.dimensions() != ib.dimensions() {
+            let (w, h) = ia.dimensions();
+            ib = image::imageops::resize(&ib, w, h, image::imageops::FilterType::Triangle);
+        }
         if ia.dimensions() != ib.dimensions() {
             bail!(
                 "{} is {:?} but {} is {:?}: sizes must match",
@@ -128,7 +132,7 @@ mod cli {
                 bench(&scene, &path, methods, &size, frames, &out, save_frames)
             }
             Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
-            Command::Compare { a, b } => compare(&a, &b),
+            Command::Compare { a, b, stretch } => compare(&a, &b, stretch),
             Command::Query { scene, filter, limit, date } => {
                 let filter: serde_json::Value =
                     serde_json::from_str(&filter).map_err(|e| anyhow::anyhow!("--filter is not JSON: {e}"))?;

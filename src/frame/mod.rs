@@ -141,6 +141,9 @@ pub struct Frame<F: Fetcher> {
     cascades: u32,
     /// The stream's packs are the plain ones (the settings' choice, applied).
     plain_textures: bool,
+    /// Block-compressed packs where the device samples them (off on CPU
+    /// rasterisers natively: lavapipe decodes BC7 at every sample, ~30× slower draws).
+    block_textures: bool,
     draw_calls: u32,
     cpu_ms: f64,
     frames: u64,
@@ -180,6 +183,7 @@ impl<F: Fetcher> Frame<F> {
             waited: None,
             cascades: 0,
             plain_textures: false,
+            block_textures: true,
             draw_calls: 0,
             cpu_ms: 0.0,
             frames: 0,
@@ -188,6 +192,24 @@ impl<F: Fetcher> Frame<F> {
             device,
             queue,
         }
+    }
+
+    /// Whether packs' block-compressed variants are taken where the device
+    /// samples them (default on; `OffscreenScene` turns it off on a CPU
+    /// adapter, where sampling BC7 costs ~30× the draw time). Applies to
+    /// packs not yet chosen: call before streaming.
+    pub fn set_block_textures(&mut self, on: bool) {
+        self.block_textures = on;
+        self.apply_texture_choice();
+    }
+
+    fn apply_texture_choice(&mut self) {
+        let encodings = if self.plain_textures || !self.block_textures {
+            Vec::new()
+        } else {
+            crate::render::mesh::block_formats(&self.device)
+        };
+        self.stream.set_texture_encodings(encodings);
     }
 
     /// Times the passes with timestamp queries where the device has them (the
@@ -205,9 +227,7 @@ impl<F: Fetcher> Frame<F> {
         // (`RenderSettings::plain_textures`): for packs not yet fetched.
         if self.settings.plain_textures != self.plain_textures {
             self.plain_textures = self.settings.plain_textures;
-            let encodings =
-                if self.plain_textures { Vec::new() } else { crate::render::mesh::block_formats(&self.device) };
-            self.stream.set_texture_encodings(encodings);
+            self.apply_texture_choice();
         }
         // The terrain setting decides what is fetched too, not only what is drawn.
         if self.stream.config().terrain != self.settings.terrain {

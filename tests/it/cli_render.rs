@@ -331,3 +331,29 @@ fn scene_files_that_are_no_regular_files_fail_at_once_and_are_listed() {
     assert!(stderr.contains(ids.file_name().unwrap().to_str().unwrap()), "names the file: {stderr}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `sylva compare` refuses images of different sizes unless told to stretch the
+/// second (a frame the governor drew at a lower scale): a stretched copy of an
+/// image is close to it, a different image is not.
+#[test]
+fn compare_stretches_a_smaller_frame_only_when_asked() {
+    let dir = tmp("compare-stretch");
+    // A smooth gradient at 64×36 and the same at 32×18; a checker at 32×18.
+    let grad = |w: u32, h: u32| {
+        image::RgbaImage::from_fn(w, h, |x, y| image::Rgba([(x * 255 / w) as u8, (y * 255 / h) as u8, 90, 255]))
+    };
+    let (a, b, c) = (dir.join("a.png"), dir.join("b.png"), dir.join("c.png"));
+    grad(64, 36).save(&a).unwrap();
+    grad(32, 18).save(&b).unwrap();
+    image::RgbaImage::from_fn(32, 18, |x, y| image::Rgba(if (x + y) % 2 == 0 { [255; 4] } else { [0, 0, 0, 255] }))
+        .save(&c)
+        .unwrap();
+    let compare = |extra: &[&str], other: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_sylva")).arg("compare").args(extra).arg(&a).arg(other).output().unwrap()
+    };
+    let o = compare(&[], &b);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("sizes must match"), "{o:?}");
+    let near: f64 = String::from_utf8_lossy(&compare(&["--stretch"], &b).stdout).trim().parse().unwrap();
+    let far: f64 = String::from_utf8_lossy(&compare(&["--stretch"], &c).stdout).trim().parse().unwrap();
+    assert!(near < 0.02 && far > 0.2, "stretched gradient {near}, checker {far}");
+}
