@@ -61,19 +61,20 @@ impl GeoFit {
     /// non-finite input.
     #[must_use]
     pub fn to_local(&self, lon: f64, lat: f64) -> Option<(f64, f64)> {
-        let (u, v) = (unit(self.geo[0], self.geo[2], lon), unit(self.geo[1], self.geo[3], lat));
-        let n = self.degree as usize;
-        let p = (eval(&self.to_local[0], n, u, v), eval(&self.to_local[1], n, u, v));
-        (p.0.is_finite() && p.1.is_finite()).then_some(p)
+        self.eval(&self.to_local, &self.geo, lon, lat)
     }
 
     /// (lon, lat) degrees of the scene-relative point (x, y); `None` for
     /// non-finite input.
     #[must_use]
     pub fn to_geo(&self, x: f64, y: f64) -> Option<(f64, f64)> {
-        let (u, v) = (unit(self.local[0], self.local[2], x), unit(self.local[1], self.local[3], y));
-        let n = self.degree as usize;
-        let p = (eval(&self.to_geo[0], n, u, v), eval(&self.to_geo[1], n, u, v));
+        self.eval(&self.to_geo, &self.local, x, y)
+    }
+
+    /// Both coordinates of one direction's fit over the box `bx` at (a, b).
+    fn eval(&self, c: &[Vec<f64>; 2], bx: &[f64; 4], a: f64, b: f64) -> Option<(f64, f64)> {
+        let (u, v) = (unit(bx[0], bx[2], a), unit(bx[1], bx[3], b));
+        let p = eval(c, self.degree as usize, u, v);
         (p.0.is_finite() && p.1.is_finite()).then_some(p)
     }
 
@@ -260,22 +261,25 @@ fn basis(n: usize, u: f64) -> ([f64; SIDE], [f64; SIDE]) {
     (t, d)
 }
 
-/// One fitted coordinate at (u, v); outside [−1, 1]² along the tangent plane
-/// at the nearest point of the square.
-fn eval(c: &[f64], n: usize, u: f64, v: f64) -> f64 {
+/// Both fitted coordinates at (u, v) (the basis computed once for the two);
+/// outside [−1, 1]² along the tangent plane at the nearest point of the square.
+fn eval(c: &[Vec<f64>; 2], n: usize, u: f64, v: f64) -> (f64, f64) {
     let n = n.min(SIDE - 1);
     let (uc, vc) = (u.clamp(-1.0, 1.0), v.clamp(-1.0, 1.0));
     let ((tu, du), (tv, dv)) = (basis(n, uc), basis(n, vc));
-    let (mut f, mut fu, mut fv) = (0.0, 0.0, 0.0);
-    for i in 0..=n {
-        for j in 0..=n {
-            let cij = c.get(i * (n + 1) + j).copied().unwrap_or(0.0);
-            f += cij * tu[i] * tv[j];
-            fu += cij * du[i] * tv[j];
-            fv += cij * tu[i] * dv[j];
+    let one = |c: &[f64]| {
+        let (mut f, mut fu, mut fv) = (0.0, 0.0, 0.0);
+        for i in 0..=n {
+            for j in 0..=n {
+                let cij = c.get(i * (n + 1) + j).copied().unwrap_or(0.0);
+                f += cij * tu[i] * tv[j];
+                fu += cij * du[i] * tv[j];
+                fv += cij * tu[i] * dv[j];
+            }
         }
-    }
-    f + fu * (u - uc) + fv * (v - vc)
+        f + fu * (u - uc) + fv * (v - vc)
+    };
+    (one(&c[0]), one(&c[1]))
 }
 
 #[cfg(test)]
