@@ -242,14 +242,42 @@ struct FragmentOut {
 @fragment
 fn fs_main(in: VertexOut) -> FragmentOut {
     let hit = impostor_hit(in);
+    if !impostor_keeps(hit, in) {
+        discard;
+    }
+    var out: FragmentOut;
+    out.color = impostor_shade(hit, in);
+    out.depth = impostor_depth(hit.at, in);
+    return out;
+}
+
+// A moving frame's impostors (`RenderSettings::moving_impostors`, the
+// frame-time governor's deepest levels): the nearest view alone, sampled once,
+// and no depth of their own — the quad's, at the front of the tree's box. With
+// no depth written the depth test runs before the shading, so a crown hidden
+// behind nearer ones costs nothing: 4× cheaper on lavapipe (docs/BENCHMARKS.md).
+// Crowns that interpenetrate sort by their quads while the camera moves.
+@fragment
+fn fs_moving(in: VertexOut) -> @location(0) vec4<f32> {
+    let hit = impostor_nearest(in, true);
+    if !impostor_keeps(hit, in) {
+        discard;
+    }
+    return impostor_shade(hit, in);
+}
+
+// The blended views' coverage test, and the dither of a cross-fade.
+fn impostor_keeps(hit: ImpostorHit, in: VertexOut) -> bool {
     if hit.color.a < 0.5 || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
-        discard;
+        return false;
     }
-    let is_leaf = hit.packed >= 0.5;
     // Leaf-off before the bare capture has come: the wood the leaves let through.
-    if is_leaf && leaves_off(in.tree_size.z) {
-        discard;
-    }
+    return !(hit.packed >= 0.5 && leaves_off(in.tree_size.z));
+}
+
+// The hit lit, hazed, highlighted.
+fn impostor_shade(hit: ImpostorHit, in: VertexOut) -> vec4<f32> {
+    let is_leaf = hit.packed >= 0.5;
     let baked_ao = clamp((hit.packed - select(0.0, 128.0 / 255.0, is_leaf)) * (255.0 / 127.0), 0.0, 1.0);
     // Normals follow the crown's stretch (inverse transpose of the scaling).
     let nm = hit.normal;
@@ -268,11 +296,8 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     let ao = own_ao(baked_ao, view);
     let lift = draw.bb_center.w * in.tree_size.x * 0.25;
     let sun = sun_visibility(rel, n, lift, open_sun(canopy));
-    var out: FragmentOut;
     let lit = highlighted(shade_filtered(albedo, m, is_leaf, view, sun, canopy, ao), in.style);
-    out.color = vec4<f32>(haze(lit, in.clip, view), 1.0);
-    out.depth = impostor_depth(hit.at, in);
-    return out;
+    return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }
 
 // A shadow caster's coverage and depth, cheaply: the nearest of the three
@@ -282,6 +307,14 @@ fn fs_main(in: VertexOut) -> FragmentOut {
 // Returns the model-space point hit (xyz) and its coverage (w; 0 for a leaf
 // texel in leaf-off).
 fn impostor_cover(in: VertexOut) -> vec4<f32> {
+    let hit = impostor_nearest(in, false);
+    return vec4<f32>(hit.at, select(hit.color.a, 0.0, leaves_off(in.tree_size.z) && hit.packed >= 0.5));
+}
+
+// The nearest of the three views alone, at the quad's plane: its colour, its
+// surface (normal, occlusion and leaf flag) and the point its depth puts the
+// hit at, from one texel (shadow casters, and a moving frame's impostors).
+fn impostor_nearest(in: VertexOut, shading: bool) -> ImpostorHit {
     let grid = max(draw.ids.w, 2u);
     let center = draw.bb_center.xyz;
     let radius = draw.bb_center.w;
@@ -308,11 +341,16 @@ fn impostor_cover(in: VertexOut) -> vec4<f32> {
     let uv0 = impostor_texcoord(o + d * (dot(center - o, d0) / min(dot(d, d0), -1e-3)) - center, r0, cross(d0, r0), radius);
     let size = f32(textureDimensions(imp_color).x);
     let footprint = max(length(dpdx(uv0)), length(dpdy(uv0))) * size;
-    let lod = clamp(log2(max(footprint, 1e-6)), 0.0, max(log2(size) - 3.0, 0.0));
-    let cover = textureSampleLevel(imp_color, imp_sampler, uv, layer, lod).a;
-    let surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, lod);
-    let at = o + d * ((to_plane + (surface.b * 2.0 - 1.0) * radius) / denom);
-    return vec4<f32>(at, select(cover, 0.0, leaves_off(in.tree_size.z) && surface.a >= 0.5));
+    var hit: ImpostorHit;
+    hit.lod = clamp(log2(max(footprint, 1e-6)), 0.0, max(log2(size) - 3.0, 0.0));
+    hit.color = textureSampleLevel(imp_color, imp_sampler, uv, layer, hit.lod);
+    let surface = textureSampleLevel(imp_surface, imp_sampler, uv, layer, hit.lod);
+    hit.packed = surface.a;
+    hit.at = o + d * ((to_plane + (surface.b * 2.0 - 1.0) * radius) / denom);
+    if shading {
+        hit.normal = impostor_normal(uv, layer, hit.lod);
+    }
+    return hit;
 }
 
 // Shadow cascades: depth only, the nearest view's coverage tested, its depth.
@@ -329,7 +367,7 @@ fn fs_shadow(in: VertexOut) -> @builtin(frag_depth) f32 {
 @fragment
 fn fs_id(in: VertexOut) -> IdOut {
     let hit = impostor_hit(in);
-    if hit.color.a < 0.5 || (leaves_off(in.tree_size.z) && hit.packed >= 0.5) || !fade_keeps(in.item_y, in.clip.xy, view.eye_lo.w) {
+    if !impostor_keeps(hit, in) {
         discard;
     }
     var out: IdOut;

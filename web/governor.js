@@ -2,19 +2,27 @@
 // down until frames take the target time, and back up with hysteresis; at rest
 // everything is restored (the refinement then converges at full quality).
 // Pure logic, no DOM: `web/sylva.js` applies the levels (the canvas's render
-// scale, the shadows, the LoD quality) and `web/tests/governor.test.mjs` tests it.
+// scale, the shadows, the LoD quality, the impostors) and
+// `web/tests/governor.test.mjs` tests it.
 
 /** The ladder, cheapest last: render scale (the canvas's backing store, which
- * the browser upscales), shadows at most this ('high' | 'low' | 'off'), and a
- * factor on the LoD quality (projected sizes). */
+ * the browser upscales), shadows at most this ('high' | 'low' | 'off'), a
+ * factor on the LoD quality (projected sizes), and the impostors ('full':
+ * three views blended, each pixel's own depth; 'moving': the nearest view at
+ * the depth of the tree's quad, so hidden crowns cost nothing). Ordered by what
+ * each step costs in image error for what it saves (`make bench-governor`,
+ * docs/BENCHMARKS.md): the moving impostors first (6× cheaper draws for
+ * 0.008 MS-RMSE), then shadows, then pixels, the LoD quality last. Thinning
+ * more was measured and left out: a moving frame's cost is its pixels, not
+ * its trees. */
 export const LEVELS = [
-  { scale: 1.0, shadows: 'high', lod: 1.0 },
-  { scale: 0.85, shadows: 'high', lod: 1.0 },
-  { scale: 0.7, shadows: 'low', lod: 1.0 },
-  { scale: 0.6, shadows: 'off', lod: 1.0 },
-  { scale: 0.5, shadows: 'off', lod: 0.5 },
-  { scale: 0.42, shadows: 'off', lod: 0.5 },
-  { scale: 0.35, shadows: 'off', lod: 0.25 },
+  { scale: 1.0, shadows: 'high', lod: 1.0, impostors: 'full' },
+  { scale: 1.0, shadows: 'high', lod: 1.0, impostors: 'moving' },
+  { scale: 0.85, shadows: 'low', lod: 1.0, impostors: 'moving' },
+  { scale: 0.7, shadows: 'off', lod: 1.0, impostors: 'moving' },
+  { scale: 0.5, shadows: 'off', lod: 1.0, impostors: 'moving' },
+  { scale: 0.42, shadows: 'off', lod: 0.5, impostors: 'moving' },
+  { scale: 0.35, shadows: 'off', lod: 0.25, impostors: 'moving' },
 ];
 
 const SHADOW_RANK = { off: 0, low: 1, high: 2 };
@@ -120,12 +128,13 @@ export class Governor {
   apply(userShadows = 'high', userLod = 1) {
     const l = LEVELS[this.level];
     const shadows = SHADOW_RANK[l.shadows] < SHADOW_RANK[userShadows] ? l.shadows : userShadows;
-    return { scale: l.scale, shadows, lod: userLod * l.lod };
+    return { scale: l.scale, shadows, lod: userLod * l.lod, impostors: l.impostors };
   }
 
-  /** For `stats()`: `{enabled, level, scale, target_ms, min_scale, reason}`. */
+  /** For `stats()`: `{enabled, level, scale, impostors, target_ms, min_scale, reason}`. */
   report() {
-    return { enabled: this.enabled, level: this.level, scale: LEVELS[this.level].scale,
+    const l = LEVELS[this.level];
+    return { enabled: this.enabled, level: this.level, scale: l.scale, impostors: l.impostors,
       target_ms: this.target_ms, min_scale: this.min_scale, reason: this.reason };
   }
 }

@@ -31,7 +31,7 @@
 //                                           its input row; null with row for a tree without an id)
 //   v.stats()                               same keys as `sylva render --stats` (`governor`: the governor's level and why)
 //   v.setQuality({target_ms = 33, min_scale = 0.35, enabled})  the frame-time governor: while the camera moves,
-//                                           render scale, shadows, then LoD step down to hold target_ms, and back
+//                                           impostors, shadows, render scale, then LoD step down to hold target_ms, and back
 //                                           up; at rest full quality ('off': none; a number: the LoD factor)
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
@@ -97,7 +97,7 @@ class SylvaViewer {
     this.governor = new Governor();
     this.userShadows = 'high';
     this.userLod = 1;
-    this.applied = { scale: 1, shadows: 'high', lod: 1 };
+    this.applied = { scale: 1, shadows: 'high', lod: 1, impostors: 'full' };
     this.readySettled = false;
     this.ready = new Promise((resolve, reject) => { this.resolveReady = resolve; this.rejectReady = reject; });
     this.ready.catch(() => {}); // observed through 'error' events too
@@ -471,8 +471,8 @@ class SylvaViewer {
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = SETTLE_FRAMES; }
   /** A number: the LoD quality factor (1, 0.5, 0.25: projected sizes are
    * scaled by it). An object `{target_ms, min_scale, enabled}`: the frame-time
-   * governor — while the camera moves, quality steps down (render scale, then
-   * shadows, then LoD) until frames take `target_ms` (default 33), never below
+   * governor — while the camera moves, quality steps down (impostors, shadows,
+   * render scale, then LoD) until frames take `target_ms` (default 33), never below
    * `min_scale` (0.25–1, default 0.35), and back up; at rest all is restored.
    * `'off'` turns the governor off. `stats().governor` says its level and why. */
   setQuality(q) {
@@ -496,7 +496,7 @@ class SylvaViewer {
     this.dirty = SETTLE_FRAMES;
   }
 
-  /** Applies the governor's level: render scale, shadows, LoD quality. */
+  /** Applies the governor's level: render scale, shadows, LoD quality, impostors. */
   applyGovernor() {
     const a = this.governor.apply(this.userShadows, this.userLod);
     if (a.scale !== this.applied.scale) {
@@ -518,6 +518,10 @@ class SylvaViewer {
     }
     if (a.shadows !== this.applied.shadows) { this.viewer.set_shadows(a.shadows); this.applied.shadows = a.shadows; }
     if (a.lod !== this.applied.lod) { this.viewer.set_quality(a.lod); this.applied.lod = a.lod; }
+    if (a.impostors !== this.applied.impostors) {
+      this.viewer.set_moving_impostors(a.impostors === 'moving');
+      this.applied.impostors = a.impostors;
+    }
     this.dirty = SETTLE_FRAMES;
   }
   /**

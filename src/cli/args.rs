@@ -395,6 +395,11 @@ pub(crate) struct RenderArgs {
     /// its shape all round) or view-angle billboards.
     #[arg(long, value_enum, default_value = "impostors")]
     pub(crate) far_tier: FarTierArg,
+    /// Impostors as the browser draws them while the camera moves (the
+    /// frame-time governor's deepest levels): the nearest view alone, at the
+    /// depth of each tree's quad (hidden crowns then cost nothing).
+    #[arg(long)]
+    pub(crate) moving_impostors: bool,
     /// Write the converged image of progressive refinement, as the viewer
     /// shows it once the camera rests: sub-pixel jittered frames accumulate
     /// into an anti-aliased image while the level of detail rises step by step

@@ -439,6 +439,7 @@ fn suffixed(path: &std::path::Path, label: &str) -> PathBuf {
 pub(crate) fn render(args: RenderArgs) -> Result<()> {
     let RenderArgs {
         far_tier,
+        moving_impostors,
         scene,
         pack,
         out,
@@ -516,6 +517,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             shadows,
             ao,
             far_tier: far_tier_of(far_tier),
+            moving_impostors,
             lod_policy,
             representations,
             season,

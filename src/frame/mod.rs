@@ -724,6 +724,7 @@ impl<F: Fetcher> Frame<F> {
     fn stats_of(&self, frame: Option<u64>) -> FrameStats {
         let mut stats = FrameStats::gather(&self.renderer, &self.stream, self.draw_calls, self.cpu_ms);
         stats.adapter.clone_from(&self.adapter);
+        stats.governor.impostors = if self.settings.moving_impostors { "moving" } else { "full" }.into();
         if self.refine.config.enabled {
             stats.refine_step = self.refine.step();
             stats.refine_level = self.refine.level();

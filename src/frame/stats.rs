@@ -111,10 +111,13 @@ pub struct FrameStats {
 pub struct GovernorReport {
     /// Whether it governs (never natively).
     pub enabled: bool,
-    /// Its level: 0 full quality, each step cheaper (render scale, shadows, LoD).
+    /// Its level: 0 full quality, each step cheaper (impostors, shadows, render scale, LoD).
     pub level: u32,
     /// The render scale of its level (the canvas's pixels per CSS pixel × DPR).
     pub scale: f32,
+    /// How impostors are drawn: `full` (three views blended, each pixel's own
+    /// depth) or `moving` (`RenderSettings::moving_impostors`).
+    pub impostors: String,
     /// The frame time it holds while the camera moves (ms).
     pub target_ms: f32,
     /// The smallest render scale it uses.
@@ -125,7 +128,15 @@ pub struct GovernorReport {
 
 impl Default for GovernorReport {
     fn default() -> Self {
-        Self { enabled: false, level: 0, scale: 1.0, target_ms: 33.0, min_scale: 0.35, reason: "off".into() }
+        Self {
+            enabled: false,
+            level: 0,
+            scale: 1.0,
+            impostors: "full".into(),
+            target_ms: 33.0,
+            min_scale: 0.35,
+            reason: "off".into(),
+        }
     }
 }
 

@@ -18,6 +18,8 @@ pub struct FarTierPipeline {
     /// Group 1.
     pub texture_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
+    /// A moving frame's (`fs_moving`; impostors alone), built when first asked for.
+    moving: Option<super::layouts::LazyPulling>,
     shadow: wgpu::RenderPipeline,
     /// The id pass's (picking).
     pub id: super::layouts::IdPipeline,
@@ -31,10 +33,11 @@ impl FarTierPipeline {
     /// The billboards' pipelines for `color_format` targets.
     #[must_use]
     pub fn billboard(device: &wgpu::Device, shared: &SharedLayouts, color_format: wgpu::TextureFormat) -> Self {
-        Self::new(device, shared, color_format, "billboard", &shaders::BILLBOARD.source(), 3)
+        Self::new(device, shared, color_format, "billboard", &shaders::BILLBOARD.source(), 3, false)
     }
 
-    /// A far tier's pipelines from WGSL `source` with `arrays` texture arrays.
+    /// A far tier's pipelines from WGSL `source` with `arrays` texture arrays;
+    /// `moving`: a moving frame's too (the source's `fs_moving`).
     #[must_use]
     pub fn new(
         device: &wgpu::Device,
@@ -43,6 +46,7 @@ impl FarTierPipeline {
         label: &str,
         source: &str,
         arrays: u32,
+        moving: bool,
     ) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
@@ -68,6 +72,7 @@ impl FarTierPipeline {
             format: color_format,
         };
         let pipeline = super::layouts::pulling_pipeline(device, label, &module, &layout, "fs_main", &target);
+        let moving = moving.then(|| super::layouts::LazyPulling::new(label, &module, &layout, "fs_moving", &target));
         let shadow = super::layouts::shadow_caster_pipeline(device, &format!("{label} shadow"), &module, &layout, &[]);
         let id = super::layouts::IdPipeline::new(label, &module, &layout, &[], target.primitive);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -79,13 +84,27 @@ impl FarTierPipeline {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        Self { texture_layout, pipeline, shadow, id, sampler }
+        Self { texture_layout, pipeline, moving, shadow, id, sampler }
     }
 
     /// The lit pipeline.
     #[must_use]
     pub fn pipeline(&self) -> &wgpu::RenderPipeline {
         &self.pipeline
+    }
+
+    /// A moving frame's lit pipeline, where the tier has one and it is built
+    /// ([`Self::build_moving`]).
+    #[must_use]
+    pub fn moving_pipeline(&self) -> Option<&wgpu::RenderPipeline> {
+        self.moving.as_ref().and_then(super::layouts::LazyPulling::get)
+    }
+
+    /// Builds the moving frame's pipeline, where the tier has one.
+    pub fn build_moving(&self, device: &wgpu::Device) {
+        if let Some(m) = &self.moving {
+            m.build(device);
+        }
     }
 
     /// The shadow casters' pipeline (depth only).

@@ -310,6 +310,9 @@ impl ForestRenderer {
     ) -> FrameData {
         self.measure_reach(view, settings);
         self.species.update_table(queue, &self.pools, settings);
+        if settings.moving_impostors {
+            self.species.build_moving_pipelines(device);
+        }
         let l = &settings.lighting;
         let uniform = ViewUniform {
             clip_from_eye: view.clip_from_eye.to_cols_array_2d(),
@@ -379,7 +382,11 @@ impl ForestRenderer {
         self.last_view = uniform;
         FrameData {
             view: uniform,
-            species: SpeciesFrame { fade_band: settings.fade_band, cluster_exact_depth: settings.cluster_exact_depth },
+            species: SpeciesFrame {
+                fade_band: settings.fade_band,
+                cluster_exact_depth: settings.cluster_exact_depth,
+                moving_impostors: settings.moving_impostors,
+            },
             debug_bounds: settings.debug_bounds,
             clear: settings.clear,
             sky: settings.sky,

@@ -105,7 +105,7 @@ pub fn impostor_pipeline(
     shared: &SharedLayouts,
     color_format: wgpu::TextureFormat,
 ) -> ImpostorPipeline {
-    FarTierPipeline::new(device, shared, color_format, "impostor", &shaders::IMPOSTOR.source(), 2)
+    FarTierPipeline::new(device, shared, color_format, "impostor", &shaders::IMPOSTOR.source(), 2, true)
 }
 
 /// One species' impostor arrays on the GPU.

@@ -258,6 +258,7 @@ impl SharedLayouts {
 }
 
 /// What a vertex-pulling pipeline draws into.
+#[derive(Debug, Clone)]
 pub struct PullingTarget {
     /// Topology and culling.
     pub primitive: wgpu::PrimitiveState,
@@ -265,6 +266,51 @@ pub struct PullingTarget {
     pub depth_stencil: Option<wgpu::DepthStencilState>,
     /// Colour target format.
     pub format: wgpu::TextureFormat,
+}
+
+/// A [`pulling_pipeline`] built the first time it is asked for (a viewer
+/// that never needs it never compiles it).
+pub struct LazyPulling {
+    label: String,
+    fragment: &'static str,
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+    target: PullingTarget,
+    pipeline: std::sync::OnceLock<wgpu::RenderPipeline>,
+}
+
+impl LazyPulling {
+    /// `module`'s `vs_main` and `fragment` under `layout` into `target`; not built yet.
+    #[must_use]
+    pub fn new(
+        label: &str,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::PipelineLayout,
+        fragment: &'static str,
+        target: &PullingTarget,
+    ) -> Self {
+        Self {
+            label: format!("{label} {fragment}"),
+            fragment,
+            module: module.clone(),
+            layout: layout.clone(),
+            target: target.clone(),
+            pipeline: std::sync::OnceLock::new(),
+        }
+    }
+
+    /// Builds the pipeline if it is not yet.
+    pub fn build(&self, device: &wgpu::Device) {
+        self.pipeline.get_or_init(|| {
+            pulling_pipeline(device, &self.label, &self.module, &self.layout, self.fragment, &self.target)
+        });
+    }
+
+    /// The pipeline, once built.
+    #[must_use]
+    pub fn get(&self) -> Option<&wgpu::RenderPipeline> {
+        self.pipeline.get()
+    }
 }
 
 /// A render pipeline whose vertex shader `vs_main` reads its data from storage

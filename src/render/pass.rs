@@ -71,4 +71,6 @@ pub struct SpeciesFrame {
     pub fade_band: f32,
     /// Ellipsoids write their exact depth.
     pub cluster_exact_depth: bool,
+    /// Impostors drawn as a moving frame's (`RenderSettings::moving_impostors`).
+    pub moving_impostors: bool,
 }

@@ -79,6 +79,13 @@ pub struct RenderSettings {
     /// AO field): darker inside crowns at every level of detail. Packs baked
     /// before it draw unoccluded either way.
     pub ao: bool,
+    /// Impostors as a moving frame draws them (the browser's frame-time
+    /// governor, its deepest levels): the nearest baked view alone, sampled
+    /// once, at the depth of the tree's quad rather than each pixel's own —
+    /// the depth test then runs before the shading and hidden crowns cost
+    /// nothing (4× cheaper on lavapipe); crowns that interpenetrate sort by
+    /// their quads. Off: three views blended with parallax, per-pixel depth.
+    pub moving_impostors: bool,
     /// The far tier where a pack has both: multi-view impostors (default) or
     /// the single-view billboards. A pack with one of them draws that one.
     pub far_tier: FarTier,
@@ -313,6 +320,7 @@ impl Default for RenderSettings {
             shadows: ShadowQuality::Off,
             ao: true,
             far_tier: FarTier::Impostors,
+            moving_impostors: false,
             full_res_alpha: false,
             adaptive_alpha: true,
             lod_policy: true,

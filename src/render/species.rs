@@ -65,8 +65,9 @@ struct SpeciesGpu {
 /// Which pipelines a species draw uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Pipeline {
-    /// The lit ones (ellipsoids with their exact depth or not).
-    Lit(bool),
+    /// The lit ones: ellipsoids with their exact depth or not, impostors as
+    /// a moving frame draws them or not.
+    Lit { exact_depth: bool, moving: bool },
     /// The shadow casters' (depth only).
     Shadow,
     /// The id pass's (picking; ellipsoids with their exact depth or not, as lit).
@@ -77,7 +78,7 @@ impl Pipeline {
     /// The mesh pipelines' mode.
     fn mesh_mode(self) -> RenderMode {
         match self {
-            Pipeline::Lit(_) => RenderMode::Lit,
+            Pipeline::Lit { .. } => RenderMode::Lit,
             Pipeline::Shadow => RenderMode::Shadow,
             Pipeline::Id(_) => RenderMode::Id,
         }
@@ -86,7 +87,8 @@ impl Pipeline {
     /// A far tier's pipeline (the id pass's only once built).
     fn far_tier(self, p: &super::billboard::FarTierPipeline) -> Option<&wgpu::RenderPipeline> {
         match self {
-            Pipeline::Lit(_) => Some(p.pipeline()),
+            Pipeline::Lit { moving: true, .. } => Some(p.moving_pipeline().unwrap_or(p.pipeline())),
+            Pipeline::Lit { .. } => Some(p.pipeline()),
             Pipeline::Shadow => Some(p.shadow_pipeline()),
             Pipeline::Id(_) => p.id.get(),
         }
@@ -445,7 +447,20 @@ impl Species {
         reach: &Reach,
         frame: SpeciesFrame,
     ) -> u32 {
-        self.draw_with(pass, pools, reach, frame, Pipeline::Lit(frame.cluster_exact_depth))
+        self.draw_with(
+            pass,
+            pools,
+            reach,
+            frame,
+            Pipeline::Lit { exact_depth: frame.cluster_exact_depth, moving: frame.moving_impostors },
+        )
+    }
+
+    /// Builds the pipelines a moving frame draws with (`RenderSettings::moving_impostors`).
+    pub fn build_moving_pipelines(&self, device: &wgpu::Device) {
+        if let Some(i) = &self.impostor {
+            i.build_moving(device);
+        }
     }
 
     /// Builds the id pipelines (picking) of the passes built so far.
@@ -553,7 +568,7 @@ impl Species {
             Repr::Cluster0 | Repr::Cluster1 | Repr::Cluster2 | Repr::Cluster3 => {
                 let (Some(c), Some(cluster)) = (&p.cluster, &self.cluster) else { return false };
                 let Some(pipe) = (match pipeline {
-                    Pipeline::Lit(exact_depth) => Some(cluster.pipeline(exact_depth)),
+                    Pipeline::Lit { exact_depth, .. } => Some(cluster.pipeline(exact_depth)),
                     Pipeline::Shadow => Some(cluster.shadow_pipeline()),
                     Pipeline::Id(true) => cluster.id.get(),
                     Pipeline::Id(false) => cluster.id_proxy.get(),

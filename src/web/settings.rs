@@ -222,6 +222,13 @@ impl Viewer {
         self.frame.frames() as f64
     }
 
+    /// Impostors as a moving frame draws them (the frame-time governor): the
+    /// nearest view alone at the depth of each tree's quad, or (false) three
+    /// views blended with each pixel's own depth.
+    pub fn set_moving_impostors(&mut self, on: bool) {
+        self.frame.settings.moving_impostors = on;
+    }
+
     /// LoD quality factor (1, 0.5, 0.25).
     pub fn set_quality(&mut self, quality: f32) {
         self.frame.settings.quality = quality.clamp(0.05, 4.0);

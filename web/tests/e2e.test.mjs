@@ -329,12 +329,15 @@ test('the viewer page', async (t) => {
     const moving = await orbit(30000);
     assert.ok(moving.deepest >= 2 && moving.smallest < full, `governed while moving: ${JSON.stringify(moving)} (full ${full} px)`);
     assert.match(moving.report.reason, /target/);
+    // (From level 1 on the impostors are a moving frame's: the nearest view, the quad's depth.)
+    assert.equal(moving.report.impostors, 'moving', JSON.stringify(moving.report));
     // …and at rest everything comes back.
     await page.waitForFunction((full) => {
       const v = window.sylva;
       return v.stats().governor.level === 0 && v.canvas.width === full;
     }, full, { timeout: 60000 });
     assert.equal(await page.evaluate(() => window.sylva.stats().governor.reason), 'at rest');
+    assert.equal(await page.evaluate(() => window.sylva.stats().governor.impostors), 'full');
     // (Full quality again draws the trees, not only the canopy a low level may leave.)
     await page.waitForFunction(() => Object.values(window.sylva.stats().instances).reduce((a, b) => a + b, 0) > 100, null, { timeout: 60000 });
     // Off: nothing changes while moving.
