@@ -1,6 +1,7 @@
 // Sylva's JS API: `const v = await Sylva.create(canvasOrElement, {scene})`
 // (also {camera, lighting, season, date, refine}: as the setters below take them;
-// {textures: 'plain'}: RGBA8 packs where the GPU would take the BC7 variants).
+// {textures: 'plain' | 'bc7' | 'etc2'}: RGBA8 packs where the GPU would take the
+// BC7 or ETC2 variants, or one of those alone).
 // Wraps the wasm Viewer (src/web/) with a render loop, camera controls
 // (mouse, touch, keyboard), events and the camera in the URL hash.
 //
@@ -909,8 +910,9 @@ export async function create(target, options = {}) {
   await loadWasm();
   const scene = options.scene || 'scene/scene.json';
   const viewer = await Viewer.create(canvas, scene);
-  // textures: 'plain' fetches RGBA8 packs where the GPU would take BC7 ones (to compare).
-  if (options.textures === 'plain') viewer.set_plain_textures(true);
+  // textures: 'plain' fetches RGBA8 packs where the GPU would take BC7 or ETC2
+  // ones (to compare); 'bc7' / 'etc2' that encoding alone where the GPU samples it.
+  if (options.textures && options.textures !== 'auto') viewer.set_textures(String(options.textures));
   if (options.overlay) viewer.set_overlay(true);
   if (options.fov) viewer.set_fov(options.fov);
   const v = new SylvaViewer(canvas, viewer, { ...options, scene });

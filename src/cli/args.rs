@@ -255,8 +255,10 @@ pub(crate) struct ViewArgs {
     /// where trees are under a pixel or two (scenes baked with canopy rasters).
     #[arg(long)]
     pub(crate) no_canopy: bool,
-    /// Textures as the GPU takes them best (`auto`: a pack's BC7 variant where
-    /// the GPU samples BC textures) or `plain` (RGBA8 packs, to compare).
+    /// Textures as the GPU takes them best (`auto`: a pack's BC7 or ETC2
+    /// variant where the GPU samples it; a CPU rasteriser the plain pack),
+    /// `plain` (RGBA8 packs, to compare), or `bc7` / `etc2` (that variant
+    /// where the GPU samples it, else the plain pack).
     #[arg(long, value_enum, default_value_t = TexturesArg::Auto)]
     pub(crate) textures: TexturesArg,
 }
@@ -268,6 +270,24 @@ pub(crate) enum TexturesArg {
     Auto,
     /// Plain RGBA8 packs.
     Plain,
+    /// BC7 variants where the GPU samples them.
+    Bc7,
+    /// ETC2 variants where the GPU samples them.
+    Etc2,
+}
+
+impl TexturesArg {
+    /// As the renderer's setting.
+    pub(crate) fn choice(self) -> sylva::render::settings::TextureChoice {
+        use sylva::format::pack::TexelEncoding;
+        use sylva::render::settings::TextureChoice;
+        match self {
+            TexturesArg::Auto => TextureChoice::Auto,
+            TexturesArg::Plain => TextureChoice::Plain,
+            TexturesArg::Bc7 => TextureChoice::Only(TexelEncoding::Bc7),
+            TexturesArg::Etc2 => TextureChoice::Only(TexelEncoding::Etc2),
+        }
+    }
 }
 
 impl ViewArgs {

@@ -26,7 +26,7 @@ pub const SCENE_FORMAT: &str = "sylva-scene";
 /// geographic fit (`crs.fit`) and packs' block-compressed variants
 /// (`species[].variants`).
 /// The bake writes the oldest version that holds what a scene has (11 for
-/// every scene with trees, 12 with a geographic fit or packs' BC7 variants, 9 for a
+/// every scene with trees, 12 with a geographic fit or packs' block-compressed variants, 9 for a
 /// shard's part, which has no canopy (12 for shard 0's, with the variants); 3 to 8
 /// for older bakes), so older viewers refuse newer scenes with a clear message.
 pub const SCENE_VERSION: u32 = 12;
@@ -79,7 +79,7 @@ pub struct SpeciesEntry {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PackVariant {
-    /// The block encoding of its texture arrays (`"bc7"`); viewers skip
+    /// The block encoding of its texture arrays (`"bc7"`, `"etc2"`); viewers skip
     /// names they do not know.
     pub textures: String,
     /// Pack URL relative to the manifest.

@@ -194,7 +194,7 @@ pub struct TextureArrayMeta {
     /// Mip levels stored (mip 0 included).
     pub mips: u32,
     /// How the texels are stored when not one RGBA8 (or R8) texel after
-    /// another: `"bc7"`, 4 × 4 texel blocks of 16 bytes (a pack's
+    /// another: `"bc7"` or `"etc2"`, 4 × 4 texel blocks of 16 bytes (a pack's
     /// block-compressed variant, [`TexelEncoding`]). Absent: plain texels.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub encoding: Option<TexelEncoding>,
@@ -207,6 +207,11 @@ pub enum TexelEncoding {
     /// BC7 (BPTC): 16 bytes per 4 × 4 block, RGBA, sampled by GPUs with
     /// `texture-compression-bc` (desktop adapters).
     Bc7,
+    /// ETC2 RGBA8 (ETC2 colour with EAC alpha): 16 bytes per 4 × 4 block —
+    /// the 8-byte EAC alpha block, then the 8-byte colour block, each a
+    /// big-endian 64-bit word — sampled by GPUs with `texture-compression-etc2`
+    /// (phones and tablets, Apple silicon).
+    Etc2,
 }
 
 impl PackMeta {
@@ -230,6 +235,7 @@ impl TexelEncoding {
     pub fn name(self) -> &'static str {
         match self {
             TexelEncoding::Bc7 => "bc7",
+            TexelEncoding::Etc2 => "etc2",
         }
     }
 }
@@ -261,7 +267,7 @@ impl TextureArrayMeta {
         let s = u64::from((self.size >> m).max(1));
         match self.encoding {
             None => s * s * texel_bytes,
-            Some(TexelEncoding::Bc7) => s.div_ceil(4).pow(2) * 16,
+            Some(TexelEncoding::Bc7 | TexelEncoding::Etc2) => s.div_ceil(4).pow(2) * 16,
         }
     }
 

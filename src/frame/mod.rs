@@ -139,8 +139,8 @@ pub struct Frame<F: Fetcher> {
     waited: Option<(u64, [f64; 3])>,
     /// Shadow cascades of the last frame recorded.
     cascades: u32,
-    /// The stream's packs are the plain ones (the settings' choice, applied).
-    plain_textures: bool,
+    /// The texture encodings the stream takes (the settings' choice, applied).
+    textures: crate::render::settings::TextureChoice,
     /// Block-compressed packs where the device samples them (off on CPU
     /// rasterisers natively: lavapipe decodes BC7 at every sample, ~30× slower draws).
     block_textures: bool,
@@ -182,7 +182,7 @@ impl<F: Fetcher> Frame<F> {
             timer: None,
             waited: None,
             cascades: 0,
-            plain_textures: false,
+            textures: crate::render::settings::TextureChoice::Auto,
             block_textures: true,
             draw_calls: 0,
             cpu_ms: 0.0,
@@ -204,10 +204,13 @@ impl<F: Fetcher> Frame<F> {
     }
 
     fn apply_texture_choice(&mut self) {
-        let encodings = if self.plain_textures || !self.block_textures {
-            Vec::new()
-        } else {
-            crate::render::mesh::block_formats(&self.device)
+        use crate::render::settings::TextureChoice;
+        let sampled = crate::render::mesh::block_formats(&self.device);
+        let encodings = match self.textures {
+            TextureChoice::Plain => Vec::new(),
+            TextureChoice::Only(e) => sampled.into_iter().filter(|s| *s == e).collect(),
+            TextureChoice::Auto if self.block_textures => sampled,
+            TextureChoice::Auto => Vec::new(),
         };
         self.stream.set_texture_encodings(encodings);
     }
@@ -223,10 +226,10 @@ impl<F: Fetcher> Frame<F> {
     /// seconds, for retry backoff). Events wait in the stream
     /// ([`SceneStream::drain_events`]).
     pub fn stream(&mut self, view: &ViewData, now_s: f64) {
-        // Plain packs even where the GPU samples block-compressed ones
-        // (`RenderSettings::plain_textures`): for packs not yet fetched.
-        if self.settings.plain_textures != self.plain_textures {
-            self.plain_textures = self.settings.plain_textures;
+        // Plain packs even where the GPU samples block-compressed ones, or one
+        // encoding alone (`RenderSettings::textures`): for packs not yet fetched.
+        if self.settings.textures != self.textures {
+            self.textures = self.settings.textures;
             self.apply_texture_choice();
         }
         // The terrain setting decides what is fetched too, not only what is drawn.

@@ -97,9 +97,9 @@ pub struct FrameStats {
     /// Refinement done: the image is final and the host stops drawing. Always
     /// false when refinement is off.
     pub refine_converged: bool,
-    /// How the scene's textures are fetched and held on the GPU: `bc7` (the
-    /// packs' block-compressed variants, where the GPU samples them) or
-    /// `plain` (RGBA8).
+    /// How the scene's textures are fetched and held on the GPU: `bc7` or
+    /// `etc2` (the packs' block-compressed variants, where the GPU samples
+    /// them) or `plain` (RGBA8).
     pub textures: String,
     /// The browser's frame-time governor (`web/governor.js`, which fills it in):
     /// its level and why. Off here, natively and in tests: full quality.

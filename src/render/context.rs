@@ -93,7 +93,8 @@ impl GpuContext {
 /// what runs natively also runs in a browser. `TIMESTAMP_QUERY` is asked for
 /// where the adapter has it, only to time the passes (the browser's stats), and
 /// `PIPELINE_STATISTICS_QUERY` (native only) for the bake's work counts, and
-/// `TEXTURE_COMPRESSION_BC` for packs' BC7 variants where the adapter samples them.
+/// `TEXTURE_COMPRESSION_BC` and `TEXTURE_COMPRESSION_ETC2` for packs' BC7 and
+/// ETC2 variants where the adapter samples them.
 ///
 /// # Errors
 /// [`ContextError::Device`] when the adapter refuses.
@@ -103,11 +104,13 @@ pub async fn request_device(adapter: &wgpu::Adapter) -> Result<(wgpu::Device, wg
             label: Some("sylva"),
             // Timestamp queries only to time the passes (the browser's stats);
             // pipeline statistics only for the bake's LoD policy (work counts);
-            // BC textures for packs' block-compressed variants (desktop GPUs).
+            // BC and ETC2 textures for packs' block-compressed variants
+            // (desktop GPUs; phones, tablets and Apple silicon).
             required_features: adapter.features()
                 & (wgpu::Features::TIMESTAMP_QUERY
                     | wgpu::Features::PIPELINE_STATISTICS_QUERY
-                    | wgpu::Features::TEXTURE_COMPRESSION_BC),
+                    | wgpu::Features::TEXTURE_COMPRESSION_BC
+                    | wgpu::Features::TEXTURE_COMPRESSION_ETC2),
             required_limits: wgpu::Limits::default().using_resolution(adapter.limits()),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,

@@ -450,6 +450,8 @@ pub fn upload_texture_array(
     let format = match (meta.encoding, format) {
         (Some(TexelEncoding::Bc7), wgpu::TextureFormat::Rgba8UnormSrgb) => wgpu::TextureFormat::Bc7RgbaUnormSrgb,
         (Some(TexelEncoding::Bc7), _) => wgpu::TextureFormat::Bc7RgbaUnorm,
+        (Some(TexelEncoding::Etc2), wgpu::TextureFormat::Rgba8UnormSrgb) => wgpu::TextureFormat::Etc2Rgba8UnormSrgb,
+        (Some(TexelEncoding::Etc2), _) => wgpu::TextureFormat::Etc2Rgba8Unorm,
         (None, f) => f,
     };
     let texel_bytes = format.block_copy_size(None).unwrap_or(4);
@@ -493,9 +495,13 @@ pub fn upload_texture_array(
 /// what a viewer may ask of a pack's block-compressed variants.
 #[must_use]
 pub fn block_formats(device: &wgpu::Device) -> Vec<TexelEncoding> {
+    // Best first: BC7 keeps more of the texels than ETC2 where a GPU has both.
+    let mut out = Vec::new();
     if device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC) {
-        vec![TexelEncoding::Bc7]
-    } else {
-        Vec::new()
+        out.push(TexelEncoding::Bc7);
     }
+    if device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_ETC2) {
+        out.push(TexelEncoding::Etc2);
+    }
+    out
 }

@@ -17,6 +17,34 @@ pub enum CullingMode {
     None,
 }
 
+/// Which of a pack's texture encodings a viewer fetches ([`RenderSettings::textures`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TextureChoice {
+    /// The first block-compressed variant the GPU samples (BC7, then ETC2),
+    /// else the plain pack — natively on a CPU rasteriser the plain pack.
+    #[default]
+    Auto,
+    /// The plain (RGBA8) packs.
+    Plain,
+    /// This encoding's variants where the GPU samples it (a CPU rasteriser
+    /// too), else the plain packs.
+    Only(crate::format::pack::TexelEncoding),
+}
+
+impl std::str::FromStr for TextureChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        use crate::format::pack::TexelEncoding;
+        match s.trim() {
+            "auto" => Ok(Self::Auto),
+            "plain" => Ok(Self::Plain),
+            "bc7" => Ok(Self::Only(TexelEncoding::Bc7)),
+            "etc2" => Ok(Self::Only(TexelEncoding::Etc2)),
+            other => Err(format!("textures {other:?}: auto, plain, bc7 or etc2")),
+        }
+    }
+}
+
 /// How to draw: quality, draw distance, transitions, debug colouring.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
@@ -25,9 +53,10 @@ pub struct RenderSettings {
     /// Fetch every tile whole, not the prefix levels prefix thinning draws (for
     /// comparisons; the image is the same).
     pub whole_tiles: bool,
-    /// Fetch the plain (RGBA8) packs even where the GPU samples the scene's
-    /// block-compressed variants (for comparisons; applies to packs not yet fetched).
-    pub plain_textures: bool,
+    /// Which of a pack's texture encodings to fetch: the best the GPU samples
+    /// (`Auto`), the plain RGBA8 packs, or one block encoding's variants where
+    /// the GPU samples it (for comparisons; applies to packs not yet fetched).
+    pub textures: TextureChoice,
     /// Where trees are a pixel or two, draw the scene's canopy rasters instead,
     /// cross-faded with them (scenes of version 8; [`CANOPY_PX`]): trees under
     /// a pixel are then neither fetched nor drawn.
@@ -302,7 +331,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         Self {
             quality: 1.0,
-            plain_textures: false,
+            textures: TextureChoice::Auto,
             draw_distance_m: f32::INFINITY,
             fade_band: 0.12,
             debug_lod: false,

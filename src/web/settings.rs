@@ -14,11 +14,17 @@ impl Viewer {
         self.frame.settings.debug_bounds = bounds;
     }
 
-    /// Plain (RGBA8) packs even where the GPU samples the scene's
-    /// block-compressed (BC7) variants: `create(…, {textures: 'plain'})`,
-    /// `?textures=plain`. Applies to packs not yet fetched (call it at once).
-    pub fn set_plain_textures(&mut self, plain: bool) {
-        self.frame.settings.plain_textures = plain;
+    /// Which texture encodings to fetch: `"auto"` (the best the GPU samples),
+    /// `"plain"` (RGBA8 packs even where the GPU samples the scene's
+    /// block-compressed variants), `"bc7"` or `"etc2"` (that encoding's
+    /// variants where the GPU samples it, else plain): `create(…, {textures})`,
+    /// `?textures=`. Applies to packs not yet fetched (call it at once).
+    ///
+    /// # Errors
+    /// Any other name (the message names the four).
+    pub fn set_textures(&mut self, textures: &str) -> Result<(), JsValue> {
+        self.frame.settings.textures = textures.parse().map_err(|e: String| JsValue::from_str(&e))?;
+        Ok(())
     }
 
     /// Level-of-detail policy: trees at least `ellipsoid_min_px` tall (and below

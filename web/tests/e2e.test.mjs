@@ -553,6 +553,17 @@ test('the first view frames the trees of two districts far apart', async (t) => 
     const badStyle = await page.evaluate(() => { try { window.sylva.setStyle({ color: { by: 'dbh' } }); return 'set'; } catch (e) { return String(e); } });
     assert.match(badStyle, /not an attribute of the scene/);
     assert.deepEqual(errors, []);
+    // ?textures=etc2: the packs' ETC2 variants where the GPU samples them
+    // (SwiftShader does: phones' and tablets' encoding), the same trees drawn.
+    const etc = await openViewer(`${url}?ui=0&textures=etc2`);
+    const etcStats = await ready(etc.page);
+    const hasEtc2 = await etc.page.evaluate(async () => (await navigator.gpu.requestAdapter()).features.has('texture-compression-etc2'));
+    assert.equal(etcStats.textures, hasEtc2 ? 'etc2' : 'plain', `adapter with ETC2 textures: ${hasEtc2}`);
+    assert.deepEqual(etcStats.instances, stats.instances, 'the same trees as the first view');
+    assert.deepEqual(etcStats.failed, []);
+    const etcShare = await foliageShare(etc.page, 'districts-first-view-etc2');
+    assert.ok(Math.abs(etcShare - share) < 0.25 * share, `foliage ${etcShare} with ETC2, ${share} with BC7`);
+    assert.deepEqual(etc.errors, []);
   } finally {
     served.proc.kill();
   }

@@ -49,12 +49,13 @@ pub(crate) struct PackArgs {
     /// fetches about a seventh of the bytes; docs/FORMAT.md "Stored packs").
     #[arg(long)]
     pub(crate) raw_packs: bool,
-    /// GPU block-compressed variants of every pack to write beside it:
-    /// `bc7` (the default; desktop GPUs sample it: a quarter of the texture
-    /// memory, fewer bytes to fetch) or `none`. A viewer whose GPU cannot
-    /// sample a variant fetches the plain pack.
-    #[arg(long, value_enum, default_value_t = GpuTextures::Bc7)]
-    pub(crate) gpu_textures: GpuTextures,
+    /// GPU block-compressed variants of every pack to write beside it, comma
+    /// separated: `bc7` (desktop GPUs), `etc2` (phones, tablets, Apple
+    /// silicon) — both by default: a quarter of the texture memory, fewer
+    /// bytes to fetch — or `none`. A viewer fetches the first variant its GPU
+    /// samples (BC7 before ETC2), else the plain pack.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "bc7,etc2")]
+    pub(crate) gpu_textures: Vec<GpuTextures>,
     /// Capture the far tiers (impostors, billboards) of each of a library
     /// tree's mesh variants, not variant 0's alone: far trees keep their own
     /// shapes (closer to their meshes) for 3× the far tiers' bytes.
@@ -174,10 +175,7 @@ impl PackArgs {
             cloud_planes: self.cloud_planes,
             seasons: !self.no_seasons,
             raw_packs: self.raw_packs,
-            gpu_textures: match self.gpu_textures {
-                GpuTextures::Bc7 => vec![sylva::format::pack::TexelEncoding::Bc7],
-                GpuTextures::None => Vec::new(),
-            },
+            gpu_textures: gpu_textures(&self.gpu_textures)?,
             far_variants: self.far_tier_variants,
         })
     }
@@ -193,11 +191,36 @@ impl PackArgs {
     }
 }
 
-/// `--gpu-textures`.
+/// `--gpu-textures`: one of a comma-separated list.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum GpuTextures {
     /// BC7 variants (desktop GPUs).
     Bc7,
+    /// ETC2 variants (phones, tablets, Apple silicon).
+    Etc2,
     /// Plain packs only.
     None,
+}
+
+/// The encodings `--gpu-textures` names, each once, in the order given.
+fn gpu_textures(list: &[GpuTextures]) -> Result<Vec<sylva::format::pack::TexelEncoding>> {
+    use sylva::format::pack::TexelEncoding;
+    if list.contains(&GpuTextures::None) {
+        if list.len() > 1 {
+            bail!("--gpu-textures: `none` stands alone (not with bc7 or etc2)");
+        }
+        return Ok(Vec::new());
+    }
+    let mut out = Vec::new();
+    for g in list {
+        let e = match g {
+            GpuTextures::Bc7 => TexelEncoding::Bc7,
+            GpuTextures::Etc2 => TexelEncoding::Etc2,
+            GpuTextures::None => continue,
+        };
+        if !out.contains(&e) {
+            out.push(e);
+        }
+    }
+    Ok(out)
 }

@@ -65,7 +65,7 @@ pub struct PackOptions {
     /// (the pack cache keeps packs as they are, whichever is written).
     pub raw_packs: bool,
     /// Block-compressed variants written beside each pack ([`textures`]):
-    /// BC7 by default. Not a property of the pack's content either.
+    /// BC7 and ETC2 by default. Not a property of the pack's content either.
     pub gpu_textures: Vec<sylva::format::pack::TexelEncoding>,
     /// Capture the far tiers (billboards, impostors) of every mesh variant,
     /// not variant 0's alone: a tree's far tier then shows its own shape (the
@@ -110,7 +110,7 @@ impl Default for PackOptions {
             cloud_planes: DEFAULT_CLOUD_PLANES,
             seasons: true,
             raw_packs: false,
-            gpu_textures: vec![sylva::format::pack::TexelEncoding::Bc7],
+            gpu_textures: vec![sylva::format::pack::TexelEncoding::Bc7, sylva::format::pack::TexelEncoding::Etc2],
             far_variants: false,
         }
     }

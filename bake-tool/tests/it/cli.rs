@@ -3,6 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
+use sylva::format::pack::TexelEncoding;
+
 use crate::common::{bin, bin_building_packs, fails, run, snapshot, tmp, write_geotiff_dem, SMALL};
 
 fn inspect_json(path: &Path) -> serde_json::Value {
@@ -76,9 +78,9 @@ fn demo_scene_is_complete_valid_and_deterministic() {
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|x| x == "pack"))
-        .partition(|p| p.to_string_lossy().ends_with("-bc7.pack"));
+        .partition(|p| p.to_string_lossy().ends_with("-bc7.pack") || p.to_string_lossy().ends_with("-etc2.pack"));
     assert_eq!(entries.len(), 3, "one entry a species: {entries:?}");
-    assert_eq!(variants.len(), 3, "and one for its BC7 variant: {variants:?}");
+    assert_eq!(variants.len(), 6, "and one each for its BC7 and ETC2 variants: {variants:?}");
     std::fs::write(&entries[0], b"SYLVAPAK but not really").unwrap();
     let log = demo(&d, true);
     assert!(
@@ -87,47 +89,56 @@ fn demo_scene_is_complete_valid_and_deterministic() {
     );
     assert_eq!(snapshot(&a), snapshot(&d), "a corrupt cache entry is built again");
     assert!(std::fs::read(&entries[0]).unwrap().len() > 1000, "and replaced");
-    // Each pack has its BC7 variant beside it (manifest version 12): the same
-    // pack but for its RGBA texture arrays, a quarter of their bytes.
+    // Each pack has its BC7 and ETC2 variants beside it (manifest version 12):
+    // the same pack but for its RGBA texture arrays, a quarter of their bytes.
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(a.join("scene.json")).unwrap()).unwrap();
     for s in &m.species {
-        assert_eq!(s.variants.len(), 1, "{}", s.name);
-        let v = &s.variants[0];
-        assert_eq!((v.textures.as_str(), v.pack.as_str()), ("bc7", s.pack.replace(".pack", ".bc7.pack").as_str()));
-        let read = |rel: &str| {
-            let b = sylva::format::stored::unstore(rel, std::fs::read(a.join(rel)).unwrap()).unwrap();
-            let meta = sylva::format::decode_pack(rel, &b).unwrap().meta;
-            (b.len(), meta)
-        };
-        let ((plain_len, plain), (bc7_len, bc7)) = (read(&s.pack), read(&v.pack));
-        assert_eq!(std::fs::metadata(a.join(&v.pack)).unwrap().len(), v.bytes);
-        let enc = Some(sylva::format::pack::TexelEncoding::Bc7);
-        let (pi, bi) = (plain.impostors.unwrap().texture, bc7.impostors.unwrap().texture);
-        assert_eq!((pi.encoding, bi.encoding), (None, enc));
-        // 4:1 but the 2² and 1² mips, a whole 16-byte block each (4 × 16 − 16 and 4 × 16 − 4 more).
-        assert_eq!(bi.byte_len() * 4, pi.byte_len() + (48 + 60) * u64::from(pi.layers), "{pi:?}");
-        assert_eq!(bc7.billboards.unwrap().texture.encoding, enc);
-        assert_eq!(bc7.material_texture.unwrap().encoding, enc);
-        // The viewer cannot count covered texels in blocks: the bake counted them.
-        for (p, b) in plain.materials.iter().zip(&bc7.materials) {
-            assert_eq!(p.coverage, None);
-            if p.texture_layer.is_some() && p.alpha_cutoff > 0.0 {
-                assert!(b.coverage.is_some_and(|c| c > 0.0 && c <= 1.0), "{}: {:?}", s.name, b.coverage);
+        let names: Vec<&str> = s.variants.iter().map(|v| v.textures.as_str()).collect();
+        assert_eq!(names, ["bc7", "etc2"], "{}: BC7 first, the viewer's preference", s.name);
+        for (v, encoding) in s.variants.iter().zip([TexelEncoding::Bc7, TexelEncoding::Etc2]) {
+            let suffix = format!(".{}.pack", encoding.name());
+            assert_eq!(v.pack, s.pack.replace(".pack", &suffix));
+            let read = |rel: &str| {
+                let b = sylva::format::stored::unstore(rel, std::fs::read(a.join(rel)).unwrap()).unwrap();
+                let meta = sylva::format::decode_pack(rel, &b).unwrap().meta;
+                (b.len(), meta)
+            };
+            let ((plain_len, plain), (blocked_len, blocked)) = (read(&s.pack), read(&v.pack));
+            assert_eq!(std::fs::metadata(a.join(&v.pack)).unwrap().len(), v.bytes);
+            let enc = Some(encoding);
+            let (pi, bi) = (plain.impostors.unwrap().texture, blocked.impostors.unwrap().texture);
+            assert_eq!((pi.encoding, bi.encoding), (None, enc));
+            // 4:1 but the 2² and 1² mips, a whole 16-byte block each (4 × 16 − 16 and 4 × 16 − 4 more).
+            assert_eq!(bi.byte_len() * 4, pi.byte_len() + (48 + 60) * u64::from(pi.layers), "{pi:?}");
+            assert_eq!(blocked.billboards.unwrap().texture.encoding, enc);
+            assert_eq!(blocked.material_texture.unwrap().encoding, enc);
+            // The viewer cannot count covered texels in blocks: the bake counted them.
+            for (p, b) in plain.materials.iter().zip(&blocked.materials) {
+                assert_eq!(p.coverage, None);
+                if p.texture_layer.is_some() && p.alpha_cutoff > 0.0 {
+                    assert!(b.coverage.is_some_and(|c| c > 0.0 && c <= 1.0), "{}: {:?}", s.name, b.coverage);
+                }
             }
+            assert_eq!(blocked.mesh_levels, plain.mesh_levels);
+            assert!(blocked_len < plain_len / 2, "{} {encoding:?}: {blocked_len} vs {plain_len}", s.name);
         }
-        assert_eq!(bc7.mesh_levels, plain.mesh_levels);
-        assert!(bc7_len < plain_len / 2, "{}: {bc7_len} vs {plain_len}", s.name);
     }
+    // One encoding alone, and a name it does not know said plainly.
+    let one = dir.join("one");
+    run(bin().args(["demo", "--trees", "30", "--gpu-textures", "etc2"]).args(SMALL).arg("--out").arg(&one));
+    let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(one.join("scene.json")).unwrap()).unwrap();
+    assert!(m.species.iter().all(|s| s.variants.len() == 1 && s.variants[0].textures == "etc2"));
+    let err =
+        fails(bin().args(["demo", "--trees", "30", "--gpu-textures", "bc7,none"]).arg("--out").arg(dir.join("x")));
+    assert!(err.contains("`none` stands alone"), "{err}");
     // --gpu-textures none: plain packs alone.
     let none = dir.join("none");
     run(bin().args(["demo", "--trees", "30", "--gpu-textures", "none"]).args(SMALL).arg("--out").arg(&none));
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(none.join("scene.json")).unwrap()).unwrap();
     assert!(m.species.iter().all(|s| s.variants.is_empty()));
-    assert!(!std::fs::read_dir(none.join("species")).unwrap().any(|e| e
-        .unwrap()
-        .path()
-        .to_string_lossy()
-        .contains(".bc7.")));
+    let files: Vec<String> =
+        std::fs::read_dir(none.join("species")).unwrap().map(|e| e.unwrap().path().to_string_lossy().into()).collect();
+    assert!(files.iter().all(|f| !f.contains(".bc7.") && !f.contains(".etc2.")), "{files:?}");
     let v = inspect_json(&a);
     assert_eq!(v["trees_total"], 3000);
     assert_eq!(v["species_count"], 3);
@@ -2635,10 +2646,12 @@ fn three_censuses_bake_into_the_forest_at_each_date() {
 /// A scene's BC7 pack variants on the GPU: where the device samples BC
 /// textures (lavapipe does) the viewer fetches them, holds a quarter of the
 /// texture bytes and draws the same trees within a small image error of the
-/// plain packs; `plain_textures` (`--textures plain`) keeps the RGBA8 packs.
+/// plain packs; `TextureChoice::Plain` (`--textures plain`) keeps the RGBA8
+/// packs, `Only(Etc2)` the ETC2 variants where the GPU samples them.
 #[test]
 fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() {
     use sylva::offscreen::{NamedView, OffscreenScene};
+    use sylva::render::settings::TextureChoice;
     let dir = tmp("bc7-draw");
     let out = dir.join("scene");
     run(bin().args(["demo", "--trees", "2000", "--seed", "3", "--no-clusters"]).args(SMALL).arg("--out").arg(&out));
@@ -2654,9 +2667,9 @@ fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() 
     let bc = auto.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
     assert_eq!(auto.render(&cam, false).textures, if bc && !cpu { "bc7" } else { "plain" });
     drop(auto);
-    let draw = |plain: bool| {
+    let draw = |textures: TextureChoice| {
         let mut off = open();
-        off.settings.plain_textures = plain;
+        off.settings.textures = textures;
         // (The BC7 path tested on a CPU adapter all the same, at a small size.)
         off.set_block_textures(true);
         off.load_manifest(60.0);
@@ -2665,8 +2678,19 @@ fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() 
         let stats = off.render(&cam, true);
         (stats, off.read_image(), off.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC))
     };
-    let (plain, plain_img, _) = draw(true);
-    let (bc7, bc7_img, has_bc) = draw(false);
+    let (plain, plain_img, _) = draw(TextureChoice::Plain);
+    let (bc7, bc7_img, has_bc) = draw(TextureChoice::Auto);
+    // ETC2 alone: where the GPU samples it (lavapipe does not; SwiftShader in the
+    // browser tests does), else the plain packs.
+    let (etc2, etc2_img, _) = draw(TextureChoice::Only(TexelEncoding::Etc2));
+    if open().device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_ETC2) {
+        assert_eq!(etc2.textures, "etc2");
+        let e = sylva::metrics::multiscale_rmse(&plain_img, &etc2_img, 320, 180);
+        assert!(e > 0.0 && e < 0.01, "ETC2 vs RGBA8: {e}");
+    } else {
+        assert_eq!((etc2.textures.as_str(), &etc2.instances), ("plain", &plain.instances));
+        assert_eq!(etc2_img, plain_img, "the plain packs, drawn alike");
+    }
     assert_eq!(plain.textures, "plain");
     assert!(plain.failed.is_empty() && bc7.failed.is_empty(), "{:?} {:?}", plain.failed, bc7.failed);
     let drawn: u64 = plain.instances.values().sum();
@@ -2686,7 +2710,7 @@ fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() 
     // the same trees, nothing listed as failed.
     let m = sylva::format::Manifest::decode("scene.json", &std::fs::read(out.join("scene.json")).unwrap()).unwrap();
     std::fs::remove_file(out.join(&m.species[1].variants[0].pack)).unwrap();
-    let (fallback, _, _) = draw(false);
+    let (fallback, _, _) = draw(TextureChoice::Auto);
     assert!(fallback.failed.is_empty(), "{:?}", fallback.failed);
     assert_eq!((fallback.textures.as_str(), &fallback.instances), ("bc7", &plain.instances));
     // A viewer told to take plain packs refuses a BC7 pack listed as one, by
@@ -2700,7 +2724,7 @@ fn bc7_variants_are_drawn_where_the_gpu_samples_them_close_to_the_plain_packs() 
     }
     sp.as_object_mut().unwrap().remove("variants");
     std::fs::write(&path, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
-    let (refused, _, _) = draw(true);
+    let (refused, _, _) = draw(TextureChoice::Plain);
     let why = format!("{:?}", refused.failed);
     assert!(why.contains(".bc7.pack") && why.contains("bc7 blocks, which this GPU does not sample"), "{why}");
     assert!(refused.instances.values().sum::<u64>() > 0, "the other species drawn: {:?}", refused.instances);
