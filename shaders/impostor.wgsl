@@ -251,11 +251,11 @@ fn fs_main(in: VertexOut) -> FragmentOut {
     return out;
 }
 
-// A moving frame's impostors (`RenderSettings::moving_impostors`, the
-// frame-time governor's deepest levels): the nearest view alone, sampled once,
+// A moving frame's impostors (`RenderSettings::moving_impostors`, every
+// level of the frame-time governor but its first): the nearest view alone, sampled once,
 // and no depth of their own — the quad's, at the front of the tree's box. With
 // no depth written the depth test runs before the shading, so a crown hidden
-// behind nearer ones costs nothing: 4× cheaper on lavapipe (docs/BENCHMARKS.md).
+// behind nearer ones costs nothing: 6–9× cheaper on lavapipe (docs/BENCHMARKS.md).
 // Crowns that interpenetrate sort by their quads while the camera moves.
 @fragment
 fn fs_moving(in: VertexOut) -> @location(0) vec4<f32> {
@@ -311,9 +311,10 @@ fn impostor_cover(in: VertexOut) -> vec4<f32> {
     return vec4<f32>(hit.at, select(hit.color.a, 0.0, leaves_off(in.tree_size.z) && hit.packed >= 0.5));
 }
 
-// The nearest of the three views alone, at the quad's plane: its colour, its
-// surface (normal, occlusion and leaf flag) and the point its depth puts the
-// hit at, from one texel (shadow casters, and a moving frame's impostors).
+// The nearest of the three views alone, on the view's plane through the box's
+// centre: its colour, its surface (normal, occlusion and leaf flag) and the
+// point its depth puts the hit at, from one texel (shadow casters, and a
+// moving frame's impostors).
 fn impostor_nearest(in: VertexOut, shading: bool) -> ImpostorHit {
     let grid = max(draw.ids.w, 2u);
     let center = draw.bb_center.xyz;

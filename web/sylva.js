@@ -468,7 +468,12 @@ class SylvaViewer {
     return state;
   }
 
-  stats() { return { ...JSON.parse(this.viewer.stats_json()), governor: this.governor.report() }; }
+  stats() {
+    const s = JSON.parse(this.viewer.stats_json());
+    // The governor's level and why (web/governor.js); which impostors the frame
+    // drew, from the viewer itself.
+    return { ...s, governor: { ...this.governor.report(), impostors: s.governor.impostors } };
+  }
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = SETTLE_FRAMES; }
   /** A number: the LoD quality factor (1, 0.5, 0.25: projected sizes are
    * scaled by it). An object `{target_ms, min_scale, enabled}`: the frame-time
@@ -583,6 +588,7 @@ class SylvaViewer {
       const viewer = await Viewer.create(this.canvas, this.options.scene || 'scene/scene.json');
       if (this.destroyed) { viewer.free(); return; }
       this.viewer = viewer;
+      if (this.options.textures && this.options.textures !== 'auto') viewer.set_textures(String(this.options.textures));
       this.resize();
       if (this.options.overlay) this.viewer.set_overlay(true);
       if (this.fov ?? this.options.fov) this.viewer.set_fov(this.fov ?? this.options.fov);
@@ -599,6 +605,10 @@ class SylvaViewer {
       if (this.date) this.pendingDate = this.date; // placed when the new viewer has the manifest
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
+      // The new viewer starts at full quality: the governor's level (and the
+      // user's LoD factor and shadows) applied to it again.
+      this.applied = { ...this.applied, shadows: 'high', lod: 1, impostors: 'full' };
+      this.applyGovernor();
       this.dirty = SETTLE_FRAMES;
       this.emit('recovered', {});
     } catch (e) {

@@ -416,7 +416,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_enum, default_value = "impostors")]
     pub(crate) far_tier: FarTierArg,
     /// Impostors as the browser draws them while the camera moves (the
-    /// frame-time governor's deepest levels): the nearest view alone, at the
+    /// frame-time governor, every level but its first): the nearest view alone, at the
     /// depth of each tree's quad (hidden crowns then cost nothing).
     #[arg(long)]
     pub(crate) moving_impostors: bool,

@@ -584,7 +584,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     };
     let gpu = GpuContext::new_headless_blocking()?;
     let sampled = sylva::render::mesh::block_formats(&gpu.device);
-    if let Some(e) = decoded.meta.encodings().into_iter().find(|e| !sampled.contains(e)) {
+    if let Some(e) = decoded.meta.unsampled(&sampled) {
         bail!(
             "{}: its textures are {} blocks, which this GPU ({}) does not sample; render the plain pack beside it",
             pack.display(),

@@ -227,6 +227,13 @@ impl PackMeta {
         out.dedup();
         out
     }
+
+    /// The first block encoding of its texture arrays that is not among
+    /// `sampled` (what a device samples): such a pack cannot be uploaded there.
+    #[must_use]
+    pub fn unsampled(&self, sampled: &[TexelEncoding]) -> Option<TexelEncoding> {
+        self.encodings().into_iter().find(|e| !sampled.contains(e))
+    }
 }
 
 impl TexelEncoding {

@@ -434,7 +434,7 @@ fn pad4(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
 
 /// Uploads a mip-major texture array (the pack layout) as it is: plain
 /// texels of `format`, or a block-encoded array ([`TextureArrayMeta::encoding`])
-/// in the block format of `format`'s kind (BC7 for RGBA8, sRGB kept), which the
+/// in the block format `meta.encoding` names (BC7 or ETC2 RGBA8, sRGB kept as `format`'s), which the
 /// device must support ([`block_formats`]).
 #[must_use]
 pub fn upload_texture_array(

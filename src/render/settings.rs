@@ -109,10 +109,10 @@ pub struct RenderSettings {
     /// before it draw unoccluded either way.
     pub ao: bool,
     /// Impostors as a moving frame draws them (the browser's frame-time
-    /// governor, its deepest levels): the nearest baked view alone, sampled
+    /// governor, every level but its first): the nearest baked view alone, sampled
     /// once, at the depth of the tree's quad rather than each pixel's own —
     /// the depth test then runs before the shading and hidden crowns cost
-    /// nothing (4× cheaper on lavapipe); crowns that interpenetrate sort by
+    /// nothing (6–9× cheaper on lavapipe); crowns that interpenetrate sort by
     /// their quads. Off: three views blended with parallax, per-pixel depth.
     pub moving_impostors: bool,
     /// The far tier where a pack has both: multi-view impostors (default) or

@@ -202,7 +202,8 @@ pub(crate) enum GpuTextures {
     None,
 }
 
-/// The encodings `--gpu-textures` names, each once, in the order given.
+/// The encodings `--gpu-textures` names, each once, BC7 first whatever the
+/// order given (the manifest lists variants in the viewers' preference).
 fn gpu_textures(list: &[GpuTextures]) -> Result<Vec<sylva::format::pack::TexelEncoding>> {
     use sylva::format::pack::TexelEncoding;
     if list.contains(&GpuTextures::None) {
@@ -211,16 +212,8 @@ fn gpu_textures(list: &[GpuTextures]) -> Result<Vec<sylva::format::pack::TexelEn
         }
         return Ok(Vec::new());
     }
-    let mut out = Vec::new();
-    for g in list {
-        let e = match g {
-            GpuTextures::Bc7 => TexelEncoding::Bc7,
-            GpuTextures::Etc2 => TexelEncoding::Etc2,
-            GpuTextures::None => continue,
-        };
-        if !out.contains(&e) {
-            out.push(e);
-        }
-    }
-    Ok(out)
+    Ok([(GpuTextures::Bc7, TexelEncoding::Bc7), (GpuTextures::Etc2, TexelEncoding::Etc2)]
+        .into_iter()
+        .filter_map(|(g, e)| list.contains(&g).then_some(e))
+        .collect())
 }

@@ -110,10 +110,14 @@ fn encode_image(texels: &[u8], size: u32, encoding: TexelEncoding) -> Vec<u8> {
             }
         }
     }
-    let surface =
-        intel_tex_2::RgbaSurface { data: &padded, width: padded_side, height: padded_side, stride: padded_side * 4 };
     match encoding {
         TexelEncoding::Bc7 => {
+            let surface = intel_tex_2::RgbaSurface {
+                data: &padded,
+                width: padded_side,
+                height: padded_side,
+                stride: padded_side * 4,
+            };
             intel_tex_2::bc7::compress_blocks(&intel_tex_2::bc7::alpha_very_fast_settings(), &surface)
         }
         TexelEncoding::Etc2 => {

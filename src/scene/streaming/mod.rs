@@ -400,14 +400,12 @@ impl<F: Fetcher> SceneStream<F> {
         m.species[s].pack_for(encodings)
     }
 
-    /// The encodings species `s` may be fetched in: none once its variant
-    /// failed for good (the plain pack then).
-    fn encodings_for(&self, s: usize) -> &[crate::format::pack::TexelEncoding] {
-        if self.packs.get(s).is_some_and(|p| p.plain) {
-            &[]
-        } else {
-            &self.texture_encodings
-        }
+    /// The encodings species `s` may be fetched in: those the device samples,
+    /// less those whose variant failed for good (the next, or the plain pack,
+    /// then).
+    fn encodings_for(&self, s: usize) -> Vec<crate::format::pack::TexelEncoding> {
+        let failed = self.packs.get(s).map_or(&[][..], |p| &p.failed[..]);
+        self.texture_encodings.iter().copied().filter(|e| !failed.contains(e)).collect()
     }
 
     /// The block encoding the scene's textures are fetched in (`None`: plain
@@ -415,7 +413,7 @@ impl<F: Fetcher> SceneStream<F> {
     #[must_use]
     pub fn textures_in_use(&self) -> Option<crate::format::pack::TexelEncoding> {
         let m = self.manifest.as_ref()?;
-        (0..m.species.len()).find_map(|s| m.species[s].pack_for(self.encodings_for(s)).encoding)
+        (0..m.species.len()).find_map(|s| m.species[s].pack_for(&self.encodings_for(s)).encoding)
     }
 
     /// Starts streaming the scene at `scene` (directory, `scene.json` path or URL).

@@ -30,8 +30,10 @@ pub(super) struct PackLoad {
     blocked: [bool; PACK_PARTS],
     /// The whole pack is uploaded: nothing more to fetch.
     whole: bool,
-    /// Its block-compressed variant failed for good: the plain pack instead.
-    pub(super) plain: bool,
+    /// The encodings whose variant failed for good (missing, corrupt, in
+    /// blocks the device does not sample): the next the device samples, or
+    /// the plain pack, instead.
+    pub(super) failed: Vec<crate::format::pack::TexelEncoding>,
 }
 
 impl PackLoad {
@@ -45,7 +47,7 @@ impl PackLoad {
             wants: [false; PACK_PARTS],
             blocked: [false; PACK_PARTS],
             whole: false,
-            plain: false,
+            failed: Vec::new(),
         }
     }
 
@@ -65,6 +67,25 @@ impl PackLoad {
     }
 }
 
+/// Whether any of a pack's load is on the GPU.
+fn load_drawn(load: &PackLoad) -> bool {
+    load.whole || load.have.contains(&true)
+}
+
+/// Refuses a pack whose textures are in a block encoding the device does not
+/// sample (a plain pack that is not plain, a variant listed under another
+/// name, a file changed on the server): it could not be uploaded.
+fn sampled(
+    url: &str,
+    meta: &crate::format::pack::PackMeta,
+    encodings: &[crate::format::pack::TexelEncoding],
+) -> Result<(), (String, bool)> {
+    match meta.unsampled(encodings) {
+        Some(e) => Err((format!("{url}: its textures are {} blocks, which this GPU does not sample", e.name()), false)),
+        None => Ok(()),
+    }
+}
+
 impl<F: Fetcher> SceneStream<F> {
     pub(super) fn on_pack_head(
         &mut self,
@@ -74,25 +95,14 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let entry = Self::pack_choice(m, self.encodings_for(s), s);
-        let variant = entry.encoding.is_some();
+        let entry = Self::pack_choice(m, &self.encodings_for(s), s);
+        let variant = entry.encoding;
         let url = join(&self.base, entry.pack);
         let attempt = self.packs[s].head.attempt();
         let pack_bytes = entry.bytes;
         let ranged = entry.head_bytes.is_some();
-        // Textures in a block encoding the device does not sample (a plain
-        // pack that is not plain, a variant listed under another name): refused.
         let encodings = &self.texture_encodings;
-        let sampled = |meta: &crate::format::pack::PackMeta| match meta
-            .encodings()
-            .into_iter()
-            .find(|e| !encodings.contains(e))
-        {
-            Some(e) => {
-                Err((format!("{url}: its textures are {} blocks, which this GPU does not sample", e.name()), false))
-            }
-            None => Ok(()),
-        };
+        let sampled = |meta: &crate::format::pack::PackMeta| sampled(&url, meta, encodings);
         let outcome = result.map_err(|e| (e.to_string(), e.retryable())).and_then(|bytes| {
             // No head size in the manifest, or a server that ignores ranges: the whole pack.
             if !ranged || bytes.len() as u64 == pack_bytes && pack_bytes > entry.head_bytes.unwrap_or(0) {
@@ -120,14 +130,8 @@ impl<F: Fetcher> SceneStream<F> {
             }
             Err((message, retryable)) => {
                 let given_up = self.fail(url.clone(), &message, attempt, retryable, now_s);
-                if variant && given_up == Load::Broken {
-                    // A variant missing or broken: the plain pack draws the
-                    // species instead, so the image lacks nothing (the event
-                    // said what failed).
-                    self.packs[s].plain = true;
-                    self.packs[s].head = Load::Idle;
-                    self.failures.retain(|f| f.url != url);
-                    self.stats.broken = self.stats.broken.saturating_sub(1);
+                if let (Some(e), Load::Broken) = (variant, &given_up) {
+                    self.give_up_variant(s, e, &url);
                 } else {
                     self.packs[s].head = given_up;
                 }
@@ -148,9 +152,11 @@ impl<F: Fetcher> SceneStream<F> {
         now_s: f64,
     ) {
         let Some(m) = &self.manifest else { return };
-        let choice = Self::pack_choice(m, self.encodings_for(s), s);
+        let choice = Self::pack_choice(m, &self.encodings_for(s), s);
         let url = join(&self.base, choice.pack);
         let file_bytes = choice.bytes;
+        let variant = choice.encoding;
+        let encodings = &self.texture_encodings;
         let load = &mut self.packs[s];
         let attempt = load.parts[part].attempt();
         let Some(head) = &load.parsed else { return };
@@ -164,6 +170,7 @@ impl<F: Fetcher> SceneStream<F> {
                 // The server sent the whole file instead of the range.
                 let bytes = unstore(&url, bytes).map_err(|e| (e.to_string(), false))?;
                 let pack = decode_pack(&url, &bytes).map_err(|e| (e.to_string(), true))?;
+                sampled(&url, &pack.meta, encodings)?;
                 residency.upload_pack(s as u32, &pack);
                 return Ok(true);
             }
@@ -215,9 +222,33 @@ impl<F: Fetcher> SceneStream<F> {
                 }
             }
             Err((message, retryable)) => {
-                self.packs[s].parts[part] = self.fail(url, &message, attempt, retryable, now_s)
+                let given_up = self.fail(url.clone(), &message, attempt, retryable, now_s);
+                let nothing_drawn = !load_drawn(&self.packs[s]);
+                match (variant, &given_up) {
+                    // A variant's part broken before any of it is on the GPU:
+                    // the species starts again from the next pack.
+                    (Some(e), Load::Broken) if nothing_drawn => self.give_up_variant(s, e, &url),
+                    _ => self.packs[s].parts[part] = given_up,
+                }
             }
         }
+    }
+
+    /// Species `s`'s variant in encoding `e` (at `url`) failed for good: the
+    /// species starts again from the next pack the device samples, or the
+    /// plain one, so the image lacks nothing (the event said what failed; it
+    /// is not counted among the broken files).
+    fn give_up_variant(&mut self, s: usize, e: crate::format::pack::TexelEncoding, url: &str) {
+        let failed = std::mem::take(&mut self.packs[s].failed);
+        self.packs[s] = PackLoad::new();
+        self.packs[s].failed = failed;
+        self.packs[s].failed.push(e);
+        // Whatever of the variant is still on its way is dropped when it comes.
+        self.requests.retain(
+            |_, t| !matches!(t, Target::PackHead(x) | Target::PackPart(x, _) | Target::PackInflate(x, _) if *x == s),
+        );
+        self.failures.retain(|f| f.url != url);
+        self.stats.broken = self.stats.broken.saturating_sub(1);
     }
 
     /// Whether trees of species `s` can be drawn (its billboards, or the whole
@@ -317,7 +348,7 @@ impl<F: Fetcher> SceneStream<F> {
             _ => None,
         };
         for &s in &needed {
-            let choice = Self::pack_choice(m, self.encodings_for(s), s);
+            let choice = Self::pack_choice(m, &self.encodings_for(s), s);
             let load = &mut self.packs[s];
             if load.whole || self.fetcher.in_flight() >= self.config.max_in_flight {
                 continue;
