@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 600
 # wgpu's Vulkan loader wants a runtime dir; headless machines often have none.
 export XDG_RUNTIME_DIR ?= /tmp/sylva-xdg-$(shell id -u)
 
-.PHONY: setup test fmt clippy clippy-wasm test-build test-rust test-web bins web demo release bench-bake bench-render bench-serve bench-governor bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
+.PHONY: setup test fmt clippy clippy-wasm test-build test-rust test-web bins web demo release bench-bake bench-render bench-serve bench-governor bench-trace bench-cesium bench-clusters bench-stress sweep-cell-size sweep-billboard-angles sweep-billboard-size sweep-fade fuzz fixtures
 
 setup:
 	@mkdir -p -m 700 $(XDG_RUNTIME_DIR)
@@ -145,6 +145,16 @@ GOVERNOR_SIZE ?= 480x270
 bench-governor: release
 	@test -f target/bench/demo-100k/scene.json || target/release/sylva-bake demo --trees 100000 --out target/bench/demo-100k
 	python3 bench/governor.py target/bench/demo-100k medium $(GOVERNOR_SIZE)
+
+# The path tracer's bottom level (issue 48; docs/BENCHMARKS.md "The tracer's
+# bottom level"): each species' BVH and rays per second on one core and on the
+# GPU, for the fixture's small meshes and the ez-tree models of the Amsterdam bake.
+bench-trace: release
+	@test -f target/bench/amsterdam/scene.json || target/release/sylva-bake bake \
+	  --model oak=$(SHARED)/models/eztree_oak_medium.glb --model pine=$(SHARED)/models/eztree_pine_medium.glb \
+	  --placements $(SHARED)/placements/amsterdam_trees.csv --default-model oak --out target/bench/amsterdam
+	target/release/sylva bench --trace --scene tests/fixtures/forest-small --out target/bench/trace-fixture
+	target/release/sylva bench --trace --scene target/bench/amsterdam --out target/bench/trace-amsterdam
 
 # Sylva's viewer beside CesiumJS with the scene's 3D Tiles export (issue 21;
 # docs/BENCHMARKS.md "Sylva beside CesiumJS"): the 100k demo and the Amsterdam

@@ -6,6 +6,7 @@
 //! * [`render`] — wgpu context and passes (and the billboard capture the bake uses).
 //! * [`scene`] — fetching, streaming and residency of scenes; styles and search.
 //! * [`lod`] — the level-of-detail rules on the CPU, each the twin of its WGSL.
+//! * [`trace`] — the path tracer's geometry on the CPU (rays, BVH), the twin of its WGSL.
 //! * [`camera`], [`orbit`], [`geo`], [`sun`], [`metrics`] — view maths, the viewer's camera
 //!   controls, lon/lat ↔ scene metres, the sun, image error (Clasen et al. 2010, §4).
 //! * [`format`] — the scene manifest, LoD packs, tiles and sidecars (on disk and over the wire).
@@ -32,5 +33,6 @@ pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod serve;
 pub mod sun;
+pub mod trace;
 #[cfg(target_arch = "wasm32")]
 pub mod web;

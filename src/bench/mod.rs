@@ -34,6 +34,7 @@ use crate::render::shadow::ShadowQuality;
 pub mod memory;
 mod plots;
 pub mod stress;
+pub mod trace;
 pub use plots::write_plots;
 
 /// A keyframe of a camera path (scene-relative metres, degrees).

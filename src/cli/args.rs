@@ -94,6 +94,15 @@ pub(crate) enum Command {
         /// per pack, against Eichner 2024, eq. 4.1 (writes memory.json; --scene a directory).
         #[arg(long, conflicts_with_all = ["replot", "stress"])]
         memory: bool,
+        /// The path tracer's bottom level instead: each species' BVH over its
+        /// full mesh (build time, nodes, depth, bytes) and nearest hits per
+        /// second through it on one CPU core and on the GPU, the two's hits
+        /// compared (writes trace.json; --scene a directory).
+        #[arg(long, conflicts_with_all = ["replot", "stress", "memory"])]
+        trace: bool,
+        /// --trace: rays per species.
+        #[arg(long, default_value_t = 65_536, requires = "trace", value_parser = clap::value_parser!(u32).range(1..=16_777_216))]
+        rays: u32,
         /// The stress run instead: Sylva alone along --path, forwards and back,
         /// for --frames frames (10000 is the standard run), streaming without
         /// waiting; fails unless memory stays flat and frame time does not grow

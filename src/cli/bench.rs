@@ -246,6 +246,16 @@ pub(crate) fn replot(out: &std::path::Path, path: &str, size: &str) -> Result<()
     Ok(())
 }
 
+/// `sylva bench --trace`: the tracer's BVH per species and rays per second.
+pub(crate) fn trace(scene: &str, out: &std::path::Path, rays: usize) -> Result<()> {
+    let r = sylva::bench::trace::measure(std::path::Path::new(&scene), rays)?;
+    print!("{}", sylva::bench::trace::report(&r));
+    std::fs::create_dir_all(out)?;
+    std::fs::write(out.join("trace.json"), serde_json::to_string_pretty(&r)?)?;
+    eprintln!("wrote {}", out.join("trace.json").display());
+    Ok(())
+}
+
 /// `sylva bench --memory`: bytes per tree on disk, compressed and on the GPU.
 pub(crate) fn memory(scene: &str, out: &std::path::Path) -> Result<()> {
     let m = sylva::bench::memory::measure(std::path::Path::new(&scene))?;

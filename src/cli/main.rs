@@ -93,6 +93,7 @@ mod cli {
         match Cli::parse().command {
             Command::Bench { out, replot: true, path, size, .. } => replot(&out, &path, &size),
             Command::Bench { scene, out, memory: true, .. } => memory(&scene, &out),
+            Command::Bench { scene, out, trace: true, rays, .. } => trace(&scene, &out, rays as usize),
             Command::Bench { scene, path, size, frames, out, stress: true, save_frames, pool_trees, .. } => {
                 stress(&scene, &path, &size, frames, &out, save_frames, pool_trees)
             }

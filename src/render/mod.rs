@@ -26,6 +26,9 @@ pub mod shaders;
 pub mod shadow;
 pub mod species;
 pub mod terrain;
+/// (Native for now: the probe waits for the GPU; the browser's tracer comes with its pass.)
+#[cfg(not(target_arch = "wasm32"))]
+pub mod trace;
 
 use glam::{Mat4, Vec3};
 

@@ -46,6 +46,8 @@ static BOUNDS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/bounds.wgsl")
 static TERRAIN_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/terrain.wgsl"));
 static CANOPY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/canopy.wgsl"));
 static ACCUMULATE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/accumulate.wgsl"));
+static TRACE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace.wgsl"));
+static TRACE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_probe.wgsl"));
 
 /// The modules every tree pass (mesh, billboard, impostor, cluster) reads,
 /// before its own.
@@ -91,6 +93,9 @@ pub static CANOPY: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, 
 /// Progressive refinement's accumulate and resolve passes.
 pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
 
+/// The tracer's probe: rays through one species' hierarchy (`render/trace.rs`).
+pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_WGSL, TRACE_PROBE_WGSL]]);
+
 /// Every composed shader with its name, for validation tests.
 pub static ALL: &[(&str, Shader)] = &[
     ("mesh", MESH),
@@ -103,4 +108,5 @@ pub static ALL: &[(&str, Shader)] = &[
     ("terrain", TERRAIN),
     ("canopy", CANOPY),
     ("accumulate", ACCUMULATE),
+    ("trace_probe", TRACE_PROBE),
 ];

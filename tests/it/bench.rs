@@ -53,3 +53,18 @@ fn bench_writes_frames_summary_and_plots() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn bench_trace_measures_every_species_and_the_gpu_agrees() {
+    let r = sylva::bench::trace::measure(std::path::Path::new(SCENE), 512).expect("GPU adapter");
+    let names: Vec<&str> = r.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names.len(), 3, "{names:?}");
+    for s in &r.species {
+        assert!(s.triangles > 500 && s.nodes > 100 && s.depth >= 8, "{s:?}");
+        assert_eq!(s.bytes, s.nodes * 32 + s.triangles * 48);
+        assert!(s.hits > 100 && s.hits < s.rays, "{}: {} of {} rays hit", s.name, s.hits, s.rays);
+        assert!(s.differ <= 1, "{}: {} hits differ", s.name, s.differ);
+        assert!(s.cpu_rays_per_s > 0.0 && s.gpu_rays_per_s > 0.0);
+    }
+    assert!(sylva::bench::trace::report(&r).contains("beech"));
+}

@@ -215,3 +215,14 @@ fn a_moved_member_is_caught() {
     let text = message.downcast_ref::<String>().map_or("", String::as_str);
     assert!(text.contains("Batch: members (name, offset)"), "failed for another reason: {text}");
 }
+
+#[test]
+fn the_tracer_structs_match_their_wgsl_twins() {
+    use sylva::render::trace::{GpuHit, ProbeRay};
+    use sylva::trace::bvh::{BvhNode, GpuTriangle};
+    let shader = "trace_probe";
+    check(shader, "BvhNode", &members!(BvhNode: min, first, max, count), size_of::<BvhNode>(), None);
+    check(shader, "TraceTriangle", &members!(GpuTriangle: v0, id, e1, pad0, e2, pad1), size_of::<GpuTriangle>(), None);
+    check(shader, "TraceHit", &members!(GpuHit: t, triangle, u, v), size_of::<GpuHit>(), None);
+    check(shader, "ProbeRay", &members!(ProbeRay: origin, t_max, dir, pad), size_of::<ProbeRay>(), None);
+}

@@ -1,0 +1,26 @@
+// Traces a list of rays through one species' hierarchy and writes each nearest
+// hit: the twin test of the WGSL walk against src/trace/bvh.rs, and the
+// measure of rays per second (src/render/trace.rs, `trace_rays`). Needs trace.wgsl.
+
+// A ray. Must match `ProbeRay` in src/render/trace.rs.
+struct ProbeRay {
+    origin: vec3<f32>,
+    t_max: f32,
+    dir: vec3<f32>,
+    pad: f32,
+};
+
+@group(0) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
+@group(0) @binding(1) var<storage, read> bvh_tris: array<TraceTriangle>;
+@group(0) @binding(2) var<storage, read> probe_rays: array<ProbeRay>;
+@group(0) @binding(3) var<storage, read_write> probe_hits: array<TraceHit>;
+
+@compute @workgroup_size(64)
+fn trace_probe(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= arrayLength(&probe_rays) {
+        return;
+    }
+    let r = probe_rays[i];
+    probe_hits[i] = trace_bvh(r.origin, r.dir, r.t_max, 0u, 0u);
+}
