@@ -1,14 +1,7 @@
 // Traces a list of rays through one species' hierarchy and writes each nearest
 // hit: the twin test of the WGSL walk against src/trace/bvh.rs, and the
-// measure of rays per second (src/render/trace.rs, `trace_rays`). Needs trace.wgsl.
-
-// A ray. Must match `ProbeRay` in src/render/trace.rs.
-struct ProbeRay {
-    origin: vec3<f32>,
-    t_max: f32,
-    dir: vec3<f32>,
-    pad: f32,
-};
+// measure of rays per second (src/render/trace.rs, `TraceProbe::trace`). Needs
+// trace.wgsl and trace_probe_ray.wgsl.
 
 @group(0) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(0) @binding(1) var<storage, read> bvh_tris: array<TraceTriangle>;

@@ -48,6 +48,9 @@ static CANOPY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/canopy.wgsl")
 static ACCUMULATE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/accumulate.wgsl"));
 static TRACE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace.wgsl"));
 static TRACE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_probe.wgsl"));
+static TRACE_PROBE_RAY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_probe_ray.wgsl"));
+static TRACE_SCENE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_scene.wgsl"));
+static TRACE_SCENE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_scene_probe.wgsl"));
 
 /// The modules every tree pass (mesh, billboard, impostor, cluster) reads,
 /// before its own.
@@ -94,7 +97,11 @@ pub static CANOPY: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, 
 pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
 
 /// The tracer's probe: rays through one species' hierarchy (`render/trace.rs`).
-pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_WGSL, TRACE_PROBE_WGSL]]);
+pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_PROBE_WGSL]]);
+
+/// The tracer's scene probe: rays through both levels (`render/trace.rs`).
+pub static TRACE_SCENE_PROBE: Shader =
+    Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_SCENE_PROBE_WGSL]]);
 
 /// Every composed shader with its name, for validation tests.
 pub static ALL: &[(&str, Shader)] = &[
@@ -109,4 +116,5 @@ pub static ALL: &[(&str, Shader)] = &[
     ("canopy", CANOPY),
     ("accumulate", ACCUMULATE),
     ("trace_probe", TRACE_PROBE),
+    ("trace_scene_probe", TRACE_SCENE_PROBE),
 ];

@@ -10,6 +10,7 @@ use super::layouts::storage_entry;
 use super::shaders;
 use super::GpuContext;
 use crate::trace::bvh::Bvh;
+use crate::trace::scene::{SceneHit, TraceScene};
 use crate::trace::{Hit, Ray};
 
 /// A ray as the probe reads it. Must match `ProbeRay` in `shaders/trace_probe.wgsl`.
@@ -49,47 +50,60 @@ impl GpuHit {
     }
 }
 
+/// A scene's nearest hit as the GPU writes it. Must match `SceneHit` in
+/// `shaders/trace_scene.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuSceneHit {
+    /// The instance's id (its index in the list the scene was built from).
+    pub instance: u32,
+    /// The hit on its species' mesh.
+    pub hit: GpuHit,
+}
+
 /// Rays per dispatch (64 per workgroup, within WebGPU's 65,535 workgroups).
 const RAYS_PER_DISPATCH: usize = 64 * 65_535;
 
-/// The probe's pipeline.
+/// The probes' pipelines: one species' hierarchy, and a scene's two levels.
 pub struct TraceProbe {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+    scene_layout: wgpu::BindGroupLayout,
+    scene_pipeline: wgpu::ComputePipeline,
 }
 
 impl TraceProbe {
-    /// Creates the pipeline.
+    /// Creates the pipelines.
     #[must_use]
     pub fn new(device: &wgpu::Device) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("trace_probe.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::TRACE_PROBE.source().into()),
-        });
-        let c = wgpu::ShaderStages::COMPUTE;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("trace probe"),
-            entries: &[
-                storage_entry(0, c, true),
-                storage_entry(1, c, true),
-                storage_entry(2, c, true),
-                storage_entry(3, c, false),
-            ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("trace probe"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("trace_probe"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("trace_probe"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Self { layout, pipeline }
+        let make = |name: &str, shader: &shaders::Shader, buffers: u32| {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(name),
+                source: wgpu::ShaderSource::Wgsl(shader.source().into()),
+            });
+            let c = wgpu::ShaderStages::COMPUTE;
+            // Every buffer read but the last, the hits.
+            let entries: Vec<_> = (0..buffers).map(|b| storage_entry(b, c, b + 1 < buffers)).collect();
+            let layout = device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(name), entries: &entries });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(name),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            (layout, pipeline)
+        };
+        let (layout, pipeline) = make("trace_probe", &shaders::TRACE_PROBE, 4);
+        let (scene_layout, scene_pipeline) = make("trace_scene_probe", &shaders::TRACE_SCENE_PROBE, 7);
+        Self { layout, pipeline, scene_layout, scene_pipeline }
     }
 
     /// Traces `rays` through `bvh` on the GPU and waits for the hits (one per
@@ -99,24 +113,51 @@ impl TraceProbe {
         if bvh.nodes.is_empty() || rays.is_empty() {
             return vec![None; rays.len()];
         }
+        let nodes = storage(ctx, "bvh nodes", bytemuck::cast_slice(&bvh.nodes));
+        let tris = storage(ctx, "bvh triangles", bytemuck::cast_slice(&bvh.triangles));
+        let hits: Vec<GpuHit> = self.dispatch(ctx, &self.layout, &self.pipeline, &[&nodes, &tris], rays);
+        hits.iter().map(GpuHit::hit).collect()
+    }
+
+    /// Traces `rays` through `scene`'s two levels on the GPU and waits for the
+    /// hits (one per ray, in order).
+    #[must_use]
+    pub fn trace_scene(&self, ctx: &GpuContext, scene: &TraceScene, rays: &[Ray]) -> Vec<Option<SceneHit>> {
+        let (nodes, tris, table) = scene.species_arrays();
+        if scene.instances.is_empty() || nodes.is_empty() || rays.is_empty() {
+            return vec![None; rays.len()];
+        }
+        let buffers = [
+            storage(ctx, "bvh nodes", bytemuck::cast_slice(&nodes)),
+            storage(ctx, "bvh triangles", bytemuck::cast_slice(&tris)),
+            storage(ctx, "trace species", bytemuck::cast_slice(&table)),
+            storage(ctx, "trace top", bytemuck::cast_slice(&scene.top)),
+            storage(ctx, "trace instances", bytemuck::cast_slice(&scene.instances)),
+        ];
+        let inputs: Vec<&wgpu::Buffer> = buffers.iter().collect();
+        let hits: Vec<GpuSceneHit> = self.dispatch(ctx, &self.scene_layout, &self.scene_pipeline, &inputs, rays);
+        hits.iter().map(|h| h.hit.hit().map(|hit| SceneHit { instance: h.instance, hit })).collect()
+    }
+
+    /// One probe's dispatches over `rays` (in chunks WebGPU's workgroup
+    /// limit allows), bound after `inputs`; the hits read back.
+    fn dispatch<H: bytemuck::Pod>(
+        &self,
+        ctx: &GpuContext,
+        layout: &wgpu::BindGroupLayout,
+        pipeline: &wgpu::ComputePipeline,
+        inputs: &[&wgpu::Buffer],
+        rays: &[Ray],
+    ) -> Vec<H> {
         let device = &ctx.device;
-        let storage = |label, contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
-        let nodes = storage("bvh nodes", bytemuck::cast_slice(&bvh.nodes));
-        let tris = storage("bvh triangles", bytemuck::cast_slice(&bvh.triangles));
         let mut out = Vec::with_capacity(rays.len());
         for chunk in rays.chunks(RAYS_PER_DISPATCH) {
             let probe: Vec<ProbeRay> = chunk
                 .iter()
                 .map(|r| ProbeRay { origin: r.origin.into(), t_max: r.t_max, dir: r.dir.into(), pad: 0.0 })
                 .collect();
-            let ray_buf = storage("probe rays", bytemuck::cast_slice(&probe));
-            let size = (chunk.len() * std::mem::size_of::<GpuHit>()) as u64;
+            let ray_buf = storage(ctx, "probe rays", bytemuck::cast_slice(&probe));
+            let size = (chunk.len() * std::mem::size_of::<H>()) as u64;
             let hits = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("probe hits"),
                 size,
@@ -129,20 +170,23 @@ impl TraceProbe {
                 usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
                 mapped_at_creation: false,
             });
+            let mut entries: Vec<wgpu::BindGroupEntry> = inputs
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect();
+            let n = inputs.len() as u32;
+            entries.push(wgpu::BindGroupEntry { binding: n, resource: ray_buf.as_entire_binding() });
+            entries.push(wgpu::BindGroupEntry { binding: n + 1, resource: hits.as_entire_binding() });
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("trace probe"),
-                layout: &self.layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: nodes.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: tris.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: ray_buf.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 3, resource: hits.as_entire_binding() },
-                ],
+                layout,
+                entries: &entries,
             });
             let mut encoder = device.create_command_encoder(&Default::default());
             {
                 let mut pass = encoder.begin_compute_pass(&Default::default());
-                pass.set_pipeline(&self.pipeline);
+                pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &group, &[]);
                 pass.dispatch_workgroups(chunk.len().div_ceil(64) as u32, 1, 1);
             }
@@ -152,10 +196,19 @@ impl TraceProbe {
             slice.map_async(wgpu::MapMode::Read, |r| r.expect("map the probe's hits"));
             device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
             let mapped = slice.get_mapped_range().expect("mapped range");
-            out.extend(bytemuck::cast_slice::<u8, GpuHit>(&mapped).iter().map(GpuHit::hit));
+            out.extend_from_slice(bytemuck::cast_slice::<u8, H>(&mapped));
             drop(mapped);
             read.unmap();
         }
         out
     }
+}
+
+/// A storage buffer holding `contents`.
+fn storage(ctx: &GpuContext, label: &str, contents: &[u8]) -> wgpu::Buffer {
+    ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents,
+        usage: wgpu::BufferUsages::STORAGE,
+    })
 }

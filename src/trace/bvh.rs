@@ -113,56 +113,14 @@ impl Bvh {
     /// Deterministic: the same triangles give the same arrays.
     #[must_use]
     pub fn build(triangles: &[Triangle]) -> Self {
-        if triangles.is_empty() {
-            return Self::default();
-        }
-        let boxes: Vec<Bounds> = triangles.iter().map(triangle_bounds).collect();
-        let centroids: Vec<Vec3> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
-        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
-        let mut root = Bounds::EMPTY;
-        boxes.iter().for_each(|b| root.grow(b));
-        // Boxes grow by a hair so that a hit on a triangle lying in a box's
-        // face is not lost to the slab test's rounding.
-        let pad = Vec3::splat((root.max - root.min).max_element() * 1e-6 + 1e-7);
-        let bounds_of = |range: &[u32]| {
-            let mut b = Bounds::EMPTY;
-            range.iter().for_each(|&i| b.grow(&boxes[i as usize]));
-            (b.min - pad, b.max + pad)
-        };
-        let node = |range: &[u32], first: u32| {
-            let (min, max) = bounds_of(range);
-            BvhNode { min: min.into(), first, max: max.into(), count: range.len() as u32 }
-        };
-        let mut nodes = vec![node(&order, 0)];
-        let mut work = vec![(0usize, 0u32)];
-        while let Some((ni, depth)) = work.pop() {
-            let (start, count) = (nodes[ni].first as usize, nodes[ni].count);
-            if count <= LEAF_MIN || depth >= MAX_DEPTH {
-                continue;
-            }
-            let range = &mut order[start..start + count as usize];
-            let Some((axis, split, cost)) = best_split(range, &boxes, &centroids) else { continue };
-            let area = Bounds { min: nodes[ni].min.into(), max: nodes[ni].max.into() }.half_area().max(1e-30);
-            // Price of a leaf: one intersection per triangle; of a split: one
-            // traversal step plus the children's triangles by their area.
-            if 1.0 + cost / area >= count as f32 && count <= LEAF_MAX {
-                continue;
-            }
-            let (cmin, cmax) = centroid_range(range, &centroids);
-            let left_len = partition(range, |i| bin_of(centroids[i as usize], axis, cmin, cmax) < split);
-            if left_len == 0 || left_len == range.len() {
-                continue;
-            }
-            let left = nodes.len();
-            let (l, r) = range.split_at(left_len);
-            let (ln, rn) = (node(l, start as u32), node(r, (start + left_len) as u32));
-            nodes.push(ln);
-            nodes.push(rn);
-            nodes[ni].first = left as u32;
-            nodes[ni].count = 0;
-            work.push((left + 1, depth + 1));
-            work.push((left, depth + 1));
-        }
+        let boxes: Vec<(Vec3, Vec3)> = triangles
+            .iter()
+            .map(|t| {
+                let b = triangle_bounds(t);
+                (b.min, b.max)
+            })
+            .collect();
+        let (nodes, order) = build_nodes(&boxes);
         let triangles = order
             .iter()
             .map(|&i| {
@@ -186,67 +144,149 @@ impl Bvh {
     /// Twin: `trace_bvh` in `shaders/trace.wgsl`.
     #[must_use]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let root = self.nodes.first()?;
-        let inv = inv_dir(ray.dir);
-        let enter = ray_box(ray.origin, inv, root.min.into(), root.max.into(), ray.t_max)?;
-        let mut stack = [(0u32, 0f32); STACK];
-        stack[0] = (0, enter);
-        let mut sp = 1;
-        let mut closest = ray.t_max;
         let mut best = None;
-        while sp > 0 {
-            sp -= 1;
-            let (ni, entered) = stack[sp];
-            if entered >= closest {
-                continue;
-            }
-            let node = &self.nodes[ni as usize];
-            if node.count > 0 {
-                for t in &self.triangles[node.first as usize..(node.first + node.count) as usize] {
-                    if let Some((d, u, v)) = ray_triangle(ray.origin, ray.dir, &t.triangle(), closest) {
-                        closest = d;
-                        best = Some(Hit { t: d, triangle: t.id, u, v });
-                    }
+        walk(&self.nodes, ray, |first, count, closest| {
+            let mut nearer = None;
+            for t in &self.triangles[first as usize..(first + count) as usize] {
+                let limit = nearer.unwrap_or(closest);
+                if let Some((d, u, v)) = ray_triangle(ray.origin, ray.dir, &t.triangle(), limit) {
+                    nearer = Some(d);
+                    best = Some(Hit { t: d, triangle: t.id, u, v });
                 }
-                continue;
             }
-            let child = |i: u32| {
-                let c = &self.nodes[i as usize];
-                ray_box(ray.origin, inv, c.min.into(), c.max.into(), closest).map(|t| (i, t))
-            };
-            match (child(node.first), child(node.first + 1)) {
-                (Some(a), Some(b)) => {
-                    // The farther first, so the nearer is walked next.
-                    let (near, far) = if b.1 < a.1 { (b, a) } else { (a, b) };
-                    stack[sp] = far;
-                    stack[sp + 1] = near;
-                    sp += 2;
-                }
-                (Some(a), None) | (None, Some(a)) => {
-                    stack[sp] = a;
-                    sp += 1;
-                }
-                (None, None) => {}
-            }
-        }
+            nearer
+        });
         best
     }
 
     /// The deepest leaf's depth (the root's is 0).
     #[must_use]
     pub fn depth(&self) -> u32 {
-        let mut deepest = 0;
-        let mut work = vec![(0usize, 0u32)];
-        while let Some((i, d)) = work.pop() {
-            let Some(n) = self.nodes.get(i) else { break };
-            deepest = deepest.max(d);
-            if n.count == 0 {
-                work.push((n.first as usize, d + 1));
-                work.push((n.first as usize + 1, d + 1));
-            }
-        }
-        deepest
+        depth_of(&self.nodes)
     }
+}
+
+/// The deepest leaf's depth in `nodes` (the root's is 0).
+#[must_use]
+pub fn depth_of(nodes: &[BvhNode]) -> u32 {
+    let mut deepest = 0;
+    let mut work = vec![(0usize, 0u32)];
+    while let Some((i, d)) = work.pop() {
+        let Some(n) = nodes.get(i) else { break };
+        deepest = deepest.max(d);
+        if n.count == 0 {
+            work.push((n.first as usize, d + 1));
+            work.push((n.first as usize + 1, d + 1));
+        }
+    }
+    deepest
+}
+
+/// Walks `nodes` for `ray` front to back, skipping boxes entered at or beyond
+/// the nearest hit so far: at each leaf reached, `leaf(first, count, closest)`
+/// tests its primitives against `closest` and returns a nearer hit's distance,
+/// if any. Returns the nearest distance found (`ray.t_max` if none).
+/// Twin: the walk of `trace_bvh` (and of `trace_scene`) in `shaders/trace.wgsl`.
+pub fn walk(nodes: &[BvhNode], ray: &Ray, mut leaf: impl FnMut(u32, u32, f32) -> Option<f32>) -> f32 {
+    let mut closest = ray.t_max;
+    let Some(root) = nodes.first() else { return closest };
+    let inv = inv_dir(ray.dir);
+    let Some(enter) = ray_box(ray.origin, inv, root.min.into(), root.max.into(), closest) else { return closest };
+    let mut stack = [(0u32, 0f32); STACK];
+    stack[0] = (0, enter);
+    let mut sp = 1;
+    while sp > 0 {
+        sp -= 1;
+        let (ni, entered) = stack[sp];
+        if entered >= closest {
+            continue;
+        }
+        let node = &nodes[ni as usize];
+        if node.count > 0 {
+            if let Some(t) = leaf(node.first, node.count, closest) {
+                closest = t;
+            }
+            continue;
+        }
+        let child = |i: u32| {
+            let c = &nodes[i as usize];
+            ray_box(ray.origin, inv, c.min.into(), c.max.into(), closest).map(|t| (i, t))
+        };
+        match (child(node.first), child(node.first + 1)) {
+            (Some(a), Some(b)) => {
+                // The farther first, so the nearer is walked next.
+                let (near, far) = if b.1 < a.1 { (b, a) } else { (a, b) };
+                stack[sp] = far;
+                stack[sp + 1] = near;
+                sp += 2;
+            }
+            (Some(a), None) | (None, Some(a)) => {
+                stack[sp] = a;
+                sp += 1;
+            }
+            (None, None) => {}
+        }
+    }
+    closest
+}
+
+/// Builds hierarchy nodes over primitives given by their boxes (the binned
+/// surface area heuristic, as [`Bvh::build`] describes): the nodes, root
+/// first, and the primitives' order — a leaf's `first..first + count` are
+/// positions in it. Deterministic. Empty for no primitives.
+#[must_use]
+pub fn build_nodes(prim_boxes: &[(Vec3, Vec3)]) -> (Vec<BvhNode>, Vec<u32>) {
+    if prim_boxes.is_empty() {
+        return (Vec::new(), Vec::new());
+    }
+    let boxes: Vec<Bounds> = prim_boxes.iter().map(|&(min, max)| Bounds { min, max }).collect();
+    let centroids: Vec<Vec3> = boxes.iter().map(|b| (b.min + b.max) * 0.5).collect();
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    let mut root = Bounds::EMPTY;
+    boxes.iter().for_each(|b| root.grow(b));
+    // Boxes grow by a hair so that a hit on a primitive lying in a box's
+    // face is not lost to the slab test's rounding.
+    let pad = Vec3::splat((root.max - root.min).max_element() * 1e-6 + 1e-7);
+    let bounds_of = |range: &[u32]| {
+        let mut b = Bounds::EMPTY;
+        range.iter().for_each(|&i| b.grow(&boxes[i as usize]));
+        (b.min - pad, b.max + pad)
+    };
+    let node = |range: &[u32], first: u32| {
+        let (min, max) = bounds_of(range);
+        BvhNode { min: min.into(), first, max: max.into(), count: range.len() as u32 }
+    };
+    let mut nodes = vec![node(&order, 0)];
+    let mut work = vec![(0usize, 0u32)];
+    while let Some((ni, depth)) = work.pop() {
+        let (start, count) = (nodes[ni].first as usize, nodes[ni].count);
+        if count <= LEAF_MIN || depth >= MAX_DEPTH {
+            continue;
+        }
+        let range = &mut order[start..start + count as usize];
+        let Some((axis, split, cost)) = best_split(range, &boxes, &centroids) else { continue };
+        let area = Bounds { min: nodes[ni].min.into(), max: nodes[ni].max.into() }.half_area().max(1e-30);
+        // Price of a leaf: one intersection per primitive; of a split: one
+        // traversal step plus the children's primitives by their area.
+        if 1.0 + cost / area >= count as f32 && count <= LEAF_MAX {
+            continue;
+        }
+        let (cmin, cmax) = centroid_range(range, &centroids);
+        let left_len = partition(range, |i| bin_of(centroids[i as usize], axis, cmin, cmax) < split);
+        if left_len == 0 || left_len == range.len() {
+            continue;
+        }
+        let left = nodes.len();
+        let (l, r) = range.split_at(left_len);
+        let (ln, rn) = (node(l, start as u32), node(r, (start + left_len) as u32));
+        nodes.push(ln);
+        nodes.push(rn);
+        nodes[ni].first = left as u32;
+        nodes[ni].count = 0;
+        work.push((left + 1, depth + 1));
+        work.push((left, depth + 1));
+    }
+    (nodes, order)
 }
 
 /// The triangles of a mesh level, positions dequantised as `shaders/mesh.wgsl`

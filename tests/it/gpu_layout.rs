@@ -226,3 +226,25 @@ fn the_tracer_structs_match_their_wgsl_twins() {
     check(shader, "TraceHit", &members!(GpuHit: t, triangle, u, v), size_of::<GpuHit>(), None);
     check(shader, "ProbeRay", &members!(ProbeRay: origin, t_max, dir, pad), size_of::<ProbeRay>(), None);
 }
+
+#[test]
+fn the_tracer_scene_structs_match_their_wgsl_twins() {
+    use sylva::render::trace::GpuSceneHit;
+    use sylva::trace::scene::{GpuInstance, GpuSpeciesBvh};
+    let shader = "trace_scene_probe";
+    check(
+        shader,
+        "TraceInstance",
+        &members!(GpuInstance: position, yaw, scale_xy, scale_z, species, id),
+        size_of::<GpuInstance>(),
+        None,
+    );
+    check(
+        shader,
+        "TraceSpecies",
+        &members!(GpuSpeciesBvh: node_base, tri_base, node_count, pad),
+        size_of::<GpuSpeciesBvh>(),
+        None,
+    );
+    check(shader, "SceneHit", &members!(GpuSceneHit: instance, hit), size_of::<GpuSceneHit>(), None);
+}

@@ -10,7 +10,7 @@ use sylva::format::decode_pack;
 use sylva::render::trace::TraceProbe;
 use sylva::render::GpuContext;
 use sylva::trace::bvh::{mesh_triangles, Bvh, MAX_DEPTH};
-use sylva::trace::{brute_force, Triangle};
+use sylva::trace::{brute_force, Ray, Triangle};
 
 const SPECIES: [&str; 3] = ["beech", "birch", "spruce"];
 
@@ -115,4 +115,64 @@ fn the_gpu_walk_finds_the_hits_its_cpu_twin_finds() {
             &differ[..differ.len().min(3)]
         );
     }
+}
+
+#[test]
+fn the_gpu_two_level_walk_finds_the_trees_its_cpu_twin_finds() {
+    use sylva::trace::scene::{Instance, TraceScene};
+    let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    let probe = TraceProbe::new(&ctx.device);
+    let mut rng = Rng(0x0bad_cafe);
+    let species: Vec<Bvh> = SPECIES.iter().map(|n| Bvh::build(&species(n).0)).collect();
+    // A stand of 600 trees of the three species over 120 × 120 m, each turned,
+    // scaled and stretched as a batch's instances are.
+    let trees: Vec<Instance> = (0..600)
+        .map(|i| Instance {
+            position: rng.inside(Vec3::ZERO, Vec3::new(120.0, 120.0, 2.0)),
+            yaw: rng.unit() * std::f32::consts::TAU,
+            scale: 0.6 + rng.unit() * 0.8,
+            aspect: 0.8 + rng.unit() * 0.4,
+            species: i % 3,
+        })
+        .collect();
+    let scene = TraceScene::build(species, &trees);
+    assert_eq!(scene.instances.len(), trees.len());
+    // Rays across the stand from above its crowns and from its edges.
+    let rays: Vec<Ray> = (0..4096)
+        .map(|_| {
+            let origin = rng.inside(Vec3::new(-20.0, -20.0, 5.0), Vec3::new(140.0, 140.0, 60.0));
+            let target = rng.inside(Vec3::ZERO, Vec3::new(120.0, 120.0, 20.0));
+            Ray { origin, dir: target - origin, t_max: 1.5 }
+        })
+        .collect();
+    let gpu = probe.trace_scene(&ctx, &scene, &rays);
+    let (mut hits, mut differ, mut trees_hit) = (0, Vec::new(), std::collections::BTreeSet::new());
+    for (ray, g) in rays.iter().zip(&gpu) {
+        let c = scene.intersect(ray);
+        let same = match (c, g) {
+            (None, None) => true,
+            (Some(c), Some(g)) => {
+                c.instance == g.instance
+                    && c.hit.triangle == g.hit.triangle
+                    && (c.hit.t - g.hit.t).abs() <= 1e-4 * c.hit.t.max(1.0)
+            }
+            _ => false,
+        };
+        if let Some(c) = c {
+            hits += 1;
+            trees_hit.insert(c.instance);
+        }
+        if !same {
+            differ.push((ray, c, *g));
+        }
+    }
+    assert!(hits > 400 && trees_hit.len() > 100, "{hits} rays hit {} trees", trees_hit.len());
+    // The GPU's sin and cos may differ from the CPU's in the last bits: a ray
+    // grazing an edge may flip; no more than one in a hundred.
+    assert!(
+        differ.len() <= rays.len() / 100,
+        "{} rays differ, e.g. {:?}",
+        differ.len(),
+        &differ[..differ.len().min(3)]
+    );
 }
