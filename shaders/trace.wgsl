@@ -3,7 +3,8 @@
 // src/trace/mod.rs and src/trace/bvh.rs, the same operations in the same order
 // (a GPU may fuse multiply-adds: hits agree to rounding, tests/it/gpu_trace.rs).
 // The composing module declares `bvh_nodes: array<BvhNode>` and
-// `bvh_tris: array<TraceTriangle>` (storage, read).
+// `bvh_tris: array<TraceTriangle>` (storage, read) and the alpha test
+// `fn trace_keeps(species: u32, tri: TraceTriangle, u: f32, v: f32) -> bool`.
 
 // A node of a species' hierarchy. Must match `BvhNode` in src/trace/bvh.rs.
 struct BvhNode {
@@ -15,23 +16,28 @@ struct BvhNode {
     count: u32,
 };
 
-// A triangle: first corner, the edges from it, the mesh's index of it.
+// A triangle: first corner, the edges from it, the mesh's index of it, its
+// material and its corners' quantised texture coordinates (u | v << 16).
 // Must match `GpuTriangle` in src/trace/bvh.rs.
 struct TraceTriangle {
     v0: vec3<f32>,
     id: u32,
     e1: vec3<f32>,
-    pad0: u32,
+    material: u32,
     e2: vec3<f32>,
-    pad1: u32,
+    pad: u32,
+    uv: vec4<u32>,
 };
 
 // A ray's nearest hit: t < 0 for none. Twin: `Hit` in src/trace/mod.rs.
 struct TraceHit {
     t: f32,
+    // The mesh's index of the triangle.
     triangle: u32,
     u: f32,
     v: f32,
+    // Its place in bvh_tris.
+    index: u32,
 };
 
 // Entries of a walk's stack (src/trace/bvh.rs `STACK`; the build's depth bound keeps it enough).
@@ -87,11 +93,11 @@ fn ray_triangle(o: vec3<f32>, d: vec3<f32>, tri: TraceTriangle, t_max: f32) -> v
     return miss;
 }
 
-// The nearest hit of the ray o + t d (t < t_max) in the hierarchy whose nodes
-// start at node_base and triangles at tri_base, walked front to back.
-// Twin: `Bvh::intersect` in src/trace/bvh.rs.
-fn trace_bvh(o: vec3<f32>, d: vec3<f32>, t_max: f32, node_base: u32, tri_base: u32) -> TraceHit {
-    var hit = TraceHit(-1.0, 0u, 0.0, 0.0);
+// The nearest hit of the ray o + t d (t < t_max) that `trace_keeps` keeps, in
+// the hierarchy of `species` whose nodes start at node_base and triangles at
+// tri_base, walked front to back. Twin: `Bvh::intersect_where` in src/trace/bvh.rs.
+fn trace_bvh(o: vec3<f32>, d: vec3<f32>, t_max: f32, species: u32, node_base: u32, tri_base: u32) -> TraceHit {
+    var hit = TraceHit(-1.0, 0u, 0.0, 0.0, 0u);
     let inv = ray_inv_dir(d);
     let root = bvh_nodes[node_base];
     let enter = ray_box(o, inv, root.min, root.max, t_max);
@@ -117,9 +123,9 @@ fn trace_bvh(o: vec3<f32>, d: vec3<f32>, t_max: f32, node_base: u32, tri_base: u
             for (var i = node.first; i < node.first + node.count; i++) {
                 let tri = bvh_tris[tri_base + i];
                 let h = ray_triangle(o, d, tri, closest);
-                if h.x > 0.0 {
+                if h.x > 0.0 && trace_keeps(species, tri, h.y, h.z) {
                     closest = h.x;
-                    hit = TraceHit(h.x, tri.id, h.y, h.z);
+                    hit = TraceHit(h.x, tri.id, h.y, h.z, tri_base + i);
                 }
             }
             continue;

@@ -8,6 +8,11 @@
 @group(0) @binding(2) var<storage, read> probe_rays: array<ProbeRay>;
 @group(0) @binding(3) var<storage, read_write> probe_hits: array<TraceHit>;
 
+// The probe tests the walk alone: every hit kept.
+fn trace_keeps(species: u32, tri: TraceTriangle, u: f32, v: f32) -> bool {
+    return true;
+}
+
 @compute @workgroup_size(64)
 fn trace_probe(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -15,5 +20,5 @@ fn trace_probe(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let r = probe_rays[i];
-    probe_hits[i] = trace_bvh(r.origin, r.dir, r.t_max, 0u, 0u);
+    probe_hits[i] = trace_bvh(r.origin, r.dir, r.t_max, 0u, 0u, 0u);
 }

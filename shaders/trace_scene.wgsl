@@ -1,8 +1,20 @@
 // The tracer's two levels (Dietrich et al. 2005, §4.1): the top level over the
 // trees walked front to back, each tree entered carried into its species'
 // model space and walked there (trace_bvh). Twin: src/trace/scene.rs. Needs
-// trace.wgsl; the composing module declares `trace_top: array<BvhNode>`,
-// `trace_instances: array<TraceInstance>` and `trace_species: array<TraceSpecies>`.
+// trace.wgsl; the composing module declares (beside trace.wgsl's `bvh_nodes`,
+// which hold the species' nodes and then the top level's, and `bvh_tris`)
+// `trace_params: TraceParams` (uniform), `trace_instances: array<TraceInstance>`,
+// `trace_species: array<TraceSpecies>`, `trace_materials: array<TraceMaterial>`
+// and `trace_texels: array<u32>`.
+
+// Must match `GpuTraceParams` in src/render/trace.rs.
+struct TraceParams {
+    // Where the top level starts in bvh_nodes.
+    top_base: u32,
+    instance_count: u32,
+    pad0: u32,
+    pad1: u32,
+};
 
 // A tree. Must match `GpuInstance` in src/trace/scene.rs.
 struct TraceInstance {
@@ -15,17 +27,80 @@ struct TraceInstance {
     id: u32,
 };
 
-// Where a species' hierarchy starts. Must match `GpuSpeciesBvh` in src/trace/scene.rs.
+// Where a species' hierarchy and materials start, and how its texture
+// coordinates dequantise. Must match `GpuSpeciesBvh` in src/trace/scene.rs.
 struct TraceSpecies {
     node_base: u32,
     tri_base: u32,
     node_count: u32,
-    pad: u32,
+    material_base: u32,
+    uv_min: vec2<f32>,
+    uv_extent: vec2<f32>,
 };
 
-// The nearest hit in the scene: the instance's id and the hit on its mesh (t < 0: none).
+// Must match `GpuTraceMaterial` in src/trace/scene.rs.
+struct TraceMaterial {
+    base_color: vec4<f32>,
+    alpha_cutoff: f32,
+    // First texel of its full-resolution layer in trace_texels, or 0xffffffff.
+    texel_base: u32,
+    size: u32,
+    // 0 leaf, 1 branch.
+    kind: u32,
+};
+
+const NO_TEXTURE: u32 = 0xffffffffu;
+
+// Alpha of a texture layer at uv: bilinear between the four nearest texel
+// centres, repeating. Twin: `texel_alpha` in src/trace/scene.rs.
+fn texel_alpha(base: u32, size: u32, uv: vec2<f32>) -> f32 {
+    let n = i32(size);
+    let x = uv.x * f32(size) - 0.5;
+    let y = uv.y * f32(size) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let ix = i32(x0);
+    let iy = i32(y0);
+    var a: array<f32, 4>;
+    for (var k = 0; k < 4; k++) {
+        let tx = (((ix + (k & 1)) % n) + n) % n;
+        let ty = (((iy + (k >> 1u)) % n) + n) % n;
+        a[k] = f32(trace_texels[base + u32(ty * n + tx)] >> 24u) / 255.0;
+    }
+    let top = a[0] + (a[1] - a[0]) * fx;
+    let bottom = a[2] + (a[3] - a[2]) * fx;
+    return top + (bottom - top) * fy;
+}
+
+// A hit's texture coordinate on `tri` at barycentric (u, v).
+// Twin: `TraceSpecies::uv` in src/trace/scene.rs.
+fn trace_uv(sp: TraceSpecies, tri: TraceTriangle, u: f32, v: f32) -> vec2<f32> {
+    let a = sp.uv_min + vec2<f32>(f32(tri.uv.x & 0xffffu), f32(tri.uv.x >> 16u)) / 65535.0 * sp.uv_extent;
+    let b = sp.uv_min + vec2<f32>(f32(tri.uv.y & 0xffffu), f32(tri.uv.y >> 16u)) / 65535.0 * sp.uv_extent;
+    let c = sp.uv_min + vec2<f32>(f32(tri.uv.z & 0xffffu), f32(tri.uv.z >> 16u)) / 65535.0 * sp.uv_extent;
+    let w = 1.0 - u - v;
+    return w * a + u * b + v * c;
+}
+
+// The alpha test of leaf cards: the material's alpha (x its texture's) at
+// least its cutoff. Twin: `TraceSpecies::keeps` in src/trace/scene.rs.
+fn trace_keeps(species: u32, tri: TraceTriangle, u: f32, v: f32) -> bool {
+    let sp = trace_species[species];
+    let m = trace_materials[sp.material_base + tri.material];
+    var alpha = m.base_color.a;
+    if m.texel_base != NO_TEXTURE && m.size > 0u {
+        alpha *= texel_alpha(m.texel_base, m.size, trace_uv(sp, tri, u, v));
+    }
+    return alpha >= m.alpha_cutoff;
+}
+
+// The nearest hit in the scene: the instance's id, its place in
+// trace_instances and the hit on its mesh (t < 0: none).
 struct SceneHit {
     instance: u32,
+    slot: u32,
     hit: TraceHit,
 };
 
@@ -42,12 +117,13 @@ fn to_model(inst: TraceInstance, v: vec3<f32>, translate: f32) -> vec3<f32> {
 // The nearest hit of the ray o + t d (t < t_max) among the scene's trees.
 // Twin: `TraceScene::intersect` in src/trace/scene.rs.
 fn trace_scene(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> SceneHit {
-    var best = SceneHit(0u, TraceHit(-1.0, 0u, 0.0, 0.0));
-    if arrayLength(&trace_instances) == 0u {
+    var best = SceneHit(0u, 0u, TraceHit(-1.0, 0u, 0.0, 0.0, 0u));
+    if trace_params.instance_count == 0u {
         return best;
     }
+    let top = trace_params.top_base;
     let inv = ray_inv_dir(d);
-    let root = trace_top[0];
+    let root = bvh_nodes[top];
     let enter = ray_box(o, inv, root.min, root.max, t_max);
     if enter < 0.0 {
         return best;
@@ -66,7 +142,7 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> SceneHit {
         if stack_t[sp] >= closest {
             continue;
         }
-        let node = trace_top[stack_node[sp]];
+        let node = bvh_nodes[top + stack_node[sp]];
         if node.count > 0u {
             for (var i = node.first; i < node.first + node.count; i++) {
                 let inst = trace_instances[i];
@@ -74,18 +150,18 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> SceneHit {
                 if sp_.node_count == 0u {
                     continue;
                 }
-                let h = trace_bvh(to_model(inst, o, 1.0), to_model(inst, d, 0.0), closest, sp_.node_base, sp_.tri_base);
+                let h = trace_bvh(to_model(inst, o, 1.0), to_model(inst, d, 0.0), closest, inst.species, sp_.node_base, sp_.tri_base);
                 if h.t > 0.0 {
                     closest = h.t;
-                    best = SceneHit(inst.id, h);
+                    best = SceneHit(inst.id, i, h);
                 }
             }
             continue;
         }
         let a = node.first;
         let b = node.first + 1u;
-        let na = trace_top[a];
-        let nb = trace_top[b];
+        let na = bvh_nodes[top + a];
+        let nb = bvh_nodes[top + b];
         let ta = ray_box(o, inv, na.min, na.max, closest);
         let tb = ray_box(o, inv, nb.min, nb.max, closest);
         if ta >= 0.0 && tb >= 0.0 && sp + 2u <= TRACE_STACK {

@@ -183,6 +183,32 @@ pub fn multiscale_rmse_pyramid(a: &[u8], b: &[u8], width: u32, height: u32) -> f
     sum / f64::from(levels)
 }
 
+/// Whether an RGBA8 pixel is foliage: its green stands out over red and blue
+/// by 8 levels or 12 % of the green, whichever is less (shaded foliage is
+/// dark, and the trees' own occlusion darkens it further; sky, ground and
+/// haze are not green).
+#[must_use]
+pub fn is_foliage(p: &[u8]) -> bool {
+    let margin = (f32::from(p[1]) * 0.12).clamp(3.0, 8.0);
+    f32::from(p[1]) > f32::from(p[0]) + margin && f32::from(p[1]) > f32::from(p[2]) + margin
+}
+
+/// The agreement of two images' foliage masks ([`is_foliage`], RGBA8 of the
+/// same size): intersection over union, and each image's foliage pixels.
+/// Two images without foliage agree (1).
+#[must_use]
+pub fn foliage_iou(a: &[u8], b: &[u8]) -> (f64, usize, usize) {
+    let (mut both, mut either, mut na, mut nb) = (0usize, 0usize, 0usize, 0usize);
+    for (pa, pb) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        let (fa, fb) = (is_foliage(pa), is_foliage(pb));
+        both += usize::from(fa && fb);
+        either += usize::from(fa || fb);
+        na += usize::from(fa);
+        nb += usize::from(fb);
+    }
+    (if either == 0 { 1.0 } else { both as f64 / either as f64 }, na, nb)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

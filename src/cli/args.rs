@@ -203,6 +203,11 @@ Examples:
         /// of a frame the frame-time governor drew smaller.
         #[arg(long)]
         stretch: bool,
+        /// Print the agreement of the two images' foliage masks instead
+        /// (green-dominant pixels): intersection over union, and each one's
+        /// foliage pixels — whether two renderers see the same forest.
+        #[arg(long)]
+        foliage: bool,
     },
     /// Serve the browser viewer at / with DIR's scene as its default scene (/scene/). DIR may
     /// also be a 3D Tiles export (`sylva-bake export-3dtiles`): CesiumJS shows it at /cesium.html.
@@ -270,6 +275,15 @@ pub(crate) struct ViewArgs {
     /// where the GPU samples it, else the plain pack).
     #[arg(long, value_enum, default_value_t = TexturesArg::Auto)]
     pub(crate) textures: TexturesArg,
+}
+
+/// `--light`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum LightArg {
+    /// Sun disk, sky, bounces, transmitting leaves.
+    Physical,
+    /// The raster's simple sun and sky light.
+    Raster,
 }
 
 /// `--textures`.
@@ -429,6 +443,29 @@ pub(crate) struct RenderArgs {
     /// depth of each tree's quad (hidden crowns then cost nothing).
     #[arg(long)]
     pub(crate) moving_impostors: bool,
+    /// Trace the view instead of drawing it (issue 48): every tree within
+    /// --reach at its full mesh (leaf cards alpha-tested at full texture
+    /// resolution) through a two-level BVH on the GPU, the sun as a disk of
+    /// its true size (soft shadows), the sky's light, leaves that transmit,
+    /// --bounces bounces, --spp samples per pixel; the ground a plane at the
+    /// lowest tree's base (none with --no-terrain). A scene directory only.
+    #[arg(long, conflicts_with_all = ["pack", "converge"])]
+    pub(crate) path_trace: bool,
+    /// --path-trace: samples per pixel.
+    #[arg(long, default_value_t = 64, requires = "path_trace", value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    pub(crate) spp: u32,
+    /// --path-trace: bounces after the first hit.
+    #[arg(long, default_value_t = 2, requires = "path_trace", value_parser = clap::value_parser!(u32).range(0..=16))]
+    pub(crate) bounces: u32,
+    /// --path-trace: the light — physical (sun disk, sky, bounces, leaves
+    /// that transmit) or raster (the raster's simple sun and sky light, no
+    /// bounce: the traced geometry under the raster's light).
+    #[arg(long, value_enum, default_value = "physical", requires = "path_trace")]
+    pub(crate) light: LightArg,
+    /// --path-trace: trees within this many metres of the eye (horizontally)
+    /// are traced (the top level for a view; memory grows with it).
+    #[arg(long, default_value_t = 2000.0, requires = "path_trace")]
+    pub(crate) reach: f64,
     /// Write the converged image of progressive refinement, as the viewer
     /// shows it once the camera rests: sub-pixel jittered frames accumulate
     /// into an anti-aliased image while the level of detail rises step by step

@@ -21,7 +21,7 @@ mod cli {
     use super::render::*;
 
     /// `sylva compare`: the multi-scale RMSE of two PNGs.
-    fn compare(a: &PathBuf, b: &PathBuf, stretch: bool) -> Result<()> {
+    fn compare(a: &PathBuf, b: &PathBuf, stretch: bool, foliage: bool) -> Result<()> {
         let load =
             |p: &PathBuf| image::open(p).with_context(|| format!("cannot read {}", p.display())).map(|i| i.to_rgba8());
         let (ia, mut ib) = (load(a)?, load(b)?);
@@ -39,6 +39,11 @@ mod cli {
             );
         }
         let (w, h) = ia.dimensions();
+        if foliage {
+            let (iou, na, nb) = sylva::metrics::foliage_iou(ia.as_raw(), ib.as_raw());
+            println!("foliage IoU {iou:.4} ({na} and {nb} foliage pixels of {})", w * h);
+            return Ok(());
+        }
         println!("{:.6}", sylva::metrics::multiscale_rmse(ia.as_raw(), ib.as_raw(), w, h));
         Ok(())
     }
@@ -133,7 +138,7 @@ mod cli {
                 bench(&scene, &path, methods, &size, frames, &out, save_frames)
             }
             Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
-            Command::Compare { a, b, stretch } => compare(&a, &b, stretch),
+            Command::Compare { a, b, stretch, foliage } => compare(&a, &b, stretch, foliage),
             Command::Query { scene, filter, limit, date } => {
                 let filter: serde_json::Value =
                     serde_json::from_str(&filter).map_err(|e| anyhow::anyhow!("--filter is not JSON: {e}"))?;

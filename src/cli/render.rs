@@ -31,6 +31,7 @@ pub(crate) fn render_scene(
     refine: RefineConfig,
     (style, select): (Option<&str>, &[String]),
     date: Option<&str>,
+    path: Option<PathTraceArgs>,
 ) -> Result<()> {
     let mut off = OffscreenScene::open(scene, w, h, PoolConfig::default())?;
     off.settings = settings;
@@ -75,6 +76,10 @@ pub(crate) fn render_scene(
         off.select(select.iter().map(|s| sylva::scene::style::TreeId::Text(s.clone())));
     }
     let cam = scene_camera(&mut off, &manifest, view, camera, timeout)?;
+    if let Some(path) = path {
+        let suns = sun_lighting(sun, &manifest, off.settings.lighting)?;
+        return path_trace(&off.ctx, scene, out, (w, h), &cam, &suns, &path, stats_path);
+    }
     let t = std::time::Instant::now();
     events.extend(off.load_view(&cam, timeout));
     let load_s = t.elapsed().as_secs_f64();
@@ -472,6 +477,11 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         variant,
         season,
         date,
+        path_trace,
+        spp,
+        bounces,
+        light,
+        reach,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, textures, .. } = frame;
@@ -538,6 +548,13 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             RefineConfig { enabled: converge, jitter_frames: converge_frames, levels: converge_levels },
             (style.as_deref(), &select),
             date.as_deref(),
+            path_trace.then_some(PathTraceArgs {
+                spp,
+                bounces,
+                simple: light == LightArg::Raster,
+                reach_m: reach,
+                no_ground: no_terrain,
+            }),
         );
     }
     let pack = pack.expect("clap requires --scene or --pack");
@@ -609,5 +626,116 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     image::save_buffer(&out, &rgba, w, h, image::ColorType::Rgba8)
         .with_context(|| format!("cannot write {}", out.display()))?;
     eprintln!("wrote {} ({w}x{h}, {} on {})", out.display(), decoded.meta.name, gpu.adapter_summary());
+    Ok(())
+}
+
+/// `sylva render --path-trace`'s options.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PathTraceArgs {
+    pub(crate) spp: u32,
+    pub(crate) bounces: u32,
+    pub(crate) simple: bool,
+    pub(crate) reach_m: f64,
+    /// `--no-terrain`: no ground plane either.
+    pub(crate) no_ground: bool,
+}
+
+/// `sylva render --path-trace`: the view traced at full detail (issue 48).
+#[allow(clippy::too_many_arguments)]
+fn path_trace(
+    ctx: &sylva::render::GpuContext,
+    scene: &str,
+    out: &std::path::Path,
+    (w, h): (u32, u32),
+    cam: &sylva::camera::Camera,
+    suns: &[(String, sylva::render::Lighting)],
+    args: &PathTraceArgs,
+    stats_path: Option<&PathBuf>,
+) -> Result<()> {
+    use sylva::render::path_trace::{to_srgb8, PathOptions, PathTracer, PathView};
+    let dir = std::path::Path::new(scene);
+    let dir = if dir.is_file() { dir.parent().unwrap_or(dir) } else { dir };
+    if !dir.join("scene.json").is_file() {
+        bail!("--path-trace reads a scene directory (or its scene.json), not {scene}");
+    }
+    let t = std::time::Instant::now();
+    let (traced, report) =
+        sylva::trace::load::load_dir(dir, cam.eye_m, args.reach_m).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let load_s = t.elapsed().as_secs_f64();
+    eprintln!(
+        "tracing {} of {} trees within {} m ({:.1} M instanced triangles; species {}), {:.1} MB on the GPU, loaded in {:.1} s",
+        report.trees,
+        report.trees_in_scene,
+        args.reach_m,
+        report.instanced_triangles as f64 / 1e6,
+        report.species_triangles.iter().map(|(n, t)| format!("{n} {t}")).collect::<Vec<_>>().join(", "),
+        report.bytes as f64 / 1e6,
+        load_s
+    );
+    let tracer = PathTracer::new(&ctx.device);
+    let several = suns.len() > 1;
+    for (label, lighting) in suns {
+        // The sky as the raster's background draws it (shaders/sky.wgsl), as
+        // bright as the raster's sky light: a white surface under it alone
+        // reflects about the raster's ambient.
+        let scale = (lighting.ambient.dot(glam::Vec3::new(0.2126, 0.7152, 0.0722)) / 0.4573).clamp(0.15, 1.5);
+        let view = PathView {
+            eye: cam.eye_m.as_vec3(),
+            forward: cam.forward().as_vec3(),
+            fov_y: cam.fov_y_rad,
+            sun_dir: lighting.sun_dir,
+            sun_color: lighting.sun_color,
+            sky_zenith: glam::Vec3::new(0.23, 0.42, 0.72) * scale,
+            sky_horizon: glam::Vec3::new(0.62, 0.74, 0.86) * scale,
+        };
+        let options = PathOptions {
+            spp: args.spp,
+            bounces: args.bounces,
+            simple: args.simple,
+            ground_z: (!args.no_ground).then_some(report.ground_z),
+            ..PathOptions::default()
+        };
+        let t = std::time::Instant::now();
+        let mut last = std::time::Instant::now();
+        let image = tracer.render(ctx, &traced, &view, (w, h), &options, &mut |done| {
+            if last.elapsed().as_secs_f64() > 5.0 {
+                eprintln!("  {done} of {} samples per pixel ({:.0} s)", args.spp, t.elapsed().as_secs_f64());
+                last = std::time::Instant::now();
+            }
+        });
+        let trace_s = t.elapsed().as_secs_f64();
+        let path = if several { suffixed(out, label) } else { out.to_path_buf() };
+        image::save_buffer(&path, &to_srgb8(&image), w, h, image::ColorType::Rgba8)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let paths = u64::from(w) * u64::from(h) * u64::from(args.spp);
+        eprintln!(
+            "wrote {} ({w}x{h}, {} spp, {} bounces, {} light) in {:.1} s: {:.2} M paths/s on {}",
+            path.display(),
+            args.spp,
+            args.bounces,
+            if args.simple { "raster" } else { "physical" },
+            trace_s,
+            paths as f64 / trace_s.max(1e-9) / 1e6,
+            ctx.adapter_summary()
+        );
+        if let Some(p) = stats_path {
+            let stats = serde_json::json!({
+                "renderer": "path-trace",
+                "trees": report.trees,
+                "trees_in_scene": report.trees_in_scene,
+                "instanced_triangles": report.instanced_triangles,
+                "gpu_bytes": report.bytes,
+                "spp": args.spp,
+                "bounces": args.bounces,
+                "light": if args.simple { "raster" } else { "physical" },
+                "load_s": load_s,
+                "trace_s": trace_s,
+                "paths_per_s": paths as f64 / trace_s.max(1e-9),
+                "adapter": ctx.adapter_summary(),
+            });
+            std::fs::write(p, serde_json::to_string_pretty(&stats)?)
+                .with_context(|| format!("cannot write {}", p.display()))?;
+        }
+    }
     Ok(())
 }

@@ -51,6 +51,7 @@ static TRACE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_pr
 static TRACE_PROBE_RAY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_probe_ray.wgsl"));
 static TRACE_SCENE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_scene.wgsl"));
 static TRACE_SCENE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_scene_probe.wgsl"));
+static PATH_TRACE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/path_trace.wgsl"));
 
 /// The modules every tree pass (mesh, billboard, impostor, cluster) reads,
 /// before its own.
@@ -99,6 +100,9 @@ pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
 /// The tracer's probe: rays through one species' hierarchy (`render/trace.rs`).
 pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_PROBE_WGSL]]);
 
+/// The path tracer (`render/path_trace.rs`).
+pub static PATH_TRACE: Shader = Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, PATH_TRACE_WGSL]]);
+
 /// The tracer's scene probe: rays through both levels (`render/trace.rs`).
 pub static TRACE_SCENE_PROBE: Shader =
     Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_SCENE_PROBE_WGSL]]);
@@ -117,4 +121,5 @@ pub static ALL: &[(&str, Shader)] = &[
     ("accumulate", ACCUMULATE),
     ("trace_probe", TRACE_PROBE),
     ("trace_scene_probe", TRACE_SCENE_PROBE),
+    ("path_trace", PATH_TRACE),
 ];

@@ -40,13 +40,15 @@ pub struct GpuHit {
     pub u: f32,
     /// Barycentric weight of the third corner.
     pub v: f32,
+    /// The triangle's place in the concatenated triangles.
+    pub index: u32,
 }
 
 impl GpuHit {
     /// The hit, or `None` for a miss.
     #[must_use]
     pub fn hit(&self) -> Option<Hit> {
-        (self.t >= 0.0).then_some(Hit { t: self.t, triangle: self.triangle, u: self.u, v: self.v })
+        (self.t >= 0.0).then_some(Hit { t: self.t, triangle: self.triangle, u: self.u, v: self.v, index: self.index })
     }
 }
 
@@ -57,8 +59,24 @@ impl GpuHit {
 pub struct GpuSceneHit {
     /// The instance's id (its index in the list the scene was built from).
     pub instance: u32,
+    /// Its place in the top level's order (`TraceScene::instances`).
+    pub slot: u32,
     /// The hit on its species' mesh.
     pub hit: GpuHit,
+}
+
+/// The scene probe's uniform. Must match `TraceParams` in `shaders/trace_scene.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuTraceParams {
+    /// Where the top level starts in the nodes.
+    pub top_base: u32,
+    /// Instances in the top level.
+    pub instance_count: u32,
+    /// Padding (0).
+    pub pad0: u32,
+    /// Padding (0).
+    pub pad1: u32,
 }
 
 /// Rays per dispatch (64 per workgroup, within WebGPU's 65,535 workgroups).
@@ -76,14 +94,32 @@ impl TraceProbe {
     /// Creates the pipelines.
     #[must_use]
     pub fn new(device: &wgpu::Device) -> Self {
-        let make = |name: &str, shader: &shaders::Shader, buffers: u32| {
+        let make = |name: &str, shader: &shaders::Shader, uniform: bool, buffers: u32| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(name),
                 source: wgpu::ShaderSource::Wgsl(shader.source().into()),
             });
             let c = wgpu::ShaderStages::COMPUTE;
-            // Every buffer read but the last, the hits.
-            let entries: Vec<_> = (0..buffers).map(|b| storage_entry(b, c, b + 1 < buffers)).collect();
+            // A uniform first where asked for, then storage buffers, every one
+            // read but the last (the hits).
+            let first = u32::from(uniform);
+            let mut entries: Vec<_> =
+                (first..first + buffers).map(|b| storage_entry(b, c, b + 1 < first + buffers)).collect();
+            if uniform {
+                entries.insert(
+                    0,
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 0,
+                        visibility: c,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    },
+                );
+            }
             let layout = device
                 .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(name), entries: &entries });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -101,8 +137,8 @@ impl TraceProbe {
             });
             (layout, pipeline)
         };
-        let (layout, pipeline) = make("trace_probe", &shaders::TRACE_PROBE, 4);
-        let (scene_layout, scene_pipeline) = make("trace_scene_probe", &shaders::TRACE_SCENE_PROBE, 7);
+        let (layout, pipeline) = make("trace_probe", &shaders::TRACE_PROBE, false, 4);
+        let (scene_layout, scene_pipeline) = make("trace_scene_probe", &shaders::TRACE_SCENE_PROBE, true, 8);
         Self { layout, pipeline, scene_layout, scene_pipeline }
     }
 
@@ -123,20 +159,31 @@ impl TraceProbe {
     /// hits (one per ray, in order).
     #[must_use]
     pub fn trace_scene(&self, ctx: &GpuContext, scene: &TraceScene, rays: &[Ray]) -> Vec<Option<SceneHit>> {
-        let (nodes, tris, table) = scene.species_arrays();
-        if scene.instances.is_empty() || nodes.is_empty() || rays.is_empty() {
+        let a = scene.arrays();
+        if scene.instances.is_empty() || a.triangles.is_empty() || rays.is_empty() {
             return vec![None; rays.len()];
         }
+        let params =
+            GpuTraceParams { top_base: a.top_base, instance_count: scene.instances.len() as u32, pad0: 0, pad1: 0 };
+        let params = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("trace params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        // (A binding may not be empty: a scene without textures binds one texel.)
+        let texels = if a.texels.is_empty() { vec![0] } else { a.texels };
         let buffers = [
-            storage(ctx, "bvh nodes", bytemuck::cast_slice(&nodes)),
-            storage(ctx, "bvh triangles", bytemuck::cast_slice(&tris)),
-            storage(ctx, "trace species", bytemuck::cast_slice(&table)),
-            storage(ctx, "trace top", bytemuck::cast_slice(&scene.top)),
+            params,
+            storage(ctx, "bvh nodes", bytemuck::cast_slice(&a.nodes)),
+            storage(ctx, "bvh triangles", bytemuck::cast_slice(&a.triangles)),
+            storage(ctx, "trace species", bytemuck::cast_slice(&a.species)),
             storage(ctx, "trace instances", bytemuck::cast_slice(&scene.instances)),
+            storage(ctx, "trace materials", bytemuck::cast_slice(&a.materials)),
+            storage(ctx, "trace texels", bytemuck::cast_slice(&texels)),
         ];
         let inputs: Vec<&wgpu::Buffer> = buffers.iter().collect();
         let hits: Vec<GpuSceneHit> = self.dispatch(ctx, &self.scene_layout, &self.scene_pipeline, &inputs, rays);
-        hits.iter().map(|h| h.hit.hit().map(|hit| SceneHit { instance: h.instance, hit })).collect()
+        hits.iter().map(|h| h.hit.hit().map(|hit| SceneHit { instance: h.instance, slot: h.slot, hit })).collect()
     }
 
     /// One probe's dispatches over `rays` (in chunks WebGPU's workgroup

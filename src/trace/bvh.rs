@@ -44,7 +44,9 @@ pub struct BvhNode {
 }
 
 /// A triangle as the GPU reads it ([`Triangle`]'s corner and edges), with the
-/// mesh's own index of it. Must match `TraceTriangle` in `shaders/trace.wgsl`.
+/// mesh's own index of it, its material and its corners' texture
+/// coordinates (for the alpha test of leaf cards). 64 bytes. Must match
+/// `TraceTriangle` in `shaders/trace.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuTriangle {
@@ -54,12 +56,25 @@ pub struct GpuTriangle {
     pub id: u32,
     /// Second corner − first.
     pub e1: [f32; 3],
-    /// Padding (0).
-    pub pad0: u32,
+    /// The species' material index.
+    pub material: u32,
     /// Third corner − first.
     pub e2: [f32; 3],
     /// Padding (0).
-    pub pad1: u32,
+    pub pad: u32,
+    /// The corners' texture coordinates as the vertices quantise them (u, v
+    /// as u16 in 1/65535 steps of the level's uv range; u low), then 0.
+    pub uv: [u32; 4],
+}
+
+/// What a triangle carries besides its corners: its material and its
+/// corners' quantised texture coordinates (see [`GpuTriangle::uv`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TriangleSurface {
+    /// The species' material index.
+    pub material: u32,
+    /// Per corner, u | v << 16.
+    pub uv: [u32; 3],
 }
 
 impl GpuTriangle {
@@ -109,10 +124,18 @@ fn triangle_bounds(t: &Triangle) -> Bounds {
 }
 
 impl Bvh {
-    /// Builds the hierarchy over `triangles` (their order gives their ids).
-    /// Deterministic: the same triangles give the same arrays.
+    /// Builds the hierarchy over `triangles` (their order gives their ids),
+    /// all of material 0 without texture coordinates. Deterministic: the same
+    /// triangles give the same arrays.
     #[must_use]
     pub fn build(triangles: &[Triangle]) -> Self {
+        Self::build_with(triangles, &[])
+    }
+
+    /// Builds the hierarchy over `triangles` with each one's `surfaces`
+    /// entry (material, texture coordinates; missing entries: the default).
+    #[must_use]
+    pub fn build_with(triangles: &[Triangle], surfaces: &[TriangleSurface]) -> Self {
         let boxes: Vec<(Vec3, Vec3)> = triangles
             .iter()
             .map(|t| {
@@ -125,7 +148,16 @@ impl Bvh {
             .iter()
             .map(|&i| {
                 let t = &triangles[i as usize];
-                GpuTriangle { v0: t.v0.into(), id: i, e1: t.e1.into(), pad0: 0, e2: t.e2.into(), pad1: 0 }
+                let s = surfaces.get(i as usize).copied().unwrap_or_default();
+                GpuTriangle {
+                    v0: t.v0.into(),
+                    id: i,
+                    e1: t.e1.into(),
+                    material: s.material,
+                    e2: t.e2.into(),
+                    pad: 0,
+                    uv: [s.uv[0], s.uv[1], s.uv[2], 0],
+                }
             })
             .collect();
         Self { nodes, triangles }
@@ -141,17 +173,26 @@ impl Bvh {
     }
 
     /// The nearest hit of `ray`, walking the hierarchy front to back.
-    /// Twin: `trace_bvh` in `shaders/trace.wgsl`.
     #[must_use]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.intersect_where(ray, |_, _, _| true)
+    }
+
+    /// The nearest hit of `ray` that `keeps` (a triangle, the hit's
+    /// barycentric u and v) keeps: the alpha test of leaf cards.
+    /// Twin: `trace_bvh` in `shaders/trace.wgsl` (with `trace_keeps`).
+    #[must_use]
+    pub fn intersect_where(&self, ray: &Ray, keeps: impl Fn(&GpuTriangle, f32, f32) -> bool) -> Option<Hit> {
         let mut best = None;
         walk(&self.nodes, ray, |first, count, closest| {
             let mut nearer = None;
-            for t in &self.triangles[first as usize..(first + count) as usize] {
+            for (i, t) in self.triangles[first as usize..(first + count) as usize].iter().enumerate() {
                 let limit = nearer.unwrap_or(closest);
-                if let Some((d, u, v)) = ray_triangle(ray.origin, ray.dir, &t.triangle(), limit) {
+                if let Some((d, u, v)) =
+                    ray_triangle(ray.origin, ray.dir, &t.triangle(), limit).filter(|h| keeps(t, h.1, h.2))
+                {
                     nearer = Some(d);
-                    best = Some(Hit { t: d, triangle: t.id, u, v });
+                    best = Some(Hit { t: d, triangle: t.id, u, v, index: first + i as u32 });
                 }
             }
             nearer
@@ -304,6 +345,25 @@ pub fn mesh_triangles(level: &MeshLevelMeta, vertices: &[MeshVertex], indices: &
     indices
         .chunks_exact(3)
         .map_while(|c| Some(Triangle::new(position(c[0])?, position(c[1])?, position(c[2])?)))
+        .collect()
+}
+
+/// Each triangle's material (from the level's draw ranges) and its corners'
+/// quantised texture coordinates, in the order of [`mesh_triangles`].
+#[must_use]
+pub fn mesh_surfaces(level: &MeshLevelMeta, vertices: &[MeshVertex], indices: &[u32]) -> Vec<TriangleSurface> {
+    let uv = |i: u32| vertices.get(i as usize).map_or(0, |v| u32::from(v.uv[0]) | (u32::from(v.uv[1]) << 16));
+    let material_of = |first_index: usize| {
+        level
+            .draws
+            .iter()
+            .find(|d| (d.first_index as usize..(d.first_index + d.index_count) as usize).contains(&first_index))
+            .map_or(0, |d| d.material)
+    };
+    indices
+        .chunks_exact(3)
+        .enumerate()
+        .map(|(t, c)| TriangleSurface { material: material_of(t * 3), uv: [uv(c[0]), uv(c[1]), uv(c[2])] })
         .collect()
 }
 

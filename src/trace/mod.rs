@@ -10,6 +10,9 @@
 //! the same random rays with both and compares the hits.
 
 pub mod bvh;
+/// (Native: it reads a scene directory.)
+#[cfg(not(target_arch = "wasm32"))]
+pub mod load;
 pub mod scene;
 
 use glam::Vec3;
@@ -38,6 +41,9 @@ pub struct Hit {
     pub u: f32,
     /// See `u`.
     pub v: f32,
+    /// Where the triangle is in its hierarchy's leaf order (brute force: its
+    /// index); on the GPU, in the concatenated triangles of every species.
+    pub index: u32,
 }
 
 /// `1 / dir` per axis for the slab test, with components nearer zero than
@@ -131,7 +137,7 @@ pub fn brute_force(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
     for (i, tri) in triangles.iter().enumerate() {
         let limit = best.map_or(ray.t_max, |h| h.t);
         if let Some((t, u, v)) = ray_triangle(ray.origin, ray.dir, tri, limit) {
-            best = Some(Hit { t, triangle: i as u32, u, v });
+            best = Some(Hit { t, triangle: i as u32, u, v, index: i as u32 });
         }
     }
     best

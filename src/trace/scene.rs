@@ -11,8 +11,9 @@
 
 use glam::Vec3;
 
-use super::bvh::{build_nodes, walk, Bvh, BvhNode};
+use super::bvh::{build_nodes, mesh_surfaces, mesh_triangles, walk, Bvh, BvhNode, GpuTriangle};
 use super::{Hit, Ray};
+use crate::format::pack::{kind, Pack};
 
 /// A tree as the tracer places it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,10 +48,11 @@ pub struct GpuInstance {
     pub id: u32,
 }
 
-/// Where a species' hierarchy starts in the concatenated arrays. Must match
-/// `TraceSpecies` in `shaders/trace.wgsl`.
+/// Where a species' hierarchy and materials start in the concatenated
+/// arrays, and how its texture coordinates dequantise. Must match
+/// `TraceSpecies` in `shaders/trace_scene.wgsl`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuSpeciesBvh {
     /// First node.
     pub node_base: u32,
@@ -58,8 +60,164 @@ pub struct GpuSpeciesBvh {
     pub tri_base: u32,
     /// Nodes (0: a species without triangles; its trees are never hit).
     pub node_count: u32,
-    /// Padding (0).
-    pub pad: u32,
+    /// First material.
+    pub material_base: u32,
+    /// Texture coordinates: `uv_min + q / 65535 · uv_extent` (as `mesh.wgsl`).
+    pub uv_min: [f32; 2],
+    /// See `uv_min`.
+    pub uv_extent: [f32; 2],
+}
+
+/// A material as the tracer reads it. Must match `TraceMaterial` in
+/// `shaders/trace_scene.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuTraceMaterial {
+    /// Linear RGBA factor (× the texture).
+    pub base_color: [f32; 4],
+    /// A hit whose alpha is below this is passed through (leaf cards).
+    pub alpha_cutoff: f32,
+    /// First texel of its texture's full-resolution layer in the texel
+    /// array (RGBA8, one u32 each, rows of `size`), or `NO_TEXTURE`.
+    pub texel_base: u32,
+    /// The texture's side in texels (0 untextured).
+    pub size: u32,
+    /// 0 leaf, 1 branch (`MaterialKind`).
+    pub kind: u32,
+}
+
+/// `GpuTraceMaterial::texel_base` of an untextured material.
+pub const NO_TEXTURE: u32 = u32::MAX;
+
+/// One species as the tracer holds it: its hierarchy in model space, its
+/// materials and their textures' full-resolution texels.
+#[derive(Debug, Clone, Default)]
+pub struct TraceSpecies {
+    /// The hierarchy over the full mesh.
+    pub bvh: Bvh,
+    /// Materials (`texel_base` into `texels`).
+    pub materials: Vec<GpuTraceMaterial>,
+    /// The material textures' mip 0, every layer, RGBA8 as u32 (r low).
+    pub texels: Vec<u32>,
+    /// Texture coordinates' dequantisation: minimum.
+    pub uv_min: [f32; 2],
+    /// Texture coordinates' dequantisation: extent.
+    pub uv_extent: [f32; 2],
+}
+
+impl TraceSpecies {
+    /// A species drawn by `bvh` alone: one opaque untextured material.
+    #[must_use]
+    pub fn opaque(bvh: Bvh) -> Self {
+        let material = GpuTraceMaterial { base_color: [1.0; 4], texel_base: NO_TEXTURE, ..Default::default() };
+        Self { bvh, materials: vec![material], texels: Vec::new(), uv_min: [0.0; 2], uv_extent: [1.0; 2] }
+    }
+
+    /// The species of a decoded pack: its full mesh (level 0), materials and
+    /// material textures at full resolution.
+    ///
+    /// # Errors
+    /// A pack without a mesh, or whose material textures are block-encoded
+    /// (trace the plain pack).
+    pub fn of_pack(pack: &Pack<'_>) -> Result<Self, String> {
+        let meta = &pack.meta;
+        let level = meta.mesh_levels.first().ok_or_else(|| format!("{}: no mesh to trace", meta.name))?;
+        let (vertices, indices) = (pack.mesh_vertices(0), pack.mesh_indices(0));
+        let bvh =
+            Bvh::build_with(&mesh_triangles(level, &vertices, &indices), &mesh_surfaces(level, &vertices, &indices));
+        let mut texels = Vec::new();
+        let mut layer_base = Vec::new();
+        if let Some(t) = &meta.material_texture {
+            if let Some(e) = t.encoding {
+                return Err(format!("{}: its textures are {} blocks; trace the plain pack", meta.name, e.name()));
+            }
+            let bytes = pack.section(kind::MATERIAL_TEXTURES, 0).unwrap_or_default();
+            let layer_bytes = (t.size as usize).pow(2) * 4;
+            for l in 0..t.layers as usize {
+                layer_base.push(texels.len() as u32);
+                let layer = bytes
+                    .get(l * layer_bytes..(l + 1) * layer_bytes)
+                    .ok_or_else(|| format!("{}: texture layer {l} missing", meta.name))?;
+                texels.extend(layer.chunks_exact(4).map(|p| u32::from_le_bytes([p[0], p[1], p[2], p[3]])));
+            }
+        }
+        let size = meta.material_texture.map_or(0, |t| t.size);
+        let materials = meta
+            .materials
+            .iter()
+            .map(|m| {
+                let base = m.texture_layer.and_then(|l| layer_base.get(l as usize).copied());
+                GpuTraceMaterial {
+                    base_color: m.base_color,
+                    alpha_cutoff: m.alpha_cutoff,
+                    texel_base: base.unwrap_or(NO_TEXTURE),
+                    size: if base.is_some() { size } else { 0 },
+                    kind: match m.kind {
+                        crate::format::mesh::MaterialKind::Branch => 1,
+                        _ => 0,
+                    },
+                }
+            })
+            .collect();
+        let uv_extent = [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]];
+        Ok(Self { bvh, materials, texels, uv_min: level.uv_min, uv_extent })
+    }
+
+    /// A hit's texture coordinate on `tri` at barycentric (u, v), dequantised
+    /// as `mesh.wgsl` does. Twin: `trace_uv` in `shaders/trace_scene.wgsl`.
+    #[must_use]
+    pub fn uv(&self, tri: &GpuTriangle, u: f32, v: f32) -> [f32; 2] {
+        let corner = |q: u32| {
+            [
+                self.uv_min[0] + (q & 0xffff) as f32 / 65535.0 * self.uv_extent[0],
+                self.uv_min[1] + (q >> 16) as f32 / 65535.0 * self.uv_extent[1],
+            ]
+        };
+        let (a, b, c) = (corner(tri.uv[0]), corner(tri.uv[1]), corner(tri.uv[2]));
+        let w = 1.0 - u - v;
+        [w * a[0] + u * b[0] + v * c[0], w * a[1] + u * b[1] + v * c[1]]
+    }
+
+    /// Whether a hit on `tri` at (u, v) is kept: the material's alpha (× its
+    /// texture's, bilinear at full resolution, repeating, as the raster
+    /// reference samples it) at least its cutoff. Twin: `trace_keeps` in
+    /// `shaders/trace_scene.wgsl`.
+    #[must_use]
+    pub fn keeps(&self, tri: &GpuTriangle, u: f32, v: f32) -> bool {
+        let Some(m) = self.materials.get(tri.material as usize) else { return true };
+        let mut alpha = m.base_color[3];
+        if m.texel_base != NO_TEXTURE && m.size > 0 {
+            alpha *= texel_alpha(&self.texels, m.texel_base, m.size, self.uv(tri, u, v));
+        }
+        alpha >= m.alpha_cutoff
+    }
+
+    /// The nearest kept hit of a model-space ray.
+    #[must_use]
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.bvh.intersect_where(ray, |t, u, v| self.keeps(t, u, v))
+    }
+}
+
+/// Alpha (0–1) of a texture layer (`size`² RGBA8 texels from `base`) at `uv`,
+/// bilinear between the four nearest texel centres, repeating at the edges.
+/// Twin: `texel_alpha` in `shaders/trace_scene.wgsl`.
+#[must_use]
+pub fn texel_alpha(texels: &[u32], base: u32, size: u32, uv: [f32; 2]) -> f32 {
+    let n = size as i32;
+    let x = uv[0] * size as f32 - 0.5;
+    let y = uv[1] * size as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let a = |dx: i32, dy: i32| {
+        let tx = (x0 as i32 + dx).rem_euclid(n);
+        let ty = (y0 as i32 + dy).rem_euclid(n);
+        let t = texels.get((base + (ty * n + tx) as u32) as usize).copied().unwrap_or(0);
+        (t >> 24) as f32 / 255.0
+    };
+    let top = a(0, 0) + (a(1, 0) - a(0, 0)) * fx;
+    let bottom = a(0, 1) + (a(1, 1) - a(0, 1)) * fx;
+    top + (bottom - top) * fy
 }
 
 /// The nearest hit in a scene.
@@ -67,6 +225,8 @@ pub struct GpuSpeciesBvh {
 pub struct SceneHit {
     /// The instance hit (its index in the list the scene was built from).
     pub instance: u32,
+    /// Its place in [`TraceScene::instances`].
+    pub slot: u32,
     /// The hit on its species' mesh.
     pub hit: Hit,
 }
@@ -74,8 +234,8 @@ pub struct SceneHit {
 /// Both levels, in the arrays the GPU reads.
 #[derive(Debug, Clone, Default)]
 pub struct TraceScene {
-    /// Per species its hierarchy (model space).
-    pub species: Vec<Bvh>,
+    /// Per species its hierarchy (model space), materials and textures.
+    pub species: Vec<TraceSpecies>,
     /// The top level over the instances; a leaf's `first..first + count` index `instances`.
     pub top: Vec<BvhNode>,
     /// The instances in the top level's leaf order.
@@ -121,11 +281,11 @@ impl TraceScene {
     /// species index past the list, or with a non-finite or non-positive
     /// transform, are left out).
     #[must_use]
-    pub fn build(species: Vec<Bvh>, instances: &[Instance]) -> Self {
+    pub fn build(species: Vec<TraceSpecies>, instances: &[Instance]) -> Self {
         let mut kept = Vec::new();
         let mut boxes = Vec::new();
         for (i, inst) in instances.iter().enumerate() {
-            let Some(root) = species.get(inst.species as usize).and_then(|b| b.nodes.first()) else { continue };
+            let Some(root) = species.get(inst.species as usize).and_then(|s| s.bvh.nodes.first()) else { continue };
             let g = GpuInstance::of(inst, i as u32);
             let scaled = g.scale_xy > 0.0 && g.scale_z > 0.0 && g.scale_xy.is_finite() && g.scale_z.is_finite();
             if !(inst.position.is_finite() && inst.yaw.is_finite() && scaled) {
@@ -160,12 +320,12 @@ impl TraceScene {
         let mut best = None;
         walk(&self.top, ray, |first, count, closest| {
             let mut nearer = None;
-            for inst in &self.instances[first as usize..(first + count) as usize] {
+            for (k, inst) in self.instances[first as usize..(first + count) as usize].iter().enumerate() {
                 let mut model = inst.to_model(ray);
                 model.t_max = nearer.unwrap_or(closest);
                 if let Some(hit) = self.species[inst.species as usize].intersect(&model) {
                     nearer = Some(hit.t);
-                    best = Some(SceneHit { instance: inst.id, hit });
+                    best = Some(SceneHit { instance: inst.id, slot: first + k as u32, hit });
                 }
             }
             nearer
@@ -173,23 +333,51 @@ impl TraceScene {
         best
     }
 
-    /// The species' hierarchies concatenated (nodes, triangles) with each
-    /// one's offsets, as the GPU reads them.
+    /// Everything the GPU reads, concatenated: the species' nodes then the
+    /// top level's (from `top_base`), their triangles, the species table,
+    /// materials (texel bases made global) and texels.
     #[must_use]
-    pub fn species_arrays(&self) -> (Vec<BvhNode>, Vec<super::bvh::GpuTriangle>, Vec<GpuSpeciesBvh>) {
-        let (mut nodes, mut tris, mut table) = (Vec::new(), Vec::new(), Vec::new());
-        for b in &self.species {
-            table.push(GpuSpeciesBvh {
-                node_base: nodes.len() as u32,
-                tri_base: tris.len() as u32,
-                node_count: b.nodes.len() as u32,
-                pad: 0,
+    pub fn arrays(&self) -> TraceArrays {
+        let mut a = TraceArrays::default();
+        for s in &self.species {
+            a.species.push(GpuSpeciesBvh {
+                node_base: a.nodes.len() as u32,
+                tri_base: a.triangles.len() as u32,
+                node_count: s.bvh.nodes.len() as u32,
+                material_base: a.materials.len() as u32,
+                uv_min: s.uv_min,
+                uv_extent: s.uv_extent,
             });
-            nodes.extend_from_slice(&b.nodes);
-            tris.extend_from_slice(&b.triangles);
+            let texel_base = a.texels.len() as u32;
+            a.materials.extend(s.materials.iter().map(|m| GpuTraceMaterial {
+                texel_base: if m.texel_base == NO_TEXTURE { NO_TEXTURE } else { m.texel_base + texel_base },
+                ..*m
+            }));
+            a.nodes.extend_from_slice(&s.bvh.nodes);
+            a.triangles.extend_from_slice(&s.bvh.triangles);
+            a.texels.extend_from_slice(&s.texels);
         }
-        (nodes, tris, table)
+        a.top_base = a.nodes.len() as u32;
+        a.nodes.extend_from_slice(&self.top);
+        a
     }
+}
+
+/// A scene's arrays as the GPU binds them (`TraceScene::arrays`).
+#[derive(Debug, Clone, Default)]
+pub struct TraceArrays {
+    /// Every species' nodes, then the top level's.
+    pub nodes: Vec<BvhNode>,
+    /// Where the top level starts in `nodes`.
+    pub top_base: u32,
+    /// Every species' triangles.
+    pub triangles: Vec<GpuTriangle>,
+    /// Per species its offsets.
+    pub species: Vec<GpuSpeciesBvh>,
+    /// Every species' materials.
+    pub materials: Vec<GpuTraceMaterial>,
+    /// Every species' texels.
+    pub texels: Vec<u32>,
 }
 
 #[cfg(test)]
@@ -205,7 +393,7 @@ mod tests {
     #[test]
     fn a_ray_meets_a_placed_tree_where_the_raster_path_draws_it() {
         let inst = Instance { position: Vec3::new(10.0, 5.0, 1.0), yaw: 0.3, scale: 2.0, aspect: 1.5, species: 0 };
-        let scene = TraceScene::build(vec![tree()], &[inst]);
+        let scene = TraceScene::build(vec![TraceSpecies::opaque(tree())], &[inst]);
         // The model point (0.1, 0, 1) placed as mesh.wgsl places it.
         let g = scene.instances[0];
         let target = g.to_scene(Vec3::new(0.1, 0.0, 1.0));
@@ -236,7 +424,7 @@ mod tests {
                 species: i % 2,
             })
             .collect();
-        let scene = TraceScene::build(vec![tree(), tree()], &trees);
+        let scene = TraceScene::build(vec![TraceSpecies::opaque(tree()), TraceSpecies::opaque(tree())], &trees);
         assert_eq!(scene.instances.len(), 400);
         let mut hits = 0;
         let one = tree();
@@ -264,7 +452,7 @@ mod tests {
     fn bad_instances_are_left_out() {
         let ok = Instance { position: Vec3::ZERO, yaw: 0.0, scale: 1.0, aspect: 1.0, species: 0 };
         let scene = TraceScene::build(
-            vec![tree()],
+            vec![TraceSpecies::opaque(tree())],
             &[
                 ok,
                 Instance { species: 7, ..ok },
@@ -274,8 +462,43 @@ mod tests {
             ],
         );
         assert_eq!(scene.instances.iter().map(|i| i.id).collect::<Vec<_>>(), vec![0]);
-        assert!(TraceScene::build(vec![tree()], &[])
+        assert!(TraceScene::build(vec![TraceSpecies::opaque(tree())], &[])
             .intersect(&Ray { origin: Vec3::ZERO, dir: Vec3::X, t_max: 1.0 })
             .is_none());
+    }
+
+    #[test]
+    fn a_leaf_card_is_hit_where_its_texture_is_opaque_and_passed_where_not() {
+        use super::super::bvh::TriangleSurface;
+        // A 1 × 1 card in the xz plane, uv = (x, z); a 4² texture whose left
+        // half is opaque, right half clear.
+        let card = [
+            Triangle::new(Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0)),
+            Triangle::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0), Vec3::Z),
+        ];
+        let q = |u: f32, v: f32| (u * 65535.0) as u32 | (((v * 65535.0) as u32) << 16);
+        let surfaces = [
+            TriangleSurface { material: 0, uv: [q(0.0, 0.0), q(1.0, 0.0), q(1.0, 1.0)] },
+            TriangleSurface { material: 0, uv: [q(0.0, 0.0), q(1.0, 1.0), q(0.0, 1.0)] },
+        ];
+        let texels: Vec<u32> = (0..16).map(|i| if i % 4 < 2 { 0xff00_ff00 } else { 0x0000_ff00 }).collect();
+        let species = TraceSpecies {
+            bvh: Bvh::build_with(&card, &surfaces),
+            materials: vec![GpuTraceMaterial {
+                base_color: [1.0; 4],
+                alpha_cutoff: 0.5,
+                texel_base: 0,
+                size: 4,
+                kind: 0,
+            }],
+            texels,
+            uv_min: [0.0; 2],
+            uv_extent: [1.0; 2],
+        };
+        let at = |x: f32| Ray { origin: Vec3::new(x, -1.0, 0.5), dir: Vec3::Y, t_max: 10.0 };
+        assert!(species.intersect(&at(0.2)).is_some(), "opaque half");
+        assert!(species.intersect(&at(0.8)).is_none(), "clear half");
+        assert!(species.bvh.intersect(&at(0.8)).is_some(), "the card itself is there");
+        assert!((texel_alpha(&species.texels, 0, 4, [0.5, 0.5]) - 0.5).abs() < 1e-6, "bilinear at the edge");
     }
 }

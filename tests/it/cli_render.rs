@@ -357,3 +357,46 @@ fn compare_stretches_a_smaller_frame_only_when_asked() {
     let far: f64 = String::from_utf8_lossy(&compare(&["--stretch"], &c).stdout).trim().parse().unwrap();
     assert!(near < 0.02 && far > 0.2, "stretched gradient {near}, checker {far}");
 }
+
+#[test]
+fn path_trace_writes_the_traced_view_and_refuses_what_it_cannot_trace() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/forest-small");
+    let dir = tmp("path-trace");
+    let (png, stats) = (dir.join("traced.png"), dir.join("traced.json"));
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["render", "--scene"])
+        .arg(&scene)
+        .args(["--view", "medium", "--size", "48x27", "--path-trace", "--spp", "1", "--out"])
+        .arg(&png)
+        .arg("--stats")
+        .arg(&stats)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    assert_eq!(s["renderer"], "path-trace");
+    assert!(s["trees"].as_u64().unwrap() > 1000 && s["instanced_triangles"].as_u64().unwrap() > 1_000_000, "{s}");
+    let img = image::open(&png).unwrap().to_rgba8();
+    let green = img.as_raw().chunks_exact(4).filter(|p| sylva::metrics::is_foliage(p)).count();
+    assert!(green > 48 * 27 / 5, "{green} foliage pixels of {}", 48 * 27);
+    // What it cannot trace is refused with a reason.
+    let refuse = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_sylva")).args(args).output().unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let url = refuse(&[
+        "render",
+        "--scene",
+        "http://127.0.0.1:9/scene.json",
+        "--path-trace",
+        "--out",
+        "/dev/null",
+        "--timeout",
+        "1",
+    ]);
+    assert!(url.contains("cannot load the scene") || url.contains("scene directory"), "{url}");
+    let spp = refuse(&["render", "--scene", "x", "--spp", "4", "--out", "/dev/null"]);
+    assert!(spp.contains("--path-trace"), "{spp}");
+}

@@ -52,10 +52,6 @@ pub fn copy_dir(src: &Path, dst: &Path) {
 /// 12 % of the green, whichever is less (shaded foliage is dark, and the
 /// trees' own occlusion darkens it further; sky, ground and haze are not green).
 pub fn foliage_share(img: &[u8]) -> f64 {
-    let green = |p: &[u8]| {
-        let margin = (f32::from(p[1]) * 0.12).clamp(3.0, 8.0);
-        f32::from(p[1]) > f32::from(p[0]) + margin && f32::from(p[1]) > f32::from(p[2]) + margin
-    };
-    let n = img.chunks_exact(4).filter(|p| green(p)).count();
+    let n = img.chunks_exact(4).filter(|p| sylva::metrics::is_foliage(p)).count();
     n as f64 / (img.len() / 4) as f64
 }

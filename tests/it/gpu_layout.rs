@@ -222,15 +222,21 @@ fn the_tracer_structs_match_their_wgsl_twins() {
     use sylva::trace::bvh::{BvhNode, GpuTriangle};
     let shader = "trace_probe";
     check(shader, "BvhNode", &members!(BvhNode: min, first, max, count), size_of::<BvhNode>(), None);
-    check(shader, "TraceTriangle", &members!(GpuTriangle: v0, id, e1, pad0, e2, pad1), size_of::<GpuTriangle>(), None);
-    check(shader, "TraceHit", &members!(GpuHit: t, triangle, u, v), size_of::<GpuHit>(), None);
+    check(
+        shader,
+        "TraceTriangle",
+        &members!(GpuTriangle: v0, id, e1, material, e2, pad, uv),
+        size_of::<GpuTriangle>(),
+        None,
+    );
+    check(shader, "TraceHit", &members!(GpuHit: t, triangle, u, v, index), size_of::<GpuHit>(), None);
     check(shader, "ProbeRay", &members!(ProbeRay: origin, t_max, dir, pad), size_of::<ProbeRay>(), None);
 }
 
 #[test]
 fn the_tracer_scene_structs_match_their_wgsl_twins() {
-    use sylva::render::trace::GpuSceneHit;
-    use sylva::trace::scene::{GpuInstance, GpuSpeciesBvh};
+    use sylva::render::trace::{GpuSceneHit, GpuTraceParams};
+    use sylva::trace::scene::{GpuInstance, GpuSpeciesBvh, GpuTraceMaterial};
     let shader = "trace_scene_probe";
     check(
         shader,
@@ -242,9 +248,23 @@ fn the_tracer_scene_structs_match_their_wgsl_twins() {
     check(
         shader,
         "TraceSpecies",
-        &members!(GpuSpeciesBvh: node_base, tri_base, node_count, pad),
+        &members!(GpuSpeciesBvh: node_base, tri_base, node_count, material_base, uv_min, uv_extent),
         size_of::<GpuSpeciesBvh>(),
         None,
     );
-    check(shader, "SceneHit", &members!(GpuSceneHit: instance, hit), size_of::<GpuSceneHit>(), None);
+    check(
+        shader,
+        "TraceMaterial",
+        &members!(GpuTraceMaterial: base_color, alpha_cutoff, texel_base, size, kind),
+        size_of::<GpuTraceMaterial>(),
+        None,
+    );
+    check(
+        shader,
+        "TraceParams",
+        &members!(GpuTraceParams: top_base, instance_count, pad0, pad1),
+        size_of::<GpuTraceParams>(),
+        None,
+    );
+    check(shader, "SceneHit", &members!(GpuSceneHit: instance, slot, hit), size_of::<GpuSceneHit>(), None);
 }

@@ -1,0 +1,259 @@
+// The path tracer (issue 48): per pixel a path through the forest's two levels
+// (trace_scene.wgsl) with the sun as a disk of its true angular size sampled
+// at every vertex (soft shadows), the sky as an environment, leaves that
+// reflect and transmit (two-sided Lambert), bark and ground that reflect, up to
+// `bounces` bounces; samples accumulate into `accum` while the camera rests.
+// Everything is relative to the eye (instances were placed so on the CPU).
+// Rust side: src/render/path_trace.rs. Needs trace.wgsl and trace_scene.wgsl.
+
+// Must match `PathParams` in src/render/path_trace.rs.
+struct PathParams {
+    // Camera basis: forward, right and up scaled by the half field of view.
+    forward: vec4<f32>,
+    right: vec4<f32>,
+    up: vec4<f32>,
+    // Unit vector towards the sun; w: the cosine of its angular radius.
+    sun_dir: vec4<f32>,
+    // Irradiance of the sun at normal incidence over pi (the raster's
+    // `sun_color`: a white surface facing it reflects this).
+    sun_color: vec4<f32>,
+    // The sky's radiance at the zenith and at the horizon (w: unused).
+    sky_zenith: vec4<f32>,
+    sky_horizon: vec4<f32>,
+    // The ground plane: albedo (rgb) and height relative to the eye (w; -1e30: none).
+    ground: vec4<f32>,
+    width: u32,
+    height: u32,
+    // The first sample of this dispatch (sequence index), and how many it adds.
+    sample: u32,
+    samples: u32,
+    bounces: u32,
+    // 1: the raster's simple light instead (sun and sky, no bounce, no
+    // transmission): the light error split from the geometry error.
+    simple: u32,
+    // The share of a leaf's albedo it transmits (the rest it reflects).
+    leaf_transmit: f32,
+    pad: u32,
+};
+
+@group(0) @binding(0) var<uniform> trace_params: TraceParams;
+@group(0) @binding(1) var<uniform> path: PathParams;
+@group(0) @binding(2) var<storage, read> bvh_nodes: array<BvhNode>;
+@group(0) @binding(3) var<storage, read> bvh_tris: array<TraceTriangle>;
+@group(0) @binding(4) var<storage, read> trace_species: array<TraceSpecies>;
+@group(0) @binding(5) var<storage, read> trace_instances: array<TraceInstance>;
+@group(0) @binding(6) var<storage, read> trace_materials: array<TraceMaterial>;
+@group(0) @binding(7) var<storage, read> trace_texels: array<u32>;
+@group(0) @binding(8) var<storage, read_write> accum: array<vec4<f32>>;
+
+const PI: f32 = 3.14159265;
+const FAR: f32 = 1e7;
+
+// A hash of three words (PCG-style, Jarzynski & Olano 2020): the random
+// numbers of a pixel's sample, dimension by dimension.
+fn hash3(v0: vec3<u32>) -> vec3<u32> {
+    var v = v0 * 1664525u + 1013904223u;
+    v.x += v.y * v.z;
+    v.y += v.z * v.x;
+    v.z += v.x * v.y;
+    v ^= v >> vec3<u32>(16u);
+    v.x += v.y * v.z;
+    v.y += v.z * v.x;
+    v.z += v.x * v.y;
+    return v;
+}
+
+var<private> rng_state: vec3<u32>;
+
+fn rand2() -> vec2<f32> {
+    rng_state = hash3(rng_state + vec3<u32>(0u, 0u, 0x9e3779b9u));
+    return vec2<f32>(f32(rng_state.x >> 8u), f32(rng_state.y >> 8u)) / 16777216.0;
+}
+
+// A unit vector around `n`, cosine-weighted.
+fn cosine_around(n: vec3<f32>, r: vec2<f32>) -> vec3<f32> {
+    let phi = 2.0 * PI * r.x;
+    let s = sqrt(r.y);
+    let t = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(n.z) > 0.5 && abs(n.x) < 0.5);
+    let a = normalize(cross(t, n));
+    let b = cross(n, a);
+    return normalize(a * (cos(phi) * s) + b * (sin(phi) * s) + n * sqrt(max(1.0 - r.y, 0.0)));
+}
+
+// A direction within the sun's disk (uniform over its cone).
+fn sun_sample(r: vec2<f32>) -> vec3<f32> {
+    let d = path.sun_dir.xyz;
+    let cos_max = path.sun_dir.w;
+    let c = 1.0 - r.x * (1.0 - cos_max);
+    let s = sqrt(max(1.0 - c * c, 0.0));
+    let phi = 2.0 * PI * r.y;
+    let t = select(vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(1.0, 0.0, 0.0), abs(d.z) > 0.9);
+    let a = normalize(cross(t, d));
+    let b = cross(d, a);
+    return normalize(a * (cos(phi) * s) + b * (sin(phi) * s) + d * c);
+}
+
+// The sky's radiance in direction d (the sun's disk not included: it is sampled).
+fn sky(d: vec3<f32>) -> vec3<f32> {
+    if d.z < 0.0 {
+        return path.ground.rgb * path.sky_horizon.rgb;
+    }
+    return mix(path.sky_horizon.rgb, path.sky_zenith.rgb, sqrt(d.z));
+}
+
+// An sRGB-encoded texel's linear colour and alpha.
+fn texel_linear(t: u32) -> vec4<f32> {
+    let c = vec4<f32>(f32(t & 0xffu), f32((t >> 8u) & 0xffu), f32((t >> 16u) & 0xffu), f32(t >> 24u)) / 255.0;
+    let lin = select(pow((c.rgb + 0.055) / 1.055, vec3<f32>(2.4)), c.rgb / 12.92, c.rgb <= vec3<f32>(0.04045));
+    return vec4<f32>(lin, c.a);
+}
+
+// A texture layer's linear colour at uv: bilinear, repeating (the raster's sampler at mip 0).
+fn texel_color(base: u32, size: u32, uv: vec2<f32>) -> vec3<f32> {
+    let n = i32(size);
+    let x = uv.x * f32(size) - 0.5;
+    let y = uv.y * f32(size) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let f = vec2<f32>(x - x0, y - y0);
+    var c: array<vec3<f32>, 4>;
+    for (var k = 0; k < 4; k++) {
+        let tx = (((i32(x0) + (k & 1)) % n) + n) % n;
+        let ty = (((i32(y0) + (k >> 1u)) % n) + n) % n;
+        c[k] = texel_linear(trace_texels[base + u32(ty * n + tx)]).rgb;
+    }
+    return mix(mix(c[0], c[1], f.x), mix(c[2], c[3], f.x), f.y);
+}
+
+// What a path meets: where, the surface's normal (facing the ray), its albedo
+// and whether it is a leaf; t < 0 for the sky.
+struct Surface {
+    t: f32,
+    normal: vec3<f32>,
+    albedo: vec3<f32>,
+    leaf: bool,
+};
+
+// The nearest surface along o + t d: a tree (the two levels) or the ground plane.
+fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
+    var s: Surface;
+    s.t = -1.0;
+    var t_max = FAR;
+    var t_ground = -1.0;
+    if abs(d.z) > 1e-9 {
+        let t = (path.ground.w - o.z) / d.z;
+        // (A ground far below everything, -1e30: none.)
+        if t > 0.0 && t < FAR {
+            t_ground = t;
+            t_max = t;
+        }
+    }
+    let h = trace_scene(o, d, t_max);
+    if h.hit.t > 0.0 {
+        let inst = trace_instances[h.slot];
+        let sp = trace_species[inst.species];
+        let tri = bvh_tris[h.hit.index];
+        let m = trace_materials[sp.material_base + tri.material];
+        // The geometric normal, carried out of model space (inverse transpose).
+        let nm = cross(tri.e1, tri.e2);
+        var n = normalize(vec3<f32>(nm.x / inst.scale_xy, nm.y / inst.scale_xy, nm.z / inst.scale_z));
+        let c = cos(inst.yaw);
+        let sn = sin(inst.yaw);
+        n = vec3<f32>(c * n.x - sn * n.y, sn * n.x + c * n.y, n.z);
+        s.t = h.hit.t;
+        s.normal = select(n, -n, dot(n, d) > 0.0);
+        var albedo = m.base_color.rgb;
+        if m.texel_base != NO_TEXTURE && m.size > 0u {
+            albedo *= texel_color(m.texel_base, m.size, trace_uv(sp, tri, h.hit.u, h.hit.v));
+        }
+        s.albedo = albedo;
+        s.leaf = m.kind == 0u;
+        return s;
+    }
+    if t_ground > 0.0 {
+        s.t = t_ground;
+        s.normal = vec3<f32>(0.0, 0.0, 1.0);
+        s.albedo = path.ground.rgb;
+        s.leaf = false;
+    }
+    return s;
+}
+
+// Whether the sun is seen from p along l (nothing, the ground included, in the way).
+fn sun_visible(p: vec3<f32>, l: vec3<f32>) -> bool {
+    if l.z <= 0.0 {
+        return false;
+    }
+    return trace_scene(p, l, FAR).hit.t < 0.0;
+}
+
+@compute @workgroup_size(8, 8)
+fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= path.width || gid.y >= path.height {
+        return;
+    }
+    let pixel = gid.y * path.width + gid.x;
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < path.samples; k++) {
+        rng_state = hash3(vec3<u32>(gid.x, gid.y, path.sample + k));
+        let jitter = rand2();
+        let ndc = vec2<f32>(
+            (f32(gid.x) + jitter.x) / f32(path.width) * 2.0 - 1.0,
+            1.0 - (f32(gid.y) + jitter.y) / f32(path.height) * 2.0,
+        );
+        var d = normalize(path.forward.xyz + path.right.xyz * ndc.x + path.up.xyz * ndc.y);
+        var o = vec3<f32>(0.0);
+        var throughput = vec3<f32>(1.0);
+        var radiance = vec3<f32>(0.0);
+        for (var bounce = 0u; bounce <= path.bounces; bounce++) {
+            let s = hit_surface(o, d);
+            if s.t < 0.0 {
+                radiance += throughput * sky(d);
+                break;
+            }
+            let p = o + d * s.t;
+            let eps = 2e-3 + 1e-6 * length(p);
+            var reflect_share = 1.0;
+            if s.leaf && path.simple == 0u {
+                reflect_share = 1.0 - path.leaf_transmit;
+            }
+            // The sun, sampled on its disk: reflected on the side facing the
+            // ray, transmitted through a leaf from the other side.
+            let l = sun_sample(rand2());
+            let cos_l = dot(s.normal, l);
+            let side = select(-1.0, 1.0, cos_l > 0.0);
+            let share = select(1.0 - reflect_share, reflect_share, cos_l > 0.0);
+            if share > 0.0 && sun_visible(p + s.normal * (eps * side), l) {
+                radiance += throughput * s.albedo * share * path.sun_color.rgb * abs(cos_l);
+            }
+            if path.simple == 1u {
+                // The raster's light: the sky's light on the facing side, no bounce.
+                radiance += throughput * s.albedo * mix(sky(vec3<f32>(0.0, 0.0, -1.0)), sky(vec3<f32>(0.0, 0.0, 1.0)), 0.5 + 0.5 * s.normal.z);
+                break;
+            }
+            if bounce == path.bounces {
+                break;
+            }
+            // The next direction: reflected (cosine around the facing normal)
+            // or, through a leaf, transmitted (around the other side's).
+            let r = rand2();
+            var n = s.normal;
+            if r.x >= reflect_share {
+                n = -n;
+            }
+            d = cosine_around(n, rand2());
+            o = p + n * eps;
+            throughput *= s.albedo;
+            // Russian roulette past the first bounce.
+            if bounce >= 1u {
+                let q = clamp(max(throughput.r, max(throughput.g, throughput.b)), 0.05, 1.0);
+                if r.y > q {
+                    break;
+                }
+                throughput /= q;
+            }
+        }
+        sum += radiance;
+    }
+    accum[pixel] += vec4<f32>(sum, f32(path.samples));
+}
