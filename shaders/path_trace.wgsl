@@ -22,6 +22,8 @@ struct PathParams {
     sky_horizon: vec4<f32>,
     // The ground plane: albedo (rgb) and height relative to the eye (w; -1e30: none).
     ground: vec4<f32>,
+    // The raster's ambient light (its `Lighting.ambient`), for the simple light.
+    ambient: vec4<f32>,
     width: u32,
     height: u32,
     // The first sample of this dispatch (sequence index), and how many it adds.
@@ -33,7 +35,8 @@ struct PathParams {
     simple: u32,
     // The share of a leaf's albedo it transmits (the rest it reflects).
     leaf_transmit: f32,
-    pad: u32,
+    // The eye's height above the scene origin (the raster's haze thins with height).
+    eye_z: f32,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -99,6 +102,26 @@ fn sky(d: vec3<f32>) -> vec3<f32> {
         return path.ground.rgb * path.sky_horizon.rgb;
     }
     return mix(path.sky_horizon.rgb, path.sky_zenith.rgb, sqrt(d.z));
+}
+
+// The raster's background where a view ray meets nothing (shaders/sky.wgsl):
+// the sky above the horizon, its ground colour below.
+fn raster_background(d: vec3<f32>) -> vec3<f32> {
+    if d.z >= 0.0 {
+        return sky(d);
+    }
+    let scale = path.sky_horizon.rgb / vec3<f32>(0.62, 0.74, 0.86);
+    let ground = vec3<f32>(0.16, 0.15, 0.08) * scale;
+    return mix(path.sky_horizon.rgb * 0.5 + ground * 0.5, ground, sqrt(min(-d.z * 4.0, 1.0)));
+}
+
+// The raster's aerial perspective (haze_at in shaders/light.wgsl): `color`
+// seen through `dist` metres of air along the unit direction d.
+fn raster_haze(color: vec3<f32>, d: vec3<f32>, dist: f32) -> vec3<f32> {
+    let rel = d * dist;
+    let h = max(path.eye_z + 0.5 * rel.z, 0.0);
+    let f = 1.0 - exp(-dist * (1.0 / 16000.0) * exp(-h / 1500.0));
+    return mix(color, path.sky_horizon.rgb, f);
 }
 
 // An sRGB-encoded texel's linear colour and alpha.
@@ -208,14 +231,33 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var bounce = 0u; bounce <= path.bounces; bounce++) {
             let s = hit_surface(o, d);
             if s.t < 0.0 {
-                radiance += throughput * sky(d);
+                if path.simple == 1u && bounce == 0u {
+                    radiance += raster_background(d);
+                } else {
+                    radiance += throughput * sky(d);
+                }
                 break;
             }
             let p = o + d * s.t;
             let eps = 2e-3 + 1e-6 * length(p);
             var reflect_share = 1.0;
-            if s.leaf && path.simple == 0u {
+            if s.leaf {
                 reflect_share = 1.0 - path.leaf_transmit;
+            }
+            if path.simple == 1u {
+                // The raster's light (shade() in shaders/light.wgsl with its
+                // shadows off): the sun with a leaf's wrap, the sky's hemisphere
+                // light, the haze; no bounce.
+                let ndl = dot(s.normal, path.sun_dir.xyz);
+                var diffuse = max(ndl, 0.0);
+                var up = 0.5 + 0.5 * clamp(s.normal.z, -1.0, 1.0);
+                if s.leaf {
+                    diffuse = max(ndl, 0.0) * 0.75 + abs(ndl) * 0.25;
+                    up = 0.5 + 0.25 * clamp(s.normal.z, -1.0, 1.0);
+                }
+                let sky_light = path.ambient.rgb * mix(vec3<f32>(0.62, 0.58, 0.5), vec3<f32>(1.1, 1.12, 1.18), up);
+                radiance = raster_haze(s.albedo * (sky_light + path.sun_color.rgb * diffuse), d, s.t);
+                break;
             }
             // The sun, sampled on its disk: reflected on the side facing the
             // ray, transmitted through a leaf from the other side.
@@ -225,11 +267,6 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             let share = select(1.0 - reflect_share, reflect_share, cos_l > 0.0);
             if share > 0.0 && sun_visible(p + s.normal * (eps * side), l) {
                 radiance += throughput * s.albedo * share * path.sun_color.rgb * abs(cos_l);
-            }
-            if path.simple == 1u {
-                // The raster's light: the sky's light on the facing side, no bounce.
-                radiance += throughput * s.albedo * mix(sky(vec3<f32>(0.0, 0.0, -1.0)), sky(vec3<f32>(0.0, 0.0, 1.0)), 0.5 + 0.5 * s.normal.z);
-                break;
             }
             if bounce == path.bounces {
                 break;

@@ -443,6 +443,11 @@ pub(crate) struct RenderArgs {
     /// depth of each tree's quad (hidden crowns then cost nothing).
     #[arg(long)]
     pub(crate) moving_impostors: bool,
+    /// Draw every tree at its full mesh, leaf cards alpha-tested at full
+    /// texture resolution: the benchmark's raster reference (and what
+    /// --path-trace traces), for comparisons. Slow for large views.
+    #[arg(long, conflicts_with_all = ["pack", "only", "path_trace"])]
+    pub(crate) full_detail: bool,
     /// Trace the view instead of drawing it (issue 48): every tree within
     /// --reach at its full mesh (leaf cards alpha-tested at full texture
     /// resolution) through a two-level BVH on the GPU, the sun as a disk of

@@ -477,6 +477,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         variant,
         season,
         date,
+        full_detail,
         path_trace,
         spp,
         bounces,
@@ -511,8 +512,14 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     };
     let sun = SunArg::parse(sun_time.as_deref(), sun.as_deref())?;
     if let Some(scene) = scene {
-        let (representations, lod_policy) = representations(only);
+        let (mut representations, lod_policy) = representations(only);
+        let mut quality = quality;
+        if full_detail {
+            representations = sylva::render::settings::Representations::MESHES;
+            quality = sylva::render::refine::FULL_MESH_QUALITY;
+        }
         let settings = RenderSettings {
+            full_res_alpha: full_detail,
             quality,
             draw_distance_m: draw_distance,
             whole_tiles,
@@ -687,6 +694,7 @@ fn path_trace(
             sun_color: lighting.sun_color,
             sky_zenith: glam::Vec3::new(0.23, 0.42, 0.72) * scale,
             sky_horizon: glam::Vec3::new(0.62, 0.74, 0.86) * scale,
+            ambient: lighting.ambient,
         };
         let options = PathOptions {
             spp: args.spp,

@@ -38,6 +38,8 @@ pub struct PathParams {
     pub sky_horizon: [f32; 4],
     /// Ground albedo (rgb) and the ground plane's height relative to the eye (w; −1e30: none).
     pub ground: [f32; 4],
+    /// The raster's ambient light, for the simple light.
+    pub ambient: [f32; 4],
     /// Image width.
     pub width: u32,
     /// Image height.
@@ -48,12 +50,13 @@ pub struct PathParams {
     pub samples: u32,
     /// Bounces after the first hit.
     pub bounces: u32,
-    /// 1: the raster's simple light (sun and sky, no bounce, no transmission).
+    /// 1: the raster's light (its `shade()` without shadows: the sun with a
+    /// leaf's wrap, the sky's hemisphere light, its haze and background).
     pub simple: u32,
     /// Share of a leaf's albedo transmitted.
     pub leaf_transmit: f32,
-    /// Padding (0).
-    pub pad: u32,
+    /// The eye's height above the scene origin (the raster's haze).
+    pub eye_z: f32,
 }
 
 /// How a frame is traced.
@@ -110,6 +113,8 @@ pub struct PathView {
     pub sky_zenith: Vec3,
     /// The sky's colour at the horizon.
     pub sky_horizon: Vec3,
+    /// The raster's ambient light (`Lighting::ambient`), for the simple light.
+    pub ambient: Vec3,
 }
 
 /// The pass's pipeline.
@@ -250,6 +255,7 @@ impl PathTracer {
             sky_zenith: v4(view.sky_zenith, 0.0),
             sky_horizon: v4(view.sky_horizon, 0.0),
             ground: v4(options.ground_albedo, options.ground_z.map_or(-1e30, |z| z - view.eye.z)),
+            ambient: v4(view.ambient, 0.0),
             width,
             height,
             sample: 0,
@@ -257,7 +263,7 @@ impl PathTracer {
             bounces: options.bounces,
             simple: u32::from(options.simple),
             leaf_transmit: options.leaf_transmit.clamp(0.0, 1.0),
-            pad: 0,
+            eye_z: view.eye.z,
         };
         let mut done = 0;
         while done < options.spp.max(1) {
