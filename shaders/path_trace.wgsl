@@ -8,7 +8,7 @@
 
 // Must match `PathParams` in src/render/path_trace.rs.
 struct PathParams {
-    // Camera basis: forward, right and up scaled by the half field of view.
+    // Camera basis: forward (unit), right and up scaled by the half field of view.
     forward: vec4<f32>,
     right: vec4<f32>,
     up: vec4<f32>,
@@ -37,6 +37,17 @@ struct PathParams {
     leaf_transmit: f32,
     // The eye's height above the scene origin (the raster's haze thins with height).
     eye_z: f32,
+    // The clear sky of Preetham et al. 1999 (src/trace/sky.rs): Perez
+    // coefficients A-E, each for (Y, x, y); the zenith's values over their
+    // distribution (w: render units per kcd/m2); the sun as the fit saw it
+    // (w: 1 for this sky, 0 for the raster's gradient).
+    perez_a: vec4<f32>,
+    perez_b: vec4<f32>,
+    perez_c: vec4<f32>,
+    perez_d: vec4<f32>,
+    perez_e: vec4<f32>,
+    sky_zenith_yxy: vec4<f32>,
+    sky_sun: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -77,7 +88,8 @@ fn rand2() -> vec2<f32> {
 fn cosine_around(n: vec3<f32>, r: vec2<f32>) -> vec3<f32> {
     let phi = 2.0 * PI * r.x;
     let s = sqrt(r.y);
-    let t = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(n.z) > 0.5 && abs(n.x) < 0.5);
+    // A helper axis far from n (never parallel to it: no zero cross product).
+    let t = select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), abs(n.x) > 0.5);
     let a = normalize(cross(t, n));
     let b = cross(n, a);
     return normalize(a * (cos(phi) * s) + b * (sin(phi) * s) + n * sqrt(max(1.0 - r.y, 0.0)));
@@ -96,8 +108,38 @@ fn sun_sample(r: vec2<f32>) -> vec3<f32> {
     return normalize(a * (cos(phi) * s) + b * (sin(phi) * s) + d * c);
 }
 
-// The sky's radiance in direction d (the sun's disk not included: it is sampled).
+// Perez et al.'s distribution for (Y, x, y). Twin: `perez` in src/trace/sky.rs.
+fn perez(cos_theta: f32, gamma: f32) -> vec3<f32> {
+    let cos_gamma = cos(gamma);
+    return (1.0 + path.perez_a.xyz * exp(path.perez_b.xyz / max(cos_theta, 0.01)))
+        * (1.0 + path.perez_c.xyz * exp(path.perez_d.xyz * gamma) + path.perez_e.xyz * cos_gamma * cos_gamma);
+}
+
+// The clear sky's radiance towards d (render units, linear sRGB).
+// Twin: `PreethamSky::radiance` in src/trace/sky.rs.
+fn sky_preetham(d: vec3<f32>) -> vec3<f32> {
+    let gamma = acos(clamp(dot(d, path.sky_sun.xyz), -1.0, 1.0));
+    let yxy = path.sky_zenith_yxy.xyz * perez(d.z, gamma);
+    let y = max(yxy.z, 1e-4);
+    let big_x = yxy.y * yxy.x / y;
+    let big_z = (1.0 - yxy.y - yxy.z) * yxy.x / y;
+    let rgb = vec3<f32>(
+        3.2406 * big_x - 1.5372 * yxy.x - 0.4986 * big_z,
+        -0.9689 * big_x + 1.8758 * yxy.x + 0.0415 * big_z,
+        0.0557 * big_x - 0.2040 * yxy.x + 1.0570 * big_z,
+    );
+    return max(rgb, vec3<f32>(0.0)) * path.sky_zenith_yxy.w;
+}
+
+// The sky's radiance in direction d (the sun's disk not included: it is
+// sampled); below the horizon, the ground's albedo under it.
 fn sky(d: vec3<f32>) -> vec3<f32> {
+    if path.sky_sun.w > 0.5 {
+        if d.z < 0.0 {
+            return path.ground.rgb * sky_preetham(normalize(vec3<f32>(d.x, d.y, 0.0) + vec3<f32>(0.0, 0.0, 1e-3)));
+        }
+        return sky_preetham(d);
+    }
     if d.z < 0.0 {
         return path.ground.rgb * path.sky_horizon.rgb;
     }
@@ -134,8 +176,8 @@ fn texel_linear(t: u32) -> vec4<f32> {
 // A texture layer's linear colour at uv: bilinear, repeating (the raster's sampler at mip 0).
 fn texel_color(base: u32, size: u32, uv: vec2<f32>) -> vec3<f32> {
     let n = i32(size);
-    let x = uv.x * f32(size) - 0.5;
-    let y = uv.y * f32(size) - 0.5;
+    let x = fract(uv.x) * f32(size) - 0.5;
+    let y = fract(uv.y) * f32(size) - 0.5;
     let x0 = floor(x);
     let y0 = floor(y);
     let f = vec2<f32>(x - x0, y - y0);
@@ -185,7 +227,9 @@ fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
         n = vec3<f32>(c * n.x - sn * n.y, sn * n.x + c * n.y, n.z);
         s.t = h.hit.t;
         s.normal = select(n, -n, dot(n, d) > 0.0);
-        var albedo = m.base_color.rgb;
+        // The raster's albedo: material × vertex colour × texture.
+        let vc = vec3<f32>(f32(tri.color & 0xffu), f32((tri.color >> 8u) & 0xffu), f32((tri.color >> 16u) & 0xffu)) / 255.0;
+        var albedo = m.base_color.rgb * vc;
         if m.texel_base != NO_TEXTURE && m.size > 0u {
             albedo *= texel_color(m.texel_base, m.size, trace_uv(sp, tri, h.hit.u, h.hit.v));
         }
@@ -195,7 +239,8 @@ fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
     }
     if t_ground > 0.0 {
         s.t = t_ground;
-        s.normal = vec3<f32>(0.0, 0.0, 1.0);
+        // Facing the ray (an eye below the plane sees its underside).
+        s.normal = vec3<f32>(0.0, 0.0, select(1.0, -1.0, d.z > 0.0));
         s.albedo = path.ground.rgb;
         s.leaf = false;
     }
@@ -268,9 +313,6 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             if share > 0.0 && sun_visible(p + s.normal * (eps * side), l) {
                 radiance += throughput * s.albedo * share * path.sun_color.rgb * abs(cos_l);
             }
-            if bounce == path.bounces {
-                break;
-            }
             // The next direction: reflected (cosine around the facing normal)
             // or, through a leaf, transmitted (around the other side's).
             let r = rand2();
@@ -281,6 +323,13 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             d = cosine_around(n, rand2());
             o = p + n * eps;
             throughput *= s.albedo;
+            if bounce == path.bounces {
+                // The last vertex still sees the sky (its sun is sampled above).
+                if hit_surface(o, d).t < 0.0 {
+                    radiance += throughput * sky(d);
+                }
+                break;
+            }
             // Russian roulette past the first bounce.
             if bounce >= 1u {
                 let q = clamp(max(throughput.r, max(throughput.g, throughput.b)), 0.05, 1.0);
@@ -290,7 +339,10 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
                 throughput /= q;
             }
         }
-        sum += radiance;
+        // (A sample gone non-finite is dropped rather than poisoning the pixel.)
+        if all(radiance == radiance) && all(abs(radiance) < vec3<f32>(1e30)) {
+            sum += radiance;
+        }
     }
     accum[pixel] += vec4<f32>(sum, f32(path.samples));
 }

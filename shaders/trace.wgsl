@@ -25,7 +25,8 @@ struct TraceTriangle {
     e1: vec3<f32>,
     material: u32,
     e2: vec3<f32>,
-    pad: u32,
+    // The corners' vertex colours averaged, linear RGBA8 (r low).
+    color: u32,
     uv: vec4<u32>,
 };
 

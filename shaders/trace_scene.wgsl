@@ -55,8 +55,9 @@ const NO_TEXTURE: u32 = 0xffffffffu;
 // centres, repeating. Twin: `texel_alpha` in src/trace/scene.rs.
 fn texel_alpha(base: u32, size: u32, uv: vec2<f32>) -> f32 {
     let n = i32(size);
-    let x = uv.x * f32(size) - 0.5;
-    let y = uv.y * f32(size) - 0.5;
+    // Wrapped first (repeating), so the texel indices stay small whatever the uv.
+    let x = fract(uv.x) * f32(size) - 0.5;
+    let y = fract(uv.y) * f32(size) - 0.5;
     let x0 = floor(x);
     let y0 = floor(y);
     let fx = x - x0;
@@ -89,7 +90,7 @@ fn trace_uv(sp: TraceSpecies, tri: TraceTriangle, u: f32, v: f32) -> vec2<f32> {
 fn trace_keeps(species: u32, tri: TraceTriangle, u: f32, v: f32) -> bool {
     let sp = trace_species[species];
     let m = trace_materials[sp.material_base + tri.material];
-    var alpha = m.base_color.a;
+    var alpha = m.base_color.a * f32(tri.color >> 24u) / 255.0;
     if m.texel_base != NO_TEXTURE && m.size > 0u {
         alpha *= texel_alpha(m.texel_base, m.size, trace_uv(sp, tri, u, v));
     }

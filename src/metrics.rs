@@ -184,7 +184,7 @@ pub fn multiscale_rmse_pyramid(a: &[u8], b: &[u8], width: u32, height: u32) -> f
 }
 
 /// Whether an RGBA8 pixel is foliage: its green stands out over red and blue
-/// by 8 levels or 12 % of the green, whichever is less (shaded foliage is
+/// by 8 levels or 12 % of the green, whichever is less, and at least 3 (shaded foliage is
 /// dark, and the trees' own occlusion darkens it further; sky, ground and
 /// haze are not green).
 #[must_use]

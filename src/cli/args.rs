@@ -454,7 +454,7 @@ pub(crate) struct RenderArgs {
     /// its true size (soft shadows), the sky's light, leaves that transmit,
     /// --bounces bounces, --spp samples per pixel; the ground a plane at the
     /// lowest tree's base (none with --no-terrain). A scene directory only.
-    #[arg(long, conflicts_with_all = ["pack", "converge"])]
+    #[arg(long, conflicts_with_all = ["pack", "converge", "date", "style", "select", "season"])]
     pub(crate) path_trace: bool,
     /// --path-trace: samples per pixel.
     #[arg(long, default_value_t = 64, requires = "path_trace", value_parser = clap::value_parser!(u32).range(1..=65_536))]
@@ -467,9 +467,13 @@ pub(crate) struct RenderArgs {
     /// bounce: the traced geometry under the raster's light).
     #[arg(long, value_enum, default_value = "physical", requires = "path_trace")]
     pub(crate) light: LightArg,
+    /// --path-trace with the physical light: the air's turbidity for the
+    /// clear sky (Preetham et al. 1999): 2 very clear, 3 clear, 6 hazy.
+    #[arg(long, default_value_t = 3.0, requires = "path_trace", value_parser = parse_turbidity)]
+    pub(crate) turbidity: f32,
     /// --path-trace: trees within this many metres of the eye (horizontally)
     /// are traced (the top level for a view; memory grows with it).
-    #[arg(long, default_value_t = 2000.0, requires = "path_trace")]
+    #[arg(long, default_value_t = 2000.0, requires = "path_trace", value_parser = parse_reach)]
     pub(crate) reach: f64,
     /// Write the converged image of progressive refinement, as the viewer
     /// shows it once the camera rests: sub-pixel jittered frames accumulate
@@ -570,5 +574,23 @@ pub(crate) fn parse_on_off(s: &str) -> Result<bool, String> {
         "on" | "true" | "yes" | "1" => Ok(true),
         "off" | "false" | "no" | "0" => Ok(false),
         _ => Err(format!("{s:?}: expected on or off")),
+    }
+}
+
+/// `--turbidity`: a number in 1.7–10 (the clear-sky fit's range).
+fn parse_turbidity(s: &str) -> Result<f32, String> {
+    let t: f32 = s.trim().parse().map_err(|_| format!("{s:?} is not a number"))?;
+    if (1.7..=10.0).contains(&t) {
+        Ok(t)
+    } else {
+        Err(format!("{t}: the clear sky is fitted for turbidity 1.7–10 (2 very clear, 3 clear, 6 hazy)"))
+    }
+}
+
+/// `--reach`: a positive distance in metres.
+fn parse_reach(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(m) if m.is_finite() && m > 0.0 => Ok(m),
+        _ => Err(format!("{s:?}: a distance in metres above 0")),
     }
 }

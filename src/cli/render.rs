@@ -483,6 +483,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         bounces,
         light,
         reach,
+        turbidity,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, textures, .. } = frame;
@@ -512,6 +513,13 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     };
     let sun = SunArg::parse(sun_time.as_deref(), sun.as_deref())?;
     if let Some(scene) = scene {
+        if path_trace {
+            let dir = std::path::Path::new(&scene);
+            let dir = if dir.is_file() { dir.parent().unwrap_or(dir) } else { dir };
+            if !dir.join("scene.json").is_file() {
+                bail!("--path-trace reads a scene directory (or its scene.json), not {scene}");
+            }
+        }
         let (mut representations, lod_policy) = representations(only);
         let mut quality = quality;
         if full_detail {
@@ -561,6 +569,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 simple: light == LightArg::Raster,
                 reach_m: reach,
                 no_ground: no_terrain,
+                turbidity,
             }),
         );
     }
@@ -645,6 +654,8 @@ pub(crate) struct PathTraceArgs {
     pub(crate) reach_m: f64,
     /// `--no-terrain`: no ground plane either.
     pub(crate) no_ground: bool,
+    /// The clear sky's turbidity (physical light).
+    pub(crate) turbidity: f32,
 }
 
 /// `sylva render --path-trace`: the view traced at full detail (issue 48).
@@ -682,20 +693,10 @@ fn path_trace(
     let tracer = PathTracer::new(&ctx.device);
     let several = suns.len() > 1;
     for (label, lighting) in suns {
-        // The sky as the raster's background draws it (shaders/sky.wgsl), as
-        // bright as the raster's sky light: a white surface under it alone
-        // reflects about the raster's ambient.
-        let scale = (lighting.ambient.dot(glam::Vec3::new(0.2126, 0.7152, 0.0722)) / 0.4573).clamp(0.15, 1.5);
-        let view = PathView {
-            eye: cam.eye_m.as_vec3(),
-            forward: cam.forward().as_vec3(),
-            fov_y: cam.fov_y_rad,
-            sun_dir: lighting.sun_dir,
-            sun_color: lighting.sun_color,
-            sky_zenith: glam::Vec3::new(0.23, 0.42, 0.72) * scale,
-            sky_horizon: glam::Vec3::new(0.62, 0.74, 0.86) * scale,
-            ambient: lighting.ambient,
-        };
+        // The physical light's sky: Preetham et al.'s clear sky; the raster
+        // light's: its background as shaders/sky.wgsl draws it.
+        let turbidity = (!args.simple).then_some(args.turbidity);
+        let view = PathView::under(lighting, cam.eye_m.as_vec3(), cam.forward().as_vec3(), cam.fov_y_rad, turbidity);
         let options = PathOptions {
             spp: args.spp,
             bounces: args.bounces,
@@ -705,12 +706,14 @@ fn path_trace(
         };
         let t = std::time::Instant::now();
         let mut last = std::time::Instant::now();
-        let image = tracer.render(ctx, &traced, &view, (w, h), &options, &mut |done| {
-            if last.elapsed().as_secs_f64() > 5.0 {
-                eprintln!("  {done} of {} samples per pixel ({:.0} s)", args.spp, t.elapsed().as_secs_f64());
-                last = std::time::Instant::now();
-            }
-        });
+        let image = tracer
+            .render(ctx, &traced, &view, (w, h), &options, &mut |done| {
+                if last.elapsed().as_secs_f64() > 5.0 {
+                    eprintln!("  {done} of {} samples per pixel ({:.0} s)", args.spp, t.elapsed().as_secs_f64());
+                    last = std::time::Instant::now();
+                }
+            })
+            .map_err(|e| anyhow::anyhow!("--path-trace: {e}"))?;
         let trace_s = t.elapsed().as_secs_f64();
         let path = if several { suffixed(out, label) } else { out.to_path_buf() };
         image::save_buffer(&path, &to_srgb8(&image), w, h, image::ColorType::Rgba8)
@@ -727,6 +730,7 @@ fn path_trace(
             ctx.adapter_summary()
         );
         if let Some(p) = stats_path {
+            let p = if several { suffixed(p, label) } else { p.clone() };
             let stats = serde_json::json!({
                 "renderer": "path-trace",
                 "trees": report.trees,
@@ -741,7 +745,7 @@ fn path_trace(
                 "paths_per_s": paths as f64 / trace_s.max(1e-9),
                 "adapter": ctx.adapter_summary(),
             });
-            std::fs::write(p, serde_json::to_string_pretty(&stats)?)
+            std::fs::write(&p, serde_json::to_string_pretty(&stats)?)
                 .with_context(|| format!("cannot write {}", p.display()))?;
         }
     }

@@ -57,6 +57,20 @@ pub struct PathParams {
     pub leaf_transmit: f32,
     /// The eye's height above the scene origin (the raster's haze).
     pub eye_z: f32,
+    /// Preetham et al. 1999's Perez coefficient A for (Y, x, y).
+    pub perez_a: [f32; 4],
+    /// Coefficient B.
+    pub perez_b: [f32; 4],
+    /// Coefficient C.
+    pub perez_c: [f32; 4],
+    /// Coefficient D.
+    pub perez_d: [f32; 4],
+    /// Coefficient E.
+    pub perez_e: [f32; 4],
+    /// The zenith's (Y, x, y) over their distribution; w: render units per kcd/m².
+    pub sky_zenith_yxy: [f32; 4],
+    /// The sun as the sky's fit saw it; w: 1 for the clear sky, 0 for the raster's gradient.
+    pub sky_sun: [f32; 4],
 }
 
 /// How a frame is traced.
@@ -115,6 +129,37 @@ pub struct PathView {
     pub sky_horizon: Vec3,
     /// The raster's ambient light (`Lighting::ambient`), for the simple light.
     pub ambient: Vec3,
+    /// A clear sky (Preetham et al. 1999) instead of the raster's gradient
+    /// (`sky_zenith`, `sky_horizon`) for the physical light.
+    pub sky: Option<crate::trace::sky::PreethamSky>,
+}
+
+/// The raster's sky at the zenith and at the horizon (`shaders/sky.wgsl`'s
+/// `SKY_ZENITH`, `SKY_HORIZON`; linear), and its ground below the horizon.
+pub const RASTER_SKY_ZENITH: Vec3 = Vec3::new(0.23, 0.42, 0.72);
+/// See [`RASTER_SKY_ZENITH`].
+pub const RASTER_SKY_HORIZON: Vec3 = Vec3::new(0.62, 0.74, 0.86);
+
+impl PathView {
+    /// A view from `eye` along `forward` (unit) under the raster's `lighting`:
+    /// its sun, its sky colours scaled as `sky_scale` in `shaders/light.wgsl`
+    /// scales them (the sky's brightness follows the ambient light), and a
+    /// clear sky of `turbidity` for the physical light (`None`: the gradient).
+    #[must_use]
+    pub fn under(lighting: &super::Lighting, eye: Vec3, forward: Vec3, fov_y: f32, turbidity: Option<f32>) -> Self {
+        let scale = (lighting.ambient.dot(Vec3::new(0.2126, 0.7152, 0.0722)) / 0.4573).clamp(0.15, 1.5);
+        Self {
+            eye,
+            forward,
+            fov_y,
+            sun_dir: lighting.sun_dir,
+            sun_color: lighting.sun_color,
+            sky_zenith: RASTER_SKY_ZENITH * scale,
+            sky_horizon: RASTER_SKY_HORIZON * scale,
+            ambient: lighting.ambient,
+            sky: turbidity.map(|t| crate::trace::sky::PreethamSky::new(lighting.sun_dir, t)),
+        }
+    }
 }
 
 /// The pass's pipeline.
@@ -172,7 +217,10 @@ impl PathTracer {
     /// image of linear radiance (rgb, row-major, top row first), `options.spp`
     /// samples per pixel, waiting for the GPU; `progress(samples done)` after
     /// each dispatch.
-    #[must_use]
+    ///
+    /// # Errors
+    /// The image or the scene's arrays larger than a storage buffer the
+    /// device binds (say which and by how much).
     pub fn render(
         &self,
         ctx: &GpuContext,
@@ -181,9 +229,26 @@ impl PathTracer {
         (width, height): (u32, u32),
         options: &PathOptions,
         progress: &mut dyn FnMut(u32),
-    ) -> Vec<[f32; 3]> {
+    ) -> Result<Vec<[f32; 3]>, String> {
         let device = &ctx.device;
         let a = scene.arrays();
+        let limit = device.limits().max_storage_buffer_binding_size;
+        let pixels = u64::from(width) * u64::from(height);
+        for (what, bytes) in [
+            ("the image's accumulation (16 bytes a pixel)", pixels * 16),
+            ("the species' BVH nodes", std::mem::size_of_val(&a.nodes[..]) as u64),
+            ("the species' triangles (64 bytes each)", std::mem::size_of_val(&a.triangles[..]) as u64),
+            ("the material textures' texels", a.texels.len() as u64 * 4),
+            ("the trees", std::mem::size_of_val(&scene.instances[..]) as u64),
+        ] {
+            if bytes > limit {
+                return Err(format!(
+                    "{what} take {:.1} MB, more than this GPU binds in one buffer ({:.1} MB): trace a smaller image or fewer trees (--reach)",
+                    bytes as f64 / 1e6,
+                    limit as f64 / 1e6
+                ));
+            }
+        }
         let pad_u32 = |v: Vec<u32>| if v.is_empty() { vec![0] } else { v };
         let storage = |label: &str, contents: &[u8], extra: wgpu::BufferUsages| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -216,8 +281,14 @@ impl PathTracer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let pixels = (width as usize) * (height as usize);
-        let accum = storage("path accum", &vec![0u8; pixels * 16], wgpu::BufferUsages::COPY_SRC);
+        let pixels = pixels as usize;
+        // Zeroed at creation (wgpu clears new buffers).
+        let accum = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("path accum"),
+            size: (pixels * 16) as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
         let buffers = [
             storage("bvh nodes", bytemuck::cast_slice(&nodes), none),
             storage("bvh triangles", bytemuck::cast_slice(&tris), none),
@@ -264,7 +335,25 @@ impl PathTracer {
             simple: u32::from(options.simple),
             leaf_transmit: options.leaf_transmit.clamp(0.0, 1.0),
             eye_z: view.eye.z,
+            perez_a: [0.0; 4],
+            perez_b: [0.0; 4],
+            perez_c: [0.0; 4],
+            perez_d: [0.0; 4],
+            perez_e: [0.0; 4],
+            sky_zenith_yxy: [0.0; 4],
+            sky_sun: [0.0; 4],
         };
+        if let (Some(sky), false) = (view.sky, options.simple) {
+            let letter = |k: usize| [sky.perez[0][k], sky.perez[1][k], sky.perez[2][k], 0.0];
+            params.perez_a = letter(0);
+            params.perez_b = letter(1);
+            params.perez_c = letter(2);
+            params.perez_d = letter(3);
+            params.perez_e = letter(4);
+            params.sky_zenith_yxy = [sky.zenith[0], sky.zenith[1], sky.zenith[2], crate::trace::sky::UNITS_PER_KCD];
+            let fitted = sky.fitted_sun();
+            params.sky_sun = [fitted.x, fitted.y, fitted.z, 1.0];
+        }
         let mut done = 0;
         while done < options.spp.max(1) {
             params.sample = options.first_sample.wrapping_add(done);
@@ -300,7 +389,7 @@ impl PathTracer {
             let n = s[3].max(1.0);
             [s[0] / n, s[1] / n, s[2] / n]
         });
-        image.collect()
+        Ok(image.collect())
     }
 }
 

@@ -13,7 +13,7 @@ use crate::trace::bvh::Bvh;
 use crate::trace::scene::{SceneHit, TraceScene};
 use crate::trace::{Hit, Ray};
 
-/// A ray as the probe reads it. Must match `ProbeRay` in `shaders/trace_probe.wgsl`.
+/// A ray as the probe reads it. Must match `ProbeRay` in `shaders/trace_probe_ray.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct ProbeRay {

@@ -4,7 +4,7 @@
 //! Booth 1990) evaluated over bins of the triangles' centroids (Wald 2007,
 //! "On fast construction of SAH-based bounding volume hierarchies", §3), in
 //! arrays the GPU reads as they are: [`BvhNode`]s (32 bytes) and
-//! [`GpuTriangle`]s (48 bytes) in leaf order.
+//! [`GpuTriangle`]s (64 bytes) in leaf order.
 //!
 //! [`Bvh::intersect`] is the twin of `trace_bvh` in `shaders/trace.wgsl`.
 
@@ -60,21 +60,31 @@ pub struct GpuTriangle {
     pub material: u32,
     /// Third corner − first.
     pub e2: [f32; 3],
-    /// Padding (0).
-    pub pad: u32,
+    /// The corners' vertex colours averaged, linear RGBA8 (r low): the
+    /// raster multiplies albedo and alpha by them.
+    pub color: u32,
     /// The corners' texture coordinates as the vertices quantise them (u, v
     /// as u16 in 1/65535 steps of the level's uv range; u low), then 0.
     pub uv: [u32; 4],
 }
 
-/// What a triangle carries besides its corners: its material and its
-/// corners' quantised texture coordinates (see [`GpuTriangle::uv`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// What a triangle carries besides its corners: its material, its corners'
+/// quantised texture coordinates (see [`GpuTriangle::uv`]) and their colour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TriangleSurface {
     /// The species' material index.
     pub material: u32,
     /// Per corner, u | v << 16.
     pub uv: [u32; 3],
+    /// The corners' vertex colours averaged, linear RGBA8 (r low).
+    pub color: u32,
+}
+
+impl Default for TriangleSurface {
+    /// Material 0, no texture coordinates, white.
+    fn default() -> Self {
+        Self { material: 0, uv: [0; 3], color: u32::MAX }
+    }
 }
 
 impl GpuTriangle {
@@ -155,7 +165,7 @@ impl Bvh {
                     e1: t.e1.into(),
                     material: s.material,
                     e2: t.e2.into(),
-                    pad: 0,
+                    color: s.color,
                     uv: [s.uv[0], s.uv[1], s.uv[2], 0],
                 }
             })
@@ -227,7 +237,7 @@ pub fn depth_of(nodes: &[BvhNode]) -> u32 {
 /// the nearest hit so far: at each leaf reached, `leaf(first, count, closest)`
 /// tests its primitives against `closest` and returns a nearer hit's distance,
 /// if any. Returns the nearest distance found (`ray.t_max` if none).
-/// Twin: the walk of `trace_bvh` (and of `trace_scene`) in `shaders/trace.wgsl`.
+/// Twin: the walk of `trace_bvh` in `shaders/trace.wgsl` (and of `trace_scene` in `trace_scene.wgsl`).
 pub fn walk(nodes: &[BvhNode], ray: &Ray, mut leaf: impl FnMut(u32, u32, f32) -> Option<f32>) -> f32 {
     let mut closest = ray.t_max;
     let Some(root) = nodes.first() else { return closest };
@@ -348,22 +358,27 @@ pub fn mesh_triangles(level: &MeshLevelMeta, vertices: &[MeshVertex], indices: &
         .collect()
 }
 
-/// Each triangle's material (from the level's draw ranges) and its corners'
-/// quantised texture coordinates, in the order of [`mesh_triangles`].
+/// Each triangle's material (its first corner's, as the raster's flat
+/// attribute takes it), its corners' quantised texture coordinates and their
+/// colours averaged, in the order of [`mesh_triangles`].
 #[must_use]
-pub fn mesh_surfaces(level: &MeshLevelMeta, vertices: &[MeshVertex], indices: &[u32]) -> Vec<TriangleSurface> {
+pub fn mesh_surfaces(vertices: &[MeshVertex], indices: &[u32]) -> Vec<TriangleSurface> {
     let uv = |i: u32| vertices.get(i as usize).map_or(0, |v| u32::from(v.uv[0]) | (u32::from(v.uv[1]) << 16));
-    let material_of = |first_index: usize| {
-        level
-            .draws
-            .iter()
-            .find(|d| (d.first_index as usize..(d.first_index + d.index_count) as usize).contains(&first_index))
-            .map_or(0, |d| d.material)
+    let color = |c: &[u32]| {
+        let mut sum = [0u32; 4];
+        for &i in c {
+            let v = vertices.get(i as usize).map_or([255; 4], |v| v.color);
+            (0..4).for_each(|k| sum[k] += u32::from(v[k]));
+        }
+        (0..4).fold(0, |word, k| word | (((sum[k] + 1) / 3).min(255) << (8 * k)))
     };
     indices
         .chunks_exact(3)
-        .enumerate()
-        .map(|(t, c)| TriangleSurface { material: material_of(t * 3), uv: [uv(c[0]), uv(c[1]), uv(c[2])] })
+        .map(|c| TriangleSurface {
+            material: vertices.get(c[0] as usize).map_or(0, |v| u32::from(v.material)),
+            uv: [uv(c[0]), uv(c[1]), uv(c[2])],
+            color: color(c),
+        })
         .collect()
 }
 

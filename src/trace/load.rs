@@ -48,7 +48,10 @@ pub fn load_dir(dir: &Path, eye: DVec3, reach_m: f64) -> Result<(TraceScene, Loa
     for s in &m.species {
         let bytes = crate::format::stored::unstore(&s.pack, read(&s.pack)?).map_err(|e| e.to_string())?;
         let pack = decode_pack(&s.pack, &bytes).map_err(|e| e.to_string())?;
-        let traced = TraceSpecies::of_pack(&pack)?;
+        // A pack without a mesh (the format allows one) traces nothing: its
+        // trees are left out, the rest traced.
+        let traced =
+            if pack.meta.mesh_levels.is_empty() { TraceSpecies::default() } else { TraceSpecies::of_pack(&pack)? };
         species_triangles.push((s.name.clone(), traced.bvh.triangles.len()));
         species.push(traced);
     }

@@ -14,6 +14,7 @@ pub mod bvh;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod load;
 pub mod scene;
+pub mod sky;
 
 use glam::Vec3;
 

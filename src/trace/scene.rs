@@ -7,7 +7,7 @@
 //! there; its parameter `t` is the same in both spaces (the map is affine and
 //! the direction is not renormalised).
 //!
-//! [`TraceScene::intersect`] is the twin of `trace_scene` in `shaders/trace.wgsl`.
+//! [`TraceScene::intersect`] is the twin of `trace_scene` in `shaders/trace_scene.wgsl`.
 
 use glam::Vec3;
 
@@ -30,7 +30,7 @@ pub struct Instance {
     pub species: u32,
 }
 
-/// An instance as the GPU reads it. Must match `TraceInstance` in `shaders/trace.wgsl`.
+/// An instance as the GPU reads it. Must match `TraceInstance` in `shaders/trace_scene.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuInstance {
@@ -123,8 +123,7 @@ impl TraceSpecies {
         let meta = &pack.meta;
         let level = meta.mesh_levels.first().ok_or_else(|| format!("{}: no mesh to trace", meta.name))?;
         let (vertices, indices) = (pack.mesh_vertices(0), pack.mesh_indices(0));
-        let bvh =
-            Bvh::build_with(&mesh_triangles(level, &vertices, &indices), &mesh_surfaces(level, &vertices, &indices));
+        let bvh = Bvh::build_with(&mesh_triangles(level, &vertices, &indices), &mesh_surfaces(&vertices, &indices));
         let mut texels = Vec::new();
         let mut layer_base = Vec::new();
         if let Some(t) = &meta.material_texture {
@@ -185,7 +184,7 @@ impl TraceSpecies {
     #[must_use]
     pub fn keeps(&self, tri: &GpuTriangle, u: f32, v: f32) -> bool {
         let Some(m) = self.materials.get(tri.material as usize) else { return true };
-        let mut alpha = m.base_color[3];
+        let mut alpha = m.base_color[3] * (tri.color >> 24) as f32 / 255.0;
         if m.texel_base != NO_TEXTURE && m.size > 0 {
             alpha *= texel_alpha(&self.texels, m.texel_base, m.size, self.uv(tri, u, v));
         }
@@ -205,8 +204,9 @@ impl TraceSpecies {
 #[must_use]
 pub fn texel_alpha(texels: &[u32], base: u32, size: u32, uv: [f32; 2]) -> f32 {
     let n = size as i32;
-    let x = uv[0] * size as f32 - 0.5;
-    let y = uv[1] * size as f32 - 0.5;
+    // Wrapped first (repeating), so the texel indices stay small whatever the uv.
+    let x = (uv[0] - uv[0].floor()) * size as f32 - 0.5;
+    let y = (uv[1] - uv[1].floor()) * size as f32 - 0.5;
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let a = |dx: i32, dy: i32| {
@@ -257,7 +257,7 @@ impl GpuInstance {
     }
 
     /// A scene-space ray carried into the species' model space: the same `t`
-    /// reaches the same point. Twin: `to_model` in `shaders/trace.wgsl`.
+    /// reaches the same point. Twin: `to_model` in `shaders/trace_scene.wgsl`.
     #[must_use]
     pub fn to_model(&self, ray: &Ray) -> Ray {
         let (s, c) = self.yaw.sin_cos();
@@ -314,7 +314,7 @@ impl TraceScene {
 
     /// The nearest hit of a scene-space `ray`: the top level walked front to
     /// back, each tree entered walked in its species' model space.
-    /// Twin: `trace_scene` in `shaders/trace.wgsl`.
+    /// Twin: `trace_scene` in `shaders/trace_scene.wgsl`.
     #[must_use]
     pub fn intersect(&self, ray: &Ray) -> Option<SceneHit> {
         let mut best = None;
@@ -478,8 +478,8 @@ mod tests {
         ];
         let q = |u: f32, v: f32| (u * 65535.0) as u32 | (((v * 65535.0) as u32) << 16);
         let surfaces = [
-            TriangleSurface { material: 0, uv: [q(0.0, 0.0), q(1.0, 0.0), q(1.0, 1.0)] },
-            TriangleSurface { material: 0, uv: [q(0.0, 0.0), q(1.0, 1.0), q(0.0, 1.0)] },
+            TriangleSurface { material: 0, uv: [q(0.0, 0.0), q(1.0, 0.0), q(1.0, 1.0)], color: u32::MAX },
+            TriangleSurface { material: 0, uv: [q(0.0, 0.0), q(1.0, 1.0), q(0.0, 1.0)], color: u32::MAX },
         ];
         let texels: Vec<u32> = (0..16).map(|i| if i % 4 < 2 { 0xff00_ff00 } else { 0x0000_ff00 }).collect();
         let species = TraceSpecies {

@@ -225,7 +225,7 @@ fn the_tracer_structs_match_their_wgsl_twins() {
     check(
         shader,
         "TraceTriangle",
-        &members!(GpuTriangle: v0, id, e1, material, e2, pad, uv),
+        &members!(GpuTriangle: v0, id, e1, material, e2, color, uv),
         size_of::<GpuTriangle>(),
         None,
     );
@@ -267,4 +267,17 @@ fn the_tracer_scene_structs_match_their_wgsl_twins() {
         None,
     );
     check(shader, "SceneHit", &members!(GpuSceneHit: instance, slot, hit), size_of::<GpuSceneHit>(), None);
+}
+
+#[test]
+fn the_path_tracer_params_match_their_wgsl_twin() {
+    use sylva::render::path_trace::PathParams;
+    check(
+        "path_trace",
+        "PathParams",
+        &members!(PathParams: forward, right, up, sun_dir, sun_color, sky_zenith, sky_horizon, ground, ambient, width, height,
+            sample, samples, bounces, simple, leaf_transmit, eye_z, perez_a, perez_b, perez_c, perez_d, perez_e, sky_zenith_yxy, sky_sun),
+        size_of::<PathParams>(),
+        None,
+    );
 }

@@ -160,15 +160,24 @@ fn the_gpu_two_level_walk_finds_the_trees_its_cpu_twin_finds() {
         })
         .collect();
     let gpu = probe.trace_scene(&ctx, &scene, &rays);
+    let arrays = scene.arrays();
     let (mut hits, mut differ, mut trees_hit) = (0, Vec::new(), std::collections::BTreeSet::new());
     for (ray, g) in rays.iter().zip(&gpu) {
         let c = scene.intersect(ray);
         let same = match (c, g) {
             (None, None) => true,
             (Some(c), Some(g)) => {
+                // The same tree in the same slot, the same triangle (by the
+                // mesh's index and by its place in the GPU's arrays).
+                let inst = scene.instances[c.slot as usize];
                 c.instance == g.instance
+                    && c.slot == g.slot
+                    && inst.id == c.instance
                     && c.hit.triangle == g.hit.triangle
+                    && g.hit.index == arrays.species[inst.species as usize].tri_base + c.hit.index
                     && (c.hit.t - g.hit.t).abs() <= 1e-4 * c.hit.t.max(1.0)
+                    && (c.hit.u - g.hit.u).abs() < 1e-3
+                    && (c.hit.v - g.hit.v).abs() < 1e-3
             }
             _ => false,
         };
@@ -221,19 +230,11 @@ fn the_traced_view_covers_what_the_raster_full_mesh_covers() {
     let raster = off.read_image();
     let (traced_scene, report) = sylva::trace::load::load_dir(std::path::Path::new(scene), cam.eye_m, 2000.0).unwrap();
     assert!(report.trees > 1000 && report.instanced_triangles > 1_000_000, "{report:?}");
-    let light = off.settings.lighting;
-    let view = PathView {
-        eye: cam.eye_m.as_vec3(),
-        forward: cam.forward().as_vec3(),
-        fov_y: cam.fov_y_rad,
-        sun_dir: light.sun_dir,
-        sun_color: light.sun_color,
-        sky_zenith: glam::Vec3::new(0.23, 0.42, 0.72),
-        sky_horizon: glam::Vec3::new(0.62, 0.74, 0.86),
-        ambient: light.ambient,
-    };
+    let view =
+        PathView::under(&off.settings.lighting, cam.eye_m.as_vec3(), cam.forward().as_vec3(), cam.fov_y_rad, None);
     let options = PathOptions { spp: 4, simple: true, ground_z: None, ..PathOptions::default() };
-    let traced = PathTracer::new(&off.ctx.device).render(&off.ctx, &traced_scene, &view, (w, h), &options, &mut |_| {});
+    let traced =
+        PathTracer::new(&off.ctx.device).render(&off.ctx, &traced_scene, &view, (w, h), &options, &mut |_| {}).unwrap();
     let traced = to_srgb8(&traced);
     let (iou, a, b) = sylva::metrics::foliage_iou(&raster, &traced);
     // Trees fill a good part of the view in both (not a blank or a sky).
@@ -261,22 +262,14 @@ fn the_traced_image_converges_at_the_monte_carlo_rate() {
     // Above the stand, looking down across it: crowns, gaps and ground.
     let eye = glam::DVec3::new(0.0, -150.0, 90.0);
     let (traced, _) = sylva::trace::load::load_dir(std::path::Path::new(scene), eye, 2000.0).unwrap();
-    let light = sylva::render::Lighting::default();
-    let view = PathView {
-        eye: eye.as_vec3(),
-        forward: glam::Vec3::new(0.0, 0.8, -0.6).normalize(),
-        fov_y: 50f32.to_radians(),
-        sun_dir: light.sun_dir,
-        sun_color: light.sun_color,
-        sky_zenith: glam::Vec3::new(0.23, 0.42, 0.72),
-        sky_horizon: glam::Vec3::new(0.62, 0.74, 0.86),
-        ambient: light.ambient,
-    };
+    let forward = glam::Vec3::new(0.0, 0.8, -0.6).normalize();
+    let view =
+        PathView::under(&sylva::render::Lighting::default(), eye.as_vec3(), forward, 50f32.to_radians(), Some(3.0));
     let tracer = PathTracer::new(&ctx.device);
     let size = (32, 18);
     let run = |spp, first_sample| {
         let options = PathOptions { spp, first_sample, ground_z: Some(0.0), ..PathOptions::default() };
-        tracer.render(&ctx, &traced, &view, size, &options, &mut |_| {})
+        tracer.render(&ctx, &traced, &view, size, &options, &mut |_| {}).unwrap()
     };
     // The reference's samples are its own (another start in the sequences).
     let reference = run(64, 1 << 20);
@@ -292,4 +285,91 @@ fn the_traced_image_converges_at_the_monte_carlo_rate() {
     let ratio = e16 / e4;
     eprintln!("traced error against 64 spp: 4 spp {e4:.5}, 16 spp {e16:.5} (ratio {ratio:.3})");
     assert!(e4 > 0.0 && (0.35..0.7).contains(&ratio), "error at 4 spp {e4:.5}, at 16 {e16:.5}: ratio {ratio:.3}");
+}
+
+/// The clear sky (Preetham et al. 1999) on the GPU is its CPU twin: an empty
+/// scene's traced pixels are the sky's radiance in their directions.
+#[test]
+fn the_gpu_sky_is_its_cpu_twin() {
+    use sylva::render::path_trace::{PathOptions, PathTracer, PathView};
+    use sylva::trace::scene::TraceScene;
+    use sylva::trace::sky::PreethamSky;
+    let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    let sun = glam::Vec3::new(0.3, 0.5, 0.4).normalize();
+    let sky = PreethamSky::new(sun, 3.0);
+    // Looking up: every pixel sees the sky (below the horizon the tracer shows the ground's albedo under it).
+    let forward = glam::Vec3::new(0.0, 1.0, 1.2).normalize();
+    let view = PathView {
+        eye: glam::Vec3::ZERO,
+        forward,
+        fov_y: 60f32.to_radians(),
+        sun_dir: sun,
+        sun_color: glam::Vec3::splat(0.85),
+        sky_zenith: glam::Vec3::ZERO,
+        sky_horizon: glam::Vec3::ZERO,
+        ambient: glam::Vec3::ZERO,
+        sky: Some(sky),
+    };
+    let (w, h) = (16u32, 9u32);
+    let options = PathOptions { spp: 16, ground_z: None, ..PathOptions::default() };
+    let img = PathTracer::new(&ctx.device)
+        .render(&ctx, &TraceScene::default(), &view, (w, h), &options, &mut |_| {})
+        .unwrap();
+    // Each pixel's direction through its centre, as the pass builds it.
+    let right = forward.cross(glam::Vec3::Z).normalize();
+    let up = right.cross(forward);
+    let tan_half = (view.fov_y * 0.5).tan();
+    let aspect = w as f32 / h as f32;
+    let mut worst = 0f32;
+    for y in 0..h {
+        for x in 0..w {
+            let ndc = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0, 1.0 - (y as f32 + 0.5) / h as f32 * 2.0);
+            let d = (forward + right * tan_half * aspect * ndc.0 + up * tan_half * ndc.1).normalize();
+            assert!(d.z > 0.0);
+            let cpu = sky.radiance(d);
+            let gpu = glam::Vec3::from(img[(y * w + x) as usize]);
+            assert!(cpu.min_element() > 0.0, "a lit sky: {cpu}");
+            worst = worst.max(((gpu - cpu).abs() / cpu).max_element());
+        }
+    }
+    // (The GPU averages 16 jittered directions across each pixel.)
+    assert!(worst < 0.05, "largest relative difference {worst}");
+}
+
+/// Light transport against hand-worked cases: a ground under the sun at the
+/// zenith and a black sky reflects `albedo × sun_color`; under a uniform sky
+/// alone, a white ground reflects the sky's radiance.
+#[test]
+fn the_tracer_lights_a_plane_as_the_rendering_equation_says() {
+    use sylva::render::path_trace::{PathOptions, PathTracer, PathView};
+    use sylva::trace::scene::TraceScene;
+    let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    let tracer = PathTracer::new(&ctx.device);
+    let mut view = PathView {
+        eye: glam::Vec3::new(0.0, 0.0, 10.0),
+        forward: glam::Vec3::new(0.0, 0.2, -1.0).normalize(),
+        fov_y: 30f32.to_radians(),
+        sun_dir: glam::Vec3::Z,
+        sun_color: glam::Vec3::new(0.9, 0.6, 0.3),
+        sky_zenith: glam::Vec3::ZERO,
+        sky_horizon: glam::Vec3::ZERO,
+        ambient: glam::Vec3::ZERO,
+        sky: None,
+    };
+    let albedo = glam::Vec3::new(0.5, 0.25, 1.0);
+    let options =
+        PathOptions { spp: 8, ground_z: Some(0.0), ground_albedo: albedo, bounces: 0, ..PathOptions::default() };
+    let mean = |img: &[[f32; 3]]| img.iter().fold(glam::Vec3::ZERO, |a, p| a + glam::Vec3::from(*p)) / img.len() as f32;
+    // The sun alone: albedo × sun_color × cos 0 (a disk of 0.27°: cos ≈ 1).
+    let sun = mean(&tracer.render(&ctx, &TraceScene::default(), &view, (8, 8), &options, &mut |_| {}).unwrap());
+    let want = albedo * view.sun_color;
+    assert!((sun - want).abs().max_element() < 1e-3, "sun-lit ground {sun}, expected {want}");
+    // A uniform sky of radiance L alone (the sun below the horizon): a white
+    // Lambertian plane reflects L (its cosine-weighted integral over π).
+    view.sun_dir = -glam::Vec3::Z;
+    view.sky_zenith = glam::Vec3::splat(0.4);
+    view.sky_horizon = glam::Vec3::splat(0.4);
+    let white = PathOptions { spp: 64, ground_albedo: glam::Vec3::ONE, ..options };
+    let sky = mean(&tracer.render(&ctx, &TraceScene::default(), &view, (8, 8), &white, &mut |_| {}).unwrap());
+    assert!((sky - glam::Vec3::splat(0.4)).abs().max_element() < 0.02, "sky-lit ground {sky}, expected 0.4");
 }
