@@ -452,8 +452,9 @@ pub(crate) struct RenderArgs {
     /// --reach at its full mesh (leaf cards alpha-tested at full texture
     /// resolution) through a two-level BVH on the GPU, the sun as a disk of
     /// its true size (soft shadows), the sky's light, leaves that transmit,
-    /// --bounces bounces, --spp samples per pixel; the ground a plane at the
-    /// lowest tree's base (none with --no-terrain). A scene directory only.
+    /// --bounces bounces, --spp samples per pixel; the scene's terrain within
+    /// reach as triangles (a plane at the lowest tree's base where it has
+    /// none; no ground with --no-terrain). A scene directory only.
     #[arg(long, conflicts_with_all = ["pack", "converge", "date", "style", "select", "season"])]
     pub(crate) path_trace: bool,
     /// --path-trace: samples per pixel.

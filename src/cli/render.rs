@@ -677,16 +677,28 @@ fn path_trace(
         bail!("--path-trace reads a scene directory (or its scene.json), not {scene}");
     }
     let t = std::time::Instant::now();
-    let (traced, report) =
-        sylva::trace::load::load_dir(dir, cam.eye_m, args.reach_m).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (traced, report) = sylva::trace::load::load_dir(
+        dir,
+        cam.eye_m,
+        args.reach_m,
+        (!args.no_ground).then_some(PathOptions::default().ground_albedo),
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
     let load_s = t.elapsed().as_secs_f64();
     eprintln!(
-        "tracing {} of {} trees within {} m ({:.1} M instanced triangles; species {}), {:.1} MB on the GPU, loaded in {:.1} s",
+        "tracing {} of {} trees within {} m ({:.1} M instanced triangles; species {}) and {}, {:.1} MB on the GPU, loaded in {:.1} s",
         report.trees,
         report.trees_in_scene,
         args.reach_m,
         report.instanced_triangles as f64 / 1e6,
         report.species_triangles.iter().map(|(n, t)| format!("{n} {t}")).collect::<Vec<_>>().join(", "),
+        if report.terrain_triangles > 0 {
+            format!("{} terrain triangles", report.terrain_triangles)
+        } else if args.no_ground {
+            "no ground".to_string()
+        } else {
+            format!("a ground plane at {:.1} m", report.ground_z)
+        },
         report.bytes as f64 / 1e6,
         load_s
     );
@@ -701,7 +713,8 @@ fn path_trace(
             spp: args.spp,
             bounces: args.bounces,
             simple: args.simple,
-            ground_z: (!args.no_ground).then_some(report.ground_z),
+            // The terrain where the scene has it, else a plane at the lowest tree's base.
+            ground_z: (!args.no_ground && report.terrain_triangles == 0).then_some(report.ground_z),
             ..PathOptions::default()
         };
         let t = std::time::Instant::now();
@@ -736,6 +749,7 @@ fn path_trace(
                 "trees": report.trees,
                 "trees_in_scene": report.trees_in_scene,
                 "instanced_triangles": report.instanced_triangles,
+                "terrain_triangles": report.terrain_triangles,
                 "gpu_bytes": report.bytes,
                 "spp": args.spp,
                 "bounces": args.bounces,

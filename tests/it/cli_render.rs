@@ -377,6 +377,8 @@ fn path_trace_writes_the_traced_view_and_refuses_what_it_cannot_trace() {
     let s: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
     assert_eq!(s["renderer"], "path-trace");
     assert!(s["trees"].as_u64().unwrap() > 1000 && s["instanced_triangles"].as_u64().unwrap() > 1_000_000, "{s}");
+    // The fixture's terrain is traced (its tiles within reach as triangles).
+    assert!(s["terrain_triangles"].as_u64().unwrap() > 1000, "{s}");
     let img = image::open(&png).unwrap().to_rgba8();
     let green = img.as_raw().chunks_exact(4).filter(|p| sylva::metrics::is_foliage(p)).count();
     assert!(green > 48 * 27 / 5, "{green} foliage pixels of {}", 48 * 27);

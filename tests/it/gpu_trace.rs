@@ -228,7 +228,8 @@ fn the_traced_view_covers_what_the_raster_full_mesh_covers() {
     let stats = off.render(&cam, true);
     assert!(stats.instances["mesh0"] > 500, "{:?}", stats.instances);
     let raster = off.read_image();
-    let (traced_scene, report) = sylva::trace::load::load_dir(std::path::Path::new(scene), cam.eye_m, 2000.0).unwrap();
+    let (traced_scene, report) =
+        sylva::trace::load::load_dir(std::path::Path::new(scene), cam.eye_m, 2000.0, None).unwrap();
     assert!(report.trees > 1000 && report.instanced_triangles > 1_000_000, "{report:?}");
     let view =
         PathView::under(&off.settings.lighting, cam.eye_m.as_vec3(), cam.forward().as_vec3(), cam.fov_y_rad, None);
@@ -261,7 +262,7 @@ fn the_traced_image_converges_at_the_monte_carlo_rate() {
     let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
     // Above the stand, looking down across it: crowns, gaps and ground.
     let eye = glam::DVec3::new(0.0, -150.0, 90.0);
-    let (traced, _) = sylva::trace::load::load_dir(std::path::Path::new(scene), eye, 2000.0).unwrap();
+    let (traced, _) = sylva::trace::load::load_dir(std::path::Path::new(scene), eye, 2000.0, None).unwrap();
     let forward = glam::Vec3::new(0.0, 0.8, -0.6).normalize();
     let view =
         PathView::under(&sylva::render::Lighting::default(), eye.as_vec3(), forward, 50f32.to_radians(), Some(3.0));
