@@ -94,6 +94,44 @@ fn ray_triangle(o: vec3<f32>, d: vec3<f32>, tri: TraceTriangle, t_max: f32) -> v
     return miss;
 }
 
+// A walk's stack: node indices (relative to the hierarchy's first node) and
+// the distances at which the ray entered them.
+struct TraceStack {
+    node: array<u32, TRACE_STACK>,
+    t: array<f32, TRACE_STACK>,
+    sp: u32,
+};
+
+// An inner node's children (at `first` and `first + 1` from `base` in
+// bvh_nodes) that the ray enters before `closest`, pushed the farther first so
+// the nearer is walked next. Both walks' step (trace_bvh, trace_scene); twin:
+// the child step of `walk` in src/trace/bvh.rs.
+fn trace_push_children(stack: ptr<function, TraceStack>, o: vec3<f32>, inv: vec3<f32>, base: u32, first: u32, closest: f32) {
+    let a = first;
+    let b = first + 1u;
+    let na = bvh_nodes[base + a];
+    let nb = bvh_nodes[base + b];
+    let ta = ray_box(o, inv, na.min, na.max, closest);
+    let tb = ray_box(o, inv, nb.min, nb.max, closest);
+    let sp = (*stack).sp;
+    if ta >= 0.0 && tb >= 0.0 && sp + 2u <= TRACE_STACK {
+        let near_a = !(tb < ta);
+        (*stack).node[sp] = select(a, b, near_a);
+        (*stack).t[sp] = select(ta, tb, near_a);
+        (*stack).node[sp + 1u] = select(b, a, near_a);
+        (*stack).t[sp + 1u] = select(tb, ta, near_a);
+        (*stack).sp = sp + 2u;
+    } else if ta >= 0.0 && sp < TRACE_STACK {
+        (*stack).node[sp] = a;
+        (*stack).t[sp] = ta;
+        (*stack).sp = sp + 1u;
+    } else if tb >= 0.0 && sp < TRACE_STACK {
+        (*stack).node[sp] = b;
+        (*stack).t[sp] = tb;
+        (*stack).sp = sp + 1u;
+    }
+}
+
 // The nearest hit of the ray o + t d (t < t_max) that `trace_keeps` keeps, in
 // the hierarchy of `species` whose nodes start at node_base and triangles at
 // tri_base, walked front to back. Twin: `Bvh::intersect_where` in src/trace/bvh.rs.
@@ -105,21 +143,20 @@ fn trace_bvh(o: vec3<f32>, d: vec3<f32>, t_max: f32, species: u32, node_base: u3
     if enter < 0.0 {
         return hit;
     }
-    var stack_node: array<u32, TRACE_STACK>;
-    var stack_t: array<f32, TRACE_STACK>;
-    stack_node[0] = 0u;
-    stack_t[0] = enter;
-    var sp = 1u;
+    var stack: TraceStack;
+    stack.node[0] = 0u;
+    stack.t[0] = enter;
+    stack.sp = 1u;
     var closest = t_max;
     loop {
-        if sp == 0u {
+        if stack.sp == 0u {
             break;
         }
-        sp -= 1u;
-        if stack_t[sp] >= closest {
+        stack.sp -= 1u;
+        if stack.t[stack.sp] >= closest {
             continue;
         }
-        let node = bvh_nodes[node_base + stack_node[sp]];
+        let node = bvh_nodes[node_base + stack.node[stack.sp]];
         if node.count > 0u {
             for (var i = node.first; i < node.first + node.count; i++) {
                 let tri = bvh_tris[tri_base + i];
@@ -131,35 +168,7 @@ fn trace_bvh(o: vec3<f32>, d: vec3<f32>, t_max: f32, species: u32, node_base: u3
             }
             continue;
         }
-        let a = node.first;
-        let b = node.first + 1u;
-        let na = bvh_nodes[node_base + a];
-        let nb = bvh_nodes[node_base + b];
-        let ta = ray_box(o, inv, na.min, na.max, closest);
-        let tb = ray_box(o, inv, nb.min, nb.max, closest);
-        if ta >= 0.0 && tb >= 0.0 && sp + 2u <= TRACE_STACK {
-            // The farther first, so the nearer is walked next.
-            if tb < ta {
-                stack_node[sp] = a;
-                stack_t[sp] = ta;
-                stack_node[sp + 1u] = b;
-                stack_t[sp + 1u] = tb;
-            } else {
-                stack_node[sp] = b;
-                stack_t[sp] = tb;
-                stack_node[sp + 1u] = a;
-                stack_t[sp + 1u] = ta;
-            }
-            sp += 2u;
-        } else if ta >= 0.0 && sp < TRACE_STACK {
-            stack_node[sp] = a;
-            stack_t[sp] = ta;
-            sp += 1u;
-        } else if tb >= 0.0 && sp < TRACE_STACK {
-            stack_node[sp] = b;
-            stack_t[sp] = tb;
-            sp += 1u;
-        }
+        trace_push_children(&stack, o, inv, node_base, node.first, closest);
     }
     return hit;
 }

@@ -129,21 +129,20 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> SceneHit {
     if enter < 0.0 {
         return best;
     }
-    var stack_node: array<u32, TRACE_STACK>;
-    var stack_t: array<f32, TRACE_STACK>;
-    stack_node[0] = 0u;
-    stack_t[0] = enter;
-    var sp = 1u;
+    var stack: TraceStack;
+    stack.node[0] = 0u;
+    stack.t[0] = enter;
+    stack.sp = 1u;
     var closest = t_max;
     loop {
-        if sp == 0u {
+        if stack.sp == 0u {
             break;
         }
-        sp -= 1u;
-        if stack_t[sp] >= closest {
+        stack.sp -= 1u;
+        if stack.t[stack.sp] >= closest {
             continue;
         }
-        let node = bvh_nodes[top + stack_node[sp]];
+        let node = bvh_nodes[top + stack.node[stack.sp]];
         if node.count > 0u {
             for (var i = node.first; i < node.first + node.count; i++) {
                 let inst = trace_instances[i];
@@ -159,34 +158,7 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> SceneHit {
             }
             continue;
         }
-        let a = node.first;
-        let b = node.first + 1u;
-        let na = bvh_nodes[top + a];
-        let nb = bvh_nodes[top + b];
-        let ta = ray_box(o, inv, na.min, na.max, closest);
-        let tb = ray_box(o, inv, nb.min, nb.max, closest);
-        if ta >= 0.0 && tb >= 0.0 && sp + 2u <= TRACE_STACK {
-            if tb < ta {
-                stack_node[sp] = a;
-                stack_t[sp] = ta;
-                stack_node[sp + 1u] = b;
-                stack_t[sp + 1u] = tb;
-            } else {
-                stack_node[sp] = b;
-                stack_t[sp] = tb;
-                stack_node[sp + 1u] = a;
-                stack_t[sp + 1u] = ta;
-            }
-            sp += 2u;
-        } else if ta >= 0.0 && sp < TRACE_STACK {
-            stack_node[sp] = a;
-            stack_t[sp] = ta;
-            sp += 1u;
-        } else if tb >= 0.0 && sp < TRACE_STACK {
-            stack_node[sp] = b;
-            stack_t[sp] = tb;
-            sp += 1u;
-        }
+        trace_push_children(&stack, o, inv, top, node.first, closest);
     }
     return best;
 }

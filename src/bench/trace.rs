@@ -58,13 +58,8 @@ pub struct TraceReport {
 /// random points inside it (a fixed sequence: xorshift32 from `seed`).
 #[must_use]
 pub fn rays_at(min: Vec3, max: Vec3, n: usize, seed: u32) -> Vec<Ray> {
-    let mut state = seed.max(1);
-    let mut unit = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        (state >> 8) as f32 / (1u32 << 24) as f32
-    };
+    let mut rng = crate::trace::Xorshift32(seed.max(1));
+    let mut unit = move || rng.unit();
     let size = max - min;
     (0..n)
         .map(|_| {

@@ -11,7 +11,7 @@ use wgpu::util::DeviceExt;
 
 use super::layouts::storage_entry;
 use super::shaders;
-use super::trace::GpuTraceParams;
+use super::trace::{non_empty, read_back, storage, GpuTraceParams};
 use super::GpuContext;
 use crate::trace::scene::TraceScene;
 
@@ -249,21 +249,6 @@ impl PathTracer {
                 ));
             }
         }
-        let pad_u32 = |v: Vec<u32>| if v.is_empty() { vec![0] } else { v };
-        let storage = |label: &str, contents: &[u8], extra: wgpu::BufferUsages| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | extra,
-            })
-        };
-        let none = wgpu::BufferUsages::empty();
-        // (A binding may not be empty: an empty scene binds one zeroed record.)
-        let nodes = if a.nodes.is_empty() { vec![Default::default()] } else { a.nodes.clone() };
-        let tris = if a.triangles.is_empty() { vec![Default::default()] } else { a.triangles.clone() };
-        let species = if a.species.is_empty() { vec![Default::default()] } else { a.species.clone() };
-        let instances = if scene.instances.is_empty() { vec![Default::default()] } else { scene.instances.clone() };
-        let materials = if a.materials.is_empty() { vec![Default::default()] } else { a.materials.clone() };
         let trace_params = GpuTraceParams {
             top_base: a.top_base,
             instance_count: if scene.top.is_empty() { 0 } else { scene.instances.len() as u32 },
@@ -289,13 +274,15 @@ impl PathTracer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
+        // (A binding may not be empty: an empty scene binds one zeroed record.)
+        let instances = non_empty(scene.instances.clone());
         let buffers = [
-            storage("bvh nodes", bytemuck::cast_slice(&nodes), none),
-            storage("bvh triangles", bytemuck::cast_slice(&tris), none),
-            storage("trace species", bytemuck::cast_slice(&species), none),
-            storage("trace instances", bytemuck::cast_slice(&instances), none),
-            storage("trace materials", bytemuck::cast_slice(&materials), none),
-            storage("trace texels", bytemuck::cast_slice(&pad_u32(a.texels)), none),
+            storage(ctx, "bvh nodes", bytemuck::cast_slice(&non_empty(a.nodes))),
+            storage(ctx, "bvh triangles", bytemuck::cast_slice(&non_empty(a.triangles))),
+            storage(ctx, "trace species", bytemuck::cast_slice(&non_empty(a.species))),
+            storage(ctx, "trace instances", bytemuck::cast_slice(&instances)),
+            storage(ctx, "trace materials", bytemuck::cast_slice(&non_empty(a.materials))),
+            storage(ctx, "trace texels", bytemuck::cast_slice(&non_empty(a.texels))),
         ];
         let mut entries = vec![
             wgpu::BindGroupEntry { binding: 0, resource: trace_params.as_entire_binding() },
@@ -371,20 +358,7 @@ impl PathTracer {
             done += params.samples;
             progress(done);
         }
-        let read = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("path accum readback"),
-            size: (pixels * 16) as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut encoder = device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&accum, 0, &read, 0, (pixels * 16) as u64);
-        ctx.queue.submit([encoder.finish()]);
-        let slice = read.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |r| r.expect("map the traced image"));
-        device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
-        let mapped = slice.get_mapped_range().expect("mapped range");
-        let sums: &[[f32; 4]] = bytemuck::cast_slice(&mapped);
+        let sums: Vec<[f32; 4]> = read_back(ctx, &accum, (pixels * 16) as u64);
         let image = sums.iter().map(|s| {
             let n = s[3].max(1.0);
             [s[0] / n, s[1] / n, s[2] / n]

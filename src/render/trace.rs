@@ -170,8 +170,7 @@ impl TraceProbe {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        // (A binding may not be empty: a scene without textures binds one texel.)
-        let texels = if a.texels.is_empty() { vec![0] } else { a.texels };
+        let texels = non_empty(a.texels);
         let buffers = [
             params,
             storage(ctx, "bvh nodes", bytemuck::cast_slice(&a.nodes)),
@@ -211,12 +210,6 @@ impl TraceProbe {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             });
-            let read = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("probe hits readback"),
-                size,
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            });
             let mut entries: Vec<wgpu::BindGroupEntry> = inputs
                 .iter()
                 .enumerate()
@@ -237,22 +230,45 @@ impl TraceProbe {
                 pass.set_bind_group(0, &group, &[]);
                 pass.dispatch_workgroups(chunk.len().div_ceil(64) as u32, 1, 1);
             }
-            encoder.copy_buffer_to_buffer(&hits, 0, &read, 0, size);
             ctx.queue.submit([encoder.finish()]);
-            let slice = read.slice(..);
-            slice.map_async(wgpu::MapMode::Read, |r| r.expect("map the probe's hits"));
-            device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
-            let mapped = slice.get_mapped_range().expect("mapped range");
-            out.extend_from_slice(bytemuck::cast_slice::<u8, H>(&mapped));
-            drop(mapped);
-            read.unmap();
+            out.extend(read_back::<H>(ctx, &hits, size));
         }
         out
     }
 }
 
+/// The first `size` bytes of `buffer` (made with `COPY_SRC`) read back once
+/// the GPU is done with what was submitted.
+pub(crate) fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> Vec<T> {
+    let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &read, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    let slice = read.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map a readback buffer"));
+    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
+    let mapped = slice.get_mapped_range().expect("mapped range");
+    let out = bytemuck::cast_slice::<u8, T>(&mapped).to_vec();
+    drop(mapped);
+    read.unmap();
+    out
+}
+
+/// `v`, or one default record where it is empty: a binding may not be empty.
+pub(crate) fn non_empty<T: Default>(mut v: Vec<T>) -> Vec<T> {
+    if v.is_empty() {
+        v.push(T::default());
+    }
+    v
+}
+
 /// A storage buffer holding `contents`.
-fn storage(ctx: &GpuContext, label: &str, contents: &[u8]) -> wgpu::Buffer {
+pub(crate) fn storage(ctx: &GpuContext, label: &str, contents: &[u8]) -> wgpu::Buffer {
     ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some(label),
         contents,

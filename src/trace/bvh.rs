@@ -455,26 +455,19 @@ mod tests {
     use super::super::brute_force;
     use super::*;
 
-    /// A small deterministic generator (xorshift32) for the tests' scenes and rays.
-    struct Rng(u32);
-    impl Rng {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 17;
-            self.0 ^= self.0 << 5;
-            (self.0 >> 8) as f32 / (1u32 << 24) as f32
-        }
-        fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
-            Vec3::new(self.next(), self.next(), self.next()) * (hi - lo) + Vec3::splat(lo)
-        }
+    use super::super::Xorshift32 as Rng;
+
+    /// A point in the cube `lo..hi` on each axis.
+    fn vec(rng: &mut Rng, lo: f32, hi: f32) -> Vec3 {
+        rng.inside(Vec3::splat(lo), Vec3::splat(hi))
     }
 
     /// A cloud of small random triangles in a 10 m cube, like leaf cards.
     fn leaves(n: usize, rng: &mut Rng) -> Vec<Triangle> {
         (0..n)
             .map(|_| {
-                let a = rng.vec(0.0, 10.0);
-                Triangle::new(a, a + rng.vec(-0.3, 0.3), a + rng.vec(-0.3, 0.3))
+                let a = vec(rng, 0.0, 10.0);
+                Triangle::new(a, a + vec(rng, -0.3, 0.3), a + vec(rng, -0.3, 0.3))
             })
             .collect()
     }
@@ -487,8 +480,8 @@ mod tests {
         assert!(bvh.nodes.len() > 100 && bvh.depth() <= MAX_DEPTH, "{} nodes, depth {}", bvh.nodes.len(), bvh.depth());
         let mut hits = 0;
         for _ in 0..2000 {
-            let origin = rng.vec(-5.0, 15.0);
-            let ray = Ray { origin, dir: rng.vec(0.0, 10.0) - origin, t_max: 2.0 };
+            let origin = vec(&mut rng, -5.0, 15.0);
+            let ray = Ray { origin, dir: vec(&mut rng, 0.0, 10.0) - origin, t_max: 2.0 };
             let (a, b) = (bvh.intersect(&ray), brute_force(&tris, &ray));
             assert_eq!(a.map(|h| h.t), b.map(|h| h.t), "{ray:?}");
             if let (Some(a), Some(b)) = (a, b) {

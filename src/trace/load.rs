@@ -118,12 +118,7 @@ pub fn load_dir(
         .filter(|i| i.species < tree_species)
         .map(|i| scene.species[i.species as usize].bvh.triangles.len() as u64)
         .sum();
-    let a = scene.arrays();
-    let bytes = (std::mem::size_of_val(&a.nodes[..])
-        + std::mem::size_of_val(&a.triangles[..])
-        + std::mem::size_of_val(&a.materials[..])
-        + a.texels.len() * 4
-        + std::mem::size_of_val(&scene.instances[..])) as u64;
+    let bytes = scene.gpu_bytes();
     let report = LoadReport {
         trees: scene.instances.iter().filter(|i| i.species < tree_species).count(),
         trees_in_scene,

@@ -144,6 +144,26 @@ pub fn brute_force(triangles: &[Triangle], ray: &Ray) -> Option<Hit> {
     best
 }
 
+/// A small deterministic generator (xorshift32, Marsaglia 2003) for test
+/// scenes and benchmark rays: the same sequence on every machine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Xorshift32(pub u32);
+
+impl Xorshift32 {
+    /// The next number in [0, 1).
+    pub fn unit(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 17;
+        self.0 ^= self.0 << 5;
+        (self.0 >> 8) as f32 / (1u32 << 24) as f32
+    }
+
+    /// A point in the box `min..max`.
+    pub fn inside(&mut self, min: Vec3, max: Vec3) -> Vec3 {
+        min + Vec3::new(self.unit(), self.unit(), self.unit()) * (max - min)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

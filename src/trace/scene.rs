@@ -333,6 +333,23 @@ impl TraceScene {
         best
     }
 
+    /// Bytes of everything the GPU reads ([`Self::arrays`] and the
+    /// instances), counted without concatenating anything.
+    #[must_use]
+    pub fn gpu_bytes(&self) -> u64 {
+        let species: usize = self
+            .species
+            .iter()
+            .map(|s| {
+                std::mem::size_of_val(&s.bvh.nodes[..])
+                    + std::mem::size_of_val(&s.bvh.triangles[..])
+                    + std::mem::size_of_val(&s.materials[..])
+                    + s.texels.len() * 4
+            })
+            .sum();
+        (species + std::mem::size_of_val(&self.top[..]) + std::mem::size_of_val(&self.instances[..])) as u64
+    }
+
     /// Everything the GPU reads, concatenated: the species' nodes then the
     /// top level's (from `top_base`), their triangles, the species table,
     /// materials (texel bases made global) and texels.
@@ -408,13 +425,8 @@ mod tests {
 
     #[test]
     fn the_nearest_of_many_trees_is_found_as_a_scan_finds_it() {
-        let mut state = 0x2545_f491u32;
-        let mut unit = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut rng = super::super::Xorshift32(0x2545_f491);
+        let mut unit = move || rng.unit();
         let trees: Vec<Instance> = (0..400)
             .map(|i| Instance {
                 position: Vec3::new(unit() * 60.0, unit() * 60.0, unit()),

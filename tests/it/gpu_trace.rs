@@ -14,21 +14,7 @@ use sylva::trace::{brute_force, Ray, Triangle};
 
 const SPECIES: [&str; 3] = ["beech", "birch", "spruce"];
 
-/// A small deterministic generator (xorshift32).
-struct Rng(u32);
-
-impl Rng {
-    fn unit(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 17;
-        self.0 ^= self.0 << 5;
-        (self.0 >> 8) as f32 / (1u32 << 24) as f32
-    }
-
-    fn inside(&mut self, min: Vec3, max: Vec3) -> Vec3 {
-        min + Vec3::new(self.unit(), self.unit(), self.unit()) * (max - min)
-    }
-}
+use sylva::trace::Xorshift32 as Rng;
 
 /// A fixture species' full mesh (level 0), in model space at scale 1, and its bounds.
 fn species(name: &str) -> (Vec<Triangle>, Vec3, Vec3) {
