@@ -3,7 +3,8 @@
 // at every vertex (soft shadows), the sky as an environment, leaves that
 // reflect and transmit (two-sided Lambert), bark and ground that reflect, up to
 // `bounces` bounces; samples accumulate into `accum` while the camera rests.
-// Everything is relative to the eye (instances were placed so on the CPU).
+// Everything is relative to the point the instances were placed around on the
+// CPU (the eye they were loaded for; the eye is at `origin` from it).
 // Rust side: src/render/path_trace.rs. Needs trace.wgsl and trace_scene.wgsl.
 
 // Must match `PathParams` in src/render/path_trace.rs.
@@ -48,6 +49,8 @@ struct PathParams {
     perez_e: vec4<f32>,
     sky_zenith_yxy: vec4<f32>,
     sky_sun: vec4<f32>,
+    // The eye relative to the point the scene was placed around (xyz).
+    origin: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -270,7 +273,7 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             1.0 - (f32(gid.y) + jitter.y) / f32(path.height) * 2.0,
         );
         var d = normalize(path.forward.xyz + path.right.xyz * ndc.x + path.up.xyz * ndc.y);
-        var o = vec3<f32>(0.0);
+        var o = path.origin.xyz;
         var throughput = vec3<f32>(1.0);
         var radiance = vec3<f32>(0.0);
         for (var bounce = 0u; bounce <= path.bounces; bounce++) {

@@ -44,6 +44,12 @@
 //   await v.flyToTree(id, {seconds, distance})  select a tree and fly to look at it; resolves to its query result
 //   v.attributes()                          the scene's attribute columns [{name, type, min, max, categories}] or null
 //   v.timeline()                            a scene's censuses: {censuses, latest, first, last} (setDate across them) or null
+//   v.setRenderer('path-trace', {spp = 256, reach = 300, bounces = 2, light = 'physical', turbidity = 3})
+//                                           the view traced at full detail (every tree within reach at its full
+//                                           mesh, the sun's disk, a clear sky, bounces), a sample a pixel each
+//                                           frame while the camera rests, up to spp; 'raster' (the default) back.
+//                                           v.photo(): {state: 'loading' | 'ready' | 'failed', samples, spp, trees,
+//                                           instanced_triangles, gpu_bytes, error} or null with the raster
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
 //
@@ -543,6 +549,25 @@ class SylvaViewer {
     this.viewer.set_refine(!!on, Math.max(1, frames | 0), Math.max(0, levels | 0));
     this.dirty = SETTLE_FRAMES;
   }
+  /**
+   * The renderer: 'raster' (streamed levels of detail, the default) or
+   * 'path-trace' — the view traced at full detail (issue 48): every tree
+   * within `reach` metres of the eye at its full mesh and the terrain under
+   * them (fetched and built in the browser; the raster view is drawn
+   * meanwhile), the sun as a disk of its true size, a clear sky of
+   * `turbidity` (`light: 'raster'`: the raster's own simple light), `bounces`
+   * bounces; each frame while the camera rests adds a sample a pixel up to
+   * `spp`, then the viewer idles; a move starts over. `photo()` says how far
+   * it is. Throws on an unknown renderer or settings out of range.
+   */
+  setRenderer(renderer = 'raster', { spp = 256, reach = 300, bounces = 2, light = 'physical', turbidity = 3 } = {}) {
+    if (light !== 'physical' && light !== 'raster') throw new Error(`light: ${light}: expected physical or raster`);
+    this.viewer.set_renderer(String(renderer), spp | 0, Number(reach), bounces | 0, light === 'raster', Number(turbidity));
+    this.renderer = renderer === 'path-trace' ? { renderer, spp, reach, bounces, light, turbidity } : undefined;
+    this.dirty = SETTLE_FRAMES;
+  }
+  /** The path-traced view's state, or null with the raster renderer (see setRenderer). */
+  photo() { return JSON.parse(this.viewer.photo_json()); }
   /** Ground imagery on the terrain: 'scene' (the scene's baked imagery), null
    * (none: the ground material), or an XYZ/WMTS raster source in Web Mercator
    * as a URL template, reprojected onto the scene's terrain. Throws for a
@@ -605,6 +630,7 @@ class SylvaViewer {
       if (this.date) this.pendingDate = this.date; // placed when the new viewer has the manifest
       if (this.terrain) this.setTerrain(...this.terrain);
       if (this.refine) this.setRefine(this.refine.on, this.refine);
+      if (this.renderer) this.setRenderer(this.renderer.renderer, this.renderer);
       // The new viewer starts at full quality: the governor's level (and the
       // user's LoD factor and shadows) applied to it again.
       this.applied = { ...this.applied, shadows: 'high', lod: 1, impostors: 'full' };
@@ -935,6 +961,7 @@ export async function create(target, options = {}) {
     if (typeof r === 'object' && r !== null) v.setRefine(r.on !== false, r);
     else v.setRefine(!!r);
   }
+  if (options.renderer) v.setRenderer(options.renderer, options.photo || {});
   return v;
 }
 

@@ -94,6 +94,19 @@ pub fn store_pack(name: &str, pack: &[u8]) -> Result<Vec<u8>, DecodeError> {
 /// A [`DecodeError`] for a head that does not decode, a block outside the file
 /// or one that does not inflate to exactly its part's size.
 pub fn unstore(name: &str, file: Vec<u8>) -> Result<Vec<u8>, DecodeError> {
+    unstore_with(name, file, &mut |deflated, len| inflate(deflated, len))
+}
+
+/// Inflates a stored block to its part's bytes (`deflated`, the part's size).
+pub type Inflater<'a> = dyn FnMut(&[u8], u64) -> Result<Vec<u8>, String> + 'a;
+
+/// [`unstore`] with another inflater: `inflate(deflated, len)` gives a
+/// block's `len` bytes or says why not (the browser inflates each block
+/// first, with its own `DecompressionStream`, then hands them over).
+///
+/// # Errors
+/// As [`unstore`].
+pub fn unstore_with(name: &str, file: Vec<u8>, inflate: &mut Inflater) -> Result<Vec<u8>, DecodeError> {
     let head = PackHead::decode(name, &file)?;
     if head.stored.is_empty() {
         return Ok(file);
@@ -112,6 +125,15 @@ pub fn unstore(name: &str, file: Vec<u8>) -> Result<Vec<u8>, DecodeError> {
             inflate(&file[b.stored.0 as usize..b.stored.1 as usize], b.logical.1 - b.logical.0).map_err(|e| {
                 DecodeError::new(name, Problem::Invalid(format!("stored part at bytes {}: {e}", b.stored.0)))
             })?;
+        if part.len() as u64 != b.logical.1 - b.logical.0 {
+            let what = format!(
+                "stored part at bytes {} inflates to {} bytes, not {}",
+                b.stored.0,
+                part.len(),
+                b.logical.1 - b.logical.0
+            );
+            return Err(DecodeError::new(name, Problem::Invalid(what)));
+        }
         out.extend_from_slice(&part);
     }
     out.resize(head.file_bytes as usize, 0);

@@ -17,7 +17,6 @@ pub mod mesh;
 pub mod mips;
 pub mod overlay;
 pub mod pass;
-#[cfg(not(target_arch = "wasm32"))]
 pub mod path_trace;
 pub mod pools;
 pub mod reach;

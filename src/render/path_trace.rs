@@ -2,17 +2,16 @@
 //! [`TraceScene`] placed relative to the eye — the sun as a disk of its true
 //! angular size sampled at every path vertex, the sky as an environment,
 //! two-sided leaves that reflect and transmit, bark and a ground plane that
-//! reflect, `bounces` bounces; samples accumulate on the GPU. Native for now
-//! (`sylva render --path-trace`); the browser's control comes with the
-//! refinement machinery.
+//! reflect, `bounces` bounces; samples accumulate on the GPU. One code path
+//! for `sylva render --path-trace` ([`PathTracer::render`]) and the browser's
+//! `setRenderer('path-trace')` (a dispatch a frame while the camera rests,
+//! shown by [`PathDisplay`]).
 
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::layouts::storage_entry;
 use super::shaders;
-use super::trace::{non_empty, read_back, storage, GpuTraceParams};
-use super::GpuContext;
 use crate::trace::scene::TraceScene;
 
 /// The sun's angular radius, radians (0.2666°: its mean apparent size).
@@ -71,6 +70,9 @@ pub struct PathParams {
     pub sky_zenith_yxy: [f32; 4],
     /// The sun as the sky's fit saw it; w: 1 for the clear sky, 0 for the raster's gradient.
     pub sky_sun: [f32; 4],
+    /// The eye relative to the point the scene was placed around (xyz; the
+    /// browser keeps a view's scene while the camera moves near it).
+    pub origin: [f32; 4],
 }
 
 /// How a frame is traced.
@@ -162,14 +164,84 @@ impl PathView {
     }
 }
 
-/// The pass's pipeline.
+/// The scene walk's uniform. Must match `TraceParams` in `shaders/trace_scene.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuTraceParams {
+    /// Where the top level starts in the nodes.
+    pub top_base: u32,
+    /// Instances in the top level.
+    pub instance_count: u32,
+    /// Padding (0).
+    pub pad0: u32,
+    /// Padding (0).
+    pub pad1: u32,
+}
+
+/// `v`, or one default record where it is empty: a binding may not be empty.
+pub(crate) fn non_empty<T: Default>(mut v: Vec<T>) -> Vec<T> {
+    if v.is_empty() {
+        v.push(T::default());
+    }
+    v
+}
+
+/// A storage buffer holding `contents`.
+pub(crate) fn storage(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents,
+        usage: wgpu::BufferUsages::STORAGE,
+    })
+}
+
+/// The pass's pipelines: the tracer, and the display of its accumulation
+/// (the browser's canvas).
 pub struct PathTracer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
-/// Samples one dispatch adds per pixel (a dispatch stays short on a slow device).
-const SAMPLES_PER_DISPATCH: u32 = 4;
+/// A scene on the GPU with an image's accumulation, for one size: uploaded
+/// once for a view (the top level for a view, not for the whole scene),
+/// traced a dispatch at a time while the camera rests, restarted when it moves.
+pub struct PathScene {
+    group: wgpu::BindGroup,
+    params: wgpu::Buffer,
+    accum: wgpu::Buffer,
+    /// The walk's uniform and the scene's arrays (bindings 0, 2–7).
+    trace_params: wgpu::Buffer,
+    arrays: Vec<wgpu::Buffer>,
+    size: (u32, u32),
+    /// Samples accumulated per pixel since the last restart.
+    pub samples: u32,
+    /// Bytes it holds on the GPU (the scene's arrays and the accumulation).
+    pub bytes: u64,
+}
+
+impl PathScene {
+    /// The image's size.
+    #[must_use]
+    pub fn size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    /// The accumulation: per pixel (row-major, top row first) the sum of its
+    /// samples' linear radiance (rgb) and their count (a).
+    #[must_use]
+    pub fn accum(&self) -> &wgpu::Buffer {
+        &self.accum
+    }
+
+    /// Starts the image over (the camera or the light changed).
+    pub fn restart(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.accum, 0, None);
+        self.samples = 0;
+    }
+}
+
+/// Samples one dispatch adds per pixel at most (a dispatch stays short on a slow device).
+pub const SAMPLES_PER_DISPATCH: u32 = 4;
 
 impl PathTracer {
     /// Creates the pipeline.
@@ -180,17 +252,7 @@ impl PathTracer {
             source: wgpu::ShaderSource::Wgsl(shaders::PATH_TRACE.source().into()),
         });
         let c = wgpu::ShaderStages::COMPUTE;
-        let uniform = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: c,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let mut entries = vec![uniform(0), uniform(1)];
+        let mut entries = vec![uniform_entry(0, c), uniform_entry(1, c)];
         entries.extend((2..8).map(|b| storage_entry(b, c, true)));
         entries.push(storage_entry(8, c, false));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -213,24 +275,18 @@ impl PathTracer {
         Self { layout, pipeline }
     }
 
-    /// Traces `scene` (placed relative to `view.eye`) into a `width`×`height`
-    /// image of linear radiance (rgb, row-major, top row first), `options.spp`
-    /// samples per pixel, waiting for the GPU; `progress(samples done)` after
-    /// each dispatch.
+    /// Uploads `scene` (placed relative to the eye) with a zeroed
+    /// `width`×`height` accumulation.
     ///
     /// # Errors
     /// The image or the scene's arrays larger than a storage buffer the
     /// device binds (say which and by how much).
-    pub fn render(
+    pub fn upload(
         &self,
-        ctx: &GpuContext,
+        device: &wgpu::Device,
         scene: &TraceScene,
-        view: &PathView,
         (width, height): (u32, u32),
-        options: &PathOptions,
-        progress: &mut dyn FnMut(u32),
-    ) -> Result<Vec<[f32; 3]>, String> {
-        let device = &ctx.device;
+    ) -> Result<PathScene, String> {
         let a = scene.arrays();
         let limit = device.limits().max_storage_buffer_binding_size;
         let pixels = u64::from(width) * u64::from(height);
@@ -260,35 +316,77 @@ impl PathTracer {
             contents: bytemuck::bytes_of(&trace_params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let path_buf = device.create_buffer(&wgpu::BufferDescriptor {
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("path params"),
             size: std::mem::size_of::<PathParams>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let pixels = pixels as usize;
+        // (A binding may not be empty: an empty scene binds one zeroed record.)
+        let instances = non_empty(scene.instances.clone());
+        let arrays = vec![
+            storage(device, "bvh nodes", bytemuck::cast_slice(&non_empty(a.nodes))),
+            storage(device, "bvh triangles", bytemuck::cast_slice(&non_empty(a.triangles))),
+            storage(device, "trace species", bytemuck::cast_slice(&non_empty(a.species))),
+            storage(device, "trace instances", bytemuck::cast_slice(&instances)),
+            storage(device, "trace materials", bytemuck::cast_slice(&non_empty(a.materials))),
+            storage(device, "trace texels", bytemuck::cast_slice(&non_empty(a.texels))),
+        ];
+        let (accum, group) = self.image(device, &trace_params, &params, &arrays, (width, height));
+        let bytes = arrays.iter().map(wgpu::Buffer::size).sum::<u64>() + accum.size();
+        Ok(PathScene { group, params, accum, trace_params, arrays, size: (width, height), samples: 0, bytes })
+    }
+
+    /// A new zeroed accumulation of `size` for `scene` (the canvas resized):
+    /// the scene's arrays stay.
+    ///
+    /// # Errors
+    /// The image larger than a storage buffer the device binds.
+    pub fn resize(
+        &self,
+        device: &wgpu::Device,
+        scene: &mut PathScene,
+        (width, height): (u32, u32),
+    ) -> Result<(), String> {
+        let bytes = u64::from(width) * u64::from(height) * 16;
+        let limit = device.limits().max_storage_buffer_binding_size;
+        if bytes > limit {
+            return Err(format!(
+                "the image's accumulation (16 bytes a pixel) takes {:.1} MB, more than this GPU binds in one buffer ({:.1} MB)",
+                bytes as f64 / 1e6,
+                limit as f64 / 1e6
+            ));
+        }
+        let (accum, group) = self.image(device, &scene.trace_params, &scene.params, &scene.arrays, (width, height));
+        scene.bytes = scene.bytes - scene.accum.size() + accum.size();
+        scene.accum = accum;
+        scene.group = group;
+        scene.size = (width, height);
+        scene.samples = 0;
+        Ok(())
+    }
+
+    /// A zeroed accumulation of `size` and the pass's bindings over it.
+    fn image(
+        &self,
+        device: &wgpu::Device,
+        trace_params: &wgpu::Buffer,
+        params: &wgpu::Buffer,
+        arrays: &[wgpu::Buffer],
+        (width, height): (u32, u32),
+    ) -> (wgpu::Buffer, wgpu::BindGroup) {
         // Zeroed at creation (wgpu clears new buffers).
         let accum = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("path accum"),
-            size: (pixels * 16) as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            size: (u64::from(width) * u64::from(height)).max(1) * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        // (A binding may not be empty: an empty scene binds one zeroed record.)
-        let instances = non_empty(scene.instances.clone());
-        let buffers = [
-            storage(ctx, "bvh nodes", bytemuck::cast_slice(&non_empty(a.nodes))),
-            storage(ctx, "bvh triangles", bytemuck::cast_slice(&non_empty(a.triangles))),
-            storage(ctx, "trace species", bytemuck::cast_slice(&non_empty(a.species))),
-            storage(ctx, "trace instances", bytemuck::cast_slice(&instances)),
-            storage(ctx, "trace materials", bytemuck::cast_slice(&non_empty(a.materials))),
-            storage(ctx, "trace texels", bytemuck::cast_slice(&non_empty(a.texels))),
-        ];
         let mut entries = vec![
             wgpu::BindGroupEntry { binding: 0, resource: trace_params.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: path_buf.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
         ];
-        for (i, b) in buffers.iter().enumerate() {
+        for (i, b) in arrays.iter().enumerate() {
             entries.push(wgpu::BindGroupEntry { binding: 2 + i as u32, resource: b.as_entire_binding() });
         }
         entries.push(wgpu::BindGroupEntry { binding: 8, resource: accum.as_entire_binding() });
@@ -297,73 +395,227 @@ impl PathTracer {
             layout: &self.layout,
             entries: &entries,
         });
-        let f = view.forward.normalize();
-        let up_ref = if f.cross(Vec3::Z).length_squared() < 1e-8 { Vec3::Y } else { Vec3::Z };
-        let right = f.cross(up_ref).normalize();
-        let up = right.cross(f);
-        let tan_half = (view.fov_y * 0.5).tan();
-        let aspect = width.max(1) as f32 / height.max(1) as f32;
-        let v4 = |v: Vec3, w: f32| [v.x, v.y, v.z, w];
-        let mut params = PathParams {
-            forward: v4(f, 0.0),
-            right: v4(right * tan_half * aspect, 0.0),
-            up: v4(up * tan_half, 0.0),
-            sun_dir: v4(view.sun_dir.normalize(), SUN_ANGULAR_RADIUS.cos()),
-            sun_color: v4(view.sun_color, 0.0),
-            sky_zenith: v4(view.sky_zenith, 0.0),
-            sky_horizon: v4(view.sky_horizon, 0.0),
-            ground: v4(options.ground_albedo, options.ground_z.map_or(-1e30, |z| z - view.eye.z)),
-            ambient: v4(view.ambient, 0.0),
-            width,
-            height,
-            sample: 0,
-            samples: 0,
-            bounces: options.bounces,
-            simple: u32::from(options.simple),
-            leaf_transmit: options.leaf_transmit.clamp(0.0, 1.0),
-            eye_z: view.eye.z,
-            perez_a: [0.0; 4],
-            perez_b: [0.0; 4],
-            perez_c: [0.0; 4],
-            perez_d: [0.0; 4],
-            perez_e: [0.0; 4],
-            sky_zenith_yxy: [0.0; 4],
-            sky_sun: [0.0; 4],
-        };
-        if let (Some(sky), false) = (view.sky, options.simple) {
-            let letter = |k: usize| [sky.perez[0][k], sky.perez[1][k], sky.perez[2][k], 0.0];
-            params.perez_a = letter(0);
-            params.perez_b = letter(1);
-            params.perez_c = letter(2);
-            params.perez_d = letter(3);
-            params.perez_e = letter(4);
-            params.sky_zenith_yxy = [sky.zenith[0], sky.zenith[1], sky.zenith[2], crate::trace::sky::UNITS_PER_KCD];
-            let fitted = sky.fitted_sun();
-            params.sky_sun = [fitted.x, fitted.y, fitted.z, 1.0];
-        }
-        let mut done = 0;
-        while done < options.spp.max(1) {
-            params.sample = options.first_sample.wrapping_add(done);
-            params.samples = SAMPLES_PER_DISPATCH.min(options.spp.max(1) - done);
-            ctx.queue.write_buffer(&path_buf, 0, bytemuck::bytes_of(&params));
-            let mut encoder = device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
-            }
+        (accum, group)
+    }
+
+    /// Records one dispatch adding `samples` (at most
+    /// [`SAMPLES_PER_DISPATCH`]) samples a pixel to `target` with `params`
+    /// ([`path_params`]; its sample index is set here). One dispatch per
+    /// submission: the parameters are written through the queue.
+    pub fn dispatch(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &mut PathScene,
+        params: &PathParams,
+        first_sample: u32,
+        samples: u32,
+    ) {
+        let samples = samples.clamp(1, SAMPLES_PER_DISPATCH);
+        let params = PathParams { sample: first_sample.wrapping_add(target.samples), samples, ..*params };
+        queue.write_buffer(&target.params, 0, bytemuck::bytes_of(&params));
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &target.group, &[]);
+        pass.dispatch_workgroups(target.size.0.div_ceil(8), target.size.1.div_ceil(8), 1);
+        target.samples += samples;
+    }
+
+    /// Traces `scene` (placed relative to `view.eye`) into a `width`×`height`
+    /// image of linear radiance (rgb, row-major, top row first), `options.spp`
+    /// samples per pixel, waiting for the GPU; `progress(samples done)` after
+    /// each dispatch.
+    ///
+    /// # Errors
+    /// See [`Self::upload`].
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn render(
+        &self,
+        ctx: &super::GpuContext,
+        scene: &TraceScene,
+        view: &PathView,
+        (width, height): (u32, u32),
+        options: &PathOptions,
+        progress: &mut dyn FnMut(u32),
+    ) -> Result<Vec<[f32; 3]>, String> {
+        let mut target = self.upload(&ctx.device, scene, (width, height))?;
+        let params = path_params(view, options, (width, height), view.eye);
+        while target.samples < options.spp.max(1) {
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            let samples = SAMPLES_PER_DISPATCH.min(options.spp.max(1) - target.samples);
+            self.dispatch(&ctx.queue, &mut encoder, &mut target, &params, options.first_sample, samples);
             ctx.queue.submit([encoder.finish()]);
-            device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
-            done += params.samples;
-            progress(done);
+            ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
+            progress(target.samples);
         }
-        let sums: Vec<[f32; 4]> = read_back(ctx, &accum, (pixels * 16) as u64);
+        let pixels = (u64::from(width) * u64::from(height)) as usize;
+        let sums: Vec<[f32; 4]> = super::trace::read_back(ctx, &target.accum, (pixels * 16) as u64);
         let image = sums.iter().map(|s| {
             let n = s[3].max(1.0);
             [s[0] / n, s[1] / n, s[2] / n]
         });
         Ok(image.collect())
+    }
+}
+
+fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// The pass's uniform for `view` and `options` at `size`, the scene placed
+/// around `scene_origin` (scene frame; `view.eye` where it was placed for
+/// this view), its sample index and count set per dispatch.
+#[must_use]
+pub fn path_params(
+    view: &PathView,
+    options: &PathOptions,
+    (width, height): (u32, u32),
+    scene_origin: Vec3,
+) -> PathParams {
+    let f = view.forward.normalize();
+    let up_ref = if f.cross(Vec3::Z).length_squared() < 1e-8 { Vec3::Y } else { Vec3::Z };
+    let right = f.cross(up_ref).normalize();
+    let up = right.cross(f);
+    let tan_half = (view.fov_y * 0.5).tan();
+    let aspect = width.max(1) as f32 / height.max(1) as f32;
+    let v4 = |v: Vec3, w: f32| [v.x, v.y, v.z, w];
+    let mut params = PathParams {
+        forward: v4(f, 0.0),
+        right: v4(right * tan_half * aspect, 0.0),
+        up: v4(up * tan_half, 0.0),
+        sun_dir: v4(view.sun_dir.normalize(), SUN_ANGULAR_RADIUS.cos()),
+        sun_color: v4(view.sun_color, 0.0),
+        sky_zenith: v4(view.sky_zenith, 0.0),
+        sky_horizon: v4(view.sky_horizon, 0.0),
+        ground: v4(options.ground_albedo, options.ground_z.map_or(-1e30, |z| z - scene_origin.z)),
+        ambient: v4(view.ambient, 0.0),
+        width,
+        height,
+        sample: 0,
+        samples: 0,
+        bounces: options.bounces,
+        simple: u32::from(options.simple),
+        leaf_transmit: options.leaf_transmit.clamp(0.0, 1.0),
+        eye_z: view.eye.z,
+        perez_a: [0.0; 4],
+        perez_b: [0.0; 4],
+        perez_c: [0.0; 4],
+        perez_d: [0.0; 4],
+        perez_e: [0.0; 4],
+        sky_zenith_yxy: [0.0; 4],
+        sky_sun: [0.0; 4],
+        origin: v4(view.eye - scene_origin, 0.0),
+    };
+    if let (Some(sky), false) = (view.sky, options.simple) {
+        let letter = |k: usize| [sky.perez[0][k], sky.perez[1][k], sky.perez[2][k], 0.0];
+        params.perez_a = letter(0);
+        params.perez_b = letter(1);
+        params.perez_c = letter(2);
+        params.perez_d = letter(3);
+        params.perez_e = letter(4);
+        params.sky_zenith_yxy = [sky.zenith[0], sky.zenith[1], sky.zenith[2], crate::trace::sky::UNITS_PER_KCD];
+        let fitted = sky.fitted_sun();
+        params.sky_sun = [fitted.x, fitted.y, fitted.z, 1.0];
+    }
+    params
+}
+
+/// The accumulation's display on a colour target (the browser's canvas):
+/// each pixel its samples' mean, clamped as [`to_srgb8`] clamps.
+pub struct PathDisplay {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::RenderPipeline,
+    size: wgpu::Buffer,
+}
+
+impl PathDisplay {
+    /// Creates the pipeline for targets of `format` (an sRGB one: the image is linear).
+    #[must_use]
+    pub fn new(device: &wgpu::Device, format: wgpu::TextureFormat) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("path_display.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::PATH_DISPLAY.source().into()),
+        });
+        let f = wgpu::ShaderStages::FRAGMENT;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("path display"),
+            entries: &[uniform_entry(0, f), storage_entry(1, f, true)],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("path display"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("path_display"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("display_vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("display_fs"),
+                compilation_options: Default::default(),
+                targets: &[Some(format.into())],
+            }),
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            multiview_mask: None,
+            cache: None,
+        });
+        let size = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("path display size"),
+            size: 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self { layout, pipeline, size }
+    }
+
+    /// Records the display of `scene`'s accumulation on `target`.
+    pub fn draw(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &PathScene,
+        target: &wgpu::TextureView,
+    ) {
+        queue.write_buffer(&self.size, 0, bytemuck::cast_slice(&[scene.size.0, scene.size.1, 0, 0]));
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("path display"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: self.size.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: scene.accum.as_entire_binding() },
+            ],
+        });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("path display"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: target,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+            })],
+            ..Default::default()
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.draw(0..3, 0..1);
     }
 }
 

@@ -52,6 +52,7 @@ static TRACE_PROBE_RAY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trac
 static TRACE_SCENE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_scene.wgsl"));
 static TRACE_SCENE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_scene_probe.wgsl"));
 static PATH_TRACE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/path_trace.wgsl"));
+static PATH_DISPLAY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/path_display.wgsl"));
 
 /// The modules every tree pass (mesh, billboard, impostor, cluster) reads,
 /// before its own.
@@ -103,6 +104,9 @@ pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_WGSL, TRACE_PROBE_RAY_WGSL, TR
 /// The path tracer (`render/path_trace.rs`).
 pub static PATH_TRACE: Shader = Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, PATH_TRACE_WGSL]]);
 
+/// The path tracer's image on a colour target (`render/path_trace.rs`).
+pub static PATH_DISPLAY: Shader = Shader(&[&[PATH_DISPLAY_WGSL]]);
+
 /// The tracer's scene probe: rays through both levels (`render/trace.rs`).
 pub static TRACE_SCENE_PROBE: Shader =
     Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_SCENE_PROBE_WGSL]]);
@@ -122,4 +126,5 @@ pub static ALL: &[(&str, Shader)] = &[
     ("trace_probe", TRACE_PROBE),
     ("trace_scene_probe", TRACE_SCENE_PROBE),
     ("path_trace", PATH_TRACE),
+    ("path_display", PATH_DISPLAY),
 ];

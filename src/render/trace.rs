@@ -7,6 +7,7 @@
 use wgpu::util::DeviceExt;
 
 use super::layouts::storage_entry;
+use super::path_trace::{non_empty, storage};
 use super::shaders;
 use super::GpuContext;
 use crate::trace::bvh::Bvh;
@@ -65,19 +66,7 @@ pub struct GpuSceneHit {
     pub hit: GpuHit,
 }
 
-/// The scene probe's uniform. Must match `TraceParams` in `shaders/trace_scene.wgsl`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct GpuTraceParams {
-    /// Where the top level starts in the nodes.
-    pub top_base: u32,
-    /// Instances in the top level.
-    pub instance_count: u32,
-    /// Padding (0).
-    pub pad0: u32,
-    /// Padding (0).
-    pub pad1: u32,
-}
+pub use super::path_trace::GpuTraceParams;
 
 /// Rays per dispatch (64 per workgroup, within WebGPU's 65,535 workgroups).
 const RAYS_PER_DISPATCH: usize = 64 * 65_535;
@@ -149,8 +138,8 @@ impl TraceProbe {
         if bvh.nodes.is_empty() || rays.is_empty() {
             return vec![None; rays.len()];
         }
-        let nodes = storage(ctx, "bvh nodes", bytemuck::cast_slice(&bvh.nodes));
-        let tris = storage(ctx, "bvh triangles", bytemuck::cast_slice(&bvh.triangles));
+        let nodes = storage(&ctx.device, "bvh nodes", bytemuck::cast_slice(&bvh.nodes));
+        let tris = storage(&ctx.device, "bvh triangles", bytemuck::cast_slice(&bvh.triangles));
         let hits: Vec<GpuHit> = self.dispatch(ctx, &self.layout, &self.pipeline, &[&nodes, &tris], rays);
         hits.iter().map(GpuHit::hit).collect()
     }
@@ -173,12 +162,12 @@ impl TraceProbe {
         let texels = non_empty(a.texels);
         let buffers = [
             params,
-            storage(ctx, "bvh nodes", bytemuck::cast_slice(&a.nodes)),
-            storage(ctx, "bvh triangles", bytemuck::cast_slice(&a.triangles)),
-            storage(ctx, "trace species", bytemuck::cast_slice(&a.species)),
-            storage(ctx, "trace instances", bytemuck::cast_slice(&scene.instances)),
-            storage(ctx, "trace materials", bytemuck::cast_slice(&a.materials)),
-            storage(ctx, "trace texels", bytemuck::cast_slice(&texels)),
+            storage(&ctx.device, "bvh nodes", bytemuck::cast_slice(&a.nodes)),
+            storage(&ctx.device, "bvh triangles", bytemuck::cast_slice(&a.triangles)),
+            storage(&ctx.device, "trace species", bytemuck::cast_slice(&a.species)),
+            storage(&ctx.device, "trace instances", bytemuck::cast_slice(&scene.instances)),
+            storage(&ctx.device, "trace materials", bytemuck::cast_slice(&a.materials)),
+            storage(&ctx.device, "trace texels", bytemuck::cast_slice(&texels)),
         ];
         let inputs: Vec<&wgpu::Buffer> = buffers.iter().collect();
         let hits: Vec<GpuSceneHit> = self.dispatch(ctx, &self.scene_layout, &self.scene_pipeline, &inputs, rays);
@@ -202,7 +191,7 @@ impl TraceProbe {
                 .iter()
                 .map(|r| ProbeRay { origin: r.origin.into(), t_max: r.t_max, dir: r.dir.into(), pad: 0.0 })
                 .collect();
-            let ray_buf = storage(ctx, "probe rays", bytemuck::cast_slice(&probe));
+            let ray_buf = storage(&ctx.device, "probe rays", bytemuck::cast_slice(&probe));
             let size = (chunk.len() * std::mem::size_of::<H>()) as u64;
             let hits = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("probe hits"),
@@ -257,21 +246,4 @@ pub(crate) fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buffer: &wgpu::Buffe
     drop(mapped);
     read.unmap();
     out
-}
-
-/// `v`, or one default record where it is empty: a binding may not be empty.
-pub(crate) fn non_empty<T: Default>(mut v: Vec<T>) -> Vec<T> {
-    if v.is_empty() {
-        v.push(T::default());
-    }
-    v
-}
-
-/// A storage buffer holding `contents`.
-pub(crate) fn storage(ctx: &GpuContext, label: &str, contents: &[u8]) -> wgpu::Buffer {
-    ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some(label),
-        contents,
-        usage: wgpu::BufferUsages::STORAGE,
-    })
 }

@@ -3,6 +3,7 @@
 //! the eye placed relative to it (the top level for a view, not for the whole
 //! scene: memory bounded by `reach_m`).
 
+#[cfg(not(target_arch = "wasm32"))]
 use std::path::Path;
 
 use glam::{DVec3, Vec3};
@@ -32,6 +33,42 @@ pub struct LoadReport {
     pub terrain_triangles: usize,
 }
 
+/// The files a load reads, by path relative to the scene directory: each
+/// file's bytes, or `None` where it is not at hand yet (the browser fetches
+/// what a load asked for, then loads again: [`load_with`]).
+pub trait SceneFiles {
+    /// A file as it is stored.
+    ///
+    /// # Errors
+    /// A file that cannot be read, named.
+    fn file(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String>;
+    /// A species pack with its stored (deflated) parts inflated
+    /// ([`crate::format::stored::unstore`]).
+    ///
+    /// # Errors
+    /// A pack that cannot be read or inflated, named.
+    fn pack(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String>;
+}
+
+/// A scene directory on disk.
+#[cfg(not(target_arch = "wasm32"))]
+pub struct DirFiles<'a>(pub &'a Path);
+
+#[cfg(not(target_arch = "wasm32"))]
+impl SceneFiles for DirFiles<'_> {
+    fn file(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
+        let p = self.0.join(rel);
+        crate::paths::read_regular(&p, None, crate::paths::MAX_SCENE_FILE_BYTES)
+            .map(Some)
+            .map_err(|e| format!("cannot read {}: {e}", p.display()))
+    }
+
+    fn pack(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
+        let Some(bytes) = self.file(rel)? else { return Ok(None) };
+        crate::format::stored::unstore(rel, bytes).map(Some).map_err(|e| e.to_string())
+    }
+}
+
 /// Loads the scene in `dir` for a view from `eye` (scene frame, metres from
 /// the origin): trees whose base is within `reach_m` horizontally, placed
 /// relative to the eye, and — with `ground` (an albedo) — the scene's terrain
@@ -39,42 +76,70 @@ pub struct LoadReport {
 ///
 /// # Errors
 /// Unreadable or invalid files, named.
+#[cfg(not(target_arch = "wasm32"))]
 pub fn load_dir(
     dir: &Path,
     eye: DVec3,
     reach_m: f64,
     ground: Option<Vec3>,
 ) -> Result<(TraceScene, LoadReport), String> {
-    let read = |rel: &str| {
-        let p = dir.join(rel);
-        crate::paths::read_regular(&p, None, crate::paths::MAX_SCENE_FILE_BYTES)
-            .map_err(|e| format!("cannot read {}: {e}", p.display()))
-    };
-    let m = Manifest::decode("scene.json", &read("scene.json")?).map_err(|e| e.to_string())?;
-    let mut species = Vec::new();
-    let mut species_triangles = Vec::new();
-    for s in &m.species {
-        let bytes = crate::format::stored::unstore(&s.pack, read(&s.pack)?).map_err(|e| e.to_string())?;
-        let pack = decode_pack(&s.pack, &bytes).map_err(|e| e.to_string())?;
-        // A pack without a mesh (the format allows one) traces nothing: its
-        // trees are left out, the rest traced.
-        let traced =
-            if pack.meta.mesh_levels.is_empty() { TraceSpecies::default() } else { TraceSpecies::of_pack(&pack)? };
-        species_triangles.push((s.name.clone(), traced.bvh.triangles.len()));
-        species.push(traced);
+    load_with(&mut DirFiles(dir), eye, reach_m, ground)?
+        .ok_or_else(|| format!("{}: a file was not at hand", dir.display()))
+}
+
+/// [`load_dir`] over any [`SceneFiles`]: `Ok(None)` where files it needs are
+/// not at hand yet (each asked for once in this call; in phases — the index,
+/// the tiles within reach, the terrain a level at a time, the packs of the
+/// species placed — so a browser fetches a phase's files together and loads
+/// again, and decodes the packs once, in the last call).
+///
+/// # Errors
+/// Unreadable or invalid files, named.
+pub fn load_with(
+    files: &mut dyn SceneFiles,
+    eye: DVec3,
+    reach_m: f64,
+    ground: Option<Vec3>,
+) -> Result<Option<(TraceScene, LoadReport)>, String> {
+    let Some(manifest) = files.file("scene.json")? else { return Ok(None) };
+    let m = Manifest::decode("scene.json", &manifest).map_err(|e| e.to_string())?;
+    // The index, node by node.
+    let mut walk = crate::format::index::TileWalk::new(&m);
+    while let Some(url) = walk.next_url()?.map(str::to_string) {
+        let Some(bytes) = files.file(&url)? else { return Ok(None) };
+        walk.feed(&bytes).map_err(|e| format!("{url}: {e}"))?;
     }
-    let tiles = crate::format::index::read_all_tiles(dir, &m)?;
-    let mut instances = Vec::new();
+    // The tiles whose bounds come within reach, together.
+    let near = |b: &crate::format::Bounds| {
+        let dx = (eye.x - f64::from(b.max[0])).max(f64::from(b.min[0]) - eye.x).max(0.0);
+        let dy = (eye.y - f64::from(b.max[1])).max(f64::from(b.min[1]) - eye.y).max(0.0);
+        dx.hypot(dy) <= reach_m
+    };
+    let entries = walk.finish();
+    let mut tiles = Vec::new();
+    let mut missing = false;
     let mut trees_in_scene = 0;
+    for t in &entries {
+        trees_in_scene += t.trees as usize;
+        if !near(&t.bounds) {
+            continue;
+        }
+        match files.file(&t.url)? {
+            Some(bytes) => tiles.push(Tile::decode(&t.url, &bytes, m.species.len() as u32).map_err(|e| e.to_string())?),
+            None => missing = true,
+        }
+    }
+    if missing {
+        return Ok(None);
+    }
+    let mut instances = Vec::new();
     let mut bases = Vec::new();
-    for t in &tiles {
-        let tile = Tile::decode(&t.url, &read(&t.url)?, m.species.len() as u32).map_err(|e| e.to_string())?;
+    for tile in &tiles {
         for b in &tile.batches {
-            let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
-            trees_in_scene += run.len();
             if b.flags & BATCH_DATED != 0 {
                 continue;
             }
+            let run = b.instance_offset as usize..(b.instance_offset + b.instance_count) as usize;
             for p in tile.instances.get(run).unwrap_or_default() {
                 let d = p.decode(b);
                 let pos =
@@ -94,20 +159,58 @@ pub fn load_dir(
         }
     }
     let ground_z = bases.iter().copied().reduce(f32::min).unwrap_or(0.0);
-    let mut terrain_triangles = 0;
-    if let (Some(albedo), Some(t)) = (ground, &m.terrain) {
-        let terrain = terrain_species(t, &read, eye, reach_m, albedo)?;
-        terrain_triangles = terrain.bvh.triangles.len();
-        if terrain_triangles > 0 {
-            instances.push(Instance {
-                position: Vec3::ZERO,
-                yaw: 0.0,
-                scale: 1.0,
-                aspect: 1.0,
-                species: species.len() as u32,
-            });
-            species.push(terrain);
+    let terrain = match (ground, &m.terrain) {
+        (Some(albedo), Some(t)) => match terrain_species(t, files, eye, reach_m, albedo)? {
+            Some(terrain) => Some(terrain),
+            None => return Ok(None),
+        },
+        _ => None,
+    };
+    // The packs of the species placed, together (a species no tree within
+    // reach uses is not read: it traces as nothing).
+    let mut used = vec![false; m.species.len()];
+    for i in &instances {
+        if let Some(u) = used.get_mut(i.species as usize) {
+            *u = true;
         }
+    }
+    let mut packs = Vec::new();
+    for (s, &used) in m.species.iter().zip(&used) {
+        packs.push(if used { files.pack(&s.pack)?.map(Some) } else { Some(None) });
+    }
+    if packs.iter().any(Option::is_none) {
+        return Ok(None);
+    }
+    let mut species = Vec::new();
+    let mut species_triangles = Vec::new();
+    for (s, bytes) in m.species.iter().zip(packs.into_iter().flatten()) {
+        let traced = match bytes {
+            Some(bytes) => {
+                let pack = decode_pack(&s.pack, &bytes).map_err(|e| e.to_string())?;
+                // A pack without a mesh (the format allows one) traces nothing:
+                // its trees are left out, the rest traced.
+                if pack.meta.mesh_levels.is_empty() {
+                    TraceSpecies::default()
+                } else {
+                    TraceSpecies::of_pack(&pack)?
+                }
+            }
+            None => TraceSpecies::default(),
+        };
+        species_triangles.push((s.name.clone(), traced.bvh.triangles.len()));
+        species.push(traced);
+    }
+    let mut terrain_triangles = 0;
+    if let Some(terrain) = terrain.filter(|t| !t.bvh.triangles.is_empty()) {
+        terrain_triangles = terrain.bvh.triangles.len();
+        instances.push(Instance {
+            position: Vec3::ZERO,
+            yaw: 0.0,
+            scale: 1.0,
+            aspect: 1.0,
+            species: species.len() as u32,
+        });
+        species.push(terrain);
     }
     let scene = TraceScene::build(species, &instances);
     // (Trees only: the terrain is not a tree.)
@@ -128,7 +231,7 @@ pub fn load_dir(
         ground_z,
         terrain_triangles,
     };
-    Ok((scene, report))
+    Ok(Some((scene, report)))
 }
 
 /// Most terrain cells traced (two triangles each, 64 bytes a triangle).
@@ -143,14 +246,15 @@ const MAX_TERRAIN_CELLS: f64 = 200_000.0;
 /// the cracks the raster hides with skirts (not traced yet).
 ///
 /// # Errors
-/// Unreadable or invalid terrain tiles, named.
+/// Unreadable or invalid terrain tiles, named; `Ok(None)` where tiles are
+/// not at hand yet (those of the level reached, each asked for).
 pub fn terrain_species(
     t: &crate::format::terrain::TerrainEntry,
-    read: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    files: &mut dyn SceneFiles,
     eye: DVec3,
     reach_m: f64,
     albedo: Vec3,
-) -> Result<TraceSpecies, String> {
+) -> Result<Option<TraceSpecies>, String> {
     use crate::format::terrain::TerrainTile;
     use crate::trace::bvh::{Bvh, TriangleSurface};
     use crate::trace::scene::{GpuTraceMaterial, NO_TEXTURE};
@@ -167,12 +271,17 @@ pub fn terrain_species(
     // enough, it is the last level, or none of its children overlapping the
     // reach exists.
     let mut stack = vec![(0u8, 0u32, 0u32)];
+    let mut missing = false;
     while let Some((level, x, y)) = stack.pop() {
         if !overlaps(level, x, y) {
             continue;
         }
         let url = t.tile_url(level, x, y);
-        let tile = TerrainTile::decode(&url, &read(&url)?).map_err(|e| e.to_string())?;
+        let Some(bytes) = files.file(&url)? else {
+            missing = true;
+            continue;
+        };
+        let tile = TerrainTile::decode(&url, &bytes).map_err(|e| e.to_string())?;
         let cell = t.tile_size_m(level) / f64::from(tile.grid.max(1));
         let children: Vec<(u8, u32, u32)> = (0..4)
             .filter(|&q| tile.children[q].exists)
@@ -206,6 +315,9 @@ pub fn terrain_species(
             }
         }
     }
+    if missing {
+        return Ok(None);
+    }
     let surfaces = vec![TriangleSurface::default(); triangles.len()];
     let material = GpuTraceMaterial {
         base_color: [albedo.x, albedo.y, albedo.z, 1.0],
@@ -214,11 +326,81 @@ pub fn terrain_species(
         size: 0,
         kind: 1,
     };
-    Ok(TraceSpecies {
+    Ok(Some(TraceSpecies {
         bvh: Bvh::build_with(&triangles, &surfaces),
         materials: vec![material],
         texels: Vec::new(),
         uv_min: [0.0; 2],
         uv_extent: [1.0; 2],
-    })
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene directory whose files are at hand only once asked for and
+    /// "fetched" (as the browser's): each round fetches what the last load asked.
+    struct Rounds<'a> {
+        dir: DirFiles<'a>,
+        fetched: std::collections::HashSet<(String, bool)>,
+        wanted: Vec<(String, bool)>,
+    }
+
+    impl Rounds<'_> {
+        fn get(&mut self, rel: &str, pack: bool) -> Result<Option<Vec<u8>>, String> {
+            if self.fetched.contains(&(rel.to_string(), pack)) {
+                return if pack { self.dir.pack(rel) } else { self.dir.file(rel) };
+            }
+            self.wanted.push((rel.to_string(), pack));
+            Ok(None)
+        }
+    }
+
+    impl SceneFiles for Rounds<'_> {
+        fn file(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
+            self.get(rel, false)
+        }
+        fn pack(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
+            self.get(rel, true)
+        }
+    }
+
+    #[test]
+    fn a_load_in_rounds_of_fetches_is_the_load_from_disk() {
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small"));
+        let m = Manifest::decode("scene.json", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+        let eye = DVec3::new(0.0, -190.0, 90.0);
+        let ground = Some(Vec3::splat(0.2));
+        let (whole, report) = load_dir(dir, eye, 150.0, ground).unwrap();
+        let mut files = Rounds { dir: DirFiles(dir), fetched: Default::default(), wanted: Vec::new() };
+        let mut rounds = Vec::new();
+        let (scene, r) = loop {
+            if let Some(done) = load_with(&mut files, eye, 150.0, ground).unwrap() {
+                break done;
+            }
+            let wanted = std::mem::take(&mut files.wanted);
+            assert!(!wanted.is_empty(), "a load that waits asks for something");
+            files.fetched.extend(wanted.iter().cloned());
+            rounds.push(wanted);
+            assert!(rounds.len() < 32);
+        };
+        assert_eq!(r, report);
+        assert_eq!(scene.instances, whole.instances);
+        assert_eq!(scene.top.len(), whole.top.len());
+        assert!(report.trees > 0 && report.terrain_triangles > 0, "{report:?}");
+        // In phases: the manifest alone first; the packs together, last, and only
+        // those of species placed within reach.
+        assert_eq!(rounds[0], vec![("scene.json".to_string(), false)]);
+        let last = rounds.last().unwrap();
+        assert!(last.iter().all(|(_, pack)| *pack), "{last:?}");
+        assert!(rounds[..rounds.len() - 1].iter().flatten().all(|(_, pack)| !pack));
+        let used: std::collections::HashSet<u32> = whole.instances.iter().map(|i| i.species).collect();
+        let placed = m.species.iter().enumerate().filter(|(i, _)| used.contains(&(*i as u32))).count();
+        assert_eq!(last.len(), placed);
+        // Tiles beyond reach are not fetched.
+        let tiles = rounds.iter().flatten().filter(|(f, _)| f.ends_with(".tile")).count();
+        let entries = crate::format::index::read_all_tiles(dir, &m).unwrap();
+        assert!(tiles < entries.len(), "{tiles} of {} tiles fetched", entries.len());
+    }
 }

@@ -10,8 +10,6 @@
 //! the same random rays with both and compares the hits.
 
 pub mod bvh;
-/// (Native: it reads a scene directory.)
-#[cfg(not(target_arch = "wasm32"))]
 pub mod load;
 pub mod scene;
 pub mod sky;

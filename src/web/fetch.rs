@@ -20,7 +20,10 @@ pub struct WebFetcher {
     done: Rc<RefCell<Done>>,
 }
 
-async fn fetch_bytes(url: &str, range: Option<crate::scene::fetch::ByteRange>) -> Result<Vec<u8>, FetchError> {
+pub(super) async fn fetch_bytes(
+    url: &str,
+    range: Option<crate::scene::fetch::ByteRange>,
+) -> Result<Vec<u8>, FetchError> {
     let transport = |e: JsValue| FetchError::Transport {
         url: url.to_string(),
         message: e.as_string().unwrap_or_else(|| format!("{e:?}")),
@@ -98,7 +101,7 @@ extern "C" {
 /// A stored pack's part inflated by the browser (`DecompressionStream`,
 /// deflate-raw: no inflater in the wasm module), read chunk by chunk and
 /// stopped past `len` bytes; an error unless it is exactly `len` bytes.
-async fn inflate_in_browser(url: &str, deflated: &[u8], len: u64) -> Result<Vec<u8>, FetchError> {
+pub(super) async fn inflate_in_browser(url: &str, deflated: &[u8], len: u64) -> Result<Vec<u8>, FetchError> {
     let fail = |m: String| FetchError::Transport { url: url.to_string(), message: format!("the stored part {m}") };
     let js = |e: JsValue| fail(format!("does not inflate ({})", e.as_string().unwrap_or_else(|| format!("{e:?}"))));
     let inflater = DecompressionStream::new("deflate-raw").map_err(js)?;

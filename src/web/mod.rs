@@ -20,6 +20,8 @@ use crate::scene::StreamEvent;
 
 mod camera;
 mod fetch;
+mod math;
+mod photo;
 mod query;
 mod settings;
 
@@ -62,6 +64,11 @@ pub struct Viewer {
     pacer: crate::frame::pacing::LoadPacer,
     /// The camera of the last frame drawn.
     drawn_camera: Option<Camera>,
+    /// The scene's URL as given (the path tracer fetches its files).
+    scene_url: String,
+    /// The path-traced view (`set_renderer`), and its pipelines once made.
+    photo: Option<photo::Photo>,
+    photo_pipes: Option<photo::PhotoPipelines>,
 }
 
 /// A geographic camera asked for before the scene's CRS was known.
@@ -140,6 +147,7 @@ impl Viewer {
         let pools = PoolConfig { instances: 2 << 20, items: 3 << 20, ..PoolConfig::default() };
         let depth = depth_texture(&device, width, height);
         let name = adapter_name(&adapter).await;
+        let scene_url = scene.clone();
         let mut frame = Frame::new(device, queue, name, view_format, pools, &scene, WebFetcher::default());
         frame.use_timestamps();
         // A resting camera refines its image, then the viewer idles (`setRefine`).
@@ -167,6 +175,9 @@ impl Viewer {
             last_done: Default::default(),
             pacer: Default::default(),
             drawn_camera: None,
+            scene_url,
+            photo: None,
+            photo_pipes: None,
         })
     }
 
@@ -371,7 +382,8 @@ impl Viewer {
         // The camera again: placing it, or the ground under it, may have moved it.
         let camera = self.camera();
         let moved = self.drawn_camera != Some(camera);
-        if !self.pacer.should_draw(now_ms, settled, s.bytes_fetched + s.requests) && !moved {
+        let tracing = self.poll_photo(&camera);
+        if !tracing && !self.pacer.should_draw(now_ms, settled, s.bytes_fetched + s.requests) && !moved {
             return Ok(false);
         }
         let target = match self.surface.get_current_texture() {
@@ -387,9 +399,14 @@ impl Viewer {
         let color = target
             .texture
             .create_view(&wgpu::TextureViewDescriptor { format: Some(self.view_format), ..Default::default() });
-        let depth = self.depth.create_view(&Default::default());
-        let recorded = self.frame.record(&view, &color, &depth, true);
-        self.frame.submit(recorded, false);
+        let traced = if tracing { self.record_photo(&camera, &color) } else { None };
+        if let Some(work) = traced {
+            self.frame.queue.submit([work]);
+        } else {
+            let depth = self.depth.create_view(&Default::default());
+            let recorded = self.frame.record(&view, &color, &depth, true);
+            self.frame.submit(recorded, false);
+        }
         self.frame.queue.present(target);
         self.frames_ahead.fetch_add(1, Ordering::Relaxed);
         let (ahead, done_ms) = (self.frames_ahead.clone(), self.frame_done_ms.clone());
@@ -413,6 +430,38 @@ impl Viewer {
             self.settled_frame = None;
         }
         Ok(true)
+    }
+
+    /// Takes a finished load of the path-traced view (its error as an
+    /// event) and reloads one the eye left: whether the traced image is
+    /// what this frame shows (else the raster view, while it loads).
+    fn poll_photo(&mut self, camera: &Camera) -> bool {
+        let Some(p) = self.photo.as_mut() else { return false };
+        if p.stale(camera.eye_m) {
+            *p = photo::Photo::start(&self.scene_url, camera.eye_m, p.settings);
+        }
+        if let Some(message) = p.poll() {
+            self.events.push(StreamEvent::Failed { url: "path-trace".into(), message, retrying: false });
+        }
+        p.ready()
+    }
+
+    /// The next traced sample and its display on `color` (the display alone
+    /// once complete), or `None` on a failure (it goes to the events; the
+    /// raster view is drawn).
+    fn record_photo(&mut self, camera: &Camera, color: &wgpu::TextureView) -> Option<wgpu::CommandBuffer> {
+        let p = self.photo.as_mut()?;
+        let pipes =
+            self.photo_pipes.get_or_insert_with(|| photo::PhotoPipelines::new(&self.frame.device, self.view_format));
+        let lighting = self.frame.settings.lighting;
+        let size = (self.config.width, self.config.height);
+        match p.record(pipes, &self.frame.device, &self.frame.queue, camera, &lighting, size, color) {
+            Ok(work) => work,
+            Err(message) => {
+                self.events.push(StreamEvent::Failed { url: "path-trace".into(), message, retrying: false });
+                None
+            }
+        }
     }
 
     fn camera(&self) -> Camera {

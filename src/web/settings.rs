@@ -217,10 +217,72 @@ impl Viewer {
         };
     }
 
-    /// Whether a refinement is under way: more frames would improve the image.
+    /// Whether a refinement is under way: more frames would improve the image
+    /// (the raster's refinement, or the path-traced view's samples).
     /// False when it has converged (the viewer idles) or is off.
     pub fn refining(&self) -> bool {
+        if let Some(p) = &self.photo {
+            return p.wants_frames();
+        }
         self.frame.refine.config.enabled && !self.frame.refine.converged() && self.frame.stream.manifest().is_some()
+    }
+
+    /// The renderer: `"raster"` (the streamed levels of detail, the default)
+    /// or `"path-trace"`: the view traced at full detail (issue 48) — every
+    /// tree within `reach_m` of the eye at its full mesh and the terrain
+    /// under them, the sun's disk, the clear sky of `turbidity` (the raster's
+    /// simple light with `simple`), `bounces` bounces — a sample a pixel each
+    /// frame while the camera rests, up to `spp`, then the viewer idles.
+    ///
+    /// # Errors
+    /// An unknown renderer, or settings out of range (named).
+    pub fn set_renderer(
+        &mut self,
+        renderer: &str,
+        spp: u32,
+        reach_m: f64,
+        bounces: u32,
+        simple: bool,
+        turbidity: f32,
+    ) -> Result<(), JsValue> {
+        match renderer {
+            "raster" => {
+                self.photo = None;
+                self.drawn_camera = None;
+                Ok(())
+            }
+            "path-trace" => {
+                if !(1..=65_536).contains(&spp) {
+                    return Err(JsValue::from_str("path-trace: spp is 1–65536 samples a pixel"));
+                }
+                if !(reach_m.is_finite() && (1.0..=20_000.0).contains(&reach_m)) {
+                    return Err(JsValue::from_str("path-trace: reach is 1–20000 m"));
+                }
+                if bounces > 16 {
+                    return Err(JsValue::from_str("path-trace: bounces is 0–16"));
+                }
+                if !(1.7..=10.0).contains(&turbidity) {
+                    return Err(JsValue::from_str("path-trace: the clear sky is fitted for turbidity 1.7–10"));
+                }
+                let settings = super::photo::PhotoSettings { spp, reach_m, bounces, simple, turbidity };
+                let eye = self.camera().eye_m;
+                match &mut self.photo {
+                    // The same view's scene: only the image's settings change.
+                    Some(p) if p.settings.reach_m == reach_m && !p.stale(eye) => p.set(settings),
+                    _ => self.photo = Some(super::photo::Photo::start(&self.scene_url, eye, settings)),
+                }
+                Ok(())
+            }
+            other => Err(JsValue::from_str(&format!("{other}: the renderer is raster or path-trace"))),
+        }
+    }
+
+    /// The path-traced view's state as JSON (`null` with the raster renderer):
+    /// `{state: loading|ready|failed, samples, spp, reach_m, trees,
+    /// trees_in_scene, instanced_triangles, terrain_triangles, gpu_bytes,
+    /// fetch_rounds, bytes_fetched, error}`.
+    pub fn photo_json(&self) -> String {
+        self.photo.as_ref().map_or_else(|| "null".into(), super::photo::Photo::json)
     }
 
     /// Frames submitted to the GPU so far.

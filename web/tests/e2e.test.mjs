@@ -1088,6 +1088,66 @@ test('the browser draws what the native renderer draws for the same camera', asy
   assert.deepEqual(errors, []);
 });
 
+test('the path tracer traces the fixture in the browser as natively, converges, then idles; a move starts over', async () => {
+  // The camera of the test above (every family close by), at the page's size.
+  const cam = { x: 0, y: -190, z: 90, heading: 0, pitch: -30 };
+  const { page, errors } = await openViewer(`${base}?ui=0#local=${cam.x},${cam.y},${cam.z},${cam.heading},${cam.pitch}`);
+  await ready(page);
+  const box = await page.locator('#view').boundingBox();
+  const origin = (await page.evaluate(() => window.sylva.camera())).origin;
+  const at = `${origin[0] + cam.x},${origin[1] + cam.y},${origin[2] + cam.z},${cam.heading},${cam.pitch}`;
+  const trace = async (name, options) => {
+    await page.evaluate((o) => window.sylva.setRenderer('path-trace', o), options);
+    await page.waitForFunction((spp) => {
+      const p = window.sylva.photo();
+      return p.state === 'failed' || (p.state === 'ready' && p.samples >= spp);
+    }, options.spp, { timeout: 240000, polling: 250 });
+    const photo = await page.evaluate(() => window.sylva.photo());
+    assert.equal(photo.state, 'ready', JSON.stringify(photo));
+    await settle(page);
+    const png = join(artifacts, `path-trace-${name}-browser.png`);
+    await page.screenshot({ path: png, clip: box, timeout: 60000 });
+    const nativePng = join(artifacts, `path-trace-${name}-native.png`);
+    execFileSync(sylvaBin, ['render', '--scene', scene, '--size', `${box.width}x${box.height}`, '--camera', at, '--path-trace',
+      '--spp', String(options.spp), '--reach', String(options.reach), '--light', options.light ?? 'physical', '--out', nativePng],
+    { stdio: 'ignore' });
+    return { photo, png, nativePng };
+  };
+  // The raster's light: the traced geometry alone, the same samples as natively.
+  const raster = await trace('raster-light', { spp: 4, reach: 400, light: 'raster' });
+  assert.ok(raster.photo.trees > 100 && raster.photo.instanced_triangles > 1e5 && raster.photo.terrain_triangles > 1000,
+    JSON.stringify(raster.photo));
+  // What was drawn: the forest, not a sky (trees cover the view's lower part).
+  const share = await foliageShare(page, 'path-trace-raster-light');
+  assert.ok(share > 0.1, `foliage covers ${share} of the traced view`);
+  const rasterError = Number(execFileSync(sylvaBin, ['compare', raster.png, raster.nativePng]).toString());
+  // (`foliage IoU 0.9998 (35215 and 35211 foliage pixels of 38400)`)
+  const iou = Number(/IoU ([0-9.]+)/.exec(execFileSync(sylvaBin, ['compare', '--foliage', raster.png, raster.nativePng]).toString())?.[1]);
+  // (SwiftShader and lavapipe round floats differently; the samples are the same.)
+  assert.ok(rasterError < 0.02, `multi-scale RMSE browser vs native, raster light: ${rasterError} (see ${artifacts})`);
+  assert.ok(iou > 0.9, `foliage IoU browser vs native: ${iou}`);
+  // The physical light (sun disk, sky, bounces, leaves that transmit), same scene
+  // (1 sample: under SwiftShader a physical sample of this view takes ~10 s).
+  const physical = await trace('physical', { spp: 1, reach: 400 });
+  assert.equal(physical.photo.fetch_rounds, raster.photo.fetch_rounds, 'the same view\'s scene is not loaded again');
+  const physicalError = Number(execFileSync(sylvaBin, ['compare', physical.png, physical.nativePng]).toString());
+  assert.ok(physicalError < 0.03, `multi-scale RMSE browser vs native, physical light: ${physicalError}`);
+  // Converged: nothing more to draw.
+  assert.equal(await page.evaluate(() => window.sylva.viewer.refining()), false);
+  // A move starts the image over, and it converges again (the raster's light: cheaper).
+  await page.evaluate(() => window.sylva.setRenderer('path-trace', { spp: 2, reach: 400, light: 'raster' }));
+  await page.waitForFunction(() => window.sylva.photo().samples >= 2, null, { timeout: 240000, polling: 250 });
+  const c = await page.evaluate(() => window.sylva.camera());
+  await page.evaluate((c) => window.sylva.setCamera({ x: c.x + 3, y: c.y, z: c.z, heading: c.heading + 2, pitch: c.pitch }), c);
+  await page.waitForFunction(() => window.sylva.photo().samples < 2, null, { timeout: 30000, polling: 50 });
+  await page.waitForFunction(() => window.sylva.photo().samples >= 2, null, { timeout: 240000, polling: 250 });
+  // Back to the raster.
+  await page.evaluate(() => window.sylva.setRenderer('raster'));
+  assert.equal(await page.evaluate(() => window.sylva.photo()), null);
+  await assert.rejects(page.evaluate(() => window.sylva.setRenderer('ray-march')), /raster or path-trace/);
+  assert.deepEqual(errors, []);
+});
+
 test('two viewers on one page, and destroy() releases one', async () => {
   const { page, errors } = await openViewer(`${base}embed.html`, { size: PORTAL });
   await page.addStyleTag({ content: SMALL_EMBED });
