@@ -449,19 +449,107 @@ pub fn downsample(img: &[u8], width: u32, height: u32, f: u32) -> Vec<u8> {
 pub struct BenchRun {
     /// Every frame of every method.
     pub frames: Vec<FrameRecord>,
+    /// Every frame of every method judged against the path-traced reference
+    /// (`sylva bench --reference path-traced`; empty without).
+    pub traced: Vec<TracedRecord>,
     /// Per method.
     pub summary: BTreeMap<String, MethodSummary>,
     /// The adapter.
     pub adapter: String,
 }
 
+/// The path-traced reference (`sylva bench --reference path-traced`): each
+/// frame also traced at full detail (issue 48), under the physical light and
+/// under the raster's simple light, and every method judged against both.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TracedReference {
+    /// Samples per pixel of each traced image.
+    pub spp: u32,
+    /// Bounces after the first hit (physical light).
+    pub bounces: u32,
+    /// Trees within this many metres of the eye are traced.
+    pub reach_m: f64,
+    /// The clear sky's turbidity.
+    pub turbidity: f32,
+}
+
+/// The name of the traced image under the raster's light among the traced
+/// records: its `error` is the raster light model's own error.
+pub const TRACED_RASTER_LIGHT: &str = "path-traced-raster-light";
+
+/// One method's frame against the path-traced reference.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct TracedRecord {
+    /// Method name ([`TRACED_RASTER_LIGHT`]: the traced image under the raster's light).
+    pub method: String,
+    /// Frame index along the path.
+    pub frame: usize,
+    /// Multi-scale RMSE against the image traced under the physical light:
+    /// geometry and light together (0–1).
+    pub error: f64,
+    /// Mean FLIP against it.
+    pub flip: f64,
+    /// Multi-scale RMSE against the image traced under the raster's own
+    /// light: the geometry's error alone.
+    pub geometry_error: f64,
+    /// Foliage IoU against the image traced under the raster's light (the
+    /// check that both see the same forest; [`crate::metrics::foliage_iou`]).
+    pub foliage_iou: f64,
+}
+
+/// The path-traced images of one camera: under the physical light and under
+/// the raster's (each `width`×`height` sRGB RGBA8).
+fn trace_frame(
+    ctx: &crate::render::GpuContext,
+    tracer: &crate::render::path_trace::PathTracer,
+    dir: &Path,
+    cam: &Camera,
+    lighting: &crate::render::Lighting,
+    (width, height): (u32, u32),
+    t: &TracedReference,
+) -> Result<[Vec<u8>; 2]> {
+    use crate::render::path_trace::{to_srgb8, PathOptions, PathView};
+    let albedo = PathOptions::default().ground_albedo;
+    let (scene, report) = crate::trace::load::load_dir(dir, cam.eye_m, t.reach_m, Some(albedo))
+        .map_err(|e| anyhow::anyhow!("the traced reference: {e}"))?;
+    let mut out = Vec::new();
+    for simple in [false, true] {
+        let view = PathView::under(
+            lighting,
+            cam.eye_m.as_vec3(),
+            cam.forward().as_vec3(),
+            cam.fov_y_rad,
+            (!simple).then_some(t.turbidity),
+        );
+        let options = PathOptions {
+            spp: t.spp,
+            bounces: t.bounces,
+            simple,
+            ground_z: (report.terrain_triangles == 0).then_some(report.ground_z),
+            ..PathOptions::default()
+        };
+        let image = tracer
+            .render(ctx, &scene, &view, (width, height), &options, &mut |_| {})
+            .map_err(|e| anyhow::anyhow!("the traced reference: {e}"))?;
+        out.push(to_srgb8(&image));
+    }
+    let raster = out.pop().unwrap_or_default();
+    let physical = out.pop().unwrap_or_default();
+    Ok([physical, raster])
+}
+
 /// Runs `methods` over `cameras` on `scene` at `width`×`height`. `progress(method,
 /// frame, frames)` is called per frame. With `frames_dir`, each method's frames
 /// are written there as `NNN-method.png`, and per frame a strip of all of them
 /// side by side in the methods' order (`NNN-strip.png`, the reference first).
+/// With `traced`, each frame is also path traced under both lights and every
+/// method judged against the two images ([`BenchRun::traced`]; with
+/// `frames_dir` they are written too, the physical one first in the strip).
 ///
 /// # Errors
-/// A scene that does not open, no GPU adapter, or a frame that cannot be written.
+/// A scene that does not open, no GPU adapter, or a frame that cannot be
+/// written; with `traced`, a scene that is not a directory.
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     scene: &str,
     cameras: &[Camera],
@@ -469,8 +557,20 @@ pub fn run(
     width: u32,
     height: u32,
     frames_dir: Option<&Path>,
+    traced: Option<TracedReference>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<BenchRun> {
+    let trace_dir = match traced {
+        Some(_) => {
+            let dir = Path::new(scene);
+            let dir = if dir.is_file() { dir.parent().unwrap_or(dir) } else { dir };
+            if !dir.join("scene.json").is_file() {
+                bail!("--reference path-traced reads a scene directory (or its scene.json), not {scene}");
+            }
+            Some(dir.to_path_buf())
+        }
+        None => None,
+    };
     if methods.first().is_none_or(|m| m.reference.is_some())
         || methods.iter().any(|m| m.reference.is_some_and(|r| methods.get(r).is_none_or(|r| r.reference.is_some())))
     {
@@ -487,6 +587,8 @@ pub fn run(
         scenes.push(off);
     }
     let adapter = scenes.first().map(|s| s.ctx.adapter_summary()).unwrap_or_default();
+    let tracer = traced.and(scenes.first()).map(|s| crate::render::path_trace::PathTracer::new(&s.ctx.device));
+    let mut traced_records = Vec::new();
     let mut frames = Vec::new();
     let mut prev: Vec<Option<Vec<u8>>> = vec![None; methods.len()];
     for (i, cam) in cameras.iter().enumerate() {
@@ -494,6 +596,8 @@ pub fn run(
         let mut reference: Vec<Option<Vec<u8>>> = vec![None; methods.len()];
         let mut ref_motion = vec![f64::NAN; methods.len()];
         let mut strip: Vec<Vec<u8>> = Vec::new();
+        // Each method's image of this frame, for the traced reference.
+        let mut images: Vec<Vec<u8>> = Vec::new();
         for (k, (method, off)) in methods.iter().zip(scenes.iter_mut()).enumerate() {
             progress(&method.name, i, cameras.len());
             let ss = method.supersample.max(1);
@@ -566,8 +670,36 @@ pub fn run(
                     .with_context(|| format!("cannot write {}", path.display()))?;
                 strip.push(img.clone());
             }
+            if traced.is_some() {
+                images.push(img.clone());
+            }
             prev[k] = Some(img);
             frames.push(rec);
+        }
+        if let (Some(t), Some(tracer), Some(dir), Some(first)) = (traced, &tracer, &trace_dir, scenes.first()) {
+            progress("path-traced", i, cameras.len());
+            let [physical, raster_light] =
+                trace_frame(&first.ctx, tracer, dir, cam, &methods[0].settings.lighting, (width, height), &t)?;
+            let judge = |name: &str, img: &[u8]| TracedRecord {
+                method: name.to_string(),
+                frame: i,
+                error: crate::metrics::multiscale_rmse(img, &physical, width, height),
+                flip: flip(&physical, img, width, height),
+                geometry_error: crate::metrics::multiscale_rmse(img, &raster_light, width, height),
+                foliage_iou: crate::metrics::foliage_iou(img, &raster_light).0,
+            };
+            for (method, img) in methods.iter().zip(&images) {
+                traced_records.push(judge(&method.name, img));
+            }
+            traced_records.push(judge(TRACED_RASTER_LIGHT, &raster_light));
+            if let Some(dir) = frames_dir {
+                for (name, img) in [("path-traced", &physical), (TRACED_RASTER_LIGHT, &raster_light)] {
+                    let path = dir.join(format!("{i:03}-{name}.png"));
+                    image::save_buffer(&path, img, width, height, image::ColorType::Rgba8)
+                        .with_context(|| format!("cannot write {}", path.display()))?;
+                }
+                strip.insert(0, physical);
+            }
         }
         if let Some(dir) = frames_dir {
             let path = dir.join(format!("{i:03}-strip.png"));
@@ -588,7 +720,69 @@ pub fn run(
     frames.sort_by_key(|r| (methods.iter().position(|m| m.name == r.method), r.frame));
     let names: Vec<String> = methods.iter().map(|m| m.name.clone()).collect();
     let summary = summarise(&frames, &names);
-    Ok(BenchRun { frames, summary, adapter })
+    Ok(BenchRun { frames, traced: traced_records, summary, adapter })
+}
+
+/// One method against the path-traced reference, over the frames.
+#[derive(Debug, Clone, Serialize)]
+pub struct TracedSummary {
+    /// Against the image traced under the physical light.
+    pub error: Stat,
+    /// Mean FLIP against it.
+    pub flip: Stat,
+    /// Against the image traced under the raster's light (geometry alone).
+    pub geometry_error: Stat,
+    /// `error` − `geometry_error` per frame: what the raster's light adds.
+    pub light_error: Stat,
+    /// Foliage IoU against the image traced under the raster's light.
+    pub foliage_iou: Stat,
+}
+
+/// Per-method medians and p95s of `records` (in first-seen order of methods).
+#[must_use]
+pub fn summarise_traced(records: &[TracedRecord]) -> Vec<(String, TracedSummary)> {
+    let mut names: Vec<&str> = Vec::new();
+    for r in records {
+        if !names.contains(&r.method.as_str()) {
+            names.push(&r.method);
+        }
+    }
+    names
+        .into_iter()
+        .map(|name| {
+            let f: Vec<&TracedRecord> = records.iter().filter(|r| r.method == name).collect();
+            let summary = TracedSummary {
+                error: Stat::of(f.iter().map(|r| r.error)),
+                flip: Stat::of(f.iter().map(|r| r.flip)),
+                geometry_error: Stat::of(f.iter().map(|r| r.geometry_error)),
+                light_error: Stat::of(f.iter().map(|r| r.error - r.geometry_error)),
+                foliage_iou: Stat::of(f.iter().map(|r| r.foliage_iou)),
+            };
+            (name.to_string(), summary)
+        })
+        .collect()
+}
+
+/// Writes `traced.csv`: one row per method and frame against the traced reference.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_traced_csv(dir: &Path, records: &[TracedRecord]) -> Result<()> {
+    let mut csv = String::from("method,frame,error,flip,geometry_error,light_error,foliage_iou\n");
+    for r in records {
+        csv.push_str(&format!(
+            "{},{},{:.6},{:.6},{:.6},{:.6},{:.4}\n",
+            r.method,
+            r.frame,
+            r.error,
+            r.flip,
+            r.geometry_error,
+            r.error - r.geometry_error,
+            r.foliage_iou
+        ));
+    }
+    let path = dir.join("traced.csv");
+    std::fs::write(&path, csv).with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// Per-method medians and p95s of `frames`.

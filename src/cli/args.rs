@@ -151,6 +151,21 @@ pub(crate) enum Command {
         #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4),
               conflicts_with_all = ["replot", "stress", "memory"])]
         reference_supersample: u32,
+        /// The reference every method is also judged against: raster (the
+        /// full mesh rasterised and supersampled; always run) or path-traced —
+        /// each frame also traced at full detail (issue 48) under the physical
+        /// light (sun disk, clear sky, bounces, leaves that transmit) and under
+        /// the raster's own light, each method's error against both (the first
+        /// geometry and light, the second geometry alone, the difference the
+        /// light's; traced.csv, summary.json "path_traced"). A scene directory.
+        #[arg(long, value_enum, default_value = "raster", conflicts_with_all = ["replot", "stress", "memory", "trace"])]
+        reference: ReferenceArg,
+        /// --reference path-traced: samples per pixel of each traced image.
+        #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+        trace_spp: u32,
+        /// --reference path-traced: trees within this many metres of the eye are traced.
+        #[arg(long, default_value_t = 2000.0, value_parser = parse_reach)]
+        trace_reach: f64,
     },
     /// One table row per bench output directory (its summary.json) for one
     /// method: median GPU ms, multi-scale RMSE, FLIP, temporal noise, draw calls
@@ -576,6 +591,15 @@ pub(crate) fn parse_on_off(s: &str) -> Result<bool, String> {
         "off" | "false" | "no" | "0" => Ok(false),
         _ => Err(format!("{s:?}: expected on or off")),
     }
+}
+
+/// `sylva bench --reference`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum ReferenceArg {
+    /// The full mesh rasterised, supersampled (the methods' own reference).
+    Raster,
+    /// Also the path tracer's image of each frame, under both lights.
+    PathTraced,
 }
 
 /// `--turbidity`: a number in 1.7–10 (the clear-sky fit's range).

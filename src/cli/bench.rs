@@ -62,6 +62,7 @@ pub(crate) fn path_cameras(scene: &str, path: &str, frames: usize) -> Result<Vec
     Ok(b::interpolate(&keys, frames))
 }
 
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn bench(
     scene: &str,
     path: &str,
@@ -70,6 +71,7 @@ pub(crate) fn bench(
     frames: usize,
     out: &std::path::Path,
     save_frames: bool,
+    traced: Option<sylva::bench::TracedReference>,
 ) -> Result<()> {
     use sylva::bench as b;
     let (w, h) = parse_size(size)?;
@@ -80,14 +82,15 @@ pub(crate) fn bench(
     }
     let cameras = path_cameras(scene, path, frames)?;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let total = methods.len() * cameras.len();
+    let total = (methods.len() + usize::from(traced.is_some())) * cameras.len();
     let started = std::time::Instant::now();
     let mut done = 0usize;
     let frames_dir = out.join("frames");
     if save_frames {
         std::fs::create_dir_all(&frames_dir).with_context(|| format!("cannot create {}", frames_dir.display()))?;
     }
-    let run = b::run(scene, &cameras, &methods, w, h, save_frames.then_some(frames_dir.as_path()), &mut |m, i, n| {
+    let frames_at = save_frames.then_some(frames_dir.as_path());
+    let run = b::run(scene, &cameras, &methods, w, h, frames_at, traced, &mut |m, i, n| {
         done += 1;
         let eta = started.elapsed().as_secs_f64() / done as f64 * (total - done) as f64;
         let bar = "#".repeat(done * 30 / total.max(1));
@@ -103,6 +106,13 @@ pub(crate) fn bench(
         "adapter": run.adapter,
         "reference_supersample": methods.iter().find(|m| m.reference.is_none()).map_or(2, |m| m.supersample),
         "methods": run.summary,
+        "path_traced": traced.map(|t| serde_json::json!({
+            "spp": t.spp,
+            "bounces": t.bounces,
+            "reach_m": t.reach_m,
+            "turbidity": t.turbidity,
+            "methods": b::summarise_traced(&run.traced).into_iter().collect::<std::collections::BTreeMap<_, _>>(),
+        })),
     });
     std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
     b::write_plots(out, &run, &format!("{path}, {w}x{h}"))?;
@@ -112,6 +122,17 @@ pub(crate) fn bench(
             "{name:<14} {:>9.2} {:>9.3} {:>9.4} {:>9.4} {:>10.5}",
             m.gpu_ms.median, m.cpu_ms.median, m.error.median, m.flip.median, m.temporal_noise.median
         );
+    }
+    if traced.is_some() {
+        b::write_traced_csv(out, &run.traced)?;
+        eprintln!("against the path-traced reference (ms-rmse; geometry: against the trace under the raster's light):");
+        eprintln!("{:<26} {:>9} {:>9} {:>9} {:>9} {:>9}", "method", "ms-rmse", "flip", "geometry", "light", "iou");
+        for (name, m) in b::summarise_traced(&run.traced) {
+            eprintln!(
+                "{name:<26} {:>9.4} {:>9.4} {:>9.4} {:>9.4} {:>9.4}",
+                m.error.median, m.flip.median, m.geometry_error.median, m.light_error.median, m.foliage_iou.median
+            );
+        }
     }
     eprintln!("wrote frames.csv, summary.json, pareto.svg, frame_time.svg, temporal_noise.svg to {}", out.display());
     Ok(())
@@ -239,8 +260,12 @@ pub(crate) fn replot(out: &std::path::Path, path: &str, size: &str) -> Result<()
             names.push(f.method.clone());
         }
     }
-    let run =
-        sylva::bench::BenchRun { summary: sylva::bench::summarise(&frames, &names), frames, adapter: String::new() };
+    let run = sylva::bench::BenchRun {
+        summary: sylva::bench::summarise(&frames, &names),
+        frames,
+        traced: Vec::new(),
+        adapter: String::new(),
+    };
     sylva::bench::write_plots(out, &run, &format!("{path}, {size}"))?;
     eprintln!("redrew the plots in {}", out.display());
     Ok(())

@@ -116,6 +116,9 @@ mod cli {
                 season,
                 save_frames,
                 reference_supersample,
+                reference,
+                trace_spp,
+                trace_reach,
                 ..
             } => {
                 if !(0.0..0.5).contains(&fade_band) {
@@ -135,7 +138,13 @@ mod cli {
                         m.supersample = reference_supersample;
                     }
                 }
-                bench(&scene, &path, methods, &size, frames, &out, save_frames)
+                let traced = (reference == ReferenceArg::PathTraced).then_some(sylva::bench::TracedReference {
+                    spp: trace_spp,
+                    bounces: 2,
+                    reach_m: trace_reach,
+                    turbidity: 3.0,
+                });
+                bench(&scene, &path, methods, &size, frames, &out, save_frames, traced)
             }
             Command::BenchTable { dirs, method } => bench_table(&dirs, &method),
             Command::Compare { a, b, stretch, foliage } => compare(&a, &b, stretch, foliage),

@@ -403,12 +403,25 @@ pub fn decode_attributes(
     Ok(AttributeCodes { count: instances, columns: out })
 }
 
+/// Unicode lower case: in the browser its own (`String.prototype.toLowerCase`,
+/// the same mapping without carrying Rust's case tables in the wasm).
+fn lowercase(s: &str) -> String {
+    #[cfg(target_arch = "wasm32")]
+    {
+        js_sys::JsString::from(s).to_lower_case().into()
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        s.to_lowercase()
+    }
+}
+
 /// Whether `text` matches `pattern`, case-insensitively: `*` matches any run of
 /// characters (a glob, anchored at both ends); without one, the whole text.
 #[must_use]
 pub fn glob_matches(pattern: &str, text: &str) -> bool {
-    let p = pattern.to_lowercase();
-    let l = text.to_lowercase();
+    let p = lowercase(pattern);
+    let l = lowercase(text);
     if !p.contains('*') {
         return p == l;
     }

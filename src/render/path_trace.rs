@@ -449,7 +449,7 @@ impl PathTracer {
             progress(target.samples);
         }
         let pixels = (u64::from(width) * u64::from(height)) as usize;
-        let sums: Vec<[f32; 4]> = super::trace::read_back(ctx, &target.accum, (pixels * 16) as u64);
+        let sums: Vec<[f32; 4]> = read_back(ctx, &target.accum, (pixels * 16) as u64);
         let image = sums.iter().map(|s| {
             let n = s[3].max(1.0);
             [s[0] / n, s[1] / n, s[2] / n]
@@ -617,6 +617,29 @@ impl PathDisplay {
         pass.set_bind_group(0, &group, &[]);
         pass.draw(0..3, 0..1);
     }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// The first `size` bytes of `buffer` (made with `COPY_SRC`) read back once
+/// the GPU is done with what was submitted.
+pub(crate) fn read_back<T: bytemuck::Pod>(ctx: &super::GpuContext, buffer: &wgpu::Buffer, size: u64) -> Vec<T> {
+    let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &read, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    let slice = read.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map a readback buffer"));
+    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
+    let mapped = slice.get_mapped_range().expect("mapped range");
+    let out = bytemuck::cast_slice::<u8, T>(&mapped).to_vec();
+    drop(mapped);
+    read.unmap();
+    out
 }
 
 /// Linear radiance to 8-bit sRGB (clamped), as the raster's sRGB target stores it.

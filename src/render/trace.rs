@@ -7,7 +7,7 @@
 use wgpu::util::DeviceExt;
 
 use super::layouts::storage_entry;
-use super::path_trace::{non_empty, storage};
+use super::path_trace::{non_empty, read_back, storage};
 use super::shaders;
 use super::GpuContext;
 use crate::trace::bvh::Bvh;
@@ -224,26 +224,4 @@ impl TraceProbe {
         }
         out
     }
-}
-
-/// The first `size` bytes of `buffer` (made with `COPY_SRC`) read back once
-/// the GPU is done with what was submitted.
-pub(crate) fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> Vec<T> {
-    let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
-        size,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(buffer, 0, &read, 0, size);
-    ctx.queue.submit([encoder.finish()]);
-    let slice = read.slice(..);
-    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map a readback buffer"));
-    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
-    let mapped = slice.get_mapped_range().expect("mapped range");
-    let out = bytemuck::cast_slice::<u8, T>(&mapped).to_vec();
-    drop(mapped);
-    read.unmap();
-    out
 }

@@ -234,6 +234,9 @@ pub fn load_with(
     Ok(Some((scene, report)))
 }
 
+/// Most ground images traced (256² texels each: 16 MB).
+pub const IMAGERY_TILES: usize = 64;
+
 /// Most terrain cells traced (two triangles each, 64 bytes a triangle).
 const MAX_TERRAIN_CELLS: f64 = 200_000.0;
 
@@ -241,9 +244,13 @@ const MAX_TERRAIN_CELLS: f64 = 200_000.0;
 /// the quadtree's tiles over the reach's square at the coarsest level whose
 /// cells are at most the reach's side over √[`MAX_TERRAIN_CELLS`] (or the
 /// finest there is), two triangles a cell with both corners' heights, placed
-/// relative to the eye, one opaque material of `albedo`. Tiles that do not
-/// exist (no data there) leave holes; tiles of different levels meet with
-/// the cracks the raster hides with skirts (not traced yet).
+/// relative to the eye, one opaque material of `albedo` — and where the
+/// scene has ground imagery, each tile its image as the raster drapes it
+/// ([`IMAGERY_TILES`] images at most: coarser ones over a wide reach), the
+/// photograph's colour over the raster's `DAY_FLAT_LIGHT` as its albedo (as
+/// `shaders/terrain.wgsl` relights it). Tiles that do not exist (no data
+/// there) leave holes; tiles of different levels meet with the cracks the
+/// raster hides with skirts (not traced yet).
 ///
 /// # Errors
 /// Unreadable or invalid terrain tiles, named; `Ok(None)` where tiles are
@@ -272,6 +279,25 @@ pub fn terrain_species(
     // reach exists.
     let mut stack = vec![(0u8, 0u32, 0u32)];
     let mut missing = false;
+    // The images: (level, x, y) → material (0: the plain ground), and the
+    // coarsest-enough level so that the reach takes at most IMAGERY_TILES.
+    let imagery = t.imagery.as_ref().filter(|i| i.levels > 0);
+    let image_level_cap = imagery.map_or(0, |i| {
+        (0..i.levels)
+            .rev()
+            .find(|&l| ((2.0 * reach_m / t.tile_size_m(l)).ceil() + 1.0).powi(2) <= IMAGERY_TILES as f64)
+            .unwrap_or(0)
+    });
+    let mut images: std::collections::HashMap<(u8, u32, u32), u32> = std::collections::HashMap::new();
+    let mut materials = vec![GpuTraceMaterial {
+        base_color: [albedo.x, albedo.y, albedo.z, 1.0],
+        alpha_cutoff: 0.0,
+        texel_base: NO_TEXTURE,
+        size: 0,
+        kind: 1,
+    }];
+    let mut texels: Vec<u32> = Vec::new();
+    let mut surfaces = Vec::new();
     while let Some((level, x, y)) = stack.pop() {
         if !overlaps(level, x, y) {
             continue;
@@ -303,14 +329,86 @@ pub fn terrain_species(
                 )
             })
         };
+        // This tile's image (or an ancestor's, coarser), and where it lies.
+        let mut image = None;
+        if let Some(im) = imagery {
+            let l = level.min(im.levels - 1).min(image_level_cap);
+            let (ix, iy) = (x >> (level - l), y >> (level - l));
+            let o = t.tile_origin_m(l, ix, iy);
+            let s = t.tile_size_m(l);
+            let inside = o[0] < im.extent_m[2]
+                && o[0] + s > im.extent_m[0]
+                && o[1] < im.extent_m[3]
+                && o[1] + s > im.extent_m[1];
+            let material = match images.get(&(l, ix, iy)) {
+                Some(&m) => Some(m),
+                None if inside => {
+                    let url = im.tile_url(l, ix, iy);
+                    // (An image that cannot be read leaves the plain ground there.)
+                    match files.file(&url) {
+                        Ok(Some(bytes)) => {
+                            let m = crate::format::imagery::decode_image(&url, &bytes, 4096)
+                                .ok()
+                                .filter(|px| px.width == px.height && px.width > 0)
+                                .map(|px| {
+                                    let material = materials.len() as u32;
+                                    materials.push(GpuTraceMaterial {
+                                        base_color: [1.0 / 1.159, 1.0 / 1.184, 1.0 / 1.227, 1.0],
+                                        alpha_cutoff: 0.0,
+                                        texel_base: texels.len() as u32,
+                                        size: px.width,
+                                        kind: 1,
+                                    });
+                                    texels.extend(
+                                        px.pixels.chunks_exact(4).map(|p| u32::from_le_bytes([p[0], p[1], p[2], p[3]])),
+                                    );
+                                    material
+                                })
+                                .unwrap_or(0);
+                            images.insert((l, ix, iy), m);
+                            Some(m)
+                        }
+                        Ok(None) => {
+                            missing = true;
+                            None
+                        }
+                        Err(_) => {
+                            images.insert((l, ix, iy), 0);
+                            None
+                        }
+                    }
+                }
+                None => None,
+            };
+            if let Some(m) = material.filter(|&m| m > 0) {
+                image = Some((m, o, s, materials[m as usize].size));
+            }
+        }
+        // Texture coordinates over the image (north row first), texel centres
+        // at its edges (the tracer's lookups wrap).
+        let uv = |p: Vec3| -> u32 {
+            let Some((_, o, s, n)) = image else { return 0 };
+            let n = f64::from(n.max(2));
+            let u = ((f64::from(p.x) + eye.x - o[0]) / s).clamp(0.0, 1.0);
+            let v = 1.0 - ((f64::from(p.y) + eye.y - o[1]) / s).clamp(0.0, 1.0);
+            let q = |c: f64| (((0.5 + c * (n - 1.0)) / n) * 65535.0).round() as u32;
+            q(u) | (q(v) << 16)
+        };
+        let surface = |a: Vec3, b: Vec3, c: Vec3| TriangleSurface {
+            material: image.map_or(0, |i| i.0),
+            uv: [uv(a), uv(b), uv(c)],
+            color: u32::MAX,
+        };
         for j in 0..side - 1 {
             for i in 0..side - 1 {
                 let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
                 if let (Some(a), Some(b), Some(c)) = (a, b, c) {
                     triangles.push(Triangle::new(a, b, c));
+                    surfaces.push(surface(a, b, c));
                 }
                 if let (Some(a), Some(c), Some(d)) = (a, c, d) {
                     triangles.push(Triangle::new(a, c, d));
+                    surfaces.push(surface(a, c, d));
                 }
             }
         }
@@ -318,18 +416,10 @@ pub fn terrain_species(
     if missing {
         return Ok(None);
     }
-    let surfaces = vec![TriangleSurface::default(); triangles.len()];
-    let material = GpuTraceMaterial {
-        base_color: [albedo.x, albedo.y, albedo.z, 1.0],
-        alpha_cutoff: 0.0,
-        texel_base: NO_TEXTURE,
-        size: 0,
-        kind: 1,
-    };
     Ok(Some(TraceSpecies {
         bvh: Bvh::build_with(&triangles, &surfaces),
-        materials: vec![material],
-        texels: Vec::new(),
+        materials,
+        texels,
         uv_min: [0.0; 2],
         uv_extent: [1.0; 2],
     }))

@@ -242,30 +242,36 @@ impl Photo {
 struct BrowserFiles {
     files: HashMap<String, Vec<u8>>,
     packs: HashMap<String, Vec<u8>>,
+    /// Files whose fetch failed, and why (a load decides what that means:
+    /// a ground image missing leaves the plain ground, a tile fails the load).
+    failed: HashMap<(String, bool), String>,
     /// (path, whether a pack).
     wanted: Vec<(String, bool)>,
 }
 
 impl BrowserFiles {
-    fn get(&mut self, rel: &str, pack: bool) -> Option<Vec<u8>> {
+    fn get(&mut self, rel: &str, pack: bool) -> Result<Option<Vec<u8>>, String> {
         let held = if pack { &self.packs } else { &self.files };
         if let Some(b) = held.get(rel) {
-            return Some(b.clone());
+            return Ok(Some(b.clone()));
+        }
+        if let Some(e) = self.failed.get(&(rel.to_string(), pack)) {
+            return Err(e.clone());
         }
         if !self.wanted.iter().any(|(w, p)| w == rel && *p == pack) {
             self.wanted.push((rel.to_string(), pack));
         }
-        None
+        Ok(None)
     }
 }
 
 impl SceneFiles for BrowserFiles {
     fn file(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
-        Ok(self.get(rel, false))
+        self.get(rel, false)
     }
 
     fn pack(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
-        Ok(self.get(rel, true))
+        self.get(rel, true)
     }
 }
 
@@ -280,7 +286,8 @@ async fn load(
     reach_m: f64,
     counts: Rc<RefCell<(u32, u64)>>,
 ) -> Result<(TraceScene, LoadReport), String> {
-    let mut files = BrowserFiles { files: HashMap::new(), packs: HashMap::new(), wanted: Vec::new() };
+    let mut files =
+        BrowserFiles { files: HashMap::new(), packs: HashMap::new(), failed: HashMap::new(), wanted: Vec::new() };
     for _ in 0..MAX_ROUNDS {
         if let Some(done) = load_with(&mut files, eye, reach_m, Some(ground_albedo()))? {
             return Ok(done);
@@ -295,10 +302,19 @@ async fn load(
             let url = if rel == "scene.json" { manifest_url.clone() } else { crate::scene::fetch::join(&base, rel) };
             let pack = *pack;
             promises.push(&wasm_bindgen_futures::future_to_promise(async move {
-                let bytes =
-                    super::fetch::fetch_bytes(&url, None).await.map_err(|e| JsValue::from_str(&e.to_string()))?;
-                let bytes =
-                    if pack { inflate_pack(&url, bytes).await.map_err(|e| JsValue::from_str(&e))? } else { bytes };
+                // (A failure resolves to its message: the load decides what it means.)
+                let bytes = match super::fetch::fetch_bytes(&url, None).await {
+                    Ok(b) => b,
+                    Err(e) => return Ok(JsValue::from_str(&e.to_string())),
+                };
+                let bytes = if pack {
+                    match inflate_pack(&url, bytes).await {
+                        Ok(b) => b,
+                        Err(e) => return Ok(JsValue::from_str(&e)),
+                    }
+                } else {
+                    bytes
+                };
                 Ok(js_sys::Uint8Array::from(&bytes[..]).into())
             }));
         }
@@ -308,8 +324,12 @@ async fn load(
         let all: js_sys::Array = all.into();
         let mut c = counts.borrow_mut();
         c.0 += 1;
-        for ((rel, pack), bytes) in wanted.into_iter().zip(all.iter()) {
-            let bytes = js_sys::Uint8Array::new(&bytes).to_vec();
+        for ((rel, pack), got) in wanted.into_iter().zip(all.iter()) {
+            if let Some(message) = got.as_string() {
+                files.failed.insert((rel, pack), message);
+                continue;
+            }
+            let bytes = js_sys::Uint8Array::new(&got).to_vec();
             c.1 += bytes.len() as u64;
             if pack {
                 files.packs.insert(rel, bytes);

@@ -18,7 +18,7 @@ fn bench_writes_frames_summary_and_plots() {
     let methods = bench::methods("sylva,billboard", sylva::render::shadow::ShadowQuality::Off).unwrap();
     let (w, h) = (160, 90);
     let mut calls = 0;
-    let run = bench::run(SCENE, &cameras, &methods, w, h, None, &mut |_, _, _| calls += 1).unwrap();
+    let run = bench::run(SCENE, &cameras, &methods, w, h, None, None, &mut |_, _, _| calls += 1).unwrap();
     assert_eq!(calls, 9, "progress once per frame and method");
     assert_eq!(run.frames.len(), 9);
     let reference = &run.summary["reference"];
@@ -52,6 +52,48 @@ fn bench_writes_frames_summary_and_plots() {
         assert!(svg.starts_with("<svg") && svg.contains("sylva") && svg.len() > 2000, "{plot}");
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bench_judges_every_method_against_the_path_traced_reference_under_both_lights() {
+    let cameras =
+        [Camera { eye_m: glam::DVec3::new(0.0, -190.0, 60.0), heading_rad: 0.0, pitch_rad: -0.3, ..Camera::default() }];
+    let methods = bench::methods("sylva", sylva::render::shadow::ShadowQuality::Off).unwrap();
+    let traced = bench::TracedReference { spp: 4, bounces: 2, reach_m: 300.0, turbidity: 3.0 };
+    let (w, h) = (96, 54);
+    let mut calls = Vec::new();
+    let run = bench::run(SCENE, &cameras, &methods, w, h, None, Some(traced), &mut |m, _, _| calls.push(m.to_string()))
+        .unwrap();
+    assert_eq!(calls, ["reference", "sylva", "path-traced"]);
+    let summary = bench::summarise_traced(&run.traced);
+    let names: Vec<&str> = summary.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["reference", "sylva", bench::TRACED_RASTER_LIGHT]);
+    let get = |n: &str| &summary.iter().find(|(m, _)| m == n).unwrap().1;
+    // The raster's full mesh and the trace under the raster's light see the
+    // same forest on the same ground (imagery draped as the raster drapes it).
+    let reference = get("reference");
+    assert!(reference.foliage_iou.median > 0.85, "foliage IoU {}", reference.foliage_iou.median);
+    assert!(reference.geometry_error.median < 0.06, "geometry error {}", reference.geometry_error.median);
+    // The raster's light is not the physical light: its error is the light's.
+    let light = get(bench::TRACED_RASTER_LIGHT);
+    assert_eq!(light.geometry_error.median, 0.0);
+    assert!(light.error.median > 0.02, "the raster light against the physical {}", light.error.median);
+    assert!(reference.error.median > reference.geometry_error.median);
+    let sylva = get("sylva");
+    assert!(sylva.error.median > 0.0 && sylva.geometry_error.median > 0.0 && sylva.flip.median > 0.0);
+    let dir = std::env::temp_dir().join(format!("sylva-bench-traced-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    bench::write_traced_csv(&dir, &run.traced).unwrap();
+    let csv = std::fs::read_to_string(dir.join("traced.csv")).unwrap();
+    assert!(csv.starts_with("method,frame,error,flip,geometry_error,light_error,foliage_iou"));
+    assert_eq!(csv.lines().count(), 4, "header + 3 rows");
+    std::fs::remove_dir_all(&dir).ok();
+    // A URL is not a directory the tracer reads.
+    let err =
+        bench::run("http://127.0.0.1:9/scene.json", &cameras, &methods, w, h, None, Some(traced), &mut |_, _, _| {})
+            .err()
+            .expect("refused");
+    assert!(err.to_string().contains("scene directory"), "{err}");
 }
 
 #[test]
