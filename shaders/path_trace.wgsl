@@ -51,6 +51,9 @@ struct PathParams {
     sky_sun: vec4<f32>,
     // The eye relative to the point the scene was placed around (xyz).
     origin: vec4<f32>,
+    // An HDR environment (x: 1 when bound, y: its radiance's scale): the
+    // sky and the sun then, importance sampled at every vertex.
+    env: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -62,6 +65,10 @@ struct PathParams {
 @group(0) @binding(6) var<storage, read> trace_materials: array<TraceMaterial>;
 @group(0) @binding(7) var<storage, read> trace_texels: array<u32>;
 @group(0) @binding(8) var<storage, read_write> accum: array<vec4<f32>>;
+// The environment (src/trace/environment.rs, `Environment::gpu_array`):
+// [width, height, total, 0], its texels (rgb, 0) from the zenith row, the
+// marginal CDF over rows, each row's CDF over its columns.
+@group(0) @binding(9) var<storage, read> env: array<f32>;
 
 const PI: f32 = 3.14159265;
 const FAR: f32 = 1e7;
@@ -134,9 +141,110 @@ fn sky_preetham(d: vec3<f32>) -> vec3<f32> {
     return max(rgb, vec3<f32>(0.0)) * path.sky_zenith_yxy.w;
 }
 
+fn env_on() -> bool {
+    return path.env.x > 0.5;
+}
+
+fn env_size() -> vec2<u32> {
+    return vec2<u32>(u32(env[0]), u32(env[1]));
+}
+
+// The map's (u, v) of a unit direction: u the azimuth (0.5 north, clockwise),
+// v the zenith angle over pi. Twin: `Environment::uv`.
+fn env_uv(d: vec3<f32>) -> vec2<f32> {
+    let u = atan2(d.x, d.y) / (2.0 * PI) + 0.5;
+    return vec2<f32>(u - floor(u), acos(clamp(d.z, -1.0, 1.0)) / PI);
+}
+
+fn env_direction(uv: vec2<f32>) -> vec3<f32> {
+    let az = (uv.x - 0.5) * 2.0 * PI;
+    let th = uv.y * PI;
+    return vec3<f32>(sin(th) * sin(az), sin(th) * cos(az), cos(th));
+}
+
+fn env_texel(uv: vec2<f32>) -> vec2<u32> {
+    let s = env_size();
+    return min(vec2<u32>(uv * vec2<f32>(s)), s - vec2<u32>(1u));
+}
+
+fn env_rgb(t: vec2<u32>) -> vec3<f32> {
+    let k = 4u + 4u * (t.y * env_size().x + t.x);
+    return vec3<f32>(env[k], env[k + 1u], env[k + 2u]);
+}
+
+// The environment's radiance towards d (nearest texel). Twin: `Environment::radiance`.
+fn env_radiance(d: vec3<f32>) -> vec3<f32> {
+    return env_rgb(env_texel(env_uv(d))) * path.env.y;
+}
+
+// The density (per steradian) of drawing d. Twin: `Environment::pdf`.
+fn env_pdf(d: vec3<f32>) -> f32 {
+    let uv = env_uv(d);
+    let t = env_texel(uv);
+    let sin_theta = sin(uv.y * PI);
+    if sin_theta <= 0.0 {
+        return 0.0;
+    }
+    let row_sin = sin((f32(t.y) + 0.5) / f32(env_size().y) * PI);
+    let lum = max(dot(env_rgb(t), vec3<f32>(0.2126, 0.7152, 0.0722)), 0.0);
+    return lum * row_sin / env[2] / (2.0 * PI * PI * sin_theta);
+}
+
+// The last k with cdf[k] <= x among `n` ascending values from `base`.
+fn env_find(base: u32, n: u32, x: f32) -> u32 {
+    var lo = 0u;
+    var hi = n - 1u;
+    while lo + 1u < hi {
+        let mid = (lo + hi) / 2u;
+        if env[base + mid] <= x {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+// A direction drawn from the environment's luminance × sin(theta) (xyz) and
+// its density (w). Twin: `Environment::sample`.
+fn env_sample(xi: vec2<f32>) -> vec4<f32> {
+    let s = env_size();
+    let mb = 4u + 4u * s.x * s.y;
+    let cb = mb + s.y + 1u;
+    let j = min(env_find(mb, s.y + 1u, xi.x), s.y - 1u);
+    let dv = (xi.x - env[mb + j]) / max(env[mb + j + 1u] - env[mb + j], 1e-30);
+    let rb = cb + j * (s.x + 1u);
+    let i = min(env_find(rb, s.x + 1u, xi.y), s.x - 1u);
+    let du = (xi.y - env[rb + i]) / max(env[rb + i + 1u] - env[rb + i], 1e-30);
+    let uv = vec2<f32>((f32(i) + clamp(du, 0.0, 1.0)) / f32(s.x), (f32(j) + clamp(dv, 0.0, 1.0)) / f32(s.y));
+    let d = env_direction(uv);
+    return vec4<f32>(d, env_pdf(d));
+}
+
+// The weight of light found by escaping along d, sampled by the surface with
+// density pdf_surface: 1 without an environment (nothing else samples the
+// sky), else against the environment's own sampling.
+fn escape_weight(d: vec3<f32>, pdf_surface: f32) -> f32 {
+    if !env_on() {
+        return 1.0;
+    }
+    return power_weight(pdf_surface, env_pdf(d));
+}
+
+// The power heuristic's weight of a strategy of density a beside one of b
+// (Veach & Guibas 1995).
+fn power_weight(a: f32, b: f32) -> f32 {
+    let a2 = a * a;
+    return select(0.0, a2 / (a2 + b * b), a2 > 0.0);
+}
+
 // The sky's radiance in direction d (the sun's disk not included: it is
-// sampled); below the horizon, the ground's albedo under it.
+// sampled); below the horizon, the ground's albedo under it. With an
+// environment, the environment (its sun included).
 fn sky(d: vec3<f32>) -> vec3<f32> {
+    if env_on() {
+        return env_radiance(d);
+    }
     if path.sky_sun.w > 0.5 {
         if d.z < 0.0 {
             return path.ground.rgb * sky_preetham(normalize(vec3<f32>(d.x, d.y, 0.0) + vec3<f32>(0.0, 0.0, 1e-3)));
@@ -251,6 +359,15 @@ fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
 }
 
 // Whether the sun is seen from p along l (nothing, the ground included, in the way).
+// Whether the environment is seen from p along l (the ground plane, where
+// there is one, hides what lies below the horizon).
+fn env_visible(p: vec3<f32>, l: vec3<f32>) -> bool {
+    if l.z < 0.0 && path.ground.w > -1e29 {
+        return false;
+    }
+    return trace_scene(p, l, FAR).hit.t < 0.0;
+}
+
 fn sun_visible(p: vec3<f32>, l: vec3<f32>) -> bool {
     if l.z <= 0.0 {
         return false;
@@ -276,13 +393,17 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
         var o = path.origin.xyz;
         var throughput = vec3<f32>(1.0);
         var radiance = vec3<f32>(0.0);
+        // The density with which the surface sampled the path's last direction.
+        var last_pdf = 0.0;
         for (var bounce = 0u; bounce <= path.bounces; bounce++) {
             let s = hit_surface(o, d);
             if s.t < 0.0 {
                 if path.simple == 1u && bounce == 0u {
                     radiance += raster_background(d);
-                } else {
+                } else if bounce == 0u {
                     radiance += throughput * sky(d);
+                } else {
+                    radiance += throughput * sky(d) * escape_weight(d, last_pdf);
                 }
                 break;
             }
@@ -307,32 +428,52 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
                 radiance = raster_haze(s.albedo * (sky_light + path.sun_color.rgb * diffuse), d, s.t);
                 break;
             }
-            // The sun, sampled on its disk: reflected on the side facing the
-            // ray, transmitted through a leaf from the other side.
-            let l = sun_sample(rand2());
-            let cos_l = dot(s.normal, l);
-            let side = select(-1.0, 1.0, cos_l > 0.0);
-            let share = select(1.0 - reflect_share, reflect_share, cos_l > 0.0);
-            if share > 0.0 && sun_visible(p + s.normal * (eps * side), l) {
-                radiance += throughput * s.albedo * share * path.sun_color.rgb * abs(cos_l);
+            if env_on() {
+                // The environment, importance sampled, weighed against the
+                // chance the surface's own sampling finds the same direction.
+                let e = env_sample(rand2());
+                let l = e.xyz;
+                let cos_l = dot(s.normal, l);
+                let side = select(-1.0, 1.0, cos_l > 0.0);
+                let share = select(1.0 - reflect_share, reflect_share, cos_l > 0.0);
+                if share > 0.0 && e.w > 0.0 && env_visible(p + s.normal * (eps * side), l) {
+                    let pdf_surface = share * abs(cos_l) / PI;
+                    let f = s.albedo * share / PI;
+                    radiance += throughput * f * env_radiance(l) * abs(cos_l) / e.w * power_weight(e.w, pdf_surface);
+                }
+            } else {
+                // The sun, sampled on its disk: reflected on the side facing the
+                // ray, transmitted through a leaf from the other side.
+                let l = sun_sample(rand2());
+                let cos_l = dot(s.normal, l);
+                let side = select(-1.0, 1.0, cos_l > 0.0);
+                let share = select(1.0 - reflect_share, reflect_share, cos_l > 0.0);
+                if share > 0.0 && sun_visible(p + s.normal * (eps * side), l) {
+                    radiance += throughput * s.albedo * share * path.sun_color.rgb * abs(cos_l);
+                }
             }
             // The next direction: reflected (cosine around the facing normal)
             // or, through a leaf, transmitted (around the other side's).
             let r = rand2();
             var n = s.normal;
+            var chosen = reflect_share;
             if r.x >= reflect_share {
                 n = -n;
+                chosen = 1.0 - reflect_share;
             }
             d = cosine_around(n, rand2());
             o = p + n * eps;
             throughput *= s.albedo;
+            // The density of that direction (for the environment's weight where it escapes).
+            let pdf_surface = chosen * max(dot(n, d), 0.0) / PI;
             if bounce == path.bounces {
                 // The last vertex still sees the sky (its sun is sampled above).
                 if hit_surface(o, d).t < 0.0 {
-                    radiance += throughput * sky(d);
+                    radiance += throughput * sky(d) * escape_weight(d, pdf_surface);
                 }
                 break;
             }
+            last_pdf = pdf_surface;
             // Russian roulette past the first bounce.
             if bounce >= 1u {
                 let q = clamp(max(throughput.r, max(throughput.g, throughput.b)), 0.05, 1.0);

@@ -529,7 +529,7 @@ fn trace_frame(
             ..PathOptions::default()
         };
         let image = tracer
-            .render(ctx, &scene, &view, (width, height), &options, &mut |_| {})
+            .render(ctx, &scene, None, &view, (width, height), &options, &mut |_| {})
             .map_err(|e| anyhow::anyhow!("the traced reference: {e}"))?;
         out.push(to_srgb8(&image));
     }

@@ -487,6 +487,15 @@ pub(crate) struct RenderArgs {
     /// clear sky (Preetham et al. 1999): 2 very clear, 3 clear, 6 hazy.
     #[arg(long, default_value_t = 3.0, requires = "path_trace", value_parser = parse_turbidity)]
     pub(crate) turbidity: f32,
+    /// --path-trace with the physical light: light from an equirectangular HDR
+    /// environment (Radiance .hdr or OpenEXR-free float images the image
+    /// crate reads; row 0 the zenith, the middle column north) instead of the
+    /// sun and the clear sky, importance sampled.
+    #[arg(long, value_name = "FILE.hdr", requires = "path_trace")]
+    pub(crate) environment: Option<PathBuf>,
+    /// --environment: its radiance's scale (exposure).
+    #[arg(long, default_value_t = 1.0, requires = "environment", value_parser = parse_environment_scale)]
+    pub(crate) environment_scale: f32,
     /// --path-trace: trees within this many metres of the eye (horizontally)
     /// are traced (the top level for a view; memory grows with it).
     #[arg(long, default_value_t = 2000.0, requires = "path_trace", value_parser = parse_reach)]
@@ -600,6 +609,16 @@ pub(crate) enum ReferenceArg {
     Raster,
     /// Also the path tracer's image of each frame, under both lights.
     PathTraced,
+}
+
+/// `--environment-scale`: a positive finite number.
+fn parse_environment_scale(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("{s}: not a number"))?;
+    if v.is_finite() && v > 0.0 && v <= 1e6 {
+        Ok(v)
+    } else {
+        Err(format!("{v}: the environment's scale is a positive number (1: as the file has it)"))
+    }
 }
 
 /// `--turbidity`: a number in 1.7–10 (the clear-sky fit's range).

@@ -484,6 +484,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         light,
         reach,
         turbidity,
+        environment,
+        environment_scale,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, textures, .. } = frame;
@@ -570,6 +572,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 reach_m: reach,
                 no_ground: no_terrain,
                 turbidity,
+                environment_scale,
+                environment,
             }),
         );
     }
@@ -646,8 +650,12 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
 }
 
 /// `sylva render --path-trace`'s options.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub(crate) struct PathTraceArgs {
+    /// `--environment-scale`.
+    pub(crate) environment_scale: f32,
+    /// `--environment FILE.hdr`: the sky and the sun from an HDR map.
+    pub(crate) environment: Option<PathBuf>,
     pub(crate) spp: u32,
     pub(crate) bounces: u32,
     pub(crate) simple: bool,
@@ -702,6 +710,18 @@ fn path_trace(
         report.bytes as f64 / 1e6,
         load_s
     );
+    let environment = match &args.environment {
+        Some(p) => {
+            if args.simple {
+                bail!("--environment lights the physical light; --light raster has its own sky");
+            }
+            let env = sylva::trace::environment::Environment::from_file(p)
+                .map_err(|e| anyhow::anyhow!("--environment: {e}"))?;
+            eprintln!("environment {} ({}×{} texels, importance sampled)", p.display(), env.width, env.height);
+            Some(env)
+        }
+        None => None,
+    };
     let tracer = PathTracer::new(&ctx.device);
     let several = suns.len() > 1;
     for (label, lighting) in suns {
@@ -715,12 +735,13 @@ fn path_trace(
             simple: args.simple,
             // The terrain where the scene has it, else a plane at the lowest tree's base.
             ground_z: (!args.no_ground && report.terrain_triangles == 0).then_some(report.ground_z),
+            environment_scale: args.environment_scale,
             ..PathOptions::default()
         };
         let t = std::time::Instant::now();
         let mut last = std::time::Instant::now();
         let image = tracer
-            .render(ctx, &traced, &view, (w, h), &options, &mut |done| {
+            .render(ctx, &traced, environment.as_ref(), &view, (w, h), &options, &mut |done| {
                 if last.elapsed().as_secs_f64() > 5.0 {
                     eprintln!("  {done} of {} samples per pixel ({:.0} s)", args.spp, t.elapsed().as_secs_f64());
                     last = std::time::Instant::now();

@@ -73,6 +73,9 @@ pub struct PathParams {
     /// The eye relative to the point the scene was placed around (xyz; the
     /// browser keeps a view's scene while the camera moves near it).
     pub origin: [f32; 4],
+    /// x: 1 with an HDR environment bound (the sky and the sun then); y: its
+    /// radiance's scale. Set by the upload.
+    pub env: [f32; 4],
 }
 
 /// How a frame is traced.
@@ -95,6 +98,8 @@ pub struct PathOptions {
     pub ground_z: Option<f32>,
     /// Ground albedo, linear.
     pub ground_albedo: Vec3,
+    /// The scale of an HDR environment's radiance (where one is uploaded).
+    pub environment_scale: f32,
 }
 
 impl Default for PathOptions {
@@ -107,6 +112,7 @@ impl Default for PathOptions {
             leaf_transmit: 0.3,
             ground_z: Some(0.0),
             ground_albedo: Vec3::new(0.16, 0.15, 0.08),
+            environment_scale: 1.0,
         }
     }
 }
@@ -209,9 +215,11 @@ pub struct PathScene {
     group: wgpu::BindGroup,
     params: wgpu::Buffer,
     accum: wgpu::Buffer,
-    /// The walk's uniform and the scene's arrays (bindings 0, 2–7).
+    /// The walk's uniform and the scene's arrays (bindings 0, 2–7, 9).
     trace_params: wgpu::Buffer,
     arrays: Vec<wgpu::Buffer>,
+    /// Whether an environment is bound.
+    environment: bool,
     size: (u32, u32),
     /// Samples accumulated per pixel since the last restart.
     pub samples: u32,
@@ -255,6 +263,7 @@ impl PathTracer {
         let mut entries = vec![uniform_entry(0, c), uniform_entry(1, c)];
         entries.extend((2..8).map(|b| storage_entry(b, c, true)));
         entries.push(storage_entry(8, c, false));
+        entries.push(storage_entry(9, c, true));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("path trace"),
             entries: &entries,
@@ -275,8 +284,9 @@ impl PathTracer {
         Self { layout, pipeline }
     }
 
-    /// Uploads `scene` (placed relative to the eye) with a zeroed
-    /// `width`×`height` accumulation.
+    /// Uploads `scene` (placed relative to the eye) and, where given, an HDR
+    /// environment (the sky and the sun then) with a zeroed `width`×`height`
+    /// accumulation.
     ///
     /// # Errors
     /// The image or the scene's arrays larger than a storage buffer the
@@ -285,9 +295,11 @@ impl PathTracer {
         &self,
         device: &wgpu::Device,
         scene: &TraceScene,
+        environment: Option<&crate::trace::environment::Environment>,
         (width, height): (u32, u32),
     ) -> Result<PathScene, String> {
         let a = scene.arrays();
+        let env = environment.map_or_else(|| vec![0.0f32; 4], crate::trace::environment::Environment::gpu_array);
         let limit = device.limits().max_storage_buffer_binding_size;
         let pixels = u64::from(width) * u64::from(height);
         for (what, bytes) in [
@@ -296,6 +308,7 @@ impl PathTracer {
             ("the species' triangles (64 bytes each)", std::mem::size_of_val(&a.triangles[..]) as u64),
             ("the material textures' texels", a.texels.len() as u64 * 4),
             ("the trees", std::mem::size_of_val(&scene.instances[..]) as u64),
+            ("the environment map", std::mem::size_of_val(&env[..]) as u64),
         ] {
             if bytes > limit {
                 return Err(format!(
@@ -331,10 +344,21 @@ impl PathTracer {
             storage(device, "trace instances", bytemuck::cast_slice(&instances)),
             storage(device, "trace materials", bytemuck::cast_slice(&non_empty(a.materials))),
             storage(device, "trace texels", bytemuck::cast_slice(&non_empty(a.texels))),
+            storage(device, "environment", bytemuck::cast_slice(&env)),
         ];
         let (accum, group) = self.image(device, &trace_params, &params, &arrays, (width, height));
         let bytes = arrays.iter().map(wgpu::Buffer::size).sum::<u64>() + accum.size();
-        Ok(PathScene { group, params, accum, trace_params, arrays, size: (width, height), samples: 0, bytes })
+        Ok(PathScene {
+            group,
+            params,
+            accum,
+            trace_params,
+            arrays,
+            environment: environment.is_some(),
+            size: (width, height),
+            samples: 0,
+            bytes,
+        })
     }
 
     /// A new zeroed accumulation of `size` for `scene` (the canvas resized):
@@ -386,8 +410,10 @@ impl PathTracer {
             wgpu::BindGroupEntry { binding: 0, resource: trace_params.as_entire_binding() },
             wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
         ];
+        // (Bindings 2–7 the scene, 8 the image, 9 the environment.)
         for (i, b) in arrays.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: 2 + i as u32, resource: b.as_entire_binding() });
+            let binding = if i < 6 { 2 + i as u32 } else { 9 };
+            entries.push(wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() });
         }
         entries.push(wgpu::BindGroupEntry { binding: 8, resource: accum.as_entire_binding() });
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -412,7 +438,8 @@ impl PathTracer {
         samples: u32,
     ) {
         let samples = samples.clamp(1, SAMPLES_PER_DISPATCH);
-        let params = PathParams { sample: first_sample.wrapping_add(target.samples), samples, ..*params };
+        let mut params = PathParams { sample: first_sample.wrapping_add(target.samples), samples, ..*params };
+        params.env[0] = if target.environment { 1.0 } else { 0.0 };
         queue.write_buffer(&target.params, 0, bytemuck::bytes_of(&params));
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.pipeline);
@@ -421,7 +448,8 @@ impl PathTracer {
         target.samples += samples;
     }
 
-    /// Traces `scene` (placed relative to `view.eye`) into a `width`×`height`
+    /// Traces `scene` (placed relative to `view.eye`), lit by `environment`
+    /// where given (else the view's sun and sky), into a `width`×`height`
     /// image of linear radiance (rgb, row-major, top row first), `options.spp`
     /// samples per pixel, waiting for the GPU; `progress(samples done)` after
     /// each dispatch.
@@ -429,16 +457,18 @@ impl PathTracer {
     /// # Errors
     /// See [`Self::upload`].
     #[cfg(not(target_arch = "wasm32"))]
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         &self,
         ctx: &super::GpuContext,
         scene: &TraceScene,
+        environment: Option<&crate::trace::environment::Environment>,
         view: &PathView,
         (width, height): (u32, u32),
         options: &PathOptions,
         progress: &mut dyn FnMut(u32),
     ) -> Result<Vec<[f32; 3]>, String> {
-        let mut target = self.upload(&ctx.device, scene, (width, height))?;
+        let mut target = self.upload(&ctx.device, scene, environment, (width, height))?;
         let params = path_params(view, options, (width, height), view.eye);
         while target.samples < options.spp.max(1) {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -514,6 +544,7 @@ pub fn path_params(
         sky_zenith_yxy: [0.0; 4],
         sky_sun: [0.0; 4],
         origin: v4(view.eye - scene_origin, 0.0),
+        env: [0.0, options.environment_scale, 0.0, 0.0],
     };
     if let (Some(sky), false) = (view.sky, options.simple) {
         let letter = |k: usize| [sky.perez[0][k], sky.perez[1][k], sky.perez[2][k], 0.0];

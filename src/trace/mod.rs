@@ -10,6 +10,7 @@
 //! the same random rays with both and compares the hits.
 
 pub mod bvh;
+pub mod environment;
 pub mod load;
 pub mod scene;
 pub mod sky;

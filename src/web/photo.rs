@@ -159,7 +159,7 @@ impl Photo {
             let made = match scene.as_mut() {
                 Some(s) => pipes.tracer.resize(device, s, size),
                 None => match traced.take() {
-                    Some(t) => pipes.tracer.upload(device, &t, size).map(|s| *scene = Some(s)),
+                    Some(t) => pipes.tracer.upload(device, &t, None, size).map(|s| *scene = Some(s)),
                     None => Err("the scene was lost before it was uploaded".to_string()),
                 },
             };

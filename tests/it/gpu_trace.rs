@@ -220,8 +220,9 @@ fn the_traced_view_covers_what_the_raster_full_mesh_covers() {
     let view =
         PathView::under(&off.settings.lighting, cam.eye_m.as_vec3(), cam.forward().as_vec3(), cam.fov_y_rad, None);
     let options = PathOptions { spp: 4, simple: true, ground_z: None, ..PathOptions::default() };
-    let traced =
-        PathTracer::new(&off.ctx.device).render(&off.ctx, &traced_scene, &view, (w, h), &options, &mut |_| {}).unwrap();
+    let traced = PathTracer::new(&off.ctx.device)
+        .render(&off.ctx, &traced_scene, None, &view, (w, h), &options, &mut |_| {})
+        .unwrap();
     let traced = to_srgb8(&traced);
     let (iou, a, b) = sylva::metrics::foliage_iou(&raster, &traced);
     // Trees fill a good part of the view in both (not a blank or a sky).
@@ -256,7 +257,7 @@ fn the_traced_image_converges_at_the_monte_carlo_rate() {
     let size = (32, 18);
     let run = |spp, first_sample| {
         let options = PathOptions { spp, first_sample, ground_z: Some(0.0), ..PathOptions::default() };
-        tracer.render(&ctx, &traced, &view, size, &options, &mut |_| {}).unwrap()
+        tracer.render(&ctx, &traced, None, &view, size, &options, &mut |_| {}).unwrap()
     };
     // The reference's samples are its own (another start in the sequences).
     let reference = run(64, 1 << 20);
@@ -300,7 +301,7 @@ fn the_gpu_sky_is_its_cpu_twin() {
     let (w, h) = (16u32, 9u32);
     let options = PathOptions { spp: 16, ground_z: None, ..PathOptions::default() };
     let img = PathTracer::new(&ctx.device)
-        .render(&ctx, &TraceScene::default(), &view, (w, h), &options, &mut |_| {})
+        .render(&ctx, &TraceScene::default(), None, &view, (w, h), &options, &mut |_| {})
         .unwrap();
     // Each pixel's direction through its centre, as the pass builds it.
     let right = forward.cross(glam::Vec3::Z).normalize();
@@ -348,7 +349,7 @@ fn the_tracer_lights_a_plane_as_the_rendering_equation_says() {
         PathOptions { spp: 8, ground_z: Some(0.0), ground_albedo: albedo, bounces: 0, ..PathOptions::default() };
     let mean = |img: &[[f32; 3]]| img.iter().fold(glam::Vec3::ZERO, |a, p| a + glam::Vec3::from(*p)) / img.len() as f32;
     // The sun alone: albedo × sun_color × cos 0 (a disk of 0.27°: cos ≈ 1).
-    let sun = mean(&tracer.render(&ctx, &TraceScene::default(), &view, (8, 8), &options, &mut |_| {}).unwrap());
+    let sun = mean(&tracer.render(&ctx, &TraceScene::default(), None, &view, (8, 8), &options, &mut |_| {}).unwrap());
     let want = albedo * view.sun_color;
     assert!((sun - want).abs().max_element() < 1e-3, "sun-lit ground {sun}, expected {want}");
     // A uniform sky of radiance L alone (the sun below the horizon): a white
@@ -357,6 +358,42 @@ fn the_tracer_lights_a_plane_as_the_rendering_equation_says() {
     view.sky_zenith = glam::Vec3::splat(0.4);
     view.sky_horizon = glam::Vec3::splat(0.4);
     let white = PathOptions { spp: 64, ground_albedo: glam::Vec3::ONE, ..options };
-    let sky = mean(&tracer.render(&ctx, &TraceScene::default(), &view, (8, 8), &white, &mut |_| {}).unwrap());
+    let sky = mean(&tracer.render(&ctx, &TraceScene::default(), None, &view, (8, 8), &white, &mut |_| {}).unwrap());
     assert!((sky - glam::Vec3::splat(0.4)).abs().max_element() < 0.02, "sky-lit ground {sky}, expected 0.4");
+    // An HDR environment with a small bright patch (a sun) over a dim sky:
+    // the ground reflects albedo/π × ∫ L cos θ dω, summed over the map's
+    // texels on the CPU — the importance sampling and its weights against
+    // the surface's own sampling leave the estimate unbiased.
+    use sylva::trace::environment::Environment;
+    let (w, h) = (64u32, 32u32);
+    let texels: Vec<[f32; 3]> = (0..w * h)
+        .map(|k| {
+            let (i, j) = (k % w, k / w);
+            if (40..42).contains(&i) && (6..8).contains(&j) {
+                [300.0, 250.0, 200.0]
+            } else {
+                [0.05, 0.08, 0.15]
+            }
+        })
+        .collect();
+    let env = Environment::new(w, h, texels).unwrap();
+    let mut irradiance = glam::Vec3::ZERO;
+    let n = 256;
+    for b in 0..n * n {
+        // (Each texel's solid angle, finely: cos θ over the upper hemisphere.)
+        let (u, v) = ((b % n) as f32 + 0.5, (b / n) as f32 + 0.5);
+        let (u, v) = (u / n as f32, v / n as f32);
+        let d = Environment::direction([u, v]);
+        if d.z > 0.0 {
+            let d_omega =
+                2.0 * std::f32::consts::PI * std::f32::consts::PI * (v * std::f32::consts::PI).sin() / (n * n) as f32;
+            irradiance += env.radiance(d) * d.z * d_omega;
+        }
+    }
+    let want = glam::Vec3::ONE * 0.5 * irradiance / std::f32::consts::PI;
+    let half = PathOptions { spp: 256, ground_albedo: glam::Vec3::splat(0.5), ..options };
+    let lit =
+        mean(&tracer.render(&ctx, &TraceScene::default(), Some(&env), &view, (8, 8), &half, &mut |_| {}).unwrap());
+    let rel = ((lit - want).abs() / want).max_element();
+    assert!(rel < 0.03, "environment-lit ground {lit}, expected {want} ({rel:.3} off)");
 }
