@@ -54,6 +54,8 @@ struct PathParams {
     // An HDR environment (x: 1 when bound, y: its radiance's scale): the
     // sky and the sun then, importance sampled at every vertex.
     env: vec4<f32>,
+    // x: 1 to jitter samples within their pixels, 0 for pixel centres.
+    sampling: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -327,7 +329,7 @@ fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
     let h = trace_scene(o, d, t_max);
     if h.hit.t > 0.0 {
         let inst = trace_instances[h.slot];
-        let sp = trace_species[inst.species];
+        let sp = trace_species[inst.species & 0xffffffu];
         let tri = bvh_tris[h.hit.index];
         let m = trace_materials[sp.material_base + tri.material];
         // The geometric normal, carried out of model space (inverse transpose).
@@ -343,6 +345,12 @@ fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
         var albedo = m.base_color.rgb * vc;
         if m.texel_base != NO_TEXTURE && m.size > 0u {
             albedo *= texel_color(m.texel_base, m.size, trace_uv(sp, tri, h.hit.u, h.hit.v));
+        }
+        // The tree's tint, as the raster's `variation_tint` (shaders/light.wgsl).
+        let tint = inst.species >> 24u;
+        if tint > 0u {
+            let v = f32(tint - 1u) / 31.0 - 0.5;
+            albedo *= vec3<f32>(1.0 + 0.12 * v, 1.0 + 0.08 * v, 1.0 - 0.05 * v);
         }
         s.albedo = albedo;
         s.leaf = m.kind == 0u;
@@ -384,7 +392,10 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
     var sum = vec3<f32>(0.0);
     for (var k = 0u; k < path.samples; k++) {
         rng_state = hash3(vec3<u32>(gid.x, gid.y, path.sample + k));
-        let jitter = rand2();
+        var jitter = rand2();
+        if path.sampling.x < 0.5 {
+            jitter = vec2<f32>(0.5);
+        }
         let ndc = vec2<f32>(
             (f32(gid.x) + jitter.x) / f32(path.width) * 2.0 - 1.0,
             1.0 - (f32(gid.y) + jitter.y) / f32(path.height) * 2.0,

@@ -23,6 +23,7 @@ struct TraceInstance {
     // Model xy -> scene: scale x crown aspect; z: scale.
     scale_xy: f32,
     scale_z: f32,
+    // The species (bits 0-23) and the tree's tint (24-31: variation + 1, 0 none).
     species: u32,
     id: u32,
 };
@@ -146,11 +147,11 @@ fn trace_scene(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> SceneHit {
         if node.count > 0u {
             for (var i = node.first; i < node.first + node.count; i++) {
                 let inst = trace_instances[i];
-                let sp_ = trace_species[inst.species];
+                let sp_ = trace_species[inst.species & 0xffffffu];
                 if sp_.node_count == 0u {
                     continue;
                 }
-                let h = trace_bvh(to_model(inst, o, 1.0), to_model(inst, d, 0.0), closest, inst.species, sp_.node_base, sp_.tri_base);
+                let h = trace_bvh(to_model(inst, o, 1.0), to_model(inst, d, 0.0), closest, inst.species & 0xffffffu, sp_.node_base, sp_.tri_base);
                 if h.t > 0.0 {
                     closest = h.t;
                     best = SceneHit(inst.id, i, h);

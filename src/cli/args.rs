@@ -487,6 +487,11 @@ pub(crate) struct RenderArgs {
     /// clear sky (Preetham et al. 1999): 2 very clear, 3 clear, 6 hazy.
     #[arg(long, default_value_t = 3.0, requires = "path_trace", value_parser = parse_turbidity)]
     pub(crate) turbidity: f32,
+    /// --path-trace: every ray through its pixel's centre, where a
+    /// rasteriser's one sample lies (no anti-aliasing): the coverage check
+    /// against `--full-detail` (`sylva compare --foliage`).
+    #[arg(long, requires = "path_trace")]
+    pub(crate) pixel_centres: bool,
     /// --path-trace with the physical light: light from an equirectangular HDR
     /// environment (Radiance .hdr or OpenEXR-free float images the image
     /// crate reads; row 0 the zenith, the middle column north) instead of the

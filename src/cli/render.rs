@@ -486,6 +486,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         turbidity,
         environment,
         environment_scale,
+        pixel_centres,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, textures, .. } = frame;
@@ -574,6 +575,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 turbidity,
                 environment_scale,
                 environment,
+                jitter: !pixel_centres,
             }),
         );
     }
@@ -656,6 +658,8 @@ pub(crate) struct PathTraceArgs {
     pub(crate) environment_scale: f32,
     /// `--environment FILE.hdr`: the sky and the sun from an HDR map.
     pub(crate) environment: Option<PathBuf>,
+    /// Not `--pixel-centres`.
+    pub(crate) jitter: bool,
     pub(crate) spp: u32,
     pub(crate) bounces: u32,
     pub(crate) simple: bool,
@@ -736,6 +740,7 @@ fn path_trace(
             // The terrain where the scene has it, else a plane at the lowest tree's base.
             ground_z: (!args.no_ground && report.terrain_triangles == 0).then_some(report.ground_z),
             environment_scale: args.environment_scale,
+            jitter: args.jitter,
             ..PathOptions::default()
         };
         let t = std::time::Instant::now();

@@ -76,6 +76,9 @@ pub struct PathParams {
     /// x: 1 with an HDR environment bound (the sky and the sun then); y: its
     /// radiance's scale. Set by the upload.
     pub env: [f32; 4],
+    /// x: 1 to jitter each sample within its pixel (anti-aliasing), 0 for
+    /// rays through pixel centres as a rasteriser samples (coverage comparisons).
+    pub sampling: [f32; 4],
 }
 
 /// How a frame is traced.
@@ -100,6 +103,10 @@ pub struct PathOptions {
     pub ground_albedo: Vec3,
     /// The scale of an HDR environment's radiance (where one is uploaded).
     pub environment_scale: f32,
+    /// Jitter samples within their pixels (anti-aliased; the default), or
+    /// send every ray through its pixel's centre, where a rasteriser's one
+    /// sample lies (the coverage check against the raster).
+    pub jitter: bool,
 }
 
 impl Default for PathOptions {
@@ -113,6 +120,7 @@ impl Default for PathOptions {
             ground_z: Some(0.0),
             ground_albedo: Vec3::new(0.16, 0.15, 0.08),
             environment_scale: 1.0,
+            jitter: true,
         }
     }
 }
@@ -545,6 +553,7 @@ pub fn path_params(
         sky_sun: [0.0; 4],
         origin: v4(view.eye - scene_origin, 0.0),
         env: [0.0, options.environment_scale, 0.0, 0.0],
+        sampling: [if options.jitter { 1.0 } else { 0.0 }, 0.0, 0.0, 0.0],
     };
     if let (Some(sky), false) = (view.sky, options.simple) {
         let letter = |k: usize| [sky.perez[0][k], sky.perez[1][k], sky.perez[2][k], 0.0];

@@ -154,6 +154,7 @@ pub fn load_with(
                     scale: d.scale,
                     aspect: d.aspect,
                     species: b.species,
+                    tint: d.variation.min(31) + 1,
                 });
             }
         }
@@ -209,6 +210,7 @@ pub fn load_with(
             scale: 1.0,
             aspect: 1.0,
             species: species.len() as u32,
+            tint: 0,
         });
         species.push(terrain);
     }
@@ -218,12 +220,12 @@ pub fn load_with(
     let instanced_triangles = scene
         .instances
         .iter()
-        .filter(|i| i.species < tree_species)
-        .map(|i| scene.species[i.species as usize].bvh.triangles.len() as u64)
+        .filter(|i| i.species_index() < tree_species)
+        .map(|i| scene.species[i.species_index() as usize].bvh.triangles.len() as u64)
         .sum();
     let bytes = scene.gpu_bytes();
     let report = LoadReport {
-        trees: scene.instances.iter().filter(|i| i.species < tree_species).count(),
+        trees: scene.instances.iter().filter(|i| i.species_index() < tree_species).count(),
         trees_in_scene,
         species_triangles,
         instanced_triangles,
@@ -485,7 +487,7 @@ mod tests {
         let last = rounds.last().unwrap();
         assert!(last.iter().all(|(_, pack)| *pack), "{last:?}");
         assert!(rounds[..rounds.len() - 1].iter().flatten().all(|(_, pack)| !pack));
-        let used: std::collections::HashSet<u32> = whole.instances.iter().map(|i| i.species).collect();
+        let used: std::collections::HashSet<u32> = whole.instances.iter().map(|i| i.species_index()).collect();
         let placed = m.species.iter().enumerate().filter(|(i, _)| used.contains(&(*i as u32))).count();
         assert_eq!(last.len(), placed);
         // Tiles beyond reach are not fetched.

@@ -28,6 +28,9 @@ pub struct Instance {
     pub aspect: f32,
     /// Index into the scene's species.
     pub species: u32,
+    /// The tree's tint as the raster gives it (`variation_tint` in
+    /// `shaders/light.wgsl`): its variation + 1, 0 for none (the terrain).
+    pub tint: u8,
 }
 
 /// An instance as the GPU reads it. Must match `TraceInstance` in `shaders/trace_scene.wgsl`.
@@ -42,7 +45,8 @@ pub struct GpuInstance {
     pub scale_xy: f32,
     /// Model z → scene: scale.
     pub scale_z: f32,
-    /// Index into the species table.
+    /// Index into the species table (bits 0–23) and the tree's tint (24–31,
+    /// [`Instance::tint`]): [`Self::species_index`], [`Self::tint`].
     pub species: u32,
     /// The instance's index in the list it was built from.
     pub id: u32,
@@ -251,9 +255,21 @@ impl GpuInstance {
             yaw: inst.yaw,
             scale_xy: inst.scale * inst.aspect,
             scale_z: inst.scale,
-            species: inst.species,
+            species: (inst.species & 0xff_ffff) | (u32::from(inst.tint) << 24),
             id,
         }
+    }
+
+    /// Its species' index.
+    #[must_use]
+    pub fn species_index(&self) -> u32 {
+        self.species & 0xff_ffff
+    }
+
+    /// Its tint (variation + 1; 0 none).
+    #[must_use]
+    pub fn tint(&self) -> u32 {
+        self.species >> 24
     }
 
     /// A scene-space ray carried into the species' model space: the same `t`
@@ -323,7 +339,7 @@ impl TraceScene {
             for (k, inst) in self.instances[first as usize..(first + count) as usize].iter().enumerate() {
                 let mut model = inst.to_model(ray);
                 model.t_max = nearer.unwrap_or(closest);
-                if let Some(hit) = self.species[inst.species as usize].intersect(&model) {
+                if let Some(hit) = self.species[inst.species_index() as usize].intersect(&model) {
                     nearer = Some(hit.t);
                     best = Some(SceneHit { instance: inst.id, slot: first + k as u32, hit });
                 }
@@ -409,7 +425,8 @@ mod tests {
 
     #[test]
     fn a_ray_meets_a_placed_tree_where_the_raster_path_draws_it() {
-        let inst = Instance { position: Vec3::new(10.0, 5.0, 1.0), yaw: 0.3, scale: 2.0, aspect: 1.5, species: 0 };
+        let inst =
+            Instance { position: Vec3::new(10.0, 5.0, 1.0), yaw: 0.3, scale: 2.0, aspect: 1.5, species: 0, tint: 0 };
         let scene = TraceScene::build(vec![TraceSpecies::opaque(tree())], &[inst]);
         // The model point (0.1, 0, 1) placed as mesh.wgsl places it.
         let g = scene.instances[0];
@@ -429,6 +446,7 @@ mod tests {
         let mut unit = move || rng.unit();
         let trees: Vec<Instance> = (0..400)
             .map(|i| Instance {
+                tint: 0,
                 position: Vec3::new(unit() * 60.0, unit() * 60.0, unit()),
                 yaw: unit() * std::f32::consts::TAU,
                 scale: 0.5 + unit() * 3.0,
@@ -462,7 +480,7 @@ mod tests {
 
     #[test]
     fn bad_instances_are_left_out() {
-        let ok = Instance { position: Vec3::ZERO, yaw: 0.0, scale: 1.0, aspect: 1.0, species: 0 };
+        let ok = Instance { position: Vec3::ZERO, yaw: 0.0, scale: 1.0, aspect: 1.0, species: 0, tint: 0 };
         let scene = TraceScene::build(
             vec![TraceSpecies::opaque(tree())],
             &[

@@ -276,7 +276,7 @@ fn the_path_tracer_params_match_their_wgsl_twin() {
         "path_trace",
         "PathParams",
         &members!(PathParams: forward, right, up, sun_dir, sun_color, sky_zenith, sky_horizon, ground, ambient, width, height,
-            sample, samples, bounces, simple, leaf_transmit, eye_z, perez_a, perez_b, perez_c, perez_d, perez_e, sky_zenith_yxy, sky_sun, origin, env),
+            sample, samples, bounces, simple, leaf_transmit, eye_z, perez_a, perez_b, perez_c, perez_d, perez_e, sky_zenith_yxy, sky_sun, origin, env, sampling),
         size_of::<PathParams>(),
         None,
     );
