@@ -366,7 +366,6 @@ fn hit_surface(o: vec3<f32>, d: vec3<f32>) -> Surface {
     return s;
 }
 
-// Whether the sun is seen from p along l (nothing, the ground included, in the way).
 // Whether the environment is seen from p along l (the ground plane, where
 // there is one, hides what lies below the horizon).
 fn env_visible(p: vec3<f32>, l: vec3<f32>) -> bool {
@@ -376,6 +375,7 @@ fn env_visible(p: vec3<f32>, l: vec3<f32>) -> bool {
     return trace_scene(p, l, FAR).hit.t < 0.0;
 }
 
+// Whether the sun is seen from p along l (nothing, the ground included, in the way).
 fn sun_visible(p: vec3<f32>, l: vec3<f32>) -> bool {
     if l.z <= 0.0 {
         return false;

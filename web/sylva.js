@@ -48,8 +48,9 @@
 //                                           the view traced at full detail (every tree within reach at its full
 //                                           mesh, the sun's disk, a clear sky, bounces), a sample a pixel each
 //                                           frame while the camera rests, up to spp; 'raster' (the default) back.
-//                                           v.photo(): {state: 'loading' | 'ready' | 'failed', samples, spp, trees,
-//                                           instanced_triangles, gpu_bytes, error} or null with the raster
+//                                           v.photo(): {state: 'loading' | 'ready' | 'failed', samples, spp, reach_m,
+//                                           load, restarts, fetch_rounds, bytes_loaded, trees, trees_in_scene,
+//                                           instanced_triangles, terrain_triangles, gpu_bytes, error} or null
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
 //

@@ -688,6 +688,9 @@ fn path_trace(
     if !dir.join("scene.json").is_file() {
         bail!("--path-trace reads a scene directory (or its scene.json), not {scene}");
     }
+    if args.environment.is_some() && args.simple {
+        bail!("--environment lights the physical light; --light raster has its own sky");
+    }
     let t = std::time::Instant::now();
     let (traced, report) = sylva::trace::load::load_dir(
         dir,
@@ -716,9 +719,6 @@ fn path_trace(
     );
     let environment = match &args.environment {
         Some(p) => {
-            if args.simple {
-                bail!("--environment lights the physical light; --light raster has its own sky");
-            }
             let env = sylva::trace::environment::Environment::from_file(p)
                 .map_err(|e| anyhow::anyhow!("--environment: {e}"))?;
             eprintln!("environment {} ({}×{} texels, importance sampled)", p.display(), env.width, env.height);

@@ -336,6 +336,13 @@ impl TileWalk {
         Ok(Some(url))
     }
 
+    /// Every node the walk knows it will fetch (the next one last): a
+    /// fetcher that waits for the network asks for them together, so a walk
+    /// takes as many rounds as the index has levels, not nodes.
+    pub fn pending_urls(&self) -> impl Iterator<Item = &str> {
+        self.stack.iter().map(|(url, _)| url.as_str())
+    }
+
     /// Takes the bytes of the node [`Self::next_url`] named.
     ///
     /// # Errors

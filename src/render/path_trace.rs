@@ -73,8 +73,8 @@ pub struct PathParams {
     /// The eye relative to the point the scene was placed around (xyz; the
     /// browser keeps a view's scene while the camera moves near it).
     pub origin: [f32; 4],
-    /// x: 1 with an HDR environment bound (the sky and the sun then); y: its
-    /// radiance's scale. Set by the upload.
+    /// x: 1 with an HDR environment bound (the sky and the sun then; set by
+    /// [`PathTracer::dispatch`] from the upload); y: its radiance's scale.
     pub env: [f32; 4],
     /// x: 1 to jitter each sample within its pixel (anti-aliasing), 0 for
     /// rays through pixel centres as a rasteriser samples (coverage comparisons).
@@ -209,8 +209,7 @@ pub(crate) fn storage(device: &wgpu::Device, label: &str, contents: &[u8]) -> wg
     })
 }
 
-/// The pass's pipelines: the tracer, and the display of its accumulation
-/// (the browser's canvas).
+/// The pass's pipeline (its image shown on a canvas by [`PathDisplay`]).
 pub struct PathTracer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
@@ -320,7 +319,7 @@ impl PathTracer {
         ] {
             if bytes > limit {
                 return Err(format!(
-                    "{what} take {:.1} MB, more than this GPU binds in one buffer ({:.1} MB): trace a smaller image or fewer trees (--reach)",
+                    "{what} take {:.1} MB, more than this GPU binds in one buffer ({:.1} MB): trace a smaller image or fewer trees (a shorter reach)",
                     bytes as f64 / 1e6,
                     limit as f64 / 1e6
                 ));

@@ -89,13 +89,15 @@ impl Environment {
     /// floating point), averaged down to at most [`MAX_WIDTH`] columns.
     ///
     /// # Errors
-    /// A file that does not read or decode, or a map that is not 2:1-ish (named).
+    /// A file that does not read or decode (within the `image` crate's
+    /// 512 MiB allocation limit), or a map that is not 2:1-ish (named).
     #[cfg(not(target_arch = "wasm32"))]
     pub fn from_file(path: &std::path::Path) -> Result<Self, String> {
         let img = image::open(path).map_err(|e| format!("cannot read the environment {}: {e}", path.display()))?;
         let img = img.to_rgb32f();
         let (w, h) = img.dimensions();
-        if w < 2 || h < 1 || w < h {
+        // (Equirectangular: twice as wide as tall, give or take a texel row.)
+        if h < 2 || !(1.5..=2.5).contains(&(f64::from(w) / f64::from(h))) {
             return Err(format!("{}: {w}×{h} is not an equirectangular map (twice as wide as tall)", path.display()));
         }
         let f = w.div_ceil(MAX_WIDTH).max(1);
@@ -106,7 +108,7 @@ impl Environment {
                 let mut sum = [0.0f32; 3];
                 for y in 0..f {
                     for x in 0..f {
-                        let p = img.get_pixel(i as u32 * f + x, j as u32 * f + y).0;
+                        let p = img.get_pixel((i as u32 * f + x).min(w - 1), (j as u32 * f + y).min(h - 1)).0;
                         for k in 0..3 {
                             sum[k] += if p[k].is_finite() { p[k].max(0.0) } else { 0.0 };
                         }

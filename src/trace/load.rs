@@ -106,7 +106,14 @@ pub fn load_with(
     // The index, node by node.
     let mut walk = crate::format::index::TileWalk::new(&m);
     while let Some(url) = walk.next_url()?.map(str::to_string) {
-        let Some(bytes) = files.file(&url)? else { return Ok(None) };
+        let Some(bytes) = files.file(&url)? else {
+            // Every node the walk will fetch asked for together: a round a level.
+            let pending: Vec<String> = walk.pending_urls().map(str::to_string).collect();
+            for p in pending {
+                files.file(&p)?;
+            }
+            return Ok(None);
+        };
         walk.feed(&bytes).map_err(|e| format!("{url}: {e}"))?;
     }
     // The tiles whose bounds come within reach, together.
@@ -236,6 +243,40 @@ pub fn load_with(
     Ok(Some((scene, report)))
 }
 
+/// The raster's light on flat ground by day (`DAY_FLAT_LIGHT` in
+/// `shaders/terrain.wgsl`), by which a ground image is relit: its colour over
+/// this is the ground's albedo.
+const DAY_FLAT_LIGHT: [f32; 3] = [1.159, 1.184, 1.227];
+
+/// Texels of a ground image (`origin`, `side` metres; row 0 north) whose
+/// centre lies outside the imagery's `extent` become the plain ground of
+/// `albedo` (encoded so that over [`DAY_FLAT_LIGHT`] it is that albedo).
+fn outside_extent_plain(
+    img: &mut crate::format::imagery::Rgba8,
+    origin: [f64; 2],
+    side: f64,
+    extent: [f64; 4],
+    albedo: Vec3,
+) {
+    let enc = |c: f32| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+        (s * 255.0 + 0.5) as u8
+    };
+    let plain =
+        [enc(albedo.x * DAY_FLAT_LIGHT[0]), enc(albedo.y * DAY_FLAT_LIGHT[1]), enc(albedo.z * DAY_FLAT_LIGHT[2]), 255];
+    let (w, h) = (img.width as usize, img.height as usize);
+    for j in 0..h {
+        let y = origin[1] + side * (1.0 - (j as f64 + 0.5) / h as f64);
+        for i in 0..w {
+            let x = origin[0] + side * (i as f64 + 0.5) / w as f64;
+            if x < extent[0] || x > extent[2] || y < extent[1] || y > extent[3] {
+                img.pixels[(j * w + i) * 4..(j * w + i) * 4 + 4].copy_from_slice(&plain);
+            }
+        }
+    }
+}
+
 /// Most ground images traced (256² texels each: 16 MB).
 pub const IMAGERY_TILES: usize = 64;
 
@@ -349,13 +390,24 @@ pub fn terrain_species(
                     // (An image that cannot be read leaves the plain ground there.)
                     match files.file(&url) {
                         Ok(Some(bytes)) => {
-                            let m = crate::format::imagery::decode_image(&url, &bytes, 4096)
+                            let px = crate::format::terrain::IMAGERY_PX;
+                            let m = crate::format::imagery::decode_image(&url, &bytes, px)
                                 .ok()
-                                .filter(|px| px.width == px.height && px.width > 0)
-                                .map(|px| {
+                                .filter(|img| img.width == px && img.height == px)
+                                .map(|mut img| {
+                                    // Outside the imagery's extent the image holds its mean
+                                    // colour (docs/FORMAT.md): the plain ground there, as the
+                                    // raster shows its own ground.
+                                    outside_extent_plain(&mut img, o, s, im.extent_m, albedo);
+                                    let px = img;
                                     let material = materials.len() as u32;
                                     materials.push(GpuTraceMaterial {
-                                        base_color: [1.0 / 1.159, 1.0 / 1.184, 1.0 / 1.227, 1.0],
+                                        base_color: [
+                                            1.0 / DAY_FLAT_LIGHT[0],
+                                            1.0 / DAY_FLAT_LIGHT[1],
+                                            1.0 / DAY_FLAT_LIGHT[2],
+                                            1.0,
+                                        ],
                                         alpha_cutoff: 0.0,
                                         texel_base: texels.len() as u32,
                                         size: px.width,
@@ -490,6 +542,14 @@ mod tests {
         let used: std::collections::HashSet<u32> = whole.instances.iter().map(|i| i.species_index()).collect();
         let placed = m.species.iter().enumerate().filter(|(i, _)| used.contains(&(*i as u32))).count();
         assert_eq!(last.len(), placed);
+        // A round a level: the index's nodes of a level together (not one
+        // node a round), the tiles, the terrain's levels, its images, the packs.
+        let depth = m.index.as_ref().map_or(0, |i| i.depth as usize);
+        let levels = m.terrain.as_ref().map_or(0, |t| t.levels as usize);
+        assert!(rounds.len() <= 1 + depth + 1 + levels + 2, "{} rounds: {rounds:?}", rounds.len());
+        if let Some(index) = &m.index {
+            assert!(index.nodes as usize > depth, "the fixture's index has levels with several nodes");
+        }
         // Tiles beyond reach are not fetched.
         let tiles = rounds.iter().flatten().filter(|(f, _)| f.ends_with(".tile")).count();
         let entries = crate::format::index::read_all_tiles(dir, &m).unwrap();

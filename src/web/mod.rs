@@ -69,6 +69,8 @@ pub struct Viewer {
     /// The path-traced view (`set_renderer`), and its pipelines once made.
     photo: Option<photo::Photo>,
     photo_pipes: Option<photo::PhotoPipelines>,
+    /// Loads of a path-traced view started (`photo_json`'s `load`).
+    photo_loads: u32,
 }
 
 /// A geographic camera asked for before the scene's CRS was known.
@@ -178,6 +180,7 @@ impl Viewer {
             scene_url,
             photo: None,
             photo_pipes: None,
+            photo_loads: 0,
         })
     }
 
@@ -382,7 +385,8 @@ impl Viewer {
         // The camera again: placing it, or the ground under it, may have moved it.
         let camera = self.camera();
         let moved = self.drawn_camera != Some(camera);
-        let tracing = self.poll_photo(&camera);
+        // (A moving camera sees the raster; the trace starts once it rests.)
+        let tracing = self.poll_photo(&camera) && !moved;
         if !tracing && !self.pacer.should_draw(now_ms, settled, s.bytes_fetched + s.requests) && !moved {
             return Ok(false);
         }
@@ -433,12 +437,13 @@ impl Viewer {
     }
 
     /// Takes a finished load of the path-traced view (its error as an
-    /// event) and reloads one the eye left: whether the traced image is
+    /// event) and reloads one the eye left: whether the traced image can be
     /// what this frame shows (else the raster view, while it loads).
     fn poll_photo(&mut self, camera: &Camera) -> bool {
         let Some(p) = self.photo.as_mut() else { return false };
         if p.stale(camera.eye_m) {
-            *p = photo::Photo::start(&self.scene_url, camera.eye_m, p.settings);
+            self.photo_loads += 1;
+            *p = photo::Photo::start(&self.scene_url, camera.eye_m, p.settings, self.photo_loads);
         }
         if let Some(message) = p.poll() {
             self.events.push(StreamEvent::Failed { url: "path-trace".into(), message, retrying: false });

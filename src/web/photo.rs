@@ -8,7 +8,7 @@
 //! starts the image over, and one far from where the scene was loaded loads
 //! it again (the raster view is drawn meanwhile).
 
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::collections::HashMap;
 use std::rc::Rc;
 
@@ -62,6 +62,20 @@ pub(super) struct Photo {
     state: State,
     /// Fetch rounds and bytes of the load (for `photo_json`).
     fetched: Rc<RefCell<(u32, u64)>>,
+    /// Set when this view is dropped: its load stops at its next step.
+    cancelled: Rc<Cell<bool>>,
+    /// The viewer's count of loads started, this one's (for `photo_json`).
+    pub load: u32,
+    /// Times the image started over (a move, a new light or settings).
+    restarts: u32,
+}
+
+impl Drop for Photo {
+    fn drop(&mut self) {
+        // A superseded load (the renderer switched back, the eye moved on)
+        // fetches and builds nothing more.
+        self.cancelled.set(true);
+    }
 }
 
 /// The pipelines, made once a viewer first traces.
@@ -82,24 +96,36 @@ fn ground_albedo() -> Vec3 {
 }
 
 impl Photo {
-    /// Starts loading the scene at `scene_url` for a view from `eye`.
-    pub fn start(scene_url: &str, eye: DVec3, settings: PhotoSettings) -> Self {
+    /// Starts loading the scene at `scene_url` for a view from `eye` (the
+    /// viewer's `load`-th load).
+    pub fn start(scene_url: &str, eye: DVec3, settings: PhotoSettings, load_number: u32) -> Self {
         let job: Job = Rc::default();
         let fetched: Rc<RefCell<(u32, u64)>> = Rc::default();
+        let cancelled: Rc<Cell<bool>> = Rc::default();
         let (base, manifest_url) = crate::scene::fetch::scene_locations(scene_url);
-        let (cell, counts) = (job.clone(), fetched.clone());
+        let (cell, counts, stop) = (job.clone(), fetched.clone(), cancelled.clone());
         wasm_bindgen_futures::spawn_local(async move {
-            let result = load(base, manifest_url, eye, settings.reach_m, counts).await;
+            let result = load(base, manifest_url, eye, settings.reach_m, counts, stop).await;
             *cell.borrow_mut() = Some(result);
         });
-        Self { settings, eye, state: State::Loading(job), fetched }
+        Self { settings, eye, state: State::Loading(job), fetched, cancelled, load: load_number, restarts: 0 }
+    }
+
+    /// Whether its load failed (or its upload): setting the renderer again
+    /// loads anew.
+    pub fn failed(&self) -> bool {
+        matches!(self.state, State::Failed(_))
     }
 
     /// New settings for the same scene: the image starts over.
     pub fn set(&mut self, settings: PhotoSettings) {
         self.settings = settings;
-        if let State::Ready { drawn, .. } = &mut self.state {
+        if let State::Ready { drawn, scene, .. } = &mut self.state {
+            // (Cleared at the next frame: until then nothing counts as done.)
             *drawn = None;
+            if let Some(s) = scene.as_mut() {
+                s.samples = 0;
+            }
         }
     }
 
@@ -179,6 +205,7 @@ impl Photo {
         if drawn.as_ref() != Some(&now) {
             scene.restart(&mut encoder);
             *drawn = Some(now);
+            self.restarts += 1;
         } else if scene.samples >= settings.spp {
             // Complete: shown again (a canvas texture taken and not drawn shows black).
             pipes.display.draw(device, queue, &mut encoder, scene, target);
@@ -205,7 +232,9 @@ impl Photo {
         Ok(Some(encoder.finish()))
     }
 
-    /// `{state, samples, spp, reach_m, fetch_rounds, bytes_fetched}` and,
+    /// `{state, samples, spp, reach_m, load, restarts, fetch_rounds,
+    /// bytes_loaded}` (`load`: the viewer's count of loads started, this
+    /// one's; `bytes_loaded`: the files as loaded, packs inflated) and,
     /// ready, `trees, trees_in_scene, instanced_triangles,
     /// terrain_triangles, gpu_bytes`; failed, `error`.
     pub fn json(&self) -> String {
@@ -227,8 +256,8 @@ impl Photo {
             State::Failed(e) => ("failed", 0, format!(r#","error":{}"#, serde_json::Value::from(e.as_str()))),
         };
         format!(
-            r#"{{"state":"{state}","samples":{samples},"spp":{},"reach_m":{},"fetch_rounds":{rounds},"bytes_fetched":{bytes}{more}}}"#,
-            self.settings.spp, self.settings.reach_m
+            r#"{{"state":"{state}","samples":{samples},"spp":{},"reach_m":{},"load":{},"restarts":{},"fetch_rounds":{rounds},"bytes_loaded":{bytes}{more}}}"#,
+            self.settings.spp, self.settings.reach_m, self.load, self.restarts
         )
     }
 
@@ -275,8 +304,12 @@ impl SceneFiles for BrowserFiles {
     }
 }
 
-/// Most fetch rounds a load takes (index depth + terrain levels + 2 is far less).
+/// Most fetch rounds a load takes (the index's levels + the terrain's + 2 is far less).
 const MAX_ROUNDS: u32 = 64;
+
+/// Most bytes a load holds (files as loaded, packs inflated): wasm's memory
+/// ends at 4 GB, and the load's images and arrays come after.
+const MAX_LOAD_BYTES: u64 = 1 << 30;
 
 /// Loads the view's scene: [`load_with`] again after each round of fetches.
 async fn load(
@@ -285,10 +318,15 @@ async fn load(
     eye: DVec3,
     reach_m: f64,
     counts: Rc<RefCell<(u32, u64)>>,
+    cancelled: Rc<Cell<bool>>,
 ) -> Result<(TraceScene, LoadReport), String> {
     let mut files =
         BrowserFiles { files: HashMap::new(), packs: HashMap::new(), failed: HashMap::new(), wanted: Vec::new() };
+    let mut held = 0u64;
     for _ in 0..MAX_ROUNDS {
+        if cancelled.get() {
+            return Err("superseded".into());
+        }
         if let Some(done) = load_with(&mut files, eye, reach_m, Some(ground_albedo()))? {
             return Ok(done);
         }
@@ -304,6 +342,13 @@ async fn load(
             promises.push(&wasm_bindgen_futures::future_to_promise(async move {
                 // (A failure resolves to its message: the load decides what it means.)
                 let bytes = match super::fetch::fetch_bytes(&url, None).await {
+                    Ok(b) if b.len() as u64 > crate::paths::MAX_SCENE_FILE_BYTES => {
+                        return Ok(JsValue::from_str(&format!(
+                            "{url}: {} bytes, more than a scene file may hold ({})",
+                            b.len(),
+                            crate::paths::MAX_SCENE_FILE_BYTES
+                        )))
+                    }
                     Ok(b) => b,
                     Err(e) => return Ok(JsValue::from_str(&e.to_string())),
                 };
@@ -322,6 +367,9 @@ async fn load(
             .await
             .map_err(|e| e.as_string().unwrap_or_else(|| format!("{e:?}")))?;
         let all: js_sys::Array = all.into();
+        if cancelled.get() {
+            return Err("superseded".into());
+        }
         let mut c = counts.borrow_mut();
         c.0 += 1;
         for ((rel, pack), got) in wanted.into_iter().zip(all.iter()) {
@@ -331,6 +379,13 @@ async fn load(
             }
             let bytes = js_sys::Uint8Array::new(&got).to_vec();
             c.1 += bytes.len() as u64;
+            held += bytes.len() as u64;
+            if held > MAX_LOAD_BYTES {
+                return Err(format!(
+                    "the view's files take more than {} MB within {reach_m} m: trace a shorter reach",
+                    MAX_LOAD_BYTES >> 20
+                ));
+            }
             if pack {
                 files.packs.insert(rel, bytes);
             } else {

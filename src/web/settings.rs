@@ -268,8 +268,11 @@ impl Viewer {
                 let eye = self.camera().eye_m;
                 match &mut self.photo {
                     // The same view's scene: only the image's settings change.
-                    Some(p) if p.settings.reach_m == reach_m && !p.stale(eye) => p.set(settings),
-                    _ => self.photo = Some(super::photo::Photo::start(&self.scene_url, eye, settings)),
+                    Some(p) if p.settings.reach_m == reach_m && !p.stale(eye) && !p.failed() => p.set(settings),
+                    _ => {
+                        self.photo_loads += 1;
+                        self.photo = Some(super::photo::Photo::start(&self.scene_url, eye, settings, self.photo_loads));
+                    }
                 }
                 Ok(())
             }

@@ -76,7 +76,6 @@ fn bench_judges_every_method_against_the_path_traced_reference_under_both_lights
     assert!(reference.geometry_error.median < 0.06, "geometry error {}", reference.geometry_error.median);
     // The raster's light is not the physical light: its error is the light's.
     let light = get(bench::TRACED_RASTER_LIGHT);
-    assert_eq!(light.geometry_error.median, 0.0);
     assert!(light.error.median > 0.02, "the raster light against the physical {}", light.error.median);
     assert!(reference.error.median > reference.geometry_error.median);
     let sylva = get("sylva");
