@@ -247,14 +247,20 @@ fn sky(d: vec3<f32>) -> vec3<f32> {
     if env_on() {
         return env_radiance(d);
     }
+    // Below the horizon, where nothing traced lies: level ground of the
+    // ground's albedo lit by the sun and the sky, unshadowed (Lambertian:
+    // albedo x (the sun's irradiance / pi + the sky's mean radiance, taken
+    // 45 degrees up in the same azimuth)).
+    let sun_on_ground = path.sun_color.rgb * max(path.sun_dir.z, 0.0);
     if path.sky_sun.w > 0.5 {
         if d.z < 0.0 {
-            return path.ground.rgb * sky_preetham(normalize(vec3<f32>(d.x, d.y, 0.0) + vec3<f32>(0.0, 0.0, 1e-3)));
+            let up45 = normalize(vec3<f32>(d.x, d.y, 0.0) + vec3<f32>(0.0, 0.0, length(d.xy) + 1e-3));
+            return path.ground.rgb * (sun_on_ground + sky_preetham(up45));
         }
         return sky_preetham(d);
     }
     if d.z < 0.0 {
-        return path.ground.rgb * path.sky_horizon.rgb;
+        return path.ground.rgb * (sun_on_ground + mix(path.sky_horizon.rgb, path.sky_zenith.rgb, 0.84));
     }
     return mix(path.sky_horizon.rgb, path.sky_zenith.rgb, sqrt(d.z));
 }

@@ -44,12 +44,12 @@
 //   await v.flyToTree(id, {seconds, distance})  select a tree and fly to look at it; resolves to its query result
 //   v.attributes()                          the scene's attribute columns [{name, type, min, max, categories}] or null
 //   v.timeline()                            a scene's censuses: {censuses, latest, first, last} (setDate across them) or null
-//   v.setRenderer('path-trace', {spp = 256, reach = 300, bounces = 2, light = 'physical', turbidity = 3})
+//   v.setRenderer('path-trace', {spp = 256, reach = 0, bounces = 2, light = 'physical', turbidity = 3})
 //                                           the view traced at full detail (every tree within reach at its full
 //                                           mesh, the sun's disk, a clear sky, bounces), a sample a pixel each
 //                                           frame while the camera rests, up to spp; 'raster' (the default) back.
 //                                           v.photo(): {state: 'loading' | 'ready' | 'failed', samples, spp, reach_m,
-//                                           load, restarts, fetch_rounds, bytes_loaded, trees, trees_in_scene,
+//                                           load, restarts, fetch_rounds, bytes_loaded, load_ms, trees, trees_in_scene,
 //                                           instanced_triangles, terrain_triangles, gpu_bytes, error} or null
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
@@ -553,7 +553,8 @@ class SylvaViewer {
   /**
    * The renderer: 'raster' (streamed levels of detail, the default) or
    * 'path-trace' — the view traced at full detail (issue 48): every tree
-   * within `reach` metres of the eye at its full mesh and the terrain under
+   * within `reach` metres of the eye (0, the default: twice the distance the
+   * camera looks at + 200 m, within 300–4000 m) at its full mesh and the terrain under
    * them (fetched and built in the browser; the raster view is drawn
    * meanwhile), the sun as a disk of its true size, a clear sky of
    * `turbidity` (`light: 'raster'`: the raster's own simple light), `bounces`
@@ -561,7 +562,7 @@ class SylvaViewer {
    * `spp`, then the viewer idles; a move starts over. `photo()` says how far
    * it is. Throws on an unknown renderer or settings out of range.
    */
-  setRenderer(renderer = 'raster', { spp = 256, reach = 300, bounces = 2, light = 'physical', turbidity = 3 } = {}) {
+  setRenderer(renderer = 'raster', { spp = 256, reach = 0, bounces = 2, light = 'physical', turbidity = 3 } = {}) {
     if (light !== 'physical' && light !== 'raster') throw new Error(`light: ${light}: expected physical or raster`);
     this.viewer.set_renderer(String(renderer), spp | 0, Number(reach), bounces | 0, light === 'raster', Number(turbidity));
     this.renderer = renderer === 'path-trace' ? { renderer, spp, reach, bounces, light, turbidity } : undefined;

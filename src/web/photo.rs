@@ -68,6 +68,9 @@ pub(super) struct Photo {
     pub load: u32,
     /// Times the image started over (a move, a new light or settings).
     restarts: u32,
+    /// When the load began (`Date.now()`, ms), and how long it took to the scene built.
+    started_ms: f64,
+    load_ms: f64,
 }
 
 impl Drop for Photo {
@@ -108,7 +111,17 @@ impl Photo {
             let result = load(base, manifest_url, eye, settings.reach_m, counts, stop).await;
             *cell.borrow_mut() = Some(result);
         });
-        Self { settings, eye, state: State::Loading(job), fetched, cancelled, load: load_number, restarts: 0 }
+        Self {
+            settings,
+            eye,
+            state: State::Loading(job),
+            fetched,
+            cancelled,
+            load: load_number,
+            restarts: 0,
+            started_ms: js_sys::Date::now(),
+            load_ms: 0.0,
+        }
     }
 
     /// Whether its load failed (or its upload): setting the renderer again
@@ -148,6 +161,7 @@ impl Photo {
     pub fn poll(&mut self) -> Option<String> {
         let State::Loading(job) = &self.state else { return None };
         let done = job.borrow_mut().take()?;
+        self.load_ms = js_sys::Date::now() - self.started_ms;
         match done {
             Ok((traced, report)) => {
                 self.state = State::Ready { traced: Some(traced), report, scene: None, drawn: None };
@@ -233,8 +247,9 @@ impl Photo {
     }
 
     /// `{state, samples, spp, reach_m, load, restarts, fetch_rounds,
-    /// bytes_loaded}` (`load`: the viewer's count of loads started, this
-    /// one's; `bytes_loaded`: the files as loaded, packs inflated) and,
+    /// bytes_loaded, load_ms}` (`load`: the viewer's count of loads started,
+    /// this one's; `bytes_loaded`: the files as loaded, packs inflated;
+    /// `load_ms`: from the start to the scene built, 0 until then) and,
     /// ready, `trees, trees_in_scene, instanced_triangles,
     /// terrain_triangles, gpu_bytes`; failed, `error`.
     pub fn json(&self) -> String {
@@ -256,8 +271,8 @@ impl Photo {
             State::Failed(e) => ("failed", 0, format!(r#","error":{}"#, serde_json::Value::from(e.as_str()))),
         };
         format!(
-            r#"{{"state":"{state}","samples":{samples},"spp":{},"reach_m":{},"load":{},"restarts":{},"fetch_rounds":{rounds},"bytes_loaded":{bytes}{more}}}"#,
-            self.settings.spp, self.settings.reach_m, self.load, self.restarts
+            r#"{{"state":"{state}","samples":{samples},"spp":{},"reach_m":{},"load":{},"restarts":{},"fetch_rounds":{rounds},"bytes_loaded":{bytes},"load_ms":{:.0}{more}}}"#,
+            self.settings.spp, self.settings.reach_m, self.load, self.restarts, self.load_ms
         )
     }
 

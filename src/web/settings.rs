@@ -229,7 +229,8 @@ impl Viewer {
 
     /// The renderer: `"raster"` (the streamed levels of detail, the default)
     /// or `"path-trace"`: the view traced at full detail (issue 48) — every
-    /// tree within `reach_m` of the eye at its full mesh and the terrain
+    /// tree within `reach_m` of the eye (0: twice the distance the camera
+    /// looks at + 200 m, within 300–4000 m) at its full mesh and the terrain
     /// under them, the sun's disk, the clear sky of `turbidity` (the raster's
     /// simple light with `simple`), `bounces` bounces — a sample a pixel each
     /// frame while the camera rests, up to `spp`, then the viewer idles.
@@ -255,9 +256,16 @@ impl Viewer {
                 if !(1..=65_536).contains(&spp) {
                     return Err(JsValue::from_str("path-trace: spp is 1–65536 samples a pixel"));
                 }
-                if !(reach_m.is_finite() && (1.0..=20_000.0).contains(&reach_m)) {
-                    return Err(JsValue::from_str("path-trace: reach is 1–20000 m"));
+                if !(reach_m.is_finite() && (reach_m == 0.0 || (1.0..=20_000.0).contains(&reach_m))) {
+                    return Err(JsValue::from_str("path-trace: reach is 1–20000 m (0: as far as the view looks)"));
                 }
+                // 0: twice the distance the orbit looks at, and 200 m more (the
+                // whole first view of a district), within 300–4000 m.
+                let reach_m = if reach_m == 0.0 {
+                    (self.orbit.distance * 2.0 + 200.0).clamp(300.0, 4000.0).round()
+                } else {
+                    reach_m
+                };
                 if bounces > 16 {
                     return Err(JsValue::from_str("path-trace: bounces is 0–16"));
                 }
