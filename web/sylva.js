@@ -49,8 +49,9 @@
 //                                           mesh, the sun's disk, a clear sky, bounces), a sample a pixel each
 //                                           frame while the camera rests, up to spp; 'raster' (the default) back.
 //                                           v.photo(): {state: 'loading' | 'ready' | 'failed', samples, spp, reach_m,
-//                                           load, restarts, fetch_rounds, bytes_loaded, load_ms, trees, trees_in_scene,
-//                                           instanced_triangles, terrain_triangles, gpu_bytes, error} or null
+//                                           load, restarts, fetch_rounds, bytes_loaded, load_ms, build_ms, trees,
+//                                           trees_in_scene, instanced_triangles, terrain_triangles, gpu_bytes,
+//                                           error} or null
 //   v.ready                                 resolves after the first frame with everything the view needs
 //   v.destroy()
 //

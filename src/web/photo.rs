@@ -60,8 +60,9 @@ pub(super) struct Photo {
     /// The eye the scene was loaded for (scene frame): instances are placed around it.
     eye: DVec3,
     state: State,
-    /// Fetch rounds and bytes of the load (for `photo_json`).
-    fetched: Rc<RefCell<(u32, u64)>>,
+    /// Fetch rounds, bytes of the load and the last pass's ms (the one that
+    /// decodes the packs and builds both levels), for `photo_json`.
+    fetched: Rc<RefCell<(u32, u64, f64)>>,
     /// Set when this view is dropped: its load stops at its next step.
     cancelled: Rc<Cell<bool>>,
     /// The viewer's count of loads started, this one's (for `photo_json`).
@@ -103,7 +104,7 @@ impl Photo {
     /// viewer's `load`-th load).
     pub fn start(scene_url: &str, eye: DVec3, settings: PhotoSettings, load_number: u32) -> Self {
         let job: Job = Rc::default();
-        let fetched: Rc<RefCell<(u32, u64)>> = Rc::default();
+        let fetched: Rc<RefCell<(u32, u64, f64)>> = Rc::default();
         let cancelled: Rc<Cell<bool>> = Rc::default();
         let (base, manifest_url) = crate::scene::fetch::scene_locations(scene_url);
         let (cell, counts, stop) = (job.clone(), fetched.clone(), cancelled.clone());
@@ -247,13 +248,15 @@ impl Photo {
     }
 
     /// `{state, samples, spp, reach_m, load, restarts, fetch_rounds,
-    /// bytes_loaded, load_ms}` (`load`: the viewer's count of loads started,
+    /// bytes_loaded, load_ms, build_ms}` (`load`: the viewer's count of loads started,
     /// this one's; `bytes_loaded`: the files as loaded, packs inflated;
-    /// `load_ms`: from the start to the scene built, 0 until then) and,
+    /// `load_ms`: from the start to the scene built, 0 until then;
+    /// `build_ms`: the last pass over the files, which decodes the packs and
+    /// builds the species' BVHs and the top level) and,
     /// ready, `trees, trees_in_scene, instanced_triangles,
     /// terrain_triangles, gpu_bytes`; failed, `error`.
     pub fn json(&self) -> String {
-        let (rounds, bytes) = *self.fetched.borrow();
+        let (rounds, bytes, build_ms) = *self.fetched.borrow();
         let (state, samples, more) = match &self.state {
             State::Loading(_) => ("loading", 0, String::new()),
             State::Ready { report: r, scene, .. } => (
@@ -271,7 +274,7 @@ impl Photo {
             State::Failed(e) => ("failed", 0, format!(r#","error":{}"#, serde_json::Value::from(e.as_str()))),
         };
         format!(
-            r#"{{"state":"{state}","samples":{samples},"spp":{},"reach_m":{},"load":{},"restarts":{},"fetch_rounds":{rounds},"bytes_loaded":{bytes},"load_ms":{:.0}{more}}}"#,
+            r#"{{"state":"{state}","samples":{samples},"spp":{},"reach_m":{},"load":{},"restarts":{},"fetch_rounds":{rounds},"bytes_loaded":{bytes},"load_ms":{:.0},"build_ms":{build_ms:.0}{more}}}"#,
             self.settings.spp, self.settings.reach_m, self.load, self.restarts, self.load_ms
         )
     }
@@ -332,7 +335,7 @@ async fn load(
     manifest_url: String,
     eye: DVec3,
     reach_m: f64,
-    counts: Rc<RefCell<(u32, u64)>>,
+    counts: Rc<RefCell<(u32, u64, f64)>>,
     cancelled: Rc<Cell<bool>>,
 ) -> Result<(TraceScene, LoadReport), String> {
     let mut files =
@@ -342,7 +345,10 @@ async fn load(
         if cancelled.get() {
             return Err("superseded".into());
         }
-        if let Some(done) = load_with(&mut files, eye, reach_m, Some(ground_albedo()))? {
+        let t = js_sys::Date::now();
+        let done = load_with(&mut files, eye, reach_m, Some(ground_albedo()))?;
+        counts.borrow_mut().2 = js_sys::Date::now() - t;
+        if let Some(done) = done {
             return Ok(done);
         }
         let wanted = std::mem::take(&mut files.wanted);
