@@ -57,8 +57,9 @@ release:
 # which cargo maps to other folders).
 WASM_PROFILE ?= web
 # The served wasm's budget, gzipped (-9) after wasm-opt: `make web` fails over
-# it at the `web` profile (issue 47's goal: 400 KB; it is at 379 KB since the
-# browser converts lon/lat with the bake's fit instead of proj4rs).
+# it at the `web` profile (issue 47's goal: 400 KB; 396 KB with the path tracer
+# in it, since the browser's own Math and toLowerCase replaced Rust's libm and
+# case tables: src/web/math.rs).
 WASM_GZ_BUDGET ?= 400000
 # What going over it does: fail (`make web`), or warn (`make demo`: a new
 # user's first command does not stop on a compiler that packs a little worse).
