@@ -662,32 +662,12 @@ impl PathDisplay {
 /// The first `size` bytes of `buffer` (made with `COPY_SRC`) read back once
 /// the GPU is done with what was submitted.
 pub(crate) fn read_back<T: bytemuck::Pod>(ctx: &super::GpuContext, buffer: &wgpu::Buffer, size: u64) -> Vec<T> {
-    let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
-        size,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(buffer, 0, &read, 0, size);
-    ctx.queue.submit([encoder.finish()]);
-    let slice = read.slice(..);
-    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map a readback buffer"));
-    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
-    let mapped = slice.get_mapped_range().expect("mapped range");
-    let out = bytemuck::cast_slice::<u8, T>(&mapped).to_vec();
-    drop(mapped);
-    read.unmap();
-    out
+    bytemuck::pod_collect_to_vec(&super::readback::read_buffer(ctx, buffer, size)[..size as usize])
 }
 
 /// Linear radiance to 8-bit sRGB (clamped), as the raster's sRGB target stores it.
 #[must_use]
 pub fn to_srgb8(image: &[[f32; 3]]) -> Vec<u8> {
-    let enc = |c: f32| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
-        (s * 255.0 + 0.5) as u8
-    };
+    let enc = super::mips::linear_to_srgb;
     image.iter().flat_map(|p| [enc(p[0]), enc(p[1]), enc(p[2]), 255]).collect()
 }

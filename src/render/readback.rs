@@ -226,3 +226,25 @@ impl PassTimer {
         self.latest
     }
 }
+
+#[cfg(not(target_arch = "wasm32"))]
+/// Copies `size` bytes of a GPU buffer (which needs COPY_SRC) to the CPU. Blocks.
+#[must_use]
+pub fn read_buffer(ctx: &super::GpuContext, buffer: &wgpu::Buffer, size: u64) -> Vec<u8> {
+    let size = size.max(4).next_multiple_of(4);
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    let slice = staging.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |r| r.expect("map readback"));
+    ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("GPU wait");
+    let data = slice.get_mapped_range().expect("mapped").to_vec();
+    staging.unmap();
+    data
+}

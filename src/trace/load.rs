@@ -258,11 +258,7 @@ fn outside_extent_plain(
     extent: [f64; 4],
     albedo: Vec3,
 ) {
-    let enc = |c: f32| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
-        (s * 255.0 + 0.5) as u8
-    };
+    let enc = |c: f32| (crate::format::cluster::linear_to_srgb(c) * 255.0 + 0.5) as u8;
     let plain =
         [enc(albedo.x * DAY_FLAT_LIGHT[0]), enc(albedo.y * DAY_FLAT_LIGHT[1]), enc(albedo.z * DAY_FLAT_LIGHT[2]), 255];
     let (w, h) = (img.width as usize, img.height as usize);
