@@ -2,19 +2,9 @@
 // ray–triangle test and the nearest-hit walk of a species' BVH. Twins:
 // src/trace/mod.rs and src/trace/bvh.rs, the same operations in the same order
 // (a GPU may fuse multiply-adds: hits agree to rounding, tests/it/gpu_trace.rs).
-// The composing module declares `bvh_nodes: array<BvhNode>` and
+// Needs trace_types.wgsl; the composing module declares `bvh_nodes: array<BvhNode>` and
 // `bvh_tris: array<TraceTriangle>` (storage, read) and the alpha test
 // `fn trace_keeps(species: u32, tri: TraceTriangle, u: f32, v: f32) -> bool`.
-
-// A node of a species' hierarchy. Must match `BvhNode` in src/trace/bvh.rs.
-struct BvhNode {
-    min: vec3<f32>,
-    // A leaf's first triangle; an inner node's first child (the second follows).
-    first: u32,
-    max: vec3<f32>,
-    // A leaf's triangle count; 0 for an inner node.
-    count: u32,
-};
 
 // A triangle: first corner, the edges from it, the mesh's index of it, its
 // material and its corners' quantised texture coordinates (u | v << 16).

@@ -16,29 +16,6 @@ struct TraceParams {
     pad1: u32,
 };
 
-// A tree. Must match `GpuInstance` in src/trace/scene.rs.
-struct TraceInstance {
-    position: vec3<f32>,
-    yaw: f32,
-    // Model xy -> scene: scale x crown aspect; z: scale.
-    scale_xy: f32,
-    scale_z: f32,
-    // The species (bits 0-23) and the tree's tint (24-31: variation + 1, 0 none).
-    species: u32,
-    id: u32,
-};
-
-// Where a species' hierarchy and materials start, and how its texture
-// coordinates dequantise. Must match `GpuSpeciesBvh` in src/trace/scene.rs.
-struct TraceSpecies {
-    node_base: u32,
-    tri_base: u32,
-    node_count: u32,
-    material_base: u32,
-    uv_min: vec2<f32>,
-    uv_extent: vec2<f32>,
-};
-
 // Must match `GpuTraceMaterial` in src/trace/scene.rs.
 struct TraceMaterial {
     base_color: vec4<f32>,

@@ -27,6 +27,7 @@ pub mod shaders;
 pub mod shadow;
 pub mod species;
 pub mod terrain;
+pub mod top_level;
 /// (Native for now: the probe waits for the GPU; the browser's tracer comes with its pass.)
 #[cfg(not(target_arch = "wasm32"))]
 pub mod trace;

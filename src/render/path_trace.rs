@@ -213,6 +213,7 @@ pub(crate) fn storage(device: &wgpu::Device, label: &str, contents: &[u8]) -> wg
 pub struct PathTracer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+    top: super::top_level::TopLevel,
 }
 
 /// A scene on the GPU with an image's accumulation, for one size: uploaded
@@ -227,6 +228,8 @@ pub struct PathScene {
     arrays: Vec<wgpu::Buffer>,
     /// Whether an environment is bound.
     environment: bool,
+    /// The top level's build on the GPU, recorded before the first samples.
+    top_job: Option<super::top_level::TopJob>,
     size: (u32, u32),
     /// Samples accumulated per pixel since the last restart.
     pub samples: u32,
@@ -288,7 +291,7 @@ impl PathTracer {
             compilation_options: Default::default(),
             cache: None,
         });
-        Self { layout, pipeline }
+        Self { layout, pipeline, top: super::top_level::TopLevel::new(device) }
     }
 
     /// Uploads `scene` (placed relative to the eye) and, where given, an HDR
@@ -311,7 +314,6 @@ impl PathTracer {
         let pixels = u64::from(width) * u64::from(height);
         for (what, bytes) in [
             ("the image's accumulation (16 bytes a pixel)", pixels * 16),
-            ("the species' BVH nodes", std::mem::size_of_val(&a.nodes[..]) as u64),
             ("the species' triangles (64 bytes each)", std::mem::size_of_val(&a.triangles[..]) as u64),
             ("the material textures' texels", a.texels.len() as u64 * 4),
             ("the trees", std::mem::size_of_val(&scene.instances[..]) as u64),
@@ -325,12 +327,23 @@ impl PathTracer {
                 ));
             }
         }
-        let trace_params = GpuTraceParams {
-            top_base: a.top_base,
-            instance_count: if scene.top.is_empty() { 0 } else { scene.instances.len() as u32 },
-            pad0: 0,
-            pad1: 0,
-        };
+        // Trees without a top level get theirs built on the GPU (2n − 1 nodes
+        // after the species'), recorded before the first samples.
+        let count = scene.instances.len() as u32;
+        let gpu_top = scene.top.is_empty() && count > 0;
+        let mut nodes = a.nodes;
+        if gpu_top {
+            nodes.resize(a.top_base as usize + 2 * count as usize - 1, crate::trace::bvh::BvhNode::default());
+        }
+        let nodes_bytes = std::mem::size_of_val(&nodes[..]) as u64;
+        if nodes_bytes > limit {
+            return Err(format!(
+                "the BVH nodes take {:.1} MB, more than this GPU binds in one buffer ({:.1} MB): trace fewer trees (a shorter reach)",
+                nodes_bytes as f64 / 1e6,
+                limit as f64 / 1e6
+            ));
+        }
+        let trace_params = GpuTraceParams { top_base: a.top_base, instance_count: count, pad0: 0, pad1: 0 };
         let trace_params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("trace params"),
             contents: bytemuck::bytes_of(&trace_params),
@@ -345,7 +358,7 @@ impl PathTracer {
         // (A binding may not be empty: an empty scene binds one zeroed record.)
         let instances = non_empty(scene.instances.clone());
         let arrays = vec![
-            storage(device, "bvh nodes", bytemuck::cast_slice(&non_empty(a.nodes))),
+            storage(device, "bvh nodes", bytemuck::cast_slice(&non_empty(nodes))),
             storage(device, "bvh triangles", bytemuck::cast_slice(&non_empty(a.triangles))),
             storage(device, "trace species", bytemuck::cast_slice(&non_empty(a.species))),
             storage(device, "trace instances", bytemuck::cast_slice(&instances)),
@@ -353,6 +366,10 @@ impl PathTracer {
             storage(device, "trace texels", bytemuck::cast_slice(&non_empty(a.texels))),
             storage(device, "environment", bytemuck::cast_slice(&env)),
         ];
+        let top_job = gpu_top.then(|| {
+            let source = storage(device, "trees as loaded", bytemuck::cast_slice(&scene.instances));
+            self.top.prepare(device, &arrays[0], &arrays[2], &source, &arrays[3], count, a.top_base)
+        });
         let (accum, group) = self.image(device, &trace_params, &params, &arrays, (width, height));
         let bytes = arrays.iter().map(wgpu::Buffer::size).sum::<u64>() + accum.size();
         Ok(PathScene {
@@ -362,6 +379,7 @@ impl PathTracer {
             trace_params,
             arrays,
             environment: environment.is_some(),
+            top_job,
             size: (width, height),
             samples: 0,
             bytes,
@@ -448,6 +466,9 @@ impl PathTracer {
         let mut params = PathParams { sample: first_sample.wrapping_add(target.samples), samples, ..*params };
         params.env[0] = if target.environment { 1.0 } else { 0.0 };
         queue.write_buffer(&target.params, 0, bytemuck::bytes_of(&params));
+        if let Some(job) = target.top_job.take() {
+            self.top.encode(encoder, &job);
+        }
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &target.group, &[]);

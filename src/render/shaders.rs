@@ -46,6 +46,8 @@ static BOUNDS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/bounds.wgsl")
 static TERRAIN_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/terrain.wgsl"));
 static CANOPY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/canopy.wgsl"));
 static ACCUMULATE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/accumulate.wgsl"));
+static TRACE_TYPES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_types.wgsl"));
+static TOP_LEVEL_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/top_level.wgsl"));
 static TRACE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace.wgsl"));
 static TRACE_PROBE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_probe.wgsl"));
 static TRACE_PROBE_RAY_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trace_probe_ray.wgsl"));
@@ -99,17 +101,20 @@ pub static CANOPY: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, 
 pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
 
 /// The tracer's probe: rays through one species' hierarchy (`render/trace.rs`).
-pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_PROBE_WGSL]]);
+pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_TYPES_WGSL, TRACE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_PROBE_WGSL]]);
 
 /// The path tracer (`render/path_trace.rs`).
-pub static PATH_TRACE: Shader = Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, PATH_TRACE_WGSL]]);
+pub static PATH_TRACE: Shader = Shader(&[&[TRACE_TYPES_WGSL, TRACE_WGSL, TRACE_SCENE_WGSL, PATH_TRACE_WGSL]]);
 
 /// The path tracer's image on a colour target (`render/path_trace.rs`).
 pub static PATH_DISPLAY: Shader = Shader(&[&[PATH_DISPLAY_WGSL]]);
 
+/// The tracer's top level built on the GPU (`render/top_level.rs`).
+pub static TOP_LEVEL: Shader = Shader(&[&[TRACE_TYPES_WGSL, TOP_LEVEL_WGSL]]);
+
 /// The tracer's scene probe: rays through both levels (`render/trace.rs`).
 pub static TRACE_SCENE_PROBE: Shader =
-    Shader(&[&[TRACE_WGSL, TRACE_SCENE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_SCENE_PROBE_WGSL]]);
+    Shader(&[&[TRACE_TYPES_WGSL, TRACE_WGSL, TRACE_SCENE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_SCENE_PROBE_WGSL]]);
 
 /// Every composed shader with its name, for validation tests.
 pub static ALL: &[(&str, Shader)] = &[
@@ -126,5 +131,6 @@ pub static ALL: &[(&str, Shader)] = &[
     ("trace_probe", TRACE_PROBE),
     ("trace_scene_probe", TRACE_SCENE_PROBE),
     ("path_trace", PATH_TRACE),
+    ("top_level", TOP_LEVEL),
     ("path_display", PATH_DISPLAY),
 ];

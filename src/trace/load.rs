@@ -9,6 +9,7 @@ use std::path::Path;
 use glam::{DVec3, Vec3};
 
 use super::scene::{Instance, TraceScene, TraceSpecies};
+use crate::format::mesh::variant_of;
 use crate::format::pack::decode_pack;
 use crate::format::tile::{Tile, BATCH_DATED};
 use crate::format::Manifest;
@@ -189,24 +190,50 @@ pub fn load_with(
     if packs.iter().any(Option::is_none) {
         return Ok(None);
     }
+    // Each species' shapes its trees draw (the library's variants: a tree
+    // draws `variant_of(variation, variants)` of the full mesh, as the raster
+    // does), each one traced "species"; `entry[s][v]` its place in the list.
     let mut species = Vec::new();
     let mut species_triangles = Vec::new();
-    for (s, bytes) in m.species.iter().zip(packs.into_iter().flatten()) {
-        let traced = match bytes {
-            Some(bytes) => {
-                let pack = decode_pack(&s.pack, &bytes).map_err(|e| e.to_string())?;
-                // A pack without a mesh (the format allows one) traces nothing:
-                // its trees are left out, the rest traced.
-                if pack.meta.mesh_levels.is_empty() {
-                    TraceSpecies::default()
-                } else {
-                    TraceSpecies::of_pack(&pack)?
-                }
-            }
-            None => TraceSpecies::default(),
+    let mut entry: Vec<Vec<Option<u32>>> = Vec::new();
+    for (si, (s, bytes)) in m.species.iter().zip(packs.into_iter().flatten()).enumerate() {
+        let pack = match &bytes {
+            Some(bytes) => Some(decode_pack(&s.pack, bytes).map_err(|e| e.to_string())?),
+            None => None,
         };
-        species_triangles.push((s.name.clone(), traced.bvh.triangles.len()));
-        species.push(traced);
+        // A pack without a mesh (the format allows one) traces nothing: its
+        // trees are left out, the rest traced.
+        let Some(pack) = pack.filter(|p| !p.meta.mesh_levels.is_empty()) else {
+            species_triangles.push((s.name.clone(), 0));
+            entry.push(Vec::new());
+            continue;
+        };
+        let extra = pack.meta.mesh_levels[0].variants;
+        let wanted: std::collections::BTreeSet<u32> = instances
+            .iter()
+            .filter(|i| i.species as usize == si)
+            .map(|i| variant_of(u32::from(i.tint.saturating_sub(1)), extra))
+            .collect();
+        let shapes = TraceSpecies::of_pack_variants(&pack, |v| wanted.contains(&v))?;
+        species_triangles.push((s.name.clone(), shapes.iter().flatten().next().map_or(0, |t| t.bvh.triangles.len())));
+        entry.push(
+            shapes
+                .into_iter()
+                .map(|shape| {
+                    shape.map(|t| {
+                        species.push(t);
+                        species.len() as u32 - 1
+                    })
+                })
+                .collect(),
+        );
+    }
+    for i in &mut instances {
+        let extra = entry.get(i.species as usize).map_or(0, |e| e.len().saturating_sub(1) as u32);
+        let v = variant_of(u32::from(i.tint.saturating_sub(1)), extra);
+        // (No shape: a species index past every list, left out by `place`.)
+        i.species =
+            entry.get(i.species as usize).and_then(|e| e.get(v as usize).copied().flatten()).unwrap_or(u32::MAX);
     }
     let mut terrain_triangles = 0;
     if let Some(terrain) = terrain.filter(|t| !t.bvh.triangles.is_empty()) {
@@ -221,18 +248,17 @@ pub fn load_with(
         });
         species.push(terrain);
     }
-    let scene = TraceScene::build(species, &instances);
-    // (Trees only: the terrain is not a tree.)
-    let tree_species = m.species.len() as u32;
+    let scene = TraceScene::place(species, &instances);
+    // (Trees only: the terrain, the one instance without a tint, is not a tree.)
     let instanced_triangles = scene
         .instances
         .iter()
-        .filter(|i| i.species_index() < tree_species)
+        .filter(|i| i.tint() > 0)
         .map(|i| scene.species[i.species_index() as usize].bvh.triangles.len() as u64)
         .sum();
     let bytes = scene.gpu_bytes();
     let report = LoadReport {
-        trees: scene.instances.iter().filter(|i| i.species_index() < tree_species).count(),
+        trees: scene.instances.iter().filter(|i| i.tint() > 0).count(),
         trees_in_scene,
         species_triangles,
         instanced_triangles,
@@ -469,7 +495,7 @@ pub fn terrain_species(
     Ok(Some(TraceSpecies {
         bvh: Bvh::build_with(&triangles, &surfaces),
         materials,
-        texels,
+        texels: texels.into(),
         uv_min: [0.0; 2],
         uv_extent: [1.0; 2],
     }))
@@ -527,7 +553,7 @@ mod tests {
         };
         assert_eq!(r, report);
         assert_eq!(scene.instances, whole.instances);
-        assert_eq!(scene.top.len(), whole.top.len());
+        assert!(scene.top.is_empty() && whole.top.is_empty(), "the top level is the GPU's to build");
         assert!(report.trees > 0 && report.terrain_triangles > 0, "{report:?}");
         // In phases: the manifest alone first; the packs together, last, and only
         // those of species placed within reach.
@@ -535,8 +561,8 @@ mod tests {
         let last = rounds.last().unwrap();
         assert!(last.iter().all(|(_, pack)| *pack), "{last:?}");
         assert!(rounds[..rounds.len() - 1].iter().flatten().all(|(_, pack)| !pack));
-        let used: std::collections::HashSet<u32> = whole.instances.iter().map(|i| i.species_index()).collect();
-        let placed = m.species.iter().enumerate().filter(|(i, _)| used.contains(&(*i as u32))).count();
+        // (A species no tree within reach uses is not read: 0 triangles.)
+        let placed = report.species_triangles.iter().filter(|(_, n)| *n > 0).count();
         assert_eq!(last.len(), placed);
         // A round a level: the index's nodes of a level together (not one
         // node a round), the tiles, the terrain's levels, its images, the packs.

@@ -101,8 +101,9 @@ pub struct TraceSpecies {
     pub bvh: Bvh,
     /// Materials (`texel_base` into `texels`).
     pub materials: Vec<GpuTraceMaterial>,
-    /// The material textures' mip 0, every layer, RGBA8 as u32 (r low).
-    pub texels: Vec<u32>,
+    /// The material textures' mip 0, every layer, RGBA8 as u32 (r low);
+    /// shared by a species' variants (uploaded once).
+    pub texels: std::sync::Arc<Vec<u32>>,
     /// Texture coordinates' dequantisation: minimum.
     pub uv_min: [f32; 2],
     /// Texture coordinates' dequantisation: extent.
@@ -114,20 +115,47 @@ impl TraceSpecies {
     #[must_use]
     pub fn opaque(bvh: Bvh) -> Self {
         let material = GpuTraceMaterial { base_color: [1.0; 4], texel_base: NO_TEXTURE, ..Default::default() };
-        Self { bvh, materials: vec![material], texels: Vec::new(), uv_min: [0.0; 2], uv_extent: [1.0; 2] }
+        Self { bvh, materials: vec![material], texels: Default::default(), uv_min: [0.0; 2], uv_extent: [1.0; 2] }
     }
 
     /// The species of a decoded pack: its full mesh (level 0), materials and
     /// material textures at full resolution.
     ///
     /// # Errors
+    /// See [`Self::of_pack_variants`].
+    pub fn of_pack(pack: &Pack<'_>) -> Result<Self, String> {
+        Ok(Self::of_pack_variants(pack, |v| v == 0)?.swap_remove(0).unwrap_or_default())
+    }
+
+    /// The shapes of a decoded pack's full mesh (level 0) that `wanted`
+    /// asks for: variant 0 its own vertices, 1… the library's other shapes
+    /// of the tree (`MVAR`; a tree draws [`variant_of`](crate::format::mesh::variant_of)
+    /// `(variation, variants)`, as the raster's `mesh.wgsl` does). Each its
+    /// own BVH; the materials and textures (at full resolution) shared.
+    ///
+    /// # Errors
     /// A pack without a mesh, or whose material textures are block-encoded
     /// (trace the plain pack).
-    pub fn of_pack(pack: &Pack<'_>) -> Result<Self, String> {
+    pub fn of_pack_variants(pack: &Pack<'_>, wanted: impl Fn(u32) -> bool) -> Result<Vec<Option<Self>>, String> {
+        use crate::format::mesh::VariantVertex;
         let meta = &pack.meta;
         let level = meta.mesh_levels.first().ok_or_else(|| format!("{}: no mesh to trace", meta.name))?;
         let (vertices, indices) = (pack.mesh_vertices(0), pack.mesh_indices(0));
-        let bvh = Bvh::build_with(&mesh_triangles(level, &vertices, &indices), &mesh_surfaces(&vertices, &indices));
+        let shapes: Vec<VariantVertex> =
+            pack.section(kind::MESH_VARIANTS, 0).map(bytemuck::pod_collect_to_vec).unwrap_or_default();
+        let n = vertices.len();
+        let extra = if n == 0 { 0 } else { (level.variants as usize).min(shapes.len() / n) };
+        let surfaces = mesh_surfaces(&vertices, &indices);
+        let bvh_of = |v: usize| {
+            if v == 0 {
+                return Bvh::build_with(&mesh_triangles(level, &vertices, &indices), &surfaces);
+            }
+            let mut moved = vertices.clone();
+            for (m, w) in moved.iter_mut().zip(&shapes[(v - 1) * n..v * n]) {
+                m.position = w.position;
+            }
+            Bvh::build_with(&mesh_triangles(level, &moved, &indices), &surfaces)
+        };
         let mut texels = Vec::new();
         let mut layer_base = Vec::new();
         if let Some(t) = &meta.material_texture {
@@ -145,7 +173,7 @@ impl TraceSpecies {
             }
         }
         let size = meta.material_texture.map_or(0, |t| t.size);
-        let materials = meta
+        let materials: Vec<GpuTraceMaterial> = meta
             .materials
             .iter()
             .map(|m| {
@@ -163,7 +191,18 @@ impl TraceSpecies {
             })
             .collect();
         let uv_extent = [level.uv_max[0] - level.uv_min[0], level.uv_max[1] - level.uv_min[1]];
-        Ok(Self { bvh, materials, texels, uv_min: level.uv_min, uv_extent })
+        let texels = std::sync::Arc::new(texels);
+        Ok((0..=extra)
+            .map(|v| {
+                wanted(v as u32).then(|| Self {
+                    bvh: bvh_of(v),
+                    materials: materials.clone(),
+                    texels: texels.clone(),
+                    uv_min: level.uv_min,
+                    uv_extent,
+                })
+            })
+            .collect())
     }
 
     /// A hit's texture coordinate on `tri` at barycentric (u, v), dequantised
@@ -293,39 +332,57 @@ impl GpuInstance {
 }
 
 impl TraceScene {
-    /// Builds the top level over `instances` of `species` (instances of a
-    /// species index past the list, or with a non-finite or non-positive
-    /// transform, are left out).
+    /// The trees of `instances` ready for the GPU's top-level build
+    /// (`render::top_level`): the instances of a species index past the list,
+    /// of a species without nodes, or with a non-finite or non-positive
+    /// transform left out, the rest in their order; `top` empty (the CPU's
+    /// walk then meets nothing: [`Self::build`] builds its own).
+    #[must_use]
+    pub fn place(species: Vec<TraceSpecies>, instances: &[Instance]) -> Self {
+        let instances = instances
+            .iter()
+            .enumerate()
+            .filter(|(_, inst)| {
+                let g = GpuInstance::of(inst, 0);
+                let has_nodes = species.get(inst.species as usize).is_some_and(|s| !s.bvh.nodes.is_empty());
+                let scaled = g.scale_xy > 0.0 && g.scale_z > 0.0 && g.scale_xy.is_finite() && g.scale_z.is_finite();
+                has_nodes && inst.position.is_finite() && inst.yaw.is_finite() && scaled
+            })
+            .map(|(i, inst)| GpuInstance::of(inst, i as u32))
+            .collect();
+        Self { species, top: Vec::new(), instances }
+    }
+
+    /// [`Self::place`] with the top level built on the CPU (the binned
+    /// surface area heuristic over the trees' placed boxes): the twin the
+    /// tests walk beside the GPU's build.
     #[must_use]
     pub fn build(species: Vec<TraceSpecies>, instances: &[Instance]) -> Self {
-        let mut kept = Vec::new();
-        let mut boxes = Vec::new();
-        for (i, inst) in instances.iter().enumerate() {
-            let Some(root) = species.get(inst.species as usize).and_then(|s| s.bvh.nodes.first()) else { continue };
-            let g = GpuInstance::of(inst, i as u32);
-            let scaled = g.scale_xy > 0.0 && g.scale_z > 0.0 && g.scale_xy.is_finite() && g.scale_z.is_finite();
-            if !(inst.position.is_finite() && inst.yaw.is_finite() && scaled) {
-                continue;
-            }
-            // The species' box placed: the box around its eight corners.
-            let (lo, hi) = (Vec3::from(root.min), Vec3::from(root.max));
-            let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-            for k in 0..8 {
-                let corner = Vec3::new(
-                    if k & 1 == 0 { lo.x } else { hi.x },
-                    if k & 2 == 0 { lo.y } else { hi.y },
-                    if k & 4 == 0 { lo.z } else { hi.z },
-                );
-                let p = g.to_scene(corner);
-                min = min.min(p);
-                max = max.max(p);
-            }
-            kept.push(g);
-            boxes.push((min, max));
-        }
+        let placed = Self::place(species, instances);
+        let boxes: Vec<(Vec3, Vec3)> = placed.instances.iter().map(|g| placed.placed_box(g)).collect();
         let (top, order) = build_nodes(&boxes);
-        let instances = order.iter().map(|&i| kept[i as usize]).collect();
-        Self { species, top, instances }
+        let instances = order.iter().map(|&i| placed.instances[i as usize]).collect();
+        Self { species: placed.species, top, instances }
+    }
+
+    /// A tree's species box placed: the box around its eight corners. Twin:
+    /// `placed_box` in `shaders/top_level.wgsl`.
+    #[must_use]
+    pub fn placed_box(&self, g: &GpuInstance) -> (Vec3, Vec3) {
+        let root = self.species[g.species_index() as usize].bvh.nodes[0];
+        let (lo, hi) = (Vec3::from(root.min), Vec3::from(root.max));
+        let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for k in 0..8 {
+            let corner = Vec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            let p = g.to_scene(corner);
+            min = min.min(p);
+            max = max.max(p);
+        }
+        (min, max)
     }
 
     /// The nearest hit of a scene-space `ray`: the top level walked front to
@@ -353,17 +410,27 @@ impl TraceScene {
     /// instances), counted without concatenating anything.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
+        let mut seen: Vec<&std::sync::Arc<Vec<u32>>> = Vec::new();
         let species: usize = self
             .species
             .iter()
             .map(|s| {
+                // (A variant's texels are its species'.)
+                let texels = if seen.iter().any(|t| std::sync::Arc::ptr_eq(t, &s.texels)) {
+                    0
+                } else {
+                    seen.push(&s.texels);
+                    s.texels.len() * 4
+                };
                 std::mem::size_of_val(&s.bvh.nodes[..])
                     + std::mem::size_of_val(&s.bvh.triangles[..])
                     + std::mem::size_of_val(&s.materials[..])
-                    + s.texels.len() * 4
+                    + texels
             })
             .sum();
-        (species + std::mem::size_of_val(&self.top[..]) + std::mem::size_of_val(&self.instances[..])) as u64
+        // (An unbuilt top level: the 2n − 1 nodes the GPU's build makes.)
+        let top = if self.top.is_empty() { (2 * self.instances.len()).saturating_sub(1) } else { self.top.len() };
+        (species + top * std::mem::size_of::<BvhNode>() + std::mem::size_of_val(&self.instances[..])) as u64
     }
 
     /// Everything the GPU reads, concatenated: the species' nodes then the
@@ -372,6 +439,8 @@ impl TraceScene {
     #[must_use]
     pub fn arrays(&self) -> TraceArrays {
         let mut a = TraceArrays::default();
+        // Texels uploaded once for a species and its variants.
+        let mut shared: Vec<(&std::sync::Arc<Vec<u32>>, u32)> = Vec::new();
         for s in &self.species {
             a.species.push(GpuSpeciesBvh {
                 node_base: a.nodes.len() as u32,
@@ -381,14 +450,21 @@ impl TraceScene {
                 uv_min: s.uv_min,
                 uv_extent: s.uv_extent,
             });
-            let texel_base = a.texels.len() as u32;
+            let texel_base = match shared.iter().find(|(t, _)| std::sync::Arc::ptr_eq(t, &s.texels)) {
+                Some(&(_, base)) => base,
+                None => {
+                    let base = a.texels.len() as u32;
+                    a.texels.extend_from_slice(&s.texels);
+                    shared.push((&s.texels, base));
+                    base
+                }
+            };
             a.materials.extend(s.materials.iter().map(|m| GpuTraceMaterial {
                 texel_base: if m.texel_base == NO_TEXTURE { NO_TEXTURE } else { m.texel_base + texel_base },
                 ..*m
             }));
             a.nodes.extend_from_slice(&s.bvh.nodes);
             a.triangles.extend_from_slice(&s.bvh.triangles);
-            a.texels.extend_from_slice(&s.texels);
         }
         a.top_base = a.nodes.len() as u32;
         a.nodes.extend_from_slice(&self.top);
@@ -438,6 +514,87 @@ mod tests {
         // Beside the crown (model x 0.6 > its half width 0.5 at that height): a miss.
         let beside = g.to_scene(Vec3::new(0.6, 0.0, 1.0));
         assert!(scene.intersect(&Ray { origin, dir: beside - origin, t_max: 2.0 }).is_none());
+    }
+
+    /// A library species' other shapes (`MVAR`) traced as the raster draws
+    /// them: each its own BVH, materials and textures shared (uploaded once),
+    /// a tree of a variation taking the shape `variant_of` gives it.
+    #[test]
+    fn a_species_variants_are_traced_each_with_its_own_shape() {
+        use crate::format::mesh::{variant_of, VariantVertex};
+        use crate::format::pack::{decode_pack, encode_pack, Section};
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small/species/beech.pack");
+        let bytes = std::fs::read(path).expect("fixture pack (make fixtures)");
+        let pack = decode_pack(path, &bytes).unwrap();
+        // Variant 1: the tree at half its height (z quantised to half).
+        let squat: Vec<VariantVertex> = pack
+            .mesh_vertices(0)
+            .iter()
+            .map(|v| VariantVertex { position: [v.position[0], v.position[1], v.position[2] / 2], normal_oct: [0, 0] })
+            .collect();
+        let mut meta = pack.meta.clone();
+        meta.mesh_levels[0].variants = 1;
+        let mut sections: Vec<Section> = pack
+            .sections
+            .iter()
+            .filter(|(e, _)| e.kind != kind::META)
+            .map(|(e, d)| Section { kind: e.kind, index: e.index, count: e.count, stride: e.stride, data: d.to_vec() })
+            .collect();
+        sections.push(Section {
+            kind: kind::MESH_VARIANTS,
+            index: 0,
+            count: squat.len() as u32,
+            stride: 8,
+            data: bytemuck::cast_slice(&squat).to_vec(),
+        });
+        let bytes = encode_pack(&meta, &sections);
+        let pack = decode_pack("squat beech", &bytes).unwrap();
+        let shapes = TraceSpecies::of_pack_variants(&pack, |_| true).unwrap();
+        assert_eq!(shapes.len(), 2);
+        let (own, squat) = (shapes[0].clone().unwrap(), shapes[1].clone().unwrap());
+        let height = |s: &TraceSpecies| s.bvh.nodes[0].max[2] - s.bvh.nodes[0].min[2];
+        assert!((height(&squat) / height(&own) - 0.5).abs() < 0.05, "{} vs {}", height(&squat), height(&own));
+        assert!(std::sync::Arc::ptr_eq(&own.texels, &squat.texels) && !own.texels.is_empty());
+        assert_eq!(own.materials, squat.materials);
+        // Only the shapes asked for are built.
+        let some = TraceSpecies::of_pack_variants(&pack, |v| v == 1).unwrap();
+        assert!(some[0].is_none() && some[1].is_some());
+        // A tree of variation 15 draws variant 0, of 16 variant 1.
+        assert_eq!((variant_of(15, 1), variant_of(16, 1)), (0, 1));
+        let trees: Vec<Instance> = [0, 1]
+            .iter()
+            .map(|&v| Instance {
+                position: Vec3::new(10.0 * v as f32, 0.0, 0.0),
+                yaw: 0.0,
+                scale: 1.0,
+                aspect: 1.0,
+                species: v,
+                tint: 16 + v as u8,
+            })
+            .collect();
+        let scene = TraceScene::build(vec![own.clone(), squat], &trees);
+        let a = scene.arrays();
+        // The texels once; both shapes' materials reading them.
+        assert_eq!(a.texels.len(), own.texels.len());
+        assert_eq!(a.materials.len(), 2 * own.materials.len());
+        assert_eq!(a.materials[..own.materials.len()], a.materials[own.materials.len()..]);
+        assert_eq!(scene.gpu_bytes() as usize, {
+            let b = |s: &TraceSpecies| {
+                std::mem::size_of_val(&s.bvh.nodes[..])
+                    + std::mem::size_of_val(&s.bvh.triangles[..])
+                    + std::mem::size_of_val(&s.materials[..])
+            };
+            scene.species.iter().map(b).sum::<usize>()
+                + own.texels.len() * 4
+                + std::mem::size_of_val(&scene.top[..])
+                + std::mem::size_of_val(&scene.instances[..])
+        });
+        // A ray at three quarters of the tree's height meets the tall one, passes over the squat one.
+        let z = own.bvh.nodes[0].max[2] * 0.75;
+        let across = |x: f32| Ray { origin: Vec3::new(x, -30.0, z), dir: Vec3::Y, t_max: 60.0 };
+        let hits = (0..40).filter(|k| scene.intersect(&across(-1.0 + *k as f32 * 0.05)).is_some()).count();
+        let squat_hits = (0..40).filter(|k| scene.intersect(&across(9.0 + *k as f32 * 0.05)).is_some()).count();
+        assert!(hits > 5 && squat_hits == 0, "tall {hits}, squat {squat_hits}");
     }
 
     #[test]
@@ -521,7 +678,7 @@ mod tests {
                 size: 4,
                 kind: 0,
             }],
-            texels,
+            texels: texels.into(),
             uv_min: [0.0; 2],
             uv_extent: [1.0; 2],
         };

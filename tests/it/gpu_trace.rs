@@ -187,6 +187,124 @@ fn the_gpu_two_level_walk_finds_the_trees_its_cpu_twin_finds() {
     );
 }
 
+/// Walks a top level from its root: every tree in exactly one leaf (of one
+/// tree), every inner node's box the union of its children's; the leaves'
+/// boxes in leaf order.
+fn check_top(top: &[sylva::trace::bvh::BvhNode], trees: usize) -> Vec<(Vec3, Vec3)> {
+    assert_eq!(top.len(), 2 * trees - 1, "2n - 1 nodes");
+    let mut seen = vec![0u32; trees];
+    let mut leaves = vec![(Vec3::ZERO, Vec3::ZERO); trees];
+    let mut stack = vec![0usize];
+    let mut visited = 0;
+    while let Some(i) = stack.pop() {
+        visited += 1;
+        assert!(visited <= top.len(), "a node reached twice");
+        let n = top[i];
+        if n.count > 0 {
+            assert_eq!(n.count, 1, "a leaf holds one tree");
+            seen[n.first as usize] += 1;
+            leaves[n.first as usize] = (n.min.into(), n.max.into());
+            continue;
+        }
+        let (a, b) = (top[n.first as usize], top[n.first as usize + 1]);
+        for k in 0..3 {
+            assert_eq!(n.min[k], a.min[k].min(b.min[k]), "node {i}: its box is its children's");
+            assert_eq!(n.max[k], a.max[k].max(b.max[k]), "node {i}: its box is its children's");
+        }
+        stack.extend([n.first as usize, n.first as usize + 1]);
+    }
+    assert!(seen.iter().all(|&c| c == 1), "every tree in exactly one leaf");
+    leaves
+}
+
+/// The top level the GPU builds (`render::top_level`: Morton codes, a
+/// bitonic sort, Karras 2012's splits, refits) holds every tree once, boxes
+/// each as the CPU places it, and leads the walk to the trees the CPU's
+/// binned-SAH top level leads it to — on a stand with trees standing on the
+/// same spot (equal codes), and on scenes of one, two and three trees.
+#[test]
+fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds() {
+    use sylva::render::top_level::TopLevel;
+    use sylva::trace::scene::{Instance, TraceScene, TraceSpecies};
+    let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    let probe = TraceProbe::new(&ctx.device);
+    let top_level = TopLevel::new(&ctx.device);
+    let species: Vec<TraceSpecies> = SPECIES.iter().map(|n| traced(n)).collect();
+    let mut rng = Rng(0x5eed_0048);
+    let mut trees: Vec<Instance> = (0..700)
+        .map(|i| Instance {
+            position: rng.inside(Vec3::ZERO, Vec3::new(150.0, 150.0, 3.0)),
+            yaw: rng.unit() * std::f32::consts::TAU,
+            scale: 0.6 + rng.unit() * 0.8,
+            aspect: 0.8 + rng.unit() * 0.4,
+            species: i % 3,
+            tint: 1,
+        })
+        .collect();
+    // Twenty trees on one spot, and one of a species past the list (left out).
+    for i in 0..20 {
+        trees.push(Instance { yaw: i as f32, ..trees[7] });
+    }
+    trees.push(Instance { species: 9, ..trees[3] });
+    for n in [1, 2, 3, trees.len()] {
+        let cpu = TraceScene::build(species.clone(), &trees[..n]);
+        let placed = TraceScene::place(species.clone(), &trees[..n]);
+        assert!(placed.top.is_empty());
+        let gpu = top_level.built(&ctx, &placed);
+        let kept = placed.instances.len();
+        assert_eq!(kept, n.min(trees.len() - 1), "the tree of no species is left out");
+        let leaves = check_top(&gpu.top, kept);
+        // The trees in curve order: the same trees, each boxed as the CPU boxes it.
+        let ids = |s: &TraceScene| {
+            let mut v: Vec<u32> = s.instances.iter().map(|i| i.id).collect();
+            v.sort_unstable();
+            v
+        };
+        assert_eq!(ids(&gpu), ids(&cpu));
+        for (inst, (lo, hi)) in gpu.instances.iter().zip(&leaves) {
+            let (a, b) = cpu.placed_box(inst);
+            let tol = 1e-4 * (b - a).length().max(1.0);
+            assert!((*lo - a).abs().max_element() <= tol && (*hi - b).abs().max_element() <= tol, "tree {}", inst.id);
+        }
+        if n < 100 {
+            continue;
+        }
+        // In curve order: neighbours in the list stand near each other.
+        let step: f32 = gpu
+            .instances
+            .windows(2)
+            .map(|w| (Vec3::from(w[0].position) - Vec3::from(w[1].position)).length())
+            .sum::<f32>();
+        let loaded: f32 = placed
+            .instances
+            .windows(2)
+            .map(|w| (Vec3::from(w[0].position) - Vec3::from(w[1].position)).length())
+            .sum::<f32>();
+        assert!(step < loaded / 4.0, "curve order walks {step:.0} m, the loaded order {loaded:.0} m");
+        let rays: Vec<Ray> = (0..4096)
+            .map(|_| {
+                let origin = rng.inside(Vec3::new(-20.0, -20.0, 5.0), Vec3::new(170.0, 170.0, 60.0));
+                let target = rng.inside(Vec3::ZERO, Vec3::new(150.0, 150.0, 20.0));
+                Ray { origin, dir: target - origin, t_max: 1.5 }
+            })
+            .collect();
+        let hits = probe.trace_scene(&ctx, &gpu, &rays);
+        let (mut met, mut differ) = (0, 0);
+        for (ray, g) in rays.iter().zip(&hits) {
+            let c = cpu.intersect(ray);
+            met += usize::from(c.is_some());
+            let same = match (c, g) {
+                (None, None) => true,
+                (Some(c), Some(g)) => c.instance == g.instance && (c.hit.t - g.hit.t).abs() <= 1e-4 * c.hit.t.max(1.0),
+                _ => false,
+            };
+            differ += usize::from(!same);
+        }
+        assert!(met > 400, "{met} rays met trees");
+        assert!(differ <= rays.len() / 100, "{differ} of {} rays differ", rays.len());
+    }
+}
+
 /// The raster's reference (full meshes everywhere, leaf cards alpha-tested at
 /// full texture resolution, no shadows, no terrain) and the path tracer under
 /// the raster's light, one camera: both see the same forest.
