@@ -9,9 +9,13 @@
 // inner node's box from its children's, as many times as the tree is deep).
 //
 // The layout is the walks' (trace.wgsl): an inner node's children side by
-// side. Inner node k's children lie at 1 + 2k and 2 + 2k (from top_base),
-// the root at 0; a leaf holds one tree (first = its place in
-// trace_instances, count = 1). 2n - 1 nodes for n trees. Needs trace_types.wgsl.
+// side. Inner node k's children lie at 1 + 2k and 2 + 2k (from the trees'
+// root), the root at 0; a leaf holds one tree (first = its place in
+// trace_instances, count = 1). 2n - 1 nodes for n trees. With the ground (one
+// instance after the trees, as large as the view: in a linear BVH its box
+// would swell every node above its place on the curve) the root has two
+// children: the ground's leaf at 1 and the trees' root at 2 (`top_join`).
+// Needs trace_types.wgsl.
 
 // Must match `TopBuild` in src/render/top_level.rs.
 struct TopBuild {
@@ -20,7 +24,8 @@ struct TopBuild {
     padded: u32,
     // Where the top level starts in bvh_nodes.
     top_base: u32,
-    pad: u32,
+    // 1: instance `count` is the ground, beside the trees at the root.
+    ground: u32,
 };
 
 // One bitonic step: the sequence length being merged and the compare distance.
@@ -117,7 +122,12 @@ fn top_codes(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgrou
     if i < build.count {
         let lo = vec3<f32>(unordered(atomicLoad(&centre_box[0])), unordered(atomicLoad(&centre_box[1])), unordered(atomicLoad(&centre_box[2])));
         let hi = vec3<f32>(unordered(atomicLoad(&centre_box[3])), unordered(atomicLoad(&centre_box[4])), unordered(atomicLoad(&centre_box[5])));
-        let q = vec3<u32>(clamp((centre(i) - lo) / max(hi - lo, vec3<f32>(1e-6)), vec3<f32>(0.0), vec3<f32>(1.0)) * 1023.0);
+        // One scale for the three axes (the box's longest side): a forest is
+        // flat, and its few metres of height spread over 1,024 steps would
+        // split it by height before place.
+        let e = hi - lo;
+        let side = max(max(max(e.x, e.y), e.z), 1e-6);
+        let q = vec3<u32>(clamp((centre(i) - lo) / side, vec3<f32>(0.0), vec3<f32>(1.0)) * 1023.0);
         code = (spread(q.x) << 2u) | (spread(q.y) << 1u) | spread(q.z);
     }
     codes[i] = vec2<u32>(code, i);
@@ -162,15 +172,29 @@ fn prefix(i: i32, j: i32) -> i32 {
     return i32(countLeadingZeros(a ^ b));
 }
 
-// A node in slot `at`: a leaf over tree j, or an empty inner node whose
-// children are at `first` (its box made by top_refit).
+// Where the trees' hierarchy starts in the top level (after the root and
+// the ground's leaf where there is a ground).
+fn trees_at() -> u32 {
+    return 2u * build.ground;
+}
+
+// A node in slot `at` of the trees' hierarchy: a leaf over tree j, or an
+// empty inner node k whose children follow at 1 + 2k (its box made by top_refit).
 fn leaf(at: u32, j: u32) {
-    let b = placed_box(trace_instances[j]);
-    bvh_nodes[build.top_base + at] = BvhNode(b[0], j, b[1], 1u);
+    let b = padded(placed_box(trace_instances[j]));
+    bvh_nodes[build.top_base + trees_at() + at] = BvhNode(b[0], j, b[1], 1u);
+}
+
+// A box grown by a millionth of its coordinates' size: this GPU's sine and
+// cosine may place a corner a rounding away from where the walk's own
+// transform puts the tree's surface, and a box must never cut a tree.
+fn padded(b: array<vec3<f32>, 2>) -> array<vec3<f32>, 2> {
+    let pad = 1e-6 * max(abs(b[0]), abs(b[1])) + vec3<f32>(1e-6);
+    return array<vec3<f32>, 2>(b[0] - pad, b[1] + pad);
 }
 
 fn inner(at: u32, k: u32) {
-    bvh_nodes[build.top_base + at] = BvhNode(vec3<f32>(EMPTY), 1u + 2u * k, vec3<f32>(-EMPTY), 0u);
+    bvh_nodes[build.top_base + trees_at() + at] = BvhNode(vec3<f32>(EMPTY), trees_at() + 1u + 2u * k, vec3<f32>(-EMPTY), 0u);
     parents[k] = at;
 }
 
@@ -241,8 +265,18 @@ fn top_refit(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgrou
     if k + 1u >= build.count {
         return;
     }
-    let base = build.top_base;
+    let base = build.top_base + trees_at();
     let a = bvh_nodes[base + 1u + 2u * k];
     let b = bvh_nodes[base + 2u + 2u * k];
-    bvh_nodes[base + parents[k]] = BvhNode(min(a.min, b.min), 1u + 2u * k, max(a.max, b.max), 0u);
+    bvh_nodes[base + parents[k]] = BvhNode(min(a.min, b.min), trees_at() + 1u + 2u * k, max(a.max, b.max), 0u);
+}
+
+// With a ground: the root over the ground's leaf (1) and the trees' root (2).
+@compute @workgroup_size(1)
+fn top_join() {
+    let g = padded(placed_box(trace_instances[build.count]));
+    let base = build.top_base;
+    bvh_nodes[base + 1u] = BvhNode(g[0], build.count, g[1], 1u);
+    let t = bvh_nodes[base + 2u];
+    bvh_nodes[base] = BvhNode(min(g[0], t.min), 1u, max(g[1], t.max), 0u);
 }

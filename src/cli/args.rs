@@ -301,6 +301,15 @@ pub(crate) enum LightArg {
     Raster,
 }
 
+/// `sylva render --path-trace --top-level`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum TopLevelArg {
+    /// Built on the GPU (a linear BVH).
+    Gpu,
+    /// Built on the CPU (binned SAH).
+    Cpu,
+}
+
 /// `--textures`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum TexturesArg {
@@ -492,6 +501,12 @@ pub(crate) struct RenderArgs {
     /// against `--full-detail` (`sylva compare --foliage`).
     #[arg(long, requires = "path_trace")]
     pub(crate) pixel_centres: bool,
+    /// --path-trace: who builds the top level over the trees — `gpu` (the
+    /// default: a linear BVH sorted along a Morton curve, Karras 2012, in the
+    /// first samples' command buffer) or `cpu` (the binned surface area
+    /// heuristic, slower to build, a little faster to walk), for comparison.
+    #[arg(long, value_enum, default_value_t = TopLevelArg::Gpu, requires = "path_trace")]
+    pub(crate) top_level: TopLevelArg,
     /// --path-trace with the physical light: light from an equirectangular HDR
     /// environment (Radiance .hdr or OpenEXR-free float images the image
     /// crate reads; row 0 the zenith, the middle column north) instead of the

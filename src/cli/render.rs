@@ -487,6 +487,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         environment,
         environment_scale,
         pixel_centres,
+        top_level,
     } = args;
     let (w, h) = frame.checked_size()?;
     let ViewArgs { view, camera, quality, draw_distance, whole_tiles, no_canopy, textures, .. } = frame;
@@ -576,6 +577,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 environment_scale,
                 environment,
                 jitter: !pixel_centres,
+                cpu_top: top_level == super::args::TopLevelArg::Cpu,
             }),
         );
     }
@@ -660,6 +662,8 @@ pub(crate) struct PathTraceArgs {
     pub(crate) environment: Option<PathBuf>,
     /// Not `--pixel-centres`.
     pub(crate) jitter: bool,
+    /// `--top-level cpu`.
+    pub(crate) cpu_top: bool,
     pub(crate) spp: u32,
     pub(crate) bounces: u32,
     pub(crate) simple: bool,
@@ -699,6 +703,14 @@ fn path_trace(
         (!args.no_ground).then_some(PathOptions::default().ground_albedo),
     )
     .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let traced = if args.cpu_top {
+        let t = std::time::Instant::now();
+        let traced = traced.with_cpu_top();
+        eprintln!("top level built on the CPU (binned SAH) in {:.3} s", t.elapsed().as_secs_f64());
+        traced
+    } else {
+        traced
+    };
     let load_s = t.elapsed().as_secs_f64();
     eprintln!(
         "tracing {} of {} trees within {} m ({:.1} M instanced triangles; species {}) and {}, {:.1} MB on the GPU, loaded in {:.1} s",
@@ -747,7 +759,9 @@ fn path_trace(
         let mut last = std::time::Instant::now();
         let image = tracer
             .render(ctx, &traced, environment.as_ref(), &view, (w, h), &options, &mut |done| {
-                if last.elapsed().as_secs_f64() > 5.0 {
+                if done == 0 && traced.top.is_empty() {
+                    eprintln!("uploaded, top level built on the GPU, in {:.3} s", t.elapsed().as_secs_f64());
+                } else if last.elapsed().as_secs_f64() > 5.0 {
                     eprintln!("  {done} of {} samples per pixel ({:.0} s)", args.spp, t.elapsed().as_secs_f64());
                     last = std::time::Instant::now();
                 }

@@ -330,10 +330,11 @@ impl PathTracer {
         // Trees without a top level get theirs built on the GPU (2n − 1 nodes
         // after the species'), recorded before the first samples.
         let count = scene.instances.len() as u32;
-        let gpu_top = scene.top.is_empty() && count > 0;
+        let gpu_top = scene.top_level_trees().filter(|_| scene.top.is_empty());
         let mut nodes = a.nodes;
-        if gpu_top {
-            nodes.resize(a.top_base as usize + 2 * count as usize - 1, crate::trace::bvh::BvhNode::default());
+        if let Some((trees, ground)) = gpu_top {
+            let top = super::top_level::top_nodes(trees, ground);
+            nodes.resize((a.top_base + top) as usize, crate::trace::bvh::BvhNode::default());
         }
         let nodes_bytes = std::mem::size_of_val(&nodes[..]) as u64;
         if nodes_bytes > limit {
@@ -366,9 +367,9 @@ impl PathTracer {
             storage(device, "trace texels", bytemuck::cast_slice(&non_empty(a.texels))),
             storage(device, "environment", bytemuck::cast_slice(&env)),
         ];
-        let top_job = gpu_top.then(|| {
+        let top_job = gpu_top.map(|(trees, ground)| {
             let source = storage(device, "trees as loaded", bytemuck::cast_slice(&scene.instances));
-            self.top.prepare(device, &arrays[0], &arrays[2], &source, &arrays[3], count, a.top_base)
+            self.top.prepare(device, &arrays[0], &arrays[2], &source, &arrays[3], trees, a.top_base, ground)
         });
         let (accum, group) = self.image(device, &trace_params, &params, &arrays, (width, height));
         let bytes = arrays.iter().map(wgpu::Buffer::size).sum::<u64>() + accum.size();
@@ -449,6 +450,14 @@ impl PathTracer {
         (accum, group)
     }
 
+    /// Records the build of `target`'s top level on the GPU, if it waits for
+    /// one (the first [`Self::dispatch`] records it otherwise).
+    pub fn build_top(&self, encoder: &mut wgpu::CommandEncoder, target: &mut PathScene) {
+        if let Some(job) = target.top_job.take() {
+            self.top.encode(encoder, &job);
+        }
+    }
+
     /// Records one dispatch adding `samples` (at most
     /// [`SAMPLES_PER_DISPATCH`]) samples a pixel to `target` with `params`
     /// ([`path_params`]; its sample index is set here). One dispatch per
@@ -466,9 +475,7 @@ impl PathTracer {
         let mut params = PathParams { sample: first_sample.wrapping_add(target.samples), samples, ..*params };
         params.env[0] = if target.environment { 1.0 } else { 0.0 };
         queue.write_buffer(&target.params, 0, bytemuck::bytes_of(&params));
-        if let Some(job) = target.top_job.take() {
-            self.top.encode(encoder, &job);
-        }
+        self.build_top(encoder, target);
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &target.group, &[]);
@@ -480,7 +487,8 @@ impl PathTracer {
     /// where given (else the view's sun and sky), into a `width`×`height`
     /// image of linear radiance (rgb, row-major, top row first), `options.spp`
     /// samples per pixel, waiting for the GPU; `progress(samples done)` after
-    /// each dispatch.
+    /// the top level's build (0: its own submission, so it can be timed) and
+    /// after each dispatch.
     ///
     /// # Errors
     /// See [`Self::upload`].
@@ -498,6 +506,11 @@ impl PathTracer {
     ) -> Result<Vec<[f32; 3]>, String> {
         let mut target = self.upload(&ctx.device, scene, environment, (width, height))?;
         let params = path_params(view, options, (width, height), view.eye);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.build_top(&mut encoder, &mut target);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.device.poll(wgpu::PollType::wait_indefinitely()).expect("wait for the GPU");
+        progress(0);
         while target.samples < options.spp.max(1) {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             let samples = SAMPLES_PER_DISPATCH.min(options.spp.max(1) - target.samples);

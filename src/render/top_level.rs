@@ -21,14 +21,14 @@ pub struct TopBuild {
     pub padded: u32,
     /// Where the top level starts in the nodes.
     pub top_base: u32,
-    /// Padding (0).
-    pub pad: u32,
+    /// 1: instance `count` is the ground, beside the trees at the root.
+    pub ground: u32,
 }
 
 /// The build's pipelines, one per pass.
 pub struct TopLevel {
     layout: wgpu::BindGroupLayout,
-    /// bounds, codes, sort, gather, split, refit.
+    /// bounds, codes, sort, gather, split, refit, join.
     passes: Vec<wgpu::ComputePipeline>,
 }
 
@@ -66,7 +66,14 @@ pub fn refit_levels(count: u32) -> u32 {
     31 + (32 - count.saturating_sub(1).leading_zeros())
 }
 
-const ENTRIES: [&str; 6] = ["top_bounds", "top_codes", "top_sort", "top_gather", "top_split", "top_refit"];
+const ENTRIES: [&str; 7] = ["top_bounds", "top_codes", "top_sort", "top_gather", "top_split", "top_refit", "top_join"];
+
+/// Nodes of the top level over `trees` trees, with or without the ground
+/// beside them at the root.
+#[must_use]
+pub fn top_nodes(trees: u32, ground: bool) -> u32 {
+    (2 * trees).saturating_sub(1) + 2 * u32::from(ground)
+}
 
 impl TopLevel {
     /// Creates the pipelines.
@@ -114,10 +121,12 @@ impl TopLevel {
     }
 
     /// A build of the top level over the `count` trees in `source` into
-    /// `nodes` (from `top_base`, 2·count − 1 nodes) and `instances` (the
+    /// `nodes` (from `top_base`, [`top_nodes`] of them) and `instances` (the
     /// trees in the leaves' order), with `species` (whose roots give each
-    /// tree's box). Every tree's species must have nodes (`TraceScene::place`
-    /// leaves out the others). `count` ≥ 1.
+    /// tree's box). With `ground`, instance `count` (after the trees; already
+    /// in `instances` at that place) is the ground: a leaf beside the trees'
+    /// hierarchy at the root. Every tree's species must have nodes
+    /// (`TraceScene::place` leaves out the others). `count` ≥ 1.
     #[allow(clippy::too_many_arguments)]
     #[must_use]
     pub fn prepare(
@@ -129,9 +138,10 @@ impl TopLevel {
         instances: &wgpu::Buffer,
         count: u32,
         top_base: u32,
+        ground: bool,
     ) -> TopJob {
         let padded = count.max(2).next_power_of_two();
-        let build = TopBuild { count, padded, top_base, pad: 0 };
+        let build = TopBuild { count, padded, top_base, ground: u32::from(ground) };
         let stride = device.limits().min_uniform_buffer_offset_alignment.max(16);
         let steps = sort_steps(padded);
         let mut step_bytes = vec![0u8; steps.len() * stride as usize];
@@ -205,6 +215,11 @@ impl TopLevel {
                 run(&mut pass, 5, count - 1, 0);
             }
         }
+        if job.build.ground == 1 {
+            pass.set_pipeline(&self.passes[6]);
+            pass.set_bind_group(0, &job.group, &[0]);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
     }
 }
 
@@ -222,8 +237,8 @@ fn groups(threads: u32) -> (u32, u32) {
 #[cfg(not(target_arch = "wasm32"))]
 impl TopLevel {
     /// `scene` with its top level built on the GPU and read back (its
-    /// instances in the leaves' order): what the tracer walks, for tests and
-    /// figures. A scene of no trees comes back as it is.
+    /// trees in the leaves' order): what the tracer walks, for tests and
+    /// figures. A scene of no instances comes back as it is.
     #[must_use]
     pub fn built(
         &self,
@@ -231,15 +246,12 @@ impl TopLevel {
         scene: &crate::trace::scene::TraceScene,
     ) -> crate::trace::scene::TraceScene {
         use crate::trace::bvh::BvhNode;
-        let count = scene.instances.len() as u32;
-        if count == 0 {
-            return scene.clone();
-        }
+        let Some((count, ground)) = scene.top_level_trees() else { return scene.clone() };
         let a = scene.arrays();
         let top_base = a.top_base;
         let mut nodes = a.nodes;
         nodes.truncate(top_base as usize);
-        nodes.resize(top_base as usize + 2 * count as usize - 1, BvhNode::default());
+        nodes.resize((top_base + top_nodes(count, ground)) as usize, BvhNode::default());
         let rw = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let init = |label, contents: &[u8], usage| {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
@@ -248,7 +260,7 @@ impl TopLevel {
         let species = init("trace species", bytemuck::cast_slice(&a.species), wgpu::BufferUsages::STORAGE);
         let source = init("trees as loaded", bytemuck::cast_slice(&scene.instances), wgpu::BufferUsages::STORAGE);
         let instances = init("trees", bytemuck::cast_slice(&scene.instances), rw);
-        let job = self.prepare(&ctx.device, &nodes_buf, &species, &source, &instances, count, top_base);
+        let job = self.prepare(&ctx.device, &nodes_buf, &species, &source, &instances, count, top_base, ground);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.encode(&mut encoder, &job);
         ctx.queue.submit([encoder.finish()]);

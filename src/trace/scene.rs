@@ -353,16 +353,33 @@ impl TraceScene {
         Self { species, top: Vec::new(), instances }
     }
 
+    /// The trees the GPU's top level is built over and whether the ground
+    /// stands beside them: the last instance is the ground where it has no
+    /// tint (the terrain, `load`) and trees precede it. `None`: no instances.
+    #[must_use]
+    pub fn top_level_trees(&self) -> Option<(u32, bool)> {
+        let n = self.instances.len() as u32;
+        let ground = n > 1 && self.instances.last().is_some_and(|i| i.tint() == 0);
+        (n > 0).then_some((n - u32::from(ground), ground))
+    }
+
     /// [`Self::place`] with the top level built on the CPU (the binned
     /// surface area heuristic over the trees' placed boxes): the twin the
     /// tests walk beside the GPU's build.
     #[must_use]
     pub fn build(species: Vec<TraceSpecies>, instances: &[Instance]) -> Self {
-        let placed = Self::place(species, instances);
-        let boxes: Vec<(Vec3, Vec3)> = placed.instances.iter().map(|g| placed.placed_box(g)).collect();
+        Self::place(species, instances).with_cpu_top()
+    }
+
+    /// The scene with its top level built on the CPU by the binned surface
+    /// area heuristic (its instances in the leaves' order): [`Self::build`]'s
+    /// second half, and `sylva render --path-trace --top-level cpu`.
+    #[must_use]
+    pub fn with_cpu_top(self) -> Self {
+        let boxes: Vec<(Vec3, Vec3)> = self.instances.iter().map(|g| self.placed_box(g)).collect();
         let (top, order) = build_nodes(&boxes);
-        let instances = order.iter().map(|&i| placed.instances[i as usize]).collect();
-        Self { species: placed.species, top, instances }
+        let instances = order.iter().map(|&i| self.instances[i as usize]).collect();
+        Self { species: self.species, top, instances }
     }
 
     /// A tree's species box placed: the box around its eight corners. Twin:
@@ -428,7 +445,8 @@ impl TraceScene {
                     + texels
             })
             .sum();
-        // (An unbuilt top level: the 2n − 1 nodes the GPU's build makes.)
+        // (An unbuilt top level: the nodes the GPU's build makes, 2n − 1 for
+        // n instances with or without the ground beside the trees.)
         let top = if self.top.is_empty() { (2 * self.instances.len()).saturating_sub(1) } else { self.top.len() };
         (species + top * std::mem::size_of::<BvhNode>() + std::mem::size_of_val(&self.instances[..])) as u64
     }

@@ -221,7 +221,9 @@ fn check_top(top: &[sylva::trace::bvh::BvhNode], trees: usize) -> Vec<(Vec3, Vec
 /// bitonic sort, Karras 2012's splits, refits) holds every tree once, boxes
 /// each as the CPU places it, and leads the walk to the trees the CPU's
 /// binned-SAH top level leads it to — on a stand with trees standing on the
-/// same spot (equal codes), and on scenes of one, two and three trees.
+/// same spot (equal codes) and the ground beside them (an instance without a
+/// tint, last: a leaf beside the trees' hierarchy at the root), and on scenes
+/// of one, two and three trees.
 #[test]
 fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds() {
     use sylva::render::top_level::TopLevel;
@@ -229,7 +231,11 @@ fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds(
     let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
     let probe = TraceProbe::new(&ctx.device);
     let top_level = TopLevel::new(&ctx.device);
-    let species: Vec<TraceSpecies> = SPECIES.iter().map(|n| traced(n)).collect();
+    let mut species: Vec<TraceSpecies> = SPECIES.iter().map(|n| traced(n)).collect();
+    // The ground: a 200 m square, one opaque "species" of two triangles.
+    let corner = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+    let (a, b, c, d) = (corner(-25.0, -25.0), corner(175.0, -25.0), corner(175.0, 175.0), corner(-25.0, 175.0));
+    species.push(TraceSpecies::opaque(Bvh::build(&[Triangle::new(a, b, c), Triangle::new(a, c, d)])));
     let mut rng = Rng(0x5eed_0048);
     let mut trees: Vec<Instance> = (0..700)
         .map(|i| Instance {
@@ -246,6 +252,7 @@ fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds(
         trees.push(Instance { yaw: i as f32, ..trees[7] });
     }
     trees.push(Instance { species: 9, ..trees[3] });
+    trees.push(Instance { position: Vec3::ZERO, yaw: 0.0, scale: 1.0, aspect: 1.0, species: 3, tint: 0 });
     for n in [1, 2, 3, trees.len()] {
         let cpu = TraceScene::build(species.clone(), &trees[..n]);
         let placed = TraceScene::place(species.clone(), &trees[..n]);
@@ -253,6 +260,8 @@ fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds(
         let gpu = top_level.built(&ctx, &placed);
         let kept = placed.instances.len();
         assert_eq!(kept, n.min(trees.len() - 1), "the tree of no species is left out");
+        let ground = n == trees.len();
+        assert_eq!(placed.top_level_trees(), Some(((kept - usize::from(ground)) as u32, ground)));
         let leaves = check_top(&gpu.top, kept);
         // The trees in curve order: the same trees, each boxed as the CPU boxes it.
         let ids = |s: &TraceScene| {
@@ -269,6 +278,9 @@ fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds(
         if n < 100 {
             continue;
         }
+        // The ground beside the trees at the root, and last.
+        assert_eq!((gpu.top[1].count, gpu.top[1].first), (1, kept as u32 - 1));
+        assert_eq!(gpu.instances.last().unwrap().tint(), 0);
         // In curve order: neighbours in the list stand near each other.
         let step: f32 = gpu
             .instances
@@ -300,7 +312,7 @@ fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds(
             };
             differ += usize::from(!same);
         }
-        assert!(met > 400, "{met} rays met trees");
+        assert!(met > 400, "{met} rays met trees or the ground");
         assert!(differ <= rays.len() / 100, "{differ} of {} rays differ", rays.len());
     }
 }
