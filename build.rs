@@ -22,11 +22,39 @@ fn main() {
         for line in source.lines() {
             let code = line.split("//").next().unwrap_or("").trim();
             if !code.is_empty() {
-                min.push_str(code);
+                min.push_str(&squeeze(code));
                 min.push('\n');
             }
         }
         let file = path.file_name().expect("a file name");
         std::fs::write(Path::new(&out).join(file), min).expect("write a minified module");
     }
+}
+
+/// A line of WGSL without the spaces a lexer does not need: a space stays only
+/// between two word characters (`let x`, `fn f`) and between two operator
+/// characters (`* -1`, where `*-` could read as one token); beside brackets,
+/// commas, colons and the rest it goes (`a + b` → `a+b`, `f(x, y)` →
+/// `f(x,y)`). WGSL's template lists are found from the tokens, not the
+/// spacing, so `a < b` and `a<b` read alike.
+fn squeeze(line: &str) -> String {
+    let word = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '.';
+    let op = |c: char| "+-*/%&|^<>=!".contains(c);
+    let chars: Vec<char> = line.chars().collect();
+    let mut out = String::with_capacity(line.len());
+    for (i, &c) in chars.iter().enumerate() {
+        if c == ' ' {
+            let before = out.chars().last();
+            let after = chars[i + 1..].iter().copied().find(|&c| c != ' ');
+            let keep = match (before, after) {
+                (Some(a), Some(b)) => (word(a) && word(b)) || (op(a) && op(b)),
+                _ => false,
+            };
+            if !keep || before == Some(' ') {
+                continue;
+            }
+        }
+        out.push(c);
+    }
+    out
 }

@@ -310,10 +310,20 @@ impl PathTracer {
     ) -> Result<PathScene, String> {
         let a = scene.arrays();
         let env = environment.map_or_else(|| vec![0.0f32; 4], crate::trace::environment::Environment::gpu_array);
+        // Trees without a top level get theirs built on the GPU (2n − 1 nodes
+        // after the species'), recorded before the first samples.
+        let count = scene.instances.len() as u32;
+        let gpu_top = scene.top_level_trees().filter(|_| scene.top.is_empty());
+        let mut nodes = a.nodes;
+        if let Some((trees, ground)) = gpu_top {
+            let top = super::top_level::top_nodes(trees, ground);
+            nodes.resize((a.top_base + top) as usize, crate::trace::bvh::BvhNode::default());
+        }
         let limit = device.limits().max_storage_buffer_binding_size;
         let pixels = u64::from(width) * u64::from(height);
         for (what, bytes) in [
             ("the image's accumulation (16 bytes a pixel)", pixels * 16),
+            ("the BVH nodes (32 bytes each)", std::mem::size_of_val(&nodes[..]) as u64),
             ("the species' triangles (64 bytes each)", std::mem::size_of_val(&a.triangles[..]) as u64),
             ("the material textures' texels", a.texels.len() as u64 * 4),
             ("the trees", std::mem::size_of_val(&scene.instances[..]) as u64),
@@ -326,23 +336,6 @@ impl PathTracer {
                     limit as f64 / 1e6
                 ));
             }
-        }
-        // Trees without a top level get theirs built on the GPU (2n − 1 nodes
-        // after the species'), recorded before the first samples.
-        let count = scene.instances.len() as u32;
-        let gpu_top = scene.top_level_trees().filter(|_| scene.top.is_empty());
-        let mut nodes = a.nodes;
-        if let Some((trees, ground)) = gpu_top {
-            let top = super::top_level::top_nodes(trees, ground);
-            nodes.resize((a.top_base + top) as usize, crate::trace::bvh::BvhNode::default());
-        }
-        let nodes_bytes = std::mem::size_of_val(&nodes[..]) as u64;
-        if nodes_bytes > limit {
-            return Err(format!(
-                "the BVH nodes take {:.1} MB, more than this GPU binds in one buffer ({:.1} MB): trace fewer trees (a shorter reach)",
-                nodes_bytes as f64 / 1e6,
-                limit as f64 / 1e6
-            ));
         }
         let trace_params = GpuTraceParams { top_base: a.top_base, instance_count: count, pad0: 0, pad1: 0 };
         let trace_params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -209,12 +209,12 @@ pub fn load_with(
             continue;
         };
         let extra = pack.meta.mesh_levels[0].variants;
-        let wanted: std::collections::BTreeSet<u32> = instances
+        // (A bit per variant: at most MAX_VARIANTS + 1 of them.)
+        let wanted = instances
             .iter()
             .filter(|i| i.species as usize == si)
-            .map(|i| variant_of(u32::from(i.tint.saturating_sub(1)), extra))
-            .collect();
-        let shapes = TraceSpecies::of_pack_variants(&pack, |v| wanted.contains(&v))?;
+            .fold(0u32, |m, i| m | 1 << variant_of(u32::from(i.tint.saturating_sub(1)), extra).min(31));
+        let shapes = TraceSpecies::of_pack_variants(&pack, |v| wanted >> v.min(31) & 1 == 1)?;
         species_triangles.push((s.name.clone(), shapes.iter().flatten().next().map_or(0, |t| t.bvh.triangles.len())));
         entry.push(
             shapes
