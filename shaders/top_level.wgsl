@@ -258,7 +258,10 @@ fn top_split(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgrou
 
 // Inner node k's box from its children's. Run once per level of the tree
 // (inner boxes start empty and only grow towards their union, so a read of a
-// box another thread is writing is never too large).
+// box another thread is writing is never too large: each 32-bit word read is
+// the old or the new value, both within the final box, and first and count
+// never change; WGSL itself leaves such a race's result undefined, and
+// ordered-integer atomics would make it formal at a cost).
 @compute @workgroup_size(64)
 fn top_refit(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let k = thread(id, groups);

@@ -1,7 +1,7 @@
 // The tracer's two levels (Dietrich et al. 2005, §4.1): the top level over the
 // trees walked front to back, each tree entered carried into its species'
 // model space and walked there (trace_bvh). Twin: src/trace/scene.rs. Needs
-// trace.wgsl; the composing module declares (beside trace.wgsl's `bvh_nodes`,
+// trace_types.wgsl and trace.wgsl; the composing module declares (beside trace.wgsl's `bvh_nodes`,
 // which hold the species' nodes and then the top level's, and `bvh_tris`)
 // `trace_params: TraceParams` (uniform), `trace_instances: array<TraceInstance>`,
 // `trace_species: array<TraceSpecies>`, `trace_materials: array<TraceMaterial>`

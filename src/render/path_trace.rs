@@ -317,7 +317,9 @@ impl PathTracer {
         let mut nodes = a.nodes;
         if let Some((trees, ground)) = gpu_top {
             let top = super::top_level::top_nodes(trees, ground);
-            nodes.resize((a.top_base + top) as usize, crate::trace::bvh::BvhNode::default());
+            // (Its root empty until built: a walk before the build meets nothing.)
+            let empty = crate::trace::bvh::BvhNode { min: [3e38; 3], max: [-3e38; 3], ..Default::default() };
+            nodes.resize((a.top_base + top) as usize, empty);
         }
         let limit = device.limits().max_storage_buffer_binding_size;
         let pixels = u64::from(width) * u64::from(height);

@@ -3,7 +3,8 @@
 //! 2012, §3–4) recorded in the command buffer that traces the view's first
 //! samples, so the CPU hands over the trees as loaded and never orders them.
 //! The layout is the walks' (an inner node's children side by side; a leaf a
-//! tree), 2n − 1 nodes for n trees after the species' nodes. The CPU's
+//! tree), 2n − 1 nodes for n instances after the species' nodes (the ground
+//! beside the trees at the root). The CPU's
 //! binned-SAH top level (`TraceScene::build`) stays the twin the tests walk.
 
 use wgpu::util::DeviceExt;
@@ -17,7 +18,7 @@ use super::shaders;
 pub struct TopBuild {
     /// Trees.
     pub count: u32,
-    /// The sort's length: the power of two at or above `count`.
+    /// The sort's length: the power of two at or above `count` (at least 2).
     pub padded: u32,
     /// Where the top level starts in the nodes.
     pub top_base: u32,
@@ -36,7 +37,7 @@ pub struct TopLevel {
 pub struct TopJob {
     group: wgpu::BindGroup,
     build: TopBuild,
-    /// Bitonic steps, each a [`SortStep`] at `stride` in the steps uniform.
+    /// Bitonic steps, each a `SortStep` (k, j) at `stride` in the steps uniform.
     steps: u32,
     stride: u32,
 }

@@ -1,5 +1,6 @@
 //! A scene directory as the tracer holds it for one view: every species'
-//! full mesh once ([`TraceSpecies::of_pack`]), and the trees within reach of
+//! full mesh once, each library variant a tree within reach draws its own
+//! shape ([`TraceSpecies::of_pack_variants`]), and the trees within reach of
 //! the eye placed relative to it (the top level for a view, not for the whole
 //! scene: memory bounded by `reach_m`).
 
@@ -196,6 +197,13 @@ pub fn load_with(
     let mut species = Vec::new();
     let mut species_triangles = Vec::new();
     let mut entry: Vec<Vec<Option<u32>>> = Vec::new();
+    // Per species the variations (0–31) its trees within reach have, a bit each.
+    let mut variations = vec![0u32; m.species.len()];
+    for i in &instances {
+        if let Some(v) = variations.get_mut(i.species as usize) {
+            *v |= 1 << (u32::from(i.tint.saturating_sub(1)) & 31);
+        }
+    }
     for (si, (s, bytes)) in m.species.iter().zip(packs.into_iter().flatten()).enumerate() {
         let pack = match &bytes {
             Some(bytes) => Some(decode_pack(&s.pack, bytes).map_err(|e| e.to_string())?),
@@ -208,13 +216,10 @@ pub fn load_with(
             entry.push(Vec::new());
             continue;
         };
-        let extra = pack.meta.mesh_levels[0].variants;
-        // (A bit per variant: at most MAX_VARIANTS + 1 of them.)
-        let wanted = instances
-            .iter()
-            .filter(|i| i.species as usize == si)
-            .fold(0u32, |m, i| m | 1 << variant_of(u32::from(i.tint.saturating_sub(1)), extra).min(31));
-        let shapes = TraceSpecies::of_pack_variants(&pack, |v| wanted >> v.min(31) & 1 == 1)?;
+        let used = variations[si];
+        let shapes = TraceSpecies::of_pack_variants(&pack, |v, extra| {
+            (0..32).any(|var| used >> var & 1 == 1 && variant_of(var, extra) == v)
+        })?;
         species_triangles.push((s.name.clone(), shapes.iter().flatten().next().map_or(0, |t| t.bvh.triangles.len())));
         entry.push(
             shapes
@@ -523,6 +528,61 @@ mod tests {
         }
     }
 
+    /// The fixture with a squat second shape added to the beech's pack.
+    struct SquatBeech<'a>(DirFiles<'a>);
+
+    impl SceneFiles for SquatBeech<'_> {
+        fn file(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
+            self.0.file(rel)
+        }
+        fn pack(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
+            let bytes = self.0.pack(rel)?;
+            Ok(if rel.ends_with("beech.pack") {
+                bytes.map(|b| crate::trace::scene::with_a_squat_variant(&b))
+            } else {
+                bytes
+            })
+        }
+    }
+
+    /// Each tree takes the shape of its species the raster draws for it:
+    /// `variant_of(variation, variants)`.
+    #[test]
+    fn a_tree_is_traced_in_the_shape_its_variation_draws() {
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small"));
+        let m = Manifest::decode("scene.json", &std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+        let beech = m.species.iter().position(|s| s.name == "beech").unwrap() as u32;
+        let eye = DVec3::new(0.0, 0.0, 0.0);
+        let (plain, _) = load_dir(dir, eye, 5000.0, None).unwrap();
+        let (squat, _) = load_with(&mut SquatBeech(DirFiles(dir)), eye, 5000.0, None).unwrap().unwrap();
+        // Every species placed (no variants: a traced species each, in the manifest's order).
+        assert_eq!(plain.species.len(), m.species.len());
+        assert_eq!(squat.species.len(), m.species.len() + 1);
+        assert_eq!(plain.instances.len(), squat.instances.len());
+        let height = |s: &TraceScene, i: &crate::trace::scene::GpuInstance| {
+            let n = s.species[i.species_index() as usize].bvh.nodes[0];
+            n.max[2] - n.min[2]
+        };
+        let (mut own, mut low) = (0, 0);
+        for (p, q) in plain.instances.iter().zip(&squat.instances) {
+            assert_eq!(p.id, q.id);
+            if p.species_index() != beech {
+                assert_eq!(height(&plain, p), height(&squat, q));
+                continue;
+            }
+            let variant = variant_of(p.tint() - 1, 1);
+            let ratio = height(&squat, q) / height(&plain, p);
+            if variant == 1 {
+                assert!((ratio - 0.5).abs() < 0.05, "tree {}: {ratio}", p.id);
+                low += 1;
+            } else {
+                assert_eq!(ratio, 1.0, "tree {}", p.id);
+                own += 1;
+            }
+        }
+        assert!(own > 10 && low > 10, "{own} beeches in their own shape, {low} squat");
+    }
+
     impl SceneFiles for Rounds<'_> {
         fn file(&mut self, rel: &str) -> Result<Option<Vec<u8>>, String> {
             self.get(rel, false)
@@ -561,8 +621,11 @@ mod tests {
         let last = rounds.last().unwrap();
         assert!(last.iter().all(|(_, pack)| *pack), "{last:?}");
         assert!(rounds[..rounds.len() - 1].iter().flatten().all(|(_, pack)| !pack));
-        // (A species no tree within reach uses is not read: 0 triangles.)
-        let placed = report.species_triangles.iter().filter(|(_, n)| *n > 0).count();
+        // (The fixture's species have no variants: a traced species for each
+        // species a tree within reach stands of.)
+        let placed: std::collections::HashSet<u32> =
+            whole.instances.iter().filter(|i| i.tint() > 0).map(|i| i.species_index()).collect();
+        let placed = placed.len();
         assert_eq!(last.len(), placed);
         // A round a level: the index's nodes of a level together (not one
         // node a round), the tiles, the terrain's levels, its images, the packs.

@@ -124,11 +124,11 @@ impl TraceSpecies {
     /// # Errors
     /// See [`Self::of_pack_variants`].
     pub fn of_pack(pack: &Pack<'_>) -> Result<Self, String> {
-        Ok(Self::of_pack_variants(pack, |v| v == 0)?.swap_remove(0).unwrap_or_default())
+        Ok(Self::of_pack_variants(pack, |v, _| v == 0)?.swap_remove(0).unwrap_or_default())
     }
 
-    /// The shapes of a decoded pack's full mesh (level 0) that `wanted`
-    /// asks for: variant 0 its own vertices, 1… the library's other shapes
+    /// The shapes of a decoded pack's full mesh (level 0) that `wanted(variant,
+    /// extra shapes the level has)` asks for: variant 0 its own vertices, 1… the library's other shapes
     /// of the tree (`MVAR`; a tree draws [`variant_of`](crate::format::mesh::variant_of)
     /// `(variation, variants)`, as the raster's `mesh.wgsl` does). Each its
     /// own BVH; the materials and textures (at full resolution) shared.
@@ -136,7 +136,7 @@ impl TraceSpecies {
     /// # Errors
     /// A pack without a mesh, or whose material textures are block-encoded
     /// (trace the plain pack).
-    pub fn of_pack_variants(pack: &Pack<'_>, wanted: impl Fn(u32) -> bool) -> Result<Vec<Option<Self>>, String> {
+    pub fn of_pack_variants(pack: &Pack<'_>, wanted: impl Fn(u32, u32) -> bool) -> Result<Vec<Option<Self>>, String> {
         use crate::format::mesh::VariantVertex;
         let meta = &pack.meta;
         let level = meta.mesh_levels.first().ok_or_else(|| format!("{}: no mesh to trace", meta.name))?;
@@ -144,7 +144,7 @@ impl TraceSpecies {
         let shapes: Vec<VariantVertex> =
             pack.section(kind::MESH_VARIANTS, 0).map(bytemuck::pod_collect_to_vec).unwrap_or_default();
         let n = vertices.len();
-        let extra = if n == 0 { 0 } else { (level.variants as usize).min(shapes.len() / n) };
+        let extra = shapes.len().checked_div(n).map_or(0, |k| (level.variants as usize).min(k));
         let surfaces = mesh_surfaces(&vertices, &indices);
         let bvh_of = |v: usize| {
             if v == 0 {
@@ -194,7 +194,7 @@ impl TraceSpecies {
         let texels = std::sync::Arc::new(texels);
         Ok((0..=extra)
             .map(|v| {
-                wanted(v as u32).then(|| Self {
+                wanted(v as u32, extra as u32).then(|| Self {
                     bvh: bvh_of(v),
                     materials: materials.clone(),
                     texels: texels.clone(),
@@ -345,7 +345,8 @@ impl TraceScene {
             .filter(|(_, inst)| {
                 let g = GpuInstance::of(inst, 0);
                 let has_nodes = species.get(inst.species as usize).is_some_and(|s| !s.bvh.nodes.is_empty());
-                let scaled = g.scale_xy > 0.0 && g.scale_z > 0.0 && g.scale_xy.is_finite() && g.scale_z.is_finite();
+                // (A scale past 10,000 — a hostile tile's — would place corners at infinity.)
+                let scaled = g.scale_xy > 0.0 && g.scale_z > 0.0 && g.scale_xy < 1e4 && g.scale_z < 1e4;
                 has_nodes && inst.position.is_finite() && inst.yaw.is_finite() && scaled
             })
             .map(|(i, inst)| GpuInstance::of(inst, i as u32))
@@ -427,18 +428,15 @@ impl TraceScene {
     /// instances), counted without concatenating anything.
     #[must_use]
     pub fn gpu_bytes(&self) -> u64 {
-        let mut seen: Vec<&std::sync::Arc<Vec<u32>>> = Vec::new();
+        let mut last: Option<&std::sync::Arc<Vec<u32>>> = None;
         let species: usize = self
             .species
             .iter()
             .map(|s| {
-                // (A variant's texels are its species'.)
-                let texels = if seen.iter().any(|t| std::sync::Arc::ptr_eq(t, &s.texels)) {
-                    0
-                } else {
-                    seen.push(&s.texels);
-                    s.texels.len() * 4
-                };
+                // (A variant's texels are its species', which it follows.)
+                let shared = last.is_some_and(|t| std::sync::Arc::ptr_eq(t, &s.texels));
+                last = Some(&s.texels);
+                let texels = if shared { 0 } else { s.texels.len() * 4 };
                 std::mem::size_of_val(&s.bvh.nodes[..])
                     + std::mem::size_of_val(&s.bvh.triangles[..])
                     + std::mem::size_of_val(&s.materials[..])
@@ -457,8 +455,8 @@ impl TraceScene {
     #[must_use]
     pub fn arrays(&self) -> TraceArrays {
         let mut a = TraceArrays::default();
-        // Texels uploaded once for a species and its variants.
-        let mut shared: Vec<(&std::sync::Arc<Vec<u32>>, u32)> = Vec::new();
+        // Texels uploaded once for a species and its variants (which follow it).
+        let mut shared: Option<(&std::sync::Arc<Vec<u32>>, u32)> = None;
         for s in &self.species {
             a.species.push(GpuSpeciesBvh {
                 node_base: a.nodes.len() as u32,
@@ -468,15 +466,15 @@ impl TraceScene {
                 uv_min: s.uv_min,
                 uv_extent: s.uv_extent,
             });
-            let texel_base = match shared.iter().find(|(t, _)| std::sync::Arc::ptr_eq(t, &s.texels)) {
-                Some(&(_, base)) => base,
+            let texel_base = match shared.filter(|(t, _)| std::sync::Arc::ptr_eq(t, &s.texels)) {
+                Some((_, base)) => base,
                 None => {
                     let base = a.texels.len() as u32;
                     a.texels.extend_from_slice(&s.texels);
-                    shared.push((&s.texels, base));
                     base
                 }
             };
+            shared = Some((&s.texels, texel_base));
             a.materials.extend(s.materials.iter().map(|m| GpuTraceMaterial {
                 texel_base: if m.texel_base == NO_TEXTURE { NO_TEXTURE } else { m.texel_base + texel_base },
                 ..*m
@@ -505,6 +503,36 @@ pub struct TraceArrays {
     pub materials: Vec<GpuTraceMaterial>,
     /// Every species' texels.
     pub texels: Vec<u32>,
+}
+
+/// A pack's bytes with one more shape of its full mesh (`MVAR`, variant 1):
+/// the tree at half its height (z quantised to half). For tests.
+#[cfg(test)]
+pub(crate) fn with_a_squat_variant(bytes: &[u8]) -> Vec<u8> {
+    use crate::format::mesh::VariantVertex;
+    use crate::format::pack::{decode_pack, encode_pack, Section};
+    let pack = decode_pack("a pack", bytes).unwrap();
+    let squat: Vec<VariantVertex> = pack
+        .mesh_vertices(0)
+        .iter()
+        .map(|v| VariantVertex { position: [v.position[0], v.position[1], v.position[2] / 2], normal_oct: [0, 0] })
+        .collect();
+    let mut meta = pack.meta.clone();
+    meta.mesh_levels[0].variants = 1;
+    let mut sections: Vec<Section> = pack
+        .sections
+        .iter()
+        .filter(|(e, _)| e.kind != kind::META)
+        .map(|(e, d)| Section { kind: e.kind, index: e.index, count: e.count, stride: e.stride, data: d.to_vec() })
+        .collect();
+    sections.push(Section {
+        kind: kind::MESH_VARIANTS,
+        index: 0,
+        count: squat.len() as u32,
+        stride: 8,
+        data: bytemuck::cast_slice(&squat).to_vec(),
+    });
+    encode_pack(&meta, &sections)
 }
 
 #[cfg(test)]
@@ -539,35 +567,12 @@ mod tests {
     /// a tree of a variation taking the shape `variant_of` gives it.
     #[test]
     fn a_species_variants_are_traced_each_with_its_own_shape() {
-        use crate::format::mesh::{variant_of, VariantVertex};
-        use crate::format::pack::{decode_pack, encode_pack, Section};
+        use crate::format::mesh::variant_of;
+        use crate::format::pack::decode_pack;
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/forest-small/species/beech.pack");
-        let bytes = std::fs::read(path).expect("fixture pack (make fixtures)");
-        let pack = decode_pack(path, &bytes).unwrap();
-        // Variant 1: the tree at half its height (z quantised to half).
-        let squat: Vec<VariantVertex> = pack
-            .mesh_vertices(0)
-            .iter()
-            .map(|v| VariantVertex { position: [v.position[0], v.position[1], v.position[2] / 2], normal_oct: [0, 0] })
-            .collect();
-        let mut meta = pack.meta.clone();
-        meta.mesh_levels[0].variants = 1;
-        let mut sections: Vec<Section> = pack
-            .sections
-            .iter()
-            .filter(|(e, _)| e.kind != kind::META)
-            .map(|(e, d)| Section { kind: e.kind, index: e.index, count: e.count, stride: e.stride, data: d.to_vec() })
-            .collect();
-        sections.push(Section {
-            kind: kind::MESH_VARIANTS,
-            index: 0,
-            count: squat.len() as u32,
-            stride: 8,
-            data: bytemuck::cast_slice(&squat).to_vec(),
-        });
-        let bytes = encode_pack(&meta, &sections);
+        let bytes = with_a_squat_variant(&std::fs::read(path).expect("fixture pack (make fixtures)"));
         let pack = decode_pack("squat beech", &bytes).unwrap();
-        let shapes = TraceSpecies::of_pack_variants(&pack, |_| true).unwrap();
+        let shapes = TraceSpecies::of_pack_variants(&pack, |_, extra| extra == 1).unwrap();
         assert_eq!(shapes.len(), 2);
         let (own, squat) = (shapes[0].clone().unwrap(), shapes[1].clone().unwrap());
         let height = |s: &TraceSpecies| s.bvh.nodes[0].max[2] - s.bvh.nodes[0].min[2];
@@ -575,7 +580,7 @@ mod tests {
         assert!(std::sync::Arc::ptr_eq(&own.texels, &squat.texels) && !own.texels.is_empty());
         assert_eq!(own.materials, squat.materials);
         // Only the shapes asked for are built.
-        let some = TraceSpecies::of_pack_variants(&pack, |v| v == 1).unwrap();
+        let some = TraceSpecies::of_pack_variants(&pack, |v, _| v == 1).unwrap();
         assert!(some[0].is_none() && some[1].is_some());
         // A tree of variation 15 draws variant 0, of 16 variant 1.
         assert_eq!((variant_of(15, 1), variant_of(16, 1)), (0, 1));

@@ -252,7 +252,7 @@ impl Photo {
     /// this one's; `bytes_loaded`: the files as loaded, packs inflated;
     /// `load_ms`: from the start to the scene built, 0 until then;
     /// `build_ms`: the last pass over the files, which decodes the packs and
-    /// builds the species' BVHs and the top level) and,
+    /// builds the species' BVHs; the top level is built on the GPU) and,
     /// ready, `trees, trees_in_scene, instanced_triangles,
     /// terrain_triangles, gpu_bytes`; failed, `error`.
     pub fn json(&self) -> String {

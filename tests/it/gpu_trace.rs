@@ -315,6 +315,13 @@ fn the_top_level_built_on_the_gpu_holds_every_tree_and_finds_what_the_cpu_finds(
         assert!(met > 400, "{met} rays met trees or the ground");
         assert!(differ <= rays.len() / 100, "{differ} of {} rays differ", rays.len());
     }
+    // One tree and the ground: the root over the ground's leaf and the tree's.
+    let pair = [trees[0], *trees.last().unwrap()];
+    let placed = TraceScene::place(species.clone(), &pair);
+    assert_eq!(placed.top_level_trees(), Some((1, true)));
+    let gpu = top_level.built(&ctx, &placed);
+    check_top(&gpu.top, 2);
+    assert_eq!([gpu.top[1].count, gpu.top[1].first, gpu.top[2].count, gpu.top[2].first], [1, 1, 1, 0]);
 }
 
 /// The raster's reference (full meshes everywhere, leaf cards alpha-tested at
