@@ -73,6 +73,21 @@ pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages, read_only: bo
     storage(binding, visibility, read_only)
 }
 
+/// A uniform buffer read by `visibility`, bound at a dynamic offset where `dynamic`.
+#[must_use]
+pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
 /// A filterable 2D-array texture read by the fragment stage (material and billboard arrays).
 #[must_use]
 pub fn texture_array_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {

@@ -10,7 +10,7 @@
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
-use super::layouts::storage_entry;
+use super::layouts::{storage_entry, uniform_entry};
 use super::shaders;
 use crate::trace::scene::TraceScene;
 
@@ -270,7 +270,7 @@ impl PathTracer {
             source: wgpu::ShaderSource::Wgsl(shaders::PATH_TRACE.source().into()),
         });
         let c = wgpu::ShaderStages::COMPUTE;
-        let mut entries = vec![uniform_entry(0, c), uniform_entry(1, c)];
+        let mut entries = vec![uniform_entry(0, c, false), uniform_entry(1, c, false)];
         entries.extend((2..8).map(|b| storage_entry(b, c, true)));
         entries.push(storage_entry(8, c, false));
         entries.push(storage_entry(9, c, true));
@@ -524,19 +524,6 @@ impl PathTracer {
     }
 }
 
-fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 /// The pass's uniform for `view` and `options` at `size`, the scene placed
 /// around `scene_origin` (scene frame; `view.eye` where it was placed for
 /// this view), its sample index and count set per dispatch.
@@ -616,7 +603,7 @@ impl PathDisplay {
         let f = wgpu::ShaderStages::FRAGMENT;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("path display"),
-            entries: &[uniform_entry(0, f), storage_entry(1, f, true)],
+            entries: &[uniform_entry(0, f, false), storage_entry(1, f, true)],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("path display"),

@@ -9,7 +9,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::layouts::storage_entry;
+use super::layouts::{storage_entry, uniform_entry};
 use super::shaders;
 
 /// The build's uniform. Must match `TopBuild` in `shaders/top_level.wgsl`.
@@ -85,17 +85,7 @@ impl TopLevel {
             source: wgpu::ShaderSource::Wgsl(shaders::TOP_LEVEL.source().into()),
         });
         let c = wgpu::ShaderStages::COMPUTE;
-        let uniform = |binding, dynamic| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: c,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: dynamic,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let mut entries = vec![uniform(0, false), uniform(1, true)];
+        let mut entries = vec![uniform_entry(0, c, false), uniform_entry(1, c, true)];
         // (2 nodes, 3 species, 4 the trees as loaded, 5 in curve order, 6 codes, 7 parents, 8 the centres' box.)
         entries.extend((2..9).map(|b| storage_entry(b, c, b == 3 || b == 4)));
         let layout = device
