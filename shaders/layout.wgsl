@@ -47,7 +47,10 @@ struct View {
     // heights of a batch's tallest tree (px, × quality) below which its trees are all / begin to be
     // replaced by the canopy rasters (x = 0: no canopy); zw unused.
     canopy: vec4<f32>,
+    // The sky and the air (`Sky` in sky_model.wgsl).
+    sky: Sky,
 };
+
 
 // One batch of the resident pool. Must match `GpuBatch` in src/format/tile.rs
 // (`instance_offset` is rebased to the instance pool on upload).

@@ -13,11 +13,51 @@ const SKY_TINT: vec3<f32> = vec3<f32>(1.1, 1.12, 1.18);
 const GROUND_BOUNCE: vec3<f32> = vec3<f32>(0.62, 0.58, 0.5);
 
 fn sky_light(n: vec3<f32>, is_leaf: bool, view: View) -> vec3<f32> {
+    if light_on(view, LIGHT_SKY_LIGHT) {
+        // The sky's own light (src/render/sky_light.rs); a leaf sees the sky
+        // on both its sides, the far side's through it.
+        if is_leaf {
+            let t = leaf_share(view);
+            return (1.0 - t) * sky_sh(n, view) + t * sky_sh(-n, view);
+        }
+        return sky_sh(n, view);
+    }
     var up = 0.5 + 0.5 * clamp(n.z, -1.0, 1.0);
     if is_leaf {
         up = 0.5 + 0.25 * clamp(n.z, -1.0, 1.0);
     }
     return view.ambient.rgb * mix(GROUND_BOUNCE, SKY_TINT, up);
+}
+
+fn light_on(view: View, part: u32) -> bool {
+    return (view.sky.parts.x & part) != 0u;
+}
+
+// The share of a leaf's light that comes from its far side: the tracer's
+// leaf (reflecting 1 - t of its albedo, transmitting t) with transmission
+// on, else the old wrap term's quarter.
+fn leaf_share(view: View) -> f32 {
+    return select(0.25, view.sky.sun.w, light_on(view, LIGHT_TRANSMISSION));
+}
+
+// The sky's irradiance over pi on a surface facing n (`sh_irradiance`).
+fn sky_sh(n: vec3<f32>, view: View) -> vec3<f32> {
+    return sh_irradiance(n, view.sky.sh);
+}
+
+// The clear sky's radiance towards the unit direction d (render units,
+// linear sRGB; at and below the horizon, the horizon's). Twin: `SkyLight::sky`.
+fn sky_radiance(d: vec3<f32>, view: View) -> vec3<f32> {
+    return preetham_radiance(d, view.sky.sun.xyz, view.sky.zenith, view.sky.perez);
+}
+
+// Aerial perspective: what lies `rel` from the eye, seen through the air —
+// dimmed by its transmittance and veiled by the light it scatters towards
+// the eye (`air_light_dir`), so far ground fades into the horizon's colour
+// at every sun position (sky_model.wgsl).
+fn aerial(color: vec3<f32>, rel: vec3<f32>, view: View) -> vec3<f32> {
+    let t = air_transmittance(rel, view.eye_hi.z + view.eye_lo.z, view.sky.rayleigh, view.sky.mie);
+    return color * t + sky_radiance(air_light_dir(rel), view) * (1.0 - t);
 }
 
 // Aerial perspective: light scattered by the air between the eye and a
@@ -40,6 +80,9 @@ fn sky_scale(view: View) -> f32 {
 fn haze_at(color: vec3<f32>, rel: vec3<f32>, view: View) -> vec3<f32> {
     if view.params.z == 1u {
         return color;
+    }
+    if light_on(view, LIGHT_AERIAL) {
+        return aerial(color, rel, view);
     }
     let eye_z = view.eye_hi.z + view.eye_lo.z;
     let h = max(eye_z + 0.5 * rel.z, 0.0);
@@ -67,10 +110,30 @@ fn shade(albedo: vec3<f32>, n: vec3<f32>, is_leaf: bool, view: View, sun: f32, o
     let ndl = dot(n, view.sun_dir.xyz);
     var diffuse = max(ndl, 0.0);
     if is_leaf {
-        diffuse = max(ndl, 0.0) * 0.75 + abs(ndl) * 0.25;
+        // Reflected on the lit side, transmitted from the far one; the wrap
+        // term (transmission off) reflects all and adds a quarter of |n.l|.
+        let t = leaf_share(view);
+        diffuse = select(max(ndl, 0.0) + t * max(-ndl, 0.0), (1.0 - t) * max(ndl, 0.0) + t * max(-ndl, 0.0), light_on(view, LIGHT_TRANSMISSION));
     }
-    let sky = sky_light(n, is_leaf, view) * (1.0 - CANOPY_SKY_OCCLUSION * occlusion) * ao;
+    let sky = sky_light(n, is_leaf, view) * sky_visibility(albedo, occlusion, ao, view);
     return albedo * (sky + view.sun_color.rgb * (diffuse * sun));
+}
+
+// The share of the sky a surface sees: the forest's (`occlusion`) and its
+// own tree's (`ao`) occlusion. With the sky's light on, the light that the
+// occluders (leaves, wood, of about the surface's albedo) scatter on is added
+// back: Jimenez et al. 2016 ("Practical Real-Time Strategies for Accurate
+// Indirect Occlusion", §5, eq. 10), the fit of multi-bounce occlusion
+// to a visibility and an albedo.
+fn sky_visibility(albedo: vec3<f32>, occlusion: f32, ao: f32, view: View) -> vec3<f32> {
+    let v = (1.0 - CANOPY_SKY_OCCLUSION * occlusion) * ao;
+    if !light_on(view, LIGHT_SKY_LIGHT) {
+        return vec3<f32>(v);
+    }
+    let a = 2.0404 * albedo - 0.3324;
+    let b = -4.7951 * albedo + 0.6417;
+    let c = 2.7552 * albedo + 0.6903;
+    return max(vec3<f32>(v), ((a * v + b) * v + c) * v);
 }
 
 // `shade` for a pre-filtered surface (a billboard's or an impostor's texel
@@ -88,12 +151,18 @@ fn shade_filtered(albedo: vec3<f32>, m: vec3<f32>, is_leaf: bool, view: View, su
     let ndl = dot(m, view.sun_dir.xyz);
     let spread = clamp(2.0 * r - 1.0, 0.0, 1.0);
     let mean_abs = mix(0.5, abs(ndl) / r, spread);
-    // max(x, 0) = (x + |x|) / 2; leaves: 0.75 max(x, 0) + 0.25 |x|.
+    // max(x, 0) = (x + |x|) / 2; leaves: (1 - t) max(x, 0) + t max(-x, 0)
+    // = (1 - 2t) x / 2 + |x| / 2 (transmission on), else max(x, 0) + t max(-x, 0).
     var diffuse = 0.5 * ndl + 0.5 * mean_abs;
     if is_leaf {
-        diffuse = 0.375 * ndl + 0.625 * mean_abs;
+        let t = leaf_share(view);
+        if light_on(view, LIGHT_TRANSMISSION) {
+            diffuse = 0.5 * (1.0 - 2.0 * t) * ndl + 0.5 * mean_abs;
+        } else {
+            diffuse = 0.5 * (1.0 - t) * ndl + 0.5 * (1.0 + t) * mean_abs;
+        }
     }
-    let sky = sky_light(m, is_leaf, view) * (1.0 - CANOPY_SKY_OCCLUSION * occlusion) * ao;
+    let sky = sky_light(m, is_leaf, view) * sky_visibility(albedo, occlusion, ao, view);
     return albedo * (sky + view.sun_color.rgb * (max(diffuse, 0.0) * sun));
 }
 

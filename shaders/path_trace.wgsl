@@ -38,17 +38,6 @@ struct PathParams {
     leaf_transmit: f32,
     // The eye's height above the scene origin (the raster's haze thins with height).
     eye_z: f32,
-    // The clear sky of Preetham et al. 1999 (src/trace/sky.rs): Perez
-    // coefficients A-E, each for (Y, x, y); the zenith's values over their
-    // distribution (w: render units per kcd/m2); the sun as the fit saw it
-    // (w: 1 for this sky, 0 for the raster's gradient).
-    perez_a: vec4<f32>,
-    perez_b: vec4<f32>,
-    perez_c: vec4<f32>,
-    perez_d: vec4<f32>,
-    perez_e: vec4<f32>,
-    sky_zenith_yxy: vec4<f32>,
-    sky_sun: vec4<f32>,
     // The eye relative to the point the scene was placed around (xyz).
     origin: vec4<f32>,
     // An HDR environment (x: 1 when bound, y: its radiance's scale): the
@@ -56,6 +45,12 @@ struct PathParams {
     env: vec4<f32>,
     // x: 1 to jitter samples within their pixels, 0 for pixel centres.
     sampling: vec4<f32>,
+    // The clear sky of Preetham et al. 1999, the air and the raster light's
+    // parts, as the raster's view has them (sky_model.wgsl): physical light,
+    // LIGHT_SKY the clear sky (else the gradient), LIGHT_AERIAL the air
+    // between the eye and the first hit; the simple light mirrors the
+    // raster's parts.
+    sky: Sky,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -120,27 +115,22 @@ fn sun_sample(r: vec2<f32>) -> vec3<f32> {
     return normalize(a * (cos(phi) * s) + b * (sin(phi) * s) + d * c);
 }
 
-// Perez et al.'s distribution for (Y, x, y). Twin: `perez` in src/trace/sky.rs.
-fn perez(cos_theta: f32, gamma: f32) -> vec3<f32> {
-    let cos_gamma = cos(gamma);
-    return (1.0 + path.perez_a.xyz * exp(path.perez_b.xyz / max(cos_theta, 0.01)))
-        * (1.0 + path.perez_c.xyz * exp(path.perez_d.xyz * gamma) + path.perez_e.xyz * cos_gamma * cos_gamma);
-}
-
 // The clear sky's radiance towards d (render units, linear sRGB).
 // Twin: `PreethamSky::radiance` in src/trace/sky.rs.
 fn sky_preetham(d: vec3<f32>) -> vec3<f32> {
-    let gamma = acos(clamp(dot(d, path.sky_sun.xyz), -1.0, 1.0));
-    let yxy = path.sky_zenith_yxy.xyz * perez(d.z, gamma);
-    let y = max(yxy.z, 1e-4);
-    let big_x = yxy.y * yxy.x / y;
-    let big_z = (1.0 - yxy.y - yxy.z) * yxy.x / y;
-    let rgb = vec3<f32>(
-        3.2406 * big_x - 1.5372 * yxy.x - 0.4986 * big_z,
-        -0.9689 * big_x + 1.8758 * yxy.x + 0.0415 * big_z,
-        0.0557 * big_x - 0.2040 * yxy.x + 1.0570 * big_z,
-    );
-    return max(rgb, vec3<f32>(0.0)) * path.sky_zenith_yxy.w;
+    return preetham_radiance(d, path.sky.sun.xyz, path.sky.zenith, path.sky.perez);
+}
+
+fn part_on(part: u32) -> bool {
+    return (path.sky.parts.x & part) != 0u;
+}
+
+// `color` at `dist` along the primary ray d, seen through the air
+// (`aerial` in light.wgsl, the same model).
+fn through_air(color: vec3<f32>, d: vec3<f32>, dist: f32) -> vec3<f32> {
+    let rel = d * dist;
+    let t = air_transmittance(rel, path.eye_z, path.sky.rayleigh, path.sky.mie);
+    return color * t + sky_preetham(air_light_dir(rel)) * (1.0 - t);
 }
 
 fn env_on() -> bool {
@@ -252,7 +242,7 @@ fn sky(d: vec3<f32>) -> vec3<f32> {
     // albedo x (the sun's irradiance / pi + the sky's mean radiance, taken
     // 45 degrees up in the same azimuth)).
     let sun_on_ground = path.sun_color.rgb * max(path.sun_dir.z, 0.0);
-    if path.sky_sun.w > 0.5 {
+    if part_on(LIGHT_SKY) {
         if d.z < 0.0 {
             let up45 = normalize(vec3<f32>(d.x, d.y, 0.0) + vec3<f32>(0.0, 0.0, length(d.xy) + 1e-3));
             return path.ground.rgb * (sun_on_ground + sky_preetham(up45));
@@ -268,7 +258,7 @@ fn sky(d: vec3<f32>) -> vec3<f32> {
 // The raster's background where a view ray meets nothing (shaders/sky.wgsl):
 // the sky above the horizon, its ground colour below.
 fn raster_background(d: vec3<f32>) -> vec3<f32> {
-    if d.z >= 0.0 {
+    if d.z >= 0.0 || part_on(LIGHT_SKY) {
         return sky(d);
     }
     let scale = path.sky_horizon.rgb / vec3<f32>(0.62, 0.74, 0.86);
@@ -279,6 +269,9 @@ fn raster_background(d: vec3<f32>) -> vec3<f32> {
 // The raster's aerial perspective (haze_at in shaders/light.wgsl): `color`
 // seen through `dist` metres of air along the unit direction d.
 fn raster_haze(color: vec3<f32>, d: vec3<f32>, dist: f32) -> vec3<f32> {
+    if part_on(LIGHT_AERIAL) {
+        return through_air(color, d, dist);
+    }
     let rel = d * dist;
     let h = max(path.eye_z + 0.5 * rel.z, 0.0);
     let f = 1.0 - exp(-dist * (1.0 / 16000.0) * exp(-h / 1500.0));
@@ -412,8 +405,14 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
         var radiance = vec3<f32>(0.0);
         // The density with which the surface sampled the path's last direction.
         var last_pdf = 0.0;
+        // The primary ray and how far it went before its first hit (-1: none).
+        let d0 = d;
+        var primary_t = -1.0;
         for (var bounce = 0u; bounce <= path.bounces; bounce++) {
             let s = hit_surface(o, d);
+            if bounce == 0u {
+                primary_t = s.t;
+            }
             if s.t < 0.0 {
                 if path.simple == 1u && bounce == 0u {
                     radiance += raster_background(d);
@@ -432,16 +431,24 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if path.simple == 1u {
                 // The raster's light (shade() in shaders/light.wgsl with its
-                // shadows off): the sun with a leaf's wrap, the sky's hemisphere
-                // light, the haze; no bounce.
+                // shadows and occlusion off, its parts as the raster's): the
+                // sun on a leaf reflected and transmitted (or the wrap term),
+                // the sky's light (or the hemisphere), the air; no bounce.
                 let ndl = dot(s.normal, path.sun_dir.xyz);
                 var diffuse = max(ndl, 0.0);
                 var up = 0.5 + 0.5 * clamp(s.normal.z, -1.0, 1.0);
+                let t = select(0.25, path.sky.sun.w, part_on(LIGHT_TRANSMISSION));
                 if s.leaf {
-                    diffuse = max(ndl, 0.0) * 0.75 + abs(ndl) * 0.25;
+                    diffuse = select(1.0, 1.0 - t, part_on(LIGHT_TRANSMISSION)) * max(ndl, 0.0) + t * max(-ndl, 0.0);
                     up = 0.5 + 0.25 * clamp(s.normal.z, -1.0, 1.0);
                 }
-                let sky_light = path.ambient.rgb * mix(vec3<f32>(0.62, 0.58, 0.5), vec3<f32>(1.1, 1.12, 1.18), up);
+                var sky_light = path.ambient.rgb * mix(vec3<f32>(0.62, 0.58, 0.5), vec3<f32>(1.1, 1.12, 1.18), up);
+                if part_on(LIGHT_SKY_LIGHT) {
+                    sky_light = sh_irradiance(s.normal, path.sky.sh);
+                    if s.leaf {
+                        sky_light = (1.0 - t) * sky_light + t * sh_irradiance(-s.normal, path.sky.sh);
+                    }
+                }
                 radiance = raster_haze(s.albedo * (sky_light + path.sun_color.rgb * diffuse), d, s.t);
                 break;
             }
@@ -501,6 +508,11 @@ fn path_trace(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         // (A sample gone non-finite is dropped rather than poisoning the pixel.)
+        // All the light the path gathered reaches the eye through the air of
+        // the primary segment (the simple light hazes its own, as the raster).
+        if path.simple == 0u && primary_t > 0.0 && part_on(LIGHT_AERIAL) {
+            radiance = through_air(radiance, d0, primary_t);
+        }
         if all(radiance == radiance) && all(abs(radiance) < vec3<f32>(1e30)) {
             sum += radiance;
         }

@@ -31,6 +31,9 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let far = inv * vec4<f32>(in.ndc, 1e-6, 1.0);
     let dir = normalize(far.xyz / far.w);
     let up = dir.z;
+    if light_on(view, LIGHT_SKY) {
+        return vec4<f32>(sky_background(dir), 1.0);
+    }
     var color: vec3<f32>;
     if up >= 0.0 {
         color = mix(SKY_HORIZON, SKY_ZENITH, sqrt(up));
@@ -38,6 +41,18 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         color = mix(SKY_HORIZON * 0.5 + GROUND * 0.5, GROUND, sqrt(min(-up * 4.0, 1.0)));
     }
     return vec4<f32>(color * sky_scale(view), 1.0);
+}
+
+// The clear sky (Preetham et al. 1999) above the horizon, below it level
+// ground of the background's albedo lit by the sun and the sky — what the path
+// tracer's rays that leave the scene see (`sky` in path_trace.wgsl; CPU twin
+// `SkyLight::radiance`).
+fn sky_background(d: vec3<f32>) -> vec3<f32> {
+    if d.z >= 0.0 {
+        return sky_radiance(d, view);
+    }
+    let up45 = normalize(vec3<f32>(d.xy, length(d.xy) + 1e-3));
+    return GROUND * (view.sun_color.rgb * max(view.sun_dir.z, 0.0) + sky_radiance(up45, view));
 }
 
 // General 4×4 inverse (WGSL has none); used once per pixel of a cheap pass.

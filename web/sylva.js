@@ -17,8 +17,10 @@
 //   v.setImagery(source, {maxZoom = 19})     ground imagery: 'scene' (baked, the default), null (none), or an
 //                                           XYZ/WMTS URL template ({z}/{x}/{y}, {-y}, {TileMatrix}/{TileCol}/{TileRow})
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
-//   v.setLighting({shadows, ao})           the sun's shadows: 'off' | 'low' | 'high' (the default);
-//                                           ao: each tree's own baked ambient occlusion, true (the default) | false
+//   v.setLighting({shadows, ao, parts, turbidity}) the sun's shadows: 'off' | 'low' | 'high' (the default);
+//                                           ao: each tree's own baked ambient occlusion, true (the default) | false;
+//                                           parts: 'all' (the default) | 'none' | 'sky,aerial,sky-light,transmission,soft-shadows';
+//                                           turbidity: the air, 1.7–10 (3, clear)
 //   v.setSeason(season)                     deciduous species in 'leaf-on' (the default) | 'autumn' | 'leaf-off'
 //                                           (bare wood; their bare far tiers are fetched then); evergreens alike in all
 //   v.setDate('2026-10-20')                 each deciduous species as its genus's leaf calendar has it there then,
@@ -413,10 +415,16 @@ class SylvaViewer {
   /** Light settings: `shadows` 'off' | 'low' (2 cascades over 300 m, maps of
    * 0.8 texels per canvas pixel) | 'high' (3 over 600 m, 1.6 texels per pixel,
    * softer; the default); `ao` true (the default: crowns darker inside, as
-   * baked into each species' pack) | false. Throws for an unknown key or value. */
+   * baked into each species' pack) | false; `parts` 'all' (the default) |
+   * 'none' | a comma-separated list of 'sky' (the clear sky of Preetham et
+   * al.), 'aerial' (the air between the eye and the forest), 'sky-light' (the
+   * sky's light on every surface), 'transmission' (leaves that let light
+   * through), 'soft-shadows' (penumbrae as wide as the sun makes them);
+   * `turbidity` 1.7–10 (3, clear, by default). Throws for an unknown key or value. */
   setLighting(options = {}) {
+    const known = ['shadows', 'ao', 'parts', 'turbidity'];
     for (const key of Object.keys(options)) {
-      if (key !== 'shadows' && key !== 'ao') throw new Error(`setLighting: unknown setting ${key} (known: shadows, ao)`);
+      if (!known.includes(key)) throw new Error(`setLighting: unknown setting ${key} (known: ${known.join(', ')})`);
     }
     if (options.ao !== undefined && typeof options.ao !== 'boolean') {
       throw new Error(`setLighting: ao must be true or false, not ${JSON.stringify(options.ao)}`);
@@ -429,6 +437,10 @@ class SylvaViewer {
       this.applyGovernor(); // (while governed, at most the governor's level)
     }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
+    if (options.parts !== undefined || options.turbidity !== undefined) {
+      const merged = { parts: 'all', turbidity: 3, ...this.lighting, ...options };
+      this.viewer.set_light(String(merged.parts), Number(merged.turbidity)); // (throws for unknown parts)
+    }
     this.lighting = { ...this.lighting, ...options };
     this.dirty = SETTLE_FRAMES;
   }

@@ -259,9 +259,17 @@ pub fn methods(list: &str, shadows: ShadowQuality) -> Result<Vec<Method>> {
             "sylva-q0.25" => m(RenderSettings { quality: 0.25, ..base }, 1),
             "sylva-shadows-low" => m(RenderSettings { shadows: ShadowQuality::Low, ..base }, 1),
             "sylva-shadows-high" => m(RenderSettings { shadows: ShadowQuality::High, ..base }, 1),
+            // The light's parts alone or together (issue 49): sylva-light-none
+            // is the light before it, sylva-light-sky+aerial two parts.
+            other if other.starts_with("sylva-light-") => {
+                let parts = other["sylva-light-".len()..].replace('+', ",");
+                let light_parts = parts.parse().map_err(|e: String| anyhow::anyhow!("method {other}: {e}"))?;
+                m(RenderSettings { light_parts, ..base }, 1)
+            }
             other => bail!(
                 "unknown method {other:?}: use reference, mesh, mesh-plain-alpha, per-tree, billboard, impostor, billboard-cloud, ellipsoid, sylva, sylva-plain-alpha, \
-                 sylva-no-canopy, sylva-converged, sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high or all"
+                 sylva-no-canopy, sylva-converged, sylva-q0.5, sylva-q0.25, sylva-shadows-low, sylva-shadows-high, \
+                 sylva-light-PARTS (none, all, or sky, aerial, sky-light, transmission, soft-shadows joined by +) or all"
             ),
         })
     };
@@ -471,6 +479,8 @@ pub struct TracedReference {
     pub reach_m: f64,
     /// The clear sky's turbidity.
     pub turbidity: f32,
+    /// The raster light's parts the trace under the raster's light mirrors.
+    pub raster_parts: crate::render::sky_light::LightParts,
 }
 
 /// The name of the traced image under the raster's light among the traced
@@ -514,12 +524,13 @@ fn trace_frame(
         .map_err(|e| anyhow::anyhow!("the traced reference: {e}"))?;
     let mut out = Vec::new();
     for simple in [false, true] {
-        let view = PathView::under(
+        let view = PathView::under_parts(
             lighting,
             cam.eye_m.as_vec3(),
             cam.forward().as_vec3(),
             cam.fov_y_rad,
-            (!simple).then_some(t.turbidity),
+            t.turbidity,
+            if simple { t.raster_parts } else { crate::render::sky_light::LightParts::ALL },
         );
         let options = PathOptions {
             spp: t.spp,

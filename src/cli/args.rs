@@ -132,6 +132,17 @@ pub(crate) enum Command {
         /// ambient occlusion (on) or without (off).
         #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
         ao: bool,
+        /// Draw every method (the references too; not the sylva-light-…
+        /// methods, which name their own) with these parts of the light: all,
+        /// none (the light before the physical sky), or a comma-separated
+        /// list of sky, aerial, sky-light, transmission, soft-shadows. The
+        /// trace under the raster's light mirrors them.
+        #[arg(long, value_name = "PARTS", default_value = "all")]
+        light_parts: sylva::render::sky_light::LightParts,
+        /// The air's turbidity for the sky, its light and the aerial
+        /// perspective, raster and traced (2 very clear, 3 clear, 6 hazy).
+        #[arg(long, default_value_t = 3.0, value_parser = parse_turbidity)]
+        turbidity: f32,
         /// Draw every method (the references too) with deciduous species in
         /// this season: leaf-on, autumn or leaf-off.
         #[arg(long, value_name = "leaf-on|autumn|leaf-off", default_value = "leaf-on")]
@@ -492,10 +503,22 @@ pub(crate) struct RenderArgs {
     /// bounce: the traced geometry under the raster's light).
     #[arg(long, value_enum, default_value = "physical", requires = "path_trace")]
     pub(crate) light: LightArg,
-    /// --path-trace with the physical light: the air's turbidity for the
-    /// clear sky (Preetham et al. 1999): 2 very clear, 3 clear, 6 hazy.
-    #[arg(long, default_value_t = 3.0, requires = "path_trace", value_parser = parse_turbidity)]
+    /// The air's turbidity (Preetham et al. 1999): the clear sky behind the
+    /// scene, its light and the aerial perspective, drawn or traced — 2 very
+    /// clear, 3 clear, 6 hazy.
+    #[arg(long, default_value_t = 3.0, value_parser = parse_turbidity)]
     pub(crate) turbidity: f32,
+    /// The parts of the light: all (the default), none (the light before the
+    /// physical sky: a gradient sky, a grey haze, a flat ambient, leaves
+    /// lit by a wrap term, fixed-width shadow filtering), or a
+    /// comma-separated list of sky (Preetham's clear sky behind the scene),
+    /// aerial (the air between the eye and what it sees), sky-light (the
+    /// sky's light on every surface), transmission (leaves that let light
+    /// through), soft-shadows (penumbrae as wide as the sun and the
+    /// occluder's distance make them). With --path-trace --light raster, the
+    /// raster light traced mirrors them.
+    #[arg(long, value_name = "PARTS", default_value = "all")]
+    pub(crate) light_parts: sylva::render::sky_light::LightParts,
     /// --path-trace: every ray through its pixel's centre, where a
     /// rasteriser's one sample lies (no anti-aliasing): the coverage check
     /// against `--full-detail` (`sylva compare --foliage`).

@@ -113,6 +113,8 @@ mod cli {
                 thin_px,
                 shadows,
                 ao,
+                light_parts,
+                turbidity,
                 season,
                 save_frames,
                 reference_supersample,
@@ -129,6 +131,11 @@ mod cli {
                 for m in &mut methods {
                     m.settings.ao = ao;
                     m.settings.season = season;
+                    m.settings.turbidity = turbidity;
+                    // The methods that name their own parts (sylva-light-…) keep them.
+                    if !m.name.starts_with("sylva-light-") {
+                        m.settings.light_parts = light_parts;
+                    }
                 }
                 for m in methods.iter_mut() {
                     if m.reference.is_some() {
@@ -142,7 +149,8 @@ mod cli {
                     spp: trace_spp,
                     bounces: 2,
                     reach_m: trace_reach,
-                    turbidity: 3.0,
+                    turbidity,
+                    raster_parts: light_parts,
                 });
                 bench(&scene, &path, methods, &size, frames, &out, save_frames, traced)
             }

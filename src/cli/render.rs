@@ -484,6 +484,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
         light,
         reach,
         turbidity,
+        light_parts,
         environment,
         environment_scale,
         pixel_centres,
@@ -550,6 +551,8 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
             lod_policy,
             representations,
             season,
+            light_parts,
+            turbidity,
             ..RenderSettings::default()
         };
         return render_scene(
@@ -574,6 +577,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
                 reach_m: reach,
                 no_ground: no_terrain,
                 turbidity,
+                light_parts,
                 environment_scale,
                 environment,
                 jitter: !pixel_centres,
@@ -670,8 +674,10 @@ pub(crate) struct PathTraceArgs {
     pub(crate) reach_m: f64,
     /// `--no-terrain`: no ground plane either.
     pub(crate) no_ground: bool,
-    /// The clear sky's turbidity (physical light).
+    /// The clear sky's turbidity.
     pub(crate) turbidity: f32,
+    /// The raster light's parts (`--light raster` mirrors them).
+    pub(crate) light_parts: sylva::render::sky_light::LightParts,
 }
 
 /// `sylva render --path-trace`: the view traced at full detail (issue 48).
@@ -741,10 +747,17 @@ fn path_trace(
     let tracer = PathTracer::new(&ctx.device);
     let several = suns.len() > 1;
     for (label, lighting) in suns {
-        // The physical light's sky: Preetham et al.'s clear sky; the raster
-        // light's: its background as shaders/sky.wgsl draws it.
-        let turbidity = (!args.simple).then_some(args.turbidity);
-        let view = PathView::under(lighting, cam.eye_m.as_vec3(), cam.forward().as_vec3(), cam.fov_y_rad, turbidity);
+        // The physical light: Preetham et al.'s clear sky and the air; the
+        // raster light: its parts as the raster draws them.
+        let parts = if args.simple { args.light_parts } else { sylva::render::sky_light::LightParts::ALL };
+        let view = PathView::under_parts(
+            lighting,
+            cam.eye_m.as_vec3(),
+            cam.forward().as_vec3(),
+            cam.fov_y_rad,
+            args.turbidity,
+            parts,
+        );
         let options = PathOptions {
             spp: args.spp,
             bounces: args.bounces,

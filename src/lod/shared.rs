@@ -48,8 +48,55 @@ pub struct ViewUniform {
     /// batch's tallest tree (px × quality) below which its trees are all / begin to be replaced by the
     /// canopy rasters (x = 0: no canopy); zw unused.
     pub canopy: [f32; 4],
+    /// The sky and the air (issue 49; `crate::render::sky_light`).
+    pub sky: SkyUniform,
 }
-const _: () = assert!(std::mem::size_of::<ViewUniform>() == 656);
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 960);
+
+/// The sky's light, the air between the eye and what it sees, and which of
+/// the light's parts are on. Must match `Sky` in `shaders/layout.wgsl`;
+/// written by `crate::render::sky_light::SkyLight::uniform`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable)]
+pub struct SkyUniform {
+    /// The irradiance over π that the sky and the ground below the horizon
+    /// give a surface facing n, as 9 spherical-harmonic coefficients (rgb)
+    /// pre-multiplied by their basis' constants: `sh[0] + sh[1] y + sh[2] z +
+    /// sh[3] x + sh[4] xy + sh[5] yz + sh[6] (3z² − 1) + sh[7] xz + sh[8] (x² − y²)`.
+    pub sh: [[f32; 4]; 9],
+    /// Preetham et al. 1999's Perez coefficients A–E, each for (Y, x, y).
+    pub perez: [[f32; 4]; 5],
+    /// The zenith's (Y, x, y) over their distribution at the zenith; w: render
+    /// units per kcd/m² (times the dusk's fading).
+    pub zenith: [f32; 4],
+    /// The sun as the sky's fit saw it (xyz); w: the share of a leaf's albedo
+    /// it transmits.
+    pub sun: [f32; 4],
+    /// Rayleigh scattering at the scene origin's height (rgb, per metre); w:
+    /// its scale height (m).
+    pub rayleigh: [f32; 4],
+    /// x: the haze's (Mie) extinction at the scene origin's height (per
+    /// metre), y: its scale height (m); zw unused.
+    pub mie: [f32; 4],
+    /// x: the light's parts that are on (`LIGHT_*` bits); yzw unused.
+    pub parts: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<SkyUniform>() == 304);
+
+/// The light's parts (`SkyUniform::parts`), each switchable. Must match
+/// `LIGHT_*` in `shaders/light.wgsl`.
+/// The clear sky of Preetham et al. 1999 behind the scene (off: the gradient).
+pub const LIGHT_SKY: u32 = 1;
+/// Aerial perspective: the air's extinction and in-scattering (off: the grey haze).
+pub const LIGHT_AERIAL: u32 = 2;
+/// The sky's light as spherical harmonics of the sky (off: the flat hemisphere ambient).
+pub const LIGHT_SKY_LIGHT: u32 = 4;
+/// Leaves that reflect and transmit as the tracer's do (off: the wrap term).
+pub const LIGHT_TRANSMISSION: u32 = 8;
+/// Shadows whose penumbra follows the sun's size and the occluder's distance (off: fixed PCF).
+pub const LIGHT_SOFT_SHADOWS: u32 = 16;
+/// Every part.
+pub const LIGHT_ALL: u32 = 31;
 
 /// Most shadow cascades a view carries.
 pub const MAX_CASCADES: usize = 4;

@@ -379,6 +379,11 @@ pub struct TreeRenderer {
     format: wgpu::TextureFormat,
     /// Draw with the trees' own baked occlusion (on by default).
     pub ao: bool,
+    /// The light (the default daylight by default).
+    pub lighting: Lighting,
+    /// The share of a leaf's albedo it transmits
+    /// ([`super::sky_light::LEAF_TRANSMIT`] by default).
+    pub leaf_transmit: f32,
     /// Alpha-test mesh leaves at their textures' full resolution (the accuracy
     /// reference's [`super::settings::RenderSettings::full_res_alpha`]).
     pub full_res_alpha: bool,
@@ -434,6 +439,8 @@ impl TreeRenderer {
             view_group,
             format,
             ao: true,
+            lighting: Lighting::default(),
+            leaf_transmit: super::sky_light::LEAF_TRANSMIT,
             full_res_alpha: false,
             season: std::cell::Cell::new((Season::LeafOn, [0.0; 4])),
         }
@@ -547,8 +554,9 @@ impl TreeRenderer {
         draws: u32,
     ) -> (wgpu::CommandEncoder, wgpu::Texture) {
         let Shot { clip_from_eye, eye, size: [width, height] } = *shot;
-        let mut uniform = Lighting::default().view_uniform(clip_from_eye, eye, [width, height]);
+        let mut uniform = self.lighting.view_uniform(clip_from_eye, eye, [width, height]);
         uniform.ambient[3] = f32::from(u8::from(self.ao));
+        uniform.sky.sun[3] = self.leaf_transmit;
         uniform.eye_hi[3] = f32::from(u8::from(self.full_res_alpha));
         // Pixels per metre at 1 m, for the lines' minimum width.
         let row1 = Vec3::new(clip_from_eye.x_axis.y, clip_from_eye.y_axis.y, clip_from_eye.z_axis.y);

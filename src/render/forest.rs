@@ -37,6 +37,14 @@ use crate::format::pack::PACK_PARTS;
 use crate::format::{Pack, PackMeta, Tile};
 use crate::scene::{PoolError, Residency, TileSlot};
 
+/// What the sky's uniform depends on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SkyKey {
+    light: [[f32; 3]; 3],
+    parts: u32,
+    turbidity: f32,
+}
+
 /// The GPU-driven forest renderer (see the module docs).
 pub struct ForestRenderer {
     /// Shared bind group layouts.
@@ -65,6 +73,9 @@ pub struct ForestRenderer {
     height_span_m: f32,
     last_view: ViewUniform,
     last_cascades: Vec<ViewUniform>,
+    /// The sky's uniform and what it was worked out for (the SH projection
+    /// runs once per change of the light, not per frame).
+    sky_cache: Option<(SkyKey, super::gpu_data::SkyUniform)>,
     styles_epoch: u64,
 }
 
@@ -114,6 +125,7 @@ impl ForestRenderer {
             height_span_m: 60.0,
             last_view: bytemuck::Zeroable::zeroed(),
             last_cascades: Vec::new(),
+            sky_cache: None,
             styles_epoch: 0,
         }
     }
@@ -352,6 +364,7 @@ impl ForestRenderer {
             shadow_texel: [0.0; 4],
             shadow: [0.0; 4],
             canopy: [self.canopy_px[0], self.canopy_px[1], 0.0, 0.0],
+            sky: self.sky_uniform(settings),
         };
         let mut uniform = uniform;
         self.last_cascades.clear();
@@ -643,6 +656,25 @@ impl ForestRenderer {
         pass.set_bind_group(0, &self.view_group, &[]);
         let cx = PassContext { pools: &self.pools, reach: &self.reach, frame };
         self.passes().iter().filter(|p| p.enabled(frame)).map(|p| p.draw_ids(&mut pass, &cx)).sum()
+    }
+
+    /// The sky's uniform for `settings`' light (worked out again only when it changed).
+    fn sky_uniform(&mut self, settings: &RenderSettings) -> super::gpu_data::SkyUniform {
+        let l = &settings.lighting;
+        let key = SkyKey {
+            light: [l.sun_dir.to_array(), l.sun_color.to_array(), l.ambient.to_array()],
+            parts: settings.light_parts.0,
+            turbidity: settings.turbidity,
+        };
+        if let Some((k, u)) = &self.sky_cache {
+            if *k == key {
+                return *u;
+            }
+        }
+        use super::sky_light::{SkyLight, LEAF_TRANSMIT};
+        let u = SkyLight::new(l, settings.turbidity).uniform(settings.light_parts, LEAF_TRANSMIT, settings.turbidity);
+        self.sky_cache = Some((key, u));
+        u
     }
 
     /// The last frame's view uniform (for the CPU oracle and tests).

@@ -25,6 +25,7 @@ pub mod refine;
 pub mod settings;
 pub mod shaders;
 pub mod shadow;
+pub mod sky_light;
 pub mod species;
 pub mod terrain;
 pub mod top_level;
@@ -145,6 +146,11 @@ impl Lighting {
             shadow_texel: [0.0; 4],
             shadow: [0.0; 4],
             canopy: [0.0; 4],
+            sky: sky_light::SkyLight::new(self, sky_light::DEFAULT_TURBIDITY).uniform(
+                sky_light::LightParts::ALL,
+                sky_light::LEAF_TRANSMIT,
+                sky_light::DEFAULT_TURBIDITY,
+            ),
         }
     }
 }

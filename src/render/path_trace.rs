@@ -12,6 +12,7 @@ use wgpu::util::DeviceExt;
 
 use super::layouts::{storage_entry, uniform_entry};
 use super::shaders;
+use super::sky_light::{sky_scale, LightParts, SkyLight, DEFAULT_TURBIDITY, LEAF_TRANSMIT};
 use crate::trace::scene::TraceScene;
 
 /// The sun's angular radius, radians (0.2666°: its mean apparent size).
@@ -56,20 +57,6 @@ pub struct PathParams {
     pub leaf_transmit: f32,
     /// The eye's height above the scene origin (the raster's haze).
     pub eye_z: f32,
-    /// Preetham et al. 1999's Perez coefficient A for (Y, x, y).
-    pub perez_a: [f32; 4],
-    /// Coefficient B.
-    pub perez_b: [f32; 4],
-    /// Coefficient C.
-    pub perez_c: [f32; 4],
-    /// Coefficient D.
-    pub perez_d: [f32; 4],
-    /// Coefficient E.
-    pub perez_e: [f32; 4],
-    /// The zenith's (Y, x, y) over their distribution; w: render units per kcd/m².
-    pub sky_zenith_yxy: [f32; 4],
-    /// The sun as the sky's fit saw it; w: 1 for the clear sky, 0 for the raster's gradient.
-    pub sky_sun: [f32; 4],
     /// The eye relative to the point the scene was placed around (xyz; the
     /// browser keeps a view's scene while the camera moves near it).
     pub origin: [f32; 4],
@@ -79,6 +66,12 @@ pub struct PathParams {
     /// x: 1 to jitter each sample within its pixel (anti-aliasing), 0 for
     /// rays through pixel centres as a rasteriser samples (coverage comparisons).
     pub sampling: [f32; 4],
+    /// The clear sky (Preetham et al. 1999), the air and the raster light's
+    /// parts, as the raster's view has them ([`super::sky_light`]): under the
+    /// physical light `LIGHT_SKY` draws the clear sky (else the gradient) and
+    /// `LIGHT_AERIAL` puts the air between the eye and the first hit; the
+    /// simple light mirrors the raster's parts.
+    pub sky: super::gpu_data::SkyUniform,
 }
 
 /// How a frame is traced.
@@ -116,9 +109,9 @@ impl Default for PathOptions {
             first_sample: 0,
             bounces: 2,
             simple: false,
-            leaf_transmit: 0.3,
+            leaf_transmit: LEAF_TRANSMIT,
             ground_z: Some(0.0),
-            ground_albedo: Vec3::new(0.16, 0.15, 0.08),
+            ground_albedo: super::sky_light::GROUND_ALBEDO,
             environment_scale: 1.0,
             jitter: true,
         }
@@ -145,9 +138,9 @@ pub struct PathView {
     pub sky_horizon: Vec3,
     /// The raster's ambient light (`Lighting::ambient`), for the simple light.
     pub ambient: Vec3,
-    /// A clear sky (Preetham et al. 1999) instead of the raster's gradient
-    /// (`sky_zenith`, `sky_horizon`) for the physical light.
-    pub sky: Option<crate::trace::sky::PreethamSky>,
+    /// The clear sky (Preetham et al. 1999), the air and the light's parts
+    /// ([`PathParams::sky`]; parts 0: the raster's gradient, no air).
+    pub sky: super::gpu_data::SkyUniform,
 }
 
 /// The raster's sky at the zenith and at the horizon (`shaders/sky.wgsl`'s
@@ -163,7 +156,22 @@ impl PathView {
     /// clear sky of `turbidity` for the physical light (`None`: the gradient).
     #[must_use]
     pub fn under(lighting: &super::Lighting, eye: Vec3, forward: Vec3, fov_y: f32, turbidity: Option<f32>) -> Self {
-        let scale = (lighting.ambient.dot(Vec3::new(0.2126, 0.7152, 0.0722)) / 0.4573).clamp(0.15, 1.5);
+        let parts = if turbidity.is_some() { LightParts::ALL } else { LightParts::NONE };
+        Self::under_parts(lighting, eye, forward, fov_y, turbidity.unwrap_or(DEFAULT_TURBIDITY), parts)
+    }
+
+    /// [`Self::under`] with the light's `parts` (the simple light then
+    /// mirrors a raster frame drawn with them) through air of `turbidity`.
+    #[must_use]
+    pub fn under_parts(
+        lighting: &super::Lighting,
+        eye: Vec3,
+        forward: Vec3,
+        fov_y: f32,
+        turbidity: f32,
+        parts: LightParts,
+    ) -> Self {
+        let scale = sky_scale(lighting);
         Self {
             eye,
             forward,
@@ -173,7 +181,7 @@ impl PathView {
             sky_zenith: RASTER_SKY_ZENITH * scale,
             sky_horizon: RASTER_SKY_HORIZON * scale,
             ambient: lighting.ambient,
-            sky: turbidity.map(|t| crate::trace::sky::PreethamSky::new(lighting.sun_dir, t)),
+            sky: SkyLight::new(lighting, turbidity).uniform(parts, LEAF_TRANSMIT, turbidity),
         }
     }
 }
@@ -559,28 +567,12 @@ pub fn path_params(
         simple: u32::from(options.simple),
         leaf_transmit: options.leaf_transmit.clamp(0.0, 1.0),
         eye_z: view.eye.z,
-        perez_a: [0.0; 4],
-        perez_b: [0.0; 4],
-        perez_c: [0.0; 4],
-        perez_d: [0.0; 4],
-        perez_e: [0.0; 4],
-        sky_zenith_yxy: [0.0; 4],
-        sky_sun: [0.0; 4],
         origin: v4(view.eye - scene_origin, 0.0),
         env: [0.0, options.environment_scale, 0.0, 0.0],
         sampling: [if options.jitter { 1.0 } else { 0.0 }, 0.0, 0.0, 0.0],
+        sky: view.sky,
     };
-    if let (Some(sky), false) = (view.sky, options.simple) {
-        let letter = |k: usize| [sky.perez[0][k], sky.perez[1][k], sky.perez[2][k], 0.0];
-        params.perez_a = letter(0);
-        params.perez_b = letter(1);
-        params.perez_c = letter(2);
-        params.perez_d = letter(3);
-        params.perez_e = letter(4);
-        params.sky_zenith_yxy = [sky.zenith[0], sky.zenith[1], sky.zenith[2], crate::trace::sky::UNITS_PER_KCD];
-        let fitted = sky.fitted_sun();
-        params.sky_sun = [fitted.x, fitted.y, fitted.z, 1.0];
-    }
+    params.sky.sun[3] = options.leaf_transmit.clamp(0.0, 1.0);
     params
 }
 

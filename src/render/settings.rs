@@ -73,6 +73,12 @@ pub struct RenderSettings {
     pub debug_bounds: bool,
     /// Sun and ambient.
     pub lighting: Lighting,
+    /// Which parts of the light are on ([`super::sky_light::LightParts`]):
+    /// all by default; none is the light before issue 49.
+    pub light_parts: super::sky_light::LightParts,
+    /// The air's turbidity (the clear sky, its light and the aerial
+    /// perspective; Preetham et al. 1999: 2 very clear, 3 clear, 6 hazy).
+    pub turbidity: f32,
     /// Clear colour (linear RGBA).
     pub clear: [f64; 4],
     /// Draw the sky (and the ground beyond the terrain) behind the scene. Off
@@ -337,6 +343,8 @@ impl Default for RenderSettings {
             debug_lod: false,
             debug_bounds: false,
             lighting: Lighting::default(),
+            light_parts: super::sky_light::LightParts::ALL,
+            turbidity: super::sky_light::DEFAULT_TURBIDITY,
             clear: [0.55, 0.68, 0.82, 1.0],
             sky: true,
             culling: CullingMode::Batches,

@@ -3,7 +3,8 @@
 //! in `src/render/`) after the modules it uses, each binding declared once:
 //! `layout.wgsl` (the structs every pass reads), `instance.wgsl` (a tree
 //! decoded), `select.wgsl` (the selection rules the passes share; twin
-//! `src/lod/select.rs`), `light.wgsl` (the lighting model), `style_bits.wgsl`
+//! `src/lod/select.rs`), `light.wgsl` (the lighting model), `sky_model.wgsl` (the clear sky and
+//! the air, which the path tracer reads too), `style_bits.wgsl`
 //! (the styles' bit layout), `view.wgsl` (the view, group 0),
 //! `trees.wgsl` (the tree passes' pools and draw params, groups 2 and 3),
 //! `styles.wgsl` (the styles' binding and colours), `shadow.wgsl` (the shadow
@@ -30,6 +31,7 @@ static LAYOUT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/layout.wgsl")
 static INSTANCE_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/instance.wgsl"));
 static SELECT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/select.wgsl"));
 static LIGHT_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/light.wgsl"));
+static SKY_MODEL_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/sky_model.wgsl"));
 static STYLE_BITS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/style_bits.wgsl"));
 static VIEW_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/view.wgsl"));
 static TREES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/trees.wgsl"));
@@ -63,6 +65,7 @@ static TREE_PASS: &[&str] = &[
     INSTANCE_WGSL,
     SELECT_WGSL,
     LIGHT_WGSL,
+    SKY_MODEL_WGSL,
     STYLE_BITS_WGSL,
     VIEW_WGSL,
     TREES_WGSL,
@@ -83,19 +86,22 @@ pub static IMPOSTOR: Shader = Shader(&[TREE_PASS, &[IMPOSTOR_VIEWS_WGSL, IMPOSTO
 pub static CLUSTER: Shader = Shader(&[TREE_PASS, &[CLUSTER_WGSL]]);
 
 /// The cull and LoD-selection compute passes.
-pub static CULL: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, STYLE_BITS_WGSL, VIEW_WGSL, CULL_WGSL]]);
+pub static CULL: Shader =
+    Shader(&[&[LAYOUT_WGSL, SKY_MODEL_WGSL, INSTANCE_WGSL, SELECT_WGSL, STYLE_BITS_WGSL, VIEW_WGSL, CULL_WGSL]]);
 
 /// The sky/ground background.
-pub static SKY: Shader = Shader(&[&[LAYOUT_WGSL, LIGHT_WGSL, VIEW_WGSL, SKY_WGSL]]);
+pub static SKY: Shader = Shader(&[&[LAYOUT_WGSL, LIGHT_WGSL, SKY_MODEL_WGSL, VIEW_WGSL, SKY_WGSL]]);
 
 /// The batch-bounds debug view.
-pub static BOUNDS: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, VIEW_WGSL, BOUNDS_WGSL]]);
+pub static BOUNDS: Shader = Shader(&[&[LAYOUT_WGSL, SKY_MODEL_WGSL, INSTANCE_WGSL, VIEW_WGSL, BOUNDS_WGSL]]);
 
 /// The terrain pass.
-pub static TERRAIN: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, LIGHT_WGSL, VIEW_WGSL, SHADOW_WGSL, TERRAIN_WGSL]]);
+pub static TERRAIN: Shader =
+    Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, LIGHT_WGSL, SKY_MODEL_WGSL, VIEW_WGSL, SHADOW_WGSL, TERRAIN_WGSL]]);
 
 /// The canopy pass.
-pub static CANOPY: Shader = Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, LIGHT_WGSL, VIEW_WGSL, CANOPY_WGSL]]);
+pub static CANOPY: Shader =
+    Shader(&[&[LAYOUT_WGSL, INSTANCE_WGSL, SELECT_WGSL, LIGHT_WGSL, SKY_MODEL_WGSL, VIEW_WGSL, CANOPY_WGSL]]);
 
 /// Progressive refinement's accumulate and resolve passes.
 pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
@@ -104,7 +110,8 @@ pub static ACCUMULATE: Shader = Shader(&[&[ACCUMULATE_WGSL]]);
 pub static TRACE_PROBE: Shader = Shader(&[&[TRACE_TYPES_WGSL, TRACE_WGSL, TRACE_PROBE_RAY_WGSL, TRACE_PROBE_WGSL]]);
 
 /// The path tracer (`render/path_trace.rs`).
-pub static PATH_TRACE: Shader = Shader(&[&[TRACE_TYPES_WGSL, TRACE_WGSL, TRACE_SCENE_WGSL, PATH_TRACE_WGSL]]);
+pub static PATH_TRACE: Shader =
+    Shader(&[&[TRACE_TYPES_WGSL, TRACE_WGSL, TRACE_SCENE_WGSL, SKY_MODEL_WGSL, PATH_TRACE_WGSL]]);
 
 /// The path tracer's image on a colour target (`render/path_trace.rs`).
 pub static PATH_DISPLAY: Shader = Shader(&[&[PATH_DISPLAY_WGSL]]);

@@ -59,7 +59,13 @@ fn bench_judges_every_method_against_the_path_traced_reference_under_both_lights
     let cameras =
         [Camera { eye_m: glam::DVec3::new(0.0, -190.0, 60.0), heading_rad: 0.0, pitch_rad: -0.3, ..Camera::default() }];
     let methods = bench::methods("sylva", sylva::render::shadow::ShadowQuality::Off).unwrap();
-    let traced = bench::TracedReference { spp: 4, bounces: 2, reach_m: 300.0, turbidity: 3.0 };
+    let traced = bench::TracedReference {
+        spp: 4,
+        bounces: 2,
+        reach_m: 300.0,
+        turbidity: 3.0,
+        raster_parts: sylva::render::sky_light::LightParts::ALL,
+    };
     let (w, h) = (96, 54);
     let mut calls = Vec::new();
     let run = bench::run(SCENE, &cameras, &methods, w, h, None, Some(traced), &mut |m, _, _| calls.push(m.to_string()))

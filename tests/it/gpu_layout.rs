@@ -6,7 +6,9 @@
 use std::mem::{offset_of, size_of};
 
 use sylva::format::tile::GpuBatch;
-use sylva::render::gpu_data::{CullDispatch, DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, ViewUniform};
+use sylva::render::gpu_data::{
+    CullDispatch, DrawArgs, DrawParams, GpuMaterial, GpuSpecies, MeshUniform, SkyUniform, ViewUniform,
+};
 
 /// The composed `shader` (`shaders::ALL`), parsed by naga.
 fn parse(shader: &str) -> naga::Module {
@@ -84,8 +86,15 @@ fn shared_structs_match_their_wgsl_twins() {
             shader,
             "View",
             &members!(ViewUniform: clip_from_eye, eye_hi, eye_lo, frustum, sun_dir, sun_color, ambient, lod, params, eye_from_clip, viewport,
-                shadow_from_eye, shadow_texel, shadow, canopy),
+                shadow_from_eye, shadow_texel, shadow, canopy, sky),
             size_of::<ViewUniform>(),
+            None,
+        );
+        check(
+            shader,
+            "Sky",
+            &members!(SkyUniform: sh, perez, zenith, sun, rayleigh, mie, parts),
+            size_of::<SkyUniform>(),
             None,
         );
         check(
@@ -276,7 +285,7 @@ fn the_path_tracer_params_match_their_wgsl_twin() {
         "path_trace",
         "PathParams",
         &members!(PathParams: forward, right, up, sun_dir, sun_color, sky_zenith, sky_horizon, ground, ambient, width, height,
-            sample, samples, bounces, simple, leaf_transmit, eye_z, perez_a, perez_b, perez_c, perez_d, perez_e, sky_zenith_yxy, sky_sun, origin, env, sampling),
+            sample, samples, bounces, simple, leaf_transmit, eye_z, origin, env, sampling, sky),
         size_of::<PathParams>(),
         None,
     );

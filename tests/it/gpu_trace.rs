@@ -420,10 +420,11 @@ fn the_traced_image_converges_at_the_monte_carlo_rate() {
 fn the_gpu_sky_is_its_cpu_twin() {
     use sylva::render::path_trace::{PathOptions, PathTracer, PathView};
     use sylva::trace::scene::TraceScene;
-    use sylva::trace::sky::PreethamSky;
     let ctx = GpuContext::new_headless_blocking().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
     let sun = glam::Vec3::new(0.3, 0.5, 0.4).normalize();
-    let sky = PreethamSky::new(sun, 3.0);
+    let lighting = sylva::render::Lighting { sun_dir: sun, sun_color: glam::Vec3::splat(0.85), ..Default::default() };
+    let sky_light = sylva::render::sky_light::SkyLight::new(&lighting, 3.0);
+    let sky = sky_light.sky;
     // Looking up: every pixel sees the sky (below the horizon the tracer shows the ground's albedo under it).
     let forward = glam::Vec3::new(0.0, 1.0, 1.2).normalize();
     let view = PathView {
@@ -435,7 +436,7 @@ fn the_gpu_sky_is_its_cpu_twin() {
         sky_zenith: glam::Vec3::ZERO,
         sky_horizon: glam::Vec3::ZERO,
         ambient: glam::Vec3::ZERO,
-        sky: Some(sky),
+        sky: sky_light.uniform(sylva::render::sky_light::LightParts::ALL, 0.3, 3.0),
     };
     let (w, h) = (16u32, 9u32);
     let options = PathOptions { spp: 16, ground_z: None, ..PathOptions::default() };
@@ -481,7 +482,7 @@ fn the_tracer_lights_a_plane_as_the_rendering_equation_says() {
         sky_zenith: glam::Vec3::ZERO,
         sky_horizon: glam::Vec3::ZERO,
         ambient: glam::Vec3::ZERO,
-        sky: None,
+        sky: sylva::render::gpu_data::SkyUniform::default(),
     };
     let albedo = glam::Vec3::new(0.5, 0.25, 1.0);
     let options =

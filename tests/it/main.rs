@@ -16,6 +16,7 @@ mod gpu_ao;
 mod gpu_clusters;
 mod gpu_impostor;
 mod gpu_layout;
+mod gpu_light;
 mod gpu_mesh;
 mod gpu_pick;
 mod gpu_refine;
