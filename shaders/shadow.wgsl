@@ -29,6 +29,53 @@ fn shadow_pcf(uv: vec2<f32>, layer: u32, depth: f32) -> f32 {
     return sum / taps;
 }
 
+// The sun's angular radius (0.2666 degrees, its mean apparent size; the path
+// tracer's `SUN_ANGULAR_RADIUS`): its tangent, twice, is the penumbra's width
+// per metre between an occluder and what it shades.
+const SUN_TAN: f32 = 0.004653;
+// Soft shadows: the blocker search's and the filter's reach (texels).
+const SOFT_SEARCH_TEXELS: f32 = 6.0;
+const SOFT_MAX_TEXELS: f32 = 6.0;
+
+// Percentage-closer soft shadows (Fernando 2005, "Percentage-Closer Soft
+// Shadows", §3): the mean depth of the texels nearer the sun than the
+// receiver around it (the blockers), the penumbra's width from the sun's
+// angular size and the blockers' distance (a directional light: 2 tan(r) per
+// metre), then PCF over that width. In metres, not texels: a shadow keeps its
+// softness where one cascade hands over to the next (no seam between
+// cascades), never narrower than a texel.
+fn shadow_soft(uv: vec2<f32>, layer: u32, depth: f32, texel_m: f32, depth_per_m: f32) -> f32 {
+    let size = view.shadow.y;
+    let last = i32(size) - 1;
+    var sum = 0.0;
+    var count = 0.0;
+    for (var y = 0; y < 4; y++) {
+        for (var x = 0; x < 4; x++) {
+            let o = (vec2<f32>(f32(x), f32(y)) - 1.5) / 1.5 * SOFT_SEARCH_TEXELS;
+            let t = clamp(vec2<i32>(floor(uv * size + o)), vec2<i32>(0), vec2<i32>(last));
+            let d = textureLoad(shadow_map, t, i32(layer), 0);
+            // Reversed Z: nearer the sun is greater.
+            if d > depth {
+                sum += d;
+                count += 1.0;
+            }
+        }
+    }
+    if count == 0.0 {
+        return 1.0;
+    }
+    let blocker_m = (sum / count - depth) / max(depth_per_m, 1e-9);
+    let r = clamp(2.0 * SUN_TAN * blocker_m / texel_m, 0.5, SOFT_MAX_TEXELS);
+    var lit = 0.0;
+    for (var y = 0; y < 4; y++) {
+        for (var x = 0; x < 4; x++) {
+            let o = (vec2<f32>(f32(x), f32(y)) - 1.5) / 1.5 * r;
+            lit += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + o / size, layer, depth);
+        }
+    }
+    return lit / 16.0;
+}
+
 // How much of the sun reaches the eye-relative point `rel` with normal `n`
 // (1 lit, 0 shadowed). `lift_m` moves the receiver towards the sun first
 // (flat billboards, which stand for a whole crown, lift by their half width
@@ -49,7 +96,9 @@ fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
     }
     let sun = view.sun_dir.xyz;
     let towards_sun = select(-n, n, dot(n, sun) >= 0.0);
-    let margin = (view.shadow.z + 1.0) / view.shadow.y;
+    let soft = light_on(view, LIGHT_SOFT_SHADOWS);
+    let reach = select(view.shadow.z, SOFT_SEARCH_TEXELS, soft);
+    let margin = (reach + 1.0) / view.shadow.y;
     for (var i = 0u; i < count; i++) {
         let texel = view.shadow_texel[i];
         let p = rel + towards_sun * (SHADOW_NORMAL_OFFSET * texel) + sun * (SHADOW_SUN_OFFSET * texel + lift_m);
@@ -58,6 +107,11 @@ fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
         if all(uv >= vec2<f32>(margin)) && all(uv <= vec2<f32>(1.0 - margin)) && c.z >= 0.0 {
             if c.z > 1.0 {
                 return mix(1.0, open, fade); // above every caster
+            }
+            if soft {
+                let m = view.shadow_from_eye[i];
+                let depth_per_m = length(vec3<f32>(m[0].z, m[1].z, m[2].z));
+                return mix(shadow_soft(uv, i, c.z, texel, depth_per_m), open, fade);
             }
             return mix(shadow_pcf(uv, i, c.z), open, fade);
         }

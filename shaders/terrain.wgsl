@@ -36,8 +36,10 @@ struct TerrainDraw {
     image_uv: vec4<f32>,
     // Layer of the image, NO_IMAGE for none.
     layer: u32,
-    pad0: u32,
-    pad1: u32,
+    // The draws (index + 1; 0: none) of the neighbours of this level drawn
+    // beside it: west | east << 16, south | north << 16 (`height_across`).
+    across_x: u32,
+    across_y: u32,
     pad2: u32,
 };
 
@@ -97,24 +99,57 @@ fn mean_valid(a: vec2<f32>, b: vec2<f32>, c: vec2<f32>, d: vec2<f32>, fallback: 
     return (a.x * a.y + b.x * b.y + c.x * c.y + d.x * d.y) / n;
 }
 
-// Normal at vertex (i, j) from the heights at columns a0/a1 (row j) and rows
-// b0/b1 (column i); missing neighbours count as `h` (a flat side).
-fn grid_normal(t: TerrainDraw, i: u32, j: u32, a0: u32, a1: u32, b0: u32, b1: u32, h: f32, step: f32) -> vec3<f32> {
-    let x0 = height_at(t, a0, j);
-    let x1 = height_at(t, a1, j);
-    let y0 = height_at(t, i, b0);
-    let y1 = height_at(t, i, b1);
+// (height, 1) at vertex (i, j) of tile `t`, where i or j may lie up to a
+// tile beyond its edge: then the neighbour of its level drawn there
+// (`across_x`, `across_y`), else (0, 0) as for a hole. Normals along an edge
+// then take the same differences on both sides — before, each side took its
+// own one-sided difference and the ground's shading broke along the edge
+// (the seam of docs/images/shadows-close.png).
+fn height_across(t: TerrainDraw, i: i32, j: i32) -> vec2<f32> {
+    let n = i32(params.grid);
+    if i >= 0 && i <= n && j >= 0 && j <= n {
+        return height_at(t, u32(i), u32(j));
+    }
+    var ii = i;
+    var jj = j;
+    var k = 0u;
+    if i < 0 {
+        k = t.across_x & 0xffffu;
+        ii = i + n;
+    } else if i > n {
+        k = t.across_x >> 16u;
+        ii = i - n;
+    } else if j < 0 {
+        k = t.across_y & 0xffffu;
+        jj = j + n;
+    } else {
+        k = t.across_y >> 16u;
+        jj = j - n;
+    }
+    if k == 0u || ii < 0 || ii > n || jj < 0 || jj > n {
+        return vec2<f32>(0.0, 0.0);
+    }
+    return height_at(tiles[k - 1u], u32(ii), u32(jj));
+}
+
+// Normal at vertex (i, j) from central differences over `d` steps either
+// side (one-sided where a side is missing: a hole, or an edge with no
+// neighbour drawn beyond it); `h` the vertex's own height.
+fn grid_normal(t: TerrainDraw, i: i32, j: i32, d: i32, h: f32, step: f32) -> vec3<f32> {
+    let x0 = height_across(t, i - d, j);
+    let x1 = height_across(t, i + d, j);
+    let y0 = height_across(t, i, j - d);
+    let y1 = height_across(t, i, j + d);
     let dx = select(h, x1.x, x1.y > 0.5) - select(h, x0.x, x0.y > 0.5);
     let dy = select(h, y1.x, y1.y > 0.5) - select(h, y0.x, y0.y > 0.5);
-    return normalize(vec3<f32>(-dx / max(f32(a1 - a0) * step, 1e-6), -dy / max(f32(b1 - b0) * step, 1e-6), 1.0));
+    let span = f32(d) * step;
+    return normalize(vec3<f32>(-dx / max((x0.y + x1.y) * span, 1e-6), -dy / max((y0.y + y1.y) * span, 1e-6), 1.0));
 }
 
 // The parent level's normal at this tile's even vertex (i, j): differences
 // over the parent's neighbours, two of this tile's steps away.
 fn parent_normal(t: TerrainDraw, i: u32, j: u32, step: f32) -> vec3<f32> {
-    let n = params.grid;
-    let h = height_at(t, i, j).x;
-    return grid_normal(t, i, j, u32(max(i32(i) - 2, 0)), min(i + 2u, n), u32(max(i32(j) - 2, 0)), min(j + 2u, n), h, step);
+    return grid_normal(t, i32(i), i32(j), 2, height_at(t, i, j).x, step);
 }
 
 @vertex
@@ -166,7 +201,7 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     // Normal from central differences of the neighbours, morphed like the
     // height: towards the parent's normal (the same differences over its
     // vertices, this tile's even ones), so the light does not pop either.
-    let fine_n = grid_normal(t, i, j, im, ip, jm, jp, own.x, step);
+    let fine_n = grid_normal(t, i32(i), i32(j), 1, own.x, step);
     // The parent interpolates its vertex normals across its triangles: at an
     // edge's middle the mean of the edge's ends, at a cell's centre (on the
     // diagonal) the mean of its south-west and north-east corners.

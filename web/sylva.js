@@ -19,7 +19,7 @@
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
 //   v.setLighting({shadows, ao, parts, turbidity}) the sun's shadows: 'off' | 'low' | 'high' (the default);
 //                                           ao: each tree's own baked ambient occlusion, true (the default) | false;
-//                                           parts: 'all' (the default) | 'none' | 'sky,aerial,sky-light,transmission,soft-shadows';
+//                                           parts: 'all' | 'none' (the default for now) | 'sky,aerial,sky-light,transmission,soft-shadows';
 //                                           turbidity: the air, 1.7–10 (3, clear)
 //   v.setSeason(season)                     deciduous species in 'leaf-on' (the default) | 'autumn' | 'leaf-off'
 //                                           (bare wood; their bare far tiers are fetched then); evergreens alike in all
@@ -89,6 +89,22 @@ function loadWasm() {
 export function webgpuHelp() {
   return 'This browser has no WebGPU. Use a current Chrome or Edge (113+), Safari 18+ or Firefox 141+; ' +
     'on Linux, Chromium needs --enable-unsafe-webgpu --enable-features=Vulkan.';
+}
+
+// The light's parts by name (`LIGHT_*` in src/lod/shared.rs): 'all', 'none'
+// or a comma-separated list; throws for an unknown name.
+const LIGHT_PARTS = ['sky', 'aerial', 'sky-light', 'transmission', 'soft-shadows'];
+function lightParts(spec) {
+  const s = String(spec).trim();
+  if (s === 'all') return (1 << LIGHT_PARTS.length) - 1;
+  if (s === 'none' || s === '') return 0;
+  let bits = 0;
+  for (const word of s.split(',').map((w) => w.trim())) {
+    const k = LIGHT_PARTS.indexOf(word);
+    if (k < 0) throw new Error(`setLighting: unknown light part ${JSON.stringify(word)} (known: all, none, ${LIGHT_PARTS.join(', ')})`);
+    bits |= 1 << k;
+  }
+  return bits;
 }
 
 class SylvaViewer {
@@ -415,8 +431,8 @@ class SylvaViewer {
   /** Light settings: `shadows` 'off' | 'low' (2 cascades over 300 m, maps of
    * 0.8 texels per canvas pixel) | 'high' (3 over 600 m, 1.6 texels per pixel,
    * softer; the default); `ao` true (the default: crowns darker inside, as
-   * baked into each species' pack) | false; `parts` 'all' (the default) |
-   * 'none' | a comma-separated list of 'sky' (the clear sky of Preetham et
+   * baked into each species' pack) | false; `parts` 'all' (the light judged
+   * against the path-traced reference) | 'none' (the default for now) | a comma-separated list of 'sky' (the clear sky of Preetham et
    * al.), 'aerial' (the air between the eye and the forest), 'sky-light' (the
    * sky's light on every surface), 'transmission' (leaves that let light
    * through), 'soft-shadows' (penumbrae as wide as the sun makes them);
@@ -438,8 +454,12 @@ class SylvaViewer {
     }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
     if (options.parts !== undefined || options.turbidity !== undefined) {
-      const merged = { parts: 'all', turbidity: 3, ...this.lighting, ...options };
-      this.viewer.set_light(String(merged.parts), Number(merged.turbidity)); // (throws for unknown parts)
+      const merged = { parts: 'none', turbidity: 3, ...this.lighting, ...options };
+      const turbidity = Number(merged.turbidity);
+      if (!(turbidity >= 1.7 && turbidity <= 10)) {
+        throw new Error(`setLighting: turbidity ${merged.turbidity}: the clear sky is fitted for 1.7–10 (2 very clear, 3 clear, 6 hazy)`);
+      }
+      this.viewer.set_light(lightParts(merged.parts), turbidity);
     }
     this.lighting = { ...this.lighting, ...options };
     this.dirty = SETTLE_FRAMES;

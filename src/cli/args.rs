@@ -66,7 +66,7 @@ pub(crate) enum Command {
     /// frames: writes frames.csv, summary.json and SVG plots (pareto,
     /// frame_time, temporal_noise) into --out.
     #[command(
-        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-no-canopy (trees at every size, no canopy\n  rasters), sylva-converged (refined at rest), sylva-q0.5,\n  sylva-q0.25, sylva-shadows-low, sylva-shadows-high, or all; mesh-plain-alpha and\n  sylva-plain-alpha (without adaptive transparency) for comparison.\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
+        after_help = "Methods: reference (full mesh everywhere, 2x supersampled; always run), mesh, per-tree,\n  billboard, impostor, ellipsoid, sylva, sylva-no-canopy (trees at every size, no canopy\n  rasters), sylva-converged (refined at rest), sylva-q0.5,\n  sylva-q0.25, sylva-shadows-low, sylva-shadows-high, or all; mesh-plain-alpha and\n  sylva-plain-alpha (without adaptive transparency) for comparison; sylva-light-PARTS\n  (none, all, or sky, aerial, sky-light, transmission, soft-shadows joined by +).\nPaths: flyover, far, medium, close (360° sweeps), or a JSON file\n  {\"keyframes\": [{\"eye\": [x, y, z], \"heading_deg\": 0, \"pitch_deg\": -10}, ...], \"frames\": 60}\n  in metres from the scene origin.\nExample:\n  sylva bench --scene demo-scene --path flyover --methods all --size 640x360 --out bench-out"
     )]
     Bench {
         /// Scene directory, scene.json path or http(s) URL.
@@ -134,10 +134,10 @@ pub(crate) enum Command {
         ao: bool,
         /// Draw every method (the references too; not the sylva-light-…
         /// methods, which name their own) with these parts of the light: all,
-        /// none (the light before the physical sky), or a comma-separated
+        /// none (the default for now: the light before the physical sky), or a comma-separated
         /// list of sky, aerial, sky-light, transmission, soft-shadows. The
         /// trace under the raster's light mirrors them.
-        #[arg(long, value_name = "PARTS", default_value = "all")]
+        #[arg(long, value_name = "PARTS", default_value = "none")]
         light_parts: sylva::render::sky_light::LightParts,
         /// The air's turbidity for the sky, its light and the aerial
         /// perspective, raster and traced (2 very clear, 3 clear, 6 hazy).
@@ -508,16 +508,17 @@ pub(crate) struct RenderArgs {
     /// clear, 3 clear, 6 hazy.
     #[arg(long, default_value_t = 3.0, value_parser = parse_turbidity)]
     pub(crate) turbidity: f32,
-    /// The parts of the light: all (the default), none (the light before the
-    /// physical sky: a gradient sky, a grey haze, a flat ambient, leaves
-    /// lit by a wrap term, fixed-width shadow filtering), or a
+    /// The parts of the light: all (the light judged against the path-traced
+    /// reference), none (the default for now: the light before the physical
+    /// sky — a gradient sky, a grey haze, a flat ambient, leaves lit by a
+    /// wrap term, fixed-width shadow filtering), or a
     /// comma-separated list of sky (Preetham's clear sky behind the scene),
     /// aerial (the air between the eye and what it sees), sky-light (the
     /// sky's light on every surface), transmission (leaves that let light
     /// through), soft-shadows (penumbrae as wide as the sun and the
     /// occluder's distance make them). With --path-trace --light raster, the
     /// raster light traced mirrors them.
-    #[arg(long, value_name = "PARTS", default_value = "all")]
+    #[arg(long, value_name = "PARTS", default_value = "none")]
     pub(crate) light_parts: sylva::render::sky_light::LightParts,
     /// --path-trace: every ray through its pixel's centre, where a
     /// rasteriser's one sample lies (no anti-aliasing): the coverage check

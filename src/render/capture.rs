@@ -384,6 +384,8 @@ pub struct TreeRenderer {
     /// The share of a leaf's albedo it transmits
     /// ([`super::sky_light::LEAF_TRANSMIT`] by default).
     pub leaf_transmit: f32,
+    /// The light's parts ([`super::sky_light::LightParts`]; the default's).
+    pub light_parts: super::sky_light::LightParts,
     /// Alpha-test mesh leaves at their textures' full resolution (the accuracy
     /// reference's [`super::settings::RenderSettings::full_res_alpha`]).
     pub full_res_alpha: bool,
@@ -441,6 +443,7 @@ impl TreeRenderer {
             ao: true,
             lighting: Lighting::default(),
             leaf_transmit: super::sky_light::LEAF_TRANSMIT,
+            light_parts: super::sky_light::LightParts::default(),
             full_res_alpha: false,
             season: std::cell::Cell::new((Season::LeafOn, [0.0; 4])),
         }
@@ -557,6 +560,7 @@ impl TreeRenderer {
         let mut uniform = self.lighting.view_uniform(clip_from_eye, eye, [width, height]);
         uniform.ambient[3] = f32::from(u8::from(self.ao));
         uniform.sky.sun[3] = self.leaf_transmit;
+        uniform.sky.parts[0] = self.light_parts.0;
         uniform.eye_hi[3] = f32::from(u8::from(self.full_res_alpha));
         // Pixels per metre at 1 m, for the lines' minimum width.
         let row1 = Vec3::new(clip_from_eye.x_axis.y, clip_from_eye.y_axis.y, clip_from_eye.z_axis.y);

@@ -74,7 +74,9 @@ pub struct RenderSettings {
     /// Sun and ambient.
     pub lighting: Lighting,
     /// Which parts of the light are on ([`super::sky_light::LightParts`]):
-    /// all by default; none is the light before issue 49.
+    /// none by default for now (the light before issue 49; the tests and
+    /// thresholds tuned to it move over with the default, issue 49's next
+    /// step); all for the light judged against the traced reference.
     pub light_parts: super::sky_light::LightParts,
     /// The air's turbidity (the clear sky, its light and the aerial
     /// perspective; Preetham et al. 1999: 2 very clear, 3 clear, 6 hazy).
@@ -343,7 +345,7 @@ impl Default for RenderSettings {
             debug_lod: false,
             debug_bounds: false,
             lighting: Lighting::default(),
-            light_parts: super::sky_light::LightParts::ALL,
+            light_parts: super::sky_light::LightParts::NONE,
             turbidity: super::sky_light::DEFAULT_TURBIDITY,
             clear: [0.55, 0.68, 0.82, 1.0],
             sky: true,

@@ -121,6 +121,42 @@ pub(crate) fn free_or_oldest<K: Copy>(slots: &[Option<(K, u64)>], frame: u64) ->
     })
 }
 
+/// Links each drawn tile to the neighbours of its level drawn beside it
+/// ([`GpuTerrainDraw::across_x`], `across_y`), found by key and placed by
+/// their corners (west/east, south/north). Draws past 65,535 link none.
+fn link_neighbours(records: &mut [GpuTerrainDraw], keys: &[TerrainKey]) {
+    // (A scan of every pair: a frame draws a few hundred tiles at most, and
+    // a map's code would cost the browser's wasm more than the scan its time.)
+    let n = records.len().min(keys.len()).min(0xffff);
+    for k in 0..n {
+        let (level, x, y) = keys[k];
+        let me = records[k];
+        let mut across = [0u32; 4]; // west, east, south, north
+        for o in 0..n {
+            let (l, ox, oy) = keys[o];
+            if l != level || ox.abs_diff(x) + oy.abs_diff(y) != 1 {
+                continue;
+            }
+            let other = records[o];
+            if (other.size_m - me.size_m).abs() > 1e-3 * me.size_m {
+                continue;
+            }
+            let (ex, ey) =
+                ((other.origin_m[0] - me.origin_m[0]) / me.size_m, (other.origin_m[1] - me.origin_m[1]) / me.size_m);
+            let side = match (ex.round() as i32, ey.round() as i32) {
+                (-1, 0) => 0,
+                (1, 0) => 1,
+                (0, -1) => 2,
+                (0, 1) => 3,
+                _ => continue,
+            };
+            across[side] = o as u32 + 1;
+        }
+        records[k].across_x = across[0] | across[1] << 16;
+        records[k].across_y = across[2] | across[3] << 16;
+    }
+}
+
 /// A ground image's identity: (source generation, terrain tile it covers).
 type ImageKey = (u32, TerrainKey);
 
@@ -144,11 +180,13 @@ pub struct GpuTerrainDraw {
     pub image_uv: [f32; 4],
     /// Layer of the image in the array, [`NO_IMAGE`] for none.
     pub layer: u32,
+    /// The draws (index + 1; 0: none) of the neighbours of the same level
+    /// drawn this frame, west in bits 0–15 and east in 16–31: the normals
+    /// along an edge reach across it, so both sides shade alike (no seam).
+    pub across_x: u32,
+    /// South (bits 0–15) and north (16–31), as [`Self::across_x`].
+    pub across_y: u32,
     /// Padding to 16 bytes.
-    pub pad0: u32,
-    /// Padding.
-    pub pad1: u32,
-    /// Padding.
     pub pad2: u32,
 }
 
@@ -397,6 +435,7 @@ impl TerrainPass {
         );
         let mut records = std::mem::take(&mut self.records);
         records.clear();
+        let mut keys: Vec<TerrainKey> = Vec::with_capacity(draws.len());
         for (d, &layer) in draws.iter().zip(&layers) {
             if d.tile.grid != grid {
                 self.dropped += 1;
@@ -442,11 +481,13 @@ impl TerrainPass {
                 skirt_m: (2.0 * d.parent_error_m.min(d.tile.max_m - d.tile.min_m) + 0.5 * cell as f32).max(0.5),
                 image_uv: d.imagery.as_ref().map_or([0.0, 0.0, 1.0, 1.0], |i| i.uv),
                 layer,
-                pad0: 0,
-                pad1: 0,
+                across_x: 0,
+                across_y: 0,
                 pad2: 0,
             });
+            keys.push(d.key);
         }
+        link_neighbours(&mut records, &keys);
         if !records.is_empty() {
             queue.write_buffer(&pool.draws, 0, bytemuck::cast_slice(&records));
         }

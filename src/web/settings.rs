@@ -206,23 +206,12 @@ impl Viewer {
         self.frame.settings.ao = on;
     }
 
-    /// The parts of the light (`"all"`, `"none"` or a comma-separated list
-    /// of sky, aerial, sky-light, transmission, soft-shadows) and the air's
-    /// turbidity (1.7–10; 3 clear).
-    ///
-    /// # Errors
-    /// An unknown part or a turbidity outside the clear sky's fit (the
-    /// message names them).
-    pub fn set_light(&mut self, parts: &str, turbidity: f32) -> Result<(), JsValue> {
-        let parts = parts.parse().map_err(|e: String| JsValue::from_str(&format!("setLighting: {e}")))?;
-        if !(1.7..=10.0).contains(&turbidity) {
-            return Err(JsValue::from_str(&format!(
-                "setLighting: turbidity {turbidity}: the clear sky is fitted for 1.7–10 (2 very clear, 3 clear, 6 hazy)"
-            )));
-        }
-        self.frame.settings.light_parts = parts;
-        self.frame.settings.turbidity = turbidity;
-        Ok(())
+    /// The parts of the light (`LIGHT_*` bits; `web/sylva.js` reads their
+    /// names) and the air's turbidity (clamped to the clear sky's fit, 1.7–10;
+    /// the page checks it).
+    pub fn set_light(&mut self, parts: u32, turbidity: f32) {
+        self.frame.settings.light_parts = crate::render::sky_light::LightParts(parts & crate::lod::shared::LIGHT_ALL);
+        self.frame.settings.turbidity = turbidity.clamp(1.7, 10.0);
     }
 
     /// Progressive refinement while the camera rests: on or off, jittered

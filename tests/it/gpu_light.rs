@@ -48,6 +48,7 @@ fn back_lit_leaves_glow_at_every_level_of_detail() {
             let mut r = TreeRenderer::new(&ctx);
             r.lighting = Lighting::for_sun(sun, 20.0);
             r.leaf_transmit = transmit;
+            r.light_parts = sylva::render::sky_light::LightParts::ALL;
             r.render_pack(&ctx, &pack, repr, PackView::Side, [SIZE, SIZE], BG)
         };
         let Some(off) = render(behind, 0.0) else {
