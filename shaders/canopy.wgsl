@@ -42,6 +42,9 @@ const CANOPY_SURFACE: f32 = 0.75;
 // their mean normal (length: how much the leaves agree) and the sky they see.
 const CANOPY_NORMAL: vec3<f32> = vec3<f32>(0.0, 0.0, 0.55);
 const CANOPY_AO: f32 = 0.8;
+// Under the sky's own light (LIGHT_SKY_LIGHT: less sky, more of it from the
+// horizon), the crowns' sky as the trees' impostors see theirs.
+const CANOPY_AO_SKY: f32 = 0.9;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -169,7 +172,8 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let lit = shade_filtered(in.albedo, CANOPY_NORMAL, true, view, 1.0, 0.0, CANOPY_AO);
+    let ao = select(CANOPY_AO, CANOPY_AO_SKY, light_on(view, LIGHT_SKY_LIGHT));
+    let lit = shade_filtered(in.albedo, CANOPY_NORMAL, true, view, 1.0, 0.0, ao);
     let color = haze(lit, in.clip, view);
     return vec4<f32>(color * in.alpha, in.alpha);
 }

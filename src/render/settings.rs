@@ -74,9 +74,8 @@ pub struct RenderSettings {
     /// Sun and ambient.
     pub lighting: Lighting,
     /// Which parts of the light are on ([`super::sky_light::LightParts`]):
-    /// none by default for now (the light before issue 49; the tests and
-    /// thresholds tuned to it move over with the default, issue 49's next
-    /// step); all for the light judged against the traced reference.
+    /// all by default (the light judged against the path-traced reference);
+    /// none is the light before issue 49.
     pub light_parts: super::sky_light::LightParts,
     /// The air's turbidity (the clear sky, its light and the aerial
     /// perspective; Preetham et al. 1999: 2 very clear, 3 clear, 6 hazy).
@@ -345,7 +344,7 @@ impl Default for RenderSettings {
             debug_lod: false,
             debug_bounds: false,
             lighting: Lighting::default(),
-            light_parts: super::sky_light::LightParts::NONE,
+            light_parts: super::sky_light::LightParts::ALL,
             turbidity: super::sky_light::DEFAULT_TURBIDITY,
             clear: [0.55, 0.68, 0.82, 1.0],
             sky: true,

@@ -68,11 +68,9 @@ impl LightParts {
     }
 }
 
-/// None for now: the light before issue 49 stays the default until the
-/// tests and thresholds tuned to it move over (`RenderSettings::light_parts`).
 impl Default for LightParts {
     fn default() -> Self {
-        Self::NONE
+        Self::ALL
     }
 }
 

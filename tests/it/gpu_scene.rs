@@ -210,9 +210,11 @@ fn renders_match_references() {
     // Tolerance: lavapipe is deterministic on one machine; 0.01 (≈ 2.5/255 averaged
     // over scales) absorbs LLVM/Mesa version differences in rasterisation and
     // transcendental functions, while a missing species, a wrong LoD band or a
-    // shifted camera gives 0.05 and more.
+    // shifted camera gives 0.05 and more. (From above, the spruces' dark
+    // crowns under the sky's own light and the air read as foliage a little
+    // less often: 0.19 of the top view, 0.23 under the light before issue 49.)
     for (name, view, min_foliage) in
-        [("close", NamedView::Close, 0.2), ("medium", NamedView::Medium, 0.3), ("top", NamedView::Top, 0.2)]
+        [("close", NamedView::Close, 0.2), ("medium", NamedView::Medium, 0.3), ("top", NamedView::Top, 0.15)]
     {
         let cam = off.named_camera(view, 30.0).unwrap();
         let img = render(&mut off, &cam);
@@ -617,11 +619,12 @@ fn a_far_view_fetches_no_mesh_or_cluster_level() {
     assert!(!events.iter().any(|e| matches!(e, StreamEvent::Failed { .. } | StreamEvent::Fatal { .. })), "{events:?}");
     let drawn = off.render(&far, true).instances.get("billboard").copied().unwrap_or(0);
     let img = off.read_image();
-    // 1.5 km away in the haze the forest is a dim blue-green: count billboards
-    // drawn, and pixels greener than red and blue at all.
+    // 1.5 km away in the air the forest is a dim grey-green: count billboards
+    // drawn, and pixels greener than red and blue at all (about 200 under the
+    // clear sky's air at turbidity 3, over 300 under the old thinner haze).
     let greenish = img.chunks_exact(4).filter(|p| p[1] > p[0] + 2 && p[1] > p[2] + 2).count();
     assert!(
-        drawn > 100 && greenish > 300,
+        drawn > 100 && greenish > 120,
         "the far view shows the forest: {drawn} billboards, {greenish} green pixels"
     );
     let stats = off.stream.stats();
@@ -941,26 +944,42 @@ fn far_ground_fades_towards_the_horizon_haze() {
         Camera::look_at(spot + DVec3::new(0.0, -1.0, 50.0), spot),
         Camera::look_at(spot + DVec3::new(0.0, -1400.0, 600.0), spot),
     );
+    use sylva::render::sky_light::{LightParts, SkyLight, DEFAULT_TURBIDITY};
+    // The centre pixels are the ground, not the sky pass's colour below the
+    // horizon: without the terrain both views show something else there
+    // (the gradient's ground, unlike the physical sky's level ground lit as
+    // the terrain is).
+    off.settings.light_parts = LightParts::NONE;
     let near = centre(&render(&mut off, &near_cam));
     let far = centre(&render(&mut off, &far_cam));
-    // The centre pixels are the ground, not the sky pass's colour below the
-    // horizon (which also pales towards the horizon): without the terrain
-    // both views show something else there.
     off.settings.terrain = false;
     for (cam, with) in [(&near_cam, near), (&far_cam, far)] {
         let without = centre(&render(&mut off, cam));
         assert!((0..3).any(|k| (with[k] - without[k]).abs() > 10.0), "ground {with:?} vs background {without:?}");
     }
     off.settings.terrain = true;
-    // The horizon colour (linear 0.62, 0.74, 0.86) in sRGB.
-    let haze = [206.0, 225.0, 239.0];
-    let to_haze = |p: [f64; 3]| (0..3).map(|k| (p[k] - haze[k]).powi(2)).sum::<f64>().sqrt();
-    eprintln!("near {near:?}, far {far:?}");
-    assert!(near.iter().sum::<f64>() > 60.0, "the ground is drawn: {near:?}");
-    assert!(to_haze(far) < to_haze(near) - 8.0, "far {far:?} should be nearer the haze than near {near:?}");
-    // The veil is a blend towards it: every channel moves the same way.
-    for k in 0..3 {
-        assert!((far[k] - near[k]) * (haze[k] - near[k]) >= 0.0, "channel {k}: near {near:?}, far {far:?}");
+    // The old haze's colour (linear 0.62, 0.74, 0.86) in sRGB; the air's
+    // (issue 49): the clear sky's radiance at the horizon, looking north.
+    let srgb = |v: glam::Vec3| v.to_array().map(|c| f64::from(sylva::format::cluster::linear_to_srgb(c)) * 255.0);
+    let air = srgb(SkyLight::new(&off.settings.lighting, DEFAULT_TURBIDITY).sky(glam::Vec3::Y));
+    for (parts, haze) in [(LightParts::NONE, [206.0, 225.0, 239.0]), (LightParts::ALL, air)] {
+        off.settings.light_parts = parts;
+        let near = centre(&render(&mut off, &near_cam));
+        let far = centre(&render(&mut off, &far_cam));
+        let to_haze = |p: [f64; 3]| (0..3).map(|k| (p[k] - haze[k]).powi(2)).sum::<f64>().sqrt();
+        eprintln!("light {parts}: near {near:?}, far {far:?}, haze {haze:?}");
+        assert!(near.iter().sum::<f64>() > 60.0, "{parts}: the ground is drawn: {near:?}");
+        assert!(
+            to_haze(far) < to_haze(near) - 8.0,
+            "{parts}: far {far:?} should be nearer the haze than near {near:?}"
+        );
+        // The veil is a blend towards it: every channel moves the same way.
+        for k in 0..3 {
+            assert!(
+                (far[k] - near[k]) * (haze[k] - near[k]) >= 0.0,
+                "{parts}: channel {k}: near {near:?}, far {far:?}, haze {haze:?}"
+            );
+        }
     }
 }
 
@@ -1035,6 +1054,12 @@ fn the_canopy_cross_fade_keeps_the_forests_cover() {
         };
         let mut shot = |canopy: bool, trees: bool| {
             off.settings = RenderSettings {
+                // Without the air: 17 km away (the tallest tree at 0.6 px)
+                // a clear day's haze hides the forest (issue 49's aerial
+                // perspective); the cross-fade's cover is what is measured.
+                light_parts: sylva::render::sky_light::LightParts(
+                    sylva::render::sky_light::LightParts::ALL.0 & !sylva::lod::shared::LIGHT_AERIAL,
+                ),
                 canopy,
                 representations: if trees {
                     Representations::default()
