@@ -19,7 +19,7 @@
 //   v.setSun({date, time, utcOffset})      the sun at a local date and time there (NOAA); or {azimuth, elevation}; null: default
 //   v.setLighting({shadows, ao, parts, turbidity}) the sun's shadows: 'off' | 'low' | 'high' (the default);
 //                                           ao: each tree's own baked ambient occlusion, true (the default) | false;
-//                                           parts: 'all' | 'none' (the default for now) | 'sky,aerial,sky-light,transmission,soft-shadows';
+//                                           parts: 'all' (the default) | 'none' | 'sky,aerial,sky-light,transmission,soft-shadows';
 //                                           turbidity: the air, 1.7–10 (3, clear)
 //   v.setSeason(season)                     deciduous species in 'leaf-on' (the default) | 'autumn' | 'leaf-off'
 //                                           (bare wood; their bare far tiers are fetched then); evergreens alike in all
@@ -431,8 +431,9 @@ class SylvaViewer {
   /** Light settings: `shadows` 'off' | 'low' (2 cascades over 300 m, maps of
    * 0.8 texels per canvas pixel) | 'high' (3 over 600 m, 1.6 texels per pixel,
    * softer; the default); `ao` true (the default: crowns darker inside, as
-   * baked into each species' pack) | false; `parts` 'all' (the light judged
-   * against the path-traced reference) | 'none' (the default for now) | a comma-separated list of 'sky' (the clear sky of Preetham et
+   * baked into each species' pack) | false; `parts` 'all' (the default: the
+   * light judged against the path-traced reference) | 'none' (the light before
+   * it) | a comma-separated list of 'sky' (the clear sky of Preetham et
    * al.), 'aerial' (the air between the eye and the forest), 'sky-light' (the
    * sky's light on every surface), 'transmission' (leaves that let light
    * through), 'soft-shadows' (penumbrae as wide as the sun makes them);
@@ -454,7 +455,7 @@ class SylvaViewer {
     }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
     if (options.parts !== undefined || options.turbidity !== undefined) {
-      const merged = { parts: 'none', turbidity: 3, ...this.lighting, ...options };
+      const merged = { parts: 'all', turbidity: 3, ...this.lighting, ...options };
       const turbidity = Number(merged.turbidity);
       if (!(turbidity >= 1.7 && turbidity <= 10)) {
         throw new Error(`setLighting: turbidity ${merged.turbidity}: the clear sky is fitted for 1.7–10 (2 very clear, 3 clear, 6 hazy)`);

@@ -133,11 +133,11 @@ pub(crate) enum Command {
         #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
         ao: bool,
         /// Draw every method (the references too; not the sylva-light-…
-        /// methods, which name their own) with these parts of the light: all,
-        /// none (the default for now: the light before the physical sky), or a comma-separated
+        /// methods, which name their own) with these parts of the light: all
+        /// (the default), none (the light before the physical sky), or a comma-separated
         /// list of sky, aerial, sky-light, transmission, soft-shadows. The
         /// trace under the raster's light mirrors them.
-        #[arg(long, value_name = "PARTS", default_value = "none")]
+        #[arg(long, value_name = "PARTS", default_value = "all")]
         light_parts: sylva::render::sky_light::LightParts,
         /// The air's turbidity for the sky, its light and the aerial
         /// perspective, raster and traced (2 very clear, 3 clear, 6 hazy).
@@ -508,17 +508,17 @@ pub(crate) struct RenderArgs {
     /// clear, 3 clear, 6 hazy.
     #[arg(long, default_value_t = 3.0, value_parser = parse_turbidity)]
     pub(crate) turbidity: f32,
-    /// The parts of the light: all (the light judged against the path-traced
-    /// reference), none (the default for now: the light before the physical
-    /// sky — a gradient sky, a grey haze, a flat ambient, leaves lit by a
-    /// wrap term, fixed-width shadow filtering), or a
+    /// The parts of the light: all (the default: the light judged against the
+    /// path-traced reference), none (the light before the physical sky — a
+    /// gradient sky, a grey haze, a flat ambient, leaves lit by a wrap term,
+    /// fixed-width shadow filtering), or a
     /// comma-separated list of sky (Preetham's clear sky behind the scene),
     /// aerial (the air between the eye and what it sees), sky-light (the
     /// sky's light on every surface), transmission (leaves that let light
     /// through), soft-shadows (penumbrae as wide as the sun and the
     /// occluder's distance make them). With --path-trace --light raster, the
     /// raster light traced mirrors them.
-    #[arg(long, value_name = "PARTS", default_value = "none")]
+    #[arg(long, value_name = "PARTS", default_value = "all")]
     pub(crate) light_parts: sylva::render::sky_light::LightParts,
     /// --path-trace: every ray through its pixel's centre, where a
     /// rasteriser's one sample lies (no anti-aliasing): the coverage check
