@@ -57,7 +57,7 @@ fn sky_radiance(d: vec3<f32>, view: View) -> vec3<f32> {
 // at every sun position (sky_model.wgsl).
 fn aerial(color: vec3<f32>, rel: vec3<f32>, view: View) -> vec3<f32> {
     let t = air_transmittance(rel, view.eye_hi.z + view.eye_lo.z, view.sky.rayleigh, view.sky.mie);
-    return color * t + sky_radiance(air_light_dir(rel), view) * (1.0 - t);
+    return color * t + air_light(rel, view.sky.air) * (1.0 - t);
 }
 
 // Aerial perspective: light scattered by the air between the eye and a

@@ -43,15 +43,17 @@ const SOFT_MAX_TEXELS: f32 = 6.0;
 // angular size and the blockers' distance (a directional light: 2 tan(r) per
 // metre), then PCF over that width. In metres, not texels: a shadow keeps its
 // softness where one cascade hands over to the next (no seam between
-// cascades), never narrower than a texel.
+// cascades), never narrower than a texel nor wider than 12 of the cascade's.
 fn shadow_soft(uv: vec2<f32>, layer: u32, depth: f32, texel_m: f32, depth_per_m: f32) -> f32 {
     let size = view.shadow.y;
     let last = i32(size) - 1;
     var sum = 0.0;
     var count = 0.0;
-    for (var y = 0; y < 4; y++) {
-        for (var x = 0; x < 4; x++) {
-            let o = (vec2<f32>(f32(x), f32(y)) - 1.5) / 1.5 * SOFT_SEARCH_TEXELS;
+    // A 5 x 5 grid 0, 3 and 6 texels out: the receiver's own texel too, so a
+    // blocker narrower than the grid's step over it is found.
+    for (var y = -2; y <= 2; y++) {
+        for (var x = -2; x <= 2; x++) {
+            let o = vec2<f32>(f32(x), f32(y)) * (0.5 * SOFT_SEARCH_TEXELS);
             let t = clamp(vec2<i32>(floor(uv * size + o)), vec2<i32>(0), vec2<i32>(last));
             let d = textureLoad(shadow_map, t, i32(layer), 0);
             // Reversed Z: nearer the sun is greater.
@@ -65,7 +67,8 @@ fn shadow_soft(uv: vec2<f32>, layer: u32, depth: f32, texel_m: f32, depth_per_m:
         return 1.0;
     }
     let blocker_m = (sum / count - depth) / max(depth_per_m, 1e-9);
-    let r = clamp(2.0 * SUN_TAN * blocker_m / texel_m, 0.5, SOFT_MAX_TEXELS);
+    // The filter's radius: half the penumbra's width (2 tan(r) per metre).
+    let r = clamp(SUN_TAN * blocker_m / texel_m, 0.5, SOFT_MAX_TEXELS);
     var lit = 0.0;
     for (var y = 0; y < 4; y++) {
         for (var x = 0; x < 4; x++) {

@@ -19,6 +19,10 @@ struct Sky {
     rayleigh: vec4<f32>,
     // x: the haze's extinction at the origin's height (1/m), y: scale height (m).
     mie: vec4<f32>,
+    // The air's light: the horizon's radiance as air[0] + sum over k = 1..4 of
+    // air[2k-1] cos(k phi) + air[2k] sin(k phi), phi the azimuth from east
+    // towards north (`air_light`).
+    air: array<vec4<f32>, 9>,
     // x: LIGHT_* bits on.
     parts: vec4<u32>,
 };
@@ -67,13 +71,14 @@ fn preetham_radiance(d: vec3<f32>, sun: vec3<f32>, zenith: vec4<f32>, p: array<v
     return max(rgb, vec3<f32>(0.0)) * zenith.w;
 }
 
-// The length of air at the eye's density equivalent to `s` metres rising
-// `dz` through a layer of scale height h, from `eye_z` (>= 0) up: the optical
-// depth of an exponential layer in closed form.
+// The length of air at the scene origin's density equivalent to `s` metres
+// rising `dz` through a layer of scale height h, from `eye_z` (>= 0) up: the
+// optical depth of an exponential layer in closed form (as a difference of
+// the two ends' densities, finite however high the eye).
 fn air_depth(eye_z: f32, s: f32, dz: f32, h: f32) -> f32 {
     let x = dz / h;
-    let f = select((1.0 - exp(-x)) / x, 1.0 - 0.5 * x, abs(x) < 1e-4);
-    return exp(-eye_z / h) * s * f;
+    let a = exp(-eye_z / h);
+    return select(s / x * (a - exp(-eye_z / h - x)), s * a * (1.0 - 0.5 * x), abs(x) < 1e-4);
 }
 
 // The air's transmittance from an eye `eye_z` metres above the scene's
@@ -85,6 +90,22 @@ fn air_transmittance(rel: vec3<f32>, eye_z: f32, rayleigh: vec4<f32>, mie: vec4<
     let s = length(rel);
     let tau = rayleigh.rgb * air_depth(z, s, rel.z, rayleigh.w) + vec3<f32>(mie.x * air_depth(z, s, rel.z, mie.y));
     return exp(-tau);
+}
+
+// The light the air scatters towards the eye over a long path towards `rel`:
+// the horizon's radiance in that azimuth, from the Fourier series the CPU
+// fitted (`SkyLight::air_ring`) — a few multiplies per fragment where the
+// clear sky's own formula costs exponentials and an arccosine.
+fn air_light(rel: vec3<f32>, air: array<vec4<f32>, 9>) -> vec3<f32> {
+    let h = rel.xy / max(length(rel.xy), 1e-6);
+    var l = air[0].rgb;
+    // cos(k phi) + i sin(k phi) as powers of h.
+    var e = vec2<f32>(1.0, 0.0);
+    for (var k = 1u; k <= 4u; k++) {
+        e = vec2<f32>(e.x * h.x - e.y * h.y, e.y * h.x + e.x * h.y);
+        l += air[2u * k - 1u].rgb * e.x + air[2u * k].rgb * e.y;
+    }
+    return max(l, vec3<f32>(0.0));
 }
 
 // Where the air's light comes from along the view towards `rel`: over a long

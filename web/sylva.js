@@ -97,7 +97,7 @@ const LIGHT_PARTS = ['sky', 'aerial', 'sky-light', 'transmission', 'soft-shadows
 function lightParts(spec) {
   const s = String(spec).trim();
   if (s === 'all') return (1 << LIGHT_PARTS.length) - 1;
-  if (s === 'none' || s === '') return 0;
+  if (s === 'none') return 0;
   let bits = 0;
   for (const word of s.split(',').map((w) => w.trim())) {
     const k = LIGHT_PARTS.indexOf(word);
@@ -440,11 +440,23 @@ class SylvaViewer {
    * `turbidity` 1.7–10 (3, clear, by default). Throws for an unknown key or value. */
   setLighting(options = {}) {
     const known = ['shadows', 'ao', 'parts', 'turbidity'];
+    // (Settings left undefined are not changed.)
+    options = Object.fromEntries(Object.entries(options).filter(([, v]) => v !== undefined));
     for (const key of Object.keys(options)) {
       if (!known.includes(key)) throw new Error(`setLighting: unknown setting ${key} (known: ${known.join(', ')})`);
     }
+    // Every value checked before any is applied: a bad one changes nothing.
     if (options.ao !== undefined && typeof options.ao !== 'boolean') {
       throw new Error(`setLighting: ao must be true or false, not ${JSON.stringify(options.ao)}`);
+    }
+    let light = null;
+    if (options.parts !== undefined || options.turbidity !== undefined) {
+      const merged = { parts: 'all', turbidity: 3, ...this.lighting, ...options };
+      const turbidity = Number(merged.turbidity);
+      if (!(turbidity >= 1.7 && turbidity <= 10)) {
+        throw new Error(`setLighting: turbidity ${merged.turbidity}: the clear sky is fitted for 1.7–10 (2 very clear, 3 clear, 6 hazy)`);
+      }
+      light = [lightParts(merged.parts), turbidity]; // (throws for an unknown part)
     }
     if (options.shadows !== undefined) {
       const shadows = String(options.shadows).trim().toLowerCase();
@@ -454,14 +466,7 @@ class SylvaViewer {
       this.applyGovernor(); // (while governed, at most the governor's level)
     }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
-    if (options.parts !== undefined || options.turbidity !== undefined) {
-      const merged = { parts: 'all', turbidity: 3, ...this.lighting, ...options };
-      const turbidity = Number(merged.turbidity);
-      if (!(turbidity >= 1.7 && turbidity <= 10)) {
-        throw new Error(`setLighting: turbidity ${merged.turbidity}: the clear sky is fitted for 1.7–10 (2 very clear, 3 clear, 6 hazy)`);
-      }
-      this.viewer.set_light(lightParts(merged.parts), turbidity);
-    }
+    if (light) this.viewer.set_light(light[0], light[1]);
     this.lighting = { ...this.lighting, ...options };
     this.dirty = SETTLE_FRAMES;
   }

@@ -749,7 +749,12 @@ fn path_trace(
     for (label, lighting) in suns {
         // The physical light: Preetham et al.'s clear sky and the air; the
         // raster light: its parts as the raster draws them.
-        let parts = if args.simple { args.light_parts } else { sylva::render::sky_light::LightParts::ALL };
+        // (An HDR environment is the sky and the light: no clear sky, no air from it.)
+        let parts = match (args.simple, environment.is_some()) {
+            (true, _) => args.light_parts,
+            (false, false) => sylva::render::sky_light::LightParts::ALL,
+            (false, true) => sylva::render::sky_light::LightParts::NONE,
+        };
         let view = PathView::under_parts(
             lighting,
             cam.eye_m.as_vec3(),

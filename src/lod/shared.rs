@@ -51,10 +51,10 @@ pub struct ViewUniform {
     /// The sky and the air (issue 49; `crate::render::sky_light`).
     pub sky: SkyUniform,
 }
-const _: () = assert!(std::mem::size_of::<ViewUniform>() == 960);
+const _: () = assert!(std::mem::size_of::<ViewUniform>() == 1104);
 
 /// The sky's light, the air between the eye and what it sees, and which of
-/// the light's parts are on. Must match `Sky` in `shaders/layout.wgsl`;
+/// the light's parts are on. Must match `Sky` in `shaders/sky_model.wgsl`;
 /// written by `crate::render::sky_light::SkyLight::uniform`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Pod, Zeroable)]
@@ -78,13 +78,18 @@ pub struct SkyUniform {
     /// x: the haze's (Mie) extinction at the scene origin's height (per
     /// metre), y: its scale height (m); zw unused.
     pub mie: [f32; 4],
+    /// The light the air scatters towards the eye over a long path: the
+    /// sky's radiance at the horizon as a Fourier series in the azimuth φ
+    /// (from +x, east, towards +y, north; rgb each): `air[0] + Σk air[2k−1]
+    /// cos kφ + air[2k] sin kφ`, k = 1…4.
+    pub air: [[f32; 4]; 9],
     /// x: the light's parts that are on (`LIGHT_*` bits); yzw unused.
     pub parts: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<SkyUniform>() == 304);
+const _: () = assert!(std::mem::size_of::<SkyUniform>() == 448);
 
 /// The light's parts (`SkyUniform::parts`), each switchable. Must match
-/// `LIGHT_*` in `shaders/light.wgsl`.
+/// `LIGHT_*` in `shaders/sky_model.wgsl`.
 /// The clear sky of Preetham et al. 1999 behind the scene (off: the gradient).
 pub const LIGHT_SKY: u32 = 1;
 /// Aerial perspective: the air's extinction and in-scattering (off: the grey haze).

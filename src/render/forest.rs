@@ -672,7 +672,7 @@ impl ForestRenderer {
             }
         }
         use super::sky_light::{SkyLight, LEAF_TRANSMIT};
-        let u = SkyLight::new(l, settings.turbidity).uniform(settings.light_parts, LEAF_TRANSMIT, settings.turbidity);
+        let u = SkyLight::new(l, settings.turbidity).uniform(settings.light_parts, LEAF_TRANSMIT);
         self.sky_cache = Some((key, u));
         u
     }

@@ -12,7 +12,7 @@ pub use crate::scene::style::STYLE_HEADER_WORDS;
 
 /// Byte stride of views in the view buffer (main view, then one per cascade):
 /// the size rounded up to WebGPU's 256-byte storage offset alignment.
-pub const VIEW_STRIDE: u64 = 1024;
+pub const VIEW_STRIDE: u64 = 1280;
 const _: () = assert!(std::mem::size_of::<ViewUniform>() as u64 <= VIEW_STRIDE);
 
 /// Per-draw constants, bound with a dynamic offset. Must match `DrawParams` in

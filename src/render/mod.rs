@@ -146,11 +146,8 @@ impl Lighting {
             shadow_texel: [0.0; 4],
             shadow: [0.0; 4],
             canopy: [0.0; 4],
-            sky: sky_light::SkyLight::new(self, sky_light::DEFAULT_TURBIDITY).uniform(
-                sky_light::LightParts::default(),
-                sky_light::LEAF_TRANSMIT,
-                sky_light::DEFAULT_TURBIDITY,
-            ),
+            sky: sky_light::SkyLight::new(self, sky_light::DEFAULT_TURBIDITY)
+                .uniform(sky_light::LightParts::default(), sky_light::LEAF_TRANSMIT),
         }
     }
 }

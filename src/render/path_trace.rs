@@ -181,7 +181,7 @@ impl PathView {
             sky_zenith: RASTER_SKY_ZENITH * scale,
             sky_horizon: RASTER_SKY_HORIZON * scale,
             ambient: lighting.ambient,
-            sky: SkyLight::new(lighting, turbidity).uniform(parts, LEAF_TRANSMIT, turbidity),
+            sky: SkyLight::new(lighting, turbidity).uniform(parts, LEAF_TRANSMIT),
         }
     }
 }

@@ -80,7 +80,7 @@ impl FromStr for LightParts {
     fn from_str(s: &str) -> Result<Self, String> {
         match s.trim() {
             "all" => return Ok(Self::ALL),
-            "none" | "" => return Ok(Self::NONE),
+            "none" => return Ok(Self::NONE),
             _ => {}
         }
         let mut bits = 0;
@@ -193,6 +193,8 @@ pub struct SkyLight {
     pub sun_color: Vec3,
     /// The ground's albedo below the horizon.
     pub ground_albedo: Vec3,
+    /// The air's turbidity (the sky's and the haze's).
+    pub turbidity: f32,
 }
 
 /// How bright the raster's gradient sky is relative to day: the ambient
@@ -223,6 +225,7 @@ impl SkyLight {
             sun_dir: lighting.sun_dir.normalize_or(Vec3::Z),
             sun_color: lighting.sun_color,
             ground_albedo: GROUND_ALBEDO,
+            turbidity,
         }
     }
 
@@ -246,6 +249,27 @@ impl SkyLight {
         self.ground_albedo * (self.sun_color * self.sun_dir.z.max(0.0) + self.sky(up45))
     }
 
+    /// The air's light ([`SkyUniform::air`]): the sky's radiance at the
+    /// horizon fitted by a Fourier series of the azimuth to the
+    /// [`AIR_HARMONICS`]th harmonic (128 azimuths), rgb each: the mean, then
+    /// per harmonic k its cos kφ and sin kφ terms.
+    #[must_use]
+    pub fn air_ring(&self) -> [Vec3; AIR_TERMS] {
+        const N: usize = 128;
+        let mut out = [Vec3::ZERO; AIR_TERMS];
+        for i in 0..N {
+            let phi = std::f32::consts::TAU * (i as f32 + 0.5) / N as f32;
+            let l = self.sky(Vec3::new(phi.cos(), phi.sin(), 0.0));
+            out[0] += l / N as f32;
+            for k in 1..=AIR_HARMONICS {
+                let (s, c) = (k as f32 * phi).sin_cos();
+                out[2 * k - 1] += l * (2.0 * c / N as f32);
+                out[2 * k] += l * (2.0 * s / N as f32);
+            }
+        }
+        out
+    }
+
     /// The irradiance over π this sky gives a surface facing n, as SH
     /// coefficients ([`eval_sh`]).
     #[must_use]
@@ -254,9 +278,9 @@ impl SkyLight {
     }
 
     /// The view's sky uniform with `parts` on, leaves transmitting
-    /// `leaf_transmit` of their albedo, through air of `turbidity`.
+    /// `leaf_transmit` of their albedo.
     #[must_use]
-    pub fn uniform(&self, parts: LightParts, leaf_transmit: f32, turbidity: f32) -> SkyUniform {
+    pub fn uniform(&self, parts: LightParts, leaf_transmit: f32) -> SkyUniform {
         let sh = self.irradiance();
         let mut u = SkyUniform::zeroed();
         for (o, (c, k)) in u.sh.iter_mut().zip(sh.iter().zip(SH_CONSTANTS)) {
@@ -268,10 +292,31 @@ impl SkyLight {
         u.zenith = [self.sky.zenith[0], self.sky.zenith[1], self.sky.zenith[2], self.units];
         u.sun = self.sky.fitted_sun().extend(leaf_transmit.clamp(0.0, 1.0)).to_array();
         u.rayleigh = RAYLEIGH.extend(RAYLEIGH_HEIGHT_M).to_array();
-        u.mie = [mie_extinction(turbidity), MIE_HEIGHT_M, 0.0, 0.0];
+        u.mie = [mie_extinction(self.turbidity), MIE_HEIGHT_M, 0.0, 0.0];
+        u.air = self.air_ring().map(|c| c.extend(0.0).to_array());
         u.parts = [parts.0, 0, 0, 0];
         u
     }
+}
+
+/// Harmonics of the air's light's fit ([`SkyLight::air_ring`]).
+pub const AIR_HARMONICS: usize = 4;
+/// Its terms: the mean, then a cosine and a sine per harmonic.
+pub const AIR_TERMS: usize = 2 * AIR_HARMONICS + 1;
+
+/// The air's light towards `rel` from the fitted ring ([`SkyLight::air_ring`]).
+/// Twin: `air_light` in `shaders/sky_model.wgsl`.
+#[must_use]
+pub fn air_light(ring: &[Vec3; AIR_TERMS], rel: Vec3) -> Vec3 {
+    let h = rel.truncate() / rel.truncate().length().max(1e-6);
+    let mut l = ring[0];
+    // cos kφ + i sin kφ as powers of cos φ + i sin φ.
+    let (mut c, mut s) = (1.0f32, 0.0f32);
+    for k in 1..=AIR_HARMONICS {
+        (c, s) = (c * h.x - s * h.y, s * h.x + c * h.y);
+        l += ring[2 * k - 1] * c + ring[2 * k] * s;
+    }
+    l.max(Vec3::ZERO)
 }
 
 /// The haze's extinction at sea level (1/m) for `turbidity`: Preetham et
@@ -282,7 +327,7 @@ impl SkyLight {
 #[must_use]
 pub fn mie_extinction(turbidity: f32) -> f32 {
     let rayleigh_thickness = RAYLEIGH.y * RAYLEIGH_HEIGHT_M;
-    (turbidity.clamp(1.0, 10.0) - 1.0) * rayleigh_thickness / MIE_HEIGHT_M
+    (turbidity.clamp(1.7, 10.0) - 1.0) * rayleigh_thickness / MIE_HEIGHT_M
 }
 
 /// The air's transmittance over the segment from an eye `eye_z` metres above
@@ -292,10 +337,15 @@ pub fn mie_extinction(turbidity: f32) -> f32 {
 #[must_use]
 pub fn air_transmittance(eye_z: f32, rel: Vec3, turbidity: f32) -> Vec3 {
     let s = rel.length();
+    let z = eye_z.max(0.0);
     let depth = |h: f32| {
         let x = rel.z / h;
-        let f = if x.abs() < 1e-4 { 1.0 - 0.5 * x } else { (1.0 - (-x).exp()) / x };
-        (-eye_z.max(0.0) / h).exp() * s * f
+        let a = (-z / h).exp();
+        if x.abs() < 1e-4 {
+            s * a * (1.0 - 0.5 * x)
+        } else {
+            s / x * (a - (-z / h - x).exp())
+        }
     };
     let tau = RAYLEIGH * depth(RAYLEIGH_HEIGHT_M) + Vec3::splat(mie_extinction(turbidity) * depth(MIE_HEIGHT_M));
     (-tau).exp()
@@ -399,6 +449,32 @@ mod tests {
         }
         let closed = air_transmittance(100.0, rel, 3.0);
         assert!((closed - (-tau).exp()).abs().max_element() < 1e-4, "{closed} vs {}", (-tau).exp());
+    }
+
+    #[test]
+    fn the_airs_light_follows_the_horizon_all_round() {
+        // The four-harmonic ring against the horizon's radiance itself, with
+        // the sun high and low (its glow then narrower): every azimuth's
+        // luminance within the bound (measured 0.001 and 0.126), the mean
+        // over the ring kept.
+        for (elevation, bound) in [(55.0f32, 0.01f32), (8.0, 0.15)] {
+            let e = elevation.to_radians();
+            let sun = Vec3::new(0.6 * e.cos(), -0.8 * e.cos(), e.sin());
+            let sky = SkyLight::new(&crate::render::Lighting::for_sun(sun, elevation), DEFAULT_TURBIDITY);
+            let ring = sky.air_ring();
+            let (mut worst, mut sum_fit, mut sum_sky) = (0f32, 0f32, 0f32);
+            for k in 0..90 {
+                let a = k as f32 * 4f32.to_radians();
+                let d = Vec3::new(a.cos(), a.sin(), 0.0);
+                let fit = air_light(&ring, d * 1000.0 - Vec3::Z * 30.0).dot(LUMINANCE);
+                let exact = sky.sky(d).dot(LUMINANCE);
+                worst = worst.max((fit - exact).abs() / exact);
+                sum_fit += fit;
+                sum_sky += exact;
+            }
+            assert!(worst < bound, "sun {elevation}°: the ring is off the horizon by {worst:.3}");
+            assert!((sum_fit / sum_sky - 1.0).abs() < 0.01);
+        }
     }
 
     #[test]

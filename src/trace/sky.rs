@@ -2,8 +2,9 @@
 //! Model for Daylight"): the sky's luminance and chromaticity in any direction
 //! from the sun's position and the air's turbidity — Perez et al.'s
 //! distribution (§3.2, eq. 3) with the fitted coefficients and zenith values of
-//! appendix A.2. The path tracer's sky (`sky_preetham` in
-//! `shaders/path_trace.wgsl` is the twin of [`PreethamSky::yxy`]).
+//! appendix A.2. The path tracer's sky and the raster's (`preetham_radiance`
+//! in `shaders/sky_model.wgsl` is the twin of [`PreethamSky::radiance`]; the
+//! raster's in render units faded through dusk, `render::sky_light`).
 //!
 //! Directions are unit vectors with +Z up. The model is fitted for the sun
 //! above the horizon and turbidity 2–10 (the paper's range; below about 1.7
@@ -32,8 +33,8 @@ pub struct PreethamSky {
 }
 
 /// Perez et al.'s distribution: F(θ, γ) = (1 + A e^(B / cos θ)) (1 + C e^(D γ) + E cos² γ),
-/// with cos θ at least 0.01 (at and below the horizon). Twin: `perez` in
-/// `shaders/path_trace.wgsl`.
+/// with cos θ at least 0.01 (at and below the horizon). Twin: `perez_yxy` in
+/// `shaders/sky_model.wgsl`.
 #[must_use]
 pub fn perez(cos_theta: f32, gamma: f32, c: [f32; 5]) -> f32 {
     let cos_gamma = gamma.cos();
@@ -112,7 +113,8 @@ impl PreethamSky {
     }
 
     /// The sky's radiance towards `dir` in render units, linear sRGB.
-    /// Twin: `sky_preetham` in `shaders/path_trace.wgsl`.
+    /// Twin: `preetham_radiance` in `shaders/sky_model.wgsl` (the raster's
+    /// and the tracer's).
     #[must_use]
     pub fn radiance(&self, dir: Vec3) -> Vec3 {
         xyy_to_linear_srgb(self.yxy(dir)) * UNITS_PER_KCD

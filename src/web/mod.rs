@@ -459,8 +459,9 @@ impl Viewer {
         let pipes =
             self.photo_pipes.get_or_insert_with(|| photo::PhotoPipelines::new(&self.frame.device, self.view_format));
         let lighting = self.frame.settings.lighting;
+        let parts = self.frame.settings.light_parts;
         let size = (self.config.width, self.config.height);
-        match p.record(pipes, &self.frame.device, &self.frame.queue, camera, &lighting, size, color) {
+        match p.record(pipes, &self.frame.device, &self.frame.queue, camera, &lighting, parts, size, color) {
             Ok(work) => work,
             Err(message) => {
                 self.events.push(StreamEvent::Failed { url: "path-trace".into(), message, retrying: false });

@@ -49,7 +49,7 @@ enum State {
         report: LoadReport,
         scene: Option<PathScene>,
         /// The camera and light the accumulation is of.
-        drawn: Option<(Camera, Lighting)>,
+        drawn: Option<(Camera, Lighting, u32)>,
     },
     Failed(String),
 }
@@ -178,7 +178,8 @@ impl Photo {
 
     /// Records the next sample of `camera`'s view under `lighting` and its
     /// display on `target` (`size`) — the display alone once the image is
-    /// complete —, or `None` while the scene loads.
+    /// complete —, or `None` while the scene loads. The raster light traced
+    /// (`simple`) mirrors the viewer's light `parts`.
     ///
     /// # Errors
     /// The scene larger than the device binds (then the raster view stays).
@@ -190,6 +191,7 @@ impl Photo {
         queue: &wgpu::Queue,
         camera: &Camera,
         lighting: &Lighting,
+        parts: crate::render::sky_light::LightParts,
         size: (u32, u32),
         target: &wgpu::TextureView,
     ) -> Result<Option<wgpu::CommandBuffer>, String> {
@@ -216,7 +218,7 @@ impl Photo {
         }
         let Some(scene) = scene.as_mut() else { return Ok(None) };
         let mut encoder = device.create_command_encoder(&Default::default());
-        let now = (*camera, *lighting);
+        let now = (*camera, *lighting, parts.0);
         if drawn.as_ref() != Some(&now) {
             scene.restart(&mut encoder);
             *drawn = Some(now);
@@ -226,12 +228,13 @@ impl Photo {
             pipes.display.draw(device, queue, &mut encoder, scene, target);
             return Ok(Some(encoder.finish()));
         }
-        let view = PathView::under(
+        let view = PathView::under_parts(
             lighting,
             camera.eye_m.as_vec3(),
             camera.forward().as_vec3(),
             camera.fov_y_rad,
-            (!settings.simple).then_some(settings.turbidity),
+            settings.turbidity,
+            if settings.simple { parts } else { crate::render::sky_light::LightParts::ALL },
         );
         let options = PathOptions {
             spp: settings.spp,

@@ -93,7 +93,7 @@ fn shared_structs_match_their_wgsl_twins() {
         check(
             shader,
             "Sky",
-            &members!(SkyUniform: sh, perez, zenith, sun, rayleigh, mie, parts),
+            &members!(SkyUniform: sh, perez, zenith, sun, rayleigh, mie, air, parts),
             size_of::<SkyUniform>(),
             None,
         );

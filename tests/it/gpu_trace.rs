@@ -436,7 +436,7 @@ fn the_gpu_sky_is_its_cpu_twin() {
         sky_zenith: glam::Vec3::ZERO,
         sky_horizon: glam::Vec3::ZERO,
         ambient: glam::Vec3::ZERO,
-        sky: sky_light.uniform(sylva::render::sky_light::LightParts::ALL, 0.3, 3.0),
+        sky: sky_light.uniform(sylva::render::sky_light::LightParts::ALL, 0.3),
     };
     let (w, h) = (16u32, 9u32);
     let options = PathOptions { spp: 16, ground_z: None, ..PathOptions::default() };
