@@ -644,6 +644,7 @@ pub(crate) fn render(args: RenderArgs) -> Result<()> {
     };
     let mut renderer = TreeRenderer::new(&gpu);
     renderer.ao = ao;
+    renderer.light_parts = light_parts;
     if variant > 0 {
         renderer.set_variant(&gpu, variant);
     }
