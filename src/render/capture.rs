@@ -273,11 +273,13 @@ pub fn capture_views(
         tree.set_variant(ctx, variant);
     }
     let mut out = CapturedBillboards { color: Vec::new(), normal: Vec::new(), ao: Vec::new(), depth: Vec::new() };
+    let light = Lighting::default();
+    let sky = light.default_sky();
     for clip_from_model in views {
         let uniform = ViewUniform {
             clip_from_eye: clip_from_model.to_cols_array_2d(),
             params: [RenderMode::Capture as u32, 0, 0, 0],
-            ..Lighting::default().view_uniform(*clip_from_model, Vec3::ZERO, [size, size])
+            ..light.view_uniform_with(*clip_from_model, Vec3::ZERO, [size, size], sky)
         };
         ctx.queue.write_buffer(&view_buffer, 0, bytemuck::bytes_of(&uniform));
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -391,6 +393,9 @@ pub struct TreeRenderer {
     pub full_res_alpha: bool,
     /// The season drawn ([`Self::set_season`]) and its draw params.
     season: std::cell::Cell<(Season, [f32; 4])>,
+    /// The sky of the last light drawn under (its SH projection is worked
+    /// out once per light, not per image).
+    sky: std::cell::Cell<Option<(Lighting, super::gpu_data::SkyUniform)>>,
 }
 
 /// What one capture sees: a camera (`clip_from_eye` at `eye`, model space)
@@ -446,6 +451,7 @@ impl TreeRenderer {
             light_parts: super::sky_light::LightParts::default(),
             full_res_alpha: false,
             season: std::cell::Cell::new((Season::LeafOn, [0.0; 4])),
+            sky: std::cell::Cell::new(None),
         }
     }
 
@@ -557,7 +563,15 @@ impl TreeRenderer {
         draws: u32,
     ) -> (wgpu::CommandEncoder, wgpu::Texture) {
         let Shot { clip_from_eye, eye, size: [width, height] } = *shot;
-        let mut uniform = self.lighting.view_uniform(clip_from_eye, eye, [width, height]);
+        let sky = match self.sky.get() {
+            Some((light, sky)) if light == self.lighting => sky,
+            _ => {
+                let sky = self.lighting.default_sky();
+                self.sky.set(Some((self.lighting, sky)));
+                sky
+            }
+        };
+        let mut uniform = self.lighting.view_uniform_with(clip_from_eye, eye, [width, height], sky);
         uniform.ambient[3] = f32::from(u8::from(self.ao));
         uniform.sky.sun[3] = self.leaf_transmit;
         uniform.sky.parts[0] = self.light_parts.0;

@@ -126,9 +126,29 @@ impl Lighting {
     }
 
     /// The view uniform for a lit render of a single tree (previews and captures:
-    /// no culling, so no frustum or LoD data).
+    /// no culling, so no frustum or LoD data), under this light's default sky.
     #[must_use]
     pub fn view_uniform(&self, clip_from_eye: Mat4, eye_m: Vec3, viewport: [u32; 2]) -> ViewUniform {
+        self.view_uniform_with(clip_from_eye, eye_m, viewport, self.default_sky())
+    }
+
+    /// This light's sky uniform with the default parts, turbidity and leaves
+    /// (an SH projection: worked out once per light by callers that draw often).
+    #[must_use]
+    pub fn default_sky(&self) -> gpu_data::SkyUniform {
+        sky_light::SkyLight::new(self, sky_light::DEFAULT_TURBIDITY)
+            .uniform(sky_light::LightParts::default(), sky_light::LEAF_TRANSMIT)
+    }
+
+    /// [`Self::view_uniform`] with a sky already worked out.
+    #[must_use]
+    pub fn view_uniform_with(
+        &self,
+        clip_from_eye: Mat4,
+        eye_m: Vec3,
+        viewport: [u32; 2],
+        sky: gpu_data::SkyUniform,
+    ) -> ViewUniform {
         ViewUniform {
             clip_from_eye: clip_from_eye.to_cols_array_2d(),
             eye_hi: eye_m.extend(0.0).to_array(),
@@ -146,8 +166,7 @@ impl Lighting {
             shadow_texel: [0.0; 4],
             shadow: [0.0; 4],
             canopy: [0.0; 4],
-            sky: sky_light::SkyLight::new(self, sky_light::DEFAULT_TURBIDITY)
-                .uniform(sky_light::LightParts::default(), sky_light::LEAF_TRANSMIT),
+            sky,
         }
     }
 }

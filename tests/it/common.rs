@@ -1,4 +1,4 @@
-//! Helpers shared by the GPU tests: scene copies with edits.
+//! Helpers shared by the GPU tests: scene copies with edits, measures of images.
 
 use std::path::Path;
 
@@ -54,4 +54,15 @@ pub fn copy_dir(src: &Path, dst: &Path) {
 pub fn foliage_share(img: &[u8]) -> f64 {
     let n = img.chunks_exact(4).filter(|p| sylva::metrics::is_foliage(p)).count();
     n as f64 / (img.len() / 4) as f64
+}
+
+/// Mean brightness (0–255, the mean of R, G and B) of the RGBA8 pixels in
+/// `mask`, and how many there are.
+pub fn tree_brightness(img: &[u8], mask: &[bool]) -> (f64, usize) {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (p, _) in img.chunks(4).zip(mask).filter(|(_, m)| **m) {
+        sum += (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0;
+        n += 1;
+    }
+    (sum / n.max(1) as f64, n)
 }

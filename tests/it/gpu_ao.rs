@@ -10,20 +10,11 @@ use sylva::metrics::multiscale_rmse;
 use sylva::render::capture::{PackRepr, PackView, TreeRenderer};
 use sylva::render::GpuContext;
 
+use crate::common::tree_brightness;
+
 const SPECIES: [&str; 3] = ["beech", "birch", "spruce"];
 const SIZE: u32 = 128;
 const BG: [f64; 4] = [0.62, 0.74, 0.86, 1.0];
-
-/// Mean sRGB brightness (0–255) of the pixels that are not background in
-/// `mask`, and how many there are.
-fn tree_brightness(img: &[u8], mask: &[bool]) -> (f64, usize) {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for (p, _) in img.chunks(4).zip(mask).filter(|(_, m)| **m) {
-        sum += (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0;
-        n += 1;
-    }
-    (sum / n.max(1) as f64, n)
-}
 
 #[test]
 fn occlusion_darkens_every_level_alike() {

@@ -6,18 +6,10 @@ use sylva::format::decode_pack;
 use sylva::render::capture::{BillboardFrame, PackRepr, PackView, TreeRenderer};
 use sylva::render::{GpuContext, Lighting};
 
+use crate::common::tree_brightness;
+
 const SIZE: u32 = 128;
 const BG: [f64; 4] = [0.62, 0.74, 0.86, 1.0];
-
-/// Mean brightness (0–255) of the pixels in `mask`, and how many.
-fn brightness(img: &[u8], mask: &[bool]) -> (f64, usize) {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for (p, _) in img.chunks(4).zip(mask).filter(|(_, m)| **m) {
-        sum += (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0;
-        n += 1;
-    }
-    (sum / n.max(1) as f64, n)
-}
 
 /// A tree with the sun behind it glows where its leaves let the light
 /// through: brighter with the tracer's transmittance (0.3 of the albedo)
@@ -60,11 +52,11 @@ fn back_lit_leaves_glow_at_every_level_of_detail() {
         let mask: Vec<bool> =
             off.chunks(4).map(|p| p.iter().zip(&background).take(3).any(|(a, b)| a.abs_diff(*b) > 2)).collect();
         let on = render(behind, 0.3).expect("drawn once");
-        let (b_off, n) = brightness(&off, &mask);
-        let (b_on, _) = brightness(&on, &mask);
+        let (b_off, n) = tree_brightness(&off, &mask);
+        let (b_on, _) = tree_brightness(&on, &mask);
         let back = b_on / b_off;
-        let (f_off, _) = brightness(&render(in_front, 0.0).expect("drawn once"), &mask);
-        let (f_on, _) = brightness(&render(in_front, 0.3).expect("drawn once"), &mask);
+        let (f_off, _) = tree_brightness(&render(in_front, 0.0).expect("drawn once"), &mask);
+        let (f_on, _) = tree_brightness(&render(in_front, 0.3).expect("drawn once"), &mask);
         let front = f_on / f_off;
         rows.push(format!(
             "{name:10}: {n} px; back-lit {b_off:.1} -> {b_on:.1} (x{back:.3}); front-lit {f_off:.1} -> {f_on:.1} (x{front:.3})"
