@@ -26,20 +26,22 @@ text = (root / "web" / "governor.js").read_text()
 block = text[text.index("export const LEVELS = ["):]
 block = block[: block.index("];")]
 levels = [
-    (float(s), sh, float(l), imp)
-    for s, sh, l, imp in re.findall(
-        r"\{ scale: ([\d.]+), shadows: '(\w+)', lod: ([\d.]+), impostors: '(\w+)' \}", block)
+    (float(s), sh, float(l), imp, light)
+    for s, sh, l, imp, light in re.findall(
+        r"\{ scale: ([\d.]+), shadows: '(\w+)', lod: ([\d.]+), impostors: '(\w+)', light: '([\w-]+)' \}", block)
 ]
+# The light parts of each: all, or all but the soft shadows.
+LIGHT = {"all": "all", "no-soft-shadows": "sky,aerial,sky-light,transmission"}
 assert levels and len(levels) == block.count("{"), "LEVELS in web/governor.js: an entry this script does not read"
 
 rows = []
-for i, (scale, shadows, lod, impostors) in enumerate(levels):
+for i, (scale, shadows, lod, impostors, light) in enumerate(levels):
     lw, lh = max(2, round(w * scale)), max(2, round(h * scale))
     png, stats = out / f"level{i}.png", out / f"level{i}.json"
     # (GPU times are of the passes alone: pipeline compilation is not in them.)
     subprocess.run(
         [str(sylva), "render", "--scene", scene, "--view", view, "--size", f"{lw}x{lh}",
-         "--sun", "180,35", "--shadows", shadows, "--quality", str(lod),
+         "--sun", "180,35", "--shadows", shadows, "--quality", str(lod), "--light-parts", LIGHT[light],
          "--out", str(png), "--stats", str(stats)]
         + (["--moving-impostors"] if impostors == "moving" else []),
         check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -50,12 +52,12 @@ for i, (scale, shadows, lod, impostors) in enumerate(levels):
         r = subprocess.run([str(sylva), "compare", "--stretch", str(out / "level0.png"), str(png)],
                            check=True, capture_output=True, text=True)
         err = float(r.stdout.strip())
-    rows.append((i, scale, shadows, lod, impostors, f"{lw}x{lh}", sum(gpu.values()), gpu,
+    rows.append((i, scale, shadows, lod, impostors, light, f"{lw}x{lh}", sum(gpu.values()), gpu,
                  sum(s["instances"].values()), err))
 
 print(f"scene {scene}, view {view}, full size {w}x{h}; adapter {s.get('adapter', '?')}")
-print("| level | scale | shadows | LoD | impostors | size | GPU ms (cull + draw + shadow) | trees drawn | MS-RMSE vs level 0 |")
-print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-for i, scale, shadows, lod, impostors, size, total, gpu, drawn, err in rows:
+print("| level | scale | shadows | LoD | impostors | light | size | GPU ms (cull + draw + shadow) | trees drawn | MS-RMSE vs level 0 |")
+print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+for i, scale, shadows, lod, impostors, light, size, total, gpu, drawn, err in rows:
     parts = " + ".join(f"{gpu.get(k, 0):.0f}" for k in ("cull", "draw", "shadow"))
-    print(f"| {i} | {scale} | {shadows} | {lod} | {impostors} | {size} | {total:.0f} ({parts}) | {drawn} | {err:.4f} |")
+    print(f"| {i} | {scale} | {shadows} | {lod} | {impostors} | {light} | {size} | {total:.0f} ({parts}) | {drawn} | {err:.4f} |")

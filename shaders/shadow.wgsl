@@ -85,6 +85,47 @@ fn shadow_soft(uv: vec2<f32>, layer: u32, depth: f32, texel_m: f32, depth_per_m:
 // so they are shaded by other trees, not by their own caster). Where no
 // cascade holds the point (shadows off, beyond the shadow distance) the
 // precomputed `open` term stands in, and the shadows fade into it.
+// The receiver moved off its surface against acne (see the offsets above)
+// for cascade `i`, in that cascade's clip space.
+fn shadow_clip(i: u32, rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> vec4<f32> {
+    let sun = view.sun_dir.xyz;
+    let towards_sun = select(-n, n, dot(n, sun) >= 0.0);
+    let texel = view.shadow_texel[i];
+    let p = rel + towards_sun * (SHADOW_NORMAL_OFFSET * texel) + sun * (SHADOW_SUN_OFFSET * texel + lift_m);
+    return view.shadow_from_eye[i] * vec4<f32>(p, 1.0);
+}
+
+// The first cascade whose map holds the receiver with room for the filter
+// (its index; the cascade count where none does).
+fn shadow_cascade(rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> u32 {
+    let count = u32(view.shadow.x);
+    let reach = select(view.shadow.z, SOFT_SEARCH_TEXELS, light_on(view, LIGHT_SOFT_SHADOWS));
+    let margin = (reach + 1.0) / view.shadow.y;
+    for (var i = 0u; i < count; i++) {
+        let c = shadow_clip(i, rel, n, lift_m);
+        let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
+        if all(uv >= vec2<f32>(margin)) && all(uv <= vec2<f32>(1.0 - margin)) && c.z >= 0.0 {
+            return i;
+        }
+    }
+    return count;
+}
+
+// The sun's visibility from cascade `i` alone (1 above every caster).
+fn cascade_visibility(i: u32, rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> f32 {
+    let c = shadow_clip(i, rel, n, lift_m);
+    let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
+    if c.z > 1.0 {
+        return 1.0; // above every caster
+    }
+    if light_on(view, LIGHT_SOFT_SHADOWS) {
+        let m = view.shadow_from_eye[i];
+        let depth_per_m = length(vec3<f32>(m[0].z, m[1].z, m[2].z));
+        return shadow_soft(uv, i, c.z, view.shadow_texel[i], depth_per_m);
+    }
+    return shadow_pcf(uv, i, c.z);
+}
+
 fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
     let count = u32(view.shadow.x);
     if view.params.x != 0u {
@@ -97,27 +138,10 @@ fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
     if fade >= 1.0 {
         return open;
     }
-    let sun = view.sun_dir.xyz;
-    let towards_sun = select(-n, n, dot(n, sun) >= 0.0);
-    let soft = light_on(view, LIGHT_SOFT_SHADOWS);
-    let reach = select(view.shadow.z, SOFT_SEARCH_TEXELS, soft);
-    let margin = (reach + 1.0) / view.shadow.y;
-    for (var i = 0u; i < count; i++) {
-        let texel = view.shadow_texel[i];
-        let p = rel + towards_sun * (SHADOW_NORMAL_OFFSET * texel) + sun * (SHADOW_SUN_OFFSET * texel + lift_m);
-        let c = view.shadow_from_eye[i] * vec4<f32>(p, 1.0);
-        let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
-        if all(uv >= vec2<f32>(margin)) && all(uv <= vec2<f32>(1.0 - margin)) && c.z >= 0.0 {
-            if c.z > 1.0 {
-                return mix(1.0, open, fade); // above every caster
-            }
-            if soft {
-                let m = view.shadow_from_eye[i];
-                let depth_per_m = length(vec3<f32>(m[0].z, m[1].z, m[2].z));
-                return mix(shadow_soft(uv, i, c.z, texel, depth_per_m), open, fade);
-            }
-            return mix(shadow_pcf(uv, i, c.z), open, fade);
-        }
+    let i = shadow_cascade(rel, n, lift_m);
+    if i >= count {
+        return open;
     }
-    return open;
+    let lit = cascade_visibility(i, rel, n, lift_m);
+    return mix(lit, open, fade);
 }

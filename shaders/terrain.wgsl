@@ -70,6 +70,10 @@ struct VertexOut {
     // Position in the tile (east, north; 0–1) mapped into its image's uv.
     @location(3) image_uv: vec2<f32>,
     @location(4) @interpolate(flat) layer: u32,
+    // The tile's draw (its index in `tiles`).
+    @location(5) @interpolate(flat) draw: u32,
+    // Position in the tile (east, north; 0–1).
+    @location(6) tile_uv: vec2<f32>,
 };
 
 const HOLE: u32 = 0xffffu;
@@ -223,6 +227,8 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let tile_uv = vec2<f32>(f32(i), f32(j)) / f32(n);
     out.image_uv = t.image_uv.xy + tile_uv * t.image_uv.zw;
     out.layer = t.layer;
+    out.draw = instance;
+    out.tile_uv = tile_uv;
     return out;
 }
 
@@ -245,6 +251,12 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         albedo = select(select(vec3<f32>(0.5, 0.3, 0.3), vec3<f32>(0.3, 0.5, 0.3), k == 1u), vec3<f32>(0.3, 0.3, 0.5), k == 2u);
     }
     let sun = sun_visibility(frag_rel(in.clip, view), n, 0.0, 1.0);
+    if (params.debug & 4u) != 0u {
+        // Coloured by the shadow cascade (black: none holds it).
+        let k = select(shadow_cascade(frag_rel(in.clip, view), n, 0.0), 4u, u32(view.shadow.x) == 0u);
+        let colours = array<vec3<f32>, 5>(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(1.0), vec3<f32>(0.0));
+        return vec4<f32>(colours[min(k, 4u)] * (0.5 + 0.5 * sun), 1.0);
+    }
     var lit = shade(albedo, n, false, view, sun, 0.0, 1.0);
     // Sampled everywhere (uniform control flow), used where there is an image.
     let has = in.layer != NO_IMAGE && (params.debug & 1u) == 0u;
@@ -256,9 +268,12 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     // above the ground, 0.3 s with this). On the ground uv is in 0–1 and
     // nothing changes.
     let uv = vec2<f32>(in.image_uv.x, 1.0 - in.image_uv.y);
-    let finite = (bitcast<vec2<u32>>(uv) & vec2<u32>(0x7f800000u)) != vec2<u32>(0x7f800000u);
-    let uv_safe = clamp(select(vec2<f32>(0.0), uv, finite), vec2<f32>(-1.0), vec2<f32>(2.0));
-    let photo = textureSample(images, image_sampler, uv_safe, select(0u, in.layer, has));
+    let uv_safe = finite_uv(uv);
+    // (Per pixel: the blend across image edges follows the footprint smoothly.)
+    let ddx = dpdxFine(uv_safe);
+    let ddy = dpdyFine(uv_safe);
+    let own = textureSampleGrad(images, image_sampler, uv_safe, select(0u, in.layer, has), ddx, ddy);
+    let photo = photo_across(in, has, uv_safe, ddx, ddy, own);
     // A photograph already holds the light of its day: relit relative to flat
     // ground under the default daylight, so level ground at midday shows its
     // own colours, slopes their relief, and dusk darkens it like the rest.
@@ -266,6 +281,74 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     lit = mix(lit, relit, select(0.0, photo.a, has));
     return vec4<f32>(haze(lit, in.clip, view), 1.0);
 }
+
+fn finite_uv(uv: vec2<f32>) -> vec2<f32> {
+    let finite = (bitcast<vec2<u32>>(uv) & vec2<u32>(0x7f800000u)) != vec2<u32>(0x7f800000u);
+    return clamp(select(vec2<f32>(0.0), uv, finite), vec2<f32>(-1.0), vec2<f32>(2.0));
+}
+
+// The neighbour drawn on `side` (0 west, 1 east, 2 south, 3 north) at this
+// level, when it drapes another image: its draw index + 1, else 0.
+fn image_neighbour(t: TerrainDraw, side: u32) -> u32 {
+    let links = select(t.across_x, t.across_y, side >= 2u);
+    let k = select(links & 0xffffu, links >> 16u, (side & 1u) == 1u);
+    if k == 0u {
+        return 0u;
+    }
+    let layer = tiles[k - 1u].layer;
+    return select(k, 0u, layer == NO_IMAGE || layer == t.layer);
+}
+
+// The image of draw `k` (index + 1; 0: none, then layer 0, unused) at this
+// fragment's place carried across the edge on `side` (its edge texels, as the
+// sampler clamps).
+fn neighbour_photo(t: TerrainDraw, k: u32, side: u32, tile_uv: vec2<f32>, lod: f32) -> vec4<f32> {
+    let o = tiles[max(k, 1u) - 1u];
+    let shift = array<vec2<f32>, 4>(vec2<f32>(1.0, 0.0), vec2<f32>(-1.0, 0.0), vec2<f32>(0.0, 1.0), vec2<f32>(0.0, -1.0));
+    let at = o.image_uv.xy + (tile_uv + shift[side]) * o.image_uv.zw;
+    // Its image's texels against this one's: the footprint's level shifted alike.
+    let ratio = o.image_uv.z / max(t.image_uv.z, 1e-9);
+    let uv = finite_uv(vec2<f32>(at.x, 1.0 - at.y));
+    return textureSampleLevel(images, image_sampler, uv, select(0u, o.layer, k != 0u), max(lod + log2(ratio), 0.0));
+}
+
+// Ground images meet without a seam: each image is filtered within itself
+// (the sampler clamps at its edge), so where two tiles drape different
+// images the last half texel on either side of their edge showed its own
+// edge texel alone, a hard step along the edge — most of all close by, where
+// one texel spans many pixels (the vertical seam through docs/images/
+// shadows-close.png, whose eye stood on such an edge). Within half a texel
+// of the mip the sampler reads (its level estimated as the anisotropic
+// filter picks it, at most 4:1), the nearer neighbour's edge texels across
+// each axis are blended in, half and half at the edge: bilinear filtering
+// across the two images. (Sampled in uniform control flow, every fragment:
+// in a branch llvmpipe filtered them by the quad, 2 x 2 blocks.)
+fn photo_across(in: VertexOut, has: bool, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>, own: vec4<f32>) -> vec4<f32> {
+    let px = f32(IMAGE_TEXELS);
+    let fx = length(ddx * px);
+    let fy = length(ddy * px);
+    let lod = max(log2(max(min(fx, fy), max(fx, fy) / 4.0)), 0.0);
+    let half = 0.5 * exp2(lod) / px;
+    let t = tiles[in.draw];
+    // The nearer edge on each axis: west or east, south or north (v runs north to south).
+    let side_x = select(0u, 1u, uv.x > 0.5);
+    let side_y = select(3u, 2u, uv.y > 0.5);
+    let to_x = min(uv.x, 1.0 - uv.x);
+    let to_y = min(uv.y, 1.0 - uv.y);
+    let kx = select(0u, image_neighbour(t, side_x), has && to_x < half);
+    let ky = select(0u, image_neighbour(t, side_y), has && to_y < half);
+    // (At the level of the footprint's longer axis: llvmpipe's anisotropic
+    // filter, clamped at the image's edge, took its taps by the quad.)
+    let level = log2(max(max(fx, fy), 1e-6));
+    let across_x = neighbour_photo(t, kx, side_x, in.tile_uv, level);
+    let across_y = neighbour_photo(t, ky, side_y, in.tile_uv, level);
+    let wx = select(0.0, 0.5 * (1.0 - to_x / half), kx != 0u);
+    let wy = select(0.0, 0.5 * (1.0 - to_y / half), ky != 0u);
+    return mix(mix(own, across_x, wx), across_y, wy);
+}
+
+// Texels a side of a ground image (scene::imagery::IMAGE_PX).
+const IMAGE_TEXELS: u32 = 256u;
 
 // Picking: the ground hides the trees behind it and is no tree (0).
 @fragment

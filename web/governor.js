@@ -9,20 +9,23 @@
  * the browser upscales), shadows at most this ('high' | 'low' | 'off'), a
  * factor on the LoD quality (projected sizes), and the impostors ('full':
  * three views blended, each pixel's own depth; 'moving': the nearest view at
- * the depth of the tree's quad, so hidden crowns cost nothing). Ordered by what
+ * the depth of the tree's quad, so hidden crowns cost nothing), and the
+ * light's parts ('all', or 'no-soft-shadows': the penumbrae's blocker search
+ * and wide filter, 1.16× of a close frame's GPU time with high shadows, go
+ * with the high shadows). Ordered by what
  * each step costs in image error for what it saves (`make bench-governor`,
  * docs/BENCHMARKS.md): the moving impostors first (6× cheaper draws for
  * 0.008 MS-RMSE), then shadows, then pixels, the LoD quality last. Thinning
  * more was measured and left out: a moving frame's cost is its pixels, not
  * its trees. */
 export const LEVELS = [
-  { scale: 1.0, shadows: 'high', lod: 1.0, impostors: 'full' },
-  { scale: 1.0, shadows: 'high', lod: 1.0, impostors: 'moving' },
-  { scale: 0.85, shadows: 'low', lod: 1.0, impostors: 'moving' },
-  { scale: 0.7, shadows: 'off', lod: 1.0, impostors: 'moving' },
-  { scale: 0.5, shadows: 'off', lod: 1.0, impostors: 'moving' },
-  { scale: 0.42, shadows: 'off', lod: 0.5, impostors: 'moving' },
-  { scale: 0.35, shadows: 'off', lod: 0.25, impostors: 'moving' },
+  { scale: 1.0, shadows: 'high', lod: 1.0, impostors: 'full', light: 'all' },
+  { scale: 1.0, shadows: 'high', lod: 1.0, impostors: 'moving', light: 'all' },
+  { scale: 0.85, shadows: 'low', lod: 1.0, impostors: 'moving', light: 'no-soft-shadows' },
+  { scale: 0.7, shadows: 'off', lod: 1.0, impostors: 'moving', light: 'no-soft-shadows' },
+  { scale: 0.5, shadows: 'off', lod: 1.0, impostors: 'moving', light: 'no-soft-shadows' },
+  { scale: 0.42, shadows: 'off', lod: 0.5, impostors: 'moving', light: 'no-soft-shadows' },
+  { scale: 0.35, shadows: 'off', lod: 0.25, impostors: 'moving', light: 'no-soft-shadows' },
 ];
 
 const SHADOW_RANK = { off: 0, low: 1, high: 2 };
@@ -124,17 +127,19 @@ export class Governor {
     return this.level !== before;
   }
 
-  /** What the current level draws, given the user's own shadows and LoD quality. */
+  /** What the current level draws, given the user's own shadows and LoD quality
+   * (`softShadows`: whether the level keeps the light's soft shadows, which
+   * the user's own light parts may still leave off). */
   apply(userShadows = 'high', userLod = 1) {
     const l = LEVELS[this.level];
     const shadows = SHADOW_RANK[l.shadows] < SHADOW_RANK[userShadows] ? l.shadows : userShadows;
-    return { scale: l.scale, shadows, lod: userLod * l.lod, impostors: l.impostors };
+    return { scale: l.scale, shadows, lod: userLod * l.lod, impostors: l.impostors, softShadows: l.light === 'all' };
   }
 
-  /** For `stats()`: `{enabled, level, scale, impostors, target_ms, min_scale, reason}`. */
+  /** For `stats()`: `{enabled, level, scale, impostors, light, target_ms, min_scale, reason}`. */
   report() {
     const l = LEVELS[this.level];
-    return { enabled: this.enabled, level: this.level, scale: l.scale, impostors: l.impostors,
+    return { enabled: this.enabled, level: this.level, scale: l.scale, impostors: l.impostors, light: l.light,
       target_ms: this.target_ms, min_scale: this.min_scale, reason: this.reason };
   }
 }

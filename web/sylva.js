@@ -124,7 +124,9 @@ class SylvaViewer {
     this.governor = new Governor();
     this.userShadows = 'high';
     this.userLod = 1;
-    this.applied = { scale: 1, shadows: 'high', lod: 1, impostors: 'full' };
+    // The user's light parts (bits) and turbidity; the governor may leave the soft shadows out.
+    this.userLight = [(1 << LIGHT_PARTS.length) - 1, 3];
+    this.applied = { scale: 1, shadows: 'high', lod: 1, impostors: 'full', light: this.userLight[0] };
     this.readySettled = false;
     this.ready = new Promise((resolve, reject) => { this.resolveReady = resolve; this.rejectReady = reject; });
     this.ready.catch(() => {}); // observed through 'error' events too
@@ -466,8 +468,12 @@ class SylvaViewer {
       this.applyGovernor(); // (while governed, at most the governor's level)
     }
     if (options.ao !== undefined) this.viewer.set_ao(options.ao);
-    if (light) this.viewer.set_light(light[0], light[1]);
     this.lighting = { ...this.lighting, ...options };
+    if (light) {
+      this.userLight = light;
+      this.applied.light = -1; // (set again below, with the turbidity)
+      this.applyGovernor();
+    }
     this.dirty = SETTLE_FRAMES;
   }
 
@@ -548,7 +554,7 @@ class SylvaViewer {
     this.dirty = SETTLE_FRAMES;
   }
 
-  /** Applies the governor's level: render scale, shadows, LoD quality, impostors. */
+  /** Applies the governor's level: render scale, shadows, LoD quality, impostors, soft shadows. */
   applyGovernor() {
     const a = this.governor.apply(this.userShadows, this.userLod);
     if (a.scale !== this.applied.scale) {
@@ -573,6 +579,11 @@ class SylvaViewer {
     if (a.impostors !== this.applied.impostors) {
       this.viewer.set_moving_impostors(a.impostors === 'moving');
       this.applied.impostors = a.impostors;
+    }
+    const light = a.softShadows ? this.userLight[0] : this.userLight[0] & ~(1 << LIGHT_PARTS.indexOf('soft-shadows'));
+    if (light !== this.applied.light) {
+      this.viewer.set_light(light, this.userLight[1]);
+      this.applied.light = light;
     }
     this.dirty = SETTLE_FRAMES;
   }
@@ -674,7 +685,7 @@ class SylvaViewer {
       if (this.renderer) this.setRenderer(this.renderer.renderer, this.renderer);
       // The new viewer starts at full quality: the governor's level (and the
       // user's LoD factor and shadows) applied to it again.
-      this.applied = { ...this.applied, shadows: 'high', lod: 1, impostors: 'full' };
+      this.applied = { ...this.applied, shadows: 'high', lod: 1, impostors: 'full', light: (1 << LIGHT_PARTS.length) - 1 };
       this.applyGovernor();
       this.dirty = SETTLE_FRAMES;
       this.emit('recovered', {});

@@ -411,6 +411,10 @@ pub(crate) struct RenderArgs {
     /// levels, blue billboard).
     #[arg(long)]
     pub(crate) debug_lod: bool,
+    /// Colour the ground by the shadow cascade that holds it (red, green,
+    /// blue, white; black beyond the shadows), to see where the splits fall.
+    #[arg(long)]
+    pub(crate) debug_cascades: bool,
     /// Draw only one representation family (the benchmark baselines); the
     /// default mixes meshes, ellipsoids and billboards by projected size.
     #[arg(long, value_enum)]

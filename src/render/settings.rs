@@ -69,6 +69,8 @@ pub struct RenderSettings {
     pub fade_band: f32,
     /// Colour trees by representation.
     pub debug_lod: bool,
+    /// Colour the ground by the shadow cascade that holds it.
+    pub debug_cascades: bool,
     /// Draw the boxes of the batches that pass the batch test.
     pub debug_bounds: bool,
     /// Sun and ambient.
@@ -342,6 +344,7 @@ impl Default for RenderSettings {
             draw_distance_m: f32::INFINITY,
             fade_band: 0.12,
             debug_lod: false,
+            debug_cascades: false,
             debug_bounds: false,
             lighting: Lighting::default(),
             light_parts: super::sky_light::LightParts::ALL,

@@ -104,6 +104,9 @@ const IMAGE_MIPS: u32 = IMAGE_PX.ilog2() + 1;
 pub const TERRAIN_LEVEL_COLOURS: u32 = 1;
 /// `TerrainParams::debug` bit: no geomorphing (comparisons only).
 pub const TERRAIN_NO_MORPH: u32 = 2;
+/// `TerrainParams::debug` bit: colour the ground by the shadow cascade that
+/// holds it (red, green, blue, white for the first four; black: none).
+pub const TERRAIN_CASCADE_COLOURS: u32 = 4;
 /// `GpuTerrainDraw::layer` of a tile without an image.
 pub const NO_IMAGE: u32 = u32::MAX;
 
@@ -200,7 +203,7 @@ pub struct TerrainParams {
     pub words: u32,
     /// Selection threshold, pixels.
     pub threshold_px: f32,
-    /// Bits: [`TERRAIN_LEVEL_COLOURS`], [`TERRAIN_NO_MORPH`].
+    /// Bits: [`TERRAIN_LEVEL_COLOURS`], [`TERRAIN_NO_MORPH`], [`TERRAIN_CASCADE_COLOURS`].
     pub debug: u32,
 }
 
@@ -270,7 +273,8 @@ impl TerrainPass {
             label: Some("terrain"),
             entries: &[
                 storage_entry(0, vertex, true),
-                storage_entry(1, vertex, true),
+                // (The fragments read their neighbours' images from the draws: `photo_across`.)
+                storage_entry(1, wgpu::ShaderStages::VERTEX_FRAGMENT, true),
                 wgpu::BindGroupLayoutEntry {
                     binding: 2,
                     visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,

@@ -202,6 +202,8 @@ fn the_cull_counter_and_argument_words_match() {
     assert_eq!(wgsl_const("cull", "BATCH_CROWN_ASPECT"), BATCH_CROWN_ASPECT as usize);
     assert_eq!(wgsl_const("cull", "BATCH_PARTIAL"), sylva::format::tile::BATCH_PARTIAL as usize);
     assert_eq!(wgsl_const("cull", "PARTIAL_COUNT_SHIFT"), sylva::format::tile::PARTIAL_COUNT_SHIFT as usize);
+    // The ground images' side, which the terrain's blend across image edges measures texels by.
+    assert_eq!(wgsl_const("terrain", "IMAGE_TEXELS"), sylva::scene::imagery::IMAGE_PX as usize);
 }
 
 #[test]

@@ -21,6 +21,7 @@ mod gpu_mesh;
 mod gpu_pick;
 mod gpu_refine;
 mod gpu_scene;
+mod gpu_seams;
 mod gpu_shadows;
 mod gpu_trace;
 mod layers;

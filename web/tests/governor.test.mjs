@@ -27,13 +27,13 @@ test('slow frames while moving step down to the lowest allowed level, and say wh
   assert.equal(LEVELS[g.level].scale, 0.5, 'never below min_scale');
   assert.match(g.report().reason, /lowest level.*0\.5.*33 ms/);
   const a = g.apply('high', 1);
-  assert.deepEqual(a, { scale: 0.5, shadows: 'off', lod: 1, impostors: 'moving' });
+  assert.deepEqual(a, { scale: 0.5, shadows: 'off', lod: 1, impostors: 'moving', softShadows: false });
   // The user's own choices are ceilings, never raised.
-  assert.deepEqual(g.apply('off', 0.25), { scale: 0.5, shadows: 'off', lod: 0.25, impostors: 'moving' });
+  assert.deepEqual(g.apply('off', 0.25), { scale: 0.5, shadows: 'off', lod: 0.25, impostors: 'moving', softShadows: false });
   // The deepest level draws less where min_scale allows it.
   g.set({ min_scale: 0.35 });
   run(g, t, 3, 200);
-  assert.deepEqual(g.apply('high', 1), { scale: 0.35, shadows: 'off', lod: 0.25, impostors: 'moving' });
+  assert.deepEqual(g.apply('high', 1), { scale: 0.35, shadows: 'off', lod: 0.25, impostors: 'moving', softShadows: false });
 });
 
 test('fast frames step back up, with hysteresis; at rest everything is restored', () => {
@@ -58,6 +58,7 @@ test('fast frames step back up, with hysteresis; at rest everything is restored'
   assert.equal(g.report().reason, 'at rest');
   assert.equal(g.apply('low', 1).shadows, 'low');
   assert.equal(g.apply('high', 1).impostors, 'full', 'at rest the impostors are whole again');
+  assert.equal(g.apply('high', 1).softShadows, true, 'at rest the shadows are soft again');
 });
 
 test('the ladder gets cheaper at every step and never raises what a level before lowered', () => {
@@ -66,10 +67,13 @@ test('the ladder gets cheaper at every step and never raises what a level before
     const [a, b] = [LEVELS[i - 1], LEVELS[i]];
     assert.ok(b.scale <= a.scale && rank[b.shadows] <= rank[a.shadows] && b.lod <= a.lod, `level ${i}`);
     assert.ok(!(a.impostors === 'moving' && b.impostors === 'full'), `level ${i}`);
+    assert.ok(['all', 'no-soft-shadows'].includes(b.light) && !(a.light !== 'all' && b.light === 'all'), `level ${i}`);
+    // Soft shadows go with the high shadows: a level with them off keeps none.
+    assert.ok(b.shadows === 'high' || b.light !== 'all', `level ${i}`);
     assert.notDeepEqual(a, b, `level ${i} changes something`);
   }
   assert.equal(LEVELS[0].impostors, 'full');
-  assert.deepEqual(LEVELS[0], { scale: 1, shadows: 'high', lod: 1, impostors: 'full' });
+  assert.deepEqual(LEVELS[0], { scale: 1, shadows: 'high', lod: 1, impostors: 'full', light: 'all' });
 });
 
 test('off, and settings checked', () => {
