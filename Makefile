@@ -63,8 +63,10 @@ WASM_PROFILE ?= web
 # air and its fitted horizon, spherical-harmonic sky light, soft shadows) added
 # 4.0 KB, 2.1 KB of it won back (the sky pass's inverse, the light's parts read
 # in JS, a scan for terrain neighbours): 402 KB until the rest is found
-# (wasm-opt --converge would give 0.8 KB of it for a slower build).
-WASM_GZ_BUDGET ?= 402000
+# (wasm-opt --converge would give 0.8 KB of it for a slower build). The
+# ground images blended across tile edges (no seam) and the cascade debug
+# view added 1.1 KB more: 403 KB (402,994 B), still to be won back.
+WASM_GZ_BUDGET ?= 403200
 # What going over it does: fail (`make web`), or warn (`make demo`: a new
 # user's first command does not stop on a compiler that packs a little worse).
 WASM_OVER_BUDGET ?= fail

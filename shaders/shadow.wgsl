@@ -10,8 +10,8 @@
 
 // Receiver offsets against acne, in shadow texels of the cascade: along the
 // normal (turned to the sun) and towards the sun.
-const SHADOW_NORMAL_OFFSET: f32 = 1.5;
-const SHADOW_SUN_OFFSET: f32 = 1.0;
+const SHADOW_NORMAL_OFFSET: f32 = 0.5;
+const SHADOW_SUN_OFFSET: f32 = 2.0;
 // Shadows fade out over the last fifth of the shadow distance.
 const SHADOW_FADE_START: f32 = 0.8;
 

@@ -41,6 +41,10 @@ struct TerrainDraw {
     across_x: u32,
     across_y: u32,
     pad2: u32,
+    // The neighbours' images (west, east, south, north) where another than
+    // this tile's: offset (xy) and scale (z) of this tile's place carried
+    // across the edge, layer (w; -1: none). For `photo_across`.
+    image_across: array<vec4<f32>, 4>,
 };
 
 const NO_IMAGE: u32 = 0xffffffffu;
@@ -70,10 +74,16 @@ struct VertexOut {
     // Position in the tile (east, north; 0–1) mapped into its image's uv.
     @location(3) image_uv: vec2<f32>,
     @location(4) @interpolate(flat) layer: u32,
-    // The tile's draw (its index in `tiles`).
-    @location(5) @interpolate(flat) draw: u32,
     // Position in the tile (east, north; 0–1).
-    @location(6) tile_uv: vec2<f32>,
+    @location(5) tile_uv: vec2<f32>,
+    // The neighbours' images (`TerrainDraw::image_across`), passed on: a
+    // fragment shader's storage reads cost llvmpipe 5x the whole frame.
+    @location(6) @interpolate(flat) across_w: vec4<f32>,
+    @location(7) @interpolate(flat) across_e: vec4<f32>,
+    @location(8) @interpolate(flat) across_s: vec4<f32>,
+    @location(9) @interpolate(flat) across_n: vec4<f32>,
+    // The tile's share of its image's side (`image_uv.z`).
+    @location(10) @interpolate(flat) image_scale: f32,
 };
 
 const HOLE: u32 = 0xffffu;
@@ -227,8 +237,12 @@ fn vs_main(@builtin(vertex_index) vertex: u32, @builtin(instance_index) instance
     let tile_uv = vec2<f32>(f32(i), f32(j)) / f32(n);
     out.image_uv = t.image_uv.xy + tile_uv * t.image_uv.zw;
     out.layer = t.layer;
-    out.draw = instance;
     out.tile_uv = tile_uv;
+    out.across_w = t.image_across[0];
+    out.across_e = t.image_across[1];
+    out.across_s = t.image_across[2];
+    out.across_n = t.image_across[3];
+    out.image_scale = t.image_uv.z;
     return out;
 }
 
@@ -252,10 +266,18 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     }
     let sun = sun_visibility(frag_rel(in.clip, view), n, 0.0, 1.0);
     if (params.debug & 4u) != 0u {
-        // Coloured by the shadow cascade (black: none holds it).
-        let k = select(shadow_cascade(frag_rel(in.clip, view), n, 0.0), 4u, u32(view.shadow.x) == 0u);
-        let colours = array<vec3<f32>, 5>(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(1.0), vec3<f32>(0.0));
-        return vec4<f32>(colours[min(k, 4u)] * (0.5 + 0.5 * sun), 1.0);
+        // Coloured by the shadow cascade (black: none holds it), as bright as
+        // the sun there; with bit 8 the first cascade's ground is shaded by
+        // the second (the same ground's light from either).
+        let rel = frag_rel(in.clip, view);
+        let count = u32(view.shadow.x);
+        let k = select(9u, shadow_cascade(rel, n, 0.0), count > 0u && shadow_cascade(rel, n, 0.0) < count);
+        var vis = sun;
+        if (params.debug & 8u) != 0u && k == 0u && count > 1u {
+            vis = cascade_visibility(1u, rel, n, 0.0);
+        }
+        let c = vec3<f32>(vec3<u32>(k) == vec3<u32>(0u, 1u, 2u)) + f32(k == 3u);
+        return vec4<f32>(c * (0.5 + 0.5 * vis), 1.0);
     }
     var lit = shade(albedo, n, false, view, sun, 0.0, 1.0);
     // Sampled everywhere (uniform control flow), used where there is an image.
@@ -273,7 +295,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let ddx = dpdxFine(uv_safe);
     let ddy = dpdyFine(uv_safe);
     let own = textureSampleGrad(images, image_sampler, uv_safe, select(0u, in.layer, has), ddx, ddy);
-    let photo = photo_across(in, has, uv_safe, ddx, ddy, own);
+    let photo = photo_across(in, has, in.image_scale, uv_safe, ddx, ddy, own);
     // A photograph already holds the light of its day: relit relative to flat
     // ground under the default daylight, so level ground at midday shows its
     // own colours, slopes their relief, and dusk darkens it like the rest.
@@ -287,29 +309,15 @@ fn finite_uv(uv: vec2<f32>) -> vec2<f32> {
     return clamp(select(vec2<f32>(0.0), uv, finite), vec2<f32>(-1.0), vec2<f32>(2.0));
 }
 
-// The neighbour drawn on `side` (0 west, 1 east, 2 south, 3 north) at this
-// level, when it drapes another image: its draw index + 1, else 0.
-fn image_neighbour(t: TerrainDraw, side: u32) -> u32 {
-    let links = select(t.across_x, t.across_y, side >= 2u);
-    let k = select(links & 0xffffu, links >> 16u, (side & 1u) == 1u);
-    if k == 0u {
-        return 0u;
-    }
-    let layer = tiles[k - 1u].layer;
-    return select(k, 0u, layer == NO_IMAGE || layer == t.layer);
-}
-
-// The image of draw `k` (index + 1; 0: none, then layer 0, unused) at this
-// fragment's place carried across the edge on `side` (its edge texels, as the
-// sampler clamps).
-fn neighbour_photo(t: TerrainDraw, k: u32, side: u32, tile_uv: vec2<f32>, lod: f32) -> vec4<f32> {
-    let o = tiles[max(k, 1u) - 1u];
-    let shift = array<vec2<f32>, 4>(vec2<f32>(1.0, 0.0), vec2<f32>(-1.0, 0.0), vec2<f32>(0.0, 1.0), vec2<f32>(0.0, -1.0));
-    let at = o.image_uv.xy + (tile_uv + shift[side]) * o.image_uv.zw;
-    // Its image's texels against this one's: the footprint's level shifted alike.
-    let ratio = o.image_uv.z / max(t.image_uv.z, 1e-9);
+// The neighbour's image `across` (`TerrainDraw::image_across`) at this
+// fragment's place carried across the edge (its edge texels, as the sampler
+// clamps), at mip `lod` of this tile's image (shifted by the two images'
+// scales); layer 0, unused, where there is none.
+fn neighbour_photo(across: vec4<f32>, scale: f32, tile_uv: vec2<f32>, lod: f32) -> vec4<f32> {
+    let at = across.xy + tile_uv * across.z;
     let uv = finite_uv(vec2<f32>(at.x, 1.0 - at.y));
-    return textureSampleLevel(images, image_sampler, uv, select(0u, o.layer, k != 0u), max(lod + log2(ratio), 0.0));
+    let level = max(lod + log2(max(across.z, 1e-9) / max(scale, 1e-9)), 0.0);
+    return textureSampleLevel(images, image_sampler, uv, u32(max(across.w, 0.0)), level);
 }
 
 // Ground images meet without a seam: each image is filtered within itself
@@ -321,30 +329,28 @@ fn neighbour_photo(t: TerrainDraw, k: u32, side: u32, tile_uv: vec2<f32>, lod: f
 // of the mip the sampler reads (its level estimated as the anisotropic
 // filter picks it, at most 4:1), the nearer neighbour's edge texels across
 // each axis are blended in, half and half at the edge: bilinear filtering
-// across the two images. (Sampled in uniform control flow, every fragment:
-// in a branch llvmpipe filtered them by the quad, 2 x 2 blocks.)
-fn photo_across(in: VertexOut, has: bool, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>, own: vec4<f32>) -> vec4<f32> {
+// across the two images. The neighbours' edge texels are read at the level
+// of the footprint's longer axis (llvmpipe's anisotropic filter, clamped at
+// an image's edge, took its taps by the quad: 2 x 2 blocks), their images
+// named by the draw record, passed on by the vertex shader (storage reads in
+// the fragments cost llvmpipe 5 times the frame).
+fn photo_across(in: VertexOut, has: bool, scale: f32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>, own: vec4<f32>) -> vec4<f32> {
     let px = f32(IMAGE_TEXELS);
     let fx = length(ddx * px);
     let fy = length(ddy * px);
     let lod = max(log2(max(min(fx, fy), max(fx, fy) / 4.0)), 0.0);
     let half = 0.5 * exp2(lod) / px;
-    let t = tiles[in.draw];
     // The nearer edge on each axis: west or east, south or north (v runs north to south).
-    let side_x = select(0u, 1u, uv.x > 0.5);
-    let side_y = select(3u, 2u, uv.y > 0.5);
+    let across_x = select(in.across_w, in.across_e, uv.x > 0.5);
+    let across_y = select(in.across_n, in.across_s, uv.y > 0.5);
     let to_x = min(uv.x, 1.0 - uv.x);
     let to_y = min(uv.y, 1.0 - uv.y);
-    let kx = select(0u, image_neighbour(t, side_x), has && to_x < half);
-    let ky = select(0u, image_neighbour(t, side_y), has && to_y < half);
-    // (At the level of the footprint's longer axis: llvmpipe's anisotropic
-    // filter, clamped at the image's edge, took its taps by the quad.)
     let level = log2(max(max(fx, fy), 1e-6));
-    let across_x = neighbour_photo(t, kx, side_x, in.tile_uv, level);
-    let across_y = neighbour_photo(t, ky, side_y, in.tile_uv, level);
-    let wx = select(0.0, 0.5 * (1.0 - to_x / half), kx != 0u);
-    let wy = select(0.0, 0.5 * (1.0 - to_y / half), ky != 0u);
-    return mix(mix(own, across_x, wx), across_y, wy);
+    let photo_x = neighbour_photo(across_x, scale, in.tile_uv, level);
+    let photo_y = neighbour_photo(across_y, scale, in.tile_uv, level);
+    let wx = select(0.0, 0.5 * (1.0 - to_x / half), has && across_x.w >= 0.0 && to_x < half);
+    let wy = select(0.0, 0.5 * (1.0 - to_y / half), has && across_y.w >= 0.0 && to_y < half);
+    return mix(mix(own, photo_x, wx), photo_y, wy);
 }
 
 // Texels a side of a ground image (scene::imagery::IMAGE_PX).

@@ -522,7 +522,8 @@ impl<F: Fetcher> Frame<F> {
         let threshold = self.stream.config().terrain_error_px;
         let flags = if settings.debug_lod { crate::render::terrain::TERRAIN_LEVEL_COLOURS } else { 0 }
             | if settings.terrain_morph { 0 } else { crate::render::terrain::TERRAIN_NO_MORPH }
-            | if settings.debug_cascades { crate::render::terrain::TERRAIN_CASCADE_COLOURS } else { 0 };
+            | if settings.debug_cascades { crate::render::terrain::TERRAIN_CASCADE_COLOURS } else { 0 }
+            | if settings.debug_next_cascade { crate::render::terrain::TERRAIN_NEXT_CASCADE } else { 0 };
         // (The threshold travels to the shader for reference only: the morph
         // is worked out per tile by the selection.)
         let threshold = threshold * settings.quality;

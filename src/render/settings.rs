@@ -69,8 +69,12 @@ pub struct RenderSettings {
     pub fade_band: f32,
     /// Colour trees by representation.
     pub debug_lod: bool,
-    /// Colour the ground by the shadow cascade that holds it.
+    /// Colour the ground by the shadow cascade that holds it (its colour's
+    /// brightness: 0.5 + 0.5 × the sun's visibility there).
     pub debug_cascades: bool,
+    /// With `debug_cascades`: the ground the first cascade holds shaded by
+    /// the second (the test that both give the ground the same light).
+    pub debug_next_cascade: bool,
     /// Draw the boxes of the batches that pass the batch test.
     pub debug_bounds: bool,
     /// Sun and ambient.
@@ -345,6 +349,7 @@ impl Default for RenderSettings {
             fade_band: 0.12,
             debug_lod: false,
             debug_cascades: false,
+            debug_next_cascade: false,
             debug_bounds: false,
             lighting: Lighting::default(),
             light_parts: super::sky_light::LightParts::ALL,

@@ -107,6 +107,9 @@ pub const TERRAIN_NO_MORPH: u32 = 2;
 /// `TerrainParams::debug` bit: colour the ground by the shadow cascade that
 /// holds it (red, green, blue, white for the first four; black: none).
 pub const TERRAIN_CASCADE_COLOURS: u32 = 4;
+/// `TerrainParams::debug` bit, with [`TERRAIN_CASCADE_COLOURS`]: the ground
+/// the first cascade holds is shaded by the second instead (the two compared).
+pub const TERRAIN_NEXT_CASCADE: u32 = 8;
 /// `GpuTerrainDraw::layer` of a tile without an image.
 pub const NO_IMAGE: u32 = u32::MAX;
 
@@ -157,6 +160,18 @@ fn link_neighbours(records: &mut [GpuTerrainDraw], keys: &[TerrainKey]) {
         }
         records[k].across_x = across[0] | across[1] << 16;
         records[k].across_y = across[2] | across[3] << 16;
+        // Their images, where another than this tile's: the place one tile
+        // west (east, south, north) of this one's in the neighbour's.
+        const SHIFT: [[f32; 2]; 4] = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]];
+        for side in 0..4 {
+            records[k].image_across[side] = [0.0, 0.0, 0.0, -1.0];
+            let Some(o) = across[side].checked_sub(1).map(|o| records[o as usize]) else { continue };
+            if o.layer == NO_IMAGE || o.layer == me.layer {
+                continue;
+            }
+            let [ox, oy, s, _] = o.image_uv;
+            records[k].image_across[side] = [ox + SHIFT[side][0] * s, oy + SHIFT[side][1] * s, s, o.layer as f32];
+        }
     }
 }
 
@@ -191,6 +206,13 @@ pub struct GpuTerrainDraw {
     pub across_y: u32,
     /// Padding to 16 bytes.
     pub pad2: u32,
+    /// The images of the neighbours in [`Self::across_x`], `across_y` (west,
+    /// east, south, north) that drape another image than this tile's: where
+    /// this tile's place (0–1, east and north) lies in it, `offset + place ×
+    /// scale`, carried across the edge (x, y the offset, z the scale) and its
+    /// layer (w; −1: none). The fragments near an image's edge blend its
+    /// edge texels in (`photo_across`: no seam between images).
+    pub image_across: [[f32; 4]; 4],
 }
 
 /// Pass constants. Must match `TerrainParams` in `shaders/terrain.wgsl`.
@@ -203,7 +225,7 @@ pub struct TerrainParams {
     pub words: u32,
     /// Selection threshold, pixels.
     pub threshold_px: f32,
-    /// Bits: [`TERRAIN_LEVEL_COLOURS`], [`TERRAIN_NO_MORPH`], [`TERRAIN_CASCADE_COLOURS`].
+    /// Bits: [`TERRAIN_LEVEL_COLOURS`], [`TERRAIN_NO_MORPH`], [`TERRAIN_CASCADE_COLOURS`], [`TERRAIN_NEXT_CASCADE`].
     pub debug: u32,
 }
 
@@ -273,8 +295,7 @@ impl TerrainPass {
             label: Some("terrain"),
             entries: &[
                 storage_entry(0, vertex, true),
-                // (The fragments read their neighbours' images from the draws: `photo_across`.)
-                storage_entry(1, wgpu::ShaderStages::VERTEX_FRAGMENT, true),
+                storage_entry(1, vertex, true),
                 wgpu::BindGroupLayoutEntry {
                     binding: 2,
                     visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
@@ -488,6 +509,7 @@ impl TerrainPass {
                 across_x: 0,
                 across_y: 0,
                 pad2: 0,
+                image_across: [[0.0, 0.0, 0.0, -1.0]; 4],
             });
             keys.push(d.key);
         }

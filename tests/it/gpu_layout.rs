@@ -53,7 +53,7 @@ fn the_terrain_structs_match_their_wgsl_twins() {
     check(
         "terrain",
         "TerrainDraw",
-        &members!(GpuTerrainDraw: origin_m, slot, size_m, range_m, morph, skirt_m, image_uv, layer, across_x, across_y, pad2),
+        &members!(GpuTerrainDraw: origin_m, slot, size_m, range_m, morph, skirt_m, image_uv, layer, across_x, across_y, pad2, image_across),
         size_of::<GpuTerrainDraw>(),
         None,
     );
