@@ -65,8 +65,8 @@ WASM_PROFILE ?= web
 # in JS, a scan for terrain neighbours): 402 KB until the rest is found
 # (wasm-opt --converge would give 0.8 KB of it for a slower build). The
 # ground images blended across tile edges (no seam) and the cascade debug
-# view added 1.1 KB more: 403 KB (402,994 B), still to be won back.
-WASM_GZ_BUDGET ?= 403200
+# view added 1.3 KB more: 403.5 KB (403,191 B), still to be won back.
+WASM_GZ_BUDGET ?= 403500
 # What going over it does: fail (`make web`), or warn (`make demo`: a new
 # user's first command does not stop on a compiler that packs a little worse).
 WASM_OVER_BUDGET ?= fail

@@ -79,12 +79,6 @@ fn shadow_soft(uv: vec2<f32>, layer: u32, depth: f32, texel_m: f32, depth_per_m:
     return lit / 16.0;
 }
 
-// How much of the sun reaches the eye-relative point `rel` with normal `n`
-// (1 lit, 0 shadowed). `lift_m` moves the receiver towards the sun first
-// (flat billboards, which stand for a whole crown, lift by their half width
-// so they are shaded by other trees, not by their own caster). Where no
-// cascade holds the point (shadows off, beyond the shadow distance) the
-// precomputed `open` term stands in, and the shadows fade into it.
 // The receiver moved off its surface against acne (see the offsets above)
 // for cascade `i`, in that cascade's clip space.
 fn shadow_clip(i: u32, rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> vec4<f32> {
@@ -126,6 +120,12 @@ fn cascade_visibility(i: u32, rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> f32 
     return shadow_pcf(uv, i, c.z);
 }
 
+// How much of the sun reaches the eye-relative point `rel` with normal `n`
+// (1 lit, 0 shadowed). `lift_m` moves the receiver towards the sun first
+// (flat billboards, which stand for a whole crown, lift by their half width
+// so they are shaded by other trees, not by their own caster). Where no
+// cascade holds the point (shadows off, beyond the shadow distance) the
+// precomputed `open` term stands in, and the shadows fade into it.
 fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
     let count = u32(view.shadow.x);
     if view.params.x != 0u {

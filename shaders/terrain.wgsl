@@ -61,7 +61,8 @@ struct TerrainParams {
     words: u32,
     // Selection threshold, pixels.
     threshold_px: f32,
-    // Bits: 1 colour by level (debug view), 2 no geomorphing (comparisons).
+    // Bits: 1 colour by level (debug view), 2 no geomorphing (comparisons),
+    // 4 colour by shadow cascade, 8 with 4: the first cascade's ground shaded by the second.
     debug: u32,
 };
 
@@ -271,7 +272,8 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         // the second (the same ground's light from either).
         let rel = frag_rel(in.clip, view);
         let count = u32(view.shadow.x);
-        let k = select(9u, shadow_cascade(rel, n, 0.0), count > 0u && shadow_cascade(rel, n, 0.0) < count);
+        let held = shadow_cascade(rel, n, 0.0);
+        let k = select(9u, held, count > 0u && held < count);
         var vis = sun;
         if (params.debug & 8u) != 0u && k == 0u && count > 1u {
             vis = cascade_visibility(1u, rel, n, 0.0);
@@ -314,9 +316,10 @@ fn finite_uv(uv: vec2<f32>) -> vec2<f32> {
 // clamps), at mip `lod` of this tile's image (shifted by the two images'
 // scales); layer 0, unused, where there is none.
 fn neighbour_photo(across: vec4<f32>, scale: f32, tile_uv: vec2<f32>, lod: f32) -> vec4<f32> {
-    let at = across.xy + tile_uv * across.z;
+    let s = abs(across.z);
+    let at = across.xy + tile_uv * s;
     let uv = finite_uv(vec2<f32>(at.x, 1.0 - at.y));
-    let level = max(lod + log2(max(across.z, 1e-9) / max(scale, 1e-9)), 0.0);
+    let level = max(lod + log2(max(s, 1e-9) / max(scale, 1e-9)), 0.0);
     return textureSampleLevel(images, image_sampler, uv, u32(max(across.w, 0.0)), level);
 }
 
@@ -348,8 +351,12 @@ fn photo_across(in: VertexOut, has: bool, scale: f32, uv: vec2<f32>, ddx: vec2<f
     let level = log2(max(max(fx, fy), 1e-6));
     let photo_x = neighbour_photo(across_x, scale, in.tile_uv, level);
     let photo_y = neighbour_photo(across_y, scale, in.tile_uv, level);
-    let wx = select(0.0, 0.5 * (1.0 - to_x / half), has && across_x.w >= 0.0 && to_x < half);
-    let wy = select(0.0, 0.5 * (1.0 - to_y / half), has && across_y.w >= 0.0 && to_y < half);
+    // Half at the edge; whole where the neighbour's image goes on across it
+    // unblended (scale negated: it drapes an ancestor's image there).
+    let edge_x = select(0.5, 1.0, across_x.z < 0.0);
+    let edge_y = select(0.5, 1.0, across_y.z < 0.0);
+    let wx = select(0.0, edge_x * (1.0 - to_x / half), has && across_x.w >= 0.0 && to_x < half);
+    let wy = select(0.0, edge_y * (1.0 - to_y / half), has && across_y.w >= 0.0 && to_y < half);
     return mix(mix(own, photo_x, wx), photo_y, wy);
 }
 

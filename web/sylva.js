@@ -34,7 +34,7 @@
 //                                           its input row; null with row for a tree without an id)
 //   v.stats()                               same keys as `sylva render --stats` (`governor`: the governor's level and why)
 //   v.setQuality({target_ms = 33, min_scale = 0.35, enabled})  the frame-time governor: while the camera moves,
-//                                           impostors, shadows, render scale, then LoD step down to hold target_ms, and back
+//                                           impostors, shadows (soft ones with them), render scale, then LoD step down to hold target_ms, and back
 //                                           up; at rest full quality ('off': none; a number: the LoD factor)
 //   await v.query(filter, {limit = 10000})  trees by attribute and id, as `sylva query`: {count, ids, bounds, tiles, skipped};
 //                                           filter {species: 'quercus*', dbh: [30, null], planted: ['1990-01-01', null], id: [..]}
@@ -529,8 +529,8 @@ class SylvaViewer {
   setDebug(lod, bounds) { this.viewer.set_debug(!!lod, !!bounds); this.dirty = SETTLE_FRAMES; }
   /** A number: the LoD quality factor (1, 0.5, 0.25: projected sizes are
    * scaled by it). An object `{target_ms, min_scale, enabled}`: the frame-time
-   * governor — while the camera moves, quality steps down (impostors, shadows,
-   * render scale, then LoD) until frames take `target_ms` (default 33), never below
+   * governor — while the camera moves, quality steps down (impostors, shadows
+   * and their softness, render scale, then LoD) until frames take `target_ms` (default 33), never below
    * `min_scale` (0.25–1, default 0.35), and back up; at rest all is restored.
    * `'off'` turns the governor off. `stats().governor` says its level and why. */
   setQuality(q) {

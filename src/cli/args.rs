@@ -412,7 +412,8 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     pub(crate) debug_lod: bool,
     /// Colour the ground by the shadow cascade that holds it (red, green,
-    /// blue, white; black beyond the shadows), to see where the splits fall.
+    /// blue, white; black where no cascade's box holds it), as bright as the
+    /// sun there, to see where the splits fall.
     #[arg(long)]
     pub(crate) debug_cascades: bool,
     /// Draw only one representation family (the benchmark baselines); the

@@ -170,7 +170,14 @@ fn link_neighbours(records: &mut [GpuTerrainDraw], keys: &[TerrainKey]) {
                 continue;
             }
             let [ox, oy, s, _] = o.image_uv;
-            records[k].image_across[side] = [ox + SHIFT[side][0] * s, oy + SHIFT[side][1] * s, s, o.layer as f32];
+            // Where the shared edge lies inside the neighbour's image (it
+            // drapes an ancestor's, its own not there yet), that side shows
+            // its image on across the edge unblended: this side then takes it
+            // whole at the edge (the scale negated says so), not half.
+            let edge = [ox + s, ox, oy + s, oy][side];
+            let inside = edge > 1e-6 && edge < 1.0 - 1e-6;
+            records[k].image_across[side] =
+                [ox + SHIFT[side][0] * s, oy + SHIFT[side][1] * s, if inside { -s } else { s }, o.layer as f32];
         }
     }
 }
@@ -209,8 +216,8 @@ pub struct GpuTerrainDraw {
     /// The images of the neighbours in [`Self::across_x`], `across_y` (west,
     /// east, south, north) that drape another image than this tile's: where
     /// this tile's place (0–1, east and north) lies in it, `offset + place ×
-    /// scale`, carried across the edge (x, y the offset, z the scale) and its
-    /// layer (w; −1: none). The fragments near an image's edge blend its
+    /// scale`, carried across the edge (x, y the offset, z the scale, negated
+    /// where the edge lies inside that image) and its layer (w; −1: none). The fragments near an image's edge blend its
     /// edge texels in (`photo_across`: no seam between images).
     pub image_across: [[f32; 4]; 4],
 }
@@ -638,5 +645,49 @@ impl super::pass::DrawPass for TerrainPass {
 
     fn gpu_bytes(&self) -> u64 {
         TerrainPass::gpu_bytes(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn draw(x: u32, y: u32, image_uv: [f32; 4], layer: u32) -> GpuTerrainDraw {
+        GpuTerrainDraw {
+            origin_m: [x as f32 * 256.0, y as f32 * 256.0, 0.0],
+            size_m: 256.0,
+            image_uv,
+            layer,
+            image_across: [[0.0; 4]; 4],
+            ..bytemuck::Zeroable::zeroed()
+        }
+    }
+
+    #[test]
+    fn neighbours_name_their_images_carried_across_the_edge() {
+        // A tile with its own image; west of it one draping its parent's
+        // image (its east edge inside it), east one with its own, north one
+        // draping the same image as the middle one.
+        let keys = [(2, 1, 1), (2, 0, 1), (2, 2, 1), (2, 1, 2)];
+        let mut records = [
+            draw(1, 1, [0.0, 0.0, 1.0, 1.0], 5),
+            draw(0, 1, [0.0, 0.5, 0.5, 0.5], 7),
+            draw(2, 1, [0.0, 0.0, 1.0, 1.0], 6),
+            draw(1, 2, [0.0, 0.0, 1.0, 1.0], 5),
+        ];
+        link_neighbours(&mut records, &keys);
+        let t = records[0];
+        assert_eq!((t.across_x, t.across_y), (2 | 3 << 16, 4 << 16));
+        // West: this tile's place one tile east in the parent's image, the
+        // edge at its middle (inside: the scale negated).
+        assert_eq!(t.image_across[0], [0.5, 0.5, -0.5, 7.0]);
+        // East: one tile west in the neighbour's own image, its edge at 0.
+        assert_eq!(t.image_across[1], [-1.0, 0.0, 1.0, 6.0]);
+        // South: nothing drawn; north: the same image, nothing to blend.
+        assert_eq!(t.image_across[2][3], -1.0);
+        assert_eq!(t.image_across[3][3], -1.0);
+        // The western tile sees this one's image from its east, one tile
+        // west of it there, at this image's edge.
+        assert_eq!(records[1].image_across[1], [-1.0, 0.0, 1.0, 5.0]);
     }
 }
