@@ -93,21 +93,25 @@ fn shadow_clip(i: u32, rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> vec4<f32> {
 // (its index; the cascade count where none does).
 fn shadow_cascade(rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> u32 {
     let count = u32(view.shadow.x);
-    let reach = select(view.shadow.z, SOFT_SEARCH_TEXELS, light_on(view, LIGHT_SOFT_SHADOWS));
-    let margin = (reach + 1.0) / view.shadow.y;
     for (var i = 0u; i < count; i++) {
-        let c = shadow_clip(i, rel, n, lift_m);
-        let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
-        if all(uv >= vec2<f32>(margin)) && all(uv <= vec2<f32>(1.0 - margin)) && c.z >= 0.0 {
+        if cascade_holds(shadow_clip(i, rel, n, lift_m)) {
             return i;
         }
     }
     return count;
 }
 
-// The sun's visibility from cascade `i` alone (1 above every caster).
-fn cascade_visibility(i: u32, rel: vec3<f32>, n: vec3<f32>, lift_m: f32) -> f32 {
-    let c = shadow_clip(i, rel, n, lift_m);
+// Whether a cascade's map holds the receiver at `c` (its clip position).
+fn cascade_holds(c: vec4<f32>) -> bool {
+    let reach = select(view.shadow.z, SOFT_SEARCH_TEXELS, light_on(view, LIGHT_SOFT_SHADOWS));
+    let margin = (reach + 1.0) / view.shadow.y;
+    let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
+    return all(uv >= vec2<f32>(margin)) && all(uv <= vec2<f32>(1.0 - margin)) && c.z >= 0.0;
+}
+
+// The sun's visibility from cascade `i` alone at the receiver's clip
+// position `c` there (1 above every caster).
+fn cascade_visibility(i: u32, c: vec4<f32>) -> f32 {
     let uv = vec2<f32>(0.5 + 0.5 * c.x, 0.5 - 0.5 * c.y);
     if c.z > 1.0 {
         return 1.0; // above every caster
@@ -138,10 +142,12 @@ fn sun_visibility(rel: vec3<f32>, n: vec3<f32>, lift_m: f32, open: f32) -> f32 {
     if fade >= 1.0 {
         return open;
     }
-    let i = shadow_cascade(rel, n, lift_m);
-    if i >= count {
-        return open;
+    // The first cascade that holds it, its clip position worked out once.
+    for (var i = 0u; i < count; i++) {
+        let c = shadow_clip(i, rel, n, lift_m);
+        if cascade_holds(c) {
+            return mix(cascade_visibility(i, c), open, fade);
+        }
     }
-    let lit = cascade_visibility(i, rel, n, lift_m);
-    return mix(lit, open, fade);
+    return open;
 }

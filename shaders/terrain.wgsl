@@ -276,7 +276,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
         let k = select(9u, held, count > 0u && held < count);
         var vis = sun;
         if (params.debug & 8u) != 0u && k == 0u && count > 1u {
-            vis = cascade_visibility(1u, rel, n, 0.0);
+            vis = cascade_visibility(1u, shadow_clip(1u, rel, n, 0.0));
         }
         let c = vec3<f32>(vec3<u32>(k) == vec3<u32>(0u, 1u, 2u)) + f32(k == 3u);
         return vec4<f32>(c * (0.5 + 0.5 * vis), 1.0);
